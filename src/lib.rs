@@ -1,0 +1,20 @@
+//! verdant: a streaming open-world terrain service with GPU grass, on wgpu.
+//!
+//! Crate map:
+//! - [`world`]: GPU-free world format: the `world.toml` manifest, [`world::TileId`] quadtree
+//!   addressing, stored tiles (EXR heights, PNG grass type and density) and the DEM baker.
+//! - [`stream`]: the tile service: async streamer, CPU cache, atlas residency, derived tiles.
+//! - [`lod`]: which terrain tiles a camera needs, at which level, with frustum culling.
+//! - [`gpu`]: the headless GPU context (adapter choice from `WGPU_*` variables), the tile atlas,
+//!   timestamp timing and readback.
+//! - [`terrain`]: the terrain and sky passes (`shaders/terrain.wgsl`).
+//! - [`flythrough`]: cameras, camera paths, the headless fly-through and its report.
+//! - [`metrics`]: percentiles and image error (FLIP).
+
+pub mod flythrough;
+pub mod gpu;
+pub mod lod;
+pub mod metrics;
+pub mod terrain;
+pub mod world;
+pub mod stream;

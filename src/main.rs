@@ -1,1 +1,217 @@
-fn main(){}
+//! The `verdant` command line.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use verdant::flythrough::{run_fly, FlyOptions, FlyProgress};
+use verdant::world::{bake, BakeOptions};
+
+/// Streaming open-world terrain with GPU grass.
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render PNG frames along a camera path and write report.json.
+    Fly {
+        /// World folder, or the name of a world under ./worlds.
+        #[arg(default_value = "santa-cruz")]
+        world: String,
+        /// Camera path from the world's manifest (default: its first path).
+        #[arg(long)]
+        path: Option<String>,
+        /// Frames to render, spread evenly over the path.
+        #[arg(long, default_value_t = 120)]
+        frames: u32,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "640x360", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Output folder.
+        #[arg(long, default_value = "out/fly")]
+        out: PathBuf,
+        /// Write only report.json, no PNG frames.
+        #[arg(long)]
+        no_images: bool,
+    },
+    /// Bake a DEM (16-bit PNG with a JSON sidecar) into a world folder.
+    Bake {
+        /// The DEM's PNG; its sidecar is the .json of the same stem.
+        #[arg(long)]
+        dem: PathBuf,
+        /// The world folder to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// World name (default: the output folder's name).
+        #[arg(long)]
+        name: Option<String>,
+        /// Cell size of the finest stored level, metres (default: from the DEM).
+        #[arg(long)]
+        cell_size: Option<f64>,
+        /// Cells per tile edge (a power of two).
+        #[arg(long, default_value_t = 128)]
+        tile_cells: u32,
+        /// Stored levels of the tile pyramid.
+        #[arg(long, default_value_t = 3)]
+        levels: u8,
+        /// Seed of the grass-painting noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().map_err(|_| format!("{v:?} is not a pixel count"));
+    let (w, h) = (parse(w)?, parse(h)?);
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("{w}x{h} is out of range (1 to 16384 pixels a side)"));
+    }
+    Ok((w, h))
+}
+
+/// A world argument is a folder, or a name under `./worlds` or the crate's own `worlds`.
+fn resolve_world(arg: &str) -> Result<PathBuf> {
+    let direct = Path::new(arg);
+    if direct.join("world.toml").is_file() {
+        return Ok(direct.to_path_buf());
+    }
+    let candidates = [
+        Path::new("worlds").join(arg),
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds").join(arg),
+    ];
+    for c in &candidates {
+        if c.join("world.toml").is_file() {
+            return Ok(c.clone());
+        }
+    }
+    if direct.is_dir() {
+        // Let the world loader say what is missing.
+        return Ok(direct.to_path_buf());
+    }
+    bail!(
+        "no world {arg:?}: neither {} nor {} holds a world.toml",
+        direct.display(),
+        candidates[0].display()
+    )
+}
+
+fn bar(len: u64, what: &str) -> ProgressBar {
+    let pb = ProgressBar::new(len);
+    pb.set_style(
+        ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}")
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    pb.set_message(what.to_owned());
+    pb
+}
+
+fn fly(opts: FlyOptions) -> Result<()> {
+    let mut loading: Option<ProgressBar> = None;
+    let mut frames: Option<ProgressBar> = None;
+    let report = run_fly(&opts, &mut |p| match p {
+        FlyProgress::Loading(done, total) => {
+            let pb = loading.get_or_insert_with(|| bar(total, "tiles"));
+            pb.set_position(done);
+        }
+        FlyProgress::Frame(done, total) => {
+            if let Some(pb) = loading.take() {
+                pb.finish();
+            }
+            let pb = frames.get_or_insert_with(|| bar(total, "frames"));
+            pb.set_position(done);
+        }
+    })?;
+    if let Some(pb) = frames {
+        pb.finish();
+    }
+    let s = &report.summary;
+    println!(
+        "{} frames of {} ({}) on {} [{}]",
+        report.frames.len(),
+        report.world,
+        report.path,
+        report.adapter.name,
+        report.adapter.backend
+    );
+    println!(
+        "frame time: median {:.2} ms, p99 {:.2} ms; tiles drawn: median {:.0}",
+        s.frame_ms.median, s.frame_ms.p99, s.tiles_drawn.median
+    );
+    for (pass, t) in &s.gpu_ms {
+        println!("gpu {pass}: median {:.3} ms, p99 {:.3} ms", t.median, t.p99);
+    }
+    println!("wrote {}", opts.out.join("report.json").display());
+    Ok(())
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Fly { world, path, frames, size, out, no_images } => fly(FlyOptions {
+            world: resolve_world(&world)?,
+            path,
+            frames,
+            size,
+            out,
+            write_images: !no_images,
+        }),
+        Command::Bake { dem, out, name, cell_size, tile_cells, levels, seed } => {
+            let opts = BakeOptions {
+                dem,
+                out,
+                name,
+                cell_size_m: cell_size,
+                tile_cells,
+                stored_levels: levels,
+                seed,
+            };
+            let mut current: Option<(String, ProgressBar)> = None;
+            let report = bake(&opts, &mut |stage, done, total| {
+                let label = format!("{stage:?}").to_lowercase();
+                if current.as_ref().map(|(l, _)| l != &label).unwrap_or(true) {
+                    if let Some((_, pb)) = current.take() {
+                        pb.finish();
+                    }
+                    current = Some((label.clone(), bar(total, &label)));
+                }
+                if let Some((_, pb)) = &current {
+                    pb.set_length(total);
+                    pb.set_position(done);
+                }
+            })
+            .with_context(|| format!("baking {}", opts.dem.display()))?;
+            if let Some((_, pb)) = current {
+                pb.finish();
+            }
+            println!(
+                "baked {} tiles in {} levels into {} in {:.1} s",
+                report.tiles_written,
+                report.levels,
+                opts.out.display(),
+                report.seconds
+            );
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

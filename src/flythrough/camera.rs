@@ -1,0 +1,125 @@
+//! The camera and the camera paths of a world's manifest.
+
+use glam::{DVec3, Mat4, Vec3};
+
+use crate::world::CameraPath;
+
+/// A camera in world space: position in metres (f64), looking along yaw and pitch.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Eye position, metres (x east, y north, z up).
+    pub position: DVec3,
+    /// Heading in degrees: 0 looks east, 90 north.
+    pub yaw_deg: f64,
+    /// Degrees above the horizon; negative looks down.
+    pub pitch_deg: f64,
+    /// Vertical field of view, degrees.
+    pub fov_y_deg: f32,
+    /// Near plane, metres (the far plane is at infinity: reverse-Z).
+    pub near_m: f32,
+}
+
+impl Camera {
+    /// A camera at `position` looking along `yaw_deg`/`pitch_deg` with a 60 degree field of view.
+    pub fn new(position: DVec3, yaw_deg: f64, pitch_deg: f64) -> Self {
+        Self {
+            position,
+            yaw_deg,
+            pitch_deg,
+            fov_y_deg: 60.0,
+            near_m: 0.5,
+        }
+    }
+
+    /// Unit view direction.
+    pub fn forward(&self) -> DVec3 {
+        let (yaw, pitch) = (self.yaw_deg.to_radians(), self.pitch_deg.to_radians());
+        DVec3::new(yaw.cos() * pitch.cos(), yaw.sin() * pitch.cos(), pitch.sin())
+    }
+
+    /// View-projection with the eye at the origin: positions fed to it must be camera-relative.
+    /// Reverse-Z with an infinite far plane (depth 1 at the near plane, 0 at infinity).
+    pub fn view_proj_relative(&self, aspect: f32) -> Mat4 {
+        use glam::camera::rh::{proj::directx, view::look_to_mat4};
+        let view = look_to_mat4(Vec3::ZERO, self.forward().as_vec3(), Vec3::Z);
+        // wgpu's clip space is Direct3D's: z in [0, 1], y up.
+        let proj = directx::perspective_infinite_reverse(self.fov_y_deg.to_radians(), aspect, self.near_m);
+        proj * view
+    }
+}
+
+/// The camera on `path` at time `t_s` (clamped to the path's keys): Catmull-Rom through the key
+/// positions, yaw and pitch interpolated the short way round.
+pub fn sample_path(path: &CameraPath, t_s: f64) -> Camera {
+    let keys = &path.keys;
+    let last = keys.len() - 1;
+    let t = t_s.clamp(keys[0].t_s, keys[last].t_s);
+    let i = keys
+        .windows(2)
+        .position(|w| t <= w[1].t_s)
+        .unwrap_or(last.saturating_sub(1));
+    let (k1, k2) = (&keys[i], &keys[(i + 1).min(last)]);
+    let span = k2.t_s - k1.t_s;
+    let u = if span > 0.0 { (t - k1.t_s) / span } else { 0.0 };
+    let p = |k: usize| DVec3::from_array(keys[k].position_m);
+    let (p0, p1, p2, p3) = (p(i.saturating_sub(1)), p(i), p((i + 1).min(last)), p((i + 2).min(last)));
+    let position = catmull_rom(p0, p1, p2, p3, u);
+    let mut dyaw = (k2.yaw_deg - k1.yaw_deg) % 360.0;
+    if dyaw > 180.0 {
+        dyaw -= 360.0;
+    } else if dyaw < -180.0 {
+        dyaw += 360.0;
+    }
+    let yaw_deg = k1.yaw_deg + dyaw * u;
+    let pitch_deg = k1.pitch_deg + (k2.pitch_deg - k1.pitch_deg) * u;
+    Camera::new(position, yaw_deg, pitch_deg)
+}
+
+fn catmull_rom(p0: DVec3, p1: DVec3, p2: DVec3, p3: DVec3, u: f64) -> DVec3 {
+    let u2 = u * u;
+    let u3 = u2 * u;
+    0.5 * ((2.0 * p1)
+        + (p2 - p0) * u
+        + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * u2
+        + (3.0 * p1 - p0 - 3.0 * p2 + p3) * u3)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::CameraKey;
+
+    fn key(t_s: f64, x: f64, yaw_deg: f64) -> CameraKey {
+        CameraKey {
+            t_s,
+            position_m: [x, 0.0, 100.0],
+            yaw_deg,
+            pitch_deg: -10.0,
+        }
+    }
+
+    #[test]
+    fn path_passes_through_its_keys_and_turns_the_short_way() {
+        let path = CameraPath {
+            name: "test".into(),
+            duration_s: 20.0,
+            keys: vec![key(0.0, 0.0, 350.0), key(10.0, 100.0, 10.0), key(20.0, 300.0, 10.0)],
+        };
+        for k in &path.keys {
+            let c = sample_path(&path, k.t_s);
+            assert!((c.position - DVec3::from_array(k.position_m)).length() < 1e-9);
+        }
+        let mid = sample_path(&path, 5.0);
+        // 350 -> 10 degrees goes through 0, not through 180.
+        assert!((mid.yaw_deg.rem_euclid(360.0) - 0.0).abs() < 1e-9 || (mid.yaw_deg - 360.0).abs() < 1e-9);
+        assert!(mid.position.x > 0.0 && mid.position.x < 100.0);
+    }
+
+    #[test]
+    fn forward_follows_yaw_and_pitch() {
+        let c = Camera::new(DVec3::ZERO, 90.0, 0.0);
+        assert!((c.forward() - DVec3::Y).length() < 1e-12);
+        let down = Camera::new(DVec3::ZERO, 0.0, -90.0);
+        assert!((down.forward() - DVec3::NEG_Z).length() < 1e-12);
+    }
+}

@@ -1,0 +1,157 @@
+//! Headless fly-throughs: a camera path rendered frame by frame to PNG, with a JSON report of
+//! what each frame drew and what it cost.
+
+mod camera;
+mod report;
+mod scene;
+
+pub use camera::{sample_path, Camera};
+pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
+pub use scene::{FrameStats, Scene, SceneError};
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+
+use crate::gpu::GpuContext;
+use crate::metrics::Summary;
+use crate::world::World;
+
+/// What `verdant fly` is asked to do.
+#[derive(Clone, Debug)]
+pub struct FlyOptions {
+    /// The world's folder.
+    pub world: PathBuf,
+    /// Camera path name; the manifest's first path when `None`.
+    pub path: Option<String>,
+    /// Frames to render, spread evenly over the path's duration.
+    pub frames: u32,
+    /// Image width and height.
+    pub size: (u32, u32),
+    /// Output folder for the PNG frames and `report.json`.
+    pub out: PathBuf,
+    /// Write a PNG for every frame (the report is always written).
+    pub write_images: bool,
+}
+
+/// Progress of a fly-through, for a progress bar.
+pub enum FlyProgress {
+    /// Tiles loaded into the atlas so far, of a total.
+    Loading(u64, u64),
+    /// Frames rendered so far, of a total.
+    Frame(u64, u64),
+}
+
+/// Runs a fly-through and writes its frames and `report.json` into `opts.out`.
+pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Result<FlyReport> {
+    if opts.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let world = World::open(&opts.world)?;
+    let path = match &opts.path {
+        Some(name) => world.manifest.path(name).cloned().with_context(|| {
+            let names: Vec<&str> = world.manifest.paths.iter().map(|p| p.name.as_str()).collect();
+            format!(
+                "world {} has no camera path {name:?} (it has: {})",
+                opts.world.display(),
+                names.join(", ")
+            )
+        })?,
+        None => world.manifest.paths.first().cloned().with_context(|| {
+            format!("world {} has no camera paths", opts.world.display())
+        })?,
+    };
+    std::fs::create_dir_all(&opts.out)
+        .with_context(|| format!("cannot create output folder {}", opts.out.display()))?;
+
+    let ctx = GpuContext::new()?;
+    let world_name = world.manifest.name.clone();
+    let (width, height) = opts.size;
+    let mut scene = Scene::new(&ctx, world, width, height, &mut |d, t| {
+        progress(FlyProgress::Loading(d, t))
+    })?;
+
+    // PNG encoding runs beside the renderer; the bounded channel keeps at most a few frames queued.
+    let (tx, rx) = mpsc::sync_channel::<(PathBuf, image::RgbaImage)>(4);
+    let writer = std::thread::spawn(move || -> Result<()> {
+        for (file, img) in rx {
+            img.save(&file)
+                .with_context(|| format!("cannot write frame {}", file.display()))?;
+        }
+        Ok(())
+    });
+
+    let mut records = Vec::with_capacity(opts.frames as usize);
+    let last = (opts.frames.max(2) - 1) as f64;
+    let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
+    for i in 0..opts.frames {
+        let t_s = t0 + (t1 - t0) * f64::from(i) / last;
+        let camera = sample_path(&path, t_s);
+        let start = Instant::now();
+        let stats = scene.render(&ctx, &camera);
+        let image = scene.read_image(&ctx)?;
+        let frame_ms = start.elapsed().as_secs_f64() * 1e3;
+        if opts.write_images {
+            let file = opts.out.join(format!("frame_{i:05}.png"));
+            if tx.send((file, image)).is_err() {
+                break; // the writer failed; its error is reported below
+            }
+        }
+        records.push(FrameRecord {
+            index: i,
+            t_s,
+            camera_m: camera.position.to_array(),
+            frame_ms,
+            cpu_ms: stats.cpu_ms,
+            gpu_ms: stats.gpu.into_iter().collect::<BTreeMap<_, _>>(),
+            tiles_drawn: stats.tiles_drawn,
+        });
+        progress(FlyProgress::Frame(u64::from(i) + 1, u64::from(opts.frames)));
+    }
+    drop(tx);
+    writer
+        .join()
+        .map_err(|_| anyhow::anyhow!("the frame writer thread panicked"))??;
+
+    let report = FlyReport::new(
+        world_name,
+        path.name.clone(),
+        opts.size,
+        AdapterReport::of(&ctx),
+        records,
+    );
+    write_json(&opts.out.join("report.json"), &report)?;
+    Ok(report)
+}
+
+/// Writes `value` as pretty JSON, via a temporary file so a reader never sees half a report.
+pub fn write_json<T: serde::Serialize>(file: &Path, value: &T) -> Result<()> {
+    let tmp = file.with_extension("json.tmp");
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, file).with_context(|| format!("cannot write {}", file.display()))?;
+    Ok(())
+}
+
+impl FlySummary {
+    /// Summarises the frames of a fly-through.
+    pub fn of(frames: &[FrameRecord]) -> Self {
+        let series = |f: &dyn Fn(&FrameRecord) -> f64| frames.iter().map(f).collect::<Vec<f64>>();
+        let mut gpu_ms = BTreeMap::new();
+        let passes: std::collections::BTreeSet<&String> =
+            frames.iter().flat_map(|f| f.gpu_ms.keys()).collect();
+        for pass in passes {
+            let v: Vec<f64> = frames.iter().filter_map(|f| f.gpu_ms.get(pass).copied()).collect();
+            gpu_ms.insert(pass.clone(), Summary::of(&v));
+        }
+        Self {
+            frame_ms: Summary::of(&series(&|f| f.frame_ms)),
+            cpu_ms: Summary::of(&series(&|f| f.cpu_ms)),
+            gpu_ms,
+            tiles_drawn: Summary::of(&series(&|f| f64::from(f.tiles_drawn))),
+        }
+    }
+}

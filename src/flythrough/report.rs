@@ -1,0 +1,105 @@
+//! The fly-through report, `report.json`.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::gpu::GpuContext;
+use crate::metrics::Summary;
+
+/// The adapter a run used.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct AdapterReport {
+    /// Adapter name, e.g. `llvmpipe (LLVM 15.0.6, 256 bits)` or `NVIDIA H100 80GB HBM3`.
+    pub name: String,
+    /// Backend, e.g. `Vulkan`.
+    pub backend: String,
+    /// Device type: discrete GPU, CPU, ...
+    pub device_type: String,
+    /// Driver name and version.
+    pub driver: String,
+    /// Whether per-pass GPU times were measured.
+    pub timestamps: bool,
+}
+
+impl AdapterReport {
+    /// Describes the context's adapter.
+    pub fn of(ctx: &GpuContext) -> Self {
+        Self {
+            name: ctx.info.name.clone(),
+            backend: format!("{:?}", ctx.info.backend),
+            device_type: format!("{:?}", ctx.info.device_type),
+            driver: format!("{} {}", ctx.info.driver, ctx.info.driver_info).trim().to_owned(),
+            timestamps: ctx.timestamps,
+        }
+    }
+}
+
+/// One rendered frame.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FrameRecord {
+    /// Frame number from 0.
+    pub index: u32,
+    /// Time on the camera path, seconds.
+    pub t_s: f64,
+    /// Camera position, metres.
+    pub camera_m: [f64; 3],
+    /// Wall time of the whole frame (record, submit, GPU, readback), milliseconds.
+    pub frame_ms: f64,
+    /// CPU time to select tiles and record and submit the frame, milliseconds.
+    pub cpu_ms: f64,
+    /// GPU time of each pass, milliseconds (empty without timestamp queries).
+    pub gpu_ms: BTreeMap<String, f64>,
+    /// Terrain tiles drawn.
+    pub tiles_drawn: u32,
+}
+
+/// Summary statistics over all frames.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FlySummary {
+    /// Whole-frame wall time.
+    pub frame_ms: Summary,
+    /// CPU time a frame.
+    pub cpu_ms: Summary,
+    /// GPU time a frame, per pass.
+    pub gpu_ms: BTreeMap<String, Summary>,
+    /// Tiles drawn a frame.
+    pub tiles_drawn: Summary,
+}
+
+/// Everything `report.json` holds.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FlyReport {
+    /// The world's name.
+    pub world: String,
+    /// The camera path flown.
+    pub path: String,
+    /// Image width and height.
+    pub size: (u32, u32),
+    /// The adapter.
+    pub adapter: AdapterReport,
+    /// Summary over all frames.
+    pub summary: FlySummary,
+    /// Every frame.
+    pub frames: Vec<FrameRecord>,
+}
+
+impl FlyReport {
+    /// A report over `frames`, with its summary computed.
+    pub fn new(
+        world: String,
+        path: String,
+        size: (u32, u32),
+        adapter: AdapterReport,
+        frames: Vec<FrameRecord>,
+    ) -> Self {
+        Self {
+            world,
+            path,
+            size,
+            adapter,
+            summary: FlySummary::of(&frames),
+            frames,
+        }
+    }
+}

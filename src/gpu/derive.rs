@@ -1,0 +1,197 @@
+//! The derivation stage: a compute pass that derives child tiles from parents already in the
+//! tile atlas (`shaders/derive_child.wgsl`), then copies each result into its own atlas slot.
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::gpu::{GpuTimer, TileAtlas};
+use crate::stream::DeriveParams;
+use crate::world::{Pyramid, TileId};
+
+/// One child to derive: its address, its parent's slot and the slot to fill.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DeriveJob {
+    /// The child tile.
+    pub child: TileId,
+    /// Atlas slot holding the child's parent.
+    pub parent_slot: u32,
+    /// Atlas slot the child goes to.
+    pub child_slot: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct JobGpu {
+    child_x: u32,
+    child_y: u32,
+    child_level: u32,
+    parent_layer: u32,
+    out_layer: u32,
+    cell_parent: f32,
+    cell_child: f32,
+    _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<JobGpu>() == 32);
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ParamsGpu {
+    grid: [u32; 4],
+    detail: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 32);
+
+/// Pipeline, staging textures and buffers of the derivation stage.
+pub struct DeriveStage {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    jobs: wgpu::Buffer,
+    staging_heights: wgpu::Texture,
+    staging_grass: wgpu::Texture,
+    pyramid: Pyramid,
+    batch: u32,
+}
+
+impl DeriveStage {
+    /// A stage that derives up to `batch` tiles a call, reading parents from `atlas`.
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, pyramid: &Pyramid, params: &DeriveParams, atlas: &TileAtlas, batch: u32) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("derive_child.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/derive_child.wgsl").into()),
+        });
+        let size = atlas.size();
+        let staging = |label, format| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width: size, height: size, depth_or_array_layers: batch },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            })
+        };
+        let staging_heights = staging("derive heights", wgpu::TextureFormat::R32Float);
+        let staging_grass = staging("derive grass", wgpu::TextureFormat::Rgba8Uint);
+        let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("derive params"),
+            size: std::mem::size_of::<ParamsGpu>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        queue.write_buffer(
+            &params_buffer,
+            0,
+            bytemuck::bytes_of(&ParamsGpu {
+                grid: [pyramid.tile_cells, pyramid.border, pyramid.samples_per_side(), params.seed],
+                detail: [params.detail, params.window_cells, 0.0, 0.0],
+            }),
+        );
+        let jobs = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("derive jobs"),
+            size: u64::from(batch) * std::mem::size_of::<JobGpu>() as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let array_view = |t: &wgpu::Texture| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("derive_child"),
+            layout: None,
+            module: &module,
+            entry_point: Some("derive_child"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let layout = pipeline.get_bind_group_layout(0);
+        let views = [
+            array_view(&atlas.heights),
+            array_view(&atlas.grass),
+            array_view(&staging_heights),
+            array_view(&staging_grass),
+        ];
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("derive"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: params_buffer.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&views[0]) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&views[1]) },
+                wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&views[2]) },
+                wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&views[3]) },
+            ],
+        });
+        Self { pipeline, bind_group, jobs, staging_heights, staging_grass, pyramid: pyramid.clone(), batch }
+    }
+
+    /// Most tiles one call derives.
+    pub fn batch(&self) -> u32 {
+        self.batch
+    }
+
+    /// Records the derivation of `jobs` (at most [`Self::batch`]; the rest are ignored) and the
+    /// copies into their slots. Returns how many were recorded.
+    pub fn record(
+        &self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        atlas: &TileAtlas,
+        jobs: &[DeriveJob],
+        timer: &mut GpuTimer,
+    ) -> usize {
+        let jobs = &jobs[..jobs.len().min(self.batch as usize)];
+        if jobs.is_empty() {
+            return 0;
+        }
+        let gpu_jobs: Vec<JobGpu> = jobs
+            .iter()
+            .enumerate()
+            .map(|(k, j)| JobGpu {
+                child_x: j.child.x,
+                child_y: j.child.y,
+                child_level: u32::from(j.child.level),
+                parent_layer: j.parent_slot,
+                out_layer: k as u32,
+                cell_parent: self.pyramid.cell_size_m(j.child.level - 1) as f32,
+                cell_child: self.pyramid.cell_size_m(j.child.level) as f32,
+                _pad: 0,
+            })
+            .collect();
+        queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&gpu_jobs));
+        let size = atlas.size();
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("derive"),
+                timestamp_writes: timer.compute_pass("derive"),
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(size.div_ceil(8), size.div_ceil(8), jobs.len() as u32);
+        }
+        for (k, j) in jobs.iter().enumerate() {
+            for (from, to) in [(&self.staging_heights, &atlas.heights), (&self.staging_grass, &atlas.grass)] {
+                encoder.copy_texture_to_texture(
+                    wgpu::TexelCopyTextureInfo {
+                        texture: from,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d { x: 0, y: 0, z: k as u32 },
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    wgpu::TexelCopyTextureInfo {
+                        texture: to,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d { x: 0, y: 0, z: j.child_slot },
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+                );
+            }
+        }
+        jobs.len()
+    }
+}

@@ -1,0 +1,140 @@
+//! Headless GPU context: adapter choice, device limits, timestamp timing and readback.
+//!
+//! The adapter is chosen the way wgpu's own tools choose it, from environment variables:
+//! `WGPU_BACKEND` (e.g. `vulkan`, `gl`), `WGPU_ADAPTER_NAME` (a case-insensitive substring of the
+//! adapter's name, e.g. `llvmpipe` or `nvidia`) and `WGPU_POWER_PREF` (`low`, `high`).
+
+mod atlas;
+mod derive;
+mod readback;
+mod timing;
+
+pub use atlas::{pack_grass, AtlasError, TileAtlas};
+pub use derive::{DeriveJob, DeriveStage};
+pub use readback::{read_texture_layer, read_texture_rgba8, ReadbackError};
+pub use timing::{GpuTimer, PassTimes};
+
+use thiserror::Error;
+
+/// What can go wrong while opening the GPU.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum GpuError {
+    /// No adapter matched the requested backends (and name, if one was asked for).
+    #[error(
+        "no GPU adapter found (backends: {backends}{name_note}). On a machine without a GPU, install \
+         software Vulkan: `apt-get install mesa-vulkan-drivers` (Debian/Ubuntu), which provides the \
+         llvmpipe adapter"
+    )]
+    NoAdapter {
+        /// The backends that were searched.
+        backends: String,
+        /// A note about `WGPU_ADAPTER_NAME`, when it was set.
+        name_note: String,
+    },
+    /// The adapter refused to open a device.
+    #[error("adapter {adapter} could not open a device: {source}")]
+    RequestDevice {
+        /// The adapter's name.
+        adapter: String,
+        /// wgpu's error.
+        #[source]
+        source: wgpu::RequestDeviceError,
+    },
+}
+
+/// A device and queue with what the rest of the crate needs to know about them.
+pub struct GpuContext {
+    /// The wgpu instance the adapter came from.
+    pub instance: wgpu::Instance,
+    /// The chosen adapter.
+    pub adapter: wgpu::Adapter,
+    /// The logical device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// Name, backend and driver of the adapter.
+    pub info: wgpu::AdapterInfo,
+    /// Whether render and compute passes can write timestamps.
+    pub timestamps: bool,
+}
+
+impl GpuContext {
+    /// Opens the adapter selected by the usual wgpu environment variables (see the module docs).
+    pub fn new() -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_async())
+    }
+
+    async fn new_async() -> Result<Self, GpuError> {
+        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = backends;
+        desc.flags = wgpu::InstanceFlags::default().with_env();
+        let instance = wgpu::Instance::new(desc);
+
+        let wanted_name = std::env::var("WGPU_ADAPTER_NAME").ok().map(|n| n.to_lowercase());
+        let adapter = match &wanted_name {
+            Some(name) => instance
+                .enumerate_adapters(backends)
+                .await
+                .into_iter()
+                .find(|a| a.get_info().name.to_lowercase().contains(name.as_str())),
+            None => instance
+                .request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: wgpu::PowerPreference::from_env()
+                        .unwrap_or(wgpu::PowerPreference::HighPerformance),
+                    ..Default::default()
+                })
+                .await
+                .ok(),
+        };
+        let Some(adapter) = adapter else {
+            return Err(GpuError::NoAdapter {
+                backends: format!("{backends:?}"),
+                name_note: wanted_name
+                    .map(|n| format!(", WGPU_ADAPTER_NAME contains {n:?}"))
+                    .unwrap_or_default(),
+            });
+        };
+        let info = adapter.get_info();
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let mut required_features = wgpu::Features::empty();
+        if timestamps {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("verdant"),
+                required_features,
+                required_limits: adapter.limits(),
+                ..Default::default()
+            })
+            .await
+            .map_err(|source| GpuError::RequestDevice {
+                adapter: info.name.clone(),
+                source,
+            })?;
+        Ok(Self {
+            instance,
+            adapter,
+            device,
+            queue,
+            info,
+            timestamps,
+        })
+    }
+
+    /// A one-line description: adapter name, backend and driver.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} ({:?}, {} {})",
+            self.info.name, self.info.backend, self.info.driver, self.info.driver_info
+        )
+    }
+
+    /// Blocks until all submitted work has finished.
+    pub fn wait_idle(&self) {
+        // An error here means the device was lost; the next submission reports it.
+        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+    }
+}

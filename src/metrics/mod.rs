@@ -1,0 +1,123 @@
+//! Measurements: percentiles of timings and image error by FLIP.
+
+use thiserror::Error;
+
+/// The `q`-quantile (0..=1) of `values` by linear interpolation between order statistics.
+/// `None` when there are no finite values.
+pub fn percentile(values: &[f64], q: f64) -> Option<f64> {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let pos = q.clamp(0.0, 1.0) * (v.len() - 1) as f64;
+    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
+    Some(v[lo] + (v[hi] - v[lo]) * (pos - lo as f64))
+}
+
+/// Median, 99th percentile and mean of a series.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Summary {
+    /// 50th percentile.
+    pub median: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Arithmetic mean.
+    pub mean: f64,
+    /// Largest value.
+    pub max: f64,
+}
+
+impl Summary {
+    /// Summarises `values`; all zero when empty.
+    pub fn of(values: &[f64]) -> Self {
+        if values.is_empty() {
+            return Self::default();
+        }
+        Self {
+            median: percentile(values, 0.5).unwrap_or(0.0),
+            p99: percentile(values, 0.99).unwrap_or(0.0),
+            mean: values.iter().sum::<f64>() / values.len() as f64,
+            max: values.iter().copied().fold(f64::MIN, f64::max),
+        }
+    }
+}
+
+/// Why two images could not be compared.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum ImageCompareError {
+    /// The images differ in size.
+    #[error("image sizes differ: reference {reference:?}, actual {actual:?}")]
+    SizeMismatch {
+        /// Width and height of the reference.
+        reference: (u32, u32),
+        /// Width and height of the actual image.
+        actual: (u32, u32),
+    },
+}
+
+/// The FLIP error of an image against its reference.
+#[derive(Clone, Debug)]
+pub struct FlipResult {
+    /// Mean FLIP error over all pixels (0 = identical, 1 = as different as can be).
+    pub mean: f32,
+    /// 99th percentile of the per-pixel error.
+    pub p99: f32,
+    /// Largest per-pixel error.
+    pub max: f32,
+    /// The error map coloured with the magma map, RGB8, for a difference image.
+    pub difference_rgb: Vec<u8>,
+}
+
+/// Compares two RGB8 images of the same size with NVIDIA's FLIP at the default viewing distance.
+pub fn flip_compare(reference: &image::RgbImage, actual: &image::RgbImage) -> Result<FlipResult, ImageCompareError> {
+    if reference.dimensions() != actual.dimensions() {
+        return Err(ImageCompareError::SizeMismatch {
+            reference: reference.dimensions(),
+            actual: actual.dimensions(),
+        });
+    }
+    let (w, h) = reference.dimensions();
+    let r = nv_flip::FlipImageRgb8::with_data(w, h, reference.as_raw());
+    let a = nv_flip::FlipImageRgb8::with_data(w, h, actual.as_raw());
+    let error = nv_flip::flip(r, a, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
+    let mut pool = nv_flip::FlipPool::from_image(&error);
+    Ok(FlipResult {
+        mean: pool.mean(),
+        p99: pool.get_percentile(0.99, true),
+        max: pool.max_value(),
+        difference_rgb: error.apply_color_lut(&nv_flip::magma_lut()).to_vec(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_interpolate() {
+        let v = [4.0, 1.0, 3.0, 2.0];
+        assert_eq!(percentile(&v, 0.0), Some(1.0));
+        assert_eq!(percentile(&v, 1.0), Some(4.0));
+        assert_eq!(percentile(&v, 0.5), Some(2.5));
+        assert_eq!(percentile(&[], 0.5), None);
+        let s = Summary::of(&v);
+        assert_eq!((s.median, s.mean, s.max), (2.5, 2.5, 4.0));
+    }
+
+    #[test]
+    fn flip_sees_identical_and_different_images() {
+        let a = image::RgbImage::from_fn(32, 32, |x, y| image::Rgb([(x * 8) as u8, (y * 8) as u8, 90]));
+        let same = flip_compare(&a, &a).unwrap();
+        assert_eq!(same.mean, 0.0);
+        let mut b = a.clone();
+        for p in b.pixels_mut().take(300) {
+            *p = image::Rgb([255, 255, 255]);
+        }
+        let diff = flip_compare(&a, &b).unwrap();
+        assert!(diff.mean > 0.05, "mean {}", diff.mean);
+        let small = image::RgbImage::new(8, 8);
+        assert!(flip_compare(&a, &small).is_err());
+    }
+}

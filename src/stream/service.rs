@@ -1,0 +1,240 @@
+//! The streamer: a service on its own tokio runtime that loads and decodes stored tiles.
+//!
+//! The frame sends the set of tiles it wants (with priorities) over a bounded channel and polls a
+//! second bounded channel for finished tiles; neither side ever waits for the other. Decoding
+//! runs on tokio's blocking pool (`spawn_blocking`), at most `max_in_flight` loads at a time, the
+//! most urgent first. A tile that leaves the wanted set is cancelled: if its load has not
+//! started it never starts, and if it has, its result is dropped and reported as cancelled.
+
+use std::collections::{HashMap, HashSet};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
+use tokio::sync::mpsc;
+use tokio::task::JoinSet;
+
+use crate::world::{TileData, TileId, World, WorldError};
+
+/// Where the streamer gets tiles from: the world on disk, or a test double.
+pub trait TileSource: Send + Sync + 'static {
+    /// Loads and decodes one stored tile. Runs on a blocking thread.
+    fn load(&self, id: TileId) -> Result<TileData, WorldError>;
+}
+
+impl TileSource for World {
+    fn load(&self, id: TileId) -> Result<TileData, WorldError> {
+        self.load_tile(id)
+    }
+}
+
+/// Limits of the streamer.
+#[derive(Clone, Copy, Debug)]
+pub struct StreamConfig {
+    /// Loads running at once.
+    pub max_in_flight: usize,
+    /// Capacity of the request channel (frame to streamer).
+    pub request_capacity: usize,
+    /// Capacity of the result channel (streamer to frame).
+    pub result_capacity: usize,
+}
+
+impl Default for StreamConfig {
+    fn default() -> Self {
+        Self {
+            max_in_flight: 8,
+            request_capacity: 4,
+            result_capacity: 32,
+        }
+    }
+}
+
+/// A tile wanted by the frame; lower `priority` is loaded first.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Want {
+    /// The tile.
+    pub id: TileId,
+    /// Urgency: lower first (e.g. distance to the camera, weighted by view direction).
+    pub priority: f32,
+}
+
+/// What the streamer hands back.
+#[derive(Debug)]
+pub enum Loaded {
+    /// A decoded tile.
+    Tile(Arc<TileData>),
+    /// The load failed; the message names the file and the problem.
+    Failed {
+        /// The tile.
+        id: TileId,
+        /// What went wrong.
+        error: String,
+    },
+}
+
+/// Counters shared by the streamer and the frame.
+#[derive(Debug, Default)]
+struct Counters {
+    in_flight: AtomicU64,
+    completed: AtomicU64,
+    cancelled: AtomicU64,
+    failed: AtomicU64,
+}
+
+/// A snapshot of the streamer's counters.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StreamStats {
+    /// Loads running now.
+    pub in_flight: u64,
+    /// Loads finished and handed back.
+    pub completed: u64,
+    /// Loads dropped because their tile left the wanted set.
+    pub cancelled: u64,
+    /// Loads that failed.
+    pub failed: u64,
+}
+
+/// Handle of the streamer service, owned by the frame loop.
+pub struct Streamer {
+    requests: mpsc::Sender<Vec<Want>>,
+    results: mpsc::Receiver<Loaded>,
+    counters: Arc<Counters>,
+    pending: Option<Vec<Want>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Streamer {
+    /// Starts the service on a runtime thread of its own.
+    pub fn start(source: Arc<dyn TileSource>, config: StreamConfig) -> std::io::Result<Self> {
+        let (req_tx, req_rx) = mpsc::channel(config.request_capacity.max(1));
+        let (res_tx, res_rx) = mpsc::channel(config.result_capacity.max(1));
+        let counters = Arc::new(Counters::default());
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .max_blocking_threads(config.max_in_flight.max(1))
+            .thread_name("verdant-stream")
+            .build()?;
+        let service_counters = Arc::clone(&counters);
+        let thread = std::thread::Builder::new()
+            .name("verdant-streamer".into())
+            .spawn(move || {
+                runtime.block_on(serve(source, config, req_rx, res_tx, service_counters));
+            })?;
+        Ok(Self {
+            requests: req_tx,
+            results: res_rx,
+            counters,
+            pending: None,
+            thread: Some(thread),
+        })
+    }
+
+    /// Tells the streamer which tiles the frame wants now (replacing the last set). Never
+    /// blocks: if the channel is full, the set is sent on a later call.
+    pub fn want(&mut self, wants: Vec<Want>) {
+        self.pending = Some(wants);
+        self.flush();
+    }
+
+    fn flush(&mut self) {
+        if let Some(w) = self.pending.take() {
+            match self.requests.try_send(w) {
+                Ok(()) => {}
+                Err(mpsc::error::TrySendError::Full(w)) => self.pending = Some(w),
+                Err(mpsc::error::TrySendError::Closed(_)) => {}
+            }
+        }
+    }
+
+    /// Finished loads, without waiting.
+    pub fn poll(&mut self) -> Vec<Loaded> {
+        self.flush();
+        let mut out = Vec::new();
+        while let Ok(l) = self.results.try_recv() {
+            out.push(l);
+        }
+        out
+    }
+
+    /// The counters now.
+    pub fn stats(&self) -> StreamStats {
+        let c = &self.counters;
+        StreamStats {
+            in_flight: c.in_flight.load(Ordering::Relaxed),
+            completed: c.completed.load(Ordering::Relaxed),
+            cancelled: c.cancelled.load(Ordering::Relaxed),
+            failed: c.failed.load(Ordering::Relaxed),
+        }
+    }
+}
+
+impl Drop for Streamer {
+    fn drop(&mut self) {
+        // Closing the request channel ends the service loop; in-flight decodes finish on their own.
+        let (tx, _) = mpsc::channel(1);
+        drop(std::mem::replace(&mut self.requests, tx));
+        self.results.close();
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+async fn serve(
+    source: Arc<dyn TileSource>,
+    config: StreamConfig,
+    mut requests: mpsc::Receiver<Vec<Want>>,
+    results: mpsc::Sender<Loaded>,
+    counters: Arc<Counters>,
+) {
+    let mut wanted: HashMap<TileId, f32> = HashMap::new();
+    let mut running: HashSet<TileId> = HashSet::new();
+    let mut tasks: JoinSet<(TileId, Result<TileData, WorldError>)> = JoinSet::new();
+    loop {
+        // Start the most urgent wanted tiles that are not running yet.
+        if running.len() < config.max_in_flight {
+            let mut queue: Vec<(TileId, f32)> = wanted
+                .iter()
+                .filter(|(id, _)| !running.contains(id))
+                .map(|(id, p)| (*id, *p))
+                .collect();
+            queue.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+            for (id, _) in queue.into_iter().take(config.max_in_flight - running.len()) {
+                running.insert(id);
+                counters.in_flight.fetch_add(1, Ordering::Relaxed);
+                let source = Arc::clone(&source);
+                tasks.spawn_blocking(move || (id, source.load(id)));
+            }
+        }
+        tokio::select! {
+            request = requests.recv() => match request {
+                Some(wants) => {
+                    wanted = wants.into_iter().map(|w| (w.id, w.priority)).collect();
+                }
+                None => break,
+            },
+            Some(joined) = tasks.join_next(), if !tasks.is_empty() => {
+                counters.in_flight.fetch_sub(1, Ordering::Relaxed);
+                let Ok((id, result)) = joined else { continue };
+                running.remove(&id);
+                if wanted.remove(&id).is_none() {
+                    // Left the wanted set while it loaded: dropped, never inserted.
+                    counters.cancelled.fetch_add(1, Ordering::Relaxed);
+                    continue;
+                }
+                let message = match result {
+                    Ok(tile) => {
+                        counters.completed.fetch_add(1, Ordering::Relaxed);
+                        Loaded::Tile(Arc::new(tile))
+                    }
+                    Err(e) => {
+                        counters.failed.fetch_add(1, Ordering::Relaxed);
+                        Loaded::Failed { id, error: e.to_string() }
+                    }
+                };
+                if results.send(message).await.is_err() {
+                    break;
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,379 @@
+//! Terrain drawing: a regular grid per tile, displaced by the tile atlas's heights, lit by the
+//! sun and a sky hemisphere and fogged toward the horizon; then the sky where no terrain is.
+//!
+//! Everything is drawn camera-relative (see `shaders/terrain.wgsl`).
+
+use bytemuck::{Pod, Zeroable};
+use wgpu::util::DeviceExt;
+use glam::{DVec2, Mat4, Vec3};
+
+use crate::flythrough::Camera;
+use crate::gpu::TileAtlas;
+use crate::world::{Manifest, Pyramid, Sky, TileId};
+
+/// Colour target format of the renderer.
+pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+/// Depth format (reverse-Z: cleared to 0, greater is nearer).
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// How many grass types the shader's colour table holds.
+pub const MAX_GRASS_TYPES: usize = 16;
+
+/// Per-frame uniforms; mirrors `Frame` in `shaders/terrain.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct FrameUniforms {
+    view_proj: [[f32; 4]; 4],
+    inv_view_proj: [[f32; 4]; 4],
+    camera: [f32; 4],
+    sun_dir: [f32; 4],
+    sun_color: [f32; 4],
+    sky_color: [f32; 4],
+    horizon_color: [f32; 4],
+    grid: [u32; 4],
+    ground_colors: [[f32; 4]; MAX_GRASS_TYPES],
+}
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 480);
+
+/// One tile (or the part of an ancestor standing in for it) to draw; mirrors `TileDraw` in
+/// `shaders/terrain.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct TileDraw {
+    /// South-west corner of the drawn area relative to the camera, metres.
+    pub origin: [f32; 2],
+    /// Metres between grid vertices.
+    pub cell_size: f32,
+    /// Atlas slot the data comes from.
+    pub layer: u32,
+    /// Atlas texel at the drawn area's south-west corner.
+    pub tex_origin: [f32; 2],
+    /// Atlas texels per grid cell (1, or 1/2^k for an ancestor k levels up).
+    pub tex_step: f32,
+    /// Distance at which morphing toward the coarser grid starts, metres.
+    pub morph_start: f32,
+}
+const _: () = assert!(std::mem::size_of::<TileDraw>() == 32);
+
+impl TileDraw {
+    /// The draw of the tile `id`, whose data sits in atlas slot `layer` and belongs to the tile
+    /// `source` (`id` itself, or an ancestor standing in for it), seen from `eye`.
+    /// Positions are made relative to the eye in f64, so the f32 that reaches the GPU is small.
+    pub fn new(
+        pyramid: &Pyramid,
+        id: TileId,
+        source: TileId,
+        layer: u32,
+        eye: DVec2,
+        morph_start: f32,
+    ) -> Self {
+        let b = pyramid.bounds(id);
+        let rel = (b.min - eye).as_vec2();
+        let up = u32::from(id.level.saturating_sub(source.level));
+        let scale = 1.0 / f64::from(1u32 << up);
+        // Offset of `id` inside `source`, in source cells.
+        let n = f64::from(pyramid.tile_cells);
+        let (fx, fy) = (
+            f64::from(id.x) * scale - f64::from(source.x),
+            f64::from(id.y) * scale - f64::from(source.y),
+        );
+        let border = f64::from(pyramid.border);
+        Self {
+            origin: rel.to_array(),
+            cell_size: pyramid.cell_size_m(id.level) as f32,
+            layer,
+            tex_origin: [(border + fx * n) as f32, (border + fy * n) as f32],
+            tex_step: scale as f32,
+            morph_start,
+        }
+    }
+}
+
+/// Unit vector toward the sun; the manifest's azimuth runs counter-clockwise from east.
+pub fn sun_direction(sky: &Sky) -> Vec3 {
+    let (az, el) = (sky.sun_azimuth_deg.to_radians(), sky.sun_elevation_deg.to_radians());
+    Vec3::new(az.cos() * el.cos(), az.sin() * el.cos(), el.sin()).normalize()
+}
+
+/// Pipelines and buffers of the terrain and sky passes.
+pub struct TerrainRenderer {
+    terrain: wgpu::RenderPipeline,
+    sky: wgpu::RenderPipeline,
+    bind_group: wgpu::BindGroup,
+    frame_buffer: wgpu::Buffer,
+    tile_buffer: wgpu::Buffer,
+    index_buffer: wgpu::Buffer,
+    index_count: u32,
+    max_tiles: u32,
+    uniforms: FrameUniforms,
+}
+
+impl TerrainRenderer {
+    /// Builds the pipelines for `manifest`'s world, reading tiles from `atlas`; at most
+    /// `max_tiles` tiles are drawn a frame.
+    pub fn new(device: &wgpu::Device, manifest: &Manifest, atlas: &TileAtlas, max_tiles: u32) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("terrain.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/terrain.wgsl").into()),
+        });
+        let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("terrain frame"),
+            size: std::mem::size_of::<FrameUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let tile_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("terrain tiles"),
+            size: u64::from(max_tiles) * std::mem::size_of::<TileDraw>() as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let n = manifest.pyramid.tile_cells;
+        let indices = grid_indices(n + 3);
+        let index_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("terrain grid indices"),
+            contents: bytemuck::cast_slice(&indices),
+            usage: wgpu::BufferUsages::INDEX,
+        });
+
+        let tex_entry = |binding, sample_type| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::VERTEX,
+            ty: wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension: wgpu::TextureViewDimension::D2Array,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("terrain"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                tex_entry(2, wgpu::TextureSampleType::Float { filterable: false }),
+                tex_entry(3, wgpu::TextureSampleType::Uint),
+            ],
+        });
+        let view = |t: &wgpu::Texture| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
+        let (hv, gv) = (view(&atlas.heights), view(&atlas.grass));
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("terrain"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: frame_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: tile_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&hv),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&gv),
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("terrain"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |label, vs, fs, depth_write, compare, cull| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some(vs),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState {
+                    cull_mode: cull,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(depth_write),
+                    depth_compare: Some(compare),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(fs),
+                    compilation_options: Default::default(),
+                    targets: &[Some(COLOR_FORMAT.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let terrain = pipeline(
+            "terrain",
+            "vs_terrain",
+            "fs_terrain",
+            true,
+            wgpu::CompareFunction::Greater,
+            Some(wgpu::Face::Back),
+        );
+        let sky = pipeline("sky", "vs_sky", "fs_sky", false, wgpu::CompareFunction::Equal, None);
+
+        let mut ground_colors = [[0.0; 4]; MAX_GRASS_TYPES];
+        for (slot, t) in ground_colors.iter_mut().zip(&manifest.grass_types) {
+            let c = t.ground_color;
+            *slot = [c[0], c[1], c[2], 1.0];
+        }
+        let sky_cfg = &manifest.sky;
+        // Manifest colours are linear RGB.
+        let lin4 = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
+        let uniforms = FrameUniforms {
+            view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            inv_view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            camera: [0.0, sky_cfg.fog_distance_m, 2.0, 0.0],
+            sun_dir: sun_direction(sky_cfg).extend(0.0).to_array(),
+            sun_color: lin4(sky_cfg.sun_color),
+            sky_color: lin4(sky_cfg.sky_color),
+            horizon_color: lin4(sky_cfg.horizon_color),
+            grid: [
+                n,
+                manifest.pyramid.border,
+                manifest.grass_types.len().clamp(1, MAX_GRASS_TYPES) as u32,
+                0,
+            ],
+            ground_colors,
+        };
+        Self {
+            terrain,
+            sky,
+            bind_group,
+            frame_buffer,
+            tile_buffer,
+            index_buffer,
+            index_count: indices.len() as u32,
+            max_tiles,
+            uniforms,
+        }
+    }
+
+    /// Most tiles a frame can draw.
+    pub fn max_tiles(&self) -> u32 {
+        self.max_tiles
+    }
+
+    /// Writes this frame's camera and tile list. Returns how many tiles will be drawn
+    /// (`draws` past `max_tiles` are dropped).
+    pub fn prepare(&mut self, queue: &wgpu::Queue, camera: &Camera, aspect: f32, draws: &[TileDraw]) -> u32 {
+        let view_proj = camera.view_proj_relative(aspect);
+        self.uniforms.view_proj = view_proj.to_cols_array_2d();
+        self.uniforms.inv_view_proj = view_proj.inverse().to_cols_array_2d();
+        self.uniforms.camera[0] = camera.position.z as f32;
+        queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&self.uniforms));
+        let n = draws.len().min(self.max_tiles as usize);
+        if n > 0 {
+            queue.write_buffer(&self.tile_buffer, 0, bytemuck::cast_slice(&draws[..n]));
+        }
+        n as u32
+    }
+
+    /// Records the terrain (`tiles` instances from [`Self::prepare`]) and then the sky.
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, tiles: u32) {
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        if tiles > 0 {
+            pass.set_pipeline(&self.terrain);
+            pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..self.index_count, 0, 0..tiles);
+        }
+        pass.set_pipeline(&self.sky);
+        pass.draw(0..3, 0..1);
+    }
+}
+
+/// Triangle indices of a `row` x `row` vertex grid, counter-clockwise seen from above.
+fn grid_indices(row: u32) -> Vec<u32> {
+    let mut out = Vec::with_capacity(((row - 1) * (row - 1) * 6) as usize);
+    for j in 0..row - 1 {
+        for i in 0..row - 1 {
+            let a = j * row + i;
+            let (b, c, d) = (a + 1, a + row, a + row + 1);
+            out.extend_from_slice(&[a, b, d, a, d, c]);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_triangles_face_up() {
+        let idx = grid_indices(3);
+        assert_eq!(idx.len(), 2 * 2 * 6);
+        let pos = |v: u32| Vec3::new((v % 3) as f32, (v / 3) as f32, 0.0);
+        for tri in idx.chunks(3) {
+            let (a, b, c) = (pos(tri[0]), pos(tri[1]), pos(tri[2]));
+            assert!((b - a).cross(c - a).z > 0.0);
+        }
+    }
+
+    fn pyramid() -> Pyramid {
+        Pyramid {
+            root_tile_size_m: 65536.0,
+            root_tiles: [1024, 1],
+            tile_cells: 64,
+            border: 2,
+            stored_levels: 4,
+            derived_levels: 0,
+        }
+    }
+
+    #[test]
+    fn camera_relative_origin_keeps_precision_far_from_the_world_origin() {
+        let p = pyramid();
+        let id = TileId::new(0, 600, 0);
+        let eye = DVec2::new(600.0 * 65536.0 - 99.75, 7.5);
+        let d = TileDraw::new(&p, id, id, 3, eye, 100.0);
+        assert_eq!(d.origin, [99.75, -7.5]);
+        assert_eq!((d.tex_origin, d.tex_step, d.layer), ([2.0, 2.0], 1.0, 3));
+    }
+
+    #[test]
+    fn an_ancestor_stands_in_with_the_right_texels() {
+        let p = pyramid();
+        let id = TileId::new(2, 3, 1); // level-0 tile (0, 0), quarter (3, 1) of 4x4
+        let d = TileDraw::new(&p, id, TileId::new(0, 0, 0), 0, DVec2::ZERO, 100.0);
+        assert_eq!(d.tex_step, 0.25);
+        assert_eq!(d.tex_origin, [2.0 + 48.0, 2.0 + 16.0]);
+        assert_eq!(d.cell_size, (65536.0 / 4.0 / 64.0) as f32);
+    }
+}
