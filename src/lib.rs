@@ -1,0 +1,3 @@
+//! verdant: a streaming open-world terrain service with GPU grass.
+
+pub mod world;
