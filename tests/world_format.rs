@@ -217,6 +217,14 @@ fn manifest_absurd_sizes() {
             "{to}: {err}"
         );
     }
+    let deep = VALID
+        .replace("root_tiles = [2, 2]", "root_tiles = [4096, 1]")
+        .replace("derived_levels = 1", "derived_levels = 20");
+    let err = parse(&deep).unwrap_err();
+    assert!(
+        matches!(err, WorldError::OutOfRange { ref field, .. } if field == "pyramid.root_tiles[0]"),
+        "{err}"
+    );
     let err = broken("root_tiles = [2, 2]", "root_tiles = [100, 100]");
     assert!(
         matches!(err, WorldError::TooManyTiles { count: 10_000, .. }),

@@ -583,7 +583,7 @@ fn cut_tile(pyramid: &Pyramid, painted: &Painted, id: TileId) -> TileData {
 }
 
 /// Height of the camera above the highest terrain near the overview path, metres.
-const OVERVIEW_CLEARANCE_M: f64 = 280.0;
+const OVERVIEW_CLEARANCE_M: f64 = 220.0;
 /// Height of the camera above the highest terrain near the low path, metres.
 const LOW_CLEARANCE_M: f64 = 32.0;
 
@@ -680,7 +680,7 @@ fn overview_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
 }
 
 /// A 32 s pass 30-60 m above the ground along the grassiest, gentlest 1.6 km line found in the
-/// data area.
+/// data area, heading toward the higher ground.
 fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     let grid = &painted.grid;
     const LENGTH: f64 = 1600.0;
@@ -722,7 +722,11 @@ fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
             }
         }
     }
-    let (_, c, dir) = best;
+    let (_, c, mut dir) = best;
+    // Fly toward the higher ground, so that the view ahead holds hills rather than plain.
+    if grid.height_bilinear(c - dir * 3000.0) > grid.height_bilinear(c + dir * 3000.0) {
+        dir = -dir;
+    }
     let times: Vec<f64> = (0..KEYS)
         .map(|k| DURATION * k as f64 / (KEYS - 1) as f64)
         .collect();

@@ -110,15 +110,15 @@ impl Dem {
                 value: sidecar.height_offset_m,
             });
         }
-        if let Some(order) = &sidecar.row_order {
-            if !order.contains("north") {
-                return Err(WorldError::BadSidecar {
-                    path: sidecar_file,
-                    message: format!(
-                        "row_order \"{order}\": only \"first row is the northern edge\" is supported"
-                    ),
-                });
-            }
+        if let Some(order) = &sidecar.row_order
+            && !order.contains("north")
+        {
+            return Err(WorldError::BadSidecar {
+                path: sidecar_file,
+                message: format!(
+                    "row_order \"{order}\": only \"first row is the northern edge\" is supported"
+                ),
+            });
         }
         for (field, value) in [("width", sidecar.width), ("height", sidecar.height)] {
             if value < 2 {

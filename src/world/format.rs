@@ -452,14 +452,14 @@ pub(crate) fn decode_png(
                 found: describe_color(decoder.original_color_type()),
             }));
         }
-        if let Some(expected) = expected_dims {
-            if [width, height] != expected {
-                return Ok(Err(WorldError::WrongDimensions {
-                    path: path.to_path_buf(),
-                    expected,
-                    found: [width, height],
-                }));
-            }
+        if let Some(expected) = expected_dims
+            && [width, height] != expected
+        {
+            return Ok(Err(WorldError::WrongDimensions {
+                path: path.to_path_buf(),
+                expected,
+                found: [width, height],
+            }));
         }
         if u64::from(width) * u64::from(height) > MAX_PNG_PIXELS {
             return Err(format!(

@@ -226,6 +226,16 @@ impl Manifest {
                 max: MAX_ROOT_TILES,
             });
         }
+        for axis in 0..2 {
+            // Tile coordinates of the finest level, derived or stored, must fit a u32.
+            if u64::from(p.root_tiles[axis]) << (levels - 1) > u64::from(u32::MAX) {
+                return Err(v.out_of_range(
+                    &format!("pyramid.root_tiles[{axis}]"),
+                    p.root_tiles[axis],
+                    "small enough that the finest level's tile count fits in 32 bits",
+                ));
+            }
+        }
         let finest = roots << (2 * (u32::from(p.stored_levels) - 1));
         if finest > MAX_FINEST_TILES {
             return Err(WorldError::TooManyTiles {

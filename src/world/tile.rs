@@ -195,7 +195,7 @@ impl Pyramid {
                 None
             } else if f < f64::from(n) {
                 Some(f as u32)
-            } else if v == f64::from(n) * size {
+            } else if n > 0 && v == f64::from(n) * size {
                 Some(n - 1)
             } else {
                 None
