@@ -1,4 +1,5 @@
-//! Helpers shared by the integration tests.
+//! Helpers shared by the integration tests: GPU, reference images, synthetic DEMs, terrain
+//! lookups on baked worlds.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
@@ -6,6 +7,9 @@ use std::path::{Path, PathBuf};
 use verdant::gpu::GpuContext;
 use verdant::metrics::flip_compare;
 
+use std::collections::HashMap;
+use glam::DVec2;
+use verdant::world::{CameraPath, TileData, TileId, World};
 /// The repository's root.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -97,5 +101,122 @@ pub fn copy_dir(from: &Path, to: &Path) {
         } else {
             std::fs::copy(entry.path(), &target).unwrap();
         }
+    }
+}
+
+/// Writes a 16-bit DEM `name.png` with its sidecar into `dir`: `width x height` samples,
+/// row 0 north, height at sample (c, r) = `f(c * cell_ew, (height - 1 - r) * cell_ns)`,
+/// stored as `round((h - offset) / scale)`.
+pub fn write_dem(
+    dir: &Path,
+    name: &str,
+    [width, height]: [u32; 2],
+    [cell_ew, cell_ns]: [f64; 2],
+    [offset, scale]: [f64; 2],
+    f: impl Fn(f64, f64) -> f64,
+) -> PathBuf {
+    let mut img = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::new(width, height);
+    for r in 0..height {
+        for c in 0..width {
+            let h = f(f64::from(c) * cell_ew, f64::from(height - 1 - r) * cell_ns);
+            let v = ((h - offset) / scale).round().clamp(0.0, 65535.0) as u16;
+            img.put_pixel(c, r, image::Luma([v]));
+        }
+    }
+    let png = dir.join(format!("{name}.png"));
+    img.save(&png).unwrap();
+    write_sidecar(
+        dir,
+        name,
+        [width, height],
+        [cell_ew, cell_ns],
+        [offset, scale],
+    );
+    png
+}
+
+/// Writes only the sidecar `name.json`.
+pub fn write_sidecar(
+    dir: &Path,
+    name: &str,
+    [width, height]: [u32; 2],
+    [cell_ew, cell_ns]: [f64; 2],
+    [offset, scale]: [f64; 2],
+) {
+    let json = serde_json::json!({
+        "file": format!("{name}.png"),
+        "width": width,
+        "height": height,
+        "row_order": "first row is the northern edge",
+        "cell_size_m": { "east_west": cell_ew, "north_south": cell_ns },
+        "height_offset_m": offset,
+        "height_scale_m": scale,
+        "place": "a synthetic test landscape",
+    });
+    std::fs::write(dir.join(format!("{name}.json")), json.to_string()).unwrap();
+}
+
+/// All stored tiles of a world, decoded, for lookups across tiles.
+pub struct Terrain {
+    pub world: World,
+    pub tiles: HashMap<TileId, TileData>,
+}
+
+impl Terrain {
+    pub fn load(dir: &Path) -> Terrain {
+        let world = World::open(dir).unwrap();
+        let tiles = world
+            .stored_tiles()
+            .map(|id| (id, world.load_tile(id).unwrap()))
+            .collect();
+        Terrain { world, tiles }
+    }
+
+    /// Height at `p` by bilinear interpolation in the finest stored level.
+    pub fn height(&self, p: DVec2) -> f64 {
+        let pyramid = &self.world.manifest.pyramid;
+        let level = pyramid.stored_levels - 1;
+        let id = pyramid.tile_at(level, p).expect("point inside the world");
+        let tile = &self.tiles[&id];
+        let cell = pyramid.cell_size_m(level);
+        let u = (p - pyramid.bounds(id).min) / cell + f64::from(pyramid.border);
+        let (i, j) = (u.x.floor() as u32, u.y.floor() as u32);
+        let (fu, fv) = (u.x - f64::from(i), u.y - f64::from(j));
+        let h = |i, j| f64::from(tile.height_at(i, j));
+        let s = h(i, j) * (1.0 - fu) + h(i + 1, j) * fu;
+        let n = h(i, j + 1) * (1.0 - fu) + h(i + 1, j + 1) * fu;
+        s * (1.0 - fv) + n * fv
+    }
+
+    /// Clearance of the camera above the terrain at `samples` points per key interval along
+    /// `path`, with positions interpolated linearly between keys.
+    pub fn clearances(&self, path: &CameraPath, samples: usize) -> Vec<f64> {
+        let mut out = Vec::new();
+        for w in path.keys.windows(2) {
+            let (a, b) = (w[0].position_m, w[1].position_m);
+            for s in 0..samples {
+                let t = s as f64 / samples as f64;
+                let p: [f64; 3] = std::array::from_fn(|k| a[k] + (b[k] - a[k]) * t);
+                out.push(p[2] - self.height(DVec2::new(p[0], p[1])));
+            }
+        }
+        out
+    }
+}
+
+/// A tiny deterministic random generator (xorshift64*).
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+
+    /// Uniform in 0..1.
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }

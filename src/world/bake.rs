@@ -1,0 +1,780 @@
+//! The baker: turns a DEM ([`Dem`]) into a world: a pyramid of stored tiles and `world.toml`.
+//!
+//! 1. The DEM is resampled (Catmull-Rom bicubic in its own, non-square grid) to square cells at
+//!    the finest stored level, over the whole root grid plus a margin for the tile borders of
+//!    every level. Beyond the DEM the height of the nearest edge point is repeated.
+//! 2. Grass type and density are painted on that grid from slope, altitude and value noise
+//!    seeded by [`BakeOptions::seed`]: no grass where the slope exceeds 35 degrees, lush meadow
+//!    and tall grass low down, dry grass high up and on dry (noise) ground.
+//! 3. Coarser levels are point samples of the finest grid: the sample at level `L` is the
+//!    sample at the same position at level `L + 1` (every other one). Coarse and fine tiles
+//!    therefore agree exactly where their samples coincide, so a fine tile morphed to its
+//!    parent's resolution meets the parent without cracks, and children derived from a parent
+//!    start from the parent's own values.
+//! 4. Every tile of every stored level is cut from that one global grid (borders included), so
+//!    neighbours share identical edge and border samples, and written through temporary files.
+//! 5. Two camera paths are computed from the terrain ("overview" and "low") and `world.toml` is
+//!    written last, so a world with a manifest is a complete world.
+//!
+//! The bake is deterministic: the same DEM, options and seed give byte-identical files.
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::Instant;
+
+use glam::DVec2;
+
+use super::dem::Dem;
+use super::error::WorldError;
+use super::format::{TileData, write_atomic, write_tile};
+use super::manifest::{CameraKey, CameraPath, GrassType, Manifest, Sky, WindDefaults};
+use super::tile::{Pyramid, TileId};
+
+/// Shared samples beyond each tile edge in baked worlds.
+pub const BAKE_BORDER: u32 = 2;
+/// Levels finer than the stored ones that baked worlds ask the runtime to derive.
+pub const BAKE_DERIVED_LEVELS: u8 = 3;
+/// Steepest slope that carries grass, degrees.
+pub const MAX_GRASS_SLOPE_DEG: f64 = 35.0;
+/// Largest finest-level grid the baker will hold in memory, samples.
+const MAX_GRID_SAMPLES: u64 = 1 << 30;
+
+/// What to bake, and how.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakeOptions {
+    /// The DEM image; its sidecar sits beside it with the extension `.json`.
+    pub dem: PathBuf,
+    /// The world directory to write (created where needed; other files in it are kept).
+    pub out: PathBuf,
+    /// World name; by default the name of `out`.
+    pub name: Option<String>,
+    /// Cell size at the finest stored level, metres; by default the DEM's smaller cell size
+    /// rounded to 1, 2, 2.5 or 5 times a power of ten (25 m for 24.585 m).
+    pub cell_size_m: Option<f64>,
+    /// Cells per tile edge (power of two, 8..=1024).
+    pub tile_cells: u32,
+    /// Stored levels (1..=12).
+    pub stored_levels: u8,
+    /// Seed of the grass noise.
+    pub seed: u64,
+}
+
+impl Default for BakeOptions {
+    fn default() -> Self {
+        BakeOptions {
+            dem: PathBuf::new(),
+            out: PathBuf::new(),
+            name: None,
+            cell_size_m: None,
+            tile_cells: 128,
+            stored_levels: 3,
+            seed: 1,
+        }
+    }
+}
+
+/// The stages of a bake, reported to the progress callback.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum BakeStage {
+    /// Reading the DEM (total 1).
+    LoadDem,
+    /// Resampling the DEM to the finest grid (total = grid rows).
+    Resample,
+    /// Painting grass type and density (total = grid rows).
+    Paint,
+    /// Computing camera paths (total = paths).
+    Paths,
+    /// Writing tiles (total = stored tiles).
+    WriteTiles,
+    /// Writing `world.toml` (total 1).
+    WriteManifest,
+}
+
+/// What a bake did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakeReport {
+    /// Tiles written (each is three files).
+    pub tiles_written: u64,
+    /// Stored levels.
+    pub levels: u8,
+    /// Extent of the data area, metres.
+    pub extent_m: [f64; 2],
+    /// Lowest and highest stored height, metres.
+    pub height_range_m: [f32; 2],
+    /// Wall-clock time of the bake.
+    pub seconds: f64,
+}
+
+/// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
+/// work goes on; the library prints nothing.
+pub fn bake(
+    opts: &BakeOptions,
+    progress: &mut dyn FnMut(BakeStage, u64, u64),
+) -> Result<BakeReport, WorldError> {
+    let start = Instant::now();
+    let manifest_path = opts.out.join("world.toml");
+
+    progress(BakeStage::LoadDem, 0, 1);
+    let dem = Dem::load(&opts.dem)?;
+    progress(BakeStage::LoadDem, 1, 1);
+
+    let cell = match opts.cell_size_m {
+        Some(c) => c,
+        None => nice_cell_size(dem.cell_ew_m.min(dem.cell_ns_m)),
+    };
+    if !cell.is_finite() {
+        return Err(WorldError::NonFinite {
+            path: manifest_path,
+            field: "cell_size_m (bake option)".into(),
+            value: cell,
+        });
+    }
+    if cell <= 0.0 {
+        return Err(WorldError::NonPositive {
+            path: manifest_path,
+            field: "cell_size_m (bake option)".into(),
+            value: cell,
+        });
+    }
+
+    // Millimetres are plenty, and keep the manifest free of float noise.
+    let extent = dem.extent_m().map(|e| round_to(e, 3));
+    let finest = opts.stored_levels.saturating_sub(1);
+    let root_size = cell * f64::from(opts.tile_cells) * 2f64.powi(i32::from(finest));
+    let root_tiles =
+        extent.map(|e| ((e / root_size).ceil().max(1.0)).min(f64::from(u32::MAX)) as u32);
+    let pyramid = Pyramid {
+        root_tile_size_m: root_size,
+        root_tiles,
+        tile_cells: opts.tile_cells,
+        border: BAKE_BORDER,
+        stored_levels: opts.stored_levels,
+        derived_levels: BAKE_DERIVED_LEVELS,
+    };
+    let name = opts.name.clone().unwrap_or_else(|| default_name(opts));
+    let mut manifest = Manifest {
+        name,
+        description: description(&dem, &opts.dem, cell),
+        extent_m: extent,
+        pyramid,
+        height_range_m: [0.0, 1.0],
+        grass_types: default_grass_types(),
+        wind: WindDefaults::default(),
+        sky: Sky::default(),
+        paths: Vec::new(),
+    };
+    // Refuse absurd sizes before allocating anything.
+    manifest.validate(&manifest_path)?;
+
+    let grid = Grid::resample(&dem, &manifest.pyramid, &opts.dem, progress)?;
+    let height_range = grid.height_range();
+    manifest.height_range_m = height_range;
+
+    let painted = grid.paint(height_range, opts.seed, progress);
+    progress(BakeStage::Paths, 0, 2);
+    let overview = overview_path(&painted, extent);
+    progress(BakeStage::Paths, 1, 2);
+    let low = low_path(&painted, extent);
+    progress(BakeStage::Paths, 2, 2);
+    manifest.paths = vec![overview, low];
+    manifest.validate(&manifest_path)?;
+
+    let tiles_written = write_all_tiles(&opts.out, &manifest.pyramid, &painted, progress)?;
+
+    progress(BakeStage::WriteManifest, 0, 1);
+    write_atomic(&manifest_path, manifest.to_toml().as_bytes())?;
+    progress(BakeStage::WriteManifest, 1, 1);
+
+    Ok(BakeReport {
+        tiles_written,
+        levels: manifest.pyramid.stored_levels,
+        extent_m: extent,
+        height_range_m: height_range,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The grass types of a baked world: 0 bare rock, 1 meadow, 2 tall grass, 3 dry grass.
+pub fn default_grass_types() -> Vec<GrassType> {
+    vec![
+        GrassType {
+            name: "bare".into(),
+            ground_color: [0.30, 0.27, 0.23],
+            base_color: [0.30, 0.27, 0.23],
+            tip_color: [0.30, 0.27, 0.23],
+            height_m: [0.0, 0.0],
+            width_m: [0.0, 0.0],
+            stiffness: 1.0,
+        },
+        GrassType {
+            name: "meadow".into(),
+            ground_color: [0.10, 0.16, 0.05],
+            base_color: [0.04, 0.14, 0.02],
+            tip_color: [0.22, 0.45, 0.08],
+            height_m: [0.15, 0.35],
+            width_m: [0.008, 0.014],
+            stiffness: 0.6,
+        },
+        GrassType {
+            name: "tall grass".into(),
+            ground_color: [0.09, 0.13, 0.05],
+            base_color: [0.05, 0.12, 0.02],
+            tip_color: [0.32, 0.42, 0.10],
+            height_m: [0.5, 1.1],
+            width_m: [0.010, 0.018],
+            stiffness: 0.35,
+        },
+        GrassType {
+            name: "dry grass".into(),
+            ground_color: [0.28, 0.21, 0.10],
+            base_color: [0.25, 0.18, 0.06],
+            tip_color: [0.70, 0.52, 0.22],
+            height_m: [0.25, 0.6],
+            width_m: [0.006, 0.012],
+            stiffness: 0.5,
+        },
+    ]
+}
+
+/// Rounds a cell size to 1, 2, 2.5 or 5 times a power of ten, whichever is nearest in ratio.
+pub fn nice_cell_size(c: f64) -> f64 {
+    if !(c.is_finite() && c > 0.0) {
+        return c;
+    }
+    let base = 10f64.powf(c.log10().floor());
+    [1.0, 2.0, 2.5, 5.0, 10.0]
+        .map(|m| m * base)
+        .into_iter()
+        .min_by(|a, b| (a / c).ln().abs().total_cmp(&(b / c).ln().abs()))
+        .unwrap_or(c)
+}
+
+fn default_name(opts: &BakeOptions) -> String {
+    opts.out
+        .file_name()
+        .or_else(|| opts.dem.file_stem())
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "world".into())
+}
+
+fn description(dem: &Dem, dem_path: &Path, cell: f64) -> String {
+    let file = dem_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut text = String::new();
+    if !dem.place.is_empty() {
+        text.push_str(dem.place.trim_end_matches('.'));
+        text.push_str(". ");
+    }
+    text.push_str(&format!(
+        "Baked from {file} ({}x{} samples of {} m x {} m) at {cell} m cells.",
+        dem.width, dem.height, dem.cell_ew_m, dem.cell_ns_m
+    ));
+    if !dem.source.is_empty() {
+        text.push(' ');
+        text.push_str(&dem.source);
+    }
+    text
+}
+
+/// The finest stored level over the whole root grid, with a margin wide enough for the border
+/// samples of every coarser level. Array index `(a, b)` is global sample `(a - margin,
+/// b - margin)` at world position `(a - margin, b - margin) * cell`.
+struct Grid {
+    width: usize,
+    height: usize,
+    margin: i64,
+    cell: f64,
+    finest: u8,
+    heights: Vec<f32>,
+}
+
+/// The finest grid with grass painted on it.
+struct Painted {
+    grid: Grid,
+    grass_type: Vec<u8>,
+    density: Vec<u8>,
+}
+
+impl Grid {
+    fn resample(
+        dem: &Dem,
+        pyramid: &Pyramid,
+        dem_path: &Path,
+        progress: &mut dyn FnMut(BakeStage, u64, u64),
+    ) -> Result<Grid, WorldError> {
+        let finest = pyramid.stored_levels - 1;
+        let margin = i64::from(pyramid.border) << finest;
+        let [nx, ny] = pyramid.tiles_at(finest);
+        let cells = |n: u32| i64::from(n) * i64::from(pyramid.tile_cells);
+        let width = (cells(nx) + 1 + 2 * margin) as usize;
+        let height = (cells(ny) + 1 + 2 * margin) as usize;
+        if width as u64 * height as u64 > MAX_GRID_SAMPLES {
+            return Err(WorldError::OutOfRange {
+                path: dem_path.to_path_buf(),
+                field: "finest grid (root grid / cell size)".into(),
+                value: format!("{width}x{height} samples"),
+                allowed: format!("at most {MAX_GRID_SAMPLES} samples"),
+            });
+        }
+        let cell = pyramid.cell_size_m(finest);
+        let mut heights = vec![0f32; width * height];
+        let total = height as u64;
+        for (b, row) in heights.chunks_exact_mut(width).enumerate() {
+            let y = (b as i64 - margin) as f64 * cell;
+            for (a, h) in row.iter_mut().enumerate() {
+                let x = (a as i64 - margin) as f64 * cell;
+                *h = dem.sample(x, y) as f32;
+            }
+            if b % 64 == 0 || b + 1 == height {
+                progress(BakeStage::Resample, b as u64 + 1, total);
+            }
+        }
+        Ok(Grid {
+            width,
+            height,
+            margin,
+            cell,
+            finest,
+            heights,
+        })
+    }
+
+    fn at(&self, a: usize, b: usize) -> f32 {
+        self.heights[b * self.width + a]
+    }
+
+    /// Min and max of all samples; an empty range is widened to 1 m.
+    fn height_range(&self) -> [f32; 2] {
+        let (lo, hi) = self
+            .heights
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
+                (lo.min(h), hi.max(h))
+            });
+        if lo < hi {
+            [lo, hi]
+        } else {
+            [lo - 0.5, hi + 0.5]
+        }
+    }
+
+    /// Height at world position `p` by bilinear interpolation, clamped to the grid.
+    fn height_bilinear(&self, p: DVec2) -> f64 {
+        let u = (p.x / self.cell + self.margin as f64).clamp(0.0, (self.width - 1) as f64);
+        let v = (p.y / self.cell + self.margin as f64).clamp(0.0, (self.height - 1) as f64);
+        let (a, b) = (
+            (u.floor() as usize).min(self.width - 2),
+            (v.floor() as usize).min(self.height - 2),
+        );
+        let (fu, fv) = (u - a as f64, v - b as f64);
+        let h = |a, b| f64::from(self.at(a, b));
+        let south = h(a, b) * (1.0 - fu) + h(a + 1, b) * fu;
+        let north = h(a, b + 1) * (1.0 - fu) + h(a + 1, b + 1) * fu;
+        south * (1.0 - fv) + north * fv
+    }
+
+    /// Slope at sample `(a, b)` in degrees, from central differences (one-sided at the grid's
+    /// edge).
+    fn slope_deg(&self, a: usize, b: usize) -> f64 {
+        let d = |lo: usize, hi: usize, get: &dyn Fn(usize) -> f32| {
+            f64::from(get(hi) - get(lo)) / ((hi - lo) as f64 * self.cell)
+        };
+        let (a0, a1) = (a.saturating_sub(1), (a + 1).min(self.width - 1));
+        let (b0, b1) = (b.saturating_sub(1), (b + 1).min(self.height - 1));
+        let dx = d(a0, a1, &|i| self.at(i, b));
+        let dy = d(b0, b1, &|j| self.at(a, j));
+        (dx * dx + dy * dy).sqrt().atan().to_degrees()
+    }
+
+    fn position(&self, a: usize, b: usize) -> DVec2 {
+        DVec2::new(
+            (a as i64 - self.margin) as f64,
+            (b as i64 - self.margin) as f64,
+        ) * self.cell
+    }
+
+    fn paint(
+        self,
+        height_range: [f32; 2],
+        seed: u64,
+        progress: &mut dyn FnMut(BakeStage, u64, u64),
+    ) -> Painted {
+        let n = self.width * self.height;
+        let mut grass_type = vec![0u8; n];
+        let mut density = vec![0u8; n];
+        let span = f64::from(height_range[1] - height_range[0]);
+        for b in 0..self.height {
+            for a in 0..self.width {
+                let altitude = (f64::from(self.at(a, b) - height_range[0]) / span).clamp(0.0, 1.0);
+                let (t, d) =
+                    paint_sample(self.slope_deg(a, b), altitude, self.position(a, b), seed);
+                grass_type[b * self.width + a] = t;
+                density[b * self.width + a] = d;
+            }
+            if b % 64 == 0 || b + 1 == self.height {
+                progress(BakeStage::Paint, b as u64 + 1, self.height as u64);
+            }
+        }
+        Painted {
+            grid: self,
+            grass_type,
+            density,
+        }
+    }
+}
+
+/// Grass type and density byte of one sample from its slope (degrees), altitude (0 at the
+/// world's lowest point, 1 at its highest) and position (for the noise).
+fn paint_sample(slope_deg: f64, altitude: f64, p: DVec2, seed: u64) -> (u8, u8) {
+    if slope_deg > MAX_GRASS_SLOPE_DEG {
+        return (0, 0);
+    }
+    // Large patches (a couple of km) decide how dry the ground is; small ones (a few hundred m)
+    // break up the cover and place tall grass.
+    let broad = fbm(p / 1800.0, seed, 3);
+    let patch = fbm(p / 300.0, seed.wrapping_add(1), 3);
+    let speckle = fbm(p / 90.0, seed.wrapping_add(2), 2);
+    // Rocky outcrops on steep-ish ground.
+    if slope_deg > 27.0 && patch > 0.58 {
+        return (0, 0);
+    }
+    let dryness = 1.1 * altitude + 0.9 * (broad - 0.5) + 0.25 * slope_deg / MAX_GRASS_SLOPE_DEG;
+    let kind = if dryness > 0.72 {
+        3
+    } else if patch > 0.56 && slope_deg < 18.0 {
+        2
+    } else {
+        1
+    };
+    let steepness = smoothstep(18.0, MAX_GRASS_SLOPE_DEG, slope_deg);
+    let cover = (0.55 + 0.45 * speckle) * (1.0 - steepness) * if kind == 3 { 0.8 } else { 1.0 };
+    let byte = (cover.clamp(0.0, 1.0) * 255.0).round() as u8;
+    if byte == 0 { (0, 0) } else { (kind, byte) }
+}
+
+fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
+    let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// A hash of a lattice point to 0..1.
+fn lattice(ix: i64, iy: i64, seed: u64) -> f64 {
+    let mut z = seed
+        ^ (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Smooth value noise in 0..1 with one lattice cell per unit.
+fn value_noise(p: DVec2, seed: u64) -> f64 {
+    let f = p.floor();
+    let (ix, iy) = (f.x as i64, f.y as i64);
+    let t = p - f;
+    let s = t * t * (DVec2::splat(3.0) - 2.0 * t);
+    let v00 = lattice(ix, iy, seed);
+    let v10 = lattice(ix + 1, iy, seed);
+    let v01 = lattice(ix, iy + 1, seed);
+    let v11 = lattice(ix + 1, iy + 1, seed);
+    let south = v00 + (v10 - v00) * s.x;
+    let north = v01 + (v11 - v01) * s.x;
+    south + (north - south) * s.y
+}
+
+/// Fractal sum of `octaves` value noises, normalised to 0..1.
+fn fbm(p: DVec2, seed: u64, octaves: u32) -> f64 {
+    let (mut sum, mut norm, mut amp, mut freq) = (0.0, 0.0, 1.0, 1.0);
+    for o in 0..octaves {
+        sum += amp * value_noise(p * freq, seed.wrapping_add(u64::from(o) * 0x1000_0001));
+        norm += amp;
+        amp *= 0.5;
+        freq *= 2.03;
+    }
+    sum / norm
+}
+
+/// Cuts every stored tile from the painted grid and writes it, on as many threads as the
+/// machine offers.
+fn write_all_tiles(
+    out: &Path,
+    pyramid: &Pyramid,
+    painted: &Painted,
+    progress: &mut dyn FnMut(BakeStage, u64, u64),
+) -> Result<u64, WorldError> {
+    let tiles: Vec<TileId> = (0..pyramid.stored_levels)
+        .flat_map(|level| {
+            let [nx, ny] = pyramid.tiles_at(level);
+            (0..ny).flat_map(move |y| (0..nx).map(move |x| TileId::new(level, x, y)))
+        })
+        .collect();
+    let total = tiles.len() as u64;
+    progress(BakeStage::WriteTiles, 0, total);
+    let threads = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(1)
+        .min(8);
+    let (tx, rx) = mpsc::channel::<Result<(), WorldError>>();
+    let mut first_error = None;
+    std::thread::scope(|scope| {
+        for t in 0..threads {
+            let tx = tx.clone();
+            let tiles = &tiles;
+            scope.spawn(move || {
+                for &id in tiles.iter().skip(t).step_by(threads) {
+                    let result = write_tile(out, pyramid, &cut_tile(pyramid, painted, id));
+                    let failed = result.is_err();
+                    if tx.send(result).is_err() || failed {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        let mut done = 0;
+        for result in rx {
+            match result {
+                Ok(()) => {
+                    done += 1;
+                    progress(BakeStage::WriteTiles, done, total);
+                }
+                Err(e) => {
+                    first_error.get_or_insert(e);
+                }
+            }
+        }
+    });
+    match first_error {
+        Some(e) => Err(e),
+        None => Ok(total),
+    }
+}
+
+/// The samples of tile `id`, taken from the finest grid every `2^(finest - level)` samples.
+fn cut_tile(pyramid: &Pyramid, painted: &Painted, id: TileId) -> TileData {
+    let grid = &painted.grid;
+    let size = pyramid.samples_per_side();
+    let step = 1i64 << (grid.finest - id.level);
+    let border = i64::from(pyramid.border);
+    let cells = i64::from(pyramid.tile_cells);
+    let n = size as usize * size as usize;
+    let mut tile = TileData {
+        id,
+        size,
+        heights: Vec::with_capacity(n),
+        grass_type: Vec::with_capacity(n),
+        density: Vec::with_capacity(n),
+    };
+    for j in 0..i64::from(size) {
+        let b = ((i64::from(id.y) * cells + j - border) * step + grid.margin) as usize;
+        for i in 0..i64::from(size) {
+            let a = ((i64::from(id.x) * cells + i - border) * step + grid.margin) as usize;
+            let k = b * grid.width + a;
+            tile.heights.push(grid.heights[k]);
+            tile.grass_type.push(painted.grass_type[k]);
+            tile.density.push(painted.density[k]);
+        }
+    }
+    tile
+}
+
+/// Height of the camera above the highest terrain near the overview path, metres.
+const OVERVIEW_CLEARANCE_M: f64 = 220.0;
+/// Height of the camera above the highest terrain near the low path, metres.
+const LOW_CLEARANCE_M: f64 = 32.0;
+
+/// Highest terrain within `half_width` of the polyline through `points`, sampled every `step`.
+fn max_terrain_along(grid: &Grid, points: &[DVec2], half_width: f64, step: f64) -> f64 {
+    let mut best = f64::NEG_INFINITY;
+    for w in points.windows(2) {
+        let (p, q) = (w[0], w[1]);
+        let d = q - p;
+        let len = d.length();
+        let side = if len > 0.0 {
+            d.perp() / len
+        } else {
+            DVec2::ZERO
+        };
+        let n = (len / step).ceil().max(1.0) as usize;
+        for s in 0..=n {
+            let c = p + d * (s as f64 / n as f64);
+            for o in [-1.0, -0.5, 0.0, 0.5, 1.0] {
+                best = best.max(grid.height_bilinear(c + side * (o * half_width)));
+            }
+        }
+    }
+    best
+}
+
+/// Keys along `points` (one per key time): each key's height clears the highest terrain near
+/// the path on both sides of it by `clearance`, so the straight line between two keys clears
+/// the terrain under it by at least `clearance` too.
+fn keys_along(
+    grid: &Grid,
+    points: &[DVec2],
+    times: &[f64],
+    clearance: f64,
+    half_width: f64,
+    pitch_deg: f64,
+) -> Vec<CameraKey> {
+    let last = points.len() - 1;
+    let mut keys: Vec<CameraKey> = Vec::with_capacity(points.len());
+    for k in 0..=last {
+        let around = &points[k.saturating_sub(1)..=(k + 1).min(last)];
+        let z = max_terrain_along(grid, around, half_width, grid.cell * 0.5) + clearance;
+        let ahead = points[(k + 1).min(last)] - points[k.saturating_sub(1)];
+        let mut yaw = ahead.y.atan2(ahead.x).to_degrees();
+        if let Some(prev) = keys.last() {
+            // Unwrap, so that interpolating yaw never turns the long way round.
+            yaw = prev.yaw_deg + (yaw - prev.yaw_deg + 540.0).rem_euclid(360.0) - 180.0;
+        }
+        keys.push(CameraKey {
+            t_s: times[k],
+            position_m: [
+                round_to(points[k].x, 2),
+                round_to(points[k].y, 2),
+                round_to(z, 2),
+            ],
+            yaw_deg: round_to(yaw, 3),
+            pitch_deg,
+        });
+    }
+    keys
+}
+
+/// `v` rounded to `decimals` places, as the f64 nearest that decimal (so it prints short).
+fn round_to(v: f64, decimals: usize) -> f64 {
+    format!("{v:.decimals$}").parse().unwrap_or(v)
+}
+
+/// A 60 s flight along a gentle S-curve from the south-west to the north-east of the data
+/// area, high above the terrain, looking ahead and down.
+fn overview_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
+    let grid = &painted.grid;
+    let e = DVec2::from(extent);
+    let a = e * DVec2::new(0.12, 0.10);
+    let b = e * DVec2::new(0.88, 0.90);
+    let d = b - a;
+    let side = d.perp().normalize_or_zero() * (0.07 * d.length());
+    const DURATION: f64 = 60.0;
+    const KEYS: usize = 31;
+    let times: Vec<f64> = (0..KEYS)
+        .map(|k| DURATION * k as f64 / (KEYS - 1) as f64)
+        .collect();
+    let points: Vec<DVec2> = times
+        .iter()
+        .map(|t| {
+            let u = t / DURATION;
+            a + d * u + side * (std::f64::consts::TAU * u).sin()
+        })
+        .collect();
+    CameraPath {
+        name: "overview".into(),
+        duration_s: DURATION,
+        keys: keys_along(grid, &points, &times, OVERVIEW_CLEARANCE_M, 150.0, -14.0),
+    }
+}
+
+/// A 32 s pass 30-60 m above the ground along the grassiest, gentlest 1.6 km line found in the
+/// data area, heading toward the higher ground.
+fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
+    let grid = &painted.grid;
+    const LENGTH: f64 = 1600.0;
+    const DURATION: f64 = 32.0;
+    const KEYS: usize = 33;
+    let e = DVec2::from(extent);
+    let density_at = |p: DVec2| -> f64 {
+        let a = ((p.x / grid.cell).round() as i64 + grid.margin).clamp(0, grid.width as i64 - 1);
+        let b = ((p.y / grid.cell).round() as i64 + grid.margin).clamp(0, grid.height as i64 - 1);
+        f64::from(painted.density[b as usize * grid.width + a as usize]) / 255.0
+    };
+    // Candidates: centres on a grid inside the data area, eight headings each. Score: grass
+    // cover along the line, less its height variation (a low pass over rugged ground would
+    // either hit hills or fly high over valleys).
+    let inset = (LENGTH * 0.6).min(e.min_element() * 0.45);
+    let steps = 24;
+    let mut best = (f64::NEG_INFINITY, e * 0.5, DVec2::X);
+    for cy in 0..=steps {
+        for cx in 0..=steps {
+            let c = DVec2::new(
+                inset + (e.x - 2.0 * inset) * cx as f64 / steps as f64,
+                inset + (e.y - 2.0 * inset) * cy as f64 / steps as f64,
+            );
+            for h in 0..8 {
+                let dir = DVec2::from_angle(std::f64::consts::PI * h as f64 / 8.0);
+                let (mut cover, mut lo, mut hi) = (0.0, f64::INFINITY, f64::NEG_INFINITY);
+                let n = 32;
+                for s in 0..=n {
+                    let p = c + dir * LENGTH * (s as f64 / n as f64 - 0.5);
+                    cover += density_at(p);
+                    let z = grid.height_bilinear(p);
+                    lo = lo.min(z);
+                    hi = hi.max(z);
+                }
+                let score = cover / (n + 1) as f64 - (hi - lo) / 100.0;
+                if score > best.0 {
+                    best = (score, c, dir);
+                }
+            }
+        }
+    }
+    let (_, c, mut dir) = best;
+    // Fly toward the higher ground, so that the view ahead holds hills rather than plain.
+    if grid.height_bilinear(c - dir * 3000.0) > grid.height_bilinear(c + dir * 3000.0) {
+        dir = -dir;
+    }
+    let times: Vec<f64> = (0..KEYS)
+        .map(|k| DURATION * k as f64 / (KEYS - 1) as f64)
+        .collect();
+    let points: Vec<DVec2> = times
+        .iter()
+        .map(|t| c + dir * LENGTH * (t / DURATION - 0.5))
+        .collect();
+    CameraPath {
+        name: "low".into(),
+        duration_s: DURATION,
+        keys: keys_along(grid, &points, &times, LOW_CLEARANCE_M, 20.0, -8.0),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nice_cell_sizes() {
+        assert_eq!(nice_cell_size(24.585), 25.0);
+        assert_eq!(nice_cell_size(30.888), 25.0);
+        assert_eq!(nice_cell_size(10.2), 10.0);
+        assert_eq!(nice_cell_size(0.95), 1.0);
+        assert_eq!(nice_cell_size(4.4), 5.0);
+    }
+
+    #[test]
+    fn steep_ground_is_bare() {
+        for slope in [36.0, 45.0, 80.0] {
+            for k in 0..50 {
+                let p = DVec2::new(k as f64 * 37.0, k as f64 * 91.0);
+                assert_eq!(paint_sample(slope, 0.3, p, 7), (0, 0));
+            }
+        }
+    }
+
+    #[test]
+    fn noise_is_deterministic_and_bounded() {
+        for k in 0..1000 {
+            let p = DVec2::new(k as f64 * 0.37 - 100.0, k as f64 * 0.11);
+            let v = fbm(p, 3, 3);
+            assert!((0.0..=1.0).contains(&v));
+            assert_eq!(v, fbm(p, 3, 3));
+        }
+        assert_ne!(
+            fbm(DVec2::new(0.5, 0.5), 1, 3),
+            fbm(DVec2::new(0.5, 0.5), 2, 3)
+        );
+    }
+}

@@ -1,0 +1,382 @@
+//! [`WorldError`]: everything that can go wrong opening, reading, writing or baking a world.
+//!
+//! Every variant that concerns a file carries that file's path, and its message starts with it,
+//! so that a user sees at once which file is wrong and how.
+
+use std::path::{Path, PathBuf};
+
+use super::tile::TileId;
+
+/// An error from the world module. Messages start with the file they concern.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum WorldError {
+    /// Reading, writing, creating or renaming a file or directory failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// The world directory does not exist (or is not a directory).
+    #[error("{}: world directory not found", path.display())]
+    MissingWorldDir {
+        /// The directory that was asked for.
+        path: PathBuf,
+    },
+
+    /// A file that the world or the baker needs does not exist.
+    #[error("{}: file not found", path.display())]
+    MissingFile {
+        /// The missing file.
+        path: PathBuf,
+    },
+
+    /// The manifest is not valid TOML, lacks a field, has a field of the wrong type or has a
+    /// field that the format does not know.
+    #[error("{}: {message}", path.display())]
+    ManifestSyntax {
+        /// The manifest file.
+        path: PathBuf,
+        /// The parser's message, with the line and the field.
+        message: String,
+    },
+
+    /// A number is NaN or infinite.
+    #[error("{}: {field} = {value}: must be a finite number", path.display())]
+    NonFinite {
+        /// The file holding the number.
+        path: PathBuf,
+        /// The field, as a dotted path (e.g. `paths[0].keys[3].position_m`).
+        field: String,
+        /// The value found.
+        value: f64,
+    },
+
+    /// A size, extent or scale that must be positive is zero or negative.
+    #[error("{}: {field} = {value}: must be greater than zero", path.display())]
+    NonPositive {
+        /// The file holding the value.
+        path: PathBuf,
+        /// The field.
+        field: String,
+        /// The value found.
+        value: f64,
+    },
+
+    /// A size or count lies outside what the format supports.
+    #[error("{}: {field} = {value}: must be {allowed}", path.display())]
+    OutOfRange {
+        /// The file holding the value.
+        path: PathBuf,
+        /// The field.
+        field: String,
+        /// The value found, as written.
+        value: String,
+        /// What is allowed, in words (e.g. `a power of two in 8..=1024`).
+        allowed: String,
+    },
+
+    /// The pyramid would hold more tiles at its finest stored level than a world may.
+    #[error(
+        "{}: {field}: {count} tiles at the finest stored level, more than the {max} allowed",
+        path.display()
+    )]
+    TooManyTiles {
+        /// The manifest file.
+        path: PathBuf,
+        /// The fields that multiply to the count.
+        field: String,
+        /// The number of tiles asked for.
+        count: u64,
+        /// The most allowed.
+        max: u64,
+    },
+
+    /// The world's extent reaches beyond the area that its root tiles cover.
+    #[error(
+        "{}: extent_m[{axis}] = {extent_m} m is larger than the {grid_m} m that the root tiles cover",
+        path.display()
+    )]
+    ExtentBeyondGrid {
+        /// The manifest file.
+        path: PathBuf,
+        /// 0 for x (east), 1 for y (north).
+        axis: usize,
+        /// The extent asked for.
+        extent_m: f64,
+        /// What `root_tiles * root_tile_size_m` covers.
+        grid_m: f64,
+    },
+
+    /// The height range is empty (min = max) or inverted (min > max).
+    #[error(
+        "{}: height_range_m = [{min}, {max}]: the minimum must be below the maximum",
+        path.display()
+    )]
+    BadHeightRange {
+        /// The manifest file.
+        path: PathBuf,
+        /// The minimum found.
+        min: f32,
+        /// The maximum found.
+        max: f32,
+    },
+
+    /// The manifest lists no grass types (at least type 0, bare ground, is needed).
+    #[error("{}: grass_types is empty: at least one type (index 0, bare ground) is needed", path.display())]
+    NoGrassTypes {
+        /// The manifest file.
+        path: PathBuf,
+    },
+
+    /// A grass type's height or width range is negative or inverted.
+    #[error(
+        "{}: grass_types[{index}] ({name}).{field} = [{min}, {max}]: must satisfy 0 <= min <= max",
+        path.display()
+    )]
+    BadGrassRange {
+        /// The manifest file.
+        path: PathBuf,
+        /// Index of the grass type.
+        index: usize,
+        /// Name of the grass type.
+        name: String,
+        /// `height_m` or `width_m`.
+        field: &'static str,
+        /// The minimum found.
+        min: f32,
+        /// The maximum found.
+        max: f32,
+    },
+
+    /// A camera path has fewer than two keys.
+    #[error("{}: camera path \"{name}\" has {keys} key(s): at least 2 are needed", path.display())]
+    PathTooShort {
+        /// The manifest file.
+        path: PathBuf,
+        /// The path's name.
+        name: String,
+        /// The number of keys found.
+        keys: usize,
+    },
+
+    /// A camera path's keys are not in strictly increasing time order.
+    #[error(
+        "{}: camera path \"{name}\": keys[{index}].t_s = {t_s} does not come after the previous key's {previous_t_s}",
+        path.display()
+    )]
+    PathKeysOutOfOrder {
+        /// The manifest file.
+        path: PathBuf,
+        /// The path's name.
+        name: String,
+        /// Index of the offending key.
+        index: usize,
+        /// Its time.
+        t_s: f64,
+        /// The time of the key before it.
+        previous_t_s: f64,
+    },
+
+    /// Two camera paths share a name.
+    #[error("{}: camera path name \"{name}\" is used more than once", path.display())]
+    DuplicatePath {
+        /// The manifest file.
+        path: PathBuf,
+        /// The repeated name.
+        name: String,
+    },
+
+    /// A tile was asked for that the world does not store.
+    #[error("{}: tile {id:?} is not a stored tile of this world", path.display())]
+    TileNotStored {
+        /// The world directory.
+        path: PathBuf,
+        /// The tile asked for.
+        id: TileId,
+    },
+
+    /// An image file (EXR or PNG) is truncated or corrupt and cannot be decoded.
+    #[error("{}: corrupt or truncated {format} file: {message}", path.display())]
+    CorruptImage {
+        /// The file.
+        path: PathBuf,
+        /// `EXR` or `PNG`.
+        format: &'static str,
+        /// The decoder's message.
+        message: String,
+    },
+
+    /// An image has other dimensions than expected.
+    #[error(
+        "{}: expected {}x{} samples, found {}x{}",
+        path.display(), expected[0], expected[1], found[0], found[1]
+    )]
+    WrongDimensions {
+        /// The file.
+        path: PathBuf,
+        /// Expected width, height.
+        expected: [u32; 2],
+        /// Found width, height.
+        found: [u32; 2],
+    },
+
+    /// An image has the wrong channels, sample type or bit depth.
+    #[error("{}: expected {expected}, found {found}", path.display())]
+    WrongLayout {
+        /// The file.
+        path: PathBuf,
+        /// The layout that the format requires.
+        expected: String,
+        /// The layout found.
+        found: String,
+    },
+
+    /// A height sample is NaN or infinite.
+    #[error(
+        "{}: height sample (i={i}, j={j}) is {value}: heights must be finite",
+        path.display()
+    )]
+    NonFiniteHeight {
+        /// The file.
+        path: PathBuf,
+        /// Column, from the west edge.
+        i: u32,
+        /// Row, from the south edge.
+        j: u32,
+        /// The value found.
+        value: f32,
+    },
+
+    /// A height sample lies far outside the manifest's height range.
+    #[error(
+        "{}: height sample (i={i}, j={j}) is {value} m, outside the world's height range [{}, {}] m",
+        path.display(), range[0], range[1]
+    )]
+    HeightOutOfRange {
+        /// The file.
+        path: PathBuf,
+        /// Column, from the west edge.
+        i: u32,
+        /// Row, from the south edge.
+        j: u32,
+        /// The value found.
+        value: f32,
+        /// The manifest's height range.
+        range: [f32; 2],
+    },
+
+    /// A grass type index has no grass type in the manifest.
+    #[error(
+        "{}: grass type index {index} at sample (i={i}, j={j}), but the world has only {count} grass types",
+        path.display()
+    )]
+    GrassTypeOutOfRange {
+        /// The file.
+        path: PathBuf,
+        /// Column, from the west edge.
+        i: u32,
+        /// Row, from the south edge.
+        j: u32,
+        /// The index found.
+        index: u8,
+        /// The number of grass types in the manifest.
+        count: usize,
+    },
+
+    /// In-memory tile data does not fit the pyramid (a caller's mistake, caught before writing).
+    #[error("{}: tile data does not fit the pyramid: {message}", path.display())]
+    BadTileData {
+        /// The file that was to be written.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+
+    /// A DEM's JSON sidecar is missing.
+    #[error("{}: the DEM's sidecar {} is missing", path.display(), sidecar.display())]
+    MissingSidecar {
+        /// The DEM image.
+        path: PathBuf,
+        /// Where the sidecar was looked for.
+        sidecar: PathBuf,
+    },
+
+    /// A DEM's JSON sidecar cannot be parsed or lacks a field.
+    #[error("{}: bad DEM sidecar: {message}", path.display())]
+    BadSidecar {
+        /// The sidecar file.
+        path: PathBuf,
+        /// The parser's message.
+        message: String,
+    },
+
+    /// A DEM's sidecar disagrees with its image.
+    #[error(
+        "{}: the sidecar says {field} = {sidecar}, the image has {image}",
+        path.display()
+    )]
+    SidecarMismatch {
+        /// The sidecar file.
+        path: PathBuf,
+        /// `width` or `height`.
+        field: &'static str,
+        /// The sidecar's value.
+        sidecar: u32,
+        /// The image's value.
+        image: u32,
+    },
+}
+
+impl WorldError {
+    /// The file or directory the error concerns, where it concerns one.
+    pub fn path(&self) -> Option<&Path> {
+        use WorldError::*;
+        match self {
+            Io { path, .. }
+            | MissingWorldDir { path }
+            | MissingFile { path }
+            | ManifestSyntax { path, .. }
+            | NonFinite { path, .. }
+            | NonPositive { path, .. }
+            | OutOfRange { path, .. }
+            | TooManyTiles { path, .. }
+            | ExtentBeyondGrid { path, .. }
+            | BadHeightRange { path, .. }
+            | NoGrassTypes { path }
+            | BadGrassRange { path, .. }
+            | PathTooShort { path, .. }
+            | PathKeysOutOfOrder { path, .. }
+            | DuplicatePath { path, .. }
+            | TileNotStored { path, .. }
+            | CorruptImage { path, .. }
+            | WrongDimensions { path, .. }
+            | WrongLayout { path, .. }
+            | NonFiniteHeight { path, .. }
+            | HeightOutOfRange { path, .. }
+            | GrassTypeOutOfRange { path, .. }
+            | BadTileData { path, .. }
+            | MissingSidecar { path, .. }
+            | BadSidecar { path, .. }
+            | SidecarMismatch { path, .. } => Some(path),
+        }
+    }
+
+    /// An [`WorldError::Io`] for `path`, or [`WorldError::MissingFile`] where the file is absent.
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> WorldError {
+        if source.kind() == std::io::ErrorKind::NotFound {
+            WorldError::MissingFile {
+                path: path.to_path_buf(),
+            }
+        } else {
+            WorldError::Io {
+                path: path.to_path_buf(),
+                source,
+            }
+        }
+    }
+}

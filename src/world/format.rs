@@ -1,0 +1,497 @@
+//! Stored tile files and [`TileData`], the decoded contents of one tile.
+//!
+//! A stored tile is three files under `worlds/NAME/tiles/L{level}/`:
+//! - `{x}_{y}.height.exr`: heights in metres, one `f32` channel named `Y`, ZIP compressed
+//!   (lossless);
+//! - `{x}_{y}.type.png`: 8-bit grayscale, the grass type index of each sample;
+//! - `{x}_{y}.density.png`: 8-bit grayscale, grass density (0..=255 for 0..=1).
+//!
+//! All three are `samples_per_side` square and stored with the first row at the NORTH edge, so
+//! that they look right in an image viewer. In memory ([`TileData`]) the first row is the SOUTH
+//! edge: index `j * size + i`, with `i` growing east and `j` north. Sample `(i, j)` lies at
+//! `bounds.min + ((i - border) * cell, (j - border) * cell)`, so neighbouring tiles share their
+//! edge and border samples, with identical values.
+//!
+//! Files are written to a temporary name and renamed into place, so that an interrupted writer
+//! never leaves half a tile. Readers check everything and never panic on bad bytes.
+
+use std::io::Cursor;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::{Path, PathBuf};
+
+use super::error::WorldError;
+use super::tile::{Pyramid, TileId};
+
+/// The three files of a stored tile.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum TileFile {
+    /// Heights, `.height.exr`.
+    Height,
+    /// Grass type indices, `.type.png`.
+    Type,
+    /// Grass density, `.density.png`.
+    Density,
+}
+
+impl TileFile {
+    /// All three, in the order height, type, density.
+    pub const ALL: [TileFile; 3] = [TileFile::Height, TileFile::Type, TileFile::Density];
+
+    fn suffix(self) -> &'static str {
+        match self {
+            TileFile::Height => "height.exr",
+            TileFile::Type => "type.png",
+            TileFile::Density => "density.png",
+        }
+    }
+}
+
+/// Where a tile file lives: `world_dir/tiles/L{level}/{x}_{y}.{kind}`.
+pub fn tile_path(world_dir: &Path, id: TileId, kind: TileFile) -> PathBuf {
+    world_dir
+        .join("tiles")
+        .join(format!("L{}", id.level))
+        .join(format!("{}_{}.{}", id.x, id.y, kind.suffix()))
+}
+
+/// The decoded contents of one tile; see the module docs for the sample layout.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileData {
+    /// Which tile.
+    pub id: TileId,
+    /// Samples per edge (`Pyramid::samples_per_side`).
+    pub size: u32,
+    /// Heights in metres, `size * size`, south row first.
+    pub heights: Vec<f32>,
+    /// Grass type indices into `Manifest::grass_types`, same layout.
+    pub grass_type: Vec<u8>,
+    /// Grass density, 0..=255 for 0..=1, same layout.
+    pub density: Vec<u8>,
+}
+
+impl TileData {
+    /// Height of sample `(i, j)` (column from the west, row from the south).
+    pub fn height_at(&self, i: u32, j: u32) -> f32 {
+        self.heights[self.index(i, j)]
+    }
+
+    /// Index of sample `(i, j)` in the sample vectors.
+    pub fn index(&self, i: u32, j: u32) -> usize {
+        j as usize * self.size as usize + i as usize
+    }
+
+    /// Bytes this tile holds in memory (samples and the struct itself), for cache budgets.
+    pub fn byte_size(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self.heights.len() * std::mem::size_of::<f32>()
+            + self.grass_type.len()
+            + self.density.len()
+    }
+}
+
+/// What [`read_tile_with`] checks a tile against.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReadOptions {
+    /// The manifest's height range; heights beyond it by more than 1 m + 1 % of its span are
+    /// refused.
+    pub height_range_m: [f32; 2],
+    /// Number of grass types in the manifest; larger type indices are refused.
+    pub grass_type_count: usize,
+}
+
+/// Writes the three files of `tile`, each through a temporary file renamed into place.
+pub fn write_tile(world_dir: &Path, pyramid: &Pyramid, tile: &TileData) -> Result<(), WorldError> {
+    let size = pyramid.samples_per_side();
+    let n = size as usize * size as usize;
+    let height_path = tile_path(world_dir, tile.id, TileFile::Height);
+    let bad = |message: String| WorldError::BadTileData {
+        path: height_path.clone(),
+        message,
+    };
+    if !pyramid.contains(tile.id) {
+        return Err(bad(format!("tile {:?} is outside the pyramid", tile.id)));
+    }
+    if tile.size != size
+        || tile.heights.len() != n
+        || tile.grass_type.len() != n
+        || tile.density.len() != n
+    {
+        return Err(bad(format!(
+            "expected {size}x{size} samples ({n} per map), found size {} with {} heights, {} types, {} densities",
+            tile.size,
+            tile.heights.len(),
+            tile.grass_type.len(),
+            tile.density.len()
+        )));
+    }
+    if let Some(k) = tile.heights.iter().position(|h| !h.is_finite()) {
+        return Err(bad(format!(
+            "height sample (i={}, j={}) is {}",
+            k % size as usize,
+            k / size as usize,
+            tile.heights[k]
+        )));
+    }
+
+    let exr = encode_exr(&north_first(&tile.heights, size), size)
+        .map_err(|message| bad(format!("EXR encoding failed: {message}")))?;
+    write_atomic(&height_path, &exr)?;
+    for (kind, data) in [
+        (TileFile::Type, &tile.grass_type),
+        (TileFile::Density, &tile.density),
+    ] {
+        let path = tile_path(world_dir, tile.id, kind);
+        let png = encode_png_l8(&north_first(data, size), size).map_err(|message| {
+            WorldError::BadTileData {
+                path: path.clone(),
+                message: format!("PNG encoding failed: {message}"),
+            }
+        })?;
+        write_atomic(&path, &png)?;
+    }
+    Ok(())
+}
+
+/// Reads and checks a stored tile. Heights are checked against `height_range_m`; grass type
+/// indices are not checked (use [`read_tile_with`] for that).
+pub fn read_tile(
+    world_dir: &Path,
+    pyramid: &Pyramid,
+    id: TileId,
+    height_range_m: [f32; 2],
+) -> Result<TileData, WorldError> {
+    let options = ReadOptions {
+        height_range_m,
+        grass_type_count: 256,
+    };
+    read_tile_with(world_dir, pyramid, id, &options)
+}
+
+/// Reads a stored tile and checks its dimensions, layout, heights and grass type indices.
+pub fn read_tile_with(
+    world_dir: &Path,
+    pyramid: &Pyramid,
+    id: TileId,
+    options: &ReadOptions,
+) -> Result<TileData, WorldError> {
+    if !pyramid.is_stored(id) {
+        return Err(WorldError::TileNotStored {
+            path: world_dir.to_path_buf(),
+            id,
+        });
+    }
+    let size = pyramid.samples_per_side();
+
+    let path = tile_path(world_dir, id, TileFile::Height);
+    let bytes = std::fs::read(&path).map_err(|e| WorldError::io(&path, e))?;
+    let heights = south_first(&decode_exr(&bytes, size, &path)?, size);
+    let [lo, hi] = options.height_range_m;
+    let tolerance = 1.0 + 0.01 * (hi - lo).abs();
+    for (k, &h) in heights.iter().enumerate() {
+        let (i, j) = (k as u32 % size, k as u32 / size);
+        if !h.is_finite() {
+            return Err(WorldError::NonFiniteHeight {
+                path,
+                i,
+                j,
+                value: h,
+            });
+        }
+        if h < lo - tolerance || h > hi + tolerance {
+            return Err(WorldError::HeightOutOfRange {
+                path,
+                i,
+                j,
+                value: h,
+                range: options.height_range_m,
+            });
+        }
+    }
+
+    let path = tile_path(world_dir, id, TileFile::Type);
+    let bytes = std::fs::read(&path).map_err(|e| WorldError::io(&path, e))?;
+    let grass_type = south_first(&decode_png_l8(&bytes, size, &path)?, size);
+    if let Some(k) = grass_type
+        .iter()
+        .position(|&t| usize::from(t) >= options.grass_type_count)
+    {
+        return Err(WorldError::GrassTypeOutOfRange {
+            path,
+            i: k as u32 % size,
+            j: k as u32 / size,
+            index: grass_type[k],
+            count: options.grass_type_count,
+        });
+    }
+
+    let path = tile_path(world_dir, id, TileFile::Density);
+    let bytes = std::fs::read(&path).map_err(|e| WorldError::io(&path, e))?;
+    let density = south_first(&decode_png_l8(&bytes, size, &path)?, size);
+
+    Ok(TileData {
+        id,
+        size,
+        heights,
+        grass_type,
+        density,
+    })
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same directory, creating the
+/// directory where needed.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WorldError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).map_err(|e| WorldError::Io {
+        path: dir.to_path_buf(),
+        source: e,
+    })?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let io = |source| WorldError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    std::fs::write(&tmp, bytes).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        io(e)
+    })
+}
+
+/// Reorders rows between south-first (memory) and north-first (files); its own inverse.
+fn flip_rows<T: Copy>(data: &[T], size: u32) -> Vec<T> {
+    data.chunks_exact(size as usize)
+        .rev()
+        .flatten()
+        .copied()
+        .collect()
+}
+
+fn north_first<T: Copy>(data: &[T], size: u32) -> Vec<T> {
+    flip_rows(data, size)
+}
+
+fn south_first<T: Copy>(data: &[T], size: u32) -> Vec<T> {
+    flip_rows(data, size)
+}
+
+/// Runs a decoder, turning a panic inside it into an error message.
+fn guarded<T>(f: impl FnOnce() -> Result<T, String>) -> Result<T, String> {
+    catch_unwind(AssertUnwindSafe(f)).unwrap_or_else(|_| Err("the decoder failed".into()))
+}
+
+fn encode_exr(rows_north_first: &[f32], size: u32) -> Result<Vec<u8>, String> {
+    use exr::prelude::*;
+    let channel = AnyChannel::new("Y", FlatSamples::F32(rows_north_first.to_vec()));
+    let layer = Layer::new(
+        (size as usize, size as usize),
+        LayerAttributes::named("height"),
+        Encoding {
+            compression: Compression::ZIP16,
+            blocks: Blocks::ScanLines,
+            line_order: LineOrder::Increasing,
+        },
+        AnyChannels::sort(SmallVec::from_vec(vec![channel])),
+    );
+    let mut out = Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .non_parallel()
+        .to_buffered(&mut out)
+        .map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
+}
+
+/// Decodes a single-channel f32 EXR of `size x size`, checking the header before the pixels.
+fn decode_exr(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<f32>, WorldError> {
+    use exr::prelude::*;
+    let corrupt = |message: String| WorldError::CorruptImage {
+        path: path.to_path_buf(),
+        format: "EXR",
+        message,
+    };
+    let meta = guarded(|| {
+        MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(|e| e.to_string())
+    })
+    .map_err(corrupt)?;
+    let expected_layout = "one layer with one f32 channel";
+    let describe = |h: &exr::meta::header::Header| {
+        let channels: Vec<String> = h
+            .channels
+            .list
+            .iter()
+            .map(|c| format!("{} {:?}", c.name, c.sample_type))
+            .collect();
+        format!("channels [{}]", channels.join(", "))
+    };
+    let [header] = meta.headers.as_slice() else {
+        return Err(WorldError::WrongLayout {
+            path: path.to_path_buf(),
+            expected: expected_layout.into(),
+            found: format!("{} layers", meta.headers.len()),
+        });
+    };
+    if header.deep
+        || header.channels.list.len() != 1
+        || header.channels.list[0].sample_type != SampleType::F32
+        || header.channels.list[0].sampling != Vec2(1, 1)
+    {
+        return Err(WorldError::WrongLayout {
+            path: path.to_path_buf(),
+            expected: expected_layout.into(),
+            found: describe(header),
+        });
+    }
+    let found = header.layer_size;
+    if found != Vec2(size as usize, size as usize) {
+        return Err(WorldError::WrongDimensions {
+            path: path.to_path_buf(),
+            expected: [size, size],
+            found: [
+                u32::try_from(found.0).unwrap_or(u32::MAX),
+                u32::try_from(found.1).unwrap_or(u32::MAX),
+            ],
+        });
+    }
+
+    let image = guarded(|| {
+        read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .all_layers()
+            .all_attributes()
+            .non_parallel()
+            .from_buffered(Cursor::new(bytes))
+            .map_err(|e| e.to_string())
+    })
+    .map_err(corrupt)?;
+    let samples = image
+        .layer_data
+        .into_iter()
+        .next()
+        .and_then(|layer| layer.channel_data.list.into_iter().next())
+        .map(|channel| channel.sample_data);
+    match samples {
+        Some(FlatSamples::F32(v)) if v.len() == size as usize * size as usize => Ok(v),
+        _ => Err(corrupt("pixel data does not match the header".into())),
+    }
+}
+
+pub(crate) fn encode_png_l8(rows: &[u8], size: u32) -> Result<Vec<u8>, String> {
+    encode_png(rows, size, size, image::ExtendedColorType::L8)
+}
+
+/// Encodes a grayscale PNG (`L8` from bytes, `L16` from native-endian u16 bytes).
+pub(crate) fn encode_png(
+    bytes: &[u8],
+    width: u32,
+    height: u32,
+    color: image::ExtendedColorType,
+) -> Result<Vec<u8>, String> {
+    use image::ImageEncoder;
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    let bytes_per_pixel = u64::from(color.bits_per_pixel()).div_ceil(8);
+    if u64::from(width) * u64::from(height) * bytes_per_pixel != bytes.len() as u64 {
+        return Err("buffer size does not match the image size".into());
+    }
+    let mut out = Vec::new();
+    PngEncoder::new_with_quality(&mut out, CompressionType::Best, FilterType::Adaptive)
+        .write_image(bytes, width, height, color)
+        .map_err(|e| e.to_string())?;
+    Ok(out)
+}
+
+/// A decoded PNG: dimensions and raw bytes in the colour type asked for.
+pub(crate) struct DecodedPng {
+    pub width: u32,
+    pub height: u32,
+    pub bytes: Vec<u8>,
+}
+
+/// Most pixels a PNG may hold before decoding is refused (a 16k x 16k DEM).
+const MAX_PNG_PIXELS: u64 = 16_384 * 16_384;
+
+/// Decodes a PNG, checking that it holds `expected` colour samples of `expected_dims`
+/// (where given) before decoding its pixels.
+pub(crate) fn decode_png(
+    bytes: &[u8],
+    path: &Path,
+    expected_color: image::ColorType,
+    expected_layout: &str,
+    expected_dims: Option<[u32; 2]>,
+) -> Result<DecodedPng, WorldError> {
+    use image::ImageDecoder;
+    use image::codecs::png::PngDecoder;
+    let corrupt = |message: String| WorldError::CorruptImage {
+        path: path.to_path_buf(),
+        format: "PNG",
+        message,
+    };
+    let result = guarded(|| {
+        let decoder = match PngDecoder::new(Cursor::new(bytes)) {
+            Ok(d) => d,
+            Err(image::ImageError::Unsupported(e)) => {
+                return Ok(Err(WorldError::WrongLayout {
+                    path: path.to_path_buf(),
+                    expected: expected_layout.into(),
+                    found: e.to_string(),
+                }));
+            }
+            Err(e) => return Err(e.to_string()),
+        };
+        let (width, height) = decoder.dimensions();
+        let color = decoder.color_type();
+        if color != expected_color {
+            return Ok(Err(WorldError::WrongLayout {
+                path: path.to_path_buf(),
+                expected: expected_layout.into(),
+                found: describe_color(decoder.original_color_type()),
+            }));
+        }
+        if let Some(expected) = expected_dims
+            && [width, height] != expected
+        {
+            return Ok(Err(WorldError::WrongDimensions {
+                path: path.to_path_buf(),
+                expected,
+                found: [width, height],
+            }));
+        }
+        if u64::from(width) * u64::from(height) > MAX_PNG_PIXELS {
+            return Err(format!(
+                "{width}x{height} pixels is more than this reader accepts"
+            ));
+        }
+        let mut buf = vec![0u8; decoder.total_bytes() as usize];
+        decoder.read_image(&mut buf).map_err(|e| e.to_string())?;
+        Ok(Ok(DecodedPng {
+            width,
+            height,
+            bytes: buf,
+        }))
+    });
+    result.map_err(corrupt)?
+}
+
+fn describe_color(c: image::ExtendedColorType) -> String {
+    use image::ExtendedColorType::*;
+    match c {
+        L1 | L2 | L4 | L8 | L16 => format!("{}-bit grayscale", c.bits_per_pixel()),
+        other => format!("{other:?}"),
+    }
+}
+
+fn decode_png_l8(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<u8>, WorldError> {
+    let png = decode_png(
+        bytes,
+        path,
+        image::ColorType::L8,
+        "8-bit grayscale",
+        Some([size, size]),
+    )?;
+    Ok(png.bytes)
+}

@@ -1,0 +1,406 @@
+//! The world manifest, `worlds/NAME/world.toml`: extent, tile pyramid, height range, grass types,
+//! wind and sky defaults and named camera paths. Parsed with serde, then checked by
+//! [`Manifest::validate`] so that a world that asks for too much is refused before anything is
+//! loaded.
+//!
+//! Conventions: positions in metres with x east, y north, z up, from the world's south-west
+//! corner; angles in degrees counter-clockwise from east (0 = east, 90 = north), the same for
+//! camera yaw, sun azimuth and wind direction; colours are linear RGB in 0..=1.
+
+use std::collections::HashSet;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::error::WorldError;
+use super::tile::Pyramid;
+
+/// Most root tiles (x times y) a world may have.
+pub const MAX_ROOT_TILES: u64 = 4096;
+/// Most tiles a world may have at its finest stored level.
+pub const MAX_FINEST_TILES: u64 = 1_000_000;
+/// Largest extent a world may have along either axis, metres.
+pub const MAX_EXTENT_M: f64 = 10_000_000.0;
+
+/// The manifest of a world (`world.toml`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// Short name, e.g. `santa-cruz`.
+    pub name: String,
+    /// What the world is and where its data comes from.
+    #[serde(default)]
+    pub description: String,
+    /// Size of the data area from the SW corner, metres (x, y); may be smaller than the root
+    /// grid, whose remainder repeats the data's edge.
+    pub extent_m: [f64; 2],
+    /// The tile pyramid.
+    pub pyramid: Pyramid,
+    /// Lowest and highest stored height, metres.
+    pub height_range_m: [f32; 2],
+    /// Grass types; index 0 is bare ground. Tile type maps index into this list.
+    #[serde(default)]
+    pub grass_types: Vec<GrassType>,
+    /// Default wind.
+    #[serde(default)]
+    pub wind: WindDefaults,
+    /// Sun, sky and fog.
+    #[serde(default)]
+    pub sky: Sky,
+    /// Named camera paths; the first is the default.
+    #[serde(default)]
+    pub paths: Vec<CameraPath>,
+}
+
+/// One kind of grass (or, at index 0, bare ground).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GrassType {
+    /// Name, e.g. `meadow`.
+    pub name: String,
+    /// Colour of the ground under this type.
+    pub ground_color: [f32; 3],
+    /// Colour at a blade's root.
+    pub base_color: [f32; 3],
+    /// Colour at a blade's tip.
+    pub tip_color: [f32; 3],
+    /// Blade height range, metres (min, max).
+    pub height_m: [f32; 2],
+    /// Blade width range at the root, metres (min, max).
+    pub width_m: [f32; 2],
+    /// Resistance to bending in the wind: 0 bends freely, 1 barely moves.
+    pub stiffness: f32,
+}
+
+/// Default ambient wind.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WindDefaults {
+    /// Direction the wind blows toward, degrees counter-clockwise from east.
+    pub direction_deg: f32,
+    /// Mean speed, metres per second.
+    pub speed_mps: f32,
+    /// Strength of gusts relative to the mean, 0..=1.
+    pub gustiness: f32,
+}
+
+impl Default for WindDefaults {
+    /// A light westerly breeze: from the west-south-west, blowing toward the east-north-east.
+    fn default() -> Self {
+        WindDefaults {
+            direction_deg: 20.0,
+            speed_mps: 4.0,
+            gustiness: 0.35,
+        }
+    }
+}
+
+/// Sun, sky and fog.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Sky {
+    /// Direction toward the sun, degrees counter-clockwise from east (225 = south-west).
+    pub sun_azimuth_deg: f32,
+    /// Sun height above the horizon, degrees.
+    pub sun_elevation_deg: f32,
+    /// Sunlight colour (linear RGB, may exceed 1 for intensity).
+    pub sun_color: [f32; 3],
+    /// Sky colour overhead.
+    pub sky_color: [f32; 3],
+    /// Sky colour at the horizon, also the fog colour.
+    pub horizon_color: [f32; 3],
+    /// Distance at which fog hides the terrain completely, metres.
+    pub fog_distance_m: f32,
+}
+
+impl Default for Sky {
+    /// Afternoon sun from the south-west, 35 degrees up, a clear blue sky with a pale horizon.
+    fn default() -> Self {
+        Sky {
+            sun_azimuth_deg: 225.0,
+            sun_elevation_deg: 35.0,
+            sun_color: [1.0, 0.92, 0.78],
+            sky_color: [0.26, 0.46, 0.80],
+            horizon_color: [0.72, 0.80, 0.88],
+            fog_distance_m: 12_000.0,
+        }
+    }
+}
+
+/// A named camera flight.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraPath {
+    /// Name, unique within the world.
+    pub name: String,
+    /// Length of the flight, seconds.
+    pub duration_s: f64,
+    /// Keys in strictly increasing time order.
+    pub keys: Vec<CameraKey>,
+}
+
+/// A camera pose at a time.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraKey {
+    /// Time from the start of the path, seconds.
+    pub t_s: f64,
+    /// Absolute position, metres (x east, y north, z up).
+    pub position_m: [f64; 3],
+    /// Heading, degrees counter-clockwise from east (0 looks east, 90 north).
+    pub yaw_deg: f64,
+    /// Degrees above the horizontal; negative looks down.
+    pub pitch_deg: f64,
+}
+
+impl Manifest {
+    /// Reads, parses and validates a manifest file.
+    pub fn from_path(path: &Path) -> Result<Manifest, WorldError> {
+        let text = std::fs::read_to_string(path).map_err(|e| WorldError::io(path, e))?;
+        Manifest::parse(&text, path)
+    }
+
+    /// Parses and validates manifest text; `path` is only used in error messages.
+    pub fn parse(text: &str, path: &Path) -> Result<Manifest, WorldError> {
+        let manifest: Manifest = toml::from_str(text).map_err(|e| WorldError::ManifestSyntax {
+            path: path.to_path_buf(),
+            message: e.to_string().trim_end().to_string(),
+        })?;
+        manifest.validate(path)?;
+        Ok(manifest)
+    }
+
+    /// The manifest as TOML text, as written to `world.toml`.
+    pub fn to_toml(&self) -> String {
+        // Every field is a plain string, number or array: serialisation cannot fail.
+        toml::to_string(self).unwrap_or_default()
+    }
+
+    /// The camera path called `name`.
+    pub fn path(&self, name: &str) -> Option<&CameraPath> {
+        self.paths.iter().find(|p| p.name == name)
+    }
+
+    /// Checks that every value is finite and within what the format supports; `path` is only
+    /// used in error messages.
+    pub fn validate(&self, path: &Path) -> Result<(), WorldError> {
+        let v = Validator { path };
+        let p = &self.pyramid;
+
+        for axis in 0..2 {
+            v.positive(&format!("extent_m[{axis}]"), self.extent_m[axis])?;
+        }
+        v.positive("pyramid.root_tile_size_m", p.root_tile_size_m)?;
+        for axis in 0..2 {
+            if p.root_tiles[axis] == 0 {
+                return Err(v.non_positive(&format!("pyramid.root_tiles[{axis}]"), 0.0));
+            }
+        }
+        if !(8..=1024).contains(&p.tile_cells) || !p.tile_cells.is_power_of_two() {
+            return Err(v.out_of_range(
+                "pyramid.tile_cells",
+                p.tile_cells,
+                "a power of two in 8..=1024",
+            ));
+        }
+        if p.border > 8 {
+            return Err(v.out_of_range("pyramid.border", p.border, "in 0..=8"));
+        }
+        if !(1..=12).contains(&p.stored_levels) {
+            return Err(v.out_of_range("pyramid.stored_levels", p.stored_levels, "in 1..=12"));
+        }
+        let levels = u32::from(p.stored_levels) + u32::from(p.derived_levels);
+        if levels > 24 {
+            return Err(v.out_of_range(
+                "pyramid.stored_levels + pyramid.derived_levels",
+                levels,
+                "at most 24",
+            ));
+        }
+        let roots = u64::from(p.root_tiles[0]) * u64::from(p.root_tiles[1]);
+        if roots > MAX_ROOT_TILES {
+            return Err(WorldError::TooManyTiles {
+                path: path.to_path_buf(),
+                field: "pyramid.root_tiles".into(),
+                count: roots,
+                max: MAX_ROOT_TILES,
+            });
+        }
+        for axis in 0..2 {
+            // Tile coordinates of the finest level, derived or stored, must fit a u32.
+            if u64::from(p.root_tiles[axis]) << (levels - 1) > u64::from(u32::MAX) {
+                return Err(v.out_of_range(
+                    &format!("pyramid.root_tiles[{axis}]"),
+                    p.root_tiles[axis],
+                    "small enough that the finest level's tile count fits in 32 bits",
+                ));
+            }
+        }
+        let finest = roots << (2 * (u32::from(p.stored_levels) - 1));
+        if finest > MAX_FINEST_TILES {
+            return Err(WorldError::TooManyTiles {
+                path: path.to_path_buf(),
+                field: "pyramid.root_tiles and pyramid.stored_levels".into(),
+                count: finest,
+                max: MAX_FINEST_TILES,
+            });
+        }
+        for axis in 0..2 {
+            if self.extent_m[axis] > MAX_EXTENT_M {
+                return Err(v.out_of_range(
+                    &format!("extent_m[{axis}]"),
+                    self.extent_m[axis],
+                    "at most 10,000 km (10000000 m)",
+                ));
+            }
+            let grid_m = f64::from(p.root_tiles[axis]) * p.root_tile_size_m;
+            // Allow rounding in the last digits of a value written out and read back.
+            if self.extent_m[axis] > grid_m * (1.0 + 1e-9) {
+                return Err(WorldError::ExtentBeyondGrid {
+                    path: path.to_path_buf(),
+                    axis,
+                    extent_m: self.extent_m[axis],
+                    grid_m,
+                });
+            }
+        }
+
+        let [lo, hi] = self.height_range_m;
+        v.finite("height_range_m[0]", lo)?;
+        v.finite("height_range_m[1]", hi)?;
+        if lo >= hi {
+            return Err(WorldError::BadHeightRange {
+                path: path.to_path_buf(),
+                min: lo,
+                max: hi,
+            });
+        }
+
+        if self.grass_types.is_empty() {
+            return Err(WorldError::NoGrassTypes {
+                path: path.to_path_buf(),
+            });
+        }
+        for (index, g) in self.grass_types.iter().enumerate() {
+            let field = |f: &str| format!("grass_types[{index}].{f}");
+            v.all_finite(&field("ground_color"), &g.ground_color)?;
+            v.all_finite(&field("base_color"), &g.base_color)?;
+            v.all_finite(&field("tip_color"), &g.tip_color)?;
+            v.all_finite(&field("height_m"), &g.height_m)?;
+            v.all_finite(&field("width_m"), &g.width_m)?;
+            v.finite(&field("stiffness"), g.stiffness)?;
+            for (name, [min, max]) in [("height_m", g.height_m), ("width_m", g.width_m)] {
+                if min < 0.0 || min > max {
+                    return Err(WorldError::BadGrassRange {
+                        path: path.to_path_buf(),
+                        index,
+                        name: g.name.clone(),
+                        field: name,
+                        min,
+                        max,
+                    });
+                }
+            }
+        }
+
+        v.finite("wind.direction_deg", self.wind.direction_deg)?;
+        v.finite("wind.speed_mps", self.wind.speed_mps)?;
+        v.finite("wind.gustiness", self.wind.gustiness)?;
+        let s = &self.sky;
+        v.finite("sky.sun_azimuth_deg", s.sun_azimuth_deg)?;
+        v.finite("sky.sun_elevation_deg", s.sun_elevation_deg)?;
+        v.all_finite("sky.sun_color", &s.sun_color)?;
+        v.all_finite("sky.sky_color", &s.sky_color)?;
+        v.all_finite("sky.horizon_color", &s.horizon_color)?;
+        v.positive("sky.fog_distance_m", s.fog_distance_m)?;
+
+        let mut names = HashSet::new();
+        for (pi, cam) in self.paths.iter().enumerate() {
+            if !names.insert(cam.name.as_str()) {
+                return Err(WorldError::DuplicatePath {
+                    path: path.to_path_buf(),
+                    name: cam.name.clone(),
+                });
+            }
+            v.positive(&format!("paths[{pi}].duration_s"), cam.duration_s)?;
+            if cam.keys.len() < 2 {
+                return Err(WorldError::PathTooShort {
+                    path: path.to_path_buf(),
+                    name: cam.name.clone(),
+                    keys: cam.keys.len(),
+                });
+            }
+            for (ki, key) in cam.keys.iter().enumerate() {
+                let field = |f: &str| format!("paths[{pi}].keys[{ki}].{f}");
+                v.finite(&field("t_s"), key.t_s)?;
+                v.all_finite(&field("position_m"), &key.position_m)?;
+                v.finite(&field("yaw_deg"), key.yaw_deg)?;
+                v.finite(&field("pitch_deg"), key.pitch_deg)?;
+                if ki > 0 && key.t_s <= cam.keys[ki - 1].t_s {
+                    return Err(WorldError::PathKeysOutOfOrder {
+                        path: path.to_path_buf(),
+                        name: cam.name.clone(),
+                        index: ki,
+                        t_s: key.t_s,
+                        previous_t_s: cam.keys[ki - 1].t_s,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Builds validation errors that name the manifest file.
+struct Validator<'a> {
+    path: &'a Path,
+}
+
+impl Validator<'_> {
+    fn finite(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        let value = value.into();
+        if value.is_finite() {
+            Ok(())
+        } else {
+            Err(WorldError::NonFinite {
+                path: self.path.to_path_buf(),
+                field: field.to_string(),
+                value,
+            })
+        }
+    }
+
+    fn all_finite<T: Copy + Into<f64>>(&self, field: &str, values: &[T]) -> Result<(), WorldError> {
+        for (i, &x) in values.iter().enumerate() {
+            self.finite(&format!("{field}[{i}]"), x)?;
+        }
+        Ok(())
+    }
+
+    fn positive(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        let value = value.into();
+        self.finite(field, value)?;
+        if value > 0.0 {
+            Ok(())
+        } else {
+            Err(self.non_positive(field, value))
+        }
+    }
+
+    fn non_positive(&self, field: &str, value: f64) -> WorldError {
+        WorldError::NonPositive {
+            path: self.path.to_path_buf(),
+            field: field.to_string(),
+            value,
+        }
+    }
+
+    fn out_of_range(&self, field: &str, value: impl ToString, allowed: &str) -> WorldError {
+        WorldError::OutOfRange {
+            path: self.path.to_path_buf(),
+            field: field.to_string(),
+            value: value.to_string(),
+            allowed: allowed.to_string(),
+        }
+    }
+}

@@ -1,0 +1,77 @@
+//! The world, GPU-free: tile addressing ([`TileId`], [`Pyramid`]), the manifest
+//! ([`Manifest`], `world.toml`), the stored tile files ([`TileData`]), DEM loading and the
+//! [`bake`]r that turns a DEM into a world.
+//!
+//! A world is a directory:
+//! ```text
+//! worlds/NAME/world.toml                         the manifest
+//! worlds/NAME/tiles/L{level}/{x}_{y}.height.exr  heights (f32)
+//! worlds/NAME/tiles/L{level}/{x}_{y}.type.png    grass type index (8-bit)
+//! worlds/NAME/tiles/L{level}/{x}_{y}.density.png grass density (8-bit)
+//! ```
+
+pub mod bake;
+pub mod dem;
+pub mod error;
+pub mod format;
+pub mod manifest;
+pub mod tile;
+
+use std::path::{Path, PathBuf};
+
+pub use bake::{BakeOptions, BakeReport, BakeStage, bake};
+pub use dem::Dem;
+pub use error::WorldError;
+pub use format::{
+    ReadOptions, TileData, TileFile, read_tile, read_tile_with, tile_path, write_tile,
+};
+pub use manifest::{CameraKey, CameraPath, GrassType, Manifest, Sky, WindDefaults};
+pub use tile::{Bounds, Pyramid, TileId};
+
+/// An opened world: its directory and its validated manifest.
+#[derive(Clone, Debug, PartialEq)]
+pub struct World {
+    /// The world directory (holding `world.toml` and `tiles/`).
+    pub dir: PathBuf,
+    /// The manifest.
+    pub manifest: Manifest,
+}
+
+impl World {
+    /// Opens the world in `dir`: reads and validates `dir/world.toml`.
+    pub fn open(dir: &Path) -> Result<World, WorldError> {
+        if !dir.is_dir() {
+            return Err(WorldError::MissingWorldDir {
+                path: dir.to_path_buf(),
+            });
+        }
+        let manifest = Manifest::from_path(&dir.join("world.toml"))?;
+        Ok(World {
+            dir: dir.to_path_buf(),
+            manifest,
+        })
+    }
+
+    /// Reads a stored tile, checked against the manifest's height range and grass types.
+    pub fn load_tile(&self, id: TileId) -> Result<TileData, WorldError> {
+        let options = ReadOptions {
+            height_range_m: self.manifest.height_range_m,
+            grass_type_count: self.manifest.grass_types.len(),
+        };
+        read_tile_with(&self.dir, &self.manifest.pyramid, id, &options)
+    }
+
+    /// Every stored tile, level by level (coarsest first), rows south to north, west to east.
+    pub fn stored_tiles(&self) -> impl Iterator<Item = TileId> + '_ {
+        let pyramid = &self.manifest.pyramid;
+        (0..pyramid.stored_levels).flat_map(move |level| {
+            let [nx, ny] = pyramid.tiles_at(level);
+            (0..ny).flat_map(move |y| (0..nx).map(move |x| TileId::new(level, x, y)))
+        })
+    }
+
+    /// The path to one of a tile's files.
+    pub fn tile_path(&self, id: TileId, kind: TileFile) -> PathBuf {
+        tile_path(&self.dir, id, kind)
+    }
+}

@@ -1,0 +1,443 @@
+//! The baker on synthetic DEMs: heights match the analytic landscape, tiles meet without seams
+//! at every level, cliffs stay bare, the bake is deterministic, and bad DEMs are refused with
+//! errors that name the file.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use common::{Terrain, write_dem, write_sidecar};
+use glam::DVec2;
+use verdant::world::{BakeOptions, BakeStage, Dem, TileId, WorldError, bake};
+
+/// The analytic landscape: rolling hills on a gentle slope, 118..=381 m.
+fn hills(x: f64, y: f64) -> f64 {
+    200.0 + 80.0 * (x / 300.0).sin() * (y / 400.0).cos() + 0.05 * x
+}
+
+/// A 300 m wall (79 degrees) between x = 800 m and x = 860 m, on gently rolling ground.
+fn wall(x: f64, y: f64) -> f64 {
+    let ground = 100.0 + 5.0 * (y / 200.0).sin();
+    ground + 300.0 * ((x - 800.0) / 60.0).clamp(0.0, 1.0)
+}
+
+const DEM_SIZE: [u32; 2] = [200, 150];
+const DEM_CELLS: [f64; 2] = [10.0, 13.0];
+/// Heights are stored in centimetres.
+const DEM_SCALE: [f64; 2] = [0.0, 0.01];
+
+/// Largest difference allowed between baked heights and the analytic function: Catmull-Rom
+/// interpolation of these hills (wavelength about 1.9 km, cells of 10 m x 13 m) is good to about
+/// a centimetre, and the DEM rounds to half a centimetre.
+const HEIGHT_TOLERANCE_M: f64 = 0.03;
+
+fn small_bake(dir: &Path, dem: PathBuf, name: &str) -> PathBuf {
+    let out = dir.join(name);
+    let opts = BakeOptions {
+        dem,
+        out: out.clone(),
+        name: Some(name.into()),
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        seed: 7,
+    };
+    bake(&opts, &mut |_, _, _| {}).unwrap();
+    out
+}
+
+fn hills_world(dir: &Path) -> PathBuf {
+    let dem = write_dem(dir, "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    small_bake(dir, dem, "hills")
+}
+
+#[test]
+fn baked_heights_match_the_analytic_function() {
+    let dir = tempfile::tempdir().unwrap();
+    let terrain = Terrain::load(&hills_world(dir.path()));
+    let m = &terrain.world.manifest;
+    assert_eq!(m.extent_m, [1990.0, 1937.0]);
+    assert_eq!(m.pyramid.root_tile_size_m, 640.0);
+    assert_eq!(m.pyramid.root_tiles, [4, 4]);
+    assert_eq!(terrain.tiles.len(), 16 + 64);
+
+    let mut checked = 0;
+    let mut worst: f64 = 0.0;
+    for (id, tile) in &terrain.tiles {
+        for j in 0..tile.size {
+            for i in 0..tile.size {
+                let p = m.pyramid.sample_position(*id, i, j);
+                if p.x < 0.0 || p.y < 0.0 || p.x > m.extent_m[0] || p.y > m.extent_m[1] {
+                    continue;
+                }
+                let err = (f64::from(tile.height_at(i, j)) - hills(p.x, p.y)).abs();
+                worst = worst.max(err);
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 10_000);
+    assert!(
+        worst <= HEIGHT_TOLERANCE_M,
+        "worst height error {worst} m over {checked} samples"
+    );
+}
+
+#[test]
+fn beyond_the_dem_the_edge_is_repeated() {
+    let dir = tempfile::tempdir().unwrap();
+    let terrain = Terrain::load(&hills_world(dir.path()));
+    let m = &terrain.world.manifest;
+    // North of the data area (y > 1937 m), heights repeat the northern edge's: every sample
+    // from the first one beyond the edge (y = 1940 m, with 20 m cells) holds the same height.
+    let cell = m.pyramid.cell_size_m(1);
+    let [ex, ey] = m.extent_m.map(|e| (e / cell).ceil() * cell);
+    for x in [0.0, 300.0, 1000.0, 1980.0] {
+        let edge = terrain.height(DVec2::new(x, ey));
+        for y in [ey + 20.0, ey + 200.0, 2500.0] {
+            assert_eq!(terrain.height(DVec2::new(x, y)), edge);
+        }
+    }
+    let edge = terrain.height(DVec2::new(ex, 500.0));
+    assert_eq!(terrain.height(DVec2::new(2400.0, 500.0)), edge);
+}
+
+/// Every pair of neighbours at every level shares its edge and border samples bit for bit, and
+/// every coarse sample equals the fine sample at the same position.
+#[test]
+fn tiles_meet_without_seams() {
+    let dir = tempfile::tempdir().unwrap();
+    let terrain = Terrain::load(&hills_world(dir.path()));
+    let p = &terrain.world.manifest.pyramid;
+    let (size, cells, b) = (p.samples_per_side(), p.tile_cells, p.border);
+    let same = |a: &verdant::world::TileData, ai, aj, c: &verdant::world::TileData, ci, cj| {
+        let (ka, kc) = (a.index(ai, aj), c.index(ci, cj));
+        assert_eq!(
+            a.heights[ka].to_bits(),
+            c.heights[kc].to_bits(),
+            "{:?} ({ai},{aj}) vs {:?} ({ci},{cj})",
+            a.id,
+            c.id
+        );
+        assert_eq!(a.grass_type[ka], c.grass_type[kc]);
+        assert_eq!(a.density[ka], c.density[kc]);
+    };
+    let mut pairs = 0;
+    for (id, tile) in &terrain.tiles {
+        let [_, east, _, north] = p.neighbours(*id);
+        if let Some(e) = east {
+            let other = &terrain.tiles[&e];
+            for j in 0..size {
+                for k in 0..=2 * b {
+                    same(tile, cells + k, j, other, k, j);
+                }
+            }
+            pairs += 1;
+        }
+        if let Some(n) = north {
+            let other = &terrain.tiles[&n];
+            for i in 0..size {
+                for k in 0..=2 * b {
+                    same(tile, i, cells + k, other, i, k);
+                }
+            }
+            pairs += 1;
+        }
+        if id.level + 1 < p.stored_levels {
+            for child in id.children() {
+                let c = &terrain.tiles[&child];
+                for j in 0..size {
+                    for i in 0..size {
+                        // Global sample index at the parent's level, doubled at the child's.
+                        let gx = 2 * (i64::from(id.x * cells + i) - i64::from(b));
+                        let gy = 2 * (i64::from(id.y * cells + j) - i64::from(b));
+                        let ci = gx - i64::from(child.x * cells) + i64::from(b);
+                        let cj = gy - i64::from(child.y * cells) + i64::from(b);
+                        if (0..i64::from(size)).contains(&ci) && (0..i64::from(size)).contains(&cj)
+                        {
+                            same(tile, i, j, c, ci as u32, cj as u32);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // 4x4 at level 0 and 8x8 at level 1: 2*4*3 + 2*8*7 neighbour pairs.
+    assert_eq!(pairs, 24 + 112);
+}
+
+#[test]
+fn cliffs_are_bare_and_flat_ground_is_grassy() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "wall", DEM_SIZE, DEM_CELLS, DEM_SCALE, wall);
+    let terrain = Terrain::load(&small_bake(dir.path(), dem, "wall"));
+    let p = &terrain.world.manifest.pyramid;
+    let (mut on_wall, mut grassy) = (0, 0);
+    for (id, tile) in &terrain.tiles {
+        for j in 0..tile.size {
+            for i in 0..tile.size {
+                let pos = p.sample_position(*id, i, j);
+                let k = tile.index(i, j);
+                if (810.0..=850.0).contains(&pos.x) {
+                    assert_eq!(tile.grass_type[k], 0, "{id:?} ({i},{j}) at {pos}");
+                    assert_eq!(tile.density[k], 0, "{id:?} ({i},{j}) at {pos}");
+                    on_wall += 1;
+                } else if pos.x < 700.0 && tile.grass_type[k] != 0 {
+                    assert!(tile.density[k] > 0);
+                    grassy += 1;
+                }
+            }
+        }
+    }
+    assert!(on_wall > 100, "{on_wall} samples on the wall");
+    assert!(grassy > 1000, "{grassy} grassy samples on flat ground");
+}
+
+fn read_all_files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let rel = path.strip_prefix(dir).unwrap().to_path_buf();
+                out.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn bake_is_deterministic_and_leaves_no_temporary_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let out_a = dir.path().join("a");
+    std::fs::create_dir_all(out_a.join("notes")).unwrap();
+    std::fs::write(out_a.join("notes/keep.txt"), "mine").unwrap();
+    let a = small_bake(dir.path(), dem.clone(), "a");
+    let b = small_bake(dir.path(), dem, "b");
+    let mut files_a = read_all_files(&a);
+    let files_b = read_all_files(&b);
+    assert_eq!(
+        files_a.remove(Path::new("notes/keep.txt")).unwrap(),
+        b"mine"
+    );
+    // The manifests differ only in the name.
+    let manifest_a = files_a.remove(Path::new("world.toml")).unwrap();
+    let mut files_b = files_b;
+    let manifest_b = files_b.remove(Path::new("world.toml")).unwrap();
+    assert_eq!(
+        String::from_utf8(manifest_a)
+            .unwrap()
+            .replacen("name = \"a\"", "name = \"b\"", 1),
+        String::from_utf8(manifest_b).unwrap()
+    );
+    assert_eq!(files_a.len(), 3 * 80);
+    assert!(
+        files_a
+            .keys()
+            .all(|p| !p.to_string_lossy().contains(".tmp"))
+    );
+    assert!(files_a == files_b, "tile files differ between two bakes");
+}
+
+#[test]
+fn camera_paths_clear_the_terrain() {
+    let dir = tempfile::tempdir().unwrap();
+    let terrain = Terrain::load(&hills_world(dir.path()));
+    let m = &terrain.world.manifest;
+    assert_eq!(m.paths[0].name, "overview");
+    let overview = terrain.clearances(&m.paths[0], 50);
+    assert!(overview.iter().all(|&c| c >= 50.0), "{overview:?}");
+    let low = terrain.clearances(m.path("low").unwrap(), 50);
+    assert!(low.iter().all(|&c| (30.0..=80.0).contains(&c)), "{low:?}");
+}
+
+#[test]
+fn progress_reaches_every_stage() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let mut last: BTreeMap<String, (u64, u64)> = BTreeMap::new();
+    let opts = BakeOptions {
+        dem,
+        out: dir.path().join("w"),
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        ..Default::default()
+    };
+    let report = bake(&opts, &mut |stage, done, total| {
+        assert!(done <= total);
+        last.insert(format!("{stage:?}"), (done, total));
+    })
+    .unwrap();
+    assert_eq!(report.tiles_written, 80);
+    assert_eq!(report.levels, 2);
+    assert_eq!(last["WriteTiles"], (80, 80));
+    for stage in [
+        BakeStage::LoadDem,
+        BakeStage::Resample,
+        BakeStage::Paint,
+        BakeStage::Paths,
+        BakeStage::WriteManifest,
+    ] {
+        let (done, total) = last[&format!("{stage:?}")];
+        assert_eq!(done, total, "{stage:?}");
+    }
+    // The world is named after its directory by default.
+    assert_eq!(
+        verdant::world::World::open(&dir.path().join("w"))
+            .unwrap()
+            .manifest
+            .name,
+        "w"
+    );
+}
+
+#[test]
+fn absurd_bake_options_are_refused_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let out = dir.path().join("w");
+    for (tile_cells, stored_levels, cell) in [
+        (100, 2, 20.0),
+        (16, 0, 20.0),
+        (16, 13, 20.0),
+        (16, 2, 0.001),
+    ] {
+        let opts = BakeOptions {
+            dem: dem.clone(),
+            out: out.clone(),
+            cell_size_m: Some(cell),
+            tile_cells,
+            stored_levels,
+            ..Default::default()
+        };
+        let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                WorldError::OutOfRange { .. } | WorldError::TooManyTiles { .. }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("world.toml"), "{err}");
+        assert!(!out.exists());
+    }
+    let opts = BakeOptions {
+        dem,
+        out: out.clone(),
+        cell_size_m: Some(-5.0),
+        ..Default::default()
+    };
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(err, WorldError::NonPositive { .. }), "{err}");
+}
+
+#[test]
+fn dem_loads_with_its_sidecar() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let dem = Dem::load(&png).unwrap();
+    assert_eq!((dem.width, dem.height), (200, 150));
+    assert_eq!(dem.extent_m(), [1990.0, 1937.0]);
+    // Row 0 is north: its first sample lies at (0, 1937).
+    assert!((f64::from(dem.heights[0]) - hills(0.0, 1937.0)).abs() < 0.006);
+    let last_row = 149 * 200;
+    assert!((f64::from(dem.heights[last_row + 5]) - hills(50.0, 0.0)).abs() < 0.006);
+    // Interpolation passes through the posts.
+    assert!((dem.sample(50.0, 0.0) - f64::from(dem.heights[last_row + 5])).abs() < 1e-9);
+}
+
+#[test]
+fn dem_sidecar_disagreeing_with_its_png_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = write_dem(dir.path(), "d", [20, 10], [5.0, 5.0], [0.0, 1.0], hills);
+    write_sidecar(dir.path(), "d", [21, 10], [5.0, 5.0], [0.0, 1.0]);
+    let err = Dem::load(&png).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            WorldError::SidecarMismatch {
+                field: "width",
+                sidecar: 21,
+                image: 20,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("d.json"), "{err}");
+}
+
+#[test]
+fn eight_bit_dem_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("d.png");
+    image::GrayImage::new(20, 10).save(&png).unwrap();
+    write_sidecar(dir.path(), "d", [20, 10], [5.0, 5.0], [0.0, 1.0]);
+    let err = Dem::load(&png).unwrap_err();
+    assert!(matches!(err, WorldError::WrongLayout { .. }), "{err}");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("d.png") && msg.contains("16-bit grayscale"),
+        "{msg}"
+    );
+    assert!(msg.contains("8-bit"), "{msg}");
+}
+
+#[test]
+fn dem_without_sidecar_or_with_a_bad_one_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = write_dem(dir.path(), "d", [20, 10], [5.0, 5.0], [0.0, 1.0], hills);
+    let json = dir.path().join("d.json");
+
+    std::fs::write(&json, "{ \"width\": 20, ").unwrap();
+    let err = Dem::load(&png).unwrap_err();
+    assert!(matches!(err, WorldError::BadSidecar { .. }), "{err}");
+    assert!(err.to_string().contains("d.json"), "{err}");
+
+    write_sidecar(dir.path(), "d", [20, 10], [0.0, 5.0], [0.0, 1.0]);
+    let err = Dem::load(&png).unwrap_err();
+    assert!(matches!(err, WorldError::NonPositive { .. }), "{err}");
+    assert!(err.to_string().contains("cell_size_m.east_west"), "{err}");
+
+    write_sidecar(dir.path(), "d", [20, 10], [5.0, 5.0], [0.0, -1.0]);
+    let err = Dem::load(&png).unwrap_err();
+    assert!(matches!(err, WorldError::NonPositive { .. }), "{err}");
+
+    std::fs::remove_file(&json).unwrap();
+    let err = Dem::load(&png).unwrap_err();
+    assert!(matches!(err, WorldError::MissingSidecar { .. }), "{err}");
+    assert!(err.to_string().contains("d.json"), "{err}");
+
+    let err = Dem::load(&dir.path().join("absent.png")).unwrap_err();
+    assert!(matches!(err, WorldError::MissingFile { .. }), "{err}");
+    assert!(err.to_string().contains("absent.png"), "{err}");
+}
+
+#[test]
+fn corrupt_dem_png_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = write_dem(dir.path(), "d", [20, 10], [5.0, 5.0], [0.0, 1.0], hills);
+    let bytes = std::fs::read(&png).unwrap();
+    std::fs::write(&png, &bytes[..bytes.len() / 2]).unwrap();
+    let err = Dem::load(&png).unwrap_err();
+    assert!(matches!(err, WorldError::CorruptImage { .. }), "{err}");
+    assert!(err.to_string().contains("d.png"), "{err}");
+}
+
+#[test]
+fn tile_ids_of_a_baked_world_are_in_level_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = verdant::world::World::open(&hills_world(dir.path())).unwrap();
+    let ids: Vec<TileId> = world.stored_tiles().collect();
+    assert_eq!(ids.len(), 80);
+    assert!(ids.windows(2).all(|w| w[0].level <= w[1].level));
+    assert_eq!(ids[0], TileId::new(0, 0, 0));
+    assert_eq!(ids[79], TileId::new(1, 7, 7));
+}

@@ -1,0 +1,725 @@
+//! The manifest, the tile files and the committed default world: valid input round-trips, and
+//! every kind of bad input gets its own error naming the file, without a panic.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{Rng, Terrain};
+use verdant::world::{
+    Manifest, Pyramid, ReadOptions, TileData, TileFile, TileId, World, WorldError, read_tile,
+    read_tile_with, tile_path, write_tile,
+};
+
+fn repo_world() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz")
+}
+
+const VALID: &str = r#"
+name = "test"
+description = "a small test world"
+extent_m = [900.0, 1000.0]
+height_range_m = [-10.0, 500.0]
+
+[pyramid]
+root_tile_size_m = 512.0
+root_tiles = [2, 2]
+tile_cells = 16
+border = 2
+stored_levels = 2
+derived_levels = 1
+
+[[grass_types]]
+name = "bare"
+ground_color = [0.3, 0.3, 0.3]
+base_color = [0.3, 0.3, 0.3]
+tip_color = [0.3, 0.3, 0.3]
+height_m = [0.0, 0.0]
+width_m = [0.0, 0.0]
+stiffness = 1.0
+
+[[grass_types]]
+name = "meadow"
+ground_color = [0.1, 0.2, 0.05]
+base_color = [0.05, 0.15, 0.02]
+tip_color = [0.2, 0.5, 0.1]
+height_m = [0.2, 0.4]
+width_m = [0.01, 0.02]
+stiffness = 0.5
+
+[[paths]]
+name = "overview"
+duration_s = 10.0
+keys = [
+    { t_s = 0.0, position_m = [10.0, 10.0, 600.0], yaw_deg = 45.0, pitch_deg = -10.0 },
+    { t_s = 10.0, position_m = [800.0, 900.0, 600.0], yaw_deg = 45.0, pitch_deg = -10.0 },
+]
+"#;
+
+fn toml_path() -> &'static Path {
+    Path::new("worlds/test/world.toml")
+}
+
+fn parse(text: &str) -> Result<Manifest, WorldError> {
+    Manifest::parse(text, toml_path())
+}
+
+/// Parses VALID with `from` replaced by `to` (which must occur), expecting an error.
+fn broken(from: &str, to: &str) -> WorldError {
+    assert!(VALID.contains(from), "{from}");
+    let err = parse(&VALID.replacen(from, to, 1)).expect_err(to);
+    assert!(
+        err.to_string().starts_with("worlds/test/world.toml: "),
+        "message does not name the file: {err}"
+    );
+    err
+}
+
+#[test]
+fn committed_world_manifest_parses_and_validates() {
+    let m = Manifest::from_path(&repo_world().join("world.toml")).unwrap();
+    assert_eq!(m.name, "santa-cruz");
+    assert_eq!(m.pyramid.tile_cells, 128);
+    assert_eq!(m.pyramid.stored_levels, 3);
+    assert_eq!(m.pyramid.cell_size_m(2), 25.0);
+    let names: Vec<&str> = m.grass_types.iter().map(|g| g.name.as_str()).collect();
+    assert_eq!(names, ["bare", "meadow", "tall grass", "dry grass"]);
+    assert_eq!(m.paths[0].name, "overview");
+    assert!(m.path("low").is_some());
+    assert!(m.height_range_m[0] >= 0.0 && m.height_range_m[1] <= 1000.0);
+    // Text written by `to_toml` reads back to the same manifest.
+    assert_eq!(parse(&m.to_toml()).unwrap(), m);
+}
+
+#[test]
+fn committed_world_tiles_all_load() {
+    let world = World::open(&repo_world()).unwrap();
+    let mut count = 0;
+    for id in world.stored_tiles() {
+        let tile = world.load_tile(id).unwrap();
+        assert_eq!(tile.size, 133);
+        count += 1;
+    }
+    assert_eq!(count, 6 + 24 + 96);
+}
+
+#[test]
+fn committed_world_camera_paths_clear_the_terrain() {
+    let terrain = Terrain::load(&repo_world());
+    let m = &terrain.world.manifest;
+    let overview = &m.paths[0];
+    assert!((50.0..=70.0).contains(&overview.duration_s));
+    let c = terrain.clearances(overview, 40);
+    let min = c.iter().copied().fold(f64::INFINITY, f64::min);
+    let mean = c.iter().sum::<f64>() / c.len() as f64;
+    assert!(min >= 50.0, "overview dips to {min} m above the terrain");
+    assert!(
+        (250.0..=450.0).contains(&mean),
+        "overview flies {mean} m up on average"
+    );
+
+    let c = terrain.clearances(m.path("low").unwrap(), 40);
+    let min = c.iter().copied().fold(f64::INFINITY, f64::min);
+    let max = c.iter().copied().fold(0.0, f64::max);
+    assert!(
+        min >= 30.0 && max <= 60.0,
+        "low pass flies {min}..{max} m up"
+    );
+}
+
+#[test]
+fn valid_manifest_parses() {
+    let m = parse(VALID).unwrap();
+    assert_eq!(m.name, "test");
+    assert_eq!(m.pyramid.max_level(), 2);
+    assert_eq!(m.paths[0].keys[1].position_m, [800.0, 900.0, 600.0]);
+    // Wind and sky take their defaults: the sun in the south-west, 35 degrees up.
+    assert_eq!(m.sky.sun_azimuth_deg, 225.0);
+    assert_eq!(m.sky.sun_elevation_deg, 35.0);
+    assert_eq!(m.sky.fog_distance_m, 12_000.0);
+    assert!(m.wind.speed_mps > 0.0);
+    assert_eq!(parse(&m.to_toml()).unwrap(), m);
+}
+
+#[test]
+fn manifest_syntax_errors() {
+    let err = broken("stiffness = 0.5", "stiffness = 0.5\nshininess = 2.0");
+    assert!(matches!(err, WorldError::ManifestSyntax { .. }), "{err}");
+    assert!(err.to_string().contains("shininess"), "{err}");
+    let err = broken("tile_cells = 16\n", "");
+    assert!(matches!(err, WorldError::ManifestSyntax { .. }), "{err}");
+    assert!(err.to_string().contains("tile_cells"), "{err}");
+    let err = broken("name = \"test\"", "name = test");
+    assert!(matches!(err, WorldError::ManifestSyntax { .. }), "{err}");
+}
+
+#[test]
+fn manifest_non_finite_numbers() {
+    let err = broken("extent_m = [900.0, 1000.0]", "extent_m = [nan, 1000.0]");
+    assert!(
+        matches!(err, WorldError::NonFinite { ref field, .. } if field == "extent_m[0]"),
+        "{err}"
+    );
+    let err = broken("[800.0, 900.0, 600.0]", "[800.0, inf, 600.0]");
+    assert!(
+        matches!(err, WorldError::NonFinite { ref field, .. } if field == "paths[0].keys[1].position_m[1]"),
+        "{err}"
+    );
+    let err = broken(
+        "height_range_m = [-10.0, 500.0]",
+        "height_range_m = [-10.0, nan]",
+    );
+    assert!(matches!(err, WorldError::NonFinite { .. }), "{err}");
+}
+
+#[test]
+fn manifest_non_positive_sizes() {
+    let err = broken("extent_m = [900.0, 1000.0]", "extent_m = [900.0, -1.0]");
+    assert!(
+        matches!(err, WorldError::NonPositive { ref field, .. } if field == "extent_m[1]"),
+        "{err}"
+    );
+    assert!(err.to_string().contains("extent_m[1] = -1"), "{err}");
+    let err = broken("root_tile_size_m = 512.0", "root_tile_size_m = 0.0");
+    assert!(matches!(err, WorldError::NonPositive { .. }), "{err}");
+    let err = broken("root_tiles = [2, 2]", "root_tiles = [0, 2]");
+    assert!(matches!(err, WorldError::NonPositive { .. }), "{err}");
+    let err = broken("duration_s = 10.0", "duration_s = 0.0");
+    assert!(matches!(err, WorldError::NonPositive { .. }), "{err}");
+}
+
+#[test]
+fn manifest_absurd_sizes() {
+    for (from, to, field) in [
+        ("tile_cells = 16", "tile_cells = 100", "pyramid.tile_cells"),
+        ("tile_cells = 16", "tile_cells = 4", "pyramid.tile_cells"),
+        ("tile_cells = 16", "tile_cells = 2048", "pyramid.tile_cells"),
+        ("border = 2", "border = 9", "pyramid.border"),
+        (
+            "stored_levels = 2",
+            "stored_levels = 0",
+            "pyramid.stored_levels",
+        ),
+        (
+            "stored_levels = 2",
+            "stored_levels = 13",
+            "pyramid.stored_levels",
+        ),
+        (
+            "derived_levels = 1",
+            "derived_levels = 23",
+            "pyramid.stored_levels + pyramid.derived_levels",
+        ),
+    ] {
+        let err = broken(from, to);
+        assert!(
+            matches!(err, WorldError::OutOfRange { field: ref f, .. } if f == field),
+            "{to}: {err}"
+        );
+    }
+    let deep = VALID
+        .replace("root_tiles = [2, 2]", "root_tiles = [4096, 1]")
+        .replace("derived_levels = 1", "derived_levels = 20");
+    let err = parse(&deep).unwrap_err();
+    assert!(
+        matches!(err, WorldError::OutOfRange { ref field, .. } if field == "pyramid.root_tiles[0]"),
+        "{err}"
+    );
+    let err = broken("root_tiles = [2, 2]", "root_tiles = [100, 100]");
+    assert!(
+        matches!(err, WorldError::TooManyTiles { count: 10_000, .. }),
+        "{err}"
+    );
+    let err = broken("stored_levels = 2", "stored_levels = 12");
+    assert!(matches!(err, WorldError::TooManyTiles { .. }), "{err}");
+    assert!(err.to_string().contains("1000000"), "{err}");
+    let err = broken("extent_m = [900.0, 1000.0]", "extent_m = [1100.0, 1000.0]");
+    assert!(
+        matches!(err, WorldError::ExtentBeyondGrid { axis: 0, .. }),
+        "{err}"
+    );
+    let err = broken(
+        "extent_m = [900.0, 1000.0]\n",
+        "extent_m = [2.0e7, 1000.0]\n",
+    )
+    .to_string();
+    assert!(err.contains("extent_m[0]"), "{err}");
+    let huge = VALID
+        .replace("extent_m = [900.0, 1000.0]", "extent_m = [2.0e7, 1000.0]")
+        .replace("root_tile_size_m = 512.0", "root_tile_size_m = 1.0e7");
+    let err = parse(&huge).unwrap_err();
+    assert!(
+        matches!(err, WorldError::OutOfRange { ref field, .. } if field == "extent_m[0]"),
+        "{err}"
+    );
+}
+
+#[test]
+fn manifest_bad_height_range() {
+    let err = broken(
+        "height_range_m = [-10.0, 500.0]",
+        "height_range_m = [500.0, -10.0]",
+    );
+    assert!(
+        matches!(
+            err,
+            WorldError::BadHeightRange {
+                min: 500.0,
+                max: -10.0,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let err = broken(
+        "height_range_m = [-10.0, 500.0]",
+        "height_range_m = [5.0, 5.0]",
+    );
+    assert!(matches!(err, WorldError::BadHeightRange { .. }), "{err}");
+}
+
+#[test]
+fn manifest_bad_grass_types() {
+    let no_grass: String = VALID.split("[[grass_types]]").next().unwrap().to_string()
+        + "[[paths]]"
+        + VALID.split("[[paths]]").nth(1).unwrap();
+    let err = parse(&no_grass).unwrap_err();
+    assert!(matches!(err, WorldError::NoGrassTypes { .. }), "{err}");
+    assert!(err.to_string().contains("worlds/test/world.toml"), "{err}");
+
+    let err = broken("height_m = [0.2, 0.4]", "height_m = [0.4, 0.2]");
+    assert!(
+        matches!(
+            err,
+            WorldError::BadGrassRange {
+                index: 1,
+                field: "height_m",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("meadow"), "{err}");
+    let err = broken("width_m = [0.01, 0.02]", "width_m = [-0.01, 0.02]");
+    assert!(
+        matches!(
+            err,
+            WorldError::BadGrassRange {
+                field: "width_m",
+                ..
+            }
+        ),
+        "{err}"
+    );
+}
+
+#[test]
+fn manifest_bad_camera_paths() {
+    let one_key = VALID.replace(
+        "    { t_s = 10.0, position_m = [800.0, 900.0, 600.0], yaw_deg = 45.0, pitch_deg = -10.0 },\n",
+        "",
+    );
+    let err = parse(&one_key).unwrap_err();
+    assert!(
+        matches!(err, WorldError::PathTooShort { keys: 1, .. }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("\"overview\""), "{err}");
+
+    let err = broken("{ t_s = 10.0,", "{ t_s = 0.0,");
+    assert!(
+        matches!(err, WorldError::PathKeysOutOfOrder { index: 1, .. }),
+        "{err}"
+    );
+
+    let paths = &VALID[VALID.find("[[paths]]").unwrap()..];
+    let err = parse(&format!("{VALID}\n{paths}")).unwrap_err();
+    assert!(
+        matches!(err, WorldError::DuplicatePath { ref name, .. } if name == "overview"),
+        "{err}"
+    );
+}
+
+#[test]
+fn missing_world_dir_and_manifest() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nowhere");
+    let err = World::open(&missing).unwrap_err();
+    assert!(matches!(err, WorldError::MissingWorldDir { .. }), "{err}");
+    assert!(err.to_string().contains("nowhere"), "{err}");
+
+    let err = World::open(dir.path()).unwrap_err();
+    assert!(matches!(err, WorldError::MissingFile { .. }), "{err}");
+    assert!(err.to_string().contains("world.toml"), "{err}");
+}
+
+fn pyramid() -> Pyramid {
+    Pyramid {
+        root_tile_size_m: 512.0,
+        root_tiles: [2, 2],
+        tile_cells: 16,
+        border: 2,
+        stored_levels: 2,
+        derived_levels: 1,
+    }
+}
+
+const RANGE: [f32; 2] = [-100.0, 1000.0];
+
+fn random_tile(id: TileId, size: u32, seed: u64) -> TileData {
+    let mut rng = Rng(seed);
+    let n = (size * size) as usize;
+    TileData {
+        id,
+        size,
+        heights: (0..n)
+            .map(|_| (RANGE[0] as f64 + rng.unit() * f64::from(RANGE[1] - RANGE[0])) as f32)
+            .collect(),
+        grass_type: (0..n).map(|_| (rng.next_u64() % 4) as u8).collect(),
+        density: (0..n).map(|_| rng.next_u64() as u8).collect(),
+    }
+}
+
+#[test]
+fn tiles_round_trip_bit_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = pyramid();
+    for (k, id) in [
+        TileId::new(0, 0, 0),
+        TileId::new(0, 1, 1),
+        TileId::new(1, 3, 2),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let mut tile = random_tile(id, p.samples_per_side(), 11 + k as u64);
+        // Awkward values survive too.
+        tile.heights[0] = -0.0;
+        tile.heights[1] = f32::MIN_POSITIVE / 8.0;
+        tile.heights[2] = 999.999_94;
+        write_tile(dir.path(), &p, &tile).unwrap();
+        let back = read_tile(dir.path(), &p, id, RANGE).unwrap();
+        assert_eq!(back.id, id);
+        assert_eq!(back.size, tile.size);
+        let bits = |v: &[f32]| v.iter().map(|h| h.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back.heights), bits(&tile.heights));
+        assert_eq!(back.grass_type, tile.grass_type);
+        assert_eq!(back.density, tile.density);
+        assert_eq!(back.byte_size(), tile.byte_size());
+    }
+    assert!(
+        tile_path(dir.path(), TileId::new(1, 3, 2), TileFile::Height)
+            .ends_with("tiles/L1/3_2.height.exr")
+    );
+}
+
+/// The files store the north edge first: the type PNG's first row is the tile's last (north) row.
+#[test]
+fn files_store_north_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = pyramid();
+    let id = TileId::new(0, 0, 0);
+    let tile = random_tile(id, p.samples_per_side(), 5);
+    write_tile(dir.path(), &p, &tile).unwrap();
+    let png = image::open(tile_path(dir.path(), id, TileFile::Type))
+        .unwrap()
+        .into_luma8();
+    let size = tile.size;
+    for i in 0..size {
+        assert_eq!(
+            png.get_pixel(i, 0).0[0],
+            tile.grass_type[tile.index(i, size - 1)]
+        );
+        assert_eq!(
+            png.get_pixel(i, size - 1).0[0],
+            tile.grass_type[tile.index(i, 0)]
+        );
+    }
+}
+
+fn written_tile(dir: &Path) -> (Pyramid, TileId) {
+    let p = pyramid();
+    let id = TileId::new(1, 2, 1);
+    write_tile(dir, &p, &random_tile(id, p.samples_per_side(), 3)).unwrap();
+    (p, id)
+}
+
+fn assert_names(err: &WorldError, file: &str) {
+    let msg = err.to_string();
+    assert!(msg.contains(file), "message does not name {file}: {msg}");
+}
+
+#[test]
+fn truncated_exr_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    let path = tile_path(dir.path(), id, TileFile::Height);
+    let bytes = std::fs::read(&path).unwrap();
+    for len in [0, 10, 300, bytes.len() / 2, bytes.len() - 1] {
+        std::fs::write(&path, &bytes[..len]).unwrap();
+        let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+        assert!(
+            matches!(err, WorldError::CorruptImage { format: "EXR", .. }),
+            "{len}: {err}"
+        );
+        assert_names(&err, "L1/2_1.height.exr");
+    }
+}
+
+#[test]
+fn random_bytes_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    let mut rng = Rng(99);
+    for kind in TileFile::ALL {
+        let path = tile_path(dir.path(), id, kind);
+        let good = std::fs::read(&path).unwrap();
+        for round in 0..40 {
+            let mut bytes = good.clone();
+            if round < 20 {
+                // Flip bytes of a good file.
+                for _ in 0..1 + round {
+                    let k = (rng.next_u64() % bytes.len() as u64) as usize;
+                    bytes[k] ^= (rng.next_u64() % 255 + 1) as u8;
+                }
+            } else {
+                bytes = (0..rng.next_u64() % 2000)
+                    .map(|_| rng.next_u64() as u8)
+                    .collect();
+            }
+            std::fs::write(&path, &bytes).unwrap();
+            // Any result but a panic will do; errors must name the file.
+            if let Err(err) = read_tile(dir.path(), &p, id, RANGE) {
+                assert!(err.to_string().contains(&*path.to_string_lossy()), "{err}");
+            }
+        }
+        std::fs::write(&path, &good).unwrap();
+    }
+}
+
+#[test]
+fn corrupt_png_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    let path = tile_path(dir.path(), id, TileFile::Type);
+    let mut rng = Rng(7);
+    let junk: Vec<u8> = (0..500).map(|_| rng.next_u64() as u8).collect();
+    std::fs::write(&path, junk).unwrap();
+    let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+    assert!(
+        matches!(err, WorldError::CorruptImage { format: "PNG", .. }),
+        "{err}"
+    );
+    assert_names(&err, "L1/2_1.type.png");
+
+    let path = tile_path(dir.path(), id, TileFile::Density);
+    let good = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &good[..good.len() - 20]).unwrap();
+    written_tile_type_fixed(dir.path(), &p, id);
+    let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+    assert!(
+        matches!(err, WorldError::CorruptImage { format: "PNG", .. }),
+        "{err}"
+    );
+    assert_names(&err, "L1/2_1.density.png");
+}
+
+/// Rewrites only the type map of `id` with a valid one.
+fn written_tile_type_fixed(dir: &Path, p: &Pyramid, id: TileId) {
+    let size = p.samples_per_side();
+    image::GrayImage::new(size, size)
+        .save(tile_path(dir, id, TileFile::Type))
+        .unwrap();
+}
+
+#[test]
+fn tile_of_the_wrong_size_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let small = Pyramid {
+        tile_cells: 8,
+        ..pyramid()
+    };
+    let id = TileId::new(0, 1, 0);
+    write_tile(
+        dir.path(),
+        &small,
+        &random_tile(id, small.samples_per_side(), 1),
+    )
+    .unwrap();
+    let err = read_tile(dir.path(), &pyramid(), id, RANGE).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            WorldError::WrongDimensions {
+                expected: [21, 21],
+                found: [13, 13],
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(
+        err.to_string()
+            .ends_with("L0/1_0.height.exr: expected 21x21 samples, found 13x13"),
+        "{err}"
+    );
+
+    // A type map of the wrong size, beside a good height file.
+    let p = pyramid();
+    write_tile(dir.path(), &p, &random_tile(id, p.samples_per_side(), 1)).unwrap();
+    image::GrayImage::new(21, 20)
+        .save(tile_path(dir.path(), id, TileFile::Type))
+        .unwrap();
+    let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            WorldError::WrongDimensions {
+                found: [21, 20],
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert_names(&err, "1_0.type.png");
+
+    // Writing data that does not fit the pyramid is refused too.
+    let err = write_tile(dir.path(), &p, &random_tile(id, 20, 1)).unwrap_err();
+    assert!(matches!(err, WorldError::BadTileData { .. }), "{err}");
+}
+
+#[test]
+fn wrong_layouts_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    // A 16-bit type map.
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::new(21, 21)
+        .save(tile_path(dir.path(), id, TileFile::Type))
+        .unwrap();
+    let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+    assert!(matches!(err, WorldError::WrongLayout { .. }), "{err}");
+    assert!(
+        err.to_string()
+            .contains("expected 8-bit grayscale, found 16-bit grayscale"),
+        "{err}"
+    );
+
+    // An RGB height file.
+    write_exr(
+        &tile_path(dir.path(), id, TileFile::Height),
+        21,
+        &["R", "G", "B"],
+        |_| 1.0,
+    );
+    let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+    assert!(matches!(err, WorldError::WrongLayout { .. }), "{err}");
+    assert_names(&err, "2_1.height.exr");
+}
+
+/// Writes an f32 EXR with the given channels, every channel holding `f(sample index)`.
+fn write_exr(path: &Path, size: usize, channels: &[&str], f: impl Fn(usize) -> f32) {
+    use exr::prelude::*;
+    let list: Vec<AnyChannel<FlatSamples>> = channels
+        .iter()
+        .map(|name| AnyChannel::new(*name, FlatSamples::F32((0..size * size).map(&f).collect())))
+        .collect();
+    let layer = Layer::new(
+        (size, size),
+        LayerAttributes::named("height"),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(list)),
+    );
+    Image::from_layer(layer).write().to_file(path).unwrap();
+}
+
+#[test]
+fn nan_heights_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    let path = tile_path(dir.path(), id, TileFile::Height);
+    // Sample 5 of the file's first row: i = 5 at the north edge, j = 20.
+    write_exr(&path, 21, &["Y"], |k| if k == 5 { f32::NAN } else { 10.0 });
+    let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+    assert!(
+        matches!(err, WorldError::NonFiniteHeight { i: 5, j: 20, .. }),
+        "{err}"
+    );
+    assert_names(&err, "2_1.height.exr");
+
+    write_exr(&path, 21, &["Y"], |k| {
+        if k == 21 * 20 { f32::INFINITY } else { 10.0 }
+    });
+    let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+    assert!(
+        matches!(err, WorldError::NonFiniteHeight { i: 0, j: 0, .. }),
+        "{err}"
+    );
+
+    // Writing NaN is refused before anything reaches the disk.
+    let mut tile = random_tile(id, 21, 1);
+    tile.heights[7] = f32::NAN;
+    assert!(matches!(
+        write_tile(dir.path(), &p, &tile),
+        Err(WorldError::BadTileData { .. })
+    ));
+}
+
+#[test]
+fn heights_outside_the_range_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    // Within 1 m + 1 % of the span: accepted.
+    let ok = read_tile(dir.path(), &p, id, [-100.0, 990.0]);
+    assert!(ok.is_ok());
+    let err = read_tile(dir.path(), &p, id, [0.0, 500.0]).unwrap_err();
+    assert!(matches!(err, WorldError::HeightOutOfRange { .. }), "{err}");
+    assert_names(&err, "2_1.height.exr");
+}
+
+#[test]
+fn grass_types_beyond_the_manifest_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    let options = ReadOptions {
+        height_range_m: RANGE,
+        grass_type_count: 3,
+    };
+    let err = read_tile_with(dir.path(), &p, id, &options).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            WorldError::GrassTypeOutOfRange {
+                index: 3,
+                count: 3,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert_names(&err, "2_1.type.png");
+    let options = ReadOptions {
+        grass_type_count: 4,
+        ..options
+    };
+    assert!(read_tile_with(dir.path(), &p, id, &options).is_ok());
+}
+
+#[test]
+fn missing_tiles_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    std::fs::remove_file(tile_path(dir.path(), id, TileFile::Density)).unwrap();
+    let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+    assert!(matches!(err, WorldError::MissingFile { .. }), "{err}");
+    assert_names(&err, "2_1.density.png");
+
+    let err = read_tile(dir.path(), &p, TileId::new(0, 0, 0), RANGE).unwrap_err();
+    assert!(matches!(err, WorldError::MissingFile { .. }), "{err}");
+    assert_names(&err, "L0/0_0.height.exr");
+
+    // Outside the stored levels or the grid: not a stored tile at all.
+    for id in [TileId::new(2, 0, 0), TileId::new(0, 2, 0)] {
+        let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+        assert!(matches!(err, WorldError::TileNotStored { .. }), "{err}");
+    }
+}
