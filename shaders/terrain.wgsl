@@ -130,15 +130,16 @@ fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
     let lit = in.albedo * (frame.sun_color.rgb * lambert + 0.45 * ambient);
 
     let dist = length(in.rel_pos);
-    // 95% fog at the manifest's fog distance.
-    let fog = 1.0 - exp(-3.0 * dist / frame.camera.y);
+    // Clear near the camera, 95% fog at the manifest's fog distance.
+    let x = dist / frame.camera.y;
+    let fog = 1.0 - exp(-3.0 * x * x);
     let color = mix(lit, fog_color(in.rel_pos / max(dist, 1e-3)), fog);
     return vec4<f32>(color, 1.0);
 }
 
 // Sky: drawn after the terrain, only where the depth buffer still holds the far plane.
 struct SkyOut {
-    @builtin(position) clip: vec4<f32>,
+    @builtin(position) @invariant clip: vec4<f32>,
     @location(0) ndc: vec2<f32>,
 }
 

@@ -15,6 +15,6 @@ pub mod flythrough;
 pub mod gpu;
 pub mod lod;
 pub mod metrics;
+pub mod stream;
 pub mod terrain;
 pub mod world;
-pub mod stream;

@@ -3,12 +3,12 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use verdant::flythrough::{run_fly, FlyOptions, FlyProgress};
-use verdant::world::{bake, BakeOptions};
+use verdant::flythrough::{FlyOptions, FlyProgress, run_fly};
+use verdant::world::{BakeOptions, bake};
 
 /// Streaming open-world terrain with GPU grass.
 #[derive(Parser)]
@@ -29,7 +29,7 @@ enum Command {
         #[arg(long)]
         path: Option<String>,
         /// Frames to render, spread evenly over the path.
-        #[arg(long, default_value_t = 120)]
+        #[arg(long, default_value_t = 240)]
         frames: u32,
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "640x360", value_parser = parse_size)]
@@ -71,10 +71,16 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
-    let parse = |v: &str| v.trim().parse::<u32>().map_err(|_| format!("{v:?} is not a pixel count"));
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("{v:?} is not a pixel count"))
+    };
     let (w, h) = (parse(w)?, parse(h)?);
     if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("{w}x{h} is out of range (1 to 16384 pixels a side)"));
+        return Err(format!(
+            "{w}x{h} is out of range (1 to 16384 pixels a side)"
+        ));
     }
     Ok((w, h))
 }
@@ -87,7 +93,9 @@ fn resolve_world(arg: &str) -> Result<PathBuf> {
     }
     let candidates = [
         Path::new("worlds").join(arg),
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds").join(arg),
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("worlds")
+            .join(arg),
     ];
     for c in &candidates {
         if c.join("world.toml").is_file() {
@@ -108,9 +116,11 @@ fn resolve_world(arg: &str) -> Result<PathBuf> {
 fn bar(len: u64, what: &str) -> ProgressBar {
     let pb = ProgressBar::new(len);
     pb.set_style(
-        ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}")
-            .expect("static template")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{msg:>10} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}",
+        )
+        .expect("static template")
+        .progress_chars("=> "),
     );
     pb.set_message(what.to_owned());
     pb
@@ -157,7 +167,14 @@ fn fly(opts: FlyOptions) -> Result<()> {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Fly { world, path, frames, size, out, no_images } => fly(FlyOptions {
+        Command::Fly {
+            world,
+            path,
+            frames,
+            size,
+            out,
+            no_images,
+        } => fly(FlyOptions {
             world: resolve_world(&world)?,
             path,
             frames,
@@ -165,7 +182,15 @@ fn run(cli: Cli) -> Result<()> {
             out,
             write_images: !no_images,
         }),
-        Command::Bake { dem, out, name, cell_size, tile_cells, levels, seed } => {
+        Command::Bake {
+            dem,
+            out,
+            name,
+            cell_size,
+            tile_cells,
+            levels,
+            seed,
+        } => {
             let opts = BakeOptions {
                 dem,
                 out,

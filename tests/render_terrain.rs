@@ -2,7 +2,7 @@
 
 mod common;
 
-use verdant::flythrough::{sample_path, Scene};
+use verdant::flythrough::{Scene, sample_path};
 use verdant::world::World;
 
 #[test]
@@ -34,9 +34,16 @@ fn frames_show_lit_terrain_below_a_sky() {
     // than the sky; and the terrain is not flat-coloured (it is lit by a directional sun).
     let bottom: Vec<[u8; 4]> = (0..160).map(|x| image.get_pixel(x, 89).0).collect();
     let distinct: std::collections::HashSet<[u8; 4]> = bottom.iter().copied().collect();
-    assert!(distinct.len() > 10, "terrain looks flat: {} colours on the bottom row", distinct.len());
+    assert!(
+        distinct.len() > 10,
+        "terrain looks flat: {} colours on the bottom row",
+        distinct.len()
+    );
     let mean_blue_minus_red = |px: &[[u8; 4]]| {
-        px.iter().map(|p| f64::from(p[2]) - f64::from(p[0])).sum::<f64>() / px.len() as f64
+        px.iter()
+            .map(|p| f64::from(p[2]) - f64::from(p[0]))
+            .sum::<f64>()
+            / px.len() as f64
     };
     let top: Vec<[u8; 4]> = (0..160).map(|x| image.get_pixel(x, 0).0).collect();
     assert!(

@@ -34,7 +34,11 @@ impl Camera {
     /// Unit view direction.
     pub fn forward(&self) -> DVec3 {
         let (yaw, pitch) = (self.yaw_deg.to_radians(), self.pitch_deg.to_radians());
-        DVec3::new(yaw.cos() * pitch.cos(), yaw.sin() * pitch.cos(), pitch.sin())
+        DVec3::new(
+            yaw.cos() * pitch.cos(),
+            yaw.sin() * pitch.cos(),
+            pitch.sin(),
+        )
     }
 
     /// View-projection with the eye at the origin: positions fed to it must be camera-relative.
@@ -43,7 +47,8 @@ impl Camera {
         use glam::camera::rh::{proj::directx, view::look_to_mat4};
         let view = look_to_mat4(Vec3::ZERO, self.forward().as_vec3(), Vec3::Z);
         // wgpu's clip space is Direct3D's: z in [0, 1], y up.
-        let proj = directx::perspective_infinite_reverse(self.fov_y_deg.to_radians(), aspect, self.near_m);
+        let proj =
+            directx::perspective_infinite_reverse(self.fov_y_deg.to_radians(), aspect, self.near_m);
         proj * view
     }
 }
@@ -62,7 +67,12 @@ pub fn sample_path(path: &CameraPath, t_s: f64) -> Camera {
     let span = k2.t_s - k1.t_s;
     let u = if span > 0.0 { (t - k1.t_s) / span } else { 0.0 };
     let p = |k: usize| DVec3::from_array(keys[k].position_m);
-    let (p0, p1, p2, p3) = (p(i.saturating_sub(1)), p(i), p((i + 1).min(last)), p((i + 2).min(last)));
+    let (p0, p1, p2, p3) = (
+        p(i.saturating_sub(1)),
+        p(i),
+        p((i + 1).min(last)),
+        p((i + 2).min(last)),
+    );
     let position = catmull_rom(p0, p1, p2, p3, u);
     let mut dyaw = (k2.yaw_deg - k1.yaw_deg) % 360.0;
     if dyaw > 180.0 {
@@ -103,7 +113,11 @@ mod tests {
         let path = CameraPath {
             name: "test".into(),
             duration_s: 20.0,
-            keys: vec![key(0.0, 0.0, 350.0), key(10.0, 100.0, 10.0), key(20.0, 300.0, 10.0)],
+            keys: vec![
+                key(0.0, 0.0, 350.0),
+                key(10.0, 100.0, 10.0),
+                key(20.0, 300.0, 10.0),
+            ],
         };
         for k in &path.keys {
             let c = sample_path(&path, k.t_s);
@@ -111,7 +125,10 @@ mod tests {
         }
         let mid = sample_path(&path, 5.0);
         // 350 -> 10 degrees goes through 0, not through 180.
-        assert!((mid.yaw_deg.rem_euclid(360.0) - 0.0).abs() < 1e-9 || (mid.yaw_deg - 360.0).abs() < 1e-9);
+        assert!(
+            (mid.yaw_deg.rem_euclid(360.0) - 0.0).abs() < 1e-9
+                || (mid.yaw_deg - 360.0).abs() < 1e-9
+        );
         assert!(mid.position.x > 0.0 && mid.position.x < 100.0);
     }
 

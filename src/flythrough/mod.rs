@@ -5,7 +5,7 @@ mod camera;
 mod report;
 mod scene;
 
-pub use camera::{sample_path, Camera};
+pub use camera::{Camera, sample_path};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
 pub use scene::{FrameStats, Scene, SceneError};
 
@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result, bail};
 
 use crate::gpu::GpuContext;
 use crate::metrics::Summary;
@@ -53,16 +53,24 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     let world = World::open(&opts.world)?;
     let path = match &opts.path {
         Some(name) => world.manifest.path(name).cloned().with_context(|| {
-            let names: Vec<&str> = world.manifest.paths.iter().map(|p| p.name.as_str()).collect();
+            let names: Vec<&str> = world
+                .manifest
+                .paths
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect();
             format!(
                 "world {} has no camera path {name:?} (it has: {})",
                 opts.world.display(),
                 names.join(", ")
             )
         })?,
-        None => world.manifest.paths.first().cloned().with_context(|| {
-            format!("world {} has no camera paths", opts.world.display())
-        })?,
+        None => world
+            .manifest
+            .paths
+            .first()
+            .cloned()
+            .with_context(|| format!("world {} has no camera paths", opts.world.display()))?,
     };
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("cannot create output folder {}", opts.out.display()))?;
@@ -144,7 +152,10 @@ impl FlySummary {
         let passes: std::collections::BTreeSet<&String> =
             frames.iter().flat_map(|f| f.gpu_ms.keys()).collect();
         for pass in passes {
-            let v: Vec<f64> = frames.iter().filter_map(|f| f.gpu_ms.get(pass).copied()).collect();
+            let v: Vec<f64> = frames
+                .iter()
+                .filter_map(|f| f.gpu_ms.get(pass).copied())
+                .collect();
             gpu_ms.insert(pass.clone(), Summary::of(&v));
         }
         Self {

@@ -29,7 +29,9 @@ impl AdapterReport {
             name: ctx.info.name.clone(),
             backend: format!("{:?}", ctx.info.backend),
             device_type: format!("{:?}", ctx.info.device_type),
-            driver: format!("{} {}", ctx.info.driver, ctx.info.driver_info).trim().to_owned(),
+            driver: format!("{} {}", ctx.info.driver, ctx.info.driver_info)
+                .trim()
+                .to_owned(),
             timestamps: ctx.timestamps,
         }
     }

@@ -7,8 +7,8 @@ use glam::DVec2;
 
 use crate::flythrough::Camera;
 use crate::gpu::{AtlasError, GpuContext, GpuTimer, PassTimes, ReadbackError, TileAtlas};
-use crate::lod::{select_terrain, Frustum, TerrainLod};
-use crate::terrain::{TerrainRenderer, TileDraw, COLOR_FORMAT, DEPTH_FORMAT};
+use crate::lod::{Frustum, TerrainLod, select_terrain};
+use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT, TerrainRenderer, TileDraw};
 use crate::world::{TileId, World, WorldError};
 
 /// What stops a scene from being built or drawn.
@@ -25,7 +25,9 @@ pub enum SceneError {
     #[error(transparent)]
     Readback(#[from] ReadbackError),
     /// The world has more stored tiles than the device's texture arrays can hold.
-    #[error("the world has {tiles} stored tiles but the adapter's texture arrays hold at most {limit} layers")]
+    #[error(
+        "the world has {tiles} stored tiles but the adapter's texture arrays hold at most {limit} layers"
+    )]
     TooManyTiles {
         /// Stored tiles.
         tiles: usize,
@@ -91,7 +93,11 @@ impl Scene {
         let limits = ctx.device.limits();
         let max_dim = limits.max_texture_dimension_2d;
         if width == 0 || height == 0 || width > max_dim || height > max_dim {
-            return Err(SceneError::BadSize { width, height, limit: max_dim });
+            return Err(SceneError::BadSize {
+                width,
+                height,
+                limit: max_dim,
+            });
         }
         let ids: Vec<TileId> = world.stored_tiles().collect();
         if ids.len() > limits.max_texture_array_layers as usize {
@@ -111,7 +117,14 @@ impl Scene {
                 .heights
                 .iter()
                 .fold((f32::MAX, f32::MIN), |(lo, hi), &h| (lo.min(h), hi.max(h)));
-            resident.insert(*id, Resident { layer: layer as u32, min_h, max_h });
+            resident.insert(
+                *id,
+                Resident {
+                    layer: layer as u32,
+                    min_h,
+                    max_h,
+                },
+            );
             progress(layer as u64 + 1, total);
         }
         let max_level = pyramid.stored_levels.saturating_sub(1);
@@ -119,7 +132,11 @@ impl Scene {
         let target = |label, format, usage| {
             ctx.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
-                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
@@ -133,12 +150,19 @@ impl Scene {
             COLOR_FORMAT,
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
         );
-        let depth = target("depth", DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT);
+        let depth = target(
+            "depth",
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
         Ok(Self {
             world,
             resident,
             renderer,
-            lod: TerrainLod { lod_factor: 2.0, max_level },
+            lod: TerrainLod {
+                lod_factor: 2.0,
+                max_level,
+            },
             color_view: color.create_view(&Default::default()),
             depth_view: depth.create_view(&Default::default()),
             color,
@@ -164,7 +188,11 @@ impl Scene {
             self.lod,
             camera.position,
             &frustum,
-            &|id| resident.get(&id).map_or((-1e4, 1e5), |r| (r.min_h, r.max_h)),
+            &|id| {
+                resident
+                    .get(&id)
+                    .map_or((-1e4, 1e5), |r| (r.min_h, r.max_h))
+            },
         )
     }
 
@@ -217,7 +245,11 @@ impl Scene {
         ctx.queue.submit([encoder.finish()]);
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         let gpu = self.timer.read(&ctx.device);
-        FrameStats { tiles_drawn: tiles, cpu_ms, gpu }
+        FrameStats {
+            tiles_drawn: tiles,
+            cpu_ms,
+            gpu,
+        }
     }
 
     /// Reads the last frame back as an RGBA8 image (sRGB).

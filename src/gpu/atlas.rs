@@ -82,7 +82,12 @@ impl TileAtlas {
     }
 
     /// Writes `tile` into `slot`.
-    pub fn upload(&self, queue: &wgpu::Queue, slot: u32, tile: &TileData) -> Result<(), AtlasError> {
+    pub fn upload(
+        &self,
+        queue: &wgpu::Queue,
+        slot: u32,
+        tile: &TileData,
+    ) -> Result<(), AtlasError> {
         if slot >= self.slots {
             return Err(AtlasError::SlotOutOfRange {
                 slot,
@@ -101,7 +106,11 @@ impl TileAtlas {
                 wgpu::TexelCopyTextureInfo {
                     texture,
                     mip_level: 0,
-                    origin: wgpu::Origin3d { x: 0, y: 0, z: slot },
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: 0,
+                        z: slot,
+                    },
                     aspect: wgpu::TextureAspect::All,
                 },
                 bytes,

@@ -53,16 +53,29 @@ pub struct DeriveStage {
 
 impl DeriveStage {
     /// A stage that derives up to `batch` tiles a call, reading parents from `atlas`.
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, pyramid: &Pyramid, params: &DeriveParams, atlas: &TileAtlas, batch: u32) -> Self {
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        pyramid: &Pyramid,
+        params: &DeriveParams,
+        atlas: &TileAtlas,
+        batch: u32,
+    ) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("derive_child.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/derive_child.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(
+                include_str!("../../shaders/derive_child.wgsl").into(),
+            ),
         });
         let size = atlas.size();
         let staging = |label, format| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
-                size: wgpu::Extent3d { width: size, height: size, depth_or_array_layers: batch },
+                size: wgpu::Extent3d {
+                    width: size,
+                    height: size,
+                    depth_or_array_layers: batch,
+                },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
@@ -83,7 +96,12 @@ impl DeriveStage {
             &params_buffer,
             0,
             bytemuck::bytes_of(&ParamsGpu {
-                grid: [pyramid.tile_cells, pyramid.border, pyramid.samples_per_side(), params.seed],
+                grid: [
+                    pyramid.tile_cells,
+                    pyramid.border,
+                    pyramid.samples_per_side(),
+                    params.seed,
+                ],
                 detail: [params.detail, params.window_cells, 0.0, 0.0],
             }),
         );
@@ -118,15 +136,41 @@ impl DeriveStage {
             label: Some("derive"),
             layout: &layout,
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: params_buffer.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: jobs.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&views[0]) },
-                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&views[1]) },
-                wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(&views[2]) },
-                wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&views[3]) },
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: jobs.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&views[0]),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&views[1]),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(&views[2]),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::TextureView(&views[3]),
+                },
             ],
         });
-        Self { pipeline, bind_group, jobs, staging_heights, staging_grass, pyramid: pyramid.clone(), batch }
+        Self {
+            pipeline,
+            bind_group,
+            jobs,
+            staging_heights,
+            staging_grass,
+            pyramid: pyramid.clone(),
+            batch,
+        }
     }
 
     /// Most tiles one call derives.
@@ -174,21 +218,36 @@ impl DeriveStage {
             pass.dispatch_workgroups(size.div_ceil(8), size.div_ceil(8), jobs.len() as u32);
         }
         for (k, j) in jobs.iter().enumerate() {
-            for (from, to) in [(&self.staging_heights, &atlas.heights), (&self.staging_grass, &atlas.grass)] {
+            for (from, to) in [
+                (&self.staging_heights, &atlas.heights),
+                (&self.staging_grass, &atlas.grass),
+            ] {
                 encoder.copy_texture_to_texture(
                     wgpu::TexelCopyTextureInfo {
                         texture: from,
                         mip_level: 0,
-                        origin: wgpu::Origin3d { x: 0, y: 0, z: k as u32 },
+                        origin: wgpu::Origin3d {
+                            x: 0,
+                            y: 0,
+                            z: k as u32,
+                        },
                         aspect: wgpu::TextureAspect::All,
                     },
                     wgpu::TexelCopyTextureInfo {
                         texture: to,
                         mip_level: 0,
-                        origin: wgpu::Origin3d { x: 0, y: 0, z: j.child_slot },
+                        origin: wgpu::Origin3d {
+                            x: 0,
+                            y: 0,
+                            z: j.child_slot,
+                        },
                         aspect: wgpu::TextureAspect::All,
                     },
-                    wgpu::Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+                    wgpu::Extent3d {
+                        width: size,
+                        height: size,
+                        depth_or_array_layers: 1,
+                    },
                 );
             }
         }

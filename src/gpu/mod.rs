@@ -9,9 +9,9 @@ mod derive;
 mod readback;
 mod timing;
 
-pub use atlas::{pack_grass, AtlasError, TileAtlas};
+pub use atlas::{AtlasError, TileAtlas, pack_grass};
 pub use derive::{DeriveJob, DeriveStage};
-pub use readback::{read_texture_layer, read_texture_rgba8, ReadbackError};
+pub use readback::{ReadbackError, read_texture_layer, read_texture_rgba8};
 pub use timing::{GpuTimer, PassTimes};
 
 use thiserror::Error;
@@ -72,7 +72,9 @@ impl GpuContext {
         desc.flags = wgpu::InstanceFlags::default().with_env();
         let instance = wgpu::Instance::new(desc);
 
-        let wanted_name = std::env::var("WGPU_ADAPTER_NAME").ok().map(|n| n.to_lowercase());
+        let wanted_name = std::env::var("WGPU_ADAPTER_NAME")
+            .ok()
+            .map(|n| n.to_lowercase());
         let adapter = match &wanted_name {
             Some(name) => instance
                 .enumerate_adapters(backends)

@@ -18,7 +18,14 @@ impl Frustum {
     /// Extracts the side and near planes of a (reverse-Z, infinite) view-projection matrix.
     pub fn from_view_proj(m: Mat4) -> Self {
         let r = |i: usize| m.row(i);
-        let planes = [r(3) + r(0), r(3) - r(0), r(3) + r(1), r(3) - r(1), r(3) - r(2)].map(|p| {
+        let planes = [
+            r(3) + r(0),
+            r(3) - r(0),
+            r(3) + r(1),
+            r(3) - r(1),
+            r(3) - r(2),
+        ]
+        .map(|p| {
             let n = p.truncate().length();
             if n > 0.0 { p / n } else { p }
         });
@@ -27,7 +34,9 @@ impl Frustum {
 
     /// A frustum that rejects nothing.
     pub fn everything() -> Self {
-        Self { planes: [Vec4::ZERO; 5] }
+        Self {
+            planes: [Vec4::ZERO; 5],
+        }
     }
 
     /// Whether any part of the box `[min, max]` may be inside.
@@ -123,13 +132,19 @@ mod tests {
         let f = Frustum::everything();
         let tiles = select_terrain(
             &p,
-            TerrainLod { lod_factor: 1.5, max_level: 3 },
+            TerrainLod {
+                lod_factor: 1.5,
+                max_level: 3,
+            },
             cam.position,
             &f,
             &|_| (0.0, 10.0),
         );
         let area: f64 = tiles.iter().map(|t| p.tile_size_m(t.level).powi(2)).sum();
-        assert!((area - 2048.0 * 2048.0).abs() < 1e-6, "tiles overlap or leave gaps");
+        assert!(
+            (area - 2048.0 * 2048.0).abs() < 1e-6,
+            "tiles overlap or leave gaps"
+        );
         let under = tiles
             .iter()
             .find(|t| p.bounds(**t).contains(glam::DVec2::new(100.0, 100.0)))

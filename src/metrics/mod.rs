@@ -71,7 +71,10 @@ pub struct FlipResult {
 }
 
 /// Compares two RGB8 images of the same size with NVIDIA's FLIP at the default viewing distance.
-pub fn flip_compare(reference: &image::RgbImage, actual: &image::RgbImage) -> Result<FlipResult, ImageCompareError> {
+pub fn flip_compare(
+    reference: &image::RgbImage,
+    actual: &image::RgbImage,
+) -> Result<FlipResult, ImageCompareError> {
     if reference.dimensions() != actual.dimensions() {
         return Err(ImageCompareError::SizeMismatch {
             reference: reference.dimensions(),
@@ -108,7 +111,9 @@ mod tests {
 
     #[test]
     fn flip_sees_identical_and_different_images() {
-        let a = image::RgbImage::from_fn(32, 32, |x, y| image::Rgb([(x * 8) as u8, (y * 8) as u8, 90]));
+        let a = image::RgbImage::from_fn(32, 32, |x, y| {
+            image::Rgb([(x * 8) as u8, (y * 8) as u8, 90])
+        });
         let same = flip_compare(&a, &a).unwrap();
         assert_eq!(same.mean, 0.0);
         let mut b = a.clone();

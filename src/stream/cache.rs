@@ -27,7 +27,11 @@ impl CacheStats {
     /// Hits over lookups (1 when there were none).
     pub fn hit_rate(&self) -> f64 {
         let lookups = self.hits + self.misses;
-        if lookups == 0 { 1.0 } else { self.hits as f64 / lookups as f64 }
+        if lookups == 0 {
+            1.0
+        } else {
+            self.hits as f64 / lookups as f64
+        }
     }
 }
 
@@ -100,6 +104,9 @@ impl TileCache {
 
     /// The counters.
     pub fn stats(&self) -> CacheStats {
-        CacheStats { tiles: self.tiles.len() as u64, ..self.stats }
+        CacheStats {
+            tiles: self.tiles.len() as u64,
+            ..self.stats
+        }
     }
 }

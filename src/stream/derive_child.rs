@@ -25,7 +25,11 @@ pub struct DeriveParams {
 
 impl Default for DeriveParams {
     fn default() -> Self {
-        Self { seed: 0x5eed, detail: 0.25, window_cells: 4.0 }
+        Self {
+            seed: 0x5eed,
+            detail: 0.25,
+            window_cells: 4.0,
+        }
     }
 }
 
@@ -52,7 +56,12 @@ fn unit(h: u32) -> f32 {
 const WEIGHTS: [[f32; 4]; 2] = [[0.0, 1.0, 0.0, 0.0], [-0.0625, 0.5625, 0.5625, -0.0625]];
 
 /// Derives `child` from `parent` (its parent tile). `pyramid.border` must be at least 2.
-pub fn derive_child(pyramid: &Pyramid, parent: &TileData, child: TileId, params: &DeriveParams) -> TileData {
+pub fn derive_child(
+    pyramid: &Pyramid,
+    parent: &TileData,
+    child: TileId,
+    params: &DeriveParams,
+) -> TileData {
     let s = parent.size as i32;
     let n = pyramid.tile_cells as i32;
     let b = pyramid.border as i32;
@@ -81,8 +90,10 @@ pub fn derive_child(pyramid: &Pyramid, parent: &TileData, child: TileId, params:
             }
             let mut h = ((wy[0] * rows[0] + wy[1] * rows[1]) + wy[2] * rows[2]) + wy[3] * rows[3];
 
-            let gx = (parent.heights[at(ix + 1, iy)] - parent.heights[at(ix - 1, iy)]) / (2.0 * cell_parent);
-            let gy = (parent.heights[at(ix, iy + 1)] - parent.heights[at(ix, iy - 1)]) / (2.0 * cell_parent);
+            let gx = (parent.heights[at(ix + 1, iy)] - parent.heights[at(ix - 1, iy)])
+                / (2.0 * cell_parent);
+            let gy = (parent.heights[at(ix, iy + 1)] - parent.heights[at(ix, iy - 1)])
+                / (2.0 * cell_parent);
             let slope = (gx * gx + gy * gy).sqrt().min(1.5);
 
             // Global sample coordinates at the child's level.
@@ -92,10 +103,20 @@ pub fn derive_child(pyramid: &Pyramid, parent: &TileData, child: TileId, params:
             let my = sy.rem_euclid(n);
             let edge = mx.min(n - mx).min(my).min(n - my) as f32;
             let window = (edge / params.window_cells).min(1.0);
-            let noise = unit(hash4(sx as u32, sy as u32, u32::from(child.level), params.seed));
+            let noise = unit(hash4(
+                sx as u32,
+                sy as u32,
+                u32::from(child.level),
+                params.seed,
+            ));
             h += noise * (params.detail * cell_child * slope * window);
 
-            let pick = hash4(sx as u32, sy as u32, u32::from(child.level), params.seed ^ 0x9e37_79b9);
+            let pick = hash4(
+                sx as u32,
+                sy as u32,
+                u32::from(child.level),
+                params.seed ^ 0x9e37_79b9,
+            );
             let tx = ix + (fx as i32) * (pick & 1) as i32;
             let ty = iy + (fy as i32) * ((pick >> 1) & 1) as i32;
 
@@ -113,5 +134,11 @@ pub fn derive_child(pyramid: &Pyramid, parent: &TileData, child: TileId, params:
             density[o] = ((sum + count / 2) / count) as u8;
         }
     }
-    TileData { id: child, size: parent.size, heights, grass_type, density }
+    TileData {
+        id: child,
+        size: parent.size,
+        heights,
+        grass_type,
+        density,
+    }
 }

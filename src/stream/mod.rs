@@ -7,6 +7,6 @@ mod residency;
 mod service;
 
 pub use cache::{CacheStats, TileCache};
-pub use derive_child::{derive_child, hash_u32, DeriveParams};
+pub use derive_child::{DeriveParams, derive_child, hash_u32};
 pub use residency::{ResidencyPlan, ResidencyStats, ServiceConfig, TileService};
 pub use service::{Loaded, StreamConfig, StreamStats, Streamer, TileSource, Want};

@@ -11,7 +11,9 @@ use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use crate::gpu::DeriveJob;
-use crate::stream::{CacheStats, Loaded, StreamConfig, StreamStats, Streamer, TileCache, TileSource, Want};
+use crate::stream::{
+    CacheStats, Loaded, StreamConfig, StreamStats, Streamer, TileCache, TileSource, Want,
+};
 use crate::world::{Pyramid, TileData, TileId};
 
 /// Limits of the tile service.
@@ -114,7 +116,10 @@ impl TileService {
     ) -> Result<(Self, ResidencyPlan), crate::world::WorldError> {
         let [nx, ny] = pyramid.tiles_at(0);
         let roots = nx * ny;
-        assert!(config.atlas_slots > roots, "the atlas needs more slots than there are level-0 tiles");
+        assert!(
+            config.atlas_slots > roots,
+            "the atlas needs more slots than there are level-0 tiles"
+        );
         let mut plan = ResidencyPlan::default();
         let mut slots = vec![None; config.atlas_slots as usize];
         let mut resident = HashMap::new();
@@ -125,12 +130,23 @@ impl TileService {
                 let index = (y * nx + x) as u32;
                 let (min_h, max_h) = height_range(&tile);
                 slots[index as usize] = Some(id);
-                resident.insert(id, Slot { index, last_used: 0, min_h, max_h });
+                resident.insert(
+                    id,
+                    Slot {
+                        index,
+                        last_used: 0,
+                        min_h,
+                        max_h,
+                    },
+                );
                 plan.uploads.push((index, tile));
             }
         }
-        let streamer = Streamer::start(source, config.stream)
-            .map_err(|e| crate::world::WorldError::Io { path: "tile streamer".into(), source: e })?;
+        let streamer =
+            Streamer::start(source, config.stream).map_err(|e| crate::world::WorldError::Io {
+                path: "tile streamer".into(),
+                source: e,
+            })?;
         Ok((
             Self {
                 pyramid: pyramid.clone(),
@@ -164,7 +180,9 @@ impl TileService {
                 }
                 Loaded::Failed { id, error } => {
                     if self.failed.insert(id) {
-                        log::warn!("tile {id:?} failed to load, drawing its ancestor instead: {error}");
+                        log::warn!(
+                            "tile {id:?} failed to load, drawing its ancestor instead: {error}"
+                        );
                     }
                 }
             }
@@ -230,11 +248,18 @@ impl TileService {
                             let margin = self.pyramid.cell_size_m(id.level) as f32;
                             self.place(id, index, (range.0 - margin, range.1 + margin));
                             fresh.insert(id);
-                            plan.derives.push(DeriveJob { child: id, parent_slot, child_slot: index });
+                            plan.derives.push(DeriveJob {
+                                child: id,
+                                parent_slot,
+                                child_slot: index,
+                            });
                         }
                     }
                     Some(_) => {}
-                    None => work.push(Want { id: parent, priority: w.priority }),
+                    None => work.push(Want {
+                        id: parent,
+                        priority: w.priority,
+                    }),
                 }
             }
         }
@@ -259,8 +284,11 @@ impl TileService {
                 None => stats.holes += 1,
             }
         }
-        stats.resident_fraction =
-            if wants.is_empty() { 1.0 } else { f64::from(stats.resident) / wants.len() as f64 };
+        stats.resident_fraction = if wants.is_empty() {
+            1.0
+        } else {
+            f64::from(stats.resident) / wants.len() as f64
+        };
         self.last = stats;
         plan
     }
@@ -313,7 +341,15 @@ impl TileService {
 
     fn place(&mut self, id: TileId, index: u32, (min_h, max_h): (f32, f32)) {
         self.slots[index as usize] = Some(id);
-        self.resident.insert(id, Slot { index, last_used: self.frame, min_h, max_h });
+        self.resident.insert(
+            id,
+            Slot {
+                index,
+                last_used: self.frame,
+                min_h,
+                max_h,
+            },
+        );
     }
 
     /// A free slot, or the least recently used one whose tile is neither protected nor level 0.

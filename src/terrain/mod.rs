@@ -4,8 +4,8 @@
 //! Everything is drawn camera-relative (see `shaders/terrain.wgsl`).
 
 use bytemuck::{Pod, Zeroable};
-use wgpu::util::DeviceExt;
 use glam::{DVec2, Mat4, Vec3};
+use wgpu::util::DeviceExt;
 
 use crate::flythrough::Camera;
 use crate::gpu::TileAtlas;
@@ -90,7 +90,10 @@ impl TileDraw {
 
 /// Unit vector toward the sun; the manifest's azimuth runs counter-clockwise from east.
 pub fn sun_direction(sky: &Sky) -> Vec3 {
-    let (az, el) = (sky.sun_azimuth_deg.to_radians(), sky.sun_elevation_deg.to_radians());
+    let (az, el) = (
+        sky.sun_azimuth_deg.to_radians(),
+        sky.sun_elevation_deg.to_radians(),
+    );
     Vec3::new(az.cos() * el.cos(), az.sin() * el.cos(), el.sin()).normalize()
 }
 
@@ -110,7 +113,12 @@ pub struct TerrainRenderer {
 impl TerrainRenderer {
     /// Builds the pipelines for `manifest`'s world, reading tiles from `atlas`; at most
     /// `max_tiles` tiles are drawn a frame.
-    pub fn new(device: &wgpu::Device, manifest: &Manifest, atlas: &TileAtlas, max_tiles: u32) -> Self {
+    pub fn new(
+        device: &wgpu::Device,
+        manifest: &Manifest,
+        atlas: &TileAtlas,
+        max_tiles: u32,
+    ) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("terrain.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/terrain.wgsl").into()),
@@ -246,7 +254,14 @@ impl TerrainRenderer {
             wgpu::CompareFunction::Greater,
             Some(wgpu::Face::Back),
         );
-        let sky = pipeline("sky", "vs_sky", "fs_sky", false, wgpu::CompareFunction::Equal, None);
+        let sky = pipeline(
+            "sky",
+            "vs_sky",
+            "fs_sky",
+            false,
+            wgpu::CompareFunction::Equal,
+            None,
+        );
 
         let mut ground_colors = [[0.0; 4]; MAX_GRASS_TYPES];
         for (slot, t) in ground_colors.iter_mut().zip(&manifest.grass_types) {
@@ -292,7 +307,13 @@ impl TerrainRenderer {
 
     /// Writes this frame's camera and tile list. Returns how many tiles will be drawn
     /// (`draws` past `max_tiles` are dropped).
-    pub fn prepare(&mut self, queue: &wgpu::Queue, camera: &Camera, aspect: f32, draws: &[TileDraw]) -> u32 {
+    pub fn prepare(
+        &mut self,
+        queue: &wgpu::Queue,
+        camera: &Camera,
+        aspect: f32,
+        draws: &[TileDraw],
+    ) -> u32 {
         let view_proj = camera.view_proj_relative(aspect);
         self.uniforms.view_proj = view_proj.to_cols_array_2d();
         self.uniforms.inv_view_proj = view_proj.inverse().to_cols_array_2d();

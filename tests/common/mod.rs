@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use verdant::gpu::GpuContext;
 use verdant::metrics::flip_compare;
 
-use std::collections::HashMap;
 use glam::DVec2;
+use std::collections::HashMap;
 use verdant::world::{CameraPath, TileData, TileId, World};
 /// The repository's root.
 pub fn root() -> PathBuf {
@@ -39,10 +39,15 @@ pub fn failure_dir() -> PathBuf {
 /// `VERDANT_UPDATE_REFERENCES=1` asks for the reference to be (re)written; review a new
 /// reference image before committing it.
 pub fn check_reference(name: &str, actual: &image::RgbaImage, max_mean: f32, max_p99: f32) {
-    let reference_path = root().join("tests").join("reference").join(format!("{name}.png"));
+    let reference_path = root()
+        .join("tests")
+        .join("reference")
+        .join(format!("{name}.png"));
     let actual_rgb = image::DynamicImage::ImageRgba8(actual.clone()).to_rgb8();
     if std::env::var("VERDANT_UPDATE_REFERENCES").as_deref() == Ok("1") {
-        actual_rgb.save(&reference_path).expect("write reference image");
+        actual_rgb
+            .save(&reference_path)
+            .expect("write reference image");
         eprintln!("wrote reference {}", reference_path.display());
         return;
     }
@@ -54,7 +59,8 @@ pub fn check_reference(name: &str, actual: &image::RgbaImage, max_mean: f32, max
         if let Some(diff) = diff {
             let (w, h) = actual_rgb.dimensions();
             let img = image::RgbImage::from_raw(w, h, diff.to_vec()).expect("difference size");
-            img.save(dir.join(format!("{name}-difference.png"))).expect("write difference");
+            img.save(dir.join(format!("{name}-difference.png")))
+                .expect("write difference");
         }
         actual_file
     };
@@ -77,7 +83,10 @@ pub fn check_reference(name: &str, actual: &image::RgbaImage, max_mean: f32, max
             panic!("{name}: {e}; actual image at {}", file.display());
         }
     };
-    eprintln!("{name}: FLIP mean {:.4}, p99 {:.4}, max {:.4}", result.mean, result.p99, result.max);
+    eprintln!(
+        "{name}: FLIP mean {:.4}, p99 {:.4}, max {:.4}",
+        result.mean, result.p99, result.max
+    );
     if result.mean > max_mean || result.p99 > max_p99 {
         let file = write_failure(Some(&result.difference_rgb));
         panic!(

@@ -1,0 +1,176 @@
+//! The command line on bad input: a clear error naming the file and the problem, a non-zero
+//! exit, no panic, and nothing lost.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn verdant(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run verdant")
+}
+
+fn assert_fails_naming(out: &Output, needles: &[&str]) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "expected failure, stderr: {stderr}");
+    assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
+    assert!(!stderr.contains("panicked"), "panicked: {stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "stderr should mention {n:?}: {stderr}");
+    }
+}
+
+fn world_copy(dir: &Path) -> std::path::PathBuf {
+    let w = dir.join("world");
+    std::fs::create_dir_all(&w).unwrap();
+    std::fs::copy(
+        common::default_world().join("world.toml"),
+        w.join("world.toml"),
+    )
+    .unwrap();
+    common::copy_dir(&common::default_world().join("tiles"), &w.join("tiles"));
+    w
+}
+
+#[test]
+fn fly_with_a_corrupt_tile_names_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = world_copy(tmp.path());
+    let tile = w.join("tiles/L0/0_0.height.exr");
+    let bytes = std::fs::read(&tile).unwrap();
+    std::fs::write(&tile, &bytes[..bytes.len() / 3]).unwrap();
+    let out = verdant(
+        &["fly", w.to_str().unwrap(), "--frames", "1", "--out", "o"],
+        tmp.path(),
+    );
+    assert_fails_naming(&out, &["0_0.height.exr"]);
+}
+
+#[test]
+fn fly_with_an_absurd_manifest_names_the_field() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = world_copy(tmp.path());
+    let manifest = std::fs::read_to_string(w.join("world.toml")).unwrap();
+    let absurd = manifest.replace("tile_cells = 128", "tile_cells = 1048576");
+    assert_ne!(manifest, absurd);
+    std::fs::write(w.join("world.toml"), absurd).unwrap();
+    let out = verdant(&["fly", w.to_str().unwrap(), "--frames", "1"], tmp.path());
+    assert_fails_naming(&out, &["world.toml", "tile_cells"]);
+}
+
+#[test]
+fn fly_without_a_world_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = verdant(&["fly", "no-such-world", "--frames", "1"], tmp.path());
+    assert_fails_naming(&out, &["no-such-world"]);
+}
+
+#[test]
+fn fly_rejects_a_bad_size() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = verdant(&["fly", "--size", "0x100"], tmp.path());
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("0x100"));
+}
+
+#[test]
+fn bake_with_a_sidecar_that_disagrees_names_it_and_writes_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let png = common::write_dem(
+        tmp.path(),
+        "dem",
+        [64, 48],
+        [10.0, 12.0],
+        [0.0, 1.0],
+        |x, y| x * 0.1 + y * 0.05,
+    );
+    common::write_sidecar(tmp.path(), "dem", [65, 48], [10.0, 12.0], [0.0, 1.0]);
+    let out_dir = tmp.path().join("out");
+    let out = verdant(
+        &[
+            "bake",
+            "--dem",
+            png.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--tile-cells",
+            "16",
+            "--levels",
+            "2",
+        ],
+        tmp.path(),
+    );
+    assert_fails_naming(&out, &["dem.json"]);
+    assert!(
+        !out_dir.join("world.toml").exists(),
+        "a failed bake must not write a manifest"
+    );
+}
+
+#[test]
+fn bake_of_a_missing_dem_names_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = verdant(&["bake", "--dem", "missing.png", "--out", "w"], tmp.path());
+    assert_fails_naming(&out, &["missing.png"]);
+}
+
+#[test]
+fn bake_writes_a_world_that_flies() {
+    let tmp = tempfile::tempdir().unwrap();
+    let png = common::write_dem(
+        tmp.path(),
+        "hills",
+        [96, 80],
+        [20.0, 25.0],
+        [0.0, 0.5],
+        |x, y| 200.0 + 80.0 * (x / 300.0).sin() * (y / 400.0).cos(),
+    );
+    let world = tmp.path().join("hills");
+    let out = verdant(
+        &[
+            "bake",
+            "--dem",
+            png.to_str().unwrap(),
+            "--out",
+            world.to_str().unwrap(),
+            "--tile-cells",
+            "16",
+            "--levels",
+            "2",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        out.status.success(),
+        "bake failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = verdant(
+        &[
+            "fly",
+            world.to_str().unwrap(),
+            "--frames",
+            "2",
+            "--size",
+            "64x36",
+            "--out",
+            "fly",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        out.status.success(),
+        "fly failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("fly/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["frames"].as_array().unwrap().len(), 2);
+    assert!(report["summary"]["frame_ms"]["median"].as_f64().unwrap() > 0.0);
+    assert!(tmp.path().join("fly/frame_00001.png").is_file());
+}
