@@ -127,17 +127,10 @@ fn bar(len: u64, what: &str) -> ProgressBar {
 }
 
 fn fly(opts: FlyOptions) -> Result<()> {
-    let mut loading: Option<ProgressBar> = None;
     let mut frames: Option<ProgressBar> = None;
     let report = run_fly(&opts, &mut |p| match p {
-        FlyProgress::Loading(done, total) => {
-            let pb = loading.get_or_insert_with(|| bar(total, "tiles"));
-            pb.set_position(done);
-        }
+        FlyProgress::WarmingUp => eprintln!("loading the first frame's tiles"),
         FlyProgress::Frame(done, total) => {
-            if let Some(pb) = loading.take() {
-                pb.finish();
-            }
             let pb = frames.get_or_insert_with(|| bar(total, "frames"));
             pb.set_position(done);
         }
@@ -157,6 +150,13 @@ fn fly(opts: FlyOptions) -> Result<()> {
     println!(
         "frame time: median {:.2} ms, p99 {:.2} ms; tiles drawn: median {:.0}",
         s.frame_ms.median, s.frame_ms.p99, s.tiles_drawn.median
+    );
+    println!(
+        "tiles resident at their own level: median {:.0}%, holes {}, cache peak {:.1} MiB, atlas peak {} slots",
+        100.0 * s.resident_fraction.median,
+        s.holes,
+        s.cache_peak_bytes as f64 / (1 << 20) as f64,
+        s.atlas_peak_slots
     );
     for (pass, t) in &s.gpu_ms {
         println!("gpu {pass}: median {:.3} ms, p99 {:.3} ms", t.median, t.p99);

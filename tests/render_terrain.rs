@@ -2,7 +2,9 @@
 
 mod common;
 
-use verdant::flythrough::{Scene, sample_path};
+use std::time::Duration;
+
+use verdant::flythrough::{Scene, SceneConfig, sample_path};
 use verdant::world::World;
 
 #[test]
@@ -10,10 +12,18 @@ fn default_world_matches_reference_image() {
     let ctx = common::gpu();
     let world = World::open(&common::default_world()).expect("open the default world");
     let path = world.manifest.paths[0].clone();
-    let mut scene = Scene::new(&ctx, world, 256, 144, &mut |_, _| {}).expect("build the scene");
+    let config = SceneConfig::for_world(&world);
+    let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
     let t = path.keys[0].t_s + 0.3 * (path.keys[path.keys.len() - 1].t_s - path.keys[0].t_s);
     let camera = sample_path(&path, t);
-    let stats = scene.render(&ctx, &camera);
+    assert!(
+        scene
+            .warm_up(&ctx, &camera, Duration::from_secs(60))
+            .unwrap(),
+        "tiles did not load"
+    );
+    let stats = scene.render(&ctx, &camera).unwrap();
+    assert_eq!(stats.residency.resident, stats.residency.desired);
     assert!(stats.tiles_drawn > 0, "no terrain tiles drawn");
     let image = scene.read_image(&ctx).expect("read back the frame");
     // Bounds set on llvmpipe (Mesa 22.3, 2 cores), where repeated runs give the same image;
@@ -26,9 +36,13 @@ fn frames_show_lit_terrain_below_a_sky() {
     let ctx = common::gpu();
     let world = World::open(&common::default_world()).expect("open the default world");
     let path = world.manifest.paths[0].clone();
-    let mut scene = Scene::new(&ctx, world, 160, 90, &mut |_, _| {}).expect("build the scene");
+    let config = SceneConfig::for_world(&world);
+    let mut scene = Scene::new(&ctx, world, 160, 90, config).expect("build the scene");
     let camera = sample_path(&path, path.keys[0].t_s);
-    scene.render(&ctx, &camera);
+    scene
+        .warm_up(&ctx, &camera, Duration::from_secs(60))
+        .unwrap();
+    scene.render(&ctx, &camera).unwrap();
     let image = scene.read_image(&ctx).unwrap();
     // The camera looks slightly down: the bottom row is terrain, which is darker and less blue
     // than the sky; and the terrain is not flat-coloured (it is lit by a directional sun).

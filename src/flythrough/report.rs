@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::gpu::GpuContext;
 use crate::metrics::Summary;
+use crate::stream::ResidencyStats;
 
 /// The adapter a run used.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -54,6 +55,13 @@ pub struct FrameRecord {
     pub gpu_ms: BTreeMap<String, f64>,
     /// Terrain tiles drawn.
     pub tiles_drawn: u32,
+    /// Grass tiles in the high-LOD ring.
+    pub grass_tiles_high: u32,
+    /// Grass tiles in the low-LOD ring.
+    pub grass_tiles_low: u32,
+    /// Tile service figures: tiles desired, resident, drawn from an ancestor, loads in flight,
+    /// completed and cancelled, cache bytes and hit rate, atlas slots, evictions.
+    pub residency: ResidencyStats,
 }
 
 /// Summary statistics over all frames.
@@ -67,6 +75,14 @@ pub struct FlySummary {
     pub gpu_ms: BTreeMap<String, Summary>,
     /// Tiles drawn a frame.
     pub tiles_drawn: Summary,
+    /// Fraction of desired tiles resident at their own level.
+    pub resident_fraction: Summary,
+    /// Desired tiles with nothing to draw them from, summed over frames (0 unless broken).
+    pub holes: u64,
+    /// Most bytes the CPU tile cache held.
+    pub cache_peak_bytes: u64,
+    /// Most atlas slots in use.
+    pub atlas_peak_slots: u32,
 }
 
 /// Everything `report.json` holds.

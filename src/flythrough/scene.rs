@@ -1,13 +1,19 @@
-//! A world made ready to draw: its tiles in the atlas, the terrain renderer and the targets.
+//! A world made ready to draw: the tile service feeding the atlas, the derivation stage, the
+//! terrain renderer and the targets.
 
-use std::collections::HashMap;
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::DVec2;
 
 use crate::flythrough::Camera;
-use crate::gpu::{AtlasError, GpuContext, GpuTimer, PassTimes, ReadbackError, TileAtlas};
-use crate::lod::{Frustum, TerrainLod, select_terrain};
+use crate::gpu::{
+    AtlasError, DeriveStage, GpuContext, GpuTimer, PassTimes, ReadbackError, TileAtlas,
+};
+use crate::lod::{Frustum, GrassRings, Ring, RingSettings, TerrainLod, select_terrain};
+use crate::stream::{
+    DeriveParams, ResidencyPlan, ResidencyStats, ServiceConfig, TileService, Want,
+};
 use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT, TerrainRenderer, TileDraw};
 use crate::world::{TileId, World, WorldError};
 
@@ -24,13 +30,16 @@ pub enum SceneError {
     /// The image could not be read back.
     #[error(transparent)]
     Readback(#[from] ReadbackError),
-    /// The world has more stored tiles than the device's texture arrays can hold.
+    /// The atlas slot count does not fit the adapter or the world.
     #[error(
-        "the world has {tiles} stored tiles but the adapter's texture arrays hold at most {limit} layers"
+        "an atlas of {slots} slots does not fit: it needs more slots than the world's {roots} \
+         level-0 tiles and at most the adapter's {limit} texture array layers"
     )]
-    TooManyTiles {
-        /// Stored tiles.
-        tiles: usize,
+    AtlasSlots {
+        /// Slots asked for.
+        slots: u32,
+        /// Level-0 tiles of the world (always resident).
+        roots: u32,
         /// The adapter's `max_texture_array_layers`.
         limit: u32,
     },
@@ -46,49 +55,80 @@ pub enum SceneError {
     },
 }
 
+/// Settings of a scene.
 #[derive(Clone, Copy, Debug)]
-struct Resident {
-    layer: u32,
-    min_h: f32,
-    max_h: f32,
+pub struct SceneConfig {
+    /// Limits of the tile service (atlas slots, cache bytes, loads in flight, budgets).
+    pub service: ServiceConfig,
+    /// Terrain tiles split while the camera is nearer than this many tile edges.
+    pub lod_factor: f64,
+    /// Derivation of child tiles.
+    pub derive: DeriveParams,
+    /// Grass rings, or none to ask for no grass tiles.
+    pub grass: Option<RingSettings>,
+}
+
+impl SceneConfig {
+    /// Defaults for `world`.
+    pub fn for_world(world: &World) -> Self {
+        Self {
+            service: ServiceConfig::default(),
+            lod_factor: 1.0,
+            derive: DeriveParams::default(),
+            grass: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
+        }
+    }
 }
 
 /// What one frame drew and what it cost.
 #[derive(Clone, Debug)]
 pub struct FrameStats {
-    /// Terrain tiles drawn.
+    /// Terrain tiles drawn (each from its own data or an ancestor's).
     pub tiles_drawn: u32,
+    /// Grass tiles in the high and low rings.
+    pub grass_tiles: (u32, u32),
     /// CPU time to select tiles and record and submit the frame, milliseconds.
     pub cpu_ms: f64,
     /// GPU time per pass (empty without timestamp queries).
     pub gpu: PassTimes,
+    /// The tile service's figures.
+    pub residency: ResidencyStats,
 }
 
 /// A world on the GPU, with colour and depth targets of a fixed size.
 pub struct Scene {
     /// The world being drawn.
     pub world: World,
-    resident: HashMap<TileId, Resident>,
+    service: TileService,
+    atlas: TileAtlas,
+    derive: DeriveStage,
     renderer: TerrainRenderer,
     lod: TerrainLod,
+    rings: Option<GrassRings>,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     timer: GpuTimer,
     width: u32,
     height: u32,
-    _atlas: TileAtlas,
+}
+
+/// The tiles a frame wants, before residency.
+struct Selection {
+    terrain: Vec<TileId>,
+    grass: Vec<(TileId, Ring, f64)>,
+    wants: Vec<Want>,
 }
 
 impl Scene {
-    /// Loads every stored tile of `world` into an atlas and prepares `width` x `height` targets.
-    /// `progress(done, total)` is called as tiles load.
+    /// Starts the tile service for `world` (its level-0 tiles are loaded here) and prepares
+    /// `width` x `height` targets.
     pub fn new(
         ctx: &GpuContext,
         world: World,
         width: u32,
         height: u32,
-        progress: &mut dyn FnMut(u64, u64),
+        config: SceneConfig,
     ) -> Result<Self, SceneError> {
         let limits = ctx.device.limits();
         let max_dim = limits.max_texture_dimension_2d;
@@ -99,35 +139,29 @@ impl Scene {
                 limit: max_dim,
             });
         }
-        let ids: Vec<TileId> = world.stored_tiles().collect();
-        if ids.len() > limits.max_texture_array_layers as usize {
-            return Err(SceneError::TooManyTiles {
-                tiles: ids.len(),
+        let pyramid = world.manifest.pyramid.clone();
+        let [nx, ny] = pyramid.tiles_at(0);
+        let slots = config.service.atlas_slots;
+        if slots > limits.max_texture_array_layers || slots <= nx * ny {
+            return Err(SceneError::AtlasSlots {
+                slots,
+                roots: nx * ny,
                 limit: limits.max_texture_array_layers,
             });
         }
-        let pyramid = &world.manifest.pyramid;
-        let atlas = TileAtlas::new(&ctx.device, pyramid.samples_per_side(), ids.len() as u32);
-        let mut resident = HashMap::with_capacity(ids.len());
-        let total = ids.len() as u64;
-        for (layer, id) in ids.iter().enumerate() {
-            let tile = world.load_tile(*id)?;
-            atlas.upload(&ctx.queue, layer as u32, &tile)?;
-            let (min_h, max_h) = tile
-                .heights
-                .iter()
-                .fold((f32::MAX, f32::MIN), |(lo, hi), &h| (lo.min(h), hi.max(h)));
-            resident.insert(
-                *id,
-                Resident {
-                    layer: layer as u32,
-                    min_h,
-                    max_h,
-                },
-            );
-            progress(layer as u64 + 1, total);
+        let atlas = TileAtlas::new(&ctx.device, pyramid.samples_per_side(), slots);
+        let (service, plan) = TileService::new(&pyramid, Arc::new(world.clone()), config.service)?;
+        for (slot, tile) in &plan.uploads {
+            atlas.upload(&ctx.queue, *slot, tile)?;
         }
-        let max_level = pyramid.stored_levels.saturating_sub(1);
+        let derive = DeriveStage::new(
+            &ctx.device,
+            &ctx.queue,
+            &pyramid,
+            &config.derive,
+            &atlas,
+            config.service.derives_per_frame.max(1),
+        );
         let renderer = TerrainRenderer::new(&ctx.device, &world.manifest, &atlas, 4096);
         let target = |label, format, usage| {
             ctx.device.create_texture(&wgpu::TextureDescriptor {
@@ -156,20 +190,22 @@ impl Scene {
             wgpu::TextureUsages::RENDER_ATTACHMENT,
         );
         Ok(Self {
-            world,
-            resident,
-            renderer,
             lod: TerrainLod {
-                lod_factor: 2.0,
-                max_level,
+                lod_factor: config.lod_factor,
+                max_level: pyramid.max_level(),
             },
+            rings: config.grass.map(GrassRings::new),
+            world,
+            service,
+            atlas,
+            derive,
+            renderer,
             color_view: color.create_view(&Default::default()),
             depth_view: depth.create_view(&Default::default()),
             color,
             timer: GpuTimer::new(&ctx.device, &ctx.queue, ctx.timestamps, 8),
             width,
             height,
-            _atlas: atlas,
         })
     }
 
@@ -178,36 +214,136 @@ impl Scene {
         (self.width, self.height)
     }
 
-    /// The terrain tiles a camera needs this frame.
-    pub fn select(&self, camera: &Camera) -> Vec<TileId> {
-        let aspect = self.width as f32 / self.height as f32;
-        let frustum = Frustum::from_view_proj(camera.view_proj_relative(aspect));
-        let resident = &self.resident;
-        select_terrain(
-            &self.world.manifest.pyramid,
-            self.lod,
-            camera.position,
-            &frustum,
-            &|id| {
-                resident
-                    .get(&id)
-                    .map_or((-1e4, 1e5), |r| (r.min_h, r.max_h))
-            },
-        )
+    /// The tile service (for its figures and residency queries).
+    pub fn service(&self) -> &TileService {
+        &self.service
     }
 
-    /// Draws one frame from `camera` and waits for its GPU times.
-    pub fn render(&mut self, ctx: &GpuContext, camera: &Camera) -> FrameStats {
+    /// The tile atlas.
+    pub fn atlas(&self) -> &TileAtlas {
+        &self.atlas
+    }
+
+    fn select(&mut self, camera: &Camera) -> Selection {
+        let aspect = self.width as f32 / self.height as f32;
+        let frustum = Frustum::from_view_proj(camera.view_proj_relative(aspect));
+        let pyramid = &self.world.manifest.pyramid;
+        let service = &self.service;
+        let range = |id: TileId| service.height_range(id);
+        let terrain = select_terrain(pyramid, self.lod, camera.position, &frustum, &range);
+        let grass = match &mut self.rings {
+            Some(r) => r.update(pyramid, camera.position, &range),
+            None => Vec::new(),
+        };
+        // Priority: distance, doubled for what lies behind the camera.
+        let forward = camera.forward();
+        let priority = |id: TileId| {
+            let b = pyramid.bounds(id);
+            let (h0, h1) = range(id);
+            let c = glam::DVec3::new(b.center().x, b.center().y, 0.5 * f64::from(h0 + h1));
+            let to = c - camera.position;
+            let d = to.length().max(1e-3);
+            (d * (1.5 - 0.5 * forward.dot(to / d))) as f32
+        };
+        let mut wants: Vec<Want> = terrain
+            .iter()
+            .map(|&id| Want {
+                id,
+                priority: priority(id),
+            })
+            .collect();
+        wants.extend(grass.iter().map(|&(id, _, _)| Want {
+            id,
+            priority: priority(id),
+        }));
+        Selection {
+            terrain,
+            grass,
+            wants,
+        }
+    }
+
+    /// Brings every tile `camera` wants into the atlas, waiting for loads (for tests and the
+    /// first frame of a run, never inside the frame loop). Gives up after `timeout`; returns
+    /// whether everything became resident.
+    pub fn warm_up(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        timeout: std::time::Duration,
+    ) -> Result<bool, SceneError> {
         let start = Instant::now();
+        loop {
+            let sel = self.select(camera);
+            let plan = self.service.update(&sel.wants);
+            let busy = !plan.uploads.is_empty() || !plan.derives.is_empty();
+            self.apply(ctx, plan, None)?;
+            let stats = self.service.stats();
+            if stats.resident == stats.desired {
+                ctx.wait_idle();
+                return Ok(true);
+            }
+            if start.elapsed() > timeout {
+                return Ok(false);
+            }
+            if !busy {
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+        }
+    }
+
+    /// Uploads and derivations of a plan; derivations go into `encoder`, or a submission of
+    /// their own.
+    fn apply(
+        &mut self,
+        ctx: &GpuContext,
+        plan: ResidencyPlan,
+        encoder: Option<&mut wgpu::CommandEncoder>,
+    ) -> Result<(), SceneError> {
+        for (slot, tile) in &plan.uploads {
+            self.atlas.upload(&ctx.queue, *slot, tile)?;
+        }
+        if plan.derives.is_empty() {
+            return Ok(());
+        }
+        match encoder {
+            Some(e) => {
+                self.derive
+                    .record(&ctx.queue, e, &self.atlas, &plan.derives, &mut self.timer);
+            }
+            None => {
+                let mut e = ctx.device.create_command_encoder(&Default::default());
+                let mut no_timer = GpuTimer::new(&ctx.device, &ctx.queue, false, 0);
+                self.derive.record(
+                    &ctx.queue,
+                    &mut e,
+                    &self.atlas,
+                    &plan.derives,
+                    &mut no_timer,
+                );
+                ctx.queue.submit([e.finish()]);
+            }
+        }
+        Ok(())
+    }
+
+    /// Draws one frame from `camera` and waits for its GPU times. Tiles that are not resident
+    /// yet are drawn from their nearest resident ancestor.
+    pub fn render(&mut self, ctx: &GpuContext, camera: &Camera) -> Result<FrameStats, SceneError> {
+        let start = Instant::now();
+        let sel = self.select(camera);
+        let plan = self.service.update(&sel.wants);
+        let residency = self.service.stats();
+
         let pyramid = &self.world.manifest.pyramid;
         let eye = DVec2::new(camera.position.x, camera.position.y);
-        let draws: Vec<TileDraw> = self
-            .select(camera)
-            .into_iter()
-            .filter_map(|id| {
-                let r = self.resident.get(&id)?;
+        let draws: Vec<TileDraw> = sel
+            .terrain
+            .iter()
+            .filter_map(|&id| {
+                let (src, slot) = self.service.draw_source(id)?;
                 let morph_start = self.lod.morph_start(pyramid, id.level);
-                Some(TileDraw::new(pyramid, id, id, r.layer, eye, morph_start))
+                Some(TileDraw::new(pyramid, id, src, slot, eye, morph_start))
             })
             .collect();
         let aspect = self.width as f32 / self.height as f32;
@@ -215,6 +351,7 @@ impl Scene {
 
         self.timer.begin_frame();
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        self.apply(ctx, plan, Some(&mut encoder))?;
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("terrain"),
@@ -245,11 +382,14 @@ impl Scene {
         ctx.queue.submit([encoder.finish()]);
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         let gpu = self.timer.read(&ctx.device);
-        FrameStats {
+        let high = sel.grass.iter().filter(|g| g.1 == Ring::High).count() as u32;
+        Ok(FrameStats {
             tiles_drawn: tiles,
+            grass_tiles: (high, sel.grass.len() as u32 - high),
             cpu_ms,
             gpu,
-        }
+            residency,
+        })
     }
 
     /// Reads the last frame back as an RGBA8 image (sRGB).

@@ -109,6 +109,108 @@ pub fn select_terrain(
     out
 }
 
+/// Which ring a grass tile is in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum Ring {
+    /// Near the camera: blades at full density and detail.
+    High,
+    /// Beyond the high ring: blades at twice the spacing.
+    Low,
+}
+
+/// Settings of the grass rings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RingSettings {
+    /// Quadtree level of grass tiles.
+    pub level: u8,
+    /// Tiles nearer than this (3D distance to the tile's box) are high LOD, metres.
+    pub high_radius_m: f64,
+    /// Tiles nearer than this are low LOD; beyond it there is no grass, metres.
+    pub low_radius_m: f64,
+    /// A tile leaves a ring only once it is this much beyond the ring's radius, metres.
+    pub hysteresis_m: f64,
+}
+
+impl RingSettings {
+    /// Rings for `pyramid`: grass tiles at the finest level, radii in proportion to the tile size.
+    pub fn for_pyramid(pyramid: &Pyramid) -> Self {
+        let level = pyramid.max_level();
+        let size = pyramid.tile_size_m(level);
+        Self {
+            level,
+            high_radius_m: 1.0 * size,
+            low_radius_m: 3.0 * size,
+            hysteresis_m: 0.1 * size,
+        }
+    }
+}
+
+/// The grass tiles around the camera and their rings, with hysteresis: a tile keeps its ring
+/// until the camera is clearly past the boundary, so hovering there flips nothing.
+#[derive(Clone, Debug)]
+pub struct GrassRings {
+    /// The settings.
+    pub settings: RingSettings,
+    current: std::collections::HashMap<TileId, Ring>,
+}
+
+impl GrassRings {
+    /// No tiles yet.
+    pub fn new(settings: RingSettings) -> Self {
+        Self {
+            settings,
+            current: Default::default(),
+        }
+    }
+
+    /// Updates the rings for a camera at `eye`; `height_range(tile)` bounds a tile's heights.
+    /// Returns the grass tiles and their rings, nearest first.
+    pub fn update(
+        &mut self,
+        pyramid: &Pyramid,
+        eye: DVec3,
+        height_range: &dyn Fn(TileId) -> (f32, f32),
+    ) -> Vec<(TileId, Ring, f64)> {
+        let s = self.settings;
+        let reach = s.low_radius_m + s.hysteresis_m;
+        let p = glam::DVec2::new(eye.x, eye.y);
+        let size = pyramid.tile_size_m(s.level);
+        let [nx, ny] = pyramid.tiles_at(s.level);
+        let cell = |v: f64, n: u32| ((v / size).floor().max(0.0) as i64).min(i64::from(n) - 1);
+        let (x0, x1) = (cell(p.x - reach, nx), cell(p.x + reach, nx));
+        let (y0, y1) = (cell(p.y - reach, ny), cell(p.y + reach, ny));
+        let mut next = std::collections::HashMap::new();
+        let mut out = Vec::new();
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let id = TileId::new(s.level, x as u32, y as u32);
+                let b = pyramid.bounds(id);
+                let (h0, h1) = height_range(id);
+                let min = DVec3::new(b.min.x, b.min.y, f64::from(h0));
+                let max = DVec3::new(b.max.x, b.max.y, f64::from(h1));
+                let d = (eye.clamp(min, max) - eye).length();
+                let before = self.current.get(&id).copied();
+                let high = d < s.high_radius_m
+                    || (before == Some(Ring::High) && d < s.high_radius_m + s.hysteresis_m);
+                let low =
+                    d < s.low_radius_m || (before.is_some() && d < s.low_radius_m + s.hysteresis_m);
+                let ring = if high {
+                    Ring::High
+                } else if low {
+                    Ring::Low
+                } else {
+                    continue;
+                };
+                next.insert(id, ring);
+                out.push((id, ring, d));
+            }
+        }
+        self.current = next;
+        out.sort_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -155,6 +257,52 @@ mod tests {
             .find(|t| p.bounds(**t).contains(glam::DVec2::new(2000.0, 2000.0)))
             .unwrap();
         assert!(far.level < 3);
+    }
+
+    #[test]
+    fn rings_hold_their_tiles_at_the_boundary() {
+        let p = pyramid();
+        let settings = RingSettings {
+            level: 3,
+            high_radius_m: 100.0,
+            low_radius_m: 300.0,
+            hysteresis_m: 20.0,
+        };
+        let mut rings = GrassRings::new(settings);
+        let flat = |_| (0.0, 0.0);
+        // Tile (3, 2, 0) at level 3 spans x in [256, 384]: the camera hovers 101 to 111 m west of it, inside the hysteresis band.
+        let id = TileId::new(3, 2, 0);
+        let ring_of = |r: &[(TileId, Ring, f64)]| r.iter().find(|t| t.0 == id).map(|t| t.1);
+        let at = |x: f64| DVec3::new(x, 10.0, 0.0);
+        assert_eq!(
+            ring_of(&rings.update(&p, at(160.0), &flat)),
+            Some(Ring::High)
+        );
+        for k in 0..20 {
+            let x = if k % 2 == 0 { 145.0 } else { 155.0 };
+            assert_eq!(
+                ring_of(&rings.update(&p, at(x), &flat)),
+                Some(Ring::High),
+                "flipped at {x}"
+            );
+        }
+        assert_eq!(
+            ring_of(&rings.update(&p, at(130.0), &flat)),
+            Some(Ring::Low)
+        );
+        for k in 0..20 {
+            let x = if k % 2 == 0 { 145.0 } else { 155.0 };
+            assert_eq!(
+                ring_of(&rings.update(&p, at(x), &flat)),
+                Some(Ring::Low),
+                "flipped at {x}"
+            );
+        }
+        assert_eq!(
+            ring_of(&rings.update(&p, at(170.0), &flat)),
+            Some(Ring::High)
+        );
+        assert_eq!(ring_of(&rings.update(&p, at(-200.0), &flat)), None);
     }
 
     #[test]

@@ -36,8 +36,8 @@ impl Default for ServiceConfig {
         Self {
             atlas_slots: 256,
             cache_bytes: 64 << 20,
-            uploads_per_frame: 8,
-            derives_per_frame: 8,
+            uploads_per_frame: 16,
+            derives_per_frame: 32,
             stream: StreamConfig::default(),
         }
     }

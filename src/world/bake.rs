@@ -33,7 +33,7 @@ use super::tile::{Pyramid, TileId};
 /// Shared samples beyond each tile edge in baked worlds.
 pub const BAKE_BORDER: u32 = 2;
 /// Levels finer than the stored ones that baked worlds ask the runtime to derive.
-pub const BAKE_DERIVED_LEVELS: u8 = 3;
+pub const BAKE_DERIVED_LEVELS: u8 = 5;
 /// Steepest slope that carries grass, degrees.
 pub const MAX_GRASS_SLOPE_DEG: f64 = 35.0;
 /// Largest finest-level grid the baker will hold in memory, samples.
