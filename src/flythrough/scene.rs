@@ -12,7 +12,7 @@ use crate::gpu::{
 };
 use crate::lod::{Frustum, GrassRings, Ring, RingSettings, TerrainLod, select_terrain};
 use crate::stream::{
-    DeriveParams, ResidencyPlan, ResidencyStats, ServiceConfig, TileService, Want,
+    DeriveParams, ResidencyPlan, ResidencyStats, ServiceConfig, TileService, TileSource, Want,
 };
 use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT, TerrainRenderer, TileDraw};
 use crate::world::{TileId, World, WorldError};
@@ -130,6 +130,20 @@ impl Scene {
         height: u32,
         config: SceneConfig,
     ) -> Result<Self, SceneError> {
+        let source = Arc::new(world.clone());
+        Self::with_source(ctx, world, source, width, height, config)
+    }
+
+    /// Like [`Scene::new`], with tiles from `source` instead of the world's files (tests use
+    /// this to make loads slow or failing on purpose).
+    pub fn with_source(
+        ctx: &GpuContext,
+        world: World,
+        source: Arc<dyn TileSource>,
+        width: u32,
+        height: u32,
+        config: SceneConfig,
+    ) -> Result<Self, SceneError> {
         let limits = ctx.device.limits();
         let max_dim = limits.max_texture_dimension_2d;
         if width == 0 || height == 0 || width > max_dim || height > max_dim {
@@ -150,7 +164,7 @@ impl Scene {
             });
         }
         let atlas = TileAtlas::new(&ctx.device, pyramid.samples_per_side(), slots);
-        let (service, plan) = TileService::new(&pyramid, Arc::new(world.clone()), config.service)?;
+        let (service, plan) = TileService::new(&pyramid, source, config.service)?;
         for (slot, tile) in &plan.uploads {
             atlas.upload(&ctx.queue, *slot, tile)?;
         }

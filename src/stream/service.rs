@@ -118,6 +118,8 @@ impl Streamer {
             .name("verdant-streamer".into())
             .spawn(move || {
                 runtime.block_on(serve(source, config, req_rx, res_tx, service_counters));
+                // Decodes still running are abandoned (their results would be dropped anyway).
+                runtime.shutdown_background();
             })?;
         Ok(Self {
             requests: req_tx,
