@@ -7,8 +7,33 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use verdant::flythrough::{FlyOptions, FlyProgress, run_fly};
+use verdant::flythrough::{FlyOptions, FlyProgress, SoakOptions, run_fly, run_soak};
+use verdant::stream::ServiceConfig;
 use verdant::world::{BakeOptions, bake};
+
+/// Limits of the tile service, shared by the commands that stream.
+#[derive(clap::Args, Clone, Copy)]
+struct StreamArgs {
+    /// Ceiling of the CPU cache of decoded tiles, MiB.
+    #[arg(long, default_value_t = 64)]
+    cache_mib: u64,
+    /// Slots of the GPU tile atlas (each holds one tile).
+    #[arg(long, default_value_t = 256)]
+    atlas_slots: u32,
+    /// Tile loads in flight at most.
+    #[arg(long, default_value_t = 8)]
+    max_loads: usize,
+}
+
+impl StreamArgs {
+    fn service(self) -> ServiceConfig {
+        let mut c = ServiceConfig::default();
+        c.cache_bytes = self.cache_mib << 20;
+        c.atlas_slots = self.atlas_slots;
+        c.stream.max_in_flight = self.max_loads.max(1);
+        c
+    }
+}
 
 /// Streaming open-world terrain with GPU grass.
 #[derive(Parser)]
@@ -40,6 +65,32 @@ enum Command {
         /// Write only report.json, no PNG frames.
         #[arg(long)]
         no_images: bool,
+        #[command(flatten)]
+        stream: StreamArgs,
+    },
+    /// Fly fast with random turns and teleports; check the streaming ceilings, holes and memory.
+    /// Writes soak.json and exits non-zero if a check failed.
+    Soak {
+        /// World folder, or the name of a world under ./worlds.
+        #[arg(default_value = "santa-cruz")]
+        world: String,
+        /// Simulated flight time, seconds (0.1 s a frame).
+        #[arg(long, default_value_t = 60.0)]
+        seconds: f64,
+        /// Camera speed, metres a second.
+        #[arg(long, default_value_t = 50.0)]
+        speed: f64,
+        /// Seed of the turns and teleports.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "320x180", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Output folder.
+        #[arg(long, default_value = "out/soak")]
+        out: PathBuf,
+        #[command(flatten)]
+        stream: StreamArgs,
     },
     /// Bake a DEM (16-bit PNG with a JSON sidecar) into a world folder.
     Bake {
@@ -165,6 +216,50 @@ fn fly(opts: FlyOptions) -> Result<()> {
     Ok(())
 }
 
+fn soak(opts: SoakOptions) -> Result<()> {
+    let mut pb: Option<ProgressBar> = None;
+    let r = run_soak(&opts, &mut |done, total| {
+        pb.get_or_insert_with(|| bar(total, "frames"))
+            .set_position(done);
+    })?;
+    if let Some(pb) = pb {
+        pb.finish();
+    }
+    let mib = |b: u64| b as f64 / 1048576.0;
+    println!(
+        "{} frames ({:.0} s at {} m/s) on {}: frame p50 {:.1} ms, p99 {:.1} ms",
+        r.frames, r.seconds, r.speed_mps, r.adapter.name, r.frame_ms.median, r.frame_ms.p99
+    );
+    println!(
+        "peak RSS {:.1} MiB, growth after warm-up {:.1} MiB; cache peak {:.1} of {:.1} MiB; atlas peak {} of {} slots",
+        mib(r.rss_peak_bytes),
+        mib(r.rss_growth_bytes),
+        mib(r.cache_peak_bytes),
+        mib(r.cache_ceiling_bytes),
+        r.atlas_peak_slots,
+        r.atlas_slots
+    );
+    println!(
+        "loads: {} completed, {} cancelled, {} failed; {} evictions; cache hit rate {:.0}%; \
+         full detail {:.1} s after a teleport (median of {})",
+        r.loads_completed,
+        r.loads_cancelled,
+        r.loads_failed,
+        r.evictions,
+        100.0 * r.cache_hit_rate,
+        r.full_detail_after_teleport_s.unwrap_or(f64::NAN),
+        r.teleports.len()
+    );
+    println!("wrote {}", opts.out.join("soak.json").display());
+    if !r.violations.is_empty() {
+        for v in r.violations.iter().take(20) {
+            eprintln!("violation: {v}");
+        }
+        bail!("the soak failed {} check(s)", r.violations.len());
+    }
+    Ok(())
+}
+
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Fly {
@@ -174,6 +269,7 @@ fn run(cli: Cli) -> Result<()> {
             size,
             out,
             no_images,
+            stream,
         } => fly(FlyOptions {
             world: resolve_world(&world)?,
             path,
@@ -181,6 +277,25 @@ fn run(cli: Cli) -> Result<()> {
             size,
             out,
             write_images: !no_images,
+            service: stream.service(),
+        }),
+        Command::Soak {
+            world,
+            seconds,
+            speed,
+            seed,
+            size,
+            out,
+            stream,
+        } => soak(SoakOptions {
+            world: resolve_world(&world)?,
+            seconds,
+            speed_mps: speed,
+            seed,
+            size,
+            out,
+            service: stream.service(),
+            ..SoakOptions::default()
         }),
         Command::Bake {
             dem,

@@ -174,3 +174,66 @@ fn bake_writes_a_world_that_flies() {
     assert!(report["summary"]["frame_ms"]["median"].as_f64().unwrap() > 0.0);
     assert!(tmp.path().join("fly/frame_00001.png").is_file());
 }
+
+#[test]
+fn a_short_soak_holds_its_ceilings_and_its_memory() {
+    let tmp = tempfile::tempdir().unwrap();
+    // About 30 s of simulated flight at 50 m/s with teleports, small ceilings so that both the
+    // cache and the atlas fill up and must evict.
+    let out = verdant(
+        &[
+            "soak",
+            common::default_world().to_str().unwrap(),
+            "--seconds",
+            "30",
+            "--speed",
+            "50",
+            "--seed",
+            "3",
+            "--size",
+            "96x54",
+            "--cache-mib",
+            "3",
+            "--atlas-slots",
+            "96",
+            "--out",
+            "soak",
+        ],
+        tmp.path(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "soak failed: {stderr}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("soak/soak.json")).unwrap())
+            .unwrap();
+    assert_eq!(r["violations"].as_array().unwrap().len(), 0);
+    assert_eq!(r["frames"], 300);
+    assert!(r["cache_peak_bytes"].as_u64().unwrap() <= 3 << 20);
+    assert!(r["atlas_peak_slots"].as_u64().unwrap() <= 96);
+    assert!(
+        r["evictions"].as_u64().unwrap() > 0,
+        "the atlas should have had to evict"
+    );
+    assert!(r["teleports"].as_array().unwrap().len() >= 2);
+    assert!(r["rss_peak_bytes"].as_u64().unwrap() > 0);
+}
+
+#[test]
+fn a_soak_with_an_atlas_too_small_for_the_world_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    // An atlas too small for the world's always-resident level-0 tiles is refused up front.
+    let out = verdant(
+        &[
+            "soak",
+            common::default_world().to_str().unwrap(),
+            "--seconds",
+            "1",
+            "--atlas-slots",
+            "4",
+            "--out",
+            "soak",
+        ],
+        tmp.path(),
+    );
+    assert_fails_naming(&out, &["atlas", "4 slots"]);
+}

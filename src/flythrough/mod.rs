@@ -4,10 +4,12 @@
 mod camera;
 mod report;
 mod scene;
+mod soak;
 
 pub use camera::{Camera, sample_path};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
 pub use scene::{FrameStats, Scene, SceneConfig, SceneError};
+pub use soak::{SoakOptions, SoakReport, TeleportRecord, resident_bytes, run_soak};
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -35,6 +37,8 @@ pub struct FlyOptions {
     pub out: PathBuf,
     /// Write a PNG for every frame (the report is always written).
     pub write_images: bool,
+    /// Limits of the tile service.
+    pub service: crate::stream::ServiceConfig,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -78,7 +82,8 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     let ctx = GpuContext::new()?;
     let world_name = world.manifest.name.clone();
     let (width, height) = opts.size;
-    let config = SceneConfig::for_world(&world);
+    let mut config = SceneConfig::for_world(&world);
+    config.service = opts.service;
     let mut scene = Scene::new(&ctx, world, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.

@@ -66,6 +66,8 @@ pub struct SceneConfig {
     pub derive: DeriveParams,
     /// Grass rings, or none to ask for no grass tiles.
     pub grass: Option<RingSettings>,
+    /// Terrain grid vertices every this many samples (1 = every sample).
+    pub mesh_step: u32,
 }
 
 impl SceneConfig {
@@ -76,6 +78,7 @@ impl SceneConfig {
             lod_factor: 1.0,
             derive: DeriveParams::default(),
             grass: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
+            mesh_step: 2,
         }
     }
 }
@@ -105,6 +108,7 @@ pub struct Scene {
     renderer: TerrainRenderer,
     lod: TerrainLod,
     rings: Option<GrassRings>,
+    mesh_step: u32,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
@@ -176,7 +180,8 @@ impl Scene {
             &atlas,
             config.service.derives_per_frame.max(1),
         );
-        let renderer = TerrainRenderer::new(&ctx.device, &world.manifest, &atlas, 4096);
+        let renderer =
+            TerrainRenderer::new(&ctx.device, &world.manifest, &atlas, 4096, config.mesh_step);
         let target = |label, format, usage| {
             ctx.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
@@ -209,6 +214,7 @@ impl Scene {
                 max_level: pyramid.max_level(),
             },
             rings: config.grass.map(GrassRings::new),
+            mesh_step: config.mesh_step,
             world,
             service,
             atlas,
@@ -357,7 +363,15 @@ impl Scene {
             .filter_map(|&id| {
                 let (src, slot) = self.service.draw_source(id)?;
                 let morph_start = self.lod.morph_start(pyramid, id.level);
-                Some(TileDraw::new(pyramid, id, src, slot, eye, morph_start))
+                Some(TileDraw::new(
+                    pyramid,
+                    id,
+                    src,
+                    slot,
+                    eye,
+                    morph_start,
+                    self.mesh_step,
+                ))
             })
             .collect();
         let aspect = self.width as f32 / self.height as f32;

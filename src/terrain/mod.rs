@@ -56,8 +56,9 @@ const _: () = assert!(std::mem::size_of::<TileDraw>() == 32);
 
 impl TileDraw {
     /// The draw of the tile `id`, whose data sits in atlas slot `layer` and belongs to the tile
-    /// `source` (`id` itself, or an ancestor standing in for it), seen from `eye`.
-    /// Positions are made relative to the eye in f64, so the f32 that reaches the GPU is small.
+    /// `source` (`id` itself, or an ancestor standing in for it), seen from `eye`, with a grid
+    /// vertex every `mesh_step` samples. Positions are made relative to the eye in f64, so the
+    /// f32 that reaches the GPU is small.
     pub fn new(
         pyramid: &Pyramid,
         id: TileId,
@@ -65,6 +66,7 @@ impl TileDraw {
         layer: u32,
         eye: DVec2,
         morph_start: f32,
+        mesh_step: u32,
     ) -> Self {
         let b = pyramid.bounds(id);
         let rel = (b.min - eye).as_vec2();
@@ -79,10 +81,10 @@ impl TileDraw {
         let border = f64::from(pyramid.border);
         Self {
             origin: rel.to_array(),
-            cell_size: pyramid.cell_size_m(id.level) as f32,
+            cell_size: (pyramid.cell_size_m(id.level) * f64::from(mesh_step)) as f32,
             layer,
             tex_origin: [(border + fx * n) as f32, (border + fy * n) as f32],
-            tex_step: scale as f32,
+            tex_step: (scale * f64::from(mesh_step)) as f32,
             morph_start,
         }
     }
@@ -112,12 +114,14 @@ pub struct TerrainRenderer {
 
 impl TerrainRenderer {
     /// Builds the pipelines for `manifest`'s world, reading tiles from `atlas`; at most
-    /// `max_tiles` tiles are drawn a frame.
+    /// `max_tiles` tiles are drawn a frame, each a grid with a vertex every `mesh_step` samples
+    /// (a power of two that divides the tile's cells).
     pub fn new(
         device: &wgpu::Device,
         manifest: &Manifest,
         atlas: &TileAtlas,
         max_tiles: u32,
+        mesh_step: u32,
     ) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("terrain.wgsl"),
@@ -135,7 +139,7 @@ impl TerrainRenderer {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let n = manifest.pyramid.tile_cells;
+        let n = manifest.pyramid.tile_cells / mesh_step.clamp(1, manifest.pyramid.tile_cells);
         let indices = grid_indices(n + 3);
         let index_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("terrain grid indices"),
@@ -383,7 +387,7 @@ mod tests {
         let p = pyramid();
         let id = TileId::new(0, 600, 0);
         let eye = DVec2::new(600.0 * 65536.0 - 99.75, 7.5);
-        let d = TileDraw::new(&p, id, id, 3, eye, 100.0);
+        let d = TileDraw::new(&p, id, id, 3, eye, 100.0, 1);
         assert_eq!(d.origin, [99.75, -7.5]);
         assert_eq!((d.tex_origin, d.tex_step, d.layer), ([2.0, 2.0], 1.0, 3));
     }
@@ -392,9 +396,12 @@ mod tests {
     fn an_ancestor_stands_in_with_the_right_texels() {
         let p = pyramid();
         let id = TileId::new(2, 3, 1); // level-0 tile (0, 0), quarter (3, 1) of 4x4
-        let d = TileDraw::new(&p, id, TileId::new(0, 0, 0), 0, DVec2::ZERO, 100.0);
+        let d = TileDraw::new(&p, id, TileId::new(0, 0, 0), 0, DVec2::ZERO, 100.0, 1);
         assert_eq!(d.tex_step, 0.25);
         assert_eq!(d.tex_origin, [2.0 + 48.0, 2.0 + 16.0]);
         assert_eq!(d.cell_size, (65536.0 / 4.0 / 64.0) as f32);
+        let coarse = TileDraw::new(&p, id, TileId::new(0, 0, 0), 0, DVec2::ZERO, 100.0, 2);
+        assert_eq!((coarse.tex_step, coarse.tex_origin), (0.5, d.tex_origin));
+        assert_eq!(coarse.cell_size, 2.0 * d.cell_size);
     }
 }

@@ -1,0 +1,376 @@
+//! The streaming soak test: a camera that flies fast with random turns and teleports, while the
+//! tile service's ceilings, holes and the process's memory are watched.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use glam::{DVec2, DVec3};
+use serde::{Deserialize, Serialize};
+
+use crate::flythrough::{AdapterReport, Camera, Scene, SceneConfig, write_json};
+use crate::gpu::GpuContext;
+use crate::metrics::Summary;
+use crate::world::{TileData, TileId, World};
+
+/// What `verdant soak` is asked to do.
+#[derive(Clone, Debug)]
+pub struct SoakOptions {
+    /// The world's folder.
+    pub world: PathBuf,
+    /// Simulated flight time, seconds.
+    pub seconds: f64,
+    /// Camera speed, metres a second.
+    pub speed_mps: f64,
+    /// Seed of the turns and teleports.
+    pub seed: u64,
+    /// Output folder for `soak.json`.
+    pub out: PathBuf,
+    /// Image size.
+    pub size: (u32, u32),
+    /// Simulated time a frame, seconds.
+    pub dt_s: f64,
+    /// Simulated time between teleports, seconds.
+    pub teleport_every_s: f64,
+    /// Frames after a teleport before holes count as failures.
+    pub settle_frames: u32,
+    /// Share of the run (at least 3 s) before memory is expected to stay flat.
+    pub warmup_fraction: f64,
+    /// Limits of the tile service.
+    pub service: crate::stream::ServiceConfig,
+    /// Resident memory may grow this much after the warm-up, bytes (allocator noise); see
+    /// [`SoakReport::rss_growth_bytes`].
+    pub rss_tolerance_bytes: u64,
+}
+
+impl Default for SoakOptions {
+    fn default() -> Self {
+        Self {
+            world: PathBuf::from("worlds/santa-cruz"),
+            seconds: 60.0,
+            speed_mps: 50.0,
+            seed: 1,
+            out: PathBuf::from("out/soak"),
+            size: (320, 180),
+            dt_s: 0.1,
+            teleport_every_s: 10.0,
+            settle_frames: 10,
+            warmup_fraction: 0.25,
+            rss_tolerance_bytes: 8 << 20,
+            service: crate::stream::ServiceConfig::default(),
+        }
+    }
+}
+
+/// One teleport and how long the streamer took to catch up.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TeleportRecord {
+    /// Frame of the jump.
+    pub frame: u32,
+    /// Where to.
+    pub to_m: [f64; 3],
+    /// Frames until every desired tile was resident at its own level (None: not before the
+    /// next teleport or the end).
+    pub frames_to_full_detail: Option<u32>,
+    /// The same in wall-clock seconds.
+    pub seconds_to_full_detail: Option<f64>,
+}
+
+/// Everything `soak.json` holds.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SoakReport {
+    /// The world's name.
+    pub world: String,
+    /// The adapter.
+    pub adapter: AdapterReport,
+    /// Frames flown.
+    pub frames: u32,
+    /// Simulated seconds flown.
+    pub seconds: f64,
+    /// Camera speed, metres a second.
+    pub speed_mps: f64,
+    /// Seed.
+    pub seed: u64,
+    /// Whole-frame wall time, milliseconds.
+    pub frame_ms: Summary,
+    /// Peak resident memory of the process, bytes.
+    pub rss_peak_bytes: u64,
+    /// Median resident memory just after the warm-up, bytes.
+    pub rss_after_warmup_bytes: u64,
+    /// Growth of the median resident memory from just after the warm-up to the last quarter of
+    /// the run, less the CPU cache's own growth (which its ceiling bounds), bytes.
+    pub rss_growth_bytes: u64,
+    /// Ceiling of the CPU tile cache, bytes.
+    pub cache_ceiling_bytes: u64,
+    /// Most bytes the cache held.
+    pub cache_peak_bytes: u64,
+    /// Atlas slots.
+    pub atlas_slots: u32,
+    /// Most atlas slots in use.
+    pub atlas_peak_slots: u32,
+    /// Frames after a teleport's settle time with a hole.
+    pub holes_after_settle: u32,
+    /// Loads completed, cancelled and failed.
+    pub loads_completed: u64,
+    /// Loads dropped because their tiles left the desired set.
+    pub loads_cancelled: u64,
+    /// Loads that failed.
+    pub loads_failed: u64,
+    /// Atlas evictions.
+    pub evictions: u64,
+    /// Cache hit rate over the run.
+    pub cache_hit_rate: f64,
+    /// Median fraction of desired tiles resident at their own level.
+    pub resident_fraction_median: f64,
+    /// Resident memory every 10 frames: (frame, bytes, CPU cache bytes).
+    pub rss_timeline: Vec<(u32, u64, u64)>,
+    /// Teleports and the time to full detail after each.
+    pub teleports: Vec<TeleportRecord>,
+    /// Median wall time to full detail after a teleport, seconds.
+    pub full_detail_after_teleport_s: Option<f64>,
+    /// What went wrong; empty when the soak passed.
+    pub violations: Vec<String>,
+}
+
+/// Resident set size of this process, bytes (Linux; 0 elsewhere).
+pub fn resident_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| s.split_whitespace().nth(1)?.parse::<u64>().ok())
+        .map_or(0, |pages| pages * 4096)
+}
+
+/// Ground height from the level-0 tiles, for keeping the camera above the terrain.
+struct Ground {
+    tiles: Vec<TileData>,
+    world: World,
+}
+
+impl Ground {
+    fn new(world: &World) -> Result<Self> {
+        let [nx, ny] = world.manifest.pyramid.tiles_at(0);
+        let mut tiles = Vec::new();
+        for y in 0..ny {
+            for x in 0..nx {
+                tiles.push(world.load_tile(TileId::new(0, x, y))?);
+            }
+        }
+        Ok(Self {
+            tiles,
+            world: world.clone(),
+        })
+    }
+
+    fn height(&self, p: DVec2) -> f64 {
+        let pyr = &self.world.manifest.pyramid;
+        let Some(id) = pyr.tile_at(0, p) else {
+            return 0.0;
+        };
+        let [nx, _] = pyr.tiles_at(0);
+        let tile = &self.tiles[(id.y * nx + id.x) as usize];
+        let b = pyr.bounds(id);
+        let cell = pyr.cell_size_m(0);
+        let u = (p - b.min) / cell + f64::from(pyr.border);
+        let (i, j) = (u.x.floor(), u.y.floor());
+        let (fx, fy) = (u.x - i, u.y - j);
+        let max = f64::from(tile.size - 2);
+        let (i, j) = (i.clamp(0.0, max) as u32, j.clamp(0.0, max) as u32);
+        let h = |a: u32, b: u32| f64::from(tile.height_at(a, b));
+        let low = h(i, j) * (1.0 - fx) + h(i + 1, j) * fx;
+        let high = h(i, j + 1) * (1.0 - fx) + h(i + 1, j + 1) * fx;
+        low * (1.0 - fy) + high * fy
+    }
+}
+
+/// A small deterministic generator (splitmix64).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Runs a soak and writes `soak.json`. The report's `violations` list what failed.
+pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Result<SoakReport> {
+    anyhow::ensure!(
+        opts.seconds > 0.0 && opts.seconds.is_finite(),
+        "--seconds must be positive"
+    );
+    anyhow::ensure!(
+        opts.speed_mps >= 0.0 && opts.speed_mps.is_finite(),
+        "--speed must not be negative"
+    );
+    anyhow::ensure!(opts.dt_s > 0.0, "the frame step must be positive");
+    let world = World::open(&opts.world)?;
+    std::fs::create_dir_all(&opts.out)
+        .with_context(|| format!("cannot create output folder {}", opts.out.display()))?;
+    let ground = Ground::new(&world)?;
+    let ctx = GpuContext::new()?;
+    let mut config = SceneConfig::for_world(&world);
+    config.service = opts.service;
+    let name = world.manifest.name.clone();
+    let [ex, ey] = world.manifest.extent_m;
+    let (width, height) = opts.size;
+    let mut scene = Scene::new(&ctx, world, width, height, config)?;
+
+    let frames = (opts.seconds / opts.dt_s).ceil() as u32;
+    let warmup_frames = ((opts.seconds * opts.warmup_fraction).max(3.0) / opts.dt_s) as u32;
+    let teleport_every = ((opts.teleport_every_s / opts.dt_s).round() as u32).max(1);
+    let mut rng = Rng(opts.seed);
+    let random_spot =
+        |rng: &mut Rng| DVec2::new((0.1 + 0.8 * rng.next()) * ex, (0.1 + 0.8 * rng.next()) * ey);
+    let mut pos = random_spot(&mut rng);
+    let mut yaw = rng.next() * 360.0;
+    let mut turn_rate = 0.0;
+    let mut frame_ms = Vec::with_capacity(frames as usize);
+    let mut resident_fraction = Vec::with_capacity(frames as usize);
+    let mut teleports: Vec<TeleportRecord> = Vec::new();
+    let mut teleport_start = (0u32, Instant::now());
+    let mut rss_series: Vec<(u64, u64)> = Vec::with_capacity(frames as usize);
+    let mut rss_peak = 0u64;
+    let (mut cache_peak, mut atlas_peak, mut holes_after_settle) = (0u64, 0u32, 0u32);
+    let mut violations = Vec::new();
+    let mut rss_timeline = Vec::new();
+    let mut last = None;
+    let slots = config.service.atlas_slots;
+    let ceiling = config.service.cache_bytes;
+
+    for frame in 0..frames {
+        let t = f64::from(frame) * opts.dt_s;
+        if frame > 0 && frame % teleport_every == 0 {
+            pos = random_spot(&mut rng);
+            yaw = rng.next() * 360.0;
+            teleport_start = (frame, Instant::now());
+            teleports.push(TeleportRecord {
+                frame,
+                to_m: [pos.x, pos.y, 0.0],
+                frames_to_full_detail: None,
+                seconds_to_full_detail: None,
+            });
+        }
+        // Random turns, and a pull toward the middle near the world's edge.
+        if frame % 20 == 0 {
+            turn_rate = (rng.next() - 0.5) * 60.0;
+        }
+        let centre = DVec2::new(ex / 2.0, ey / 2.0);
+        let margin = 0.08 * ex.min(ey);
+        if pos.x < margin || pos.y < margin || pos.x > ex - margin || pos.y > ey - margin {
+            let to_centre = centre - pos;
+            yaw = to_centre.y.atan2(to_centre.x).to_degrees();
+        }
+        yaw += turn_rate * opts.dt_s;
+        let heading = DVec2::new(yaw.to_radians().cos(), yaw.to_radians().sin());
+        pos += heading * opts.speed_mps * opts.dt_s;
+        let agl = 60.0 + 40.0 * (t * 0.3).sin();
+        let eye = DVec3::new(pos.x, pos.y, ground.height(pos) + agl);
+        if let Some(tp) = teleports.last_mut() {
+            if tp.frame == frame {
+                tp.to_m[2] = eye.z;
+            }
+        }
+        let camera = Camera::new(eye, yaw, -12.0);
+
+        let start = Instant::now();
+        let stats = scene.render(&ctx, &camera)?;
+        ctx.wait_idle();
+        frame_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        let r = &stats.residency;
+        resident_fraction.push(r.resident_fraction);
+        cache_peak = cache_peak.max(r.cache.bytes);
+        atlas_peak = atlas_peak.max(r.atlas_used);
+        if r.cache.bytes > ceiling {
+            violations.push(format!(
+                "frame {frame}: CPU cache holds {} bytes, ceiling {ceiling}",
+                r.cache.bytes
+            ));
+        }
+        if r.atlas_used > slots {
+            violations.push(format!(
+                "frame {frame}: {} atlas slots in use of {slots}",
+                r.atlas_used
+            ));
+        }
+        if r.holes > 0 && frame >= teleport_start.0 + opts.settle_frames {
+            holes_after_settle += 1;
+            violations.push(format!(
+                "frame {frame}: {} desired tiles had nothing to draw them from",
+                r.holes
+            ));
+        }
+        if let Some(tp) = teleports.last_mut() {
+            if tp.frames_to_full_detail.is_none() && r.resident == r.desired {
+                tp.frames_to_full_detail = Some(frame - tp.frame);
+                tp.seconds_to_full_detail = Some(teleport_start.1.elapsed().as_secs_f64());
+            }
+        }
+        let rss = resident_bytes();
+        rss_peak = rss_peak.max(rss);
+        if frame % 10 == 0 {
+            rss_timeline.push((frame, rss, r.cache.bytes));
+        }
+        rss_series.push((rss, r.cache.bytes));
+        last = Some(stats.residency);
+        progress(u64::from(frame) + 1, u64::from(frames));
+    }
+    // Memory growth: the typical resident size over the last quarter of the run against the
+    // typical size just after the warm-up. Medians, because drivers allocate and free scratch
+    // memory in bursts; the CPU cache's own growth is taken out, since it has its ceiling.
+    let window = |from: usize, to: usize| {
+        let part = &rss_series[from.min(rss_series.len())..to.min(rss_series.len())];
+        let rss: Vec<f64> = part.iter().map(|p| p.0 as f64).collect();
+        let cache: Vec<f64> = part.iter().map(|p| p.1 as f64).collect();
+        (Summary::of(&rss).median, Summary::of(&cache).median)
+    };
+    let n = rss_series.len();
+    let w = warmup_frames as usize;
+    let (rss_early, cache_early) = window(w, w + (n / 10).max(1));
+    let (rss_late, cache_late) = window(n - n / 4, n);
+    let rss_after_warmup = rss_early as u64;
+    let rss_growth = ((rss_late - rss_early) - (cache_late - cache_early)).max(0.0) as u64;
+    if n > w && rss_growth > opts.rss_tolerance_bytes {
+        violations.push(format!(
+            "resident memory grew by {:.1} MiB after the warm-up (tolerance {:.1} MiB)",
+            rss_growth as f64 / 1048576.0,
+            opts.rss_tolerance_bytes as f64 / 1048576.0
+        ));
+    }
+    let last = last.unwrap_or_default();
+    let detail: Vec<f64> = teleports
+        .iter()
+        .filter_map(|t| t.seconds_to_full_detail)
+        .collect();
+    let report = SoakReport {
+        world: name,
+        adapter: AdapterReport::of(&ctx),
+        frames,
+        seconds: opts.seconds,
+        speed_mps: opts.speed_mps,
+        seed: opts.seed,
+        frame_ms: Summary::of(&frame_ms),
+        rss_peak_bytes: rss_peak,
+        rss_after_warmup_bytes: rss_after_warmup,
+        rss_growth_bytes: rss_growth,
+        cache_ceiling_bytes: ceiling,
+        cache_peak_bytes: cache_peak.max(last.cache.peak_bytes),
+        atlas_slots: slots,
+        atlas_peak_slots: atlas_peak,
+        holes_after_settle,
+        loads_completed: last.stream.completed,
+        loads_cancelled: last.stream.cancelled,
+        loads_failed: last.stream.failed,
+        evictions: last.evictions,
+        cache_hit_rate: last.cache.hit_rate(),
+        resident_fraction_median: Summary::of(&resident_fraction).median,
+        full_detail_after_teleport_s: (!detail.is_empty()).then(|| Summary::of(&detail).median),
+        rss_timeline,
+        teleports,
+        violations,
+    };
+    write_json(&opts.out.join("soak.json"), &report)?;
+    Ok(report)
+}
