@@ -92,6 +92,11 @@ enum Command {
         #[command(flatten)]
         stream: StreamArgs,
     },
+    /// Measure methods against real data and chart speed against accuracy.
+    Eval {
+        #[command(subcommand)]
+        what: EvalCommand,
+    },
     /// Bake a DEM (16-bit PNG with a JSON sidecar) into a world folder.
     Bake {
         /// The DEM's PNG; its sidecar is the .json of the same stem.
@@ -116,6 +121,79 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
+}
+
+#[derive(Subcommand)]
+enum EvalCommand {
+    /// Downsample a DEM by K, derive it back with each method (nearest, bilinear, bicubic,
+    /// bicubic + detail), and chart height and slope error against time per tile.
+    Derive {
+        /// The DEM's PNG (16-bit, with its JSON sidecar).
+        #[arg(long)]
+        dem: PathBuf,
+        /// Downsampling factor, a power of two.
+        #[arg(long, default_value_t = 4)]
+        factor: usize,
+        /// Output folder for derive.csv and the charts.
+        #[arg(long, default_value = "out/eval-derive")]
+        out: PathBuf,
+    },
+}
+
+fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
+    use verdant::stream::eval;
+    if !(factor.is_power_of_two() && (2..=64).contains(&factor)) {
+        bail!("--factor must be a power of two from 2 to 64, got {factor}");
+    }
+    let dem = verdant::world::Dem::load(dem_path)?;
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let truth = eval::dem_grid(&dem);
+    let methods = eval::methods();
+    let pb = bar(methods.len() as u64, "methods");
+    let mut results = Vec::new();
+    for m in methods {
+        pb.set_message(m.name());
+        results.push(eval::evaluate(&truth, factor, m, 5));
+        pb.inc(1);
+    }
+    pb.finish();
+    let name = dem_path
+        .file_stem()
+        .map_or("DEM".into(), |s| s.to_string_lossy().into_owned());
+    eval::write_results(&results, &name, out)?;
+    println!(
+        "{:<22} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11}",
+        "method", "RMSE m", "max m", "slope deg", "bias deg", "rough", "ms/tile"
+    );
+    for r in &results {
+        println!(
+            "{:<22} {:>9.3} {:>9.2} {:>10.3} {:>10.3} {:>9.3} {:>11.4}",
+            r.method,
+            r.rmse_m,
+            r.max_m,
+            r.slope_rmse_deg,
+            r.slope_bias_deg,
+            r.roughness_ratio,
+            r.ms_per_tile
+        );
+    }
+    let front = eval::joint_front(&results);
+    let names: Vec<String> = front.iter().map(|&i| results[i].method.clone()).collect();
+    let chosen = eval::runtime_method().name();
+    println!(
+        "on the joint Pareto front (time, height, slope, flattening, roughness): {}",
+        names.join(", ")
+    );
+    println!(
+        "runtime method: {chosen} ({} the joint front); wrote derive.csv and charts to {}",
+        if names.contains(&chosen) {
+            "on"
+        } else {
+            "NOT on"
+        },
+        out.display()
+    );
+    Ok(())
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -297,6 +375,9 @@ fn run(cli: Cli) -> Result<()> {
             service: stream.service(),
             ..SoakOptions::default()
         }),
+        Command::Eval {
+            what: EvalCommand::Derive { dem, factor, out },
+        } => eval_derive(&dem, factor, &out),
         Command::Bake {
             dem,
             out,

@@ -237,3 +237,93 @@ fn a_soak_with_an_atlas_too_small_for_the_world_is_refused() {
     );
     assert_fails_naming(&out, &["atlas", "4 slots"]);
 }
+
+#[test]
+fn eval_derive_writes_its_table_and_charts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let png = common::write_dem(
+        tmp.path(),
+        "ridge",
+        [129, 97],
+        [20.0, 25.0],
+        [0.0, 0.1],
+        |x, y| {
+            300.0
+                + 120.0 * (x / 500.0).sin() * (y / 700.0).cos()
+                + 8.0 * (x / 190.0).sin() * (y / 150.0).sin()
+        },
+    );
+    let out = verdant(
+        &[
+            "eval",
+            "derive",
+            "--dem",
+            png.to_str().unwrap(),
+            "--factor",
+            "4",
+            "--out",
+            "ev",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        out.status.success(),
+        "eval failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(tmp.path().join("ev/derive.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 7, "{csv}");
+    let rmse = |name: &str| -> f64 {
+        rows.iter().find(|r| r[0] == name).unwrap()[2]
+            .parse()
+            .unwrap()
+    };
+    assert!(
+        rmse("bicubic") < rmse("bilinear") && rmse("bilinear") < rmse("nearest"),
+        "{csv}"
+    );
+    assert_eq!(
+        rows.iter().filter(|r| r[9] == "true").count(),
+        1,
+        "exactly one runtime default: {csv}"
+    );
+    for chart in [
+        "derive_height.png",
+        "derive_slope.png",
+        "derive_flattening.png",
+        "derive_roughness.png",
+    ] {
+        let img = image::open(tmp.path().join("ev").join(chart)).unwrap();
+        assert_eq!((img.width(), img.height()), (900, 600));
+    }
+}
+
+#[test]
+fn eval_derive_refuses_a_bad_factor() {
+    let tmp = tempfile::tempdir().unwrap();
+    let png = common::write_dem(
+        tmp.path(),
+        "d",
+        [33, 33],
+        [10.0, 10.0],
+        [0.0, 1.0],
+        |x, _| x,
+    );
+    let out = verdant(
+        &[
+            "eval",
+            "derive",
+            "--dem",
+            png.to_str().unwrap(),
+            "--factor",
+            "3",
+        ],
+        tmp.path(),
+    );
+    assert_fails_naming(&out, &["--factor", "3"]);
+}

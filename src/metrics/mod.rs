@@ -1,4 +1,8 @@
-//! Measurements: percentiles of timings and image error by FLIP.
+//! Measurements: percentiles of timings, image error by FLIP, and speed-against-accuracy charts.
+
+mod chart;
+
+pub use chart::{Chart, ChartError, ChartPoint, pareto_front, pareto_front_n};
 
 use thiserror::Error;
 

@@ -43,17 +43,18 @@ pub fn hash_u32(mut x: u32) -> u32 {
     x
 }
 
-fn hash4(a: u32, b: u32, c: u32, d: u32) -> u32 {
+pub(crate) fn hash4(a: u32, b: u32, c: u32, d: u32) -> u32 {
     hash_u32(a ^ hash_u32(b ^ hash_u32(c ^ hash_u32(d))))
 }
 
 /// A hash mapped to [-1, 1) exactly (24 bits).
-fn unit(h: u32) -> f32 {
+pub(crate) fn unit(h: u32) -> f32 {
     (h >> 8) as f32 * (1.0 / 16_777_216.0) * 2.0 - 1.0
 }
 
 /// Catmull-Rom weights at fraction 0 and one half (the only fractions a 2x upsampling meets).
-const WEIGHTS: [[f32; 4]; 2] = [[0.0, 1.0, 0.0, 0.0], [-0.0625, 0.5625, 0.5625, -0.0625]];
+pub(crate) const WEIGHTS: [[f32; 4]; 2] =
+    [[0.0, 1.0, 0.0, 0.0], [-0.0625, 0.5625, 0.5625, -0.0625]];
 
 /// Derives `child` from `parent` (its parent tile). `pyramid.border` must be at least 2.
 pub fn derive_child(

@@ -3,6 +3,7 @@
 
 mod cache;
 mod derive_child;
+pub mod eval;
 mod residency;
 mod service;
 

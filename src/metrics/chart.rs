@@ -1,0 +1,278 @@
+//! PNG charts of one measure against another (speed against accuracy), with the Pareto front
+//! drawn in. The CSV with the same numbers is written beside each chart by its caller.
+
+use std::path::Path;
+use std::sync::Once;
+
+use plotters::prelude::*;
+
+/// A labelled point of a chart.
+#[derive(Clone, Debug)]
+pub struct ChartPoint {
+    /// Label drawn beside the point (a method or a setting).
+    pub label: String,
+    /// x value.
+    pub x: f64,
+    /// y value.
+    pub y: f64,
+    /// Highlight (the default choice).
+    pub chosen: bool,
+}
+
+/// A scatter chart: each point labelled, the Pareto front (lower x and lower y are better)
+/// joined by a line.
+#[derive(Clone, Debug)]
+pub struct Chart {
+    /// Title at the top.
+    pub title: String,
+    /// x axis label.
+    pub x_label: String,
+    /// y axis label.
+    pub y_label: String,
+    /// Logarithmic x axis.
+    pub log_x: bool,
+    /// Logarithmic y axis.
+    pub log_y: bool,
+    /// The points.
+    pub points: Vec<ChartPoint>,
+}
+
+/// Why a chart could not be drawn or written.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ChartError {
+    /// Plotting failed.
+    #[error("drawing chart {path}: {message}")]
+    Draw {
+        /// The chart's file.
+        path: String,
+        /// What plotters said.
+        message: String,
+    },
+    /// Writing the PNG failed.
+    #[error("writing chart {path}: {source}")]
+    Write {
+        /// The chart's file.
+        path: String,
+        /// The encoder's error.
+        #[source]
+        source: image::ImageError,
+    },
+}
+
+/// Indices of the points no other point beats in both x and y (lower is better), by x.
+pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
+    let rows: Vec<Vec<f64>> = points.iter().map(|&(x, y)| vec![x, y]).collect();
+    let mut front = pareto_front_n(&rows);
+    front.sort_by(|&a, &b| points[a].0.total_cmp(&points[b].0));
+    front
+}
+
+/// Indices of the rows that no other row dominates (at most as large in every measure and
+/// smaller in one; lower is better in every column).
+pub fn pareto_front_n(rows: &[Vec<f64>]) -> Vec<usize> {
+    let dominates = |a: &[f64], b: &[f64]| {
+        a.iter().zip(b).all(|(x, y)| x <= y) && a.iter().zip(b).any(|(x, y)| x < y)
+    };
+    (0..rows.len())
+        .filter(|&i| {
+            !rows
+                .iter()
+                .enumerate()
+                .any(|(j, r)| j != i && dominates(r, &rows[i]))
+        })
+        .collect()
+}
+
+static FONT: Once = Once::new();
+
+fn register_font() {
+    FONT.call_once(|| {
+        // DejaVu Sans (Bitstream Vera licence, see fonts/LICENSE-DejaVu.txt), compiled in so that
+        // charts need no system fonts.
+        let bytes: &'static [u8] = include_bytes!("fonts/DejaVuSans.ttf");
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, bytes);
+    });
+}
+
+/// A tick label with a few significant digits and no float noise.
+fn short_number(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        "0".into()
+    } else if a >= 100.0 {
+        format!("{v:.0}")
+    } else if a >= 1.0 {
+        format!("{v:.2}")
+            .trim_end_matches('0')
+            .trim_end_matches('.')
+            .into()
+    } else {
+        let digits = (-a.log10()).ceil() as usize + 1;
+        format!("{v:.digits$}")
+            .trim_end_matches('0')
+            .trim_end_matches('.')
+            .into()
+    }
+}
+
+fn range(values: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
+    let (mut lo, mut hi) = values
+        .filter(|v| v.is_finite() && (!log || *v > 0.0))
+        .fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(v), h.max(v)));
+    if lo > hi {
+        (lo, hi) = (1.0, 10.0);
+    }
+    if log {
+        (lo / 1.6, hi * 1.6)
+    } else {
+        let pad = ((hi - lo) * 0.12).max(hi.abs() * 0.05).max(1e-9);
+        (
+            (lo - pad).min(if lo >= 0.0 { 0.0 } else { lo - pad }),
+            hi + pad,
+        )
+    }
+}
+
+impl Chart {
+    /// Draws the chart into a `width` x `height` PNG at `path`.
+    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), ChartError> {
+        register_font();
+        let mut buf = vec![255u8; (width * height * 3) as usize];
+        let err = |e: String| ChartError::Draw {
+            path: path.display().to_string(),
+            message: e,
+        };
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
+            root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+            let xr = range(self.points.iter().map(|p| p.x), self.log_x);
+            let yr = range(self.points.iter().map(|p| p.y), self.log_y);
+            macro_rules! draw {
+                ($x:expr, $y:expr) => {{
+                    let mut chart = ChartBuilder::on(&root)
+                        .caption(&self.title, ("sans-serif", 20))
+                        .margin(16)
+                        .margin_right(150)
+                        .x_label_area_size(44)
+                        .y_label_area_size(64)
+                        .build_cartesian_2d($x, $y)
+                        .map_err(|e| err(e.to_string()))?;
+                    chart
+                        .configure_mesh()
+                        .x_desc(&self.x_label)
+                        .y_desc(&self.y_label)
+                        .label_style(("sans-serif", 13))
+                        .x_labels(8)
+                        .y_labels(8)
+                        .light_line_style(RGBColor(238, 238, 238))
+                        .x_label_formatter(&|v| short_number(*v))
+                        .y_label_formatter(&|v| short_number(*v))
+                        .axis_desc_style(("sans-serif", 15))
+                        .draw()
+                        .map_err(|e| err(e.to_string()))?;
+                    let xy: Vec<(f64, f64)> = self.points.iter().map(|p| (p.x, p.y)).collect();
+                    let front: Vec<(f64, f64)> =
+                        pareto_front(&xy).into_iter().map(|i| xy[i]).collect();
+                    chart
+                        .draw_series(LineSeries::new(
+                            front,
+                            RGBColor(120, 170, 120).stroke_width(2),
+                        ))
+                        .map_err(|e| err(e.to_string()))?
+                        .label("Pareto front")
+                        .legend(|(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 18, y)], RGBColor(120, 170, 120))
+                        });
+                    for p in &self.points {
+                        let color = if p.chosen {
+                            RGBColor(200, 40, 40)
+                        } else {
+                            RGBColor(40, 70, 160)
+                        };
+                        let size = if p.chosen { 7 } else { 5 };
+                        chart
+                            .draw_series(std::iter::once(
+                                EmptyElement::at((p.x, p.y))
+                                    + Circle::new((0, 0), size, color.filled())
+                                    + Text::new(
+                                        if p.chosen {
+                                            format!("{} (default)", p.label)
+                                        } else {
+                                            p.label.clone()
+                                        },
+                                        (8, -16),
+                                        ("sans-serif", 13).into_font().color(&color),
+                                    ),
+                            ))
+                            .map_err(|e| err(e.to_string()))?;
+                    }
+                    chart
+                        .configure_series_labels()
+                        .position(SeriesLabelPosition::UpperRight)
+                        .background_style(WHITE.mix(0.8))
+                        .border_style(BLACK)
+                        .label_font(("sans-serif", 13))
+                        .draw()
+                        .map_err(|e| err(e.to_string()))?;
+                }};
+            }
+            match (self.log_x, self.log_y) {
+                (true, true) => draw!((xr.0..xr.1).log_scale(), (yr.0..yr.1).log_scale()),
+                (true, false) => draw!((xr.0..xr.1).log_scale(), yr.0..yr.1),
+                (false, true) => draw!(xr.0..xr.1, (yr.0..yr.1).log_scale()),
+                (false, false) => draw!(xr.0..xr.1, yr.0..yr.1),
+            }
+            root.present().map_err(|e| err(e.to_string()))?;
+        }
+        let img = image::RgbImage::from_raw(width, height, buf).expect("buffer holds the image");
+        img.save(path).map_err(|source| ChartError::Write {
+            path: path.display().to_string(),
+            source,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_front_keeps_what_nothing_beats() {
+        let pts = [(1.0, 5.0), (2.0, 3.0), (3.0, 4.0), (4.0, 1.0), (2.0, 3.0)];
+        // (3, 4) is beaten by (2, 3); the two (2, 3) tie and both stay.
+        assert_eq!(pareto_front(&pts), vec![0, 1, 4, 3]);
+    }
+
+    #[test]
+    fn charts_are_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let chart = Chart {
+            title: "test".into(),
+            x_label: "ms".into(),
+            y_label: "m".into(),
+            log_x: true,
+            log_y: false,
+            points: vec![
+                ChartPoint {
+                    label: "a".into(),
+                    x: 0.1,
+                    y: 2.0,
+                    chosen: false,
+                },
+                ChartPoint {
+                    label: "b".into(),
+                    x: 1.0,
+                    y: 1.0,
+                    chosen: true,
+                },
+            ],
+        };
+        let file = dir.path().join("c.png");
+        chart.write_png(&file, 400, 300).unwrap();
+        let img = image::open(&file).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (400, 300));
+        // Something besides the white background was drawn, including the highlighted point.
+        assert!(img.pixels().any(|p| p.0 == [200, 40, 40]));
+    }
+}

@@ -1,0 +1,396 @@
+//! `verdant eval derive`: how well each way of deriving finer terrain from coarser terrain
+//! recovers real terrain, and what it costs.
+//!
+//! A DEM is kept as ground truth, point-sampled down by a factor K (a power of two), then
+//! brought back up by repeated 2x derivation with each method, the way the runtime derives child
+//! tiles level by level. Heights are compared with the truth (RMSE and maximum, metres), and so
+//! are slopes: point by point (RMSE, degrees), on average (the bias of the mean slope, degrees:
+//! smoothing flattens terrain, which moves where grass may grow) and as roughness (the spread of
+//! the discrete Laplacian relative to the truth's).
+
+use std::time::Instant;
+
+use crate::stream::DeriveParams;
+use crate::stream::derive_child::{WEIGHTS, hash4, unit};
+use crate::world::Dem;
+
+/// A way of deriving a finer grid from a coarser one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum DeriveMethod {
+    /// The nearest coarse sample (the lower one at half positions).
+    Nearest,
+    /// Bilinear interpolation.
+    Bilinear,
+    /// Catmull-Rom (bicubic) interpolation.
+    Bicubic,
+    /// Catmull-Rom plus slope-scaled detail noise of the given amplitude (child cells per unit
+    /// slope), as the runtime derives child tiles.
+    BicubicDetail(f32),
+}
+
+impl DeriveMethod {
+    /// Short name for tables and charts.
+    pub fn name(&self) -> String {
+        match self {
+            Self::Nearest => "nearest".into(),
+            Self::Bilinear => "bilinear".into(),
+            Self::Bicubic => "bicubic".into(),
+            Self::BicubicDetail(a) => format!("bicubic+detail {a}"),
+        }
+    }
+}
+
+/// A height grid in index space with its (possibly non-square) spacing.
+#[derive(Clone, Debug)]
+pub struct Grid {
+    /// Samples per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    /// Spacing along a row and between rows, metres.
+    pub cell: (f64, f64),
+    /// Heights, row-major.
+    pub data: Vec<f32>,
+}
+
+impl Grid {
+    fn at(&self, x: i64, y: i64) -> f32 {
+        let x = x.clamp(0, self.width as i64 - 1) as usize;
+        let y = y.clamp(0, self.height as i64 - 1) as usize;
+        self.data[y * self.width + x]
+    }
+
+    /// Every `k`-th sample in both directions.
+    pub fn downsample(&self, k: usize) -> Grid {
+        let (w, h) = ((self.width - 1) / k + 1, (self.height - 1) / k + 1);
+        let mut data = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                data.push(self.data[y * k * self.width + x * k]);
+            }
+        }
+        Grid {
+            width: w,
+            height: h,
+            cell: (self.cell.0 * k as f64, self.cell.1 * k as f64),
+            data,
+        }
+    }
+}
+
+/// One 2x derivation of `coarse` by `method`. `level` and `seed` key the detail noise.
+pub fn upsample2x(coarse: &Grid, method: DeriveMethod, level: u32, seed: u32) -> Grid {
+    let (w, h) = (coarse.width * 2 - 1, coarse.height * 2 - 1);
+    let cell = (coarse.cell.0 / 2.0, coarse.cell.1 / 2.0);
+    let mut data = vec![0.0f32; w * h];
+    for j in 0..h {
+        for i in 0..w {
+            let (ix, fx) = ((i >> 1) as i64, i & 1);
+            let (iy, fy) = ((j >> 1) as i64, j & 1);
+            let v = match method {
+                DeriveMethod::Nearest => coarse.at(ix, iy),
+                DeriveMethod::Bilinear => {
+                    let a = coarse.at(ix, iy) * (1.0 - 0.5 * fx as f32)
+                        + coarse.at(ix + 1, iy) * 0.5 * fx as f32;
+                    let b = coarse.at(ix, iy + 1) * (1.0 - 0.5 * fx as f32)
+                        + coarse.at(ix + 1, iy + 1) * 0.5 * fx as f32;
+                    a * (1.0 - 0.5 * fy as f32) + b * 0.5 * fy as f32
+                }
+                DeriveMethod::Bicubic | DeriveMethod::BicubicDetail(_) => {
+                    let (wx, wy) = (WEIGHTS[fx], WEIGHTS[fy]);
+                    let mut rows = [0.0f32; 4];
+                    for (dy, row) in rows.iter_mut().enumerate() {
+                        let y = iy - 1 + dy as i64;
+                        let p = |dx: i64| coarse.at(ix - 1 + dx, y);
+                        *row = ((wx[0] * p(0) + wx[1] * p(1)) + wx[2] * p(2)) + wx[3] * p(3);
+                    }
+                    let mut v =
+                        ((wy[0] * rows[0] + wy[1] * rows[1]) + wy[2] * rows[2]) + wy[3] * rows[3];
+                    if let DeriveMethod::BicubicDetail(amplitude) = method {
+                        let gx = (coarse.at(ix + 1, iy) - coarse.at(ix - 1, iy)) as f64
+                            / (2.0 * coarse.cell.0);
+                        let gy = (coarse.at(ix, iy + 1) - coarse.at(ix, iy - 1)) as f64
+                            / (2.0 * coarse.cell.1);
+                        let slope = (gx * gx + gy * gy).sqrt().min(1.5) as f32;
+                        let c = (0.5 * (cell.0 + cell.1)) as f32;
+                        v += unit(hash4(i as u32, j as u32, level, seed)) * (amplitude * c * slope);
+                    }
+                    v
+                }
+            };
+            data[j * w + i] = v;
+        }
+    }
+    Grid {
+        width: w,
+        height: h,
+        cell,
+        data,
+    }
+}
+
+/// What one method achieved.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MethodResult {
+    /// The method's name.
+    pub method: String,
+    /// Downsampling factor.
+    pub factor: usize,
+    /// Height RMSE, metres.
+    pub rmse_m: f64,
+    /// Largest height error, metres.
+    pub max_m: f64,
+    /// RMSE of the slope angle, degrees.
+    pub slope_rmse_deg: f64,
+    /// Mean slope of the result minus the truth's, degrees (negative: flattened).
+    pub slope_bias_deg: f64,
+    /// Spread of the Laplacian relative to the truth's (1 = as rough as the truth).
+    pub roughness_ratio: f64,
+    /// CPU time per derived 133 x 133 tile, milliseconds (median of repeats).
+    pub ms_per_tile: f64,
+}
+
+/// The DEM as a grid, north row first.
+pub fn dem_grid(dem: &Dem) -> Grid {
+    Grid {
+        width: dem.width as usize,
+        height: dem.height as usize,
+        cell: (dem.cell_ew_m, dem.cell_ns_m),
+        data: dem.heights.clone(),
+    }
+}
+
+fn slope_deg(g: &Grid, x: i64, y: i64) -> f64 {
+    let gx = (g.at(x + 1, y) - g.at(x - 1, y)) as f64 / (2.0 * g.cell.0);
+    let gy = (g.at(x, y + 1) - g.at(x, y - 1)) as f64 / (2.0 * g.cell.1);
+    (gx * gx + gy * gy).sqrt().atan().to_degrees()
+}
+
+fn laplacian(g: &Grid, x: i64, y: i64) -> f64 {
+    let c = f64::from(g.at(x, y));
+    (f64::from(g.at(x + 1, y)) + f64::from(g.at(x - 1, y)) - 2.0 * c) / (g.cell.0 * g.cell.0)
+        + (f64::from(g.at(x, y + 1)) + f64::from(g.at(x, y - 1)) - 2.0 * c) / (g.cell.1 * g.cell.1)
+}
+
+/// Evaluates `method` at downsampling `factor` (a power of two) against `truth`.
+pub fn evaluate(truth: &Grid, factor: usize, method: DeriveMethod, repeats: usize) -> MethodResult {
+    assert!(
+        factor.is_power_of_two() && factor >= 2,
+        "the factor must be a power of two"
+    );
+    let coarse = truth.downsample(factor);
+    let steps = factor.trailing_zeros();
+    let params = DeriveParams::default();
+    let mut times = Vec::new();
+    let mut fine = coarse.clone();
+    for _ in 0..repeats.max(1) {
+        let start = Instant::now();
+        fine = coarse.clone();
+        for s in 0..steps {
+            fine = upsample2x(&fine, method, s + 1, params.seed);
+        }
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    let ms = crate::metrics::Summary::of(&times).median;
+    let tiles = (fine.width * fine.height) as f64 / (133.0 * 133.0);
+
+    // Compare away from the edges, where clamping would favour no method.
+    let margin = 2 * factor as i64;
+    let (mut se, mut max, mut slope_se, mut slope_sum_f, mut slope_sum_t, mut n) =
+        (0.0, 0.0f64, 0.0, 0.0, 0.0, 0.0);
+    let (mut lap_f, mut lap_t) = (Vec::new(), Vec::new());
+    for y in margin..fine.height as i64 - margin {
+        for x in margin..fine.width as i64 - margin {
+            let e = f64::from(fine.at(x, y)) - f64::from(truth.at(x, y));
+            se += e * e;
+            max = max.max(e.abs());
+            let (sf, st) = (slope_deg(&fine, x, y), slope_deg(truth, x, y));
+            slope_se += (sf - st) * (sf - st);
+            slope_sum_f += sf;
+            slope_sum_t += st;
+            lap_f.push(laplacian(&fine, x, y));
+            lap_t.push(laplacian(truth, x, y));
+            n += 1.0;
+        }
+    }
+    let spread = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+        (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+    };
+    MethodResult {
+        method: method.name(),
+        factor,
+        rmse_m: (se / n).sqrt(),
+        max_m: max,
+        slope_rmse_deg: (slope_se / n).sqrt(),
+        slope_bias_deg: (slope_sum_f - slope_sum_t) / n,
+        roughness_ratio: spread(&lap_f) / spread(&lap_t).max(1e-12),
+        ms_per_tile: ms / tiles,
+    }
+}
+
+/// The methods `verdant eval derive` compares: the three interpolations and the runtime's
+/// method at a range of detail amplitudes.
+pub fn methods() -> Vec<DeriveMethod> {
+    let mut m = vec![
+        DeriveMethod::Nearest,
+        DeriveMethod::Bilinear,
+        DeriveMethod::Bicubic,
+    ];
+    m.extend([0.1, 0.25, 0.5, 1.0].map(DeriveMethod::BicubicDetail));
+    m
+}
+
+/// The runtime's method (what derived tiles use).
+pub fn runtime_method() -> DeriveMethod {
+    DeriveMethod::BicubicDetail(DeriveParams::default().detail)
+}
+
+/// Indices of the results on the Pareto front of all the measures at once: time per tile,
+/// height RMSE, slope RMSE, |slope bias| and roughness error, lower being better in each.
+pub fn joint_front(results: &[MethodResult]) -> Vec<usize> {
+    let rows: Vec<Vec<f64>> = results
+        .iter()
+        .map(|r| {
+            vec![
+                r.ms_per_tile,
+                r.rmse_m,
+                r.slope_rmse_deg,
+                r.slope_bias_deg.abs(),
+                (1.0 - r.roughness_ratio).abs(),
+            ]
+        })
+        .collect();
+    crate::metrics::pareto_front_n(&rows)
+}
+
+/// Writes `derive.csv` and the charts `derive_height.png` (height RMSE), `derive_slope.png`
+/// (slope RMSE), `derive_flattening.png` (slope bias) and `derive_roughness.png` against time
+/// per tile into `out`.
+pub fn write_results(
+    results: &[MethodResult],
+    dem_name: &str,
+    out: &std::path::Path,
+) -> anyhow::Result<()> {
+    use anyhow::Context;
+    use std::fmt::Write as _;
+    let chosen = runtime_method().name();
+    let front = joint_front(results);
+    let mut csv = String::from(
+        "method,factor,rmse_m,max_m,slope_rmse_deg,slope_bias_deg,roughness_ratio,ms_per_tile,\
+         on_joint_pareto_front,runtime_default\n",
+    );
+    for (i, r) in results.iter().enumerate() {
+        let _ = writeln!(
+            csv,
+            "{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{},{}",
+            r.method,
+            r.factor,
+            r.rmse_m,
+            r.max_m,
+            r.slope_rmse_deg,
+            r.slope_bias_deg,
+            r.roughness_ratio,
+            r.ms_per_tile,
+            front.contains(&i),
+            r.method == chosen
+        );
+    }
+    let csv_path = out.join("derive.csv");
+    std::fs::write(&csv_path, csv)
+        .with_context(|| format!("cannot write {}", csv_path.display()))?;
+    let factor = results.first().map_or(0, |r| r.factor);
+    let charts: [(&str, &str, fn(&MethodResult) -> f64); 4] = [
+        ("derive_height.png", "height RMSE (m)", |r| r.rmse_m),
+        ("derive_slope.png", "slope RMSE (degrees)", |r| {
+            r.slope_rmse_deg
+        }),
+        (
+            "derive_flattening.png",
+            "|mean slope bias| (degrees)",
+            |r| r.slope_bias_deg.abs(),
+        ),
+        ("derive_roughness.png", "roughness error |1 - ratio|", |r| {
+            (1.0 - r.roughness_ratio).abs()
+        }),
+    ];
+    for (file, y_label, value) in charts {
+        let chart = crate::metrics::Chart {
+            title: format!("{dem_name}: derived from 1/{factor} resolution"),
+            x_label: "CPU time per 133x133 tile (ms)".into(),
+            y_label: y_label.into(),
+            log_x: true,
+            log_y: false,
+            points: results
+                .iter()
+                .map(|r| crate::metrics::ChartPoint {
+                    label: r.method.clone(),
+                    x: r.ms_per_tile,
+                    y: value(r),
+                    chosen: r.method == chosen,
+                })
+                .collect(),
+        };
+        chart.write_png(&out.join(file), 900, 600)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn smooth_grid() -> Grid {
+        let (w, h) = (65, 49);
+        let data = (0..w * h)
+            .map(|k| {
+                let (x, y) = ((k % w) as f32, (k / w) as f32);
+                100.0 + 20.0 * (x * 0.15).sin() + 15.0 * (y * 0.11).cos()
+            })
+            .collect();
+        Grid {
+            width: w,
+            height: h,
+            cell: (10.0, 12.0),
+            data,
+        }
+    }
+
+    #[test]
+    fn every_method_keeps_the_coarse_samples() {
+        let g = smooth_grid().downsample(2);
+        for m in [
+            DeriveMethod::Nearest,
+            DeriveMethod::Bilinear,
+            DeriveMethod::Bicubic,
+        ] {
+            let f = upsample2x(&g, m, 1, 0);
+            for y in 0..g.height {
+                for x in 0..g.width {
+                    assert_eq!(
+                        f.data[(2 * y) * f.width + 2 * x],
+                        g.data[y * g.width + x],
+                        "{m:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bicubic_beats_bilinear_beats_nearest_on_smooth_terrain() {
+        let t = smooth_grid();
+        let r: Vec<f64> = [
+            DeriveMethod::Nearest,
+            DeriveMethod::Bilinear,
+            DeriveMethod::Bicubic,
+        ]
+        .iter()
+        .map(|&m| evaluate(&t, 4, m, 1).rmse_m)
+        .collect();
+        assert!(r[2] < r[1] && r[1] < r[0], "{r:?}");
+        let detail = evaluate(&t, 4, DeriveMethod::BicubicDetail(0.25), 1);
+        let plain = evaluate(&t, 4, DeriveMethod::Bicubic, 1);
+        assert!(detail.roughness_ratio > plain.roughness_ratio);
+    }
+}
