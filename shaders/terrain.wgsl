@@ -39,7 +39,8 @@ struct TileDraw {
 @group(0) @binding(3) var grass: texture_2d_array<u32>;
 
 struct VertexOut {
-    @builtin(position) clip: vec4<f32>,
+    // Invariant: the depth pre-pass and the colour pass must produce the same depths.
+    @builtin(position) @invariant clip: vec4<f32>,
     @location(0) rel_pos: vec3<f32>,
     @location(1) normal: vec3<f32>,
     @location(2) albedo: vec3<f32>,

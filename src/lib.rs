@@ -7,12 +7,14 @@
 //! - [`lod`]: which terrain tiles a camera needs, at which level, with frustum culling.
 //! - [`gpu`]: the headless GPU context (adapter choice from `WGPU_*` variables), the tile atlas,
 //!   timestamp timing and readback.
+//! - [`grass`]: GPU grass: blade generation and culling (CPU mirrors), the instance pool.
 //! - [`terrain`]: the terrain and sky passes (`shaders/terrain.wgsl`).
 //! - [`flythrough`]: cameras, camera paths, the headless fly-through and its report.
 //! - [`metrics`]: percentiles and image error (FLIP).
 
 pub mod flythrough;
 pub mod gpu;
+pub mod grass;
 pub mod lod;
 pub mod metrics;
 pub mod stream;

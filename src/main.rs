@@ -287,6 +287,10 @@ fn fly(opts: FlyOptions) -> Result<()> {
         s.cache_peak_bytes as f64 / (1 << 20) as f64,
         s.atlas_peak_slots
     );
+    println!(
+        "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",
+        s.grass_considered.median, s.grass_drawn_high.median, s.grass_drawn_low.median
+    );
     for (pass, t) in &s.gpu_ms {
         println!("gpu {pass}: median {:.3} ms, p99 {:.3} ms", t.median, t.p99);
     }
@@ -319,13 +323,14 @@ fn soak(opts: SoakOptions) -> Result<()> {
     );
     println!(
         "loads: {} completed, {} cancelled, {} failed; {} evictions; cache hit rate {:.0}%; \
-         full detail {:.1} s after a teleport (median of {})",
+         full detail {} after a teleport (median of {})",
         r.loads_completed,
         r.loads_cancelled,
         r.loads_failed,
         r.evictions,
         100.0 * r.cache_hit_rate,
-        r.full_detail_after_teleport_s.unwrap_or(f64::NAN),
+        r.full_detail_after_teleport_s
+            .map_or("never reached".to_owned(), |s| format!("{s:.1} s")),
         r.teleports.len()
     );
     println!("wrote {}", opts.out.join("soak.json").display());

@@ -131,6 +131,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
             grass_tiles_high: stats.grass_tiles.0,
             grass_tiles_low: stats.grass_tiles.1,
             residency: stats.residency,
+            grass: stats.grass,
         });
         progress(FlyProgress::Frame(u64::from(i) + 1, u64::from(opts.frames)));
     }
@@ -190,6 +191,11 @@ impl FlySummary {
                 .map(|f| f.residency.atlas_used)
                 .max()
                 .unwrap_or(0),
+            grass_considered: Summary::of(&series(&|f| {
+                f64::from(f.grass.considered[0]) + f64::from(f.grass.considered[1])
+            })),
+            grass_drawn_high: Summary::of(&series(&|f| f64::from(f.grass.drawn[0]))),
+            grass_drawn_low: Summary::of(&series(&|f| f64::from(f.grass.drawn[1]))),
         }
     }
 }

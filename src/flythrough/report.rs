@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::gpu::GpuContext;
+use crate::grass::GrassStats;
 use crate::metrics::Summary;
 use crate::stream::ResidencyStats;
 
@@ -62,6 +63,9 @@ pub struct FrameRecord {
     /// Tile service figures: tiles desired, resident, drawn from an ancestor, loads in flight,
     /// completed and cancelled, cache bytes and hit rate, atlas slots, evictions.
     pub residency: ResidencyStats,
+    /// Grass: tiles, blades considered, culled by each test (distance, frustum, occlusion),
+    /// overflowing and drawn, each per LOD (high, low).
+    pub grass: GrassStats,
 }
 
 /// Summary statistics over all frames.
@@ -83,6 +87,12 @@ pub struct FlySummary {
     pub cache_peak_bytes: u64,
     /// Most atlas slots in use.
     pub atlas_peak_slots: u32,
+    /// Grass blades considered a frame, both LODs.
+    pub grass_considered: Summary,
+    /// Grass blades drawn a frame at high LOD.
+    pub grass_drawn_high: Summary,
+    /// Grass blades drawn a frame at low LOD.
+    pub grass_drawn_low: Summary,
 }
 
 /// Everything `report.json` holds.

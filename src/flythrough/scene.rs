@@ -10,6 +10,7 @@ use crate::flythrough::Camera;
 use crate::gpu::{
     AtlasError, DeriveStage, GpuContext, GpuTimer, PassTimes, ReadbackError, TileAtlas,
 };
+use crate::grass::{GrassRenderer, GrassSettings, GrassStats, TileJob};
 use crate::lod::{Frustum, GrassRings, Ring, RingSettings, TerrainLod, select_terrain};
 use crate::stream::{
     DeriveParams, ResidencyPlan, ResidencyStats, ServiceConfig, TileService, TileSource, Want,
@@ -68,6 +69,28 @@ pub struct SceneConfig {
     pub grass: Option<RingSettings>,
     /// Terrain grid vertices every this many samples (1 = every sample).
     pub mesh_step: u32,
+    /// Blade spacing of the high-LOD grass grid, metres.
+    pub grass_spacing_m: f32,
+}
+
+impl SceneConfig {
+    /// Grass settings that follow the rings: blades the low grid drops fade out over the outer
+    /// 30% of the high ring, and all blades thin out, dithered, over the last 20% of the view
+    /// distance.
+    pub fn grass_settings(&self, world: &World) -> Option<GrassSettings> {
+        let rings = self.grass?;
+        Some(GrassSettings {
+            spacing_m: self.grass_spacing_m,
+            tile_m: world.manifest.pyramid.tile_size_m(rings.level) as f32,
+            high_radius_m: rings.high_radius_m as f32,
+            lod_fade_m: 0.3 * rings.high_radius_m as f32,
+            view_distance_m: rings.low_radius_m as f32,
+            far_fade_m: 0.2 * rings.low_radius_m as f32,
+            clump_m: 1.6,
+            short_m: 0.3,
+            seed: 0x9a55,
+        })
+    }
 }
 
 impl SceneConfig {
@@ -79,6 +102,7 @@ impl SceneConfig {
             derive: DeriveParams::default(),
             grass: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
             mesh_step: 2,
+            grass_spacing_m: 0.25,
         }
     }
 }
@@ -96,6 +120,8 @@ pub struct FrameStats {
     pub gpu: PassTimes,
     /// The tile service's figures.
     pub residency: ResidencyStats,
+    /// Grass: tiles, blades considered, culled by each test and drawn, per LOD.
+    pub grass: GrassStats,
 }
 
 /// A world on the GPU, with colour and depth targets of a fixed size.
@@ -108,6 +134,7 @@ pub struct Scene {
     renderer: TerrainRenderer,
     lod: TerrainLod,
     rings: Option<GrassRings>,
+    grass: Option<GrassRenderer>,
     mesh_step: u32,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
@@ -206,14 +233,29 @@ impl Scene {
         let depth = target(
             "depth",
             DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
         );
+        let grass = match config.grass_settings(&world) {
+            Some(settings) => {
+                let capacity = crate::grass::estimate_capacity(&world, &settings)?;
+                Some(GrassRenderer::new(
+                    &ctx.device,
+                    &world.manifest,
+                    &atlas,
+                    &depth,
+                    settings,
+                    capacity,
+                ))
+            }
+            None => None,
+        };
         Ok(Self {
             lod: TerrainLod {
                 lod_factor: config.lod_factor,
                 max_level: pyramid.max_level(),
             },
             rings: config.grass.map(GrassRings::new),
+            grass,
             mesh_step: config.mesh_step,
             world,
             service,
@@ -377,39 +419,86 @@ impl Scene {
         let aspect = self.width as f32 / self.height as f32;
         let tiles = self.renderer.prepare(&ctx.queue, camera, aspect, &draws);
 
+        // Grass tiles whose own data is resident, and whose box is in view.
+        let grass_jobs = self.grass_jobs(camera, &sel.grass);
+        let view_proj = camera.view_proj_relative(aspect);
+        if let Some(g) = &mut self.grass {
+            g.set_camera(
+                &ctx.queue,
+                view_proj,
+                camera.position.z as f32,
+                camera.near_m,
+            );
+        }
+
         self.timer.begin_frame();
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         self.apply(ctx, plan, Some(&mut encoder))?;
+        let color_attachment = |load| {
+            Some(wgpu::RenderPassColorAttachment {
+                view: &self.color_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load,
+                    store: wgpu::StoreOp::Store,
+                },
+            })
+        };
+        let depth_attachment = |load| {
+            Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load,
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            })
+        };
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("terrain depth"),
+                color_attachments: &[],
+                depth_stencil_attachment: depth_attachment(wgpu::LoadOp::Clear(0.0)),
+                timestamp_writes: self.timer.render_pass("terrain_depth"),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            self.renderer.draw_depth(&mut pass, tiles);
+        }
+        if let Some(g) = &self.grass {
+            g.hiz.record(&mut encoder, &mut self.timer);
+        }
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("terrain"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.color_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(0.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
-                    stencil_ops: None,
-                }),
+                color_attachments: &[color_attachment(wgpu::LoadOp::Clear(wgpu::Color::BLACK))],
+                depth_stencil_attachment: depth_attachment(wgpu::LoadOp::Load),
                 timestamp_writes: self.timer.render_pass("terrain"),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
             self.renderer.draw(&mut pass, tiles);
         }
+        let grass_tiles = match &self.grass {
+            Some(g) => g.record(
+                &ctx.queue,
+                &mut encoder,
+                &grass_jobs,
+                &self.color_view,
+                &self.depth_view,
+                &mut self.timer,
+            ),
+            None => [0, 0],
+        };
         self.timer.resolve(&mut encoder);
         ctx.queue.submit([encoder.finish()]);
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         let gpu = self.timer.read(&ctx.device);
+        let grass = match &self.grass {
+            Some(g) => g.read_stats(&ctx.device, grass_tiles),
+            None => GrassStats::default(),
+        };
         let high = sel.grass.iter().filter(|g| g.1 == Ring::High).count() as u32;
         Ok(FrameStats {
             tiles_drawn: tiles,
@@ -417,7 +506,43 @@ impl Scene {
             cpu_ms,
             gpu,
             residency,
+            grass,
         })
+    }
+
+    /// The generation jobs of the grass tiles that have their own data resident and are in view.
+    fn grass_jobs(&self, camera: &Camera, grass: &[(TileId, Ring, f64)]) -> Vec<TileJob> {
+        let pyramid = &self.world.manifest.pyramid;
+        let aspect = self.width as f32 / self.height as f32;
+        let frustum = Frustum::from_view_proj(camera.view_proj_relative(aspect));
+        let mut jobs = Vec::new();
+        for &(id, ring, _) in grass {
+            let Some((src, slot)) = self.service.draw_source(id) else {
+                continue;
+            };
+            if src != id {
+                continue; // no grass until the tile's own data is there
+            }
+            let b = pyramid.bounds(id);
+            let (h0, h1) = self.service.height_range(id);
+            let tallest = 1.5f64;
+            let min = glam::DVec3::new(b.min.x, b.min.y, f64::from(h0)) - camera.position;
+            let max = glam::DVec3::new(b.max.x, b.max.y, f64::from(h1) + tallest) - camera.position;
+            if !frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
+                continue;
+            }
+            let rel = b.min - DVec2::new(camera.position.x, camera.position.y);
+            jobs.push(TileJob {
+                origin: [rel.x as f32, rel.y as f32],
+                cell: pyramid.cell_size_m(id.level) as f32,
+                layer: slot,
+                tile_x: id.x,
+                tile_y: id.y,
+                lod: u32::from(ring == Ring::Low),
+                slot: 0,
+            });
+        }
+        jobs
     }
 
     /// Reads the last frame back as an RGBA8 image (sRGB).

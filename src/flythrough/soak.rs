@@ -56,7 +56,7 @@ impl Default for SoakOptions {
             teleport_every_s: 10.0,
             settle_frames: 10,
             warmup_fraction: 0.25,
-            rss_tolerance_bytes: 8 << 20,
+            rss_tolerance_bytes: 12 << 20,
             service: crate::stream::ServiceConfig::default(),
         }
     }

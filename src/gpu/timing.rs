@@ -1,6 +1,7 @@
 //! Per-pass GPU times from timestamp queries.
 
-/// GPU time of each named pass of one frame, in milliseconds, in the order the passes ran.
+/// GPU time of each named pass of one frame, in milliseconds, in the order the passes first
+/// ran; passes that share a name are summed.
 pub type PassTimes = Vec<(String, f64)>;
 
 /// Hands out timestamp writes for the passes of a frame and reads their times back.
@@ -132,15 +133,17 @@ impl GpuTimer {
                 return Vec::new();
             };
             let ticks: &[u64] = bytemuck::cast_slice(&view);
-            self.names
-                .iter()
-                .enumerate()
-                .map(|(i, name)| {
-                    let (begin, end) = (ticks[i * 2], ticks[i * 2 + 1]);
-                    let ms = end.saturating_sub(begin) as f64 * inner.period_ns / 1e6;
-                    (name.clone(), ms)
-                })
-                .collect()
+            // Passes of the same name (e.g. one per grass batch) are summed.
+            let mut times: PassTimes = Vec::new();
+            for (i, name) in self.names.iter().enumerate() {
+                let (begin, end) = (ticks[i * 2], ticks[i * 2 + 1]);
+                let ms = end.saturating_sub(begin) as f64 * inner.period_ns / 1e6;
+                match times.iter_mut().find(|(n, _)| n == name) {
+                    Some((_, t)) => *t += ms,
+                    None => times.push((name.clone(), ms)),
+                }
+            }
+            times
         };
         inner.readback.unmap();
         times

@@ -32,6 +32,11 @@ impl Frustum {
         Self { planes }
     }
 
+    /// The planes (left, right, bottom, top, near) as `(normal, offset)`, normals inward.
+    pub fn planes(&self) -> [Vec4; 5] {
+        self.planes
+    }
+
     /// A frustum that rejects nothing.
     pub fn everything() -> Self {
         Self {

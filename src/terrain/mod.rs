@@ -101,6 +101,7 @@ pub fn sun_direction(sky: &Sky) -> Vec3 {
 
 /// Pipelines and buffers of the terrain and sky passes.
 pub struct TerrainRenderer {
+    depth_prepass: wgpu::RenderPipeline,
     terrain: wgpu::RenderPipeline,
     sky: wgpu::RenderPipeline,
     bind_group: wgpu::BindGroup,
@@ -218,7 +219,8 @@ impl TerrainRenderer {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let pipeline = |label, vs, fs, depth_write, compare, cull| {
+        let color_targets = [Some(wgpu::ColorTargetState::from(COLOR_FORMAT))];
+        let pipeline = |label, vs, fs: Option<&str>, depth_write, compare, cull| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&pipeline_layout),
@@ -240,28 +242,37 @@ impl TerrainRenderer {
                     bias: Default::default(),
                 }),
                 multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
+                fragment: fs.map(|fs| wgpu::FragmentState {
                     module: &module,
                     entry_point: Some(fs),
                     compilation_options: Default::default(),
-                    targets: &[Some(COLOR_FORMAT.into())],
+                    targets: &color_targets,
                 }),
                 multiview_mask: None,
                 cache: None,
             })
         };
+        // Depth first (it feeds the Hi-Z pyramid), then colour where the depth matches.
+        let depth_prepass = pipeline(
+            "terrain depth",
+            "vs_terrain",
+            None,
+            true,
+            wgpu::CompareFunction::Greater,
+            Some(wgpu::Face::Back),
+        );
         let terrain = pipeline(
             "terrain",
             "vs_terrain",
-            "fs_terrain",
-            true,
-            wgpu::CompareFunction::Greater,
+            Some("fs_terrain"),
+            false,
+            wgpu::CompareFunction::GreaterEqual,
             Some(wgpu::Face::Back),
         );
         let sky = pipeline(
             "sky",
             "vs_sky",
-            "fs_sky",
+            Some("fs_sky"),
             false,
             wgpu::CompareFunction::Equal,
             None,
@@ -292,6 +303,7 @@ impl TerrainRenderer {
             ground_colors,
         };
         Self {
+            depth_prepass,
             terrain,
             sky,
             bind_group,
@@ -331,6 +343,17 @@ impl TerrainRenderer {
     }
 
     /// Records the terrain (`tiles` instances from [`Self::prepare`]) and then the sky.
+    /// Records the terrain's depth only (the pre-pass that feeds the Hi-Z pyramid).
+    pub fn draw_depth(&self, pass: &mut wgpu::RenderPass<'_>, tiles: u32) {
+        if tiles > 0 {
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.set_pipeline(&self.depth_prepass);
+            pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..self.index_count, 0, 0..tiles);
+        }
+    }
+
+    /// Records the terrain's colour over the depth of [`Self::draw_depth`], then the sky.
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, tiles: u32) {
         pass.set_bind_group(0, &self.bind_group, &[]);
         if tiles > 0 {

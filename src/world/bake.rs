@@ -13,7 +13,7 @@
 //!    start from the parent's own values.
 //! 4. Every tile of every stored level is cut from that one global grid (borders included), so
 //!    neighbours share identical edge and border samples, and written through temporary files.
-//! 5. Two camera paths are computed from the terrain ("overview" and "low") and `world.toml` is
+//! 5. Three camera paths are computed from the terrain ("overview", "low" and "meadow") and `world.toml` is
 //!    written last, so a world with a manifest is a complete world.
 //!
 //! The bake is deterministic: the same DEM, options and seed give byte-identical files.
@@ -33,7 +33,7 @@ use super::tile::{Pyramid, TileId};
 /// Shared samples beyond each tile edge in baked worlds.
 pub const BAKE_BORDER: u32 = 2;
 /// Levels finer than the stored ones that baked worlds ask the runtime to derive.
-pub const BAKE_DERIVED_LEVELS: u8 = 5;
+pub const BAKE_DERIVED_LEVELS: u8 = 6;
 /// Steepest slope that carries grass, degrees.
 pub const MAX_GRASS_SLOPE_DEG: f64 = 35.0;
 /// Largest finest-level grid the baker will hold in memory, samples.
@@ -176,8 +176,9 @@ pub fn bake(
     let overview = overview_path(&painted, extent);
     progress(BakeStage::Paths, 1, 2);
     let low = low_path(&painted, extent);
+    let meadow = meadow_path(&painted, extent);
     progress(BakeStage::Paths, 2, 2);
-    manifest.paths = vec![overview, low];
+    manifest.paths = vec![overview, low, meadow];
     manifest.validate(&manifest_path)?;
 
     let tiles_written = write_all_tiles(&opts.out, &manifest.pyramid, &painted, progress)?;
@@ -213,7 +214,7 @@ pub fn default_grass_types() -> Vec<GrassType> {
             base_color: [0.04, 0.14, 0.02],
             tip_color: [0.22, 0.45, 0.08],
             height_m: [0.15, 0.35],
-            width_m: [0.008, 0.014],
+            width_m: [0.02, 0.035],
             stiffness: 0.6,
         },
         GrassType {
@@ -222,7 +223,7 @@ pub fn default_grass_types() -> Vec<GrassType> {
             base_color: [0.05, 0.12, 0.02],
             tip_color: [0.32, 0.42, 0.10],
             height_m: [0.5, 1.1],
-            width_m: [0.010, 0.018],
+            width_m: [0.025, 0.045],
             stiffness: 0.35,
         },
         GrassType {
@@ -231,7 +232,7 @@ pub fn default_grass_types() -> Vec<GrassType> {
             base_color: [0.25, 0.18, 0.06],
             tip_color: [0.70, 0.52, 0.22],
             height_m: [0.25, 0.6],
-            width_m: [0.006, 0.012],
+            width_m: [0.015, 0.03],
             stiffness: 0.5,
         },
     ]
@@ -586,6 +587,8 @@ fn cut_tile(pyramid: &Pyramid, painted: &Painted, id: TileId) -> TileData {
 const OVERVIEW_CLEARANCE_M: f64 = 220.0;
 /// Height of the camera above the highest terrain near the low path, metres.
 const LOW_CLEARANCE_M: f64 = 32.0;
+/// Height of the meadow glide above the highest ground near it, metres.
+const MEADOW_CLEARANCE_M: f64 = 2.0;
 
 /// Highest terrain within `half_width` of the polyline through `points`, sampled every `step`.
 fn max_terrain_along(grid: &Grid, points: &[DVec2], half_width: f64, step: f64) -> f64 {
@@ -679,13 +682,11 @@ fn overview_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     }
 }
 
-/// A 32 s pass 30-60 m above the ground along the grassiest, gentlest 1.6 km line found in the
-/// data area, heading toward the higher ground.
-fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
+/// The grassiest, gentlest 1.6 km line of the data area: its centre and its direction, heading
+/// toward the higher ground.
+fn grassy_line(painted: &Painted, extent: [f64; 2]) -> (DVec2, DVec2) {
     let grid = &painted.grid;
     const LENGTH: f64 = 1600.0;
-    const DURATION: f64 = 32.0;
-    const KEYS: usize = 33;
     let e = DVec2::from(extent);
     let density_at = |p: DVec2| -> f64 {
         let a = ((p.x / grid.cell).round() as i64 + grid.margin).clamp(0, grid.width as i64 - 1);
@@ -727,6 +728,16 @@ fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     if grid.height_bilinear(c - dir * 3000.0) > grid.height_bilinear(c + dir * 3000.0) {
         dir = -dir;
     }
+    (c, dir)
+}
+
+/// A 32 s pass 30-60 m above the ground along the grassy line, toward the higher ground.
+fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
+    const LENGTH: f64 = 1600.0;
+    const DURATION: f64 = 32.0;
+    const KEYS: usize = 33;
+    let grid = &painted.grid;
+    let (c, dir) = grassy_line(painted, extent);
     let times: Vec<f64> = (0..KEYS)
         .map(|k| DURATION * k as f64 / (KEYS - 1) as f64)
         .collect();
@@ -738,6 +749,28 @@ fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         name: "low".into(),
         duration_s: DURATION,
         keys: keys_along(grid, &points, &times, LOW_CLEARANCE_M, 20.0, -8.0),
+    }
+}
+
+/// A 24 s glide at 8 m/s a couple of metres above the meadow in the middle of the grassy line:
+/// the view for grass.
+fn meadow_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
+    const LENGTH: f64 = 192.0;
+    const DURATION: f64 = 24.0;
+    const KEYS: usize = 25;
+    let grid = &painted.grid;
+    let (c, dir) = grassy_line(painted, extent);
+    let times: Vec<f64> = (0..KEYS)
+        .map(|k| DURATION * k as f64 / (KEYS - 1) as f64)
+        .collect();
+    let points: Vec<DVec2> = times
+        .iter()
+        .map(|t| c + dir * LENGTH * (t / DURATION - 0.5))
+        .collect();
+    CameraPath {
+        name: "meadow".into(),
+        duration_s: DURATION,
+        keys: keys_along(grid, &points, &times, MEADOW_CLEARANCE_M, 2.0, -6.0),
     }
 }
 

@@ -1,0 +1,365 @@
+// Grass generation and culling, one invocation per grid point of a tile, a batch of up to four
+// tiles per dispatch (workgroup z is the tile within the batch). Surviving blades are appended
+// to the tile's slot of the instance pool; a second entry point turns the slot counters into
+// indirect draw arguments, clamped to the slot capacity. CPU mirror: src/grass/generate.rs.
+
+struct GrassType {
+    height: vec2<f32>,
+    width: vec2<f32>,
+    growth_blend: f32,
+    stiffness: f32,
+    _pad: vec2<f32>,
+}
+
+struct Params {
+    view_proj: mat4x4<f32>,
+    planes: array<vec4<f32>, 6>,
+    // x: camera altitude, y: near plane, z, w: Hi-Z size in texels
+    camera: vec4<f32>,
+    // x: grid points a tile edge, y: tile cells, z: border, w: seed
+    grid: vec4<u32>,
+    // x: spacing, y: tile edge, z: clump cell, w: short-grass height
+    dims: vec4<f32>,
+    // x, y: LOD fade band; z, w: dithered fade band ending at the view distance
+    ranges: vec4<f32>,
+    // x: Hi-Z mips, y: slot capacity, z: grass types
+    limits: vec4<u32>,
+    types: array<GrassType, 16>,
+}
+
+struct TileJob {
+    origin: vec2<f32>,
+    cell: f32,
+    layer: u32,
+    tile_x: u32,
+    tile_y: u32,
+    lod: u32,
+    slot: u32,
+}
+
+struct Blade {
+    pos_x: f32, pos_y: f32, pos_z: f32,
+    facing: f32,
+    growth_x: f32, growth_y: f32,
+    height: f32,
+    width: f32,
+    tilt: f32,
+    bend: f32,
+    side_curve: f32,
+    wind: f32,
+    hash: u32,
+    kind: u32,
+    color: u32,
+    fade: f32,
+}
+
+struct Batch {
+    // Index of the batch's first job in `jobs`, and the number of jobs in it.
+    first: u32,
+    count: u32,
+}
+
+struct DrawArgs {
+    vertex_count: u32,
+    instance_count: u32,
+    first_vertex: u32,
+    first_instance: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> jobs: array<TileJob>;
+@group(0) @binding(2) var<uniform> batch: Batch;
+@group(0) @binding(3) var heights: texture_2d_array<f32>;
+@group(0) @binding(4) var grass: texture_2d_array<u32>;
+@group(0) @binding(5) var hiz: texture_2d<f32>;
+@group(0) @binding(6) var<storage, read_write> blades: array<Blade>;
+// Per slot of the half: blades wanted (may exceed the capacity).
+@group(0) @binding(7) var<storage, read_write> counters: array<atomic<u32>, 4>;
+// Per LOD: the counters of `counter` in generate.rs (8 each), then per slot: overflow.
+@group(0) @binding(8) var<storage, read_write> stats: array<atomic<u32>, 16>;
+@group(0) @binding(9) var<storage, read_write> args: array<DrawArgs, 4>;
+
+const CONSIDERED: u32 = 0u;
+const EMPTY: u32 = 1u;
+const DISTANCE: u32 = 2u;
+const FRUSTUM: u32 = 3u;
+const OCCLUSION: u32 = 4u;
+const EMITTED: u32 = 5u;
+const OVERFLOW: u32 = 6u;
+const DRAWN: u32 = 7u;
+
+var<workgroup> local_stats: array<atomic<u32>, 8>;
+
+fn hash_u32(v: u32) -> u32 {
+    var x = v;
+    x ^= x >> 16u;
+    x *= 0x7feb352du;
+    x ^= x >> 15u;
+    x *= 0x846ca68bu;
+    x ^= x >> 16u;
+    return x;
+}
+
+fn hash3(a: u32, b: u32, c: u32) -> u32 {
+    return hash_u32(a ^ hash_u32(b ^ hash_u32(c)));
+}
+
+fn rand01(h: u32) -> f32 {
+    return f32(h >> 8u) * (1.0 / 16777216.0);
+}
+
+fn pack_rgba8(c: vec3<f32>) -> u32 {
+    let q = vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(1.0)) * 255.0 + 0.5);
+    return q.x | (q.y << 8u) | (q.z << 16u) | (255u << 24u);
+}
+
+fn texel(x: i32, y: i32, layer: u32) -> vec2<i32> {
+    let s = i32(textureDimensions(heights).x);
+    return vec2<i32>(clamp(x, 0, s - 1), clamp(y, 0, s - 1));
+}
+
+fn h_at(x: i32, y: i32, layer: u32) -> f32 {
+    return textureLoad(heights, texel(x, y, layer), layer, 0).r;
+}
+
+fn d_at(x: i32, y: i32, layer: u32) -> f32 {
+    return f32(textureLoad(grass, texel(x, y, layer), layer, 0).g) / 255.0;
+}
+
+fn hiz_load(mip: u32, x: i32, y: i32) -> f32 {
+    let size = vec2<i32>(textureDimensions(hiz, mip));
+    return textureLoad(hiz, clamp(vec2<i32>(x, y), vec2<i32>(0), size - 1), mip).r;
+}
+
+fn occluded(center: vec3<f32>, radius: f32) -> bool {
+    let clip = params.view_proj * vec4<f32>(center, 1.0);
+    let near = params.camera.y;
+    if clip.w - radius <= near {
+        return false;
+    }
+    let ndc = clip.xy / clip.w;
+    let w = params.camera.z;
+    let h = params.camera.w;
+    let scale_y = max(abs(params.view_proj[1][1]), abs(params.view_proj[0][0]));
+    let r_px = radius * scale_y / (clip.w - radius) * 0.5 * max(w, h);
+    let sx = (ndc.x * 0.5 + 0.5) * w;
+    let sy = (0.5 - ndc.y * 0.5) * h;
+    let mips = max(params.limits.x, 1u);
+    let mip = min(u32(ceil(log2(max(2.0 * r_px, 1.0)))), mips - 1u);
+    let texel_px = f32(1u << mip);
+    let x0 = i32(floor((sx - r_px) / texel_px));
+    let y0 = i32(floor((sy - r_px) / texel_px));
+    let x1 = i32(floor((sx + r_px) / texel_px));
+    let y1 = i32(floor((sy + r_px) / texel_px));
+    if x1 - x0 > 1 || y1 - y0 > 1 {
+        return false;
+    }
+    let far = min(min(hiz_load(mip, x0, y0), hiz_load(mip, x1, y0)), min(hiz_load(mip, x0, y1), hiz_load(mip, x1, y1)));
+    let nearest_depth = near / (clip.w - radius);
+    return nearest_depth < far;
+}
+
+fn emit(slot: u32, b: Blade) {
+    let index = atomicAdd(&counters[slot], 1u);
+    if index < params.limits.y {
+        blades[slot * params.limits.y + index] = b;
+    }
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn generate(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    if lid < 8u {
+        atomicStore(&local_stats[lid], 0u);
+    }
+    workgroupBarrier();
+    let in_batch = wid.z < batch.count;
+    let job = jobs[batch.first + min(wid.z, 3u)];
+    let g = params.grid.x;
+    let lod = min(job.lod, 1u);
+    let step = 1u + lod;
+    let n = (g + step - 1u) / step;
+    if in_batch && gid.x < n && gid.y < n {
+        generate_point(job, gid.x * step, gid.y * step, lod);
+    }
+    workgroupBarrier();
+    if lid < 8u && in_batch {
+        let v = atomicLoad(&local_stats[lid]);
+        if v > 0u {
+            atomicAdd(&stats[lod * 8u + lid], v);
+        }
+    }
+}
+
+fn count(c: u32) {
+    atomicAdd(&local_stats[c], 1u);
+}
+
+fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
+    let seed = params.grid.w;
+    let border = f32(params.grid.z);
+    let spacing = params.dims.x;
+    let tile_m = params.dims.y;
+    let clump_m = params.dims.z;
+    let short_m = params.dims.w;
+    let type_count = max(params.limits.z, 1u);
+    let clumps_per_tile = i32(max(round(tile_m / clump_m), 1.0));
+    count(CONSIDERED);
+
+    let g = params.grid.x;
+    let gid_x = job.tile_x * g + gx;
+    let gid_y = job.tile_y * g + gy;
+    let h0 = hash3(gid_x, gid_y, seed);
+    let jitter = vec2<f32>(
+        (rand01(hash_u32(h0 ^ 1u)) - 0.5) * 0.9 * spacing,
+        (rand01(hash_u32(h0 ^ 2u)) - 0.5) * 0.9 * spacing,
+    );
+    let local = vec2<f32>(
+        (f32(gx) + 0.5) * spacing + jitter.x,
+        (f32(gy) + 0.5) * spacing + jitter.y,
+    );
+    let tp = vec2<f32>(border + local.x / job.cell, border + local.y / job.cell);
+
+    // Bilinear height and density, nearest grass type, normal by central differences.
+    let f0 = floor(tp);
+    let ix = i32(f0.x);
+    let iy = i32(f0.y);
+    let fx = tp.x - f0.x;
+    let fy = tp.y - f0.y;
+    let layer = job.layer;
+    let ha = h_at(ix, iy, layer) + (h_at(ix + 1, iy, layer) - h_at(ix, iy, layer)) * fx;
+    let hb = h_at(ix, iy + 1, layer) + (h_at(ix + 1, iy + 1, layer) - h_at(ix, iy + 1, layer)) * fx;
+    let ground = ha + (hb - ha) * fy;
+    let da = d_at(ix, iy, layer) + (d_at(ix + 1, iy, layer) - d_at(ix, iy, layer)) * fx;
+    let db = d_at(ix, iy + 1, layer) + (d_at(ix + 1, iy + 1, layer) - d_at(ix, iy + 1, layer)) * fx;
+    let density = da + (db - da) * fy;
+    let nx = i32(floor(tp.x + 0.5));
+    let ny = i32(floor(tp.y + 0.5));
+    let slope_x = h_at(nx - 1, ny, layer) - h_at(nx + 1, ny, layer);
+    let slope_y = h_at(nx, ny - 1, layer) - h_at(nx, ny + 1, layer);
+    let normal = normalize(vec3<f32>(slope_x, slope_y, 2.0 * job.cell));
+    let kind = min(textureLoad(grass, texel(nx, ny, layer), layer, 0).r, type_count - 1u);
+
+    if kind == 0u || density <= 0.0 || rand01(hash_u32(h0 ^ 3u)) >= density {
+        count(EMPTY);
+        return;
+    }
+    let ty = params.types[kind];
+
+    let cx = i32(floor(local.x / clump_m));
+    let cy = i32(floor(local.y / clump_m));
+    var best = 3.4028235e38;
+    var clump = 0u;
+    for (var dy = -1; dy <= 1; dy++) {
+        for (var dx = -1; dx <= 1; dx++) {
+            let ccx = cx + dx;
+            let ccy = cy + dy;
+            let kx = u32(i32(job.tile_x) * clumps_per_tile + ccx);
+            let ky = u32(i32(job.tile_y) * clumps_per_tile + ccy);
+            let ch = hash3(kx, ky, seed ^ 0x00c10b55u);
+            let px = (f32(ccx) + 0.5 + 0.8 * (rand01(ch) - 0.5)) * clump_m;
+            let py = (f32(ccy) + 0.5 + 0.8 * (rand01(hash_u32(ch ^ 1u)) - 0.5)) * clump_m;
+            let d2 = (px - local.x) * (px - local.x) + (py - local.y) * (py - local.y);
+            if d2 < best {
+                best = d2;
+                clump = ch;
+            }
+        }
+    }
+    let clump_height = 0.7 + 0.6 * rand01(hash_u32(clump ^ 2u));
+    let height = (ty.height.x + (ty.height.y - ty.height.x) * rand01(hash_u32(h0 ^ 4u)))
+        * clump_height
+        * (0.5 + 0.5 * density);
+    if height <= 0.0 {
+        count(EMPTY);
+        return;
+    }
+    let width = ty.width.x + (ty.width.y - ty.width.x) * rand01(hash_u32(h0 ^ 9u));
+    let up = vec3<f32>(0.0, 0.0, 1.0);
+    let growth = normalize(up + (normal - up) * ty.growth_blend);
+    let pos = vec3<f32>(job.origin.x + local.x, job.origin.y + local.y, ground - params.camera.x);
+
+    let dist = length(pos);
+    var fade = 1.0;
+    if job.lod == 0u && (gx % 2u == 1u || gy % 2u == 1u) {
+        fade = clamp((params.ranges.y - dist) / (params.ranges.y - params.ranges.x), 0.0, 1.0);
+    }
+    let far = clamp((params.ranges.w - dist) / (params.ranges.w - params.ranges.z), 0.0, 1.0);
+    if fade <= 0.0 || rand01(hash_u32(h0 ^ 11u)) >= far {
+        count(DISTANCE);
+        return;
+    }
+
+    let center = pos + growth * (0.5 * height);
+    let radius = 0.6 * height + width;
+    var outside = false;
+    for (var i = 0; i < 5; i++) {
+        let plane = params.planes[i];
+        if dot(plane.xyz, center) + plane.w < -radius {
+            outside = true;
+        }
+    }
+    if outside {
+        count(FRUSTUM);
+        return;
+    }
+    if occluded(center, radius) {
+        count(OCCLUSION);
+        return;
+    }
+
+    let facing = rand01(hash_u32(clump ^ 3u)) * 6.2831855 + (rand01(hash_u32(h0 ^ 5u)) - 0.5) * 1.9;
+    let tint = vec3<f32>(
+        0.85 + 0.3 * rand01(hash_u32(clump ^ 4u)),
+        0.85 + 0.3 * rand01(hash_u32(clump ^ 5u)),
+        0.85 + 0.3 * rand01(hash_u32(clump ^ 6u)),
+    ) * 0.5;
+    var b: Blade;
+    b.pos_x = pos.x;
+    b.pos_y = pos.y;
+    b.pos_z = pos.z;
+    b.facing = facing;
+    b.growth_x = growth.x;
+    b.growth_y = growth.y;
+    b.height = height * fade;
+    b.width = width * fade;
+    b.tilt = 0.1 + 0.5 * rand01(hash_u32(h0 ^ 6u));
+    b.bend = 0.2 + 0.7 * rand01(hash_u32(h0 ^ 7u));
+    b.side_curve = 2.0 * rand01(hash_u32(h0 ^ 8u)) - 1.0;
+    b.wind = (0.6 + 0.4 * rand01(hash_u32(h0 ^ 10u))) * (1.0 - 0.5 * ty.stiffness);
+    b.hash = h0;
+    b.kind = kind | (job.lod << 8u);
+    b.color = pack_rgba8(tint);
+    b.fade = fade;
+    emit(job.slot, b);
+    count(EMITTED);
+    if height < short_m {
+        b.pos_x += (rand01(hash_u32(h0 ^ 12u)) - 0.5) * 0.6 * spacing;
+        b.pos_y += (rand01(hash_u32(h0 ^ 13u)) - 0.5) * 0.6 * spacing;
+        b.facing += 1.5708;
+        b.height *= 0.85;
+        b.hash = hash_u32(h0 ^ 14u);
+        emit(job.slot, b);
+        count(EMITTED);
+    }
+}
+
+// One invocation per slot of the half: indirect arguments from the counters, clamped to the
+// slot's capacity; overflow and drawn blades go to the statistics.
+@compute @workgroup_size(4, 1, 1)
+fn finalize(@builtin(local_invocation_index) slot: u32) {
+    let wanted = atomicLoad(&counters[slot]);
+    let capacity = params.limits.y;
+    let drawn = min(wanted, capacity);
+    var vertices = 0u;
+    if slot < batch.count {
+        let lod = min(jobs[batch.first + slot].lod, 1u);
+        vertices = select(15u, 7u, lod == 1u);
+        atomicAdd(&stats[lod * 8u + OVERFLOW], wanted - drawn);
+        atomicAdd(&stats[lod * 8u + DRAWN], drawn);
+    }
+    args[slot] = DrawArgs(vertices, select(0u, drawn, slot < batch.count), 0u, 0u);
+}

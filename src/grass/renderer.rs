@@ -1,0 +1,839 @@
+//! The grass stage on the GPU: the Hi-Z pyramid, the bounded instance pool, generation and
+//! culling per tile in compute (`shaders/grass_generate.wgsl`) and one indirect draw per tile
+//! (`shaders/grass_draw.wgsl`).
+//!
+//! The pool has 8 tile slots in two halves of 4, each half with buffers of its own: a batch of 4
+//! tiles is generated into one half and drawn while the next batch is generated into the other.
+//! Its size is fixed when the stage is made, whatever the view distance.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Mat4;
+
+use crate::gpu::{GpuTimer, TileAtlas};
+use crate::grass::generate::counter;
+use crate::grass::{GenerateParams, GenerateStats, GrassTypeGpu, TileJob};
+use crate::lod::Frustum;
+use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT, sun_direction};
+use crate::world::Manifest;
+
+/// Tile slots of the pool.
+pub const POOL_SLOTS: u32 = 8;
+/// Tiles a batch (half the pool).
+pub const BATCH_TILES: u32 = 4;
+const MAX_JOBS: u32 = 1024;
+const BATCH_STRIDE: u64 = 256;
+
+/// Settings of grass generation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GrassSettings {
+    /// Blade spacing of the high-LOD grid, metres (the low-LOD grid has twice this).
+    pub spacing_m: f32,
+    /// Edge of a grass tile, metres.
+    pub tile_m: f32,
+    /// Radius of the high-LOD ring, metres: blades the low grid drops are gone here.
+    pub high_radius_m: f32,
+    /// Width of the band before it over which those blades fade out, metres.
+    pub lod_fade_m: f32,
+    /// View distance of grass, metres (the low ring's radius).
+    pub view_distance_m: f32,
+    /// Width of the dithered fade before the view distance, metres.
+    pub far_fade_m: f32,
+    /// Voronoi clump cell, metres.
+    pub clump_m: f32,
+    /// Blades shorter than this are split in two, metres.
+    pub short_m: f32,
+    /// Seed of every per-blade hash.
+    pub seed: u32,
+}
+
+impl GrassSettings {
+    /// Grid points along a tile edge at high LOD.
+    pub fn grid(&self) -> u32 {
+        (self.tile_m / self.spacing_m).round().max(1.0) as u32
+    }
+}
+
+/// Grass GPU figures of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GrassStats {
+    /// Tiles generated and drawn, per LOD (high, low).
+    pub tiles: [u32; 2],
+    /// Grid points considered, per LOD.
+    pub considered: [u32; 2],
+    /// Points without grass (bare type, zero density or height), per LOD.
+    pub empty: [u32; 2],
+    /// Blades culled by distance (LOD fade, view-distance dither), per LOD.
+    pub culled_distance: [u32; 2],
+    /// Blades culled by the frustum, per LOD.
+    pub culled_frustum: [u32; 2],
+    /// Blades culled by the terrain's Hi-Z, per LOD.
+    pub culled_occlusion: [u32; 2],
+    /// Blades that did not fit their slot, per LOD.
+    pub overflow: [u32; 2],
+    /// Blades drawn, per LOD.
+    pub drawn: [u32; 2],
+}
+
+impl GrassStats {
+    fn from_counts(tiles: [u32; 2], c: &[u32; 16]) -> Self {
+        let pick = |k: usize| [c[k], c[counter::COUNT + k]];
+        Self {
+            tiles,
+            considered: pick(counter::CONSIDERED),
+            empty: pick(counter::EMPTY),
+            culled_distance: pick(counter::DISTANCE),
+            culled_frustum: pick(counter::FRUSTUM),
+            culled_occlusion: pick(counter::OCCLUSION),
+            overflow: pick(counter::OVERFLOW),
+            drawn: pick(counter::DRAWN),
+        }
+    }
+
+    /// The same figures as the CPU mirror's counters.
+    pub fn to_generate_stats(&self) -> GenerateStats {
+        let mut s = GenerateStats::default();
+        for l in 0..2 {
+            s.counts[l][counter::CONSIDERED] = self.considered[l];
+            s.counts[l][counter::EMPTY] = self.empty[l];
+            s.counts[l][counter::DISTANCE] = self.culled_distance[l];
+            s.counts[l][counter::FRUSTUM] = self.culled_frustum[l];
+            s.counts[l][counter::OCCLUSION] = self.culled_occlusion[l];
+            s.counts[l][counter::EMITTED] = self.drawn[l] + self.overflow[l];
+            s.counts[l][counter::OVERFLOW] = self.overflow[l];
+            s.counts[l][counter::DRAWN] = self.drawn[l];
+        }
+        s
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct DrawFrame {
+    view_proj: [[f32; 4]; 4],
+    misc: [f32; 4],
+    sun_dir: [f32; 4],
+    sun_color: [f32; 4],
+    sky_color: [f32; 4],
+    horizon_color: [f32; 4],
+    base_colors: [[f32; 4]; 16],
+    tip_colors: [[f32; 4]; 16],
+}
+const _: () = assert!(std::mem::size_of::<DrawFrame>() == 64 + 80 + 512);
+
+struct Half {
+    blades: wgpu::Buffer,
+    counters: wgpu::Buffer,
+    args: wgpu::Buffer,
+    generate: wgpu::BindGroup,
+    draw: wgpu::BindGroup,
+}
+
+/// The Hi-Z pyramid of a depth target.
+pub struct HiZPyramid {
+    /// R32Float with a full mip chain.
+    pub texture: wgpu::Texture,
+    copy: wgpu::ComputePipeline,
+    reduce: wgpu::ComputePipeline,
+    copy_group: wgpu::BindGroup,
+    reduce_groups: Vec<wgpu::BindGroup>,
+    sizes: Vec<(u32, u32)>,
+}
+
+impl HiZPyramid {
+    /// A pyramid over `depth` (a `Depth32Float` texture with `TEXTURE_BINDING`).
+    pub fn new(device: &wgpu::Device, depth: &wgpu::Texture) -> Self {
+        let (w, h) = (depth.width(), depth.height());
+        let mips = crate::grass::hiz::mip_count(w, h);
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("hi-z"),
+            size: wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: mips,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::R32Float,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("hiz_build.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/hiz_build.wgsl").into()),
+        });
+        let pipeline = |entry| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let (copy, reduce) = (pipeline("copy_depth"), pipeline("reduce"));
+        let mip_view = |m: u32| {
+            texture.create_view(&wgpu::TextureViewDescriptor {
+                base_mip_level: m,
+                mip_level_count: Some(1),
+                ..Default::default()
+            })
+        };
+        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor {
+            aspect: wgpu::TextureAspect::DepthOnly,
+            ..Default::default()
+        });
+        let copy_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("hi-z copy"),
+            layout: &copy.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&depth_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&mip_view(0)),
+                },
+            ],
+        });
+        let reduce_layout = reduce.get_bind_group_layout(0);
+        let reduce_groups = (1..mips)
+            .map(|m| {
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("hi-z reduce"),
+                    layout: &reduce_layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::TextureView(&mip_view(m - 1)),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: wgpu::BindingResource::TextureView(&mip_view(m)),
+                        },
+                    ],
+                })
+            })
+            .collect();
+        let sizes = (0..mips)
+            .map(|m| ((w >> m).max(1), (h >> m).max(1)))
+            .collect();
+        Self {
+            texture,
+            copy,
+            reduce,
+            copy_group,
+            reduce_groups,
+            sizes,
+        }
+    }
+
+    /// Mip levels.
+    pub fn mips(&self) -> u32 {
+        self.sizes.len() as u32
+    }
+
+    /// Records the build of the pyramid from the depth target.
+    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, timer: &mut GpuTimer) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("hi-z"),
+            timestamp_writes: timer.compute_pass("hiz"),
+        });
+        let (w, h) = self.sizes[0];
+        pass.set_pipeline(&self.copy);
+        pass.set_bind_group(0, &self.copy_group, &[]);
+        pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        pass.set_pipeline(&self.reduce);
+        for (group, &(w, h)) in self.reduce_groups.iter().zip(&self.sizes[1..]) {
+            pass.set_bind_group(0, group, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        }
+    }
+}
+
+/// Pipelines, the instance pool and the Hi-Z pyramid of the grass stage.
+pub struct GrassRenderer {
+    settings: GrassSettings,
+    capacity: u32,
+    generate: wgpu::ComputePipeline,
+    finalize: wgpu::ComputePipeline,
+    draw_high: wgpu::RenderPipeline,
+    draw_low: wgpu::RenderPipeline,
+    params: GenerateParams,
+    params_buffer: wgpu::Buffer,
+    jobs: wgpu::Buffer,
+    batches: wgpu::Buffer,
+    stats: wgpu::Buffer,
+    stats_readback: wgpu::Buffer,
+    draw_frame: DrawFrame,
+    draw_frame_buffer: wgpu::Buffer,
+    halves: [Half; 2],
+    /// The occlusion pyramid (built from the terrain's depth pre-pass).
+    pub hiz: HiZPyramid,
+}
+
+impl GrassRenderer {
+    /// The grass stage for `manifest`'s world, reading tile data from `atlas`, with slots of
+    /// `capacity` blades, culling against the Hi-Z pyramid of `depth`.
+    pub fn new(
+        device: &wgpu::Device,
+        manifest: &Manifest,
+        atlas: &TileAtlas,
+        depth: &wgpu::Texture,
+        settings: GrassSettings,
+        capacity: u32,
+    ) -> Self {
+        // Slots start at multiples of 256 bytes (the storage offset alignment).
+        let capacity = capacity.max(4).div_ceil(4) * 4;
+        let hiz = HiZPyramid::new(device, depth);
+        let mut types = [GrassTypeGpu::default(); 16];
+        let mut base_colors = [[0.0; 4]; 16];
+        let mut tip_colors = [[0.0; 4]; 16];
+        for (i, t) in manifest.grass_types.iter().take(16).enumerate() {
+            types[i] = GrassTypeGpu {
+                height: t.height_m,
+                width: t.width_m,
+                // Soft grass follows the slope more; stiff grass grows straighter up.
+                growth_blend: 0.2 + 0.5 * (1.0 - t.stiffness.clamp(0.0, 1.0)),
+                stiffness: t.stiffness,
+                _pad: [0.0; 2],
+            };
+            base_colors[i] = [t.base_color[0], t.base_color[1], t.base_color[2], 1.0];
+            tip_colors[i] = [t.tip_color[0], t.tip_color[1], t.tip_color[2], 1.0];
+        }
+        let p = &manifest.pyramid;
+        let params = GenerateParams {
+            view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            planes: [[0.0; 4]; 6],
+            camera: [0.0, 0.5, depth.width() as f32, depth.height() as f32],
+            grid: [settings.grid(), p.tile_cells, p.border, settings.seed],
+            dims: [
+                settings.spacing_m,
+                settings.tile_m,
+                settings.clump_m,
+                settings.short_m,
+            ],
+            ranges: [
+                settings.high_radius_m - settings.lod_fade_m,
+                settings.high_radius_m,
+                settings.view_distance_m - settings.far_fade_m,
+                settings.view_distance_m,
+            ],
+            limits: [
+                hiz.mips(),
+                capacity,
+                manifest.grass_types.len().min(16) as u32,
+                0,
+            ],
+            types,
+        };
+        let sky = &manifest.sky;
+        let c4 = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
+        let draw_frame = DrawFrame {
+            view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            misc: [sky.fog_distance_m, 0.0, 0.0, 0.0],
+            sun_dir: sun_direction(sky).extend(0.0).to_array(),
+            sun_color: c4(sky.sun_color),
+            sky_color: c4(sky.sky_color),
+            horizon_color: c4(sky.horizon_color),
+            base_colors,
+            tip_colors,
+        };
+
+        let buffer = |label, size: u64, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as U;
+        let params_buffer = buffer(
+            "grass params",
+            std::mem::size_of::<GenerateParams>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
+        let jobs = buffer(
+            "grass jobs",
+            u64::from(MAX_JOBS) * 32,
+            U::STORAGE | U::COPY_DST,
+        );
+        let max_batches = MAX_JOBS.div_ceil(BATCH_TILES) as u64;
+        let batches = buffer(
+            "grass batches",
+            max_batches * BATCH_STRIDE,
+            U::UNIFORM | U::COPY_DST,
+        );
+        let stats = buffer("grass stats", 64, U::STORAGE | U::COPY_DST | U::COPY_SRC);
+        let stats_readback = buffer("grass stats readback", 64, U::MAP_READ | U::COPY_DST);
+        let draw_frame_buffer = buffer(
+            "grass draw frame",
+            std::mem::size_of::<DrawFrame>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
+
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("grass_generate.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(
+                include_str!("../../shaders/grass_generate.wgsl").into(),
+            ),
+        });
+        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let texture = |binding, sample_type, dim| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension: dim,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let uniform = |binding, dynamic| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: dynamic,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let unfilterable = wgpu::TextureSampleType::Float { filterable: false };
+        let gen_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("grass generate"),
+            entries: &[
+                uniform(0, false),
+                storage(1, true),
+                uniform(2, true),
+                texture(3, unfilterable, wgpu::TextureViewDimension::D2Array),
+                texture(
+                    4,
+                    wgpu::TextureSampleType::Uint,
+                    wgpu::TextureViewDimension::D2Array,
+                ),
+                texture(5, unfilterable, wgpu::TextureViewDimension::D2),
+                storage(6, false),
+                storage(7, false),
+                storage(8, false),
+                storage(9, false),
+            ],
+        });
+        let gen_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("grass generate"),
+            bind_group_layouts: &[Some(&gen_layout)],
+            immediate_size: 0,
+        });
+        let compute = |entry| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: Some(&gen_pl),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let (generate, finalize) = (compute("generate"), compute("finalize"));
+
+        let draw_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("grass_draw.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/grass_draw.wgsl").into()),
+        });
+        let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("grass draw"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: true,
+                        min_binding_size: std::num::NonZeroU64::new(u64::from(capacity) * 64),
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let draw_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("grass draw"),
+            bind_group_layouts: &[Some(&draw_layout)],
+            immediate_size: 0,
+        });
+        let draw_pipeline = |label, segments: f64| {
+            let constants = [("SEGMENTS", segments)];
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&draw_pl),
+                vertex: wgpu::VertexState {
+                    module: &draw_module,
+                    entry_point: Some("vs_blade"),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &constants,
+                        ..Default::default()
+                    },
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleStrip,
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Greater),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &draw_module,
+                    entry_point: Some("fs_blade"),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &constants,
+                        ..Default::default()
+                    },
+                    targets: &[Some(COLOR_FORMAT.into())],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let draw_high = draw_pipeline("grass high LOD", 7.0);
+        let draw_low = draw_pipeline("grass low LOD", 3.0);
+
+        let array_view = |t: &wgpu::Texture| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
+        let (hv, gv) = (array_view(&atlas.heights), array_view(&atlas.grass));
+        let hiz_view = hiz.texture.create_view(&Default::default());
+        let slot_bytes = u64::from(capacity) * 64;
+        let make_half = |i: usize| {
+            let blades = buffer(
+                if i == 0 {
+                    "grass pool half A"
+                } else {
+                    "grass pool half B"
+                },
+                slot_bytes * u64::from(BATCH_TILES),
+                U::STORAGE,
+            );
+            let counters = buffer("grass counters", 16, U::STORAGE | U::COPY_DST);
+            let args = buffer("grass draw args", 64, U::STORAGE | U::INDIRECT);
+            let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
+            let generate = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("grass generate"),
+                layout: &gen_layout,
+                entries: &[
+                    entry(0, params_buffer.as_entire_binding()),
+                    entry(1, jobs.as_entire_binding()),
+                    entry(
+                        2,
+                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &batches,
+                            offset: 0,
+                            size: std::num::NonZeroU64::new(16),
+                        }),
+                    ),
+                    entry(3, wgpu::BindingResource::TextureView(&hv)),
+                    entry(4, wgpu::BindingResource::TextureView(&gv)),
+                    entry(5, wgpu::BindingResource::TextureView(&hiz_view)),
+                    entry(6, blades.as_entire_binding()),
+                    entry(7, counters.as_entire_binding()),
+                    entry(8, stats.as_entire_binding()),
+                    entry(9, args.as_entire_binding()),
+                ],
+            });
+            let draw = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("grass draw"),
+                layout: &draw_layout,
+                entries: &[
+                    entry(0, draw_frame_buffer.as_entire_binding()),
+                    entry(
+                        1,
+                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &blades,
+                            offset: 0,
+                            size: std::num::NonZeroU64::new(slot_bytes),
+                        }),
+                    ),
+                ],
+            });
+            Half {
+                blades,
+                counters,
+                args,
+                generate,
+                draw,
+            }
+        };
+        let halves = [make_half(0), make_half(1)];
+        Self {
+            settings,
+            capacity,
+            generate,
+            finalize,
+            draw_high,
+            draw_low,
+            params,
+            params_buffer,
+            jobs,
+            batches,
+            stats,
+            stats_readback,
+            draw_frame,
+            draw_frame_buffer,
+            halves,
+            hiz,
+        }
+    }
+
+    /// Writes every byte of the pool once, so that its memory is committed up front (a driver
+    /// may otherwise commit pages on first use, which would look like growth later).
+    pub fn commit_pool(&self, device: &wgpu::Device, queue: &wgpu::Queue) {
+        let mut encoder = device.create_command_encoder(&Default::default());
+        for h in &self.halves {
+            encoder.clear_buffer(&h.blades, 0, None);
+        }
+        queue.submit([encoder.finish()]);
+    }
+
+    /// Blades a slot holds.
+    pub fn capacity(&self) -> u32 {
+        self.capacity
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &GrassSettings {
+        &self.settings
+    }
+
+    /// GPU memory of the instance pool, bytes (fixed: it does not depend on the view).
+    pub fn pool_bytes(&self) -> u64 {
+        self.halves
+            .iter()
+            .map(|h| h.blades.size() + h.counters.size() + h.args.size())
+            .sum()
+    }
+
+    /// The generation constants of the frame (for the CPU mirror).
+    pub fn params(&self) -> &GenerateParams {
+        &self.params
+    }
+
+    /// Sets the camera of this frame.
+    pub fn set_camera(
+        &mut self,
+        queue: &wgpu::Queue,
+        view_proj: Mat4,
+        camera_altitude: f32,
+        near: f32,
+    ) {
+        self.params.view_proj = view_proj.to_cols_array_2d();
+        self.params.planes = [[0.0; 4]; 6];
+        for (dst, p) in self
+            .params
+            .planes
+            .iter_mut()
+            .zip(Frustum::from_view_proj(view_proj).planes())
+        {
+            *dst = p.to_array();
+        }
+        self.params.camera[0] = camera_altitude;
+        self.params.camera[1] = near;
+        self.draw_frame.view_proj = self.params.view_proj;
+        queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&self.params));
+        queue.write_buffer(
+            &self.draw_frame_buffer,
+            0,
+            bytemuck::bytes_of(&self.draw_frame),
+        );
+    }
+
+    /// Records generation and drawing of `jobs` in batches of 4 (their `slot` fields are set
+    /// here), into `color` and `depth` (loaded, not cleared). Returns the tiles per LOD.
+    pub fn record(
+        &self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        jobs: &[TileJob],
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        timer: &mut GpuTimer,
+    ) -> [u32; 2] {
+        let jobs = &jobs[..jobs.len().min(MAX_JOBS as usize)];
+        encoder.clear_buffer(&self.stats, 0, None);
+        let mut tiles = [0u32; 2];
+        if jobs.is_empty() {
+            return tiles;
+        }
+        let mut gpu_jobs: Vec<TileJob> = jobs.to_vec();
+        for (i, j) in gpu_jobs.iter_mut().enumerate() {
+            j.slot = (i as u32) % BATCH_TILES;
+            tiles[j.lod.min(1) as usize] += 1;
+        }
+        queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&gpu_jobs));
+        let n_batches = gpu_jobs.len().div_ceil(BATCH_TILES as usize);
+        let mut batch_data = vec![0u8; n_batches * BATCH_STRIDE as usize];
+        for b in 0..n_batches {
+            let first = (b as u32) * BATCH_TILES;
+            let count = (gpu_jobs.len() as u32 - first).min(BATCH_TILES);
+            batch_data[b * BATCH_STRIDE as usize..][..8]
+                .copy_from_slice(bytemuck::cast_slice(&[first, count]));
+        }
+        queue.write_buffer(&self.batches, 0, &batch_data);
+        let g = self.settings.grid();
+        for (b, chunk) in gpu_jobs.chunks(BATCH_TILES as usize).enumerate() {
+            let half = &self.halves[b % 2];
+            let offset = (b as u64 * BATCH_STRIDE) as u32;
+            encoder.clear_buffer(&half.counters, 0, None);
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("grass generate"),
+                    timestamp_writes: timer.compute_pass("grass_generate"),
+                });
+                pass.set_bind_group(0, &half.generate, &[offset]);
+                pass.set_pipeline(&self.generate);
+                pass.dispatch_workgroups(g.div_ceil(8), g.div_ceil(8), chunk.len() as u32);
+                pass.set_pipeline(&self.finalize);
+                pass.dispatch_workgroups(1, 1, 1);
+            }
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("grass draw"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: color,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Load,
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: depth,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Load,
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: timer.render_pass("grass_draw"),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            for (k, job) in chunk.iter().enumerate() {
+                pass.set_pipeline(if job.lod == 0 {
+                    &self.draw_high
+                } else {
+                    &self.draw_low
+                });
+                let slot_offset = (k as u64 * u64::from(self.capacity) * 64) as u32;
+                pass.set_bind_group(0, &half.draw, &[slot_offset]);
+                pass.draw_indirect(&half.args, k as u64 * 16);
+            }
+        }
+        encoder.copy_buffer_to_buffer(&self.stats, 0, &self.stats_readback, 0, 64);
+        tiles
+    }
+
+    /// Reads the counters of the last recorded frame (waits for the GPU).
+    pub fn read_stats(&self, device: &wgpu::Device, tiles: [u32; 2]) -> GrassStats {
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.stats_readback
+            .map_async(wgpu::MapMode::Read, .., move |r| {
+                let _ = tx.send(r);
+            });
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        if !matches!(rx.recv(), Ok(Ok(()))) {
+            return GrassStats::default();
+        }
+        let counts: [u32; 16] = {
+            let Ok(view) = self.stats_readback.get_mapped_range(..) else {
+                self.stats_readback.unmap();
+                return GrassStats::default();
+            };
+            let mut c = [0u32; 16];
+            c.copy_from_slice(bytemuck::cast_slice(&view));
+            c
+        };
+        self.stats_readback.unmap();
+        GrassStats::from_counts(tiles, &counts)
+    }
+
+    /// Reads back slot `k` of pool half `half` (for tests): the draw arguments and the blades.
+    pub fn read_slot(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        half: usize,
+        k: u32,
+    ) -> ([u32; 4], Vec<crate::grass::Blade>) {
+        let h = &self.halves[half];
+        let staging_args = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("args readback"),
+            size: 64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let slot_bytes = u64::from(self.capacity) * 64;
+        let staging_blades = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("blades readback"),
+            size: slot_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&h.args, 0, &staging_args, 0, 64);
+        encoder.copy_buffer_to_buffer(
+            &h.blades,
+            u64::from(k) * slot_bytes,
+            &staging_blades,
+            0,
+            slot_bytes,
+        );
+        queue.submit([encoder.finish()]);
+        for b in [&staging_args, &staging_blades] {
+            b.map_async(wgpu::MapMode::Read, .., |_| {});
+        }
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        let args: Vec<u32> =
+            bytemuck::pod_collect_to_vec(&staging_args.get_mapped_range(..).expect("mapped"));
+        let a = [
+            args[k as usize * 4],
+            args[k as usize * 4 + 1],
+            args[k as usize * 4 + 2],
+            args[k as usize * 4 + 3],
+        ];
+        let all: Vec<crate::grass::Blade> =
+            bytemuck::pod_collect_to_vec(&staging_blades.get_mapped_range(..).expect("mapped"));
+        (a, all[..a[1] as usize].to_vec())
+    }
+}
