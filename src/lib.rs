@@ -11,6 +11,8 @@
 //! - [`terrain`]: the terrain and sky passes (`shaders/terrain.wgsl`).
 //! - [`flythrough`]: cameras, camera paths, the headless fly-through and its report.
 //! - [`metrics`]: percentiles and image error (FLIP).
+//! - [`wind`]: the grass sway spring and its integrators (`verdant eval sway`); the wind field
+//!   follows.
 
 pub mod flythrough;
 pub mod gpu;
@@ -19,4 +21,5 @@ pub mod lod;
 pub mod metrics;
 pub mod stream;
 pub mod terrain;
+pub mod wind;
 pub mod world;

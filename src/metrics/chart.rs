@@ -137,6 +137,20 @@ fn range(values: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
 impl Chart {
     /// Draws the chart into a `width` x `height` PNG at `path`.
     pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), ChartError> {
+        self.write_png_with_front(path, width, height, |_| true)
+    }
+
+    /// Draws the chart like [`Chart::write_png`], with the Pareto front taken over the points
+    /// for which `on_front` holds only. The other points are drawn all the same but neither
+    /// join nor hide the front: runs that failed, say, whose cost is real but whose accuracy
+    /// is not.
+    pub fn write_png_with_front(
+        &self,
+        path: &Path,
+        width: u32,
+        height: u32,
+        on_front: impl Fn(&ChartPoint) -> bool,
+    ) -> Result<(), ChartError> {
         register_font();
         let mut buf = vec![255u8; (width * height * 3) as usize];
         let err = |e: String| ChartError::Draw {
@@ -171,7 +185,12 @@ impl Chart {
                         .axis_desc_style(("sans-serif", 15))
                         .draw()
                         .map_err(|e| err(e.to_string()))?;
-                    let xy: Vec<(f64, f64)> = self.points.iter().map(|p| (p.x, p.y)).collect();
+                    let xy: Vec<(f64, f64)> = self
+                        .points
+                        .iter()
+                        .filter(|p| on_front(p))
+                        .map(|p| (p.x, p.y))
+                        .collect();
                     let front: Vec<(f64, f64)> =
                         pareto_front(&xy).into_iter().map(|i| xy[i]).collect();
                     chart
@@ -211,6 +230,139 @@ impl Chart {
                         .configure_series_labels()
                         .position(SeriesLabelPosition::UpperRight)
                         .background_style(WHITE.mix(0.8))
+                        .border_style(BLACK)
+                        .label_font(("sans-serif", 13))
+                        .draw()
+                        .map_err(|e| err(e.to_string()))?;
+                }};
+            }
+            match (self.log_x, self.log_y) {
+                (true, true) => draw!((xr.0..xr.1).log_scale(), (yr.0..yr.1).log_scale()),
+                (true, false) => draw!((xr.0..xr.1).log_scale(), yr.0..yr.1),
+                (false, true) => draw!(xr.0..xr.1, (yr.0..yr.1).log_scale()),
+                (false, false) => draw!(xr.0..xr.1, yr.0..yr.1),
+            }
+            root.present().map_err(|e| err(e.to_string()))?;
+        }
+        let img = image::RgbImage::from_raw(width, height, buf).expect("buffer holds the image");
+        img.save(path).map_err(|source| ChartError::Write {
+            path: path.display().to_string(),
+            source,
+        })
+    }
+}
+
+/// A named line of a [`LineChart`].
+#[derive(Clone, Debug)]
+pub struct Series {
+    /// Name in the legend.
+    pub name: String,
+    /// The points, joined in this order. Points that are not finite (or not positive on a log
+    /// axis) are left out.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// A chart of lines, one colour per series and a legend: a measure against a setting (an error
+/// against a time step, say), where a Pareto front would mean nothing. Reference lines (a
+/// threshold, a limit) are series of two points.
+#[derive(Clone, Debug)]
+pub struct LineChart {
+    /// Title at the top.
+    pub title: String,
+    /// x axis label.
+    pub x_label: String,
+    /// y axis label.
+    pub y_label: String,
+    /// Logarithmic x axis.
+    pub log_x: bool,
+    /// Logarithmic y axis.
+    pub log_y: bool,
+    /// The lines.
+    pub series: Vec<Series>,
+}
+
+/// Colours of the series of a [`LineChart`], in turn.
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(200, 40, 40),
+    RGBColor(40, 70, 160),
+    RGBColor(30, 140, 60),
+    RGBColor(130, 130, 130),
+    RGBColor(200, 130, 0),
+    RGBColor(140, 60, 160),
+    RGBColor(0, 150, 160),
+    RGBColor(90, 60, 30),
+];
+
+impl LineChart {
+    fn drawable(&self, s: &Series) -> Vec<(f64, f64)> {
+        s.points
+            .iter()
+            .copied()
+            .filter(|&(x, y)| {
+                x.is_finite()
+                    && y.is_finite()
+                    && (!self.log_x || x > 0.0)
+                    && (!self.log_y || y > 0.0)
+            })
+            .collect()
+    }
+
+    /// Draws the chart into a `width` x `height` PNG at `path`.
+    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), ChartError> {
+        register_font();
+        let mut buf = vec![255u8; (width * height * 3) as usize];
+        let err = |e: String| ChartError::Draw {
+            path: path.display().to_string(),
+            message: e,
+        };
+        {
+            let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
+            root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+            let lines: Vec<Vec<(f64, f64)>> =
+                self.series.iter().map(|s| self.drawable(s)).collect();
+            let xr = range(lines.iter().flatten().map(|p| p.0), self.log_x);
+            let yr = range(lines.iter().flatten().map(|p| p.1), self.log_y);
+            macro_rules! draw {
+                ($x:expr, $y:expr) => {{
+                    let mut chart = ChartBuilder::on(&root)
+                        .caption(&self.title, ("sans-serif", 20))
+                        .margin(16)
+                        .x_label_area_size(44)
+                        .y_label_area_size(64)
+                        .build_cartesian_2d($x, $y)
+                        .map_err(|e| err(e.to_string()))?;
+                    chart
+                        .configure_mesh()
+                        .x_desc(&self.x_label)
+                        .y_desc(&self.y_label)
+                        .label_style(("sans-serif", 13))
+                        .x_labels(8)
+                        .y_labels(8)
+                        .light_line_style(RGBColor(238, 238, 238))
+                        .x_label_formatter(&|v| short_number(*v))
+                        .y_label_formatter(&|v| short_number(*v))
+                        .axis_desc_style(("sans-serif", 15))
+                        .draw()
+                        .map_err(|e| err(e.to_string()))?;
+                    for (i, (s, pts)) in self.series.iter().zip(&lines).enumerate() {
+                        let color = PALETTE[i % PALETTE.len()];
+                        chart
+                            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                            .map_err(|e| err(e.to_string()))?
+                            .label(s.name.clone())
+                            .legend(move |(x, y)| {
+                                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+                            });
+                        if pts.len() > 2 {
+                            chart
+                                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                                .map_err(|e| err(e.to_string()))?;
+                        }
+                    }
+                    chart
+                        .configure_series_labels()
+                        .position(SeriesLabelPosition::UpperLeft)
+                        .background_style(WHITE.mix(0.85))
                         .border_style(BLACK)
                         .label_font(("sans-serif", 13))
                         .draw()
@@ -274,5 +426,33 @@ mod tests {
         assert_eq!(img.dimensions(), (400, 300));
         // Something besides the white background was drawn, including the highlighted point.
         assert!(img.pixels().any(|p| p.0 == [200, 40, 40]));
+    }
+
+    #[test]
+    fn line_charts_are_written_and_skip_what_they_cannot_draw() {
+        let dir = tempfile::tempdir().unwrap();
+        let chart = LineChart {
+            title: "lines".into(),
+            x_label: "s".into(),
+            y_label: "m".into(),
+            log_x: true,
+            log_y: true,
+            series: vec![
+                Series {
+                    name: "a".into(),
+                    points: vec![(0.01, 1.0), (0.1, 10.0), (1.0, f64::INFINITY), (2.0, 0.0)],
+                },
+                Series {
+                    name: "b".into(),
+                    points: vec![(0.01, 3.0), (1.0, 3.0)],
+                },
+            ],
+        };
+        let file = dir.path().join("l.png");
+        chart.write_png(&file, 400, 300).unwrap();
+        let img = image::open(&file).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (400, 300));
+        assert!(img.pixels().any(|p| p.0 == [200, 40, 40]));
+        assert!(img.pixels().any(|p| p.0 == [40, 70, 160]));
     }
 }

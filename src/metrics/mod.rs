@@ -2,7 +2,7 @@
 
 mod chart;
 
-pub use chart::{Chart, ChartError, ChartPoint, pareto_front, pareto_front_n};
+pub use chart::{Chart, ChartError, ChartPoint, LineChart, Series, pareto_front, pareto_front_n};
 
 use thiserror::Error;
 
