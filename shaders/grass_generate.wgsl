@@ -24,6 +24,8 @@ struct Params {
     ranges: vec4<f32>,
     // x: Hi-Z mips, y: slot capacity, z: grass types
     limits: vec4<u32>,
+    // Hi-Z levels: offset (floats), width, height
+    hiz_levels: array<vec4<u32>, 16>,
     types: array<GrassType, 16>,
 }
 
@@ -71,7 +73,7 @@ struct DrawArgs {
 @group(0) @binding(2) var<uniform> batch: Batch;
 @group(0) @binding(3) var heights: texture_2d_array<f32>;
 @group(0) @binding(4) var grass: texture_2d_array<u32>;
-@group(0) @binding(5) var hiz: texture_2d<f32>;
+@group(0) @binding(5) var<storage, read> hiz: array<f32>;
 @group(0) @binding(6) var<storage, read_write> blades: array<Blade>;
 // Per slot of the half: blades wanted (may exceed the capacity).
 @group(0) @binding(7) var<storage, read_write> counters: array<atomic<u32>, 4>;
@@ -127,8 +129,10 @@ fn d_at(x: i32, y: i32, layer: u32) -> f32 {
 }
 
 fn hiz_load(mip: u32, x: i32, y: i32) -> f32 {
-    let size = vec2<i32>(textureDimensions(hiz, mip));
-    return textureLoad(hiz, clamp(vec2<i32>(x, y), vec2<i32>(0), size - 1), mip).r;
+    let level = params.hiz_levels[mip];
+    let cx = u32(clamp(x, 0, i32(level.y) - 1));
+    let cy = u32(clamp(y, 0, i32(level.z) - 1));
+    return hiz[level.x + cy * level.y + cx];
 }
 
 fn occluded(center: vec3<f32>, radius: f32) -> bool {
@@ -145,7 +149,10 @@ fn occluded(center: vec3<f32>, radius: f32) -> bool {
     let sx = (ndc.x * 0.5 + 0.5) * w;
     let sy = (0.5 - ndc.y * 0.5) * h;
     let mips = max(params.limits.x, 1u);
-    let mip = min(u32(ceil(log2(max(2.0 * r_px, 1.0)))), mips - 1u);
+    // The smallest level whose texels are at least as wide as the footprint (integer log2, so
+    // that the CPU mirror picks the same level).
+    let footprint = max(u32(ceil(2.0 * r_px)), 1u);
+    let mip = min(select(firstLeadingBit(footprint - 1u) + 1u, 0u, footprint <= 1u), mips - 1u);
     let texel_px = f32(1u << mip);
     let x0 = i32(floor((sx - r_px) / texel_px));
     let y0 = i32(floor((sy - r_px) / texel_px));

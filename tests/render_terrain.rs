@@ -126,3 +126,38 @@ fn slow_loads_never_stall_the_frame_loop_and_leave_no_hole() {
     );
     assert!(scene.service().stats().stream.in_flight > 0);
 }
+
+#[test]
+fn grassy_meadow_matches_reference_image() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).expect("open the default world");
+    let path = world
+        .manifest
+        .path("meadow")
+        .expect("the default world has a meadow path")
+        .clone();
+    let config = SceneConfig::for_world(&world);
+    let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
+    let camera = sample_path(&path, path.keys[0].t_s + 0.4 * path.duration_s);
+    assert!(
+        scene
+            .warm_up(&ctx, &camera, Duration::from_secs(60))
+            .unwrap(),
+        "tiles did not load"
+    );
+    let stats = scene.render(&ctx, &camera).unwrap();
+    assert!(
+        stats.grass.drawn[0] > 1000,
+        "too few high-LOD blades: {:?}",
+        stats.grass
+    );
+    assert!(
+        stats.grass.drawn[1] > 1000,
+        "too few low-LOD blades: {:?}",
+        stats.grass
+    );
+    assert_eq!(stats.grass.overflow, [0, 0]);
+    let image = scene.read_image(&ctx).expect("read back the frame");
+    // Bounds set on llvmpipe (Mesa 22.3, 2 cores): repeated runs give the same image.
+    common::check_reference("grass_meadow", &image, 0.01, 0.10);
+}

@@ -238,14 +238,17 @@ impl Scene {
         let grass = match config.grass_settings(&world) {
             Some(settings) => {
                 let capacity = crate::grass::estimate_capacity(&world, &settings)?;
-                Some(GrassRenderer::new(
+                let g = GrassRenderer::new(
                     &ctx.device,
+                    &ctx.queue,
                     &world.manifest,
                     &atlas,
                     &depth,
                     settings,
                     capacity,
-                ))
+                );
+                g.commit_pool(&ctx.device, &ctx.queue);
+                Some(g)
             }
             None => None,
         };

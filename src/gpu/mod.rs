@@ -11,7 +11,7 @@ mod timing;
 
 pub use atlas::{AtlasError, TileAtlas, pack_grass};
 pub use derive::{DeriveJob, DeriveStage};
-pub use readback::{ReadbackError, read_texture_layer, read_texture_rgba8};
+pub use readback::{ReadbackError, read_texture_layer, read_texture_level, read_texture_rgba8};
 pub use timing::{GpuTimer, PassTimes};
 
 use thiserror::Error;

@@ -35,11 +35,26 @@ pub fn read_texture_layer(
     texture: &wgpu::Texture,
     layer: u32,
 ) -> Result<Vec<u8>, ReadbackError> {
+    read_texture_level(device, queue, texture, 0, layer)
+}
+
+/// Reads mip level `mip` of array layer `layer` of a texture of an uncompressed colour format
+/// into tightly packed rows, first row first.
+pub fn read_texture_level(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    mip: u32,
+    layer: u32,
+) -> Result<Vec<u8>, ReadbackError> {
     let format = texture.format();
     let Some(texel) = format.block_copy_size(None) else {
         return Err(ReadbackError::Format(format));
     };
-    let (w, h) = (texture.width(), texture.height());
+    let (w, h) = (
+        (texture.width() >> mip).max(1),
+        (texture.height() >> mip).max(1),
+    );
     let row = w * texel;
     let padded =
         row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
@@ -53,7 +68,7 @@ pub fn read_texture_layer(
     encoder.copy_texture_to_buffer(
         wgpu::TexelCopyTextureInfo {
             texture,
-            mip_level: 0,
+            mip_level: mip,
             origin: wgpu::Origin3d {
                 x: 0,
                 y: 0,

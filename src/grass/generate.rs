@@ -55,10 +55,12 @@ pub struct GenerateParams {
     pub ranges: [f32; 4],
     /// x: Hi-Z mip count, y: slot capacity (blades), z: grass type count, w: unused.
     pub limits: [u32; 4],
+    /// Hi-Z levels: offset (floats), width, height, unused.
+    pub hiz_levels: [[u32; 4]; 16],
     /// Per grass type constants.
     pub types: [GrassTypeGpu; 16],
 }
-const _: () = assert!(std::mem::size_of::<GenerateParams>() == 64 + 96 + 16 * 5 + 512);
+const _: () = assert!(std::mem::size_of::<GenerateParams>() == 64 + 96 + 16 * 5 + 256 + 512);
 
 /// One grass tile to generate; mirrors `TileJob` in the shader.
 #[repr(C)]
@@ -381,7 +383,13 @@ fn occluded(
     let sx = (ndc[0] * 0.5 + 0.5) * w;
     let sy = (0.5 - ndc[1] * 0.5) * h;
     let mips = params.limits[0].max(1);
-    let mip = ((2.0 * r_px).max(1.0).log2().ceil() as u32).min(mips - 1);
+    let footprint = ((2.0 * r_px).ceil() as u32).max(1);
+    let mip = (if footprint <= 1 {
+        0
+    } else {
+        32 - (footprint - 1).leading_zeros()
+    })
+    .min(mips - 1);
     let texel = (1u32 << mip) as f32;
     let x0 = ((sx - r_px) / texel).floor() as i32;
     let y0 = ((sy - r_px) / texel).floor() as i32;

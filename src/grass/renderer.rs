@@ -128,67 +128,125 @@ struct Half {
     draw: wgpu::BindGroup,
 }
 
-/// The Hi-Z pyramid of a depth target.
+/// The Hi-Z pyramid of a depth target, in a storage buffer (levels one after another).
 pub struct HiZPyramid {
-    /// R32Float with a full mip chain.
-    pub texture: wgpu::Texture,
+    /// The levels, f32, finest first, rows top first.
+    pub buffer: wgpu::Buffer,
     copy: wgpu::ComputePipeline,
     reduce: wgpu::ComputePipeline,
     copy_group: wgpu::BindGroup,
-    reduce_groups: Vec<wgpu::BindGroup>,
-    sizes: Vec<(u32, u32)>,
+    reduce_group: wgpu::BindGroup,
+    /// (offset in floats, width, height) of each level.
+    levels: Vec<(u32, u32, u32)>,
 }
+
+const LEVEL_STRIDE: u64 = 256;
 
 impl HiZPyramid {
     /// A pyramid over `depth` (a `Depth32Float` texture with `TEXTURE_BINDING`).
-    pub fn new(device: &wgpu::Device, depth: &wgpu::Texture) -> Self {
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, depth: &wgpu::Texture) -> Self {
         let (w, h) = (depth.width(), depth.height());
         let mips = crate::grass::hiz::mip_count(w, h);
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
+        let mut levels = Vec::new();
+        let mut offset = 0u32;
+        for m in 0..mips {
+            let (lw, lh) = ((w >> m).max(1), (h >> m).max(1));
+            levels.push((offset, lw, lh));
+            offset += lw * lh;
+        }
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("hi-z"),
-            size: wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: mips,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::R32Float,
-            usage: wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
+            size: u64::from(offset) * 4,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
         });
+        // One uniform record per level: where to read and where to write.
+        let mut records = vec![0u8; levels.len() * LEVEL_STRIDE as usize];
+        for (m, &(off, lw, lh)) in levels.iter().enumerate() {
+            let (so, sw, sh) = if m == 0 { (0, lw, lh) } else { levels[m - 1] };
+            let rec = [so, sw, sh, off, lw, lh];
+            records[m * LEVEL_STRIDE as usize..][..24].copy_from_slice(bytemuck::cast_slice(&rec));
+        }
+        let level_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hi-z levels"),
+            size: records.len() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        queue.write_buffer(&level_buffer, 0, &records);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("hiz_build.wgsl"),
             source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/hiz_build.wgsl").into()),
         });
-        let pipeline = |entry| {
+        let entry = |binding, visibility_ty| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: visibility_ty,
+            count: None,
+        };
+        let storage = entry(
+            1,
+            wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: false },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+        );
+        let uniform = entry(
+            2,
+            wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: true,
+                min_binding_size: std::num::NonZeroU64::new(24),
+            },
+        );
+        let depth_entry = entry(
+            0,
+            wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Depth,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+        );
+        let copy_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("hi-z copy"),
+            entries: &[depth_entry, storage, uniform],
+        });
+        let reduce_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("hi-z reduce"),
+            entries: &[storage, uniform],
+        });
+        let pipeline = |entry_point, layout: &wgpu::BindGroupLayout| {
+            let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(entry_point),
+                bind_group_layouts: &[Some(layout)],
+                immediate_size: 0,
+            });
             device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: None,
+                label: Some(entry_point),
+                layout: Some(&pl),
                 module: &module,
-                entry_point: Some(entry),
+                entry_point: Some(entry_point),
                 compilation_options: Default::default(),
                 cache: None,
             })
         };
-        let (copy, reduce) = (pipeline("copy_depth"), pipeline("reduce"));
-        let mip_view = |m: u32| {
-            texture.create_view(&wgpu::TextureViewDescriptor {
-                base_mip_level: m,
-                mip_level_count: Some(1),
-                ..Default::default()
-            })
-        };
+        let (copy, reduce) = (
+            pipeline("copy_depth", &copy_layout),
+            pipeline("reduce", &reduce_layout),
+        );
         let depth_view = depth.create_view(&wgpu::TextureViewDescriptor {
             aspect: wgpu::TextureAspect::DepthOnly,
             ..Default::default()
         });
+        let level_binding = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: &level_buffer,
+            offset: 0,
+            size: std::num::NonZeroU64::new(24),
+        });
         let copy_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("hi-z copy"),
-            layout: &copy.get_bind_group_layout(0),
+            layout: &copy_layout,
             entries: &[
                 wgpu::BindGroupEntry {
                     binding: 0,
@@ -196,45 +254,69 @@ impl HiZPyramid {
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&mip_view(0)),
+                    resource: buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: level_binding.clone(),
                 },
             ],
         });
-        let reduce_layout = reduce.get_bind_group_layout(0);
-        let reduce_groups = (1..mips)
-            .map(|m| {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("hi-z reduce"),
-                    layout: &reduce_layout,
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::TextureView(&mip_view(m - 1)),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: wgpu::BindingResource::TextureView(&mip_view(m)),
-                        },
-                    ],
-                })
-            })
-            .collect();
-        let sizes = (0..mips)
-            .map(|m| ((w >> m).max(1), (h >> m).max(1)))
-            .collect();
+        let reduce_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("hi-z reduce"),
+            layout: &reduce_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: level_binding,
+                },
+            ],
+        });
         Self {
-            texture,
+            buffer,
             copy,
             reduce,
             copy_group,
-            reduce_groups,
-            sizes,
+            reduce_group,
+            levels,
         }
     }
 
     /// Mip levels.
     pub fn mips(&self) -> u32 {
-        self.sizes.len() as u32
+        self.levels.len() as u32
+    }
+
+    /// (offset in floats, width, height) of each level.
+    pub fn levels(&self) -> &[(u32, u32, u32)] {
+        &self.levels
+    }
+
+    /// Reads every level back (for tests and tools; waits for the GPU).
+    pub fn read_back(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> crate::grass::HiZ {
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hi-z readback"),
+            size: self.buffer.size(),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&self.buffer, 0, &staging, 0, self.buffer.size());
+        queue.submit([encoder.finish()]);
+        staging.map_async(wgpu::MapMode::Read, .., |_| {});
+        let _ = device.poll(wgpu::PollType::wait_indefinitely());
+        let all: Vec<f32> =
+            bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..).expect("mapped"));
+        let mips = self
+            .levels
+            .iter()
+            .map(|&(o, w, h)| (w, h, all[o as usize..(o + w * h) as usize].to_vec()))
+            .collect();
+        crate::grass::HiZ { mips }
     }
 
     /// Records the build of the pyramid from the depth target.
@@ -243,13 +325,13 @@ impl HiZPyramid {
             label: Some("hi-z"),
             timestamp_writes: timer.compute_pass("hiz"),
         });
-        let (w, h) = self.sizes[0];
+        let (_, w, h) = self.levels[0];
         pass.set_pipeline(&self.copy);
-        pass.set_bind_group(0, &self.copy_group, &[]);
+        pass.set_bind_group(0, &self.copy_group, &[0]);
         pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         pass.set_pipeline(&self.reduce);
-        for (group, &(w, h)) in self.reduce_groups.iter().zip(&self.sizes[1..]) {
-            pass.set_bind_group(0, group, &[]);
+        for (m, &(_, w, h)) in self.levels.iter().enumerate().skip(1) {
+            pass.set_bind_group(0, &self.reduce_group, &[(m as u64 * LEVEL_STRIDE) as u32]);
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         }
     }
@@ -281,6 +363,7 @@ impl GrassRenderer {
     /// `capacity` blades, culling against the Hi-Z pyramid of `depth`.
     pub fn new(
         device: &wgpu::Device,
+        queue: &wgpu::Queue,
         manifest: &Manifest,
         atlas: &TileAtlas,
         depth: &wgpu::Texture,
@@ -289,7 +372,7 @@ impl GrassRenderer {
     ) -> Self {
         // Slots start at multiples of 256 bytes (the storage offset alignment).
         let capacity = capacity.max(4).div_ceil(4) * 4;
-        let hiz = HiZPyramid::new(device, depth);
+        let hiz = HiZPyramid::new(device, queue, depth);
         let mut types = [GrassTypeGpu::default(); 16];
         let mut base_colors = [[0.0; 4]; 16];
         let mut tip_colors = [[0.0; 4]; 16];
@@ -329,6 +412,13 @@ impl GrassRenderer {
                 manifest.grass_types.len().min(16) as u32,
                 0,
             ],
+            hiz_levels: {
+                let mut t = [[0u32; 4]; 16];
+                for (dst, &(o, w, h)) in t.iter_mut().zip(hiz.levels()) {
+                    *dst = [o, w, h, 0];
+                }
+                t
+            },
             types,
         };
         let sky = &manifest.sky;
@@ -426,7 +516,7 @@ impl GrassRenderer {
                     wgpu::TextureSampleType::Uint,
                     wgpu::TextureViewDimension::D2Array,
                 ),
-                texture(5, unfilterable, wgpu::TextureViewDimension::D2),
+                storage(5, true),
                 storage(6, false),
                 storage(7, false),
                 storage(8, false),
@@ -534,7 +624,6 @@ impl GrassRenderer {
             })
         };
         let (hv, gv) = (array_view(&atlas.heights), array_view(&atlas.grass));
-        let hiz_view = hiz.texture.create_view(&Default::default());
         let slot_bytes = u64::from(capacity) * 64;
         let make_half = |i: usize| {
             let blades = buffer(
@@ -544,10 +633,14 @@ impl GrassRenderer {
                     "grass pool half B"
                 },
                 slot_bytes * u64::from(BATCH_TILES),
-                U::STORAGE,
+                U::STORAGE | U::COPY_SRC | U::COPY_DST,
             );
             let counters = buffer("grass counters", 16, U::STORAGE | U::COPY_DST);
-            let args = buffer("grass draw args", 64, U::STORAGE | U::INDIRECT);
+            let args = buffer(
+                "grass draw args",
+                64,
+                U::STORAGE | U::INDIRECT | U::COPY_SRC,
+            );
             let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
             let generate = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("grass generate"),
@@ -565,7 +658,7 @@ impl GrassRenderer {
                     ),
                     entry(3, wgpu::BindingResource::TextureView(&hv)),
                     entry(4, wgpu::BindingResource::TextureView(&gv)),
-                    entry(5, wgpu::BindingResource::TextureView(&hiz_view)),
+                    entry(5, hiz.buffer.as_entire_binding()),
                     entry(6, blades.as_entire_binding()),
                     entry(7, counters.as_entire_binding()),
                     entry(8, stats.as_entire_binding()),

@@ -1,0 +1,467 @@
+//! GPU grass against its CPU mirror on lavapipe: generation and culling of several tiles (flat,
+//! steep, empty, densest), the bounds of the instance pool, and the low-LOD grid as a subset of
+//! the high-LOD grid.
+
+mod common;
+
+use glam::DVec3;
+use verdant::flythrough::{Camera, SceneConfig};
+use verdant::gpu::{GpuContext, GpuTimer, TileAtlas};
+use verdant::grass::{Blade, GrassRenderer, GrassStats, HiZ, TileBlades, TileJob, generate_tile};
+use verdant::world::{Manifest, TileData, TileId, World};
+
+const ALTITUDE: f32 = 106.0;
+const W: u32 = 320;
+const H: u32 = 180;
+
+/// Relative tolerance of blade attributes between GPU and CPU (the same arithmetic; a GPU may
+/// fuse multiply-adds, moving results by an ulp or two).
+const TOLERANCE: f32 = 1e-4;
+
+struct Rig {
+    ctx: GpuContext,
+    atlas: TileAtlas,
+    depth: wgpu::Texture,
+    color: wgpu::Texture,
+    grass: GrassRenderer,
+    manifest: Manifest,
+    occluder: wgpu::RenderPipeline,
+}
+
+fn synthetic_tile(manifest: &Manifest, id: TileId, kind: &str) -> TileData {
+    let s = manifest.pyramid.samples_per_side();
+    let cell = manifest.pyramid.cell_size_m(id.level) as f32;
+    let n = (s * s) as usize;
+    let mut t = TileData {
+        id,
+        size: s,
+        heights: vec![100.0; n],
+        grass_type: vec![1; n],
+        density: vec![255; n],
+    };
+    for j in 0..s {
+        for i in 0..s {
+            let k = (j * s + i) as usize;
+            match kind {
+                "flat" => t.density[k] = 150 + ((i * 7 + j * 3) % 100) as u8,
+                "steep" => {
+                    t.heights[k] = 100.0 + 0.8 * cell * i as f32 + 0.1 * cell * j as f32;
+                    t.grass_type[k] = 2;
+                    t.density[k] = 200;
+                }
+                "empty" => t.density[k] = 0,
+                "densest" => t.grass_type[k] = 1,
+                other => panic!("no tile kind {other}"),
+            }
+        }
+    }
+    t
+}
+
+impl Rig {
+    fn new(capacity: Option<u32>) -> Self {
+        let ctx = common::gpu();
+        let world = World::open(&common::default_world()).unwrap();
+        let manifest = world.manifest.clone();
+        let settings = SceneConfig::for_world(&world)
+            .grass_settings(&world)
+            .unwrap();
+        let atlas = TileAtlas::new(&ctx.device, manifest.pyramid.samples_per_side(), 8);
+        let target = |format, usage| {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: None,
+                size: wgpu::Extent3d {
+                    width: W,
+                    height: H,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let depth = target(
+            verdant::terrain::DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let color = target(
+            verdant::terrain::COLOR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
+        let capacity = match capacity {
+            Some(c) => c,
+            None => verdant::grass::estimate_capacity(&world, &settings).unwrap(),
+        };
+        let grass = GrassRenderer::new(
+            &ctx.device,
+            &ctx.queue,
+            &manifest,
+            &atlas,
+            &depth,
+            settings,
+            capacity,
+        );
+        // A wall over the left third of the screen, 30 m away: blades behind it are occluded.
+        let module = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("test occluder"),
+                source: wgpu::ShaderSource::Wgsl(
+                    "@vertex fn vs(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
+                    let x = array<f32, 6>(-1.0, -0.33, -1.0, -1.0, -0.33, -0.33);
+                    let y = array<f32, 6>(-1.0, -1.0, 1.0, 1.0, -1.0, 1.0);
+                    return vec4<f32>(x[i], y[i], 0.5 / 30.0, 1.0);
+                }"
+                    .into(),
+                ),
+            });
+        let occluder = ctx
+            .device
+            .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("test occluder"),
+                layout: None,
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: Default::default(),
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: verdant::terrain::DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Always),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: None,
+                multiview_mask: None,
+                cache: None,
+            });
+        Self {
+            ctx,
+            atlas,
+            depth,
+            color,
+            grass,
+            manifest,
+            occluder,
+        }
+    }
+
+    /// Runs the grass stage for `jobs` (tiles already in the atlas) and returns the GPU stats
+    /// and the Hi-Z the generation saw.
+    fn run(&mut self, camera: &Camera, jobs: &[TileJob]) -> (GrassStats, HiZ) {
+        let view_proj = camera.view_proj_relative(W as f32 / H as f32);
+        self.grass.set_camera(
+            &self.ctx.queue,
+            view_proj,
+            camera.position.z as f32,
+            camera.near_m,
+        );
+        let mut timer = GpuTimer::new(&self.ctx.device, &self.ctx.queue, false, 0);
+        let dv = self.depth.create_view(&Default::default());
+        let cv = self.color.create_view(&Default::default());
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: None,
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &dv,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.occluder);
+            pass.draw(0..6, 0..1);
+        }
+        self.grass.hiz.record(&mut encoder, &mut timer);
+        let tiles = self
+            .grass
+            .record(&self.ctx.queue, &mut encoder, jobs, &cv, &dv, &mut timer);
+        self.ctx.queue.submit([encoder.finish()]);
+        let stats = self.grass.read_stats(&self.ctx.device, tiles);
+        let hiz = self.grass.hiz.read_back(&self.ctx.device, &self.ctx.queue);
+        (stats, hiz)
+    }
+}
+
+fn camera() -> Camera {
+    // Above the tiles' south edge, looking north and down.
+    Camera::new(DVec3::new(0.0, 0.0, f64::from(ALTITUDE)), 90.0, -25.0)
+}
+
+fn job(k: usize, layer: u32, lod: u32, cell: f32) -> TileJob {
+    TileJob {
+        origin: [-40.0 + 20.0 * (k % 4) as f32, 4.0 + 8.0 * (k / 4) as f32],
+        cell,
+        layer,
+        tile_x: 1000 + k as u32,
+        tile_y: 2000,
+        lod,
+        slot: 0,
+    }
+}
+
+fn key(b: &Blade) -> (u32, u32, u32) {
+    (b.hash, b.pos[0].to_bits(), b.pos[1].to_bits())
+}
+
+fn assert_blades_match(gpu: &[Blade], cpu: &[Blade], what: &str) {
+    assert_eq!(gpu.len(), cpu.len(), "{what}: blade counts differ");
+    let mut g = gpu.to_vec();
+    let mut c = cpu.to_vec();
+    g.sort_by_key(|b| (b.hash, b.kind));
+    c.sort_by_key(|b| (b.hash, b.kind));
+    let close = |a: f32, b: f32| (a - b).abs() <= TOLERANCE * (1.0 + a.abs().max(b.abs()));
+    for (a, b) in g.iter().zip(&c) {
+        assert_eq!(
+            (a.hash, a.kind, a.color),
+            (b.hash, b.kind, b.color),
+            "{what}: blade identity differs"
+        );
+        let fa = [
+            a.pos[0],
+            a.pos[1],
+            a.pos[2],
+            a.facing,
+            a.growth[0],
+            a.growth[1],
+            a.height,
+            a.width,
+            a.tilt,
+            a.bend,
+            a.side_curve,
+            a.wind,
+            a.fade,
+        ];
+        let fb = [
+            b.pos[0],
+            b.pos[1],
+            b.pos[2],
+            b.facing,
+            b.growth[0],
+            b.growth[1],
+            b.height,
+            b.width,
+            b.tilt,
+            b.bend,
+            b.side_curve,
+            b.wind,
+            b.fade,
+        ];
+        for (i, (x, y)) in fa.iter().zip(&fb).enumerate() {
+            assert!(
+                close(*x, *y),
+                "{what}: blade {:#x} attribute {i}: GPU {x} CPU {y}",
+                a.hash
+            );
+        }
+    }
+}
+
+#[test]
+fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles() {
+    let mut rig = Rig::new(None);
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let kinds = ["flat", "steep", "empty", "densest"];
+    let mut tiles = Vec::new();
+    let mut jobs = Vec::new();
+    for (k, kind) in kinds.iter().enumerate() {
+        let j = job(k, k as u32, if k == 3 { 1 } else { 0 }, cell);
+        let t = synthetic_tile(&rig.manifest, TileId::new(level, j.tile_x, j.tile_y), kind);
+        rig.atlas.upload(&rig.ctx.queue, k as u32, &t).unwrap();
+        tiles.push(t);
+        jobs.push(j);
+    }
+    let (stats, hiz) = rig.run(&camera(), &jobs);
+    let params = *rig.grass.params();
+    let mut cpu_total = verdant::grass::GenerateStats::default();
+    for (k, kind) in kinds.iter().enumerate() {
+        let cpu: TileBlades = generate_tile(&params, &jobs[k], &tiles[k], &hiz);
+        let (args, gpu) = rig
+            .grass
+            .read_slot(&rig.ctx.device, &rig.ctx.queue, 0, k as u32);
+        let vertices = if jobs[k].lod == 0 { 15 } else { 7 };
+        assert_eq!(
+            args,
+            [vertices, cpu.blades.len() as u32, 0, 0],
+            "{kind}: indirect args"
+        );
+        assert_blades_match(&gpu, &cpu.blades, kind);
+        for l in 0..2 {
+            for c in 0..8 {
+                cpu_total.counts[l][c] += cpu.stats.counts[l][c];
+            }
+        }
+        eprintln!(
+            "{kind}: {} blades, counters {:?}",
+            cpu.blades.len(),
+            cpu.stats.counts
+        );
+        if *kind == "empty" {
+            assert!(cpu.blades.is_empty());
+        } else {
+            assert!(!cpu.blades.is_empty(), "{kind}: expected blades");
+        }
+    }
+    assert_eq!(
+        stats.to_generate_stats(),
+        cpu_total,
+        "GPU and CPU counters differ"
+    );
+    // Every culling test did some work in this view.
+    let s = &cpu_total.counts[0];
+    use verdant::grass::generate::counter;
+    for (c, name) in [
+        (counter::DISTANCE, "distance"),
+        (counter::FRUSTUM, "frustum"),
+        (counter::OCCLUSION, "occlusion"),
+    ] {
+        assert!(s[c] > 0, "no blade was culled by {name}: {s:?}");
+    }
+}
+
+#[test]
+fn an_overflowing_tile_is_clamped_and_counted_without_touching_its_neighbours() {
+    let mut rig = Rig::new(Some(1000));
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let dense = synthetic_tile(&rig.manifest, TileId::new(level, 1000, 2000), "densest");
+    let flat = synthetic_tile(&rig.manifest, TileId::new(level, 1001, 2000), "empty");
+    rig.atlas.upload(&rig.ctx.queue, 0, &dense).unwrap();
+    rig.atlas.upload(&rig.ctx.queue, 1, &flat).unwrap();
+    let jobs = [job(2, 0, 0, cell), job(3, 1, 0, cell)];
+    let (stats, hiz) = rig.run(&camera(), &jobs);
+    let capacity = rig.grass.capacity();
+    let cpu = generate_tile(rig.grass.params(), &jobs[0], &dense, &hiz);
+    assert!(
+        cpu.wanted > capacity,
+        "the test tile should overflow: {} <= {capacity}",
+        cpu.wanted
+    );
+    let (args, gpu) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 0);
+    assert_eq!(args[1], capacity, "clamped to the slot");
+    assert_eq!(stats.overflow[0], cpu.wanted - capacity);
+    assert_eq!(stats.drawn[0], capacity);
+    // Which blades won the race to the slot differs between GPU and CPU; all are real ones.
+    let cpu_all = generate_tile(
+        &{
+            let mut p = *rig.grass.params();
+            p.limits[1] = u32::MAX;
+            p
+        },
+        &jobs[0],
+        &dense,
+        &hiz,
+    );
+    let known: std::collections::HashSet<(u32, u32, u32)> =
+        cpu_all.blades.iter().map(key).collect();
+    assert!(
+        gpu.iter().all(|b| known.contains(&key(b))),
+        "a blade in the slot is not one the tile generates"
+    );
+    // The neighbouring slot is intact (its tile is empty: zero blades, zero args).
+    let (args1, _) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 1);
+    assert_eq!(args1, [15, 0, 0, 0]);
+}
+
+#[test]
+fn more_tiles_than_slots_are_all_drawn() {
+    let mut rig = Rig::new(None);
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let flat = synthetic_tile(&rig.manifest, TileId::new(level, 0, 0), "flat");
+    rig.atlas.upload(&rig.ctx.queue, 0, &flat).unwrap();
+    // Eleven tiles in a row, all reading the same data: three batches through two halves.
+    let jobs: Vec<TileJob> = (0..11).map(|k| job(k, 0, (k % 2) as u32, cell)).collect();
+    let (stats, hiz) = rig.run(&camera(), &jobs);
+    assert_eq!(stats.tiles, [6, 5]);
+    let mut drawn = [0u32; 2];
+    let mut considered = [0u32; 2];
+    for j in &jobs {
+        let cpu = generate_tile(rig.grass.params(), j, &flat, &hiz);
+        drawn[j.lod as usize] += cpu.blades.len() as u32;
+        considered[j.lod as usize] += cpu.stats.counts[j.lod as usize][0];
+    }
+    assert_eq!(stats.considered, considered);
+    assert_eq!(stats.drawn, drawn, "every tile's blades are drawn");
+    assert_eq!(
+        rig.grass.pool_bytes(),
+        2 * (4 * u64::from(rig.grass.capacity()) * 64 + 16 + 64)
+    );
+}
+
+#[test]
+fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
+    let mut rig = Rig::new(None);
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let flat = synthetic_tile(&rig.manifest, TileId::new(level, 7, 9), "flat");
+    rig.atlas.upload(&rig.ctx.queue, 0, &flat).unwrap();
+    // Far from the camera, but before the view distance: no LOD fade, little culling.
+    let mut high = job(0, 0, 0, cell);
+    high.origin = [-25.0, 70.0];
+    let low = TileJob { lod: 1, ..high };
+    let (_, hiz) = rig.run(
+        &Camera::new(
+            DVec3::new(0.0, 0.0, f64::from(ALTITUDE) + 60.0),
+            90.0,
+            -60.0,
+        ),
+        &[high, low],
+    );
+    let mut params = *rig.grass.params();
+    params.ranges = [1e6, 2e6, 3e6, 4e6]; // no distance culling, no fade
+    let h = generate_tile(&params, &high, &flat, &hiz);
+    let l = generate_tile(&params, &low, &flat, &hiz);
+    assert!(!l.blades.is_empty() && l.blades.len() < h.blades.len());
+    let high_at: std::collections::HashMap<u32, &Blade> =
+        h.blades.iter().map(|b| (b.hash, b)).collect();
+    for b in &l.blades {
+        let twin = high_at
+            .get(&b.hash)
+            .expect("a low-LOD blade missing from the high-LOD grid");
+        assert_eq!(
+            (twin.pos, twin.height, twin.facing),
+            (b.pos, b.height, b.facing)
+        );
+    }
+    // About a quarter of the high blades survive at low LOD (every other point each way).
+    let ratio = l.blades.len() as f64 / h.blades.len() as f64;
+    assert!((0.2..0.3).contains(&ratio), "low/high ratio {ratio}");
+    // The GPU agrees: its low slot holds the CPU's low blades.
+    let (_, gpu_low) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 1);
+    let mut p2 = *rig.grass.params();
+    p2.limits = params.limits;
+    let cpu_low = generate_tile(&p2, &low, &flat, &hiz);
+    assert_blades_match(&gpu_low, &cpu_low.blades, "low LOD");
+}
+
+#[test]
+fn the_hiz_pyramid_matches_its_cpu_mirror() {
+    let mut rig = Rig::new(Some(64));
+    let (_, hiz) = rig.run(&camera(), &[]);
+    let (w, h, level0) = &hiz.mips[0];
+    // Level 0 is the depth buffer: the wall over the left third, nothing elsewhere.
+    let wall = level0.iter().filter(|d| **d > 0.0).count();
+    assert_eq!(wall, (W as f32 * 0.335).round() as usize * H as usize);
+    let cpu = verdant::grass::hiz::build_hiz(*w, *h, level0);
+    assert_eq!(cpu.mips.len(), hiz.mips.len());
+    for (m, (g, c)) in hiz.mips.iter().zip(&cpu.mips).enumerate() {
+        assert_eq!((g.0, g.1), (c.0, c.1), "level {m} size");
+        assert_eq!(g.2, c.2, "level {m} differs");
+    }
+}
