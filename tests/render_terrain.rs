@@ -11,7 +11,11 @@ use verdant::world::World;
 fn default_world_matches_reference_image() {
     let ctx = common::gpu();
     let world = World::open(&common::default_world()).expect("open the default world");
-    let path = world.manifest.paths[0].clone();
+    let path = world
+        .manifest
+        .path("overview")
+        .expect("the default world has an overview path")
+        .clone();
     let config = SceneConfig::for_world(&world);
     let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
     let t = path.keys[0].t_s + 0.3 * (path.keys[path.keys.len() - 1].t_s - path.keys[0].t_s);
@@ -35,7 +39,11 @@ fn default_world_matches_reference_image() {
 fn frames_show_lit_terrain_below_a_sky() {
     let ctx = common::gpu();
     let world = World::open(&common::default_world()).expect("open the default world");
-    let path = world.manifest.paths[0].clone();
+    let path = world
+        .manifest
+        .path("overview")
+        .expect("the default world has an overview path")
+        .clone();
     let config = SceneConfig::for_world(&world);
     let mut scene = Scene::new(&ctx, world, 160, 90, config).expect("build the scene");
     let camera = sample_path(&path, path.keys[0].t_s);

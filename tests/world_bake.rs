@@ -250,11 +250,19 @@ fn camera_paths_clear_the_terrain() {
     let dir = tempfile::tempdir().unwrap();
     let terrain = Terrain::load(&hills_world(dir.path()));
     let m = &terrain.world.manifest;
-    assert_eq!(m.paths[0].name, "overview");
-    let overview = terrain.clearances(&m.paths[0], 50);
+    assert_eq!(m.paths[0].name, "tour", "the tour is the default path");
+    let overview = terrain.clearances(m.path("overview").unwrap(), 50);
     assert!(overview.iter().all(|&c| c >= 50.0), "{overview:?}");
     let low = terrain.clearances(m.path("low").unwrap(), 50);
     assert!(low.iter().all(|&c| (30.0..=80.0).contains(&c)), "{low:?}");
+    for name in ["tour", "meadow"] {
+        let c = terrain.clearances(m.path(name).unwrap(), 50);
+        assert!(c.iter().all(|&c| c >= 1.0), "{name}: {c:?}");
+        assert!(
+            *c.last().unwrap() < 5.0,
+            "{name} ends low over the ground: {c:?}"
+        );
+    }
 }
 
 #[test]

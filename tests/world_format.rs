@@ -84,8 +84,8 @@ fn committed_world_manifest_parses_and_validates() {
     assert_eq!(m.pyramid.cell_size_m(2), 25.0);
     let names: Vec<&str> = m.grass_types.iter().map(|g| g.name.as_str()).collect();
     assert_eq!(names, ["bare", "meadow", "tall grass", "dry grass"]);
-    assert_eq!(m.paths[0].name, "overview");
-    assert!(m.path("low").is_some());
+    let names: Vec<&str> = m.paths.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["tour", "overview", "low", "meadow"]);
     assert!(m.height_range_m[0] >= 0.0 && m.height_range_m[1] <= 1000.0);
     // Text written by `to_toml` reads back to the same manifest.
     assert_eq!(parse(&m.to_toml()).unwrap(), m);
@@ -107,7 +107,7 @@ fn committed_world_tiles_all_load() {
 fn committed_world_camera_paths_clear_the_terrain() {
     let terrain = Terrain::load(&repo_world());
     let m = &terrain.world.manifest;
-    let overview = &m.paths[0];
+    let overview = m.path("overview").unwrap();
     assert!((50.0..=70.0).contains(&overview.duration_s));
     let c = terrain.clearances(overview, 40);
     let min = c.iter().copied().fold(f64::INFINITY, f64::min);
@@ -124,6 +124,15 @@ fn committed_world_camera_paths_clear_the_terrain() {
     assert!(
         min >= 30.0 && max <= 60.0,
         "low pass flies {min}..{max} m up"
+    );
+
+    // The tour descends from high above the hills to a glide over the meadow.
+    let c = terrain.clearances(m.path("tour").unwrap(), 40);
+    let min = c.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(min >= 1.0, "the tour dips to {min} m above the terrain");
+    assert!(
+        c[0] > 150.0 && *c.last().unwrap() < 5.0,
+        "tour clearances {c:?}"
     );
 }
 

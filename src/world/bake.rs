@@ -13,7 +13,8 @@
 //!    start from the parent's own values.
 //! 4. Every tile of every stored level is cut from that one global grid (borders included), so
 //!    neighbours share identical edge and border samples, and written through temporary files.
-//! 5. Three camera paths are computed from the terrain ("overview", "low" and "meadow") and `world.toml` is
+//! 5. Four camera paths are computed from the terrain ("tour", the default, "overview", "low"
+//!    and "meadow") and `world.toml` is
 //!    written last, so a world with a manifest is a complete world.
 //!
 //! The bake is deterministic: the same DEM, options and seed give byte-identical files.
@@ -177,8 +178,9 @@ pub fn bake(
     progress(BakeStage::Paths, 1, 2);
     let low = low_path(&painted, extent);
     let meadow = meadow_path(&painted, extent);
+    let tour = tour_path(&painted, extent);
     progress(BakeStage::Paths, 2, 2);
-    manifest.paths = vec![overview, low, meadow];
+    manifest.paths = vec![tour, overview, low, meadow];
     manifest.validate(&manifest_path)?;
 
     let tiles_written = write_all_tiles(&opts.out, &manifest.pyramid, &painted, progress)?;
@@ -749,6 +751,71 @@ fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         name: "low".into(),
         duration_s: DURATION,
         keys: keys_along(grid, &points, &times, LOW_CLEARANCE_M, 20.0, -8.0),
+    }
+}
+
+/// The tour, the default path: 30 s descending from high above the hills toward the meadow of
+/// the grassy line, then 20 s gliding a couple of metres above it at 8 m/s: terrain far and
+/// grass near in one flight.
+fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
+    const APPROACH_S: f64 = 30.0;
+    const GLIDE_S: f64 = 20.0;
+    const GLIDE_SPEED: f64 = 8.0;
+    const KEYS_A_SECOND: f64 = 1.0;
+    let grid = &painted.grid;
+    let e = DVec2::from(extent);
+    let (c, dir) = grassy_line(painted, extent);
+    let glide = GLIDE_SPEED * GLIDE_S;
+    let meadow_start = c - dir * (glide / 2.0);
+    // Start up to 2.5 km back along the line, inside the data area.
+    let mut back = 2500.0;
+    while back > 200.0 {
+        let a = meadow_start - dir * back;
+        if a.x > 0.05 * e.x && a.y > 0.05 * e.y && a.x < 0.95 * e.x && a.y < 0.95 * e.y {
+            break;
+        }
+        back *= 0.8;
+    }
+    let start = meadow_start - dir * back;
+    // Distance along the approach: cubic Hermite from 1.5 times the mean speed down to the
+    // glide's speed, so the camera slows smoothly into the glide.
+    let (v0, v1) = (1.5 * back / APPROACH_S, GLIDE_SPEED);
+    let along = |u: f64| {
+        let (u2, u3) = (u * u, u * u * u);
+        (u3 - 2.0 * u2 + u) * APPROACH_S * v0
+            + (-2.0 * u3 + 3.0 * u2) * back
+            + (u3 - u2) * APPROACH_S * v1
+    };
+    let n_approach = (APPROACH_S * KEYS_A_SECOND) as usize;
+    let n_glide = (GLIDE_S * KEYS_A_SECOND) as usize;
+    let mut times = Vec::new();
+    let mut points = Vec::new();
+    let mut clearance = Vec::new();
+    let mut pitch = Vec::new();
+    for k in 0..n_approach {
+        let u = k as f64 / n_approach as f64;
+        times.push(APPROACH_S * u);
+        points.push(start + dir * along(u));
+        let high = (1.0 - u) * (1.0 - u);
+        clearance.push(MEADOW_CLEARANCE_M + (OVERVIEW_CLEARANCE_M - MEADOW_CLEARANCE_M) * high);
+        pitch.push(-6.0 - 14.0 * high);
+    }
+    for k in 0..=n_glide {
+        let u = k as f64 / n_glide as f64;
+        times.push(APPROACH_S + GLIDE_S * u);
+        points.push(meadow_start + dir * (glide * u));
+        clearance.push(MEADOW_CLEARANCE_M);
+        pitch.push(-6.0);
+    }
+    let mut keys = keys_along(grid, &points, &times, 0.0, 2.0, 0.0);
+    for (k, key) in keys.iter_mut().enumerate() {
+        key.position_m[2] = round_to(key.position_m[2] + clearance[k], 2);
+        key.pitch_deg = round_to(pitch[k], 2);
+    }
+    CameraPath {
+        name: "tour".into(),
+        duration_s: APPROACH_S + GLIDE_S,
+        keys,
     }
 }
 
