@@ -22,7 +22,7 @@ struct Params {
     dims: vec4<f32>,
     // x, y: LOD fade band; z, w: dithered fade band ending at the view distance
     ranges: vec4<f32>,
-    // x: Hi-Z mips, y: slot capacity, z: grass types
+    // x: Hi-Z mips, y: slot capacity, z: grass types, w: blade segments (high | low << 16)
     limits: vec4<u32>,
     // Hi-Z levels: offset (floats), width, height
     hiz_levels: array<vec4<u32>, 16>,
@@ -364,7 +364,8 @@ fn finalize(@builtin(local_invocation_index) slot: u32) {
     var vertices = 0u;
     if slot < batch.count {
         let lod = min(jobs[batch.first + slot].lod, 1u);
-        vertices = select(15u, 7u, lod == 1u);
+        let segments = select(params.limits.w & 0xffffu, params.limits.w >> 16u, lod == 1u);
+        vertices = 2u * segments + 1u;
         atomicAdd(&stats[lod * 8u + OVERFLOW], wanted - drawn);
         atomicAdd(&stats[lod * 8u + DRAWN], drawn);
     }

@@ -92,6 +92,11 @@ enum Command {
         #[command(flatten)]
         stream: StreamArgs,
     },
+    /// Benchmarks of the renderer.
+    Bench {
+        #[command(subcommand)]
+        what: BenchCommand,
+    },
     /// Measure methods against real data and chart speed against accuracy.
     Eval {
         #[command(subcommand)]
@@ -121,6 +126,80 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         seed: u64,
     },
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// The LOD transition benchmark: popping across the ring boundary, and GPU time against
+    /// image error for a set of LOD settings, charted with the Pareto front.
+    Lod {
+        /// World folder, or the name of a world under ./worlds.
+        #[arg(default_value = "santa-cruz")]
+        world: String,
+        /// Output folder.
+        #[arg(long, default_value = "out/bench-lod")]
+        out: PathBuf,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "480x270", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Frames of the dolly.
+        #[arg(long, default_value_t = 48)]
+        dolly_frames: u32,
+        /// Timed frames per view and setting.
+        #[arg(long, default_value_t = 5)]
+        timed_frames: u32,
+    },
+}
+
+fn bench_lod(opts: verdant::flythrough::BenchLodOptions) -> Result<()> {
+    let mut bars: Vec<(String, ProgressBar)> = Vec::new();
+    let r = verdant::flythrough::run_bench_lod(&opts, &mut |stage, done, total| {
+        if bars.last().map(|(s, _)| s != stage).unwrap_or(true) {
+            if let Some((_, pb)) = bars.last() {
+                pb.finish();
+            }
+            bars.push((stage.to_owned(), bar(total, stage)));
+        }
+        if let Some((_, pb)) = bars.last() {
+            pb.set_position(done);
+        }
+    })?;
+    if let Some((_, pb)) = bars.last() {
+        pb.finish();
+    }
+    println!(
+        "{} [{}], {}x{}",
+        r.adapter.name, r.adapter.backend, r.size.0, r.size.1
+    );
+    println!(
+        "dolly: largest jump of the error against no LOD: {:.4} FLIP on frames with ring switches, {:.4} on frames without",
+        r.worst_pop, r.worst_change_without_switch
+    );
+    println!(
+        "{:<16} {:>9} {:>10} {:>9} {:>10} {:>7}",
+        "setting", "GPU ms", "frame ms", "FLIP", "blades", "front"
+    );
+    for s in &r.settings {
+        println!(
+            "{:<16} {:>9.2} {:>10.1} {:>9.4} {:>10.0} {:>7}",
+            s.setting.name,
+            s.gpu_ms,
+            s.frame_ms,
+            s.flip_mean,
+            s.blades_drawn,
+            if s.pareto { "yes" } else { "" }
+        );
+    }
+    println!(
+        "default setting {} the Pareto front; wrote {}",
+        if r.default_on_front {
+            "is on"
+        } else {
+            "is NOT on"
+        },
+        opts.out.display()
+    );
+    Ok(())
 }
 
 #[derive(Subcommand)]
@@ -447,6 +526,23 @@ fn run(cli: Cli) -> Result<()> {
             out,
             service: stream.service(),
             ..SoakOptions::default()
+        }),
+        Command::Bench {
+            what:
+                BenchCommand::Lod {
+                    world,
+                    out,
+                    size,
+                    dolly_frames,
+                    timed_frames,
+                },
+        } => bench_lod(verdant::flythrough::BenchLodOptions {
+            world: resolve_world(&world)?,
+            out,
+            size,
+            dolly_frames,
+            timed_frames,
+            path: None,
         }),
         Command::Eval {
             what: EvalCommand::Derive { dem, factor, out },

@@ -327,3 +327,50 @@ fn eval_derive_refuses_a_bad_factor() {
     );
     assert_fails_naming(&out, &["--factor", "3"]);
 }
+
+#[test]
+fn bench_lod_writes_its_tables_and_charts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = verdant(
+        &[
+            "bench",
+            "lod",
+            common::default_world().to_str().unwrap(),
+            "--size",
+            "96x54",
+            "--dolly-frames",
+            "4",
+            "--timed-frames",
+            "1",
+            "--out",
+            "b",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        out.status.success(),
+        "bench failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = tmp.path().join("b");
+    let dolly = std::fs::read_to_string(dir.join("dolly.csv")).unwrap();
+    assert_eq!(dolly.lines().count(), 5, "{dolly}");
+    let settings = std::fs::read_to_string(dir.join("lod_settings.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = settings
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows[0][0], "default");
+    assert!(rows.len() >= 8);
+    // More blades cost more: no LOD draws more than the default.
+    let blades = |name: &str| -> f64 {
+        rows.iter().find(|r| r[0] == name).unwrap()[9]
+            .parse()
+            .unwrap()
+    };
+    assert!(blades("no LOD") > blades("default"));
+    for f in ["dolly.png", "lod_settings.png", "bench_lod.json"] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+}

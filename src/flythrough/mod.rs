@@ -1,11 +1,15 @@
 //! Headless fly-throughs: a camera path rendered frame by frame to PNG, with a JSON report of
 //! what each frame drew and what it cost.
 
+mod bench_lod;
 mod camera;
 mod report;
 mod scene;
 mod soak;
 
+pub use bench_lod::{
+    BenchLodOptions, BenchLodReport, LodSetting, lod_settings, reference_setting, run_bench_lod,
+};
 pub use camera::{Camera, sample_path};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
 pub use scene::{FrameStats, Scene, SceneConfig, SceneError};

@@ -71,6 +71,8 @@ pub struct SceneConfig {
     pub mesh_step: u32,
     /// Blade spacing of the high-LOD grass grid, metres.
     pub grass_spacing_m: f32,
+    /// Blade segments at high and low LOD.
+    pub grass_segments: [u32; 2],
 }
 
 impl SceneConfig {
@@ -89,6 +91,7 @@ impl SceneConfig {
             clump_m: 1.6,
             short_m: 0.3,
             seed: 0x9a55,
+            segments: self.grass_segments,
         })
     }
 }
@@ -103,6 +106,7 @@ impl SceneConfig {
             grass: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
             mesh_step: 2,
             grass_spacing_m: 0.25,
+            grass_segments: [7, 3],
         }
     }
 }
@@ -282,6 +286,11 @@ impl Scene {
     /// The tile service (for its figures and residency queries).
     pub fn service(&self) -> &TileService {
         &self.service
+    }
+
+    /// The grass tiles of the last frame and their rings.
+    pub fn grass_rings(&self) -> Vec<(TileId, Ring)> {
+        self.rings.as_ref().map_or(Vec::new(), |r| r.current())
     }
 
     /// The tile atlas.

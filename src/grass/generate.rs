@@ -53,7 +53,8 @@ pub struct GenerateParams {
     /// x, y: distances over which the blades the low grid drops fade out (they are gone at y,
     /// the high ring's radius); z, w: dithered fade from z to the view distance w.
     pub ranges: [f32; 4],
-    /// x: Hi-Z mip count, y: slot capacity (blades), z: grass type count, w: unused.
+    /// x: Hi-Z mip count, y: slot capacity (blades), z: grass type count, w: blade segments,
+    /// high LOD in the low 16 bits, low LOD in the high 16.
     pub limits: [u32; 4],
     /// Hi-Z levels: offset (floats), width, height, unused.
     pub hiz_levels: [[u32; 4]; 16],

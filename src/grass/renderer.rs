@@ -44,6 +44,8 @@ pub struct GrassSettings {
     pub short_m: f32,
     /// Seed of every per-blade hash.
     pub seed: u32,
+    /// Segments of a blade at high and at low LOD (7 and 3: 15 and 7 vertices).
+    pub segments: [u32; 2],
 }
 
 impl GrassSettings {
@@ -410,7 +412,7 @@ impl GrassRenderer {
                 hiz.mips(),
                 capacity,
                 manifest.grass_types.len().min(16) as u32,
-                0,
+                settings.segments[0].clamp(1, 64) | (settings.segments[1].clamp(1, 64) << 16),
             ],
             hiz_levels: {
                 let mut t = [[0u32; 4]; 16];
@@ -614,8 +616,14 @@ impl GrassRenderer {
                 cache: None,
             })
         };
-        let draw_high = draw_pipeline("grass high LOD", 7.0);
-        let draw_low = draw_pipeline("grass low LOD", 3.0);
+        let draw_high = draw_pipeline(
+            "grass high LOD",
+            f64::from(settings.segments[0].clamp(1, 64)),
+        );
+        let draw_low = draw_pipeline(
+            "grass low LOD",
+            f64::from(settings.segments[1].clamp(1, 64)),
+        );
 
         let array_view = |t: &wgpu::Texture| {
             t.create_view(&wgpu::TextureViewDescriptor {

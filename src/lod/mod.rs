@@ -168,6 +168,13 @@ impl GrassRings {
         }
     }
 
+    /// The tiles of the last update and their rings.
+    pub fn current(&self) -> Vec<(TileId, Ring)> {
+        let mut v: Vec<(TileId, Ring)> = self.current.iter().map(|(k, r)| (*k, *r)).collect();
+        v.sort_by_key(|t| t.0);
+        v
+    }
+
     /// Updates the rings for a camera at `eye`; `height_range(tile)` bounds a tile's heights.
     /// Returns the grass tiles and their rings, nearest first.
     pub fn update(

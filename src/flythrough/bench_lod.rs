@@ -1,0 +1,469 @@
+//! `verdant bench lod`: the LOD transition benchmark.
+//!
+//! (a) Popping: a camera dolly over the meadow crosses the high/low ring boundary of many grass
+//! tiles. Each frame is rendered twice, with the default LOD settings and with no LOD (every
+//! tile high LOD), and the two are compared by FLIP. A pop would show as a jump of that error on
+//! a frame where tiles switch ring; the jumps on frames without switches are the noise floor.
+//! (b) Speed against accuracy: for a set of LOD settings (ring radii, blade spacing, segments,
+//! view distance), GPU time per frame (median of timed frames after a warm-up frame, from
+//! timestamp queries) against the FLIP error to a full-detail reference render, with the Pareto
+//! front; the default setting is marked.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use glam::DVec3;
+use serde::Serialize;
+
+use crate::flythrough::{AdapterReport, Camera, Scene, SceneConfig, sample_path, write_json};
+use crate::gpu::GpuContext;
+use crate::lod::RingSettings;
+use crate::metrics::{Chart, ChartPoint, LineChart, Series, Summary, flip_compare, pareto_front};
+use crate::world::World;
+
+/// What `verdant bench lod` is asked to do.
+#[derive(Clone, Debug)]
+pub struct BenchLodOptions {
+    /// The world's folder.
+    pub world: PathBuf,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Image size.
+    pub size: (u32, u32),
+    /// Frames of the dolly.
+    pub dolly_frames: u32,
+    /// Timed frames per view and setting (after one warm-up frame).
+    pub timed_frames: u32,
+    /// Camera path the views are taken from (default: "meadow", else the first path).
+    pub path: Option<String>,
+}
+
+impl Default for BenchLodOptions {
+    fn default() -> Self {
+        Self {
+            world: PathBuf::from("worlds/santa-cruz"),
+            out: PathBuf::from("out/bench-lod"),
+            size: (480, 270),
+            dolly_frames: 48,
+            timed_frames: 5,
+            path: None,
+        }
+    }
+}
+
+/// One LOD setting.
+#[derive(Clone, Debug, Serialize)]
+pub struct LodSetting {
+    /// Name in tables and charts.
+    pub name: String,
+    /// High-LOD ring radius, in grass tile edges.
+    pub high_radius_tiles: f64,
+    /// View distance (low-LOD ring radius), in grass tile edges.
+    pub view_distance_tiles: f64,
+    /// Blade spacing of the high-LOD grid, metres.
+    pub spacing_m: f32,
+    /// Blade segments at high and low LOD.
+    pub segments: [u32; 2],
+}
+
+impl LodSetting {
+    fn new(name: &str, high: f64, view: f64, spacing_m: f32, segments: [u32; 2]) -> Self {
+        Self {
+            name: name.into(),
+            high_radius_tiles: high,
+            view_distance_tiles: view,
+            spacing_m,
+            segments,
+        }
+    }
+
+    /// The scene configuration of this setting for `world`.
+    pub fn config(&self, world: &World) -> SceneConfig {
+        let mut c = SceneConfig::for_world(world);
+        let base = RingSettings::for_pyramid(&world.manifest.pyramid);
+        let size = world.manifest.pyramid.tile_size_m(base.level);
+        c.grass = Some(RingSettings {
+            high_radius_m: self.high_radius_tiles * size,
+            low_radius_m: self.view_distance_tiles * size,
+            ..base
+        });
+        c.grass_spacing_m = self.spacing_m;
+        c.grass_segments = self.segments;
+        c
+    }
+}
+
+/// The settings the benchmark compares; the first is the renderer's default.
+pub fn lod_settings(world: &World) -> Vec<LodSetting> {
+    let d = SceneConfig::for_world(world);
+    let rings = d
+        .grass
+        .unwrap_or_else(|| RingSettings::for_pyramid(&world.manifest.pyramid));
+    let size = world.manifest.pyramid.tile_size_m(rings.level);
+    let (h, v) = (rings.high_radius_m / size, rings.low_radius_m / size);
+    let (s, seg) = (d.grass_spacing_m, d.grass_segments);
+    vec![
+        LodSetting::new("default", h, v, s, seg),
+        LodSetting::new("near ring x0.5", h * 0.5, v, s, seg),
+        LodSetting::new("near ring x2", h * 2.0, v, s, seg),
+        LodSetting::new("view x0.67", h, v * 2.0 / 3.0, s, seg),
+        LodSetting::new("view x1.33", h, v * 4.0 / 3.0, s, seg),
+        LodSetting::new("spacing x1.4", h, v, s * 1.4, seg),
+        LodSetting::new("spacing x0.8", h, v, s * 0.8, seg),
+        LodSetting::new("segments 5/2", h, v, s, [5, 2]),
+        LodSetting::new("segments 3/1", h, v, s, [3, 1]),
+        LodSetting::new("no LOD", v, v, s, [seg[0], seg[0]]),
+    ]
+}
+
+/// The full-detail reference: every tile high LOD out to a third further than the default view.
+pub fn reference_setting(world: &World) -> LodSetting {
+    let s = &lod_settings(world)[0];
+    let v = s.view_distance_tiles * 4.0 / 3.0;
+    LodSetting::new(
+        "reference",
+        v,
+        v,
+        s.spacing_m,
+        [s.segments[0], s.segments[0]],
+    )
+}
+
+/// Result of one setting.
+#[derive(Clone, Debug, Serialize)]
+pub struct SettingResult {
+    /// The setting.
+    pub setting: LodSetting,
+    /// Median GPU time per frame over all passes, milliseconds (0 without timestamps).
+    pub gpu_ms: f64,
+    /// Median wall time per frame, milliseconds.
+    pub frame_ms: f64,
+    /// Mean FLIP error to the reference over the views.
+    pub flip_mean: f64,
+    /// Blades drawn per frame (median).
+    pub blades_drawn: f64,
+    /// On the Pareto front of GPU time against error.
+    pub pareto: bool,
+}
+
+/// One frame of the dolly.
+#[derive(Clone, Debug, Serialize)]
+pub struct DollyFrame {
+    /// Frame.
+    pub frame: u32,
+    /// FLIP error of the LOD frame against the no-LOD frame.
+    pub flip_vs_no_lod: f64,
+    /// FLIP change from the previous LOD frame.
+    pub change_lod: f64,
+    /// FLIP change from the previous no-LOD frame.
+    pub change_no_lod: f64,
+    /// How much `flip_vs_no_lod` moved since the previous frame: a pop shows as a jump.
+    pub jump: f64,
+    /// Grass tiles that changed ring this frame.
+    pub ring_switches: u32,
+}
+
+/// Everything `bench_lod.json` holds.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchLodReport {
+    /// The adapter.
+    pub adapter: AdapterReport,
+    /// Image size.
+    pub size: (u32, u32),
+    /// The dolly.
+    pub dolly: Vec<DollyFrame>,
+    /// Largest jump of the LOD run's error against the no-LOD run on a frame where grass tiles
+    /// switched ring: the popping, as a number.
+    pub worst_pop: f64,
+    /// The same on frames without switches (the noise floor of the measure).
+    pub worst_change_without_switch: f64,
+    /// The settings.
+    pub settings: Vec<SettingResult>,
+    /// Whether the default setting is on the Pareto front.
+    pub default_on_front: bool,
+}
+
+fn rgb(img: &image::RgbaImage) -> image::RgbImage {
+    image::DynamicImage::ImageRgba8(img.clone()).to_rgb8()
+}
+
+fn flip(a: &image::RgbaImage, b: &image::RgbaImage) -> Result<f64> {
+    Ok(f64::from(flip_compare(&rgb(a), &rgb(b))?.mean))
+}
+
+struct Bench<'a> {
+    ctx: &'a GpuContext,
+    world: &'a World,
+    size: (u32, u32),
+}
+
+impl Bench<'_> {
+    fn scene(&self, setting: &LodSetting) -> Result<Scene> {
+        Ok(Scene::new(
+            self.ctx,
+            self.world.clone(),
+            self.size.0,
+            self.size.1,
+            setting.config(self.world),
+        )?)
+    }
+
+    /// Renders `camera` after bringing its tiles in; returns the image and the stats.
+    fn frame(
+        &self,
+        scene: &mut Scene,
+        camera: &Camera,
+    ) -> Result<(image::RgbaImage, crate::flythrough::FrameStats)> {
+        scene.warm_up(self.ctx, camera, std::time::Duration::from_secs(60))?;
+        let stats = scene.render(self.ctx, camera)?;
+        Ok((scene.read_image(self.ctx)?, stats))
+    }
+}
+
+/// Runs the benchmark and writes `bench_lod.json`, `dolly.csv`, `dolly.png`, `lod_settings.csv`
+/// and `lod_settings.png` into `opts.out`.
+pub fn run_bench_lod(
+    opts: &BenchLodOptions,
+    progress: &mut dyn FnMut(&str, u64, u64),
+) -> Result<BenchLodReport> {
+    let world = World::open(&opts.world)?;
+    let path = match &opts.path {
+        Some(n) => world
+            .manifest
+            .path(n)
+            .cloned()
+            .with_context(|| format!("no camera path {n:?}"))?,
+        None => match world
+            .manifest
+            .path("meadow")
+            .or(world.manifest.paths.first())
+        {
+            Some(p) => p.clone(),
+            None => bail!("world {} has no camera paths", opts.world.display()),
+        },
+    };
+    std::fs::create_dir_all(&opts.out)
+        .with_context(|| format!("cannot create {}", opts.out.display()))?;
+    let ctx = GpuContext::new()?;
+    let bench = Bench {
+        ctx: &ctx,
+        world: &world,
+        size: opts.size,
+    };
+    let settings = lod_settings(&world);
+
+    // (a) The dolly: forward along the path's direction, from where the path starts.
+    let start = sample_path(&path, path.keys[0].t_s);
+    let ring_m = settings[0].high_radius_tiles
+        * world
+            .manifest
+            .pyramid
+            .tile_size_m(RingSettings::for_pyramid(&world.manifest.pyramid).level);
+    // Far enough that tiles ahead cross the high/low boundary during the dolly.
+    let step = 1.5 * ring_m / f64::from(opts.dolly_frames.max(2));
+    let mut lod_scene = bench.scene(&settings[0])?;
+    let no_lod = settings
+        .iter()
+        .find(|s| s.name == "no LOD")
+        .expect("the no-LOD setting")
+        .clone();
+    let mut full_scene = bench.scene(&no_lod)?;
+    let mut dolly = Vec::new();
+    let mut prev: Option<(image::RgbaImage, image::RgbaImage)> = None;
+    let mut prev_rings: Option<Vec<(crate::world::TileId, crate::lod::Ring)>> = None;
+    for f in 0..opts.dolly_frames {
+        let fwd = start.forward();
+        let horizontal = DVec3::new(fwd.x, fwd.y, 0.0).normalize_or_zero();
+        let mut cam = start;
+        cam.position += horizontal * step * f64::from(f);
+        let (a, _) = bench.frame(&mut lod_scene, &cam)?;
+        let rings = lod_scene.grass_rings();
+        let (b, _) = bench.frame(&mut full_scene, &cam)?;
+        let switches = match &prev_rings {
+            Some(p) => rings
+                .iter()
+                .filter(|r| p.iter().any(|q| q.0 == r.0 && q.1 != r.1))
+                .count() as u32,
+            None => 0,
+        };
+        let (change_lod, change_no_lod) = match &prev {
+            Some((pa, pb)) => (flip(pa, &a)?, flip(pb, &b)?),
+            None => (0.0, 0.0),
+        };
+        let e = flip(&a, &b)?;
+        let jump = dolly
+            .last()
+            .map_or(0.0, |d: &DollyFrame| (e - d.flip_vs_no_lod).abs());
+        dolly.push(DollyFrame {
+            frame: f,
+            flip_vs_no_lod: e,
+            change_lod,
+            change_no_lod,
+            jump,
+            ring_switches: switches,
+        });
+        prev = Some((a, b));
+        prev_rings = Some(rings);
+        progress("dolly", u64::from(f) + 1, u64::from(opts.dolly_frames));
+    }
+    drop((lod_scene, full_scene));
+    let worst_pop = dolly
+        .iter()
+        .skip(1)
+        .filter(|d| d.ring_switches > 0)
+        .map(|d| d.jump)
+        .fold(0.0, f64::max);
+    let worst_change_without_switch = dolly
+        .iter()
+        .skip(1)
+        .filter(|d| d.ring_switches == 0)
+        .map(|d| d.jump)
+        .fold(0.0, f64::max);
+
+    // (b) Settings against the reference, at four views along the path.
+    let views: Vec<Camera> = [0.1, 0.35, 0.6, 0.85]
+        .iter()
+        .map(|u| sample_path(&path, path.keys[0].t_s + u * path.duration_s))
+        .collect();
+    let mut reference = bench.scene(&reference_setting(&world))?;
+    let mut ref_images = Vec::new();
+    for v in &views {
+        ref_images.push(bench.frame(&mut reference, v)?.0);
+    }
+    drop(reference);
+    let mut results = Vec::new();
+    let total = settings.len() as u64;
+    for (k, s) in settings.iter().enumerate() {
+        let mut scene = bench.scene(s)?;
+        let (mut gpu, mut wall, mut flips, mut blades) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for (v, r) in views.iter().zip(&ref_images) {
+            let (img, _) = bench.frame(&mut scene, v)?; // warm-up frame
+            flips.push(flip(&img, r)?);
+            for _ in 0..opts.timed_frames {
+                let t0 = std::time::Instant::now();
+                let stats = scene.render(&ctx, v)?;
+                ctx.wait_idle();
+                wall.push(t0.elapsed().as_secs_f64() * 1e3);
+                gpu.push(stats.gpu.iter().map(|(_, ms)| ms).sum::<f64>());
+                blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
+            }
+        }
+        results.push(SettingResult {
+            setting: s.clone(),
+            gpu_ms: Summary::of(&gpu).median,
+            frame_ms: Summary::of(&wall).median,
+            flip_mean: flips.iter().sum::<f64>() / flips.len() as f64,
+            blades_drawn: Summary::of(&blades).median,
+            pareto: false,
+        });
+        progress("settings", k as u64 + 1, total);
+    }
+    // Time is GPU time when the adapter has timestamps, else wall time.
+    let time = |r: &SettingResult| if ctx.timestamps { r.gpu_ms } else { r.frame_ms };
+    let xy: Vec<(f64, f64)> = results.iter().map(|r| (time(r), r.flip_mean)).collect();
+    for i in pareto_front(&xy) {
+        results[i].pareto = true;
+    }
+
+    write_outputs(opts, &dolly, &results, ctx.timestamps)?;
+    let report = BenchLodReport {
+        adapter: AdapterReport::of(&ctx),
+        size: opts.size,
+        worst_pop,
+        worst_change_without_switch,
+        default_on_front: results[0].pareto,
+        dolly,
+        settings: results,
+    };
+    write_json(&opts.out.join("bench_lod.json"), &report)?;
+    Ok(report)
+}
+
+fn write_outputs(
+    opts: &BenchLodOptions,
+    dolly: &[DollyFrame],
+    results: &[SettingResult],
+    gpu: bool,
+) -> Result<()> {
+    use std::fmt::Write as _;
+    let mut csv =
+        String::from("frame,flip_vs_no_lod,jump,change_lod,change_no_lod,ring_switches\n");
+    for d in dolly {
+        let _ = writeln!(
+            csv,
+            "{},{:.5},{:.5},{:.5},{:.5},{}",
+            d.frame, d.flip_vs_no_lod, d.jump, d.change_lod, d.change_no_lod, d.ring_switches
+        );
+    }
+    std::fs::write(opts.out.join("dolly.csv"), csv)?;
+    let line =
+        |f: &dyn Fn(&DollyFrame) -> f64| dolly.iter().map(|d| (f64::from(d.frame), f(d))).collect();
+    LineChart {
+        title: "LOD dolly across the ring boundary".into(),
+        x_label: "frame".into(),
+        y_label: "FLIP".into(),
+        log_x: false,
+        log_y: false,
+        series: vec![
+            Series {
+                name: "LOD vs no LOD".into(),
+                points: line(&|d| d.flip_vs_no_lod),
+            },
+            Series {
+                name: "jump of that error".into(),
+                points: line(&|d| d.jump),
+            },
+            Series {
+                name: "ring switches / 1000".into(),
+                points: line(&|d| f64::from(d.ring_switches) / 1000.0),
+            },
+        ],
+    }
+    .write_png(&opts.out.join("dolly.png"), 900, 600)?;
+
+    let mut csv = String::from(
+        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_high,segments_low,gpu_ms,frame_ms,flip_mean,blades_drawn,pareto\n",
+    );
+    for r in results {
+        let s = &r.setting;
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{:.3},{:.3},{:.5},{:.0},{}",
+            s.name,
+            s.high_radius_tiles,
+            s.view_distance_tiles,
+            s.spacing_m,
+            s.segments[0],
+            s.segments[1],
+            r.gpu_ms,
+            r.frame_ms,
+            r.flip_mean,
+            r.blades_drawn,
+            r.pareto
+        );
+    }
+    std::fs::write(opts.out.join("lod_settings.csv"), csv)?;
+    Chart {
+        title: "Grass LOD settings: speed against accuracy".into(),
+        x_label: if gpu {
+            "GPU time per frame (ms)".into()
+        } else {
+            "frame time (ms)".into()
+        },
+        y_label: "FLIP error vs full-detail reference".into(),
+        log_x: true,
+        log_y: false,
+        points: results
+            .iter()
+            .map(|r| ChartPoint {
+                label: r.setting.name.clone(),
+                x: if gpu { r.gpu_ms } else { r.frame_ms },
+                y: r.flip_mean,
+                chosen: r.setting.name == "default",
+            })
+            .collect(),
+    }
+    .write_png(&opts.out.join("lod_settings.png"), 900, 600)?;
+    Ok(())
+}
