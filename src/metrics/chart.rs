@@ -116,6 +116,15 @@ fn short_number(v: f64) -> String {
     }
 }
 
+/// Whether values span enough of a range (a factor of 5) for a log axis to show ticks; a
+/// narrower range is drawn on a linear axis.
+fn spans_decades(values: impl Iterator<Item = f64>) -> bool {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(v), h.max(v)));
+    lo <= hi && hi / lo >= 5.0
+}
+
 fn range(values: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
     let (mut lo, mut hi) = values
         .filter(|v| v.is_finite() && (!log || *v > 0.0))
@@ -160,8 +169,10 @@ impl Chart {
         {
             let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
             root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
-            let xr = range(self.points.iter().map(|p| p.x), self.log_x);
-            let yr = range(self.points.iter().map(|p| p.y), self.log_y);
+            let log_x = self.log_x && spans_decades(self.points.iter().map(|p| p.x));
+            let log_y = self.log_y && spans_decades(self.points.iter().map(|p| p.y));
+            let xr = range(self.points.iter().map(|p| p.x), log_x);
+            let yr = range(self.points.iter().map(|p| p.y), log_y);
             macro_rules! draw {
                 ($x:expr, $y:expr) => {{
                     let mut chart = ChartBuilder::on(&root)
@@ -236,7 +247,7 @@ impl Chart {
                         .map_err(|e| err(e.to_string()))?;
                 }};
             }
-            match (self.log_x, self.log_y) {
+            match (log_x, log_y) {
                 (true, true) => draw!((xr.0..xr.1).log_scale(), (yr.0..yr.1).log_scale()),
                 (true, false) => draw!((xr.0..xr.1).log_scale(), yr.0..yr.1),
                 (false, true) => draw!(xr.0..xr.1, (yr.0..yr.1).log_scale()),
