@@ -9,11 +9,13 @@
 //!   timestamp timing and readback.
 //! - [`grass`]: GPU grass: blade generation and culling (CPU mirrors), the instance pool.
 //! - [`terrain`]: the terrain and sky passes (`shaders/terrain.wgsl`).
+//! - [`features`]: the grass model's switchable features.
 //! - [`flythrough`]: cameras, camera paths, the headless fly-through and its report.
 //! - [`metrics`]: percentiles and image error (FLIP).
 //! - [`wind`]: the grass sway spring and its integrators (`verdant eval sway`); the wind field
 //!   follows.
 
+pub mod features;
 pub mod flythrough;
 pub mod gpu;
 pub mod grass;

@@ -145,6 +145,9 @@ enum BenchCommand {
         /// Frames of the dolly.
         #[arg(long, default_value_t = 48)]
         dolly_frames: u32,
+        /// Untimed frames per view and setting before the timed ones.
+        #[arg(long, default_value_t = 3)]
+        warmup_frames: u32,
         /// Timed frames per view and setting.
         #[arg(long, default_value_t = 5)]
         timed_frames: u32,
@@ -534,6 +537,7 @@ fn run(cli: Cli) -> Result<()> {
                     out,
                     size,
                     dolly_frames,
+                    warmup_frames,
                     timed_frames,
                 },
         } => bench_lod(verdant::flythrough::BenchLodOptions {
@@ -541,6 +545,7 @@ fn run(cli: Cli) -> Result<()> {
             out,
             size,
             dolly_frames,
+            warmup_frames,
             timed_frames,
             path: None,
         }),
