@@ -566,9 +566,9 @@ fn ambient_is_continuous_across_window_restarts_and_never_repeats() {
     }
 
     // No repetition: a window period later the field is a different one.
-    let mean =
+    let field_at =
         |t: f64| -> Vec<Vec2> { points.iter().map(|p| ambient_at(&config, *p, t)).collect() };
-    let now = mean(2.0 * period + 30.0);
+    let now = field_at(2.0 * period + 30.0);
     let avg = now.iter().copied().sum::<Vec2>() / now.len() as f32;
     let spread =
         (now.iter().map(|v| (*v - avg).length_squared()).sum::<f32>() / now.len() as f32).sqrt();
@@ -578,7 +578,7 @@ fn ambient_is_continuous_across_window_restarts_and_never_repeats() {
     );
     assert!((avg.length() - 4.0).abs() < 1.0, "mean wind {avg}");
     for later in [1.0, 2.0, 7.0] {
-        let then = mean(2.0 * period + 30.0 + later * period);
+        let then = field_at(2.0 * period + 30.0 + later * period);
         let rms = (now
             .iter()
             .zip(&then)
