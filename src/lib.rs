@@ -13,7 +13,8 @@
 //! - [`flythrough`]: cameras, camera paths, the headless fly-through and its report.
 //! - [`metrics`]: percentiles and image error (FLIP).
 //! - [`wind`]: the grass sway spring and its integrators (`verdant eval sway`); the wind field
-//!   follows.
+//!   around the camera (ambient noise, sources, trail) on the GPU with its CPU mirror, and the
+//!   wind scenes of a world made ready to run.
 
 pub mod features;
 pub mod flythrough;

@@ -255,6 +255,8 @@ fn camera_paths_clear_the_terrain() {
     assert!(overview.iter().all(|&c| c >= 50.0), "{overview:?}");
     let low = terrain.clearances(m.path("low").unwrap(), 50);
     assert!(low.iter().all(|&c| (30.0..=80.0).contains(&c)), "{low:?}");
+    let heli = terrain.clearances(m.path("helicopter").unwrap(), 50);
+    assert!(heli.iter().all(|&c| c >= 15.0), "{heli:?}");
     for name in ["tour", "meadow"] {
         let c = terrain.clearances(m.path(name).unwrap(), 50);
         assert!(c.iter().all(|&c| c >= 1.0), "{name}: {c:?}");

@@ -85,7 +85,7 @@ fn committed_world_manifest_parses_and_validates() {
     let names: Vec<&str> = m.grass_types.iter().map(|g| g.name.as_str()).collect();
     assert_eq!(names, ["bare", "meadow", "tall grass", "dry grass"]);
     let names: Vec<&str> = m.paths.iter().map(|p| p.name.as_str()).collect();
-    assert_eq!(names, ["tour", "overview", "low", "meadow"]);
+    assert_eq!(names, ["tour", "overview", "low", "meadow", "helicopter"]);
     assert!(m.height_range_m[0] >= 0.0 && m.height_range_m[1] <= 1000.0);
     // Text written by `to_toml` reads back to the same manifest.
     assert_eq!(parse(&m.to_toml()).unwrap(), m);
@@ -134,6 +134,22 @@ fn committed_world_camera_paths_clear_the_terrain() {
         c[0] > 150.0 && *c.last().unwrap() < 5.0,
         "tour clearances {c:?}"
     );
+
+    // The helicopter hovers 15-20 m over the meadow, slowly.
+    let heli = m.path("helicopter").unwrap();
+    let c = terrain.clearances(heli, 40);
+    let min = c.iter().copied().fold(f64::INFINITY, f64::min);
+    let max = c.iter().copied().fold(0.0, f64::max);
+    assert!(
+        min >= 15.0 && max <= 20.0,
+        "the helicopter flies {min}..{max} m up"
+    );
+    let (a, b) = (
+        heli.keys[0].position_m,
+        heli.keys.last().unwrap().position_m,
+    );
+    let speed = (b[0] - a[0]).hypot(b[1] - a[1]) / heli.duration_s;
+    assert!(speed <= 8.0, "the helicopter passes at {speed} m/s");
 }
 
 #[test]

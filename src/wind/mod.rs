@@ -1,12 +1,28 @@
-//! Wind: the sway spring and its integrators (the wind field follows).
+//! Wind: the grass sway spring and the wind field around the camera.
 //!
 //! - [`sway`]: the damped spring each grass blade sways on, three ways to step it
 //!   ([`Integrator`]), the one the renderer uses ([`RENDERER_INTEGRATOR`]), and
 //!   `verdant eval sway`, which measures their error, cost and stability at frame times from
 //!   1/240 s to 1/5 s and at 0.5 s hitches.
+//! - [`config`]: a wind scene of the manifest made ready to run ([`WindConfig`]) and each
+//!   frame's uniforms ([`FieldDriver`], [`FieldParams`], [`WindLookup`]).
+//! - [`field`]: the wind field on the GPU ([`WindField`], `shaders/wind_field.wgsl`): ambient
+//!   noise that never repeats, sources (directional, omni, vortex), decay toward the ambient
+//!   wind and the walker's trail, in a toroidal grid of cells that follows the camera; how
+//!   another shader reads it (`shaders/wind_lookup.wgsl`).
+//! - [`field_cpu`]: its CPU mirror ([`WindFieldCpu`], [`ambient_at`]).
 
+pub mod config;
+pub mod field;
+pub mod field_cpu;
 pub mod sway;
 
+pub use config::{
+    AmbientWind, CellState, FieldDriver, FieldParams, SourceConfig, SourceGpu, WindConfig,
+    WindError, WindLookup,
+};
+pub use field::{WIND_LOOKUP_WGSL, WindField};
+pub use field_cpu::{WindFieldCpu, ambient_at};
 pub use sway::{
     Integrator, Preset, RENDERER_INTEGRATOR, SwayResult, SwaySpring, SwayState, bounded_for,
     run_sway_eval,

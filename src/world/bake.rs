@@ -13,9 +13,10 @@
 //!    start from the parent's own values.
 //! 4. Every tile of every stored level is cut from that one global grid (borders included), so
 //!    neighbours share identical edge and border samples, and written through temporary files.
-//! 5. Four camera paths are computed from the terrain ("tour", the default, "overview", "low"
-//!    and "meadow") and `world.toml` is
-//!    written last, so a world with a manifest is a complete world.
+//! 5. Five camera paths are computed from the terrain ("tour", the default, "overview", "low",
+//!    "meadow" and "helicopter"), four wind scenes are added ("calm", "breeze", "storm" and
+//!    "helicopter", see [`default_wind_scenes`]), and `world.toml` is written last, so a world
+//!    with a manifest is a complete world.
 //!
 //! The bake is deterministic: the same DEM, options and seed give byte-identical files.
 
@@ -28,7 +29,9 @@ use glam::DVec2;
 use super::dem::Dem;
 use super::error::WorldError;
 use super::format::{TileData, write_atomic, write_tile};
-use super::manifest::{CameraKey, CameraPath, GrassType, Manifest, Sky, WindDefaults};
+use super::manifest::{
+    CameraKey, CameraPath, GrassType, Manifest, Sky, WindDefaults, WindScene, WindSource,
+};
 use super::tile::{Pyramid, TileId};
 
 /// Shared samples beyond each tile edge in baked worlds.
@@ -164,6 +167,7 @@ pub fn bake(
         wind: WindDefaults::default(),
         sky: Sky::default(),
         paths: Vec::new(),
+        wind_scenes: Vec::new(),
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;
@@ -179,8 +183,10 @@ pub fn bake(
     let low = low_path(&painted, extent);
     let meadow = meadow_path(&painted, extent);
     let tour = tour_path(&painted, extent);
+    let helicopter = helicopter_path(&painted, extent);
     progress(BakeStage::Paths, 2, 2);
-    manifest.paths = vec![tour, overview, low, meadow];
+    manifest.paths = vec![tour, overview, low, meadow, helicopter];
+    manifest.wind_scenes = default_wind_scenes();
     manifest.validate(&manifest_path)?;
 
     let tiles_written = write_all_tiles(&opts.out, &manifest.pyramid, &painted, progress)?;
@@ -592,6 +598,82 @@ const LOW_CLEARANCE_M: f64 = 32.0;
 /// Height of the meadow glide above the highest ground near it, metres.
 const MEADOW_CLEARANCE_M: f64 = 2.0;
 
+/// Name of the baked camera path that the `helicopter` wind scene's downwash follows.
+pub const HELICOPTER_PATH: &str = "helicopter";
+
+/// The wind scenes of a baked world, the ambient wind of each blowing toward 20 degrees (east-
+/// north-east), as [`WindDefaults::default`]:
+/// - `calm`: 0.8 m/s, hardly gusting;
+/// - `breeze`: 4 m/s, gustiness 0.35 (the world's default wind);
+/// - `storm`: 14 m/s, gustiness 0.8, with two directional gust sources that swell and fade on
+///   periods of 17 s and 23 s (so together they repeat only every 391 s), slightly off the mean
+///   direction;
+/// - `helicopter`: the breeze, plus a rotor's downwash following the `helicopter` camera path:
+///   an omni source (12 m/s outward, radius 25 m) and a vortex (4 m/s clockwise swirl,
+///   radius 25 m), both spinning up over the first 2 s.
+pub fn default_wind_scenes() -> Vec<WindScene> {
+    let ambient = |speed_mps: f32, gustiness: f32| WindDefaults {
+        direction_deg: 20.0,
+        speed_mps,
+        gustiness,
+    };
+    let gust = |direction_deg: f64, speed_mps: f64, period_s: f64| WindSource::Directional {
+        direction_deg,
+        speed_mps,
+        position_m: None,
+        path: None,
+        start_s: 0.0,
+        strength: [(0.0, 0.0), (0.35, 0.0), (0.55, 1.0), (0.7, 1.0), (1.0, 0.0)]
+            .map(|(u, f)| [round_to(period_s * u, 2), f])
+            .to_vec(),
+        repeat: true,
+    };
+    let spin_up = vec![[0.0, 0.0], [2.0, 1.0]];
+    vec![
+        WindScene {
+            name: "calm".into(),
+            ambient: ambient(0.8, 0.15),
+            sources: Vec::new(),
+        },
+        WindScene {
+            name: "breeze".into(),
+            ambient: ambient(4.0, 0.35),
+            sources: Vec::new(),
+        },
+        WindScene {
+            name: "storm".into(),
+            ambient: ambient(14.0, 0.8),
+            sources: vec![gust(35.0, 6.0, 17.0), gust(5.0, 5.0, 23.0)],
+        },
+        WindScene {
+            name: "helicopter".into(),
+            ambient: ambient(4.0, 0.35),
+            sources: vec![
+                WindSource::Omni {
+                    radius_m: 25.0,
+                    speed_mps: 12.0,
+                    position_m: None,
+                    path: Some(HELICOPTER_PATH.into()),
+                    start_s: 0.0,
+                    strength: spin_up.clone(),
+                    repeat: false,
+                },
+                WindSource::Vortex {
+                    radius_m: 25.0,
+                    speed_mps: 4.0,
+                    clockwise: true,
+                    inflow_mps: 0.0,
+                    position_m: None,
+                    path: Some(HELICOPTER_PATH.into()),
+                    start_s: 0.0,
+                    strength: spin_up,
+                    repeat: false,
+                },
+            ],
+        },
+    ]
+}
+
 /// Highest terrain within `half_width` of the polyline through `points`, sampled every `step`.
 fn max_terrain_along(grid: &Grid, points: &[DVec2], half_width: f64, step: f64) -> f64 {
     let mut best = f64::NEG_INFINITY;
@@ -838,6 +920,32 @@ fn meadow_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         name: "meadow".into(),
         duration_s: DURATION,
         keys: keys_along(grid, &points, &times, MEADOW_CLEARANCE_M, 2.0, -6.0),
+    }
+}
+
+/// Height of the helicopter above the highest ground near its pass, metres.
+const HELICOPTER_CLEARANCE_M: f64 = 16.0;
+
+/// A 20 s pass at 5 m/s, 16 m above the highest ground near it, over the meadow in the middle of
+/// the grassy line, looking ahead and down: the helicopter that the `helicopter` wind scene's
+/// downwash follows.
+fn helicopter_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
+    const LENGTH: f64 = 100.0;
+    const DURATION: f64 = 20.0;
+    const KEYS: usize = 11;
+    let grid = &painted.grid;
+    let (c, dir) = grassy_line(painted, extent);
+    let times: Vec<f64> = (0..KEYS)
+        .map(|k| DURATION * k as f64 / (KEYS - 1) as f64)
+        .collect();
+    let points: Vec<DVec2> = times
+        .iter()
+        .map(|t| c + dir * LENGTH * (t / DURATION - 0.5))
+        .collect();
+    CameraPath {
+        name: HELICOPTER_PATH.into(),
+        duration_s: DURATION,
+        keys: keys_along(grid, &points, &times, HELICOPTER_CLEARANCE_M, 5.0, -30.0),
     }
 }
 

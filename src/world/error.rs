@@ -67,6 +67,17 @@ pub enum WorldError {
         value: f64,
     },
 
+    /// A speed, time or factor that must not be negative is negative.
+    #[error("{}: {field} = {value}: must not be negative", path.display())]
+    Negative {
+        /// The file holding the value.
+        path: PathBuf,
+        /// The field.
+        field: String,
+        /// The value found.
+        value: f64,
+    },
+
     /// A size or count lies outside what the format supports.
     #[error("{}: {field} = {value}: must be {allowed}", path.display())]
     OutOfRange {
@@ -189,6 +200,55 @@ pub enum WorldError {
         path: PathBuf,
         /// The repeated name.
         name: String,
+    },
+
+    /// Two wind scenes share a name.
+    #[error("{}: wind scene name \"{name}\" is used more than once", path.display())]
+    DuplicateWindScene {
+        /// The manifest file.
+        path: PathBuf,
+        /// The repeated name.
+        name: String,
+    },
+
+    /// A wind source refers to a camera path that the manifest does not have.
+    #[error("{}: {field} = \"{name}\": no camera path has this name", path.display())]
+    UnknownPathRef {
+        /// The manifest file.
+        path: PathBuf,
+        /// The field holding the reference (e.g. `wind_scenes[3].sources[0].path`).
+        field: String,
+        /// The name referred to.
+        name: String,
+    },
+
+    /// A wind source has both a position and a path, or neither where it needs one.
+    #[error("{}: {field} {message}", path.display())]
+    WindSourcePlacement {
+        /// The manifest file.
+        path: PathBuf,
+        /// The source (e.g. `wind_scenes[3].sources[0]`).
+        field: String,
+        /// What is wrong.
+        message: String,
+    },
+
+    /// A wind source's strength keys are not in strictly increasing time order.
+    #[error(
+        "{}: {field}[{index}] time {t_s} does not come after the previous key's {previous_t_s}",
+        path.display()
+    )]
+    StrengthKeysOutOfOrder {
+        /// The manifest file.
+        path: PathBuf,
+        /// The keys' field (e.g. `wind_scenes[2].sources[1].strength`).
+        field: String,
+        /// Index of the offending key.
+        index: usize,
+        /// Its time.
+        t_s: f64,
+        /// The time of the key before it.
+        previous_t_s: f64,
     },
 
     /// A tile was asked for that the world does not store.
@@ -343,6 +403,11 @@ impl WorldError {
             | ManifestSyntax { path, .. }
             | NonFinite { path, .. }
             | NonPositive { path, .. }
+            | Negative { path, .. }
+            | DuplicateWindScene { path, .. }
+            | UnknownPathRef { path, .. }
+            | WindSourcePlacement { path, .. }
+            | StrengthKeysOutOfOrder { path, .. }
             | OutOfRange { path, .. }
             | TooManyTiles { path, .. }
             | ExtentBeyondGrid { path, .. }

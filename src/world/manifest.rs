@@ -1,5 +1,5 @@
 //! The world manifest, `worlds/NAME/world.toml`: extent, tile pyramid, height range, grass types,
-//! wind and sky defaults and named camera paths. Parsed with serde, then checked by
+//! wind and sky defaults, named camera paths and named wind scenes. Parsed with serde, then checked by
 //! [`Manifest::validate`] so that a world that asks for too much is refused before anything is
 //! loaded.
 //!
@@ -50,6 +50,9 @@ pub struct Manifest {
     /// Named camera paths; the first is the default.
     #[serde(default)]
     pub paths: Vec<CameraPath>,
+    /// Named wind scenes: an ambient wind and the wind sources acting in it.
+    #[serde(default)]
+    pub wind_scenes: Vec<WindScene>,
 }
 
 /// One kind of grass (or, at index 0, bare ground).
@@ -92,6 +95,217 @@ impl Default for WindDefaults {
             speed_mps: 4.0,
             gustiness: 0.35,
         }
+    }
+}
+
+/// Most wind sources a wind scene may have (the wind field's uniform holds this many).
+pub const MAX_WIND_SOURCES: usize = 8;
+
+/// A named wind scene: the ambient wind and the sources that act in it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WindScene {
+    /// Name, unique within the world (e.g. `breeze`).
+    pub name: String,
+    /// The ambient wind: mean direction and speed, and gustiness.
+    #[serde(default)]
+    pub ambient: WindDefaults,
+    /// Wind sources, summed like lights; at most [`MAX_WIND_SOURCES`].
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sources: Vec<WindSource>,
+}
+
+/// A wind source (a "wind motor"), tagged by `kind`.
+///
+/// Every kind has the same placement and timing fields: `position_m` (a fixed point) or `path`
+/// (the name of a camera path of the world: the source follows that path's positions, looping
+/// over its duration), `start_s` (the source acts from this scene time on; path and strength
+/// times count from it) and `strength` (keys `[time_s, factor]`, strictly increasing in time,
+/// linear in between, held before the first and after the last key; empty means a constant 1;
+/// with `repeat` the keys repeat with the last key's time as period).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum WindSource {
+    /// A uniform wind everywhere (placement is ignored).
+    Directional {
+        /// Direction the wind blows toward, degrees counter-clockwise from east.
+        direction_deg: f64,
+        /// Speed, metres per second.
+        speed_mps: f64,
+        /// Fixed position (unused by this kind; allowed for symmetry).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        position_m: Option<[f64; 2]>,
+        /// Camera path followed (unused by this kind; allowed for symmetry).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        path: Option<String>,
+        /// Scene time the source starts acting, seconds.
+        #[serde(default)]
+        start_s: f64,
+        /// Strength keys `[time_s, factor]` from `start_s`.
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        strength: Vec<[f64; 2]>,
+        /// Whether the strength keys repeat.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        repeat: bool,
+    },
+    /// A point blowing outward in every direction: `speed_mps` near the centre, falling off as
+    /// `(1 - d / radius)^2` to nothing at `radius_m`.
+    Omni {
+        /// Reach, metres.
+        radius_m: f64,
+        /// Outward speed at the centre, metres per second.
+        speed_mps: f64,
+        /// Fixed position, metres (x east, y north).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        position_m: Option<[f64; 2]>,
+        /// Name of the camera path the source follows.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        path: Option<String>,
+        /// Scene time the source starts acting, seconds.
+        #[serde(default)]
+        start_s: f64,
+        /// Strength keys `[time_s, factor]` from `start_s`.
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        strength: Vec<[f64; 2]>,
+        /// Whether the strength keys repeat.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        repeat: bool,
+    },
+    /// A whirl about the vertical axis through its centre: tangential `speed_mps` near the
+    /// centre, falling off as `(1 - d / radius)^2`, plus an optional radial `inflow_mps`.
+    Vortex {
+        /// Reach, metres.
+        radius_m: f64,
+        /// Tangential speed near the centre, metres per second.
+        speed_mps: f64,
+        /// Turns clockwise seen from above (default: counter-clockwise).
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        clockwise: bool,
+        /// Radial speed toward the centre near it, metres per second (negative: outward, as a
+        /// rotor's downwash spreading over the ground).
+        #[serde(default, skip_serializing_if = "is_zero")]
+        inflow_mps: f64,
+        /// Fixed position, metres (x east, y north).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        position_m: Option<[f64; 2]>,
+        /// Name of the camera path the source follows.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        path: Option<String>,
+        /// Scene time the source starts acting, seconds.
+        #[serde(default)]
+        start_s: f64,
+        /// Strength keys `[time_s, factor]` from `start_s`.
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        strength: Vec<[f64; 2]>,
+        /// Whether the strength keys repeat.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        repeat: bool,
+    },
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
+
+/// Where a wind source is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SourcePlacement<'a> {
+    /// Nowhere in particular (directional sources without a position).
+    Everywhere,
+    /// A fixed point, metres.
+    Fixed([f64; 2]),
+    /// Following the named camera path.
+    Path(&'a str),
+}
+
+impl WindSource {
+    /// `directional`, `omni` or `vortex`.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            WindSource::Directional { .. } => "directional",
+            WindSource::Omni { .. } => "omni",
+            WindSource::Vortex { .. } => "vortex",
+        }
+    }
+
+    fn common(&self) -> (&Option<[f64; 2]>, &Option<String>, f64, &[[f64; 2]], bool) {
+        match self {
+            WindSource::Directional {
+                position_m,
+                path,
+                start_s,
+                strength,
+                repeat,
+                ..
+            }
+            | WindSource::Omni {
+                position_m,
+                path,
+                start_s,
+                strength,
+                repeat,
+                ..
+            }
+            | WindSource::Vortex {
+                position_m,
+                path,
+                start_s,
+                strength,
+                repeat,
+                ..
+            } => (position_m, path, *start_s, strength, *repeat),
+        }
+    }
+
+    /// Where the source is (a path takes precedence over a position; validation refuses both).
+    pub fn placement(&self) -> SourcePlacement<'_> {
+        match self.common() {
+            (_, Some(path), ..) => SourcePlacement::Path(path),
+            (Some(p), None, ..) => SourcePlacement::Fixed(*p),
+            (None, None, ..) => SourcePlacement::Everywhere,
+        }
+    }
+
+    /// Scene time the source starts acting, seconds.
+    pub fn start_s(&self) -> f64 {
+        self.common().2
+    }
+
+    /// Strength keys `[time_s, factor]`, times from [`Self::start_s`].
+    pub fn strength_keys(&self) -> &[[f64; 2]] {
+        self.common().3
+    }
+
+    /// Whether the strength keys repeat.
+    pub fn repeats(&self) -> bool {
+        self.common().4
+    }
+
+    /// The source's strength factor at `t_s` seconds after its start: linear between keys,
+    /// held outside them, 1 without keys, 0 before the start (`t_s < 0`).
+    pub fn strength_at(&self, t_s: f64) -> f64 {
+        if t_s < 0.0 {
+            return 0.0;
+        }
+        let keys = self.strength_keys();
+        let (Some(first), Some(last)) = (keys.first(), keys.last()) else {
+            return 1.0;
+        };
+        let mut t = t_s;
+        if self.repeats() && last[0] > 0.0 {
+            t = t.rem_euclid(last[0]);
+        }
+        if t <= first[0] {
+            return first[1];
+        }
+        for w in keys.windows(2) {
+            let ([t0, f0], [t1, f1]) = (w[0], w[1]);
+            if t <= t1 {
+                let u = if t1 > t0 { (t - t0) / (t1 - t0) } else { 1.0 };
+                return f0 + (f1 - f0) * u;
+            }
+        }
+        last[1]
     }
 }
 
@@ -179,6 +393,11 @@ impl Manifest {
     /// The camera path called `name`.
     pub fn path(&self, name: &str) -> Option<&CameraPath> {
         self.paths.iter().find(|p| p.name == name)
+    }
+
+    /// The wind scene called `name`.
+    pub fn wind_scene(&self, name: &str) -> Option<&WindScene> {
+        self.wind_scenes.iter().find(|s| s.name == name)
     }
 
     /// Checks that every value is finite and within what the format supports; `path` is only
@@ -347,6 +566,119 @@ impl Manifest {
                 }
             }
         }
+        self.validate_wind_scenes(&v)
+    }
+
+    fn validate_wind_scenes(&self, v: &Validator) -> Result<(), WorldError> {
+        let mut names = HashSet::new();
+        for (si, scene) in self.wind_scenes.iter().enumerate() {
+            if !names.insert(scene.name.as_str()) {
+                return Err(WorldError::DuplicateWindScene {
+                    path: v.path.to_path_buf(),
+                    name: scene.name.clone(),
+                });
+            }
+            let a = &scene.ambient;
+            let field = |f: &str| format!("wind_scenes[{si}].ambient.{f}");
+            v.finite(&field("direction_deg"), a.direction_deg)?;
+            v.non_negative(&field("speed_mps"), a.speed_mps)?;
+            v.finite(&field("gustiness"), a.gustiness)?;
+            if !(0.0..=1.0).contains(&a.gustiness) {
+                return Err(v.out_of_range(&field("gustiness"), a.gustiness, "in 0..=1"));
+            }
+            if scene.sources.len() > MAX_WIND_SOURCES {
+                return Err(v.out_of_range(
+                    &format!("wind_scenes[{si}].sources"),
+                    format!("{} sources", scene.sources.len()),
+                    &format!("at most {MAX_WIND_SOURCES} sources"),
+                ));
+            }
+            for (ci, source) in scene.sources.iter().enumerate() {
+                self.validate_wind_source(v, &format!("wind_scenes[{si}].sources[{ci}]"), source)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_wind_source(
+        &self,
+        v: &Validator,
+        at: &str,
+        source: &WindSource,
+    ) -> Result<(), WorldError> {
+        let field = |f: &str| format!("{at}.{f}");
+        match source {
+            WindSource::Directional {
+                direction_deg,
+                speed_mps,
+                ..
+            } => {
+                v.finite(&field("direction_deg"), *direction_deg)?;
+                v.non_negative(&field("speed_mps"), *speed_mps)?;
+            }
+            WindSource::Omni {
+                radius_m,
+                speed_mps,
+                ..
+            } => {
+                v.positive(&field("radius_m"), *radius_m)?;
+                v.non_negative(&field("speed_mps"), *speed_mps)?;
+            }
+            WindSource::Vortex {
+                radius_m,
+                speed_mps,
+                inflow_mps,
+                ..
+            } => {
+                v.positive(&field("radius_m"), *radius_m)?;
+                v.non_negative(&field("speed_mps"), *speed_mps)?;
+                v.finite(&field("inflow_mps"), *inflow_mps)?;
+            }
+        }
+        let (position, path_name, start_s, strength, _) = source.common();
+        if let Some(p) = position {
+            v.all_finite(&field("position_m"), p)?;
+        }
+        match (position, path_name) {
+            (Some(_), Some(_)) => {
+                return Err(WorldError::WindSourcePlacement {
+                    path: v.path.to_path_buf(),
+                    field: at.to_string(),
+                    message: "has both position_m and path: give one".into(),
+                });
+            }
+            (None, None) if !matches!(source, WindSource::Directional { .. }) => {
+                return Err(WorldError::WindSourcePlacement {
+                    path: v.path.to_path_buf(),
+                    field: at.to_string(),
+                    message: format!("a {} source needs position_m or path", source.kind_name()),
+                });
+            }
+            _ => {}
+        }
+        if let Some(name) = path_name
+            && self.path(name).is_none()
+        {
+            return Err(WorldError::UnknownPathRef {
+                path: v.path.to_path_buf(),
+                field: field("path"),
+                name: name.clone(),
+            });
+        }
+        v.non_negative(&field("start_s"), start_s)?;
+        for (ki, key) in strength.iter().enumerate() {
+            v.all_finite(&field(&format!("strength[{ki}]")), key)?;
+            v.non_negative(&field(&format!("strength[{ki}][1]")), key[1])?;
+            if ki > 0 && key[0] <= strength[ki - 1][0] {
+                return Err(WorldError::StrengthKeysOutOfOrder {
+                    path: v.path.to_path_buf(),
+                    field: field("strength"),
+                    index: ki,
+                    t_s: key[0],
+                    previous_t_s: strength[ki - 1][0],
+                });
+            }
+        }
         Ok(())
     }
 }
@@ -384,6 +716,20 @@ impl Validator<'_> {
             Ok(())
         } else {
             Err(self.non_positive(field, value))
+        }
+    }
+
+    fn non_negative(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        let value = value.into();
+        self.finite(field, value)?;
+        if value >= 0.0 {
+            Ok(())
+        } else {
+            Err(WorldError::Negative {
+                path: self.path.to_path_buf(),
+                field: field.to_string(),
+                value,
+            })
         }
     }
 

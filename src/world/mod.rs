@@ -25,7 +25,10 @@ pub use error::WorldError;
 pub use format::{
     ReadOptions, TileData, TileFile, read_tile, read_tile_with, tile_path, write_tile,
 };
-pub use manifest::{CameraKey, CameraPath, GrassType, Manifest, Sky, WindDefaults};
+pub use manifest::{
+    CameraKey, CameraPath, GrassType, MAX_WIND_SOURCES, Manifest, Sky, SourcePlacement,
+    WindDefaults, WindScene, WindSource,
+};
 pub use tile::{Bounds, Pyramid, TileId};
 
 /// An opened world: its directory and its validated manifest.

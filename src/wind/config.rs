@@ -1,0 +1,588 @@
+//! What the wind field computes and the per-frame values it computes from.
+//!
+//! [`WindConfig`] is a wind scene of the manifest made ready to run (its sources' camera paths
+//! resolved) plus the field's grid and time constants. [`FieldDriver`] turns it, a camera, a
+//! time and a walker into one frame's [`FieldParams`] (the compute stage's uniform) and
+//! [`WindLookup`] (the uniform a shader reading the field binds). Everything that needs f64 is
+//! done here, on the CPU: the camera's world cell, the noise windows' offsets and weights, source
+//! positions relative to the camera's cell, the decay factors `exp(-dt / tau)`. The GPU stage
+//! (`shaders/wind_field.wgsl`, [`super::field`]) and its CPU mirror ([`super::field_cpu`]) both
+//! start from the same [`FieldParams`], so the tests compare the per-cell arithmetic alone.
+
+use std::f64::consts::FRAC_PI_2;
+
+use bytemuck::{Pod, Zeroable};
+use glam::{DVec2, DVec3};
+use thiserror::Error;
+
+use crate::flythrough::sample_path;
+use crate::stream::hash_u32;
+use crate::world::{
+    CameraPath, MAX_WIND_SOURCES, Manifest, SourcePlacement, WindDefaults, WindSource,
+};
+
+/// Cells along each side of the field by default.
+pub const DEFAULT_CELLS: u32 = 256;
+/// Cell size by default, metres (256 cells of 1.25 m cover 320 m around the camera).
+pub const DEFAULT_CELL_M: f32 = 1.25;
+/// Octaves of the ambient noise.
+pub const OCTAVES: usize = 4;
+/// Period of each octave's noise lattice, lattice cells: the bounded noise domain.
+pub const LATTICE_PERIOD: u32 = 1024;
+/// Fraction of a source's radius over which its speed ramps up from zero at the centre, so
+/// that omni and vortex sources have no singularity there.
+pub const SOURCE_CORE: f32 = 0.05;
+/// Seed of the ambient noise by default ("wind" in ASCII).
+pub const DEFAULT_SEED: u32 = 0x7769_6e64;
+/// Source kinds as the shader numbers them.
+pub const KIND_DIRECTIONAL: u32 = 0;
+/// Omni source.
+pub const KIND_OMNI: u32 = 1;
+/// Vortex source.
+pub const KIND_VORTEX: u32 = 2;
+/// Flag in [`FieldParams::counts`]`[1]`: the trail is on.
+pub const FLAG_TRAIL: u32 = 1;
+/// Flag in [`FieldParams::counts`]`[1]`: stamp the walker's segment this frame.
+pub const FLAG_STAMP: u32 = 2;
+
+/// The ambient wind of a scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AmbientWind {
+    /// Direction the wind blows toward, degrees counter-clockwise from east.
+    pub direction_deg: f64,
+    /// Mean speed, metres per second.
+    pub speed_mps: f64,
+    /// Strength of gusts relative to the mean, 0..=1.
+    pub gustiness: f64,
+}
+
+impl From<&WindDefaults> for AmbientWind {
+    fn from(w: &WindDefaults) -> Self {
+        Self {
+            direction_deg: f64::from(w.direction_deg),
+            speed_mps: f64::from(w.speed_mps),
+            gustiness: f64::from(w.gustiness),
+        }
+    }
+}
+
+impl AmbientWind {
+    /// Unit vector the wind blows toward.
+    pub fn direction(&self) -> DVec2 {
+        DVec2::from_angle(self.direction_deg.to_radians())
+    }
+}
+
+/// A wind source of the manifest with its camera path resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SourceConfig {
+    /// The source as the manifest gives it.
+    pub source: WindSource,
+    /// The camera path it follows, if any.
+    pub path: Option<CameraPath>,
+}
+
+impl SourceConfig {
+    /// Where the source is at scene time `time_s`: its fixed position, or its path's position
+    /// (looping over the path's duration, counted from the source's start); `None` for a
+    /// directional source without a position.
+    pub fn position_at(&self, time_s: f64) -> Option<DVec2> {
+        if let Some(path) = &self.path {
+            let local = (time_s - self.source.start_s()).rem_euclid(path.duration_s);
+            let t0 = path.keys.first().map_or(0.0, |k| k.t_s);
+            return Some(sample_path(path, t0 + local).position.truncate());
+        }
+        match self.source.placement() {
+            SourcePlacement::Fixed(p) => Some(DVec2::from_array(p)),
+            _ => None,
+        }
+    }
+
+    /// The strength factor at scene time `time_s` (0 before the source's start).
+    pub fn strength_at(&self, time_s: f64) -> f64 {
+        self.source.strength_at(time_s - self.source.start_s())
+    }
+}
+
+/// What can go wrong building a [`WindConfig`] from a manifest.
+#[derive(Debug, Error, PartialEq)]
+#[non_exhaustive]
+pub enum WindError {
+    /// No wind scene has the name asked for.
+    #[error("no wind scene called \"{name}\" (the world has: {available})")]
+    UnknownScene {
+        /// The name asked for.
+        name: String,
+        /// The scenes the world has, comma-separated.
+        available: String,
+    },
+    /// A source follows a camera path that the manifest does not have (a manifest that was not
+    /// validated).
+    #[error(
+        "wind scene \"{scene}\": source {index} follows camera path \"{path}\", which the world does not have"
+    )]
+    UnknownPath {
+        /// The scene.
+        scene: String,
+        /// Index of the source.
+        index: usize,
+        /// The missing path.
+        path: String,
+    },
+}
+
+/// The wind field's configuration: the scene, the grid and the time constants.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WindConfig {
+    /// Name of the scene this came from (empty for the manifest's default wind).
+    pub scene: String,
+    /// Cells along each side of the square grid (even, at least 8).
+    pub cells: u32,
+    /// Cell size, metres.
+    pub cell_m: f32,
+    /// The ambient wind.
+    pub ambient: AmbientWind,
+    /// The scene's sources (at most [`MAX_WIND_SOURCES`] are used).
+    pub source_list: Vec<SourceConfig>,
+    /// Whether sources act (off: the field is the ambient wind alone).
+    pub sources: bool,
+    /// Whether the walker leaves a trail.
+    pub trail: bool,
+    /// Time constant with which source wind builds up (target stronger than the cell's wind).
+    pub attack_s: f32,
+    /// Time constant with which source wind dies down toward the ambient wind.
+    pub release_s: f32,
+    /// Time constant with which the trail fades.
+    pub trail_fade_s: f32,
+    /// Radius of the capsule the walker's step stamps, metres.
+    pub trail_radius_m: f32,
+    /// Longest step that still stamps a capsule, metres; a longer one (a teleport) starts a new
+    /// trail at the new position.
+    pub trail_max_step_m: f64,
+    /// Wavelength of the coarsest ambient noise octave (its lattice spacing), metres.
+    pub gust_scale_m: f64,
+    /// Time each noise window scrolls before a fresh one (at a hashed offset) replaces it, s.
+    pub window_s: f64,
+    /// Cross-fade between an old and a new noise window, seconds (less than `window_s`).
+    pub blend_s: f64,
+    /// Seed of the ambient noise.
+    pub seed: u32,
+}
+
+impl WindConfig {
+    /// A field of the default size and time constants over `ambient`, without sources.
+    pub fn new(ambient: AmbientWind) -> Self {
+        Self {
+            scene: String::new(),
+            cells: DEFAULT_CELLS,
+            cell_m: DEFAULT_CELL_M,
+            ambient,
+            source_list: Vec::new(),
+            sources: true,
+            trail: true,
+            attack_s: 0.15,
+            release_s: 1.5,
+            trail_fade_s: 3.0,
+            trail_radius_m: 1.0,
+            trail_max_step_m: 10.0,
+            gust_scale_m: 48.0,
+            window_s: 90.0,
+            blend_s: 10.0,
+            seed: DEFAULT_SEED,
+        }
+    }
+
+    /// The configuration of the wind scene `scene_name` of `manifest`; without a name, the
+    /// scene `breeze` if the world has one, else the manifest's `wind` defaults without sources.
+    pub fn from_scene(manifest: &Manifest, scene_name: Option<&str>) -> Result<Self, WindError> {
+        let scene = match scene_name {
+            Some(name) => Some(manifest.wind_scene(name).ok_or_else(|| {
+                WindError::UnknownScene {
+                    name: name.to_string(),
+                    available: manifest
+                        .wind_scenes
+                        .iter()
+                        .map(|s| s.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                }
+            })?),
+            None => manifest.wind_scene("breeze"),
+        };
+        let Some(scene) = scene else {
+            return Ok(Self::new(AmbientWind::from(&manifest.wind)));
+        };
+        let mut config = Self::new(AmbientWind::from(&scene.ambient));
+        config.scene = scene.name.clone();
+        for (index, source) in scene.sources.iter().enumerate() {
+            let path = match source.placement() {
+                SourcePlacement::Path(name) => Some(manifest.path(name).cloned().ok_or_else(
+                    || WindError::UnknownPath {
+                        scene: scene.name.clone(),
+                        index,
+                        path: name.to_string(),
+                    },
+                )?),
+                _ => None,
+            };
+            config.source_list.push(SourceConfig {
+                source: source.clone(),
+                path,
+            });
+        }
+        Ok(config)
+    }
+
+    /// Cells in the grid (`cells * cells`).
+    pub fn cell_count(&self) -> usize {
+        (self.cells as usize) * (self.cells as usize)
+    }
+
+    /// The world cell holding `world_xy`.
+    pub fn world_cell(&self, world_xy: DVec2) -> [i32; 2] {
+        let c = (world_xy / f64::from(self.cell_m)).floor();
+        // Worlds are at most 10,000 km wide: 8e6 cells of 1.25 m fit an i32 easily.
+        [c.x as i32, c.y as i32]
+    }
+
+    /// Storage index of world cell `cell` (toroidal: `(i mod n, j mod n)`, Euclidean).
+    pub fn storage_index(&self, cell: [i32; 2]) -> usize {
+        let n = self.cells as i32;
+        (cell[1].rem_euclid(n) * n + cell[0].rem_euclid(n)) as usize
+    }
+}
+
+/// The compute stage's uniform (`Params` in `shaders/wind_field.wgsl`), one frame's worth.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct FieldParams {
+    /// The camera's world cell.
+    pub origin_cell: [i32; 2],
+    /// Cells along each side.
+    pub n: u32,
+    /// Cell size, metres.
+    pub cell_m: f32,
+    /// Ambient direction (unit xy), mean speed (m/s), gustiness.
+    pub ambient: [f32; 4],
+    /// Weight of the new noise window, of the old one; unused, unused.
+    pub blend: [f32; 4],
+    /// Attack factor `exp(-dt / attack)`, release factor, trail fade factor, trail radius (m).
+    pub decay: [f32; 4],
+    /// The walker's step: start xy, end xy, metres from the origin cell's south-west corner.
+    pub trail: [f32; 4],
+    /// Push direction on the step's axis (unit xy), cross-wind fraction, gust gain.
+    pub extra: [f32; 4],
+    /// Sources in use, flags ([`FLAG_TRAIL`], [`FLAG_STAMP`]), lattice period, noise seed.
+    pub counts: [u32; 4],
+    /// Lattice cells per metre of each octave.
+    pub octave_freq: [f32; 4],
+    /// Amplitude of each octave (they sum to 1).
+    pub octave_amp: [f32; 4],
+    /// Per octave: the new window's lattice position of the origin cell's south-west corner
+    /// (xy), the old window's (zw); each reduced modulo the lattice period.
+    pub windows: [[f32; 4]; OCTAVES],
+    /// The sources in use.
+    pub sources: [SourceGpu; MAX_WIND_SOURCES],
+}
+const _: () = assert!(std::mem::size_of::<FieldParams>() == 208 + 32 * MAX_WIND_SOURCES);
+
+/// One source as the shader sees it (`Source` in `shaders/wind_field.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct SourceGpu {
+    /// Centre, metres from the origin cell's south-west corner.
+    pub center: [f32; 2],
+    /// Reach, metres (unused by directional sources).
+    pub radius: f32,
+    /// [`KIND_DIRECTIONAL`], [`KIND_OMNI`] or [`KIND_VORTEX`].
+    pub kind: u32,
+    /// Directional: the wind vector (m/s). Omni: outward speed, 0. Vortex: tangential speed
+    /// (positive counter-clockwise), inflow speed. All scaled by the strength at this time.
+    pub a: [f32; 2],
+    /// Unused.
+    pub b: [f32; 2],
+}
+const _: () = assert!(std::mem::size_of::<SourceGpu>() == 32);
+
+/// Per-cell state of the field (`CellState` in `shaders/wind_field.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct CellState {
+    /// Source-driven wind, m/s.
+    pub source: [f32; 2],
+    /// The world cell this storage cell last held ([`CellState::EMPTY_TAG`] at first).
+    pub tag: [i32; 2],
+}
+
+impl CellState {
+    /// Tag of a cell that holds no world cell yet (no world cell has this index).
+    pub const EMPTY_TAG: i32 = i32::MIN;
+    /// A cell holding nothing.
+    pub const EMPTY: CellState = CellState {
+        source: [0.0; 2],
+        tag: [Self::EMPTY_TAG; 2],
+    };
+}
+
+/// The uniform a shader that reads the field binds (`WindLookup` in `shaders/wind_lookup.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct WindLookup {
+    /// The camera's world cell (the field covers world cells `origin - n/2 ..= origin + n/2 - 1`
+    /// on each axis).
+    pub origin_cell: [i32; 2],
+    /// Cells along each side.
+    pub n: u32,
+    /// Cell size, metres.
+    pub cell_m: f32,
+    /// The camera's xy minus its cell's south-west corner, metres (in `0..cell_m`), computed in
+    /// f64 before rounding.
+    pub camera_offset: [f32; 2],
+    /// Padding (uniform structs are 16-byte multiples).
+    pub _pad: [f32; 2],
+}
+const _: () = assert!(std::mem::size_of::<WindLookup>() == 32);
+
+/// Turns a [`WindConfig`] and each frame's camera, time and walker into the frame's uniforms;
+/// remembers the walker's last position for the trail.
+#[derive(Clone, Debug)]
+pub struct FieldDriver {
+    config: WindConfig,
+    walker_prev: Option<DVec2>,
+    push_dir: DVec2,
+}
+
+impl FieldDriver {
+    /// A driver for `config`, with no walker seen yet.
+    pub fn new(config: &WindConfig) -> Self {
+        Self {
+            config: config.clone(),
+            walker_prev: None,
+            push_dir: config.ambient.direction(),
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &WindConfig {
+        &self.config
+    }
+
+    /// One frame's uniforms: the camera at `camera_world`, scene time `time_s`, `dt_s` since the
+    /// last frame (negative or NaN counts as 0), the walker (if any) at `walker_world`.
+    pub fn frame(
+        &mut self,
+        camera_world: DVec3,
+        time_s: f64,
+        dt_s: f32,
+        walker_world: Option<DVec2>,
+    ) -> (FieldParams, WindLookup) {
+        let c = &self.config;
+        let cell = f64::from(c.cell_m);
+        let cam = camera_world.truncate();
+        let origin = c.world_cell(cam);
+        let corner = DVec2::new(f64::from(origin[0]), f64::from(origin[1])) * cell;
+        let rel = |p: DVec2| -> [f32; 2] { (p - corner).as_vec2().to_array() };
+        let dt = if dt_s.is_finite() {
+            f64::from(dt_s.max(0.0))
+        } else {
+            0.0
+        };
+
+        let mut sources = [SourceGpu::default(); MAX_WIND_SOURCES];
+        let mut used = 0;
+        if c.sources {
+            for s in c.source_list.iter().take(MAX_WIND_SOURCES) {
+                let strength = s.strength_at(time_s);
+                if strength <= 0.0 {
+                    continue;
+                }
+                let center = s.position_at(time_s).map_or([0.0; 2], rel);
+                let g = match &s.source {
+                    WindSource::Directional {
+                        direction_deg,
+                        speed_mps,
+                        ..
+                    } => SourceGpu {
+                        center,
+                        radius: 0.0,
+                        kind: KIND_DIRECTIONAL,
+                        a: (DVec2::from_angle(direction_deg.to_radians()) * speed_mps * strength)
+                            .as_vec2()
+                            .to_array(),
+                        b: [0.0; 2],
+                    },
+                    WindSource::Omni {
+                        radius_m,
+                        speed_mps,
+                        ..
+                    } => SourceGpu {
+                        center,
+                        radius: *radius_m as f32,
+                        kind: KIND_OMNI,
+                        a: [(speed_mps * strength) as f32, 0.0],
+                        b: [0.0; 2],
+                    },
+                    WindSource::Vortex {
+                        radius_m,
+                        speed_mps,
+                        clockwise,
+                        inflow_mps,
+                        ..
+                    } => {
+                        let sense = if *clockwise { -1.0 } else { 1.0 };
+                        SourceGpu {
+                            center,
+                            radius: *radius_m as f32,
+                            kind: KIND_VORTEX,
+                            a: [
+                                (sense * speed_mps * strength) as f32,
+                                (inflow_mps * strength) as f32,
+                            ],
+                            b: [0.0; 2],
+                        }
+                    }
+                };
+                sources[used] = g;
+                used += 1;
+            }
+        }
+
+        // The trail: the walker's step since the last frame, unless it jumped.
+        let mut flags = 0;
+        let mut step = [0.0f32; 4];
+        if c.trail {
+            flags |= FLAG_TRAIL;
+            match walker_world {
+                Some(now) => {
+                    let from = match self.walker_prev {
+                        Some(prev) if prev.distance(now) <= c.trail_max_step_m => prev,
+                        _ => now,
+                    };
+                    let travel = now - from;
+                    if travel.length() > 1e-6 {
+                        self.push_dir = travel.normalize();
+                    }
+                    let (a, b) = (rel(from), rel(now));
+                    step = [a[0], a[1], b[0], b[1]];
+                    flags |= FLAG_STAMP;
+                    self.walker_prev = Some(now);
+                }
+                None => self.walker_prev = None,
+            }
+        }
+
+        let factor = |tau: f32| (-dt / f64::from(tau).max(1e-6)).exp() as f32;
+        let mut params = ambient_params(c, corner, time_s);
+        params.origin_cell = origin;
+        params.n = c.cells;
+        params.cell_m = c.cell_m;
+        params.decay = [
+            factor(c.attack_s),
+            factor(c.release_s),
+            factor(c.trail_fade_s),
+            c.trail_radius_m,
+        ];
+        params.trail = step;
+        params.extra[0] = self.push_dir.x as f32;
+        params.extra[1] = self.push_dir.y as f32;
+        params.counts[0] = used as u32;
+        params.counts[1] = flags;
+        params.sources = sources;
+        let lookup = WindLookup {
+            origin_cell: origin,
+            n: c.cells,
+            cell_m: c.cell_m,
+            camera_offset: rel(cam),
+            _pad: [0.0; 2],
+        };
+        (params, lookup)
+    }
+}
+
+/// The ambient part of a frame's uniform: the ambient wind, the noise octaves and the two
+/// noise windows at `time_s` seen from `corner` (the origin cell's south-west corner, metres);
+/// everything else zero.
+pub fn ambient_params(config: &WindConfig, corner: DVec2, time_s: f64) -> FieldParams {
+    let dir = config.ambient.direction();
+    let (weights, windows) = noise_windows(config, corner, time_s);
+    let amp_sum: f64 = (0..OCTAVES).map(|o| 0.5f64.powi(o as i32)).sum();
+    FieldParams {
+        ambient: [
+            dir.x as f32,
+            dir.y as f32,
+            config.ambient.speed_mps as f32,
+            config.ambient.gustiness as f32,
+        ],
+        blend: [weights[0] as f32, weights[1] as f32, 0.0, 0.0],
+        extra: [
+            0.0,
+            0.0,
+            (0.1 + 0.25 * config.ambient.gustiness) as f32,
+            GUST_GAIN,
+        ],
+        counts: [0, 0, LATTICE_PERIOD, config.seed],
+        octave_freq: std::array::from_fn(|o| (2f64.powi(o as i32) / config.gust_scale_m) as f32),
+        octave_amp: std::array::from_fn(|o| (0.5f64.powi(o as i32) / amp_sum) as f32),
+        windows,
+        ..Zeroable::zeroed()
+    }
+}
+
+/// Gain on the normalised noise before it is clamped to -1..=1 (the sum of octaves rarely
+/// reaches its bounds; this spreads it over them).
+pub const GUST_GAIN: f32 = 1.6;
+
+/// How much faster than the wind each octave's pattern travels, per octave: fine gusts run
+/// ahead of coarse ones, so the pattern evolves as it travels instead of sliding rigidly.
+pub const OCTAVE_DRIFT: f64 = 0.2;
+
+/// The two noise windows at `time_s`: weights (new, old) and, per octave, each window's lattice
+/// position of `corner`.
+///
+/// Window `k` starts at time `k * window_s` at a hashed position of the lattice and scrolls with
+/// the wind from there; for its first `blend_s` seconds it fades in while window `k - 1` fades
+/// out (weights `sin` and `cos` of a smoothstep, so that the sum of two independent noises keeps
+/// its variance). Each window scrolls for at most `window_s + blend_s` seconds, so its offset
+/// stays small and f32-exact however long the scene runs, and a fresh hashed position means the
+/// pattern never repeats.
+pub fn noise_windows(
+    config: &WindConfig,
+    corner: DVec2,
+    time_s: f64,
+) -> ([f64; 2], [[f32; 4]; OCTAVES]) {
+    let period = config.window_s.max(1e-3);
+    let blend = config.blend_s.clamp(1e-3, period);
+    let k = (time_s / period).floor();
+    let tau_new = time_s - k * period;
+    let u = (tau_new / blend).clamp(0.0, 1.0);
+    let s = u * u * (3.0 - 2.0 * u);
+    let weights = [(FRAC_PI_2 * s).sin(), (FRAC_PI_2 * s).cos()];
+    let drift = config.ambient.direction() * config.ambient.speed_mps;
+    let p = f64::from(LATTICE_PERIOD);
+    let mut windows = [[0.0f32; 4]; OCTAVES];
+    for (o, w) in windows.iter_mut().enumerate() {
+        let freq = 2f64.powi(o as i32) / config.gust_scale_m;
+        let speed = 1.0 + OCTAVE_DRIFT * o as f64;
+        for (slot, (index, tau)) in [(k, tau_new), (k - 1.0, tau_new + period)]
+            .into_iter()
+            .enumerate()
+        {
+            let origin = window_origin(index as i64, o as u32, config.seed);
+            let q = (corner - drift * (speed * tau)) * freq + origin;
+            w[slot * 2] = q.x.rem_euclid(p) as f32;
+            w[slot * 2 + 1] = q.y.rem_euclid(p) as f32;
+        }
+    }
+    // An f32 rounding of a value just under the period can give the period itself; the lattice
+    // wraps it anyway.
+    (weights, windows)
+}
+
+/// Hashed start of noise window `index` for `octave`, lattice cells in `0..LATTICE_PERIOD`.
+fn window_origin(index: i64, octave: u32, seed: u32) -> DVec2 {
+    let lo = index as u32;
+    let hi = (index >> 32) as u32;
+    let h = |salt: u32| hash_u32(lo ^ hash_u32(hi ^ hash_u32(octave ^ hash_u32(seed ^ salt))));
+    let unit = |x: u32| f64::from(x) / 4_294_967_296.0;
+    DVec2::new(unit(h(0x51)), unit(h(0xa7))) * f64::from(LATTICE_PERIOD)
+}

@@ -1,0 +1,1063 @@
+//! The wind field: the GPU stage (`shaders/wind_field.wgsl`) against its CPU mirror
+//! (`src/wind/field_cpu.rs`), the lookup snippet (`shaders/wind_lookup.wgsl`) against its
+//! mirror, each source kind, the ambient noise across its window restarts, decay, the trail, and
+//! the wind scenes of the manifest.
+
+mod common;
+
+use std::path::Path;
+
+use glam::{DVec2, DVec3, Vec2};
+use verdant::gpu::{GpuContext, GpuTimer};
+use verdant::wind::config::{DEFAULT_CELL_M, DEFAULT_CELLS};
+use verdant::wind::{
+    AmbientWind, SourceConfig, WIND_LOOKUP_WGSL, WindConfig, WindError, WindField, WindFieldCpu,
+    ambient_at,
+};
+use verdant::world::{Manifest, WindSource, WorldError};
+
+/// Largest wind difference allowed between GPU and CPU, m/s. Both run the same f32 arithmetic
+/// in the same order from the same uniform (everything needing f64, `exp` or `sin` is computed
+/// once on the CPU); lattice values are exact. What may differ: a GPU may fuse a multiply and
+/// an add (an ulp or two), and `length`, division and `normalize` are allowed a few ulps on
+/// Vulkan. Winds reach about 30 m/s, where an ulp is 2e-6 m/s; through a few dozen dependent
+/// operations and the decay's feedback (a contraction: errors shrink from frame to frame) that
+/// stays far below 1e-3 m/s.
+const WIND_TOLERANCE_MPS: f32 = 1e-3;
+/// Largest trail push difference allowed (the push is at most 1; same reasoning).
+const PUSH_TOLERANCE: f32 = 1e-4;
+
+fn timer(ctx: &GpuContext) -> GpuTimer {
+    GpuTimer::new(&ctx.device, &ctx.queue, false, 0)
+}
+
+/// A GPU field and a CPU mirror stepped together.
+struct Pair {
+    ctx: GpuContext,
+    gpu: WindField,
+    cpu: WindFieldCpu,
+}
+
+impl Pair {
+    fn new(config: &WindConfig) -> Self {
+        let ctx = common::gpu();
+        let gpu = WindField::new(&ctx.device, &ctx.queue, config);
+        let cpu = WindFieldCpu::new(config);
+        Self { ctx, gpu, cpu }
+    }
+
+    fn step(&mut self, camera: DVec3, t: f64, dt: f32, walker: Option<DVec2>) {
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        let mut timer = timer(&self.ctx);
+        self.gpu.update(
+            &self.ctx.queue,
+            &mut encoder,
+            camera,
+            t,
+            dt,
+            walker,
+            &mut timer,
+        );
+        self.ctx.queue.submit([encoder.finish()]);
+        self.cpu.update(camera, t, dt, walker);
+        assert_eq!(self.gpu.params(), self.cpu.params());
+    }
+
+    /// Largest wind and push differences between GPU and CPU.
+    fn compare(&self) -> (f32, f32) {
+        let gpu = self.gpu.read_back(&self.ctx.device, &self.ctx.queue);
+        let cpu = self.cpu.cells();
+        assert_eq!(gpu.len(), cpu.len());
+        let (mut wind, mut push) = (0.0f32, 0.0f32);
+        for (g, c) in gpu.iter().zip(cpu) {
+            assert!(g.iter().all(|v| v.is_finite()), "non-finite cell {g:?}");
+            wind = wind.max((g[0] - c[0]).abs()).max((g[1] - c[1]).abs());
+            push = push.max((g[2] - c[2]).abs()).max((g[3] - c[3]).abs());
+        }
+        let states_gpu = self.gpu.read_back_state(&self.ctx.device, &self.ctx.queue);
+        for (g, c) in states_gpu.iter().zip(self.cpu.state()) {
+            assert_eq!(g.tag, c.tag, "cells hold different world cells");
+        }
+        (wind, push)
+    }
+}
+
+fn world() -> Manifest {
+    Manifest::from_path(&common::default_world().join("world.toml")).unwrap()
+}
+
+#[test]
+fn gpu_field_matches_the_cpu_mirror_over_frames() {
+    let m = world();
+    let config = WindConfig::from_scene(&m, Some("helicopter")).unwrap();
+    assert_eq!(config.cells, DEFAULT_CELLS);
+    let mut pair = Pair::new(&config);
+    // Under the helicopter's pass (its path loops every 20 s: at 88 s it is at its 8 s key),
+    // walking; starting 2 s before a noise window restart (90 s).
+    let heli = m.path("helicopter").unwrap();
+    let start = DVec2::from_slice(&heli.keys[3].position_m[..2]);
+    let mut t = 88.0;
+    let mut cam = DVec3::new(start.x, start.y, 60.0);
+    let mut frames: Vec<(DVec3, f32, Option<DVec2>, &str)> = Vec::new();
+    for k in 0..8 {
+        cam += DVec3::new(0.9, 0.4, 0.0);
+        frames.push((
+            cam,
+            1.0 / 30.0,
+            Some(cam.truncate()),
+            if k == 0 { "first" } else { "walk" },
+        ));
+    }
+    // A hitch, walking on.
+    cam += DVec3::new(1.5, -0.5, 0.0);
+    frames.push((cam, 0.5, Some(cam.truncate()), "0.5 s hitch"));
+    // Across the window restart at 90 s, then a jump larger than the grid (a teleport).
+    for _ in 0..3 {
+        cam += DVec3::new(0.5, 0.5, 0.0);
+        frames.push((cam, 1.0, Some(cam.truncate()), "restart"));
+    }
+    cam += DVec3::new(1234.5, -987.6, 0.0);
+    frames.push((cam, 1.0 / 30.0, Some(cam.truncate()), "jump"));
+    for _ in 0..2 {
+        cam += DVec3::new(-3.3, 2.2, 0.0);
+        frames.push((cam, 1.0 / 60.0, None, "after the jump"));
+    }
+    let (mut worst_wind, mut worst_push) = (0.0f32, 0.0f32);
+    let mut restarts = 0;
+    for (cam, dt, walker, what) in frames {
+        let before = t;
+        t += f64::from(dt);
+        if (before / config.window_s).floor() != (t / config.window_s).floor() {
+            restarts += 1;
+        }
+        pair.step(cam, t, dt, walker);
+        let (wind, push) = pair.compare();
+        let pushed = pair
+            .cpu
+            .cells()
+            .iter()
+            .filter(|c| c[2] != 0.0 || c[3] != 0.0)
+            .count();
+        assert!(
+            walker.is_none() || what == "jump" || pushed > 0,
+            "{what}: no trail"
+        );
+        eprintln!("t = {t:.3} s ({what}): GPU-CPU wind {wind:e} m/s, push {push:e}");
+        assert!(
+            wind <= WIND_TOLERANCE_MPS,
+            "{what}: wind differs by {wind} m/s"
+        );
+        assert!(push <= PUSH_TOLERANCE, "{what}: push differs by {push}");
+        worst_wind = worst_wind.max(wind);
+        worst_push = worst_push.max(push);
+    }
+    eprintln!("largest GPU-CPU differences: wind {worst_wind:e} m/s, push {worst_push:e}");
+    assert_eq!(restarts, 1, "the frames cross one noise window restart");
+    // The scene's sources did act on the field.
+    let p = pair.cpu.params();
+    assert_eq!(p.counts[0], 2, "both helicopter sources active");
+}
+
+#[test]
+fn lookup_snippet_matches_its_mirror_and_the_toroidal_layout() {
+    let ctx = common::gpu();
+    let mut config = WindConfig::new(AmbientWind {
+        direction_deg: 70.0,
+        speed_mps: 6.0,
+        gustiness: 0.6,
+    });
+    config.cells = 64;
+    let mut field = WindField::new(&ctx.device, &ctx.queue, &config);
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    // Far from the origin, at a negative cell index on x.
+    let camera = DVec3::new(-40_123.37, 7_654_321.18, 10.0);
+    field.update(
+        &ctx.queue,
+        &mut encoder,
+        camera,
+        12.5,
+        0.1,
+        None,
+        &mut timer(&ctx),
+    );
+    ctx.queue.submit([encoder.finish()]);
+    let cells = field.read_back(&ctx.device, &ctx.queue);
+    let lookup = field.lookup();
+
+    // Probe positions relative to the camera: cell centres, in between, beyond the edge.
+    let mut probes: Vec<Vec2> = Vec::new();
+    for k in 0..200 {
+        let a = k as f32 * 0.37;
+        let r = (k as f32 * 0.29) % 45.0;
+        probes.push(Vec2::new(a.cos() * r, a.sin() * r));
+    }
+    let source = format!(
+        "{WIND_LOOKUP_WGSL}
+@group(0) @binding(0) var<uniform> wind_lookup: WindLookup;
+@group(0) @binding(1) var<storage, read> wind_cells: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> probes: array<vec2<f32>>;
+@group(0) @binding(3) var<storage, read_write> results: array<vec4<f32>>;
+@compute @workgroup_size(64)
+fn probe(@builtin(global_invocation_id) gid: vec3<u32>) {{
+    if gid.x < arrayLength(&probes) {{
+        results[gid.x] = wind_at(probes[gid.x]);
+    }}
+}}"
+    );
+    use wgpu::util::DeviceExt;
+    let module = ctx
+        .device
+        .create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("wind probe"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+    let pipeline = ctx
+        .device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("wind probe"),
+            layout: None,
+            module: &module,
+            entry_point: Some("probe"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+    let probe_buffer = ctx
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents: bytemuck::cast_slice(&probes),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+    let results = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: probes.len() as u64 * 16,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: results.size(),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: None,
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: field.lookup_uniform().as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: field.buffer().as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: probe_buffer.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: results.as_entire_binding(),
+            },
+        ],
+    });
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups((probes.len() as u32).div_ceil(64), 1, 1);
+    }
+    encoder.copy_buffer_to_buffer(&results, 0, &staging, 0, results.size());
+    ctx.queue.submit([encoder.finish()]);
+    staging.map_async(wgpu::MapMode::Read, .., |_| {});
+    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+    let gpu: Vec<[f32; 4]> =
+        bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..).expect("mapped"));
+
+    let mut worst = 0.0f32;
+    for (p, g) in probes.iter().zip(&gpu) {
+        let c = verdant::wind::field_cpu::wind_at(&lookup, &cells, *p);
+        for k in 0..4 {
+            worst = worst.max((g[k] - c[k]).abs());
+        }
+    }
+    eprintln!("lookup GPU-CPU: {worst:e}");
+    assert!(worst <= 1e-4, "wind_at differs from its mirror by {worst}");
+
+    // At a cell centre, wind_at returns that world cell's storage entry.
+    let cell = f64::from(config.cell_m);
+    for (di, dj) in [(0i32, 0i32), (5, -7), (-31, 30), (-20, 12)] {
+        let origin = config.world_cell(camera.truncate());
+        let world_cell = [origin[0] + di, origin[1] + dj];
+        let centre = DVec2::new(
+            (f64::from(world_cell[0]) + 0.5) * cell,
+            (f64::from(world_cell[1]) + 0.5) * cell,
+        );
+        let rel = (centre - camera.truncate()).as_vec2();
+        let got = verdant::wind::field_cpu::wind_at(&lookup, &cells, rel);
+        let want = cells[config.storage_index(world_cell)];
+        for k in 0..4 {
+            assert!(
+                (got[k] - want[k]).abs() < 1e-4,
+                "{world_cell:?}: {got:?} vs {want:?}"
+            );
+        }
+    }
+}
+
+/// A config with no ambient wind, no trail and the given sources at fixed points.
+fn sources_only(sources: Vec<WindSource>) -> WindConfig {
+    let mut config = WindConfig::new(AmbientWind {
+        direction_deg: 0.0,
+        speed_mps: 0.0,
+        gustiness: 0.0,
+    });
+    config.cells = 64;
+    config.trail = false;
+    config.source_list = sources
+        .into_iter()
+        .map(|source| SourceConfig { source, path: None })
+        .collect();
+    config
+}
+
+fn fixed(kind: &str, at: DVec2, radius: f64, speed: f64, extra: &str) -> WindSource {
+    let text = format!(
+        "kind = \"{kind}\"\nradius_m = {radius}\nspeed_mps = {speed}\nposition_m = [{}, {}]\n{extra}",
+        at.x, at.y
+    );
+    toml::from_str(&text).unwrap()
+}
+
+fn directional(direction_deg: f64, speed_mps: f64) -> WindSource {
+    WindSource::Directional {
+        direction_deg,
+        speed_mps,
+        position_m: None,
+        path: None,
+        start_s: 0.0,
+        strength: Vec::new(),
+        repeat: false,
+    }
+}
+
+/// The settled field of `config` with the camera at `camera` (a 10 s step: the attack factor
+/// `exp(-10 / 0.15)` is 0), as (world position of the cell centre, wind).
+fn settled(ctx: &GpuContext, config: &WindConfig, camera: DVec2) -> Vec<(DVec2, Vec2)> {
+    let mut field = WindField::new(&ctx.device, &ctx.queue, config);
+    for t in [1.0, 11.0] {
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        field.update(
+            &ctx.queue,
+            &mut encoder,
+            camera.extend(5.0),
+            t,
+            10.0,
+            None,
+            &mut timer(ctx),
+        );
+        ctx.queue.submit([encoder.finish()]);
+    }
+    let cells = field.read_back(&ctx.device, &ctx.queue);
+    let n = config.cells as i32;
+    let origin = config.world_cell(camera);
+    let cell = f64::from(config.cell_m);
+    let mut out = Vec::new();
+    for dj in -n / 2..n / 2 {
+        for di in -n / 2..n / 2 {
+            let wc = [origin[0] + di, origin[1] + dj];
+            let v = cells[config.storage_index(wc)];
+            let centre = DVec2::new(
+                (f64::from(wc[0]) + 0.5) * cell,
+                (f64::from(wc[1]) + 0.5) * cell,
+            );
+            out.push((centre, Vec2::new(v[0], v[1])));
+        }
+    }
+    out
+}
+
+/// Expected falloff of omni and vortex sources at `d` of radius `r` (outside the core).
+fn falloff(d: f64, r: f64) -> f64 {
+    if d >= r { 0.0 } else { (1.0 - d / r).powi(2) }
+}
+
+#[test]
+fn each_source_kind_at_a_point() {
+    let ctx = common::gpu();
+    let camera = DVec2::new(5_012.3, 3_987.6);
+    let centre = camera + DVec2::new(3.1, -2.4);
+    let r = 20.0;
+    // Well outside the core (1 m) and inside the radius.
+    let ring = |p: DVec2| {
+        let d = p.distance(centre);
+        (2.0..r - 0.5).contains(&d)
+    };
+
+    // Directional: its vector everywhere; two of them add.
+    let one = settled(&ctx, &sources_only(vec![directional(30.0, 5.0)]), camera);
+    let want = DVec2::from_angle(30f64.to_radians()) * 5.0;
+    for (_, v) in &one {
+        assert!((v.as_dvec2() - want).length() < 1e-5, "{v} vs {want}");
+    }
+    let two = settled(
+        &ctx,
+        &sources_only(vec![directional(30.0, 5.0), directional(120.0, 2.0)]),
+        camera,
+    );
+    let want = want + DVec2::from_angle(120f64.to_radians()) * 2.0;
+    for (_, v) in &two {
+        assert!((v.as_dvec2() - want).length() < 1e-5, "sum {v} vs {want}");
+    }
+
+    // Omni: away from the centre, 10 m/s * (1 - d/20)^2 (2.5 m/s at 10 m), nothing beyond.
+    let omni = settled(
+        &ctx,
+        &sources_only(vec![fixed("omni", centre, r, 10.0, "")]),
+        camera,
+    );
+    let mut checked = 0;
+    for (p, v) in &omni {
+        let off = *p - centre;
+        let d = off.length();
+        let want = falloff(d, r) * 10.0;
+        let v = v.as_dvec2();
+        if ring(*p) {
+            assert!(v.normalize().dot(off / d) > 0.99999, "omni at {off}: {v}");
+            assert!(
+                (v.length() - want).abs() < 1e-4,
+                "omni |v| {} vs {want} at {d} m",
+                v.length()
+            );
+            checked += 1;
+        } else if d >= r {
+            assert_eq!(v, DVec2::ZERO, "omni beyond its radius at {d} m");
+        }
+    }
+    assert!(checked > 500, "{checked}");
+    assert_eq!(falloff(10.0, 20.0) * 10.0, 2.5);
+    // The cell nearest 10 m east of the centre.
+    let (p, v) = omni
+        .iter()
+        .min_by(|a, b| {
+            let t = centre + DVec2::new(10.0, 0.0);
+            a.0.distance(t).total_cmp(&b.0.distance(t))
+        })
+        .unwrap();
+    let d = p.distance(centre);
+    assert!((f64::from(v.length()) - 10.0 * falloff(d, r)).abs() < 1e-4);
+    assert!(
+        v.x > 2.0,
+        "about 2.5 m/s eastward 10 m east of the centre: {v}"
+    );
+
+    // Vortex: tangential, counter-clockwise by default, 6 m/s * (1 - d/20)^2.
+    for (extra, sense) in [("", 1.0), ("clockwise = true", -1.0)] {
+        let field = settled(
+            &ctx,
+            &sources_only(vec![fixed("vortex", centre, r, 6.0, extra)]),
+            camera,
+        );
+        for (p, v) in &field {
+            let off = *p - centre;
+            let d = off.length();
+            let v = v.as_dvec2();
+            if ring(*p) {
+                let radial = off / d;
+                assert!(
+                    v.dot(radial).abs() < 1e-4,
+                    "vortex has a radial part at {off}: {v}"
+                );
+                // Counter-clockwise: the wind turns the radius toward +90 degrees.
+                assert!(
+                    sense * radial.perp_dot(v) > 0.0,
+                    "vortex turns the wrong way at {off}"
+                );
+                assert!((v.length() - 6.0 * falloff(d, r)).abs() < 1e-4);
+            } else if d >= r {
+                assert_eq!(v, DVec2::ZERO);
+            }
+        }
+    }
+    // Vortex with inflow: the radial part points inward, inflow * falloff.
+    let field = settled(
+        &ctx,
+        &sources_only(vec![fixed("vortex", centre, r, 6.0, "inflow_mps = 3.0")]),
+        camera,
+    );
+    for (p, v) in &field {
+        if ring(*p) {
+            let off = *p - centre;
+            let d = off.length();
+            let radial_part = v.as_dvec2().dot(off / d);
+            assert!(
+                (radial_part + 3.0 * falloff(d, r)).abs() < 1e-4,
+                "{radial_part}"
+            );
+        }
+    }
+    // Omni and directional sum.
+    let sum = settled(
+        &ctx,
+        &sources_only(vec![
+            fixed("omni", centre, r, 10.0, ""),
+            directional(200.0, 3.0),
+        ]),
+        camera,
+    );
+    let dir = DVec2::from_angle(200f64.to_radians()) * 3.0;
+    for ((_, a), (_, b)) in sum.iter().zip(&omni) {
+        assert!((a.as_dvec2() - b.as_dvec2() - dir).length() < 1e-4);
+    }
+}
+
+#[test]
+fn ambient_is_continuous_across_window_restarts_and_never_repeats() {
+    let config = WindConfig::new(AmbientWind {
+        direction_deg: 20.0,
+        speed_mps: 4.0,
+        gustiness: 0.35,
+    });
+    let (period, blend) = (config.window_s, config.blend_s);
+    let points: Vec<DVec2> = (0..300)
+        .map(|k| {
+            let a = k as f64 * 2.399;
+            let r = (k as f64).sqrt() * 9.0;
+            DVec2::new(20_300.0, 28_150.0) + DVec2::from_angle(a) * r
+        })
+        .collect();
+    let dt = 1.0 / 60.0;
+    // Largest change of any point's wind between frames over a span of time.
+    let largest_step = |from: f64, to: f64| -> f32 {
+        let mut worst = 0.0f32;
+        for p in &points {
+            let mut prev = ambient_at(&config, *p, from);
+            let mut t = from;
+            while t < to {
+                t += dt;
+                let v = ambient_at(&config, *p, t);
+                worst = worst.max((v - prev).length());
+                prev = v;
+            }
+        }
+        worst
+    };
+    let ordinary = largest_step(2.0 * period + 20.0, 2.0 * period + 40.0);
+    let restart = largest_step(3.0 * period - 2.0, 3.0 * period + blend + 2.0);
+    eprintln!(
+        "largest frame-to-frame change: ordinary {ordinary} m/s, across a restart {restart} m/s"
+    );
+    assert!(ordinary > 0.0);
+    // The cross-fade adds at most a comparable rate of change (see the report for the figure).
+    assert!(
+        restart <= 1.5 * ordinary,
+        "restart changes the wind by {restart} m/s in a frame, ordinarily {ordinary}"
+    );
+    // Right at the restart, the field does not jump.
+    let t0 = 3.0 * period;
+    for p in &points {
+        let (a, b) = (
+            ambient_at(&config, *p, t0 - 1e-4),
+            ambient_at(&config, *p, t0 + 1e-4),
+        );
+        assert!((a - b).length() < 1e-3, "jump at the restart: {a} -> {b}");
+    }
+
+    // No repetition: a window period later the field is a different one.
+    let field_at =
+        |t: f64| -> Vec<Vec2> { points.iter().map(|p| ambient_at(&config, *p, t)).collect() };
+    let now = field_at(2.0 * period + 30.0);
+    let avg = now.iter().copied().sum::<Vec2>() / now.len() as f32;
+    let spread =
+        (now.iter().map(|v| (*v - avg).length_squared()).sum::<f32>() / now.len() as f32).sqrt();
+    assert!(
+        spread > 0.2,
+        "gusts vary across the field: spread {spread} m/s"
+    );
+    assert!((avg.length() - 4.0).abs() < 1.0, "mean wind {avg}");
+    for later in [1.0, 2.0, 7.0] {
+        let then = field_at(2.0 * period + 30.0 + later * period);
+        let rms = (now
+            .iter()
+            .zip(&then)
+            .map(|(a, b)| (*a - *b).length_squared())
+            .sum::<f32>()
+            / now.len() as f32)
+            .sqrt();
+        assert!(
+            rms > 0.5 * spread,
+            "{later} periods later the field differs by only {rms} m/s (spread {spread})"
+        );
+    }
+}
+
+/// Steps `field` with a fixed camera and no walker; returns the cell `index`'s source-driven
+/// wind (state) and total wind.
+fn step_fixed(
+    ctx: &GpuContext,
+    field: &mut WindField,
+    camera: DVec2,
+    t: f64,
+    dt: f32,
+    index: usize,
+) -> (Vec2, Vec2) {
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    field.update(
+        &ctx.queue,
+        &mut encoder,
+        camera.extend(3.0),
+        t,
+        dt,
+        None,
+        &mut timer(ctx),
+    );
+    ctx.queue.submit([encoder.finish()]);
+    let s = field.read_back_state(&ctx.device, &ctx.queue)[index].source;
+    let c = field.read_back(&ctx.device, &ctx.queue)[index];
+    (Vec2::from_array(s), Vec2::new(c[0], c[1]))
+}
+
+#[test]
+fn source_wind_decays_toward_the_ambient_and_stays_bounded_with_hitches() {
+    let ctx = common::gpu();
+    let camera = DVec2::new(12_345.6, 6_543.2);
+    let centre = camera + DVec2::new(4.0, 1.0);
+    // An omni source on until 5 s, off from 5.01 s, on again from 20.01 s.
+    let keys = "strength = [[0.0, 1.0], [5.0, 1.0], [5.01, 0.0], [20.0, 0.0], [20.01, 1.0]]";
+    let mut config = sources_only(vec![fixed("omni", centre, 20.0, 12.0, keys)]);
+    config.ambient = AmbientWind {
+        direction_deg: 20.0,
+        speed_mps: 4.0,
+        gustiness: 0.35,
+    };
+    let probe_cell = config.world_cell(centre + DVec2::new(6.0, 0.0));
+    let probe_centre = DVec2::new(
+        (f64::from(probe_cell[0]) + 0.5) * f64::from(config.cell_m),
+        (f64::from(probe_cell[1]) + 0.5) * f64::from(config.cell_m),
+    );
+    let index = config.storage_index(probe_cell);
+    let release = (-0.5f64 / f64::from(config.release_s)).exp() as f32;
+    let attack = (-0.5f64 / f64::from(config.attack_s)).exp() as f32;
+
+    // 0.5 s hitches throughout.
+    let mut field = WindField::new(&ctx.device, &ctx.queue, &config);
+    // A fresh cell settles on its sources at once.
+    let (s_on, _) = step_fixed(&ctx, &mut field, camera, 4.0, 0.5, index);
+    let (s, _) = step_fixed(&ctx, &mut field, camera, 4.5, 0.5, index);
+    assert!(
+        (s - s_on).length() < 1e-5 && s_on.length() > 5.0,
+        "{s_on} {s}"
+    );
+    let (s, _) = step_fixed(&ctx, &mut field, camera, 5.0, 0.5, index);
+    assert!((s - s_on).length() < 1e-5);
+    // Off: every step keeps exp(-0.5 / 1.5) of the source wind, never overshooting, and the
+    // rest of the cell's wind is the ambient field there.
+    let mut prev = s_on;
+    for k in 1..=29 {
+        let t = 5.0 + 0.5 * f64::from(k);
+        let (s, wind) = step_fixed(&ctx, &mut field, camera, t, 0.5, index);
+        assert!(
+            (s - prev * release).length() <= 1e-5 * s_on.length(),
+            "t {t}: {s} vs {}",
+            prev * release
+        );
+        assert!(
+            s.dot(s_on) >= 0.0 && s.length() <= prev.length(),
+            "t {t}: {s} after {prev}"
+        );
+        let ambient = ambient_at(&config, probe_centre, t);
+        assert!(
+            (wind - s - ambient).length() < 1e-3,
+            "t {t}: wind {wind}, source {s}, ambient {ambient}"
+        );
+        prev = s;
+    }
+    assert!(
+        prev.length() < s_on.length() * 1e-4,
+        "after 14.5 s off: {prev}"
+    );
+    // On again at 20.01 s: the attack (0.15 s) brings it 96 % of the way in one 0.5 s step.
+    let (s, _) = step_fixed(&ctx, &mut field, camera, 20.5, 0.5, index);
+    let want = s_on + (prev - s_on) * attack;
+    assert!((s - want).length() < 1e-4 * s_on.length(), "{s} vs {want}");
+    assert!(s.length() > 0.95 * s_on.length());
+
+    // At 1/32 s frames: one release time (1.5 s) after the source went off, exp(-1) remains.
+    let mut field = WindField::new(&ctx.device, &ctx.queue, &config);
+    let dt = 1.0f32 / 32.0;
+    let (s_at_5, _) = step_fixed(&ctx, &mut field, camera, 5.0, dt, index);
+    let mut s = s_at_5;
+    for k in 1..=48 {
+        s = step_fixed(
+            &ctx,
+            &mut field,
+            camera,
+            5.0 + f64::from(dt) * f64::from(k),
+            dt,
+            index,
+        )
+        .0;
+    }
+    let ratio = s.length() / s_at_5.length();
+    assert!(
+        (ratio - (-1.0f32).exp()).abs() < 1e-4,
+        "after one release time {ratio} remains"
+    );
+}
+
+#[test]
+fn trail_pushes_away_from_the_path_fades_and_stays_bounded() {
+    let ctx = common::gpu();
+    let mut config = WindConfig::new(AmbientWind {
+        direction_deg: 20.0,
+        speed_mps: 4.0,
+        gustiness: 0.35,
+    });
+    config.cells = 64;
+    let mut field = WindField::new(&ctx.device, &ctx.queue, &config);
+    let cell = f64::from(config.cell_m);
+    // Walk east along the edge between two rows of cells, whose centres lie 0.625 m north and
+    // south of the path.
+    let (x0, y0) = (1200.0 * cell, 800.0 * cell);
+    let mut t = 0.0;
+    let mut run = |field: &mut WindField, cam: DVec2, walker: Option<DVec2>, dt: f32| {
+        t += f64::from(dt);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        field.update(
+            &ctx.queue,
+            &mut encoder,
+            cam.extend(1.7),
+            t,
+            dt,
+            walker,
+            &mut timer(&ctx),
+        );
+        ctx.queue.submit([encoder.finish()]);
+        let cells = field.read_back(&ctx.device, &ctx.queue);
+        for c in &cells {
+            let push = Vec2::new(c[2], c[3]).length();
+            assert!(push <= 1.0 + 1e-6, "push {push} exceeds 1");
+        }
+        cells
+    };
+    let frame = 1.0f32 / 30.0;
+    let mut cells = Vec::new();
+    for k in 0..=20 {
+        let p = DVec2::new(x0 + 0.5 * f64::from(k), y0);
+        cells = run(&mut field, p, Some(p), frame);
+    }
+    // Standing still for a while: still bounded (a stamp keeps the larger push, never a sum).
+    let end = DVec2::new(x0 + 10.0, y0);
+    for _ in 0..10 {
+        cells = run(&mut field, end, Some(end), frame);
+    }
+    let push_at = |cells: &[[f32; 4]], p: DVec2| -> Vec2 {
+        let c = cells[config.storage_index(config.world_cell(p))];
+        Vec2::new(c[2], c[3])
+    };
+    // The cells centred 5.625 m along the path: stamped by the step at k = 12 (5.5 -> 6 m), then
+    // faded over 8 walking and 10 standing frames.
+    let mid = x0 + 5.625;
+    let north = push_at(&cells, DVec2::new(mid, y0 + 0.6));
+    let south = push_at(&cells, DVec2::new(mid, y0 - 0.6));
+    let far = push_at(&cells, DVec2::new(mid, y0 + 1.9));
+    eprintln!("push north {north}, south {south}, 1.875 m away {far}");
+    let u = 0.625f32;
+    let fade = (-f64::from(frame) / f64::from(config.trail_fade_s))
+        .exp()
+        .powi(18) as f32;
+    let want = (1.0 - u * u * (3.0 - 2.0 * u)) * fade;
+    assert!(
+        (north.y - want).abs() < 1e-4 && north.x.abs() < 1e-5,
+        "north: {north}, want {want}"
+    );
+    assert!(
+        (south.y + want).abs() < 1e-4 && south.x.abs() < 1e-5,
+        "south: {south}"
+    );
+    assert_eq!(far, Vec2::ZERO, "beyond the capsule's radius");
+
+    // No walker: the trail fades by exp(-1) over the fade time (3 s), and stays where it was in
+    // the world while the camera moves away (toroidal addressing moves no data).
+    let before = north;
+    let mut cam = end;
+    for _ in 0..30 {
+        cam += DVec2::new(0.2, 0.1);
+        cells = run(&mut field, cam, None, 0.1);
+    }
+    let after = push_at(&cells, DVec2::new(mid, y0 + 0.6));
+    let ratio = after.y / before.y;
+    assert!(
+        (ratio - (-1.0f32).exp()).abs() < 1e-4,
+        "after the fade time {ratio} remains"
+    );
+    assert!(after.x.abs() < 1e-5);
+    // A jump beyond the trail's longest step starts a new trail: no capsule across the gap.
+    let from = cam;
+    run(&mut field, from, Some(from), frame);
+    let to = from + DVec2::new(20.0, 0.0);
+    cells = run(&mut field, to, Some(to), frame);
+    let gap = push_at(&cells, from + DVec2::new(10.0, 0.3));
+    assert_eq!(gap, Vec2::ZERO, "a teleport left a trail");
+    // ... but it does stamp where the walker landed.
+    let mut landed = 0.0f32;
+    for (dx, dy) in [
+        (-1.0, -1.0),
+        (-1.0, 0.0),
+        (-1.0, 1.0),
+        (0.0, -1.0),
+        (0.0, 1.0),
+        (1.0, -1.0),
+        (1.0, 0.0),
+        (1.0, 1.0),
+        (0.0, 0.0),
+    ] {
+        landed = landed.max(push_at(&cells, to + DVec2::new(dx, dy) * cell).length());
+    }
+    assert!(landed > 0.2, "no push where the walker landed: {landed}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Wind scenes in the manifest.
+
+#[test]
+fn committed_world_has_the_wind_scenes_and_the_helicopter_path() {
+    let m = world();
+    let names: Vec<&str> = m.wind_scenes.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["calm", "breeze", "storm", "helicopter"]);
+    let heli_path = m.path("helicopter").expect("helicopter path");
+    assert!((15.0..=20.0).contains(&heli_path.duration_s));
+    let speed = |name: &str| m.wind_scene(name).unwrap().ambient.speed_mps;
+    assert!(
+        speed("calm") < 1.5 && (3.0..=5.0).contains(&speed("breeze")) && speed("storm") >= 12.0
+    );
+    let storm = m.wind_scene("storm").unwrap();
+    assert!(storm.ambient.gustiness >= 0.6);
+    assert!(
+        storm
+            .sources
+            .iter()
+            .filter(|s| s.kind_name() == "directional")
+            .count()
+            >= 2
+    );
+
+    // The default scene is the breeze; the helicopter's downwash follows its path.
+    let breeze = WindConfig::from_scene(&m, None).unwrap();
+    assert_eq!(breeze.scene, "breeze");
+    assert!(breeze.source_list.is_empty());
+    let heli = WindConfig::from_scene(&m, Some("helicopter")).unwrap();
+    assert!(!heli.source_list.is_empty());
+    for s in &heli.source_list {
+        assert!(
+            matches!(s.source, WindSource::Omni { radius_m, .. } | WindSource::Vortex { radius_m, .. } if (20.0..=30.0).contains(&radius_m))
+        );
+        let p0 = s.position_at(0.0).unwrap();
+        let want = DVec2::from_slice(&heli_path.keys[0].position_m[..2]);
+        assert!(p0.distance(want) < 1e-6);
+        // It loops over the path's duration.
+        let p1 = s.position_at(heli_path.duration_s * 0.5).unwrap();
+        let p2 = s.position_at(heli_path.duration_s * 1.5).unwrap();
+        assert!(p1.distance(p0) > 10.0 && p1.distance(p2) < 1e-6);
+        assert_eq!(s.strength_at(-1.0), 0.0);
+        assert_eq!(s.strength_at(1.0), 0.5);
+        assert_eq!(s.strength_at(60.0), 1.0);
+    }
+    assert!(matches!(
+        WindConfig::from_scene(&m, Some("hurricane")),
+        Err(WindError::UnknownScene { ref name, ref available }) if name == "hurricane" && available.contains("storm")
+    ));
+    // A world without scenes falls back to its wind defaults.
+    let mut bare = m.clone();
+    bare.wind_scenes.clear();
+    let c = WindConfig::from_scene(&bare, None).unwrap();
+    assert_eq!(c.ambient, AmbientWind::from(&m.wind));
+    assert_eq!(c.cell_m, DEFAULT_CELL_M);
+}
+
+const SMALL: &str = r#"
+name = "test"
+extent_m = [900.0, 1000.0]
+height_range_m = [-10.0, 500.0]
+
+[pyramid]
+root_tile_size_m = 512.0
+root_tiles = [2, 2]
+tile_cells = 16
+border = 2
+stored_levels = 2
+derived_levels = 1
+
+[[grass_types]]
+name = "bare"
+ground_color = [0.3, 0.3, 0.3]
+base_color = [0.3, 0.3, 0.3]
+tip_color = [0.3, 0.3, 0.3]
+height_m = [0.0, 0.0]
+width_m = [0.0, 0.0]
+stiffness = 1.0
+
+[[paths]]
+name = "overview"
+duration_s = 10.0
+keys = [
+    { t_s = 0.0, position_m = [10.0, 10.0, 600.0], yaw_deg = 45.0, pitch_deg = -10.0 },
+    { t_s = 10.0, position_m = [800.0, 900.0, 600.0], yaw_deg = 45.0, pitch_deg = -10.0 },
+]
+
+[[wind_scenes]]
+name = "gusty"
+ambient = { direction_deg = 10.0, speed_mps = 6.0, gustiness = 0.5 }
+sources = [
+    { kind = "directional", direction_deg = 90.0, speed_mps = 3.0, strength = [[0.0, 0.0], [2.0, 1.0]] },
+    { kind = "omni", radius_m = 25.0, speed_mps = 10.0, path = "overview" },
+    { kind = "vortex", radius_m = 15.0, speed_mps = 5.0, inflow_mps = -2.0, position_m = [300.0, 400.0] },
+]
+"#;
+
+fn parse(text: &str) -> Result<Manifest, WorldError> {
+    Manifest::parse(text, Path::new("worlds/test/world.toml"))
+}
+
+/// Parses SMALL with `from` replaced by `to` (which must occur), expecting an error naming the
+/// file.
+fn broken(from: &str, to: &str) -> WorldError {
+    assert!(SMALL.contains(from), "{from}");
+    let err = parse(&SMALL.replacen(from, to, 1)).expect_err(to);
+    assert!(
+        err.to_string().starts_with("worlds/test/world.toml: "),
+        "message does not name the file: {err}"
+    );
+    err
+}
+
+#[test]
+fn wind_scenes_parse_and_old_manifests_still_do() {
+    let m = parse(SMALL).unwrap();
+    let scene = m.wind_scene("gusty").unwrap();
+    assert_eq!(scene.sources.len(), 3);
+    assert_eq!(scene.sources[2].kind_name(), "vortex");
+    // Round trip.
+    assert_eq!(parse(&m.to_toml()).unwrap(), m);
+    // A manifest without wind scenes (as written before they existed) still parses.
+    let old = &SMALL[..SMALL.find("[[wind_scenes]]").unwrap()];
+    let m = parse(old).unwrap();
+    assert!(m.wind_scenes.is_empty());
+}
+
+#[test]
+fn invalid_wind_sources_get_errors_naming_the_field() {
+    let field_of = |e: &WorldError| -> String {
+        match e {
+            WorldError::NonFinite { field, .. }
+            | WorldError::NonPositive { field, .. }
+            | WorldError::Negative { field, .. }
+            | WorldError::OutOfRange { field, .. }
+            | WorldError::UnknownPathRef { field, .. }
+            | WorldError::WindSourcePlacement { field, .. }
+            | WorldError::StrengthKeysOutOfOrder { field, .. } => field.clone(),
+            other => panic!("unexpected error {other}"),
+        }
+    };
+    let cases: [(&str, &str, &str); 10] = [
+        (
+            "path = \"overview\"",
+            "path = \"tour\"",
+            "wind_scenes[0].sources[1].path",
+        ),
+        (
+            "radius_m = 25.0",
+            "radius_m = -25.0",
+            "wind_scenes[0].sources[1].radius_m",
+        ),
+        (
+            "radius_m = 15.0",
+            "radius_m = 0.0",
+            "wind_scenes[0].sources[2].radius_m",
+        ),
+        (
+            "speed_mps = 5.0",
+            "speed_mps = -5.0",
+            "wind_scenes[0].sources[2].speed_mps",
+        ),
+        (
+            "speed_mps = 3.0",
+            "speed_mps = nan",
+            "wind_scenes[0].sources[0].speed_mps",
+        ),
+        (
+            "inflow_mps = -2.0",
+            "inflow_mps = inf",
+            "wind_scenes[0].sources[2].inflow_mps",
+        ),
+        (
+            "[2.0, 1.0]",
+            "[-1.0, 1.0]",
+            "wind_scenes[0].sources[0].strength",
+        ),
+        (
+            "position_m = [300.0, 400.0]",
+            "position_m = [300.0, nan]",
+            "wind_scenes[0].sources[2].position_m[1]",
+        ),
+        (
+            "position_m = [300.0, 400.0]",
+            "position_m = [1.0, 2.0], path = \"overview\"",
+            "wind_scenes[0].sources[2]",
+        ),
+        (
+            "speed_mps = 6.0",
+            "speed_mps = -6.0",
+            "wind_scenes[0].ambient.speed_mps",
+        ),
+    ];
+    for (from, to, field) in cases {
+        let err = broken(from, to);
+        assert_eq!(field_of(&err), field, "{to}: {err}");
+        assert!(err.to_string().contains(field), "{err}");
+        eprintln!("{err}");
+    }
+    assert!(matches!(
+        broken("[2.0, 1.0]", "[-1.0, 1.0]"),
+        WorldError::StrengthKeysOutOfOrder { index: 1, .. }
+    ));
+    assert!(matches!(
+        broken("path = \"overview\"", "path = \"tour\""),
+        WorldError::UnknownPathRef { ref name, .. } if name == "tour"
+    ));
+    // An omni source needs a place.
+    let err = broken(", path = \"overview\"", "");
+    assert!(
+        matches!(err, WorldError::WindSourcePlacement { ref field, .. } if field == "wind_scenes[0].sources[1]"),
+        "{err}"
+    );
+    // Duplicate scene names.
+    let twice = format!("{SMALL}\n[[wind_scenes]]\nname = \"gusty\"\n");
+    assert!(matches!(
+        parse(&twice),
+        Err(WorldError::DuplicateWindScene { ref name, .. }) if name == "gusty"
+    ));
+    // Unknown kinds and fields are refused by the parser, naming them.
+    let err = broken("kind = \"omni\"", "kind = \"tornado\"");
+    assert!(
+        matches!(err, WorldError::ManifestSyntax { .. }) && err.to_string().contains("tornado"),
+        "{err}"
+    );
+    let err = broken("inflow_mps = -2.0", "inflow_mps = -2.0, spin = 1.0");
+    assert!(
+        matches!(err, WorldError::ManifestSyntax { .. }) && err.to_string().contains("spin"),
+        "{err}"
+    );
+    // Too many sources.
+    let many = (0..9)
+        .map(|_| "{ kind = \"directional\", direction_deg = 0.0, speed_mps = 1.0 }")
+        .collect::<Vec<_>>()
+        .join(", ");
+    let err = parse(&format!(
+        "{SMALL}\n[[wind_scenes]]\nname = \"many\"\nsources = [{many}]\n"
+    ))
+    .unwrap_err();
+    assert_eq!(field_of(&err), "wind_scenes[1].sources");
+}
