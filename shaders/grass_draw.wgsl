@@ -1,19 +1,44 @@
 // Grass blades from the instance pool: one indirect draw per tile, a triangle strip per blade.
 // The high-LOD pipeline has 7 segments (15 vertices), the low-LOD one 3 (7 vertices). The shape
-// is a cubic Bezier scaled to keep its length (CPU mirror of the shape: src/grass/blade.rs).
+// is a cubic Bezier bent by the wind and scaled to keep its length (CPU mirror of the shape:
+// src/grass/blade.rs). shaders/wind_lookup.wgsl is put in front of this file.
+//
+// Bending (after Crysis): main bending leans the whole blade by its cell's sway (a damped spring
+// per grass type, shaders/grass_sway.wgsl) plus the trail's push; detail bending adds whole-blade
+// sway and edge flutter from smoothed triangle waves at four frequencies, phased by the blade's
+// hash. Shading: front and back lighting with translucency, per-type gloss, ambient occlusion
+// from root to tip, colour variation from world-space noise at the root, highlights that travel
+// with the gusts, and normals that blend toward the terrain's with distance.
 
 override SEGMENTS: u32 = 7u;
 
 struct GrassFrame {
     view_proj: mat4x4<f32>,
-    // x: fog distance, y: time (s)
+    // x: fog distance, y: time (s), z: ambient wind speed (m/s)
     misc: vec4<f32>,
     sun_dir: vec4<f32>,
     sun_color: vec4<f32>,
     sky_color: vec4<f32>,
     horizon_color: vec4<f32>,
+    // x: feature bits (src/features.rs)
+    flags: vec4<u32>,
+    // xy: the camera's world position modulo 4096 m
+    camera_world: vec4<f32>,
+    // rgb colour; w: gloss exponent (base) and specular strength (tip)
     base_colors: array<vec4<f32>, 16>,
     tip_colors: array<vec4<f32>, 16>,
+}
+
+const WIND_SOURCES: u32 = 1u;
+const INTERACTION: u32 = 2u;
+const DETAIL_BENDING: u32 = 4u;
+const TRANSLUCENCY: u32 = 8u;
+const SPECULAR: u32 = 16u;
+const AMBIENT_OCCLUSION: u32 = 32u;
+const COLOR_VARIATION: u32 = 64u;
+
+fn has(feature: u32) -> bool {
+    return (frame.flags.x & feature) != 0u;
 }
 
 struct Blade {
@@ -34,14 +59,56 @@ struct Blade {
 
 @group(0) @binding(0) var<uniform> frame: GrassFrame;
 @group(0) @binding(1) var<storage, read> blades: array<Blade>;
+@group(0) @binding(2) var<uniform> wind_lookup: WindLookup;
+@group(0) @binding(3) var<storage, read> wind_cells: array<vec4<f32>>;
+// Per wind cell and grass type (4): bend xy in blade heights, velocity zw.
+@group(0) @binding(4) var<storage, read> sway: array<vec4<f32>>;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) rel_pos: vec3<f32>,
     @location(1) normal: vec3<f32>,
     @location(2) color: vec3<f32>,
-    // x: position along the blade 0..1
-    @location(3) t: f32,
+    // x: position along the blade 0..1, y: gust highlight 0..1, z: specular strength,
+    // w: gloss exponent
+    @location(3) misc: vec4<f32>,
+}
+
+// Crysis' smoothed triangle wave, 0..1.
+fn smooth_triangle(x: f32) -> f32 {
+    let t = abs(fract(x + 0.5) * 2.0 - 1.0);
+    return t * t * (3.0 - 2.0 * t);
+}
+
+// The sway of grass type `kind` in the wind cell under rel_xy.
+fn sway_at(rel_xy: vec2<f32>, kind: u32) -> vec2<f32> {
+    let n = i32(wind_lookup.n);
+    let half = n / 2;
+    let c = vec2<i32>(floor((wind_lookup.camera_offset + rel_xy) / wind_lookup.cell_m));
+    let r = clamp(c, vec2<i32>(-half, -half), vec2<i32>(half - 1, half - 1));
+    let w = wind_lookup.origin_cell + r;
+    let x = ((w.x % n) + n) % n;
+    let y = ((w.y % n) + n) % n;
+    return sway[(u32(y) * wind_lookup.n + u32(x)) * 4u + min(kind, 3u)].xy;
+}
+
+fn hash2(x: i32, y: i32) -> u32 {
+    var h = u32(x) * 0x8da6b343u ^ u32(y) * 0xd8163841u;
+    h ^= h >> 16u;
+    h *= 0x7feb352du;
+    h ^= h >> 15u;
+    return h;
+}
+
+fn value_noise(p: vec2<f32>) -> f32 {
+    let i = vec2<i32>(floor(p));
+    let f = p - floor(p);
+    let u = f * f * (3.0 - 2.0 * f);
+    let a = f32(hash2(i.x, i.y) >> 8u) / 16777216.0;
+    let b = f32(hash2(i.x + 1, i.y) >> 8u) / 16777216.0;
+    let c = f32(hash2(i.x, i.y + 1) >> 8u) / 16777216.0;
+    let d = f32(hash2(i.x + 1, i.y + 1) >> 8u) / 16777216.0;
+    return mix(mix(a, b, u.x), mix(c, d, u.x), u.y);
 }
 
 fn bezier(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>, t: f32) -> vec3<f32> {
@@ -54,11 +121,24 @@ fn bezier_tangent(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>, t:
     return (p1 - p0) * (3.0 * u * u) + (p2 - p1) * (6.0 * u * t) + (p3 - p2) * (3.0 * t * t);
 }
 
-fn half_length(q0: vec3<f32>, q1: vec3<f32>, q2: vec3<f32>, q3: vec3<f32>) -> f32 {
+// Mean of chord and control polygon of one piece of a curve.
+fn piece_length(q0: vec3<f32>, q1: vec3<f32>, q2: vec3<f32>, q3: vec3<f32>) -> f32 {
     return 0.5 * (distance(q0, q3) + distance(q0, q1) + distance(q1, q2) + distance(q2, q3));
 }
 
-// Length of a cubic Bezier: split in the middle; per half, the mean of chord and polygon.
+// Length of the half of a cubic Bezier: split once more, two pieces.
+fn half_length(q0: vec3<f32>, q1: vec3<f32>, q2: vec3<f32>, q3: vec3<f32>) -> f32 {
+    let q01 = (q0 + q1) * 0.5;
+    let q12 = (q1 + q2) * 0.5;
+    let q23 = (q2 + q3) * 0.5;
+    let a = (q01 + q12) * 0.5;
+    let b = (q12 + q23) * 0.5;
+    let m = (a + b) * 0.5;
+    return piece_length(q0, q01, a, m) + piece_length(m, b, q23, q3);
+}
+
+// Length of a cubic Bezier: split into quarters; per quarter, the mean of chord and polygon
+// (as bezier_length_estimate in src/grass/blade.rs).
 fn bezier_length(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>) -> f32 {
     let p01 = (p0 + p1) * 0.5;
     let p12 = (p1 + p2) * 0.5;
@@ -82,12 +162,33 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     let side = normalize(cross(up, facing_dir));
     let fwd = normalize(cross(side, up));
     let h = b.height;
+    let kind = b.kind & 255u;
 
-    // Control points (as blade_curve in src/grass/blade.rs), then scaled to keep the length.
+    // Wind: the sway of the blade's type in its cell, the trail's push, detail bending.
+    let w = wind_at(root.xy);
+    var lean = sway_at(root.xy, kind) * b.wind;
+    if has(INTERACTION) {
+        lean += w.zw * 0.9;
+    }
+    let speed = length(w.xy);
+    var blade_sway = 0.0;
+    var flutter = 0.0;
+    if has(DETAIL_BENDING) {
+        let phase = f32(b.hash & 1023u) / 1023.0;
+        let time = frame.misc.y;
+        let amount = min(speed / 5.0, 1.5) * b.wind;
+        blade_sway = (smooth_triangle(time * 0.193 + phase) + smooth_triangle(time * 0.375 + phase * 1.3) - 1.0) * amount;
+        flutter = (smooth_triangle(time * 1.975 + phase * 3.1) + smooth_triangle(time * 0.793 + phase * 2.7) - 1.0) * amount;
+    }
+
+    // Control points (as blade_curve in src/grass/blade.rs), bent, then scaled to keep the
+    // length. The bend is horizontal: every control point stays above the root, so the curve
+    // (inside their hull) never dips below the ground.
+    let bend = vec3<f32>(lean, 0.0) + side * (0.06 * blade_sway);
     let tip_angle = b.tilt + b.bend * 1.2;
-    let p3 = (up * cos(b.tilt) + fwd * sin(b.tilt)) * h;
-    let p1 = up * (h / 3.0) + side * (b.side_curve * 0.15 * h);
-    let p2 = p3 - (up * cos(tip_angle) + fwd * sin(tip_angle)) * (h / 3.0) + side * (b.side_curve * 0.15 * h);
+    let p3 = (up * cos(b.tilt) + fwd * sin(b.tilt)) * h + bend * h;
+    let p1 = up * (h / 3.0) + side * (b.side_curve * 0.15 * h) + bend * (0.15 * h);
+    let p2 = p3 - (up * cos(tip_angle) + fwd * sin(tip_angle)) * (h / 3.0) + side * (b.side_curve * 0.15 * h) - bend * (0.4 * h);
     let scale = h / max(bezier_length(vec3<f32>(0.0), p1, p2, p3), 1e-6);
     let c1 = p1 * scale;
     let c2 = p2 * scale;
@@ -110,21 +211,32 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     let edge_on = 1.0 - abs(dot(n, view));
     let side_view = normalize(cross(view, tangent) + side * 1e-4);
     let width_dir = normalize(mix(side, side_view * sign(dot(side, side_view) + 1e-6), 0.4 * edge_on));
-    let w = b.width * (1.0 - t);
-    let pos = p + width_dir * (0.5 * w * side_sign);
-    // Rounded cross-section: normals lean outward toward the edges.
+    let bw = b.width * (1.0 - t);
+    var pos = p + width_dir * (0.5 * bw * side_sign);
+    // Edge flutter: the blade's edges move along its normal, more toward the tip.
+    pos += n * (flutter * 0.03 * h * t * abs(side_sign));
+    // Rounded cross-section: normals lean outward toward the edges; far away they blend toward
+    // the ground's (the growth direction), as a field of blades reads from a distance.
     n = normalize(n + width_dir * (0.35 * side_sign));
+    n = normalize(mix(n, up, smoothstep(15.0, 90.0, length(root))));
 
-    let kind = b.kind & 255u;
     let tint = unpack_rgb(b.color) * 2.0;
-    let color = mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t) * tint;
+    var color = mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t) * tint;
+    if has(COLOR_VARIATION) {
+        // One colour per blade: world-space noise at the root, patches of a few metres.
+        let world = frame.camera_world.xy + root.xy;
+        let v = value_noise(world / 6.0) * 0.6 + value_noise(world / 1.7) * 0.4;
+        color *= mix(vec3<f32>(0.78, 0.86, 0.7), vec3<f32>(1.15, 1.1, 0.95), v);
+    }
+    // Gust highlights: where the wind runs above the ambient speed, tips catch more light.
+    let gust = clamp(speed / max(frame.misc.z, 0.5) - 1.0, 0.0, 1.0);
 
     var out: VertexOut;
     out.clip = frame.view_proj * vec4<f32>(pos, 1.0);
     out.rel_pos = pos;
     out.normal = n;
     out.color = color;
-    out.t = t;
+    out.misc = vec4<f32>(t, gust * t, frame.tip_colors[kind].w, frame.base_colors[kind].w);
     return out;
 }
 
@@ -134,13 +246,28 @@ fn fs_blade(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) v
     if !front {
         n = -n;
     }
+    let t = in.misc.x;
     let sun = frame.sun_dir.xyz;
+    let to_eye = -normalize(in.rel_pos);
     let diffuse = max(dot(n, sun), 0.0);
-    // Light through the blade when the sun is behind it.
-    let through = max(dot(-n, sun), 0.0) * 0.35;
-    let ao = mix(0.35, 1.0, in.t);
-    let ambient = frame.sky_color.rgb * (0.35 + 0.25 * n.z);
-    let lit = in.color * (frame.sun_color.rgb * (diffuse + through) + ambient) * ao;
+    var light = frame.sun_color.rgb * diffuse;
+    if has(TRANSLUCENCY) {
+        // The back side lit through the blade, stronger when looking toward the sun.
+        let back = max(dot(-n, sun), 0.0);
+        let toward_sun = pow(max(dot(-to_eye, sun), 0.0), 4.0);
+        light += frame.sun_color.rgb * back * (0.25 + 0.75 * toward_sun) * vec3<f32>(0.9, 1.0, 0.55);
+    }
+    var ao = 1.0;
+    if has(AMBIENT_OCCLUSION) {
+        ao = mix(0.3, 1.0, t);
+    }
+    let ambient = frame.sky_color.rgb * (0.35 + 0.25 * n.z) * ao;
+    var lit = in.color * (light * mix(0.6, 1.0, ao) + ambient) * (1.0 + 0.5 * in.misc.y);
+    if has(SPECULAR) {
+        let half_dir = normalize(sun + to_eye);
+        let spec = pow(max(dot(n, half_dir), 0.0), in.misc.w) * in.misc.z * (0.5 + t);
+        lit += frame.sun_color.rgb * spec;
+    }
     let dist = length(in.rel_pos);
     let x = dist / frame.misc.x;
     let fog = 1.0 - exp(-3.0 * x * x);

@@ -11,7 +11,7 @@ struct Frame {
     sun_color: vec4<f32>,
     sky_color: vec4<f32>,
     horizon_color: vec4<f32>,
-    // x: tile cells, y: border samples, z: grass type count
+    // x: tile cells, y: border samples, z: grass type count, w: feature bits (src/features.rs)
     grid: vec4<u32>,
     ground_colors: array<vec4<f32>, 16>,
 }
@@ -105,6 +105,9 @@ fn vs_terrain(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) 
     var albedo = mix(soil, grass_color, d);
     if kind == 0u {
         albedo = rock;
+    } else if (frame.grid.w & 128u) != 0u {
+        // Ground darkening: dense grass shades the soil under it.
+        albedo *= mix(1.0, 0.6, d);
     }
 
     var out: VertexOut;

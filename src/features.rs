@@ -69,10 +69,14 @@ impl fmt::Display for Feature {
 impl FromStr for Feature {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        Feature::ALL.iter().copied().find(|f| f.name() == s.trim()).ok_or_else(|| {
-            let names: Vec<&str> = Feature::ALL.iter().map(|f| f.name()).collect();
-            format!("unknown feature {s:?} (features: {})", names.join(", "))
-        })
+        Feature::ALL
+            .iter()
+            .copied()
+            .find(|f| f.name() == s.trim())
+            .ok_or_else(|| {
+                let names: Vec<&str> = Feature::ALL.iter().map(|f| f.name()).collect();
+                format!("unknown feature {s:?} (features: {})", names.join(", "))
+            })
     }
 }
 
@@ -127,6 +131,11 @@ mod tests {
             seen |= f.bit();
             assert!(!Features::all().without(f).has(f));
         }
-        assert!("sparkles".parse::<Feature>().unwrap_err().contains("translucency"));
+        assert!(
+            "sparkles"
+                .parse::<Feature>()
+                .unwrap_err()
+                .contains("translucency")
+        );
     }
 }

@@ -65,6 +65,14 @@ enum Command {
         /// Write only report.json, no PNG frames.
         #[arg(long)]
         no_images: bool,
+        /// Wind scene of the world's manifest (e.g. calm, breeze, storm, helicopter).
+        #[arg(long)]
+        wind: Option<String>,
+        /// Grass features to switch off, comma-separated: wind-sources, interaction,
+        /// detail-bending, translucency, specular, ambient-occlusion, color-variation,
+        /// ground-darkening.
+        #[arg(long, value_delimiter = ',')]
+        disable: Vec<verdant::features::Feature>,
         #[command(flatten)]
         stream: StreamArgs,
     },
@@ -502,6 +510,8 @@ fn run(cli: Cli) -> Result<()> {
             size,
             out,
             no_images,
+            wind,
+            disable,
             stream,
         } => fly(FlyOptions {
             world: resolve_world(&world)?,
@@ -511,6 +521,10 @@ fn run(cli: Cli) -> Result<()> {
             out,
             write_images: !no_images,
             service: stream.service(),
+            wind_scene: wind,
+            features: disable
+                .iter()
+                .fold(verdant::features::Features::all(), |f, d| f.without(*d)),
         }),
         Command::Soak {
             world,

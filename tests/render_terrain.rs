@@ -169,3 +169,45 @@ fn grassy_meadow_matches_reference_image() {
     // Bounds set on llvmpipe (Mesa 22.3, 2 cores): repeated runs give the same image.
     common::check_reference("grass_meadow", &image, 0.01, 0.10);
 }
+
+fn meadow_in_wind(scene_name: &str) -> image::RgbaImage {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).expect("open the default world");
+    let path = world
+        .manifest
+        .path("meadow")
+        .expect("the default world has a meadow path")
+        .clone();
+    let mut config = SceneConfig::for_world(&world);
+    config.wind_scene = Some(scene_name.to_owned());
+    let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
+    let camera = sample_path(&path, path.keys[0].t_s + 0.6 * path.duration_s);
+    assert!(
+        scene
+            .warm_up(&ctx, &camera, Duration::from_secs(60))
+            .unwrap()
+    );
+    // A few frames of wind, so that the sway has moved from its start.
+    for k in 0..4 {
+        scene
+            .render_at(&ctx, &camera, 12.0 + f64::from(k) / 30.0)
+            .unwrap();
+    }
+    scene.read_image(&ctx).unwrap()
+}
+
+#[test]
+fn calm_and_storm_match_reference_images_and_differ() {
+    let calm = meadow_in_wind("calm");
+    let storm = meadow_in_wind("storm");
+    // Bounds set on llvmpipe (Mesa 22.3, 2 cores): repeated runs give the same image.
+    common::check_reference("wind_calm", &calm, 0.01, 0.10);
+    common::check_reference("wind_storm", &storm, 0.01, 0.10);
+    let to_rgb = |i: &image::RgbaImage| image::DynamicImage::ImageRgba8(i.clone()).to_rgb8();
+    let diff = verdant::metrics::flip_compare(&to_rgb(&calm), &to_rgb(&storm)).unwrap();
+    assert!(
+        diff.mean > 0.02,
+        "a storm should visibly bend the grass: FLIP {}",
+        diff.mean
+    );
+}

@@ -43,6 +43,10 @@ pub struct FlyOptions {
     pub write_images: bool,
     /// Limits of the tile service.
     pub service: crate::stream::ServiceConfig,
+    /// Wind scene of the manifest (default: `breeze`, else the manifest's wind).
+    pub wind_scene: Option<String>,
+    /// Switched-on features of the grass model.
+    pub features: crate::features::Features,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -88,6 +92,8 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     let (width, height) = opts.size;
     let mut config = SceneConfig::for_world(&world);
     config.service = opts.service;
+    config.wind_scene = opts.wind_scene.clone();
+    config.features = opts.features;
     let mut scene = Scene::new(&ctx, world, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.
@@ -115,7 +121,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
         let camera = sample_path(&path, t_s);
         let start = Instant::now();
-        let stats = scene.render(&ctx, &camera)?;
+        let stats = scene.render_at(&ctx, &camera, t_s)?;
         let image = scene.read_image(&ctx)?;
         let frame_ms = start.elapsed().as_secs_f64() * 1e3;
         if opts.write_images {

@@ -6,16 +6,18 @@ use std::time::Instant;
 
 use glam::DVec2;
 
+use crate::features::{Feature, Features};
 use crate::flythrough::Camera;
 use crate::gpu::{
     AtlasError, DeriveStage, GpuContext, GpuTimer, PassTimes, ReadbackError, TileAtlas,
 };
-use crate::grass::{GrassRenderer, GrassSettings, GrassStats, TileJob};
+use crate::grass::{GrassRenderer, GrassSettings, GrassStats, TileJob, WindBindings};
 use crate::lod::{Frustum, GrassRings, Ring, RingSettings, TerrainLod, select_terrain};
 use crate::stream::{
     DeriveParams, ResidencyPlan, ResidencyStats, ServiceConfig, TileService, TileSource, Want,
 };
 use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT, TerrainRenderer, TileDraw};
+use crate::wind::{SwayConfig, SwayField, WindConfig, WindError, WindField};
 use crate::world::{TileId, World, WorldError};
 
 /// What stops a scene from being built or drawn.
@@ -28,6 +30,9 @@ pub enum SceneError {
     /// A tile did not fit the atlas.
     #[error(transparent)]
     Atlas(#[from] AtlasError),
+    /// The wind scene asked for does not exist or does not fit.
+    #[error(transparent)]
+    Wind(#[from] WindError),
     /// The image could not be read back.
     #[error(transparent)]
     Readback(#[from] ReadbackError),
@@ -57,7 +62,7 @@ pub enum SceneError {
 }
 
 /// Settings of a scene.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct SceneConfig {
     /// Limits of the tile service (atlas slots, cache bytes, loads in flight, budgets).
     pub service: ServiceConfig,
@@ -73,6 +78,10 @@ pub struct SceneConfig {
     pub grass_spacing_m: f32,
     /// Blade segments at high and low LOD.
     pub grass_segments: [u32; 2],
+    /// The wind scene of the manifest (default: `breeze`, else the manifest's wind).
+    pub wind_scene: Option<String>,
+    /// The switched-on features of the grass model.
+    pub features: Features,
 }
 
 impl SceneConfig {
@@ -107,6 +116,8 @@ impl SceneConfig {
             mesh_step: 2,
             grass_spacing_m: 0.25,
             grass_segments: [7, 3],
+            wind_scene: None,
+            features: Features::all(),
         }
     }
 }
@@ -128,6 +139,14 @@ pub struct FrameStats {
     pub grass: GrassStats,
 }
 
+/// The grass with the wind it bends in.
+struct GrassStage {
+    renderer: GrassRenderer,
+    wind: WindField,
+    sway: SwayField,
+    ambient_speed: f32,
+}
+
 /// A world on the GPU, with colour and depth targets of a fixed size.
 pub struct Scene {
     /// The world being drawn.
@@ -138,12 +157,14 @@ pub struct Scene {
     renderer: TerrainRenderer,
     lod: TerrainLod,
     rings: Option<GrassRings>,
-    grass: Option<GrassRenderer>,
+    grass: Option<GrassStage>,
     mesh_step: u32,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     timer: GpuTimer,
+    time_s: Option<f64>,
+    features: Features,
     width: u32,
     height: u32,
 }
@@ -211,7 +232,7 @@ impl Scene {
             &atlas,
             config.service.derives_per_frame.max(1),
         );
-        let renderer =
+        let mut renderer =
             TerrainRenderer::new(&ctx.device, &world.manifest, &atlas, 4096, config.mesh_step);
         let target = |label, format, usage| {
             ctx.device.create_texture(&wgpu::TextureDescriptor {
@@ -239,8 +260,21 @@ impl Scene {
             DEPTH_FORMAT,
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
         );
+        renderer.set_features(config.features);
         let grass = match config.grass_settings(&world) {
             Some(settings) => {
+                let mut wind_config =
+                    WindConfig::from_scene(&world.manifest, config.wind_scene.as_deref())?;
+                wind_config.sources = config.features.has(Feature::WindSources);
+                wind_config.trail = config.features.has(Feature::Interaction);
+                let wind = WindField::new(&ctx.device, &ctx.queue, &wind_config);
+                let sway = SwayField::new(
+                    &ctx.device,
+                    SwayConfig::from_manifest(&world.manifest),
+                    wind_config.cells,
+                    wind.buffer(),
+                );
+                sway.reset(&ctx.queue);
                 let capacity = crate::grass::estimate_capacity(&world, &settings)?;
                 let g = GrassRenderer::new(
                     &ctx.device,
@@ -250,9 +284,19 @@ impl Scene {
                     &depth,
                     settings,
                     capacity,
+                    WindBindings {
+                        lookup: wind.lookup_uniform(),
+                        cells: wind.buffer(),
+                        sway: sway.buffer(),
+                    },
                 );
                 g.commit_pool(&ctx.device, &ctx.queue);
-                Some(g)
+                Some(GrassStage {
+                    renderer: g,
+                    wind,
+                    sway,
+                    ambient_speed: wind_config.ambient.speed_mps as f32,
+                })
             }
             None => None,
         };
@@ -272,7 +316,9 @@ impl Scene {
             color_view: color.create_view(&Default::default()),
             depth_view: depth.create_view(&Default::default()),
             color,
-            timer: GpuTimer::new(&ctx.device, &ctx.queue, ctx.timestamps, 8),
+            timer: GpuTimer::new(&ctx.device, &ctx.queue, ctx.timestamps, 64),
+            time_s: None,
+            features: config.features,
             width,
             height,
         })
@@ -401,10 +447,26 @@ impl Scene {
         Ok(())
     }
 
-    /// Draws one frame from `camera` and waits for its GPU times. Tiles that are not resident
-    /// yet are drawn from their nearest resident ancestor.
+    /// Draws one frame from `camera` at the time of the last frame (the wind stands still).
     pub fn render(&mut self, ctx: &GpuContext, camera: &Camera) -> Result<FrameStats, SceneError> {
+        let t = self.time_s.unwrap_or(0.0);
+        self.render_at(ctx, camera, t)
+    }
+
+    /// Draws one frame from `camera` at `time_s` seconds (the wind and the sway advance by the
+    /// time since the last frame, at most 5 s) and waits for its GPU times. Tiles that are not
+    /// resident yet are drawn from their nearest resident ancestor.
+    pub fn render_at(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        time_s: f64,
+    ) -> Result<FrameStats, SceneError> {
         let start = Instant::now();
+        let dt = self
+            .time_s
+            .map_or(0.0, |last| (time_s - last).clamp(0.0, 5.0)) as f32;
+        self.time_s = Some(time_s);
         let sel = self.select(camera);
         let plan = self.service.update(&sel.wants);
         let residency = self.service.stats();
@@ -435,7 +497,9 @@ impl Scene {
         let grass_jobs = self.grass_jobs(camera, &sel.grass);
         let view_proj = camera.view_proj_relative(aspect);
         if let Some(g) = &mut self.grass {
-            g.set_camera(
+            g.renderer
+                .set_frame(time_s, g.ambient_speed, self.features, camera.position);
+            g.renderer.set_camera(
                 &ctx.queue,
                 view_proj,
                 camera.position.z as f32,
@@ -446,6 +510,21 @@ impl Scene {
         self.timer.begin_frame();
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         self.apply(ctx, plan, Some(&mut encoder))?;
+        if let Some(g) = &mut self.grass {
+            let walker = DVec2::new(camera.position.x, camera.position.y);
+            g.wind.update(
+                &ctx.queue,
+                &mut encoder,
+                camera.position,
+                time_s,
+                dt,
+                Some(walker),
+                &mut self.timer,
+            );
+            let lookup = g.wind.lookup();
+            g.sway
+                .update(&ctx.queue, &mut encoder, &lookup, dt, &mut self.timer);
+        }
         let color_attachment = |load| {
             Some(wgpu::RenderPassColorAttachment {
                 view: &self.color_view,
@@ -479,7 +558,7 @@ impl Scene {
             self.renderer.draw_depth(&mut pass, tiles);
         }
         if let Some(g) = &self.grass {
-            g.hiz.record(&mut encoder, &mut self.timer);
+            g.renderer.hiz.record(&mut encoder, &mut self.timer);
         }
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -493,7 +572,7 @@ impl Scene {
             self.renderer.draw(&mut pass, tiles);
         }
         let grass_tiles = match &self.grass {
-            Some(g) => g.record(
+            Some(g) => g.renderer.record(
                 &ctx.queue,
                 &mut encoder,
                 &grass_jobs,
@@ -508,7 +587,7 @@ impl Scene {
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         let gpu = self.timer.read(&ctx.device);
         let grass = match &self.grass {
-            Some(g) => g.read_stats(&ctx.device, grass_tiles),
+            Some(g) => g.renderer.read_stats(&ctx.device, grass_tiles),
             None => GrassStats::default(),
         };
         let high = sel.grass.iter().filter(|g| g.1 == Ring::High).count() as u32;

@@ -216,7 +216,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let name = world.manifest.name.clone();
     let [ex, ey] = world.manifest.extent_m;
     let (width, height) = opts.size;
-    let mut scene = Scene::new(&ctx, world, width, height, config)?;
+    let mut scene = Scene::new(&ctx, world, width, height, config.clone())?;
 
     let frames = (opts.seconds / opts.dt_s).ceil() as u32;
     let warmup_frames = ((opts.seconds * opts.warmup_fraction).max(3.0) / opts.dt_s) as u32;
@@ -276,7 +276,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         let camera = Camera::new(eye, yaw, -12.0);
 
         let start = Instant::now();
-        let stats = scene.render(&ctx, &camera)?;
+        let stats = scene.render_at(&ctx, &camera, t)?;
         ctx.wait_idle();
         frame_ms.push(start.elapsed().as_secs_f64() * 1e3);
         let r = &stats.residency;

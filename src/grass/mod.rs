@@ -10,11 +10,13 @@ pub mod generate;
 pub mod hiz;
 pub mod renderer;
 
-pub use blade::{Blade, bezier, bezier_length_estimate, blade_curve};
+pub use blade::{Blade, bezier, bezier_length_estimate, blade_curve, blade_curve_bent};
 pub use generate::{
     GenerateParams, GenerateStats, GrassTypeGpu, HiZ, TileBlades, TileJob, generate_tile,
 };
-pub use renderer::{BATCH_TILES, GrassRenderer, GrassSettings, GrassStats, HiZPyramid, POOL_SLOTS};
+pub use renderer::{
+    BATCH_TILES, GrassRenderer, GrassSettings, GrassStats, HiZPyramid, POOL_SLOTS, WindBindings,
+};
 
 use crate::world::{World, WorldError};
 

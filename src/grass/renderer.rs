@@ -117,10 +117,14 @@ struct DrawFrame {
     sun_color: [f32; 4],
     sky_color: [f32; 4],
     horizon_color: [f32; 4],
+    // x: feature bits
+    flags: [u32; 4],
+    // xy: the camera's world position modulo 4096 m (for world-space colour noise)
+    camera_world: [f32; 4],
     base_colors: [[f32; 4]; 16],
     tip_colors: [[f32; 4]; 16],
 }
-const _: () = assert!(std::mem::size_of::<DrawFrame>() == 64 + 80 + 512);
+const _: () = assert!(std::mem::size_of::<DrawFrame>() == 64 + 112 + 512);
 
 struct Half {
     blades: wgpu::Buffer,
@@ -339,6 +343,17 @@ impl HiZPyramid {
     }
 }
 
+/// The wind buffers the grass draw reads.
+#[derive(Clone, Copy)]
+pub struct WindBindings<'a> {
+    /// The wind field's `WindLookup` uniform.
+    pub lookup: &'a wgpu::Buffer,
+    /// The wind field's cells.
+    pub cells: &'a wgpu::Buffer,
+    /// The sway state (per cell and grass type).
+    pub sway: &'a wgpu::Buffer,
+}
+
 /// Pipelines, the instance pool and the Hi-Z pyramid of the grass stage.
 pub struct GrassRenderer {
     settings: GrassSettings,
@@ -362,7 +377,9 @@ pub struct GrassRenderer {
 
 impl GrassRenderer {
     /// The grass stage for `manifest`'s world, reading tile data from `atlas`, with slots of
-    /// `capacity` blades, culling against the Hi-Z pyramid of `depth`.
+    /// `capacity` blades, culling against the Hi-Z pyramid of `depth`; blades bend with the wind
+    /// field (`wind.lookup`, `wind.cells`) and sway on its springs (`wind.sway`).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -371,6 +388,7 @@ impl GrassRenderer {
         depth: &wgpu::Texture,
         settings: GrassSettings,
         capacity: u32,
+        wind: WindBindings<'_>,
     ) -> Self {
         // Slots start at multiples of 256 bytes (the storage offset alignment).
         let capacity = capacity.max(4).div_ceil(4) * 4;
@@ -387,8 +405,21 @@ impl GrassRenderer {
                 stiffness: t.stiffness,
                 _pad: [0.0; 2],
             };
-            base_colors[i] = [t.base_color[0], t.base_color[1], t.base_color[2], 1.0];
-            tip_colors[i] = [t.tip_color[0], t.tip_color[1], t.tip_color[2], 1.0];
+            // Gloss per type in the colours' spare channels (exponent, strength): stiffer,
+            // waxier blades are glossier.
+            let s = t.stiffness.clamp(0.0, 1.0);
+            base_colors[i] = [
+                t.base_color[0],
+                t.base_color[1],
+                t.base_color[2],
+                8.0 + 32.0 * s,
+            ];
+            tip_colors[i] = [
+                t.tip_color[0],
+                t.tip_color[1],
+                t.tip_color[2],
+                0.1 + 0.25 * s,
+            ];
         }
         let p = &manifest.pyramid;
         let params = GenerateParams {
@@ -432,6 +463,8 @@ impl GrassRenderer {
             sun_color: c4(sky.sun_color),
             sky_color: c4(sky.sky_color),
             horizon_color: c4(sky.horizon_color),
+            flags: [crate::features::Features::all().bits(), 0, 0, 0],
+            camera_world: [0.0; 4],
             base_colors,
             tip_colors,
         };
@@ -542,9 +575,14 @@ impl GrassRenderer {
         };
         let (generate, finalize) = (compute("generate"), compute("finalize"));
 
+        let draw_source = format!(
+            "{}\n{}",
+            crate::wind::WIND_LOOKUP_WGSL,
+            include_str!("../../shaders/grass_draw.wgsl")
+        );
         let draw_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("grass_draw.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/grass_draw.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(draw_source.into()),
         });
         let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("grass draw"),
@@ -566,6 +604,36 @@ impl GrassRenderer {
                         ty: wgpu::BufferBindingType::Storage { read_only: true },
                         has_dynamic_offset: true,
                         min_binding_size: std::num::NonZeroU64::new(u64::from(capacity) * 64),
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: std::num::NonZeroU64::new(32),
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 3,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
                     },
                     count: None,
                 },
@@ -686,6 +754,9 @@ impl GrassRenderer {
                             size: std::num::NonZeroU64::new(slot_bytes),
                         }),
                     ),
+                    entry(2, wind.lookup.as_entire_binding()),
+                    entry(3, wind.cells.as_entire_binding()),
+                    entry(4, wind.sway.as_entire_binding()),
                 ],
             });
             Half {
@@ -748,6 +819,26 @@ impl GrassRenderer {
     /// The generation constants of the frame (for the CPU mirror).
     pub fn params(&self) -> &GenerateParams {
         &self.params
+    }
+
+    /// Sets the frame's time (seconds), ambient wind speed (m/s, for gust highlights), the
+    /// switched-on features and the camera's world position (for world-space colour noise).
+    pub fn set_frame(
+        &mut self,
+        time_s: f64,
+        ambient_speed: f32,
+        features: crate::features::Features,
+        camera_world: glam::DVec3,
+    ) {
+        self.draw_frame.misc[1] = (time_s % 3600.0) as f32;
+        self.draw_frame.misc[2] = ambient_speed;
+        self.draw_frame.flags[0] = features.bits();
+        self.draw_frame.camera_world = [
+            camera_world.x.rem_euclid(4096.0) as f32,
+            camera_world.y.rem_euclid(4096.0) as f32,
+            0.0,
+            0.0,
+        ];
     }
 
     /// Sets the camera of this frame.

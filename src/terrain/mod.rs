@@ -298,7 +298,7 @@ impl TerrainRenderer {
                 n,
                 manifest.pyramid.border,
                 manifest.grass_types.len().clamp(1, MAX_GRASS_TYPES) as u32,
-                0,
+                crate::features::Features::all().bits(),
             ],
             ground_colors,
         };
@@ -314,6 +314,11 @@ impl TerrainRenderer {
             max_tiles,
             uniforms,
         }
+    }
+
+    /// Sets the switched-on features (the terrain reads ground darkening).
+    pub fn set_features(&mut self, features: crate::features::Features) {
+        self.uniforms.grid[3] = features.bits();
     }
 
     /// Most tiles a frame can draw.

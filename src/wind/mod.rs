@@ -16,6 +16,7 @@ pub mod config;
 pub mod field;
 pub mod field_cpu;
 pub mod sway;
+pub mod sway_field;
 
 pub use config::{
     AmbientWind, CellState, FieldDriver, FieldParams, SourceConfig, SourceGpu, WindConfig,
@@ -27,3 +28,4 @@ pub use sway::{
     Integrator, Preset, RENDERER_INTEGRATOR, SwayResult, SwaySpring, SwayState, bounded_for,
     run_sway_eval,
 };
+pub use sway_field::{SWAY_TYPES, SwayConfig, SwayField, SwayParams, update_sway};
