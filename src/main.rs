@@ -138,6 +138,22 @@ enum Command {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// Each grass feature's GPU cost against its contribution to the image (FLIP between the
+    /// render with and without it), charted one against the other.
+    Features {
+        /// World folder, or the name of a world under ./worlds.
+        #[arg(default_value = "santa-cruz")]
+        world: String,
+        /// Output folder.
+        #[arg(long, default_value = "out/bench-features")]
+        out: PathBuf,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "480x270", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Timed frames per view and variant.
+        #[arg(long, default_value_t = 5)]
+        timed_frames: u32,
+    },
     /// The LOD transition benchmark: popping across the ring boundary, and GPU time against
     /// image error for a set of LOD settings, charted with the Pareto front.
     Lod {
@@ -544,6 +560,47 @@ fn run(cli: Cli) -> Result<()> {
             service: stream.service(),
             ..SoakOptions::default()
         }),
+        Command::Bench {
+            what:
+                BenchCommand::Features {
+                    world,
+                    out,
+                    size,
+                    timed_frames,
+                },
+        } => {
+            let opts = verdant::flythrough::BenchLodOptions {
+                world: resolve_world(&world)?,
+                out,
+                size,
+                timed_frames,
+                ..Default::default()
+            };
+            let mut pb: Option<ProgressBar> = None;
+            let r = verdant::flythrough::run_bench_features(&opts, &mut |_, done, total| {
+                pb.get_or_insert_with(|| bar(total, "variants"))
+                    .set_position(done);
+            })?;
+            if let Some(pb) = pb {
+                pb.finish();
+            }
+            println!(
+                "{} [{}], {}x{}",
+                r.adapter.name, r.adapter.backend, r.size.0, r.size.1
+            );
+            println!(
+                "{:<18} {:>14} {:>10} {:>13}",
+                "feature off", "GPU ms", "cost ms", "contribution"
+            );
+            for f in &r.features {
+                println!(
+                    "{:<18} {:>14.3} {:>10.3} {:>13.4}",
+                    f.feature, f.gpu_ms, f.cost_ms, f.contribution
+                );
+            }
+            println!("wrote {}", opts.out.display());
+            Ok(())
+        }
         Command::Bench {
             what:
                 BenchCommand::Lod {

@@ -475,3 +475,145 @@ fn write_outputs(
     .write_png(&opts.out.join("lod_settings.png"), 900, 600)?;
     Ok(())
 }
+
+/// One feature's cost and contribution.
+#[derive(Clone, Debug, Serialize)]
+pub struct FeatureResult {
+    /// The feature (or "all" for the full render).
+    pub feature: String,
+    /// Median GPU time per frame with the feature off (all: everything on), milliseconds.
+    pub gpu_ms: f64,
+    /// GPU time the feature costs: the full render's minus this one's, milliseconds.
+    pub cost_ms: f64,
+    /// Mean FLIP between the full render and the render without the feature: its contribution
+    /// to the image.
+    pub contribution: f64,
+}
+
+/// Everything `bench_features.json` holds.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchFeaturesReport {
+    /// The adapter.
+    pub adapter: AdapterReport,
+    /// Image size.
+    pub size: (u32, u32),
+    /// The full render first, then one row per feature switched off.
+    pub features: Vec<FeatureResult>,
+}
+
+/// `verdant bench features`: each feature's GPU cost against its contribution to the image
+/// (FLIP between the full render and the render with that feature off), at four views along
+/// the meadow path, in the storm (so that wind features act), after a few frames of motion so
+/// that the trail and the sway are under way. Writes `bench_features.json`, `features.csv` and
+/// `features.png`.
+pub fn run_bench_features(
+    opts: &BenchLodOptions,
+    progress: &mut dyn FnMut(&str, u64, u64),
+) -> Result<BenchFeaturesReport> {
+    use crate::features::{Feature, Features};
+    let world = World::open(&opts.world)?;
+    let path = match world
+        .manifest
+        .path("meadow")
+        .or(world.manifest.paths.first())
+    {
+        Some(p) => p.clone(),
+        None => bail!("world {} has no camera paths", opts.world.display()),
+    };
+    std::fs::create_dir_all(&opts.out)
+        .with_context(|| format!("cannot create {}", opts.out.display()))?;
+    let ctx = GpuContext::new()?;
+    let views: Vec<Camera> = [0.1, 0.35, 0.6, 0.85]
+        .iter()
+        .map(|u| sample_path(&path, path.keys[0].t_s + u * path.duration_s))
+        .collect();
+    let scene_name = world
+        .manifest
+        .wind_scenes
+        .iter()
+        .any(|s| s.name == "storm")
+        .then(|| "storm".to_owned());
+    let variants: Vec<(String, Features)> = std::iter::once(("all".to_owned(), Features::all()))
+        .chain(
+            Feature::ALL
+                .iter()
+                .map(|f| (f.name().to_owned(), Features::all().without(*f))),
+        )
+        .collect();
+    let mut rows: Vec<(String, f64, Vec<image::RgbaImage>)> = Vec::new();
+    let total = variants.len() as u64;
+    for (k, (name, features)) in variants.iter().enumerate() {
+        let mut config = SceneConfig::for_world(&world);
+        config.features = *features;
+        config.wind_scene = scene_name.clone();
+        let mut scene = Scene::new(&ctx, world.clone(), opts.size.0, opts.size.1, config)?;
+        let (mut gpu, mut images) = (Vec::new(), Vec::new());
+        for v in &views {
+            scene.warm_up(&ctx, v, std::time::Duration::from_secs(60))?;
+            // A few frames walking forward: the trail and the sway get going.
+            let fwd = v.forward();
+            let step = DVec3::new(fwd.x, fwd.y, 0.0).normalize_or_zero() * 0.4;
+            let mut cam = *v;
+            for f in 0..(6 + opts.warmup_frames) {
+                cam.position += step;
+                scene.render_at(&ctx, &cam, 10.0 + f64::from(f) / 30.0)?;
+            }
+            for _ in 0..opts.timed_frames {
+                let stats = scene.render(&ctx, &cam)?;
+                gpu.push(stats.gpu.iter().map(|(_, ms)| ms).sum::<f64>());
+            }
+            images.push(scene.read_image(&ctx)?);
+        }
+        rows.push((name.clone(), Summary::of(&gpu).median, images));
+        progress("features", k as u64 + 1, total);
+    }
+    let full_ms = rows[0].1;
+    let mut features = Vec::new();
+    for (name, ms, images) in &rows {
+        let mut flips = Vec::new();
+        for (a, b) in rows[0].2.iter().zip(images) {
+            flips.push(flip(a, b)?);
+        }
+        features.push(FeatureResult {
+            feature: name.clone(),
+            gpu_ms: *ms,
+            cost_ms: full_ms - ms,
+            contribution: flips.iter().sum::<f64>() / flips.len() as f64,
+        });
+    }
+    use std::fmt::Write as _;
+    let mut csv = String::from("feature,gpu_ms_without,cost_ms,contribution_flip\n");
+    for r in &features {
+        let _ = writeln!(
+            csv,
+            "{},{:.3},{:.3},{:.5}",
+            r.feature, r.gpu_ms, r.cost_ms, r.contribution
+        );
+    }
+    std::fs::write(opts.out.join("features.csv"), csv)?;
+    Chart {
+        title: "Grass features: GPU cost against contribution to the image".into(),
+        x_label: "GPU cost (ms a frame, full render minus the render without it)".into(),
+        y_label: "FLIP between the render with and without it".into(),
+        log_x: false,
+        log_y: false,
+        points: features
+            .iter()
+            .skip(1)
+            .map(|r| ChartPoint {
+                label: r.feature.clone(),
+                x: r.cost_ms,
+                y: r.contribution,
+                chosen: false,
+            })
+            .collect(),
+    }
+    .write_png_with_front(&opts.out.join("features.png"), 900, 600, |_| false)?;
+    let report = BenchFeaturesReport {
+        adapter: AdapterReport::of(&ctx),
+        size: opts.size,
+        features,
+    };
+    write_json(&opts.out.join("bench_features.json"), &report)?;
+    Ok(report)
+}

@@ -8,7 +8,8 @@ mod scene;
 mod soak;
 
 pub use bench_lod::{
-    BenchLodOptions, BenchLodReport, LodSetting, lod_settings, reference_setting, run_bench_lod,
+    BenchFeaturesReport, BenchLodOptions, BenchLodReport, FeatureResult, LodSetting, lod_settings,
+    reference_setting, run_bench_features, run_bench_lod,
 };
 pub use camera::{Camera, sample_path};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
