@@ -54,15 +54,17 @@ struct Blade {
     hash: u32,
     kind: u32,
     color: u32,
+    // After the wind pass: the gust highlight.
     fade: f32,
+    lean_x: f32,
+    lean_y: f32,
+    sway: f32,
+    flutter: f32,
 }
 
 @group(0) @binding(0) var<uniform> frame: GrassFrame;
 @group(0) @binding(1) var<storage, read> blades: array<Blade>;
-@group(0) @binding(2) var<uniform> wind_lookup: WindLookup;
-@group(0) @binding(3) var<storage, read> wind_cells: array<vec4<f32>>;
-// Per wind cell and grass type (4): bend xy in blade heights, velocity zw.
-@group(0) @binding(4) var<storage, read> sway: array<vec4<f32>>;
+
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -72,43 +74,6 @@ struct VertexOut {
     // x: position along the blade 0..1, y: gust highlight 0..1, z: specular strength,
     // w: gloss exponent
     @location(3) misc: vec4<f32>,
-}
-
-// Crysis' smoothed triangle wave, 0..1.
-fn smooth_triangle(x: f32) -> f32 {
-    let t = abs(fract(x + 0.5) * 2.0 - 1.0);
-    return t * t * (3.0 - 2.0 * t);
-}
-
-// The sway of grass type `kind` in the wind cell under rel_xy.
-fn sway_at(rel_xy: vec2<f32>, kind: u32) -> vec2<f32> {
-    let n = i32(wind_lookup.n);
-    let half = n / 2;
-    let c = vec2<i32>(floor((wind_lookup.camera_offset + rel_xy) / wind_lookup.cell_m));
-    let r = clamp(c, vec2<i32>(-half, -half), vec2<i32>(half - 1, half - 1));
-    let w = wind_lookup.origin_cell + r;
-    let x = ((w.x % n) + n) % n;
-    let y = ((w.y % n) + n) % n;
-    return sway[(u32(y) * wind_lookup.n + u32(x)) * 4u + min(kind, 3u)].xy;
-}
-
-fn hash2(x: i32, y: i32) -> u32 {
-    var h = u32(x) * 0x8da6b343u ^ u32(y) * 0xd8163841u;
-    h ^= h >> 16u;
-    h *= 0x7feb352du;
-    h ^= h >> 15u;
-    return h;
-}
-
-fn value_noise(p: vec2<f32>) -> f32 {
-    let i = vec2<i32>(floor(p));
-    let f = p - floor(p);
-    let u = f * f * (3.0 - 2.0 * f);
-    let a = f32(hash2(i.x, i.y) >> 8u) / 16777216.0;
-    let b = f32(hash2(i.x + 1, i.y) >> 8u) / 16777216.0;
-    let c = f32(hash2(i.x, i.y + 1) >> 8u) / 16777216.0;
-    let d = f32(hash2(i.x + 1, i.y + 1) >> 8u) / 16777216.0;
-    return mix(mix(a, b, u.x), mix(c, d, u.x), u.y);
 }
 
 fn bezier(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>, t: f32) -> vec3<f32> {
@@ -164,22 +129,10 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     let h = b.height;
     let kind = b.kind & 255u;
 
-    // Wind: the sway of the blade's type in its cell, the trail's push, detail bending.
-    let w = wind_at(root.xy);
-    var lean = sway_at(root.xy, kind) * b.wind;
-    if has(INTERACTION) {
-        lean += w.zw * 0.9;
-    }
-    let speed = length(w.xy);
-    var blade_sway = 0.0;
-    var flutter = 0.0;
-    if has(DETAIL_BENDING) {
-        let phase = f32(b.hash & 1023u) / 1023.0;
-        let time = frame.misc.y;
-        let amount = min(speed / 5.0, 1.5) * b.wind;
-        blade_sway = (smooth_triangle(time * 0.193 + phase) + smooth_triangle(time * 0.375 + phase * 1.3) - 1.0) * amount;
-        flutter = (smooth_triangle(time * 1.975 + phase * 3.1) + smooth_triangle(time * 0.793 + phase * 2.7) - 1.0) * amount;
-    }
+    // Wind, worked out once per blade by the wind pass (shaders/grass_wind.wgsl).
+    let lean = vec2<f32>(b.lean_x, b.lean_y);
+    let blade_sway = b.sway;
+    let flutter = b.flutter;
 
     // Control points (as blade_curve in src/grass/blade.rs), bent, then scaled to keep the
     // length. The bend is horizontal: every control point stays above the root, so the curve
@@ -220,16 +173,11 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     n = normalize(n + width_dir * (0.35 * side_sign));
     n = normalize(mix(n, up, smoothstep(15.0, 90.0, length(root))));
 
+    // The clump's tint, with the colour variation of the blade's root folded in by the wind pass.
     let tint = unpack_rgb(b.color) * 2.0;
-    var color = mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t) * tint;
-    if has(COLOR_VARIATION) {
-        // One colour per blade: world-space noise at the root, patches of a few metres.
-        let world = frame.camera_world.xy + root.xy;
-        let v = value_noise(world / 6.0) * 0.6 + value_noise(world / 1.7) * 0.4;
-        color *= mix(vec3<f32>(0.78, 0.86, 0.7), vec3<f32>(1.15, 1.1, 0.95), v);
-    }
+    let color = mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t) * tint;
     // Gust highlights: where the wind runs above the ambient speed, tips catch more light.
-    let gust = clamp(speed / max(frame.misc.z, 0.5) - 1.0, 0.0, 1.0);
+    let gust = b.fade;
 
     var out: VertexOut;
     out.clip = frame.view_proj * vec4<f32>(pos, 1.0);

@@ -53,6 +53,10 @@ struct Blade {
     kind: u32,
     color: u32,
     fade: f32,
+    lean_x: f32,
+    lean_y: f32,
+    sway: f32,
+    flutter: f32,
 }
 
 struct Batch {

@@ -97,6 +97,9 @@ enum Command {
         /// Output folder.
         #[arg(long, default_value = "out/soak")]
         out: PathBuf,
+        /// Fly without grass and its wind: the streaming system alone.
+        #[arg(long)]
+        no_grass: bool,
         #[command(flatten)]
         stream: StreamArgs,
     },
@@ -549,6 +552,7 @@ fn run(cli: Cli) -> Result<()> {
             seed,
             size,
             out,
+            no_grass,
             stream,
         } => soak(SoakOptions {
             world: resolve_world(&world)?,
@@ -558,6 +562,7 @@ fn run(cli: Cli) -> Result<()> {
             size,
             out,
             service: stream.service(),
+            no_grass,
             ..SoakOptions::default()
         }),
         Command::Bench {

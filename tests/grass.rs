@@ -95,6 +95,18 @@ impl Rig {
             Some(c) => c,
             None => verdant::grass::estimate_capacity(&world, &settings).unwrap(),
         };
+        // The draw reads a wind field; generation, under test here, does not: still air.
+        let still = |size, usage| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let lookup = still(32, wgpu::BufferUsages::UNIFORM);
+        let cells = still(8 * 8 * 16, wgpu::BufferUsages::STORAGE);
+        let sway = still(8 * 8 * 4 * 16, wgpu::BufferUsages::STORAGE);
         let grass = GrassRenderer::new(
             &ctx.device,
             &ctx.queue,
@@ -103,6 +115,11 @@ impl Rig {
             &depth,
             settings,
             capacity,
+            verdant::grass::WindBindings {
+                lookup: &lookup,
+                cells: &cells,
+                sway: &sway,
+            },
         );
         // A wall over the left third of the screen, 30 m away: blades behind it are occluded.
         let module = ctx
@@ -400,7 +417,7 @@ fn more_tiles_than_slots_are_all_drawn() {
     assert_eq!(stats.drawn, drawn, "every tile's blades are drawn");
     assert_eq!(
         rig.grass.pool_bytes(),
-        2 * (4 * u64::from(rig.grass.capacity()) * 64 + 16 + 64)
+        2 * (4 * u64::from(rig.grass.capacity()) * 80 + 16 + 64)
     );
 }
 

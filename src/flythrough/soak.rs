@@ -38,6 +38,8 @@ pub struct SoakOptions {
     pub warmup_fraction: f64,
     /// Limits of the tile service.
     pub service: crate::stream::ServiceConfig,
+    /// Fly without grass (and so without its wind): the streaming system alone.
+    pub no_grass: bool,
     /// Resident memory may grow this much after the warm-up, bytes (allocator noise); see
     /// [`SoakReport::rss_growth_bytes`].
     pub rss_tolerance_bytes: u64,
@@ -58,6 +60,7 @@ impl Default for SoakOptions {
             warmup_fraction: 0.25,
             rss_tolerance_bytes: 12 << 20,
             service: crate::stream::ServiceConfig::default(),
+            no_grass: false,
         }
     }
 }
@@ -213,6 +216,9 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let ctx = GpuContext::new()?;
     let mut config = SceneConfig::for_world(&world);
     config.service = opts.service;
+    if opts.no_grass {
+        config.grass = None;
+    }
     let name = world.manifest.name.clone();
     let [ex, ey] = world.manifest.extent_m;
     let (width, height) = opts.size;

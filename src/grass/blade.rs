@@ -32,10 +32,18 @@ pub struct Blade {
     pub kind: u32,
     /// Clump colour tint, RGBA8 (alpha unused).
     pub color: u32,
-    /// Fade factor 0 to 1 (blades leaving at a LOD switch shrink away).
+    /// Fade factor 0 to 1 (blades leaving at a LOD switch shrink away); after the wind pass,
+    /// the gust highlight 0 to 1.
     pub fade: f32,
+    /// Lean of the tip from the sway and the trail, blade heights (x east, y north); written by
+    /// the wind pass.
+    pub lean: [f32; 2],
+    /// Whole-blade sway from detail bending, -1 to 1 times its amount; written by the wind pass.
+    pub sway: f32,
+    /// Edge flutter, likewise.
+    pub flutter: f32,
 }
-const _: () = assert!(std::mem::size_of::<Blade>() == 64);
+const _: () = assert!(std::mem::size_of::<Blade>() == 80);
 
 impl Blade {
     /// The growth direction as a unit vector.

@@ -332,6 +332,9 @@ pub fn generate_tile(
                 kind: kind | (job.lod << 8),
                 color: pack_rgba8(tint),
                 fade,
+                lean: [0.0; 2],
+                sway: 0.0,
+                flutter: 0.0,
             };
             let emit = |b: Blade, out: &mut TileBlades| {
                 if out.wanted < capacity {

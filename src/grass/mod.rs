@@ -4,11 +4,13 @@
 //! - [`blade`]: the blade record and its shape (cubic Bezier, length kept when bent).
 //! - [`generate`]: the CPU mirror of `shaders/grass_generate.wgsl`.
 //! - [`hiz`]: the CPU mirror of `shaders/hiz_build.wgsl` (the occlusion pyramid).
+//! - [`wind_pass`]: the CPU mirror of `shaders/grass_wind.wgsl` (the wind on each blade).
 
 pub mod blade;
 pub mod generate;
 pub mod hiz;
 pub mod renderer;
+pub mod wind_pass;
 
 pub use blade::{Blade, bezier, bezier_length_estimate, blade_curve, blade_curve_bent};
 pub use generate::{

@@ -11,10 +11,14 @@ use glam::Mat4;
 
 use crate::gpu::{GpuTimer, TileAtlas};
 use crate::grass::generate::counter;
+use crate::grass::wind_pass::WindPassParams;
 use crate::grass::{GenerateParams, GenerateStats, GrassTypeGpu, TileJob};
 use crate::lod::Frustum;
 use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT, sun_direction};
 use crate::world::Manifest;
+
+/// Bytes of a blade record.
+const BLADE_BYTES: u64 = std::mem::size_of::<crate::grass::Blade>() as u64;
 
 /// Tile slots of the pool.
 pub const POOL_SLOTS: u32 = 8;
@@ -132,6 +136,7 @@ struct Half {
     args: wgpu::Buffer,
     generate: wgpu::BindGroup,
     draw: wgpu::BindGroup,
+    wind: wgpu::BindGroup,
 }
 
 /// The Hi-Z pyramid of a depth target, in a storage buffer (levels one after another).
@@ -370,6 +375,9 @@ pub struct GrassRenderer {
     stats_readback: wgpu::Buffer,
     draw_frame: DrawFrame,
     draw_frame_buffer: wgpu::Buffer,
+    wind_pipeline: wgpu::ComputePipeline,
+    wind_params: WindPassParams,
+    wind_params_buffer: wgpu::Buffer,
     halves: [Half; 2],
     /// The occlusion pyramid (built from the terrain's depth pre-pass).
     pub hiz: HiZPyramid,
@@ -390,8 +398,9 @@ impl GrassRenderer {
         capacity: u32,
         wind: WindBindings<'_>,
     ) -> Self {
-        // Slots start at multiples of 256 bytes (the storage offset alignment).
-        let capacity = capacity.max(4).div_ceil(4) * 4;
+        // Slots start at multiples of 256 bytes (the storage offset alignment): 16 blades of
+        // 80 bytes are 1280 bytes.
+        let capacity = capacity.max(16).div_ceil(16) * 16;
         let hiz = HiZPyramid::new(device, queue, depth);
         let mut types = [GrassTypeGpu::default(); 16];
         let mut base_colors = [[0.0; 4]; 16];
@@ -575,15 +584,33 @@ impl GrassRenderer {
         };
         let (generate, finalize) = (compute("generate"), compute("finalize"));
 
-        let draw_source = format!(
-            "{}\n{}",
-            crate::wind::WIND_LOOKUP_WGSL,
-            include_str!("../../shaders/grass_draw.wgsl")
-        );
         let draw_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("grass_draw.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(draw_source.into()),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/grass_draw.wgsl").into()),
         });
+        let wind_source = format!(
+            "{}\n{}",
+            crate::wind::WIND_LOOKUP_WGSL,
+            include_str!("../../shaders/grass_wind.wgsl")
+        );
+        let wind_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("grass_wind.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(wind_source.into()),
+        });
+        let wind_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("grass wind"),
+            layout: None,
+            module: &wind_module,
+            entry_point: Some("apply_wind"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let wind_layout = wind_pipeline.get_bind_group_layout(0);
+        let wind_params_buffer = buffer(
+            "grass wind params",
+            std::mem::size_of::<WindPassParams>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
         let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("grass draw"),
             entries: &[
@@ -603,37 +630,9 @@ impl GrassRenderer {
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Storage { read_only: true },
                         has_dynamic_offset: true,
-                        min_binding_size: std::num::NonZeroU64::new(u64::from(capacity) * 64),
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: std::num::NonZeroU64::new(32),
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: true },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 4,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: true },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
+                        min_binding_size: std::num::NonZeroU64::new(
+                            u64::from(capacity) * BLADE_BYTES,
+                        ),
                     },
                     count: None,
                 },
@@ -700,7 +699,7 @@ impl GrassRenderer {
             })
         };
         let (hv, gv) = (array_view(&atlas.heights), array_view(&atlas.grass));
-        let slot_bytes = u64::from(capacity) * 64;
+        let slot_bytes = u64::from(capacity) * BLADE_BYTES;
         let make_half = |i: usize| {
             let blades = buffer(
                 if i == 0 {
@@ -754,9 +753,18 @@ impl GrassRenderer {
                             size: std::num::NonZeroU64::new(slot_bytes),
                         }),
                     ),
-                    entry(2, wind.lookup.as_entire_binding()),
-                    entry(3, wind.cells.as_entire_binding()),
-                    entry(4, wind.sway.as_entire_binding()),
+                ],
+            });
+            let wind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("grass wind"),
+                layout: &wind_layout,
+                entries: &[
+                    entry(0, wind_params_buffer.as_entire_binding()),
+                    entry(1, wind.lookup.as_entire_binding()),
+                    entry(2, wind.cells.as_entire_binding()),
+                    entry(3, wind.sway.as_entire_binding()),
+                    entry(4, blades.as_entire_binding()),
+                    entry(5, args.as_entire_binding()),
                 ],
             });
             Half {
@@ -765,6 +773,7 @@ impl GrassRenderer {
                 args,
                 generate,
                 draw,
+                wind: wind_group,
             }
         };
         let halves = [make_half(0), make_half(1)];
@@ -783,6 +792,12 @@ impl GrassRenderer {
             stats_readback,
             draw_frame,
             draw_frame_buffer,
+            wind_pipeline,
+            wind_params: WindPassParams {
+                misc: [0.0; 4],
+                flags: [crate::features::Features::all().bits(), capacity, 0, 0],
+            },
+            wind_params_buffer,
             halves,
             hiz,
         }
@@ -816,6 +831,11 @@ impl GrassRenderer {
             .sum()
     }
 
+    /// The wind pass's constants of the frame (for its CPU mirror).
+    pub fn wind_params(&self) -> &WindPassParams {
+        &self.wind_params
+    }
+
     /// The generation constants of the frame (for the CPU mirror).
     pub fn params(&self) -> &GenerateParams {
         &self.params
@@ -833,12 +853,13 @@ impl GrassRenderer {
         self.draw_frame.misc[1] = (time_s % 3600.0) as f32;
         self.draw_frame.misc[2] = ambient_speed;
         self.draw_frame.flags[0] = features.bits();
-        self.draw_frame.camera_world = [
+        self.wind_params.misc = [
+            (time_s % 3600.0) as f32,
+            ambient_speed,
             camera_world.x.rem_euclid(4096.0) as f32,
             camera_world.y.rem_euclid(4096.0) as f32,
-            0.0,
-            0.0,
         ];
+        self.wind_params.flags[0] = features.bits();
     }
 
     /// Sets the camera of this frame.
@@ -867,6 +888,11 @@ impl GrassRenderer {
             &self.draw_frame_buffer,
             0,
             bytemuck::bytes_of(&self.draw_frame),
+        );
+        queue.write_buffer(
+            &self.wind_params_buffer,
+            0,
+            bytemuck::bytes_of(&self.wind_params),
         );
     }
 
@@ -917,6 +943,10 @@ impl GrassRenderer {
                 pass.dispatch_workgroups(g.div_ceil(8), g.div_ceil(8), chunk.len() as u32);
                 pass.set_pipeline(&self.finalize);
                 pass.dispatch_workgroups(1, 1, 1);
+                // The wind on each generated blade, once per blade.
+                pass.set_pipeline(&self.wind_pipeline);
+                pass.set_bind_group(0, &half.wind, &[]);
+                pass.dispatch_workgroups(self.capacity.div_ceil(64), chunk.len() as u32, 1);
             }
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("grass draw"),
@@ -947,7 +977,7 @@ impl GrassRenderer {
                 } else {
                     &self.draw_low
                 });
-                let slot_offset = (k as u64 * u64::from(self.capacity) * 64) as u32;
+                let slot_offset = (k as u64 * u64::from(self.capacity) * BLADE_BYTES) as u32;
                 pass.set_bind_group(0, &half.draw, &[slot_offset]);
                 pass.draw_indirect(&half.args, k as u64 * 16);
             }
@@ -995,7 +1025,7 @@ impl GrassRenderer {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let slot_bytes = u64::from(self.capacity) * 64;
+        let slot_bytes = u64::from(self.capacity) * BLADE_BYTES;
         let staging_blades = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("blades readback"),
             size: slot_bytes,

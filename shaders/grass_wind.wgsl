@@ -1,0 +1,143 @@
+// The wind on each blade, once per blade (not per vertex): after a batch is generated, every
+// blade in its slots gets its lean (the sway of its type in its wind cell, plus the trail's
+// push), its detail bending (whole-blade sway and edge flutter from smoothed triangle waves at
+// four frequencies, phased by its hash), its gust highlight and its colour variation (world-space
+// noise at its root). shaders/wind_lookup.wgsl is put in front of this file.
+// CPU mirror: src/grass/wind_pass.rs.
+
+struct Blade {
+    pos_x: f32, pos_y: f32, pos_z: f32,
+    facing: f32,
+    growth_x: f32, growth_y: f32,
+    height: f32,
+    width: f32,
+    tilt: f32,
+    bend: f32,
+    side_curve: f32,
+    wind: f32,
+    hash: u32,
+    kind: u32,
+    color: u32,
+    fade: f32,
+    lean_x: f32,
+    lean_y: f32,
+    sway: f32,
+    flutter: f32,
+}
+
+struct DrawArgs {
+    vertex_count: u32,
+    instance_count: u32,
+    first_vertex: u32,
+    first_instance: u32,
+}
+
+struct WindPass {
+    // x: time (s), y: ambient wind speed (m/s), zw: the camera's world xy modulo 4096 m
+    misc: vec4<f32>,
+    // x: feature bits, y: slot capacity
+    flags: vec4<u32>,
+}
+
+@group(0) @binding(0) var<uniform> pass_params: WindPass;
+@group(0) @binding(1) var<uniform> wind_lookup: WindLookup;
+@group(0) @binding(2) var<storage, read> wind_cells: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> sway: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> blades: array<Blade>;
+@group(0) @binding(5) var<storage, read> args: array<DrawArgs, 4>;
+
+const WIND_SOURCES: u32 = 1u;
+const INTERACTION: u32 = 2u;
+const DETAIL_BENDING: u32 = 4u;
+const COLOR_VARIATION: u32 = 64u;
+
+fn has(feature: u32) -> bool {
+    return (pass_params.flags.x & feature) != 0u;
+}
+
+fn smooth_triangle(x: f32) -> f32 {
+    let t = abs(fract(x + 0.5) * 2.0 - 1.0);
+    return t * t * (3.0 - 2.0 * t);
+}
+
+fn sway_at(rel_xy: vec2<f32>, kind: u32) -> vec2<f32> {
+    let n = i32(wind_lookup.n);
+    let half = n / 2;
+    let c = vec2<i32>(floor((wind_lookup.camera_offset + rel_xy) / wind_lookup.cell_m));
+    let r = clamp(c, vec2<i32>(-half, -half), vec2<i32>(half - 1, half - 1));
+    let w = wind_lookup.origin_cell + r;
+    let x = ((w.x % n) + n) % n;
+    let y = ((w.y % n) + n) % n;
+    return sway[(u32(y) * wind_lookup.n + u32(x)) * 4u + min(kind, 3u)].xy;
+}
+
+fn hash2(x: i32, y: i32) -> u32 {
+    var h = (u32(x) * 0x8da6b343u) ^ (u32(y) * 0xd8163841u);
+    h ^= h >> 16u;
+    h *= 0x7feb352du;
+    h ^= h >> 15u;
+    return h;
+}
+
+fn value_noise(p: vec2<f32>) -> f32 {
+    let fl = floor(p);
+    let i = vec2<i32>(fl);
+    let f = p - fl;
+    let u = f * f * (3.0 - 2.0 * f);
+    let a = f32(hash2(i.x, i.y) >> 8u) / 16777216.0;
+    let b = f32(hash2(i.x + 1, i.y) >> 8u) / 16777216.0;
+    let c = f32(hash2(i.x, i.y + 1) >> 8u) / 16777216.0;
+    let d = f32(hash2(i.x + 1, i.y + 1) >> 8u) / 16777216.0;
+    let ab = a + (b - a) * u.x;
+    let cd = c + (d - c) * u.x;
+    return ab + (cd - ab) * u.y;
+}
+
+fn unpack_rgb(c: u32) -> vec3<f32> {
+    return vec3<f32>(f32(c & 255u), f32((c >> 8u) & 255u), f32((c >> 16u) & 255u)) / 255.0;
+}
+
+fn pack_rgba8(c: vec3<f32>) -> u32 {
+    let q = vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(1.0)) * 255.0 + 0.5);
+    return q.x | (q.y << 8u) | (q.z << 16u) | (255u << 24u);
+}
+
+// Workgroup y is the slot of the half; x runs over the slot's blades.
+@compute @workgroup_size(64, 1, 1)
+fn apply_wind(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let slot = gid.y;
+    if gid.x >= args[slot].instance_count {
+        return;
+    }
+    let index = slot * pass_params.flags.y + gid.x;
+    var b = blades[index];
+    let root = vec2<f32>(b.pos_x, b.pos_y);
+    let kind = b.kind & 255u;
+    let w = wind_at(root);
+    var lean = sway_at(root, kind) * b.wind;
+    if has(INTERACTION) {
+        lean += w.zw * 0.9;
+    }
+    let speed = length(w.xy);
+    var blade_sway = 0.0;
+    var flutter = 0.0;
+    if has(DETAIL_BENDING) {
+        let phase = f32(b.hash & 1023u) / 1023.0;
+        let time = pass_params.misc.x;
+        let amount = min(speed / 5.0, 1.5) * b.wind;
+        blade_sway = (smooth_triangle(time * 0.193 + phase) + smooth_triangle(time * 0.375 + phase * 1.3) - 1.0) * amount;
+        flutter = (smooth_triangle(time * 1.975 + phase * 3.1) + smooth_triangle(time * 0.793 + phase * 2.7) - 1.0) * amount;
+    }
+    if has(COLOR_VARIATION) {
+        let world = pass_params.misc.zw + root;
+        let v = value_noise(world / 6.0) * 0.6 + value_noise(world / 1.7) * 0.4;
+        let variation = vec3<f32>(0.78, 0.86, 0.7) + (vec3<f32>(1.15, 1.1, 0.95) - vec3<f32>(0.78, 0.86, 0.7)) * v;
+        b.color = pack_rgba8(unpack_rgb(b.color) * variation);
+    }
+    b.lean_x = lean.x;
+    b.lean_y = lean.y;
+    b.sway = blade_sway;
+    b.flutter = flutter;
+    b.fade = clamp(speed / max(pass_params.misc.y, 0.5) - 1.0, 0.0, 1.0);
+    blades[index] = b;
+}

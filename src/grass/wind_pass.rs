@@ -1,0 +1,125 @@
+//! CPU mirror of `shaders/grass_wind.wgsl`: the wind on each blade of a slot, once per blade.
+//! Written apart from the shader, statement for statement; a test compares the two.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec2;
+
+use crate::grass::Blade;
+use crate::wind::WindLookup;
+use crate::wind::field_cpu::wind_at;
+
+/// The pass's uniform; mirrors `WindPass` in the shader.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct WindPassParams {
+    /// x: time (s), y: ambient wind speed (m/s), zw: camera world xy modulo 4096 m.
+    pub misc: [f32; 4],
+    /// x: feature bits, y: slot capacity.
+    pub flags: [u32; 4],
+}
+const _: () = assert!(std::mem::size_of::<WindPassParams>() == 32);
+
+const INTERACTION: u32 = 2;
+const DETAIL_BENDING: u32 = 4;
+const COLOR_VARIATION: u32 = 64;
+
+fn smooth_triangle(x: f32) -> f32 {
+    let f = x + 0.5;
+    let t = ((f - f.floor()) * 2.0 - 1.0).abs();
+    t * t * (3.0 - 2.0 * t)
+}
+
+fn sway_at(lookup: &WindLookup, sway: &[[f32; 4]], rel: Vec2, kind: u32) -> Vec2 {
+    let n = lookup.n as i32;
+    let half = n / 2;
+    let off = Vec2::from_array(lookup.camera_offset);
+    let c = ((off + rel) / lookup.cell_m).floor();
+    let (cx, cy) = (
+        (c.x as i32).clamp(-half, half - 1),
+        (c.y as i32).clamp(-half, half - 1),
+    );
+    let (wx, wy) = (lookup.origin_cell[0] + cx, lookup.origin_cell[1] + cy);
+    let (x, y) = (wx.rem_euclid(n) as u32, wy.rem_euclid(n) as u32);
+    let s = sway[((y * lookup.n + x) * 4 + kind.min(3)) as usize];
+    Vec2::new(s[0], s[1])
+}
+
+fn hash2(x: i32, y: i32) -> u32 {
+    let mut h = (x as u32).wrapping_mul(0x8da6_b343) ^ (y as u32).wrapping_mul(0xd816_3841);
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x7feb_352d);
+    h ^= h >> 15;
+    h
+}
+
+fn value_noise(p: Vec2) -> f32 {
+    let fl = p.floor();
+    let (ix, iy) = (fl.x as i32, fl.y as i32);
+    let f = p - fl;
+    let u = f * f * (Vec2::splat(3.0) - 2.0 * f);
+    let r = |x: i32, y: i32| (hash2(x, y) >> 8) as f32 / 16_777_216.0;
+    let (a, b, c, d) = (r(ix, iy), r(ix + 1, iy), r(ix, iy + 1), r(ix + 1, iy + 1));
+    let ab = a + (b - a) * u.x;
+    let cd = c + (d - c) * u.x;
+    ab + (cd - ab) * u.y
+}
+
+fn unpack_rgb(c: u32) -> [f32; 3] {
+    [
+        (c & 255) as f32 / 255.0,
+        ((c >> 8) & 255) as f32 / 255.0,
+        ((c >> 16) & 255) as f32 / 255.0,
+    ]
+}
+
+fn pack_rgba8(c: [f32; 3]) -> u32 {
+    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32;
+    q(c[0]) | (q(c[1]) << 8) | (q(c[2]) << 16) | (255 << 24)
+}
+
+/// Applies the wind to `blades` (one slot's drawn blades), as the shader does.
+pub fn apply_wind(
+    p: &WindPassParams,
+    lookup: &WindLookup,
+    cells: &[[f32; 4]],
+    sway: &[[f32; 4]],
+    blades: &mut [Blade],
+) {
+    let has = |f: u32| p.flags[0] & f != 0;
+    for b in blades.iter_mut() {
+        let root = Vec2::new(b.pos[0], b.pos[1]);
+        let kind = b.kind & 255;
+        let w = wind_at(lookup, cells, root);
+        let mut lean = sway_at(lookup, sway, root, kind) * b.wind;
+        if has(INTERACTION) {
+            lean += Vec2::new(w[2], w[3]) * 0.9;
+        }
+        let speed = Vec2::new(w[0], w[1]).length();
+        let (mut blade_sway, mut flutter) = (0.0f32, 0.0f32);
+        if has(DETAIL_BENDING) {
+            let phase = (b.hash & 1023) as f32 / 1023.0;
+            let time = p.misc[0];
+            let amount = (speed / 5.0).min(1.5) * b.wind;
+            blade_sway = (smooth_triangle(time * 0.193 + phase)
+                + smooth_triangle(time * 0.375 + phase * 1.3)
+                - 1.0)
+                * amount;
+            flutter = (smooth_triangle(time * 1.975 + phase * 3.1)
+                + smooth_triangle(time * 0.793 + phase * 2.7)
+                - 1.0)
+                * amount;
+        }
+        if has(COLOR_VARIATION) {
+            let world = Vec2::new(p.misc[2], p.misc[3]) + root;
+            let v = value_noise(world / 6.0) * 0.6 + value_noise(world / 1.7) * 0.4;
+            let lo = [0.78, 0.86, 0.7];
+            let hi = [1.15, 1.1, 0.95];
+            let c = unpack_rgb(b.color);
+            b.color = pack_rgba8([0, 1, 2].map(|i| c[i] * (lo[i] + (hi[i] - lo[i]) * v)));
+        }
+        b.lean = lean.to_array();
+        b.sway = blade_sway;
+        b.flutter = flutter;
+        b.fade = (speed / p.misc[1].max(0.5) - 1.0).clamp(0.0, 1.0);
+    }
+}
