@@ -199,6 +199,7 @@ fn a_short_soak_holds_its_ceilings_and_its_memory() {
             "3",
             "--atlas-slots",
             "96",
+            "--no-grass",
             "--out",
             "soak",
         ],

@@ -28,6 +28,32 @@ struct Rig {
     occluder: wgpu::RenderPipeline,
 }
 
+/// A wind field of 8 x 8 cells of still air, for the generation tests.
+fn still_lookup() -> verdant::wind::WindLookup {
+    verdant::wind::WindLookup {
+        origin_cell: [0, 0],
+        n: 8,
+        cell_m: 1.25,
+        camera_offset: [0.0; 2],
+        _pad: [0.0; 2],
+    }
+}
+
+/// The CPU mirror of generation followed by the wind pass in still air with every feature
+/// off, as the rig's GPU runs them.
+fn cpu_blades(rig: &Rig, job: &TileJob, tile: &TileData, hiz: &HiZ) -> TileBlades {
+    let mut out = generate_tile(rig.grass.params(), job, tile, hiz);
+    let (cells, sway) = (vec![[0.0f32; 4]; 64], vec![[0.0f32; 4]; 256]);
+    verdant::grass::wind_pass::apply_wind(
+        rig.grass.wind_params(),
+        &still_lookup(),
+        &cells,
+        &sway,
+        &mut out.blades,
+    );
+    out
+}
+
 fn synthetic_tile(manifest: &Manifest, id: TileId, kind: &str) -> TileData {
     let s = manifest.pyramid.samples_per_side();
     let cell = manifest.pyramid.cell_size_m(id.level) as f32;
@@ -104,7 +130,12 @@ impl Rig {
                 mapped_at_creation: false,
             })
         };
-        let lookup = still(32, wgpu::BufferUsages::UNIFORM);
+        let lookup = still(
+            32,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
+        ctx.queue
+            .write_buffer(&lookup, 0, bytemuck::bytes_of(&still_lookup()));
         let cells = still(8 * 8 * 16, wgpu::BufferUsages::STORAGE);
         let sway = still(8 * 8 * 4 * 16, wgpu::BufferUsages::STORAGE);
         let grass = GrassRenderer::new(
@@ -174,6 +205,8 @@ impl Rig {
     /// and the Hi-Z the generation saw.
     fn run(&mut self, camera: &Camera, jobs: &[TileJob]) -> (GrassStats, HiZ) {
         let view_proj = camera.view_proj_relative(W as f32 / H as f32);
+        self.grass
+            .set_frame(0.0, 1.0, verdant::features::Features::none(), DVec3::ZERO);
         self.grass.set_camera(
             &self.ctx.queue,
             view_proj,
@@ -307,7 +340,7 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
     let params = *rig.grass.params();
     let mut cpu_total = verdant::grass::GenerateStats::default();
     for (k, kind) in kinds.iter().enumerate() {
-        let cpu: TileBlades = generate_tile(&params, &jobs[k], &tiles[k], &hiz);
+        let cpu: TileBlades = cpu_blades(&rig, &jobs[k], &tiles[k], &hiz);
         let (args, gpu) = rig
             .grass
             .read_slot(&rig.ctx.device, &rig.ctx.queue, 0, k as u32);
@@ -461,9 +494,7 @@ fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
     assert!((0.2..0.3).contains(&ratio), "low/high ratio {ratio}");
     // The GPU agrees: its low slot holds the CPU's low blades.
     let (_, gpu_low) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 1);
-    let mut p2 = *rig.grass.params();
-    p2.limits = params.limits;
-    let cpu_low = generate_tile(&p2, &low, &flat, &hiz);
+    let cpu_low = cpu_blades(&rig, &low, &flat, &hiz);
     assert_blades_match(&gpu_low, &cpu_low.blades, "low LOD");
 }
 
@@ -481,4 +512,171 @@ fn the_hiz_pyramid_matches_its_cpu_mirror() {
         assert_eq!((g.0, g.1), (c.0, c.1), "level {m} size");
         assert_eq!(g.2, c.2, "level {m} differs");
     }
+}
+
+/// The wind pass (`shaders/grass_wind.wgsl`) on generated blades against its CPU mirror
+/// (`grass::wind_pass::apply_wind`), in the storm, after a few frames of sway.
+#[test]
+fn gpu_wind_on_blades_matches_the_cpu_mirror() {
+    use verdant::grass::wind_pass::apply_wind;
+    use verdant::wind::{SwayConfig, SwayField, WindConfig, WindField};
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let manifest = world.manifest.clone();
+    let settings = SceneConfig::for_world(&world)
+        .grass_settings(&world)
+        .unwrap();
+    let atlas = TileAtlas::new(&ctx.device, manifest.pyramid.samples_per_side(), 2);
+    let target = |format, usage| {
+        ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: None,
+            size: wgpu::Extent3d {
+                width: W,
+                height: H,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let depth = target(
+        verdant::terrain::DEPTH_FORMAT,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+    );
+    let color = target(
+        verdant::terrain::COLOR_FORMAT,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+    );
+    let config = WindConfig::from_scene(&manifest, Some("storm")).unwrap();
+    let mut wind = WindField::new(&ctx.device, &ctx.queue, &config);
+    let mut sway = SwayField::new(
+        &ctx.device,
+        SwayConfig::from_manifest(&manifest),
+        config.cells,
+        wind.buffer(),
+    );
+    sway.reset(&ctx.queue);
+    let mut grass = GrassRenderer::new(
+        &ctx.device,
+        &ctx.queue,
+        &manifest,
+        &atlas,
+        &depth,
+        settings,
+        verdant::grass::estimate_capacity(&world, &settings).unwrap(),
+        verdant::grass::WindBindings {
+            lookup: wind.lookup_uniform(),
+            cells: wind.buffer(),
+            sway: sway.buffer(),
+        },
+    );
+    let level = manifest.pyramid.max_level();
+    let cell = manifest.pyramid.cell_size_m(level) as f32;
+    let tile = synthetic_tile(&manifest, TileId::new(level, 1000, 2000), "flat");
+    atlas.upload(&ctx.queue, 0, &tile).unwrap();
+    let job = job(1, 0, 0, cell);
+    let cam = camera();
+    let world_cam = DVec3::new(20_000.0, 28_000.0, f64::from(ALTITUDE));
+    let view_proj = cam.view_proj_relative(W as f32 / H as f32);
+    let (dv, cv) = (
+        depth.create_view(&Default::default()),
+        color.create_view(&Default::default()),
+    );
+    let mut timer = GpuTimer::new(&ctx.device, &ctx.queue, false, 0);
+    for k in 0..4 {
+        let t = 3.0 + f64::from(k) / 30.0;
+        grass.set_frame(
+            t,
+            config.ambient.speed_mps as f32,
+            verdant::features::Features::all(),
+            world_cam,
+        );
+        grass.set_camera(&ctx.queue, view_proj, ALTITUDE, cam.near_m);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        let walker = glam::DVec2::new(world_cam.x, world_cam.y);
+        wind.update(
+            &ctx.queue,
+            &mut encoder,
+            world_cam,
+            t,
+            1.0 / 30.0,
+            Some(walker),
+            &mut timer,
+        );
+        sway.update(
+            &ctx.queue,
+            &mut encoder,
+            &wind.lookup(),
+            1.0 / 30.0,
+            &mut timer,
+        );
+        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: None,
+            color_attachments: &[],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &dv,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(0.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        grass.hiz.record(&mut encoder, &mut timer);
+        grass.record(&ctx.queue, &mut encoder, &[job], &cv, &dv, &mut timer);
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait_idle();
+    }
+    let (_, gpu) = grass.read_slot(&ctx.device, &ctx.queue, 0, 0);
+    let cells = wind.read_back(&ctx.device, &ctx.queue);
+    let (sway_state, _) = sway.read_back(&ctx.device, &ctx.queue);
+    let hiz = grass.hiz.read_back(&ctx.device, &ctx.queue);
+    let mut cpu = generate_tile(grass.params(), &job, &tile, &hiz).blades;
+    apply_wind(
+        grass.wind_params(),
+        &wind.lookup(),
+        &cells,
+        &sway_state,
+        &mut cpu,
+    );
+    assert_eq!(gpu.len(), cpu.len());
+    assert!(gpu.len() > 100, "too few blades: {}", gpu.len());
+    let mut g = gpu.clone();
+    g.sort_by_key(|b| (b.hash, b.kind));
+    cpu.sort_by_key(|b| (b.hash, b.kind));
+    let mut worst = 0.0f32;
+    let mut max_lean = 0.0f32;
+    for (a, b) in g.iter().zip(&cpu) {
+        assert_eq!(a.hash, b.hash);
+        for (x, y) in [a.lean[0], a.lean[1], a.sway, a.flutter, a.fade]
+            .iter()
+            .zip([b.lean[0], b.lean[1], b.sway, b.flutter, b.fade])
+        {
+            worst = worst.max((x - y).abs());
+        }
+        for s in [0, 8, 16] {
+            let (ca, cb) = ((a.color >> s) & 255, (b.color >> s) & 255);
+            assert!(ca.abs_diff(cb) <= 1, "colour channels differ: {ca} vs {cb}");
+        }
+        max_lean = max_lean.max(a.lean[0].hypot(a.lean[1]));
+    }
+    eprintln!(
+        "wind pass: {} blades, largest difference {worst:e}, largest lean {max_lean}",
+        g.len()
+    );
+    assert!(
+        worst <= 1e-4,
+        "GPU and CPU wind on blades differ by {worst}"
+    );
+    assert!(
+        max_lean > 0.05,
+        "the storm should lean the blades: {max_lean}"
+    );
 }
