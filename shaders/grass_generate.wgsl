@@ -84,6 +84,10 @@ struct DrawArgs {
 // Per LOD: the counters of `counter` in generate.rs (8 each), then per slot: overflow.
 @group(0) @binding(8) var<storage, read_write> stats: array<atomic<u32>, 16>;
 @group(0) @binding(9) var<storage, read_write> args: array<DrawArgs, 4>;
+// Workgroups of the wind pass that follows (shaders/grass_wind.wgsl): enough for the fullest slot.
+@group(0) @binding(10) var<storage, read_write> wind_dispatch: array<u32, 3>;
+
+var<workgroup> slot_blades: array<u32, 4>;
 
 const CONSIDERED: u32 = 0u;
 const EMPTY: u32 = 1u;
@@ -373,5 +377,14 @@ fn finalize(@builtin(local_invocation_index) slot: u32) {
         atomicAdd(&stats[lod * 8u + OVERFLOW], wanted - drawn);
         atomicAdd(&stats[lod * 8u + DRAWN], drawn);
     }
-    args[slot] = DrawArgs(vertices, select(0u, drawn, slot < batch.count), 0u, 0u);
+    let in_use = select(0u, drawn, slot < batch.count);
+    args[slot] = DrawArgs(vertices, in_use, 0u, 0u);
+    slot_blades[slot] = in_use;
+    workgroupBarrier();
+    if slot == 0u {
+        let most = max(max(slot_blades[0], slot_blades[1]), max(slot_blades[2], slot_blades[3]));
+        wind_dispatch[0] = (most + 63u) / 64u;
+        wind_dispatch[1] = 4u;
+        wind_dispatch[2] = 1u;
+    }
 }

@@ -137,6 +137,7 @@ struct Half {
     generate: wgpu::BindGroup,
     draw: wgpu::BindGroup,
     wind: wgpu::BindGroup,
+    wind_dispatch: wgpu::Buffer,
 }
 
 /// The Hi-Z pyramid of a depth target, in a storage buffer (levels one after another).
@@ -565,6 +566,7 @@ impl GrassRenderer {
                 storage(7, false),
                 storage(8, false),
                 storage(9, false),
+                storage(10, false),
             ],
         });
         let gen_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -716,6 +718,7 @@ impl GrassRenderer {
                 64,
                 U::STORAGE | U::INDIRECT | U::COPY_SRC,
             );
+            let wind_dispatch = buffer("grass wind dispatch", 12, U::STORAGE | U::INDIRECT);
             let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
             let generate = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("grass generate"),
@@ -738,6 +741,7 @@ impl GrassRenderer {
                     entry(7, counters.as_entire_binding()),
                     entry(8, stats.as_entire_binding()),
                     entry(9, args.as_entire_binding()),
+                    entry(10, wind_dispatch.as_entire_binding()),
                 ],
             });
             let draw = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -774,6 +778,7 @@ impl GrassRenderer {
                 generate,
                 draw,
                 wind: wind_group,
+                wind_dispatch,
             }
         };
         let halves = [make_half(0), make_half(1)];
@@ -946,7 +951,7 @@ impl GrassRenderer {
                 // The wind on each generated blade, once per blade.
                 pass.set_pipeline(&self.wind_pipeline);
                 pass.set_bind_group(0, &half.wind, &[]);
-                pass.dispatch_workgroups(self.capacity.div_ceil(64), chunk.len() as u32, 1);
+                pass.dispatch_workgroups_indirect(&half.wind_dispatch, 0);
             }
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("grass draw"),
