@@ -1,7 +1,7 @@
 // Grass blades from the instance pool: one indirect draw per tile, a triangle strip per blade.
 // The high-LOD pipeline has 7 segments (15 vertices), the low-LOD one 3 (7 vertices). The shape
 // is a cubic Bezier bent by the wind and scaled to keep its length (CPU mirror of the shape:
-// src/grass/blade.rs). shaders/wind_lookup.wgsl is put in front of this file.
+// src/grass/blade.rs). shaders/blade.wgsl is put in front of this file.
 //
 // Bending (after Crysis): main bending leans the whole blade by its cell's sway (a damped spring
 // per grass type, shaders/grass_sway.wgsl) plus the trail's push; detail bending adds whole-blade
@@ -14,7 +14,7 @@ override SEGMENTS: u32 = 7u;
 
 struct GrassFrame {
     view_proj: mat4x4<f32>,
-    // x: fog distance, y: time (s), z: ambient wind speed (m/s)
+    // x: fog distance
     misc: vec4<f32>,
     sun_dir: vec4<f32>,
     sun_color: vec4<f32>,
@@ -22,45 +22,19 @@ struct GrassFrame {
     horizon_color: vec4<f32>,
     // x: feature bits (src/features.rs)
     flags: vec4<u32>,
-    // xy: the camera's world position modulo 4096 m
-    camera_world: vec4<f32>,
     // rgb colour; w: gloss exponent (base) and specular strength (tip)
     base_colors: array<vec4<f32>, 16>,
     tip_colors: array<vec4<f32>, 16>,
 }
 
-const WIND_SOURCES: u32 = 1u;
-const INTERACTION: u32 = 2u;
-const DETAIL_BENDING: u32 = 4u;
 const TRANSLUCENCY: u32 = 8u;
 const SPECULAR: u32 = 16u;
 const AMBIENT_OCCLUSION: u32 = 32u;
-const COLOR_VARIATION: u32 = 64u;
 
 fn has(feature: u32) -> bool {
     return (frame.flags.x & feature) != 0u;
 }
 
-struct Blade {
-    pos_x: f32, pos_y: f32, pos_z: f32,
-    facing: f32,
-    growth_x: f32, growth_y: f32,
-    height: f32,
-    width: f32,
-    tilt: f32,
-    bend: f32,
-    side_curve: f32,
-    wind: f32,
-    hash: u32,
-    kind: u32,
-    color: u32,
-    // After the wind pass: the gust highlight.
-    fade: f32,
-    lean_x: f32,
-    lean_y: f32,
-    sway: f32,
-    flutter: f32,
-}
 
 @group(0) @binding(0) var<uniform> frame: GrassFrame;
 @group(0) @binding(1) var<storage, read> blades: array<Blade>;

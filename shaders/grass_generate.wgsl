@@ -2,6 +2,7 @@
 // tiles per dispatch (workgroup z is the tile within the batch). Surviving blades are appended
 // to the tile's slot of the instance pool; a second entry point turns the slot counters into
 // indirect draw arguments, clamped to the slot capacity. CPU mirror: src/grass/generate.rs.
+// shaders/blade.wgsl is put in front of this file.
 
 struct GrassType {
     height: vec2<f32>,
@@ -39,25 +40,6 @@ struct TileJob {
     slot: u32,
 }
 
-struct Blade {
-    pos_x: f32, pos_y: f32, pos_z: f32,
-    facing: f32,
-    growth_x: f32, growth_y: f32,
-    height: f32,
-    width: f32,
-    tilt: f32,
-    bend: f32,
-    side_curve: f32,
-    wind: f32,
-    hash: u32,
-    kind: u32,
-    color: u32,
-    fade: f32,
-    lean_x: f32,
-    lean_y: f32,
-    sway: f32,
-    flutter: f32,
-}
 
 struct Batch {
     // Index of the batch's first job in `jobs`, and the number of jobs in it.

@@ -2,28 +2,10 @@
 // blade in its slots gets its lean (the sway of its type in its wind cell, plus the trail's
 // push), its detail bending (whole-blade sway and edge flutter from smoothed triangle waves at
 // four frequencies, phased by its hash), its gust highlight and its colour variation (world-space
-// noise at its root). shaders/wind_lookup.wgsl is put in front of this file.
+// noise at its root). shaders/blade.wgsl and shaders/wind_lookup.wgsl are put in front of this
+// file.
 // CPU mirror: src/grass/wind_pass.rs.
 
-struct Blade {
-    pos_x: f32, pos_y: f32, pos_z: f32,
-    facing: f32,
-    growth_x: f32, growth_y: f32,
-    height: f32,
-    width: f32,
-    tilt: f32,
-    bend: f32,
-    side_curve: f32,
-    wind: f32,
-    hash: u32,
-    kind: u32,
-    color: u32,
-    fade: f32,
-    lean_x: f32,
-    lean_y: f32,
-    sway: f32,
-    flutter: f32,
-}
 
 struct DrawArgs {
     vertex_count: u32,

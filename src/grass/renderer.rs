@@ -17,6 +17,9 @@ use crate::lod::Frustum;
 use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT, sun_direction};
 use crate::world::Manifest;
 
+/// `shaders/blade.wgsl`: the blade record, put in front of each grass shader.
+const BLADE_WGSL: &str = include_str!("../../shaders/blade.wgsl");
+
 /// Bytes of a blade record.
 const BLADE_BYTES: u64 = std::mem::size_of::<crate::grass::Blade>() as u64;
 
@@ -123,12 +126,10 @@ struct DrawFrame {
     horizon_color: [f32; 4],
     // x: feature bits
     flags: [u32; 4],
-    // xy: the camera's world position modulo 4096 m (for world-space colour noise)
-    camera_world: [f32; 4],
     base_colors: [[f32; 4]; 16],
     tip_colors: [[f32; 4]; 16],
 }
-const _: () = assert!(std::mem::size_of::<DrawFrame>() == 64 + 112 + 512);
+const _: () = assert!(std::mem::size_of::<DrawFrame>() == 64 + 96 + 512);
 
 struct Half {
     blades: wgpu::Buffer,
@@ -474,7 +475,6 @@ impl GrassRenderer {
             sky_color: c4(sky.sky_color),
             horizon_color: c4(sky.horizon_color),
             flags: [crate::features::Features::all().bits(), 0, 0, 0],
-            camera_world: [0.0; 4],
             base_colors,
             tip_colors,
         };
@@ -515,7 +515,11 @@ impl GrassRenderer {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("grass_generate.wgsl"),
             source: wgpu::ShaderSource::Wgsl(
-                include_str!("../../shaders/grass_generate.wgsl").into(),
+                format!(
+                    "{BLADE_WGSL}\n{}",
+                    include_str!("../../shaders/grass_generate.wgsl")
+                )
+                .into(),
             ),
         });
         let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
@@ -588,10 +592,16 @@ impl GrassRenderer {
 
         let draw_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("grass_draw.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/grass_draw.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(
+                format!(
+                    "{BLADE_WGSL}\n{}",
+                    include_str!("../../shaders/grass_draw.wgsl")
+                )
+                .into(),
+            ),
         });
         let wind_source = format!(
-            "{}\n{}",
+            "{BLADE_WGSL}\n{}\n{}",
             crate::wind::WIND_LOOKUP_WGSL,
             include_str!("../../shaders/grass_wind.wgsl")
         );
@@ -855,8 +865,6 @@ impl GrassRenderer {
         features: crate::features::Features,
         camera_world: glam::DVec3,
     ) {
-        self.draw_frame.misc[1] = (time_s % 3600.0) as f32;
-        self.draw_frame.misc[2] = ambient_speed;
         self.draw_frame.flags[0] = features.bits();
         self.wind_params.misc = [
             (time_s % 3600.0) as f32,

@@ -1,0 +1,23 @@
+// The blade record of the instance pool, shared by grass_generate.wgsl, grass_wind.wgsl and
+// grass_draw.wgsl (put in front of each). Mirrors `Blade` in src/grass/blade.rs (80 bytes).
+struct Blade {
+    pos_x: f32, pos_y: f32, pos_z: f32,
+    facing: f32,
+    growth_x: f32, growth_y: f32,
+    height: f32,
+    width: f32,
+    tilt: f32,
+    bend: f32,
+    side_curve: f32,
+    wind: f32,
+    hash: u32,
+    kind: u32,
+    color: u32,
+    // Fade at generation; after the wind pass, the gust highlight.
+    fade: f32,
+    // Written by the wind pass.
+    lean_x: f32,
+    lean_y: f32,
+    sway: f32,
+    flutter: f32,
+}
