@@ -28,6 +28,8 @@ struct WindPass {
 @group(0) @binding(4) var<storage, read_write> blades: array<Blade>;
 @group(0) @binding(5) var<storage, read> args: array<DrawArgs, 4>;
 
+// Lean of a blade on the axis of a fresh trail, blade heights: trampled nearly flat.
+const TRAIL_LEAN: f32 = 1.6;
 const WIND_SOURCES: u32 = 1u;
 const INTERACTION: u32 = 2u;
 const DETAIL_BENDING: u32 = 4u;
@@ -98,7 +100,7 @@ fn apply_wind(@builtin(global_invocation_id) gid: vec3<u32>) {
     let w = wind_at(root);
     var lean = sway_at(root, kind) * b.wind;
     if has(INTERACTION) {
-        lean += w.zw * 0.9;
+        lean += w.zw * TRAIL_LEAN;
     }
     let speed = length(w.xy);
     var blade_sway = 0.0;

@@ -107,6 +107,17 @@ impl Features {
         Self(self.0 & !f.bit())
     }
 
+    /// This set with `f` switched on.
+    pub fn with(self, f: Feature) -> Self {
+        Self(self.0 | f.bit())
+    }
+
+    /// This set with each of `off` switched off, then each of `on` switched on.
+    pub fn switched(self, off: &[Feature], on: &[Feature]) -> Self {
+        let s = off.iter().fold(self, |s, f| s.without(*f));
+        on.iter().fold(s, |s, f| s.with(*f))
+    }
+
     /// Whether `f` is on.
     pub fn has(self, f: Feature) -> bool {
         self.0 & f.bit() != 0
@@ -130,6 +141,8 @@ mod tests {
             assert_eq!(seen & f.bit(), 0);
             seen |= f.bit();
             assert!(!Features::all().without(f).has(f));
+            assert!(Features::none().with(f).has(f));
+            assert_eq!(Features::all().switched(&[f], &[f]), Features::all());
         }
         assert!(
             "sparkles"

@@ -65,14 +65,19 @@ enum Command {
         /// Write only report.json, no PNG frames.
         #[arg(long)]
         no_images: bool,
-        /// Wind scene of the world's manifest (e.g. calm, breeze, storm, helicopter).
+        /// Wind scene of the world's manifest (e.g. calm, breeze, storm, helicopter) for the
+        /// whole flight (default: the path's own wind keys if it has any, else breeze).
         #[arg(long)]
         wind: Option<String>,
         /// Grass features to switch off, comma-separated: wind-sources, interaction,
         /// detail-bending, translucency, specular, ambient-occlusion, color-variation,
-        /// ground-darkening.
+        /// ground-darkening (on top of the manifest's [features] table).
         #[arg(long, value_delimiter = ',')]
         disable: Vec<verdant::features::Feature>,
+        /// Grass features to switch on that the manifest's [features] table switches off,
+        /// comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        enable: Vec<verdant::features::Feature>,
         #[command(flatten)]
         stream: StreamArgs,
     },
@@ -153,6 +158,9 @@ enum BenchCommand {
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "480x270", value_parser = parse_size)]
         size: (u32, u32),
+        /// Frames of flight along the path over the two seconds before each view.
+        #[arg(long, default_value_t = 8)]
+        warmup_frames: u32,
         /// Timed frames per view and variant.
         #[arg(long, default_value_t = 5)]
         timed_frames: u32,
@@ -531,6 +539,7 @@ fn run(cli: Cli) -> Result<()> {
             no_images,
             wind,
             disable,
+            enable,
             stream,
         } => fly(FlyOptions {
             world: resolve_world(&world)?,
@@ -541,9 +550,8 @@ fn run(cli: Cli) -> Result<()> {
             write_images: !no_images,
             service: stream.service(),
             wind_scene: wind,
-            features: disable
-                .iter()
-                .fold(verdant::features::Features::all(), |f, d| f.without(*d)),
+            disable,
+            enable,
         }),
         Command::Soak {
             world,
@@ -571,6 +579,7 @@ fn run(cli: Cli) -> Result<()> {
                     world,
                     out,
                     size,
+                    warmup_frames,
                     timed_frames,
                 },
         } => {
@@ -578,6 +587,7 @@ fn run(cli: Cli) -> Result<()> {
                 world: resolve_world(&world)?,
                 out,
                 size,
+                warmup_frames,
                 timed_frames,
                 ..Default::default()
             };

@@ -764,7 +764,11 @@ fn trail_pushes_away_from_the_path_fades_and_stays_bounded() {
     let south = push_at(&cells, DVec2::new(mid, y0 - 0.6));
     let far = push_at(&cells, DVec2::new(mid, y0 + 1.9));
     eprintln!("push north {north}, south {south}, 1.875 m away {far}");
-    let u = 0.625f32;
+    let u = 0.625f32 / config.trail_radius_m;
+    assert!(
+        config.trail_radius_m < 1.875,
+        "the far cell must lie outside the capsule"
+    );
     let fade = (-f64::from(frame) / f64::from(config.trail_fade_s))
         .exp()
         .powi(18) as f32;
@@ -1060,4 +1064,235 @@ fn invalid_wind_sources_get_errors_naming_the_field() {
     ))
     .unwrap_err();
     assert_eq!(field_of(&err), "wind_scenes[1].sources");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Wind scenes changing along a camera path, walkers and the [features] table.
+
+/// SMALL with a second scene, the overview path's wind keys, a walker path and a features table.
+fn with_keys() -> String {
+    SMALL.replace(
+        "keys = [\n    { t_s = 0.0, position_m = [10.0, 10.0, 600.0]",
+        "walker = \"stroll\"\n\
+         wind = [\n    { t_s = 0.0, scene = \"still\" },\n    { t_s = 4.0, scene = \"gusty\", blend_s = 2.0 },\n]\n\
+         keys = [\n    { t_s = 0.0, position_m = [10.0, 10.0, 600.0]",
+    ) + r#"
+[[wind_scenes]]
+name = "still"
+ambient = { direction_deg = 200.0, speed_mps = 0.5, gustiness = 0.1 }
+
+[[paths]]
+name = "stroll"
+duration_s = 10.0
+keys = [
+    { t_s = 0.0, position_m = [100.0, 100.0, 1.7], yaw_deg = 0.0, pitch_deg = 0.0 },
+    { t_s = 10.0, position_m = [112.0, 100.0, 1.7], yaw_deg = 0.0, pitch_deg = 0.0 },
+]
+
+[features]
+specular = false
+ground-darkening = false
+"#
+}
+
+#[test]
+fn path_wind_keys_walkers_and_features_parse_and_bad_ones_are_named() {
+    use verdant::features::{Feature, Features};
+    let text = with_keys();
+    let m = parse(&text).unwrap();
+    let path = m.path("overview").unwrap();
+    assert_eq!(path.walker.as_deref(), Some("stroll"));
+    assert_eq!(path.wind.len(), 2);
+    assert_eq!(path.wind[0].blend_s, verdant::world::DEFAULT_WIND_BLEND_S);
+    assert_eq!(path.wind[1].blend_s, 2.0);
+    let f = Features::from(&m.features);
+    assert!(!f.has(Feature::Specular) && !f.has(Feature::GroundDarkening));
+    assert!(f.has(Feature::Translucency) && f.has(Feature::Interaction));
+    assert_eq!(parse(&m.to_toml()).unwrap(), m, "round trip");
+    // Without a [features] table, everything is on.
+    assert_eq!(
+        Features::from(&parse(SMALL).unwrap().features),
+        Features::all()
+    );
+
+    let bad = |from: &str, to: &str| -> WorldError {
+        assert!(text.contains(from), "{from}");
+        let err = parse(&text.replacen(from, to, 1)).expect_err(to);
+        assert!(
+            err.to_string().starts_with("worlds/test/world.toml: "),
+            "message does not name the file: {err}"
+        );
+        eprintln!("{err}");
+        err
+    };
+    let err = bad("scene = \"gusty\"", "scene = \"hurricane\"");
+    assert!(
+        matches!(err, WorldError::UnknownWindSceneRef { ref field, ref name, ref available, .. }
+            if field == "paths[0].wind[1].scene" && name == "hurricane" && available.contains("still")),
+        "{err}"
+    );
+    // A change may not start before the previous one has blended in (the first blends over 3 s).
+    let err = bad("t_s = 4.0, scene", "t_s = 2.0, scene");
+    assert!(
+        matches!(err, WorldError::OutOfRange { ref field, .. } if field == "paths[0].wind[1].t_s"),
+        "{err}"
+    );
+    let err = bad("blend_s = 2.0", "blend_s = -1.0");
+    assert!(
+        matches!(err, WorldError::Negative { ref field, .. } if field == "paths[0].wind[1].blend_s"),
+        "{err}"
+    );
+    let err = bad("t_s = 4.0, scene", "t_s = nan, scene");
+    assert!(
+        matches!(err, WorldError::NonFinite { ref field, .. } if field == "paths[0].wind[1].t_s"),
+        "{err}"
+    );
+    let err = bad("walker = \"stroll\"", "walker = \"nobody\"");
+    assert!(
+        matches!(err, WorldError::UnknownPathRef { ref field, ref name, .. }
+            if field == "paths[0].walker" && name == "nobody"),
+        "{err}"
+    );
+    let err = bad("specular = false", "sparkles = false");
+    assert!(
+        matches!(err, WorldError::ManifestSyntax { .. }) && err.to_string().contains("sparkles"),
+        "{err}"
+    );
+    let err = bad("specular = false", "specular = 0");
+    assert!(matches!(err, WorldError::ManifestSyntax { .. }), "{err}");
+}
+
+#[test]
+fn scene_changes_blend_the_ambient_and_the_noise_moves_on_continuously() {
+    let m = parse(&with_keys()).unwrap();
+    let config = WindConfig::from_keys(&m, &m.path("overview").unwrap().wind).unwrap();
+    let still = AmbientWind::from(&m.wind_scene("still").unwrap().ambient);
+    let gusty = AmbientWind::from(&m.wind_scene("gusty").unwrap().ambient);
+    // The scene in effect and its sources' clock.
+    let before = config.scene_at(3.0);
+    assert_eq!((before.name, before.sources.len()), ("still", 0));
+    assert_eq!(before.ambient, still);
+    let after = config.scene_at(9.0);
+    assert_eq!((after.name, after.sources.len()), ("gusty", 3));
+    assert_eq!(after.ambient, gusty);
+    assert!((after.local_s - 5.0).abs() < 1e-12);
+    // The directional source ramps up over 2 s from the change, not from time 0.
+    let directional = &after.sources[0];
+    assert_eq!(directional.strength_at(config.scene_at(5.0).local_s), 0.5);
+    // Halfway through the blend: the mean wind vectors' average.
+    let mid = config.scene_at(5.0).ambient;
+    let want = (still.direction() * still.speed_mps + gusty.direction() * gusty.speed_mps) * 0.5;
+    assert!(
+        (mid.direction() * mid.speed_mps - want).length() < 1e-9,
+        "{mid:?}"
+    );
+    assert!((mid.gustiness - 0.5 * (still.gustiness + gusty.gustiness)).abs() < 1e-12);
+
+    // The drift is the integral of the mean wind: against a fine trapezoid sum.
+    let velocity = |t: f64| {
+        let a = config.ambient_at(t);
+        a.direction() * a.speed_mps
+    };
+    for (t0, t1) in [(0.0, 3.0), (2.0, 7.5), (4.5, 5.5), (-3.0, 20.0), (9.0, 1.0)] {
+        let n = 20_000;
+        let h = (t1 - t0) / f64::from(n);
+        let sum: DVec2 = (0..n)
+            .map(|i| {
+                (velocity(t0 + h * f64::from(i)) + velocity(t0 + h * f64::from(i + 1))) * 0.5 * h
+            })
+            .sum();
+        let got = config.drift_between(t0, t1);
+        assert!((got - sum).length() < 1e-6, "{t0}..{t1}: {got} vs {sum}");
+    }
+
+    // Through the blend the field changes no faster than the steady wind's gusts plus the ramp
+    // of the mean wind (times the largest gust factor, 2) allow, and never jumps: had the
+    // pattern scrolled by speed times window age instead of the drift's integral, it would race
+    // across the field during the blend.
+    let points: Vec<DVec2> = (0..200)
+        .map(|k| {
+            DVec2::new(300.0, 400.0) + DVec2::from_angle(k as f64 * 2.399) * (k as f64).sqrt() * 6.0
+        })
+        .collect();
+    let dt = 1.0 / 60.0;
+    let largest_step = |from: f64, to: f64| -> f32 {
+        let mut worst = 0.0f32;
+        for p in &points {
+            let mut prev = ambient_at(&config, *p, from);
+            let mut t = from;
+            while t < to {
+                t += dt;
+                let v = ambient_at(&config, *p, t);
+                worst = worst.max((v - prev).length());
+                prev = v;
+            }
+        }
+        worst
+    };
+    let steady = largest_step(8.0, 12.0);
+    let change = largest_step(3.5, 6.5);
+    eprintln!(
+        "largest frame-to-frame change: steady gusty {steady} m/s, through the change {change} m/s"
+    );
+    assert!(steady > 0.0);
+    let ramp = (gusty.direction() * gusty.speed_mps - still.direction() * still.speed_mps).length()
+        * dt
+        / 2.0;
+    assert!(
+        change <= (steady + 2.0 * ramp as f32) * 1.1,
+        "the change moves the wind by {change} m/s in a frame (steady {steady}, ramp {ramp})"
+    );
+    for p in &points {
+        let (a, b) = (
+            ambient_at(&config, *p, 4.0 - 1e-4),
+            ambient_at(&config, *p, 4.0 + 1e-4),
+        );
+        assert!((a - b).length() < 1e-3, "jump at the change: {a} -> {b}");
+    }
+}
+
+#[test]
+fn the_wind_tour_shows_every_scene_its_walker_and_the_helicopter() {
+    use verdant::flythrough::sample_path;
+    let m = world();
+    let tour = m.path("wind-tour").expect("the wind tour");
+    let scenes: Vec<&str> = tour.wind.iter().map(|k| k.scene.as_str()).collect();
+    assert_eq!(scenes, ["calm", "breeze", "storm", "helicopter"]);
+    let walker = m.path(tour.walker.as_deref().expect("a walker")).unwrap();
+    let heli = m.path("helicopter").unwrap();
+    let config = WindConfig::from_keys(&m, &tour.wind).unwrap();
+    let aspect = 16.0 / 9.0;
+    // Whether a world point is inside the camera's view (with a small margin).
+    let in_view = |t: f64, p: DVec3| -> bool {
+        let cam = sample_path(tour, t);
+        let clip = cam.view_proj_relative(aspect) * (p - cam.position).as_vec3().extend(1.0);
+        clip.w > 0.0 && clip.x.abs() < 0.9 * clip.w && clip.y.abs() < 0.9 * clip.w
+    };
+    let (mut heli_seen, mut steps) = (0, 0);
+    let mut t = tour.keys[0].t_s;
+    while t <= tour.duration_s {
+        // The walker's feet are in view all the way round.
+        let w = sample_path(walker, t).position;
+        assert!(
+            in_view(t, DVec3::new(w.x, w.y, w.z - 1.7)),
+            "walker out of view at {t} s"
+        );
+        let now = config.scene_at(t);
+        if now.name == "helicopter" {
+            // The downwash's centre on the ground under the helicopter.
+            let centre = now.sources[0].position_at(now.local_s).unwrap();
+            let h = sample_path(heli, now.local_s).position;
+            assert!(centre.distance(h.truncate()) < 1e-6);
+            steps += 1;
+            if in_view(t, DVec3::new(centre.x, centre.y, h.z - 16.0)) {
+                heli_seen += 1;
+            }
+        }
+        t += 0.5;
+    }
+    assert!(steps > 20);
+    assert!(
+        heli_seen * 2 >= steps,
+        "the downwash's centre is in view for only {heli_seen} of {steps} half-seconds"
+    );
 }

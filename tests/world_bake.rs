@@ -257,6 +257,10 @@ fn camera_paths_clear_the_terrain() {
     assert!(low.iter().all(|&c| (30.0..=80.0).contains(&c)), "{low:?}");
     let heli = terrain.clearances(m.path("helicopter").unwrap(), 50);
     assert!(heli.iter().all(|&c| c >= 15.0), "{heli:?}");
+    let wind = terrain.clearances(m.path("wind-tour").unwrap(), 50);
+    assert!(wind.iter().all(|&c| c >= 5.0), "{wind:?}");
+    let walker = terrain.clearances(m.path("walker").unwrap(), 50);
+    assert!(walker.iter().all(|&c| c >= 1.0), "{walker:?}");
     for name in ["tour", "meadow"] {
         let c = terrain.clearances(m.path(name).unwrap(), 50);
         assert!(c.iter().all(|&c| c >= 1.0), "{name}: {c:?}");

@@ -85,7 +85,18 @@ fn committed_world_manifest_parses_and_validates() {
     let names: Vec<&str> = m.grass_types.iter().map(|g| g.name.as_str()).collect();
     assert_eq!(names, ["bare", "meadow", "tall grass", "dry grass"]);
     let names: Vec<&str> = m.paths.iter().map(|p| p.name.as_str()).collect();
-    assert_eq!(names, ["tour", "overview", "low", "meadow", "helicopter"]);
+    assert_eq!(
+        names,
+        [
+            "tour",
+            "overview",
+            "low",
+            "meadow",
+            "helicopter",
+            "wind-tour",
+            "walker"
+        ]
+    );
     assert!(m.height_range_m[0] >= 0.0 && m.height_range_m[1] <= 1000.0);
     // Text written by `to_toml` reads back to the same manifest.
     assert_eq!(parse(&m.to_toml()).unwrap(), m);

@@ -502,37 +502,53 @@ pub struct BenchFeaturesReport {
 }
 
 /// `verdant bench features`: each feature's GPU cost against its contribution to the image
-/// (FLIP between the full render and the render with that feature off), at four views along
-/// the meadow path, in the storm (so that wind features act), after a few frames of motion so
-/// that the trail and the sway are under way. Writes `bench_features.json`, `features.csv` and
-/// `features.png`.
+/// (FLIP between the full render and the render with that feature off), charted one against
+/// the other. The views come from the world's first camera path with wind keys (the baked
+/// `wind-tour`): one late in each of its wind scenes, each reached by two seconds of flight
+/// along the path in [`BenchLodOptions::warmup_frames`] frames (so that the sway, the gusts,
+/// the sources and the walker's trail are under way). A world without such a path is viewed along `meadow` (else its first path) in the
+/// storm. Writes `bench_features.json`, `features.csv` and `features.png`.
 pub fn run_bench_features(
     opts: &BenchLodOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> Result<BenchFeaturesReport> {
     use crate::features::{Feature, Features};
+    const LEAD_S: f64 = 2.0;
     let world = World::open(&opts.world)?;
-    let path = match world
-        .manifest
-        .path("meadow")
-        .or(world.manifest.paths.first())
-    {
+    let m = &world.manifest;
+    let toured = m.paths.iter().find(|p| !p.wind.is_empty());
+    let path = match toured.or(m.path("meadow")).or(m.paths.first()) {
         Some(p) => p.clone(),
         None => bail!("world {} has no camera paths", opts.world.display()),
     };
+    let walker = match &path.walker {
+        Some(name) => m.path(name).cloned(),
+        None => None,
+    };
+    let t0 = path.keys[0].t_s;
+    let end = t0 + path.duration_s;
+    // One view 70% of the way through each wind scene (at least LEAD_S into the path), or four
+    // views along a path without wind keys.
+    let times: Vec<f64> = if path.wind.is_empty() {
+        [0.1, 0.35, 0.6, 0.85]
+            .iter()
+            .map(|u| t0 + u * path.duration_s)
+            .collect()
+    } else {
+        path.wind
+            .iter()
+            .enumerate()
+            .map(|(i, k)| {
+                let next = path.wind.get(i + 1).map_or(end, |n| n.t_s);
+                (k.t_s + 0.7 * (next - k.t_s)).clamp(t0 + LEAD_S, end)
+            })
+            .collect()
+    };
+    let scene_name =
+        (path.wind.is_empty() && m.wind_scene("storm").is_some()).then(|| "storm".to_owned());
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("cannot create {}", opts.out.display()))?;
     let ctx = GpuContext::new()?;
-    let views: Vec<Camera> = [0.1, 0.35, 0.6, 0.85]
-        .iter()
-        .map(|u| sample_path(&path, path.keys[0].t_s + u * path.duration_s))
-        .collect();
-    let scene_name = world
-        .manifest
-        .wind_scenes
-        .iter()
-        .any(|s| s.name == "storm")
-        .then(|| "storm".to_owned());
     let variants: Vec<(String, Features)> = std::iter::once(("all".to_owned(), Features::all()))
         .chain(
             Feature::ALL
@@ -542,24 +558,36 @@ pub fn run_bench_features(
         .collect();
     let mut rows: Vec<(String, f64, Vec<image::RgbaImage>)> = Vec::new();
     let total = variants.len() as u64;
+    let lead_frames = opts.warmup_frames.max(1);
     for (k, (name, features)) in variants.iter().enumerate() {
         let mut config = SceneConfig::for_world(&world);
         config.features = *features;
         config.wind_scene = scene_name.clone();
+        config.wind_keys = path.wind.clone();
         let mut scene = Scene::new(&ctx, world.clone(), opts.size.0, opts.size.1, config)?;
         let (mut gpu, mut images) = (Vec::new(), Vec::new());
-        for v in &views {
-            scene.warm_up(&ctx, v, std::time::Duration::from_secs(60))?;
-            // A few frames walking forward: the trail and the sway get going.
-            let fwd = v.forward();
-            let step = DVec3::new(fwd.x, fwd.y, 0.0).normalize_or_zero() * 0.4;
-            let mut cam = *v;
-            for f in 0..(6 + opts.warmup_frames) {
-                cam.position += step;
-                scene.render_at(&ctx, &cam, 10.0 + f64::from(f) / 30.0)?;
+        for &t in &times {
+            scene.warm_up(
+                &ctx,
+                &sample_path(&path, t),
+                std::time::Duration::from_secs(60),
+            )?;
+            // The lead-in: the camera and the walker along the path up to the view's time.
+            let walker_at = |t: f64| {
+                walker
+                    .as_ref()
+                    .map_or(sample_path(&path, t), |w| sample_path(w, t))
+                    .position
+                    .truncate()
+            };
+            for f in 0..=lead_frames {
+                let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(lead_frames));
+                scene.render_frame(&ctx, &sample_path(&path, tf), tf, Some(walker_at(tf)))?;
             }
+            // Timed frames hold the view's time: the same image every frame.
+            let cam = sample_path(&path, t);
             for _ in 0..opts.timed_frames {
-                let stats = scene.render(&ctx, &cam)?;
+                let stats = scene.render_frame(&ctx, &cam, t, Some(walker_at(t)))?;
                 gpu.push(stats.gpu.iter().map(|(_, ms)| ms).sum::<f64>());
             }
             images.push(scene.read_image(&ctx)?);

@@ -113,6 +113,8 @@ mod tests {
         let path = CameraPath {
             name: "test".into(),
             duration_s: 20.0,
+            walker: None,
+            wind: Vec::new(),
             keys: vec![
                 key(0.0, 0.0, 350.0),
                 key(10.0, 100.0, 10.0),

@@ -44,10 +44,13 @@ pub struct FlyOptions {
     pub write_images: bool,
     /// Limits of the tile service.
     pub service: crate::stream::ServiceConfig,
-    /// Wind scene of the manifest (default: `breeze`, else the manifest's wind).
+    /// Wind scene of the manifest for the whole flight (default: the path's wind keys if it has
+    /// any, else `breeze`, else the manifest's wind).
     pub wind_scene: Option<String>,
-    /// Switched-on features of the grass model.
-    pub features: crate::features::Features,
+    /// Features of the grass model to switch off, on top of the manifest's `[features]`.
+    pub disable: Vec<crate::features::Feature>,
+    /// Features to switch on that the manifest switches off.
+    pub enable: Vec<crate::features::Feature>,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -94,7 +97,16 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     let mut config = SceneConfig::for_world(&world);
     config.service = opts.service;
     config.wind_scene = opts.wind_scene.clone();
-    config.features = opts.features;
+    config.wind_keys = path.wind.clone();
+    config.features = config.features.switched(&opts.disable, &opts.enable);
+    // The trail is left by the path's walker if it has one, else by the camera.
+    let walker =
+        match &path.walker {
+            Some(name) => Some(world.manifest.path(name).cloned().with_context(|| {
+                format!("camera path {:?} has no walker path {name:?}", path.name)
+            })?),
+            None => None,
+        };
     let mut scene = Scene::new(&ctx, world, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.
@@ -122,7 +134,11 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
         let camera = sample_path(&path, t_s);
         let start = Instant::now();
-        let stats = scene.render_at(&ctx, &camera, t_s)?;
+        let walker_xy = walker
+            .as_ref()
+            .map_or(camera.position, |w| sample_path(w, t_s).position)
+            .truncate();
+        let stats = scene.render_frame(&ctx, &camera, t_s, Some(walker_xy))?;
         let image = scene.read_image(&ctx)?;
         let frame_ms = start.elapsed().as_secs_f64() * 1e3;
         if opts.write_images {
@@ -135,6 +151,8 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
             index: i,
             t_s,
             camera_m: camera.position.to_array(),
+            walker_m: walker_xy.to_array(),
+            wind_scene: scene.wind_scene_at(t_s),
             frame_ms,
             cpu_ms: stats.cpu_ms,
             gpu_ms: stats.gpu.into_iter().collect::<BTreeMap<_, _>>(),

@@ -48,6 +48,11 @@ pub struct FrameRecord {
     pub t_s: f64,
     /// Camera position, metres.
     pub camera_m: [f64; 3],
+    /// Position of whoever leaves the trail in the grass (the camera or the path's walker), xy
+    /// metres.
+    pub walker_m: [f64; 2],
+    /// The wind scene in effect (empty: the manifest's default wind).
+    pub wind_scene: String,
     /// Wall time of the whole frame (record, submit, GPU, readback), milliseconds.
     pub frame_ms: f64,
     /// CPU time to select tiles and record and submit the frame, milliseconds.

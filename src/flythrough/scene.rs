@@ -18,7 +18,7 @@ use crate::stream::{
 };
 use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT, TerrainRenderer, TileDraw};
 use crate::wind::{SwayConfig, SwayField, WindConfig, WindError, WindField};
-use crate::world::{TileId, World, WorldError};
+use crate::world::{TileId, WindKey, World, WorldError};
 
 /// What stops a scene from being built or drawn.
 #[derive(Debug, thiserror::Error)]
@@ -78,8 +78,11 @@ pub struct SceneConfig {
     pub grass_spacing_m: f32,
     /// Blade segments at high and low LOD.
     pub grass_segments: [u32; 2],
-    /// The wind scene of the manifest (default: `breeze`, else the manifest's wind).
+    /// The wind scene of the manifest (default: `breeze`, else the manifest's wind); when
+    /// `None` and `wind_keys` is not empty, the scenes of those keys in turn.
     pub wind_scene: Option<String>,
+    /// Changes of wind scene over time (a camera path's `wind` keys).
+    pub wind_keys: Vec<WindKey>,
     /// The switched-on features of the grass model.
     pub features: Features,
 }
@@ -117,7 +120,8 @@ impl SceneConfig {
             grass_spacing_m: 0.25,
             grass_segments: [7, 3],
             wind_scene: None,
-            features: Features::all(),
+            wind_keys: Vec::new(),
+            features: Features::from(&world.manifest.features),
         }
     }
 }
@@ -144,7 +148,6 @@ struct GrassStage {
     renderer: GrassRenderer,
     wind: WindField,
     sway: SwayField,
-    ambient_speed: f32,
 }
 
 /// A world on the GPU, with colour and depth targets of a fixed size.
@@ -263,8 +266,12 @@ impl Scene {
         renderer.set_features(config.features);
         let grass = match config.grass_settings(&world) {
             Some(settings) => {
-                let mut wind_config =
-                    WindConfig::from_scene(&world.manifest, config.wind_scene.as_deref())?;
+                let mut wind_config = match &config.wind_scene {
+                    None if !config.wind_keys.is_empty() => {
+                        WindConfig::from_keys(&world.manifest, &config.wind_keys)?
+                    }
+                    scene => WindConfig::from_scene(&world.manifest, scene.as_deref())?,
+                };
                 wind_config.sources = config.features.has(Feature::WindSources);
                 wind_config.trail = config.features.has(Feature::Interaction);
                 let wind = WindField::new(&ctx.device, &ctx.queue, &wind_config);
@@ -295,7 +302,6 @@ impl Scene {
                     renderer: g,
                     wind,
                     sway,
-                    ambient_speed: wind_config.ambient.speed_mps as f32,
                 })
             }
             None => None,
@@ -454,13 +460,35 @@ impl Scene {
     }
 
     /// Draws one frame from `camera` at `time_s` seconds (the wind and the sway advance by the
-    /// time since the last frame, at most 5 s) and waits for its GPU times. Tiles that are not
-    /// resident yet are drawn from their nearest resident ancestor.
+    /// time since the last frame, at most 5 s) and waits for its GPU times; the camera leaves
+    /// the trail in the grass. Tiles that are not resident yet are drawn from their nearest
+    /// resident ancestor.
     pub fn render_at(
         &mut self,
         ctx: &GpuContext,
         camera: &Camera,
         time_s: f64,
+    ) -> Result<FrameStats, SceneError> {
+        let walker = DVec2::new(camera.position.x, camera.position.y);
+        self.render_frame(ctx, camera, time_s, Some(walker))
+    }
+
+    /// The name of the wind scene in effect at `time_s` (empty for the manifest's default wind
+    /// or without grass).
+    pub fn wind_scene_at(&self, time_s: f64) -> String {
+        self.grass.as_ref().map_or(String::new(), |g| {
+            g.wind.config().scene_at(time_s).name.to_owned()
+        })
+    }
+
+    /// Like [`Scene::render_at`], with the trail left by a walker at `walker` (world xy,
+    /// metres) instead of the camera; `None` leaves no trail this frame (the trail fades).
+    pub fn render_frame(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        time_s: f64,
+        walker: Option<DVec2>,
     ) -> Result<FrameStats, SceneError> {
         let start = Instant::now();
         let dt = self
@@ -497,8 +525,9 @@ impl Scene {
         let grass_jobs = self.grass_jobs(camera, &sel.grass);
         let view_proj = camera.view_proj_relative(aspect);
         if let Some(g) = &mut self.grass {
+            let ambient_speed = g.wind.config().ambient_at(time_s).speed_mps as f32;
             g.renderer
-                .set_frame(time_s, g.ambient_speed, self.features, camera.position);
+                .set_frame(time_s, ambient_speed, self.features, camera.position);
             g.renderer.set_camera(
                 &ctx.queue,
                 view_proj,
@@ -511,14 +540,13 @@ impl Scene {
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         self.apply(ctx, plan, Some(&mut encoder))?;
         if let Some(g) = &mut self.grass {
-            let walker = DVec2::new(camera.position.x, camera.position.y);
             g.wind.update(
                 &ctx.queue,
                 &mut encoder,
                 camera.position,
                 time_s,
                 dt,
-                Some(walker),
+                walker,
                 &mut self.timer,
             );
             let lookup = g.wind.lookup();

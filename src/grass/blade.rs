@@ -158,13 +158,13 @@ mod tests {
 
     #[test]
     fn bending_in_a_storm_keeps_length_and_stays_above_the_ground() {
-        // Leans up to the strongest sway (1.1 blade heights) plus a full trail push (0.9), in
-        // every direction, on flat and sloping ground.
+        // Leans up to the strongest sway (1.1 blade heights) plus a full trail push
+        // (TRAIL_LEAN, 1.6), in every direction, on flat and sloping ground.
         let mut worst = 0.0f32;
         for up in [Vec3::Z, Vec3::new(0.3, 0.1, 1.0).normalize()] {
             for k in 0..16 {
                 let a = k as f32 * std::f32::consts::TAU / 16.0;
-                for mag in [0.5, 1.0, 1.5, 2.0] {
+                for mag in [0.5, 1.0, 1.5, 2.0, 2.7] {
                     let lean = Vec3::new(a.cos(), a.sin(), 0.0) * mag;
                     for (tilt, bend) in [(0.1, 0.2), (0.6, 0.9), (0.35, 0.5)] {
                         let p = blade_curve_bent(up, Vec3::X, 0.6, tilt, bend, 0.7, lean);

@@ -19,6 +19,9 @@ pub struct WindPassParams {
 }
 const _: () = assert!(std::mem::size_of::<WindPassParams>() == 32);
 
+/// Lean of a blade on the axis of a fresh trail, blade heights (trampled nearly flat); the
+/// shader has the same constant.
+pub const TRAIL_LEAN: f32 = 1.6;
 const INTERACTION: u32 = 2;
 const DETAIL_BENDING: u32 = 4;
 const COLOR_VARIATION: u32 = 64;
@@ -92,7 +95,7 @@ pub fn apply_wind(
         let w = wind_at(lookup, cells, root);
         let mut lean = sway_at(lookup, sway, root, kind) * b.wind;
         if has(INTERACTION) {
-            lean += Vec2::new(w[2], w[3]) * 0.9;
+            lean += Vec2::new(w[2], w[3]) * TRAIL_LEAN;
         }
         let speed = Vec2::new(w[0], w[1]).length();
         let (mut blade_sway, mut flutter) = (0.0f32, 0.0f32);

@@ -18,7 +18,7 @@ use thiserror::Error;
 use crate::flythrough::sample_path;
 use crate::stream::hash_u32;
 use crate::world::{
-    CameraPath, MAX_WIND_SOURCES, Manifest, SourcePlacement, WindDefaults, WindSource,
+    CameraPath, MAX_WIND_SOURCES, Manifest, SourcePlacement, WindDefaults, WindKey, WindSource,
 };
 
 /// Cells along each side of the field by default.
@@ -167,6 +167,37 @@ pub struct WindConfig {
     pub blend_s: f64,
     /// Seed of the ambient noise.
     pub seed: u32,
+    /// Later scenes the wind changes to, in time order (empty: this one scene all along).
+    pub changes: Vec<SceneChange>,
+}
+
+/// A change to another wind scene at a time: from `at_s` the scene's sources act (their times
+/// counted from `at_s`) and the ambient wind blends into the scene's over `blend_s`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneChange {
+    /// Scene time of the change, seconds.
+    pub at_s: f64,
+    /// Seconds over which the ambient wind blends from the previous scene's.
+    pub blend_s: f64,
+    /// Name of the scene.
+    pub scene: String,
+    /// Its ambient wind.
+    pub ambient: AmbientWind,
+    /// Its sources.
+    pub source_list: Vec<SourceConfig>,
+}
+
+/// The scene in effect at a time, as [`WindConfig::scene_at`] finds it.
+#[derive(Clone, Copy, Debug)]
+pub struct SceneAt<'a> {
+    /// Name of the scene.
+    pub name: &'a str,
+    /// The ambient wind (blended with the previous scene's during a change).
+    pub ambient: AmbientWind,
+    /// The scene's sources.
+    pub sources: &'a [SourceConfig],
+    /// Time since the scene began (its sources' clock), seconds.
+    pub local_s: f64,
 }
 
 impl WindConfig {
@@ -183,13 +214,117 @@ impl WindConfig {
             attack_s: 0.15,
             release_s: 1.5,
             trail_fade_s: 3.0,
-            trail_radius_m: 1.0,
+            trail_radius_m: 1.25,
             trail_max_step_m: 10.0,
             gust_scale_m: 48.0,
             window_s: 90.0,
             blend_s: 10.0,
             seed: DEFAULT_SEED,
+            changes: Vec::new(),
         }
+    }
+
+    /// The configuration of a camera path's wind keys (`keys`, in time order; at least one):
+    /// the first key's scene holds from the start, each later one takes over at its time.
+    pub fn from_keys(manifest: &Manifest, keys: &[WindKey]) -> Result<Self, WindError> {
+        let Some(first) = keys.first() else {
+            return Self::from_scene(manifest, None);
+        };
+        let mut config = Self::from_scene(manifest, Some(&first.scene))?;
+        // The first scene's sources count their time from its key.
+        if first.t_s != 0.0 {
+            config.changes.push(SceneChange {
+                at_s: first.t_s,
+                blend_s: 0.0,
+                scene: config.scene.clone(),
+                ambient: config.ambient,
+                source_list: std::mem::take(&mut config.source_list),
+            });
+        }
+        for key in &keys[1..] {
+            let next = Self::from_scene(manifest, Some(&key.scene))?;
+            config.changes.push(SceneChange {
+                at_s: key.t_s,
+                blend_s: key.blend_s.max(0.0),
+                scene: next.scene,
+                ambient: next.ambient,
+                source_list: next.source_list,
+            });
+        }
+        Ok(config)
+    }
+
+    /// The scene in effect at `time_s`.
+    pub fn scene_at(&self, time_s: f64) -> SceneAt<'_> {
+        let Some(i) = self.changes.iter().rposition(|c| c.at_s <= time_s) else {
+            return SceneAt {
+                name: &self.scene,
+                ambient: self.ambient,
+                sources: &self.source_list,
+                local_s: time_s,
+            };
+        };
+        let c = &self.changes[i];
+        let prev = if i == 0 {
+            &self.ambient
+        } else {
+            &self.changes[i - 1].ambient
+        };
+        let u = if c.blend_s > 0.0 {
+            ((time_s - c.at_s) / c.blend_s).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        SceneAt {
+            name: &c.scene,
+            ambient: blend_ambient(prev, &c.ambient, u),
+            sources: &c.source_list,
+            local_s: time_s - c.at_s,
+        }
+    }
+
+    /// The ambient wind at `time_s`.
+    pub fn ambient_at(&self, time_s: f64) -> AmbientWind {
+        self.scene_at(time_s).ambient
+    }
+
+    /// The distance the ambient wind travels from `t0` to `t1` (the integral of its mean wind
+    /// vector), metres: what the noise pattern scrolls by. Exact for the piecewise-linear blends
+    /// of [`Self::scene_at`], so the pattern moves continuously through a change of scene.
+    pub fn drift_between(&self, t0: f64, t1: f64) -> DVec2 {
+        // Pieces of linear velocity: (start, end, velocity at start, velocity at end).
+        let mut pieces = Vec::with_capacity(2 * self.changes.len() + 1);
+        let mut v = drift_velocity(&self.ambient);
+        let mut from = f64::NEG_INFINITY;
+        for c in &self.changes {
+            let next = drift_velocity(&c.ambient);
+            pieces.push((from, c.at_s, v, v));
+            let end = c.at_s + c.blend_s.max(0.0);
+            pieces.push((c.at_s, end, v, next));
+            (v, from) = (next, end);
+        }
+        pieces.push((from, f64::INFINITY, v, v));
+        let (lo, hi, sign) = if t0 <= t1 {
+            (t0, t1, 1.0)
+        } else {
+            (t1, t0, -1.0)
+        };
+        let mut sum = DVec2::ZERO;
+        for (s, e, vs, ve) in pieces {
+            let (a, b) = (lo.max(s), hi.min(e));
+            if b <= a {
+                continue;
+            }
+            let at = |t: f64| {
+                if e - s > 0.0 && (e - s).is_finite() {
+                    vs + (ve - vs) * ((t - s) / (e - s))
+                } else {
+                    vs
+                }
+            };
+            sum += (at(a) + at(b)) * (0.5 * (b - a));
+        }
+        sum * sign
     }
 
     /// The configuration of the wind scene `scene_name` of `manifest`; without a name, the
@@ -249,6 +384,31 @@ impl WindConfig {
     pub fn storage_index(&self, cell: [i32; 2]) -> usize {
         let n = self.cells as i32;
         (cell[1].rem_euclid(n) * n + cell[0].rem_euclid(n)) as usize
+    }
+}
+
+/// The ambient wind's mean vector, m/s.
+fn drift_velocity(a: &AmbientWind) -> DVec2 {
+    a.direction() * a.speed_mps
+}
+
+/// `a` blended into `b` by `u` in 0..=1: the mean wind vectors linearly (so the drift integrates
+/// exactly), gustiness linearly.
+fn blend_ambient(a: &AmbientWind, b: &AmbientWind, u: f64) -> AmbientWind {
+    if u >= 1.0 {
+        return *b;
+    }
+    let v = drift_velocity(a).lerp(drift_velocity(b), u);
+    let speed = v.length();
+    let direction_deg = if speed > 1e-9 {
+        v.y.atan2(v.x).to_degrees()
+    } else {
+        b.direction_deg
+    };
+    AmbientWind {
+        direction_deg,
+        speed_mps: speed,
+        gustiness: a.gustiness + (b.gustiness - a.gustiness) * u,
     }
 }
 
@@ -390,13 +550,14 @@ impl FieldDriver {
 
         let mut sources = [SourceGpu::default(); MAX_WIND_SOURCES];
         let mut used = 0;
+        let now = c.scene_at(time_s);
         if c.sources {
-            for s in c.source_list.iter().take(MAX_WIND_SOURCES) {
-                let strength = s.strength_at(time_s);
+            for s in now.sources.iter().take(MAX_WIND_SOURCES) {
+                let strength = s.strength_at(now.local_s);
                 if strength <= 0.0 {
                     continue;
                 }
-                let center = s.position_at(time_s).map_or([0.0; 2], rel);
+                let center = s.position_at(now.local_s).map_or([0.0; 2], rel);
                 let g = match &s.source {
                     WindSource::Directional {
                         direction_deg,
@@ -503,23 +664,19 @@ impl FieldDriver {
 /// noise windows at `time_s` seen from `corner` (the origin cell's south-west corner, metres);
 /// everything else zero.
 pub fn ambient_params(config: &WindConfig, corner: DVec2, time_s: f64) -> FieldParams {
-    let dir = config.ambient.direction();
+    let ambient = config.ambient_at(time_s);
+    let dir = ambient.direction();
     let (weights, windows) = noise_windows(config, corner, time_s);
     let amp_sum: f64 = (0..OCTAVES).map(|o| 0.5f64.powi(o as i32)).sum();
     FieldParams {
         ambient: [
             dir.x as f32,
             dir.y as f32,
-            config.ambient.speed_mps as f32,
-            config.ambient.gustiness as f32,
+            ambient.speed_mps as f32,
+            ambient.gustiness as f32,
         ],
         blend: [weights[0] as f32, weights[1] as f32, 0.0, 0.0],
-        extra: [
-            0.0,
-            0.0,
-            (0.1 + 0.25 * config.ambient.gustiness) as f32,
-            GUST_GAIN,
-        ],
+        extra: [0.0, 0.0, (0.1 + 0.25 * ambient.gustiness) as f32, GUST_GAIN],
         counts: [0, 0, LATTICE_PERIOD, config.seed],
         octave_freq: std::array::from_fn(|o| (2f64.powi(o as i32) / config.gust_scale_m) as f32),
         octave_amp: std::array::from_fn(|o| (0.5f64.powi(o as i32) / amp_sum) as f32),
@@ -557,18 +714,19 @@ pub fn noise_windows(
     let u = (tau_new / blend).clamp(0.0, 1.0);
     let s = u * u * (3.0 - 2.0 * u);
     let weights = [(FRAC_PI_2 * s).sin(), (FRAC_PI_2 * s).cos()];
-    let drift = config.ambient.direction() * config.ambient.speed_mps;
     let p = f64::from(LATTICE_PERIOD);
+    // How far the wind carried each window since it started.
+    let drift = [
+        config.drift_between(k * period, time_s),
+        config.drift_between((k - 1.0) * period, time_s),
+    ];
     let mut windows = [[0.0f32; 4]; OCTAVES];
     for (o, w) in windows.iter_mut().enumerate() {
         let freq = 2f64.powi(o as i32) / config.gust_scale_m;
         let speed = 1.0 + OCTAVE_DRIFT * o as f64;
-        for (slot, (index, tau)) in [(k, tau_new), (k - 1.0, tau_new + period)]
-            .into_iter()
-            .enumerate()
-        {
+        for (slot, index) in [k, k - 1.0].into_iter().enumerate() {
             let origin = window_origin(index as i64, o as u32, config.seed);
-            let q = (corner - drift * (speed * tau)) * freq + origin;
+            let q = (corner - drift[slot] * speed) * freq + origin;
             w[slot * 2] = q.x.rem_euclid(p) as f32;
             w[slot * 2 + 1] = q.y.rem_euclid(p) as f32;
         }

@@ -19,8 +19,8 @@ pub mod sway;
 pub mod sway_field;
 
 pub use config::{
-    AmbientWind, CellState, FieldDriver, FieldParams, SourceConfig, SourceGpu, WindConfig,
-    WindError, WindLookup,
+    AmbientWind, CellState, FieldDriver, FieldParams, SceneAt, SceneChange, SourceConfig,
+    SourceGpu, WindConfig, WindError, WindLookup,
 };
 pub use field::{WIND_LOOKUP_WGSL, WindField};
 pub use field_cpu::{WindFieldCpu, ambient_at};

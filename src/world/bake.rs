@@ -13,10 +13,11 @@
 //!    start from the parent's own values.
 //! 4. Every tile of every stored level is cut from that one global grid (borders included), so
 //!    neighbours share identical edge and border samples, and written through temporary files.
-//! 5. Five camera paths are computed from the terrain ("tour", the default, "overview", "low",
-//!    "meadow" and "helicopter"), four wind scenes are added ("calm", "breeze", "storm" and
-//!    "helicopter", see [`default_wind_scenes`]), and `world.toml` is written last, so a world
-//!    with a manifest is a complete world.
+//! 5. Seven camera paths are computed from the terrain ("tour", the default, "overview", "low",
+//!    "meadow", "helicopter", and "wind-tour" with its "walker"), four wind scenes are added
+//!    ("calm", "breeze", "storm" and "helicopter", see [`default_wind_scenes`]; the wind tour
+//!    shows them in turn), and `world.toml` is written last, so a world with a manifest is a
+//!    complete world.
 //!
 //! The bake is deterministic: the same DEM, options and seed give byte-identical files.
 
@@ -30,7 +31,8 @@ use super::dem::Dem;
 use super::error::WorldError;
 use super::format::{TileData, write_atomic, write_tile};
 use super::manifest::{
-    CameraKey, CameraPath, GrassType, Manifest, Sky, WindDefaults, WindScene, WindSource,
+    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, GrassType, Manifest, Sky, WindDefaults, WindKey,
+    WindScene, WindSource,
 };
 use super::tile::{Pyramid, TileId};
 
@@ -168,6 +170,7 @@ pub fn bake(
         sky: Sky::default(),
         paths: Vec::new(),
         wind_scenes: Vec::new(),
+        features: Default::default(),
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;
@@ -184,8 +187,9 @@ pub fn bake(
     let meadow = meadow_path(&painted, extent);
     let tour = tour_path(&painted, extent);
     let helicopter = helicopter_path(&painted, extent);
+    let (wind_tour, walker) = wind_tour_paths(&painted, extent);
     progress(BakeStage::Paths, 2, 2);
-    manifest.paths = vec![tour, overview, low, meadow, helicopter];
+    manifest.paths = vec![tour, overview, low, meadow, helicopter, wind_tour, walker];
     manifest.wind_scenes = default_wind_scenes();
     manifest.validate(&manifest_path)?;
 
@@ -608,9 +612,9 @@ pub const HELICOPTER_PATH: &str = "helicopter";
 /// - `storm`: 14 m/s, gustiness 0.8, with two directional gust sources that swell and fade on
 ///   periods of 17 s and 23 s (so together they repeat only every 391 s), slightly off the mean
 ///   direction;
-/// - `helicopter`: the breeze, plus a rotor's downwash following the `helicopter` camera path:
-///   an omni source (12 m/s outward, radius 25 m) and a vortex (4 m/s clockwise swirl,
-///   radius 25 m), both spinning up over the first 2 s.
+/// - `helicopter`: light air (2 m/s, gustiness 0.3) and a rotor's downwash following the
+///   `helicopter` camera path: an omni source (25 m/s outward, radius 30 m) and a vortex
+///   (4 m/s clockwise swirl, radius 30 m), both spinning up over the first 2 s.
 pub fn default_wind_scenes() -> Vec<WindScene> {
     let ambient = |speed_mps: f32, gustiness: f32| WindDefaults {
         direction_deg: 20.0,
@@ -647,11 +651,11 @@ pub fn default_wind_scenes() -> Vec<WindScene> {
         },
         WindScene {
             name: "helicopter".into(),
-            ambient: ambient(4.0, 0.35),
+            ambient: ambient(2.0, 0.3),
             sources: vec![
                 WindSource::Omni {
-                    radius_m: 25.0,
-                    speed_mps: 12.0,
+                    radius_m: 30.0,
+                    speed_mps: 25.0,
                     position_m: None,
                     path: Some(HELICOPTER_PATH.into()),
                     start_s: 0.0,
@@ -659,7 +663,7 @@ pub fn default_wind_scenes() -> Vec<WindScene> {
                     repeat: false,
                 },
                 WindSource::Vortex {
-                    radius_m: 25.0,
+                    radius_m: 30.0,
                     speed_mps: 4.0,
                     clockwise: true,
                     inflow_mps: 0.0,
@@ -762,7 +766,9 @@ fn overview_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     CameraPath {
         name: "overview".into(),
         duration_s: DURATION,
+        walker: None,
         keys: keys_along(grid, &points, &times, OVERVIEW_CLEARANCE_M, 150.0, -14.0),
+        wind: Vec::new(),
     }
 }
 
@@ -832,7 +838,9 @@ fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     CameraPath {
         name: "low".into(),
         duration_s: DURATION,
+        walker: None,
         keys: keys_along(grid, &points, &times, LOW_CLEARANCE_M, 20.0, -8.0),
+        wind: Vec::new(),
     }
 }
 
@@ -897,7 +905,9 @@ fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     CameraPath {
         name: "tour".into(),
         duration_s: APPROACH_S + GLIDE_S,
+        walker: None,
         keys,
+        wind: Vec::new(),
     }
 }
 
@@ -919,22 +929,87 @@ fn meadow_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     CameraPath {
         name: "meadow".into(),
         duration_s: DURATION,
+        walker: None,
         keys: keys_along(grid, &points, &times, MEADOW_CLEARANCE_M, 2.0, -6.0),
+        wind: Vec::new(),
     }
+}
+
+/// The middle and direction of the helicopter's pass: the tall-grass spot nearest the middle
+/// of the grassy line, along that line.
+fn helicopter_line(painted: &Painted, extent: [f64; 2]) -> (DVec2, DVec2) {
+    let (c, dir) = grassy_line(painted, extent);
+    (tall_grass_spot(painted, extent, c), dir)
+}
+
+/// The point within 2 km of `near` (and at least 80 m inside the data area) whose surroundings
+/// (40 m around) are most thoroughly tall grass, dense and level, nearest `near` among equals.
+/// Wind reads best on tall blades.
+fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
+    const REACH_M: f64 = 2000.0;
+    const AROUND_M: f64 = 40.0;
+    let grid = &painted.grid;
+    let e = DVec2::from(extent);
+    let inset = DVec2::splat(80.0).min(e * 0.45);
+    let inside = |p: DVec2| p.cmpge(inset).all() && p.cmple(e - inset).all();
+    let sample = |p: DVec2| -> (u8, f64) {
+        let a = ((p.x / grid.cell).round() as i64 + grid.margin).clamp(0, grid.width as i64 - 1);
+        let b = ((p.y / grid.cell).round() as i64 + grid.margin).clamp(0, grid.height as i64 - 1);
+        let i = b as usize * grid.width + a as usize;
+        (painted.grass_type[i], f64::from(painted.density[i]) / 255.0)
+    };
+    let steps = (REACH_M / grid.cell).round() as i64;
+    let ring = (AROUND_M / grid.cell).ceil() as i64;
+    let mut best = (
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        near.clamp(inset, e - inset),
+    );
+    for j in -steps..=steps {
+        for i in -steps..=steps {
+            let p = near + DVec2::new(i as f64, j as f64) * grid.cell;
+            if !inside(p) {
+                continue;
+            }
+            let (mut score, mut lo, mut hi) = (0.0, f64::INFINITY, f64::NEG_INFINITY);
+            let mut count = 0.0;
+            for b in -ring..=ring {
+                for a in -ring..=ring {
+                    let q = p + DVec2::new(a as f64, b as f64) * grid.cell;
+                    if q.distance(p) > AROUND_M {
+                        continue;
+                    }
+                    let (kind, density) = sample(q);
+                    if kind == 2 {
+                        score += density;
+                    }
+                    let z = grid.height_bilinear(q);
+                    (lo, hi) = (lo.min(z), hi.max(z));
+                    count += 1.0;
+                }
+            }
+            let score = score / count - (hi - lo) / 40.0;
+            let distance = p.distance(near);
+            if score > best.0 + 1e-9 || (score > best.0 - 1e-9 && distance < best.1) {
+                best = (score, distance, p);
+            }
+        }
+    }
+    best.2
 }
 
 /// Height of the helicopter above the highest ground near its pass, metres.
 const HELICOPTER_CLEARANCE_M: f64 = 16.0;
 
-/// A 20 s pass at 5 m/s, 16 m above the highest ground near it, over the meadow in the middle of
-/// the grassy line, looking ahead and down: the helicopter that the `helicopter` wind scene's
-/// downwash follows.
+/// A 20 s pass at 5 m/s, 16 m above the highest ground near it, over the tall grass nearest
+/// the middle of the grassy line, along that line, looking ahead and down: the helicopter that
+/// the `helicopter` wind scene's downwash follows.
 fn helicopter_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     const LENGTH: f64 = 100.0;
     const DURATION: f64 = 20.0;
     const KEYS: usize = 11;
     let grid = &painted.grid;
-    let (c, dir) = grassy_line(painted, extent);
+    let (c, dir) = helicopter_line(painted, extent);
     let times: Vec<f64> = (0..KEYS)
         .map(|k| DURATION * k as f64 / (KEYS - 1) as f64)
         .collect();
@@ -945,8 +1020,83 @@ fn helicopter_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     CameraPath {
         name: HELICOPTER_PATH.into(),
         duration_s: DURATION,
+        walker: None,
         keys: keys_along(grid, &points, &times, HELICOPTER_CLEARANCE_M, 5.0, -30.0),
+        wind: Vec::new(),
     }
+}
+
+/// Name of the baked fly-through that shows the wind scenes in turn.
+pub const WIND_TOUR_PATH: &str = "wind-tour";
+/// Name of the baked path of the walker whose trail the wind tour shows.
+pub const WALKER_PATH: &str = "walker";
+/// The wind tour's scenes and the times they start, seconds: each holds 12 s (the helicopter
+/// 14 s, for its pass to cross the view), blending in over [`DEFAULT_WIND_BLEND_S`].
+pub const WIND_TOUR_SCENES: [(&str, f64); 4] = [
+    ("calm", 0.0),
+    ("breeze", 12.0),
+    ("storm", 24.0),
+    ("helicopter", 36.0),
+];
+/// Length of the wind tour, seconds.
+const WIND_TOUR_S: f64 = 50.0;
+
+/// The wind tour and its walker. The camera stands 6 m above a patch of tall grass near the
+/// grassy line (see [`tall_grass_spot`]), 18 m to the side of the helicopter's pass and looking
+/// down across it, and drifts 6 m along it over 50 s; the wind changes from calm to breeze to
+/// storm to the helicopter scene (whose pass crosses the middle of the view about 10 s into it).
+/// A walker circles 11 m in front of the camera (4 m radius, 1.25 m/s), leaving its trail in the
+/// grass in every scene.
+fn wind_tour_paths(painted: &Painted, extent: [f64; 2]) -> (CameraPath, CameraPath) {
+    const SIDE_M: f64 = 18.0;
+    const DRIFT_M: f64 = 6.0;
+    const CLEARANCE_M: f64 = 6.0;
+    const WALK_SIDE_M: f64 = 7.0;
+    const WALK_RADIUS_M: f64 = 4.0;
+    const WALK_SPEED: f64 = 1.25;
+    let grid = &painted.grid;
+    let (c, dir) = helicopter_line(painted, extent);
+    let side = dir.perp();
+    let look = -side;
+    let yaw = round_to(look.y.atan2(look.x).to_degrees(), 3);
+    let keys_n = WIND_TOUR_S as usize;
+    let times: Vec<f64> = (0..=keys_n).map(|k| k as f64).collect();
+    let camera_points: Vec<DVec2> = times
+        .iter()
+        .map(|t| c + side * SIDE_M + dir * (DRIFT_M * (t / WIND_TOUR_S - 0.5)))
+        .collect();
+    let mut keys = keys_along(grid, &camera_points, &times, CLEARANCE_M, 1.0, -24.0);
+    for k in &mut keys {
+        k.yaw_deg = yaw;
+    }
+    let centre = c + side * WALK_SIDE_M;
+    let omega = WALK_SPEED / WALK_RADIUS_M;
+    let walk_points: Vec<DVec2> = times
+        .iter()
+        .map(|t| centre + DVec2::from_angle(omega * t) * WALK_RADIUS_M)
+        .collect();
+    let walker = CameraPath {
+        name: WALKER_PATH.into(),
+        duration_s: WIND_TOUR_S,
+        walker: None,
+        keys: keys_along(grid, &walk_points, &times, 1.7, 0.0, 0.0),
+        wind: Vec::new(),
+    };
+    let tour = CameraPath {
+        name: WIND_TOUR_PATH.into(),
+        duration_s: WIND_TOUR_S,
+        walker: Some(WALKER_PATH.into()),
+        keys,
+        wind: WIND_TOUR_SCENES
+            .iter()
+            .map(|&(scene, t_s)| WindKey {
+                t_s,
+                scene: scene.into(),
+                blend_s: DEFAULT_WIND_BLEND_S,
+            })
+            .collect(),
+    };
+    (tour, walker)
 }
 
 #[cfg(test)]

@@ -222,6 +222,22 @@ pub enum WorldError {
         name: String,
     },
 
+    /// A camera path's wind key names a wind scene that the manifest does not have.
+    #[error(
+        "{}: {field} = \"{name}\": no wind scene has this name (the world has: {available})",
+        path.display()
+    )]
+    UnknownWindSceneRef {
+        /// The manifest file.
+        path: PathBuf,
+        /// The field holding the reference (e.g. `paths[5].wind[2].scene`).
+        field: String,
+        /// The name referred to.
+        name: String,
+        /// The scenes the world has, comma-separated.
+        available: String,
+    },
+
     /// A wind source has both a position and a path, or neither where it needs one.
     #[error("{}: {field} {message}", path.display())]
     WindSourcePlacement {
@@ -406,6 +422,7 @@ impl WorldError {
             | Negative { path, .. }
             | DuplicateWindScene { path, .. }
             | UnknownPathRef { path, .. }
+            | UnknownWindSceneRef { path, .. }
             | WindSourcePlacement { path, .. }
             | StrengthKeysOutOfOrder { path, .. }
             | OutOfRange { path, .. }

@@ -12,6 +12,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::features::{Feature, Features};
+
 use super::error::WorldError;
 use super::tile::Pyramid;
 
@@ -53,6 +55,72 @@ pub struct Manifest {
     /// Named wind scenes: an ambient wind and the wind sources acting in it.
     #[serde(default)]
     pub wind_scenes: Vec<WindScene>,
+    /// Which features of the grass model are on (all by default; the command line can switch
+    /// more off).
+    #[serde(default)]
+    pub features: FeatureSwitches,
+}
+
+/// The `[features]` table: each feature of the grass model on or off (all on by default). The
+/// keys are the feature names of the command line's `--disable`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default, rename_all = "kebab-case")]
+pub struct FeatureSwitches {
+    /// Wind sources on top of the ambient wind.
+    pub wind_sources: bool,
+    /// The trail a walker leaves in the grass.
+    pub interaction: bool,
+    /// Edge flutter and whole-blade sway.
+    pub detail_bending: bool,
+    /// Light through the blade when the sun is behind it.
+    pub translucency: bool,
+    /// Specular highlights with per-type gloss.
+    pub specular: bool,
+    /// Ambient occlusion from root to tip.
+    pub ambient_occlusion: bool,
+    /// Colour variation from world-space noise at the blade's root.
+    pub color_variation: bool,
+    /// Ground darkened under dense grass.
+    pub ground_darkening: bool,
+}
+
+impl Default for FeatureSwitches {
+    fn default() -> Self {
+        Self::from(Features::all())
+    }
+}
+
+impl From<Features> for FeatureSwitches {
+    fn from(f: Features) -> Self {
+        Self {
+            wind_sources: f.has(Feature::WindSources),
+            interaction: f.has(Feature::Interaction),
+            detail_bending: f.has(Feature::DetailBending),
+            translucency: f.has(Feature::Translucency),
+            specular: f.has(Feature::Specular),
+            ambient_occlusion: f.has(Feature::AmbientOcclusion),
+            color_variation: f.has(Feature::ColorVariation),
+            ground_darkening: f.has(Feature::GroundDarkening),
+        }
+    }
+}
+
+impl From<&FeatureSwitches> for Features {
+    fn from(s: &FeatureSwitches) -> Self {
+        let on = [
+            (Feature::WindSources, s.wind_sources),
+            (Feature::Interaction, s.interaction),
+            (Feature::DetailBending, s.detail_bending),
+            (Feature::Translucency, s.translucency),
+            (Feature::Specular, s.specular),
+            (Feature::AmbientOcclusion, s.ambient_occlusion),
+            (Feature::ColorVariation, s.color_variation),
+            (Feature::GroundDarkening, s.ground_darkening),
+        ];
+        on.into_iter()
+            .filter(|(_, on)| !on)
+            .fold(Features::all(), |f, (feature, _)| f.without(feature))
+    }
 }
 
 /// One kind of grass (or, at index 0, bare ground).
@@ -349,8 +417,36 @@ pub struct CameraPath {
     pub name: String,
     /// Length of the flight, seconds.
     pub duration_s: f64,
+    /// Name of the camera path whose positions leave the trail in the grass while this path is
+    /// flown (default: this path itself, the camera).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub walker: Option<String>,
     /// Keys in strictly increasing time order.
     pub keys: Vec<CameraKey>,
+    /// The wind scenes of the flight: from each key's time on, the wind is that scene (none: the
+    /// scene is chosen per run).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub wind: Vec<WindKey>,
+}
+
+/// A change of wind scene along a camera path.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WindKey {
+    /// Time from the start of the path, seconds; the scene's source times count from here.
+    pub t_s: f64,
+    /// Name of a wind scene of the world.
+    pub scene: String,
+    /// Seconds over which the ambient wind blends from the previous scene's into this one's.
+    #[serde(default = "default_wind_blend")]
+    pub blend_s: f64,
+}
+
+/// Blend between wind scenes on a path by default, seconds.
+pub const DEFAULT_WIND_BLEND_S: f64 = 3.0;
+
+fn default_wind_blend() -> f64 {
+    DEFAULT_WIND_BLEND_S
 }
 
 /// A camera pose at a time.
@@ -566,7 +662,57 @@ impl Manifest {
                 }
             }
         }
-        self.validate_wind_scenes(&v)
+        self.validate_wind_scenes(&v)?;
+        for (pi, cam) in self.paths.iter().enumerate() {
+            self.validate_path_wind(&v, pi, cam)?;
+        }
+        Ok(())
+    }
+
+    fn validate_path_wind(
+        &self,
+        v: &Validator,
+        pi: usize,
+        cam: &CameraPath,
+    ) -> Result<(), WorldError> {
+        if let Some(name) = &cam.walker
+            && self.path(name).is_none()
+        {
+            return Err(WorldError::UnknownPathRef {
+                path: v.path.to_path_buf(),
+                field: format!("paths[{pi}].walker"),
+                name: name.clone(),
+            });
+        }
+        for (ki, key) in cam.wind.iter().enumerate() {
+            let field = |f: &str| format!("paths[{pi}].wind[{ki}].{f}");
+            v.finite(&field("t_s"), key.t_s)?;
+            v.non_negative(&field("blend_s"), key.blend_s)?;
+            if self.wind_scene(&key.scene).is_none() {
+                let names: Vec<&str> = self.wind_scenes.iter().map(|s| s.name.as_str()).collect();
+                return Err(WorldError::UnknownWindSceneRef {
+                    path: v.path.to_path_buf(),
+                    field: field("scene"),
+                    name: key.scene.clone(),
+                    available: names.join(", "),
+                });
+            }
+            if ki > 0 {
+                let prev = &cam.wind[ki - 1];
+                if key.t_s < prev.t_s + prev.blend_s.max(1e-3) {
+                    return Err(v.out_of_range(
+                        &field("t_s"),
+                        key.t_s,
+                        &format!(
+                            "at least {} (the previous wind key's t_s + blend_s): a scene \
+                             change may not start before the one before it has blended in",
+                            prev.t_s + prev.blend_s.max(1e-3)
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     fn validate_wind_scenes(&self, v: &Validator) -> Result<(), WorldError> {

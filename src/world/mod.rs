@@ -26,8 +26,8 @@ pub use format::{
     ReadOptions, TileData, TileFile, read_tile, read_tile_with, tile_path, write_tile,
 };
 pub use manifest::{
-    CameraKey, CameraPath, GrassType, MAX_WIND_SOURCES, Manifest, Sky, SourcePlacement,
-    WindDefaults, WindScene, WindSource,
+    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, FeatureSwitches, GrassType, MAX_WIND_SOURCES,
+    Manifest, Sky, SourcePlacement, WindDefaults, WindKey, WindScene, WindSource,
 };
 pub use tile::{Bounds, Pyramid, TileId};
 
