@@ -1043,7 +1043,8 @@ const WIND_TOUR_S: f64 = 50.0;
 
 /// The wind tour and its walker. The camera stands 6 m above a patch of tall grass near the
 /// grassy line (see [`tall_grass_spot`]), 18 m to the side of the helicopter's pass and looking
-/// down across it, and drifts 6 m along it over 50 s; the wind changes from calm to breeze to
+/// down across it (to the right of the pass's direction, so that for the baked world the sun is
+/// behind the camera and bent blades catch it), and drifts 6 m along it over 50 s; the wind changes from calm to breeze to
 /// storm to the helicopter scene (whose pass crosses the middle of the view about 10 s into it).
 /// A walker circles 11 m in front of the camera (4 m radius, 1.25 m/s), leaving its trail in the
 /// grass in every scene.
@@ -1056,7 +1057,7 @@ fn wind_tour_paths(painted: &Painted, extent: [f64; 2]) -> (CameraPath, CameraPa
     const WALK_SPEED: f64 = 1.25;
     let grid = &painted.grid;
     let (c, dir) = helicopter_line(painted, extent);
-    let side = dir.perp();
+    let side = -dir.perp();
     let look = -side;
     let yaw = round_to(look.y.atan2(look.x).to_degrees(), 3);
     let keys_n = WIND_TOUR_S as usize;
