@@ -1296,3 +1296,89 @@ fn the_wind_tour_shows_every_scene_its_walker_and_the_helicopter() {
         "the downwash's centre is in view for only {heli_seen} of {steps} half-seconds"
     );
 }
+
+#[test]
+fn the_helicopter_flattens_the_tall_grass_under_it_and_the_grass_recovers() {
+    use verdant::wind::{SWAY_TYPES, SwayConfig, update_sway};
+    // The wind tour's helicopter scene through the mirrors of the wind field and the sway
+    // springs (each checked against its GPU stage by the tests above and in sway_field.rs), at
+    // 30 frames a second, the camera where the tour's is.
+    let m = world();
+    let tour = m.path("wind-tour").unwrap();
+    let config = WindConfig::from_keys(&m, &tour.wind).unwrap();
+    let heli_at = tour
+        .wind
+        .iter()
+        .find(|k| k.scene == "helicopter")
+        .unwrap()
+        .t_s;
+    let sway_config = SwayConfig::from_manifest(&m);
+    let tall = m
+        .grass_types
+        .iter()
+        .position(|g| g.name == "tall grass")
+        .unwrap();
+    let mut field = WindFieldCpu::new(&config);
+    let count = config.cell_count();
+    let mut sway = vec![[0.0f32; 4]; count * SWAY_TYPES];
+    let mut owners = vec![[i32::MIN; 2]; count];
+    let dt = 1.0f32 / 30.0;
+    // The bend of tall grass at a world point, and the downwash's centre, at scene time t.
+    let mut run_until = |t_end: f64, t: &mut f64| {
+        while *t < t_end {
+            *t += f64::from(dt);
+            let cam = verdant::flythrough::sample_path(tour, *t).position;
+            field.update(cam, *t, dt, None);
+            let p = sway_config.params(field.lookup(), dt);
+            update_sway(&p, field.cells(), &mut sway, &mut owners);
+        }
+    };
+    let bend_at = |sway: &[[f32; 4]], p: DVec2| -> Vec2 {
+        let s = sway[config.storage_index(config.world_cell(p)) * SWAY_TYPES + tall];
+        Vec2::new(s[0], s[1])
+    };
+    let mut t = heli_at - 5.0;
+    run_until(heli_at + 8.0, &mut t);
+    let now = config.scene_at(t);
+    assert_eq!(now.name, "helicopter");
+    let centre = now.sources[0].position_at(now.local_s).unwrap();
+    // Around the rotor, 3 to 10 m out: bent well over, away from the centre.
+    let max_bend = 1.1 - 0.5 * m.grass_types[tall].stiffness;
+    let mut outward = Vec::new();
+    for k in 0..24 {
+        let dir = DVec2::from_angle(k as f64 * std::f64::consts::TAU / 24.0);
+        for r in [3.0, 6.0, 10.0] {
+            let b = bend_at(&sway, centre + dir * r);
+            assert!(
+                b.length() > 0.5 * max_bend,
+                "{r} m out at {k}: bend {b} (max {max_bend})"
+            );
+            outward.push(f64::from(b.normalize().dot(dir.as_vec2())));
+        }
+    }
+    let mean_outward = outward.iter().sum::<f64>() / outward.len() as f64;
+    assert!(
+        mean_outward > 0.8,
+        "the grass leans outward: {mean_outward}"
+    );
+    // 60 m away, the light air alone bends it far less.
+    let far: f32 = (0..24)
+        .map(|k| {
+            let dir = DVec2::from_angle(k as f64 * std::f64::consts::TAU / 24.0);
+            bend_at(&sway, centre + dir * 60.0).length()
+        })
+        .sum::<f32>()
+        / 24.0;
+    let near = bend_at(&sway, centre + DVec2::X * 6.0).length();
+    eprintln!("bend of tall grass 6 m from the rotor {near}, 60 m away {far} (max {max_bend})");
+    assert!(far < 0.4 * near, "far {far}, near {near}");
+    // Where the helicopter was 5 s earlier (at full strength), the grass has recovered.
+    assert!(now.sources[0].strength_at(now.local_s - 5.0) == 1.0);
+    let earlier = now.sources[0].position_at(now.local_s - 5.0).unwrap();
+    assert!(earlier.distance(centre) > 20.0);
+    let behind = bend_at(&sway, earlier).length();
+    assert!(
+        behind < 0.4 * near,
+        "behind the helicopter {behind}, under it {near}"
+    );
+}
