@@ -15,7 +15,10 @@ struct SwayParams {
     gain: array<vec4<f32>, 4>,
 }
 
-@group(0) @binding(0) var<uniform> params: SwayParams;
+// A read-only storage buffer, not a uniform: Mesa's lavapipe (22.x) inlines uniform values that
+// steer branches and loops into a freshly compiled shader at every dispatch and never frees it.
+// Same layout, same results.
+@group(0) @binding(0) var<storage, read> params: SwayParams;
 @group(0) @binding(1) var<storage, read> wind_cells: array<vec4<f32>>;
 // Per cell and type: xy bend (blade heights), zw its velocity.
 @group(0) @binding(2) var<storage, read_write> sway: array<vec4<f32>>;

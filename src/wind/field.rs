@@ -94,7 +94,9 @@ impl WindField {
         let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("wind params"),
             size: std::mem::size_of::<FieldParams>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            // Bound as `var<storage, read>` (see `shaders/wind_field.wgsl`): as a uniform,
+            // lavapipe recompiles the shader at every dispatch and leaks each variant.
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let lookup_buffer = device.create_buffer(&wgpu::BufferDescriptor {

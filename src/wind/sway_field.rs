@@ -168,7 +168,9 @@ impl SwayField {
         let params_buffer = buffer(
             "sway params",
             std::mem::size_of::<SwayParams>() as u64,
-            U::UNIFORM | U::COPY_DST,
+            // Bound as `var<storage, read>` (see `shaders/grass_sway.wgsl`): as a uniform,
+            // lavapipe recompiles the shader at every dispatch and leaks each variant.
+            U::STORAGE | U::COPY_DST,
         );
         let sway = buffer(
             "sway state",
