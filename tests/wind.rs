@@ -513,6 +513,26 @@ fn each_source_kind_at_a_point() {
     }
 }
 
+/// Frame time of the continuity checks, seconds.
+const FRAME_S: f64 = 1.0 / 60.0;
+
+/// Largest change of any of `points`' ambient wind between frames of [`FRAME_S`] from `from`
+/// to `to`, m/s.
+fn largest_frame_step(config: &WindConfig, points: &[DVec2], from: f64, to: f64) -> f32 {
+    let mut worst = 0.0f32;
+    for p in points {
+        let mut prev = ambient_at(config, *p, from);
+        let mut t = from;
+        while t < to {
+            t += FRAME_S;
+            let v = ambient_at(config, *p, t);
+            worst = worst.max((v - prev).length());
+            prev = v;
+        }
+    }
+    worst
+}
+
 #[test]
 fn ambient_is_continuous_across_window_restarts_and_never_repeats() {
     let config = WindConfig::new(AmbientWind {
@@ -528,22 +548,7 @@ fn ambient_is_continuous_across_window_restarts_and_never_repeats() {
             DVec2::new(20_300.0, 28_150.0) + DVec2::from_angle(a) * r
         })
         .collect();
-    let dt = 1.0 / 60.0;
-    // Largest change of any point's wind between frames over a span of time.
-    let largest_step = |from: f64, to: f64| -> f32 {
-        let mut worst = 0.0f32;
-        for p in &points {
-            let mut prev = ambient_at(&config, *p, from);
-            let mut t = from;
-            while t < to {
-                t += dt;
-                let v = ambient_at(&config, *p, t);
-                worst = worst.max((v - prev).length());
-                prev = v;
-            }
-        }
-        worst
-    };
+    let largest_step = |from: f64, to: f64| largest_frame_step(&config, &points, from, to);
     let ordinary = largest_step(2.0 * period + 20.0, 2.0 * period + 40.0);
     let restart = largest_step(3.0 * period - 2.0, 3.0 * period + blend + 2.0);
     eprintln!(
@@ -1214,21 +1219,8 @@ fn scene_changes_blend_the_ambient_and_the_noise_moves_on_continuously() {
             DVec2::new(300.0, 400.0) + DVec2::from_angle(k as f64 * 2.399) * (k as f64).sqrt() * 6.0
         })
         .collect();
-    let dt = 1.0 / 60.0;
-    let largest_step = |from: f64, to: f64| -> f32 {
-        let mut worst = 0.0f32;
-        for p in &points {
-            let mut prev = ambient_at(&config, *p, from);
-            let mut t = from;
-            while t < to {
-                t += dt;
-                let v = ambient_at(&config, *p, t);
-                worst = worst.max((v - prev).length());
-                prev = v;
-            }
-        }
-        worst
-    };
+    let dt = FRAME_S;
+    let largest_step = |from: f64, to: f64| largest_frame_step(&config, &points, from, to);
     let steady = largest_step(8.0, 12.0);
     let change = largest_step(3.5, 6.5);
     eprintln!(
