@@ -337,7 +337,6 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
         jobs.push(j);
     }
     let (stats, hiz) = rig.run(&camera(), &jobs);
-    let params = *rig.grass.params();
     let mut cpu_total = verdant::grass::GenerateStats::default();
     for (k, kind) in kinds.iter().enumerate() {
         let cpu: TileBlades = cpu_blades(&rig, &jobs[k], &tiles[k], &hiz);
