@@ -506,8 +506,8 @@ pub struct BenchFeaturesReport {
 /// the other. The views come from the world's first camera path with wind keys (the baked
 /// `wind-tour`): one late in each of its wind scenes, each reached by two seconds of flight
 /// along the path in [`BenchLodOptions::warmup_frames`] frames (so that the sway, the gusts,
-/// the sources and the walker's trail are under way). A world without such a path is viewed along `meadow` (else its first path) in the
-/// storm. Writes `bench_features.json`, `features.csv` and `features.png`.
+/// the sources and the walker's trail are under way). A world without such a path is viewed
+/// along `meadow` (else its first path) in the storm. Writes `bench_features.json`, `features.csv` and `features.png`.
 pub fn run_bench_features(
     opts: &BenchLodOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
@@ -520,10 +520,6 @@ pub fn run_bench_features(
     let path = match toured.or(m.path("meadow")).or(m.paths.first()) {
         Some(p) => p.clone(),
         None => bail!("world {} has no camera paths", opts.world.display()),
-    };
-    let walker = match &path.walker {
-        Some(name) => m.path(name).cloned(),
-        None => None,
     };
     let t0 = path.keys[0].t_s;
     let end = t0 + path.duration_s;
@@ -573,13 +569,7 @@ pub fn run_bench_features(
                 std::time::Duration::from_secs(60),
             )?;
             // The lead-in: the camera and the walker along the path up to the view's time.
-            let walker_at = |t: f64| {
-                walker
-                    .as_ref()
-                    .map_or(sample_path(&path, t), |w| sample_path(w, t))
-                    .position
-                    .truncate()
-            };
+            let walker_at = |t: f64| super::walker_at(m, &path, t);
             for f in 0..=lead_frames {
                 let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(lead_frames));
                 scene.render_frame(&ctx, &sample_path(&path, tf), tf, Some(walker_at(tf)))?;

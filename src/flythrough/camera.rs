@@ -1,8 +1,8 @@
 //! The camera and the camera paths of a world's manifest.
 
-use glam::{DVec3, Mat4, Vec3};
+use glam::{DVec2, DVec3, Mat4, Vec3};
 
-use crate::world::CameraPath;
+use crate::world::{CameraPath, Manifest};
 
 /// A camera in world space: position in metres (f64), looking along yaw and pitch.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -83,6 +83,17 @@ pub fn sample_path(path: &CameraPath, t_s: f64) -> Camera {
     let yaw_deg = k1.yaw_deg + dyaw * u;
     let pitch_deg = k1.pitch_deg + (k2.pitch_deg - k1.pitch_deg) * u;
     Camera::new(position, yaw_deg, pitch_deg)
+}
+
+/// Where the trail in the grass is left at `t_s` along `path`: on the path's `walker` path of
+/// `manifest` (validation guarantees it exists), else under the camera.
+pub fn walker_at(manifest: &Manifest, path: &CameraPath, t_s: f64) -> DVec2 {
+    let walker = path
+        .walker
+        .as_deref()
+        .and_then(|name| manifest.path(name))
+        .unwrap_or(path);
+    sample_path(walker, t_s).position.truncate()
 }
 
 fn catmull_rom(p0: DVec3, p1: DVec3, p2: DVec3, p3: DVec3, u: f64) -> DVec3 {

@@ -11,7 +11,7 @@ pub use bench_lod::{
     BenchFeaturesReport, BenchLodOptions, BenchLodReport, FeatureResult, LodSetting, lod_settings,
     reference_setting, run_bench_features, run_bench_lod,
 };
-pub use camera::{Camera, sample_path};
+pub use camera::{Camera, sample_path, walker_at};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
 pub use scene::{FrameStats, Scene, SceneConfig, SceneError};
 pub use soak::{SoakOptions, SoakReport, TeleportRecord, resident_bytes, run_soak};
@@ -99,14 +99,6 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     config.wind_scene = opts.wind_scene.clone();
     config.wind_keys = path.wind.clone();
     config.features = config.features.switched(&opts.disable, &opts.enable);
-    // The trail is left by the path's walker if it has one, else by the camera.
-    let walker =
-        match &path.walker {
-            Some(name) => Some(world.manifest.path(name).cloned().with_context(|| {
-                format!("camera path {:?} has no walker path {name:?}", path.name)
-            })?),
-            None => None,
-        };
     let mut scene = Scene::new(&ctx, world, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.
@@ -134,10 +126,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
         let camera = sample_path(&path, t_s);
         let start = Instant::now();
-        let walker_xy = walker
-            .as_ref()
-            .map_or(camera.position, |w| sample_path(w, t_s).position)
-            .truncate();
+        let walker_xy = walker_at(&scene.world.manifest, &path, t_s);
         let stats = scene.render_frame(&ctx, &camera, t_s, Some(walker_xy))?;
         let image = scene.read_image(&ctx)?;
         let frame_ms = start.elapsed().as_secs_f64() * 1e3;

@@ -292,28 +292,17 @@ impl WindConfig {
     /// vector), metres: what the noise pattern scrolls by. Exact for the piecewise-linear blends
     /// of [`Self::scene_at`], so the pattern moves continuously through a change of scene.
     pub fn drift_between(&self, t0: f64, t1: f64) -> DVec2 {
-        // Pieces of linear velocity: (start, end, velocity at start, velocity at end).
-        let mut pieces = Vec::with_capacity(2 * self.changes.len() + 1);
-        let mut v = drift_velocity(&self.ambient);
-        let mut from = f64::NEG_INFINITY;
-        for c in &self.changes {
-            let next = drift_velocity(&c.ambient);
-            pieces.push((from, c.at_s, v, v));
-            let end = c.at_s + c.blend_s.max(0.0);
-            pieces.push((c.at_s, end, v, next));
-            (v, from) = (next, end);
-        }
-        pieces.push((from, f64::INFINITY, v, v));
         let (lo, hi, sign) = if t0 <= t1 {
             (t0, t1, 1.0)
         } else {
             (t1, t0, -1.0)
         };
-        let mut sum = DVec2::ZERO;
-        for (s, e, vs, ve) in pieces {
+        // The integral over [lo, hi] of one piece of linear velocity, from `vs` at `s` to `ve`
+        // at `e` (constant where the piece is unbounded or empty).
+        let piece = |s: f64, e: f64, vs: DVec2, ve: DVec2| -> DVec2 {
             let (a, b) = (lo.max(s), hi.min(e));
             if b <= a {
-                continue;
+                return DVec2::ZERO;
             }
             let at = |t: f64| {
                 if e - s > 0.0 && (e - s).is_finite() {
@@ -322,8 +311,18 @@ impl WindConfig {
                     vs
                 }
             };
-            sum += (at(a) + at(b)) * (0.5 * (b - a));
+            (at(a) + at(b)) * (0.5 * (b - a))
+        };
+        let mut sum = DVec2::ZERO;
+        let mut v = drift_velocity(&self.ambient);
+        let mut from = f64::NEG_INFINITY;
+        for c in &self.changes {
+            let next = drift_velocity(&c.ambient);
+            let end = c.at_s + c.blend_s.max(0.0);
+            sum += piece(from, c.at_s, v, v) + piece(c.at_s, end, v, next);
+            (v, from) = (next, end);
         }
+        sum += piece(from, f64::INFINITY, v, v);
         sum * sign
     }
 

@@ -311,6 +311,16 @@ struct Painted {
     density: Vec<u8>,
 }
 
+impl Painted {
+    /// Index of the painted sample nearest `p` (metres; clamped to the grid).
+    fn index_at(&self, p: DVec2) -> usize {
+        let g = &self.grid;
+        let a = ((p.x / g.cell).round() as i64 + g.margin).clamp(0, g.width as i64 - 1);
+        let b = ((p.y / g.cell).round() as i64 + g.margin).clamp(0, g.height as i64 - 1);
+        b as usize * g.width + a as usize
+    }
+}
+
 impl Grid {
     fn resample(
         dem: &Dem,
@@ -778,11 +788,7 @@ fn grassy_line(painted: &Painted, extent: [f64; 2]) -> (DVec2, DVec2) {
     let grid = &painted.grid;
     const LENGTH: f64 = 1600.0;
     let e = DVec2::from(extent);
-    let density_at = |p: DVec2| -> f64 {
-        let a = ((p.x / grid.cell).round() as i64 + grid.margin).clamp(0, grid.width as i64 - 1);
-        let b = ((p.y / grid.cell).round() as i64 + grid.margin).clamp(0, grid.height as i64 - 1);
-        f64::from(painted.density[b as usize * grid.width + a as usize]) / 255.0
-    };
+    let density_at = |p: DVec2| f64::from(painted.density[painted.index_at(p)]) / 255.0;
     // Candidates: centres on a grid inside the data area, eight headings each. Score: grass
     // cover along the line, less its height variation (a low pass over rugged ground would
     // either hit hills or fly high over valleys).
@@ -953,9 +959,7 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
     let inset = DVec2::splat(80.0).min(e * 0.45);
     let inside = |p: DVec2| p.cmpge(inset).all() && p.cmple(e - inset).all();
     let sample = |p: DVec2| -> (u8, f64) {
-        let a = ((p.x / grid.cell).round() as i64 + grid.margin).clamp(0, grid.width as i64 - 1);
-        let b = ((p.y / grid.cell).round() as i64 + grid.margin).clamp(0, grid.height as i64 - 1);
-        let i = b as usize * grid.width + a as usize;
+        let i = painted.index_at(p);
         (painted.grass_type[i], f64::from(painted.density[i]) / 255.0)
     };
     let steps = (REACH_M / grid.cell).round() as i64;
