@@ -596,7 +596,8 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
         );
         grass.set_camera(&ctx.queue, view_proj, ALTITUDE, cam.near_m);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        let walker = glam::DVec2::new(world_cam.x, world_cam.y);
+        // The walker crosses the tile, so that the trail's push (and its lean) is compared too.
+        let walker = glam::DVec2::new(world_cam.x + 3.0 + f64::from(k), world_cam.y + 30.0);
         wind.update(
             &ctx.queue,
             &mut encoder,
@@ -650,6 +651,21 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
     let mut g = gpu.clone();
     g.sort_by_key(|b| (b.hash, b.kind));
     cpu.sort_by_key(|b| (b.hash, b.kind));
+    let trampled = cpu
+        .iter()
+        .filter(|b| {
+            let w = verdant::wind::field_cpu::wind_at(
+                &wind.lookup(),
+                &cells,
+                glam::Vec2::new(b.pos[0], b.pos[1]),
+            );
+            w[2].hypot(w[3]) > 0.3
+        })
+        .count();
+    assert!(
+        trampled > 10,
+        "only {trampled} blades in the walker's trail"
+    );
     let mut worst = 0.0f32;
     let mut max_lean = 0.0f32;
     for (a, b) in g.iter().zip(&cpu) {
