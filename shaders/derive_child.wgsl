@@ -4,6 +4,8 @@
 //
 // One dispatch derives several tiles: workgroup z is the job index.
 
+#include "shared/hash.wgsl"
+
 struct Job {
     // Child tile address.
     child_x: u32,
@@ -31,16 +33,6 @@ struct Params {
 @group(0) @binding(3) var parent_grass: texture_2d_array<u32>;
 @group(0) @binding(4) var out_heights: texture_storage_2d_array<r32float, write>;
 @group(0) @binding(5) var out_grass: texture_storage_2d_array<rgba8uint, write>;
-
-fn hash_u32(v: u32) -> u32 {
-    var x = v;
-    x ^= x >> 16u;
-    x *= 0x7feb352du;
-    x ^= x >> 15u;
-    x *= 0x846ca68bu;
-    x ^= x >> 16u;
-    return x;
-}
 
 fn hash4(a: u32, b: u32, c: u32, d: u32) -> u32 {
     return hash_u32(a ^ hash_u32(b ^ hash_u32(c ^ hash_u32(d))));

@@ -10,6 +10,10 @@
 // from root to tip, colour variation from world-space noise at the root, highlights that travel
 // with the gusts, and normals that blend toward the terrain's with distance.
 
+#include "shared/blade.wgsl"
+#include "shared/features.wgsl"
+#include "shared/output.wgsl"
+
 override SEGMENTS: u32 = 7u;
 
 struct GrassFrame {
@@ -27,18 +31,12 @@ struct GrassFrame {
     tip_colors: array<vec4<f32>, 16>,
 }
 
-const TRANSLUCENCY: u32 = 8u;
-const SPECULAR: u32 = 16u;
-const AMBIENT_OCCLUSION: u32 = 32u;
-
 fn has(feature: u32) -> bool {
     return (frame.flags.x & feature) != 0u;
 }
 
-
 @group(0) @binding(0) var<uniform> frame: GrassFrame;
 @group(0) @binding(1) var<storage, read> blades: array<Blade>;
-
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -86,10 +84,6 @@ fn bezier_length(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>) -> 
     let b = (p12 + p23) * 0.5;
     let m = (a + b) * 0.5;
     return half_length(p0, p01, a, m) + half_length(m, b, p23, p3);
-}
-
-fn unpack_rgb(c: u32) -> vec3<f32> {
-    return vec3<f32>(f32(c & 255u), f32((c >> 8u) & 255u), f32((c >> 16u) & 255u)) / 255.0;
 }
 
 @vertex
@@ -193,5 +187,5 @@ fn fs_blade(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) v
     let dist = length(in.rel_pos);
     let x = dist / frame.misc.x;
     let fog = 1.0 - exp(-3.0 * x * x);
-    return vec4<f32>(mix(lit, frame.horizon_color.rgb, fog), 1.0);
+    return output_color(mix(lit, frame.horizon_color.rgb, fog));
 }

@@ -4,6 +4,9 @@
 // indirect draw arguments, clamped to the slot capacity. CPU mirror: src/grass/generate.rs.
 // shaders/blade.wgsl is put in front of this file.
 
+#include "shared/hash.wgsl"
+#include "shared/blade.wgsl"
+
 struct GrassType {
     height: vec2<f32>,
     width: vec2<f32>,
@@ -40,7 +43,6 @@ struct TileJob {
     slot: u32,
 }
 
-
 struct Batch {
     // Index of the batch's first job in `jobs`, and the number of jobs in it.
     first: u32,
@@ -59,7 +61,8 @@ struct DrawArgs {
 @group(0) @binding(2) var<uniform> batch: Batch;
 @group(0) @binding(3) var heights: texture_2d_array<f32>;
 @group(0) @binding(4) var grass: texture_2d_array<u32>;
-@group(0) @binding(5) var<storage, read> hiz: array<f32>;
+// The Hi-Z pyramid in a group of its own: it is rebuilt when the target is resized.
+@group(1) @binding(0) var<storage, read> hiz: array<f32>;
 @group(0) @binding(6) var<storage, read_write> blades: array<Blade>;
 // Per slot of the half: blades wanted (may exceed the capacity).
 @group(0) @binding(7) var<storage, read_write> counters: array<atomic<u32>, 4>;
@@ -81,16 +84,6 @@ const OVERFLOW: u32 = 6u;
 const DRAWN: u32 = 7u;
 
 var<workgroup> local_stats: array<atomic<u32>, 8>;
-
-fn hash_u32(v: u32) -> u32 {
-    var x = v;
-    x ^= x >> 16u;
-    x *= 0x7feb352du;
-    x ^= x >> 15u;
-    x *= 0x846ca68bu;
-    x ^= x >> 16u;
-    return x;
-}
 
 fn hash3(a: u32, b: u32, c: u32) -> u32 {
     return hash_u32(a ^ hash_u32(b ^ hash_u32(c)));

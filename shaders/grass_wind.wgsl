@@ -6,6 +6,9 @@
 // file.
 // CPU mirror: src/grass/wind_pass.rs.
 
+#include "shared/blade.wgsl"
+#include "shared/features.wgsl"
+#include "shared/wind_lookup.wgsl"
 
 struct DrawArgs {
     vertex_count: u32,
@@ -30,10 +33,6 @@ struct WindPass {
 
 // Lean of a blade on the axis of a fresh trail, blade heights: trampled nearly flat.
 const TRAIL_LEAN: f32 = 1.6;
-const WIND_SOURCES: u32 = 1u;
-const INTERACTION: u32 = 2u;
-const DETAIL_BENDING: u32 = 4u;
-const COLOR_VARIATION: u32 = 64u;
 
 fn has(feature: u32) -> bool {
     return (pass_params.flags.x & feature) != 0u;
@@ -75,10 +74,6 @@ fn value_noise(p: vec2<f32>) -> f32 {
     let ab = a + (b - a) * u.x;
     let cd = c + (d - c) * u.x;
     return ab + (cd - ab) * u.y;
-}
-
-fn unpack_rgb(c: u32) -> vec3<f32> {
-    return vec3<f32>(f32(c & 255u), f32((c >> 8u) & 255u), f32((c >> 16u) & 255u)) / 255.0;
 }
 
 fn pack_rgba8(c: vec3<f32>) -> u32 {

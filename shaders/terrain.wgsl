@@ -2,6 +2,9 @@
 // Positions are camera-relative: the CPU subtracts the camera position in f64 before anything
 // reaches the GPU, so a world tens of kilometres wide does not jitter.
 
+#include "shared/features.wgsl"
+#include "shared/output.wgsl"
+
 struct Frame {
     view_proj: mat4x4<f32>,
     inv_view_proj: mat4x4<f32>,
@@ -105,7 +108,7 @@ fn vs_terrain(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) 
     var albedo = mix(soil, grass_color, d);
     if kind == 0u {
         albedo = rock;
-    } else if (frame.grid.w & 128u) != 0u {
+    } else if (frame.grid.w & GROUND_DARKENING) != 0u {
         // Ground darkening: dense grass shades the soil under it.
         albedo *= mix(1.0, 0.6, d);
     }
@@ -138,7 +141,7 @@ fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
     let x = dist / frame.camera.y;
     let fog = 1.0 - exp(-3.0 * x * x);
     let color = mix(lit, fog_color(in.rel_pos / max(dist, 1e-3)), fog);
-    return vec4<f32>(color, 1.0);
+    return output_color(color);
 }
 
 // Sky: drawn after the terrain, only where the depth buffer still holds the far plane.
@@ -166,5 +169,5 @@ fn fs_sky(in: SkyOut) -> @location(0) vec4<f32> {
     var color = mix(fog_color(dir), frame.sky_color.rgb, pow(up, 0.6));
     let sun = dot(dir, frame.sun_dir.xyz);
     color += frame.sun_color.rgb * smoothstep(0.9995, 0.9999, sun);
-    return vec4<f32>(color, 1.0);
+    return output_color(color);
 }

@@ -5,6 +5,8 @@
 // walker's trail (a push that fades). CPU mirror: src/wind/field_cpu.rs. Uniform values are
 // prepared in f64 on the CPU (src/wind/config.rs).
 
+#include "shared/hash.wgsl"
+
 struct Source {
     // Metres from the origin cell's south-west corner.
     center: vec2<f32>,
@@ -54,16 +56,6 @@ const FLAG_STAMP: u32 = 2u;
 @group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read_write> state: array<CellState>;
 @group(0) @binding(2) var<storage, read_write> cells: array<vec4<f32>>;
-
-fn hash_u32(v: u32) -> u32 {
-    var x = v;
-    x ^= x >> 16u;
-    x *= 0x7feb352du;
-    x ^= x >> 15u;
-    x *= 0x846ca68bu;
-    x ^= x >> 16u;
-    return x;
-}
 
 fn unit(h: u32) -> f32 {
     return f32(h >> 8u) * (1.0 / 16777216.0) * 2.0 - 1.0;

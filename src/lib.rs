@@ -1,28 +1,49 @@
 //! verdant: a streaming open-world terrain service with GPU grass, on wgpu.
 //!
-//! Crate map:
+//! The engine is a library with one front door, [`Renderer`]: it draws a world's terrain and
+//! grass into the caller's colour and depth targets, recording every pass into the caller's
+//! command encoder (see `examples/embed.rs`). The command-line tools (fly, view, soak, bench,
+//! eval, bake) are built on top of it, behind the `cli` feature.
+//!
+//! Crate map, leaves first:
 //! - [`world`]: GPU-free world format: the `world.toml` manifest, [`world::TileId`] quadtree
 //!   addressing, stored tiles (EXR heights, PNG grass type and density) and the DEM baker.
-//! - [`stream`]: the tile service: async streamer, CPU cache, atlas residency, derived tiles.
-//! - [`lod`]: which terrain tiles a camera needs, at which level, with frustum culling.
-//! - [`gpu`]: the headless GPU context (adapter choice from `WGPU_*` variables), the tile atlas,
-//!   timestamp timing and readback.
-//! - [`grass`]: GPU grass: blade generation and culling (CPU mirrors), the instance pool.
-//! - [`terrain`]: the terrain and sky passes (`shaders/terrain.wgsl`).
+//! - [`camera`]: the camera (f64 position, yaw and pitch, or the caller's own matrices) and
+//!   sampling of the manifest's camera paths.
 //! - [`features`]: the grass model's switchable features.
-//! - [`flythrough`]: cameras, camera paths, the headless fly-through and its report.
-//! - [`metrics`]: percentiles and image error (FLIP).
-//! - [`wind`]: the grass sway spring and its integrators (`verdant eval sway`); the wind field
-//!   around the camera (ambient noise, sources, trail) on the GPU with its CPU mirror, and the
-//!   wind scenes of a world made ready to run.
+//! - [`shaders`]: every stage's WGSL, assembled from `shaders/` with the shared pieces
+//!   (`shaders/shared/`) included once.
+//! - [`gpu`]: what every stage shares: the headless GPU context (adapter choice from `WGPU_*`
+//!   variables), buffer and texture readback, timestamp timing.
+//! - [`stream`]: the tile service: async streamer, CPU cache, the GPU tile atlas, and child
+//!   tiles derived on the GPU (with the stage's CPU mirror beside it).
+//! - [`lod`]: which terrain tiles a camera needs, at which level, with frustum culling; grass
+//!   rings with hysteresis.
+//! - [`terrain`]: the terrain and sky passes (`shaders/terrain.wgsl`).
+//! - [`grass`]: GPU grass: Hi-Z, blade generation and culling, per-blade wind, the instance pool
+//!   and the draw; each stage with its CPU mirror.
+//! - [`wind`]: the wind field around the camera (ambient noise, sources, trail) and the sway
+//!   springs, on the GPU with their CPU mirrors; the wind scenes of a world made ready to run.
+//! - [`renderer`]: the frame: [`Renderer`], the order of its passes top to bottom in one place.
+//! - `tools` (feature `cli`): the headless scene, fly-throughs and their reports, soak,
+//!   benchmarks, evaluations, charts and image metrics, and the interactive viewer.
 
+pub mod camera;
 pub mod features;
-pub mod flythrough;
 pub mod gpu;
 pub mod grass;
 pub mod lod;
-pub mod metrics;
+pub mod renderer;
+pub mod shaders;
 pub mod stream;
 pub mod terrain;
+#[cfg(feature = "cli")]
+pub mod tools;
 pub mod wind;
 pub mod world;
+
+pub use camera::Camera;
+pub use renderer::{
+    FrameInput, FrameStats, Renderer, RendererConfig, RendererError, RendererOptions,
+};
+pub use world::World;

@@ -7,8 +7,8 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use verdant::flythrough::{FlyOptions, FlyProgress, SoakOptions, run_fly, run_soak};
 use verdant::stream::ServiceConfig;
+use verdant::tools::{FlyOptions, FlyProgress, SoakOptions, run_fly, run_soak};
 use verdant::world::{BakeOptions, bake};
 
 /// Limits of the tile service, shared by the commands that stream.
@@ -189,9 +189,9 @@ enum BenchCommand {
     },
 }
 
-fn bench_lod(opts: verdant::flythrough::BenchLodOptions) -> Result<()> {
+fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
     let mut bars: Vec<(String, ProgressBar)> = Vec::new();
-    let r = verdant::flythrough::run_bench_lod(&opts, &mut |stage, done, total| {
+    let r = verdant::tools::run_bench_lod(&opts, &mut |stage, done, total| {
         if bars.last().map(|(s, _)| s != stage).unwrap_or(true) {
             if let Some((_, pb)) = bars.last() {
                 pb.finish();
@@ -266,7 +266,7 @@ enum EvalCommand {
 }
 
 fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
-    use verdant::stream::eval;
+    use verdant::tools::eval_derive as eval;
     if !(factor.is_power_of_two() && (2..=64).contains(&factor)) {
         bail!("--factor must be a power of two from 2 to 64, got {factor}");
     }
@@ -322,7 +322,8 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
 }
 
 fn eval_sway(out: &Path) -> Result<()> {
-    use verdant::wind::sway::{self, Integrator, Preset, RENDERER_INTEGRATOR};
+    use verdant::tools::eval_sway as sway;
+    use verdant::wind::sway::{Integrator, Preset, RENDERER_INTEGRATOR};
     let results = sway::run_sway_eval(out)?;
     for preset in Preset::ALL {
         let spring = preset.spring();
@@ -583,7 +584,7 @@ fn run(cli: Cli) -> Result<()> {
                     timed_frames,
                 },
         } => {
-            let opts = verdant::flythrough::BenchLodOptions {
+            let opts = verdant::tools::BenchLodOptions {
                 world: resolve_world(&world)?,
                 out,
                 size,
@@ -592,7 +593,7 @@ fn run(cli: Cli) -> Result<()> {
                 ..Default::default()
             };
             let mut pb: Option<ProgressBar> = None;
-            let r = verdant::flythrough::run_bench_features(&opts, &mut |_, done, total| {
+            let r = verdant::tools::run_bench_features(&opts, &mut |_, done, total| {
                 pb.get_or_insert_with(|| bar(total, "variants"))
                     .set_position(done);
             })?;
@@ -626,7 +627,7 @@ fn run(cli: Cli) -> Result<()> {
                     warmup_frames,
                     timed_frames,
                 },
-        } => bench_lod(verdant::flythrough::BenchLodOptions {
+        } => bench_lod(verdant::tools::BenchLodOptions {
             world: resolve_world(&world)?,
             out,
             size,

@@ -6,7 +6,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use verdant::flythrough::sample_path;
+use verdant::camera::sample_path;
 use verdant::world::Manifest;
 
 fn fly(args: &[&str], cwd: &Path) -> serde_json::Value {

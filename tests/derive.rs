@@ -3,7 +3,8 @@
 
 mod common;
 
-use verdant::gpu::{DeriveJob, DeriveStage, GpuContext, GpuTimer, TileAtlas};
+use verdant::gpu::{GpuContext, GpuTimer};
+use verdant::stream::{DeriveJob, DeriveStage, TileAtlas};
 use verdant::stream::{DeriveParams, derive_child};
 use verdant::world::{Pyramid, TileData, TileId, World};
 

@@ -5,9 +5,11 @@
 mod common;
 
 use glam::DVec3;
-use verdant::flythrough::{Camera, SceneConfig};
-use verdant::gpu::{GpuContext, GpuTimer, TileAtlas};
+use verdant::camera::Camera;
+use verdant::gpu::{GpuContext, GpuTimer};
 use verdant::grass::{Blade, GrassRenderer, GrassStats, HiZ, TileBlades, TileJob, generate_tile};
+use verdant::stream::TileAtlas;
+use verdant::tools::SceneConfig;
 use verdant::world::{Manifest, TileData, TileId, World};
 
 const ALTITUDE: f32 = 106.0;
@@ -143,7 +145,12 @@ impl Rig {
             &ctx.queue,
             &manifest,
             &atlas,
-            &depth,
+            &verdant::gpu::Targets {
+                color_format: verdant::terrain::COLOR_FORMAT,
+                depth_format: verdant::terrain::DEPTH_FORMAT,
+                width: W,
+                height: H,
+            },
             settings,
             capacity,
             verdant::grass::WindBindings {
@@ -236,12 +243,16 @@ impl Rig {
             pass.set_pipeline(&self.occluder);
             pass.draw(0..6, 0..1);
         }
-        self.grass.hiz.record(&mut encoder, &mut timer);
+        self.grass
+            .hiz
+            .record(&self.ctx.device, &mut encoder, &self.depth, &mut timer);
         let tiles = self
             .grass
             .record(&self.ctx.queue, &mut encoder, jobs, &cv, &dv, &mut timer);
         self.ctx.queue.submit([encoder.finish()]);
-        let stats = self.grass.read_stats(&self.ctx.device, tiles);
+        let stats = self
+            .grass
+            .read_stats(&self.ctx.device, &self.ctx.queue, tiles);
         let hiz = self.grass.hiz.read_back(&self.ctx.device, &self.ctx.queue);
         (stats, hiz)
     }
@@ -564,7 +575,12 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
         &ctx.queue,
         &manifest,
         &atlas,
-        &depth,
+        &verdant::gpu::Targets {
+            color_format: verdant::terrain::COLOR_FORMAT,
+            depth_format: verdant::terrain::DEPTH_FORMAT,
+            width: W,
+            height: H,
+        },
         settings,
         verdant::grass::estimate_capacity(&world, &settings).unwrap(),
         verdant::grass::WindBindings {
@@ -629,7 +645,9 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        grass.hiz.record(&mut encoder, &mut timer);
+        grass
+            .hiz
+            .record(&ctx.device, &mut encoder, &depth, &mut timer);
         grass.record(&ctx.queue, &mut encoder, &[job], &cv, &dv, &mut timer);
         ctx.queue.submit([encoder.finish()]);
         ctx.wait_idle();

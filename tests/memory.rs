@@ -4,8 +4,8 @@
 mod common;
 
 use glam::DVec3;
-use verdant::flythrough::resident_bytes;
 use verdant::gpu::GpuTimer;
+use verdant::tools::resident_bytes;
 use verdant::wind::{SwayConfig, SwayField, WindConfig, WindField};
 use verdant::world::Manifest;
 
@@ -31,7 +31,7 @@ fn the_wind_and_sway_passes_hold_their_memory_over_many_frames() {
     let mut frame = |k: u32| {
         // Through the helicopter scene, so that sources, trail and noise all act.
         let t = 36.0 + f64::from(k) / 30.0;
-        let cam = verdant::flythrough::sample_path(tour, t).position;
+        let cam = verdant::camera::sample_path(tour, t).position;
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         field.update(
             &ctx.queue,

@@ -4,7 +4,8 @@ mod common;
 
 use std::time::Duration;
 
-use verdant::flythrough::{Scene, SceneConfig, sample_path};
+use verdant::camera::sample_path;
+use verdant::tools::{Scene, SceneConfig};
 use verdant::world::World;
 
 #[test]
@@ -204,7 +205,7 @@ fn calm_and_storm_match_reference_images_and_differ() {
     common::check_reference("wind_calm", &calm, 0.01, 0.10);
     common::check_reference("wind_storm", &storm, 0.01, 0.10);
     let to_rgb = |i: &image::RgbaImage| image::DynamicImage::ImageRgba8(i.clone()).to_rgb8();
-    let diff = verdant::metrics::flip_compare(&to_rgb(&calm), &to_rgb(&storm)).unwrap();
+    let diff = verdant::tools::metrics::flip_compare(&to_rgb(&calm), &to_rgb(&storm)).unwrap();
     assert!(
         diff.mean > 0.02,
         "a storm should visibly bend the grass: FLIP {}",

@@ -11,8 +11,7 @@ use glam::{DVec2, DVec3, Vec2};
 use verdant::gpu::{GpuContext, GpuTimer};
 use verdant::wind::config::{DEFAULT_CELL_M, DEFAULT_CELLS};
 use verdant::wind::{
-    AmbientWind, SourceConfig, WIND_LOOKUP_WGSL, WindConfig, WindError, WindField, WindFieldCpu,
-    ambient_at,
+    AmbientWind, SourceConfig, WindConfig, WindError, WindField, WindFieldCpu, ambient_at,
 };
 use verdant::world::{Manifest, WindSource, WorldError};
 
@@ -192,7 +191,7 @@ fn lookup_snippet_matches_its_mirror_and_the_toroidal_layout() {
         probes.push(Vec2::new(a.cos() * r, a.sin() * r));
     }
     let source = format!(
-        "{WIND_LOOKUP_WGSL}
+        "#include \"shared/wind_lookup.wgsl\"
 @group(0) @binding(0) var<uniform> wind_lookup: WindLookup;
 @group(0) @binding(1) var<storage, read> wind_cells: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> probes: array<vec2<f32>>;
@@ -209,7 +208,11 @@ fn probe(@builtin(global_invocation_id) gid: vec3<u32>) {{
         .device
         .create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("wind probe"),
-            source: wgpu::ShaderSource::Wgsl(source.into()),
+            source: wgpu::ShaderSource::Wgsl(
+                verdant::shaders::assemble(&source)
+                    .expect("assemble the probe")
+                    .into(),
+            ),
         });
     let pipeline = ctx
         .device
@@ -232,12 +235,6 @@ fn probe(@builtin(global_invocation_id) gid: vec3<u32>) {{
         label: None,
         size: probes.len() as u64 * 16,
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    });
-    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: None,
-        size: results.size(),
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
     let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -269,12 +266,9 @@ fn probe(@builtin(global_invocation_id) gid: vec3<u32>) {{
         pass.set_bind_group(0, &bind, &[]);
         pass.dispatch_workgroups((probes.len() as u32).div_ceil(64), 1, 1);
     }
-    encoder.copy_buffer_to_buffer(&results, 0, &staging, 0, results.size());
     ctx.queue.submit([encoder.finish()]);
-    staging.map_async(wgpu::MapMode::Read, .., |_| {});
-    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
     let gpu: Vec<[f32; 4]> =
-        bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..).expect("mapped"));
+        verdant::gpu::read_buffer_pod(&ctx.device, &ctx.queue, &results, ..).expect("read back");
 
     let mut worst = 0.0f32;
     for (p, g) in probes.iter().zip(&gpu) {
@@ -1245,7 +1239,7 @@ fn scene_changes_blend_the_ambient_and_the_noise_moves_on_continuously() {
 
 #[test]
 fn the_wind_tour_shows_every_scene_its_walker_and_the_helicopter() {
-    use verdant::flythrough::sample_path;
+    use verdant::camera::sample_path;
     let m = world();
     let tour = m.path("wind-tour").expect("the wind tour");
     let scenes: Vec<&str> = tour.wind.iter().map(|k| k.scene.as_str()).collect();
@@ -1319,7 +1313,7 @@ fn the_helicopter_flattens_the_tall_grass_under_it_and_the_grass_recovers() {
     let mut run_until = |t_end: f64, t: &mut f64| {
         while *t < t_end {
             *t += f64::from(dt);
-            let cam = verdant::flythrough::sample_path(tour, *t).position;
+            let cam = verdant::camera::sample_path(tour, *t).position;
             field.update(cam, *t, dt, None);
             let p = sway_config.params(field.lookup(), dt);
             update_sway(&p, field.cells(), &mut sway, &mut owners);

@@ -1,20 +1,45 @@
-//! Headless GPU context: adapter choice, device limits, timestamp timing and readback.
+//! What every GPU stage shares: the headless GPU context (adapter choice), the description of
+//! the targets a frame draws into, buffer and texture readback, and timestamp timing.
 //!
 //! The adapter is chosen the way wgpu's own tools choose it, from environment variables:
 //! `WGPU_BACKEND` (e.g. `vulkan`, `gl`), `WGPU_ADAPTER_NAME` (a case-insensitive substring of the
 //! adapter's name, e.g. `llvmpipe` or `nvidia`) and `WGPU_POWER_PREF` (`low`, `high`).
 
-mod atlas;
-mod derive;
 mod readback;
 mod timing;
 
-pub use atlas::{AtlasError, TileAtlas, pack_grass};
-pub use derive::{DeriveJob, DeriveStage};
-pub use readback::{ReadbackError, read_texture_layer, read_texture_level, read_texture_rgba8};
+pub use readback::{
+    ReadbackError, read_buffer, read_buffer_pod, read_texture_layer, read_texture_level,
+    read_texture_rgba8,
+};
 pub use timing::{GpuTimer, PassTimes};
 
 use thiserror::Error;
+
+/// The colour and depth targets a frame draws into: their formats and size.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Targets {
+    /// Format of the colour target.
+    pub color_format: wgpu::TextureFormat,
+    /// Format of the depth target (reverse-Z: cleared to 0, greater is nearer).
+    pub depth_format: wgpu::TextureFormat,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+}
+
+impl Targets {
+    /// The `ENCODE_SRGB` pipeline constant of `shaders/shared/output.wgsl` for the colour
+    /// format: 1 when the shader must encode sRGB itself, else 0.
+    pub fn encode_srgb(&self) -> f64 {
+        if crate::shaders::encode_srgb_for(self.color_format) == Some(true) {
+            1.0
+        } else {
+            0.0
+        }
+    }
+}
 
 /// What can go wrong while opening the GPU.
 #[derive(Debug, Error)]

@@ -1,4 +1,6 @@
-//! Copying a rendered texture back to the CPU.
+//! Copying GPU buffers and textures back to the CPU, waiting for the GPU: for tests, tools and
+//! headless captures, never inside a frame of the renderer (which reads its figures through a
+//! ring of buffers mapped on submit, see `crate::renderer`).
 
 use thiserror::Error;
 
@@ -91,8 +93,69 @@ pub fn read_texture_level(
         },
     );
     queue.submit([encoder.finish()]);
+    let all = map_and_read(device, &buffer, ..)?;
+    let mut out = Vec::with_capacity((row * h) as usize);
+    for y in 0..h as usize {
+        let start = y * padded as usize;
+        out.extend_from_slice(&all[start..start + row as usize]);
+    }
+    Ok(out)
+}
+
+/// Reads `range` of `buffer` (which needs `COPY_SRC`) through a staging buffer.
+pub fn read_buffer(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    range: impl std::ops::RangeBounds<u64>,
+) -> Result<Vec<u8>, ReadbackError> {
+    use std::ops::Bound;
+    let start = match range.start_bound() {
+        Bound::Included(&s) => s,
+        Bound::Excluded(&s) => s + 1,
+        Bound::Unbounded => 0,
+    };
+    let end = match range.end_bound() {
+        Bound::Included(&e) => e + 1,
+        Bound::Excluded(&e) => e,
+        Bound::Unbounded => buffer.size(),
+    };
+    let size = end.saturating_sub(start);
+    if size == 0 {
+        return Ok(Vec::new());
+    }
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_buffer_to_buffer(buffer, start, &staging, 0, size);
+    queue.submit([encoder.finish()]);
+    map_and_read(device, &staging, ..)
+}
+
+/// Like [`read_buffer`], as a vector of plain values (`T` of 4 or 8 bytes, say).
+pub fn read_buffer_pod<T: bytemuck::Pod>(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    buffer: &wgpu::Buffer,
+    range: impl std::ops::RangeBounds<u64>,
+) -> Result<Vec<T>, ReadbackError> {
+    Ok(bytemuck::pod_collect_to_vec(&read_buffer(
+        device, queue, buffer, range,
+    )?))
+}
+
+/// Maps a `MAP_READ` buffer, waits for it and copies `range` out; unmaps it again.
+fn map_and_read(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    range: std::ops::RangeFull,
+) -> Result<Vec<u8>, ReadbackError> {
     let (tx, rx) = std::sync::mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+    buffer.map_async(wgpu::MapMode::Read, range, move |r| {
         let _ = tx.send(r);
     });
     let _ = device.poll(wgpu::PollType::wait_indefinitely());
@@ -101,16 +164,10 @@ pub fn read_texture_level(
         Ok(Err(e)) => return Err(ReadbackError::Map(e.to_string())),
         Err(e) => return Err(ReadbackError::Map(e.to_string())),
     }
-    let mut out = Vec::with_capacity((row * h) as usize);
-    {
-        let view = buffer
-            .get_mapped_range(..)
-            .map_err(|e| ReadbackError::Map(e.to_string()))?;
-        for y in 0..h as usize {
-            let start = y * padded as usize;
-            out.extend_from_slice(&view[start..start + row as usize]);
-        }
-    }
+    let out = buffer
+        .get_mapped_range(..)
+        .map_err(|e| ReadbackError::Map(e.to_string()))?
+        .to_vec();
     buffer.unmap();
     Ok(out)
 }

@@ -4,10 +4,12 @@
 /// ran; passes that share a name are summed.
 pub type PassTimes = Vec<(String, f64)>;
 
-/// Hands out timestamp writes for the passes of a frame and reads their times back.
+/// Hands out timestamp writes for the passes of a frame and resolves them into a buffer, from
+/// which the caller copies them out ([`GpuTimer::resolve_buffer`]; the renderer copies them
+/// into its readback ring) and turns the ticks into times ([`GpuTimer::times`]).
 ///
-/// When the adapter has no timestamp queries, every method is a no-op and [`GpuTimer::read`]
-/// returns an empty list, so callers need no special case.
+/// When the adapter has no timestamp queries, every method is a no-op and there is nothing to
+/// read, so callers need no special case.
 pub struct GpuTimer {
     inner: Option<TimerInner>,
     names: Vec<String>,
@@ -16,7 +18,6 @@ pub struct GpuTimer {
 struct TimerInner {
     query_set: wgpu::QuerySet,
     resolve: wgpu::Buffer,
-    readback: wgpu::Buffer,
     period_ns: f64,
     max_passes: u32,
 }
@@ -38,12 +39,6 @@ impl GpuTimer {
                     label: Some("timestamp resolve"),
                     size: bytes,
                     usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                }),
-                readback: device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("timestamp readback"),
-                    size: bytes,
-                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
                 period_ns: f64::from(queue.get_timestamp_period()),
@@ -96,7 +91,8 @@ impl GpuTimer {
             })
     }
 
-    /// Records the copy of this frame's timestamps into the readback buffer.
+    /// Records the resolution of this frame's timestamps into [`Self::resolve_buffer`]: 16
+    /// bytes (begin and end ticks) per pass of [`Self::names`].
     pub fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
         let Some(inner) = &self.inner else { return };
         if self.names.is_empty() {
@@ -104,48 +100,42 @@ impl GpuTimer {
         }
         let count = self.names.len() as u32 * 2;
         encoder.resolve_query_set(&inner.query_set, 0..count, &inner.resolve, 0);
-        encoder.copy_buffer_to_buffer(&inner.resolve, 0, &inner.readback, 0, u64::from(count) * 8);
     }
 
-    /// Waits for the frame's submission and returns each pass's GPU time in milliseconds.
-    pub fn read(&self, device: &wgpu::Device) -> PassTimes {
+    /// The buffer the timestamps are resolved into (`COPY_SRC`), when timing is on.
+    pub fn resolve_buffer(&self) -> Option<&wgpu::Buffer> {
+        self.inner.as_ref().map(|i| &i.resolve)
+    }
+
+    /// Bytes of the resolve buffer: room for every pass the timer can time.
+    pub fn capacity_bytes(&self) -> u64 {
+        self.inner
+            .as_ref()
+            .map_or(0, |i| u64::from(i.max_passes) * 16)
+    }
+
+    /// The passes timed this frame, in order.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Each pass's GPU time in milliseconds from the resolved `ticks` (two per name), passes of
+    /// the same name (one per grass batch, say) summed, in the order they first ran.
+    pub fn times(&self, names: &[String], ticks: &[u64]) -> PassTimes {
         let Some(inner) = &self.inner else {
             return Vec::new();
         };
-        if self.names.is_empty() {
-            return Vec::new();
-        }
-        let bytes = self.names.len() as u64 * 16;
-        let (tx, rx) = std::sync::mpsc::channel();
-        inner
-            .readback
-            .map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
-                let _ = tx.send(r);
-            });
-        let _ = device.poll(wgpu::PollType::wait_indefinitely());
-        let mapped = matches!(rx.recv(), Ok(Ok(())));
-        if !mapped {
-            return Vec::new();
-        }
-        let times = {
-            let Ok(view) = inner.readback.get_mapped_range(0..bytes) else {
-                inner.readback.unmap();
-                return Vec::new();
+        let mut times: PassTimes = Vec::new();
+        for (i, name) in names.iter().enumerate() {
+            let (Some(&begin), Some(&end)) = (ticks.get(i * 2), ticks.get(i * 2 + 1)) else {
+                break;
             };
-            let ticks: &[u64] = bytemuck::cast_slice(&view);
-            // Passes of the same name (e.g. one per grass batch) are summed.
-            let mut times: PassTimes = Vec::new();
-            for (i, name) in self.names.iter().enumerate() {
-                let (begin, end) = (ticks[i * 2], ticks[i * 2 + 1]);
-                let ms = end.saturating_sub(begin) as f64 * inner.period_ns / 1e6;
-                match times.iter_mut().find(|(n, _)| n == name) {
-                    Some((_, t)) => *t += ms,
-                    None => times.push((name.clone(), ms)),
-                }
+            let ms = end.saturating_sub(begin) as f64 * inner.period_ns / 1e6;
+            match times.iter_mut().find(|(n, _)| n == name) {
+                Some((_, t)) => *t += ms,
+                None => times.push((name.clone(), ms)),
             }
-            times
-        };
-        inner.readback.unmap();
+        }
         times
     }
 }

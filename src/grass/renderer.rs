@@ -9,16 +9,14 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
-use crate::gpu::{GpuTimer, TileAtlas};
+use crate::gpu::{GpuTimer, Targets};
 use crate::grass::generate::counter;
 use crate::grass::wind_pass::WindPassParams;
 use crate::grass::{GenerateParams, GenerateStats, GrassTypeGpu, TileJob};
 use crate::lod::Frustum;
-use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT, sun_direction};
+use crate::stream::TileAtlas;
+use crate::terrain::sun_direction;
 use crate::world::Manifest;
-
-/// `shaders/blade.wgsl`: the blade record, put in front of each grass shader.
-const BLADE_WGSL: &str = include_str!("../../shaders/blade.wgsl");
 
 /// Bytes of a blade record.
 const BLADE_BYTES: u64 = std::mem::size_of::<crate::grass::Blade>() as u64;
@@ -84,7 +82,8 @@ pub struct GrassStats {
 }
 
 impl GrassStats {
-    fn from_counts(tiles: [u32; 2], c: &[u32; 16]) -> Self {
+    /// The figures from the 16 counters of `shaders/grass_generate.wgsl`.
+    pub fn from_counts(tiles: [u32; 2], c: &[u32; 16]) -> Self {
         let pick = |k: usize| [c[k], c[counter::COUNT + k]];
         Self {
             tiles,
@@ -147,7 +146,10 @@ pub struct HiZPyramid {
     pub buffer: wgpu::Buffer,
     copy: wgpu::ComputePipeline,
     reduce: wgpu::ComputePipeline,
-    copy_group: wgpu::BindGroup,
+    copy_layout: wgpu::BindGroupLayout,
+    level_buffer: wgpu::Buffer,
+    /// The depth texture the copy reads and its bind group (made again when the texture changes).
+    copy_group: Option<(wgpu::Texture, wgpu::BindGroup)>,
     reduce_group: wgpu::BindGroup,
     /// (offset in floats, width, height) of each level.
     levels: Vec<(u32, u32, u32)>,
@@ -156,9 +158,8 @@ pub struct HiZPyramid {
 const LEVEL_STRIDE: u64 = 256;
 
 impl HiZPyramid {
-    /// A pyramid over `depth` (a `Depth32Float` texture with `TEXTURE_BINDING`).
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, depth: &wgpu::Texture) -> Self {
-        let (w, h) = (depth.width(), depth.height());
+    /// A pyramid over depth targets of `w` x `h` (a depth format, with `TEXTURE_BINDING`).
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, w: u32, h: u32) -> Self {
         let mips = crate::grass::hiz::mip_count(w, h);
         let mut levels = Vec::new();
         let mut offset = 0u32;
@@ -187,10 +188,7 @@ impl HiZPyramid {
             mapped_at_creation: false,
         });
         queue.write_buffer(&level_buffer, 0, &records);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("hiz_build.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/hiz_build.wgsl").into()),
-        });
+        let module = crate::shaders::module(device, "hiz_build.wgsl");
         let entry = |binding, visibility_ty| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
@@ -248,32 +246,10 @@ impl HiZPyramid {
             pipeline("copy_depth", &copy_layout),
             pipeline("reduce", &reduce_layout),
         );
-        let depth_view = depth.create_view(&wgpu::TextureViewDescriptor {
-            aspect: wgpu::TextureAspect::DepthOnly,
-            ..Default::default()
-        });
         let level_binding = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
             buffer: &level_buffer,
             offset: 0,
             size: std::num::NonZeroU64::new(24),
-        });
-        let copy_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("hi-z copy"),
-            layout: &copy_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&depth_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: level_binding.clone(),
-                },
-            ],
         });
         let reduce_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("hi-z reduce"),
@@ -293,10 +269,24 @@ impl HiZPyramid {
             buffer,
             copy,
             reduce,
-            copy_group,
+            copy_layout,
+            level_buffer,
+            copy_group: None,
             reduce_group,
             levels,
         }
+    }
+
+    /// A bind group of `layout` (one read-only storage buffer at binding 0) over the pyramid.
+    fn read_group(&self, device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("grass hi-z"),
+            layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: self.buffer.as_entire_binding(),
+            }],
+        })
     }
 
     /// Mip levels.
@@ -311,19 +301,8 @@ impl HiZPyramid {
 
     /// Reads every level back (for tests and tools; waits for the GPU).
     pub fn read_back(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> crate::grass::HiZ {
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("hi-z readback"),
-            size: self.buffer.size(),
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder = device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(&self.buffer, 0, &staging, 0, self.buffer.size());
-        queue.submit([encoder.finish()]);
-        staging.map_async(wgpu::MapMode::Read, .., |_| {});
-        let _ = device.poll(wgpu::PollType::wait_indefinitely());
-        let all: Vec<f32> =
-            bytemuck::pod_collect_to_vec(&staging.get_mapped_range(..).expect("mapped"));
+        let all: Vec<f32> = crate::gpu::read_buffer_pod(device, queue, &self.buffer, ..)
+            .expect("read back the Hi-Z pyramid");
         let mips = self
             .levels
             .iter()
@@ -332,15 +311,52 @@ impl HiZPyramid {
         crate::grass::HiZ { mips }
     }
 
-    /// Records the build of the pyramid from the depth target.
-    pub fn record(&self, encoder: &mut wgpu::CommandEncoder, timer: &mut GpuTimer) {
+    /// Records the build of the pyramid from `depth` (of the pyramid's size; its bind group is
+    /// made when the texture differs from the last one's).
+    pub fn record(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        depth: &wgpu::Texture,
+        timer: &mut GpuTimer,
+    ) {
+        if self.copy_group.as_ref().is_none_or(|(t, _)| t != depth) {
+            let view = depth.create_view(&wgpu::TextureViewDescriptor {
+                aspect: wgpu::TextureAspect::DepthOnly,
+                ..Default::default()
+            });
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("hi-z copy"),
+                layout: &self.copy_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::TextureView(&view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: self.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &self.level_buffer,
+                            offset: 0,
+                            size: std::num::NonZeroU64::new(24),
+                        }),
+                    },
+                ],
+            });
+            self.copy_group = Some((depth.clone(), group));
+        }
+        let copy_group = &self.copy_group.as_ref().expect("made above").1;
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("hi-z"),
             timestamp_writes: timer.compute_pass("hiz"),
         });
         let (_, w, h) = self.levels[0];
         pass.set_pipeline(&self.copy);
-        pass.set_bind_group(0, &self.copy_group, &[0]);
+        pass.set_bind_group(0, copy_group, &[0]);
         pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         pass.set_pipeline(&self.reduce);
         for (m, &(_, w, h)) in self.levels.iter().enumerate().skip(1) {
@@ -374,20 +390,22 @@ pub struct GrassRenderer {
     jobs: wgpu::Buffer,
     batches: wgpu::Buffer,
     stats: wgpu::Buffer,
-    stats_readback: wgpu::Buffer,
     draw_frame: DrawFrame,
     draw_frame_buffer: wgpu::Buffer,
     wind_pipeline: wgpu::ComputePipeline,
     wind_params: WindPassParams,
     wind_params_buffer: wgpu::Buffer,
     halves: [Half; 2],
+    hiz_read_layout: wgpu::BindGroupLayout,
+    hiz_read_group: wgpu::BindGroup,
     /// The occlusion pyramid (built from the terrain's depth pre-pass).
     pub hiz: HiZPyramid,
 }
 
 impl GrassRenderer {
     /// The grass stage for `manifest`'s world, reading tile data from `atlas`, with slots of
-    /// `capacity` blades, culling against the Hi-Z pyramid of `depth`; blades bend with the wind
+    /// `capacity` blades, drawing into `targets` and culling against the Hi-Z pyramid of their
+    /// depth; blades bend with the wind
     /// field (`wind.lookup`, `wind.cells`) and sway on its springs (`wind.sway`).
     #[allow(clippy::too_many_arguments)]
     pub fn new(
@@ -395,7 +413,7 @@ impl GrassRenderer {
         queue: &wgpu::Queue,
         manifest: &Manifest,
         atlas: &TileAtlas,
-        depth: &wgpu::Texture,
+        targets: &Targets,
         settings: GrassSettings,
         capacity: u32,
         wind: WindBindings<'_>,
@@ -403,7 +421,7 @@ impl GrassRenderer {
         // Slots start at multiples of 256 bytes (the storage offset alignment): 16 blades of
         // 80 bytes are 1280 bytes.
         let capacity = capacity.max(16).div_ceil(16) * 16;
-        let hiz = HiZPyramid::new(device, queue, depth);
+        let hiz = HiZPyramid::new(device, queue, targets.width, targets.height);
         let mut types = [GrassTypeGpu::default(); 16];
         let mut base_colors = [[0.0; 4]; 16];
         let mut tip_colors = [[0.0; 4]; 16];
@@ -436,7 +454,7 @@ impl GrassRenderer {
         let params = GenerateParams {
             view_proj: Mat4::IDENTITY.to_cols_array_2d(),
             planes: [[0.0; 4]; 6],
-            camera: [0.0, 0.5, depth.width() as f32, depth.height() as f32],
+            camera: [0.0, 0.5, targets.width as f32, targets.height as f32],
             grid: [settings.grid(), p.tile_cells, p.border, settings.seed],
             dims: [
                 settings.spacing_m,
@@ -505,23 +523,13 @@ impl GrassRenderer {
             U::UNIFORM | U::COPY_DST,
         );
         let stats = buffer("grass stats", 64, U::STORAGE | U::COPY_DST | U::COPY_SRC);
-        let stats_readback = buffer("grass stats readback", 64, U::MAP_READ | U::COPY_DST);
         let draw_frame_buffer = buffer(
             "grass draw frame",
             std::mem::size_of::<DrawFrame>() as u64,
             U::UNIFORM | U::COPY_DST,
         );
 
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("grass_generate.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(
-                format!(
-                    "{BLADE_WGSL}\n{}",
-                    include_str!("../../shaders/grass_generate.wgsl")
-                )
-                .into(),
-            ),
-        });
+        let module = crate::shaders::module(device, "grass_generate.wgsl");
         let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
@@ -565,7 +573,6 @@ impl GrassRenderer {
                     wgpu::TextureSampleType::Uint,
                     wgpu::TextureViewDimension::D2Array,
                 ),
-                storage(5, true),
                 storage(6, false),
                 storage(7, false),
                 storage(8, false),
@@ -573,9 +580,13 @@ impl GrassRenderer {
                 storage(10, false),
             ],
         });
+        let hiz_read_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("grass hi-z"),
+            entries: &[storage(0, true)],
+        });
         let gen_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("grass generate"),
-            bind_group_layouts: &[Some(&gen_layout)],
+            bind_group_layouts: &[Some(&gen_layout), Some(&hiz_read_layout)],
             immediate_size: 0,
         });
         let compute = |entry| {
@@ -590,25 +601,8 @@ impl GrassRenderer {
         };
         let (generate, finalize) = (compute("generate"), compute("finalize"));
 
-        let draw_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("grass_draw.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(
-                format!(
-                    "{BLADE_WGSL}\n{}",
-                    include_str!("../../shaders/grass_draw.wgsl")
-                )
-                .into(),
-            ),
-        });
-        let wind_source = format!(
-            "{BLADE_WGSL}\n{}\n{}",
-            crate::wind::WIND_LOOKUP_WGSL,
-            include_str!("../../shaders/grass_wind.wgsl")
-        );
-        let wind_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("grass_wind.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(wind_source.into()),
-        });
+        let draw_module = crate::shaders::module(device, "grass_draw.wgsl");
+        let wind_module = crate::shaders::module(device, "grass_wind.wgsl");
         let wind_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("grass wind"),
             layout: None,
@@ -657,6 +651,10 @@ impl GrassRenderer {
         });
         let draw_pipeline = |label, segments: f64| {
             let constants = [("SEGMENTS", segments)];
+            let fs_constants = [
+                ("SEGMENTS", segments),
+                ("ENCODE_SRGB", targets.encode_srgb()),
+            ];
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&draw_pl),
@@ -675,7 +673,7 @@ impl GrassRenderer {
                     ..Default::default()
                 },
                 depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
+                    format: targets.depth_format,
                     depth_write_enabled: Some(true),
                     depth_compare: Some(wgpu::CompareFunction::Greater),
                     stencil: Default::default(),
@@ -686,10 +684,10 @@ impl GrassRenderer {
                     module: &draw_module,
                     entry_point: Some("fs_blade"),
                     compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &constants,
+                        constants: &fs_constants,
                         ..Default::default()
                     },
-                    targets: &[Some(COLOR_FORMAT.into())],
+                    targets: &[Some(targets.color_format.into())],
                 }),
                 multiview_mask: None,
                 cache: None,
@@ -746,7 +744,6 @@ impl GrassRenderer {
                     ),
                     entry(3, wgpu::BindingResource::TextureView(&hv)),
                     entry(4, wgpu::BindingResource::TextureView(&gv)),
-                    entry(5, hiz.buffer.as_entire_binding()),
                     entry(6, blades.as_entire_binding()),
                     entry(7, counters.as_entire_binding()),
                     entry(8, stats.as_entire_binding()),
@@ -792,6 +789,7 @@ impl GrassRenderer {
             }
         };
         let halves = [make_half(0), make_half(1)];
+        let hiz_read_group = hiz.read_group(device, &hiz_read_layout);
         Self {
             settings,
             capacity,
@@ -804,7 +802,6 @@ impl GrassRenderer {
             jobs,
             batches,
             stats,
-            stats_readback,
             draw_frame,
             draw_frame_buffer,
             wind_pipeline,
@@ -814,7 +811,22 @@ impl GrassRenderer {
             },
             wind_params_buffer,
             halves,
+            hiz_read_layout,
+            hiz_read_group,
             hiz,
+        }
+    }
+
+    /// Follows a resize of the targets to `width` x `height`: a new Hi-Z pyramid of that size.
+    pub fn resize(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, width: u32, height: u32) {
+        self.hiz = HiZPyramid::new(device, queue, width, height);
+        self.hiz_read_group = self.hiz.read_group(device, &self.hiz_read_layout);
+        self.params.camera[2] = width as f32;
+        self.params.camera[3] = height as f32;
+        self.params.limits[0] = self.hiz.mips();
+        self.params.hiz_levels = [[0u32; 4]; 16];
+        for (dst, &(o, w, h)) in self.params.hiz_levels.iter_mut().zip(self.hiz.levels()) {
+            *dst = [o, w, h, 0];
         }
     }
 
@@ -952,6 +964,7 @@ impl GrassRenderer {
                     timestamp_writes: timer.compute_pass("grass_generate"),
                 });
                 pass.set_bind_group(0, &half.generate, &[offset]);
+                pass.set_bind_group(1, &self.hiz_read_group, &[]);
                 pass.set_pipeline(&self.generate);
                 pass.dispatch_workgroups(g.div_ceil(8), g.div_ceil(8), chunk.len() as u32);
                 pass.set_pipeline(&self.finalize);
@@ -995,32 +1008,25 @@ impl GrassRenderer {
                 pass.draw_indirect(&half.args, k as u64 * 16);
             }
         }
-        encoder.copy_buffer_to_buffer(&self.stats, 0, &self.stats_readback, 0, 64);
         tiles
     }
 
-    /// Reads the counters of the last recorded frame (waits for the GPU).
-    pub fn read_stats(&self, device: &wgpu::Device, tiles: [u32; 2]) -> GrassStats {
-        let (tx, rx) = std::sync::mpsc::channel();
-        self.stats_readback
-            .map_async(wgpu::MapMode::Read, .., move |r| {
-                let _ = tx.send(r);
-            });
-        let _ = device.poll(wgpu::PollType::wait_indefinitely());
-        if !matches!(rx.recv(), Ok(Ok(()))) {
-            return GrassStats::default();
-        }
-        let counts: [u32; 16] = {
-            let Ok(view) = self.stats_readback.get_mapped_range(..) else {
-                self.stats_readback.unmap();
-                return GrassStats::default();
-            };
-            let mut c = [0u32; 16];
-            c.copy_from_slice(bytemuck::cast_slice(&view));
-            c
-        };
-        self.stats_readback.unmap();
-        GrassStats::from_counts(tiles, &counts)
+    /// The buffer of the frame's counters (16 u32: blades considered, culled by each test and
+    /// drawn, per LOD), for a readback after [`Self::record`].
+    pub fn stats_buffer(&self) -> &wgpu::Buffer {
+        &self.stats
+    }
+
+    /// Reads the counters of the last recorded frame (for tests and tools: waits for the GPU).
+    pub fn read_stats(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        tiles: [u32; 2],
+    ) -> GrassStats {
+        let c: Vec<u32> = crate::gpu::read_buffer_pod(device, queue, &self.stats, ..)
+            .expect("read back the grass counters");
+        GrassStats::from_counts(tiles, &c[..16].try_into().expect("16 counters"))
     }
 
     /// Reads back slot `k` of pool half `half` (for tests): the draw arguments and the blades.
@@ -1032,43 +1038,19 @@ impl GrassRenderer {
         k: u32,
     ) -> ([u32; 4], Vec<crate::grass::Blade>) {
         let h = &self.halves[half];
-        let staging_args = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("args readback"),
-            size: 64,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
         let slot_bytes = u64::from(self.capacity) * BLADE_BYTES;
-        let staging_blades = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("blades readback"),
-            size: slot_bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut encoder = device.create_command_encoder(&Default::default());
-        encoder.copy_buffer_to_buffer(&h.args, 0, &staging_args, 0, 64);
-        encoder.copy_buffer_to_buffer(
-            &h.blades,
-            u64::from(k) * slot_bytes,
-            &staging_blades,
-            0,
-            slot_bytes,
-        );
-        queue.submit([encoder.finish()]);
-        for b in [&staging_args, &staging_blades] {
-            b.map_async(wgpu::MapMode::Read, .., |_| {});
-        }
-        let _ = device.poll(wgpu::PollType::wait_indefinitely());
-        let args: Vec<u32> =
-            bytemuck::pod_collect_to_vec(&staging_args.get_mapped_range(..).expect("mapped"));
+        let args: Vec<u32> = crate::gpu::read_buffer_pod(device, queue, &h.args, ..)
+            .expect("read back the draw arguments");
         let a = [
             args[k as usize * 4],
             args[k as usize * 4 + 1],
             args[k as usize * 4 + 2],
             args[k as usize * 4 + 3],
         ];
+        let start = u64::from(k) * slot_bytes;
         let all: Vec<crate::grass::Blade> =
-            bytemuck::pod_collect_to_vec(&staging_blades.get_mapped_range(..).expect("mapped"));
+            crate::gpu::read_buffer_pod(device, queue, &h.blades, start..start + slot_bytes)
+                .expect("read back the blades");
         (a, all[..a[1] as usize].to_vec())
     }
 }

@@ -226,7 +226,7 @@ impl GrassRings {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::flythrough::Camera;
+    use crate::camera::Camera;
 
     fn pyramid() -> Pyramid {
         Pyramid {

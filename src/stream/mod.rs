@@ -1,11 +1,17 @@
 //! The tile service: the streamer (async loads on its own tokio runtime), the CPU cache of
-//! decoded tiles, residency in the GPU atlas, and child tiles derived from their parents.
+//! decoded tiles, residency in the GPU tile atlas, and child tiles derived from their parents
+//! (the GPU stage, `derive_gpu.rs` with `shaders/derive_child.wgsl`, beside its CPU mirror,
+//! `derive_child.rs`).
 
+mod atlas;
 mod cache;
-mod derive_child;
-pub mod eval;
+pub mod derive_child;
+mod derive_gpu;
 mod residency;
 mod service;
+
+pub use atlas::{AtlasError, TileAtlas, pack_grass};
+pub use derive_gpu::{DeriveJob, DeriveStage};
 
 pub use cache::{CacheStats, TileCache};
 pub use derive_child::{DeriveParams, derive_child, hash_u32};

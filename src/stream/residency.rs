@@ -10,7 +10,7 @@
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
-use crate::gpu::DeriveJob;
+use crate::stream::DeriveJob;
 use crate::stream::{
     CacheStats, Loaded, StreamConfig, StreamStats, Streamer, TileCache, TileSource, Want,
 };

@@ -7,13 +7,15 @@ use bytemuck::{Pod, Zeroable};
 use glam::{DVec2, Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
-use crate::flythrough::Camera;
-use crate::gpu::TileAtlas;
+use crate::camera::Camera;
+use crate::gpu::Targets;
+use crate::stream::TileAtlas;
 use crate::world::{Manifest, Pyramid, Sky, TileId};
 
-/// Colour target format of the renderer.
+/// Colour target format of the headless tools and the reference images (any format of
+/// [`crate::shaders::encode_srgb_for`] works).
 pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
-/// Depth format (reverse-Z: cleared to 0, greater is nearer).
+/// Depth format of the headless tools (reverse-Z: cleared to 0, greater is nearer).
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// How many grass types the shader's colour table holds.
 pub const MAX_GRASS_TYPES: usize = 16;
@@ -121,13 +123,11 @@ impl TerrainRenderer {
         device: &wgpu::Device,
         manifest: &Manifest,
         atlas: &TileAtlas,
+        targets: &Targets,
         max_tiles: u32,
         mesh_step: u32,
     ) -> Self {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("terrain.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/terrain.wgsl").into()),
-        });
+        let module = crate::shaders::module(device, "terrain.wgsl");
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("terrain frame"),
             size: std::mem::size_of::<FrameUniforms>() as u64,
@@ -219,7 +219,8 @@ impl TerrainRenderer {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let color_targets = [Some(wgpu::ColorTargetState::from(COLOR_FORMAT))];
+        let color_targets = [Some(wgpu::ColorTargetState::from(targets.color_format))];
+        let fs_constants = [("ENCODE_SRGB", targets.encode_srgb())];
         let pipeline = |label, vs, fs: Option<&str>, depth_write, compare, cull| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
@@ -235,7 +236,7 @@ impl TerrainRenderer {
                     ..Default::default()
                 },
                 depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
+                    format: targets.depth_format,
                     depth_write_enabled: Some(depth_write),
                     depth_compare: Some(compare),
                     stencil: Default::default(),
@@ -245,7 +246,10 @@ impl TerrainRenderer {
                 fragment: fs.map(|fs| wgpu::FragmentState {
                     module: &module,
                     entry_point: Some(fs),
-                    compilation_options: Default::default(),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &fs_constants,
+                        ..Default::default()
+                    },
                     targets: &color_targets,
                 }),
                 multiview_mask: None,

@@ -15,7 +15,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::{DVec2, DVec3};
 use thiserror::Error;
 
-use crate::flythrough::sample_path;
+use crate::camera::sample_path;
 use crate::stream::hash_u32;
 use crate::world::{
     CameraPath, MAX_WIND_SOURCES, Manifest, SourcePlacement, WindDefaults, WindKey, WindSource,

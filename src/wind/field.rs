@@ -30,9 +30,9 @@
 //!   summed, so it stays within 0..=1).
 //!
 //! # Reading the field from another shader (the grass draw)
-//! 1. Put `shaders/wind_lookup.wgsl` in front of the shader's source:
-//!    `format!("{}\n{}", WIND_LOOKUP_WGSL, include_str!("grass_draw.wgsl"))`
-//!    ([`WIND_LOOKUP_WGSL`]).
+//! 1. Include `shaders/shared/wind_lookup.wgsl` in the shader (`#include
+//!    "shared/wind_lookup.wgsl"`, resolved by [`crate::shaders`]; for a shader of your own,
+//!    `crate::shaders::shared("shared/wind_lookup.wgsl")`).
 //! 2. Declare in that shader, at the group and bindings of its choice:
 //!    ```wgsl
 //!    @group(0) @binding(5) var<uniform> wind_lookup: WindLookup;
@@ -59,10 +59,6 @@ use glam::{DVec2, DVec3};
 use super::config::{CellState, FieldDriver, FieldParams, WindConfig, WindLookup};
 use crate::gpu::GpuTimer;
 
-/// `shaders/wind_lookup.wgsl`: `WindLookup`, `wind_cell` and `wind_at`, to put in front of a
-/// shader that reads the field.
-pub const WIND_LOOKUP_WGSL: &str = include_str!("../../shaders/wind_lookup.wgsl");
-
 /// The wind field's pipeline and buffers.
 pub struct WindField {
     driver: FieldDriver,
@@ -87,10 +83,7 @@ impl WindField {
             config.cells
         );
         let count = config.cell_count();
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("wind_field.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/wind_field.wgsl").into()),
-        });
+        let module = crate::shaders::module(device, "wind_field.wgsl");
         let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("wind params"),
             size: std::mem::size_of::<FieldParams>() as u64,
@@ -237,28 +230,17 @@ impl WindField {
 
     /// Reads the cells back (for tests and tools; waits for the GPU).
     pub fn read_back(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Vec<[f32; 4]> {
-        bytemuck::pod_collect_to_vec(&read_buffer(device, queue, &self.cells))
+        bytemuck::pod_collect_to_vec(
+            &crate::gpu::read_buffer(device, queue, &self.cells, ..)
+                .expect("read back the wind cells"),
+        )
     }
 
     /// Reads the cells' state back (for tests and tools; waits for the GPU).
     pub fn read_back_state(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> Vec<CellState> {
-        bytemuck::pod_collect_to_vec(&read_buffer(device, queue, &self.state))
+        bytemuck::pod_collect_to_vec(
+            &crate::gpu::read_buffer(device, queue, &self.state, ..)
+                .expect("read back the wind state"),
+        )
     }
-}
-
-fn read_buffer(device: &wgpu::Device, queue: &wgpu::Queue, buffer: &wgpu::Buffer) -> Vec<u8> {
-    let staging = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("wind readback"),
-        size: buffer.size(),
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = device.create_command_encoder(&Default::default());
-    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, buffer.size());
-    queue.submit([encoder.finish()]);
-    staging.map_async(wgpu::MapMode::Read, .., |_| {});
-    let _ = device.poll(wgpu::PollType::wait_indefinitely());
-    let bytes = staging.get_mapped_range(..).expect("mapped").to_vec();
-    staging.unmap();
-    bytes
 }

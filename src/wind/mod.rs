@@ -1,9 +1,8 @@
 //! Wind: the grass sway spring and the wind field around the camera.
 //!
 //! - [`sway`]: the damped spring each grass blade sways on, three ways to step it
-//!   ([`Integrator`]), the one the renderer uses ([`RENDERER_INTEGRATOR`]), and
-//!   `verdant eval sway`, which measures their error, cost and stability at frame times from
-//!   1/240 s to 1/5 s and at 0.5 s hitches.
+//!   ([`Integrator`]) and the one the renderer uses ([`RENDERER_INTEGRATOR`]; chosen by
+//!   `verdant eval sway`, which measures their error, cost and stability).
 //! - [`config`]: a wind scene of the manifest made ready to run ([`WindConfig`]) and each
 //!   frame's uniforms ([`FieldDriver`], [`FieldParams`], [`WindLookup`]).
 //! - [`field`]: the wind field on the GPU ([`WindField`], `shaders/wind_field.wgsl`): ambient
@@ -22,10 +21,7 @@ pub use config::{
     AmbientWind, CellState, FieldDriver, FieldParams, SceneAt, SceneChange, SourceConfig,
     SourceGpu, WindConfig, WindError, WindLookup,
 };
-pub use field::{WIND_LOOKUP_WGSL, WindField};
+pub use field::WindField;
 pub use field_cpu::{WindFieldCpu, ambient_at};
-pub use sway::{
-    Integrator, Preset, RENDERER_INTEGRATOR, SwayResult, SwaySpring, SwayState, bounded_for,
-    run_sway_eval,
-};
+pub use sway::{Integrator, Preset, RENDERER_INTEGRATOR, SwaySpring, SwayState};
 pub use sway_field::{SWAY_TYPES, SwayConfig, SwayField, SwayParams, update_sway};

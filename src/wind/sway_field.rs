@@ -182,10 +182,7 @@ impl SwayField {
             cells * 8,
             U::STORAGE | U::COPY_SRC | U::COPY_DST,
         );
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("grass_sway.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/grass_sway.wgsl").into()),
-        });
+        let module = crate::shaders::module(device, "grass_sway.wgsl");
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("grass sway"),
             layout: None,
@@ -276,19 +273,7 @@ impl SwayField {
         queue: &wgpu::Queue,
     ) -> (Vec<[f32; 4]>, Vec<[i32; 2]>) {
         let read = |b: &wgpu::Buffer| {
-            let staging = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("sway readback"),
-                size: b.size(),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            let mut e = device.create_command_encoder(&Default::default());
-            e.copy_buffer_to_buffer(b, 0, &staging, 0, b.size());
-            queue.submit([e.finish()]);
-            staging.map_async(wgpu::MapMode::Read, .., |_| {});
-            let _ = device.poll(wgpu::PollType::wait_indefinitely());
-            let v = staging.get_mapped_range(..).expect("mapped").to_vec();
-            v
+            crate::gpu::read_buffer(device, queue, b, ..).expect("read back the sway state")
         };
         (
             bytemuck::pod_collect_to_vec(&read(&self.sway)),

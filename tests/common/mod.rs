@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use verdant::gpu::GpuContext;
-use verdant::metrics::flip_compare;
+use verdant::tools::metrics::flip_compare;
 
 use glam::DVec2;
 use std::collections::HashMap;

@@ -1,21 +1,6 @@
 //! Headless fly-throughs: a camera path rendered frame by frame to PNG, with a JSON report of
 //! what each frame drew and what it cost.
 
-mod bench_lod;
-mod camera;
-mod report;
-mod scene;
-mod soak;
-
-pub use bench_lod::{
-    BenchFeaturesReport, BenchLodOptions, BenchLodReport, FeatureResult, LodSetting, lod_settings,
-    reference_setting, run_bench_features, run_bench_lod,
-};
-pub use camera::{Camera, sample_path, walker_at};
-pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
-pub use scene::{FrameStats, Scene, SceneConfig, SceneError};
-pub use soak::{SoakOptions, SoakReport, TeleportRecord, resident_bytes, run_soak};
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
@@ -23,8 +8,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 
+use crate::camera::{sample_path, walker_at};
 use crate::gpu::GpuContext;
-use crate::metrics::Summary;
+use crate::tools::metrics::Summary;
+use crate::tools::report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
+use crate::tools::scene::{Scene, SceneConfig};
 use crate::world::World;
 
 /// What `verdant fly` is asked to do.
@@ -126,7 +114,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
         let camera = sample_path(&path, t_s);
         let start = Instant::now();
-        let walker_xy = walker_at(&scene.world.manifest, &path, t_s);
+        let walker_xy = walker_at(&scene.world().manifest, &path, t_s);
         let stats = scene.render_frame(&ctx, &camera, t_s, Some(walker_xy))?;
         let image = scene.read_image(&ctx)?;
         let frame_ms = start.elapsed().as_secs_f64() * 1e3;

@@ -8,9 +8,10 @@ use anyhow::{Context, Result};
 use glam::{DVec2, DVec3};
 use serde::{Deserialize, Serialize};
 
-use crate::flythrough::{AdapterReport, Camera, Scene, SceneConfig, write_json};
+use crate::camera::Camera;
 use crate::gpu::GpuContext;
-use crate::metrics::Summary;
+use crate::tools::metrics::Summary;
+use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
 use crate::world::{TileData, TileId, World};
 
 /// What `verdant soak` is asked to do.

@@ -1,4 +1,5 @@
-//! The camera and the camera paths of a world's manifest.
+//! The camera and the camera paths of a world's manifest: a leaf that every part of the crate
+//! may use.
 
 use glam::{DVec2, DVec3, Mat4, Vec3};
 
@@ -17,6 +18,21 @@ pub struct Camera {
     pub fov_y_deg: f32,
     /// Near plane, metres (the far plane is at infinity: reverse-Z).
     pub near_m: f32,
+    /// The caller's own view and projection, used instead of yaw, pitch, field of view and
+    /// near plane when set.
+    pub custom: Option<CustomView>,
+}
+
+/// A view and projection of the caller's own for a camera at [`Camera::position`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CustomView {
+    /// World-to-view rotation with the eye at the origin (no translation: positions reach the
+    /// GPU camera-relative), right-handed, looking along -z of view space, x east, y north,
+    /// z up in world space.
+    pub view: Mat4,
+    /// Projection into wgpu's clip space, reverse-Z (depth 1 at the near plane, 0 far; an
+    /// infinite far plane is best), e.g. `glam::Mat4::perspective_infinite_reverse_rh`.
+    pub proj: Mat4,
 }
 
 impl Camera {
@@ -28,11 +44,27 @@ impl Camera {
             pitch_deg,
             fov_y_deg: 60.0,
             near_m: 0.5,
+            custom: None,
         }
+    }
+
+    /// A camera at `position` with the caller's own `view` rotation and `proj`ection (see
+    /// [`CustomView`]).
+    pub fn with_view(position: DVec3, view: Mat4, proj: Mat4) -> Self {
+        let mut c = Self::new(position, 0.0, 0.0);
+        c.custom = Some(CustomView { view, proj });
+        let f = c.forward();
+        c.yaw_deg = f.y.atan2(f.x).to_degrees();
+        c.pitch_deg = f.z.clamp(-1.0, 1.0).asin().to_degrees();
+        c
     }
 
     /// Unit view direction.
     pub fn forward(&self) -> DVec3 {
+        if let Some(c) = &self.custom {
+            let f = c.view.inverse().transform_vector3(-Vec3::Z);
+            return f.normalize_or(Vec3::X).as_dvec3();
+        }
         let (yaw, pitch) = (self.yaw_deg.to_radians(), self.pitch_deg.to_radians());
         DVec3::new(
             yaw.cos() * pitch.cos(),
@@ -44,6 +76,9 @@ impl Camera {
     /// View-projection with the eye at the origin: positions fed to it must be camera-relative.
     /// Reverse-Z with an infinite far plane (depth 1 at the near plane, 0 at infinity).
     pub fn view_proj_relative(&self, aspect: f32) -> Mat4 {
+        if let Some(c) = &self.custom {
+            return c.proj * c.view;
+        }
         use glam::camera::rh::{proj::directx, view::look_to_mat4};
         let view = look_to_mat4(Vec3::ZERO, self.forward().as_vec3(), Vec3::Z);
         // wgpu's clip space is Direct3D's: z in [0, 1], y up.

@@ -15,10 +15,13 @@ use anyhow::{Context, Result, bail};
 use glam::DVec3;
 use serde::Serialize;
 
-use crate::flythrough::{AdapterReport, Camera, Scene, SceneConfig, sample_path, write_json};
+use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::lod::RingSettings;
-use crate::metrics::{Chart, ChartPoint, LineChart, Series, Summary, flip_compare, pareto_front};
+use crate::tools::metrics::{
+    Chart, ChartPoint, LineChart, Series, Summary, flip_compare, pareto_front,
+};
+use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
 use crate::world::World;
 
 /// What `verdant bench lod` is asked to do.
@@ -216,7 +219,7 @@ impl Bench<'_> {
         &self,
         scene: &mut Scene,
         camera: &Camera,
-    ) -> Result<(image::RgbaImage, crate::flythrough::FrameStats)> {
+    ) -> Result<(image::RgbaImage, crate::renderer::FrameStats)> {
         scene.warm_up(self.ctx, camera, std::time::Duration::from_secs(60))?;
         let stats = scene.render(self.ctx, camera)?;
         Ok((scene.read_image(self.ctx)?, stats))
@@ -569,7 +572,7 @@ pub fn run_bench_features(
                 std::time::Duration::from_secs(60),
             )?;
             // The lead-in: the camera and the walker along the path up to the view's time.
-            let walker_at = |t: f64| super::walker_at(m, &path, t);
+            let walker_at = |t: f64| crate::camera::walker_at(m, &path, t);
             for f in 0..=lead_frames {
                 let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(lead_frames));
                 scene.render_frame(&ctx, &sample_path(&path, tf), tf, Some(walker_at(tf)))?;

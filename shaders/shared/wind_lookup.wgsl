@@ -1,5 +1,5 @@
-// Reading the wind field (shaders/wind_field.wgsl) from another shader. Concatenate this file
-// in front of that shader's source and declare, there, with bindings of its choice:
+// Reading the wind field (shaders/wind_field.wgsl) from another shader. Include this file
+// (`#include "shared/wind_lookup.wgsl"`) and declare, there, with bindings of its choice:
 //
 //     @group(G) @binding(B0) var<uniform> wind_lookup: WindLookup;          // 32 bytes
 //     @group(G) @binding(B1) var<storage, read> wind_cells: array<vec4<f32>>; // n * n * 16 bytes

@@ -191,7 +191,7 @@ pub fn evaluate(truth: &Grid, factor: usize, method: DeriveMethod, repeats: usiz
         }
         times.push(start.elapsed().as_secs_f64() * 1e3);
     }
-    let ms = crate::metrics::Summary::of(&times).median;
+    let ms = crate::tools::metrics::Summary::of(&times).median;
     let tiles = (fine.width * fine.height) as f64 / (133.0 * 133.0);
 
     // Compare away from the edges, where clamping would favour no method.
@@ -261,7 +261,7 @@ pub fn joint_front(results: &[MethodResult]) -> Vec<usize> {
             ]
         })
         .collect();
-    crate::metrics::pareto_front_n(&rows)
+    crate::tools::metrics::pareto_front_n(&rows)
 }
 
 /// Writes `derive.csv` and the charts `derive_height.png` (height RMSE), `derive_slope.png`
@@ -315,7 +315,7 @@ pub fn write_results(
         }),
     ];
     for (file, y_label, value) in charts {
-        let chart = crate::metrics::Chart {
+        let chart = crate::tools::metrics::Chart {
             title: format!("{dem_name}: derived from 1/{factor} resolution"),
             x_label: "CPU time per 133x133 tile (ms)".into(),
             y_label: y_label.into(),
@@ -323,7 +323,7 @@ pub fn write_results(
             log_y: false,
             points: results
                 .iter()
-                .map(|r| crate::metrics::ChartPoint {
+                .map(|r| crate::tools::metrics::ChartPoint {
                     label: r.method.clone(),
                     x: r.ms_per_tile,
                     y: value(r),

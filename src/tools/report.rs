@@ -6,8 +6,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::gpu::GpuContext;
 use crate::grass::GrassStats;
-use crate::metrics::Summary;
 use crate::stream::ResidencyStats;
+use crate::tools::metrics::Summary;
 
 /// The adapter a run used.
 #[derive(Clone, Debug, Serialize, Deserialize)]

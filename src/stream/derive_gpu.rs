@@ -3,8 +3,9 @@
 
 use bytemuck::{Pod, Zeroable};
 
-use crate::gpu::{GpuTimer, TileAtlas};
+use crate::gpu::GpuTimer;
 use crate::stream::DeriveParams;
+use crate::stream::TileAtlas;
 use crate::world::{Pyramid, TileId};
 
 /// One child to derive: its address, its parent's slot and the slot to fill.
@@ -61,12 +62,7 @@ impl DeriveStage {
         atlas: &TileAtlas,
         batch: u32,
     ) -> Self {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("derive_child.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(
-                include_str!("../../shaders/derive_child.wgsl").into(),
-            ),
-        });
+        let module = crate::shaders::module(device, "derive_child.wgsl");
         let size = atlas.size();
         let staging = |label, format| {
             device.create_texture(&wgpu::TextureDescriptor {

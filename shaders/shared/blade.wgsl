@@ -1,5 +1,5 @@
 // The blade record of the instance pool, shared by grass_generate.wgsl, grass_wind.wgsl and
-// grass_draw.wgsl (put in front of each). Mirrors `Blade` in src/grass/blade.rs (80 bytes).
+// grass_draw.wgsl (each includes it). Mirrors `Blade` in src/grass/blade.rs (80 bytes).
 struct Blade {
     pos_x: f32, pos_y: f32, pos_z: f32,
     facing: f32,
@@ -20,4 +20,9 @@ struct Blade {
     lean_y: f32,
     sway: f32,
     flutter: f32,
+}
+
+// A blade's packed colour (8 bits a channel, red lowest) as linear RGB.
+fn unpack_rgb(c: u32) -> vec3<f32> {
+    return vec3<f32>(f32(c & 255u), f32((c >> 8u) & 255u), f32((c >> 16u) & 255u)) / 255.0;
 }

@@ -1,0 +1,11 @@
+// The grass model's switchable features, one bit each; mirrors `Feature::bit` in
+// src/features.rs (a test compares the two).
+
+const WIND_SOURCES: u32 = 1u;
+const INTERACTION: u32 = 2u;
+const DETAIL_BENDING: u32 = 4u;
+const TRANSLUCENCY: u32 = 8u;
+const SPECULAR: u32 = 16u;
+const AMBIENT_OCCLUSION: u32 = 32u;
+const COLOR_VARIATION: u32 = 64u;
+const GROUND_DARKENING: u32 = 128u;

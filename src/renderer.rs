@@ -1,0 +1,1013 @@
+//! The frame: [`Renderer`], verdant's front door.
+//!
+//! A renderer draws one world into the caller's targets with the caller's device and queue:
+//!
+//! ```no_run
+//! # fn demo(device: &wgpu::Device, queue: &wgpu::Queue, world: verdant::World,
+//! #         color: &wgpu::TextureView, depth: &wgpu::TextureView) -> Result<(), verdant::RendererError> {
+//! use verdant::{Camera, FrameInput, Renderer, RendererOptions};
+//! let options = RendererOptions::new(
+//!     &world,
+//!     wgpu::TextureFormat::Rgba8UnormSrgb,
+//!     wgpu::TextureFormat::Depth32Float,
+//!     1280,
+//!     720,
+//! );
+//! let mut renderer = Renderer::new(device, queue, world, options)?;
+//! let camera = Camera::new(glam::DVec3::new(9000.0, 12000.0, 600.0), 30.0, -10.0);
+//! renderer.prepare(queue, &FrameInput::new(camera, 0.0)); // streaming, uploads: no waits
+//! let mut encoder = device.create_command_encoder(&Default::default());
+//! renderer.record(&mut encoder, color, depth)?; // every pass of the frame
+//! queue.submit([encoder.finish()]);
+//! let stats = renderer.stats(); // a frame or two late, never a stall
+//! # Ok(()) }
+//! ```
+//!
+//! The depth target must have `RENDER_ATTACHMENT | TEXTURE_BINDING` usage (the Hi-Z pyramid
+//! reads it) and one of [`DEPTH_FORMATS`]; the colour target any format that
+//! [`crate::shaders::encode_srgb_for`] accepts. Depth is reverse-Z: the renderer clears it to 0
+//! and keeps the nearer, greater values, so a caller that draws into the same targets afterwards
+//! compares with `Greater`. The order of the frame's passes is [`Renderer::record`], top to
+//! bottom.
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::time::Instant;
+
+use glam::DVec2;
+
+use crate::camera::Camera;
+use crate::features::{Feature, Features};
+use crate::gpu::{GpuTimer, PassTimes, Targets};
+use crate::grass::{GrassRenderer, GrassSettings, GrassStats, TileJob, WindBindings};
+use crate::lod::{Frustum, GrassRings, Ring, RingSettings, TerrainLod, select_terrain};
+use crate::stream::{
+    AtlasError, DeriveJob, DeriveParams, DeriveStage, ResidencyPlan, ResidencyStats, ServiceConfig,
+    TileAtlas, TileService, TileSource, Want,
+};
+use crate::terrain::{TerrainRenderer, TileDraw};
+use crate::wind::{SwayConfig, SwayField, WindConfig, WindError, WindField};
+use crate::world::{TileId, WindKey, World, WorldError};
+
+/// Depth formats the renderer draws into (the Hi-Z pyramid reads them as depth textures).
+pub const DEPTH_FORMATS: [wgpu::TextureFormat; 2] = [
+    wgpu::TextureFormat::Depth32Float,
+    wgpu::TextureFormat::Depth24Plus,
+];
+
+/// Frames whose figures can be on their way back at once; a frame recorded while all of them
+/// are still on their way gets no figures (counted in [`Renderer::stats_dropped`]).
+pub const READBACK_SLOTS: usize = 4;
+
+/// Delivered figures kept until taken ([`Renderer::take_stats`]); older ones are dropped.
+pub const MAX_READY_STATS: usize = 2 * READBACK_SLOTS;
+
+/// What stops a renderer from being built or a frame from being recorded.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RendererError {
+    /// A tile or the manifest could not be read.
+    #[error(transparent)]
+    World(#[from] WorldError),
+    /// A tile did not fit the atlas.
+    #[error(transparent)]
+    Atlas(#[from] AtlasError),
+    /// The wind scene asked for does not exist or does not fit.
+    #[error(transparent)]
+    Wind(#[from] WindError),
+    /// The atlas slot count does not fit the adapter or the world.
+    #[error(
+        "an atlas of {slots} slots does not fit: it needs more slots than the world's {roots} \
+         level-0 tiles and at most the adapter's {limit} texture array layers"
+    )]
+    AtlasSlots {
+        /// Slots asked for.
+        slots: u32,
+        /// Level-0 tiles of the world (always resident).
+        roots: u32,
+        /// The adapter's `max_texture_array_layers`.
+        limit: u32,
+    },
+    /// The target size is zero or beyond the adapter's limit.
+    #[error("image size {width}x{height} is not supported (1 to {limit} pixels a side)")]
+    BadSize {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+        /// The adapter's `max_texture_dimension_2d`.
+        limit: u32,
+    },
+    /// The colour format is not one the renderer draws into.
+    #[error(
+        "colour format {0:?} is not supported (use an 8-bit RGBA/BGRA format, sRGB or not, \
+         Rgb10a2Unorm, Rgba16Unorm, Rgba16Float, Rgba32Float or Rg11b10Ufloat)"
+    )]
+    ColorFormat(wgpu::TextureFormat),
+    /// The depth format is not one the renderer draws into.
+    #[error("depth format {0:?} is not supported (use Depth32Float or Depth24Plus)")]
+    DepthFormat(wgpu::TextureFormat),
+    /// A target given to [`Renderer::record`] does not match the renderer's targets.
+    #[error("the {which} target is {found}, but the renderer was made for {expected}")]
+    Target {
+        /// `"colour"` or `"depth"`.
+        which: &'static str,
+        /// What the target is.
+        found: String,
+        /// What the renderer expects.
+        expected: String,
+    },
+    /// [`Renderer::record`] was called without a [`Renderer::prepare`] before it.
+    #[error("record was called without prepare: call prepare once before each record")]
+    NotPrepared,
+}
+
+/// Settings of the engine: streaming limits, levels of detail, grass, wind and features.
+#[derive(Clone, Debug)]
+pub struct RendererConfig {
+    /// Limits of the tile service (atlas slots, cache bytes, loads in flight, budgets).
+    pub service: ServiceConfig,
+    /// Terrain tiles split while the camera is nearer than this many tile edges.
+    pub lod_factor: f64,
+    /// Derivation of child tiles.
+    pub derive: DeriveParams,
+    /// Grass rings, or none to ask for no grass tiles.
+    pub grass: Option<RingSettings>,
+    /// Terrain grid vertices every this many samples (1 = every sample).
+    pub mesh_step: u32,
+    /// Blade spacing of the high-LOD grass grid, metres.
+    pub grass_spacing_m: f32,
+    /// Blade segments at high and low LOD.
+    pub grass_segments: [u32; 2],
+    /// The wind scene of the manifest (default: `breeze`, else the manifest's wind); when
+    /// `None` and `wind_keys` is not empty, the scenes of those keys in turn.
+    pub wind_scene: Option<String>,
+    /// Changes of wind scene over time (a camera path's `wind` keys).
+    pub wind_keys: Vec<WindKey>,
+    /// The switched-on features of the grass model.
+    pub features: Features,
+}
+
+impl RendererConfig {
+    /// Defaults for `world`.
+    pub fn for_world(world: &World) -> Self {
+        Self {
+            service: ServiceConfig::default(),
+            lod_factor: 1.0,
+            derive: DeriveParams::default(),
+            grass: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
+            mesh_step: 2,
+            grass_spacing_m: 0.25,
+            grass_segments: [7, 3],
+            wind_scene: None,
+            wind_keys: Vec::new(),
+            features: Features::from(&world.manifest.features),
+        }
+    }
+
+    /// Grass settings that follow the rings: blades the low grid drops fade out over the outer
+    /// 30% of the high ring, and all blades thin out, dithered, over the last 20% of the view
+    /// distance.
+    pub fn grass_settings(&self, world: &World) -> Option<GrassSettings> {
+        let rings = self.grass?;
+        Some(GrassSettings {
+            spacing_m: self.grass_spacing_m,
+            tile_m: world.manifest.pyramid.tile_size_m(rings.level) as f32,
+            high_radius_m: rings.high_radius_m as f32,
+            lod_fade_m: 0.3 * rings.high_radius_m as f32,
+            view_distance_m: rings.low_radius_m as f32,
+            far_fade_m: 0.2 * rings.low_radius_m as f32,
+            clump_m: 1.6,
+            short_m: 0.3,
+            seed: 0x9a55,
+            segments: self.grass_segments,
+        })
+    }
+}
+
+/// The caller's targets and the engine's settings.
+#[derive(Clone, Debug)]
+pub struct RendererOptions {
+    /// Format of the colour target.
+    pub color_format: wgpu::TextureFormat,
+    /// Format of the depth target (one of [`DEPTH_FORMATS`]).
+    pub depth_format: wgpu::TextureFormat,
+    /// Width of the targets in pixels.
+    pub width: u32,
+    /// Height of the targets in pixels.
+    pub height: u32,
+    /// Settings of the engine.
+    pub config: RendererConfig,
+}
+
+impl RendererOptions {
+    /// Targets of these formats and size, and the defaults of `world`.
+    pub fn new(
+        world: &World,
+        color_format: wgpu::TextureFormat,
+        depth_format: wgpu::TextureFormat,
+        width: u32,
+        height: u32,
+    ) -> Self {
+        Self {
+            color_format,
+            depth_format,
+            width,
+            height,
+            config: RendererConfig::for_world(world),
+        }
+    }
+}
+
+/// What a frame is drawn from.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameInput {
+    /// The camera: a position in world metres (f64) with yaw and pitch, or with the caller's
+    /// own view and projection ([`Camera::with_view`]).
+    pub camera: Camera,
+    /// Seconds since the start: the wind and the sway springs advance by the time since the
+    /// last frame (at most 5 s).
+    pub time_s: f64,
+    /// Where the walker that leaves the trail in the grass is (world xy, metres), or `None` for
+    /// no trail this frame (the trail fades).
+    pub walker: Option<DVec2>,
+}
+
+impl FrameInput {
+    /// A frame from `camera` at `time_s`, the camera leaving the trail.
+    pub fn new(camera: Camera, time_s: f64) -> Self {
+        Self {
+            camera,
+            time_s,
+            walker: Some(camera.position.truncate()),
+        }
+    }
+}
+
+/// What one frame drew and what it cost; delivered a frame or two after it was recorded.
+#[derive(Clone, Debug, Default)]
+pub struct FrameStats {
+    /// The frame's number (0 for the first [`Renderer::prepare`]).
+    pub frame: u64,
+    /// Terrain tiles drawn (each from its own data or an ancestor's).
+    pub tiles_drawn: u32,
+    /// Grass tiles in the high and low rings.
+    pub grass_tiles: (u32, u32),
+    /// CPU time of prepare and record (tile selection, uploads, recording), milliseconds.
+    pub cpu_ms: f64,
+    /// GPU time per pass (empty without timestamp queries).
+    pub gpu: PassTimes,
+    /// The tile service's figures.
+    pub residency: ResidencyStats,
+    /// Grass: tiles, blades considered, culled by each test and drawn, per LOD.
+    pub grass: GrassStats,
+}
+
+/// The grass with the wind it bends in.
+struct GrassStage {
+    renderer: GrassRenderer,
+    wind: WindField,
+    sway: SwayField,
+}
+
+/// What [`Renderer::prepare`] worked out for [`Renderer::record`].
+struct Prepared {
+    input: FrameInput,
+    dt: f32,
+    derives: Vec<DeriveJob>,
+    terrain_tiles: u32,
+    grass_jobs: Vec<TileJob>,
+    stats: FrameStats,
+    cpu_s: f64,
+}
+
+/// The tiles a frame wants, before residency.
+struct Selection {
+    terrain: Vec<TileId>,
+    grass: Vec<(TileId, Ring, f64)>,
+    wants: Vec<Want>,
+}
+
+/// A world's terrain and grass, drawn into the caller's targets. See the module docs.
+pub struct Renderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    world: World,
+    service: TileService,
+    atlas: TileAtlas,
+    derive: DeriveStage,
+    terrain: TerrainRenderer,
+    lod: TerrainLod,
+    rings: Option<GrassRings>,
+    grass: Option<GrassStage>,
+    mesh_step: u32,
+    targets: Targets,
+    features: Features,
+    timer: GpuTimer,
+    readback: StatsRing,
+    time_s: Option<f64>,
+    frame: u64,
+    prepared: Option<Prepared>,
+}
+
+impl Renderer {
+    /// A renderer of `world` for targets of `options`' formats and size. Starts the tile
+    /// service (the level-0 tiles are loaded here, waiting for them) and builds every pipeline.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        world: World,
+        options: RendererOptions,
+    ) -> Result<Self, RendererError> {
+        let source = Arc::new(world.clone());
+        Self::with_source(device, queue, world, source, options)
+    }
+
+    /// Like [`Renderer::new`], with tiles from `source` instead of the world's files (another
+    /// store, or loads made slow or failing on purpose in tests).
+    pub fn with_source(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        world: World,
+        source: Arc<dyn TileSource>,
+        options: RendererOptions,
+    ) -> Result<Self, RendererError> {
+        let config = options.config;
+        let targets = Targets {
+            color_format: options.color_format,
+            depth_format: options.depth_format,
+            width: options.width,
+            height: options.height,
+        };
+        check_formats(&targets)?;
+        check_size(device, targets.width, targets.height)?;
+        let limits = device.limits();
+        let pyramid = world.manifest.pyramid.clone();
+        let [nx, ny] = pyramid.tiles_at(0);
+        let slots = config.service.atlas_slots;
+        if slots > limits.max_texture_array_layers || slots <= nx * ny {
+            return Err(RendererError::AtlasSlots {
+                slots,
+                roots: nx * ny,
+                limit: limits.max_texture_array_layers,
+            });
+        }
+        let atlas = TileAtlas::new(device, pyramid.samples_per_side(), slots);
+        let (service, plan) = TileService::new(&pyramid, source, config.service)?;
+        for (slot, tile) in &plan.uploads {
+            atlas.upload(queue, *slot, tile)?;
+        }
+        let derive = DeriveStage::new(
+            device,
+            queue,
+            &pyramid,
+            &config.derive,
+            &atlas,
+            config.service.derives_per_frame.max(1),
+        );
+        let mut terrain = TerrainRenderer::new(
+            device,
+            &world.manifest,
+            &atlas,
+            &targets,
+            4096,
+            config.mesh_step,
+        );
+        terrain.set_features(config.features);
+        let grass = match config.grass_settings(&world) {
+            Some(settings) => {
+                let mut wind_config = match &config.wind_scene {
+                    None if !config.wind_keys.is_empty() => {
+                        WindConfig::from_keys(&world.manifest, &config.wind_keys)?
+                    }
+                    scene => WindConfig::from_scene(&world.manifest, scene.as_deref())?,
+                };
+                wind_config.sources = config.features.has(Feature::WindSources);
+                wind_config.trail = config.features.has(Feature::Interaction);
+                let wind = WindField::new(device, queue, &wind_config);
+                let sway = SwayField::new(
+                    device,
+                    SwayConfig::from_manifest(&world.manifest),
+                    wind_config.cells,
+                    wind.buffer(),
+                );
+                sway.reset(queue);
+                let capacity = crate::grass::estimate_capacity(&world, &settings)?;
+                let renderer = GrassRenderer::new(
+                    device,
+                    queue,
+                    &world.manifest,
+                    &atlas,
+                    &targets,
+                    settings,
+                    capacity,
+                    WindBindings {
+                        lookup: wind.lookup_uniform(),
+                        cells: wind.buffer(),
+                        sway: sway.buffer(),
+                    },
+                );
+                renderer.commit_pool(device, queue);
+                Some(GrassStage {
+                    renderer,
+                    wind,
+                    sway,
+                })
+            }
+            None => None,
+        };
+        let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let timer = GpuTimer::new(device, queue, timestamps, 64);
+        let readback = StatsRing::new(device, timer.capacity_bytes());
+        Ok(Self {
+            device: device.clone(),
+            queue: queue.clone(),
+            lod: TerrainLod {
+                lod_factor: config.lod_factor,
+                max_level: pyramid.max_level(),
+            },
+            rings: config.grass.map(GrassRings::new),
+            grass,
+            mesh_step: config.mesh_step,
+            world,
+            service,
+            atlas,
+            derive,
+            terrain,
+            targets,
+            features: config.features,
+            timer,
+            readback,
+            time_s: None,
+            frame: 0,
+            prepared: None,
+        })
+    }
+
+    /// The world being drawn.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// Frames prepared so far (the next frame's number).
+    pub fn frames_prepared(&self) -> u64 {
+        self.frame
+    }
+
+    /// The targets' formats and size.
+    pub fn targets(&self) -> Targets {
+        self.targets
+    }
+
+    /// The tile service (for its figures and residency queries).
+    pub fn service(&self) -> &TileService {
+        &self.service
+    }
+
+    /// The tile atlas.
+    pub fn atlas(&self) -> &TileAtlas {
+        &self.atlas
+    }
+
+    /// The grass tiles of the last frame and their rings.
+    pub fn grass_rings(&self) -> Vec<(TileId, Ring)> {
+        self.rings.as_ref().map_or(Vec::new(), |r| r.current())
+    }
+
+    /// The name of the wind scene in effect at `time_s` (empty for the manifest's default wind
+    /// or without grass).
+    pub fn wind_scene_at(&self, time_s: f64) -> String {
+        self.grass.as_ref().map_or(String::new(), |g| {
+            g.wind.config().scene_at(time_s).name.to_owned()
+        })
+    }
+
+    /// Follows a resize of the targets (the next frame draws at the new size).
+    pub fn resize(&mut self, width: u32, height: u32) -> Result<(), RendererError> {
+        check_size(&self.device, width, height)?;
+        if (width, height) == (self.targets.width, self.targets.height) {
+            return Ok(());
+        }
+        self.targets.width = width;
+        self.targets.height = height;
+        if let Some(g) = &mut self.grass {
+            g.renderer.resize(&self.device, &self.queue, width, height);
+        }
+        Ok(())
+    }
+
+    fn aspect(&self) -> f32 {
+        self.targets.width as f32 / self.targets.height as f32
+    }
+
+    fn select(&mut self, camera: &Camera) -> Selection {
+        let frustum = Frustum::from_view_proj(camera.view_proj_relative(self.aspect()));
+        let pyramid = &self.world.manifest.pyramid;
+        let service = &self.service;
+        let range = |id: TileId| service.height_range(id);
+        let terrain = select_terrain(pyramid, self.lod, camera.position, &frustum, &range);
+        let grass = match &mut self.rings {
+            Some(r) => r.update(pyramid, camera.position, &range),
+            None => Vec::new(),
+        };
+        // Priority: distance, doubled for what lies behind the camera.
+        let forward = camera.forward();
+        let priority = |id: TileId| {
+            let b = pyramid.bounds(id);
+            let (h0, h1) = range(id);
+            let c = glam::DVec3::new(b.center().x, b.center().y, 0.5 * f64::from(h0 + h1));
+            let to = c - camera.position;
+            let d = to.length().max(1e-3);
+            (d * (1.5 - 0.5 * forward.dot(to / d))) as f32
+        };
+        let wants = terrain
+            .iter()
+            .copied()
+            .chain(grass.iter().map(|g| g.0))
+            .map(|id| Want {
+                id,
+                priority: priority(id),
+            })
+            .collect();
+        Selection {
+            terrain,
+            grass,
+            wants,
+        }
+    }
+
+    /// Brings every tile `camera` wants into the atlas, waiting for loads and for the GPU: for
+    /// the first frame of a run or a teleport, never inside a frame loop. Gives up after
+    /// `timeout`; returns whether everything became resident.
+    pub fn warm_up(
+        &mut self,
+        camera: &Camera,
+        timeout: std::time::Duration,
+    ) -> Result<bool, RendererError> {
+        let start = Instant::now();
+        loop {
+            let sel = self.select(camera);
+            let plan = self.service.update(&sel.wants);
+            let busy = !plan.uploads.is_empty() || !plan.derives.is_empty();
+            let derives = self.upload(plan)?;
+            if !derives.is_empty() {
+                let mut e = self.device.create_command_encoder(&Default::default());
+                let mut no_timer = GpuTimer::new(&self.device, &self.queue, false, 0);
+                self.derive
+                    .record(&self.queue, &mut e, &self.atlas, &derives, &mut no_timer);
+                self.queue.submit([e.finish()]);
+            }
+            let stats = self.service.stats();
+            if stats.resident == stats.desired {
+                let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+                return Ok(true);
+            }
+            if start.elapsed() > timeout {
+                return Ok(false);
+            }
+            if !busy {
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+        }
+    }
+
+    /// Uploads the plan's decoded tiles to the atlas; returns the derivations to record.
+    fn upload(&mut self, plan: ResidencyPlan) -> Result<Vec<DeriveJob>, RendererError> {
+        for (slot, tile) in &plan.uploads {
+            self.atlas.upload(&self.queue, *slot, tile)?;
+        }
+        Ok(plan.derives)
+    }
+
+    /// Gets the frame of `input` ready: collects figures of earlier frames that have come back,
+    /// selects the tiles the camera needs, plans residency with the tile service (loads are
+    /// requested, finished ones uploaded), and writes the frame's uniforms. Never waits for the
+    /// GPU or for loads: a tile that is not resident is drawn from its nearest resident
+    /// ancestor.
+    pub fn prepare(&mut self, queue: &wgpu::Queue, input: &FrameInput) {
+        let start = Instant::now();
+        self.collect_stats();
+        let camera = input.camera;
+        let dt = self
+            .time_s
+            .map_or(0.0, |last| (input.time_s - last).clamp(0.0, 5.0)) as f32;
+        self.time_s = Some(input.time_s);
+        let sel = self.select(&camera);
+        let plan = self.service.update(&sel.wants);
+        let residency = self.service.stats();
+        // A failed upload (a tile of the wrong size) leaves the tile to its ancestor: the
+        // service counts it as a fault.
+        let derives = self.upload(plan).unwrap_or_default();
+
+        let pyramid = &self.world.manifest.pyramid;
+        let eye = camera.position.truncate();
+        let draws: Vec<TileDraw> = sel
+            .terrain
+            .iter()
+            .filter_map(|&id| {
+                let (src, slot) = self.service.draw_source(id)?;
+                let morph_start = self.lod.morph_start(pyramid, id.level);
+                Some(TileDraw::new(
+                    pyramid,
+                    id,
+                    src,
+                    slot,
+                    eye,
+                    morph_start,
+                    self.mesh_step,
+                ))
+            })
+            .collect();
+        let aspect = self.aspect();
+        let terrain_tiles = self.terrain.prepare(queue, &camera, aspect, &draws);
+        let grass_jobs = self.grass_jobs(&camera, &sel.grass);
+        let view_proj = camera.view_proj_relative(aspect);
+        if let Some(g) = &mut self.grass {
+            let ambient_speed = g.wind.config().ambient_at(input.time_s).speed_mps as f32;
+            g.renderer
+                .set_frame(input.time_s, ambient_speed, self.features, camera.position);
+            g.renderer
+                .set_camera(queue, view_proj, camera.position.z as f32, camera.near_m);
+        }
+        let high = sel.grass.iter().filter(|g| g.1 == Ring::High).count() as u32;
+        self.prepared = Some(Prepared {
+            input: *input,
+            dt,
+            derives,
+            terrain_tiles,
+            grass_jobs,
+            stats: FrameStats {
+                frame: self.frame,
+                tiles_drawn: terrain_tiles,
+                grass_tiles: (high, sel.grass.len() as u32 - high),
+                residency,
+                ..Default::default()
+            },
+            cpu_s: start.elapsed().as_secs_f64(),
+        });
+        self.frame += 1;
+    }
+
+    /// Records every pass of the prepared frame into `encoder`, drawing into `color` and
+    /// `depth` (cleared here); submits nothing and waits for nothing. The frame, top to bottom:
+    ///
+    /// 1. child tiles derived from their parents (compute, `derive_child.wgsl`);
+    /// 2. the wind field and the sway springs (compute, `wind_field.wgsl`, `grass_sway.wgsl`);
+    /// 3. the terrain's depth pre-pass (`terrain.wgsl`);
+    /// 4. the Hi-Z pyramid from that depth (compute, `hiz_build.wgsl`);
+    /// 5. the terrain's colour and the sky (`terrain.wgsl`);
+    /// 6. grass in batches of 4 tiles: generation and culling, then the wind on each blade
+    ///    (compute, `grass_generate.wgsl`, `grass_wind.wgsl`), then one indirect draw per tile
+    ///    (`grass_draw.wgsl`);
+    /// 7. the pass timestamps and grass counters copied into the readback ring, mapped when the
+    ///    encoder's work is submitted ([`Renderer::stats`]).
+    pub fn record(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+    ) -> Result<(), RendererError> {
+        let start = Instant::now();
+        self.check_targets(color, depth)?;
+        let Some(frame) = self.prepared.take() else {
+            return Err(RendererError::NotPrepared);
+        };
+        self.timer.begin_frame();
+
+        // 1. Child tiles.
+        if !frame.derives.is_empty() {
+            self.derive.record(
+                &self.queue,
+                encoder,
+                &self.atlas,
+                &frame.derives,
+                &mut self.timer,
+            );
+        }
+        // 2. Wind and sway.
+        if let Some(g) = &mut self.grass {
+            let camera = &frame.input.camera;
+            g.wind.update(
+                &self.queue,
+                encoder,
+                camera.position,
+                frame.input.time_s,
+                frame.dt,
+                frame.input.walker,
+                &mut self.timer,
+            );
+            let lookup = g.wind.lookup();
+            g.sway
+                .update(&self.queue, encoder, &lookup, frame.dt, &mut self.timer);
+        }
+        // 3. Terrain depth.
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("terrain depth"),
+                color_attachments: &[],
+                depth_stencil_attachment: depth_attachment(depth, wgpu::LoadOp::Clear(0.0)),
+                timestamp_writes: self.timer.render_pass("terrain_depth"),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            self.terrain.draw_depth(&mut pass, frame.terrain_tiles);
+        }
+        // 4. Hi-Z.
+        if let Some(g) = &mut self.grass {
+            g.renderer
+                .hiz
+                .record(&self.device, encoder, depth.texture(), &mut self.timer);
+        }
+        // 5. Terrain colour and sky.
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("terrain"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: color,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: depth_attachment(depth, wgpu::LoadOp::Load),
+                timestamp_writes: self.timer.render_pass("terrain"),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            self.terrain.draw(&mut pass, frame.terrain_tiles);
+        }
+        // 6. Grass.
+        let mut stats = frame.stats;
+        if let Some(g) = &self.grass {
+            stats.grass.tiles = g.renderer.record(
+                &self.queue,
+                encoder,
+                &frame.grass_jobs,
+                color,
+                depth,
+                &mut self.timer,
+            );
+        }
+        // 7. Figures.
+        self.timer.resolve(encoder);
+        stats.cpu_ms = (frame.cpu_s + start.elapsed().as_secs_f64()) * 1e3;
+        let counters = self.grass.as_ref().map(|g| g.renderer.stats_buffer());
+        self.readback.record(encoder, &self.timer, counters, stats);
+        Ok(())
+    }
+
+    /// Figures of the newest frame that has come back (polling the device without waiting);
+    /// `None` before the first has.
+    pub fn stats(&mut self) -> Option<&FrameStats> {
+        self.collect_stats();
+        self.readback.ready.back()
+    }
+
+    /// Every frame's figures that have come back since the last call, oldest first (at most
+    /// [`MAX_READY_STATS`]; older ones are dropped). Polls the device without waiting.
+    pub fn take_stats(&mut self) -> Vec<FrameStats> {
+        self.collect_stats();
+        self.readback.ready.drain(..).collect()
+    }
+
+    /// Frames recorded whose figures were lost: all readback slots were still on their way
+    /// back (the GPU is more than [`READBACK_SLOTS`] frames behind, or an encoder was not
+    /// submitted), or a mapping failed.
+    pub fn stats_dropped(&self) -> u64 {
+        self.readback.dropped
+    }
+
+    fn collect_stats(&mut self) {
+        let _ = self.device.poll(wgpu::PollType::Poll);
+        self.readback.collect(&self.timer);
+    }
+
+    fn check_targets(
+        &self,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+    ) -> Result<(), RendererError> {
+        let t = &self.targets;
+        let size = |tex: &wgpu::Texture| (tex.width(), tex.height());
+        let describe = |tex: &wgpu::Texture| {
+            format!(
+                "{}x{} {:?} with {:?}",
+                tex.width(),
+                tex.height(),
+                tex.format(),
+                tex.usage()
+            )
+        };
+        let c = color.texture();
+        if size(c) != (t.width, t.height) {
+            return Err(RendererError::Target {
+                which: "colour",
+                found: describe(c),
+                expected: format!("{}x{}", t.width, t.height),
+            });
+        }
+        let d = depth.texture();
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        if size(d) != (t.width, t.height)
+            || d.format() != t.depth_format
+            || !d.usage().contains(usage)
+        {
+            return Err(RendererError::Target {
+                which: "depth",
+                found: describe(d),
+                expected: format!(
+                    "{}x{} {:?} with {:?}",
+                    t.width, t.height, t.depth_format, usage
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    /// The generation jobs of the grass tiles that have their own data resident and are in view.
+    fn grass_jobs(&self, camera: &Camera, grass: &[(TileId, Ring, f64)]) -> Vec<TileJob> {
+        let pyramid = &self.world.manifest.pyramid;
+        let frustum = Frustum::from_view_proj(camera.view_proj_relative(self.aspect()));
+        let mut jobs = Vec::new();
+        for &(id, ring, _) in grass {
+            let Some((src, slot)) = self.service.draw_source(id) else {
+                continue;
+            };
+            if src != id {
+                continue; // no grass until the tile's own data is there
+            }
+            let b = pyramid.bounds(id);
+            let (h0, h1) = self.service.height_range(id);
+            let tallest = 1.5f64;
+            let min = glam::DVec3::new(b.min.x, b.min.y, f64::from(h0)) - camera.position;
+            let max = glam::DVec3::new(b.max.x, b.max.y, f64::from(h1) + tallest) - camera.position;
+            if !frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
+                continue;
+            }
+            let rel = b.min - camera.position.truncate();
+            jobs.push(TileJob {
+                origin: [rel.x as f32, rel.y as f32],
+                cell: pyramid.cell_size_m(id.level) as f32,
+                layer: slot,
+                tile_x: id.x,
+                tile_y: id.y,
+                lod: u32::from(ring == Ring::Low),
+                slot: 0,
+            });
+        }
+        jobs
+    }
+}
+
+fn depth_attachment(
+    view: &wgpu::TextureView,
+    load: wgpu::LoadOp<f32>,
+) -> Option<wgpu::RenderPassDepthStencilAttachment<'_>> {
+    Some(wgpu::RenderPassDepthStencilAttachment {
+        view,
+        depth_ops: Some(wgpu::Operations {
+            load,
+            store: wgpu::StoreOp::Store,
+        }),
+        stencil_ops: None,
+    })
+}
+
+fn check_formats(targets: &Targets) -> Result<(), RendererError> {
+    if crate::shaders::encode_srgb_for(targets.color_format).is_none() {
+        return Err(RendererError::ColorFormat(targets.color_format));
+    }
+    if !DEPTH_FORMATS.contains(&targets.depth_format) {
+        return Err(RendererError::DepthFormat(targets.depth_format));
+    }
+    Ok(())
+}
+
+fn check_size(device: &wgpu::Device, width: u32, height: u32) -> Result<(), RendererError> {
+    let limit = device.limits().max_texture_dimension_2d;
+    if width == 0 || height == 0 || width > limit || height > limit {
+        return Err(RendererError::BadSize {
+            width,
+            height,
+            limit,
+        });
+    }
+    Ok(())
+}
+
+const FREE: u8 = 0;
+const PENDING: u8 = 1;
+const MAPPED: u8 = 2;
+const FAILED: u8 = 3;
+
+/// One frame's figures on their way back: a buffer mapped on submit, and what the CPU knew.
+struct ReadbackSlot {
+    buffer: wgpu::Buffer,
+    state: Arc<AtomicU8>,
+    frame: Option<(FrameStats, Vec<String>)>,
+}
+
+/// A small ring of readback buffers: each frame copies its timestamps and grass counters into
+/// a free slot, mapped when the encoder is submitted; figures are read once mapped, a frame or
+/// two later, and never waited for.
+struct StatsRing {
+    slots: Vec<ReadbackSlot>,
+    timestamp_bytes: u64,
+    ready: VecDeque<FrameStats>,
+    dropped: u64,
+}
+
+impl StatsRing {
+    fn new(device: &wgpu::Device, timestamp_bytes: u64) -> Self {
+        let slots = (0..READBACK_SLOTS)
+            .map(|_| ReadbackSlot {
+                buffer: device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("frame figures readback"),
+                    size: timestamp_bytes + 64,
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }),
+                state: Arc::new(AtomicU8::new(FREE)),
+                frame: None,
+            })
+            .collect();
+        Self {
+            slots,
+            timestamp_bytes,
+            ready: VecDeque::with_capacity(MAX_READY_STATS + 1),
+            dropped: 0,
+        }
+    }
+
+    fn record(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        timer: &GpuTimer,
+        counters: Option<&wgpu::Buffer>,
+        stats: FrameStats,
+    ) {
+        let Some(slot) = self
+            .slots
+            .iter_mut()
+            .find(|s| s.state.load(Ordering::Acquire) == FREE)
+        else {
+            self.dropped += 1;
+            return;
+        };
+        let names = timer.names().to_vec();
+        if let Some(resolve) = timer.resolve_buffer()
+            && !names.is_empty()
+        {
+            encoder.copy_buffer_to_buffer(resolve, 0, &slot.buffer, 0, names.len() as u64 * 16);
+        }
+        if let Some(c) = counters {
+            encoder.copy_buffer_to_buffer(c, 0, &slot.buffer, self.timestamp_bytes, 64);
+        }
+        slot.state.store(PENDING, Ordering::Release);
+        let state = slot.state.clone();
+        encoder.map_buffer_on_submit(&slot.buffer, wgpu::MapMode::Read, .., move |r| {
+            state.store(if r.is_ok() { MAPPED } else { FAILED }, Ordering::Release);
+        });
+        slot.frame = Some((stats, names));
+    }
+
+    fn collect(&mut self, timer: &GpuTimer) {
+        let mut done: Vec<FrameStats> = Vec::new();
+        for slot in &mut self.slots {
+            match slot.state.load(Ordering::Acquire) {
+                MAPPED => {
+                    let (mut stats, names) = slot.frame.take().unwrap_or_default();
+                    if let Ok(view) = slot.buffer.get_mapped_range(..) {
+                        let words: &[u64] = bytemuck::cast_slice(&view);
+                        let ticks = &words[..(self.timestamp_bytes / 8) as usize];
+                        stats.gpu = timer.times(&names, ticks);
+                        let counters: &[u32] =
+                            bytemuck::cast_slice(&view[self.timestamp_bytes as usize..]);
+                        let c: [u32; 16] = counters[..16].try_into().unwrap_or([0; 16]);
+                        stats.grass = GrassStats::from_counts(stats.grass.tiles, &c);
+                    }
+                    slot.buffer.unmap();
+                    slot.state.store(FREE, Ordering::Release);
+                    done.push(stats);
+                }
+                FAILED => {
+                    slot.frame = None;
+                    slot.buffer.unmap();
+                    slot.state.store(FREE, Ordering::Release);
+                    self.dropped += 1;
+                }
+                _ => {}
+            }
+        }
+        done.sort_by_key(|s| s.frame);
+        for s in done {
+            if self.ready.len() == MAX_READY_STATS {
+                self.ready.pop_front();
+            }
+            self.ready.push_back(s);
+        }
+    }
+}

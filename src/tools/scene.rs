@@ -1,0 +1,224 @@
+//! The headless scene of the tools: offscreen colour and depth targets of a fixed size around a
+//! [`Renderer`], with a frame call that waits for the GPU (for runs that read every frame back)
+//! and one that does not (for timing runs).
+
+use std::sync::Arc;
+
+use glam::DVec2;
+
+use crate::camera::Camera;
+use crate::gpu::{GpuContext, ReadbackError};
+use crate::lod::Ring;
+use crate::renderer::{FrameInput, FrameStats, Renderer, RendererError, RendererOptions};
+use crate::stream::{TileAtlas, TileService, TileSource};
+use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT};
+use crate::world::{TileId, World};
+
+pub use crate::renderer::RendererConfig as SceneConfig;
+
+/// What stops a scene from being built or drawn.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SceneError {
+    /// The renderer refused.
+    #[error(transparent)]
+    Renderer(#[from] RendererError),
+    /// The image could not be read back.
+    #[error(transparent)]
+    Readback(#[from] ReadbackError),
+    /// A frame's figures did not come back after its GPU work finished.
+    #[error("the figures of frame {0} did not come back from the GPU")]
+    StatsMissing(u64),
+}
+
+/// A world drawn by a [`Renderer`] into offscreen targets (`COLOR_FORMAT`, `DEPTH_FORMAT`).
+pub struct Scene {
+    renderer: Renderer,
+    color: wgpu::Texture,
+    color_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    last: Option<(Camera, f64)>,
+}
+
+impl Scene {
+    /// A renderer of `world` with `width` x `height` targets (its level-0 tiles are loaded here).
+    pub fn new(
+        ctx: &GpuContext,
+        world: World,
+        width: u32,
+        height: u32,
+        config: SceneConfig,
+    ) -> Result<Self, SceneError> {
+        let source = Arc::new(world.clone());
+        Self::with_source(ctx, world, source, width, height, config)
+    }
+
+    /// Like [`Scene::new`], with tiles from `source` instead of the world's files (tests use
+    /// this to make loads slow or failing on purpose).
+    pub fn with_source(
+        ctx: &GpuContext,
+        world: World,
+        source: Arc<dyn TileSource>,
+        width: u32,
+        height: u32,
+        config: SceneConfig,
+    ) -> Result<Self, SceneError> {
+        let mut options = RendererOptions::new(&world, COLOR_FORMAT, DEPTH_FORMAT, width, height);
+        options.config = config;
+        let renderer = Renderer::with_source(&ctx.device, &ctx.queue, world, source, options)?;
+        let target = |label, format, usage| {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let color = target(
+            "color",
+            COLOR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        );
+        let depth = target(
+            "depth",
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        Ok(Self {
+            renderer,
+            color_view: color.create_view(&Default::default()),
+            depth_view: depth.create_view(&Default::default()),
+            color,
+            last: None,
+        })
+    }
+
+    /// The renderer.
+    pub fn renderer(&mut self) -> &mut Renderer {
+        &mut self.renderer
+    }
+
+    /// The world being drawn.
+    pub fn world(&self) -> &World {
+        self.renderer.world()
+    }
+
+    /// Width and height of the targets.
+    pub fn size(&self) -> (u32, u32) {
+        (self.color.width(), self.color.height())
+    }
+
+    /// The tile service (for its figures and residency queries).
+    pub fn service(&self) -> &TileService {
+        self.renderer.service()
+    }
+
+    /// The grass tiles of the last frame and their rings.
+    pub fn grass_rings(&self) -> Vec<(TileId, Ring)> {
+        self.renderer.grass_rings()
+    }
+
+    /// The tile atlas.
+    pub fn atlas(&self) -> &TileAtlas {
+        self.renderer.atlas()
+    }
+
+    /// The name of the wind scene in effect at `time_s`.
+    pub fn wind_scene_at(&self, time_s: f64) -> String {
+        self.renderer.wind_scene_at(time_s)
+    }
+
+    /// Brings every tile `camera` wants into the atlas, waiting (see [`Renderer::warm_up`]).
+    pub fn warm_up(
+        &mut self,
+        _ctx: &GpuContext,
+        camera: &Camera,
+        timeout: std::time::Duration,
+    ) -> Result<bool, SceneError> {
+        Ok(self.renderer.warm_up(camera, timeout)?)
+    }
+
+    /// Draws one frame from `camera` at the time of the last frame (the wind stands still).
+    pub fn render(&mut self, ctx: &GpuContext, camera: &Camera) -> Result<FrameStats, SceneError> {
+        let t = self.last.map_or(0.0, |(_, t)| t);
+        self.render_at(ctx, camera, t)
+    }
+
+    /// Draws one frame from `camera` at `time_s`, the camera leaving the trail, and waits for
+    /// it and its figures.
+    pub fn render_at(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        time_s: f64,
+    ) -> Result<FrameStats, SceneError> {
+        let walker = camera.position.truncate();
+        self.render_frame(ctx, camera, time_s, Some(walker))
+    }
+
+    /// Like [`Scene::render_at`], with the trail left by a walker at `walker` (world xy,
+    /// metres) instead of the camera; `None` leaves no trail this frame.
+    pub fn render_frame(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        time_s: f64,
+        walker: Option<DVec2>,
+    ) -> Result<FrameStats, SceneError> {
+        let (frame, submission) = self.submit_frame(ctx, camera, time_s, walker)?;
+        let _ = ctx.device.poll(wgpu::PollType::Wait {
+            submission_index: Some(submission),
+            timeout: None,
+        });
+        self.renderer
+            .take_stats()
+            .into_iter()
+            .find(|s| s.frame == frame)
+            .ok_or(SceneError::StatsMissing(frame))
+    }
+
+    /// Prepares, records and submits one frame without waiting for it; returns its number
+    /// (its figures come back through [`Renderer::take_stats`]) and its submission.
+    pub fn submit_frame(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        time_s: f64,
+        walker: Option<DVec2>,
+    ) -> Result<(u64, wgpu::SubmissionIndex), SceneError> {
+        let input = FrameInput {
+            camera: *camera,
+            time_s,
+            walker,
+        };
+        self.renderer.prepare(&ctx.queue, &input);
+        let frame = self.renderer_frame();
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        self.renderer
+            .record(&mut encoder, &self.color_view, &self.depth_view)?;
+        let submission = ctx.queue.submit([encoder.finish()]);
+        self.last = Some((*camera, time_s));
+        Ok((frame, submission))
+    }
+
+    /// The number of the frame prepared last.
+    fn renderer_frame(&self) -> u64 {
+        self.renderer.frames_prepared().saturating_sub(1)
+    }
+
+    /// Reads the last frame back as an RGBA8 image (sRGB); waits for the GPU.
+    pub fn read_image(&self, ctx: &GpuContext) -> Result<image::RgbaImage, SceneError> {
+        let pixels = crate::gpu::read_texture_rgba8(&ctx.device, &ctx.queue, &self.color)?;
+        let (w, h) = self.size();
+        Ok(image::RgbaImage::from_raw(w, h, pixels)
+            .expect("readback returns width * height * 4 bytes"))
+    }
+}
