@@ -17,6 +17,9 @@ struct Frame {
     // x: tile cells, y: border samples, z: grass type count, w: feature bits (src/features.rs)
     grid: vec4<u32>,
     ground_colors: array<vec4<f32>, 16>,
+    // The viewer's overlay: x: on (1) or off (0), y and z: radii of the high and low grass
+    // rings (m), w: the grid cell of a level-0 tile's draw (m), from which a tile's level follows.
+    overlay: vec4<f32>,
 }
 
 struct TileDraw {
@@ -47,6 +50,8 @@ struct VertexOut {
     @location(0) rel_pos: vec3<f32>,
     @location(1) normal: vec3<f32>,
     @location(2) albedo: vec3<f32>,
+    // The drawn tile's level (for the overlay).
+    @location(3) @interpolate(flat) level: f32,
 }
 
 fn texel(t: vec2<i32>, layer: u32) -> f32 {
@@ -118,6 +123,7 @@ fn vs_terrain(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) 
     out.rel_pos = rel;
     out.normal = normal;
     out.albedo = albedo;
+    out.level = round(log2(frame.overlay.w / tile.cell_size));
     return out;
 }
 
@@ -140,8 +146,34 @@ fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
     // Clear near the camera, 95% fog at the manifest's fog distance.
     let x = dist / frame.camera.y;
     let fog = 1.0 - exp(-3.0 * x * x);
-    let color = mix(lit, fog_color(in.rel_pos / max(dist, 1e-3)), fog);
+    var color = mix(lit, fog_color(in.rel_pos / max(dist, 1e-3)), fog);
+    if frame.overlay.x > 0.5 {
+        color = with_overlay(color, in);
+    }
     return output_color(color);
+}
+
+// Tile levels as hues, and the grass rings as lines around the camera.
+fn with_overlay(color: vec3<f32>, in: VertexOut) -> vec3<f32> {
+    let hues = array<vec3<f32>, 6>(
+        vec3<f32>(0.9, 0.2, 0.2),
+        vec3<f32>(0.9, 0.6, 0.1),
+        vec3<f32>(0.8, 0.9, 0.1),
+        vec3<f32>(0.2, 0.8, 0.3),
+        vec3<f32>(0.2, 0.6, 0.9),
+        vec3<f32>(0.6, 0.3, 0.9),
+    );
+    let level = u32(max(in.level, 0.0)) % 6u;
+    var c = mix(color, hues[level], 0.35);
+    let r = length(in.rel_pos.xy);
+    let width = 0.3 + 0.004 * length(in.rel_pos);
+    for (var k = 0; k < 2; k++) {
+        let radius = select(frame.overlay.z, frame.overlay.y, k == 0);
+        if radius > 0.0 && abs(r - radius) < width {
+            c = select(vec3<f32>(0.1, 0.3, 1.0), vec3<f32>(1.0, 1.0, 1.0), k == 0);
+        }
+    }
+    return c;
 }
 
 // Sky: drawn after the terrain, only where the depth buffer still holds the far plane.

@@ -81,6 +81,37 @@ enum Command {
         #[command(flatten)]
         stream: StreamArgs,
     },
+    /// Open a window on a world: drag the mouse to look, WASD to fly, Q/E down and up, Shift
+    /// faster, the wheel or +/- for speed, P to follow the camera path (N: next path), 1-9 for
+    /// the wind scenes, L for the LOD overlay, V for vsync, Esc to quit. Figures in the title.
+    View {
+        /// World folder, or the name of a world under ./worlds.
+        #[arg(default_value = "santa-cruz")]
+        world: String,
+        /// Window size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Present as fast as possible instead of waiting for the display's refresh.
+        #[arg(long)]
+        no_vsync: bool,
+        /// Camera path to start on and follow with P (default: the manifest's first).
+        #[arg(long)]
+        path: Option<String>,
+        /// Follow the camera path from the start.
+        #[arg(long)]
+        follow: bool,
+        /// Render this many frames (a fixed 1/60 s apart) and exit.
+        #[arg(long)]
+        frames: Option<u32>,
+        /// Write the last of --frames N frames to this PNG file.
+        #[arg(long)]
+        screenshot: Option<PathBuf>,
+        /// Wind scene to start with (default: the path's wind keys, else breeze).
+        #[arg(long)]
+        wind: Option<String>,
+        #[command(flatten)]
+        stream: StreamArgs,
+    },
     /// Fly fast with random turns and teleports; check the streaming ceilings, holes and memory.
     /// Writes soak.json and exits non-zero if a check failed.
     Soak {
@@ -554,6 +585,40 @@ fn run(cli: Cli) -> Result<()> {
             disable,
             enable,
         }),
+        Command::View {
+            world,
+            size,
+            no_vsync,
+            path,
+            follow,
+            frames,
+            screenshot,
+            wind,
+            stream,
+        } => {
+            let summary = verdant::tools::view::run_view(verdant::tools::view::ViewOptions {
+                world: resolve_world(&world)?,
+                size,
+                vsync: !no_vsync,
+                path,
+                follow,
+                frames,
+                screenshot: screenshot.clone(),
+                service: stream.service(),
+                wind_scene: wind,
+            })?;
+            println!(
+                "{} frames, median {:.1} ms a frame ({:.1} fps) on {}",
+                summary.frames,
+                summary.median_frame_ms,
+                1e3 / summary.median_frame_ms.max(1e-3),
+                summary.adapter
+            );
+            if let Some(file) = screenshot {
+                println!("wrote {}", file.display());
+            }
+            Ok(())
+        }
         Command::Soak {
             world,
             seconds,

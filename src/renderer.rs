@@ -483,6 +483,38 @@ impl Renderer {
         })
     }
 
+    /// Shows (or hides) the overlay of tile levels (a hue per level) and grass rings (circles
+    /// at the high and low rings' radii) on the terrain.
+    pub fn set_overlay(&mut self, on: bool) {
+        let radii = self.rings.as_ref().map_or([0.0; 2], |r| {
+            let s = &r.settings;
+            [s.high_radius_m as f32, s.low_radius_m as f32]
+        });
+        self.terrain.set_overlay(on, radii);
+    }
+
+    /// Changes the wind to the manifest's scene `name` from `time_s` on, the ambient wind
+    /// blending over `blend_s` seconds (`time_s` at or after the last change's).
+    pub fn change_wind_scene(
+        &mut self,
+        name: &str,
+        time_s: f64,
+        blend_s: f64,
+    ) -> Result<(), RendererError> {
+        let Some(g) = &mut self.grass else {
+            return Ok(());
+        };
+        let next = WindConfig::from_scene(&self.world.manifest, Some(name))?;
+        g.wind.change_scene(crate::wind::SceneChange {
+            at_s: time_s,
+            blend_s,
+            scene: next.scene,
+            ambient: next.ambient,
+            source_list: next.source_list,
+        });
+        Ok(())
+    }
+
     /// Follows a resize of the targets (the next frame draws at the new size).
     pub fn resize(&mut self, width: u32, height: u32) -> Result<(), RendererError> {
         check_size(&self.device, width, height)?;

@@ -91,11 +91,28 @@ impl GpuContext {
     }
 
     async fn new_async() -> Result<Self, GpuError> {
-        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = backends;
+        Self::open(Self::instance(None), None).await
+    }
+
+    /// A wgpu instance for the backends of `WGPU_BACKEND` (default: the primary ones), with
+    /// the display connection of a windowing system when a window will be drawn into.
+    pub fn instance(display: Option<Box<dyn wgpu::wgt::WgpuHasDisplayHandle>>) -> wgpu::Instance {
+        let mut desc = match display {
+            Some(d) => wgpu::InstanceDescriptor::new_with_display_handle(d),
+            None => wgpu::InstanceDescriptor::new_without_display_handle(),
+        };
+        desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
         desc.flags = wgpu::InstanceFlags::default().with_env();
-        let instance = wgpu::Instance::new(desc);
+        wgpu::Instance::new(desc)
+    }
+
+    /// Opens the adapter selected by the usual wgpu environment variables on `instance`, one
+    /// that can present to `surface` when given.
+    pub async fn open(
+        instance: wgpu::Instance,
+        surface: Option<&wgpu::Surface<'_>>,
+    ) -> Result<Self, GpuError> {
+        let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
 
         let wanted_name = std::env::var("WGPU_ADAPTER_NAME")
             .ok()
@@ -105,11 +122,15 @@ impl GpuContext {
                 .enumerate_adapters(backends)
                 .await
                 .into_iter()
-                .find(|a| a.get_info().name.to_lowercase().contains(name.as_str())),
+                .find(|a| {
+                    a.get_info().name.to_lowercase().contains(name.as_str())
+                        && surface.is_none_or(|s| a.is_surface_supported(s))
+                }),
             None => instance
                 .request_adapter(&wgpu::RequestAdapterOptions {
                     power_preference: wgpu::PowerPreference::from_env()
                         .unwrap_or(wgpu::PowerPreference::HighPerformance),
+                    compatible_surface: surface,
                     ..Default::default()
                 })
                 .await

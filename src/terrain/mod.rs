@@ -33,8 +33,9 @@ struct FrameUniforms {
     horizon_color: [f32; 4],
     grid: [u32; 4],
     ground_colors: [[f32; 4]; MAX_GRASS_TYPES],
+    overlay: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 480);
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 496);
 
 /// One tile (or the part of an ancestor standing in for it) to draw; mirrors `TileDraw` in
 /// `shaders/terrain.wgsl`.
@@ -305,6 +306,12 @@ impl TerrainRenderer {
                 crate::features::Features::all().bits(),
             ],
             ground_colors,
+            overlay: [
+                0.0,
+                0.0,
+                0.0,
+                (manifest.pyramid.cell_size_m(0) * f64::from(mesh_step)) as f32,
+            ],
         };
         Self {
             depth_prepass,
@@ -323,6 +330,14 @@ impl TerrainRenderer {
     /// Sets the switched-on features (the terrain reads ground darkening).
     pub fn set_features(&mut self, features: crate::features::Features) {
         self.uniforms.grid[3] = features.bits();
+    }
+
+    /// Shows (or hides) the overlay: each tile tinted by its level, and circles at the grass
+    /// rings' radii (metres; 0 for none) around the camera.
+    pub fn set_overlay(&mut self, on: bool, ring_radii_m: [f32; 2]) {
+        self.uniforms.overlay[0] = if on { 1.0 } else { 0.0 };
+        self.uniforms.overlay[1] = ring_radii_m[0];
+        self.uniforms.overlay[2] = ring_radii_m[1];
     }
 
     /// Most tiles a frame can draw.

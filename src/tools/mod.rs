@@ -11,6 +11,7 @@ pub mod metrics;
 pub mod report;
 pub mod scene;
 pub mod soak;
+pub mod view;
 
 pub use bench::{
     BenchFeaturesReport, BenchLodOptions, BenchLodReport, FeatureResult, LodSetting, lod_settings,

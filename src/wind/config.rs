@@ -526,6 +526,11 @@ impl FieldDriver {
         &self.config
     }
 
+    /// Adds a change of scene (at or after the last one's time).
+    pub fn push_change(&mut self, change: SceneChange) {
+        self.config.changes.push(change);
+    }
+
     /// One frame's uniforms: the camera at `camera_world`, scene time `time_s`, `dt_s` since the
     /// last frame (negative or NaN counts as 0), the walker (if any) at `walker_world`.
     pub fn frame(

@@ -165,6 +165,12 @@ impl WindField {
         self.driver.config()
     }
 
+    /// Changes the scene from `change.at_s` on, blending the ambient wind over its `blend_s`
+    /// (at or after the last change's time).
+    pub fn change_scene(&mut self, change: crate::wind::SceneChange) {
+        self.driver.push_change(change);
+    }
+
     /// Records one frame's update (a compute pass named `wind` for `timer`): the camera at
     /// `camera_world`, scene time `time_s`, `dt_s` seconds since the last update (0 or more;
     /// any size is stable), the walker that leaves the trail at `walker_world` (`None`: no

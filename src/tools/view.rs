@@ -1,0 +1,594 @@
+//! `verdant view`: a window on a world, drawn by a [`Renderer`] into the window's surface.
+//!
+//! Keys: drag with the left mouse button to look around; W A S D fly, Q and E down and up,
+//! Shift four times faster, the mouse wheel (or `+` and `-`) sets the speed; P follows the
+//! manifest's camera path (again to fly free from there), N takes the next path; 1 to 9 choose
+//! the manifest's wind scenes; L shows the tile levels and grass rings; V switches vsync;
+//! Escape quits. Live figures (frame time, GPU time per pass, blades drawn, tiles resident) are
+//! in the window's title.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use glam::DVec3;
+use winit::application::ApplicationHandler;
+use winit::event::{DeviceEvent, ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, EventLoop};
+use winit::keyboard::{KeyCode, PhysicalKey};
+use winit::window::{Window, WindowId};
+
+use crate::camera::{Camera, sample_path, walker_at};
+use crate::gpu::GpuContext;
+use crate::renderer::{FrameInput, FrameStats, Renderer, RendererConfig, RendererOptions};
+use crate::stream::ServiceConfig;
+use crate::world::{CameraPath, World};
+
+/// What `verdant view` is asked to do.
+#[derive(Clone, Debug)]
+pub struct ViewOptions {
+    /// The world's folder.
+    pub world: PathBuf,
+    /// Inner size of the window.
+    pub size: (u32, u32),
+    /// Wait for the display's refresh (vsync) or not.
+    pub vsync: bool,
+    /// The camera path to start on (and to follow with P); the manifest's first when `None`.
+    pub path: Option<String>,
+    /// Follow the path from the start.
+    pub follow: bool,
+    /// Render this many frames (at a fixed 1/60 s step, standing still unless following) and
+    /// exit.
+    pub frames: Option<u32>,
+    /// Write the last frame to this PNG file (with `frames`).
+    pub screenshot: Option<PathBuf>,
+    /// Limits of the tile service.
+    pub service: ServiceConfig,
+    /// Wind scene to start with (default: the path's wind keys, else `breeze`).
+    pub wind_scene: Option<String>,
+}
+
+/// What a viewing session measured.
+#[derive(Clone, Debug, Default)]
+pub struct ViewSummary {
+    /// Frames drawn.
+    pub frames: u64,
+    /// Median wall time between frames, milliseconds.
+    pub median_frame_ms: f64,
+    /// The adapter, backend and driver.
+    pub adapter: String,
+}
+
+/// Opens the window and runs until it is closed (or `frames` are drawn).
+pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
+    if opts.screenshot.is_some() && opts.frames.is_none() {
+        bail!("--screenshot needs --frames N (the frame to capture)");
+    }
+    let world = World::open(&opts.world)?;
+    if world.manifest.paths.is_empty() {
+        bail!("world {} has no camera paths", opts.world.display());
+    }
+    if let Some(name) = &opts.path
+        && world.manifest.path(name).is_none()
+    {
+        bail!("world {} has no camera path {name:?}", opts.world.display());
+    }
+    let no_display = std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty())
+        && std::env::var_os("WAYLAND_DISPLAY").is_none_or(|d| d.is_empty());
+    let event_loop = match EventLoop::new() {
+        Ok(e) if !no_display => e,
+        result => bail!(
+            "no display to open a window on ({}): `verdant view` needs a desktop session \
+             (DISPLAY or WAYLAND_DISPLAY); for a headless run use `verdant fly`",
+            match result {
+                Err(e) => e.to_string(),
+                Ok(_) => "DISPLAY and WAYLAND_DISPLAY are not set".to_owned(),
+            }
+        ),
+    };
+    let mut app = Viewer {
+        opts,
+        world: Some(world),
+        state: None,
+        error: None,
+        summary: ViewSummary::default(),
+    };
+    event_loop
+        .run_app(&mut app)
+        .context("the window's event loop failed")?;
+    match app.error {
+        Some(e) => Err(e),
+        None => Ok(app.summary),
+    }
+}
+
+struct Viewer {
+    opts: ViewOptions,
+    world: Option<World>,
+    state: Option<State>,
+    error: Option<anyhow::Error>,
+    summary: ViewSummary,
+}
+
+/// The flying camera and what the keys hold down.
+#[derive(Default)]
+struct Controls {
+    forward: f64,
+    right: f64,
+    up: f64,
+    fast: bool,
+    dragging: bool,
+}
+
+struct State {
+    window: Arc<Window>,
+    surface: wgpu::Surface<'static>,
+    config: wgpu::SurfaceConfiguration,
+    ctx: GpuContext,
+    renderer: Renderer,
+    depth: wgpu::Texture,
+    depth_view: wgpu::TextureView,
+    paths: Vec<CameraPath>,
+    path_index: usize,
+    following: bool,
+    path_t: f64,
+    position: DVec3,
+    yaw_deg: f64,
+    pitch_deg: f64,
+    speed_mps: f64,
+    controls: Controls,
+    overlay: bool,
+    time_s: f64,
+    last_frame: Instant,
+    frame_times_ms: Vec<f64>,
+    frames: u64,
+    title_at: Instant,
+    last_stats: Option<FrameStats>,
+    wind_scene: String,
+}
+
+fn depth_target(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("viewer depth"),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: crate::terrain::DEPTH_FORMAT,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        view_formats: &[],
+    })
+}
+
+impl Viewer {
+    fn start(&mut self, event_loop: &ActiveEventLoop) -> Result<State> {
+        let world = self.world.take().context("the viewer started twice")?;
+        let (w, h) = self.opts.size;
+        let attrs = Window::default_attributes()
+            .with_title(format!("verdant: {}", world.manifest.name))
+            .with_inner_size(winit::dpi::PhysicalSize::new(w, h));
+        let window = Arc::new(
+            event_loop
+                .create_window(attrs)
+                .context("cannot open a window")?,
+        );
+        let instance = GpuContext::instance(None);
+        let surface = instance
+            .create_surface(window.clone())
+            .context("cannot draw into the window")?;
+        let ctx = pollster::block_on(GpuContext::open(instance, Some(&surface)))?;
+        let size = window.inner_size();
+        let (w, h) = (size.width.max(1), size.height.max(1));
+        let caps = surface.get_capabilities(&ctx.adapter);
+        // Prefer an sRGB format; the renderer encodes for plain unorm ones itself.
+        let format = caps
+            .formats
+            .iter()
+            .copied()
+            .filter(|f| crate::shaders::encode_srgb_for(*f).is_some())
+            .min_by_key(|f| !f.is_srgb())
+            .with_context(|| {
+                format!(
+                    "the window offers no colour format the renderer draws into ({:?})",
+                    caps.formats
+                )
+            })?;
+        let mut usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
+        if self.opts.screenshot.is_some() {
+            if !caps.usages.contains(wgpu::TextureUsages::COPY_SRC) {
+                bail!("this window's surface cannot be read back for --screenshot");
+            }
+            usage |= wgpu::TextureUsages::COPY_SRC;
+        }
+        let mut config = surface
+            .get_default_config(&ctx.adapter, w, h)
+            .context("the window's surface does not work with this adapter")?;
+        config.usage = usage;
+        config.format = format;
+        config.present_mode = present_mode(&caps, self.opts.vsync);
+        config.desired_maximum_frame_latency = 2;
+        surface.configure(&ctx.device, &config);
+
+        let paths = world.manifest.paths.clone();
+        let path_index = match &self.opts.path {
+            Some(name) => paths.iter().position(|p| &p.name == name).unwrap_or(0),
+            None => 0,
+        };
+        let path = &paths[path_index];
+        let mut rc = RendererConfig::for_world(&world);
+        rc.service = self.opts.service;
+        rc.wind_scene = self.opts.wind_scene.clone();
+        if rc.wind_scene.is_none() {
+            rc.wind_keys = path.wind.clone();
+        }
+        let mut options = RendererOptions::new(&world, format, crate::terrain::DEPTH_FORMAT, w, h);
+        options.config = rc;
+        let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options)?;
+        let t0 = path.keys[0].t_s;
+        let start = sample_path(path, t0);
+        // The first frame starts complete; after that, streaming shows.
+        renderer.warm_up(&start, Duration::from_secs(30))?;
+        let depth = depth_target(&ctx.device, w, h);
+        let wind_scene = renderer.wind_scene_at(0.0);
+        Ok(State {
+            depth_view: depth.create_view(&Default::default()),
+            depth,
+            window,
+            surface,
+            config,
+            ctx,
+            renderer,
+            paths,
+            path_index,
+            following: self.opts.follow,
+            path_t: t0,
+            position: start.position,
+            yaw_deg: start.yaw_deg,
+            pitch_deg: start.pitch_deg,
+            speed_mps: 20.0,
+            controls: Controls::default(),
+            overlay: false,
+            time_s: 0.0,
+            last_frame: Instant::now(),
+            frame_times_ms: Vec::new(),
+            frames: 0,
+            title_at: Instant::now(),
+            last_stats: None,
+            wind_scene,
+        })
+    }
+
+    fn fail(&mut self, event_loop: &ActiveEventLoop, e: anyhow::Error) {
+        self.error = Some(e);
+        event_loop.exit();
+    }
+}
+
+fn present_mode(caps: &wgpu::SurfaceCapabilities, vsync: bool) -> wgpu::PresentMode {
+    use wgpu::PresentMode as P;
+    let wanted: &[P] = if vsync {
+        &[P::Fifo]
+    } else {
+        &[P::Immediate, P::Mailbox, P::Fifo]
+    };
+    wanted
+        .iter()
+        .copied()
+        .find(|m| caps.present_modes.contains(m))
+        .unwrap_or(caps.present_modes[0])
+}
+
+impl ApplicationHandler for Viewer {
+    fn resumed(&mut self, event_loop: &ActiveEventLoop) {
+        if self.state.is_some() {
+            return;
+        }
+        match self.start(event_loop) {
+            Ok(s) => {
+                s.window.request_redraw();
+                self.state = Some(s);
+            }
+            Err(e) => self.fail(event_loop, e),
+        }
+    }
+
+    fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        let Some(s) = &mut self.state else { return };
+        match event {
+            WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::Resized(size) => {
+                if size.width > 0 && size.height > 0 {
+                    s.config.width = size.width;
+                    s.config.height = size.height;
+                    s.surface.configure(&s.ctx.device, &s.config);
+                    s.depth = depth_target(&s.ctx.device, size.width, size.height);
+                    s.depth_view = s.depth.create_view(&Default::default());
+                    if let Err(e) = s.renderer.resize(size.width, size.height) {
+                        self.fail(event_loop, e.into());
+                    }
+                }
+            }
+            WindowEvent::KeyboardInput { event, .. } => {
+                let down = event.state == ElementState::Pressed;
+                if let PhysicalKey::Code(code) = event.physical_key
+                    && let Err(e) = s.key(code, down, event.repeat)
+                {
+                    self.fail(event_loop, e);
+                    return;
+                }
+                if down && event.physical_key == PhysicalKey::Code(KeyCode::Escape) {
+                    event_loop.exit();
+                }
+            }
+            WindowEvent::MouseInput { state, button, .. } => {
+                if button == MouseButton::Left {
+                    s.controls.dragging = state == ElementState::Pressed;
+                }
+            }
+            WindowEvent::MouseWheel { delta, .. } => {
+                let steps = match delta {
+                    MouseScrollDelta::LineDelta(_, y) => f64::from(y),
+                    MouseScrollDelta::PixelDelta(p) => p.y / 40.0,
+                };
+                s.speed_mps = (s.speed_mps * 1.25f64.powf(steps)).clamp(1.0, 2000.0);
+            }
+            WindowEvent::RedrawRequested => {
+                if let Err(e) = self.redraw(event_loop) {
+                    self.fail(event_loop, e);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn device_event(
+        &mut self,
+        _event_loop: &ActiveEventLoop,
+        _id: winit::event::DeviceId,
+        event: DeviceEvent,
+    ) {
+        let Some(s) = &mut self.state else { return };
+        if let DeviceEvent::MouseMotion { delta } = event
+            && s.controls.dragging
+            && !s.following
+        {
+            s.yaw_deg -= delta.0 * 0.15;
+            s.pitch_deg = (s.pitch_deg - delta.1 * 0.15).clamp(-89.0, 89.0);
+        }
+    }
+
+    fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
+        if let Some(s) = &self.state {
+            s.window.request_redraw();
+        }
+    }
+}
+
+impl State {
+    fn key(&mut self, code: KeyCode, down: bool, repeat: bool) -> Result<()> {
+        let amount = if down { 1.0 } else { 0.0 };
+        match code {
+            KeyCode::KeyW => self.controls.forward = amount,
+            KeyCode::KeyS => self.controls.forward = -amount,
+            KeyCode::KeyD => self.controls.right = amount,
+            KeyCode::KeyA => self.controls.right = -amount,
+            KeyCode::KeyE => self.controls.up = amount,
+            KeyCode::KeyQ => self.controls.up = -amount,
+            KeyCode::ShiftLeft | KeyCode::ShiftRight => self.controls.fast = down,
+            _ if !down || repeat => {}
+            KeyCode::Equal | KeyCode::NumpadAdd => {
+                self.speed_mps = (self.speed_mps * 1.5).min(2000.0)
+            }
+            KeyCode::Minus | KeyCode::NumpadSubtract => {
+                self.speed_mps = (self.speed_mps / 1.5).max(1.0);
+            }
+            KeyCode::KeyP => {
+                self.following = !self.following;
+                if self.following {
+                    // Pick the path up where it is nearest the camera's time on it.
+                    self.path_t = self.path_t.max(self.paths[self.path_index].keys[0].t_s);
+                }
+            }
+            KeyCode::KeyN => {
+                self.path_index = (self.path_index + 1) % self.paths.len();
+                self.path_t = self.paths[self.path_index].keys[0].t_s;
+            }
+            KeyCode::KeyL => {
+                self.overlay = !self.overlay;
+                self.renderer.set_overlay(self.overlay);
+            }
+            KeyCode::KeyV => {
+                let vsync = self.config.present_mode != wgpu::PresentMode::Fifo;
+                let caps = self.surface.get_capabilities(&self.ctx.adapter);
+                self.config.present_mode = present_mode(&caps, vsync);
+                self.surface.configure(&self.ctx.device, &self.config);
+            }
+            KeyCode::Digit1
+            | KeyCode::Digit2
+            | KeyCode::Digit3
+            | KeyCode::Digit4
+            | KeyCode::Digit5
+            | KeyCode::Digit6
+            | KeyCode::Digit7
+            | KeyCode::Digit8
+            | KeyCode::Digit9 => {
+                let i = code as usize - KeyCode::Digit1 as usize;
+                let scenes = &self.renderer.world().manifest.wind_scenes;
+                if let Some(scene) = scenes.get(i) {
+                    let name = scene.name.clone();
+                    self.renderer.change_wind_scene(&name, self.time_s, 3.0)?;
+                    self.wind_scene = name;
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn camera(&mut self, dt: f64) -> (Camera, Option<glam::DVec2>) {
+        let path = &self.paths[self.path_index];
+        if self.following {
+            let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
+            self.path_t += dt;
+            if self.path_t > t1 {
+                self.path_t = t0 + (self.path_t - t1) % (t1 - t0).max(1e-3);
+            }
+            let c = sample_path(path, self.path_t);
+            (self.position, self.yaw_deg, self.pitch_deg) = (c.position, c.yaw_deg, c.pitch_deg);
+            let walker = walker_at(&self.renderer.world().manifest, path, self.path_t);
+            return (c, Some(walker));
+        }
+        let c = Camera::new(self.position, self.yaw_deg, self.pitch_deg);
+        let forward = c.forward();
+        let right = forward.cross(DVec3::Z).normalize_or(DVec3::X);
+        let boost = if self.controls.fast { 4.0 } else { 1.0 };
+        let step = (forward * self.controls.forward
+            + right * self.controls.right
+            + DVec3::Z * self.controls.up)
+            * self.speed_mps
+            * boost
+            * dt;
+        self.position += step;
+        let c = Camera::new(self.position, self.yaw_deg, self.pitch_deg);
+        (c, Some(self.position.truncate()))
+    }
+
+    fn update_title(&mut self) {
+        if self.title_at.elapsed() < Duration::from_millis(500) {
+            return;
+        }
+        self.title_at = Instant::now();
+        let n = self.frame_times_ms.len().min(60);
+        let recent = &self.frame_times_ms[self.frame_times_ms.len() - n..];
+        let mut sorted = recent.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let frame_ms = sorted.get(n / 2).copied().unwrap_or(0.0);
+        let mut title = format!(
+            "verdant: {} | {:.1} ms ({:.0} fps)",
+            self.renderer.world().manifest.name,
+            frame_ms,
+            1e3 / frame_ms.max(1e-3)
+        );
+        if let Some(st) = &self.last_stats {
+            let gpu: f64 = st.gpu.iter().map(|(_, t)| t).sum();
+            let passes: Vec<String> = st
+                .gpu
+                .iter()
+                .map(|(name, t)| format!("{name} {t:.2}"))
+                .collect();
+            let blades = st.grass.drawn[0] + st.grass.drawn[1];
+            title.push_str(&format!(
+                " | GPU {gpu:.2} ms: {} | {blades} blades | tiles {}/{}",
+                passes.join(", "),
+                st.residency.resident,
+                st.residency.desired,
+            ));
+        }
+        title.push_str(&format!(
+            " | {} {:.0} m/s | wind {}{}",
+            if self.following { "path" } else { "free" },
+            self.speed_mps,
+            self.wind_scene,
+            if self.overlay { " | overlay" } else { "" }
+        ));
+        self.window.set_title(&title);
+    }
+}
+
+impl Viewer {
+    fn redraw(&mut self, event_loop: &ActiveEventLoop) -> Result<()> {
+        let Some(s) = &mut self.state else {
+            return Ok(());
+        };
+        let now = Instant::now();
+        let wall_ms = now.duration_since(s.last_frame).as_secs_f64() * 1e3;
+        s.last_frame = now;
+        if s.frames > 0 {
+            s.frame_times_ms.push(wall_ms);
+            if s.frame_times_ms.len() > 4096 {
+                s.frame_times_ms.drain(..2048);
+            }
+        }
+        // A fixed step when a run of N frames is asked for, so that it can be reproduced.
+        let dt = match self.opts.frames {
+            Some(_) => 1.0 / 60.0,
+            None => (wall_ms / 1e3).min(0.25),
+        };
+        let (camera, walker) = s.camera(dt);
+        s.time_s += dt;
+        let input = FrameInput {
+            camera,
+            time_s: s.time_s,
+            walker,
+        };
+        s.renderer.prepare(&s.ctx.queue, &input);
+        let frame = match s.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(f)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
+            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
+                s.surface.configure(&s.ctx.device, &s.config);
+                return Ok(());
+            }
+            _ => return Ok(()), // timed out or occluded: try the next frame
+        };
+        let view = frame.texture.create_view(&Default::default());
+        let mut encoder = s.ctx.device.create_command_encoder(&Default::default());
+        s.renderer.record(&mut encoder, &view, &s.depth_view)?;
+        let last = self
+            .opts
+            .frames
+            .is_some_and(|n| s.frames + 1 >= u64::from(n));
+        s.ctx.queue.submit([encoder.finish()]);
+        if last && let Some(file) = &self.opts.screenshot {
+            save_screenshot(&s.ctx, &frame.texture, file)?;
+        }
+        s.window.pre_present_notify();
+        s.ctx.queue.present(frame);
+        s.frames += 1;
+        if let Some(st) = s.renderer.take_stats().pop() {
+            s.last_stats = Some(st);
+        }
+        s.update_title();
+        if last {
+            let mut sorted = s.frame_times_ms.clone();
+            sorted.sort_by(f64::total_cmp);
+            self.summary = ViewSummary {
+                frames: s.frames,
+                median_frame_ms: sorted.get(sorted.len() / 2).copied().unwrap_or(0.0),
+                adapter: s.ctx.describe(),
+            };
+            event_loop.exit();
+        }
+        Ok(())
+    }
+}
+
+/// Writes the window's current image (an RGBA or BGRA 8-bit texture) to a PNG file.
+fn save_screenshot(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    file: &std::path::Path,
+) -> Result<()> {
+    let mut pixels = crate::gpu::read_texture_rgba8(&ctx.device, &ctx.queue, texture)
+        .context("cannot read the window's image back")?;
+    let bgra = matches!(
+        texture.format(),
+        wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
+    );
+    for px in pixels.chunks_exact_mut(4) {
+        if bgra {
+            px.swap(0, 2);
+        }
+        px[3] = 255;
+    }
+    let img = image::RgbaImage::from_raw(texture.width(), texture.height(), pixels)
+        .context("screenshot size")?;
+    img.save(file)
+        .with_context(|| format!("cannot write the screenshot {}", file.display()))?;
+    Ok(())
+}
