@@ -31,7 +31,8 @@ pub struct CustomView {
     /// z up in world space.
     pub view: Mat4,
     /// Projection into wgpu's clip space, reverse-Z (depth 1 at the near plane, 0 far; an
-    /// infinite far plane is best), e.g. `glam::Mat4::perspective_infinite_reverse_rh`.
+    /// infinite far plane is best), e.g.
+    /// `glam::camera::rh::proj::directx::perspective_infinite_reverse`.
     pub proj: Mat4,
 }
 

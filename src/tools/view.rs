@@ -76,16 +76,13 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
     }
     let no_display = std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty())
         && std::env::var_os("WAYLAND_DISPLAY").is_none_or(|d| d.is_empty());
-    let event_loop = match EventLoop::new() {
-        Ok(e) if !no_display => e,
-        result => bail!(
-            "no display to open a window on ({}): `verdant view` needs a desktop session \
-             (DISPLAY or WAYLAND_DISPLAY); for a headless run use `verdant fly`",
-            match result {
-                Err(e) => e.to_string(),
-                Ok(_) => "DISPLAY and WAYLAND_DISPLAY are not set".to_owned(),
-            }
-        ),
+    let hint = "`verdant view` needs a desktop session (X11 or Wayland); for a headless run \
+                use `verdant fly`";
+    if no_display {
+        bail!("no display to open a window on: DISPLAY and WAYLAND_DISPLAY are not set. {hint}");
+    }
+    let Ok(event_loop) = EventLoop::new() else {
+        bail!("cannot connect to the display named by DISPLAY or WAYLAND_DISPLAY. {hint}");
     };
     let mut app = Viewer {
         opts,
