@@ -578,18 +578,13 @@ impl Renderer {
         timeout: std::time::Duration,
     ) -> Result<bool, RendererError> {
         let start = Instant::now();
+        self.flush_unrecorded();
         loop {
             let sel = self.select(camera);
             let plan = self.service.update(&sel.wants);
             let busy = !plan.uploads.is_empty() || !plan.derives.is_empty();
             let derives = self.upload(plan)?;
-            if !derives.is_empty() {
-                let mut e = self.device.create_command_encoder(&Default::default());
-                let mut no_timer = GpuTimer::new(&self.device, &self.queue, false, 0);
-                self.derive
-                    .record(&self.queue, &mut e, &self.atlas, &derives, &mut no_timer);
-                self.queue.submit([e.finish()]);
-            }
+            self.submit_derives(&derives);
             let stats = self.service.stats();
             if stats.resident == stats.desired {
                 let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
@@ -601,6 +596,27 @@ impl Renderer {
             if !busy {
                 std::thread::sleep(std::time::Duration::from_millis(2));
             }
+        }
+    }
+
+    /// Records and submits derivations on their own (a batch a submission: each batch's jobs
+    /// are written to the same buffer), without waiting.
+    fn submit_derives(&mut self, derives: &[DeriveJob]) {
+        let batch = self.derive.batch().max(1) as usize;
+        let mut no_timer = GpuTimer::new(&self.device, &self.queue, false, 0);
+        for chunk in derives.chunks(batch) {
+            let mut e = self.device.create_command_encoder(&Default::default());
+            self.derive
+                .record(&self.queue, &mut e, &self.atlas, chunk, &mut no_timer);
+            self.queue.submit([e.finish()]);
+        }
+    }
+
+    /// Derivations of a frame that was prepared and never recorded: the tile service counts
+    /// those tiles as resident, so they are derived now.
+    fn flush_unrecorded(&mut self) {
+        if let Some(stale) = self.prepared.take() {
+            self.submit_derives(&stale.derives);
         }
     }
 
@@ -620,6 +636,7 @@ impl Renderer {
     pub fn prepare(&mut self, queue: &wgpu::Queue, input: &FrameInput) {
         let start = Instant::now();
         self.collect_stats();
+        self.flush_unrecorded();
         let camera = input.camera;
         let dt = self
             .time_s
@@ -807,7 +824,8 @@ impl Renderer {
 
     /// Frames recorded whose figures were lost: all readback slots were still on their way
     /// back (the GPU is more than [`READBACK_SLOTS`] frames behind, or an encoder was not
-    /// submitted), or a mapping failed.
+    /// submitted), a mapping failed, or [`MAX_READY_STATS`] newer figures came back before
+    /// they were taken. Every recorded frame's figures are delivered or counted here.
     pub fn stats_dropped(&self) -> u64 {
         self.readback.dropped
     }
@@ -1038,6 +1056,7 @@ impl StatsRing {
         for s in done {
             if self.ready.len() == MAX_READY_STATS {
                 self.ready.pop_front();
+                self.dropped += 1;
             }
             self.ready.push_back(s);
         }

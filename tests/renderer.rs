@@ -1,0 +1,304 @@
+//! The renderer through its front door: targets of other formats and sizes (and after a
+//! resize) render what the reference images show, a frame is recorded and submitted without
+//! waiting for the GPU, and its figures come back later through a bounded ring.
+
+mod common;
+
+use std::time::Duration;
+
+use verdant::camera::{Camera, sample_path};
+use verdant::renderer::{MAX_READY_STATS, READBACK_SLOTS};
+use verdant::world::World;
+use verdant::{FrameInput, Renderer, RendererError, RendererOptions};
+
+/// The camera of `default_world_matches_reference_image` (tests/render_terrain.rs).
+fn overview_camera(world: &World) -> Camera {
+    let path = world.manifest.path("overview").expect("overview path");
+    let t = path.keys[0].t_s + 0.3 * (path.keys[path.keys.len() - 1].t_s - path.keys[0].t_s);
+    sample_path(path, t)
+}
+
+struct Targets {
+    color: wgpu::Texture,
+    color_view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+}
+
+fn targets(
+    device: &wgpu::Device,
+    color_format: wgpu::TextureFormat,
+    depth_format: wgpu::TextureFormat,
+    (width, height): (u32, u32),
+) -> Targets {
+    let make = |format, usage| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: None,
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    use wgpu::TextureUsages as U;
+    let color = make(color_format, U::RENDER_ATTACHMENT | U::COPY_SRC);
+    let depth = make(depth_format, U::RENDER_ATTACHMENT | U::TEXTURE_BINDING);
+    Targets {
+        color_view: color.create_view(&Default::default()),
+        depth_view: depth.create_view(&Default::default()),
+        color,
+    }
+}
+
+/// One frame into `t`, waited for; the image as RGBA8 (sRGB-encoded bytes).
+fn draw(
+    ctx: &verdant::gpu::GpuContext,
+    renderer: &mut Renderer,
+    t: &Targets,
+    camera: Camera,
+) -> image::RgbaImage {
+    renderer.prepare(&ctx.queue, &FrameInput::new(camera, 0.0));
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    renderer
+        .record(&mut encoder, &t.color_view, &t.depth_view)
+        .expect("record");
+    ctx.queue.submit([encoder.finish()]);
+    let mut pixels =
+        verdant::gpu::read_texture_rgba8(&ctx.device, &ctx.queue, &t.color).expect("read back");
+    if matches!(
+        t.color.format(),
+        wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb
+    ) {
+        for px in pixels.chunks_exact_mut(4) {
+            px.swap(0, 2);
+        }
+    }
+    image::RgbaImage::from_raw(t.color.width(), t.color.height(), pixels).expect("size")
+}
+
+#[test]
+fn bgra_unorm_and_depth24_targets_render_the_reference() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let camera = overview_camera(&world);
+    // A window's usual format: 8-bit BGRA without sRGB encoding on store (the shaders encode).
+    let (color, depth) = (
+        wgpu::TextureFormat::Bgra8Unorm,
+        wgpu::TextureFormat::Depth24Plus,
+    );
+    let options = RendererOptions::new(&world, color, depth, 256, 144);
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    assert!(renderer.warm_up(&camera, Duration::from_secs(60)).unwrap());
+    let t = targets(&ctx.device, color, depth, (256, 144));
+    let image = draw(&ctx, &mut renderer, &t, camera);
+    // Same bounds as the Rgba8UnormSrgb render of this reference: encoding in the shader and
+    // on store round alike to within a code value.
+    common::check_reference("terrain_overview", &image, 0.01, 0.10);
+}
+
+#[test]
+fn a_resized_renderer_renders_the_reference_at_its_new_size() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let camera = overview_camera(&world);
+    let (color, depth) = (
+        wgpu::TextureFormat::Rgba8Unorm,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let options = RendererOptions::new(&world, color, depth, 96, 200);
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    assert!(renderer.warm_up(&camera, Duration::from_secs(60)).unwrap());
+    let small = targets(&ctx.device, color, depth, (96, 200));
+    draw(&ctx, &mut renderer, &small, camera);
+
+    // Targets of the old size are refused after the resize, with both sizes named.
+    renderer.resize(256, 144).unwrap();
+    renderer.prepare(&ctx.queue, &FrameInput::new(camera, 0.0));
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let err = renderer
+        .record(&mut encoder, &small.color_view, &small.depth_view)
+        .unwrap_err();
+    assert!(matches!(err, RendererError::Target { .. }), "{err}");
+    assert!(
+        err.to_string().contains("96x200") && err.to_string().contains("256x144"),
+        "{err}"
+    );
+
+    assert!(renderer.warm_up(&camera, Duration::from_secs(60)).unwrap());
+    let big = targets(&ctx.device, color, depth, (256, 144));
+    let image = draw(&ctx, &mut renderer, &big, camera);
+    common::check_reference("terrain_overview", &image, 0.01, 0.10);
+}
+
+#[test]
+fn unsupported_formats_and_a_missing_prepare_are_refused() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let bad_color = RendererOptions::new(
+        &world,
+        wgpu::TextureFormat::R8Unorm,
+        wgpu::TextureFormat::Depth32Float,
+        64,
+        64,
+    );
+    let e = Renderer::new(&ctx.device, &ctx.queue, world.clone(), bad_color)
+        .err()
+        .expect("R8Unorm refused");
+    assert!(e.to_string().contains("R8Unorm"), "{e}");
+    let bad_depth = RendererOptions::new(
+        &world,
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth16Unorm,
+        64,
+        64,
+    );
+    let e = Renderer::new(&ctx.device, &ctx.queue, world.clone(), bad_depth)
+        .err()
+        .expect("Depth16Unorm refused");
+    assert!(e.to_string().contains("Depth16Unorm"), "{e}");
+
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let mut renderer = Renderer::new(
+        &ctx.device,
+        &ctx.queue,
+        world,
+        RendererOptions::new(
+            &World::open(&common::default_world()).unwrap(),
+            c,
+            d,
+            64,
+            64,
+        ),
+    )
+    .unwrap();
+    let t = targets(&ctx.device, c, d, (64, 64));
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let e = renderer
+        .record(&mut encoder, &t.color_view, &t.depth_view)
+        .unwrap_err();
+    assert!(matches!(e, RendererError::NotPrepared), "{e}");
+}
+
+#[test]
+fn a_frame_is_recorded_and_submitted_without_waiting_and_its_figures_come_later() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    // Standing in the meadow: a frame full of grass, slow on a software renderer.
+    let path = world.manifest.path("meadow").unwrap().clone();
+    let camera = sample_path(&path, path.keys[0].t_s);
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let size = (320, 180);
+    let options = RendererOptions::new(&world, c, d, size.0, size.1);
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    assert!(renderer.warm_up(&camera, Duration::from_secs(60)).unwrap());
+    let t = targets(&ctx.device, c, d, size);
+    assert!(renderer.stats().is_none(), "no frame yet, no figures");
+
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    renderer.prepare(&ctx.queue, &FrameInput::new(camera, 0.0));
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    renderer
+        .record(&mut encoder, &t.color_view, &t.depth_view)
+        .unwrap();
+    let flag = done.clone();
+    ctx.queue.submit([encoder.finish()]);
+    ctx.queue
+        .on_submitted_work_done(move || flag.store(true, std::sync::atomic::Ordering::SeqCst));
+    // Back from prepare, record and submit while the GPU still works on the frame: nothing
+    // in them waited for it.
+    let _ = ctx.device.poll(wgpu::PollType::Poll);
+    assert!(
+        !done.load(std::sync::atomic::Ordering::SeqCst),
+        "the frame's GPU work had finished when submit returned"
+    );
+    assert!(
+        renderer.stats().is_none(),
+        "figures before the GPU finished"
+    );
+
+    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+    assert!(done.load(std::sync::atomic::Ordering::SeqCst));
+    let stats = renderer
+        .stats()
+        .expect("figures once the GPU finished")
+        .clone();
+    assert_eq!(stats.frame, 0);
+    assert!(stats.tiles_drawn > 0);
+    assert!(
+        stats.grass.drawn[0] > 10_000,
+        "meadow blades drawn: {:?}",
+        stats.grass.drawn
+    );
+    if ctx.timestamps {
+        assert!(stats.gpu.iter().any(|(n, t)| n == "grass_draw" && *t > 0.0));
+    }
+}
+
+#[test]
+fn figures_of_frames_in_flight_stay_within_the_ring() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let camera = overview_camera(&world);
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let options = RendererOptions::new(&world, c, d, 64, 36);
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    let t = targets(&ctx.device, c, d, (64, 36));
+    // Many frames submitted back to back, none waited for, figures never taken.
+    let frames = 3 * MAX_READY_STATS as u64;
+    for i in 0..frames {
+        renderer.prepare(&ctx.queue, &FrameInput::new(camera, i as f64 / 60.0));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        renderer
+            .record(&mut encoder, &t.color_view, &t.depth_view)
+            .unwrap();
+        ctx.queue.submit([encoder.finish()]);
+    }
+    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+    let delivered = renderer.take_stats();
+    assert!(
+        delivered.len() <= MAX_READY_STATS,
+        "{} figures kept",
+        delivered.len()
+    );
+    assert!(!delivered.is_empty());
+    // Oldest first, and the newest frames' figures are the ones kept.
+    assert!(delivered.windows(2).all(|w| w[0].frame < w[1].frame));
+    // Every frame's figures were delivered or counted as lost.
+    assert_eq!(delivered.len() as u64 + renderer.stats_dropped(), frames);
+    assert_eq!(
+        delivered.last().unwrap().frame,
+        frames - 1,
+        "the newest are kept"
+    );
+    assert!(renderer.take_stats().is_empty(), "taken once");
+    // With figures taken every frame and the GPU waited for, none is lost.
+    let before = renderer.stats_dropped();
+    for i in 0..2 * READBACK_SLOTS as u64 {
+        renderer.prepare(&ctx.queue, &FrameInput::new(camera, 1.0 + i as f64 / 60.0));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        renderer
+            .record(&mut encoder, &t.color_view, &t.depth_view)
+            .unwrap();
+        ctx.queue.submit([encoder.finish()]);
+        let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+        let got = renderer.take_stats();
+        assert_eq!(got.len(), 1);
+        assert_eq!(got[0].frame, frames + i);
+    }
+    assert_eq!(renderer.stats_dropped(), before);
+}
