@@ -1,7 +1,7 @@
 //! Headless fly-throughs: a camera path rendered frame by frame to PNG, with a JSON report of
 //! what each frame drew and what it cost.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Instant;
@@ -110,36 +110,58 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     let mut records = Vec::with_capacity(opts.frames as usize);
     let last = (opts.frames.max(2) - 1) as f64;
     let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
+    // Without images nothing needs a frame back: frames are submitted as an application
+    // submits them, at most FRAMES_IN_FLIGHT ahead of the GPU, and their figures are taken as
+    // they come back. With images, each frame is waited for and read back.
+    let mut in_flight: VecDeque<wgpu::SubmissionIndex> = VecDeque::new();
+    let mut waiting: VecDeque<FrameRecord> = VecDeque::new();
     for i in 0..opts.frames {
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
         let camera = sample_path(&path, t_s);
         let start = Instant::now();
         let walker_xy = walker_at(&scene.world().manifest, &path, t_s);
-        let stats = scene.render_frame(&ctx, &camera, t_s, Some(walker_xy))?;
-        let image = scene.read_image(&ctx)?;
-        let frame_ms = start.elapsed().as_secs_f64() * 1e3;
-        if opts.write_images {
-            let file = opts.out.join(format!("frame_{i:05}.png"));
-            if tx.send((file, image)).is_err() {
-                break; // the writer failed; its error is reported below
-            }
-        }
-        records.push(FrameRecord {
+        let mut record = FrameRecord {
             index: i,
             t_s,
             camera_m: camera.position.to_array(),
             walker_m: walker_xy.to_array(),
             wind_scene: scene.wind_scene_at(t_s),
-            frame_ms,
-            cpu_ms: stats.cpu_ms,
-            gpu_ms: stats.gpu.into_iter().collect::<BTreeMap<_, _>>(),
-            tiles_drawn: stats.tiles_drawn,
-            grass_tiles_high: stats.grass_tiles.0,
-            grass_tiles_low: stats.grass_tiles.1,
-            residency: stats.residency,
-            grass: stats.grass,
-        });
+            ..FrameRecord::default()
+        };
+        if opts.write_images {
+            let stats = scene.render_frame(&ctx, &camera, t_s, Some(walker_xy))?;
+            let image = scene.read_image(&ctx)?;
+            record.frame_ms = start.elapsed().as_secs_f64() * 1e3;
+            record.fill(stats);
+            records.push(record);
+            let file = opts.out.join(format!("frame_{i:05}.png"));
+            if tx.send((file, image)).is_err() {
+                break; // the writer failed; its error is reported below
+            }
+        } else {
+            let (_, submission) = scene.submit_frame(&ctx, &camera, t_s, Some(walker_xy))?;
+            in_flight.push_back(submission);
+            if in_flight.len() > FRAMES_IN_FLIGHT
+                && let Some(oldest) = in_flight.pop_front()
+            {
+                let _ = ctx.device.poll(wgpu::PollType::Wait {
+                    submission_index: Some(oldest),
+                    timeout: None,
+                });
+            }
+            record.frame_ms = start.elapsed().as_secs_f64() * 1e3;
+            waiting.push_back(record);
+            take_figures(&mut scene, &mut waiting, &mut records)?;
+        }
         progress(FlyProgress::Frame(u64::from(i) + 1, u64::from(opts.frames)));
+    }
+    ctx.wait_idle();
+    take_figures(&mut scene, &mut waiting, &mut records)?;
+    if let Some(r) = waiting.front() {
+        bail!(
+            "the figures of frame {} did not come back from the GPU",
+            r.index
+        );
     }
     drop(tx);
     writer
@@ -155,6 +177,31 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     );
     write_json(&opts.out.join("report.json"), &report)?;
     Ok(report)
+}
+
+/// Frames a fly-through without images submits ahead of the GPU at most.
+pub const FRAMES_IN_FLIGHT: usize = 2;
+
+/// Completes the waiting records (oldest first) with the figures that came back.
+fn take_figures(
+    scene: &mut Scene,
+    waiting: &mut VecDeque<FrameRecord>,
+    records: &mut Vec<FrameRecord>,
+) -> Result<()> {
+    for stats in scene.renderer().take_stats() {
+        while let Some(mut r) = waiting.pop_front() {
+            if u64::from(r.index) == stats.frame {
+                r.fill(stats);
+                records.push(r);
+                break;
+            }
+            bail!(
+                "the figures of frame {} did not come back from the GPU",
+                r.index
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Writes `value` as pretty JSON, via a temporary file so a reader never sees half a report.

@@ -40,7 +40,7 @@ impl AdapterReport {
 }
 
 /// One rendered frame.
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct FrameRecord {
     /// Frame number from 0.
     pub index: u32,
@@ -53,7 +53,9 @@ pub struct FrameRecord {
     pub walker_m: [f64; 2],
     /// The wind scene in effect (empty: the manifest's default wind).
     pub wind_scene: String,
-    /// Wall time of the whole frame (record, submit, GPU, readback), milliseconds.
+    /// Wall time of the frame, milliseconds: with images, the whole frame (record, submit,
+    /// GPU, readback); without, the time between frames submitted at most two ahead of the
+    /// GPU, as an application sees it.
     pub frame_ms: f64,
     /// CPU time to select tiles and record and submit the frame, milliseconds.
     pub cpu_ms: f64,
@@ -71,6 +73,19 @@ pub struct FrameRecord {
     /// Grass: tiles, blades considered, culled by each test (distance, frustum, occlusion),
     /// overflowing and drawn, each per LOD (high, low).
     pub grass: GrassStats,
+}
+
+impl FrameRecord {
+    /// Fills in the renderer's figures of the frame.
+    pub fn fill(&mut self, stats: crate::renderer::FrameStats) {
+        self.cpu_ms = stats.cpu_ms;
+        self.gpu_ms = stats.gpu.into_iter().collect();
+        self.tiles_drawn = stats.tiles_drawn;
+        self.grass_tiles_high = stats.grass_tiles.0;
+        self.grass_tiles_low = stats.grass_tiles.1;
+        self.residency = stats.residency;
+        self.grass = stats.grass;
+    }
 }
 
 /// Summary statistics over all frames.
