@@ -177,6 +177,38 @@ enum Command {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// The grass renderers' benchmark: a flat field of one grass type generated in memory,
+    /// swept over blade counts; GPU time per pass, ns per blade and per vertex, the ratio to a
+    /// bare pass drawing as many vertices, and the image error against no LOD.
+    Blades {
+        /// Output folder.
+        #[arg(long, default_value = "out/bench-blades")]
+        out: PathBuf,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "1920x1080", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Edge of the square field, metres.
+        #[arg(long, default_value_t = 200.0)]
+        field_m: f64,
+        /// Camera position X,Y,Z in metres (x east, y north, z up).
+        #[arg(long, default_value = "-20,-20,15", value_parser = parse_vec3)]
+        camera: [f64; 3],
+        /// The point the camera looks at, X,Y,Z in metres.
+        #[arg(long, default_value = "100,100,0", value_parser = parse_vec3)]
+        target: [f64; 3],
+        /// Vertical field of view, degrees.
+        #[arg(long, default_value_t = 45.0)]
+        fov_deg: f64,
+        /// Blade counts of the sweep, comma-separated.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "100000,300000,1000000,3000000,10000000"
+        )]
+        counts: Vec<u64>,
+        #[command(flatten)]
+        timing: TimingArgs,
+    },
     /// Each grass feature's GPU cost against its contribution to the image (FLIP between the
     /// render with and without it), charted one against the other.
     Features {
@@ -189,12 +221,8 @@ enum BenchCommand {
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "480x270", value_parser = parse_size)]
         size: (u32, u32),
-        /// Frames of flight along the path over the two seconds before each view.
-        #[arg(long, default_value_t = 8)]
-        warmup_frames: u32,
-        /// Timed frames per view and variant.
-        #[arg(long, default_value_t = 5)]
-        timed_frames: u32,
+        #[command(flatten)]
+        timing: TimingArgs,
     },
     /// The LOD transition benchmark: popping across the ring boundary, and GPU time against
     /// image error for a set of LOD settings, charted with the Pareto front.
@@ -211,19 +239,37 @@ enum BenchCommand {
         /// Frames of the dolly.
         #[arg(long, default_value_t = 48)]
         dolly_frames: u32,
-        /// Untimed frames per view and setting before the timed ones.
-        #[arg(long, default_value_t = 3)]
-        warmup_frames: u32,
-        /// Timed frames per view and setting.
-        #[arg(long, default_value_t = 5)]
-        timed_frames: u32,
+        #[command(flatten)]
+        timing: TimingArgs,
     },
 }
 
-fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
-    let mut bars: Vec<(String, ProgressBar)> = Vec::new();
-    let r = verdant::tools::run_bench_lod(&opts, &mut |stage, done, total| {
-        if bars.last().map(|(s, _)| s != stage).unwrap_or(true) {
+/// How the benchmarks time: interleaved rounds over the settings, each measurement's frames
+/// back to back. The defaults give stable figures on a GPU (5 rounds of 20 frames after 5
+/// untimed ones) and fewer on a software renderer (2 rounds of 3 after 1).
+#[derive(clap::Args, Clone, Copy)]
+struct TimingArgs {
+    /// Untimed frames before each measurement's timed ones.
+    #[arg(long)]
+    warmup_frames: Option<u32>,
+    /// Timed frames of each measurement per round.
+    #[arg(long)]
+    timed_frames: Option<u32>,
+    /// Interleaved rounds over the settings.
+    #[arg(long)]
+    rounds: Option<u32>,
+}
+
+/// Progress bars for a run of named stages, one bar a stage.
+fn stage_bars() -> (
+    std::rc::Rc<std::cell::RefCell<Vec<(String, ProgressBar)>>>,
+    impl FnMut(&str, u64, u64),
+) {
+    let bars = std::rc::Rc::new(std::cell::RefCell::new(Vec::<(String, ProgressBar)>::new()));
+    let inner = bars.clone();
+    let update = move |stage: &str, done: u64, total: u64| {
+        let mut bars = inner.borrow_mut();
+        if bars.last().is_none_or(|(s, _)| s != stage) {
             if let Some((_, pb)) = bars.last() {
                 pb.finish();
             }
@@ -232,10 +278,87 @@ fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         if let Some((_, pb)) = bars.last() {
             pb.set_position(done);
         }
-    })?;
-    if let Some((_, pb)) = bars.last() {
+    };
+    (bars, update)
+}
+
+fn finish_bars(bars: &std::cell::RefCell<Vec<(String, ProgressBar)>>) {
+    if let Some((_, pb)) = bars.borrow().last() {
         pb.finish();
     }
+}
+
+fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{s:?} is not X,Y,Z in metres"))?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
+        _ => Err(format!(
+            "{s:?} is not X,Y,Z in metres (three finite numbers)"
+        )),
+    }
+}
+
+fn bench_blades(opts: verdant::tools::bench_blades::BenchBladesOptions) -> Result<()> {
+    let (bars, mut update) = stage_bars();
+    let r = verdant::tools::bench_blades::run_bench_blades(&opts, &mut update)?;
+    finish_bars(&bars);
+    println!(
+        "{} [{}], {}x{}",
+        r.adapter.name, r.adapter.backend, r.size.0, r.size.1
+    );
+    println!(
+        "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7}",
+        "blades",
+        "drawn hi",
+        "drawn lo",
+        "vertices",
+        "gen ms",
+        "draw ms",
+        "floor ms",
+        "ns/blade",
+        "ns/vert",
+        "x floor",
+        "FLIP"
+    );
+    for b in &r.results {
+        println!(
+            "{:>10} {:>9} {:>9} {:>11} {:>9.3} {:>9.3} {:>9.3} {:>8.2} {:>8.3} {:>7.2} {:>7.4}{}",
+            b.blades,
+            b.drawn[0],
+            b.drawn[1],
+            b.vertices,
+            b.generate.median_ms,
+            b.draw.median_ms,
+            b.floor.median_ms,
+            b.ns_per_blade,
+            b.ns_per_vertex,
+            b.ratio_to_floor,
+            b.flip_vs_no_lod,
+            if b.draw.noisy || b.floor.noisy {
+                "  (spread above 10%)"
+            } else {
+                ""
+            }
+        );
+    }
+    println!(
+        "timing: {} rounds of {} frames after {} untimed, per count; wrote {}",
+        r.counts.rounds,
+        r.counts.timed,
+        r.counts.warmup,
+        opts.out.display()
+    );
+    Ok(())
+}
+
+fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
+    let (bars, mut update) = stage_bars();
+    let r = verdant::tools::run_bench_lod(&opts, &mut update)?;
+    finish_bars(&bars);
     println!(
         "{} [{}], {}x{}",
         r.adapter.name, r.adapter.backend, r.size.0, r.size.1
@@ -245,20 +368,30 @@ fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         r.worst_pop, r.worst_change_without_switch
     );
     println!(
-        "{:<16} {:>9} {:>10} {:>9} {:>10} {:>7}",
-        "setting", "GPU ms", "frame ms", "FLIP", "blades", "front"
+        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>10} {:>7}",
+        "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "blades", "front"
     );
     for s in &r.settings {
         println!(
-            "{:<16} {:>9.2} {:>10.1} {:>9.4} {:>10.0} {:>7}",
+            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>10.0} {:>7}{}",
             s.setting.name,
-            s.gpu_ms,
-            s.frame_ms,
+            s.gpu.median_ms,
+            100.0 * s.gpu.spread,
+            s.frame.median_ms,
             s.flip_mean,
             s.blades_drawn,
-            if s.pareto { "yes" } else { "" }
+            if s.pareto { "yes" } else { "" },
+            if s.gpu.noisy || s.frame.noisy {
+                "  (spread above 10%)"
+            } else {
+                ""
+            }
         );
     }
+    println!(
+        "timing: {} rounds of {} frames after {} untimed, per view and setting",
+        r.counts.rounds, r.counts.timed, r.counts.warmup
+    );
     println!(
         "default setting {} the Pareto front; wrote {}",
         if r.default_on_front {
@@ -645,38 +778,42 @@ fn run(cli: Cli) -> Result<()> {
                     world,
                     out,
                     size,
-                    warmup_frames,
-                    timed_frames,
+                    timing,
                 },
         } => {
             let opts = verdant::tools::BenchLodOptions {
                 world: resolve_world(&world)?,
                 out,
                 size,
-                warmup_frames,
-                timed_frames,
+                warmup_frames: timing.warmup_frames,
+                timed_frames: timing.timed_frames,
+                rounds: timing.rounds,
                 ..Default::default()
             };
-            let mut pb: Option<ProgressBar> = None;
-            let r = verdant::tools::run_bench_features(&opts, &mut |_, done, total| {
-                pb.get_or_insert_with(|| bar(total, "variants"))
-                    .set_position(done);
-            })?;
-            if let Some(pb) = pb {
-                pb.finish();
-            }
+            let (bars, mut update) = stage_bars();
+            let r = verdant::tools::run_bench_features(&opts, &mut update)?;
+            finish_bars(&bars);
             println!(
                 "{} [{}], {}x{}",
                 r.adapter.name, r.adapter.backend, r.size.0, r.size.1
             );
             println!(
-                "{:<18} {:>14} {:>10} {:>13}",
-                "feature off", "GPU ms", "cost ms", "contribution"
+                "{:<18} {:>10} {:>8} {:>10} {:>13}",
+                "feature off", "GPU ms", "IQR %", "cost ms", "contribution"
             );
             for f in &r.features {
                 println!(
-                    "{:<18} {:>14.3} {:>10.3} {:>13.4}",
-                    f.feature, f.gpu_ms, f.cost_ms, f.contribution
+                    "{:<18} {:>10.3} {:>8.1} {:>10.3} {:>13.4}{}",
+                    f.feature,
+                    f.gpu_ms,
+                    100.0 * f.timing.spread,
+                    f.cost_ms,
+                    f.contribution,
+                    if f.timing.noisy {
+                        "  (spread above 10%)"
+                    } else {
+                        ""
+                    }
                 );
             }
             println!("wrote {}", opts.out.display());
@@ -684,21 +821,45 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Bench {
             what:
+                BenchCommand::Blades {
+                    out,
+                    size,
+                    field_m,
+                    camera,
+                    target,
+                    fov_deg,
+                    counts,
+                    timing,
+                },
+        } => bench_blades(verdant::tools::bench_blades::BenchBladesOptions {
+            out,
+            size,
+            field_m,
+            camera_m: camera,
+            target_m: target,
+            fov_deg,
+            counts,
+            warmup_frames: timing.warmup_frames,
+            timed_frames: timing.timed_frames,
+            rounds: timing.rounds,
+        }),
+        Command::Bench {
+            what:
                 BenchCommand::Lod {
                     world,
                     out,
                     size,
                     dolly_frames,
-                    warmup_frames,
-                    timed_frames,
+                    timing,
                 },
         } => bench_lod(verdant::tools::BenchLodOptions {
             world: resolve_world(&world)?,
             out,
             size,
             dolly_frames,
-            warmup_frames,
-            timed_frames,
+            warmup_frames: timing.warmup_frames,
+            timed_frames: timing.timed_frames,
+            rounds: timing.rounds,
             path: None,
         }),
         Command::Eval {

@@ -147,6 +147,9 @@ pub struct RendererConfig {
     pub wind_keys: Vec<WindKey>,
     /// The switched-on features of the grass model.
     pub features: Features,
+    /// Blades a slot of the grass pool holds; `None`: enough for the world's densest grass
+    /// tile (found by reading its finest stored tiles).
+    pub grass_capacity: Option<u32>,
 }
 
 impl RendererConfig {
@@ -163,6 +166,7 @@ impl RendererConfig {
             wind_scene: None,
             wind_keys: Vec::new(),
             features: Features::from(&world.manifest.features),
+            grass_capacity: None,
         }
     }
 
@@ -393,7 +397,10 @@ impl Renderer {
                     wind.buffer(),
                 );
                 sway.reset(queue);
-                let capacity = crate::grass::estimate_capacity(&world, &settings)?;
+                let capacity = match config.grass_capacity {
+                    Some(c) => c,
+                    None => crate::grass::estimate_capacity(&world, &settings)?,
+                };
                 let renderer = GrassRenderer::new(
                     device,
                     queue,

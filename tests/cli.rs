@@ -343,8 +343,12 @@ fn bench_lod_writes_its_tables_and_charts() {
             "96x54",
             "--dolly-frames",
             "4",
+            "--warmup-frames",
+            "0",
             "--timed-frames",
-            "1",
+            "2",
+            "--rounds",
+            "2",
             "--out",
             "b",
         ],
@@ -359,6 +363,26 @@ fn bench_lod_writes_its_tables_and_charts() {
     let dolly = std::fs::read_to_string(dir.join("dolly.csv")).unwrap();
     assert_eq!(dolly.lines().count(), 5, "{dolly}");
     let settings = std::fs::read_to_string(dir.join("lod_settings.csv")).unwrap();
+    let header: Vec<&str> = settings.lines().next().unwrap().split(',').collect();
+    // The stated columns: each timing as a median with its quartiles and spread, flagged when
+    // noisy, with the frames it took.
+    for column in [
+        "setting",
+        "gpu_ms",
+        "gpu_q1_ms",
+        "gpu_q3_ms",
+        "gpu_spread",
+        "frame_ms",
+        "frame_spread",
+        "noisy",
+        "frames",
+        "flip_mean",
+        "blades_drawn",
+        "pareto",
+    ] {
+        assert!(header.contains(&column), "no column {column} in {header:?}");
+    }
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let rows: Vec<Vec<&str>> = settings
         .lines()
         .skip(1)
@@ -366,14 +390,107 @@ fn bench_lod_writes_its_tables_and_charts() {
         .collect();
     assert_eq!(rows[0][0], "default");
     assert!(rows.len() >= 8);
-    // More blades cost more: no LOD draws more than the default.
-    let blades = |name: &str| -> f64 {
-        rows.iter().find(|r| r[0] == name).unwrap()[9]
+    let value = |name: &str, column: &str| -> f64 {
+        rows.iter().find(|r| r[0] == name).unwrap()[col(column)]
             .parse()
             .unwrap()
     };
-    assert!(blades("no LOD") > blades("default"));
+    // More blades cost more: no LOD draws more than the default.
+    assert!(value("no LOD", "blades_drawn") > value("default", "blades_drawn"));
+    // Two rounds of two timed frames at each of the four views.
+    assert_eq!(value("default", "frames"), 16.0);
+    for r in &rows {
+        let (q1, m, q3) = (
+            r[col("gpu_q1_ms")].parse::<f64>().unwrap(),
+            r[col("gpu_ms")].parse::<f64>().unwrap(),
+            r[col("gpu_q3_ms")].parse::<f64>().unwrap(),
+        );
+        assert!(q1 <= m && m <= q3 && m > 0.0, "{r:?}");
+        assert!(r[col("frame_ms")].parse::<f64>().unwrap() > 0.0, "{r:?}");
+        assert!(["true", "false"].contains(&r[col("noisy")]), "{r:?}");
+    }
     for f in ["dolly.png", "lod_settings.png", "bench_lod.json"] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
+}
+
+#[test]
+fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertices() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = verdant(
+        &[
+            "bench",
+            "blades",
+            "--size",
+            "96x54",
+            "--counts",
+            "5000,20000",
+            "--warmup-frames",
+            "0",
+            "--timed-frames",
+            "2",
+            "--rounds",
+            "1",
+            "--out",
+            "b",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        out.status.success(),
+        "bench failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = tmp.path().join("b");
+    let csv = std::fs::read_to_string(dir.join("blades.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("no column {name} in {header:?}"))
+    };
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 2, "{csv}");
+    let n = |r: &Vec<&str>, c: &str| -> f64 { r[col(c)].parse().unwrap() };
+    for r in &rows {
+        let drawn = n(r, "drawn_high") + n(r, "drawn_low");
+        assert!(drawn > 0.0, "{csv}");
+        // Every point considered is drawn, empty or culled (by a counted test).
+        assert_eq!(
+            n(r, "considered_high") + n(r, "considered_low") - n(r, "empty") - n(r, "culled"),
+            drawn,
+            "{csv}"
+        );
+        // 15-vertex strips near, 7 far, and the floor draws exactly as many.
+        assert_eq!(
+            n(r, "vertices"),
+            15.0 * n(r, "drawn_high") + 7.0 * n(r, "drawn_low"),
+            "{csv}"
+        );
+        assert_eq!(n(r, "floor_vertices"), n(r, "vertices"), "{csv}");
+        for c in [
+            "draw_ms",
+            "floor_ms",
+            "ns_per_blade",
+            "ns_per_vertex",
+            "ratio_to_floor",
+        ] {
+            assert!(n(r, c) > 0.0, "{c} in {csv}");
+        }
+        assert!(["true", "false"].contains(&r[col("noisy")]), "{csv}");
+    }
+    // Four times the blades: more drawn.
+    assert!(n(&rows[1], "drawn_high") > n(&rows[0], "drawn_high"));
+    for f in ["blades_time.png", "blades_ratio.png", "bench_blades.json"] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    // A sweep without counts, or absurd ones, is refused before any GPU work.
+    let bad = verdant(&["bench", "blades", "--counts", "10"], tmp.path());
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("at least 1000"));
 }

@@ -114,8 +114,10 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
             "--size",
             "128x72",
             "--warmup-frames",
-            "2",
+            "0",
             "--timed-frames",
+            "1",
+            "--rounds",
             "1",
         ])
         .args(["--out", "b"])
@@ -129,6 +131,13 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
     );
     let dir = tmp.path().join("b");
     let csv = std::fs::read_to_string(dir.join("features.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("no column {name} in {header:?}"))
+    };
     let rows: Vec<Vec<&str>> = csv
         .lines()
         .skip(1)
@@ -150,7 +159,7 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
         ]
     );
     let contribution = |name: &str| -> f64 {
-        rows.iter().find(|r| r[0] == name).unwrap()[3]
+        rows.iter().find(|r| r[0] == name).unwrap()[col("contribution_flip")]
             .parse()
             .unwrap()
     };

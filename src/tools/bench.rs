@@ -5,9 +5,11 @@
 //! tile high LOD), and the two are compared by FLIP. A pop would show as a jump of that error on
 //! a frame where tiles switch ring; the jumps on frames without switches are the noise floor.
 //! (b) Speed against accuracy: for a set of LOD settings (ring radii, blade spacing, segments,
-//! view distance), GPU time per frame (median of timed frames after untimed warm-up frames,
-//! from timestamp queries) against the FLIP error to a full-detail reference render, with the Pareto
-//! front; the default setting is marked.
+//! view distance), GPU time per frame against the FLIP error to a full-detail reference render,
+//! with the Pareto front; the default setting is marked. The images are captured first; then
+//! the settings are timed in interleaved rounds, each measurement's frames back to back with
+//! nothing in between (see [`crate::tools::timing`]): a median with its interquartile range
+//! per view, a setting whose spread is above 10% flagged.
 
 use std::path::PathBuf;
 
@@ -21,6 +23,7 @@ use crate::lod::RingSettings;
 use crate::tools::metrics::{
     Chart, ChartPoint, LineChart, Series, Summary, flip_compare, pareto_front,
 };
+use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
 use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
 use crate::world::World;
 
@@ -35,10 +38,13 @@ pub struct BenchLodOptions {
     pub size: (u32, u32),
     /// Frames of the dolly.
     pub dolly_frames: u32,
-    /// Untimed frames per view and setting before the timed ones.
-    pub warmup_frames: u32,
-    /// Timed frames per view and setting.
-    pub timed_frames: u32,
+    /// Untimed frames before each measurement's timed ones (default: by adapter, see
+    /// [`FrameCounts::for_adapter`]).
+    pub warmup_frames: Option<u32>,
+    /// Timed frames of each measurement per round (default: by adapter).
+    pub timed_frames: Option<u32>,
+    /// Interleaved rounds over the settings (default: by adapter).
+    pub rounds: Option<u32>,
     /// Camera path the views are taken from (default: "meadow", else the first path).
     pub path: Option<String>,
 }
@@ -50,8 +56,9 @@ impl Default for BenchLodOptions {
             out: PathBuf::from("out/bench-lod"),
             size: (480, 270),
             dolly_frames: 48,
-            warmup_frames: 3,
-            timed_frames: 5,
+            warmup_frames: None,
+            timed_frames: None,
+            rounds: None,
             path: None,
         }
     }
@@ -140,10 +147,11 @@ pub fn reference_setting(world: &World) -> LodSetting {
 pub struct SettingResult {
     /// The setting.
     pub setting: LodSetting,
-    /// Median GPU time per frame over all passes, milliseconds (0 without timestamps).
-    pub gpu_ms: f64,
-    /// Median wall time per frame, milliseconds.
-    pub frame_ms: f64,
+    /// GPU time per frame over all passes (mean over the views of their medians and
+    /// quartiles; the largest spread), milliseconds; zero without timestamps.
+    pub gpu: Timing,
+    /// Wall time per frame, frames back to back, milliseconds.
+    pub frame: Timing,
     /// Mean FLIP error to the reference over the views.
     pub flip_mean: f64,
     /// Blades drawn per frame (median).
@@ -187,6 +195,8 @@ pub struct BenchLodReport {
     pub settings: Vec<SettingResult>,
     /// Whether the default setting is on the Pareto front.
     pub default_on_front: bool,
+    /// The frame counts of the timings.
+    pub counts: FrameCounts,
 }
 
 fn rgb(img: &image::RgbaImage) -> image::RgbImage {
@@ -337,41 +347,74 @@ pub fn run_bench_lod(
         ref_images.push(bench.frame(&mut reference, v)?.0);
     }
     drop(reference);
-    let mut results = Vec::new();
+    // Images first, every setting's scene kept for the timings.
+    let mut scenes = Vec::new();
+    let mut partial = Vec::new();
     let total = settings.len() as u64;
     for (k, s) in settings.iter().enumerate() {
         let mut scene = bench.scene(s)?;
-        let (mut gpu, mut wall, mut flips, mut blades) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut flips, mut blades) = (Vec::new(), Vec::new());
         for (v, r) in views.iter().zip(&ref_images) {
-            let (img, _) = bench.frame(&mut scene, v)?;
+            let (img, stats) = bench.frame(&mut scene, v)?;
             flips.push(flip(&img, r)?);
-            // Untimed frames first: the GPU's clocks settle after the CPU work above.
-            for _ in 0..opts.warmup_frames {
-                scene.render(&ctx, v)?;
-                ctx.wait_idle();
-            }
-            for _ in 0..opts.timed_frames {
-                let t0 = std::time::Instant::now();
-                let stats = scene.render(&ctx, v)?;
-                ctx.wait_idle();
-                wall.push(t0.elapsed().as_secs_f64() * 1e3);
-                gpu.push(stats.gpu.iter().map(|(_, ms)| ms).sum::<f64>());
-                blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
-            }
+            blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
         }
+        scenes.push(scene);
+        partial.push((flips, blades));
+        progress("images", k as u64 + 1, total);
+    }
+    // Then the timings, in interleaved rounds.
+    let counts = FrameCounts::for_adapter(&ctx.info).with(
+        opts.warmup_frames,
+        opts.timed_frames,
+        opts.rounds,
+    );
+    let n_views = views.len();
+    let mut gpu_samples = vec![vec![Vec::new(); n_views]; settings.len()];
+    let mut wall_samples = vec![vec![Vec::new(); n_views]; settings.len()];
+    let steps = u64::from(counts.rounds) * total;
+    for round in 0..counts.rounds {
+        for (k, scene) in scenes.iter_mut().enumerate() {
+            for (vi, v) in views.iter().enumerate() {
+                let walker = Some(v.position.truncate());
+                for (stats, wall) in
+                    run_frames(&ctx, scene, v, 0.0, walker, counts.warmup, counts.timed)?
+                {
+                    gpu_samples[k][vi].push(frame_ms(&stats, wall, true));
+                    wall_samples[k][vi].push(wall);
+                }
+            }
+            progress("timing", u64::from(round) * total + k as u64 + 1, steps);
+        }
+    }
+    drop(scenes);
+    let mut results = Vec::new();
+    for (k, s) in settings.iter().enumerate() {
+        let (flips, blades) = &partial[k];
+        let timing = |samples: &[Vec<f64>]| {
+            Timing::over_views(&samples.iter().map(|v| Timing::of(v)).collect::<Vec<_>>())
+        };
         results.push(SettingResult {
             setting: s.clone(),
-            gpu_ms: Summary::of(&gpu).median,
-            frame_ms: Summary::of(&wall).median,
+            gpu: if ctx.timestamps {
+                timing(&gpu_samples[k])
+            } else {
+                Timing::default()
+            },
+            frame: timing(&wall_samples[k]),
             flip_mean: flips.iter().sum::<f64>() / flips.len() as f64,
-            blades_drawn: Summary::of(&blades).median,
+            blades_drawn: Summary::of(blades).median,
             pareto: false,
         });
-        progress("settings", k as u64 + 1, total);
     }
     // Time is GPU time when the adapter has timestamps, else wall time.
-    let time = |r: &SettingResult| if ctx.timestamps { r.gpu_ms } else { r.frame_ms };
+    let time = |r: &SettingResult| {
+        if ctx.timestamps {
+            r.gpu.median_ms
+        } else {
+            r.frame.median_ms
+        }
+    };
     let xy: Vec<(f64, f64)> = results.iter().map(|r| (time(r), r.flip_mean)).collect();
     for i in pareto_front(&xy) {
         results[i].pareto = true;
@@ -384,6 +427,7 @@ pub fn run_bench_lod(
         worst_pop,
         worst_change_without_switch,
         default_on_front: results[0].pareto,
+        counts,
         dolly,
         settings: results,
     };
@@ -434,21 +478,27 @@ fn write_outputs(
     .write_png(&opts.out.join("dolly.png"), 900, 600)?;
 
     let mut csv = String::from(
-        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_high,segments_low,gpu_ms,frame_ms,flip_mean,blades_drawn,pareto\n",
+        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_high,segments_low,gpu_ms,gpu_q1_ms,gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_mean,blades_drawn,pareto\n",
     );
     for r in results {
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{:.3},{:.3},{:.5},{:.0},{}",
+            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.0},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
             s.spacing_m,
             s.segments[0],
             s.segments[1],
-            r.gpu_ms,
-            r.frame_ms,
+            r.gpu.median_ms,
+            r.gpu.q1_ms,
+            r.gpu.q3_ms,
+            r.gpu.spread,
+            r.frame.median_ms,
+            r.frame.spread,
+            if gpu { r.gpu.noisy } else { r.frame.noisy },
+            r.frame.frames,
             r.flip_mean,
             r.blades_drawn,
             r.pareto
@@ -468,8 +518,16 @@ fn write_outputs(
         points: results
             .iter()
             .map(|r| ChartPoint {
-                label: r.setting.name.clone(),
-                x: if gpu { r.gpu_ms } else { r.frame_ms },
+                label: if (gpu && r.gpu.noisy) || (!gpu && r.frame.noisy) {
+                    format!("{} (noisy)", r.setting.name)
+                } else {
+                    r.setting.name.clone()
+                },
+                x: if gpu {
+                    r.gpu.median_ms
+                } else {
+                    r.frame.median_ms
+                },
                 y: r.flip_mean,
                 chosen: r.setting.name == "default",
             })
@@ -484,8 +542,11 @@ fn write_outputs(
 pub struct FeatureResult {
     /// The feature (or "all" for the full render).
     pub feature: String,
-    /// Median GPU time per frame with the feature off (all: everything on), milliseconds.
+    /// Median GPU time per frame with the feature off (all: everything on), milliseconds (wall
+    /// time without timestamps).
     pub gpu_ms: f64,
+    /// That time's quartiles and spread.
+    pub timing: Timing,
     /// GPU time the feature costs: the full render's minus this one's, milliseconds.
     pub cost_ms: f64,
     /// Mean FLIP between the full render and the render without the feature: its contribution
@@ -508,8 +569,9 @@ pub struct BenchFeaturesReport {
 /// (FLIP between the full render and the render with that feature off), charted one against
 /// the other. The views come from the world's first camera path with wind keys (the baked
 /// `wind-tour`): one late in each of its wind scenes, each reached by two seconds of flight
-/// along the path in [`BenchLodOptions::warmup_frames`] frames (so that the sway, the gusts,
-/// the sources and the walker's trail are under way). A world without such a path is viewed
+/// along the path in 8 frames (so that the sway, the gusts, the sources and the walker's trail
+/// are under way). The images are captured first; then the variants are timed in interleaved
+/// rounds at each view's time (see [`crate::tools::timing`]). A world without such a path is viewed
 /// along `meadow` (else its first path) in the storm. Writes `bench_features.json`, `features.csv` and `features.png`.
 pub fn run_bench_features(
     opts: &BenchLodOptions,
@@ -517,6 +579,7 @@ pub fn run_bench_features(
 ) -> Result<BenchFeaturesReport> {
     use crate::features::{Feature, Features};
     const LEAD_S: f64 = 2.0;
+    const LEAD_FRAMES: u32 = 8;
     let world = World::open(&opts.world)?;
     let m = &world.manifest;
     let toured = m.paths.iter().find(|p| !p.wind.is_empty());
@@ -555,16 +618,17 @@ pub fn run_bench_features(
                 .map(|f| (f.name().to_owned(), Features::all().without(*f))),
         )
         .collect();
-    let mut rows: Vec<(String, f64, Vec<image::RgbaImage>)> = Vec::new();
+    let walker_at = |t: f64| crate::camera::walker_at(m, &path, t);
+    let mut scenes = Vec::new();
+    let mut all_images = Vec::new();
     let total = variants.len() as u64;
-    let lead_frames = opts.warmup_frames.max(1);
-    for (k, (name, features)) in variants.iter().enumerate() {
+    for (k, (_, features)) in variants.iter().enumerate() {
         let mut config = SceneConfig::for_world(&world);
         config.features = *features;
         config.wind_scene = scene_name.clone();
         config.wind_keys = path.wind.clone();
         let mut scene = Scene::new(&ctx, world.clone(), opts.size.0, opts.size.1, config)?;
-        let (mut gpu, mut images) = (Vec::new(), Vec::new());
+        let mut images = Vec::new();
         for &t in &times {
             scene.warm_up(
                 &ctx,
@@ -572,43 +636,88 @@ pub fn run_bench_features(
                 std::time::Duration::from_secs(60),
             )?;
             // The lead-in: the camera and the walker along the path up to the view's time.
-            let walker_at = |t: f64| crate::camera::walker_at(m, &path, t);
-            for f in 0..=lead_frames {
-                let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(lead_frames));
+            for f in 0..=LEAD_FRAMES {
+                let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(LEAD_FRAMES));
                 scene.render_frame(&ctx, &sample_path(&path, tf), tf, Some(walker_at(tf)))?;
-            }
-            // Timed frames hold the view's time: the same image every frame.
-            let cam = sample_path(&path, t);
-            for _ in 0..opts.timed_frames {
-                let stats = scene.render_frame(&ctx, &cam, t, Some(walker_at(t)))?;
-                gpu.push(stats.gpu.iter().map(|(_, ms)| ms).sum::<f64>());
             }
             images.push(scene.read_image(&ctx)?);
         }
-        rows.push((name.clone(), Summary::of(&gpu).median, images));
-        progress("features", k as u64 + 1, total);
+        scenes.push(scene);
+        all_images.push(images);
+        progress("images", k as u64 + 1, total);
     }
-    let full_ms = rows[0].1;
+    // Timed frames hold each view's time: the same image every frame.
+    let counts = FrameCounts::for_adapter(&ctx.info).with(
+        opts.warmup_frames,
+        opts.timed_frames,
+        opts.rounds,
+    );
+    let mut samples = vec![vec![Vec::new(); times.len()]; variants.len()];
+    for round in 0..counts.rounds {
+        for (k, scene) in scenes.iter_mut().enumerate() {
+            for (vi, &t) in times.iter().enumerate() {
+                let cam = sample_path(&path, t);
+                for (stats, wall) in run_frames(
+                    &ctx,
+                    scene,
+                    &cam,
+                    t,
+                    Some(walker_at(t)),
+                    counts.warmup,
+                    counts.timed,
+                )? {
+                    samples[k][vi].push(frame_ms(&stats, wall, ctx.timestamps));
+                }
+            }
+            progress(
+                "timing",
+                u64::from(round) * total + k as u64 + 1,
+                u64::from(counts.rounds) * total,
+            );
+        }
+    }
+    drop(scenes);
+    let rows: Vec<(String, Timing, Vec<image::RgbaImage>)> = variants
+        .iter()
+        .zip(samples)
+        .zip(all_images)
+        .map(|(((name, _), views), images)| {
+            let t = Timing::over_views(&views.iter().map(|v| Timing::of(v)).collect::<Vec<_>>());
+            (name.clone(), t, images)
+        })
+        .collect();
+    let full_ms = rows[0].1.median_ms;
     let mut features = Vec::new();
-    for (name, ms, images) in &rows {
+    for (name, timing, images) in &rows {
         let mut flips = Vec::new();
         for (a, b) in rows[0].2.iter().zip(images) {
             flips.push(flip(a, b)?);
         }
         features.push(FeatureResult {
             feature: name.clone(),
-            gpu_ms: *ms,
-            cost_ms: full_ms - ms,
+            gpu_ms: timing.median_ms,
+            timing: *timing,
+            cost_ms: full_ms - timing.median_ms,
             contribution: flips.iter().sum::<f64>() / flips.len() as f64,
         });
     }
     use std::fmt::Write as _;
-    let mut csv = String::from("feature,gpu_ms_without,cost_ms,contribution_flip\n");
+    let mut csv = String::from(
+        "feature,gpu_ms_without,q1_ms,q3_ms,spread,noisy,frames,cost_ms,contribution_flip\n",
+    );
     for r in &features {
         let _ = writeln!(
             csv,
-            "{},{:.3},{:.3},{:.5}",
-            r.feature, r.gpu_ms, r.cost_ms, r.contribution
+            "{},{:.4},{:.4},{:.4},{:.4},{},{},{:.4},{:.5}",
+            r.feature,
+            r.gpu_ms,
+            r.timing.q1_ms,
+            r.timing.q3_ms,
+            r.timing.spread,
+            r.timing.noisy,
+            r.timing.frames,
+            r.cost_ms,
+            r.contribution
         );
     }
     std::fs::write(opts.out.join("features.csv"), csv)?;
@@ -622,7 +731,11 @@ pub fn run_bench_features(
             .iter()
             .skip(1)
             .map(|r| ChartPoint {
-                label: r.feature.clone(),
+                label: if r.timing.noisy {
+                    format!("{} (noisy)", r.feature)
+                } else {
+                    r.feature.clone()
+                },
                 x: r.cost_ms,
                 y: r.contribution,
                 chosen: false,

@@ -4,6 +4,7 @@
 //! and the interactive viewer (`view`).
 
 pub mod bench;
+pub mod bench_blades;
 pub mod eval_derive;
 pub mod eval_sway;
 pub mod fly;
@@ -11,6 +12,7 @@ pub mod metrics;
 pub mod report;
 pub mod scene;
 pub mod soak;
+pub mod timing;
 pub mod view;
 
 pub use bench::{

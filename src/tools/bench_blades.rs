@@ -1,0 +1,733 @@
+//! `verdant bench blades`: the benchmark people use to compare grass renderers.
+//!
+//! A flat square field generated in memory (no world files), one grass type at uniform full
+//! density, seen from a camera given by position, target and vertical field of view; swept over
+//! blade counts (the field's blades at the high-LOD spacing, 100 thousand to 10 million by
+//! default). Per count: blades considered, drawn per LOD, vertices drawn, GPU time per pass, ns
+//! per blade drawn and per vertex, and the image error against the same field drawn with no LOD.
+//! In the same run the floor: a bare pass that draws the same number of vertices (the same
+//! instances of the same strip lengths) with a trivial shader, so that the grass draw's cost is
+//! given as a ratio to what the hardware needs for that many vertices.
+//!
+//! Coordinates: the field spans `[0, field_m]` in x (east) and y (north), z is up. The common
+//! y-up description of the default camera, "(-20, 15, -20) looking at (100, 0, 100)", is
+//! `camera_m = (-20, -20, 15)` and `target_m = (100, 100, 0)` here.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::{Context, Result, bail};
+use glam::{DVec3, Vec3};
+use serde::Serialize;
+
+use crate::camera::Camera;
+use crate::gpu::GpuContext;
+use crate::lod::RingSettings;
+use crate::renderer::FrameStats;
+use crate::stream::TileSource;
+use crate::tools::metrics::{LineChart, Series, flip_compare};
+use crate::tools::timing::{FrameCounts, Timing, run_frames};
+use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
+use crate::world::{Manifest, TileData, TileId, World, WorldError};
+
+/// What `verdant bench blades` is asked to do.
+#[derive(Clone, Debug)]
+pub struct BenchBladesOptions {
+    /// Output folder.
+    pub out: PathBuf,
+    /// Image size.
+    pub size: (u32, u32),
+    /// Edge of the square field, metres.
+    pub field_m: f64,
+    /// Camera position (x east, y north, z up), metres.
+    pub camera_m: [f64; 3],
+    /// The point the camera looks at, metres.
+    pub target_m: [f64; 3],
+    /// Vertical field of view, degrees.
+    pub fov_deg: f64,
+    /// Blade counts of the sweep (blades in the whole field at the high-LOD spacing).
+    pub counts: Vec<u64>,
+    /// Untimed frames, timed frames and rounds (default: by adapter).
+    pub warmup_frames: Option<u32>,
+    /// Timed frames of each measurement per round.
+    pub timed_frames: Option<u32>,
+    /// Interleaved rounds.
+    pub rounds: Option<u32>,
+}
+
+impl Default for BenchBladesOptions {
+    fn default() -> Self {
+        Self {
+            out: PathBuf::from("out/bench-blades"),
+            size: (1920, 1080),
+            field_m: 200.0,
+            camera_m: [-20.0, -20.0, 15.0],
+            target_m: [100.0, 100.0, 0.0],
+            fov_deg: 45.0,
+            counts: vec![100_000, 300_000, 1_000_000, 3_000_000, 10_000_000],
+            warmup_frames: None,
+            timed_frames: None,
+            rounds: None,
+        }
+    }
+}
+
+/// One blade count's figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct BladesResult {
+    /// Blades in the field at the high-LOD spacing.
+    pub blades: u64,
+    /// The high-LOD spacing that gives them, metres.
+    pub spacing_m: f64,
+    /// Grid points considered per frame, per LOD (high, low).
+    pub considered: [u32; 2],
+    /// Points without grass, summed over both LODs.
+    pub empty: u32,
+    /// Culled by distance, frustum and occlusion, and overflowing, summed over both LODs.
+    pub culled: u32,
+    /// Blades drawn per LOD.
+    pub drawn: [u32; 2],
+    /// Vertices the grass draw runs.
+    pub vertices: u64,
+    /// GPU time of generation (with the per-blade wind), milliseconds.
+    pub generate: Timing,
+    /// GPU time of the grass draw, milliseconds.
+    pub draw: Timing,
+    /// GPU time of the whole frame, milliseconds.
+    pub frame: Timing,
+    /// GPU time of the floor pass (the same vertices with a trivial shader), milliseconds.
+    pub floor: Timing,
+    /// Vertices the floor pass drew.
+    pub floor_vertices: u64,
+    /// Grass draw time per blade drawn, nanoseconds.
+    pub ns_per_blade: f64,
+    /// Grass draw time per vertex, nanoseconds.
+    pub ns_per_vertex: f64,
+    /// The grass draw's time over the floor's.
+    pub ratio_to_floor: f64,
+    /// Mean FLIP of the frame against the same field with no LOD.
+    pub flip_vs_no_lod: f64,
+}
+
+/// Everything `bench_blades.json` holds.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchBladesReport {
+    /// The adapter.
+    pub adapter: AdapterReport,
+    /// Image size.
+    pub size: (u32, u32),
+    /// The frame counts of the timings.
+    pub counts: FrameCounts,
+    /// One row per blade count.
+    pub results: Vec<BladesResult>,
+}
+
+/// The field's manifest: one grass type, tiles of 50 m at the finest level (the grass level).
+fn field_manifest(field_m: f64) -> Result<Manifest> {
+    let levels = 3u32;
+    let root = 50.0 * f64::from(1u32 << (levels - 1));
+    let roots = (field_m / root).ceil().max(1.0) as u32;
+    let text = format!(
+        r#"name = "blades-field"
+description = "A flat field of one grass type at full density, generated in memory."
+extent_m = [{field_m}, {field_m}]
+height_range_m = [0.0, 1.0]
+
+[pyramid]
+root_tile_size_m = {root}
+root_tiles = [{roots}, {roots}]
+tile_cells = 128
+border = 2
+stored_levels = {levels}
+derived_levels = 0
+
+[[grass_types]]
+name = "bare"
+ground_color = [0.3, 0.27, 0.23]
+base_color = [0.3, 0.27, 0.23]
+tip_color = [0.3, 0.27, 0.23]
+height_m = [0.0, 0.0]
+width_m = [0.0, 0.0]
+stiffness = 1.0
+
+[[grass_types]]
+name = "meadow"
+ground_color = [0.1, 0.16, 0.05]
+base_color = [0.04, 0.14, 0.02]
+tip_color = [0.22, 0.45, 0.08]
+height_m = [0.5, 0.7]
+width_m = [0.02, 0.035]
+stiffness = 0.6
+
+[wind]
+direction_deg = 30.0
+speed_mps = 4.0
+gustiness = 0.4
+
+[sky]
+sun_azimuth_deg = 210.0
+sun_elevation_deg = 40.0
+sun_color = [1.0, 0.95, 0.85]
+sky_color = [0.45, 0.6, 0.85]
+horizon_color = [0.75, 0.82, 0.9]
+fog_distance_m = 4000.0
+
+[[paths]]
+name = "still"
+duration_s = 1.0
+
+[[paths.keys]]
+t_s = 0.0
+position_m = [0.0, 0.0, 10.0]
+yaw_deg = 45.0
+pitch_deg = -10.0
+
+[[paths.keys]]
+t_s = 1.0
+position_m = [1.0, 1.0, 10.0]
+yaw_deg = 45.0
+pitch_deg = -10.0
+"#
+    );
+    Ok(Manifest::parse(
+        &text,
+        std::path::Path::new("<bench blades field>"),
+    )?)
+}
+
+/// Tiles of the field, made on request: flat at height 0, the grass type everywhere inside the
+/// field, bare outside, full density.
+struct FlatField {
+    manifest: Manifest,
+    field_m: f64,
+}
+
+impl TileSource for FlatField {
+    fn load(&self, id: TileId) -> Result<TileData, WorldError> {
+        let p = &self.manifest.pyramid;
+        let size = p.samples_per_side();
+        let b = p.bounds(id);
+        let cell = p.cell_size_m(id.level);
+        let n = (size * size) as usize;
+        let mut grass_type = vec![0u8; n];
+        for j in 0..size {
+            for i in 0..size {
+                let x = b.min.x + (f64::from(i) - f64::from(p.border)) * cell;
+                let y = b.min.y + (f64::from(j) - f64::from(p.border)) * cell;
+                if (0.0..=self.field_m).contains(&x) && (0.0..=self.field_m).contains(&y) {
+                    grass_type[(j * size + i) as usize] = 1;
+                }
+            }
+        }
+        Ok(TileData {
+            id,
+            size,
+            heights: vec![0.0; n],
+            grass_type,
+            density: vec![255; n],
+        })
+    }
+}
+
+/// The camera of `opts`.
+pub fn field_camera(opts: &BenchBladesOptions, aspect: f32) -> Camera {
+    let eye = DVec3::from_array(opts.camera_m);
+    let dir = (DVec3::from_array(opts.target_m) - eye)
+        .normalize()
+        .as_vec3();
+    let view = glam::camera::rh::view::look_to_mat4(Vec3::ZERO, dir, Vec3::Z);
+    let proj = glam::camera::rh::proj::directx::perspective_infinite_reverse(
+        (opts.fov_deg as f32).to_radians(),
+        aspect,
+        0.1,
+    );
+    Camera::with_view(eye, view, proj)
+}
+
+/// Runs the benchmark and writes `bench_blades.json`, `blades.csv`, `blades_time.png` and
+/// `blades_ratio.png` into `opts.out`.
+pub fn run_bench_blades(
+    opts: &BenchBladesOptions,
+    progress: &mut dyn FnMut(&str, u64, u64),
+) -> Result<BenchBladesReport> {
+    if !(opts.field_m >= 10.0 && opts.field_m <= 5000.0) {
+        bail!(
+            "--field-m must be between 10 and 5000 m, not {}",
+            opts.field_m
+        );
+    }
+    if opts.counts.is_empty() || opts.counts.iter().any(|&c| c < 1000) {
+        bail!(
+            "blade counts must be at least 1000 each (got {:?})",
+            opts.counts
+        );
+    }
+    if !(opts.fov_deg > 1.0 && opts.fov_deg < 170.0) {
+        bail!("--fov-deg must be between 1 and 170, not {}", opts.fov_deg);
+    }
+    std::fs::create_dir_all(&opts.out)
+        .with_context(|| format!("cannot create {}", opts.out.display()))?;
+    let manifest = field_manifest(opts.field_m)?;
+    let world = World {
+        dir: PathBuf::from("<memory>"),
+        manifest: manifest.clone(),
+    };
+    let source = Arc::new(FlatField {
+        manifest,
+        field_m: opts.field_m,
+    });
+    let ctx = GpuContext::new()?;
+    let camera = field_camera(opts, opts.size.0 as f32 / opts.size.1 as f32);
+    let counts = FrameCounts::for_adapter(&ctx.info).with(
+        opts.warmup_frames,
+        opts.timed_frames,
+        opts.rounds,
+    );
+    let base = RingSettings::for_pyramid(&world.manifest.pyramid);
+    let tile_m = world.manifest.pyramid.tile_size_m(base.level);
+    // The whole field in view: the far corner from the camera is inside the view distance.
+    let corner = DVec3::new(opts.field_m, opts.field_m, 0.0) - DVec3::from_array(opts.camera_m);
+    let view_m = (corner.length() * 1.3).max(4.0 * tile_m);
+    let config = |spacing: f64, lod: bool| -> SceneConfig {
+        let mut c = SceneConfig::for_world(&world);
+        c.grass = Some(RingSettings {
+            high_radius_m: if lod { 2.0 * tile_m } else { view_m },
+            low_radius_m: view_m,
+            ..base
+        });
+        c.grass_spacing_m = spacing as f32;
+        let grid = (tile_m / spacing).round() as u32;
+        c.grass_capacity = Some(grid * grid);
+        c
+    };
+    let spacings: Vec<f64> = opts
+        .counts
+        .iter()
+        .map(|&n| opts.field_m / (n as f64).sqrt())
+        .collect();
+    let total = spacings.len() as u64;
+    let scene_for = |spacing: f64, lod: bool| -> Result<Scene> {
+        let mut scene = Scene::with_source(
+            &ctx,
+            world.clone(),
+            source.clone(),
+            opts.size.0,
+            opts.size.1,
+            config(spacing, lod),
+        )?;
+        if !scene.warm_up(&ctx, &camera, std::time::Duration::from_secs(60))? {
+            bail!("the field's tiles did not load");
+        }
+        Ok(scene)
+    };
+
+    // Images (and the counts) first, against the same field with no LOD.
+    let mut scenes = Vec::new();
+    let mut images = Vec::new();
+    for (k, &spacing) in spacings.iter().enumerate() {
+        let mut reference = scene_for(spacing, false)?;
+        reference.render(&ctx, &camera)?;
+        let no_lod = reference.read_image(&ctx)?;
+        drop(reference);
+        let mut scene = scene_for(spacing, true)?;
+        let stats = scene.render(&ctx, &camera)?;
+        let image = scene.read_image(&ctx)?;
+        let flip = flip_compare(&rgb(&no_lod), &rgb(&image))?.mean;
+        images.push((stats, f64::from(flip)));
+        scenes.push(scene);
+        progress("images", k as u64 + 1, total);
+    }
+
+    // Then the timings, in interleaved rounds: the grass frame, then its floor.
+    let segments = SceneConfig::for_world(&world).grass_segments;
+    let floor = FloorPass::new(&ctx, opts.size, segments);
+    let mut frame_samples = vec![Vec::new(); spacings.len()];
+    let mut generate_samples = vec![Vec::new(); spacings.len()];
+    let mut draw_samples = vec![Vec::new(); spacings.len()];
+    let mut floor_samples = vec![Vec::new(); spacings.len()];
+    for round in 0..counts.rounds {
+        for (k, scene) in scenes.iter_mut().enumerate() {
+            let walker = Some(camera.position.truncate());
+            for (stats, wall) in run_frames(
+                &ctx,
+                scene,
+                &camera,
+                0.0,
+                walker,
+                counts.warmup,
+                counts.timed,
+            )? {
+                let pass = |name: &str| {
+                    stats
+                        .gpu
+                        .iter()
+                        .filter(|(n, _)| n == name)
+                        .map(|(_, t)| t)
+                        .sum::<f64>()
+                };
+                frame_samples[k].push(if ctx.timestamps {
+                    stats.gpu.iter().map(|(_, t)| t).sum()
+                } else {
+                    wall
+                });
+                generate_samples[k].push(pass("grass_generate"));
+                draw_samples[k].push(pass("grass_draw"));
+            }
+            let drawn = images[k].0.grass.drawn;
+            floor_samples[k].extend(floor.time(&ctx, drawn, counts)?);
+            progress(
+                "timing",
+                u64::from(round) * total + k as u64 + 1,
+                u64::from(counts.rounds) * total,
+            );
+        }
+    }
+    drop(scenes);
+
+    let mut results = Vec::new();
+    for (k, &spacing) in spacings.iter().enumerate() {
+        let (stats, flip): &(FrameStats, f64) = &images[k];
+        let g = &stats.grass;
+        let vertices = strip_vertices(g.drawn, segments);
+        let draw = Timing::of(&draw_samples[k]);
+        let floor_t = Timing::of(&floor_samples[k]);
+        let drawn = u64::from(g.drawn[0]) + u64::from(g.drawn[1]);
+        let culled = (0..2)
+            .map(|l| {
+                g.culled_distance[l] + g.culled_frustum[l] + g.culled_occlusion[l] + g.overflow[l]
+            })
+            .sum();
+        results.push(BladesResult {
+            blades: opts.counts[k],
+            spacing_m: spacing,
+            considered: g.considered,
+            empty: g.empty[0] + g.empty[1],
+            culled,
+            drawn: g.drawn,
+            vertices,
+            generate: Timing::of(&generate_samples[k]),
+            draw,
+            frame: Timing::of(&frame_samples[k]),
+            floor: floor_t,
+            floor_vertices: floor.vertices(g.drawn),
+            ns_per_blade: draw.median_ms * 1e6 / drawn.max(1) as f64,
+            ns_per_vertex: draw.median_ms * 1e6 / vertices.max(1) as f64,
+            ratio_to_floor: if floor_t.median_ms > 0.0 {
+                draw.median_ms / floor_t.median_ms
+            } else {
+                0.0
+            },
+            flip_vs_no_lod: *flip,
+        });
+    }
+    write_outputs(opts, &results)?;
+    let report = BenchBladesReport {
+        adapter: AdapterReport::of(&ctx),
+        size: opts.size,
+        counts,
+        results,
+    };
+    write_json(&opts.out.join("bench_blades.json"), &report)?;
+    Ok(report)
+}
+
+fn rgb(img: &image::RgbaImage) -> image::RgbImage {
+    image::DynamicImage::ImageRgba8(img.clone()).to_rgb8()
+}
+
+/// Vertices of the grass draw: a strip of `2 * segments + 1` vertices a blade, per LOD.
+pub fn strip_vertices(drawn: [u32; 2], segments: [u32; 2]) -> u64 {
+    (0..2)
+        .map(|l| u64::from(drawn[l]) * u64::from(2 * segments[l] + 1))
+        .sum()
+}
+
+fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<()> {
+    use std::fmt::Write as _;
+    let mut csv = String::from(
+        "blades,spacing_m,considered_high,considered_low,empty,culled,drawn_high,drawn_low,vertices,\
+         generate_ms,draw_ms,draw_q1_ms,draw_q3_ms,draw_spread,frame_ms,floor_ms,floor_spread,\
+         floor_vertices,ns_per_blade,ns_per_vertex,ratio_to_floor,noisy,flip_vs_no_lod\n",
+    );
+    for r in results {
+        let _ = writeln!(
+            csv,
+            "{},{:.4},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.3},{:.4},{:.3},{},{:.5}",
+            r.blades,
+            r.spacing_m,
+            r.considered[0],
+            r.considered[1],
+            r.empty,
+            r.culled,
+            r.drawn[0],
+            r.drawn[1],
+            r.vertices,
+            r.generate.median_ms,
+            r.draw.median_ms,
+            r.draw.q1_ms,
+            r.draw.q3_ms,
+            r.draw.spread,
+            r.frame.median_ms,
+            r.floor.median_ms,
+            r.floor.spread,
+            r.floor_vertices,
+            r.ns_per_blade,
+            r.ns_per_vertex,
+            r.ratio_to_floor,
+            r.draw.noisy || r.floor.noisy,
+            r.flip_vs_no_lod
+        );
+    }
+    std::fs::write(opts.out.join("blades.csv"), csv)?;
+    let series = |name: &str, f: &dyn Fn(&BladesResult) -> f64| Series {
+        name: name.into(),
+        points: results.iter().map(|r| (r.blades as f64, f(r))).collect(),
+    };
+    LineChart {
+        title: "Grass GPU time against blade count".into(),
+        x_label: "blades in the field".into(),
+        y_label: "GPU time (ms)".into(),
+        log_x: true,
+        log_y: true,
+        series: vec![
+            series("grass draw", &|r| r.draw.median_ms),
+            series("floor (same vertices, trivial shader)", &|r| {
+                r.floor.median_ms
+            }),
+            series("generation + wind", &|r| r.generate.median_ms),
+            series("whole frame", &|r| r.frame.median_ms),
+        ],
+    }
+    .write_png(&opts.out.join("blades_time.png"), 900, 600)?;
+    LineChart {
+        title: "Grass draw against the vertex floor".into(),
+        x_label: "blades in the field".into(),
+        y_label: "grass draw time / floor time".into(),
+        log_x: true,
+        log_y: false,
+        series: vec![series("ratio to floor", &|r| r.ratio_to_floor)],
+    }
+    .write_png(&opts.out.join("blades_ratio.png"), 900, 600)?;
+    Ok(())
+}
+
+/// The floor: triangle strips of the grass draw's lengths and instance counts, drawn with a
+/// trivial shader (each a sliver a pixel wide at a hashed place, one flat colour), timed with
+/// timestamps around the pass.
+struct FloorPass {
+    /// A pipeline per LOD, its strips as long as the grass's.
+    pipelines: [wgpu::RenderPipeline; 2],
+    segments: [u32; 2],
+    color: wgpu::TextureView,
+    depth: wgpu::TextureView,
+    queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    period_ns: f64,
+}
+
+const FLOOR_WGSL: &str = r#"
+override SEGMENTS: u32 = 7u;
+fn hash(v: u32) -> u32 {
+    var x = v;
+    x ^= x >> 16u; x *= 0x7feb352du; x ^= x >> 15u; x *= 0x846ca68bu; x ^= x >> 16u;
+    return x;
+}
+@vertex
+fn vs(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> @builtin(position) vec4<f32> {
+    let h = hash(ii);
+    let base = vec2<f32>(f32(h & 0xffffu), f32(h >> 16u)) / 65535.0 * 2.0 - 1.0;
+    let side = f32(vi & 1u) * 0.002;
+    let up = f32(vi >> 1u) / f32(SEGMENTS) * 0.02;
+    return vec4<f32>(base + vec2<f32>(side, up), 0.5, 1.0);
+}
+@fragment
+fn fs() -> @location(0) vec4<f32> {
+    return vec4<f32>(0.2, 0.5, 0.1, 1.0);
+}
+"#;
+
+impl FloorPass {
+    fn new(ctx: &GpuContext, (width, height): (u32, u32), segments: [u32; 2]) -> Self {
+        let device = &ctx.device;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("vertex floor"),
+            source: wgpu::ShaderSource::Wgsl(FLOOR_WGSL.into()),
+        });
+        let target = |format, usage| {
+            device
+                .create_texture(&wgpu::TextureDescriptor {
+                    label: Some("vertex floor"),
+                    size: wgpu::Extent3d {
+                        width,
+                        height,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats: &[],
+                })
+                .create_view(&Default::default())
+        };
+        let color = target(
+            crate::terrain::COLOR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
+        let depth = target(
+            crate::terrain::DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
+        let pipelines = segments.map(|n| floor_pipeline(device, &module, n));
+        let queries = ctx.timestamps.then(|| {
+            (
+                device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("vertex floor"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: 2 * MAX_FLOOR_FRAMES,
+                }),
+                device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("vertex floor timestamps"),
+                    size: u64::from(2 * MAX_FLOOR_FRAMES) * 8,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+            )
+        });
+        Self {
+            pipelines,
+            segments,
+            color,
+            depth,
+            queries,
+            period_ns: f64::from(ctx.queue.get_timestamp_period()),
+        }
+    }
+
+    /// Vertices the floor draws for `drawn` blades per LOD: the instances and strip lengths of
+    /// its draw calls.
+    fn vertices(&self, drawn: [u32; 2]) -> u64 {
+        (0..2)
+            .map(|l| u64::from(drawn[l]) * u64::from(2 * self.segments[l] + 1))
+            .sum()
+    }
+
+    /// Times `counts.warmup + counts.timed` floor frames back to back; returns the timed ones'
+    /// GPU times (milliseconds; wall times between submissions without timestamps).
+    fn time(&self, ctx: &GpuContext, drawn: [u32; 2], counts: FrameCounts) -> Result<Vec<f64>> {
+        let frames = (counts.warmup + counts.timed).min(MAX_FLOOR_FRAMES);
+        let mut walls = Vec::new();
+        let mut last = std::time::Instant::now();
+        for f in 0..frames {
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("vertex floor"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: &self.color,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &self.depth,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(0.0),
+                            store: wgpu::StoreOp::Store,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: self.queries.as_ref().map(|(q, _)| {
+                        wgpu::RenderPassTimestampWrites {
+                            query_set: q,
+                            beginning_of_pass_write_index: Some(2 * f),
+                            end_of_pass_write_index: Some(2 * f + 1),
+                        }
+                    }),
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                for (l, pipeline) in self.pipelines.iter().enumerate() {
+                    pass.set_pipeline(pipeline);
+                    pass.draw(0..2 * self.segments[l] + 1, 0..drawn[l]);
+                }
+            }
+            if f + 1 == frames
+                && let Some((q, b)) = &self.queries
+            {
+                encoder.resolve_query_set(q, 0..2 * frames, b, 0);
+            }
+            ctx.queue.submit([encoder.finish()]);
+            let now = std::time::Instant::now();
+            walls.push((now - last).as_secs_f64() * 1e3);
+            last = now;
+        }
+        ctx.wait_idle();
+        let skip = counts.warmup.min(frames) as usize;
+        match &self.queries {
+            Some((_, b)) => {
+                let ticks: Vec<u64> = crate::gpu::read_buffer_pod(
+                    &ctx.device,
+                    &ctx.queue,
+                    b,
+                    ..u64::from(frames) * 16,
+                )?;
+                Ok(ticks
+                    .chunks_exact(2)
+                    .skip(skip)
+                    .map(|t| t[1].saturating_sub(t[0]) as f64 * self.period_ns / 1e6)
+                    .collect())
+            }
+            None => Ok(walls.into_iter().skip(skip).collect()),
+        }
+    }
+}
+
+/// The floor's pipeline for strips of `segments` segments (`2 * segments + 1` vertices).
+fn floor_pipeline(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    segments: u32,
+) -> wgpu::RenderPipeline {
+    let constants = [("SEGMENTS", f64::from(segments.max(1)))];
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("vertex floor"),
+        layout: None,
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs"),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &constants,
+                ..Default::default()
+            },
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleStrip,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: crate::terrain::DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs"),
+            compilation_options: Default::default(),
+            targets: &[Some(crate::terrain::COLOR_FORMAT.into())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// Most floor frames timed in one call.
+const MAX_FLOOR_FRAMES: u32 = 256;
