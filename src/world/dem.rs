@@ -366,7 +366,7 @@ fn sniff(path: &Path) -> Result<DemFormat, WorldError> {
 
 /// Refuses a grid too small to bake or too large to hold, before anything is allocated.
 pub(crate) fn check_grid_size(path: &Path, width: u64, height: u64) -> Result<(), WorldError> {
-    if width < 2 || height < 2 || width * height > MAX_DEM_SAMPLES {
+    if width < 2 || height < 2 || width.saturating_mul(height) > MAX_DEM_SAMPLES {
         return Err(WorldError::OutOfRange {
             path: path.to_path_buf(),
             field: "grid size".into(),
@@ -403,4 +403,36 @@ fn catmull_rom_weights(t: f64) -> [f64; 4] {
         0.5 * (-3.0 * t3 + 4.0 * t2 + t),
         0.5 * (t3 - t2),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metres_per_degree_matches_the_published_wgs84_figures() {
+        // Length of a degree on the WGS 84 ellipsoid, as tabulated in geodesy references
+        // (latitude, longitude degree lengths in metres).
+        for (lat, lon_m, lat_m) in [
+            (0.0, 111_320.0, 110_574.0),
+            (45.0, 78_847.0, 111_132.0),
+            (60.0, 55_800.0, 111_412.0),
+        ] {
+            let [ew, ns] = metres_per_degree(lat);
+            assert!((ew - lon_m).abs() < 2.0, "{lat}: {ew}");
+            assert!((ns - lat_m).abs() < 2.0, "{lat}: {ns}");
+        }
+        assert_eq!(metres_per_degree(-37.5), metres_per_degree(37.5));
+    }
+
+    #[test]
+    fn grid_sizes_beyond_the_limit_are_refused() {
+        let p = Path::new("big.tif");
+        assert!(check_grid_size(p, 16384, 16384).is_ok());
+        assert!(check_grid_size(p, 2, 2).is_ok());
+        for (w, h) in [(16385, 16384), (1, 100), (100, 1), (1 << 40, 1 << 40)] {
+            let e = check_grid_size(p, w, h).unwrap_err();
+            assert!(e.to_string().starts_with("big.tif: grid size"), "{e}");
+        }
+    }
 }

@@ -10,14 +10,19 @@
 //!   centre latitude, east-west and north-south apart). Heights in feet (`VerticalUnitsGeoKey`)
 //!   are converted to metres.
 //! - Nodata from the `GDAL_NODATA` tag; NaN and infinite heights count as nodata too.
+//!
+//! LZW chunks are decompressed here, whole, rather than by the `tiff` crate: its streaming LZW
+//! reader (weezl 0.1 with `yield_on_full_buffer`) can stop short of a chunk's end when one code
+//! decodes to more bytes than a row holds, which happens in the flat, repetitive areas and the
+//! padded edge tiles that real DEMs have.
 
 use std::fs::File;
-use std::io::BufReader;
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
 use tiff::TiffError;
 use tiff::decoder::{ChunkType, Decoder, DecodingResult, Limits};
-use tiff::tags::Tag;
+use tiff::tags::{ByteOrder, Tag};
 
 use super::dem::{Dem, DemFormat, MAX_DEM_SAMPLES, check_grid_size, metres_per_degree};
 use super::error::WorldError;
@@ -118,10 +123,50 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
             format!("predictor {predictor}: only none (1), horizontal (2) and floating point (3)"),
         ));
     }
-    check_chunks_inside(path, &mut decoder, file_len)?;
+    let chunks = check_chunks_inside(path, &mut decoder, file_len)?;
 
     let geo = GeoTags::read(path, &mut decoder)?;
-    let values = decoder.read_image().map_err(|e| tiff_error(path, e))?;
+    let values = if compression == 5 {
+        let chunk_size = match decoder.get_chunk_type() {
+            ChunkType::Tile => {
+                let mut tag_u32 = |tag: Tag| -> Result<u32, WorldError> {
+                    decoder
+                        .get_tag_u32(tag)
+                        .map_err(|e| tiff_error(path, e))
+                        .and_then(|v| {
+                            if v == 0 {
+                                Err(corrupt(path, format!("{tag:?} is 0")))
+                            } else {
+                                Ok(v)
+                            }
+                        })
+                };
+                [tag_u32(Tag::TileWidth)?, tag_u32(Tag::TileLength)?]
+            }
+            ChunkType::Strip => {
+                let rows = match decoder
+                    .find_tag_unsigned::<u32>(Tag::RowsPerStrip)
+                    .map_err(|e| tiff_error(path, e))?
+                {
+                    Some(0) | None => height,
+                    Some(r) => r.min(height),
+                };
+                [width, rows]
+            }
+        };
+        let layout = ChunkLayout {
+            width,
+            height,
+            chunk_size,
+            sample_bytes: usize::from(bits / 8),
+            big_endian: decoder.byte_order() == ByteOrder::BigEndian,
+            predictor,
+        };
+        let bits = decode_lzw(path, &layout, &chunks)?;
+        typed(bits, type_name)
+    } else {
+        decoder.read_image().map_err(|e| tiff_error(path, e))?
+    };
     let nodata = geo.nodata;
     let vertical = geo.vertical_unit_m;
     let to_height = |v: f64, nodata_hit: bool| -> f32 {
@@ -550,12 +595,12 @@ fn compression_name(code: u16) -> &'static str {
 }
 
 /// Refuses a file whose strips or tiles reach past its end (a truncated download), with the
-/// chunk named, before any decoding.
+/// chunk named, before any decoding. Returns each chunk's offset and byte count.
 fn check_chunks_inside(
     path: &Path,
     d: &mut Decoder<BufReader<File>>,
     file_len: u64,
-) -> Result<(), WorldError> {
+) -> Result<Vec<(u64, u64)>, WorldError> {
     let (kind, offsets_tag, counts_tag) = match d.get_chunk_type() {
         ChunkType::Strip => ("strip", Tag::StripOffsets, Tag::StripByteCounts),
         ChunkType::Tile => ("tile", Tag::TileOffsets, Tag::TileByteCounts),
@@ -574,7 +619,121 @@ fn check_chunks_inside(
             ));
         }
     }
-    Ok(())
+    if offsets.len() != counts.len() {
+        return Err(corrupt(
+            path,
+            format!(
+                "{} {kind} offsets but {} byte counts",
+                offsets.len(),
+                counts.len()
+            ),
+        ));
+    }
+    Ok(offsets.into_iter().zip(counts).collect())
+}
+
+/// How the samples of a single-band image lie in its chunks.
+struct ChunkLayout {
+    width: u32,
+    height: u32,
+    /// Samples per chunk row and rows per chunk (a tile's size, or the image width and the
+    /// rows per strip).
+    chunk_size: [u32; 2],
+    sample_bytes: usize,
+    big_endian: bool,
+    predictor: u16,
+}
+
+/// Decompresses every LZW chunk whole and undoes its predictor; returns each sample's bit
+/// pattern (in the low `sample_bytes` bytes), row 0 first.
+fn decode_lzw(
+    path: &Path,
+    layout: &ChunkLayout,
+    chunks: &[(u64, u64)],
+) -> Result<Vec<u64>, WorldError> {
+    let [cw, ch] = layout.chunk_size.map(|v| v as usize);
+    let (w, h) = (layout.width as usize, layout.height as usize);
+    let across = w.div_ceil(cw);
+    let expected = across * h.div_ceil(ch);
+    if chunks.len() < expected {
+        return Err(corrupt(
+            path,
+            format!("{} chunks, {expected} expected", chunks.len()),
+        ));
+    }
+    let b = layout.sample_bytes;
+    let mask = if b == 8 {
+        u64::MAX
+    } else {
+        (1u64 << (8 * b)) - 1
+    };
+    let mut file = File::open(path).map_err(|e| WorldError::io(path, e))?;
+    let mut out = vec![0u64; w * h];
+    let mut row = vec![0u64; cw];
+    for (index, &(offset, count)) in chunks.iter().take(expected).enumerate() {
+        let (x0, y0) = ((index % across) * cw, (index / across) * ch);
+        let mut packed = vec![0u8; count as usize];
+        file.seek(SeekFrom::Start(offset))
+            .and_then(|_| file.read_exact(&mut packed))
+            .map_err(|e| WorldError::io(path, e))?;
+        let data = weezl::decode::Decoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
+            .decode(&packed)
+            .map_err(|e| corrupt(path, format!("LZW chunk {index}: {e:?}")))?;
+        let rows = ch.min(h - y0);
+        if data.len() < rows * cw * b {
+            return Err(corrupt(
+                path,
+                format!(
+                    "LZW chunk {index} holds {} bytes, {} expected",
+                    data.len(),
+                    rows * cw * b
+                ),
+            ));
+        }
+        for (r, bytes) in data.chunks_exact(cw * b).take(rows).enumerate() {
+            if layout.predictor == 3 {
+                // Floating-point predictor: byte differences along the row, over byte planes
+                // (most significant first).
+                let mut plane = bytes.to_vec();
+                for j in 1..plane.len() {
+                    plane[j] = plane[j].wrapping_add(plane[j - 1]);
+                }
+                for (i, v) in row.iter_mut().enumerate() {
+                    *v = (0..b).fold(0, |acc, k| (acc << 8) | u64::from(plane[k * cw + i]));
+                }
+            } else {
+                for (v, s) in row.iter_mut().zip(bytes.chunks_exact(b)) {
+                    *v = if layout.big_endian {
+                        s.iter().fold(0, |acc, &x| (acc << 8) | u64::from(x))
+                    } else {
+                        s.iter().rev().fold(0, |acc, &x| (acc << 8) | u64::from(x))
+                    };
+                }
+                if layout.predictor == 2 {
+                    for i in 1..cw {
+                        row[i] = row[i].wrapping_add(row[i - 1]) & mask;
+                    }
+                }
+            }
+            let y = y0 + r;
+            let n = cw.min(w - x0);
+            out[y * w + x0..y * w + x0 + n].copy_from_slice(&row[..n]);
+        }
+    }
+    Ok(out)
+}
+
+/// Bit patterns as the typed samples that the `tiff` crate would have returned.
+fn typed(bits: Vec<u64>, type_name: &str) -> DecodingResult {
+    match type_name {
+        "uint16" => DecodingResult::U16(bits.into_iter().map(|v| v as u16).collect()),
+        "int16" => DecodingResult::I16(bits.into_iter().map(|v| v as u16 as i16).collect()),
+        "int32" => DecodingResult::I32(bits.into_iter().map(|v| v as u32 as i32).collect()),
+        "float32" => {
+            DecodingResult::F32(bits.into_iter().map(|v| f32::from_bits(v as u32)).collect())
+        }
+        _ => DecodingResult::F64(bits.into_iter().map(f64::from_bits).collect()),
+    }
 }
 
 fn corrupt(path: &Path, message: String) -> WorldError {
