@@ -1224,6 +1224,12 @@ fn bad_cases() -> Vec<BadCase> {
             |e| matches!(e, WorldError::UnsupportedDem { .. }),
             &["model type 3"],
         ),
+        tiff_case(
+            "int-float-predictor.tif",
+            |s| s.predictor = 3,
+            |e| matches!(e, WorldError::UnsupportedDem { .. }),
+            &["floating-point predictor on int16"],
+        ),
         BadCase {
             file: "cut-directory.tif",
             write: truncated(data_first, 0.6),

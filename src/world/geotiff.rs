@@ -84,12 +84,12 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
     }
     let bits = tag_u16(Tag::BitsPerSample)?.unwrap_or(1);
     let sample_format = tag_u16(Tag::SampleFormat)?.unwrap_or(1);
-    let type_name = match (sample_format, bits) {
-        (1, 16) => "uint16",
-        (2, 16) => "int16",
-        (2, 32) => "int32",
-        (3, 32) => "float32",
-        (3, 64) => "float64",
+    let sample = match (sample_format, bits) {
+        (1, 16) => SampleType::U16,
+        (2, 16) => SampleType::I16,
+        (2, 32) => SampleType::I32,
+        (3, 32) => SampleType::F32,
+        (3, 64) => SampleType::F64,
         (f, b) => {
             let kind = match f {
                 1 => "uint",
@@ -121,6 +121,12 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
         return Err(unsupported(
             path,
             format!("predictor {predictor}: only none (1), horizontal (2) and floating point (3)"),
+        ));
+    }
+    if predictor == 3 && !sample.is_float() {
+        return Err(unsupported(
+            path,
+            format!("the floating-point predictor on {} samples", sample.name()),
         ));
     }
     let chunks = check_chunks_inside(path, &mut decoder, file_len)?;
@@ -163,7 +169,7 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
             predictor,
         };
         let bits = decode_lzw(path, &layout, &chunks)?;
-        typed(bits, type_name)
+        sample.typed(bits)
     } else {
         decoder.read_image().map_err(|e| tiff_error(path, e))?
     };
@@ -207,7 +213,10 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
         _ => {
             return Err(unsupported(
                 path,
-                format!("the decoder returned another sample type than the {type_name} declared"),
+                format!(
+                    "the decoder returned another sample type than the {} declared",
+                    sample.name()
+                ),
             ));
         }
     };
@@ -240,7 +249,8 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
         heights: raw,
         place: String::new(),
         source: format!(
-            "{type_name} GeoTIFF, compression {}",
+            "{} GeoTIFF, compression {}",
+            sample.name(),
             compression_name(compression)
         ),
         format: DemFormat::Geotiff,
@@ -723,16 +733,41 @@ fn decode_lzw(
     Ok(out)
 }
 
-/// Bit patterns as the typed samples that the `tiff` crate would have returned.
-fn typed(bits: Vec<u64>, type_name: &str) -> DecodingResult {
-    match type_name {
-        "uint16" => DecodingResult::U16(bits.into_iter().map(|v| v as u16).collect()),
-        "int16" => DecodingResult::I16(bits.into_iter().map(|v| v as u16 as i16).collect()),
-        "int32" => DecodingResult::I32(bits.into_iter().map(|v| v as u32 as i32).collect()),
-        "float32" => {
-            DecodingResult::F32(bits.into_iter().map(|v| f32::from_bits(v as u32)).collect())
+/// The sample types read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SampleType {
+    U16,
+    I16,
+    I32,
+    F32,
+    F64,
+}
+
+impl SampleType {
+    fn name(self) -> &'static str {
+        match self {
+            SampleType::U16 => "uint16",
+            SampleType::I16 => "int16",
+            SampleType::I32 => "int32",
+            SampleType::F32 => "float32",
+            SampleType::F64 => "float64",
         }
-        _ => DecodingResult::F64(bits.into_iter().map(f64::from_bits).collect()),
+    }
+
+    fn is_float(self) -> bool {
+        matches!(self, SampleType::F32 | SampleType::F64)
+    }
+
+    /// Bit patterns as the typed samples that the `tiff` crate would have returned.
+    fn typed(self, bits: Vec<u64>) -> DecodingResult {
+        let it = bits.into_iter();
+        match self {
+            SampleType::U16 => DecodingResult::U16(it.map(|v| v as u16).collect()),
+            SampleType::I16 => DecodingResult::I16(it.map(|v| v as u16 as i16).collect()),
+            SampleType::I32 => DecodingResult::I32(it.map(|v| v as u32 as i32).collect()),
+            SampleType::F32 => DecodingResult::F32(it.map(|v| f32::from_bits(v as u32)).collect()),
+            SampleType::F64 => DecodingResult::F64(it.map(f64::from_bits).collect()),
+        }
     }
 }
 
