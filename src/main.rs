@@ -126,7 +126,7 @@ enum Command {
         dem: PathBuf,
         /// Spacing of the DEM's samples in metres, M or EW,NS, in place of what the file says
         /// (needed for a TIFF without GeoTIFF tags).
-        #[arg(long, value_parser = parse_cell_size)]
+        #[arg(long, value_name = "M|EW,NS", value_parser = parse_cell_size)]
         dem_cell_size: Option<[f64; 2]>,
         /// The world folder to write.
         #[arg(long)]
