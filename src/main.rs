@@ -149,11 +149,16 @@ enum Command {
         #[command(subcommand)]
         what: EvalCommand,
     },
-    /// Bake a DEM (16-bit PNG with a JSON sidecar) into a world folder.
+    /// Bake a DEM (GeoTIFF, SRTM .hgt, or 16-bit PNG with a JSON sidecar) into a world folder.
     Bake {
-        /// The DEM's PNG; its sidecar is the .json of the same stem.
+        /// The DEM: a GeoTIFF, an SRTM .hgt tile, or a 16-bit PNG whose sidecar is the .json of
+        /// the same stem. The format is told from the content.
         #[arg(long)]
         dem: PathBuf,
+        /// Spacing of the DEM's samples in metres, M or EW,NS, in place of what the file says
+        /// (needed for a TIFF without GeoTIFF tags).
+        #[arg(long, value_name = "M|EW,NS", value_parser = parse_cell_size)]
+        dem_cell_size: Option<[f64; 2]>,
         /// The world folder to write.
         #[arg(long)]
         out: PathBuf,
@@ -564,6 +569,20 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
+/// A DEM cell size: `M` (square) or `EW,NS`, metres, each finite and positive.
+fn parse_cell_size(s: &str) -> Result<[f64; 2], String> {
+    let parse = |v: &str| -> Result<f64, String> {
+        match v.trim().parse::<f64>() {
+            Ok(m) if m.is_finite() && m > 0.0 => Ok(m),
+            _ => Err(format!("{v:?} is not a positive number of metres")),
+        }
+    };
+    match s.split_once(',') {
+        Some((ew, ns)) => Ok([parse(ew)?, parse(ns)?]),
+        None => parse(s).map(|m| [m, m]),
+    }
+}
+
 /// A world argument is a folder, or a name under `./worlds` or the crate's own `worlds`.
 fn resolve_world(arg: &str) -> Result<PathBuf> {
     let direct = Path::new(arg);
@@ -870,6 +889,7 @@ fn run(cli: Cli) -> Result<()> {
         } => eval_sway(&out),
         Command::Bake {
             dem,
+            dem_cell_size,
             out,
             name,
             cell_size,
@@ -879,6 +899,7 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let opts = BakeOptions {
                 dem,
+                dem_cell_size_m: dem_cell_size,
                 out,
                 name,
                 cell_size_m: cell_size,
@@ -904,6 +925,16 @@ fn run(cli: Cli) -> Result<()> {
             if let Some((_, pb)) = current {
                 pb.finish();
             }
+            println!(
+                "read {} ({}, {}x{} samples of {:.3} m x {:.3} m, {} nodata samples filled)",
+                opts.dem.display(),
+                report.dem_format.name(),
+                report.dem_samples[0],
+                report.dem_samples[1],
+                report.dem_cell_size_m[0],
+                report.dem_cell_size_m[1],
+                report.nodata_filled
+            );
             println!(
                 "baked {} tiles in {} levels into {} in {:.1} s",
                 report.tiles_written,

@@ -42,6 +42,7 @@ fn small_bake(dir: &Path, dem: PathBuf, name: &str) -> PathBuf {
         tile_cells: 16,
         stored_levels: 2,
         seed: 7,
+        ..Default::default()
     };
     bake(&opts, &mut |_, _, _| {}).unwrap();
     out

@@ -1,5 +1,7 @@
 //! The baker: turns a DEM ([`Dem`]) into a world: a pyramid of stored tiles and `world.toml`.
 //!
+//! 0. The DEM is read ([`Dem::load_with`]: GeoTIFF, SRTM `.hgt` or PNG + sidecar, told apart
+//!    by content) and its nodata samples are filled from the valid heights around them.
 //! 1. The DEM is resampled (Catmull-Rom bicubic in its own, non-square grid) to square cells at
 //!    the finest stored level, over the whole root grid plus a margin for the tile borders of
 //!    every level. Beyond the DEM the height of the nearest edge point is repeated.
@@ -27,12 +29,12 @@ use std::time::Instant;
 
 use glam::DVec2;
 
-use super::dem::Dem;
+use super::dem::{Dem, DemFormat, DemOptions};
 use super::error::WorldError;
 use super::format::{TileData, write_atomic, write_tile};
 use super::manifest::{
     CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, GrassType, Manifest, Sky, WindDefaults, WindKey,
-    WindScene, WindSource,
+    WindScene, WindSource, WorldSource,
 };
 use super::tile::{Pyramid, TileId};
 
@@ -48,8 +50,12 @@ const MAX_GRID_SAMPLES: u64 = 1 << 30;
 /// What to bake, and how.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BakeOptions {
-    /// The DEM image; its sidecar sits beside it with the extension `.json`.
+    /// The DEM: a GeoTIFF, an SRTM `.hgt` tile, or a 16-bit PNG whose sidecar sits beside it
+    /// with the extension `.json`.
     pub dem: PathBuf,
+    /// Spacing of the DEM's samples in metres (east-west, north-south), in place of what the
+    /// file says; needed for a TIFF without GeoTIFF tags.
+    pub dem_cell_size_m: Option<[f64; 2]>,
     /// The world directory to write (created where needed; other files in it are kept).
     pub out: PathBuf,
     /// World name; by default the name of `out`.
@@ -69,6 +75,7 @@ impl Default for BakeOptions {
     fn default() -> Self {
         BakeOptions {
             dem: PathBuf::new(),
+            dem_cell_size_m: None,
             out: PathBuf::new(),
             name: None,
             cell_size_m: None,
@@ -110,6 +117,14 @@ pub struct BakeReport {
     pub height_range_m: [f32; 2],
     /// Wall-clock time of the bake.
     pub seconds: f64,
+    /// The DEM's format.
+    pub dem_format: DemFormat,
+    /// The DEM's samples (west-east, south-north).
+    pub dem_samples: [u32; 2],
+    /// The DEM's cell size in metres (east-west, north-south).
+    pub dem_cell_size_m: [f64; 2],
+    /// Nodata samples of the DEM filled from the heights around them.
+    pub nodata_filled: u64,
 }
 
 /// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
@@ -122,7 +137,12 @@ pub fn bake(
     let manifest_path = opts.out.join("world.toml");
 
     progress(BakeStage::LoadDem, 0, 1);
-    let dem = Dem::load(&opts.dem)?;
+    let dem = Dem::load_with(
+        &opts.dem,
+        &DemOptions {
+            cell_size_m: opts.dem_cell_size_m,
+        },
+    )?;
     progress(BakeStage::LoadDem, 1, 1);
 
     let cell = match opts.cell_size_m {
@@ -171,6 +191,15 @@ pub fn bake(
         paths: Vec::new(),
         wind_scenes: Vec::new(),
         features: Default::default(),
+        source: Some(WorldSource {
+            file: file_name(&opts.dem),
+            format: dem.format,
+            crs: dem.crs.clone(),
+            origin: dem.origin,
+            samples: [dem.width, dem.height],
+            cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
+            nodata_filled: dem.nodata_filled,
+        }),
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;
@@ -205,6 +234,10 @@ pub fn bake(
         extent_m: extent,
         height_range_m: height_range,
         seconds: start.elapsed().as_secs_f64(),
+        dem_format: dem.format,
+        dem_samples: [dem.width, dem.height],
+        dem_cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
+        nodata_filled: dem.nodata_filled,
     })
 }
 
@@ -271,20 +304,33 @@ fn default_name(opts: &BakeOptions) -> String {
         .unwrap_or_else(|| "world".into())
 }
 
-fn description(dem: &Dem, dem_path: &Path, cell: f64) -> String {
-    let file = dem_path
-        .file_name()
+fn file_name(path: &Path) -> String {
+    path.file_name()
         .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
+        .unwrap_or_default()
+}
+
+fn description(dem: &Dem, dem_path: &Path, cell: f64) -> String {
+    let file = file_name(dem_path);
     let mut text = String::new();
     if !dem.place.is_empty() {
         text.push_str(dem.place.trim_end_matches('.'));
         text.push_str(". ");
     }
     text.push_str(&format!(
-        "Baked from {file} ({}x{} samples of {} m x {} m) at {cell} m cells.",
-        dem.width, dem.height, dem.cell_ew_m, dem.cell_ns_m
+        "Baked from {file} ({}, {}x{} samples of {} m x {} m) at {cell} m cells.",
+        dem.format.name(),
+        dem.width,
+        dem.height,
+        round_to(dem.cell_ew_m, 3),
+        round_to(dem.cell_ns_m, 3)
     ));
+    if dem.nodata_filled > 0 {
+        text.push_str(&format!(
+            " {} nodata samples filled from the heights around them.",
+            dem.nodata_filled
+        ));
+    }
     if !dem.source.is_empty() {
         text.push(' ');
         text.push_str(&dem.source);

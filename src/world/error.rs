@@ -276,12 +276,13 @@ pub enum WorldError {
         id: TileId,
     },
 
-    /// An image file (EXR or PNG) is truncated or corrupt and cannot be decoded.
+    /// An image or elevation file (EXR, PNG, TIFF or SRTM .hgt) is truncated or corrupt and
+    /// cannot be decoded.
     #[error("{}: corrupt or truncated {format} file: {message}", path.display())]
     CorruptImage {
         /// The file.
         path: PathBuf,
-        /// `EXR` or `PNG`.
+        /// `EXR`, `PNG`, `TIFF` or `SRTM .hgt`.
         format: &'static str,
         /// The decoder's message.
         message: String,
@@ -406,6 +407,88 @@ pub enum WorldError {
         /// The image's value.
         image: u32,
     },
+
+    /// A DEM file is none of the formats the baker reads (told by its content, not its name).
+    #[error(
+        "{}: not a DEM that verdant reads ({found}): expected a GeoTIFF, an SRTM .hgt tile \
+         (3601x3601 or 1201x1201) or a 16-bit PNG with a JSON sidecar",
+        path.display()
+    )]
+    UnknownDemFormat {
+        /// The file.
+        path: PathBuf,
+        /// What the file looks like, in words (e.g. `starts with bytes 7f 45 4c 46`).
+        found: String,
+    },
+
+    /// A DEM file uses a feature of its format that the baker does not read (several bands, a
+    /// compression or sample type it lacks, a rotated grid, an angular unit other than degrees).
+    #[error("{}: unsupported {format}: {problem}", path.display())]
+    UnsupportedDem {
+        /// The file.
+        path: PathBuf,
+        /// The format, e.g. `GeoTIFF`.
+        format: &'static str,
+        /// What is unsupported and what is.
+        problem: String,
+    },
+
+    /// A DEM does not say how far apart its samples are (a TIFF without GeoTIFF tags), and no
+    /// cell size was given to the baker.
+    #[error(
+        "{}: {problem}, so its cell size is unknown: give it in metres \
+         (verdant bake --dem-cell-size M, or EW,NS)",
+        path.display()
+    )]
+    NoGeoreference {
+        /// The file.
+        path: PathBuf,
+        /// What is missing.
+        problem: String,
+    },
+
+    /// A file read as an SRTM `.hgt` tile has a size that no SRTM tile has.
+    #[error(
+        "{}: {bytes} bytes is not the size of an SRTM .hgt tile: expected 25934402 \
+         (3601x3601 samples, 1 arc-second) or 2884802 (1201x1201, 3 arc-second)",
+        path.display()
+    )]
+    HgtSize {
+        /// The file.
+        path: PathBuf,
+        /// Its size in bytes.
+        bytes: u64,
+    },
+
+    /// An SRTM `.hgt` tile's name does not give its origin.
+    #[error(
+        "{}: an SRTM .hgt tile's name gives its south-west corner, like N37W123.hgt; \
+         rename the file, or give its cell size (verdant bake --dem-cell-size)",
+        path.display()
+    )]
+    HgtName {
+        /// The file.
+        path: PathBuf,
+    },
+
+    /// Too much of a DEM is nodata (voids) to fill from the rest.
+    #[error(
+        "{}: {nodata} of {total} samples ({:.1}%) are nodata, more than the {:.0}% that the \
+         baker fills: crop the DEM to the area that has data",
+        path.display(),
+        100.0 * *nodata as f64 / (*total).max(1) as f64,
+        100.0 * max_fraction
+    )]
+    TooMuchNodata {
+        /// The DEM file.
+        path: PathBuf,
+        /// Nodata samples.
+        nodata: u64,
+        /// All samples.
+        total: u64,
+        /// The largest fraction of nodata that is filled.
+        max_fraction: f64,
+    },
 }
 
 impl WorldError {
@@ -444,7 +527,13 @@ impl WorldError {
             | BadTileData { path, .. }
             | MissingSidecar { path, .. }
             | BadSidecar { path, .. }
-            | SidecarMismatch { path, .. } => Some(path),
+            | SidecarMismatch { path, .. }
+            | UnknownDemFormat { path, .. }
+            | UnsupportedDem { path, .. }
+            | NoGeoreference { path, .. }
+            | HgtSize { path, .. }
+            | HgtName { path }
+            | TooMuchNodata { path, .. } => Some(path),
         }
     }
 

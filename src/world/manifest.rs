@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::features::{Feature, Features};
 
+use super::dem::DemFormat;
 use super::error::WorldError;
 use super::tile::Pyramid;
 
@@ -59,6 +60,35 @@ pub struct Manifest {
     /// more off).
     #[serde(default)]
     pub features: FeatureSwitches,
+    /// Where the world's terrain came from (written by the baker; absent in worlds baked
+    /// before it was recorded, and in hand-made ones).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<WorldSource>,
+}
+
+/// The `[source]` table: the DEM a world was baked from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WorldSource {
+    /// The DEM's file name (without its folder).
+    pub file: String,
+    /// Its format.
+    pub format: DemFormat,
+    /// Its coordinate system, in words (e.g. `EPSG:4326, geographic (degrees)`); empty where
+    /// the file does not say.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub crs: String,
+    /// The DEM's south-west sample in that coordinate system (x or longitude first), where the
+    /// file gives it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub origin: Option<[f64; 2]>,
+    /// Samples in the DEM, west-east and south-north.
+    pub samples: [u32; 2],
+    /// Spacing of the DEM's samples in metres, east-west and north-south.
+    pub cell_size_m: [f64; 2],
+    /// Nodata samples filled from the heights around them.
+    #[serde(default)]
+    pub nodata_filled: u64,
 }
 
 /// The `[features]` table: each feature of the grass model on or off (all on by default). The
@@ -628,6 +658,13 @@ impl Manifest {
         v.all_finite("sky.sky_color", &s.sky_color)?;
         v.all_finite("sky.horizon_color", &s.horizon_color)?;
         v.positive("sky.fog_distance_m", s.fog_distance_m)?;
+        if let Some(source) = &self.source {
+            v.positive("source.cell_size_m[0]", source.cell_size_m[0])?;
+            v.positive("source.cell_size_m[1]", source.cell_size_m[1])?;
+            if let Some(origin) = &source.origin {
+                v.all_finite("source.origin", origin)?;
+            }
+        }
 
         let mut names = HashSet::new();
         for (pi, cam) in self.paths.iter().enumerate() {

@@ -1,6 +1,6 @@
 //! The world, GPU-free: tile addressing ([`TileId`], [`Pyramid`]), the manifest
-//! ([`Manifest`], `world.toml`), the stored tile files ([`TileData`]), DEM loading and the
-//! [`bake`]r that turns a DEM into a world.
+//! ([`Manifest`], `world.toml`), the stored tile files ([`TileData`]), DEM loading (GeoTIFF,
+//! SRTM `.hgt`, PNG + sidecar; nodata filling) and the [`bake`]r that turns a DEM into a world.
 //!
 //! A world is a directory:
 //! ```text
@@ -14,20 +14,23 @@ pub mod bake;
 pub mod dem;
 pub mod error;
 pub mod format;
+mod geotiff;
+mod hgt;
 pub mod manifest;
+pub mod nodata;
 pub mod tile;
 
 use std::path::{Path, PathBuf};
 
 pub use bake::{BakeOptions, BakeReport, BakeStage, bake};
-pub use dem::Dem;
+pub use dem::{Dem, DemFormat, DemOptions};
 pub use error::WorldError;
 pub use format::{
     ReadOptions, TileData, TileFile, read_tile, read_tile_with, tile_path, write_tile,
 };
 pub use manifest::{
     CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, FeatureSwitches, GrassType, MAX_WIND_SOURCES,
-    Manifest, Sky, SourcePlacement, WindDefaults, WindKey, WindScene, WindSource,
+    Manifest, Sky, SourcePlacement, WindDefaults, WindKey, WindScene, WindSource, WorldSource,
 };
 pub use tile::{Bounds, Pyramid, TileId};
 

@@ -1,0 +1,801 @@
+//! GeoTIFF DEMs: the TIFF container is read by the `tiff` crate (strips or tiles; no
+//! compression, Deflate, LZW or PackBits; horizontal and floating-point predictors); this module
+//! reads the GeoTIFF tags on top of it.
+//!
+//! - One band of int16, uint16, int32, float32 or float64.
+//! - Cell size from `ModelPixelScale` (with `ModelTiepoint` for the origin) or from an unrotated
+//!   `ModelTransformation`. Rows are mapped north-up (a grid stored south row first is flipped).
+//! - The GeoKey directory says whether the grid is projected (x/y in metres, or in feet, which
+//!   are converted) or geographic (degrees: the cell size in metres is taken at the grid's
+//!   centre latitude, east-west and north-south apart). Heights in feet (`VerticalUnitsGeoKey`)
+//!   are converted to metres.
+//! - Nodata from the `GDAL_NODATA` tag; NaN and infinite heights count as nodata too.
+//!
+//! LZW chunks are decompressed here, whole, rather than by the `tiff` crate: its streaming LZW
+//! reader (weezl 0.1 with `yield_on_full_buffer`) can stop short of a chunk's end when one code
+//! decodes to more bytes than a row holds, which happens in the flat, repetitive areas and the
+//! padded edge tiles that real DEMs have.
+
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::path::Path;
+
+use tiff::TiffError;
+use tiff::decoder::{ChunkType, Decoder, DecodingResult, Limits};
+use tiff::tags::{ByteOrder, Tag};
+
+use super::dem::{Dem, DemFormat, MAX_DEM_SAMPLES, check_grid_size, metres_per_degree};
+use super::error::WorldError;
+
+const FORMAT: &str = "GeoTIFF";
+
+// GeoKey ids (GeoTIFF 1.1, section 7).
+const GT_MODEL_TYPE: u16 = 1024;
+const GT_RASTER_TYPE: u16 = 1025;
+const GEOGRAPHIC_TYPE: u16 = 2048;
+const GEOG_ANGULAR_UNITS: u16 = 2054;
+const PROJECTED_CS_TYPE: u16 = 3072;
+const PROJ_LINEAR_UNITS: u16 = 3076;
+const PROJ_LINEAR_UNIT_SIZE: u16 = 3077;
+const VERTICAL_UNITS: u16 = 4099;
+
+/// Model types.
+const MODEL_PROJECTED: u16 = 1;
+const MODEL_GEOGRAPHIC: u16 = 2;
+/// Raster type: a pixel's value holds at a point (not over an area).
+const RASTER_PIXEL_IS_POINT: u16 = 2;
+/// Angular unit: degree.
+const ANGULAR_DEGREE: u16 = 9102;
+/// A code that means "given by another key".
+const USER_DEFINED: u16 = 32767;
+
+/// Reads a GeoTIFF DEM; nodata samples become NaN.
+pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, WorldError> {
+    let file = File::open(path).map_err(|e| WorldError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| WorldError::io(path, e))?.len();
+    let mut limits = Limits::default();
+    limits.decoding_buffer_size = (MAX_DEM_SAMPLES * 8) as usize;
+    limits.ifd_value_size = 64 << 20;
+    let mut decoder = Decoder::new(BufReader::new(file))
+        .map_err(|e| tiff_error(path, e))?
+        .with_limits(limits);
+    let (width, height) = decoder.dimensions().map_err(|e| tiff_error(path, e))?;
+    check_grid_size(path, u64::from(width), u64::from(height))?;
+
+    let mut tag_u16 = |tag: Tag| -> Result<Option<u16>, WorldError> {
+        match decoder.find_tag(tag).map_err(|e| tiff_error(path, e))? {
+            None => Ok(None),
+            Some(v) => v
+                .into_u16_vec()
+                .ok()
+                .and_then(|v| v.first().copied())
+                .map(Some)
+                .ok_or_else(|| corrupt(path, format!("tag {tag:?} is not a number"))),
+        }
+    };
+    let bands = tag_u16(Tag::SamplesPerPixel)?.unwrap_or(1);
+    if bands != 1 {
+        return Err(unsupported(
+            path,
+            format!(
+                "{bands} bands (samples per pixel): only single-band elevation rasters are read"
+            ),
+        ));
+    }
+    let bits = tag_u16(Tag::BitsPerSample)?.unwrap_or(1);
+    let sample_format = tag_u16(Tag::SampleFormat)?.unwrap_or(1);
+    let sample = match (sample_format, bits) {
+        (1, 16) => SampleType::U16,
+        (2, 16) => SampleType::I16,
+        (2, 32) => SampleType::I32,
+        (3, 32) => SampleType::F32,
+        (3, 64) => SampleType::F64,
+        (f, b) => {
+            let kind = match f {
+                1 => "uint",
+                2 => "int",
+                3 => "float",
+                _ => "sample format ",
+            };
+            return Err(unsupported(
+                path,
+                format!(
+                    "sample type {kind}{b}: heights must be int16, uint16, int32, float32 or float64"
+                ),
+            ));
+        }
+    };
+    let compression = tag_u16(Tag::Compression)?.unwrap_or(1);
+    if !matches!(compression, 1 | 5 | 8 | 32946 | 32773) {
+        return Err(unsupported(
+            path,
+            format!(
+                "compression {} ({compression}): the baker reads uncompressed, Deflate, LZW and \
+                 PackBits TIFFs (gdal_translate -co COMPRESS=DEFLATE converts one)",
+                compression_name(compression)
+            ),
+        ));
+    }
+    let predictor = tag_u16(Tag::Predictor)?.unwrap_or(1);
+    if !matches!(predictor, 1..=3) {
+        return Err(unsupported(
+            path,
+            format!("predictor {predictor}: only none (1), horizontal (2) and floating point (3)"),
+        ));
+    }
+    if predictor == 3 && !sample.is_float() {
+        return Err(unsupported(
+            path,
+            format!("the floating-point predictor on {} samples", sample.name()),
+        ));
+    }
+    let chunks = check_chunks_inside(path, &mut decoder, file_len)?;
+
+    let geo = GeoTags::read(path, &mut decoder)?;
+    let values = if compression == 5 {
+        let chunk_size = match decoder.get_chunk_type() {
+            ChunkType::Tile => {
+                let mut tag_u32 = |tag: Tag| -> Result<u32, WorldError> {
+                    decoder
+                        .get_tag_u32(tag)
+                        .map_err(|e| tiff_error(path, e))
+                        .and_then(|v| {
+                            if v == 0 {
+                                Err(corrupt(path, format!("{tag:?} is 0")))
+                            } else {
+                                Ok(v)
+                            }
+                        })
+                };
+                [tag_u32(Tag::TileWidth)?, tag_u32(Tag::TileLength)?]
+            }
+            ChunkType::Strip => {
+                let rows = match decoder
+                    .find_tag_unsigned::<u32>(Tag::RowsPerStrip)
+                    .map_err(|e| tiff_error(path, e))?
+                {
+                    Some(0) | None => height,
+                    Some(r) => r.min(height),
+                };
+                [width, rows]
+            }
+        };
+        let layout = ChunkLayout {
+            width,
+            height,
+            chunk_size,
+            sample_bytes: usize::from(bits / 8),
+            big_endian: decoder.byte_order() == ByteOrder::BigEndian,
+            predictor,
+        };
+        let bits = decode_lzw(path, &layout, &chunks)?;
+        sample.typed(bits)
+    } else {
+        decoder.read_image().map_err(|e| tiff_error(path, e))?
+    };
+    let nodata = geo.nodata;
+    let vertical = geo.vertical_unit_m;
+    let to_height = |v: f64, nodata_hit: bool| -> f32 {
+        if nodata_hit || !v.is_finite() {
+            f32::NAN
+        } else {
+            (v * vertical) as f32
+        }
+    };
+    // The nodata value as the file's own type would hold it, so that a float32 grid with
+    // nodata "-3.4028234663852886e+38" matches its samples exactly.
+    let mut raw: Vec<f32> = match values {
+        DecodingResult::I16(v) => {
+            let nd = nodata.filter(|n| n.fract() == 0.0 && (-32768.0..=32767.0).contains(n));
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
+                .collect()
+        }
+        DecodingResult::U16(v) => {
+            let nd = nodata.filter(|n| n.fract() == 0.0 && (0.0..=65535.0).contains(n));
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
+                .collect()
+        }
+        DecodingResult::I32(v) => {
+            let nd = nodata.filter(|n| n.fract() == 0.0 && n.abs() <= 2_147_483_648.0);
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
+                .collect()
+        }
+        DecodingResult::F32(v) => {
+            let nd = nodata.map(|n| n as f32);
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(x) == nd))
+                .collect()
+        }
+        DecodingResult::F64(v) => v.iter().map(|&x| to_height(x, Some(x) == nodata)).collect(),
+        _ => {
+            return Err(unsupported(
+                path,
+                format!(
+                    "the decoder returned another sample type than the {} declared",
+                    sample.name()
+                ),
+            ));
+        }
+    };
+    let (w, h) = (width as usize, height as usize);
+    if raw.len() != w * h {
+        return Err(corrupt(
+            path,
+            format!("{} samples decoded, {w}x{h} expected", raw.len()),
+        ));
+    }
+
+    let grid = geo.grid(path, width, height, cell_override.is_some())?;
+    if grid.flip_rows {
+        for r in 0..h / 2 {
+            let (north, south) = raw.split_at_mut((h - 1 - r) * w);
+            north[r * w..(r + 1) * w].swap_with_slice(&mut south[..w]);
+        }
+    }
+    if grid.flip_cols {
+        for row in raw.chunks_exact_mut(w) {
+            row.reverse();
+        }
+    }
+    let [cell_ew_m, cell_ns_m] = cell_override.unwrap_or(grid.cell_m);
+    Ok(Dem {
+        width,
+        height,
+        cell_ew_m,
+        cell_ns_m,
+        heights: raw,
+        place: String::new(),
+        source: format!(
+            "{} GeoTIFF, compression {}",
+            sample.name(),
+            compression_name(compression)
+        ),
+        format: DemFormat::Geotiff,
+        crs: grid.crs,
+        origin: grid.origin,
+        nodata_filled: 0,
+    })
+}
+
+/// The GeoTIFF tags of the first image.
+struct GeoTags {
+    pixel_scale: Option<Vec<f64>>,
+    tiepoint: Option<Vec<f64>>,
+    transformation: Option<Vec<f64>>,
+    keys: Option<GeoKeys>,
+    nodata: Option<f64>,
+    /// Metres per unit of the heights.
+    vertical_unit_m: f64,
+}
+
+/// The GeoKey directory, with its short values (double and ASCII values are not needed).
+struct GeoKeys {
+    shorts: Vec<(u16, u16)>,
+    doubles: Vec<(u16, f64)>,
+}
+
+impl GeoKeys {
+    fn short(&self, id: u16) -> Option<u16> {
+        self.shorts.iter().find(|(k, _)| *k == id).map(|(_, v)| *v)
+    }
+
+    fn double(&self, id: u16) -> Option<f64> {
+        self.doubles.iter().find(|(k, _)| *k == id).map(|(_, v)| *v)
+    }
+}
+
+/// Where the grid lies and how far apart its samples are.
+struct GridPlacement {
+    cell_m: [f64; 2],
+    flip_rows: bool,
+    flip_cols: bool,
+    crs: String,
+    origin: Option<[f64; 2]>,
+}
+
+impl GeoTags {
+    fn read(path: &Path, d: &mut Decoder<BufReader<File>>) -> Result<GeoTags, WorldError> {
+        let mut doubles = |tag: Tag| -> Result<Option<Vec<f64>>, WorldError> {
+            match d.find_tag(tag).map_err(|e| tiff_error(path, e))? {
+                None => Ok(None),
+                Some(v) => v
+                    .into_f64_vec()
+                    .map(Some)
+                    .map_err(|_| corrupt(path, format!("tag {tag:?} does not hold numbers"))),
+            }
+        };
+        let pixel_scale = doubles(Tag::ModelPixelScaleTag)?;
+        let tiepoint = doubles(Tag::ModelTiepointTag)?;
+        let transformation = doubles(Tag::ModelTransformationTag)?;
+        let double_params = doubles(Tag::GeoDoubleParamsTag)?.unwrap_or_default();
+        let directory =
+            match d
+                .find_tag(Tag::GeoKeyDirectoryTag)
+                .map_err(|e| tiff_error(path, e))?
+            {
+                None => None,
+                Some(v) => Some(v.into_u16_vec().map_err(|_| {
+                    corrupt(path, "the GeoKey directory does not hold shorts".into())
+                })?),
+            };
+        let keys = directory
+            .map(|dir| parse_geokeys(path, &dir, &double_params))
+            .transpose()?;
+        let nodata = match d
+            .find_tag(Tag::GdalNodata)
+            .map_err(|e| tiff_error(path, e))?
+        {
+            None => None,
+            Some(v) => {
+                let text = v
+                    .into_string()
+                    .map_err(|_| corrupt(path, "GDAL_NODATA is not text".into()))?;
+                let text = text.trim_matches(|c: char| c == '\0' || c.is_whitespace());
+                Some(text.parse::<f64>().map_err(|_| {
+                    corrupt(path, format!("GDAL_NODATA \"{text}\" is not a number"))
+                })?)
+            }
+        };
+        let vertical_unit_m = match keys.as_ref().and_then(|k| k.short(VERTICAL_UNITS)) {
+            None | Some(9001) => 1.0,
+            Some(code) => linear_unit_m(code).ok_or_else(|| {
+                unsupported(
+                    path,
+                    format!(
+                        "vertical unit code {code}: metres (9001) and feet (9002, 9003) are read"
+                    ),
+                )
+            })?,
+        };
+        Ok(GeoTags {
+            pixel_scale,
+            tiepoint,
+            transformation,
+            keys,
+            nodata,
+            vertical_unit_m,
+        })
+    }
+
+    /// The cell size, orientation and coordinate system. With `have_override`, a TIFF without
+    /// (usable) geo tags is fine: the caller gives the cell size.
+    fn grid(
+        &self,
+        path: &Path,
+        width: u32,
+        height: u32,
+        have_override: bool,
+    ) -> Result<GridPlacement, WorldError> {
+        // Model units per column (x) and per row (y, negative for north-up), and the model
+        // coordinates of the raster's (0, 0) corner.
+        let affine: Option<([f64; 2], Option<[f64; 2]>)> =
+            match (&self.pixel_scale, &self.tiepoint, &self.transformation) {
+                (Some(s), tie, _) if s.len() >= 2 => {
+                    let origin = tie
+                        .as_ref()
+                        .filter(|t| t.len() >= 6)
+                        .map(|t| [t[3] - t[0] * s[0], t[4] + t[1] * s[1]]);
+                    Some(([s[0], -s[1]], origin))
+                }
+                (_, _, Some(m)) if m.len() >= 16 => {
+                    if m[1] != 0.0 || m[4] != 0.0 {
+                        return Err(unsupported(
+                            path,
+                            "a rotated or sheared grid (ModelTransformation with rotation terms): \
+                         warp it north-up first (gdalwarp)"
+                                .into(),
+                        ));
+                    }
+                    Some(([m[0], m[5]], Some([m[3], m[7]])))
+                }
+                _ => None,
+            };
+        let Some((step, corner)) = affine else {
+            if have_override {
+                return Ok(GridPlacement {
+                    cell_m: [1.0, 1.0],
+                    flip_rows: false,
+                    flip_cols: false,
+                    crs: String::new(),
+                    origin: None,
+                });
+            }
+            return Err(WorldError::NoGeoreference {
+                path: path.to_path_buf(),
+                problem: "the TIFF has no GeoTIFF cell size (no ModelPixelScale or \
+                          ModelTransformation tag)"
+                    .into(),
+            });
+        };
+        if !step.iter().all(|s| s.is_finite() && *s != 0.0) {
+            return Err(corrupt(
+                path,
+                format!("the pixel size {} x {} is not usable", step[0], step[1]),
+            ));
+        }
+        let corner = corner.filter(|c| c.iter().all(|v| v.is_finite()));
+        let keys = self.keys.as_ref();
+        let half = match keys.and_then(|k| k.short(GT_RASTER_TYPE)) {
+            Some(RASTER_PIXEL_IS_POINT) => 0.0,
+            _ => 0.5,
+        };
+        let (w, h) = (f64::from(width), f64::from(height));
+        // Model coordinates of the sample at raster (column, row).
+        let at = |c: [f64; 2], col: f64, row: f64| {
+            [c[0] + (col + half) * step[0], c[1] + (row + half) * step[1]]
+        };
+        let west_col = if step[0] > 0.0 { 0.0 } else { w - 1.0 };
+        let south_row = if step[1] < 0.0 { h - 1.0 } else { 0.0 };
+        let origin = corner.map(|c| at(c, west_col, south_row));
+        let centre = corner.map(|c| at(c, (w - 1.0) / 2.0, (h - 1.0) / 2.0));
+        let flip_rows = step[1] > 0.0;
+        let flip_cols = step[0] < 0.0;
+        let size = [step[0].abs(), step[1].abs()];
+
+        let model = keys.and_then(|k| {
+            k.short(GT_MODEL_TYPE).or_else(|| {
+                if k.short(PROJECTED_CS_TYPE).is_some() {
+                    Some(MODEL_PROJECTED)
+                } else if k.short(GEOGRAPHIC_TYPE).is_some() {
+                    Some(MODEL_GEOGRAPHIC)
+                } else {
+                    None
+                }
+            })
+        });
+        let place = |cell_m: [f64; 2], crs: String| GridPlacement {
+            cell_m,
+            flip_rows,
+            flip_cols,
+            crs,
+            origin,
+        };
+        match (model, keys) {
+            (Some(MODEL_GEOGRAPHIC), Some(k)) => {
+                match k.short(GEOG_ANGULAR_UNITS) {
+                    None | Some(ANGULAR_DEGREE) => {}
+                    Some(code) => {
+                        return Err(unsupported(
+                            path,
+                            format!("angular unit code {code}: only degrees (9102) are read"),
+                        ));
+                    }
+                }
+                let crs = match k.short(GEOGRAPHIC_TYPE) {
+                    Some(code) if code != USER_DEFINED => {
+                        format!("EPSG:{code}, geographic (degrees)")
+                    }
+                    _ => "geographic (degrees)".into(),
+                };
+                let Some([_, lat]) = centre else {
+                    if have_override {
+                        return Ok(place([1.0, 1.0], crs));
+                    }
+                    return Err(WorldError::NoGeoreference {
+                        path: path.to_path_buf(),
+                        problem: "the geographic grid has no ModelTiepoint, so its latitude".into(),
+                    });
+                };
+                if !(-89.0..=89.0).contains(&lat) {
+                    return Err(corrupt(
+                        path,
+                        format!("the grid's centre latitude {lat} degrees is off the globe"),
+                    ));
+                }
+                let [m_ew, m_ns] = metres_per_degree(lat);
+                Ok(place([size[0] * m_ew, size[1] * m_ns], crs))
+            }
+            (Some(MODEL_PROJECTED), Some(k)) => {
+                let (unit_m, unit_name) = match k.short(PROJ_LINEAR_UNITS) {
+                    Some(9001) => (1.0, "metres"),
+                    Some(USER_DEFINED) => match k.double(PROJ_LINEAR_UNIT_SIZE) {
+                        Some(m) if m.is_finite() && m > 0.0 => (m, "user-defined units"),
+                        _ => {
+                            return Err(corrupt(
+                                path,
+                                "user-defined linear units without ProjLinearUnitSizeGeoKey".into(),
+                            ));
+                        }
+                    },
+                    Some(code) => match linear_unit_m(code) {
+                        Some(m) => (m, "feet, converted to metres"),
+                        None => {
+                            return Err(unsupported(
+                                path,
+                                format!(
+                                    "linear unit code {code}: metres (9001) and feet (9002, 9003) \
+                                     are read"
+                                ),
+                            ));
+                        }
+                    },
+                    None => (1.0, "linear units not stated, taken as metres"),
+                };
+                let crs = match k.short(PROJECTED_CS_TYPE) {
+                    Some(code) if code != USER_DEFINED => {
+                        format!("EPSG:{code}, projected ({unit_name})")
+                    }
+                    _ => format!("projected ({unit_name})"),
+                };
+                Ok(place([size[0] * unit_m, size[1] * unit_m], crs))
+            }
+            (Some(other), Some(_)) if !have_override => Err(unsupported(
+                path,
+                format!(
+                    "model type {other} (neither projected, 1, nor geographic, 2): \
+                     reproject the DEM first"
+                ),
+            )),
+            _ if have_override => Ok(place([1.0, 1.0], String::new())),
+            _ => Err(WorldError::NoGeoreference {
+                path: path.to_path_buf(),
+                problem: "the TIFF has a pixel size but no GeoKey directory saying whether it \
+                          is in metres, feet or degrees"
+                    .into(),
+            }),
+        }
+    }
+}
+
+/// Parses the GeoKey directory: a header (version, revision, minor revision, key count) and
+/// four shorts per key (id, tag holding the value or 0 for the short itself, count, value or
+/// index).
+fn parse_geokeys(path: &Path, dir: &[u16], doubles: &[f64]) -> Result<GeoKeys, WorldError> {
+    if dir.len() < 4 || dir[0] != 1 {
+        return Err(corrupt(
+            path,
+            "the GeoKey directory lacks its header (version 1)".into(),
+        ));
+    }
+    let count = usize::from(dir[3]);
+    let entries = dir.get(4..4 + 4 * count).ok_or_else(|| {
+        corrupt(
+            path,
+            format!("the GeoKey directory announces {count} keys but is shorter"),
+        )
+    })?;
+    let mut keys = GeoKeys {
+        shorts: Vec::new(),
+        doubles: Vec::new(),
+    };
+    for e in entries.chunks_exact(4) {
+        let (id, location, value) = (e[0], e[1], e[3]);
+        match location {
+            0 => keys.shorts.push((id, value)),
+            34736 => {
+                if let Some(&v) = doubles.get(usize::from(value)) {
+                    keys.doubles.push((id, v));
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(keys)
+}
+
+/// Metres per unit of the EPSG linear unit `code`, for metres and the feet.
+fn linear_unit_m(code: u16) -> Option<f64> {
+    match code {
+        9001 => Some(1.0),
+        9002 => Some(0.3048),
+        9003 => Some(1200.0 / 3937.0),
+        _ => None,
+    }
+}
+
+fn compression_name(code: u16) -> &'static str {
+    match code {
+        1 => "none",
+        2 => "CCITT RLE",
+        3 | 4 => "CCITT fax",
+        5 => "LZW",
+        6 | 7 => "JPEG",
+        8 | 32946 => "Deflate",
+        32773 => "PackBits",
+        34712 => "JPEG 2000",
+        34887 => "LERC",
+        34925 => "LZMA",
+        50000 => "Zstandard",
+        50001 => "WebP",
+        _ => "unknown",
+    }
+}
+
+/// Refuses a file whose strips or tiles reach past its end (a truncated download), with the
+/// chunk named, before any decoding. Returns each chunk's offset and byte count.
+fn check_chunks_inside(
+    path: &Path,
+    d: &mut Decoder<BufReader<File>>,
+    file_len: u64,
+) -> Result<Vec<(u64, u64)>, WorldError> {
+    let (kind, offsets_tag, counts_tag) = match d.get_chunk_type() {
+        ChunkType::Strip => ("strip", Tag::StripOffsets, Tag::StripByteCounts),
+        ChunkType::Tile => ("tile", Tag::TileOffsets, Tag::TileByteCounts),
+    };
+    let mut list = |tag: Tag| -> Result<Vec<u64>, WorldError> {
+        d.get_tag_u64_vec(tag).map_err(|e| tiff_error(path, e))
+    };
+    let offsets = list(offsets_tag)?;
+    let counts = list(counts_tag)?;
+    for (i, (&o, &n)) in offsets.iter().zip(&counts).enumerate() {
+        let end = o.saturating_add(n);
+        if end > file_len {
+            return Err(corrupt(
+                path,
+                format!("{kind} {i} ends at byte {end}, but the file has only {file_len} bytes"),
+            ));
+        }
+    }
+    if offsets.len() != counts.len() {
+        return Err(corrupt(
+            path,
+            format!(
+                "{} {kind} offsets but {} byte counts",
+                offsets.len(),
+                counts.len()
+            ),
+        ));
+    }
+    Ok(offsets.into_iter().zip(counts).collect())
+}
+
+/// How the samples of a single-band image lie in its chunks.
+struct ChunkLayout {
+    width: u32,
+    height: u32,
+    /// Samples per chunk row and rows per chunk (a tile's size, or the image width and the
+    /// rows per strip).
+    chunk_size: [u32; 2],
+    sample_bytes: usize,
+    big_endian: bool,
+    predictor: u16,
+}
+
+/// Decompresses every LZW chunk whole and undoes its predictor; returns each sample's bit
+/// pattern (in the low `sample_bytes` bytes), row 0 first.
+fn decode_lzw(
+    path: &Path,
+    layout: &ChunkLayout,
+    chunks: &[(u64, u64)],
+) -> Result<Vec<u64>, WorldError> {
+    let [cw, ch] = layout.chunk_size.map(|v| v as usize);
+    let (w, h) = (layout.width as usize, layout.height as usize);
+    let across = w.div_ceil(cw);
+    let expected = across * h.div_ceil(ch);
+    if chunks.len() < expected {
+        return Err(corrupt(
+            path,
+            format!("{} chunks, {expected} expected", chunks.len()),
+        ));
+    }
+    let b = layout.sample_bytes;
+    let mask = if b == 8 {
+        u64::MAX
+    } else {
+        (1u64 << (8 * b)) - 1
+    };
+    let mut file = File::open(path).map_err(|e| WorldError::io(path, e))?;
+    let mut out = vec![0u64; w * h];
+    let mut row = vec![0u64; cw];
+    for (index, &(offset, count)) in chunks.iter().take(expected).enumerate() {
+        let (x0, y0) = ((index % across) * cw, (index / across) * ch);
+        let mut packed = vec![0u8; count as usize];
+        file.seek(SeekFrom::Start(offset))
+            .and_then(|_| file.read_exact(&mut packed))
+            .map_err(|e| WorldError::io(path, e))?;
+        let data = weezl::decode::Decoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
+            .decode(&packed)
+            .map_err(|e| corrupt(path, format!("LZW chunk {index}: {e:?}")))?;
+        let rows = ch.min(h - y0);
+        if data.len() < rows * cw * b {
+            return Err(corrupt(
+                path,
+                format!(
+                    "LZW chunk {index} holds {} bytes, {} expected",
+                    data.len(),
+                    rows * cw * b
+                ),
+            ));
+        }
+        for (r, bytes) in data.chunks_exact(cw * b).take(rows).enumerate() {
+            if layout.predictor == 3 {
+                // Floating-point predictor: byte differences along the row, over byte planes
+                // (most significant first).
+                let mut plane = bytes.to_vec();
+                for j in 1..plane.len() {
+                    plane[j] = plane[j].wrapping_add(plane[j - 1]);
+                }
+                for (i, v) in row.iter_mut().enumerate() {
+                    *v = (0..b).fold(0, |acc, k| (acc << 8) | u64::from(plane[k * cw + i]));
+                }
+            } else {
+                for (v, s) in row.iter_mut().zip(bytes.chunks_exact(b)) {
+                    *v = if layout.big_endian {
+                        s.iter().fold(0, |acc, &x| (acc << 8) | u64::from(x))
+                    } else {
+                        s.iter().rev().fold(0, |acc, &x| (acc << 8) | u64::from(x))
+                    };
+                }
+                if layout.predictor == 2 {
+                    for i in 1..cw {
+                        row[i] = row[i].wrapping_add(row[i - 1]) & mask;
+                    }
+                }
+            }
+            let y = y0 + r;
+            let n = cw.min(w - x0);
+            out[y * w + x0..y * w + x0 + n].copy_from_slice(&row[..n]);
+        }
+    }
+    Ok(out)
+}
+
+/// The sample types read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum SampleType {
+    U16,
+    I16,
+    I32,
+    F32,
+    F64,
+}
+
+impl SampleType {
+    fn name(self) -> &'static str {
+        match self {
+            SampleType::U16 => "uint16",
+            SampleType::I16 => "int16",
+            SampleType::I32 => "int32",
+            SampleType::F32 => "float32",
+            SampleType::F64 => "float64",
+        }
+    }
+
+    fn is_float(self) -> bool {
+        matches!(self, SampleType::F32 | SampleType::F64)
+    }
+
+    /// Bit patterns as the typed samples that the `tiff` crate would have returned.
+    fn typed(self, bits: Vec<u64>) -> DecodingResult {
+        let it = bits.into_iter();
+        match self {
+            SampleType::U16 => DecodingResult::U16(it.map(|v| v as u16).collect()),
+            SampleType::I16 => DecodingResult::I16(it.map(|v| v as u16 as i16).collect()),
+            SampleType::I32 => DecodingResult::I32(it.map(|v| v as u32 as i32).collect()),
+            SampleType::F32 => DecodingResult::F32(it.map(|v| f32::from_bits(v as u32)).collect()),
+            SampleType::F64 => DecodingResult::F64(it.map(f64::from_bits).collect()),
+        }
+    }
+}
+
+fn corrupt(path: &Path, message: String) -> WorldError {
+    WorldError::CorruptImage {
+        path: path.to_path_buf(),
+        format: "TIFF",
+        message,
+    }
+}
+
+fn unsupported(path: &Path, problem: String) -> WorldError {
+    WorldError::UnsupportedDem {
+        path: path.to_path_buf(),
+        format: FORMAT,
+        problem,
+    }
+}
+
+fn tiff_error(path: &Path, e: TiffError) -> WorldError {
+    match e {
+        TiffError::UnsupportedError(u) => unsupported(path, u.to_string()),
+        TiffError::LimitsExceeded => WorldError::OutOfRange {
+            path: path.to_path_buf(),
+            field: "decoded size".into(),
+            value: "more than the decoder's limits".into(),
+            allowed: format!("at most {MAX_DEM_SAMPLES} samples"),
+        },
+        other => corrupt(path, other.to_string()),
+    }
+}
