@@ -173,10 +173,7 @@ fn neighbours_derived_from_different_parents_share_their_borders_exactly() {
     );
     assert_shared_columns_identical(&cpu_w, &cpu_e, &rig.pyramid);
     // And the detail is really there away from the edges (the derivation is not a plain copy).
-    let bicubic_only = DeriveParams {
-        detail: 0.0,
-        ..rig.params
-    };
+    let bicubic_only = rig.params.bicubic();
     let smooth = derive_child(&rig.pyramid, &tw, cw, &bicubic_only);
     let differs = smooth
         .heights

@@ -4,7 +4,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::gpu::{GpuTimer, TileAtlas};
-use crate::stream::DeriveParams;
+use crate::stream::{DeriveParams, MAX_LEVELS};
 use crate::world::{Pyramid, TileId};
 
 /// One child to derive: its address, its parent's slot and the slot to fill.
@@ -37,8 +37,9 @@ const _: () = assert!(std::mem::size_of::<JobGpu>() == 32);
 struct ParamsGpu {
     grid: [u32; 4],
     detail: [f32; 4],
+    level_detail: [f32; MAX_LEVELS],
 }
-const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 32);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 128);
 
 /// Pipeline, staging textures and buffers of the derivation stage.
 pub struct DeriveStage {
@@ -102,7 +103,15 @@ impl DeriveStage {
                     pyramid.samples_per_side(),
                     params.seed,
                 ],
-                detail: [params.detail, params.window_cells, 0.0, 0.0],
+                detail: [0.0, params.window_cells, 0.0, 0.0],
+                level_detail: std::array::from_fn(|level| {
+                    // Stored levels carry no detail.
+                    if level < usize::from(pyramid.stored_levels) {
+                        0.0
+                    } else {
+                        params.detail[level]
+                    }
+                }),
             }),
         );
         let jobs = device.create_buffer(&wgpu::BufferDescriptor {

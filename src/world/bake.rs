@@ -31,10 +31,11 @@ use super::dem::Dem;
 use super::error::WorldError;
 use super::format::{TileData, write_atomic, write_tile};
 use super::manifest::{
-    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, GrassType, Manifest, Sky, WindDefaults, WindKey,
-    WindScene, WindSource,
+    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, DeriveCalibration, GrassType, Manifest, Sky,
+    WindDefaults, WindKey, WindScene, WindSource,
 };
 use super::tile::{Pyramid, TileId};
+use crate::stream::{DeriveParams, HeightField, calibrate};
 
 /// Shared samples beyond each tile edge in baked worlds.
 pub const BAKE_BORDER: u32 = 2;
@@ -171,6 +172,7 @@ pub fn bake(
         paths: Vec::new(),
         wind_scenes: Vec::new(),
         features: Default::default(),
+        derive: None,
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;
@@ -178,6 +180,7 @@ pub fn bake(
     let grid = Grid::resample(&dem, &manifest.pyramid, &opts.dem, progress)?;
     let height_range = grid.height_range();
     manifest.height_range_m = height_range;
+    manifest.derive = Some(grid.calibrate(extent, manifest.pyramid.derived_levels));
 
     let painted = grid.paint(height_range, opts.seed, progress);
     progress(BakeStage::Paths, 0, 2);
@@ -367,6 +370,32 @@ impl Grid {
 
     fn at(&self, a: usize, b: usize) -> f32 {
         self.heights[b * self.width + a]
+    }
+
+    /// Fits the detail of the derived levels to the data area of the finest stored level (the
+    /// coarser stored levels are its subsamples): see [`calibrate`].
+    fn calibrate(&self, extent: [f64; 2], derived_levels: u8) -> DeriveCalibration {
+        let m = self.margin as usize;
+        let samples = |e: f64, n: usize| ((e / self.cell).floor() as usize + 1).min(n - m);
+        let (w, h) = (
+            samples(extent[0], self.width),
+            samples(extent[1], self.height),
+        );
+        let mut heights = Vec::with_capacity(w * h);
+        for b in m..m + h {
+            let row = b * self.width + m;
+            heights.extend_from_slice(&self.heights[row..row + w]);
+        }
+        calibrate(
+            &HeightField {
+                width: w,
+                height: h,
+                cell_m: (self.cell, self.cell),
+                heights: &heights,
+            },
+            derived_levels,
+            DeriveParams::default().seed,
+        )
     }
 
     /// Min and max of all samples; an empty range is widened to 1 m.
