@@ -88,7 +88,7 @@ fn amplitude(level: u32) -> f32 {
 // The parent's smooth height at texel (x, y): its height less its own detail, which lies on
 // the parent's new samples only, scaled by the grandparent's slope (read off the parent's
 // other samples, which are the grandparent's).
-fn smooth(x: i32, y: i32, job: Job) -> f32 {
+fn smooth_height(x: i32, y: i32, job: Job) -> f32 {
     let n = i32(params.grid.x);
     let b = i32(params.grid.y);
     let gx = i32(job.child_x >> 1u) * n - b + x;
@@ -136,7 +136,7 @@ fn derive_child(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgrou
     var taps: array<vec4<f32>, 4>;
     for (var dy = 0; dy < 4; dy++) {
         let y = iy - 1 + dy;
-        taps[dy] = vec4<f32>(smooth(ix - 1, y, job), smooth(ix, y, job), smooth(ix + 1, y, job), smooth(ix + 2, y, job));
+        taps[dy] = vec4<f32>(smooth_height(ix - 1, y, job), smooth_height(ix, y, job), smooth_height(ix + 1, y, job), smooth_height(ix + 2, y, job));
     }
     var rows: array<f32, 4>;
     for (var dy = 0; dy < 4; dy++) {

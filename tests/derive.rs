@@ -4,8 +4,8 @@
 mod common;
 
 use verdant::gpu::{DeriveJob, DeriveStage, GpuContext, GpuTimer, TileAtlas};
-use verdant::stream::{DeriveParams, derive_child};
-use verdant::world::{Pyramid, TileData, TileId, World};
+use verdant::stream::{DeriveParams, derive_child, eval};
+use verdant::world::{DeriveMode, Pyramid, TileData, TileId, World};
 
 /// Largest height difference allowed between GPU and CPU, metres. The two run the same
 /// arithmetic in the same order; a GPU may fuse a multiply and an add, which moves the result
@@ -216,4 +216,133 @@ fn the_same_tile_derives_to_the_same_bits_every_time() {
         derive_child(&rig.pyramid, &parent, child, &rig.params),
     );
     assert_eq!(bits(&c1), bits(&c2));
+}
+
+// ---- The calibrated method against held-out truth (CPU; `verdant eval derive`'s measures) ----
+
+/// A fractional Brownian surface of Hurst exponent `hurst` by midpoint displacement (diamond
+/// and square steps, the displacement shrinking by `2^(-hurst / 2)` at each, Gaussian,
+/// seeded): `2^exponent + 1` samples a side of `cell_m`, relief about `sigma_m`.
+fn fbm_surface(hurst: f64, exponent: u32, seed: u64, cell_m: f64, sigma_m: f64) -> eval::Grid {
+    let n = 1usize << exponent;
+    let w = n + 1;
+    let mut rng = common::Rng(seed);
+    let mut gauss = move || {
+        let (u, v) = (rng.unit().max(1e-12), rng.unit());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    };
+    let mut h = vec![0.0f64; w * w];
+    for (x, y) in [(0, 0), (n, 0), (0, n), (n, n)] {
+        h[y * w + x] = sigma_m * gauss();
+    }
+    let shrink = 0.5f64.powf(hurst / 2.0);
+    let (mut step, mut scale) = (n, sigma_m);
+    while step > 1 {
+        let half = step / 2;
+        scale *= shrink;
+        for y in (half..w).step_by(step) {
+            for x in (half..w).step_by(step) {
+                let corners = h[(y - half) * w + x - half]
+                    + h[(y - half) * w + x + half]
+                    + h[(y + half) * w + x - half]
+                    + h[(y + half) * w + x + half];
+                h[y * w + x] = corners / 4.0 + scale * gauss();
+            }
+        }
+        scale *= shrink;
+        for y in (0..w).step_by(half) {
+            let first = if (y / half) % 2 == 0 { half } else { 0 };
+            for x in (first..w).step_by(step) {
+                let mut sum = 0.0;
+                let mut count = 0.0;
+                for (dx, dy) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                    let (nx, ny) = (x as i64 + dx * half as i64, y as i64 + dy * half as i64);
+                    if (0..w as i64).contains(&nx) && (0..w as i64).contains(&ny) {
+                        sum += h[ny as usize * w + nx as usize];
+                        count += 1.0;
+                    }
+                }
+                h[y * w + x] = sum / count + scale * gauss();
+            }
+        }
+        step = half;
+    }
+    eval::Grid {
+        width: w,
+        height: w,
+        cell: (cell_m, cell_m),
+        data: h.iter().map(|&v| v as f32).collect(),
+    }
+}
+
+/// How far the fitted Hurst exponent may be from the surface's: midpoint displacement makes
+/// only approximately fractional Brownian surfaces, and four octaves of a coarse grid are few.
+const HURST_TOLERANCE: f64 = 0.1;
+
+#[test]
+fn calibrated_method_recovers_fractal_surfaces_of_known_hurst_exponent() {
+    for (hurst, seed) in [(0.3, 3), (0.5, 5), (0.8, 8)] {
+        // Relief for an RMS slope of about 0.3 at the finest samples.
+        let truth = fbm_surface(hurst, 10, seed, 2.0, 0.6 * 1024f64.powf(hurst));
+        for factor in [4, 8] {
+            let bicubic = eval::evaluate(&truth, factor, eval::DeriveMethod::Bicubic, 1);
+            let r = eval::evaluate_calibrated(&truth, factor, 1);
+            let fit = r.fit.clone().unwrap();
+            eprintln!(
+                "H {hurst} factor {factor}: fitted H {:.3}, roughness {:.3} (bicubic {:.3}), \
+                 RMSE {:.3}x bicubic, {}",
+                fit.hurst,
+                r.roughness_ratio,
+                bicubic.roughness_ratio,
+                r.rmse_m / bicubic.rmse_m,
+                r.parameters()
+            );
+            assert_eq!(fit.method, DeriveMode::Fractal, "{}", fit.note);
+            assert!(
+                (fit.hurst - hurst).abs() <= HURST_TOLERANCE,
+                "H {hurst} factor {factor}: fitted H {}",
+                fit.hurst
+            );
+            assert!(
+                (0.8..=1.2).contains(&r.roughness_ratio),
+                "H {hurst} factor {factor}: roughness {} of the truth's",
+                r.roughness_ratio
+            );
+        }
+    }
+}
+
+#[test]
+fn calibrated_method_keeps_real_terrain_rough_at_bicubic_height_error() {
+    for dem in [
+        common::root().join("worlds/santa-cruz/source/santa_cruz_1024.png"),
+        common::root().join("tests/data/east_bay_768.png"),
+    ] {
+        let truth = eval::dem_grid(&verdant::world::Dem::load(&dem).unwrap());
+        for factor in [4, 8] {
+            let bicubic = eval::evaluate(&truth, factor, eval::DeriveMethod::Bicubic, 1);
+            let r = eval::evaluate_calibrated(&truth, factor, 1);
+            let name = dem.file_name().unwrap().to_string_lossy();
+            eprintln!(
+                "{name} factor {factor}: roughness {:.3}, RMSE {:.3} m ({:.3}x bicubic), {}",
+                r.roughness_ratio,
+                r.rmse_m,
+                r.rmse_m / bicubic.rmse_m,
+                r.parameters()
+            );
+            assert!(
+                (0.8..=1.2).contains(&r.roughness_ratio),
+                "{name} factor {factor}: roughness {} of the truth's",
+                r.roughness_ratio
+            );
+            assert!(
+                r.rmse_m <= 1.15 * bicubic.rmse_m,
+                "{name} factor {factor}: RMSE {} m, bicubic {} m",
+                r.rmse_m,
+                bicubic.rmse_m
+            );
+            // Plain bicubic smooths the terrain; the calibrated detail is what restores it.
+            assert!(bicubic.roughness_ratio < 0.6);
+        }
+    }
 }

@@ -266,6 +266,11 @@ pub struct OctaveFit {
     /// Roughness of the field derived by Catmull-Rom alone from this octave's parent (octave
     /// `octave + 1`, that is `octave + 1` steps), relative to the field's own.
     pub bicubic_roughness: f64,
+    /// RMS slope of the field at this octave (central differences), rise over run.
+    pub slope_rms: f64,
+    /// RMS slope of the field derived by Catmull-Rom alone from octave `octave + 1`, relative
+    /// to the field's own.
+    pub bicubic_slope: f64,
 }
 
 /// Octaves [`calibrate`] measures at most, finest first.
@@ -354,6 +359,21 @@ impl Level {
         (level(smooth), level(noise))
     }
 
+    /// RMS slope (central differences) away from the edges.
+    fn slope_rms(&self) -> f64 {
+        let g = |x: usize, y: usize| f64::from(self.data[y * self.width + x]);
+        let (mut sum, mut count) = (0.0f64, 0.0f64);
+        for y in STATS_MARGIN..self.height - STATS_MARGIN {
+            for x in STATS_MARGIN..self.width - STATS_MARGIN {
+                let gx = (g(x + 1, y) - g(x - 1, y)) / (2.0 * self.cell.0);
+                let gy = (g(x, y + 1) - g(x, y - 1)) / (2.0 * self.cell.1);
+                sum += gx * gx + gy * gy;
+                count += 1.0;
+            }
+        }
+        (sum / count.max(1.0)).sqrt()
+    }
+
     fn laplacian(&self, x: usize, y: usize) -> f64 {
         let g = |x: usize, y: usize| f64::from(self.data[y * self.width + x]);
         let c = g(x, y);
@@ -417,6 +437,7 @@ pub fn measure_octaves(field: &HeightField<'_>, octaves: u32, seed: u32) -> Vec<
     let (w, h) = (crop(field.width), crop(field.height));
     let truth: Vec<Level> = (0..=n).map(|k| Level::subsample(field, k, w, h)).collect();
     let finest = laplacian_variance(&truth[0]);
+    let finest_slope = truth[0].slope_rms();
     let mut smooth = truth[0].clone();
     (0..n)
         .map(|k| {
@@ -428,15 +449,22 @@ pub fn measure_octaves(field: &HeightField<'_>, octaves: u32, seed: u32) -> Vec<
                 smooth = smooth.predict(j, seed).0;
             }
             let ratio = (laplacian_variance(&smooth) / finest.max(1e-30)).sqrt();
+            let slope_ratio = smooth.slope_rms() / finest_slope.max(1e-30);
             OctaveFit {
                 octave: k,
                 residual_rms_m,
                 detail,
                 bicubic_roughness: ratio,
+                slope_rms: truth[k as usize].slope_rms(),
+                bicubic_slope: slope_ratio,
             }
         })
         .collect()
 }
+
+/// Largest deviation (log2) of the per-octave amplitudes from their mean on terrain taken as
+/// scale-invariant.
+pub const FLAT_TREND_LOG2: f64 = 0.15;
 
 /// Smallest factor between the detail of one derived level and the next. A curve fitted over
 /// coarse octaves bends on where the terrain's own trend levels off: on the SRTM DEMs the
@@ -565,8 +593,36 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
     }
     // Amplitude at octave -s (the s-th derived level): the fitted curve continued, each level
     // within a factor [MIN_LEVEL_STEP, MAX_LEVEL_STEP] of the one above.
-    let curve = fit_quadratic(&details);
+    // Scale-invariant terrain keeps its amplitude from octave to octave (within
+    // FLAT_TREND_LOG2): it is held. Otherwise the curve through the octaves is continued.
+    let mean = details.iter().map(|p| p.1).sum::<f64>() / details.len() as f64;
+    let flat = details
+        .iter()
+        .all(|p| (p.1 - mean).abs() <= FLAT_TREND_LOG2);
+    let curve = if flat {
+        [mean, 0.0, 0.0]
+    } else {
+        fit_quadratic(&details)
+    };
     let log2_detail = |k: f64| curve[0] + curve[1] * k + curve[2] * k * k;
+    // The runtime scales its detail by the slope of the smooth (Catmull-Rom) parent, which
+    // is less steep than the terrain's own at that level once it lies below the data: as
+    // measured that many steps below the octaves, and beyond the deepest measured, less by
+    // the terrain's steepening per octave (`2^(1 - H)` on fractal terrain).
+    let slopes: Vec<(f64, f64)> = octaves
+        .iter()
+        .map(|o| (f64::from(o.octave), o.slope_rms.max(1e-12).log2()))
+        .collect();
+    let steepening = (-fit_line(&slopes).0).clamp(0.0, 1.0);
+    let deepest = octaves.len() - 1;
+    let parent_slope = |depth: usize| -> f64 {
+        match depth {
+            0 => 1.0,
+            d if d <= deepest + 1 => octaves[d - 1].bicubic_slope,
+            d => octaves[deepest].bicubic_slope * (-steepening * (d - deepest - 1) as f64).exp2(),
+        }
+        .clamp(1e-3, 1.0)
+    };
     let mut previous = log2_detail(0.0);
     let finest = previous.exp2();
     for (s, d) in table.detail.iter_mut().enumerate() {
@@ -574,12 +630,13 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
             previous + MIN_LEVEL_STEP.log2(),
             previous + MAX_LEVEL_STEP.log2(),
         );
-        // The s-th derived level is s + 1 Catmull-Rom steps below the data, which carry part of
-        // the roughness: the detail adds the rest (as measured that many steps below octave
-        // s + 1, or the deepest measured).
-        let smooth = octaves[s.min(octaves.len() - 1)].bicubic_roughness.min(1.0);
+        // The s-th derived level (from 0) is s + 1 Catmull-Rom steps below the data, which
+        // carry part of the roughness: the detail adds the rest (as measured that many steps
+        // below octave s + 1, or the deepest measured).
+        let smooth = octaves[s.min(deepest)].bicubic_roughness.min(1.0);
         let share = (1.0 - smooth * smooth).sqrt();
-        *d = ((next.exp2() * share) as f32).min(MAX_DETAIL);
+        let slope = if flat { parent_slope(s) } else { 1.0 };
+        *d = ((next.exp2() * share / slope) as f32).min(MAX_DETAIL);
         previous = next;
     }
     table.method = DeriveMode::Fractal;

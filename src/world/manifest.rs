@@ -71,7 +71,7 @@ pub struct Manifest {
 pub const LEGACY_DETAIL: f32 = 0.25;
 
 /// Largest detail amplitude a `[derive]` table may ask for (child cells per unit of slope).
-pub const MAX_DETAIL: f32 = 4.0;
+pub const MAX_DETAIL: f32 = 100.0;
 
 /// The `[derive]` table: the detail that each derived level adds to the Catmull-Rom
 /// upsampling of its parent, fitted to the world's stored pyramid (see
