@@ -23,9 +23,12 @@ struct Rig {
 
 impl Rig {
     fn new(world: &World, slots: u32) -> Self {
+        Self::with_params(world, slots, DeriveParams::default())
+    }
+
+    fn with_params(world: &World, slots: u32, params: DeriveParams) -> Self {
         let ctx = common::gpu();
         let pyramid = world.manifest.pyramid.clone();
-        let params = DeriveParams::default();
         let atlas = TileAtlas::new(&ctx.device, pyramid.samples_per_side(), slots);
         let stage = DeriveStage::new(&ctx.device, &ctx.queue, &pyramid, &params, &atlas, 8);
         Self {
@@ -216,6 +219,136 @@ fn the_same_tile_derives_to_the_same_bits_every_time() {
         derive_child(&rig.pyramid, &parent, child, &rig.params),
     );
     assert_eq!(bits(&c1), bits(&c2));
+}
+
+/// The default world's calibrated settings; fails unless the manifest carries a fractal fit.
+fn calibrated(world: &World) -> DeriveParams {
+    let fit = world
+        .manifest
+        .derive
+        .as_ref()
+        .expect("world.toml has a [derive] table");
+    assert_eq!(fit.method, DeriveMode::Fractal, "{}", fit.note);
+    let params = DeriveParams::for_manifest(&world.manifest);
+    let first = world.manifest.pyramid.stored_levels;
+    // Distinct amplitudes per derived level, none zero, as fitted.
+    for (k, &d) in fit.detail.iter().enumerate() {
+        assert!(d > 0.0);
+        assert_eq!(params.detail_at(first + k as u8), d);
+    }
+    params
+}
+
+#[test]
+fn calibrated_gpu_derivation_matches_the_mirror_over_three_generations() {
+    let world = World::open(&common::default_world()).unwrap();
+    let rig = Rig::with_params(&world, 8, calibrated(&world));
+    let parent_id = TileId::new(2, 3, 5);
+    let parent = world.load_tile(parent_id).unwrap();
+    rig.atlas.upload(&rig.ctx.queue, 0, &parent).unwrap();
+    // Down three levels: each generation's parent carries detail of its own that the GPU and
+    // the mirror both take off again.
+    let mut cpu_parent = parent;
+    let mut id = parent_id;
+    for generation in 0..3u32 {
+        let child = id.children()[(generation as usize + 1) % 4];
+        rig.derive(&[DeriveJob {
+            child,
+            parent_slot: generation,
+            child_slot: generation + 1,
+        }]);
+        let gpu = rig.read(generation + 1, child);
+        let cpu = derive_child(&rig.pyramid, &cpu_parent, child, &rig.params);
+        assert_matches_mirror(&gpu, &cpu);
+        cpu_parent = cpu;
+        id = child;
+    }
+}
+
+#[test]
+fn calibrated_neighbours_from_derived_parents_share_their_borders_exactly() {
+    let world = World::open(&common::default_world()).unwrap();
+    let rig = Rig::with_params(&world, 8, calibrated(&world));
+    let (pw, pe) = (TileId::new(2, 4, 6), TileId::new(2, 5, 6));
+    rig.atlas
+        .upload(&rig.ctx.queue, 0, &world.load_tile(pw).unwrap())
+        .unwrap();
+    rig.atlas
+        .upload(&rig.ctx.queue, 1, &world.load_tile(pe).unwrap())
+        .unwrap();
+    // Derived parents from different stored parents, then their children across the seam.
+    let (cw, ce) = (TileId::new(3, 9, 13), TileId::new(3, 10, 13));
+    let (gw, ge) = (TileId::new(4, 19, 26), TileId::new(4, 20, 26));
+    assert_eq!((gw.parent(), ge.parent()), (Some(cw), Some(ce)));
+    rig.derive(&[
+        DeriveJob {
+            child: cw,
+            parent_slot: 0,
+            child_slot: 2,
+        },
+        DeriveJob {
+            child: ce,
+            parent_slot: 1,
+            child_slot: 3,
+        },
+    ]);
+    rig.derive(&[
+        DeriveJob {
+            child: gw,
+            parent_slot: 2,
+            child_slot: 4,
+        },
+        DeriveJob {
+            child: ge,
+            parent_slot: 3,
+            child_slot: 5,
+        },
+    ]);
+    assert_shared_columns_identical(&rig.read(4, gw), &rig.read(5, ge), &rig.pyramid);
+    let cpu = |p: TileId, c: TileId, g: TileId| {
+        let stored = world.load_tile(p).unwrap();
+        let derived = derive_child(&rig.pyramid, &stored, c, &rig.params);
+        derive_child(&rig.pyramid, &derived, g, &rig.params)
+    };
+    assert_shared_columns_identical(&cpu(pw, cw, gw), &cpu(pe, ce, ge), &rig.pyramid);
+}
+
+#[test]
+fn a_derived_level_does_not_pass_its_detail_on() {
+    let world = World::open(&common::default_world()).unwrap();
+    let pyramid = &world.manifest.pyramid;
+    let params = calibrated(&world);
+    let first = pyramid.stored_levels;
+    // The same chain with no detail at the first derived level.
+    let mut plain_first = params;
+    plain_first.detail[usize::from(first)] = 0.0;
+    let stored_id = TileId::new(2, 3, 5);
+    let stored = world.load_tile(stored_id).unwrap();
+    let child = stored_id.children()[1];
+    let grandchild = child.children()[2];
+    let derive2 = |p: &DeriveParams| {
+        let c = derive_child(pyramid, &stored, child, p);
+        (c.clone(), derive_child(pyramid, &c, grandchild, p))
+    };
+    let (with_child, with) = derive2(&params);
+    let (plain_child, without) = derive2(&plain_first);
+    // The first derived level differs (it has detail of its own)...
+    let changed = with_child
+        .heights
+        .iter()
+        .zip(&plain_child.heights)
+        .filter(|(a, b)| (*a - *b).abs() > 1e-3)
+        .count();
+    assert!(changed > with_child.heights.len() / 4, "{changed}");
+    // ...but the level below it is the same up to rounding: it interpolates the smooth
+    // surface and adds only its own detail.
+    let worst = with
+        .heights
+        .iter()
+        .zip(&without.heights)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-3, "the grandchild moved by {worst} m");
 }
 
 // ---- The calibrated method against held-out truth (CPU; `verdant eval derive`'s measures) ----
