@@ -650,3 +650,97 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
     );
     table
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn field(width: usize, height: usize, f: impl Fn(usize, usize) -> f32) -> Vec<f32> {
+        (0..width * height)
+            .map(|k| f(k % width, k / width))
+            .collect()
+    }
+
+    #[test]
+    fn a_flat_world_falls_back_to_plain_bicubic() {
+        // A tilted plane: Catmull-Rom predicts it exactly.
+        let heights = field(257, 257, |x, y| 100.0 + 0.5 * x as f32 + 0.25 * y as f32);
+        let table = calibrate(
+            &HeightField {
+                width: 257,
+                height: 257,
+                cell_m: (10.0, 10.0),
+                heights: &heights,
+            },
+            6,
+            1,
+        );
+        assert_eq!(table.method, DeriveMode::Bicubic);
+        assert!(table.note.starts_with("flat"), "{}", table.note);
+        assert_eq!(table.detail, vec![0.0; 6]);
+    }
+
+    #[test]
+    fn too_few_levels_fall_back_to_plain_bicubic() {
+        let heights = field(40, 40, |x, y| ((x * 7 + y * 13) % 11) as f32);
+        let table = calibrate(
+            &HeightField {
+                width: 40,
+                height: 40,
+                cell_m: (10.0, 10.0),
+                heights: &heights,
+            },
+            3,
+            1,
+        );
+        assert_eq!(table.method, DeriveMode::Bicubic);
+        assert!(table.note.starts_with("too few levels"), "{}", table.note);
+        assert_eq!(table.detail, vec![0.0; 3]);
+    }
+
+    #[test]
+    fn the_quadratic_fit_is_exact_on_a_parabola() {
+        let points: Vec<(f64, f64)> = (0..5)
+            .map(|k| {
+                let x = f64::from(k);
+                (x, 1.5 - 0.25 * x + 0.125 * x * x)
+            })
+            .collect();
+        let c = fit_quadratic(&points);
+        for (got, want) in c.iter().zip([1.5, -0.25, 0.125]) {
+            assert!((got - want).abs() < 1e-9, "{c:?}");
+        }
+    }
+
+    #[test]
+    fn params_follow_the_manifest_table_or_keep_the_legacy_amplitude() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("worlds")
+            .join("santa-cruz")
+            .join("world.toml");
+        let mut manifest = Manifest::from_path(&path).unwrap();
+        manifest.derive = None;
+        assert_eq!(
+            DeriveParams::for_manifest(&manifest),
+            DeriveParams::default()
+        );
+        let first = manifest.pyramid.stored_levels;
+        let levels = usize::from(manifest.pyramid.derived_levels);
+        manifest.derive = Some(DeriveCalibration {
+            method: DeriveMode::Fractal,
+            note: String::new(),
+            octaves: 4,
+            hurst: 0.7,
+            fit_rms_log2: 0.01,
+            residual_rms_m: 1.0,
+            detail: (0..levels).map(|k| 0.1 * (k + 1) as f32).collect(),
+        });
+        let p = DeriveParams::for_manifest(&manifest);
+        for k in 0..levels {
+            assert_eq!(p.detail_at(first + k as u8), 0.1 * (k + 1) as f32);
+        }
+        // Beyond the table: its last amplitude.
+        assert_eq!(p.detail_at(first + levels as u8 + 3), 0.1 * levels as f32);
+        assert_eq!(p.bicubic().detail, [0.0; MAX_LEVELS]);
+    }
+}
