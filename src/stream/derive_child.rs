@@ -640,14 +640,22 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
         previous = next;
     }
     table.method = DeriveMode::Fractal;
-    table.note = format!(
-        "fractal: H {hurst:.3} over {} octaves; detail {finest:.3} at the finest level, \
-         continued along log2(detail) = {:.3} {:+.3} k {:+.3} k^2 (octave k, negative finer)",
-        octaves.len(),
-        curve[0],
-        curve[1],
-        curve[2]
-    );
+    table.note = if flat {
+        format!(
+            "fractal: H {hurst:.3} over {} octaves; scale-invariant detail {finest:.3} held, \
+             raised where the smooth parent is less steep than the terrain",
+            octaves.len()
+        )
+    } else {
+        format!(
+            "fractal: H {hurst:.3} over {} octaves; detail {finest:.3} at the finest level, \
+             continued along log2(detail) = {:.3} {:+.3} k {:+.3} k^2 (octave k, negative finer)",
+            octaves.len(),
+            curve[0],
+            curve[1],
+            curve[2]
+        )
+    };
     table
 }
 
