@@ -17,7 +17,11 @@ struct Job {
     out_layer: u32,
     cell_parent: f32,
     cell_child: f32,
-    _pad: u32,
+    // Detail amplitudes of the child's level and of the parent's (0 for a stored parent), in
+    // cells per unit of slope. Per job rather than in the uniforms: lavapipe compiles a shader
+    // variant per distinct uniform value that steers it.
+    detail_child: f32,
+    detail_parent: f32,
 }
 
 struct Params {
@@ -25,8 +29,6 @@ struct Params {
     grid: vec4<u32>,
     // x: unused, y: window cells
     detail: vec4<f32>,
-    // Detail amplitude of level l: level_detail[l / 4][l % 4] (24 levels; 0 for stored ones).
-    level_detail: array<vec4<f32>, 6>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -80,11 +82,6 @@ fn window_at(sx: i32, sy: i32) -> f32 {
     return clamp(f32(edge) / params.detail.y, 0.0, 1.0);
 }
 
-fn amplitude(level: u32) -> f32 {
-    let l = min(level, 23u);
-    return params.level_detail[l >> 2u][l & 3u];
-}
-
 // The parent's smooth height at texel (x, y): its height less its own detail, which lies on
 // the parent's new samples only, scaled by the grandparent's slope (read off the parent's
 // other samples, which are the grandparent's).
@@ -105,7 +102,7 @@ fn smooth_height(x: i32, y: i32, job: Job) -> f32 {
     let slope = min(sqrt(gpx * gpx + gpy * gpy), 1.5);
     let parent_level = job.child_level - 1u;
     let noise = unit(hash4(u32(gx), u32(gy), parent_level, params.grid.w));
-    let detail = noise * (amplitude(parent_level) * job.cell_parent * slope * window_at(gx, gy) * new_sample);
+    let detail = noise * (job.detail_parent * job.cell_parent * slope * window_at(gx, gy) * new_sample);
     return ph(x, y, layer) - detail;
 }
 
@@ -155,7 +152,7 @@ fn derive_child(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgrou
     let new_sample = min(f32((sx | sy) & 1), 1.0);
     let seed = params.grid.w;
     let noise = unit(hash4(u32(sx), u32(sy), job.child_level, seed));
-    h += noise * (amplitude(job.child_level) * job.cell_child * slope * window_at(sx, sy) * new_sample);
+    h += noise * (job.detail_child * job.cell_child * slope * window_at(sx, sy) * new_sample);
 
     let pick = hash4(u32(sx), u32(sy), job.child_level, seed ^ 0x9e3779b9u);
     let tx = ix + fx * i32(pick & 1u);

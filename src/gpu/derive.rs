@@ -28,18 +28,18 @@ struct JobGpu {
     out_layer: u32,
     cell_parent: f32,
     cell_child: f32,
-    _pad: u32,
+    detail_child: f32,
+    detail_parent: f32,
 }
-const _: () = assert!(std::mem::size_of::<JobGpu>() == 32);
+const _: () = assert!(std::mem::size_of::<JobGpu>() == 36);
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct ParamsGpu {
     grid: [u32; 4],
     detail: [f32; 4],
-    level_detail: [f32; MAX_LEVELS],
 }
-const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 128);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 32);
 
 /// Pipeline, staging textures and buffers of the derivation stage.
 pub struct DeriveStage {
@@ -49,6 +49,8 @@ pub struct DeriveStage {
     staging_heights: wgpu::Texture,
     staging_grass: wgpu::Texture,
     pyramid: Pyramid,
+    /// Detail amplitude per level, 0 for stored levels.
+    level_detail: [f32; MAX_LEVELS],
     batch: u32,
 }
 
@@ -104,14 +106,6 @@ impl DeriveStage {
                     params.seed,
                 ],
                 detail: [0.0, params.window_cells, 0.0, 0.0],
-                level_detail: std::array::from_fn(|level| {
-                    // Stored levels carry no detail.
-                    if level < usize::from(pyramid.stored_levels) {
-                        0.0
-                    } else {
-                        params.detail[level]
-                    }
-                }),
             }),
         );
         let jobs = device.create_buffer(&wgpu::BufferDescriptor {
@@ -178,8 +172,20 @@ impl DeriveStage {
             staging_heights,
             staging_grass,
             pyramid: pyramid.clone(),
+            level_detail: std::array::from_fn(|level| {
+                // Stored levels carry no detail.
+                if level < usize::from(pyramid.stored_levels) {
+                    0.0
+                } else {
+                    params.detail[level]
+                }
+            }),
             batch,
         }
+    }
+
+    fn detail_at(&self, level: u8) -> f32 {
+        self.level_detail[usize::from(level).min(MAX_LEVELS - 1)]
     }
 
     /// Most tiles one call derives.
@@ -212,7 +218,8 @@ impl DeriveStage {
                 out_layer: k as u32,
                 cell_parent: self.pyramid.cell_size_m(j.child.level - 1) as f32,
                 cell_child: self.pyramid.cell_size_m(j.child.level) as f32,
-                _pad: 0,
+                detail_child: self.detail_at(j.child.level),
+                detail_parent: self.detail_at(j.child.level - 1),
             })
             .collect();
         queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&gpu_jobs));
