@@ -100,7 +100,8 @@ pub(crate) fn unit(h: u32) -> f32 {
 pub(crate) const WEIGHTS: [[f32; 4]; 2] =
     [[0.0, 1.0, 0.0, 0.0], [-0.0625, 0.5625, 0.5625, -0.0625]];
 
-/// Derives `child` from `parent` (its parent tile). `pyramid.border` must be at least 2.
+/// Derives `child` from `parent` (its parent tile). `pyramid.border` must be even and at
+/// least 2.
 ///
 /// A derived level is the Catmull-Rom upsampling of its parent's *smooth* surface plus its own
 /// detail; the detail is not passed on. The parent's detail, where the parent is itself
@@ -438,13 +439,12 @@ pub fn measure_octaves(field: &HeightField<'_>, octaves: u32, seed: u32) -> Vec<
     let truth: Vec<Level> = (0..=n).map(|k| Level::subsample(field, k, w, h)).collect();
     let finest = laplacian_variance(&truth[0]);
     let finest_slope = truth[0].slope_rms();
-    let mut smooth = truth[0].clone();
     (0..n)
         .map(|k| {
             let (predicted, noise) = truth[k as usize + 1].predict(k, seed);
             let (residual_rms_m, detail) = match_roughness(&truth[k as usize], &predicted, &noise);
             // Catmull-Rom from octave k + 1 all the way down to the field.
-            smooth = truth[k as usize + 1].clone();
+            let mut smooth = truth[k as usize + 1].clone();
             for j in (0..=k).rev() {
                 smooth = smooth.predict(j, seed).0;
             }
