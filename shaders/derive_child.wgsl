@@ -1,5 +1,7 @@
-// Derives child tiles from their parents in the tile atlas: Catmull-Rom upsampling of heights
-// plus slope-scaled detail noise that fades to zero at tile edges; grass type from one of the
+// Derives child tiles from their parents in the tile atlas: Catmull-Rom upsampling of the
+// parent's smooth heights (the parent less its own detail, recomputed here) plus slope-scaled
+// detail noise between the parent's samples, at the child level's amplitude (fitted per world;
+// zero for stored levels), that fades to zero near tile edges; grass type from one of the
 // nearest parent samples, density as their rounded mean. CPU mirror: src/stream/derive_child.rs.
 //
 // One dispatch derives several tiles: workgroup z is the job index.
@@ -17,13 +19,17 @@ struct Job {
     out_layer: u32,
     cell_parent: f32,
     cell_child: f32,
-    _pad: u32,
+    // Detail amplitudes of the child's level and of the parent's (0 for a stored parent), in
+    // cells per unit of slope. Per job rather than in the uniforms: lavapipe compiles a shader
+    // variant per distinct uniform value that steers it.
+    detail_child: f32,
+    detail_parent: f32,
 }
 
 struct Params {
     // x: tile cells, y: border, z: samples per side, w: seed
     grid: vec4<u32>,
-    // x: detail amplitude, y: window cells
+    // x: unused, y: window cells
     detail: vec4<f32>,
 }
 
@@ -58,6 +64,40 @@ fn ph(x: i32, y: i32, layer: u32) -> f32 {
     return textureLoad(parent_heights, clamp_texel(x, y), layer, 0).r;
 }
 
+fn window_at(sx: i32, sy: i32) -> f32 {
+    let n = i32(params.grid.x);
+    let b = i32(params.grid.y);
+    // Euclidean remainder (the shader's % keeps the sign of the dividend).
+    let mx = ((sx % n) + n) % n;
+    let my = ((sy % n) + n) % n;
+    let edge = min(min(mx, n - mx), min(my, n - my)) - b;
+    return clamp(f32(edge) / params.detail.y, 0.0, 1.0);
+}
+
+// The parent's smooth height at texel (x, y): its height less its own detail, which lies on
+// the parent's new samples only, scaled by the grandparent's slope (read off the parent's
+// other samples, which are the grandparent's).
+fn smooth_height(x: i32, y: i32, job: Job) -> f32 {
+    let n = i32(params.grid.x);
+    let b = i32(params.grid.y);
+    let gx = i32(job.child_x >> 1u) * n - b + x;
+    let gy = i32(job.child_y >> 1u) * n - b + y;
+    let ex = gx & 1;
+    let ey = gy & 1;
+    let new_sample = min(f32(ex | ey), 1.0);
+    let cx = x - ex;
+    let cy = y - ey;
+    let layer = job.parent_layer;
+    let cell_grandparent = 2.0 * job.cell_parent;
+    let gpx = (ph(cx + 2, cy, layer) - ph(cx - 2, cy, layer)) / (2.0 * cell_grandparent);
+    let gpy = (ph(cx, cy + 2, layer) - ph(cx, cy - 2, layer)) / (2.0 * cell_grandparent);
+    let slope = min(sqrt(gpx * gpx + gpy * gpy), 1.5);
+    let parent_level = job.child_level - 1u;
+    let noise = unit(hash4(u32(gx), u32(gy), parent_level, params.grid.w));
+    let detail = noise * (job.detail_parent * job.cell_parent * slope * window_at(gx, gy) * new_sample);
+    return ph(x, y, layer) - detail;
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn derive_child(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
     let s = i32(params.grid.z);
@@ -82,28 +122,29 @@ fn derive_child(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgrou
     let wx = weights(fx);
     let wy = weights(fy);
 
-    var rows: array<f32, 4>;
+    var taps: array<vec4<f32>, 4>;
     for (var dy = 0; dy < 4; dy++) {
         let y = iy - 1 + dy;
-        rows[dy] = ((wx.x * ph(ix - 1, y, layer) + wx.y * ph(ix, y, layer)) + wx.z * ph(ix + 1, y, layer))
-            + wx.w * ph(ix + 2, y, layer);
+        taps[dy] = vec4<f32>(smooth_height(ix - 1, y, job), smooth_height(ix, y, job), smooth_height(ix + 1, y, job), smooth_height(ix + 2, y, job));
+    }
+    var rows: array<f32, 4>;
+    for (var dy = 0; dy < 4; dy++) {
+        let t = taps[dy];
+        rows[dy] = ((wx.x * t.x + wx.y * t.y) + wx.z * t.z) + wx.w * t.w;
     }
     var h = ((wy.x * rows[0] + wy.y * rows[1]) + wy.z * rows[2]) + wy.w * rows[3];
 
-    let gx = (ph(ix + 1, iy, layer) - ph(ix - 1, iy, layer)) / (2.0 * job.cell_parent);
-    let gy = (ph(ix, iy + 1, layer) - ph(ix, iy - 1, layer)) / (2.0 * job.cell_parent);
+    let gx = (taps[1].z - taps[1].x) / (2.0 * job.cell_parent);
+    let gy = (taps[2].y - taps[0].y) / (2.0 * job.cell_parent);
     let slope = min(sqrt(gx * gx + gy * gy), 1.5);
 
+    // Global sample coordinates at the child's level; detail only between the parent's samples.
     let sx = i32(job.child_x) * n + i - b;
     let sy = i32(job.child_y) * n + j - b;
-    // Euclidean remainder (the shader's % keeps the sign of the dividend).
-    let mx = ((sx % n) + n) % n;
-    let my = ((sy % n) + n) % n;
-    let edge = f32(min(min(mx, n - mx), min(my, n - my)));
-    let window = min(edge / params.detail.y, 1.0);
+    let new_sample = min(f32((sx | sy) & 1), 1.0);
     let seed = params.grid.w;
     let noise = unit(hash4(u32(sx), u32(sy), job.child_level, seed));
-    h += noise * (params.detail.x * job.cell_child * slope * window);
+    h += noise * (job.detail_child * job.cell_child * slope * window_at(sx, sy) * new_sample);
 
     let pick = hash4(u32(sx), u32(sy), job.child_level, seed ^ 0x9e3779b9u);
     let tx = ix + fx * i32(pick & 1u);

@@ -412,7 +412,8 @@ fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
 #[derive(Subcommand)]
 enum EvalCommand {
     /// Downsample a DEM by K, derive it back with each method (nearest, bilinear, bicubic,
-    /// bicubic + detail), and chart height and slope error against time per tile.
+    /// bicubic + fixed detail, and the calibrated detail fitted to the coarse grid), and chart
+    /// height and slope error against time per tile.
     Derive {
         /// The DEM's PNG (16-bit, with its JSON sidecar).
         #[arg(long)]
@@ -443,44 +444,51 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let truth = eval::dem_grid(&dem);
     let methods = eval::methods();
-    let pb = bar(methods.len() as u64, "methods");
+    let pb = bar(methods.len() as u64 + 1, "methods");
     let mut results = Vec::new();
     for m in methods {
         pb.set_message(m.name());
         results.push(eval::evaluate(&truth, factor, m, 5));
         pb.inc(1);
     }
+    pb.set_message(eval::RUNTIME_METHOD);
+    results.push(eval::evaluate_calibrated(&truth, factor, 5));
+    pb.inc(1);
     pb.finish();
     let name = dem_path
         .file_stem()
         .map_or("DEM".into(), |s| s.to_string_lossy().into_owned());
     eval::write_results(&results, &name, out)?;
     println!(
-        "{:<22} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11}",
+        "{:<22} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11}  parameters",
         "method", "RMSE m", "max m", "slope deg", "bias deg", "rough", "ms/tile"
     );
     for r in &results {
         println!(
-            "{:<22} {:>9.3} {:>9.2} {:>10.3} {:>10.3} {:>9.3} {:>11.4}",
+            "{:<22} {:>9.3} {:>9.2} {:>10.3} {:>10.3} {:>9.3} {:>11.4}  {}",
             r.method,
             r.rmse_m,
             r.max_m,
             r.slope_rmse_deg,
             r.slope_bias_deg,
             r.roughness_ratio,
-            r.ms_per_tile
+            r.ms_per_tile,
+            r.parameters()
         );
+    }
+    if let Some(fit) = results.last().and_then(|r| r.fit.as_ref()) {
+        println!("calibration from the coarse grid: {}", fit.note);
     }
     let front = eval::joint_front(&results);
     let names: Vec<String> = front.iter().map(|&i| results[i].method.clone()).collect();
-    let chosen = eval::runtime_method().name();
+    let chosen = eval::RUNTIME_METHOD;
     println!(
         "on the joint Pareto front (time, height, slope, flattening, roughness): {}",
         names.join(", ")
     );
     println!(
         "runtime method: {chosen} ({} the joint front); wrote derive.csv and charts to {}",
-        if names.contains(&chosen) {
+        if names.iter().any(|n| n == chosen) {
             "on"
         } else {
             "NOT on"

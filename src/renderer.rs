@@ -158,7 +158,7 @@ impl RendererConfig {
         Self {
             service: ServiceConfig::default(),
             lod_factor: 1.0,
-            derive: DeriveParams::default(),
+            derive: DeriveParams::for_manifest(&world.manifest),
             grass: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
             mesh_step: 2,
             grass_spacing_m: 0.25,

@@ -280,7 +280,7 @@ fn eval_derive_writes_its_table_and_charts() {
         .skip(1)
         .map(|l| l.split(',').collect())
         .collect();
-    assert_eq!(rows.len(), 7, "{csv}");
+    assert_eq!(rows.len(), 9, "{csv}");
     let rmse = |name: &str| -> f64 {
         rows.iter().find(|r| r[0] == name).unwrap()[2]
             .parse()
@@ -295,6 +295,17 @@ fn eval_derive_writes_its_table_and_charts() {
         1,
         "exactly one runtime default: {csv}"
     );
+    // The runtime's method is the calibrated one. A 33 x 25 coarse grid has too few octaves
+    // to fit: it falls back to plain bicubic, and says so.
+    let calibrated = rows.iter().find(|r| r[0] == "calibrated").unwrap();
+    assert_eq!(
+        (calibrated[9], calibrated[10]),
+        ("true", "bicubic"),
+        "{csv}"
+    );
+    assert_eq!(rmse("calibrated"), rmse("bicubic"), "{csv}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("too few levels"), "{stdout}");
     for chart in [
         "derive_height.png",
         "derive_slope.png",

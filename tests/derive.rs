@@ -4,9 +4,9 @@
 mod common;
 
 use verdant::gpu::{GpuContext, GpuTimer};
-use verdant::stream::{DeriveJob, DeriveStage, TileAtlas};
-use verdant::stream::{DeriveParams, derive_child};
-use verdant::world::{Pyramid, TileData, TileId, World};
+use verdant::stream::{DeriveJob, DeriveParams, DeriveStage, TileAtlas, derive_child};
+use verdant::tools::eval_derive as eval;
+use verdant::world::{DeriveMode, Pyramid, TileData, TileId, World};
 
 /// Largest height difference allowed between GPU and CPU, metres. The two run the same
 /// arithmetic in the same order; a GPU may fuse a multiply and an add, which moves the result
@@ -24,9 +24,12 @@ struct Rig {
 
 impl Rig {
     fn new(world: &World, slots: u32) -> Self {
+        Self::with_params(world, slots, DeriveParams::default())
+    }
+
+    fn with_params(world: &World, slots: u32, params: DeriveParams) -> Self {
         let ctx = common::gpu();
         let pyramid = world.manifest.pyramid.clone();
-        let params = DeriveParams::default();
         let atlas = TileAtlas::new(&ctx.device, pyramid.samples_per_side(), slots);
         let stage = DeriveStage::new(&ctx.device, &ctx.queue, &pyramid, &params, &atlas, 8);
         Self {
@@ -174,10 +177,7 @@ fn neighbours_derived_from_different_parents_share_their_borders_exactly() {
     );
     assert_shared_columns_identical(&cpu_w, &cpu_e, &rig.pyramid);
     // And the detail is really there away from the edges (the derivation is not a plain copy).
-    let bicubic_only = DeriveParams {
-        detail: 0.0,
-        ..rig.params
-    };
+    let bicubic_only = rig.params.bicubic();
     let smooth = derive_child(&rig.pyramid, &tw, cw, &bicubic_only);
     let differs = smooth
         .heights
@@ -220,4 +220,263 @@ fn the_same_tile_derives_to_the_same_bits_every_time() {
         derive_child(&rig.pyramid, &parent, child, &rig.params),
     );
     assert_eq!(bits(&c1), bits(&c2));
+}
+
+/// The default world's calibrated settings; fails unless the manifest carries a fractal fit.
+fn calibrated(world: &World) -> DeriveParams {
+    let fit = world
+        .manifest
+        .derive
+        .as_ref()
+        .expect("world.toml has a [derive] table");
+    assert_eq!(fit.method, DeriveMode::Fractal, "{}", fit.note);
+    let params = DeriveParams::for_manifest(&world.manifest);
+    let first = world.manifest.pyramid.stored_levels;
+    // Distinct amplitudes per derived level, none zero, as fitted.
+    for (k, &d) in fit.detail.iter().enumerate() {
+        assert!(d > 0.0);
+        assert_eq!(params.detail_at(first + k as u8), d);
+    }
+    params
+}
+
+#[test]
+fn calibrated_gpu_derivation_matches_the_mirror_over_three_generations() {
+    let world = World::open(&common::default_world()).unwrap();
+    let rig = Rig::with_params(&world, 8, calibrated(&world));
+    let parent_id = TileId::new(2, 3, 5);
+    let parent = world.load_tile(parent_id).unwrap();
+    rig.atlas.upload(&rig.ctx.queue, 0, &parent).unwrap();
+    // Down three levels: each generation's parent carries detail of its own that the GPU and
+    // the mirror both take off again.
+    let mut cpu_parent = parent;
+    let mut id = parent_id;
+    for generation in 0..3u32 {
+        let child = id.children()[(generation as usize + 1) % 4];
+        rig.derive(&[DeriveJob {
+            child,
+            parent_slot: generation,
+            child_slot: generation + 1,
+        }]);
+        let gpu = rig.read(generation + 1, child);
+        let cpu = derive_child(&rig.pyramid, &cpu_parent, child, &rig.params);
+        assert_matches_mirror(&gpu, &cpu);
+        cpu_parent = cpu;
+        id = child;
+    }
+}
+
+#[test]
+fn calibrated_neighbours_from_derived_parents_share_their_borders_exactly() {
+    let world = World::open(&common::default_world()).unwrap();
+    let rig = Rig::with_params(&world, 8, calibrated(&world));
+    let (pw, pe) = (TileId::new(2, 4, 6), TileId::new(2, 5, 6));
+    rig.atlas
+        .upload(&rig.ctx.queue, 0, &world.load_tile(pw).unwrap())
+        .unwrap();
+    rig.atlas
+        .upload(&rig.ctx.queue, 1, &world.load_tile(pe).unwrap())
+        .unwrap();
+    // Derived parents from different stored parents, then their children across the seam.
+    let (cw, ce) = (TileId::new(3, 9, 13), TileId::new(3, 10, 13));
+    let (gw, ge) = (TileId::new(4, 19, 26), TileId::new(4, 20, 26));
+    assert_eq!((gw.parent(), ge.parent()), (Some(cw), Some(ce)));
+    rig.derive(&[
+        DeriveJob {
+            child: cw,
+            parent_slot: 0,
+            child_slot: 2,
+        },
+        DeriveJob {
+            child: ce,
+            parent_slot: 1,
+            child_slot: 3,
+        },
+    ]);
+    rig.derive(&[
+        DeriveJob {
+            child: gw,
+            parent_slot: 2,
+            child_slot: 4,
+        },
+        DeriveJob {
+            child: ge,
+            parent_slot: 3,
+            child_slot: 5,
+        },
+    ]);
+    assert_shared_columns_identical(&rig.read(4, gw), &rig.read(5, ge), &rig.pyramid);
+    let cpu = |p: TileId, c: TileId, g: TileId| {
+        let stored = world.load_tile(p).unwrap();
+        let derived = derive_child(&rig.pyramid, &stored, c, &rig.params);
+        derive_child(&rig.pyramid, &derived, g, &rig.params)
+    };
+    assert_shared_columns_identical(&cpu(pw, cw, gw), &cpu(pe, ce, ge), &rig.pyramid);
+}
+
+#[test]
+fn a_derived_level_does_not_pass_its_detail_on() {
+    let world = World::open(&common::default_world()).unwrap();
+    let pyramid = &world.manifest.pyramid;
+    let params = calibrated(&world);
+    let first = pyramid.stored_levels;
+    // The same chain with no detail at the first derived level.
+    let mut plain_first = params;
+    plain_first.detail[usize::from(first)] = 0.0;
+    let stored_id = TileId::new(2, 3, 5);
+    let stored = world.load_tile(stored_id).unwrap();
+    let child = stored_id.children()[1];
+    let grandchild = child.children()[2];
+    let derive2 = |p: &DeriveParams| {
+        let c = derive_child(pyramid, &stored, child, p);
+        (c.clone(), derive_child(pyramid, &c, grandchild, p))
+    };
+    let (with_child, with) = derive2(&params);
+    let (plain_child, without) = derive2(&plain_first);
+    // The first derived level differs (it has detail of its own)...
+    let changed = with_child
+        .heights
+        .iter()
+        .zip(&plain_child.heights)
+        .filter(|(a, b)| (*a - *b).abs() > 1e-3)
+        .count();
+    assert!(changed > with_child.heights.len() / 4, "{changed}");
+    // ...but the level below it is the same up to rounding: it interpolates the smooth
+    // surface and adds only its own detail.
+    let worst = with
+        .heights
+        .iter()
+        .zip(&without.heights)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-3, "the grandchild moved by {worst} m");
+}
+
+// ---- The calibrated method against held-out truth (CPU; `verdant eval derive`'s measures) ----
+
+/// A fractional Brownian surface of Hurst exponent `hurst` by midpoint displacement (diamond
+/// and square steps, the displacement shrinking by `2^(-hurst / 2)` at each, Gaussian,
+/// seeded): `2^exponent + 1` samples a side of `cell_m`, relief about `sigma_m`.
+fn fbm_surface(hurst: f64, exponent: u32, seed: u64, cell_m: f64, sigma_m: f64) -> eval::Grid {
+    let n = 1usize << exponent;
+    let w = n + 1;
+    let mut rng = common::Rng(seed);
+    let mut gauss = move || {
+        let (u, v) = (rng.unit().max(1e-12), rng.unit());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    };
+    let mut h = vec![0.0f64; w * w];
+    for (x, y) in [(0, 0), (n, 0), (0, n), (n, n)] {
+        h[y * w + x] = sigma_m * gauss();
+    }
+    let shrink = 0.5f64.powf(hurst / 2.0);
+    let (mut step, mut scale) = (n, sigma_m);
+    while step > 1 {
+        let half = step / 2;
+        scale *= shrink;
+        for y in (half..w).step_by(step) {
+            for x in (half..w).step_by(step) {
+                let corners = h[(y - half) * w + x - half]
+                    + h[(y - half) * w + x + half]
+                    + h[(y + half) * w + x - half]
+                    + h[(y + half) * w + x + half];
+                h[y * w + x] = corners / 4.0 + scale * gauss();
+            }
+        }
+        scale *= shrink;
+        for y in (0..w).step_by(half) {
+            let first = if (y / half) % 2 == 0 { half } else { 0 };
+            for x in (first..w).step_by(step) {
+                let mut sum = 0.0;
+                let mut count = 0.0;
+                for (dx, dy) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                    let (nx, ny) = (x as i64 + dx * half as i64, y as i64 + dy * half as i64);
+                    if (0..w as i64).contains(&nx) && (0..w as i64).contains(&ny) {
+                        sum += h[ny as usize * w + nx as usize];
+                        count += 1.0;
+                    }
+                }
+                h[y * w + x] = sum / count + scale * gauss();
+            }
+        }
+        step = half;
+    }
+    eval::Grid {
+        width: w,
+        height: w,
+        cell: (cell_m, cell_m),
+        data: h.iter().map(|&v| v as f32).collect(),
+    }
+}
+
+/// How far the fitted Hurst exponent may be from the surface's: midpoint displacement makes
+/// only approximately fractional Brownian surfaces, and four octaves of a coarse grid are few.
+const HURST_TOLERANCE: f64 = 0.1;
+
+#[test]
+fn calibrated_method_recovers_fractal_surfaces_of_known_hurst_exponent() {
+    for (hurst, seed) in [(0.3, 3), (0.5, 5), (0.8, 8)] {
+        // Relief for an RMS slope of about 0.3 at the finest samples.
+        let truth = fbm_surface(hurst, 10, seed, 2.0, 0.6 * 1024f64.powf(hurst));
+        for factor in [4, 8] {
+            let bicubic = eval::evaluate(&truth, factor, eval::DeriveMethod::Bicubic, 1);
+            let r = eval::evaluate_calibrated(&truth, factor, 1);
+            let fit = r.fit.clone().unwrap();
+            eprintln!(
+                "H {hurst} factor {factor}: fitted H {:.3}, roughness {:.3} (bicubic {:.3}), \
+                 RMSE {:.3}x bicubic, {}",
+                fit.hurst,
+                r.roughness_ratio,
+                bicubic.roughness_ratio,
+                r.rmse_m / bicubic.rmse_m,
+                r.parameters()
+            );
+            assert_eq!(fit.method, DeriveMode::Fractal, "{}", fit.note);
+            assert!(
+                (fit.hurst - hurst).abs() <= HURST_TOLERANCE,
+                "H {hurst} factor {factor}: fitted H {}",
+                fit.hurst
+            );
+            assert!(
+                (0.8..=1.2).contains(&r.roughness_ratio),
+                "H {hurst} factor {factor}: roughness {} of the truth's",
+                r.roughness_ratio
+            );
+        }
+    }
+}
+
+#[test]
+fn calibrated_method_keeps_real_terrain_rough_at_bicubic_height_error() {
+    for dem in [
+        common::root().join("worlds/santa-cruz/source/santa_cruz_1024.png"),
+        common::root().join("tests/data/east_bay_768.png"),
+    ] {
+        let truth = eval::dem_grid(&verdant::world::Dem::load(&dem).unwrap());
+        for factor in [4, 8] {
+            let bicubic = eval::evaluate(&truth, factor, eval::DeriveMethod::Bicubic, 1);
+            let r = eval::evaluate_calibrated(&truth, factor, 1);
+            let name = dem.file_name().unwrap().to_string_lossy();
+            eprintln!(
+                "{name} factor {factor}: roughness {:.3}, RMSE {:.3} m ({:.3}x bicubic), {}",
+                r.roughness_ratio,
+                r.rmse_m,
+                r.rmse_m / bicubic.rmse_m,
+                r.parameters()
+            );
+            assert!(
+                (0.8..=1.2).contains(&r.roughness_ratio),
+                "{name} factor {factor}: roughness {} of the truth's",
+                r.roughness_ratio
+            );
+            assert!(
+                r.rmse_m <= 1.15 * bicubic.rmse_m,
+                "{name} factor {factor}: RMSE {} m, bicubic {} m",
+                r.rmse_m,
+                bicubic.rmse_m
+            );
+            // Plain bicubic smooths the terrain; the calibrated detail is what restores it.
+            assert!(bicubic.roughness_ratio < 0.6);
+        }
+    }
 }

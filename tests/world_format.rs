@@ -98,6 +98,9 @@ fn committed_world_manifest_parses_and_validates() {
         ]
     );
     assert!(m.height_range_m[0] >= 0.0 && m.height_range_m[1] <= 1000.0);
+    // The baker fitted the derived levels' detail: one amplitude per derived level.
+    let fit = m.derive.as_ref().expect("a [derive] table");
+    assert_eq!(fit.detail.len(), usize::from(m.pyramid.derived_levels));
     // Text written by `to_toml` reads back to the same manifest.
     assert_eq!(parse(&m.to_toml()).unwrap(), m);
 }
@@ -175,6 +178,54 @@ fn valid_manifest_parses() {
     assert_eq!(m.sky.fog_distance_m, 12_000.0);
     assert!(m.wind.speed_mps > 0.0);
     assert_eq!(parse(&m.to_toml()).unwrap(), m);
+}
+
+const DERIVE: &str = r#"
+[derive]
+method = "fractal"
+note = "fitted"
+octaves = 4
+hurst = 0.8
+fit_rms_log2 = 0.05
+residual_rms_m = 1.5
+detail = [0.3]
+"#;
+
+#[test]
+fn derive_calibration_is_optional_and_validated() {
+    // Worlds baked before calibration: no table, the legacy amplitude at every level.
+    let m = parse(VALID).unwrap();
+    assert_eq!(m.derive, None);
+    assert_eq!(
+        verdant::stream::DeriveParams::for_manifest(&m),
+        verdant::stream::DeriveParams::default()
+    );
+    let with = format!("{VALID}{DERIVE}");
+    let m = parse(&with).unwrap();
+    let table = m.derive.as_ref().unwrap();
+    assert_eq!(table.method, verdant::world::DeriveMode::Fractal);
+    assert_eq!(table.detail, vec![0.3]);
+    assert_eq!(parse(&m.to_toml()).unwrap(), m);
+    for (from, to, field) in [
+        ("detail = [0.3]", "detail = [0.3, 0.2]", "derive.detail"),
+        ("detail = [0.3]", "detail = [-0.3]", "derive.detail[0]"),
+        ("detail = [0.3]", "detail = [1000.0]", "derive.detail[0]"),
+        (
+            "method = \"fractal\"",
+            "method = \"bicubic\"",
+            "derive.detail[0]",
+        ),
+        ("hurst = 0.8", "hurst = nan", "derive.hurst"),
+    ] {
+        let err = parse(&with.replacen(from, to, 1)).expect_err(to);
+        let text = err.to_string();
+        assert!(
+            text.starts_with("worlds/test/world.toml: ") && text.contains(field),
+            "{to}: {text}"
+        );
+    }
+    let err = parse(&with.replacen("\"fractal\"", "\"spline\"", 1)).expect_err("spline");
+    assert!(matches!(err, WorldError::ManifestSyntax { .. }), "{err}");
 }
 
 #[test]

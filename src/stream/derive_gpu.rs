@@ -4,8 +4,7 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::gpu::GpuTimer;
-use crate::stream::DeriveParams;
-use crate::stream::TileAtlas;
+use crate::stream::{DeriveParams, MAX_LEVELS, TileAtlas};
 use crate::world::{Pyramid, TileId};
 
 /// One child to derive: its address, its parent's slot and the slot to fill.
@@ -29,9 +28,10 @@ struct JobGpu {
     out_layer: u32,
     cell_parent: f32,
     cell_child: f32,
-    _pad: u32,
+    detail_child: f32,
+    detail_parent: f32,
 }
-const _: () = assert!(std::mem::size_of::<JobGpu>() == 32);
+const _: () = assert!(std::mem::size_of::<JobGpu>() == 36);
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -49,6 +49,8 @@ pub struct DeriveStage {
     staging_heights: wgpu::Texture,
     staging_grass: wgpu::Texture,
     pyramid: Pyramid,
+    /// Detail amplitude per level, 0 for stored levels.
+    level_detail: [f32; MAX_LEVELS],
     batch: u32,
 }
 
@@ -98,7 +100,7 @@ impl DeriveStage {
                     pyramid.samples_per_side(),
                     params.seed,
                 ],
-                detail: [params.detail, params.window_cells, 0.0, 0.0],
+                detail: [0.0, params.window_cells, 0.0, 0.0],
             }),
         );
         let jobs = device.create_buffer(&wgpu::BufferDescriptor {
@@ -165,8 +167,20 @@ impl DeriveStage {
             staging_heights,
             staging_grass,
             pyramid: pyramid.clone(),
+            level_detail: std::array::from_fn(|level| {
+                // Stored levels carry no detail.
+                if level < usize::from(pyramid.stored_levels) {
+                    0.0
+                } else {
+                    params.detail[level]
+                }
+            }),
             batch,
         }
+    }
+
+    fn detail_at(&self, level: u8) -> f32 {
+        self.level_detail[usize::from(level).min(MAX_LEVELS - 1)]
     }
 
     /// Most tiles one call derives.
@@ -199,7 +213,8 @@ impl DeriveStage {
                 out_layer: k as u32,
                 cell_parent: self.pyramid.cell_size_m(j.child.level - 1) as f32,
                 cell_child: self.pyramid.cell_size_m(j.child.level) as f32,
-                _pad: 0,
+                detail_child: self.detail_at(j.child.level),
+                detail_parent: self.detail_at(j.child.level - 1),
             })
             .collect();
         queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&gpu_jobs));

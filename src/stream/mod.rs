@@ -14,6 +14,9 @@ pub use atlas::{AtlasError, TileAtlas, pack_grass};
 pub use derive_gpu::{DeriveJob, DeriveStage};
 
 pub use cache::{CacheStats, TileCache};
-pub use derive_child::{DeriveParams, derive_child, hash_u32};
+pub use derive_child::{
+    DeriveParams, FIT_OCTAVES, HeightField, MAX_LEVELS, OctaveFit, calibrate, derive_child,
+    hash_u32, measure_octaves,
+};
 pub use residency::{ResidencyPlan, ResidencyStats, ServiceConfig, TileService};
 pub use service::{Loaded, StreamConfig, StreamStats, Streamer, TileSource, Want};

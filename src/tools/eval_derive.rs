@@ -7,12 +7,19 @@
 //! are slopes: point by point (RMSE, degrees), on average (the bias of the mean slope, degrees:
 //! smoothing flattens terrain, which moves where grass may grow) and as roughness (the spread of
 //! the discrete Laplacian relative to the truth's).
+//!
+//! The calibrated method (the runtime's) fits its per-level detail to the coarse grid alone,
+//! as the baker fits a world's to its stored pyramid ([`crate::stream::calibrate`]): the truth
+//! only scores it.
 
 use std::time::Instant;
 
-use crate::stream::DeriveParams;
 use crate::stream::derive_child::{WEIGHTS, hash4, unit};
-use crate::world::Dem;
+use crate::stream::{DeriveParams, HeightField, calibrate};
+use crate::world::{Dem, DeriveCalibration, LEGACY_DETAIL};
+
+/// Most 2x steps an evaluation takes (factor 64).
+pub const MAX_STEPS: usize = 6;
 
 /// A way of deriving a finer grid from a coarser one.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -24,8 +31,16 @@ pub enum DeriveMethod {
     /// Catmull-Rom (bicubic) interpolation.
     Bicubic,
     /// Catmull-Rom plus slope-scaled detail noise of the given amplitude (child cells per unit
-    /// slope), as the runtime derives child tiles.
+    /// slope) on every sample, each step upsampling the last one's result, detail included:
+    /// the runtime's method before calibration, at 0.25.
+    InheritedDetail(f32),
+    /// Catmull-Rom of the smooth chain plus slope-scaled detail noise of the given amplitude
+    /// between the coarser step's samples, not passed on to the next step (as the runtime
+    /// derives child tiles now).
     BicubicDetail(f32),
+    /// Catmull-Rom plus slope-scaled detail noise at a fitted amplitude per step (the first
+    /// step first), as the runtime derives child tiles of a calibrated world.
+    Calibrated([f32; MAX_STEPS]),
 }
 
 impl DeriveMethod {
@@ -35,7 +50,9 @@ impl DeriveMethod {
             Self::Nearest => "nearest".into(),
             Self::Bilinear => "bilinear".into(),
             Self::Bicubic => "bicubic".into(),
+            Self::InheritedDetail(a) => format!("inherited detail {a}"),
             Self::BicubicDetail(a) => format!("bicubic+detail {a}"),
+            Self::Calibrated(_) => "calibrated".into(),
         }
     }
 }
@@ -78,7 +95,54 @@ impl Grid {
     }
 }
 
-/// One 2x derivation of `coarse` by `method`. `level` and `seed` key the detail noise.
+/// Derives `coarse` up by `steps` 2x steps with `method`, as the runtime derives levels.
+pub fn derive_steps(coarse: &Grid, method: DeriveMethod, steps: u32, seed: u32) -> Grid {
+    let amplitude = |step: u32| match method {
+        DeriveMethod::BicubicDetail(a) => Some(a),
+        DeriveMethod::Calibrated(a) => Some(a[(step as usize).min(MAX_STEPS - 1)]),
+        _ => None,
+    };
+    if amplitude(0).is_none() {
+        let mut fine = coarse.clone();
+        for s in 0..steps {
+            fine = upsample2x(&fine, method, s + 1, seed);
+        }
+        return fine;
+    }
+    // The smooth chain is plain Catmull-Rom; each step adds its own detail to it.
+    let mut smooth = coarse.clone();
+    let mut fine = coarse.clone();
+    for s in 0..steps {
+        let next = upsample2x(&smooth, DeriveMethod::Bicubic, s + 1, seed);
+        let a = amplitude(s).unwrap_or(0.0);
+        let c = (0.5 * (next.cell.0 + next.cell.1)) as f32;
+        let mut data = next.data.clone();
+        for j in 0..next.height {
+            for i in 0..next.width {
+                if (i | j) & 1 == 0 {
+                    continue;
+                }
+                let (ix, iy) = ((i >> 1) as i64, (j >> 1) as i64);
+                let gx =
+                    (smooth.at(ix + 1, iy) - smooth.at(ix - 1, iy)) as f64 / (2.0 * smooth.cell.0);
+                let gy =
+                    (smooth.at(ix, iy + 1) - smooth.at(ix, iy - 1)) as f64 / (2.0 * smooth.cell.1);
+                let slope = (gx * gx + gy * gy).sqrt().min(1.5) as f32;
+                data[j * next.width + i] +=
+                    unit(hash4(i as u32, j as u32, s + 1, seed)) * (a * c * slope);
+            }
+        }
+        fine = Grid {
+            data,
+            ..next.clone()
+        };
+        smooth = next;
+    }
+    fine
+}
+
+/// One 2x derivation of `coarse` by `method` (for the detail methods: detail on every sample,
+/// as [`DeriveMethod::InheritedDetail`]). `level` and `seed` key the detail noise.
 pub fn upsample2x(coarse: &Grid, method: DeriveMethod, level: u32, seed: u32) -> Grid {
     let (w, h) = (coarse.width * 2 - 1, coarse.height * 2 - 1);
     let cell = (coarse.cell.0 / 2.0, coarse.cell.1 / 2.0);
@@ -96,7 +160,10 @@ pub fn upsample2x(coarse: &Grid, method: DeriveMethod, level: u32, seed: u32) ->
                         + coarse.at(ix + 1, iy + 1) * 0.5 * fx as f32;
                     a * (1.0 - 0.5 * fy as f32) + b * 0.5 * fy as f32
                 }
-                DeriveMethod::Bicubic | DeriveMethod::BicubicDetail(_) => {
+                DeriveMethod::Bicubic
+                | DeriveMethod::InheritedDetail(_)
+                | DeriveMethod::BicubicDetail(_)
+                | DeriveMethod::Calibrated(_) => {
                     let (wx, wy) = (WEIGHTS[fx], WEIGHTS[fy]);
                     let mut rows = [0.0f32; 4];
                     for (dy, row) in rows.iter_mut().enumerate() {
@@ -106,7 +173,16 @@ pub fn upsample2x(coarse: &Grid, method: DeriveMethod, level: u32, seed: u32) ->
                     }
                     let mut v =
                         ((wy[0] * rows[0] + wy[1] * rows[1]) + wy[2] * rows[2]) + wy[3] * rows[3];
-                    if let DeriveMethod::BicubicDetail(amplitude) = method {
+                    let amplitude = match method {
+                        DeriveMethod::InheritedDetail(a) | DeriveMethod::BicubicDetail(a) => {
+                            Some(a)
+                        }
+                        DeriveMethod::Calibrated(a) => {
+                            Some(a[(level as usize).clamp(1, MAX_STEPS) - 1])
+                        }
+                        _ => None,
+                    };
+                    if let Some(amplitude) = amplitude {
                         let gx = (coarse.at(ix + 1, iy) - coarse.at(ix - 1, iy)) as f64
                             / (2.0 * coarse.cell.0);
                         let gy = (coarse.at(ix, iy + 1) - coarse.at(ix, iy - 1)) as f64
@@ -148,6 +224,31 @@ pub struct MethodResult {
     pub roughness_ratio: f64,
     /// CPU time per derived 133 x 133 tile, milliseconds (median of repeats).
     pub ms_per_tile: f64,
+    /// Detail amplitude of each step, first step first (empty: no detail).
+    pub detail: Vec<f32>,
+    /// For the calibrated method, what was fitted to the coarse grid.
+    pub fit: Option<DeriveCalibration>,
+}
+
+impl MethodResult {
+    /// The fitted or fixed parameters in one short line (empty for plain interpolations).
+    pub fn parameters(&self) -> String {
+        let detail = self
+            .detail
+            .iter()
+            .map(|d| format!("{d:.3}"))
+            .collect::<Vec<_>>()
+            .join("/");
+        match &self.fit {
+            Some(f) => format!(
+                "{:?} H={:.3} dev={:.3} octaves={} detail={detail}",
+                f.method, f.hurst, f.fit_rms_log2, f.octaves
+            )
+            .to_lowercase(),
+            None if detail.is_empty() => String::new(),
+            None => format!("detail={detail}"),
+        }
+    }
 }
 
 /// The DEM as a grid, north row first.
@@ -185,10 +286,7 @@ pub fn evaluate(truth: &Grid, factor: usize, method: DeriveMethod, repeats: usiz
     let mut fine = coarse.clone();
     for _ in 0..repeats.max(1) {
         let start = Instant::now();
-        fine = coarse.clone();
-        for s in 0..steps {
-            fine = upsample2x(&fine, method, s + 1, params.seed);
-        }
+        fine = derive_steps(&coarse, method, steps, params.seed);
         times.push(start.elapsed().as_secs_f64() * 1e3);
     }
     let ms = crate::tools::metrics::Summary::of(&times).median;
@@ -217,6 +315,13 @@ pub fn evaluate(truth: &Grid, factor: usize, method: DeriveMethod, repeats: usiz
         let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
         (v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len().max(1) as f64).sqrt()
     };
+    let detail = match method {
+        DeriveMethod::InheritedDetail(a) | DeriveMethod::BicubicDetail(a) => {
+            vec![a; steps as usize]
+        }
+        DeriveMethod::Calibrated(a) => a[..(steps as usize).min(MAX_STEPS)].to_vec(),
+        _ => Vec::new(),
+    };
     MethodResult {
         method: method.name(),
         factor,
@@ -226,25 +331,61 @@ pub fn evaluate(truth: &Grid, factor: usize, method: DeriveMethod, repeats: usiz
         slope_bias_deg: (slope_sum_f - slope_sum_t) / n,
         roughness_ratio: spread(&lap_f) / spread(&lap_t).max(1e-12),
         ms_per_tile: ms / tiles,
+        detail,
+        fit: None,
     }
 }
 
-/// The methods `verdant eval derive` compares: the three interpolations and the runtime's
-/// method at a range of detail amplitudes.
+/// Fits the calibrated method to the coarse grid that `evaluate` derives from (`truth`
+/// downsampled by `factor`): the amplitudes of the factor's steps, and the fit itself.
+pub fn calibrate_coarse(truth: &Grid, factor: usize) -> (DeriveMethod, DeriveCalibration) {
+    let coarse = truth.downsample(factor);
+    let steps = (factor.trailing_zeros() as usize).min(MAX_STEPS);
+    let fit = calibrate(
+        &HeightField {
+            width: coarse.width,
+            height: coarse.height,
+            cell_m: coarse.cell,
+            heights: &coarse.data,
+        },
+        steps as u8,
+        DeriveParams::default().seed,
+    );
+    let mut amplitudes = [0.0f32; MAX_STEPS];
+    amplitudes[..steps].copy_from_slice(&fit.detail[..steps]);
+    (DeriveMethod::Calibrated(amplitudes), fit)
+}
+
+/// Evaluates the calibrated method: fitted to the coarse grid alone, then scored against the
+/// truth like every other method.
+pub fn evaluate_calibrated(truth: &Grid, factor: usize, repeats: usize) -> MethodResult {
+    let (method, fit) = calibrate_coarse(truth, factor);
+    let mut r = evaluate(truth, factor, method, repeats);
+    r.fit = Some(fit);
+    r
+}
+
+/// The fixed methods `verdant eval derive` compares with the calibrated one: the three
+/// interpolations and bicubic plus detail at a range of fixed amplitudes.
 pub fn methods() -> Vec<DeriveMethod> {
     let mut m = vec![
         DeriveMethod::Nearest,
         DeriveMethod::Bilinear,
         DeriveMethod::Bicubic,
     ];
+    m.push(legacy_method());
     m.extend([0.1, 0.25, 0.5, 1.0].map(DeriveMethod::BicubicDetail));
     m
 }
 
-/// The runtime's method (what derived tiles use).
-pub fn runtime_method() -> DeriveMethod {
-    DeriveMethod::BicubicDetail(DeriveParams::default().detail)
+/// The runtime's method before calibration: detail 0.25 on every sample, passed on from level
+/// to level.
+pub fn legacy_method() -> DeriveMethod {
+    DeriveMethod::InheritedDetail(LEGACY_DETAIL)
 }
+
+/// Name of the runtime's method in a calibrated world (what charts and tables mark).
+pub const RUNTIME_METHOD: &str = "calibrated";
 
 /// Indices of the results on the Pareto front of all the measures at once: time per tile,
 /// height RMSE, slope RMSE, |slope bias| and roughness error, lower being better in each.
@@ -274,16 +415,17 @@ pub fn write_results(
 ) -> anyhow::Result<()> {
     use anyhow::Context;
     use std::fmt::Write as _;
-    let chosen = runtime_method().name();
+    let chosen = RUNTIME_METHOD;
     let front = joint_front(results);
     let mut csv = String::from(
         "method,factor,rmse_m,max_m,slope_rmse_deg,slope_bias_deg,roughness_ratio,ms_per_tile,\
-         on_joint_pareto_front,runtime_default\n",
+         on_joint_pareto_front,runtime_default,fit,hurst,fit_rms_log2,detail\n",
     );
     for (i, r) in results.iter().enumerate() {
+        let fit = r.fit.as_ref();
         let _ = writeln!(
             csv,
-            "{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{},{}",
+            "{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{},{},{},{},{},{}",
             r.method,
             r.factor,
             r.rmse_m,
@@ -293,7 +435,15 @@ pub fn write_results(
             r.roughness_ratio,
             r.ms_per_tile,
             front.contains(&i),
-            r.method == chosen
+            r.method == chosen,
+            fit.map_or(String::new(), |f| format!("{:?}", f.method).to_lowercase()),
+            fit.map_or(String::new(), |f| format!("{:.4}", f.hurst)),
+            fit.map_or(String::new(), |f| format!("{:.4}", f.fit_rms_log2)),
+            r.detail
+                .iter()
+                .map(|d| format!("{d:.4}"))
+                .collect::<Vec<_>>()
+                .join(" "),
         );
     }
     let csv_path = out.join("derive.csv");
@@ -324,7 +474,10 @@ pub fn write_results(
             points: results
                 .iter()
                 .map(|r| crate::tools::metrics::ChartPoint {
-                    label: r.method.clone(),
+                    label: match &r.fit {
+                        Some(f) => format!("{} (H {:.2})", r.method, f.hurst),
+                        None => r.method.clone(),
+                    },
                     x: r.ms_per_tile,
                     y: value(r),
                     chosen: r.method == chosen,

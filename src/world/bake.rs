@@ -33,10 +33,11 @@ use super::dem::{Dem, DemFormat, DemOptions};
 use super::error::WorldError;
 use super::format::{TileData, write_atomic, write_tile};
 use super::manifest::{
-    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, GrassType, Manifest, Sky, WindDefaults, WindKey,
-    WindScene, WindSource, WorldSource,
+    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, DeriveCalibration, GrassType, Manifest, Sky,
+    WindDefaults, WindKey, WindScene, WindSource, WorldSource,
 };
 use super::tile::{Pyramid, TileId};
+use crate::stream::{DeriveParams, HeightField, calibrate};
 
 /// Shared samples beyond each tile edge in baked worlds.
 pub const BAKE_BORDER: u32 = 2;
@@ -200,6 +201,7 @@ pub fn bake(
             cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
             nodata_filled: dem.nodata_filled,
         }),
+        derive: None,
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;
@@ -207,6 +209,7 @@ pub fn bake(
     let grid = Grid::resample(&dem, &manifest.pyramid, &opts.dem, progress)?;
     let height_range = grid.height_range();
     manifest.height_range_m = height_range;
+    manifest.derive = Some(grid.calibrate(extent, manifest.pyramid.derived_levels));
 
     let painted = grid.paint(height_range, opts.seed, progress);
     progress(BakeStage::Paths, 0, 2);
@@ -413,6 +416,32 @@ impl Grid {
 
     fn at(&self, a: usize, b: usize) -> f32 {
         self.heights[b * self.width + a]
+    }
+
+    /// Fits the detail of the derived levels to the data area of the finest stored level (the
+    /// coarser stored levels are its subsamples): see [`calibrate`].
+    fn calibrate(&self, extent: [f64; 2], derived_levels: u8) -> DeriveCalibration {
+        let m = self.margin as usize;
+        let samples = |e: f64, n: usize| ((e / self.cell).floor() as usize + 1).min(n - m);
+        let (w, h) = (
+            samples(extent[0], self.width),
+            samples(extent[1], self.height),
+        );
+        let mut heights = Vec::with_capacity(w * h);
+        for b in m..m + h {
+            let row = b * self.width + m;
+            heights.extend_from_slice(&self.heights[row..row + w]);
+        }
+        calibrate(
+            &HeightField {
+                width: w,
+                height: h,
+                cell_m: (self.cell, self.cell),
+                heights: &heights,
+            },
+            derived_levels,
+            DeriveParams::default().seed,
+        )
     }
 
     /// Min and max of all samples; an empty range is widened to 1 m.

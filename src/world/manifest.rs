@@ -64,6 +64,11 @@ pub struct Manifest {
     /// before it was recorded, and in hand-made ones).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub source: Option<WorldSource>,
+    /// How derived levels (finer than the stored data) add detail, fitted by the baker to the
+    /// world's own stored pyramid. Absent in worlds baked before the fit: every derived level
+    /// then adds detail at [`LEGACY_DETAIL`], as those worlds always did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub derive: Option<DeriveCalibration>,
 }
 
 /// The `[source]` table: the DEM a world was baked from.
@@ -89,6 +94,51 @@ pub struct WorldSource {
     /// Nodata samples filled from the heights around them.
     #[serde(default)]
     pub nodata_filled: u64,
+}
+
+/// Detail amplitude of every derived level in a world whose manifest has no `[derive]` table
+/// (child cells per unit of slope): the one value used before worlds were calibrated.
+pub const LEGACY_DETAIL: f32 = 0.25;
+
+/// Largest detail amplitude a `[derive]` table may ask for (child cells per unit of slope).
+pub const MAX_DETAIL: f32 = 100.0;
+
+/// The `[derive]` table: the detail that each derived level adds to the Catmull-Rom
+/// upsampling of its parent, fitted to the world's stored pyramid (see
+/// `crate::stream::calibrate`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeriveCalibration {
+    /// `fractal`: derived levels add detail at `detail`; `bicubic`: the fit was poor (too few
+    /// levels, flat or irregular terrain) and derived levels are plain Catmull-Rom.
+    pub method: DeriveMode,
+    /// What the fit found, or why it fell back to plain bicubic.
+    pub note: String,
+    /// Octaves measured: stored levels, and subsamples of the coarsest one, each predicted
+    /// from the next coarser.
+    pub octaves: u32,
+    /// Fitted Hurst exponent: the RMS residual between a level and the Catmull-Rom prediction
+    /// from its parent grows by `2^hurst` per octave coarser.
+    pub hurst: f64,
+    /// RMS deviation of the measured log2 residuals from the fitted line (0 = a perfect
+    /// fractal).
+    pub fit_rms_log2: f64,
+    /// RMS residual at the finest stored level, metres.
+    pub residual_rms_m: f64,
+    /// Detail amplitude of each derived level, the first derived level first (child cells per
+    /// unit of slope; the roughness-matching amplitude measured per stored octave and
+    /// extrapolated). One per derived level; all zero for `bicubic`.
+    pub detail: Vec<f32>,
+}
+
+/// How derived levels are made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DeriveMode {
+    /// Catmull-Rom plus slope-scaled detail noise at the fitted amplitudes.
+    Fractal,
+    /// Catmull-Rom alone.
+    Bicubic,
 }
 
 /// The `[features]` table: each feature of the grass model on or off (all on by default). The
@@ -702,6 +752,34 @@ impl Manifest {
         self.validate_wind_scenes(&v)?;
         for (pi, cam) in self.paths.iter().enumerate() {
             self.validate_path_wind(&v, pi, cam)?;
+        }
+        if let Some(c) = &self.derive {
+            self.validate_derive(&v, c)?;
+        }
+        Ok(())
+    }
+
+    fn validate_derive(&self, v: &Validator, c: &DeriveCalibration) -> Result<(), WorldError> {
+        v.finite("derive.hurst", c.hurst)?;
+        v.non_negative("derive.fit_rms_log2", c.fit_rms_log2)?;
+        v.non_negative("derive.residual_rms_m", c.residual_rms_m)?;
+        let levels = usize::from(self.pyramid.derived_levels);
+        if c.detail.len() != levels {
+            return Err(v.out_of_range(
+                "derive.detail",
+                format!("{} values", c.detail.len()),
+                &format!("one value per derived level ({levels})"),
+            ));
+        }
+        for (i, &d) in c.detail.iter().enumerate() {
+            let field = format!("derive.detail[{i}]");
+            v.non_negative(&field, d)?;
+            if d > MAX_DETAIL {
+                return Err(v.out_of_range(&field, d, &format!("at most {MAX_DETAIL}")));
+            }
+            if c.method == DeriveMode::Bicubic && d != 0.0 {
+                return Err(v.out_of_range(&field, d, "0 when derive.method is \"bicubic\""));
+            }
         }
         Ok(())
     }

@@ -29,8 +29,9 @@ pub use format::{
     ReadOptions, TileData, TileFile, read_tile, read_tile_with, tile_path, write_tile,
 };
 pub use manifest::{
-    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, FeatureSwitches, GrassType, MAX_WIND_SOURCES,
-    Manifest, Sky, SourcePlacement, WindDefaults, WindKey, WindScene, WindSource, WorldSource,
+    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, DeriveCalibration, DeriveMode, FeatureSwitches,
+    GrassType, LEGACY_DETAIL, MAX_DETAIL, MAX_WIND_SOURCES, Manifest, Sky, SourcePlacement,
+    WindDefaults, WindKey, WindScene, WindSource, WorldSource,
 };
 pub use tile::{Bounds, Pyramid, TileId};
 
