@@ -514,7 +514,7 @@ fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<
 /// The floor: triangle strips of the grass draw's lengths and instance counts, drawn with a
 /// trivial shader (each strip a sub-pixel sliver at a hashed place, so that it costs vertex and
 /// primitive work but next to no fragments; one flat colour), timed with timestamps around the
-/// pass.
+/// pass. The pass loads its targets, as the grass draw does, so that no clear is timed.
 struct FloorPass {
     /// A pipeline per LOD, its strips as long as the grass's.
     pipelines: [wgpu::RenderPipeline; 2],
@@ -629,14 +629,14 @@ impl FloorPass {
                         depth_slice: None,
                         resolve_target: None,
                         ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                            load: wgpu::LoadOp::Load,
                             store: wgpu::StoreOp::Store,
                         },
                     })],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                         view: &self.depth,
                         depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(0.0),
+                            load: wgpu::LoadOp::Load,
                             store: wgpu::StoreOp::Store,
                         }),
                         stencil_ops: None,
