@@ -99,6 +99,41 @@ pub enum RendererError {
         /// The adapter's `max_texture_dimension_2d`.
         limit: u32,
     },
+    /// The target size needs a buffer larger than the adapter allows (the grass's Hi-Z pyramid
+    /// is one storage buffer bound whole, about 5.3 bytes a pixel).
+    #[error(
+        "image size {width}x{height} needs a {what} of {bytes} bytes, more than this adapter's \
+         {limit_name} of {limit} bytes: choose a smaller size (about {max_pixels} pixels at most)"
+    )]
+    SizeBeyondLimit {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+        /// The buffer, in words (e.g. `Hi-Z pyramid storage buffer`).
+        what: &'static str,
+        /// Its size at this target size.
+        bytes: u64,
+        /// The adapter limit it exceeds (e.g. `max_storage_buffer_binding_size`).
+        limit_name: &'static str,
+        /// That limit.
+        limit: u64,
+        /// Roughly the most pixels (width times height) that fit.
+        max_pixels: u64,
+    },
+    /// The CPU tile cache cannot hold a single tile, so no tile could ever be uploaded.
+    #[error(
+        "a CPU tile cache of {bytes} bytes cannot hold one tile of this world ({tile_bytes} \
+         bytes): give it at least {min_mib} MiB"
+    )]
+    CacheTooSmall {
+        /// The cache's ceiling asked for.
+        bytes: u64,
+        /// Bytes of one decoded tile.
+        tile_bytes: u64,
+        /// The smallest ceiling in MiB that holds one tile.
+        min_mib: u64,
+    },
     /// The colour format is not one the renderer draws into.
     #[error(
         "colour format {0:?} is not supported (use an 8-bit RGBA/BGRA format, sRGB or not, \
@@ -179,7 +214,7 @@ impl RendererConfig {
             view_distance_m: rings.low_radius_m as f32,
             far_fade_m: 0.2 * rings.low_radius_m as f32,
             clump_m: 1.6,
-            short_m: 0.3,
+            short_m: crate::world::grass_density::SHORT_GRASS_M,
             seed: 0x9a55,
             segments: self.grass_segments,
         })
@@ -264,6 +299,46 @@ pub struct FrameStats {
     pub grass: GrassStats,
 }
 
+/// How long a warm-up waits with nothing loading, uploaded or derived before it gives up.
+pub const WARM_UP_STALL: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// What a warm-up could not make resident.
+#[derive(Clone, Debug, Default)]
+pub struct WarmUp {
+    /// The wanted tiles that are not resident, each with the reason; empty when all are.
+    pub missing: Vec<MissingTile>,
+}
+
+/// A tile that a warm-up could not make resident.
+#[derive(Clone, Debug)]
+pub struct MissingTile {
+    /// The tile.
+    pub tile: TileId,
+    /// Why, in words (the failed load's error where there is one).
+    pub reason: String,
+}
+
+impl WarmUp {
+    /// One line per missing tile (at most `max`, then a count of the rest).
+    pub fn describe(&self, max: usize) -> Vec<String> {
+        let mut lines: Vec<String> = self
+            .missing
+            .iter()
+            .take(max)
+            .map(|m| {
+                format!(
+                    "tile L{} {}_{}: {}",
+                    m.tile.level, m.tile.x, m.tile.y, m.reason
+                )
+            })
+            .collect();
+        if self.missing.len() > max {
+            lines.push(format!("and {} more", self.missing.len() - max));
+        }
+        lines
+    }
+}
+
 /// The grass with the wind it bends in.
 struct GrassStage {
     renderer: GrassRenderer,
@@ -341,7 +416,8 @@ impl Renderer {
             height: options.height,
         };
         check_formats(&targets)?;
-        check_size(device, targets.width, targets.height)?;
+        let grass_on = config.grass.is_some();
+        check_size(device, targets.width, targets.height, grass_on)?;
         let limits = device.limits();
         let pyramid = world.manifest.pyramid.clone();
         let [nx, ny] = pyramid.tiles_at(0);
@@ -351,6 +427,14 @@ impl Renderer {
                 slots,
                 roots: nx * ny,
                 limit: limits.max_texture_array_layers,
+            });
+        }
+        let tile_bytes = crate::world::TileData::byte_size_for(pyramid.samples_per_side());
+        if config.service.cache_bytes < tile_bytes {
+            return Err(RendererError::CacheTooSmall {
+                bytes: config.service.cache_bytes,
+                tile_bytes,
+                min_mib: tile_bytes.div_ceil(1 << 20),
             });
         }
         let atlas = TileAtlas::new(device, pyramid.samples_per_side(), slots);
@@ -517,7 +601,7 @@ impl Renderer {
 
     /// Follows a resize of the targets (the next frame draws at the new size).
     pub fn resize(&mut self, width: u32, height: u32) -> Result<(), RendererError> {
-        check_size(&self.device, width, height)?;
+        check_size(&self.device, width, height, self.grass.is_some())?;
         if (width, height) == (self.targets.width, self.targets.height) {
             return Ok(());
         }
@@ -571,14 +655,29 @@ impl Renderer {
 
     /// Brings every tile `camera` wants into the atlas, waiting for loads and for the GPU: for
     /// the first frame of a run or a teleport, never inside a frame loop. Gives up after
-    /// `timeout`; returns whether everything became resident.
+    /// `timeout`; returns whether everything became resident. See [`Renderer::warm_up_report`]
+    /// for what is missing when not.
     pub fn warm_up(
         &mut self,
         camera: &Camera,
         timeout: std::time::Duration,
     ) -> Result<bool, RendererError> {
+        Ok(self.warm_up_report(camera, timeout)?.missing.is_empty())
+    }
+
+    /// Like [`Renderer::warm_up`], and says which tiles are missing and why. Stops early, without
+    /// waiting for `timeout`, once every missing tile is kept out by a failed load (its own or
+    /// that of the stored ancestor it is derived from), or when nothing has moved for
+    /// [`WARM_UP_STALL`].
+    pub fn warm_up_report(
+        &mut self,
+        camera: &Camera,
+        timeout: std::time::Duration,
+    ) -> Result<WarmUp, RendererError> {
         let start = Instant::now();
         self.flush_unrecorded();
+        let mut last_change = Instant::now();
+        let mut last_resident = u32::MAX;
         loop {
             let sel = self.select(camera);
             let plan = self.service.update(&sel.wants);
@@ -588,10 +687,44 @@ impl Renderer {
             let stats = self.service.stats();
             if stats.resident == stats.desired {
                 let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
-                return Ok(true);
+                return Ok(WarmUp::default());
             }
-            if start.elapsed() > timeout {
-                return Ok(false);
+            if busy || stats.resident != last_resident || stats.stream.in_flight > 0 {
+                last_change = Instant::now();
+                last_resident = stats.resident;
+            }
+            let missing: Vec<TileId> = sel
+                .wants
+                .iter()
+                .map(|w| w.id)
+                .filter(|&id| !self.service.is_resident(id))
+                .collect();
+            let all_failed = missing
+                .iter()
+                .all(|&id| self.service.blocked_by(id).is_some());
+            let stalled = last_change.elapsed() > WARM_UP_STALL;
+            if all_failed || stalled || start.elapsed() > timeout {
+                let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+                let why_else = if stalled {
+                    "nothing was loading".to_owned()
+                } else {
+                    format!("not resident after {:.0} s", timeout.as_secs_f64())
+                };
+                let missing = missing
+                    .into_iter()
+                    .map(|tile| {
+                        let reason = match self.service.blocked_by(tile) {
+                            Some((t, e)) if t == tile => format!("failed to load: {e}"),
+                            Some((t, e)) => format!(
+                                "derived from tile L{} {}_{}, which failed to load: {e}",
+                                t.level, t.x, t.y
+                            ),
+                            None => why_else.clone(),
+                        };
+                        MissingTile { tile, reason }
+                    })
+                    .collect();
+                return Ok(WarmUp { missing });
             }
             if !busy {
                 std::thread::sleep(std::time::Duration::from_millis(2));
@@ -936,8 +1069,17 @@ fn check_formats(targets: &Targets) -> Result<(), RendererError> {
     Ok(())
 }
 
-fn check_size(device: &wgpu::Device, width: u32, height: u32) -> Result<(), RendererError> {
-    let limit = device.limits().max_texture_dimension_2d;
+/// Refuses a target size that the adapter cannot serve: beyond its largest 2D texture, or (with
+/// grass) a Hi-Z pyramid larger than the largest storage buffer binding or buffer. Checked here,
+/// against this device's limits, so that no wgpu validation error can follow.
+fn check_size(
+    device: &wgpu::Device,
+    width: u32,
+    height: u32,
+    grass: bool,
+) -> Result<(), RendererError> {
+    let limits = device.limits();
+    let limit = limits.max_texture_dimension_2d;
     if width == 0 || height == 0 || width > limit || height > limit {
         return Err(RendererError::BadSize {
             width,
@@ -945,7 +1087,38 @@ fn check_size(device: &wgpu::Device, width: u32, height: u32) -> Result<(), Rend
             limit,
         });
     }
+    if grass {
+        let bytes = hiz_bytes(width, height);
+        let (limit_name, limit) =
+            if limits.max_storage_buffer_binding_size <= limits.max_buffer_size {
+                (
+                    "max_storage_buffer_binding_size",
+                    limits.max_storage_buffer_binding_size,
+                )
+            } else {
+                ("max_buffer_size", limits.max_buffer_size)
+            };
+        if bytes > limit {
+            let pixels = u64::from(width) * u64::from(height);
+            return Err(RendererError::SizeBeyondLimit {
+                width,
+                height,
+                what: "Hi-Z pyramid storage buffer",
+                bytes,
+                limit_name,
+                limit,
+                max_pixels: (pixels as f64 * limit as f64 / bytes as f64) as u64,
+            });
+        }
+    }
     Ok(())
+}
+
+/// Bytes of the Hi-Z pyramid of a `width` x `height` target (f32 levels down to 1x1).
+pub fn hiz_bytes(width: u32, height: u32) -> u64 {
+    (0..crate::grass::hiz::mip_count(width, height))
+        .map(|m| u64::from((width >> m).max(1)) * u64::from((height >> m).max(1)) * 4)
+        .sum()
 }
 
 const FREE: u8 = 0;

@@ -14,6 +14,7 @@ pub mod bake;
 pub mod dem;
 pub mod error;
 pub mod format;
+pub mod grass_density;
 pub mod manifest;
 pub mod tile;
 
@@ -25,11 +26,16 @@ pub use error::WorldError;
 pub use format::{
     ReadOptions, TileData, TileFile, read_tile, read_tile_with, tile_path, write_tile,
 };
+pub use grass_density::GrassPeak;
 pub use manifest::{
     CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, FeatureSwitches, GrassType, MAX_WIND_SOURCES,
     Manifest, Sky, SourcePlacement, WindDefaults, WindKey, WindScene, WindSource,
 };
 pub use tile::{Bounds, Pyramid, TileId};
+
+/// Heights a world may hold, metres: Earth's surface spans about -10,935 m (the Challenger
+/// Deep) to 8,849 m (Everest); a height beyond this range is a wrong offset or scale.
+pub const PLAUSIBLE_HEIGHTS_M: [f64; 2] = [-12_000.0, 10_000.0];
 
 /// An opened world: its directory and its validated manifest.
 #[derive(Clone, Debug, PartialEq)]
