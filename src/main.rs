@@ -552,7 +552,10 @@ fn fly(opts: FlyOptions) -> Result<()> {
             }
         }
         FlyProgress::Frame(done, total) => {
-            let pb = frames.get_or_insert_with(|| bar(total, "frames"));
+            let pb = frames.get_or_insert_with(|| {
+                eprintln!("rendering {total} frames");
+                bar(total, "frames")
+            });
             pb.set_position(done);
         }
     })?;
