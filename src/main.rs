@@ -137,6 +137,12 @@ enum Command {
         /// Fly without grass and its wind: the streaming system alone.
         #[arg(long)]
         no_grass: bool,
+        /// A teleport must reach full detail within this many frames.
+        #[arg(long, default_value_t = 50)]
+        max_recovery_frames: u32,
+        /// No frame may take longer than this, milliseconds (wall time).
+        #[arg(long, default_value_t = 5000.0)]
+        max_stall_ms: f64,
         #[command(flatten)]
         stream: StreamArgs,
     },
@@ -705,6 +711,8 @@ fn run(cli: Cli) -> Result<()> {
             size,
             out,
             no_grass,
+            max_recovery_frames,
+            max_stall_ms,
             stream,
         } => soak(SoakOptions {
             world: resolve_world(&world)?,
@@ -715,6 +723,8 @@ fn run(cli: Cli) -> Result<()> {
             out,
             service: stream.service(),
             no_grass,
+            max_recovery_frames,
+            max_stall_ms,
             ..SoakOptions::default()
         }),
         Command::Bench {

@@ -45,6 +45,11 @@ pub struct SoakOptions {
     /// Resident memory may grow this much after the warm-up, bytes (allocator noise); see
     /// [`SoakReport::rss_growth_bytes`].
     pub rss_tolerance_bytes: u64,
+    /// A teleport must reach full detail (every desired tile resident at its own level) within
+    /// this many frames, where the run flies that long after it.
+    pub max_recovery_frames: u32,
+    /// No frame may take longer than this wall time, milliseconds (a stall).
+    pub max_stall_ms: f64,
 }
 
 impl Default for SoakOptions {
@@ -61,6 +66,8 @@ impl Default for SoakOptions {
             settle_frames: 10,
             warmup_fraction: 0.25,
             rss_tolerance_bytes: 12 << 20,
+            max_recovery_frames: 50,
+            max_stall_ms: 5000.0,
             service: crate::stream::ServiceConfig::default(),
             no_grass: false,
         }
@@ -115,6 +122,18 @@ pub struct SoakReport {
     pub atlas_peak_slots: u32,
     /// Frames after a teleport's settle time with a hole.
     pub holes_after_settle: u32,
+    /// Most grass blades drawn in a frame (0 without grass).
+    #[serde(default)]
+    pub grass_blades_drawn_peak: u64,
+    /// Longest frame, wall time, milliseconds.
+    #[serde(default)]
+    pub longest_frame_ms: f64,
+    /// The bound on frames to full detail after a teleport.
+    #[serde(default)]
+    pub max_recovery_frames: u32,
+    /// The bound on a frame's wall time, milliseconds.
+    #[serde(default)]
+    pub max_stall_ms: f64,
     /// Loads completed, cancelled and failed.
     pub loads_completed: u64,
     /// Loads dropped because their tiles left the desired set.
@@ -191,6 +210,23 @@ impl Violations {
         if self.listed.len() < MAX_SOAK_VIOLATIONS {
             self.listed.push(v);
         }
+    }
+}
+
+/// A teleport must reach full detail within `bound` frames, where the run flew that long after
+/// it (up to `end`, the next teleport or the end of the run).
+fn check_recovery(t: &TeleportRecord, end: u32, bound: u32, violations: &mut Violations) {
+    match t.frames_to_full_detail {
+        Some(f) if f > bound => violations.push(format!(
+            "teleport at frame {}: full detail after {f} frames, more than {bound}",
+            t.frame
+        )),
+        None if end - t.frame > bound => violations.push(format!(
+            "teleport at frame {}: not at full detail {} frames later (bound {bound})",
+            t.frame,
+            end - t.frame
+        )),
+        _ => {}
     }
 }
 
@@ -321,6 +357,8 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let mut current_teleport: Option<TeleportRecord> = None;
     let mut teleport_start = (0u32, Instant::now());
     let mut rss_peak = 0u64;
+    let mut longest_frame_ms = 0.0f64;
+    let mut blades_peak = 0u64;
     let (mut cache_peak, mut atlas_peak, mut holes_after_settle) = (0u64, 0u32, 0u32);
     let mut violations = Violations::default();
     let mut rss_timeline: Thinned<(u32, u64, u64)> = Thinned::new(MAX_SOAK_RECORDS);
@@ -335,6 +373,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             yaw = rng.next() * 360.0;
             teleport_start = (frame, Instant::now());
             if let Some(done) = current_teleport.take() {
+                check_recovery(&done, frame, opts.max_recovery_frames, &mut violations);
                 teleports.push(done);
             }
             current_teleport = Some(TeleportRecord {
@@ -370,6 +409,15 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         let stats = scene.render_at(&ctx, &camera, t)?;
         ctx.wait_idle();
         let ms = start.elapsed().as_secs_f64() * 1e3;
+        longest_frame_ms = longest_frame_ms.max(ms);
+        let drawn = u64::from(stats.grass.drawn[0]) + u64::from(stats.grass.drawn[1]);
+        blades_peak = blades_peak.max(drawn);
+        if ms > opts.max_stall_ms {
+            violations.push(format!(
+                "frame {frame}: took {ms:.0} ms, longer than the {:.0} ms a frame may stall",
+                opts.max_stall_ms
+            ));
+        }
         let r = &stats.residency;
         cache_peak = cache_peak.max(r.cache.bytes);
         atlas_peak = atlas_peak.max(r.atlas_used);
@@ -414,6 +462,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         progress(u64::from(frame) + 1, u64::from(frames));
     }
     if let Some(done) = current_teleport.take() {
+        check_recovery(&done, frames, opts.max_recovery_frames, &mut violations);
         teleports.push(done);
     }
     // Memory growth: the typical resident size over the last quarter of the run against the
@@ -475,6 +524,10 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         atlas_slots: slots,
         atlas_peak_slots: atlas_peak,
         holes_after_settle,
+        grass_blades_drawn_peak: blades_peak,
+        longest_frame_ms,
+        max_recovery_frames: opts.max_recovery_frames,
+        max_stall_ms: opts.max_stall_ms,
         loads_completed: last.stream.completed,
         loads_cancelled: last.stream.cancelled,
         loads_failed: last.stream.failed,

@@ -190,7 +190,33 @@ pub fn read_tile_with(
 
     let path = tile_path(world_dir, id, TileFile::Height);
     let bytes = read_regular(&path, max_file_bytes(TileFile::Height, size))?;
-    let heights = south_first(&decode_exr(&bytes, size, &path)?, size);
+    let heights = decode_heights(&bytes, size, options, &path)?;
+    let path = tile_path(world_dir, id, TileFile::Type);
+    let bytes = read_regular(&path, max_file_bytes(TileFile::Type, size))?;
+    let grass_type = decode_grass_types(&bytes, size, options, &path)?;
+    let path = tile_path(world_dir, id, TileFile::Density);
+    let bytes = read_regular(&path, max_file_bytes(TileFile::Density, size))?;
+    let density = decode_density(&bytes, size, &path)?;
+    Ok(TileData {
+        id,
+        size,
+        heights,
+        grass_type,
+        density,
+    })
+}
+
+/// Decodes a tile's height file (`size` samples a side) into south-first heights, each finite
+/// and within the height range of `options` (with its tolerance). `path` names the file in
+/// errors.
+pub fn decode_heights(
+    bytes: &[u8],
+    size: u32,
+    options: &ReadOptions,
+    path: &Path,
+) -> Result<Vec<f32>, WorldError> {
+    let path = path.to_path_buf();
+    let heights = south_first(&decode_exr(bytes, size, &path)?, size);
     let [lo, hi] = options.height_range_m;
     let tolerance = 1.0 + 0.01 * (hi - lo).abs();
     for (k, &h) in heights.iter().enumerate() {
@@ -213,34 +239,36 @@ pub fn read_tile_with(
             });
         }
     }
+    Ok(heights)
+}
 
-    let path = tile_path(world_dir, id, TileFile::Type);
-    let bytes = read_regular(&path, max_file_bytes(TileFile::Type, size))?;
-    let grass_type = south_first(&decode_png_l8(&bytes, size, &path)?, size);
+/// Decodes a tile's grass type map into south-first indices, each below the grass type count
+/// of `options`.
+pub fn decode_grass_types(
+    bytes: &[u8],
+    size: u32,
+    options: &ReadOptions,
+    path: &Path,
+) -> Result<Vec<u8>, WorldError> {
+    let grass_type = south_first(&decode_png_l8(bytes, size, path)?, size);
     if let Some(k) = grass_type
         .iter()
         .position(|&t| usize::from(t) >= options.grass_type_count)
     {
         return Err(WorldError::GrassTypeOutOfRange {
-            path,
+            path: path.to_path_buf(),
             i: k as u32 % size,
             j: k as u32 / size,
             index: grass_type[k],
             count: options.grass_type_count,
         });
     }
+    Ok(grass_type)
+}
 
-    let path = tile_path(world_dir, id, TileFile::Density);
-    let bytes = read_regular(&path, max_file_bytes(TileFile::Density, size))?;
-    let density = south_first(&decode_png_l8(&bytes, size, &path)?, size);
-
-    Ok(TileData {
-        id,
-        size,
-        heights,
-        grass_type,
-        density,
-    })
+/// Decodes a tile's density map into south-first densities.
+pub fn decode_density(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<u8>, WorldError> {
+    Ok(south_first(&decode_png_l8(bytes, size, path)?, size))
 }
 
 /// The most bytes a tile file of `size` samples a side may hold: twice its raw samples (a

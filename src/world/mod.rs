@@ -14,6 +14,7 @@ pub mod bake;
 pub mod dem;
 pub mod error;
 pub mod format;
+pub mod fuzz;
 pub mod grass_density;
 pub mod manifest;
 pub mod tile;
