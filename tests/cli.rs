@@ -835,3 +835,32 @@ fn a_fly_of_u32_max_frames_runs_in_bounded_memory() {
         text.lock().unwrap()
     );
 }
+
+#[test]
+fn fly_at_a_size_beyond_the_adapters_buffers_names_the_limit() {
+    let tmp = tempfile::tempdir().unwrap();
+    let ctx = common::gpu();
+    let limit = ctx.device.limits().max_storage_buffer_binding_size;
+    let bytes = verdant::renderer::hiz_bytes(7680, 4320);
+    let out = verdant(
+        &[
+            "fly",
+            "--frames",
+            "1",
+            "--size",
+            "7680x4320",
+            "--no-images",
+            "--out",
+            "o",
+        ],
+        tmp.path(),
+    );
+    if bytes > limit {
+        // lavapipe binds at most 128 MiB: refused up front, the limit named.
+        assert_fails_naming(&out, &["7680x4320", "max_storage_buffer_binding_size"]);
+        assert!(!tmp.path().join("o").exists());
+    } else {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{stderr}");
+    }
+}
