@@ -353,6 +353,9 @@ struct Prepared {
     derives: Vec<DeriveJob>,
     terrain_tiles: u32,
     grass_jobs: Vec<TileJob>,
+    /// The atlas slots the frame reads and the tiles it expects there (terrain draws and
+    /// grass jobs), checked against the atlas on the GPU.
+    reads: Vec<(u32, TileId)>,
     stats: FrameStats,
     cpu_s: f64,
 }
@@ -381,6 +384,8 @@ pub struct Renderer {
     features: Features,
     timer: GpuTimer,
     readback: StatsRing,
+    holes: HoleCheck,
+    skip_uploads: u32,
     time_s: Option<f64>,
     frame: u64,
     prepared: Option<Prepared>,
@@ -504,6 +509,7 @@ impl Renderer {
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let timer = GpuTimer::new(device, queue, timestamps, 64);
         let readback = StatsRing::new(device, timer.capacity_bytes());
+        let holes = HoleCheck::new(device, &atlas);
         Ok(Self {
             device: device.clone(),
             queue: queue.clone(),
@@ -523,6 +529,8 @@ impl Renderer {
             features: config.features,
             timer,
             readback,
+            holes,
+            skip_uploads: 0,
             time_s: None,
             frame: 0,
             prepared: None,
@@ -756,9 +764,23 @@ impl Renderer {
     /// Uploads the plan's decoded tiles to the atlas; returns the derivations to record.
     fn upload(&mut self, plan: ResidencyPlan) -> Result<Vec<DeriveJob>, RendererError> {
         for (slot, tile) in &plan.uploads {
+            if self.skip_uploads > 0 {
+                // A fault injected by a test: the slot is given to the tile, its data never
+                // reaches the GPU.
+                self.skip_uploads -= 1;
+                self.atlas.claim(*slot, tile.id);
+                continue;
+            }
             self.atlas.upload(&self.queue, *slot, tile)?;
         }
         Ok(plan.derives)
+    }
+
+    /// For tests of the hole count: the next `n` uploads are planned (their slots given to
+    /// their tiles) but never written to the GPU, as a lost upload would be.
+    #[doc(hidden)]
+    pub fn skip_next_uploads(&mut self, n: u32) {
+        self.skip_uploads = n;
     }
 
     /// Gets the frame of `input` ready: collects figures of earlier frames that have come back,
@@ -804,6 +826,17 @@ impl Renderer {
         let aspect = self.aspect();
         let terrain_tiles = self.terrain.prepare(queue, &camera, aspect, &draws);
         let grass_jobs = self.grass_jobs(&camera, &sel.grass);
+        let grass_level = self.rings.as_ref().map_or(0, |r| r.settings.level);
+        let reads: Vec<(u32, TileId)> = sel
+            .terrain
+            .iter()
+            .filter_map(|&id| self.service.draw_source(id).map(|(src, slot)| (slot, src)))
+            .chain(
+                grass_jobs
+                    .iter()
+                    .map(|j| (j.layer, TileId::new(grass_level, j.tile_x, j.tile_y))),
+            )
+            .collect();
         let view_proj = camera.view_proj_relative(aspect);
         if let Some(g) = &mut self.grass {
             let ambient_speed = g.wind.config().ambient_at(input.time_s).speed_mps as f32;
@@ -819,6 +852,7 @@ impl Renderer {
             derives,
             terrain_tiles,
             grass_jobs,
+            reads,
             stats: FrameStats {
                 frame: self.frame,
                 tiles_drawn: terrain_tiles,
@@ -867,6 +901,10 @@ impl Renderer {
                 &mut self.timer,
             );
         }
+        // Every atlas read of the frame against what its slot holds on the GPU.
+        let cpu_holes = self
+            .holes
+            .record(&self.queue, encoder, &self.atlas, &frame.reads);
         // 2. Wind and sway.
         if let Some(g) = &mut self.grass {
             let camera = &frame.input.camera;
@@ -923,6 +961,7 @@ impl Renderer {
         }
         // 6. Grass.
         let mut stats = frame.stats;
+        stats.residency.holes += cpu_holes;
         if let Some(g) = &self.grass {
             stats.grass.tiles = g.renderer.record(
                 &self.queue,
@@ -937,7 +976,8 @@ impl Renderer {
         self.timer.resolve(encoder);
         stats.cpu_ms = (frame.cpu_s + start.elapsed().as_secs_f64()) * 1e3;
         let counters = self.grass.as_ref().map(|g| g.renderer.stats_buffer());
-        self.readback.record(encoder, &self.timer, counters, stats);
+        self.readback
+            .record(encoder, &self.timer, counters, &self.holes.counter, stats);
         Ok(())
     }
 
@@ -1136,6 +1176,108 @@ struct ReadbackSlot {
 /// A small ring of readback buffers: each frame copies its timestamps and grass counters into
 /// a free slot, mapped when the encoder is submitted; figures are read once mapped, a frame or
 /// two later, and never waited for.
+/// Most atlas reads a frame checks (terrain draws and grass jobs).
+const MAX_HOLE_CHECKS: usize = 8192;
+
+/// The hole count, observed on the GPU: each frame's atlas reads (slot and expected identity)
+/// are compared by a compute pass (`shaders/hole_check.wgsl`) with the identity that the
+/// uploads and derivations left in each slot ([`TileAtlas::identity`]).
+struct HoleCheck {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    checks: wgpu::Buffer,
+    /// The frame's count of mismatches (u32, then padding), copied to the figures.
+    counter: wgpu::Buffer,
+}
+
+impl HoleCheck {
+    fn new(device: &wgpu::Device, atlas: &TileAtlas) -> Self {
+        let module = crate::shaders::module(device, "hole_check.wgsl");
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("hole_check"),
+            layout: None,
+            module: &module,
+            entry_point: Some("hole_check"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let checks = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hole checks"),
+            size: 16 + MAX_HOLE_CHECKS as u64 * 32,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let counter = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("holes"),
+            size: 16,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("hole check"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: checks.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: atlas.identity.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: counter.as_entire_binding(),
+                },
+            ],
+        });
+        Self {
+            pipeline,
+            bind_group,
+            checks,
+            counter,
+        }
+    }
+
+    /// Records the check of `reads` (after the frame's derivations, which claim their slots);
+    /// returns the reads that fail already on the CPU (a slot given to another tile).
+    fn record(
+        &self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        atlas: &TileAtlas,
+        reads: &[(u32, TileId)],
+    ) -> u32 {
+        let mut cpu_holes = 0;
+        let mut words: Vec<u32> = vec![0; 4];
+        for &(slot, tile) in reads.iter().take(MAX_HOLE_CHECKS) {
+            let claimed = atlas.claimed(slot);
+            if claimed[..3] != [u32::from(tile.level), tile.x, tile.y] || claimed[3] == 0 {
+                cpu_holes += 1;
+                continue;
+            }
+            words.extend_from_slice(&claimed);
+            words.extend_from_slice(&[slot, 0, 0, 0]);
+        }
+        let n = (words.len() - 4) / 8;
+        words[0] = n as u32;
+        queue.write_buffer(&self.checks, 0, bytemuck::cast_slice(&words));
+        encoder.clear_buffer(&self.counter, 0, None);
+        if n > 0 {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("hole check"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups((n as u32).div_ceil(64), 1, 1);
+        }
+        cpu_holes
+    }
+}
+
 struct StatsRing {
     slots: Vec<ReadbackSlot>,
     timestamp_bytes: u64,
@@ -1149,7 +1291,7 @@ impl StatsRing {
             .map(|_| ReadbackSlot {
                 buffer: device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("frame figures readback"),
-                    size: timestamp_bytes + 64,
+                    size: timestamp_bytes + 64 + 16,
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
@@ -1170,6 +1312,7 @@ impl StatsRing {
         encoder: &mut wgpu::CommandEncoder,
         timer: &GpuTimer,
         counters: Option<&wgpu::Buffer>,
+        holes: &wgpu::Buffer,
         stats: FrameStats,
     ) {
         let Some(slot) = self
@@ -1189,6 +1332,7 @@ impl StatsRing {
         if let Some(c) = counters {
             encoder.copy_buffer_to_buffer(c, 0, &slot.buffer, self.timestamp_bytes, 64);
         }
+        encoder.copy_buffer_to_buffer(holes, 0, &slot.buffer, self.timestamp_bytes + 64, 16);
         slot.state.store(PENDING, Ordering::Release);
         let state = slot.state.clone();
         encoder.map_buffer_on_submit(&slot.buffer, wgpu::MapMode::Read, .., move |r| {
@@ -1211,6 +1355,8 @@ impl StatsRing {
                             bytemuck::cast_slice(&view[self.timestamp_bytes as usize..]);
                         let c: [u32; 16] = counters[..16].try_into().unwrap_or([0; 16]);
                         stats.grass = GrassStats::from_counts(stats.grass.tiles, &c);
+                        // Atlas reads that found another tile than expected (HoleCheck).
+                        stats.residency.holes += counters.get(16).copied().unwrap_or(0);
                     }
                     slot.buffer.unmap();
                     slot.state.store(FREE, Ordering::Release);

@@ -432,3 +432,54 @@ fn a_warm_up_says_which_tiles_failed_and_does_not_wait_for_them() {
     assert!(lines.contains("failed to load"), "{lines}");
     assert!(lines.contains("tile L"), "{lines}");
 }
+
+/// Renders `frames` frames along the tour's start, prepared, recorded and submitted one after
+/// another, and returns the holes each frame's figures report.
+fn holes_along_the_tour(skip_uploads: u32, frames: u32) -> Vec<u32> {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let path = world.manifest.paths[0].clone();
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let mut options = RendererOptions::new(&world, c, d, 64, 36);
+    options.config.grass = None;
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    renderer.skip_next_uploads(skip_uploads);
+    let t = targets(&ctx.device, c, d, (64, 36));
+    let mut holes = Vec::new();
+    for f in 0..frames {
+        let t_s = path.keys[0].t_s + f64::from(f) * 0.5;
+        renderer.prepare(&ctx.queue, &FrameInput::new(sample_path(&path, t_s), t_s));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        renderer
+            .record(&mut encoder, &t.color_view, &t.depth_view)
+            .unwrap();
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait_idle();
+        // Let loads finish between frames, as frames of an application would.
+        std::thread::sleep(Duration::from_millis(50));
+        holes.extend(renderer.take_stats().iter().map(|s| s.residency.holes));
+    }
+    holes
+}
+
+#[test]
+fn holes_are_counted_on_the_gpu_when_an_upload_is_lost() {
+    // Every frame's atlas reads are checked against what the GPU's uploads and derivations
+    // left in each slot. Streaming as it should: no holes.
+    let clean = holes_along_the_tour(0, 12);
+    assert_eq!(clean.len(), 12, "every frame's figures came back");
+    assert!(
+        clean.iter().all(|&h| h == 0),
+        "holes without a fault: {clean:?}"
+    );
+    // The first uploads after start-up planned but never written: the tiles read from those
+    // slots (and children derived from them) are holes.
+    let lost = holes_along_the_tour(4, 12);
+    assert!(
+        lost.iter().any(|&h| h > 0),
+        "lost uploads went unseen: {lost:?}"
+    );
+}
