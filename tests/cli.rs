@@ -298,7 +298,7 @@ fn a_soak_with_an_atlas_too_small_for_the_world_is_refused() {
             "soak",
             common::default_world().to_str().unwrap(),
             "--seconds",
-            "1",
+            "5",
             "--atlas-slots",
             "4",
             "--out",

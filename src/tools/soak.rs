@@ -107,10 +107,10 @@ pub struct SoakReport {
     pub frame_ms: Summary,
     /// Peak resident memory of the process, bytes.
     pub rss_peak_bytes: u64,
-    /// Median resident memory just after the warm-up, bytes.
+    /// Resident memory just after the warm-up (the window's 10th percentile), bytes.
     pub rss_after_warmup_bytes: u64,
-    /// Growth of the median resident memory from just after the warm-up to the last quarter of
-    /// the run, less the CPU cache's own growth (which its ceiling bounds), bytes.
+    /// Growth of the resident memory's floor (10th percentile) from just after the warm-up to the
+    /// last quarter of the run, less the CPU cache's own growth (which its ceiling bounds), bytes.
     pub rss_growth_bytes: u64,
     /// Ceiling of the CPU tile cache, bytes.
     pub cache_ceiling_bytes: u64,
@@ -168,6 +168,9 @@ pub const MAX_SOAK_RECORDS: usize = 65_536;
 
 /// Most violations listed in `soak.json` (all are counted).
 pub const MAX_SOAK_VIOLATIONS: usize = 1000;
+
+/// The percentile of a memory window taken as its floor.
+const FLOOR_PERCENTILE: f64 = 0.1;
 
 /// One frame's figures that the soak keeps for its summary.
 #[derive(Clone, Copy, Debug)]
@@ -465,9 +468,11 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         check_recovery(&done, frames, opts.max_recovery_frames, &mut violations);
         teleports.push(done);
     }
-    // Memory growth: the typical resident size over the last quarter of the run against the
-    // typical size just after the warm-up. Medians, because drivers allocate and free scratch
-    // memory in bursts; the CPU cache's own growth is taken out, since it has its ceiling.
+    // Memory growth: the resident size's floor over the last quarter of the run against its
+    // floor just after the warm-up. The floor (the 10th percentile of each window), because
+    // drivers allocate and free scratch memory in bursts: on lavapipe the resident size swings
+    // by 40 MiB between frames, enough to move a window's median by as much under load, while
+    // a leak lifts the floor. The CPU cache's own growth is taken out, since it has its ceiling.
     let (early, late) = memory_windows(frames, warmup_frames).expect("checked before the run");
     let window = |range: &std::ops::Range<u32>| {
         let part: Vec<&FrameSample> = samples
@@ -477,7 +482,9 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             .collect();
         let rss: Vec<f64> = part.iter().map(|p| p.rss as f64).collect();
         let cache: Vec<f64> = part.iter().map(|p| p.cache_bytes as f64).collect();
-        (Summary::of(&rss).median, Summary::of(&cache).median)
+        let floor =
+            |v: &[f64]| crate::tools::metrics::percentile(v, FLOOR_PERCENTILE).unwrap_or(0.0);
+        (floor(&rss), floor(&cache))
     };
     let (rss_early, cache_early) = window(&early);
     let (rss_late, cache_late) = window(&late);
