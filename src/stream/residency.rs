@@ -179,11 +179,11 @@ impl TileService {
                     self.cache.insert(tile);
                 }
                 Loaded::Failed { id, error } => {
-                    if !self.failed.contains_key(&id) {
+                    if let std::collections::hash_map::Entry::Vacant(e) = self.failed.entry(id) {
                         log::warn!(
                             "tile {id:?} failed to load, drawing its ancestor instead: {error}"
                         );
-                        self.failed.insert(id, error);
+                        e.insert(error);
                     }
                 }
             }
