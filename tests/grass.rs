@@ -789,3 +789,36 @@ fn an_overflow_leaves_the_neighbouring_slots_blades_intact() {
     assert_eq!(args, [7, cpu.blades.len() as u32, 0, 0]);
     assert_blades_match(&gpu, &cpu.blades, "the overflowing tile's neighbour");
 }
+
+#[test]
+fn more_jobs_than_the_job_buffer_holds_are_cut_at_its_size() {
+    let mut rig = Rig::new(None);
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let flat = synthetic_tile(&rig.manifest, TileId::new(level, 0, 0), "flat");
+    rig.atlas.upload(&rig.ctx.queue, 0, &flat).unwrap();
+    let max = verdant::grass::renderer::MAX_JOBS as usize;
+    // Low-LOD tiles far behind the camera: every point is considered, none is drawn.
+    let far = |k: usize| TileJob {
+        origin: [
+            -40.0 + 20.0 * (k % 4) as f32,
+            -5000.0 - 8.0 * (k / 4) as f32,
+        ],
+        ..job(k, 0, 1, cell)
+    };
+    let jobs: Vec<TileJob> = (0..max + 6).map(far).collect();
+    let (stats, hiz) = rig.run(&camera(), &jobs);
+    assert_eq!(
+        stats.tiles,
+        [0, max as u32],
+        "tiles beyond the job buffer were generated"
+    );
+    let one = generate_tile(rig.grass.params(), &jobs[0], &flat, &hiz);
+    assert!(one.stats.counts[1][0] > 0);
+    assert_eq!(
+        stats.considered[1],
+        max as u32 * one.stats.counts[1][0],
+        "every job in the buffer considered its points once"
+    );
+    assert_eq!(stats.drawn, [0, 0]);
+}
