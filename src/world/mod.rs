@@ -1,6 +1,8 @@
 //! The world, GPU-free: tile addressing ([`TileId`], [`Pyramid`]), the manifest
 //! ([`Manifest`], `world.toml`), the stored tile files ([`TileData`]), DEM loading and the
 //! [`bake`]r that turns a DEM into a world.
+//! [`grass_density`] works out the densest grass that sizes the grass pool (the manifest's
+//! `grass_peak`), and [`fuzz`] holds the checks that the decoders are fuzzed against.
 //!
 //! A world is a directory:
 //! ```text
