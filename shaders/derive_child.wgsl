@@ -24,6 +24,13 @@ struct Job {
     // variant per distinct uniform value that steers it.
     detail_child: f32,
     detail_parent: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+    // The child's identity in the atlas: [level, x, y, generation].
+    identity: vec4<u32>,
+    // What the parent's slot must hold; a parent slot holding anything else poisons the child.
+    parent_identity: vec4<u32>,
 }
 
 struct Params {
@@ -39,6 +46,9 @@ struct Params {
 @group(0) @binding(3) var parent_grass: texture_2d_array<u32>;
 @group(0) @binding(4) var out_heights: texture_storage_2d_array<r32float, write>;
 @group(0) @binding(5) var out_grass: texture_storage_2d_array<rgba8uint, write>;
+// What each atlas slot holds (read: the parent's), and the identities of this batch's children.
+@group(0) @binding(6) var<storage, read> atlas_identity: array<vec4<u32>>;
+@group(0) @binding(7) var<storage, read_write> out_identity: array<vec4<u32>>;
 
 fn hash4(a: u32, b: u32, c: u32, d: u32) -> u32 {
     return hash_u32(a ^ hash_u32(b ^ hash_u32(c ^ hash_u32(d))));
@@ -107,6 +117,14 @@ fn derive_child(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgrou
         return;
     }
     let job = jobs[wid.z];
+    if i == 0 && j == 0 {
+        // A child derived from a slot that does not hold its parent is not the child.
+        var identity = job.identity;
+        if any(atlas_identity[job.parent_layer] != job.parent_identity) {
+            identity.w = 0u;
+        }
+        out_identity[job.out_layer] = identity;
+    }
     let n = i32(params.grid.x);
     let b = i32(params.grid.y);
     let qx = i32(job.child_x & 1u);

@@ -44,6 +44,7 @@ pub mod world;
 
 pub use camera::Camera;
 pub use renderer::{
-    FrameInput, FrameStats, Renderer, RendererConfig, RendererError, RendererOptions,
+    FrameInput, FrameStats, MissingTile, Renderer, RendererConfig, RendererError, RendererOptions,
+    WarmUp,
 };
 pub use world::World;

@@ -14,8 +14,8 @@ use verdant::world::{BakeOptions, bake};
 /// Limits of the tile service, shared by the commands that stream.
 #[derive(clap::Args, Clone, Copy)]
 struct StreamArgs {
-    /// Ceiling of the CPU cache of decoded tiles, MiB.
-    #[arg(long, default_value_t = 64)]
+    /// Ceiling of the CPU cache of decoded tiles, MiB (it must hold at least one tile).
+    #[arg(long, default_value = "64", value_parser = parse_mib)]
     cache_mib: u64,
     /// Slots of the GPU tile atlas (each holds one tile).
     #[arg(long, default_value_t = 256)]
@@ -28,6 +28,7 @@ struct StreamArgs {
 impl StreamArgs {
     fn service(self) -> ServiceConfig {
         let mut c = ServiceConfig::default();
+        // parse_mib has checked that the bytes fit a u64.
         c.cache_bytes = self.cache_mib << 20;
         c.atlas_slots = self.atlas_slots;
         c.stream.max_in_flight = self.max_loads.max(1);
@@ -136,6 +137,12 @@ enum Command {
         /// Fly without grass and its wind: the streaming system alone.
         #[arg(long)]
         no_grass: bool,
+        /// A teleport must reach full detail within this many frames.
+        #[arg(long, default_value_t = 50)]
+        max_recovery_frames: u32,
+        /// No frame may take longer than this, milliseconds (wall time).
+        #[arg(long, default_value_t = 5000.0)]
+        max_stall_ms: f64,
         #[command(flatten)]
         stream: StreamArgs,
     },
@@ -177,6 +184,9 @@ enum Command {
         /// Seed of the grass-painting noise.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Replace --out if it exists and is not empty (otherwise it is refused).
+        #[arg(long)]
+        replace: bool,
     },
 }
 
@@ -441,7 +451,26 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
         bail!("--factor must be a power of two from 2 to 64, got {factor}");
     }
     let dem = verdant::world::Dem::load(dem_path)?;
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let side = dem.width.min(dem.height) as usize;
+    let needed = eval_derive_min_side(factor);
+    if side < needed {
+        let fits = (1..=6)
+            .map(|k| 1usize << k)
+            .filter(|&f| eval_derive_min_side(f) <= side)
+            .max();
+        bail!(
+            "{}: {}x{} samples is too small for --factor {factor}: the comparison leaves out \
+             {} samples at each edge and needs at least {needed} samples a side ({})",
+            dem_path.display(),
+            dem.width,
+            dem.height,
+            2 * factor,
+            match fits {
+                Some(f) => format!("use --factor {f} or less"),
+                None => "no factor fits this DEM".to_owned(),
+            }
+        );
+    }
     let truth = eval::dem_grid(&dem);
     let methods = eval::methods();
     let pb = bar(methods.len() as u64 + 1, "methods");
@@ -455,6 +484,18 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
     results.push(eval::evaluate_calibrated(&truth, factor, 5));
     pb.inc(1);
     pb.finish();
+    if let Some(r) = results.iter().find(|r| {
+        ![r.rmse_m, r.max_m, r.slope_rmse_deg, r.slope_bias_deg]
+            .iter()
+            .all(|v| v.is_finite())
+    }) {
+        bail!(
+            "{}: method {} gave no finite error at --factor {factor}; nothing written",
+            dem_path.display(),
+            r.method
+        );
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let name = dem_path
         .file_stem()
         .map_or("DEM".into(), |s| s.to_string_lossy().into_owned());
@@ -496,6 +537,12 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+/// Samples a side a DEM needs for `eval derive --factor factor`: the comparison leaves out
+/// `2 * factor` samples at each edge and keeps at least 8 a side between them.
+fn eval_derive_min_side(factor: usize) -> usize {
+    4 * factor + 8
 }
 
 fn eval_sway(out: &Path) -> Result<()> {
@@ -559,6 +606,21 @@ fn eval_sway(out: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Parses a size in MiB whose byte count fits a u64 (so that it never wraps).
+fn parse_mib(s: &str) -> Result<u64, String> {
+    let mib: u64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a whole number of MiB"))?;
+    if mib.checked_mul(1 << 20).is_none() {
+        return Err(format!(
+            "{mib} MiB is more bytes than a 64-bit count holds (at most {} MiB)",
+            u64::MAX >> 20
+        ));
+    }
+    Ok(mib)
+}
+
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
@@ -597,26 +659,36 @@ fn resolve_world(arg: &str) -> Result<PathBuf> {
     if direct.join("world.toml").is_file() {
         return Ok(direct.to_path_buf());
     }
-    let candidates = [
-        Path::new("worlds").join(arg),
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("worlds")
-            .join(arg),
-    ];
-    for c in &candidates {
-        if c.join("world.toml").is_file() {
-            return Ok(c.clone());
+    // A bare name is also looked for under the worlds folders; a path only where it points.
+    let bare = direct.components().count() == 1 && !direct.is_absolute();
+    let mut candidates: Vec<PathBuf> = Vec::new();
+    if bare {
+        for c in [
+            Path::new("worlds").join(arg),
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("worlds")
+                .join(arg),
+        ] {
+            if c.join("world.toml").is_file() {
+                return Ok(c);
+            }
+            if !candidates.contains(&c) {
+                candidates.push(c);
+            }
         }
     }
     if direct.is_dir() {
         // Let the world loader say what is missing.
         return Ok(direct.to_path_buf());
     }
-    bail!(
-        "no world {arg:?}: neither {} nor {} holds a world.toml",
-        direct.display(),
-        candidates[0].display()
-    )
+    match candidates.first() {
+        Some(c) => bail!(
+            "no world {arg:?}: neither {} nor {} holds a world.toml",
+            direct.display(),
+            c.display()
+        ),
+        None => bail!("no world at {}: no such folder", direct.display()),
+    }
 }
 
 fn bar(len: u64, what: &str) -> ProgressBar {
@@ -636,8 +708,20 @@ fn fly(opts: FlyOptions) -> Result<()> {
     let mut frames: Option<ProgressBar> = None;
     let report = run_fly(&opts, &mut |p| match p {
         FlyProgress::WarmingUp => eprintln!("loading the first frame's tiles"),
+        FlyProgress::WarmUpIncomplete(missing) => {
+            eprintln!(
+                "warning: not every tile of the first frame became resident; going on, drawing \
+                 these from their ancestors:"
+            );
+            for m in missing {
+                eprintln!("  {m}");
+            }
+        }
         FlyProgress::Frame(done, total) => {
-            let pb = frames.get_or_insert_with(|| bar(total, "frames"));
+            let pb = frames.get_or_insert_with(|| {
+                eprintln!("rendering {total} frames");
+                bar(total, "frames")
+            });
             pb.set_position(done);
         }
     })?;
@@ -715,7 +799,7 @@ fn soak(opts: SoakOptions) -> Result<()> {
         for v in r.violations.iter().take(20) {
             eprintln!("violation: {v}");
         }
-        bail!("the soak failed {} check(s)", r.violations.len());
+        bail!("the soak failed {} check(s)", r.violation_count);
     }
     Ok(())
 }
@@ -787,6 +871,8 @@ fn run(cli: Cli) -> Result<()> {
             size,
             out,
             no_grass,
+            max_recovery_frames,
+            max_stall_ms,
             stream,
         } => soak(SoakOptions {
             world: resolve_world(&world)?,
@@ -797,6 +883,8 @@ fn run(cli: Cli) -> Result<()> {
             out,
             service: stream.service(),
             no_grass,
+            max_recovery_frames,
+            max_stall_ms,
             ..SoakOptions::default()
         }),
         Command::Bench {
@@ -904,6 +992,7 @@ fn run(cli: Cli) -> Result<()> {
             tile_cells,
             levels,
             seed,
+            replace,
         } => {
             let opts = BakeOptions {
                 dem,
@@ -914,6 +1003,7 @@ fn run(cli: Cli) -> Result<()> {
                 tile_cells,
                 stored_levels: levels,
                 seed,
+                replace,
             };
             let mut current: Option<(String, ProgressBar)> = None;
             let report = bake(&opts, &mut |stage, done, total| {
@@ -955,12 +1045,29 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// The error and its causes, joined by ": ", leaving out a cause that the message before it
+/// already quotes (typed errors name their file and repeat their source's message).
+fn error_chain(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
 fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", error_chain(&e));
             ExitCode::FAILURE
         }
     }

@@ -99,6 +99,41 @@ pub enum RendererError {
         /// The adapter's `max_texture_dimension_2d`.
         limit: u32,
     },
+    /// The target size needs a buffer larger than the adapter allows (the grass's Hi-Z pyramid
+    /// is one storage buffer bound whole, about 5.3 bytes a pixel).
+    #[error(
+        "image size {width}x{height} needs a {what} of {bytes} bytes, more than this adapter's \
+         {limit_name} of {limit} bytes: choose a smaller size (about {max_pixels} pixels at most)"
+    )]
+    SizeBeyondLimit {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+        /// The buffer, in words (e.g. `Hi-Z pyramid storage buffer`).
+        what: &'static str,
+        /// Its size at this target size.
+        bytes: u64,
+        /// The adapter limit it exceeds (e.g. `max_storage_buffer_binding_size`).
+        limit_name: &'static str,
+        /// That limit.
+        limit: u64,
+        /// Roughly the most pixels (width times height) that fit.
+        max_pixels: u64,
+    },
+    /// The CPU tile cache cannot hold a single tile, so no tile could ever be uploaded.
+    #[error(
+        "a CPU tile cache of {bytes} bytes cannot hold one tile of this world ({tile_bytes} \
+         bytes): give it at least {min_mib} MiB"
+    )]
+    CacheTooSmall {
+        /// The cache's ceiling asked for.
+        bytes: u64,
+        /// Bytes of one decoded tile.
+        tile_bytes: u64,
+        /// The smallest ceiling in MiB that holds one tile.
+        min_mib: u64,
+    },
     /// The colour format is not one the renderer draws into.
     #[error(
         "colour format {0:?} is not supported (use an 8-bit RGBA/BGRA format, sRGB or not, \
@@ -183,7 +218,7 @@ impl RendererConfig {
             view_distance_m: rings.low_radius_m as f32,
             far_fade_m: 0.2 * rings.low_radius_m as f32,
             clump_m: 1.6,
-            short_m: 0.3,
+            short_m: crate::world::grass_density::SHORT_GRASS_M,
             seed: 0x9a55,
             segments: self.grass_segments,
         })
@@ -268,6 +303,46 @@ pub struct FrameStats {
     pub grass: GrassStats,
 }
 
+/// How long a warm-up waits with nothing loading, uploaded or derived before it gives up.
+pub const WARM_UP_STALL: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// What a warm-up could not make resident.
+#[derive(Clone, Debug, Default)]
+pub struct WarmUp {
+    /// The wanted tiles that are not resident, each with the reason; empty when all are.
+    pub missing: Vec<MissingTile>,
+}
+
+/// A tile that a warm-up could not make resident.
+#[derive(Clone, Debug)]
+pub struct MissingTile {
+    /// The tile.
+    pub tile: TileId,
+    /// Why, in words (the failed load's error where there is one).
+    pub reason: String,
+}
+
+impl WarmUp {
+    /// One line per missing tile (at most `max`, then a count of the rest).
+    pub fn describe(&self, max: usize) -> Vec<String> {
+        let mut lines: Vec<String> = self
+            .missing
+            .iter()
+            .take(max)
+            .map(|m| {
+                format!(
+                    "tile L{} {}_{}: {}",
+                    m.tile.level, m.tile.x, m.tile.y, m.reason
+                )
+            })
+            .collect();
+        if self.missing.len() > max {
+            lines.push(format!("and {} more", self.missing.len() - max));
+        }
+        lines
+    }
+}
+
 /// The grass with the wind it bends in.
 struct GrassStage {
     renderer: GrassRenderer,
@@ -282,6 +357,9 @@ struct Prepared {
     derives: Vec<DeriveJob>,
     terrain_tiles: u32,
     grass_jobs: Vec<TileJob>,
+    /// The atlas slots the frame reads and the tiles it expects there (terrain draws and
+    /// grass jobs), checked against the atlas on the GPU.
+    reads: Vec<(u32, TileId)>,
     stats: FrameStats,
     cpu_s: f64,
 }
@@ -310,6 +388,8 @@ pub struct Renderer {
     features: Features,
     timer: GpuTimer,
     readback: StatsRing,
+    holes: HoleCheck,
+    skip_uploads: u32,
     time_s: Option<f64>,
     frame: u64,
     prepared: Option<Prepared>,
@@ -345,7 +425,8 @@ impl Renderer {
             height: options.height,
         };
         check_formats(&targets)?;
-        check_size(device, targets.width, targets.height)?;
+        let grass_on = config.grass.is_some();
+        check_size(device, targets.width, targets.height, grass_on)?;
         let limits = device.limits();
         let pyramid = world.manifest.pyramid.clone();
         let [nx, ny] = pyramid.tiles_at(0);
@@ -355,6 +436,14 @@ impl Renderer {
                 slots,
                 roots: nx * ny,
                 limit: limits.max_texture_array_layers,
+            });
+        }
+        let tile_bytes = crate::world::TileData::byte_size_for(pyramid.samples_per_side());
+        if config.service.cache_bytes < tile_bytes {
+            return Err(RendererError::CacheTooSmall {
+                bytes: config.service.cache_bytes,
+                tile_bytes,
+                min_mib: tile_bytes.div_ceil(1 << 20),
             });
         }
         let atlas = TileAtlas::new(device, pyramid.samples_per_side(), slots);
@@ -427,6 +516,7 @@ impl Renderer {
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let timer = GpuTimer::new(device, queue, timestamps, 64);
         let readback = StatsRing::new(device, timer.capacity_bytes());
+        let holes = HoleCheck::new(device, &atlas);
         Ok(Self {
             device: device.clone(),
             queue: queue.clone(),
@@ -446,6 +536,8 @@ impl Renderer {
             features: config.features,
             timer,
             readback,
+            holes,
+            skip_uploads: 0,
             time_s: None,
             frame: 0,
             prepared: None,
@@ -524,7 +616,7 @@ impl Renderer {
 
     /// Follows a resize of the targets (the next frame draws at the new size).
     pub fn resize(&mut self, width: u32, height: u32) -> Result<(), RendererError> {
-        check_size(&self.device, width, height)?;
+        check_size(&self.device, width, height, self.grass.is_some())?;
         if (width, height) == (self.targets.width, self.targets.height) {
             return Ok(());
         }
@@ -578,14 +670,29 @@ impl Renderer {
 
     /// Brings every tile `camera` wants into the atlas, waiting for loads and for the GPU: for
     /// the first frame of a run or a teleport, never inside a frame loop. Gives up after
-    /// `timeout`; returns whether everything became resident.
+    /// `timeout`; returns whether everything became resident. See [`Renderer::warm_up_report`]
+    /// for what is missing when not.
     pub fn warm_up(
         &mut self,
         camera: &Camera,
         timeout: std::time::Duration,
     ) -> Result<bool, RendererError> {
+        Ok(self.warm_up_report(camera, timeout)?.missing.is_empty())
+    }
+
+    /// Like [`Renderer::warm_up`], and says which tiles are missing and why. Stops early, without
+    /// waiting for `timeout`, once every missing tile is kept out by a failed load (its own or
+    /// that of the stored ancestor it is derived from), or when nothing has moved for
+    /// [`WARM_UP_STALL`].
+    pub fn warm_up_report(
+        &mut self,
+        camera: &Camera,
+        timeout: std::time::Duration,
+    ) -> Result<WarmUp, RendererError> {
         let start = Instant::now();
         self.flush_unrecorded();
+        let mut last_change = Instant::now();
+        let mut last_resident = u32::MAX;
         loop {
             let sel = self.select(camera);
             let plan = self.service.update(&sel.wants);
@@ -595,10 +702,44 @@ impl Renderer {
             let stats = self.service.stats();
             if stats.resident == stats.desired {
                 let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
-                return Ok(true);
+                return Ok(WarmUp::default());
             }
-            if start.elapsed() > timeout {
-                return Ok(false);
+            if busy || stats.resident != last_resident || stats.stream.in_flight > 0 {
+                last_change = Instant::now();
+                last_resident = stats.resident;
+            }
+            let missing: Vec<TileId> = sel
+                .wants
+                .iter()
+                .map(|w| w.id)
+                .filter(|&id| !self.service.is_resident(id))
+                .collect();
+            let all_failed = missing
+                .iter()
+                .all(|&id| self.service.blocked_by(id).is_some());
+            let stalled = last_change.elapsed() > WARM_UP_STALL;
+            if all_failed || stalled || start.elapsed() > timeout {
+                let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+                let why_else = if stalled {
+                    "nothing was loading".to_owned()
+                } else {
+                    format!("not resident after {:.0} s", timeout.as_secs_f64())
+                };
+                let missing = missing
+                    .into_iter()
+                    .map(|tile| {
+                        let reason = match self.service.blocked_by(tile) {
+                            Some((t, e)) if t == tile => format!("failed to load: {e}"),
+                            Some((t, e)) => format!(
+                                "derived from tile L{} {}_{}, which failed to load: {e}",
+                                t.level, t.x, t.y
+                            ),
+                            None => why_else.clone(),
+                        };
+                        MissingTile { tile, reason }
+                    })
+                    .collect();
+                return Ok(WarmUp { missing });
             }
             if !busy {
                 std::thread::sleep(std::time::Duration::from_millis(2));
@@ -630,9 +771,23 @@ impl Renderer {
     /// Uploads the plan's decoded tiles to the atlas; returns the derivations to record.
     fn upload(&mut self, plan: ResidencyPlan) -> Result<Vec<DeriveJob>, RendererError> {
         for (slot, tile) in &plan.uploads {
+            if self.skip_uploads > 0 {
+                // A fault injected by a test: the slot is given to the tile, its data never
+                // reaches the GPU.
+                self.skip_uploads -= 1;
+                self.atlas.claim(*slot, tile.id);
+                continue;
+            }
             self.atlas.upload(&self.queue, *slot, tile)?;
         }
         Ok(plan.derives)
+    }
+
+    /// For tests of the hole count: the next `n` uploads are planned (their slots given to
+    /// their tiles) but never written to the GPU, as a lost upload would be.
+    #[doc(hidden)]
+    pub fn skip_next_uploads(&mut self, n: u32) {
+        self.skip_uploads = n;
     }
 
     /// Gets the frame of `input` ready: collects figures of earlier frames that have come back,
@@ -678,6 +833,17 @@ impl Renderer {
         let aspect = self.aspect();
         let terrain_tiles = self.terrain.prepare(queue, &camera, aspect, &draws);
         let grass_jobs = self.grass_jobs(&camera, &sel.grass);
+        let grass_level = self.rings.as_ref().map_or(0, |r| r.settings.level);
+        let reads: Vec<(u32, TileId)> = sel
+            .terrain
+            .iter()
+            .filter_map(|&id| self.service.draw_source(id).map(|(src, slot)| (slot, src)))
+            .chain(
+                grass_jobs
+                    .iter()
+                    .map(|j| (j.layer, TileId::new(grass_level, j.tile_x, j.tile_y))),
+            )
+            .collect();
         let view_proj = camera.view_proj_relative(aspect);
         if let Some(g) = &mut self.grass {
             let ambient_speed = g.wind.config().ambient_at(input.time_s).speed_mps as f32;
@@ -693,6 +859,7 @@ impl Renderer {
             derives,
             terrain_tiles,
             grass_jobs,
+            reads,
             stats: FrameStats {
                 frame: self.frame,
                 tiles_drawn: terrain_tiles,
@@ -741,6 +908,10 @@ impl Renderer {
                 &mut self.timer,
             );
         }
+        // Every atlas read of the frame against what its slot holds on the GPU.
+        let cpu_holes = self
+            .holes
+            .record(&self.queue, encoder, &self.atlas, &frame.reads);
         // 2. Wind and sway.
         if let Some(g) = &mut self.grass {
             let camera = &frame.input.camera;
@@ -797,6 +968,7 @@ impl Renderer {
         }
         // 6. Grass.
         let mut stats = frame.stats;
+        stats.residency.holes += cpu_holes;
         if let Some(g) = &self.grass {
             stats.grass.tiles = g.renderer.record(
                 &self.queue,
@@ -811,7 +983,8 @@ impl Renderer {
         self.timer.resolve(encoder);
         stats.cpu_ms = (frame.cpu_s + start.elapsed().as_secs_f64()) * 1e3;
         let counters = self.grass.as_ref().map(|g| g.renderer.stats_buffer());
-        self.readback.record(encoder, &self.timer, counters, stats);
+        self.readback
+            .record(encoder, &self.timer, counters, &self.holes.counter, stats);
         Ok(())
     }
 
@@ -943,8 +1116,17 @@ fn check_formats(targets: &Targets) -> Result<(), RendererError> {
     Ok(())
 }
 
-fn check_size(device: &wgpu::Device, width: u32, height: u32) -> Result<(), RendererError> {
-    let limit = device.limits().max_texture_dimension_2d;
+/// Refuses a target size that the adapter cannot serve: beyond its largest 2D texture, or (with
+/// grass) a Hi-Z pyramid larger than the largest storage buffer binding or buffer. Checked here,
+/// against this device's limits, so that no wgpu validation error can follow.
+fn check_size(
+    device: &wgpu::Device,
+    width: u32,
+    height: u32,
+    grass: bool,
+) -> Result<(), RendererError> {
+    let limits = device.limits();
+    let limit = limits.max_texture_dimension_2d;
     if width == 0 || height == 0 || width > limit || height > limit {
         return Err(RendererError::BadSize {
             width,
@@ -952,7 +1134,38 @@ fn check_size(device: &wgpu::Device, width: u32, height: u32) -> Result<(), Rend
             limit,
         });
     }
+    if grass {
+        let bytes = hiz_bytes(width, height);
+        let (limit_name, limit) =
+            if limits.max_storage_buffer_binding_size <= limits.max_buffer_size {
+                (
+                    "max_storage_buffer_binding_size",
+                    limits.max_storage_buffer_binding_size,
+                )
+            } else {
+                ("max_buffer_size", limits.max_buffer_size)
+            };
+        if bytes > limit {
+            let pixels = u64::from(width) * u64::from(height);
+            return Err(RendererError::SizeBeyondLimit {
+                width,
+                height,
+                what: "Hi-Z pyramid storage buffer",
+                bytes,
+                limit_name,
+                limit,
+                max_pixels: (pixels as f64 * limit as f64 / bytes as f64) as u64,
+            });
+        }
+    }
     Ok(())
+}
+
+/// Bytes of the Hi-Z pyramid of a `width` x `height` target (f32 levels down to 1x1).
+pub fn hiz_bytes(width: u32, height: u32) -> u64 {
+    (0..crate::grass::hiz::mip_count(width, height))
+        .map(|m| u64::from((width >> m).max(1)) * u64::from((height >> m).max(1)) * 4)
+        .sum()
 }
 
 const FREE: u8 = 0;
@@ -970,6 +1183,108 @@ struct ReadbackSlot {
 /// A small ring of readback buffers: each frame copies its timestamps and grass counters into
 /// a free slot, mapped when the encoder is submitted; figures are read once mapped, a frame or
 /// two later, and never waited for.
+/// Most atlas reads a frame checks (terrain draws and grass jobs).
+const MAX_HOLE_CHECKS: usize = 8192;
+
+/// The hole count, observed on the GPU: each frame's atlas reads (slot and expected identity)
+/// are compared by a compute pass (`shaders/hole_check.wgsl`) with the identity that the
+/// uploads and derivations left in each slot ([`TileAtlas::identity`]).
+struct HoleCheck {
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    checks: wgpu::Buffer,
+    /// The frame's count of mismatches (u32, then padding), copied to the figures.
+    counter: wgpu::Buffer,
+}
+
+impl HoleCheck {
+    fn new(device: &wgpu::Device, atlas: &TileAtlas) -> Self {
+        let module = crate::shaders::module(device, "hole_check.wgsl");
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("hole_check"),
+            layout: None,
+            module: &module,
+            entry_point: Some("hole_check"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let checks = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("hole checks"),
+            size: 16 + MAX_HOLE_CHECKS as u64 * 32,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let counter = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("holes"),
+            size: 16,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("hole check"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: checks.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: atlas.identity.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: counter.as_entire_binding(),
+                },
+            ],
+        });
+        Self {
+            pipeline,
+            bind_group,
+            checks,
+            counter,
+        }
+    }
+
+    /// Records the check of `reads` (after the frame's derivations, which claim their slots);
+    /// returns the reads that fail already on the CPU (a slot given to another tile).
+    fn record(
+        &self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        atlas: &TileAtlas,
+        reads: &[(u32, TileId)],
+    ) -> u32 {
+        let mut cpu_holes = 0;
+        let mut words: Vec<u32> = vec![0; 4];
+        for &(slot, tile) in reads.iter().take(MAX_HOLE_CHECKS) {
+            let claimed = atlas.claimed(slot);
+            if claimed[..3] != [u32::from(tile.level), tile.x, tile.y] || claimed[3] == 0 {
+                cpu_holes += 1;
+                continue;
+            }
+            words.extend_from_slice(&claimed);
+            words.extend_from_slice(&[slot, 0, 0, 0]);
+        }
+        let n = (words.len() - 4) / 8;
+        words[0] = n as u32;
+        queue.write_buffer(&self.checks, 0, bytemuck::cast_slice(&words));
+        encoder.clear_buffer(&self.counter, 0, None);
+        if n > 0 {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("hole check"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups((n as u32).div_ceil(64), 1, 1);
+        }
+        cpu_holes
+    }
+}
+
 struct StatsRing {
     slots: Vec<ReadbackSlot>,
     timestamp_bytes: u64,
@@ -983,7 +1298,7 @@ impl StatsRing {
             .map(|_| ReadbackSlot {
                 buffer: device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("frame figures readback"),
-                    size: timestamp_bytes + 64,
+                    size: timestamp_bytes + 64 + 16,
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
@@ -1004,6 +1319,7 @@ impl StatsRing {
         encoder: &mut wgpu::CommandEncoder,
         timer: &GpuTimer,
         counters: Option<&wgpu::Buffer>,
+        holes: &wgpu::Buffer,
         stats: FrameStats,
     ) {
         let Some(slot) = self
@@ -1023,6 +1339,7 @@ impl StatsRing {
         if let Some(c) = counters {
             encoder.copy_buffer_to_buffer(c, 0, &slot.buffer, self.timestamp_bytes, 64);
         }
+        encoder.copy_buffer_to_buffer(holes, 0, &slot.buffer, self.timestamp_bytes + 64, 16);
         slot.state.store(PENDING, Ordering::Release);
         let state = slot.state.clone();
         encoder.map_buffer_on_submit(&slot.buffer, wgpu::MapMode::Read, .., move |r| {
@@ -1045,6 +1362,8 @@ impl StatsRing {
                             bytemuck::cast_slice(&view[self.timestamp_bytes as usize..]);
                         let c: [u32; 16] = counters[..16].try_into().unwrap_or([0; 16]);
                         stats.grass = GrassStats::from_counts(stats.grass.tiles, &c);
+                        // Atlas reads that found another tile than expected (HoleCheck).
+                        stats.residency.holes += counters.get(16).copied().unwrap_or(0);
                     }
                     slot.buffer.unmap();
                     slot.state.store(FREE, Ordering::Release);

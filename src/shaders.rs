@@ -41,6 +41,10 @@ pub const STAGES: &[(&str, &str)] = &[
     ("terrain.wgsl", include_str!("../shaders/terrain.wgsl")),
     ("hiz_build.wgsl", include_str!("../shaders/hiz_build.wgsl")),
     (
+        "hole_check.wgsl",
+        include_str!("../shaders/hole_check.wgsl"),
+    ),
+    (
         "grass_generate.wgsl",
         include_str!("../shaders/grass_generate.wgsl"),
     ),

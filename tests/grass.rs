@@ -713,3 +713,112 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
         "the storm should lean the blades: {max_lean}"
     );
 }
+
+#[test]
+fn every_slot_holds_its_own_tiles_blades_after_a_half_is_reused() {
+    let mut rig = Rig::new(None);
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let flat = synthetic_tile(&rig.manifest, TileId::new(level, 0, 0), "flat");
+    let steep = synthetic_tile(&rig.manifest, TileId::new(level, 1, 0), "steep");
+    rig.atlas.upload(&rig.ctx.queue, 0, &flat).unwrap();
+    rig.atlas.upload(&rig.ctx.queue, 1, &steep).unwrap();
+    // Eleven tiles at eleven places, alternating data and LOD: batches 0..4 (half A), 4..8
+    // (half B) and 8..11 (half A again, over the first batch's blades).
+    let jobs: Vec<TileJob> = (0..11)
+        .map(|k| job(k, (k % 2) as u32, ((k / 2) % 2) as u32, cell))
+        .collect();
+    let (_, hiz) = rig.run(&camera(), &jobs);
+    let tiles = [&flat, &steep];
+    let mut seen_blades = 0;
+    for (half, range) in [(0usize, 8..11usize), (1, 4..8)] {
+        for (k, j) in range.enumerate() {
+            let cpu = cpu_blades(&rig, &jobs[j], tiles[j % 2], &hiz);
+            let (args, gpu) = rig
+                .grass
+                .read_slot(&rig.ctx.device, &rig.ctx.queue, half, k as u32);
+            let vertices = if jobs[j].lod == 0 { 15 } else { 7 };
+            assert_eq!(
+                args,
+                [vertices, cpu.blades.len() as u32, 0, 0],
+                "job {j} in half {half} slot {k}: indirect args"
+            );
+            assert_blades_match(
+                &gpu,
+                &cpu.blades,
+                &format!("job {j} in half {half} slot {k}"),
+            );
+            seen_blades += gpu.len();
+        }
+    }
+    assert!(seen_blades > 0, "the view should hold blades");
+}
+
+#[test]
+fn an_overflow_leaves_the_neighbouring_slots_blades_intact() {
+    let mut rig = Rig::new(Some(1000));
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let dense = synthetic_tile(&rig.manifest, TileId::new(level, 1000, 2000), "densest");
+    // Grass on one row in eight: a sparse tile whose blades fit the slot.
+    let mut sparse = synthetic_tile(&rig.manifest, TileId::new(level, 1001, 2000), "flat");
+    let size = sparse.size as usize;
+    for (k, d) in sparse.density.iter_mut().enumerate() {
+        if (k / size) % 8 != 0 {
+            *d = 0;
+        }
+    }
+    rig.atlas.upload(&rig.ctx.queue, 0, &dense).unwrap();
+    rig.atlas.upload(&rig.ctx.queue, 1, &sparse).unwrap();
+    // The dense tile overflows slot 0; slot 1 holds a low-LOD tile of sparse grass that fits.
+    let jobs = [job(2, 0, 0, cell), job(11, 1, 1, cell)];
+    let (stats, hiz) = rig.run(&camera(), &jobs);
+    let capacity = rig.grass.capacity();
+    assert!(
+        stats.overflow[0] > 0,
+        "slot 0 should overflow: {:?}",
+        stats.overflow
+    );
+    let cpu = cpu_blades(&rig, &jobs[1], &sparse, &hiz);
+    assert!(
+        !cpu.blades.is_empty() && (cpu.blades.len() as u32) < capacity,
+        "the neighbour should have blades that fit: {}",
+        cpu.blades.len()
+    );
+    let (args, gpu) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 1);
+    assert_eq!(args, [7, cpu.blades.len() as u32, 0, 0]);
+    assert_blades_match(&gpu, &cpu.blades, "the overflowing tile's neighbour");
+}
+
+#[test]
+fn more_jobs_than_the_job_buffer_holds_are_cut_at_its_size() {
+    let mut rig = Rig::new(None);
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let flat = synthetic_tile(&rig.manifest, TileId::new(level, 0, 0), "flat");
+    rig.atlas.upload(&rig.ctx.queue, 0, &flat).unwrap();
+    let max = verdant::grass::renderer::MAX_JOBS as usize;
+    // Low-LOD tiles far behind the camera: every point is considered, none is drawn.
+    let far = |k: usize| TileJob {
+        origin: [
+            -40.0 + 20.0 * (k % 4) as f32,
+            -5000.0 - 8.0 * (k / 4) as f32,
+        ],
+        ..job(k, 0, 1, cell)
+    };
+    let jobs: Vec<TileJob> = (0..max + 6).map(far).collect();
+    let (stats, hiz) = rig.run(&camera(), &jobs);
+    assert_eq!(
+        stats.tiles,
+        [0, max as u32],
+        "tiles beyond the job buffer were generated"
+    );
+    let one = generate_tile(rig.grass.params(), &jobs[0], &flat, &hiz);
+    assert!(one.stats.counts[1][0] > 0);
+    assert_eq!(
+        stats.considered[1],
+        max as u32 * one.stats.counts[1][0],
+        "every job in the buffer considered its points once"
+    );
+    assert_eq!(stats.drawn, [0, 0]);
+}

@@ -302,3 +302,184 @@ fn figures_of_frames_in_flight_stay_within_the_ring() {
     }
     assert_eq!(renderer.stats_dropped(), before);
 }
+
+/// A device of the test's adapter whose largest storage buffer binding is 128 MiB (the WebGPU
+/// default; many adapters allow no more).
+fn device_with_small_buffers(ctx: &verdant::gpu::GpuContext) -> (wgpu::Device, wgpu::Queue) {
+    let mut limits = ctx.adapter.limits();
+    limits.max_storage_buffer_binding_size = limits.max_storage_buffer_binding_size.min(128 << 20);
+    pollster::block_on(ctx.adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("small buffers"),
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .expect("a device with lower limits")
+}
+
+#[test]
+fn sizes_beyond_the_adapters_buffers_are_refused_with_the_limit_named() {
+    let ctx = common::gpu();
+    let (device, queue) = device_with_small_buffers(&ctx);
+    let limits = device.limits();
+    let world = World::open(&common::default_world()).unwrap();
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    // 7680x4320 fits every adapter's 2D textures; its Hi-Z pyramid (177 MB) does not fit a
+    // 128 MiB binding.
+    assert!(verdant::renderer::hiz_bytes(7680, 4320) > 128 << 20);
+    let side = limits.max_texture_dimension_2d;
+    for (w, h) in [(7680, 4320), (side, side)] {
+        let options = RendererOptions::new(&world, c, d, w, h);
+        let e = Renderer::new(&device, &queue, world.clone(), options)
+            .err()
+            .expect("refused");
+        assert!(
+            matches!(e, RendererError::SizeBeyondLimit { .. }),
+            "{w}x{h}: {e}"
+        );
+        let text = e.to_string();
+        assert!(
+            text.contains("max_storage_buffer_binding_size") && text.contains(&format!("{w}x{h}")),
+            "{text}"
+        );
+    }
+    // A renderer resized beyond the limit refuses too, and keeps working at its old size.
+    let options = RendererOptions::new(&world, c, d, 64, 36);
+    let mut renderer = Renderer::new(&device, &queue, world.clone(), options).unwrap();
+    let e = renderer.resize(7680, 4320).unwrap_err();
+    assert!(matches!(e, RendererError::SizeBeyondLimit { .. }), "{e}");
+    assert_eq!(
+        (renderer.targets().width, renderer.targets().height),
+        (64, 36)
+    );
+    // Without grass there is no Hi-Z pyramid, and the size is served.
+    let mut options = RendererOptions::new(&world, c, d, 7680, 4320);
+    options.config.grass = None;
+    Renderer::new(&device, &queue, world, options).unwrap();
+}
+
+#[test]
+fn a_cache_too_small_for_one_tile_is_refused() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let mut options = RendererOptions::new(
+        &world,
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+        64,
+        36,
+    );
+    options.config.service.cache_bytes = 0;
+    let e = Renderer::new(&ctx.device, &ctx.queue, world, options)
+        .err()
+        .expect("refused");
+    assert!(matches!(e, RendererError::CacheTooSmall { .. }), "{e}");
+    assert!(e.to_string().contains("1 MiB"), "{e}");
+}
+
+/// Tiles of the world, except that every load at `level` fails.
+struct FailingLevel {
+    world: World,
+    level: u8,
+}
+
+impl verdant::stream::TileSource for FailingLevel {
+    fn load(
+        &self,
+        id: verdant::world::TileId,
+    ) -> Result<verdant::world::TileData, verdant::world::WorldError> {
+        if id.level == self.level {
+            return self.world.load_tile(verdant::world::TileId::new(99, 0, 0));
+        }
+        self.world.load_tile(id)
+    }
+}
+
+#[test]
+fn a_warm_up_says_which_tiles_failed_and_does_not_wait_for_them() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let source = std::sync::Arc::new(FailingLevel {
+        world: world.clone(),
+        level: 1,
+    });
+    let options = RendererOptions::new(
+        &world,
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+        64,
+        36,
+    );
+    let camera = overview_camera(&world);
+    let mut renderer =
+        Renderer::with_source(&ctx.device, &ctx.queue, world, source, options).unwrap();
+    let start = std::time::Instant::now();
+    let report = renderer
+        .warm_up_report(&camera, Duration::from_secs(60))
+        .unwrap();
+    let waited = start.elapsed();
+    assert!(
+        waited < Duration::from_secs(20),
+        "the warm-up waited {waited:?} for tiles that failed"
+    );
+    assert!(
+        !report.missing.is_empty(),
+        "level-1 tiles should be missing"
+    );
+    let lines = report.describe(5).join("\n");
+    assert!(lines.contains("failed to load"), "{lines}");
+    assert!(lines.contains("tile L"), "{lines}");
+}
+
+/// Renders `frames` frames along the tour's start, prepared, recorded and submitted one after
+/// another, and returns the holes each frame's figures report.
+fn holes_along_the_tour(skip_uploads: u32, frames: u32) -> Vec<u32> {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let path = world.manifest.paths[0].clone();
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let mut options = RendererOptions::new(&world, c, d, 64, 36);
+    options.config.grass = None;
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    renderer.skip_next_uploads(skip_uploads);
+    let t = targets(&ctx.device, c, d, (64, 36));
+    let mut holes = Vec::new();
+    for f in 0..frames {
+        let t_s = path.keys[0].t_s + f64::from(f) * 0.5;
+        renderer.prepare(&ctx.queue, &FrameInput::new(sample_path(&path, t_s), t_s));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        renderer
+            .record(&mut encoder, &t.color_view, &t.depth_view)
+            .unwrap();
+        ctx.queue.submit([encoder.finish()]);
+        ctx.wait_idle();
+        // Let loads finish between frames, as frames of an application would.
+        std::thread::sleep(Duration::from_millis(50));
+        holes.extend(renderer.take_stats().iter().map(|s| s.residency.holes));
+    }
+    holes
+}
+
+#[test]
+fn holes_are_counted_on_the_gpu_when_an_upload_is_lost() {
+    // Every frame's atlas reads are checked against what the GPU's uploads and derivations
+    // left in each slot. Streaming as it should: no holes.
+    let clean = holes_along_the_tour(0, 12);
+    assert_eq!(clean.len(), 12, "every frame's figures came back");
+    assert!(
+        clean.iter().all(|&h| h == 0),
+        "holes without a fault: {clean:?}"
+    );
+    // The first uploads after start-up planned but never written: the tiles read from those
+    // slots (and children derived from them) are holes.
+    let lost = holes_along_the_tour(4, 12);
+    assert!(
+        lost.iter().any(|&h| h > 0),
+        "lost uploads went unseen: {lost:?}"
+    );
+}

@@ -216,17 +216,12 @@ fn read_all_files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
 fn bake_is_deterministic_and_leaves_no_temporary_files() {
     let dir = tempfile::tempdir().unwrap();
     let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
-    let out_a = dir.path().join("a");
-    std::fs::create_dir_all(out_a.join("notes")).unwrap();
-    std::fs::write(out_a.join("notes/keep.txt"), "mine").unwrap();
+    // An empty output folder is baked into.
+    std::fs::create_dir_all(dir.path().join("a")).unwrap();
     let a = small_bake(dir.path(), dem.clone(), "a");
     let b = small_bake(dir.path(), dem, "b");
     let mut files_a = read_all_files(&a);
     let files_b = read_all_files(&b);
-    assert_eq!(
-        files_a.remove(Path::new("notes/keep.txt")).unwrap(),
-        b"mine"
-    );
     // The manifests differ only in the name.
     let manifest_a = files_a.remove(Path::new("world.toml")).unwrap();
     let mut files_b = files_b;
@@ -270,6 +265,57 @@ fn camera_paths_clear_the_terrain() {
             "{name} ends low over the ground: {c:?}"
         );
     }
+}
+
+#[test]
+fn bake_into_a_non_empty_folder_is_refused_unless_replaced_as_a_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let out = dir.path().join("w");
+    std::fs::create_dir_all(out.join("tiles/L5")).unwrap();
+    std::fs::write(out.join("tiles/L5/0_0.height.exr"), "stale").unwrap();
+    std::fs::write(out.join("world.toml"), "old").unwrap();
+    let mut opts = BakeOptions {
+        dem,
+        out: out.clone(),
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        ..Default::default()
+    };
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(err, WorldError::OutputNotEmpty { .. }), "{err}");
+    assert!(err.to_string().contains("--replace"), "{err}");
+    assert_eq!(std::fs::read(out.join("world.toml")).unwrap(), b"old");
+    // A bake that fails after its checks leaves the old folder as it was and no temporary one.
+    opts.replace = true;
+    let good_dem = opts.dem.clone();
+    opts.dem = dir.path().join("missing.png");
+    bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    assert_eq!(std::fs::read(out.join("world.toml")).unwrap(), b"old");
+    opts.dem = good_dem;
+    // Told to replace it, the bake replaces the folder as a whole: nothing stale stays.
+    let mut written_into_out = false;
+    bake(&opts, &mut |stage, _, _| {
+        if stage == BakeStage::WriteTiles {
+            written_into_out |= out.join("tiles/L0").exists();
+        }
+    })
+    .unwrap();
+    assert!(
+        !written_into_out,
+        "tiles were written into the output folder in place"
+    );
+    assert!(!out.join("tiles/L5").exists(), "a stale tile was kept");
+    verdant::world::World::open(&out).unwrap();
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        names.iter().all(|n| !n.starts_with('.')),
+        "temporary folders left: {names:?}"
+    );
 }
 
 #[test]
@@ -318,11 +364,15 @@ fn absurd_bake_options_are_refused_before_writing() {
     let dir = tempfile::tempdir().unwrap();
     let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
     let out = dir.path().join("w");
-    for (tile_cells, stored_levels, cell) in [
-        (100, 2, 20.0),
-        (16, 0, 20.0),
-        (16, 13, 20.0),
-        (16, 2, 0.001),
+    // Each is blamed on the option, not on the world.toml that does not exist yet.
+    for (tile_cells, stored_levels, cell, option) in [
+        (100, 2, 20.0, "--tile-cells 100"),
+        (3, 2, 20.0, "--tile-cells 3"),
+        (16, 0, 20.0, "--levels 0"),
+        (16, 13, 20.0, "--levels 13"),
+        (16, 2, 0.001, "--cell-size 0.001"),
+        (16, 2, 1e-6, "--cell-size 0.000001"),
+        (16, 2, -5.0, "--cell-size -5"),
     ] {
         let opts = BakeOptions {
             dem: dem.clone(),
@@ -333,24 +383,92 @@ fn absurd_bake_options_are_refused_before_writing() {
             ..Default::default()
         };
         let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
-        assert!(
-            matches!(
-                err,
-                WorldError::OutOfRange { .. } | WorldError::TooManyTiles { .. }
-            ),
-            "{err}"
-        );
-        assert!(err.to_string().contains("world.toml"), "{err}");
+        assert!(matches!(err, WorldError::BadOption { .. }), "{err}");
+        assert!(err.to_string().starts_with(option), "{err}");
+        assert!(!err.to_string().contains("world.toml"), "{err}");
         assert!(!out.exists());
     }
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        2,
+        "nothing but the DEM and its sidecar"
+    );
+}
+
+#[test]
+fn implausible_dem_heights_and_cells_blame_the_sidecar() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("w");
+    // Offset -1e30 m, scale 1e36 m (heights beyond f32), 1e33 m: a wrong sidecar.
+    for (name, offset, scale) in [
+        ("low", -1e30, 1.0),
+        ("huge", 0.0, 1e36),
+        ("high", 1e33, 1.0),
+    ] {
+        let png = write_dem(dir.path(), name, [20, 16], [5.0, 5.0], [0.0, 1.0], hills);
+        write_sidecar(dir.path(), name, [20, 16], [5.0, 5.0], [offset, scale]);
+        let opts = BakeOptions {
+            dem: png,
+            out: out.clone(),
+            tile_cells: 8,
+            stored_levels: 1,
+            ..Default::default()
+        };
+        let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+        assert!(matches!(err, WorldError::ImplausibleHeight { .. }), "{err}");
+        let text = err.to_string();
+        assert!(
+            text.starts_with(&format!(
+                "{}",
+                dir.path().join(format!("{name}.json")).display()
+            )),
+            "{text}"
+        );
+        assert!(
+            text.contains("height_scale_m") && !text.contains("world.toml"),
+            "{text}"
+        );
+        assert!(!out.exists());
+    }
+    // A DEM of 1 um cells: the sidecar's cell size is named.
+    let png = write_dem(dir.path(), "tiny", [20, 16], [5.0, 5.0], [0.0, 1.0], hills);
+    write_sidecar(dir.path(), "tiny", [20, 16], [1e-6, 1e-6], [0.0, 1.0]);
     let opts = BakeOptions {
-        dem,
+        dem: png,
         out: out.clone(),
-        cell_size_m: Some(-5.0),
+        tile_cells: 8,
+        stored_levels: 1,
         ..Default::default()
     };
-    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
-    assert!(matches!(err, WorldError::NonPositive { .. }), "{err}");
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err().to_string();
+    assert!(
+        err.contains("tiny.json") && err.contains("cell_size_m"),
+        "{err}"
+    );
+    assert!(!err.contains("world.toml"), "{err}");
+}
+
+#[test]
+fn a_manifest_with_heights_beyond_a_planet_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = small_bake(
+        dir.path(),
+        write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills),
+        "w",
+    );
+    let file = world.join("world.toml");
+    let text = std::fs::read_to_string(&file).unwrap();
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("height_range_m"))
+        .unwrap()
+        .to_owned();
+    std::fs::write(&file, text.replace(&line, "height_range_m = [0.0, 1e33]")).unwrap();
+    let err = verdant::world::World::open(&world).unwrap_err().to_string();
+    assert!(
+        err.contains("world.toml") && err.contains("height_range_m"),
+        "{err}"
+    );
 }
 
 #[test]

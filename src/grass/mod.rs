@@ -22,53 +22,45 @@ pub use renderer::{
 
 use crate::world::{World, WorldError};
 
-/// The blades a slot must hold: the densest grass tile's count, estimated from the finest stored
-/// level. Every window of a grass tile's size is looked at; a point of the grid carries grass
-/// with the window's mean density, and grass whose type can be shorter than the split height is
-/// counted twice. A tile denser than this at run time is clamped and counted as overflow.
+/// The blades a slot must hold: the densest grass tile's count. A point of the grid carries
+/// grass with the densest window's mean density, and grass whose type can be shorter than the
+/// split height is counted twice. The density comes from the manifest's `grass_peak`, worked
+/// out by the baker for these grass tiles; a world without it (or baked for other grass tiles)
+/// has its finest stored tiles read, every window of a grass tile's size looked at, and a tile
+/// that cannot be read skipped (it will never be resident, so never generates grass). A tile
+/// denser than this at run time is clamped and counted as overflow.
 pub fn estimate_capacity(world: &World, settings: &GrassSettings) -> Result<u32, WorldError> {
+    let g = settings.grid() as f32;
+    let blades = |densest: f32| ((g * g * densest * 1.1).ceil() as u32).max(64);
+    let m = &world.manifest;
+    if let Some(peak) = &m.grass_peak
+        && (peak.window_m - f64::from(settings.tile_m)).abs() <= 1e-6 * peak.window_m
+        && peak.short_m == settings.short_m
+    {
+        return Ok(blades(peak.density));
+    }
+    Ok(blades(scan_grass_peak(
+        world,
+        f64::from(settings.tile_m),
+        settings.short_m,
+    )))
+}
+
+/// The densest grass of the finest stored level over windows of `window_m` (see
+/// [`crate::world::GrassPeak`]), from the tiles themselves; tiles that cannot be read are
+/// skipped (logged).
+pub fn scan_grass_peak(world: &World, window_m: f64, short_m: f32) -> f32 {
+    use crate::world::grass_density::{split_shares, tile_peak, window_cells};
     let m = &world.manifest;
     let level = m.pyramid.stored_levels - 1;
-    let cell = m.pyramid.cell_size_m(level) as f32;
-    let window = ((settings.tile_m / cell).round() as u32).max(1);
-    // Largest share of blades that are split, per type: 1 if any blade of the type can be
-    // shorter than the split height (heights shrink to 0.35 of the range with clump and density).
-    let split: Vec<f32> = m
-        .grass_types
-        .iter()
-        .map(|t| {
-            if t.height_m[0] * 0.35 < settings.short_m {
-                1.0
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let window = window_cells(&m.pyramid, window_m);
+    let split = split_shares(&m.grass_types, short_m);
     let mut densest = 0.0f32;
     for id in world.stored_tiles().filter(|t| t.level == level) {
-        let tile = world.load_tile(id)?;
-        let b = m.pyramid.border;
-        let n = m.pyramid.tile_cells;
-        let mut y = 0;
-        while y + window <= n {
-            let mut x = 0;
-            while x + window <= n {
-                let mut sum = 0.0f32;
-                for j in y..y + window {
-                    for i in x..x + window {
-                        let k = tile.index(i + b, j + b);
-                        let t = tile.grass_type[k] as usize;
-                        if t > 0 && t < split.len() {
-                            sum += f32::from(tile.density[k]) / 255.0 * (1.0 + split[t]);
-                        }
-                    }
-                }
-                densest = densest.max(sum / (window * window) as f32);
-                x += window.div_ceil(2);
-            }
-            y += window.div_ceil(2);
+        match world.load_tile(id) {
+            Ok(tile) => densest = densest.max(tile_peak(&tile, &m.pyramid, window, &split)),
+            Err(e) => log::warn!("grass pool sizing skips a tile that will be a fault: {e}"),
         }
     }
-    let g = settings.grid() as f32;
-    Ok(((g * g * densest * 1.1).ceil() as u32).max(64))
+    densest
 }

@@ -25,7 +25,8 @@ const BLADE_BYTES: u64 = std::mem::size_of::<crate::grass::Blade>() as u64;
 pub const POOL_SLOTS: u32 = 8;
 /// Tiles a batch (half the pool).
 pub const BATCH_TILES: u32 = 4;
-const MAX_JOBS: u32 = 1024;
+/// Grass tiles a frame generates and draws at most (the job buffer's size); more are left out.
+pub const MAX_JOBS: u32 = 1024;
 const BATCH_STRIDE: u64 = 256;
 
 /// Settings of grass generation.

@@ -1,7 +1,9 @@
 //! The tile atlas: texture arrays holding the heights, grass types and densities of resident
 //! tiles, one array layer per slot. The slot count is fixed when the atlas is made.
 
-use crate::world::TileData;
+use std::sync::Mutex;
+
+use crate::world::{TileData, TileId};
 
 /// Texture arrays with a fixed number of tile slots.
 pub struct TileAtlas {
@@ -9,6 +11,13 @@ pub struct TileAtlas {
     pub heights: wgpu::Texture,
     /// Grass, `Rgba8Uint`: r = type index, g = density (0..=255), b and a unused.
     pub grass: wgpu::Texture,
+    /// Per slot, the identity of what was last written into it on the GPU, as
+    /// `[level, x, y, generation]` u32s (16 bytes a slot): an upload writes it with the tile's
+    /// samples, a derivation from its compute pass. The frame compares it with what it expects
+    /// to read ([`TileAtlas::claimed`]) and counts mismatches as holes.
+    pub identity: wgpu::Buffer,
+    /// Per slot, the identity the CPU last gave it ([`TileAtlas::claim`]).
+    claims: Mutex<Vec<[u32; 4]>>,
     size: u32,
     slots: u32,
 }
@@ -58,9 +67,19 @@ impl TileAtlas {
                 view_formats: &[],
             })
         };
+        let identity = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("atlas identity"),
+            size: u64::from(slots.max(1)) * 16,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST
+                | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
         Self {
             heights: make("atlas heights", wgpu::TextureFormat::R32Float),
             grass: make("atlas grass", wgpu::TextureFormat::Rgba8Uint),
+            identity,
+            claims: Mutex::new(vec![[0; 4]; slots as usize]),
             size,
             slots,
         }
@@ -128,7 +147,32 @@ impl TileAtlas {
         };
         write(&self.heights, bytemuck::cast_slice(&tile.heights), 4);
         write(&self.grass, &pack_grass(tile), 4);
+        let identity = self.claim(slot, tile.id);
+        queue.write_buffer(
+            &self.identity,
+            u64::from(slot) * 16,
+            bytemuck::cast_slice(&identity),
+        );
         Ok(())
+    }
+
+    /// Gives `slot` to `tile` with a new generation and returns its identity
+    /// (`[level, x, y, generation]`, generations from 1): what the GPU's copy of the slot must
+    /// hold once the upload or derivation that fills it has run.
+    pub fn claim(&self, slot: u32, tile: TileId) -> [u32; 4] {
+        let mut claims = self.claims.lock().unwrap_or_else(|e| e.into_inner());
+        let Some(c) = claims.get_mut(slot as usize) else {
+            return [0; 4];
+        };
+        let generation = c[3].wrapping_add(1).max(1);
+        *c = [u32::from(tile.level), tile.x, tile.y, generation];
+        *c
+    }
+
+    /// The identity `slot` was last given ([`TileAtlas::claim`]); zeros if never.
+    pub fn claimed(&self, slot: u32) -> [u32; 4] {
+        let claims = self.claims.lock().unwrap_or_else(|e| e.into_inner());
+        claims.get(slot as usize).copied().unwrap_or([0; 4])
     }
 }
 

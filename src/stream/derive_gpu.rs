@@ -30,8 +30,14 @@ struct JobGpu {
     cell_child: f32,
     detail_child: f32,
     detail_parent: f32,
+    _pad: [u32; 3],
+    /// The child's identity in the atlas (`TileAtlas::claim`), written by the pass.
+    identity: [u32; 4],
+    /// What the parent's slot must hold: a derivation from anything else writes a poisoned
+    /// identity (generation 0), so the child counts as a hole.
+    parent_identity: [u32; 4],
 }
-const _: () = assert!(std::mem::size_of::<JobGpu>() == 36);
+const _: () = assert!(std::mem::size_of::<JobGpu>() == 80);
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -48,6 +54,7 @@ pub struct DeriveStage {
     jobs: wgpu::Buffer,
     staging_heights: wgpu::Texture,
     staging_grass: wgpu::Texture,
+    staging_identity: wgpu::Buffer,
     pyramid: Pyramid,
     /// Detail amplitude per level, 0 for stored levels.
     level_detail: [f32; MAX_LEVELS],
@@ -109,6 +116,12 @@ impl DeriveStage {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let staging_identity = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("derive identity"),
+            size: u64::from(batch.max(1)) * 16,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
         let array_view = |t: &wgpu::Texture| {
             t.create_view(&wgpu::TextureViewDescriptor {
                 dimension: Some(wgpu::TextureViewDimension::D2Array),
@@ -158,6 +171,14 @@ impl DeriveStage {
                     binding: 5,
                     resource: wgpu::BindingResource::TextureView(&views[3]),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: atlas.identity.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: staging_identity.as_entire_binding(),
+                },
             ],
         });
         Self {
@@ -166,6 +187,7 @@ impl DeriveStage {
             jobs,
             staging_heights,
             staging_grass,
+            staging_identity,
             pyramid: pyramid.clone(),
             level_detail: std::array::from_fn(|level| {
                 // Stored levels carry no detail.
@@ -215,6 +237,9 @@ impl DeriveStage {
                 cell_child: self.pyramid.cell_size_m(j.child.level) as f32,
                 detail_child: self.detail_at(j.child.level),
                 detail_parent: self.detail_at(j.child.level - 1),
+                _pad: [0; 3],
+                parent_identity: atlas.claimed(j.parent_slot),
+                identity: atlas.claim(j.child_slot, j.child),
             })
             .collect();
         queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&gpu_jobs));
@@ -261,6 +286,13 @@ impl DeriveStage {
                     },
                 );
             }
+            encoder.copy_buffer_to_buffer(
+                &self.staging_identity,
+                k as u64 * 16,
+                &atlas.identity,
+                u64::from(j.child_slot) * 16,
+                16,
+            );
         }
         jobs.len()
     }

@@ -100,7 +100,7 @@ pub struct TileService {
     cache: TileCache,
     slots: Vec<Option<TileId>>,
     resident: HashMap<TileId, Slot>,
-    failed: HashSet<TileId>,
+    failed: HashMap<TileId, String>,
     frame: u64,
     evictions: u64,
     last: ResidencyStats,
@@ -155,7 +155,7 @@ impl TileService {
                 cache: TileCache::new(config.cache_bytes),
                 slots,
                 resident,
-                failed: HashSet::new(),
+                failed: HashMap::new(),
                 frame: 0,
                 evictions: 0,
                 last: ResidencyStats::default(),
@@ -179,10 +179,11 @@ impl TileService {
                     self.cache.insert(tile);
                 }
                 Loaded::Failed { id, error } => {
-                    if self.failed.insert(id) {
+                    if let std::collections::hash_map::Entry::Vacant(e) = self.failed.entry(id) {
                         log::warn!(
                             "tile {id:?} failed to load, drawing its ancestor instead: {error}"
                         );
+                        e.insert(error);
                     }
                 }
             }
@@ -213,7 +214,8 @@ impl TileService {
         let mut work: Vec<Want> = order.iter().rev().copied().collect();
         while let Some(w) = work.pop() {
             let id = w.id;
-            if !seen.insert(id) || self.resident.contains_key(&id) || self.failed.contains(&id) {
+            if !seen.insert(id) || self.resident.contains_key(&id) || self.failed.contains_key(&id)
+            {
                 continue;
             }
             if self.pyramid.is_stored(id) {
@@ -321,6 +323,26 @@ impl TileService {
             t = cur.parent();
         }
         (-1.0e4, 1.0e5)
+    }
+
+    /// The failed tile that keeps `id` from becoming resident, with its error: `id` itself or
+    /// the ancestor it would be derived from (through non-resident tiles), if its load failed.
+    /// `None` while nothing on that chain has failed.
+    pub fn blocked_by(&self, id: TileId) -> Option<(TileId, &str)> {
+        let mut t = Some(id);
+        while let Some(cur) = t {
+            if self.resident.contains_key(&cur) {
+                return None;
+            }
+            if let Some(error) = self.failed.get(&cur) {
+                return Some((cur, error));
+            }
+            if self.pyramid.is_stored(cur) {
+                return None;
+            }
+            t = cur.parent();
+        }
+        None
     }
 
     /// Whether `id` holds an atlas slot.

@@ -11,7 +11,9 @@ use anyhow::{Context, Result, bail};
 use crate::camera::{sample_path, walker_at};
 use crate::gpu::GpuContext;
 use crate::tools::metrics::Summary;
-use crate::tools::report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
+use crate::tools::report::{
+    AdapterReport, FlyReport, FlySummary, FlyTotals, FrameRecord, MAX_REPORT_FRAMES, Thinned,
+};
 use crate::tools::scene::{Scene, SceneConfig};
 use crate::world::World;
 
@@ -45,6 +47,8 @@ pub struct FlyOptions {
 pub enum FlyProgress {
     /// The tiles of the first frame are loading.
     WarmingUp,
+    /// The warm-up ended with tiles missing (one line each); the run goes on without them.
+    WarmUpIncomplete(Vec<String>),
     /// Frames rendered so far, of a total.
     Frame(u64, u64),
 }
@@ -76,8 +80,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
             .cloned()
             .with_context(|| format!("world {} has no camera paths", opts.world.display()))?,
     };
-    std::fs::create_dir_all(&opts.out)
-        .with_context(|| format!("cannot create output folder {}", opts.out.display()))?;
+    let out_dir = OutDir::create(&opts.out)?;
 
     let ctx = GpuContext::new()?;
     let world_name = world.manifest.name.clone();
@@ -91,11 +94,14 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.
     progress(FlyProgress::WarmingUp);
-    scene.warm_up(
-        &ctx,
+    let warm_up = scene.warm_up_report(
         &sample_path(&path, path.keys[0].t_s),
         std::time::Duration::from_secs(60),
     )?;
+    let warm_up_missing = warm_up.describe(20);
+    if !warm_up_missing.is_empty() {
+        progress(FlyProgress::WarmUpIncomplete(warm_up_missing.clone()));
+    }
 
     // PNG encoding runs beside the renderer; the bounded channel keeps at most a few frames queued.
     let (tx, rx) = mpsc::sync_channel::<(PathBuf, image::RgbaImage)>(4);
@@ -107,7 +113,11 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
         Ok(())
     });
 
-    let mut records = Vec::with_capacity(opts.frames as usize);
+    // Bounded whatever --frames asks for: an evenly spaced sample of at most MAX_REPORT_FRAMES.
+    let mut records = Records {
+        kept: Thinned::new(MAX_REPORT_FRAMES),
+        totals: FlyTotals::default(),
+    };
     let last = (opts.frames.max(2) - 1) as f64;
     let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
     // Without images nothing needs a frame back: frames are submitted as an application
@@ -168,25 +178,41 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
         .join()
         .map_err(|_| anyhow::anyhow!("the frame writer thread panicked"))??;
 
-    let report = FlyReport::new(
+    let mut report = FlyReport::new(
         world_name,
         path.name.clone(),
         opts.size,
         AdapterReport::of(&ctx),
-        records,
+        records.kept,
+        records.totals,
     );
+    report.warm_up_missing = warm_up_missing;
     write_json(&opts.out.join("report.json"), &report)?;
+    out_dir.keep();
     Ok(report)
 }
 
 /// Frames a fly-through without images submits ahead of the GPU at most.
 pub const FRAMES_IN_FLIGHT: usize = 2;
 
+/// The frame records of a fly-through: a bounded sample, and tallies over every frame.
+struct Records {
+    kept: Thinned<FrameRecord>,
+    totals: FlyTotals,
+}
+
+impl Records {
+    fn push(&mut self, record: FrameRecord) {
+        self.totals.add(&record);
+        self.kept.push(record);
+    }
+}
+
 /// Completes the waiting records (oldest first) with the figures that came back.
 fn take_figures(
     scene: &mut Scene,
     waiting: &mut VecDeque<FrameRecord>,
-    records: &mut Vec<FrameRecord>,
+    records: &mut Records,
 ) -> Result<()> {
     for stats in scene.renderer().take_stats() {
         while let Some(mut r) = waiting.pop_front() {
@@ -209,8 +235,47 @@ pub fn write_json<T: serde::Serialize>(file: &Path, value: &T) -> Result<()> {
     let tmp = file.with_extension("json.tmp");
     let text = serde_json::to_string_pretty(value)?;
     std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, file).with_context(|| format!("cannot write {}", file.display()))?;
+    if let Err(e) = std::fs::rename(&tmp, file) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e).with_context(|| format!("cannot write {}", file.display()));
+    }
     Ok(())
+}
+
+/// An output folder made for a run. If the run created it and fails before writing anything
+/// into it, it is removed again (only while empty), so an early failure leaves no trace.
+pub struct OutDir {
+    path: PathBuf,
+    created: bool,
+    kept: bool,
+}
+
+impl OutDir {
+    /// Creates `path` (and its parents) where needed.
+    pub fn create(path: &Path) -> Result<Self> {
+        let created = !path.exists();
+        std::fs::create_dir_all(path)
+            .with_context(|| format!("cannot create output folder {}", path.display()))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            created,
+            kept: false,
+        })
+    }
+
+    /// The run succeeded: the folder stays.
+    pub fn keep(mut self) {
+        self.kept = true;
+    }
+}
+
+impl Drop for OutDir {
+    fn drop(&mut self) {
+        if self.created && !self.kept {
+            // Fails, and so keeps the folder, when anything was written into it.
+            let _ = std::fs::remove_dir(&self.path);
+        }
+    }
 }
 
 impl FlySummary {

@@ -126,28 +126,160 @@ pub struct FlyReport {
     pub size: (u32, u32),
     /// The adapter.
     pub adapter: AdapterReport,
-    /// Summary over all frames.
+    /// Summary over the frames kept in `frames` (every frame unless the run was longer than
+    /// [`MAX_REPORT_FRAMES`]); `holes`, `cache_peak_bytes` and `atlas_peak_slots` cover every
+    /// frame flown.
     pub summary: FlySummary,
-    /// Every frame.
+    /// Frames flown.
+    #[serde(default)]
+    pub frames_flown: u64,
+    /// Every how many frames one is kept in `frames`: 1, unless the run was longer than
+    /// [`MAX_REPORT_FRAMES`] frames (then the kept frames are an evenly spaced sample).
+    #[serde(default)]
+    pub frame_stride: u64,
+    /// Tiles of the first frame that the warm-up could not make resident, and why.
+    #[serde(default)]
+    pub warm_up_missing: Vec<String>,
+    /// The frames, at most [`MAX_REPORT_FRAMES`] of them (see `frame_stride`).
     pub frames: Vec<FrameRecord>,
 }
 
+/// Most per-frame records a fly-through keeps in memory and in `report.json`: about 2 KiB
+/// each, so at most about 32 MiB whatever `--frames` asks for. Longer runs keep an evenly
+/// spaced sample ([`Thinned`]).
+pub const MAX_REPORT_FRAMES: usize = 16_384;
+
+/// What a fly-through tallies over every frame, kept or not.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FlyTotals {
+    /// Holes summed over frames.
+    pub holes: u64,
+    /// Most bytes the CPU tile cache held.
+    pub cache_peak_bytes: u64,
+    /// Most atlas slots in use.
+    pub atlas_peak_slots: u32,
+}
+
+impl FlyTotals {
+    /// Adds a frame.
+    pub fn add(&mut self, f: &FrameRecord) {
+        self.holes += u64::from(f.residency.holes);
+        self.cache_peak_bytes = self.cache_peak_bytes.max(f.residency.cache.peak_bytes);
+        self.atlas_peak_slots = self.atlas_peak_slots.max(f.residency.atlas_used);
+    }
+}
+
 impl FlyReport {
-    /// A report over `frames`, with its summary computed.
+    /// A report over the kept `frames`, with its summary computed (the tallies of `totals`
+    /// cover every frame flown).
     pub fn new(
         world: String,
         path: String,
         size: (u32, u32),
         adapter: AdapterReport,
-        frames: Vec<FrameRecord>,
+        frames: Thinned<FrameRecord>,
+        totals: FlyTotals,
     ) -> Self {
+        let mut summary = FlySummary::of(frames.items());
+        summary.holes = totals.holes;
+        summary.cache_peak_bytes = totals.cache_peak_bytes;
+        summary.atlas_peak_slots = totals.atlas_peak_slots;
         Self {
             world,
             path,
             size,
             adapter,
-            summary: FlySummary::of(&frames),
-            frames,
+            summary,
+            frames_flown: frames.seen(),
+            frame_stride: frames.stride(),
+            warm_up_missing: Vec::new(),
+            frames: frames.into_items(),
         }
+    }
+}
+
+/// An evenly spaced sample of a run's per-frame records, bounded in memory: it keeps every
+/// record until it holds `cap`, then every other one, then every fourth, and so on (always
+/// the records whose index is a multiple of [`Thinned::stride`]). However long the run, it
+/// never holds more than `cap` records.
+#[derive(Clone, Debug)]
+pub struct Thinned<T> {
+    items: Vec<T>,
+    stride: u64,
+    cap: usize,
+    seen: u64,
+}
+
+impl<T> Thinned<T> {
+    /// An empty sample holding at most `cap` records (at least 2).
+    pub fn new(cap: usize) -> Self {
+        Self {
+            items: Vec::new(),
+            stride: 1,
+            cap: cap.max(2),
+            seen: 0,
+        }
+    }
+
+    /// Offers the next record (records are numbered from 0 in the order offered).
+    pub fn push(&mut self, item: T) {
+        if self.seen % self.stride == 0 {
+            if self.items.len() == self.cap {
+                // Keep the records at even positions: indices that are multiples of 2 * stride.
+                let mut k = 0;
+                self.items.retain(|_| {
+                    k += 1;
+                    (k - 1) % 2 == 0
+                });
+                self.stride *= 2;
+            }
+            if self.seen % self.stride == 0 {
+                self.items.push(item);
+            }
+        }
+        self.seen += 1;
+    }
+
+    /// The kept records, oldest first.
+    pub fn items(&self) -> &[T] {
+        &self.items
+    }
+
+    /// Takes the kept records.
+    pub fn into_items(self) -> Vec<T> {
+        self.items
+    }
+
+    /// Every how many records one is kept.
+    pub fn stride(&self) -> u64 {
+        self.stride
+    }
+
+    /// Records offered so far.
+    pub fn seen(&self) -> u64 {
+        self.seen
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Thinned;
+
+    #[test]
+    fn thinned_keeps_an_even_sample_within_its_cap() {
+        let mut t = Thinned::new(8);
+        for i in 0..1000u64 {
+            t.push(i);
+            assert!(t.items().len() <= 8, "{} records held", t.items().len());
+            assert!(t.items().iter().all(|&v| v % t.stride() == 0));
+        }
+        assert_eq!(t.seen(), 1000);
+        assert_eq!(t.stride(), 128);
+        assert_eq!(t.items(), &[0, 128, 256, 384, 512, 640, 768, 896]);
+        let mut small = Thinned::new(8);
+        for i in 0..5u64 {
+            small.push(i);
+        }
+        assert_eq!((small.items(), small.stride()), (&[0, 1, 2, 3, 4][..], 1));
     }
 }

@@ -146,6 +146,16 @@ impl Scene {
         Ok(self.renderer.warm_up(camera, timeout)?)
     }
 
+    /// Like [`Scene::warm_up`], saying which tiles are missing (see
+    /// [`Renderer::warm_up_report`]).
+    pub fn warm_up_report(
+        &mut self,
+        camera: &Camera,
+        timeout: std::time::Duration,
+    ) -> Result<crate::renderer::WarmUp, SceneError> {
+        Ok(self.renderer.warm_up_report(camera, timeout)?)
+    }
+
     /// Draws one frame from `camera` at the time of the last frame (the wind stands still).
     pub fn render(&mut self, ctx: &GpuContext, camera: &Camera) -> Result<FrameStats, SceneError> {
         let t = self.last.map_or(0.0, |(_, t)| t);

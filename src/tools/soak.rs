@@ -4,13 +4,14 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use glam::{DVec2, DVec3};
 use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
 use crate::gpu::GpuContext;
 use crate::tools::metrics::Summary;
+use crate::tools::report::Thinned;
 use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
 use crate::world::{TileData, TileId, World};
 
@@ -44,6 +45,11 @@ pub struct SoakOptions {
     /// Resident memory may grow this much after the warm-up, bytes (allocator noise); see
     /// [`SoakReport::rss_growth_bytes`].
     pub rss_tolerance_bytes: u64,
+    /// A teleport must reach full detail (every desired tile resident at its own level) within
+    /// this many frames, where the run flies that long after it.
+    pub max_recovery_frames: u32,
+    /// No frame may take longer than this wall time, milliseconds (a stall).
+    pub max_stall_ms: f64,
 }
 
 impl Default for SoakOptions {
@@ -60,6 +66,8 @@ impl Default for SoakOptions {
             settle_frames: 10,
             warmup_fraction: 0.25,
             rss_tolerance_bytes: 12 << 20,
+            max_recovery_frames: 50,
+            max_stall_ms: 5000.0,
             service: crate::stream::ServiceConfig::default(),
             no_grass: false,
         }
@@ -99,10 +107,10 @@ pub struct SoakReport {
     pub frame_ms: Summary,
     /// Peak resident memory of the process, bytes.
     pub rss_peak_bytes: u64,
-    /// Median resident memory just after the warm-up, bytes.
+    /// Resident memory just after the warm-up (the window's 10th percentile), bytes.
     pub rss_after_warmup_bytes: u64,
-    /// Growth of the median resident memory from just after the warm-up to the last quarter of
-    /// the run, less the CPU cache's own growth (which its ceiling bounds), bytes.
+    /// Growth of the resident memory's floor (10th percentile) from just after the warm-up to the
+    /// last quarter of the run, less the CPU cache's own growth (which its ceiling bounds), bytes.
     pub rss_growth_bytes: u64,
     /// Ceiling of the CPU tile cache, bytes.
     pub cache_ceiling_bytes: u64,
@@ -114,6 +122,18 @@ pub struct SoakReport {
     pub atlas_peak_slots: u32,
     /// Frames after a teleport's settle time with a hole.
     pub holes_after_settle: u32,
+    /// Most grass blades drawn in a frame (0 without grass).
+    #[serde(default)]
+    pub grass_blades_drawn_peak: u64,
+    /// Longest frame, wall time, milliseconds.
+    #[serde(default)]
+    pub longest_frame_ms: f64,
+    /// The bound on frames to full detail after a teleport.
+    #[serde(default)]
+    pub max_recovery_frames: u32,
+    /// The bound on a frame's wall time, milliseconds.
+    #[serde(default)]
+    pub max_stall_ms: f64,
     /// Loads completed, cancelled and failed.
     pub loads_completed: u64,
     /// Loads dropped because their tiles left the desired set.
@@ -126,14 +146,91 @@ pub struct SoakReport {
     pub cache_hit_rate: f64,
     /// Median fraction of desired tiles resident at their own level.
     pub resident_fraction_median: f64,
-    /// Resident memory every 10 frames: (frame, bytes, CPU cache bytes).
+    /// Resident memory every 10 frames: (frame, bytes, CPU cache bytes); at most
+    /// [`MAX_SOAK_RECORDS`] entries, evenly spaced over longer runs.
     pub rss_timeline: Vec<(u32, u64, u64)>,
-    /// Teleports and the time to full detail after each.
+    /// Teleports and the time to full detail after each; at most [`MAX_SOAK_RECORDS`], evenly
+    /// spaced over longer runs.
     pub teleports: Vec<TeleportRecord>,
-    /// Median wall time to full detail after a teleport, seconds.
+    /// Median wall time to full detail after a teleport (over `teleports`), seconds.
     pub full_detail_after_teleport_s: Option<f64>,
-    /// What went wrong; empty when the soak passed.
+    /// What went wrong; empty when the soak passed. At most [`MAX_SOAK_VIOLATIONS`] are listed.
     pub violations: Vec<String>,
+    /// Violations in all, listed or not.
+    #[serde(default)]
+    pub violation_count: u64,
+}
+
+/// Most per-frame samples a soak keeps for its medians and memory windows (an evenly spaced
+/// sample beyond that, [`Thinned`]): 40 bytes each, so at most 2.5 MiB whatever the run's
+/// length. Also the most `rss_timeline` entries and `teleports` kept.
+pub const MAX_SOAK_RECORDS: usize = 65_536;
+
+/// Most violations listed in `soak.json` (all are counted).
+pub const MAX_SOAK_VIOLATIONS: usize = 1000;
+
+/// The percentile of a memory window taken as its floor.
+const FLOOR_PERCENTILE: f64 = 0.1;
+
+/// One frame's figures that the soak keeps for its summary.
+#[derive(Clone, Copy, Debug)]
+struct FrameSample {
+    frame: u32,
+    frame_ms: f64,
+    resident_fraction: f64,
+    rss: u64,
+    cache_bytes: u64,
+}
+
+/// The frames of the memory check: the window just after the warm-up and the last quarter of
+/// the run, as frame ranges; `None` when the run is too short for them to be apart.
+fn memory_windows(
+    frames: u32,
+    warmup_frames: u32,
+) -> Option<(std::ops::Range<u32>, std::ops::Range<u32>)> {
+    let early = warmup_frames..warmup_frames + (frames / 10).max(1);
+    let late = frames - frames / 4..frames;
+    (early.end <= late.start && !late.is_empty()).then_some((early, late))
+}
+
+/// Frames of a soak of `seconds` and its warm-up.
+fn soak_frames(opts: &SoakOptions, seconds: f64) -> (f64, u32) {
+    let frames = (seconds / opts.dt_s).ceil();
+    let warmup = ((seconds * opts.warmup_fraction).max(3.0) / opts.dt_s) as u32;
+    (frames, warmup)
+}
+
+/// The violations of a soak: all counted, the first [`MAX_SOAK_VIOLATIONS`] listed.
+#[derive(Default)]
+struct Violations {
+    listed: Vec<String>,
+    count: u64,
+}
+
+impl Violations {
+    fn push(&mut self, v: String) {
+        self.count += 1;
+        if self.listed.len() < MAX_SOAK_VIOLATIONS {
+            self.listed.push(v);
+        }
+    }
+}
+
+/// A teleport must reach full detail within `bound` frames, where the run flew that long after
+/// it (up to `end`, the next teleport or the end of the run).
+fn check_recovery(t: &TeleportRecord, end: u32, bound: u32, violations: &mut Violations) {
+    match t.frames_to_full_detail {
+        Some(f) if f > bound => violations.push(format!(
+            "teleport at frame {}: full detail after {f} frames, more than {bound}",
+            t.frame
+        )),
+        None if end - t.frame > bound => violations.push(format!(
+            "teleport at frame {}: not at full detail {} frames later (bound {bound})",
+            t.frame,
+            end - t.frame
+        )),
+        _ => {}
+    }
 }
 
 /// Resident set size of this process, bytes (Linux; 0 elsewhere).
@@ -210,9 +307,33 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         "--speed must not be negative"
     );
     anyhow::ensure!(opts.dt_s > 0.0, "the frame step must be positive");
+    let (frames_f, warmup_frames) = soak_frames(opts, opts.seconds);
+    anyhow::ensure!(
+        frames_f <= f64::from(u32::MAX),
+        "--seconds {} is {frames_f} frames of {} s, more than a soak counts (at most {:.0} s)",
+        opts.seconds,
+        opts.dt_s,
+        f64::from(u32::MAX) * opts.dt_s
+    );
+    if memory_windows(frames_f as u32, warmup_frames).is_none() {
+        // The shortest run whose memory windows fall after the warm-up and apart.
+        let mut min_s = opts.seconds;
+        while {
+            let (f, w) = soak_frames(opts, min_s);
+            memory_windows(f as u32, w).is_none()
+        } {
+            min_s += opts.dt_s;
+        }
+        anyhow::bail!(
+            "--seconds {} is too short for the memory check: the warm-up alone takes {:.1} s; \
+             use --seconds {:.1} or more",
+            opts.seconds,
+            f64::from(warmup_frames) * opts.dt_s,
+            min_s
+        );
+    }
     let world = World::open(&opts.world)?;
-    std::fs::create_dir_all(&opts.out)
-        .with_context(|| format!("cannot create output folder {}", opts.out.display()))?;
+    let out_dir = crate::tools::fly::OutDir::create(&opts.out)?;
     let ground = Ground::new(&world)?;
     let ctx = GpuContext::new()?;
     let mut config = SceneConfig::for_world(&world);
@@ -225,8 +346,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let (width, height) = opts.size;
     let mut scene = Scene::new(&ctx, world, width, height, config.clone())?;
 
-    let frames = (opts.seconds / opts.dt_s).ceil() as u32;
-    let warmup_frames = ((opts.seconds * opts.warmup_fraction).max(3.0) / opts.dt_s) as u32;
+    let frames = frames_f as u32;
     let teleport_every = ((opts.teleport_every_s / opts.dt_s).round() as u32).max(1);
     let mut rng = Rng(opts.seed);
     let random_spot =
@@ -234,15 +354,17 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let mut pos = random_spot(&mut rng);
     let mut yaw = rng.next() * 360.0;
     let mut turn_rate = 0.0;
-    let mut frame_ms = Vec::with_capacity(frames as usize);
-    let mut resident_fraction = Vec::with_capacity(frames as usize);
-    let mut teleports: Vec<TeleportRecord> = Vec::new();
+    // Everything kept per frame is bounded: see MAX_SOAK_RECORDS and MAX_SOAK_VIOLATIONS.
+    let mut samples: Thinned<FrameSample> = Thinned::new(MAX_SOAK_RECORDS);
+    let mut teleports: Thinned<TeleportRecord> = Thinned::new(MAX_SOAK_RECORDS);
+    let mut current_teleport: Option<TeleportRecord> = None;
     let mut teleport_start = (0u32, Instant::now());
-    let mut rss_series: Vec<(u64, u64)> = Vec::with_capacity(frames as usize);
     let mut rss_peak = 0u64;
+    let mut longest_frame_ms = 0.0f64;
+    let mut blades_peak = 0u64;
     let (mut cache_peak, mut atlas_peak, mut holes_after_settle) = (0u64, 0u32, 0u32);
-    let mut violations = Vec::new();
-    let mut rss_timeline = Vec::new();
+    let mut violations = Violations::default();
+    let mut rss_timeline: Thinned<(u32, u64, u64)> = Thinned::new(MAX_SOAK_RECORDS);
     let mut last = None;
     let slots = config.service.atlas_slots;
     let ceiling = config.service.cache_bytes;
@@ -253,7 +375,11 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             pos = random_spot(&mut rng);
             yaw = rng.next() * 360.0;
             teleport_start = (frame, Instant::now());
-            teleports.push(TeleportRecord {
+            if let Some(done) = current_teleport.take() {
+                check_recovery(&done, frame, opts.max_recovery_frames, &mut violations);
+                teleports.push(done);
+            }
+            current_teleport = Some(TeleportRecord {
                 frame,
                 to_m: [pos.x, pos.y, 0.0],
                 frames_to_full_detail: None,
@@ -275,7 +401,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         pos += heading * opts.speed_mps * opts.dt_s;
         let agl = 60.0 + 40.0 * (t * 0.3).sin();
         let eye = DVec3::new(pos.x, pos.y, ground.height(pos) + agl);
-        if let Some(tp) = teleports.last_mut() {
+        if let Some(tp) = current_teleport.as_mut() {
             if tp.frame == frame {
                 tp.to_m[2] = eye.z;
             }
@@ -285,9 +411,17 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         let start = Instant::now();
         let stats = scene.render_at(&ctx, &camera, t)?;
         ctx.wait_idle();
-        frame_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        longest_frame_ms = longest_frame_ms.max(ms);
+        let drawn = u64::from(stats.grass.drawn[0]) + u64::from(stats.grass.drawn[1]);
+        blades_peak = blades_peak.max(drawn);
+        if ms > opts.max_stall_ms {
+            violations.push(format!(
+                "frame {frame}: took {ms:.0} ms, longer than the {:.0} ms a frame may stall",
+                opts.max_stall_ms
+            ));
+        }
         let r = &stats.residency;
-        resident_fraction.push(r.resident_fraction);
         cache_peak = cache_peak.max(r.cache.bytes);
         atlas_peak = atlas_peak.max(r.atlas_used);
         if r.cache.bytes > ceiling {
@@ -309,7 +443,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
                 r.holes
             ));
         }
-        if let Some(tp) = teleports.last_mut() {
+        if let Some(tp) = current_teleport.as_mut() {
             if tp.frames_to_full_detail.is_none() && r.resident == r.desired {
                 tp.frames_to_full_detail = Some(frame - tp.frame);
                 tp.seconds_to_full_detail = Some(teleport_start.1.elapsed().as_secs_f64());
@@ -320,26 +454,49 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         if frame % 10 == 0 {
             rss_timeline.push((frame, rss, r.cache.bytes));
         }
-        rss_series.push((rss, r.cache.bytes));
+        samples.push(FrameSample {
+            frame,
+            frame_ms: ms,
+            resident_fraction: r.resident_fraction,
+            rss,
+            cache_bytes: r.cache.bytes,
+        });
         last = Some(stats.residency);
         progress(u64::from(frame) + 1, u64::from(frames));
     }
-    // Memory growth: the typical resident size over the last quarter of the run against the
-    // typical size just after the warm-up. Medians, because drivers allocate and free scratch
-    // memory in bursts; the CPU cache's own growth is taken out, since it has its ceiling.
-    let window = |from: usize, to: usize| {
-        let part = &rss_series[from.min(rss_series.len())..to.min(rss_series.len())];
-        let rss: Vec<f64> = part.iter().map(|p| p.0 as f64).collect();
-        let cache: Vec<f64> = part.iter().map(|p| p.1 as f64).collect();
-        (Summary::of(&rss).median, Summary::of(&cache).median)
+    if let Some(done) = current_teleport.take() {
+        check_recovery(&done, frames, opts.max_recovery_frames, &mut violations);
+        teleports.push(done);
+    }
+    // Memory growth: the resident size's floor over the last quarter of the run against its
+    // floor just after the warm-up. The floor (the 10th percentile of each window), because
+    // drivers allocate and free scratch memory in bursts: on lavapipe the resident size swings
+    // by 40 MiB between frames, enough to move a window's median by as much under load, while
+    // a leak lifts the floor. The CPU cache's own growth is taken out, since it has its ceiling.
+    let (early, late) = memory_windows(frames, warmup_frames).expect("checked before the run");
+    let window = |range: &std::ops::Range<u32>| {
+        let part: Vec<&FrameSample> = samples
+            .items()
+            .iter()
+            .filter(|s| range.contains(&s.frame))
+            .collect();
+        let rss: Vec<f64> = part.iter().map(|p| p.rss as f64).collect();
+        let cache: Vec<f64> = part.iter().map(|p| p.cache_bytes as f64).collect();
+        let floor =
+            |v: &[f64]| crate::tools::metrics::percentile(v, FLOOR_PERCENTILE).unwrap_or(0.0);
+        (floor(&rss), floor(&cache))
     };
-    let n = rss_series.len();
-    let w = warmup_frames as usize;
-    let (rss_early, cache_early) = window(w, w + (n / 10).max(1));
-    let (rss_late, cache_late) = window(n - n / 4, n);
+    let (rss_early, cache_early) = window(&early);
+    let (rss_late, cache_late) = window(&late);
     let rss_after_warmup = rss_early as u64;
     let rss_growth = ((rss_late - rss_early) - (cache_late - cache_early)).max(0.0) as u64;
-    if n > w && rss_growth > opts.rss_tolerance_bytes {
+    if rss_early <= 0.0 || rss_late <= 0.0 {
+        violations.push(format!(
+            "resident memory could not be measured after the warm-up (frames {}..{} and {}..{}): \
+             the memory check cannot pass without it",
+            early.start, early.end, late.start, late.end
+        ));
+    } else if rss_growth > opts.rss_tolerance_bytes {
         violations.push(format!(
             "resident memory grew by {:.1} MiB after the warm-up (tolerance {:.1} MiB)",
             rss_growth as f64 / 1048576.0,
@@ -347,6 +504,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         ));
     }
     let last = last.unwrap_or_default();
+    let teleports = teleports.into_items();
     let detail: Vec<f64> = teleports
         .iter()
         .filter_map(|t| t.seconds_to_full_detail)
@@ -358,7 +516,13 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         seconds: opts.seconds,
         speed_mps: opts.speed_mps,
         seed: opts.seed,
-        frame_ms: Summary::of(&frame_ms),
+        frame_ms: Summary::of(
+            &samples
+                .items()
+                .iter()
+                .map(|s| s.frame_ms)
+                .collect::<Vec<_>>(),
+        ),
         rss_peak_bytes: rss_peak,
         rss_after_warmup_bytes: rss_after_warmup,
         rss_growth_bytes: rss_growth,
@@ -367,17 +531,30 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         atlas_slots: slots,
         atlas_peak_slots: atlas_peak,
         holes_after_settle,
+        grass_blades_drawn_peak: blades_peak,
+        longest_frame_ms,
+        max_recovery_frames: opts.max_recovery_frames,
+        max_stall_ms: opts.max_stall_ms,
         loads_completed: last.stream.completed,
         loads_cancelled: last.stream.cancelled,
         loads_failed: last.stream.failed,
         evictions: last.evictions,
         cache_hit_rate: last.cache.hit_rate(),
-        resident_fraction_median: Summary::of(&resident_fraction).median,
+        resident_fraction_median: Summary::of(
+            &samples
+                .items()
+                .iter()
+                .map(|s| s.resident_fraction)
+                .collect::<Vec<_>>(),
+        )
+        .median,
         full_detail_after_teleport_s: (!detail.is_empty()).then(|| Summary::of(&detail).median),
-        rss_timeline,
+        rss_timeline: rss_timeline.into_items(),
         teleports,
-        violations,
+        violation_count: violations.count,
+        violations: violations.listed,
     };
     write_json(&opts.out.join("soak.json"), &report)?;
+    out_dir.keep();
     Ok(report)
 }

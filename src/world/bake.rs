@@ -57,7 +57,9 @@ pub struct BakeOptions {
     /// Spacing of the DEM's samples in metres (east-west, north-south), in place of what the
     /// file says; needed for a TIFF without GeoTIFF tags.
     pub dem_cell_size_m: Option<[f64; 2]>,
-    /// The world directory to write (created where needed; other files in it are kept).
+    /// The world directory to write. The world is baked into a temporary folder beside it and
+    /// renamed into place at the end; an existing folder that is not empty is refused unless
+    /// `replace` is set, and is then replaced as a whole.
     pub out: PathBuf,
     /// World name; by default the name of `out`.
     pub name: Option<String>,
@@ -70,6 +72,8 @@ pub struct BakeOptions {
     pub stored_levels: u8,
     /// Seed of the grass noise.
     pub seed: u64,
+    /// Replace `out` if it exists and is not empty (otherwise such a folder is refused).
+    pub replace: bool,
 }
 
 impl Default for BakeOptions {
@@ -83,6 +87,7 @@ impl Default for BakeOptions {
             tile_cells: 128,
             stored_levels: 3,
             seed: 1,
+            replace: false,
         }
     }
 }
@@ -136,6 +141,7 @@ pub fn bake(
 ) -> Result<BakeReport, WorldError> {
     let start = Instant::now();
     let manifest_path = opts.out.join("world.toml");
+    check_options(opts)?;
 
     progress(BakeStage::LoadDem, 0, 1);
     let dem = Dem::load_with(
@@ -145,25 +151,13 @@ pub fn bake(
         },
     )?;
     progress(BakeStage::LoadDem, 1, 1);
+    check_dem_heights(&dem, &opts.dem)?;
 
     let cell = match opts.cell_size_m {
         Some(c) => c,
         None => nice_cell_size(dem.cell_ew_m.min(dem.cell_ns_m)),
     };
-    if !cell.is_finite() {
-        return Err(WorldError::NonFinite {
-            path: manifest_path,
-            field: "cell_size_m (bake option)".into(),
-            value: cell,
-        });
-    }
-    if cell <= 0.0 {
-        return Err(WorldError::NonPositive {
-            path: manifest_path,
-            field: "cell_size_m (bake option)".into(),
-            value: cell,
-        });
-    }
+    check_cell_size(&dem, &opts.dem, opts.cell_size_m, cell)?;
 
     // Millimetres are plenty, and keep the manifest free of float noise.
     let extent = dem.extent_m().map(|e| round_to(e, 3));
@@ -202,6 +196,7 @@ pub fn bake(
             nodata_filled: dem.nodata_filled,
         }),
         derive: None,
+        grass_peak: None,
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;
@@ -223,12 +218,18 @@ pub fn bake(
     progress(BakeStage::Paths, 2, 2);
     manifest.paths = vec![tour, overview, low, meadow, helicopter, wind_tour, walker];
     manifest.wind_scenes = default_wind_scenes();
+    manifest.grass_peak = Some(grass_peak(&manifest, &painted));
     manifest.validate(&manifest_path)?;
 
-    let tiles_written = write_all_tiles(&opts.out, &manifest.pyramid, &painted, progress)?;
+    let staging = Staging::begin(&opts.out, opts.replace)?;
+    let tiles_written = write_all_tiles(staging.dir(), &manifest.pyramid, &painted, progress)?;
 
     progress(BakeStage::WriteManifest, 0, 1);
-    write_atomic(&manifest_path, manifest.to_toml().as_bytes())?;
+    write_atomic(
+        &staging.dir().join("world.toml"),
+        manifest.to_toml().as_bytes(),
+    )?;
+    staging.publish()?;
     progress(BakeStage::WriteManifest, 1, 1);
 
     Ok(BakeReport {
@@ -1214,5 +1215,204 @@ mod tests {
             fbm(DVec2::new(0.5, 0.5), 1, 3),
             fbm(DVec2::new(0.5, 0.5), 2, 3)
         );
+    }
+}
+
+/// Refuses bake options out of range before anything is read, naming the option.
+fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
+    let t = opts.tile_cells;
+    if !(8..=1024).contains(&t) || !t.is_power_of_two() {
+        return Err(WorldError::bad_option(
+            "--tile-cells",
+            t,
+            "a power of two in 8..=1024".into(),
+        ));
+    }
+    if !(1..=12).contains(&opts.stored_levels) {
+        return Err(WorldError::bad_option(
+            "--levels",
+            opts.stored_levels,
+            "in 1..=12".into(),
+        ));
+    }
+    if let Some(c) = opts.cell_size_m
+        && !(c.is_finite() && c > 0.0)
+    {
+        return Err(WorldError::bad_option(
+            "--cell-size",
+            c,
+            "a positive number of metres".into(),
+        ));
+    }
+    check_out(&opts.out, opts.replace)
+}
+
+/// Smallest cell a bake resamples to, metres.
+pub const MIN_BAKE_CELL_M: f64 = 1e-3;
+
+/// Most cells a side a bake resamples the DEM to.
+pub const MAX_BAKE_CELLS: f64 = 65_536.0;
+
+/// Refuses a cell size (given, or the DEM's own) below a millimetre or resampling the DEM to
+/// more than [`MAX_BAKE_CELLS`] a side, naming the option or the sidecar's field.
+fn check_cell_size(
+    dem: &Dem,
+    dem_path: &Path,
+    option: Option<f64>,
+    cell: f64,
+) -> Result<(), WorldError> {
+    let extent = dem.extent_m();
+    let cells = extent[0].max(extent[1]) / cell;
+    let least = (extent[0].max(extent[1]) / MAX_BAKE_CELLS).max(MIN_BAKE_CELL_M);
+    if cell >= MIN_BAKE_CELL_M && cells <= MAX_BAKE_CELLS {
+        return Ok(());
+    }
+    let allowed = format!(
+        "at least {least} m for this DEM ({:.3} x {:.3} m; a bake resamples to at least 1 mm \
+         cells and at most {MAX_BAKE_CELLS} cells a side)",
+        extent[0], extent[1]
+    );
+    match option {
+        Some(c) => Err(WorldError::bad_option("--cell-size", c, allowed)),
+        None => Err(WorldError::OutOfRange {
+            path: super::dem::sidecar_path(dem_path),
+            field: "cell_size_m".into(),
+            value: format!("{} x {}", dem.cell_ew_m, dem.cell_ns_m),
+            allowed: format!("{allowed}, or pass --cell-size"),
+        }),
+    }
+}
+
+/// Refuses a DEM whose heights leave [`super::PLAUSIBLE_HEIGHTS_M`] (a wrong offset or scale in
+/// its sidecar), naming the sidecar.
+fn check_dem_heights(dem: &Dem, dem_path: &Path) -> Result<(), WorldError> {
+    let [lo, hi] = super::PLAUSIBLE_HEIGHTS_M;
+    let bad = dem.heights.iter().position(|&h| {
+        let h = f64::from(h);
+        !(lo..=hi).contains(&h)
+    });
+    match bad {
+        None => Ok(()),
+        Some(k) => Err(WorldError::ImplausibleHeight {
+            path: super::dem::sidecar_path(dem_path),
+            dem: dem_path.to_path_buf(),
+            column: k as u32 % dem.width,
+            row: k as u32 / dem.width,
+            value: f64::from(dem.heights[k]),
+            range: super::PLAUSIBLE_HEIGHTS_M,
+        }),
+    }
+}
+
+/// The densest grass of the finest stored level over windows of the finest grass tiles
+/// (`Pyramid::max_level`), for the manifest's `grass_peak`.
+fn grass_peak(manifest: &Manifest, painted: &Painted) -> super::GrassPeak {
+    use super::grass_density::{SHORT_GRASS_M, split_shares, tile_peak, window_cells};
+    let pyramid = &manifest.pyramid;
+    let level = pyramid.stored_levels - 1;
+    let window_m = pyramid.tile_size_m(pyramid.max_level());
+    let window = window_cells(pyramid, window_m);
+    let split = split_shares(&manifest.grass_types, SHORT_GRASS_M);
+    let [nx, ny] = pyramid.tiles_at(level);
+    let mut density = 0.0f32;
+    for y in 0..ny {
+        for x in 0..nx {
+            let tile = cut_tile(pyramid, painted, TileId::new(level, x, y));
+            density = density.max(tile_peak(&tile, pyramid, window, &split));
+        }
+    }
+    super::GrassPeak {
+        window_m,
+        short_m: SHORT_GRASS_M,
+        density,
+    }
+}
+
+/// Refuses an output folder that exists and is not empty, unless it is to be replaced.
+fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
+    match std::fs::read_dir(out) {
+        Ok(mut entries) => {
+            if entries.next().is_some() && !replace {
+                return Err(WorldError::OutputNotEmpty {
+                    path: out.to_path_buf(),
+                });
+            }
+            Ok(())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(WorldError::io(out, e)),
+    }
+}
+
+/// A world being baked in a temporary folder beside its output folder, renamed into place by
+/// [`Staging::publish`]; removed if the bake fails first, so that a failed or interrupted bake
+/// never leaves a half-written world where the world should be.
+struct Staging {
+    out: PathBuf,
+    dir: PathBuf,
+    replace: bool,
+    published: bool,
+}
+
+impl Staging {
+    fn begin(out: &Path, replace: bool) -> Result<Self, WorldError> {
+        check_out(out, replace)?;
+        let name = out
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "world".into());
+        let parent = match out.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        std::fs::create_dir_all(&parent).map_err(|e| WorldError::io(&parent, e))?;
+        let dir = parent.join(format!(".{name}.baking.{}", std::process::id()));
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).map_err(|e| WorldError::io(&dir, e))?;
+        }
+        std::fs::create_dir(&dir).map_err(|e| WorldError::io(&dir, e))?;
+        Ok(Self {
+            out: out.to_path_buf(),
+            dir,
+            replace,
+            published: false,
+        })
+    }
+
+    fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Renames the baked world into place. An existing output folder (empty, or any with
+    /// `replace`) is moved aside first and removed once the new world is in place.
+    fn publish(mut self) -> Result<(), WorldError> {
+        check_out(&self.out, self.replace)?;
+        let old = self.out.exists().then(|| {
+            let mut aside = self.dir.clone().into_os_string();
+            aside.push(".old");
+            PathBuf::from(aside)
+        });
+        if let Some(aside) = &old {
+            std::fs::rename(&self.out, aside).map_err(|e| WorldError::io(&self.out, e))?;
+        }
+        if let Err(e) = std::fs::rename(&self.dir, &self.out) {
+            if let Some(aside) = &old {
+                let _ = std::fs::rename(aside, &self.out);
+            }
+            return Err(WorldError::io(&self.out, e));
+        }
+        self.published = true;
+        if let Some(aside) = &old {
+            std::fs::remove_dir_all(aside).map_err(|e| WorldError::io(aside, e))?;
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        if !self.published {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
     }
 }

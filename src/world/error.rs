@@ -392,6 +392,71 @@ pub enum WorldError {
         message: String,
     },
 
+    /// A command-line option of the baker is out of range (no file is to blame).
+    #[error("{option} {value}: must be {allowed}")]
+    BadOption {
+        /// The option, e.g. `--tile-cells`.
+        option: &'static str,
+        /// The value given.
+        value: String,
+        /// What is allowed, in words.
+        allowed: String,
+    },
+
+    /// A DEM's height lies outside the heights of a planet's surface (a wrong offset or scale in
+    /// its sidecar).
+    #[error(
+        "{}: height {value} m at column {column}, row {row} of {} (height_offset_m + \
+         height_scale_m x the sample) is outside [{}, {}] m, the heights of a planet's surface: \
+         check height_offset_m and height_scale_m",
+        path.display(), dem.display(), range[0], range[1]
+    )]
+    ImplausibleHeight {
+        /// The sidecar holding the offset and scale.
+        path: PathBuf,
+        /// The DEM image.
+        dem: PathBuf,
+        /// Column of the sample, from the west.
+        column: u32,
+        /// Row of the sample, from the north.
+        row: u32,
+        /// The height it gives, metres.
+        value: f64,
+        /// The plausible range, metres.
+        range: [f64; 2],
+    },
+
+    /// A file to be read is not a regular file (a device, a FIFO, a folder).
+    #[error("{}: not a regular file ({kind}); a world holds only regular files", path.display())]
+    NotARegularFile {
+        /// The file.
+        path: PathBuf,
+        /// What it is instead.
+        kind: &'static str,
+    },
+
+    /// A file is larger than its format allows for this world.
+    #[error("{}: {size} bytes, more than the {max} that this file may hold", path.display())]
+    FileTooLarge {
+        /// The file.
+        path: PathBuf,
+        /// Its size, or the bytes read before giving up.
+        size: u64,
+        /// The most allowed.
+        max: u64,
+    },
+
+    /// The bake's output folder exists and is not empty.
+    #[error(
+        "{}: the output folder is not empty; bake into a new folder, or pass --replace to \
+         replace it (the new world is written beside it and renamed into place)",
+        path.display()
+    )]
+    OutputNotEmpty {
+        /// The output folder.
+        path: PathBuf,
+    },
+
     /// A DEM's sidecar disagrees with its image.
     #[error(
         "{}: the sidecar says {field} = {sidecar}, the image has {image}",
@@ -491,6 +556,18 @@ pub enum WorldError {
     },
 }
 
+/// Variants added for bad options, implausible DEMs, unbounded reads and bake output folders.
+impl WorldError {
+    /// A bake option (or a value derived from the DEM and the options) is out of range.
+    pub(crate) fn bad_option(option: &'static str, value: impl ToString, allowed: String) -> Self {
+        WorldError::BadOption {
+            option,
+            value: value.to_string(),
+            allowed,
+        }
+    }
+}
+
 impl WorldError {
     /// The file or directory the error concerns, where it concerns one.
     pub fn path(&self) -> Option<&Path> {
@@ -533,7 +610,12 @@ impl WorldError {
             | NoGeoreference { path, .. }
             | HgtSize { path, .. }
             | HgtName { path }
-            | TooMuchNodata { path, .. } => Some(path),
+            | TooMuchNodata { path, .. }
+            | ImplausibleHeight { path, .. }
+            | NotARegularFile { path, .. }
+            | FileTooLarge { path, .. }
+            | OutputNotEmpty { path } => Some(path),
+            BadOption { .. } => None,
         }
     }
 

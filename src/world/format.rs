@@ -80,6 +80,12 @@ impl TileData {
         j as usize * self.size as usize + i as usize
     }
 
+    /// Bytes a tile of `size` samples a side holds in memory, as [`TileData::byte_size`] counts
+    /// them.
+    pub fn byte_size_for(size: u32) -> u64 {
+        std::mem::size_of::<Self>() as u64 + u64::from(size) * u64::from(size) * 6
+    }
+
     /// Bytes this tile holds in memory (samples and the struct itself), for cache budgets.
     pub fn byte_size(&self) -> usize {
         std::mem::size_of::<Self>()
@@ -183,8 +189,34 @@ pub fn read_tile_with(
     let size = pyramid.samples_per_side();
 
     let path = tile_path(world_dir, id, TileFile::Height);
-    let bytes = std::fs::read(&path).map_err(|e| WorldError::io(&path, e))?;
-    let heights = south_first(&decode_exr(&bytes, size, &path)?, size);
+    let bytes = read_regular(&path, max_file_bytes(TileFile::Height, size))?;
+    let heights = decode_heights(&bytes, size, options, &path)?;
+    let path = tile_path(world_dir, id, TileFile::Type);
+    let bytes = read_regular(&path, max_file_bytes(TileFile::Type, size))?;
+    let grass_type = decode_grass_types(&bytes, size, options, &path)?;
+    let path = tile_path(world_dir, id, TileFile::Density);
+    let bytes = read_regular(&path, max_file_bytes(TileFile::Density, size))?;
+    let density = decode_density(&bytes, size, &path)?;
+    Ok(TileData {
+        id,
+        size,
+        heights,
+        grass_type,
+        density,
+    })
+}
+
+/// Decodes a tile's height file (`size` samples a side) into south-first heights, each finite
+/// and within the height range of `options` (with its tolerance). `path` names the file in
+/// errors.
+pub fn decode_heights(
+    bytes: &[u8],
+    size: u32,
+    options: &ReadOptions,
+    path: &Path,
+) -> Result<Vec<f32>, WorldError> {
+    let path = path.to_path_buf();
+    let heights = south_first(&decode_exr(bytes, size, &path)?, size);
     let [lo, hi] = options.height_range_m;
     let tolerance = 1.0 + 0.01 * (hi - lo).abs();
     for (k, &h) in heights.iter().enumerate() {
@@ -207,34 +239,113 @@ pub fn read_tile_with(
             });
         }
     }
+    Ok(heights)
+}
 
-    let path = tile_path(world_dir, id, TileFile::Type);
-    let bytes = std::fs::read(&path).map_err(|e| WorldError::io(&path, e))?;
-    let grass_type = south_first(&decode_png_l8(&bytes, size, &path)?, size);
+/// Decodes a tile's grass type map into south-first indices, each below the grass type count
+/// of `options`.
+pub fn decode_grass_types(
+    bytes: &[u8],
+    size: u32,
+    options: &ReadOptions,
+    path: &Path,
+) -> Result<Vec<u8>, WorldError> {
+    let grass_type = south_first(&decode_png_l8(bytes, size, path)?, size);
     if let Some(k) = grass_type
         .iter()
         .position(|&t| usize::from(t) >= options.grass_type_count)
     {
         return Err(WorldError::GrassTypeOutOfRange {
-            path,
+            path: path.to_path_buf(),
             i: k as u32 % size,
             j: k as u32 / size,
             index: grass_type[k],
             count: options.grass_type_count,
         });
     }
+    Ok(grass_type)
+}
 
-    let path = tile_path(world_dir, id, TileFile::Density);
-    let bytes = std::fs::read(&path).map_err(|e| WorldError::io(&path, e))?;
-    let density = south_first(&decode_png_l8(&bytes, size, &path)?, size);
+/// Decodes a tile's density map into south-first densities.
+pub fn decode_density(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<u8>, WorldError> {
+    Ok(south_first(&decode_png_l8(bytes, size, path)?, size))
+}
 
-    Ok(TileData {
-        id,
+/// The most bytes a tile file of `size` samples a side may hold: twice its raw samples (a
+/// compressor never doubles them) and 64 KiB of headers.
+pub fn max_file_bytes(kind: TileFile, size: u32) -> u64 {
+    let samples = u64::from(size) * u64::from(size);
+    let bytes_per_sample = match kind {
+        TileFile::Height => 4,
+        TileFile::Type | TileFile::Density => 1,
+    };
+    2 * samples * bytes_per_sample + (64 << 10)
+}
+
+/// Reads a regular file of at most `max` bytes. Anything else (a device such as `/dev/zero`
+/// behind a symlink, a FIFO, a folder) is refused before it is opened, and the read stops
+/// after `max + 1` bytes, so that no file can make a reader hang or run out of memory.
+pub(crate) fn read_regular(path: &Path, max: u64) -> Result<Vec<u8>, WorldError> {
+    use std::io::Read;
+    let not_regular = |kind| WorldError::NotARegularFile {
+        path: path.to_path_buf(),
+        kind,
+    };
+    let meta = std::fs::metadata(path).map_err(|e| WorldError::io(path, e))?;
+    let kind_of = |m: &std::fs::Metadata| special_kind(m.file_type());
+    if !meta.is_file() {
+        return Err(not_regular(kind_of(&meta)));
+    }
+    let too_large = |size| WorldError::FileTooLarge {
+        path: path.to_path_buf(),
         size,
-        heights,
-        grass_type,
-        density,
-    })
+        max,
+    };
+    if meta.len() > max {
+        return Err(too_large(meta.len()));
+    }
+    let file = std::fs::File::open(path).map_err(|e| WorldError::io(path, e))?;
+    // The path may have been swapped since the check: look at what was opened.
+    let opened = file.metadata().map_err(|e| WorldError::io(path, e))?;
+    if !opened.is_file() {
+        return Err(not_regular(kind_of(&opened)));
+    }
+    let mut bytes = Vec::with_capacity(opened.len().min(max) as usize);
+    file.take(max + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| WorldError::io(path, e))?;
+    if bytes.len() as u64 > max {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
+/// What a file that is not a regular file is, in words.
+#[cfg(unix)]
+fn special_kind(t: std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if t.is_dir() {
+        "a folder"
+    } else if t.is_fifo() {
+        "a FIFO"
+    } else if t.is_char_device() {
+        "a character device"
+    } else if t.is_block_device() {
+        "a block device"
+    } else if t.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    }
+}
+
+#[cfg(not(unix))]
+fn special_kind(t: std::fs::FileType) -> &'static str {
+    if t.is_dir() {
+        "a folder"
+    } else {
+        "not a regular file"
+    }
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same directory, creating the

@@ -69,6 +69,10 @@ pub struct Manifest {
     /// then adds detail at [`LEGACY_DETAIL`], as those worlds always did.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub derive: Option<DeriveCalibration>,
+    /// The densest grass of the finest stored level, which sizes the grass pool; written by the
+    /// baker. Without it (older worlds) the renderer reads the finest tiles to estimate it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grass_peak: Option<super::GrassPeak>,
 }
 
 /// The `[source]` table: the DEM a world was baked from.
@@ -543,10 +547,17 @@ pub struct CameraKey {
     pub pitch_deg: f64,
 }
 
+/// The largest `world.toml` read, bytes.
+pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
+
 impl Manifest {
     /// Reads, parses and validates a manifest file.
     pub fn from_path(path: &Path) -> Result<Manifest, WorldError> {
-        let text = std::fs::read_to_string(path).map_err(|e| WorldError::io(path, e))?;
+        let bytes = super::format::read_regular(path, MAX_MANIFEST_BYTES)?;
+        let text = String::from_utf8(bytes).map_err(|e| WorldError::ManifestSyntax {
+            path: path.to_path_buf(),
+            message: format!("not UTF-8 text: {e}"),
+        })?;
         Manifest::parse(&text, path)
     }
 
@@ -670,6 +681,14 @@ impl Manifest {
                 max: hi,
             });
         }
+        let [plo, phi] = super::PLAUSIBLE_HEIGHTS_M;
+        if f64::from(lo) < plo || f64::from(hi) > phi {
+            return Err(v.out_of_range(
+                "height_range_m",
+                format!("[{lo}, {hi}]"),
+                &format!("within [{plo}, {phi}] m, the heights of a planet's surface"),
+            ));
+        }
 
         if self.grass_types.is_empty() {
             return Err(WorldError::NoGrassTypes {
@@ -752,6 +771,14 @@ impl Manifest {
         self.validate_wind_scenes(&v)?;
         for (pi, cam) in self.paths.iter().enumerate() {
             self.validate_path_wind(&v, pi, cam)?;
+        }
+        if let Some(g) = &self.grass_peak {
+            v.positive("grass_peak.window_m", g.window_m)?;
+            v.non_negative("grass_peak.short_m", g.short_m)?;
+            v.finite("grass_peak.density", g.density)?;
+            if !(0.0..=2.0).contains(&g.density) {
+                return Err(v.out_of_range("grass_peak.density", g.density, "in 0..=2"));
+            }
         }
         if let Some(c) = &self.derive {
             self.validate_derive(&v, c)?;

@@ -1,6 +1,8 @@
 //! The world, GPU-free: tile addressing ([`TileId`], [`Pyramid`]), the manifest
 //! ([`Manifest`], `world.toml`), the stored tile files ([`TileData`]), DEM loading (GeoTIFF,
 //! SRTM `.hgt`, PNG + sidecar; nodata filling) and the [`bake`]r that turns a DEM into a world.
+//! [`grass_density`] works out the densest grass that sizes the grass pool (the manifest's
+//! `grass_peak`), and [`fuzz`] holds the checks that the decoders are fuzzed against.
 //!
 //! A world is a directory:
 //! ```text
@@ -16,6 +18,8 @@ pub mod error;
 pub mod format;
 mod geotiff;
 mod hgt;
+pub mod fuzz;
+pub mod grass_density;
 pub mod manifest;
 pub mod nodata;
 pub mod tile;
@@ -28,12 +32,17 @@ pub use error::WorldError;
 pub use format::{
     ReadOptions, TileData, TileFile, read_tile, read_tile_with, tile_path, write_tile,
 };
+pub use grass_density::GrassPeak;
 pub use manifest::{
     CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, DeriveCalibration, DeriveMode, FeatureSwitches,
     GrassType, LEGACY_DETAIL, MAX_DETAIL, MAX_WIND_SOURCES, Manifest, Sky, SourcePlacement,
     WindDefaults, WindKey, WindScene, WindSource, WorldSource,
 };
 pub use tile::{Bounds, Pyramid, TileId};
+
+/// Heights a world may hold, metres: Earth's surface spans about -10,935 m (the Challenger
+/// Deep) to 8,849 m (Everest); a height beyond this range is a wrong offset or scale.
+pub const PLAUSIBLE_HEIGHTS_M: [f64; 2] = [-12_000.0, 10_000.0];
 
 /// An opened world: its directory and its validated manifest.
 #[derive(Clone, Debug, PartialEq)]
