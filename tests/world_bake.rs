@@ -275,6 +275,8 @@ fn bake_into_a_non_empty_folder_is_refused_unless_replaced_as_a_whole() {
     std::fs::create_dir_all(out.join("tiles/L5")).unwrap();
     std::fs::write(out.join("tiles/L5/0_0.height.exr"), "stale").unwrap();
     std::fs::write(out.join("world.toml"), "old").unwrap();
+    std::fs::create_dir_all(out.join("source")).unwrap();
+    std::fs::write(out.join("source/notes.txt"), "keep me").unwrap();
     let mut opts = BakeOptions {
         dem,
         out: out.clone(),
@@ -307,6 +309,11 @@ fn bake_into_a_non_empty_folder_is_refused_unless_replaced_as_a_whole() {
         "tiles were written into the output folder in place"
     );
     assert!(!out.join("tiles/L5").exists(), "a stale tile was kept");
+    // Files beside the world (a README, the source DEM) are kept.
+    assert_eq!(
+        std::fs::read_to_string(out.join("source/notes.txt")).unwrap(),
+        "keep me"
+    );
     verdant::world::World::open(&out).unwrap();
     let names: Vec<String> = std::fs::read_dir(dir.path())
         .unwrap()

@@ -59,7 +59,8 @@ pub struct BakeOptions {
     pub dem_cell_size_m: Option<[f64; 2]>,
     /// The world directory to write. The world is baked into a temporary folder beside it and
     /// renamed into place at the end; an existing folder that is not empty is refused unless
-    /// `replace` is set, and is then replaced as a whole.
+    /// `replace` is set; the world in it (`world.toml` and `tiles/`) is then replaced as a whole,
+    /// and its other files (a README, the source DEM) are kept.
     pub out: PathBuf,
     /// World name; by default the name of `out`.
     pub name: Option<String>,
@@ -1384,9 +1385,23 @@ impl Staging {
     }
 
     /// Renames the baked world into place. An existing output folder (empty, or any with
-    /// `replace`) is moved aside first and removed once the new world is in place.
+    /// `replace`) is moved aside first and removed once the new world is in place; what it held
+    /// besides a world (`world.toml`, `tiles/`), such as a README or the source DEM, is moved
+    /// into the new world first, so that replacing a world never loses its other files.
     fn publish(mut self) -> Result<(), WorldError> {
         check_out(&self.out, self.replace)?;
+        if self.replace && self.out.is_dir() {
+            let entries = std::fs::read_dir(&self.out).map_err(|e| WorldError::io(&self.out, e))?;
+            for entry in entries {
+                let entry = entry.map_err(|e| WorldError::io(&self.out, e))?;
+                let name = entry.file_name();
+                if name == "world.toml" || name == "tiles" {
+                    continue;
+                }
+                let to = self.dir.join(&name);
+                std::fs::rename(entry.path(), &to).map_err(|e| WorldError::io(&entry.path(), e))?;
+            }
+        }
         let old = self.out.exists().then(|| {
             let mut aside = self.dir.clone().into_os_string();
             aside.push(".old");
