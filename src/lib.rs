@@ -7,7 +7,8 @@
 //!
 //! Crate map, leaves first:
 //! - [`world`]: GPU-free world format: the `world.toml` manifest, [`world::TileId`] quadtree
-//!   addressing, stored tiles (EXR heights, PNG grass type and density) and the DEM baker.
+//!   addressing, stored tiles (EXR heights, PNG grass type and density), DEM reading (GeoTIFF,
+//!   SRTM `.hgt`, PNG + sidecar).
 //! - [`camera`]: the camera (f64 position, yaw and pitch, or the caller's own matrices) and
 //!   sampling of the manifest's camera paths.
 //! - [`features`]: the grass model's switchable features.
@@ -24,10 +25,13 @@
 //!   and the draw; each stage with its CPU mirror.
 //! - [`wind`]: the wind field around the camera (ambient noise, sources, trail) and the sway
 //!   springs, on the GPU with their CPU mirrors; the wind scenes of a world made ready to run.
+//! - [`bake`]: the baker that turns a DEM into a world (GPU-free; it fits the derived levels'
+//!   detail with [`stream::calibrate`]).
 //! - [`renderer`]: the frame: [`Renderer`], the order of its passes top to bottom in one place.
 //! - `tools` (feature `cli`): the headless scene, fly-throughs and their reports, soak,
 //!   benchmarks, evaluations, charts and image metrics, and the interactive viewer.
 
+pub mod bake;
 pub mod camera;
 pub mod features;
 pub mod gpu;

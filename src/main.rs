@@ -7,9 +7,9 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use verdant::bake::{BakeOptions, bake};
 use verdant::stream::ServiceConfig;
 use verdant::tools::{FlyOptions, FlyProgress, SoakOptions, run_fly, run_soak};
-use verdant::world::{BakeOptions, bake};
 
 /// Limits of the tile service, shared by the commands that stream.
 #[derive(clap::Args, Clone, Copy)]

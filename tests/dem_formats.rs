@@ -9,9 +9,9 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use verdant::bake::{BakeOptions, bake};
 use verdant::world::{
-    BakeOptions, Dem, DemFormat, DemOptions, TileId, World, WorldError, bake,
-    dem::metres_per_degree,
+    Dem, DemFormat, DemOptions, TileId, World, WorldError, dem::metres_per_degree,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -1108,9 +1108,21 @@ fn an_srtm_tile_reads_and_bakes_like_its_png_twin() {
 #[test]
 fn worlds_without_a_source_table_still_open() {
     let text = std::fs::read_to_string(common::default_world().join("world.toml")).unwrap();
-    assert!(!text.contains("[source]"));
+    let start = text
+        .find("[source]")
+        .expect("the default world records its source");
+    let end = text[start..]
+        .find("\n\n")
+        .map_or(text.len(), |e| start + e + 2);
+    let without = format!("{}{}", &text[..start], &text[end..]);
+    assert!(!without.contains("[source]"));
+    let manifest = verdant::world::Manifest::parse(&without, Path::new("world.toml")).unwrap();
+    assert!(manifest.source.is_none());
     let world = World::open(&common::default_world()).unwrap();
-    assert!(world.manifest.source.is_none());
+    assert_eq!(
+        world.manifest.source.as_ref().map(|s| s.format),
+        Some(DemFormat::PngSidecar)
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -104,7 +104,7 @@ fn slow_loads_never_stall_the_frame_loop_and_leave_no_hole() {
         .clone();
     let source = std::sync::Arc::new(SlowLevel2 {
         world: world.clone(),
-        delay: Duration::from_secs(3),
+        delay: Duration::from_secs(20),
     });
     let config = SceneConfig::for_world(&world);
     let mut scene =
@@ -113,8 +113,9 @@ fn slow_loads_never_stall_the_frame_loop_and_leave_no_hole() {
     let start = std::time::Instant::now();
     let mut frames = 0;
     let mut drawn_from_ancestors = 0;
-    // While the first slow loads are still running, frames keep coming, fully covered.
-    while start.elapsed() < Duration::from_millis(2500) {
+    // While the first slow loads are still running (each takes 20 s), frames keep coming, fully
+    // covered: five frames well inside the first load's time, however slow the machine.
+    while start.elapsed() < Duration::from_secs(15) {
         let stats = scene.render(&ctx, &camera).unwrap();
         assert_eq!(stats.residency.holes, 0);
         assert!(stats.tiles_drawn > 0);
@@ -128,7 +129,7 @@ fn slow_loads_never_stall_the_frame_loop_and_leave_no_hole() {
         frames >= 5,
         "only {frames} frames while the loads were pending: the frame loop waited"
     );
-    assert!(start.elapsed() < Duration::from_millis(2500));
+    assert!(start.elapsed() < Duration::from_secs(15));
     assert!(
         drawn_from_ancestors > 0,
         "tiles waiting for slow loads should be drawn from ancestors"

@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 
 use common::{Terrain, write_dem, write_sidecar};
 use glam::DVec2;
-use verdant::world::{BakeOptions, BakeStage, Dem, TileId, WorldError, bake};
+use verdant::bake::{BakeOptions, BakeStage, bake};
+use verdant::world::{Dem, TileId, WorldError};
 
 /// The analytic landscape: rolling hills on a gentle slope, 118..=381 m.
 fn hills(x: f64, y: f64) -> f64 {

@@ -569,8 +569,9 @@ pub struct BenchFeaturesReport {
 /// (FLIP between the full render and the render with that feature off), charted one against
 /// the other. The views come from the world's first camera path with wind keys (the baked
 /// `wind-tour`): one late in each of its wind scenes, each reached by two seconds of flight
-/// along the path in 8 frames (so that the sway, the gusts, the sources and the walker's trail
-/// are under way). The images are captured first; then the variants are timed in interleaved
+/// along the path in as many frames as the untimed warm-up has (at least one; the sway's exact
+/// step is stable at any frame time), so that the sway, the gusts, the sources and the walker's
+/// trail are under way. The images are captured first; then the variants are timed in interleaved
 /// rounds at each view's time (see [`crate::tools::timing`]). A world without such a path is viewed
 /// along `meadow` (else its first path) in the storm. Writes `bench_features.json`, `features.csv` and `features.png`.
 pub fn run_bench_features(
@@ -579,7 +580,6 @@ pub fn run_bench_features(
 ) -> Result<BenchFeaturesReport> {
     use crate::features::{Feature, Features};
     const LEAD_S: f64 = 2.0;
-    const LEAD_FRAMES: u32 = 8;
     let world = World::open(&opts.world)?;
     let m = &world.manifest;
     let toured = m.paths.iter().find(|p| !p.wind.is_empty());
@@ -619,6 +619,12 @@ pub fn run_bench_features(
         )
         .collect();
     let walker_at = |t: f64| crate::camera::walker_at(m, &path, t);
+    let counts = FrameCounts::for_adapter(&ctx.info).with(
+        opts.warmup_frames,
+        opts.timed_frames,
+        opts.rounds,
+    );
+    let lead_frames = counts.warmup.max(1);
     let mut scenes = Vec::new();
     let mut all_images = Vec::new();
     let total = variants.len() as u64;
@@ -636,8 +642,8 @@ pub fn run_bench_features(
                 std::time::Duration::from_secs(60),
             )?;
             // The lead-in: the camera and the walker along the path up to the view's time.
-            for f in 0..=LEAD_FRAMES {
-                let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(LEAD_FRAMES));
+            for f in 0..=lead_frames {
+                let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(lead_frames));
                 scene.render_frame(&ctx, &sample_path(&path, tf), tf, Some(walker_at(tf)))?;
             }
             images.push(scene.read_image(&ctx)?);
@@ -647,11 +653,6 @@ pub fn run_bench_features(
         progress("images", k as u64 + 1, total);
     }
     // Timed frames hold each view's time: the same image every frame.
-    let counts = FrameCounts::for_adapter(&ctx.info).with(
-        opts.warmup_frames,
-        opts.timed_frames,
-        opts.rounds,
-    );
     let mut samples = vec![vec![Vec::new(); times.len()]; variants.len()];
     for round in 0..counts.rounds {
         for (k, scene) in scenes.iter_mut().enumerate() {

@@ -1,6 +1,7 @@
 //! The world, GPU-free: tile addressing ([`TileId`], [`Pyramid`]), the manifest
 //! ([`Manifest`], `world.toml`), the stored tile files ([`TileData`]), DEM loading (GeoTIFF,
-//! SRTM `.hgt`, PNG + sidecar; nodata filling) and the [`bake`]r that turns a DEM into a world.
+//! SRTM `.hgt`, PNG + sidecar; nodata filling); the baker that turns a DEM into a world is
+//! `crate::bake`.
 //! [`grass_density`] works out the densest grass that sizes the grass pool (the manifest's
 //! `grass_peak`), and [`fuzz`] holds the checks that the decoders are fuzzed against.
 //!
@@ -12,7 +13,6 @@
 //! worlds/NAME/tiles/L{level}/{x}_{y}.density.png grass density (8-bit)
 //! ```
 
-pub mod bake;
 pub mod dem;
 pub mod error;
 pub mod format;
@@ -26,7 +26,6 @@ pub mod tile;
 
 use std::path::{Path, PathBuf};
 
-pub use bake::{BakeOptions, BakeReport, BakeStage, bake};
 pub use dem::{Dem, DemFormat, DemOptions};
 pub use error::WorldError;
 pub use format::{

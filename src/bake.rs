@@ -29,15 +29,15 @@ use std::time::Instant;
 
 use glam::DVec2;
 
-use super::dem::{Dem, DemFormat, DemOptions};
-use super::error::WorldError;
-use super::format::{TileData, write_atomic, write_tile};
-use super::manifest::{
+use crate::stream::{DeriveParams, HeightField, calibrate};
+use crate::world::dem::{Dem, DemFormat, DemOptions};
+use crate::world::error::WorldError;
+use crate::world::format::{TileData, write_atomic, write_tile};
+use crate::world::manifest::{
     CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, DeriveCalibration, GrassType, Manifest, Sky,
     WindDefaults, WindKey, WindScene, WindSource, WorldSource,
 };
-use super::tile::{Pyramid, TileId};
-use crate::stream::{DeriveParams, HeightField, calibrate};
+use crate::world::tile::{Pyramid, TileId};
 
 /// Shared samples beyond each tile edge in baked worlds.
 pub const BAKE_BORDER: u32 = 2;
@@ -1276,7 +1276,7 @@ fn check_cell_size(
     match option {
         Some(c) => Err(WorldError::bad_option("--cell-size", c, allowed)),
         None => Err(WorldError::OutOfRange {
-            path: super::dem::sidecar_path(dem_path),
+            path: crate::world::dem::sidecar_path(dem_path),
             field: "cell_size_m".into(),
             value: format!("{} x {}", dem.cell_ew_m, dem.cell_ns_m),
             allowed: format!("{allowed}, or pass --cell-size"),
@@ -1284,10 +1284,10 @@ fn check_cell_size(
     }
 }
 
-/// Refuses a DEM whose heights leave [`super::PLAUSIBLE_HEIGHTS_M`] (a wrong offset or scale in
+/// Refuses a DEM whose heights leave [`crate::world::PLAUSIBLE_HEIGHTS_M`] (a wrong offset or scale in
 /// its sidecar), naming the sidecar.
 fn check_dem_heights(dem: &Dem, dem_path: &Path) -> Result<(), WorldError> {
-    let [lo, hi] = super::PLAUSIBLE_HEIGHTS_M;
+    let [lo, hi] = crate::world::PLAUSIBLE_HEIGHTS_M;
     let bad = dem.heights.iter().position(|&h| {
         let h = f64::from(h);
         !(lo..=hi).contains(&h)
@@ -1295,20 +1295,20 @@ fn check_dem_heights(dem: &Dem, dem_path: &Path) -> Result<(), WorldError> {
     match bad {
         None => Ok(()),
         Some(k) => Err(WorldError::ImplausibleHeight {
-            path: super::dem::sidecar_path(dem_path),
+            path: crate::world::dem::sidecar_path(dem_path),
             dem: dem_path.to_path_buf(),
             column: k as u32 % dem.width,
             row: k as u32 / dem.width,
             value: f64::from(dem.heights[k]),
-            range: super::PLAUSIBLE_HEIGHTS_M,
+            range: crate::world::PLAUSIBLE_HEIGHTS_M,
         }),
     }
 }
 
 /// The densest grass of the finest stored level over windows of the finest grass tiles
 /// (`Pyramid::max_level`), for the manifest's `grass_peak`.
-fn grass_peak(manifest: &Manifest, painted: &Painted) -> super::GrassPeak {
-    use super::grass_density::{SHORT_GRASS_M, split_shares, tile_peak, window_cells};
+fn grass_peak(manifest: &Manifest, painted: &Painted) -> crate::world::GrassPeak {
+    use crate::world::grass_density::{SHORT_GRASS_M, split_shares, tile_peak, window_cells};
     let pyramid = &manifest.pyramid;
     let level = pyramid.stored_levels - 1;
     let window_m = pyramid.tile_size_m(pyramid.max_level());
@@ -1322,7 +1322,7 @@ fn grass_peak(manifest: &Manifest, painted: &Painted) -> super::GrassPeak {
             density = density.max(tile_peak(&tile, pyramid, window, &split));
         }
     }
-    super::GrassPeak {
+    crate::world::GrassPeak {
         window_m,
         short_m: SHORT_GRASS_M,
         density,
