@@ -1434,3 +1434,49 @@ fn cli_bakes_a_geotiff_and_a_plain_tiff_with_a_cell_size() {
         "{stderr}"
     );
 }
+
+/// A Web Mercator grid (EPSG:3857, the projection of web map services' exports) has cells of
+/// its stated size only at the equator: on the ground they are cos(latitude) as long, taken at
+/// the grid's centre.
+#[test]
+fn a_web_mercator_geotiff_gets_ground_metres_at_its_centre_latitude() {
+    let dir = tempfile::tempdir().unwrap();
+    let heights = grid(Sample::F32);
+    // 10 m Mercator cells around 60 degrees north, where Mercator stretches by 2.
+    let r = 6_378_137.0f64;
+    let y60 = r * (60f64.to_radians().tan() + 1.0 / 60f64.to_radians().cos()).ln();
+    let mut spec = TiffSpec::new(Sample::F32, Layout::Strips { rows: 4 }, Compression::None);
+    spec.geo = Geo::Scale {
+        scale: [10.0, 10.0],
+        corner: [1_000_000.0, y60 + 5.0 * f64::from(SIZE[1])],
+        keys: projected_keys(3857, 9001),
+    };
+    let tif = dir.path().join("mercator.tif");
+    write_tiff(&tif, &spec, SIZE[0], SIZE[1], &heights);
+    let dem = Dem::load(&tif).unwrap();
+    // The centre sample sits half a cell below the middle of the grid's extent.
+    let centre_y = y60 + 5.0 * f64::from(SIZE[1]) - (f64::from(SIZE[1] - 1) / 2.0 + 0.5) * 10.0;
+    let lat = (centre_y / r).sinh().atan();
+    let expected = 10.0 * lat.cos();
+    assert!(
+        (lat.to_degrees() - 60.0).abs() < 0.01,
+        "{}",
+        lat.to_degrees()
+    );
+    assert!(
+        (dem.cell_ew_m - expected).abs() < 1e-6,
+        "{} vs {expected}",
+        dem.cell_ew_m
+    );
+    assert!(
+        (dem.cell_ns_m - expected).abs() < 1e-6,
+        "{} vs {expected}",
+        dem.cell_ns_m
+    );
+    assert!((dem.cell_ew_m - 5.0).abs() < 0.01, "{}", dem.cell_ew_m);
+    assert!(
+        dem.crs.contains("EPSG:3857") && dem.crs.contains("Web Mercator"),
+        "{}",
+        dem.crs
+    );
+}

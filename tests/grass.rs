@@ -822,3 +822,24 @@ fn more_jobs_than_the_job_buffer_holds_are_cut_at_its_size() {
     );
     assert_eq!(stats.drawn, [0, 0]);
 }
+
+/// A world of coarse cells asks for a pool larger than the device binds: the pool is clamped to
+/// what a binding holds (its densest tiles then overflow, counted) instead of failing.
+#[test]
+fn a_pool_larger_than_the_device_binds_is_clamped_and_still_draws() {
+    let mut rig = Rig::new(Some(u32::MAX / 4));
+    let limits = rig.ctx.device.limits();
+    let bind = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+    let blade = std::mem::size_of::<verdant::grass::Blade>() as u64;
+    let capacity = u64::from(rig.grass.capacity());
+    assert!(
+        capacity >= 16 && capacity * blade * 4 <= bind,
+        "{capacity} blades a slot"
+    );
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let flat = synthetic_tile(&rig.manifest, TileId::new(level, 0, 0), "flat");
+    rig.atlas.upload(&rig.ctx.queue, 0, &flat).unwrap();
+    let (stats, _) = rig.run(&camera(), &[job(0, 0, 0, cell)]);
+    assert!(stats.drawn[0] > 0, "{stats:?}");
+}

@@ -422,6 +422,20 @@ impl GrassRenderer {
         // Slots start at multiples of 256 bytes (the storage offset alignment): 16 blades of
         // 80 bytes are 1280 bytes.
         let capacity = capacity.max(16).div_ceil(16) * 16;
+        // A half of the pool is bound whole: a world of coarse cells (large grass tiles) can
+        // ask for more than the device binds. Its densest tiles then overflow, clamped and
+        // counted, instead of the pool failing.
+        let limits = device.limits();
+        let bind_limit =
+            u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let most = (bind_limit / (u64::from(BATCH_TILES) * BLADE_BYTES)) as u32 / 16 * 16;
+        if capacity > most {
+            log::warn!(
+                "the grass pool needs {capacity} blades a slot, more than the device binds \
+                 ({most}); the densest grass tiles will overflow"
+            );
+        }
+        let capacity = capacity.min(most).max(16);
         let hiz = HiZPyramid::new(device, queue, targets.width, targets.height);
         let mut types = [GrassTypeGpu::default(); 16];
         let mut base_colors = [[0.0; 4]; 16];

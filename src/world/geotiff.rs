@@ -35,6 +35,11 @@ const GT_RASTER_TYPE: u16 = 1025;
 const GEOGRAPHIC_TYPE: u16 = 2048;
 const GEOG_ANGULAR_UNITS: u16 = 2054;
 const PROJECTED_CS_TYPE: u16 = 3072;
+/// EPSG codes of Web (pseudo-) Mercator: 3857, and 3785, its earlier number.
+const WEB_MERCATOR: u16 = 3857;
+const WEB_MERCATOR_OLD: u16 = 3785;
+/// The sphere of Web Mercator, metres.
+const WEB_MERCATOR_RADIUS_M: f64 = 6_378_137.0;
 const PROJ_LINEAR_UNITS: u16 = 3076;
 const PROJ_LINEAR_UNIT_SIZE: u16 = 3077;
 const VERTICAL_UNITS: u16 = 4099;
@@ -514,7 +519,21 @@ impl GeoTags {
                     },
                     None => (1.0, "linear units not stated, taken as metres"),
                 };
-                let crs = match k.short(PROJECTED_CS_TYPE) {
+                let code = k.short(PROJECTED_CS_TYPE);
+                // Web Mercator's metres are metres at the equator: on the ground a cell is
+                // cos(latitude) as long, taken at the grid's centre.
+                if let (Some(WEB_MERCATOR | WEB_MERCATOR_OLD), Some([_, y])) = (code, centre) {
+                    let lat = (y * unit_m / WEB_MERCATOR_RADIUS_M).sinh().atan();
+                    let scale = unit_m * lat.cos();
+                    let crs = format!(
+                        "EPSG:{}, Web Mercator ({unit_name}; cells scaled by cos({:.4} deg) to \
+                         ground metres at the grid's centre)",
+                        code.unwrap_or(WEB_MERCATOR),
+                        lat.to_degrees()
+                    );
+                    return Ok(place([size[0] * scale, size[1] * scale], crs));
+                }
+                let crs = match code {
                     Some(code) if code != USER_DEFINED => {
                         format!("EPSG:{code}, projected ({unit_name})")
                     }
