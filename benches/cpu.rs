@@ -85,7 +85,8 @@ fn lod(c: &mut Criterion) {
     g.finish();
 }
 
-/// Decoding stored tiles: the EXR heights and the PNG maps, from the default world's files.
+/// Decoding stored tiles: the EXR heights and the PNG maps, from the default world's files, and
+/// a PNG map alone.
 fn decode(c: &mut Criterion) {
     let world = world();
     let id = finest_tile(&world);
@@ -93,14 +94,6 @@ fn decode(c: &mut Criterion) {
     g.throughput(Throughput::Elements(1));
     g.bench_function("stored tile (EXR heights, PNG type and density)", |b| {
         b.iter(|| world.load_tile(black_box(id)).unwrap())
-    });
-    let heights = world.tile_path(id, verdant::world::TileFile::Height);
-    let bytes = std::fs::metadata(&heights).map(|m| m.len()).unwrap_or(0);
-    g.throughput(Throughput::Bytes(bytes));
-    g.bench_function("EXR heights alone", |b| {
-        b.iter(|| {
-            exr::prelude::read_first_flat_layer_from_file(black_box(&heights)).unwrap();
-        })
     });
     let type_map = world.tile_path(id, verdant::world::TileFile::Type);
     g.bench_function("PNG type map alone", |b| {
