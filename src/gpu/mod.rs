@@ -29,6 +29,30 @@ pub struct Targets {
     pub height: u32,
 }
 
+/// A 2D target texture of `width` x `height`, one mip level, one sample.
+pub fn target_texture(
+    device: &wgpu::Device,
+    label: &str,
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+    (width, height): (u32, u32),
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
 impl Targets {
     /// The `ENCODE_SRGB` pipeline constant of `shaders/shared/output.wgsl` for the colour
     /// format: 1 when the shader must encode sRGB itself, else 0.

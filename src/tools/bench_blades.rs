@@ -554,21 +554,7 @@ impl FloorPass {
             source: wgpu::ShaderSource::Wgsl(FLOOR_WGSL.into()),
         });
         let target = |format, usage| {
-            device
-                .create_texture(&wgpu::TextureDescriptor {
-                    label: Some("vertex floor"),
-                    size: wgpu::Extent3d {
-                        width,
-                        height,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage,
-                    view_formats: &[],
-                })
+            crate::gpu::target_texture(device, "vertex floor", format, usage, (width, height))
                 .create_view(&Default::default())
         };
         let color = target(

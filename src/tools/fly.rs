@@ -123,7 +123,6 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     // Without images nothing needs a frame back: frames are submitted as an application
     // submits them, at most FRAMES_IN_FLIGHT ahead of the GPU, and their figures are taken as
     // they come back. With images, each frame is waited for and read back.
-    let mut in_flight: VecDeque<wgpu::SubmissionIndex> = VecDeque::new();
     let mut waiting: VecDeque<FrameRecord> = VecDeque::new();
     for i in 0..opts.frames {
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
@@ -149,16 +148,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
                 break; // the writer failed; its error is reported below
             }
         } else {
-            let (_, submission) = scene.submit_frame(&ctx, &camera, t_s, Some(walker_xy))?;
-            in_flight.push_back(submission);
-            if in_flight.len() > FRAMES_IN_FLIGHT
-                && let Some(oldest) = in_flight.pop_front()
-            {
-                let _ = ctx.device.poll(wgpu::PollType::Wait {
-                    submission_index: Some(oldest),
-                    timeout: None,
-                });
-            }
+            scene.submit_frame(&ctx, &camera, t_s, Some(walker_xy))?;
             record.frame_ms = start.elapsed().as_secs_f64() * 1e3;
             waiting.push_back(record);
             take_figures(&mut scene, &mut waiting, &mut records)?;
@@ -191,9 +181,6 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     out_dir.keep();
     Ok(report)
 }
-
-/// Frames a fly-through without images submits ahead of the GPU at most.
-pub const FRAMES_IN_FLIGHT: usize = 2;
 
 /// The frame records of a fly-through: a bounded sample, and tallies over every frame.
 struct Records {

@@ -16,6 +16,10 @@ use crate::world::{TileId, World};
 
 pub use crate::renderer::RendererConfig as SceneConfig;
 
+/// Frames [`Scene::submit_frame`] lets the CPU run ahead of the GPU at most, as an application
+/// with double buffering does.
+pub const FRAMES_IN_FLIGHT: usize = 2;
+
 /// What stops a scene from being built or drawn.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -38,6 +42,7 @@ pub struct Scene {
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
     last: Option<(Camera, f64)>,
+    in_flight: std::collections::VecDeque<wgpu::SubmissionIndex>,
 }
 
 impl Scene {
@@ -67,20 +72,7 @@ impl Scene {
         options.config = config;
         let renderer = Renderer::with_source(&ctx.device, &ctx.queue, world, source, options)?;
         let target = |label, format, usage| {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
+            crate::gpu::target_texture(&ctx.device, label, format, usage, (width, height))
         };
         let color = target(
             "color",
@@ -98,6 +90,7 @@ impl Scene {
             depth_view: depth.create_view(&Default::default()),
             color,
             last: None,
+            in_flight: std::collections::VecDeque::new(),
         })
     }
 
@@ -195,8 +188,9 @@ impl Scene {
             .ok_or(SceneError::StatsMissing(frame))
     }
 
-    /// Prepares, records and submits one frame without waiting for it; returns its number
-    /// (its figures come back through [`Renderer::take_stats`]) and its submission.
+    /// Prepares, records and submits one frame without waiting for it, unless more than
+    /// [`FRAMES_IN_FLIGHT`] frames would then be on the GPU (it waits for the oldest); returns
+    /// its number (its figures come back through [`Renderer::take_stats`]) and its submission.
     pub fn submit_frame(
         &mut self,
         ctx: &GpuContext,
@@ -216,6 +210,15 @@ impl Scene {
             .record(&mut encoder, &self.color_view, &self.depth_view)?;
         let submission = ctx.queue.submit([encoder.finish()]);
         self.last = Some((*camera, time_s));
+        self.in_flight.push_back(submission.clone());
+        while self.in_flight.len() > FRAMES_IN_FLIGHT {
+            if let Some(oldest) = self.in_flight.pop_front() {
+                let _ = ctx.device.poll(wgpu::PollType::Wait {
+                    submission_index: Some(oldest),
+                    timeout: None,
+                });
+            }
+        }
         Ok((frame, submission))
     }
 

@@ -12,7 +12,6 @@ use crate::camera::Camera;
 use crate::gpu::GpuContext;
 use crate::renderer::FrameStats;
 use crate::tools::Scene;
-use crate::tools::fly::FRAMES_IN_FLIGHT;
 
 /// A measurement whose interquartile range is above this share of its median is flagged.
 pub const NOISY_SPREAD: f64 = 0.10;
@@ -126,7 +125,7 @@ pub fn frame_ms(stats: &FrameStats, wall_ms: f64, timestamps: bool) -> f64 {
 }
 
 /// Renders `warmup + timed` frames of `camera` at `time_s` back to back (at most
-/// [`FRAMES_IN_FLIGHT`] ahead of the GPU) and returns the timed frames' figures with their wall
+/// [`crate::tools::scene::FRAMES_IN_FLIGHT`] ahead of the GPU) and returns the timed frames' figures with their wall
 /// time from the previous frame, milliseconds.
 pub fn run_frames(
     ctx: &GpuContext,
@@ -138,24 +137,14 @@ pub fn run_frames(
     timed: u32,
 ) -> Result<Vec<(FrameStats, f64)>> {
     let total = warmup + timed;
-    let mut in_flight = std::collections::VecDeque::new();
     let mut first_timed = None;
     let mut walls = Vec::with_capacity(total as usize);
     let mut out = Vec::with_capacity(timed as usize);
     let mut last = std::time::Instant::now();
     for i in 0..total {
-        let (frame, submission) = scene.submit_frame(ctx, camera, time_s, walker)?;
+        let (frame, _) = scene.submit_frame(ctx, camera, time_s, walker)?;
         if i == warmup {
             first_timed = Some(frame);
-        }
-        in_flight.push_back(submission);
-        if in_flight.len() > FRAMES_IN_FLIGHT
-            && let Some(oldest) = in_flight.pop_front()
-        {
-            let _ = ctx.device.poll(wgpu::PollType::Wait {
-                submission_index: Some(oldest),
-                timeout: None,
-            });
         }
         let now = std::time::Instant::now();
         walls.push((frame, (now - last).as_secs_f64() * 1e3));
