@@ -490,3 +490,62 @@ fn the_server_answers_with_content_types_and_conditional_gets() {
         assert!(head.starts_with("HTTP/1.1 404"), "{outside}: {head}");
     }
 }
+
+/// `verdant serve` in one process and `verdant fly http://...` in another, as the README says;
+/// an address where nothing listens is refused with a message that names it.
+#[test]
+fn verdant_fly_flies_a_world_from_verdant_serve() {
+    let bin = env!("CARGO_BIN_EXE_verdant");
+    let mut serve = Command::new(bin)
+        .args(["serve", "santa-cruz", "--addr", "127.0.0.1:0"])
+        .current_dir(common::root())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(serve.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let url = line.split_whitespace().last().unwrap_or("").to_string();
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("fly");
+    let fly = Command::new(bin)
+        .args([
+            "fly",
+            &url,
+            "--frames",
+            "2",
+            "--size",
+            "64x36",
+            "--http-timeout-s",
+            "1",
+        ])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let _ = serve.kill();
+    let _ = serve.wait();
+    assert!(
+        fly.status.success(),
+        "serve said {line:?}; fly: {}",
+        String::from_utf8_lossy(&fly.stderr)
+    );
+    assert!(out.join("report.json").is_file() && out.join("frame_00001.png").is_file());
+
+    let nowhere = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}/world", nowhere.local_addr().unwrap());
+    drop(nowhere);
+    let fly = Command::new(bin)
+        .args(["fly", &url, "--frames", "1", "--http-retries", "1"])
+        .arg("--out")
+        .arg(tmp.path().join("none"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&fly.stderr);
+    assert!(!fly.status.success());
+    assert!(
+        stderr.contains(&format!("{url}/world.toml")) && stderr.contains("2 attempt(s)"),
+        "{stderr}"
+    );
+}
