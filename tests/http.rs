@@ -549,3 +549,50 @@ fn verdant_fly_flies_a_world_from_verdant_serve() {
         "{stderr}"
     );
 }
+
+/// A tile that leaves the wanted set while its files are being fetched sends no more requests:
+/// its later files are never asked for, and it counts as cancelled, not failed.
+#[test]
+fn a_cancelled_tile_sends_no_more_requests() {
+    let server = FaultServer::start(
+        common::default_world(),
+        Duration::from_millis(400),
+        |_, _| Reply::File,
+    );
+    let (_, source) = HttpSource::open(&server.url, quick_options()).unwrap();
+    let config = StreamConfig {
+        max_in_flight: 2,
+        ..StreamConfig::default()
+    };
+    let mut streamer = Streamer::start(Arc::new(source), config).unwrap();
+    let want = |ids: &[TileId]| -> Vec<Want> {
+        ids.iter().map(|&id| Want { id, priority: 1.0 }).collect()
+    };
+    let (dropped, kept) = (TileId::new(2, 5, 5), TileId::new(2, 6, 6));
+    streamer.want(want(&[dropped]));
+    // Its height file is on the way (400 ms); then it leaves the wanted set.
+    let start = Instant::now();
+    while server.asked("/tiles/L2/5_5.height.exr") == 0 {
+        streamer.poll();
+        assert!(start.elapsed() < Duration::from_secs(10), "never asked");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    streamer.want(want(&[kept]));
+    let mut got = Vec::new();
+    while got.is_empty() || streamer.stats().in_flight > 0 {
+        for l in streamer.poll() {
+            match l {
+                Loaded::Tile(t) => got.push(t.id),
+                Loaded::Failed { id, error } => panic!("{id:?} failed: {error}"),
+            }
+        }
+        assert!(start.elapsed() < Duration::from_secs(20), "loads stalled");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    assert_eq!(got, vec![kept]);
+    let s = streamer.stats();
+    assert_eq!((s.cancelled, s.failed, s.completed), (1, 0, 1), "{s:?}");
+    assert_eq!(server.asked("/tiles/L2/5_5.type.png"), 0);
+    assert_eq!(server.asked("/tiles/L2/5_5.density.png"), 0);
+    assert_eq!(server.asked("/tiles/L2/6_6.density.png"), 1);
+}

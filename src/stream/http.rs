@@ -17,7 +17,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crate::world::format::{decode_density, decode_grass_types, decode_heights, max_file_bytes};
@@ -89,6 +89,12 @@ pub enum HttpError {
         size: u64,
         /// The most allowed.
         max: u64,
+    },
+    /// The tile left the wanted set: no more requests were sent for it.
+    #[error("{url}: cancelled, the tile is no longer wanted")]
+    Cancelled {
+        /// The file that was not fetched.
+        url: String,
     },
     /// The on-disk cache could not be opened.
     #[error("{}: tile cache: {source}", path.display())]
@@ -217,7 +223,7 @@ impl HttpSource {
             bytes: AtomicU64::new(0),
         };
         let manifest_url = format!("{base}world.toml");
-        let bytes = client.fetch(&manifest_url, MAX_MANIFEST_BYTES)?;
+        let bytes = client.fetch(&manifest_url, MAX_MANIFEST_BYTES, None)?;
         let path = Path::new(&manifest_url);
         let text = String::from_utf8(bytes).map_err(|e| WorldError::ManifestSyntax {
             path: path.to_path_buf(),
@@ -263,7 +269,12 @@ impl HttpSource {
 
 impl Client {
     /// Fetches one file (through the cache when there is one), retrying transient failures.
-    fn fetch(&self, url: &str, max: u64) -> Result<Vec<u8>, HttpError> {
+    fn fetch(
+        &self,
+        url: &str,
+        max: u64,
+        cancelled: Option<&AtomicBool>,
+    ) -> Result<Vec<u8>, HttpError> {
         let cached = self
             .cache
             .as_ref()
@@ -271,6 +282,9 @@ impl Client {
         let timeout_s = self.options.timeout.as_secs_f64().ceil().max(1.0) as u64;
         let mut attempt = 0;
         loop {
+            if cancelled.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                return Err(HttpError::Cancelled { url: url.into() });
+            }
             attempt += 1;
             let mut request = minreq::get(url).with_timeout(timeout_s);
             if let Some((validator, _)) = &cached {
@@ -375,6 +389,12 @@ impl Client {
 
 impl TileSource for HttpSource {
     fn load(&self, id: TileId) -> Result<TileData, WorldError> {
+        self.load_cancellable(id, &AtomicBool::new(false))
+    }
+
+    /// Fetches the three files one after another; once `cancelled` is set, no further request
+    /// (file or retry) is sent.
+    fn load_cancellable(&self, id: TileId, cancelled: &AtomicBool) -> Result<TileData, WorldError> {
         let pyramid = &self.manifest.pyramid;
         if !pyramid.is_stored(id) {
             return Err(WorldError::TileNotStored {
@@ -389,7 +409,9 @@ impl TileSource for HttpSource {
         };
         let get = |kind| -> Result<(Vec<u8>, String), WorldError> {
             let url = self.tile_url(id, kind);
-            let bytes = self.client.fetch(&url, max_file_bytes(kind, size))?;
+            let bytes = self
+                .client
+                .fetch(&url, max_file_bytes(kind, size), Some(cancelled))?;
             Ok((bytes, url))
         };
         let (bytes, url) = get(TileFile::Height)?;
