@@ -340,11 +340,11 @@ impl Client {
         attempts: u32,
         cached: &Option<(Validator, Vec<u8>)>,
     ) -> Result<Vec<u8>, HttpError> {
-        if response.status_code == 304 {
-            if let Some((_, body)) = cached {
-                self.cache_hits.fetch_add(1, Ordering::Relaxed);
-                return Ok(body.clone());
-            }
+        if response.status_code == 304
+            && let Some((_, body)) = cached
+        {
+            self.cache_hits.fetch_add(1, Ordering::Relaxed);
+            return Ok(body.clone());
         }
         if !(200..300).contains(&response.status_code) {
             return Err(HttpError::Status {
@@ -361,15 +361,15 @@ impl Client {
         let validator = Validator::from_headers(&response.headers);
         let body = response.into_bytes();
         self.bytes.fetch_add(body.len() as u64, Ordering::Relaxed);
-        if let Some(expected) = expected {
-            if (body.len() as u64) < expected {
-                return Err(HttpError::Truncated {
-                    url: url.into(),
-                    expected,
-                    received: body.len() as u64,
-                    attempts,
-                });
-            }
+        if let Some(expected) = expected
+            && (body.len() as u64) < expected
+        {
+            return Err(HttpError::Truncated {
+                url: url.into(),
+                expected,
+                received: body.len() as u64,
+                attempts,
+            });
         }
         if body.len() as u64 > max {
             return Err(HttpError::TooLarge {
@@ -378,10 +378,10 @@ impl Client {
                 max,
             });
         }
-        if let (Some(cache), Some(validator)) = (&self.cache, validator) {
-            if let Ok(mut cache) = cache.lock() {
-                cache.put(url, &validator, &body);
-            }
+        if let (Some(cache), Some(validator)) = (&self.cache, validator)
+            && let Ok(mut cache) = cache.lock()
+        {
+            cache.put(url, &validator, &body);
         }
         Ok(body)
     }
