@@ -17,7 +17,8 @@
 //! - [`gpu`]: what every stage shares: the headless GPU context (adapter choice from `WGPU_*`
 //!   variables), buffer and texture readback, timestamp timing.
 //! - [`stream`]: the tile service: async streamer, CPU cache, the GPU tile atlas, and child
-//!   tiles derived on the GPU (with the stage's CPU mirror beside it).
+//!   tiles derived on the GPU (with the stage's CPU mirror beside it); worlds streamed over
+//!   HTTP (`stream::HttpSource`, feature `http`).
 //! - [`lod`]: which terrain tiles a camera needs, at which level, with frustum culling; grass
 //!   rings with hysteresis.
 //! - [`terrain`]: the terrain and sky passes (`shaders/terrain.wgsl`).
@@ -29,7 +30,8 @@
 //!   detail with [`stream::calibrate`]).
 //! - [`renderer`]: the frame: [`Renderer`], the order of its passes top to bottom in one place.
 //! - `tools` (feature `cli`): the headless scene, fly-throughs and their reports, soak,
-//!   benchmarks, evaluations, charts and image metrics, and the interactive viewer.
+//!   benchmarks, evaluations, charts and image metrics, the interactive viewer, and `serve`
+//!   (a static server of a world folder).
 
 pub mod bake;
 pub mod camera;

@@ -12,7 +12,7 @@ use verdant::stream::ServiceConfig;
 use verdant::tools::{FlyOptions, FlyProgress, SoakOptions, run_fly, run_soak};
 
 /// Limits of the tile service, shared by the commands that stream.
-#[derive(clap::Args, Clone, Copy)]
+#[derive(clap::Args, Clone)]
 struct StreamArgs {
     /// Ceiling of the CPU cache of decoded tiles, MiB (it must hold at least one tile).
     #[arg(long, default_value = "64", value_parser = parse_mib)]
@@ -23,9 +23,38 @@ struct StreamArgs {
     /// Tile loads in flight at most.
     #[arg(long, default_value_t = 8)]
     max_loads: usize,
+    /// A world over HTTP: deadline of one request, seconds (whole seconds, at least 1).
+    #[arg(long, default_value_t = 10)]
+    http_timeout_s: u64,
+    /// A world over HTTP: retries of a transient failure (connection error, 5xx, a body cut
+    /// short), with doubling backoff from 200 ms.
+    #[arg(long, default_value_t = 3)]
+    http_retries: u32,
+    /// A world over HTTP: keep fetched tile files in this folder, revalidated with the
+    /// server's ETag or Last-Modified.
+    #[arg(long)]
+    http_cache: Option<PathBuf>,
+    /// Ceiling of the --http-cache folder, MiB.
+    #[arg(long, default_value = "512", value_parser = parse_mib)]
+    http_cache_mib: u64,
 }
 
 impl StreamArgs {
+    fn http(&self) -> verdant::stream::HttpOptions {
+        verdant::stream::HttpOptions {
+            timeout: std::time::Duration::from_secs(self.http_timeout_s.max(1)),
+            retries: self.http_retries,
+            cache: self
+                .http_cache
+                .as_ref()
+                .map(|dir| verdant::stream::HttpCacheConfig {
+                    dir: dir.clone(),
+                    max_bytes: self.http_cache_mib << 20,
+                }),
+            ..Default::default()
+        }
+    }
+
     fn service(self) -> ServiceConfig {
         let mut c = ServiceConfig::default();
         // parse_mib has checked that the bytes fit a u64.
@@ -48,7 +77,7 @@ struct Cli {
 enum Command {
     /// Render PNG frames along a camera path and write report.json.
     Fly {
-        /// World folder, or the name of a world under ./worlds.
+        /// World folder, the name of a world under ./worlds, or a world's http:// address.
         #[arg(default_value = "santa-cruz")]
         world: String,
         /// Camera path from the world's manifest (default: its first path).
@@ -86,7 +115,7 @@ enum Command {
     /// faster, the wheel or +/- for speed, P to follow the camera path (N: next path), 1-9 for
     /// the wind scenes, L for the LOD overlay, V for vsync, Esc to quit. Figures in the title.
     View {
-        /// World folder, or the name of a world under ./worlds.
+        /// World folder, the name of a world under ./worlds, or a world's http:// address.
         #[arg(default_value = "santa-cruz")]
         world: String,
         /// Window size, WIDTHxHEIGHT.
@@ -116,7 +145,7 @@ enum Command {
     /// Fly fast with random turns and teleports; check the streaming ceilings, holes and memory.
     /// Writes soak.json and exits non-zero if a check failed.
     Soak {
-        /// World folder, or the name of a world under ./worlds.
+        /// World folder, the name of a world under ./worlds, or a world's http:// address.
         #[arg(default_value = "santa-cruz")]
         world: String,
         /// Simulated flight time, seconds (0.1 s a frame).
@@ -145,6 +174,17 @@ enum Command {
         max_stall_ms: f64,
         #[command(flatten)]
         stream: StreamArgs,
+    },
+    /// Serve a world folder over HTTP (GET and HEAD, content types, ETag and Last-Modified,
+    /// conditional GET), for `verdant fly http://HOST:PORT/` and the like. For production, put
+    /// the folder behind any ordinary HTTP server, object store or CDN.
+    Serve {
+        /// World folder, or the name of a world under ./worlds.
+        #[arg(default_value = "santa-cruz")]
+        world: String,
+        /// Address to listen on (port 0 picks a free port).
+        #[arg(long, default_value = "127.0.0.1:8000")]
+        addr: String,
     },
     /// Benchmarks of the renderer.
     Bench {
@@ -655,6 +695,10 @@ fn parse_cell_size(s: &str) -> Result<[f64; 2], String> {
 
 /// A world argument is a folder, or a name under `./worlds` or the crate's own `worlds`.
 fn resolve_world(arg: &str) -> Result<PathBuf> {
+    if verdant::stream::http::is_url(arg) {
+        // Opened over HTTP by the tools.
+        return Ok(PathBuf::from(arg));
+    }
     let direct = Path::new(arg);
     if direct.join("world.toml").is_file() {
         return Ok(direct.to_path_buf());
@@ -819,6 +863,7 @@ fn run(cli: Cli) -> Result<()> {
             stream,
         } => fly(FlyOptions {
             world: resolve_world(&world)?,
+            http: stream.http(),
             path,
             frames,
             size,
@@ -842,6 +887,7 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let summary = verdant::tools::view::run_view(verdant::tools::view::ViewOptions {
                 world: resolve_world(&world)?,
+                http: stream.http(),
                 size,
                 vsync: !no_vsync,
                 path,
@@ -876,6 +922,7 @@ fn run(cli: Cli) -> Result<()> {
             stream,
         } => soak(SoakOptions {
             world: resolve_world(&world)?,
+            http: stream.http(),
             seconds,
             speed_mps: speed,
             seed,
@@ -887,6 +934,16 @@ fn run(cli: Cli) -> Result<()> {
             max_stall_ms,
             ..SoakOptions::default()
         }),
+        Command::Serve { world, addr } => {
+            let dir = resolve_world(&world)?;
+            if verdant::stream::http::is_url(&world) {
+                bail!("verdant serve serves a world folder, not {world}");
+            }
+            let server = verdant::tools::serve::WorldServer::start(&dir, &addr)?;
+            println!("serving {} at {}", dir.display(), server.url());
+            server.wait();
+            Ok(())
+        }
         Command::Bench {
             what:
                 BenchCommand::Features {

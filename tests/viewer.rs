@@ -158,6 +158,8 @@ fn a_crate_without_default_features_compiles_no_tools() {
         "winit",
         "anyhow",
         "env_logger",
+        "tiny_http",
+        "httpdate",
     ] {
         assert!(
             !text.lines().any(|l| l.starts_with(&format!("{tool} v"))),

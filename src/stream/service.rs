@@ -6,9 +6,9 @@
 //! most urgent first. A tile that leaves the wanted set is cancelled: if its load has not
 //! started it never starts, and if it has, its result is dropped and reported as cancelled.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use tokio::sync::mpsc;
 use tokio::task::JoinSet;
@@ -19,6 +19,15 @@ use crate::world::{TileData, TileId, World, WorldError};
 pub trait TileSource: Send + Sync + 'static {
     /// Loads and decodes one stored tile. Runs on a blocking thread.
     fn load(&self, id: TileId) -> Result<TileData, WorldError>;
+
+    /// Like [`TileSource::load`], for a source that can give up early: the streamer sets
+    /// `cancelled` when the tile leaves the wanted set, and a load that then returns an error
+    /// counts as cancelled, not failed (an HTTP source sends no more requests for it). The
+    /// default ignores the flag.
+    fn load_cancellable(&self, id: TileId, cancelled: &AtomicBool) -> Result<TileData, WorldError> {
+        let _ = cancelled;
+        self.load(id)
+    }
 }
 
 impl TileSource for World {
@@ -189,35 +198,53 @@ async fn serve(
     counters: Arc<Counters>,
 ) {
     let mut wanted: HashMap<TileId, f32> = HashMap::new();
-    let mut running: HashSet<TileId> = HashSet::new();
+    // Each running load with the flag that tells it its tile is no longer wanted.
+    let mut running: HashMap<TileId, Arc<AtomicBool>> = HashMap::new();
     let mut tasks: JoinSet<(TileId, Result<TileData, WorldError>)> = JoinSet::new();
     loop {
         // Start the most urgent wanted tiles that are not running yet.
         if running.len() < config.max_in_flight {
             let mut queue: Vec<(TileId, f32)> = wanted
                 .iter()
-                .filter(|(id, _)| !running.contains(id))
+                .filter(|(id, _)| !running.contains_key(id))
                 .map(|(id, p)| (*id, *p))
                 .collect();
             queue.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
             for (id, _) in queue.into_iter().take(config.max_in_flight - running.len()) {
-                running.insert(id);
+                let cancelled = Arc::new(AtomicBool::new(false));
+                running.insert(id, Arc::clone(&cancelled));
                 counters.in_flight.fetch_add(1, Ordering::Relaxed);
                 let source = Arc::clone(&source);
-                tasks.spawn_blocking(move || (id, source.load(id)));
+                tasks.spawn_blocking(move || {
+                    let result = source.load_cancellable(id, &cancelled);
+                    (id, result)
+                });
             }
         }
         tokio::select! {
             request = requests.recv() => match request {
                 Some(wants) => {
                     wanted = wants.into_iter().map(|w| (w.id, w.priority)).collect();
+                    for (id, cancelled) in &running {
+                        if !wanted.contains_key(id) {
+                            cancelled.store(true, Ordering::Relaxed);
+                        }
+                    }
                 }
                 None => break,
             },
             Some(joined) = tasks.join_next(), if !tasks.is_empty() => {
                 counters.in_flight.fetch_sub(1, Ordering::Relaxed);
                 let Ok((id, result)) = joined else { continue };
-                running.remove(&id);
+                let given_up = running
+                    .remove(&id)
+                    .is_some_and(|c| c.load(Ordering::Relaxed))
+                    && result.is_err();
+                if given_up {
+                    // Told to stop: not a fault. Still wanted (it came back), it starts again.
+                    counters.cancelled.fetch_add(1, Ordering::Relaxed);
+                    continue;
+                }
                 if wanted.remove(&id).is_none() {
                     // Left the wanted set while it loaded: dropped, never inserted.
                     counters.cancelled.fetch_add(1, Ordering::Relaxed);

@@ -15,13 +15,14 @@ use crate::tools::report::{
     AdapterReport, FlyReport, FlySummary, FlyTotals, FrameRecord, MAX_REPORT_FRAMES, Thinned,
 };
 use crate::tools::scene::{Scene, SceneConfig};
-use crate::world::World;
 
 /// What `verdant fly` is asked to do.
 #[derive(Clone, Debug)]
 pub struct FlyOptions {
-    /// The world's folder.
+    /// The world's folder, or its `http://` address.
     pub world: PathBuf,
+    /// How a world over HTTP is fetched.
+    pub http: crate::stream::HttpOptions,
     /// Camera path name; the manifest's first path when `None`.
     pub path: Option<String>,
     /// Frames to render, spread evenly over the path's duration.
@@ -58,7 +59,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     if opts.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let world = World::open(&opts.world)?;
+    let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
     let path = match &opts.path {
         Some(name) => world.manifest.path(name).cloned().with_context(|| {
             let names: Vec<&str> = world
@@ -90,7 +91,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     config.wind_scene = opts.wind_scene.clone();
     config.wind_keys = path.wind.clone();
     config.features = config.features.switched(&opts.disable, &opts.enable);
-    let mut scene = Scene::new(&ctx, world, width, height, config)?;
+    let mut scene = Scene::with_source(&ctx, world, source, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.
     progress(FlyProgress::WarmingUp);

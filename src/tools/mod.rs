@@ -1,7 +1,7 @@
 //! The tools built on the engine (feature `cli`): the headless [`Scene`] (offscreen targets
 //! around a [`crate::Renderer`]), `fly` and its report, `soak`, the benchmarks (`bench lod`,
 //! `bench features`), the evaluations (`eval derive`, `eval sway`), charts and image metrics,
-//! and the interactive viewer (`view`).
+//! the interactive viewer (`view`), and `serve`, a static server of a world folder.
 
 pub mod bench;
 pub mod bench_blades;
@@ -11,6 +11,7 @@ pub mod fly;
 pub mod metrics;
 pub mod report;
 pub mod scene;
+pub mod serve;
 pub mod soak;
 pub mod timing;
 pub mod view;
@@ -23,3 +24,27 @@ pub use fly::{FlyOptions, FlyProgress, run_fly, write_json};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
 pub use scene::{Scene, SceneConfig, SceneError};
 pub use soak::{SoakOptions, SoakReport, TeleportRecord, resident_bytes, run_soak};
+
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::stream::{HttpOptions, HttpSource, TileSource};
+use crate::world::World;
+
+/// Opens a world and the source of its tiles: its folder, or, when `location` is an `http://`
+/// address, the world served there (`stream::HttpSource`).
+pub fn open_world(
+    location: &Path,
+    http: &HttpOptions,
+) -> anyhow::Result<(World, Arc<dyn TileSource>)> {
+    match location.to_str() {
+        Some(url) if crate::stream::http::is_url(url) => {
+            let (world, source) = HttpSource::open(url, http.clone())?;
+            Ok((world, Arc::new(source)))
+        }
+        _ => {
+            let world = World::open(location)?;
+            Ok((world.clone(), Arc::new(world)))
+        }
+    }
+}

@@ -18,8 +18,10 @@ use crate::world::{TileData, TileId, World};
 /// What `verdant soak` is asked to do.
 #[derive(Clone, Debug)]
 pub struct SoakOptions {
-    /// The world's folder.
+    /// The world's folder, or its `http://` address.
     pub world: PathBuf,
+    /// How a world over HTTP is fetched.
+    pub http: crate::stream::HttpOptions,
     /// Simulated flight time, seconds.
     pub seconds: f64,
     /// Camera speed, metres a second.
@@ -56,6 +58,7 @@ impl Default for SoakOptions {
     fn default() -> Self {
         Self {
             world: PathBuf::from("worlds/santa-cruz"),
+            http: crate::stream::HttpOptions::default(),
             seconds: 60.0,
             speed_mps: 50.0,
             seed: 1,
@@ -248,12 +251,12 @@ struct Ground {
 }
 
 impl Ground {
-    fn new(world: &World) -> Result<Self> {
+    fn new(world: &World, source: &dyn crate::stream::TileSource) -> Result<Self> {
         let [nx, ny] = world.manifest.pyramid.tiles_at(0);
         let mut tiles = Vec::new();
         for y in 0..ny {
             for x in 0..nx {
-                tiles.push(world.load_tile(TileId::new(0, x, y))?);
+                tiles.push(source.load(TileId::new(0, x, y))?);
             }
         }
         Ok(Self {
@@ -332,9 +335,9 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             min_s
         );
     }
-    let world = World::open(&opts.world)?;
+    let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
     let out_dir = crate::tools::fly::OutDir::create(&opts.out)?;
-    let ground = Ground::new(&world)?;
+    let ground = Ground::new(&world, source.as_ref())?;
     let ctx = GpuContext::new()?;
     let mut config = SceneConfig::for_world(&world);
     config.service = opts.service;
@@ -344,7 +347,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let name = world.manifest.name.clone();
     let [ex, ey] = world.manifest.extent_m;
     let (width, height) = opts.size;
-    let mut scene = Scene::new(&ctx, world, width, height, config.clone())?;
+    let mut scene = Scene::with_source(&ctx, world, source, width, height, config.clone())?;
 
     let frames = frames_f as u32;
     let teleport_every = ((opts.teleport_every_s / opts.dt_s).round() as u32).max(1);

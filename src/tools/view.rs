@@ -28,8 +28,10 @@ use crate::world::{CameraPath, World};
 /// What `verdant view` is asked to do.
 #[derive(Clone, Debug)]
 pub struct ViewOptions {
-    /// The world's folder.
+    /// The world's folder, or its `http://` address.
     pub world: PathBuf,
+    /// How a world over HTTP is fetched.
+    pub http: crate::stream::HttpOptions,
     /// Inner size of the window.
     pub size: (u32, u32),
     /// Wait for the display's refresh (vsync) or not.
@@ -65,7 +67,7 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
     if opts.screenshot.is_some() && opts.frames.is_none() {
         bail!("--screenshot needs --frames N (the frame to capture)");
     }
-    let world = World::open(&opts.world)?;
+    let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
     if world.manifest.paths.is_empty() {
         bail!("world {} has no camera paths", opts.world.display());
     }
@@ -86,7 +88,7 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
     };
     let mut app = Viewer {
         opts,
-        world: Some(world),
+        world: Some((world, source)),
         state: None,
         error: None,
         summary: ViewSummary::default(),
@@ -102,7 +104,7 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
 
 struct Viewer {
     opts: ViewOptions,
-    world: Option<World>,
+    world: Option<(World, std::sync::Arc<dyn crate::stream::TileSource>)>,
     state: Option<State>,
     error: Option<anyhow::Error>,
     summary: ViewSummary,
@@ -157,7 +159,7 @@ fn depth_target(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Texture
 
 impl Viewer {
     fn start(&mut self, event_loop: &ActiveEventLoop) -> Result<State> {
-        let world = self.world.take().context("the viewer started twice")?;
+        let (world, source) = self.world.take().context("the viewer started twice")?;
         let (w, h) = self.opts.size;
         let attrs = Window::default_attributes()
             .with_title(format!("verdant: {}", world.manifest.name))
@@ -218,7 +220,7 @@ impl Viewer {
         }
         let mut options = RendererOptions::new(&world, format, crate::terrain::DEPTH_FORMAT, w, h);
         options.config = rc;
-        let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options)?;
+        let mut renderer = Renderer::with_source(&ctx.device, &ctx.queue, world, source, options)?;
         let t0 = path.keys[0].t_s;
         let start = sample_path(path, t0);
         // The first frame starts complete; after that, streaming shows.

@@ -554,6 +554,11 @@ pub enum WorldError {
         /// The largest fraction of nodata that is filled.
         max_fraction: f64,
     },
+
+    /// A file fetched from a world served over HTTP could not be had: the server said no, the
+    /// connection failed or stalled, or the body was cut short (the error names the URL).
+    #[error(transparent)]
+    Fetch(Box<dyn std::error::Error + Send + Sync + 'static>),
 }
 
 /// Variants added for bad options, implausible DEMs, unbounded reads and bake output folders.
@@ -615,7 +620,7 @@ impl WorldError {
             | NotARegularFile { path, .. }
             | FileTooLarge { path, .. }
             | OutputNotEmpty { path } => Some(path),
-            BadOption { .. } => None,
+            BadOption { .. } | Fetch(_) => None,
         }
     }
 

@@ -1,0 +1,183 @@
+//! `verdant serve`: a small static file server for a world folder, for trying worlds over HTTP
+//! locally. It answers `GET` and `HEAD` with the file's content type, an `ETag` and a
+//! `Last-Modified`, and a conditional `GET` (`If-None-Match`, `If-Modified-Since`) whose file
+//! has not changed with `304 Not Modified`. Production puts the world folder behind any
+//! ordinary HTTP server, object store or CDN instead.
+
+use std::net::SocketAddr;
+use std::path::{Component, Path, PathBuf};
+use std::sync::Arc;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use anyhow::{Context, Result, bail};
+use tiny_http::{Header, Method, Request, Response};
+
+/// Requests answered at once.
+const WORKERS: usize = 8;
+
+/// A running server; dropping it stops it.
+pub struct WorldServer {
+    server: Arc<tiny_http::Server>,
+    addr: SocketAddr,
+    workers: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl WorldServer {
+    /// Serves the folder `root` (which must hold a `world.toml`) on `addr` (port 0 picks a free
+    /// one) from worker threads of its own.
+    pub fn start(root: &Path, addr: &str) -> Result<WorldServer> {
+        if !root.join("world.toml").is_file() {
+            bail!("{}: no world.toml: not a world folder", root.display());
+        }
+        let root = Arc::new(
+            root.canonicalize()
+                .with_context(|| format!("{}: cannot open", root.display()))?,
+        );
+        let server = tiny_http::Server::http(addr)
+            .map_err(|e| anyhow::anyhow!("cannot listen on {addr}: {e}"))?;
+        let addr = server
+            .server_addr()
+            .to_ip()
+            .context("the server has no IP address")?;
+        let server = Arc::new(server);
+        let workers = (0..WORKERS)
+            .map(|_| {
+                let (server, root) = (Arc::clone(&server), Arc::clone(&root));
+                std::thread::spawn(move || {
+                    while let Ok(request) = server.recv() {
+                        if let Err(e) = answer(&root, request) {
+                            log::debug!("serve: {e}");
+                        }
+                    }
+                })
+            })
+            .collect();
+        Ok(WorldServer {
+            server,
+            addr,
+            workers,
+        })
+    }
+
+    /// The address it listens on.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The world's URL: `http://ADDR/`.
+    pub fn url(&self) -> String {
+        format!("http://{}/", self.addr)
+    }
+
+    /// Serves until the process ends.
+    pub fn wait(mut self) {
+        for w in self.workers.drain(..) {
+            let _ = w.join();
+        }
+    }
+}
+
+impl Drop for WorldServer {
+    fn drop(&mut self) {
+        for _ in 0..self.workers.len() {
+            self.server.unblock();
+        }
+        for w in self.workers.drain(..) {
+            let _ = w.join();
+        }
+    }
+}
+
+/// The content type of a world's file.
+pub fn content_type(path: &Path) -> &'static str {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("toml") => "application/toml",
+        Some("png") => "image/png",
+        Some("exr") => "image/x-exr",
+        Some("json") => "application/json",
+        Some("md") => "text/markdown; charset=utf-8",
+        Some("txt") => "text/plain; charset=utf-8",
+        Some("tif" | "tiff") => "image/tiff",
+        _ => "application/octet-stream",
+    }
+}
+
+/// The file under `root` that a request path names, if it names one inside it.
+fn resolve(root: &Path, url: &str) -> Option<PathBuf> {
+    let path = url.split(['?', '#']).next().unwrap_or("");
+    let relative = Path::new(path.trim_start_matches('/'));
+    if path.contains('%')
+        || relative
+            .components()
+            .any(|c| !matches!(c, Component::Normal(_)))
+    {
+        return None;
+    }
+    let file = root.join(relative);
+    // Symlinks out of the folder are not followed.
+    let real = file.canonicalize().ok()?;
+    (real.starts_with(root) && real.is_file()).then_some(real)
+}
+
+fn header(name: &str, value: &str) -> Header {
+    Header::from_bytes(name.as_bytes(), value.as_bytes()).expect("ASCII header")
+}
+
+fn answer(root: &Path, request: Request) -> std::io::Result<()> {
+    if !matches!(request.method(), Method::Get | Method::Head) {
+        return request.respond(Response::empty(405).with_header(header("Allow", "GET, HEAD")));
+    }
+    let Some(file) = resolve(root, request.url()) else {
+        return request.respond(Response::from_string("not found\n").with_status_code(404));
+    };
+    let meta = std::fs::metadata(&file)?;
+    let modified = meta.modified().unwrap_or(UNIX_EPOCH);
+    let nanos = modified
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
+    let etag = format!("\"{:x}-{:x}\"", meta.len(), nanos);
+    let last_modified = httpdate::fmt_http_date(modified);
+    let value = |name: &'static str| {
+        request
+            .headers()
+            .iter()
+            .find(|h| h.field.equiv(name))
+            .map(|h| h.value.as_str().to_string())
+    };
+    // If-None-Match wins over If-Modified-Since (RFC 9110, 13.2.2).
+    let not_modified = match value("If-None-Match") {
+        Some(tags) => tags
+            .split(',')
+            .any(|t| t.trim() == "*" || t.trim().trim_start_matches("W/") == etag),
+        None => value("If-Modified-Since")
+            .and_then(|d| httpdate::parse_http_date(&d).ok())
+            .is_some_and(|since| truncate_to_seconds(modified) <= since),
+    };
+    let validators = [
+        header("ETag", &etag),
+        header("Last-Modified", &last_modified),
+    ];
+    if not_modified {
+        let mut response = Response::empty(304);
+        for h in validators {
+            response = response.with_header(h);
+        }
+        return request.respond(response);
+    }
+    let body = std::fs::read(&file)?;
+    let mut response =
+        Response::from_data(body).with_header(header("Content-Type", content_type(&file)));
+    for h in validators {
+        response = response.with_header(h);
+    }
+    request.respond(response)
+}
+
+fn truncate_to_seconds(t: SystemTime) -> SystemTime {
+    let s = t
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    UNIX_EPOCH + std::time::Duration::from_secs(s)
+}
