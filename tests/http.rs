@@ -80,10 +80,11 @@ impl FaultServer {
                     Arc::clone(&reply),
                 );
                 std::thread::spawn(move || {
-                    let running = now.fetch_add(1, Ordering::SeqCst) + 1;
-                    peak.fetch_max(running, Ordering::SeqCst);
-                    let _ = answer(stream, &root, delay, &asked, reply.as_ref());
-                    now.fetch_sub(1, Ordering::SeqCst);
+                    let counter = Concurrency {
+                        now: &now,
+                        peak: &peak,
+                    };
+                    let _ = answer(stream, &root, delay, &asked, reply.as_ref(), &counter);
                 });
             }
         });
@@ -95,12 +96,21 @@ impl FaultServer {
     }
 }
 
+/// Requests being served at once: from a request's arrival (its head read) until its answer
+/// starts, so that a client that has its answer and sends the next request is never counted
+/// twice while the server closes the first connection.
+struct Concurrency<'a> {
+    now: &'a AtomicUsize,
+    peak: &'a AtomicUsize,
+}
+
 fn answer(
     mut stream: TcpStream,
     root: &Path,
     delay: Duration,
     asked: &Mutex<HashMap<String, u32>>,
     reply: &(dyn Fn(&str, u32) -> Reply + Send + Sync),
+    counter: &Concurrency<'_>,
 ) -> std::io::Result<()> {
     let mut reader = BufReader::new(stream.try_clone()?);
     let mut line = String::new();
@@ -118,8 +128,11 @@ fn answer(
         *n += 1;
         *n
     };
+    let running = counter.now.fetch_add(1, Ordering::SeqCst) + 1;
+    counter.peak.fetch_max(running, Ordering::SeqCst);
     std::thread::sleep(delay);
     let body = std::fs::read(root.join(path.trim_start_matches('/')));
+    counter.now.fetch_sub(1, Ordering::SeqCst);
     let head = |status: &str, len: usize| {
         format!("HTTP/1.1 {status}\r\nContent-Length: {len}\r\nConnection: close\r\n\r\n")
     };
