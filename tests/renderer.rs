@@ -31,20 +31,7 @@ fn targets(
     (width, height): (u32, u32),
 ) -> Targets {
     let make = |format, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: None,
-            size: wgpu::Extent3d {
-                width,
-                height,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
+        verdant::gpu::target_texture(device, "test target", format, usage, (width, height))
     };
     use wgpu::TextureUsages as U;
     let color = make(color_format, U::RENDER_ATTACHMENT | U::COPY_SRC);

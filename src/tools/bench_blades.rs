@@ -345,6 +345,7 @@ pub fn run_bench_blades(
     let mut generate_samples = vec![Vec::new(); spacings.len()];
     let mut draw_samples = vec![Vec::new(); spacings.len()];
     let mut floor_samples = vec![Vec::new(); spacings.len()];
+    let mut floor_vertices = vec![0u64; spacings.len()];
     for round in 0..counts.rounds {
         for (k, scene) in scenes.iter_mut().enumerate() {
             let walker = Some(camera.position.truncate());
@@ -374,7 +375,9 @@ pub fn run_bench_blades(
                 draw_samples[k].push(pass("grass_draw"));
             }
             let drawn = images[k].0.grass.drawn;
-            floor_samples[k].extend(floor.time(&ctx, drawn, counts)?);
+            let (times, vertices) = floor.time(&ctx, drawn, counts)?;
+            floor_samples[k].extend(times);
+            floor_vertices[k] = vertices;
             progress(
                 "timing",
                 u64::from(round) * total + k as u64 + 1,
@@ -409,7 +412,7 @@ pub fn run_bench_blades(
             draw,
             frame: Timing::of(&frame_samples[k]),
             floor: floor_t,
-            floor_vertices: floor.vertices(g.drawn),
+            floor_vertices: floor_vertices[k],
             ns_per_blade: draw.median_ms * 1e6 / drawn.max(1) as f64,
             ns_per_vertex: draw.median_ms * 1e6 / vertices.max(1) as f64,
             ratio_to_floor: if floor_t.median_ms > 0.0 {
@@ -591,19 +594,18 @@ impl FloorPass {
         }
     }
 
-    /// Vertices the floor draws for `drawn` blades per LOD: the instances and strip lengths of
-    /// its draw calls.
-    fn vertices(&self, drawn: [u32; 2]) -> u64 {
-        (0..2)
-            .map(|l| u64::from(drawn[l]) * u64::from(2 * self.segments[l] + 1))
-            .sum()
-    }
-
     /// Times `counts.warmup + counts.timed` floor frames back to back; returns the timed ones'
-    /// GPU times (milliseconds; wall times between submissions without timestamps).
-    fn time(&self, ctx: &GpuContext, drawn: [u32; 2], counts: FrameCounts) -> Result<Vec<f64>> {
+    /// GPU times (milliseconds; wall times between submissions without timestamps) and the
+    /// vertices a frame drew, counted from the ranges of its draw calls.
+    fn time(
+        &self,
+        ctx: &GpuContext,
+        drawn: [u32; 2],
+        counts: FrameCounts,
+    ) -> Result<(Vec<f64>, u64)> {
         let frames = (counts.warmup + counts.timed).min(MAX_FLOOR_FRAMES);
         let mut walls = Vec::new();
+        let mut vertices = 0u64;
         let mut last = std::time::Instant::now();
         for f in 0..frames {
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
@@ -637,9 +639,12 @@ impl FloorPass {
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
+                vertices = 0;
                 for (l, pipeline) in self.pipelines.iter().enumerate() {
+                    let (strip, instances) = (0..2 * self.segments[l] + 1, 0..drawn[l]);
+                    vertices += u64::from(strip.len() as u32) * u64::from(instances.len() as u32);
                     pass.set_pipeline(pipeline);
-                    pass.draw(0..2 * self.segments[l] + 1, 0..drawn[l]);
+                    pass.draw(strip, instances);
                 }
             }
             if f + 1 == frames
@@ -654,7 +659,7 @@ impl FloorPass {
         }
         ctx.wait_idle();
         let skip = counts.warmup.min(frames) as usize;
-        match &self.queries {
+        let times = match &self.queries {
             Some((_, b)) => {
                 let ticks: Vec<u64> = crate::gpu::read_buffer_pod(
                     &ctx.device,
@@ -662,14 +667,15 @@ impl FloorPass {
                     b,
                     ..u64::from(frames) * 16,
                 )?;
-                Ok(ticks
+                ticks
                     .chunks_exact(2)
                     .skip(skip)
                     .map(|t| t[1].saturating_sub(t[0]) as f64 * self.period_ns / 1e6)
-                    .collect())
+                    .collect()
             }
-            None => Ok(walls.into_iter().skip(skip).collect()),
-        }
+            None => walls.into_iter().skip(skip).collect(),
+        };
+        Ok((times, vertices))
     }
 }
 
