@@ -183,7 +183,14 @@ struct FrameSample {
     resident_fraction: f64,
     rss: u64,
     cache_bytes: u64,
+    /// No teleport's reload is under way: the streamer has caught up with the last teleport
+    /// and `settle_frames` more have passed.
+    settled: bool,
 }
+
+/// The fewest settled frames (no teleport's reload under way) a memory window is measured on;
+/// with fewer, the window's every frame counts.
+const MIN_SETTLED_FRAMES: usize = 5;
 
 /// The frames of the memory check: the window just after the warm-up and the last quarter of
 /// the run, as frame ranges; `None` when the run is too short for them to be apart.
@@ -457,12 +464,17 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         if frame % 10 == 0 {
             rss_timeline.push((frame, rss, r.cache.bytes));
         }
+        let settled = current_teleport.as_ref().is_none_or(|tp| {
+            tp.frames_to_full_detail
+                .is_some_and(|f| frame >= tp.frame + f + opts.settle_frames)
+        });
         samples.push(FrameSample {
             frame,
             frame_ms: ms,
             resident_fraction: r.resident_fraction,
             rss,
             cache_bytes: r.cache.bytes,
+            settled,
         });
         last = Some(stats.residency);
         progress(u64::from(frame) + 1, u64::from(frames));
@@ -476,13 +488,22 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     // drivers allocate and free scratch memory in bursts: on lavapipe the resident size swings
     // by 40 MiB between frames, enough to move a window's median by as much under load, while
     // a leak lifts the floor. The CPU cache's own growth is taken out, since it has its ceiling.
+    // Frames while a teleport's reload is under way (up to MIN_SETTLED_FRAMES of them kept when
+    // a window has too few others) are left out: the burst of uploads, decodes and derivations
+    // holds transient memory that the allocator may keep a while, which is not a leak.
     let (early, late) = memory_windows(frames, warmup_frames).expect("checked before the run");
     let window = |range: &std::ops::Range<u32>| {
-        let part: Vec<&FrameSample> = samples
+        let all: Vec<&FrameSample> = samples
             .items()
             .iter()
             .filter(|s| range.contains(&s.frame))
             .collect();
+        let settled: Vec<&FrameSample> = all.iter().copied().filter(|s| s.settled).collect();
+        let part = if settled.len() >= MIN_SETTLED_FRAMES {
+            settled
+        } else {
+            all
+        };
         let rss: Vec<f64> = part.iter().map(|p| p.rss as f64).collect();
         let cache: Vec<f64> = part.iter().map(|p| p.cache_bytes as f64).collect();
         let floor =
