@@ -3,6 +3,7 @@
 // reaches the GPU, so a world tens of kilometres wide does not jitter.
 
 #include "shared/features.wgsl"
+#include "shared/hash.wgsl"
 #include "shared/output.wgsl"
 
 struct Frame {
@@ -20,6 +21,27 @@ struct Frame {
     // The viewer's overlay: x: on (1) or off (0), y and z: radii of the high and low grass
     // rings (m), w: the grid cell of a level-0 tile's draw (m), from which a tile's level follows.
     overlay: vec4<f32>,
+    // The camera's world position, metres (x, y, z), in f32: exact to millimetres across a
+    // world tens of kilometres wide, enough for shadow rays and noise; w: unused.
+    camera_world: vec4<f32>,
+    // x, y: the camera's world xy modulo 4096 m (the world-space colour noise of the grass's wind
+    // pass); z: the start and w: the end of grass's dithered fade at its view distance (m), both
+    // 0 without grass (the far-field shading is then everywhere).
+    grass_view: vec4<f32>,
+    // x, y: the camera's clump cell (floor of its xy over the clump cell), as i32 bits; z: the
+    // grass seed; w: the clump cell (m) as f32 bits.
+    clump: vec4<u32>,
+    // x, y: the camera's xy minus its clump cell's south-west corner (m); z: the far field's
+    // blade position t (0 root .. 1 tip) whose colour it shows; w: unused.
+    clump_offset: vec4<f32>,
+    // Per grass type: rgb the colour of blade base and tip, w of base: the growth blend.
+    base_colors: array<vec4<f32>, 16>,
+    tip_colors: array<vec4<f32>, 16>,
+    // Level-0 tiles: x, y the root tile grid, z the cell size (m) as f32 bits, w: 1 when the
+    // slots below hold every root tile (worlds of at most 64), else 0.
+    roots: vec4<u32>,
+    // Atlas slot of root tile (x, y) at index y * roots.x + x, four to a vector.
+    root_slots: array<vec4<u32>, 16>,
 }
 
 struct TileDraw {
@@ -48,10 +70,13 @@ struct VertexOut {
     // Invariant: the depth pre-pass and the colour pass must produce the same depths.
     @builtin(position) @invariant clip: vec4<f32>,
     @location(0) rel_pos: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) albedo: vec3<f32>,
+    // The atlas texel under the vertex (fractional), in the slot `layer`.
+    @location(2) tex: vec2<f32>,
     // The drawn tile's level (for the overlay).
     @location(3) @interpolate(flat) level: f32,
+    @location(4) @interpolate(flat) layer: u32,
+    // Metres per atlas texel of the slot's data.
+    @location(5) @interpolate(flat) texel_m: f32,
 }
 
 fn texel(t: vec2<i32>, layer: u32) -> f32 {
@@ -90,13 +115,8 @@ fn vs_terrain(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) 
 
     let tp = tile.tex_origin + gm * tile.tex_step;
     let h = height_at(tp, tile.layer);
-    // Central differences one texel apart; the border samples make this seamless across tiles.
+    // Metres per texel of the slot's data (the fragment's normals and maps are per texel).
     let texel_m = tile.cell_size / tile.tex_step;
-    let hl = height_at(tp - vec2<f32>(1.0, 0.0), tile.layer);
-    let hr = height_at(tp + vec2<f32>(1.0, 0.0), tile.layer);
-    let hd = height_at(tp - vec2<f32>(0.0, 1.0), tile.layer);
-    let hu = height_at(tp + vec2<f32>(0.0, 1.0), tile.layer);
-    let normal = normalize(vec3<f32>(hl - hr, hd - hu, 2.0 * texel_m));
 
     var z = h;
     if skirt {
@@ -104,25 +124,12 @@ fn vs_terrain(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) 
     }
     let rel = vec3<f32>(tile.origin + gm * tile.cell_size, z - frame.camera.x);
 
-    let gt = textureLoad(grass, vec2<i32>(round(tp)), tile.layer, 0);
-    let kind = min(gt.r, frame.grid.z - 1u);
-    let d = f32(gt.g) / 255.0;
-    let rock = vec3<f32>(0.30, 0.28, 0.26);
-    let soil = vec3<f32>(0.33, 0.27, 0.19);
-    let grass_color = frame.ground_colors[kind].rgb;
-    var albedo = mix(soil, grass_color, d);
-    if kind == 0u {
-        albedo = rock;
-    } else if (frame.grid.w & GROUND_DARKENING) != 0u {
-        // Ground darkening: dense grass shades the soil under it.
-        albedo *= mix(1.0, 0.6, d);
-    }
-
     var out: VertexOut;
     out.clip = frame.view_proj * vec4<f32>(rel, 1.0);
     out.rel_pos = rel;
-    out.normal = normal;
-    out.albedo = albedo;
+    out.tex = tp;
+    out.layer = tile.layer;
+    out.texel_m = texel_m;
     out.level = round(log2(frame.overlay.w / tile.cell_size));
     return out;
 }
@@ -132,21 +139,311 @@ fn fog_color(view_dir: vec3<f32>) -> vec3<f32> {
     return mix(frame.horizon_color.rgb, frame.sun_color.rgb, 0.35 * sun_amount);
 }
 
+// ---- Terrain shading, per pixel (CPU mirror of the far field: src/terrain/far_field.rs) ----
+
+const ROCK: vec3<f32> = vec3<f32>(0.33, 0.30, 0.26);
+const SOIL: vec3<f32> = vec3<f32>(0.33, 0.27, 0.19);
+
+fn rand01(h: u32) -> f32 {
+    return f32(h >> 8u) * (1.0 / 16777216.0);
+}
+
+fn hash3(a: u32, b: u32, c: u32) -> u32 {
+    return hash_u32(a ^ hash_u32(b ^ hash_u32(c)));
+}
+
+// The lattice hash and value noise of the grass's wind pass (shaders/grass_wind.wgsl), so that
+// the far field's colour variation is the blades'.
+fn hash2(x: i32, y: i32) -> u32 {
+    var h = (u32(x) * 0x8da6b343u) ^ (u32(y) * 0xd8163841u);
+    h ^= h >> 16u;
+    h *= 0x7feb352du;
+    h ^= h >> 15u;
+    return h;
+}
+
+// Value noise in 0..1 (x) and its gradient (yz), per unit of p.
+fn noise_grad(p: vec2<f32>) -> vec3<f32> {
+    let fl = floor(p);
+    let i = vec2<i32>(fl);
+    let f = p - fl;
+    let u = f * f * (3.0 - 2.0 * f);
+    let du = 6.0 * f * (1.0 - f);
+    let a = f32(hash2(i.x, i.y) >> 8u) / 16777216.0;
+    let b = f32(hash2(i.x + 1, i.y) >> 8u) / 16777216.0;
+    let c = f32(hash2(i.x, i.y + 1) >> 8u) / 16777216.0;
+    let d = f32(hash2(i.x + 1, i.y + 1) >> 8u) / 16777216.0;
+    let k = a - b - c + d;
+    let v = a + (b - a) * u.x + (c - a) * u.y + k * u.x * u.y;
+    return vec3<f32>(v, du.x * ((b - a) + k * u.y), du.y * ((c - a) + k * u.x));
+}
+
+fn value_noise(p: vec2<f32>) -> f32 {
+    return noise_grad(p).x;
+}
+
+fn grass_texel(t: vec2<i32>, layer: u32) -> vec2<u32> {
+    let size = vec2<i32>(textureDimensions(grass));
+    return textureLoad(grass, clamp(t, vec2<i32>(0), size - 1), layer, 0).rg;
+}
+
+// The tint of the Voronoi clump around `rel_xy` (metres from the camera): the nearest of the
+// jittered clump centres of the 3x3 cells around, as shaders/grass_generate.wgsl picks it for
+// each blade, and its tint (mean 1).
+fn clump_tint(rel_xy: vec2<f32>) -> vec3<f32> {
+    let clump_m = bitcast<f32>(frame.clump.w);
+    let local = rel_xy + frame.clump_offset.xy;
+    let c = vec2<i32>(floor(local / clump_m));
+    let base = vec2<i32>(bitcast<i32>(frame.clump.x), bitcast<i32>(frame.clump.y));
+    var best = 3.4028235e38;
+    var clump = 0u;
+    for (var dy = -1; dy <= 1; dy++) {
+        for (var dx = -1; dx <= 1; dx++) {
+            let cc = c + vec2<i32>(dx, dy);
+            let k = base + cc;
+            let ch = hash3(u32(k.x), u32(k.y), frame.clump.z ^ 0x00c10b55u);
+            let p = (vec2<f32>(cc) + 0.5 + 0.8 * (vec2<f32>(rand01(ch), rand01(hash_u32(ch ^ 1u))) - 0.5)) * clump_m;
+            let d = p - local;
+            let d2 = dot(d, d);
+            if d2 < best {
+                best = d2;
+                clump = ch;
+            }
+        }
+    }
+    return vec3<f32>(
+        0.85 + 0.3 * rand01(hash_u32(clump ^ 4u)),
+        0.85 + 0.3 * rand01(hash_u32(clump ^ 5u)),
+        0.85 + 0.3 * rand01(hash_u32(clump ^ 6u)),
+    );
+}
+
+// The blades' colour variation at `rel_xy` (as the wind pass applies it to each blade's root).
+fn color_variation(rel_xy: vec2<f32>) -> vec3<f32> {
+    if (frame.grid.w & COLOR_VARIATION) == 0u {
+        return vec3<f32>(1.0);
+    }
+    let world = frame.grass_view.xy + rel_xy;
+    let v = value_noise(world / 6.0) * 0.6 + value_noise(world / 1.7) * 0.4;
+    return vec3<f32>(0.78, 0.86, 0.7) + (vec3<f32>(1.15, 1.1, 0.95) - vec3<f32>(0.78, 0.86, 0.7)) * v;
+}
+
+// Grass seen from afar, lit as shaders/grass_draw.wgsl lights a blade at position t whose
+// normal has turned to its growth direction `n` (as far blades' normals do): the mean of a
+// blade's front (lit by the sun) and back (lit through the blade when translucency is on),
+// dimmed by CANOPY_SHADE for the blades' shade on each other, plus the sheen of the blades'
+// specular highlights on average (SHEEN of the sun, when specular is on).
+const CANOPY_SHADE: f32 = 0.75;
+const SHEEN: f32 = 0.0125;
+// Under the blades: how much of the ground the far field's grass covers, and how much light
+// reaches it there.
+const UNDER_FILL: f32 = 0.5;
+const UNDER_SHADE: f32 = 0.6;
+
+fn far_grass_light(albedo: vec3<f32>, n: vec3<f32>, t: f32, sun_vis: f32) -> vec3<f32> {
+    let sun = frame.sun_dir.xyz;
+    let diffuse = max(dot(n, sun), 0.0) * sun_vis;
+    var through = vec3<f32>(0.0);
+    if (frame.grid.w & TRANSLUCENCY) != 0u {
+        through = 0.25 * vec3<f32>(0.9, 1.0, 0.55);
+    }
+    var ao = 1.0;
+    if (frame.grid.w & AMBIENT_OCCLUSION) != 0u {
+        ao = mix(0.3, 1.0, t);
+    }
+    let light = frame.sun_color.rgb * diffuse * 0.5 * (vec3<f32>(1.0) + through);
+    let ambient = frame.sky_color.rgb * 0.35 * ao;
+    var sheen = 0.0;
+    if (frame.grid.w & SPECULAR) != 0u {
+        sheen = SHEEN * diffuse;
+    }
+    return albedo * (light * mix(0.6, 1.0, ao) + ambient) * CANOPY_SHADE + frame.sun_color.rgb * sheen;
+}
+
+// How much of the ground the far field's grass of density d hides.
+fn far_cover(d: f32) -> f32 {
+    return clamp(1.25 * d, 0.0, 1.0);
+}
+
+// Bilinear height of the root (level-0) tiles at world xy, or a very low height off the world.
+fn root_height(world: vec2<f32>) -> f32 {
+    let cell = bitcast<f32>(frame.roots.z);
+    let size = i32(textureDimensions(heights).x);
+    let border = f32(frame.grid.y);
+    let cells = f32(size) - 2.0 * border;
+    let tile_m = cell * cells;
+    let r = vec2<i32>(floor(world / tile_m));
+    if r.x < 0 || r.y < 0 || r.x >= i32(frame.roots.x) || r.y >= i32(frame.roots.y) {
+        return -1e9;
+    }
+    let index = u32(r.y) * frame.roots.x + u32(r.x);
+    let slot = frame.root_slots[index / 4u][index % 4u];
+    let p = (world - vec2<f32>(r) * tile_m) / cell + border;
+    return height_at(p, slot);
+}
+
+// The fraction of the sun seen from a surface point: rays marched over the heights of the
+// pixel's own tile (short range, fine), then over the root tiles (long range, coarse), with a
+// soft edge from the angle by which the ray clears the terrain.
+fn sun_visibility(tex: vec2<f32>, layer: u32, texel_m: f32, world: vec3<f32>) -> f32 {
+    let sun = frame.sun_dir.xyz;
+    if sun.z <= 0.0 {
+        return 0.0;
+    }
+    let flat_len = length(sun.xy);
+    if flat_len < 1e-4 {
+        return 1.0;
+    }
+    let dir = sun.xy / flat_len;
+    let rise = sun.z / flat_len;
+    let softness = 0.06;
+    var vis = 1.0;
+    // Fine: within the tile's own texels (its border included).
+    let size = f32(textureDimensions(heights).x) - 1.0;
+    let h0 = world.z + 0.05 * texel_m;
+    var s = 1.5;
+    for (var i = 0; i < 20; i++) {
+        let q = tex + dir * s;
+        if any(q < vec2<f32>(0.0)) || any(q > vec2<f32>(size)) {
+            break;
+        }
+        let over = (h0 + s * texel_m * rise - height_at(q, layer)) / (s * texel_m);
+        vis = min(vis, smoothstep(-softness, softness, over));
+        s *= 1.3;
+    }
+    // Coarse: the root tiles, from a few of their cells away (closer, their smoothed heights
+    // would shadow the fine surface itself), up to 8 km.
+    if frame.roots.w == 1u {
+        let cell = bitcast<f32>(frame.roots.z);
+        let bias = 0.1 * cell;
+        var d = max(2.0 * cell, 40.0 * texel_m);
+        for (var i = 0; i < 16; i++) {
+            if d > 8000.0 {
+                break;
+            }
+            let p = world.xy + dir * d;
+            let over = (world.z + d * rise + bias - root_height(p)) / d;
+            vis = min(vis, smoothstep(-softness, softness, over));
+            d *= 1.35;
+        }
+    }
+    return vis;
+}
+
 @fragment
 fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
-    let n = normalize(in.normal);
+    let rel = in.rel_pos;
+    let dist = length(rel);
+    let world = frame.camera_world.xyz + rel;
+
+    // Per-pixel normal from the height atlas (central differences one texel apart).
+    let tex = in.tex;
+    let hl = height_at(tex - vec2<f32>(1.0, 0.0), in.layer);
+    let hr = height_at(tex + vec2<f32>(1.0, 0.0), in.layer);
+    let hd = height_at(tex - vec2<f32>(0.0, 1.0), in.layer);
+    let hu = height_at(tex + vec2<f32>(0.0, 1.0), in.layer);
+    let n_terrain = normalize(vec3<f32>(hl - hr, hd - hu, 2.0 * in.texel_m));
+
+    // Maps: the four grass samples around the pixel, blended with weights whose border is
+    // moved about by world-space noise (up to about half a texel), so that no texel edge shows.
+    let warp_scale = max(in.texel_m, 0.5);
+    let wn = 0.65 * value_noise(world.xy / (0.9 * warp_scale)) + 0.35 * value_noise(world.xy / (0.3 * warp_scale) + 31.7);
+    let wn2 = 0.65 * value_noise(world.xy / (0.9 * warp_scale) + 57.3) + 0.35 * value_noise(world.xy / (0.3 * warp_scale) + 11.1);
+    let cell = floor(tex);
+    let f = tex - cell;
+    let fw = clamp(f + (vec2<f32>(wn, wn2) - 0.5) * 0.9, vec2<f32>(0.0), vec2<f32>(1.0));
+    let sw = smoothstep(vec2<f32>(0.3), vec2<f32>(0.7), fw);
+    let ci = vec2<i32>(cell);
+    var ground = vec3<f32>(0.0);
+    var grass_col = vec3<f32>(0.0);
+    var cover = 0.0;
+    var growth_blend = 0.0;
+    var density = 0.0;
+    let t_far = frame.clump_offset.z;
+    for (var k = 0; k < 4; k++) {
+        let o = vec2<i32>(k & 1, k >> 1);
+        let w = select(1.0 - sw.x, sw.x, o.x == 1) * select(1.0 - sw.y, sw.y, o.y == 1);
+        let g = grass_texel(ci + o, in.layer);
+        let kind = min(g.x, frame.grid.z - 1u);
+        let d = f32(g.y) / 255.0;
+        var a = mix(SOIL, frame.ground_colors[kind].rgb, d);
+        if kind == 0u {
+            a = ROCK;
+        } else if (frame.grid.w & GROUND_DARKENING) != 0u {
+            a *= mix(1.0, 0.6, d);
+        }
+        ground += w * a;
+        density += w * d;
+        if kind != 0u {
+            let c = far_cover(d) * w;
+            grass_col += c * mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t_far);
+            growth_blend += c * frame.base_colors[kind].w;
+            cover += c;
+        }
+    }
+    if cover > 0.0 {
+        grass_col /= cover;
+        growth_blend /= cover;
+    }
+
+    // Close-range detail: a few octaves of world-space noise in the ground's colour and normal,
+    // each faded out before its features shrink below a pixel.
+    var detail = 0.0;
+    var slope_noise = vec2<f32>(0.0);
+    let scales = array<f32, 4>(37.0, 9.3, 2.1, 0.55);
+    let amps = array<f32, 4>(0.10, 0.08, 0.07, 0.06);
+    for (var k = 0; k < 4; k++) {
+        let sc = scales[k];
+        let vis = clamp(sc / (0.004 * dist + 1e-3) - 1.0, 0.0, 1.0);
+        if vis > 0.0 {
+            let ng = noise_grad(world.xy / sc + f32(k) * 19.1);
+            detail += (ng.x - 0.5) * amps[k] * 2.0 * vis;
+            slope_noise += ng.yz / sc * amps[k] * sc * 0.8 * vis;
+        }
+    }
+    let n = normalize(n_terrain - vec3<f32>(slope_noise, 0.0));
+
+    // Materials: rock on steep slopes (the border moved by noise), soil where it is steep
+    // enough to thin the grass.
+    let slope = 1.0 - n_terrain.z;
+    let rock_w = smoothstep(0.26, 0.40, slope + (wn - 0.5) * 0.12);
+    let soil_w = smoothstep(0.10, 0.22, slope + (wn2 - 0.5) * 0.08) * 0.6;
+    ground = mix(ground, SOIL * 0.9, soil_w * (1.0 - rock_w));
+    ground = mix(ground, ROCK * (0.9 + 0.3 * wn2), rock_w);
+    cover *= (1.0 - rock_w) * (1.0 - 0.5 * soil_w);
+    ground *= 1.0 + detail;
+
+    var sun_vis = 1.0;
+    if (frame.grid.w & SHADOWS) != 0u {
+        sun_vis = sun_visibility(tex, in.layer, in.texel_m, world);
+    }
     let sun = frame.sun_dir.xyz;
-    let lambert = max(dot(n, sun), 0.0);
+    let lambert = max(dot(n, sun), 0.0) * sun_vis;
     // Hemisphere ambient: sky from above, warm bounce from the ground below.
     let bounce = vec3<f32>(0.20, 0.17, 0.12);
     let ambient = mix(bounce, frame.sky_color.rgb, 0.5 + 0.5 * n.z);
-    let lit = in.albedo * (frame.sun_color.rgb * lambert + 0.45 * ambient);
+    var lit = ground * (frame.sun_color.rgb * lambert + 0.45 * ambient);
 
-    let dist = length(in.rel_pos);
+    // The far field: beyond the grass's view distance the terrain shows what the blades would,
+    // faded in over the band where the blades thin out. Inside it, the ground under the
+    // blades is half covered by the far field's grass in the shade of the blades above (the
+    // lower layers of a real field), so that the gaps between blades read as grass.
+    if (frame.grid.w & FAR_FIELD) != 0u && cover > 0.0 {
+        var w = 1.0;
+        if frame.grass_view.w > 0.0 {
+            w = clamp((dist - frame.grass_view.z) / (frame.grass_view.w - frame.grass_view.z), 0.0, 1.0);
+        }
+        let up = vec3<f32>(0.0, 0.0, 1.0);
+        let growth = normalize(up + (n_terrain - up) * growth_blend);
+        let albedo = grass_col * clump_tint(rel.xy) * color_variation(rel.xy) * (1.0 + 0.5 * detail);
+        let grass_lit = far_grass_light(albedo, growth, t_far, sun_vis) * mix(UNDER_SHADE, 1.0, w);
+        lit = mix(lit, grass_lit, min(cover, 1.0) * mix(UNDER_FILL, 1.0, w));
+    }
+
     // Clear near the camera, 95% fog at the manifest's fog distance.
     let x = dist / frame.camera.y;
     let fog = 1.0 - exp(-3.0 * x * x);
-    var color = mix(lit, fog_color(in.rel_pos / max(dist, 1e-3)), fog);
+    var color = mix(lit, fog_color(rel / max(dist, 1e-3)), fog);
     if frame.overlay.x > 0.5 {
         color = with_overlay(color, in);
     }

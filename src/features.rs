@@ -25,11 +25,15 @@ pub enum Feature {
     ColorVariation,
     /// Ground darkened under dense grass.
     GroundDarkening,
+    /// Beyond the grass's view distance, the terrain shaded with what the blades would show.
+    FarField,
+    /// Sun shadows cast by the terrain.
+    Shadows,
 }
 
 impl Feature {
     /// Every feature, in bit order.
-    pub const ALL: [Feature; 8] = [
+    pub const ALL: [Feature; 10] = [
         Feature::WindSources,
         Feature::Interaction,
         Feature::DetailBending,
@@ -38,6 +42,8 @@ impl Feature {
         Feature::AmbientOcclusion,
         Feature::ColorVariation,
         Feature::GroundDarkening,
+        Feature::FarField,
+        Feature::Shadows,
     ];
 
     /// The bit of this feature in [`Features::bits`] (and in the shaders).
@@ -56,6 +62,8 @@ impl Feature {
             Feature::AmbientOcclusion => "ambient-occlusion",
             Feature::ColorVariation => "color-variation",
             Feature::GroundDarkening => "ground-darkening",
+            Feature::FarField => "far-field",
+            Feature::Shadows => "shadows",
         }
     }
 }

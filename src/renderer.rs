@@ -468,6 +468,7 @@ impl Renderer {
             config.mesh_step,
         );
         terrain.set_features(config.features);
+        terrain.set_grass(config.grass_settings(&world).as_ref());
         let grass = match config.grass_settings(&world) {
             Some(settings) => {
                 let mut wind_config = match &config.wind_scene {
@@ -833,6 +834,19 @@ impl Renderer {
                 ))
             })
             .collect();
+        // The root tiles (always resident) carry the long shadow rays.
+        let [rx, ry] = pyramid.root_tiles;
+        let roots: Option<Vec<(u32, TileId)>> = (0..ry)
+            .flat_map(|y| (0..rx).map(move |x| TileId::new(0, x, y)))
+            .take(crate::terrain::MAX_ROOT_TILES + 1)
+            .map(|id| match self.service.draw_source(id) {
+                Some((src, slot)) if src == id => Some((slot, id)),
+                _ => None,
+            })
+            .collect();
+        let roots = roots.filter(|r| r.len() <= crate::terrain::MAX_ROOT_TILES);
+        let root_slots: Option<Vec<u32>> = roots.as_ref().map(|r| r.iter().map(|p| p.0).collect());
+        self.terrain.set_root_slots(root_slots.as_deref());
         let aspect = self.aspect();
         let terrain_tiles = self.terrain.prepare(queue, &camera, aspect, &draws);
         let grass_jobs = self.grass_jobs(&camera, &sel.grass);
@@ -846,6 +860,7 @@ impl Renderer {
                     .iter()
                     .map(|j| (j.layer, TileId::new(grass_level, j.tile_x, j.tile_y))),
             )
+            .chain(roots.into_iter().flatten())
             .collect();
         let view_proj = camera.view_proj_relative(aspect);
         if let Some(g) = &mut self.grass {

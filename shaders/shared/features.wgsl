@@ -9,3 +9,5 @@ const SPECULAR: u32 = 16u;
 const AMBIENT_OCCLUSION: u32 = 32u;
 const COLOR_VARIATION: u32 = 64u;
 const GROUND_DARKENING: u32 = 128u;
+const FAR_FIELD: u32 = 256u;
+const SHADOWS: u32 = 512u;

@@ -152,7 +152,7 @@ pub(crate) fn rand01(h: u32) -> f32 {
     (h >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
-fn hash3(a: u32, b: u32, c: u32) -> u32 {
+pub(crate) fn hash3(a: u32, b: u32, c: u32) -> u32 {
     hash_u32(a ^ hash_u32(b ^ hash_u32(c)))
 }
 

@@ -445,7 +445,7 @@ impl GrassRenderer {
                 height: t.height_m,
                 width: t.width_m,
                 // Soft grass follows the slope more; stiff grass grows straighter up.
-                growth_blend: 0.2 + 0.5 * (1.0 - t.stiffness.clamp(0.0, 1.0)),
+                growth_blend: crate::terrain::far_field::growth_blend(t.stiffness),
                 stiffness: t.stiffness,
                 _pad: [0.0; 2],
             };

@@ -55,7 +55,7 @@ fn hash2(x: i32, y: i32) -> u32 {
     h
 }
 
-fn value_noise(p: Vec2) -> f32 {
+pub(crate) fn value_noise(p: Vec2) -> f32 {
     let fl = p.floor();
     let (ix, iy) = (fl.x as i32, fl.y as i32);
     let f = p - fl;

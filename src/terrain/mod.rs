@@ -12,6 +12,8 @@ use crate::gpu::Targets;
 use crate::stream::TileAtlas;
 use crate::world::{Manifest, Pyramid, Sky, TileId};
 
+pub mod far_field;
+
 /// Colour target format of the headless tools and the reference images (any format of
 /// [`crate::shaders::encode_srgb_for`] works).
 pub const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
@@ -34,8 +36,20 @@ struct FrameUniforms {
     grid: [u32; 4],
     ground_colors: [[f32; 4]; MAX_GRASS_TYPES],
     overlay: [f32; 4],
+    camera_world: [f32; 4],
+    grass_view: [f32; 4],
+    clump: [u32; 4],
+    clump_offset: [f32; 4],
+    base_colors: [[f32; 4]; MAX_GRASS_TYPES],
+    tip_colors: [[f32; 4]; MAX_GRASS_TYPES],
+    roots: [u32; 4],
+    root_slots: [[u32; 4]; MAX_ROOT_TILES / 4],
 }
-const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 496);
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 1344);
+
+/// Most root (level-0) tiles whose heights the long shadow rays march over; a world with more
+/// has terrain shadows from each tile's own heights only.
+pub const MAX_ROOT_TILES: usize = 64;
 
 /// One tile (or the part of an ancestor standing in for it) to draw; mirrors `TileDraw` in
 /// `shaders/terrain.wgsl`.
@@ -114,6 +128,7 @@ pub struct TerrainRenderer {
     index_count: u32,
     max_tiles: u32,
     uniforms: FrameUniforms,
+    clump_m: f64,
 }
 
 impl TerrainRenderer {
@@ -151,7 +166,7 @@ impl TerrainRenderer {
 
         let tex_entry = |binding, sample_type| wgpu::BindGroupLayoutEntry {
             binding,
-            visibility: wgpu::ShaderStages::VERTEX,
+            visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
             ty: wgpu::BindingType::Texture {
                 sample_type,
                 view_dimension: wgpu::TextureViewDimension::D2Array,
@@ -284,10 +299,17 @@ impl TerrainRenderer {
         );
 
         let mut ground_colors = [[0.0; 4]; MAX_GRASS_TYPES];
-        for (slot, t) in ground_colors.iter_mut().zip(&manifest.grass_types) {
+        let mut base_colors = [[0.0; 4]; MAX_GRASS_TYPES];
+        let mut tip_colors = [[0.0; 4]; MAX_GRASS_TYPES];
+        for (i, t) in manifest.grass_types.iter().take(MAX_GRASS_TYPES).enumerate() {
             let c = t.ground_color;
-            *slot = [c[0], c[1], c[2], 1.0];
+            ground_colors[i] = [c[0], c[1], c[2], 1.0];
+            let (b, tip) = (t.base_color, t.tip_color);
+            base_colors[i] = [b[0], b[1], b[2], far_field::growth_blend(t.stiffness)];
+            tip_colors[i] = [tip[0], tip[1], tip[2], 1.0];
         }
+        let roots = manifest.pyramid.root_tiles;
+        let root_cell = manifest.pyramid.cell_size_m(0) as f32;
         let sky_cfg = &manifest.sky;
         // Manifest colours are linear RGB.
         let lin4 = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
@@ -312,6 +334,14 @@ impl TerrainRenderer {
                 0.0,
                 (manifest.pyramid.cell_size_m(0) * f64::from(mesh_step)) as f32,
             ],
+            camera_world: [0.0; 4],
+            grass_view: [0.0; 4],
+            clump: [0, 0, 0, 1.0f32.to_bits()],
+            clump_offset: [0.0, 0.0, far_field::FAR_T, 0.0],
+            base_colors,
+            tip_colors,
+            roots: [roots[0], roots[1], root_cell.to_bits(), 0],
+            root_slots: [[0; 4]; MAX_ROOT_TILES / 4],
         };
         Self {
             depth_prepass,
@@ -324,10 +354,47 @@ impl TerrainRenderer {
             index_count: indices.len() as u32,
             max_tiles,
             uniforms,
+            clump_m: 1.0,
         }
     }
 
-    /// Sets the switched-on features (the terrain reads ground darkening).
+    /// Sets what the far field shows of the grass: the dithered fade to the view distance, the
+    /// clump cells and seed of `settings`; `None` (no grass drawn) shows the far field
+    /// everywhere.
+    pub fn set_grass(&mut self, settings: Option<&crate::grass::GrassSettings>) {
+        match settings {
+            Some(g) => {
+                self.uniforms.grass_view[2] = g.view_distance_m - g.far_fade_m;
+                self.uniforms.grass_view[3] = g.view_distance_m;
+                self.uniforms.clump[2] = g.seed;
+                self.uniforms.clump[3] = g.clump_m.to_bits();
+                self.clump_m = f64::from(g.clump_m);
+            }
+            None => {
+                self.uniforms.grass_view[2] = 0.0;
+                self.uniforms.grass_view[3] = 0.0;
+            }
+        }
+    }
+
+    /// Sets the atlas slots of the root (level-0) tiles, `slots[y * root_tiles_x + x]`, over
+    /// which long shadow rays march; `None` (a root tile not resident, or more than
+    /// [`MAX_ROOT_TILES`]) leaves shadows to each tile's own heights.
+    pub fn set_root_slots(&mut self, slots: Option<&[u32]>) {
+        let n = (self.uniforms.roots[0] * self.uniforms.roots[1]) as usize;
+        match slots {
+            Some(s) if s.len() == n && n <= MAX_ROOT_TILES => {
+                for (i, &slot) in s.iter().enumerate() {
+                    self.uniforms.root_slots[i / 4][i % 4] = slot;
+                }
+                self.uniforms.roots[3] = 1;
+            }
+            _ => self.uniforms.roots[3] = 0,
+        }
+    }
+
+    /// Sets the switched-on features (the terrain reads ground darkening, the far field and
+    /// shadows).
     pub fn set_features(&mut self, features: crate::features::Features) {
         self.uniforms.grid[3] = features.bits();
     }
@@ -358,6 +425,15 @@ impl TerrainRenderer {
         self.uniforms.view_proj = view_proj.to_cols_array_2d();
         self.uniforms.inv_view_proj = view_proj.inverse().to_cols_array_2d();
         self.uniforms.camera[0] = camera.position.z as f32;
+        let p = camera.position;
+        self.uniforms.camera_world = [p.x as f32, p.y as f32, p.z as f32, 0.0];
+        self.uniforms.grass_view[0] = p.x.rem_euclid(4096.0) as f32;
+        self.uniforms.grass_view[1] = p.y.rem_euclid(4096.0) as f32;
+        let (cx, cy) = ((p.x / self.clump_m).floor(), (p.y / self.clump_m).floor());
+        self.uniforms.clump[0] = (cx as i32) as u32;
+        self.uniforms.clump[1] = (cy as i32) as u32;
+        self.uniforms.clump_offset[0] = (p.x - cx * self.clump_m) as f32;
+        self.uniforms.clump_offset[1] = (p.y - cy * self.clump_m) as f32;
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&self.uniforms));
         let n = draws.len().min(self.max_tiles as usize);
         if n > 0 {

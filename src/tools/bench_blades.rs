@@ -229,6 +229,17 @@ impl TileSource for FlatField {
     }
 }
 
+/// A flat square field `field_m` metres wide of one grass type at full density, generated in
+/// memory (no world files): its world and its tile source.
+pub fn flat_field(field_m: f64) -> Result<(World, Arc<dyn TileSource>)> {
+    let manifest = field_manifest(field_m)?;
+    let world = World {
+        dir: PathBuf::from("<memory>"),
+        manifest: manifest.clone(),
+    };
+    Ok((world, Arc::new(FlatField { manifest, field_m })))
+}
+
 /// The camera of `opts`.
 pub fn field_camera(opts: &BenchBladesOptions, aspect: f32) -> Camera {
     let eye = DVec3::from_array(opts.camera_m);
@@ -267,15 +278,7 @@ pub fn run_bench_blades(
     }
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("cannot create {}", opts.out.display()))?;
-    let manifest = field_manifest(opts.field_m)?;
-    let world = World {
-        dir: PathBuf::from("<memory>"),
-        manifest: manifest.clone(),
-    };
-    let source = Arc::new(FlatField {
-        manifest,
-        field_m: opts.field_m,
-    });
+    let (world, source) = flat_field(opts.field_m)?;
     let ctx = GpuContext::new()?;
     let camera = field_camera(opts, opts.size.0 as f32 / opts.size.1 as f32);
     let counts = FrameCounts::for_adapter(&ctx.info).with(

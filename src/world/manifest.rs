@@ -166,6 +166,10 @@ pub struct FeatureSwitches {
     pub color_variation: bool,
     /// Ground darkened under dense grass.
     pub ground_darkening: bool,
+    /// The terrain beyond the grass shaded with what the blades would show.
+    pub far_field: bool,
+    /// Sun shadows cast by the terrain.
+    pub shadows: bool,
 }
 
 impl Default for FeatureSwitches {
@@ -185,6 +189,8 @@ impl From<Features> for FeatureSwitches {
             ambient_occlusion: f.has(Feature::AmbientOcclusion),
             color_variation: f.has(Feature::ColorVariation),
             ground_darkening: f.has(Feature::GroundDarkening),
+            far_field: f.has(Feature::FarField),
+            shadows: f.has(Feature::Shadows),
         }
     }
 }
@@ -200,6 +206,8 @@ impl From<&FeatureSwitches> for Features {
             (Feature::AmbientOcclusion, s.ambient_occlusion),
             (Feature::ColorVariation, s.color_variation),
             (Feature::GroundDarkening, s.ground_darkening),
+            (Feature::FarField, s.far_field),
+            (Feature::Shadows, s.shadows),
         ];
         on.into_iter()
             .filter(|(_, on)| !on)

@@ -1,0 +1,158 @@
+//! CPU mirror of the far field (`shaders/terrain.wgsl`): beyond the grass's view distance the
+//! terrain is shaded with what the blades would show there, in the way Ghost of Tsushima
+//! carries its grass to the horizon: the grass type's blade colour at a representative height
+//! along the blade, the Voronoi clump's tint and the colour variation that the blades get,
+//! lit as a far blade is lit (its normal turned to its growth direction), over the ground in
+//! proportion to the density. It is faded in over the band where the blades thin out (the
+//! dithered fade before the view distance), so that no line shows where the blades end.
+
+use glam::{DVec2, Vec2, Vec3};
+
+use crate::grass::generate::{hash3, rand01};
+use crate::stream::derive_child::hash_u32;
+
+/// The position along a blade (0 root, 1 tip) whose colour the far field shows: seen at a
+/// grazing angle a field shows mostly the upper part of its blades.
+pub const FAR_T: f32 = 0.4;
+
+/// How much a blade's growth direction leans from the vertical toward the terrain's normal,
+/// by its grass type's stiffness (as generation sets it).
+pub fn growth_blend(stiffness: f32) -> f32 {
+    0.2 + 0.5 * (1.0 - stiffness.clamp(0.0, 1.0))
+}
+
+/// How much of the ground the far field's grass of density `d` (0..1) hides.
+pub fn cover(d: f32) -> f32 {
+    (1.25 * d).clamp(0.0, 1.0)
+}
+
+/// Weight of the far field at `dist` metres from the camera: 0 inside the grass's dithered
+/// fade (`fade_start`..`view_distance`), rising to 1 at the view distance. Without grass
+/// (`view_distance` 0) it is 1 everywhere.
+pub fn weight(dist: f32, fade_start: f32, view_distance: f32) -> f32 {
+    if view_distance <= 0.0 {
+        return 1.0;
+    }
+    ((dist - fade_start) / (view_distance - fade_start)).clamp(0.0, 1.0)
+}
+
+/// The tint (mean 1) of the Voronoi clump around `world` (metres), with clump cells of
+/// `clump_m` and the grass `seed`: the clump whose jittered centre is nearest, among the 3x3
+/// cells around, as generation picks each blade's clump.
+pub fn clump_tint(world: DVec2, clump_m: f32, seed: u32) -> Vec3 {
+    let c = (world / f64::from(clump_m)).floor();
+    let (cx, cy) = (c.x as i32, c.y as i32);
+    let local = (world - c * f64::from(clump_m)).as_vec2();
+    let mut best = f32::MAX;
+    let mut clump = 0u32;
+    for dy in -1..=1 {
+        for dx in -1..=1 {
+            let (kx, ky) = (cx + dx, cy + dy);
+            let ch = hash3(kx as u32, ky as u32, seed ^ 0x00c1_0b55);
+            let jitter = Vec2::new(rand01(ch), rand01(hash_u32(ch ^ 1))) - 0.5;
+            let centre =
+                (Vec2::new(dx as f32, dy as f32) + Vec2::splat(0.5) + 0.8 * jitter) * clump_m;
+            let d2 = (centre - local).length_squared();
+            if d2 < best {
+                best = d2;
+                clump = ch;
+            }
+        }
+    }
+    Vec3::new(
+        0.85 + 0.3 * rand01(hash_u32(clump ^ 4)),
+        0.85 + 0.3 * rand01(hash_u32(clump ^ 5)),
+        0.85 + 0.3 * rand01(hash_u32(clump ^ 6)),
+    )
+}
+
+/// The blades' colour variation at `world_mod` (the world position modulo 4096 m, as the wind
+/// pass applies it to each blade's root).
+pub fn color_variation(world_mod: Vec2) -> Vec3 {
+    let v = crate::grass::wind_pass::value_noise(world_mod / 6.0) * 0.6
+        + crate::grass::wind_pass::value_noise(world_mod / 1.7) * 0.4;
+    let (lo, hi) = (Vec3::new(0.78, 0.86, 0.7), Vec3::new(1.15, 1.1, 0.95));
+    lo + (hi - lo) * v
+}
+
+/// The blades' shade on each other, as the far field dims its light (fitted so that the far
+/// field where the blades end matches their mean colour; see `tests/far_field.rs`).
+pub const CANOPY_SHADE: f32 = 0.75;
+
+/// The blades' specular highlights on average, as a fraction of the sun on the far field
+/// (fitted as [`CANOPY_SHADE`] is).
+pub const SHEEN: f32 = 0.0125;
+
+/// The sun and sky that light the far field.
+#[derive(Clone, Copy, Debug)]
+pub struct Light {
+    /// Unit vector toward the sun.
+    pub sun_dir: Vec3,
+    /// Linear colour of the sun.
+    pub sun_color: Vec3,
+    /// Linear colour of the sky.
+    pub sky_color: Vec3,
+    /// Whether blades get ambient occlusion from root to tip.
+    pub ambient_occlusion: bool,
+    /// Whether blades let the sun through to their back.
+    pub translucency: bool,
+    /// Whether blades have specular highlights.
+    pub specular: bool,
+}
+
+/// A far blade's colour `albedo` at position `t` along it, its normal turned to its growth
+/// direction `n`, lit by `light` with the fraction `sun_vis` of the sun seen: the mean of the
+/// blade's front, lit by the sun, and its back, lit through the blade (a quarter of the sun,
+/// tinted as the blade shader tints it) when translucency is on, with the blade's ambient
+/// occlusion at `t` and its sky light averaged over both sides, dimmed by [`CANOPY_SHADE`],
+/// plus [`SHEEN`] of the sun for the blades' highlights when specular is on.
+pub fn light_far_grass(albedo: Vec3, n: Vec3, t: f32, sun_vis: f32, light: &Light) -> Vec3 {
+    let diffuse = n.dot(light.sun_dir).max(0.0) * sun_vis;
+    let through = if light.translucency {
+        Vec3::new(0.9, 1.0, 0.55) * 0.25
+    } else {
+        Vec3::ZERO
+    };
+    let ao = if light.ambient_occlusion {
+        0.3 + 0.7 * t
+    } else {
+        1.0
+    };
+    let sun = light.sun_color * diffuse * 0.5 * (Vec3::ONE + through);
+    let ambient = light.sky_color * 0.35 * ao;
+    let sheen = if light.specular { SHEEN * diffuse } else { 0.0 };
+    albedo * (sun * (0.6 + 0.4 * ao) + ambient) * CANOPY_SHADE + light.sun_color * sheen
+}
+
+/// The growth direction of a blade of `growth_blend` on terrain of normal `n`.
+pub fn growth_direction(n: Vec3, growth_blend: f32) -> Vec3 {
+    (Vec3::Z + (n - Vec3::Z) * growth_blend).normalize()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_far_field_fades_in_over_the_blades_fade_and_is_everywhere_without_grass() {
+        assert_eq!(weight(100.0, 120.0, 150.0), 0.0);
+        assert_eq!(weight(135.0, 120.0, 150.0), 0.5);
+        assert_eq!(weight(400.0, 120.0, 150.0), 1.0);
+        assert_eq!(weight(1.0, 0.0, 0.0), 1.0);
+    }
+
+    #[test]
+    fn clump_tints_average_one_and_are_constant_inside_a_clump() {
+        let mut sum = Vec3::ZERO;
+        let n = 4000;
+        for i in 0..n {
+            let p = DVec2::new(f64::from(i) * 0.77 + 3.0, f64::from(i % 61) * 1.3 + 5000.0);
+            sum += clump_tint(p, 1.6, 0x9a55);
+        }
+        let mean = sum / n as f32;
+        assert!((mean - Vec3::ONE).abs().max_element() < 0.02, "{mean}");
+        // Two points a millimetre apart lie in the same clump (almost always).
+        let p = DVec2::new(12345.678, 2345.6);
+        assert_eq!(clump_tint(p, 1.6, 7), clump_tint(p + 0.001, 1.6, 7));
+    }
+}
