@@ -302,29 +302,30 @@ fn sun_visibility(tex: vec2<f32>, layer: u32, texel_m: f32, world: vec3<f32>) ->
     let size = f32(textureDimensions(heights).x) - 1.0;
     let h0 = world.z + 0.05 * texel_m;
     var s = 1.5;
-    for (var i = 0; i < 20; i++) {
+    for (var i = 0; i < 28; i++) {
         let q = tex + dir * s;
         if any(q < vec2<f32>(0.0)) || any(q > vec2<f32>(size)) {
             break;
         }
         let over = (h0 + s * texel_m * rise - height_at(q, layer)) / (s * texel_m);
         vis = min(vis, smoothstep(-softness, softness, over));
-        s *= 1.3;
+        s *= 1.2;
     }
-    // Coarse: the root tiles, from a few of their cells away (closer, their smoothed heights
-    // would shadow the fine surface itself), up to 8 km.
+    // Coarse: the root tiles, from where the fine march stopped up to 8 km. The ray starts
+    // lifted to the root tiles' surface where that lies above the pixel's (their heights are
+    // smoothed: a valley floor lies below them), so that they shade only what stands above.
     if frame.roots.w == 1u {
         let cell = bitcast<f32>(frame.roots.z);
-        let bias = 0.1 * cell;
-        var d = max(2.0 * cell, 40.0 * texel_m);
-        for (var i = 0; i < 16; i++) {
+        let lift = max(root_height(world.xy) - world.z, 0.0) + 0.02 * cell;
+        var d = s * texel_m;
+        for (var i = 0; i < 24; i++) {
             if d > 8000.0 {
                 break;
             }
             let p = world.xy + dir * d;
-            let over = (world.z + d * rise + bias - root_height(p)) / d;
+            let over = (world.z + lift + d * rise - root_height(p)) / d;
             vis = min(vis, smoothstep(-softness, softness, over));
-            d *= 1.35;
+            d *= 1.25;
         }
     }
     return vis;

@@ -12,6 +12,7 @@ use crate::gpu::Targets;
 use crate::stream::TileAtlas;
 use crate::world::{Manifest, Pyramid, Sky, TileId};
 
+pub mod contact_shadow;
 pub mod far_field;
 
 /// Colour target format of the headless tools and the reference images (any format of

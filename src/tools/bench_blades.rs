@@ -17,7 +17,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
-use glam::{DVec3, Vec3};
+use glam::{DVec2, DVec3, Vec3};
 use serde::Serialize;
 
 use crate::camera::Camera;
@@ -122,16 +122,18 @@ pub struct BenchBladesReport {
     pub results: Vec<BladesResult>,
 }
 
-/// The field's manifest: one grass type, tiles of 50 m at the finest level (the grass level).
-fn field_manifest(field_m: f64) -> Result<Manifest> {
+/// The field's manifest: one grass type, tiles of 50 m at the finest level (the grass level),
+/// heights up to `top_m`.
+fn field_manifest(field_m: f64, top_m: f32) -> Result<Manifest> {
     let levels = 3u32;
     let root = 50.0 * f64::from(1u32 << (levels - 1));
     let roots = (field_m / root).ceil().max(1.0) as u32;
+    let top = top_m.max(1.0);
     let text = format!(
         r#"name = "blades-field"
 description = "A flat field of one grass type at full density, generated in memory."
 extent_m = [{field_m}, {field_m}]
-height_range_m = [0.0, 1.0]
+height_range_m = [0.0, {top}]
 
 [pyramid]
 root_tile_size_m = {root}
@@ -195,11 +197,15 @@ pitch_deg = -10.0
     )?)
 }
 
-/// Tiles of the field, made on request: flat at height 0, the grass type everywhere inside the
-/// field, bare outside, full density.
+/// The height of a generated field at a world position (metres).
+pub type HeightFn = Arc<dyn Fn(DVec2) -> f32 + Send + Sync>;
+
+/// Tiles of the field, made on request: heights from `height` (flat at 0 for the benchmark),
+/// the grass type everywhere inside the field, bare outside, full density.
 struct FlatField {
     manifest: Manifest,
     field_m: f64,
+    height: Option<HeightFn>,
 }
 
 impl TileSource for FlatField {
@@ -210,6 +216,7 @@ impl TileSource for FlatField {
         let cell = p.cell_size_m(id.level);
         let n = (size * size) as usize;
         let mut grass_type = vec![0u8; n];
+        let mut heights = vec![0.0; n];
         for j in 0..size {
             for i in 0..size {
                 let x = b.min.x + (f64::from(i) - f64::from(p.border)) * cell;
@@ -217,12 +224,15 @@ impl TileSource for FlatField {
                 if (0.0..=self.field_m).contains(&x) && (0.0..=self.field_m).contains(&y) {
                     grass_type[(j * size + i) as usize] = 1;
                 }
+                if let Some(h) = &self.height {
+                    heights[(j * size + i) as usize] = h(DVec2::new(x, y));
+                }
             }
         }
         Ok(TileData {
             id,
             size,
-            heights: vec![0.0; n],
+            heights,
             grass_type,
             density: vec![255; n],
         })
@@ -232,12 +242,29 @@ impl TileSource for FlatField {
 /// A flat square field `field_m` metres wide of one grass type at full density, generated in
 /// memory (no world files): its world and its tile source.
 pub fn flat_field(field_m: f64) -> Result<(World, Arc<dyn TileSource>)> {
-    let manifest = field_manifest(field_m)?;
+    field_with_heights(field_m, None, 0.0)
+}
+
+/// Like [`flat_field`], with the heights of `height` (none: flat at 0), which stay within
+/// 0..=`top_m`.
+pub fn field_with_heights(
+    field_m: f64,
+    height: Option<HeightFn>,
+    top_m: f32,
+) -> Result<(World, Arc<dyn TileSource>)> {
+    let manifest = field_manifest(field_m, top_m)?;
     let world = World {
         dir: PathBuf::from("<memory>"),
         manifest: manifest.clone(),
     };
-    Ok((world, Arc::new(FlatField { manifest, field_m })))
+    Ok((
+        world,
+        Arc::new(FlatField {
+            manifest,
+            field_m,
+            height,
+        }),
+    ))
 }
 
 /// The camera of `opts`.

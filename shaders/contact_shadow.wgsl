@@ -1,0 +1,99 @@
+// Contact shadows: the shadows of the grass (and of anything else in the depth buffer) within
+// about 30 m of the camera, onto the ground and onto other blades. Each pixel's surface point
+// marches toward the sun in screen space; where a step lands behind something nearer than it
+// (and within a thickness of it), the pixel is in shadow and its colour is dimmed by
+// multiplying the target (the sun's share of the light: the ambient stays). CPU mirror:
+// src/terrain/contact_shadow.rs.
+
+override ENCODE_SRGB: bool = false;
+
+struct Params {
+    // Camera-relative view-projection and its inverse (reverse-Z).
+    view_proj: mat4x4<f32>,
+    inv_view_proj: mat4x4<f32>,
+    // xyz: unit vector toward the sun.
+    sun_dir: vec4<f32>,
+    // x, y: target size (pixels); z: distance where the shadows have faded out (m); w: where
+    // they start to fade (m).
+    size: vec4<f32>,
+    // x: ray length (m); y: thickness of an occluder (m); z: the colour's factor in full
+    // shadow; w: steps.
+    march: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var depth: texture_depth_2d;
+
+@vertex
+fn vs_full(@builtin(vertex_index) vi: u32) -> @builtin(position) vec4<f32> {
+    let uv = vec2<f32>(f32((vi << 1u) & 2u), f32(vi & 2u));
+    return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
+}
+
+// The camera-relative point under pixel centre `px` at depth `d`.
+fn unproject(px: vec2<f32>, d: f32) -> vec3<f32> {
+    let ndc = vec2<f32>(px.x / params.size.x * 2.0 - 1.0, 1.0 - px.y / params.size.y * 2.0);
+    let p = params.inv_view_proj * vec4<f32>(ndc, d, 1.0);
+    return p.xyz / p.w;
+}
+
+// 1 in full sun, 0 in full contact shadow (before the distance fade).
+fn sun_seen(px: vec2<i32>) -> f32 {
+    let d = textureLoad(depth, px, 0);
+    if d <= 0.0 {
+        return 1.0;
+    }
+    let centre = vec2<f32>(px) + 0.5;
+    let p = unproject(centre, d);
+    let dist = length(p);
+    if dist >= params.size.z {
+        return 1.0;
+    }
+    let steps = i32(params.march.w);
+    let sun = params.sun_dir.xyz;
+    for (var i = 1; i <= steps; i++) {
+        let t = params.march.x * f32(i) / f32(steps);
+        let q = p + sun * t;
+        let c = params.view_proj * vec4<f32>(q, 1.0);
+        if c.w <= 0.0 {
+            break;
+        }
+        let n = c.xyz / c.w;
+        let spx = vec2<f32>((n.x * 0.5 + 0.5) * params.size.x, (0.5 - n.y * 0.5) * params.size.y);
+        if any(spx < vec2<f32>(0.0)) || any(spx >= params.size.xy) {
+            break;
+        }
+        let ipx = vec2<i32>(floor(spx));
+        if all(ipx == px) {
+            continue;
+        }
+        let sd = textureLoad(depth, ipx, 0);
+        if sd <= 0.0 {
+            continue;
+        }
+        let s = unproject(vec2<f32>(ipx) + 0.5, sd);
+        let behind = length(q) - length(s);
+        let bias = 0.02 + 0.004 * length(q);
+        if behind > bias && behind < params.march.y {
+            return 0.0;
+        }
+    }
+    return 1.0;
+}
+
+@fragment
+fn fs_contact_shadow(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {
+    let px = vec2<i32>(floor(pos.xy));
+    let d = textureLoad(depth, px, 0);
+    let dist = length(unproject(vec2<f32>(px) + 0.5, d));
+    let fade = 1.0 - smoothstep(params.size.w, params.size.z, dist);
+    var f = mix(1.0, params.march.z, (1.0 - sun_seen(px)) * fade);
+    if d <= 0.0 {
+        f = 1.0;
+    }
+    if ENCODE_SRGB {
+        // The target holds sRGB-encoded values: scale them so that the linear light scales by f.
+        f = pow(f, 1.0 / 2.4);
+    }
+    return vec4<f32>(f, f, f, 1.0);
+}
