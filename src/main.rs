@@ -796,6 +796,13 @@ fn fly(opts: FlyOptions) -> Result<()> {
         "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",
         s.grass_considered.median, s.grass_drawn_high.median, s.grass_drawn_low.median
     );
+    println!(
+        "grass coverage within {:.0} m: median {:.1}%, mean {:.1}% over {} frames",
+        verdant::tools::metrics::COVERAGE_DISTANCE_M,
+        100.0 * s.coverage.median,
+        100.0 * s.coverage.mean,
+        report.coverage.len()
+    );
     for (pass, t) in &s.gpu_ms {
         println!("gpu {pass}: median {:.3} ms, p99 {:.3} ms", t.median, t.p99);
     }

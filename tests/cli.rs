@@ -457,6 +457,7 @@ fn bench_lod_writes_its_tables_and_charts() {
         "frames",
         "flip_mean",
         "blades_drawn",
+        "coverage",
         "pareto",
     ] {
         assert!(header.contains(&column), "no column {column} in {header:?}");
