@@ -56,10 +56,12 @@ impl StreamArgs {
     }
 
     fn service(self) -> ServiceConfig {
-        let mut c = ServiceConfig::default();
-        // parse_mib has checked that the bytes fit a u64.
-        c.cache_bytes = self.cache_mib << 20;
-        c.atlas_slots = self.atlas_slots;
+        let mut c = ServiceConfig {
+            // parse_mib has checked that the bytes fit a u64.
+            cache_bytes: self.cache_mib << 20,
+            atlas_slots: self.atlas_slots,
+            ..ServiceConfig::default()
+        };
         c.stream.max_in_flight = self.max_loads.max(1);
         c
     }
@@ -315,11 +317,11 @@ struct TimingArgs {
     rounds: Option<u32>,
 }
 
+/// The progress bars of [`stage_bars`], shared with its update function.
+type StageBars = std::rc::Rc<std::cell::RefCell<Vec<(String, ProgressBar)>>>;
+
 /// Progress bars for a run of named stages, one bar a stage.
-fn stage_bars() -> (
-    std::rc::Rc<std::cell::RefCell<Vec<(String, ProgressBar)>>>,
-    impl FnMut(&str, u64, u64),
-) {
+fn stage_bars() -> (StageBars, impl FnMut(&str, u64, u64)) {
     let bars = std::rc::Rc::new(std::cell::RefCell::new(Vec::<(String, ProgressBar)>::new()));
     let inner = bars.clone();
     let update = move |stage: &str, done: u64, total: u64| {

@@ -250,16 +250,15 @@ fn take_figures(
     records: &mut Records,
 ) -> Result<()> {
     for stats in scene.renderer().take_stats() {
-        while let Some(mut r) = waiting.pop_front() {
-            if u64::from(r.index) == stats.frame {
-                r.fill(stats);
-                records.push(r);
-                break;
+        if let Some(mut r) = waiting.pop_front() {
+            if u64::from(r.index) != stats.frame {
+                bail!(
+                    "the figures of frame {} did not come back from the GPU",
+                    r.index
+                );
             }
-            bail!(
-                "the figures of frame {} did not come back from the GPU",
-                r.index
-            );
+            r.fill(stats);
+            records.push(r);
         }
     }
     Ok(())

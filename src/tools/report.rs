@@ -250,7 +250,7 @@ impl<T> Thinned<T> {
 
     /// Offers the next record (records are numbered from 0 in the order offered).
     pub fn push(&mut self, item: T) {
-        if self.seen % self.stride == 0 {
+        if self.seen.is_multiple_of(self.stride) {
             if self.items.len() == self.cap {
                 // Keep the records at even positions: indices that are multiples of 2 * stride.
                 let mut k = 0;
@@ -260,7 +260,7 @@ impl<T> Thinned<T> {
                 });
                 self.stride *= 2;
             }
-            if self.seen % self.stride == 0 {
+            if self.seen.is_multiple_of(self.stride) {
                 self.items.push(item);
             }
         }

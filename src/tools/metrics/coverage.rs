@@ -62,7 +62,7 @@ pub fn grass_coverage(
                 continue;
             }
             let distance = (p.truncate() / p.w).length();
-            if !(distance <= max_distance_m) {
+            if distance.is_nan() || distance > max_distance_m {
                 continue;
             }
             pixels += 1;
@@ -122,9 +122,8 @@ mod tests {
             grass[i] = 0.9;
         }
         // Half of the bottom half covered.
-        for i in (W * H / 2) as usize..(W * H * 3 / 4) as usize {
-            grass[i] = terrain[i];
-        }
+        let bottom = (W * H / 2) as usize..(W * H * 3 / 4) as usize;
+        grass[bottom.clone()].copy_from_slice(&terrain[bottom]);
         let c = grass_coverage(&terrain, &grass, W, H, inv_proj(), 30.0);
         assert_eq!(c.pixels, u64::from(W * H / 2));
         assert_eq!(c.covered, u64::from(W * H / 4));
