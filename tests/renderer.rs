@@ -513,7 +513,7 @@ fn grass_covers_the_near_meadow_and_nothing_covers_it_without_grass() {
 }
 
 #[test]
-fn the_terrain_depth_capture_is_refused_for_a_depth_format_that_cannot_be_copied() {
+fn the_terrain_depth_capture_needs_a_depth_target_it_can_copy() {
     let ctx = common::gpu();
     let world = World::open(&common::default_world()).unwrap();
     let options = RendererOptions::new(
@@ -528,4 +528,28 @@ fn the_terrain_depth_capture_is_refused_for_a_depth_format_that_cannot_be_copied
     assert!(matches!(e, RendererError::DepthCapture(_)), "{e}");
     assert!(renderer.terrain_depth().is_none());
     renderer.set_terrain_depth_capture(false).unwrap();
+
+    // Depth32Float can be copied; the capture then needs a depth target it can copy from.
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let world = World::open(&common::default_world()).unwrap();
+    let camera = overview_camera(&world);
+    let options = RendererOptions::new(&world, c, d, 64, 36);
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    renderer.set_terrain_depth_capture(true).unwrap();
+    renderer.resize(48, 27).unwrap();
+    let copy = renderer.terrain_depth().expect("the capture is on");
+    assert_eq!((copy.width(), copy.height(), copy.format()), (48, 27, d));
+    let t = targets(&ctx.device, c, d, (48, 27));
+    renderer.prepare(&ctx.queue, &FrameInput::new(camera, 0.0));
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let e = renderer
+        .record(&mut encoder, &t.color_view, &t.depth_view)
+        .unwrap_err();
+    assert!(
+        matches!(e, RendererError::Target { which: "depth", .. }),
+        "{e}"
+    );
 }
