@@ -56,10 +56,12 @@ impl StreamArgs {
     }
 
     fn service(self) -> ServiceConfig {
-        let mut c = ServiceConfig::default();
-        // parse_mib has checked that the bytes fit a u64.
-        c.cache_bytes = self.cache_mib << 20;
-        c.atlas_slots = self.atlas_slots;
+        let mut c = ServiceConfig {
+            // parse_mib has checked that the bytes fit a u64.
+            cache_bytes: self.cache_mib << 20,
+            atlas_slots: self.atlas_slots,
+            ..ServiceConfig::default()
+        };
         c.stream.max_in_flight = self.max_loads.max(1);
         c
     }
@@ -315,11 +317,11 @@ struct TimingArgs {
     rounds: Option<u32>,
 }
 
+/// The progress bars of [`stage_bars`], shared with its update function.
+type StageBars = std::rc::Rc<std::cell::RefCell<Vec<(String, ProgressBar)>>>;
+
 /// Progress bars for a run of named stages, one bar a stage.
-fn stage_bars() -> (
-    std::rc::Rc<std::cell::RefCell<Vec<(String, ProgressBar)>>>,
-    impl FnMut(&str, u64, u64),
-) {
+fn stage_bars() -> (StageBars, impl FnMut(&str, u64, u64)) {
     let bars = std::rc::Rc::new(std::cell::RefCell::new(Vec::<(String, ProgressBar)>::new()));
     let inner = bars.clone();
     let update = move |stage: &str, done: u64, total: u64| {
@@ -795,6 +797,13 @@ fn fly(opts: FlyOptions) -> Result<()> {
     println!(
         "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",
         s.grass_considered.median, s.grass_drawn_high.median, s.grass_drawn_low.median
+    );
+    println!(
+        "grass coverage within {:.0} m: median {:.1}%, mean {:.1}% over {} frames",
+        verdant::tools::metrics::COVERAGE_DISTANCE_M,
+        100.0 * s.coverage.median,
+        100.0 * s.coverage.mean,
+        report.coverage.len()
     );
     for (pass, t) in &s.gpu_ms {
         println!("gpu {pass}: median {:.3} ms, p99 {:.3} ms", t.median, t.p99);

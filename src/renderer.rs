@@ -156,6 +156,13 @@ pub enum RendererError {
     /// [`Renderer::record`] was called without a [`Renderer::prepare`] before it.
     #[error("record was called without prepare: call prepare once before each record")]
     NotPrepared,
+    /// The capture of the terrain-only depth was asked for with a depth format whose texels
+    /// cannot be copied (use Depth32Float).
+    #[error(
+        "the terrain-only depth cannot be captured from a {0:?} target: its texels cannot be \
+         copied (use Depth32Float)"
+    )]
+    DepthCapture(wgpu::TextureFormat),
 }
 
 /// Settings of the engine: streaming limits, levels of detail, grass, wind and features.
@@ -393,6 +400,9 @@ pub struct Renderer {
     time_s: Option<f64>,
     frame: u64,
     prepared: Option<Prepared>,
+    /// A copy of the depth target after the terrain colour pass, when asked for
+    /// ([`Renderer::set_terrain_depth_capture`]).
+    terrain_depth: Option<wgpu::Texture>,
 }
 
 impl Renderer {
@@ -542,6 +552,7 @@ impl Renderer {
             time_s: None,
             frame: 0,
             prepared: None,
+            terrain_depth: None,
         })
     }
 
@@ -615,6 +626,42 @@ impl Renderer {
         Ok(())
     }
 
+    /// Switches the capture of the terrain-only depth on or off (off by default, costing
+    /// nothing). While on, each [`Renderer::record`] copies the depth target after the terrain
+    /// colour pass, before any grass, into a texture of the renderer's
+    /// ([`Renderer::terrain_depth`]); the depth target then needs `COPY_SRC` usage as well.
+    /// Refused for a depth format that cannot be copied (Depth24Plus).
+    pub fn set_terrain_depth_capture(&mut self, on: bool) -> Result<(), RendererError> {
+        let format = self.targets.depth_format;
+        if !on {
+            self.terrain_depth = None;
+        } else if format
+            .block_copy_size(Some(wgpu::TextureAspect::DepthOnly))
+            .is_none()
+        {
+            return Err(RendererError::DepthCapture(format));
+        } else if self.terrain_depth.is_none() {
+            self.terrain_depth = Some(self.depth_copy());
+        }
+        Ok(())
+    }
+
+    /// The terrain-only depth of the last frame recorded with the capture on (see
+    /// [`Renderer::set_terrain_depth_capture`]); `None` while it is off.
+    pub fn terrain_depth(&self) -> Option<&wgpu::Texture> {
+        self.terrain_depth.as_ref()
+    }
+
+    fn depth_copy(&self) -> wgpu::Texture {
+        crate::gpu::target_texture(
+            &self.device,
+            "terrain-only depth",
+            self.targets.depth_format,
+            wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
+            (self.targets.width, self.targets.height),
+        )
+    }
+
     /// Follows a resize of the targets (the next frame draws at the new size).
     pub fn resize(&mut self, width: u32, height: u32) -> Result<(), RendererError> {
         check_size(&self.device, width, height, self.grass.is_some())?;
@@ -623,6 +670,9 @@ impl Renderer {
         }
         self.targets.width = width;
         self.targets.height = height;
+        if self.terrain_depth.is_some() {
+            self.terrain_depth = Some(self.depth_copy());
+        }
         if let Some(g) = &mut self.grass {
             g.renderer.resize(&self.device, &self.queue, width, height);
         }
@@ -984,6 +1034,13 @@ impl Renderer {
             });
             self.terrain.draw(&mut pass, frame.terrain_tiles);
         }
+        if let Some(copy) = &self.terrain_depth {
+            encoder.copy_texture_to_texture(
+                depth.texture().as_image_copy(),
+                copy.as_image_copy(),
+                copy.size(),
+            );
+        }
         // 6. Grass.
         let mut stats = frame.stats;
         stats.residency.holes += cpu_holes;
@@ -1058,7 +1115,11 @@ impl Renderer {
             });
         }
         let d = depth.texture();
-        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let mut usage =
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        if self.terrain_depth.is_some() {
+            usage |= wgpu::TextureUsages::COPY_SRC;
+        }
         if size(d) != (t.width, t.height)
             || d.format() != t.depth_format
             || !d.usage().contains(usage)

@@ -180,6 +180,14 @@ fn bake_writes_a_world_that_flies() {
             .unwrap();
     assert_eq!(report["frames"].as_array().unwrap().len(), 2);
     assert!(report["summary"]["frame_ms"]["median"].as_f64().unwrap() > 0.0);
+    // The grass coverage of each frame written, and its summary.
+    let coverage = report["coverage"].as_array().unwrap();
+    assert_eq!(coverage.len(), 2);
+    for c in coverage {
+        let f = c["coverage"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&f), "{c}");
+    }
+    assert!(report["summary"]["coverage"]["median"].is_f64());
     assert!(tmp.path().join("fly/frame_00001.png").is_file());
 }
 
@@ -458,6 +466,7 @@ fn bench_lod_writes_its_tables_and_charts() {
         "frames",
         "flip_mean",
         "blades_drawn",
+        "coverage",
         "pareto",
     ] {
         assert!(header.contains(&column), "no column {column} in {header:?}");
@@ -479,6 +488,10 @@ fn bench_lod_writes_its_tables_and_charts() {
     assert!(value("no LOD", "blades_drawn") > value("default", "blades_drawn"));
     // Two rounds of one timed frame at each of the four views.
     assert_eq!(value("default", "frames"), 8.0);
+    // Grass covers part of the near meadow; a closer blade spacing covers more of it.
+    let coverage = value("default", "coverage");
+    assert!(coverage > 0.0 && coverage <= 1.0, "{settings}");
+    assert!(value("spacing x0.8", "coverage") > coverage, "{settings}");
     for r in &rows {
         let (q1, m, q3) = (
             r[col("gpu_q1_ms")].parse::<f64>().unwrap(),

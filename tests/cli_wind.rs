@@ -169,6 +169,14 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
     for name in &names[1..] {
         assert!(contribution(name) > 0.0, "{name} changes nothing: {csv}");
     }
+    // Grass coverage of the captured views: grass covers part of the near terrain whatever
+    // feature is off.
+    for name in &names {
+        let coverage: f64 = rows.iter().find(|r| r[0] == *name).unwrap()[col("coverage")]
+            .parse()
+            .unwrap();
+        assert!(coverage > 0.0 && coverage <= 1.0, "{name}: {csv}");
+    }
     for f in ["features.png", "bench_features.json"] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }

@@ -470,3 +470,86 @@ fn holes_are_counted_on_the_gpu_when_an_upload_is_lost() {
         "lost uploads went unseen: {lost:?}"
     );
 }
+
+/// Standing in the meadow (1.7 m above the ground where the meadow path starts) looking
+/// slightly down, with the terrain-only depth captured.
+fn meadow_coverage(grass: bool) -> verdant::tools::metrics::Coverage {
+    use verdant::tools::{Scene, SceneConfig};
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let path = world.manifest.path("meadow").unwrap().clone();
+    let mut camera = sample_path(&path, path.keys[0].t_s);
+    let ground = common::Terrain::load(&common::default_world()).height(camera.position.truncate());
+    camera.position.z = ground + 1.7;
+    camera.pitch_deg = -12.0;
+    let mut config = SceneConfig::for_world(&world);
+    if !grass {
+        config.grass = None;
+    }
+    let mut scene = Scene::new(&ctx, world, 160, 90, config).unwrap();
+    assert!(
+        scene
+            .warm_up(&ctx, &camera, Duration::from_secs(60))
+            .unwrap()
+    );
+    assert!(matches!(
+        scene.coverage(&ctx, 30.0),
+        Err(verdant::tools::SceneError::NoCapture)
+    ));
+    scene.set_coverage_capture(true).unwrap();
+    scene.render(&ctx, &camera).unwrap();
+    scene.coverage(&ctx, 30.0).unwrap()
+}
+
+#[test]
+fn grass_covers_the_near_meadow_and_nothing_covers_it_without_grass() {
+    let with = meadow_coverage(true);
+    let without = meadow_coverage(false);
+    eprintln!("meadow coverage at 160x90: with grass {with:?}, without {without:?}");
+    assert!(with.pixels > 1000, "{with:?}");
+    assert!(with.fraction > 0.0, "{with:?}");
+    assert_eq!(without.pixels, with.pixels, "the same terrain either way");
+    assert_eq!((without.covered, without.fraction), (0, 0.0), "{without:?}");
+}
+
+#[test]
+fn the_terrain_depth_capture_needs_a_depth_target_it_can_copy() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let options = RendererOptions::new(
+        &world,
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth24Plus,
+        64,
+        36,
+    );
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    let e = renderer.set_terrain_depth_capture(true).unwrap_err();
+    assert!(matches!(e, RendererError::DepthCapture(_)), "{e}");
+    assert!(renderer.terrain_depth().is_none());
+    renderer.set_terrain_depth_capture(false).unwrap();
+
+    // Depth32Float can be copied; the capture then needs a depth target it can copy from.
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let world = World::open(&common::default_world()).unwrap();
+    let camera = overview_camera(&world);
+    let options = RendererOptions::new(&world, c, d, 64, 36);
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    renderer.set_terrain_depth_capture(true).unwrap();
+    renderer.resize(48, 27).unwrap();
+    let copy = renderer.terrain_depth().expect("the capture is on");
+    assert_eq!((copy.width(), copy.height(), copy.format()), (48, 27, d));
+    let t = targets(&ctx.device, c, d, (48, 27));
+    renderer.prepare(&ctx.queue, &FrameInput::new(camera, 0.0));
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    let e = renderer
+        .record(&mut encoder, &t.color_view, &t.depth_view)
+        .unwrap_err();
+    assert!(
+        matches!(e, RendererError::Target { which: "depth", .. }),
+        "{e}"
+    );
+}

@@ -21,7 +21,7 @@ use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::lod::RingSettings;
 use crate::tools::metrics::{
-    Chart, ChartPoint, LineChart, Series, Summary, flip_compare, pareto_front,
+    COVERAGE_DISTANCE_M, Chart, ChartPoint, LineChart, Series, Summary, flip_compare, pareto_front,
 };
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
 use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
@@ -156,6 +156,10 @@ pub struct SettingResult {
     pub flip_mean: f64,
     /// Blades drawn per frame (median).
     pub blades_drawn: f64,
+    /// Grass coverage within [`COVERAGE_DISTANCE_M`] (see
+    /// [`crate::tools::metrics::grass_coverage`]), mean over the views, measured on the
+    /// captured frames, not the timed ones.
+    pub coverage: f64,
     /// On the Pareto front of GPU time against error.
     pub pareto: bool,
 }
@@ -233,6 +237,20 @@ impl Bench<'_> {
         scene.warm_up(self.ctx, camera, std::time::Duration::from_secs(60))?;
         let stats = scene.render(self.ctx, camera)?;
         Ok((scene.read_image(self.ctx)?, stats))
+    }
+
+    /// Like [`Bench::frame`], with the frame's grass coverage (the capture of the terrain-only
+    /// depth is on for this frame only).
+    fn frame_with_coverage(
+        &self,
+        scene: &mut Scene,
+        camera: &Camera,
+    ) -> Result<(image::RgbaImage, crate::renderer::FrameStats, f64)> {
+        scene.set_coverage_capture(true)?;
+        let (img, stats) = self.frame(scene, camera)?;
+        let coverage = scene.coverage(self.ctx, COVERAGE_DISTANCE_M)?.fraction;
+        scene.set_coverage_capture(false)?;
+        Ok((img, stats, coverage))
     }
 }
 
@@ -353,14 +371,15 @@ pub fn run_bench_lod(
     let total = settings.len() as u64;
     for (k, s) in settings.iter().enumerate() {
         let mut scene = bench.scene(s)?;
-        let (mut flips, mut blades) = (Vec::new(), Vec::new());
+        let (mut flips, mut blades, mut coverage) = (Vec::new(), Vec::new(), Vec::new());
         for (v, r) in views.iter().zip(&ref_images) {
-            let (img, stats) = bench.frame(&mut scene, v)?;
+            let (img, stats, c) = bench.frame_with_coverage(&mut scene, v)?;
             flips.push(flip(&img, r)?);
             blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
+            coverage.push(c);
         }
         scenes.push(scene);
-        partial.push((flips, blades));
+        partial.push((flips, blades, coverage));
         progress("images", k as u64 + 1, total);
     }
     // Then the timings, in interleaved rounds.
@@ -390,7 +409,7 @@ pub fn run_bench_lod(
     drop(scenes);
     let mut results = Vec::new();
     for (k, s) in settings.iter().enumerate() {
-        let (flips, blades) = &partial[k];
+        let (flips, blades, coverage) = &partial[k];
         let timing = |samples: &[Vec<f64>]| {
             Timing::over_views(&samples.iter().map(|v| Timing::of(v)).collect::<Vec<_>>())
         };
@@ -404,6 +423,7 @@ pub fn run_bench_lod(
             frame: timing(&wall_samples[k]),
             flip_mean: flips.iter().sum::<f64>() / flips.len() as f64,
             blades_drawn: Summary::of(blades).median,
+            coverage: coverage.iter().sum::<f64>() / coverage.len() as f64,
             pareto: false,
         });
     }
@@ -478,13 +498,13 @@ fn write_outputs(
     .write_png(&opts.out.join("dolly.png"), 900, 600)?;
 
     let mut csv = String::from(
-        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_high,segments_low,gpu_ms,gpu_q1_ms,gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_mean,blades_drawn,pareto\n",
+        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_high,segments_low,gpu_ms,gpu_q1_ms,gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_mean,blades_drawn,coverage,pareto\n",
     );
     for r in results {
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.0},{}",
+            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.0},{:.4},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -501,6 +521,7 @@ fn write_outputs(
             r.frame.frames,
             r.flip_mean,
             r.blades_drawn,
+            r.coverage,
             r.pareto
         );
     }
@@ -552,6 +573,9 @@ pub struct FeatureResult {
     /// Mean FLIP between the full render and the render without the feature: its contribution
     /// to the image.
     pub contribution: f64,
+    /// Grass coverage within [`COVERAGE_DISTANCE_M`] with the feature off (all: everything
+    /// on), mean over the views, measured on the captured frames, not the timed ones.
+    pub coverage: f64,
 }
 
 /// Everything `bench_features.json` holds.
@@ -634,7 +658,8 @@ pub fn run_bench_features(
         config.wind_scene = scene_name.clone();
         config.wind_keys = path.wind.clone();
         let mut scene = Scene::new(&ctx, world.clone(), opts.size.0, opts.size.1, config)?;
-        let mut images = Vec::new();
+        let (mut images, mut coverage) = (Vec::new(), Vec::new());
+        scene.set_coverage_capture(true)?;
         for &t in &times {
             scene.warm_up(
                 &ctx,
@@ -647,9 +672,11 @@ pub fn run_bench_features(
                 scene.render_frame(&ctx, &sample_path(&path, tf), tf, Some(walker_at(tf)))?;
             }
             images.push(scene.read_image(&ctx)?);
+            coverage.push(scene.coverage(&ctx, COVERAGE_DISTANCE_M)?.fraction);
         }
+        scene.set_coverage_capture(false)?;
         scenes.push(scene);
-        all_images.push(images);
+        all_images.push((images, coverage));
         progress("images", k as u64 + 1, total);
     }
     // Timed frames hold each view's time: the same image every frame.
@@ -678,18 +705,19 @@ pub fn run_bench_features(
         }
     }
     drop(scenes);
-    let rows: Vec<(String, Timing, Vec<image::RgbaImage>)> = variants
+    let rows: Vec<(String, Timing, Vec<image::RgbaImage>, f64)> = variants
         .iter()
         .zip(samples)
         .zip(all_images)
-        .map(|(((name, _), views), images)| {
+        .map(|(((name, _), views), (images, coverage))| {
             let t = Timing::over_views(&views.iter().map(|v| Timing::of(v)).collect::<Vec<_>>());
-            (name.clone(), t, images)
+            let c = coverage.iter().sum::<f64>() / coverage.len().max(1) as f64;
+            (name.clone(), t, images, c)
         })
         .collect();
     let full_ms = rows[0].1.median_ms;
     let mut features = Vec::new();
-    for (name, timing, images) in &rows {
+    for (name, timing, images, coverage) in &rows {
         let mut flips = Vec::new();
         for (a, b) in rows[0].2.iter().zip(images) {
             flips.push(flip(a, b)?);
@@ -700,16 +728,17 @@ pub fn run_bench_features(
             timing: *timing,
             cost_ms: full_ms - timing.median_ms,
             contribution: flips.iter().sum::<f64>() / flips.len() as f64,
+            coverage: *coverage,
         });
     }
     use std::fmt::Write as _;
     let mut csv = String::from(
-        "feature,gpu_ms_without,q1_ms,q3_ms,spread,noisy,frames,cost_ms,contribution_flip\n",
+        "feature,gpu_ms_without,q1_ms,q3_ms,spread,noisy,frames,cost_ms,contribution_flip,coverage\n",
     );
     for r in &features {
         let _ = writeln!(
             csv,
-            "{},{:.4},{:.4},{:.4},{:.4},{},{},{:.4},{:.5}",
+            "{},{:.4},{:.4},{:.4},{:.4},{},{},{:.4},{:.5},{:.4}",
             r.feature,
             r.gpu_ms,
             r.timing.q1_ms,
@@ -718,7 +747,8 @@ pub fn run_bench_features(
             r.timing.noisy,
             r.timing.frames,
             r.cost_ms,
-            r.contribution
+            r.contribution,
+            r.coverage
         );
     }
     std::fs::write(opts.out.join("features.csv"), csv)?;

@@ -10,10 +10,15 @@ use anyhow::{Context, Result, bail};
 
 use crate::camera::{sample_path, walker_at};
 use crate::gpu::GpuContext;
-use crate::tools::metrics::Summary;
+use crate::tools::metrics::{COVERAGE_DISTANCE_M, Summary};
 use crate::tools::report::{
-    AdapterReport, FlyReport, FlySummary, FlyTotals, FrameRecord, MAX_REPORT_FRAMES, Thinned,
+    AdapterReport, CoverageRecord, FlyReport, FlySummary, FlyTotals, FrameRecord,
+    MAX_REPORT_FRAMES, Thinned,
 };
+
+/// Frames whose grass coverage a fly-through without images measures: evenly spaced over the
+/// path, drawn again after the flight (never among the timed frames).
+pub const COVERAGE_FRAMES: u32 = 8;
 use crate::tools::scene::{Scene, SceneConfig};
 
 /// What `verdant fly` is asked to do.
@@ -125,6 +130,9 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     // submits them, at most FRAMES_IN_FLIGHT ahead of the GPU, and their figures are taken as
     // they come back. With images, each frame is waited for and read back.
     let mut waiting: VecDeque<FrameRecord> = VecDeque::new();
+    // With images, the grass coverage of every frame written (read back like its image).
+    let mut coverage = Thinned::new(MAX_REPORT_FRAMES);
+    scene.set_coverage_capture(opts.write_images)?;
     for i in 0..opts.frames {
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
         let camera = sample_path(&path, t_s);
@@ -144,6 +152,14 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
             record.frame_ms = start.elapsed().as_secs_f64() * 1e3;
             record.fill(stats);
             records.push(record);
+            let c = scene.coverage(&ctx, COVERAGE_DISTANCE_M)?;
+            coverage.push(CoverageRecord {
+                index: i,
+                t_s,
+                coverage: c.fraction,
+                pixels: c.pixels,
+                covered: c.covered,
+            });
             let file = opts.out.join(format!("frame_{i:05}.png"));
             if tx.send((file, image)).is_err() {
                 break; // the writer failed; its error is reported below
@@ -168,6 +184,34 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     writer
         .join()
         .map_err(|_| anyhow::anyhow!("the frame writer thread panicked"))??;
+    // Without images, the coverage of a few frames drawn again after the timed flight, each
+    // after a warm-up (it is a jump back along the path).
+    if !opts.write_images {
+        scene.set_coverage_capture(true)?;
+        let n = opts.frames.min(COVERAGE_FRAMES);
+        let span = f64::from(opts.frames - 1);
+        for k in 0..n {
+            let i = if n > 1 {
+                (span * f64::from(k) / f64::from(n - 1)).round() as u32
+            } else {
+                0
+            };
+            let t_s = t0 + (t1 - t0) * f64::from(i) / last;
+            let camera = sample_path(&path, t_s);
+            scene.warm_up_report(&camera, std::time::Duration::from_secs(30))?;
+            let walker_xy = walker_at(&scene.world().manifest, &path, t_s);
+            scene.render_frame(&ctx, &camera, t_s, Some(walker_xy))?;
+            let c = scene.coverage(&ctx, COVERAGE_DISTANCE_M)?;
+            coverage.push(CoverageRecord {
+                index: i,
+                t_s,
+                coverage: c.fraction,
+                pixels: c.pixels,
+                covered: c.covered,
+            });
+        }
+    }
+    scene.set_coverage_capture(false)?;
 
     let mut report = FlyReport::new(
         world_name,
@@ -178,6 +222,9 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
         records.totals,
     );
     report.warm_up_missing = warm_up_missing;
+    report.coverage = coverage.into_items();
+    let fractions: Vec<f64> = report.coverage.iter().map(|c| c.coverage).collect();
+    report.summary.coverage = Summary::of(&fractions);
     write_json(&opts.out.join("report.json"), &report)?;
     out_dir.keep();
     Ok(report)
@@ -203,16 +250,15 @@ fn take_figures(
     records: &mut Records,
 ) -> Result<()> {
     for stats in scene.renderer().take_stats() {
-        while let Some(mut r) = waiting.pop_front() {
-            if u64::from(r.index) == stats.frame {
-                r.fill(stats);
-                records.push(r);
-                break;
+        if let Some(mut r) = waiting.pop_front() {
+            if u64::from(r.index) != stats.frame {
+                bail!(
+                    "the figures of frame {} did not come back from the GPU",
+                    r.index
+                );
             }
-            bail!(
-                "the figures of frame {} did not come back from the GPU",
-                r.index
-            );
+            r.fill(stats);
+            records.push(r);
         }
     }
     Ok(())
@@ -302,6 +348,7 @@ impl FlySummary {
             })),
             grass_drawn_high: Summary::of(&series(&|f| f64::from(f.grass.drawn[0]))),
             grass_drawn_low: Summary::of(&series(&|f| f64::from(f.grass.drawn[1]))),
+            coverage: Summary::default(),
         }
     }
 }

@@ -113,6 +113,27 @@ pub struct FlySummary {
     pub grass_drawn_high: Summary,
     /// Grass blades drawn a frame at low LOD.
     pub grass_drawn_low: Summary,
+    /// Grass coverage over the frames of `coverage` (see [`CoverageRecord`]).
+    #[serde(default)]
+    pub coverage: Summary,
+}
+
+/// The grass coverage of one frame: of the pixels where terrain within
+/// [`crate::tools::metrics::COVERAGE_DISTANCE_M`] of the camera (along the view ray) is the
+/// nearest surface in the terrain-only depth, the fraction that a blade covers in the final
+/// depth. Measured on frames apart from the timed ones.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
+pub struct CoverageRecord {
+    /// The frame (its number in `frames`).
+    pub index: u32,
+    /// Time on the camera path, seconds.
+    pub t_s: f64,
+    /// Covered pixels over pixels considered, in [0, 1] (0 when none were considered).
+    pub coverage: f64,
+    /// Pixels considered: near terrain in the terrain-only depth.
+    pub pixels: u64,
+    /// Of those, pixels a blade covers.
+    pub covered: u64,
 }
 
 /// Everything `report.json` holds.
@@ -142,6 +163,11 @@ pub struct FlyReport {
     pub warm_up_missing: Vec<String>,
     /// The frames, at most [`MAX_REPORT_FRAMES`] of them (see `frame_stride`).
     pub frames: Vec<FrameRecord>,
+    /// Grass coverage of the frames it was measured on: every frame written as an image (at
+    /// most [`MAX_REPORT_FRAMES`], evenly spaced), or without images up to
+    /// [`crate::tools::fly::COVERAGE_FRAMES`] evenly spaced frames drawn again after the flight.
+    #[serde(default)]
+    pub coverage: Vec<CoverageRecord>,
 }
 
 /// Most per-frame records a fly-through keeps in memory and in `report.json`: about 2 KiB
@@ -194,6 +220,7 @@ impl FlyReport {
             frame_stride: frames.stride(),
             warm_up_missing: Vec::new(),
             frames: frames.into_items(),
+            coverage: Vec::new(),
         }
     }
 }
@@ -223,7 +250,7 @@ impl<T> Thinned<T> {
 
     /// Offers the next record (records are numbered from 0 in the order offered).
     pub fn push(&mut self, item: T) {
-        if self.seen % self.stride == 0 {
+        if self.seen.is_multiple_of(self.stride) {
             if self.items.len() == self.cap {
                 // Keep the records at even positions: indices that are multiples of 2 * stride.
                 let mut k = 0;
@@ -233,7 +260,7 @@ impl<T> Thinned<T> {
                 });
                 self.stride *= 2;
             }
-            if self.seen % self.stride == 0 {
+            if self.seen.is_multiple_of(self.stride) {
                 self.items.push(item);
             }
         }

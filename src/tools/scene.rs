@@ -33,6 +33,12 @@ pub enum SceneError {
     /// A frame's figures did not come back after its GPU work finished.
     #[error("the figures of frame {0} did not come back from the GPU")]
     StatsMissing(u64),
+    /// Coverage was asked for without a frame drawn with the capture on.
+    #[error(
+        "no frame was drawn with the terrain-only depth captured: switch the capture on \
+         (Scene::set_coverage_capture) and draw a frame first"
+    )]
+    NoCapture,
 }
 
 /// A world drawn by a [`Renderer`] into offscreen targets (`COLOR_FORMAT`, `DEPTH_FORMAT`).
@@ -40,8 +46,11 @@ pub struct Scene {
     renderer: Renderer,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
+    depth: wgpu::Texture,
     depth_view: wgpu::TextureView,
     last: Option<(Camera, f64)>,
+    /// The camera of the last frame drawn with the terrain-only depth captured.
+    captured: Option<Camera>,
     in_flight: std::collections::VecDeque<wgpu::SubmissionIndex>,
 }
 
@@ -82,14 +91,18 @@ impl Scene {
         let depth = target(
             "depth",
             DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
         );
         Ok(Self {
             renderer,
             color_view: color.create_view(&Default::default()),
             depth_view: depth.create_view(&Default::default()),
+            depth,
             color,
             last: None,
+            captured: None,
             in_flight: std::collections::VecDeque::new(),
         })
     }
@@ -210,6 +223,7 @@ impl Scene {
             .record(&mut encoder, &self.color_view, &self.depth_view)?;
         let submission = ctx.queue.submit([encoder.finish()]);
         self.last = Some((*camera, time_s));
+        self.captured = self.renderer.terrain_depth().map(|_| *camera);
         self.in_flight.push_back(submission.clone());
         while self.in_flight.len() > FRAMES_IN_FLIGHT {
             if let Some(oldest) = self.in_flight.pop_front() {
@@ -233,5 +247,46 @@ impl Scene {
         let (w, h) = self.size();
         Ok(image::RgbaImage::from_raw(w, h, pixels)
             .expect("readback returns width * height * 4 bytes"))
+    }
+
+    /// Switches the capture of the terrain-only depth on or off (see
+    /// [`Renderer::set_terrain_depth_capture`]): on for the frames whose grass coverage is
+    /// measured ([`Scene::coverage`]), off for timed ones.
+    pub fn set_coverage_capture(&mut self, on: bool) -> Result<(), SceneError> {
+        self.renderer.set_terrain_depth_capture(on)?;
+        if !on {
+            self.captured = None;
+        }
+        Ok(())
+    }
+
+    /// The grass coverage of the last frame (drawn with the capture on): of the pixels where
+    /// terrain within `max_distance_m` of the camera (along the view ray) is the nearest surface
+    /// in the terrain-only depth, the fraction that something nearer covers in the final depth
+    /// (see [`crate::tools::metrics::grass_coverage`]). Reads both depths back; waits for the
+    /// GPU.
+    pub fn coverage(
+        &self,
+        ctx: &GpuContext,
+        max_distance_m: f32,
+    ) -> Result<crate::tools::metrics::Coverage, SceneError> {
+        let (Some(camera), Some(terrain)) = (self.captured, self.renderer.terrain_depth()) else {
+            return Err(SceneError::NoCapture);
+        };
+        let read = |t: &wgpu::Texture| -> Result<Vec<f32>, SceneError> {
+            let bytes = crate::gpu::read_texture_level(&ctx.device, &ctx.queue, t, 0, 0)?;
+            Ok(bytemuck::pod_collect_to_vec(&bytes))
+        };
+        let (terrain, last) = (read(terrain)?, read(&self.depth)?);
+        let (w, h) = self.size();
+        let inv = camera.view_proj_relative(w as f32 / h as f32).inverse();
+        Ok(crate::tools::metrics::grass_coverage(
+            &terrain,
+            &last,
+            w,
+            h,
+            inv,
+            max_distance_m,
+        ))
     }
 }

@@ -1,8 +1,11 @@
-//! Measurements: percentiles of timings, image error by FLIP, and speed-against-accuracy charts.
+//! Measurements: percentiles of timings, image error by FLIP, grass coverage, and
+//! speed-against-accuracy charts.
 
 mod chart;
+mod coverage;
 
 pub use chart::{Chart, ChartError, ChartPoint, LineChart, Series, pareto_front, pareto_front_n};
+pub use coverage::{COVERAGE_DISTANCE_M, COVERAGE_EPSILON, Coverage, grass_coverage};
 
 use thiserror::Error;
 
