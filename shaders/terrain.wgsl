@@ -141,7 +141,7 @@ fn fog_color(view_dir: vec3<f32>) -> vec3<f32> {
 
 // ---- Terrain shading, per pixel (CPU mirror of the far field: src/terrain/far_field.rs) ----
 
-const ROCK: vec3<f32> = vec3<f32>(0.33, 0.30, 0.26);
+const ROCK: vec3<f32> = vec3<f32>(0.25, 0.23, 0.20);
 const SOIL: vec3<f32> = vec3<f32>(0.33, 0.27, 0.19);
 
 fn rand01(h: u32) -> f32 {

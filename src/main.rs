@@ -110,6 +110,12 @@ enum Command {
         /// comma-separated.
         #[arg(long, value_delimiter = ',')]
         enable: Vec<verdant::features::Feature>,
+        /// Blade spacing of the near grass grid, metres (default: the renderer's).
+        #[arg(long)]
+        grass_spacing_m: Option<f32>,
+        /// Every grass type's blade width times this (default: the renderer's).
+        #[arg(long)]
+        grass_width_scale: Option<f32>,
         #[command(flatten)]
         stream: StreamArgs,
     },
@@ -869,6 +875,8 @@ fn run(cli: Cli) -> Result<()> {
             wind,
             disable,
             enable,
+            grass_spacing_m,
+            grass_width_scale,
             stream,
         } => fly(FlyOptions {
             world: resolve_world(&world)?,
@@ -882,6 +890,8 @@ fn run(cli: Cli) -> Result<()> {
             wind_scene: wind,
             disable,
             enable,
+            grass_spacing_m,
+            grass_width_scale,
         }),
         Command::View {
             world,

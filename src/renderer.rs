@@ -180,6 +180,8 @@ pub struct RendererConfig {
     pub mesh_step: u32,
     /// Blade spacing of the high-LOD grass grid, metres.
     pub grass_spacing_m: f32,
+    /// Every grass type's blade width times this (the manifest's widths at 1).
+    pub grass_width_scale: f32,
     /// Blade segments at high and low LOD.
     pub grass_segments: [u32; 2],
     /// The wind scene of the manifest (default: `breeze`, else the manifest's wind); when
@@ -204,6 +206,7 @@ impl RendererConfig {
             grass: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
             mesh_step: 2,
             grass_spacing_m: 0.25,
+            grass_width_scale: 1.0,
             grass_segments: [7, 3],
             wind_scene: None,
             wind_keys: Vec::new(),
@@ -219,6 +222,7 @@ impl RendererConfig {
         let rings = self.grass?;
         Some(GrassSettings {
             spacing_m: self.grass_spacing_m,
+            width_scale: self.grass_width_scale,
             tile_m: world.manifest.pyramid.tile_size_m(rings.level) as f32,
             high_radius_m: rings.high_radius_m as f32,
             lod_fade_m: 0.3 * rings.high_radius_m as f32,
@@ -387,6 +391,7 @@ pub struct Renderer {
     atlas: TileAtlas,
     derive: DeriveStage,
     terrain: TerrainRenderer,
+    contact_shadows: crate::terrain::contact_shadow::ContactShadowPass,
     lod: TerrainLod,
     rings: Option<GrassRings>,
     grass: Option<GrassStage>,
@@ -479,6 +484,11 @@ impl Renderer {
         );
         terrain.set_features(config.features);
         terrain.set_grass(config.grass_settings(&world).as_ref());
+        let contact_shadows = crate::terrain::contact_shadow::ContactShadowPass::new(
+            device,
+            &targets,
+            crate::terrain::contact_shadow::ContactShadows::default(),
+        );
         let grass = match config.grass_settings(&world) {
             Some(settings) => {
                 let mut wind_config = match &config.wind_scene {
@@ -543,6 +553,7 @@ impl Renderer {
             atlas,
             derive,
             terrain,
+            contact_shadows,
             targets,
             features: config.features,
             timer,
@@ -913,6 +924,12 @@ impl Renderer {
             .chain(roots.into_iter().flatten())
             .collect();
         let view_proj = camera.view_proj_relative(aspect);
+        self.contact_shadows.prepare(
+            queue,
+            view_proj,
+            crate::terrain::sun_direction(&self.world.manifest.sky),
+            (self.targets.width, self.targets.height),
+        );
         if let Some(g) = &mut self.grass {
             let ambient_speed = g.wind.config().ambient_at(input.time_s).speed_mps as f32;
             g.renderer
@@ -951,7 +968,9 @@ impl Renderer {
     /// 6. grass in batches of 4 tiles: generation and culling, then the wind on each blade
     ///    (compute, `grass_generate.wgsl`, `grass_wind.wgsl`), then one indirect draw per tile
     ///    (`grass_draw.wgsl`);
-    /// 7. the pass timestamps and grass counters copied into the readback ring, mapped when the
+    /// 7. contact shadows, with the `shadows` feature: the colour dimmed where a short ray
+    ///    toward the sun is blocked in the depth buffer (`contact_shadow.wgsl`);
+    /// 8. the pass timestamps and grass counters copied into the readback ring, mapped when the
     ///    encoder's work is submitted ([`Renderer::stats`]).
     pub fn record(
         &mut self,
@@ -1054,7 +1073,17 @@ impl Renderer {
                 &mut self.timer,
             );
         }
-        // 7. Figures.
+        // 7. Contact shadows: the grass's (and everything's) short shadows, from the depth.
+        if self.features.has(Feature::Shadows) {
+            self.contact_shadows.record(
+                &self.device,
+                encoder,
+                color,
+                depth,
+                self.timer.render_pass("contact_shadows"),
+            );
+        }
+        // 8. Figures.
         self.timer.resolve(encoder);
         stats.cpu_ms = (frame.cpu_s + start.elapsed().as_secs_f64()) * 1e3;
         let counters = self.grass.as_ref().map(|g| g.renderer.stats_buffer());

@@ -39,6 +39,10 @@ pub const STAGES: &[(&str, &str)] = &[
         include_str!("../shaders/derive_child.wgsl"),
     ),
     ("terrain.wgsl", include_str!("../shaders/terrain.wgsl")),
+    (
+        "contact_shadow.wgsl",
+        include_str!("../shaders/contact_shadow.wgsl"),
+    ),
     ("hiz_build.wgsl", include_str!("../shaders/hiz_build.wgsl")),
     (
         "hole_check.wgsl",

@@ -34,6 +34,8 @@ const BATCH_STRIDE: u64 = 256;
 pub struct GrassSettings {
     /// Blade spacing of the high-LOD grid, metres (the low-LOD grid has twice this).
     pub spacing_m: f32,
+    /// Every grass type's blade width times this.
+    pub width_scale: f32,
     /// Edge of a grass tile, metres.
     pub tile_m: f32,
     /// Radius of the high-LOD ring, metres: blades the low grid drops are gone here.
@@ -443,7 +445,7 @@ impl GrassRenderer {
         for (i, t) in manifest.grass_types.iter().take(16).enumerate() {
             types[i] = GrassTypeGpu {
                 height: t.height_m,
-                width: t.width_m,
+                width: t.width_m.map(|w| w * settings.width_scale),
                 // Soft grass follows the slope more; stiff grass grows straighter up.
                 growth_blend: crate::terrain::far_field::growth_blend(t.stiffness),
                 stiffness: t.stiffness,

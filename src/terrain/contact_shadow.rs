@@ -112,6 +112,205 @@ impl ContactShadows {
     }
 }
 
+/// Uniforms of `shaders/contact_shadow.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    view_proj: [[f32; 4]; 4],
+    inv_view_proj: [[f32; 4]; 4],
+    sun_dir: [f32; 4],
+    size: [f32; 4],
+    march: [f32; 4],
+}
+
+/// The contact shadows' pass: a full-screen triangle that multiplies the colour target by each
+/// pixel's factor, reading the depth target (which it does not write).
+pub struct ContactShadowPass {
+    settings: ContactShadows,
+    pipeline: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+    params: Params,
+    buffer: wgpu::Buffer,
+}
+
+impl ContactShadowPass {
+    /// The pass for `targets`, with `settings`.
+    pub fn new(
+        device: &wgpu::Device,
+        targets: &crate::gpu::Targets,
+        settings: ContactShadows,
+    ) -> Self {
+        let module = crate::shaders::module(device, "contact_shadow.wgsl");
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("contact shadows"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Depth,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("contact shadows"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        // The colour target times the pass's output; its alpha kept.
+        let blend = wgpu::BlendState {
+            color: wgpu::BlendComponent {
+                src_factor: wgpu::BlendFactor::Zero,
+                dst_factor: wgpu::BlendFactor::Src,
+                operation: wgpu::BlendOperation::Add,
+            },
+            alpha: wgpu::BlendComponent {
+                src_factor: wgpu::BlendFactor::Zero,
+                dst_factor: wgpu::BlendFactor::One,
+                operation: wgpu::BlendOperation::Add,
+            },
+        };
+        let constants = [("ENCODE_SRGB", targets.encode_srgb())];
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("contact shadows"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_full"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: None,
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_contact_shadow"),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &constants,
+                    ..Default::default()
+                },
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: targets.color_format,
+                    blend: Some(blend),
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("contact shadows"),
+            size: std::mem::size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let params = Params {
+            view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            inv_view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            sun_dir: [0.0, 0.0, 1.0, 0.0],
+            size: [
+                targets.width as f32,
+                targets.height as f32,
+                settings.fade_end_m,
+                settings.fade_start_m,
+            ],
+            march: [
+                settings.ray_m,
+                settings.thickness_m,
+                settings.shade,
+                settings.steps as f32,
+            ],
+        };
+        Self {
+            settings,
+            pipeline,
+            layout,
+            params,
+            buffer,
+        }
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &ContactShadows {
+        &self.settings
+    }
+
+    /// Writes the frame's camera (camera-relative `view_proj`), sun and target size.
+    pub fn prepare(
+        &mut self,
+        queue: &wgpu::Queue,
+        view_proj: Mat4,
+        sun_dir: Vec3,
+        (width, height): (u32, u32),
+    ) {
+        self.params.view_proj = view_proj.to_cols_array_2d();
+        self.params.inv_view_proj = view_proj.inverse().to_cols_array_2d();
+        self.params.sun_dir = sun_dir.extend(0.0).to_array();
+        self.params.size[0] = width as f32;
+        self.params.size[1] = height as f32;
+        queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&self.params));
+    }
+
+    /// Records the pass: `color` multiplied by the factors found in `depth`.
+    pub fn record(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
+    ) {
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("contact shadows"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(depth),
+                },
+            ],
+        });
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("contact shadows"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Load,
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.draw(0..3, 0..1);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -47,6 +47,10 @@ pub struct FlyOptions {
     pub disable: Vec<crate::features::Feature>,
     /// Features to switch on that the manifest switches off.
     pub enable: Vec<crate::features::Feature>,
+    /// Blade spacing of the near grass grid, metres (None: the renderer's default).
+    pub grass_spacing_m: Option<f32>,
+    /// Blade width scale (None: the renderer's default).
+    pub grass_width_scale: Option<f32>,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -96,6 +100,18 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     config.wind_scene = opts.wind_scene.clone();
     config.wind_keys = path.wind.clone();
     config.features = config.features.switched(&opts.disable, &opts.enable);
+    if let Some(s) = opts.grass_spacing_m {
+        if !(0.02..=5.0).contains(&s) {
+            bail!("--grass-spacing-m must be between 0.02 and 5 m, not {s}");
+        }
+        config.grass_spacing_m = s;
+    }
+    if let Some(w) = opts.grass_width_scale {
+        if !(0.05..=20.0).contains(&w) {
+            bail!("--grass-width-scale must be between 0.05 and 20, not {w}");
+        }
+        config.grass_width_scale = w;
+    }
     let mut scene = Scene::with_source(&ctx, world, source, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.
