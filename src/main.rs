@@ -101,9 +101,9 @@ enum Command {
         /// whole flight (default: the path's own wind keys if it has any, else breeze).
         #[arg(long)]
         wind: Option<String>,
-        /// Grass features to switch off, comma-separated: wind-sources, interaction,
+        /// Features to switch off, comma-separated: wind-sources, interaction,
         /// detail-bending, translucency, specular, ambient-occlusion, color-variation,
-        /// ground-darkening (on top of the manifest's [features] table).
+        /// ground-darkening, far-field, shadows (on top of the manifest's [features] table).
         #[arg(long, value_delimiter = ',')]
         disable: Vec<verdant::features::Feature>,
         /// Grass features to switch on that the manifest's [features] table switches off,

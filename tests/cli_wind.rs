@@ -155,7 +155,9 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
             "specular",
             "ambient-occlusion",
             "color-variation",
-            "ground-darkening"
+            "ground-darkening",
+            "far-field",
+            "shadows"
         ]
     );
     let contribution = |name: &str| -> f64 {

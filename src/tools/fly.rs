@@ -63,6 +63,17 @@ pub enum FlyProgress {
     Frame(u64, u64),
 }
 
+/// A written frame whose camera moved farther than this since the last frame waits for its
+/// tiles (metres: half a grass tile of the default world, more than a path covers in a frame
+/// at 60 fps and any sensible speed).
+const WAIT_JUMP_M: f64 = 25.0;
+/// The longest a written frame waits for its tiles.
+const FRAME_TILE_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
+
+fn path_start_position(path: &crate::world::CameraPath) -> glam::DVec3 {
+    sample_path(path, path.keys[0].t_s).position
+}
+
 /// Runs a fly-through and writes its frames and `report.json` into `opts.out`.
 pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Result<FlyReport> {
     if opts.frames == 0 {
@@ -149,9 +160,23 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     // With images, the grass coverage of every frame written (read back like its image).
     let mut coverage = Thinned::new(MAX_REPORT_FRAMES);
     scene.set_coverage_capture(opts.write_images)?;
+    let mut last_position = path_start_position(&path);
     for i in 0..opts.frames {
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
         let camera = sample_path(&path, t_s);
+        // Frames written far apart along the path (a short fly-through) wait, boundedly, for
+        // the tiles they need: each picture shows the world at full detail where its camera
+        // stands, not what streaming could catch up with in one frame.
+        let mut wait = (0.0, 0u32);
+        if opts.write_images && camera.position.distance(last_position) > WAIT_JUMP_M {
+            let waited = Instant::now();
+            let report = scene.warm_up_report(&camera, FRAME_TILE_WAIT)?;
+            wait = (
+                waited.elapsed().as_secs_f64() * 1e3,
+                report.missing.len() as u32,
+            );
+        }
+        last_position = camera.position;
         let start = Instant::now();
         let walker_xy = walker_at(&scene.world().manifest, &path, t_s);
         let mut record = FrameRecord {
@@ -160,6 +185,8 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
             camera_m: camera.position.to_array(),
             walker_m: walker_xy.to_array(),
             wind_scene: scene.wind_scene_at(t_s),
+            tile_wait_ms: wait.0,
+            tiles_missing_after_wait: wait.1,
             ..FrameRecord::default()
         };
         if opts.write_images {

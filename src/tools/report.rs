@@ -73,6 +73,13 @@ pub struct FrameRecord {
     /// Grass: tiles, blades considered, culled by each test (distance, frustum, occlusion),
     /// overflowing and drawn, each per LOD (high, low).
     pub grass: GrassStats,
+    /// With images, the wait for this frame's tiles before it was drawn, milliseconds (0 when
+    /// the camera moved too little since the last frame to need one; see `fly`'s docs).
+    #[serde(default)]
+    pub tile_wait_ms: f64,
+    /// Tiles still missing when that wait ended (0: the frame is at full detail).
+    #[serde(default)]
+    pub tiles_missing_after_wait: u32,
 }
 
 impl FrameRecord {
