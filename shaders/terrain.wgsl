@@ -235,10 +235,9 @@ fn color_variation(rel_xy: vec2<f32>) -> vec3<f32> {
 // specular highlights on average (SHEEN of the sun, when specular is on).
 const CANOPY_SHADE: f32 = 0.75;
 const SHEEN: f32 = 0.0125;
-// Under the blades: how much of the ground the far field's grass covers, and how much light
-// reaches it there.
-const UNDER_FILL: f32 = 0.5;
-const UNDER_SHADE: f32 = 0.6;
+// Under the blades: how much of the ground the far field's grass covers (for the grass that
+// the blades drawn leave out between them).
+const UNDER_FILL: f32 = 0.6;
 
 fn far_grass_light(albedo: vec3<f32>, n: vec3<f32>, t: f32, sun_vis: f32) -> vec3<f32> {
     let sun = frame.sun_dir.xyz;
@@ -260,9 +259,14 @@ fn far_grass_light(albedo: vec3<f32>, n: vec3<f32>, t: f32, sun_vis: f32) -> vec
     return albedo * (light * mix(0.6, 1.0, ao) + ambient) * CANOPY_SHADE + frame.sun_color.rgb * sheen;
 }
 
-// How much of the ground the far field's grass of density d hides.
-fn far_cover(d: f32) -> f32 {
-    return clamp(1.25 * d, 0.0, 1.0);
+// How much of the ground the far field's grass of density d hides, seen at an elevation whose
+// sine is sin_e: blades stand up, so a grazing view sees only grass and a view from above
+// sees the ground between them (Beer-Lambert through the grass layer, COVER_TAU of optical
+// depth straight down at full density).
+const COVER_TAU: f32 = 0.25;
+
+fn far_cover(d: f32, sin_e: f32) -> f32 {
+    return 1.0 - exp(-COVER_TAU * d / max(sin_e, 0.02));
 }
 
 // Bilinear height of the root (level-0) tiles at world xy, or a very low height off the world.
@@ -361,6 +365,7 @@ fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
     var growth_blend = 0.0;
     var density = 0.0;
     let t_far = frame.clump_offset.z;
+    let sin_e = abs(rel.z) / max(dist, 1e-3);
     for (var k = 0; k < 4; k++) {
         let o = vec2<i32>(k & 1, k >> 1);
         let w = select(1.0 - sw.x, sw.x, o.x == 1) * select(1.0 - sw.y, sw.y, o.y == 1);
@@ -376,7 +381,7 @@ fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
         ground += w * a;
         density += w * d;
         if kind != 0u {
-            let c = far_cover(d) * w;
+            let c = far_cover(d, sin_e) * w;
             grass_col += c * mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t_far);
             growth_blend += c * frame.base_colors[kind].w;
             cover += c;
@@ -426,18 +431,19 @@ fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
     var lit = ground * (frame.sun_color.rgb * lambert + 0.45 * ambient);
 
     // The far field: beyond the grass's view distance the terrain shows what the blades would,
-    // faded in over the band where the blades thin out. Inside it, the ground under the
-    // blades is half covered by the far field's grass in the shade of the blades above (the
-    // lower layers of a real field), so that the gaps between blades read as grass.
+    // faded in from twice the width of the band where the blades thin out before it. Nearer,
+    // the ground under the blades is partly covered by the far field's grass (the grass that
+    // the blades drawn leave out), so that the gaps between blades read as grass.
     if (frame.grid.w & FAR_FIELD) != 0u && cover > 0.0 {
         var w = 1.0;
         if frame.grass_view.w > 0.0 {
-            w = clamp((dist - frame.grass_view.z) / (frame.grass_view.w - frame.grass_view.z), 0.0, 1.0);
+            let band = frame.grass_view.w - frame.grass_view.z;
+            w = clamp((dist - (frame.grass_view.z - 2.0 * band)) / (3.0 * band), 0.0, 1.0);
         }
         let up = vec3<f32>(0.0, 0.0, 1.0);
         let growth = normalize(up + (n_terrain - up) * growth_blend);
         let albedo = grass_col * clump_tint(rel.xy) * color_variation(rel.xy) * (1.0 + 0.5 * detail);
-        let grass_lit = far_grass_light(albedo, growth, t_far, sun_vis) * mix(UNDER_SHADE, 1.0, w);
+        let grass_lit = far_grass_light(albedo, growth, t_far, sun_vis);
         lit = mix(lit, grass_lit, min(cover, 1.0) * mix(UNDER_FILL, 1.0, w));
     }
 

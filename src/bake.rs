@@ -927,9 +927,9 @@ fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     }
 }
 
-/// The tour, the default path: 30 s descending from high above the hills toward the meadow of
-/// the grassy line, then 20 s gliding a couple of metres above it at 8 m/s: terrain far and
-/// grass near in one flight.
+/// The tour, the default path: 30 s descending from high above the highest ground near the
+/// meadow of the grassy line toward it, then 20 s gliding a couple of metres above it at
+/// 8 m/s: terrain far and grass near in one flight.
 fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     const APPROACH_S: f64 = 30.0;
     const GLIDE_S: f64 = 20.0;
@@ -940,16 +940,50 @@ fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     let (c, dir) = grassy_line(painted, extent);
     let glide = GLIDE_SPEED * GLIDE_S;
     let meadow_start = c - dir * (glide / 2.0);
-    // Start up to 2.5 km back along the line, inside the data area.
-    let mut back = 2500.0;
-    while back > 200.0 {
-        let a = meadow_start - dir * back;
-        if a.x > 0.05 * e.x && a.y > 0.05 * e.y && a.x < 0.95 * e.x && a.y < 0.95 * e.y {
-            break;
+    // Start over the highest ground 2 to 8 km from the meadow (inside the data area), so that
+    // the first half of the flight shows ridges and valleys from the air; where the world has
+    // no such ground, 2.5 km back along the line. The approach is a quadratic Bezier curve that
+    // comes into the meadow along the line.
+    let inside = |a: DVec2| a.x > 0.05 * e.x && a.y > 0.05 * e.y && a.x < 0.95 * e.x && a.y < 0.95 * e.y;
+    let mut start = None;
+    let mut best = f64::NEG_INFINITY;
+    let step = 200.0;
+    let n = (8000.0 / step) as i64;
+    for j in -n..=n {
+        for i in -n..=n {
+            let p = meadow_start + DVec2::new(i as f64, j as f64) * step;
+            let r = p.distance(meadow_start);
+            if !(2000.0..=8000.0).contains(&r) || !inside(p) {
+                continue;
+            }
+            let h = f64::from(grid.height_bilinear(p));
+            if h > best {
+                best = h;
+                start = Some(p);
+            }
         }
-        back *= 0.8;
     }
-    let start = meadow_start - dir * back;
+    let meadow_h = f64::from(grid.height_bilinear(meadow_start));
+    let start = match start {
+        Some(p) if best > meadow_h + 100.0 => p,
+        _ => {
+            let mut back = 2500.0;
+            while back > 200.0 && !inside(meadow_start - dir * back) {
+                back *= 0.8;
+            }
+            meadow_start - dir * back
+        }
+    };
+    let span = start.distance(meadow_start);
+    let control = meadow_start - dir * (0.45 * span);
+    let curve = |v: f64| {
+        let w = 1.0 - v;
+        start * (w * w) + control * (2.0 * w * v) + meadow_start * (v * v)
+    };
+    // The curve's length, for the speeds below.
+    let back: f64 = (0..64)
+        .map(|k| curve((k + 1) as f64 / 64.0).distance(curve(k as f64 / 64.0)))
+        .sum();
     // Distance along the approach: cubic Hermite from 1.5 times the mean speed down to the
     // glide's speed, so the camera slows smoothly into the glide.
     let (v0, v1) = (1.5 * back / APPROACH_S, GLIDE_SPEED);
@@ -968,7 +1002,7 @@ fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     for k in 0..n_approach {
         let u = k as f64 / n_approach as f64;
         times.push(APPROACH_S * u);
-        points.push(start + dir * along(u));
+        points.push(curve((along(u) / back).clamp(0.0, 1.0)));
         let high = (1.0 - u) * (1.0 - u);
         clearance.push(MEADOW_CLEARANCE_M + (OVERVIEW_CLEARANCE_M - MEADOW_CLEARANCE_M) * high);
         pitch.push(-6.0 - 14.0 * high);

@@ -21,19 +21,26 @@ pub fn growth_blend(stiffness: f32) -> f32 {
     0.2 + 0.5 * (1.0 - stiffness.clamp(0.0, 1.0))
 }
 
-/// How much of the ground the far field's grass of density `d` (0..1) hides.
-pub fn cover(d: f32) -> f32 {
-    (1.25 * d).clamp(0.0, 1.0)
+/// Optical depth of the grass layer straight down at full density (see [`cover`]).
+pub const COVER_TAU: f32 = 0.25;
+
+/// How much of the ground the far field's grass of density `d` (0..1) hides, seen at an
+/// elevation whose sine is `sin_e`: blades stand up, so a grazing view sees only grass and a
+/// view from above sees the ground between them (Beer-Lambert through the grass layer).
+pub fn cover(d: f32, sin_e: f32) -> f32 {
+    1.0 - (-COVER_TAU * d / sin_e.max(0.02)).exp()
 }
 
-/// Weight of the far field at `dist` metres from the camera: 0 inside the grass's dithered
-/// fade (`fade_start`..`view_distance`), rising to 1 at the view distance. Without grass
-/// (`view_distance` 0) it is 1 everywhere.
+/// Weight of the far field at `dist` metres from the camera, where the grass's dithered fade
+/// runs from `fade_start` to `view_distance`: 0 up to twice the fade's width before it, rising
+/// to 1 at the view distance, so that the far field is in place under the last blades. Without
+/// grass (`view_distance` 0) it is 1 everywhere.
 pub fn weight(dist: f32, fade_start: f32, view_distance: f32) -> f32 {
     if view_distance <= 0.0 {
         return 1.0;
     }
-    ((dist - fade_start) / (view_distance - fade_start)).clamp(0.0, 1.0)
+    let band = view_distance - fade_start;
+    ((dist - (fade_start - 2.0 * band)) / (3.0 * band)).clamp(0.0, 1.0)
 }
 
 /// The tint (mean 1) of the Voronoi clump around `world` (metres), with clump cells of
@@ -134,9 +141,17 @@ mod tests {
     use super::*;
 
     #[test]
+    fn grass_hides_the_ground_seen_at_a_grazing_angle_and_shows_it_from_above() {
+        assert!(cover(1.0, 0.03) > 0.99);
+        assert!((cover(1.0, 1.0) - 0.221).abs() < 0.01);
+        assert_eq!(cover(0.0, 0.03), 0.0);
+        assert!(cover(0.5, 0.2) < cover(1.0, 0.2));
+    }
+
+    #[test]
     fn the_far_field_fades_in_over_the_blades_fade_and_is_everywhere_without_grass() {
-        assert_eq!(weight(100.0, 120.0, 150.0), 0.0);
-        assert_eq!(weight(135.0, 120.0, 150.0), 0.5);
+        assert_eq!(weight(50.0, 120.0, 150.0), 0.0);
+        assert_eq!(weight(105.0, 120.0, 150.0), 0.5);
         assert_eq!(weight(400.0, 120.0, 150.0), 1.0);
         assert_eq!(weight(1.0, 0.0, 0.0), 1.0);
     }
