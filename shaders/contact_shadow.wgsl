@@ -37,24 +37,16 @@ fn unproject(px: vec2<f32>, d: f32) -> vec3<f32> {
     return p.xyz / p.w;
 }
 
-// 1 in full sun, 0 in full contact shadow (before the distance fade).
-fn sun_seen(px: vec2<i32>) -> f32 {
-    let d = textureLoad(depth, px, 0);
-    if d <= 0.0 {
-        return 1.0;
-    }
-    let centre = vec2<f32>(px) + 0.5;
-    let p = unproject(centre, d);
-    let dist = length(p);
-    if dist >= params.size.z {
-        return 1.0;
-    }
+// 1 in full sun, 0 in full contact shadow, for the surface point p (camera-relative) under
+// pixel px. The ray's steps are interpolated in clip space (linear in the point), and depths
+// are compared as view depths: with a reverse-Z projection to infinity a depth d at clip w
+// means w * d is the same for every point, so the scene under a step lies at w * qd / sd.
+fn sun_seen(px: vec2<i32>, p: vec3<f32>) -> f32 {
     let steps = i32(params.march.w);
-    let sun = params.sun_dir.xyz;
+    let c0 = params.view_proj * vec4<f32>(p, 1.0);
+    let c1 = params.view_proj * vec4<f32>(p + params.sun_dir.xyz * params.march.x, 1.0);
     for (var i = 1; i <= steps; i++) {
-        let t = params.march.x * f32(i) / f32(steps);
-        let q = p + sun * t;
-        let c = params.view_proj * vec4<f32>(q, 1.0);
+        let c = mix(c0, c1, f32(i) / f32(steps));
         if c.w <= 0.0 {
             break;
         }
@@ -71,9 +63,8 @@ fn sun_seen(px: vec2<i32>) -> f32 {
         if sd <= 0.0 {
             continue;
         }
-        let s = unproject(vec2<f32>(ipx) + 0.5, sd);
-        let behind = length(q) - length(s);
-        let bias = 0.02 + 0.004 * length(q);
+        let behind = c.w * (1.0 - n.z / sd);
+        let bias = 0.02 + 0.004 * c.w;
         if behind > bias && behind < params.march.y {
             return 0.0;
         }
@@ -85,12 +76,16 @@ fn sun_seen(px: vec2<i32>) -> f32 {
 fn fs_contact_shadow(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {
     let px = vec2<i32>(floor(pos.xy));
     let d = textureLoad(depth, px, 0);
-    let dist = length(unproject(vec2<f32>(px) + 0.5, d));
-    let fade = 1.0 - smoothstep(params.size.w, params.size.z, dist);
-    var f = mix(1.0, params.march.z, (1.0 - sun_seen(px)) * fade);
     if d <= 0.0 {
-        f = 1.0;
+        return vec4<f32>(1.0);
     }
+    let p = unproject(vec2<f32>(px) + 0.5, d);
+    let dist = length(p);
+    if dist >= params.size.z {
+        return vec4<f32>(1.0);
+    }
+    let fade = 1.0 - smoothstep(params.size.w, params.size.z, dist);
+    var f = mix(1.0, params.march.z, (1.0 - sun_seen(px, p)) * fade);
     if ENCODE_SRGB {
         // The target holds sRGB-encoded values: scale them so that the linear light scales by f.
         f = pow(f, 1.0 / 2.4);

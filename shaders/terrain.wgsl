@@ -77,7 +77,14 @@ struct VertexOut {
     @location(4) @interpolate(flat) layer: u32,
     // Metres per atlas texel of the slot's data.
     @location(5) @interpolate(flat) texel_m: f32,
+    // The fraction of the sun the terrain lets through to this point (terrain shadows, worked
+    // out per vertex in the colour pass: they change slowly over the ground).
+    @location(6) sun_vis: f32,
 }
+
+// Whether the vertex stage works out the terrain's shadows (the colour pass; the depth
+// pre-pass needs positions only).
+override VERTEX_SHADOWS: bool = false;
 
 fn texel(t: vec2<i32>, layer: u32) -> f32 {
     let size = vec2<i32>(textureDimensions(heights));
@@ -131,6 +138,11 @@ fn vs_terrain(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) 
     out.layer = tile.layer;
     out.texel_m = texel_m;
     out.level = round(log2(frame.overlay.w / tile.cell_size));
+    out.sun_vis = 1.0;
+    if VERTEX_SHADOWS && (frame.grid.w & SHADOWS) != 0u {
+        let world = frame.camera_world.xyz + vec3<f32>(rel.xy, h - frame.camera.x);
+        out.sun_vis = sun_visibility(tp, tile.layer, texel_m, world);
+    }
     return out;
 }
 
@@ -234,7 +246,7 @@ fn color_variation(rel_xy: vec2<f32>) -> vec3<f32> {
 // dimmed by CANOPY_SHADE for the blades' shade on each other, plus the sheen of the blades'
 // specular highlights on average (SHEEN of the sun, when specular is on).
 const CANOPY_SHADE: f32 = 0.75;
-const SHEEN: f32 = 0.0125;
+const SHEEN: f32 = 0.005;
 // Under the blades: how much of the ground the far field's grass covers (for the grass that
 // the blades drawn leave out between them).
 const UNDER_FILL: f32 = 0.6;
@@ -306,7 +318,7 @@ fn sun_visibility(tex: vec2<f32>, layer: u32, texel_m: f32, world: vec3<f32>) ->
     let size = f32(textureDimensions(heights).x) - 1.0;
     let h0 = world.z + 0.05 * texel_m;
     var s = 1.5;
-    for (var i = 0; i < 28; i++) {
+    for (var i = 0; i < 24; i++) {
         let q = tex + dir * s;
         if any(q < vec2<f32>(0.0)) || any(q > vec2<f32>(size)) {
             break;
@@ -322,17 +334,54 @@ fn sun_visibility(tex: vec2<f32>, layer: u32, texel_m: f32, world: vec3<f32>) ->
         let cell = bitcast<f32>(frame.roots.z);
         let lift = max(root_height(world.xy) - world.z, 0.0) + 0.02 * cell;
         var d = s * texel_m;
-        for (var i = 0; i < 24; i++) {
+        for (var i = 0; i < 32; i++) {
             if d > 8000.0 {
                 break;
             }
             let p = world.xy + dir * d;
             let over = (world.z + lift + d * rise - root_height(p)) / d;
             vis = min(vis, smoothstep(-softness, softness, over));
-            d *= 1.25;
+            d *= 1.2;
         }
     }
     return vis;
+}
+
+// The maps of one of the four grass samples around a pixel, added in with weight w.
+struct Maps {
+    ground: vec3<f32>,
+    grass_col: vec3<f32>,
+    cover: f32,
+    growth_blend: f32,
+}
+
+fn add_corner(m: ptr<function, Maps>, g: vec2<u32>, w: f32, t_far: f32, sin_e: f32) {
+    let kind = min(g.x, frame.grid.z - 1u);
+    let d = f32(g.y) / 255.0;
+    var a = mix(SOIL, frame.ground_colors[kind].rgb, d);
+    if kind == 0u {
+        a = ROCK;
+    } else if (frame.grid.w & GROUND_DARKENING) != 0u {
+        a *= mix(1.0, 0.6, d);
+    }
+    (*m).ground += w * a;
+    if kind != 0u {
+        let c = far_cover(d, sin_e) * w;
+        (*m).grass_col += c * mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t_far);
+        (*m).growth_blend += c * frame.base_colors[kind].w;
+        (*m).cover += c;
+    }
+}
+
+// One octave of detail noise of feature size `scale` (m) and amplitude `amp`, faded out as the
+// pixel's footprint (m) nears the feature size: x the colour offset, yz the slope.
+fn octave(p: vec2<f32>, scale: f32, amp: f32, footprint: f32) -> vec3<f32> {
+    let vis = clamp(scale / footprint - 1.0, 0.0, 1.0);
+    if vis <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let ng = noise_grad(p / scale);
+    return vec3<f32>((ng.x - 0.5) * amp * 2.0, ng.yz * amp * 0.8) * vis;
 }
 
 @fragment
@@ -359,54 +408,32 @@ fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
     let fw = clamp(f + (vec2<f32>(wn, wn2) - 0.5) * 0.9, vec2<f32>(0.0), vec2<f32>(1.0));
     let sw = smoothstep(vec2<f32>(0.3), vec2<f32>(0.7), fw);
     let ci = vec2<i32>(cell);
-    var ground = vec3<f32>(0.0);
-    var grass_col = vec3<f32>(0.0);
-    var cover = 0.0;
-    var growth_blend = 0.0;
-    var density = 0.0;
     let t_far = frame.clump_offset.z;
     let sin_e = abs(rel.z) / max(dist, 1e-3);
-    for (var k = 0; k < 4; k++) {
-        let o = vec2<i32>(k & 1, k >> 1);
-        let w = select(1.0 - sw.x, sw.x, o.x == 1) * select(1.0 - sw.y, sw.y, o.y == 1);
-        let g = grass_texel(ci + o, in.layer);
-        let kind = min(g.x, frame.grid.z - 1u);
-        let d = f32(g.y) / 255.0;
-        var a = mix(SOIL, frame.ground_colors[kind].rgb, d);
-        if kind == 0u {
-            a = ROCK;
-        } else if (frame.grid.w & GROUND_DARKENING) != 0u {
-            a *= mix(1.0, 0.6, d);
-        }
-        ground += w * a;
-        density += w * d;
-        if kind != 0u {
-            let c = far_cover(d, sin_e) * w;
-            grass_col += c * mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t_far);
-            growth_blend += c * frame.base_colors[kind].w;
-            cover += c;
-        }
-    }
+    var m = Maps();
+    add_corner(&m, grass_texel(ci, in.layer), (1.0 - sw.x) * (1.0 - sw.y), t_far, sin_e);
+    add_corner(&m, grass_texel(ci + vec2<i32>(1, 0), in.layer), sw.x * (1.0 - sw.y), t_far, sin_e);
+    add_corner(&m, grass_texel(ci + vec2<i32>(0, 1), in.layer), (1.0 - sw.x) * sw.y, t_far, sin_e);
+    add_corner(&m, grass_texel(ci + vec2<i32>(1, 1), in.layer), sw.x * sw.y, t_far, sin_e);
+    var ground = m.ground;
+    var grass_col = m.grass_col;
+    var cover = m.cover;
+    var growth_blend = m.growth_blend;
     if cover > 0.0 {
         grass_col /= cover;
         growth_blend /= cover;
     }
 
-    // Close-range detail: a few octaves of world-space noise in the ground's colour and normal,
+    // Close-range detail: three octaves of world-space noise in the ground's colour and normal,
     // each faded out before its features shrink below a pixel.
     var detail = 0.0;
     var slope_noise = vec2<f32>(0.0);
-    let scales = array<f32, 4>(37.0, 9.3, 2.1, 0.55);
-    let amps = array<f32, 4>(0.10, 0.08, 0.07, 0.06);
-    for (var k = 0; k < 4; k++) {
-        let sc = scales[k];
-        let vis = clamp(sc / (0.004 * dist + 1e-3) - 1.0, 0.0, 1.0);
-        if vis > 0.0 {
-            let ng = noise_grad(world.xy / sc + f32(k) * 19.1);
-            detail += (ng.x - 0.5) * amps[k] * 2.0 * vis;
-            slope_noise += ng.yz / sc * amps[k] * sc * 0.8 * vis;
-        }
-    }
+    let footprint = 0.004 * dist + 1e-3;
+    let o1 = octave(world.xy, 23.0, 0.10, footprint);
+    let o2 = octave(world.xy + 19.1, 4.7, 0.08, footprint);
+    let o3 = octave(world.xy + 38.2, 0.9, 0.07, footprint);
+    detail = o1.x + o2.x + o3.x;
+    slope_noise = o1.yz + o2.yz + o3.yz;
     let n = normalize(n_terrain - vec3<f32>(slope_noise, 0.0));
 
     // Materials: rock on steep slopes (the border moved by noise), soil where it is steep
@@ -419,10 +446,7 @@ fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
     cover *= (1.0 - rock_w) * (1.0 - 0.5 * soil_w);
     ground *= 1.0 + detail;
 
-    var sun_vis = 1.0;
-    if (frame.grid.w & SHADOWS) != 0u {
-        sun_vis = sun_visibility(tex, in.layer, in.texel_m, world);
-    }
+    let sun_vis = in.sun_vis;
     let sun = frame.sun_dir.xyz;
     let lambert = max(dot(n, sun), 0.0) * sun_vis;
     // Hemisphere ambient: sky from above, warm bounce from the ground below.
@@ -442,7 +466,11 @@ fn fs_terrain(in: VertexOut) -> @location(0) vec4<f32> {
         }
         let up = vec3<f32>(0.0, 0.0, 1.0);
         let growth = normalize(up + (n_terrain - up) * growth_blend);
-        let albedo = grass_col * clump_tint(rel.xy) * color_variation(rel.xy) * (1.0 + 0.5 * detail);
+        var tint = vec3<f32>(1.0);
+        if w > 0.0 {
+            tint = clump_tint(rel.xy) * color_variation(rel.xy);
+        }
+        let albedo = grass_col * tint * (1.0 + 0.5 * detail);
         let grass_lit = far_grass_light(albedo, growth, t_far, sun_vis);
         lit = mix(lit, grass_lit, min(cover, 1.0) * mix(UNDER_FILL, 1.0, w));
     }

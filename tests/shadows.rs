@@ -102,3 +102,74 @@ fn a_wall_casts_its_shadow_where_the_sun_ray_says() {
     assert!(shadowed_dark > 0.98, "only {shadowed_dark:.3} of the shadow is dark");
     assert!(lit_dark < 0.03, "{lit_dark:.3} of the sunlit ground is dark");
 }
+
+fn srgb_to_linear(c: u8) -> f32 {
+    let c = f32::from(c) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// The contact shadows' pass (`shaders/contact_shadow.wgsl`) against its CPU mirror
+/// (`src/terrain/contact_shadow.rs`): the same frame of a meadow drawn with and without
+/// shadows, whose ratio is the pass's factor, against the factors the mirror finds in the
+/// frame's depth.
+#[test]
+fn contact_shadows_match_their_cpu_mirror() {
+    use verdant::features::Feature;
+    use verdant::terrain::contact_shadow::ContactShadows;
+    use verdant::tools::bench_blades::flat_field;
+
+    let ctx = common::gpu();
+    let (world, source) = flat_field(400.0).unwrap();
+    let (w, h) = (192u32, 108u32);
+    // Standing in the meadow, looking across the sun's direction so that the blades' shadows
+    // fall beside them, in view.
+    let camera = Camera::new(DVec3::new(200.0, 200.0, 1.7), 120.0, -25.0);
+    let render = |features| {
+        let mut config = SceneConfig::for_world(&world);
+        config.features = features;
+        let settings = config.grass_settings(&world).unwrap();
+        config.grass_capacity = Some(settings.grid() * settings.grid());
+        let mut scene =
+            Scene::with_source(&ctx, world.clone(), source.clone(), w, h, config).unwrap();
+        assert!(scene
+            .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
+            .unwrap());
+        scene.render_at(&ctx, &camera, 1.0).unwrap();
+        (scene.read_image(&ctx).unwrap(), scene.read_depth(&ctx).unwrap())
+    };
+    let all = SceneConfig::for_world(&world).features;
+    let (lit, depth) = render(all.without(Feature::Shadows));
+    let (shaded, depth_shaded) = render(all);
+    assert_eq!(depth, depth_shaded, "the two frames must be the same scene");
+
+    let s = ContactShadows::default();
+    let sun = sun_direction(&world.manifest.sky);
+    let vp = camera.view_proj_relative(w as f32 / h as f32);
+    let cpu = s.factors(&depth, w, h, vp, sun);
+    let (mut agree, mut counted, mut shadowed) = (0usize, 0usize, 0usize);
+    for (i, &f) in cpu.iter().enumerate() {
+        let (a, b) = (&lit.as_raw()[i * 4..i * 4 + 3], &shaded.as_raw()[i * 4..i * 4 + 3]);
+        let (la, lb) = (srgb_to_linear(a[1]), srgb_to_linear(b[1]));
+        // Too dark to read a ratio from 8 bits.
+        if la < 0.02 {
+            continue;
+        }
+        counted += 1;
+        let gpu = lb / la;
+        if f < 0.999 {
+            shadowed += 1;
+        }
+        if (gpu - f).abs() < 0.08 {
+            agree += 1;
+        }
+    }
+    let fraction = agree as f64 / counted.max(1) as f64;
+    eprintln!("{shadowed} of {counted} pixels in contact shadow; GPU and CPU agree on {fraction:.4}");
+    assert!(shadowed > counted / 50, "too few shadowed pixels to test: {shadowed}");
+    // Pixels where a step lands right at a depth edge can differ by the last bit of a depth.
+    assert!(fraction > 0.98, "GPU and CPU agree on only {fraction:.4} of the pixels");
+}

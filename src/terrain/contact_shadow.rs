@@ -33,7 +33,7 @@ impl Default for ContactShadows {
             ray_m: 1.2,
             thickness_m: 0.6,
             shade: 0.55,
-            steps: 16,
+            steps: 12,
             fade_start_m: 22.0,
             fade_end_m: 32.0,
         }
@@ -74,9 +74,12 @@ impl ContactShadows {
                     continue;
                 }
                 let mut shadowed = false;
+                // Steps interpolated in clip space; the scene under a step at clip w and depth
+                // qd lies at view depth w * qd / sd (reverse-Z to infinity).
+                let c0 = view_proj * p.extend(1.0);
+                let c1 = view_proj * (p + sun_dir * self.ray_m).extend(1.0);
                 for i in 1..=self.steps {
-                    let q = p + sun_dir * (self.ray_m * i as f32 / self.steps as f32);
-                    let c = view_proj * q.extend(1.0);
+                    let c = c0.lerp(c1, i as f32 / self.steps as f32);
                     if c.w <= 0.0 {
                         break;
                     }
@@ -93,8 +96,8 @@ impl ContactShadows {
                     if sd <= 0.0 {
                         continue;
                     }
-                    let behind = q.length() - point(sx, sy, sd).length();
-                    let bias = 0.02 + 0.004 * q.length();
+                    let behind = c.w * (1.0 - n.z / sd);
+                    let bias = 0.02 + 0.004 * c.w;
                     if behind > bias && behind < self.thickness_m {
                         shadowed = true;
                         break;

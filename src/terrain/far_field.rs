@@ -88,7 +88,7 @@ pub const CANOPY_SHADE: f32 = 0.75;
 
 /// The blades' specular highlights on average, as a fraction of the sun on the far field
 /// (fitted as [`CANOPY_SHADE`] is).
-pub const SHEEN: f32 = 0.0125;
+pub const SHEEN: f32 = 0.005;
 
 /// The sun and sky that light the far field.
 #[derive(Clone, Copy, Debug)]

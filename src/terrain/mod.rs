@@ -238,14 +238,19 @@ impl TerrainRenderer {
         });
         let color_targets = [Some(wgpu::ColorTargetState::from(targets.color_format))];
         let fs_constants = [("ENCODE_SRGB", targets.encode_srgb())];
+        // The colour pass's vertices work out the terrain's shadows; the depth pre-pass's not.
         let pipeline = |label, vs, fs: Option<&str>, depth_write, compare, cull| {
+            let vs_constants = [("VERTEX_SHADOWS", if fs.is_some() { 1.0 } else { 0.0 })];
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&pipeline_layout),
                 vertex: wgpu::VertexState {
                     module: &module,
                     entry_point: Some(vs),
-                    compilation_options: Default::default(),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &vs_constants,
+                        ..Default::default()
+                    },
                     buffers: &[],
                 },
                 primitive: wgpu::PrimitiveState {

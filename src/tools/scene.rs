@@ -249,6 +249,13 @@ impl Scene {
             .expect("readback returns width * height * 4 bytes"))
     }
 
+    /// Reads the last frame's depth back (reverse-Z, row-major, top row first); waits for the
+    /// GPU.
+    pub fn read_depth(&self, ctx: &GpuContext) -> Result<Vec<f32>, SceneError> {
+        let bytes = crate::gpu::read_texture_level(&ctx.device, &ctx.queue, &self.depth, 0, 0)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+
     /// Switches the capture of the terrain-only depth on or off (see
     /// [`Renderer::set_terrain_depth_capture`]): on for the frames whose grass coverage is
     /// measured ([`Scene::coverage`]), off for timed ones.
