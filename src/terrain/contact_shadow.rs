@@ -134,6 +134,8 @@ pub struct ContactShadowPass {
     layout: wgpu::BindGroupLayout,
     params: Params,
     buffer: wgpu::Buffer,
+    /// The bind group of the last depth target, made again only when the target changes.
+    bound: Option<(wgpu::Texture, wgpu::BindGroup)>,
 }
 
 impl ContactShadowPass {
@@ -245,6 +247,7 @@ impl ContactShadowPass {
             layout,
             params,
             buffer,
+            bound: None,
         }
     }
 
@@ -269,29 +272,39 @@ impl ContactShadowPass {
         queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&self.params));
     }
 
-    /// Records the pass: `color` multiplied by the factors found in `depth`.
+    /// Records the pass: `color` multiplied by the factors found in `depth` (its bind group is
+    /// made when the depth texture differs from the last one's).
     pub fn record(
-        &self,
+        &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
         timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
     ) {
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("contact shadows"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: self.buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(depth),
-                },
-            ],
-        });
+        let texture = depth.texture();
+        if self.bound.as_ref().is_none_or(|(t, _)| t != texture) {
+            let view = texture.create_view(&wgpu::TextureViewDescriptor {
+                aspect: wgpu::TextureAspect::DepthOnly,
+                ..Default::default()
+            });
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("contact shadows"),
+                layout: &self.layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: self.buffer.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::TextureView(&view),
+                    },
+                ],
+            });
+            self.bound = Some((texture.clone(), group));
+        }
+        let bind_group = &self.bound.as_ref().expect("bound above").1;
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("contact shadows"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -309,7 +322,7 @@ impl ContactShadowPass {
             multiview_mask: None,
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
+        pass.set_bind_group(0, bind_group, &[]);
         pass.draw(0..3, 0..1);
     }
 }
