@@ -685,6 +685,7 @@ impl Renderer {
             self.terrain_depth = Some(self.depth_copy());
         }
         self.terrain.resize(&self.device, width, height);
+        self.contact_shadows.resize(&self.device, width, height);
         if let Some(g) = &mut self.grass {
             g.renderer.resize(&self.device, &self.queue, width, height);
         }
@@ -972,8 +973,9 @@ impl Renderer {
     /// 6. grass in batches of 4 tiles: generation and culling, then the wind on each blade
     ///    (compute, `grass_generate.wgsl`, `grass_wind.wgsl`), then one indirect draw per tile
     ///    (`grass_draw.wgsl`);
-    /// 7. contact shadows, with the `shadows` feature: the colour dimmed where a short ray
-    ///    toward the sun is blocked in the depth buffer (`contact_shadow.wgsl`);
+    /// 7. contact shadows, with the `shadows` feature: each pixel's factor, less than 1 where a
+    ///    short ray toward the sun is blocked in the depth buffer (compute), then the colour
+    ///    multiplied by it (a full-screen pass; both `contact_shadow.wgsl`);
     /// 8. the pass timestamps and grass counters copied into the readback ring, mapped when the
     ///    encoder's work is submitted ([`Renderer::stats`]).
     pub fn record(
@@ -1068,13 +1070,8 @@ impl Renderer {
         }
         // 7. Contact shadows: the grass's (and everything's) short shadows, from the depth.
         if self.features.has(Feature::Shadows) {
-            self.contact_shadows.record(
-                &self.device,
-                encoder,
-                color,
-                depth,
-                self.timer.render_pass("contact_shadows"),
-            );
+            self.contact_shadows
+                .record(&self.device, encoder, color, depth, &mut self.timer);
         }
         // 8. Figures.
         self.timer.resolve(encoder);
