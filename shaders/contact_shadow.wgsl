@@ -2,8 +2,10 @@
 // about 30 m of the camera, onto the ground and onto other blades. Each pixel's surface point
 // marches toward the sun in screen space; where a step lands behind something nearer than it
 // (and within a thickness of it), the pixel is in shadow and its colour is dimmed by
-// multiplying the target (the sun's share of the light: the ambient stays). CPU mirror:
-// src/terrain/contact_shadow.rs.
+// multiplying the target (the sun's share of the light: the ambient stays). Two passes: the
+// factors, per pixel in a compute pass over the target (1 where unshadowed, and beyond the
+// fade distance without a march), then a full-screen pass that multiplies the colour target by
+// them (blending). CPU mirror: src/terrain/contact_shadow.rs.
 
 override ENCODE_SRGB: bool = false;
 
@@ -23,6 +25,9 @@ struct Params {
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var depth: texture_depth_2d;
+// The factors: written by the compute pass, read by the full-screen pass.
+@group(0) @binding(2) var factors_out: texture_storage_2d<r32float, write>;
+@group(0) @binding(3) var factors: texture_2d<f32>;
 
 @vertex
 fn vs_full(@builtin(vertex_index) vi: u32) -> @builtin(position) vec4<f32> {
@@ -72,20 +77,33 @@ fn sun_seen(px: vec2<i32>, p: vec3<f32>) -> f32 {
     return 1.0;
 }
 
-@fragment
-fn fs_contact_shadow(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {
-    let px = vec2<i32>(floor(pos.xy));
+// The colour's factor at pixel px: 1 in full sun, the shade in full contact shadow.
+fn factor_at(px: vec2<i32>) -> f32 {
     let d = textureLoad(depth, px, 0);
     if d <= 0.0 {
-        return vec4<f32>(1.0);
+        return 1.0;
     }
     let p = unproject(vec2<f32>(px) + 0.5, d);
     let dist = length(p);
     if dist >= params.size.z {
-        return vec4<f32>(1.0);
+        return 1.0;
     }
     let fade = 1.0 - smoothstep(params.size.w, params.size.z, dist);
-    var f = mix(1.0, params.march.z, (1.0 - sun_seen(px, p)) * fade);
+    return mix(1.0, params.march.z, (1.0 - sun_seen(px, p)) * fade);
+}
+
+@compute @workgroup_size(8, 8)
+fn cs_contact_shadow(@builtin(global_invocation_id) id: vec3<u32>) {
+    if any(vec2<f32>(id.xy) >= params.size.xy) {
+        return;
+    }
+    let px = vec2<i32>(id.xy);
+    textureStore(factors_out, px, vec4<f32>(factor_at(px), 0.0, 0.0, 1.0));
+}
+
+@fragment
+fn fs_contact_shadow(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {
+    var f = textureLoad(factors, vec2<i32>(floor(pos.xy)), 0).r;
     if ENCODE_SRGB {
         // The target holds sRGB-encoded values: scale them so that the linear light scales by f.
         f = pow(f, 1.0 / 2.4);

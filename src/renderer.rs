@@ -405,7 +405,7 @@ pub struct Renderer {
     time_s: Option<f64>,
     frame: u64,
     prepared: Option<Prepared>,
-    /// A copy of the depth target after the terrain colour pass, when asked for
+    /// A copy of the depth target after the terrain colour passes, when asked for
     /// ([`Renderer::set_terrain_depth_capture`]).
     terrain_depth: Option<wgpu::Texture>,
 }
@@ -639,7 +639,7 @@ impl Renderer {
 
     /// Switches the capture of the terrain-only depth on or off (off by default, costing
     /// nothing). While on, each [`Renderer::record`] copies the depth target after the terrain
-    /// colour pass, before any grass, into a texture of the renderer's
+    /// colour passes, before any grass, into a texture of the renderer's
     /// ([`Renderer::terrain_depth`]); the depth target then needs `COPY_SRC` usage as well.
     /// Refused for a depth format that cannot be copied (Depth24Plus).
     pub fn set_terrain_depth_capture(&mut self, on: bool) -> Result<(), RendererError> {
@@ -684,6 +684,8 @@ impl Renderer {
         if self.terrain_depth.is_some() {
             self.terrain_depth = Some(self.depth_copy());
         }
+        self.terrain.resize(&self.device, width, height);
+        self.contact_shadows.resize(&self.device, width, height);
         if let Some(g) = &mut self.grass {
             g.renderer.resize(&self.device, &self.queue, width, height);
         }
@@ -964,12 +966,16 @@ impl Renderer {
     /// 2. the wind field and the sway springs (compute, `wind_field.wgsl`, `grass_sway.wgsl`);
     /// 3. the terrain's depth pre-pass (`terrain.wgsl`);
     /// 4. the Hi-Z pyramid from that depth (compute, `hiz_build.wgsl`);
-    /// 5. the terrain's colour and the sky (`terrain.wgsl`);
+    /// 5. the terrain's colour and the sky, deferred: the terrain's G-buffer pass over that depth
+    ///    (`terrain.wgsl`: where in the atlas each pixel's ground is), then every pixel's
+    ///    shading, terrain and sky, with the terrain's shadows (compute, `terrain_shade.wgsl`),
+    ///    then its composite into the colour target (`composite.wgsl`);
     /// 6. grass in batches of 4 tiles: generation and culling, then the wind on each blade
     ///    (compute, `grass_generate.wgsl`, `grass_wind.wgsl`), then one indirect draw per tile
     ///    (`grass_draw.wgsl`);
-    /// 7. contact shadows, with the `shadows` feature: the colour dimmed where a short ray
-    ///    toward the sun is blocked in the depth buffer (`contact_shadow.wgsl`);
+    /// 7. contact shadows, with the `shadows` feature: each pixel's factor, less than 1 where a
+    ///    short ray toward the sun is blocked in the depth buffer (compute), then the colour
+    ///    multiplied by it (a full-screen pass; both `contact_shadow.wgsl`);
     /// 8. the pass timestamps and grass counters copied into the readback ring, mapped when the
     ///    encoder's work is submitted ([`Renderer::stats`]).
     pub fn record(
@@ -1033,26 +1039,15 @@ impl Renderer {
                 .hiz
                 .record(&self.device, encoder, depth.texture(), &mut self.timer);
         }
-        // 5. Terrain colour and sky.
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("terrain"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: color,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: depth_attachment(depth, wgpu::LoadOp::Load),
-                timestamp_writes: self.timer.render_pass("terrain"),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            self.terrain.draw(&mut pass, frame.terrain_tiles);
-        }
+        // 5. Terrain colour and sky: G-buffer, shading (compute), composite into `color`.
+        self.terrain.record_color(
+            &self.device,
+            encoder,
+            color,
+            depth,
+            frame.terrain_tiles,
+            &mut self.timer,
+        );
         if let Some(copy) = &self.terrain_depth {
             encoder.copy_texture_to_texture(
                 depth.texture().as_image_copy(),
@@ -1075,13 +1070,8 @@ impl Renderer {
         }
         // 7. Contact shadows: the grass's (and everything's) short shadows, from the depth.
         if self.features.has(Feature::Shadows) {
-            self.contact_shadows.record(
-                &self.device,
-                encoder,
-                color,
-                depth,
-                self.timer.render_pass("contact_shadows"),
-            );
+            self.contact_shadows
+                .record(&self.device, encoder, color, depth, &mut self.timer);
         }
         // 8. Figures.
         self.timer.resolve(encoder);

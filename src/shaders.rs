@@ -2,7 +2,7 @@
 //!
 //! A stage's file may include shared pieces with a line `#include "shared/NAME.wgsl"`: the
 //! integer hash, the feature bits, the blade record of the instance pool, reading the wind field
-//! and the colour output. Each piece is written once in `shaders/shared/` and included at most
+//! the colour output and the terrain's shading. Each piece is written once in `shaders/shared/` and included at most
 //! once per assembled shader. The sources are compiled into the crate, so a shipped binary reads
 //! no shader files at run time; `tests/shaders.rs` validates every assembled stage with naga.
 
@@ -30,6 +30,10 @@ const SHARED: &[(&str, &str)] = &[
         "shared/output.wgsl",
         include_str!("../shaders/shared/output.wgsl"),
     ),
+    (
+        "shared/terrain_shading.wgsl",
+        include_str!("../shaders/shared/terrain_shading.wgsl"),
+    ),
 ];
 
 /// One WGSL file per GPU stage, by file name.
@@ -39,6 +43,11 @@ pub const STAGES: &[(&str, &str)] = &[
         include_str!("../shaders/derive_child.wgsl"),
     ),
     ("terrain.wgsl", include_str!("../shaders/terrain.wgsl")),
+    (
+        "terrain_shade.wgsl",
+        include_str!("../shaders/terrain_shade.wgsl"),
+    ),
+    ("composite.wgsl", include_str!("../shaders/composite.wgsl")),
     (
         "contact_shadow.wgsl",
         include_str!("../shaders/contact_shadow.wgsl"),

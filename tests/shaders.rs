@@ -33,6 +33,7 @@ fn shared_pieces_are_defined_once_per_stage() {
         "struct Blade {",
         "fn output_color(",
         "struct WindLookup {",
+        "fn sun_visibility(",
     ];
     for (name, _) in STAGES {
         let wgsl = source(name);
@@ -51,7 +52,10 @@ fn shared_pieces_are_defined_once_per_stage() {
         ("grass_wind.wgsl", "struct Blade {"),
         ("grass_draw.wgsl", "struct Blade {"),
         ("grass_wind.wgsl", "struct WindLookup {"),
-        ("terrain.wgsl", "fn output_color("),
+        ("composite.wgsl", "fn output_color("),
+        ("terrain.wgsl", "struct Frame {"),
+        ("terrain_shade.wgsl", "fn sun_visibility("),
+        ("terrain_shade.wgsl", "fn sky_color("),
         ("grass_draw.wgsl", "fn output_color("),
     ] {
         assert_eq!(source(stage).matches(def).count(), 1, "{stage}: {def}");

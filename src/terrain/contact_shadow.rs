@@ -126,16 +126,49 @@ struct Params {
     march: [f32; 4],
 }
 
-/// The contact shadows' pass: a full-screen triangle that multiplies the colour target by each
-/// pixel's factor, reading the depth target (which it does not write).
+/// Format of the factors' texture (a storage format of every adapter).
+pub const FACTOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
+
+/// The contact shadows' passes: each pixel's factor worked out in a compute pass over the
+/// target, reading the depth target (which it does not write), into a texture of the pass's;
+/// then a full-screen triangle that multiplies the colour target by the factors.
 pub struct ContactShadowPass {
     settings: ContactShadows,
+    compute: wgpu::ComputePipeline,
+    compute_layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
-    layout: wgpu::BindGroupLayout,
+    apply_layout: wgpu::BindGroupLayout,
+    factors: wgpu::TextureView,
+    apply: wgpu::BindGroup,
     params: Params,
     buffer: wgpu::Buffer,
     /// The bind group of the last depth target, made again only when the target changes.
     bound: Option<(wgpu::Texture, wgpu::BindGroup)>,
+}
+
+/// The factors' texture of a `size` target and the bind group of the pass that applies them.
+fn factor_texture(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    size: (u32, u32),
+) -> (wgpu::TextureView, wgpu::BindGroup) {
+    let texture = crate::gpu::target_texture(
+        device,
+        "contact shadow factors",
+        FACTOR_FORMAT,
+        wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
+        size,
+    );
+    let view = texture.create_view(&Default::default());
+    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("contact shadows apply"),
+        layout,
+        entries: &[wgpu::BindGroupEntry {
+            binding: 3,
+            resource: wgpu::BindingResource::TextureView(&view),
+        }],
+    });
+    (view, bind_group)
 }
 
 impl ContactShadowPass {
@@ -146,12 +179,12 @@ impl ContactShadowPass {
         settings: ContactShadows,
     ) -> Self {
         let module = crate::shaders::module(device, "contact_shadow.wgsl");
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        let compute_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("contact shadows"),
             entries: &[
                 wgpu::BindGroupLayoutEntry {
                     binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    visibility: wgpu::ShaderStages::COMPUTE,
                     ty: wgpu::BindingType::Buffer {
                         ty: wgpu::BufferBindingType::Uniform,
                         has_dynamic_offset: false,
@@ -161,7 +194,7 @@ impl ContactShadowPass {
                 },
                 wgpu::BindGroupLayoutEntry {
                     binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    visibility: wgpu::ShaderStages::COMPUTE,
                     ty: wgpu::BindingType::Texture {
                         sample_type: wgpu::TextureSampleType::Depth,
                         view_dimension: wgpu::TextureViewDimension::D2,
@@ -169,11 +202,48 @@ impl ContactShadowPass {
                     },
                     count: None,
                 },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: FACTOR_FORMAT,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                    count: None,
+                },
             ],
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        let compute = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("contact shadows"),
-            bind_group_layouts: &[Some(&layout)],
+            layout: Some(
+                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("contact shadows"),
+                    bind_group_layouts: &[Some(&compute_layout)],
+                    immediate_size: 0,
+                }),
+            ),
+            module: &module,
+            entry_point: Some("cs_contact_shadow"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let apply_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("contact shadows apply"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 3,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            }],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("contact shadows apply"),
+            bind_group_layouts: &[Some(&apply_layout)],
             immediate_size: 0,
         });
         // The colour target times the pass's output; its alpha kept.
@@ -191,7 +261,7 @@ impl ContactShadowPass {
         };
         let constants = [("ENCODE_SRGB", targets.encode_srgb())];
         let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("contact shadows"),
+            label: Some("contact shadows apply"),
             layout: Some(&pipeline_layout),
             vertex: wgpu::VertexState {
                 module: &module,
@@ -241,14 +311,26 @@ impl ContactShadowPass {
                 settings.steps as f32,
             ],
         };
+        let (factors, apply) =
+            factor_texture(device, &apply_layout, (targets.width, targets.height));
         Self {
             settings,
+            compute,
+            compute_layout,
             pipeline,
-            layout,
+            apply_layout,
+            factors,
+            apply,
             params,
             buffer,
             bound: None,
         }
+    }
+
+    /// Follows a resize of the targets: the factors' texture at the new size.
+    pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
+        (self.factors, self.apply) = factor_texture(device, &self.apply_layout, (width, height));
+        self.bound = None;
     }
 
     /// The settings.
@@ -272,15 +354,16 @@ impl ContactShadowPass {
         queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&self.params));
     }
 
-    /// Records the pass: `color` multiplied by the factors found in `depth` (its bind group is
-    /// made when the depth texture differs from the last one's).
+    /// Records the passes: the factors found in `depth` (compute, `contact_shadows`), then
+    /// `color` multiplied by them (`contact_shadows_apply`). The compute pass's bind group is
+    /// made again only when the depth texture changes (or the targets are resized).
     pub fn record(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
-        timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
+        timer: &mut crate::gpu::GpuTimer,
     ) {
         let texture = depth.texture();
         if self.bound.as_ref().is_none_or(|(t, _)| t != texture) {
@@ -290,7 +373,7 @@ impl ContactShadowPass {
             });
             let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("contact shadows"),
-                layout: &self.layout,
+                layout: &self.compute_layout,
                 entries: &[
                     wgpu::BindGroupEntry {
                         binding: 0,
@@ -300,13 +383,27 @@ impl ContactShadowPass {
                         binding: 1,
                         resource: wgpu::BindingResource::TextureView(&view),
                     },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: wgpu::BindingResource::TextureView(&self.factors),
+                    },
                 ],
             });
             self.bound = Some((texture.clone(), group));
         }
         let bind_group = &self.bound.as_ref().expect("bound above").1;
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("contact shadows"),
+                timestamp_writes: timer.compute_pass("contact_shadows"),
+            });
+            let size = texture.size();
+            pass.set_pipeline(&self.compute);
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
+        }
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("contact shadows"),
+            label: Some("contact shadows apply"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
                 view: color,
                 depth_slice: None,
@@ -317,12 +414,12 @@ impl ContactShadowPass {
                 },
             })],
             depth_stencil_attachment: None,
-            timestamp_writes,
+            timestamp_writes: timer.render_pass("contact_shadows_apply"),
             occlusion_query_set: None,
             multiview_mask: None,
         });
         pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, bind_group, &[]);
+        pass.set_bind_group(0, &self.apply, &[]);
         pass.draw(0..3, 0..1);
     }
 }

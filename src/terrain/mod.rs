@@ -1,14 +1,18 @@
 //! Terrain drawing: a regular grid per tile, displaced by the tile atlas's heights, lit by the
 //! sun and a sky hemisphere and fogged toward the horizon; then the sky where no terrain is.
 //!
-//! Everything is drawn camera-relative (see `shaders/terrain.wgsl`).
+//! Everything is drawn camera-relative (see `shaders/terrain.wgsl`). The shading is deferred:
+//! the terrain's draw writes only a G-buffer (where in the atlas each pixel's ground is), a
+//! compute pass over the whole target shades every pixel, terrain and sky
+//! (`shaders/terrain_shade.wgsl`), and a full-screen pass writes that into the colour target
+//! (`shaders/composite.wgsl`).
 
 use bytemuck::{Pod, Zeroable};
 use glam::{DVec2, Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
 use crate::camera::Camera;
-use crate::gpu::Targets;
+use crate::gpu::{GpuTimer, Targets};
 use crate::stream::TileAtlas;
 use crate::world::{Manifest, Pyramid, Sky, TileId};
 
@@ -23,7 +27,21 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// How many grass types the shader's colour table holds.
 pub const MAX_GRASS_TYPES: usize = 16;
 
-/// Per-frame uniforms; mirrors `Frame` in `shaders/terrain.wgsl`.
+/// Format of the G-buffer: per pixel the atlas texel (x, y), the slot plus 65536 times the
+/// drawn tile's level, and metres per texel (see `fs_gbuffer` in `shaders/terrain.wgsl`).
+pub const GBUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+/// Format of the shaded colour (linear) that the composite pass copies into the colour target.
+pub const SHADED_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// Bytes of the terrain's internal textures (G-buffer and shaded colour) for a `width` x
+/// `height` target.
+pub fn deferred_bytes(width: u32, height: u32) -> u64 {
+    let per_pixel = GBUFFER_FORMAT.block_copy_size(None).unwrap_or(16)
+        + SHADED_FORMAT.block_copy_size(None).unwrap_or(8);
+    u64::from(width) * u64::from(height) * u64::from(per_pixel)
+}
+
+/// Per-frame uniforms; mirrors `Frame` in `shaders/shared/terrain_shading.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct FrameUniforms {
@@ -117,11 +135,61 @@ pub fn sun_direction(sky: &Sky) -> Vec3 {
     Vec3::new(az.cos() * el.cos(), az.sin() * el.cos(), el.sin()).normalize()
 }
 
-/// Pipelines and buffers of the terrain and sky passes.
+/// The internal textures of the deferred shading, at the targets' size.
+struct Deferred {
+    gbuffer: wgpu::TextureView,
+    shaded: wgpu::TextureView,
+    composite: wgpu::BindGroup,
+}
+
+impl Deferred {
+    fn new(device: &wgpu::Device, layout: &wgpu::BindGroupLayout, size: (u32, u32)) -> Self {
+        let usage = wgpu::TextureUsages::TEXTURE_BINDING;
+        let gbuffer = crate::gpu::target_texture(
+            device,
+            "terrain G-buffer",
+            GBUFFER_FORMAT,
+            usage | wgpu::TextureUsages::RENDER_ATTACHMENT,
+            size,
+        );
+        let shaded = crate::gpu::target_texture(
+            device,
+            "terrain shaded",
+            SHADED_FORMAT,
+            usage | wgpu::TextureUsages::STORAGE_BINDING,
+            size,
+        );
+        let shaded = shaded.create_view(&Default::default());
+        let composite = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("composite"),
+            layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::TextureView(&shaded),
+            }],
+        });
+        Self {
+            gbuffer: gbuffer.create_view(&Default::default()),
+            shaded,
+            composite,
+        }
+    }
+}
+
+/// Pipelines, buffers and internal textures of the terrain and sky passes.
 pub struct TerrainRenderer {
     depth_prepass: wgpu::RenderPipeline,
-    terrain: wgpu::RenderPipeline,
-    sky: wgpu::RenderPipeline,
+    gbuffer: wgpu::RenderPipeline,
+    shade: wgpu::ComputePipeline,
+    shade_layout: wgpu::BindGroupLayout,
+    composite: wgpu::RenderPipeline,
+    composite_layout: wgpu::BindGroupLayout,
+    deferred: Deferred,
+    /// The shading pass's bind group for the last depth texture, made again only when it
+    /// changes (or the targets are resized).
+    shade_bound: Option<(wgpu::Texture, wgpu::BindGroup)>,
+    heights_view: wgpu::TextureView,
+    grass_view: wgpu::TextureView,
     bind_group: wgpu::BindGroup,
     frame_buffer: wgpu::Buffer,
     tile_buffer: wgpu::Buffer,
@@ -236,25 +304,19 @@ impl TerrainRenderer {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let color_targets = [Some(wgpu::ColorTargetState::from(targets.color_format))];
-        let fs_constants = [("ENCODE_SRGB", targets.encode_srgb())];
-        // The colour pass's vertices work out the terrain's shadows; the depth pre-pass's not.
-        let pipeline = |label, vs, fs: Option<&str>, depth_write, compare, cull| {
-            let vs_constants = [("VERTEX_SHADOWS", if fs.is_some() { 1.0 } else { 0.0 })];
+        let gbuffer_targets = [Some(wgpu::ColorTargetState::from(GBUFFER_FORMAT))];
+        let pipeline = |label, fs: Option<&str>, depth_write, compare| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&pipeline_layout),
                 vertex: wgpu::VertexState {
                     module: &module,
-                    entry_point: Some(vs),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &vs_constants,
-                        ..Default::default()
-                    },
+                    entry_point: Some("vs_terrain"),
+                    compilation_options: Default::default(),
                     buffers: &[],
                 },
                 primitive: wgpu::PrimitiveState {
-                    cull_mode: cull,
+                    cull_mode: Some(wgpu::Face::Back),
                     ..Default::default()
                 },
                 depth_stencil: Some(wgpu::DepthStencilState {
@@ -268,41 +330,139 @@ impl TerrainRenderer {
                 fragment: fs.map(|fs| wgpu::FragmentState {
                     module: &module,
                     entry_point: Some(fs),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &fs_constants,
-                        ..Default::default()
-                    },
-                    targets: &color_targets,
+                    compilation_options: Default::default(),
+                    targets: &gbuffer_targets,
                 }),
                 multiview_mask: None,
                 cache: None,
             })
         };
-        // Depth first (it feeds the Hi-Z pyramid), then colour where the depth matches.
+        // Depth first (it feeds the Hi-Z pyramid), then the G-buffer where the depth matches.
         let depth_prepass = pipeline(
             "terrain depth",
-            "vs_terrain",
             None,
             true,
             wgpu::CompareFunction::Greater,
-            Some(wgpu::Face::Back),
         );
-        let terrain = pipeline(
+        let gbuffer = pipeline(
             "terrain",
-            "vs_terrain",
-            Some("fs_terrain"),
+            Some("fs_gbuffer"),
             false,
             wgpu::CompareFunction::GreaterEqual,
-            Some(wgpu::Face::Back),
         );
-        let sky = pipeline(
-            "sky",
-            "vs_sky",
-            Some("fs_sky"),
-            false,
-            wgpu::CompareFunction::Equal,
-            None,
-        );
+
+        // The shading: a compute pass over the target (terrain and sky).
+        let shade_module = crate::shaders::module(device, "terrain_shade.wgsl");
+        let compute_tex = |binding, sample_type, view_dimension| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let float = wgpu::TextureSampleType::Float { filterable: false };
+        let shade_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("terrain shade"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                compute_tex(2, float, wgpu::TextureViewDimension::D2Array),
+                compute_tex(
+                    3,
+                    wgpu::TextureSampleType::Uint,
+                    wgpu::TextureViewDimension::D2Array,
+                ),
+                compute_tex(
+                    4,
+                    wgpu::TextureSampleType::Depth,
+                    wgpu::TextureViewDimension::D2,
+                ),
+                compute_tex(5, float, wgpu::TextureViewDimension::D2),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 6,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: SHADED_FORMAT,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let shade = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("terrain shade"),
+            layout: Some(
+                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("terrain shade"),
+                    bind_group_layouts: &[Some(&shade_layout)],
+                    immediate_size: 0,
+                }),
+            ),
+            module: &shade_module,
+            entry_point: Some("cs_shade"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+
+        // The composite: the shaded colour into the caller's target.
+        let composite_module = crate::shaders::module(device, "composite.wgsl");
+        let composite_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("composite"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: float,
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            }],
+        });
+        let fs_constants = [("ENCODE_SRGB", targets.encode_srgb())];
+        let composite = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("composite"),
+            layout: Some(
+                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("composite"),
+                    bind_group_layouts: &[Some(&composite_layout)],
+                    immediate_size: 0,
+                }),
+            ),
+            vertex: wgpu::VertexState {
+                module: &composite_module,
+                entry_point: Some("vs_full"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: None,
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &composite_module,
+                entry_point: Some("fs_composite"),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &fs_constants,
+                    ..Default::default()
+                },
+                targets: &[Some(wgpu::ColorTargetState::from(targets.color_format))],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let deferred = Deferred::new(device, &composite_layout, (targets.width, targets.height));
 
         let mut ground_colors = [[0.0; 4]; MAX_GRASS_TYPES];
         let mut base_colors = [[0.0; 4]; MAX_GRASS_TYPES];
@@ -351,8 +511,15 @@ impl TerrainRenderer {
         };
         Self {
             depth_prepass,
-            terrain,
-            sky,
+            gbuffer,
+            shade,
+            shade_layout,
+            composite,
+            composite_layout,
+            deferred,
+            shade_bound: None,
+            heights_view: hv,
+            grass_view: gv,
             bind_group,
             frame_buffer,
             tile_buffer,
@@ -448,7 +615,6 @@ impl TerrainRenderer {
         n as u32
     }
 
-    /// Records the terrain (`tiles` instances from [`Self::prepare`]) and then the sky.
     /// Records the terrain's depth only (the pre-pass that feeds the Hi-Z pyramid).
     pub fn draw_depth(&self, pass: &mut wgpu::RenderPass<'_>, tiles: u32) {
         if tiles > 0 {
@@ -459,15 +625,116 @@ impl TerrainRenderer {
         }
     }
 
-    /// Records the terrain's colour over the depth of [`Self::draw_depth`], then the sky.
-    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, tiles: u32) {
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        if tiles > 0 {
-            pass.set_pipeline(&self.terrain);
-            pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..self.index_count, 0, 0..tiles);
+    /// Follows a resize of the targets: the internal textures at the new size.
+    pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
+        self.deferred = Deferred::new(device, &self.composite_layout, (width, height));
+        self.shade_bound = None;
+    }
+
+    /// Records the terrain's and the sky's colour into `color` over the depth of
+    /// [`Self::draw_depth`] (in `depth`, which it does not write): the G-buffer pass (`terrain`),
+    /// the shading of every pixel (compute, `terrain_shade`) and its composite into `color`
+    /// (`composite`), which it overwrites.
+    pub fn record_color(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        tiles: u32,
+        timer: &mut GpuTimer,
+    ) {
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("terrain"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &self.deferred.gbuffer,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: depth,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Load,
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: timer.render_pass("terrain"),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            if tiles > 0 {
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                pass.set_pipeline(&self.gbuffer);
+                pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..self.index_count, 0, 0..tiles);
+            }
         }
-        pass.set_pipeline(&self.sky);
+        let depth_texture = depth.texture();
+        if self
+            .shade_bound
+            .as_ref()
+            .is_none_or(|(t, _)| t != depth_texture)
+        {
+            let texture = |binding, view| wgpu::BindGroupEntry {
+                binding,
+                resource: wgpu::BindingResource::TextureView(view),
+            };
+            let depth_view = depth_texture.create_view(&wgpu::TextureViewDescriptor {
+                aspect: wgpu::TextureAspect::DepthOnly,
+                ..Default::default()
+            });
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("terrain shade"),
+                layout: &self.shade_layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: self.frame_buffer.as_entire_binding(),
+                    },
+                    texture(2, &self.heights_view),
+                    texture(3, &self.grass_view),
+                    texture(4, &depth_view),
+                    texture(5, &self.deferred.gbuffer),
+                    texture(6, &self.deferred.shaded),
+                ],
+            });
+            self.shade_bound = Some((depth_texture.clone(), group));
+        }
+        let bind_group = &self.shade_bound.as_ref().expect("bound above").1;
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("terrain shade"),
+                timestamp_writes: timer.compute_pass("terrain_shade"),
+            });
+            let size = depth.texture().size();
+            pass.set_pipeline(&self.shade);
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
+        }
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("composite"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: color,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: None,
+            timestamp_writes: timer.render_pass("composite"),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.composite);
+        pass.set_bind_group(0, &self.deferred.composite, &[]);
         pass.draw(0..3, 0..1);
     }
 }
