@@ -948,7 +948,8 @@ fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
     // the first half of the flight shows ridges and valleys from the air; where the world has
     // no such ground, 2.5 km back along the line. The approach is a quadratic Bezier curve that
     // comes into the meadow along the line.
-    let inside = |a: DVec2| a.x > 0.05 * e.x && a.y > 0.05 * e.y && a.x < 0.95 * e.x && a.y < 0.95 * e.y;
+    let inside =
+        |a: DVec2| a.x > 0.05 * e.x && a.y > 0.05 * e.y && a.x < 0.95 * e.x && a.y < 0.95 * e.y;
     let mut start = None;
     let mut best = f64::NEG_INFINITY;
     let step = 200.0;

@@ -430,6 +430,16 @@ fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         "dolly: largest jump of the error against no LOD: {:.4} FLIP on frames with ring switches, {:.4} on frames without",
         r.worst_pop, r.worst_change_without_switch
     );
+    let flip = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
+    println!(
+        "far band ({:.0}-{:.0} m, {} pixels) against real blades out to {:.0} m: {} FLIP with the far field, {} without",
+        r.far_band.near_m,
+        r.far_band.far_m,
+        r.far_band.band_pixels,
+        r.far_band.far_m,
+        flip(r.far_band.flip_far_field),
+        flip(r.far_band.flip_no_far_field)
+    );
     println!(
         "{:<16} {:>9} {:>8} {:>10} {:>9} {:>10} {:>7}",
         "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "blades", "front"

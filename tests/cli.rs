@@ -502,6 +502,24 @@ fn bench_lod_writes_its_tables_and_charts() {
         assert!(r[col("frame_ms")].parse::<f64>().unwrap() > 0.0, "{r:?}");
         assert!(["true", "false"].contains(&r[col("noisy")]), "{r:?}");
     }
+    // The far band: real blades out to four times the view distance against the default with
+    // the far field on and off, over the pixels between the two distances.
+    let band = std::fs::read_to_string(dir.join("far_band.csv")).unwrap();
+    let mut lines = band.lines();
+    assert_eq!(
+        lines.next(),
+        Some("view,band_pixels,flip_far_field,flip_no_far_field")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4, "{band}");
+    let pixels: u64 = rows.iter().map(|r| r[1].parse::<u64>().unwrap()).sum();
+    assert!(pixels > 0, "{band}");
+    for r in rows.iter().filter(|r| r[1] != "0") {
+        for v in &r[2..] {
+            let v: f64 = v.parse().unwrap();
+            assert!(v.is_finite() && (0.0..=1.0).contains(&v), "{band}");
+        }
+    }
     for f in ["dolly.png", "lod_settings.png", "bench_lod.json"] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }

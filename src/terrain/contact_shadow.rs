@@ -489,11 +489,9 @@ mod tests {
                 // In the shadow by geometry (and within the ray's reach): ground south of the
                 // post within its width. Clear: ground away from the post's shadow, by more than
                 // a pixel's footprint (about 0.3 m deep at this size) from the post itself.
-                let in_shadow = on_ground
-                    && (2.93..3.07).contains(&p.x)
-                    && (-0.9..-0.15).contains(&p.y);
-                let clear = on_ground
-                    && (p.y > 0.2 || p.x < 2.6 || p.x > 3.8 || p.y < -1.8);
+                let in_shadow =
+                    on_ground && (2.93..3.07).contains(&p.x) && (-0.9..-0.15).contains(&p.y);
+                let clear = on_ground && (p.y > 0.2 || p.x < 2.6 || p.x > 3.8 || p.y < -1.8);
                 if in_shadow && dark {
                     behind += 1;
                 }
@@ -502,7 +500,10 @@ mod tests {
                 }
             }
         }
-        assert!(behind > 3, "the post's shadow was not found ({behind} pixels)");
+        assert!(
+            behind > 3,
+            "the post's shadow was not found ({behind} pixels)"
+        );
         assert_eq!(elsewhere, 0, "{elsewhere} pixels dark away from the shadow");
     }
 }

@@ -467,7 +467,12 @@ impl TerrainRenderer {
         let mut ground_colors = [[0.0; 4]; MAX_GRASS_TYPES];
         let mut base_colors = [[0.0; 4]; MAX_GRASS_TYPES];
         let mut tip_colors = [[0.0; 4]; MAX_GRASS_TYPES];
-        for (i, t) in manifest.grass_types.iter().take(MAX_GRASS_TYPES).enumerate() {
+        for (i, t) in manifest
+            .grass_types
+            .iter()
+            .take(MAX_GRASS_TYPES)
+            .enumerate()
+        {
             let c = t.ground_color;
             ground_colors[i] = [c[0], c[1], c[2], 1.0];
             let (b, tip) = (t.base_color, t.tip_color);

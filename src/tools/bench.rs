@@ -10,6 +10,11 @@
 //! the settings are timed in interleaved rounds, each measurement's frames back to back with
 //! nothing in between (see [`crate::tools::timing`]): a median with its interquartile range
 //! per view, a setting whose spread is above 10% flagged.
+//! (c) The far field: beyond the view distance the terrain is shaded with what the grass would
+//! show there. At the same views, a far reference draws real blades out to
+//! [`FAR_BAND_FACTOR`] times the default view distance; the default setting is compared with
+//! it, with the far field on and off, by the mean FLIP over the band of pixels whose surface (in
+//! the reference's depth) lies between the view distance and that factor times it.
 
 use std::path::PathBuf;
 
@@ -21,7 +26,8 @@ use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::lod::RingSettings;
 use crate::tools::metrics::{
-    COVERAGE_DISTANCE_M, Chart, ChartPoint, LineChart, Series, Summary, flip_compare, pareto_front,
+    COVERAGE_DISTANCE_M, Chart, ChartPoint, LineChart, Series, Summary, band_mask, flip_compare,
+    flip_error_map, masked_mean, pareto_front, ray_distances,
 };
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
 use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
@@ -181,6 +187,40 @@ pub struct DollyFrame {
     pub ring_switches: u32,
 }
 
+/// How far the far reference draws real blades, in default view distances.
+pub const FAR_BAND_FACTOR: f64 = 4.0;
+
+/// The far band at one view: the default setting against the far reference over the pixels
+/// whose surface lies between the view distance and [`FAR_BAND_FACTOR`] times it.
+#[derive(Clone, Debug, Serialize)]
+pub struct FarBandView {
+    /// The view (0-based, of the four along the path).
+    pub view: u32,
+    /// Pixels in the band.
+    pub band_pixels: u64,
+    /// Mean FLIP over the band with the far field on (`None` when the band is empty).
+    pub flip_far_field: Option<f64>,
+    /// The same with the far field switched off.
+    pub flip_no_far_field: Option<f64>,
+}
+
+/// The far band over the views.
+#[derive(Clone, Debug, Serialize)]
+pub struct FarBand {
+    /// Where the band starts: the default view distance, metres along the view ray.
+    pub near_m: f64,
+    /// Where it ends: [`FAR_BAND_FACTOR`] times that, the far reference's view distance.
+    pub far_m: f64,
+    /// Pixels in the band, all views together.
+    pub band_pixels: u64,
+    /// Mean FLIP over the band's pixels of all views, far field on (`None` if none).
+    pub flip_far_field: Option<f64>,
+    /// The same, far field off.
+    pub flip_no_far_field: Option<f64>,
+    /// Each view.
+    pub views: Vec<FarBandView>,
+}
+
 /// Everything `bench_lod.json` holds.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchLodReport {
@@ -201,6 +241,8 @@ pub struct BenchLodReport {
     pub default_on_front: bool,
     /// The frame counts of the timings.
     pub counts: FrameCounts,
+    /// The far field against real blades out to [`FAR_BAND_FACTOR`] times the view distance.
+    pub far_band: FarBand,
 }
 
 fn rgb(img: &image::RgbaImage) -> image::RgbImage {
@@ -254,8 +296,8 @@ impl Bench<'_> {
     }
 }
 
-/// Runs the benchmark and writes `bench_lod.json`, `dolly.csv`, `dolly.png`, `lod_settings.csv`
-/// and `lod_settings.png` into `opts.out`.
+/// Runs the benchmark and writes `bench_lod.json`, `dolly.csv`, `dolly.png`, `lod_settings.csv`,
+/// `lod_settings.png` and `far_band.csv` into `opts.out`.
 pub fn run_bench_lod(
     opts: &BenchLodOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
@@ -365,6 +407,38 @@ pub fn run_bench_lod(
         ref_images.push(bench.frame(&mut reference, v)?.0);
     }
     drop(reference);
+    // (c) The far band's reference and masks, and the default without the far field.
+    let tile_m = world
+        .manifest
+        .pyramid
+        .tile_size_m(RingSettings::for_pyramid(&world.manifest.pyramid).level);
+    let near_m = settings[0].view_distance_tiles * tile_m;
+    let far_m = FAR_BAND_FACTOR * near_m;
+    let mut far_setting = settings[0].clone();
+    far_setting.name = "far reference".into();
+    far_setting.view_distance_tiles *= FAR_BAND_FACTOR;
+    let (w, h) = opts.size;
+    let (mut far_refs, mut masks) = (Vec::new(), Vec::new());
+    let mut scene = bench.scene(&far_setting)?;
+    for v in &views {
+        let (img, _) = bench.frame(&mut scene, v)?;
+        let depth = scene.read_depth(&ctx)?;
+        let inv = v.view_proj_relative(w as f32 / h as f32).inverse();
+        let distances = ray_distances(&depth, w, h, inv);
+        masks.push(band_mask(&distances, near_m as f32, far_m as f32));
+        far_refs.push(rgb(&img));
+    }
+    drop(scene);
+    let mut config = settings[0].config(&world);
+    config.features = config.features.without(crate::features::Feature::FarField);
+    let mut scene = Scene::new(&ctx, world.clone(), w, h, config)?;
+    let mut no_far_field = Vec::new();
+    for v in &views {
+        no_far_field.push(bench.frame(&mut scene, v)?.0);
+    }
+    drop(scene);
+    progress("far band", 1, 1);
+    let mut default_images = Vec::new();
     // Images first, every setting's scene kept for the timings.
     let mut scenes = Vec::new();
     let mut partial = Vec::new();
@@ -377,11 +451,22 @@ pub fn run_bench_lod(
             flips.push(flip(&img, r)?);
             blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
             coverage.push(c);
+            if k == 0 {
+                default_images.push(img);
+            }
         }
         scenes.push(scene);
         partial.push((flips, blades, coverage));
         progress("images", k as u64 + 1, total);
     }
+    let far_band = far_band(
+        (near_m, far_m),
+        &far_refs,
+        &masks,
+        &default_images,
+        &no_far_field,
+    )?;
+    drop((far_refs, masks, default_images, no_far_field));
     // Then the timings, in interleaved rounds.
     let counts = FrameCounts::for_adapter(&ctx.info).with(
         opts.warmup_frames,
@@ -441,6 +526,7 @@ pub fn run_bench_lod(
     }
 
     write_outputs(opts, &dolly, &results, ctx.timestamps)?;
+    write_far_band(opts, &far_band)?;
     let report = BenchLodReport {
         adapter: AdapterReport::of(&ctx),
         size: opts.size,
@@ -450,9 +536,65 @@ pub fn run_bench_lod(
         counts,
         dolly,
         settings: results,
+        far_band,
     };
     write_json(&opts.out.join("bench_lod.json"), &report)?;
     Ok(report)
+}
+
+/// The far band's figures from the far reference's images and band masks, and the default
+/// setting's images with the far field on and off (all in the order of the views).
+fn far_band(
+    (near_m, far_m): (f64, f64),
+    references: &[image::RgbImage],
+    masks: &[Vec<bool>],
+    with: &[image::RgbaImage],
+    without: &[image::RgbaImage],
+) -> Result<FarBand> {
+    let mut views = Vec::new();
+    let (mut sum_with, mut sum_without, mut pixels) = (0.0, 0.0, 0u64);
+    for (i, (r, mask)) in references.iter().zip(masks).enumerate() {
+        let band_pixels = mask.iter().filter(|&&m| m).count() as u64;
+        let with = masked_mean(&flip_error_map(r, &rgb(&with[i]))?, mask);
+        let without = masked_mean(&flip_error_map(r, &rgb(&without[i]))?, mask);
+        if let (Some(a), Some(b)) = (with, without) {
+            sum_with += a * band_pixels as f64;
+            sum_without += b * band_pixels as f64;
+            pixels += band_pixels;
+        }
+        views.push(FarBandView {
+            view: i as u32,
+            band_pixels,
+            flip_far_field: with,
+            flip_no_far_field: without,
+        });
+    }
+    let mean = |sum: f64| (pixels > 0).then(|| sum / pixels as f64);
+    Ok(FarBand {
+        near_m,
+        far_m,
+        band_pixels: pixels,
+        flip_far_field: mean(sum_with),
+        flip_no_far_field: mean(sum_without),
+        views,
+    })
+}
+
+/// Writes `far_band.csv`: one row a view, empty FLIP cells where the band is empty.
+fn write_far_band(opts: &BenchLodOptions, band: &FarBand) -> Result<()> {
+    let cell = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
+    let mut csv = String::from("view,band_pixels,flip_far_field,flip_no_far_field\n");
+    for v in &band.views {
+        csv.push_str(&format!(
+            "{},{},{},{}\n",
+            v.view,
+            v.band_pixels,
+            cell(v.flip_far_field),
+            cell(v.flip_no_far_field)
+        ));
+    }
+    std::fs::write(opts.out.join("far_band.csv"), csv)?;
+    Ok(())
 }
 
 fn write_outputs(

@@ -17,8 +17,8 @@ pub mod timing;
 pub mod view;
 
 pub use bench::{
-    BenchFeaturesReport, BenchLodOptions, BenchLodReport, FeatureResult, LodSetting, lod_settings,
-    reference_setting, run_bench_features, run_bench_lod,
+    BenchFeaturesReport, BenchLodOptions, BenchLodReport, FAR_BAND_FACTOR, FarBand, FarBandView,
+    FeatureResult, LodSetting, lod_settings, reference_setting, run_bench_features, run_bench_lod,
 };
 pub use fly::{FlyOptions, FlyProgress, run_fly, write_json};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};

@@ -1,8 +1,11 @@
 //! Measurements: percentiles of timings, image error by FLIP, grass coverage, and
 //! speed-against-accuracy charts.
 
+mod band;
 mod chart;
 mod coverage;
+
+pub use band::{band_mask, masked_mean, ray_distances};
 
 pub use chart::{Chart, ChartError, ChartPoint, LineChart, Series, pareto_front, pareto_front_n};
 pub use coverage::{COVERAGE_DISTANCE_M, COVERAGE_EPSILON, Coverage, grass_coverage};
@@ -101,6 +104,25 @@ pub fn flip_compare(
     })
 }
 
+/// The per-pixel FLIP error map of an image against its reference (0..=1, row-major, top row
+/// first): what [`flip_compare`] pools into its mean, for means over part of the image (see
+/// [`masked_mean`]).
+pub fn flip_error_map(
+    reference: &image::RgbImage,
+    actual: &image::RgbImage,
+) -> Result<Vec<f32>, ImageCompareError> {
+    if reference.dimensions() != actual.dimensions() {
+        return Err(ImageCompareError::SizeMismatch {
+            reference: reference.dimensions(),
+            actual: actual.dimensions(),
+        });
+    }
+    let (w, h) = reference.dimensions();
+    let r = nv_flip::FlipImageRgb8::with_data(w, h, reference.as_raw());
+    let a = nv_flip::FlipImageRgb8::with_data(w, h, actual.as_raw());
+    Ok(nv_flip::flip(r, a, nv_flip::DEFAULT_PIXELS_PER_DEGREE).to_vec())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -131,5 +153,17 @@ mod tests {
         assert!(diff.mean > 0.05, "mean {}", diff.mean);
         let small = image::RgbImage::new(8, 8);
         assert!(flip_compare(&a, &small).is_err());
+        // The map pools to the same mean, and its mean over the changed pixels is larger.
+        let map = flip_error_map(&a, &b).unwrap();
+        assert_eq!(map.len(), 32 * 32);
+        let all = map.iter().map(|&e| f64::from(e)).sum::<f64>() / map.len() as f64;
+        assert!(
+            (all - f64::from(diff.mean)).abs() < 1e-3,
+            "{all} {}",
+            diff.mean
+        );
+        let changed: Vec<bool> = (0..map.len()).map(|i| i < 300).collect();
+        assert!(masked_mean(&map, &changed).unwrap() > all);
+        assert!(flip_error_map(&a, &small).is_err());
     }
 }
