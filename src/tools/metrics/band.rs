@@ -67,7 +67,7 @@ mod tests {
     #[test]
     fn distances_follow_the_ray_and_the_band_selects_them() {
         // Reverse-Z, infinite far plane: depth = near / view depth on the axis.
-        let proj = glam::Mat4::perspective_infinite_reverse_rh(1.0, 1.0, 0.5);
+        let proj = glam::camera::rh::proj::directx::perspective_infinite_reverse(1.0, 1.0, 0.5);
         let inv = proj.inverse();
         // The centre pixel of a 1x1 buffer looks straight down the axis.
         let d = ray_distances(&[0.5 / 40.0], 1, 1, inv);
