@@ -26,6 +26,9 @@ struct Params {
     dims: vec4<f32>,
     // x, y: LOD fade band; z, w: dithered fade band ending at the view distance
     ranges: vec4<f32>,
+    // Infill near the camera: x, y: fade band of the quarter-spacing points; z, w: of the
+    // half-spacing points (w <= 0: no infill)
+    infill: vec4<f32>,
     // x: Hi-Z mips, y: slot capacity, z: grass types, w: blade segments (high | low << 16)
     limits: vec4<u32>,
     // Hi-Z levels: offset (floats), width, height
@@ -80,6 +83,9 @@ const DISTANCE: u32 = 2u;
 const FRUSTUM: u32 = 3u;
 const OCCLUSION: u32 = 4u;
 const EMITTED: u32 = 5u;
+// Metres (in the difference of the distances to the two nearest clump points) over which the
+// grass types of two clumps mix.
+const CLUMP_BLEND_M: f32 = 0.4;
 const OVERFLOW: u32 = 6u;
 const DRAWN: u32 = 7u;
 
@@ -109,6 +115,13 @@ fn h_at(x: i32, y: i32, layer: u32) -> f32 {
 
 fn d_at(x: i32, y: i32, layer: u32) -> f32 {
     return f32(textureLoad(grass, texel(x, y, layer), layer, 0).g) / 255.0;
+}
+
+// The grass type of the map's texel nearest `local` (metres from the tile's corner).
+fn kind_at(local: vec2<f32>, job: TileJob) -> u32 {
+    let border = f32(params.grid.z);
+    let t = floor(vec2<f32>(border, border) + local / job.cell + 0.5);
+    return textureLoad(grass, texel(i32(t.x), i32(t.y), job.layer), job.layer, 0).r;
 }
 
 fn hiz_load(mip: u32, x: i32, y: i32) -> f32 {
@@ -188,17 +201,13 @@ fn count(c: u32) {
     atomicAdd(&local_stats[c], 1u);
 }
 
+// One point of the tile's grid, and near the camera the infill points of its cell: the cell's
+// quarters (half the spacing) out to infill.w, its sixteenths (a quarter of the spacing) out to
+// infill.y, each set shrinking away over its fade band. Blades seen at a grazing angle cover
+// the ground between them; near the camera they are seen from above and must stand closer.
 fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
     let seed = params.grid.w;
-    let border = f32(params.grid.z);
     let spacing = params.dims.x;
-    let tile_m = params.dims.y;
-    let clump_m = params.dims.z;
-    let short_m = params.dims.w;
-    let type_count = max(params.limits.z, 1u);
-    let clumps_per_tile = i32(max(round(tile_m / clump_m), 1.0));
-    count(CONSIDERED);
-
     let g = params.grid.x;
     let gid_x = job.tile_x * g + gx;
     let gid_y = job.tile_y * g + gy;
@@ -207,10 +216,57 @@ fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
         (rand01(hash_u32(h0 ^ 1u)) - 0.5) * 0.9 * spacing,
         (rand01(hash_u32(h0 ^ 2u)) - 0.5) * 0.9 * spacing,
     );
-    let local = vec2<f32>(
-        (f32(gx) + 0.5) * spacing + jitter.x,
-        (f32(gy) + 0.5) * spacing + jitter.y,
-    );
+    let cell = vec2<f32>(f32(gx), f32(gy));
+    // Blades the low grid drops fade out before the ring switch.
+    var band = vec2<f32>(0.0, 0.0);
+    if job.lod == 0u && (gx % 2u == 1u || gy % 2u == 1u) {
+        band = params.ranges.xy;
+    }
+    plant(job, (cell + 0.5) * spacing + jitter, h0, spacing, band);
+
+    if job.lod != 0u || params.infill.w <= 0.0 {
+        return;
+    }
+    // Horizontal distance of the cell's nearest point at most; the camera is at the origin.
+    let reach = length(job.origin + (cell + 0.5) * spacing) - 0.75 * spacing;
+    if reach >= params.infill.w {
+        return;
+    }
+    let stride = select(2u, 1u, reach < params.infill.y);
+    for (var j = 0u; j < 4u; j += stride) {
+        for (var i = 0u; i < 4u; i += stride) {
+            if i == 0u && j == 0u {
+                continue;
+            }
+            let half = i % 2u == 0u && j % 2u == 0u;
+            let sub = select(0.25, 0.5, half) * spacing;
+            let h = hash3(gid_x * 4u + i, gid_y * 4u + j, seed ^ 0x1f111u);
+            let offset = select(
+                (vec2<f32>(f32(i), f32(j)) + 0.5) * 0.25,
+                vec2<f32>(f32(i), f32(j)) * 0.25 + 0.25,
+                half,
+            );
+            let jit = vec2<f32>(
+                (rand01(hash_u32(h ^ 1u)) - 0.5) * 0.9 * sub,
+                (rand01(hash_u32(h ^ 2u)) - 0.5) * 0.9 * sub,
+            );
+            plant(job, (cell + offset) * spacing + jit, h, sub, select(params.infill.xy, params.infill.zw, half));
+        }
+    }
+}
+
+// A blade at `local` (metres from the tile's corner) with its hash `h0`, of a grid of `spacing`,
+// shrinking away over the distance band `band` (none where band.y <= 0).
+fn plant(job: TileJob, local: vec2<f32>, h0: u32, spacing: f32, band: vec2<f32>) {
+    let seed = params.grid.w;
+    let border = f32(params.grid.z);
+    let tile_m = params.dims.y;
+    let clump_m = params.dims.z;
+    let short_m = params.dims.w;
+    let type_count = max(params.limits.z, 1u);
+    let clumps_per_tile = i32(max(round(tile_m / clump_m), 1.0));
+    count(CONSIDERED);
+
     let tp = vec2<f32>(border + local.x / job.cell, border + local.y / job.cell);
 
     // Bilinear height and density, nearest grass type, normal by central differences.
@@ -231,18 +287,16 @@ fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
     let slope_x = h_at(nx - 1, ny, layer) - h_at(nx + 1, ny, layer);
     let slope_y = h_at(nx, ny - 1, layer) - h_at(nx, ny + 1, layer);
     let normal = normalize(vec3<f32>(slope_x, slope_y, 2.0 * job.cell));
-    let kind = min(textureLoad(grass, texel(nx, ny, layer), layer, 0).r, type_count - 1u);
-
-    if kind == 0u || density <= 0.0 || rand01(hash_u32(h0 ^ 3u)) >= density {
-        count(EMPTY);
-        return;
-    }
-    let ty = params.types[kind];
-
+    // Clump: the nearest of the hashed points of the 3x3 clump cells around, and the second
+    // nearest. A clump has one grass type, the map's at its point: types meet along clump
+    // borders, mixed over CLUMP_BLEND_M either side.
     let cx = i32(floor(local.x / clump_m));
     let cy = i32(floor(local.y / clump_m));
     var best = 3.4028235e38;
+    var second = 3.4028235e38;
     var clump = 0u;
+    var at_best = vec2<f32>(0.0);
+    var at_second = vec2<f32>(0.0);
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {
             let ccx = cx + dx;
@@ -254,11 +308,31 @@ fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
             let py = (f32(ccy) + 0.5 + 0.8 * (rand01(hash_u32(ch ^ 1u)) - 0.5)) * clump_m;
             let d2 = (px - local.x) * (px - local.x) + (py - local.y) * (py - local.y);
             if d2 < best {
+                second = best;
+                at_second = at_best;
                 best = d2;
                 clump = ch;
+                at_best = vec2<f32>(px, py);
+            } else if d2 < second {
+                second = d2;
+                at_second = vec2<f32>(px, py);
             }
         }
     }
+    var kind = kind_at(at_best, job);
+    let other = kind_at(at_second, job);
+    let edge = sqrt(second) - sqrt(best);
+    if other != kind && rand01(hash_u32(h0 ^ 15u)) < 0.5 * (1.0 - clamp(edge / CLUMP_BLEND_M, 0.0, 1.0)) {
+        kind = other;
+    }
+    kind = min(kind, type_count - 1u);
+
+    if kind == 0u || density <= 0.0 || rand01(hash_u32(h0 ^ 3u)) >= density {
+        count(EMPTY);
+        return;
+    }
+    let ty = params.types[kind];
+
     let clump_height = 0.7 + 0.6 * rand01(hash_u32(clump ^ 2u));
     let height = (ty.height.x + (ty.height.y - ty.height.x) * rand01(hash_u32(h0 ^ 4u)))
         * clump_height
@@ -274,8 +348,8 @@ fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
 
     let dist = length(pos);
     var fade = 1.0;
-    if job.lod == 0u && (gx % 2u == 1u || gy % 2u == 1u) {
-        fade = clamp((params.ranges.y - dist) / (params.ranges.y - params.ranges.x), 0.0, 1.0);
+    if band.y > 0.0 {
+        fade = clamp((band.y - dist) / (band.y - band.x), 0.0, 1.0);
     }
     let far = clamp((params.ranges.w - dist) / (params.ranges.w - params.ranges.z), 0.0, 1.0);
     if fade <= 0.0 || rand01(hash_u32(h0 ^ 11u)) >= far {

@@ -116,6 +116,11 @@ enum Command {
         /// Every grass type's blade width times this (default: the renderer's).
         #[arg(long)]
         grass_width_scale: Option<f32>,
+        /// Radii of the grass infill near the camera, HALF,QUARTER metres: blades at half the
+        /// spacing out to the first, at a quarter of it out to the second; 0,0 turns it off
+        /// (default: the renderer's).
+        #[arg(long, value_delimiter = ',')]
+        grass_infill_m: Option<Vec<f32>>,
         #[command(flatten)]
         stream: StreamArgs,
     },
@@ -887,6 +892,7 @@ fn run(cli: Cli) -> Result<()> {
             enable,
             grass_spacing_m,
             grass_width_scale,
+            grass_infill_m,
             stream,
         } => fly(FlyOptions {
             world: resolve_world(&world)?,
@@ -902,6 +908,13 @@ fn run(cli: Cli) -> Result<()> {
             enable,
             grass_spacing_m,
             grass_width_scale,
+            grass_infill_m: match grass_infill_m.as_deref() {
+                None => None,
+                Some(&[half, quarter]) => Some([half, quarter]),
+                Some(v) => {
+                    anyhow::bail!("--grass-infill-m takes two radii, HALF,QUARTER, not {v:?}")
+                }
+            },
         }),
         Command::View {
             world,

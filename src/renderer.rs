@@ -182,6 +182,8 @@ pub struct RendererConfig {
     pub grass_spacing_m: f32,
     /// Every grass type's blade width times this (the manifest's widths at 1).
     pub grass_width_scale: f32,
+    /// Radii of the grass infill near the camera, metres (see [`GrassSettings::infill_m`]).
+    pub grass_infill_m: [f32; 2],
     /// Blade segments at high and low LOD.
     pub grass_segments: [u32; 2],
     /// The wind scene of the manifest (default: `breeze`, else the manifest's wind); when
@@ -196,6 +198,9 @@ pub struct RendererConfig {
     pub grass_capacity: Option<u32>,
 }
 
+/// Default radii of the grass infill near the camera (half and quarter spacing), metres.
+pub const DEFAULT_INFILL_M: [f32; 2] = [20.0, 10.0];
+
 impl RendererConfig {
     /// Defaults for `world`.
     pub fn for_world(world: &World) -> Self {
@@ -207,6 +212,7 @@ impl RendererConfig {
             mesh_step: 2,
             grass_spacing_m: 0.25,
             grass_width_scale: 1.0,
+            grass_infill_m: DEFAULT_INFILL_M,
             grass_segments: [7, 3],
             wind_scene: None,
             wind_keys: Vec::new(),
@@ -226,6 +232,7 @@ impl RendererConfig {
             tile_m: world.manifest.pyramid.tile_size_m(rings.level) as f32,
             high_radius_m: rings.high_radius_m as f32,
             lod_fade_m: 0.3 * rings.high_radius_m as f32,
+            infill_m: self.grass_infill_m,
             view_distance_m: rings.low_radius_m as f32,
             far_fade_m: 0.2 * rings.low_radius_m as f32,
             clump_m: 1.6,
@@ -1021,33 +1028,18 @@ impl Renderer {
             g.sway
                 .update(&self.queue, encoder, &lookup, frame.dt, &mut self.timer);
         }
-        // 3. Terrain depth.
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("terrain depth"),
-                color_attachments: &[],
-                depth_stencil_attachment: depth_attachment(depth, wgpu::LoadOp::Clear(0.0)),
-                timestamp_writes: self.timer.render_pass("terrain_depth"),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            self.terrain.draw_depth(&mut pass, frame.terrain_tiles);
-        }
+        // 3. Terrain: depth and G-buffer.
+        self.terrain
+            .record_gbuffer(encoder, depth, frame.terrain_tiles, &mut self.timer);
         // 4. Hi-Z.
         if let Some(g) = &mut self.grass {
             g.renderer
                 .hiz
                 .record(&self.device, encoder, depth.texture(), &mut self.timer);
         }
-        // 5. Terrain colour and sky: G-buffer, shading (compute), composite into `color`.
-        self.terrain.record_color(
-            &self.device,
-            encoder,
-            color,
-            depth,
-            frame.terrain_tiles,
-            &mut self.timer,
-        );
+        // 5. Terrain colour and sky: shading (compute), composite into `color`.
+        self.terrain
+            .record_shade(&self.device, encoder, color, depth, &mut self.timer);
         if let Some(copy) = &self.terrain_depth {
             encoder.copy_texture_to_texture(
                 depth.texture().as_image_copy(),
@@ -1188,20 +1180,6 @@ impl Renderer {
         }
         jobs
     }
-}
-
-fn depth_attachment(
-    view: &wgpu::TextureView,
-    load: wgpu::LoadOp<f32>,
-) -> Option<wgpu::RenderPassDepthStencilAttachment<'_>> {
-    Some(wgpu::RenderPassDepthStencilAttachment {
-        view,
-        depth_ops: Some(wgpu::Operations {
-            load,
-            store: wgpu::StoreOp::Store,
-        }),
-        stencil_ops: None,
-    })
 }
 
 fn check_formats(targets: &Targets) -> Result<(), RendererError> {

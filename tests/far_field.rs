@@ -76,9 +76,11 @@ fn the_far_field_continues_the_blades_at_the_ring_and_matches_its_cpu_mirror() {
     // the bands before and after it are many pixels tall.
     let mut camera = Camera::new(DVec3::new(150.0, 150.0, 6.0), 45.0, -2.2);
     camera.fov_y_deg = 8.0;
-    assert!(scene
-        .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
-        .unwrap());
+    assert!(
+        scene
+            .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
+            .unwrap()
+    );
     scene.render(&ctx, &camera).unwrap();
     let image = scene.read_image(&ctx).unwrap();
     let points = ground_points(&camera, w, h);
@@ -131,7 +133,6 @@ fn the_far_field_continues_the_blades_at_the_ring_and_matches_its_cpu_mirror() {
                 * far_field::color_variation(world_mod.as_vec2());
             let lit = far_field::light_far_grass(albedo, Vec3::Z, far_field::FAR_T, 1.0, &light);
             far_cpu.push(lit.lerp(fog_color, fog));
-
         }
     }
     assert!(
@@ -145,11 +146,17 @@ fn the_far_field_continues_the_blades_at_the_ring_and_matches_its_cpu_mirror() {
     // The GPU against its mirror: within 4% per channel (the mirror leaves out the ground's
     // detail noise, whose mean is zero, and the 8-bit target's rounding).
     let rel = ((fg - fc).abs() / fc).max_element();
-    assert!(rel < 0.04, "far field GPU {fg} vs CPU mirror {fc}: {rel:.3}");
+    assert!(
+        rel < 0.04,
+        "far field GPU {fg} vs CPU mirror {fc}: {rel:.3}"
+    );
     // The far field where the blades end against the blades before it: a colour difference
     // (CIE76 delta E of the mean colours) small enough that no line shows where they meet.
     let delta_e = (lab(fg) - lab(b)).length();
     eprintln!("delta E {delta_e:.2}");
     // 2.7 seen on software Vulkan; about 2.3 is the least difference the eye notices.
-    assert!(delta_e < 3.5, "far field {fg} vs blades {b}: delta E {delta_e:.2}");
+    assert!(
+        delta_e < 3.5,
+        "far field {fg} vs blades {b}: delta E {delta_e:.2}"
+    );
 }

@@ -71,7 +71,11 @@ fn synthetic_tile(manifest: &Manifest, id: TileId, kind: &str) -> TileData {
         for i in 0..s {
             let k = (j * s + i) as usize;
             match kind {
-                "flat" => t.density[k] = 150 + ((i * 7 + j * 3) % 100) as u8,
+                "flat" => {
+                    t.density[k] = 150 + ((i * 7 + j * 3) % 100) as u8;
+                    // Meadow and dry grass in squares of 3x3 texels.
+                    t.grass_type[k] = if (i / 3 + j / 3) % 2 == 0 { 1 } else { 3 };
+                }
                 "steep" => {
                     t.heights[k] = 100.0 + 0.8 * cell * i as f32 + 0.1 * cell * j as f32;
                     t.grass_type[k] = 2;
@@ -275,6 +279,34 @@ fn job(k: usize, layer: u32, lod: u32, cell: f32) -> TileJob {
     }
 }
 
+/// Grass types meet along clump borders, not along the map's texel edges: the blades of a
+/// clump (its colour, from the clump's hash) share one type, but for those mixed in near its
+/// border; the map's squares of types are smaller than a clump, so texel edges would split most
+/// clumps.
+fn assert_types_follow_clumps(blades: &[Blade]) {
+    let mut clumps: std::collections::HashMap<u32, [usize; 16]> = Default::default();
+    for b in blades {
+        clumps.entry(b.color).or_default()[(b.kind & 0xff) as usize] += 1;
+    }
+    let (mut majority, mut total) = (0usize, 0usize);
+    let mut mixed_types = false;
+    for counts in clumps.values().filter(|c| c.iter().sum::<usize>() >= 8) {
+        majority += counts.iter().max().unwrap();
+        total += counts.iter().sum::<usize>();
+        mixed_types |= counts[1] > 0 && counts[3] > 0;
+    }
+    assert!(total > 500, "too few blades in clumps: {total}");
+    let share = majority as f64 / total as f64;
+    eprintln!("blades of their clump's main type: {share:.3} of {total}");
+    assert!(share > 0.85, "clumps are split between types: {share:.3}");
+    assert!(mixed_types, "no clump border mixes types");
+    let types: std::collections::HashSet<u32> = blades.iter().map(|b| b.kind & 0xff).collect();
+    assert!(
+        types.contains(&1) && types.contains(&3),
+        "both types grow: {types:?}"
+    );
+}
+
 fn key(b: &Blade) -> (u32, u32, u32) {
     (b.hash, b.pos[0].to_bits(), b.pos[1].to_bits())
 }
@@ -361,6 +393,9 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
             "{kind}: indirect args"
         );
         assert_blades_match(&gpu, &cpu.blades, kind);
+        if *kind == "flat" {
+            assert_types_follow_clumps(&cpu.blades);
+        }
         for l in 0..2 {
             for c in 0..8 {
                 cpu_total.counts[l][c] += cpu.stats.counts[l][c];
@@ -385,6 +420,14 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
     // Every culling test did some work in this view.
     let s = &cpu_total.counts[0];
     use verdant::grass::generate::counter;
+    // The three high-LOD tiles reach within the infill radii of the camera: their near cells
+    // were filled in, so more points were looked at than their grids have.
+    let g = rig.grass.params().grid[0];
+    assert!(
+        s[counter::CONSIDERED] > 3 * g * g,
+        "no infill: {} points for 3 grids of {g}x{g}",
+        s[counter::CONSIDERED]
+    );
     for (c, name) in [
         (counter::DISTANCE, "distance"),
         (counter::FRUSTUM, "frustum"),

@@ -502,14 +502,60 @@ fn meadow_coverage(grass: bool) -> verdant::tools::metrics::Coverage {
 }
 
 #[test]
-fn grass_covers_the_near_meadow_and_nothing_covers_it_without_grass() {
+fn grass_covers_nine_tenths_of_the_near_meadow_and_nothing_covers_it_without_grass() {
     let with = meadow_coverage(true);
     let without = meadow_coverage(false);
     eprintln!("meadow coverage at 160x90: with grass {with:?}, without {without:?}");
     assert!(with.pixels > 1000, "{with:?}");
-    assert!(with.fraction > 0.0, "{with:?}");
+    // The target for a full-density meadow seen from standing height.
+    assert!(with.fraction >= 0.9, "{with:?}");
     assert_eq!(without.pixels, with.pixels, "the same terrain either way");
     assert_eq!((without.covered, without.fraction), (0, 0.0), "{without:?}");
+}
+
+/// Coverage standing 1.7 m up in a flat field at full density of the default world's grass type
+/// `kind`, looking 12 degrees down.
+fn field_coverage(kind: &str) -> verdant::tools::metrics::Coverage {
+    use verdant::tools::bench_blades::flat_field;
+    use verdant::tools::{Scene, SceneConfig};
+    let ctx = common::gpu();
+    let default = World::open(&common::default_world()).unwrap();
+    let ty = default
+        .manifest
+        .grass_types
+        .iter()
+        .find(|t| t.name == kind)
+        .unwrap()
+        .clone();
+    let (mut world, source) = flat_field(400.0).unwrap();
+    world.manifest.grass_types[1] = ty;
+    let mut config = SceneConfig::for_world(&world);
+    // The field is generated, not read: room for a tile's blades, split and infilled.
+    let g = config.grass_settings(&world).unwrap().grid();
+    config.grass_capacity = Some(3 * g * g);
+    let mut scene = Scene::with_source(&ctx, world, source, 160, 90, config).unwrap();
+    let camera = Camera::new(glam::DVec3::new(200.0, 200.0, 1.7), 30.0, -12.0);
+    assert!(
+        scene
+            .warm_up(&ctx, &camera, Duration::from_secs(60))
+            .unwrap()
+    );
+    scene.set_coverage_capture(true).unwrap();
+    scene.render(&ctx, &camera).unwrap();
+    scene.coverage(&ctx, 30.0).unwrap()
+}
+
+#[test]
+fn full_density_meadow_and_tall_grass_reach_their_coverage_from_standing_height() {
+    for (kind, target) in [("meadow", 0.9), ("tall grass", 0.95)] {
+        let c = field_coverage(kind);
+        eprintln!("{kind} field at 160x90: {c:?}");
+        assert!(c.pixels > 3000, "{kind}: {c:?}");
+        assert!(
+            c.fraction >= target,
+            "{kind}: coverage {c:?} below {target}"
+        );
+    }
 }
 
 #[test]

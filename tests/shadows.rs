@@ -37,9 +37,11 @@ fn a_wall_casts_its_shadow_where_the_sun_ray_says() {
     // Looking straight down from 200 m over the wall's east side.
     let mut camera = Camera::new(DVec3::new(330.0, 300.0, 200.0), 0.0, -89.0);
     camera.fov_y_deg = 40.0;
-    assert!(scene
-        .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
-        .unwrap());
+    assert!(
+        scene
+            .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
+            .unwrap()
+    );
     scene.render(&ctx, &camera).unwrap();
     let image = scene.read_image(&ctx).unwrap();
 
@@ -47,7 +49,10 @@ fn a_wall_casts_its_shadow_where_the_sun_ray_says() {
     // the wall's east face after (x - 310) / |sun.xy.x| metres of ground, at a height of that
     // times the sun's rise; in shadow when that is below the wall's top.
     let sun = sun_direction(&world.manifest.sky).as_dvec3();
-    assert!(sun.x < 0.0, "the sun must stand to the west of the wall for this test");
+    assert!(
+        sun.x < 0.0,
+        "the sun must stand to the west of the wall for this test"
+    );
     let rise = sun.z / sun.truncate().length();
     let in_shadow = |x: f64| {
         x > WALL.1 && (x - WALL.1) / (-sun.x / sun.truncate().length()) * rise < f64::from(WALL_M)
@@ -99,8 +104,14 @@ fn a_wall_casts_its_shadow_where_the_sun_ray_says() {
         shadowed_dark, lit_dark
     );
     // 0.993 seen on software Vulkan.
-    assert!(shadowed_dark > 0.98, "only {shadowed_dark:.3} of the shadow is dark");
-    assert!(lit_dark < 0.03, "{lit_dark:.3} of the sunlit ground is dark");
+    assert!(
+        shadowed_dark > 0.98,
+        "only {shadowed_dark:.3} of the shadow is dark"
+    );
+    assert!(
+        lit_dark < 0.03,
+        "{lit_dark:.3} of the sunlit ground is dark"
+    );
 }
 
 fn srgb_to_linear(c: u8) -> f32 {
@@ -135,11 +146,16 @@ fn contact_shadows_match_their_cpu_mirror() {
         config.grass_capacity = Some(settings.grid() * settings.grid());
         let mut scene =
             Scene::with_source(&ctx, world.clone(), source.clone(), w, h, config).unwrap();
-        assert!(scene
-            .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
-            .unwrap());
+        assert!(
+            scene
+                .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
+                .unwrap()
+        );
         scene.render_at(&ctx, &camera, 1.0).unwrap();
-        (scene.read_image(&ctx).unwrap(), scene.read_depth(&ctx).unwrap())
+        (
+            scene.read_image(&ctx).unwrap(),
+            scene.read_depth(&ctx).unwrap(),
+        )
     };
     let all = SceneConfig::for_world(&world).features;
     let (lit, depth) = render(all.without(Feature::Shadows));
@@ -152,7 +168,10 @@ fn contact_shadows_match_their_cpu_mirror() {
     let cpu = s.factors(&depth, w, h, vp, sun);
     let (mut agree, mut counted, mut shadowed) = (0usize, 0usize, 0usize);
     for (i, &f) in cpu.iter().enumerate() {
-        let (a, b) = (&lit.as_raw()[i * 4..i * 4 + 3], &shaded.as_raw()[i * 4..i * 4 + 3]);
+        let (a, b) = (
+            &lit.as_raw()[i * 4..i * 4 + 3],
+            &shaded.as_raw()[i * 4..i * 4 + 3],
+        );
         let (la, lb) = (srgb_to_linear(a[1]), srgb_to_linear(b[1]));
         // Too dark to read a ratio from 8 bits.
         if la < 0.02 {
@@ -168,8 +187,16 @@ fn contact_shadows_match_their_cpu_mirror() {
         }
     }
     let fraction = agree as f64 / counted.max(1) as f64;
-    eprintln!("{shadowed} of {counted} pixels in contact shadow; GPU and CPU agree on {fraction:.4}");
-    assert!(shadowed > counted / 50, "too few shadowed pixels to test: {shadowed}");
+    eprintln!(
+        "{shadowed} of {counted} pixels in contact shadow; GPU and CPU agree on {fraction:.4}"
+    );
+    assert!(
+        shadowed > counted / 50,
+        "too few shadowed pixels to test: {shadowed}"
+    );
     // Pixels where a step lands right at a depth edge can differ by the last bit of a depth.
-    assert!(fraction > 0.98, "GPU and CPU agree on only {fraction:.4} of the pixels");
+    assert!(
+        fraction > 0.98,
+        "GPU and CPU agree on only {fraction:.4} of the pixels"
+    );
 }

@@ -3,10 +3,13 @@
 //! separately from it. Tests run both on the same tile and compare.
 //!
 //! For each point of a jittered grid at the tile's spacing (low LOD: every other point in each
-//! direction, so the low grid is a subset of the high one): a hash of the point's global grid
-//! index drives every random attribute; grass type (nearest sample) and density (bilinear) come
-//! from the tile's maps; a Voronoi clump of hashed points lends its facing, colour and height;
-//! the growth direction blends between up and the terrain normal by grass type; short grass is
+//! direction, so the low grid is a subset of the high one), and near the camera (high LOD
+//! only) the infill points of its cell (its quarters out to one radius, its sixteenths out to a
+//! second, each set shrinking away over the outer part of its radius): a hash of the point's
+//! global grid index drives every random attribute; density (bilinear) comes from the tile's
+//! map; a Voronoi clump of hashed points lends its grass type (the map's at the clump's point,
+//! mixed with the second-nearest clump's near their border), facing, colour and height; the
+//! growth direction blends between up and the terrain normal by grass type; short grass is
 //! split into two blades. Points with no grass are dropped; the rest are culled by distance
 //! (with the fade of blades the low grid drops and the dithered fade at the view distance),
 //! frustum and occlusion (a Hi-Z pyramid of the terrain's depth).
@@ -53,6 +56,10 @@ pub struct GenerateParams {
     /// x, y: distances over which the blades the low grid drops fade out (they are gone at y,
     /// the high ring's radius); z, w: dithered fade from z to the view distance w.
     pub ranges: [f32; 4],
+    /// Infill near the camera (see [`generate_tile`]): x, y: the band over which the
+    /// quarter-spacing points shrink away (gone at y); z, w: the same for the half-spacing
+    /// points. No infill where w <= 0.
+    pub infill: [f32; 4],
     /// x: Hi-Z mip count, y: slot capacity (blades), z: grass type count, w: blade segments,
     /// high LOD in the low 16 bits, low LOD in the high 16.
     pub limits: [u32; 4],
@@ -61,7 +68,7 @@ pub struct GenerateParams {
     /// Per grass type constants.
     pub types: [GrassTypeGpu; 16],
 }
-const _: () = assert!(std::mem::size_of::<GenerateParams>() == 64 + 96 + 16 * 5 + 256 + 512);
+const _: () = assert!(std::mem::size_of::<GenerateParams>() == 64 + 96 + 16 * 6 + 256 + 512);
 
 /// One grass tile to generate; mirrors `TileJob` in the shader.
 #[repr(C)]
@@ -148,6 +155,10 @@ pub struct TileBlades {
     pub stats: GenerateStats,
 }
 
+/// Metres (in the difference of a blade's distances to its two nearest clump points) over
+/// which the grass types of two clumps mix.
+pub const CLUMP_BLEND_M: f32 = 0.4;
+
 pub(crate) fn rand01(h: u32) -> f32 {
     (h >> 8) as f32 * (1.0 / 16_777_216.0)
 }
@@ -161,11 +172,10 @@ fn pack_rgba8(c: Vec3) -> u32 {
     q(c.x) | (q(c.y) << 8) | (q(c.z) << 16) | (255 << 24)
 }
 
-/// Bilinear height and density and the nearest grass type at texel position `tp` of `tile`.
+/// Bilinear height and density and the normal at texel position `tp` of `tile`.
 struct Sample {
     height: f32,
     density: f32,
-    kind: u32,
     normal: Vec3,
 }
 
@@ -188,7 +198,6 @@ fn sample(tile: &TileData, tp: [f32; 2], cell: f32) -> Sample {
     Sample {
         height: bil(&h),
         density: bil(&d),
-        kind: u32::from(tile.grass_type[at(nx, ny)]),
         normal: Vec3::new(gx, gy, 2.0 * cell).normalize(),
     }
 }
@@ -202,9 +211,8 @@ pub fn generate_tile(
 ) -> TileBlades {
     let g = params.grid[0];
     let seed = params.grid[3];
-    let border = params.grid[2] as f32;
-    let [spacing, tile_m, clump_m, short_m] = params.dims;
-    let [fade_start, fade_end, dither_start, view_dist] = params.ranges;
+    let [spacing, tile_m, clump_m, _] = params.dims;
+    let [fade_start, fade_end, _, _] = params.ranges;
     let capacity = params.limits[1];
     let type_count = params.limits[2].max(1);
     let lod = job.lod.min(1) as usize;
@@ -215,10 +223,18 @@ pub fn generate_tile(
     let mut out = TileBlades::default();
     let mut stats = [0u32; counter::COUNT];
 
+    let ctx = PlantContext {
+        params,
+        job,
+        tile,
+        hiz,
+        view_proj,
+        clumps_per_tile,
+        type_count,
+    };
     for iy in 0..n {
         for ix in 0..n {
             let (gx, gy) = (ix * step, iy * step);
-            stats[counter::CONSIDERED] += 1;
             let gid_x = job.tile_x * g + gx;
             let gid_y = job.tile_y * g + gy;
             let h0 = hash3(gid_x, gid_y, seed);
@@ -226,133 +242,61 @@ pub fn generate_tile(
                 (rand01(hash_u32(h0 ^ 1)) - 0.5) * 0.9 * spacing,
                 (rand01(hash_u32(h0 ^ 2)) - 0.5) * 0.9 * spacing,
             ];
+            let cell = [gx as f32, gy as f32];
+            // Blades the low grid drops fade out before the ring switch.
+            let band = if job.lod == 0 && (gx % 2 == 1 || gy % 2 == 1) {
+                [fade_start, fade_end]
+            } else {
+                [0.0, 0.0]
+            };
             let local = [
-                (gx as f32 + 0.5) * spacing + jitter[0],
-                (gy as f32 + 0.5) * spacing + jitter[1],
+                (cell[0] + 0.5) * spacing + jitter[0],
+                (cell[1] + 0.5) * spacing + jitter[1],
             ];
-            let tp = [border + local[0] / job.cell, border + local[1] / job.cell];
-            let s = sample(tile, tp, job.cell);
-            let kind = s.kind.min(type_count - 1);
-            if kind == 0 || s.density <= 0.0 || rand01(hash_u32(h0 ^ 3)) >= s.density {
-                stats[counter::EMPTY] += 1;
+            ctx.plant(local, h0, spacing, band, &mut out, &mut stats);
+
+            // Infill: near the camera, the cell's quarters and sixteenths.
+            let [q0, q1, h0_start, h1] = params.infill;
+            if job.lod != 0 || h1 <= 0.0 {
                 continue;
             }
-            let ty = params.types[kind as usize];
-
-            // Clump: the nearest of the hashed points of the 3x3 clump cells around.
-            let cx = (local[0] / clump_m).floor() as i32;
-            let cy = (local[1] / clump_m).floor() as i32;
-            let mut best = f32::MAX;
-            let mut clump = 0u32;
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    let (ccx, ccy) = (cx + dx, cy + dy);
-                    let kx = (job.tile_x as i32 * clumps_per_tile + ccx) as u32;
-                    let ky = (job.tile_y as i32 * clumps_per_tile + ccy) as u32;
-                    let ch = hash3(kx, ky, seed ^ 0x00c1_0b55);
-                    let px = (ccx as f32 + 0.5 + 0.8 * (rand01(ch) - 0.5)) * clump_m;
-                    let py = (ccy as f32 + 0.5 + 0.8 * (rand01(hash_u32(ch ^ 1)) - 0.5)) * clump_m;
-                    let d2 = (px - local[0]) * (px - local[0]) + (py - local[1]) * (py - local[1]);
-                    if d2 < best {
-                        best = d2;
-                        clump = ch;
+            let centre = [
+                job.origin[0] + (cell[0] + 0.5) * spacing,
+                job.origin[1] + (cell[1] + 0.5) * spacing,
+            ];
+            let reach = (centre[0] * centre[0] + centre[1] * centre[1]).sqrt() - 0.75 * spacing;
+            if reach >= h1 {
+                continue;
+            }
+            let stride = if reach < q1 { 1 } else { 2 };
+            for j in (0..4u32).step_by(stride) {
+                for i in (0..4u32).step_by(stride) {
+                    if i == 0 && j == 0 {
+                        continue;
                     }
+                    let half = i % 2 == 0 && j % 2 == 0;
+                    let sub = if half { 0.5 } else { 0.25 } * spacing;
+                    let h = hash3(
+                        gid_x.wrapping_mul(4).wrapping_add(i),
+                        gid_y.wrapping_mul(4).wrapping_add(j),
+                        seed ^ 0x1f111,
+                    );
+                    let offset = |k: u32| {
+                        if half {
+                            k as f32 * 0.25 + 0.25
+                        } else {
+                            (k as f32 + 0.5) * 0.25
+                        }
+                    };
+                    let local = [
+                        (cell[0] + offset(i)) * spacing
+                            + (rand01(hash_u32(h ^ 1)) - 0.5) * 0.9 * sub,
+                        (cell[1] + offset(j)) * spacing
+                            + (rand01(hash_u32(h ^ 2)) - 0.5) * 0.9 * sub,
+                    ];
+                    let band = if half { [h0_start, h1] } else { [q0, q1] };
+                    ctx.plant(local, h, sub, band, &mut out, &mut stats);
                 }
-            }
-            let clump_height = 0.7 + 0.6 * rand01(hash_u32(clump ^ 2));
-            let height = (ty.height[0] + (ty.height[1] - ty.height[0]) * rand01(hash_u32(h0 ^ 4)))
-                * clump_height
-                * (0.5 + 0.5 * s.density);
-            if height <= 0.0 {
-                stats[counter::EMPTY] += 1;
-                continue;
-            }
-            let width = ty.width[0] + (ty.width[1] - ty.width[0]) * rand01(hash_u32(h0 ^ 9));
-            let up = Vec3::Z;
-            let growth = (up + (s.normal - up) * ty.growth_blend).normalize();
-            let pos = Vec3::new(
-                job.origin[0] + local[0],
-                job.origin[1] + local[1],
-                s.height - params.camera[0],
-            );
-
-            // Distance: blades the low grid drops fade out before the ring switch; all blades
-            // thin out, dithered, toward the view distance.
-            let dist = pos.length();
-            let mut fade = 1.0f32;
-            if job.lod == 0 && (gx % 2 == 1 || gy % 2 == 1) {
-                fade = ((fade_end - dist) / (fade_end - fade_start)).clamp(0.0, 1.0);
-            }
-            let far = ((view_dist - dist) / (view_dist - dither_start)).clamp(0.0, 1.0);
-            if fade <= 0.0 || rand01(hash_u32(h0 ^ 11)) >= far {
-                stats[counter::DISTANCE] += 1;
-                continue;
-            }
-
-            // Frustum: the blade's bounding sphere against each plane.
-            let center = pos + growth * (0.5 * height);
-            let radius = 0.6 * height + width;
-            let mut outside = false;
-            for p in &params.planes[..5] {
-                let plane = Vec4::from_array(*p);
-                if plane.truncate().dot(center) + plane.w < -radius {
-                    outside = true;
-                }
-            }
-            if outside {
-                stats[counter::FRUSTUM] += 1;
-                continue;
-            }
-
-            // Occlusion: the sphere's nearest depth against the farthest terrain depth of the
-            // Hi-Z texels that cover its screen footprint.
-            if occluded(params, &view_proj, hiz, center, radius) {
-                stats[counter::OCCLUSION] += 1;
-                continue;
-            }
-
-            let facing = rand01(hash_u32(clump ^ 3)) * std::f32::consts::TAU
-                + (rand01(hash_u32(h0 ^ 5)) - 0.5) * 1.9;
-            let tint = Vec3::new(
-                0.85 + 0.3 * rand01(hash_u32(clump ^ 4)),
-                0.85 + 0.3 * rand01(hash_u32(clump ^ 5)),
-                0.85 + 0.3 * rand01(hash_u32(clump ^ 6)),
-            ) * 0.5;
-            let mut blade = Blade {
-                pos: pos.to_array(),
-                facing,
-                growth: [growth.x, growth.y],
-                height: height * fade,
-                width: width * fade,
-                tilt: 0.1 + 0.5 * rand01(hash_u32(h0 ^ 6)),
-                bend: 0.2 + 0.7 * rand01(hash_u32(h0 ^ 7)),
-                side_curve: 2.0 * rand01(hash_u32(h0 ^ 8)) - 1.0,
-                wind: (0.6 + 0.4 * rand01(hash_u32(h0 ^ 10))) * (1.0 - 0.5 * ty.stiffness),
-                hash: h0,
-                kind: kind | (job.lod << 8),
-                color: pack_rgba8(tint),
-                fade,
-                lean: [0.0; 2],
-                sway: 0.0,
-                flutter: 0.0,
-            };
-            let emit = |b: Blade, out: &mut TileBlades| {
-                if out.wanted < capacity {
-                    out.blades.push(b);
-                }
-                out.wanted += 1;
-            };
-            emit(blade, &mut out);
-            stats[counter::EMITTED] += 1;
-            if height < short_m {
-                // Short grass: a second, smaller blade beside the first, turned a quarter.
-                blade.pos[0] += (rand01(hash_u32(h0 ^ 12)) - 0.5) * 0.6 * spacing;
-                blade.pos[1] += (rand01(hash_u32(h0 ^ 13)) - 0.5) * 0.6 * spacing;
-                blade.facing += 1.5708;
-                blade.height *= 0.85;
-                blade.hash = hash_u32(h0 ^ 14);
-                emit(blade, &mut out);
-                stats[counter::EMITTED] += 1;
             }
         }
     }
@@ -362,6 +306,189 @@ pub fn generate_tile(
     stats[counter::DRAWN] = drawn;
     out.stats.counts[lod] = stats;
     out
+}
+
+/// What every blade of a tile's generation shares.
+struct PlantContext<'a> {
+    params: &'a GenerateParams,
+    job: &'a TileJob,
+    tile: &'a TileData,
+    hiz: &'a HiZ,
+    view_proj: Mat4,
+    clumps_per_tile: i32,
+    type_count: u32,
+}
+
+impl PlantContext<'_> {
+    /// A blade at `local` (metres from the tile's corner) with its hash `h0`, of a grid of
+    /// `spacing`, shrinking away over the distance band `band` (none where `band[1] <= 0`).
+    fn plant(
+        &self,
+        local: [f32; 2],
+        h0: u32,
+        spacing: f32,
+        band: [f32; 2],
+        out: &mut TileBlades,
+        stats: &mut [u32; counter::COUNT],
+    ) {
+        let Self {
+            params,
+            job,
+            tile,
+            hiz,
+            view_proj,
+            clumps_per_tile,
+            type_count,
+        } = *self;
+        let seed = params.grid[3];
+        let border = params.grid[2] as f32;
+        let [_, _, clump_m, short_m] = params.dims;
+        let [_, _, dither_start, view_dist] = params.ranges;
+        let capacity = params.limits[1];
+        stats[counter::CONSIDERED] += 1;
+        let tp = [border + local[0] / job.cell, border + local[1] / job.cell];
+        let s = sample(tile, tp, job.cell);
+        // Clump: the nearest of the hashed points of the 3x3 clump cells around, and the
+        // second nearest. A clump has the map's grass type at its point: types meet along
+        // clump borders, mixed over CLUMP_BLEND_M either side.
+        let cx = (local[0] / clump_m).floor() as i32;
+        let cy = (local[1] / clump_m).floor() as i32;
+        let (mut best, mut second) = (f32::MAX, f32::MAX);
+        let mut clump = 0u32;
+        let (mut at_best, mut at_second) = ([0.0f32; 2], [0.0f32; 2]);
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let (ccx, ccy) = (cx + dx, cy + dy);
+                let kx = (job.tile_x as i32 * clumps_per_tile + ccx) as u32;
+                let ky = (job.tile_y as i32 * clumps_per_tile + ccy) as u32;
+                let ch = hash3(kx, ky, seed ^ 0x00c1_0b55);
+                let px = (ccx as f32 + 0.5 + 0.8 * (rand01(ch) - 0.5)) * clump_m;
+                let py = (ccy as f32 + 0.5 + 0.8 * (rand01(hash_u32(ch ^ 1)) - 0.5)) * clump_m;
+                let d2 = (px - local[0]) * (px - local[0]) + (py - local[1]) * (py - local[1]);
+                if d2 < best {
+                    (second, at_second) = (best, at_best);
+                    (best, clump, at_best) = (d2, ch, [px, py]);
+                } else if d2 < second {
+                    (second, at_second) = (d2, [px, py]);
+                }
+            }
+        }
+        let kind_at = |p: [f32; 2]| {
+            let size = tile.size as i32;
+            let t = |v: f32| ((border + v / job.cell + 0.5).floor() as i32).clamp(0, size - 1);
+            u32::from(tile.grass_type[(t(p[1]) * size + t(p[0])) as usize])
+        };
+        let mut kind = kind_at(at_best);
+        let other = kind_at(at_second);
+        let edge = second.sqrt() - best.sqrt();
+        if other != kind
+            && rand01(hash_u32(h0 ^ 15)) < 0.5 * (1.0 - (edge / CLUMP_BLEND_M).clamp(0.0, 1.0))
+        {
+            kind = other;
+        }
+        let kind = kind.min(type_count - 1);
+        if kind == 0 || s.density <= 0.0 || rand01(hash_u32(h0 ^ 3)) >= s.density {
+            stats[counter::EMPTY] += 1;
+            return;
+        }
+        let ty = params.types[kind as usize];
+
+        let clump_height = 0.7 + 0.6 * rand01(hash_u32(clump ^ 2));
+        let height = (ty.height[0] + (ty.height[1] - ty.height[0]) * rand01(hash_u32(h0 ^ 4)))
+            * clump_height
+            * (0.5 + 0.5 * s.density);
+        if height <= 0.0 {
+            stats[counter::EMPTY] += 1;
+            return;
+        }
+        let width = ty.width[0] + (ty.width[1] - ty.width[0]) * rand01(hash_u32(h0 ^ 9));
+        let up = Vec3::Z;
+        let growth = (up + (s.normal - up) * ty.growth_blend).normalize();
+        let pos = Vec3::new(
+            job.origin[0] + local[0],
+            job.origin[1] + local[1],
+            s.height - params.camera[0],
+        );
+
+        // Distance: blades the low grid drops fade out before the ring switch; all blades
+        // thin out, dithered, toward the view distance.
+        let dist = pos.length();
+        let mut fade = 1.0f32;
+        if band[1] > 0.0 {
+            fade = ((band[1] - dist) / (band[1] - band[0])).clamp(0.0, 1.0);
+        }
+        let far = ((view_dist - dist) / (view_dist - dither_start)).clamp(0.0, 1.0);
+        if fade <= 0.0 || rand01(hash_u32(h0 ^ 11)) >= far {
+            stats[counter::DISTANCE] += 1;
+            return;
+        }
+
+        // Frustum: the blade's bounding sphere against each plane.
+        let center = pos + growth * (0.5 * height);
+        let radius = 0.6 * height + width;
+        let mut outside = false;
+        for p in &params.planes[..5] {
+            let plane = Vec4::from_array(*p);
+            if plane.truncate().dot(center) + plane.w < -radius {
+                outside = true;
+            }
+        }
+        if outside {
+            stats[counter::FRUSTUM] += 1;
+            return;
+        }
+
+        // Occlusion: the sphere's nearest depth against the farthest terrain depth of the
+        // Hi-Z texels that cover its screen footprint.
+        if occluded(params, &view_proj, hiz, center, radius) {
+            stats[counter::OCCLUSION] += 1;
+            return;
+        }
+
+        let facing = rand01(hash_u32(clump ^ 3)) * std::f32::consts::TAU
+            + (rand01(hash_u32(h0 ^ 5)) - 0.5) * 1.9;
+        let tint = Vec3::new(
+            0.85 + 0.3 * rand01(hash_u32(clump ^ 4)),
+            0.85 + 0.3 * rand01(hash_u32(clump ^ 5)),
+            0.85 + 0.3 * rand01(hash_u32(clump ^ 6)),
+        ) * 0.5;
+        let mut blade = Blade {
+            pos: pos.to_array(),
+            facing,
+            growth: [growth.x, growth.y],
+            height: height * fade,
+            width: width * fade,
+            tilt: 0.1 + 0.5 * rand01(hash_u32(h0 ^ 6)),
+            bend: 0.2 + 0.7 * rand01(hash_u32(h0 ^ 7)),
+            side_curve: 2.0 * rand01(hash_u32(h0 ^ 8)) - 1.0,
+            wind: (0.6 + 0.4 * rand01(hash_u32(h0 ^ 10))) * (1.0 - 0.5 * ty.stiffness),
+            hash: h0,
+            kind: kind | (job.lod << 8),
+            color: pack_rgba8(tint),
+            fade,
+            lean: [0.0; 2],
+            sway: 0.0,
+            flutter: 0.0,
+        };
+        let emit = |b: Blade, out: &mut TileBlades| {
+            if out.wanted < capacity {
+                out.blades.push(b);
+            }
+            out.wanted += 1;
+        };
+        emit(blade, out);
+        stats[counter::EMITTED] += 1;
+        if height < short_m {
+            // Short grass: a second, smaller blade beside the first, turned a quarter.
+            blade.pos[0] += (rand01(hash_u32(h0 ^ 12)) - 0.5) * 0.6 * spacing;
+            blade.pos[1] += (rand01(hash_u32(h0 ^ 13)) - 0.5) * 0.6 * spacing;
+            blade.facing += 1.5708;
+            blade.height *= 0.85;
+            blade.hash = hash_u32(h0 ^ 14);
+            emit(blade, out);
+            stats[counter::EMITTED] += 1;
+        }
+    }
 }
 
 fn occluded(

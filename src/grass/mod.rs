@@ -22,7 +22,7 @@ pub use renderer::{
 
 use crate::world::{World, WorldError};
 
-/// The blades a slot must hold: the densest grass tile's count. A point of the grid carries
+/// The blades a slot must hold: the densest grass tile's count, infill included. A point of the grid carries
 /// grass with the densest window's mean density, and grass whose type can be shorter than the
 /// split height is counted twice. The density comes from the manifest's `grass_peak`, worked
 /// out by the baker for these grass tiles; a world without it (or baked for other grass tiles)
@@ -31,7 +31,12 @@ use crate::world::{World, WorldError};
 /// denser than this at run time is clamped and counted as overflow.
 pub fn estimate_capacity(world: &World, settings: &GrassSettings) -> Result<u32, WorldError> {
     let g = settings.grid() as f32;
-    let blades = |densest: f32| ((g * g * densest * 1.1).ceil() as u32).max(64);
+    // The infill near the camera adds 3 points a cell out to its first radius and 12 more out
+    // to its second, of which a frustum (narrower than 180 degrees) sees at most half.
+    let [half, quarter] = settings.infill_m.map(|r| r.max(0.0));
+    let infill = 0.5 * std::f32::consts::PI * (3.0 * half * half + 12.0 * quarter * quarter)
+        / (settings.spacing_m * settings.spacing_m);
+    let blades = |densest: f32| (((g * g + infill) * densest * 1.1).ceil() as u32).max(64);
     let m = &world.manifest;
     if let Some(peak) = &m.grass_peak
         && (peak.window_m - f64::from(settings.tile_m)).abs() <= 1e-6 * peak.window_m

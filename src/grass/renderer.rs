@@ -28,6 +28,8 @@ pub const BATCH_TILES: u32 = 4;
 /// Grass tiles a frame generates and draws at most (the job buffer's size); more are left out.
 pub const MAX_JOBS: u32 = 1024;
 const BATCH_STRIDE: u64 = 256;
+/// The share of an infill radius over which its blades shrink away.
+pub const INFILL_FADE: f32 = 0.3;
 
 /// Settings of grass generation.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -42,6 +44,10 @@ pub struct GrassSettings {
     pub high_radius_m: f32,
     /// Width of the band before it over which those blades fade out, metres.
     pub lod_fade_m: f32,
+    /// Radii of the infill near the camera, metres: out to the first, every high-LOD cell gets
+    /// three more blades (half the spacing), out to the second twelve more (a quarter of it).
+    /// Each set shrinks away over the outer [`INFILL_FADE`] of its radius; 0 turns it off.
+    pub infill_m: [f32; 2],
     /// View distance of grass, metres (the low ring's radius).
     pub view_distance_m: f32,
     /// Width of the dithered fade before the view distance, metres.
@@ -485,6 +491,12 @@ impl GrassRenderer {
                 settings.view_distance_m - settings.far_fade_m,
                 settings.view_distance_m,
             ],
+            infill: {
+                let [half, quarter] = settings.infill_m;
+                let band = |r: f32| [(1.0 - INFILL_FADE) * r, r];
+                let (q, h) = (band(quarter), band(half));
+                [q[0], q[1], h[0], h[1]]
+            },
             limits: [
                 hiz.mips(),
                 capacity,

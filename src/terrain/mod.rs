@@ -178,7 +178,6 @@ impl Deferred {
 
 /// Pipelines, buffers and internal textures of the terrain and sky passes.
 pub struct TerrainRenderer {
-    depth_prepass: wgpu::RenderPipeline,
     gbuffer: wgpu::RenderPipeline,
     shade: wgpu::ComputePipeline,
     shade_layout: wgpu::BindGroupLayout,
@@ -337,18 +336,14 @@ impl TerrainRenderer {
                 cache: None,
             })
         };
-        // Depth first (it feeds the Hi-Z pyramid), then the G-buffer where the depth matches.
-        let depth_prepass = pipeline(
-            "terrain depth",
-            None,
-            true,
-            wgpu::CompareFunction::Greater,
-        );
+        // The G-buffer and the depth in one pass (the depth then feeds the Hi-Z pyramid): a
+        // G-buffer texel costs little more than a depth-only one, a second pass of the mesh
+        // more.
         let gbuffer = pipeline(
             "terrain",
             Some("fs_gbuffer"),
-            false,
-            wgpu::CompareFunction::GreaterEqual,
+            true,
+            wgpu::CompareFunction::Greater,
         );
 
         // The shading: a compute pass over the target (terrain and sky).
@@ -515,7 +510,6 @@ impl TerrainRenderer {
             root_slots: [[0; 4]; MAX_ROOT_TILES / 4],
         };
         Self {
-            depth_prepass,
             gbuffer,
             shade,
             shade_layout,
@@ -620,31 +614,17 @@ impl TerrainRenderer {
         n as u32
     }
 
-    /// Records the terrain's depth only (the pre-pass that feeds the Hi-Z pyramid).
-    pub fn draw_depth(&self, pass: &mut wgpu::RenderPass<'_>, tiles: u32) {
-        if tiles > 0 {
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            pass.set_pipeline(&self.depth_prepass);
-            pass.set_index_buffer(self.index_buffer.slice(..), wgpu::IndexFormat::Uint32);
-            pass.draw_indexed(0..self.index_count, 0, 0..tiles);
-        }
-    }
-
     /// Follows a resize of the targets: the internal textures at the new size.
     pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
         self.deferred = Deferred::new(device, &self.composite_layout, (width, height));
         self.shade_bound = None;
     }
 
-    /// Records the terrain's and the sky's colour into `color` over the depth of
-    /// [`Self::draw_depth`] (in `depth`, which it does not write): the G-buffer pass (`terrain`),
-    /// the shading of every pixel (compute, `terrain_shade`) and its composite into `color`
-    /// (`composite`), which it overwrites.
-    pub fn record_color(
-        &mut self,
-        device: &wgpu::Device,
+    /// Records the terrain's G-buffer pass (`terrain`): clears `depth` and writes the terrain's
+    /// depth and, per pixel, where in the atlas its ground lies (see [`Self::record_shade`]).
+    pub fn record_gbuffer(
+        &self,
         encoder: &mut wgpu::CommandEncoder,
-        color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
         tiles: u32,
         timer: &mut GpuTimer,
@@ -664,7 +644,7 @@ impl TerrainRenderer {
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: depth,
                     depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Load,
+                        load: wgpu::LoadOp::Clear(0.0),
                         store: wgpu::StoreOp::Store,
                     }),
                     stencil_ops: None,
@@ -680,6 +660,20 @@ impl TerrainRenderer {
                 pass.draw_indexed(0..self.index_count, 0, 0..tiles);
             }
         }
+    }
+
+    /// Records the terrain's and the sky's colour into `color` from the G-buffer and the depth
+    /// of [`Self::record_gbuffer`] (in `depth`, which it does not write): the shading of every
+    /// pixel (compute, `terrain_shade`) and its composite into `color` (`composite`), which it
+    /// overwrites.
+    pub fn record_shade(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        timer: &mut GpuTimer,
+    ) {
         let depth_texture = depth.texture();
         if self
             .shade_bound

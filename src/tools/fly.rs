@@ -51,6 +51,9 @@ pub struct FlyOptions {
     pub grass_spacing_m: Option<f32>,
     /// Blade width scale (None: the renderer's default).
     pub grass_width_scale: Option<f32>,
+    /// Radii of the grass infill near the camera, half and quarter spacing (None: the
+    /// renderer's default).
+    pub grass_infill_m: Option<[f32; 2]>,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -122,6 +125,12 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
             bail!("--grass-width-scale must be between 0.05 and 20, not {w}");
         }
         config.grass_width_scale = w;
+    }
+    if let Some([half, quarter]) = opts.grass_infill_m {
+        if !(0.0..=100.0).contains(&half) || !(0.0..=100.0).contains(&quarter) {
+            bail!("--grass-infill-m radii must be between 0 and 100 m, not {half},{quarter}");
+        }
+        config.grass_infill_m = [half, quarter];
     }
     let mut scene = Scene::with_source(&ctx, world, source, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
