@@ -961,14 +961,14 @@ fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
             if !(2000.0..=8000.0).contains(&r) || !inside(p) {
                 continue;
             }
-            let h = f64::from(grid.height_bilinear(p));
+            let h = grid.height_bilinear(p);
             if h > best {
                 best = h;
                 start = Some(p);
             }
         }
     }
-    let meadow_h = f64::from(grid.height_bilinear(meadow_start));
+    let meadow_h = grid.height_bilinear(meadow_start);
     let start = match start {
         Some(p) if best > meadow_h + 100.0 => p,
         _ => {

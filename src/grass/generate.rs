@@ -482,7 +482,10 @@ impl PlantContext<'_> {
             // Short grass: a second, smaller blade beside the first, turned a quarter.
             blade.pos[0] += (rand01(hash_u32(h0 ^ 12)) - 0.5) * 0.6 * spacing;
             blade.pos[1] += (rand01(hash_u32(h0 ^ 13)) - 0.5) * 0.6 * spacing;
-            blade.facing += 1.5708;
+            // The shader's literal, not FRAC_PI_2, so that both round alike.
+            #[allow(clippy::approx_constant)]
+            let quarter_turn = 1.5708;
+            blade.facing += quarter_turn;
             blade.height *= 0.85;
             blade.hash = hash_u32(h0 ^ 14);
             emit(blade, out);
