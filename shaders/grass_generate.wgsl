@@ -29,7 +29,10 @@ struct Params {
     // Infill near the camera: x, y: fade band of the quarter-spacing points; z, w: of the
     // half-spacing points (w <= 0: no infill)
     infill: vec4<f32>,
-    // x: Hi-Z mips, y: slot capacity, z: grass types, w: blade segments (high | low << 16)
+    // x: horizontal radius of the near blades (job LOD 2, drawn with the most segments)
+    near: vec4<f32>,
+    // x: Hi-Z mips, y: slot capacity, z: grass types, w: blade segments, 8 bits each: near
+    // blades, the rest of the high ring, the low ring
     limits: vec4<u32>,
     // Hi-Z levels: offset (floats), width, height
     hiz_levels: array<vec4<u32>, 16>,
@@ -182,7 +185,7 @@ fn generate(
     let in_batch = wid.z < batch.count;
     let job = jobs[batch.first + min(wid.z, 3u)];
     let g = params.grid.x;
-    let lod = min(job.lod, 1u);
+    let lod = stats_lod(job.lod);
     let step = 1u + lod;
     let n = (g + step - 1u) / step;
     if in_batch && gid.x < n && gid.y < n {
@@ -195,6 +198,11 @@ fn generate(
             atomicAdd(&stats[lod * 8u + lid], v);
         }
     }
+}
+
+// The statistics' LOD of a job's: near blades (LOD 2) count as high LOD (0).
+fn stats_lod(lod: u32) -> u32 {
+    return select(0u, 1u, lod == 1u);
 }
 
 fn count(c: u32) {
@@ -219,12 +227,12 @@ fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
     let cell = vec2<f32>(f32(gx), f32(gy));
     // Blades the low grid drops fade out before the ring switch.
     var band = vec2<f32>(0.0, 0.0);
-    if job.lod == 0u && (gx % 2u == 1u || gy % 2u == 1u) {
+    if job.lod != 1u && (gx % 2u == 1u || gy % 2u == 1u) {
         band = params.ranges.xy;
     }
     plant(job, (cell + 0.5) * spacing + jitter, h0, spacing, band);
 
-    if job.lod != 0u || params.infill.w <= 0.0 {
+    if job.lod == 1u || params.infill.w <= 0.0 {
         return;
     }
     // Horizontal distance of the cell's nearest point at most; the camera is at the origin.
@@ -258,6 +266,11 @@ fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
 // A blade at `local` (metres from the tile's corner) with its hash `h0`, of a grid of `spacing`,
 // shrinking away over the distance band `band` (none where band.y <= 0).
 fn plant(job: TileJob, local: vec2<f32>, h0: u32, spacing: f32, band: vec2<f32>) {
+    // A high-LOD tile near the camera has two jobs: the near one (LOD 2) takes its blades within
+    // params.near.x of the camera, the other (LOD 0) the rest.
+    if job.lod != 1u && (length(job.origin + local) < params.near.x) != (job.lod == 2u) {
+        return;
+    }
     let seed = params.grid.w;
     let border = f32(params.grid.z);
     let tile_m = params.dims.y;
@@ -420,8 +433,10 @@ fn finalize(@builtin(local_invocation_index) slot: u32) {
     let drawn = min(wanted, capacity);
     var vertices = 0u;
     if slot < batch.count {
-        let lod = min(jobs[batch.first + slot].lod, 1u);
-        let segments = select(params.limits.w & 0xffffu, params.limits.w >> 16u, lod == 1u);
+        let job_lod = jobs[batch.first + slot].lod;
+        let lod = stats_lod(job_lod);
+        let shift = 8u * select(select(1u, 2u, job_lod == 1u), 0u, job_lod == 2u);
+        let segments = (params.limits.w >> shift) & 0xffu;
         vertices = 2u * segments + 1u;
         atomicAdd(&stats[lod * 8u + OVERFLOW], wanted - drawn);
         atomicAdd(&stats[lod * 8u + DRAWN], drawn);

@@ -121,6 +121,18 @@ enum Command {
         /// (default: the renderer's).
         #[arg(long, value_delimiter = ',')]
         grass_infill_m: Option<Vec<f32>>,
+        /// Blade segments NEAR,HIGH,LOW: of the blades near the camera, the rest of the high
+        /// ring and the low ring (default: the renderer's).
+        #[arg(long, value_delimiter = ',')]
+        grass_segments: Option<Vec<u32>>,
+        /// Horizontal radius of the blades drawn with the NEAR segments, metres (default: the
+        /// renderer's).
+        #[arg(long)]
+        grass_near_m: Option<f32>,
+        /// Terrain mesh: one vertex every this many samples of a tile (1, 2, 4, ...; default:
+        /// the renderer's).
+        #[arg(long)]
+        mesh_step: Option<u32>,
         #[command(flatten)]
         stream: StreamArgs,
     },
@@ -893,6 +905,9 @@ fn run(cli: Cli) -> Result<()> {
             grass_spacing_m,
             grass_width_scale,
             grass_infill_m,
+            grass_segments,
+            grass_near_m,
+            mesh_step,
             stream,
         } => fly(FlyOptions {
             world: resolve_world(&world)?,
@@ -915,6 +930,15 @@ fn run(cli: Cli) -> Result<()> {
                     anyhow::bail!("--grass-infill-m takes two radii, HALF,QUARTER, not {v:?}")
                 }
             },
+            grass_segments: match grass_segments.as_deref() {
+                None => None,
+                Some(&[near, high, low]) => Some([near, high, low]),
+                Some(v) => {
+                    anyhow::bail!("--grass-segments takes three counts, NEAR,HIGH,LOW, not {v:?}")
+                }
+            },
+            grass_near_m,
+            mesh_step,
         }),
         Command::View {
             world,

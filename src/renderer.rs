@@ -184,8 +184,10 @@ pub struct RendererConfig {
     pub grass_width_scale: f32,
     /// Radii of the grass infill near the camera, metres (see [`GrassSettings::infill_m`]).
     pub grass_infill_m: [f32; 2],
-    /// Blade segments at high and low LOD.
-    pub grass_segments: [u32; 2],
+    /// Blade segments near the camera, in the rest of the high ring and in the low ring.
+    pub grass_segments: [u32; 3],
+    /// Horizontal radius of the blades drawn with the most segments, metres.
+    pub grass_near_m: f32,
     /// The wind scene of the manifest (default: `breeze`, else the manifest's wind); when
     /// `None` and `wind_keys` is not empty, the scenes of those keys in turn.
     pub wind_scene: Option<String>,
@@ -213,7 +215,8 @@ impl RendererConfig {
             grass_spacing_m: 0.25,
             grass_width_scale: 1.0,
             grass_infill_m: DEFAULT_INFILL_M,
-            grass_segments: [7, 3],
+            grass_segments: [7, 4, 3],
+            grass_near_m: 12.0,
             wind_scene: None,
             wind_keys: Vec::new(),
             features: Features::from(&world.manifest.features),
@@ -239,6 +242,7 @@ impl RendererConfig {
             short_m: crate::world::grass_density::SHORT_GRASS_M,
             seed: 0x9a55,
             segments: self.grass_segments,
+            near_m: self.grass_near_m,
         })
     }
 }
@@ -1151,6 +1155,10 @@ impl Renderer {
     fn grass_jobs(&self, camera: &Camera, grass: &[(TileId, Ring, f64)]) -> Vec<TileJob> {
         let pyramid = &self.world.manifest.pyramid;
         let frustum = Frustum::from_view_proj(camera.view_proj_relative(self.aspect()));
+        let near_m = self
+            .grass
+            .as_ref()
+            .map_or(0.0, |g| g.renderer.settings().near_m);
         let mut jobs = Vec::new();
         for &(id, ring, _) in grass {
             let Some((src, slot)) = self.service.draw_source(id) else {
@@ -1168,7 +1176,7 @@ impl Renderer {
                 continue;
             }
             let rel = b.min - camera.position.truncate();
-            jobs.push(TileJob {
+            let job = TileJob {
                 origin: [rel.x as f32, rel.y as f32],
                 cell: pyramid.cell_size_m(id.level) as f32,
                 layer: slot,
@@ -1176,7 +1184,14 @@ impl Renderer {
                 tile_y: id.y,
                 lod: u32::from(ring == Ring::Low),
                 slot: 0,
-            });
+            };
+            jobs.push(job);
+            // A high-LOD tile within the near radius: a second job for its blades there.
+            let c = camera.position.truncate();
+            let nearest = c.clamp(b.min, b.max) - c;
+            if ring == Ring::High && nearest.length() < f64::from(near_m) {
+                jobs.push(TileJob { lod: 2, ..job });
+            }
         }
         jobs
     }

@@ -369,24 +369,28 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
     let mut rig = Rig::new(None);
     let level = rig.manifest.pyramid.max_level();
     let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
-    let kinds = ["flat", "steep", "empty", "densest"];
+    // The flat tile's near blades are a job of their own (LOD 2), in the second half's slot.
+    let kinds = ["flat", "steep", "empty", "densest", "flat near"];
     let mut tiles = Vec::new();
     let mut jobs = Vec::new();
-    for (k, kind) in kinds.iter().enumerate() {
+    for (k, kind) in kinds.iter().enumerate().take(4) {
         let j = job(k, k as u32, if k == 3 { 1 } else { 0 }, cell);
         let t = synthetic_tile(&rig.manifest, TileId::new(level, j.tile_x, j.tile_y), kind);
         rig.atlas.upload(&rig.ctx.queue, k as u32, &t).unwrap();
         tiles.push(t);
         jobs.push(j);
     }
+    tiles.push(tiles[0].clone());
+    jobs.push(TileJob { lod: 2, ..jobs[0] });
     let (stats, hiz) = rig.run(&camera(), &jobs);
     let mut cpu_total = verdant::grass::GenerateStats::default();
     for (k, kind) in kinds.iter().enumerate() {
         let cpu: TileBlades = cpu_blades(&rig, &jobs[k], &tiles[k], &hiz);
-        let (args, gpu) = rig
-            .grass
-            .read_slot(&rig.ctx.device, &rig.ctx.queue, 0, k as u32);
-        let vertices = if jobs[k].lod == 0 { 15 } else { 7 };
+        let (args, gpu) =
+            rig.grass
+                .read_slot(&rig.ctx.device, &rig.ctx.queue, k / 4, (k % 4) as u32);
+        let segments = rig.grass.settings().segments;
+        let vertices = 2 * segments[[1, 2, 0][jobs[k].lod as usize]] + 1;
         assert_eq!(
             args,
             [vertices, cpu.blades.len() as u32, 0, 0],
@@ -420,13 +424,33 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
     // Every culling test did some work in this view.
     let s = &cpu_total.counts[0];
     use verdant::grass::generate::counter;
-    // The three high-LOD tiles reach within the infill radii of the camera: their near cells
-    // were filled in, so more points were looked at than their grids have.
+    // The flat tile reaches within the infill radii of the camera: its near cells were filled
+    // in, so its two jobs looked at more points than its grid has.
     let g = rig.grass.params().grid[0];
+    let flat: Vec<TileBlades> = [0, 4]
+        .map(|k| cpu_blades(&rig, &jobs[k], &tiles[k], &hiz))
+        .into();
+    let considered: u32 = flat
+        .iter()
+        .map(|b| b.stats.counts[0][counter::CONSIDERED])
+        .sum();
     assert!(
-        s[counter::CONSIDERED] > 3 * g * g,
-        "no infill: {} points for 3 grids of {g}x{g}",
-        s[counter::CONSIDERED]
+        considered > g * g,
+        "no infill: {considered} points for a grid of {g}x{g}"
+    );
+    // Its two jobs split its blades: together they are the blades of one job with no near
+    // radius, each once.
+    assert!(!flat[1].blades.is_empty(), "no near blades");
+    let mut whole = rig.grass.params().clone();
+    whole.near = [0.0; 4];
+    let all = generate_tile(&whole, &jobs[0], &tiles[0], &hiz);
+    let mut split: Vec<_> = flat.iter().flat_map(|b| b.blades.iter().map(key)).collect();
+    let mut one: Vec<_> = all.blades.iter().map(key).collect();
+    split.sort();
+    one.sort();
+    assert_eq!(
+        split, one,
+        "the near job and the rest are not a partition of the tile"
     );
     for (c, name) in [
         (counter::DISTANCE, "distance"),
@@ -478,7 +502,8 @@ fn an_overflowing_tile_is_clamped_and_counted_without_touching_its_neighbours() 
     );
     // The neighbouring slot is intact (its tile is empty: zero blades, zero args).
     let (args1, _) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 1);
-    assert_eq!(args1, [15, 0, 0, 0]);
+    let high = 2 * rig.grass.settings().segments[1] + 1;
+    assert_eq!(args1, [high, 0, 0, 0]);
 }
 
 #[test]
@@ -780,7 +805,8 @@ fn every_slot_holds_its_own_tiles_blades_after_a_half_is_reused() {
             let (args, gpu) = rig
                 .grass
                 .read_slot(&rig.ctx.device, &rig.ctx.queue, half, k as u32);
-            let vertices = if jobs[j].lod == 0 { 15 } else { 7 };
+            let segments = rig.grass.settings().segments;
+            let vertices = 2 * segments[[1, 2, 0][jobs[j].lod as usize]] + 1;
             assert_eq!(
                 args,
                 [vertices, cpu.blades.len() as u32, 0, 0],
@@ -829,7 +855,8 @@ fn an_overflow_leaves_the_neighbouring_slots_blades_intact() {
         cpu.blades.len()
     );
     let (args, gpu) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 1);
-    assert_eq!(args, [7, cpu.blades.len() as u32, 0, 0]);
+    let low = 2 * rig.grass.settings().segments[2] + 1;
+    assert_eq!(args, [low, cpu.blades.len() as u32, 0, 0]);
     assert_blades_match(&gpu, &cpu.blades, "the overflowing tile's neighbour");
 }
 

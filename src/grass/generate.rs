@@ -60,6 +60,8 @@ pub struct GenerateParams {
     /// quarter-spacing points shrink away (gone at y); z, w: the same for the half-spacing
     /// points. No infill where w <= 0.
     pub infill: [f32; 4],
+    /// x: horizontal radius of the near blades (see [`TileJob::lod`]); y, z, w: unused.
+    pub near: [f32; 4],
     /// x: Hi-Z mip count, y: slot capacity (blades), z: grass type count, w: blade segments,
     /// high LOD in the low 16 bits, low LOD in the high 16.
     pub limits: [u32; 4],
@@ -68,7 +70,7 @@ pub struct GenerateParams {
     /// Per grass type constants.
     pub types: [GrassTypeGpu; 16],
 }
-const _: () = assert!(std::mem::size_of::<GenerateParams>() == 64 + 96 + 16 * 6 + 256 + 512);
+const _: () = assert!(std::mem::size_of::<GenerateParams>() == 64 + 96 + 16 * 7 + 256 + 512);
 
 /// One grass tile to generate; mirrors `TileJob` in the shader.
 #[repr(C)]
@@ -84,7 +86,9 @@ pub struct TileJob {
     pub tile_x: u32,
     /// The tile's address at the grass level.
     pub tile_y: u32,
-    /// 0 = high LOD, 1 = low LOD (twice the spacing).
+    /// 0 = high LOD, 1 = low LOD (twice the spacing), 2 = the blades of a high-LOD tile within
+    /// the near radius (`GenerateParams::near`), which its LOD 0 job then leaves out: drawn with
+    /// the most segments.
     pub lod: u32,
     /// Pool slot (within its half) to write to.
     pub slot: u32,
@@ -159,6 +163,11 @@ pub struct TileBlades {
 /// which the grass types of two clumps mix.
 pub const CLUMP_BLEND_M: f32 = 0.4;
 
+/// The statistics' LOD of a job's: near blades (LOD 2) count as high LOD (0).
+pub fn stats_lod(lod: u32) -> usize {
+    usize::from(lod == 1)
+}
+
 pub(crate) fn rand01(h: u32) -> f32 {
     (h >> 8) as f32 * (1.0 / 16_777_216.0)
 }
@@ -215,8 +224,8 @@ pub fn generate_tile(
     let [fade_start, fade_end, _, _] = params.ranges;
     let capacity = params.limits[1];
     let type_count = params.limits[2].max(1);
-    let lod = job.lod.min(1) as usize;
-    let step = 1 + job.lod.min(1);
+    let lod = stats_lod(job.lod);
+    let step = 1 + lod as u32;
     let n = g.div_ceil(step);
     let clumps_per_tile = (tile_m / clump_m).round().max(1.0) as i32;
     let view_proj = Mat4::from_cols_array_2d(&params.view_proj);
@@ -244,7 +253,7 @@ pub fn generate_tile(
             ];
             let cell = [gx as f32, gy as f32];
             // Blades the low grid drops fade out before the ring switch.
-            let band = if job.lod == 0 && (gx % 2 == 1 || gy % 2 == 1) {
+            let band = if job.lod != 1 && (gx % 2 == 1 || gy % 2 == 1) {
                 [fade_start, fade_end]
             } else {
                 [0.0, 0.0]
@@ -257,7 +266,7 @@ pub fn generate_tile(
 
             // Infill: near the camera, the cell's quarters and sixteenths.
             let [q0, q1, h0_start, h1] = params.infill;
-            if job.lod != 0 || h1 <= 0.0 {
+            if job.lod == 1 || h1 <= 0.0 {
                 continue;
             }
             let centre = [
@@ -345,6 +354,13 @@ impl PlantContext<'_> {
         let [_, _, clump_m, short_m] = params.dims;
         let [_, _, dither_start, view_dist] = params.ranges;
         let capacity = params.limits[1];
+        // A high-LOD tile near the camera has two jobs: the near one takes its blades within
+        // the near radius, the other the rest.
+        let (hx, hy) = (job.origin[0] + local[0], job.origin[1] + local[1]);
+        let horizontal = (hx * hx + hy * hy).sqrt();
+        if job.lod != 1 && (horizontal < params.near[0]) != (job.lod == 2) {
+            return;
+        }
         stats[counter::CONSIDERED] += 1;
         let tp = [border + local[0] / job.cell, border + local[1] / job.cell];
         let s = sample(tile, tp, job.cell);

@@ -58,8 +58,12 @@ pub struct GrassSettings {
     pub short_m: f32,
     /// Seed of every per-blade hash.
     pub seed: u32,
-    /// Segments of a blade at high and at low LOD (7 and 3: 15 and 7 vertices).
-    pub segments: [u32; 2],
+    /// Segments of a blade near the camera (within [`Self::near_m`]), in the rest of the high
+    /// ring and in the low ring (7, 4 and 3: 15, 9 and 7 vertices).
+    pub segments: [u32; 3],
+    /// Horizontal radius of the near blades, metres: the high-LOD tiles it reaches get a second
+    /// job for their blades within it.
+    pub near_m: f32,
 }
 
 impl GrassSettings {
@@ -392,6 +396,7 @@ pub struct GrassRenderer {
     capacity: u32,
     generate: wgpu::ComputePipeline,
     finalize: wgpu::ComputePipeline,
+    draw_near: wgpu::RenderPipeline,
     draw_high: wgpu::RenderPipeline,
     draw_low: wgpu::RenderPipeline,
     params: GenerateParams,
@@ -497,11 +502,14 @@ impl GrassRenderer {
                 let (q, h) = (band(quarter), band(half));
                 [q[0], q[1], h[0], h[1]]
             },
+            near: [settings.near_m, 0.0, 0.0, 0.0],
             limits: [
                 hiz.mips(),
                 capacity,
                 manifest.grass_types.len().min(16) as u32,
-                settings.segments[0].clamp(1, 64) | (settings.segments[1].clamp(1, 64) << 16),
+                settings.segments[0].clamp(1, 64)
+                    | (settings.segments[1].clamp(1, 64) << 8)
+                    | (settings.segments[2].clamp(1, 64) << 16),
             ],
             hiz_levels: {
                 let mut t = [[0u32; 4]; 16];
@@ -722,14 +730,10 @@ impl GrassRenderer {
                 cache: None,
             })
         };
-        let draw_high = draw_pipeline(
-            "grass high LOD",
-            f64::from(settings.segments[0].clamp(1, 64)),
-        );
-        let draw_low = draw_pipeline(
-            "grass low LOD",
-            f64::from(settings.segments[1].clamp(1, 64)),
-        );
+        let segments = |k: usize| f64::from(settings.segments[k].clamp(1, 64));
+        let draw_near = draw_pipeline("grass near blades", segments(0));
+        let draw_high = draw_pipeline("grass high LOD", segments(1));
+        let draw_low = draw_pipeline("grass low LOD", segments(2));
 
         let array_view = |t: &wgpu::Texture| {
             t.create_view(&wgpu::TextureViewDescriptor {
@@ -824,6 +828,7 @@ impl GrassRenderer {
             capacity,
             generate,
             finalize,
+            draw_near,
             draw_high,
             draw_low,
             params,
@@ -970,7 +975,10 @@ impl GrassRenderer {
         let mut gpu_jobs: Vec<TileJob> = jobs.to_vec();
         for (i, j) in gpu_jobs.iter_mut().enumerate() {
             j.slot = (i as u32) % BATCH_TILES;
-            tiles[j.lod.min(1) as usize] += 1;
+            // A near job is the second of its tile's.
+            if j.lod != 2 {
+                tiles[crate::grass::generate::stats_lod(j.lod)] += 1;
+            }
         }
         queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&gpu_jobs));
         let n_batches = gpu_jobs.len().div_ceil(BATCH_TILES as usize);
@@ -1027,10 +1035,10 @@ impl GrassRenderer {
                 multiview_mask: None,
             });
             for (k, job) in chunk.iter().enumerate() {
-                pass.set_pipeline(if job.lod == 0 {
-                    &self.draw_high
-                } else {
-                    &self.draw_low
+                pass.set_pipeline(match job.lod {
+                    0 => &self.draw_high,
+                    2 => &self.draw_near,
+                    _ => &self.draw_low,
                 });
                 let slot_offset = (k as u64 * u64::from(self.capacity) * BLADE_BYTES) as u32;
                 pass.set_bind_group(0, &half.draw, &[slot_offset]);

@@ -81,12 +81,12 @@ pub struct LodSetting {
     pub view_distance_tiles: f64,
     /// Blade spacing of the high-LOD grid, metres.
     pub spacing_m: f32,
-    /// Blade segments at high and low LOD.
-    pub segments: [u32; 2],
+    /// Blade segments near the camera, in the rest of the high ring and in the low ring.
+    pub segments: [u32; 3],
 }
 
 impl LodSetting {
-    fn new(name: &str, high: f64, view: f64, spacing_m: f32, segments: [u32; 2]) -> Self {
+    fn new(name: &str, high: f64, view: f64, spacing_m: f32, segments: [u32; 3]) -> Self {
         Self {
             name: name.into(),
             high_radius_tiles: high,
@@ -129,9 +129,10 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         LodSetting::new("view x1.33", h, v * 4.0 / 3.0, s, seg),
         LodSetting::new("spacing x1.4", h, v, s * 1.4, seg),
         LodSetting::new("spacing x0.8", h, v, s * 0.8, seg),
-        LodSetting::new("segments 5/2", h, v, s, [5, 2]),
-        LodSetting::new("segments 3/1", h, v, s, [3, 1]),
-        LodSetting::new("no LOD", v, v, s, [seg[0], seg[0]]),
+        LodSetting::new("segments 7/7/3", h, v, s, [7, 7, 3]),
+        LodSetting::new("segments 5/3/2", h, v, s, [5, 3, 2]),
+        LodSetting::new("segments 3/2/1", h, v, s, [3, 2, 1]),
+        LodSetting::new("no LOD", v, v, s, [seg[0]; 3]),
     ]
 }
 
@@ -139,13 +140,7 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
 pub fn reference_setting(world: &World) -> LodSetting {
     let s = &lod_settings(world)[0];
     let v = s.view_distance_tiles * 4.0 / 3.0;
-    LodSetting::new(
-        "reference",
-        v,
-        v,
-        s.spacing_m,
-        [s.segments[0], s.segments[0]],
-    )
+    LodSetting::new("reference", v, v, s.spacing_m, [s.segments[0]; 3])
 }
 
 /// Result of one setting.
@@ -640,19 +635,20 @@ fn write_outputs(
     .write_png(&opts.out.join("dolly.png"), 900, 600)?;
 
     let mut csv = String::from(
-        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_high,segments_low,gpu_ms,gpu_q1_ms,gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_mean,blades_drawn,coverage,pareto\n",
+        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,segments_low,gpu_ms,gpu_q1_ms,gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_mean,blades_drawn,coverage,pareto\n",
     );
     for r in results {
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.0},{:.4},{}",
+            "{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.0},{:.4},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
             s.spacing_m,
             s.segments[0],
             s.segments[1],
+            s.segments[2],
             r.gpu.median_ms,
             r.gpu.q1_ms,
             r.gpu.q3_ms,

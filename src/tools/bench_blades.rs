@@ -369,7 +369,10 @@ pub fn run_bench_blades(
     }
 
     // Then the timings, in interleaved rounds: the grass frame, then its floor.
-    let segments = SceneConfig::for_world(&world).grass_segments;
+    // The floor per statistics LOD: the high ring's near blades have more segments than the
+    // rest of it; the floor counts them all at the rest's.
+    let [_, high, low] = SceneConfig::for_world(&world).grass_segments;
+    let segments = [high, low];
     let floor = FloorPass::new(&ctx, opts.size, segments);
     let mut frame_samples = vec![Vec::new(); spacings.len()];
     let mut generate_samples = vec![Vec::new(); spacings.len()];

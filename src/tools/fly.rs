@@ -54,6 +54,13 @@ pub struct FlyOptions {
     /// Radii of the grass infill near the camera, half and quarter spacing (None: the
     /// renderer's default).
     pub grass_infill_m: Option<[f32; 2]>,
+    /// Blade segments near the camera, in the rest of the high ring and in the low ring (None:
+    /// the renderer's default).
+    pub grass_segments: Option<[u32; 3]>,
+    /// Horizontal radius of the near blades, metres (None: the renderer's default).
+    pub grass_near_m: Option<f32>,
+    /// Terrain mesh step in samples (None: the renderer's default).
+    pub mesh_step: Option<u32>,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -131,6 +138,24 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
             bail!("--grass-infill-m radii must be between 0 and 100 m, not {half},{quarter}");
         }
         config.grass_infill_m = [half, quarter];
+    }
+    if let Some(seg) = opts.grass_segments {
+        if seg.iter().any(|s| !(1..=64).contains(s)) {
+            bail!("--grass-segments must be between 1 and 64 each, not {seg:?}");
+        }
+        config.grass_segments = seg;
+    }
+    if let Some(r) = opts.grass_near_m {
+        if !(0.0..=200.0).contains(&r) {
+            bail!("--grass-near-m must be between 0 and 200 m, not {r}");
+        }
+        config.grass_near_m = r;
+    }
+    if let Some(step) = opts.mesh_step {
+        if !step.is_power_of_two() || step > 16 {
+            bail!("--mesh-step must be a power of two up to 16, not {step}");
+        }
+        config.mesh_step = step;
     }
     let mut scene = Scene::with_source(&ctx, world, source, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
