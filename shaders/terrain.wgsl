@@ -80,10 +80,13 @@ fn vs_terrain(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) 
     return out;
 }
 
-// The G-buffer: x, y the atlas texel under the pixel, z its slot plus 65536 times the drawn
-// tile's level (both whole numbers, exact in f32), w metres per texel. Read back by
-// `gbuffer_decode` in shaders/terrain_shade.wgsl.
+// The G-buffer, two words: x the atlas texel under the pixel (x, y in 8.8 fixed point); y its
+// slot (12 bits), the drawn tile's level (5 bits) and metres per texel (a half float without
+// its sign, 15 bits). Read back by cs_shade in shaders/terrain_shade.wgsl.
 @fragment
-fn fs_gbuffer(in: VertexOut) -> @location(0) vec4<f32> {
-    return vec4<f32>(in.tex, f32(in.layer) + 65536.0 * max(in.level, 0.0), in.texel_m);
+fn fs_gbuffer(in: VertexOut) -> @location(0) vec2<u32> {
+    let t = vec2<u32>(clamp(round(in.tex * 256.0), vec2<f32>(0.0), vec2<f32>(65535.0)));
+    let level = u32(clamp(in.level, 0.0, 31.0));
+    let metres = pack2x16float(vec2<f32>(in.texel_m, 0.0)) & 0x7fffu;
+    return vec2<u32>(t.x | (t.y << 16u), (in.layer & 0xfffu) | (level << 12u) | (metres << 17u));
 }

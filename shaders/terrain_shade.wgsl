@@ -8,7 +8,7 @@
 #include "shared/terrain_shading.wgsl"
 
 @group(0) @binding(4) var depth: texture_depth_2d;
-@group(0) @binding(5) var gbuffer: texture_2d<f32>;
+@group(0) @binding(5) var gbuffer: texture_2d<u32>;
 @group(0) @binding(6) var shaded: texture_storage_2d<rgba16float, write>;
 
 @compute @workgroup_size(8, 8)
@@ -31,10 +31,12 @@ fn cs_shade(@builtin(global_invocation_id) id: vec3<u32>) {
     } else {
         let p = frame.inv_view_proj * vec4<f32>(ndc, d, 1.0);
         let rel = p.xyz / p.w;
-        let g = textureLoad(gbuffer, px, 0);
-        let level = floor(g.z / 65536.0);
-        let layer = u32(g.z - 65536.0 * level);
-        color = shade_terrain(rel, g.xy, layer, g.w, level);
+        let g = textureLoad(gbuffer, px, 0).xy;
+        let tex = vec2<f32>(f32(g.x & 0xffffu), f32(g.x >> 16u)) / 256.0;
+        let layer = g.y & 0xfffu;
+        let level = f32((g.y >> 12u) & 31u);
+        let texel_m = unpack2x16float(g.y >> 17u).x;
+        color = shade_terrain(rel, tex, layer, texel_m, level);
     }
     textureStore(shaded, px, vec4<f32>(color, 1.0));
 }

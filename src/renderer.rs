@@ -457,11 +457,15 @@ impl Renderer {
         let pyramid = world.manifest.pyramid.clone();
         let [nx, ny] = pyramid.tiles_at(0);
         let slots = config.service.atlas_slots;
-        if slots > limits.max_texture_array_layers || slots <= nx * ny {
+        // The terrain's G-buffer names a slot in 12 bits.
+        let most = limits
+            .max_texture_array_layers
+            .min(crate::terrain::GBUFFER_MAX_SLOTS);
+        if slots > most || slots <= nx * ny {
             return Err(RendererError::AtlasSlots {
                 slots,
                 roots: nx * ny,
-                limit: limits.max_texture_array_layers,
+                limit: most,
             });
         }
         let tile_bytes = crate::world::TileData::byte_size_for(pyramid.samples_per_side());

@@ -27,9 +27,13 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// How many grass types the shader's colour table holds.
 pub const MAX_GRASS_TYPES: usize = 16;
 
-/// Format of the G-buffer: per pixel the atlas texel (x, y), the slot plus 65536 times the
-/// drawn tile's level, and metres per texel (see `fs_gbuffer` in `shaders/terrain.wgsl`).
-pub const GBUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+/// Format of the G-buffer: per pixel the atlas texel (x, y, 8.8 fixed point), the slot, the
+/// drawn tile's level and metres per texel (half float), packed into two words (see
+/// `fs_gbuffer` in `shaders/terrain.wgsl`). Eight bytes a pixel, not sixteen: on GPUs whose
+/// raster units are few, the G-buffer's bytes are much of the terrain pass's time.
+pub const GBUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
+/// Atlas slots the G-buffer can name (12 bits).
+pub const GBUFFER_MAX_SLOTS: u32 = 4096;
 /// Format of the shaded colour (linear) that the composite pass copies into the colour target.
 pub const SHADED_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
@@ -383,7 +387,11 @@ impl TerrainRenderer {
                     wgpu::TextureSampleType::Depth,
                     wgpu::TextureViewDimension::D2,
                 ),
-                compute_tex(5, float, wgpu::TextureViewDimension::D2),
+                compute_tex(
+                    5,
+                    wgpu::TextureSampleType::Uint,
+                    wgpu::TextureViewDimension::D2,
+                ),
                 wgpu::BindGroupLayoutEntry {
                     binding: 6,
                     visibility: wgpu::ShaderStages::COMPUTE,
