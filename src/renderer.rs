@@ -215,7 +215,7 @@ impl RendererConfig {
             grass_spacing_m: 0.25,
             grass_width_scale: 1.0,
             grass_infill_m: DEFAULT_INFILL_M,
-            grass_segments: [7, 4, 3],
+            grass_segments: [5, 3, 3],
             grass_near_m: 12.0,
             wind_scene: None,
             wind_keys: Vec::new(),

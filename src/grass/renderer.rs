@@ -59,7 +59,7 @@ pub struct GrassSettings {
     /// Seed of every per-blade hash.
     pub seed: u32,
     /// Segments of a blade near the camera (within [`Self::near_m`]), in the rest of the high
-    /// ring and in the low ring (7, 4 and 3: 15, 9 and 7 vertices).
+    /// ring and in the low ring (by default 5, 3 and 3: 11, 7 and 7 vertices).
     pub segments: [u32; 3],
     /// Horizontal radius of the near blades, metres: the high-LOD tiles it reaches get a second
     /// job for their blades within it.
