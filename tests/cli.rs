@@ -568,6 +568,8 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
         .collect();
     assert_eq!(rows.len(), 2, "{csv}");
     let n = |r: &Vec<&str>, c: &str| -> f64 { r[col(c)].parse().unwrap() };
+    let world = verdant::world::World::open(&common::default_world()).unwrap();
+    let [_, high, low] = verdant::tools::SceneConfig::for_world(&world).grass_segments;
     for r in &rows {
         let drawn = n(r, "drawn_high") + n(r, "drawn_low");
         assert!(drawn > 0.0, "{csv}");
@@ -577,10 +579,12 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
             drawn,
             "{csv}"
         );
-        // 15-vertex strips near, 7 far, and the floor draws exactly as many.
+        // Strips of the high and the low ring's segments (the camera stands outside the field,
+        // beyond the near blades' radius), and the floor draws exactly as many.
         assert_eq!(
             n(r, "vertices"),
-            15.0 * n(r, "drawn_high") + 7.0 * n(r, "drawn_low"),
+            f64::from(2 * high + 1) * n(r, "drawn_high")
+                + f64::from(2 * low + 1) * n(r, "drawn_low"),
             "{csv}"
         );
         assert_eq!(n(r, "floor_vertices"), n(r, "vertices"), "{csv}");
