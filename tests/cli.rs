@@ -191,6 +191,65 @@ fn bake_writes_a_world_that_flies() {
     assert!(tmp.path().join("fly/frame_00001.png").is_file());
 }
 
+/// The frames of `fly --frames 6 --path PATH` on the default world, from its report.
+fn six_frames(path: &str) -> Vec<serde_json::Value> {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = verdant(
+        &[
+            "fly",
+            common::default_world().to_str().unwrap(),
+            "--path",
+            path,
+            "--frames",
+            "6",
+            "--size",
+            "96x54",
+            "--out",
+            "fly",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        out.status.success(),
+        "fly failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("fly/report.json")).unwrap())
+            .unwrap();
+    report["frames"].as_array().unwrap().clone()
+}
+
+#[test]
+fn six_widely_spaced_frames_are_each_at_full_detail_and_the_meadow_has_blades() {
+    // The tour's frames are 10 s of flight apart: each waits for its own tiles, so none is
+    // drawn from an ancestor standing in for a tile.
+    let tour = six_frames("tour");
+    assert_eq!(tour.len(), 6);
+    for f in &tour {
+        let r = &f["residency"];
+        assert_eq!(r["from_ancestor"], 0, "frame {}: {r}", f["index"]);
+        assert_eq!(r["resident"], r["desired"], "frame {}: {r}", f["index"]);
+        assert_eq!(f["tiles_missing_after_wait"], 0, "frame {}", f["index"]);
+    }
+    // Every frame of the meadow path draws blades.
+    let meadow = six_frames("meadow");
+    assert_eq!(meadow.len(), 6);
+    for f in &meadow {
+        let drawn: u64 = f["grass"]["drawn"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|d| d.as_u64().unwrap())
+            .sum();
+        assert!(
+            drawn > 0,
+            "frame {} of the meadow has no blades",
+            f["index"]
+        );
+    }
+}
+
 #[test]
 fn a_short_soak_holds_its_ceilings_and_its_memory() {
     let _serial = SOAKS.lock().unwrap_or_else(|e| e.into_inner());
