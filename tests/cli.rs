@@ -551,6 +551,12 @@ fn bench_lod_writes_its_tables_and_charts() {
     let coverage = value("default", "coverage");
     assert!(coverage > 0.0 && coverage <= 1.0, "{settings}");
     assert!(value("spacing x0.8", "coverage") > coverage, "{settings}");
+    // The infill near the camera is what covers the ground between the blades there.
+    assert!(value("infill off", "coverage") < coverage, "{settings}");
+    assert!(
+        value("infill x1.2", "coverage") >= value("infill x0.8", "coverage"),
+        "{settings}"
+    );
     for r in &rows {
         let (q1, m, q3) = (
             r[col("gpu_q1_ms")].parse::<f64>().unwrap(),
@@ -579,7 +585,12 @@ fn bench_lod_writes_its_tables_and_charts() {
             assert!(v.is_finite() && (0.0..=1.0).contains(&v), "{band}");
         }
     }
-    for f in ["dolly.png", "lod_settings.png", "bench_lod.json"] {
+    for f in [
+        "dolly.png",
+        "lod_settings.png",
+        "lod_coverage.png",
+        "bench_lod.json",
+    ] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
 }

@@ -83,6 +83,8 @@ pub struct LodSetting {
     pub spacing_m: f32,
     /// Blade segments near the camera, in the rest of the high ring and in the low ring.
     pub segments: [u32; 3],
+    /// Radii of the grass infill near the camera, metres (half and quarter spacing).
+    pub infill_m: [f32; 2],
 }
 
 impl LodSetting {
@@ -93,7 +95,14 @@ impl LodSetting {
             view_distance_tiles: view,
             spacing_m,
             segments,
+            infill_m: crate::renderer::DEFAULT_INFILL_M,
         }
+    }
+
+    /// The same setting with the infill radii `infill_m`.
+    fn with_infill(mut self, infill_m: [f32; 2]) -> Self {
+        self.infill_m = infill_m;
+        self
     }
 
     /// The scene configuration of this setting for `world`.
@@ -108,6 +117,7 @@ impl LodSetting {
         });
         c.grass_spacing_m = self.spacing_m;
         c.grass_segments = self.segments;
+        c.grass_infill_m = self.infill_m;
         c
     }
 }
@@ -120,7 +130,7 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         .unwrap_or_else(|| RingSettings::for_pyramid(&world.manifest.pyramid));
     let size = world.manifest.pyramid.tile_size_m(rings.level);
     let (h, v) = (rings.high_radius_m / size, rings.low_radius_m / size);
-    let (s, seg) = (d.grass_spacing_m, d.grass_segments);
+    let (s, seg, infill) = (d.grass_spacing_m, d.grass_segments, d.grass_infill_m);
     vec![
         LodSetting::new("default", h, v, s, seg),
         LodSetting::new("near ring x0.5", h * 0.5, v, s, seg),
@@ -132,6 +142,9 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         LodSetting::new("segments 7/7/3", h, v, s, [7, 7, 3]),
         LodSetting::new("segments 5/3/2", h, v, s, [5, 3, 2]),
         LodSetting::new("segments 3/2/1", h, v, s, [3, 2, 1]),
+        LodSetting::new("infill off", h, v, s, seg).with_infill([0.0; 2]),
+        LodSetting::new("infill x0.8", h, v, s, seg).with_infill(infill.map(|r| 0.8 * r)),
+        LodSetting::new("infill x1.2", h, v, s, seg).with_infill(infill.map(|r| 1.2 * r)),
         LodSetting::new("no LOD", v, v, s, [seg[0]; 3]),
     ]
 }
@@ -292,7 +305,7 @@ impl Bench<'_> {
 }
 
 /// Runs the benchmark and writes `bench_lod.json`, `dolly.csv`, `dolly.png`, `lod_settings.csv`,
-/// `lod_settings.png` and `far_band.csv` into `opts.out`.
+/// `lod_settings.png`, `lod_coverage.png` and `far_band.csv` into `opts.out`.
 pub fn run_bench_lod(
     opts: &BenchLodOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
@@ -635,13 +648,13 @@ fn write_outputs(
     .write_png(&opts.out.join("dolly.png"), 900, 600)?;
 
     let mut csv = String::from(
-        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,segments_low,gpu_ms,gpu_q1_ms,gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_mean,blades_drawn,coverage,pareto\n",
+        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,segments_low,infill_half_m,infill_quarter_m,gpu_ms,gpu_q1_ms,gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_mean,blades_drawn,coverage,pareto\n",
     );
     for r in results {
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.0},{:.4},{}",
+            "{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.0},{:.4},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -649,6 +662,8 @@ fn write_outputs(
             s.segments[0],
             s.segments[1],
             s.segments[2],
+            s.infill_m[0],
+            s.infill_m[1],
             r.gpu.median_ms,
             r.gpu.q1_ms,
             r.gpu.q3_ms,
@@ -693,6 +708,33 @@ fn write_outputs(
             .collect(),
     }
     .write_png(&opts.out.join("lod_settings.png"), 900, 600)?;
+    // Coverage against cost: the ground a view of the near meadow leaves bare, so that lower
+    // is better on both axes, as on the chart above.
+    Chart {
+        title: "Grass LOD settings: ground left bare against speed".into(),
+        x_label: if gpu {
+            "GPU time per frame (ms)".into()
+        } else {
+            "frame time (ms)".into()
+        },
+        y_label: "1 - grass coverage within 30 m".into(),
+        log_x: true,
+        log_y: false,
+        points: results
+            .iter()
+            .map(|r| ChartPoint {
+                label: r.setting.name.clone(),
+                x: if gpu {
+                    r.gpu.median_ms
+                } else {
+                    r.frame.median_ms
+                },
+                y: 1.0 - r.coverage,
+                chosen: r.setting.name == "default",
+            })
+            .collect(),
+    }
+    .write_png(&opts.out.join("lod_coverage.png"), 900, 600)?;
     Ok(())
 }
 
