@@ -979,15 +979,15 @@ impl Renderer {
     ///
     /// 1. child tiles derived from their parents (compute, `derive_child.wgsl`);
     /// 2. the wind field and the sway springs (compute, `wind_field.wgsl`, `grass_sway.wgsl`);
-    /// 3. the terrain's depth pre-pass (`terrain.wgsl`);
+    /// 3. the terrain's G-buffer pass (`terrain.wgsl`): its depth, and per pixel where in the
+    ///    atlas its ground is;
     /// 4. the Hi-Z pyramid from that depth (compute, `hiz_build.wgsl`);
-    /// 5. the terrain's colour and the sky, deferred: the terrain's G-buffer pass over that depth
-    ///    (`terrain.wgsl`: where in the atlas each pixel's ground is), then every pixel's
-    ///    shading, terrain and sky, with the terrain's shadows (compute, `terrain_shade.wgsl`),
-    ///    then its composite into the colour target (`composite.wgsl`);
-    /// 6. grass in batches of 4 tiles: generation and culling, then the wind on each blade
-    ///    (compute, `grass_generate.wgsl`, `grass_wind.wgsl`), then one indirect draw per tile
-    ///    (`grass_draw.wgsl`);
+    /// 5. the terrain's colour and the sky, deferred: every pixel's shading, terrain and sky,
+    ///    with the terrain's shadows (compute, `terrain_shade.wgsl`), then its composite into
+    ///    the colour target (`composite.wgsl`);
+    /// 6. grass in batches of 4 jobs (a tile, or a near tile's blades within the near radius):
+    ///    generation and culling, then the wind on each blade (compute, `grass_generate.wgsl`,
+    ///    `grass_wind.wgsl`), then one indirect draw per job (`grass_draw.wgsl`);
     /// 7. contact shadows, with the `shadows` feature: each pixel's factor, less than 1 where a
     ///    short ray toward the sun is blocked in the depth buffer (compute), then the colour
     ///    multiplied by it (a full-screen pass; both `contact_shadow.wgsl`);

@@ -292,7 +292,13 @@ fn server_faults_are_counted_once_and_leave_no_hole() {
             _ => Reply::File,
         },
     );
-    let (world, source) = HttpSource::open(&server.url, quick_options()).unwrap();
+    // A deadline long enough that no healthy request misses it while the tests beside this
+    // one keep both cores busy rendering: only the stall may run into it.
+    let options = HttpOptions {
+        timeout: Duration::from_secs(4),
+        ..quick_options()
+    };
+    let (world, source) = HttpSource::open(&server.url, options).unwrap();
     let source = Arc::new(source);
     let pyramid = world.manifest.pyramid.clone();
     let (mut service, _) =
