@@ -119,18 +119,25 @@ fn the_far_field_continues_the_blades_at_the_ring_and_matches_its_cpu_mirror() {
             srgb_to_linear(px[2]),
         );
         let (fog, fog_color, dist) = fog_at(p);
+        // The grass's fade goes by the distance plus the height the camera stands above.
+        let faded_at = f64::from(far_field::far_distance(
+            dist,
+            (camera.position.z - p.z) as f32,
+        ));
         let dist = f64::from(dist);
         // Blades at full density just before their fade; the far field past its end, where
         // the last blades (0.7 m at most, seen from 6 m) no longer stand in front of it.
-        if (fade_start - 25.0..fade_start).contains(&dist) {
+        if (fade_start - 25.0..fade_start).contains(&faded_at) {
             blades.push(gpu);
-        } else if (view + 25.0..view + 80.0).contains(&dist) {
+        } else if (view + 25.0..view + 80.0).contains(&faded_at) {
             far_gpu.push(gpu);
             let xy = DVec2::new(p.x, p.y);
             let world_mod = DVec2::new(xy.x.rem_euclid(4096.0), xy.y.rem_euclid(4096.0));
-            let albedo = blade
-                * far_field::clump_tint(xy, settings.clump_m, settings.seed)
-                * far_field::color_variation(world_mod.as_vec2());
+            let clump = Vec3::ONE.lerp(
+                far_field::clump_tint(xy, settings.clump_m, settings.seed),
+                far_field::clump_visibility(dist as f32, settings.clump_m),
+            );
+            let albedo = blade * clump * far_field::color_variation(world_mod.as_vec2());
             let lit = far_field::light_far_grass(albedo, Vec3::Z, far_field::FAR_T, 1.0, &light);
             far_cpu.push(lit.lerp(fog_color, fog));
         }

@@ -70,6 +70,8 @@ fn fog_color(view_dir: vec3<f32>) -> vec3<f32> {
 // ---- Terrain shading, per pixel (CPU mirror of the far field: src/terrain/far_field.rs) ----
 
 const ROCK: vec3<f32> = vec3<f32>(0.25, 0.23, 0.20);
+// How much of the clump's tint the ground under grass takes.
+const GROUND_TINT: f32 = 0.8;
 const SOIL: vec3<f32> = vec3<f32>(0.33, 0.27, 0.19);
 
 fn rand01(h: u32) -> f32 {
@@ -163,9 +165,6 @@ fn color_variation(rel_xy: vec2<f32>) -> vec3<f32> {
 // specular highlights on average (SHEEN of the sun, when specular is on).
 const CANOPY_SHADE: f32 = 0.75;
 const SHEEN: f32 = 0.005;
-// Under the blades: how much of the ground the far field's grass covers (for the grass that
-// the blades drawn leave out between them).
-const UNDER_FILL: f32 = 0.6;
 
 fn far_grass_light(albedo: vec3<f32>, n: vec3<f32>, t: f32, sun_vis: f32) -> vec3<f32> {
     let sun = frame.sun_dir.xyz;
@@ -363,6 +362,20 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
     cover *= (1.0 - rock_w) * (1.0 - 0.5 * soil_w);
     ground *= 1.0 + detail;
 
+    // The clump's tint (mean 1), faded out as its cells shrink below a few pixels (no sparkle
+    // far away), and the blades' colour variation: on the far field's grass and, under grass,
+    // on the ground between the blades, so that a meadow seen from above is mottled by its
+    // clumps as its blades are.
+    var tint = vec3<f32>(1.0);
+    if (frame.grid.w & FAR_FIELD) != 0u && cover > 0.0 {
+        let clump_vis = clamp(bitcast<f32>(frame.clump.w) / footprint - 1.0, 0.0, 1.0);
+        if clump_vis > 0.0 {
+            tint = mix(vec3<f32>(1.0), clump_tint(rel.xy), clump_vis);
+        }
+        tint *= color_variation(rel.xy);
+        ground *= mix(vec3<f32>(1.0), tint, GROUND_TINT * (1.0 - rock_w));
+    }
+
     // Terrain shadows, from the surface of the heights under the pixel (the rays march over
     // the same heights).
     var sun_vis = 1.0;
@@ -372,30 +385,22 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
     }
     let sun = frame.sun_dir.xyz;
     let lambert = max(dot(n, sun), 0.0) * sun_vis;
-    // Hemisphere ambient: sky from above, warm bounce from the ground below.
+    // Hemisphere ambient: the sky from above (its zenith and horizon averaged, as the dome a
+    // point of ground sees), warm bounce from the ground below.
     let bounce = vec3<f32>(0.20, 0.17, 0.12);
-    let ambient = mix(bounce, frame.sky_color.rgb, 0.5 + 0.5 * n.z);
+    let dome = mix(frame.sky_color.rgb, frame.horizon_color.rgb, 0.5);
+    let ambient = mix(bounce, dome, 0.5 + 0.5 * n.z);
     var lit = ground * (frame.sun_color.rgb * lambert + 0.45 * ambient);
 
-    // The far field: beyond the grass's view distance the terrain shows what the blades would,
-    // faded in from twice the width of the band where the blades thin out before it. Nearer,
-    // the ground under the blades is partly covered by the far field's grass (the grass that
-    // the blades drawn leave out), so that the gaps between blades read as grass.
+    // The far field: the terrain shows what the blades would, under the blades drawn as beyond
+    // them, so that the gaps between near blades read as grass and the blades' end, where
+    // they thin out before the view distance, shows nothing new.
     if (frame.grid.w & FAR_FIELD) != 0u && cover > 0.0 {
-        var w = 1.0;
-        if frame.grass_view.w > 0.0 {
-            let band = frame.grass_view.w - frame.grass_view.z;
-            w = clamp((dist - (frame.grass_view.z - 2.0 * band)) / (3.0 * band), 0.0, 1.0);
-        }
         let up = vec3<f32>(0.0, 0.0, 1.0);
         let growth = normalize(up + (n_terrain - up) * growth_blend);
-        var tint = vec3<f32>(1.0);
-        if w > 0.0 {
-            tint = clump_tint(rel.xy) * color_variation(rel.xy);
-        }
         let albedo = grass_col * tint * (1.0 + 0.5 * detail);
         let grass_lit = far_grass_light(albedo, growth, t_far, sun_vis);
-        lit = mix(lit, grass_lit, min(cover, 1.0) * mix(UNDER_FILL, 1.0, w));
+        lit = mix(lit, grass_lit, min(cover, 1.0));
     }
 
     // Clear near the camera, 95% fog at the manifest's fog distance.

@@ -433,7 +433,9 @@ impl PlantContext<'_> {
         if band[1] > 0.0 {
             fade = ((band[1] - dist) / (band[1] - band[0])).clamp(0.0, 1.0);
         }
-        let far = ((view_dist - dist) / (view_dist - dither_start)).clamp(0.0, 1.0);
+        // Seen from above, far blades are specks the far field shows better.
+        let far_dist = crate::terrain::far_field::far_distance(dist, (-pos.z).max(0.0));
+        let far = ((view_dist - far_dist) / (view_dist - dither_start)).clamp(0.0, 1.0);
         if fade <= 0.0 || rand01(hash_u32(h0 ^ 11)) >= far {
             stats[counter::DISTANCE] += 1;
             return;

@@ -1,10 +1,12 @@
-//! CPU mirror of the far field (`shaders/terrain.wgsl`): beyond the grass's view distance the
-//! terrain is shaded with what the blades would show there, in the way Ghost of Tsushima
-//! carries its grass to the horizon: the grass type's blade colour at a representative height
-//! along the blade, the Voronoi clump's tint and the colour variation that the blades get,
-//! lit as a far blade is lit (its normal turned to its growth direction), over the ground in
-//! proportion to the density. It is faded in over the band where the blades thin out (the
-//! dithered fade before the view distance), so that no line shows where the blades end.
+//! CPU mirror of the far field (`shaders/shared/terrain_shading.wgsl`): the terrain under grass
+//! is shaded with what the blades would show there, in the way Ghost of Tsushima carries its
+//! grass to the horizon: the grass type's blade colour at a representative height along the
+//! blade, the Voronoi clump's tint (faded out where its cells shrink below a few pixels) and
+//! the colour variation that the blades get, lit as a far blade is lit (its normal turned to
+//! its growth direction), over the ground in proportion to what the grass hides from that
+//! view. It lies under the blades drawn as beyond them, so that nothing new shows where the
+//! blades thin out before the view distance; seen from above, where blades are specks, the
+//! blades thin out sooner ([`far_distance`]).
 
 use glam::{DVec2, Vec2, Vec3};
 
@@ -31,16 +33,24 @@ pub fn cover(d: f32, sin_e: f32) -> f32 {
     1.0 - (-COVER_TAU * d / sin_e.max(0.02)).exp()
 }
 
-/// Weight of the far field at `dist` metres from the camera, where the grass's dithered fade
-/// runs from `fade_start` to `view_distance`: 0 up to twice the fade's width before it, rising
-/// to 1 at the view distance, so that the far field is in place under the last blades. Without
-/// grass (`view_distance` 0) it is 1 everywhere.
-pub fn weight(dist: f32, fade_start: f32, view_distance: f32) -> f32 {
-    if view_distance <= 0.0 {
-        return 1.0;
-    }
-    let band = view_distance - fade_start;
-    ((dist - (fade_start - 2.0 * band)) / (3.0 * band)).clamp(0.0, 1.0)
+/// Metres of distance toward the grass's view-distance fade per metre the camera stands above
+/// a blade: seen from above, far blades are sub-pixel specks that the far field shows better,
+/// so from 50 m up none are drawn.
+pub const ELEVATION_DISTANCE: f32 = 3.0;
+
+/// The distance that the grass's fade at the view distance goes by, for a point `dist`
+/// metres from the camera and `below_m` metres below it: `dist` plus [`ELEVATION_DISTANCE`]
+/// times `below_m`.
+pub fn far_distance(dist: f32, below_m: f32) -> f32 {
+    dist + ELEVATION_DISTANCE * below_m.max(0.0)
+}
+
+/// How much of the clump tint shows at `dist` metres from the camera, for clump cells of
+/// `clump_m`: all of it while a cell spans at least two pixel footprints (0.004 of the
+/// distance), none once it spans one, so that far clumps do not sparkle. The tint fades toward
+/// its mean (1).
+pub fn clump_visibility(dist: f32, clump_m: f32) -> f32 {
+    (clump_m / (0.004 * dist + 1e-3) - 1.0).clamp(0.0, 1.0)
 }
 
 /// The tint (mean 1) of the Voronoi clump around `world` (metres), with clump cells of
@@ -149,11 +159,11 @@ mod tests {
     }
 
     #[test]
-    fn the_far_field_fades_in_over_the_blades_fade_and_is_everywhere_without_grass() {
-        assert_eq!(weight(50.0, 120.0, 150.0), 0.0);
-        assert_eq!(weight(105.0, 120.0, 150.0), 0.5);
-        assert_eq!(weight(400.0, 120.0, 150.0), 1.0);
-        assert_eq!(weight(1.0, 0.0, 0.0), 1.0);
+    fn the_grass_fade_goes_by_distance_plus_the_height_below_the_camera() {
+        assert_eq!(far_distance(100.0, 0.0), 100.0);
+        assert_eq!(far_distance(100.0, 10.0), 100.0 + 10.0 * ELEVATION_DISTANCE);
+        // A point above the camera is not nearer than it is.
+        assert_eq!(far_distance(100.0, -10.0), 100.0);
     }
 
     #[test]
