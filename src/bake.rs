@@ -1220,44 +1220,6 @@ fn wind_tour_paths(painted: &Painted, extent: [f64; 2]) -> (CameraPath, CameraPa
     (tour, walker)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn nice_cell_sizes() {
-        assert_eq!(nice_cell_size(24.585), 25.0);
-        assert_eq!(nice_cell_size(30.888), 25.0);
-        assert_eq!(nice_cell_size(10.2), 10.0);
-        assert_eq!(nice_cell_size(0.95), 1.0);
-        assert_eq!(nice_cell_size(4.4), 5.0);
-    }
-
-    #[test]
-    fn steep_ground_is_bare() {
-        for slope in [36.0, 45.0, 80.0] {
-            for k in 0..50 {
-                let p = DVec2::new(k as f64 * 37.0, k as f64 * 91.0);
-                assert_eq!(paint_sample(slope, 0.3, p, 7), (0, 0));
-            }
-        }
-    }
-
-    #[test]
-    fn noise_is_deterministic_and_bounded() {
-        for k in 0..1000 {
-            let p = DVec2::new(k as f64 * 0.37 - 100.0, k as f64 * 0.11);
-            let v = fbm(p, 3, 3);
-            assert!((0.0..=1.0).contains(&v));
-            assert_eq!(v, fbm(p, 3, 3));
-        }
-        assert_ne!(
-            fbm(DVec2::new(0.5, 0.5), 1, 3),
-            fbm(DVec2::new(0.5, 0.5), 2, 3)
-        );
-    }
-}
-
 /// Refuses bake options out of range before anything is read, naming the option.
 fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
     let t = opts.tile_cells;
@@ -1468,5 +1430,43 @@ impl Drop for Staging {
         if !self.published {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nice_cell_sizes() {
+        assert_eq!(nice_cell_size(24.585), 25.0);
+        assert_eq!(nice_cell_size(30.888), 25.0);
+        assert_eq!(nice_cell_size(10.2), 10.0);
+        assert_eq!(nice_cell_size(0.95), 1.0);
+        assert_eq!(nice_cell_size(4.4), 5.0);
+    }
+
+    #[test]
+    fn steep_ground_is_bare() {
+        for slope in [36.0, 45.0, 80.0] {
+            for k in 0..50 {
+                let p = DVec2::new(k as f64 * 37.0, k as f64 * 91.0);
+                assert_eq!(paint_sample(slope, 0.3, p, 7), (0, 0));
+            }
+        }
+    }
+
+    #[test]
+    fn noise_is_deterministic_and_bounded() {
+        for k in 0..1000 {
+            let p = DVec2::new(k as f64 * 0.37 - 100.0, k as f64 * 0.11);
+            let v = fbm(p, 3, 3);
+            assert!((0.0..=1.0).contains(&v));
+            assert_eq!(v, fbm(p, 3, 3));
+        }
+        assert_ne!(
+            fbm(DVec2::new(0.5, 0.5), 1, 3),
+            fbm(DVec2::new(0.5, 0.5), 2, 3)
+        );
     }
 }

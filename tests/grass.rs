@@ -441,7 +441,7 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
     // Its two jobs split its blades: together they are the blades of one job with no near
     // radius, each once.
     assert!(!flat[1].blades.is_empty(), "no near blades");
-    let mut whole = rig.grass.params().clone();
+    let mut whole = *rig.grass.params();
     whole.near = [0.0; 4];
     let all = generate_tile(&whole, &jobs[0], &tiles[0], &hiz);
     let mut split: Vec<_> = flat.iter().flat_map(|b| b.blades.iter().map(key)).collect();
@@ -833,7 +833,7 @@ fn an_overflow_leaves_the_neighbouring_slots_blades_intact() {
     let mut sparse = synthetic_tile(&rig.manifest, TileId::new(level, 1001, 2000), "flat");
     let size = sparse.size as usize;
     for (k, d) in sparse.density.iter_mut().enumerate() {
-        if (k / size) % 8 != 0 {
+        if !(k / size).is_multiple_of(8) {
             *d = 0;
         }
     }
@@ -899,7 +899,9 @@ fn more_jobs_than_the_job_buffer_holds_are_cut_at_its_size() {
 fn a_pool_larger_than_the_device_binds_is_clamped_and_still_draws() {
     let mut rig = Rig::new(Some(u32::MAX / 4));
     let limits = rig.ctx.device.limits();
-    let bind = u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+    let bind = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
     let blade = std::mem::size_of::<verdant::grass::Blade>() as u64;
     let capacity = u64::from(rig.grass.capacity());
     assert!(

@@ -348,7 +348,7 @@ fn server_faults_are_counted_once_and_leave_no_hole() {
     // Those three retries at least: a connection that this test server drops under load is a
     // transient failure too, and is retried like one.
     let retries = source.stats().retries;
-    assert!(retries >= 1 + 2, "{retries} retries");
+    assert!(retries > 2, "{retries} retries");
 }
 
 /// The same faults on tiles all over the world, on the GPU: every frame draws without a hole

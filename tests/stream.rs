@@ -147,7 +147,7 @@ fn cache_never_passes_its_ceiling() {
     // Least recently used goes first: the last three stay.
     assert!(cache.get(TileId::new(2, 9, 0)).is_some());
     assert!(cache.get(TileId::new(2, 6, 0)).is_none());
-    assert_eq!((s.peak_bytes <= cache.ceiling_bytes()), true);
+    assert!(s.peak_bytes <= cache.ceiling_bytes());
 }
 
 /// Runs the frame side of the tile service for a scripted camera that jumps across the world,

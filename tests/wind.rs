@@ -190,19 +190,18 @@ fn lookup_snippet_matches_its_mirror_and_the_toroidal_layout() {
         let r = (k as f32 * 0.29) % 45.0;
         probes.push(Vec2::new(a.cos() * r, a.sin() * r));
     }
-    let source = format!(
-        "#include \"shared/wind_lookup.wgsl\"
+    let source = "#include \"shared/wind_lookup.wgsl\"
 @group(0) @binding(0) var<uniform> wind_lookup: WindLookup;
 @group(0) @binding(1) var<storage, read> wind_cells: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> probes: array<vec2<f32>>;
 @group(0) @binding(3) var<storage, read_write> results: array<vec4<f32>>;
 @compute @workgroup_size(64)
-fn probe(@builtin(global_invocation_id) gid: vec3<u32>) {{
-    if gid.x < arrayLength(&probes) {{
+fn probe(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x < arrayLength(&probes) {
         results[gid.x] = wind_at(probes[gid.x]);
-    }}
-}}"
-    );
+    }
+}"
+    .to_string();
     use wgpu::util::DeviceExt;
     let module = ctx
         .device

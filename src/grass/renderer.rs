@@ -439,8 +439,9 @@ impl GrassRenderer {
         // ask for more than the device binds. Its densest tiles then overflow, clamped and
         // counted, instead of the pool failing.
         let limits = device.limits();
-        let bind_limit =
-            u64::from(limits.max_storage_buffer_binding_size).min(limits.max_buffer_size);
+        let bind_limit = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
         let most = (bind_limit / (u64::from(BATCH_TILES) * BLADE_BYTES)) as u32 / 16 * 16;
         if capacity > most {
             log::warn!(

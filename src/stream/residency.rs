@@ -127,7 +127,7 @@ impl TileService {
             for x in 0..nx {
                 let id = TileId::new(0, x, y);
                 let tile = Arc::new(source.load(id)?);
-                let index = (y * nx + x) as u32;
+                let index = y * nx + x;
                 let (min_h, max_h) = height_range(&tile);
                 slots[index as usize] = Some(id);
                 resident.insert(

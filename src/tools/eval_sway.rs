@@ -97,7 +97,7 @@ pub fn bounded_for(
     while t < f64::from(seconds) {
         i += 1;
         let h = match hitch_every {
-            Some((n, hitch)) if n > 0 && i % n == 0 => hitch,
+            Some((n, hitch)) if n > 0 && i.is_multiple_of(n) => hitch,
             _ => dt,
         };
         s = integrator.step(spring, s, target_at(spring, t) as f32, h);

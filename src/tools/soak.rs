@@ -411,10 +411,10 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         pos += heading * opts.speed_mps * opts.dt_s;
         let agl = 60.0 + 40.0 * (t * 0.3).sin();
         let eye = DVec3::new(pos.x, pos.y, ground.height(pos) + agl);
-        if let Some(tp) = current_teleport.as_mut() {
-            if tp.frame == frame {
-                tp.to_m[2] = eye.z;
-            }
+        if let Some(tp) = current_teleport.as_mut()
+            && tp.frame == frame
+        {
+            tp.to_m[2] = eye.z;
         }
         let camera = Camera::new(eye, yaw, -12.0);
 
@@ -453,11 +453,12 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
                 r.holes
             ));
         }
-        if let Some(tp) = current_teleport.as_mut() {
-            if tp.frames_to_full_detail.is_none() && r.resident == r.desired {
-                tp.frames_to_full_detail = Some(frame - tp.frame);
-                tp.seconds_to_full_detail = Some(teleport_start.1.elapsed().as_secs_f64());
-            }
+        if let Some(tp) = current_teleport.as_mut()
+            && tp.frames_to_full_detail.is_none()
+            && r.resident == r.desired
+        {
+            tp.frames_to_full_detail = Some(frame - tp.frame);
+            tp.seconds_to_full_detail = Some(teleport_start.1.elapsed().as_secs_f64());
         }
         let rss = resident_bytes();
         rss_peak = rss_peak.max(rss);

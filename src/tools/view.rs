@@ -293,16 +293,14 @@ impl ApplicationHandler for Viewer {
         let Some(s) = &mut self.state else { return };
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
-            WindowEvent::Resized(size) => {
-                if size.width > 0 && size.height > 0 {
-                    s.config.width = size.width;
-                    s.config.height = size.height;
-                    s.surface.configure(&s.ctx.device, &s.config);
-                    s.depth = depth_target(&s.ctx.device, size.width, size.height);
-                    s.depth_view = s.depth.create_view(&Default::default());
-                    if let Err(e) = s.renderer.resize(size.width, size.height) {
-                        self.fail(event_loop, e.into());
-                    }
+            WindowEvent::Resized(size) if size.width > 0 && size.height > 0 => {
+                s.config.width = size.width;
+                s.config.height = size.height;
+                s.surface.configure(&s.ctx.device, &s.config);
+                s.depth = depth_target(&s.ctx.device, size.width, size.height);
+                s.depth_view = s.depth.create_view(&Default::default());
+                if let Err(e) = s.renderer.resize(size.width, size.height) {
+                    self.fail(event_loop, e.into());
                 }
             }
             WindowEvent::KeyboardInput { event, .. } => {
@@ -317,10 +315,12 @@ impl ApplicationHandler for Viewer {
                     event_loop.exit();
                 }
             }
-            WindowEvent::MouseInput { state, button, .. } => {
-                if button == MouseButton::Left {
-                    s.controls.dragging = state == ElementState::Pressed;
-                }
+            WindowEvent::MouseInput {
+                state,
+                button: MouseButton::Left,
+                ..
+            } => {
+                s.controls.dragging = state == ElementState::Pressed;
             }
             WindowEvent::MouseWheel { delta, .. } => {
                 let steps = match delta {

@@ -40,7 +40,7 @@ pub(crate) fn origin_from_name(path: &Path) -> Option<[f64; 2]> {
         b'W' => -lon,
         _ => return None,
     };
-    (lat <= 89.0 && lon <= 179.0 && lon >= -180.0).then_some([lon, lat])
+    (lat <= 89.0 && (-180.0..=179.0).contains(&lon)).then_some([lon, lat])
 }
 
 /// Reads an `.hgt` tile; voids become NaN. Without `cell_override` the name must give the
