@@ -1,5 +1,6 @@
-// Grass blades from the instance pool: one indirect draw per tile, a triangle strip per blade.
-// The high-LOD pipeline has 7 segments (15 vertices), the low-LOD one 3 (7 vertices). The shape
+// Grass blades from the instance pool: one indirect draw per generation job, a triangle strip
+// per blade. SEGMENTS is set per pipeline: by default 5 (11 vertices) for the blades within the
+// near radius, 3 (7 vertices) for the rest of the high ring and for the low ring. The shape
 // is a cubic Bezier bent by the wind and scaled to keep its length (CPU mirror of the shape:
 // src/grass/blade.rs). shaders/blade.wgsl is put in front of this file.
 //

@@ -1,5 +1,7 @@
-// Grass generation and culling, one invocation per grid point of a tile, a batch of up to four
-// tiles per dispatch (workgroup z is the tile within the batch). Surviving blades are appended
+// Grass generation and culling, one invocation per grid point of a tile (and, near the camera,
+// the infill points of its cell), a batch of up to four jobs per dispatch (workgroup z is the
+// job within the batch; a high-LOD tile within the near radius has a second job, LOD 2, for its
+// blades there, drawn with more segments). Surviving blades are appended
 // to the tile's slot of the instance pool; a second entry point turns the slot counters into
 // indirect draw arguments, clamped to the slot capacity. CPU mirror: src/grass/generate.rs.
 // shaders/blade.wgsl is put in front of this file.

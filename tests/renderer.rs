@@ -497,7 +497,10 @@ fn meadow_coverage(grass: bool) -> verdant::tools::metrics::Coverage {
         Err(verdant::tools::SceneError::NoCapture)
     ));
     scene.set_coverage_capture(true).unwrap();
-    scene.render(&ctx, &camera).unwrap();
+    let stats = scene.render(&ctx, &camera).unwrap();
+    // The pool's estimated capacity holds the densest view there is: standing in the meadow,
+    // the infill and the near job's blades included.
+    assert_eq!(stats.grass.overflow, [0, 0], "{:?}", stats.grass);
     scene.coverage(&ctx, 30.0).unwrap()
 }
 

@@ -32,11 +32,18 @@ use crate::world::{World, WorldError};
 pub fn estimate_capacity(world: &World, settings: &GrassSettings) -> Result<u32, WorldError> {
     let g = settings.grid() as f32;
     // The infill near the camera adds 3 points a cell out to its first radius and 12 more out
-    // to its second, of which a frustum (narrower than 180 degrees) sees at most half.
+    // to its second, of which a frustum (narrower than 180 degrees) sees at most half. Points
+    // within the near radius go to the tile's near job, the rest to its own job: a slot holds
+    // the larger of the two.
     let [half, quarter] = settings.infill_m.map(|r| r.max(0.0));
-    let infill = 0.5 * std::f32::consts::PI * (3.0 * half * half + 12.0 * quarter * quarter)
-        / (settings.spacing_m * settings.spacing_m);
-    let blades = |densest: f32| (((g * g + infill) * densest * 1.1).ceil() as u32).max(64);
+    let near = settings.near_m.max(0.0);
+    let disc =
+        |r: f32| 0.5 * std::f32::consts::PI * r * r / (settings.spacing_m * settings.spacing_m);
+    let beyond = |r: f32| disc(r) - disc(r.min(near));
+    let tile_job = g * g + 3.0 * beyond(half) + 12.0 * beyond(quarter);
+    let near_job = disc(near) + 3.0 * disc(half.min(near)) + 12.0 * disc(quarter.min(near));
+    let points = tile_job.max(near_job);
+    let blades = |densest: f32| ((points * densest * 1.1).ceil() as u32).max(64);
     let m = &world.manifest;
     if let Some(peak) = &m.grass_peak
         && (peak.window_m - f64::from(settings.tile_m)).abs() <= 1e-6 * peak.window_m
