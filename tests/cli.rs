@@ -157,27 +157,10 @@ fn bake_writes_a_world_that_flies() {
         "bake failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let out = verdant(
-        &[
-            "fly",
-            world.to_str().unwrap(),
-            "--frames",
-            "2",
-            "--size",
-            "64x36",
-            "--out",
-            "fly",
-        ],
+    let report = fly_report(
+        &[world.to_str().unwrap(), "--frames", "2", "--size", "64x36"],
         tmp.path(),
     );
-    assert!(
-        out.status.success(),
-        "fly failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("fly/report.json")).unwrap())
-            .unwrap();
     assert_eq!(report["frames"].as_array().unwrap().len(), 2);
     assert!(report["summary"]["frame_ms"]["median"].as_f64().unwrap() > 0.0);
     // The grass coverage of each frame written, and its summary.
@@ -191,32 +174,39 @@ fn bake_writes_a_world_that_flies() {
     assert!(tmp.path().join("fly/frame_00001.png").is_file());
 }
 
+/// Runs `verdant fly ARGS --out fly` in `dir`, which must succeed, and reads its report.
+fn fly_report(args: &[&str], dir: &Path) -> serde_json::Value {
+    let args: Vec<&str> = ["fly"]
+        .iter()
+        .chain(args)
+        .chain(&["--out", "fly"])
+        .copied()
+        .collect();
+    let out = verdant(&args, dir);
+    assert!(
+        out.status.success(),
+        "fly failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(dir.join("fly/report.json")).unwrap()).unwrap()
+}
+
 /// The frames of `fly --frames 6 --path PATH` on the default world, from its report.
 fn six_frames(path: &str) -> Vec<serde_json::Value> {
     let tmp = tempfile::tempdir().unwrap();
-    let out = verdant(
+    let world = common::default_world();
+    let report = fly_report(
         &[
-            "fly",
-            common::default_world().to_str().unwrap(),
+            world.to_str().unwrap(),
             "--path",
             path,
             "--frames",
             "6",
             "--size",
             "96x54",
-            "--out",
-            "fly",
         ],
         tmp.path(),
     );
-    assert!(
-        out.status.success(),
-        "fly failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("fly/report.json")).unwrap())
-            .unwrap();
     report["frames"].as_array().unwrap().clone()
 }
 
