@@ -547,6 +547,11 @@ fn bench_lod_writes_its_tables_and_charts() {
         value("infill x1.2", "coverage") >= value("infill x0.8", "coverage"),
         "{settings}"
     );
+    // Wider blades cover more.
+    assert!(
+        value("width x1.5", "coverage") > value("width x0.67", "coverage"),
+        "{settings}"
+    );
     for r in &rows {
         let (q1, m, q3) = (
             r[col("gpu_q1_ms")].parse::<f64>().unwrap(),

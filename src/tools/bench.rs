@@ -85,6 +85,8 @@ pub struct LodSetting {
     pub segments: [u32; 3],
     /// Radii of the grass infill near the camera, metres (half and quarter spacing).
     pub infill_m: [f32; 2],
+    /// Every grass type's blade width times this.
+    pub width_scale: f32,
 }
 
 impl LodSetting {
@@ -96,7 +98,14 @@ impl LodSetting {
             spacing_m,
             segments,
             infill_m: crate::renderer::DEFAULT_INFILL_M,
+            width_scale: 1.0,
         }
+    }
+
+    /// The same setting with blades `width_scale` times as wide.
+    fn with_width(mut self, width_scale: f32) -> Self {
+        self.width_scale = width_scale;
+        self
     }
 
     /// The same setting with the infill radii `infill_m`.
@@ -118,6 +127,7 @@ impl LodSetting {
         c.grass_spacing_m = self.spacing_m;
         c.grass_segments = self.segments;
         c.grass_infill_m = self.infill_m;
+        c.grass_width_scale = self.width_scale;
         c
     }
 }
@@ -145,6 +155,8 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         LodSetting::new("infill off", h, v, s, seg).with_infill([0.0; 2]),
         LodSetting::new("infill x0.8", h, v, s, seg).with_infill(infill.map(|r| 0.8 * r)),
         LodSetting::new("infill x1.2", h, v, s, seg).with_infill(infill.map(|r| 1.2 * r)),
+        LodSetting::new("width x0.67", h, v, s, seg).with_width(2.0 / 3.0),
+        LodSetting::new("width x1.5", h, v, s, seg).with_width(1.5),
         LodSetting::new("no LOD", v, v, s, [seg[0]; 3]),
     ]
 }
@@ -648,13 +660,13 @@ fn write_outputs(
     .write_png(&opts.out.join("dolly.png"), 900, 600)?;
 
     let mut csv = String::from(
-        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,segments_low,infill_half_m,infill_quarter_m,gpu_ms,gpu_q1_ms,gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_mean,blades_drawn,coverage,pareto\n",
+        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,segments_low,infill_half_m,infill_quarter_m,width_scale,gpu_ms,gpu_q1_ms,gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_mean,blades_drawn,coverage,pareto\n",
     );
     for r in results {
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.0},{:.4},{}",
+            "{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.0},{:.4},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -664,6 +676,7 @@ fn write_outputs(
             s.segments[2],
             s.infill_m[0],
             s.infill_m[1],
+            s.width_scale,
             r.gpu.median_ms,
             r.gpu.q1_ms,
             r.gpu.q3_ms,
