@@ -1,6 +1,6 @@
 // Derives child tiles from their parents in the tile atlas: Catmull-Rom upsampling of the
 // parent's smooth heights (the parent less its own detail, recomputed here) plus slope-scaled
-// detail noise between the parent's samples, at the child level's amplitude (fitted per world;
+// high-pass detail noise between the parent's samples, at the child level's amplitude (fitted per world;
 // zero for stored levels), that fades to zero near tile edges; grass type from one of the
 // nearest parent samples, density as their rounded mean. CPU mirror: src/stream/derive_child.rs.
 //
@@ -58,6 +58,28 @@ fn unit(h: u32) -> f32 {
     return f32(h >> 8u) * (1.0 / 16777216.0) * 2.0 - 1.0;
 }
 
+// Weight k (0, 1, 2) of the high-pass filter [-1/2, 1, -1/2].
+fn high_pass(k: i32) -> f32 {
+    if k == 1 {
+        return 1.0;
+    }
+    return -0.5;
+}
+
+// The detail noise at sample (x, y) of `level`: hashed values filtered by [-1/2, 1, -1/2]
+// along x and then y, scaled by 2/3 (the variance of the hashed values).
+fn detail_noise(x: i32, y: i32, level: u32, seed: u32) -> f32 {
+    var sum = 0.0;
+    for (var dy = 0; dy < 3; dy++) {
+        var row = 0.0;
+        for (var dx = 0; dx < 3; dx++) {
+            row += high_pass(dx) * unit(hash4(u32(x + dx - 1), u32(y + dy - 1), level, seed));
+        }
+        sum += high_pass(dy) * row;
+    }
+    return sum * (2.0 / 3.0);
+}
+
 fn weights(f: i32) -> vec4<f32> {
     if f == 0 {
         return vec4<f32>(0.0, 1.0, 0.0, 0.0);
@@ -103,7 +125,7 @@ fn smooth_height(x: i32, y: i32, job: Job) -> f32 {
     let gpy = (ph(cx, cy + 2, layer) - ph(cx, cy - 2, layer)) / (2.0 * cell_grandparent);
     let slope = min(sqrt(gpx * gpx + gpy * gpy), 1.5);
     let parent_level = job.child_level - 1u;
-    let noise = unit(hash4(u32(gx), u32(gy), parent_level, params.grid.w));
+    let noise = detail_noise(gx, gy, parent_level, params.grid.w);
     let detail = noise * (job.detail_parent * job.cell_parent * slope * window_at(gx, gy) * new_sample);
     return ph(x, y, layer) - detail;
 }
@@ -161,7 +183,7 @@ fn derive_child(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgrou
     let sy = i32(job.child_y) * n + j - b;
     let new_sample = min(f32((sx | sy) & 1), 1.0);
     let seed = params.grid.w;
-    let noise = unit(hash4(u32(sx), u32(sy), job.child_level, seed));
+    let noise = detail_noise(sx, sy, job.child_level, seed);
     h += noise * (job.detail_child * job.cell_child * slope * window_at(sx, sy) * new_sample);
 
     let pick = hash4(u32(sx), u32(sy), job.child_level, seed ^ 0x9e3779b9u);

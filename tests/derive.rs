@@ -4,6 +4,7 @@
 mod common;
 
 use verdant::gpu::{GpuContext, GpuTimer};
+use verdant::stream::derive_child::{MIN_DECAY_LOG2, SCALE_INVARIANT_TREND_LOG2};
 use verdant::stream::{DeriveJob, DeriveParams, DeriveStage, TileAtlas, derive_child};
 use verdant::tools::eval_derive as eval;
 use verdant::world::{DeriveMode, Pyramid, TileData, TileId, World};
@@ -442,6 +443,19 @@ fn calibrated_method_recovers_fractal_surfaces_of_known_hurst_exponent() {
                 "H {hurst} factor {factor}: roughness {} of the truth's",
                 r.roughness_ratio
             );
+            assert!(
+                r.rmse_m <= 1.15 * bicubic.rmse_m,
+                "H {hurst} factor {factor}: RMSE {} m, bicubic {} m",
+                r.rmse_m,
+                bicubic.rmse_m
+            );
+            // A fractal is taken as scale-invariant: each depth's amplitude is carried to its
+            // own scale nearly unchanged.
+            assert!(
+                fit.decay_log2 <= SCALE_INVARIANT_TREND_LOG2,
+                "H {hurst} factor {factor}: {}",
+                fit.note
+            );
         }
     }
 }
@@ -477,6 +491,9 @@ fn calibrated_method_keeps_real_terrain_rough_at_bicubic_height_error() {
             );
             // Plain bicubic smooths the terrain; the calibrated detail is what restores it.
             assert!(bicubic.roughness_ratio < 0.6);
+            // SRTM smooths out toward its finest scales: the amplitudes fall below the data.
+            let fit = r.fit.as_ref().unwrap();
+            assert!(fit.decay_log2 >= MIN_DECAY_LOG2, "{name}: {}", fit.note);
         }
     }
 }

@@ -2,8 +2,8 @@
 //! finer than the stored data.
 //!
 //! Heights: Catmull-Rom (bicubic) upsampling of the parent's smooth surface (the parent less
-//! its own detail, see [`derive_child`]) plus deterministic detail noise between the parent's
-//! samples, scaled by the local slope and by the child level's amplitude (fitted per world by
+//! its own detail, see [`derive_child`]) plus deterministic high-pass detail noise (see
+//! [`detail_noise`]) between the parent's samples, scaled by the local slope and by the child level's amplitude (fitted per world by
 //! [`calibrate`], stored in the manifest's `[derive]` table) and faded to zero toward the tile
 //! edges. Every term is a function
 //! of the global sample position and of parent samples that neighbouring tiles share, so
@@ -96,6 +96,35 @@ pub(crate) fn unit(h: u32) -> f32 {
     (h >> 8) as f32 * (1.0 / 16_777_216.0) * 2.0 - 1.0
 }
 
+/// Weights of the high-pass filter applied to hashed values along each axis.
+const HIGH_PASS: [f32; 3] = [-0.5, 1.0, -0.5];
+
+/// The detail noise at sample `(x, y)` of `level`: hashed values in [-1, 1) filtered by
+/// [-1/2, 1, -1/2] along x and then y, scaled by 2/3 so that its variance is the hashed
+/// values' own (1/3).
+///
+/// A high-pass noise makes a surface as rough (the spread of its Laplacian) as white noise does
+/// for less height variance: 1.9 times the Laplacian variance per unit of height variance on a
+/// derived level's new samples. Noise that is independent of the relief it stands in for adds
+/// its whole variance to the height error, so the same roughness costs less accuracy.
+pub fn detail_noise(x: i32, y: i32, level: u32, seed: u32) -> f32 {
+    let mut sum = 0.0f32;
+    for (dy, wy) in HIGH_PASS.iter().enumerate() {
+        let mut row = 0.0f32;
+        for (dx, wx) in HIGH_PASS.iter().enumerate() {
+            let h = hash4(
+                (x + dx as i32 - 1) as u32,
+                (y + dy as i32 - 1) as u32,
+                level,
+                seed,
+            );
+            row += wx * unit(h);
+        }
+        sum += wy * row;
+    }
+    sum * (2.0 / 3.0)
+}
+
 /// Catmull-Rom weights at fraction 0 and one half (the only fractions a 2x upsampling meets).
 pub(crate) const WEIGHTS: [[f32; 4]; 2] =
     [[0.0, 1.0, 0.0, 0.0], [-0.0625, 0.5625, 0.5625, -0.0625]];
@@ -155,12 +184,7 @@ pub fn derive_child(
         let gpy = (parent.heights[at(cx, cy + 2)] - parent.heights[at(cx, cy - 2)])
             / (2.0 * cell_grandparent);
         let slope = (gpx * gpx + gpy * gpy).sqrt().min(1.5);
-        let noise = unit(hash4(
-            gx as u32,
-            gy as u32,
-            u32::from(parent_level),
-            params.seed,
-        ));
+        let noise = detail_noise(gx, gy, u32::from(parent_level), params.seed);
         let detail = noise * (parent_amplitude * cell_parent * slope * window_at(gx, gy) * new);
         parent.heights[at(x, y)] - detail
     };
@@ -199,12 +223,7 @@ pub fn derive_child(
             let sx = child.x as i32 * n + i - b;
             let sy = child.y as i32 * n + j - b;
             let new = (((sx | sy) & 1) as f32).min(1.0);
-            let noise = unit(hash4(
-                sx as u32,
-                sy as u32,
-                u32::from(child.level),
-                params.seed,
-            ));
+            let noise = detail_noise(sx, sy, u32::from(child.level), params.seed);
             h += noise * (child_amplitude * cell_child * slope * window_at(sx, sy) * new);
 
             let pick = hash4(
@@ -261,17 +280,12 @@ pub struct OctaveFit {
     /// RMS of truth minus the Catmull-Rom prediction from the (true) octave above, at the
     /// samples the prediction adds, metres.
     pub residual_rms_m: f64,
-    /// Detail amplitude (child cells per unit of slope) for which the runtime's detail noise
-    /// alone is as rough as the truth (the same spread of the Laplacian).
+    /// Detail amplitude (child cells per unit of slope) for which the prediction plus the
+    /// runtime's detail is as rough as the truth (the same spread of the Laplacian); 0 where
+    /// Catmull-Rom alone is as rough.
     pub detail: f32,
-    /// Roughness of the field derived by Catmull-Rom alone from this octave's parent (octave
-    /// `octave + 1`, that is `octave + 1` steps), relative to the field's own.
+    /// Roughness of the Catmull-Rom prediction alone, relative to the octave's own.
     pub bicubic_roughness: f64,
-    /// RMS slope of the field at this octave (central differences), rise over run.
-    pub slope_rms: f64,
-    /// RMS slope of the field derived by Catmull-Rom alone from octave `octave + 1`, relative
-    /// to the field's own.
-    pub bicubic_slope: f64,
 }
 
 /// Octaves [`calibrate`] measures at most, finest first.
@@ -282,10 +296,23 @@ pub const MIN_FIT_OCTAVES: usize = 3;
 pub const FLAT_RESIDUAL_M: f64 = 0.01;
 /// Largest RMS deviation (log2) of the residuals from the fitted line that is still a fit.
 pub const MAX_FIT_RMS_LOG2: f64 = 0.5;
-/// Smallest grid the coarsest measured octave's parent may be, samples a side.
+/// Largest growth (log2) of the measured amplitude per octave coarser on terrain taken as
+/// scale-invariant: fractal surfaces stay well under it (0.0 to 0.18 on fractional Brownian
+/// surfaces of H 0.3 to 0.8), the SRTM DEMs lie well above it (0.30 to 0.80).
+pub const SCALE_INVARIANT_TREND_LOG2: f64 = 0.25;
+/// Least fall (log2) of the amplitude per octave finer, below the data, on terrain that is not
+/// scale-invariant. Such terrain smooths out toward its finest scales, and faster the finer
+/// (on the SRTM DEMs the Hurst exponent rises by about 0.2 an octave finer, and the amplitude
+/// that the finest 25 m octaves need falls by 0.55 to 0.9 an octave), which coarse octaves
+/// under-state: the finest measured fall is continued, and at least this.
+pub const MIN_DECAY_LOG2: f64 = 0.585;
+/// Smallest grid a measured octave's parent may be, samples a side.
 const MIN_OCTAVE_SAMPLES: usize = 12;
 /// Samples kept clear of the grid's edges in the statistics (clamping flattens them).
 const STATS_MARGIN: usize = 4;
+/// Key of the detail noise that the calibration measures with (any level key would do: the
+/// noise's statistics do not depend on it).
+const CALIBRATION_NOISE: u32 = 0xca11;
 
 /// One octave of the field, as a grid of its own.
 #[derive(Clone, Debug)]
@@ -321,15 +348,19 @@ impl Level {
         self.data[y * self.width + x]
     }
 
-    /// Catmull-Rom 2x upsampling, and the runtime's detail noise at amplitude 1 (a hashed
-    /// value in [-1, 1) times the child cell times the parent's slope, capped at 1.5, on the
-    /// new samples only).
-    fn predict(&self, octave: u32, seed: u32) -> (Level, Level) {
+    fn child(&self, data: Vec<f32>) -> Level {
+        Level {
+            width: 2 * self.width - 1,
+            height: 2 * self.height - 1,
+            cell: (self.cell.0 / 2.0, self.cell.1 / 2.0),
+            data,
+        }
+    }
+
+    /// Catmull-Rom 2x upsampling.
+    fn upsample(&self) -> Level {
         let (w, h) = (2 * self.width - 1, 2 * self.height - 1);
-        let cell = (self.cell.0 / 2.0, self.cell.1 / 2.0);
-        let cell_child = (0.5 * (cell.0 + cell.1)) as f32;
-        let mut smooth = vec![0.0f32; w * h];
-        let mut noise = vec![0.0f32; w * h];
+        let mut data = vec![0.0f32; w * h];
         for j in 0..h {
             for i in 0..w {
                 let (ix, fx) = ((i >> 1) as i64, i & 1);
@@ -341,38 +372,33 @@ impl Level {
                     let p = |dx: i64| self.at(ix - 1 + dx, y);
                     *row = ((wx[0] * p(0) + wx[1] * p(1)) + wx[2] * p(2)) + wx[3] * p(3);
                 }
-                smooth[j * w + i] =
+                data[j * w + i] =
                     ((wy[0] * rows[0] + wy[1] * rows[1]) + wy[2] * rows[2]) + wy[3] * rows[3];
+            }
+        }
+        self.child(data)
+    }
+
+    /// The runtime's detail at amplitude 1 on a child of this level: [`detail_noise`] times
+    /// the child cell times this level's slope (capped at 1.5), on the new samples only.
+    fn detail(&self, seed: u32) -> Level {
+        let (w, h) = (2 * self.width - 1, 2 * self.height - 1);
+        let cell_child = (0.25 * (self.cell.0 + self.cell.1)) as f32;
+        let mut data = vec![0.0f32; w * h];
+        for j in 0..h {
+            for i in 0..w {
+                if (i | j) & 1 == 0 {
+                    continue;
+                }
+                let (ix, iy) = ((i >> 1) as i64, (j >> 1) as i64);
                 let gx = f64::from(self.at(ix + 1, iy) - self.at(ix - 1, iy)) / (2.0 * self.cell.0);
                 let gy = f64::from(self.at(ix, iy + 1) - self.at(ix, iy - 1)) / (2.0 * self.cell.1);
                 let slope = (gx * gx + gy * gy).sqrt().min(1.5) as f32;
-                let n = unit(hash4(i as u32, j as u32, 0xca11 ^ octave, seed));
-                let new = ((fx | fy) as f32).min(1.0);
-                noise[j * w + i] = n * cell_child * slope * new;
+                let n = detail_noise(i as i32, j as i32, CALIBRATION_NOISE, seed);
+                data[j * w + i] = n * cell_child * slope;
             }
         }
-        let level = |data| Level {
-            width: w,
-            height: h,
-            cell,
-            data,
-        };
-        (level(smooth), level(noise))
-    }
-
-    /// RMS slope (central differences) away from the edges.
-    fn slope_rms(&self) -> f64 {
-        let g = |x: usize, y: usize| f64::from(self.data[y * self.width + x]);
-        let (mut sum, mut count) = (0.0f64, 0.0f64);
-        for y in STATS_MARGIN..self.height - STATS_MARGIN {
-            for x in STATS_MARGIN..self.width - STATS_MARGIN {
-                let gx = (g(x + 1, y) - g(x - 1, y)) / (2.0 * self.cell.0);
-                let gy = (g(x, y + 1) - g(x, y - 1)) / (2.0 * self.cell.1);
-                sum += gx * gx + gy * gy;
-                count += 1.0;
-            }
-        }
-        (sum / count.max(1.0)).sqrt()
+        self.child(data)
     }
 
     fn laplacian(&self, x: usize, y: usize) -> f64 {
@@ -381,11 +407,31 @@ impl Level {
         (g(x + 1, y) + g(x - 1, y) - 2.0 * c) / (self.cell.0 * self.cell.0)
             + (g(x, y + 1) + g(x, y - 1) - 2.0 * c) / (self.cell.1 * self.cell.1)
     }
+
+    /// Variance of the Laplacian away from the edges.
+    fn laplacian_variance(&self) -> f64 {
+        let (mut sum, mut sum2, mut count) = (0.0f64, 0.0f64, 0.0f64);
+        for y in STATS_MARGIN..self.height - STATS_MARGIN {
+            for x in STATS_MARGIN..self.width - STATS_MARGIN {
+                let l = self.laplacian(x, y);
+                sum += l;
+                sum2 += l * l;
+                count += 1.0;
+            }
+        }
+        let mean = sum / count.max(1.0);
+        (sum2 / count.max(1.0) - mean * mean).max(0.0)
+    }
 }
 
-/// RMS of `truth - smooth` at the samples a 2x upsampling adds, and the amplitude `d` for
-/// which `d * noise` alone has the spread of the Laplacian of `truth`, both away from the edges.
-fn match_roughness(truth: &Level, smooth: &Level, noise: &Level) -> (f64, f32) {
+/// How `truth` compares with its derivation from `parent` (the smooth surface one level
+/// coarser): the RMS of `truth` minus the Catmull-Rom upsampling at the samples it adds, the
+/// detail amplitude for which the upsampling plus the runtime's detail is as rough as `truth`
+/// (the spread of the Laplacian, the eval's roughness; 0 where the upsampling alone is as
+/// rough), and the upsampling's own roughness relative to `truth`'s.
+fn match_roughness(truth: &Level, parent: &Level, seed: u32) -> (f64, f32, f64) {
+    let smooth = parent.upsample();
+    let noise = parent.detail(seed);
     let (w, h) = (truth.width, truth.height);
     let (mut se, mut n_new) = (0.0f64, 0usize);
     for y in STATS_MARGIN..h - STATS_MARGIN {
@@ -397,116 +443,69 @@ fn match_roughness(truth: &Level, smooth: &Level, noise: &Level) -> (f64, f32) {
             }
         }
     }
-    let (var_t, var_n) = (laplacian_variance(truth), laplacian_variance(noise));
+    let var_t = truth.laplacian_variance();
+    let var_s = smooth.laplacian_variance();
+    let var_n = noise.laplacian_variance();
     let detail = if var_n > 0.0 {
-        (var_t / var_n).sqrt() as f32
+        ((var_t - var_s).max(0.0) / var_n).sqrt() as f32
     } else {
         0.0
     };
-    ((se / n_new.max(1) as f64).sqrt(), detail)
+    let roughness = (var_s / var_t.max(1e-30)).sqrt();
+    ((se / n_new.max(1) as f64).sqrt(), detail, roughness)
 }
 
-/// Variance of the Laplacian of `level` away from its edges.
-fn laplacian_variance(level: &Level) -> f64 {
-    let (mut sum, mut sum2, mut count) = (0.0f64, 0.0f64, 0.0f64);
-    for y in STATS_MARGIN..level.height - STATS_MARGIN {
-        for x in STATS_MARGIN..level.width - STATS_MARGIN {
-            let l = level.laplacian(x, y);
-            sum += l;
-            sum2 += l * l;
-            count += 1.0;
-        }
-    }
-    let mean = sum / count.max(1.0);
-    (sum2 / count.max(1.0) - mean * mean).max(0.0)
+/// Whether `field`'s octave `octave` is at least [`MIN_OCTAVE_SAMPLES`] a side.
+fn octave_fits(field: &HeightField<'_>, octave: u32) -> bool {
+    let step = 1usize << octave;
+    (field.width - 1) / step + 1 >= MIN_OCTAVE_SAMPLES
+        && (field.height - 1) / step + 1 >= MIN_OCTAVE_SAMPLES
+}
+
+/// The samples of `len` that `2^octaves` divides into whole cells.
+fn crop(len: usize, octaves: u32) -> usize {
+    ((len - 1) >> octaves << octaves) + 1
 }
 
 /// Measures up to `octaves` octaves of `field` (see [`OctaveFit`]), finest first; fewer where
 /// the coarsest parent would be smaller than 12 samples a side.
 pub fn measure_octaves(field: &HeightField<'_>, octaves: u32, seed: u32) -> Vec<OctaveFit> {
-    let fits = |k: u32| {
-        let step = 1usize << (k + 1);
-        (field.width - 1) / step + 1 >= MIN_OCTAVE_SAMPLES
-            && (field.height - 1) / step + 1 >= MIN_OCTAVE_SAMPLES
-    };
-    let n = (0..octaves).take_while(|&k| fits(k)).count() as u32;
+    let n = (0..octaves).take_while(|&k| octave_fits(field, k + 1)).count() as u32;
     if n == 0 {
         return Vec::new();
     }
     // Crop so that every octave's grid is exactly twice its parent's.
-    let crop = |len: usize| ((len - 1) >> n << n) + 1;
-    let (w, h) = (crop(field.width), crop(field.height));
+    let (w, h) = (crop(field.width, n), crop(field.height, n));
     let truth: Vec<Level> = (0..=n).map(|k| Level::subsample(field, k, w, h)).collect();
-    let finest = laplacian_variance(&truth[0]);
-    let finest_slope = truth[0].slope_rms();
     (0..n)
         .map(|k| {
-            let (predicted, noise) = truth[k as usize + 1].predict(k, seed);
-            let (residual_rms_m, detail) = match_roughness(&truth[k as usize], &predicted, &noise);
-            // Catmull-Rom from octave k + 1 all the way down to the field.
-            let mut smooth = truth[k as usize + 1].clone();
-            for j in (0..=k).rev() {
-                smooth = smooth.predict(j, seed).0;
-            }
-            let ratio = (laplacian_variance(&smooth) / finest.max(1e-30)).sqrt();
-            let slope_ratio = smooth.slope_rms() / finest_slope.max(1e-30);
+            let (residual_rms_m, detail, bicubic_roughness) =
+                match_roughness(&truth[k as usize], &truth[k as usize + 1], seed);
             OctaveFit {
                 octave: k,
                 residual_rms_m,
                 detail,
-                bicubic_roughness: ratio,
-                slope_rms: truth[k as usize].slope_rms(),
-                bicubic_slope: slope_ratio,
+                bicubic_roughness,
             }
         })
         .collect()
 }
 
-/// Largest deviation (log2) of the per-octave amplitudes from their mean on terrain taken as
-/// scale-invariant.
-pub const FLAT_TREND_LOG2: f64 = 0.15;
-
-/// Smallest factor between the detail of one derived level and the next. A curve fitted over
-/// coarse octaves bends on where the terrain's own trend levels off: on the SRTM DEMs the
-/// measured amplitude falls by about a third per octave below 100 m, and no faster.
-pub const MIN_LEVEL_STEP: f64 = 2.0 / 3.0;
-/// Largest factor between the detail of one derived level and the next.
-pub const MAX_LEVEL_STEP: f64 = 1.25;
-
-/// Least-squares polynomial of degree 2 (degree 1 through two points) through `(x, y)`
-/// points: its coefficients, constant first.
-fn fit_quadratic(points: &[(f64, f64)]) -> [f64; 3] {
-    if points.len() < 3 {
-        let (slope, intercept, _) = fit_line(points);
-        return [intercept, slope, 0.0];
+/// The detail amplitude a level `depth` Catmull-Rom steps below `field` would need, measured
+/// `depth` octaves up: `field` itself derived from its octave `depth` by `depth` steps, the
+/// detail added at the last one only (as the runtime derives levels). `None` where that octave
+/// is smaller than 12 samples a side.
+pub fn detail_at_depth(field: &HeightField<'_>, depth: u32, seed: u32) -> Option<f32> {
+    if depth == 0 || !octave_fits(field, depth) {
+        return None;
     }
-    // Normal equations, solved by Cramer's rule (3 x 3).
-    let mut m = [[0.0f64; 3]; 3];
-    let mut v = [0.0f64; 3];
-    for &(x, y) in points {
-        let p = [1.0, x, x * x];
-        for r in 0..3 {
-            for c in 0..3 {
-                m[r][c] += p[r] * p[c];
-            }
-            v[r] += p[r] * y;
-        }
+    let (w, h) = (crop(field.width, depth), crop(field.height, depth));
+    let truth = Level::subsample(field, 0, w, h);
+    let mut parent = Level::subsample(field, depth, w, h);
+    for _ in 1..depth {
+        parent = parent.upsample();
     }
-    let det = |a: &[[f64; 3]; 3]| {
-        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
-            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
-            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
-    };
-    let d = det(&m);
-    let mut out = [0.0; 3];
-    for (c, o) in out.iter_mut().enumerate() {
-        let mut a = m;
-        for r in 0..3 {
-            a[r][c] = v[r];
-        }
-        *o = det(&a) / d;
-    }
-    out
+    Some(match_roughness(&truth, &parent, seed).1)
 }
 
 /// Least-squares line through `(x, y)` points: slope, intercept and RMS deviation.
@@ -531,13 +530,20 @@ fn fit_line(points: &[(f64, f64)]) -> (f64, f64, f64) {
 /// Fits the detail of `derived_levels` levels finer than `field` (a world's finest stored
 /// level, or the coarse grid `verdant eval derive` is given) to the field itself.
 ///
-/// Each octave of the field (the field, every other sample, every fourth, ... up to
-/// [`FIT_OCTAVES`]) is predicted by Catmull-Rom from the next coarser one. The RMS residual of
-/// the prediction grows by `2^H` an octave coarser on fractal terrain: a line through
-/// log2(residual) against octave gives the Hurst exponent `H` and, by its deviation, how
-/// fractal the terrain is. Per octave, the detail amplitude that makes it exactly as rough as
-/// the truth is measured too (see [`OctaveFit::detail`]); the trend of those amplitudes over
-/// the octaves (a curve through log2(amplitude)) is continued to each derived level.
+/// 1. Each octave of the field (the field, every other sample, every fourth, ... up to
+///    [`FIT_OCTAVES`]) is predicted by Catmull-Rom from the next coarser one. The RMS residual
+///    grows by `2^H` an octave coarser on fractal terrain: a line through log2(residual)
+///    against octave gives the Hurst exponent `H` and, by its deviation, how fractal the
+///    terrain is.
+/// 2. Per octave, the amplitude is measured for which the prediction plus the runtime's detail
+///    is as rough as the octave (see [`OctaveFit::detail`]); the slope of log2(amplitude)
+///    against octave is the terrain's trend of roughness with scale.
+/// 3. Per derived level `d` steps below the data, the amplitude is measured one level of the
+///    data `d` steps below its own octave `d` ([`detail_at_depth`]): the share of roughness
+///    that `d` Catmull-Rom steps keep is in it. It is carried `d` octaves finer: held on
+///    scale-invariant terrain (trend at most [`SCALE_INVARIANT_TREND_LOG2`], continued as it
+///    is); otherwise lowered by the finest measured fall per octave, at least
+///    [`MIN_DECAY_LOG2`] (`decay_log2`).
 ///
 /// Falls back to plain bicubic (`method = "bicubic"`, every amplitude 0, the reason in
 /// `note`) with fewer than [`MIN_FIT_OCTAVES`] octaves, on flat terrain (finest residual
@@ -553,6 +559,7 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
         hurst: 0.0,
         fit_rms_log2: 0.0,
         residual_rms_m,
+        decay_log2: 0.0,
         detail: vec![0.0; usize::from(derived_levels)],
     };
     if octaves.len() < MIN_FIT_OCTAVES {
@@ -586,74 +593,62 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
         .filter(|o| o.detail > 0.0)
         .map(|o| (f64::from(o.octave), f64::from(o.detail).log2()))
         .collect();
-    if octaves[0].detail <= 0.0 || octaves[0].bicubic_roughness >= 1.0 || details.len() < 2 {
+    if octaves[0].detail <= 0.0 || details.len() < 2 {
         table.note =
             format!("H {hurst:.3}, but Catmull-Rom alone is as rough as the data; plain bicubic");
         return table;
     }
-    // Amplitude at octave -s (the s-th derived level): the fitted curve continued, each level
-    // within a factor [MIN_LEVEL_STEP, MAX_LEVEL_STEP] of the one above.
-    // Scale-invariant terrain keeps its amplitude from octave to octave (within
-    // FLAT_TREND_LOG2): it is held. Otherwise the curve through the octaves is continued.
-    let mean = details.iter().map(|p| p.1).sum::<f64>() / details.len() as f64;
-    let flat = details
-        .iter()
-        .all(|p| (p.1 - mean).abs() <= FLAT_TREND_LOG2);
-    let curve = if flat {
-        [mean, 0.0, 0.0]
+    let (trend, _, _) = fit_line(&details);
+    let scale_invariant = trend <= SCALE_INVARIANT_TREND_LOG2;
+    let decay = if scale_invariant {
+        trend.max(0.0)
     } else {
-        fit_quadratic(&details)
+        let finest = if octaves[1].detail > 0.0 {
+            f64::from(octaves[1].detail).log2() - f64::from(octaves[0].detail).log2()
+        } else {
+            trend
+        };
+        finest.max(MIN_DECAY_LOG2)
     };
-    let log2_detail = |k: f64| curve[0] + curve[1] * k + curve[2] * k * k;
-    // The runtime scales its detail by the slope of the smooth (Catmull-Rom) parent, which
-    // is less steep than the terrain's own at that level once it lies below the data: as
-    // measured that many steps below the octaves, and beyond the deepest measured, less by
-    // the terrain's steepening per octave (`2^(1 - H)` on fractal terrain).
-    let slopes: Vec<(f64, f64)> = octaves
-        .iter()
-        .map(|o| (f64::from(o.octave), o.slope_rms.max(1e-12).log2()))
-        .collect();
-    let steepening = (-fit_line(&slopes).0).clamp(0.0, 1.0);
-    let deepest = octaves.len() - 1;
-    let parent_slope = |depth: usize| -> f64 {
-        match depth {
-            0 => 1.0,
-            d if d <= deepest + 1 => octaves[d - 1].bicubic_slope,
-            d => octaves[deepest].bicubic_slope * (-steepening * (d - deepest - 1) as f64).exp2(),
+    table.decay_log2 = decay;
+    // Amplitude measured at each depth, log2; depths too deep to measure continue the last
+    // two measured (growing by at most 1 an octave).
+    let mut measured: Vec<f64> = Vec::new();
+    let mut at_data: Vec<Option<f64>> = Vec::new();
+    for depth in 1..=u32::from(derived_levels) {
+        let value = match detail_at_depth(field, depth, seed) {
+            Some(a) if a > 0.0 => Some(f64::from(a).log2()),
+            Some(_) => None,
+            None => Some(match measured.as_slice() {
+                [.., a, b] => b + (b - a).clamp(0.0, 1.0),
+                [b] => *b,
+                [] => f64::from(octaves[0].detail).log2(),
+            }),
+        };
+        if let Some(v) = value {
+            measured.push(v);
         }
-        .clamp(1e-3, 1.0)
-    };
-    let mut previous = log2_detail(0.0);
-    let finest = previous.exp2();
-    for (s, d) in table.detail.iter_mut().enumerate() {
-        let next = log2_detail(-(s as f64 + 1.0)).clamp(
-            previous + MIN_LEVEL_STEP.log2(),
-            previous + MAX_LEVEL_STEP.log2(),
-        );
-        // The s-th derived level (from 0) is s + 1 Catmull-Rom steps below the data, which
-        // carry part of the roughness: the detail adds the rest (as measured that many steps
-        // below octave s + 1, or the deepest measured).
-        let smooth = octaves[s.min(deepest)].bicubic_roughness.min(1.0);
-        let share = (1.0 - smooth * smooth).sqrt();
-        let slope = if flat { parent_slope(s) } else { 1.0 };
-        *d = ((next.exp2() * share / slope) as f32).min(MAX_DETAIL);
-        previous = next;
+        at_data.push(value);
+    }
+    for (s, (d, a)) in table.detail.iter_mut().zip(&at_data).enumerate() {
+        *d = a.map_or(0.0, |a| {
+            ((a - decay * (s as f64 + 1.0)).exp2() as f32).min(MAX_DETAIL)
+        });
     }
     table.method = DeriveMode::Fractal;
-    table.note = if flat {
+    table.note = if scale_invariant {
         format!(
-            "fractal: H {hurst:.3} over {} octaves; scale-invariant detail {finest:.3} held, \
-             raised where the smooth parent is less steep than the terrain",
+            "fractal: H {hurst:.3} over {} octaves; scale-invariant (amplitude trend \
+             {trend:+.3} log2 an octave), each depth's amplitude carried finer at {decay:.3} \
+             log2 an octave",
             octaves.len()
         )
     } else {
         format!(
-            "fractal: H {hurst:.3} over {} octaves; detail {finest:.3} at the finest level, \
-             continued along log2(detail) = {:.3} {:+.3} k {:+.3} k^2 (octave k, negative finer)",
-            octaves.len(),
-            curve[0],
-            curve[1],
-            curve[2]
+            "fractal: H {hurst:.3} over {} octaves; smoother toward fine scales (amplitude \
+             trend {trend:+.3} log2 an octave), each depth's amplitude carried finer falling \
+             {decay:.3} log2 an octave",
+            octaves.len()
         )
     };
     table
@@ -707,20 +702,6 @@ mod tests {
     }
 
     #[test]
-    fn the_quadratic_fit_is_exact_on_a_parabola() {
-        let points: Vec<(f64, f64)> = (0..5)
-            .map(|k| {
-                let x = f64::from(k);
-                (x, 1.5 - 0.25 * x + 0.125 * x * x)
-            })
-            .collect();
-        let c = fit_quadratic(&points);
-        for (got, want) in c.iter().zip([1.5, -0.25, 0.125]) {
-            assert!((got - want).abs() < 1e-9, "{c:?}");
-        }
-    }
-
-    #[test]
     fn params_follow_the_manifest_table_or_keep_the_legacy_amplitude() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("worlds")
@@ -741,6 +722,7 @@ mod tests {
             hurst: 0.7,
             fit_rms_log2: 0.01,
             residual_rms_m: 1.0,
+            decay_log2: 0.5,
             detail: (0..levels).map(|k| 0.1 * (k + 1) as f32).collect(),
         });
         let p = DeriveParams::for_manifest(&manifest);

@@ -14,7 +14,7 @@
 
 use std::time::Instant;
 
-use crate::stream::derive_child::{WEIGHTS, hash4, unit};
+use crate::stream::derive_child::{WEIGHTS, detail_noise, hash4, unit};
 use crate::stream::{DeriveParams, HeightField, calibrate};
 use crate::world::{Dem, DeriveCalibration, LEGACY_DETAIL};
 
@@ -30,13 +30,13 @@ pub enum DeriveMethod {
     Bilinear,
     /// Catmull-Rom (bicubic) interpolation.
     Bicubic,
-    /// Catmull-Rom plus slope-scaled detail noise of the given amplitude (child cells per unit
-    /// slope) on every sample, each step upsampling the last one's result, detail included:
-    /// the runtime's method before calibration, at 0.25.
+    /// Catmull-Rom plus slope-scaled white detail noise of the given amplitude (child cells
+    /// per unit slope) on every sample, each step upsampling the last one's result, detail
+    /// included: the runtime's method before calibration, at 0.25.
     InheritedDetail(f32),
-    /// Catmull-Rom of the smooth chain plus slope-scaled detail noise of the given amplitude
-    /// between the coarser step's samples, not passed on to the next step (as the runtime
-    /// derives child tiles now).
+    /// Catmull-Rom of the smooth chain plus slope-scaled high-pass detail noise of the given
+    /// amplitude between the coarser step's samples, not passed on to the next step (as the
+    /// runtime derives child tiles now).
     BicubicDetail(f32),
     /// Catmull-Rom plus slope-scaled detail noise at a fitted amplitude per step (the first
     /// step first), as the runtime derives child tiles of a calibrated world.
@@ -129,7 +129,7 @@ pub fn derive_steps(coarse: &Grid, method: DeriveMethod, steps: u32, seed: u32) 
                     (smooth.at(ix, iy + 1) - smooth.at(ix, iy - 1)) as f64 / (2.0 * smooth.cell.1);
                 let slope = (gx * gx + gy * gy).sqrt().min(1.5) as f32;
                 data[j * next.width + i] +=
-                    unit(hash4(i as u32, j as u32, s + 1, seed)) * (a * c * slope);
+                    detail_noise(i as i32, j as i32, s + 1, seed) * (a * c * slope);
             }
         }
         fine = Grid {
@@ -241,8 +241,8 @@ impl MethodResult {
             .join("/");
         match &self.fit {
             Some(f) => format!(
-                "{:?} H={:.3} dev={:.3} octaves={} detail={detail}",
-                f.method, f.hurst, f.fit_rms_log2, f.octaves
+                "{:?} H={:.3} dev={:.3} octaves={} decay={:.3} detail={detail}",
+                f.method, f.hurst, f.fit_rms_log2, f.octaves, f.decay_log2
             )
             .to_lowercase(),
             None if detail.is_empty() => String::new(),
@@ -419,13 +419,13 @@ pub fn write_results(
     let front = joint_front(results);
     let mut csv = String::from(
         "method,factor,rmse_m,max_m,slope_rmse_deg,slope_bias_deg,roughness_ratio,ms_per_tile,\
-         on_joint_pareto_front,runtime_default,fit,hurst,fit_rms_log2,detail\n",
+         on_joint_pareto_front,runtime_default,fit,hurst,fit_rms_log2,decay_log2,detail\n",
     );
     for (i, r) in results.iter().enumerate() {
         let fit = r.fit.as_ref();
         let _ = writeln!(
             csv,
-            "{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{},{},{},{},{},{}",
+            "{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{},{},{},{},{},{},{}",
             r.method,
             r.factor,
             r.rmse_m,
@@ -439,6 +439,7 @@ pub fn write_results(
             fit.map_or(String::new(), |f| format!("{:?}", f.method).to_lowercase()),
             fit.map_or(String::new(), |f| format!("{:.4}", f.hurst)),
             fit.map_or(String::new(), |f| format!("{:.4}", f.fit_rms_log2)),
+            fit.map_or(String::new(), |f| format!("{:.4}", f.decay_log2)),
             r.detail
                 .iter()
                 .map(|d| format!("{d:.4}"))

@@ -129,6 +129,12 @@ pub struct DeriveCalibration {
     pub fit_rms_log2: f64,
     /// RMS residual at the finest stored level, metres.
     pub residual_rms_m: f64,
+    /// Fall (log2) of the amplitude per octave finer with which each derived level's
+    /// amplitude, measured as many octaves above the data as it lies below, was carried down
+    /// to its own scale (0 on scale-invariant terrain). Informational; absent in worlds baked
+    /// before it was recorded.
+    #[serde(default)]
+    pub decay_log2: f64,
     /// Detail amplitude of each derived level, the first derived level first (child cells per
     /// unit of slope; the roughness-matching amplitude measured per stored octave and
     /// extrapolated). One per derived level; all zero for `bicubic`.
@@ -798,6 +804,7 @@ impl Manifest {
         v.finite("derive.hurst", c.hurst)?;
         v.non_negative("derive.fit_rms_log2", c.fit_rms_log2)?;
         v.non_negative("derive.residual_rms_m", c.residual_rms_m)?;
+        v.non_negative("derive.decay_log2", c.decay_log2)?;
         let levels = usize::from(self.pyramid.derived_levels);
         if c.detail.len() != levels {
             return Err(v.out_of_range(
