@@ -548,13 +548,16 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
     }
     let truth = eval::dem_grid(&dem);
     let methods = eval::methods();
-    let pb = bar(methods.len() as u64 + 1, "methods");
+    let pb = bar(methods.len() as u64 + 2, "methods");
     let mut results = Vec::new();
     for m in methods {
         pb.set_message(m.name());
         results.push(eval::evaluate(&truth, factor, m, 5));
         pb.inc(1);
     }
+    pb.set_message("fitted kernel");
+    results.push(eval::evaluate_kernel(&truth, factor, 5));
+    pb.inc(1);
     pb.set_message(eval::RUNTIME_METHOD);
     results.push(eval::evaluate_calibrated(&truth, factor, 5));
     pb.inc(1);

@@ -416,7 +416,7 @@ const HURST_TOLERANCE: f64 = 0.1;
 
 #[test]
 fn calibrated_method_recovers_fractal_surfaces_of_known_hurst_exponent() {
-    for (hurst, seed) in [(0.3, 3), (0.5, 5), (0.8, 8)] {
+    for (hurst, seed) in [(0.3, 3), (0.3, 103), (0.5, 5), (0.5, 105), (0.8, 8), (0.8, 108)] {
         // Relief for an RMS slope of about 0.3 at the finest samples.
         let truth = fbm_surface(hurst, 10, seed, 2.0, 0.6 * 1024f64.powf(hurst));
         for factor in [4, 8] {
@@ -424,8 +424,8 @@ fn calibrated_method_recovers_fractal_surfaces_of_known_hurst_exponent() {
             let r = eval::evaluate_calibrated(&truth, factor, 1);
             let fit = r.fit.clone().unwrap();
             eprintln!(
-                "H {hurst} factor {factor}: fitted H {:.3}, roughness {:.3} (bicubic {:.3}), \
-                 RMSE {:.3}x bicubic, {}",
+                "H {hurst} seed {seed} factor {factor}: fitted H {:.3}, roughness {:.3} \
+                 (bicubic {:.3}), RMSE {:.3}x bicubic, {}",
                 fit.hurst,
                 r.roughness_ratio,
                 bicubic.roughness_ratio,

@@ -296,16 +296,17 @@ pub const MIN_FIT_OCTAVES: usize = 3;
 pub const FLAT_RESIDUAL_M: f64 = 0.01;
 /// Largest RMS deviation (log2) of the residuals from the fitted line that is still a fit.
 pub const MAX_FIT_RMS_LOG2: f64 = 0.5;
-/// Largest growth (log2) of the measured amplitude per octave coarser on terrain taken as
-/// scale-invariant: fractal surfaces stay well under it (0.0 to 0.18 on fractional Brownian
-/// surfaces of H 0.3 to 0.8), the SRTM DEMs lie well above it (0.30 to 0.80).
+/// Largest growth (log2) of the measured amplitude per octave coarser (a line weighted by each
+/// octave's samples) on terrain taken as scale-invariant: fractional Brownian surfaces of H 0.3
+/// to 0.8 stay under 0.18, the SRTM DEMs and their crops lie above 0.35.
 pub const SCALE_INVARIANT_TREND_LOG2: f64 = 0.25;
 /// Least fall (log2) of the amplitude per octave finer, below the data, on terrain that is not
 /// scale-invariant. Such terrain smooths out toward its finest scales, and faster the finer
 /// (on the SRTM DEMs the Hurst exponent rises by about 0.2 an octave finer, and the amplitude
-/// that the finest 25 m octaves need falls by 0.55 to 0.9 an octave), which coarse octaves
-/// under-state: the finest measured fall is continued, and at least this.
-pub const MIN_DECAY_LOG2: f64 = 0.585;
+/// that a level three steps below 200 m data needs falls by 0.6 to 0.9 an octave on the way
+/// down to 25 m), which coarse octaves under-state: the finest measured fall is continued, and
+/// at least this.
+pub const MIN_DECAY_LOG2: f64 = 0.7;
 /// Smallest grid a measured octave's parent may be, samples a side.
 const MIN_OCTAVE_SAMPLES: usize = 12;
 /// Samples kept clear of the grid's edges in the statistics (clamping flattens them).
@@ -527,6 +528,16 @@ fn fit_line(points: &[(f64, f64)]) -> (f64, f64, f64) {
     (slope, intercept, rms)
 }
 
+/// Slope of the weighted least-squares line through `(x, y, weight)` points.
+fn fit_line_weighted(points: &[(f64, f64, f64)]) -> f64 {
+    let total: f64 = points.iter().map(|p| p.2).sum();
+    let mx = points.iter().map(|p| p.0 * p.2).sum::<f64>() / total;
+    let my = points.iter().map(|p| p.1 * p.2).sum::<f64>() / total;
+    let sxx: f64 = points.iter().map(|p| p.2 * (p.0 - mx) * (p.0 - mx)).sum();
+    let sxy: f64 = points.iter().map(|p| p.2 * (p.0 - mx) * (p.1 - my)).sum();
+    if sxx > 0.0 { sxy / sxx } else { 0.0 }
+}
+
 /// Fits the detail of `derived_levels` levels finer than `field` (a world's finest stored
 /// level, or the coarse grid `verdant eval derive` is given) to the field itself.
 ///
@@ -541,9 +552,9 @@ fn fit_line(points: &[(f64, f64)]) -> (f64, f64, f64) {
 /// 3. Per derived level `d` steps below the data, the amplitude is measured one level of the
 ///    data `d` steps below its own octave `d` ([`detail_at_depth`]): the share of roughness
 ///    that `d` Catmull-Rom steps keep is in it. It is carried `d` octaves finer: held on
-///    scale-invariant terrain (trend at most [`SCALE_INVARIANT_TREND_LOG2`], continued as it
-///    is); otherwise lowered by the finest measured fall per octave, at least
-///    [`MIN_DECAY_LOG2`] (`decay_log2`).
+///    scale-invariant terrain (trend at most [`SCALE_INVARIANT_TREND_LOG2`]); otherwise
+///    lowered by the finest measured fall per octave, at least [`MIN_DECAY_LOG2`]
+///    (`decay_log2`).
 ///
 /// Falls back to plain bicubic (`method = "bicubic"`, every amplitude 0, the reason in
 /// `note`) with fewer than [`MIN_FIT_OCTAVES`] octaves, on flat terrain (finest residual
@@ -598,10 +609,15 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
             format!("H {hurst:.3}, but Catmull-Rom alone is as rough as the data; plain bicubic");
         return table;
     }
-    let (trend, _, _) = fit_line(&details);
+    // The trend, weighted by each octave's samples (the coarse octaves are few, and noisy).
+    let weighted: Vec<(f64, f64, f64)> = details
+        .iter()
+        .map(|&(k, a)| (k, a, (-2.0 * k).exp2()))
+        .collect();
+    let trend = fit_line_weighted(&weighted);
     let scale_invariant = trend <= SCALE_INVARIANT_TREND_LOG2;
     let decay = if scale_invariant {
-        trend.max(0.0)
+        0.0
     } else {
         let finest = if octaves[1].detail > 0.0 {
             f64::from(octaves[1].detail).log2() - f64::from(octaves[0].detail).log2()
@@ -639,8 +655,7 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
     table.note = if scale_invariant {
         format!(
             "fractal: H {hurst:.3} over {} octaves; scale-invariant (amplitude trend \
-             {trend:+.3} log2 an octave), each depth's amplitude carried finer at {decay:.3} \
-             log2 an octave",
+             {trend:+.3} log2 an octave), each depth's amplitude held",
             octaves.len()
         )
     } else {
