@@ -406,7 +406,15 @@ fn eval_derive_writes_its_table_and_charts() {
         .skip(1)
         .map(|l| l.split(',').collect())
         .collect();
-    assert_eq!(rows.len(), 9, "{csv}");
+    assert_eq!(rows.len(), 10, "{csv}");
+    // The fitted kernel reports its weight, within the searched range.
+    let kernel = rows
+        .iter()
+        .find(|r| r[0].starts_with("fitted kernel "))
+        .unwrap_or_else(|| panic!("no fitted kernel row: {csv}"));
+    let w: f32 = kernel[0]["fitted kernel ".len()..].parse().unwrap();
+    let (lo, hi) = verdant::tools::eval_derive::KERNEL_RANGE;
+    assert!((lo..=hi).contains(&w), "{csv}");
     let rmse = |name: &str| -> f64 {
         rows.iter().find(|r| r[0] == name).unwrap()[2]
             .parse()
