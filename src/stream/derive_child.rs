@@ -647,6 +647,18 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
         }
         at_data.push(value);
     }
+    let deepest = (1..=u32::from(derived_levels))
+        .take_while(|&d| octave_fits(field, d))
+        .last()
+        .unwrap_or(0);
+    let continued = if deepest < u32::from(derived_levels) {
+        format!(
+            "; depths beyond {deepest} continue the amplitudes measured above them (the grid \
+             is too small to measure them)"
+        )
+    } else {
+        String::new()
+    };
     for (s, (d, a)) in table.detail.iter_mut().zip(&at_data).enumerate() {
         *d = a.map_or(0.0, |a| {
             ((a - decay * (s as f64 + 1.0)).exp2() as f32).min(MAX_DETAIL)
@@ -656,14 +668,14 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
     table.note = if scale_invariant {
         format!(
             "fractal: H {hurst:.3} over {} octaves; scale-invariant (amplitude trend \
-             {trend:+.3} log2 an octave), each depth's amplitude held",
+             {trend:+.3} log2 an octave), each depth's amplitude held{continued}",
             octaves.len()
         )
     } else {
         format!(
             "fractal: H {hurst:.3} over {} octaves; smoother toward fine scales (amplitude \
              trend {trend:+.3} log2 an octave), each depth's amplitude carried finer falling \
-             {decay:.3} log2 an octave",
+             {decay:.3} log2 an octave{continued}",
             octaves.len()
         )
     };
@@ -715,6 +727,50 @@ mod tests {
         assert_eq!(table.method, DeriveMode::Bicubic);
         assert!(table.note.starts_with("too few levels"), "{}", table.note);
         assert_eq!(table.detail, vec![0.0; 3]);
+    }
+
+    /// Value noise: hashed values at every `2^k`-th sample, bilinear between, summed over
+    /// octaves with amplitude `2^(k * hurst)`.
+    fn value_noise(width: usize, height: usize, hurst: f32, seed: u32) -> Vec<f32> {
+        field(width, height, |x, y| {
+            (0..6u32)
+                .map(|k| {
+                    let step = 1usize << k;
+                    let (gx, gy) = (x / step, y / step);
+                    let (fx, fy) = (
+                        (x % step) as f32 / step as f32,
+                        (y % step) as f32 / step as f32,
+                    );
+                    let v = |i: usize, j: usize| unit(hash4(i as u32, j as u32, k, seed));
+                    let top = v(gx, gy) * (1.0 - fx) + v(gx + 1, gy) * fx;
+                    let bottom = v(gx, gy + 1) * (1.0 - fx) + v(gx + 1, gy + 1) * fx;
+                    (top * (1.0 - fy) + bottom * fy) * (k as f32 * hurst).exp2()
+                })
+                .sum()
+        })
+    }
+
+    #[test]
+    fn levels_too_deep_to_measure_continue_the_measured_ones() {
+        // 97 samples: depths 1 to 3 measurable (octave 3 has 13 samples), 4 to 6 not.
+        let heights = value_noise(97, 97, 0.6, 9);
+        let table = calibrate(
+            &HeightField {
+                width: 97,
+                height: 97,
+                cell_m: (10.0, 10.0),
+                heights: &heights,
+            },
+            6,
+            1,
+        );
+        assert_eq!(table.method, DeriveMode::Fractal, "{}", table.note);
+        assert!(table.note.contains("depths beyond 3"), "{}", table.note);
+        assert!(
+            table.detail.iter().all(|d| d.is_finite() && *d > 0.0),
+            "{:?}",
+            table.detail
+        );
     }
 
     #[test]
