@@ -416,7 +416,14 @@ const HURST_TOLERANCE: f64 = 0.1;
 
 #[test]
 fn calibrated_method_recovers_fractal_surfaces_of_known_hurst_exponent() {
-    for (hurst, seed) in [(0.3, 3), (0.3, 103), (0.5, 5), (0.5, 105), (0.8, 8), (0.8, 108)] {
+    for (hurst, seed) in [
+        (0.3, 3),
+        (0.3, 103),
+        (0.5, 5),
+        (0.5, 105),
+        (0.8, 8),
+        (0.8, 108),
+    ] {
         // Relief for an RMS slope of about 0.3 at the finest samples.
         let truth = fbm_surface(hurst, 10, seed, 2.0, 0.6 * 1024f64.powf(hurst));
         for factor in [4, 8] {

@@ -280,3 +280,44 @@ fn missing_and_corrupt_tiles_fall_back_to_their_ancestors() {
         "each broken tile is loaded and reported once"
     );
 }
+
+/// A source whose every load fails at once, counting loads.
+struct BrokenSource {
+    loads: AtomicU32,
+}
+
+impl TileSource for BrokenSource {
+    fn load(&self, id: TileId) -> Result<TileData, WorldError> {
+        self.loads.fetch_add(1, Ordering::SeqCst);
+        Err(WorldError::MissingFile {
+            path: std::path::PathBuf::from(format!(
+                "tiles/L{}/{}_{}.height.exr",
+                id.level, id.x, id.y
+            )),
+        })
+    }
+}
+
+#[test]
+fn a_failed_tile_is_not_loaded_again_when_a_stale_want_set_names_it() {
+    let source = Arc::new(BrokenSource {
+        loads: AtomicU32::new(0),
+    });
+    let mut streamer = Streamer::start(source.clone(), StreamConfig::default()).unwrap();
+    let broken = TileId::new(2, 3, 4);
+    let want = vec![Want {
+        id: broken,
+        priority: 1.0,
+    }];
+    streamer.want(want.clone());
+    wait_for(|| streamer.stats().failed == 1, "the load to fail");
+    // The frame has not polled the failure yet: its next want set still names the tile.
+    streamer.want(want.clone());
+    streamer.want(want);
+    std::thread::sleep(Duration::from_millis(100));
+    let failures: Vec<Loaded> = streamer.poll();
+    assert_eq!(failures.len(), 1, "reported once");
+    assert!(matches!(failures[0], Loaded::Failed { id, .. } if id == broken));
+    assert_eq!(source.loads.load(Ordering::SeqCst), 1, "loaded once");
+    assert_eq!(streamer.stats().failed, 1);
+}

@@ -472,7 +472,9 @@ fn crop(len: usize, octaves: u32) -> usize {
 /// Measures up to `octaves` octaves of `field` (see [`OctaveFit`]), finest first; fewer where
 /// the coarsest parent would be smaller than 12 samples a side.
 pub fn measure_octaves(field: &HeightField<'_>, octaves: u32, seed: u32) -> Vec<OctaveFit> {
-    let n = (0..octaves).take_while(|&k| octave_fits(field, k + 1)).count() as u32;
+    let n = (0..octaves)
+        .take_while(|&k| octave_fits(field, k + 1))
+        .count() as u32;
     if n == 0 {
         return Vec::new();
     }

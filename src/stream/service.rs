@@ -5,8 +5,11 @@
 //! runs on tokio's blocking pool (`spawn_blocking`), at most `max_in_flight` loads at a time, the
 //! most urgent first. A tile that leaves the wanted set is cancelled: if its load has not
 //! started it never starts, and if it has, its result is dropped and reported as cancelled.
+//! A tile whose load failed is reported once and never loaded again by this streamer, even when
+//! a want set that the frame sent before it saw the failure names it again (the failed set
+//! holds at most the world's tiles).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
@@ -201,6 +204,8 @@ async fn serve(
     // Each running load with the flag that tells it its tile is no longer wanted.
     let mut running: HashMap<TileId, Arc<AtomicBool>> = HashMap::new();
     let mut tasks: JoinSet<(TileId, Result<TileData, WorldError>)> = JoinSet::new();
+    // Tiles whose load failed (and was reported): never started again.
+    let mut failed: HashSet<TileId> = HashSet::new();
     loop {
         // Start the most urgent wanted tiles that are not running yet.
         if running.len() < config.max_in_flight {
@@ -224,7 +229,11 @@ async fn serve(
         tokio::select! {
             request = requests.recv() => match request {
                 Some(wants) => {
-                    wanted = wants.into_iter().map(|w| (w.id, w.priority)).collect();
+                    wanted = wants
+                        .into_iter()
+                        .filter(|w| !failed.contains(&w.id))
+                        .map(|w| (w.id, w.priority))
+                        .collect();
                     for (id, cancelled) in &running {
                         if !wanted.contains_key(id) {
                             cancelled.store(true, Ordering::Relaxed);
@@ -257,6 +266,7 @@ async fn serve(
                     }
                     Err(e) => {
                         counters.failed.fetch_add(1, Ordering::Relaxed);
+                        failed.insert(id);
                         Loaded::Failed { id, error: e.to_string() }
                     }
                 };
