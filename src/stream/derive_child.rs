@@ -3,10 +3,10 @@
 //!
 //! Heights: Catmull-Rom (bicubic) upsampling of the parent's smooth surface (the parent less
 //! its own detail, see [`derive_child`]) plus deterministic high-pass detail noise (see
-//! [`detail_noise`]) between the parent's samples, scaled by the local slope and by the child level's amplitude (fitted per world by
-//! [`calibrate`], stored in the manifest's `[derive]` table) and faded to zero toward the tile
-//! edges. Every term is a function
-//! of the global sample position and of parent samples that neighbouring tiles share, so
+//! [`detail_noise`]) between the parent's samples, scaled by the local slope and by the child
+//! level's amplitude (fitted per world by [`calibrate`], stored in the manifest's `[derive]`
+//! table) and faded to zero toward the tile edges. Every term is a function of the global
+//! sample position and of parent samples that neighbouring tiles share, so
 //! neighbours derive identical edge and border values. Grass type is taken from one of the
 //! nearest parent samples (picked by a hash, so types stay crisp and clump), density is the
 //! rounded mean of the nearest parent samples.
@@ -694,20 +694,22 @@ mod tests {
             .collect()
     }
 
+    /// [`calibrate`] on a square grid of `side` samples of 10 m, seed 1.
+    fn calibrate_square(heights: &[f32], side: usize, derived_levels: u8) -> DeriveCalibration {
+        let field = HeightField {
+            width: side,
+            height: side,
+            cell_m: (10.0, 10.0),
+            heights,
+        };
+        calibrate(&field, derived_levels, 1)
+    }
+
     #[test]
     fn a_flat_world_falls_back_to_plain_bicubic() {
         // A tilted plane: Catmull-Rom predicts it exactly.
         let heights = field(257, 257, |x, y| 100.0 + 0.5 * x as f32 + 0.25 * y as f32);
-        let table = calibrate(
-            &HeightField {
-                width: 257,
-                height: 257,
-                cell_m: (10.0, 10.0),
-                heights: &heights,
-            },
-            6,
-            1,
-        );
+        let table = calibrate_square(&heights, 257, 6);
         assert_eq!(table.method, DeriveMode::Bicubic);
         assert!(table.note.starts_with("flat"), "{}", table.note);
         assert_eq!(table.detail, vec![0.0; 6]);
@@ -716,16 +718,7 @@ mod tests {
     #[test]
     fn too_few_levels_fall_back_to_plain_bicubic() {
         let heights = field(40, 40, |x, y| ((x * 7 + y * 13) % 11) as f32);
-        let table = calibrate(
-            &HeightField {
-                width: 40,
-                height: 40,
-                cell_m: (10.0, 10.0),
-                heights: &heights,
-            },
-            3,
-            1,
-        );
+        let table = calibrate_square(&heights, 40, 3);
         assert_eq!(table.method, DeriveMode::Bicubic);
         assert!(table.note.starts_with("too few levels"), "{}", table.note);
         assert_eq!(table.detail, vec![0.0; 3]);
@@ -756,16 +749,7 @@ mod tests {
     fn levels_too_deep_to_measure_continue_the_measured_ones() {
         // 97 samples: depths 1 to 3 measurable (octave 3 has 13 samples), 4 to 6 not.
         let heights = value_noise(97, 97, 0.6, 9);
-        let table = calibrate(
-            &HeightField {
-                width: 97,
-                height: 97,
-                cell_m: (10.0, 10.0),
-                heights: &heights,
-            },
-            6,
-            1,
-        );
+        let table = calibrate_square(&heights, 97, 6);
         assert_eq!(table.method, DeriveMode::Fractal, "{}", table.note);
         assert!(table.note.contains("depths beyond 3"), "{}", table.note);
         assert!(

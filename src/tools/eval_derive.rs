@@ -82,6 +82,18 @@ impl Grid {
         self.data[y * self.width + x]
     }
 
+    /// The separable four-tap interpolation with weights `wx` along a row and `wy` across
+    /// rows over the samples `ix - 1 ..= ix + 2`, `iy - 1 ..= iy + 2`.
+    fn four_tap(&self, ix: i64, iy: i64, wx: [f32; 4], wy: [f32; 4]) -> f32 {
+        let mut rows = [0.0f32; 4];
+        for (dy, row) in rows.iter_mut().enumerate() {
+            let y = iy - 1 + dy as i64;
+            let p = |dx: i64| self.at(ix - 1 + dx, y);
+            *row = ((wx[0] * p(0) + wx[1] * p(1)) + wx[2] * p(2)) + wx[3] * p(3);
+        }
+        ((wy[0] * rows[0] + wy[1] * rows[1]) + wy[2] * rows[2]) + wy[3] * rows[3]
+    }
+
     /// Every `k`-th sample in both directions.
     pub fn downsample(&self, k: usize) -> Grid {
         let (w, h) = ((self.width - 1) / k + 1, (self.height - 1) / k + 1);
@@ -159,18 +171,8 @@ pub fn upsample2x(coarse: &Grid, method: DeriveMethod, level: u32, seed: u32) ->
             let v = match method {
                 DeriveMethod::Nearest => coarse.at(ix, iy),
                 DeriveMethod::Kernel(k) => {
-                    let half = [-k, 0.5 + k, 0.5 + k, -k];
-                    let (wx, wy) = (
-                        if fx == 0 { WEIGHTS[0] } else { half },
-                        if fy == 0 { WEIGHTS[0] } else { half },
-                    );
-                    let mut rows = [0.0f32; 4];
-                    for (dy, row) in rows.iter_mut().enumerate() {
-                        let y = iy - 1 + dy as i64;
-                        let p = |dx: i64| coarse.at(ix - 1 + dx, y);
-                        *row = ((wx[0] * p(0) + wx[1] * p(1)) + wx[2] * p(2)) + wx[3] * p(3);
-                    }
-                    ((wy[0] * rows[0] + wy[1] * rows[1]) + wy[2] * rows[2]) + wy[3] * rows[3]
+                    let weights = [WEIGHTS[0], [-k, 0.5 + k, 0.5 + k, -k]];
+                    coarse.four_tap(ix, iy, weights[fx], weights[fy])
                 }
                 DeriveMethod::Bilinear => {
                     let a = coarse.at(ix, iy) * (1.0 - 0.5 * fx as f32)
@@ -183,15 +185,7 @@ pub fn upsample2x(coarse: &Grid, method: DeriveMethod, level: u32, seed: u32) ->
                 | DeriveMethod::InheritedDetail(_)
                 | DeriveMethod::BicubicDetail(_)
                 | DeriveMethod::Calibrated(_) => {
-                    let (wx, wy) = (WEIGHTS[fx], WEIGHTS[fy]);
-                    let mut rows = [0.0f32; 4];
-                    for (dy, row) in rows.iter_mut().enumerate() {
-                        let y = iy - 1 + dy as i64;
-                        let p = |dx: i64| coarse.at(ix - 1 + dx, y);
-                        *row = ((wx[0] * p(0) + wx[1] * p(1)) + wx[2] * p(2)) + wx[3] * p(3);
-                    }
-                    let mut v =
-                        ((wy[0] * rows[0] + wy[1] * rows[1]) + wy[2] * rows[2]) + wy[3] * rows[3];
+                    let mut v = coarse.four_tap(ix, iy, WEIGHTS[fx], WEIGHTS[fy]);
                     let amplitude = match method {
                         DeriveMethod::InheritedDetail(a) | DeriveMethod::BicubicDetail(a) => {
                             Some(a)
