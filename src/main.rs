@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
+use clap::builder::RangedU64ValueParser;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -14,27 +15,29 @@ use verdant::tools::{FlyOptions, FlyProgress, SoakOptions, run_fly, run_soak};
 /// Limits of the tile service, shared by the commands that stream.
 #[derive(clap::Args, Clone)]
 struct StreamArgs {
-    /// Ceiling of the CPU cache of decoded tiles, MiB (it must hold at least one tile).
+    /// Ceiling of the CPU cache of decoded tiles, MiB, 1..=1048576 (it must hold at least one
+    /// tile).
     #[arg(long, default_value = "64", value_parser = parse_mib)]
     cache_mib: u64,
-    /// Slots of the GPU tile atlas (each holds one tile).
-    #[arg(long, default_value_t = 256)]
+    /// Slots of the GPU tile atlas (each holds one tile), 2..=4096; more than the world's
+    /// level-0 tiles and at most the adapter's texture array layers.
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(2..=4096))]
     atlas_slots: u32,
-    /// Tile loads in flight at most.
-    #[arg(long, default_value_t = 8)]
+    /// Tile loads in flight at most, 1..=64.
+    #[arg(long, default_value_t = 8, value_parser = RangedU64ValueParser::<usize>::new().range(1..=64))]
     max_loads: usize,
-    /// A world over HTTP: deadline of one request, seconds (whole seconds, at least 1).
-    #[arg(long, default_value_t = 10)]
+    /// A world over HTTP: deadline of one request, whole seconds, 1..=3600.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=3600))]
     http_timeout_s: u64,
     /// A world over HTTP: retries of a transient failure (connection error, 5xx, a body cut
-    /// short), with doubling backoff from 200 ms.
-    #[arg(long, default_value_t = 3)]
+    /// short), 0..=20, with doubling backoff from 200 ms.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=20))]
     http_retries: u32,
     /// A world over HTTP: keep fetched tile files in this folder, revalidated with the
     /// server's ETag or Last-Modified.
     #[arg(long)]
     http_cache: Option<PathBuf>,
-    /// Ceiling of the --http-cache folder, MiB.
+    /// Ceiling of the --http-cache folder, MiB, 1..=1048576.
     #[arg(long, default_value = "512", value_parser = parse_mib)]
     http_cache_mib: u64,
 }
@@ -42,7 +45,7 @@ struct StreamArgs {
 impl StreamArgs {
     fn http(&self) -> verdant::stream::HttpOptions {
         verdant::stream::HttpOptions {
-            timeout: std::time::Duration::from_secs(self.http_timeout_s.max(1)),
+            timeout: std::time::Duration::from_secs(self.http_timeout_s),
             retries: self.http_retries,
             cache: self
                 .http_cache
@@ -62,7 +65,7 @@ impl StreamArgs {
             atlas_slots: self.atlas_slots,
             ..ServiceConfig::default()
         };
-        c.stream.max_in_flight = self.max_loads.max(1);
+        c.stream.max_in_flight = self.max_loads;
         c
     }
 }
@@ -85,8 +88,8 @@ enum Command {
         /// Camera path from the world's manifest (default: its first path).
         #[arg(long)]
         path: Option<String>,
-        /// Frames to render, spread evenly over the path.
-        #[arg(long, default_value_t = 240)]
+        /// Frames to render, spread evenly over the path, 1..=1000000.
+        #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
         frames: u32,
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "640x360", value_parser = parse_size)]
@@ -155,8 +158,8 @@ enum Command {
         /// Follow the camera path from the start.
         #[arg(long)]
         follow: bool,
-        /// Render this many frames (a fixed 1/60 s apart) and exit.
-        #[arg(long)]
+        /// Render this many frames (a fixed 1/60 s apart) and exit, 1..=1000000.
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
         frames: Option<u32>,
         /// Write the last of --frames N frames to this PNG file.
         #[arg(long)]
@@ -173,11 +176,12 @@ enum Command {
         /// World folder, the name of a world under ./worlds, or a world's http:// address.
         #[arg(default_value = "santa-cruz")]
         world: String,
-        /// Simulated flight time, seconds (0.1 s a frame).
-        #[arg(long, default_value_t = 60.0)]
+        /// Simulated flight time, seconds (0.1 s a frame), 1..=604800 (a week).
+        #[arg(long, default_value_t = 60.0, value_parser = float_in(1.0, 604_800.0))]
         seconds: f64,
-        /// Camera speed, metres a second.
-        #[arg(long, default_value_t = 50.0)]
+        /// Camera speed, metres a second, 0..=1000 (and less than a world's width in 20
+        /// frames: the camera must stay over the world).
+        #[arg(long, default_value_t = 50.0, value_parser = float_in(0.0, 1000.0))]
         speed: f64,
         /// Seed of the turns and teleports.
         #[arg(long, default_value_t = 1)]
@@ -191,11 +195,11 @@ enum Command {
         /// Fly without grass and its wind: the streaming system alone.
         #[arg(long)]
         no_grass: bool,
-        /// A teleport must reach full detail within this many frames.
-        #[arg(long, default_value_t = 50)]
+        /// A teleport must reach full detail within this many frames, 1..=100000.
+        #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..=100_000))]
         max_recovery_frames: u32,
-        /// No frame may take longer than this, milliseconds (wall time).
-        #[arg(long, default_value_t = 5000.0)]
+        /// No frame may take longer than this, milliseconds (wall time), 1..=3600000.
+        #[arg(long, default_value_t = 5000.0, value_parser = float_in(1.0, 3_600_000.0))]
         max_stall_ms: f64,
         #[command(flatten)]
         stream: StreamArgs,
@@ -316,8 +320,8 @@ enum BenchCommand {
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "480x270", value_parser = parse_size)]
         size: (u32, u32),
-        /// Frames of the dolly.
-        #[arg(long, default_value_t = 48)]
+        /// Frames of the dolly, 2..=10000.
+        #[arg(long, default_value_t = 48, value_parser = clap::value_parser!(u32).range(2..=10_000))]
         dolly_frames: u32,
         #[command(flatten)]
         timing: TimingArgs,
@@ -329,14 +333,14 @@ enum BenchCommand {
 /// untimed ones) and fewer on a software renderer (2 rounds of 3 after 1).
 #[derive(clap::Args, Clone, Copy)]
 struct TimingArgs {
-    /// Untimed frames before each measurement's timed ones.
-    #[arg(long)]
+    /// Untimed frames before each measurement's timed ones, 0..=10000.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=10_000))]
     warmup_frames: Option<u32>,
-    /// Timed frames of each measurement per round.
-    #[arg(long)]
+    /// Timed frames of each measurement per round, 1..=10000.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=10_000))]
     timed_frames: Option<u32>,
-    /// Interleaved rounds over the settings.
-    #[arg(long)]
+    /// Interleaved rounds over the settings, 1..=1000.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1000))]
     rounds: Option<u32>,
 }
 
@@ -684,19 +688,31 @@ fn eval_sway(out: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Parses a size in MiB whose byte count fits a u64 (so that it never wraps).
+/// Most frames `fly` and `view` render in one run.
+const MAX_FRAMES: i64 = 1_000_000;
+
+/// Most MiB a memory ceiling may name (1 TiB).
+const MAX_MIB: u64 = 1 << 20;
+
+/// Parses a size in MiB, 1..=[`MAX_MIB`].
 fn parse_mib(s: &str) -> Result<u64, String> {
     let mib: u64 = s
         .trim()
         .parse()
         .map_err(|_| format!("{s:?} is not a whole number of MiB"))?;
-    if mib.checked_mul(1 << 20).is_none() {
-        return Err(format!(
-            "{mib} MiB is more bytes than a 64-bit count holds (at most {} MiB)",
-            u64::MAX >> 20
-        ));
+    if !(1..=MAX_MIB).contains(&mib) {
+        return Err(format!("{mib} MiB is out of range (1..={MAX_MIB} MiB)"));
     }
     Ok(mib)
+}
+
+/// A parser of a finite number in `lo..=hi` whose error states the range.
+fn float_in(lo: f64, hi: f64) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
+    move |s: &str| match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (lo..=hi).contains(&v) => Ok(v),
+        Ok(_) => Err(format!("{} is out of range ({lo}..={hi})", s.trim())),
+        Err(_) => Err(format!("{s:?} is not a number (expected {lo}..={hi})")),
+    }
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {

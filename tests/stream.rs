@@ -163,6 +163,7 @@ fn ceilings_hold_when_the_camera_jumps_across_the_world() {
         uploads_per_frame: 8,
         derives_per_frame: 8,
         stream: StreamConfig::default(),
+        ..ServiceConfig::default()
     };
     let (mut service, _) = TileService::new(&pyramid, Arc::new(w.clone()), config).unwrap();
     let lod = TerrainLod {
@@ -320,4 +321,92 @@ fn a_failed_tile_is_not_loaded_again_when_a_stale_want_set_names_it() {
     assert!(matches!(failures[0], Loaded::Failed { id, .. } if id == broken));
     assert_eq!(source.loads.load(Ordering::SeqCst), 1, "loaded once");
     assert_eq!(streamer.stats().failed, 1);
+}
+
+/// A tile file broken and then restored: the tile is drawn from its ancestor while broken, loaded
+/// again after the retry wait (which doubles with each failure), and resident once restored.
+#[test]
+fn a_failed_tile_is_retried_and_heals_once_its_file_is_restored() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("world");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(
+        common::default_world().join("world.toml"),
+        dir.join("world.toml"),
+    )
+    .unwrap();
+    common::copy_dir(&common::default_world().join("tiles"), &dir.join("tiles"));
+    let broken = TileId::new(2, 3, 4);
+    let file = dir.join("tiles/L2/3_4.height.exr");
+    let good = std::fs::read(&file).unwrap();
+    std::fs::write(&file, &good[..good.len() / 2]).unwrap();
+    let w = World::open(&dir).unwrap();
+    let pyramid = w.manifest.pyramid.clone();
+    let config = ServiceConfig {
+        fault_retry_s: 0.05,
+        fault_retry_max_s: 0.2,
+        ..ServiceConfig::default()
+    };
+    let (mut service, _) = TileService::new(&pyramid, Arc::new(w), config).unwrap();
+    let wants = vec![Want {
+        id: broken,
+        priority: 1.0,
+    }];
+    let step = |service: &mut TileService| {
+        service.update(&wants);
+        let s = service.stats();
+        assert_eq!(s.holes, 0, "{s:?}");
+        std::thread::sleep(Duration::from_millis(2));
+        s
+    };
+    // Broken: it fails, is retried, and fails again; meanwhile its ancestor draws it.
+    let start = Instant::now();
+    while step(&mut service).stream.failed < 3 {
+        assert!(start.elapsed() < Duration::from_secs(30), "no retries");
+    }
+    let s = service.stats();
+    assert_eq!(s.faults, 1, "one tile is failed: {s:?}");
+    assert_eq!(
+        s.fault_blocked, 1,
+        "the wanted tile is blocked by its fault"
+    );
+    assert!(!service.is_resident(broken));
+    assert!(service.blocked_by(broken).is_some());
+    // Restored: the next retry loads it.
+    std::fs::write(&file, &good).unwrap();
+    while !service.is_resident(broken) {
+        step(&mut service);
+        assert!(start.elapsed() < Duration::from_secs(30), "never healed");
+    }
+    let s = step(&mut service);
+    assert_eq!(
+        (s.faults, s.fault_blocked, s.faults_healed),
+        (0, 0, 1),
+        "{s:?}"
+    );
+    assert_eq!(s.resident, 1);
+}
+
+#[test]
+fn the_retry_wait_doubles_up_to_its_ceiling() {
+    use verdant::stream::fault_retry_delay;
+    let d = |n| fault_retry_delay(5.0, 120.0, n).as_secs_f64();
+    assert_eq!(
+        [d(1), d(2), d(3), d(5), d(6), d(1000)],
+        [5.0, 10.0, 20.0, 80.0, 120.0, 120.0]
+    );
+}
+
+#[test]
+fn a_streamer_refuses_zero_or_absurd_loads_in_flight() {
+    for n in [0, verdant::stream::MAX_LOADS_IN_FLIGHT + 1, usize::MAX] {
+        let config = StreamConfig {
+            max_in_flight: n,
+            ..StreamConfig::default()
+        };
+        let err = Streamer::start(Arc::new(world()), config)
+            .err()
+            .expect("refused");
+        assert!(err.to_string().contains("1..=1024"), "{err}");
+    }
 }

@@ -23,5 +23,7 @@ pub use derive_child::{
 };
 #[cfg(feature = "http")]
 pub use http::{HttpCacheConfig, HttpError, HttpOptions, HttpSource, HttpStats};
-pub use residency::{ResidencyPlan, ResidencyStats, ServiceConfig, TileService};
-pub use service::{Loaded, StreamConfig, StreamStats, Streamer, TileSource, Want};
+pub use residency::{ResidencyPlan, ResidencyStats, ServiceConfig, TileService, fault_retry_delay};
+pub use service::{
+    Loaded, MAX_LOADS_IN_FLIGHT, StreamConfig, StreamStats, Streamer, TileSource, Want,
+};

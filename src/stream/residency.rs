@@ -9,6 +9,7 @@
 
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use crate::stream::DeriveJob;
 use crate::stream::{
@@ -29,6 +30,13 @@ pub struct ServiceConfig {
     pub derives_per_frame: u32,
     /// The streamer's limits.
     pub stream: StreamConfig,
+    /// A tile whose load failed is drawn from its ancestor and loaded again (when still wanted)
+    /// after this long, seconds; the wait doubles with each failure of the same tile, up to
+    /// [`ServiceConfig::fault_retry_max_s`]. A fault that heals (a server back up, a file
+    /// restored) so heals on screen too.
+    pub fault_retry_s: f64,
+    /// The longest wait before a failed tile is loaded again, seconds.
+    pub fault_retry_max_s: f64,
 }
 
 impl Default for ServiceConfig {
@@ -39,6 +47,8 @@ impl Default for ServiceConfig {
             uploads_per_frame: 16,
             derives_per_frame: 32,
             stream: StreamConfig::default(),
+            fault_retry_s: 5.0,
+            fault_retry_max_s: 120.0,
         }
     }
 }
@@ -82,14 +92,41 @@ pub struct ResidencyStats {
     pub uploaded: u32,
     /// Tiles derived this frame.
     pub derived: u32,
-    /// Tiles whose load failed so far (each logged once, then drawn from an ancestor).
+    /// Tiles whose last load failed, drawn from an ancestor until a retry loads them (each
+    /// logged once).
     pub faults: u32,
+    /// Desired tiles drawn from an ancestor because their own load, or the load of the stored
+    /// tile they derive from, failed (counted in `from_ancestor` too).
+    #[serde(default)]
+    pub fault_blocked: u32,
+    /// Tiles that loaded after failing, so far.
+    #[serde(default)]
+    pub faults_healed: u64,
     /// Desired tiles resident at their own level, as a fraction (1 when none are desired).
     pub resident_fraction: f64,
     /// The streamer's counters.
     pub stream: StreamStats,
     /// The CPU cache's counters.
     pub cache: CacheStats,
+}
+
+/// A tile whose last load failed.
+#[derive(Debug)]
+struct Failure {
+    error: String,
+    /// Failed loads in a row.
+    attempts: u32,
+    /// When it may be loaded again.
+    retry_at: Instant,
+    /// Its retry was sent to the streamer; the load's outcome is awaited.
+    retrying: bool,
+}
+
+/// The wait before the `attempts`-th retry of a failed tile: `first` doubled per earlier
+/// failure, at most `max`.
+pub fn fault_retry_delay(first_s: f64, max_s: f64, attempts: u32) -> Duration {
+    let s = first_s * 2f64.powi(attempts.saturating_sub(1).min(64) as i32);
+    Duration::from_secs_f64(s.min(max_s).clamp(0.0, 1e9))
 }
 
 /// The tile service's frame side.
@@ -100,7 +137,8 @@ pub struct TileService {
     cache: TileCache,
     slots: Vec<Option<TileId>>,
     resident: HashMap<TileId, Slot>,
-    failed: HashMap<TileId, String>,
+    failed: HashMap<TileId, Failure>,
+    healed: u64,
     frame: u64,
     evictions: u64,
     last: ResidencyStats,
@@ -156,6 +194,7 @@ impl TileService {
                 slots,
                 resident,
                 failed: HashMap::new(),
+                healed: 0,
                 frame: 0,
                 evictions: 0,
                 last: ResidencyStats::default(),
@@ -173,19 +212,58 @@ impl TileService {
     /// (most urgent first) and tells the streamer what to load next. Never waits.
     pub fn update(&mut self, wants: &[Want]) -> ResidencyPlan {
         self.frame += 1;
+        let now = Instant::now();
+        let (first_s, max_s) = (self.config.fault_retry_s, self.config.fault_retry_max_s);
         for loaded in self.streamer.poll() {
             match loaded {
                 Loaded::Tile(tile) => {
+                    if let Some(f) = self.failed.remove(&tile.id) {
+                        self.healed += 1;
+                        log::info!(
+                            "tile {:?} loaded after {} failed loads",
+                            tile.id,
+                            f.attempts
+                        );
+                    }
                     self.cache.insert(tile);
                 }
-                Loaded::Failed { id, error } => {
-                    if let std::collections::hash_map::Entry::Vacant(e) = self.failed.entry(id) {
+                Loaded::Failed { id, error } => match self.failed.get_mut(&id) {
+                    None => {
                         log::warn!(
                             "tile {id:?} failed to load, drawing its ancestor instead: {error}"
                         );
-                        e.insert(error);
+                        self.failed.insert(
+                            id,
+                            Failure {
+                                error,
+                                attempts: 1,
+                                retry_at: now + fault_retry_delay(first_s, max_s, 1),
+                                retrying: false,
+                            },
+                        );
                     }
-                }
+                    // A retry failed: wait longer.
+                    Some(f) if f.retrying => {
+                        f.attempts += 1;
+                        f.retrying = false;
+                        f.retry_at = now + fault_retry_delay(first_s, max_s, f.attempts);
+                        log::info!(
+                            "tile {id:?} failed again ({} times), next try in {:.0} s: {error}",
+                            f.attempts,
+                            (f.retry_at - now).as_secs_f64()
+                        );
+                        f.error = error;
+                    }
+                    Some(_) => {}
+                },
+            }
+        }
+        // Failed tiles whose wait is over are loaded again when wanted.
+        let mut retry = Vec::new();
+        for (id, f) in &mut self.failed {
+            if !f.retrying && f.retry_at <= now {
+                f.retrying = true;
+                retry.push(*id);
             }
         }
 
@@ -214,7 +292,9 @@ impl TileService {
         let mut work: Vec<Want> = order.iter().rev().copied().collect();
         while let Some(w) = work.pop() {
             let id = w.id;
-            if !seen.insert(id) || self.resident.contains_key(&id) || self.failed.contains_key(&id)
+            if !seen.insert(id)
+                || self.resident.contains_key(&id)
+                || self.failed.get(&id).is_some_and(|f| !f.retrying)
             {
                 continue;
             }
@@ -265,7 +345,7 @@ impl TileService {
                 }
             }
         }
-        self.streamer.want(stream_wants);
+        self.streamer.want_retrying(stream_wants, retry);
 
         let mut stats = ResidencyStats {
             desired: wants.len() as u32,
@@ -275,6 +355,7 @@ impl TileService {
             uploaded: plan.uploads.len() as u32,
             derived: plan.derives.len() as u32,
             faults: self.failed.len() as u32,
+            faults_healed: self.healed,
             stream: self.streamer.stats(),
             cache: self.cache.stats(),
             ..Default::default()
@@ -282,7 +363,12 @@ impl TileService {
         for w in wants {
             match self.draw_source(w.id) {
                 Some((src, _)) if src == w.id => stats.resident += 1,
-                Some(_) => stats.from_ancestor += 1,
+                Some(_) => {
+                    stats.from_ancestor += 1;
+                    if self.blocked_by(w.id).is_some() {
+                        stats.fault_blocked += 1;
+                    }
+                }
                 None => stats.holes += 1,
             }
         }
@@ -334,8 +420,8 @@ impl TileService {
             if self.resident.contains_key(&cur) {
                 return None;
             }
-            if let Some(error) = self.failed.get(&cur) {
-                return Some((cur, error));
+            if let Some(f) = self.failed.get(&cur) {
+                return Some((cur, &f.error));
             }
             if self.pyramid.is_stored(cur) {
                 return None;

@@ -5,9 +5,10 @@
 //! runs on tokio's blocking pool (`spawn_blocking`), at most `max_in_flight` loads at a time, the
 //! most urgent first. A tile that leaves the wanted set is cancelled: if its load has not
 //! started it never starts, and if it has, its result is dropped and reported as cancelled.
-//! A tile whose load failed is reported once and never loaded again by this streamer, even when
+//! A tile whose load failed is reported once and not loaded again by this streamer, even when
 //! a want set that the frame sent before it saw the failure names it again (the failed set
-//! holds at most the world's tiles).
+//! holds at most the world's tiles), until the frame, having seen the failure, asks for a retry
+//! ([`Streamer::want_retrying`]).
 
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
@@ -49,6 +50,9 @@ pub struct StreamConfig {
     /// Capacity of the result channel (streamer to frame).
     pub result_capacity: usize,
 }
+
+/// Most loads a streamer runs at once ([`StreamConfig::max_in_flight`]).
+pub const MAX_LOADS_IN_FLIGHT: usize = 1024;
 
 impl Default for StreamConfig {
     fn default() -> Self {
@@ -105,18 +109,34 @@ pub struct StreamStats {
     pub failed: u64,
 }
 
+/// What the frame sends the streamer: the tiles it wants now, and failed tiles to try again.
+#[derive(Debug, Default)]
+struct Request {
+    wants: Vec<Want>,
+    retry: Vec<TileId>,
+}
+
 /// Handle of the streamer service, owned by the frame loop.
 pub struct Streamer {
-    requests: mpsc::Sender<Vec<Want>>,
+    requests: mpsc::Sender<Request>,
     results: mpsc::Receiver<Loaded>,
     counters: Arc<Counters>,
-    pending: Option<Vec<Want>>,
+    pending: Option<Request>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
 impl Streamer {
     /// Starts the service on a runtime thread of its own.
     pub fn start(source: Arc<dyn TileSource>, config: StreamConfig) -> std::io::Result<Self> {
+        if !(1..=MAX_LOADS_IN_FLIGHT).contains(&config.max_in_flight) {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!(
+                    "loads in flight must be in 1..={MAX_LOADS_IN_FLIGHT}, not {}",
+                    config.max_in_flight
+                ),
+            ));
+        }
         let (req_tx, req_rx) = mpsc::channel(config.request_capacity.max(1));
         let (res_tx, res_rx) = mpsc::channel(config.result_capacity.max(1));
         let counters = Arc::new(Counters::default());
@@ -145,7 +165,16 @@ impl Streamer {
     /// Tells the streamer which tiles the frame wants now (replacing the last set). Never
     /// blocks: if the channel is full, the set is sent on a later call.
     pub fn want(&mut self, wants: Vec<Want>) {
-        self.pending = Some(wants);
+        self.want_retrying(wants, Vec::new());
+    }
+
+    /// Like [`Streamer::want`], and forgets the failures of the `retry` tiles, so that they are
+    /// loaded again when wanted. A retry list not sent yet is kept for the next set.
+    pub fn want_retrying(&mut self, wants: Vec<Want>, mut retry: Vec<TileId>) {
+        if let Some(unsent) = self.pending.take() {
+            retry.extend(unsent.retry);
+        }
+        self.pending = Some(Request { wants, retry });
         self.flush();
     }
 
@@ -196,7 +225,7 @@ impl Drop for Streamer {
 async fn serve(
     source: Arc<dyn TileSource>,
     config: StreamConfig,
-    mut requests: mpsc::Receiver<Vec<Want>>,
+    mut requests: mpsc::Receiver<Request>,
     results: mpsc::Sender<Loaded>,
     counters: Arc<Counters>,
 ) {
@@ -228,7 +257,10 @@ async fn serve(
         }
         tokio::select! {
             request = requests.recv() => match request {
-                Some(wants) => {
+                Some(Request { wants, retry }) => {
+                    for id in &retry {
+                        failed.remove(id);
+                    }
                     wanted = wants
                         .into_iter()
                         .filter(|w| !failed.contains(&w.id))

@@ -1,0 +1,163 @@
+//! Every numeric option of the command line has a stated range: a value outside it is refused
+//! before anything runs, with the option and the range in the message, exit code 2 and no panic.
+
+use std::process::Command;
+
+/// Runs `verdant ARGS` and returns its exit code and stderr.
+fn run(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(args)
+        .output()
+        .expect("run verdant");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Each case: the arguments, and what the error must say (the option and its range).
+const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
+    // A timeout that overflowed the deadline's arithmetic (it panicked).
+    (
+        &[
+            "fly",
+            "http://127.0.0.1:9/",
+            "--http-timeout-s",
+            "18446744073709551615",
+        ],
+        &["--http-timeout-s", "1..=3600"],
+    ),
+    (
+        &["fly", "--http-timeout-s", "0"],
+        &["--http-timeout-s", "1..=3600"],
+    ),
+    // Loads in flight that left streaming dead (nothing loaded, exit 0).
+    (
+        &["fly", "--max-loads", "18446744073709551615"],
+        &["--max-loads", "1..=64"],
+    ),
+    (&["soak", "--max-loads", "0"], &["--max-loads", "1..=64"]),
+    // Retries whose doubling backoff ran for hours.
+    (
+        &["fly", "--http-retries", "30"],
+        &["--http-retries", "0..=20"],
+    ),
+    // A soak camera that left the world at once.
+    (&["soak", "--speed", "1e300"], &["--speed", "0..=1000"]),
+    (&["soak", "--speed", "NaN"], &["--speed", "0..=1000"]),
+    (&["soak", "--seconds", "inf"], &["--seconds", "1..=604800"]),
+    (&["soak", "--seconds=-5"], &["--seconds", "1..=604800"]),
+    (&["soak", "--seconds", "0.5"], &["--seconds", "1..=604800"]),
+    (
+        &["soak", "--max-stall-ms", "0"],
+        &["--max-stall-ms", "1..=3600000"],
+    ),
+    (
+        &["soak", "--max-recovery-frames", "0"],
+        &["--max-recovery-frames", "1..=100000"],
+    ),
+    (&["view", "--frames", "0"], &["--frames", "1..=1000000"]),
+    (
+        &["fly", "--frames", "4294967295"],
+        &["--frames", "1..=1000000"],
+    ),
+    (
+        &["fly", "--atlas-slots", "1"],
+        &["--atlas-slots", "2..=4096"],
+    ),
+    (
+        &["fly", "--cache-mib", "0"],
+        &["--cache-mib", "1..=1048576"],
+    ),
+    (
+        &["fly", "--http-cache-mib", "99999999999999"],
+        &["--http-cache-mib", "1..=1048576"],
+    ),
+    (&["fly", "--size", "0x10"], &["--size", "1 to 16384"]),
+    (
+        &["bench", "lod", "--dolly-frames", "1"],
+        &["--dolly-frames", "2..=10000"],
+    ),
+    (
+        &["bench", "lod", "--rounds", "0"],
+        &["--rounds", "1..=1000"],
+    ),
+    (
+        &["bench", "features", "--timed-frames", "0"],
+        &["--timed-frames", "1..=10000"],
+    ),
+    (
+        &["bench", "blades", "--warmup-frames", "99999"],
+        &["--warmup-frames", "0..=10000"],
+    ),
+];
+
+#[test]
+fn out_of_range_options_are_refused_with_their_range() {
+    for (args, says) in OUT_OF_RANGE {
+        let (code, stderr) = run(args);
+        assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+        assert_eq!(code, Some(2), "{args:?} exited {code:?}: {stderr}");
+        for s in *says {
+            assert!(
+                stderr.contains(s),
+                "{args:?}: the error does not say {s:?}: {stderr}"
+            );
+        }
+    }
+}
+
+#[test]
+fn every_numeric_option_states_its_range_in_its_help() {
+    // The options above, as `--help` documents them.
+    for (sub, options) in [
+        (
+            &["fly"][..],
+            &[
+                "--frames",
+                "--max-loads",
+                "--http-timeout-s",
+                "--http-retries",
+                "--atlas-slots",
+                "--cache-mib",
+                "--http-cache-mib",
+            ][..],
+        ),
+        (
+            &["soak"][..],
+            &[
+                "--seconds",
+                "--speed",
+                "--max-recovery-frames",
+                "--max-stall-ms",
+            ][..],
+        ),
+        (
+            &["bench", "lod"][..],
+            &[
+                "--dolly-frames",
+                "--warmup-frames",
+                "--timed-frames",
+                "--rounds",
+            ][..],
+        ),
+    ] {
+        let mut args = sub.to_vec();
+        args.push("--help");
+        let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+            .args(&args)
+            .output()
+            .unwrap();
+        let help = String::from_utf8_lossy(&out.stdout);
+        for o in options {
+            let at = help
+                .find(&format!("{o} "))
+                .unwrap_or_else(|| panic!("{sub:?} has no {o}"));
+            let entry: String = help[at..].lines().take(4).collect();
+            assert!(
+                entry.contains("..="),
+                "{sub:?} {o}'s help states no range: {entry}"
+            );
+        }
+    }
+}
