@@ -88,7 +88,7 @@ enum Command {
         /// Camera path from the world's manifest (default: its first path).
         #[arg(long)]
         path: Option<String>,
-        /// Frames to render, spread evenly over the path, 1..=1000000.
+        /// Frames to render, spread evenly over the path, 1..=4294967295.
         #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
         frames: u32,
         /// Image size, WIDTHxHEIGHT.
@@ -158,7 +158,7 @@ enum Command {
         /// Follow the camera path from the start.
         #[arg(long)]
         follow: bool,
-        /// Render this many frames (a fixed 1/60 s apart) and exit, 1..=1000000.
+        /// Render this many frames (a fixed 1/60 s apart) and exit, 1..=4294967295.
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
         frames: Option<u32>,
         /// Write the last of --frames N frames to this PNG file.
@@ -688,8 +688,9 @@ fn eval_sway(out: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Most frames `fly` and `view` render in one run.
-const MAX_FRAMES: i64 = 1_000_000;
+/// Most frames `fly` and `view` render in one run (what they keep per frame is thinned to a
+/// bound, so any count runs in bounded memory).
+const MAX_FRAMES: i64 = u32::MAX as i64;
 
 /// Most MiB a memory ceiling may name (1 TiB).
 const MAX_MIB: u64 = 1 << 20;

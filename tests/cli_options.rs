@@ -56,10 +56,10 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
         &["soak", "--max-recovery-frames", "0"],
         &["--max-recovery-frames", "1..=100000"],
     ),
-    (&["view", "--frames", "0"], &["--frames", "1..=1000000"]),
+    (&["view", "--frames", "0"], &["--frames", "1..=4294967295"]),
     (
-        &["fly", "--frames", "4294967295"],
-        &["--frames", "1..=1000000"],
+        &["fly", "--frames", "4294967296"],
+        &["--frames", "1..=4294967295"],
     ),
     (
         &["fly", "--atlas-slots", "1"],
