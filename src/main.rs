@@ -201,6 +201,14 @@ enum Command {
         /// No frame may take longer than this, milliseconds (wall time), 1..=3600000.
         #[arg(long, default_value_t = 5000.0, value_parser = float_in(1.0, 3_600_000.0))]
         max_stall_ms: f64,
+        /// Inject faults while flying, 0..=1 (0: none). A world on disk is flown from a copy
+        /// in --out whose tile files (level 1 and finer) are removed, truncated, overwritten
+        /// with garbage, emptied or replaced by a folder, this share of them at any moment,
+        /// a fresh set every 2 s of flight; a world over HTTP through a proxy that fails this
+        /// share of tile requests (errors, stalls, resets, short bodies). The checks stay the
+        /// same: broken tiles are drawn from their ancestors (no holes) and retried.
+        #[arg(long, default_value_t = 0.0, value_parser = float_in(0.0, 1.0))]
+        faults: f64,
         #[command(flatten)]
         stream: StreamArgs,
     },
@@ -900,6 +908,14 @@ fn soak(opts: SoakOptions) -> Result<()> {
             .map_or("never reached".to_owned(), |s| format!("{s:.1} s")),
         r.teleports.len()
     );
+    if let Some(f) = &r.faults {
+        let injected = f.files.as_ref().map_or(0, |c| c.injected());
+        println!(
+            "faults at rate {}: {injected} tile files broken, {} loads failed, {} tiles healed, \
+             at most {} desired tiles drawn from an ancestor for a fault",
+            f.rate, f.loads_failed, f.tiles_healed, f.fault_blocked_peak
+        );
+    }
     println!("wrote {}", opts.out.join("soak.json").display());
     if !r.violations.is_empty() {
         for v in r.violations.iter().take(20) {
@@ -1005,6 +1021,7 @@ fn run(cli: Cli) -> Result<()> {
             no_grass,
             max_recovery_frames,
             max_stall_ms,
+            faults,
             stream,
         } => soak(SoakOptions {
             world: resolve_world(&world)?,
@@ -1018,6 +1035,7 @@ fn run(cli: Cli) -> Result<()> {
             no_grass,
             max_recovery_frames,
             max_stall_ms,
+            faults,
             ..SoakOptions::default()
         }),
         Command::Serve { world, addr } => {

@@ -7,6 +7,7 @@ pub mod bench;
 pub mod bench_blades;
 pub mod eval_derive;
 pub mod eval_sway;
+pub mod faults;
 pub mod fly;
 pub mod metrics;
 pub mod report;
@@ -23,7 +24,7 @@ pub use bench::{
 pub use fly::{FlyOptions, FlyProgress, run_fly, write_json};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
 pub use scene::{Scene, SceneConfig, SceneError};
-pub use soak::{SoakOptions, SoakReport, TeleportRecord, resident_bytes, run_soak};
+pub use soak::{SoakFaults, SoakOptions, SoakReport, TeleportRecord, resident_bytes, run_soak};
 
 use std::path::Path;
 use std::sync::Arc;

@@ -52,6 +52,14 @@ pub struct SoakOptions {
     pub max_recovery_frames: u32,
     /// No frame may take longer than this wall time, milliseconds (a stall).
     pub max_stall_ms: f64,
+    /// Faults injected while the soak flies, 0..=1 (0: none). On a world on disk, the share of
+    /// its tile files (level 1 and finer) broken at any moment in a copy of the world that the
+    /// soak flies ([`crate::tools::faults`]); over HTTP, the share of tile requests that a
+    /// proxy in front of the server fails.
+    pub faults: f64,
+    /// Simulated time between rounds of file faults (each restores the last round's files and
+    /// breaks a fresh set), seconds.
+    pub fault_period_s: f64,
 }
 
 impl Default for SoakOptions {
@@ -73,6 +81,8 @@ impl Default for SoakOptions {
             max_stall_ms: 5000.0,
             service: crate::stream::ServiceConfig::default(),
             no_grass: false,
+            faults: 0.0,
+            fault_period_s: 2.0,
         }
     }
 }
@@ -162,6 +172,27 @@ pub struct SoakReport {
     /// Violations in all, listed or not.
     #[serde(default)]
     pub violation_count: u64,
+    /// Frames whose camera was over the world.
+    #[serde(default)]
+    pub frames_over_world: u32,
+    /// The faults injected and what they did (None without `--faults`).
+    #[serde(default)]
+    pub faults: Option<SoakFaults>,
+}
+
+/// The faults of a soak with `--faults`, and what the tile service made of them.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct SoakFaults {
+    /// The rate asked for.
+    pub rate: f64,
+    /// Tile files broken and restored (a world on disk).
+    pub files: Option<crate::tools::faults::FileFaultCounts>,
+    /// Tile loads that failed (each drawn from its ancestor, then retried).
+    pub loads_failed: u64,
+    /// Tiles that loaded after failing.
+    pub tiles_healed: u64,
+    /// Most desired tiles drawn from an ancestor because of a fault, in a frame.
+    pub fault_blocked_peak: u32,
 }
 
 /// Most per-frame samples a soak keeps for its medians and memory windows (an evenly spaced
@@ -294,10 +325,11 @@ impl Ground {
 }
 
 /// A small deterministic generator (splitmix64).
-struct Rng(u64);
+pub(crate) struct Rng(pub(crate) u64);
 
 impl Rng {
-    fn next(&mut self) -> f64 {
+    /// The next number in 0..1.
+    pub(crate) fn next(&mut self) -> f64 {
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
@@ -317,6 +349,17 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         "--speed must not be negative"
     );
     anyhow::ensure!(opts.dt_s > 0.0, "the frame step must be positive");
+    anyhow::ensure!(
+        opts.faults.is_finite() && (0.0..=1.0).contains(&opts.faults),
+        "--faults must be in 0..=1, not {}",
+        opts.faults
+    );
+    anyhow::ensure!(
+        opts.fault_period_s.is_finite() && opts.fault_period_s >= opts.dt_s,
+        "the fault period must be at least a frame ({} s), not {}",
+        opts.dt_s,
+        opts.fault_period_s
+    );
     let (frames_f, warmup_frames) = soak_frames(opts, opts.seconds);
     anyhow::ensure!(
         frames_f <= f64::from(u32::MAX),
@@ -342,8 +385,37 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             min_s
         );
     }
-    let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
     let out_dir = crate::tools::fly::OutDir::create(&opts.out)?;
+    let is_url = opts.world.to_str().is_some_and(crate::stream::http::is_url);
+    // With faults on a world on disk, the soak flies a copy whose files it breaks.
+    let mut file_faults = if opts.faults > 0.0 && !is_url {
+        Some(crate::tools::faults::FileFaults::new(
+            &opts.world,
+            &opts.out.join(".world-with-faults"),
+            opts.faults,
+            opts.seed,
+        )?)
+    } else {
+        None
+    };
+    let location = match &file_faults {
+        Some(f) => f.world_dir().to_path_buf(),
+        None => opts.world.clone(),
+    };
+    let (world, source) = crate::tools::open_world(&location, &opts.http)?;
+    let [ex, ey] = world.manifest.extent_m;
+    // The pull toward the middle keeps the camera over the world only while a frame's step is
+    // well inside the margin it turns at.
+    let most_speed = 0.04 * ex.min(ey) / opts.dt_s;
+    anyhow::ensure!(
+        opts.speed_mps <= most_speed,
+        "--speed {} m/s would leave {} (a world {:.0} m across) within a few frames: it must be \
+         in 0..={:.0} m/s for this world",
+        opts.speed_mps,
+        world.manifest.name,
+        ex.min(ey),
+        most_speed
+    );
     let ground = Ground::new(&world, source.as_ref())?;
     let ctx = GpuContext::new()?;
     let mut config = SceneConfig::for_world(&world);
@@ -352,7 +424,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         config.grass = None;
     }
     let name = world.manifest.name.clone();
-    let [ex, ey] = world.manifest.extent_m;
+    let stored_levels = world.manifest.pyramid.stored_levels;
     let (width, height) = opts.size;
     let mut scene = Scene::with_source(&ctx, world, source, width, height, config.clone())?;
 
@@ -378,9 +450,17 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let mut last = None;
     let slots = config.service.atlas_slots;
     let ceiling = config.service.cache_bytes;
+    let fault_every = ((opts.fault_period_s / opts.dt_s).round() as u32).max(1);
+    let mut fault_blocked_peak = 0u32;
+    let mut frames_over_world = 0u32;
 
     for frame in 0..frames {
         let t = f64::from(frame) * opts.dt_s;
+        if let Some(f) = file_faults.as_mut()
+            && frame % fault_every == 0
+        {
+            f.step()?;
+        }
         if frame > 0 && frame % teleport_every == 0 {
             pos = random_spot(&mut rng);
             yaw = rng.next() * 360.0;
@@ -417,6 +497,9 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             tp.to_m[2] = eye.z;
         }
         let camera = Camera::new(eye, yaw, -12.0);
+        if (0.0..=ex).contains(&pos.x) && (0.0..=ey).contains(&pos.y) {
+            frames_over_world += 1;
+        }
 
         let start = Instant::now();
         let stats = scene.render_at(&ctx, &camera, t)?;
@@ -453,9 +536,12 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
                 r.holes
             ));
         }
+        fault_blocked_peak = fault_blocked_peak.max(r.fault_blocked);
+        // Full detail: every desired tile resident at its own level, but for those whose data
+        // is broken now (drawn from an ancestor until a retry loads them).
         if let Some(tp) = current_teleport.as_mut()
             && tp.frames_to_full_detail.is_none()
-            && r.resident == r.desired
+            && r.resident + r.fault_blocked == r.desired
         {
             tp.frames_to_full_detail = Some(frame - tp.frame);
             tp.seconds_to_full_detail = Some(teleport_start.1.elapsed().as_secs_f64());
@@ -529,6 +615,40 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         ));
     }
     let last = last.unwrap_or_default();
+    // A soak that never flew over the world, or never loaded a tile, checked nothing.
+    if f64::from(frames_over_world) < 0.9 * f64::from(frames) {
+        violations.push(format!(
+            "the camera was over the world in only {frames_over_world} of {frames} frames: \
+             the soak checked little of its streaming"
+        ));
+    }
+    if stored_levels > 1 && last.stream.completed == 0 {
+        violations.push(format!(
+            "no tile was loaded in {frames} frames ({} loads failed): the soak checked nothing \
+             of its streaming",
+            last.stream.failed
+        ));
+    }
+    let faults = (opts.faults > 0.0).then(|| SoakFaults {
+        rate: opts.faults,
+        files: file_faults.as_ref().map(|f| f.counts().clone()),
+        loads_failed: last.stream.failed,
+        tiles_healed: last.faults_healed,
+        fault_blocked_peak,
+    });
+    if let Some(f) = &faults
+        && f.loads_failed == 0
+    {
+        violations.push(format!(
+            "faults at rate {} were injected, but no tile load failed: the soak never met them \
+             (fly longer or raise --faults)",
+            f.rate
+        ));
+    }
+    if let Some(f) = file_faults.as_mut() {
+        f.restore()?;
+    }
+    drop(file_faults);
     let teleports = teleports.into_items();
     let detail: Vec<f64> = teleports
         .iter()
@@ -578,6 +698,8 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         teleports,
         violation_count: violations.count,
         violations: violations.listed,
+        frames_over_world,
+        faults,
     };
     write_json(&opts.out.join("soak.json"), &report)?;
     out_dir.keep();

@@ -1,0 +1,300 @@
+//! Faults for `verdant soak --faults RATE` on a world on disk: the soak flies a copy of the
+//! world whose tile files are broken (removed, truncated, overwritten with garbage, emptied, or
+//! replaced by a folder) and restored again while it flies. The world itself is never touched.
+//!
+//! The rate is the share of the copy's tile files of level 1 and finer that are broken at any
+//! moment; each [`FileFaults::step`] restores the broken ones and breaks a fresh random set.
+//! Level 0 is left whole: its tiles are loaded once, before the first frame, and stay resident
+//! (every other tile is drawn from them while its own is broken).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use serde::{Deserialize, Serialize};
+
+/// How a tile file is broken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FileFault {
+    /// Removed.
+    Missing,
+    /// Cut to half its length.
+    Truncated,
+    /// Overwritten with as many pseudo-random bytes.
+    Garbage,
+    /// Emptied.
+    Empty,
+    /// Replaced by a folder of the same name.
+    Folder,
+}
+
+impl FileFault {
+    const ALL: [FileFault; 5] = [
+        FileFault::Missing,
+        FileFault::Truncated,
+        FileFault::Garbage,
+        FileFault::Empty,
+        FileFault::Folder,
+    ];
+}
+
+/// What the fault injector did, for `soak.json`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FileFaultCounts {
+    /// Tile files that may be broken (level 1 and finer).
+    pub files: u64,
+    /// Rounds of faults (each restores the last round's files and breaks a new set).
+    pub rounds: u64,
+    /// Files removed.
+    pub missing: u64,
+    /// Files truncated.
+    pub truncated: u64,
+    /// Files overwritten with garbage.
+    pub garbage: u64,
+    /// Files emptied.
+    pub empty: u64,
+    /// Files replaced by a folder.
+    pub folder: u64,
+    /// Files restored.
+    pub restored: u64,
+}
+
+impl FileFaultCounts {
+    /// Faults injected in all.
+    pub fn injected(&self) -> u64 {
+        self.missing + self.truncated + self.garbage + self.empty + self.folder
+    }
+}
+
+/// A copy of a world whose tile files are broken and restored.
+pub struct FileFaults {
+    original: PathBuf,
+    copy: PathBuf,
+    /// Tile files of level 1 and finer, relative to the world's folder.
+    files: Vec<PathBuf>,
+    broken: Vec<PathBuf>,
+    rate: f64,
+    rng: crate::tools::soak::Rng,
+    counts: FileFaultCounts,
+}
+
+impl FileFaults {
+    /// Copies the world in `original` to `copy` (which must not exist) and readies faults at
+    /// `rate` (0..=1). Nothing is broken before the first [`FileFaults::step`].
+    pub fn new(original: &Path, copy: &Path, rate: f64, seed: u64) -> Result<Self> {
+        anyhow::ensure!(
+            rate.is_finite() && (0.0..=1.0).contains(&rate),
+            "--faults must be in 0..=1, not {rate}"
+        );
+        anyhow::ensure!(
+            !copy.exists(),
+            "{} exists already: the faulty copy of the world goes there",
+            copy.display()
+        );
+        copy_dir(original, copy)
+            .with_context(|| format!("cannot copy {} for its faults", original.display()))?;
+        let mut files = Vec::new();
+        let tiles = copy.join("tiles");
+        for level in
+            std::fs::read_dir(&tiles).with_context(|| format!("cannot list {}", tiles.display()))?
+        {
+            let level = level?;
+            let name = level.file_name().to_string_lossy().into_owned();
+            if name == "L0" || !name.starts_with('L') || !level.file_type()?.is_dir() {
+                continue;
+            }
+            for file in std::fs::read_dir(level.path())? {
+                let file = file?;
+                if file.file_type()?.is_file() {
+                    files.push(Path::new("tiles").join(&name).join(file.file_name()));
+                }
+            }
+        }
+        // A fixed order, so that a seed picks the same files on every machine.
+        files.sort();
+        Ok(Self {
+            original: original.to_path_buf(),
+            copy: copy.to_path_buf(),
+            counts: FileFaultCounts {
+                files: files.len() as u64,
+                ..FileFaultCounts::default()
+            },
+            files,
+            broken: Vec::new(),
+            rate,
+            rng: crate::tools::soak::Rng(seed ^ 0xfa17_5eed),
+        })
+    }
+
+    /// The faulty world's folder.
+    pub fn world_dir(&self) -> &Path {
+        &self.copy
+    }
+
+    /// What was done so far.
+    pub fn counts(&self) -> &FileFaultCounts {
+        &self.counts
+    }
+
+    /// Restores the files broken last and breaks a fresh random set: the rate's share of the
+    /// files (at least one when the rate is not 0).
+    pub fn step(&mut self) -> Result<()> {
+        self.restore()?;
+        if self.rate == 0.0 || self.files.is_empty() {
+            return Ok(());
+        }
+        let n = ((self.rate * self.files.len() as f64).round() as usize).clamp(1, self.files.len());
+        // A partial Fisher-Yates shuffle picks n distinct files.
+        let len = self.files.len();
+        for i in 0..n {
+            let j = i + (self.rng.next() * (len - i) as f64) as usize;
+            self.files.swap(i, j.min(len - 1));
+        }
+        for i in 0..n {
+            let kind = FileFault::ALL[(self.rng.next() * 5.0) as usize % 5];
+            let rel = self.files[i].clone();
+            self.break_file(&rel, kind)?;
+            self.broken.push(rel);
+        }
+        self.counts.rounds += 1;
+        Ok(())
+    }
+
+    /// Puts every broken file back as it was, each whole at once (a temporary file renamed
+    /// into place), so that a load never sees a half-restored file.
+    pub fn restore(&mut self) -> Result<()> {
+        for rel in std::mem::take(&mut self.broken) {
+            let at = self.copy.join(&rel);
+            match std::fs::symlink_metadata(&at) {
+                Ok(m) if m.is_dir() => std::fs::remove_dir_all(&at)?,
+                Ok(_) => std::fs::remove_file(&at)?,
+                Err(_) => {}
+            }
+            let tmp = temp_name(&at);
+            std::fs::copy(self.original.join(&rel), &tmp)
+                .with_context(|| format!("cannot restore {}", at.display()))?;
+            std::fs::rename(&tmp, &at)
+                .with_context(|| format!("cannot restore {}", at.display()))?;
+            self.counts.restored += 1;
+        }
+        Ok(())
+    }
+
+    fn break_file(&mut self, rel: &Path, kind: FileFault) -> Result<()> {
+        let at = self.copy.join(rel);
+        let len = std::fs::metadata(&at)
+            .with_context(|| format!("cannot read {}", at.display()))?
+            .len() as usize;
+        let replace = |bytes: &[u8]| -> Result<()> {
+            let tmp = temp_name(&at);
+            std::fs::write(&tmp, bytes)?;
+            std::fs::rename(&tmp, &at)?;
+            Ok(())
+        };
+        match kind {
+            FileFault::Missing => {
+                std::fs::remove_file(&at)?;
+                self.counts.missing += 1;
+            }
+            FileFault::Truncated => {
+                let bytes = std::fs::read(&at)?;
+                replace(&bytes[..len / 2])?;
+                self.counts.truncated += 1;
+            }
+            FileFault::Garbage => {
+                let bytes: Vec<u8> = (0..len).map(|_| (self.rng.next() * 256.0) as u8).collect();
+                replace(&bytes)?;
+                self.counts.garbage += 1;
+            }
+            FileFault::Empty => {
+                replace(&[])?;
+                self.counts.empty += 1;
+            }
+            FileFault::Folder => {
+                std::fs::remove_file(&at)?;
+                std::fs::create_dir(&at)?;
+                self.counts.folder += 1;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Drop for FileFaults {
+    fn drop(&mut self) {
+        // The copy is scratch: it goes with the injector, whatever state it is in.
+        let _ = std::fs::remove_dir_all(&self.copy);
+    }
+}
+
+/// A temporary name beside `path`.
+fn temp_name(path: &Path) -> PathBuf {
+    let mut name = path.as_os_str().to_owned();
+    name.push(".restoring");
+    PathBuf::from(name)
+}
+
+fn copy_dir(from: &Path, to: &Path) -> std::io::Result<()> {
+    std::fs::create_dir_all(to)?;
+    for entry in std::fs::read_dir(from)? {
+        let entry = entry?;
+        let target = to.join(entry.file_name());
+        let kind = entry.file_type()?;
+        if kind.is_dir() {
+            copy_dir(&entry.path(), &target)?;
+        } else if kind.is_file() {
+            std::fs::copy(entry.path(), &target)?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn world() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz")
+    }
+
+    #[test]
+    fn faults_break_the_rates_share_and_restore_it_byte_for_byte() {
+        let tmp = tempfile::tempdir().unwrap();
+        let copy = tmp.path().join("w");
+        let mut f = FileFaults::new(&world(), &copy, 0.05, 7).unwrap();
+        let files = f.counts().files;
+        assert!(files > 100, "{files} tile files");
+        let damaged = |f: &FileFaults| {
+            f.files
+                .iter()
+                .filter(|rel| {
+                    std::fs::read(copy.join(rel)).ok() != std::fs::read(world().join(rel)).ok()
+                })
+                .count() as u64
+        };
+        for round in 1..=4 {
+            f.step().unwrap();
+            let want = (0.05 * files as f64).round() as u64;
+            assert_eq!(damaged(&f), want, "round {round}");
+            assert_eq!(f.counts().injected(), want * round);
+        }
+        let c = f.counts().clone();
+        assert!(c.missing > 0 && c.truncated > 0 && c.garbage > 0 && c.empty > 0 && c.folder > 0);
+        f.restore().unwrap();
+        assert_eq!(damaged(&f), 0);
+        // Level 0 is never broken, and the world itself is never touched.
+        assert!(f.files.iter().all(|rel| !rel.starts_with("tiles/L0")));
+        drop(f);
+        assert!(!copy.exists(), "the faulty copy is removed");
+    }
+
+    #[test]
+    fn a_rate_outside_0_to_1_is_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        for rate in [-0.1, 1.5, f64::NAN] {
+            let e = FileFaults::new(&world(), &tmp.path().join("w"), rate, 1)
+                .err()
+                .unwrap();
+            assert!(e.to_string().contains("0..=1"), "{e}");
+        }
+    }
+}
