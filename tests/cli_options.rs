@@ -161,3 +161,22 @@ fn every_numeric_option_states_its_range_in_its_help() {
         }
     }
 }
+
+/// A soak whose camera would leave the world within a few frames (it once flew off at
+/// 1e300 m/s, loaded nothing and passed) is refused before it flies, with the range for the
+/// world; the library checks what the command line's range cannot know.
+#[test]
+fn a_soak_too_fast_for_its_world_is_refused_by_the_library() {
+    let tmp = tempfile::tempdir().unwrap();
+    for speed in [1e300, 5.0e4] {
+        let opts = verdant::tools::SoakOptions {
+            world: std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz"),
+            speed_mps: speed,
+            out: tmp.path().join("soak"),
+            ..Default::default()
+        };
+        let e = verdant::tools::run_soak(&opts, &mut |_, _| {}).unwrap_err();
+        let text = format!("{e:#}");
+        assert!(text.contains("--speed") && text.contains("m/s for this world"), "{text}");
+    }
+}
