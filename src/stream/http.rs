@@ -5,12 +5,12 @@
 //! Each load runs on one of the streamer's blocking threads (at most `max_in_flight` at once),
 //! so the streamer's priorities, its bound on loads in flight and its cancellation apply
 //! unchanged. A request has a deadline ([`HttpOptions::timeout`], at most [`MAX_TIMEOUT`]);
-//! transient failures (a connection refused or reset, a 5xx status, a body cut short) are
-//! retried after a wait that doubles from [`HttpOptions::backoff`] up to
-//! [`HttpOptions::backoff_max`] (each retry is logged as a warning: what, why and when);
-//! anything else (a 4xx status, a stall past the deadline, a body that is not a tile or is too
-//! large) fails the load at once, and the streamer counts it as a fault exactly like a corrupt
-//! tile on disk.
+//! transient failures (a connection refused or reset, a 5xx status, a body cut short by its
+//! `Content-Length` or mid-chunk) are retried after a wait that doubles from
+//! [`HttpOptions::backoff`] up to [`HttpOptions::backoff_max`] (each retry is logged as a
+//! warning: what, why and when); anything else (a 4xx status, a stall past the deadline, a
+//! body that is not a tile or is too large) fails the load at once, and the streamer counts it
+//! as a fault exactly like a corrupt tile on disk.
 //!
 //! Bodies are streamed and never read past the most that such a file may hold: `world.toml` at
 //! most [`MAX_MANIFEST_BYTES`] (16 MiB, as on disk), a tile file at most
@@ -124,6 +124,16 @@ pub enum HttpError {
         url: String,
         /// Bytes announced.
         expected: u64,
+        /// Bytes received.
+        received: u64,
+        /// Requests made.
+        attempts: u32,
+    },
+    /// A chunked body ended (the connection closed) in the middle of a chunk.
+    #[error("{url}: chunked body cut short after {received} bytes (after {attempts} attempt(s))")]
+    ChunksCutShort {
+        /// The file's URL.
+        url: String,
         /// Bytes received.
         received: u64,
         /// Requests made.
@@ -502,6 +512,10 @@ impl Client {
                 max,
             });
         }
+        let chunked = response
+            .headers
+            .get("transfer-encoding")
+            .is_some_and(|v| v.trim().eq_ignore_ascii_case("chunked"));
         let validator = Validator::from_headers(&response.headers);
         let capacity = expected.unwrap_or(64 << 10).min(max);
         let mut body = Vec::with_capacity(capacity as usize);
@@ -523,6 +537,15 @@ impl Client {
             return Err(HttpError::BodyTooLong {
                 url: url.into(),
                 max,
+            });
+        }
+        // minreq replaces Transfer-Encoding by a Content-Length once it has seen the last
+        // chunk, and ends the body without an error when the connection closes mid-chunk.
+        if chunked && response.headers.contains_key("transfer-encoding") {
+            return Err(HttpError::ChunksCutShort {
+                url: url.into(),
+                received: body.len() as u64,
+                attempts,
             });
         }
         if let Some(expected) = expected
@@ -622,7 +645,9 @@ impl TileSource for HttpSource {
 /// Failures worth another try: the connection, the server's own errors, a body cut short.
 fn is_transient(e: &HttpError) -> bool {
     match e {
-        HttpError::Transport { .. } | HttpError::Truncated { .. } => true,
+        HttpError::Transport { .. }
+        | HttpError::Truncated { .. }
+        | HttpError::ChunksCutShort { .. } => true,
         HttpError::Status { status, .. } => (500..600).contains(status),
         _ => false,
     }

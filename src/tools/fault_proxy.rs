@@ -483,17 +483,23 @@ fn inject(
         // The request is still unread: closing now makes the kernel send a reset.
         Fault::Reset => client.write_all(b"HTTP/1.1 200 OK\r\nContent-Ty"),
         Fault::ShortBody => {
-            let (resp_head, body) = match forward(shared, head, relative, query).and_then(read_response)
+            let (fields, body) = match forward(shared, head, relative, query)
+                .and_then(read_response)
             {
-                Ok((h, b)) if h.starts_with("HTTP/1.1 200") && b.len() >= 2 => (h, b),
+                Ok((fields, body))
+                    if fields[0].split_whitespace().nth(1) == Some("200") && body.len() >= 2 =>
+                {
+                    (fields, body)
+                }
                 // No body to cut short (a 304, an error): announce one and send half of it.
-                _ => (
-                    "HTTP/1.1 200 OK\r\nContent-Length: 1024\r\nConnection: close\r\n\r\n"
-                        .to_string(),
-                    vec![0; 1024],
-                ),
+                _ => (vec!["HTTP/1.1 200 OK".to_string()], vec![0; 1024]),
             };
-            client.write_all(resp_head.as_bytes())?;
+            let mut head = fields.join("\r\n");
+            head.push_str(&format!(
+                "\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                body.len()
+            ));
+            client.write_all(head.as_bytes())?;
             client.write_all(&body[..body.len() / 2])
         }
     }
@@ -532,9 +538,10 @@ fn forward(
     Ok(stream)
 }
 
-/// Reads a whole upstream answer (its head as text, its body as bytes) until the upstream
-/// closes, at most [`MAX_HELD_BODY`] bytes of body.
-fn read_response(upstream: TcpStream) -> std::io::Result<(String, Vec<u8>)> {
+/// Reads a whole upstream answer until the upstream closes (at most [`MAX_HELD_BODY`] bytes
+/// of body): its status line and header fields other than those of framing (`Content-Length`,
+/// `Transfer-Encoding`, `Connection`), and its body, de-chunked.
+fn read_response(upstream: TcpStream) -> std::io::Result<(Vec<String>, Vec<u8>)> {
     let mut all = Vec::new();
     upstream
         .take((MAX_REQUEST_HEAD + MAX_HELD_BODY) as u64)
@@ -542,7 +549,45 @@ fn read_response(upstream: TcpStream) -> std::io::Result<(String, Vec<u8>)> {
     let end = find_head_end(&all)
         .ok_or_else(|| std::io::Error::other("upstream answer without a complete head"))?;
     let body = all.split_off(end);
-    Ok((String::from_utf8_lossy(&all).into_owned(), body))
+    let head = String::from_utf8_lossy(&all).into_owned();
+    let mut chunked = false;
+    let mut fields = Vec::new();
+    for line in head.lines().filter(|l| !l.is_empty()) {
+        let name = line.split(':').next().unwrap_or("").trim();
+        if name.eq_ignore_ascii_case("transfer-encoding") {
+            chunked = line.to_ascii_lowercase().contains("chunked");
+        } else if !["content-length", "connection"]
+            .iter()
+            .any(|f| name.eq_ignore_ascii_case(f))
+        {
+            fields.push(line.to_string());
+        }
+    }
+    if fields.is_empty() {
+        return Err(std::io::Error::other("upstream answer without a status line"));
+    }
+    let body = if chunked {
+        dechunk(&body).ok_or_else(|| std::io::Error::other("upstream chunks malformed"))?
+    } else {
+        body
+    };
+    Ok((fields, body))
+}
+
+/// The data of a chunked body (through its last chunk; trailers ignored), if well formed.
+fn dechunk(mut bytes: &[u8]) -> Option<Vec<u8>> {
+    let mut data = Vec::new();
+    loop {
+        let line_end = bytes.windows(2).position(|w| w == b"\r\n")?;
+        let size = std::str::from_utf8(&bytes[..line_end]).ok()?;
+        let size = usize::from_str_radix(size.split(';').next()?.trim(), 16).ok()?;
+        bytes = &bytes[line_end + 2..];
+        if size == 0 {
+            return Some(data);
+        }
+        data.extend_from_slice(bytes.get(..size)?);
+        bytes = bytes.get(size + 2..)?;
+    }
 }
 
 /// The length of a request or response head (through its blank line), if complete.
@@ -613,6 +658,17 @@ mod tests {
                 .count();
             assert!((300..500).contains(&n), "{kind:?}: {n} of 2000");
         }
+    }
+
+    #[test]
+    fn chunked_bodies_are_joined() {
+        assert_eq!(
+            dechunk(b"4\r\nWiki\r\n7;x=1\r\npedia i\r\n0\r\nTrailer: t\r\n\r\n").unwrap(),
+            b"Wikipedia i"
+        );
+        assert_eq!(dechunk(b"0\r\n\r\n").unwrap(), b"");
+        assert!(dechunk(b"9\r\nWiki\r\n").is_none(), "cut short");
+        assert!(dechunk(b"zz\r\n").is_none());
     }
 
     #[test]
