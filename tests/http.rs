@@ -767,8 +767,14 @@ fn a_huge_content_length_is_refused_before_its_body_is_read() {
         ..quick_options()
     };
     let start = Instant::now();
-    let e = HttpSource::open(&server.url, options).unwrap_err().to_string();
-    assert!(start.elapsed() < Duration::from_secs(3), "{:?}", start.elapsed());
+    let e = HttpSource::open(&server.url, options)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        start.elapsed() < Duration::from_secs(3),
+        "{:?}",
+        start.elapsed()
+    );
     let url = format!("{}world.toml", server.url);
     assert!(
         e.contains(&url) && e.contains("3221225472") && e.contains(&MAX_MANIFEST_BYTES.to_string()),
@@ -824,7 +830,11 @@ fn tile_bodies_stop_at_the_largest_legal_tile_file() {
         );
         let start = Instant::now();
         let e = source.load(id).unwrap_err().to_string();
-        assert!(start.elapsed() < Duration::from_secs(3), "{url}: {:?}", start.elapsed());
+        assert!(
+            start.elapsed() < Duration::from_secs(3),
+            "{url}: {:?}",
+            start.elapsed()
+        );
         assert!(e.contains(&url) && e.contains(&max.to_string()), "{e}");
         let kept = source.stats().bytes - bytes;
         if announced {
@@ -854,7 +864,9 @@ fn a_timeout_of_any_length_is_refused_not_a_panic() {
             timeout,
             ..quick_options()
         };
-        let e = HttpSource::open(&ours.url(), options).unwrap_err().to_string();
+        let e = HttpSource::open(&ours.url(), options)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("timeout") && e.contains("1..=3600 s"), "{e}");
     }
     let options = HttpOptions {
@@ -930,7 +942,11 @@ fn a_damaged_cache_entry_is_fetched_again_and_rewritten() {
     let (world, third) = HttpSource::open(&ours.url(), options.clone()).unwrap();
     assert_eq!(world.manifest, local.manifest);
     assert_eq!(third.stats().cache_hits, 0);
-    assert_eq!(std::fs::read(&manifest_meta).unwrap(), meta, "not rewritten");
+    assert_eq!(
+        std::fs::read(&manifest_meta).unwrap(),
+        meta,
+        "not rewritten"
+    );
     // Whole again: the next open revalidates it.
     let (_, fourth) = HttpSource::open(&ours.url(), options).unwrap();
     assert_eq!((fourth.stats().cache_hits, fourth.stats().bytes), (1, 0));
@@ -952,7 +968,9 @@ fn many_retries_against_a_failing_server_end_within_their_bound() {
     let waits: Duration = (1..=30).map(|r| options.retry_delay(r)).sum();
     assert_eq!(waits, Duration::from_millis(5 + 10 + 28 * 20));
     let start = Instant::now();
-    let e = HttpSource::open(&server.url, options).unwrap_err().to_string();
+    let e = HttpSource::open(&server.url, options)
+        .unwrap_err()
+        .to_string();
     let took = start.elapsed();
     assert!(e.contains("HTTP 500") && e.contains("31 attempt(s)"), "{e}");
     assert_eq!(server.asked("/world.toml"), 31);
@@ -1079,11 +1097,18 @@ fn the_fault_proxy_at_rate_zero_passes_everything_through() {
         assert_eq!(source.load(id).unwrap(), local.load_tile(id).unwrap());
     }
     let (_, again) = HttpSource::open(&proxy.url(), options).unwrap();
-    assert_eq!(again.load(ids[0]).unwrap(), local.load_tile(ids[0]).unwrap());
+    assert_eq!(
+        again.load(ids[0]).unwrap(),
+        local.load_tile(ids[0]).unwrap()
+    );
     assert_eq!((again.stats().cache_hits, again.stats().bytes), (4, 0));
     let c = proxy.counts();
     let requests = 2 * (1 + 3) + 3 * (ids.len() as u64 - 1);
-    assert_eq!((c.requests, c.passed, c.faults()), (requests, requests, 0), "{c:?}");
+    assert_eq!(
+        (c.requests, c.passed, c.faults()),
+        (requests, requests, 0),
+        "{c:?}"
+    );
 }
 
 /// The fault a client error is, by its typed error.
@@ -1118,8 +1143,15 @@ fn every_tile_request_faults_at_rate_one_each_kind_a_named_error() {
         ..quick_options()
     };
     let (world, source) = HttpSource::open(&proxy.url(), options).unwrap();
-    assert_eq!(world.manifest, World::open(&common::default_world()).unwrap().manifest);
-    let ids: Vec<TileId> = world.stored_tiles().filter(|id| id.level == 2).take(20).collect();
+    assert_eq!(
+        world.manifest,
+        World::open(&common::default_world()).unwrap().manifest
+    );
+    let ids: Vec<TileId> = world
+        .stored_tiles()
+        .filter(|id| id.level == 2)
+        .take(20)
+        .collect();
     let results: Vec<(Fault, Duration)> = std::thread::scope(|s| {
         let handles: Vec<_> = ids
             .iter()
@@ -1143,7 +1175,10 @@ fn every_tile_request_faults_at_rate_one_each_kind_a_named_error() {
         assert_eq!(seen, c.of(kind), "{kind:?}: {c:?}");
     }
     let slowest = results.iter().map(|(_, t)| *t).max().unwrap();
-    assert!(slowest < Duration::from_secs(4), "{slowest:?} past the 2 s deadline");
+    assert!(
+        slowest < Duration::from_secs(4),
+        "{slowest:?} past the 2 s deadline"
+    );
     // Stopping the proxy does not wait on its stalls.
     let start = Instant::now();
     drop(proxy);

@@ -830,7 +830,8 @@ impl DiskCache {
         );
         let write = |suffix: &str, bytes: &[u8]| {
             let tmp = self.path(&key, &format!("{suffix}.tmp"));
-            std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, self.path(&key, suffix)))
+            std::fs::write(&tmp, bytes)
+                .and_then(|()| std::fs::rename(&tmp, self.path(&key, suffix)))
         };
         if let Err(e) = write("body", body).and_then(|()| write("meta", meta.as_bytes())) {
             log::warn!("{}: tile cache: {e}", self.dir.display());
@@ -927,7 +928,9 @@ mod tests {
                 bytes[3] ^= 0x80;
                 std::fs::write(b, bytes).unwrap();
             }),
-            ("a shorter body", |b, _| std::fs::write(b, b"name = ").unwrap()),
+            ("a shorter body", |b, _| {
+                std::fs::write(b, b"name = ").unwrap()
+            }),
             ("no body", |b, _| std::fs::remove_file(b).unwrap()),
             ("torn metadata", |_, m| {
                 let meta = std::fs::read(m).unwrap();
@@ -965,7 +968,9 @@ mod tests {
     #[test]
     fn retry_waits_double_up_to_their_ceiling() {
         let options = HttpOptions::default();
-        let waits: Vec<u128> = (1..=8).map(|r| options.retry_delay(r).as_millis()).collect();
+        let waits: Vec<u128> = (1..=8)
+            .map(|r| options.retry_delay(r).as_millis())
+            .collect();
         assert_eq!(waits, [200, 400, 800, 1600, 3200, 5000, 5000, 5000]);
         assert_eq!(options.retry_delay(u32::MAX), Duration::from_secs(5));
         let huge = HttpOptions {
@@ -1002,7 +1007,10 @@ mod tests {
 
     #[test]
     fn redirect_hosts_are_the_authority_of_the_url() {
-        assert_eq!(host_of("http://a.example:8080/w/world.toml"), "a.example:8080");
+        assert_eq!(
+            host_of("http://a.example:8080/w/world.toml"),
+            "a.example:8080"
+        );
         assert_eq!(host_of("http://b.example?x=1"), "b.example");
         assert_eq!(host_of("http://c"), "c");
     }

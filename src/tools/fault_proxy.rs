@@ -163,7 +163,9 @@ impl Upstream {
             .get(..7)
             .filter(|s| s.eq_ignore_ascii_case("http://"))
             .map(|_| &url[7..])
-            .with_context(|| format!("{url}: the upstream must be a plain http://HOST[:PORT]/PATH/"))?;
+            .with_context(|| {
+                format!("{url}: the upstream must be a plain http://HOST[:PORT]/PATH/")
+            })?;
         let (authority, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
         if authority.is_empty() {
             bail!("{url}: the upstream address has no host");
@@ -292,11 +294,15 @@ impl FaultProxy {
                 if stop.stop.load(Ordering::SeqCst) {
                     break;
                 }
-                // Blocks while the queue is full: the backlog holds the rest.
-                if let Ok(conn) = conn
-                    && tx.send(conn).is_err()
-                {
-                    break;
+                match conn {
+                    // Blocks while the queue is full: the backlog holds the rest.
+                    Ok(conn) => {
+                        if tx.send(conn).is_err() {
+                            break;
+                        }
+                    }
+                    // Out of descriptors, say: wait rather than spin.
+                    Err(_) => std::thread::sleep(Duration::from_millis(10)),
                 }
             }
         });
@@ -327,11 +333,13 @@ impl FaultProxy {
 impl Drop for FaultProxy {
     fn drop(&mut self) {
         self.shared.stop.store(true, Ordering::SeqCst);
-        // Wakes the acceptor from `accept`; it then sees the flag and drops the queue's sender.
-        let woken = TcpStream::connect_timeout(&self.addr, Duration::from_secs(1)).is_ok();
-        if let Some(acceptor) = self.acceptor.take()
-            && woken
-        {
+        // Wakes the acceptor from `accept`; it then sees the flag and drops the queue's sender,
+        // which ends the workers once they have closed what is queued.
+        if TcpStream::connect_timeout(&self.addr, Duration::from_secs(1)).is_err() {
+            // Not woken: its threads are left to end with the process rather than hang here.
+            return;
+        }
+        if let Some(acceptor) = self.acceptor.take() {
             let _ = acceptor.join();
         }
         for w in self.workers.drain(..) {
@@ -507,12 +515,7 @@ fn inject(
 
 /// Sends the request (head `head`, file `relative` and its `query`) to the upstream server
 /// and returns the connection its answer comes on.
-fn forward(
-    shared: &Shared,
-    head: &str,
-    relative: &str,
-    query: &str,
-) -> std::io::Result<TcpStream> {
+fn forward(shared: &Shared, head: &str, relative: &str, query: &str) -> std::io::Result<TcpStream> {
     let up = &shared.upstream;
     let mut lines = head.lines();
     let method = lines
@@ -523,16 +526,26 @@ fn forward(
     for line in lines.take_while(|l| !l.is_empty()) {
         let name = line.split(':').next().unwrap_or("").trim();
         // Hop-by-hop fields and the host are the proxy's own.
-        if ["host", "connection", "keep-alive", "proxy-connection", "te", "upgrade"]
-            .iter()
-            .any(|h| name.eq_ignore_ascii_case(h))
+        if [
+            "host",
+            "connection",
+            "keep-alive",
+            "proxy-connection",
+            "te",
+            "upgrade",
+        ]
+        .iter()
+        .any(|h| name.eq_ignore_ascii_case(h))
         {
             continue;
         }
         request.push_str(line);
         request.push_str("\r\n");
     }
-    request.push_str(&format!("Host: {}\r\nConnection: close\r\n\r\n", up.authority));
+    request.push_str(&format!(
+        "Host: {}\r\nConnection: close\r\n\r\n",
+        up.authority
+    ));
     let mut stream = up.connect()?;
     stream.write_all(request.as_bytes())?;
     Ok(stream)
@@ -564,7 +577,9 @@ fn read_response(upstream: TcpStream) -> std::io::Result<(Vec<String>, Vec<u8>)>
         }
     }
     if fields.is_empty() {
-        return Err(std::io::Error::other("upstream answer without a status line"));
+        return Err(std::io::Error::other(
+            "upstream answer without a status line",
+        ));
     }
     let body = if chunked {
         dechunk(&body).ok_or_else(|| std::io::Error::other("upstream chunks malformed"))?
@@ -592,7 +607,10 @@ fn dechunk(mut bytes: &[u8]) -> Option<Vec<u8>> {
 
 /// The length of a request or response head (through its blank line), if complete.
 fn find_head_end(bytes: &[u8]) -> Option<usize> {
-    bytes.windows(4).position(|w| w == b"\r\n\r\n").map(|p| p + 4)
+    bytes
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .map(|p| p + 4)
 }
 
 /// Peeks at the request head without reading it; `None` if the client closed first.
@@ -679,7 +697,10 @@ mod tests {
         assert_eq!(up.addrs, vec!["127.0.0.1:8080".parse().unwrap()]);
         let up = Upstream::parse("HTTP://127.0.0.1:9/").unwrap();
         assert_eq!(up.base, "/");
-        assert_eq!(Upstream::parse("http://127.0.0.1").unwrap().addrs[0].port(), 80);
+        assert_eq!(
+            Upstream::parse("http://127.0.0.1").unwrap().addrs[0].port(),
+            80
+        );
         for bad in ["https://127.0.0.1/", "127.0.0.1:80/", "http:///w"] {
             let e = Upstream::parse(bad).err().unwrap();
             assert!(e.to_string().contains(bad), "{e}");
