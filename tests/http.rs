@@ -1,6 +1,8 @@
 //! Worlds streamed over HTTP: the same images as from the folder (from `verdant serve` and from
 //! Python's `http.server`), every server fault counted once and survived, the bound on loads in
-//! flight against a slow server, and the on-disk cache revalidated with ETags.
+//! flight against a slow server, the on-disk cache revalidated with ETags and its damaged
+//! entries fetched again, bodies bounded by the largest legal file, options and retries
+//! bounded, redirects, and the fault-injecting proxy.
 
 mod common;
 
@@ -9,19 +11,23 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use verdant::camera::sample_path;
+use verdant::stream::http::MAX_TIMEOUT;
 use verdant::stream::{
-    HttpCacheConfig, HttpOptions, HttpSource, Loaded, ServiceConfig, StreamConfig, Streamer,
-    TileService, TileSource, Want,
+    HttpCacheConfig, HttpError, HttpOptions, HttpSource, Loaded, ServiceConfig, StreamConfig,
+    Streamer, TileService, TileSource, Want,
 };
+use verdant::tools::fault_proxy::{Fault, FaultProxy};
 use verdant::tools::metrics::flip_compare;
 use verdant::tools::serve::WorldServer;
 use verdant::tools::{Scene, SceneConfig};
-use verdant::world::{TileId, World};
+use verdant::world::format::max_file_bytes;
+use verdant::world::manifest::MAX_MANIFEST_BYTES;
+use verdant::world::{TileFile, TileId, World};
 
 /// Short deadlines keep the fault tests fast.
 fn quick_options() -> HttpOptions {
@@ -29,7 +35,7 @@ fn quick_options() -> HttpOptions {
         timeout: Duration::from_secs(1),
         retries: 2,
         backoff: Duration::from_millis(10),
-        cache: None,
+        ..HttpOptions::default()
     }
 }
 
@@ -617,4 +623,590 @@ fn a_cancelled_tile_sends_no_more_requests() {
     assert_eq!(server.asked("/tiles/L2/5_5.type.png"), 0);
     assert_eq!(server.asked("/tiles/L2/5_5.density.png"), 0);
     assert_eq!(server.asked("/tiles/L2/6_6.density.png"), 1);
+}
+
+/// Socket buffers on the loopback interface: what a server may have written (into the kernel)
+/// beyond what the client read before it hung up.
+const SOCKET_SLACK: u64 = 16 << 20;
+
+/// The most an endless body sends on one connection, so that a client that reads it all (as
+/// the client once did) fails the test rather than the machine.
+const ENDLESS_CAP: u64 = 64 << 20;
+
+/// What a [`RawServer`] does with one request: `(path, connection, bytes served so far)`.
+type Handler = dyn Fn(&str, &mut TcpStream, &AtomicU64) -> std::io::Result<()> + Send + Sync;
+
+/// A hand-written HTTP/1.1 server whose every answer a handler writes; it counts requests,
+/// body bytes written (into the socket) and connections finished.
+struct RawServer {
+    url: String,
+    authority: String,
+    asked: Arc<AtomicUsize>,
+    served: Arc<AtomicU64>,
+    finished: Arc<AtomicUsize>,
+}
+
+impl RawServer {
+    fn start(
+        handler: impl Fn(&str, &mut TcpStream, &AtomicU64) -> std::io::Result<()>
+        + Send
+        + Sync
+        + 'static,
+    ) -> RawServer {
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let authority = listener.local_addr().unwrap().to_string();
+        let (asked, served, finished) = (
+            Arc::new(AtomicUsize::new(0)),
+            Arc::new(AtomicU64::new(0)),
+            Arc::new(AtomicUsize::new(0)),
+        );
+        let handler: Arc<Handler> = Arc::new(handler);
+        let (a, s, f) = (asked.clone(), served.clone(), finished.clone());
+        std::thread::spawn(move || {
+            for stream in listener.incoming() {
+                let Ok(mut stream) = stream else { continue };
+                let (a, s, f, handler) = (a.clone(), s.clone(), f.clone(), handler.clone());
+                std::thread::spawn(move || {
+                    let mut reader = BufReader::new(stream.try_clone().unwrap());
+                    let mut line = String::new();
+                    let _ = reader.read_line(&mut line);
+                    let path = line.split_whitespace().nth(1).unwrap_or("/").to_string();
+                    loop {
+                        let mut header = String::new();
+                        match reader.read_line(&mut header) {
+                            Ok(0) | Err(_) => break,
+                            Ok(_) if header.trim().is_empty() => break,
+                            Ok(_) => {}
+                        }
+                    }
+                    a.fetch_add(1, Ordering::SeqCst);
+                    let _ = handler(&path, &mut stream, &s);
+                    let _ = stream.shutdown(std::net::Shutdown::Both);
+                    f.fetch_add(1, Ordering::SeqCst);
+                });
+            }
+        });
+        RawServer {
+            url: format!("http://{authority}/"),
+            authority,
+            asked,
+            served,
+            finished,
+        }
+    }
+
+    /// Waits (up to 5 s) until `n` connections have been answered in all; whether they were.
+    fn wait_finished(&self, n: usize) -> bool {
+        let start = Instant::now();
+        while self.finished.load(Ordering::SeqCst) < n {
+            if start.elapsed() > Duration::from_secs(5) {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        true
+    }
+}
+
+/// Writes `head`, then body bytes (in chunks when `chunked`) until the client goes away or
+/// [`ENDLESS_CAP`] bytes have been sent, counting them in `served`.
+fn endless(
+    stream: &mut TcpStream,
+    head: &str,
+    chunked: bool,
+    served: &AtomicU64,
+) -> std::io::Result<()> {
+    stream.write_all(head.as_bytes())?;
+    let block = vec![b'x'; 16 << 10];
+    let mut sent = 0;
+    while sent < ENDLESS_CAP {
+        if chunked {
+            write!(stream, "{:x}\r\n", block.len())?;
+            stream.write_all(&block)?;
+            stream.write_all(b"\r\n")?;
+        } else {
+            stream.write_all(&block)?;
+        }
+        sent += block.len() as u64;
+        served.fetch_add(block.len() as u64, Ordering::SeqCst);
+    }
+    Ok(())
+}
+
+/// Answers with the default world's file at `path`, or 404.
+fn world_file(stream: &mut TcpStream, path: &str) -> std::io::Result<()> {
+    match std::fs::read(common::default_world().join(path.trim_start_matches('/'))) {
+        Ok(body) => {
+            write!(
+                stream,
+                "HTTP/1.1 200 OK\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                body.len()
+            )?;
+            stream.write_all(&body)
+        }
+        Err(_) => stream.write_all(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n"),
+    }
+}
+
+/// A `world.toml` announced at 3 GiB is refused by its Content-Length: no body byte is kept, the
+/// error names the URL, the size and the limit, and it is not retried.
+#[test]
+fn a_huge_content_length_is_refused_before_its_body_is_read() {
+    let server = RawServer::start(|path, stream, served| match path {
+        "/world.toml" => endless(
+            stream,
+            "HTTP/1.1 200 OK\r\nContent-Length: 3221225472\r\n\r\n",
+            false,
+            served,
+        ),
+        _ => world_file(stream, path),
+    });
+    // A deadline far past the bound below: failing fast is not the deadline at work.
+    let options = HttpOptions {
+        timeout: Duration::from_secs(20),
+        ..quick_options()
+    };
+    let start = Instant::now();
+    let e = HttpSource::open(&server.url, options)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        start.elapsed() < Duration::from_secs(3),
+        "{:?}",
+        start.elapsed()
+    );
+    let url = format!("{}world.toml", server.url);
+    assert!(
+        e.contains(&url) && e.contains("3221225472") && e.contains(&MAX_MANIFEST_BYTES.to_string()),
+        "{e}"
+    );
+    assert!(server.wait_finished(1), "the server is still sending");
+    assert_eq!(server.asked.load(Ordering::SeqCst), 1, "retried");
+    let served = server.served.load(Ordering::SeqCst);
+    assert!(served < SOCKET_SLACK, "{served} bytes served");
+}
+
+/// Tile bodies without an honest size (announced huge, chunked without end, ended only by a
+/// close that never comes) stop at the largest legal file for the world's tile size: the
+/// client keeps at most that many bytes and the server is cut off soon after.
+#[test]
+fn tile_bodies_stop_at_the_largest_legal_tile_file() {
+    let server = RawServer::start(|path, stream, served| match path {
+        "/tiles/L2/0_0.height.exr" => endless(
+            stream,
+            "HTTP/1.1 200 OK\r\nContent-Length: 3221225472\r\n\r\n",
+            false,
+            served,
+        ),
+        "/tiles/L2/1_0.height.exr" => endless(
+            stream,
+            "HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\n",
+            true,
+            served,
+        ),
+        "/tiles/L2/2_0.height.exr" => endless(
+            stream,
+            "HTTP/1.1 200 OK\r\nConnection: close\r\n\r\n",
+            false,
+            served,
+        ),
+        _ => world_file(stream, path),
+    });
+    let options = HttpOptions {
+        timeout: Duration::from_secs(20),
+        ..quick_options()
+    };
+    let (world, source) = HttpSource::open(&server.url, options).unwrap();
+    let max = max_file_bytes(TileFile::Height, world.manifest.pyramid.samples_per_side());
+    // The default world's 133-sample tiles: 2 * 133² * 4 bytes + 64 KiB.
+    assert_eq!(max, 207_048);
+    for (x, announced) in [(0, true), (1, false), (2, false)] {
+        let id = TileId::new(2, x, 0);
+        let url = source.tile_url(id, TileFile::Height);
+        let (bytes, served, finished) = (
+            source.stats().bytes,
+            server.served.load(Ordering::SeqCst),
+            server.finished.load(Ordering::SeqCst),
+        );
+        let start = Instant::now();
+        let e = source.load(id).unwrap_err().to_string();
+        assert!(
+            start.elapsed() < Duration::from_secs(3),
+            "{url}: {:?}",
+            start.elapsed()
+        );
+        assert!(e.contains(&url) && e.contains(&max.to_string()), "{e}");
+        let kept = source.stats().bytes - bytes;
+        if announced {
+            assert!(e.contains("Content-Length of 3221225472 bytes"), "{e}");
+            assert_eq!(kept, 0, "{url}");
+        } else {
+            assert!(e.contains("body longer than"), "{e}");
+            assert!(kept <= max + 1, "{url}: {kept} bytes read, limit {max}");
+        }
+        assert!(server.wait_finished(finished + 1), "{url}: still sending");
+        let served = server.served.load(Ordering::SeqCst) - served;
+        assert!(served < max + SOCKET_SLACK, "{url}: {served} bytes served");
+    }
+}
+
+/// `HttpOptions` is public: a timeout of any length is refused with the range, never a panic
+/// (minreq adds the deadline to an `Instant`).
+#[test]
+fn a_timeout_of_any_length_is_refused_not_a_panic() {
+    let ours = WorldServer::start(&common::default_world(), "127.0.0.1:0").unwrap();
+    for timeout in [
+        Duration::MAX,
+        Duration::from_secs(u64::MAX),
+        MAX_TIMEOUT + Duration::from_millis(1),
+    ] {
+        let options = HttpOptions {
+            timeout,
+            ..quick_options()
+        };
+        let e = HttpSource::open(&ours.url(), options)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("timeout") && e.contains("1..=3600 s"), "{e}");
+    }
+    let options = HttpOptions {
+        timeout: MAX_TIMEOUT,
+        backoff: Duration::MAX,
+        ..quick_options()
+    };
+    HttpSource::open(&ours.url(), options).unwrap();
+}
+
+/// The cache's files per URL: `(body, metadata)`.
+fn cache_entries(dir: &Path) -> HashMap<String, (PathBuf, PathBuf)> {
+    let mut entries = HashMap::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let meta = entry.unwrap().path();
+        if meta.extension().is_some_and(|e| e == "meta") {
+            let text = std::fs::read_to_string(&meta).unwrap();
+            let url = text.lines().next().unwrap().to_string();
+            entries.insert(url, (meta.with_extension("body"), meta));
+        }
+    }
+    entries
+}
+
+/// A cached `world.toml` or tile file whose body was damaged, or whose metadata was, is not
+/// reused: the next open fetches it again in full, succeeds, and rewrites the entry.
+#[test]
+fn a_damaged_cache_entry_is_fetched_again_and_rewritten() {
+    let dir = common::default_world();
+    let ours = WorldServer::start(&dir, "127.0.0.1:0").unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let cache = tmp.path().join("cache");
+    let options = HttpOptions {
+        cache: Some(HttpCacheConfig {
+            dir: cache.clone(),
+            max_bytes: 16 << 20,
+        }),
+        ..quick_options()
+    };
+    let id = TileId::new(2, 1, 1);
+    let local = World::open(&dir).unwrap();
+    let (_, first) = HttpSource::open(&ours.url(), options.clone()).unwrap();
+    first.load(id).unwrap();
+    let manifest_url = format!("{}world.toml", ours.url());
+    let height_url = first.tile_url(id, TileFile::Height);
+    let entries = cache_entries(&cache);
+    let (manifest_body, manifest_meta) = entries[&manifest_url].clone();
+    let (height_body, _) = entries[&height_url].clone();
+    let manifest = std::fs::read(dir.join("world.toml")).unwrap();
+    let height = std::fs::read(local.tile_path(id, TileFile::Height)).unwrap();
+    assert_eq!(std::fs::read(&manifest_body).unwrap(), manifest);
+
+    // Bodies damaged in place, their length kept: not UTF-8, and a flipped sample.
+    let mut bad = manifest.clone();
+    bad[0] = 0xff;
+    std::fs::write(&manifest_body, &bad).unwrap();
+    let mut bad = height.clone();
+    let mid = bad.len() / 2;
+    bad[mid] ^= 0x55;
+    std::fs::write(&height_body, &bad).unwrap();
+    let (world, second) = HttpSource::open(&ours.url(), options.clone()).unwrap();
+    assert_eq!(world.manifest, local.manifest);
+    assert_eq!(second.load(id).unwrap(), local.load_tile(id).unwrap());
+    // Only the type and density files were revalidated; the two damaged were fetched whole.
+    let s = second.stats();
+    assert_eq!(s.cache_hits, 2, "{s:?}");
+    assert_eq!(std::fs::read(&manifest_body).unwrap(), manifest);
+    assert_eq!(std::fs::read(&height_body).unwrap(), height);
+
+    // Metadata damaged: torn.
+    let meta = std::fs::read(&manifest_meta).unwrap();
+    std::fs::write(&manifest_meta, &meta[..meta.len() / 2]).unwrap();
+    let (world, third) = HttpSource::open(&ours.url(), options.clone()).unwrap();
+    assert_eq!(world.manifest, local.manifest);
+    assert_eq!(third.stats().cache_hits, 0);
+    assert_eq!(
+        std::fs::read(&manifest_meta).unwrap(),
+        meta,
+        "not rewritten"
+    );
+    // Whole again: the next open revalidates it.
+    let (_, fourth) = HttpSource::open(&ours.url(), options).unwrap();
+    assert_eq!((fourth.stats().cache_hits, fourth.stats().bytes), (1, 0));
+}
+
+/// Thirty retries against a server that always answers 500 end within the capped schedule's
+/// sum (each wait at most `backoff_max`), after exactly 31 requests.
+#[test]
+fn many_retries_against_a_failing_server_end_within_their_bound() {
+    let server = FaultServer::start(common::default_world(), Duration::ZERO, |_, _| {
+        Reply::Status(500)
+    });
+    let options = HttpOptions {
+        retries: 30,
+        backoff: Duration::from_millis(5),
+        backoff_max: Duration::from_millis(20),
+        ..quick_options()
+    };
+    let waits: Duration = (1..=30).map(|r| options.retry_delay(r)).sum();
+    assert_eq!(waits, Duration::from_millis(5 + 10 + 28 * 20));
+    let start = Instant::now();
+    let e = HttpSource::open(&server.url, options)
+        .unwrap_err()
+        .to_string();
+    let took = start.elapsed();
+    assert!(e.contains("HTTP 500") && e.contains("31 attempt(s)"), "{e}");
+    assert_eq!(server.asked("/world.toml"), 31);
+    assert!(took >= waits, "{took:?}: the retries did not wait");
+    assert!(took < waits + Duration::from_secs(5), "{took:?}");
+}
+
+/// `verdant fly` says on stderr what it retries, why and when.
+#[test]
+fn retries_are_announced_on_stderr() {
+    let server = FaultServer::start(common::default_world(), Duration::ZERO, |_, _| {
+        Reply::Status(500)
+    });
+    let tmp = tempfile::tempdir().unwrap();
+    let start = Instant::now();
+    let fly = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["fly", &server.url, "--frames", "1", "--http-retries", "2"])
+        .arg("--out")
+        .arg(tmp.path().join("out"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&fly.stderr);
+    assert!(!fly.status.success(), "{stderr}");
+    let url = format!("{}world.toml", server.url);
+    for line in [
+        format!("{url}: HTTP 500 Fault (after 1 attempt(s)); retry 1 of 2 in 0.2 s"),
+        format!("{url}: HTTP 500 Fault (after 2 attempt(s)); retry 2 of 2 in 0.4 s"),
+    ] {
+        assert!(stderr.contains(&line), "no {line:?} in:\n{stderr}");
+    }
+    assert!(stderr.contains("3 attempt(s)"), "{stderr}");
+    assert!(start.elapsed() < Duration::from_secs(30));
+}
+
+/// Warnings logged in this test binary (installed on first use).
+fn warnings() -> &'static Mutex<Vec<String>> {
+    struct Capture;
+    static LOGS: Mutex<Vec<String>> = Mutex::new(Vec::new());
+    static CAPTURE: Capture = Capture;
+    impl log::Log for Capture {
+        fn enabled(&self, m: &log::Metadata) -> bool {
+            m.level() <= log::Level::Warn
+        }
+        fn log(&self, r: &log::Record) {
+            if self.enabled(r.metadata()) {
+                LOGS.lock().unwrap().push(r.args().to_string());
+            }
+        }
+        fn flush(&self) {}
+    }
+    static INSTALL: std::sync::Once = std::sync::Once::new();
+    INSTALL.call_once(|| {
+        log::set_logger(&CAPTURE).unwrap();
+        log::set_max_level(log::LevelFilter::Warn);
+    });
+    &LOGS
+}
+
+/// A world whose files redirect to another host opens, with one warning naming both hosts;
+/// a server that redirects without end is given up after five redirects, not retried.
+#[test]
+fn redirects_are_bounded_and_a_move_to_another_host_is_warned() {
+    let logs = warnings();
+    let target = WorldServer::start(&common::default_world(), "127.0.0.1:0").unwrap();
+    let moved = format!("localhost:{}", target.addr().port());
+    let to = moved.clone();
+    let server = RawServer::start(move |path, stream, _| {
+        write!(
+            stream,
+            "HTTP/1.1 302 Found\r\nLocation: http://{to}{path}\r\nContent-Length: 0\r\n\r\n"
+        )
+    });
+    let (world, source) = HttpSource::open(&server.url, quick_options()).unwrap();
+    let local = World::open(&common::default_world()).unwrap();
+    assert_eq!(world.manifest, local.manifest);
+    let id = TileId::new(2, 3, 1);
+    assert_eq!(source.load(id).unwrap(), local.load_tile(id).unwrap());
+    assert_eq!(server.asked.load(Ordering::SeqCst), 4);
+    let said: Vec<String> = logs
+        .lock()
+        .unwrap()
+        .iter()
+        .filter(|l| l.contains(&server.authority))
+        .cloned()
+        .collect();
+    assert_eq!(said.len(), 1, "{said:?}");
+    assert!(said[0].contains(&format!("host {moved}")), "{said:?}");
+
+    // Its byte counter counts the redirects instead, so that each names a new URL.
+    let endless = RawServer::start(|_, stream, count| {
+        let n = count.fetch_add(1, Ordering::SeqCst);
+        write!(
+            stream,
+            "HTTP/1.1 302 Found\r\nLocation: /world.toml?{n}\r\nContent-Length: 0\r\n\r\n"
+        )
+    });
+    let e = HttpSource::open(&endless.url, quick_options())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("world.toml") && e.contains("at most 5"), "{e}");
+    assert_eq!(endless.asked.load(Ordering::SeqCst), 6, "{e}");
+}
+
+/// Through the proxy at rate 0, every file passes unchanged: from a server under a path (the
+/// world at `/santa-cruz/`), with `Last-Modified` revalidation (a `304`) through it.
+#[test]
+fn the_fault_proxy_at_rate_zero_passes_everything_through() {
+    let python = PythonServer::start(&common::root().join("worlds"));
+    let upstream = format!("{}santa-cruz/", python.url);
+    let proxy = FaultProxy::start(&upstream, 0.0, 1).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let options = HttpOptions {
+        cache: Some(HttpCacheConfig {
+            dir: tmp.path().join("cache"),
+            max_bytes: 16 << 20,
+        }),
+        ..quick_options()
+    };
+    let local = World::open(&common::default_world()).unwrap();
+    let ids: Vec<TileId> = local.stored_tiles().take(6).collect();
+    let (world, source) = HttpSource::open(&proxy.url(), options.clone()).unwrap();
+    assert_eq!(world.manifest, local.manifest);
+    for &id in &ids {
+        assert_eq!(source.load(id).unwrap(), local.load_tile(id).unwrap());
+    }
+    let (_, again) = HttpSource::open(&proxy.url(), options).unwrap();
+    assert_eq!(
+        again.load(ids[0]).unwrap(),
+        local.load_tile(ids[0]).unwrap()
+    );
+    assert_eq!((again.stats().cache_hits, again.stats().bytes), (4, 0));
+    let c = proxy.counts();
+    let requests = 2 * (1 + 3) + 3 * (ids.len() as u64 - 1);
+    assert_eq!(
+        (c.requests, c.passed, c.faults()),
+        (requests, requests, 0),
+        "{c:?}"
+    );
+}
+
+/// The fault a client error is, by its typed error.
+fn fault_of(e: &verdant::world::WorldError) -> Fault {
+    let verdant::world::WorldError::Fetch(inner) = e else {
+        panic!("not a fetch error: {e}");
+    };
+    match inner.downcast_ref::<HttpError>() {
+        Some(HttpError::Status { status: 500, .. }) => Fault::Status500,
+        Some(HttpError::Status {
+            status: 503,
+            reason,
+            ..
+        }) if reason == "Service Unavailable" => Fault::Status503,
+        Some(HttpError::TimedOut { .. }) => Fault::Stall,
+        Some(HttpError::Transport { .. }) => Fault::Reset,
+        Some(HttpError::Truncated { .. }) => Fault::ShortBody,
+        _ => panic!("not an injected fault: {e}"),
+    }
+}
+
+/// At rate 1 every tile request faults and the manifest does not (the world opens); the client
+/// turns each kind of fault into its own error, as many of each as the proxy counted, and none
+/// waits past its deadline.
+#[test]
+fn every_tile_request_faults_at_rate_one_each_kind_a_named_error() {
+    let ours = WorldServer::start(&common::default_world(), "127.0.0.1:0").unwrap();
+    let proxy = FaultProxy::start(&ours.url(), 1.0, 5).unwrap();
+    let options = HttpOptions {
+        timeout: Duration::from_secs(2),
+        retries: 0,
+        ..quick_options()
+    };
+    let (world, source) = HttpSource::open(&proxy.url(), options).unwrap();
+    assert_eq!(
+        world.manifest,
+        World::open(&common::default_world()).unwrap().manifest
+    );
+    let ids: Vec<TileId> = world
+        .stored_tiles()
+        .filter(|id| id.level == 2)
+        .take(20)
+        .collect();
+    let results: Vec<(Fault, Duration)> = std::thread::scope(|s| {
+        let handles: Vec<_> = ids
+            .iter()
+            .map(|&id| {
+                let source = &source;
+                s.spawn(move || {
+                    let start = Instant::now();
+                    let e = source.load(id).unwrap_err();
+                    (fault_of(&e), start.elapsed())
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let c = proxy.counts();
+    assert_eq!(c.requests, 1 + ids.len() as u64, "{c:?}");
+    assert_eq!((c.passed, c.faults()), (1, ids.len() as u64), "{c:?}");
+    for kind in Fault::ALL {
+        let seen = results.iter().filter(|(f, _)| *f == kind).count() as u64;
+        assert!(seen > 0, "no {kind:?} among {} faults: {c:?}", ids.len());
+        assert_eq!(seen, c.of(kind), "{kind:?}: {c:?}");
+    }
+    let slowest = results.iter().map(|(_, t)| *t).max().unwrap();
+    assert!(
+        slowest < Duration::from_secs(4),
+        "{slowest:?} past the 2 s deadline"
+    );
+    // Stopping the proxy does not wait on its stalls.
+    let start = Instant::now();
+    drop(proxy);
+    assert!(start.elapsed() < Duration::from_secs(2));
+}
+
+/// A chunked body whose connection closes mid-chunk is a body cut short, retried like one (the
+/// client once took the part it had for the whole file).
+#[test]
+fn a_chunked_body_cut_short_is_retried() {
+    let cut = Arc::new(AtomicUsize::new(0));
+    let c = cut.clone();
+    let server = RawServer::start(move |path, stream, _| {
+        if path == "/tiles/L2/1_2.height.exr" && c.fetch_add(1, Ordering::SeqCst) == 0 {
+            let body = std::fs::read(common::default_world().join(&path[1..]))?;
+            write!(
+                stream,
+                "HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\n{:x}\r\n",
+                body.len()
+            )?;
+            return stream.write_all(&body[..body.len() / 2]);
+        }
+        world_file(stream, path)
+    });
+    let (_, source) = HttpSource::open(&server.url, quick_options()).unwrap();
+    let id = TileId::new(2, 1, 2);
+    let local = World::open(&common::default_world()).unwrap();
+    assert_eq!(source.load(id).unwrap(), local.load_tile(id).unwrap());
+    assert_eq!(cut.load(Ordering::SeqCst), 2, "cut once, then asked again");
+    assert_eq!(source.stats().retries, 1);
 }

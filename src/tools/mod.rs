@@ -7,6 +7,7 @@ pub mod bench;
 pub mod bench_blades;
 pub mod eval_derive;
 pub mod eval_sway;
+pub mod fault_proxy;
 pub mod faults;
 pub mod fly;
 pub mod metrics;
