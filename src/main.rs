@@ -30,7 +30,7 @@ struct StreamArgs {
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=3600))]
     http_timeout_s: u64,
     /// A world over HTTP: retries of a transient failure (connection error, 5xx, a body cut
-    /// short), 0..=20, with doubling backoff from 200 ms.
+    /// short), 0..=20, after a wait that doubles from 200 ms up to 5 s.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=20))]
     http_retries: u32,
     /// A world over HTTP: keep fetched tile files in this folder, revalidated with the
@@ -909,10 +909,14 @@ fn soak(opts: SoakOptions) -> Result<()> {
         r.teleports.len()
     );
     if let Some(f) = &r.faults {
-        let injected = f.files.as_ref().map_or(0, |c| c.injected());
+        let injected = match (&f.files, &f.http) {
+            (Some(c), _) => format!("{} tile files broken", c.injected()),
+            (_, Some(h)) => format!("{} of {} requests faulted", h.faults(), h.requests),
+            _ => "none injected".to_owned(),
+        };
         println!(
-            "faults at rate {}: {injected} tile files broken, {} loads failed, {} tiles healed, \
-             at most {} desired tiles drawn from an ancestor for a fault",
+            "faults at rate {}: {injected}, {} loads failed, {} tiles healed, at most {} \
+             desired tiles drawn from an ancestor for a fault",
             f.rate, f.loads_failed, f.tiles_healed, f.fault_blocked_peak
         );
     }

@@ -177,6 +177,9 @@ fn a_soak_too_fast_for_its_world_is_refused_by_the_library() {
         };
         let e = verdant::tools::run_soak(&opts, &mut |_, _| {}).unwrap_err();
         let text = format!("{e:#}");
-        assert!(text.contains("--speed") && text.contains("m/s for this world"), "{text}");
+        assert!(
+            text.contains("--speed") && text.contains("m/s for this world"),
+            "{text}"
+        );
     }
 }

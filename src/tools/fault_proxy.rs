@@ -84,6 +84,9 @@ pub struct FaultOptions {
     pub stall: Duration,
     /// Threads serving connections, in 1..=[`MAX_WORKERS`]. Default 32; a stall holds one.
     pub workers: usize,
+    /// Tile paths (relative to the world, e.g. `tiles/L0/`) that never fault, by prefix. The
+    /// soak spares level 0, which the tile service loads once before the first frame.
+    pub spared: Vec<String>,
 }
 
 impl Default for FaultOptions {
@@ -93,6 +96,7 @@ impl Default for FaultOptions {
             seed: 0,
             stall: Duration::from_secs(60),
             workers: 32,
+            spared: Vec::new(),
         }
     }
 }
@@ -401,7 +405,12 @@ fn serve(shared: &Shared, mut client: TcpStream) -> std::io::Result<()> {
     let (method, target) = (words.next().unwrap_or(""), words.next().unwrap_or("/"));
     let path = target.split(['?', '#']).next().unwrap_or("");
     let (relative, query) = (path.trim_start_matches('/'), &target[path.len()..]);
-    let fault = if relative.starts_with("tiles/") {
+    let spared = shared
+        .options
+        .spared
+        .iter()
+        .any(|p| relative.starts_with(p.as_str()));
+    let fault = if relative.starts_with("tiles/") && !spared {
         let nth = {
             let mut asked = shared.asked.lock().unwrap_or_else(|e| e.into_inner());
             let n = asked.entry(path.to_string()).or_insert(0);
