@@ -1038,3 +1038,85 @@ pub fn run_bench_features(
     out_dir.keep();
     Ok(report)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bench_options_out_of_range_name_the_option_and_its_range() {
+        let d = BenchLodOptions::default;
+        d().validate().unwrap();
+        let cases = [
+            (
+                BenchLodOptions {
+                    dolly_frames: 0,
+                    ..d()
+                },
+                "--dolly-frames 0",
+                "2..=1000",
+            ),
+            (
+                BenchLodOptions {
+                    dolly_frames: u32::MAX,
+                    ..d()
+                },
+                "--dolly-frames 4294967295",
+                "2..=1000",
+            ),
+            (
+                BenchLodOptions {
+                    size: (0, 0),
+                    ..d()
+                },
+                "--size 0x0",
+                "1..=16384",
+            ),
+            (
+                BenchLodOptions {
+                    warmup_frames: Some(101),
+                    ..d()
+                },
+                "--warmup-frames 101",
+                "0..=100",
+            ),
+            (
+                BenchLodOptions {
+                    timed_frames: Some(0),
+                    ..d()
+                },
+                "--timed-frames 0",
+                "1..=150",
+            ),
+            (
+                BenchLodOptions {
+                    rounds: Some(0),
+                    ..d()
+                },
+                "--rounds 0",
+                "1..=100",
+            ),
+        ];
+        for (opts, option, range) in cases {
+            let e = opts.validate().unwrap_err().to_string();
+            assert!(e.contains(option) && e.contains(range), "{e}");
+        }
+        // `bench features` has no dolly.
+        BenchLodOptions {
+            dolly_frames: 0,
+            ..d()
+        }
+        .validate_features()
+        .unwrap();
+        // The largest counts taken stay within the floor pass's 256 frames.
+        assert!(
+            MAX_WARMUP_FRAMES + MAX_TIMED_FRAMES <= crate::tools::bench_blades::MAX_FLOOR_FRAMES
+        );
+        check_timing(
+            Some(MAX_WARMUP_FRAMES),
+            Some(MAX_TIMED_FRAMES),
+            Some(MAX_ROUNDS),
+        )
+        .unwrap();
+    }
+}

@@ -867,4 +867,163 @@ fn floor_pipeline(
 }
 
 /// Most floor frames timed in one call.
-const MAX_FLOOR_FRAMES: u32 = 256;
+pub(crate) const MAX_FLOOR_FRAMES: u32 = 256;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_field_has_grass_tiles_of_the_stated_size() {
+        let (world, _) = flat_field(200.0).unwrap();
+        let level = RingSettings::for_pyramid(&world.manifest.pyramid).level;
+        assert_eq!(world.manifest.pyramid.tile_size_m(level), FIELD_TILE_M);
+    }
+
+    #[test]
+    fn slot_sizes_near_the_bound_do_not_wrap() {
+        // The largest slot fits a u32 with room for the renderer's rounding up to 16.
+        assert_eq!(MAX_SLOT_BLADES, 13_421_772);
+        let range = count_range(200.0, FIELD_TILE_M);
+        assert_eq!(*range.start(), 1000);
+        assert_eq!(*range.end(), 214_681_104);
+        let top = slot_blades(*range.end(), 200.0, FIELD_TILE_M).unwrap();
+        assert!(top <= MAX_SLOT_BLADES, "{top}");
+        assert_eq!(top, 3663 * 3663);
+        // One past the bound needs no more (the grid rounds), but the counts beyond it do, and
+        // they are counted in 64 bits: 10^12 blades are 250,000^2 a slot, not that wrapped
+        // to 2,370,457,856 in 32 bits.
+        assert_eq!(
+            slot_blades(1_000_000_000_000, 200.0, FIELD_TILE_M),
+            Some(62_500_000_000)
+        );
+        assert_eq!(slot_blades(u64::MAX, 10.0, FIELD_TILE_M), None);
+        // Each end of every field's range keeps a slot within the bound and a blade a tile.
+        for field in [10.0, 200.0, 1234.5, 5000.0] {
+            let r = count_range(field, FIELD_TILE_M);
+            for n in [*r.start(), *r.end()] {
+                let slot = slot_blades(n, field, FIELD_TILE_M).unwrap();
+                assert!((1..=MAX_SLOT_BLADES).contains(&slot), "{field} {n} {slot}");
+                assert!(field_spacing_m(n, field) <= FIELD_TILE_M, "{field} {n}");
+            }
+        }
+        // A big field needs a blade a tile: 100 x 100 tiles.
+        assert_eq!(*count_range(5000.0, FIELD_TILE_M).start(), 10_000);
+    }
+
+    #[test]
+    fn absurd_options_name_the_option_and_its_range() {
+        BenchBladesOptions::default().validate().unwrap();
+        let bad = |o: BenchBladesOptions, needles: &[&str]| {
+            let e = o.validate().unwrap_err().to_string();
+            for n in needles {
+                assert!(e.contains(n), "{n:?} not in {e:?}");
+            }
+        };
+        let d = BenchBladesOptions::default;
+        bad(
+            BenchBladesOptions {
+                counts: vec![1000, 1_000_000_000_000],
+                ..d()
+            },
+            &[
+                "--counts 1000000000000",
+                "1000..=214681104",
+                "--field-m 200",
+            ],
+        );
+        bad(
+            BenchBladesOptions {
+                counts: vec![10],
+                ..d()
+            },
+            &["--counts 10", "1000..="],
+        );
+        bad(
+            BenchBladesOptions {
+                counts: vec![],
+                ..d()
+            },
+            &["--counts", "1..=32 blade counts"],
+        );
+        bad(
+            BenchBladesOptions {
+                counts: vec![5000; 33],
+                ..d()
+            },
+            &["--counts", "1..=32 blade counts"],
+        );
+        bad(
+            BenchBladesOptions {
+                field_m: f64::NAN,
+                ..d()
+            },
+            &["--field-m NaN", "10..=5000 m"],
+        );
+        bad(
+            BenchBladesOptions {
+                fov_deg: 170.0,
+                ..d()
+            },
+            &["--fov-deg 170", "between 1 and 170"],
+        );
+        bad(
+            BenchBladesOptions {
+                camera_m: [0.0, f64::INFINITY, 1.0],
+                ..d()
+            },
+            &["--camera 0,inf,1", "-100000..=100000 m"],
+        );
+        bad(
+            BenchBladesOptions {
+                target_m: [-20.0, -20.0, 15.0],
+                ..d()
+            },
+            &["--target -20,-20,15", "0.01 m from --camera"],
+        );
+        bad(
+            BenchBladesOptions {
+                size: (1920, 0),
+                ..d()
+            },
+            &["--size 1920x0", "1..=16384"],
+        );
+        // Frame counts that would run for ever or wrap when added up.
+        bad(
+            BenchBladesOptions {
+                warmup_frames: Some(u32::MAX),
+                ..d()
+            },
+            &["--warmup-frames 4294967295", "0..=100"],
+        );
+        bad(
+            BenchBladesOptions {
+                timed_frames: Some(0),
+                ..d()
+            },
+            &["--timed-frames 0", "1..=150"],
+        );
+        bad(
+            BenchBladesOptions {
+                rounds: Some(1_000_000),
+                ..d()
+            },
+            &["--rounds 1000000", "1..=100"],
+        );
+    }
+
+    #[test]
+    fn a_camera_looking_straight_down_sees_the_field() {
+        let opts = BenchBladesOptions {
+            camera_m: [100.0, 100.0, 50.0],
+            target_m: [100.0, 100.0, 0.0],
+            ..BenchBladesOptions::default()
+        };
+        let cam = field_camera(&opts, 16.0 / 9.0);
+        let m = cam.view_proj_relative(16.0 / 9.0);
+        assert!(m.to_cols_array().iter().all(|v| v.is_finite()), "{m}");
+        // The point below the camera is in the middle of the view.
+        let p = m.project_point3(glam::Vec3::new(0.0, 0.0, -50.0));
+        assert!(p.x.abs() < 1e-4 && p.y.abs() < 1e-4, "{p}");
+    }
+}
