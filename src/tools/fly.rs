@@ -21,11 +21,12 @@ use crate::tools::report::{
     MAX_REPORT_FRAMES, Thinned,
 };
 
+use crate::tools::scene::{Scene, SceneConfig};
+use crate::world::World;
+
 /// Frames whose grass coverage a fly-through without images measures: evenly spaced over the
 /// path, drawn again after the flight (never among the timed frames).
 pub const COVERAGE_FRAMES: u32 = 8;
-use crate::tools::scene::{Scene, SceneConfig};
-use crate::world::World;
 
 /// What `verdant fly` is asked to do.
 #[derive(Clone, Debug)]
@@ -423,8 +424,8 @@ pub fn check_streaming(
 /// A run whose tile streaming delivered nothing (see [`check_streaming`]).
 #[derive(Debug, thiserror::Error)]
 #[error(
-    "world {}: no tile became resident beyond the level-0 tiles; the first frame's {missing} \
-     wanted tiles never loaded ({}); check the world's tiles and --max-loads",
+    "world {}: no tile became resident beyond the level-0 tiles: the {missing} other tiles \
+     the first frame wants never loaded ({}); check the world's tiles and --max-loads",
     world.display(),
     first.join("; ")
 )]
@@ -556,7 +557,8 @@ pub fn write_atomic(
         let f = w
             .into_inner()
             .map_err(std::io::IntoInnerError::into_error)?;
-        // Errors a full disk defers to the flush surface here, before the rename.
+        // A full disk may only say so when the data is flushed: that error surfaces here,
+        // before the rename.
         f.sync_all()?;
         drop(f);
         std::fs::rename(&tmp, file)
