@@ -677,10 +677,19 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
     for f in ["blades_time.png", "blades_ratio.png", "bench_blades.json"] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
-    // A sweep without counts, or absurd ones, is refused before any GPU work.
-    let bad = verdant(&["bench", "blades", "--counts", "10"], tmp.path());
-    assert_eq!(bad.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("at least 1000"));
+    // Absurd counts are refused before any GPU work, the option and its range named: too few,
+    // and too many for the grass pool's slots (once wrapped to a pool of 2,370,457,856 blades).
+    for (count, range) in [
+        ("10", "1000..=214681104"),
+        ("1000000000000", "1000..=214681104"),
+    ] {
+        let bad = verdant(
+            &["bench", "blades", "--counts", count, "--out", "bad"],
+            tmp.path(),
+        );
+        assert_fails_naming(&bad, &[&format!("--counts {count}"), range]);
+        assert!(!tmp.path().join("bad").exists());
+    }
 }
 
 /// Runs verdant with a deadline: kills it and fails the test if it runs longer.
@@ -939,8 +948,196 @@ fn a_report_whose_rename_fails_leaves_no_temporary_file() {
     let tmp = tempfile::tempdir().unwrap();
     let file = tmp.path().join("report.json");
     std::fs::create_dir_all(file.join("in-the-way")).unwrap();
-    verdant::tools::write_json(&file, &serde_json::json!({ "a": 1 })).unwrap_err();
-    assert!(!tmp.path().join("report.json.tmp").exists());
+    let e = verdant::tools::write_json(&file, &serde_json::json!({ "a": 1 })).unwrap_err();
+    assert!(e.to_string().contains("report.json"), "{e}");
+    // Only the folder in the way is there.
+    let names: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names, ["report.json"]);
+    assert!(file.join("in-the-way").is_dir());
+}
+
+/// The files under `dir` (recursively), as paths relative to it; none if it does not exist.
+fn files_under(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut stack: Vec<_> = dir
+        .exists()
+        .then(|| dir.to_path_buf())
+        .into_iter()
+        .collect();
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).unwrap().display().to_string());
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn a_fly_onto_a_full_disk_leaves_no_half_written_file() {
+    // A file size limit of 1 KiB makes every write past it fail (EFBIG, the signal that
+    // would kill the process ignored), as a full disk does: the first frame cannot be written.
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::default_world();
+    // The frame of an earlier run, which a failed write must not touch.
+    let earlier = tmp.path().join("o/frame_00000.png");
+    std::fs::create_dir_all(earlier.parent().unwrap()).unwrap();
+    image::RgbImage::from_pixel(2, 2, image::Rgb([1, 2, 3]))
+        .save(&earlier)
+        .unwrap();
+    let earlier_bytes = std::fs::read(&earlier).unwrap();
+    let out = Command::new("bash")
+        .args([
+            "-c",
+            "trap '' XFSZ; ulimit -f 1; exec \"$0\" \"$@\"",
+            env!("CARGO_BIN_EXE_verdant"),
+            "fly",
+            world.to_str().unwrap(),
+            "--frames",
+            "2",
+            "--size",
+            "64x36",
+            "--out",
+            "o",
+        ])
+        .env("MESA_SHADER_CACHE_DISABLE", "true")
+        .current_dir(tmp.path())
+        .output()
+        .unwrap();
+    assert_fails_naming(&out, &["frame_00000.png"]);
+    // No file under its final name is half-written, no temporary file (nor the lock) is left,
+    // and the report, which the run never reached, is not there.
+    let files = files_under(&tmp.path().join("o"));
+    for f in &files {
+        assert!(
+            f.starts_with("frame_") && f.ends_with(".png"),
+            "{f} left: {files:?}"
+        );
+        image::open(tmp.path().join("o").join(f))
+            .unwrap_or_else(|e| panic!("{f} is not a whole PNG: {e}"));
+    }
+    // The earlier run's frame is as it was.
+    assert_eq!(std::fs::read(&earlier).unwrap(), earlier_bytes);
+}
+
+#[test]
+fn a_second_run_into_a_busy_output_folder_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    // The first run goes on until it is killed.
+    let mut first = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args([
+            "fly",
+            "--frames",
+            "4294967295",
+            "--size",
+            "32x18",
+            "--no-images",
+            "--out",
+            "o",
+        ])
+        .current_dir(tmp.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let lock = tmp.path().join("o").join(verdant::tools::fly::LOCK_FILE);
+    let start = std::time::Instant::now();
+    while std::fs::read_to_string(&lock).map_or(true, |t| t.is_empty()) {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(60),
+            "the first run never locked its folder"
+        );
+        assert!(first.try_wait().unwrap().is_none(), "the first run ended");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let second = verdant(
+        &["fly", "--frames", "1", "--no-images", "--out", "o"],
+        tmp.path(),
+    );
+    let owner = format!("verdant process {} (fly)", first.id());
+    assert_fails_naming(&second, &["o", &owner, "choose another --out"]);
+    // However the first run ends (here, killed), the OS lets go of its lock.
+    first.kill().unwrap();
+    first.wait().unwrap();
+    let dir = verdant::tools::fly::OutDir::create_for(&tmp.path().join("o"), "test").unwrap();
+    dir.keep();
+}
+
+/// Tiles of the default world: the level-0 tiles at once, every other one never (each load
+/// waits until the test is over).
+struct NeverDelivers(verdant::World);
+
+impl verdant::stream::TileSource for NeverDelivers {
+    fn load(
+        &self,
+        id: verdant::world::TileId,
+    ) -> Result<verdant::world::TileData, verdant::world::WorldError> {
+        if id.level == 0 {
+            return self.0.load_tile(id);
+        }
+        std::thread::sleep(std::time::Duration::from_secs(600));
+        Err(verdant::world::WorldError::Io {
+            path: "never".into(),
+            source: std::io::Error::other("never delivered"),
+        })
+    }
+}
+
+#[test]
+fn a_fly_whose_tiles_never_arrive_fails_naming_the_world() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = verdant::World::open(&common::default_world()).unwrap();
+    let opts = verdant::tools::FlyOptions {
+        world: common::default_world(),
+        http: Default::default(),
+        path: None,
+        frames: 2,
+        size: (32, 18),
+        out: tmp.path().join("o"),
+        write_images: true,
+        service: Default::default(),
+        wind_scene: None,
+        disable: Vec::new(),
+        enable: Vec::new(),
+        grass_spacing_m: None,
+        grass_width_scale: None,
+        grass_infill_m: None,
+        grass_segments: None,
+        grass_near_m: None,
+        mesh_step: None,
+    };
+    let e = verdant::tools::fly::run_fly_with_source(
+        &opts,
+        world.clone(),
+        std::sync::Arc::new(NeverDelivers(world)),
+        std::time::Duration::from_secs(2),
+        &mut |_| {},
+    )
+    .unwrap_err();
+    let text = format!("{e:#}");
+    assert!(
+        e.downcast_ref::<verdant::tools::fly::NothingStreamed>()
+            .is_some(),
+        "{text}"
+    );
+    for needle in [
+        "santa-cruz",
+        "no tile became resident",
+        "never loaded",
+        "not resident after 2 s",
+    ] {
+        assert!(text.contains(needle), "{needle:?} not in {text}");
+    }
+    // Nothing was written: the folder the run made is gone.
+    assert!(!tmp.path().join("o").exists());
 }
 
 #[test]

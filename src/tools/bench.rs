@@ -25,6 +25,7 @@ use serde::Serialize;
 use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::lod::RingSettings;
+use crate::tools::fly::{OptionError, OutDir, check_range, check_size, write_text};
 use crate::tools::metrics::{
     COVERAGE_DISTANCE_M, Chart, ChartPoint, LineChart, Series, Summary, band_mask, flip_compare,
     flip_error_map, masked_mean, pareto_front, ray_distances,
@@ -67,6 +68,59 @@ impl Default for BenchLodOptions {
             rounds: None,
             path: None,
         }
+    }
+}
+
+/// The most untimed frames before each measurement (`--warmup-frames`).
+pub const MAX_WARMUP_FRAMES: u32 = 100;
+/// The most timed frames of each measurement per round (`--timed-frames`); with the warm-up,
+/// within the 256 frames that `bench blades` times its floor pass over at once.
+pub const MAX_TIMED_FRAMES: u32 = 150;
+// The largest counts taken stay within the floor pass's frames.
+const _: () =
+    assert!(MAX_WARMUP_FRAMES + MAX_TIMED_FRAMES <= crate::tools::bench_blades::MAX_FLOOR_FRAMES);
+/// The most interleaved rounds (`--rounds`).
+pub const MAX_ROUNDS: u32 = 100;
+/// The most frames of the dolly (`--dolly-frames`).
+pub const MAX_DOLLY_FRAMES: u32 = 1000;
+
+/// Checks the timing options of a benchmark: `--warmup-frames` 0..=100, `--timed-frames`
+/// 1..=150, `--rounds` 1..=100 (those not given take the adapter's defaults, which lie within).
+pub fn check_timing(
+    warmup_frames: Option<u32>,
+    timed_frames: Option<u32>,
+    rounds: Option<u32>,
+) -> Result<(), OptionError> {
+    if let Some(n) = warmup_frames {
+        check_range("--warmup-frames", n, 0..=MAX_WARMUP_FRAMES, "")?;
+    }
+    if let Some(n) = timed_frames {
+        check_range("--timed-frames", n, 1..=MAX_TIMED_FRAMES, "")?;
+    }
+    if let Some(n) = rounds {
+        check_range("--rounds", n, 1..=MAX_ROUNDS, "")?;
+    }
+    Ok(())
+}
+
+impl BenchLodOptions {
+    /// Checks the options of `bench lod`: `--size` 1..=16384 pixels a side, `--dolly-frames`
+    /// 2..=1000, and the timing options (see [`check_timing`]).
+    pub fn validate(&self) -> Result<(), OptionError> {
+        self.validate_features()?;
+        check_range(
+            "--dolly-frames",
+            self.dolly_frames,
+            2..=MAX_DOLLY_FRAMES,
+            "",
+        )
+    }
+
+    /// Checks the options `bench features` uses: `--size` and the timing options (see
+    /// [`check_timing`]).
+    pub fn validate_features(&self) -> Result<(), OptionError> {
+        check_size("--size", self.size)?;
+        check_timing(self.warmup_frames, self.timed_frames, self.rounds)
     }
 }
 
@@ -296,7 +350,7 @@ impl Bench<'_> {
         scene: &mut Scene,
         camera: &Camera,
     ) -> Result<(image::RgbaImage, crate::renderer::FrameStats)> {
-        scene.warm_up(self.ctx, camera, std::time::Duration::from_secs(60))?;
+        warm_up(scene, camera)?;
         let stats = scene.render(self.ctx, camera)?;
         Ok((scene.read_image(self.ctx)?, stats))
     }
@@ -316,12 +370,27 @@ impl Bench<'_> {
     }
 }
 
+/// Brings in the tiles `camera` wants, waiting up to [`crate::tools::fly::FIRST_FRAME_WAIT`];
+/// fails if streaming delivered nothing (see [`crate::tools::fly::check_streaming`]). Tiles
+/// still missing otherwise are drawn from their ancestors, as in any frame.
+fn warm_up(scene: &mut Scene, camera: &Camera) -> Result<()> {
+    let report = scene.warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+    crate::tools::fly::check_streaming(
+        &scene.world().dir,
+        &scene.world().manifest.pyramid,
+        &scene.service().stats(),
+        &report,
+    )?;
+    Ok(())
+}
+
 /// Runs the benchmark and writes `bench_lod.json`, `dolly.csv`, `dolly.png`, `lod_settings.csv`,
 /// `lod_settings.png`, `lod_coverage.png` and `far_band.csv` into `opts.out`.
 pub fn run_bench_lod(
     opts: &BenchLodOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> Result<BenchLodReport> {
+    opts.validate()?;
     let world = World::open(&opts.world)?;
     let path = match &opts.path {
         Some(n) => world
@@ -338,8 +407,7 @@ pub fn run_bench_lod(
             None => bail!("world {} has no camera paths", opts.world.display()),
         },
     };
-    std::fs::create_dir_all(&opts.out)
-        .with_context(|| format!("cannot create {}", opts.out.display()))?;
+    let out_dir = OutDir::create_for(&opts.out, "bench lod")?;
     let ctx = GpuContext::new()?;
     let bench = Bench {
         ctx: &ctx,
@@ -356,7 +424,7 @@ pub fn run_bench_lod(
             .pyramid
             .tile_size_m(RingSettings::for_pyramid(&world.manifest.pyramid).level);
     // Far enough that tiles ahead cross the high/low boundary during the dolly.
-    let step = 1.5 * ring_m / f64::from(opts.dolly_frames.max(2));
+    let step = 1.5 * ring_m / f64::from(opts.dolly_frames);
     let mut lod_scene = bench.scene(&settings[0])?;
     let no_lod = settings
         .iter()
@@ -559,6 +627,7 @@ pub fn run_bench_lod(
         far_band,
     };
     write_json(&opts.out.join("bench_lod.json"), &report)?;
+    out_dir.keep();
     Ok(report)
 }
 
@@ -613,7 +682,7 @@ fn write_far_band(opts: &BenchLodOptions, band: &FarBand) -> Result<()> {
             cell(v.flip_no_far_field)
         ));
     }
-    std::fs::write(opts.out.join("far_band.csv"), csv)?;
+    write_text(&opts.out.join("far_band.csv"), &csv)?;
     Ok(())
 }
 
@@ -633,7 +702,7 @@ fn write_outputs(
             d.frame, d.flip_vs_no_lod, d.jump, d.change_lod, d.change_no_lod, d.ring_switches
         );
     }
-    std::fs::write(opts.out.join("dolly.csv"), csv)?;
+    write_text(&opts.out.join("dolly.csv"), &csv)?;
     let line =
         |f: &dyn Fn(&DollyFrame) -> f64| dolly.iter().map(|d| (f64::from(d.frame), f(d))).collect();
     LineChart {
@@ -691,7 +760,7 @@ fn write_outputs(
             r.pareto
         );
     }
-    std::fs::write(opts.out.join("lod_settings.csv"), csv)?;
+    write_text(&opts.out.join("lod_settings.csv"), &csv)?;
     Chart {
         title: "Grass LOD settings: speed against accuracy".into(),
         x_label: if gpu {
@@ -797,6 +866,7 @@ pub fn run_bench_features(
 ) -> Result<BenchFeaturesReport> {
     use crate::features::{Feature, Features};
     const LEAD_S: f64 = 2.0;
+    opts.validate_features()?;
     let world = World::open(&opts.world)?;
     let m = &world.manifest;
     let toured = m.paths.iter().find(|p| !p.wind.is_empty());
@@ -825,8 +895,7 @@ pub fn run_bench_features(
     };
     let scene_name =
         (path.wind.is_empty() && m.wind_scene("storm").is_some()).then(|| "storm".to_owned());
-    std::fs::create_dir_all(&opts.out)
-        .with_context(|| format!("cannot create {}", opts.out.display()))?;
+    let out_dir = OutDir::create_for(&opts.out, "bench features")?;
     let ctx = GpuContext::new()?;
     let variants: Vec<(String, Features)> = std::iter::once(("all".to_owned(), Features::all()))
         .chain(
@@ -854,11 +923,7 @@ pub fn run_bench_features(
         let (mut images, mut coverage) = (Vec::new(), Vec::new());
         scene.set_coverage_capture(true)?;
         for &t in &times {
-            scene.warm_up(
-                &ctx,
-                &sample_path(&path, t),
-                std::time::Duration::from_secs(60),
-            )?;
+            warm_up(&mut scene, &sample_path(&path, t))?;
             // The lead-in: the camera and the walker along the path up to the view's time.
             for f in 0..=lead_frames {
                 let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(lead_frames));
@@ -944,7 +1009,7 @@ pub fn run_bench_features(
             r.coverage
         );
     }
-    std::fs::write(opts.out.join("features.csv"), csv)?;
+    write_text(&opts.out.join("features.csv"), &csv)?;
     Chart {
         title: "Grass features: GPU cost against contribution to the image".into(),
         x_label: "GPU cost (ms a frame, full render minus the render without it)".into(),
@@ -973,5 +1038,84 @@ pub fn run_bench_features(
         features,
     };
     write_json(&opts.out.join("bench_features.json"), &report)?;
+    out_dir.keep();
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bench_options_out_of_range_name_the_option_and_its_range() {
+        let d = BenchLodOptions::default;
+        d().validate().unwrap();
+        let cases = [
+            (
+                BenchLodOptions {
+                    dolly_frames: 0,
+                    ..d()
+                },
+                "--dolly-frames 0",
+                "2..=1000",
+            ),
+            (
+                BenchLodOptions {
+                    dolly_frames: u32::MAX,
+                    ..d()
+                },
+                "--dolly-frames 4294967295",
+                "2..=1000",
+            ),
+            (
+                BenchLodOptions {
+                    size: (0, 0),
+                    ..d()
+                },
+                "--size 0x0",
+                "1..=16384",
+            ),
+            (
+                BenchLodOptions {
+                    warmup_frames: Some(101),
+                    ..d()
+                },
+                "--warmup-frames 101",
+                "0..=100",
+            ),
+            (
+                BenchLodOptions {
+                    timed_frames: Some(0),
+                    ..d()
+                },
+                "--timed-frames 0",
+                "1..=150",
+            ),
+            (
+                BenchLodOptions {
+                    rounds: Some(0),
+                    ..d()
+                },
+                "--rounds 0",
+                "1..=100",
+            ),
+        ];
+        for (opts, option, range) in cases {
+            let e = opts.validate().unwrap_err().to_string();
+            assert!(e.contains(option) && e.contains(range), "{e}");
+        }
+        // `bench features` has no dolly.
+        BenchLodOptions {
+            dolly_frames: 0,
+            ..d()
+        }
+        .validate_features()
+        .unwrap();
+        check_timing(
+            Some(MAX_WARMUP_FRAMES),
+            Some(MAX_TIMED_FRAMES),
+            Some(MAX_ROUNDS),
+        )
+        .unwrap();
+    }
 }

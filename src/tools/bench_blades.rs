@@ -22,9 +22,11 @@ use serde::Serialize;
 
 use crate::camera::Camera;
 use crate::gpu::GpuContext;
+use crate::grass::{BATCH_TILES, Blade};
 use crate::lod::RingSettings;
 use crate::renderer::FrameStats;
 use crate::stream::TileSource;
+use crate::tools::fly::{OptionError, OutDir, check_range, check_size, write_text};
 use crate::tools::metrics::{LineChart, Series, flip_compare};
 use crate::tools::timing::{FrameCounts, Timing, run_frames};
 use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
@@ -69,6 +71,116 @@ impl Default for BenchBladesOptions {
             timed_frames: None,
             rounds: None,
         }
+    }
+}
+
+/// The most blade counts of one sweep (`--counts`): each keeps a scene with a grass pool of
+/// its own for the timings.
+pub const MAX_SWEEP_COUNTS: usize = 32;
+
+/// The most blades a slot of the grass pool holds on any device: half the pool
+/// ([`BATCH_TILES`] slots of [`Blade`]s) is bound as one storage buffer, and no device binds
+/// more than 4 GiB. (A device that binds less clamps its slots, with a warning, and counts the
+/// blades that do not fit as overflow.)
+pub const MAX_SLOT_BLADES: u64 =
+    (1 << 32) / (BATCH_TILES as u64 * std::mem::size_of::<Blade>() as u64);
+
+/// The largest camera or target coordinate, metres (`--camera`, `--target`).
+pub const MAX_COORDINATE_M: f64 = 100_000.0;
+
+/// Edge of the field's grass tiles (the tiles of its finest level), metres.
+pub const FIELD_TILE_M: f64 = 50.0;
+
+/// The high-LOD blade spacing that puts `count` blades in a square field `field_m` metres
+/// wide, metres.
+pub fn field_spacing_m(count: u64, field_m: f64) -> f64 {
+    field_m / (count as f64).sqrt()
+}
+
+/// Blades a slot of the grass pool needs for `count` blades in a field `field_m` metres wide
+/// of grass tiles `tile_m` metres wide: a tile's grid of `(tile_m / spacing)^2` points (at
+/// least one), counted in 64 bits; `None` where even that does not hold it.
+pub fn slot_blades(count: u64, field_m: f64, tile_m: f64) -> Option<u64> {
+    let grid = (tile_m / field_spacing_m(count, field_m)).round();
+    if !(grid.is_finite() && (0.0..=f64::from(u32::MAX)).contains(&grid)) {
+        return None;
+    }
+    let grid = (grid as u64).max(1);
+    grid.checked_mul(grid)
+}
+
+/// The blade counts `--counts` takes for a field `field_m` metres wide of grass tiles `tile_m`
+/// metres wide: at least 1000 and at least one blade a grass tile (`(field_m / tile_m)^2`), and
+/// at most the count whose grass tiles need [`MAX_SLOT_BLADES`] blades a slot (214,681,104 for
+/// the default 200 m field).
+pub fn count_range(field_m: f64, tile_m: f64) -> std::ops::RangeInclusive<u64> {
+    let tiles_a_side = field_m / tile_m;
+    let min = ((tiles_a_side * tiles_a_side).ceil() as u64).max(1000);
+    // A grid of at most `side` points a tile edge: `side^2` blades fit a slot.
+    let side = MAX_SLOT_BLADES.isqrt() as f64;
+    let max = (side * tiles_a_side).powi(2).floor() as u64;
+    min..=max
+}
+
+impl BenchBladesOptions {
+    /// Checks every option against its range (stated in the error), before any GPU work:
+    /// `--size` 1..=16384 pixels a side, `--field-m` 10..=5000, `--fov-deg` between 1 and 170
+    /// (both excluded), `--camera` and `--target` within 100 km of the origin in each
+    /// coordinate and at least 1 cm apart, 1..=32 `--counts` each in [`count_range`], and the
+    /// timing options (see [`crate::tools::bench::check_timing`]).
+    pub fn validate(&self) -> Result<(), OptionError> {
+        check_size("--size", self.size)?;
+        check_range("--field-m", self.field_m, 10.0..=5000.0, "m")?;
+        if !(self.fov_deg > 1.0 && self.fov_deg < 170.0) {
+            return Err(OptionError::new(
+                "--fov-deg",
+                self.fov_deg,
+                "between 1 and 170 degrees, both excluded",
+            ));
+        }
+        for (option, v) in [("--camera", self.camera_m), ("--target", self.target_m)] {
+            if !v.iter().all(|c| c.abs() <= MAX_COORDINATE_M) {
+                return Err(OptionError::new(
+                    option,
+                    format!("{},{},{}", v[0], v[1], v[2]),
+                    format!("X,Y,Z each in -{MAX_COORDINATE_M}..={MAX_COORDINATE_M} m"),
+                ));
+            }
+        }
+        let eye = DVec3::from_array(self.camera_m);
+        let target = DVec3::from_array(self.target_m);
+        if eye.distance(target) < 0.01 {
+            let v = self.target_m;
+            return Err(OptionError::new(
+                "--target",
+                format!("{},{},{}", v[0], v[1], v[2]),
+                "at least 0.01 m from --camera",
+            ));
+        }
+        if !(1..=MAX_SWEEP_COUNTS).contains(&self.counts.len()) {
+            return Err(OptionError::new(
+                "--counts",
+                format!("{:?}", self.counts),
+                format!("1..={MAX_SWEEP_COUNTS} blade counts"),
+            ));
+        }
+        let range = count_range(self.field_m, FIELD_TILE_M);
+        if let Some(&n) = self.counts.iter().find(|n| !range.contains(n)) {
+            return Err(OptionError::new(
+                "--counts",
+                n,
+                format!(
+                    "in {}..={} with --field-m {} (at least one blade a {FIELD_TILE_M} m grass \
+                     tile, and at most {MAX_SLOT_BLADES} blades a tile: the most a slot of the \
+                     grass pool holds, {BATCH_TILES} slots being bound in one GPU buffer of at \
+                     most 4 GiB)",
+                    range.start(),
+                    range.end(),
+                    self.field_m
+                ),
+            ));
+        }
+        crate::tools::bench::check_timing(self.warmup_frames, self.timed_frames, self.rounds)
     }
 }
 
@@ -126,7 +238,7 @@ pub struct BenchBladesReport {
 /// heights up to `top_m`.
 fn field_manifest(field_m: f64, top_m: f32) -> Result<Manifest> {
     let levels = 3u32;
-    let root = 50.0 * f64::from(1u32 << (levels - 1));
+    let root = FIELD_TILE_M * f64::from(1u32 << (levels - 1));
     let roots = (field_m / root).ceil().max(1.0) as u32;
     let top = top_m.max(1.0);
     let text = format!(
@@ -273,7 +385,13 @@ pub fn field_camera(opts: &BenchBladesOptions, aspect: f32) -> Camera {
     let dir = (DVec3::from_array(opts.target_m) - eye)
         .normalize()
         .as_vec3();
-    let view = glam::camera::rh::view::look_to_mat4(Vec3::ZERO, dir, Vec3::Z);
+    // Looking straight up or down, z cannot be the view's up: north is.
+    let up = if dir.z.abs() > 0.999 {
+        Vec3::Y
+    } else {
+        Vec3::Z
+    };
+    let view = glam::camera::rh::view::look_to_mat4(Vec3::ZERO, dir, up);
     let proj = glam::camera::rh::proj::directx::perspective_infinite_reverse(
         (opts.fov_deg as f32).to_radians(),
         aspect,
@@ -288,23 +406,8 @@ pub fn run_bench_blades(
     opts: &BenchBladesOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> Result<BenchBladesReport> {
-    if !(opts.field_m >= 10.0 && opts.field_m <= 5000.0) {
-        bail!(
-            "--field-m must be between 10 and 5000 m, not {}",
-            opts.field_m
-        );
-    }
-    if opts.counts.is_empty() || opts.counts.iter().any(|&c| c < 1000) {
-        bail!(
-            "blade counts must be at least 1000 each (got {:?})",
-            opts.counts
-        );
-    }
-    if !(opts.fov_deg > 1.0 && opts.fov_deg < 170.0) {
-        bail!("--fov-deg must be between 1 and 170, not {}", opts.fov_deg);
-    }
-    std::fs::create_dir_all(&opts.out)
-        .with_context(|| format!("cannot create {}", opts.out.display()))?;
+    opts.validate()?;
+    let out_dir = OutDir::create_for(&opts.out, "bench blades")?;
     let (world, source) = flat_field(opts.field_m)?;
     let ctx = GpuContext::new()?;
     let camera = field_camera(opts, opts.size.0 as f32 / opts.size.1 as f32);
@@ -318,7 +421,7 @@ pub fn run_bench_blades(
     // The whole field in view: the far corner from the camera is inside the view distance.
     let corner = DVec3::new(opts.field_m, opts.field_m, 0.0) - DVec3::from_array(opts.camera_m);
     let view_m = (corner.length() * 1.3).max(4.0 * tile_m);
-    let config = |spacing: f64, lod: bool| -> SceneConfig {
+    let config = |(spacing, slot): (f64, u32), lod: bool| -> SceneConfig {
         let mut c = SceneConfig::for_world(&world);
         c.grass = Some(RingSettings {
             high_radius_m: if lod { 2.0 * tile_m } else { view_m },
@@ -326,24 +429,31 @@ pub fn run_bench_blades(
             ..base
         });
         c.grass_spacing_m = spacing as f32;
-        let grid = (tile_m / spacing).round() as u32;
-        c.grass_capacity = Some(grid * grid);
+        c.grass_capacity = Some(slot);
         c
     };
-    let spacings: Vec<f64> = opts
+    // Each count's spacing and the blades a slot needs for it (within MAX_SLOT_BLADES, which
+    // fits a u32, once validated).
+    let sizes: Vec<(f64, u32)> = opts
         .counts
         .iter()
-        .map(|&n| opts.field_m / (n as f64).sqrt())
-        .collect();
+        .map(|&n| {
+            let slot = slot_blades(n, opts.field_m, tile_m)
+                .and_then(|b| u32::try_from(b).ok())
+                .with_context(|| format!("--counts {n}: too many blades a grass tile"))?;
+            Ok((field_spacing_m(n, opts.field_m), slot))
+        })
+        .collect::<Result<_>>()?;
+    let spacings: Vec<f64> = sizes.iter().map(|s| s.0).collect();
     let total = spacings.len() as u64;
-    let scene_for = |spacing: f64, lod: bool| -> Result<Scene> {
+    let scene_for = |size: (f64, u32), lod: bool| -> Result<Scene> {
         let mut scene = Scene::with_source(
             &ctx,
             world.clone(),
             source.clone(),
             opts.size.0,
             opts.size.1,
-            config(spacing, lod),
+            config(size, lod),
         )?;
         if !scene.warm_up(&ctx, &camera, std::time::Duration::from_secs(60))? {
             bail!("the field's tiles did not load");
@@ -354,12 +464,12 @@ pub fn run_bench_blades(
     // Images (and the counts) first, against the same field with no LOD.
     let mut scenes = Vec::new();
     let mut images = Vec::new();
-    for (k, &spacing) in spacings.iter().enumerate() {
-        let mut reference = scene_for(spacing, false)?;
+    for (k, &size) in sizes.iter().enumerate() {
+        let mut reference = scene_for(size, false)?;
         reference.render(&ctx, &camera)?;
         let no_lod = reference.read_image(&ctx)?;
         drop(reference);
-        let mut scene = scene_for(spacing, true)?;
+        let mut scene = scene_for(size, true)?;
         let stats = scene.render(&ctx, &camera)?;
         let image = scene.read_image(&ctx)?;
         let flip = flip_compare(&rgb(&no_lod), &rgb(&image))?.mean;
@@ -464,6 +574,7 @@ pub fn run_bench_blades(
         results,
     };
     write_json(&opts.out.join("bench_blades.json"), &report)?;
+    out_dir.keep();
     Ok(report)
 }
 
@@ -514,7 +625,7 @@ fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<
             r.flip_vs_no_lod
         );
     }
-    std::fs::write(opts.out.join("blades.csv"), csv)?;
+    write_text(&opts.out.join("blades.csv"), &csv)?;
     let series = |name: &str, f: &dyn Fn(&BladesResult) -> f64| Series {
         name: name.into(),
         points: results.iter().map(|r| (r.blades as f64, f(r))).collect(),
@@ -756,4 +867,163 @@ fn floor_pipeline(
 }
 
 /// Most floor frames timed in one call.
-const MAX_FLOOR_FRAMES: u32 = 256;
+pub(crate) const MAX_FLOOR_FRAMES: u32 = 256;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_field_has_grass_tiles_of_the_stated_size() {
+        let (world, _) = flat_field(200.0).unwrap();
+        let level = RingSettings::for_pyramid(&world.manifest.pyramid).level;
+        assert_eq!(world.manifest.pyramid.tile_size_m(level), FIELD_TILE_M);
+    }
+
+    #[test]
+    fn slot_sizes_near_the_bound_do_not_wrap() {
+        // The largest slot fits a u32 with room for the renderer's rounding up to 16.
+        assert_eq!(MAX_SLOT_BLADES, 13_421_772);
+        let range = count_range(200.0, FIELD_TILE_M);
+        assert_eq!(*range.start(), 1000);
+        assert_eq!(*range.end(), 214_681_104);
+        let top = slot_blades(*range.end(), 200.0, FIELD_TILE_M).unwrap();
+        assert!(top <= MAX_SLOT_BLADES, "{top}");
+        assert_eq!(top, 3663 * 3663);
+        // One past the bound needs no more (the grid rounds), but the counts beyond it do, and
+        // they are counted in 64 bits: 10^12 blades are 250,000^2 a slot, not that wrapped
+        // to 2,370,457,856 in 32 bits.
+        assert_eq!(
+            slot_blades(1_000_000_000_000, 200.0, FIELD_TILE_M),
+            Some(62_500_000_000)
+        );
+        assert_eq!(slot_blades(u64::MAX, 10.0, FIELD_TILE_M), None);
+        // Each end of every field's range keeps a slot within the bound and a blade a tile.
+        for field in [10.0, 200.0, 1234.5, 5000.0] {
+            let r = count_range(field, FIELD_TILE_M);
+            for n in [*r.start(), *r.end()] {
+                let slot = slot_blades(n, field, FIELD_TILE_M).unwrap();
+                assert!((1..=MAX_SLOT_BLADES).contains(&slot), "{field} {n} {slot}");
+                assert!(field_spacing_m(n, field) <= FIELD_TILE_M, "{field} {n}");
+            }
+        }
+        // A big field needs a blade a tile: 100 x 100 tiles.
+        assert_eq!(*count_range(5000.0, FIELD_TILE_M).start(), 10_000);
+    }
+
+    #[test]
+    fn absurd_options_name_the_option_and_its_range() {
+        BenchBladesOptions::default().validate().unwrap();
+        let bad = |o: BenchBladesOptions, needles: &[&str]| {
+            let e = o.validate().unwrap_err().to_string();
+            for n in needles {
+                assert!(e.contains(n), "{n:?} not in {e:?}");
+            }
+        };
+        let d = BenchBladesOptions::default;
+        bad(
+            BenchBladesOptions {
+                counts: vec![1000, 1_000_000_000_000],
+                ..d()
+            },
+            &[
+                "--counts 1000000000000",
+                "1000..=214681104",
+                "--field-m 200",
+            ],
+        );
+        bad(
+            BenchBladesOptions {
+                counts: vec![10],
+                ..d()
+            },
+            &["--counts 10", "1000..="],
+        );
+        bad(
+            BenchBladesOptions {
+                counts: vec![],
+                ..d()
+            },
+            &["--counts", "1..=32 blade counts"],
+        );
+        bad(
+            BenchBladesOptions {
+                counts: vec![5000; 33],
+                ..d()
+            },
+            &["--counts", "1..=32 blade counts"],
+        );
+        bad(
+            BenchBladesOptions {
+                field_m: f64::NAN,
+                ..d()
+            },
+            &["--field-m NaN", "10..=5000 m"],
+        );
+        bad(
+            BenchBladesOptions {
+                fov_deg: 170.0,
+                ..d()
+            },
+            &["--fov-deg 170", "between 1 and 170"],
+        );
+        bad(
+            BenchBladesOptions {
+                camera_m: [0.0, f64::INFINITY, 1.0],
+                ..d()
+            },
+            &["--camera 0,inf,1", "-100000..=100000 m"],
+        );
+        bad(
+            BenchBladesOptions {
+                target_m: [-20.0, -20.0, 15.0],
+                ..d()
+            },
+            &["--target -20,-20,15", "0.01 m from --camera"],
+        );
+        bad(
+            BenchBladesOptions {
+                size: (1920, 0),
+                ..d()
+            },
+            &["--size 1920x0", "1..=16384"],
+        );
+        // Frame counts that would run for ever or wrap when added up.
+        bad(
+            BenchBladesOptions {
+                warmup_frames: Some(u32::MAX),
+                ..d()
+            },
+            &["--warmup-frames 4294967295", "0..=100"],
+        );
+        bad(
+            BenchBladesOptions {
+                timed_frames: Some(0),
+                ..d()
+            },
+            &["--timed-frames 0", "1..=150"],
+        );
+        bad(
+            BenchBladesOptions {
+                rounds: Some(1_000_000),
+                ..d()
+            },
+            &["--rounds 1000000", "1..=100"],
+        );
+    }
+
+    #[test]
+    fn a_camera_looking_straight_down_sees_the_field() {
+        let opts = BenchBladesOptions {
+            camera_m: [100.0, 100.0, 50.0],
+            target_m: [100.0, 100.0, 0.0],
+            ..BenchBladesOptions::default()
+        };
+        let cam = field_camera(&opts, 16.0 / 9.0);
+        let m = cam.view_proj_relative(16.0 / 9.0);
+        assert!(m.to_cols_array().iter().all(|v| v.is_finite()), "{m}");
+        // The point below the camera is in the middle of the view.
+        let p = m.project_point3(glam::Vec3::new(0.0, 0.0, -50.0));
+        assert!(p.x.abs() < 1e-4 && p.y.abs() < 1e-4, "{p}");
+    }
+}

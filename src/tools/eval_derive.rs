@@ -476,13 +476,14 @@ pub fn joint_front(results: &[MethodResult]) -> Vec<usize> {
 
 /// Writes `derive.csv` and the charts `derive_height.png` (height RMSE), `derive_slope.png`
 /// (slope RMSE), `derive_flattening.png` (slope bias) and `derive_roughness.png` against time
-/// per tile into `out`.
+/// per tile into `out` (created if needed; locked while they are written, see
+/// [`crate::tools::fly::OutDir`]).
 pub fn write_results(
     results: &[MethodResult],
     dem_name: &str,
     out: &std::path::Path,
 ) -> anyhow::Result<()> {
-    use anyhow::Context;
+    let out_dir = crate::tools::fly::OutDir::create_for(out, "eval derive")?;
     use std::fmt::Write as _;
     let chosen = RUNTIME_METHOD;
     let front = joint_front(results);
@@ -516,9 +517,7 @@ pub fn write_results(
                 .join(" "),
         );
     }
-    let csv_path = out.join("derive.csv");
-    std::fs::write(&csv_path, csv)
-        .with_context(|| format!("cannot write {}", csv_path.display()))?;
+    crate::tools::fly::write_text(&out.join("derive.csv"), &csv)?;
     let factor = results.first().map_or(0, |r| r.factor);
     let charts: [(&str, &str, fn(&MethodResult) -> f64); 4] = [
         ("derive_height.png", "height RMSE (m)", |r| r.rmse_m),
@@ -556,6 +555,7 @@ pub fn write_results(
         };
         chart.write_png(&out.join(file), 900, 600)?;
     }
+    out_dir.keep();
     Ok(())
 }
 

@@ -7,8 +7,6 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::Context;
-
 use crate::tools::metrics::{Chart, ChartPoint, LineChart, Series, Summary};
 use crate::wind::sway::*;
 
@@ -312,7 +310,7 @@ pub fn dt_label(dt: f64) -> String {
 ///   stiff preset, with the blow-up threshold and the theoretical limits of the two Euler
 ///   steps.
 pub fn run_sway_eval(out: &Path) -> anyhow::Result<Vec<SwayResult>> {
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let out_dir = crate::tools::fly::OutDir::create_for(out, "eval sway")?;
     let results = evaluate_all();
     write_csv(&results, &out.join("sway.csv"))?;
     for (preset, file) in [
@@ -329,6 +327,7 @@ pub fn run_sway_eval(out: &Path) -> anyhow::Result<Vec<SwayResult>> {
         1000,
         650,
     )?;
+    out_dir.keep();
     Ok(results)
 }
 
@@ -351,7 +350,7 @@ fn write_csv(results: &[SwayResult], path: &Path) -> anyhow::Result<()> {
             r.max_abs_x
         );
     }
-    std::fs::write(path, csv).with_context(|| format!("cannot write {}", path.display()))
+    Ok(crate::tools::fly::write_text(path, &csv)?)
 }
 
 /// Ends the chart label of a run that blew up.

@@ -2,24 +2,31 @@
 //! what each frame drew and what it cost.
 
 use std::collections::{BTreeMap, VecDeque};
+use std::fs::File;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::sync::mpsc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, mpsc};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 
 use crate::camera::{sample_path, walker_at};
 use crate::gpu::GpuContext;
+use crate::renderer::WarmUp;
+use crate::stream::TileSource;
 use crate::tools::metrics::{COVERAGE_DISTANCE_M, Summary};
 use crate::tools::report::{
     AdapterReport, CoverageRecord, FlyReport, FlySummary, FlyTotals, FrameRecord,
     MAX_REPORT_FRAMES, Thinned,
 };
 
+use crate::tools::scene::{Scene, SceneConfig};
+use crate::world::World;
+
 /// Frames whose grass coverage a fly-through without images measures: evenly spaced over the
 /// path, drawn again after the flight (never among the timed frames).
 pub const COVERAGE_FRAMES: u32 = 8;
-use crate::tools::scene::{Scene, SceneConfig};
 
 /// What `verdant fly` is asked to do.
 #[derive(Clone, Debug)]
@@ -84,12 +91,81 @@ fn path_start_position(path: &crate::world::CameraPath) -> glam::DVec3 {
     sample_path(path, path.keys[0].t_s).position
 }
 
+/// The longest the first frame waits for its tiles.
+pub const FIRST_FRAME_WAIT: std::time::Duration = std::time::Duration::from_secs(60);
+
+/// The most pixels a side of a frame or a benchmark image (as `--size` says).
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+
+impl FlyOptions {
+    /// Checks every numeric option against its range (stated in the error), before anything
+    /// is opened or written: `--frames` 1..=4294967295, `--size` 1..=16384 pixels a side,
+    /// `--grass-spacing-m` 0.02..=5, `--grass-width-scale` 0.05..=20, `--grass-infill-m`
+    /// 0..=100 each, `--grass-segments` 1..=64 each, `--grass-near-m` 0..=200, `--mesh-step` a
+    /// power of two in 1..=16. NaN and infinities are out of every range.
+    pub fn validate(&self) -> Result<(), OptionError> {
+        if self.frames == 0 {
+            return Err(OptionError::new("--frames", 0, "in 1..=4294967295"));
+        }
+        check_size("--size", self.size)?;
+        if let Some(s) = self.grass_spacing_m {
+            check_range("--grass-spacing-m", s, 0.02..=5.0, "m")?;
+        }
+        if let Some(w) = self.grass_width_scale {
+            check_range("--grass-width-scale", w, 0.05..=20.0, "")?;
+        }
+        if let Some([half, quarter]) = self.grass_infill_m
+            && ![half, quarter].iter().all(|r| (0.0..=100.0).contains(r))
+        {
+            return Err(OptionError::new(
+                "--grass-infill-m",
+                format!("{half},{quarter}"),
+                "in 0..=100 m each",
+            ));
+        }
+        if let Some(seg) = self.grass_segments
+            && !seg.iter().all(|s| (1..=64).contains(s))
+        {
+            return Err(OptionError::new(
+                "--grass-segments",
+                format!("{},{},{}", seg[0], seg[1], seg[2]),
+                "in 1..=64 each",
+            ));
+        }
+        if let Some(r) = self.grass_near_m {
+            check_range("--grass-near-m", r, 0.0..=200.0, "m")?;
+        }
+        if let Some(step) = self.mesh_step
+            && !(step.is_power_of_two() && step <= 16)
+        {
+            return Err(OptionError::new(
+                "--mesh-step",
+                step,
+                "a power of two in 1..=16",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Runs a fly-through and writes its frames and `report.json` into `opts.out`.
 pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Result<FlyReport> {
-    if opts.frames == 0 {
-        bail!("--frames must be at least 1");
-    }
+    opts.validate()?;
     let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
+    run_fly_with_source(opts, world, source, FIRST_FRAME_WAIT, progress)
+}
+
+/// Like [`run_fly`], on a world already opened with its tiles from `source` (`opts.world` and
+/// `opts.http` only name it), the first frame waiting at most `first_frame_wait` for its tiles.
+/// Tests use this with sources that are slow or failing on purpose.
+pub fn run_fly_with_source(
+    opts: &FlyOptions,
+    world: World,
+    source: Arc<dyn TileSource>,
+    first_frame_wait: std::time::Duration,
+    progress: &mut dyn FnMut(FlyProgress),
+) -> Result<FlyReport> {
+    opts.validate()?;
     let path = match &opts.path {
         Some(name) => world.manifest.path(name).cloned().with_context(|| {
             let names: Vec<&str> = world
@@ -111,7 +187,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
             .cloned()
             .with_context(|| format!("world {} has no camera paths", opts.world.display()))?,
     };
-    let out_dir = OutDir::create(&opts.out)?;
+    let out_dir = OutDir::create_for(&opts.out, "fly")?;
 
     let ctx = GpuContext::new()?;
     let world_name = world.manifest.name.clone();
@@ -122,48 +198,33 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     config.wind_keys = path.wind.clone();
     config.features = config.features.switched(&opts.disable, &opts.enable);
     if let Some(s) = opts.grass_spacing_m {
-        if !(0.02..=5.0).contains(&s) {
-            bail!("--grass-spacing-m must be between 0.02 and 5 m, not {s}");
-        }
         config.grass_spacing_m = s;
     }
     if let Some(w) = opts.grass_width_scale {
-        if !(0.05..=20.0).contains(&w) {
-            bail!("--grass-width-scale must be between 0.05 and 20, not {w}");
-        }
         config.grass_width_scale = w;
     }
-    if let Some([half, quarter]) = opts.grass_infill_m {
-        if !(0.0..=100.0).contains(&half) || !(0.0..=100.0).contains(&quarter) {
-            bail!("--grass-infill-m radii must be between 0 and 100 m, not {half},{quarter}");
-        }
-        config.grass_infill_m = [half, quarter];
+    if let Some(infill) = opts.grass_infill_m {
+        config.grass_infill_m = infill;
     }
     if let Some(seg) = opts.grass_segments {
-        if seg.iter().any(|s| !(1..=64).contains(s)) {
-            bail!("--grass-segments must be between 1 and 64 each, not {seg:?}");
-        }
         config.grass_segments = seg;
     }
     if let Some(r) = opts.grass_near_m {
-        if !(0.0..=200.0).contains(&r) {
-            bail!("--grass-near-m must be between 0 and 200 m, not {r}");
-        }
         config.grass_near_m = r;
     }
     if let Some(step) = opts.mesh_step {
-        if !step.is_power_of_two() || step > 16 {
-            bail!("--mesh-step must be a power of two up to 16, not {step}");
-        }
         config.mesh_step = step;
     }
     let mut scene = Scene::with_source(&ctx, world, source, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.
     progress(FlyProgress::WarmingUp);
-    let warm_up = scene.warm_up_report(
-        &sample_path(&path, path.keys[0].t_s),
-        std::time::Duration::from_secs(60),
+    let warm_up = scene.warm_up_report(&sample_path(&path, path.keys[0].t_s), first_frame_wait)?;
+    check_streaming(
+        &opts.world,
+        &scene.world().manifest.pyramid,
+        &scene.service().stats(),
+        &warm_up,
     )?;
     let warm_up_missing = warm_up.describe(20);
     if !warm_up_missing.is_empty() {
@@ -174,8 +235,7 @@ pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Resu
     let (tx, rx) = mpsc::sync_channel::<(PathBuf, image::RgbaImage)>(4);
     let writer = std::thread::spawn(move || -> Result<()> {
         for (file, img) in rx {
-            img.save(&file)
-                .with_context(|| format!("cannot write frame {}", file.display()))?;
+            write_png(&file, &img)?;
         }
         Ok(())
     });
@@ -341,47 +401,380 @@ fn take_figures(
     Ok(())
 }
 
-/// Writes `value` as pretty JSON, via a temporary file so a reader never sees half a report.
-pub fn write_json<T: serde::Serialize>(file: &Path, value: &T) -> Result<()> {
-    let tmp = file.with_extension("json.tmp");
-    let text = serde_json::to_string_pretty(value)?;
-    std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
-    if let Err(e) = std::fs::rename(&tmp, file) {
+/// Fails when a warm-up ended with tiles missing and not one tile beyond the level-0 tiles
+/// (resident from the start) became resident: streaming delivered nothing, and a run would
+/// draw the coarsest terrain only while reporting success.
+pub fn check_streaming(
+    world: &Path,
+    pyramid: &crate::world::Pyramid,
+    stats: &crate::stream::ResidencyStats,
+    warm_up: &WarmUp,
+) -> Result<(), NothingStreamed> {
+    let [nx, ny] = pyramid.tiles_at(0);
+    if warm_up.missing.is_empty() || u64::from(stats.atlas_used) > u64::from(nx) * u64::from(ny) {
+        return Ok(());
+    }
+    Err(NothingStreamed {
+        world: world.to_path_buf(),
+        missing: warm_up.missing.len(),
+        first: warm_up.describe(3),
+    })
+}
+
+/// A run whose tile streaming delivered nothing (see [`check_streaming`]).
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "world {}: no tile became resident beyond the level-0 tiles: the {missing} other tiles \
+     the first frame wants never loaded ({}); check the world's tiles and --max-loads",
+    world.display(),
+    first.join("; ")
+)]
+pub struct NothingStreamed {
+    /// The world, as given.
+    pub world: PathBuf,
+    /// Wanted tiles that are not resident.
+    pub missing: usize,
+    /// The first few of them, each with the reason.
+    pub first: Vec<String>,
+}
+
+/// An option out of its range.
+#[derive(Debug, thiserror::Error)]
+#[error("{option} {value} is out of range: it must be {range}")]
+pub struct OptionError {
+    /// The option as the command line spells it, e.g. `--frames`.
+    pub option: &'static str,
+    /// The value given.
+    pub value: String,
+    /// What it must be, with its range and unit.
+    pub range: String,
+}
+
+impl OptionError {
+    /// `option` given `value`, which must be `range`.
+    pub fn new(
+        option: &'static str,
+        value: impl std::fmt::Display,
+        range: impl Into<String>,
+    ) -> Self {
+        Self {
+            option,
+            value: value.to_string(),
+            range: range.into(),
+        }
+    }
+}
+
+/// Checks that `value` lies in `range` (NaN never does); `unit` follows the range in the error.
+pub fn check_range<T>(
+    option: &'static str,
+    value: T,
+    range: std::ops::RangeInclusive<T>,
+    unit: &str,
+) -> Result<(), OptionError>
+where
+    T: PartialOrd + std::fmt::Display,
+{
+    if range.contains(&value) {
+        return Ok(());
+    }
+    let unit = if unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {unit}")
+    };
+    Err(OptionError::new(
+        option,
+        value,
+        format!("in {}..={}{unit}", range.start(), range.end()),
+    ))
+}
+
+/// Checks an image size: 1..=[`MAX_IMAGE_SIDE`] pixels a side.
+pub fn check_size(option: &'static str, (w, h): (u32, u32)) -> Result<(), OptionError> {
+    if (1..=MAX_IMAGE_SIDE).contains(&w) && (1..=MAX_IMAGE_SIDE).contains(&h) {
+        return Ok(());
+    }
+    Err(OptionError::new(
+        option,
+        format!("{w}x{h}"),
+        format!("1..={MAX_IMAGE_SIDE} pixels a side"),
+    ))
+}
+
+// Output files. Every file the tools write goes through `write_atomic`, and every output folder
+// is held by an `OutDir` while a run writes into it.
+
+/// Why an output file could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write {}: {source}", path.display())]
+pub struct WriteError {
+    /// The file.
+    pub path: PathBuf,
+    /// What failed.
+    #[source]
+    pub source: std::io::Error,
+}
+
+/// Writes `file` whole or not at all: `write` fills a temporary file beside it (a hidden name
+/// ending in `.tmp`, in the same folder so that the rename is atomic), which is flushed to disk
+/// and renamed over `file`. If anything fails (`write` itself, a full disk, the rename), the
+/// temporary file is removed and `file` is left as it was: absent, or its old contents.
+pub fn write_atomic(
+    file: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), WriteError> {
+    let err = |source| WriteError {
+        path: file.to_path_buf(),
+        source,
+    };
+    let Some(name) = file.file_name() else {
+        return Err(err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a file name",
+        )));
+    };
+    let dir = match file.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    // Unique within the process too: frames are written on a thread of their own.
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let tmp = dir.join(format!(
+        ".{}.{}-{}.tmp",
+        name.to_string_lossy(),
+        std::process::id(),
+        NEXT.fetch_add(1, Ordering::Relaxed)
+    ));
+    let created = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .map_err(err)?;
+    let result = (|| {
+        let mut w = std::io::BufWriter::new(created);
+        write(&mut w)?;
+        let f = w
+            .into_inner()
+            .map_err(std::io::IntoInnerError::into_error)?;
+        // A full disk may only say so when the data is flushed: that error surfaces here,
+        // before the rename.
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, file)
+    })();
+    if let Err(e) = result {
         let _ = std::fs::remove_file(&tmp);
-        return Err(e).with_context(|| format!("cannot write {}", file.display()));
+        return Err(err(e));
     }
     Ok(())
 }
 
-/// An output folder made for a run. If the run created it and fails before writing anything
-/// into it, it is removed again (only while empty), so an early failure leaves no trace.
+/// Writes `value` as pretty JSON through [`write_atomic`].
+pub fn write_json<T: serde::Serialize>(file: &Path, value: &T) -> Result<(), WriteError> {
+    write_atomic(file, |w| Ok(serde_json::to_writer_pretty(w, value)?))
+}
+
+/// Writes `text` (a CSV table, say) through [`write_atomic`].
+pub fn write_text(file: &Path, text: &str) -> Result<(), WriteError> {
+    write_atomic(file, |w| w.write_all(text.as_bytes()))
+}
+
+/// Writes an 8-bit image as a PNG through [`write_atomic`].
+pub fn write_png<P, C>(file: &Path, image: &image::ImageBuffer<P, C>) -> Result<(), WriteError>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+    C: std::ops::Deref<Target = [P::Subpixel]>,
+{
+    write_atomic(file, |w| {
+        image
+            .write_with_encoder(image::codecs::png::PngEncoder::new(w))
+            .map_err(|e| match e {
+                image::ImageError::IoError(e) => e,
+                e => std::io::Error::other(e),
+            })
+    })
+}
+
+/// The file in an output folder that a run holds locked while it writes there; it holds the
+/// run's process id and tool, and is removed when the run ends.
+pub const LOCK_FILE: &str = ".verdant.lock";
+
+/// Why an output folder could not be taken.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum OutDirError {
+    /// The folder could not be created.
+    #[error("cannot create output folder {}: {source}", path.display())]
+    Create {
+        /// The folder.
+        path: PathBuf,
+        /// What failed.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Its lock file could not be opened or locked.
+    #[error("cannot lock output folder {} (its file {LOCK_FILE}): {source}", path.display())]
+    Lock {
+        /// The folder.
+        path: PathBuf,
+        /// What failed.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Another run writes into it.
+    #[error(
+        "output folder {} is in use by {}; wait for it or choose another --out",
+        path.display(),
+        owner_words(*pid, tool)
+    )]
+    InUse {
+        /// The folder.
+        path: PathBuf,
+        /// The other run's process id, when its lock file says.
+        pid: Option<u32>,
+        /// The other run's tool (`fly`, `bench lod`, ...), when its lock file says.
+        tool: String,
+    },
+}
+
+fn owner_words(pid: Option<u32>, tool: &str) -> String {
+    match (pid, tool.is_empty()) {
+        (Some(pid), false) => format!("verdant process {pid} ({tool})"),
+        (Some(pid), true) => format!("verdant process {pid}"),
+        (None, _) => "another verdant process".to_owned(),
+    }
+}
+
+/// An output folder held by a run. Its lock file ([`LOCK_FILE`]) is locked with an OS file lock
+/// for as long as the `OutDir` lives, so that a second run into the same folder is refused
+/// instead of mixing its files with this one's; the OS releases the lock when the process ends,
+/// however it ends. If the run created the folder and fails before writing anything into it,
+/// the folder is removed again (only while empty), so an early failure leaves no trace.
 pub struct OutDir {
     path: PathBuf,
     created: bool,
     kept: bool,
+    lock: Option<File>,
 }
 
 impl OutDir {
-    /// Creates `path` (and its parents) where needed.
-    pub fn create(path: &Path) -> Result<Self> {
+    /// Creates `path` (and its parents) where needed and locks it for this process, named in
+    /// the lock by its first argument (the `verdant` subcommand).
+    pub fn create(path: &Path) -> Result<Self, OutDirError> {
+        let tool = std::env::args()
+            .nth(1)
+            .filter(|a| !a.starts_with('-'))
+            .unwrap_or_default();
+        Self::create_for(path, &tool)
+    }
+
+    /// Creates `path` (and its parents) where needed and locks it for `tool` (`fly`,
+    /// `bench lod`, ...), which a refused second run names.
+    pub fn create_for(path: &Path, tool: &str) -> Result<Self, OutDirError> {
         let created = !path.exists();
-        std::fs::create_dir_all(path)
-            .with_context(|| format!("cannot create output folder {}", path.display()))?;
-        Ok(Self {
+        std::fs::create_dir_all(path).map_err(|source| OutDirError::Create {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        // From here on, dropping `dir` removes a folder this run created.
+        let mut dir = Self {
             path: path.to_path_buf(),
             created,
             kept: false,
-        })
+            lock: None,
+        };
+        dir.lock = lock_folder(path, tool)?;
+        Ok(dir)
     }
 
-    /// The run succeeded: the folder stays.
+    /// The folder.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The run succeeded: the folder stays (its lock is let go).
     pub fn keep(mut self) {
         self.kept = true;
     }
 }
 
+/// Takes the lock of `dir` for `tool`; `None` where the file system has no locks.
+fn lock_folder(dir: &Path, tool: &str) -> Result<Option<File>, OutDirError> {
+    let file = dir.join(LOCK_FILE);
+    let failed = |source| OutDirError::Lock {
+        path: dir.to_path_buf(),
+        source,
+    };
+    // A run that lets go of the lock removes the file first: a file locked here after that
+    // removal is no longer the folder's lock, and the lock is taken again on the new one.
+    for _ in 0..100 {
+        let mut f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&file)
+            .map_err(failed)?;
+        match f.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let mut text = String::new();
+                let _ = f.read_to_string(&mut text);
+                let mut words = text.split_whitespace();
+                let pid = words.next().and_then(|w| w.parse().ok());
+                let tool = words.collect::<Vec<_>>().join(" ");
+                return Err(OutDirError::InUse {
+                    path: dir.to_path_buf(),
+                    pid,
+                    tool,
+                });
+            }
+            Err(std::fs::TryLockError::Error(e)) if e.kind() == std::io::ErrorKind::Unsupported => {
+                log::warn!(
+                    "the file system of {} has no file locks: two runs into it would not be told apart",
+                    dir.display()
+                );
+                return Ok(None);
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(failed(e)),
+        }
+        if !same_file(&f, &file) {
+            continue;
+        }
+        f.set_len(0).map_err(failed)?;
+        f.write_all(format!("{} {tool}\n", std::process::id()).as_bytes())
+            .map_err(failed)?;
+        return Ok(Some(f));
+    }
+    Err(failed(std::io::Error::other(
+        "its lock file kept being replaced",
+    )))
+}
+
+/// Whether `path` still names the open file `f`.
+#[cfg(unix)]
+fn same_file(f: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (f.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+#[cfg(not(unix))]
+fn same_file(_: &File, path: &Path) -> bool {
+    path.exists()
+}
+
 impl Drop for OutDir {
     fn drop(&mut self) {
+        if let Some(lock) = self.lock.take() {
+            // Removed while still locked (see `lock_folder`).
+            let _ = std::fs::remove_file(self.path.join(LOCK_FILE));
+            drop(lock);
+        }
         if self.created && !self.kept {
             // Fails, and so keeps the folder, when anything was written into it.
             let _ = std::fs::remove_dir(&self.path);
@@ -427,5 +820,268 @@ impl FlySummary {
             grass_drawn_low: Summary::of(&series(&|f| f64::from(f.grass.drawn[1]))),
             coverage: Summary::default(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Passes `left` bytes on, then fails as a full disk does.
+    struct FailAfter<'a> {
+        inner: &'a mut dyn Write,
+        left: usize,
+    }
+
+    impl Write for FailAfter<'_> {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if self.left == 0 {
+                return Err(std::io::Error::from(std::io::ErrorKind::StorageFull));
+            }
+            let n = buf.len().min(self.left);
+            self.left -= n;
+            self.inner.write(&buf[..n])
+        }
+
+        fn flush(&mut self) -> std::io::Result<()> {
+            self.inner.flush()
+        }
+    }
+
+    fn names(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn a_write_that_fails_part_way_leaves_no_file_and_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("frame_00003.png");
+        // Noise: a PNG far larger than the write buffer.
+        let img = image::RgbaImage::from_fn(128, 128, |x, y| {
+            let h = (x * 7919 + y * 104_729).wrapping_mul(2_654_435_761);
+            image::Rgba([(h >> 24) as u8, (h >> 16) as u8, (h >> 8) as u8, 255])
+        });
+        let fail = |left| {
+            write_atomic(&file, |w| {
+                let mut w = FailAfter { inner: w, left };
+                img.write_with_encoder(image::codecs::png::PngEncoder::new(&mut w))
+                    .map_err(std::io::Error::other)
+            })
+            .unwrap_err()
+        };
+        // Failing at once, after some bytes, and after more than the buffer holds.
+        for left in [0, 100, 20_000] {
+            let e = fail(left);
+            assert_eq!(e.path, file);
+            assert!(e.to_string().contains("frame_00003.png"), "{e}");
+            assert!(names(dir.path()).is_empty(), "{:?}", names(dir.path()));
+        }
+        // A file already there keeps its contents when a new write fails.
+        std::fs::write(&file, b"old frame").unwrap();
+        fail(100);
+        assert_eq!(std::fs::read(&file).unwrap(), b"old frame");
+        assert_eq!(names(dir.path()), ["frame_00003.png"]);
+        // And a whole write replaces it.
+        write_png(&file, &img).unwrap();
+        assert_eq!(image::open(&file).unwrap().to_rgba8(), img);
+        assert_eq!(names(dir.path()), ["frame_00003.png"]);
+    }
+
+    #[test]
+    fn json_and_text_are_written_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        write_json(
+            &dir.path().join("r.json"),
+            &serde_json::json!({ "a": [1, 2] }),
+        )
+        .unwrap();
+        write_text(&dir.path().join("t.csv"), "a,b\n1,2\n").unwrap();
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("r.json")).unwrap())
+                .unwrap();
+        assert_eq!(v["a"][1], 2);
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("t.csv")).unwrap(),
+            "a,b\n1,2\n"
+        );
+        assert_eq!(names(dir.path()), ["r.json", "t.csv"]);
+        // Into a folder that does not exist: an error naming the file, nothing created.
+        let e = write_text(&dir.path().join("no/t.csv"), "x").unwrap_err();
+        assert!(e.to_string().contains("t.csv"), "{e}");
+        assert!(!dir.path().join("no").exists());
+    }
+
+    #[test]
+    fn a_held_output_folder_refuses_a_second_run_until_it_is_let_go() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("out");
+        let first = OutDir::create_for(&out, "fly").unwrap();
+        let lock = std::fs::read_to_string(out.join(LOCK_FILE)).unwrap();
+        assert_eq!(lock, format!("{} fly\n", std::process::id()));
+        // A second run (another open of the lock file: flock locks are per open file) is
+        // refused, naming the folder, the first run's process and tool, and what to do.
+        let e = match OutDir::create_for(&out, "bench lod") {
+            Err(e) => e,
+            Ok(_) => panic!("a second run was let into a held folder"),
+        };
+        let text = e.to_string();
+        assert!(matches!(e, OutDirError::InUse { pid: Some(p), .. } if p == std::process::id()));
+        for needle in [
+            out.display().to_string(),
+            format!("verdant process {} (fly)", std::process::id()),
+            "--out".to_owned(),
+        ] {
+            assert!(text.contains(&needle), "{needle:?} not in {text:?}");
+        }
+        // The refused run took nothing away: the folder and its lock are the first run's.
+        assert!(out.join(LOCK_FILE).exists());
+        // Let go (the run failed with nothing written): the folder it made is removed.
+        drop(first);
+        assert!(!out.exists());
+        // Then a second run gets in, and a kept folder loses only its lock file.
+        let second = OutDir::create_for(&out, "bench lod").unwrap();
+        std::fs::write(out.join("report.json"), "{}").unwrap();
+        second.keep();
+        assert_eq!(names(&out), ["report.json"]);
+        let third = OutDir::create(&out).unwrap();
+        drop(third);
+        assert_eq!(names(&out), ["report.json"]);
+    }
+
+    #[test]
+    fn a_stale_lock_file_does_not_hold_the_folder() {
+        // A run that was killed leaves its lock file, but no lock: the OS let go of it.
+        let tmp = tempfile::tempdir().unwrap();
+        std::fs::write(tmp.path().join(LOCK_FILE), "4000000000 fly\n").unwrap();
+        let dir = OutDir::create_for(tmp.path(), "fly").unwrap();
+        let lock = std::fs::read_to_string(tmp.path().join(LOCK_FILE)).unwrap();
+        assert_eq!(lock, format!("{} fly\n", std::process::id()));
+        dir.keep();
+        assert!(names(tmp.path()).is_empty());
+    }
+
+    fn fly_options() -> FlyOptions {
+        FlyOptions {
+            world: PathBuf::from("w"),
+            http: Default::default(),
+            path: None,
+            frames: 1,
+            size: (64, 36),
+            out: PathBuf::from("o"),
+            write_images: false,
+            service: Default::default(),
+            wind_scene: None,
+            disable: Vec::new(),
+            enable: Vec::new(),
+            grass_spacing_m: None,
+            grass_width_scale: None,
+            grass_infill_m: None,
+            grass_segments: None,
+            grass_near_m: None,
+            mesh_step: None,
+        }
+    }
+
+    #[test]
+    fn fly_options_out_of_range_name_the_option_and_the_range() {
+        fly_options().validate().unwrap();
+        let cases: Vec<(FlyOptions, &str, &str)> = vec![
+            (
+                FlyOptions {
+                    frames: 0,
+                    ..fly_options()
+                },
+                "--frames 0",
+                "1..=4294967295",
+            ),
+            (
+                FlyOptions {
+                    size: (0, 36),
+                    ..fly_options()
+                },
+                "--size 0x36",
+                "1..=16384",
+            ),
+            (
+                FlyOptions {
+                    size: (64, 16385),
+                    ..fly_options()
+                },
+                "--size 64x16385",
+                "1..=16384",
+            ),
+            (
+                FlyOptions {
+                    grass_spacing_m: Some(f32::NAN),
+                    ..fly_options()
+                },
+                "--grass-spacing-m NaN",
+                "0.02..=5 m",
+            ),
+            (
+                FlyOptions {
+                    grass_width_scale: Some(f32::INFINITY),
+                    ..fly_options()
+                },
+                "--grass-width-scale inf",
+                "0.05..=20",
+            ),
+            (
+                FlyOptions {
+                    grass_infill_m: Some([1.0, -1.0]),
+                    ..fly_options()
+                },
+                "--grass-infill-m 1,-1",
+                "0..=100 m each",
+            ),
+            (
+                FlyOptions {
+                    grass_segments: Some([1, 0, 3]),
+                    ..fly_options()
+                },
+                "--grass-segments 1,0,3",
+                "1..=64 each",
+            ),
+            (
+                FlyOptions {
+                    grass_near_m: Some(1e30),
+                    ..fly_options()
+                },
+                "--grass-near-m",
+                "0..=200 m",
+            ),
+            (
+                FlyOptions {
+                    mesh_step: Some(0),
+                    ..fly_options()
+                },
+                "--mesh-step 0",
+                "1..=16",
+            ),
+            (
+                FlyOptions {
+                    mesh_step: Some(32),
+                    ..fly_options()
+                },
+                "--mesh-step 32",
+                "1..=16",
+            ),
+        ];
+        for (opts, option, range) in cases {
+            let e = opts.validate().unwrap_err().to_string();
+            assert!(e.contains(option) && e.contains(range), "{e}");
+        }
+        // The largest frame count is taken (frames are spaced in f64 and counted in u64).
+        FlyOptions {
+            frames: u32::MAX,
+            ..fly_options()
+        }
+        .validate()
+        .unwrap();
     }
 }

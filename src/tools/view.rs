@@ -64,6 +64,10 @@ pub struct ViewSummary {
 
 /// Opens the window and runs until it is closed (or `frames` are drawn).
 pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
+    crate::tools::fly::check_size("--size", opts.size)?;
+    if let Some(n) = opts.frames {
+        crate::tools::fly::check_range("--frames", n, 1..=u32::MAX, "")?;
+    }
     if opts.screenshot.is_some() && opts.frames.is_none() {
         bail!("--screenshot needs --frames N (the frame to capture)");
     }
@@ -224,7 +228,19 @@ impl Viewer {
         let t0 = path.keys[0].t_s;
         let start = sample_path(path, t0);
         // The first frame starts complete; after that, streaming shows.
-        renderer.warm_up(&start, Duration::from_secs(30))?;
+        let warm_up = renderer.warm_up_report(&start, Duration::from_secs(30))?;
+        let streamed = crate::tools::fly::check_streaming(
+            &self.opts.world,
+            &renderer.world().manifest.pyramid,
+            &renderer.service().stats(),
+            &warm_up,
+        );
+        match streamed {
+            // A run of N frames (a screenshot, say) would show the coarsest tiles only.
+            Err(e) if self.opts.frames.is_some() => return Err(e.into()),
+            Err(e) => log::warn!("{e}"),
+            Ok(()) => {}
+        }
         let depth = depth_target(&ctx.device, w, h);
         let wind_scene = renderer.wind_scene_at(0.0);
         Ok(State {
@@ -580,7 +596,6 @@ fn save_screenshot(
     }
     let img = image::RgbaImage::from_raw(texture.width(), texture.height(), pixels)
         .context("screenshot size")?;
-    img.save(file)
-        .with_context(|| format!("cannot write the screenshot {}", file.display()))?;
+    crate::tools::fly::write_png(file, &img).context("cannot write the screenshot")?;
     Ok(())
 }

@@ -49,15 +49,10 @@ pub enum ChartError {
         /// What plotters said.
         message: String,
     },
-    /// Writing the PNG failed.
-    #[error("writing chart {path}: {source}")]
-    Write {
-        /// The chart's file.
-        path: String,
-        /// The encoder's error.
-        #[source]
-        source: image::ImageError,
-    },
+    /// Writing the PNG failed (nothing is left under its name, see
+    /// [`crate::tools::fly::write_atomic`]).
+    #[error(transparent)]
+    Write(#[from] crate::tools::fly::WriteError),
 }
 
 /// Indices of the points no other point beats in both x and y (lower is better), by x.
@@ -161,7 +156,7 @@ impl Chart {
         on_front: impl Fn(&ChartPoint) -> bool,
     ) -> Result<(), ChartError> {
         register_font();
-        let mut buf = vec![255u8; (width * height * 3) as usize];
+        let mut buf = vec![255u8; width as usize * height as usize * 3];
         let err = |e: String| ChartError::Draw {
             path: path.display().to_string(),
             message: e,
@@ -256,10 +251,7 @@ impl Chart {
             root.present().map_err(|e| err(e.to_string()))?;
         }
         let img = image::RgbImage::from_raw(width, height, buf).expect("buffer holds the image");
-        img.save(path).map_err(|source| ChartError::Write {
-            path: path.display().to_string(),
-            source,
-        })
+        Ok(crate::tools::fly::write_png(path, &img)?)
     }
 }
 
@@ -321,7 +313,7 @@ impl LineChart {
     /// Draws the chart into a `width` x `height` PNG at `path`.
     pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), ChartError> {
         register_font();
-        let mut buf = vec![255u8; (width * height * 3) as usize];
+        let mut buf = vec![255u8; width as usize * height as usize * 3];
         let err = |e: String| ChartError::Draw {
             path: path.display().to_string(),
             message: e,
@@ -389,10 +381,7 @@ impl LineChart {
             root.present().map_err(|e| err(e.to_string()))?;
         }
         let img = image::RgbImage::from_raw(width, height, buf).expect("buffer holds the image");
-        img.save(path).map_err(|source| ChartError::Write {
-            path: path.display().to_string(),
-            source,
-        })
+        Ok(crate::tools::fly::write_png(path, &img)?)
     }
 }
 
