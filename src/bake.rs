@@ -287,7 +287,8 @@ pub fn bake(
     manifest.derive = Some(grid.calibrate(extent, manifest.pyramid.derived_levels));
     cancelled()?;
 
-    let painted = grid.paint(height_range, opts.seed, &cancelled, progress)?;
+    let mut painted = grid.paint(height_range, opts.seed, &cancelled, progress)?;
+    painted.cancel = opts.cancel.clone();
     check_painted_types(&painted, &manifest, &manifest_path)?;
     progress(BakeStage::Paths, 0, 2);
     let overview = overview_path(&painted, extent);
@@ -297,6 +298,7 @@ pub fn bake(
     let tour = tour_path(&painted, extent);
     let helicopter = helicopter_path(&painted, extent);
     let (wind_tour, walker) = wind_tour_paths(&painted, extent);
+    cancelled()?;
     progress(BakeStage::Paths, 2, 2);
     manifest.paths = vec![tour, overview, low, meadow, helicopter, wind_tour, walker];
     manifest.wind_scenes = default_wind_scenes();
@@ -454,9 +456,16 @@ struct Painted {
     grid: Grid,
     grass_type: Vec<u8>,
     density: Vec<u8>,
+    /// The bake's cancel flag, which the long searches for camera paths check as they go.
+    cancel: Option<CancelFlag>,
 }
 
 impl Painted {
+    /// Whether the bake was cancelled: a search then ends early, its result unused.
+    fn cancelled(&self) -> bool {
+        self.cancel.as_ref().is_some_and(CancelFlag::is_cancelled)
+    }
+
     /// Index of the painted sample nearest `p` (metres; clamped to the grid).
     fn index_at(&self, p: DVec2) -> usize {
         let g = &self.grid;
@@ -620,6 +629,7 @@ impl Grid {
             grid: self,
             grass_type,
             density,
+            cancel: None,
         })
     }
 }
@@ -973,6 +983,9 @@ fn grassy_line(painted: &Painted, extent: [f64; 2]) -> (DVec2, DVec2) {
     let steps = 24;
     let mut best = (f64::NEG_INFINITY, e * 0.5, DVec2::X);
     for cy in 0..=steps {
+        if painted.cancelled() {
+            break;
+        }
         for cx in 0..=steps {
             let c = DVec2::new(
                 inset + (e.x - 2.0 * inset) * cx as f64 / steps as f64,
@@ -1182,6 +1195,9 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
         near.clamp(inset, e - inset),
     );
     for j in -steps..=steps {
+        if painted.cancelled() {
+            break;
+        }
         for i in -steps..=steps {
             let p = near + DVec2::new(i as f64, j as f64) * grid.cell;
             if !inside(p) {
