@@ -22,10 +22,19 @@
 //!    complete world.
 //!
 //! The bake is deterministic: the same DEM, options and seed give byte-identical files.
+//!
+//! The world is written into a staging folder beside the output folder (`.NAME.baking.*`,
+//! never inside it) and moved into place at the end; a bake that fails or is cancelled
+//! ([`BakeOptions::cancel`]) removes it and leaves the output folder as it was. A bake holds
+//! an OS lock on a file in its staging folder while it runs, so that the next bake beside the
+//! same output folder removes the staging folders of bakes that were killed (whose lock is
+//! free) and leaves those of running bakes alone.
 
-use std::path::{Path, PathBuf};
+use std::path::{Component, Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc;
-use std::time::Instant;
+use std::time::{Duration, Instant, SystemTime};
 
 use glam::DVec2;
 
@@ -57,10 +66,11 @@ pub struct BakeOptions {
     /// Spacing of the DEM's samples in metres (east-west, north-south), in place of what the
     /// file says; needed for a TIFF without GeoTIFF tags.
     pub dem_cell_size_m: Option<[f64; 2]>,
-    /// The world directory to write. The world is baked into a temporary folder beside it and
-    /// renamed into place at the end; an existing folder that is not empty is refused unless
-    /// `replace` is set; the world in it (`world.toml` and `tiles/`) is then replaced as a whole,
-    /// and its other files (a README, the source DEM) are kept.
+    /// The world directory to write (`.`, `..` and relative paths are resolved first). The
+    /// world is baked into a staging folder beside it and moved into place at the end; an
+    /// existing folder that is not empty is refused unless `replace` is set. A bake writes, and
+    /// replaces, only `world.toml` and `tiles/` in it: its other files (a README, the source
+    /// DEM) are never moved or changed.
     pub out: PathBuf,
     /// World name; by default the name of `out`.
     pub name: Option<String>,
@@ -73,8 +83,61 @@ pub struct BakeOptions {
     pub stored_levels: u8,
     /// Seed of the grass noise.
     pub seed: u64,
-    /// Replace `out` if it exists and is not empty (otherwise such a folder is refused).
+    /// Replace the world (`world.toml` and `tiles/`) in `out` if `out` exists and is not empty
+    /// (otherwise such a folder is refused).
     pub replace: bool,
+    /// Stops the bake when set (checked between rows and between tiles): the bake then fails
+    /// with [`WorldError::Cancelled`], removes its staging folder and leaves `out` as it was.
+    pub cancel: Option<CancelFlag>,
+}
+
+/// A flag that cancels a running bake, from another thread or a signal handler
+/// ([`CancelFlag::shared`] gives the atomic to hand to one). Clones share the flag; two flags
+/// are equal when they are the same flag.
+#[derive(Clone, Debug, Default)]
+pub struct CancelFlag(Arc<AtomicBool>);
+
+impl CancelFlag {
+    /// A flag that is not set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Asks the bake to stop.
+    pub fn cancel(&self) {
+        self.0.store(true, Ordering::SeqCst);
+    }
+
+    /// Whether the bake was asked to stop.
+    pub fn is_cancelled(&self) -> bool {
+        self.0.load(Ordering::SeqCst)
+    }
+
+    /// The flag itself, for a signal handler to set (e.g. `signal_hook::flag::register`).
+    pub fn shared(&self) -> Arc<AtomicBool> {
+        Arc::clone(&self.0)
+    }
+
+    /// A flag that SIGINT and SIGTERM (Ctrl-C, `kill`) set, for the command line: the first
+    /// signal cancels the bake, which then removes its staging folder; a second one ends the
+    /// process at once (status 130), and the next bake removes the staging folder it leaves.
+    #[cfg(feature = "cli")]
+    pub fn on_termination_signals() -> std::io::Result<Self> {
+        use signal_hook::consts::{SIGINT, SIGTERM};
+        let flag = Self::new();
+        for signal in [SIGINT, SIGTERM] {
+            // Registered first, so that it sees the flag as the previous signal left it.
+            signal_hook::flag::register_conditional_shutdown(signal, 130, flag.shared())?;
+            signal_hook::flag::register(signal, flag.shared())?;
+        }
+        Ok(flag)
+    }
+}
+
+impl PartialEq for CancelFlag {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
 }
 
 impl Default for BakeOptions {
@@ -89,6 +152,7 @@ impl Default for BakeOptions {
             stored_levels: 3,
             seed: 1,
             replace: false,
+            cancel: None,
         }
     }
 }
@@ -143,6 +207,17 @@ pub fn bake(
     let start = Instant::now();
     let manifest_path = opts.out.join("world.toml");
     check_options(opts)?;
+    let out = resolve_out(&opts.out)?;
+    let cancelled = || {
+        let stop = opts.cancel.as_ref().is_some_and(CancelFlag::is_cancelled);
+        if stop {
+            Err(WorldError::Cancelled {
+                path: opts.out.clone(),
+            })
+        } else {
+            Ok(())
+        }
+    };
 
     progress(BakeStage::LoadDem, 0, 1);
     let dem = Dem::load_with(
@@ -153,6 +228,7 @@ pub fn bake(
     )?;
     progress(BakeStage::LoadDem, 1, 1);
     check_dem_heights(&dem, &opts.dem)?;
+    cancelled()?;
 
     let cell = match opts.cell_size_m {
         Some(c) => c,
@@ -174,7 +250,10 @@ pub fn bake(
         stored_levels: opts.stored_levels,
         derived_levels: BAKE_DERIVED_LEVELS,
     };
-    let name = opts.name.clone().unwrap_or_else(|| default_name(opts));
+    let name = opts
+        .name
+        .clone()
+        .unwrap_or_else(|| default_name(&out, &opts.dem));
     let mut manifest = Manifest {
         name,
         description: description(&dem, &opts.dem, cell),
@@ -202,12 +281,15 @@ pub fn bake(
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;
 
-    let grid = Grid::resample(&dem, &manifest.pyramid, &opts.dem, progress)?;
+    let grid = Grid::resample(&dem, &manifest.pyramid, &opts.dem, &cancelled, progress)?;
     let height_range = grid.height_range();
     manifest.height_range_m = height_range;
     manifest.derive = Some(grid.calibrate(extent, manifest.pyramid.derived_levels));
+    cancelled()?;
 
-    let painted = grid.paint(height_range, opts.seed, progress);
+    let mut painted = grid.paint(height_range, opts.seed, &cancelled, progress)?;
+    painted.cancel = opts.cancel.clone();
+    check_painted_types(&painted, &manifest, &manifest_path)?;
     progress(BakeStage::Paths, 0, 2);
     let overview = overview_path(&painted, extent);
     progress(BakeStage::Paths, 1, 2);
@@ -216,20 +298,30 @@ pub fn bake(
     let tour = tour_path(&painted, extent);
     let helicopter = helicopter_path(&painted, extent);
     let (wind_tour, walker) = wind_tour_paths(&painted, extent);
+    cancelled()?;
     progress(BakeStage::Paths, 2, 2);
     manifest.paths = vec![tour, overview, low, meadow, helicopter, wind_tour, walker];
     manifest.wind_scenes = default_wind_scenes();
     manifest.grass_peak = Some(grass_peak(&manifest, &painted));
     manifest.validate(&manifest_path)?;
+    cancelled()?;
 
-    let staging = Staging::begin(&opts.out, opts.replace)?;
-    let tiles_written = write_all_tiles(staging.dir(), &manifest.pyramid, &painted, progress)?;
+    let staging = Staging::begin(&out, &opts.out, opts.replace)?;
+    let tiles_written = write_all_tiles(
+        staging.world(),
+        &manifest.pyramid,
+        &painted,
+        &cancelled,
+        progress,
+    )?;
 
     progress(BakeStage::WriteManifest, 0, 1);
     write_atomic(
-        &staging.dir().join("world.toml"),
+        &staging.world().join("world.toml"),
         manifest.to_toml().as_bytes(),
     )?;
+    // The last chance to stop: once the world is being moved into place, it is finished.
+    cancelled()?;
     staging.publish()?;
     progress(BakeStage::WriteManifest, 1, 1);
 
@@ -305,10 +397,10 @@ pub fn nice_cell_size(c: f64) -> f64 {
         .unwrap_or(c)
 }
 
-fn default_name(opts: &BakeOptions) -> String {
-    opts.out
-        .file_name()
-        .or_else(|| opts.dem.file_stem())
+/// The name of the (resolved) output folder, else the DEM's stem.
+fn default_name(out: &Path, dem: &Path) -> String {
+    out.file_name()
+        .or_else(|| dem.file_stem())
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "world".into())
 }
@@ -364,9 +456,16 @@ struct Painted {
     grid: Grid,
     grass_type: Vec<u8>,
     density: Vec<u8>,
+    /// The bake's cancel flag, which the long searches for camera paths check as they go.
+    cancel: Option<CancelFlag>,
 }
 
 impl Painted {
+    /// Whether the bake was cancelled: a search then ends early, its result unused.
+    fn cancelled(&self) -> bool {
+        self.cancel.as_ref().is_some_and(CancelFlag::is_cancelled)
+    }
+
     /// Index of the painted sample nearest `p` (metres; clamped to the grid).
     fn index_at(&self, p: DVec2) -> usize {
         let g = &self.grid;
@@ -381,6 +480,7 @@ impl Grid {
         dem: &Dem,
         pyramid: &Pyramid,
         dem_path: &Path,
+        cancelled: &dyn Fn() -> Result<(), WorldError>,
         progress: &mut dyn FnMut(BakeStage, u64, u64),
     ) -> Result<Grid, WorldError> {
         let finest = pyramid.stored_levels - 1;
@@ -407,6 +507,7 @@ impl Grid {
                 *h = dem.sample(x, y) as f32;
             }
             if b % 64 == 0 || b + 1 == height {
+                cancelled()?;
                 progress(BakeStage::Resample, b as u64 + 1, total);
             }
         }
@@ -504,8 +605,9 @@ impl Grid {
         self,
         height_range: [f32; 2],
         seed: u64,
+        cancelled: &dyn Fn() -> Result<(), WorldError>,
         progress: &mut dyn FnMut(BakeStage, u64, u64),
-    ) -> Painted {
+    ) -> Result<Painted, WorldError> {
         let n = self.width * self.height;
         let mut grass_type = vec![0u8; n];
         let mut density = vec![0u8; n];
@@ -519,14 +621,16 @@ impl Grid {
                 density[b * self.width + a] = d;
             }
             if b % 64 == 0 || b + 1 == self.height {
+                cancelled()?;
                 progress(BakeStage::Paint, b as u64 + 1, self.height as u64);
             }
         }
-        Painted {
+        Ok(Painted {
             grid: self,
             grass_type,
             density,
-        }
+            cancel: None,
+        })
     }
 }
 
@@ -603,11 +707,12 @@ fn fbm(p: DVec2, seed: u64, octaves: u32) -> f64 {
 }
 
 /// Cuts every stored tile from the painted grid and writes it, on as many threads as the
-/// machine offers.
+/// machine offers; stops between tiles when `cancelled` says so.
 fn write_all_tiles(
     out: &Path,
     pyramid: &Pyramid,
     painted: &Painted,
+    cancelled: &(dyn Fn() -> Result<(), WorldError> + Sync),
     progress: &mut dyn FnMut(BakeStage, u64, u64),
 ) -> Result<u64, WorldError> {
     let tiles: Vec<TileId> = (0..pyramid.stored_levels)
@@ -630,7 +735,8 @@ fn write_all_tiles(
             let tiles = &tiles;
             scope.spawn(move || {
                 for &id in tiles.iter().skip(t).step_by(threads) {
-                    let result = write_tile(out, pyramid, &cut_tile(pyramid, painted, id));
+                    let result = cancelled()
+                        .and_then(|()| write_tile(out, pyramid, &cut_tile(pyramid, painted, id)));
                     let failed = result.is_err();
                     if tx.send(result).is_err() || failed {
                         break;
@@ -877,6 +983,9 @@ fn grassy_line(painted: &Painted, extent: [f64; 2]) -> (DVec2, DVec2) {
     let steps = 24;
     let mut best = (f64::NEG_INFINITY, e * 0.5, DVec2::X);
     for cy in 0..=steps {
+        if painted.cancelled() {
+            break;
+        }
         for cx in 0..=steps {
             let c = DVec2::new(
                 inset + (e.x - 2.0 * inset) * cx as f64 / steps as f64,
@@ -1086,6 +1195,9 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
         near.clamp(inset, e - inset),
     );
     for j in -steps..=steps {
+        if painted.cancelled() {
+            break;
+        }
         for i in -steps..=steps {
             let p = near + DVec2::new(i as f64, j as f64) * grid.cell;
             if !inside(p) {
@@ -1346,90 +1458,270 @@ fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
     }
 }
 
-/// A world being baked in a temporary folder beside its output folder, renamed into place by
-/// [`Staging::publish`]; removed if the bake fails first, so that a failed or interrupted bake
-/// never leaves a half-written world where the world should be.
+/// Refuses painted grass type indices beyond the types the manifest lists: the painter and
+/// [`default_grass_types`] must agree, or the renderer would draw an unknown index as another
+/// type.
+fn check_painted_types(
+    painted: &Painted,
+    manifest: &Manifest,
+    manifest_path: &Path,
+) -> Result<(), WorldError> {
+    let count = manifest.grass_types.len();
+    match painted
+        .grass_type
+        .iter()
+        .position(|&t| usize::from(t) >= count)
+    {
+        None => Ok(()),
+        Some(k) => Err(WorldError::BadTileData {
+            path: manifest_path.to_path_buf(),
+            message: format!(
+                "grass type index {} painted at sample {k}, but the world has only {count} \
+                 grass types",
+                painted.grass_type[k]
+            ),
+        }),
+    }
+}
+
+/// `out` made absolute, without `.` or `..` components or a trailing slash: the longest part
+/// that exists is canonicalised (symlinks followed) and the rest appended. The staging folder
+/// goes beside this path, so that it is never inside the output folder however `--out` is
+/// spelled (`.`, `..`, `w/`, `w/sub/..`).
+fn resolve_out(out: &Path) -> Result<PathBuf, WorldError> {
+    let not_a_folder = || {
+        WorldError::bad_option(
+            "--out",
+            format!("\"{}\"", out.display()),
+            "a folder other than the root of the file system".into(),
+        )
+    };
+    if out.as_os_str().is_empty() {
+        return Err(not_a_folder());
+    }
+    let absolute = std::path::absolute(out).map_err(|e| WorldError::io(out, e))?;
+    let components: Vec<Component> = absolute.components().collect();
+    let mut resolved = None;
+    for n in (1..=components.len()).rev() {
+        let prefix: PathBuf = components[..n].iter().collect();
+        match prefix.canonicalize() {
+            Ok(base) => {
+                resolved = Some((base, n));
+                break;
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(WorldError::io(out, e)),
+        }
+    }
+    let Some((mut path, n)) = resolved else {
+        return Err(not_a_folder());
+    };
+    // What does not exist yet holds no symlinks, so `..` may be taken lexically.
+    for c in &components[n..] {
+        match c {
+            Component::Normal(name) => path.push(name),
+            Component::ParentDir => {
+                path.pop();
+            }
+            _ => {}
+        }
+    }
+    if path.file_name().is_none() || path.parent().is_none() {
+        return Err(not_a_folder());
+    }
+    Ok(path)
+}
+
+/// The lock file in a staging folder, locked while its bake runs.
+const STAGING_LOCK: &str = "lock";
+/// The folder in a staging folder that the new world is written to.
+const STAGING_WORLD: &str = "world";
+/// The folder in a staging folder that the replaced world is moved to while the new one goes in.
+const STAGING_PREVIOUS: &str = "previous";
+/// A staging folder without a lock file belongs to a bake that is just starting, unless it was
+/// last changed longer ago than this (folders of older versions, which had no lock).
+const UNLOCKED_STAGING_GRACE: Duration = Duration::from_secs(60);
+
+/// A world being baked in a staging folder beside its output folder,
+/// `PARENT/.NAME.baking.PID-N/`: `lock` (locked while the bake runs), `world/` (the new world)
+/// and, while [`Staging::publish`] runs, `previous/` (the world it replaces). Publishing moves
+/// `world.toml` and `tiles/` alone into the output folder, so that no other file of that folder
+/// is ever moved; the staging folder is removed when the bake ends, however it ends.
 struct Staging {
     out: PathBuf,
     dir: PathBuf,
+    world: PathBuf,
     replace: bool,
-    published: bool,
+    /// Held for the lock's sake: a bake that is killed releases it with its process.
+    _lock: std::fs::File,
+    /// Leave the staging folder in place (it holds the only copy of the replaced world).
+    keep: bool,
 }
 
 impl Staging {
-    fn begin(out: &Path, replace: bool) -> Result<Self, WorldError> {
+    /// Creates the staging folder beside `out` (resolved by [`resolve_out`]), first removing
+    /// the staging folders of killed bakes into the same output folder.
+    fn begin(out: &Path, shown: &Path, replace: bool) -> Result<Self, WorldError> {
         check_out(out, replace)?;
-        let name = out
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "world".into());
-        let parent = match out.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
+        let (Some(name), Some(parent)) = (out.file_name(), out.parent()) else {
+            return Err(WorldError::bad_option(
+                "--out",
+                shown.display(),
+                "a folder other than the root of the file system".into(),
+            ));
         };
-        std::fs::create_dir_all(&parent).map_err(|e| WorldError::io(&parent, e))?;
-        let dir = parent.join(format!(".{name}.baking.{}", std::process::id()));
-        if dir.exists() {
-            std::fs::remove_dir_all(&dir).map_err(|e| WorldError::io(&dir, e))?;
-        }
+        let name = name.to_string_lossy();
+        std::fs::create_dir_all(parent).map_err(|e| WorldError::io(parent, e))?;
+        remove_stale_staging(parent, &name);
+        static NEXT: AtomicU64 = AtomicU64::new(0);
+        let n = NEXT.fetch_add(1, Ordering::Relaxed);
+        let dir = parent.join(format!(".{name}.baking.{}-{n}", std::process::id()));
         std::fs::create_dir(&dir).map_err(|e| WorldError::io(&dir, e))?;
-        Ok(Self {
+        let lock = match lock_staging(&dir) {
+            Ok(lock) => lock,
+            Err(e) => {
+                let _ = std::fs::remove_dir_all(&dir);
+                return Err(e);
+            }
+        };
+        let staging = Self {
             out: out.to_path_buf(),
+            world: dir.join(STAGING_WORLD),
             dir,
             replace,
-            published: false,
-        })
+            _lock: lock,
+            keep: false,
+        };
+        std::fs::create_dir(&staging.world).map_err(|e| WorldError::io(&staging.world, e))?;
+        Ok(staging)
     }
 
-    fn dir(&self) -> &Path {
-        &self.dir
+    /// The folder the new world is written to.
+    fn world(&self) -> &Path {
+        &self.world
     }
 
-    /// Renames the baked world into place. An existing output folder (empty, or any with
-    /// `replace`) is moved aside first and removed once the new world is in place; what it held
-    /// besides a world (`world.toml`, `tiles/`), such as a README or the source DEM, is moved
-    /// into the new world first, so that replacing a world never loses its other files.
+    /// Moves the baked world into the output folder: the replaced world's `world.toml` and
+    /// `tiles/` (if any) aside into the staging folder, then the new `tiles/` and, last, the new
+    /// `world.toml` in. Nothing else in the output folder is touched. If a step fails, what was
+    /// moved is moved back.
     fn publish(mut self) -> Result<(), WorldError> {
         check_out(&self.out, self.replace)?;
-        if self.replace && self.out.is_dir() {
-            let entries = std::fs::read_dir(&self.out).map_err(|e| WorldError::io(&self.out, e))?;
-            for entry in entries {
-                let entry = entry.map_err(|e| WorldError::io(&self.out, e))?;
-                let name = entry.file_name();
-                if name == "world.toml" || name == "tiles" {
-                    continue;
-                }
-                let to = self.dir.join(&name);
-                std::fs::rename(entry.path(), &to).map_err(|e| WorldError::io(&entry.path(), e))?;
+        let created = !self.out.exists();
+        std::fs::create_dir_all(&self.out).map_err(|e| WorldError::io(&self.out, e))?;
+        let previous = self.dir.join(STAGING_PREVIOUS);
+        std::fs::create_dir(&previous).map_err(|e| WorldError::io(&previous, e))?;
+        // Each move done, as (where it is now, where it came from).
+        let mut moved: Vec<(PathBuf, PathBuf)> = Vec::new();
+        let mut step = |from: PathBuf, to: PathBuf| -> Result<(), (PathBuf, std::io::Error)> {
+            std::fs::rename(&from, &to).map_err(|e| (from.clone(), e))?;
+            moved.push((to, from));
+            Ok(())
+        };
+        // The old manifest goes first and the new one comes last, so that the folder never
+        // holds a manifest over tiles it does not describe.
+        let mut result = Ok(());
+        for name in ["world.toml", "tiles"] {
+            let old = self.out.join(name);
+            if result.is_ok() && old.symlink_metadata().is_ok() {
+                result = step(old, previous.join(name));
             }
         }
-        let old = self.out.exists().then(|| {
-            let mut aside = self.dir.clone().into_os_string();
-            aside.push(".old");
-            PathBuf::from(aside)
-        });
-        if let Some(aside) = &old {
-            std::fs::rename(&self.out, aside).map_err(|e| WorldError::io(&self.out, e))?;
-        }
-        if let Err(e) = std::fs::rename(&self.dir, &self.out) {
-            if let Some(aside) = &old {
-                let _ = std::fs::rename(aside, &self.out);
+        for name in ["tiles", "world.toml"] {
+            if result.is_ok() {
+                result = step(self.world.join(name), self.out.join(name));
             }
-            return Err(WorldError::io(&self.out, e));
         }
-        self.published = true;
-        if let Some(aside) = &old {
-            std::fs::remove_dir_all(aside).map_err(|e| WorldError::io(aside, e))?;
+        let Err((failed, source)) = result else {
+            return Ok(());
+        };
+        let restored = moved
+            .iter()
+            .rev()
+            .all(|(now, was)| std::fs::rename(now, was).is_ok());
+        if restored {
+            if created {
+                let _ = std::fs::remove_dir(&self.out);
+            }
+            return Err(WorldError::io(&failed, source));
         }
-        Ok(())
+        // The previous world is in the staging folder: keep it, under a name that no later
+        // bake removes.
+        self.keep = true;
+        let kept = self.dir.with_file_name(
+            self.dir
+                .file_name()
+                .map(|n| n.to_string_lossy().replacen(".baking.", ".previous.", 1))
+                .unwrap_or_default(),
+        );
+        let kept = match std::fs::rename(&self.dir, &kept) {
+            Ok(()) => kept,
+            Err(_) => self.dir.clone(),
+        };
+        Err(WorldError::PublishFailed {
+            path: self.out.clone(),
+            kept,
+            source,
+        })
     }
 }
 
 impl Drop for Staging {
     fn drop(&mut self) {
-        if !self.published {
+        if !self.keep {
             let _ = std::fs::remove_dir_all(&self.dir);
         }
+    }
+}
+
+/// Creates and locks the lock file of the staging folder `dir`. It is locked under another
+/// name and then renamed, so that no other bake ever finds it unlocked.
+fn lock_staging(dir: &Path) -> Result<std::fs::File, WorldError> {
+    let path = dir.join(STAGING_LOCK);
+    let new = dir.join(format!("{STAGING_LOCK}.new"));
+    let file = std::fs::File::create_new(&new).map_err(|e| WorldError::io(&new, e))?;
+    file.lock().map_err(|e| WorldError::io(&new, e))?;
+    std::fs::rename(&new, &path).map_err(|e| WorldError::io(&path, e))?;
+    Ok(file)
+}
+
+/// Removes the staging folders of bakes into `parent/name` that no running bake holds: those
+/// whose lock file can be locked (its bake was killed), and those without one that were last
+/// changed over [`UNLOCKED_STAGING_GRACE`] ago. Best effort: a folder that cannot be removed
+/// is left for the next bake.
+fn remove_stale_staging(parent: &Path, name: &str) {
+    let prefix = format!(".{name}.baking.");
+    let Ok(entries) = std::fs::read_dir(parent) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        if !entry.file_name().to_string_lossy().starts_with(&prefix)
+            || !entry.file_type().is_ok_and(|t| t.is_dir())
+        {
+            continue;
+        }
+        let dir = entry.path();
+        let lock = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(dir.join(STAGING_LOCK));
+        let stale = match &lock {
+            Ok(file) => file.try_lock().is_ok(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => entry
+                .metadata()
+                .and_then(|m| m.modified())
+                .is_ok_and(|changed| {
+                    SystemTime::now()
+                        .duration_since(changed)
+                        .is_ok_and(|age| age > UNLOCKED_STAGING_GRACE)
+                }),
+            Err(_) => false,
+        };
+        if stale {
+            // Removed while the lock is held, so that no bake can take the folder meanwhile.
+            let _ = std::fs::remove_dir_all(&dir);
+        }
+        drop(lock);
     }
 }
 
@@ -1454,6 +1746,125 @@ mod tests {
                 assert_eq!(paint_sample(slope, 0.3, p, 7), (0, 0));
             }
         }
+    }
+
+    /// Every index the painter gives names one of the grass types a bake writes, and there are
+    /// no more of those than the renderer draws.
+    #[test]
+    fn painted_indices_name_the_types_written() {
+        let types = default_grass_types().len();
+        assert!(types <= crate::world::MAX_GRASS_TYPES);
+        let mut seen = [false; 256];
+        for seed in [1, 7, 12345] {
+            for s in 0..=90 {
+                for a in 0..=20 {
+                    for k in 0..20 {
+                        let p = DVec2::new(k as f64 * 613.0, (s * 21 + a) as f64 * 97.0);
+                        let (kind, _) = paint_sample(f64::from(s), f64::from(a) / 20.0, p, seed);
+                        seen[usize::from(kind)] = true;
+                    }
+                }
+            }
+        }
+        let used: Vec<usize> = (0..256).filter(|&k| seen[k]).collect();
+        assert_eq!(
+            used,
+            (0..types).collect::<Vec<_>>(),
+            "every type, and no other"
+        );
+    }
+
+    /// A painted index beyond the manifest's types is refused before anything is written.
+    #[test]
+    fn painted_indices_beyond_the_types_are_refused() {
+        let grid = Grid {
+            width: 2,
+            height: 2,
+            margin: 0,
+            cell: 1.0,
+            finest: 0,
+            heights: vec![0.0; 4],
+        };
+        let mut painted = Painted {
+            grid,
+            grass_type: vec![0, 1, 2, 3],
+            density: vec![9; 4],
+            cancel: None,
+        };
+        let mut manifest = crate::world::Manifest::parse(
+            include_str!("../worlds/santa-cruz/world.toml"),
+            Path::new("world.toml"),
+        )
+        .unwrap();
+        assert!(check_painted_types(&painted, &manifest, Path::new("w/world.toml")).is_ok());
+        painted.grass_type[2] = 4;
+        let err = check_painted_types(&painted, &manifest, Path::new("w/world.toml")).unwrap_err();
+        assert!(matches!(err, WorldError::BadTileData { .. }), "{err}");
+        assert!(err.to_string().contains("grass type index 4"), "{err}");
+        manifest.grass_types.truncate(2);
+        painted.grass_type[2] = 2;
+        assert!(check_painted_types(&painted, &manifest, Path::new("w/world.toml")).is_err());
+    }
+
+    /// Output paths resolve to a folder with a name and a parent, so that the staging folder
+    /// goes beside it.
+    #[test]
+    fn output_paths_resolve_without_dots() {
+        let dir = tempfile::tempdir().unwrap();
+        let base = dir.path().canonicalize().unwrap();
+        std::fs::create_dir_all(base.join("w/sub")).unwrap();
+        for (given, want) in [
+            (base.join("w"), base.join("w")),
+            (base.join("w/."), base.join("w")),
+            (base.join("w/sub/.."), base.join("w")),
+            (base.join("w/sub/../"), base.join("w")),
+            (base.join("new/deeper/.."), base.join("new")),
+            (base.join("w/sub/new/../.."), base.join("w")),
+        ] {
+            assert_eq!(resolve_out(&given).unwrap(), want, "{}", given.display());
+        }
+        for bad in ["/", "/..", ""] {
+            let err = resolve_out(Path::new(bad)).unwrap_err();
+            assert!(err.to_string().starts_with("--out"), "{err}");
+        }
+    }
+
+    /// When a world cannot be moved into place, the one it was to replace is put back, and the
+    /// folder's other files are never touched.
+    #[test]
+    fn a_failed_publish_puts_the_previous_world_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().canonicalize().unwrap().join("w");
+        std::fs::create_dir_all(out.join("tiles/L0")).unwrap();
+        std::fs::write(out.join("tiles/L0/0_0.type.png"), "old tile").unwrap();
+        std::fs::write(out.join("world.toml"), "old manifest").unwrap();
+        std::fs::write(out.join("notes.txt"), "mine").unwrap();
+        let staging = Staging::begin(&out, &out, true).unwrap();
+        let dir_of_staging = staging.dir.clone();
+        assert_eq!(dir_of_staging.parent(), out.parent());
+        // The new world lacks its manifest: the last move fails.
+        std::fs::create_dir_all(staging.world().join("tiles/L0")).unwrap();
+        std::fs::write(staging.world().join("tiles/L0/0_0.type.png"), "new tile").unwrap();
+        let err = staging.publish().unwrap_err();
+        assert!(err.to_string().contains("world.toml"), "{err}");
+        assert_eq!(
+            std::fs::read(out.join("world.toml")).unwrap(),
+            b"old manifest"
+        );
+        assert_eq!(
+            std::fs::read(out.join("tiles/L0/0_0.type.png")).unwrap(),
+            b"old tile"
+        );
+        assert_eq!(std::fs::read(out.join("notes.txt")).unwrap(), b"mine");
+        assert!(!dir_of_staging.exists());
+
+        // Into a new folder: nothing is left at all.
+        let new = dir.path().canonicalize().unwrap().join("new");
+        let staging = Staging::begin(&new, &new, false).unwrap();
+        assert!(staging.publish().is_err());
+        assert!(!new.exists());
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(left.len(), 1, "{left:?}");
     }
 
     #[test]

@@ -1169,6 +1169,10 @@ fn run(cli: Cli) -> Result<()> {
                 stored_levels: levels,
                 seed,
                 replace,
+                cancel: Some(
+                    verdant::bake::CancelFlag::on_termination_signals()
+                        .context("installing the SIGINT and SIGTERM handlers")?,
+                ),
             };
             let mut current: Option<(String, ProgressBar)> = None;
             let report = bake(&opts, &mut |stage, done, total| {

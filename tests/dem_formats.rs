@@ -1237,6 +1237,19 @@ fn bad_cases() -> Vec<BadCase> {
             &["model type 3"],
         ),
         tiff_case(
+            "no-model-type.tif",
+            |s| {
+                // Raster type and linear unit, but not whether the grid is projected.
+                s.geo = Geo::Scale {
+                    scale: CELL,
+                    corner: [0.0, 0.0],
+                    keys: vec![[1025, 0, 1, 1], [3076, 0, 1, 9001]],
+                }
+            },
+            |e| matches!(e, WorldError::NoGeoreference { .. }),
+            &["GeoKey directory lacks its model type", "GTModelTypeGeoKey"],
+        ),
+        tiff_case(
             "int-float-predictor.tif",
             |s| s.predictor = 3,
             |e| matches!(e, WorldError::UnsupportedDem { .. }),
@@ -1479,4 +1492,79 @@ fn a_web_mercator_geotiff_gets_ground_metres_at_its_centre_latitude() {
         "{}",
         dem.crs
     );
+}
+
+/// Runs `f` on another thread, failing the test if it takes longer than `seconds` (a reader
+/// that blocks on a FIFO would never return).
+fn within<T: Send + 'static>(seconds: u64, f: impl FnOnce() -> T + Send + 'static) -> T {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || tx.send(f()));
+    rx.recv_timeout(std::time::Duration::from_secs(seconds))
+        .expect("the reader hung")
+}
+
+#[cfg(unix)]
+fn mkfifo(path: &Path) {
+    let status = Command::new("mkfifo")
+        .arg(path)
+        .status()
+        .expect("run mkfifo");
+    assert!(status.success(), "mkfifo {}", path.display());
+}
+
+/// A DEM or a sidecar that is a FIFO (or another special file) is refused at once, by name:
+/// opening a FIFO would wait for a writer for ever.
+#[cfg(unix)]
+#[test]
+fn special_files_as_dems_or_sidecars_are_refused_without_hanging() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cases: Vec<(PathBuf, PathBuf, &str)> = Vec::new();
+    for name in ["fifo.tif", "fifo.png", "N37W123.hgt"] {
+        let path = dir.path().join(name);
+        mkfifo(&path);
+        cases.push((path.clone(), path, "a FIFO"));
+    }
+    // A good PNG whose sidecar is a FIFO.
+    let png = write_png_twin(dir.path(), "twin", SIZE, CELL, &grid(Sample::F32));
+    let sidecar = dir.path().join("twin.json");
+    std::fs::remove_file(&sidecar).unwrap();
+    mkfifo(&sidecar);
+    cases.push((png, sidecar, "a FIFO"));
+    // A folder named like a DEM.
+    let folder = dir.path().join("folder.tif");
+    std::fs::create_dir(&folder).unwrap();
+    cases.push((folder.clone(), folder, "a folder"));
+
+    for (dem, blamed, kind) in cases {
+        let err = within(10, {
+            let dem = dem.clone();
+            move || Dem::load(&dem).unwrap_err()
+        });
+        assert!(
+            matches!(err, WorldError::NotARegularFile { .. }),
+            "{}: {err}",
+            dem.display()
+        );
+        assert_eq!(err.path(), Some(blamed.as_path()), "{err}");
+        let text = err.to_string();
+        assert!(text.starts_with(&blamed.display().to_string()), "{text}");
+        assert!(text.contains(kind), "{text}");
+
+        // The command line says the same, with status 1, and writes nothing.
+        let out_dir = dir.path().join("out");
+        let run = within(30, {
+            let (dem, cwd) = (dem.clone(), dir.path().to_path_buf());
+            move || {
+                verdant(
+                    &["bake", "--dem", dem.to_str().unwrap(), "--out", "out"],
+                    &cwd,
+                )
+            }
+        });
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains(&*blamed.to_string_lossy()), "{stderr}");
+        assert!(stderr.contains(kind), "{stderr}");
+        assert!(!out_dir.exists());
+    }
 }

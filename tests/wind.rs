@@ -1064,6 +1064,123 @@ fn invalid_wind_sources_get_errors_naming_the_field() {
     assert_eq!(field_of(&err), "wind_scenes[1].sources");
 }
 
+/// Wind values beyond their documented ranges (a wind of 1e30 m/s was accepted and drawn as
+/// calm) are refused, naming the field and the range.
+#[test]
+fn wind_values_beyond_their_ranges_are_refused_naming_field_and_range() {
+    let cases: &[(&str, &str, &str, &str)] = &[
+        (
+            "speed_mps = 6.0",
+            "speed_mps = 1e30",
+            "wind_scenes[0].ambient.speed_mps",
+            "at most 120 m/s",
+        ),
+        (
+            "gustiness = 0.5",
+            "gustiness = 1.5",
+            "wind_scenes[0].ambient.gustiness",
+            "in 0..=1",
+        ),
+        (
+            "direction_deg = 10.0",
+            "direction_deg = 1e30",
+            "wind_scenes[0].ambient.direction_deg",
+            "in -36000..=36000 degrees",
+        ),
+        (
+            "speed_mps = 3.0",
+            "speed_mps = 121.0",
+            "wind_scenes[0].sources[0].speed_mps",
+            "at most 120 m/s",
+        ),
+        (
+            "direction_deg = 90.0",
+            "direction_deg = -1e300",
+            "wind_scenes[0].sources[0].direction_deg",
+            "in -36000..=36000 degrees",
+        ),
+        (
+            "[2.0, 1.0]",
+            "[2.0, 1e30]",
+            "wind_scenes[0].sources[0].strength[1][1]",
+            "at most 10",
+        ),
+        (
+            "[2.0, 1.0]",
+            "[1e30, 1.0]",
+            "wind_scenes[0].sources[0].strength[1][0]",
+            "in -1000000..=1000000 s",
+        ),
+        (
+            "strength = [[0.0, 0.0]",
+            "start_s = 1e30, strength = [[0.0, 0.0]",
+            "wind_scenes[0].sources[0].start_s",
+            "at most 1000000 s",
+        ),
+        (
+            "radius_m = 25.0",
+            "radius_m = 1e30",
+            "wind_scenes[0].sources[1].radius_m",
+            "at most 10000 m",
+        ),
+        (
+            "speed_mps = 10.0",
+            "speed_mps = 1e30",
+            "wind_scenes[0].sources[1].speed_mps",
+            "at most 120 m/s",
+        ),
+        (
+            "inflow_mps = -2.0",
+            "inflow_mps = -1e30",
+            "wind_scenes[0].sources[2].inflow_mps",
+            "in -120..=120 m/s",
+        ),
+        (
+            "position_m = [300.0, 400.0]",
+            "position_m = [300.0, 1e30]",
+            "wind_scenes[0].sources[2].position_m[1]",
+            "in -20000000..=20000000 m",
+        ),
+    ];
+    for &(from, to, field, range) in cases {
+        let err = broken(from, to);
+        assert!(
+            matches!(err, WorldError::OutOfRange { field: ref f, .. } if f == field),
+            "{to}: {err}"
+        );
+        let text = err.to_string();
+        assert!(text.contains(&format!(": {field} = ")), "{text}");
+        assert!(text.ends_with(&format!("must be {range}")), "{text}");
+    }
+    // The largest values allowed are accepted.
+    let edge = SMALL
+        .replacen("speed_mps = 6.0", "speed_mps = 120.0", 1)
+        .replacen("radius_m = 25.0", "radius_m = 10000.0", 1)
+        .replacen("[2.0, 1.0]", "[2.0, 10.0]", 1);
+    parse(&edge).unwrap();
+    // A path's wind keys: times and blends.
+    let text = with_keys();
+    for (from, to, field) in [
+        (
+            "{ t_s = 4.0, scene = \"gusty\", blend_s = 2.0 }",
+            "{ t_s = 4.0, scene = \"gusty\", blend_s = 1e30 }",
+            "paths[0].wind[1].blend_s",
+        ),
+        (
+            "{ t_s = 4.0, scene = \"gusty\", blend_s = 2.0 }",
+            "{ t_s = 1e30, scene = \"gusty\", blend_s = 2.0 }",
+            "paths[0].wind[1].t_s",
+        ),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let err = parse(&text.replacen(from, to, 1)).unwrap_err();
+        assert!(
+            matches!(err, WorldError::OutOfRange { field: ref f, .. } if f == field),
+            "{to}: {err}"
+        );
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Wind scenes changing along a camera path, walkers and the [features] table.
 

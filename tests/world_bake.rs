@@ -582,3 +582,353 @@ fn tile_ids_of_a_baked_world_are_in_level_order() {
     assert_eq!(ids[0], TileId::new(0, 0, 0));
     assert_eq!(ids[79], TileId::new(1, 7, 7));
 }
+
+/// What a folder holds apart from a world (`world.toml`, `tiles/`): every file's bytes, every
+/// folder, every symlink's target, by path.
+fn unrelated_files(dir: &Path) -> BTreeMap<PathBuf, String> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            let rel = path.strip_prefix(dir).unwrap().to_path_buf();
+            if rel == Path::new("world.toml") || rel == Path::new("tiles") {
+                continue;
+            }
+            let meta = std::fs::symlink_metadata(&path).unwrap();
+            let what = if meta.file_type().is_symlink() {
+                format!("link to {}", std::fs::read_link(&path).unwrap().display())
+            } else if meta.is_dir() {
+                stack.push(path.clone());
+                "folder".to_string()
+            } else {
+                format!("file {:?}", std::fs::read(&path).unwrap())
+            };
+            out.insert(rel, what);
+        }
+    }
+    out
+}
+
+/// A folder holding a dozen files and folders that are not a world: notes, the DEM, a hidden
+/// file, nested folders, an empty one, a symlink, and a file named like a staging folder.
+fn busy_folder(dir: &Path) -> PathBuf {
+    let w = dir.join("w");
+    for sub in ["notes", "notes/deeper", "empty", "source"] {
+        std::fs::create_dir_all(w.join(sub)).unwrap();
+    }
+    let files: [(&str, &[u8]); 9] = [
+        ("README.md", b"# my world\n"),
+        (".hidden", b"secret"),
+        ("notes/a.txt", b"alpha"),
+        ("notes/deeper/b.bin", &[0, 1, 2, 255, 254]),
+        ("source/dem.json", b"{}"),
+        ("world.toml.bak", b"an old manifest"),
+        ("tiles.txt", b"not the tiles folder"),
+        (".w.baking.notes", b"a file, not a staging folder"),
+        ("big.bin", &[7; 5000]),
+    ];
+    for (name, bytes) in files {
+        std::fs::write(w.join(name), bytes).unwrap();
+    }
+    #[cfg(unix)]
+    std::os::unix::fs::symlink("README.md", w.join("readme-link")).unwrap();
+    w
+}
+
+fn replace_opts(dem: PathBuf, out: PathBuf) -> BakeOptions {
+    BakeOptions {
+        dem,
+        out,
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        replace: true,
+        ..Default::default()
+    }
+}
+
+/// Staging folders (`.NAME.baking.*` folders) in `dir`.
+fn staging_folders(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.file_type().unwrap().is_dir())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains(".baking."))
+        .collect()
+}
+
+/// `--replace` replaces the world (world.toml, tiles/) and nothing else, however the output
+/// folder is spelled (`w/.`, `w/`, `w/notes/..`): every other file and folder stays where it
+/// was, byte for byte, and no staging folder is left, inside or beside it.
+#[test]
+fn replace_keeps_every_unrelated_file_however_the_folder_is_spelled() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let w = busy_folder(dir.path());
+    std::fs::create_dir_all(w.join("tiles/L5")).unwrap();
+    std::fs::write(w.join("tiles/L5/0_0.height.exr"), "stale").unwrap();
+    let before = unrelated_files(&w);
+    assert!(before.len() >= 12, "{before:?}");
+    let spellings = [
+        w.join("."),
+        PathBuf::from(format!("{}/", w.display())),
+        w.join("notes").join(".."),
+        w.join("notes/deeper/../.."),
+    ];
+    for out in spellings {
+        bake(&replace_opts(dem.clone(), out.clone()), &mut |_, _, _| {})
+            .unwrap_or_else(|e| panic!("{}: {e}", out.display()));
+        assert_eq!(unrelated_files(&w), before, "{}", out.display());
+        let world = verdant::world::World::open(&w).unwrap();
+        assert_eq!(world.manifest.name, "w", "{}", out.display());
+        assert!(!w.join("tiles/L5").exists(), "a stale tile was kept");
+        assert!(staging_folders(&w).is_empty(), "{}", out.display());
+        assert!(staging_folders(dir.path()).is_empty(), "{}", out.display());
+    }
+}
+
+/// A bake that fails, before writing (a bad DEM) or while writing tiles (cancelled part-way),
+/// leaves the folder exactly as it was: its world and every other file.
+#[test]
+fn a_failed_bake_leaves_the_folder_as_it_was() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let w = busy_folder(dir.path());
+    bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {}).unwrap();
+    let world_before = read_all_files(&w);
+    let before = unrelated_files(&w);
+
+    // A truncated DEM.
+    let bad = dir.path().join("bad.png");
+    let bytes = std::fs::read(&dem).unwrap();
+    std::fs::write(&bad, &bytes[..bytes.len() / 2]).unwrap();
+    std::fs::copy(dir.path().join("hills.json"), dir.path().join("bad.json")).unwrap();
+    let err = bake(&replace_opts(bad, w.join(".")), &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(err, WorldError::CorruptImage { .. }), "{err}");
+    assert_eq!(read_all_files(&w), world_before);
+
+    // Cancelled after a few tiles were written into the staging folder.
+    let cancel = verdant::bake::CancelFlag::new();
+    let opts = BakeOptions {
+        cancel: Some(cancel.clone()),
+        seed: 99,
+        ..replace_opts(dem, w.join("notes/.."))
+    };
+    let mut tiles_seen = 0;
+    let err = bake(&opts, &mut |stage, done, _| {
+        if stage == BakeStage::WriteTiles && done >= 5 {
+            tiles_seen = done;
+            cancel.cancel();
+        }
+    })
+    .unwrap_err();
+    assert!(
+        tiles_seen >= 5,
+        "the bake was cancelled before writing tiles"
+    );
+    assert!(matches!(err, WorldError::Cancelled { .. }), "{err}");
+    assert!(err.to_string().contains("cancelled"), "{err}");
+    assert_eq!(read_all_files(&w), world_before);
+    assert_eq!(unrelated_files(&w), before);
+    assert!(staging_folders(dir.path()).is_empty());
+}
+
+/// A cancelled bake into a new folder creates nothing, and leaves no staging folder.
+#[test]
+fn a_cancelled_bake_leaves_no_staging_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    for stage in [
+        BakeStage::Resample,
+        BakeStage::Paint,
+        BakeStage::Paths,
+        BakeStage::WriteTiles,
+    ] {
+        let cancel = verdant::bake::CancelFlag::new();
+        let out = dir.path().join("new");
+        let opts = BakeOptions {
+            cancel: Some(cancel.clone()),
+            ..replace_opts(dem.clone(), out.clone())
+        };
+        let err = bake(&opts, &mut |s, _, _| {
+            if s == stage {
+                cancel.cancel();
+            }
+        })
+        .unwrap_err();
+        assert!(
+            matches!(err, WorldError::Cancelled { .. }),
+            "{stage:?}: {err}"
+        );
+        assert!(!out.exists(), "{stage:?}");
+        assert!(staging_folders(dir.path()).is_empty(), "{stage:?}");
+    }
+}
+
+/// The next bake beside an output folder removes the staging folders of killed bakes (their
+/// lock is free; without a lock file, older than a minute) and leaves alone those of running
+/// bakes (locked), young ones without a lock file, and anything not a staging folder of it.
+#[test]
+fn stale_staging_folders_are_removed_and_live_ones_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let staging = |name: &str, lock: bool| {
+        let d = dir.path().join(name);
+        std::fs::create_dir_all(d.join("world/tiles/L0")).unwrap();
+        std::fs::write(d.join("world/tiles/L0/0_0.type.png"), [0u8; 100]).unwrap();
+        if lock {
+            std::fs::write(d.join("lock"), "").unwrap();
+        }
+        d
+    };
+    let killed = staging(".w.baking.4242-0", true);
+    let running = staging(".w.baking.4243-0", true);
+    let held = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(running.join("lock"))
+        .unwrap();
+    held.try_lock().unwrap();
+    let old_version = staging(".w.baking.77.old", false);
+    // An hour ago, as a folder left by an older version that took no lock.
+    let hour_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+    std::fs::File::open(&old_version)
+        .unwrap()
+        .set_modified(hour_ago)
+        .unwrap();
+    let starting = staging(".w.baking.4244-0", false);
+    let other_world = staging(".v.baking.4245-0", true);
+
+    bake(&replace_opts(dem, dir.path().join("w")), &mut |_, _, _| {}).unwrap();
+    assert!(!killed.exists(), "the killed bake's staging folder is left");
+    assert!(
+        !old_version.exists(),
+        "the old version's staging folder is left"
+    );
+    assert!(running.join("world/tiles/L0/0_0.type.png").exists());
+    assert!(starting.exists());
+    assert!(other_world.exists());
+    drop(held);
+    // Once its bake is gone, the next bake removes it.
+    bake(
+        &replace_opts(dir.path().join("hills.png"), dir.path().join("w")),
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert!(!running.exists());
+}
+
+fn verdant_cli(args: &[&str], cwd: &Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run verdant")
+}
+
+/// `verdant bake --out . --replace` in a folder of other files bakes the world into it and
+/// keeps every other file, byte for byte.
+#[test]
+fn cli_bake_into_the_current_folder_keeps_its_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let w = busy_folder(dir.path());
+    write_dem(&w, "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let before = unrelated_files(&w);
+    for out in [".", "./", "../w", "notes/.."] {
+        let run = verdant_cli(
+            &[
+                "bake",
+                "--dem",
+                "hills.png",
+                "--out",
+                out,
+                "--replace",
+                "--cell-size",
+                "20",
+                "--tile-cells",
+                "16",
+                "--levels",
+                "2",
+            ],
+            &w,
+        );
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(run.status.success(), "--out {out}: {stderr}");
+        assert_eq!(unrelated_files(&w), before, "--out {out}");
+        let world = verdant::world::World::open(&w).unwrap();
+        assert_eq!(world.manifest.name, "w", "--out {out}");
+        assert!(staging_folders(&w).is_empty() && staging_folders(dir.path()).is_empty());
+    }
+}
+
+/// A child process killed when dropped, so that a failing test leaves no bake running.
+struct Running(std::process::Child);
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// SIGTERM during a bake stops it: status 1, a message, no world and no staging folder left.
+#[cfg(unix)]
+#[test]
+fn cli_sigterm_during_a_bake_cleans_up() {
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let dem = common::root().join("tests/data/east_bay_768.png");
+    // About 14,000 tiles of 8 cells: the bake is writing tiles for many seconds.
+    let mut child = Running(
+        std::process::Command::new(env!("CARGO_BIN_EXE_verdant"))
+            .args(["bake", "--dem", dem.to_str().unwrap(), "--out", "w"])
+            .args(["--tile-cells", "8", "--levels", "2"])
+            .current_dir(dir.path())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let start = Instant::now();
+    let staging = loop {
+        if let Some(name) = staging_folders(dir.path()).pop() {
+            let path = dir.path().join(name);
+            if path.join("world/tiles").exists() {
+                break path;
+            }
+        }
+        if let Some(status) = child.0.try_wait().unwrap() {
+            panic!("the bake ended ({status}) before it wrote tiles");
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no staging folder"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let kill = std::process::Command::new("kill")
+        .args(["-TERM", &child.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(status) = child.0.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the bake did not stop on SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.0.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert_eq!(status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("bake cancelled"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!staging.exists(), "{} is left", staging.display());
+    assert!(!dir.path().join("w").exists());
+}

@@ -685,11 +685,9 @@ fn wrong_layouts_are_refused() {
         .unwrap();
     let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
     assert!(matches!(err, WorldError::WrongLayout { .. }), "{err}");
-    assert!(
-        err.to_string()
-            .contains("expected 8-bit grayscale, found 16-bit grayscale"),
-        "{err}"
-    );
+    let text = err.to_string();
+    assert!(text.contains("expected 8-bit grayscale"), "{err}");
+    assert!(text.ends_with("found 16-bit grayscale"), "{err}");
 
     // An RGB height file.
     write_exr(
@@ -809,4 +807,279 @@ fn missing_tiles_are_refused() {
         let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
         assert!(matches!(err, WorldError::TileNotStored { .. }), "{err}");
     }
+}
+
+/// A grayscale PNG of `bits` (1, 2, 4 or 8) bits a sample, `size` square, holding `values`
+/// (north row first), as an image editor saving a map at a low bit depth writes it.
+fn gray_png(path: &Path, size: u32, bits: u8, values: &[u8]) {
+    let depth = match bits {
+        1 => png::BitDepth::One,
+        2 => png::BitDepth::Two,
+        4 => png::BitDepth::Four,
+        _ => png::BitDepth::Eight,
+    };
+    let per_byte = 8 / usize::from(bits);
+    let mut packed = Vec::new();
+    for row in values.chunks(size as usize) {
+        for group in row.chunks(per_byte) {
+            let mut byte = 0u8;
+            for (k, &v) in group.iter().enumerate() {
+                assert!(u32::from(v) < 1 << bits, "{v} does not fit {bits} bits");
+                byte |= v << (8 - usize::from(bits) * (k + 1));
+            }
+            packed.push(byte);
+        }
+    }
+    let mut encoder = png::Encoder::new(std::fs::File::create(path).unwrap(), size, size);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(depth);
+    let mut writer = encoder.write_header().unwrap();
+    writer.write_image_data(&packed).unwrap();
+}
+
+/// Maps of 1, 2 and 4 bits read as their own values: a 4-bit type map holding 0..=3 is types
+/// 0..=3 (not 0, 17, 34, 51, as the decoder scales them for display), and a 4-bit density map
+/// holds densities 0..=15 of 255.
+#[test]
+fn low_bit_depth_maps_read_as_their_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    let size = p.samples_per_side();
+    let n = (size * size) as usize;
+    for bits in [1u8, 2, 4] {
+        let top = (1u16 << bits) as usize;
+        let types: Vec<u8> = (0..n).map(|k| ((k * 7) % top.min(4)) as u8).collect();
+        let density: Vec<u8> = (0..n).map(|k| ((k * 5) % top) as u8).collect();
+        gray_png(
+            &tile_path(dir.path(), id, TileFile::Type),
+            size,
+            bits,
+            &types,
+        );
+        gray_png(
+            &tile_path(dir.path(), id, TileFile::Density),
+            size,
+            bits,
+            &density,
+        );
+        let options = ReadOptions {
+            height_range_m: RANGE,
+            grass_type_count: 4,
+        };
+        let tile = read_tile_with(dir.path(), &p, id, &options)
+            .unwrap_or_else(|e| panic!("{bits}-bit maps: {e}"));
+        // The files are north row first, the tile south row first.
+        let south_first =
+            |v: &[u8]| -> Vec<u8> { v.chunks(size as usize).rev().flatten().copied().collect() };
+        assert_eq!(tile.grass_type, south_first(&types), "{bits}-bit type map");
+        assert_eq!(
+            tile.density,
+            south_first(&density),
+            "{bits}-bit density map"
+        );
+    }
+}
+
+/// A palette PNG is refused by name: whether it meant its indices or its colours cannot be told.
+#[test]
+fn palette_maps_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, id) = written_tile(dir.path());
+    let size = p.samples_per_side();
+    let path = tile_path(dir.path(), id, TileFile::Type);
+    let mut encoder = png::Encoder::new(std::fs::File::create(&path).unwrap(), size, size);
+    encoder.set_color(png::ColorType::Indexed);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_palette(vec![0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3]);
+    let mut writer = encoder.write_header().unwrap();
+    writer
+        .write_image_data(&vec![1u8; (size * size) as usize])
+        .unwrap();
+    drop(writer);
+    let err = read_tile(dir.path(), &p, id, RANGE).unwrap_err();
+    assert!(matches!(err, WorldError::WrongLayout { .. }), "{err}");
+    assert_names(&err, "2_1.type.png");
+    assert!(
+        err.to_string()
+            .ends_with("found 8-bit palette (indexed-colour)"),
+        "{err}"
+    );
+}
+
+/// A world lists at most MAX_GRASS_TYPES (16) grass types: the renderer draws that many, and a
+/// 17th would be drawn as the 16th.
+#[test]
+fn manifest_with_more_grass_types_than_the_renderer_draws_is_refused() {
+    use verdant::world::manifest::MAX_GRASS_TYPES;
+    assert_eq!(MAX_GRASS_TYPES, 16);
+    let meadow = &VALID[VALID.rfind("[[grass_types]]").unwrap()..VALID.find("[[paths]]").unwrap()];
+    let with_types = |count: usize| -> String {
+        let extra = meadow.repeat(count - 2);
+        VALID.replacen("[[paths]]", &format!("{extra}[[paths]]"), 1)
+    };
+    let m = parse(&with_types(16)).unwrap();
+    assert_eq!(m.grass_types.len(), 16);
+    let err = parse(&with_types(17)).unwrap_err();
+    assert!(
+        matches!(err, WorldError::OutOfRange { ref field, .. } if field == "grass_types"),
+        "{err}"
+    );
+    let text = err.to_string();
+    assert!(
+        text.starts_with("worlds/test/world.toml: grass_types = 17 types: must be at most 16"),
+        "{text}"
+    );
+}
+
+/// Every float of the manifest has a documented range: NaN, infinities and absurd magnitudes are
+/// refused with the field and the range named.
+#[test]
+fn manifest_floats_beyond_their_ranges_are_refused_naming_field_and_range() {
+    let sky = "\n[sky]\nsun_azimuth_deg = 225.0\nsun_elevation_deg = 35.0\n\
+               sun_color = [1.0, 0.9, 0.8]\nsky_color = [0.3, 0.5, 0.8]\n\
+               horizon_color = [0.7, 0.8, 0.9]\nfog_distance_m = 12000.0\n\n[[paths]]";
+    let wind = "\n[wind]\ndirection_deg = 20.0\nspeed_mps = 4.0\ngustiness = 0.35\n";
+    let text = VALID.replacen("\n[[paths]]", &format!("{wind}{sky}"), 1);
+    parse(&text).unwrap();
+    let cases: &[(&str, &str, &str, &str)] = &[
+        (
+            "speed_mps = 4.0",
+            "speed_mps = 1e30",
+            "wind.speed_mps",
+            "at most 120 m/s",
+        ),
+        (
+            "gustiness = 0.35",
+            "gustiness = 3.0",
+            "wind.gustiness",
+            "in 0..=1",
+        ),
+        (
+            "direction_deg = 20.0",
+            "direction_deg = 1e30",
+            "wind.direction_deg",
+            "in -36000..=36000 degrees",
+        ),
+        (
+            "sun_elevation_deg = 35.0",
+            "sun_elevation_deg = 95.0",
+            "sky.sun_elevation_deg",
+            "in -90..=90 degrees",
+        ),
+        (
+            "sun_azimuth_deg = 225.0",
+            "sun_azimuth_deg = -1e20",
+            "sky.sun_azimuth_deg",
+            "in -36000..=36000 degrees",
+        ),
+        (
+            "sun_color = [1.0, 0.9, 0.8]",
+            "sun_color = [1.0, 1e30, 0.8]",
+            "sky.sun_color[1]",
+            "in 0..=100",
+        ),
+        (
+            "sky_color = [0.3, 0.5, 0.8]",
+            "sky_color = [0.3, -0.5, 0.8]",
+            "sky.sky_color[1]",
+            "in 0..=1",
+        ),
+        (
+            "horizon_color = [0.7, 0.8, 0.9]",
+            "horizon_color = [0.7, 0.8, 9.0]",
+            "sky.horizon_color[2]",
+            "in 0..=1",
+        ),
+        (
+            "fog_distance_m = 12000.0",
+            "fog_distance_m = 1e30",
+            "sky.fog_distance_m",
+            "at most 10000000 m",
+        ),
+        (
+            "tip_color = [0.2, 0.5, 0.1]",
+            "tip_color = [0.2, 5.0, 0.1]",
+            "grass_types[1].tip_color[1]",
+            "in 0..=1",
+        ),
+        (
+            "stiffness = 0.5",
+            "stiffness = 7.0",
+            "grass_types[1].stiffness",
+            "in 0..=1",
+        ),
+        (
+            "height_m = [0.2, 0.4]",
+            "height_m = [0.2, 1e30]",
+            "grass_types[1].height_m[1]",
+            "at most 10 m",
+        ),
+        (
+            "width_m = [0.01, 0.02]",
+            "width_m = [0.01, 2.0]",
+            "grass_types[1].width_m[1]",
+            "at most 1 m",
+        ),
+        (
+            "root_tile_size_m = 512.0",
+            "root_tile_size_m = 1e300",
+            "pyramid.root_tile_size_m",
+            "at most 100000000 m",
+        ),
+        (
+            "duration_s = 10.0",
+            "duration_s = 1e30",
+            "paths[0].duration_s",
+            "at most 1000000 s",
+        ),
+        (
+            "{ t_s = 0.0,",
+            "{ t_s = -1e30,",
+            "paths[0].keys[0].t_s",
+            "in -1000000..=1000000 s",
+        ),
+        (
+            "[10.0, 10.0, 600.0]",
+            "[10.0, 1e30, 600.0]",
+            "paths[0].keys[0].position_m[1]",
+            "in -20000000..=20000000 m",
+        ),
+        (
+            "yaw_deg = 45.0",
+            "yaw_deg = 1e30",
+            "paths[0].keys[0].yaw_deg",
+            "in -36000..=36000 degrees",
+        ),
+        (
+            "pitch_deg = -10.0",
+            "pitch_deg = -100.0",
+            "paths[0].keys[0].pitch_deg",
+            "in -90..=90 degrees",
+        ),
+    ];
+    for &(from, to, field, range) in cases {
+        assert!(text.contains(from), "{from}");
+        let err = parse(&text.replacen(from, to, 1)).expect_err(to);
+        assert!(
+            matches!(err, WorldError::OutOfRange { field: ref f, .. } if f == field),
+            "{to}: {err}"
+        );
+        let message = err.to_string();
+        assert!(
+            message.starts_with(&format!("worlds/test/world.toml: {field} = ")),
+            "{message}"
+        );
+        assert!(message.ends_with(&format!("must be {range}")), "{message}");
+    }
+    // NaN and infinities are named as such.
+    let err = parse(&text.replacen("speed_mps = 4.0", "speed_mps = nan", 1)).unwrap_err();
+    assert!(
+        matches!(err, WorldError::NonFinite { ref field, .. } if field == "wind.speed_mps"),
+        "{err}"
+    );
+    let err = parse(&text.replacen("stiffness = 0.5", "stiffness = -inf", 1)).unwrap_err();
+    assert!(
+        matches!(err, WorldError::NonFinite { ref field, .. } if field == "grass_types[1].stiffness"),
+        "{err}"
+    );
 }

@@ -45,7 +45,10 @@ pub const FLAG_TRAIL: u32 = 1;
 /// Flag in [`FieldParams::counts`]`[1]`: stamp the walker's segment this frame.
 pub const FLAG_STAMP: u32 = 2;
 
-/// The ambient wind of a scene.
+/// The ambient wind of a scene. From a manifest, its values lie in the ranges that
+/// [`Manifest::validate`] checks (speed 0..=[`crate::world::manifest::MAX_WIND_SPEED_MPS`],
+/// direction within +-[`crate::world::manifest::MAX_ANGLE_DEG`]); the field's f32 arithmetic
+/// needs no more (far larger speeds overflow it, and the GPU would draw them as calm).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AmbientWind {
     /// Direction the wind blows toward, degrees counter-clockwise from east.
@@ -328,6 +331,8 @@ impl WindConfig {
 
     /// The configuration of the wind scene `scene_name` of `manifest`; without a name, the
     /// scene `breeze` if the world has one, else the manifest's `wind` defaults without sources.
+    /// The manifest is taken as validated ([`Manifest::validate`] refuses speeds, strengths,
+    /// radii, times and angles beyond their documented ranges).
     pub fn from_scene(manifest: &Manifest, scene_name: Option<&str>) -> Result<Self, WindError> {
         let scene = match scene_name {
             Some(name) => Some(manifest.wind_scene(name).ok_or_else(|| {

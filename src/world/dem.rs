@@ -23,13 +23,18 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::error::WorldError;
-use super::format::decode_png;
+use super::format::{decode_png, open_regular, read_regular};
 use super::nodata::fill_nodata;
 
 /// Most samples a DEM may have (16384 x 16384): its heights alone take 1 GiB.
 pub const MAX_DEM_SAMPLES: u64 = 1 << 28;
 /// Largest fraction of a DEM that may be nodata; more is refused rather than invented.
 pub const MAX_NODATA_FRACTION: f64 = 0.5;
+/// Largest PNG DEM read, bytes: twice the raw samples of the largest DEM (a compressor never
+/// doubles them) and 64 KiB of headers.
+pub const MAX_DEM_PNG_BYTES: u64 = 2 * 2 * MAX_DEM_SAMPLES + (64 << 10);
+/// Largest DEM sidecar read, bytes.
+pub const MAX_SIDECAR_BYTES: u64 = 1 << 20;
 
 /// The file formats a DEM is read from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -126,7 +131,8 @@ pub fn sidecar_path(png_path: &Path) -> PathBuf {
 
 impl Dem {
     /// Loads a DEM in any of the formats read (see the module docs), telling them apart by
-    /// content, and fills its nodata samples.
+    /// content, and fills its nodata samples. The DEM and its sidecar must be regular files (a
+    /// FIFO or a device is refused by name rather than read).
     pub fn load(path: &Path) -> Result<Dem, WorldError> {
         Dem::load_with(path, &DemOptions::default())
     }
@@ -178,16 +184,19 @@ impl Dem {
     /// Loads a 16-bit PNG DEM and its sidecar, checking that they agree.
     fn load_png_sidecar(png_path: &Path) -> Result<Dem, WorldError> {
         let sidecar_file = sidecar_path(png_path);
-        let png_bytes = std::fs::read(png_path).map_err(|e| WorldError::io(png_path, e))?;
-        let text = match std::fs::read_to_string(&sidecar_file) {
-            Ok(t) => t,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+        let png_bytes = read_regular(png_path, MAX_DEM_PNG_BYTES)?;
+        let text = match read_regular(&sidecar_file, MAX_SIDECAR_BYTES) {
+            Ok(bytes) => String::from_utf8(bytes).map_err(|e| WorldError::BadSidecar {
+                path: sidecar_file.clone(),
+                message: format!("not UTF-8 text: {e}"),
+            })?,
+            Err(WorldError::MissingFile { .. }) => {
                 return Err(WorldError::MissingSidecar {
                     path: png_path.to_path_buf(),
                     sidecar: sidecar_file,
                 });
             }
-            Err(e) => return Err(WorldError::io(&sidecar_file, e)),
+            Err(e) => return Err(e),
         };
         let sidecar: Sidecar = serde_json::from_str(&text).map_err(|e| WorldError::BadSidecar {
             path: sidecar_file.clone(),
@@ -330,8 +339,7 @@ impl Dem {
 /// from the name or the size.
 fn sniff(path: &Path) -> Result<DemFormat, WorldError> {
     use std::io::Read;
-    let mut file = std::fs::File::open(path).map_err(|e| WorldError::io(path, e))?;
-    let bytes = file.metadata().map_err(|e| WorldError::io(path, e))?.len();
+    let (mut file, bytes) = open_regular(path)?;
     let mut head = Vec::with_capacity(8);
     file.by_ref()
         .take(8)

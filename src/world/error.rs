@@ -427,7 +427,10 @@ pub enum WorldError {
     },
 
     /// A file to be read is not a regular file (a device, a FIFO, a folder).
-    #[error("{}: not a regular file ({kind}); a world holds only regular files", path.display())]
+    #[error(
+        "{}: not a regular file ({kind}); worlds, DEMs and sidecars are read only from regular files",
+        path.display()
+    )]
     NotARegularFile {
         /// The file.
         path: PathBuf,
@@ -449,12 +452,37 @@ pub enum WorldError {
     /// The bake's output folder exists and is not empty.
     #[error(
         "{}: the output folder is not empty; bake into a new folder, or pass --replace to \
-         replace it (the new world is written beside it and renamed into place)",
+         replace the world in it (its world.toml and tiles/; other files are kept)",
         path.display()
     )]
     OutputNotEmpty {
         /// The output folder.
         path: PathBuf,
+    },
+
+    /// The bake was cancelled (its cancel flag was set, e.g. by SIGINT or SIGTERM) before the
+    /// new world was put in place; the output folder was left as it was.
+    #[error("{}: bake cancelled; the output folder was left as it was", path.display())]
+    Cancelled {
+        /// The output folder.
+        path: PathBuf,
+    },
+
+    /// Putting a baked world in place failed, and so did putting the previous world back: its
+    /// `world.toml` and `tiles/` are kept in a folder beside the output folder.
+    #[error(
+        "{}: {source}; the previous world.toml and tiles/ could not be put back and are kept \
+         in {}",
+        path.display(), kept.display()
+    )]
+    PublishFailed {
+        /// The output folder.
+        path: PathBuf,
+        /// Where the previous world's files are.
+        kept: PathBuf,
+        /// The failure that stopped the publishing.
+        #[source]
+        source: std::io::Error,
     },
 
     /// A DEM's sidecar disagrees with its image.
@@ -619,7 +647,9 @@ impl WorldError {
             | ImplausibleHeight { path, .. }
             | NotARegularFile { path, .. }
             | FileTooLarge { path, .. }
-            | OutputNotEmpty { path } => Some(path),
+            | OutputNotEmpty { path }
+            | Cancelled { path }
+            | PublishFailed { path, .. } => Some(path),
             BadOption { .. } | Fetch(_) => None,
         }
     }

@@ -6,6 +6,11 @@
 //! - `{x}_{y}.type.png`: 8-bit grayscale, the grass type index of each sample;
 //! - `{x}_{y}.density.png`: 8-bit grayscale, grass density (0..=255 for 0..=1).
 //!
+//! The maps are written with 8 bits; grayscale maps of 1, 2 or 4 bits are read too, each
+//! sample as its own value (a 4-bit sample 3 is type 3, or density 3 of 255), not scaled up
+//! to 8 bits as image viewers show them. Palette (indexed-colour) maps are refused: their
+//! samples are colours, and whether a map meant the index or the colour cannot be told.
+//!
 //! All three are `samples_per_side` square and stored with the first row at the NORTH edge, so
 //! that they look right in an image viewer. In memory ([`TileData`]) the first row is the SOUTH
 //! edge: index `j * size + i`, with `i` growing east and `j` north. Sample `(i, j)` lies at
@@ -283,10 +288,34 @@ pub fn max_file_bytes(kind: TileFile, size: u32) -> u64 {
 }
 
 /// Reads a regular file of at most `max` bytes. Anything else (a device such as `/dev/zero`
-/// behind a symlink, a FIFO, a folder) is refused before it is opened, and the read stops
-/// after `max + 1` bytes, so that no file can make a reader hang or run out of memory.
+/// behind a symlink, a FIFO, a folder) is refused before it is opened (see [`open_regular`]),
+/// and the read stops after `max + 1` bytes, so that no file can make a reader hang or run out
+/// of memory.
 pub(crate) fn read_regular(path: &Path, max: u64) -> Result<Vec<u8>, WorldError> {
     use std::io::Read;
+    let too_large = |size| WorldError::FileTooLarge {
+        path: path.to_path_buf(),
+        size,
+        max,
+    };
+    let (file, len) = open_regular(path)?;
+    if len > max {
+        return Err(too_large(len));
+    }
+    let mut bytes = Vec::with_capacity(len.min(max) as usize);
+    file.take(max + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| WorldError::io(path, e))?;
+    if bytes.len() as u64 > max {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
+/// Opens a regular file for reading, with its size. Anything else (a FIFO, whose opening
+/// would block until a writer comes; a device; a folder) is refused by name before it is
+/// opened, and what was opened is checked again in case the path was swapped meanwhile.
+pub(crate) fn open_regular(path: &Path) -> Result<(std::fs::File, u64), WorldError> {
     let not_regular = |kind| WorldError::NotARegularFile {
         path: path.to_path_buf(),
         kind,
@@ -296,28 +325,12 @@ pub(crate) fn read_regular(path: &Path, max: u64) -> Result<Vec<u8>, WorldError>
     if !meta.is_file() {
         return Err(not_regular(kind_of(&meta)));
     }
-    let too_large = |size| WorldError::FileTooLarge {
-        path: path.to_path_buf(),
-        size,
-        max,
-    };
-    if meta.len() > max {
-        return Err(too_large(meta.len()));
-    }
     let file = std::fs::File::open(path).map_err(|e| WorldError::io(path, e))?;
-    // The path may have been swapped since the check: look at what was opened.
     let opened = file.metadata().map_err(|e| WorldError::io(path, e))?;
     if !opened.is_file() {
         return Err(not_regular(kind_of(&opened)));
     }
-    let mut bytes = Vec::with_capacity(opened.len().min(max) as usize);
-    file.take(max + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| WorldError::io(path, e))?;
-    if bytes.len() as u64 > max {
-        return Err(too_large(bytes.len() as u64));
-    }
-    Ok(bytes)
+    Ok((file, opened.len()))
 }
 
 /// What a file that is not a regular file is, in words.
@@ -527,7 +540,8 @@ pub(crate) struct DecodedPng {
 const MAX_PNG_PIXELS: u64 = 16_384 * 16_384;
 
 /// Decodes a PNG, checking that it holds `expected` colour samples of `expected_dims`
-/// (where given) before decoding its pixels.
+/// (where given) before decoding its pixels. For `L8`, grayscale PNGs of 1, 2 or 4 bits are
+/// read too, with their own sample values.
 pub(crate) fn decode_png(
     bytes: &[u8],
     path: &Path,
@@ -542,6 +556,14 @@ pub(crate) fn decode_png(
         format: "PNG",
         message,
     };
+    // The stored colour type and bit depth, which the image decoder's output hides.
+    let header = guarded(|| {
+        png::Decoder::new(Cursor::new(bytes))
+            .read_header_info()
+            .map(|info| (info.color_type, info.bit_depth))
+            .map_err(|e| e.to_string())
+    })
+    .map_err(corrupt)?;
     let result = guarded(|| {
         let decoder = match PngDecoder::new(Cursor::new(bytes)) {
             Ok(d) => d,
@@ -560,7 +582,7 @@ pub(crate) fn decode_png(
             return Ok(Err(WorldError::WrongLayout {
                 path: path.to_path_buf(),
                 expected: expected_layout.into(),
-                found: describe_color(decoder.original_color_type()),
+                found: describe_png(header, color),
             }));
         }
         if let Some(expected) = expected_dims
@@ -579,6 +601,12 @@ pub(crate) fn decode_png(
         }
         let mut buf = vec![0u8; decoder.total_bytes() as usize];
         decoder.read_image(&mut buf).map_err(|e| e.to_string())?;
+        if let (png::ColorType::Grayscale, bits @ 1..=4) = (header.0, header.1 as u8) {
+            // The decoder scales low-bit samples to 8 bits (by 255 / (2^bits - 1), an integer):
+            // undo it, exactly, for the samples' own values.
+            let scale = 255 / ((1u8 << bits) - 1);
+            buf.iter_mut().for_each(|v| *v /= scale);
+        }
         Ok(Ok(DecodedPng {
             width,
             height,
@@ -588,20 +616,37 @@ pub(crate) fn decode_png(
     result.map_err(corrupt)?
 }
 
-fn describe_color(c: image::ExtendedColorType) -> String {
-    use image::ExtendedColorType::*;
-    match c {
-        L1 | L2 | L4 | L8 | L16 => format!("{}-bit grayscale", c.bits_per_pixel()),
-        other => format!("{other:?}"),
-    }
+/// A PNG's stored layout in words, from its header and what the image decoder makes of it (a
+/// transparent colour, `tRNS`, adds alpha).
+fn describe_png(header: (png::ColorType, png::BitDepth), decoded: image::ColorType) -> String {
+    use png::ColorType::*;
+    let (color, bits) = (header.0, header.1 as u8);
+    let kind = match color {
+        Grayscale => "grayscale",
+        Rgb => "RGB",
+        Indexed => "palette (indexed-colour)",
+        GrayscaleAlpha => "grayscale with alpha",
+        Rgba => "RGBA",
+    };
+    let transparent = decoded.has_alpha() && !matches!(color, GrayscaleAlpha | Rgba);
+    let trns = if transparent {
+        " with a transparent colour (tRNS)"
+    } else {
+        ""
+    };
+    format!("{bits}-bit {kind}{trns}")
 }
+
+/// The layout of type and density maps, as errors state it.
+const MAP_LAYOUT: &str =
+    "8-bit grayscale (or 1, 2 or 4 bits, read as their values; no alpha, no palette)";
 
 fn decode_png_l8(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<u8>, WorldError> {
     let png = decode_png(
         bytes,
         path,
         image::ColorType::L8,
-        "8-bit grayscale",
+        MAP_LAYOUT,
         Some([size, size]),
     )?;
     Ok(png.bytes)

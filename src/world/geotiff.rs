@@ -56,8 +56,7 @@ const USER_DEFINED: u16 = 32767;
 
 /// Reads a GeoTIFF DEM; nodata samples become NaN.
 pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, WorldError> {
-    let file = File::open(path).map_err(|e| WorldError::io(path, e))?;
-    let file_len = file.metadata().map_err(|e| WorldError::io(path, e))?.len();
+    let (file, file_len) = super::format::open_regular(path)?;
     let mut limits = Limits::default();
     limits.decoding_buffer_size = (MAX_DEM_SAMPLES * 8) as usize;
     limits.ifd_value_size = 64 << 20;
@@ -549,7 +548,14 @@ impl GeoTags {
                 ),
             )),
             _ if have_override => Ok(place([1.0, 1.0], String::new())),
-            _ => Err(WorldError::NoGeoreference {
+            (_, Some(_)) => Err(WorldError::NoGeoreference {
+                path: path.to_path_buf(),
+                problem: "the TIFF's GeoKey directory lacks its model type (GTModelTypeGeoKey, \
+                          1024; nor has it a ProjectedCSTypeGeoKey or GeographicTypeGeoKey), \
+                          which says whether the grid is in metres, feet or degrees"
+                    .into(),
+            }),
+            (_, None) => Err(WorldError::NoGeoreference {
                 path: path.to_path_buf(),
                 problem: "the TIFF has a pixel size but no GeoKey directory saying whether it \
                           is in metres, feet or degrees"
@@ -696,7 +702,7 @@ fn decode_lzw(
     } else {
         (1u64 << (8 * b)) - 1
     };
-    let mut file = File::open(path).map_err(|e| WorldError::io(path, e))?;
+    let (mut file, _) = super::format::open_regular(path)?;
     let mut out = vec![0u64; w * h];
     let mut row = vec![0u64; cw];
     for (index, &(offset, count)) in chunks.iter().take(expected).enumerate() {

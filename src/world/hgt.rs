@@ -46,13 +46,25 @@ pub(crate) fn origin_from_name(path: &Path) -> Option<[f64; 2]> {
 /// Reads an `.hgt` tile; voids become NaN. Without `cell_override` the name must give the
 /// tile's origin (its latitude sets the cell size in metres).
 pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, WorldError> {
-    let bytes = std::fs::read(path).map_err(|e| WorldError::io(path, e))?;
-    let Some(side) = side_for_size(bytes.len() as u64) else {
+    use std::io::Read;
+    let (file, len) = super::format::open_regular(path)?;
+    // The size is checked before reading, so that a huge file is not read at all.
+    let Some(side) = side_for_size(len) else {
+        return Err(WorldError::HgtSize {
+            path: path.to_path_buf(),
+            bytes: len,
+        });
+    };
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(len)
+        .read_to_end(&mut bytes)
+        .map_err(|e| WorldError::io(path, e))?;
+    if bytes.len() as u64 != len {
         return Err(WorldError::HgtSize {
             path: path.to_path_buf(),
             bytes: bytes.len() as u64,
         });
-    };
+    }
     let origin = origin_from_name(path);
     let [cell_ew_m, cell_ns_m] = match (origin, cell_override) {
         (_, Some(cell)) => cell,

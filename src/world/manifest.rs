@@ -6,6 +6,12 @@
 //! Conventions: positions in metres with x east, y north, z up, from the world's south-west
 //! corner; angles in degrees counter-clockwise from east (0 = east, 90 = north), the same for
 //! camera yaw, sun azimuth and wind direction; colours are linear RGB in 0..=1.
+//!
+//! Every number is checked: NaN and infinities are refused, and so is any value beyond the
+//! range its field documents (the limits are the `MAX_*` constants of this module), with the
+//! field and the range named in the error. The ranges are wide enough for any real world and
+//! keep the f32 arithmetic of the renderer exact enough: a wind of 1e30 m/s, say, would
+//! otherwise overflow to NaN on the GPU and be drawn as calm.
 
 use std::collections::HashSet;
 use std::path::Path;
@@ -24,6 +30,42 @@ pub const MAX_ROOT_TILES: u64 = 4096;
 pub const MAX_FINEST_TILES: u64 = 1_000_000;
 /// Largest extent a world may have along either axis, metres.
 pub const MAX_EXTENT_M: f64 = 10_000_000.0;
+/// Largest root tile, metres (`pyramid.root_tile_size_m`).
+pub const MAX_ROOT_TILE_M: f64 = 100_000_000.0;
+/// Most grass types a world may have: the renderer's table of types holds this many, so a type
+/// index beyond it could not be drawn as its own type.
+pub const MAX_GRASS_TYPES: usize = 16;
+/// Tallest grass blade, metres (`grass_types[].height_m`, `grass_peak.short_m`).
+pub const MAX_BLADE_HEIGHT_M: f64 = 10.0;
+/// Widest grass blade at its root, metres (`grass_types[].width_m`).
+pub const MAX_BLADE_WIDTH_M: f64 = 1.0;
+/// Largest sunlight colour component (`sky.sun_color`, which may exceed 1 for intensity);
+/// every other colour is in 0..=1.
+pub const MAX_SUN_INTENSITY: f64 = 100.0;
+/// Fastest wind, metres per second: every wind speed of the manifest (`wind.speed_mps`, a
+/// scene's `ambient.speed_mps`, a source's `speed_mps`, and `inflow_mps` either way). Above
+/// the strongest gust measured on Earth (113 m/s).
+pub const MAX_WIND_SPEED_MPS: f64 = 120.0;
+/// Largest wind source strength factor (`strength` keys' second value).
+pub const MAX_WIND_STRENGTH: f64 = 10.0;
+/// Largest reach of an omni or vortex wind source, metres (`radius_m`).
+pub const MAX_WIND_RADIUS_M: f64 = 10_000.0;
+/// Largest angle, degrees, either way: wind directions, sun azimuth and camera yaw (a hundred
+/// turns: room for the unwrapped yaw of a path that circles, and still exact in f32).
+pub const MAX_ANGLE_DEG: f64 = 36_000.0;
+/// Longest time, seconds, either way: path durations and key times, wind source start and
+/// strength key times, and blends (about eleven and a half days).
+pub const MAX_TIME_S: f64 = 1_000_000.0;
+/// Farthest position, metres either way along each axis: camera keys and wind sources (twice
+/// the largest extent, so that paths may start well outside the world).
+pub const MAX_POSITION_M: f64 = 2.0 * MAX_EXTENT_M;
+/// Farthest fog distance, metres (`sky.fog_distance_m`).
+pub const MAX_FOG_DISTANCE_M: f64 = MAX_EXTENT_M;
+/// Largest magnitude of the `[derive]` table's log2 figures (`hurst`, `fit_rms_log2`,
+/// `decay_log2`): beyond any fit of f32 heights.
+pub const MAX_DERIVE_LOG2: f64 = 300.0;
+/// Largest `[source]` coordinate (`origin`, in the DEM's own units) in magnitude.
+pub const MAX_SOURCE_COORDINATE: f64 = 1e9;
 
 /// The manifest of a world (`world.toml`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -41,7 +83,8 @@ pub struct Manifest {
     pub pyramid: Pyramid,
     /// Lowest and highest stored height, metres.
     pub height_range_m: [f32; 2],
-    /// Grass types; index 0 is bare ground. Tile type maps index into this list.
+    /// Grass types; index 0 is bare ground. Tile type maps index into this list. At least 1
+    /// and at most [`MAX_GRASS_TYPES`] (16).
     #[serde(default)]
     pub grass_types: Vec<GrassType>,
     /// Default wind.
@@ -221,23 +264,24 @@ impl From<&FeatureSwitches> for Features {
     }
 }
 
-/// One kind of grass (or, at index 0, bare ground).
+/// One kind of grass (or, at index 0, bare ground). A world has at most [`MAX_GRASS_TYPES`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GrassType {
     /// Name, e.g. `meadow`.
     pub name: String,
-    /// Colour of the ground under this type.
+    /// Colour of the ground under this type (each component in 0..=1).
     pub ground_color: [f32; 3],
-    /// Colour at a blade's root.
+    /// Colour at a blade's root (0..=1).
     pub base_color: [f32; 3],
-    /// Colour at a blade's tip.
+    /// Colour at a blade's tip (0..=1).
     pub tip_color: [f32; 3],
-    /// Blade height range, metres (min, max).
+    /// Blade height range, metres (min, max; 0 <= min <= max <= [`MAX_BLADE_HEIGHT_M`]).
     pub height_m: [f32; 2],
-    /// Blade width range at the root, metres (min, max).
+    /// Blade width range at the root, metres (min, max; 0 <= min <= max <=
+    /// [`MAX_BLADE_WIDTH_M`]).
     pub width_m: [f32; 2],
-    /// Resistance to bending in the wind: 0 bends freely, 1 barely moves.
+    /// Resistance to bending in the wind, 0..=1: 0 bends freely, 1 barely moves.
     pub stiffness: f32,
 }
 
@@ -245,9 +289,10 @@ pub struct GrassType {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct WindDefaults {
-    /// Direction the wind blows toward, degrees counter-clockwise from east.
+    /// Direction the wind blows toward, degrees counter-clockwise from east (within
+    /// +-[`MAX_ANGLE_DEG`]).
     pub direction_deg: f32,
-    /// Mean speed, metres per second.
+    /// Mean speed, metres per second, 0..=[`MAX_WIND_SPEED_MPS`] (120).
     pub speed_mps: f32,
     /// Strength of gusts relative to the mean, 0..=1.
     pub gustiness: f32,
@@ -289,6 +334,11 @@ pub struct WindScene {
 /// times count from it) and `strength` (keys `[time_s, factor]`, strictly increasing in time,
 /// linear in between, held before the first and after the last key; empty means a constant 1;
 /// with `repeat` the keys repeat with the last key's time as period).
+///
+/// Ranges: speeds (`speed_mps` 0..=[`MAX_WIND_SPEED_MPS`], `inflow_mps` either way up to it),
+/// `radius_m` above 0 and at most [`MAX_WIND_RADIUS_M`], `direction_deg` within
+/// +-[`MAX_ANGLE_DEG`], `position_m` within +-[`MAX_POSITION_M`], `start_s` 0..=[`MAX_TIME_S`],
+/// strength key times within +-[`MAX_TIME_S`] and factors 0..=[`MAX_WIND_STRENGTH`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
 pub enum WindSource {
@@ -479,17 +529,19 @@ impl WindSource {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Sky {
-    /// Direction toward the sun, degrees counter-clockwise from east (225 = south-west).
+    /// Direction toward the sun, degrees counter-clockwise from east (225 = south-west; within
+    /// +-[`MAX_ANGLE_DEG`]).
     pub sun_azimuth_deg: f32,
-    /// Sun height above the horizon, degrees.
+    /// Sun height above the horizon, degrees, -90..=90.
     pub sun_elevation_deg: f32,
-    /// Sunlight colour (linear RGB, may exceed 1 for intensity).
+    /// Sunlight colour (linear RGB, may exceed 1 for intensity: 0..=[`MAX_SUN_INTENSITY`]).
     pub sun_color: [f32; 3],
-    /// Sky colour overhead.
+    /// Sky colour overhead (0..=1).
     pub sky_color: [f32; 3],
-    /// Sky colour at the horizon, also the fog colour.
+    /// Sky colour at the horizon, also the fog colour (0..=1).
     pub horizon_color: [f32; 3],
-    /// Distance at which fog hides the terrain completely, metres.
+    /// Distance at which fog hides the terrain completely, metres (above 0, at most
+    /// [`MAX_FOG_DISTANCE_M`]).
     pub fog_distance_m: f32,
 }
 
@@ -513,7 +565,7 @@ impl Default for Sky {
 pub struct CameraPath {
     /// Name, unique within the world.
     pub name: String,
-    /// Length of the flight, seconds.
+    /// Length of the flight, seconds (above 0, at most [`MAX_TIME_S`]).
     pub duration_s: f64,
     /// Name of the camera path whose positions leave the trail in the grass while this path is
     /// flown (default: this path itself, the camera).
@@ -531,11 +583,13 @@ pub struct CameraPath {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WindKey {
-    /// Time from the start of the path, seconds; the scene's source times count from here.
+    /// Time from the start of the path, seconds (within +-[`MAX_TIME_S`]); the scene's source
+    /// times count from here.
     pub t_s: f64,
     /// Name of a wind scene of the world.
     pub scene: String,
-    /// Seconds over which the ambient wind blends from the previous scene's into this one's.
+    /// Seconds over which the ambient wind blends from the previous scene's into this one's
+    /// (0..=[`MAX_TIME_S`]).
     #[serde(default = "default_wind_blend")]
     pub blend_s: f64,
 }
@@ -551,13 +605,14 @@ fn default_wind_blend() -> f64 {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraKey {
-    /// Time from the start of the path, seconds.
+    /// Time from the start of the path, seconds (within +-[`MAX_TIME_S`]).
     pub t_s: f64,
-    /// Absolute position, metres (x east, y north, z up).
+    /// Absolute position, metres (x east, y north, z up; each within +-[`MAX_POSITION_M`]).
     pub position_m: [f64; 3],
-    /// Heading, degrees counter-clockwise from east (0 looks east, 90 north).
+    /// Heading, degrees counter-clockwise from east (0 looks east, 90 north; within
+    /// +-[`MAX_ANGLE_DEG`]).
     pub yaw_deg: f64,
-    /// Degrees above the horizontal; negative looks down.
+    /// Degrees above the horizontal, -90..=90; negative looks down.
     pub pitch_deg: f64,
 }
 
@@ -611,6 +666,12 @@ impl Manifest {
             v.positive(&format!("extent_m[{axis}]"), self.extent_m[axis])?;
         }
         v.positive("pyramid.root_tile_size_m", p.root_tile_size_m)?;
+        v.at_most(
+            "pyramid.root_tile_size_m",
+            p.root_tile_size_m,
+            MAX_ROOT_TILE_M,
+            " m",
+        )?;
         for axis in 0..2 {
             if p.root_tiles[axis] == 0 {
                 return Err(v.non_positive(&format!("pyramid.root_tiles[{axis}]"), 0.0));
@@ -709,15 +770,28 @@ impl Manifest {
                 path: path.to_path_buf(),
             });
         }
+        if self.grass_types.len() > MAX_GRASS_TYPES {
+            return Err(v.out_of_range(
+                "grass_types",
+                format!("{} types", self.grass_types.len()),
+                &format!(
+                    "at most {MAX_GRASS_TYPES} types (the renderer draws {MAX_GRASS_TYPES} kinds \
+                     of grass)"
+                ),
+            ));
+        }
         for (index, g) in self.grass_types.iter().enumerate() {
             let field = |f: &str| format!("grass_types[{index}].{f}");
-            v.all_finite(&field("ground_color"), &g.ground_color)?;
-            v.all_finite(&field("base_color"), &g.base_color)?;
-            v.all_finite(&field("tip_color"), &g.tip_color)?;
+            v.all_within(&field("ground_color"), &g.ground_color, [0.0, 1.0], "")?;
+            v.all_within(&field("base_color"), &g.base_color, [0.0, 1.0], "")?;
+            v.all_within(&field("tip_color"), &g.tip_color, [0.0, 1.0], "")?;
             v.all_finite(&field("height_m"), &g.height_m)?;
             v.all_finite(&field("width_m"), &g.width_m)?;
-            v.finite(&field("stiffness"), g.stiffness)?;
-            for (name, [min, max]) in [("height_m", g.height_m), ("width_m", g.width_m)] {
+            v.within(&field("stiffness"), g.stiffness, [0.0, 1.0], "")?;
+            for (name, [min, max], most) in [
+                ("height_m", g.height_m, MAX_BLADE_HEIGHT_M),
+                ("width_m", g.width_m, MAX_BLADE_WIDTH_M),
+            ] {
                 if min < 0.0 || min > max {
                     return Err(WorldError::BadGrassRange {
                         path: path.to_path_buf(),
@@ -728,24 +802,38 @@ impl Manifest {
                         max,
                     });
                 }
+                v.at_most(&format!("{}[1]", field(name)), max, most, " m")?;
             }
         }
 
-        v.finite("wind.direction_deg", self.wind.direction_deg)?;
-        v.finite("wind.speed_mps", self.wind.speed_mps)?;
-        v.finite("wind.gustiness", self.wind.gustiness)?;
+        v.validate_ambient("wind", &self.wind)?;
         let s = &self.sky;
-        v.finite("sky.sun_azimuth_deg", s.sun_azimuth_deg)?;
-        v.finite("sky.sun_elevation_deg", s.sun_elevation_deg)?;
-        v.all_finite("sky.sun_color", &s.sun_color)?;
-        v.all_finite("sky.sky_color", &s.sky_color)?;
-        v.all_finite("sky.horizon_color", &s.horizon_color)?;
+        v.angle("sky.sun_azimuth_deg", s.sun_azimuth_deg)?;
+        v.within(
+            "sky.sun_elevation_deg",
+            s.sun_elevation_deg,
+            [-90.0, 90.0],
+            " degrees",
+        )?;
+        v.all_within("sky.sun_color", &s.sun_color, [0.0, MAX_SUN_INTENSITY], "")?;
+        v.all_within("sky.sky_color", &s.sky_color, [0.0, 1.0], "")?;
+        v.all_within("sky.horizon_color", &s.horizon_color, [0.0, 1.0], "")?;
         v.positive("sky.fog_distance_m", s.fog_distance_m)?;
+        v.at_most(
+            "sky.fog_distance_m",
+            s.fog_distance_m,
+            MAX_FOG_DISTANCE_M,
+            " m",
+        )?;
         if let Some(source) = &self.source {
-            v.positive("source.cell_size_m[0]", source.cell_size_m[0])?;
-            v.positive("source.cell_size_m[1]", source.cell_size_m[1])?;
+            for axis in 0..2 {
+                let field = format!("source.cell_size_m[{axis}]");
+                v.positive(&field, source.cell_size_m[axis])?;
+                v.at_most(&field, source.cell_size_m[axis], MAX_EXTENT_M, " m")?;
+            }
             if let Some(origin) = &source.origin {
-                v.all_finite("source.origin", origin)?;
+                let most = MAX_SOURCE_COORDINATE;
+                v.all_within("source.origin", origin, [-most, most], "")?;
             }
         }
 
@@ -757,7 +845,9 @@ impl Manifest {
                     name: cam.name.clone(),
                 });
             }
-            v.positive(&format!("paths[{pi}].duration_s"), cam.duration_s)?;
+            let duration = format!("paths[{pi}].duration_s");
+            v.positive(&duration, cam.duration_s)?;
+            v.at_most(&duration, cam.duration_s, MAX_TIME_S, " s")?;
             if cam.keys.len() < 2 {
                 return Err(WorldError::PathTooShort {
                     path: path.to_path_buf(),
@@ -767,10 +857,15 @@ impl Manifest {
             }
             for (ki, key) in cam.keys.iter().enumerate() {
                 let field = |f: &str| format!("paths[{pi}].keys[{ki}].{f}");
-                v.finite(&field("t_s"), key.t_s)?;
-                v.all_finite(&field("position_m"), &key.position_m)?;
-                v.finite(&field("yaw_deg"), key.yaw_deg)?;
-                v.finite(&field("pitch_deg"), key.pitch_deg)?;
+                v.time(&field("t_s"), key.t_s)?;
+                v.position(&field("position_m"), &key.position_m)?;
+                v.angle(&field("yaw_deg"), key.yaw_deg)?;
+                v.within(
+                    &field("pitch_deg"),
+                    key.pitch_deg,
+                    [-90.0, 90.0],
+                    " degrees",
+                )?;
                 if ki > 0 && key.t_s <= cam.keys[ki - 1].t_s {
                     return Err(WorldError::PathKeysOutOfOrder {
                         path: path.to_path_buf(),
@@ -788,7 +883,9 @@ impl Manifest {
         }
         if let Some(g) = &self.grass_peak {
             v.positive("grass_peak.window_m", g.window_m)?;
+            v.at_most("grass_peak.window_m", g.window_m, MAX_ROOT_TILE_M, " m")?;
             v.non_negative("grass_peak.short_m", g.short_m)?;
+            v.at_most("grass_peak.short_m", g.short_m, MAX_BLADE_HEIGHT_M, " m")?;
             v.finite("grass_peak.density", g.density)?;
             if !(0.0..=2.0).contains(&g.density) {
                 return Err(v.out_of_range("grass_peak.density", g.density, "in 0..=2"));
@@ -801,10 +898,15 @@ impl Manifest {
     }
 
     fn validate_derive(&self, v: &Validator, c: &DeriveCalibration) -> Result<(), WorldError> {
-        v.finite("derive.hurst", c.hurst)?;
+        let most = MAX_DERIVE_LOG2;
+        v.within("derive.hurst", c.hurst, [-most, most], "")?;
         v.non_negative("derive.fit_rms_log2", c.fit_rms_log2)?;
+        v.at_most("derive.fit_rms_log2", c.fit_rms_log2, most, "")?;
         v.non_negative("derive.residual_rms_m", c.residual_rms_m)?;
+        let [lo, hi] = super::PLAUSIBLE_HEIGHTS_M;
+        v.at_most("derive.residual_rms_m", c.residual_rms_m, hi - lo, " m")?;
         v.non_negative("derive.decay_log2", c.decay_log2)?;
+        v.at_most("derive.decay_log2", c.decay_log2, most, "")?;
         let levels = usize::from(self.pyramid.derived_levels);
         if c.detail.len() != levels {
             return Err(v.out_of_range(
@@ -843,8 +945,9 @@ impl Manifest {
         }
         for (ki, key) in cam.wind.iter().enumerate() {
             let field = |f: &str| format!("paths[{pi}].wind[{ki}].{f}");
-            v.finite(&field("t_s"), key.t_s)?;
+            v.time(&field("t_s"), key.t_s)?;
             v.non_negative(&field("blend_s"), key.blend_s)?;
+            v.at_most(&field("blend_s"), key.blend_s, MAX_TIME_S, " s")?;
             if self.wind_scene(&key.scene).is_none() {
                 let names: Vec<&str> = self.wind_scenes.iter().map(|s| s.name.as_str()).collect();
                 return Err(WorldError::UnknownWindSceneRef {
@@ -881,14 +984,7 @@ impl Manifest {
                     name: scene.name.clone(),
                 });
             }
-            let a = &scene.ambient;
-            let field = |f: &str| format!("wind_scenes[{si}].ambient.{f}");
-            v.finite(&field("direction_deg"), a.direction_deg)?;
-            v.non_negative(&field("speed_mps"), a.speed_mps)?;
-            v.finite(&field("gustiness"), a.gustiness)?;
-            if !(0.0..=1.0).contains(&a.gustiness) {
-                return Err(v.out_of_range(&field("gustiness"), a.gustiness, "in 0..=1"));
-            }
+            v.validate_ambient(&format!("wind_scenes[{si}].ambient"), &scene.ambient)?;
             if scene.sources.len() > MAX_WIND_SOURCES {
                 return Err(v.out_of_range(
                     &format!("wind_scenes[{si}].sources"),
@@ -916,16 +1012,16 @@ impl Manifest {
                 speed_mps,
                 ..
             } => {
-                v.finite(&field("direction_deg"), *direction_deg)?;
-                v.non_negative(&field("speed_mps"), *speed_mps)?;
+                v.angle(&field("direction_deg"), *direction_deg)?;
+                v.speed(&field("speed_mps"), *speed_mps)?;
             }
             WindSource::Omni {
                 radius_m,
                 speed_mps,
                 ..
             } => {
-                v.positive(&field("radius_m"), *radius_m)?;
-                v.non_negative(&field("speed_mps"), *speed_mps)?;
+                v.radius(&field("radius_m"), *radius_m)?;
+                v.speed(&field("speed_mps"), *speed_mps)?;
             }
             WindSource::Vortex {
                 radius_m,
@@ -933,14 +1029,15 @@ impl Manifest {
                 inflow_mps,
                 ..
             } => {
-                v.positive(&field("radius_m"), *radius_m)?;
-                v.non_negative(&field("speed_mps"), *speed_mps)?;
-                v.finite(&field("inflow_mps"), *inflow_mps)?;
+                v.radius(&field("radius_m"), *radius_m)?;
+                v.speed(&field("speed_mps"), *speed_mps)?;
+                let most = MAX_WIND_SPEED_MPS;
+                v.within(&field("inflow_mps"), *inflow_mps, [-most, most], " m/s")?;
             }
         }
         let (position, path_name, start_s, strength, _) = source.common();
         if let Some(p) = position {
-            v.all_finite(&field("position_m"), p)?;
+            v.position(&field("position_m"), p)?;
         }
         match (position, path_name) {
             (Some(_), Some(_)) => {
@@ -969,9 +1066,13 @@ impl Manifest {
             });
         }
         v.non_negative(&field("start_s"), start_s)?;
+        v.at_most(&field("start_s"), start_s, MAX_TIME_S, " s")?;
         for (ki, key) in strength.iter().enumerate() {
             v.all_finite(&field(&format!("strength[{ki}]")), key)?;
-            v.non_negative(&field(&format!("strength[{ki}][1]")), key[1])?;
+            v.time(&field(&format!("strength[{ki}][0]")), key[0])?;
+            let factor = field(&format!("strength[{ki}][1]"));
+            v.non_negative(&factor, key[1])?;
+            v.at_most(&factor, key[1], MAX_WIND_STRENGTH, "")?;
             if ki > 0 && key[0] <= strength[ki - 1][0] {
                 return Err(WorldError::StrengthKeysOutOfOrder {
                     path: v.path.to_path_buf(),
@@ -1036,6 +1137,88 @@ impl Validator<'_> {
         }
     }
 
+    /// Refuses a finite `value` above `most` (`unit` follows the number in the message).
+    fn at_most(
+        &self,
+        field: &str,
+        value: impl Into<f64>,
+        most: f64,
+        unit: &str,
+    ) -> Result<(), WorldError> {
+        let value = value.into();
+        self.finite(field, value)?;
+        if value <= most {
+            Ok(())
+        } else {
+            Err(self.out_of_range(
+                field,
+                number(value),
+                &format!("at most {}{unit}", number(most)),
+            ))
+        }
+    }
+
+    /// Refuses a value that is not finite or lies outside `lo..=hi`.
+    fn within(
+        &self,
+        field: &str,
+        value: impl Into<f64>,
+        [lo, hi]: [f64; 2],
+        unit: &str,
+    ) -> Result<(), WorldError> {
+        let value = value.into();
+        self.finite(field, value)?;
+        if (lo..=hi).contains(&value) {
+            Ok(())
+        } else {
+            let allowed = format!("in {}..={}{unit}", number(lo), number(hi));
+            Err(self.out_of_range(field, number(value), &allowed))
+        }
+    }
+
+    fn all_within<T: Copy + Into<f64>>(
+        &self,
+        field: &str,
+        values: &[T],
+        range: [f64; 2],
+        unit: &str,
+    ) -> Result<(), WorldError> {
+        for (i, &x) in values.iter().enumerate() {
+            self.within(&format!("{field}[{i}]"), x, range, unit)?;
+        }
+        Ok(())
+    }
+
+    fn angle(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        self.within(field, value, [-MAX_ANGLE_DEG, MAX_ANGLE_DEG], " degrees")
+    }
+
+    fn time(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        self.within(field, value, [-MAX_TIME_S, MAX_TIME_S], " s")
+    }
+
+    fn position(&self, field: &str, values: &[f64]) -> Result<(), WorldError> {
+        self.all_within(field, values, [-MAX_POSITION_M, MAX_POSITION_M], " m")
+    }
+
+    fn speed(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        let value = value.into();
+        self.non_negative(field, value)?;
+        self.at_most(field, value, MAX_WIND_SPEED_MPS, " m/s")
+    }
+
+    fn radius(&self, field: &str, value: f64) -> Result<(), WorldError> {
+        self.positive(field, value)?;
+        self.at_most(field, value, MAX_WIND_RADIUS_M, " m")
+    }
+
+    /// An ambient wind (`[wind]` or a scene's `ambient`) at `at`.
+    fn validate_ambient(&self, at: &str, a: &WindDefaults) -> Result<(), WorldError> {
+        self.angle(&format!("{at}.direction_deg"), a.direction_deg)?;
+        self.speed(&format!("{at}.speed_mps"), a.speed_mps)?;
+        self.within(&format!("{at}.gustiness"), a.gustiness, [0.0, 1.0], "")
+    }
+
     fn non_positive(&self, field: &str, value: f64) -> WorldError {
         WorldError::NonPositive {
             path: self.path.to_path_buf(),
@@ -1051,5 +1234,16 @@ impl Validator<'_> {
             value: value.to_string(),
             allowed: allowed.to_string(),
         }
+    }
+}
+
+/// A number as messages show it: plainly, or in exponent form where plain digits would run
+/// long (1e30 rather than thirty-one digits).
+fn number(x: f64) -> String {
+    let a = x.abs();
+    if a != 0.0 && !(1e-4..1e9).contains(&a) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
     }
 }

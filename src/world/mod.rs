@@ -34,8 +34,8 @@ pub use format::{
 pub use grass_density::GrassPeak;
 pub use manifest::{
     CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, DeriveCalibration, DeriveMode, FeatureSwitches,
-    GrassType, LEGACY_DETAIL, MAX_DETAIL, MAX_WIND_SOURCES, Manifest, Sky, SourcePlacement,
-    WindDefaults, WindKey, WindScene, WindSource, WorldSource,
+    GrassType, LEGACY_DETAIL, MAX_DETAIL, MAX_GRASS_TYPES, MAX_WIND_SOURCES, Manifest, Sky,
+    SourcePlacement, WindDefaults, WindKey, WindScene, WindSource, WorldSource,
 };
 pub use tile::{Bounds, Pyramid, TileId};
 
