@@ -261,7 +261,8 @@ enum Command {
         /// Seed of the grass-painting noise.
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Replace --out if it exists and is not empty (otherwise it is refused).
+        /// Replace the world (world.toml and tiles/) in --out if it exists and is not empty
+        /// (otherwise it is refused); its other files are kept.
         #[arg(long)]
         replace: bool,
     },
@@ -328,8 +329,8 @@ enum BenchCommand {
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "480x270", value_parser = parse_size)]
         size: (u32, u32),
-        /// Frames of the dolly, 2..=10000.
-        #[arg(long, default_value_t = 48, value_parser = clap::value_parser!(u32).range(2..=10_000))]
+        /// Frames of the dolly, 2..=1000.
+        #[arg(long, default_value_t = 48, value_parser = clap::value_parser!(u32).range(2..=1000))]
         dolly_frames: u32,
         #[command(flatten)]
         timing: TimingArgs,
@@ -341,14 +342,14 @@ enum BenchCommand {
 /// untimed ones) and fewer on a software renderer (2 rounds of 3 after 1).
 #[derive(clap::Args, Clone, Copy)]
 struct TimingArgs {
-    /// Untimed frames before each measurement's timed ones, 0..=10000.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=10_000))]
+    /// Untimed frames before each measurement's timed ones, 0..=100.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100))]
     warmup_frames: Option<u32>,
-    /// Timed frames of each measurement per round, 1..=10000.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    /// Timed frames of each measurement per round, 1..=150.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=150))]
     timed_frames: Option<u32>,
-    /// Interleaved rounds over the settings, 1..=1000.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    /// Interleaved rounds over the settings, 1..=100.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100))]
     rounds: Option<u32>,
 }
 
