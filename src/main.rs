@@ -195,7 +195,9 @@ enum Command {
         /// Fly without grass and its wind: the streaming system alone.
         #[arg(long)]
         no_grass: bool,
-        /// A teleport must reach full detail within this many frames, 1..=100000.
+        /// A teleport must reach full detail within this many frames, 1..=100000, or within
+        /// the simulated time they stand for (0.1 s each) of wall time, on a machine that
+        /// renders faster than that.
         #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..=100_000))]
         max_recovery_frames: u32,
         /// No frame may take longer than this, milliseconds (wall time), 1..=3600000.
