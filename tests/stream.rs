@@ -410,3 +410,18 @@ fn a_streamer_refuses_zero_or_absurd_loads_in_flight() {
         assert!(err.to_string().contains("1..=1024"), "{err}");
     }
 }
+
+#[test]
+fn an_atlas_no_larger_than_level_0_is_refused_not_a_panic() {
+    let w = world();
+    let pyramid = w.manifest.pyramid.clone();
+    let [nx, ny] = pyramid.tiles_at(0);
+    let config = ServiceConfig {
+        atlas_slots: nx * ny,
+        ..ServiceConfig::default()
+    };
+    let e = TileService::new(&pyramid, Arc::new(w), config)
+        .err()
+        .expect("refused");
+    assert!(e.to_string().contains("level-0 tiles"), "{e}");
+}

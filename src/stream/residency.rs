@@ -154,10 +154,14 @@ impl TileService {
     ) -> Result<(Self, ResidencyPlan), crate::world::WorldError> {
         let [nx, ny] = pyramid.tiles_at(0);
         let roots = nx * ny;
-        assert!(
-            config.atlas_slots > roots,
-            "the atlas needs more slots than there are level-0 tiles"
-        );
+        // Level 0 stays resident for good: the atlas needs a slot more than it.
+        if config.atlas_slots <= roots {
+            return Err(crate::world::WorldError::bad_option(
+                "atlas slots",
+                config.atlas_slots,
+                format!("more than the world's {roots} level-0 tiles"),
+            ));
+        }
         let mut plan = ResidencyPlan::default();
         let mut slots = vec![None; config.atlas_slots as usize];
         let mut resident = HashMap::new();
