@@ -7,6 +7,8 @@
 // fade distance without a march), then a full-screen pass that multiplies the colour target by
 // them (blending). CPU mirror: src/terrain/contact_shadow.rs.
 
+#include "shared/full_screen.wgsl"
+
 override ENCODE_SRGB: bool = false;
 
 struct Params {
@@ -28,12 +30,6 @@ struct Params {
 // The factors: written by the compute pass, read by the full-screen pass.
 @group(0) @binding(2) var factors_out: texture_storage_2d<r32float, write>;
 @group(0) @binding(3) var factors: texture_2d<f32>;
-
-@vertex
-fn vs_full(@builtin(vertex_index) vi: u32) -> @builtin(position) vec4<f32> {
-    let uv = vec2<f32>(f32((vi << 1u) & 2u), f32(vi & 2u));
-    return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
-}
 
 // The camera-relative point under pixel centre `px` at depth `d`.
 fn unproject(px: vec2<f32>, d: f32) -> vec3<f32> {

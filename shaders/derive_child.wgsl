@@ -50,14 +50,6 @@ struct Params {
 @group(0) @binding(6) var<storage, read> atlas_identity: array<vec4<u32>>;
 @group(0) @binding(7) var<storage, read_write> out_identity: array<vec4<u32>>;
 
-fn hash4(a: u32, b: u32, c: u32, d: u32) -> u32 {
-    return hash_u32(a ^ hash_u32(b ^ hash_u32(c ^ hash_u32(d))));
-}
-
-fn unit(h: u32) -> f32 {
-    return f32(h >> 8u) * (1.0 / 16777216.0) * 2.0 - 1.0;
-}
-
 // Weight k (0, 1, 2) of the high-pass filter [-1/2, 1, -1/2].
 fn high_pass(k: i32) -> f32 {
     if k == 1 {

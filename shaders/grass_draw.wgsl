@@ -2,7 +2,8 @@
 // per blade. SEGMENTS is set per pipeline: by default 5 (11 vertices) for the blades within the
 // near radius, 3 (7 vertices) for the rest of the high ring and for the low ring. The shape
 // is a cubic Bezier bent by the wind and scaled to keep its length (CPU mirror of the shape:
-// src/grass/blade.rs). shaders/blade.wgsl is put in front of this file.
+// src/grass/blade.rs). The blade record, the feature bits and the colour output are
+// included from shaders/shared/.
 //
 // Bending (after Crysis): main bending leans the whole blade by its cell's sway (a damped spring
 // per grass type, shaders/grass_sway.wgsl) plus the trail's push; detail bending adds whole-blade
@@ -30,10 +31,6 @@ struct GrassFrame {
     // rgb colour; w: gloss exponent (base) and specular strength (tip)
     base_colors: array<vec4<f32>, 16>,
     tip_colors: array<vec4<f32>, 16>,
-}
-
-fn has(feature: u32) -> bool {
-    return (frame.flags.x & feature) != 0u;
 }
 
 @group(0) @binding(0) var<uniform> frame: GrassFrame;
@@ -168,19 +165,19 @@ fn fs_blade(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) v
     let to_eye = -normalize(in.rel_pos);
     let diffuse = max(dot(n, sun), 0.0);
     var light = frame.sun_color.rgb * diffuse;
-    if has(TRANSLUCENCY) {
+    if has_feature(frame.flags.x, TRANSLUCENCY) {
         // The back side lit through the blade, stronger when looking toward the sun.
         let back = max(dot(-n, sun), 0.0);
         let toward_sun = pow(max(dot(-to_eye, sun), 0.0), 4.0);
         light += frame.sun_color.rgb * back * (0.25 + 0.75 * toward_sun) * vec3<f32>(0.9, 1.0, 0.55);
     }
     var ao = 1.0;
-    if has(AMBIENT_OCCLUSION) {
+    if has_feature(frame.flags.x, AMBIENT_OCCLUSION) {
         ao = mix(0.3, 1.0, t);
     }
     let ambient = frame.sky_color.rgb * (0.35 + 0.25 * n.z) * ao;
     var lit = in.color * (light * mix(0.6, 1.0, ao) + ambient) * (1.0 + 0.5 * in.misc.y);
-    if has(SPECULAR) {
+    if has_feature(frame.flags.x, SPECULAR) {
         let half_dir = normalize(sun + to_eye);
         let spec = pow(max(dot(n, half_dir), 0.0), in.misc.w) * in.misc.z * (0.5 + t);
         lit += frame.sun_color.rgb * spec;

@@ -4,7 +4,7 @@
 // blades there, drawn with more segments). Surviving blades are appended
 // to the tile's slot of the instance pool; a second entry point turns the slot counters into
 // indirect draw arguments, clamped to the slot capacity. CPU mirror: src/grass/generate.rs.
-// shaders/blade.wgsl is put in front of this file.
+// The hashes and the blade record are included from shaders/shared/.
 
 #include "shared/hash.wgsl"
 #include "shared/blade.wgsl"
@@ -99,37 +99,24 @@ const DRAWN: u32 = 7u;
 
 var<workgroup> local_stats: array<atomic<u32>, 8>;
 
-fn hash3(a: u32, b: u32, c: u32) -> u32 {
-    return hash_u32(a ^ hash_u32(b ^ hash_u32(c)));
-}
-
-fn rand01(h: u32) -> f32 {
-    return f32(h >> 8u) * (1.0 / 16777216.0);
-}
-
-fn pack_rgba8(c: vec3<f32>) -> u32 {
-    let q = vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(1.0)) * 255.0 + 0.5);
-    return q.x | (q.y << 8u) | (q.z << 16u) | (255u << 24u);
-}
-
-fn texel(x: i32, y: i32, layer: u32) -> vec2<i32> {
+fn tile_texel(x: i32, y: i32, layer: u32) -> vec2<i32> {
     let s = i32(textureDimensions(heights).x);
     return vec2<i32>(clamp(x, 0, s - 1), clamp(y, 0, s - 1));
 }
 
 fn h_at(x: i32, y: i32, layer: u32) -> f32 {
-    return textureLoad(heights, texel(x, y, layer), layer, 0).r;
+    return textureLoad(heights, tile_texel(x, y, layer), layer, 0).r;
 }
 
 fn d_at(x: i32, y: i32, layer: u32) -> f32 {
-    return f32(textureLoad(grass, texel(x, y, layer), layer, 0).g) / 255.0;
+    return f32(textureLoad(grass, tile_texel(x, y, layer), layer, 0).g) / 255.0;
 }
 
 // The grass type of the map's texel nearest `local` (metres from the tile's corner).
 fn kind_at(local: vec2<f32>, job: TileJob) -> u32 {
     let border = f32(params.grid.z);
     let t = floor(vec2<f32>(border, border) + local / job.cell + 0.5);
-    return textureLoad(grass, texel(i32(t.x), i32(t.y), job.layer), job.layer, 0).r;
+    return textureLoad(grass, tile_texel(i32(t.x), i32(t.y), job.layer), job.layer, 0).r;
 }
 
 fn hiz_load(mip: u32, x: i32, y: i32) -> f32 {

@@ -2,10 +2,11 @@
 // blade in its slots gets its lean (the sway of its type in its wind cell, plus the trail's
 // push), its detail bending (whole-blade sway and edge flutter from smoothed triangle waves at
 // four frequencies, phased by its hash), its gust highlight and its colour variation (world-space
-// noise at its root). shaders/blade.wgsl and shaders/wind_lookup.wgsl are put in front of this
-// file.
+// noise at its root). The hashes, the blade record, the feature bits and the wind lookup are
+// included from shaders/shared/.
 // CPU mirror: src/grass/wind_pass.rs.
 
+#include "shared/hash.wgsl"
 #include "shared/blade.wgsl"
 #include "shared/features.wgsl"
 #include "shared/wind_lookup.wgsl"
@@ -34,10 +35,6 @@ struct WindPass {
 // Lean of a blade on the axis of a fresh trail, blade heights: trampled nearly flat.
 const TRAIL_LEAN: f32 = 1.6;
 
-fn has(feature: u32) -> bool {
-    return (pass_params.flags.x & feature) != 0u;
-}
-
 fn smooth_triangle(x: f32) -> f32 {
     let t = abs(fract(x + 0.5) * 2.0 - 1.0);
     return t * t * (3.0 - 2.0 * t);
@@ -54,14 +51,6 @@ fn sway_at(rel_xy: vec2<f32>, kind: u32) -> vec2<f32> {
     return sway[(u32(y) * wind_lookup.n + u32(x)) * 4u + min(kind, 3u)].xy;
 }
 
-fn hash2(x: i32, y: i32) -> u32 {
-    var h = (u32(x) * 0x8da6b343u) ^ (u32(y) * 0xd8163841u);
-    h ^= h >> 16u;
-    h *= 0x7feb352du;
-    h ^= h >> 15u;
-    return h;
-}
-
 fn value_noise(p: vec2<f32>) -> f32 {
     let fl = floor(p);
     let i = vec2<i32>(fl);
@@ -74,11 +63,6 @@ fn value_noise(p: vec2<f32>) -> f32 {
     let ab = a + (b - a) * u.x;
     let cd = c + (d - c) * u.x;
     return ab + (cd - ab) * u.y;
-}
-
-fn pack_rgba8(c: vec3<f32>) -> u32 {
-    let q = vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(1.0)) * 255.0 + 0.5);
-    return q.x | (q.y << 8u) | (q.z << 16u) | (255u << 24u);
 }
 
 // Workgroup y is the slot of the half; x runs over the slot's blades.
@@ -94,20 +78,20 @@ fn apply_wind(@builtin(global_invocation_id) gid: vec3<u32>) {
     let kind = b.kind & 255u;
     let w = wind_at(root);
     var lean = sway_at(root, kind) * b.wind;
-    if has(INTERACTION) {
+    if has_feature(pass_params.flags.x, INTERACTION) {
         lean += w.zw * TRAIL_LEAN;
     }
     let speed = length(w.xy);
     var blade_sway = 0.0;
     var flutter = 0.0;
-    if has(DETAIL_BENDING) {
+    if has_feature(pass_params.flags.x, DETAIL_BENDING) {
         let phase = f32(b.hash & 1023u) / 1023.0;
         let time = pass_params.misc.x;
         let amount = min(speed / 5.0, 1.5) * b.wind;
         blade_sway = (smooth_triangle(time * 0.193 + phase) + smooth_triangle(time * 0.375 + phase * 1.3) - 1.0) * amount;
         flutter = (smooth_triangle(time * 1.975 + phase * 3.1) + smooth_triangle(time * 0.793 + phase * 2.7) - 1.0) * amount;
     }
-    if has(COLOR_VARIATION) {
+    if has_feature(pass_params.flags.x, COLOR_VARIATION) {
         let world = pass_params.misc.zw + root;
         let v = value_noise(world / 6.0) * 0.6 + value_noise(world / 1.7) * 0.4;
         let variation = vec3<f32>(0.78, 0.86, 0.7) + (vec3<f32>(1.15, 1.1, 0.95) - vec3<f32>(0.78, 0.86, 0.7)) * v;

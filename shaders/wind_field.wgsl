@@ -57,10 +57,6 @@ const FLAG_STAMP: u32 = 2u;
 @group(0) @binding(1) var<storage, read_write> state: array<CellState>;
 @group(0) @binding(2) var<storage, read_write> cells: array<vec4<f32>>;
 
-fn unit(h: u32) -> f32 {
-    return f32(h >> 8u) * (1.0 / 16777216.0) * 2.0 - 1.0;
-}
-
 fn wrap(x: i32, p: i32) -> u32 {
     return u32(((x % p) + p) % p);
 }
@@ -77,7 +73,7 @@ fn lerp2(a: vec2<f32>, b: vec2<f32>, t: f32) -> vec2<f32> {
 }
 
 // Value noise of both channels at lattice position q, quintic fade.
-fn value_noise(q: vec2<f32>, octave: u32) -> vec2<f32> {
+fn lattice_noise(q: vec2<f32>, octave: u32) -> vec2<f32> {
     let fl = floor(q);
     let f = q - fl;
     let ix = i32(fl.x);
@@ -100,10 +96,10 @@ fn ambient_wind(d: vec2<f32>) -> vec2<f32> {
         let q = d * params.octave_freq[o];
         var v = vec2<f32>(0.0, 0.0);
         if w_new > 0.0 {
-            v += value_noise(params.windows[o].xy + q, o) * w_new;
+            v += lattice_noise(params.windows[o].xy + q, o) * w_new;
         }
         if w_old > 0.0 {
-            v += value_noise(params.windows[o].zw + q, o) * w_old;
+            v += lattice_noise(params.windows[o].zw + q, o) * w_old;
         }
         n += v * params.octave_amp[o];
     }

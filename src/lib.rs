@@ -38,6 +38,7 @@ pub mod camera;
 pub mod features;
 pub mod gpu;
 pub mod grass;
+pub mod hash;
 pub mod lod;
 pub mod renderer;
 pub mod shaders;

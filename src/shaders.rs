@@ -1,10 +1,13 @@
 //! Every stage's WGSL, assembled from `shaders/`.
 //!
 //! A stage's file may include shared pieces with a line `#include "shared/NAME.wgsl"`: the
-//! integer hash, the feature bits, the blade record of the instance pool, reading the wind field
-//! the colour output and the terrain's shading. Each piece is written once in `shaders/shared/` and included at most
-//! once per assembled shader. The sources are compiled into the crate, so a shipped binary reads
-//! no shader files at run time; `tests/shaders.rs` validates every assembled stage with naga.
+//! integer hashes, the feature bits, the blade record of the instance pool, reading the wind
+//! field, the colour output, the full-screen triangle and the terrain's shading. A piece may
+//! include other pieces; each is written once in `shaders/shared/` and included at most once
+//! per assembled shader, so every WGSL function is written in one file only. The sources are
+//! compiled into the crate, so a shipped binary reads no shader files at run time;
+//! `tests/shaders.rs` validates every assembled stage with naga and checks that no function
+//! name is defined twice.
 
 use std::borrow::Cow;
 
@@ -31,10 +34,19 @@ const SHARED: &[(&str, &str)] = &[
         include_str!("../shaders/shared/output.wgsl"),
     ),
     (
+        "shared/full_screen.wgsl",
+        include_str!("../shaders/shared/full_screen.wgsl"),
+    ),
+    (
         "shared/terrain_shading.wgsl",
         include_str!("../shaders/shared/terrain_shading.wgsl"),
     ),
 ];
+
+/// Every shared piece, by the path an `#include` names, with its source.
+pub fn shared_pieces() -> &'static [(&'static str, &'static str)] {
+    SHARED
+}
 
 /// One WGSL file per GPU stage, by file name.
 pub const STAGES: &[(&str, &str)] = &[

@@ -1,8 +1,11 @@
-//! Every assembled shader stage parses and validates with naga (source spans in the error), and
-//! the shared WGSL agrees with the Rust it mirrors.
+//! Every assembled shader stage parses and validates with naga (source spans in the error),
+//! every WGSL function is written in one file only, and the shared WGSL agrees with the Rust it
+//! mirrors.
+
+use std::collections::BTreeMap;
 
 use verdant::features::Feature;
-use verdant::shaders::{STAGES, source};
+use verdant::shaders::{STAGES, shared_pieces, source};
 
 #[test]
 fn every_assembled_stage_validates_with_naga() {
@@ -69,6 +72,36 @@ fn shared_pieces_are_defined_once_per_stage() {
             );
         }
     }
+}
+
+/// The names of the functions that `text` defines (`fn NAME(` at the start of a line).
+fn function_names(text: &str) -> impl Iterator<Item = &str> {
+    text.lines().filter_map(|line| {
+        let rest = line.trim_start().strip_prefix("fn ")?;
+        let name = &rest[..rest.find('(')?];
+        Some(name.trim())
+    })
+}
+
+#[test]
+fn no_function_is_written_in_two_files() {
+    let mut defined: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
+    for (file, text) in STAGES.iter().chain(shared_pieces()) {
+        for name in function_names(text) {
+            defined.entry(name).or_default().push(file);
+        }
+    }
+    assert!(defined.contains_key("hash_u32") && defined.contains_key("vs_full"));
+    let twice: Vec<String> = defined
+        .iter()
+        .filter(|(_, files)| files.len() > 1)
+        .map(|(name, files)| format!("{name}: {}", files.join(", ")))
+        .collect();
+    assert!(
+        twice.is_empty(),
+        "functions defined more than once (move each into shaders/shared/ or rename one):\n{}",
+        twice.join("\n")
+    );
 }
 
 #[test]

@@ -26,3 +26,9 @@ struct Blade {
 fn unpack_rgb(c: u32) -> vec3<f32> {
     return vec3<f32>(f32(c & 255u), f32((c >> 8u) & 255u), f32((c >> 16u) & 255u)) / 255.0;
 }
+
+// Linear RGB packed as a blade's colour (opaque alpha), the inverse of unpack_rgb.
+fn pack_rgba8(c: vec3<f32>) -> u32 {
+    let q = vec3<u32>(clamp(c, vec3<f32>(0.0), vec3<f32>(1.0)) * 255.0 + 0.5);
+    return q.x | (q.y << 8u) | (q.z << 16u) | (255u << 24u);
+}

@@ -74,24 +74,6 @@ const ROCK: vec3<f32> = vec3<f32>(0.25, 0.23, 0.20);
 const GROUND_TINT: f32 = 0.8;
 const SOIL: vec3<f32> = vec3<f32>(0.33, 0.27, 0.19);
 
-fn rand01(h: u32) -> f32 {
-    return f32(h >> 8u) * (1.0 / 16777216.0);
-}
-
-fn hash3(a: u32, b: u32, c: u32) -> u32 {
-    return hash_u32(a ^ hash_u32(b ^ hash_u32(c)));
-}
-
-// The lattice hash and value noise of the grass's wind pass (shaders/grass_wind.wgsl), so that
-// the far field's colour variation is the blades'.
-fn hash2(x: i32, y: i32) -> u32 {
-    var h = (u32(x) * 0x8da6b343u) ^ (u32(y) * 0xd8163841u);
-    h ^= h >> 16u;
-    h *= 0x7feb352du;
-    h ^= h >> 15u;
-    return h;
-}
-
 // Value noise in 0..1 (x) and its gradient (yz), per unit of p.
 fn noise_grad(p: vec2<f32>) -> vec3<f32> {
     let fl = floor(p);
@@ -108,7 +90,9 @@ fn noise_grad(p: vec2<f32>) -> vec3<f32> {
     return vec3<f32>(v, du.x * ((b - a) + k * u.y), du.y * ((c - a) + k * u.x));
 }
 
-fn value_noise(p: vec2<f32>) -> f32 {
+// Value noise in 0..1 (noise_grad's value): the noise of the wind pass's colour variation
+// (value_noise in shaders/grass_wind.wgsl), with its terms summed in another order.
+fn noise_value(p: vec2<f32>) -> f32 {
     return noise_grad(p).x;
 }
 
@@ -154,7 +138,7 @@ fn color_variation(rel_xy: vec2<f32>) -> vec3<f32> {
         return vec3<f32>(1.0);
     }
     let world = frame.grass_view.xy + rel_xy;
-    let v = value_noise(world / 6.0) * 0.6 + value_noise(world / 1.7) * 0.4;
+    let v = noise_value(world / 6.0) * 0.6 + noise_value(world / 1.7) * 0.4;
     return vec3<f32>(0.78, 0.86, 0.7) + (vec3<f32>(1.15, 1.1, 0.95) - vec3<f32>(0.78, 0.86, 0.7)) * v;
 }
 
@@ -317,8 +301,8 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
     // Maps: the four grass samples around the pixel, blended with weights whose border is
     // moved about by world-space noise (up to about half a texel), so that no texel edge shows.
     let warp_scale = max(texel_m, 0.5);
-    let wn = 0.65 * value_noise(world.xy / (0.9 * warp_scale)) + 0.35 * value_noise(world.xy / (0.3 * warp_scale) + 31.7);
-    let wn2 = 0.65 * value_noise(world.xy / (0.9 * warp_scale) + 57.3) + 0.35 * value_noise(world.xy / (0.3 * warp_scale) + 11.1);
+    let wn = 0.65 * noise_value(world.xy / (0.9 * warp_scale)) + 0.35 * noise_value(world.xy / (0.3 * warp_scale) + 31.7);
+    let wn2 = 0.65 * noise_value(world.xy / (0.9 * warp_scale) + 57.3) + 0.35 * noise_value(world.xy / (0.3 * warp_scale) + 11.1);
     let cell = floor(tex);
     let f = tex - cell;
     let fw = clamp(f + (vec2<f32>(wn, wn2) - 0.5) * 0.9, vec2<f32>(0.0), vec2<f32>(1.0));

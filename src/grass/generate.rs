@@ -18,7 +18,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 
 use crate::grass::Blade;
-use crate::stream::hash_u32;
+use crate::hash::{hash_u32, hash3, rand01};
 use crate::world::TileData;
 
 /// Per-type constants of generation; mirrors `GrassTypeGpu` in the shader.
@@ -166,14 +166,6 @@ pub const CLUMP_BLEND_M: f32 = 0.4;
 /// The statistics' LOD of a job's: near blades (LOD 2) count as high LOD (0).
 pub fn stats_lod(lod: u32) -> usize {
     usize::from(lod == 1)
-}
-
-pub(crate) fn rand01(h: u32) -> f32 {
-    (h >> 8) as f32 * (1.0 / 16_777_216.0)
-}
-
-pub(crate) fn hash3(a: u32, b: u32, c: u32) -> u32 {
-    hash_u32(a ^ hash_u32(b ^ hash_u32(c)))
 }
 
 fn pack_rgba8(c: Vec3) -> u32 {

@@ -10,8 +10,7 @@
 
 use glam::{DVec2, Vec2, Vec3};
 
-use crate::grass::generate::{hash3, rand01};
-use crate::stream::derive_child::hash_u32;
+use crate::hash::{hash_u32, hash3, rand01};
 
 /// The position along a blade (0 root, 1 tip) whose colour the far field shows: seen at a
 /// grazing angle a field shows mostly the upper part of its blades.

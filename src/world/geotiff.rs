@@ -24,7 +24,7 @@ use tiff::TiffError;
 use tiff::decoder::{ChunkType, Decoder, DecodingResult, Limits};
 use tiff::tags::{ByteOrder, Tag};
 
-use super::dem::{Dem, DemFormat, MAX_DEM_SAMPLES, check_grid_size, metres_per_degree};
+use super::dem_grid::{Dem, DemFormat, MAX_DEM_SAMPLES, check_grid_size, metres_per_degree};
 use super::error::WorldError;
 
 const FORMAT: &str = "GeoTIFF";

@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use super::dem::{Dem, DemFormat, metres_per_degree};
+use super::dem_grid::{Dem, DemFormat, metres_per_degree};
 use super::error::WorldError;
 
 /// The value SRTM stores for a void.

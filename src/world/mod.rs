@@ -14,6 +14,7 @@
 //! ```
 
 pub mod dem;
+mod dem_grid;
 pub mod error;
 pub mod format;
 pub mod fuzz;
