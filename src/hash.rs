@@ -42,6 +42,21 @@ pub fn unit(h: u32) -> f32 {
     (h >> 8) as f32 * (1.0 / 16_777_216.0) * 2.0 - 1.0
 }
 
+/// Value noise in [0, 1) with a smoothstep fade, on the lattice of [`hash2`]: the grass's
+/// colour variation (`value_noise` in `shaders/grass_wind.wgsl`), which the far field's colour
+/// must match.
+pub fn value_noise(p: glam::Vec2) -> f32 {
+    let fl = p.floor();
+    let (ix, iy) = (fl.x as i32, fl.y as i32);
+    let f = p - fl;
+    let u = f * f * (glam::Vec2::splat(3.0) - 2.0 * f);
+    let r = |x: i32, y: i32| (hash2(x, y) >> 8) as f32 / 16_777_216.0;
+    let (a, b, c, d) = (r(ix, iy), r(ix + 1, iy), r(ix, iy + 1), r(ix + 1, iy + 1));
+    let ab = a + (b - a) * u.x;
+    let cd = c + (d - c) * u.x;
+    ab + (cd - ab) * u.y
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -12,6 +12,9 @@
 //! - [`camera`]: the camera (f64 position, yaw and pitch, or the caller's own matrices) and
 //!   sampling of the manifest's camera paths.
 //! - [`features`]: the grass model's switchable features.
+//! - [`hash`]: the integer hashes (and the value noise on them) that every stage draws its
+//!   randomness from: the CPU mirror of `shaders/shared/hash.wgsl`, used by every stage's CPU
+//!   mirror.
 //! - [`shaders`]: every stage's WGSL, assembled from `shaders/` with the shared pieces
 //!   (`shaders/shared/`) included once.
 //! - [`gpu`]: what every stage shares: the headless GPU context (adapter choice from `WGPU_*`

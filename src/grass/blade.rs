@@ -95,6 +95,13 @@ pub fn blade_curve_bent(
     p.map(|q| q * scale)
 }
 
+/// A linear RGB colour packed as the blade record's RGBA8 word (alpha 255), as `pack_rgba8` in
+/// `shaders/shared/blade.wgsl` packs it.
+pub(crate) fn pack_rgba8(c: [f32; 3]) -> u32 {
+    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32;
+    q(c[0]) | (q(c[1]) << 8) | (q(c[2]) << 16) | (255 << 24)
+}
+
 fn lerp(a: Vec3, b: Vec3) -> Vec3 {
     (a + b) * 0.5
 }

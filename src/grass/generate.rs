@@ -168,10 +168,6 @@ pub fn stats_lod(lod: u32) -> usize {
     usize::from(lod == 1)
 }
 
-fn pack_rgba8(c: Vec3) -> u32 {
-    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32;
-    q(c.x) | (q(c.y) << 8) | (q(c.z) << 16) | (255 << 24)
-}
 
 /// Bilinear height and density and the normal at texel position `tp` of `tile`.
 struct Sample {
@@ -474,7 +470,7 @@ impl PlantContext<'_> {
             wind: (0.6 + 0.4 * rand01(hash_u32(h0 ^ 10))) * (1.0 - 0.5 * ty.stiffness),
             hash: h0,
             kind: kind | (job.lod << 8),
-            color: pack_rgba8(tint),
+            color: crate::grass::blade::pack_rgba8(tint.to_array()),
             fade,
             lean: [0.0; 2],
             sway: 0.0,

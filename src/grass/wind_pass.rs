@@ -5,6 +5,8 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec2;
 
 use crate::grass::Blade;
+use crate::grass::blade::pack_rgba8;
+use crate::hash::value_noise;
 use crate::wind::WindLookup;
 use crate::wind::field_cpu::wind_at;
 
@@ -47,25 +49,6 @@ fn sway_at(lookup: &WindLookup, sway: &[[f32; 4]], rel: Vec2, kind: u32) -> Vec2
     Vec2::new(s[0], s[1])
 }
 
-fn hash2(x: i32, y: i32) -> u32 {
-    let mut h = (x as u32).wrapping_mul(0x8da6_b343) ^ (y as u32).wrapping_mul(0xd816_3841);
-    h ^= h >> 16;
-    h = h.wrapping_mul(0x7feb_352d);
-    h ^= h >> 15;
-    h
-}
-
-pub(crate) fn value_noise(p: Vec2) -> f32 {
-    let fl = p.floor();
-    let (ix, iy) = (fl.x as i32, fl.y as i32);
-    let f = p - fl;
-    let u = f * f * (Vec2::splat(3.0) - 2.0 * f);
-    let r = |x: i32, y: i32| (hash2(x, y) >> 8) as f32 / 16_777_216.0;
-    let (a, b, c, d) = (r(ix, iy), r(ix + 1, iy), r(ix, iy + 1), r(ix + 1, iy + 1));
-    let ab = a + (b - a) * u.x;
-    let cd = c + (d - c) * u.x;
-    ab + (cd - ab) * u.y
-}
 
 fn unpack_rgb(c: u32) -> [f32; 3] {
     [
@@ -75,10 +58,6 @@ fn unpack_rgb(c: u32) -> [f32; 3] {
     ]
 }
 
-fn pack_rgba8(c: [f32; 3]) -> u32 {
-    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u32;
-    q(c[0]) | (q(c[1]) << 8) | (q(c[2]) << 16) | (255 << 24)
-}
 
 /// Applies the wind to `blades` (one slot's drawn blades), as the shader does.
 pub fn apply_wind(

@@ -77,24 +77,9 @@ impl DeriveParams {
     }
 }
 
-/// The integer hash used by derivation (a 32-bit avalanche hash; identical in WGSL).
-pub fn hash_u32(mut x: u32) -> u32 {
-    x ^= x >> 16;
-    x = x.wrapping_mul(0x7feb_352d);
-    x ^= x >> 15;
-    x = x.wrapping_mul(0x846c_a68b);
-    x ^= x >> 16;
-    x
-}
-
-pub(crate) fn hash4(a: u32, b: u32, c: u32, d: u32) -> u32 {
-    hash_u32(a ^ hash_u32(b ^ hash_u32(c ^ hash_u32(d))))
-}
-
-/// A hash mapped to [-1, 1) exactly (24 bits).
-pub(crate) fn unit(h: u32) -> f32 {
-    (h >> 8) as f32 * (1.0 / 16_777_216.0) * 2.0 - 1.0
-}
+/// The integer hash used by derivation, as every stage hashes (`crate::hash`).
+pub use crate::hash::hash_u32;
+pub(crate) use crate::hash::{hash4, unit};
 
 /// Weights of the high-pass filter applied to hashed values along each axis.
 const HIGH_PASS: [f32; 3] = [-0.5, 1.0, -0.5];

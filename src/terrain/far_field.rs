@@ -85,8 +85,8 @@ pub fn clump_tint(world: DVec2, clump_m: f32, seed: u32) -> Vec3 {
 /// The blades' colour variation at `world_mod` (the world position modulo 4096 m, as the wind
 /// pass applies it to each blade's root).
 pub fn color_variation(world_mod: Vec2) -> Vec3 {
-    let v = crate::grass::wind_pass::value_noise(world_mod / 6.0) * 0.6
-        + crate::grass::wind_pass::value_noise(world_mod / 1.7) * 0.4;
+    let v = crate::hash::value_noise(world_mod / 6.0) * 0.6
+        + crate::hash::value_noise(world_mod / 1.7) * 0.4;
     let (lo, hi) = (Vec3::new(0.78, 0.86, 0.7), Vec3::new(1.15, 1.1, 0.95));
     lo + (hi - lo) * v
 }

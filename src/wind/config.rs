@@ -16,7 +16,7 @@ use glam::{DVec2, DVec3};
 use thiserror::Error;
 
 use crate::camera::sample_path;
-use crate::stream::hash_u32;
+use crate::hash::hash_u32;
 use crate::world::{
     CameraPath, MAX_WIND_SOURCES, Manifest, SourcePlacement, WindDefaults, WindKey, WindSource,
 };

@@ -11,15 +11,10 @@ use super::config::{
     CellState, FLAG_STAMP, FLAG_TRAIL, FieldDriver, FieldParams, KIND_DIRECTIONAL, KIND_OMNI,
     OCTAVES, SOURCE_CORE, WindConfig, WindLookup, ambient_params,
 };
-use crate::stream::hash_u32;
+use crate::hash::{hash_u32, unit};
 
 /// Salt that turns a lattice hash into the cross-wind channel's.
 const CROSS_SALT: u32 = 0x68e3_1da4;
-
-/// A hash mapped to [-1, 1) exactly (24 bits).
-fn unit(h: u32) -> f32 {
-    (h >> 8) as f32 * (1.0 / 16_777_216.0) * 2.0 - 1.0
-}
 
 /// Lattice values (gust, cross) of `octave` at lattice point (ix, iy), the lattice repeating
 /// every `period` points.
