@@ -9,6 +9,11 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
+use crate::gpu::layout::*;
+use crate::gpu::pipeline::{
+    array_view, buffer as gpu_buffer, compute_pipeline, compute_pipeline_auto, depth_view,
+    render_pipeline,
+};
 use crate::gpu::{GpuTimer, Targets};
 use crate::grass::generate::counter;
 use crate::grass::wind_pass::WindPassParams;
@@ -169,6 +174,8 @@ pub struct HiZPyramid {
 }
 
 const LEVEL_STRIDE: u64 = 256;
+/// Bytes of a level's record: where to read and where to write.
+const LEVEL_BYTES: u64 = 24;
 
 impl HiZPyramid {
     /// A pyramid over depth targets of `w` x `h` (a depth format, with `TEXTURE_BINDING`).
@@ -181,12 +188,12 @@ impl HiZPyramid {
             levels.push((offset, lw, lh));
             offset += lw * lh;
         }
-        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("hi-z"),
-            size: u64::from(offset) * 4,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
+        let buffer = gpu_buffer(
+            device,
+            "hi-z",
+            u64::from(offset) * 4,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        );
         // One uniform record per level: where to read and where to write.
         let mut records = vec![0u8; levels.len() * LEVEL_STRIDE as usize];
         for (m, &(off, lw, lh)) in levels.iter().enumerate() {
@@ -194,90 +201,46 @@ impl HiZPyramid {
             let rec = [so, sw, sh, off, lw, lh];
             records[m * LEVEL_STRIDE as usize..][..24].copy_from_slice(bytemuck::cast_slice(&rec));
         }
-        let level_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("hi-z levels"),
-            size: records.len() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let level_buffer = gpu_buffer(
+            device,
+            "hi-z levels",
+            records.len() as u64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
         queue.write_buffer(&level_buffer, 0, &records);
         let module = crate::shaders::module(device, "hiz_build.wgsl");
-        let entry = |binding, visibility_ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: visibility_ty,
-            count: None,
-        };
-        let storage = entry(
-            1,
-            wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: false },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
+        // Each level's record is bound through a dynamic offset.
+        let level = || uniform_buffer().dynamic().min_size(LEVEL_BYTES);
+        let copy_layout = bind_group_layout(
+            device,
+            "hi-z copy",
+            &sequential(
+                wgpu::ShaderStages::COMPUTE,
+                [texture_depth_2d(), storage_buffer(), level()],
+            ),
         );
-        let uniform = entry(
-            2,
-            wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: true,
-                min_binding_size: std::num::NonZeroU64::new(24),
-            },
+        let reduce_layout = bind_group_layout(
+            device,
+            "hi-z reduce",
+            &with_indices(
+                wgpu::ShaderStages::COMPUTE,
+                [(1, storage_buffer()), (2, level())],
+            ),
         );
-        let depth_entry = entry(
-            0,
-            wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Depth,
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-        );
-        let copy_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("hi-z copy"),
-            entries: &[depth_entry, storage, uniform],
-        });
-        let reduce_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("hi-z reduce"),
-            entries: &[storage, uniform],
-        });
-        let pipeline = |entry_point, layout: &wgpu::BindGroupLayout| {
-            let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(entry_point),
-                bind_group_layouts: &[Some(layout)],
-                immediate_size: 0,
-            });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry_point),
-                layout: Some(&pl),
-                module: &module,
-                entry_point: Some(entry_point),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
+        let pipeline = |entry, layout| compute_pipeline(device, entry, &module, entry, &[layout]);
         let (copy, reduce) = (
             pipeline("copy_depth", &copy_layout),
             pipeline("reduce", &reduce_layout),
         );
-        let level_binding = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-            buffer: &level_buffer,
-            offset: 0,
-            size: std::num::NonZeroU64::new(24),
-        });
-        let reduce_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("hi-z reduce"),
-            layout: &reduce_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: level_binding,
-                },
+        let reduce_group = bind_group_with_indices(
+            device,
+            "hi-z reduce",
+            &reduce_layout,
+            [
+                (1, buffer.as_entire_binding()),
+                (2, buffer_prefix(&level_buffer, LEVEL_BYTES)),
             ],
-        });
+        );
         Self {
             buffer,
             copy,
@@ -292,14 +255,12 @@ impl HiZPyramid {
 
     /// A bind group of `layout` (one read-only storage buffer at binding 0) over the pyramid.
     fn read_group(&self, device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("grass hi-z"),
+        bind_group(
+            device,
+            "grass hi-z",
             layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: self.buffer.as_entire_binding(),
-            }],
-        })
+            [self.buffer.as_entire_binding()],
+        )
     }
 
     /// Mip levels.
@@ -334,32 +295,16 @@ impl HiZPyramid {
         timer: &mut GpuTimer,
     ) {
         if self.copy_group.as_ref().is_none_or(|(t, _)| t != depth) {
-            let view = depth.create_view(&wgpu::TextureViewDescriptor {
-                aspect: wgpu::TextureAspect::DepthOnly,
-                ..Default::default()
-            });
-            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("hi-z copy"),
-                layout: &self.copy_layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::TextureView(&view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: self.buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &self.level_buffer,
-                            offset: 0,
-                            size: std::num::NonZeroU64::new(24),
-                        }),
-                    },
+            let group = bind_group(
+                device,
+                "hi-z copy",
+                &self.copy_layout,
+                [
+                    view(&depth_view(depth)),
+                    self.buffer.as_entire_binding(),
+                    buffer_prefix(&self.level_buffer, LEVEL_BYTES),
                 ],
-            });
+            );
             self.copy_group = Some((depth.clone(), group));
         }
         let copy_group = &self.copy_group.as_ref().expect("made above").1;
@@ -535,14 +480,7 @@ impl GrassRenderer {
             tip_colors,
         };
 
-        let buffer = |label, size: u64, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
+        let buffer = |label, size: u64, usage| gpu_buffer(device, label, size, usage);
         use wgpu::BufferUsages as U;
         let params_buffer = buffer(
             "grass params",
@@ -568,182 +506,90 @@ impl GrassRenderer {
         );
 
         let module = crate::shaders::module(device, "grass_generate.wgsl");
-        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let texture = |binding, sample_type, dim| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture {
-                sample_type,
-                view_dimension: dim,
-                multisampled: false,
-            },
-            count: None,
-        };
-        let uniform = |binding, dynamic| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: dynamic,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let unfilterable = wgpu::TextureSampleType::Float { filterable: false };
-        let gen_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("grass generate"),
-            entries: &[
-                uniform(0, false),
-                storage(1, true),
-                uniform(2, true),
-                texture(3, unfilterable, wgpu::TextureViewDimension::D2Array),
-                texture(
-                    4,
-                    wgpu::TextureSampleType::Uint,
-                    wgpu::TextureViewDimension::D2Array,
-                ),
-                storage(6, false),
-                storage(7, false),
-                storage(8, false),
-                storage(9, false),
-                storage(10, false),
-            ],
-        });
-        let hiz_read_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("grass hi-z"),
-            entries: &[storage(0, true)],
-        });
-        let gen_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("grass generate"),
-            bind_group_layouts: &[Some(&gen_layout), Some(&hiz_read_layout)],
-            immediate_size: 0,
-        });
+        let gen_layout = bind_group_layout(
+            device,
+            "grass generate",
+            &with_indices(
+                wgpu::ShaderStages::COMPUTE,
+                [
+                    (0, uniform_buffer()),
+                    (1, storage_buffer_read_only()),
+                    (2, uniform_buffer().dynamic()),
+                    (3, texture_2d_array(UNFILTERABLE_FLOAT)),
+                    (4, texture_2d_array(wgpu::TextureSampleType::Uint)),
+                    (6, storage_buffer()),
+                    (7, storage_buffer()),
+                    (8, storage_buffer()),
+                    (9, storage_buffer()),
+                    (10, storage_buffer()),
+                ],
+            ),
+        );
+        let hiz_read_layout = bind_group_layout(
+            device,
+            "grass hi-z",
+            &sequential(wgpu::ShaderStages::COMPUTE, [storage_buffer_read_only()]),
+        );
         let compute = |entry| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&gen_pl),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
+            compute_pipeline(
+                device,
+                entry,
+                &module,
+                entry,
+                &[&gen_layout, &hiz_read_layout],
+            )
         };
         let (generate, finalize) = (compute("generate"), compute("finalize"));
 
         let draw_module = crate::shaders::module(device, "grass_draw.wgsl");
         let wind_module = crate::shaders::module(device, "grass_wind.wgsl");
-        let wind_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("grass wind"),
-            layout: None,
-            module: &wind_module,
-            entry_point: Some("apply_wind"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let wind_pipeline = compute_pipeline_auto(device, "grass wind", &wind_module, "apply_wind");
         let wind_layout = wind_pipeline.get_bind_group_layout(0);
         let wind_params_buffer = buffer(
             "grass wind params",
             std::mem::size_of::<WindPassParams>() as u64,
             U::UNIFORM | U::COPY_DST,
         );
-        let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("grass draw"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: true },
-                        has_dynamic_offset: true,
-                        min_binding_size: std::num::NonZeroU64::new(
-                            u64::from(capacity) * BLADE_BYTES,
-                        ),
-                    },
-                    count: None,
-                },
-            ],
-        });
-        let draw_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("grass draw"),
-            bind_group_layouts: &[Some(&draw_layout)],
-            immediate_size: 0,
-        });
+        let slot_bytes = u64::from(capacity) * BLADE_BYTES;
+        let draw_layout = bind_group_layout(
+            device,
+            "grass draw",
+            &sequential(
+                wgpu::ShaderStages::VERTEX_FRAGMENT,
+                [
+                    uniform_buffer(),
+                    // A slot of the pool, chosen by a dynamic offset.
+                    storage_buffer_read_only()
+                        .dynamic()
+                        .min_size(slot_bytes)
+                        .visible_in(wgpu::ShaderStages::VERTEX),
+                ],
+            ),
+        );
         let draw_pipeline = |label, segments: f64| {
             let constants = [("SEGMENTS", segments)];
             let fs_constants = [
                 ("SEGMENTS", segments),
                 ("ENCODE_SRGB", targets.encode_srgb()),
             ];
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&draw_pl),
-                vertex: wgpu::VertexState {
-                    module: &draw_module,
-                    entry_point: Some("vs_blade"),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &constants,
-                        ..Default::default()
-                    },
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleStrip,
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: targets.depth_format,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &draw_module,
-                    entry_point: Some("fs_blade"),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &fs_constants,
-                        ..Default::default()
-                    },
-                    targets: &[Some(targets.color_format.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+            render_pipeline(
+                label,
+                &draw_module,
+                ("vs_blade", "fs_blade"),
+                targets.color_format,
+            )
+            .layouts(&[&draw_layout])
+            .constants(&constants, &fs_constants)
+            .triangle_strips()
+            .depth(targets.depth_format, true, wgpu::CompareFunction::Greater)
+            .build(device)
         };
         let segments = |k: usize| f64::from(settings.segments[k].clamp(1, 64));
         let draw_near = draw_pipeline("grass near blades", segments(0));
         let draw_high = draw_pipeline("grass high LOD", segments(1));
         let draw_low = draw_pipeline("grass low LOD", segments(2));
 
-        let array_view = |t: &wgpu::Texture| {
-            t.create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            })
-        };
         let (hv, gv) = (array_view(&atlas.heights), array_view(&atlas.grass));
-        let slot_bytes = u64::from(capacity) * BLADE_BYTES;
         let make_half = |i: usize| {
             let blades = buffer(
                 if i == 0 {
@@ -761,57 +607,45 @@ impl GrassRenderer {
                 U::STORAGE | U::INDIRECT | U::COPY_SRC,
             );
             let wind_dispatch = buffer("grass wind dispatch", 12, U::STORAGE | U::INDIRECT);
-            let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-            let generate = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("grass generate"),
-                layout: &gen_layout,
-                entries: &[
-                    entry(0, params_buffer.as_entire_binding()),
-                    entry(1, jobs.as_entire_binding()),
-                    entry(
-                        2,
-                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &batches,
-                            offset: 0,
-                            size: std::num::NonZeroU64::new(16),
-                        }),
-                    ),
-                    entry(3, wgpu::BindingResource::TextureView(&hv)),
-                    entry(4, wgpu::BindingResource::TextureView(&gv)),
-                    entry(6, blades.as_entire_binding()),
-                    entry(7, counters.as_entire_binding()),
-                    entry(8, stats.as_entire_binding()),
-                    entry(9, args.as_entire_binding()),
-                    entry(10, wind_dispatch.as_entire_binding()),
+            let generate = bind_group_with_indices(
+                device,
+                "grass generate",
+                &gen_layout,
+                [
+                    (0, params_buffer.as_entire_binding()),
+                    (1, jobs.as_entire_binding()),
+                    (2, buffer_prefix(&batches, 16)),
+                    (3, view(&hv)),
+                    (4, view(&gv)),
+                    (6, blades.as_entire_binding()),
+                    (7, counters.as_entire_binding()),
+                    (8, stats.as_entire_binding()),
+                    (9, args.as_entire_binding()),
+                    (10, wind_dispatch.as_entire_binding()),
                 ],
-            });
-            let draw = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("grass draw"),
-                layout: &draw_layout,
-                entries: &[
-                    entry(0, draw_frame_buffer.as_entire_binding()),
-                    entry(
-                        1,
-                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &blades,
-                            offset: 0,
-                            size: std::num::NonZeroU64::new(slot_bytes),
-                        }),
-                    ),
+            );
+            let draw = bind_group(
+                device,
+                "grass draw",
+                &draw_layout,
+                [
+                    draw_frame_buffer.as_entire_binding(),
+                    buffer_prefix(&blades, slot_bytes),
                 ],
-            });
-            let wind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("grass wind"),
-                layout: &wind_layout,
-                entries: &[
-                    entry(0, wind_params_buffer.as_entire_binding()),
-                    entry(1, wind.lookup.as_entire_binding()),
-                    entry(2, wind.cells.as_entire_binding()),
-                    entry(3, wind.sway.as_entire_binding()),
-                    entry(4, blades.as_entire_binding()),
-                    entry(5, args.as_entire_binding()),
+            );
+            let wind_group = bind_group(
+                device,
+                "grass wind",
+                &wind_layout,
+                [
+                    wind_params_buffer.as_entire_binding(),
+                    wind.lookup.as_entire_binding(),
+                    wind.cells.as_entire_binding(),
+                    wind.sway.as_entire_binding(),
+                    blades.as_entire_binding(),
+                    args.as_entire_binding(),
                 ],
-            });
+            );
             Half {
                 blades,
                 counters,

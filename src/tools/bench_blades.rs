@@ -830,40 +830,20 @@ fn floor_pipeline(
     segments: u32,
 ) -> wgpu::RenderPipeline {
     let constants = [("SEGMENTS", f64::from(segments.max(1)))];
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("vertex floor"),
-        layout: None,
-        vertex: wgpu::VertexState {
-            module,
-            entry_point: Some("vs"),
-            compilation_options: wgpu::PipelineCompilationOptions {
-                constants: &constants,
-                ..Default::default()
-            },
-            buffers: &[],
-        },
-        primitive: wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleStrip,
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: crate::terrain::DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Greater),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(crate::terrain::COLOR_FORMAT.into())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    crate::gpu::pipeline::render_pipeline(
+        "vertex floor",
+        module,
+        ("vs", "fs"),
+        crate::terrain::COLOR_FORMAT,
+    )
+    .constants(&constants, &[])
+    .triangle_strips()
+    .depth(
+        crate::terrain::DEPTH_FORMAT,
+        true,
+        wgpu::CompareFunction::Greater,
+    )
+    .build(device)
 }
 
 /// Most floor frames timed in one call.
