@@ -11,6 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
 use crate::gpu::layout::*;
+use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{array_view, buffer as gpu_buffer};
 use crate::gpu::{GpuTimer, Targets};
 use crate::grass::generate::counter;
@@ -667,29 +668,13 @@ impl GrassRenderer {
                 pass.set_bind_group(0, &half.wind, &[]);
                 pass.dispatch_workgroups_indirect(&half.wind_dispatch, 0);
             }
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("grass draw"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: color,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Load,
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Load,
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: timer.render_pass("grass_draw"),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = render_pass(
+                encoder,
+                "grass draw",
+                (color, wgpu::LoadOp::Load),
+                Some((depth, wgpu::LoadOp::Load)),
+                timer.render_pass("grass_draw"),
+            );
             for (k, job) in chunk.iter().enumerate() {
                 pass.set_pipeline(match job.lod {
                     0 => &self.draw_pass.high,

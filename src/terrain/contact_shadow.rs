@@ -11,6 +11,7 @@
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
 use crate::gpu::layout::{view as view_of, *};
+use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{buffer, compute_pipeline, depth_view, render_pipeline};
 
 /// Settings of the contact shadows.
@@ -338,22 +339,13 @@ impl ContactShadowPass {
             pass.set_bind_group(0, bind_group, &[]);
             pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
         }
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("contact shadows apply"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: color,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Load,
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: timer.render_pass("contact_shadows_apply"),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = render_pass(
+            encoder,
+            "contact shadows apply",
+            (color, wgpu::LoadOp::Load),
+            None,
+            timer.render_pass("contact_shadows_apply"),
+        );
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.apply, &[]);
         pass.draw(0..3, 0..1);

@@ -13,6 +13,7 @@ use wgpu::util::DeviceExt;
 
 use crate::camera::Camera;
 use crate::gpu::layout::*;
+use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{array_view, buffer, compute_pipeline, depth_view, render_pipeline};
 use crate::gpu::{GpuTimer, Targets};
 use crate::stream::TileAtlas;
@@ -489,29 +490,16 @@ impl TerrainRenderer {
         timer: &mut GpuTimer,
     ) {
         {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("terrain"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.deferred.gbuffer,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(0.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: timer.render_pass("terrain"),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = render_pass(
+                encoder,
+                "terrain",
+                (
+                    &self.deferred.gbuffer,
+                    wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                ),
+                Some((depth, wgpu::LoadOp::Clear(0.0))),
+                timer.render_pass("terrain"),
+            );
             if tiles > 0 {
                 pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.set_pipeline(&self.gbuffer);
@@ -566,22 +554,13 @@ impl TerrainRenderer {
             pass.set_bind_group(0, bind_group, &[]);
             pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
         }
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("composite"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: color,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: timer.render_pass("composite"),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = render_pass(
+            encoder,
+            "composite",
+            (color, wgpu::LoadOp::Clear(wgpu::Color::BLACK)),
+            None,
+            timer.render_pass("composite"),
+        );
         pass.set_pipeline(&self.composite);
         pass.set_bind_group(0, &self.deferred.composite, &[]);
         pass.draw(0..3, 0..1);
