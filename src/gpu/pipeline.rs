@@ -218,3 +218,28 @@ pub fn depth_view(texture: &wgpu::Texture) -> wgpu::TextureView {
         ..Default::default()
     })
 }
+
+/// A bind group that reads a depth target, made again only when the target's texture changes
+/// (a new frame's target, or a resize): the passes that read the depth keep one each.
+#[derive(Default)]
+pub struct DepthBound(Option<(wgpu::Texture, wgpu::BindGroup)>);
+
+impl DepthBound {
+    /// The bind group for `depth`, made by `make` from a view of its depth when `depth` is not
+    /// the texture of the last one.
+    pub fn get(
+        &mut self,
+        depth: &wgpu::Texture,
+        make: impl FnOnce(&wgpu::TextureView) -> wgpu::BindGroup,
+    ) -> &wgpu::BindGroup {
+        if self.0.as_ref().is_none_or(|(t, _)| t != depth) {
+            self.0 = Some((depth.clone(), make(&depth_view(depth))));
+        }
+        &self.0.as_ref().expect("made above").1
+    }
+
+    /// Forgets the bind group (what it binds besides the depth has changed).
+    pub fn clear(&mut self) {
+        self.0 = None;
+    }
+}

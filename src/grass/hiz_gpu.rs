@@ -4,7 +4,7 @@
 
 use crate::gpu::GpuTimer;
 use crate::gpu::layout::*;
-use crate::gpu::pipeline::{buffer as gpu_buffer, compute_pipeline, depth_view};
+use crate::gpu::pipeline::{DepthBound, buffer as gpu_buffer, compute_pipeline};
 
 /// The Hi-Z pyramid of a depth target, in a storage buffer (levels one after another).
 pub struct HiZPyramid {
@@ -15,7 +15,7 @@ pub struct HiZPyramid {
     copy_layout: wgpu::BindGroupLayout,
     level_buffer: wgpu::Buffer,
     /// The depth texture the copy reads and its bind group (made again when the texture changes).
-    copy_group: Option<(wgpu::Texture, wgpu::BindGroup)>,
+    copy_group: DepthBound,
     reduce_group: wgpu::BindGroup,
     /// (offset in floats, width, height) of each level.
     levels: Vec<(u32, u32, u32)>,
@@ -95,7 +95,7 @@ impl HiZPyramid {
             reduce,
             copy_layout,
             level_buffer,
-            copy_group: None,
+            copy_group: DepthBound::default(),
             reduce_group,
             levels,
         }
@@ -146,20 +146,18 @@ impl HiZPyramid {
         depth: &wgpu::Texture,
         timer: &mut GpuTimer,
     ) {
-        if self.copy_group.as_ref().is_none_or(|(t, _)| t != depth) {
-            let group = bind_group(
+        let copy_group = self.copy_group.get(depth, |depth| {
+            bind_group(
                 device,
                 "hi-z copy",
                 &self.copy_layout,
                 [
-                    view(&depth_view(depth)),
+                    view(depth),
                     self.buffer.as_entire_binding(),
                     buffer_prefix(&self.level_buffer, LEVEL_BYTES),
                 ],
-            );
-            self.copy_group = Some((depth.clone(), group));
-        }
-        let copy_group = &self.copy_group.as_ref().expect("made above").1;
+            )
+        });
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("hi-z"),
             timestamp_writes: timer.compute_pass("hiz"),

@@ -12,7 +12,7 @@ use glam::{Mat4, Vec2, Vec3, Vec4};
 
 use crate::gpu::layout::{view as view_of, *};
 use crate::gpu::pass::render_pass;
-use crate::gpu::pipeline::{buffer, compute_pipeline, depth_view, render_pipeline};
+use crate::gpu::pipeline::{DepthBound, buffer, compute_pipeline, render_pipeline};
 
 /// Settings of the contact shadows.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -147,7 +147,7 @@ pub struct ContactShadowPass {
     params: Params,
     buffer: wgpu::Buffer,
     /// The bind group of the last depth target, made again only when the target changes.
-    bound: Option<(wgpu::Texture, wgpu::BindGroup)>,
+    bound: DepthBound,
 }
 
 /// The factors' texture of a `size` target and the bind group of the pass that applies them.
@@ -271,14 +271,14 @@ impl ContactShadowPass {
             apply,
             params,
             buffer,
-            bound: None,
+            bound: DepthBound::default(),
         }
     }
 
     /// Follows a resize of the targets: the factors' texture at the new size.
     pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
         (self.factors, self.apply) = factor_texture(device, &self.apply_layout, (width, height));
-        self.bound = None;
+        self.bound.clear();
     }
 
     /// The settings.
@@ -314,21 +314,18 @@ impl ContactShadowPass {
         timer: &mut crate::gpu::GpuTimer,
     ) {
         let texture = depth.texture();
-        if self.bound.as_ref().is_none_or(|(t, _)| t != texture) {
-            let depth = depth_view(texture);
-            let group = bind_group(
+        let group = self.bound.get(texture, |depth| {
+            bind_group(
                 device,
                 "contact shadows",
                 &self.compute_layout,
                 [
                     self.buffer.as_entire_binding(),
-                    view_of(&depth),
+                    view_of(depth),
                     view_of(&self.factors),
                 ],
-            );
-            self.bound = Some((texture.clone(), group));
-        }
-        let bind_group = &self.bound.as_ref().expect("bound above").1;
+            )
+        });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("contact shadows"),
@@ -336,7 +333,7 @@ impl ContactShadowPass {
             });
             let size = texture.size();
             pass.set_pipeline(&self.compute);
-            pass.set_bind_group(0, bind_group, &[]);
+            pass.set_bind_group(0, group, &[]);
             pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
         }
         let mut pass = render_pass(

@@ -14,7 +14,7 @@ use wgpu::util::DeviceExt;
 use crate::camera::Camera;
 use crate::gpu::layout::*;
 use crate::gpu::pass::render_pass;
-use crate::gpu::pipeline::{array_view, buffer, compute_pipeline, depth_view, render_pipeline};
+use crate::gpu::pipeline::{DepthBound, array_view, buffer, compute_pipeline, render_pipeline};
 use crate::gpu::{GpuTimer, Targets};
 use crate::stream::TileAtlas;
 use crate::world::{Manifest, Pyramid, Sky, TileId};
@@ -186,7 +186,7 @@ pub struct TerrainRenderer {
     deferred: Deferred,
     /// The shading pass's bind group for the last depth texture, made again only when it
     /// changes (or the targets are resized).
-    shade_bound: Option<(wgpu::Texture, wgpu::BindGroup)>,
+    shade_bound: DepthBound,
     heights_view: wgpu::TextureView,
     grass_view: wgpu::TextureView,
     bind_group: wgpu::BindGroup,
@@ -376,7 +376,7 @@ impl TerrainRenderer {
             composite,
             composite_layout,
             deferred,
-            shade_bound: None,
+            shade_bound: DepthBound::default(),
             heights_view: hv,
             grass_view: gv,
             bind_group,
@@ -477,7 +477,7 @@ impl TerrainRenderer {
     /// Follows a resize of the targets: the internal textures at the new size.
     pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
         self.deferred = Deferred::new(device, &self.composite_layout, (width, height));
-        self.shade_bound = None;
+        self.shade_bound.clear();
     }
 
     /// Records the terrain's G-buffer pass (`terrain`): clears `depth` and writes the terrain's
@@ -521,14 +521,8 @@ impl TerrainRenderer {
         depth: &wgpu::TextureView,
         timer: &mut GpuTimer,
     ) {
-        let depth_texture = depth.texture();
-        if self
-            .shade_bound
-            .as_ref()
-            .is_none_or(|(t, _)| t != depth_texture)
-        {
-            let depth_view = depth_view(depth_texture);
-            let group = bind_group_with_indices(
+        let group = self.shade_bound.get(depth.texture(), |depth| {
+            bind_group_with_indices(
                 device,
                 "terrain shade",
                 &self.shade_layout,
@@ -536,14 +530,12 @@ impl TerrainRenderer {
                     (0, self.frame_buffer.as_entire_binding()),
                     (2, view(&self.heights_view)),
                     (3, view(&self.grass_view)),
-                    (4, view(&depth_view)),
+                    (4, view(depth)),
                     (5, view(&self.deferred.gbuffer)),
                     (6, view(&self.deferred.shaded)),
                 ],
-            );
-            self.shade_bound = Some((depth_texture.clone(), group));
-        }
-        let bind_group = &self.shade_bound.as_ref().expect("bound above").1;
+            )
+        });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("terrain shade"),
@@ -551,7 +543,7 @@ impl TerrainRenderer {
             });
             let size = depth.texture().size();
             pass.set_pipeline(&self.shade);
-            pass.set_bind_group(0, bind_group, &[]);
+            pass.set_bind_group(0, group, &[]);
             pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
         }
         let mut pass = render_pass(
