@@ -4,7 +4,6 @@
 use crate::gpu::Targets;
 use crate::gpu::layout::*;
 use crate::gpu::pipeline::{compute_pipeline, compute_pipeline_auto, render_pipeline};
-use crate::grass::GrassSettings;
 
 /// Generation and culling per tile (`shaders/grass_generate.wgsl`): blades into a pool slot,
 /// then the slot's draw arguments.
@@ -84,12 +83,12 @@ pub(crate) struct DrawPass {
 }
 
 impl DrawPass {
-    /// Pipelines drawing into `targets` slots of `slot_bytes`, with the blade segments of
-    /// `settings`.
+    /// Pipelines drawing into `targets` from slots of `slot_bytes`, with blades of `segments`
+    /// segments near the camera, in the rest of the high ring and in the low ring.
     pub(crate) fn new(
         device: &wgpu::Device,
         targets: &Targets,
-        settings: &GrassSettings,
+        segments: [u32; 3],
         slot_bytes: u64,
     ) -> Self {
         let module = crate::shaders::module(device, "grass_draw.wgsl");
@@ -127,7 +126,7 @@ impl DrawPass {
             .depth(targets.depth_format, true, wgpu::CompareFunction::Greater)
             .build(device)
         };
-        let [near, high, low] = settings.segments;
+        let [near, high, low] = segments;
         Self {
             near: pipeline("grass near blades", near),
             high: pipeline("grass high LOD", high),

@@ -470,7 +470,7 @@ impl GrassRenderer {
         let slot_bytes = u64::from(capacity) * BLADE_BYTES;
         let gen_pass = GeneratePass::new(device);
         let wind_pass = WindPass::new(device);
-        let draw_pass = DrawPass::new(device, targets, &settings, slot_bytes);
+        let draw_pass = DrawPass::new(device, targets, settings.segments, slot_bytes);
         let bindings = PoolBindings {
             gen_pass: &gen_pass,
             wind_layout: &wind_pass.layout(),
