@@ -1,10 +1,15 @@
 //! What every GPU stage shares: the headless GPU context (adapter choice), the description of
-//! the targets a frame draws into, buffer and texture readback, and timestamp timing.
+//! the targets a frame draws into, buffer and texture readback, timestamp timing, and the small
+//! vocabulary every stage's set-up is written in: bind group layouts and bind groups one line a
+//! binding ([`layout`]), pipelines, buffers and views ([`pipeline`]), render passes ([`pass`]).
 //!
 //! The adapter is chosen the way wgpu's own tools choose it, from environment variables:
 //! `WGPU_BACKEND` (e.g. `vulkan`, `gl`), `WGPU_ADAPTER_NAME` (a case-insensitive substring of the
 //! adapter's name, e.g. `llvmpipe` or `nvidia`) and `WGPU_POWER_PREF` (`low`, `high`).
 
+pub mod layout;
+pub mod pass;
+pub mod pipeline;
 mod readback;
 mod timing;
 

@@ -9,6 +9,8 @@
 pub mod blade;
 pub mod generate;
 pub mod hiz;
+pub mod hiz_gpu;
+mod passes;
 pub mod renderer;
 pub mod wind_pass;
 

@@ -1,6 +1,7 @@
-//! The grass stage on the GPU: the Hi-Z pyramid, the bounded instance pool, generation and
-//! culling per tile in compute (`shaders/grass_generate.wgsl`) and one indirect draw per tile
-//! (`shaders/grass_draw.wgsl`).
+//! The grass stage on the GPU: the bounded instance pool, generation and culling per tile in
+//! compute (`shaders/grass_generate.wgsl`), the wind on each blade (`shaders/grass_wind.wgsl`)
+//! and one indirect draw per tile (`shaders/grass_draw.wgsl`), culled against the Hi-Z pyramid
+//! of [`crate::grass::hiz_gpu`].
 //!
 //! The pool has 8 tile slots in two halves of 4, each half with buffers of its own: a batch of 4
 //! tiles is generated into one half and drawn while the next batch is generated into the other.
@@ -9,8 +10,13 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
+use crate::gpu::layout::*;
+use crate::gpu::pass::render_pass;
+use crate::gpu::pipeline::{array_view, buffer as gpu_buffer};
 use crate::gpu::{GpuTimer, Targets};
 use crate::grass::generate::counter;
+pub use crate::grass::hiz_gpu::HiZPyramid;
+use crate::grass::passes::{DrawPass, GeneratePass, WindPass};
 use crate::grass::wind_pass::WindPassParams;
 use crate::grass::{GenerateParams, GenerateStats, GrassTypeGpu, TileJob};
 use crate::lod::Frustum;
@@ -153,232 +159,6 @@ struct Half {
     wind_dispatch: wgpu::Buffer,
 }
 
-/// The Hi-Z pyramid of a depth target, in a storage buffer (levels one after another).
-pub struct HiZPyramid {
-    /// The levels, f32, finest first, rows top first.
-    pub buffer: wgpu::Buffer,
-    copy: wgpu::ComputePipeline,
-    reduce: wgpu::ComputePipeline,
-    copy_layout: wgpu::BindGroupLayout,
-    level_buffer: wgpu::Buffer,
-    /// The depth texture the copy reads and its bind group (made again when the texture changes).
-    copy_group: Option<(wgpu::Texture, wgpu::BindGroup)>,
-    reduce_group: wgpu::BindGroup,
-    /// (offset in floats, width, height) of each level.
-    levels: Vec<(u32, u32, u32)>,
-}
-
-const LEVEL_STRIDE: u64 = 256;
-
-impl HiZPyramid {
-    /// A pyramid over depth targets of `w` x `h` (a depth format, with `TEXTURE_BINDING`).
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, w: u32, h: u32) -> Self {
-        let mips = crate::grass::hiz::mip_count(w, h);
-        let mut levels = Vec::new();
-        let mut offset = 0u32;
-        for m in 0..mips {
-            let (lw, lh) = ((w >> m).max(1), (h >> m).max(1));
-            levels.push((offset, lw, lh));
-            offset += lw * lh;
-        }
-        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("hi-z"),
-            size: u64::from(offset) * 4,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        // One uniform record per level: where to read and where to write.
-        let mut records = vec![0u8; levels.len() * LEVEL_STRIDE as usize];
-        for (m, &(off, lw, lh)) in levels.iter().enumerate() {
-            let (so, sw, sh) = if m == 0 { (0, lw, lh) } else { levels[m - 1] };
-            let rec = [so, sw, sh, off, lw, lh];
-            records[m * LEVEL_STRIDE as usize..][..24].copy_from_slice(bytemuck::cast_slice(&rec));
-        }
-        let level_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("hi-z levels"),
-            size: records.len() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        queue.write_buffer(&level_buffer, 0, &records);
-        let module = crate::shaders::module(device, "hiz_build.wgsl");
-        let entry = |binding, visibility_ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: visibility_ty,
-            count: None,
-        };
-        let storage = entry(
-            1,
-            wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: false },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-        );
-        let uniform = entry(
-            2,
-            wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: true,
-                min_binding_size: std::num::NonZeroU64::new(24),
-            },
-        );
-        let depth_entry = entry(
-            0,
-            wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Depth,
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-        );
-        let copy_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("hi-z copy"),
-            entries: &[depth_entry, storage, uniform],
-        });
-        let reduce_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("hi-z reduce"),
-            entries: &[storage, uniform],
-        });
-        let pipeline = |entry_point, layout: &wgpu::BindGroupLayout| {
-            let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(entry_point),
-                bind_group_layouts: &[Some(layout)],
-                immediate_size: 0,
-            });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry_point),
-                layout: Some(&pl),
-                module: &module,
-                entry_point: Some(entry_point),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
-        let (copy, reduce) = (
-            pipeline("copy_depth", &copy_layout),
-            pipeline("reduce", &reduce_layout),
-        );
-        let level_binding = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-            buffer: &level_buffer,
-            offset: 0,
-            size: std::num::NonZeroU64::new(24),
-        });
-        let reduce_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("hi-z reduce"),
-            layout: &reduce_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: level_binding,
-                },
-            ],
-        });
-        Self {
-            buffer,
-            copy,
-            reduce,
-            copy_layout,
-            level_buffer,
-            copy_group: None,
-            reduce_group,
-            levels,
-        }
-    }
-
-    /// A bind group of `layout` (one read-only storage buffer at binding 0) over the pyramid.
-    fn read_group(&self, device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("grass hi-z"),
-            layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: self.buffer.as_entire_binding(),
-            }],
-        })
-    }
-
-    /// Mip levels.
-    pub fn mips(&self) -> u32 {
-        self.levels.len() as u32
-    }
-
-    /// (offset in floats, width, height) of each level.
-    pub fn levels(&self) -> &[(u32, u32, u32)] {
-        &self.levels
-    }
-
-    /// Reads every level back (for tests and tools; waits for the GPU).
-    pub fn read_back(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> crate::grass::HiZ {
-        let all: Vec<f32> = crate::gpu::read_buffer_pod(device, queue, &self.buffer, ..)
-            .expect("read back the Hi-Z pyramid");
-        let mips = self
-            .levels
-            .iter()
-            .map(|&(o, w, h)| (w, h, all[o as usize..(o + w * h) as usize].to_vec()))
-            .collect();
-        crate::grass::HiZ { mips }
-    }
-
-    /// Records the build of the pyramid from `depth` (of the pyramid's size; its bind group is
-    /// made when the texture differs from the last one's).
-    pub fn record(
-        &mut self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        depth: &wgpu::Texture,
-        timer: &mut GpuTimer,
-    ) {
-        if self.copy_group.as_ref().is_none_or(|(t, _)| t != depth) {
-            let view = depth.create_view(&wgpu::TextureViewDescriptor {
-                aspect: wgpu::TextureAspect::DepthOnly,
-                ..Default::default()
-            });
-            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("hi-z copy"),
-                layout: &self.copy_layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::TextureView(&view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: self.buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &self.level_buffer,
-                            offset: 0,
-                            size: std::num::NonZeroU64::new(24),
-                        }),
-                    },
-                ],
-            });
-            self.copy_group = Some((depth.clone(), group));
-        }
-        let copy_group = &self.copy_group.as_ref().expect("made above").1;
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("hi-z"),
-            timestamp_writes: timer.compute_pass("hiz"),
-        });
-        let (_, w, h) = self.levels[0];
-        pass.set_pipeline(&self.copy);
-        pass.set_bind_group(0, copy_group, &[0]);
-        pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        pass.set_pipeline(&self.reduce);
-        for (m, &(_, w, h)) in self.levels.iter().enumerate().skip(1) {
-            pass.set_bind_group(0, &self.reduce_group, &[(m as u64 * LEVEL_STRIDE) as u32]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        }
-    }
-}
-
 /// The wind buffers the grass draw reads.
 #[derive(Clone, Copy)]
 pub struct WindBindings<'a> {
@@ -394,11 +174,9 @@ pub struct WindBindings<'a> {
 pub struct GrassRenderer {
     settings: GrassSettings,
     capacity: u32,
-    generate: wgpu::ComputePipeline,
-    finalize: wgpu::ComputePipeline,
-    draw_near: wgpu::RenderPipeline,
-    draw_high: wgpu::RenderPipeline,
-    draw_low: wgpu::RenderPipeline,
+    gen_pass: GeneratePass,
+    wind_pass: WindPass,
+    draw_pass: DrawPass,
     params: GenerateParams,
     params_buffer: wgpu::Buffer,
     jobs: wgpu::Buffer,
@@ -406,14 +184,235 @@ pub struct GrassRenderer {
     stats: wgpu::Buffer,
     draw_frame: DrawFrame,
     draw_frame_buffer: wgpu::Buffer,
-    wind_pipeline: wgpu::ComputePipeline,
     wind_params: WindPassParams,
     wind_params_buffer: wgpu::Buffer,
     halves: [Half; 2],
-    hiz_read_layout: wgpu::BindGroupLayout,
     hiz_read_group: wgpu::BindGroup,
     /// The occlusion pyramid (built from the terrain's depth pre-pass).
     pub hiz: HiZPyramid,
+}
+
+/// What a half of the pool binds besides its own buffers.
+struct PoolBindings<'a> {
+    gen_pass: &'a GeneratePass,
+    wind_layout: &'a wgpu::BindGroupLayout,
+    draw_layout: &'a wgpu::BindGroupLayout,
+    params: &'a wgpu::Buffer,
+    jobs: &'a wgpu::Buffer,
+    batches: &'a wgpu::Buffer,
+    stats: &'a wgpu::Buffer,
+    draw_frame: &'a wgpu::Buffer,
+    wind_params: &'a wgpu::Buffer,
+    /// The atlas's heights and grass, as 2D arrays.
+    atlas: (wgpu::TextureView, wgpu::TextureView),
+    wind: WindBindings<'a>,
+}
+
+impl Half {
+    /// Half `label` of a pool of `slot_bytes` slots, with its bind groups.
+    fn new(device: &wgpu::Device, label: &str, slot_bytes: u64, b: &PoolBindings<'_>) -> Self {
+        use wgpu::BufferUsages as U;
+        let buffer = |label, size: u64, usage| gpu_buffer(device, label, size, usage);
+        let blades = buffer(
+            label,
+            slot_bytes * u64::from(BATCH_TILES),
+            U::STORAGE | U::COPY_SRC | U::COPY_DST,
+        );
+        let counters = buffer("grass counters", 16, U::STORAGE | U::COPY_DST);
+        let args = buffer(
+            "grass draw args",
+            64,
+            U::STORAGE | U::INDIRECT | U::COPY_SRC,
+        );
+        let wind_dispatch = buffer("grass wind dispatch", 12, U::STORAGE | U::INDIRECT);
+        let generate = bind_group_with_indices(
+            device,
+            "grass generate",
+            &b.gen_pass.layout,
+            [
+                (0, b.params.as_entire_binding()),
+                (1, b.jobs.as_entire_binding()),
+                (2, buffer_prefix(b.batches, 16)),
+                (3, view(&b.atlas.0)),
+                (4, view(&b.atlas.1)),
+                (6, blades.as_entire_binding()),
+                (7, counters.as_entire_binding()),
+                (8, b.stats.as_entire_binding()),
+                (9, args.as_entire_binding()),
+                (10, wind_dispatch.as_entire_binding()),
+            ],
+        );
+        let draw = bind_group(
+            device,
+            "grass draw",
+            b.draw_layout,
+            [
+                b.draw_frame.as_entire_binding(),
+                buffer_prefix(&blades, slot_bytes),
+            ],
+        );
+        let wind = bind_group(
+            device,
+            "grass wind",
+            b.wind_layout,
+            [
+                b.wind_params.as_entire_binding(),
+                b.wind.lookup.as_entire_binding(),
+                b.wind.cells.as_entire_binding(),
+                b.wind.sway.as_entire_binding(),
+                blades.as_entire_binding(),
+                args.as_entire_binding(),
+            ],
+        );
+        Self {
+            blades,
+            counters,
+            args,
+            generate,
+            draw,
+            wind,
+            wind_dispatch,
+        }
+    }
+}
+
+/// Blades a slot holds: `asked` rounded up to whole 256-byte slots, at most what the device
+/// binds in a half of the pool.
+fn pool_capacity(device: &wgpu::Device, asked: u32) -> u32 {
+    // Slots start at multiples of 256 bytes (the storage offset alignment): 16 blades of
+    // 80 bytes are 1280 bytes.
+    let capacity = asked.max(16).div_ceil(16) * 16;
+    // A half of the pool is bound whole: a world of coarse cells (large grass tiles) can
+    // ask for more than the device binds. Its densest tiles then overflow, clamped and
+    // counted, instead of the pool failing.
+    let limits = device.limits();
+    let bind_limit = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    let most = (bind_limit / (u64::from(BATCH_TILES) * BLADE_BYTES)) as u32 / 16 * 16;
+    if capacity > most {
+        log::warn!(
+            "the grass pool needs {capacity} blades a slot, more than the device binds \
+             ({most}); the densest grass tiles will overflow"
+        );
+    }
+    capacity.min(most).max(16)
+}
+
+/// The Hi-Z levels' table of the generation constants: (offset, width, height) per level.
+fn hiz_levels(hiz: &HiZPyramid) -> [[u32; 4]; 16] {
+    let mut t = [[0u32; 4]; 16];
+    for (dst, &(o, w, h)) in t.iter_mut().zip(hiz.levels()) {
+        *dst = [o, w, h, 0];
+    }
+    t
+}
+
+/// Per grass type of `manifest` (at most 16): its shape for the generation and its base and
+/// tip colours for the draw.
+fn type_tables(
+    manifest: &Manifest,
+    settings: &GrassSettings,
+) -> ([GrassTypeGpu; 16], [[f32; 4]; 16], [[f32; 4]; 16]) {
+    let mut types = [GrassTypeGpu::default(); 16];
+    let mut base_colors = [[0.0; 4]; 16];
+    let mut tip_colors = [[0.0; 4]; 16];
+    for (i, t) in manifest.grass_types.iter().take(16).enumerate() {
+        types[i] = GrassTypeGpu {
+            height: t.height_m,
+            width: t.width_m.map(|w| w * settings.width_scale),
+            // Soft grass follows the slope more; stiff grass grows straighter up.
+            growth_blend: crate::terrain::far_field::growth_blend(t.stiffness),
+            stiffness: t.stiffness,
+            _pad: [0.0; 2],
+        };
+        // Gloss per type in the colours' spare channels (exponent, strength): stiffer,
+        // waxier blades are glossier.
+        let s = t.stiffness.clamp(0.0, 1.0);
+        base_colors[i] = [
+            t.base_color[0],
+            t.base_color[1],
+            t.base_color[2],
+            8.0 + 32.0 * s,
+        ];
+        tip_colors[i] = [
+            t.tip_color[0],
+            t.tip_color[1],
+            t.tip_color[2],
+            0.1 + 0.25 * s,
+        ];
+    }
+    (types, base_colors, tip_colors)
+}
+
+/// The generation constants before the first camera: the grid, rings and grass types of
+/// `settings` and `manifest`, slots of `capacity` blades, the targets' size and `hiz`'s levels.
+fn generate_params(
+    manifest: &Manifest,
+    settings: &GrassSettings,
+    targets: &Targets,
+    hiz: &HiZPyramid,
+    capacity: u32,
+    types: [GrassTypeGpu; 16],
+) -> GenerateParams {
+    let p = &manifest.pyramid;
+    GenerateParams {
+        view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+        planes: [[0.0; 4]; 6],
+        camera: [0.0, 0.5, targets.width as f32, targets.height as f32],
+        grid: [settings.grid(), p.tile_cells, p.border, settings.seed],
+        dims: [
+            settings.spacing_m,
+            settings.tile_m,
+            settings.clump_m,
+            settings.short_m,
+        ],
+        ranges: [
+            settings.high_radius_m - settings.lod_fade_m,
+            settings.high_radius_m,
+            settings.view_distance_m - settings.far_fade_m,
+            settings.view_distance_m,
+        ],
+        infill: {
+            let [half, quarter] = settings.infill_m;
+            let band = |r: f32| [(1.0 - INFILL_FADE) * r, r];
+            let (q, h) = (band(quarter), band(half));
+            [q[0], q[1], h[0], h[1]]
+        },
+        near: [settings.near_m, 0.0, 0.0, 0.0],
+        limits: [
+            hiz.mips(),
+            capacity,
+            manifest.grass_types.len().min(16) as u32,
+            settings.segments[0].clamp(1, 64)
+                | (settings.segments[1].clamp(1, 64) << 8)
+                | (settings.segments[2].clamp(1, 64) << 16),
+        ],
+        hiz_levels: hiz_levels(hiz),
+        types,
+    }
+}
+
+impl DrawFrame {
+    /// The draw's constants before the first camera: the sky's light and the types' colours.
+    fn new(
+        sky: &crate::world::Sky,
+        base_colors: [[f32; 4]; 16],
+        tip_colors: [[f32; 4]; 16],
+    ) -> Self {
+        let c4 = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
+        Self {
+            view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            misc: [sky.fog_distance_m, 0.0, 0.0, 0.0],
+            sun_dir: sun_direction(sky).extend(0.0).to_array(),
+            sun_color: c4(sky.sun_color),
+            sky_color: c4(sky.sky_color),
+            horizon_color: c4(sky.horizon_color),
+            flags: [crate::features::Features::all().bits(), 0, 0, 0],
+            base_colors,
+            tip_colors,
+        }
+    }
 }
 
 impl GrassRenderer {
@@ -432,117 +431,13 @@ impl GrassRenderer {
         capacity: u32,
         wind: WindBindings<'_>,
     ) -> Self {
-        // Slots start at multiples of 256 bytes (the storage offset alignment): 16 blades of
-        // 80 bytes are 1280 bytes.
-        let capacity = capacity.max(16).div_ceil(16) * 16;
-        // A half of the pool is bound whole: a world of coarse cells (large grass tiles) can
-        // ask for more than the device binds. Its densest tiles then overflow, clamped and
-        // counted, instead of the pool failing.
-        let limits = device.limits();
-        let bind_limit = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
-        let most = (bind_limit / (u64::from(BATCH_TILES) * BLADE_BYTES)) as u32 / 16 * 16;
-        if capacity > most {
-            log::warn!(
-                "the grass pool needs {capacity} blades a slot, more than the device binds \
-                 ({most}); the densest grass tiles will overflow"
-            );
-        }
-        let capacity = capacity.min(most).max(16);
+        let capacity = pool_capacity(device, capacity);
         let hiz = HiZPyramid::new(device, queue, targets.width, targets.height);
-        let mut types = [GrassTypeGpu::default(); 16];
-        let mut base_colors = [[0.0; 4]; 16];
-        let mut tip_colors = [[0.0; 4]; 16];
-        for (i, t) in manifest.grass_types.iter().take(16).enumerate() {
-            types[i] = GrassTypeGpu {
-                height: t.height_m,
-                width: t.width_m.map(|w| w * settings.width_scale),
-                // Soft grass follows the slope more; stiff grass grows straighter up.
-                growth_blend: crate::terrain::far_field::growth_blend(t.stiffness),
-                stiffness: t.stiffness,
-                _pad: [0.0; 2],
-            };
-            // Gloss per type in the colours' spare channels (exponent, strength): stiffer,
-            // waxier blades are glossier.
-            let s = t.stiffness.clamp(0.0, 1.0);
-            base_colors[i] = [
-                t.base_color[0],
-                t.base_color[1],
-                t.base_color[2],
-                8.0 + 32.0 * s,
-            ];
-            tip_colors[i] = [
-                t.tip_color[0],
-                t.tip_color[1],
-                t.tip_color[2],
-                0.1 + 0.25 * s,
-            ];
-        }
-        let p = &manifest.pyramid;
-        let params = GenerateParams {
-            view_proj: Mat4::IDENTITY.to_cols_array_2d(),
-            planes: [[0.0; 4]; 6],
-            camera: [0.0, 0.5, targets.width as f32, targets.height as f32],
-            grid: [settings.grid(), p.tile_cells, p.border, settings.seed],
-            dims: [
-                settings.spacing_m,
-                settings.tile_m,
-                settings.clump_m,
-                settings.short_m,
-            ],
-            ranges: [
-                settings.high_radius_m - settings.lod_fade_m,
-                settings.high_radius_m,
-                settings.view_distance_m - settings.far_fade_m,
-                settings.view_distance_m,
-            ],
-            infill: {
-                let [half, quarter] = settings.infill_m;
-                let band = |r: f32| [(1.0 - INFILL_FADE) * r, r];
-                let (q, h) = (band(quarter), band(half));
-                [q[0], q[1], h[0], h[1]]
-            },
-            near: [settings.near_m, 0.0, 0.0, 0.0],
-            limits: [
-                hiz.mips(),
-                capacity,
-                manifest.grass_types.len().min(16) as u32,
-                settings.segments[0].clamp(1, 64)
-                    | (settings.segments[1].clamp(1, 64) << 8)
-                    | (settings.segments[2].clamp(1, 64) << 16),
-            ],
-            hiz_levels: {
-                let mut t = [[0u32; 4]; 16];
-                for (dst, &(o, w, h)) in t.iter_mut().zip(hiz.levels()) {
-                    *dst = [o, w, h, 0];
-                }
-                t
-            },
-            types,
-        };
-        let sky = &manifest.sky;
-        let c4 = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
-        let draw_frame = DrawFrame {
-            view_proj: Mat4::IDENTITY.to_cols_array_2d(),
-            misc: [sky.fog_distance_m, 0.0, 0.0, 0.0],
-            sun_dir: sun_direction(sky).extend(0.0).to_array(),
-            sun_color: c4(sky.sun_color),
-            sky_color: c4(sky.sky_color),
-            horizon_color: c4(sky.horizon_color),
-            flags: [crate::features::Features::all().bits(), 0, 0, 0],
-            base_colors,
-            tip_colors,
-        };
+        let (types, base_colors, tip_colors) = type_tables(manifest, &settings);
+        let params = generate_params(manifest, &settings, targets, &hiz, capacity, types);
+        let draw_frame = DrawFrame::new(&manifest.sky, base_colors, tip_colors);
 
-        let buffer = |label, size: u64, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
+        let buffer = |label, size: u64, usage| gpu_buffer(device, label, size, usage);
         use wgpu::BufferUsages as U;
         let params_buffer = buffer(
             "grass params",
@@ -566,272 +461,38 @@ impl GrassRenderer {
             std::mem::size_of::<DrawFrame>() as u64,
             U::UNIFORM | U::COPY_DST,
         );
-
-        let module = crate::shaders::module(device, "grass_generate.wgsl");
-        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let texture = |binding, sample_type, dim| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture {
-                sample_type,
-                view_dimension: dim,
-                multisampled: false,
-            },
-            count: None,
-        };
-        let uniform = |binding, dynamic| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: dynamic,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let unfilterable = wgpu::TextureSampleType::Float { filterable: false };
-        let gen_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("grass generate"),
-            entries: &[
-                uniform(0, false),
-                storage(1, true),
-                uniform(2, true),
-                texture(3, unfilterable, wgpu::TextureViewDimension::D2Array),
-                texture(
-                    4,
-                    wgpu::TextureSampleType::Uint,
-                    wgpu::TextureViewDimension::D2Array,
-                ),
-                storage(6, false),
-                storage(7, false),
-                storage(8, false),
-                storage(9, false),
-                storage(10, false),
-            ],
-        });
-        let hiz_read_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("grass hi-z"),
-            entries: &[storage(0, true)],
-        });
-        let gen_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("grass generate"),
-            bind_group_layouts: &[Some(&gen_layout), Some(&hiz_read_layout)],
-            immediate_size: 0,
-        });
-        let compute = |entry| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&gen_pl),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
-        let (generate, finalize) = (compute("generate"), compute("finalize"));
-
-        let draw_module = crate::shaders::module(device, "grass_draw.wgsl");
-        let wind_module = crate::shaders::module(device, "grass_wind.wgsl");
-        let wind_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("grass wind"),
-            layout: None,
-            module: &wind_module,
-            entry_point: Some("apply_wind"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let wind_layout = wind_pipeline.get_bind_group_layout(0);
         let wind_params_buffer = buffer(
             "grass wind params",
             std::mem::size_of::<WindPassParams>() as u64,
             U::UNIFORM | U::COPY_DST,
         );
-        let draw_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("grass draw"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: true },
-                        has_dynamic_offset: true,
-                        min_binding_size: std::num::NonZeroU64::new(
-                            u64::from(capacity) * BLADE_BYTES,
-                        ),
-                    },
-                    count: None,
-                },
-            ],
-        });
-        let draw_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("grass draw"),
-            bind_group_layouts: &[Some(&draw_layout)],
-            immediate_size: 0,
-        });
-        let draw_pipeline = |label, segments: f64| {
-            let constants = [("SEGMENTS", segments)];
-            let fs_constants = [
-                ("SEGMENTS", segments),
-                ("ENCODE_SRGB", targets.encode_srgb()),
-            ];
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&draw_pl),
-                vertex: wgpu::VertexState {
-                    module: &draw_module,
-                    entry_point: Some("vs_blade"),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &constants,
-                        ..Default::default()
-                    },
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleStrip,
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: targets.depth_format,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &draw_module,
-                    entry_point: Some("fs_blade"),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants: &fs_constants,
-                        ..Default::default()
-                    },
-                    targets: &[Some(targets.color_format.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
-        let segments = |k: usize| f64::from(settings.segments[k].clamp(1, 64));
-        let draw_near = draw_pipeline("grass near blades", segments(0));
-        let draw_high = draw_pipeline("grass high LOD", segments(1));
-        let draw_low = draw_pipeline("grass low LOD", segments(2));
 
-        let array_view = |t: &wgpu::Texture| {
-            t.create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            })
-        };
-        let (hv, gv) = (array_view(&atlas.heights), array_view(&atlas.grass));
         let slot_bytes = u64::from(capacity) * BLADE_BYTES;
-        let make_half = |i: usize| {
-            let blades = buffer(
-                if i == 0 {
-                    "grass pool half A"
-                } else {
-                    "grass pool half B"
-                },
-                slot_bytes * u64::from(BATCH_TILES),
-                U::STORAGE | U::COPY_SRC | U::COPY_DST,
-            );
-            let counters = buffer("grass counters", 16, U::STORAGE | U::COPY_DST);
-            let args = buffer(
-                "grass draw args",
-                64,
-                U::STORAGE | U::INDIRECT | U::COPY_SRC,
-            );
-            let wind_dispatch = buffer("grass wind dispatch", 12, U::STORAGE | U::INDIRECT);
-            let entry = |binding, resource| wgpu::BindGroupEntry { binding, resource };
-            let generate = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("grass generate"),
-                layout: &gen_layout,
-                entries: &[
-                    entry(0, params_buffer.as_entire_binding()),
-                    entry(1, jobs.as_entire_binding()),
-                    entry(
-                        2,
-                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &batches,
-                            offset: 0,
-                            size: std::num::NonZeroU64::new(16),
-                        }),
-                    ),
-                    entry(3, wgpu::BindingResource::TextureView(&hv)),
-                    entry(4, wgpu::BindingResource::TextureView(&gv)),
-                    entry(6, blades.as_entire_binding()),
-                    entry(7, counters.as_entire_binding()),
-                    entry(8, stats.as_entire_binding()),
-                    entry(9, args.as_entire_binding()),
-                    entry(10, wind_dispatch.as_entire_binding()),
-                ],
-            });
-            let draw = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("grass draw"),
-                layout: &draw_layout,
-                entries: &[
-                    entry(0, draw_frame_buffer.as_entire_binding()),
-                    entry(
-                        1,
-                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: &blades,
-                            offset: 0,
-                            size: std::num::NonZeroU64::new(slot_bytes),
-                        }),
-                    ),
-                ],
-            });
-            let wind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("grass wind"),
-                layout: &wind_layout,
-                entries: &[
-                    entry(0, wind_params_buffer.as_entire_binding()),
-                    entry(1, wind.lookup.as_entire_binding()),
-                    entry(2, wind.cells.as_entire_binding()),
-                    entry(3, wind.sway.as_entire_binding()),
-                    entry(4, blades.as_entire_binding()),
-                    entry(5, args.as_entire_binding()),
-                ],
-            });
-            Half {
-                blades,
-                counters,
-                args,
-                generate,
-                draw,
-                wind: wind_group,
-                wind_dispatch,
-            }
+        let gen_pass = GeneratePass::new(device);
+        let wind_pass = WindPass::new(device);
+        let draw_pass = DrawPass::new(device, targets, settings.segments, slot_bytes);
+        let bindings = PoolBindings {
+            gen_pass: &gen_pass,
+            wind_layout: &wind_pass.layout(),
+            draw_layout: &draw_pass.layout,
+            params: &params_buffer,
+            jobs: &jobs,
+            batches: &batches,
+            stats: &stats,
+            draw_frame: &draw_frame_buffer,
+            wind_params: &wind_params_buffer,
+            atlas: (array_view(&atlas.heights), array_view(&atlas.grass)),
+            wind,
         };
-        let halves = [make_half(0), make_half(1)];
-        let hiz_read_group = hiz.read_group(device, &hiz_read_layout);
+        let halves = ["grass pool half A", "grass pool half B"]
+            .map(|label| Half::new(device, label, slot_bytes, &bindings));
+        let hiz_read_group = hiz.read_group(device, &gen_pass.hiz_layout);
         Self {
             settings,
             capacity,
-            generate,
-            finalize,
-            draw_near,
-            draw_high,
-            draw_low,
+            gen_pass,
+            wind_pass,
+            draw_pass,
             params,
             params_buffer,
             jobs,
@@ -839,14 +500,12 @@ impl GrassRenderer {
             stats,
             draw_frame,
             draw_frame_buffer,
-            wind_pipeline,
             wind_params: WindPassParams {
                 misc: [0.0; 4],
                 flags: [crate::features::Features::all().bits(), capacity, 0, 0],
             },
             wind_params_buffer,
             halves,
-            hiz_read_layout,
             hiz_read_group,
             hiz,
         }
@@ -855,14 +514,11 @@ impl GrassRenderer {
     /// Follows a resize of the targets to `width` x `height`: a new Hi-Z pyramid of that size.
     pub fn resize(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, width: u32, height: u32) {
         self.hiz = HiZPyramid::new(device, queue, width, height);
-        self.hiz_read_group = self.hiz.read_group(device, &self.hiz_read_layout);
+        self.hiz_read_group = self.hiz.read_group(device, &self.gen_pass.hiz_layout);
         self.params.camera[2] = width as f32;
         self.params.camera[3] = height as f32;
         self.params.limits[0] = self.hiz.mips();
-        self.params.hiz_levels = [[0u32; 4]; 16];
-        for (dst, &(o, w, h)) in self.params.hiz_levels.iter_mut().zip(self.hiz.levels()) {
-            *dst = [o, w, h, 0];
-        }
+        self.params.hiz_levels = hiz_levels(&self.hiz);
     }
 
     /// Writes every byte of the pool once, so that its memory is committed up front (a driver
@@ -1003,43 +659,27 @@ impl GrassRenderer {
                 });
                 pass.set_bind_group(0, &half.generate, &[offset]);
                 pass.set_bind_group(1, &self.hiz_read_group, &[]);
-                pass.set_pipeline(&self.generate);
+                pass.set_pipeline(&self.gen_pass.generate);
                 pass.dispatch_workgroups(g.div_ceil(8), g.div_ceil(8), chunk.len() as u32);
-                pass.set_pipeline(&self.finalize);
+                pass.set_pipeline(&self.gen_pass.finalize);
                 pass.dispatch_workgroups(1, 1, 1);
                 // The wind on each generated blade, once per blade.
-                pass.set_pipeline(&self.wind_pipeline);
+                pass.set_pipeline(&self.wind_pass.pipeline);
                 pass.set_bind_group(0, &half.wind, &[]);
                 pass.dispatch_workgroups_indirect(&half.wind_dispatch, 0);
             }
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("grass draw"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: color,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Load,
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Load,
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: timer.render_pass("grass_draw"),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = render_pass(
+                encoder,
+                "grass draw",
+                (color, wgpu::LoadOp::Load),
+                Some((depth, wgpu::LoadOp::Load)),
+                timer.render_pass("grass_draw"),
+            );
             for (k, job) in chunk.iter().enumerate() {
                 pass.set_pipeline(match job.lod {
-                    0 => &self.draw_high,
-                    2 => &self.draw_near,
-                    _ => &self.draw_low,
+                    0 => &self.draw_pass.high,
+                    2 => &self.draw_pass.near,
+                    _ => &self.draw_pass.low,
                 });
                 let slot_offset = (k as u64 * u64::from(self.capacity) * BLADE_BYTES) as u32;
                 pass.set_bind_group(0, &half.draw, &[slot_offset]);

@@ -4,6 +4,8 @@
 use bytemuck::{Pod, Zeroable};
 
 use crate::gpu::GpuTimer;
+use crate::gpu::layout::{bind_group, view};
+use crate::gpu::pipeline::{array_view, buffer, compute_pipeline_auto};
 use crate::stream::{DeriveParams, MAX_LEVELS, TileAtlas};
 use crate::world::{Pyramid, TileId};
 
@@ -91,12 +93,13 @@ impl DeriveStage {
         };
         let staging_heights = staging("derive heights", wgpu::TextureFormat::R32Float);
         let staging_grass = staging("derive grass", wgpu::TextureFormat::Rgba8Uint);
-        let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("derive params"),
-            size: std::mem::size_of::<ParamsGpu>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        use wgpu::BufferUsages as U;
+        let params_buffer = buffer(
+            device,
+            "derive params",
+            std::mem::size_of::<ParamsGpu>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
         queue.write_buffer(
             &params_buffer,
             0,
@@ -110,32 +113,19 @@ impl DeriveStage {
                 detail: [0.0, params.window_cells, 0.0, 0.0],
             }),
         );
-        let jobs = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("derive jobs"),
-            size: u64::from(batch) * std::mem::size_of::<JobGpu>() as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let staging_identity = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("derive identity"),
-            size: u64::from(batch.max(1)) * 16,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let array_view = |t: &wgpu::Texture| {
-            t.create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            })
-        };
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("derive_child"),
-            layout: None,
-            module: &module,
-            entry_point: Some("derive_child"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let jobs = buffer(
+            device,
+            "derive jobs",
+            u64::from(batch) * std::mem::size_of::<JobGpu>() as u64,
+            U::STORAGE | U::COPY_DST,
+        );
+        let staging_identity = buffer(
+            device,
+            "derive identity",
+            u64::from(batch.max(1)) * 16,
+            U::STORAGE | U::COPY_SRC,
+        );
+        let pipeline = compute_pipeline_auto(device, "derive_child", &module, "derive_child");
         let layout = pipeline.get_bind_group_layout(0);
         let views = [
             array_view(&atlas.heights),
@@ -143,44 +133,21 @@ impl DeriveStage {
             array_view(&staging_heights),
             array_view(&staging_grass),
         ];
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("derive"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: jobs.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&views[0]),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&views[1]),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::TextureView(&views[2]),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: wgpu::BindingResource::TextureView(&views[3]),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: atlas.identity.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: staging_identity.as_entire_binding(),
-                },
+        let bind_group = bind_group(
+            device,
+            "derive",
+            &layout,
+            [
+                params_buffer.as_entire_binding(),
+                jobs.as_entire_binding(),
+                view(&views[0]),
+                view(&views[1]),
+                view(&views[2]),
+                view(&views[3]),
+                atlas.identity.as_entire_binding(),
+                staging_identity.as_entire_binding(),
             ],
-        });
+        );
         Self {
             pipeline,
             bind_group,

@@ -10,6 +10,10 @@
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
 
+use crate::gpu::layout::{view as view_of, *};
+use crate::gpu::pass::render_pass;
+use crate::gpu::pipeline::{DepthBound, buffer, compute_pipeline, render_pipeline};
+
 /// Settings of the contact shadows.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ContactShadows {
@@ -143,7 +147,7 @@ pub struct ContactShadowPass {
     params: Params,
     buffer: wgpu::Buffer,
     /// The bind group of the last depth target, made again only when the target changes.
-    bound: Option<(wgpu::Texture, wgpu::BindGroup)>,
+    bound: DepthBound,
 }
 
 /// The factors' texture of a `size` target and the bind group of the pass that applies them.
@@ -160,14 +164,12 @@ fn factor_texture(
         size,
     );
     let view = texture.create_view(&Default::default());
-    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("contact shadows apply"),
+    let bind_group = bind_group_with_indices(
+        device,
+        "contact shadows apply",
         layout,
-        entries: &[wgpu::BindGroupEntry {
-            binding: 3,
-            resource: wgpu::BindingResource::TextureView(&view),
-        }],
-    });
+        [(3, view_of(&view))],
+    );
     (view, bind_group)
 }
 
@@ -179,73 +181,33 @@ impl ContactShadowPass {
         settings: ContactShadows,
     ) -> Self {
         let module = crate::shaders::module(device, "contact_shadow.wgsl");
-        let compute_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("contact shadows"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: FACTOR_FORMAT,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                    count: None,
-                },
-            ],
-        });
-        let compute = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("contact shadows"),
-            layout: Some(
-                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some("contact shadows"),
-                    bind_group_layouts: &[Some(&compute_layout)],
-                    immediate_size: 0,
-                }),
+        let compute_layout = bind_group_layout(
+            device,
+            "contact shadows",
+            &sequential(
+                wgpu::ShaderStages::COMPUTE,
+                [
+                    uniform_buffer(),
+                    texture_depth_2d(),
+                    texture_storage_2d(FACTOR_FORMAT),
+                ],
             ),
-            module: &module,
-            entry_point: Some("cs_contact_shadow"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let apply_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("contact shadows apply"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 3,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                    multisampled: false,
-                },
-                count: None,
-            }],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("contact shadows apply"),
-            bind_group_layouts: &[Some(&apply_layout)],
-            immediate_size: 0,
-        });
+        );
+        let compute = compute_pipeline(
+            device,
+            "contact shadows",
+            &module,
+            "cs_contact_shadow",
+            &[&compute_layout],
+        );
+        let apply_layout = bind_group_layout(
+            device,
+            "contact shadows apply",
+            &with_indices(
+                wgpu::ShaderStages::FRAGMENT,
+                [(3, texture_2d(UNFILTERABLE_FLOAT))],
+            ),
+        );
         // The colour target times the pass's output; its alpha kept.
         let blend = wgpu::BlendState {
             color: wgpu::BlendComponent {
@@ -260,40 +222,26 @@ impl ContactShadowPass {
             },
         };
         let constants = [("ENCODE_SRGB", targets.encode_srgb())];
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("contact shadows apply"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_full"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: Default::default(),
-            depth_stencil: None,
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_contact_shadow"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &constants,
-                    ..Default::default()
-                },
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: targets.color_format,
-                    blend: Some(blend),
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("contact shadows"),
-            size: std::mem::size_of::<Params>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let target = wgpu::ColorTargetState {
+            format: targets.color_format,
+            blend: Some(blend),
+            write_mask: wgpu::ColorWrites::ALL,
+        };
+        let pipeline = render_pipeline(
+            "contact shadows apply",
+            &module,
+            ("vs_full", "fs_contact_shadow"),
+            target,
+        )
+        .layouts(&[&apply_layout])
+        .constants(&[], &constants)
+        .build(device);
+        let buffer = buffer(
+            device,
+            "contact shadows",
+            std::mem::size_of::<Params>() as u64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
         let params = Params {
             view_proj: Mat4::IDENTITY.to_cols_array_2d(),
             inv_view_proj: Mat4::IDENTITY.to_cols_array_2d(),
@@ -323,14 +271,14 @@ impl ContactShadowPass {
             apply,
             params,
             buffer,
-            bound: None,
+            bound: DepthBound::default(),
         }
     }
 
     /// Follows a resize of the targets: the factors' texture at the new size.
     pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
         (self.factors, self.apply) = factor_texture(device, &self.apply_layout, (width, height));
-        self.bound = None;
+        self.bound.clear();
     }
 
     /// The settings.
@@ -366,32 +314,18 @@ impl ContactShadowPass {
         timer: &mut crate::gpu::GpuTimer,
     ) {
         let texture = depth.texture();
-        if self.bound.as_ref().is_none_or(|(t, _)| t != texture) {
-            let view = texture.create_view(&wgpu::TextureViewDescriptor {
-                aspect: wgpu::TextureAspect::DepthOnly,
-                ..Default::default()
-            });
-            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("contact shadows"),
-                layout: &self.compute_layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: self.buffer.as_entire_binding(),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::TextureView(&view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: wgpu::BindingResource::TextureView(&self.factors),
-                    },
+        let group = self.bound.get(texture, |depth| {
+            bind_group(
+                device,
+                "contact shadows",
+                &self.compute_layout,
+                [
+                    self.buffer.as_entire_binding(),
+                    view_of(depth),
+                    view_of(&self.factors),
                 ],
-            });
-            self.bound = Some((texture.clone(), group));
-        }
-        let bind_group = &self.bound.as_ref().expect("bound above").1;
+            )
+        });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("contact shadows"),
@@ -399,25 +333,16 @@ impl ContactShadowPass {
             });
             let size = texture.size();
             pass.set_pipeline(&self.compute);
-            pass.set_bind_group(0, bind_group, &[]);
+            pass.set_bind_group(0, group, &[]);
             pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
         }
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("contact shadows apply"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: color,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Load,
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: timer.render_pass("contact_shadows_apply"),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = render_pass(
+            encoder,
+            "contact shadows apply",
+            (color, wgpu::LoadOp::Load),
+            None,
+            timer.render_pass("contact_shadows_apply"),
+        );
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.apply, &[]);
         pass.draw(0..3, 0..1);

@@ -12,6 +12,9 @@ use glam::{DVec2, Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
 use crate::camera::Camera;
+use crate::gpu::layout::*;
+use crate::gpu::pass::render_pass;
+use crate::gpu::pipeline::{DepthBound, array_view, buffer, compute_pipeline, render_pipeline};
 use crate::gpu::{GpuTimer, Targets};
 use crate::stream::TileAtlas;
 use crate::world::{Manifest, Pyramid, Sky, TileId};
@@ -164,14 +167,7 @@ impl Deferred {
             size,
         );
         let shaded = shaded.create_view(&Default::default());
-        let composite = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("composite"),
-            layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::TextureView(&shaded),
-            }],
-        });
+        let composite = bind_group(device, "composite", layout, [view(&shaded)]);
         Self {
             gbuffer: gbuffer.create_view(&Default::default()),
             shaded,
@@ -190,7 +186,7 @@ pub struct TerrainRenderer {
     deferred: Deferred,
     /// The shading pass's bind group for the last depth texture, made again only when it
     /// changes (or the targets are resized).
-    shade_bound: Option<(wgpu::Texture, wgpu::BindGroup)>,
+    shade_bound: DepthBound,
     heights_view: wgpu::TextureView,
     grass_view: wgpu::TextureView,
     bind_group: wgpu::BindGroup,
@@ -216,255 +212,111 @@ impl TerrainRenderer {
         mesh_step: u32,
     ) -> Self {
         let module = crate::shaders::module(device, "terrain.wgsl");
-        let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("terrain frame"),
-            size: std::mem::size_of::<FrameUniforms>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let tile_buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("terrain tiles"),
-            size: u64::from(max_tiles) * std::mem::size_of::<TileDraw>() as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        use wgpu::BufferUsages as U;
+        let frame_buffer = buffer(
+            device,
+            "terrain frame",
+            std::mem::size_of::<FrameUniforms>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
+        let tile_buffer = buffer(
+            device,
+            "terrain tiles",
+            u64::from(max_tiles) * std::mem::size_of::<TileDraw>() as u64,
+            U::STORAGE | U::COPY_DST,
+        );
         let n = manifest.pyramid.tile_cells / mesh_step.clamp(1, manifest.pyramid.tile_cells);
         let indices = grid_indices(n + 3);
         let index_buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("terrain grid indices"),
             contents: bytemuck::cast_slice(&indices),
-            usage: wgpu::BufferUsages::INDEX,
+            usage: U::INDEX,
         });
 
-        let tex_entry = |binding, sample_type| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type,
-                view_dimension: wgpu::TextureViewDimension::D2Array,
-                multisampled: false,
-            },
-            count: None,
-        };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("terrain"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::VERTEX,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: true },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                tex_entry(2, wgpu::TextureSampleType::Float { filterable: false }),
-                tex_entry(3, wgpu::TextureSampleType::Uint),
+        let layout = bind_group_layout(
+            device,
+            "terrain",
+            &sequential(
+                wgpu::ShaderStages::VERTEX_FRAGMENT,
+                [
+                    uniform_buffer(),
+                    storage_buffer_read_only().visible_in(wgpu::ShaderStages::VERTEX),
+                    texture_2d_array(UNFILTERABLE_FLOAT),
+                    texture_2d_array(wgpu::TextureSampleType::Uint),
+                ],
+            ),
+        );
+        let (hv, gv) = (array_view(&atlas.heights), array_view(&atlas.grass));
+        let bind_group = bind_group(
+            device,
+            "terrain",
+            &layout,
+            [
+                frame_buffer.as_entire_binding(),
+                tile_buffer.as_entire_binding(),
+                view(&hv),
+                view(&gv),
             ],
-        });
-        let view = |t: &wgpu::Texture| {
-            t.create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2Array),
-                ..Default::default()
-            })
-        };
-        let (hv, gv) = (view(&atlas.heights), view(&atlas.grass));
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("terrain"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: frame_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: tile_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&hv),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&gv),
-                },
-            ],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("terrain"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let gbuffer_targets = [Some(wgpu::ColorTargetState::from(GBUFFER_FORMAT))];
-        let pipeline = |label, fs: Option<&str>, depth_write, compare| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_terrain"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    cull_mode: Some(wgpu::Face::Back),
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: targets.depth_format,
-                    depth_write_enabled: Some(depth_write),
-                    depth_compare: Some(compare),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: fs.map(|fs| wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some(fs),
-                    compilation_options: Default::default(),
-                    targets: &gbuffer_targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
+        );
         // The G-buffer and the depth in one pass (the depth then feeds the Hi-Z pyramid): a
         // G-buffer texel costs little more than a depth-only one, a second pass of the mesh
         // more.
-        let gbuffer = pipeline(
+        let gbuffer = render_pipeline(
             "terrain",
-            Some("fs_gbuffer"),
-            true,
-            wgpu::CompareFunction::Greater,
-        );
+            &module,
+            ("vs_terrain", "fs_gbuffer"),
+            GBUFFER_FORMAT,
+        )
+        .layouts(&[&layout])
+        .cull_back()
+        .depth(targets.depth_format, true, wgpu::CompareFunction::Greater)
+        .build(device);
 
         // The shading: a compute pass over the target (terrain and sky).
         let shade_module = crate::shaders::module(device, "terrain_shade.wgsl");
-        let compute_tex = |binding, sample_type, view_dimension| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture {
-                sample_type,
-                view_dimension,
-                multisampled: false,
-            },
-            count: None,
-        };
-        let float = wgpu::TextureSampleType::Float { filterable: false };
-        let shade_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("terrain shade"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                compute_tex(2, float, wgpu::TextureViewDimension::D2Array),
-                compute_tex(
-                    3,
-                    wgpu::TextureSampleType::Uint,
-                    wgpu::TextureViewDimension::D2Array,
-                ),
-                compute_tex(
-                    4,
-                    wgpu::TextureSampleType::Depth,
-                    wgpu::TextureViewDimension::D2,
-                ),
-                compute_tex(
-                    5,
-                    wgpu::TextureSampleType::Uint,
-                    wgpu::TextureViewDimension::D2,
-                ),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 6,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: SHADED_FORMAT,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                    count: None,
-                },
-            ],
-        });
-        let shade = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("terrain shade"),
-            layout: Some(
-                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some("terrain shade"),
-                    bind_group_layouts: &[Some(&shade_layout)],
-                    immediate_size: 0,
-                }),
+        let shade_layout = bind_group_layout(
+            device,
+            "terrain shade",
+            &with_indices(
+                wgpu::ShaderStages::COMPUTE,
+                [
+                    (0, uniform_buffer()),
+                    (2, texture_2d_array(UNFILTERABLE_FLOAT)),
+                    (3, texture_2d_array(wgpu::TextureSampleType::Uint)),
+                    (4, texture_depth_2d()),
+                    (5, texture_2d(wgpu::TextureSampleType::Uint)),
+                    (6, texture_storage_2d(SHADED_FORMAT)),
+                ],
             ),
-            module: &shade_module,
-            entry_point: Some("cs_shade"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        );
+        let shade = compute_pipeline(
+            device,
+            "terrain shade",
+            &shade_module,
+            "cs_shade",
+            &[&shade_layout],
+        );
 
         // The composite: the shaded colour into the caller's target.
         let composite_module = crate::shaders::module(device, "composite.wgsl");
-        let composite_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("composite"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: float,
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                    multisampled: false,
-                },
-                count: None,
-            }],
-        });
-        let fs_constants = [("ENCODE_SRGB", targets.encode_srgb())];
-        let composite = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("composite"),
-            layout: Some(
-                &device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some("composite"),
-                    bind_group_layouts: &[Some(&composite_layout)],
-                    immediate_size: 0,
-                }),
+        let composite_layout = bind_group_layout(
+            device,
+            "composite",
+            &sequential(
+                wgpu::ShaderStages::FRAGMENT,
+                [texture_2d(UNFILTERABLE_FLOAT)],
             ),
-            vertex: wgpu::VertexState {
-                module: &composite_module,
-                entry_point: Some("vs_full"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: Default::default(),
-            depth_stencil: None,
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &composite_module,
-                entry_point: Some("fs_composite"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &fs_constants,
-                    ..Default::default()
-                },
-                targets: &[Some(wgpu::ColorTargetState::from(targets.color_format))],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        );
+        let fs_constants = [("ENCODE_SRGB", targets.encode_srgb())];
+        let composite = render_pipeline(
+            "composite",
+            &composite_module,
+            ("vs_full", "fs_composite"),
+            targets.color_format,
+        )
+        .layouts(&[&composite_layout])
+        .constants(&[], &fs_constants)
+        .build(device);
         let deferred = Deferred::new(device, &composite_layout, (targets.width, targets.height));
 
         let mut ground_colors = [[0.0; 4]; MAX_GRASS_TYPES];
@@ -524,7 +376,7 @@ impl TerrainRenderer {
             composite,
             composite_layout,
             deferred,
-            shade_bound: None,
+            shade_bound: DepthBound::default(),
             heights_view: hv,
             grass_view: gv,
             bind_group,
@@ -625,7 +477,7 @@ impl TerrainRenderer {
     /// Follows a resize of the targets: the internal textures at the new size.
     pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
         self.deferred = Deferred::new(device, &self.composite_layout, (width, height));
-        self.shade_bound = None;
+        self.shade_bound.clear();
     }
 
     /// Records the terrain's G-buffer pass (`terrain`): clears `depth` and writes the terrain's
@@ -638,29 +490,16 @@ impl TerrainRenderer {
         timer: &mut GpuTimer,
     ) {
         {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("terrain"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.deferred.gbuffer,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(0.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: timer.render_pass("terrain"),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = render_pass(
+                encoder,
+                "terrain",
+                (
+                    &self.deferred.gbuffer,
+                    wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                ),
+                Some((depth, wgpu::LoadOp::Clear(0.0))),
+                timer.render_pass("terrain"),
+            );
             if tiles > 0 {
                 pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.set_pipeline(&self.gbuffer);
@@ -682,38 +521,21 @@ impl TerrainRenderer {
         depth: &wgpu::TextureView,
         timer: &mut GpuTimer,
     ) {
-        let depth_texture = depth.texture();
-        if self
-            .shade_bound
-            .as_ref()
-            .is_none_or(|(t, _)| t != depth_texture)
-        {
-            let texture = |binding, view| wgpu::BindGroupEntry {
-                binding,
-                resource: wgpu::BindingResource::TextureView(view),
-            };
-            let depth_view = depth_texture.create_view(&wgpu::TextureViewDescriptor {
-                aspect: wgpu::TextureAspect::DepthOnly,
-                ..Default::default()
-            });
-            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("terrain shade"),
-                layout: &self.shade_layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: self.frame_buffer.as_entire_binding(),
-                    },
-                    texture(2, &self.heights_view),
-                    texture(3, &self.grass_view),
-                    texture(4, &depth_view),
-                    texture(5, &self.deferred.gbuffer),
-                    texture(6, &self.deferred.shaded),
+        let group = self.shade_bound.get(depth.texture(), |depth| {
+            bind_group_with_indices(
+                device,
+                "terrain shade",
+                &self.shade_layout,
+                [
+                    (0, self.frame_buffer.as_entire_binding()),
+                    (2, view(&self.heights_view)),
+                    (3, view(&self.grass_view)),
+                    (4, view(depth)),
+                    (5, view(&self.deferred.gbuffer)),
+                    (6, view(&self.deferred.shaded)),
                 ],
-            });
-            self.shade_bound = Some((depth_texture.clone(), group));
-        }
-        let bind_group = &self.shade_bound.as_ref().expect("bound above").1;
+            )
+        });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("terrain shade"),
@@ -721,25 +543,16 @@ impl TerrainRenderer {
             });
             let size = depth.texture().size();
             pass.set_pipeline(&self.shade);
-            pass.set_bind_group(0, bind_group, &[]);
+            pass.set_bind_group(0, group, &[]);
             pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
         }
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("composite"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: color,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: timer.render_pass("composite"),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = render_pass(
+            encoder,
+            "composite",
+            (color, wgpu::LoadOp::Clear(wgpu::Color::BLACK)),
+            None,
+            timer.render_pass("composite"),
+        );
         pass.set_pipeline(&self.composite);
         pass.set_bind_group(0, &self.deferred.composite, &[]);
         pass.draw(0..3, 0..1);

@@ -754,35 +754,19 @@ impl FloorPass {
         for f in 0..frames {
             let mut encoder = ctx.device.create_command_encoder(&Default::default());
             {
-                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("vertex floor"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &self.color,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Load,
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &self.depth,
-                        depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Load,
-                            store: wgpu::StoreOp::Store,
-                        }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: self.queries.as_ref().map(|(q, _)| {
-                        wgpu::RenderPassTimestampWrites {
+                let mut pass = crate::gpu::pass::render_pass(
+                    &mut encoder,
+                    "vertex floor",
+                    (&self.color, wgpu::LoadOp::Load),
+                    Some((&self.depth, wgpu::LoadOp::Load)),
+                    self.queries
+                        .as_ref()
+                        .map(|(q, _)| wgpu::RenderPassTimestampWrites {
                             query_set: q,
                             beginning_of_pass_write_index: Some(2 * f),
                             end_of_pass_write_index: Some(2 * f + 1),
-                        }
-                    }),
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
+                        }),
+                );
                 vertices = 0;
                 for (l, pipeline) in self.pipelines.iter().enumerate() {
                     let (strip, instances) = (0..2 * self.segments[l] + 1, 0..drawn[l]);
@@ -830,40 +814,20 @@ fn floor_pipeline(
     segments: u32,
 ) -> wgpu::RenderPipeline {
     let constants = [("SEGMENTS", f64::from(segments.max(1)))];
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("vertex floor"),
-        layout: None,
-        vertex: wgpu::VertexState {
-            module,
-            entry_point: Some("vs"),
-            compilation_options: wgpu::PipelineCompilationOptions {
-                constants: &constants,
-                ..Default::default()
-            },
-            buffers: &[],
-        },
-        primitive: wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleStrip,
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: crate::terrain::DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Greater),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(crate::terrain::COLOR_FORMAT.into())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    crate::gpu::pipeline::render_pipeline(
+        "vertex floor",
+        module,
+        ("vs", "fs"),
+        crate::terrain::COLOR_FORMAT,
+    )
+    .constants(&constants, &[])
+    .triangle_strips()
+    .depth(
+        crate::terrain::DEPTH_FORMAT,
+        true,
+        wgpu::CompareFunction::Greater,
+    )
+    .build(device)
 }
 
 /// Most floor frames timed in one call.

@@ -58,6 +58,8 @@ use glam::{DVec2, DVec3};
 
 use super::config::{CellState, FieldDriver, FieldParams, WindConfig, WindLookup};
 use crate::gpu::GpuTimer;
+use crate::gpu::layout::bind_group;
+use crate::gpu::pipeline::compute_pipeline_auto;
 
 /// The wind field's pipeline and buffers.
 pub struct WindField {
@@ -121,32 +123,17 @@ impl WindField {
             0,
             bytemuck::cast_slice(&vec![CellState::EMPTY; count]),
         );
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("update_wind"),
-            layout: None,
-            module: &module,
-            entry_point: Some("update_wind"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("wind"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: state.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: cells.as_entire_binding(),
-                },
+        let pipeline = compute_pipeline_auto(device, "update_wind", &module, "update_wind");
+        let bind_group = bind_group(
+            device,
+            "wind",
+            &pipeline.get_bind_group_layout(0),
+            [
+                params_buffer.as_entire_binding(),
+                state.as_entire_binding(),
+                cells.as_entire_binding(),
             ],
-        });
+        );
         Self {
             driver: FieldDriver::new(config),
             pipeline,

@@ -11,6 +11,8 @@ use bytemuck::{Pod, Zeroable};
 use super::config::WindLookup;
 use super::sway::{RENDERER_INTEGRATOR, SwaySpring};
 use crate::gpu::GpuTimer;
+use crate::gpu::layout::bind_group;
+use crate::gpu::pipeline::{buffer, compute_pipeline_auto};
 
 /// Grass types the sway keeps state for.
 pub const SWAY_TYPES: usize = 4;
@@ -156,14 +158,7 @@ impl SwayField {
         wind_cells: &wgpu::Buffer,
     ) -> Self {
         let cells = u64::from(n) * u64::from(n);
-        let buffer = |label, size, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
+        let buffer = |label, size, usage| buffer(device, label, size, usage);
         use wgpu::BufferUsages as U;
         let params_buffer = buffer(
             "sway params",
@@ -183,36 +178,18 @@ impl SwayField {
             U::STORAGE | U::COPY_SRC | U::COPY_DST,
         );
         let module = crate::shaders::module(device, "grass_sway.wgsl");
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("grass sway"),
-            layout: None,
-            module: &module,
-            entry_point: Some("update_sway"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("grass sway"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wind_cells.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: sway.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: owners.as_entire_binding(),
-                },
+        let pipeline = compute_pipeline_auto(device, "grass sway", &module, "update_sway");
+        let bind_group = bind_group(
+            device,
+            "grass sway",
+            &pipeline.get_bind_group_layout(0),
+            [
+                params_buffer.as_entire_binding(),
+                wind_cells.as_entire_binding(),
+                sway.as_entire_binding(),
+                owners.as_entire_binding(),
             ],
-        });
+        );
         Self {
             config,
             pipeline,

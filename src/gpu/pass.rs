@@ -1,0 +1,36 @@
+//! Render passes over one colour target and at most one depth target, each loaded or cleared
+//! as the pass asks and always stored: the only kind of render pass the stages record.
+
+/// A render pass labelled `label` into `color`, and `depth` when given, with their load
+/// operations, timed by `timestamp_writes`.
+pub fn render_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    (color, color_load): (&wgpu::TextureView, wgpu::LoadOp<wgpu::Color>),
+    depth: Option<(&wgpu::TextureView, wgpu::LoadOp<f32>)>,
+    timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
+) -> wgpu::RenderPass<'e> {
+    let store = wgpu::StoreOp::Store;
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: color,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: color_load,
+                store,
+            },
+        })],
+        depth_stencil_attachment: depth.map(|(view, load)| {
+            wgpu::RenderPassDepthStencilAttachment {
+                view,
+                depth_ops: Some(wgpu::Operations { load, store }),
+                stencil_ops: None,
+            }
+        }),
+        timestamp_writes,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}
