@@ -393,7 +393,9 @@ fn a_flight_over_a_failing_server_draws_every_frame_without_a_hole() {
     assert!(start.elapsed() < Duration::from_secs(60));
     let s = scene.service().stats();
     assert!(s.faults > 0, "no tile failed: {s:?}");
-    assert_eq!(u64::from(s.faults), s.stream.failed);
+    // Each tile failed now failed at least once; a failed tile is loaded again after its wait
+    // (5 s, longer than the first failures take here), so a tile may have failed more than once.
+    assert!(u64::from(s.faults) <= s.stream.failed, "{s:?}");
 }
 
 #[test]

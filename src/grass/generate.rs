@@ -168,7 +168,6 @@ pub fn stats_lod(lod: u32) -> usize {
     usize::from(lod == 1)
 }
 
-
 /// Bilinear height and density and the normal at texel position `tp` of `tile`.
 struct Sample {
     height: f32,

@@ -49,7 +49,6 @@ fn sway_at(lookup: &WindLookup, sway: &[[f32; 4]], rel: Vec2, kind: u32) -> Vec2
     Vec2::new(s[0], s[1])
 }
 
-
 fn unpack_rgb(c: u32) -> [f32; 3] {
     [
         (c & 255) as f32 / 255.0,
@@ -57,7 +56,6 @@ fn unpack_rgb(c: u32) -> [f32; 3] {
         ((c >> 16) & 255) as f32 / 255.0,
     ]
 }
-
 
 /// Applies the wind to `blades` (one slot's drawn blades), as the shader does.
 pub fn apply_wind(

@@ -422,6 +422,9 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
                 rate: opts.faults,
                 seed: opts.seed,
                 spared: vec!["tiles/L0/".into()],
+                // Enough for every load in flight and a request of the manifest's; the proxy
+                // lives in this process, so its threads count in the memory the soak checks.
+                workers: 2 * opts.service.stream.max_in_flight,
                 ..Default::default()
             },
         )?)
