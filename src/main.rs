@@ -537,67 +537,21 @@ enum EvalCommand {
 
 fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
     use verdant::tools::eval_derive as eval;
-    if !(factor.is_power_of_two() && (2..=64).contains(&factor)) {
-        bail!("--factor must be a power of two from 2 to 64, got {factor}");
+    let mut pb: Option<ProgressBar> = None;
+    let report = eval::run_derive_eval(dem_path, factor, out, &mut |method, done, total| {
+        let pb = pb.get_or_insert_with(|| bar(total, "methods"));
+        pb.set_message(method.to_owned());
+        pb.set_position(done);
+    });
+    if let Some(pb) = pb {
+        pb.finish();
     }
-    let dem = verdant::world::Dem::load(dem_path)?;
-    let side = dem.width.min(dem.height) as usize;
-    let needed = eval_derive_min_side(factor);
-    if side < needed {
-        let fits = (1..=6)
-            .map(|k| 1usize << k)
-            .filter(|&f| eval_derive_min_side(f) <= side)
-            .max();
-        bail!(
-            "{}: {}x{} samples is too small for --factor {factor}: the comparison leaves out \
-             {} samples at each edge and needs at least {needed} samples a side ({})",
-            dem_path.display(),
-            dem.width,
-            dem.height,
-            2 * factor,
-            match fits {
-                Some(f) => format!("use --factor {f} or less"),
-                None => "no factor fits this DEM".to_owned(),
-            }
-        );
-    }
-    let truth = eval::dem_grid(&dem);
-    let methods = eval::methods();
-    let pb = bar(methods.len() as u64 + 2, "methods");
-    let mut results = Vec::new();
-    for m in methods {
-        pb.set_message(m.name());
-        results.push(eval::evaluate(&truth, factor, m, 5));
-        pb.inc(1);
-    }
-    pb.set_message("fitted kernel");
-    results.push(eval::evaluate_kernel(&truth, factor, 5));
-    pb.inc(1);
-    pb.set_message(eval::RUNTIME_METHOD);
-    results.push(eval::evaluate_calibrated(&truth, factor, 5));
-    pb.inc(1);
-    pb.finish();
-    if let Some(r) = results.iter().find(|r| {
-        ![r.rmse_m, r.max_m, r.slope_rmse_deg, r.slope_bias_deg]
-            .iter()
-            .all(|v| v.is_finite())
-    }) {
-        bail!(
-            "{}: method {} gave no finite error at --factor {factor}; nothing written",
-            dem_path.display(),
-            r.method
-        );
-    }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let name = dem_path
-        .file_stem()
-        .map_or("DEM".into(), |s| s.to_string_lossy().into_owned());
-    eval::write_results(&results, &name, out)?;
+    let report = report?;
     println!(
         "{:<22} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11}  parameters",
         "method", "RMSE m", "max m", "slope deg", "bias deg", "rough", "ms/tile"
     );
-    for r in &results {
+    for r in &report.results {
         println!(
             "{:<22} {:>9.3} {:>9.2} {:>10.3} {:>10.3} {:>9.3} {:>11.4}  {}",
             r.method,
@@ -610,19 +564,17 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
             r.parameters()
         );
     }
-    if let Some(fit) = results.last().and_then(|r| r.fit.as_ref()) {
+    if let Some(fit) = report.calibration() {
         println!("calibration from the coarse grid: {}", fit.note);
     }
-    let front = eval::joint_front(&results);
-    let names: Vec<String> = front.iter().map(|&i| results[i].method.clone()).collect();
-    let chosen = eval::RUNTIME_METHOD;
     println!(
         "on the joint Pareto front (time, height, slope, flattening, roughness): {}",
-        names.join(", ")
+        report.front.join(", ")
     );
     println!(
-        "runtime method: {chosen} ({} the joint front); wrote derive.csv and charts to {}",
-        if names.iter().any(|n| n == chosen) {
+        "runtime method: {} ({} the joint front); wrote derive.csv and charts to {}",
+        eval::RUNTIME_METHOD,
+        if report.runtime_on_front() {
             "on"
         } else {
             "NOT on"
@@ -632,16 +584,10 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Samples a side a DEM needs for `eval derive --factor factor`: the comparison leaves out
-/// `2 * factor` samples at each edge and keeps at least 8 a side between them.
-fn eval_derive_min_side(factor: usize) -> usize {
-    4 * factor + 8
-}
-
 fn eval_sway(out: &Path) -> Result<()> {
     use verdant::tools::eval_sway as sway;
     use verdant::wind::sway::{Integrator, Preset, RENDERER_INTEGRATOR};
-    let results = sway::run_sway_eval(out)?;
+    let report = sway::run_sway_eval(out)?;
     for preset in Preset::ALL {
         let spring = preset.spring();
         println!(
@@ -661,7 +607,7 @@ fn eval_sway(out: &Path) -> Result<()> {
         "{:<7} {:<14} {:>7} {:>11} {:>11} {:>8}  stable",
         "preset", "integrator", "dt", "RMS rad", "max rad", "ns/step"
     );
-    for r in &results {
+    for r in &report.results {
         println!(
             "{:<7} {:<14} {:>7} {:>11.3e} {:>11.3e} {:>8.1}  {}",
             r.preset,
@@ -676,8 +622,7 @@ fn eval_sway(out: &Path) -> Result<()> {
             }
         );
     }
-    let stable = sway::stable_everywhere(&results);
-    let names: Vec<&str> = stable.iter().map(Integrator::name).collect();
+    let names: Vec<&str> = report.stable.iter().map(Integrator::name).collect();
     println!(
         "stable at every step and at the 0.5 s hitch, both presets: {}",
         if names.is_empty() {
@@ -689,7 +634,7 @@ fn eval_sway(out: &Path) -> Result<()> {
     println!(
         "renderer integrator: {} ({}); wrote sway.csv and charts to {}",
         RENDERER_INTEGRATOR.name(),
-        if stable.contains(&RENDERER_INTEGRATOR) {
+        if report.renderer_bounded() {
             "bounded in every run above, and exact for wind held over a frame"
         } else {
             "NOT bounded in every run above"

@@ -309,7 +309,7 @@ pub fn dt_label(dt: f64) -> String {
 /// - `sway_stability.png`: largest `|x|` against the time step, one line per integrator, for the
 ///   stiff preset, with the blow-up threshold and the theoretical limits of the two Euler
 ///   steps.
-pub fn run_sway_eval(out: &Path) -> anyhow::Result<Vec<SwayResult>> {
+pub fn run_sway_eval(out: &Path) -> anyhow::Result<SwayEvalReport> {
     let out_dir = crate::tools::fly::OutDir::create_for(out, "eval sway")?;
     let results = evaluate_all();
     write_csv(&results, &out.join("sway.csv"))?;
@@ -328,7 +328,23 @@ pub fn run_sway_eval(out: &Path) -> anyhow::Result<Vec<SwayResult>> {
         650,
     )?;
     out_dir.keep();
-    Ok(results)
+    let stable = stable_everywhere(&results);
+    Ok(SwayEvalReport { results, stable })
+}
+
+/// What [`run_sway_eval`] measured.
+pub struct SwayEvalReport {
+    /// One result per preset, integrator and time step ([`evaluate_all`]).
+    pub results: Vec<SwayResult>,
+    /// The integrators that stayed bounded in every run ([`stable_everywhere`]).
+    pub stable: Vec<Integrator>,
+}
+
+impl SwayEvalReport {
+    /// Whether the renderer's integrator ([`RENDERER_INTEGRATOR`]) stayed bounded in every run.
+    pub fn renderer_bounded(&self) -> bool {
+        self.stable.contains(&RENDERER_INTEGRATOR)
+    }
 }
 
 fn write_csv(results: &[SwayResult], path: &Path) -> anyhow::Result<()> {
