@@ -586,7 +586,7 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
 
 fn eval_sway(out: &Path) -> Result<()> {
     use verdant::tools::eval_sway as sway;
-    use verdant::wind::sway::{Integrator, Preset, RENDERER_INTEGRATOR};
+    use verdant::tools::sway_integrators::{EulerLimits, Integrator, Preset, RENDERER_INTEGRATOR};
     let report = sway::run_sway_eval(out)?;
     for preset in Preset::ALL {
         let spring = preset.spring();

@@ -8,7 +8,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::tools::metrics::{Chart, ChartPoint, LineChart, Series, Summary};
-use crate::wind::sway::*;
+use crate::tools::sway_integrators::{EulerLimits, Integrator, Preset, RENDERER_INTEGRATOR};
+use crate::wind::sway::{SwaySpring, SwayState, exact_step};
 
 /// Simulated time of each run of the eval, seconds.
 pub const EVAL_SECONDS: f64 = 20.0;
