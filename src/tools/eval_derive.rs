@@ -474,6 +474,9 @@ pub fn joint_front(results: &[MethodResult]) -> Vec<usize> {
     crate::tools::metrics::pareto_front_n(&rows)
 }
 
+/// A chart of [`write_results`]: its file, its y axis, and the measure it plots.
+type ChartSpec = (&'static str, &'static str, fn(&MethodResult) -> f64);
+
 /// Writes `derive.csv` and the charts `derive_height.png` (height RMSE), `derive_slope.png`
 /// (slope RMSE), `derive_flattening.png` (slope bias) and `derive_roughness.png` against time
 /// per tile into `out` (created if needed; locked while they are written, see
@@ -519,7 +522,7 @@ pub fn write_results(
     }
     crate::tools::fly::write_text(&out.join("derive.csv"), &csv)?;
     let factor = results.first().map_or(0, |r| r.factor);
-    let charts: [(&str, &str, fn(&MethodResult) -> f64); 4] = [
+    let charts: [ChartSpec; 4] = [
         ("derive_height.png", "height RMSE (m)", |r| r.rmse_m),
         ("derive_slope.png", "slope RMSE (degrees)", |r| {
             r.slope_rmse_deg
