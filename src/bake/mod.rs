@@ -59,10 +59,10 @@ pub use paint::{MAX_GRASS_SLOPE_DEG, default_grass_types};
 pub use publish::CancelFlag;
 
 use author::{helicopter_path, low_path, meadow_path, overview_path, tour_path, wind_tour_paths};
-use paint::{check_painted_types, grass_peak};
+use paint::check_painted_types;
 use publish::{Staging, check_out, resolve_out};
 use resample::Grid;
-use tiles::write_all_tiles;
+use tiles::{grass_peak, write_all_tiles};
 
 /// Shared samples beyond each tile edge in baked worlds.
 pub const BAKE_BORDER: u32 = 2;

@@ -7,12 +7,10 @@ use glam::DVec2;
 
 use crate::world::error::WorldError;
 use crate::world::manifest::{GrassType, Manifest};
-use crate::world::tile::TileId;
 
 use super::BakeStage;
 use super::publish::CancelFlag;
 use super::resample::Grid;
-use super::tiles::cut_tile;
 
 /// Steepest slope that carries grass, degrees.
 pub const MAX_GRASS_SLOPE_DEG: f64 = 35.0;
@@ -189,29 +187,6 @@ pub(super) fn fbm(p: DVec2, seed: u64, octaves: u32) -> f64 {
         freq *= 2.03;
     }
     sum / norm
-}
-/// The densest grass of the finest stored level over windows of the finest grass tiles
-/// (`Pyramid::max_level`), for the manifest's `grass_peak`.
-pub(super) fn grass_peak(manifest: &Manifest, painted: &Painted) -> crate::world::GrassPeak {
-    use crate::world::grass_density::{SHORT_GRASS_M, split_shares, tile_peak, window_cells};
-    let pyramid = &manifest.pyramid;
-    let level = pyramid.stored_levels - 1;
-    let window_m = pyramid.tile_size_m(pyramid.max_level());
-    let window = window_cells(pyramid, window_m);
-    let split = split_shares(&manifest.grass_types, SHORT_GRASS_M);
-    let [nx, ny] = pyramid.tiles_at(level);
-    let mut density = 0.0f32;
-    for y in 0..ny {
-        for x in 0..nx {
-            let tile = cut_tile(pyramid, painted, TileId::new(level, x, y));
-            density = density.max(tile_peak(&tile, pyramid, window, &split));
-        }
-    }
-    crate::world::GrassPeak {
-        window_m,
-        short_m: SHORT_GRASS_M,
-        density,
-    }
 }
 /// Refuses painted grass type indices beyond the types the manifest lists: the painter and
 /// [`default_grass_types`] must agree, or the renderer would draw an unknown index as another

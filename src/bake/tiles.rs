@@ -1,11 +1,12 @@
 //! Steps 3 and 4 of the bake: every stored tile cut from the one painted grid, borders
-//! included, and written.
+//! included, and written; and the densest grass over the finest tiles, for the manifest.
 
 use std::path::Path;
 use std::sync::mpsc;
 
 use crate::world::error::WorldError;
 use crate::world::format::{TileData, write_tile};
+use crate::world::manifest::Manifest;
 use crate::world::tile::{Pyramid, TileId};
 
 use super::BakeStage;
@@ -95,4 +96,28 @@ pub(super) fn cut_tile(pyramid: &Pyramid, painted: &Painted, id: TileId) -> Tile
         }
     }
     tile
+}
+
+/// The densest grass of the finest stored level over windows of the finest grass tiles
+/// (`Pyramid::max_level`), for the manifest's `grass_peak`.
+pub(super) fn grass_peak(manifest: &Manifest, painted: &Painted) -> crate::world::GrassPeak {
+    use crate::world::grass_density::{SHORT_GRASS_M, split_shares, tile_peak, window_cells};
+    let pyramid = &manifest.pyramid;
+    let level = pyramid.stored_levels - 1;
+    let window_m = pyramid.tile_size_m(pyramid.max_level());
+    let window = window_cells(pyramid, window_m);
+    let split = split_shares(&manifest.grass_types, SHORT_GRASS_M);
+    let [nx, ny] = pyramid.tiles_at(level);
+    let mut density = 0.0f32;
+    for y in 0..ny {
+        for x in 0..nx {
+            let tile = cut_tile(pyramid, painted, TileId::new(level, x, y));
+            density = density.max(tile_peak(&tile, pyramid, window, &split));
+        }
+    }
+    crate::world::GrassPeak {
+        window_m,
+        short_m: SHORT_GRASS_M,
+        density,
+    }
 }
