@@ -81,139 +81,14 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Render PNG frames along a camera path and write report.json.
-    Fly {
-        /// World folder, the name of a world under ./worlds, or a world's http:// address.
-        #[arg(default_value = "santa-cruz")]
-        world: String,
-        /// Camera path from the world's manifest (default: its first path).
-        #[arg(long)]
-        path: Option<String>,
-        /// Frames to render, spread evenly over the path, 1..=4294967295.
-        #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
-        frames: u32,
-        /// Image size, WIDTHxHEIGHT.
-        #[arg(long, default_value = "640x360", value_parser = parse_size)]
-        size: (u32, u32),
-        /// Output folder.
-        #[arg(long, default_value = "out/fly")]
-        out: PathBuf,
-        /// Write only report.json, no PNG frames.
-        #[arg(long)]
-        no_images: bool,
-        /// Wind scene of the world's manifest (e.g. calm, breeze, storm, helicopter) for the
-        /// whole flight (default: the path's own wind keys if it has any, else breeze).
-        #[arg(long)]
-        wind: Option<String>,
-        /// Features to switch off, comma-separated: wind-sources, interaction,
-        /// detail-bending, translucency, specular, ambient-occlusion, color-variation,
-        /// ground-darkening, far-field, shadows (on top of the manifest's [features] table).
-        #[arg(long, value_delimiter = ',')]
-        disable: Vec<verdant::features::Feature>,
-        /// Grass features to switch on that the manifest's [features] table switches off,
-        /// comma-separated.
-        #[arg(long, value_delimiter = ',')]
-        enable: Vec<verdant::features::Feature>,
-        /// Blade spacing of the near grass grid, metres (default: the renderer's).
-        #[arg(long)]
-        grass_spacing_m: Option<f32>,
-        /// Every grass type's blade width times this (default: the renderer's).
-        #[arg(long)]
-        grass_width_scale: Option<f32>,
-        /// Radii of the grass infill near the camera, HALF,QUARTER metres: blades at half the
-        /// spacing out to the first, at a quarter of it out to the second; 0,0 turns it off
-        /// (default: the renderer's).
-        #[arg(long, value_delimiter = ',')]
-        grass_infill_m: Option<Vec<f32>>,
-        /// Blade segments NEAR,HIGH,LOW: of the blades near the camera, the rest of the high
-        /// ring and the low ring (default: the renderer's).
-        #[arg(long, value_delimiter = ',')]
-        grass_segments: Option<Vec<u32>>,
-        /// Horizontal radius of the blades drawn with the NEAR segments, metres (default: the
-        /// renderer's).
-        #[arg(long)]
-        grass_near_m: Option<f32>,
-        /// Terrain mesh: one vertex every this many samples of a tile (1, 2, 4, ...; default:
-        /// the renderer's).
-        #[arg(long)]
-        mesh_step: Option<u32>,
-        #[command(flatten)]
-        stream: StreamArgs,
-    },
+    Fly(FlyArgs),
     /// Open a window on a world: drag the mouse to look, WASD to fly, Q/E down and up, Shift
     /// faster, the wheel or +/- for speed, P to follow the camera path (N: next path), 1-9 for
     /// the wind scenes, L for the LOD overlay, V for vsync, Esc to quit. Figures in the title.
-    View {
-        /// World folder, the name of a world under ./worlds, or a world's http:// address.
-        #[arg(default_value = "santa-cruz")]
-        world: String,
-        /// Window size, WIDTHxHEIGHT.
-        #[arg(long, default_value = "1280x720", value_parser = parse_size)]
-        size: (u32, u32),
-        /// Present as fast as possible instead of waiting for the display's refresh.
-        #[arg(long)]
-        no_vsync: bool,
-        /// Camera path to start on and follow with P (default: the manifest's first).
-        #[arg(long)]
-        path: Option<String>,
-        /// Follow the camera path from the start.
-        #[arg(long)]
-        follow: bool,
-        /// Render this many frames (a fixed 1/60 s apart) and exit, 1..=4294967295.
-        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
-        frames: Option<u32>,
-        /// Write the last of --frames N frames to this PNG file.
-        #[arg(long)]
-        screenshot: Option<PathBuf>,
-        /// Wind scene to start with (default: the path's wind keys, else breeze).
-        #[arg(long)]
-        wind: Option<String>,
-        #[command(flatten)]
-        stream: StreamArgs,
-    },
+    View(ViewArgs),
     /// Fly fast with random turns and teleports; check the streaming ceilings, holes and memory.
     /// Writes soak.json and exits non-zero if a check failed.
-    Soak {
-        /// World folder, the name of a world under ./worlds, or a world's http:// address.
-        #[arg(default_value = "santa-cruz")]
-        world: String,
-        /// Simulated flight time, seconds (0.1 s a frame), 1..=604800 (a week).
-        #[arg(long, default_value_t = 60.0, value_parser = float_in(1.0, 604_800.0))]
-        seconds: f64,
-        /// Camera speed, metres a second, 0..=1000 (and less than a world's width in 20
-        /// frames: the camera must stay over the world).
-        #[arg(long, default_value_t = 50.0, value_parser = float_in(0.0, 1000.0))]
-        speed: f64,
-        /// Seed of the turns and teleports.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Image size, WIDTHxHEIGHT.
-        #[arg(long, default_value = "320x180", value_parser = parse_size)]
-        size: (u32, u32),
-        /// Output folder.
-        #[arg(long, default_value = "out/soak")]
-        out: PathBuf,
-        /// Fly without grass and its wind: the streaming system alone.
-        #[arg(long)]
-        no_grass: bool,
-        /// A teleport must reach full detail within this many frames, 1..=100000, or within
-        /// the simulated time they stand for (0.1 s each) of wall time, on a machine that
-        /// renders faster than that.
-        #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..=100_000))]
-        max_recovery_frames: u32,
-        /// No frame may take longer than this, milliseconds (wall time), 1..=3600000.
-        #[arg(long, default_value_t = 5000.0, value_parser = float_in(1.0, 3_600_000.0))]
-        max_stall_ms: f64,
-        /// Inject faults while flying, 0..=1 (0: none). A world on disk is flown from a copy
-        /// in --out whose tile files (level 1 and finer) are removed, truncated, overwritten
-        /// with garbage, emptied or replaced by a folder, this share of them at any moment,
-        /// a fresh set every 2 s of flight; a world over HTTP through a proxy that fails this
-        /// share of tile requests (errors, stalls, resets, short bodies). The checks stay the
-        /// same: broken tiles are drawn from their ancestors (no holes) and retried.
-        #[arg(long, default_value_t = 0.0, value_parser = float_in(0.0, 1.0))]
-        faults: f64,
-        #[command(flatten)]
-        stream: StreamArgs,
-    },
+    Soak(SoakArgs),
     /// Serve a world folder over HTTP (GET and HEAD, content types, ETag and Last-Modified,
     /// conditional GET), for `verdant fly http://HOST:PORT/` and the like. For production, put
     /// the folder behind any ordinary HTTP server, object store or CDN.
@@ -236,38 +111,179 @@ enum Command {
         what: EvalCommand,
     },
     /// Bake a DEM (GeoTIFF, SRTM .hgt, or 16-bit PNG with a JSON sidecar) into a world folder.
-    Bake {
-        /// The DEM: a GeoTIFF, an SRTM .hgt tile, or a 16-bit PNG whose sidecar is the .json of
-        /// the same stem. The format is told from the content.
-        #[arg(long)]
-        dem: PathBuf,
-        /// Spacing of the DEM's samples in metres, M or EW,NS, in place of what the file says
-        /// (needed for a TIFF without GeoTIFF tags).
-        #[arg(long, value_name = "M|EW,NS", value_parser = parse_cell_size)]
-        dem_cell_size: Option<[f64; 2]>,
-        /// The world folder to write.
-        #[arg(long)]
-        out: PathBuf,
-        /// World name (default: the output folder's name).
-        #[arg(long)]
-        name: Option<String>,
-        /// Cell size of the finest stored level, metres (default: from the DEM).
-        #[arg(long)]
-        cell_size: Option<f64>,
-        /// Cells per tile edge (a power of two).
-        #[arg(long, default_value_t = 128)]
-        tile_cells: u32,
-        /// Stored levels of the tile pyramid.
-        #[arg(long, default_value_t = 3)]
-        levels: u8,
-        /// Seed of the grass-painting noise.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Replace the world (world.toml and tiles/) in --out if it exists and is not empty
-        /// (otherwise it is refused); its other files are kept.
-        #[arg(long)]
-        replace: bool,
-    },
+    Bake(BakeArgs),
+}
+
+// The options of `verdant fly`.
+#[derive(clap::Args)]
+struct FlyArgs {
+    /// World folder, the name of a world under ./worlds, or a world's http:// address.
+    #[arg(default_value = "santa-cruz")]
+    world: String,
+    /// Camera path from the world's manifest (default: its first path).
+    #[arg(long)]
+    path: Option<String>,
+    /// Frames to render, spread evenly over the path, 1..=4294967295.
+    #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
+    frames: u32,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "640x360", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Output folder.
+    #[arg(long, default_value = "out/fly")]
+    out: PathBuf,
+    /// Write only report.json, no PNG frames.
+    #[arg(long)]
+    no_images: bool,
+    /// Wind scene of the world's manifest (e.g. calm, breeze, storm, helicopter) for the
+    /// whole flight (default: the path's own wind keys if it has any, else breeze).
+    #[arg(long)]
+    wind: Option<String>,
+    /// Features to switch off, comma-separated: wind-sources, interaction,
+    /// detail-bending, translucency, specular, ambient-occlusion, color-variation,
+    /// ground-darkening, far-field, shadows (on top of the manifest's [features] table).
+    #[arg(long, value_delimiter = ',')]
+    disable: Vec<verdant::features::Feature>,
+    /// Grass features to switch on that the manifest's [features] table switches off,
+    /// comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    enable: Vec<verdant::features::Feature>,
+    /// Blade spacing of the near grass grid, metres (default: the renderer's).
+    #[arg(long)]
+    grass_spacing_m: Option<f32>,
+    /// Every grass type's blade width times this (default: the renderer's).
+    #[arg(long)]
+    grass_width_scale: Option<f32>,
+    /// Radii of the grass infill near the camera, HALF,QUARTER metres: blades at half the
+    /// spacing out to the first, at a quarter of it out to the second; 0,0 turns it off
+    /// (default: the renderer's).
+    #[arg(long, value_delimiter = ',')]
+    grass_infill_m: Option<Vec<f32>>,
+    /// Blade segments NEAR,HIGH,LOW: of the blades near the camera, the rest of the high
+    /// ring and the low ring (default: the renderer's).
+    #[arg(long, value_delimiter = ',')]
+    grass_segments: Option<Vec<u32>>,
+    /// Horizontal radius of the blades drawn with the NEAR segments, metres (default: the
+    /// renderer's).
+    #[arg(long)]
+    grass_near_m: Option<f32>,
+    /// Terrain mesh: one vertex every this many samples of a tile (1, 2, 4, ...; default:
+    /// the renderer's).
+    #[arg(long)]
+    mesh_step: Option<u32>,
+    #[command(flatten)]
+    stream: StreamArgs,
+}
+
+// The options of `verdant view`.
+#[derive(clap::Args)]
+struct ViewArgs {
+    /// World folder, the name of a world under ./worlds, or a world's http:// address.
+    #[arg(default_value = "santa-cruz")]
+    world: String,
+    /// Window size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Present as fast as possible instead of waiting for the display's refresh.
+    #[arg(long)]
+    no_vsync: bool,
+    /// Camera path to start on and follow with P (default: the manifest's first).
+    #[arg(long)]
+    path: Option<String>,
+    /// Follow the camera path from the start.
+    #[arg(long)]
+    follow: bool,
+    /// Render this many frames (a fixed 1/60 s apart) and exit, 1..=4294967295.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
+    frames: Option<u32>,
+    /// Write the last of --frames N frames to this PNG file.
+    #[arg(long)]
+    screenshot: Option<PathBuf>,
+    /// Wind scene to start with (default: the path's wind keys, else breeze).
+    #[arg(long)]
+    wind: Option<String>,
+    #[command(flatten)]
+    stream: StreamArgs,
+}
+
+// The options of `verdant soak`.
+#[derive(clap::Args)]
+struct SoakArgs {
+    /// World folder, the name of a world under ./worlds, or a world's http:// address.
+    #[arg(default_value = "santa-cruz")]
+    world: String,
+    /// Simulated flight time, seconds (0.1 s a frame), 1..=604800 (a week).
+    #[arg(long, default_value_t = 60.0, value_parser = float_in(1.0, 604_800.0))]
+    seconds: f64,
+    /// Camera speed, metres a second, 0..=1000 (and less than a world's width in 20
+    /// frames: the camera must stay over the world).
+    #[arg(long, default_value_t = 50.0, value_parser = float_in(0.0, 1000.0))]
+    speed: f64,
+    /// Seed of the turns and teleports.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "320x180", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Output folder.
+    #[arg(long, default_value = "out/soak")]
+    out: PathBuf,
+    /// Fly without grass and its wind: the streaming system alone.
+    #[arg(long)]
+    no_grass: bool,
+    /// A teleport must reach full detail within this many frames, 1..=100000, or within
+    /// the simulated time they stand for (0.1 s each) of wall time, on a machine that
+    /// renders faster than that.
+    #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    max_recovery_frames: u32,
+    /// No frame may take longer than this, milliseconds (wall time), 1..=3600000.
+    #[arg(long, default_value_t = 5000.0, value_parser = float_in(1.0, 3_600_000.0))]
+    max_stall_ms: f64,
+    /// Inject faults while flying, 0..=1 (0: none). A world on disk is flown from a copy
+    /// in --out whose tile files (level 1 and finer) are removed, truncated, overwritten
+    /// with garbage, emptied or replaced by a folder, this share of them at any moment,
+    /// a fresh set every 2 s of flight; a world over HTTP through a proxy that fails this
+    /// share of tile requests (errors, stalls, resets, short bodies). The checks stay the
+    /// same: broken tiles are drawn from their ancestors (no holes) and retried.
+    #[arg(long, default_value_t = 0.0, value_parser = float_in(0.0, 1.0))]
+    faults: f64,
+    #[command(flatten)]
+    stream: StreamArgs,
+}
+
+// The options of `verdant bake`.
+#[derive(clap::Args)]
+struct BakeArgs {
+    /// The DEM: a GeoTIFF, an SRTM .hgt tile, or a 16-bit PNG whose sidecar is the .json of
+    /// the same stem. The format is told from the content.
+    #[arg(long)]
+    dem: PathBuf,
+    /// Spacing of the DEM's samples in metres, M or EW,NS, in place of what the file says
+    /// (needed for a TIFF without GeoTIFF tags).
+    #[arg(long, value_name = "M|EW,NS", value_parser = parse_cell_size)]
+    dem_cell_size: Option<[f64; 2]>,
+    /// The world folder to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// World name (default: the output folder's name).
+    #[arg(long)]
+    name: Option<String>,
+    /// Cell size of the finest stored level, metres (default: from the DEM).
+    #[arg(long)]
+    cell_size: Option<f64>,
+    /// Cells per tile edge (a power of two).
+    #[arg(long, default_value_t = 128)]
+    tile_cells: u32,
+    /// Stored levels of the tile pyramid.
+    #[arg(long, default_value_t = 3)]
+    levels: u8,
+    /// Seed of the grass-painting noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Replace the world (world.toml and tiles/) in --out if it exists and is not empty
+    /// (otherwise it is refused); its other files are kept.
+    #[arg(long)]
+    replace: bool,
 }
 
 #[derive(Subcommand)]
@@ -395,6 +411,37 @@ fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
             "{s:?} is not X,Y,Z in metres (three finite numbers)"
         )),
     }
+}
+
+fn bench_features(opts: verdant::tools::BenchLodOptions) -> Result<()> {
+    let (bars, mut update) = stage_bars();
+    let r = verdant::tools::run_bench_features(&opts, &mut update)?;
+    finish_bars(&bars);
+    println!(
+        "{} [{}], {}x{}",
+        r.adapter.name, r.adapter.backend, r.size.0, r.size.1
+    );
+    println!(
+        "{:<18} {:>10} {:>8} {:>10} {:>13}",
+        "feature off", "GPU ms", "IQR %", "cost ms", "contribution"
+    );
+    for f in &r.features {
+        println!(
+            "{:<18} {:>10.3} {:>8.1} {:>10.3} {:>13.4}{}",
+            f.feature,
+            f.gpu_ms,
+            100.0 * f.timing.spread,
+            f.cost_ms,
+            f.contribution,
+            if f.timing.noisy {
+                "  (spread above 10%)"
+            } else {
+                ""
+            }
+        );
+    }
+    println!("wrote {}", opts.out.display());
+    Ok(())
 }
 
 fn bench_blades(opts: verdant::tools::bench_blades::BenchBladesOptions) -> Result<()> {
@@ -537,67 +584,21 @@ enum EvalCommand {
 
 fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
     use verdant::tools::eval_derive as eval;
-    if !(factor.is_power_of_two() && (2..=64).contains(&factor)) {
-        bail!("--factor must be a power of two from 2 to 64, got {factor}");
+    let mut pb: Option<ProgressBar> = None;
+    let report = eval::run_derive_eval(dem_path, factor, out, &mut |method, done, total| {
+        let pb = pb.get_or_insert_with(|| bar(total, "methods"));
+        pb.set_message(method.to_owned());
+        pb.set_position(done);
+    });
+    if let Some(pb) = pb {
+        pb.finish();
     }
-    let dem = verdant::world::Dem::load(dem_path)?;
-    let side = dem.width.min(dem.height) as usize;
-    let needed = eval_derive_min_side(factor);
-    if side < needed {
-        let fits = (1..=6)
-            .map(|k| 1usize << k)
-            .filter(|&f| eval_derive_min_side(f) <= side)
-            .max();
-        bail!(
-            "{}: {}x{} samples is too small for --factor {factor}: the comparison leaves out \
-             {} samples at each edge and needs at least {needed} samples a side ({})",
-            dem_path.display(),
-            dem.width,
-            dem.height,
-            2 * factor,
-            match fits {
-                Some(f) => format!("use --factor {f} or less"),
-                None => "no factor fits this DEM".to_owned(),
-            }
-        );
-    }
-    let truth = eval::dem_grid(&dem);
-    let methods = eval::methods();
-    let pb = bar(methods.len() as u64 + 2, "methods");
-    let mut results = Vec::new();
-    for m in methods {
-        pb.set_message(m.name());
-        results.push(eval::evaluate(&truth, factor, m, 5));
-        pb.inc(1);
-    }
-    pb.set_message("fitted kernel");
-    results.push(eval::evaluate_kernel(&truth, factor, 5));
-    pb.inc(1);
-    pb.set_message(eval::RUNTIME_METHOD);
-    results.push(eval::evaluate_calibrated(&truth, factor, 5));
-    pb.inc(1);
-    pb.finish();
-    if let Some(r) = results.iter().find(|r| {
-        ![r.rmse_m, r.max_m, r.slope_rmse_deg, r.slope_bias_deg]
-            .iter()
-            .all(|v| v.is_finite())
-    }) {
-        bail!(
-            "{}: method {} gave no finite error at --factor {factor}; nothing written",
-            dem_path.display(),
-            r.method
-        );
-    }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let name = dem_path
-        .file_stem()
-        .map_or("DEM".into(), |s| s.to_string_lossy().into_owned());
-    eval::write_results(&results, &name, out)?;
+    let report = report?;
     println!(
         "{:<22} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11}  parameters",
         "method", "RMSE m", "max m", "slope deg", "bias deg", "rough", "ms/tile"
     );
-    for r in &results {
+    for r in &report.results {
         println!(
             "{:<22} {:>9.3} {:>9.2} {:>10.3} {:>10.3} {:>9.3} {:>11.4}  {}",
             r.method,
@@ -610,19 +611,17 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
             r.parameters()
         );
     }
-    if let Some(fit) = results.last().and_then(|r| r.fit.as_ref()) {
+    if let Some(fit) = report.calibration() {
         println!("calibration from the coarse grid: {}", fit.note);
     }
-    let front = eval::joint_front(&results);
-    let names: Vec<String> = front.iter().map(|&i| results[i].method.clone()).collect();
-    let chosen = eval::RUNTIME_METHOD;
     println!(
         "on the joint Pareto front (time, height, slope, flattening, roughness): {}",
-        names.join(", ")
+        report.front.join(", ")
     );
     println!(
-        "runtime method: {chosen} ({} the joint front); wrote derive.csv and charts to {}",
-        if names.iter().any(|n| n == chosen) {
+        "runtime method: {} ({} the joint front); wrote derive.csv and charts to {}",
+        eval::RUNTIME_METHOD,
+        if report.runtime_on_front() {
             "on"
         } else {
             "NOT on"
@@ -632,16 +631,10 @@ fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Samples a side a DEM needs for `eval derive --factor factor`: the comparison leaves out
-/// `2 * factor` samples at each edge and keeps at least 8 a side between them.
-fn eval_derive_min_side(factor: usize) -> usize {
-    4 * factor + 8
-}
-
 fn eval_sway(out: &Path) -> Result<()> {
     use verdant::tools::eval_sway as sway;
-    use verdant::wind::sway::{Integrator, Preset, RENDERER_INTEGRATOR};
-    let results = sway::run_sway_eval(out)?;
+    use verdant::tools::sway_integrators::{EulerLimits, Integrator, Preset, RENDERER_INTEGRATOR};
+    let report = sway::run_sway_eval(out)?;
     for preset in Preset::ALL {
         let spring = preset.spring();
         println!(
@@ -661,7 +654,7 @@ fn eval_sway(out: &Path) -> Result<()> {
         "{:<7} {:<14} {:>7} {:>11} {:>11} {:>8}  stable",
         "preset", "integrator", "dt", "RMS rad", "max rad", "ns/step"
     );
-    for r in &results {
+    for r in &report.results {
         println!(
             "{:<7} {:<14} {:>7} {:>11.3e} {:>11.3e} {:>8.1}  {}",
             r.preset,
@@ -676,8 +669,7 @@ fn eval_sway(out: &Path) -> Result<()> {
             }
         );
     }
-    let stable = sway::stable_everywhere(&results);
-    let names: Vec<&str> = stable.iter().map(Integrator::name).collect();
+    let names: Vec<&str> = report.stable.iter().map(Integrator::name).collect();
     println!(
         "stable at every step and at the 0.5 s hitch, both presets: {}",
         if names.is_empty() {
@@ -689,7 +681,7 @@ fn eval_sway(out: &Path) -> Result<()> {
     println!(
         "renderer integrator: {} ({}); wrote sway.csv and charts to {}",
         RENDERER_INTEGRATOR.name(),
-        if stable.contains(&RENDERER_INTEGRATOR) {
+        if report.renderer_bounded() {
             "bounded in every run above, and exact for wind held over a frame"
         } else {
             "NOT bounded in every run above"
@@ -933,9 +925,9 @@ fn soak(opts: SoakOptions) -> Result<()> {
     Ok(())
 }
 
-fn run(cli: Cli) -> Result<()> {
-    match cli.command {
-        Command::Fly {
+impl FlyArgs {
+    fn options(self) -> Result<FlyOptions> {
+        let FlyArgs {
             world,
             path,
             frames,
@@ -952,7 +944,8 @@ fn run(cli: Cli) -> Result<()> {
             grass_near_m,
             mesh_step,
             stream,
-        } => fly(FlyOptions {
+        } = self;
+        Ok(FlyOptions {
             world: resolve_world(&world)?,
             http: stream.http(),
             path,
@@ -982,43 +975,13 @@ fn run(cli: Cli) -> Result<()> {
             },
             grass_near_m,
             mesh_step,
-        }),
-        Command::View {
-            world,
-            size,
-            no_vsync,
-            path,
-            follow,
-            frames,
-            screenshot,
-            wind,
-            stream,
-        } => {
-            let summary = verdant::tools::view::run_view(verdant::tools::view::ViewOptions {
-                world: resolve_world(&world)?,
-                http: stream.http(),
-                size,
-                vsync: !no_vsync,
-                path,
-                follow,
-                frames,
-                screenshot: screenshot.clone(),
-                service: stream.service(),
-                wind_scene: wind,
-            })?;
-            println!(
-                "{} frames, median {:.1} ms a frame ({:.1} fps) on {}",
-                summary.frames,
-                summary.median_frame_ms,
-                1e3 / summary.median_frame_ms.max(1e-3),
-                summary.adapter
-            );
-            if let Some(file) = screenshot {
-                println!("wrote {}", file.display());
-            }
-            Ok(())
-        }
-        Command::Soak {
+        })
+    }
+}
+
+impl SoakArgs {
+    fn options(self) -> Result<SoakOptions> {
+        let SoakArgs {
             world,
             seconds,
             speed,
@@ -1030,7 +993,8 @@ fn run(cli: Cli) -> Result<()> {
             max_stall_ms,
             faults,
             stream,
-        } => soak(SoakOptions {
+        } = self;
+        Ok(SoakOptions {
             world: resolve_world(&world)?,
             http: stream.http(),
             seconds,
@@ -1044,17 +1008,129 @@ fn run(cli: Cli) -> Result<()> {
             max_stall_ms,
             faults,
             ..SoakOptions::default()
-        }),
-        Command::Serve { world, addr } => {
-            let dir = resolve_world(&world)?;
-            if verdant::stream::http::is_url(&world) {
-                bail!("verdant serve serves a world folder, not {world}");
+        })
+    }
+}
+
+fn view(args: ViewArgs) -> Result<()> {
+    let ViewArgs {
+        world,
+        size,
+        no_vsync,
+        path,
+        follow,
+        frames,
+        screenshot,
+        wind,
+        stream,
+    } = args;
+    let summary = verdant::tools::view::run_view(verdant::tools::view::ViewOptions {
+        world: resolve_world(&world)?,
+        http: stream.http(),
+        size,
+        vsync: !no_vsync,
+        path,
+        follow,
+        frames,
+        screenshot: screenshot.clone(),
+        service: stream.service(),
+        wind_scene: wind,
+    })?;
+    println!(
+        "{} frames, median {:.1} ms a frame ({:.1} fps) on {}",
+        summary.frames,
+        summary.median_frame_ms,
+        1e3 / summary.median_frame_ms.max(1e-3),
+        summary.adapter
+    );
+    if let Some(file) = screenshot {
+        println!("wrote {}", file.display());
+    }
+    Ok(())
+}
+
+fn bake_world(args: BakeArgs) -> Result<()> {
+    let BakeArgs {
+        dem,
+        dem_cell_size,
+        out,
+        name,
+        cell_size,
+        tile_cells,
+        levels,
+        seed,
+        replace,
+    } = args;
+    let opts = BakeOptions {
+        dem,
+        dem_cell_size_m: dem_cell_size,
+        out,
+        name,
+        cell_size_m: cell_size,
+        tile_cells,
+        stored_levels: levels,
+        seed,
+        replace,
+        cancel: Some(
+            verdant::bake::CancelFlag::on_termination_signals()
+                .context("installing the SIGINT and SIGTERM handlers")?,
+        ),
+    };
+    let mut current: Option<(String, ProgressBar)> = None;
+    let report = bake(&opts, &mut |stage, done, total| {
+        let label = format!("{stage:?}").to_lowercase();
+        if current.as_ref().map(|(l, _)| l != &label).unwrap_or(true) {
+            if let Some((_, pb)) = current.take() {
+                pb.finish();
             }
-            let server = verdant::tools::serve::WorldServer::start(&dir, &addr)?;
-            println!("serving {} at {}", dir.display(), server.url());
-            server.wait();
-            Ok(())
+            current = Some((label.clone(), bar(total, &label)));
         }
+        if let Some((_, pb)) = &current {
+            pb.set_length(total);
+            pb.set_position(done);
+        }
+    })
+    .with_context(|| format!("baking {}", opts.dem.display()))?;
+    if let Some((_, pb)) = current {
+        pb.finish();
+    }
+    println!(
+        "read {} ({}, {}x{} samples of {:.3} m x {:.3} m, {} nodata samples filled)",
+        opts.dem.display(),
+        report.dem_format.name(),
+        report.dem_samples[0],
+        report.dem_samples[1],
+        report.dem_cell_size_m[0],
+        report.dem_cell_size_m[1],
+        report.nodata_filled
+    );
+    println!(
+        "baked {} tiles in {} levels into {} in {:.1} s",
+        report.tiles_written,
+        report.levels,
+        opts.out.display(),
+        report.seconds
+    );
+    Ok(())
+}
+
+fn serve(world: &str, addr: &str) -> Result<()> {
+    let dir = resolve_world(world)?;
+    if verdant::stream::http::is_url(world) {
+        bail!("verdant serve serves a world folder, not {world}");
+    }
+    let server = verdant::tools::serve::WorldServer::start(&dir, addr)?;
+    println!("serving {} at {}", dir.display(), server.url());
+    server.wait();
+    Ok(())
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Fly(args) => fly(args.options()?),
+        Command::View(args) => view(args),
+        Command::Soak(args) => soak(args.options()?),
+        Command::Serve { world, addr } => serve(&world, &addr),
         Command::Bench {
             what:
                 BenchCommand::Features {
@@ -1063,45 +1139,15 @@ fn run(cli: Cli) -> Result<()> {
                     size,
                     timing,
                 },
-        } => {
-            let opts = verdant::tools::BenchLodOptions {
-                world: resolve_world(&world)?,
-                out,
-                size,
-                warmup_frames: timing.warmup_frames,
-                timed_frames: timing.timed_frames,
-                rounds: timing.rounds,
-                ..Default::default()
-            };
-            let (bars, mut update) = stage_bars();
-            let r = verdant::tools::run_bench_features(&opts, &mut update)?;
-            finish_bars(&bars);
-            println!(
-                "{} [{}], {}x{}",
-                r.adapter.name, r.adapter.backend, r.size.0, r.size.1
-            );
-            println!(
-                "{:<18} {:>10} {:>8} {:>10} {:>13}",
-                "feature off", "GPU ms", "IQR %", "cost ms", "contribution"
-            );
-            for f in &r.features {
-                println!(
-                    "{:<18} {:>10.3} {:>8.1} {:>10.3} {:>13.4}{}",
-                    f.feature,
-                    f.gpu_ms,
-                    100.0 * f.timing.spread,
-                    f.cost_ms,
-                    f.contribution,
-                    if f.timing.noisy {
-                        "  (spread above 10%)"
-                    } else {
-                        ""
-                    }
-                );
-            }
-            println!("wrote {}", opts.out.display());
-            Ok(())
-        }
+        } => bench_features(verdant::tools::BenchLodOptions {
+            world: resolve_world(&world)?,
+            out,
+            size,
+            warmup_frames: timing.warmup_frames,
+            timed_frames: timing.timed_frames,
+            rounds: timing.rounds,
+            ..Default::default()
+        }),
         Command::Bench {
             what:
                 BenchCommand::Blades {
@@ -1151,69 +1197,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Eval {
             what: EvalCommand::Sway { out },
         } => eval_sway(&out),
-        Command::Bake {
-            dem,
-            dem_cell_size,
-            out,
-            name,
-            cell_size,
-            tile_cells,
-            levels,
-            seed,
-            replace,
-        } => {
-            let opts = BakeOptions {
-                dem,
-                dem_cell_size_m: dem_cell_size,
-                out,
-                name,
-                cell_size_m: cell_size,
-                tile_cells,
-                stored_levels: levels,
-                seed,
-                replace,
-                cancel: Some(
-                    verdant::bake::CancelFlag::on_termination_signals()
-                        .context("installing the SIGINT and SIGTERM handlers")?,
-                ),
-            };
-            let mut current: Option<(String, ProgressBar)> = None;
-            let report = bake(&opts, &mut |stage, done, total| {
-                let label = format!("{stage:?}").to_lowercase();
-                if current.as_ref().map(|(l, _)| l != &label).unwrap_or(true) {
-                    if let Some((_, pb)) = current.take() {
-                        pb.finish();
-                    }
-                    current = Some((label.clone(), bar(total, &label)));
-                }
-                if let Some((_, pb)) = &current {
-                    pb.set_length(total);
-                    pb.set_position(done);
-                }
-            })
-            .with_context(|| format!("baking {}", opts.dem.display()))?;
-            if let Some((_, pb)) = current {
-                pb.finish();
-            }
-            println!(
-                "read {} ({}, {}x{} samples of {:.3} m x {:.3} m, {} nodata samples filled)",
-                opts.dem.display(),
-                report.dem_format.name(),
-                report.dem_samples[0],
-                report.dem_samples[1],
-                report.dem_cell_size_m[0],
-                report.dem_cell_size_m[1],
-                report.nodata_filled
-            );
-            println!(
-                "baked {} tiles in {} levels into {} in {:.1} s",
-                report.tiles_written,
-                report.levels,
-                opts.out.display(),
-                report.seconds
-            );
-            Ok(())
-        }
+        Command::Bake(args) => bake_world(args),
     }
 }
 

@@ -474,6 +474,9 @@ pub fn joint_front(results: &[MethodResult]) -> Vec<usize> {
     crate::tools::metrics::pareto_front_n(&rows)
 }
 
+/// A chart of [`write_results`]: its file, its y axis, and the measure it plots.
+type ChartSpec = (&'static str, &'static str, fn(&MethodResult) -> f64);
+
 /// Writes `derive.csv` and the charts `derive_height.png` (height RMSE), `derive_slope.png`
 /// (slope RMSE), `derive_flattening.png` (slope bias) and `derive_roughness.png` against time
 /// per tile into `out` (created if needed; locked while they are written, see
@@ -519,7 +522,7 @@ pub fn write_results(
     }
     crate::tools::fly::write_text(&out.join("derive.csv"), &csv)?;
     let factor = results.first().map_or(0, |r| r.factor);
-    let charts: [(&str, &str, fn(&MethodResult) -> f64); 4] = [
+    let charts: [ChartSpec; 4] = [
         ("derive_height.png", "height RMSE (m)", |r| r.rmse_m),
         ("derive_slope.png", "slope RMSE (degrees)", |r| {
             r.slope_rmse_deg
@@ -557,6 +560,104 @@ pub fn write_results(
     }
     out_dir.keep();
     Ok(())
+}
+
+/// What [`run_derive_eval`] found: a result per method (the fixed ones, the fitted kernel, then
+/// the calibrated runtime method last) and the names on their joint Pareto front.
+pub struct DeriveEvalReport {
+    /// One result per method, in the order they were run.
+    pub results: Vec<MethodResult>,
+    /// Names of the methods on the joint Pareto front ([`joint_front`]).
+    pub front: Vec<String>,
+}
+
+impl DeriveEvalReport {
+    /// Whether the runtime's method ([`RUNTIME_METHOD`]) is on the joint front.
+    pub fn runtime_on_front(&self) -> bool {
+        self.front.iter().any(|n| n == RUNTIME_METHOD)
+    }
+
+    /// The calibrated method's fit to the coarse grid, when it ran.
+    pub fn calibration(&self) -> Option<&DeriveCalibration> {
+        self.results.last().and_then(|r| r.fit.as_ref())
+    }
+}
+
+/// Samples a side a DEM needs for `eval derive --factor factor`: the comparison leaves out
+/// `2 * factor` samples at each edge and keeps at least 8 a side between them.
+pub fn min_side(factor: usize) -> usize {
+    4 * factor + 8
+}
+
+/// Runs `eval derive` on the DEM at `dem_path` downsampled by `factor` and writes its CSV and
+/// charts into `out` ([`write_results`]). `progress` hears each method's name before it runs,
+/// with the methods done and their total. Refuses a factor that is not a power of two from 2
+/// to 64, a DEM too small for it, and results that are not finite (then nothing is written).
+pub fn run_derive_eval(
+    dem_path: &std::path::Path,
+    factor: usize,
+    out: &std::path::Path,
+    progress: &mut dyn FnMut(&str, u64, u64),
+) -> anyhow::Result<DeriveEvalReport> {
+    use anyhow::{Context as _, bail};
+    if !(factor.is_power_of_two() && (2..=64).contains(&factor)) {
+        bail!("--factor must be a power of two from 2 to 64, got {factor}");
+    }
+    let dem = Dem::load(dem_path)?;
+    let side = dem.width.min(dem.height) as usize;
+    let needed = min_side(factor);
+    if side < needed {
+        let fits = (1..=6)
+            .map(|k| 1usize << k)
+            .filter(|&f| min_side(f) <= side)
+            .max();
+        bail!(
+            "{}: {}x{} samples is too small for --factor {factor}: the comparison leaves out \
+             {} samples at each edge and needs at least {needed} samples a side ({})",
+            dem_path.display(),
+            dem.width,
+            dem.height,
+            2 * factor,
+            match fits {
+                Some(f) => format!("use --factor {f} or less"),
+                None => "no factor fits this DEM".to_owned(),
+            }
+        );
+    }
+    let truth = dem_grid(&dem);
+    let fixed = methods();
+    let total = fixed.len() as u64 + 2;
+    let mut results = Vec::new();
+    for m in fixed {
+        progress(&m.name(), results.len() as u64, total);
+        results.push(evaluate(&truth, factor, m, 5));
+    }
+    progress("fitted kernel", results.len() as u64, total);
+    results.push(evaluate_kernel(&truth, factor, 5));
+    progress(RUNTIME_METHOD, results.len() as u64, total);
+    results.push(evaluate_calibrated(&truth, factor, 5));
+    progress(RUNTIME_METHOD, total, total);
+    if let Some(r) = results.iter().find(|r| {
+        ![r.rmse_m, r.max_m, r.slope_rmse_deg, r.slope_bias_deg]
+            .iter()
+            .all(|v| v.is_finite())
+    }) {
+        bail!(
+            "{}: method {} gave no finite error at --factor {factor}; nothing written",
+            dem_path.display(),
+            r.method
+        );
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let name = dem_path
+        .file_stem()
+        .map_or("DEM".into(), |s| s.to_string_lossy().into_owned());
+    write_results(&results, &name, out)?;
+    let front = joint_front(&results)
+        .into_iter()
+        .map(|i| results[i].method.clone())
+        .collect();
+    Ok(DeriveEvalReport { results, front })
 }
 
 #[cfg(test)]

@@ -2,13 +2,15 @@
 //! fine reference at frame times from 1/240 s to 1/5 s and at a 0.5 s hitch: RMS and largest
 //! error, cost per step, and whether the sway blew up; CSV and charts.
 
+use std::cmp::Ordering::{Equal, Less};
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
 use crate::tools::metrics::{Chart, ChartPoint, LineChart, Series, Summary};
-use crate::wind::sway::*;
+use crate::tools::sway_integrators::{EulerLimits, Integrator, Preset, RENDERER_INTEGRATOR};
+use crate::wind::sway::{SwaySpring, SwayState, exact_step};
 
 /// Simulated time of each run of the eval, seconds.
 pub const EVAL_SECONDS: f64 = 20.0;
@@ -205,8 +207,9 @@ fn ns_per_step(integrator: Integrator, spring: &SwaySpring, dt: f64) -> f64 {
                 targets[i & 1023],
                 black_box(dt as f32),
             );
-            // An unstable run starts again, so that it is timed on ordinary numbers.
-            if !(s.x.abs() <= limit) {
+            // An unstable run starts again, so that it is timed on ordinary numbers (a NaN
+            // counts as unstable).
+            if !matches!(s.x.abs().partial_cmp(&limit), Some(Less | Equal)) {
                 s = start;
             }
         }
@@ -309,7 +312,7 @@ pub fn dt_label(dt: f64) -> String {
 /// - `sway_stability.png`: largest `|x|` against the time step, one line per integrator, for the
 ///   stiff preset, with the blow-up threshold and the theoretical limits of the two Euler
 ///   steps.
-pub fn run_sway_eval(out: &Path) -> anyhow::Result<Vec<SwayResult>> {
+pub fn run_sway_eval(out: &Path) -> anyhow::Result<SwayEvalReport> {
     let out_dir = crate::tools::fly::OutDir::create_for(out, "eval sway")?;
     let results = evaluate_all();
     write_csv(&results, &out.join("sway.csv"))?;
@@ -328,7 +331,23 @@ pub fn run_sway_eval(out: &Path) -> anyhow::Result<Vec<SwayResult>> {
         650,
     )?;
     out_dir.keep();
-    Ok(results)
+    let stable = stable_everywhere(&results);
+    Ok(SwayEvalReport { results, stable })
+}
+
+/// What [`run_sway_eval`] measured.
+pub struct SwayEvalReport {
+    /// One result per preset, integrator and time step ([`evaluate_all`]).
+    pub results: Vec<SwayResult>,
+    /// The integrators that stayed bounded in every run ([`stable_everywhere`]).
+    pub stable: Vec<Integrator>,
+}
+
+impl SwayEvalReport {
+    /// Whether the renderer's integrator ([`RENDERER_INTEGRATOR`]) stayed bounded in every run.
+    pub fn renderer_bounded(&self) -> bool {
+        self.stable.contains(&RENDERER_INTEGRATOR)
+    }
 }
 
 fn write_csv(results: &[SwayResult], path: &Path) -> anyhow::Result<()> {

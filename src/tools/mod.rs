@@ -15,6 +15,7 @@ pub mod report;
 pub mod scene;
 pub mod serve;
 pub mod soak;
+pub mod sway_integrators;
 pub mod timing;
 pub mod view;
 

@@ -1,8 +1,8 @@
 //! Wind: the grass sway spring and the wind field around the camera.
 //!
-//! - [`sway`]: the damped spring each grass blade sways on, three ways to step it
-//!   ([`Integrator`]) and the one the renderer uses ([`RENDERER_INTEGRATOR`]; chosen by
-//!   `verdant eval sway`, which measures their error, cost and stability).
+//! - [`sway`]: the damped spring each grass blade sways on and the exact step the renderer
+//!   advances it with ([`RENDERER_INTEGRATOR`]; chosen by `verdant eval sway`, which measures
+//!   its error, cost and stability against the Euler steps).
 //! - [`config`]: a wind scene of the manifest made ready to run ([`WindConfig`]) and each
 //!   frame's uniforms ([`FieldDriver`], [`FieldParams`], [`WindLookup`]).
 //! - [`field`]: the wind field on the GPU ([`WindField`], `shaders/wind_field.wgsl`): ambient
@@ -23,5 +23,5 @@ pub use config::{
 };
 pub use field::WindField;
 pub use field_cpu::{WindFieldCpu, ambient_at};
-pub use sway::{Integrator, Preset, RENDERER_INTEGRATOR, SwaySpring, SwayState};
+pub use sway::{ExactStep, RENDERER_INTEGRATOR, SwaySpring, SwayState};
 pub use sway_field::{SWAY_TYPES, SwayConfig, SwayField, SwayParams, update_sway};

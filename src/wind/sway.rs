@@ -8,12 +8,11 @@
 //! `c` its damping (1/s) and `f` the wind's forcing (1/s^2). The wind pushes the blade toward
 //! the equilibrium `x_eq = f / k`; the renderer holds that target constant over a frame.
 //!
-//! Three integrators step the spring by a frame time `dt` ([`Integrator`]): explicit Euler,
-//! semi-implicit (symplectic) Euler, and the exact solution of the oscillator over the step with
-//! the forcing held constant. `verdant eval sway` (`tools::eval_sway`) measures each against a
-//! fine reference at frame times from 1/240 s to 1/5 s and at a 0.5 s hitch: RMS and largest
-//! error, cost per step, and whether the sway blew up. The renderer's choice,
-//! [`RENDERER_INTEGRATOR`], is the one that stayed bounded everywhere.
+//! The renderer steps the spring by a frame time `dt` with the exact solution of the oscillator
+//! over the step, the forcing held constant ([`ExactStep`], [`RENDERER_INTEGRATOR`]).
+//! `verdant eval sway` (`tools::eval_sway`, with the Euler steps it compares in
+//! `tools::sway_integrators`) measures it against a fine reference at frame times from 1/240 s
+//! to 1/5 s and at a 0.5 s hitch: it is the one step that stayed bounded everywhere.
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
@@ -79,69 +78,6 @@ impl SwaySpring {
     pub fn damping_ratio(&self) -> f64 {
         f64::from(self.damping) / (2.0 * self.omega())
     }
-
-    /// Largest time step at which explicit Euler is stable (strictly below it).
-    ///
-    /// Explicit Euler multiplies each mode by `1 + dt lambda`, with `lambda` the eigenvalues of
-    /// `[[0, 1], [-k, -c]]`: `-c/2 +- sqrt(c^2/4 - k)`. Under-damped, `|1 + dt lambda|^2 =
-    /// 1 - c dt + k dt^2`, below 1 exactly when `dt < c / k` (that is `2 zeta / w`: an
-    /// undamped spring is never stable). Over-damped, the eigenvalues are real and the bound is
-    /// `2 / |lambda|` of the faster one.
-    pub fn explicit_euler_max_dt(&self) -> f64 {
-        let (k, c) = (f64::from(self.stiffness), f64::from(self.damping));
-        let disc = c * c / 4.0 - k;
-        if disc < 0.0 {
-            c / k
-        } else {
-            2.0 / (c / 2.0 + disc.sqrt())
-        }
-    }
-
-    /// Largest time step at which semi-implicit Euler is stable (strictly below it).
-    ///
-    /// Its step matrix `[[1 - k dt^2, dt (1 - c dt)], [-k dt, 1 - c dt]]` has trace
-    /// `2 - c dt - k dt^2` and determinant `1 - c dt`; both eigenvalues lie inside the unit
-    /// circle (Jury's conditions) exactly when `k dt^2 + 2 c dt < 4`, that is
-    /// `dt < (sqrt(c^2 + 4 k) - c) / k`: `2 / w` without damping, a little less with it.
-    pub fn semi_implicit_euler_max_dt(&self) -> f64 {
-        let (k, c) = (f64::from(self.stiffness), f64::from(self.damping));
-        ((c * c + 4.0 * k).sqrt() - c) / k
-    }
-}
-
-/// The two springs `verdant eval sway` measures.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Preset {
-    /// The stiffest grass the manifest allows (stiffness 1): 3 Hz, damping ratio 0.1.
-    Stiff,
-    /// Tall grass of the default world (stiffness 0.35): 1.375 Hz, damping ratio 0.23.
-    Soft,
-}
-
-impl Preset {
-    /// Both presets.
-    pub const ALL: [Preset; 2] = [Preset::Stiff, Preset::Soft];
-
-    /// Name in tables, charts and the CSV.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Self::Stiff => "stiff",
-            Self::Soft => "soft",
-        }
-    }
-
-    /// The manifest stiffness the preset stands for.
-    pub fn grass_stiffness(&self) -> f32 {
-        match self {
-            Self::Stiff => 1.0,
-            Self::Soft => 0.35,
-        }
-    }
-
-    /// The preset's spring.
-    pub fn spring(&self) -> SwaySpring {
-        SwaySpring::from_grass(self.grass_stiffness())
-    }
 }
 
 /// A blade's sway: displacement (bend angle, radians) and its rate (rad/s).
@@ -153,21 +89,11 @@ pub struct SwayState {
     pub v: f32,
 }
 
-/// A way to advance the sway spring by one frame.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Integrator {
-    /// `x += dt v; v += dt (k (x_eq - x) - c v)`, both from the old state.
-    ExplicitEuler,
-    /// `v += dt (k (x_eq - x) - c v); x += dt v`, the position from the new velocity.
-    SemiImplicitEuler,
-    /// The closed-form solution of the damped oscillator over the step with the target held
-    /// constant: exact for piecewise-constant forcing and stable at any step.
-    Exact,
-}
-
-/// The integrator the renderer steps the sway spring with: [`Integrator::Exact`].
+/// The step the renderer advances the sway spring with: the closed-form solution of the damped
+/// oscillator over the frame with the target held constant, exact for piecewise-constant
+/// forcing and stable at any step.
 ///
-/// In `verdant eval sway` (see the README) it is the only one of the three that stays bounded
+/// In `verdant eval sway` (see the README) it is the only one of three steps that stays bounded
 /// at every frame time from 1/240 s to 1/5 s and at a 0.5 s hitch, for both presets: explicit
 /// Euler blows up from 1/60 s on the stiff spring (its limit is `dt < c/k` = 10.6 ms) and from
 /// 1/10 s on the soft one (limit 53 ms); semi-implicit Euler from 1/10 s on the stiff spring
@@ -179,7 +105,11 @@ pub enum Integrator {
 /// depend only on the spring and the frame time, so a shader can compute them once per grass
 /// type per frame. At a 0.5 s hitch its error is the wind's lag over the held step (RMS
 /// 2.5e-2 rad on the stiff spring), never a blow-up.
-pub const RENDERER_INTEGRATOR: Integrator = Integrator::Exact;
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ExactStep;
+
+/// The renderer's step of the sway spring (see [`ExactStep`]).
+pub const RENDERER_INTEGRATOR: ExactStep = ExactStep;
 
 /// The arithmetic the exact step needs, for running it in f32 (as the shader does) and in f64
 /// (for the reference).
@@ -283,77 +213,50 @@ pub(crate) fn exact_step<R: Real>(k: R, c: R, x: R, v: R, target: R, dt: R) -> (
     )
 }
 
-impl Integrator {
-    /// All three, cheapest first.
-    pub const ALL: [Integrator; 3] = [
-        Integrator::ExplicitEuler,
-        Integrator::SemiImplicitEuler,
-        Integrator::Exact,
-    ];
-
+impl ExactStep {
     /// Short name for tables, charts and the CSV.
     pub fn name(&self) -> &'static str {
-        match self {
-            Self::ExplicitEuler => "explicit",
-            Self::SemiImplicitEuler => "semi-implicit",
-            Self::Exact => "exact",
-        }
+        "exact"
     }
 
     /// Advances `state` by `dt` seconds on `spring`, the wind pushing toward the equilibrium
     /// `target` (`f / k`) all through the step.
     pub fn step(&self, spring: &SwaySpring, state: SwayState, target: f32, dt: f32) -> SwayState {
-        let (k, c) = (spring.stiffness, spring.damping);
-        let SwayState { x, v } = state;
-        match self {
-            Self::ExplicitEuler => SwayState {
-                x: x + dt * v,
-                v: v + dt * (k * (target - x) - c * v),
-            },
-            Self::SemiImplicitEuler => {
-                let v = v + dt * (k * (target - x) - c * v);
-                SwayState { x: x + dt * v, v }
-            }
-            Self::Exact => {
-                let (x, v) = exact_step(k, c, x, v, target, dt);
-                SwayState { x, v }
-            }
-        }
+        let (x, v) = exact_step(
+            spring.stiffness,
+            spring.damping,
+            state.x,
+            state.v,
+            target,
+            dt,
+        );
+        SwayState { x, v }
     }
 
     /// The matrix the step applies to the deviation `(x - x_eq, v)` from a constant target.
     pub fn amplification(&self, spring: &SwaySpring, dt: f64) -> [[f64; 2]; 2] {
-        let (k, c, h) = (f64::from(spring.stiffness), f64::from(spring.damping), dt);
-        match self {
-            Self::ExplicitEuler => [[1.0, h], [-k * h, 1.0 - c * h]],
-            Self::SemiImplicitEuler => {
-                [[1.0 - k * h * h, h * (1.0 - c * h)], [-k * h, 1.0 - c * h]]
-            }
-            Self::Exact => {
-                let (cc, s) = free_response(k, c, h);
-                let a = c / 2.0;
-                [[cc + a * s, s], [-k * s, cc - a * s]]
-            }
-        }
+        let (k, c) = (f64::from(spring.stiffness), f64::from(spring.damping));
+        let (cc, s) = free_response(k, c, dt);
+        let a = c / 2.0;
+        [[cc + a * s, s], [-k * s, cc - a * s]]
     }
+}
 
-    /// Spectral radius of [`Self::amplification`]: the step is stable when it is below 1.
-    pub fn spectral_radius(&self, spring: &SwaySpring, dt: f64) -> f64 {
-        let m = self.amplification(spring, dt);
-        let tr = m[0][0] + m[1][1];
-        let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-        let disc = tr * tr / 4.0 - det;
-        if disc >= 0.0 {
-            let r = disc.sqrt();
-            (tr / 2.0 + r).abs().max((tr / 2.0 - r).abs())
-        } else {
-            det.sqrt()
-        }
+/// Spectral radius of a step's amplification matrix: the step is stable when it is below 1.
+pub fn spectral_radius(m: [[f64; 2]; 2]) -> f64 {
+    let tr = m[0][0] + m[1][1];
+    let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+    let disc = tr * tr / 4.0 - det;
+    if disc >= 0.0 {
+        let r = disc.sqrt();
+        (tr / 2.0 + r).abs().max((tr / 2.0 - r).abs())
+    } else {
+        det.sqrt()
     }
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// The free oscillation `x'' = -k x - c x'` from `(x0, v0)`, evaluated at `t` in f64,
@@ -378,7 +281,8 @@ mod tests {
         }
     }
 
-    fn springs() -> Vec<(&'static str, SwaySpring)> {
+    /// Springs over the whole range of damping, for the tests of the steps.
+    pub(crate) fn springs() -> Vec<(&'static str, SwaySpring)> {
         let w = 2.0f32 * std::f32::consts::PI * 1.5;
         vec![
             ("under-damped", SwaySpring::from_grass(0.35)),
@@ -410,8 +314,7 @@ mod tests {
                 for (x0, v0) in [(0.3f32, 0.0f32), (0.0, 2.0), (-0.2, 1.5)] {
                     let scale = f64::from(x0.abs()).max(f64::from(v0.abs()) / spring.omega());
                     // One step.
-                    let s =
-                        Integrator::Exact.step(&spring, SwayState { x: x0, v: v0 }, 0.0, dt as f32);
+                    let s = ExactStep.step(&spring, SwayState { x: x0, v: v0 }, 0.0, dt as f32);
                     let want = analytic(k, c, f64::from(x0), f64::from(v0), f64::from(dt as f32));
                     let err = (f64::from(s.x) - want).abs();
                     assert!(
@@ -422,7 +325,7 @@ mod tests {
                     // Forty steps: the error grows no faster than an ulp or so a step.
                     let mut s = SwayState { x: x0, v: v0 };
                     for _ in 0..40 {
-                        s = Integrator::Exact.step(&spring, s, 0.0, dt as f32);
+                        s = ExactStep.step(&spring, s, 0.0, dt as f32);
                     }
                     let want = analytic(
                         k,
@@ -447,37 +350,17 @@ mod tests {
     fn exact_settles_on_the_target_and_is_unconditionally_stable() {
         for (name, spring) in springs() {
             for dt in [1e-4, 1.0 / 60.0, 0.5, 10.0] {
-                let rho = Integrator::Exact.spectral_radius(&spring, dt);
+                let rho = spectral_radius(ExactStep.amplification(&spring, dt));
                 assert!(rho < 1.0, "{name} dt {dt}: spectral radius {rho}");
             }
             let mut s = SwayState::default();
             for _ in 0..2000 {
-                s = Integrator::Exact.step(&spring, s, 0.25, 0.5);
+                s = ExactStep.step(&spring, s, 0.25, 0.5);
             }
             assert!(
                 (s.x - 0.25).abs() < 1e-5 && s.v.abs() < 1e-4,
                 "{name}: {s:?}"
             );
-        }
-    }
-
-    #[test]
-    fn closed_form_limits_agree_with_the_spectral_radius() {
-        for (name, spring) in springs() {
-            for (integrator, limit) in [
-                (Integrator::ExplicitEuler, spring.explicit_euler_max_dt()),
-                (
-                    Integrator::SemiImplicitEuler,
-                    spring.semi_implicit_euler_max_dt(),
-                ),
-            ] {
-                let below = integrator.spectral_radius(&spring, limit * 0.999);
-                let above = integrator.spectral_radius(&spring, limit * 1.001);
-                assert!(
-                    below < 1.0 && above > 1.0,
-                    "{name} {integrator:?}: limit {limit}, radius {below} below, {above} above"
-                );
-            }
         }
     }
 

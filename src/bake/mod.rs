@@ -1,0 +1,446 @@
+//! The baker: turns a DEM ([`Dem`]) into a world: a pyramid of stored tiles and `world.toml`.
+//!
+//! 0. The DEM is read ([`Dem::load_with`]: GeoTIFF, SRTM `.hgt` or PNG + sidecar, told apart
+//!    by content) and its nodata samples are filled from the valid heights around them.
+//! 1. The DEM is resampled (Catmull-Rom bicubic in its own, non-square grid) to square cells at
+//!    the finest stored level, over the whole root grid plus a margin for the tile borders of
+//!    every level. Beyond the DEM the height of the nearest edge point is repeated.
+//! 2. Grass type and density are painted on that grid from slope, altitude and value noise
+//!    seeded by [`BakeOptions::seed`]: no grass where the slope exceeds 35 degrees, lush meadow
+//!    and tall grass low down, dry grass high up and on dry (noise) ground.
+//! 3. Coarser levels are point samples of the finest grid: the sample at level `L` is the
+//!    sample at the same position at level `L + 1` (every other one). Coarse and fine tiles
+//!    therefore agree exactly where their samples coincide, so a fine tile morphed to its
+//!    parent's resolution meets the parent without cracks, and children derived from a parent
+//!    start from the parent's own values.
+//! 4. Every tile of every stored level is cut from that one global grid (borders included), so
+//!    neighbours share identical edge and border samples, and written through temporary files.
+//! 5. Seven camera paths are computed from the terrain ("tour", the default, "overview", "low",
+//!    "meadow", "helicopter", and "wind-tour" with its "walker"), four wind scenes are added
+//!    ("calm", "breeze", "storm" and "helicopter", see [`default_wind_scenes`]; the wind tour
+//!    shows them in turn), and `world.toml` is written last, so a world with a manifest is a
+//!    complete world.
+//!
+//! The bake is deterministic: the same DEM, options and seed give byte-identical files.
+//!
+//! The world is written into a staging folder beside the output folder (`.NAME.baking.*`,
+//! never inside it) and moved into place at the end; a bake that fails or is cancelled
+//! ([`BakeOptions::cancel`]) removes it and leaves the output folder as it was. A bake holds
+//! an OS lock on a file in its staging folder while it runs, so that the next bake beside the
+//! same output folder removes the staging folders of bakes that were killed (whose lock is
+//! free) and leaves those of running bakes alone.
+//!
+//! The stages live in submodules: `resample` (the DEM to the finest square grid and the
+//! derivation calibration), `paint` (grass types and density), `tiles` (cutting and writing
+//! the pyramid), `author` (camera paths and wind scenes) and `publish` (the staging folder,
+//! the safe replacement of `world.toml` and `tiles/`, and cancellation).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::world::dem::{Dem, DemFormat, DemOptions};
+use crate::world::error::WorldError;
+use crate::world::format::write_atomic;
+use crate::world::manifest::{Manifest, Sky, WindDefaults, WorldSource};
+use crate::world::tile::Pyramid;
+
+mod author;
+mod paint;
+mod publish;
+mod resample;
+#[cfg(test)]
+mod tests;
+mod tiles;
+
+pub use author::{
+    HELICOPTER_PATH, WALKER_PATH, WIND_TOUR_PATH, WIND_TOUR_SCENES, default_wind_scenes,
+};
+pub use paint::{MAX_GRASS_SLOPE_DEG, default_grass_types};
+pub use publish::CancelFlag;
+
+use author::{helicopter_path, low_path, meadow_path, overview_path, tour_path, wind_tour_paths};
+use paint::check_painted_types;
+use publish::{Staging, check_out, resolve_out};
+use resample::Grid;
+use tiles::{grass_peak, write_all_tiles};
+
+/// Shared samples beyond each tile edge in baked worlds.
+pub const BAKE_BORDER: u32 = 2;
+/// Levels finer than the stored ones that baked worlds ask the runtime to derive.
+pub const BAKE_DERIVED_LEVELS: u8 = 6;
+
+/// What to bake, and how.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakeOptions {
+    /// The DEM: a GeoTIFF, an SRTM `.hgt` tile, or a 16-bit PNG whose sidecar sits beside it
+    /// with the extension `.json`.
+    pub dem: PathBuf,
+    /// Spacing of the DEM's samples in metres (east-west, north-south), in place of what the
+    /// file says; needed for a TIFF without GeoTIFF tags.
+    pub dem_cell_size_m: Option<[f64; 2]>,
+    /// The world directory to write (`.`, `..` and relative paths are resolved first). The
+    /// world is baked into a staging folder beside it and moved into place at the end; an
+    /// existing folder that is not empty is refused unless `replace` is set. A bake writes, and
+    /// replaces, only `world.toml` and `tiles/` in it: its other files (a README, the source
+    /// DEM) are never moved or changed.
+    pub out: PathBuf,
+    /// World name; by default the name of `out`.
+    pub name: Option<String>,
+    /// Cell size at the finest stored level, metres; by default the DEM's smaller cell size
+    /// rounded to 1, 2, 2.5 or 5 times a power of ten (25 m for 24.585 m).
+    pub cell_size_m: Option<f64>,
+    /// Cells per tile edge (power of two, 8..=1024).
+    pub tile_cells: u32,
+    /// Stored levels (1..=12).
+    pub stored_levels: u8,
+    /// Seed of the grass noise.
+    pub seed: u64,
+    /// Replace the world (`world.toml` and `tiles/`) in `out` if `out` exists and is not empty
+    /// (otherwise such a folder is refused).
+    pub replace: bool,
+    /// Stops the bake when set (checked between rows and between tiles): the bake then fails
+    /// with [`WorldError::Cancelled`], removes its staging folder and leaves `out` as it was.
+    pub cancel: Option<CancelFlag>,
+}
+impl Default for BakeOptions {
+    fn default() -> Self {
+        BakeOptions {
+            dem: PathBuf::new(),
+            dem_cell_size_m: None,
+            out: PathBuf::new(),
+            name: None,
+            cell_size_m: None,
+            tile_cells: 128,
+            stored_levels: 3,
+            seed: 1,
+            replace: false,
+            cancel: None,
+        }
+    }
+}
+
+/// The stages of a bake, reported to the progress callback.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum BakeStage {
+    /// Reading the DEM (total 1).
+    LoadDem,
+    /// Resampling the DEM to the finest grid (total = grid rows).
+    Resample,
+    /// Painting grass type and density (total = grid rows).
+    Paint,
+    /// Computing camera paths (total = paths).
+    Paths,
+    /// Writing tiles (total = stored tiles).
+    WriteTiles,
+    /// Writing `world.toml` (total 1).
+    WriteManifest,
+}
+
+/// What a bake did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakeReport {
+    /// Tiles written (each is three files).
+    pub tiles_written: u64,
+    /// Stored levels.
+    pub levels: u8,
+    /// Extent of the data area, metres.
+    pub extent_m: [f64; 2],
+    /// Lowest and highest stored height, metres.
+    pub height_range_m: [f32; 2],
+    /// Wall-clock time of the bake.
+    pub seconds: f64,
+    /// The DEM's format.
+    pub dem_format: DemFormat,
+    /// The DEM's samples (west-east, south-north).
+    pub dem_samples: [u32; 2],
+    /// The DEM's cell size in metres (east-west, north-south).
+    pub dem_cell_size_m: [f64; 2],
+    /// Nodata samples of the DEM filled from the heights around them.
+    pub nodata_filled: u64,
+}
+
+/// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
+/// work goes on; the library prints nothing.
+pub fn bake(
+    opts: &BakeOptions,
+    progress: &mut dyn FnMut(BakeStage, u64, u64),
+) -> Result<BakeReport, WorldError> {
+    let start = Instant::now();
+    let manifest_path = opts.out.join("world.toml");
+    check_options(opts)?;
+    let out = resolve_out(&opts.out)?;
+    let cancelled = || {
+        let stop = opts.cancel.as_ref().is_some_and(CancelFlag::is_cancelled);
+        if stop {
+            Err(WorldError::Cancelled {
+                path: opts.out.clone(),
+            })
+        } else {
+            Ok(())
+        }
+    };
+
+    progress(BakeStage::LoadDem, 0, 1);
+    let dem = Dem::load_with(
+        &opts.dem,
+        &DemOptions {
+            cell_size_m: opts.dem_cell_size_m,
+        },
+    )?;
+    progress(BakeStage::LoadDem, 1, 1);
+    check_dem_heights(&dem, &opts.dem)?;
+    cancelled()?;
+
+    let cell = match opts.cell_size_m {
+        Some(c) => c,
+        None => nice_cell_size(dem.cell_ew_m.min(dem.cell_ns_m)),
+    };
+    check_cell_size(&dem, &opts.dem, opts.cell_size_m, cell)?;
+
+    // Millimetres are plenty, and keep the manifest free of float noise.
+    let extent = dem.extent_m().map(|e| round_to(e, 3));
+    let finest = opts.stored_levels.saturating_sub(1);
+    let root_size = cell * f64::from(opts.tile_cells) * 2f64.powi(i32::from(finest));
+    let root_tiles =
+        extent.map(|e| ((e / root_size).ceil().max(1.0)).min(f64::from(u32::MAX)) as u32);
+    let pyramid = Pyramid {
+        root_tile_size_m: root_size,
+        root_tiles,
+        tile_cells: opts.tile_cells,
+        border: BAKE_BORDER,
+        stored_levels: opts.stored_levels,
+        derived_levels: BAKE_DERIVED_LEVELS,
+    };
+    let name = opts
+        .name
+        .clone()
+        .unwrap_or_else(|| default_name(&out, &opts.dem));
+    let mut manifest = Manifest {
+        name,
+        description: description(&dem, &opts.dem, cell),
+        extent_m: extent,
+        pyramid,
+        height_range_m: [0.0, 1.0],
+        grass_types: default_grass_types(),
+        wind: WindDefaults::default(),
+        sky: Sky::default(),
+        paths: Vec::new(),
+        wind_scenes: Vec::new(),
+        features: Default::default(),
+        source: Some(WorldSource {
+            file: file_name(&opts.dem),
+            format: dem.format,
+            crs: dem.crs.clone(),
+            origin: dem.origin,
+            samples: [dem.width, dem.height],
+            cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
+            nodata_filled: dem.nodata_filled,
+        }),
+        derive: None,
+        grass_peak: None,
+    };
+    // Refuse absurd sizes before allocating anything.
+    manifest.validate(&manifest_path)?;
+
+    let grid = Grid::resample(&dem, &manifest.pyramid, &opts.dem, &cancelled, progress)?;
+    let height_range = grid.height_range();
+    manifest.height_range_m = height_range;
+    manifest.derive = Some(grid.calibrate(extent, manifest.pyramid.derived_levels));
+    cancelled()?;
+
+    let mut painted = grid.paint(height_range, opts.seed, &cancelled, progress)?;
+    painted.cancel = opts.cancel.clone();
+    check_painted_types(&painted, &manifest, &manifest_path)?;
+    progress(BakeStage::Paths, 0, 2);
+    let overview = overview_path(&painted, extent);
+    progress(BakeStage::Paths, 1, 2);
+    let low = low_path(&painted, extent);
+    let meadow = meadow_path(&painted, extent);
+    let tour = tour_path(&painted, extent);
+    let helicopter = helicopter_path(&painted, extent);
+    let (wind_tour, walker) = wind_tour_paths(&painted, extent);
+    cancelled()?;
+    progress(BakeStage::Paths, 2, 2);
+    manifest.paths = vec![tour, overview, low, meadow, helicopter, wind_tour, walker];
+    manifest.wind_scenes = default_wind_scenes();
+    manifest.grass_peak = Some(grass_peak(&manifest, &painted));
+    manifest.validate(&manifest_path)?;
+    cancelled()?;
+
+    let staging = Staging::begin(&out, &opts.out, opts.replace)?;
+    let tiles_written = write_all_tiles(
+        staging.world(),
+        &manifest.pyramid,
+        &painted,
+        &cancelled,
+        progress,
+    )?;
+
+    progress(BakeStage::WriteManifest, 0, 1);
+    write_atomic(
+        &staging.world().join("world.toml"),
+        manifest.to_toml().as_bytes(),
+    )?;
+    // The last chance to stop: once the world is being moved into place, it is finished.
+    cancelled()?;
+    staging.publish()?;
+    progress(BakeStage::WriteManifest, 1, 1);
+
+    Ok(BakeReport {
+        tiles_written,
+        levels: manifest.pyramid.stored_levels,
+        extent_m: extent,
+        height_range_m: height_range,
+        seconds: start.elapsed().as_secs_f64(),
+        dem_format: dem.format,
+        dem_samples: [dem.width, dem.height],
+        dem_cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
+        nodata_filled: dem.nodata_filled,
+    })
+}
+
+/// Rounds a cell size to 1, 2, 2.5 or 5 times a power of ten, whichever is nearest in ratio.
+pub fn nice_cell_size(c: f64) -> f64 {
+    if !(c.is_finite() && c > 0.0) {
+        return c;
+    }
+    let base = 10f64.powf(c.log10().floor());
+    [1.0, 2.0, 2.5, 5.0, 10.0]
+        .map(|m| m * base)
+        .into_iter()
+        .min_by(|a, b| (a / c).ln().abs().total_cmp(&(b / c).ln().abs()))
+        .unwrap_or(c)
+}
+
+/// The name of the (resolved) output folder, else the DEM's stem.
+fn default_name(out: &Path, dem: &Path) -> String {
+    out.file_name()
+        .or_else(|| dem.file_stem())
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "world".into())
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+fn description(dem: &Dem, dem_path: &Path, cell: f64) -> String {
+    let file = file_name(dem_path);
+    let mut text = String::new();
+    if !dem.place.is_empty() {
+        text.push_str(dem.place.trim_end_matches('.'));
+        text.push_str(". ");
+    }
+    text.push_str(&format!(
+        "Baked from {file} ({}, {}x{} samples of {} m x {} m) at {cell} m cells.",
+        dem.format.name(),
+        dem.width,
+        dem.height,
+        round_to(dem.cell_ew_m, 3),
+        round_to(dem.cell_ns_m, 3)
+    ));
+    if dem.nodata_filled > 0 {
+        text.push_str(&format!(
+            " {} nodata samples filled from the heights around them.",
+            dem.nodata_filled
+        ));
+    }
+    if !dem.source.is_empty() {
+        text.push(' ');
+        text.push_str(&dem.source);
+    }
+    text
+}
+/// `v` rounded to `decimals` places, as the f64 nearest that decimal (so it prints short).
+pub(super) fn round_to(v: f64, decimals: usize) -> f64 {
+    format!("{v:.decimals$}").parse().unwrap_or(v)
+}
+
+/// Refuses bake options out of range before anything is read, naming the option.
+fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
+    let t = opts.tile_cells;
+    if !(8..=1024).contains(&t) || !t.is_power_of_two() {
+        return Err(WorldError::bad_option(
+            "--tile-cells",
+            t,
+            "a power of two in 8..=1024".into(),
+        ));
+    }
+    if !(1..=12).contains(&opts.stored_levels) {
+        return Err(WorldError::bad_option(
+            "--levels",
+            opts.stored_levels,
+            "in 1..=12".into(),
+        ));
+    }
+    if let Some(c) = opts.cell_size_m
+        && !(c.is_finite() && c > 0.0)
+    {
+        return Err(WorldError::bad_option(
+            "--cell-size",
+            c,
+            "a positive number of metres".into(),
+        ));
+    }
+    check_out(&opts.out, opts.replace)
+}
+
+/// Smallest cell a bake resamples to, metres.
+pub const MIN_BAKE_CELL_M: f64 = 1e-3;
+
+/// Most cells a side a bake resamples the DEM to.
+pub const MAX_BAKE_CELLS: f64 = 65_536.0;
+
+/// Refuses a cell size (given, or the DEM's own) below a millimetre or resampling the DEM to
+/// more than [`MAX_BAKE_CELLS`] a side, naming the option or the sidecar's field.
+fn check_cell_size(
+    dem: &Dem,
+    dem_path: &Path,
+    option: Option<f64>,
+    cell: f64,
+) -> Result<(), WorldError> {
+    let extent = dem.extent_m();
+    let cells = extent[0].max(extent[1]) / cell;
+    let least = (extent[0].max(extent[1]) / MAX_BAKE_CELLS).max(MIN_BAKE_CELL_M);
+    if cell >= MIN_BAKE_CELL_M && cells <= MAX_BAKE_CELLS {
+        return Ok(());
+    }
+    let allowed = format!(
+        "at least {least} m for this DEM ({:.3} x {:.3} m; a bake resamples to at least 1 mm \
+         cells and at most {MAX_BAKE_CELLS} cells a side)",
+        extent[0], extent[1]
+    );
+    match option {
+        Some(c) => Err(WorldError::bad_option("--cell-size", c, allowed)),
+        None => Err(WorldError::OutOfRange {
+            path: crate::world::dem::sidecar_path(dem_path),
+            field: "cell_size_m".into(),
+            value: format!("{} x {}", dem.cell_ew_m, dem.cell_ns_m),
+            allowed: format!("{allowed}, or pass --cell-size"),
+        }),
+    }
+}
+
+/// Refuses a DEM whose heights leave [`crate::world::PLAUSIBLE_HEIGHTS_M`] (a wrong offset or scale in
+/// its sidecar), naming the sidecar.
+fn check_dem_heights(dem: &Dem, dem_path: &Path) -> Result<(), WorldError> {
+    let [lo, hi] = crate::world::PLAUSIBLE_HEIGHTS_M;
+    let bad = dem.heights.iter().position(|&h| {
+        let h = f64::from(h);
+        !(lo..=hi).contains(&h)
+    });
+    match bad {
+        None => Ok(()),
+        Some(k) => Err(WorldError::ImplausibleHeight {
+            path: crate::world::dem::sidecar_path(dem_path),
+            dem: dem_path.to_path_buf(),
+            column: k as u32 % dem.width,
+            row: k as u32 / dem.width,
+            value: f64::from(dem.heights[k]),
+            range: crate::world::PLAUSIBLE_HEIGHTS_M,
+        }),
+    }
+}

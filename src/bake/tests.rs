@@ -1,0 +1,158 @@
+//! Unit tests of the baker's stages.
+
+use glam::DVec2;
+
+use super::paint::{Painted, fbm, paint_sample};
+use super::*;
+
+#[test]
+fn nice_cell_sizes() {
+    assert_eq!(nice_cell_size(24.585), 25.0);
+    assert_eq!(nice_cell_size(30.888), 25.0);
+    assert_eq!(nice_cell_size(10.2), 10.0);
+    assert_eq!(nice_cell_size(0.95), 1.0);
+    assert_eq!(nice_cell_size(4.4), 5.0);
+}
+
+#[test]
+fn steep_ground_is_bare() {
+    for slope in [36.0, 45.0, 80.0] {
+        for k in 0..50 {
+            let p = DVec2::new(k as f64 * 37.0, k as f64 * 91.0);
+            assert_eq!(paint_sample(slope, 0.3, p, 7), (0, 0));
+        }
+    }
+}
+
+/// Every index the painter gives names one of the grass types a bake writes, and there are
+/// no more of those than the renderer draws.
+#[test]
+fn painted_indices_name_the_types_written() {
+    let types = default_grass_types().len();
+    assert!(types <= crate::world::MAX_GRASS_TYPES);
+    let mut seen = [false; 256];
+    for seed in [1, 7, 12345] {
+        for s in 0..=90 {
+            for a in 0..=20 {
+                for k in 0..20 {
+                    let p = DVec2::new(k as f64 * 613.0, (s * 21 + a) as f64 * 97.0);
+                    let (kind, _) = paint_sample(f64::from(s), f64::from(a) / 20.0, p, seed);
+                    seen[usize::from(kind)] = true;
+                }
+            }
+        }
+    }
+    let used: Vec<usize> = (0..256).filter(|&k| seen[k]).collect();
+    assert_eq!(
+        used,
+        (0..types).collect::<Vec<_>>(),
+        "every type, and no other"
+    );
+}
+
+/// A painted index beyond the manifest's types is refused before anything is written.
+#[test]
+fn painted_indices_beyond_the_types_are_refused() {
+    let grid = Grid {
+        width: 2,
+        height: 2,
+        margin: 0,
+        cell: 1.0,
+        finest: 0,
+        heights: vec![0.0; 4],
+    };
+    let mut painted = Painted {
+        grid,
+        grass_type: vec![0, 1, 2, 3],
+        density: vec![9; 4],
+        cancel: None,
+    };
+    let mut manifest = crate::world::Manifest::parse(
+        include_str!("../../worlds/santa-cruz/world.toml"),
+        Path::new("world.toml"),
+    )
+    .unwrap();
+    assert!(check_painted_types(&painted, &manifest, Path::new("w/world.toml")).is_ok());
+    painted.grass_type[2] = 4;
+    let err = check_painted_types(&painted, &manifest, Path::new("w/world.toml")).unwrap_err();
+    assert!(matches!(err, WorldError::BadTileData { .. }), "{err}");
+    assert!(err.to_string().contains("grass type index 4"), "{err}");
+    manifest.grass_types.truncate(2);
+    painted.grass_type[2] = 2;
+    assert!(check_painted_types(&painted, &manifest, Path::new("w/world.toml")).is_err());
+}
+
+/// Output paths resolve to a folder with a name and a parent, so that the staging folder
+/// goes beside it.
+#[test]
+fn output_paths_resolve_without_dots() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = dir.path().canonicalize().unwrap();
+    std::fs::create_dir_all(base.join("w/sub")).unwrap();
+    for (given, want) in [
+        (base.join("w"), base.join("w")),
+        (base.join("w/."), base.join("w")),
+        (base.join("w/sub/.."), base.join("w")),
+        (base.join("w/sub/../"), base.join("w")),
+        (base.join("new/deeper/.."), base.join("new")),
+        (base.join("w/sub/new/../.."), base.join("w")),
+    ] {
+        assert_eq!(resolve_out(&given).unwrap(), want, "{}", given.display());
+    }
+    for bad in ["/", "/..", ""] {
+        let err = resolve_out(Path::new(bad)).unwrap_err();
+        assert!(err.to_string().starts_with("--out"), "{err}");
+    }
+}
+
+/// When a world cannot be moved into place, the one it was to replace is put back, and the
+/// folder's other files are never touched.
+#[test]
+fn a_failed_publish_puts_the_previous_world_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().canonicalize().unwrap().join("w");
+    std::fs::create_dir_all(out.join("tiles/L0")).unwrap();
+    std::fs::write(out.join("tiles/L0/0_0.type.png"), "old tile").unwrap();
+    std::fs::write(out.join("world.toml"), "old manifest").unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let staging = Staging::begin(&out, &out, true).unwrap();
+    let dir_of_staging = staging.dir.clone();
+    assert_eq!(dir_of_staging.parent(), out.parent());
+    // The new world lacks its manifest: the last move fails.
+    std::fs::create_dir_all(staging.world().join("tiles/L0")).unwrap();
+    std::fs::write(staging.world().join("tiles/L0/0_0.type.png"), "new tile").unwrap();
+    let err = staging.publish().unwrap_err();
+    assert!(err.to_string().contains("world.toml"), "{err}");
+    assert_eq!(
+        std::fs::read(out.join("world.toml")).unwrap(),
+        b"old manifest"
+    );
+    assert_eq!(
+        std::fs::read(out.join("tiles/L0/0_0.type.png")).unwrap(),
+        b"old tile"
+    );
+    assert_eq!(std::fs::read(out.join("notes.txt")).unwrap(), b"mine");
+    assert!(!dir_of_staging.exists());
+
+    // Into a new folder: nothing is left at all.
+    let new = dir.path().canonicalize().unwrap().join("new");
+    let staging = Staging::begin(&new, &new, false).unwrap();
+    assert!(staging.publish().is_err());
+    assert!(!new.exists());
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert_eq!(left.len(), 1, "{left:?}");
+}
+
+#[test]
+fn noise_is_deterministic_and_bounded() {
+    for k in 0..1000 {
+        let p = DVec2::new(k as f64 * 0.37 - 100.0, k as f64 * 0.11);
+        let v = fbm(p, 3, 3);
+        assert!((0.0..=1.0).contains(&v));
+        assert_eq!(v, fbm(p, 3, 3));
+    }
+    assert_ne!(
+        fbm(DVec2::new(0.5, 0.5), 1, 3),
+        fbm(DVec2::new(0.5, 0.5), 2, 3)
+    );
+}
