@@ -18,19 +18,22 @@
 //! - [`shaders`]: every stage's WGSL, assembled from `shaders/` with the shared pieces
 //!   (`shaders/shared/`) included once.
 //! - [`gpu`]: what every stage shares: the headless GPU context (adapter choice from `WGPU_*`
-//!   variables), buffer and texture readback, timestamp timing.
+//!   variables), buffer and texture readback, timestamp timing, and the set-up vocabulary
+//!   (`gpu::layout`: bind group layouts one line a binding; `gpu::pipeline`; `gpu::pass`).
 //! - [`stream`]: the tile service: async streamer, CPU cache, the GPU tile atlas, and child
 //!   tiles derived on the GPU (with the stage's CPU mirror beside it); worlds streamed over
 //!   HTTP (`stream::HttpSource`, feature `http`).
 //! - [`lod`]: which terrain tiles a camera needs, at which level, with frustum culling; grass
 //!   rings with hysteresis.
 //! - [`terrain`]: the terrain and sky passes (`shaders/terrain.wgsl`).
-//! - [`grass`]: GPU grass: Hi-Z, blade generation and culling, per-blade wind, the instance pool
-//!   and the draw; each stage with its CPU mirror.
+//! - [`grass`]: GPU grass: Hi-Z (`grass::hiz_gpu`, its mirror `grass::hiz`), blade generation
+//!   and culling, per-blade wind, the instance pool and the draw; each stage with its CPU
+//!   mirror.
 //! - [`wind`]: the wind field around the camera (ambient noise, sources, trail) and the sway
 //!   springs, on the GPU with their CPU mirrors; the wind scenes of a world made ready to run.
 //! - [`bake`]: the baker that turns a DEM into a world (GPU-free; it fits the derived levels'
-//!   detail with [`stream::calibrate`]).
+//!   detail with [`stream::calibrate`]), one module per job: resampling, painting, tiles,
+//!   authoring camera paths and wind scenes, publishing.
 //! - [`renderer`]: the frame: [`Renderer`], the order of its passes top to bottom in one place.
 //! - `tools` (feature `cli`): the headless scene, fly-throughs and their reports, soak,
 //!   benchmarks, evaluations, charts and image metrics, the interactive viewer, and `serve`
