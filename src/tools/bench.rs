@@ -76,9 +76,6 @@ pub const MAX_WARMUP_FRAMES: u32 = 100;
 /// The most timed frames of each measurement per round (`--timed-frames`); with the warm-up,
 /// within the 256 frames that `bench blades` times its floor pass over at once.
 pub const MAX_TIMED_FRAMES: u32 = 150;
-// The largest counts taken stay within the floor pass's frames.
-const _: () =
-    assert!(MAX_WARMUP_FRAMES + MAX_TIMED_FRAMES <= crate::tools::bench_blades::MAX_FLOOR_FRAMES);
 /// The most interleaved rounds (`--rounds`).
 pub const MAX_ROUNDS: u32 = 100;
 /// The most frames of the dolly (`--dolly-frames`).

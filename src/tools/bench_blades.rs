@@ -832,6 +832,11 @@ fn floor_pipeline(
 
 /// Most floor frames timed in one call.
 pub(crate) const MAX_FLOOR_FRAMES: u32 = 256;
+// The largest timing options that benchmarks take stay within the floor pass's frames.
+const _: () = assert!(
+    crate::tools::bench::MAX_WARMUP_FRAMES + crate::tools::bench::MAX_TIMED_FRAMES
+        <= MAX_FLOOR_FRAMES
+);
 
 #[cfg(test)]
 mod tests {

@@ -73,7 +73,7 @@ pub struct FileFaults {
     files: Vec<PathBuf>,
     broken: Vec<PathBuf>,
     rate: f64,
-    rng: crate::tools::soak::Rng,
+    rng: crate::tools::rng::Rng,
     counts: FileFaultCounts,
 }
 
@@ -121,7 +121,7 @@ impl FileFaults {
             files,
             broken: Vec::new(),
             rate,
-            rng: crate::tools::soak::Rng(seed ^ 0xfa17_5eed),
+            rng: crate::tools::rng::Rng(seed ^ 0xfa17_5eed),
         })
     }
 

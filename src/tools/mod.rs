@@ -12,6 +12,7 @@ pub mod faults;
 pub mod fly;
 pub mod metrics;
 pub mod report;
+pub(crate) mod rng;
 pub mod scene;
 pub mod serve;
 pub mod soak;

@@ -12,6 +12,7 @@ use crate::camera::Camera;
 use crate::gpu::GpuContext;
 use crate::tools::metrics::Summary;
 use crate::tools::report::Thinned;
+use crate::tools::rng::Rng;
 use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
 use crate::world::{TileData, TileId, World};
 
@@ -336,20 +337,6 @@ impl Ground {
         let low = h(i, j) * (1.0 - fx) + h(i + 1, j) * fx;
         let high = h(i, j + 1) * (1.0 - fx) + h(i + 1, j + 1) * fx;
         low * (1.0 - fy) + high * fy
-    }
-}
-
-/// A small deterministic generator (splitmix64).
-pub(crate) struct Rng(pub(crate) u64);
-
-impl Rng {
-    /// The next number in 0..1.
-    pub(crate) fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 

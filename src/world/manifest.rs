@@ -434,6 +434,10 @@ pub enum SourcePlacement<'a> {
     Path(&'a str),
 }
 
+/// The fields every kind of wind source has: position, path, start time, strength keys and
+/// whether they repeat.
+type SourceCommon<'a> = (&'a Option<[f64; 2]>, &'a Option<String>, f64, &'a [[f64; 2]], bool);
+
 impl WindSource {
     /// `directional`, `omni` or `vortex`.
     pub fn kind_name(&self) -> &'static str {
@@ -444,7 +448,7 @@ impl WindSource {
         }
     }
 
-    fn common(&self) -> (&Option<[f64; 2]>, &Option<String>, f64, &[[f64; 2]], bool) {
+    fn common(&self) -> SourceCommon<'_> {
         match self {
             WindSource::Directional {
                 position_m,
