@@ -1095,22 +1095,11 @@ fn a_fly_whose_tiles_never_arrive_fails_naming_the_world() {
     let world = verdant::World::open(&common::default_world()).unwrap();
     let opts = verdant::tools::FlyOptions {
         world: common::default_world(),
-        http: Default::default(),
-        path: None,
         frames: 2,
         size: (32, 18),
         out: tmp.path().join("o"),
         write_images: true,
-        service: Default::default(),
-        wind_scene: None,
-        disable: Vec::new(),
-        enable: Vec::new(),
-        grass_spacing_m: None,
-        grass_width_scale: None,
-        grass_infill_m: None,
-        grass_segments: None,
-        grass_near_m: None,
-        mesh_step: None,
+        ..Default::default()
     };
     let e = verdant::tools::fly::run_fly_with_source(
         &opts,

@@ -223,12 +223,9 @@ fn ceilings_hold_when_the_camera_jumps_across_the_world() {
     assert!(peak_cache <= config.cache_bytes && peak_atlas <= config.atlas_slots);
 }
 
-/// A missing and a corrupt tile file: the frame loop keeps going, the tiles are drawn from
-/// their ancestors, and each fault is reported once.
-#[test]
-fn missing_and_corrupt_tiles_fall_back_to_their_ancestors() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("world");
+/// A copy of the default world's manifest and tiles in `parent/world`, to break files of.
+fn world_copy(parent: &std::path::Path) -> std::path::PathBuf {
+    let dir = parent.join("world");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::copy(
         common::default_world().join("world.toml"),
@@ -236,6 +233,15 @@ fn missing_and_corrupt_tiles_fall_back_to_their_ancestors() {
     )
     .unwrap();
     common::copy_dir(&common::default_world().join("tiles"), &dir.join("tiles"));
+    dir
+}
+
+/// A missing and a corrupt tile file: the frame loop keeps going, the tiles are drawn from
+/// their ancestors, and each fault is reported once.
+#[test]
+fn missing_and_corrupt_tiles_fall_back_to_their_ancestors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = world_copy(tmp.path());
     let (missing, corrupt) = (TileId::new(2, 3, 4), TileId::new(1, 2, 2));
     std::fs::remove_file(dir.join("tiles/L2/3_4.height.exr")).unwrap();
     std::fs::write(dir.join("tiles/L1/2_2.density.png"), b"not a png at all").unwrap();
@@ -328,14 +334,7 @@ fn a_failed_tile_is_not_loaded_again_when_a_stale_want_set_names_it() {
 #[test]
 fn a_failed_tile_is_retried_and_heals_once_its_file_is_restored() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("world");
-    std::fs::create_dir_all(&dir).unwrap();
-    std::fs::copy(
-        common::default_world().join("world.toml"),
-        dir.join("world.toml"),
-    )
-    .unwrap();
-    common::copy_dir(&common::default_world().join("tiles"), &dir.join("tiles"));
+    let dir = world_copy(tmp.path());
     let broken = TileId::new(2, 3, 4);
     let file = dir.join("tiles/L2/3_4.height.exr");
     let good = std::fs::read(&file).unwrap();

@@ -12,6 +12,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::tools::fly::write_atomic;
+
 /// How a tile file is broken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FileFault {
@@ -90,8 +92,12 @@ impl FileFaults {
             "{} exists already: the faulty copy of the world goes there",
             copy.display()
         );
-        copy_dir(original, copy)
-            .with_context(|| format!("cannot copy {} for its faults", original.display()))?;
+        if let Err(e) = copy_dir(original, copy) {
+            // A partial copy is this run's own (the folder did not exist): not left behind.
+            let _ = std::fs::remove_dir_all(copy);
+            return Err(anyhow::Error::new(e)
+                .context(format!("cannot copy {} for its faults", original.display())));
+        }
         let mut files = Vec::new();
         let tiles = copy.join("tiles");
         for level in
@@ -159,8 +165,8 @@ impl FileFaults {
         Ok(())
     }
 
-    /// Puts every broken file back as it was, each whole at once (a temporary file renamed
-    /// into place), so that a load never sees a half-restored file.
+    /// Puts every broken file back as it was, each whole at once ([`write_atomic`]), so that a
+    /// load never sees a half-restored file.
     pub fn restore(&mut self) -> Result<()> {
         for rel in std::mem::take(&mut self.broken) {
             let at = self.copy.join(&rel);
@@ -169,11 +175,9 @@ impl FileFaults {
                 Ok(_) => std::fs::remove_file(&at)?,
                 Err(_) => {}
             }
-            let tmp = temp_name(&at);
-            std::fs::copy(self.original.join(&rel), &tmp)
+            let bytes = std::fs::read(self.original.join(&rel))
                 .with_context(|| format!("cannot restore {}", at.display()))?;
-            std::fs::rename(&tmp, &at)
-                .with_context(|| format!("cannot restore {}", at.display()))?;
+            write_atomic(&at, |w| w.write_all(&bytes))?;
             self.counts.restored += 1;
         }
         Ok(())
@@ -184,12 +188,7 @@ impl FileFaults {
         let len = std::fs::metadata(&at)
             .with_context(|| format!("cannot read {}", at.display()))?
             .len() as usize;
-        let replace = |bytes: &[u8]| -> Result<()> {
-            let tmp = temp_name(&at);
-            std::fs::write(&tmp, bytes)?;
-            std::fs::rename(&tmp, &at)?;
-            Ok(())
-        };
+        let replace = |bytes: &[u8]| write_atomic(&at, |w| w.write_all(bytes));
         match kind {
             FileFault::Missing => {
                 std::fs::remove_file(&at)?;
@@ -224,13 +223,6 @@ impl Drop for FileFaults {
         // The copy is scratch: it goes with the injector, whatever state it is in.
         let _ = std::fs::remove_dir_all(&self.copy);
     }
-}
-
-/// A temporary name beside `path`.
-fn temp_name(path: &Path) -> PathBuf {
-    let mut name = path.as_os_str().to_owned();
-    name.push(".restoring");
-    PathBuf::from(name)
 }
 
 fn copy_dir(from: &Path, to: &Path) -> std::io::Result<()> {

@@ -97,6 +97,32 @@ pub const FIRST_FRAME_WAIT: std::time::Duration = std::time::Duration::from_secs
 /// The most pixels a side of a frame or a benchmark image (as `--size` says).
 pub const MAX_IMAGE_SIDE: u32 = 16384;
 
+impl Default for FlyOptions {
+    /// The command line's defaults: the default world's first path, 240 frames at 640x360
+    /// into `out/fly`, the renderer's own grass settings.
+    fn default() -> Self {
+        Self {
+            world: PathBuf::from("worlds/santa-cruz"),
+            http: Default::default(),
+            path: None,
+            frames: 240,
+            size: (640, 360),
+            out: PathBuf::from("out/fly"),
+            write_images: true,
+            service: Default::default(),
+            wind_scene: None,
+            disable: Vec::new(),
+            enable: Vec::new(),
+            grass_spacing_m: None,
+            grass_width_scale: None,
+            grass_infill_m: None,
+            grass_segments: None,
+            grass_near_m: None,
+            mesh_step: None,
+        }
+    }
+}
+
 impl FlyOptions {
     /// Checks every numeric option against its range (stated in the error), before anything
     /// is opened or written: `--frames` 1..=4294967295, `--size` 1..=16384 pixels a side,
@@ -968,22 +994,11 @@ mod tests {
     fn fly_options() -> FlyOptions {
         FlyOptions {
             world: PathBuf::from("w"),
-            http: Default::default(),
-            path: None,
             frames: 1,
             size: (64, 36),
             out: PathBuf::from("o"),
             write_images: false,
-            service: Default::default(),
-            wind_scene: None,
-            disable: Vec::new(),
-            enable: Vec::new(),
-            grass_spacing_m: None,
-            grass_width_scale: None,
-            grass_infill_m: None,
-            grass_segments: None,
-            grass_near_m: None,
-            mesh_step: None,
+            ..FlyOptions::default()
         }
     }
 

@@ -436,7 +436,13 @@ pub enum SourcePlacement<'a> {
 
 /// The fields every kind of wind source has: position, path, start time, strength keys and
 /// whether they repeat.
-type SourceCommon<'a> = (&'a Option<[f64; 2]>, &'a Option<String>, f64, &'a [[f64; 2]], bool);
+type SourceCommon<'a> = (
+    &'a Option<[f64; 2]>,
+    &'a Option<String>,
+    f64,
+    &'a [[f64; 2]],
+    bool,
+);
 
 impl WindSource {
     /// `directional`, `omni` or `vortex`.
