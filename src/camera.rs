@@ -1,7 +1,7 @@
 //! The camera and the camera paths of a world's manifest: a leaf that every part of the crate
 //! may use.
 
-use glam::{DVec2, DVec3, Mat4, Vec3};
+use glam::{DVec2, DVec3, Mat4, Vec2, Vec3};
 
 use crate::world::{CameraPath, Manifest};
 
@@ -86,6 +86,43 @@ impl Camera {
         let proj =
             directx::perspective_infinite_reverse(self.fov_y_deg.to_radians(), aspect, self.near_m);
         proj * view
+    }
+
+    /// This camera with its image shifted by `offset_px` pixels (x right, y down) on a
+    /// `width` x `height` target: the projection is translated in clip space, so that every
+    /// point moves by the same sub-pixel amount on screen. A zero offset returns the camera
+    /// unchanged.
+    pub fn jittered(&self, offset_px: Vec2, width: u32, height: u32, aspect: f32) -> Camera {
+        if offset_px == Vec2::ZERO {
+            return *self;
+        }
+        let (view, proj) = match &self.custom {
+            Some(c) => (c.view, c.proj),
+            None => {
+                use glam::camera::rh::{proj::directx, view::look_to_mat4};
+                (
+                    look_to_mat4(Vec3::ZERO, self.forward().as_vec3(), Vec3::Z),
+                    directx::perspective_infinite_reverse(
+                        self.fov_y_deg.to_radians(),
+                        aspect,
+                        self.near_m,
+                    ),
+                )
+            }
+        };
+        // Clip-space x' = x + tx w moves normalised x by tx: 2 / width per pixel (y is up in
+        // normalised coordinates and down in pixels).
+        let shift = Mat4::from_translation(Vec3::new(
+            2.0 * offset_px.x / width.max(1) as f32,
+            -2.0 * offset_px.y / height.max(1) as f32,
+            0.0,
+        ));
+        let mut c = *self;
+        c.custom = Some(CustomView {
+            view,
+            proj: shift * proj,
+        });
+        c
     }
 }
 
@@ -187,5 +224,30 @@ mod tests {
         assert!((c.forward() - DVec3::Y).length() < 1e-12);
         let down = Camera::new(DVec3::ZERO, 0.0, -90.0);
         assert!((down.forward() - DVec3::NEG_Z).length() < 1e-12);
+    }
+
+    #[test]
+    fn jitter_moves_every_point_by_the_offset_in_pixels() {
+        let c = Camera::new(DVec3::ZERO, 30.0, -10.0);
+        let (w, h) = (640u32, 360u32);
+        let aspect = w as f32 / h as f32;
+        let offset = Vec2::new(0.25, -0.375);
+        let j = c.jittered(offset, w, h, aspect);
+        assert!((j.forward() - c.forward()).length() < 1e-6);
+        let to_px = |m: Mat4, p: Vec3| {
+            let clip = m * p.extend(1.0);
+            let ndc = clip.truncate() / clip.w;
+            (
+                Vec2::new((ndc.x + 1.0) * 0.5 * w as f32, (1.0 - ndc.y) * 0.5 * h as f32),
+                ndc.z,
+            )
+        };
+        for p in [Vec3::new(40.0, 30.0, -5.0), Vec3::new(400.0, 180.0, 20.0)] {
+            let (a, za) = to_px(c.view_proj_relative(aspect), p);
+            let (b, zb) = to_px(j.view_proj_relative(aspect), p);
+            assert!((b - a - offset).length() < 1e-3, "{a} -> {b}");
+            assert!((za - zb).abs() < 1e-6);
+        }
+        assert_eq!(c.jittered(Vec2::ZERO, w, h, aspect), c);
     }
 }

@@ -212,6 +212,7 @@ impl Scene {
         walker: Option<DVec2>,
     ) -> Result<(u64, wgpu::SubmissionIndex), SceneError> {
         let input = FrameInput {
+            jitter_px: glam::Vec2::ZERO,
             camera: *camera,
             time_s,
             walker,

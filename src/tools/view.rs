@@ -530,6 +530,7 @@ impl Viewer {
         let (camera, walker) = s.camera(dt);
         s.time_s += dt;
         let input = FrameInput {
+            jitter_px: glam::Vec2::ZERO,
             camera,
             time_s: s.time_s,
             walker,

@@ -35,7 +35,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
 use std::time::Instant;
 
-use glam::DVec2;
+use glam::{DVec2, Vec2};
 
 use crate::camera::Camera;
 use crate::features::{Feature, Features};
@@ -293,6 +293,10 @@ pub struct FrameInput {
     /// Where the walker that leaves the trail in the grass is (world xy, metres), or `None` for
     /// no trail this frame (the trail fades).
     pub walker: Option<DVec2>,
+    /// Sub-pixel offset of the whole image, in pixels of the target (x right, y down; zero
+    /// for none): the projection is shifted by it, so that frames jittered within a pixel
+    /// sample the scene at different points of each pixel (supersampling by accumulation).
+    pub jitter_px: Vec2,
 }
 
 impl FrameInput {
@@ -302,6 +306,7 @@ impl FrameInput {
             camera,
             time_s,
             walker: Some(camera.position.truncate()),
+            jitter_px: Vec2::ZERO,
         }
     }
 }
@@ -883,7 +888,12 @@ impl Renderer {
         let start = Instant::now();
         self.collect_stats();
         self.flush_unrecorded();
-        let camera = input.camera;
+        let camera = input.camera.jittered(
+            input.jitter_px,
+            self.targets.width,
+            self.targets.height,
+            self.aspect(),
+        );
         let dt = self
             .time_s
             .map_or(0.0, |last| (input.time_s - last).clamp(0.0, 5.0)) as f32;
