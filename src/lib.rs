@@ -39,6 +39,7 @@
 //!   benchmarks, evaluations, charts and image metrics, the interactive viewer, and `serve`
 //!   (a static server of a world folder).
 
+pub mod aa;
 pub mod bake;
 pub mod camera;
 pub mod features;

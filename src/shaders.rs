@@ -50,6 +50,7 @@ pub fn shared_pieces() -> &'static [(&'static str, &'static str)] {
 
 /// One WGSL file per GPU stage, by file name.
 pub const STAGES: &[(&str, &str)] = &[
+    ("aa_taa.wgsl", include_str!("../shaders/aa_taa.wgsl")),
     (
         "derive_child.wgsl",
         include_str!("../shaders/derive_child.wgsl"),

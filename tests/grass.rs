@@ -7,6 +7,7 @@ mod common;
 use glam::DVec3;
 use verdant::camera::Camera;
 use verdant::gpu::{GpuContext, GpuTimer};
+use verdant::lod::Frustum;
 use verdant::grass::{Blade, GrassRenderer, GrassStats, HiZ, TileBlades, TileJob, generate_tile};
 use verdant::stream::TileAtlas;
 use verdant::tools::SceneConfig;
@@ -221,6 +222,7 @@ impl Rig {
         self.grass.set_camera(
             &self.ctx.queue,
             view_proj,
+            &Frustum::from_view_proj(view_proj),
             camera.position.z as f32,
             camera.near_m,
         );
@@ -678,7 +680,13 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
             verdant::features::Features::all(),
             world_cam,
         );
-        grass.set_camera(&ctx.queue, view_proj, ALTITUDE, cam.near_m);
+        grass.set_camera(
+            &ctx.queue,
+            view_proj,
+            &Frustum::from_view_proj(view_proj),
+            ALTITUDE,
+            cam.near_m,
+        );
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         // The walker crosses the tile, so that the trail's push (and its lean) is compared too.
         let walker = glam::DVec2::new(world_cam.x + 3.0 + f64::from(k), world_cam.y + 30.0);

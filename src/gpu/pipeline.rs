@@ -29,12 +29,25 @@ pub fn compute_pipeline(
     entry: &str,
     layouts: &[&BindGroupLayout],
 ) -> wgpu::ComputePipeline {
+    compute_pipeline_with_constants(device, label, module, entry, layouts, &[])
+}
+
+/// Like [`compute_pipeline`], with pipeline `constants` (the shader's `override`s).
+pub fn compute_pipeline_with_constants(
+    device: &wgpu::Device,
+    label: &str,
+    module: &ShaderModule,
+    entry: &str,
+    layouts: &[&BindGroupLayout],
+    constants: Constants<'_>,
+) -> wgpu::ComputePipeline {
     compute(
         device,
         label,
         module,
         entry,
         Some(&pipeline_layout(device, label, layouts)),
+        constants,
     )
 }
 
@@ -46,7 +59,7 @@ pub fn compute_pipeline_auto(
     module: &ShaderModule,
     entry: &str,
 ) -> wgpu::ComputePipeline {
-    compute(device, label, module, entry, None)
+    compute(device, label, module, entry, None, &[])
 }
 
 fn compute(
@@ -55,13 +68,17 @@ fn compute(
     module: &ShaderModule,
     entry: &str,
     layout: Option<&wgpu::PipelineLayout>,
+    constants: Constants<'_>,
 ) -> wgpu::ComputePipeline {
     device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some(label),
         layout,
         module,
         entry_point: Some(entry),
-        compilation_options: Default::default(),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants,
+            ..Default::default()
+        },
         cache: None,
     })
 }

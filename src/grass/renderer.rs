@@ -578,21 +578,18 @@ impl GrassRenderer {
         self.wind_params.flags[0] = features.bits();
     }
 
-    /// Sets the camera of this frame.
+    /// Sets the camera of this frame: its camera-relative view-projection and that's frustum.
     pub fn set_camera(
         &mut self,
         queue: &wgpu::Queue,
         view_proj: Mat4,
+        frustum: &Frustum,
         camera_altitude: f32,
         near: f32,
     ) {
         self.params.view_proj = view_proj.to_cols_array_2d();
         self.params.planes = [[0.0; 4]; 6];
-        for (dst, p) in self
-            .params
-            .planes
-            .iter_mut()
-            .zip(Frustum::from_view_proj(view_proj).planes())
+        for (dst, p) in self.params.planes.iter_mut().zip(frustum.planes())
         {
             *dst = p.to_array();
         }

@@ -30,6 +30,10 @@
 //! compares with `Greater`. The order of the frame's passes is [`Renderer::record`], top to
 //! bottom.
 
+mod view;
+
+pub use view::FrameView;
+
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
@@ -37,11 +41,13 @@ use std::time::Instant;
 
 use glam::{DVec2, Vec2};
 
+use crate::aa::AntiAliasing;
+use crate::aa::taa::{Taa, TaaSettings};
 use crate::camera::Camera;
 use crate::features::{Feature, Features};
 use crate::gpu::{GpuTimer, PassTimes, Targets};
 use crate::grass::{GrassRenderer, GrassSettings, GrassStats, TileJob, WindBindings};
-use crate::lod::{Frustum, GrassRings, Ring, RingSettings, TerrainLod, select_terrain};
+use crate::lod::{GrassRings, Ring, RingSettings, TerrainLod, select_terrain};
 use crate::stream::{
     AtlasError, DeriveJob, DeriveParams, DeriveStage, ResidencyPlan, ResidencyStats, ServiceConfig,
     TileAtlas, TileService, TileSource, Want,
@@ -198,6 +204,8 @@ pub struct RendererConfig {
     /// Blades a slot of the grass pool holds; `None`: enough for the world's densest grass
     /// tile (found by reading its finest stored tiles).
     pub grass_capacity: Option<u32>,
+    /// How the frame is anti-aliased.
+    pub aa: AntiAliasing,
 }
 
 /// Default radii of the grass infill near the camera (half and quarter spacing), metres.
@@ -221,6 +229,7 @@ impl RendererConfig {
             wind_keys: Vec::new(),
             features: Features::from(&world.manifest.features),
             grass_capacity: None,
+            aa: AntiAliasing::default(),
         }
     }
 
@@ -424,6 +433,9 @@ pub struct Renderer {
     /// A copy of the depth target after the terrain colour passes, when asked for
     /// ([`Renderer::set_terrain_depth_capture`]).
     terrain_depth: Option<wgpu::Texture>,
+    /// The temporal anti-aliasing, when on: the frame is drawn into its texture and resolved
+    /// into the caller's colour target.
+    taa: Option<Taa>,
 }
 
 impl Renderer {
@@ -558,6 +570,8 @@ impl Renderer {
         let timer = GpuTimer::new(device, queue, timestamps, 64);
         let readback = StatsRing::new(device, timer.capacity_bytes());
         let holes = HoleCheck::new(device, &atlas);
+        let taa = (config.aa == AntiAliasing::Taa)
+            .then(|| Taa::new(device, &targets, TaaSettings::default()));
         Ok(Self {
             device: device.clone(),
             queue: queue.clone(),
@@ -584,6 +598,7 @@ impl Renderer {
             frame: 0,
             prepared: None,
             terrain_depth: None,
+            taa,
         })
     }
 
@@ -706,18 +721,18 @@ impl Renderer {
         }
         self.terrain.resize(&self.device, width, height);
         self.contact_shadows.resize(&self.device, width, height);
+        if let Some(taa) = &mut self.taa {
+            taa.resize(&self.device, width, height);
+        }
         if let Some(g) = &mut self.grass {
             g.renderer.resize(&self.device, &self.queue, width, height);
         }
         Ok(())
     }
 
-    fn aspect(&self) -> f32 {
-        self.targets.width as f32 / self.targets.height as f32
-    }
-
-    fn select(&mut self, camera: &Camera) -> Selection {
-        let frustum = Frustum::from_view_proj(camera.view_proj_relative(self.aspect()));
+    fn select(&mut self, view: &FrameView) -> Selection {
+        let camera = &view.camera;
+        let frustum = view.frustum;
         let pyramid = &self.world.manifest.pyramid;
         let service = &self.service;
         let range = |id: TileId| service.height_range(id);
@@ -777,8 +792,9 @@ impl Renderer {
         self.flush_unrecorded();
         let mut last_change = Instant::now();
         let mut last_resident = u32::MAX;
+        let view = FrameView::new(camera, Vec2::ZERO, self.targets.width, self.targets.height);
         loop {
-            let sel = self.select(camera);
+            let sel = self.select(&view);
             let plan = self.service.update(&sel.wants);
             let busy = !plan.uploads.is_empty() || !plan.derives.is_empty();
             let derives = self.upload(plan);
@@ -888,17 +904,24 @@ impl Renderer {
         let start = Instant::now();
         self.collect_stats();
         self.flush_unrecorded();
-        let camera = input.camera.jittered(
-            input.jitter_px,
+        // The view, once for every stage: the caller's jitter plus the temporal
+        // anti-aliasing's.
+        let jitter = input.jitter_px + self.taa.as_ref().map_or(Vec2::ZERO, |t| t.next_jitter());
+        let view = FrameView::new(
+            &input.camera,
+            jitter,
             self.targets.width,
             self.targets.height,
-            self.aspect(),
         );
+        if let Some(taa) = &mut self.taa {
+            taa.prepare(&self.queue, view.unjittered, view.eye, view.forward);
+        }
+        let camera = view.camera;
         let dt = self
             .time_s
             .map_or(0.0, |last| (input.time_s - last).clamp(0.0, 5.0)) as f32;
         self.time_s = Some(input.time_s);
-        let sel = self.select(&camera);
+        let sel = self.select(&view);
         let plan = self.service.update(&sel.wants);
         let residency = self.service.stats();
         let derives = self.upload(plan);
@@ -935,9 +958,8 @@ impl Renderer {
         let roots = roots.filter(|r| r.len() <= crate::terrain::MAX_ROOT_TILES);
         let root_slots: Option<Vec<u32>> = roots.as_ref().map(|r| r.iter().map(|p| p.0).collect());
         self.terrain.set_root_slots(root_slots.as_deref());
-        let aspect = self.aspect();
-        let terrain_tiles = self.terrain.prepare(queue, &camera, aspect, &draws);
-        let grass_jobs = self.grass_jobs(&camera, &sel.grass);
+        let terrain_tiles = self.terrain.prepare(queue, view.view_proj, camera.position, &draws);
+        let grass_jobs = self.grass_jobs(&view, &sel.grass);
         let grass_level = self.rings.as_ref().map_or(0, |r| r.settings.level);
         let reads: Vec<(u32, TileId)> = sel
             .terrain
@@ -950,10 +972,9 @@ impl Renderer {
             )
             .chain(roots.into_iter().flatten())
             .collect();
-        let view_proj = camera.view_proj_relative(aspect);
         self.contact_shadows.prepare(
             queue,
-            view_proj,
+            view.view_proj,
             crate::terrain::sun_direction(&self.world.manifest.sky),
             (self.targets.width, self.targets.height),
         );
@@ -961,8 +982,13 @@ impl Renderer {
             let ambient_speed = g.wind.config().ambient_at(input.time_s).speed_mps as f32;
             g.renderer
                 .set_frame(input.time_s, ambient_speed, self.features, camera.position);
-            g.renderer
-                .set_camera(queue, view_proj, camera.position.z as f32, camera.near_m);
+            g.renderer.set_camera(
+                queue,
+                view.view_proj,
+                &view.frustum,
+                camera.position.z as f32,
+                camera.near_m,
+            );
         }
         let high = sel.grass.iter().filter(|g| g.1 == Ring::High).count() as u32;
         self.prepared = Some(Prepared {
@@ -1001,7 +1027,10 @@ impl Renderer {
     /// 7. contact shadows, with the `shadows` feature: each pixel's factor, less than 1 where a
     ///    short ray toward the sun is blocked in the depth buffer (compute), then the colour
     ///    multiplied by it (a full-screen pass; both `contact_shadow.wgsl`);
-    /// 8. the pass timestamps and grass counters copied into the readback ring, mapped when the
+    /// 8. with temporal anti-aliasing (passes 5-7 then draw into its own texture, with a
+    ///    jittered projection): the frame folded into the reprojected history (compute,
+    ///    `aa_taa.wgsl`), and the result written into `color`;
+    /// 9. the pass timestamps and grass counters copied into the readback ring, mapped when the
     ///    encoder's work is submitted ([`Renderer::stats`]).
     pub fn record(
         &mut self,
@@ -1055,9 +1084,13 @@ impl Renderer {
                 .hiz
                 .record(&self.device, encoder, depth.texture(), &mut self.timer);
         }
-        // 5. Terrain colour and sky: shading (compute), composite into `color`.
+        // With temporal anti-aliasing the frame is drawn into its texture, then resolved into
+        // `color` (9.).
+        let target = self.taa.as_ref().map(|t| t.scene_view().clone());
+        let scene = target.as_ref().unwrap_or(color);
+        // 5. Terrain colour and sky: shading (compute), composite into the frame.
         self.terrain
-            .record_shade(&self.device, encoder, color, depth, &mut self.timer);
+            .record_shade(&self.device, encoder, scene, depth, &mut self.timer);
         if let Some(copy) = &self.terrain_depth {
             encoder.copy_texture_to_texture(
                 depth.texture().as_image_copy(),
@@ -1073,7 +1106,7 @@ impl Renderer {
                 &self.queue,
                 encoder,
                 &frame.grass_jobs,
-                color,
+                scene,
                 depth,
                 &mut self.timer,
             );
@@ -1081,9 +1114,13 @@ impl Renderer {
         // 7. Contact shadows: the grass's (and everything's) short shadows, from the depth.
         if self.features.has(Feature::Shadows) {
             self.contact_shadows
-                .record(&self.device, encoder, color, depth, &mut self.timer);
+                .record(&self.device, encoder, scene, depth, &mut self.timer);
         }
-        // 8. Figures.
+        // 8. Temporal anti-aliasing: the frame against its history, into `color`.
+        if let Some(taa) = &mut self.taa {
+            taa.record(&self.device, encoder, color, depth, &mut self.timer);
+        }
+        // 9. Figures.
         self.timer.resolve(encoder);
         stats.cpu_ms = (frame.cpu_s + start.elapsed().as_secs_f64()) * 1e3;
         let counters = self.grass.as_ref().map(|g| g.renderer.stats_buffer());
@@ -1166,9 +1203,9 @@ impl Renderer {
     }
 
     /// The generation jobs of the grass tiles that have their own data resident and are in view.
-    fn grass_jobs(&self, camera: &Camera, grass: &[(TileId, Ring, f64)]) -> Vec<TileJob> {
+    fn grass_jobs(&self, view: &FrameView, grass: &[(TileId, Ring, f64)]) -> Vec<TileJob> {
         let pyramid = &self.world.manifest.pyramid;
-        let frustum = Frustum::from_view_proj(camera.view_proj_relative(self.aspect()));
+        let (camera, frustum) = (&view.camera, &view.frustum);
         let near_m = self
             .grass
             .as_ref()

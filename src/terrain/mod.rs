@@ -8,10 +8,9 @@
 //! (`shaders/composite.wgsl`).
 
 use bytemuck::{Pod, Zeroable};
-use glam::{DVec2, Mat4, Vec3};
+use glam::{DVec2, DVec3, Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
-use crate::camera::Camera;
 use crate::gpu::layout::*;
 use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{DepthBound, array_view, buffer, compute_pipeline, render_pipeline};
@@ -449,15 +448,14 @@ impl TerrainRenderer {
     pub fn prepare(
         &mut self,
         queue: &wgpu::Queue,
-        camera: &Camera,
-        aspect: f32,
+        view_proj: Mat4,
+        eye: DVec3,
         draws: &[TileDraw],
     ) -> u32 {
-        let view_proj = camera.view_proj_relative(aspect);
         self.uniforms.view_proj = view_proj.to_cols_array_2d();
         self.uniforms.inv_view_proj = view_proj.inverse().to_cols_array_2d();
-        self.uniforms.camera[0] = camera.position.z as f32;
-        let p = camera.position;
+        self.uniforms.camera[0] = eye.z as f32;
+        let p = eye;
         self.uniforms.camera_world = [p.x as f32, p.y as f32, p.z as f32, 0.0];
         self.uniforms.grass_view[0] = p.x.rem_euclid(4096.0) as f32;
         self.uniforms.grass_view[1] = p.y.rem_euclid(4096.0) as f32;

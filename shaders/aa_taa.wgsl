@@ -1,0 +1,153 @@
+// Temporal anti-aliasing: each frame is drawn with its projection jittered within a pixel
+// (a Halton sequence), and this stage folds it into a history that follows the surfaces on
+// screen. Per pixel, the history is fetched where the pixel's surface was in the last frame
+// (reprojected through the depth: the closest depth of the 3x3 neighbourhood, so that thin
+// blades keep their edges), clipped toward the current frame's 3x3 neighbourhood (its mean
+// and spread in YCoCg: what the neighbourhood cannot explain is a ghost and is dropped), and
+// blended with the current sample with weight 1 / n, n the samples the history holds (at
+// most MAX_SAMPLES): a still scene converges to the box-filtered average of the jittered
+// samples, a moved one keeps only what its clipping allows. A pixel whose history falls off
+// screen, and every pixel after a cut, starts again from its current sample. Two passes: the
+// resolve (compute) into the next history (linear colour, samples in alpha), then a
+// full-screen pass that writes it into the colour target. CPU mirror: src/aa/taa_cpu.rs.
+
+#include "shared/full_screen.wgsl"
+#include "shared/output.wgsl"
+
+// 1 when the current frame's texture holds sRGB-encoded values in a plain unorm format (the
+// passes that drew it encoded them): decoded here.
+override DECODE_SRGB: bool = false;
+
+struct Params {
+    // From the current frame's unjittered normalised coordinates and depth (reverse-Z) to the
+    // last frame's unjittered clip space (the camera's move included).
+    reproject: mat4x4<f32>,
+    // x, y: target size (pixels); z: most samples a history holds; w: 1 to start every pixel
+    // again (a cut, a teleport, the first frame).
+    size: vec4<f32>,
+    // x: the neighbourhood's spread, in standard deviations, that bounds the history.
+    clip: vec4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var current: texture_2d<f32>;
+@group(0) @binding(2) var depth: texture_depth_2d;
+@group(0) @binding(3) var history: texture_2d<f32>;
+@group(0) @binding(4) var history_out: texture_storage_2d<rgba16float, write>;
+// The full-screen pass's input: the history just written.
+@group(0) @binding(5) var resolved: texture_2d<f32>;
+
+fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
+    let lo = c / 12.92;
+    let hi = pow((c + 0.055) / 1.055, vec3<f32>(2.4));
+    return select(hi, lo, c <= vec3<f32>(0.04045));
+}
+
+fn load_current(p: vec2<i32>) -> vec3<f32> {
+    let size = vec2<i32>(params.size.xy);
+    let c = textureLoad(current, clamp(p, vec2<i32>(0), size - 1), 0).rgb;
+    if DECODE_SRGB {
+        return srgb_to_linear(c);
+    }
+    return c;
+}
+
+fn to_ycocg(c: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(
+        0.25 * c.r + 0.5 * c.g + 0.25 * c.b,
+        0.5 * c.r - 0.5 * c.b,
+        -0.25 * c.r + 0.5 * c.g - 0.25 * c.b,
+    );
+}
+
+fn from_ycocg(c: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(c.x + c.y - c.z, c.x + c.z, c.x - c.y - c.z);
+}
+
+// The history at pixel position `pos` (pixel centres at +0.5), bilinear between the four
+// nearest texels; texels off screen count for nothing.
+fn sample_history(pos: vec2<f32>) -> vec4<f32> {
+    let size = vec2<i32>(params.size.xy);
+    let f = pos - 0.5;
+    let base = vec2<i32>(floor(f));
+    let t = f - floor(f);
+    var sum = vec4<f32>(0.0);
+    var weight = 0.0;
+    for (var j = 0; j < 2; j++) {
+        for (var i = 0; i < 2; i++) {
+            let q = base + vec2<i32>(i, j);
+            if all(q >= vec2<i32>(0)) && all(q < size) {
+                let w = select(1.0 - t.x, t.x, i == 1) * select(1.0 - t.y, t.y, j == 1);
+                sum += w * textureLoad(history, q, 0);
+                weight += w;
+            }
+        }
+    }
+    if weight <= 0.0 {
+        return vec4<f32>(0.0);
+    }
+    return sum / weight;
+}
+
+// Moves `h` toward the box's centre until it lies inside the box (clipping, not clamping:
+// the colour keeps its hue as it is pulled in).
+fn clip_to_box(h: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec3<f32> {
+    let center = 0.5 * (hi + lo);
+    let extent = max(0.5 * (hi - lo), vec3<f32>(1e-5));
+    let d = h - center;
+    let m = max(max(abs(d.x) / extent.x, abs(d.y) / extent.y), abs(d.z) / extent.z);
+    if m > 1.0 {
+        return center + d / m;
+    }
+    return h;
+}
+
+@compute @workgroup_size(8, 8)
+fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = vec2<i32>(params.size.xy);
+    let p = vec2<i32>(id.xy);
+    if any(p >= size) {
+        return;
+    }
+    let cur = load_current(p);
+    var m1 = vec3<f32>(0.0);
+    var m2 = vec3<f32>(0.0);
+    var closest = 0.0;
+    for (var dy = -1; dy <= 1; dy++) {
+        for (var dx = -1; dx <= 1; dx++) {
+            let q = p + vec2<i32>(dx, dy);
+            let c = to_ycocg(load_current(q));
+            m1 += c;
+            m2 += c * c;
+            closest = max(closest, textureLoad(depth, clamp(q, vec2<i32>(0), size - 1), 0));
+        }
+    }
+    let mean = m1 / 9.0;
+    let sigma = sqrt(max(m2 / 9.0 - mean * mean, vec3<f32>(0.0)));
+
+    var out = vec4<f32>(cur, 1.0);
+    if params.size.w < 0.5 {
+        let px = vec2<f32>(p) + 0.5;
+        let ndc = vec2<f32>(px.x / params.size.x * 2.0 - 1.0, 1.0 - px.y / params.size.y * 2.0);
+        let prev = params.reproject * vec4<f32>(ndc, closest, 1.0);
+        if prev.w > 0.0 {
+            let pn = prev.xy / prev.w;
+            let pp = vec2<f32>((pn.x * 0.5 + 0.5) * params.size.x, (0.5 - pn.y * 0.5) * params.size.y);
+            if all(pp >= vec2<f32>(0.0)) && all(pp < params.size.xy) {
+                let h = sample_history(pp);
+                if h.a >= 1.0 {
+                    let g = params.clip.x;
+                    let clipped = from_ycocg(clip_to_box(to_ycocg(h.rgb), mean - g * sigma, mean + g * sigma));
+                    let n = min(h.a + 1.0, params.size.z);
+                    out = vec4<f32>(mix(clipped, cur, 1.0 / n), n);
+                }
+            }
+        }
+    }
+    textureStore(history_out, p, out);
+}
+
+@fragment
+fn fs_taa_output(@builtin(position) pos: vec4<f32>) -> @location(0) vec4<f32> {
+    return output_color(textureLoad(resolved, vec2<i32>(pos.xy), 0).rgb);
+}

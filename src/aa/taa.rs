@@ -1,0 +1,370 @@
+//! The temporal anti-aliasing stage (`shaders/aa_taa.wgsl`): the frame is drawn into a
+//! texture of the stage's with a jittered projection, then resolved against the history into
+//! the caller's colour target. See the shader's header for the method; the CPU mirror is
+//! [`crate::aa::taa_cpu`].
+
+use glam::{DMat4, DVec3, Mat4, Vec2};
+
+use crate::gpu::layout::{
+    UNFILTERABLE_FLOAT, bind_group, bind_group_layout, sequential, texture_2d, texture_depth_2d,
+    texture_storage_2d, uniform_buffer, view as view_of, with_indices,
+};
+use crate::gpu::pass::render_pass;
+use crate::gpu::pipeline::{DepthBound, buffer, compute_pipeline_with_constants, render_pipeline};
+
+/// Format of the history: linear colour in rgb, the samples it holds in alpha.
+pub const HISTORY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// Settings of the temporal anti-aliasing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TaaSettings {
+    /// Most samples a pixel's history holds: the current frame's weight is never below one
+    /// over this. More converges further in a still scene and lags longer in a moving one.
+    pub max_samples: u32,
+    /// The history is clipped to the current neighbourhood's mean plus and minus this many
+    /// standard deviations (per YCoCg channel).
+    pub clip_sigma: f32,
+    /// A camera that moves further than this in one frame (metres) starts every history again.
+    pub cut_distance_m: f64,
+    /// A camera that turns by more than this in one frame (degrees) starts every history again.
+    pub cut_angle_deg: f64,
+}
+
+impl Default for TaaSettings {
+    fn default() -> Self {
+        Self {
+            max_samples: 12,
+            clip_sigma: 1.0,
+            cut_distance_m: 20.0,
+            cut_angle_deg: 30.0,
+        }
+    }
+}
+
+/// Uniforms of `shaders/aa_taa.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TaaParams {
+    /// From the current frame's unjittered normalised coordinates and depth to the last
+    /// frame's unjittered clip space.
+    pub reproject: [[f32; 4]; 4],
+    /// Target width and height, most samples, 1 to start every pixel again.
+    pub size: [f32; 4],
+    /// The clip's standard deviations, then padding.
+    pub clip: [f32; 4],
+}
+
+/// The matrix that takes a pixel of the current frame (normalised coordinates of the
+/// unjittered projection, and its depth) to where its surface was in the last frame's
+/// unjittered clip space: both view-projections are camera-relative, so the camera's move
+/// from `last_eye` to `eye` is added in between (in f64, so that a far camera keeps its
+/// precision).
+pub fn reprojection(last_view_proj: Mat4, last_eye: DVec3, view_proj: Mat4, eye: DVec3) -> Mat4 {
+    let last = DMat4::from_cols_array(&last_view_proj.to_cols_array().map(f64::from));
+    let current = DMat4::from_cols_array(&view_proj.to_cols_array().map(f64::from));
+    (last * DMat4::from_translation(eye - last_eye) * current.inverse()).as_mat4()
+}
+
+/// The camera of the last resolved frame.
+#[derive(Clone, Copy, Debug)]
+struct LastView {
+    view_proj: Mat4,
+    eye: DVec3,
+    forward: DVec3,
+}
+
+/// The temporal anti-aliasing stage: the texture the frame is drawn into, the two histories
+/// (read one, write the other, swapped every frame) and the resolve and output passes.
+pub struct Taa {
+    settings: TaaSettings,
+    resolve: wgpu::ComputePipeline,
+    resolve_layout: wgpu::BindGroupLayout,
+    output: wgpu::RenderPipeline,
+    output_layout: wgpu::BindGroupLayout,
+    color_format: wgpu::TextureFormat,
+    scene: wgpu::TextureView,
+    history: [wgpu::TextureView; 2],
+    output_groups: [wgpu::BindGroup; 2],
+    resolve_groups: [DepthBound; 2],
+    params: TaaParams,
+    buffer: wgpu::Buffer,
+    /// The history the next resolve reads (it writes the other).
+    read: usize,
+    last: Option<LastView>,
+    /// Frames prepared: the index into the jitter sequence.
+    frames: u64,
+}
+
+/// The stage's textures at `size`: the frame's, the two histories, and the output pass's bind
+/// groups over the histories.
+fn textures(
+    device: &wgpu::Device,
+    output_layout: &wgpu::BindGroupLayout,
+    color_format: wgpu::TextureFormat,
+    size: (u32, u32),
+) -> (
+    wgpu::TextureView,
+    [wgpu::TextureView; 2],
+    [wgpu::BindGroup; 2],
+) {
+    // Copies in are for tests that set a frame of their own.
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+        | wgpu::TextureUsages::TEXTURE_BINDING
+        | wgpu::TextureUsages::COPY_DST;
+    let scene = crate::gpu::target_texture(device, "taa frame", color_format, usage, size)
+        .create_view(&Default::default());
+    let history = [0, 1].map(|i| {
+        crate::gpu::target_texture(
+            device,
+            &format!("taa history {i}"),
+            HISTORY_FORMAT,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
+            size,
+        )
+        .create_view(&Default::default())
+    });
+    let groups = [0, 1].map(|i| {
+        crate::gpu::layout::bind_group_with_indices(
+            device,
+            "taa output",
+            output_layout,
+            [(5, view_of(&history[i]))],
+        )
+    });
+    (scene, history, groups)
+}
+
+impl Taa {
+    /// The stage for `targets`, with `settings`.
+    pub fn new(
+        device: &wgpu::Device,
+        targets: &crate::gpu::Targets,
+        settings: TaaSettings,
+    ) -> Self {
+        let module = crate::shaders::module(device, "aa_taa.wgsl");
+        let resolve_layout = bind_group_layout(
+            device,
+            "taa resolve",
+            &sequential(
+                wgpu::ShaderStages::COMPUTE,
+                [
+                    uniform_buffer(),
+                    texture_2d(UNFILTERABLE_FLOAT),
+                    texture_depth_2d(),
+                    texture_2d(UNFILTERABLE_FLOAT),
+                    texture_storage_2d(HISTORY_FORMAT),
+                ],
+            ),
+        );
+        let decode = [("DECODE_SRGB", targets.encode_srgb())];
+        let resolve = compute_pipeline_with_constants(
+            device,
+            "taa resolve",
+            &module,
+            "cs_taa_resolve",
+            &[&resolve_layout],
+            &decode,
+        );
+        let output_layout = bind_group_layout(
+            device,
+            "taa output",
+            &with_indices(
+                wgpu::ShaderStages::FRAGMENT,
+                [(5, texture_2d(UNFILTERABLE_FLOAT))],
+            ),
+        );
+        let encode = [("ENCODE_SRGB", targets.encode_srgb())];
+        let output = render_pipeline(
+            "taa output",
+            &module,
+            ("vs_full", "fs_taa_output"),
+            targets.color_format,
+        )
+        .layouts(&[&output_layout])
+        .constants(&[], &encode)
+        .build(device);
+        let buffer = buffer(
+            device,
+            "taa",
+            std::mem::size_of::<TaaParams>() as u64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
+        let (scene, history, output_groups) = textures(
+            device,
+            &output_layout,
+            targets.color_format,
+            (targets.width, targets.height),
+        );
+        Self {
+            settings,
+            resolve,
+            resolve_layout,
+            output,
+            output_layout,
+            color_format: targets.color_format,
+            scene,
+            history,
+            output_groups,
+            resolve_groups: Default::default(),
+            params: TaaParams {
+                reproject: Mat4::IDENTITY.to_cols_array_2d(),
+                size: [
+                    targets.width as f32,
+                    targets.height as f32,
+                    settings.max_samples as f32,
+                    1.0,
+                ],
+                clip: [settings.clip_sigma, 0.0, 0.0, 0.0],
+            },
+            buffer,
+            read: 0,
+            last: None,
+            frames: 0,
+        }
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &TaaSettings {
+        &self.settings
+    }
+
+    /// Follows a resize of the targets: new textures, and every history starts again.
+    pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
+        (self.scene, self.history, self.output_groups) =
+            textures(device, &self.output_layout, self.color_format, (width, height));
+        self.resolve_groups = Default::default();
+        self.params.size[0] = width as f32;
+        self.params.size[1] = height as f32;
+        self.last = None;
+    }
+
+    /// Starts every pixel's history again at the next frame (a cut the camera's move does not
+    /// show, such as a change of scene).
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+
+    /// The texture the frame's passes draw into instead of the caller's colour target.
+    pub fn scene_view(&self) -> &wgpu::TextureView {
+        &self.scene
+    }
+
+    /// The sub-pixel offset of the next frame to prepare.
+    pub fn next_jitter(&self) -> Vec2 {
+        super::jitter(self.frames)
+    }
+
+    /// Sets up the resolve of the frame drawn from `view_proj` (camera-relative, unjittered)
+    /// at `eye` looking along `forward`: the reprojection from the last frame, or a start
+    /// from scratch after a cut (a move or a turn past the settings' limits). Returns whether
+    /// the histories start again.
+    pub fn prepare(
+        &mut self,
+        queue: &wgpu::Queue,
+        view_proj: Mat4,
+        eye: DVec3,
+        forward: DVec3,
+    ) -> bool {
+        let cut = match self.last {
+            None => true,
+            Some(last) => {
+                let angle = last.forward.dot(forward).clamp(-1.0, 1.0).acos().to_degrees();
+                (eye - last.eye).length() > self.settings.cut_distance_m
+                    || angle > self.settings.cut_angle_deg
+            }
+        };
+        self.params.reproject = match self.last {
+            Some(last) if !cut => reprojection(last.view_proj, last.eye, view_proj, eye),
+            _ => Mat4::IDENTITY,
+        }
+        .to_cols_array_2d();
+        self.params.size[3] = if cut { 1.0 } else { 0.0 };
+        queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&self.params));
+        self.last = Some(LastView {
+            view_proj,
+            eye,
+            forward,
+        });
+        self.frames += 1;
+        cut
+    }
+
+    /// Records the resolve of the frame drawn into [`Taa::scene_view`] (with its depth in
+    /// `depth`) against the history into the next history (compute, `taa_resolve`), then that
+    /// into `color` (`taa_output`).
+    pub fn record(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        timer: &mut crate::gpu::GpuTimer,
+    ) {
+        let (read, write) = (self.read, 1 - self.read);
+        let texture = depth.texture();
+        let (scene, history, buffer, layout) = (
+            &self.scene,
+            &self.history,
+            &self.buffer,
+            &self.resolve_layout,
+        );
+        let group = self.resolve_groups[read].get(texture, |depth| {
+            bind_group(
+                device,
+                "taa resolve",
+                layout,
+                [
+                    buffer.as_entire_binding(),
+                    view_of(scene),
+                    view_of(depth),
+                    view_of(&history[read]),
+                    view_of(&history[write]),
+                ],
+            )
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("taa resolve"),
+                timestamp_writes: timer.compute_pass("taa_resolve"),
+            });
+            let size = texture.size();
+            pass.set_pipeline(&self.resolve);
+            pass.set_bind_group(0, group, &[]);
+            pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
+        }
+        let mut pass = render_pass(
+            encoder,
+            "taa output",
+            (color, wgpu::LoadOp::Clear(wgpu::Color::BLACK)),
+            None,
+            timer.render_pass("taa_output"),
+        );
+        pass.set_pipeline(&self.output);
+        pass.set_bind_group(0, &self.output_groups[write], &[]);
+        pass.draw(0..3, 0..1);
+        self.read = write;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_still_camera_reprojects_every_pixel_onto_itself_and_a_move_shifts_it() {
+        let camera = crate::Camera::new(DVec3::new(1e5, -2e5, 300.0), 40.0, -8.0);
+        let vp = camera.view_proj_relative(1.5);
+        let m = reprojection(vp, camera.position, vp, camera.position);
+        assert!(m.abs_diff_eq(Mat4::IDENTITY, 1e-4), "{m}");
+        // One metre east: a point 10 m ahead and 1 m below moves on screen, and the pixel of
+        // the current frame lands where that point was in the last one.
+        let mut moved = camera;
+        moved.position.x += 1.0;
+        let m = reprojection(vp, camera.position, vp, moved.position);
+        let p = glam::Vec3::new(8.0, 6.0, -1.0);
+        let now = vp * (p - glam::Vec3::X).extend(1.0);
+        let then = vp * p.extend(1.0);
+        let back = m * (now / now.w);
+        assert!(((back / back.w) - then / then.w).length() < 1e-4);
+    }
+}

@@ -1,0 +1,206 @@
+//! CPU mirror of the temporal anti-aliasing resolve (`shaders/aa_taa.wgsl`, stage
+//! [`crate::aa::taa`]): the same per-pixel rule over images in memory, for the test that
+//! compares the two and for reading the method without a GPU.
+
+use glam::{Mat4, Vec2, Vec3, Vec4};
+
+/// One resolve's inputs: images row-major, top row first.
+pub struct ResolveInput<'a> {
+    /// Width and height in pixels.
+    pub size: (u32, u32),
+    /// The current (jittered) frame, linear colour.
+    pub current: &'a [Vec3],
+    /// Its depth (reverse-Z: 1 near, 0 at infinity).
+    pub depth: &'a [f32],
+    /// The last history: linear colour, and in `w` the samples it holds (0: none).
+    pub history: &'a [Vec4],
+    /// See [`crate::aa::taa::reprojection`].
+    pub reproject: Mat4,
+    /// Most samples a history holds.
+    pub max_samples: f32,
+    /// Standard deviations of the neighbourhood the history is clipped to.
+    pub clip_sigma: f32,
+    /// Start every pixel again.
+    pub reset: bool,
+}
+
+/// Luma and the two chroma differences.
+fn ycocg(c: Vec3) -> Vec3 {
+    Vec3::new(
+        (c.x + 2.0 * c.y + c.z) / 4.0,
+        (c.x - c.z) / 2.0,
+        (2.0 * c.y - c.x - c.z) / 4.0,
+    )
+}
+
+fn rgb(c: Vec3) -> Vec3 {
+    let (y, co, cg) = (c.x, c.y, c.z);
+    Vec3::new(y + co - cg, y + cg, y - co - cg)
+}
+
+impl ResolveInput<'_> {
+    fn at<T: Copy>(&self, image: &[T], x: i64, y: i64) -> T {
+        let (w, h) = (self.size.0 as i64, self.size.1 as i64);
+        image[(y.clamp(0, h - 1) * w + x.clamp(0, w - 1)) as usize]
+    }
+
+    /// The history bilinearly at pixel position `p` (centres at +0.5), renormalised over the
+    /// texels that lie on screen.
+    fn history_at(&self, p: Vec2) -> Vec4 {
+        let (w, h) = (self.size.0 as i64, self.size.1 as i64);
+        let f = p - Vec2::splat(0.5);
+        let (x0, y0) = (f.x.floor() as i64, f.y.floor() as i64);
+        let (tx, ty) = (f.x - f.x.floor(), f.y - f.y.floor());
+        let mut acc = Vec4::ZERO;
+        let mut total = 0.0;
+        for (x, wx) in [(x0, 1.0 - tx), (x0 + 1, tx)] {
+            for (y, wy) in [(y0, 1.0 - ty), (y0 + 1, ty)] {
+                if (0..w).contains(&x) && (0..h).contains(&y) {
+                    acc += wx * wy * self.history[(y * w + x) as usize];
+                    total += wx * wy;
+                }
+            }
+        }
+        if total > 0.0 { acc / total } else { Vec4::ZERO }
+    }
+
+    /// The next history at pixel (x, y).
+    pub fn pixel(&self, x: u32, y: u32) -> Vec4 {
+        let (xi, yi) = (x as i64, y as i64);
+        let current = self.at(self.current, xi, yi);
+        let samples: Vec<Vec3> = (-1..=1)
+            .flat_map(|dy| (-1..=1).map(move |dx| (dx, dy)))
+            .map(|(dx, dy)| ycocg(self.at(self.current, xi + dx, yi + dy)))
+            .collect();
+        let nearest = (-1..=1)
+            .flat_map(|dy| (-1..=1).map(move |dx| (dx, dy)))
+            .map(|(dx, dy)| self.at(self.depth, xi + dx, yi + dy))
+            .fold(0.0f32, f32::max);
+        let mean = samples.iter().copied().sum::<Vec3>() / 9.0;
+        let variance = samples.iter().map(|s| *s * *s).sum::<Vec3>() / 9.0 - mean * mean;
+        let sigma = variance.max(Vec3::ZERO).powf(0.5);
+        let fresh = current.extend(1.0);
+        if self.reset {
+            return fresh;
+        }
+        let (w, h) = (self.size.0 as f32, self.size.1 as f32);
+        let ndc = Vec2::new(
+            (x as f32 + 0.5) / w * 2.0 - 1.0,
+            1.0 - (y as f32 + 0.5) / h * 2.0,
+        );
+        let then = self.reproject * Vec4::new(ndc.x, ndc.y, nearest, 1.0);
+        if then.w <= 0.0 {
+            return fresh;
+        }
+        let then_ndc = Vec2::new(then.x, then.y) / then.w;
+        let then_px = Vec2::new((then_ndc.x + 1.0) * 0.5 * w, (1.0 - then_ndc.y) * 0.5 * h);
+        if then_px.x < 0.0 || then_px.y < 0.0 || then_px.x >= w || then_px.y >= h {
+            return fresh;
+        }
+        let old = self.history_at(then_px);
+        if old.w < 1.0 {
+            return fresh;
+        }
+        // Pull the history toward the box's centre along the line to it, just far enough.
+        let lo = mean - self.clip_sigma * sigma;
+        let hi = mean + self.clip_sigma * sigma;
+        let centre = (lo + hi) * 0.5;
+        let half = ((hi - lo) * 0.5).max(Vec3::splat(1e-5));
+        let offset = ycocg(old.truncate()) - centre;
+        let outside = (offset.abs() / half).max_element();
+        let kept = if outside > 1.0 {
+            rgb(centre + offset / outside)
+        } else {
+            old.truncate()
+        };
+        let n = (old.w + 1.0).min(self.max_samples);
+        (kept + (current - kept) / n).extend(n)
+    }
+
+    /// The next history, every pixel.
+    pub fn resolve(&self) -> Vec<Vec4> {
+        let (w, h) = self.size;
+        (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| self.pixel(x, y))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn flat(size: (u32, u32), c: Vec3) -> Vec<Vec3> {
+        vec![c; (size.0 * size.1) as usize]
+    }
+
+    #[test]
+    fn a_still_scene_averages_its_jittered_samples() {
+        // A pixel that sees white in one sample out of four converges to a quarter white,
+        // the box filter's answer, with no reprojection error.
+        let size = (5, 5);
+        let depth = vec![0.5; 25];
+        let mut history = vec![Vec4::ZERO; 25];
+        for frame in 0..40 {
+            let mut current = flat(size, Vec3::ZERO);
+            if frame % 4 == 0 {
+                current[12] = Vec3::ONE;
+            }
+            let input = ResolveInput {
+                size,
+                current: &current,
+                depth: &depth,
+                history: &history,
+                reproject: Mat4::IDENTITY,
+                max_samples: 1000.0,
+                clip_sigma: 100.0,
+                reset: frame == 0,
+            };
+            history = input.resolve();
+        }
+        assert!((history[12].x - 0.25).abs() < 0.02, "{}", history[12]);
+        assert_eq!(history[12].w, 40.0);
+    }
+
+    #[test]
+    fn a_ghost_outside_the_neighbourhood_is_clipped_away() {
+        // The history says white where the whole neighbourhood is now black: it is pulled to
+        // the neighbourhood and does not linger.
+        let size = (3, 3);
+        let current = flat(size, Vec3::new(0.1, 0.1, 0.1));
+        let history = vec![Vec4::new(1.0, 1.0, 1.0, 8.0); 9];
+        let input = ResolveInput {
+            size,
+            current: &current,
+            depth: &[0.5; 9],
+            history: &history,
+            reproject: Mat4::IDENTITY,
+            max_samples: 12.0,
+            clip_sigma: 1.0,
+            reset: false,
+        };
+        let out = input.pixel(1, 1);
+        assert!((out.truncate() - Vec3::splat(0.1)).length() < 1e-3, "{out}");
+        assert_eq!(out.w, 9.0);
+    }
+
+    #[test]
+    fn history_that_comes_from_off_screen_starts_again() {
+        let size = (4, 2);
+        let current = flat(size, Vec3::new(0.2, 0.4, 0.6));
+        let history = vec![Vec4::new(0.9, 0.9, 0.9, 5.0); 8];
+        // Everything moved two screens to the right: no history is on screen.
+        let input = ResolveInput {
+            size,
+            current: &current,
+            depth: &[0.5; 8],
+            history: &history,
+            reproject: Mat4::from_translation(Vec3::new(4.0, 0.0, 0.0)),
+            max_samples: 12.0,
+            clip_sigma: 10.0,
+            reset: false,
+        };
+        assert!(input.resolve().iter().all(|p| *p == Vec4::new(0.2, 0.4, 0.6, 1.0)));
+    }
+}

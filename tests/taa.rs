@@ -1,0 +1,270 @@
+//! The temporal anti-aliasing resolve on the GPU (`shaders/aa_taa.wgsl`) against its CPU
+//! mirror (`verdant::aa::taa_cpu`): the same frames, depths and camera moves give the same
+//! output, frame after frame; and the renderer with it on converges on a still view.
+
+mod common;
+
+use glam::{DVec3, Mat4, Vec3, Vec4};
+use verdant::aa::taa::{Taa, TaaSettings, reprojection};
+use verdant::aa::taa_cpu::ResolveInput;
+use verdant::camera::Camera;
+use verdant::gpu::{GpuTimer, Targets};
+
+const W: u32 = 40;
+const H: u32 = 28;
+
+fn srgb_to_linear(v: u8) -> f32 {
+    let c = f32::from(v) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn linear_to_srgb(c: f32) -> f32 {
+    let c = c.max(0.0);
+    255.0
+        * if c <= 0.0031308 {
+            c * 12.92
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        }
+}
+
+/// A frame of thin bright lines on a dark gradient (the kind of image the method is for),
+/// shifted by `phase` pixels, and a depth with a near band and a sky strip.
+fn frame(phase: u32) -> (Vec<u8>, Vec<f32>) {
+    let mut rgba = Vec::new();
+    let mut depth = Vec::new();
+    for y in 0..H {
+        for x in 0..W {
+            let line = (x + phase) % 7 == 0 || (x + 2 * y + phase) % 11 == 0;
+            let base = [20 + (y * 3) as u8, 60 + (x * 2) as u8, 30];
+            let c = if line { [230, 240, 120] } else { base };
+            rgba.extend_from_slice(&[c[0], c[1], c[2], 255]);
+            depth.push(if y < 4 {
+                0.0
+            } else if (12..18).contains(&y) {
+                0.2
+            } else {
+                0.01 + 0.001 * y as f32
+            });
+        }
+    }
+    (rgba, depth)
+}
+
+const DEPTH_IN: &str = r#"
+@group(0) @binding(0) var values: texture_2d<f32>;
+
+@vertex
+fn vs(@builtin(vertex_index) vi: u32) -> @builtin(position) vec4<f32> {
+    let uv = vec2<f32>(f32((vi << 1u) & 2u), f32(vi & 2u));
+    return vec4<f32>(uv * 2.0 - 1.0, 0.0, 1.0);
+}
+
+@fragment
+fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
+    return textureLoad(values, vec2<i32>(pos.xy), 0).r;
+}
+"#;
+
+#[test]
+fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
+    let ctx = common::gpu();
+    let targets = Targets {
+        color_format: wgpu::TextureFormat::Rgba8UnormSrgb,
+        depth_format: wgpu::TextureFormat::Depth32Float,
+        width: W,
+        height: H,
+    };
+    let settings = TaaSettings::default();
+    let mut taa = Taa::new(&ctx.device, &targets, settings);
+    let size = wgpu::Extent3d {
+        width: W,
+        height: H,
+        depth_or_array_layers: 1,
+    };
+    let depth_tex = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("depth"),
+        size,
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Depth32Float,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_DST
+            | wgpu::TextureUsages::RENDER_ATTACHMENT,
+        view_formats: &[],
+    });
+    let color = verdant::gpu::target_texture(
+        &ctx.device,
+        "color",
+        targets.color_format,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        (W, H),
+    );
+    let color_view = color.create_view(&Default::default());
+    let depth_view = depth_tex.create_view(&Default::default());
+    // Depth targets take no copies: a full-screen pass writes the test's depths into it.
+    let depth_src = verdant::gpu::target_texture(
+        &ctx.device,
+        "depth values",
+        wgpu::TextureFormat::R32Float,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        (W, H),
+    );
+    let module = ctx
+        .device
+        .create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("depth in"),
+            source: wgpu::ShaderSource::Wgsl(DEPTH_IN.into()),
+        });
+    let depth_in = ctx
+        .device
+        .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("depth in"),
+            layout: None,
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: wgpu::TextureFormat::Depth32Float,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Always),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs"),
+                compilation_options: Default::default(),
+                targets: &[],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+    let depth_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("depth in"),
+        layout: &depth_in.get_bind_group_layout(0),
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::TextureView(
+                &depth_src.create_view(&Default::default()),
+            ),
+        }],
+    });
+    let mut timer = GpuTimer::new(&ctx.device, &ctx.queue, false, 0);
+    let write = |texture: &wgpu::Texture, bytes: &[u8], aspect| {
+        ctx.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect,
+            },
+            bytes,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(4 * W),
+                rows_per_image: Some(H),
+            },
+            size,
+        );
+    };
+
+    // A camera that holds still, then moves sideways and turns a little: the history is
+    // reprojected by the depth, clipped, and blended.
+    let mut camera = Camera::new(DVec3::new(0.0, 0.0, 10.0), 0.0, -5.0);
+    let aspect = W as f32 / H as f32;
+    let mut history = vec![Vec4::ZERO; (W * H) as usize];
+    let mut last: Option<(Mat4, DVec3)> = None;
+    for step in 0..6u32 {
+        if step >= 3 {
+            camera.position.y += 0.3;
+            camera.yaw_deg += 0.7;
+        }
+        let vp = camera.view_proj_relative(aspect);
+        let (rgba, depth) = frame(step);
+        write(taa.scene_view().texture(), &rgba, wgpu::TextureAspect::All);
+        write(&depth_src, bytemuck::cast_slice(&depth), wgpu::TextureAspect::All);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("depth in"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&depth_in);
+            pass.set_bind_group(0, &depth_group, &[]);
+            pass.draw(0..3, 0..1);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        let reset = taa.prepare(&ctx.queue, vp, camera.position, camera.forward());
+        assert_eq!(reset, step == 0);
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        taa.record(&ctx.device, &mut encoder, &color_view, &depth_view, &mut timer);
+        ctx.queue.submit([encoder.finish()]);
+        let gpu = verdant::gpu::read_texture_rgba8(&ctx.device, &ctx.queue, &color).unwrap();
+
+        let current: Vec<Vec3> = rgba
+            .chunks(4)
+            .map(|p| Vec3::new(srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2])))
+            .collect();
+        let input = ResolveInput {
+            size: (W, H),
+            current: &current,
+            depth: &depth,
+            history: &history,
+            reproject: match last {
+                Some((lvp, leye)) => reprojection(lvp, leye, vp, camera.position),
+                None => Mat4::IDENTITY,
+            },
+            max_samples: settings.max_samples as f32,
+            clip_sigma: settings.clip_sigma,
+            reset: last.is_none(),
+        };
+        history = input.resolve();
+        last = Some((vp, camera.position));
+
+        let mut worst = 0.0f32;
+        let mut total = 0.0f32;
+        let mut changed = 0;
+        for (i, h) in history.iter().enumerate() {
+            for c in 0..3 {
+                let d = (linear_to_srgb(h[c]) - f32::from(gpu[4 * i + c])).abs();
+                worst = worst.max(d);
+                total += d;
+            }
+            if (h.truncate() - current[i]).length() > 0.02 {
+                changed += 1;
+            }
+        }
+        let mean = total / (3 * W * H) as f32;
+        // The GPU keeps its history in half floats: a level or two of 255 apart at most.
+        assert!(
+            worst <= 2.5 && mean < 0.3,
+            "frame {step}: GPU and CPU differ by up to {worst} (mean {mean}) levels"
+        );
+        // After the first frame the history matters: the output is not the current frame.
+        if step > 0 {
+            assert!(changed > 50, "frame {step}: only {changed} pixels blended");
+        }
+    }
+}
