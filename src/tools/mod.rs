@@ -4,6 +4,7 @@
 //! the interactive viewer (`view`), and `serve`, a static server of a world folder.
 
 pub mod bench;
+pub mod bench_aa;
 pub mod bench_blades;
 pub mod eval_derive;
 pub mod eval_sway;

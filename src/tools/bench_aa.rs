@@ -1,0 +1,650 @@
+//! `verdant bench aa`: anti-aliasing against the truth, in motion.
+//!
+//! Each method ([`AntiAliasing`]) renders sequences of consecutive 60 Hz frames from the
+//! camera path's first view (default: "meadow"): **still** (the camera holds, the wind blows),
+//! a **dolly** forward at [`DOLLY_MPS`], a **pan** at [`PAN_DEG_PER_S`], and a **teleport**
+//! (half the frames at one view, then a jump of [`TELEPORT_M`] along the view). Every sequence
+//! starts with untimed run-up frames along the same motion (a temporal method has a history
+//! when measuring starts; the truth steps through them too, so both see the same wind and sway).
+//! The same frames are rendered as the truth ([`crate::tools::truth`]: k x k sub-samples in
+//! linear light, the most accurate grass). Per frame: FLIP against the truth (aliasing, blur
+//! and ghosting all raise it). Per sequence: flicker, the mean absolute change between
+//! consecutive frames (0..255), over the truth's; after the teleport, the frames until FLIP is
+//! back within 10% of its steady value (the mean of the sequence's last quarter).
+//!
+//! The **paths** part measures what a user flies: at four times spread along each named path
+//! (default: meadow, tour, wind-tour), FLIP against the truth after [`PATH_RUN_UP`] frames of
+//! flight along the path. Speed: GPU time per frame of each method (timestamp queries; the
+//! wall time without them), timed in interleaved rounds at the still view (see
+//! [`crate::tools::timing`]). Outputs: `aa_frames.csv` (every frame), `aa_sequences.csv`,
+//! `aa_paths.csv`, `aa.json`, and per size a chart of error against GPU time with the Pareto
+//! front (`aa_WxH.png`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use glam::{DVec2, DVec3};
+use image::RgbaImage;
+use serde::Serialize;
+
+use crate::aa::AntiAliasing;
+use crate::camera::{Camera, sample_path};
+use crate::gpu::GpuContext;
+use crate::tools::fly::{OutDir, write_json, write_text};
+use crate::tools::metrics::{Chart, ChartPoint};
+use crate::tools::metrics::flip_compare;
+use crate::tools::report::AdapterReport;
+use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
+use crate::tools::{Scene, SceneConfig};
+use crate::world::{CameraPath, World};
+
+/// Frame time of the sequences: consecutive frames at 60 Hz.
+pub const DT_S: f64 = 1.0 / 60.0;
+/// Speed of the dolly, metres a second (a brisk run).
+pub const DOLLY_MPS: f64 = 7.4;
+/// Turn rate of the pan, degrees a second.
+pub const PAN_DEG_PER_S: f64 = 30.0;
+/// How far the teleport jumps along the view, metres (past any method's cut threshold).
+pub const TELEPORT_M: f64 = 60.0;
+/// Frames of flight before each measured view of the paths part.
+pub const PATH_RUN_UP: u32 = 8;
+/// The most frames of a sequence (`--frames`).
+pub const MAX_FRAMES: u32 = 600;
+/// The most run-up frames (`--run-up`).
+pub const MAX_RUN_UP: u32 = 120;
+
+/// Options of `bench aa`.
+#[derive(Clone, Debug)]
+pub struct BenchAaOptions {
+    /// The world's folder.
+    pub world: PathBuf,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Image sizes, each measured in full.
+    pub sizes: Vec<(u32, u32)>,
+    /// The methods compared.
+    pub methods: Vec<AntiAliasing>,
+    /// Measured frames of each sequence.
+    pub frames: u32,
+    /// Untimed frames before each sequence's measured ones.
+    pub run_up: u32,
+    /// Sub-samples per side of the truth.
+    pub truth_k: u32,
+    /// The path whose first view the sequences start from.
+    pub path: String,
+    /// The paths of the paths part (none: skip it).
+    pub paths: Vec<String>,
+    /// Untimed frames before each timing measurement (default: by adapter).
+    pub warmup_frames: Option<u32>,
+    /// Timed frames per measurement and round (default: by adapter).
+    pub timed_frames: Option<u32>,
+    /// Interleaved rounds (default: by adapter).
+    pub rounds: Option<u32>,
+}
+
+impl Default for BenchAaOptions {
+    fn default() -> Self {
+        Self {
+            world: PathBuf::from("worlds/santa-cruz"),
+            out: PathBuf::from("out/bench-aa"),
+            sizes: vec![(960, 540)],
+            methods: AntiAliasing::ALL.to_vec(),
+            frames: 24,
+            run_up: 16,
+            truth_k: 4,
+            path: "meadow".into(),
+            paths: vec!["meadow".into(), "tour".into(), "wind-tour".into()],
+            warmup_frames: None,
+            timed_frames: None,
+            rounds: None,
+        }
+    }
+}
+
+impl BenchAaOptions {
+    /// Checks the ranges: frames 2..=600, run-up 0..=120, at least one method and size, the
+    /// timing options as every benchmark's.
+    pub fn validate(&self) -> Result<()> {
+        if !(2..=MAX_FRAMES).contains(&self.frames) {
+            bail!("--frames {} must be in 2..={MAX_FRAMES}", self.frames);
+        }
+        if self.run_up > MAX_RUN_UP {
+            bail!("--run-up {} must be in 0..={MAX_RUN_UP}", self.run_up);
+        }
+        if self.methods.is_empty() {
+            bail!("--aa names no method");
+        }
+        if self.sizes.is_empty() {
+            bail!("--size names no size");
+        }
+        crate::tools::bench::check_timing(self.warmup_frames, self.timed_frames, self.rounds)?;
+        Ok(())
+    }
+}
+
+/// The motions of the sequences.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Motion {
+    /// The camera holds, the wind blows.
+    Still,
+    /// Forward along the view, level, at [`DOLLY_MPS`].
+    Dolly,
+    /// Turning left at [`PAN_DEG_PER_S`].
+    Pan,
+    /// Still, then a jump of [`TELEPORT_M`] along the view half-way.
+    Teleport,
+}
+
+impl Motion {
+    /// Every motion, in report order.
+    pub const ALL: [Motion; 4] = [Motion::Still, Motion::Dolly, Motion::Pan, Motion::Teleport];
+
+    /// The name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Motion::Still => "still",
+            Motion::Dolly => "dolly",
+            Motion::Pan => "pan",
+            Motion::Teleport => "teleport",
+        }
+    }
+
+    /// The camera and time of frame `i` (negative: run-up) of a sequence of `frames` measured
+    /// frames from `start` at `t0`.
+    pub fn frame(self, start: &Camera, t0: f64, i: i64, frames: u32) -> (Camera, f64) {
+        let t = i as f64 * DT_S;
+        let mut c = *start;
+        let fwd = start.forward();
+        let level = DVec3::new(fwd.x, fwd.y, 0.0).normalize_or_zero();
+        match self {
+            Motion::Still => {}
+            Motion::Dolly => c.position += level * DOLLY_MPS * t,
+            Motion::Pan => c.yaw_deg += PAN_DEG_PER_S * t,
+            Motion::Teleport => {
+                if i >= i64::from(frames / 2) {
+                    c.position += level * TELEPORT_M;
+                }
+            }
+        }
+        (c, t0 + t)
+    }
+}
+
+/// One measured frame.
+#[derive(Clone, Debug, Serialize)]
+pub struct AaFrame {
+    /// Image size.
+    pub size: (u32, u32),
+    /// The method.
+    pub method: String,
+    /// The sequence.
+    pub motion: Motion,
+    /// Frame of the sequence (0: the first measured).
+    pub frame: u32,
+    /// Mean FLIP against the truth.
+    pub flip: f64,
+    /// Mean absolute change from the previous frame, 0..255 (0 on the first).
+    pub change: f64,
+    /// The truth's change from its previous frame.
+    pub truth_change: f64,
+}
+
+/// One sequence of one method.
+#[derive(Clone, Debug, Serialize)]
+pub struct AaSequence {
+    /// Image size.
+    pub size: (u32, u32),
+    /// The method.
+    pub method: String,
+    /// The sequence.
+    pub motion: Motion,
+    /// Mean FLIP against the truth over its frames.
+    pub flip_mean: f64,
+    /// Mean change between consecutive frames (0..255).
+    pub flicker: f64,
+    /// The truth's.
+    pub truth_flicker: f64,
+    /// `flicker / truth_flicker`.
+    pub flicker_ratio: f64,
+    /// Teleport only: frames after the jump until FLIP stays within 10% of its steady value
+    /// (the mean over the last quarter); 0 when the first frame after the jump already is.
+    pub recovery_frames: Option<u32>,
+}
+
+/// One view of the paths part.
+#[derive(Clone, Debug, Serialize)]
+pub struct AaPathView {
+    /// Image size.
+    pub size: (u32, u32),
+    /// The method.
+    pub method: String,
+    /// The path.
+    pub path: String,
+    /// Time along it, seconds.
+    pub t_s: f64,
+    /// FLIP against the truth.
+    pub flip: f64,
+}
+
+/// A method's speed at one size.
+#[derive(Clone, Debug, Serialize)]
+pub struct AaTiming {
+    /// Image size.
+    pub size: (u32, u32),
+    /// The method.
+    pub method: String,
+    /// GPU time per frame over all passes (the wall time without timestamp queries).
+    pub frame: Timing,
+    /// GPU time of the anti-aliasing's own passes (0 for none; without timestamps, 0).
+    pub aa_ms: f64,
+    /// Whether the figures are GPU times.
+    pub gpu: bool,
+}
+
+/// Everything `bench aa` measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchAaReport {
+    /// The adapter.
+    pub adapter: AdapterReport,
+    /// Sub-samples per side of the truth.
+    pub truth_k: u32,
+    /// Every measured frame.
+    pub frames: Vec<AaFrame>,
+    /// Every sequence.
+    pub sequences: Vec<AaSequence>,
+    /// The paths part.
+    pub paths: Vec<AaPathView>,
+    /// Speed.
+    pub timings: Vec<AaTiming>,
+    /// Timing frame counts.
+    pub counts: FrameCounts,
+}
+
+fn rgb(img: &RgbaImage) -> image::RgbImage {
+    image::DynamicImage::ImageRgba8(img.clone()).to_rgb8()
+}
+
+fn flip(reference: &RgbaImage, actual: &RgbaImage) -> Result<f64> {
+    Ok(f64::from(flip_compare(&rgb(reference), &rgb(actual))?.mean))
+}
+
+/// Mean absolute difference of the RGB channels, 0..255.
+pub fn mean_change(a: &RgbaImage, b: &RgbaImage) -> f64 {
+    let total: u64 = a
+        .pixels()
+        .zip(b.pixels())
+        .map(|(p, q)| {
+            (0..3)
+                .map(|c| u64::from(p[c].abs_diff(q[c])))
+                .sum::<u64>()
+        })
+        .sum();
+    total as f64 / (3 * u64::from(a.width()) * u64::from(a.height())).max(1) as f64
+}
+
+/// Frames after the jump (at `jump`) until the error stays within 10% of the steady value
+/// (the mean of the last quarter of `flips`).
+pub fn recovery_frames(flips: &[f64], jump: usize) -> Option<u32> {
+    if jump >= flips.len() {
+        return None;
+    }
+    let tail = (flips.len() - jump).div_ceil(4).max(1);
+    let steady = flips[flips.len() - tail..].iter().sum::<f64>() / tail as f64;
+    let bound = steady * 1.1;
+    let last_bad = flips[jump..].iter().rposition(|&f| f > bound);
+    Some(last_bad.map_or(0, |i| i as u32 + 1))
+}
+
+/// A renderer of the truth: what every method's frames are measured against.
+pub trait Reference {
+    /// The truth of `camera` at `time_s`, the trail's walker at `walker`.
+    fn render(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        time_s: f64,
+        walker: Option<DVec2>,
+    ) -> Result<RgbaImage>;
+}
+
+/// Renders one frame of `scene`, its tiles brought in first.
+fn frame(
+    ctx: &GpuContext,
+    scene: &mut Scene,
+    camera: &Camera,
+    time_s: f64,
+) -> Result<RgbaImage> {
+    scene.warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+    scene.render_frame(ctx, camera, time_s, Some(camera.position.truncate()))?;
+    Ok(scene.read_image(ctx)?)
+}
+
+fn path_named(world: &World, name: &str) -> Result<CameraPath> {
+    world.manifest.path(name).cloned().with_context(|| {
+        let names: Vec<&str> = world.manifest.paths.iter().map(|p| p.name.as_str()).collect();
+        format!(
+            "world {} has no camera path {name:?} (it has: {})",
+            world.dir.display(),
+            names.join(", ")
+        )
+    })
+}
+
+/// Runs the benchmark, the truth rendered by what `truth` makes for each size; `progress`
+/// hears each step's name, steps done and steps in all.
+pub fn run_bench_aa(
+    opts: &BenchAaOptions,
+    truth: &mut dyn FnMut(&GpuContext, &World, (u32, u32), u32) -> Result<Box<dyn Reference>>,
+    progress: &mut dyn FnMut(&str, u64, u64),
+) -> Result<BenchAaReport> {
+    opts.validate()?;
+    let world = World::open(&opts.world)?;
+    let start_path = path_named(&world, &opts.path)?;
+    let paths: Vec<CameraPath> = opts
+        .paths
+        .iter()
+        .map(|n| path_named(&world, n))
+        .collect::<Result<_>>()?;
+    let out_dir = OutDir::create_for(&opts.out, "bench aa")?;
+    let ctx = GpuContext::new()?;
+    let gpu = ctx.timestamps;
+    let counts = FrameCounts::for_adapter(&ctx.adapter.get_info()).with(
+        opts.warmup_frames,
+        opts.timed_frames,
+        opts.rounds,
+    );
+    let start = sample_path(&start_path, start_path.keys[0].t_s);
+    let t0 = start_path.keys[0].t_s;
+    let mut frames = Vec::new();
+    let mut sequences = Vec::new();
+    let mut path_views = Vec::new();
+    let mut timings = Vec::new();
+    let total_steps = (opts.sizes.len() * Motion::ALL.len()) as u64;
+    let mut step = 0;
+    for &size in &opts.sizes {
+        let mut reference = truth(&ctx, &world, size, opts.truth_k)?;
+        let mut scenes: Vec<(AntiAliasing, Scene)> = opts
+            .methods
+            .iter()
+            .map(|&m| {
+                let mut config = SceneConfig::for_world(&world);
+                config.aa = m;
+                Ok((m, Scene::new(&ctx, world.clone(), size.0, size.1, config)?))
+            })
+            .collect::<Result<_>>()?;
+        for motion in Motion::ALL {
+            // Every method and the truth step through the same frames together.
+            let mut truth_prev: Option<RgbaImage> = None;
+            let mut prev: Vec<Option<RgbaImage>> = vec![None; scenes.len()];
+            let mut seq: Vec<Vec<AaFrame>> = vec![Vec::new(); scenes.len()];
+            let first = -i64::from(opts.run_up);
+            for i in first..i64::from(opts.frames) {
+                let (camera, t) = motion.frame(&start, t0, i, opts.frames);
+                let walker = Some(camera.position.truncate());
+                let truth_img = reference.render(&ctx, &camera, t, walker)?;
+                for (m, (method, scene)) in scenes.iter_mut().enumerate() {
+                    let img = frame(&ctx, scene, &camera, t)?;
+                    if i >= 0 {
+                        let change = prev[m].as_ref().map_or(0.0, |p| mean_change(p, &img));
+                        let truth_change =
+                            truth_prev.as_ref().map_or(0.0, |p| mean_change(p, &truth_img));
+                        seq[m].push(AaFrame {
+                            size,
+                            method: method.name().into(),
+                            motion,
+                            frame: i as u32,
+                            flip: flip(&truth_img, &img)?,
+                            change,
+                            truth_change,
+                        });
+                    }
+                    prev[m] = Some(img);
+                }
+                truth_prev = Some(truth_img);
+            }
+            for (m, (method, _)) in scenes.iter().enumerate() {
+                let f = &seq[m];
+                let n = f.len() as f64;
+                // The teleport's jump is a change of view, not flicker: its frame is left out.
+                let jump = (opts.frames / 2) as usize;
+                let moved = |x: &AaFrame| {
+                    x.frame > 0 && !(motion == Motion::Teleport && x.frame as usize == jump)
+                };
+                let changes: Vec<&AaFrame> = f.iter().filter(|x| moved(x)).collect();
+                let k = changes.len().max(1) as f64;
+                let flicker = changes.iter().map(|x| x.change).sum::<f64>() / k;
+                let truth_flicker = changes.iter().map(|x| x.truth_change).sum::<f64>() / k;
+                let flips: Vec<f64> = f.iter().map(|x| x.flip).collect();
+                sequences.push(AaSequence {
+                    size,
+                    method: method.name().into(),
+                    motion,
+                    flip_mean: flips.iter().sum::<f64>() / n.max(1.0),
+                    flicker,
+                    truth_flicker,
+                    flicker_ratio: flicker / truth_flicker.max(1e-9),
+                    recovery_frames: (motion == Motion::Teleport)
+                        .then(|| recovery_frames(&flips, jump))
+                        .flatten(),
+                });
+            }
+            frames.extend(seq.into_iter().flatten());
+            step += 1;
+            progress("sequences", step, total_steps);
+        }
+        // The paths: four views spread along each, reached by flight along it.
+        for path in &paths {
+            let (a, b) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
+            for j in 0..4 {
+                let t_view = a + (b - a) * (0.125 + 0.25 * f64::from(j));
+                for r in (0..=PATH_RUN_UP).rev() {
+                    let t = t_view - f64::from(r) * DT_S;
+                    let camera = sample_path(path, t);
+                    let walker = Some(crate::camera::walker_at(&world.manifest, path, t));
+                    let truth_img = reference.render(&ctx, &camera, t, walker)?;
+                    for (method, scene) in scenes.iter_mut() {
+                        scene.warm_up_report(&camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+                        scene.render_frame(&ctx, &camera, t, walker)?;
+                        if r == 0 {
+                            let img = scene.read_image(&ctx)?;
+                            path_views.push(AaPathView {
+                                size,
+                                method: method.name().into(),
+                                path: path.name.clone(),
+                                t_s: t,
+                                flip: flip(&truth_img, &img)?,
+                            });
+                        }
+                    }
+                }
+            }
+            progress(&format!("path {}", path.name), 1, 1);
+        }
+        drop(reference);
+        // Speed: interleaved rounds at the still view.
+        let mut samples: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); scenes.len()];
+        for round in 0..counts.rounds {
+            for (m, (_, scene)) in scenes.iter_mut().enumerate() {
+                scene.warm_up_report(&start, crate::tools::fly::FIRST_FRAME_WAIT)?;
+                let walker = Some(start.position.truncate());
+                for (stats, wall) in
+                    run_frames(&ctx, scene, &start, t0, walker, counts.warmup, counts.timed)?
+                {
+                    samples[m].0.push(frame_ms(&stats, wall, gpu));
+                    samples[m]
+                        .1
+                        .push(stats.gpu.iter().filter(|(n, _)| n.starts_with("taa")).map(|(_, ms)| ms).sum());
+                }
+            }
+            progress("timing", u64::from(round) + 1, u64::from(counts.rounds));
+        }
+        for (m, (method, _)) in scenes.iter().enumerate() {
+            let aa = Timing::of(&samples[m].1);
+            timings.push(AaTiming {
+                size,
+                method: method.name().into(),
+                frame: Timing::of(&samples[m].0),
+                aa_ms: if gpu { aa.median_ms } else { 0.0 },
+                gpu,
+            });
+        }
+    }
+    let report = BenchAaReport {
+        adapter: AdapterReport::of(&ctx),
+        truth_k: opts.truth_k,
+        frames,
+        sequences,
+        paths: path_views,
+        timings,
+        counts,
+    };
+    write_outputs(opts, &report)?;
+    out_dir.keep();
+    Ok(report)
+}
+
+fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
+    use std::fmt::Write as _;
+    let mut csv = String::from("width,height,method,motion,frame,flip,change,truth_change\n");
+    for f in &r.frames {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{:.5},{:.4},{:.4}",
+            f.size.0,
+            f.size.1,
+            f.method,
+            f.motion.name(),
+            f.frame,
+            f.flip,
+            f.change,
+            f.truth_change
+        );
+    }
+    write_text(&opts.out.join("aa_frames.csv"), &csv)?;
+    let mut csv = String::from(
+        "width,height,method,motion,flip_mean,flicker,truth_flicker,flicker_ratio,recovery_frames\n",
+    );
+    for s in &r.sequences {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{:.5},{:.4},{:.4},{:.4},{}",
+            s.size.0,
+            s.size.1,
+            s.method,
+            s.motion.name(),
+            s.flip_mean,
+            s.flicker,
+            s.truth_flicker,
+            s.flicker_ratio,
+            s.recovery_frames.map_or(String::new(), |n| n.to_string())
+        );
+    }
+    write_text(&opts.out.join("aa_sequences.csv"), &csv)?;
+    let mut csv = String::from("width,height,method,path,t_s,flip\n");
+    for p in &r.paths {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{:.3},{:.5}",
+            p.size.0, p.size.1, p.method, p.path, p.t_s, p.flip
+        );
+    }
+    write_text(&opts.out.join("aa_paths.csv"), &csv)?;
+    let mut csv = String::from(
+        "width,height,method,frame_ms,q1_ms,q3_ms,spread,noisy,frames,aa_ms,gpu\n",
+    );
+    for t in &r.timings {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{:.4},{:.4},{:.4},{:.4},{},{},{:.4},{}",
+            t.size.0,
+            t.size.1,
+            t.method,
+            t.frame.median_ms,
+            t.frame.q1_ms,
+            t.frame.q3_ms,
+            t.frame.spread,
+            t.frame.noisy,
+            t.frame.frames,
+            t.aa_ms,
+            t.gpu
+        );
+    }
+    write_text(&opts.out.join("aa_timing.csv"), &csv)?;
+    write_json(&opts.out.join("aa.json"), r)?;
+    for &size in &opts.sizes {
+        let points = r
+            .timings
+            .iter()
+            .filter(|t| t.size == size)
+            .map(|t| {
+                let errors: Vec<f64> = r
+                    .sequences
+                    .iter()
+                    .filter(|s| s.size == size && s.method == t.method)
+                    .map(|s| s.flip_mean)
+                    .collect();
+                ChartPoint {
+                    label: t.method.clone(),
+                    x: t.frame.median_ms,
+                    y: errors.iter().sum::<f64>() / errors.len().max(1) as f64,
+                    chosen: t.method == AntiAliasing::default().name(),
+                }
+            })
+            .collect();
+        Chart {
+            title: format!(
+                "Anti-aliasing at {}x{}: error against the {}x{} truth and cost",
+                size.0, size.1, r.truth_k, r.truth_k
+            ),
+            x_label: if r.timings.first().is_some_and(|t| t.gpu) {
+                "GPU time per frame (ms)".into()
+            } else {
+                "frame time (ms)".into()
+            },
+            y_label: "mean FLIP vs truth over the sequences".into(),
+            log_x: false,
+            log_y: false,
+            points,
+        }
+        .write_png(&opts.out.join(format!("aa_{}x{}.png", size.0, size.1)), 900, 600)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recovery_counts_the_frames_until_the_error_settles() {
+        let flips = [0.05, 0.05, 0.30, 0.12, 0.06, 0.05, 0.05, 0.05];
+        // Jump at frame 2; steady = mean of the last quarter of frames 2.. (2 frames) = 0.05.
+        assert_eq!(recovery_frames(&flips, 2), Some(2));
+        assert_eq!(recovery_frames(&[0.05; 8], 4), Some(0));
+        assert_eq!(recovery_frames(&[0.05; 8], 8), None);
+    }
+
+    #[test]
+    fn change_is_the_mean_absolute_difference_over_rgb() {
+        let a = RgbaImage::from_pixel(4, 2, image::Rgba([10, 20, 30, 255]));
+        let b = RgbaImage::from_pixel(4, 2, image::Rgba([13, 20, 24, 0]));
+        assert!((mean_change(&a, &b) - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn motions_move_the_camera_as_named() {
+        let start = Camera::new(DVec3::new(0.0, 0.0, 2.0), 0.0, -10.0);
+        let (c, t) = Motion::Dolly.frame(&start, 5.0, 60, 24);
+        assert!((c.position.x - DOLLY_MPS).abs() < 1e-9 && (t - 6.0).abs() < 1e-12);
+        let (c, _) = Motion::Pan.frame(&start, 0.0, -30, 24);
+        assert!((c.yaw_deg + PAN_DEG_PER_S / 2.0).abs() < 1e-9);
+        let (c, _) = Motion::Teleport.frame(&start, 0.0, 11, 24);
+        assert_eq!(c.position, start.position);
+        let (c, _) = Motion::Teleport.frame(&start, 0.0, 12, 24);
+        assert!((c.position.x - TELEPORT_M).abs() < 1e-9);
+        let (c, t) = Motion::Still.frame(&start, 1.0, 30, 24);
+        assert_eq!(c, start);
+        assert!((t - 1.5).abs() < 1e-12);
+    }
+}
