@@ -64,29 +64,43 @@ fn from_ycocg(c: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(c.x + c.y - c.z, c.x + c.z, c.x - c.y - c.z);
 }
 
-// The history at pixel position `pos` (pixel centres at +0.5), bilinear between the four
-// nearest texels; texels off screen count for nothing.
+// Catmull-Rom weights of the four texels around a sample at fraction `t` past the second.
+fn catmull_rom(t: f32) -> vec4<f32> {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    return vec4<f32>(
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    );
+}
+
+// The history at pixel position `pos` (pixel centres at +0.5), filtered by Catmull-Rom over
+// the 4x4 nearest texels (sharper than bilinear, so that a moving view does not blur its
+// history frame after frame); texels off screen count for nothing.
 fn sample_history(pos: vec2<f32>) -> vec4<f32> {
     let size = vec2<i32>(params.size.xy);
     let f = pos - 0.5;
-    let base = vec2<i32>(floor(f));
-    let t = f - floor(f);
+    let base = vec2<i32>(floor(f)) - 1;
+    let wx = catmull_rom(f.x - floor(f.x));
+    let wy = catmull_rom(f.y - floor(f.y));
     var sum = vec4<f32>(0.0);
     var weight = 0.0;
-    for (var j = 0; j < 2; j++) {
-        for (var i = 0; i < 2; i++) {
+    for (var j = 0; j < 4; j++) {
+        for (var i = 0; i < 4; i++) {
             let q = base + vec2<i32>(i, j);
             if all(q >= vec2<i32>(0)) && all(q < size) {
-                let w = select(1.0 - t.x, t.x, i == 1) * select(1.0 - t.y, t.y, j == 1);
+                let w = wx[i] * wy[j];
                 sum += w * textureLoad(history, q, 0);
                 weight += w;
             }
         }
     }
-    if weight <= 0.0 {
+    if abs(weight) < 1e-4 {
         return vec4<f32>(0.0);
     }
-    return sum / weight;
+    return max(sum / weight, vec4<f32>(0.0));
 }
 
 // Moves `h` toward the box's centre until it lies inside the box (clipping, not clamping:
