@@ -708,6 +708,25 @@ impl Renderer {
         )
     }
 
+    /// Switches anti-aliasing to `aa` from the next frame (a temporal method starts its
+    /// history from scratch).
+    pub fn set_anti_aliasing(&mut self, aa: AntiAliasing) {
+        if aa == self.anti_aliasing() {
+            return;
+        }
+        self.taa = (aa == AntiAliasing::Taa)
+            .then(|| Taa::new(&self.device, &self.targets, TaaSettings::default()));
+    }
+
+    /// How the frame is anti-aliased.
+    pub fn anti_aliasing(&self) -> AntiAliasing {
+        if self.taa.is_some() {
+            AntiAliasing::Taa
+        } else {
+            AntiAliasing::Off
+        }
+    }
+
     /// Follows a resize of the targets (the next frame draws at the new size).
     pub fn resize(&mut self, width: u32, height: u32) -> Result<(), RendererError> {
         check_size(&self.device, width, height, self.grass.is_some())?;
