@@ -343,7 +343,7 @@ fn sizes_beyond_the_adapters_buffers_are_refused_with_the_limit_named() {
     );
     // Without grass there is no Hi-Z pyramid, and the size is served.
     let mut options = RendererOptions::new(&world, c, d, 7680, 4320);
-    options.config.grass = None;
+    options.config.grass_rings = None;
     Renderer::new(&device, &queue, world, options).unwrap();
 }
 
@@ -431,7 +431,7 @@ fn holes_along_the_tour(skip_uploads: u32, frames: u32) -> Vec<u32> {
         wgpu::TextureFormat::Depth32Float,
     );
     let mut options = RendererOptions::new(&world, c, d, 64, 36);
-    options.config.grass = None;
+    options.config.grass_rings = None;
     let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
     renderer.skip_next_uploads(skip_uploads);
     let t = targets(&ctx.device, c, d, (64, 36));
@@ -474,7 +474,8 @@ fn holes_are_counted_on_the_gpu_when_an_upload_is_lost() {
 /// Standing in the meadow (1.7 m above the ground where the meadow path starts) looking
 /// slightly down, with the terrain-only depth captured.
 fn meadow_coverage(grass: bool) -> verdant::tools::metrics::Coverage {
-    use verdant::tools::{Scene, SceneConfig};
+    use verdant::RendererConfig;
+    use verdant::tools::Scene;
     let ctx = common::gpu();
     let world = World::open(&common::default_world()).unwrap();
     let path = world.manifest.path("meadow").unwrap().clone();
@@ -482,9 +483,9 @@ fn meadow_coverage(grass: bool) -> verdant::tools::metrics::Coverage {
     let ground = common::Terrain::load(&common::default_world()).height(camera.position.truncate());
     camera.position.z = ground + 1.7;
     camera.pitch_deg = -12.0;
-    let mut config = SceneConfig::for_world(&world);
+    let mut config = RendererConfig::for_world(&world);
     if !grass {
-        config.grass = None;
+        config.grass_rings = None;
     }
     let mut scene = Scene::new(&ctx, world, 160, 90, config).unwrap();
     assert!(
@@ -519,8 +520,9 @@ fn grass_covers_nine_tenths_of_the_near_meadow_and_nothing_covers_it_without_gra
 /// Coverage standing 1.7 m up in a flat field at full density of the default world's grass type
 /// `kind`, looking 12 degrees down.
 fn field_coverage(kind: &str) -> verdant::tools::metrics::Coverage {
+    use verdant::RendererConfig;
+    use verdant::tools::Scene;
     use verdant::tools::bench_blades::flat_field;
-    use verdant::tools::{Scene, SceneConfig};
     let ctx = common::gpu();
     let default = World::open(&common::default_world()).unwrap();
     let ty = default
@@ -532,10 +534,10 @@ fn field_coverage(kind: &str) -> verdant::tools::metrics::Coverage {
         .clone();
     let (mut world, source) = flat_field(400.0).unwrap();
     world.manifest.grass_types[1] = ty;
-    let mut config = SceneConfig::for_world(&world);
+    let mut config = RendererConfig::for_world(&world);
     // The field is generated, not read: room for a tile's blades, split and infilled.
     let g = config.grass_settings(&world).unwrap().grid();
-    config.grass_capacity = Some(3 * g * g);
+    config.grass.capacity = Some(3 * g * g);
     let mut scene = Scene::with_source(&ctx, world, source, 160, 90, config).unwrap();
     let camera = Camera::new(glam::DVec3::new(200.0, 200.0, 1.7), 30.0, -12.0);
     assert!(
