@@ -366,6 +366,53 @@ fn a_cache_too_small_for_one_tile_is_refused() {
     assert!(e.to_string().contains("1 MiB"), "{e}");
 }
 
+/// A setting out of its range is refused by `Renderer::new` (through `RendererConfig::validate`)
+/// with the field and its range named, never a panic: the library checks what every front end
+/// hands it.
+#[test]
+fn settings_out_of_range_are_refused_by_the_renderer_with_their_range() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let options = RendererOptions::new(
+        &world,
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+        64,
+        36,
+    );
+    let cases: [(&dyn Fn(&mut verdant::RendererConfig), &str, &str); 4] = [
+        (
+            &|c| c.grass.segments = [5, 0, 3],
+            "grass.segments",
+            "1..=64 each",
+        ),
+        (
+            &|c| c.grass.spacing_m = f32::NAN,
+            "grass.spacing_m",
+            "0.02..=5 m",
+        ),
+        (
+            &|c| c.mesh_step = 5,
+            "mesh_step",
+            "a power of two in 1..=16",
+        ),
+        (&|c| c.lod_factor = -1.0, "lod_factor", "0.25..=8"),
+    ];
+    for (change, field, range) in cases {
+        let mut options = options.clone();
+        change(&mut options.config);
+        let e = Renderer::new(&ctx.device, &ctx.queue, world.clone(), options)
+            .err()
+            .expect("refused");
+        assert!(
+            matches!(&e, RendererError::Config(c) if c.field == field),
+            "{e}"
+        );
+        let text = e.to_string();
+        assert!(text.contains(field) && text.contains(range), "{text}");
+    }
+}
+
 /// Tiles of the world, except that every load at `level` fails.
 struct FailingLevel {
     world: World,

@@ -316,3 +316,150 @@ impl RendererOptions {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn world() -> World {
+        World::open(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz"))
+            .unwrap()
+    }
+
+    #[test]
+    fn every_setting_out_of_range_names_its_field_and_range() {
+        let base = RendererConfig::for_world(&world());
+        base.validate().unwrap();
+        let with = |f: &dyn Fn(&mut RendererConfig)| {
+            let mut c = base.clone();
+            f(&mut c);
+            c
+        };
+        let cases: Vec<(RendererConfig, &str, &str)> = vec![
+            (with(&|c| c.lod_factor = 0.0), "lod_factor", "0.25..=8"),
+            (with(&|c| c.lod_factor = f64::NAN), "lod_factor", "0.25..=8"),
+            (
+                with(&|c| c.mesh_step = 3),
+                "mesh_step",
+                "power of two in 1..=16",
+            ),
+            (
+                with(&|c| c.mesh_step = 0),
+                "mesh_step",
+                "power of two in 1..=16",
+            ),
+            (
+                with(&|c| c.service.derives_per_frame = 0),
+                "service.derives_per_frame",
+                "1..=4294967295",
+            ),
+            (
+                with(&|c| c.service.uploads_per_frame = 0),
+                "service.uploads_per_frame",
+                "1..=4294967295",
+            ),
+            (
+                with(&|c| c.grass_rings.as_mut().unwrap().high_radius_m = 0.0),
+                "grass_rings.high_radius_m",
+                "above 0 m",
+            ),
+            (
+                with(&|c| c.grass_rings.as_mut().unwrap().low_radius_m = f64::INFINITY),
+                "grass_rings.high_radius_m",
+                "finite",
+            ),
+            (
+                with(&|c| c.grass_rings.as_mut().unwrap().low_radius_m = 1.0),
+                "grass_rings.low_radius_m",
+                "at least high_radius_m",
+            ),
+            (
+                with(&|c| c.grass_rings.as_mut().unwrap().hysteresis_m = -1.0),
+                "grass_rings.hysteresis_m",
+                "at least 0 m",
+            ),
+            (
+                with(&|c| c.grass.spacing_m = 0.01),
+                "grass.spacing_m",
+                "0.02..=5 m",
+            ),
+            (
+                with(&|c| c.grass.width_scale = f32::NAN),
+                "grass.width_scale",
+                "0.05..=20",
+            ),
+            (
+                with(&|c| c.grass.infill_m = [101.0, 0.0]),
+                "grass.infill_m",
+                "0..=100 m each",
+            ),
+            (
+                with(&|c| c.grass.infill_m = [10.0, 20.0]),
+                "grass.infill_m",
+                "no larger than the half-spacing one",
+            ),
+            (
+                with(&|c| c.grass.segments = [5, 65, 3]),
+                "grass.segments",
+                "1..=64 each",
+            ),
+            (
+                with(&|c| c.grass.segments = [0, 3, 3]),
+                "grass.segments",
+                "1..=64 each",
+            ),
+            (
+                with(&|c| c.grass.near_m = -1.0),
+                "grass.near_m",
+                "0..=200 m",
+            ),
+            (
+                with(&|c| c.grass.capacity = Some(0)),
+                "grass.capacity",
+                "1..=4294967295 blades",
+            ),
+        ];
+        for (config, field, range) in cases {
+            let e = config.validate().unwrap_err();
+            assert_eq!(e.field, field, "{e}");
+            let text = e.to_string();
+            assert!(text.contains(field) && text.contains(range), "{text}");
+        }
+    }
+
+    #[test]
+    fn the_range_bounds_are_taken_and_no_grass_skips_the_grass_checks() {
+        let base = RendererConfig::for_world(&world());
+        let mut c = base.clone();
+        c.lod_factor = 8.0;
+        c.mesh_step = 16;
+        c.grass.spacing_m = 0.02;
+        c.grass.width_scale = 20.0;
+        c.grass.infill_m = [0.0, 0.0];
+        c.grass.segments = [GrassSettings::MAX_SEGMENTS, 1, 1];
+        c.grass.near_m = 200.0;
+        c.grass.capacity = Some(1);
+        c.validate().unwrap();
+        let mut c = base;
+        c.grass_rings = None;
+        c.validate().unwrap();
+    }
+
+    #[test]
+    fn grass_settings_carry_the_grass_config_and_the_world_s_rings() {
+        let world = world();
+        let mut c = RendererConfig::for_world(&world);
+        c.grass.segments = [7, 4, 2];
+        c.grass.spacing_m = 0.3;
+        let s = c.grass_settings(&world).unwrap();
+        assert_eq!(s.segments, [7, 4, 2]);
+        assert_eq!(s.spacing_m, 0.3);
+        let rings = c.grass_rings.unwrap();
+        assert_eq!(
+            s.tile_m,
+            world.manifest.pyramid.tile_size_m(rings.level) as f32
+        );
+        c.grass_rings = None;
+        assert!(c.grass_settings(&world).is_none());
+    }
+}
