@@ -58,7 +58,7 @@ pub mod world;
 
 pub use camera::Camera;
 pub use renderer::{
-    FrameInput, FrameStats, MissingTile, Renderer, RendererConfig, RendererError, RendererOptions,
-    WarmUp,
+    ConfigError, FrameInput, FrameStats, GrassConfig, MissingTile, Renderer, RendererConfig,
+    RendererError, RendererOptions, WarmUp,
 };
 pub use world::World;

@@ -642,7 +642,7 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
     assert_eq!(rows.len(), 2, "{csv}");
     let n = |r: &Vec<&str>, c: &str| -> f64 { r[col(c)].parse().unwrap() };
     let world = verdant::world::World::open(&common::default_world()).unwrap();
-    let [_, high, low] = verdant::tools::SceneConfig::for_world(&world).grass_segments;
+    let [_, high, low] = verdant::RendererConfig::for_world(&world).grass.segments;
     for r in &rows {
         let drawn = n(r, "drawn_high") + n(r, "drawn_low");
         assert!(drawn > 0.0, "{csv}");

@@ -5,11 +5,12 @@
 mod common;
 
 use glam::{DVec2, DVec3, Vec3, Vec4};
+use verdant::RendererConfig;
 use verdant::camera::Camera;
 use verdant::terrain::far_field::{self, Light};
 use verdant::terrain::sun_direction;
 use verdant::tools::bench_blades::flat_field;
-use verdant::tools::scene::{Scene, SceneConfig};
+use verdant::tools::scene::Scene;
 
 fn srgb_to_linear(c: u8) -> f32 {
     let c = f32::from(c) / 255.0;
@@ -62,14 +63,14 @@ fn mean(v: &[Vec3]) -> Vec3 {
 fn the_far_field_continues_the_blades_at_the_ring_and_matches_its_cpu_mirror() {
     let ctx = common::gpu();
     let (world, source) = flat_field(800.0).unwrap();
-    let mut config = SceneConfig::for_world(&world);
+    let mut config = RendererConfig::for_world(&world);
     let settings = config.grass_settings(&world).unwrap();
     let (fade_start, view) = (
         f64::from(settings.view_distance_m - settings.far_fade_m),
         f64::from(settings.view_distance_m),
     );
     // Room in each pool slot for a whole tile of blades at full density.
-    config.grass_capacity = Some(settings.grid() * settings.grid());
+    config.grass.capacity = Some(settings.grid() * settings.grid());
     let (w, h) = (320u32, 180u32);
     let mut scene = Scene::with_source(&ctx, world.clone(), source, w, h, config).unwrap();
     // Standing 6 m up in the field, looking over the ring's end through a narrow lens, so that

@@ -5,12 +5,12 @@
 mod common;
 
 use glam::DVec3;
+use verdant::RendererConfig;
 use verdant::camera::Camera;
 use verdant::gpu::{GpuContext, GpuTimer};
 use verdant::lod::Frustum;
 use verdant::grass::{Blade, GrassRenderer, GrassStats, HiZ, TileBlades, TileJob, generate_tile};
 use verdant::stream::TileAtlas;
-use verdant::tools::SceneConfig;
 use verdant::world::{Manifest, TileData, TileId, World};
 
 const ALTITUDE: f32 = 106.0;
@@ -96,7 +96,7 @@ impl Rig {
         let ctx = common::gpu();
         let world = World::open(&common::default_world()).unwrap();
         let manifest = world.manifest.clone();
-        let settings = SceneConfig::for_world(&world)
+        let settings = RendererConfig::for_world(&world)
             .grass_settings(&world)
             .unwrap();
         let atlas = TileAtlas::new(&ctx.device, manifest.pyramid.samples_per_side(), 8);
@@ -603,7 +603,7 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
     let ctx = common::gpu();
     let world = World::open(&common::default_world()).unwrap();
     let manifest = world.manifest.clone();
-    let settings = SceneConfig::for_world(&world)
+    let settings = RendererConfig::for_world(&world)
         .grass_settings(&world)
         .unwrap();
     let atlas = TileAtlas::new(&ctx.device, manifest.pyramid.samples_per_side(), 2);

@@ -15,16 +15,17 @@ use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+use verdant::RendererConfig;
 use verdant::camera::sample_path;
 use verdant::stream::http::MAX_TIMEOUT;
 use verdant::stream::{
     HttpCacheConfig, HttpError, HttpOptions, HttpSource, Loaded, ServiceConfig, StreamConfig,
     Streamer, TileService, TileSource, Want,
 };
+use verdant::tools::Scene;
 use verdant::tools::fault_proxy::{Fault, FaultProxy};
 use verdant::tools::metrics::flip_compare;
 use verdant::tools::serve::WorldServer;
-use verdant::tools::{Scene, SceneConfig};
 use verdant::world::format::max_file_bytes;
 use verdant::world::manifest::MAX_MANIFEST_BYTES;
 use verdant::world::{TileFile, TileId, World};
@@ -220,7 +221,7 @@ impl Drop for PythonServer {
 fn fly(world: World, source: Arc<dyn TileSource>, frames: u32) -> Vec<image::RgbImage> {
     let ctx = common::gpu();
     let path = world.manifest.paths[0].clone();
-    let config = SceneConfig::for_world(&world);
+    let config = RendererConfig::for_world(&world);
     let mut scene = Scene::with_source(&ctx, world, source, 96, 54, config).unwrap();
     let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
     (0..frames)
@@ -380,8 +381,8 @@ fn a_flight_over_a_failing_server_draws_every_frame_without_a_hole() {
     let (world, source) = HttpSource::open(&server.url, quick_options()).unwrap();
     let ctx = common::gpu();
     let path = world.manifest.paths[0].clone();
-    let mut config = SceneConfig::for_world(&world);
-    config.grass = None;
+    let mut config = RendererConfig::for_world(&world);
+    config.grass_rings = None;
     let mut scene = Scene::with_source(&ctx, world, Arc::new(source), 64, 36, config).unwrap();
     let start = Instant::now();
     for f in 0..30 {

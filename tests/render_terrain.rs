@@ -4,8 +4,9 @@ mod common;
 
 use std::time::Duration;
 
+use verdant::RendererConfig;
 use verdant::camera::sample_path;
-use verdant::tools::{Scene, SceneConfig};
+use verdant::tools::Scene;
 use verdant::world::World;
 
 #[test]
@@ -17,7 +18,7 @@ fn default_world_matches_reference_image() {
         .path("overview")
         .expect("the default world has an overview path")
         .clone();
-    let config = SceneConfig::for_world(&world);
+    let config = RendererConfig::for_world(&world);
     let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
     let t = path.keys[0].t_s + 0.3 * (path.keys[path.keys.len() - 1].t_s - path.keys[0].t_s);
     let camera = sample_path(&path, t);
@@ -45,7 +46,7 @@ fn frames_show_lit_terrain_below_a_sky() {
         .path("overview")
         .expect("the default world has an overview path")
         .clone();
-    let config = SceneConfig::for_world(&world);
+    let config = RendererConfig::for_world(&world);
     let mut scene = Scene::new(&ctx, world, 160, 90, config).expect("build the scene");
     let camera = sample_path(&path, path.keys[0].t_s);
     scene
@@ -106,7 +107,7 @@ fn slow_loads_never_stall_the_frame_loop_and_leave_no_hole() {
         world: world.clone(),
         delay: Duration::from_secs(20),
     });
-    let config = SceneConfig::for_world(&world);
+    let config = RendererConfig::for_world(&world);
     let mut scene =
         Scene::with_source(&ctx, world, source, 96, 54, config).expect("build the scene");
     let camera = sample_path(&path, path.keys[0].t_s);
@@ -146,7 +147,7 @@ fn grassy_meadow_matches_reference_image() {
         .path("meadow")
         .expect("the default world has a meadow path")
         .clone();
-    let config = SceneConfig::for_world(&world);
+    let config = RendererConfig::for_world(&world);
     let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
     let camera = sample_path(&path, path.keys[0].t_s + 0.4 * path.duration_s);
     assert!(
@@ -180,7 +181,7 @@ fn meadow_in_wind(scene_name: &str) -> image::RgbaImage {
         .path("meadow")
         .expect("the default world has a meadow path")
         .clone();
-    let mut config = SceneConfig::for_world(&world);
+    let mut config = RendererConfig::for_world(&world);
     config.wind_scene = Some(scene_name.to_owned());
     let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
     let camera = sample_path(&path, path.keys[0].t_s + 0.6 * path.duration_s);

@@ -343,7 +343,7 @@ fn sizes_beyond_the_adapters_buffers_are_refused_with_the_limit_named() {
     );
     // Without grass there is no Hi-Z pyramid, and the size is served.
     let mut options = RendererOptions::new(&world, c, d, 7680, 4320);
-    options.config.grass = None;
+    options.config.grass_rings = None;
     Renderer::new(&device, &queue, world, options).unwrap();
 }
 
@@ -364,6 +364,53 @@ fn a_cache_too_small_for_one_tile_is_refused() {
         .expect("refused");
     assert!(matches!(e, RendererError::CacheTooSmall { .. }), "{e}");
     assert!(e.to_string().contains("1 MiB"), "{e}");
+}
+
+/// A setting out of its range is refused by `Renderer::new` (through `RendererConfig::validate`)
+/// with the field and its range named, never a panic: the library checks what every front end
+/// hands it.
+#[test]
+fn settings_out_of_range_are_refused_by_the_renderer_with_their_range() {
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let options = RendererOptions::new(
+        &world,
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+        64,
+        36,
+    );
+    let cases: [(&dyn Fn(&mut verdant::RendererConfig), &str, &str); 4] = [
+        (
+            &|c| c.grass.segments = [5, 0, 3],
+            "grass.segments",
+            "1..=64 each",
+        ),
+        (
+            &|c| c.grass.spacing_m = f32::NAN,
+            "grass.spacing_m",
+            "0.02..=5 m",
+        ),
+        (
+            &|c| c.mesh_step = 5,
+            "mesh_step",
+            "a power of two in 1..=16",
+        ),
+        (&|c| c.lod_factor = -1.0, "lod_factor", "0.25..=8"),
+    ];
+    for (change, field, range) in cases {
+        let mut options = options.clone();
+        change(&mut options.config);
+        let e = Renderer::new(&ctx.device, &ctx.queue, world.clone(), options)
+            .err()
+            .expect("refused");
+        assert!(
+            matches!(&e, RendererError::Config(c) if c.field == field),
+            "{e}"
+        );
+        let text = e.to_string();
+        assert!(text.contains(field) && text.contains(range), "{text}");
+    }
 }
 
 /// Tiles of the world, except that every load at `level` fails.
@@ -431,7 +478,7 @@ fn holes_along_the_tour(skip_uploads: u32, frames: u32) -> Vec<u32> {
         wgpu::TextureFormat::Depth32Float,
     );
     let mut options = RendererOptions::new(&world, c, d, 64, 36);
-    options.config.grass = None;
+    options.config.grass_rings = None;
     let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
     renderer.skip_next_uploads(skip_uploads);
     let t = targets(&ctx.device, c, d, (64, 36));
@@ -474,7 +521,8 @@ fn holes_are_counted_on_the_gpu_when_an_upload_is_lost() {
 /// Standing in the meadow (1.7 m above the ground where the meadow path starts) looking
 /// slightly down, with the terrain-only depth captured.
 fn meadow_coverage(grass: bool) -> verdant::tools::metrics::Coverage {
-    use verdant::tools::{Scene, SceneConfig};
+    use verdant::RendererConfig;
+    use verdant::tools::Scene;
     let ctx = common::gpu();
     let world = World::open(&common::default_world()).unwrap();
     let path = world.manifest.path("meadow").unwrap().clone();
@@ -482,9 +530,9 @@ fn meadow_coverage(grass: bool) -> verdant::tools::metrics::Coverage {
     let ground = common::Terrain::load(&common::default_world()).height(camera.position.truncate());
     camera.position.z = ground + 1.7;
     camera.pitch_deg = -12.0;
-    let mut config = SceneConfig::for_world(&world);
+    let mut config = RendererConfig::for_world(&world);
     if !grass {
-        config.grass = None;
+        config.grass_rings = None;
     }
     let mut scene = Scene::new(&ctx, world, 160, 90, config).unwrap();
     assert!(
@@ -519,8 +567,9 @@ fn grass_covers_nine_tenths_of_the_near_meadow_and_nothing_covers_it_without_gra
 /// Coverage standing 1.7 m up in a flat field at full density of the default world's grass type
 /// `kind`, looking 12 degrees down.
 fn field_coverage(kind: &str) -> verdant::tools::metrics::Coverage {
+    use verdant::RendererConfig;
+    use verdant::tools::Scene;
     use verdant::tools::bench_blades::flat_field;
-    use verdant::tools::{Scene, SceneConfig};
     let ctx = common::gpu();
     let default = World::open(&common::default_world()).unwrap();
     let ty = default
@@ -532,10 +581,10 @@ fn field_coverage(kind: &str) -> verdant::tools::metrics::Coverage {
         .clone();
     let (mut world, source) = flat_field(400.0).unwrap();
     world.manifest.grass_types[1] = ty;
-    let mut config = SceneConfig::for_world(&world);
+    let mut config = RendererConfig::for_world(&world);
     // The field is generated, not read: room for a tile's blades, split and infilled.
     let g = config.grass_settings(&world).unwrap().grid();
-    config.grass_capacity = Some(3 * g * g);
+    config.grass.capacity = Some(3 * g * g);
     let mut scene = Scene::with_source(&ctx, world, source, 160, 90, config).unwrap();
     let camera = Camera::new(glam::DVec3::new(200.0, 200.0, 1.7), 30.0, -12.0);
     assert!(

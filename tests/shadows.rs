@@ -7,10 +7,11 @@ mod common;
 use std::sync::Arc;
 
 use glam::{DVec2, DVec3, Vec4};
+use verdant::RendererConfig;
 use verdant::camera::Camera;
 use verdant::terrain::sun_direction;
 use verdant::tools::bench_blades::field_with_heights;
-use verdant::tools::scene::{Scene, SceneConfig};
+use verdant::tools::scene::Scene;
 
 const WALL: (f64, f64) = (300.0, 310.0);
 const WALL_M: f32 = 40.0;
@@ -30,8 +31,8 @@ fn a_wall_casts_its_shadow_where_the_sun_ray_says() {
         }
     });
     let (world, source) = field_with_heights(800.0, Some(height), WALL_M).unwrap();
-    let mut config = SceneConfig::for_world(&world);
-    config.grass = None;
+    let mut config = RendererConfig::for_world(&world);
+    config.grass_rings = None;
     let (w, h) = (256u32, 144u32);
     let mut scene = Scene::with_source(&ctx, world.clone(), source, w, h, config).unwrap();
     // Looking straight down from 200 m over the wall's east side.
@@ -140,10 +141,10 @@ fn contact_shadows_match_their_cpu_mirror() {
     // fall beside them, in view.
     let camera = Camera::new(DVec3::new(200.0, 200.0, 1.7), 120.0, -25.0);
     let render = |features| {
-        let mut config = SceneConfig::for_world(&world);
+        let mut config = RendererConfig::for_world(&world);
         config.features = features;
         let settings = config.grass_settings(&world).unwrap();
-        config.grass_capacity = Some(settings.grid() * settings.grid());
+        config.grass.capacity = Some(settings.grid() * settings.grid());
         let mut scene =
             Scene::with_source(&ctx, world.clone(), source.clone(), w, h, config).unwrap();
         assert!(
@@ -157,7 +158,7 @@ fn contact_shadows_match_their_cpu_mirror() {
             scene.read_depth(&ctx).unwrap(),
         )
     };
-    let all = SceneConfig::for_world(&world).features;
+    let all = RendererConfig::for_world(&world).features;
     let (lit, depth) = render(all.without(Feature::Shadows));
     let (shaded, depth_shaded) = render(all);
     assert_eq!(depth, depth_shaded, "the two frames must be the same scene");

@@ -7,9 +7,10 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Duration;
 
+use verdant::RendererConfig;
 use verdant::camera::sample_path;
+use verdant::tools::Scene;
 use verdant::tools::metrics::flip_compare;
-use verdant::tools::{Scene, SceneConfig};
 use verdant::world::World;
 
 const SIZE: (u32, u32) = (256, 144);
@@ -26,7 +27,7 @@ fn headless_view() -> image::RgbaImage {
     let world = World::open(&common::default_world()).unwrap();
     let path = world.manifest.path("overview").unwrap().clone();
     let camera = sample_path(&path, path.keys[0].t_s);
-    let config = SceneConfig::for_world(&world);
+    let config = RendererConfig::for_world(&world);
     let mut scene = Scene::new(&ctx, world, SIZE.0, SIZE.1, config).unwrap();
     scene
         .warm_up(&ctx, &camera, Duration::from_secs(30))

@@ -73,6 +73,10 @@ pub struct GrassSettings {
 }
 
 impl GrassSettings {
+    /// Most segments of a blade: [`crate::RendererConfig::validate`] refuses more (each count
+    /// is packed into 8 bits of the generate pass's uniforms).
+    pub const MAX_SEGMENTS: u32 = 64;
+
     /// Grid points along a tile edge at high LOD.
     pub fn grid(&self) -> u32 {
         (self.tile_m / self.spacing_m).round().max(1.0) as u32

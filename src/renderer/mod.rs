@@ -46,15 +46,22 @@ use crate::aa::taa::{Taa, TaaSettings};
 use crate::camera::Camera;
 use crate::features::{Feature, Features};
 use crate::gpu::{GpuTimer, PassTimes, Targets};
-use crate::grass::{GrassRenderer, GrassSettings, GrassStats, TileJob, WindBindings};
-use crate::lod::{GrassRings, Ring, RingSettings, TerrainLod, select_terrain};
+use crate::grass::{GrassRenderer, GrassStats, TileJob, WindBindings};
+use crate::lod::{GrassRings, Ring, TerrainLod, select_terrain};
 use crate::stream::{
-    AtlasError, DeriveJob, DeriveParams, DeriveStage, ResidencyPlan, ResidencyStats, ServiceConfig,
-    TileAtlas, TileService, TileSource, Want,
+    AtlasError, DeriveJob, DeriveStage, ResidencyPlan, ResidencyStats, TileAtlas, TileService,
+    TileSource, Want,
 };
 use crate::terrain::{TerrainRenderer, TileDraw};
 use crate::wind::{SwayConfig, SwayField, WindConfig, WindError, WindField};
-use crate::world::{TileId, WindKey, World, WorldError};
+use crate::world::{TileId, World, WorldError};
+
+mod config;
+pub use config::{
+    ConfigError, DEFAULT_INFILL_M, DEFAULT_MESH_STEP, GrassConfig, INFILL_RANGE_M,
+    LOD_FACTOR_RANGE, MAX_MESH_STEP, NEAR_RANGE_M, RendererConfig, RendererOptions,
+    SPACING_RANGE_M, WIDTH_SCALE_RANGE,
+};
 
 /// Depth formats the renderer draws into (the Hi-Z pyramid reads them as depth textures).
 pub const DEPTH_FORMATS: [wgpu::TextureFormat; 2] = [
@@ -73,6 +80,9 @@ pub const MAX_READY_STATS: usize = 2 * READBACK_SLOTS;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum RendererError {
+    /// A setting is out of its range ([`RendererConfig::validate`]).
+    #[error(transparent)]
+    Config(#[from] ConfigError),
     /// A tile or the manifest could not be read.
     #[error(transparent)]
     World(#[from] WorldError),
@@ -169,125 +179,6 @@ pub enum RendererError {
          copied (use Depth32Float)"
     )]
     DepthCapture(wgpu::TextureFormat),
-}
-
-/// Settings of the engine: streaming limits, levels of detail, grass, wind and features.
-#[derive(Clone, Debug)]
-pub struct RendererConfig {
-    /// Limits of the tile service (atlas slots, cache bytes, loads in flight, budgets).
-    pub service: ServiceConfig,
-    /// Terrain tiles split while the camera is nearer than this many tile edges.
-    pub lod_factor: f64,
-    /// Derivation of child tiles.
-    pub derive: DeriveParams,
-    /// Grass rings, or none to ask for no grass tiles.
-    pub grass: Option<RingSettings>,
-    /// Terrain grid vertices every this many samples (1 = every sample).
-    pub mesh_step: u32,
-    /// Blade spacing of the high-LOD grass grid, metres.
-    pub grass_spacing_m: f32,
-    /// Every grass type's blade width times this (the manifest's widths at 1).
-    pub grass_width_scale: f32,
-    /// Radii of the grass infill near the camera, metres (see [`GrassSettings::infill_m`]).
-    pub grass_infill_m: [f32; 2],
-    /// Blade segments near the camera, in the rest of the high ring and in the low ring.
-    pub grass_segments: [u32; 3],
-    /// Horizontal radius of the blades drawn with the most segments, metres.
-    pub grass_near_m: f32,
-    /// The wind scene of the manifest (default: `breeze`, else the manifest's wind); when
-    /// `None` and `wind_keys` is not empty, the scenes of those keys in turn.
-    pub wind_scene: Option<String>,
-    /// Changes of wind scene over time (a camera path's `wind` keys).
-    pub wind_keys: Vec<WindKey>,
-    /// The switched-on features of the grass model.
-    pub features: Features,
-    /// Blades a slot of the grass pool holds; `None`: enough for the world's densest grass
-    /// tile (found by reading its finest stored tiles).
-    pub grass_capacity: Option<u32>,
-    /// How the frame is anti-aliased.
-    pub aa: AntiAliasing,
-}
-
-/// Default radii of the grass infill near the camera (half and quarter spacing), metres.
-pub const DEFAULT_INFILL_M: [f32; 2] = [20.0, 10.0];
-
-impl RendererConfig {
-    /// Defaults for `world`.
-    pub fn for_world(world: &World) -> Self {
-        Self {
-            service: ServiceConfig::default(),
-            lod_factor: 1.0,
-            derive: DeriveParams::for_manifest(&world.manifest),
-            grass: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
-            mesh_step: 2,
-            grass_spacing_m: 0.25,
-            grass_width_scale: 1.0,
-            grass_infill_m: DEFAULT_INFILL_M,
-            grass_segments: [5, 3, 3],
-            grass_near_m: 12.0,
-            wind_scene: None,
-            wind_keys: Vec::new(),
-            features: Features::from(&world.manifest.features),
-            grass_capacity: None,
-            aa: AntiAliasing::default(),
-        }
-    }
-
-    /// Grass settings that follow the rings: blades the low grid drops fade out over the outer
-    /// 30% of the high ring, and all blades thin out, dithered, over the last 20% of the view
-    /// distance.
-    pub fn grass_settings(&self, world: &World) -> Option<GrassSettings> {
-        let rings = self.grass?;
-        Some(GrassSettings {
-            spacing_m: self.grass_spacing_m,
-            width_scale: self.grass_width_scale,
-            tile_m: world.manifest.pyramid.tile_size_m(rings.level) as f32,
-            high_radius_m: rings.high_radius_m as f32,
-            lod_fade_m: 0.3 * rings.high_radius_m as f32,
-            infill_m: self.grass_infill_m,
-            view_distance_m: rings.low_radius_m as f32,
-            far_fade_m: 0.2 * rings.low_radius_m as f32,
-            clump_m: 1.6,
-            short_m: crate::world::grass_density::SHORT_GRASS_M,
-            seed: 0x9a55,
-            segments: self.grass_segments,
-            near_m: self.grass_near_m,
-        })
-    }
-}
-
-/// The caller's targets and the engine's settings.
-#[derive(Clone, Debug)]
-pub struct RendererOptions {
-    /// Format of the colour target.
-    pub color_format: wgpu::TextureFormat,
-    /// Format of the depth target (one of [`DEPTH_FORMATS`]).
-    pub depth_format: wgpu::TextureFormat,
-    /// Width of the targets in pixels.
-    pub width: u32,
-    /// Height of the targets in pixels.
-    pub height: u32,
-    /// Settings of the engine.
-    pub config: RendererConfig,
-}
-
-impl RendererOptions {
-    /// Targets of these formats and size, and the defaults of `world`.
-    pub fn new(
-        world: &World,
-        color_format: wgpu::TextureFormat,
-        depth_format: wgpu::TextureFormat,
-        width: u32,
-        height: u32,
-    ) -> Self {
-        Self {
-            color_format,
-            depth_format,
-            width,
-            height,
-            config: RendererConfig::for_world(world),
-        }
-    }
 }
 
 /// What a frame is drawn from.
@@ -461,6 +352,7 @@ impl Renderer {
         options: RendererOptions,
     ) -> Result<Self, RendererError> {
         let config = options.config;
+        config.validate()?;
         let targets = Targets {
             color_format: options.color_format,
             depth_format: options.depth_format,
@@ -468,7 +360,7 @@ impl Renderer {
             height: options.height,
         };
         check_formats(&targets)?;
-        let grass_on = config.grass.is_some();
+        let grass_on = config.grass_rings.is_some();
         check_size(device, targets.width, targets.height, grass_on)?;
         let limits = device.limits();
         let pyramid = world.manifest.pyramid.clone();
@@ -504,7 +396,7 @@ impl Renderer {
             &pyramid,
             &config.derive,
             &atlas,
-            config.service.derives_per_frame.max(1),
+            config.service.derives_per_frame,
         );
         let mut terrain = TerrainRenderer::new(
             device,
@@ -539,7 +431,7 @@ impl Renderer {
                     wind.buffer(),
                 );
                 sway.reset(queue);
-                let capacity = match config.grass_capacity {
+                let capacity = match config.grass.capacity {
                     Some(c) => c,
                     None => crate::grass::estimate_capacity(&world, &settings)?,
                 };
@@ -579,7 +471,7 @@ impl Renderer {
                 lod_factor: config.lod_factor,
                 max_level: pyramid.max_level(),
             },
-            rings: config.grass.map(GrassRings::new),
+            rings: config.grass_rings.map(GrassRings::new),
             grass,
             mesh_step: config.mesh_step,
             world,

@@ -25,13 +25,14 @@ use serde::Serialize;
 use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::lod::RingSettings;
+use crate::renderer::RendererConfig;
 use crate::tools::fly::{OptionError, OutDir, check_range, check_size, write_text};
 use crate::tools::metrics::{
     COVERAGE_DISTANCE_M, Chart, ChartPoint, LineChart, Series, Summary, band_mask, flip_compare,
     flip_error_map, masked_mean, pareto_front, ray_distances,
 };
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
-use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
+use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::World;
 
 /// What `verdant bench lod` is asked to do.
@@ -166,32 +167,32 @@ impl LodSetting {
     }
 
     /// The scene configuration of this setting for `world`.
-    pub fn config(&self, world: &World) -> SceneConfig {
-        let mut c = SceneConfig::for_world(world);
+    pub fn config(&self, world: &World) -> RendererConfig {
+        let mut c = RendererConfig::for_world(world);
         let base = RingSettings::for_pyramid(&world.manifest.pyramid);
         let size = world.manifest.pyramid.tile_size_m(base.level);
-        c.grass = Some(RingSettings {
+        c.grass_rings = Some(RingSettings {
             high_radius_m: self.high_radius_tiles * size,
             low_radius_m: self.view_distance_tiles * size,
             ..base
         });
-        c.grass_spacing_m = self.spacing_m;
-        c.grass_segments = self.segments;
-        c.grass_infill_m = self.infill_m;
-        c.grass_width_scale = self.width_scale;
+        c.grass.spacing_m = self.spacing_m;
+        c.grass.segments = self.segments;
+        c.grass.infill_m = self.infill_m;
+        c.grass.width_scale = self.width_scale;
         c
     }
 }
 
 /// The settings the benchmark compares; the first is the renderer's default.
 pub fn lod_settings(world: &World) -> Vec<LodSetting> {
-    let d = SceneConfig::for_world(world);
+    let d = RendererConfig::for_world(world);
     let rings = d
-        .grass
+        .grass_rings
         .unwrap_or_else(|| RingSettings::for_pyramid(&world.manifest.pyramid));
     let size = world.manifest.pyramid.tile_size_m(rings.level);
     let (h, v) = (rings.high_radius_m / size, rings.low_radius_m / size);
-    let (s, seg, infill) = (d.grass_spacing_m, d.grass_segments, d.grass_infill_m);
+    let (s, seg, infill) = (d.grass.spacing_m, d.grass.segments, d.grass.infill_m);
     vec![
         LodSetting::new("default", h, v, s, seg),
         LodSetting::new("near ring x0.5", h * 0.5, v, s, seg),
@@ -912,7 +913,7 @@ pub fn run_bench_features(
     let mut all_images = Vec::new();
     let total = variants.len() as u64;
     for (k, (_, features)) in variants.iter().enumerate() {
-        let mut config = SceneConfig::for_world(&world);
+        let mut config = RendererConfig::for_world(&world);
         config.features = *features;
         config.wind_scene = scene_name.clone();
         config.wind_keys = path.wind.clone();

@@ -35,7 +35,8 @@ use crate::tools::metrics::{Chart, ChartPoint};
 use crate::tools::metrics::flip_compare;
 use crate::tools::report::AdapterReport;
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
-use crate::tools::{Scene, SceneConfig};
+use crate::RendererConfig;
+use crate::tools::Scene;
 use crate::world::{CameraPath, World};
 
 /// Frame time of the sequences: consecutive frames at 60 Hz.
@@ -368,7 +369,7 @@ pub fn run_bench_aa(
             .methods
             .iter()
             .map(|&m| {
-                let mut config = SceneConfig::for_world(&world);
+                let mut config = RendererConfig::for_world(&world);
                 config.aa = m;
                 Ok((m, Scene::new(&ctx, world.clone(), size.0, size.1, config)?))
             })

@@ -25,11 +25,12 @@ use crate::gpu::GpuContext;
 use crate::grass::{BATCH_TILES, Blade};
 use crate::lod::RingSettings;
 use crate::renderer::FrameStats;
+use crate::renderer::RendererConfig;
 use crate::stream::TileSource;
 use crate::tools::fly::{OptionError, OutDir, check_range, check_size, write_text};
 use crate::tools::metrics::{LineChart, Series, flip_compare};
 use crate::tools::timing::{FrameCounts, Timing, run_frames};
-use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
+use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::{Manifest, TileData, TileId, World, WorldError};
 
 /// What `verdant bench blades` is asked to do.
@@ -421,15 +422,15 @@ pub fn run_bench_blades(
     // The whole field in view: the far corner from the camera is inside the view distance.
     let corner = DVec3::new(opts.field_m, opts.field_m, 0.0) - DVec3::from_array(opts.camera_m);
     let view_m = (corner.length() * 1.3).max(4.0 * tile_m);
-    let config = |(spacing, slot): (f64, u32), lod: bool| -> SceneConfig {
-        let mut c = SceneConfig::for_world(&world);
-        c.grass = Some(RingSettings {
+    let config = |(spacing, slot): (f64, u32), lod: bool| -> RendererConfig {
+        let mut c = RendererConfig::for_world(&world);
+        c.grass_rings = Some(RingSettings {
             high_radius_m: if lod { 2.0 * tile_m } else { view_m },
             low_radius_m: view_m,
             ..base
         });
-        c.grass_spacing_m = spacing as f32;
-        c.grass_capacity = Some(slot);
+        c.grass.spacing_m = spacing as f32;
+        c.grass.capacity = Some(slot);
         c
     };
     // Each count's spacing and the blades a slot needs for it (within MAX_SLOT_BLADES, which
@@ -481,7 +482,7 @@ pub fn run_bench_blades(
     // Then the timings, in interleaved rounds: the grass frame, then its floor.
     // The floor per statistics LOD: the high ring's near blades have more segments than the
     // rest of it; the floor counts them all at the rest's.
-    let [_, high, low] = SceneConfig::for_world(&world).grass_segments;
+    let [_, high, low] = RendererConfig::for_world(&world).grass.segments;
     let segments = [high, low];
     let floor = FloorPass::new(&ctx, opts.size, segments);
     let mut frame_samples = vec![Vec::new(); spacings.len()];

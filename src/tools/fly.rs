@@ -21,7 +21,8 @@ use crate::tools::report::{
     MAX_REPORT_FRAMES, Thinned,
 };
 
-use crate::tools::scene::{Scene, SceneConfig};
+use crate::renderer::{ConfigError, DEFAULT_MESH_STEP, GrassConfig, RendererConfig};
+use crate::tools::scene::Scene;
 use crate::world::World;
 
 /// Frames whose grass coverage a fly-through without images measures: evenly spaced over the
@@ -54,20 +55,10 @@ pub struct FlyOptions {
     pub disable: Vec<crate::features::Feature>,
     /// Features to switch on that the manifest switches off.
     pub enable: Vec<crate::features::Feature>,
-    /// Blade spacing of the near grass grid, metres (None: the renderer's default).
-    pub grass_spacing_m: Option<f32>,
-    /// Blade width scale (None: the renderer's default).
-    pub grass_width_scale: Option<f32>,
-    /// Radii of the grass infill near the camera, half and quarter spacing (None: the
-    /// renderer's default).
-    pub grass_infill_m: Option<[f32; 2]>,
-    /// Blade segments near the camera, in the rest of the high ring and in the low ring (None:
-    /// the renderer's default).
-    pub grass_segments: Option<[u32; 3]>,
-    /// Horizontal radius of the near blades, metres (None: the renderer's default).
-    pub grass_near_m: Option<f32>,
-    /// Terrain mesh step in samples (None: the renderer's default).
-    pub mesh_step: Option<u32>,
+    /// The grass's settings (default: the renderer's).
+    pub grass: GrassConfig,
+    /// Terrain mesh step in samples (default: the renderer's).
+    pub mesh_step: u32,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -113,64 +104,66 @@ impl Default for FlyOptions {
             wind_scene: None,
             disable: Vec::new(),
             enable: Vec::new(),
-            grass_spacing_m: None,
-            grass_width_scale: None,
-            grass_infill_m: None,
-            grass_segments: None,
-            grass_near_m: None,
-            mesh_step: None,
+            grass: GrassConfig::default(),
+            mesh_step: DEFAULT_MESH_STEP,
         }
     }
 }
 
 impl FlyOptions {
-    /// Checks every numeric option against its range (stated in the error), before anything
-    /// is opened or written: `--frames` 1..=4294967295, `--size` 1..=16384 pixels a side,
-    /// `--grass-spacing-m` 0.02..=5, `--grass-width-scale` 0.05..=20, `--grass-infill-m`
-    /// 0..=100 each, `--grass-segments` 1..=64 each, `--grass-near-m` 0..=200, `--mesh-step` a
-    /// power of two in 1..=16. NaN and infinities are out of every range.
+    /// Checks the fly-through's own numeric options against their range (stated in the
+    /// error), before anything is opened or written: `--frames` 1..=4294967295, `--size`
+    /// 1..=16384 pixels a side. The renderer's settings are checked by
+    /// [`RendererConfig::validate`] (see [`FlyOptions::renderer_config`]).
     pub fn validate(&self) -> Result<(), OptionError> {
         if self.frames == 0 {
             return Err(OptionError::new("--frames", 0, "in 1..=4294967295"));
         }
-        check_size("--size", self.size)?;
-        if let Some(s) = self.grass_spacing_m {
-            check_range("--grass-spacing-m", s, 0.02..=5.0, "m")?;
-        }
-        if let Some(w) = self.grass_width_scale {
-            check_range("--grass-width-scale", w, 0.05..=20.0, "")?;
-        }
-        if let Some([half, quarter]) = self.grass_infill_m
-            && ![half, quarter].iter().all(|r| (0.0..=100.0).contains(r))
-        {
-            return Err(OptionError::new(
-                "--grass-infill-m",
-                format!("{half},{quarter}"),
-                "in 0..=100 m each",
-            ));
-        }
-        if let Some(seg) = self.grass_segments
-            && !seg.iter().all(|s| (1..=64).contains(s))
-        {
-            return Err(OptionError::new(
-                "--grass-segments",
-                format!("{},{},{}", seg[0], seg[1], seg[2]),
-                "in 1..=64 each",
-            ));
-        }
-        if let Some(r) = self.grass_near_m {
-            check_range("--grass-near-m", r, 0.0..=200.0, "m")?;
-        }
-        if let Some(step) = self.mesh_step
-            && !(step.is_power_of_two() && step <= 16)
-        {
-            return Err(OptionError::new(
-                "--mesh-step",
-                step,
-                "a power of two in 1..=16",
-            ));
-        }
-        Ok(())
+        check_size("--size", self.size)
+    }
+
+    /// The renderer's settings for flying `path` through `world`, checked by
+    /// [`RendererConfig::validate`]; a setting out of its range names its command-line option.
+    pub fn renderer_config(
+        &self,
+        world: &World,
+        path: &crate::world::CameraPath,
+    ) -> Result<RendererConfig, SettingError> {
+        let mut config = RendererConfig::for_world(world);
+        config.service = self.service;
+        config.wind_scene = self.wind_scene.clone();
+        config.wind_keys = path.wind.clone();
+        config.features = config.features.switched(&self.disable, &self.enable);
+        config.grass = self.grass;
+        config.mesh_step = self.mesh_step;
+        config.validate().map_err(SettingError::from)?;
+        Ok(config)
+    }
+}
+
+/// A renderer setting out of its range, with the command-line option that sets it.
+#[derive(Debug, thiserror::Error)]
+#[error("{option}: {source}")]
+pub struct SettingError {
+    /// The option, e.g. `--grass-segments` (the setting's field where no option sets it).
+    pub option: &'static str,
+    /// What is wrong, with the range.
+    #[source]
+    pub source: ConfigError,
+}
+
+impl From<ConfigError> for SettingError {
+    fn from(source: ConfigError) -> Self {
+        let option = match source.field {
+            "grass.spacing_m" => "--grass-spacing-m",
+            "grass.width_scale" => "--grass-width-scale",
+            "grass.infill_m" => "--grass-infill-m",
+            "grass.segments" => "--grass-segments",
+            "grass.near_m" => "--grass-near-m",
+            "mesh_step" => "--mesh-step",
+            field => field,
+        };
+        Self { option, source }
     }
 }
 
@@ -213,34 +206,13 @@ pub fn run_fly_with_source(
             .cloned()
             .with_context(|| format!("world {} has no camera paths", opts.world.display()))?,
     };
+    // Checked before anything is written.
+    let config = opts.renderer_config(&world, &path)?;
     let out_dir = OutDir::create_for(&opts.out, "fly")?;
 
     let ctx = GpuContext::new()?;
     let world_name = world.manifest.name.clone();
     let (width, height) = opts.size;
-    let mut config = SceneConfig::for_world(&world);
-    config.service = opts.service;
-    config.wind_scene = opts.wind_scene.clone();
-    config.wind_keys = path.wind.clone();
-    config.features = config.features.switched(&opts.disable, &opts.enable);
-    if let Some(s) = opts.grass_spacing_m {
-        config.grass_spacing_m = s;
-    }
-    if let Some(w) = opts.grass_width_scale {
-        config.grass_width_scale = w;
-    }
-    if let Some(infill) = opts.grass_infill_m {
-        config.grass_infill_m = infill;
-    }
-    if let Some(seg) = opts.grass_segments {
-        config.grass_segments = seg;
-    }
-    if let Some(r) = opts.grass_near_m {
-        config.grass_near_m = r;
-    }
-    if let Some(step) = opts.mesh_step {
-        config.mesh_step = step;
-    }
     let mut scene = Scene::with_source(&ctx, world, source, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.
@@ -1030,62 +1002,6 @@ mod tests {
                 "--size 64x16385",
                 "1..=16384",
             ),
-            (
-                FlyOptions {
-                    grass_spacing_m: Some(f32::NAN),
-                    ..fly_options()
-                },
-                "--grass-spacing-m NaN",
-                "0.02..=5 m",
-            ),
-            (
-                FlyOptions {
-                    grass_width_scale: Some(f32::INFINITY),
-                    ..fly_options()
-                },
-                "--grass-width-scale inf",
-                "0.05..=20",
-            ),
-            (
-                FlyOptions {
-                    grass_infill_m: Some([1.0, -1.0]),
-                    ..fly_options()
-                },
-                "--grass-infill-m 1,-1",
-                "0..=100 m each",
-            ),
-            (
-                FlyOptions {
-                    grass_segments: Some([1, 0, 3]),
-                    ..fly_options()
-                },
-                "--grass-segments 1,0,3",
-                "1..=64 each",
-            ),
-            (
-                FlyOptions {
-                    grass_near_m: Some(1e30),
-                    ..fly_options()
-                },
-                "--grass-near-m",
-                "0..=200 m",
-            ),
-            (
-                FlyOptions {
-                    mesh_step: Some(0),
-                    ..fly_options()
-                },
-                "--mesh-step 0",
-                "1..=16",
-            ),
-            (
-                FlyOptions {
-                    mesh_step: Some(32),
-                    ..fly_options()
-                },
-                "--mesh-step 32",
-                "1..=16",
-            ),
         ];
         for (opts, option, range) in cases {
             let e = opts.validate().unwrap_err().to_string();
@@ -1098,5 +1014,61 @@ mod tests {
         }
         .validate()
         .unwrap();
+    }
+
+    /// The grass options and the mesh step are checked once, by the renderer's own
+    /// `RendererConfig::validate`; the error names the option that sets the value, and the
+    /// range, before anything is written.
+    #[test]
+    fn renderer_settings_out_of_range_name_the_option_and_the_range() {
+        let world =
+            World::open(&Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz")).unwrap();
+        let path = world.manifest.paths[0].clone();
+        fly_options().renderer_config(&world, &path).unwrap();
+        let with = |f: &dyn Fn(&mut FlyOptions)| {
+            let mut o = fly_options();
+            f(&mut o);
+            o
+        };
+        let cases: Vec<(FlyOptions, &str, &str)> = vec![
+            (
+                with(&|o| o.grass.spacing_m = f32::NAN),
+                "--grass-spacing-m",
+                "0.02..=5 m",
+            ),
+            (
+                with(&|o| o.grass.width_scale = f32::INFINITY),
+                "--grass-width-scale",
+                "0.05..=20",
+            ),
+            (
+                with(&|o| o.grass.infill_m = [1.0, -1.0]),
+                "--grass-infill-m",
+                "0..=100 m each",
+            ),
+            (
+                with(&|o| o.grass.infill_m = [5.0, 10.0]),
+                "--grass-infill-m",
+                "no larger than the half-spacing one",
+            ),
+            (
+                with(&|o| o.grass.segments = [1, 0, 3]),
+                "--grass-segments",
+                "1..=64 each",
+            ),
+            (
+                with(&|o| o.grass.near_m = 1e30),
+                "--grass-near-m",
+                "0..=200 m",
+            ),
+            (with(&|o| o.mesh_step = 0), "--mesh-step", "1..=16"),
+            (with(&|o| o.mesh_step = 32), "--mesh-step", "1..=16"),
+        ];
+        for (opts, option, range) in cases {
+            let e = opts.renderer_config(&world, &path).unwrap_err();
+            assert_eq!(e.option, option);
+            let text = e.to_string();
+            assert!(text.contains(option) && text.contains(range), "{text}");
+        }
     }
 }

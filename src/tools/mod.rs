@@ -27,7 +27,7 @@ pub use bench::{
 };
 pub use fly::{FlyOptions, FlyProgress, run_fly, write_json};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
-pub use scene::{Scene, SceneConfig, SceneError};
+pub use scene::{Scene, SceneError};
 pub use soak::{SoakFaults, SoakOptions, SoakReport, TeleportRecord, resident_bytes, run_soak};
 
 use std::path::Path;

@@ -9,12 +9,12 @@ use glam::DVec2;
 use crate::camera::Camera;
 use crate::gpu::{GpuContext, ReadbackError};
 use crate::lod::Ring;
-use crate::renderer::{FrameInput, FrameStats, Renderer, RendererError, RendererOptions};
+use crate::renderer::{
+    FrameInput, FrameStats, Renderer, RendererConfig, RendererError, RendererOptions,
+};
 use crate::stream::{TileAtlas, TileService, TileSource};
 use crate::terrain::{COLOR_FORMAT, DEPTH_FORMAT};
 use crate::world::{TileId, World};
-
-pub use crate::renderer::RendererConfig as SceneConfig;
 
 /// Frames [`Scene::submit_frame`] lets the CPU run ahead of the GPU at most, as an application
 /// with double buffering does.
@@ -61,7 +61,7 @@ impl Scene {
         world: World,
         width: u32,
         height: u32,
-        config: SceneConfig,
+        config: RendererConfig,
     ) -> Result<Self, SceneError> {
         let source = Arc::new(world.clone());
         Self::with_source(ctx, world, source, width, height, config)
@@ -75,7 +75,7 @@ impl Scene {
         source: Arc<dyn TileSource>,
         width: u32,
         height: u32,
-        config: SceneConfig,
+        config: RendererConfig,
     ) -> Result<Self, SceneError> {
         let mut options = RendererOptions::new(&world, COLOR_FORMAT, DEPTH_FORMAT, width, height);
         options.config = config;

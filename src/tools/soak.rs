@@ -10,10 +10,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::camera::Camera;
 use crate::gpu::GpuContext;
+use crate::renderer::RendererConfig;
 use crate::tools::metrics::Summary;
 use crate::tools::report::Thinned;
 use crate::tools::rng::Rng;
-use crate::tools::{AdapterReport, Scene, SceneConfig, write_json};
+use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::{TileData, TileId, World};
 
 /// What `verdant soak` is asked to do.
@@ -439,10 +440,10 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     );
     let ground = Ground::new(&world, source.as_ref())?;
     let ctx = GpuContext::new()?;
-    let mut config = SceneConfig::for_world(&world);
+    let mut config = RendererConfig::for_world(&world);
     config.service = opts.service;
     if opts.no_grass {
-        config.grass = None;
+        config.grass_rings = None;
     }
     let name = world.manifest.name.clone();
     let stored_levels = world.manifest.pyramid.stored_levels;

@@ -1,0 +1,186 @@
+//! What the commands share: the tile service's options, and parsers of sizes, ranges,
+//! vectors and world arguments whose errors state the range.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, bail};
+use clap::builder::RangedU64ValueParser;
+
+use verdant::stream::ServiceConfig;
+
+/// Limits of the tile service, shared by the commands that stream.
+#[derive(clap::Args, Clone)]
+pub(crate) struct StreamArgs {
+    /// Ceiling of the CPU cache of decoded tiles, MiB, 1..=1048576 (it must hold at least one
+    /// tile).
+    #[arg(long, default_value = "64", value_parser = parse_mib)]
+    pub(crate) cache_mib: u64,
+    /// Slots of the GPU tile atlas (each holds one tile), 2..=4096; more than the world's
+    /// level-0 tiles and at most the adapter's texture array layers.
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(2..=4096))]
+    pub(crate) atlas_slots: u32,
+    /// Tile loads in flight at most, 1..=64.
+    #[arg(long, default_value_t = 8, value_parser = RangedU64ValueParser::<usize>::new().range(1..=64))]
+    pub(crate) max_loads: usize,
+    /// A world over HTTP: deadline of one request, whole seconds, 1..=3600.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=3600))]
+    pub(crate) http_timeout_s: u64,
+    /// A world over HTTP: retries of a transient failure (connection error, 5xx, a body cut
+    /// short), 0..=20, after a wait that doubles from 200 ms up to 5 s.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=20))]
+    pub(crate) http_retries: u32,
+    /// A world over HTTP: keep fetched tile files in this folder, revalidated with the
+    /// server's ETag or Last-Modified.
+    #[arg(long)]
+    pub(crate) http_cache: Option<PathBuf>,
+    /// Ceiling of the --http-cache folder, MiB, 1..=1048576.
+    #[arg(long, default_value = "512", value_parser = parse_mib)]
+    pub(crate) http_cache_mib: u64,
+}
+
+impl StreamArgs {
+    pub(crate) fn http(&self) -> verdant::stream::HttpOptions {
+        verdant::stream::HttpOptions {
+            timeout: std::time::Duration::from_secs(self.http_timeout_s),
+            retries: self.http_retries,
+            cache: self
+                .http_cache
+                .as_ref()
+                .map(|dir| verdant::stream::HttpCacheConfig {
+                    dir: dir.clone(),
+                    max_bytes: self.http_cache_mib << 20,
+                }),
+            ..Default::default()
+        }
+    }
+
+    pub(crate) fn service(self) -> ServiceConfig {
+        let mut c = ServiceConfig {
+            // parse_mib has checked that the bytes fit a u64.
+            cache_bytes: self.cache_mib << 20,
+            atlas_slots: self.atlas_slots,
+            ..ServiceConfig::default()
+        };
+        c.stream.max_in_flight = self.max_loads;
+        c
+    }
+}
+
+/// Most frames `fly` and `view` render in one run (what they keep per frame is thinned to a
+/// bound, so any count runs in bounded memory).
+pub(crate) const MAX_FRAMES: i64 = u32::MAX as i64;
+
+/// Most MiB a memory ceiling may name (1 TiB).
+pub(crate) const MAX_MIB: u64 = 1 << 20;
+
+/// Parses a size in MiB, 1..=[`MAX_MIB`].
+pub(crate) fn parse_mib(s: &str) -> Result<u64, String> {
+    let mib: u64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a whole number of MiB"))?;
+    if !(1..=MAX_MIB).contains(&mib) {
+        return Err(format!("{mib} MiB is out of range (1..={MAX_MIB} MiB)"));
+    }
+    Ok(mib)
+}
+
+/// A parser of a finite number in `lo..=hi` whose error states the range.
+pub(crate) fn float_in(
+    lo: f64,
+    hi: f64,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
+    move |s: &str| match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (lo..=hi).contains(&v) => Ok(v),
+        Ok(_) => Err(format!("{} is out of range ({lo}..={hi})", s.trim())),
+        Err(_) => Err(format!("{s:?} is not a number (expected {lo}..={hi})")),
+    }
+}
+
+pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("{v:?} is not a pixel count"))
+    };
+    let (w, h) = (parse(w)?, parse(h)?);
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!(
+            "{w}x{h} is out of range (1 to 16384 pixels a side)"
+        ));
+    }
+    Ok((w, h))
+}
+
+/// A DEM cell size: `M` (square) or `EW,NS`, metres, each finite and positive.
+pub(crate) fn parse_cell_size(s: &str) -> Result<[f64; 2], String> {
+    let parse = |v: &str| -> Result<f64, String> {
+        match v.trim().parse::<f64>() {
+            Ok(m) if m.is_finite() && m > 0.0 => Ok(m),
+            _ => Err(format!("{v:?} is not a positive number of metres")),
+        }
+    };
+    match s.split_once(',') {
+        Some((ew, ns)) => Ok([parse(ew)?, parse(ns)?]),
+        None => parse(s).map(|m| [m, m]),
+    }
+}
+
+/// A world argument is a folder, or a name under `./worlds` or the crate's own `worlds`.
+pub(crate) fn resolve_world(arg: &str) -> Result<PathBuf> {
+    if verdant::stream::http::is_url(arg) {
+        // Opened over HTTP by the tools.
+        return Ok(PathBuf::from(arg));
+    }
+    let direct = Path::new(arg);
+    if direct.join("world.toml").is_file() {
+        return Ok(direct.to_path_buf());
+    }
+    // A bare name is also looked for under the worlds folders; a path only where it points.
+    let bare = direct.components().count() == 1 && !direct.is_absolute();
+    let mut candidates: Vec<PathBuf> = Vec::new();
+    if bare {
+        for c in [
+            Path::new("worlds").join(arg),
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("worlds")
+                .join(arg),
+        ] {
+            if c.join("world.toml").is_file() {
+                return Ok(c);
+            }
+            if !candidates.contains(&c) {
+                candidates.push(c);
+            }
+        }
+    }
+    if direct.is_dir() {
+        // Let the world loader say what is missing.
+        return Ok(direct.to_path_buf());
+    }
+    match candidates.first() {
+        Some(c) => bail!(
+            "no world {arg:?}: neither {} nor {} holds a world.toml",
+            direct.display(),
+            c.display()
+        ),
+        None => bail!("no world at {}: no such folder", direct.display()),
+    }
+}
+
+pub(crate) fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{s:?} is not X,Y,Z in metres"))?;
+    match v.as_slice() {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
+        _ => Err(format!(
+            "{s:?} is not X,Y,Z in metres (three finite numbers)"
+        )),
+    }
+}

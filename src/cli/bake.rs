@@ -1,0 +1,111 @@
+//! `verdant bake`: its options, progress and summary.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use indicatif::ProgressBar;
+
+use verdant::bake::{BakeOptions, bake};
+
+use super::args::parse_cell_size;
+use super::progress::bar;
+
+// The options of `verdant bake`.
+#[derive(clap::Args)]
+pub(crate) struct BakeArgs {
+    /// The DEM: a GeoTIFF, an SRTM .hgt tile, or a 16-bit PNG whose sidecar is the .json of
+    /// the same stem. The format is told from the content.
+    #[arg(long)]
+    pub(crate) dem: PathBuf,
+    /// Spacing of the DEM's samples in metres, M or EW,NS, in place of what the file says
+    /// (needed for a TIFF without GeoTIFF tags).
+    #[arg(long, value_name = "M|EW,NS", value_parser = parse_cell_size)]
+    pub(crate) dem_cell_size: Option<[f64; 2]>,
+    /// The world folder to write.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    /// World name (default: the output folder's name).
+    #[arg(long)]
+    pub(crate) name: Option<String>,
+    /// Cell size of the finest stored level, metres (default: from the DEM).
+    #[arg(long)]
+    pub(crate) cell_size: Option<f64>,
+    /// Cells per tile edge (a power of two).
+    #[arg(long, default_value_t = 128)]
+    pub(crate) tile_cells: u32,
+    /// Stored levels of the tile pyramid.
+    #[arg(long, default_value_t = 3)]
+    pub(crate) levels: u8,
+    /// Seed of the grass-painting noise.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Replace the world (world.toml and tiles/) in --out if it exists and is not empty
+    /// (otherwise it is refused); its other files are kept.
+    #[arg(long)]
+    pub(crate) replace: bool,
+}
+
+pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
+    let BakeArgs {
+        dem,
+        dem_cell_size,
+        out,
+        name,
+        cell_size,
+        tile_cells,
+        levels,
+        seed,
+        replace,
+    } = args;
+    let opts = BakeOptions {
+        dem,
+        dem_cell_size_m: dem_cell_size,
+        out,
+        name,
+        cell_size_m: cell_size,
+        tile_cells,
+        stored_levels: levels,
+        seed,
+        replace,
+        cancel: Some(
+            verdant::bake::CancelFlag::on_termination_signals()
+                .context("installing the SIGINT and SIGTERM handlers")?,
+        ),
+    };
+    let mut current: Option<(String, ProgressBar)> = None;
+    let report = bake(&opts, &mut |stage, done, total| {
+        let label = format!("{stage:?}").to_lowercase();
+        if current.as_ref().map(|(l, _)| l != &label).unwrap_or(true) {
+            if let Some((_, pb)) = current.take() {
+                pb.finish();
+            }
+            current = Some((label.clone(), bar(total, &label)));
+        }
+        if let Some((_, pb)) = &current {
+            pb.set_length(total);
+            pb.set_position(done);
+        }
+    })
+    .with_context(|| format!("baking {}", opts.dem.display()))?;
+    if let Some((_, pb)) = current {
+        pb.finish();
+    }
+    println!(
+        "read {} ({}, {}x{} samples of {:.3} m x {:.3} m, {} nodata samples filled)",
+        opts.dem.display(),
+        report.dem_format.name(),
+        report.dem_samples[0],
+        report.dem_samples[1],
+        report.dem_cell_size_m[0],
+        report.dem_cell_size_m[1],
+        report.nodata_filled
+    );
+    println!(
+        "baked {} tiles in {} levels into {} in {:.1} s",
+        report.tiles_written,
+        report.levels,
+        opts.out.display(),
+        report.seconds
+    );
+    Ok(())
+}

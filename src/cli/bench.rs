@@ -1,0 +1,295 @@
+//! `verdant bench`: the benchmarks' subcommands, their timing options and the tables they
+//! print.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Subcommand;
+
+use super::args::{parse_size, parse_vec3, resolve_world};
+use super::progress::{finish_bars, stage_bars};
+
+#[derive(Subcommand)]
+pub(crate) enum BenchCommand {
+    /// The grass renderers' benchmark: a flat field of one grass type generated in memory,
+    /// swept over blade counts; GPU time per pass, ns per blade and per vertex, the ratio to a
+    /// bare pass drawing as many vertices, and the image error against no LOD.
+    Blades {
+        /// Output folder.
+        #[arg(long, default_value = "out/bench-blades")]
+        out: PathBuf,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "1920x1080", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Edge of the square field, metres.
+        #[arg(long, default_value_t = 200.0)]
+        field_m: f64,
+        /// Camera position X,Y,Z in metres (x east, y north, z up).
+        #[arg(long, default_value = "-20,-20,15", value_parser = parse_vec3)]
+        camera: [f64; 3],
+        /// The point the camera looks at, X,Y,Z in metres.
+        #[arg(long, default_value = "100,100,0", value_parser = parse_vec3)]
+        target: [f64; 3],
+        /// Vertical field of view, degrees.
+        #[arg(long, default_value_t = 45.0)]
+        fov_deg: f64,
+        /// Blade counts of the sweep, comma-separated.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "100000,300000,1000000,3000000,10000000"
+        )]
+        counts: Vec<u64>,
+        #[command(flatten)]
+        timing: TimingArgs,
+    },
+    /// Each grass feature's GPU cost against its contribution to the image (FLIP between the
+    /// render with and without it), charted one against the other.
+    Features {
+        /// World folder, or the name of a world under ./worlds.
+        #[arg(default_value = "santa-cruz")]
+        world: String,
+        /// Output folder.
+        #[arg(long, default_value = "out/bench-features")]
+        out: PathBuf,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "480x270", value_parser = parse_size)]
+        size: (u32, u32),
+        #[command(flatten)]
+        timing: TimingArgs,
+    },
+    /// The LOD transition benchmark: popping across the ring boundary, and GPU time against
+    /// image error for a set of LOD settings, charted with the Pareto front.
+    Lod {
+        /// World folder, or the name of a world under ./worlds.
+        #[arg(default_value = "santa-cruz")]
+        world: String,
+        /// Output folder.
+        #[arg(long, default_value = "out/bench-lod")]
+        out: PathBuf,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "480x270", value_parser = parse_size)]
+        size: (u32, u32),
+        /// Frames of the dolly, 2..=1000.
+        #[arg(long, default_value_t = 48, value_parser = clap::value_parser!(u32).range(2..=1000))]
+        dolly_frames: u32,
+        #[command(flatten)]
+        timing: TimingArgs,
+    },
+}
+
+/// How the benchmarks time: interleaved rounds over the settings, each measurement's frames
+/// back to back. The defaults give stable figures on a GPU (5 rounds of 20 frames after 5
+/// untimed ones) and fewer on a software renderer (2 rounds of 3 after 1).
+#[derive(clap::Args, Clone, Copy)]
+pub(crate) struct TimingArgs {
+    /// Untimed frames before each measurement's timed ones, 0..=100.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=100))]
+    pub(crate) warmup_frames: Option<u32>,
+    /// Timed frames of each measurement per round, 1..=150.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=150))]
+    pub(crate) timed_frames: Option<u32>,
+    /// Interleaved rounds over the settings, 1..=100.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub(crate) rounds: Option<u32>,
+}
+
+pub(crate) fn bench_features(opts: verdant::tools::BenchLodOptions) -> Result<()> {
+    let (bars, mut update) = stage_bars();
+    let r = verdant::tools::run_bench_features(&opts, &mut update)?;
+    finish_bars(&bars);
+    println!(
+        "{} [{}], {}x{}",
+        r.adapter.name, r.adapter.backend, r.size.0, r.size.1
+    );
+    println!(
+        "{:<18} {:>10} {:>8} {:>10} {:>13}",
+        "feature off", "GPU ms", "IQR %", "cost ms", "contribution"
+    );
+    for f in &r.features {
+        println!(
+            "{:<18} {:>10.3} {:>8.1} {:>10.3} {:>13.4}{}",
+            f.feature,
+            f.gpu_ms,
+            100.0 * f.timing.spread,
+            f.cost_ms,
+            f.contribution,
+            if f.timing.noisy {
+                "  (spread above 10%)"
+            } else {
+                ""
+            }
+        );
+    }
+    println!("wrote {}", opts.out.display());
+    Ok(())
+}
+
+pub(crate) fn bench_blades(opts: verdant::tools::bench_blades::BenchBladesOptions) -> Result<()> {
+    let (bars, mut update) = stage_bars();
+    let r = verdant::tools::bench_blades::run_bench_blades(&opts, &mut update)?;
+    finish_bars(&bars);
+    println!(
+        "{} [{}], {}x{}",
+        r.adapter.name, r.adapter.backend, r.size.0, r.size.1
+    );
+    println!(
+        "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7}",
+        "blades",
+        "drawn hi",
+        "drawn lo",
+        "vertices",
+        "gen ms",
+        "draw ms",
+        "floor ms",
+        "ns/blade",
+        "ns/vert",
+        "x floor",
+        "FLIP"
+    );
+    for b in &r.results {
+        println!(
+            "{:>10} {:>9} {:>9} {:>11} {:>9.3} {:>9.3} {:>9.3} {:>8.2} {:>8.3} {:>7.2} {:>7.4}{}",
+            b.blades,
+            b.drawn[0],
+            b.drawn[1],
+            b.vertices,
+            b.generate.median_ms,
+            b.draw.median_ms,
+            b.floor.median_ms,
+            b.ns_per_blade,
+            b.ns_per_vertex,
+            b.ratio_to_floor,
+            b.flip_vs_no_lod,
+            if b.draw.noisy || b.floor.noisy {
+                "  (spread above 10%)"
+            } else {
+                ""
+            }
+        );
+    }
+    println!(
+        "timing: {} rounds of {} frames after {} untimed, per count; wrote {}",
+        r.counts.rounds,
+        r.counts.timed,
+        r.counts.warmup,
+        opts.out.display()
+    );
+    Ok(())
+}
+
+pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
+    let (bars, mut update) = stage_bars();
+    let r = verdant::tools::run_bench_lod(&opts, &mut update)?;
+    finish_bars(&bars);
+    println!(
+        "{} [{}], {}x{}",
+        r.adapter.name, r.adapter.backend, r.size.0, r.size.1
+    );
+    println!(
+        "dolly: largest jump of the error against no LOD: {:.4} FLIP on frames with ring switches, {:.4} on frames without",
+        r.worst_pop, r.worst_change_without_switch
+    );
+    let flip = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
+    println!(
+        "far band ({:.0}-{:.0} m, {} pixels) against real blades out to {:.0} m: {} FLIP with the far field, {} without",
+        r.far_band.near_m,
+        r.far_band.far_m,
+        r.far_band.band_pixels,
+        r.far_band.far_m,
+        flip(r.far_band.flip_far_field),
+        flip(r.far_band.flip_no_far_field)
+    );
+    println!(
+        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>10} {:>7}",
+        "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "blades", "front"
+    );
+    for s in &r.settings {
+        println!(
+            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>10.0} {:>7}{}",
+            s.setting.name,
+            s.gpu.median_ms,
+            100.0 * s.gpu.spread,
+            s.frame.median_ms,
+            s.flip_mean,
+            s.blades_drawn,
+            if s.pareto { "yes" } else { "" },
+            if s.gpu.noisy || s.frame.noisy {
+                "  (spread above 10%)"
+            } else {
+                ""
+            }
+        );
+    }
+    println!(
+        "timing: {} rounds of {} frames after {} untimed, per view and setting",
+        r.counts.rounds, r.counts.timed, r.counts.warmup
+    );
+    println!(
+        "default setting {} the Pareto front; wrote {}",
+        if r.default_on_front {
+            "is on"
+        } else {
+            "is NOT on"
+        },
+        opts.out.display()
+    );
+    Ok(())
+}
+
+/// Runs the benchmark asked for.
+pub(crate) fn run(what: BenchCommand) -> Result<()> {
+    match what {
+        BenchCommand::Features {
+            world,
+            out,
+            size,
+            timing,
+        } => bench_features(verdant::tools::BenchLodOptions {
+            world: resolve_world(&world)?,
+            out,
+            size,
+            warmup_frames: timing.warmup_frames,
+            timed_frames: timing.timed_frames,
+            rounds: timing.rounds,
+            ..Default::default()
+        }),
+        BenchCommand::Blades {
+            out,
+            size,
+            field_m,
+            camera,
+            target,
+            fov_deg,
+            counts,
+            timing,
+        } => bench_blades(verdant::tools::bench_blades::BenchBladesOptions {
+            out,
+            size,
+            field_m,
+            camera_m: camera,
+            target_m: target,
+            fov_deg,
+            counts,
+            warmup_frames: timing.warmup_frames,
+            timed_frames: timing.timed_frames,
+            rounds: timing.rounds,
+        }),
+        BenchCommand::Lod {
+            world,
+            out,
+            size,
+            dolly_frames,
+            timing,
+        } => bench_lod(verdant::tools::BenchLodOptions {
+            world: resolve_world(&world)?,
+            out,
+            size,
+            dolly_frames,
+            warmup_frames: timing.warmup_frames,
+            timed_frames: timing.timed_frames,
+            rounds: timing.rounds,
+            path: None,
+        }),
+    }
+}

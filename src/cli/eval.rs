@@ -1,0 +1,152 @@
+//! `verdant eval`: the evaluations' subcommands and the tables they print.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use clap::Subcommand;
+use indicatif::ProgressBar;
+
+use super::progress::bar;
+
+#[derive(Subcommand)]
+pub(crate) enum EvalCommand {
+    /// Downsample a DEM by K, derive it back with each method (nearest, bilinear, bicubic,
+    /// bicubic + fixed detail, and the calibrated detail fitted to the coarse grid), and chart
+    /// height and slope error against time per tile.
+    Derive {
+        /// The DEM's PNG (16-bit, with its JSON sidecar).
+        #[arg(long)]
+        dem: PathBuf,
+        /// Downsampling factor, a power of two.
+        #[arg(long, default_value_t = 4)]
+        factor: usize,
+        /// Output folder for derive.csv and the charts.
+        #[arg(long, default_value = "out/eval-derive")]
+        out: PathBuf,
+    },
+    /// Step the grass sway spring (stiff and soft presets) with explicit Euler, semi-implicit
+    /// Euler and the exact solution at frame times from 1/240 s to 1/5 s and at a 0.5 s hitch;
+    /// chart error against cost and where each blows up.
+    Sway {
+        /// Output folder for sway.csv and the charts.
+        #[arg(long, default_value = "out/eval-sway")]
+        out: PathBuf,
+    },
+}
+
+pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
+    use verdant::tools::eval_derive as eval;
+    let mut pb: Option<ProgressBar> = None;
+    let report = eval::run_derive_eval(dem_path, factor, out, &mut |method, done, total| {
+        let pb = pb.get_or_insert_with(|| bar(total, "methods"));
+        pb.set_message(method.to_owned());
+        pb.set_position(done);
+    });
+    if let Some(pb) = pb {
+        pb.finish();
+    }
+    let report = report?;
+    println!(
+        "{:<22} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11}  parameters",
+        "method", "RMSE m", "max m", "slope deg", "bias deg", "rough", "ms/tile"
+    );
+    for r in &report.results {
+        println!(
+            "{:<22} {:>9.3} {:>9.2} {:>10.3} {:>10.3} {:>9.3} {:>11.4}  {}",
+            r.method,
+            r.rmse_m,
+            r.max_m,
+            r.slope_rmse_deg,
+            r.slope_bias_deg,
+            r.roughness_ratio,
+            r.ms_per_tile,
+            r.parameters()
+        );
+    }
+    if let Some(fit) = report.calibration() {
+        println!("calibration from the coarse grid: {}", fit.note);
+    }
+    println!(
+        "on the joint Pareto front (time, height, slope, flattening, roughness): {}",
+        report.front.join(", ")
+    );
+    println!(
+        "runtime method: {} ({} the joint front); wrote derive.csv and charts to {}",
+        eval::RUNTIME_METHOD,
+        if report.runtime_on_front() {
+            "on"
+        } else {
+            "NOT on"
+        },
+        out.display()
+    );
+    Ok(())
+}
+
+pub(crate) fn eval_sway(out: &Path) -> Result<()> {
+    use verdant::tools::eval_sway as sway;
+    use verdant::tools::sway_integrators::{EulerLimits, Integrator, Preset, RENDERER_INTEGRATOR};
+    let report = sway::run_sway_eval(out)?;
+    for preset in Preset::ALL {
+        let spring = preset.spring();
+        println!(
+            "{} spring (grass stiffness {}): k {:.1} 1/s^2, c {:.2} 1/s ({:.3} Hz, damping ratio {:.2}); \
+             explicit Euler stable below {:.1} ms, semi-implicit below {:.1} ms",
+            preset.name(),
+            preset.grass_stiffness(),
+            spring.stiffness,
+            spring.damping,
+            spring.natural_frequency_hz(),
+            spring.damping_ratio(),
+            spring.explicit_euler_max_dt() * 1e3,
+            spring.semi_implicit_euler_max_dt() * 1e3
+        );
+    }
+    println!(
+        "{:<7} {:<14} {:>7} {:>11} {:>11} {:>8}  stable",
+        "preset", "integrator", "dt", "RMS rad", "max rad", "ns/step"
+    );
+    for r in &report.results {
+        println!(
+            "{:<7} {:<14} {:>7} {:>11.3e} {:>11.3e} {:>8.1}  {}",
+            r.preset,
+            r.integrator.name(),
+            sway::dt_label(r.dt_s),
+            r.rms_error,
+            r.max_error,
+            r.ns_per_step,
+            match r.blew_up_at_s {
+                None => "yes".to_owned(),
+                Some(t) => format!("NO, blew up at {t:.2} s"),
+            }
+        );
+    }
+    let names: Vec<&str> = report.stable.iter().map(Integrator::name).collect();
+    println!(
+        "stable at every step and at the 0.5 s hitch, both presets: {}",
+        if names.is_empty() {
+            "none".to_owned()
+        } else {
+            names.join(", ")
+        }
+    );
+    println!(
+        "renderer integrator: {} ({}); wrote sway.csv and charts to {}",
+        RENDERER_INTEGRATOR.name(),
+        if report.renderer_bounded() {
+            "bounded in every run above, and exact for wind held over a frame"
+        } else {
+            "NOT bounded in every run above"
+        },
+        out.display()
+    );
+    Ok(())
+}
+
+/// Runs the evaluation asked for.
+pub(crate) fn run(what: EvalCommand) -> Result<()> {
+    match what {
+        EvalCommand::Derive { dem, factor, out } => eval_derive(&dem, factor, &out),
+        EvalCommand::Sway { out } => eval_sway(&out),
+    }
+}

@@ -1,0 +1,195 @@
+//! `verdant fly`: its options and the summary it prints.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use indicatif::ProgressBar;
+
+use verdant::renderer::{DEFAULT_MESH_STEP, GrassConfig};
+use verdant::tools::{FlyOptions, FlyProgress, run_fly};
+
+use super::args::{MAX_FRAMES, StreamArgs, parse_size, resolve_world};
+use super::progress::bar;
+
+// The options of `verdant fly`.
+#[derive(clap::Args)]
+pub(crate) struct FlyArgs {
+    /// World folder, the name of a world under ./worlds, or a world's http:// address.
+    #[arg(default_value = "santa-cruz")]
+    pub(crate) world: String,
+    /// Camera path from the world's manifest (default: its first path).
+    #[arg(long)]
+    pub(crate) path: Option<String>,
+    /// Frames to render, spread evenly over the path, 1..=4294967295.
+    #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
+    pub(crate) frames: u32,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "640x360", value_parser = parse_size)]
+    pub(crate) size: (u32, u32),
+    /// Output folder.
+    #[arg(long, default_value = "out/fly")]
+    pub(crate) out: PathBuf,
+    /// Write only report.json, no PNG frames.
+    #[arg(long)]
+    pub(crate) no_images: bool,
+    /// Wind scene of the world's manifest (e.g. calm, breeze, storm, helicopter) for the
+    /// whole flight (default: the path's own wind keys if it has any, else breeze).
+    #[arg(long)]
+    pub(crate) wind: Option<String>,
+    /// Features to switch off, comma-separated: wind-sources, interaction,
+    /// detail-bending, translucency, specular, ambient-occlusion, color-variation,
+    /// ground-darkening, far-field, shadows (on top of the manifest's [features] table).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) disable: Vec<verdant::features::Feature>,
+    /// Grass features to switch on that the manifest's [features] table switches off,
+    /// comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) enable: Vec<verdant::features::Feature>,
+    /// Blade spacing of the near grass grid, metres (default: the renderer's).
+    #[arg(long)]
+    pub(crate) grass_spacing_m: Option<f32>,
+    /// Every grass type's blade width times this (default: the renderer's).
+    #[arg(long)]
+    pub(crate) grass_width_scale: Option<f32>,
+    /// Radii of the grass infill near the camera, HALF,QUARTER metres: blades at half the
+    /// spacing out to the first, at a quarter of it out to the second; 0,0 turns it off
+    /// (default: the renderer's).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) grass_infill_m: Option<Vec<f32>>,
+    /// Blade segments NEAR,HIGH,LOW: of the blades near the camera, the rest of the high
+    /// ring and the low ring (default: the renderer's).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) grass_segments: Option<Vec<u32>>,
+    /// Horizontal radius of the blades drawn with the NEAR segments, metres (default: the
+    /// renderer's).
+    #[arg(long)]
+    pub(crate) grass_near_m: Option<f32>,
+    /// Terrain mesh: one vertex every this many samples of a tile (1, 2, 4, ...; default:
+    /// the renderer's).
+    #[arg(long)]
+    pub(crate) mesh_step: Option<u32>,
+    #[command(flatten)]
+    pub(crate) stream: StreamArgs,
+}
+
+impl FlyArgs {
+    pub(crate) fn options(self) -> Result<FlyOptions> {
+        let FlyArgs {
+            world,
+            path,
+            frames,
+            size,
+            out,
+            no_images,
+            wind,
+            disable,
+            enable,
+            grass_spacing_m,
+            grass_width_scale,
+            grass_infill_m,
+            grass_segments,
+            grass_near_m,
+            mesh_step,
+            stream,
+        } = self;
+        // The renderer's defaults with what was given; RendererConfig::validate checks the
+        // ranges.
+        let mut grass = GrassConfig::default();
+        if let Some(s) = grass_spacing_m {
+            grass.spacing_m = s;
+        }
+        if let Some(w) = grass_width_scale {
+            grass.width_scale = w;
+        }
+        match grass_infill_m.as_deref() {
+            None => {}
+            Some(&[half, quarter]) => grass.infill_m = [half, quarter],
+            Some(v) => bail!("--grass-infill-m takes two radii, HALF,QUARTER, not {v:?}"),
+        }
+        match grass_segments.as_deref() {
+            None => {}
+            Some(&[near, high, low]) => grass.segments = [near, high, low],
+            Some(v) => bail!("--grass-segments takes three counts, NEAR,HIGH,LOW, not {v:?}"),
+        }
+        if let Some(r) = grass_near_m {
+            grass.near_m = r;
+        }
+        Ok(FlyOptions {
+            world: resolve_world(&world)?,
+            http: stream.http(),
+            path,
+            frames,
+            size,
+            out,
+            write_images: !no_images,
+            service: stream.service(),
+            wind_scene: wind,
+            disable,
+            enable,
+            grass,
+            mesh_step: mesh_step.unwrap_or(DEFAULT_MESH_STEP),
+        })
+    }
+}
+
+pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
+    let mut frames: Option<ProgressBar> = None;
+    let report = run_fly(&opts, &mut |p| match p {
+        FlyProgress::WarmingUp => eprintln!("loading the first frame's tiles"),
+        FlyProgress::WarmUpIncomplete(missing) => {
+            eprintln!(
+                "warning: not every tile of the first frame became resident; going on, drawing \
+                 these from their ancestors:"
+            );
+            for m in missing {
+                eprintln!("  {m}");
+            }
+        }
+        FlyProgress::Frame(done, total) => {
+            let pb = frames.get_or_insert_with(|| {
+                eprintln!("rendering {total} frames");
+                bar(total, "frames")
+            });
+            pb.set_position(done);
+        }
+    })?;
+    if let Some(pb) = frames {
+        pb.finish();
+    }
+    let s = &report.summary;
+    println!(
+        "{} frames of {} ({}) on {} [{}]",
+        report.frames.len(),
+        report.world,
+        report.path,
+        report.adapter.name,
+        report.adapter.backend
+    );
+    println!(
+        "frame time: median {:.2} ms, p99 {:.2} ms; tiles drawn: median {:.0}",
+        s.frame_ms.median, s.frame_ms.p99, s.tiles_drawn.median
+    );
+    println!(
+        "tiles resident at their own level: median {:.0}%, holes {}, cache peak {:.1} MiB, atlas peak {} slots",
+        100.0 * s.resident_fraction.median,
+        s.holes,
+        s.cache_peak_bytes as f64 / (1 << 20) as f64,
+        s.atlas_peak_slots
+    );
+    println!(
+        "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",
+        s.grass_considered.median, s.grass_drawn_high.median, s.grass_drawn_low.median
+    );
+    println!(
+        "grass coverage within {:.0} m: median {:.1}%, mean {:.1}% over {} frames",
+        verdant::tools::metrics::COVERAGE_DISTANCE_M,
+        100.0 * s.coverage.median,
+        100.0 * s.coverage.mean,
+        report.coverage.len()
+    );
+    for (pass, t) in &s.gpu_ms {
+        println!("gpu {pass}: median {:.3} ms, p99 {:.3} ms", t.median, t.p99);
+    }
+    println!("wrote {}", opts.out.join("report.json").display());
+    Ok(())
+}

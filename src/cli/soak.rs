@@ -1,0 +1,146 @@
+//! `verdant soak`: its options and the summary it prints.
+
+use std::path::PathBuf;
+
+use anyhow::{Result, bail};
+use indicatif::ProgressBar;
+
+use verdant::tools::{SoakOptions, run_soak};
+
+use super::args::{StreamArgs, float_in, parse_size, resolve_world};
+use super::progress::bar;
+
+// The options of `verdant soak`.
+#[derive(clap::Args)]
+pub(crate) struct SoakArgs {
+    /// World folder, the name of a world under ./worlds, or a world's http:// address.
+    #[arg(default_value = "santa-cruz")]
+    pub(crate) world: String,
+    /// Simulated flight time, seconds (0.1 s a frame), 1..=604800 (a week).
+    #[arg(long, default_value_t = 60.0, value_parser = float_in(1.0, 604_800.0))]
+    pub(crate) seconds: f64,
+    /// Camera speed, metres a second, 0..=1000 (and less than a world's width in 20
+    /// frames: the camera must stay over the world).
+    #[arg(long, default_value_t = 50.0, value_parser = float_in(0.0, 1000.0))]
+    pub(crate) speed: f64,
+    /// Seed of the turns and teleports.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "320x180", value_parser = parse_size)]
+    pub(crate) size: (u32, u32),
+    /// Output folder.
+    #[arg(long, default_value = "out/soak")]
+    pub(crate) out: PathBuf,
+    /// Fly without grass and its wind: the streaming system alone.
+    #[arg(long)]
+    pub(crate) no_grass: bool,
+    /// A teleport must reach full detail within this many frames, 1..=100000, or within
+    /// the simulated time they stand for (0.1 s each) of wall time, on a machine that
+    /// renders faster than that.
+    #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub(crate) max_recovery_frames: u32,
+    /// No frame may take longer than this, milliseconds (wall time), 1..=3600000.
+    #[arg(long, default_value_t = 5000.0, value_parser = float_in(1.0, 3_600_000.0))]
+    pub(crate) max_stall_ms: f64,
+    /// Inject faults while flying, 0..=1 (0: none). A world on disk is flown from a copy
+    /// in --out whose tile files (level 1 and finer) are removed, truncated, overwritten
+    /// with garbage, emptied or replaced by a folder, this share of them at any moment,
+    /// a fresh set every 2 s of flight; a world over HTTP through a proxy that fails this
+    /// share of tile requests (errors, stalls, resets, short bodies). The checks stay the
+    /// same: broken tiles are drawn from their ancestors (no holes) and retried.
+    #[arg(long, default_value_t = 0.0, value_parser = float_in(0.0, 1.0))]
+    pub(crate) faults: f64,
+    #[command(flatten)]
+    pub(crate) stream: StreamArgs,
+}
+
+impl SoakArgs {
+    pub(crate) fn options(self) -> Result<SoakOptions> {
+        let SoakArgs {
+            world,
+            seconds,
+            speed,
+            seed,
+            size,
+            out,
+            no_grass,
+            max_recovery_frames,
+            max_stall_ms,
+            faults,
+            stream,
+        } = self;
+        Ok(SoakOptions {
+            world: resolve_world(&world)?,
+            http: stream.http(),
+            seconds,
+            speed_mps: speed,
+            seed,
+            size,
+            out,
+            service: stream.service(),
+            no_grass,
+            max_recovery_frames,
+            max_stall_ms,
+            faults,
+            ..SoakOptions::default()
+        })
+    }
+}
+
+pub(crate) fn soak(opts: SoakOptions) -> Result<()> {
+    let mut pb: Option<ProgressBar> = None;
+    let r = run_soak(&opts, &mut |done, total| {
+        pb.get_or_insert_with(|| bar(total, "frames"))
+            .set_position(done);
+    })?;
+    if let Some(pb) = pb {
+        pb.finish();
+    }
+    let mib = |b: u64| b as f64 / 1048576.0;
+    println!(
+        "{} frames ({:.0} s at {} m/s) on {}: frame p50 {:.1} ms, p99 {:.1} ms",
+        r.frames, r.seconds, r.speed_mps, r.adapter.name, r.frame_ms.median, r.frame_ms.p99
+    );
+    println!(
+        "peak RSS {:.1} MiB, growth after warm-up {:.1} MiB; cache peak {:.1} of {:.1} MiB; atlas peak {} of {} slots",
+        mib(r.rss_peak_bytes),
+        mib(r.rss_growth_bytes),
+        mib(r.cache_peak_bytes),
+        mib(r.cache_ceiling_bytes),
+        r.atlas_peak_slots,
+        r.atlas_slots
+    );
+    println!(
+        "loads: {} completed, {} cancelled, {} failed; {} evictions; cache hit rate {:.0}%; \
+         full detail {} after a teleport (median of {})",
+        r.loads_completed,
+        r.loads_cancelled,
+        r.loads_failed,
+        r.evictions,
+        100.0 * r.cache_hit_rate,
+        r.full_detail_after_teleport_s
+            .map_or("never reached".to_owned(), |s| format!("{s:.1} s")),
+        r.teleports.len()
+    );
+    if let Some(f) = &r.faults {
+        let injected = match (&f.files, &f.http) {
+            (Some(c), _) => format!("{} tile files broken", c.injected()),
+            (_, Some(h)) => format!("{} of {} requests faulted", h.faults(), h.requests),
+            _ => "none injected".to_owned(),
+        };
+        println!(
+            "faults at rate {}: {injected}, {} loads failed, {} tiles healed, at most {} \
+             desired tiles drawn from an ancestor for a fault",
+            f.rate, f.loads_failed, f.tiles_healed, f.fault_blocked_peak
+        );
+    }
+    println!("wrote {}", opts.out.join("soak.json").display());
+    if !r.violations.is_empty() {
+        for v in r.violations.iter().take(20) {
+            eprintln!("violation: {v}");
+        }
+        bail!("the soak failed {} check(s)", r.violation_count);
+    }
+    Ok(())
+}

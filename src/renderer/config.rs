@@ -1,0 +1,469 @@
+//! The renderer's settings: [`RendererConfig`] (grouped: streaming, levels of detail, the
+//! grass's [`GrassConfig`], wind, features), checked once by [`RendererConfig::validate`], and
+//! [`RendererOptions`] (the caller's targets with those settings).
+//!
+//! Every front end builds a [`RendererConfig`] (from [`RendererConfig::for_world`], changing
+//! what its user asked for) and hands it to [`crate::Renderer::new`], which refuses a value out
+//! of its range with a [`ConfigError`] naming the field and the range; nothing downstream checks
+//! or clamps those ranges again.
+
+use crate::features::Features;
+use crate::grass::GrassSettings;
+use crate::lod::RingSettings;
+use crate::stream::{DeriveParams, ServiceConfig};
+use crate::aa::AntiAliasing;
+use crate::world::{WindKey, World};
+
+/// Settings of the engine: streaming limits, levels of detail, grass, wind and features.
+#[derive(Clone, Debug)]
+pub struct RendererConfig {
+    /// Limits of the tile service (atlas slots, cache bytes, loads in flight, budgets).
+    pub service: ServiceConfig,
+    /// Terrain tiles split while the camera is nearer than this many tile edges
+    /// ([`LOD_FACTOR_RANGE`]).
+    pub lod_factor: f64,
+    /// Derivation of child tiles.
+    pub derive: DeriveParams,
+    /// Grass rings, or none to ask for no grass tiles (no grass, no wind).
+    pub grass_rings: Option<RingSettings>,
+    /// The grass's settings: blade spacing, width, infill, segments, pool capacity.
+    pub grass: GrassConfig,
+    /// Terrain grid vertices every this many samples (1 = every sample): a power of two, at
+    /// most [`MAX_MESH_STEP`].
+    pub mesh_step: u32,
+    /// The wind scene of the manifest (default: `breeze`, else the manifest's wind); when
+    /// `None` and `wind_keys` is not empty, the scenes of those keys in turn.
+    pub wind_scene: Option<String>,
+    /// Changes of wind scene over time (a camera path's `wind` keys).
+    pub wind_keys: Vec<WindKey>,
+    /// The switched-on features of the grass model.
+    pub features: Features,
+    /// How the frame is anti-aliased.
+    pub aa: AntiAliasing,
+}
+
+/// The grass's own settings, the same for every world (what follows from the world, like the
+/// grass tile's size and the ring radii, is worked out by [`RendererConfig::grass_settings`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GrassConfig {
+    /// Blade spacing of the high-LOD grid, metres ([`SPACING_RANGE_M`]; the low-LOD grid has
+    /// twice this).
+    pub spacing_m: f32,
+    /// Every grass type's blade width times this (the manifest's widths at 1;
+    /// [`WIDTH_SCALE_RANGE`]).
+    pub width_scale: f32,
+    /// Radii of the grass infill near the camera, metres (see [`GrassSettings::infill_m`]):
+    /// each in [`INFILL_RANGE_M`], the quarter-spacing radius no larger than the half-spacing
+    /// one.
+    pub infill_m: [f32; 2],
+    /// Blade segments near the camera, in the rest of the high ring and in the low ring, each
+    /// in 1..=[`GrassSettings::MAX_SEGMENTS`].
+    pub segments: [u32; 3],
+    /// Horizontal radius of the blades drawn with the most segments, metres
+    /// ([`NEAR_RANGE_M`]).
+    pub near_m: f32,
+    /// Blades a slot of the grass pool holds (at least 1); `None`: enough for the world's
+    /// densest grass tile (found by reading its finest stored tiles).
+    pub capacity: Option<u32>,
+}
+
+/// Default radii of the grass infill near the camera (half and quarter spacing), metres.
+pub const DEFAULT_INFILL_M: [f32; 2] = [20.0, 10.0];
+
+/// Default terrain mesh step: a vertex every second sample.
+pub const DEFAULT_MESH_STEP: u32 = 2;
+
+/// Blade spacing, metres.
+pub const SPACING_RANGE_M: std::ops::RangeInclusive<f32> = 0.02..=5.0;
+/// Blade width scale.
+pub const WIDTH_SCALE_RANGE: std::ops::RangeInclusive<f32> = 0.05..=20.0;
+/// Each infill radius, metres.
+pub const INFILL_RANGE_M: std::ops::RangeInclusive<f32> = 0.0..=100.0;
+/// Radius of the near blades, metres.
+pub const NEAR_RANGE_M: std::ops::RangeInclusive<f32> = 0.0..=200.0;
+/// Terrain LOD factor, tile edges.
+pub const LOD_FACTOR_RANGE: std::ops::RangeInclusive<f64> = 0.25..=8.0;
+/// Largest terrain mesh step, samples.
+pub const MAX_MESH_STEP: u32 = 16;
+
+impl Default for GrassConfig {
+    fn default() -> Self {
+        Self {
+            spacing_m: 0.25,
+            width_scale: 1.0,
+            infill_m: DEFAULT_INFILL_M,
+            segments: [5, 3, 3],
+            near_m: 12.0,
+            capacity: None,
+        }
+    }
+}
+
+/// A setting of [`RendererConfig`] out of its range.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("renderer setting {field} = {value} is out of range: it must be {range}")]
+pub struct ConfigError {
+    /// The setting, as its field is spelt (e.g. `grass.segments`).
+    pub field: &'static str,
+    /// The value given.
+    pub value: String,
+    /// What it must be, with its range and unit.
+    pub range: String,
+}
+
+impl ConfigError {
+    fn new(field: &'static str, value: impl std::fmt::Debug, range: impl Into<String>) -> Self {
+        Self {
+            field,
+            value: format!("{value:?}"),
+            range: range.into(),
+        }
+    }
+}
+
+/// `value` must lie in `range` (NaN never does); `unit` follows the range in the error.
+fn check<T>(
+    field: &'static str,
+    value: T,
+    range: &std::ops::RangeInclusive<T>,
+    unit: &str,
+) -> Result<(), ConfigError>
+where
+    T: PartialOrd + std::fmt::Debug + std::fmt::Display,
+{
+    if range.contains(&value) {
+        Ok(())
+    } else {
+        Err(ConfigError::new(
+            field,
+            value,
+            format!("in {}..={}{unit}", range.start(), range.end()),
+        ))
+    }
+}
+
+impl RendererConfig {
+    /// Defaults for `world`.
+    pub fn for_world(world: &World) -> Self {
+        Self {
+            service: ServiceConfig::default(),
+            lod_factor: 1.0,
+            derive: DeriveParams::for_manifest(&world.manifest),
+            grass_rings: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
+            grass: GrassConfig::default(),
+            mesh_step: DEFAULT_MESH_STEP,
+            wind_scene: None,
+            wind_keys: Vec::new(),
+            features: Features::from(&world.manifest.features),
+            aa: AntiAliasing::default(),
+        }
+    }
+
+    /// Checks every setting against its range, stated in the error: `lod_factor` in
+    /// [`LOD_FACTOR_RANGE`], `mesh_step` a power of two in 1..=[`MAX_MESH_STEP`], the tile
+    /// service's per-frame budgets at least 1, the grass rings' radii (finite, the high radius
+    /// above 0 and within the low one, the hysteresis at least 0), and [`GrassConfig::validate`].
+    /// NaN and infinities are out of every range. What depends on the world or the adapter
+    /// (atlas slots, cache size, the rings' level) is checked by [`crate::Renderer::new`].
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check("lod_factor", self.lod_factor, &LOD_FACTOR_RANGE, "")?;
+        if !(self.mesh_step.is_power_of_two() && self.mesh_step <= MAX_MESH_STEP) {
+            return Err(ConfigError::new(
+                "mesh_step",
+                self.mesh_step,
+                format!("a power of two in 1..={MAX_MESH_STEP}"),
+            ));
+        }
+        check(
+            "service.uploads_per_frame",
+            self.service.uploads_per_frame,
+            &(1..=u32::MAX),
+            "",
+        )?;
+        check(
+            "service.derives_per_frame",
+            self.service.derives_per_frame,
+            &(1..=u32::MAX),
+            "",
+        )?;
+        if let Some(r) = &self.grass_rings {
+            let finite = [r.high_radius_m, r.low_radius_m, r.hysteresis_m]
+                .iter()
+                .all(|v| v.is_finite());
+            if !finite || r.high_radius_m <= 0.0 {
+                return Err(ConfigError::new(
+                    "grass_rings.high_radius_m",
+                    r.high_radius_m,
+                    "above 0 m (and every radius finite)",
+                ));
+            }
+            if r.low_radius_m < r.high_radius_m {
+                return Err(ConfigError::new(
+                    "grass_rings.low_radius_m",
+                    r.low_radius_m,
+                    format!("at least high_radius_m ({} m)", r.high_radius_m),
+                ));
+            }
+            if r.hysteresis_m < 0.0 {
+                return Err(ConfigError::new(
+                    "grass_rings.hysteresis_m",
+                    r.hysteresis_m,
+                    "at least 0 m",
+                ));
+            }
+        }
+        self.grass.validate()
+    }
+
+    /// Grass settings that follow the rings: blades the low grid drops fade out over the outer
+    /// 30% of the high ring, and all blades thin out, dithered, over the last 20% of the view
+    /// distance. `None` without grass rings.
+    pub fn grass_settings(&self, world: &World) -> Option<GrassSettings> {
+        let rings = self.grass_rings?;
+        let g = &self.grass;
+        Some(GrassSettings {
+            spacing_m: g.spacing_m,
+            width_scale: g.width_scale,
+            tile_m: world.manifest.pyramid.tile_size_m(rings.level) as f32,
+            high_radius_m: rings.high_radius_m as f32,
+            lod_fade_m: 0.3 * rings.high_radius_m as f32,
+            infill_m: g.infill_m,
+            view_distance_m: rings.low_radius_m as f32,
+            far_fade_m: 0.2 * rings.low_radius_m as f32,
+            clump_m: 1.6,
+            short_m: crate::world::grass_density::SHORT_GRASS_M,
+            seed: 0x9a55,
+            segments: g.segments,
+            near_m: g.near_m,
+        })
+    }
+}
+
+impl GrassConfig {
+    /// Checks every grass setting against its range, stated in the error: `spacing_m` in
+    /// [`SPACING_RANGE_M`], `width_scale` in [`WIDTH_SCALE_RANGE`], each of `infill_m` in
+    /// [`INFILL_RANGE_M`] with the second no larger than the first, each of `segments` in
+    /// 1..=[`GrassSettings::MAX_SEGMENTS`], `near_m` in [`NEAR_RANGE_M`], `capacity` at least 1.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check("grass.spacing_m", self.spacing_m, &SPACING_RANGE_M, " m")?;
+        check(
+            "grass.width_scale",
+            self.width_scale,
+            &WIDTH_SCALE_RANGE,
+            "",
+        )?;
+        let [half, quarter] = self.infill_m;
+        if !(INFILL_RANGE_M.contains(&half) && INFILL_RANGE_M.contains(&quarter)) {
+            return Err(ConfigError::new(
+                "grass.infill_m",
+                self.infill_m,
+                format!(
+                    "in {}..={} m each",
+                    INFILL_RANGE_M.start(),
+                    INFILL_RANGE_M.end()
+                ),
+            ));
+        }
+        if quarter > half {
+            return Err(ConfigError::new(
+                "grass.infill_m",
+                self.infill_m,
+                "HALF,QUARTER with the quarter-spacing radius no larger than the half-spacing one",
+            ));
+        }
+        let most = GrassSettings::MAX_SEGMENTS;
+        if !self.segments.iter().all(|s| (1..=most).contains(s)) {
+            return Err(ConfigError::new(
+                "grass.segments",
+                self.segments,
+                format!("in 1..={most} each"),
+            ));
+        }
+        check("grass.near_m", self.near_m, &NEAR_RANGE_M, " m")?;
+        if let Some(c) = self.capacity {
+            check("grass.capacity", c, &(1..=u32::MAX), " blades")?;
+        }
+        Ok(())
+    }
+}
+
+/// The caller's targets and the engine's settings.
+#[derive(Clone, Debug)]
+pub struct RendererOptions {
+    /// Format of the colour target.
+    pub color_format: wgpu::TextureFormat,
+    /// Format of the depth target (one of [`super::DEPTH_FORMATS`]).
+    pub depth_format: wgpu::TextureFormat,
+    /// Width of the targets in pixels.
+    pub width: u32,
+    /// Height of the targets in pixels.
+    pub height: u32,
+    /// Settings of the engine.
+    pub config: RendererConfig,
+}
+
+impl RendererOptions {
+    /// Targets of these formats and size, and the defaults of `world`.
+    pub fn new(
+        world: &World,
+        color_format: wgpu::TextureFormat,
+        depth_format: wgpu::TextureFormat,
+        width: u32,
+        height: u32,
+    ) -> Self {
+        Self {
+            color_format,
+            depth_format,
+            width,
+            height,
+            config: RendererConfig::for_world(world),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn world() -> World {
+        World::open(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz"))
+            .unwrap()
+    }
+
+    #[test]
+    fn every_setting_out_of_range_names_its_field_and_range() {
+        let base = RendererConfig::for_world(&world());
+        base.validate().unwrap();
+        let with = |f: &dyn Fn(&mut RendererConfig)| {
+            let mut c = base.clone();
+            f(&mut c);
+            c
+        };
+        let cases: Vec<(RendererConfig, &str, &str)> = vec![
+            (with(&|c| c.lod_factor = 0.0), "lod_factor", "0.25..=8"),
+            (with(&|c| c.lod_factor = f64::NAN), "lod_factor", "0.25..=8"),
+            (
+                with(&|c| c.mesh_step = 3),
+                "mesh_step",
+                "power of two in 1..=16",
+            ),
+            (
+                with(&|c| c.mesh_step = 0),
+                "mesh_step",
+                "power of two in 1..=16",
+            ),
+            (
+                with(&|c| c.service.derives_per_frame = 0),
+                "service.derives_per_frame",
+                "1..=4294967295",
+            ),
+            (
+                with(&|c| c.service.uploads_per_frame = 0),
+                "service.uploads_per_frame",
+                "1..=4294967295",
+            ),
+            (
+                with(&|c| c.grass_rings.as_mut().unwrap().high_radius_m = 0.0),
+                "grass_rings.high_radius_m",
+                "above 0 m",
+            ),
+            (
+                with(&|c| c.grass_rings.as_mut().unwrap().low_radius_m = f64::INFINITY),
+                "grass_rings.high_radius_m",
+                "finite",
+            ),
+            (
+                with(&|c| c.grass_rings.as_mut().unwrap().low_radius_m = 1.0),
+                "grass_rings.low_radius_m",
+                "at least high_radius_m",
+            ),
+            (
+                with(&|c| c.grass_rings.as_mut().unwrap().hysteresis_m = -1.0),
+                "grass_rings.hysteresis_m",
+                "at least 0 m",
+            ),
+            (
+                with(&|c| c.grass.spacing_m = 0.01),
+                "grass.spacing_m",
+                "0.02..=5 m",
+            ),
+            (
+                with(&|c| c.grass.width_scale = f32::NAN),
+                "grass.width_scale",
+                "0.05..=20",
+            ),
+            (
+                with(&|c| c.grass.infill_m = [101.0, 0.0]),
+                "grass.infill_m",
+                "0..=100 m each",
+            ),
+            (
+                with(&|c| c.grass.infill_m = [10.0, 20.0]),
+                "grass.infill_m",
+                "no larger than the half-spacing one",
+            ),
+            (
+                with(&|c| c.grass.segments = [5, 65, 3]),
+                "grass.segments",
+                "1..=64 each",
+            ),
+            (
+                with(&|c| c.grass.segments = [0, 3, 3]),
+                "grass.segments",
+                "1..=64 each",
+            ),
+            (
+                with(&|c| c.grass.near_m = -1.0),
+                "grass.near_m",
+                "0..=200 m",
+            ),
+            (
+                with(&|c| c.grass.capacity = Some(0)),
+                "grass.capacity",
+                "1..=4294967295 blades",
+            ),
+        ];
+        for (config, field, range) in cases {
+            let e = config.validate().unwrap_err();
+            assert_eq!(e.field, field, "{e}");
+            let text = e.to_string();
+            assert!(text.contains(field) && text.contains(range), "{text}");
+        }
+    }
+
+    #[test]
+    fn the_range_bounds_are_taken_and_no_grass_skips_the_grass_checks() {
+        let base = RendererConfig::for_world(&world());
+        let mut c = base.clone();
+        c.lod_factor = 8.0;
+        c.mesh_step = 16;
+        c.grass.spacing_m = 0.02;
+        c.grass.width_scale = 20.0;
+        c.grass.infill_m = [0.0, 0.0];
+        c.grass.segments = [GrassSettings::MAX_SEGMENTS, 1, 1];
+        c.grass.near_m = 200.0;
+        c.grass.capacity = Some(1);
+        c.validate().unwrap();
+        let mut c = base;
+        c.grass_rings = None;
+        c.validate().unwrap();
+    }
+
+    #[test]
+    fn grass_settings_carry_the_grass_config_and_the_world_s_rings() {
+        let world = world();
+        let mut c = RendererConfig::for_world(&world);
+        c.grass.segments = [7, 4, 2];
+        c.grass.spacing_m = 0.3;
+        let s = c.grass_settings(&world).unwrap();
+        assert_eq!(s.segments, [7, 4, 2]);
+        assert_eq!(s.spacing_m, 0.3);
+        let rings = c.grass_rings.unwrap();
+        assert_eq!(
+            s.tile_m,
+            world.manifest.pyramid.tile_size_m(rings.level) as f32
+        );
+        c.grass_rings = None;
+        assert!(c.grass_settings(&world).is_none());
+    }
+}
