@@ -19,10 +19,10 @@ pub mod taa_cpu;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum AntiAliasing {
     /// None: one sample at each pixel's centre.
+    #[default]
     Off,
     /// Temporal: a jittered projection every frame, folded into a reprojected, clipped
     /// history ([`taa::Taa`]).
-    #[default]
     Taa,
 }
 
