@@ -64,7 +64,7 @@ pub const STAGES: &[(&str, &str)] = &[
         "contact_shadow.wgsl",
         include_str!("../shaders/contact_shadow.wgsl"),
     ),
-    ("hiz_build.wgsl", include_str!("../shaders/hiz_build.wgsl")),
+    ("grass_hiz.wgsl", include_str!("../shaders/grass_hiz.wgsl")),
     (
         "hole_check.wgsl",
         include_str!("../shaders/hole_check.wgsl"),

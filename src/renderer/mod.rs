@@ -991,7 +991,7 @@ impl Renderer {
     /// 2. the wind field and the sway springs (compute, `wind_field.wgsl`, `grass_sway.wgsl`);
     /// 3. the terrain's G-buffer pass (`terrain.wgsl`): its depth, and per pixel where in the
     ///    atlas its ground is;
-    /// 4. the Hi-Z pyramid from that depth (compute, `hiz_build.wgsl`);
+    /// 4. the Hi-Z pyramid from that depth (compute, `grass_hiz.wgsl`);
     /// 5. the terrain's colour and the sky, deferred: every pixel's shading, terrain and sky,
     ///    with the terrain's shadows (compute, `terrain_shade.wgsl`), then its composite into
     ///    the colour target (`composite.wgsl`);
