@@ -7,8 +7,8 @@
 //! 2x2 texels of the level below, and 3 in a direction where the level below has an odd size,
 //! so that no texel is left out.
 
-pub use crate::grass::hiz::mip_count;
 use crate::grass::HiZ;
+pub use crate::grass::hiz::mip_count;
 
 /// Builds the pyramid from a depth image (row-major, top row first).
 pub fn build_hiz(width: u32, height: u32, depth: &[f32]) -> HiZ {
