@@ -29,7 +29,7 @@ fn finest_tile(world: &World) -> TileId {
     TileId::new(level, nx / 2, ny / 2)
 }
 
-/// Child-tile derivation, the CPU mirror of `shaders/derive_child.wgsl`: one child of a stored
+/// Child-tile derivation, the CPU mirror of `shaders/stream_derive.wgsl`: one child of a stored
 /// tile, and one of a derived tile (two levels below the data).
 fn derive(c: &mut Criterion) {
     let world = world();

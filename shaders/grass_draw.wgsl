@@ -6,7 +6,7 @@
 // included from shaders/shared/.
 //
 // Bending (after Crysis): main bending leans the whole blade by its cell's sway (a damped spring
-// per grass type, shaders/grass_sway.wgsl) plus the trail's push; detail bending adds whole-blade
+// per grass type, shaders/wind_sway.wgsl) plus the trail's push; detail bending adds whole-blade
 // sway and edge flutter from smoothed triangle waves at four frequencies, phased by the blade's
 // hash. Shading: front and back lighting with translucency, per-type gloss, ambient occlusion
 // from root to tip, colour variation from world-space noise at the root, highlights that travel

@@ -3,7 +3,7 @@
 // job within the batch; a high-LOD tile within the near radius has a second job, LOD 2, for its
 // blades there, drawn with more segments). Surviving blades are appended
 // to the tile's slot of the instance pool; a second entry point turns the slot counters into
-// indirect draw arguments, clamped to the slot capacity. CPU mirror: src/grass/generate.rs.
+// indirect draw arguments, clamped to the slot capacity. CPU mirror: src/grass/generate_cpu.rs.
 // The hashes and the blade record are included from shaders/shared/.
 
 #include "shared/hash.wgsl"
@@ -74,7 +74,7 @@ struct DrawArgs {
 @group(0) @binding(6) var<storage, read_write> blades: array<Blade>;
 // Per slot of the half: blades wanted (may exceed the capacity).
 @group(0) @binding(7) var<storage, read_write> counters: array<atomic<u32>, 4>;
-// Per LOD: the counters of `counter` in generate.rs (8 each), then per slot: overflow.
+// Per LOD: the counters of `counter` in generate_cpu.rs (8 each), then per slot: overflow.
 @group(0) @binding(8) var<storage, read_write> stats: array<atomic<u32>, 16>;
 @group(0) @binding(9) var<storage, read_write> args: array<DrawArgs, 4>;
 // Workgroups of the wind pass that follows (shaders/grass_wind.wgsl): enough for the fullest slot.

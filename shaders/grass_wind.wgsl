@@ -4,7 +4,7 @@
 // four frequencies, phased by its hash), its gust highlight and its colour variation (world-space
 // noise at its root). The hashes, the blade record, the feature bits and the wind lookup are
 // included from shaders/shared/.
-// CPU mirror: src/grass/wind_pass.rs.
+// CPU mirror: src/grass/wind_cpu.rs.
 
 #include "shared/hash.wgsl"
 #include "shared/blade.wgsl"

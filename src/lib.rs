@@ -21,23 +21,41 @@
 //!   variables), buffer and texture readback, timestamp timing, and the set-up vocabulary
 //!   (`gpu::layout`: bind group layouts one line a binding; `gpu::pipeline`; `gpu::pass`).
 //! - [`stream`]: the tile service: async streamer, CPU cache, the GPU tile atlas, and child
-//!   tiles derived on the GPU (with the stage's CPU mirror beside it); worlds streamed over
+//!   tiles derived on the GPU (`stream/derive.rs`, mirror [`stream::derive_cpu`]), with each
+//!   derived level's detail fitted per world ([`mod@stream::calibrate`]); worlds streamed over
 //!   HTTP (`stream::HttpSource`, feature `http`).
 //! - [`lod`]: which terrain tiles a camera needs, at which level, with frustum culling; grass
 //!   rings with hysteresis.
-//! - [`terrain`]: the terrain and sky passes (`shaders/terrain.wgsl`).
-//! - [`grass`]: GPU grass: Hi-Z (`grass::hiz_gpu`, its mirror `grass::hiz`), blade generation
-//!   and culling, per-blade wind, the instance pool and the draw; each stage with its CPU
-//!   mirror.
-//! - [`wind`]: the wind field around the camera (ambient noise, sources, trail) and the sway
-//!   springs, on the GPU with their CPU mirrors; the wind scenes of a world made ready to run.
+//! - [`terrain`]: the terrain and sky: the G-buffer, shading and composite passes
+//!   (`terrain/mod.rs`), the contact shadows ([`terrain::contact_shadow`], mirror
+//!   [`terrain::contact_shadow_cpu`]) and the far field's mirror ([`terrain::far_field`]).
+//! - [`grass`]: GPU grass: Hi-Z ([`grass::hiz`], mirror [`grass::hiz_cpu`]), generation and
+//!   culling (`grass/generate.rs`, mirror [`grass::generate_cpu`]), the wind on each blade
+//!   (`grass/wind.rs`, mirror [`grass::wind_cpu`]), the draw (`grass/draw.rs`, the blade's shape
+//!   mirrored in [`grass::blade`]); the instance pool that records them ([`grass::renderer`]).
+//! - [`wind`]: the wind field around the camera (ambient noise, sources, trail;
+//!   [`wind::field`], mirror [`wind::field_cpu`]) and the sway springs ([`wind::spring`]) in it
+//!   ([`wind::sway`], mirror [`wind::sway_cpu`]); the wind scenes of a world made ready to run.
 //! - [`bake`]: the baker that turns a DEM into a world (GPU-free; it fits the derived levels'
-//!   detail with [`stream::calibrate`]), one module per job: resampling, painting, tiles,
+//!   detail with [`mod@stream::calibrate`]), one module per job: resampling, painting, tiles,
 //!   authoring camera paths and wind scenes, publishing.
 //! - [`renderer`]: the frame: [`Renderer`], the order of its passes top to bottom in one place.
 //! - `tools` (feature `cli`): the headless scene, fly-throughs and their reports, soak,
 //!   benchmarks, evaluations, charts and image metrics, the interactive viewer, and `serve`
 //!   (a static server of a world folder).
+//!
+//! GPU stages are named by one rule. A stage `S` of module `M` is set up (its pipelines,
+//! bindings and buffers) in `src/M/S.rs`; its CPU mirror, written loop for loop apart from the
+//! shader and compared with it by a test, is `src/M/S_cpu.rs` beside it; its shader is
+//! `shaders/M_S.wgsl`. Where one file sets up a family of passes that only run together, the
+//! file is named after the family and each pass's shader is `shaders/M_PASS.wgsl`: the
+//! terrain's G-buffer, shading and composite (`src/terrain/mod.rs`, `shaders/terrain_gbuffer.wgsl`,
+//! `terrain_shade.wgsl`, `terrain_composite.wgsl`); the frame's hole check, in
+//! `src/renderer/mod.rs` with `shaders/renderer_hole_check.wgsl`. WGSL included by more than
+//! one stage is in `shaders/shared/`, and its Rust mirror is named after what it computes
+//! ([`hash`] for `shared/hash.wgsl`, [`terrain::far_field`], `wind_at` in [`wind::field_cpu`]
+//! for `shared/wind_lookup.wgsl`). Files that are not stages (settings, records, the pool) keep
+//! names of their own.
 
 pub mod aa;
 pub mod bake;

@@ -52,23 +52,29 @@ pub fn shared_pieces() -> &'static [(&'static str, &'static str)] {
 pub const STAGES: &[(&str, &str)] = &[
     ("aa_taa.wgsl", include_str!("../shaders/aa_taa.wgsl")),
     (
-        "derive_child.wgsl",
-        include_str!("../shaders/derive_child.wgsl"),
+        "stream_derive.wgsl",
+        include_str!("../shaders/stream_derive.wgsl"),
     ),
-    ("terrain.wgsl", include_str!("../shaders/terrain.wgsl")),
+    (
+        "terrain_gbuffer.wgsl",
+        include_str!("../shaders/terrain_gbuffer.wgsl"),
+    ),
     (
         "terrain_shade.wgsl",
         include_str!("../shaders/terrain_shade.wgsl"),
     ),
-    ("composite.wgsl", include_str!("../shaders/composite.wgsl")),
     (
-        "contact_shadow.wgsl",
-        include_str!("../shaders/contact_shadow.wgsl"),
+        "terrain_composite.wgsl",
+        include_str!("../shaders/terrain_composite.wgsl"),
     ),
-    ("hiz_build.wgsl", include_str!("../shaders/hiz_build.wgsl")),
     (
-        "hole_check.wgsl",
-        include_str!("../shaders/hole_check.wgsl"),
+        "terrain_contact_shadow.wgsl",
+        include_str!("../shaders/terrain_contact_shadow.wgsl"),
+    ),
+    ("grass_hiz.wgsl", include_str!("../shaders/grass_hiz.wgsl")),
+    (
+        "renderer_hole_check.wgsl",
+        include_str!("../shaders/renderer_hole_check.wgsl"),
     ),
     (
         "grass_generate.wgsl",
@@ -86,10 +92,7 @@ pub const STAGES: &[(&str, &str)] = &[
         "wind_field.wgsl",
         include_str!("../shaders/wind_field.wgsl"),
     ),
-    (
-        "grass_sway.wgsl",
-        include_str!("../shaders/grass_sway.wgsl"),
-    ),
+    ("wind_sway.wgsl", include_str!("../shaders/wind_sway.wgsl")),
 ];
 
 /// The source of a shared piece (`"shared/blade.wgsl"`), for a caller's own shader.

@@ -1,10 +1,10 @@
-//! Child tiles derived on the GPU (`shaders/derive_child.wgsl`) against the CPU mirror
-//! (`src/stream/derive_child.rs`), seams between derived neighbours, and determinism.
+//! Child tiles derived on the GPU (`shaders/stream_derive.wgsl`) against the CPU mirror
+//! (`src/stream/derive_cpu.rs`), seams between derived neighbours, and determinism.
 
 mod common;
 
 use verdant::gpu::{GpuContext, GpuTimer};
-use verdant::stream::derive_child::{MIN_DECAY_LOG2, SCALE_INVARIANT_TREND_LOG2};
+use verdant::stream::calibrate::{MIN_DECAY_LOG2, SCALE_INVARIANT_TREND_LOG2};
 use verdant::stream::{DeriveJob, DeriveParams, DeriveStage, TileAtlas, derive_child};
 use verdant::tools::eval_derive as eval;
 use verdant::world::{DeriveMode, Pyramid, TileData, TileId, World};

@@ -47,7 +47,7 @@ fn still_lookup() -> verdant::wind::WindLookup {
 fn cpu_blades(rig: &Rig, job: &TileJob, tile: &TileData, hiz: &HiZ) -> TileBlades {
     let mut out = generate_tile(rig.grass.params(), job, tile, hiz);
     let (cells, sway) = (vec![[0.0f32; 4]; 64], vec![[0.0f32; 4]; 256]);
-    verdant::grass::wind_pass::apply_wind(
+    verdant::grass::wind_cpu::apply_wind(
         rig.grass.wind_params(),
         &still_lookup(),
         &cells,
@@ -425,7 +425,7 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
     );
     // Every culling test did some work in this view.
     let s = &cpu_total.counts[0];
-    use verdant::grass::generate::counter;
+    use verdant::grass::generate_cpu::counter;
     // The flat tile reaches within the infill radii of the camera: its near cells were filled
     // in, so its two jobs looked at more points than its grid has.
     let g = rig.grass.params().grid[0];
@@ -586,7 +586,7 @@ fn the_hiz_pyramid_matches_its_cpu_mirror() {
     // Level 0 is the depth buffer: the wall over the left third, nothing elsewhere.
     let wall = level0.iter().filter(|d| **d > 0.0).count();
     assert_eq!(wall, (W as f32 * 0.335).round() as usize * H as usize);
-    let cpu = verdant::grass::hiz::build_hiz(*w, *h, level0);
+    let cpu = verdant::grass::hiz_cpu::build_hiz(*w, *h, level0);
     assert_eq!(cpu.mips.len(), hiz.mips.len());
     for (m, (g, c)) in hiz.mips.iter().zip(&cpu.mips).enumerate() {
         assert_eq!((g.0, g.1), (c.0, c.1), "level {m} size");
@@ -595,10 +595,10 @@ fn the_hiz_pyramid_matches_its_cpu_mirror() {
 }
 
 /// The wind pass (`shaders/grass_wind.wgsl`) on generated blades against its CPU mirror
-/// (`grass::wind_pass::apply_wind`), in the storm, after a few frames of sway.
+/// (`grass::wind_cpu::apply_wind`), in the storm, after a few frames of sway.
 #[test]
 fn gpu_wind_on_blades_matches_the_cpu_mirror() {
-    use verdant::grass::wind_pass::apply_wind;
+    use verdant::grass::wind_cpu::apply_wind;
     use verdant::wind::{SwayConfig, SwayField, WindConfig, WindField};
     let ctx = common::gpu();
     let world = World::open(&common::default_world()).unwrap();

@@ -48,15 +48,15 @@ fn shared_pieces_are_defined_once_per_stage() {
         }
     }
     for (stage, def) in [
-        ("derive_child.wgsl", "fn hash_u32("),
+        ("stream_derive.wgsl", "fn hash_u32("),
         ("grass_generate.wgsl", "fn hash_u32("),
         ("wind_field.wgsl", "fn hash_u32("),
         ("grass_generate.wgsl", "struct Blade {"),
         ("grass_wind.wgsl", "struct Blade {"),
         ("grass_draw.wgsl", "struct Blade {"),
         ("grass_wind.wgsl", "struct WindLookup {"),
-        ("composite.wgsl", "fn output_color("),
-        ("terrain.wgsl", "struct Frame {"),
+        ("terrain_composite.wgsl", "fn output_color("),
+        ("terrain_gbuffer.wgsl", "struct Frame {"),
         ("terrain_shade.wgsl", "fn sun_visibility("),
         ("terrain_shade.wgsl", "fn sky_color("),
         ("grass_draw.wgsl", "fn output_color("),

@@ -124,7 +124,7 @@ fn srgb_to_linear(c: u8) -> f32 {
     }
 }
 
-/// The contact shadows' pass (`shaders/contact_shadow.wgsl`) against its CPU mirror
+/// The contact shadows' pass (`shaders/terrain_contact_shadow.wgsl`) against its CPU mirror
 /// (`src/terrain/contact_shadow.rs`): the same frame of a meadow drawn with and without
 /// shadows, whose ratio is the pass's factor, against the factors the mirror finds in the
 /// frame's depth.

@@ -3,7 +3,7 @@
 
 use verdant::tools::eval_sway::{self as sway, EVAL_STEPS_S, HITCH_S, bounded_for};
 use verdant::tools::sway_integrators::{EulerLimits, Integrator, Preset, RENDERER_INTEGRATOR};
-use verdant::wind::sway::SwaySpring;
+use verdant::wind::spring::SwaySpring;
 
 /// `|1 + dt lambda| < 1` for both eigenvalues `lambda = -c/2 +- sqrt(c^2/4 - k)` of the
 /// spring's matrix `[[0, 1], [-k, -c]]`: when explicit Euler, which multiplies each mode by

@@ -1,4 +1,4 @@
-//! The sway stage (`shaders/grass_sway.wgsl`) against its CPU mirror (`update_sway`), over
+//! The sway stage (`shaders/wind_sway.wgsl`) against its CPU mirror (`update_sway`), over
 //! frames with a moving camera, a 0.5 s hitch and a jump beyond the wind field.
 
 mod common;

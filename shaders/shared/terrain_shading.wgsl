@@ -1,7 +1,7 @@
-// The terrain's shading, shared by the G-buffer pass (shaders/terrain.wgsl, which needs the
-// frame and the heights) and the shading pass (shaders/terrain_shade.wgsl, which does all the
-// per-pixel work): the frame's uniforms, the atlas, and every function of the terrain's and the
-// sky's colour. CPU mirror of the far field: src/terrain/far_field.rs.
+// The terrain's shading, shared by the G-buffer pass (shaders/terrain_gbuffer.wgsl, which
+// needs the frame and the heights) and the shading pass (shaders/terrain_shade.wgsl, which does
+// all the per-pixel work): the frame's uniforms, the atlas, and every function of the terrain's
+// and the sky's colour. CPU mirror of the far field: src/terrain/far_field.rs.
 
 #include "shared/features.wgsl"
 #include "shared/hash.wgsl"

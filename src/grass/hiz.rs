@@ -1,77 +1,180 @@
-//! CPU mirror of `shaders/hiz_build.wgsl`: the Hi-Z pyramid of the terrain's depth.
-//!
-//! Depth is reverse-Z (1 near, 0 at infinity), so each texel of a coarser level keeps the
-//! smallest (farthest) depth of the texels it covers: a blade nearer than that value at every
-//! texel of its footprint may be visible, one farther is hidden. A level's texel covers
-//! 2x2 texels of the level below, and 3 in a direction where the level below has an odd size,
-//! so that no texel is left out.
+//! The Hi-Z pyramid on the GPU (`shaders/grass_hiz.wgsl`): the depth target copied into level
+//! 0 of a storage buffer, then each further level the farthest depth of the texels below it.
+//! Its CPU mirror is [`crate::grass::hiz_cpu`].
 
-use crate::grass::HiZ;
+use crate::gpu::GpuTimer;
+use crate::gpu::layout::*;
+use crate::gpu::pipeline::{DepthBound, buffer as gpu_buffer, compute_pipeline};
+
+/// The Hi-Z pyramid of a depth target, in a storage buffer (levels one after another).
+pub struct HiZPyramid {
+    /// The levels, f32, finest first, rows top first.
+    pub buffer: wgpu::Buffer,
+    copy: wgpu::ComputePipeline,
+    reduce: wgpu::ComputePipeline,
+    copy_layout: wgpu::BindGroupLayout,
+    level_buffer: wgpu::Buffer,
+    /// The depth texture the copy reads and its bind group (made again when the texture changes).
+    copy_group: DepthBound,
+    reduce_group: wgpu::BindGroup,
+    /// (offset in floats, width, height) of each level.
+    levels: Vec<(u32, u32, u32)>,
+}
 
 /// Mip levels of a pyramid over `width` x `height`, down to 1x1.
 pub fn mip_count(width: u32, height: u32) -> u32 {
     32 - width.max(height).max(1).leading_zeros()
 }
 
-/// Builds the pyramid from a depth image (row-major, top row first).
-pub fn build_hiz(width: u32, height: u32, depth: &[f32]) -> HiZ {
-    let mut mips = vec![(width, height, depth.to_vec())];
-    for _ in 1..mip_count(width, height) {
-        let (pw, ph, prev) = mips.last().expect("level 0 exists");
-        let (pw, ph) = (*pw, *ph);
-        let (w, h) = ((pw / 2).max(1), (ph / 2).max(1));
-        let mut out = vec![0.0f32; (w * h) as usize];
-        for y in 0..h {
-            for x in 0..w {
-                let mut m = f32::MAX;
-                // The last texel of a row or column takes in the odd one left over.
-                let xs = if x == w - 1 && pw % 2 == 1 && pw > 1 {
-                    3
-                } else {
-                    2
-                };
-                let ys = if y == h - 1 && ph % 2 == 1 && ph > 1 {
-                    3
-                } else {
-                    2
-                };
-                for dy in 0..ys {
-                    for dx in 0..xs {
-                        let sx = (2 * x + dx).min(pw - 1);
-                        let sy = (2 * y + dy).min(ph - 1);
-                        m = m.min(prev[(sy * pw + sx) as usize]);
-                    }
-                }
-                out[(y * w + x) as usize] = m;
-            }
+const LEVEL_STRIDE: u64 = 256;
+/// Bytes of a level's record: where to read and where to write.
+const LEVEL_BYTES: u64 = 24;
+
+impl HiZPyramid {
+    /// A pyramid over depth targets of `w` x `h` (a depth format, with `TEXTURE_BINDING`).
+    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, w: u32, h: u32) -> Self {
+        let mips = mip_count(w, h);
+        let mut levels = Vec::new();
+        let mut offset = 0u32;
+        for m in 0..mips {
+            let (lw, lh) = ((w >> m).max(1), (h >> m).max(1));
+            levels.push((offset, lw, lh));
+            offset += lw * lh;
         }
-        mips.push((w, h, out));
+        let buffer = gpu_buffer(
+            device,
+            "hi-z",
+            u64::from(offset) * 4,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        );
+        // One uniform record per level: where to read and where to write.
+        let mut records = vec![0u8; levels.len() * LEVEL_STRIDE as usize];
+        for (m, &(off, lw, lh)) in levels.iter().enumerate() {
+            let (so, sw, sh) = if m == 0 { (0, lw, lh) } else { levels[m - 1] };
+            let rec = [so, sw, sh, off, lw, lh];
+            records[m * LEVEL_STRIDE as usize..][..24].copy_from_slice(bytemuck::cast_slice(&rec));
+        }
+        let level_buffer = gpu_buffer(
+            device,
+            "hi-z levels",
+            records.len() as u64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
+        queue.write_buffer(&level_buffer, 0, &records);
+        let module = crate::shaders::module(device, "grass_hiz.wgsl");
+        // Each level's record is bound through a dynamic offset.
+        let level = || uniform_buffer().dynamic().min_size(LEVEL_BYTES);
+        let copy_layout = bind_group_layout(
+            device,
+            "hi-z copy",
+            &sequential(
+                wgpu::ShaderStages::COMPUTE,
+                [texture_depth_2d(), storage_buffer(), level()],
+            ),
+        );
+        let reduce_layout = bind_group_layout(
+            device,
+            "hi-z reduce",
+            &with_indices(
+                wgpu::ShaderStages::COMPUTE,
+                [(1, storage_buffer()), (2, level())],
+            ),
+        );
+        let pipeline = |entry, layout| compute_pipeline(device, entry, &module, entry, &[layout]);
+        let (copy, reduce) = (
+            pipeline("copy_depth", &copy_layout),
+            pipeline("reduce", &reduce_layout),
+        );
+        let reduce_group = bind_group_with_indices(
+            device,
+            "hi-z reduce",
+            &reduce_layout,
+            [
+                (1, buffer.as_entire_binding()),
+                (2, buffer_prefix(&level_buffer, LEVEL_BYTES)),
+            ],
+        );
+        Self {
+            buffer,
+            copy,
+            reduce,
+            copy_layout,
+            level_buffer,
+            copy_group: DepthBound::default(),
+            reduce_group,
+            levels,
+        }
     }
-    HiZ { mips }
-}
 
-#[cfg(test)]
-mod tests {
-    use super::*;
+    /// A bind group of `layout` (one read-only storage buffer at binding 0) over the pyramid.
+    pub(crate) fn read_group(
+        &self,
+        device: &wgpu::Device,
+        layout: &wgpu::BindGroupLayout,
+    ) -> wgpu::BindGroup {
+        bind_group(
+            device,
+            "grass hi-z",
+            layout,
+            [self.buffer.as_entire_binding()],
+        )
+    }
 
-    #[test]
-    fn every_level_keeps_the_farthest_depth_it_covers() {
-        let (w, h) = (13u32, 7u32);
-        let depth: Vec<f32> = (0..w * h)
-            .map(|i| 0.1 + ((i * 37) % 101) as f32 / 200.0)
+    /// Mip levels.
+    pub fn mips(&self) -> u32 {
+        self.levels.len() as u32
+    }
+
+    /// (offset in floats, width, height) of each level.
+    pub fn levels(&self) -> &[(u32, u32, u32)] {
+        &self.levels
+    }
+
+    /// Reads every level back (for tests and tools; waits for the GPU).
+    pub fn read_back(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> crate::grass::HiZ {
+        let all: Vec<f32> = crate::gpu::read_buffer_pod(device, queue, &self.buffer, ..)
+            .expect("read back the Hi-Z pyramid");
+        let mips = self
+            .levels
+            .iter()
+            .map(|&(o, w, h)| (w, h, all[o as usize..(o + w * h) as usize].to_vec()))
             .collect();
-        let hiz = build_hiz(w, h, &depth);
-        assert_eq!(hiz.mips.len() as u32, mip_count(w, h));
-        let (tw, th, top) = hiz.mips.last().unwrap();
-        assert_eq!((*tw, *th), (1, 1));
-        let min = depth.iter().copied().fold(f32::MAX, f32::min);
-        assert_eq!(top[0], min, "the top level covers every pixel");
-        // Level 1, last column: covers columns 10, 11 and 12 of level 0.
-        let (w1, _, l1) = &hiz.mips[1];
-        let d = &depth;
-        let m = (10..13)
-            .flat_map(|x| (0..2).map(move |y| d[(y * w + x) as usize]))
-            .fold(f32::MAX, f32::min);
-        assert_eq!(l1[(w1 - 1) as usize], m);
+        crate::grass::HiZ { mips }
+    }
+
+    /// Records the build of the pyramid from `depth` (of the pyramid's size; its bind group is
+    /// made when the texture differs from the last one's).
+    pub fn record(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        depth: &wgpu::Texture,
+        timer: &mut GpuTimer,
+    ) {
+        let copy_group = self.copy_group.get(depth, |depth| {
+            bind_group(
+                device,
+                "hi-z copy",
+                &self.copy_layout,
+                [
+                    view(depth),
+                    self.buffer.as_entire_binding(),
+                    buffer_prefix(&self.level_buffer, LEVEL_BYTES),
+                ],
+            )
+        });
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("hi-z"),
+            timestamp_writes: timer.compute_pass("hiz"),
+        });
+        let (_, w, h) = self.levels[0];
+        pass.set_pipeline(&self.copy);
+        pass.set_bind_group(0, copy_group, &[0]);
+        pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        pass.set_pipeline(&self.reduce);
+        for (m, &(_, w, h)) in self.levels.iter().enumerate().skip(1) {
+            pass.set_bind_group(0, &self.reduce_group, &[(m as u64 * LEVEL_STRIDE) as u32]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        }
     }
 }

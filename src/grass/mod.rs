@@ -1,21 +1,31 @@
 //! GPU grass: blades generated and culled per tile in compute into a bounded instance pool,
 //! drawn with one indirect draw per tile.
 //!
-//! - [`blade`]: the blade record and its shape (cubic Bezier, length kept when bent).
-//! - [`generate`]: the CPU mirror of `shaders/grass_generate.wgsl`.
-//! - [`hiz`]: the CPU mirror of `shaders/hiz_build.wgsl` (the occlusion pyramid).
-//! - [`wind_pass`]: the CPU mirror of `shaders/grass_wind.wgsl` (the wind on each blade).
+//! Each stage is one file that sets it up, its CPU mirror beside it (`_cpu`), its shader named
+//! after the module and the stage:
+//! - [`hiz`]: the Hi-Z pyramid of the terrain's depth (`shaders/grass_hiz.wgsl`), the occlusion
+//!   the blades are culled against; mirror [`hiz_cpu`].
+//! - `generate`: generation and culling per tile (`shaders/grass_generate.wgsl`); mirror
+//!   [`generate_cpu`].
+//! - `wind`: the wind on each blade (`shaders/grass_wind.wgsl`); mirror [`wind_cpu`].
+//! - `draw`: the indirect draw (`shaders/grass_draw.wgsl`); the blade's shape mirrored in
+//!   [`blade`].
+//!
+//! [`renderer`] holds the instance pool and records the stages per batch of tiles; [`blade`]
+//! is the blade record and its shape (cubic Bezier, length kept when bent).
 
 pub mod blade;
-pub mod generate;
+mod draw;
+mod generate;
+pub mod generate_cpu;
 pub mod hiz;
-pub mod hiz_gpu;
-mod passes;
+pub mod hiz_cpu;
 pub mod renderer;
-pub mod wind_pass;
+mod wind;
+pub mod wind_cpu;
 
 pub use blade::{Blade, bezier, bezier_length_estimate, blade_curve, blade_curve_bent};
-pub use generate::{
+pub use generate_cpu::{
     GenerateParams, GenerateStats, GrassTypeGpu, HiZ, TileBlades, TileJob, generate_tile,
 };
 pub use renderer::{

@@ -1,7 +1,7 @@
 //! The grass stage on the GPU: the bounded instance pool, generation and culling per tile in
 //! compute (`shaders/grass_generate.wgsl`), the wind on each blade (`shaders/grass_wind.wgsl`)
 //! and one indirect draw per tile (`shaders/grass_draw.wgsl`), culled against the Hi-Z pyramid
-//! of [`crate::grass::hiz_gpu`].
+//! of [`crate::grass::hiz`].
 //!
 //! The pool has 8 tile slots in two halves of 4, each half with buffers of its own: a batch of 4
 //! tiles is generated into one half and drawn while the next batch is generated into the other.
@@ -14,10 +14,12 @@ use crate::gpu::layout::*;
 use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{array_view, buffer as gpu_buffer};
 use crate::gpu::{GpuTimer, Targets};
-use crate::grass::generate::counter;
-pub use crate::grass::hiz_gpu::HiZPyramid;
-use crate::grass::passes::{DrawPass, GeneratePass, WindPass};
-use crate::grass::wind_pass::WindPassParams;
+use crate::grass::draw::DrawPass;
+use crate::grass::generate::GeneratePass;
+use crate::grass::generate_cpu::counter;
+pub use crate::grass::hiz::HiZPyramid;
+use crate::grass::wind::WindPass;
+use crate::grass::wind_cpu::WindPassParams;
 use crate::grass::{GenerateParams, GenerateStats, GrassTypeGpu, TileJob};
 use crate::lod::Frustum;
 use crate::stream::TileAtlas;
@@ -635,7 +637,7 @@ impl GrassRenderer {
             j.slot = (i as u32) % BATCH_TILES;
             // A near job is the second of its tile's.
             if j.lod != 2 {
-                tiles[crate::grass::generate::stats_lod(j.lod)] += 1;
+                tiles[crate::grass::generate_cpu::stats_lod(j.lod)] += 1;
             }
         }
         queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&gpu_jobs));

@@ -924,20 +924,20 @@ impl Renderer {
     /// Records every pass of the prepared frame into `encoder`, drawing into `color` and
     /// `depth` (cleared here); submits nothing and waits for nothing. The frame, top to bottom:
     ///
-    /// 1. child tiles derived from their parents (compute, `derive_child.wgsl`);
-    /// 2. the wind field and the sway springs (compute, `wind_field.wgsl`, `grass_sway.wgsl`);
-    /// 3. the terrain's G-buffer pass (`terrain.wgsl`): its depth, and per pixel where in the
+    /// 1. child tiles derived from their parents (compute, `stream_derive.wgsl`);
+    /// 2. the wind field and the sway springs (compute, `wind_field.wgsl`, `wind_sway.wgsl`);
+    /// 3. the terrain's G-buffer pass (`terrain_gbuffer.wgsl`): its depth, and per pixel where in the
     ///    atlas its ground is;
-    /// 4. the Hi-Z pyramid from that depth (compute, `hiz_build.wgsl`);
+    /// 4. the Hi-Z pyramid from that depth (compute, `grass_hiz.wgsl`);
     /// 5. the terrain's colour and the sky, deferred: every pixel's shading, terrain and sky,
     ///    with the terrain's shadows (compute, `terrain_shade.wgsl`), then its composite into
-    ///    the colour target (`composite.wgsl`);
+    ///    the colour target (`terrain_composite.wgsl`);
     /// 6. grass in batches of 4 jobs (a tile, or a near tile's blades within the near radius):
     ///    generation and culling, then the wind on each blade (compute, `grass_generate.wgsl`,
     ///    `grass_wind.wgsl`), then one indirect draw per job (`grass_draw.wgsl`);
     /// 7. contact shadows, with the `shadows` feature: each pixel's factor, less than 1 where a
     ///    short ray toward the sun is blocked in the depth buffer (compute), then the colour
-    ///    multiplied by it (a full-screen pass; both `contact_shadow.wgsl`);
+    ///    multiplied by it (a full-screen pass; both `terrain_contact_shadow.wgsl`);
     /// 8. with temporal anti-aliasing (passes 5-7 then draw into its own texture, with a
     ///    jittered projection): the frame folded into the reprojected history (compute,
     ///    `aa_taa.wgsl`), and the result written into `color`;
@@ -1240,7 +1240,7 @@ struct ReadbackSlot {
 const MAX_HOLE_CHECKS: usize = 8192;
 
 /// The hole count, observed on the GPU: each frame's atlas reads (slot and expected identity)
-/// are compared by a compute pass (`shaders/hole_check.wgsl`) with the identity that the
+/// are compared by a compute pass (`shaders/renderer_hole_check.wgsl`) with the identity that the
 /// uploads and derivations left in each slot ([`TileAtlas::identity`]).
 struct HoleCheck {
     pipeline: wgpu::ComputePipeline,
@@ -1252,7 +1252,7 @@ struct HoleCheck {
 
 impl HoleCheck {
     fn new(device: &wgpu::Device, atlas: &TileAtlas) -> Self {
-        let module = crate::shaders::module(device, "hole_check.wgsl");
+        let module = crate::shaders::module(device, "renderer_hole_check.wgsl");
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("hole_check"),
             layout: None,

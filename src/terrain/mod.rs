@@ -1,11 +1,14 @@
 //! Terrain drawing: a regular grid per tile, displaced by the tile atlas's heights, lit by the
 //! sun and a sky hemisphere and fogged toward the horizon; then the sky where no terrain is.
 //!
-//! Everything is drawn camera-relative (see `shaders/terrain.wgsl`). The shading is deferred:
-//! the terrain's draw writes only a G-buffer (where in the atlas each pixel's ground is), a
-//! compute pass over the whole target shades every pixel, terrain and sky
-//! (`shaders/terrain_shade.wgsl`), and a full-screen pass writes that into the colour target
-//! (`shaders/composite.wgsl`).
+//! Everything is drawn camera-relative (see `shaders/terrain_gbuffer.wgsl`). The shading is
+//! deferred: the terrain's draw writes only a G-buffer (where in the atlas each pixel's ground
+//! is, `shaders/terrain_gbuffer.wgsl`), a compute pass over the whole target shades every
+//! pixel, terrain and sky (`shaders/terrain_shade.wgsl`), and a full-screen pass writes that
+//! into the colour target (`shaders/terrain_composite.wgsl`). This file sets up and records
+//! that family of three passes; the contact shadows are a stage of their own
+//! ([`contact_shadow`], mirror [`contact_shadow_cpu`]), and [`far_field`] mirrors the far
+//! field of `shaders/shared/terrain_shading.wgsl`.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{DVec2, DVec3, Mat4, Vec3};
@@ -19,6 +22,7 @@ use crate::stream::TileAtlas;
 use crate::world::{Manifest, Pyramid, Sky, TileId};
 
 pub mod contact_shadow;
+pub mod contact_shadow_cpu;
 pub mod far_field;
 
 /// Colour target format of the headless tools and the reference images (any format of
@@ -31,7 +35,7 @@ pub const MAX_GRASS_TYPES: usize = 16;
 
 /// Format of the G-buffer: per pixel the atlas texel (x, y, 8.8 fixed point), the slot, the
 /// drawn tile's level and metres per texel (half float), packed into two words (see
-/// `fs_gbuffer` in `shaders/terrain.wgsl`). Eight bytes a pixel, not sixteen: on GPUs whose
+/// `fs_gbuffer` in `shaders/terrain_gbuffer.wgsl`). Eight bytes a pixel, not sixteen: on GPUs whose
 /// raster units are few, the G-buffer's bytes are much of the terrain pass's time.
 pub const GBUFFER_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
 /// Atlas slots the G-buffer can name (12 bits).
@@ -77,7 +81,7 @@ const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 1344);
 pub const MAX_ROOT_TILES: usize = 64;
 
 /// One tile (or the part of an ancestor standing in for it) to draw; mirrors `TileDraw` in
-/// `shaders/terrain.wgsl`.
+/// `shaders/terrain_gbuffer.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct TileDraw {
@@ -210,7 +214,7 @@ impl TerrainRenderer {
         max_tiles: u32,
         mesh_step: u32,
     ) -> Self {
-        let module = crate::shaders::module(device, "terrain.wgsl");
+        let module = crate::shaders::module(device, "terrain_gbuffer.wgsl");
         use wgpu::BufferUsages as U;
         let frame_buffer = buffer(
             device,
@@ -297,7 +301,7 @@ impl TerrainRenderer {
         );
 
         // The composite: the shaded colour into the caller's target.
-        let composite_module = crate::shaders::module(device, "composite.wgsl");
+        let composite_module = crate::shaders::module(device, "terrain_composite.wgsl");
         let composite_layout = bind_group_layout(
             device,
             "composite",

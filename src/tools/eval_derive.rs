@@ -14,7 +14,7 @@
 
 use std::time::Instant;
 
-use crate::stream::derive_child::{WEIGHTS, detail_noise, hash4, unit};
+use crate::stream::derive_cpu::{WEIGHTS, detail_noise, hash4, unit};
 use crate::stream::{DeriveParams, HeightField, calibrate};
 use crate::world::{Dem, DeriveCalibration, LEGACY_DETAIL};
 

@@ -1,4 +1,4 @@
-//! `verdant eval sway`: the sway spring's integrators ([`crate::wind::sway`]) measured against a
+//! `verdant eval sway`: the sway spring's integrators ([`crate::wind::spring`]) measured against a
 //! fine reference at frame times from 1/240 s to 1/5 s and at a 0.5 s hitch: RMS and largest
 //! error, cost per step, and whether the sway blew up; CSV and charts.
 
@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use crate::tools::metrics::{Chart, ChartPoint, LineChart, Series, Summary};
 use crate::tools::sway_integrators::{EulerLimits, Integrator, Preset, RENDERER_INTEGRATOR};
-use crate::wind::sway::{SwaySpring, SwayState, exact_step};
+use crate::wind::spring::{SwaySpring, SwayState, exact_step};
 
 /// Simulated time of each run of the eval, seconds.
 pub const EVAL_SECONDS: f64 = 20.0;

@@ -1,8 +1,8 @@
 //! The sway spring's steps that `verdant eval sway` compares: explicit and semi-implicit Euler
-//! beside the renderer's exact step ([`crate::wind::sway::ExactStep`]), their stability limits,
+//! beside the renderer's exact step ([`crate::wind::spring::ExactStep`]), their stability limits,
 //! and the two springs the eval measures them on.
 
-use crate::wind::sway::{ExactStep, SwaySpring, SwayState, spectral_radius};
+use crate::wind::spring::{ExactStep, SwaySpring, SwayState, spectral_radius};
 
 /// The stability limits of the Euler steps on a spring.
 pub trait EulerLimits {
@@ -88,7 +88,7 @@ pub enum Integrator {
     Exact,
 }
 /// The renderer's step among the [`Integrator`]s: [`Integrator::Exact`], as
-/// [`crate::wind::sway::RENDERER_INTEGRATOR`] (why: see there).
+/// [`crate::wind::spring::RENDERER_INTEGRATOR`] (why: see there).
 pub const RENDERER_INTEGRATOR: Integrator = Integrator::Exact;
 
 impl Integrator {
@@ -150,7 +150,7 @@ mod tests {
 
     #[test]
     fn closed_form_limits_agree_with_the_spectral_radius() {
-        for (name, spring) in crate::wind::sway::tests::springs() {
+        for (name, spring) in crate::wind::spring::tests::springs() {
             for (integrator, limit) in [
                 (Integrator::ExplicitEuler, spring.explicit_euler_max_dt()),
                 (

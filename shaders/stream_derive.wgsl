@@ -2,7 +2,7 @@
 // parent's smooth heights (the parent less its own detail, recomputed here) plus slope-scaled
 // high-pass detail noise between the parent's samples, at the child level's amplitude (fitted per world;
 // zero for stored levels), that fades to zero near tile edges; grass type from one of the
-// nearest parent samples, density as their rounded mean. CPU mirror: src/stream/derive_child.rs.
+// nearest parent samples, density as their rounded mean. CPU mirror: src/stream/derive_cpu.rs.
 //
 // One dispatch derives several tiles: workgroup z is the job index.
 

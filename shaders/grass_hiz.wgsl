@@ -1,7 +1,7 @@
 // The Hi-Z pyramid of the terrain's depth (reverse-Z), in a storage buffer: level 0 copies the
 // depth buffer, each further level keeps the smallest (farthest) depth of the 2x2 texels below
 // it, 3 where the level below has an odd size. Levels lie one after another, rows top first.
-// CPU mirror: src/grass/hiz.rs.
+// CPU mirror: src/grass/hiz_cpu.rs.
 
 struct Level {
     src_offset: u32,

@@ -1,5 +1,6 @@
 //! The derivation stage: a compute pass that derives child tiles from parents already in the
-//! tile atlas (`shaders/derive_child.wgsl`), then copies each result into its own atlas slot.
+//! tile atlas (`shaders/stream_derive.wgsl`), then copies each result into its own atlas slot.
+//! Its CPU mirror is [`crate::stream::derive_cpu`].
 
 use bytemuck::{Pod, Zeroable};
 
@@ -73,7 +74,7 @@ impl DeriveStage {
         atlas: &TileAtlas,
         batch: u32,
     ) -> Self {
-        let module = crate::shaders::module(device, "derive_child.wgsl");
+        let module = crate::shaders::module(device, "stream_derive.wgsl");
         let size = atlas.size();
         let staging = |label, format| {
             device.create_texture(&wgpu::TextureDescriptor {

@@ -2,7 +2,7 @@
 // type) driven toward a bend proportional to the cell's wind, advanced by the exact solution of
 // the spring over the frame's time step (stable at any step: see `verdant eval sway`). The step
 // matrix of each type is computed on the CPU for the frame's dt. CPU mirror: update_sway in
-// src/wind/sway_field.rs.
+// src/wind/sway_cpu.rs.
 
 struct SwayParams {
     // The camera's world cell (as the wind field's lookup), and the field's size.

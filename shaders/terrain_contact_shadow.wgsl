@@ -5,7 +5,7 @@
 // multiplying the target (the sun's share of the light: the ambient stays). Two passes: the
 // factors, per pixel in a compute pass over the target (1 where unshadowed, and beyond the
 // fade distance without a march), then a full-screen pass that multiplies the colour target by
-// them (blending). CPU mirror: src/terrain/contact_shadow.rs.
+// them (blending). CPU mirror: src/terrain/contact_shadow_cpu.rs.
 
 #include "shared/full_screen.wgsl"
 

@@ -1,5 +1,6 @@
-//! CPU mirror of `shaders/grass_wind.wgsl`: the wind on each blade of a slot, once per blade.
-//! Written apart from the shader, statement for statement; a test compares the two.
+//! CPU mirror of `shaders/grass_wind.wgsl` (the GPU stage: `grass/wind.rs`): the wind on each
+//! blade of a slot, once per blade. Written apart from the shader, statement for statement; a
+//! test compares the two.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec2;

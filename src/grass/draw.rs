@@ -1,0 +1,70 @@
+//! The grass's draw stage on the GPU (`shaders/grass_draw.wgsl`): the indirect draw of a pool
+//! slot's blades. The blade's shape has its CPU mirror in [`crate::grass::blade`];
+//! [`crate::grass::renderer`] binds the stage to its pool and records it.
+
+use crate::gpu::Targets;
+use crate::gpu::layout::*;
+use crate::gpu::pipeline::render_pipeline;
+
+/// The indirect draw of a slot's blades (`shaders/grass_draw.wgsl`): one pipeline per blade
+/// length.
+pub(crate) struct DrawPass {
+    pub(crate) layout: wgpu::BindGroupLayout,
+    pub(crate) near: wgpu::RenderPipeline,
+    pub(crate) high: wgpu::RenderPipeline,
+    pub(crate) low: wgpu::RenderPipeline,
+}
+
+impl DrawPass {
+    /// Pipelines drawing into `targets` from slots of `slot_bytes`, with blades of `segments`
+    /// segments near the camera, in the rest of the high ring and in the low ring.
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        targets: &Targets,
+        segments: [u32; 3],
+        slot_bytes: u64,
+    ) -> Self {
+        let module = crate::shaders::module(device, "grass_draw.wgsl");
+        let layout = bind_group_layout(
+            device,
+            "grass draw",
+            &sequential(
+                wgpu::ShaderStages::VERTEX_FRAGMENT,
+                [
+                    uniform_buffer(),
+                    // A slot of the pool, chosen by a dynamic offset.
+                    storage_buffer_read_only()
+                        .dynamic()
+                        .min_size(slot_bytes)
+                        .visible_in(wgpu::ShaderStages::VERTEX),
+                ],
+            ),
+        );
+        let pipeline = |label, segments: u32| {
+            let segments = f64::from(segments.clamp(1, 64));
+            let constants = [("SEGMENTS", segments)];
+            let fs_constants = [
+                ("SEGMENTS", segments),
+                ("ENCODE_SRGB", targets.encode_srgb()),
+            ];
+            render_pipeline(
+                label,
+                &module,
+                ("vs_blade", "fs_blade"),
+                targets.color_format,
+            )
+            .layouts(&[&layout])
+            .constants(&constants, &fs_constants)
+            .triangle_strips()
+            .depth(targets.depth_format, true, wgpu::CompareFunction::Greater)
+            .build(device)
+        };
+        let [near, high, low] = segments;
+        Self {
+            near: pipeline("grass near blades", near),
+            high: pipeline("grass high LOD", high),
+            low: pipeline("grass low LOD", low),
+            layout,
+        }
+    }
+}
