@@ -17,10 +17,14 @@
 #include "shared/output.wgsl"
 
 override SEGMENTS: u32 = 7u;
+// Multisampled targets with alpha to coverage: a blade narrower than a pixel is drawn a pixel
+// wide, its true width becoming the share of the pixel's samples it covers (its alpha), so
+// that it fades with distance instead of popping in and out of pixels.
+override COVERAGE: bool = false;
 
 struct GrassFrame {
     view_proj: mat4x4<f32>,
-    // x: fog distance
+    // x: fog distance; y: the target's height in pixels
     misc: vec4<f32>,
     sun_dir: vec4<f32>,
     sun_color: vec4<f32>,
@@ -44,6 +48,9 @@ struct VertexOut {
     // x: position along the blade 0..1, y: gust highlight 0..1, z: specular strength,
     // w: gloss exponent
     @location(3) misc: vec4<f32>,
+    // The share of a pixel the blade's width covers (1 unless COVERAGE and the blade is
+    // narrower than a pixel).
+    @location(4) @interpolate(flat) coverage: f32,
 }
 
 fn bezier(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>, t: f32) -> vec3<f32> {
@@ -130,7 +137,20 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     let edge_on = 1.0 - abs(dot(n, view));
     let side_view = normalize(cross(view, tangent) + side * 1e-4);
     let width_dir = normalize(mix(side, side_view * sign(dot(side, side_view) + 1e-6), 0.4 * edge_on));
-    let bw = b.width * (1.0 - t);
+    var bw = b.width * (1.0 - t);
+    var coverage = 1.0;
+    if COVERAGE {
+        // Pixels a metre at the root's distance: the projection's vertical scale (the length
+        // of the view-projection's second row, the view being a rotation) over the depth.
+        let clip_root = frame.view_proj * vec4<f32>(root, 1.0);
+        let scale = length(vec3<f32>(frame.view_proj[0][1], frame.view_proj[1][1], frame.view_proj[2][1]));
+        let px_per_m = 0.5 * frame.misc.y * scale / max(clip_root.w, 1e-3);
+        let width_px = b.width * px_per_m;
+        if width_px < 1.0 {
+            coverage = max(width_px, 0.0);
+            bw = bw / max(width_px, 1e-3);
+        }
+    }
     var pos = p + width_dir * (0.5 * bw * side_sign);
     // Edge flutter: the blade's edges move along its normal, more toward the tip.
     pos += n * (flutter * 0.03 * h * t * abs(side_sign));
@@ -151,6 +171,7 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     out.normal = n;
     out.color = color;
     out.misc = vec4<f32>(t, gust * t, frame.tip_colors[kind].w, frame.base_colors[kind].w);
+    out.coverage = coverage;
     return out;
 }
 
@@ -185,5 +206,9 @@ fn fs_blade(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) v
     let dist = length(in.rel_pos);
     let x = dist / frame.misc.x;
     let fog = 1.0 - exp(-3.0 * x * x);
-    return output_color(mix(lit, frame.horizon_color.rgb, fog));
+    var color = output_color(mix(lit, frame.horizon_color.rgb, fog));
+    if COVERAGE {
+        color.a = in.coverage;
+    }
+    return color;
 }

@@ -51,6 +51,7 @@ pub fn shared_pieces() -> &'static [(&'static str, &'static str)] {
 /// One WGSL file per GPU stage, by file name.
 pub const STAGES: &[(&str, &str)] = &[
     ("aa_taa.wgsl", include_str!("../shaders/aa_taa.wgsl")),
+    ("aa_msaa.wgsl", include_str!("../shaders/aa_msaa.wgsl")),
     (
         "stream_derive.wgsl",
         include_str!("../shaders/stream_derive.wgsl"),

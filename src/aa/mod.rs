@@ -1,5 +1,6 @@
-//! Anti-aliasing of the frame: the methods a [`crate::Renderer`] can use, and the temporal
-//! method's stage ([`taa`], `shaders/aa_taa.wgsl`) with its CPU mirror ([`taa_cpu`]).
+//! Anti-aliasing of the frame: the methods a [`crate::Renderer`] can use; the temporal
+//! method's stage ([`taa`], `shaders/aa_taa.wgsl`) with its CPU mirror ([`taa_cpu`]), and the
+//! multisampling stage ([`msaa`], `shaders/aa_msaa.wgsl`) with its mirror ([`msaa_cpu`]).
 //!
 //! Thin grass blades are narrower than a pixel at a few metres: drawn once per pixel centre
 //! they cover whole pixels or none, so the frame is darker and more saturated than the scene
@@ -12,6 +13,8 @@ use std::str::FromStr;
 
 use glam::Vec2;
 
+pub mod msaa;
+pub mod msaa_cpu;
 pub mod taa;
 pub mod taa_cpu;
 
@@ -24,17 +27,21 @@ pub enum AntiAliasing {
     /// Temporal: a jittered projection every frame, folded into a reprojected, clipped
     /// history ([`taa::Taa`]).
     Taa,
+    /// Multisampling of the grass, four samples a pixel, each blade's sub-pixel width kept as
+    /// coverage ([`msaa::Msaa`]).
+    Msaa,
 }
 
 impl AntiAliasing {
     /// Every method, in the order the benchmarks list them.
-    pub const ALL: [AntiAliasing; 2] = [AntiAliasing::Off, AntiAliasing::Taa];
+    pub const ALL: [AntiAliasing; 3] = [AntiAliasing::Off, AntiAliasing::Taa, AntiAliasing::Msaa];
 
     /// The method's name on the command line and in reports.
     pub fn name(self) -> &'static str {
         match self {
             AntiAliasing::Off => "off",
             AntiAliasing::Taa => "taa",
+            AntiAliasing::Msaa => "msaa",
         }
     }
 }
@@ -95,7 +102,7 @@ mod tests {
             assert_eq!(m.name().parse::<AntiAliasing>(), Ok(m));
         }
         let err = "msaa16".parse::<AntiAliasing>().unwrap_err();
-        assert!(err.contains("msaa16") && err.contains("off, taa"), "{err}");
+        assert!(err.contains("msaa16") && err.contains("off, taa, msaa"), "{err}");
     }
 
     #[test]

@@ -95,6 +95,7 @@ pub struct RenderPipelineBuilder<'a> {
     constants: (Constants<'a>, Constants<'a>),
     primitive: wgpu::PrimitiveState,
     depth: Option<wgpu::DepthStencilState>,
+    multisample: wgpu::MultisampleState,
 }
 
 /// A render pipeline drawing `module`'s `vertex` and `fragment` entry points into `target`
@@ -115,6 +116,7 @@ pub fn render_pipeline<'a>(
         constants: (&[], &[]),
         primitive: Default::default(),
         depth: None,
+        multisample: Default::default(),
     }
 }
 
@@ -174,6 +176,19 @@ impl<'a> RenderPipelineBuilder<'a> {
         }
     }
 
+    /// Into a target of `count` samples per pixel; with `alpha_to_coverage`, the fragment's
+    /// alpha chooses how many of a pixel's samples it covers.
+    pub fn multisample(self, count: u32, alpha_to_coverage: bool) -> Self {
+        Self {
+            multisample: wgpu::MultisampleState {
+                count,
+                mask: !0,
+                alpha_to_coverage_enabled: alpha_to_coverage,
+            },
+            ..self
+        }
+    }
+
     /// The pipeline.
     pub fn build(self, device: &wgpu::Device) -> wgpu::RenderPipeline {
         let layout = pipeline_layout(device, self.label, self.layouts);
@@ -192,7 +207,7 @@ impl<'a> RenderPipelineBuilder<'a> {
             },
             primitive: self.primitive,
             depth_stencil: self.depth,
-            multisample: Default::default(),
+            multisample: self.multisample,
             fragment: Some(wgpu::FragmentState {
                 module: self.module,
                 entry_point: Some(self.entries.1),

@@ -17,14 +17,16 @@ pub(crate) struct DrawPass {
 
 impl DrawPass {
     /// Pipelines drawing into `targets` from slots of `slot_bytes`, with blades of `segments`
-    /// segments near the camera, in the rest of the high ring and in the low ring.
+    /// segments near the camera, in the rest of the high ring and in the low ring. With
+    /// `samples` above 1 the targets are multisampled and a blade narrower than a pixel is
+    /// drawn a pixel wide with its true width as its coverage (alpha to coverage).
     pub(crate) fn new(
         device: &wgpu::Device,
         targets: &Targets,
         segments: [u32; 3],
         slot_bytes: u64,
+        samples: u32,
     ) -> Self {
-        let module = crate::shaders::module(device, "grass_draw.wgsl");
         let layout = bind_group_layout(
             device,
             "grass draw",
@@ -40,12 +42,33 @@ impl DrawPass {
                 ],
             ),
         );
+        let [near, high, low] = Self::pipelines(device, targets, segments, &layout, samples);
+        Self {
+            near,
+            high,
+            low,
+            layout,
+        }
+    }
+
+    /// The three pipelines (near, high LOD, low LOD) over `layout`, for targets of `samples`
+    /// samples a pixel.
+    pub(crate) fn pipelines(
+        device: &wgpu::Device,
+        targets: &Targets,
+        segments: [u32; 3],
+        layout: &wgpu::BindGroupLayout,
+        samples: u32,
+    ) -> [wgpu::RenderPipeline; 3] {
+        let module = crate::shaders::module(device, "grass_draw.wgsl");
+        let coverage = if samples > 1 { 1.0 } else { 0.0 };
         let pipeline = |label, segments: u32| {
             let segments = f64::from(segments.clamp(1, 64));
-            let constants = [("SEGMENTS", segments)];
+            let constants = [("SEGMENTS", segments), ("COVERAGE", coverage)];
             let fs_constants = [
                 ("SEGMENTS", segments),
                 ("ENCODE_SRGB", targets.encode_srgb()),
+                ("COVERAGE", coverage),
             ];
             render_pipeline(
                 label,
@@ -53,18 +76,18 @@ impl DrawPass {
                 ("vs_blade", "fs_blade"),
                 targets.color_format,
             )
-            .layouts(&[&layout])
+            .layouts(&[layout])
             .constants(&constants, &fs_constants)
             .triangle_strips()
             .depth(targets.depth_format, true, wgpu::CompareFunction::Greater)
+            .multisample(samples, samples > 1)
             .build(device)
         };
         let [near, high, low] = segments;
-        Self {
-            near: pipeline("grass near blades", near),
-            high: pipeline("grass high LOD", high),
-            low: pipeline("grass low LOD", low),
-            layout,
-        }
+        [
+            pipeline("grass near blades", near),
+            pipeline("grass high LOD", high),
+            pipeline("grass low LOD", low),
+        ]
     }
 }

@@ -196,6 +196,9 @@ pub struct GrassRenderer {
     hiz_read_group: wgpu::BindGroup,
     /// The occlusion pyramid (built from the terrain's depth pre-pass).
     pub hiz: HiZPyramid,
+    /// The targets the blades are drawn into, and their samples a pixel.
+    targets: Targets,
+    samples: u32,
 }
 
 /// What a half of the pool binds besides its own buffers.
@@ -476,7 +479,7 @@ impl GrassRenderer {
         let slot_bytes = u64::from(capacity) * BLADE_BYTES;
         let gen_pass = GeneratePass::new(device);
         let wind_pass = WindPass::new(device);
-        let draw_pass = DrawPass::new(device, targets, settings.segments, slot_bytes);
+        let draw_pass = DrawPass::new(device, targets, settings.segments, slot_bytes, 1);
         let bindings = PoolBindings {
             gen_pass: &gen_pass,
             wind_layout: &wind_pass.layout(),
@@ -514,7 +517,26 @@ impl GrassRenderer {
             halves,
             hiz_read_group,
             hiz,
+            targets: *targets,
+            samples: 1,
         }
+    }
+
+    /// Draws into targets of `samples` samples a pixel from now on (1: single-sampled; more:
+    /// multisampled, a blade narrower than a pixel drawn a pixel wide with its width as its
+    /// coverage).
+    pub fn set_samples(&mut self, device: &wgpu::Device, samples: u32) {
+        if samples == self.samples {
+            return;
+        }
+        [self.draw_pass.near, self.draw_pass.high, self.draw_pass.low] = DrawPass::pipelines(
+            device,
+            &self.targets,
+            self.settings.segments,
+            &self.draw_pass.layout,
+            samples,
+        );
+        self.samples = samples;
     }
 
     /// Follows a resize of the targets to `width` x `height`: a new Hi-Z pyramid of that size.
@@ -602,6 +624,8 @@ impl GrassRenderer {
         self.params.camera[0] = camera_altitude;
         self.params.camera[1] = near;
         self.draw_frame.view_proj = self.params.view_proj;
+        // The target's height, for the blades' width in pixels.
+        self.draw_frame.misc[1] = self.params.camera[3];
         queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&self.params));
         queue.write_buffer(
             &self.draw_frame_buffer,

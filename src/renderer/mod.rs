@@ -42,6 +42,7 @@ use std::time::Instant;
 use glam::{DVec2, Vec2};
 
 use crate::aa::AntiAliasing;
+use crate::aa::msaa::Msaa;
 use crate::aa::taa::{Taa, TaaSettings};
 use crate::camera::Camera;
 use crate::features::{Feature, Features};
@@ -327,6 +328,9 @@ pub struct Renderer {
     /// The temporal anti-aliasing, when on: the frame is drawn into its texture and resolved
     /// into the caller's colour target.
     taa: Option<Taa>,
+    /// The multisampling of the grass, when on: terrain and sky are drawn into its texture,
+    /// the blades into its multisampled targets, resolved into the caller's.
+    msaa: Option<Msaa>,
 }
 
 impl Renderer {
@@ -464,6 +468,12 @@ impl Renderer {
         let holes = HoleCheck::new(device, &atlas);
         let taa = (config.aa == AntiAliasing::Taa)
             .then(|| Taa::new(device, &targets, TaaSettings::default()));
+        let msaa = (config.aa == AntiAliasing::Msaa && grass.is_some())
+            .then(|| Msaa::new(device, &targets));
+        let mut grass = grass;
+        if let (Some(g), Some(_)) = (&mut grass, &msaa) {
+            g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
+        }
         Ok(Self {
             device: device.clone(),
             queue: queue.clone(),
@@ -491,6 +501,7 @@ impl Renderer {
             prepared: None,
             terrain_depth: None,
             taa,
+            msaa,
         })
     }
 
@@ -608,12 +619,25 @@ impl Renderer {
         }
         self.taa = (aa == AntiAliasing::Taa)
             .then(|| Taa::new(&self.device, &self.targets, TaaSettings::default()));
+        self.msaa = (aa == AntiAliasing::Msaa && self.grass.is_some())
+            .then(|| Msaa::new(&self.device, &self.targets));
+        let samples = if self.msaa.is_some() {
+            crate::aa::msaa::SAMPLES
+        } else {
+            1
+        };
+        if let Some(g) = &mut self.grass {
+            g.renderer.set_samples(&self.device, samples);
+        }
     }
 
-    /// How the frame is anti-aliased.
+    /// How the frame is anti-aliased (multisampling asked for without grass is off: it
+    /// multisamples the blades only).
     pub fn anti_aliasing(&self) -> AntiAliasing {
         if self.taa.is_some() {
             AntiAliasing::Taa
+        } else if self.msaa.is_some() {
+            AntiAliasing::Msaa
         } else {
             AntiAliasing::Off
         }
@@ -634,6 +658,9 @@ impl Renderer {
         self.contact_shadows.resize(&self.device, width, height);
         if let Some(taa) = &mut self.taa {
             taa.resize(&self.device, width, height);
+        }
+        if let Some(msaa) = &mut self.msaa {
+            msaa.resize(&self.device, width, height);
         }
         if let Some(g) = &mut self.grass {
             g.renderer.resize(&self.device, &self.queue, width, height);
@@ -935,6 +962,9 @@ impl Renderer {
     /// 6. grass in batches of 4 jobs (a tile, or a near tile's blades within the near radius):
     ///    generation and culling, then the wind on each blade (compute, `grass_generate.wgsl`,
     ///    `grass_wind.wgsl`), then one indirect draw per job (`grass_draw.wgsl`);
+    ///    With multisampling (`aa_msaa.wgsl`), the frame so far is copied into every sample of
+    ///    the stage's multisampled targets first, the blades drawn there with alpha to
+    ///    coverage, and colour and depth resolved into `color` and `depth` after;
     /// 7. contact shadows, with the `shadows` feature: each pixel's factor, less than 1 where a
     ///    short ray toward the sun is blocked in the depth buffer (compute), then the colour
     ///    multiplied by it (a full-screen pass; both `terrain_contact_shadow.wgsl`);
@@ -995,9 +1025,14 @@ impl Renderer {
                 .hiz
                 .record(&self.device, encoder, depth.texture(), &mut self.timer);
         }
-        // With temporal anti-aliasing the frame is drawn into its texture, then resolved into
-        // `color` (9.).
-        let target = self.taa.as_ref().map(|t| t.scene_view().clone());
+        // With anti-aliasing the terrain and sky are drawn into its texture: temporal
+        // anti-aliasing resolves the whole frame into `color` (8.), multisampling copies it
+        // into its multisampled targets for the grass and resolves those into `color` (6.).
+        let target = match (&self.taa, &self.msaa) {
+            (Some(t), _) => Some(t.scene_view().clone()),
+            (_, Some(m)) => Some(m.scene_view().clone()),
+            _ => None,
+        };
         let scene = target.as_ref().unwrap_or(color);
         // 5. Terrain colour and sky: shading (compute), composite into the frame.
         self.terrain
@@ -1009,19 +1044,30 @@ impl Renderer {
                 copy.size(),
             );
         }
-        // 6. Grass.
+        // 6. Grass (multisampled: into every sample of the frame so far, then resolved).
         let mut stats = frame.stats;
         stats.residency.holes += cpu_holes;
+        if let Some(msaa) = &mut self.msaa {
+            msaa.record_expand(&self.device, encoder, depth, &mut self.timer);
+        }
+        let (grass_color, grass_depth) = match &self.msaa {
+            Some(m) => (m.color_view(), m.depth_view()),
+            None => (scene, depth),
+        };
         if let Some(g) = &self.grass {
             stats.grass.tiles = g.renderer.record(
                 &self.queue,
                 encoder,
                 &frame.grass_jobs,
-                scene,
-                depth,
+                grass_color,
+                grass_depth,
                 &mut self.timer,
             );
         }
+        if let Some(msaa) = &self.msaa {
+            msaa.record_resolve(encoder, color, depth, &mut self.timer);
+        }
+        let scene = if self.msaa.is_some() { color } else { scene };
         // 7. Contact shadows: the grass's (and everything's) short shadows, from the depth.
         if self.features.has(Feature::Shadows) {
             self.contact_shadows

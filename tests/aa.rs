@@ -268,3 +268,30 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
         }
     }
 }
+
+/// Renders the meadow's first view with `aa` at a small size: `frames` frames of a still
+/// camera at consecutive 60 Hz times, returning the last.
+fn meadow(aa: verdant::aa::AntiAliasing, frames: u32, size: (u32, u32)) -> image::RgbaImage {
+    let ctx = common::gpu();
+    let world = verdant::World::open(&common::default_world()).unwrap();
+    let path = world.manifest.path("meadow").unwrap().clone();
+    let camera = verdant::camera::sample_path(&path, path.keys[0].t_s);
+    let mut config = verdant::RendererConfig::for_world(&world);
+    config.aa = aa;
+    let mut scene = verdant::tools::Scene::new(&ctx, world, size.0, size.1, config).unwrap();
+    scene.warm_up(&ctx, &camera, std::time::Duration::from_secs(60)).unwrap();
+    for f in 0..frames {
+        scene
+            .render_at(&ctx, &camera, f64::from(f) / 60.0)
+            .unwrap();
+    }
+    scene.read_image(&ctx).unwrap()
+}
+
+#[test]
+fn every_method_draws_the_meadow() {
+    for aa in verdant::aa::AntiAliasing::ALL {
+        let img = meadow(aa, 4, (96, 64));
+        img.save(format!("/tmp/aa-{}.png", aa.name())).unwrap();
+    }
+}
