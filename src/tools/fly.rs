@@ -89,7 +89,6 @@ fn path_start_position(path: &crate::world::CameraPath) -> glam::DVec3 {
 /// The longest the first frame waits for its tiles.
 pub const FIRST_FRAME_WAIT: std::time::Duration = std::time::Duration::from_secs(60);
 
-
 impl Default for FlyOptions {
     /// The command line's defaults: the default world's first path, 240 frames at 640x360
     /// into `out/fly`, the renderer's own grass settings.
@@ -437,7 +436,6 @@ pub struct NothingStreamed {
     /// The first few of them, each with the reason.
     pub first: Vec<String>,
 }
-
 
 impl FlySummary {
     /// Summarises the frames of a fly-through.

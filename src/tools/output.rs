@@ -425,5 +425,4 @@ mod tests {
         dir.keep();
         assert!(names(tmp.path()).is_empty());
     }
-
 }

@@ -131,7 +131,12 @@ impl DiskCache {
         }
     }
 
-    pub(super) fn read_entry(&self, key: &str, url: &str, max: u64) -> Result<(Validator, Vec<u8>), String> {
+    pub(super) fn read_entry(
+        &self,
+        key: &str,
+        url: &str,
+        max: u64,
+    ) -> Result<(Validator, Vec<u8>), String> {
         let meta_path = self.path(key, "meta");
         let meta_len = std::fs::metadata(&meta_path)
             .map_err(|e| format!("metadata: {e}"))?
