@@ -180,3 +180,41 @@ fn a_soak_too_fast_for_its_world_is_refused_by_the_library() {
         );
     }
 }
+
+/// The grass options and the mesh step have no range of their own on the command line: the
+/// library's `RendererConfig::validate` checks them, and fly's error names the option and the
+/// range, exits non-zero without a panic, and writes nothing.
+#[test]
+fn renderer_settings_out_of_range_are_refused_by_the_library_naming_the_option() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("fly");
+    let out_arg = out.to_str().unwrap();
+    for (args, says) in [
+        (
+            &["--grass-segments", "5,0,3"][..],
+            &["--grass-segments", "1..=64 each"][..],
+        ),
+        (
+            &["--grass-spacing-m", "9"],
+            &["--grass-spacing-m", "0.02..=5 m"],
+        ),
+        (
+            &["--grass-infill-m", "5,10"],
+            &["--grass-infill-m", "no larger than the half-spacing one"],
+        ),
+        (&["--mesh-step", "3"], &["--mesh-step", "1..=16"]),
+    ] {
+        let mut all = vec!["fly", "--frames", "1", "--out", out_arg];
+        all.extend_from_slice(args);
+        let (code, stderr) = run(&all);
+        assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+        assert_eq!(code, Some(1), "{args:?} exited {code:?}: {stderr}");
+        for s in says {
+            assert!(
+                stderr.contains(s),
+                "{args:?}: the error does not say {s:?}: {stderr}"
+            );
+        }
+        assert!(!out.exists(), "{args:?} wrote its output folder");
+    }
+}

@@ -380,7 +380,8 @@ fn settings_out_of_range_are_refused_by_the_renderer_with_their_range() {
         64,
         36,
     );
-    let cases: [(&dyn Fn(&mut verdant::RendererConfig), &str, &str); 4] = [
+    type Change = dyn Fn(&mut verdant::RendererConfig);
+    let cases: [(&Change, &str, &str); 4] = [
         (
             &|c| c.grass.segments = [5, 0, 3],
             "grass.segments",

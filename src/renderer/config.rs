@@ -4,8 +4,8 @@
 //!
 //! Every front end builds a [`RendererConfig`] (from [`RendererConfig::for_world`], changing
 //! what its user asked for) and hands it to [`crate::Renderer::new`], which refuses a value out
-//! of its range with a [`ConfigError`] naming the field and the range; nothing downstream checks
-//! or clamps those ranges again.
+//! of its range with a [`ConfigError`] naming the field and the range before anything is built;
+//! the front ends do not check these ranges themselves.
 
 use crate::features::Features;
 use crate::grass::GrassSettings;

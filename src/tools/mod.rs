@@ -12,6 +12,8 @@ pub mod fault_proxy;
 pub mod faults;
 pub mod fly;
 pub mod metrics;
+pub mod options;
+pub mod output;
 pub mod report;
 pub(crate) mod rng;
 pub mod scene;

@@ -388,7 +388,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             min_s
         );
     }
-    let out_dir = crate::tools::fly::OutDir::create(&opts.out)?;
+    let out_dir = crate::tools::output::OutDir::create(&opts.out)?;
     let is_url = opts.world.to_str().is_some_and(crate::stream::http::is_url);
     // With faults on a world on disk, the soak flies a copy whose files it breaks.
     let mut file_faults = if opts.faults > 0.0 && !is_url {

@@ -64,9 +64,9 @@ pub struct ViewSummary {
 
 /// Opens the window and runs until it is closed (or `frames` are drawn).
 pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
-    crate::tools::fly::check_size("--size", opts.size)?;
+    crate::tools::options::check_size("--size", opts.size)?;
     if let Some(n) = opts.frames {
-        crate::tools::fly::check_range("--frames", n, 1..=u32::MAX, "")?;
+        crate::tools::options::check_range("--frames", n, 1..=u32::MAX, "")?;
     }
     if opts.screenshot.is_some() && opts.frames.is_none() {
         bail!("--screenshot needs --frames N (the frame to capture)");
@@ -597,6 +597,6 @@ fn save_screenshot(
     }
     let img = image::RgbaImage::from_raw(texture.width(), texture.height(), pixels)
         .context("screenshot size")?;
-    crate::tools::fly::write_png(file, &img).context("cannot write the screenshot")?;
+    crate::tools::output::write_png(file, &img).context("cannot write the screenshot")?;
     Ok(())
 }

@@ -1,0 +1,326 @@
+//! The disk cache of fetched files: bounded in bytes, each body checked against its length
+//! and checksum before use, revalidated with the server's `ETag` or `Last-Modified`.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use super::{HttpCacheConfig, HttpError};
+
+/// What a cached body is revalidated with.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) enum Validator {
+    ETag(String),
+    LastModified(String),
+}
+
+impl Validator {
+    pub(super) fn from_headers(headers: &HashMap<String, String>) -> Option<Validator> {
+        if let Some(tag) = headers.get("etag") {
+            return Some(Validator::ETag(tag.trim().to_string()));
+        }
+        headers
+            .get("last-modified")
+            .map(|d| Validator::LastModified(d.trim().to_string()))
+    }
+
+    pub(super) fn to_line(&self) -> String {
+        match self {
+            Validator::ETag(t) => format!("etag {t}"),
+            Validator::LastModified(d) => format!("last-modified {d}"),
+        }
+    }
+
+    pub(super) fn from_line(line: &str) -> Option<Validator> {
+        let (kind, value) = line.split_once(' ')?;
+        match kind {
+            "etag" => Some(Validator::ETag(value.to_string())),
+            "last-modified" => Some(Validator::LastModified(value.to_string())),
+            _ => None,
+        }
+    }
+}
+
+/// FNV-1a, 64 bits: stable across runs and platforms; enough to name a URL's entry and to
+/// catch a damaged body (not an adversary).
+pub(super) fn fnv1a64(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+/// The most bytes of a cache entry's metadata (a URL, a validator and a checksum).
+pub(super) const MAX_META_BYTES: u64 = 16 << 10;
+
+/// Fetched bodies on disk, one `{key}.body` and `{key}.meta` per URL, the key a hash of the
+/// URL. The metadata holds three lines: the URL, the validator, and `fnv1a64 {hex} {length}`
+/// of the body. Each is written to a temporary file and renamed into place, the body before
+/// its metadata, so that an interrupted write leaves a body that its metadata does not match
+/// (and that is dropped) rather than a torn file. The least recently used go first beyond
+/// `max_bytes`.
+pub(super) struct DiskCache {
+    pub(super) dir: PathBuf,
+    pub(super) max_bytes: u64,
+    pub(super) bytes: u64,
+    pub(super) clock: u64,
+    /// Key to (body bytes, last use).
+    pub(super) entries: HashMap<String, (u64, u64)>,
+}
+
+impl DiskCache {
+    pub(super) fn open(config: &HttpCacheConfig) -> Result<DiskCache, HttpError> {
+        let err = |source| HttpError::Cache {
+            path: config.dir.clone(),
+            source,
+        };
+        std::fs::create_dir_all(&config.dir).map_err(err)?;
+        let mut cache = DiskCache {
+            dir: config.dir.clone(),
+            max_bytes: config.max_bytes,
+            bytes: 0,
+            clock: 0,
+            entries: HashMap::new(),
+        };
+        for entry in std::fs::read_dir(&config.dir).map_err(err)? {
+            let Ok(entry) = entry else { continue };
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let Some(key) = name.strip_suffix(".body") else {
+                continue;
+            };
+            if let Ok(meta) = entry.metadata() {
+                cache.entries.insert(key.to_string(), (meta.len(), 0));
+                cache.bytes += meta.len();
+            }
+        }
+        cache.evict(0);
+        Ok(cache)
+    }
+
+    pub(super) fn key(url: &str) -> String {
+        format!("{:016x}", fnv1a64(url.as_bytes()))
+    }
+
+    pub(super) fn path(&self, key: &str, suffix: &str) -> PathBuf {
+        self.dir.join(format!("{key}.{suffix}"))
+    }
+
+    /// The cached validator and body of `url` (at most `max` bytes), if its entry is whole; a
+    /// damaged entry is removed (with a warning) so that the file is fetched again
+    /// unconditionally.
+    pub(super) fn get(&mut self, url: &str, max: u64) -> Option<(Validator, Vec<u8>)> {
+        let key = Self::key(url);
+        self.entries.get(&key)?;
+        match self.read_entry(&key, url, max) {
+            Ok(found) => {
+                self.clock += 1;
+                if let Some(e) = self.entries.get_mut(&key) {
+                    e.1 = self.clock;
+                }
+                Some(found)
+            }
+            Err(problem) => {
+                log::warn!(
+                    "{}: cached copy of {url} dropped ({problem}); fetching it again",
+                    self.dir.display()
+                );
+                self.remove(&key);
+                None
+            }
+        }
+    }
+
+    pub(super) fn read_entry(
+        &self,
+        key: &str,
+        url: &str,
+        max: u64,
+    ) -> Result<(Validator, Vec<u8>), String> {
+        let meta_path = self.path(key, "meta");
+        let meta_len = std::fs::metadata(&meta_path)
+            .map_err(|e| format!("metadata: {e}"))?
+            .len();
+        if meta_len > MAX_META_BYTES {
+            return Err(format!("metadata of {meta_len} bytes"));
+        }
+        let meta = std::fs::read(&meta_path).map_err(|e| format!("metadata: {e}"))?;
+        let meta = String::from_utf8(meta).map_err(|_| "metadata not UTF-8".to_string())?;
+        let lines: Vec<&str> = meta.lines().collect();
+        let [meta_url, validator, sum] = lines[..] else {
+            return Err(format!("metadata has {} lines, not 3", lines.len()));
+        };
+        if meta_url != url {
+            return Err(format!("metadata names {meta_url}"));
+        }
+        let validator = Validator::from_line(validator).ok_or("no validator in metadata")?;
+        let (hash, len) = sum
+            .strip_prefix("fnv1a64 ")
+            .and_then(|s| s.split_once(' '))
+            .and_then(|(h, l)| Some((u64::from_str_radix(h, 16).ok()?, l.parse::<u64>().ok()?)))
+            .ok_or("no checksum in metadata")?;
+        let body_path = self.path(key, "body");
+        let size = std::fs::metadata(&body_path)
+            .map_err(|e| format!("body: {e}"))?
+            .len();
+        if size != len || size > max {
+            return Err(format!("body of {size} bytes, {len} expected"));
+        }
+        let body = std::fs::read(&body_path).map_err(|e| format!("body: {e}"))?;
+        if body.len() as u64 != len || fnv1a64(&body) != hash {
+            return Err("body does not match its checksum".into());
+        }
+        Ok((validator, body))
+    }
+
+    pub(super) fn put(&mut self, url: &str, validator: &Validator, body: &[u8]) {
+        let size = body.len() as u64;
+        if size > self.max_bytes {
+            return;
+        }
+        let key = Self::key(url);
+        self.remove(&key);
+        self.evict(size);
+        let meta = format!(
+            "{url}\n{}\nfnv1a64 {:016x} {size}\n",
+            validator.to_line(),
+            fnv1a64(body)
+        );
+        let write = |suffix: &str, bytes: &[u8]| {
+            let tmp = self.path(&key, &format!("{suffix}.tmp"));
+            std::fs::write(&tmp, bytes)
+                .and_then(|()| std::fs::rename(&tmp, self.path(&key, suffix)))
+        };
+        if let Err(e) = write("body", body).and_then(|()| write("meta", meta.as_bytes())) {
+            log::warn!("{}: tile cache: {e}", self.dir.display());
+            let _ = std::fs::remove_file(self.path(&key, "body"));
+            return;
+        }
+        self.clock += 1;
+        self.entries.insert(key, (size, self.clock));
+        self.bytes += size;
+    }
+
+    pub(super) fn remove(&mut self, key: &str) {
+        if let Some((size, _)) = self.entries.remove(key) {
+            self.bytes -= size;
+            let _ = std::fs::remove_file(self.path(key, "body"));
+            let _ = std::fs::remove_file(self.path(key, "meta"));
+        }
+    }
+
+    /// Removes the least recently used entries until `incoming` more bytes fit.
+    pub(super) fn evict(&mut self, incoming: u64) {
+        while self.bytes + incoming > self.max_bytes {
+            let Some(oldest) = self
+                .entries
+                .iter()
+                .min_by_key(|(_, (_, used))| *used)
+                .map(|(k, _)| k.clone())
+            else {
+                break;
+            };
+            self.remove(&oldest);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+
+    #[test]
+    fn the_disk_cache_stays_within_its_bytes_and_drops_the_least_recently_used() {
+        let tmp = tempfile::tempdir().unwrap();
+        let config = HttpCacheConfig {
+            dir: tmp.path().join("cache"),
+            max_bytes: 250,
+        };
+        let mut cache = DiskCache::open(&config).unwrap();
+        let tag = Validator::ETag("\"a\"".into());
+        cache.put("http://h/a", &tag, &[1; 100]);
+        cache.put("http://h/b", &tag, &[2; 100]);
+        assert!(cache.get("http://h/a", 1000).is_some()); // a is now more recent than b
+        cache.put("http://h/c", &tag, &[3; 100]);
+        assert!(cache.bytes <= 250);
+        assert!(
+            cache.get("http://h/b", 1000).is_none(),
+            "b was the least recently used"
+        );
+        assert_eq!(cache.get("http://h/a", 1000).unwrap().1, vec![1; 100]);
+        assert_eq!(
+            cache.get("http://h/c", 1000).unwrap(),
+            (tag.clone(), vec![3; 100])
+        );
+        cache.put("http://h/huge", &tag, &[0; 300]);
+        assert!(cache.get("http://h/huge", 1000).is_none());
+        // Reopened, it finds its files and still keeps within its bytes.
+        drop(cache);
+        let small = HttpCacheConfig {
+            max_bytes: 100,
+            ..config
+        };
+        let cache = DiskCache::open(&small).unwrap();
+        assert!(cache.bytes <= 100 && cache.entries.len() == 1);
+    }
+
+    /// A body that its metadata does not match (a flipped byte, another length, a body larger
+    /// than the file may be), and metadata that is torn or from another URL, are each dropped:
+    /// both files removed and the bytes no longer counted.
+    #[test]
+    fn a_damaged_cache_entry_is_dropped() {
+        let tmp = tempfile::tempdir().unwrap();
+        let config = HttpCacheConfig {
+            dir: tmp.path().to_path_buf(),
+            max_bytes: 1 << 20,
+        };
+        let mut cache = DiskCache::open(&config).unwrap();
+        let tag = Validator::LastModified("Wed, 21 Oct 2015 07:28:00 GMT".into());
+        let url = "http://h/w/world.toml";
+        let key = DiskCache::key(url);
+        let (body_path, meta_path) = (cache.path(&key, "body"), cache.path(&key, "meta"));
+        type Damage = fn(&Path, &Path);
+        let damages: [(&str, Damage); 6] = [
+            ("a flipped byte", |b, _| {
+                let mut bytes = std::fs::read(b).unwrap();
+                bytes[3] ^= 0x80;
+                std::fs::write(b, bytes).unwrap();
+            }),
+            ("a shorter body", |b, _| {
+                std::fs::write(b, b"name = ").unwrap()
+            }),
+            ("no body", |b, _| std::fs::remove_file(b).unwrap()),
+            ("torn metadata", |_, m| {
+                let meta = std::fs::read(m).unwrap();
+                std::fs::write(m, &meta[..meta.len() / 2]).unwrap();
+            }),
+            ("metadata of the old format", |_, m| {
+                let meta = std::fs::read_to_string(m).unwrap();
+                let two: Vec<&str> = meta.lines().take(2).collect();
+                std::fs::write(m, two.join("\n")).unwrap();
+            }),
+            ("metadata of another URL", |_, m| {
+                let meta = std::fs::read_to_string(m).unwrap();
+                std::fs::write(m, meta.replace("world.toml", "other.toml")).unwrap();
+            }),
+        ];
+        for (what, damage) in damages {
+            cache.put(url, &tag, b"name = \"santa-cruz\"\n");
+            assert_eq!(
+                cache.get(url, 1000).unwrap(),
+                (tag.clone(), b"name = \"santa-cruz\"\n".to_vec()),
+                "{what}: whole before"
+            );
+            damage(&body_path, &meta_path);
+            assert!(cache.get(url, 1000).is_none(), "{what}: used");
+            assert!(!body_path.exists() && !meta_path.exists(), "{what}: kept");
+            assert_eq!((cache.bytes, cache.entries.len()), (0, 0), "{what}");
+        }
+        // A whole body larger than the file may now be is not used either.
+        cache.put(url, &tag, &[b'a'; 100]);
+        assert!(cache.get(url, 99).is_none());
+        assert!(!body_path.exists());
+    }
+}

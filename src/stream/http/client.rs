@@ -1,0 +1,270 @@
+//! The requests of an [`super::HttpSource`]: deadlines, retries with backoff, redirects, and
+//! bodies read no further than the most a file may hold, through the disk cache.
+
+use std::collections::HashSet;
+use std::io::Read;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+
+use super::cache::{DiskCache, Validator};
+use super::{HttpError, HttpOptions, MAX_REDIRECTS};
+
+/// The most bytes of a response's status line and headers (a server that sends more is
+/// refused rather than buffered).
+const MAX_HEAD_BYTES: usize = 64 << 10;
+
+/// The requests, their retries, the cache and the counters.
+pub(super) struct Client {
+    pub(super) options: HttpOptions,
+    pub(super) cache: Option<Mutex<DiskCache>>,
+    /// Pairs of hosts (from, to) whose redirect has been reported.
+    pub(super) redirects_seen: Mutex<HashSet<(String, String)>>,
+    pub(super) requests: AtomicU64,
+    pub(super) retries: AtomicU64,
+    pub(super) cache_hits: AtomicU64,
+    pub(super) bytes: AtomicU64,
+}
+
+impl Client {
+    /// Fetches one file of at most `max` bytes (through the cache when there is one),
+    /// retrying transient failures.
+    pub(super) fn fetch(
+        &self,
+        url: &str,
+        max: u64,
+        cancelled: Option<&AtomicBool>,
+    ) -> Result<Vec<u8>, HttpError> {
+        let cached = self
+            .cache
+            .as_ref()
+            .and_then(|c| c.lock().ok().and_then(|mut c| c.get(url, max)));
+        let is_cancelled = || cancelled.is_some_and(|c| c.load(Ordering::Relaxed));
+        let mut attempt = 0;
+        loop {
+            if is_cancelled() {
+                return Err(HttpError::Cancelled { url: url.into() });
+            }
+            attempt += 1;
+            self.requests.fetch_add(1, Ordering::Relaxed);
+            match self.fetch_once(url, max, attempt, &cached) {
+                Ok(bytes) => return Ok(bytes),
+                Err(e) if attempt <= self.options.retries && is_transient(&e) => {
+                    self.retries.fetch_add(1, Ordering::Relaxed);
+                    let wait = self.options.retry_delay(attempt);
+                    log::warn!(
+                        "{e}; retry {attempt} of {} in {:.1} s",
+                        self.options.retries,
+                        wait.as_secs_f64()
+                    );
+                    // In slices, so that a tile that leaves the wanted set stops waiting.
+                    let slice = Duration::from_millis(50);
+                    let mut left = wait;
+                    while !left.is_zero() && !is_cancelled() {
+                        std::thread::sleep(left.min(slice));
+                        left = left.saturating_sub(slice);
+                    }
+                }
+                Err(e) => return Err(e),
+            }
+        }
+    }
+
+    /// One request: its response checked and its body read, at most `max` bytes (or the
+    /// cached body on a `304`).
+    pub(super) fn fetch_once(
+        &self,
+        url: &str,
+        max: u64,
+        attempts: u32,
+        cached: &Option<(Validator, Vec<u8>)>,
+    ) -> Result<Vec<u8>, HttpError> {
+        let timeout_s = self.options.timeout_s();
+        let mut request = minreq::get(url)
+            .with_timeout(timeout_s)
+            .with_max_redirects(MAX_REDIRECTS)
+            .with_max_headers_size(MAX_HEAD_BYTES)
+            .with_max_status_line_length(MAX_HEAD_BYTES);
+        if let Some((validator, _)) = cached {
+            request = match validator {
+                Validator::ETag(tag) => request.with_header("If-None-Match", tag.as_str()),
+                Validator::LastModified(date) => {
+                    request.with_header("If-Modified-Since", date.as_str())
+                }
+            };
+        }
+        let timed_out = || HttpError::TimedOut {
+            url: url.into(),
+            timeout_s,
+        };
+        let mut response = match request.send_lazy() {
+            Ok(response) => response,
+            Err(minreq::Error::IoError(e)) if is_timeout(&e) => return Err(timed_out()),
+            Err(minreq::Error::IoError(e)) => {
+                return Err(HttpError::Transport {
+                    url: url.into(),
+                    attempts,
+                    message: e.to_string(),
+                });
+            }
+            Err(e @ minreq::Error::AddressNotFound) => {
+                return Err(HttpError::Transport {
+                    url: url.into(),
+                    attempts,
+                    message: e.to_string(),
+                });
+            }
+            Err(e @ minreq::Error::TooManyRedirections) => {
+                return Err(HttpError::BadResponse {
+                    url: url.into(),
+                    message: format!("{e}: at most {MAX_REDIRECTS} are followed"),
+                });
+            }
+            Err(e) => {
+                return Err(HttpError::BadResponse {
+                    url: url.into(),
+                    message: e.to_string(),
+                });
+            }
+        };
+        self.note_redirect(url, &response.url);
+        if response.status_code == 304
+            && let Some((_, body)) = cached
+        {
+            self.cache_hits.fetch_add(1, Ordering::Relaxed);
+            return Ok(body.clone());
+        }
+        if !(200..300).contains(&response.status_code) {
+            return Err(HttpError::Status {
+                url: url.into(),
+                status: response.status_code,
+                reason: response.reason_phrase.clone(),
+                attempts,
+            });
+        }
+        // minreq has refused a Content-Length that is not a number; chunked bodies have none.
+        let expected = response
+            .headers
+            .get("content-length")
+            .and_then(|v| v.trim().parse::<u64>().ok());
+        if let Some(size) = expected
+            && size > max
+        {
+            return Err(HttpError::TooLarge {
+                url: url.into(),
+                size,
+                max,
+            });
+        }
+        let chunked = response
+            .headers
+            .get("transfer-encoding")
+            .is_some_and(|v| v.trim().eq_ignore_ascii_case("chunked"));
+        let validator = Validator::from_headers(&response.headers);
+        let capacity = expected.unwrap_or(64 << 10).min(max);
+        let mut body = Vec::with_capacity(capacity as usize);
+        // One byte past the limit tells a body that is too long from one that just fits.
+        let read = Read::take(&mut response, max.saturating_add(1)).read_to_end(&mut body);
+        self.bytes.fetch_add(body.len() as u64, Ordering::Relaxed);
+        match read {
+            Ok(_) => {}
+            Err(e) if is_timeout(&e) => return Err(timed_out()),
+            Err(e) => {
+                return Err(HttpError::Transport {
+                    url: url.into(),
+                    attempts,
+                    message: format!("body after {} bytes: {e}", body.len()),
+                });
+            }
+        }
+        if body.len() as u64 > max {
+            return Err(HttpError::BodyTooLong {
+                url: url.into(),
+                max,
+            });
+        }
+        // minreq replaces Transfer-Encoding by a Content-Length once it has seen the last
+        // chunk, and ends the body without an error when the connection closes mid-chunk.
+        if chunked && response.headers.contains_key("transfer-encoding") {
+            return Err(HttpError::ChunksCutShort {
+                url: url.into(),
+                received: body.len() as u64,
+                attempts,
+            });
+        }
+        if let Some(expected) = expected
+            && (body.len() as u64) < expected
+        {
+            return Err(HttpError::Truncated {
+                url: url.into(),
+                expected,
+                received: body.len() as u64,
+                attempts,
+            });
+        }
+        if let (Some(cache), Some(validator)) = (&self.cache, validator)
+            && let Ok(mut cache) = cache.lock()
+        {
+            cache.put(url, &validator, &body);
+        }
+        Ok(body)
+    }
+
+    /// Warns, once per pair of hosts, that a request for `asked` was redirected to another
+    /// host (`answered` is the URL that answered).
+    pub(super) fn note_redirect(&self, asked: &str, answered: &str) {
+        let (from, to) = (host_of(asked), host_of(answered));
+        if answered.is_empty() || from.eq_ignore_ascii_case(to) {
+            return;
+        }
+        let pair = (from.to_string(), to.to_string());
+        if let Ok(mut seen) = self.redirects_seen.lock()
+            && seen.insert(pair)
+        {
+            log::warn!(
+                "{asked}: redirected from host {from} to host {to} ({answered}); \
+                 further redirects between these hosts are followed silently"
+            );
+        }
+    }
+}
+
+/// The `host[:port]` of an `http://` URL.
+pub(super) fn host_of(url: &str) -> &str {
+    let rest = url.split_once("://").map_or(url, |(_, r)| r);
+    rest.split(['/', '?', '#']).next().unwrap_or(rest)
+}
+
+/// Whether an I/O error is the deadline passing (minreq's own, or a socket timeout).
+pub(super) fn is_timeout(e: &std::io::Error) -> bool {
+    matches!(
+        e.kind(),
+        std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
+    )
+}
+
+/// Failures worth another try: the connection, the server's own errors, a body cut short.
+pub(super) fn is_transient(e: &HttpError) -> bool {
+    match e {
+        HttpError::Transport { .. }
+        | HttpError::Truncated { .. }
+        | HttpError::ChunksCutShort { .. } => true,
+        HttpError::Status { status, .. } => (500..600).contains(status),
+        _ => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn redirect_hosts_are_the_authority_of_the_url() {
+        assert_eq!(
+            host_of("http://a.example:8080/w/world.toml"),
+            "a.example:8080"
+        );
+        assert_eq!(host_of("http://b.example?x=1"), "b.example");
+        assert_eq!(host_of("http://c"), "c");
+    }
+}

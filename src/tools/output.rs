@@ -1,0 +1,428 @@
+//! Output files and folders of the tools. Every file the tools write goes through
+//! [`write_atomic`] (whole or not at all), and every output folder is held by an [`OutDir`]
+//! (a lock file naming the process) while a run writes into it.
+
+use std::fs::File;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Why an output file could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write {}: {source}", path.display())]
+pub struct WriteError {
+    /// The file.
+    pub path: PathBuf,
+    /// What failed.
+    #[source]
+    pub source: std::io::Error,
+}
+
+/// Writes `file` whole or not at all: `write` fills a temporary file beside it (a hidden name
+/// ending in `.tmp`, in the same folder so that the rename is atomic), which is flushed to disk
+/// and renamed over `file`. If anything fails (`write` itself, a full disk, the rename), the
+/// temporary file is removed and `file` is left as it was: absent, or its old contents.
+pub fn write_atomic(
+    file: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), WriteError> {
+    let err = |source| WriteError {
+        path: file.to_path_buf(),
+        source,
+    };
+    let Some(name) = file.file_name() else {
+        return Err(err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a file name",
+        )));
+    };
+    let dir = match file.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    // Unique within the process too: frames are written on a thread of their own.
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let tmp = dir.join(format!(
+        ".{}.{}-{}.tmp",
+        name.to_string_lossy(),
+        std::process::id(),
+        NEXT.fetch_add(1, Ordering::Relaxed)
+    ));
+    let created = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .map_err(err)?;
+    let result = (|| {
+        let mut w = std::io::BufWriter::new(created);
+        write(&mut w)?;
+        let f = w
+            .into_inner()
+            .map_err(std::io::IntoInnerError::into_error)?;
+        // A full disk may only say so when the data is flushed: that error surfaces here,
+        // before the rename.
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, file)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(err(e));
+    }
+    Ok(())
+}
+
+/// Writes `value` as pretty JSON through [`write_atomic`].
+pub fn write_json<T: serde::Serialize>(file: &Path, value: &T) -> Result<(), WriteError> {
+    write_atomic(file, |w| Ok(serde_json::to_writer_pretty(w, value)?))
+}
+
+/// Writes `text` (a CSV table, say) through [`write_atomic`].
+pub fn write_text(file: &Path, text: &str) -> Result<(), WriteError> {
+    write_atomic(file, |w| w.write_all(text.as_bytes()))
+}
+
+/// Writes an 8-bit image as a PNG through [`write_atomic`].
+pub fn write_png<P, C>(file: &Path, image: &image::ImageBuffer<P, C>) -> Result<(), WriteError>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+    C: std::ops::Deref<Target = [P::Subpixel]>,
+{
+    write_atomic(file, |w| {
+        image
+            .write_with_encoder(image::codecs::png::PngEncoder::new(w))
+            .map_err(|e| match e {
+                image::ImageError::IoError(e) => e,
+                e => std::io::Error::other(e),
+            })
+    })
+}
+
+/// The file in an output folder that a run holds locked while it writes there; it holds the
+/// run's process id and tool, and is removed when the run ends.
+pub const LOCK_FILE: &str = ".verdant.lock";
+
+/// Why an output folder could not be taken.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum OutDirError {
+    /// The folder could not be created.
+    #[error("cannot create output folder {}: {source}", path.display())]
+    Create {
+        /// The folder.
+        path: PathBuf,
+        /// What failed.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Its lock file could not be opened or locked.
+    #[error("cannot lock output folder {} (its file {LOCK_FILE}): {source}", path.display())]
+    Lock {
+        /// The folder.
+        path: PathBuf,
+        /// What failed.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Another run writes into it.
+    #[error(
+        "output folder {} is in use by {}; wait for it or choose another --out",
+        path.display(),
+        owner_words(*pid, tool)
+    )]
+    InUse {
+        /// The folder.
+        path: PathBuf,
+        /// The other run's process id, when its lock file says.
+        pid: Option<u32>,
+        /// The other run's tool (`fly`, `bench lod`, ...), when its lock file says.
+        tool: String,
+    },
+}
+
+fn owner_words(pid: Option<u32>, tool: &str) -> String {
+    match (pid, tool.is_empty()) {
+        (Some(pid), false) => format!("verdant process {pid} ({tool})"),
+        (Some(pid), true) => format!("verdant process {pid}"),
+        (None, _) => "another verdant process".to_owned(),
+    }
+}
+
+/// An output folder held by a run. Its lock file ([`LOCK_FILE`]) is locked with an OS file lock
+/// for as long as the `OutDir` lives, so that a second run into the same folder is refused
+/// instead of mixing its files with this one's; the OS releases the lock when the process ends,
+/// however it ends. If the run created the folder and fails before writing anything into it,
+/// the folder is removed again (only while empty), so an early failure leaves no trace.
+pub struct OutDir {
+    path: PathBuf,
+    created: bool,
+    kept: bool,
+    lock: Option<File>,
+}
+
+impl OutDir {
+    /// Creates `path` (and its parents) where needed and locks it for this process, named in
+    /// the lock by its first argument (the `verdant` subcommand).
+    pub fn create(path: &Path) -> Result<Self, OutDirError> {
+        let tool = std::env::args()
+            .nth(1)
+            .filter(|a| !a.starts_with('-'))
+            .unwrap_or_default();
+        Self::create_for(path, &tool)
+    }
+
+    /// Creates `path` (and its parents) where needed and locks it for `tool` (`fly`,
+    /// `bench lod`, ...), which a refused second run names.
+    pub fn create_for(path: &Path, tool: &str) -> Result<Self, OutDirError> {
+        let created = !path.exists();
+        std::fs::create_dir_all(path).map_err(|source| OutDirError::Create {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        // From here on, dropping `dir` removes a folder this run created.
+        let mut dir = Self {
+            path: path.to_path_buf(),
+            created,
+            kept: false,
+            lock: None,
+        };
+        dir.lock = lock_folder(path, tool)?;
+        Ok(dir)
+    }
+
+    /// The folder.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The run succeeded: the folder stays (its lock is let go).
+    pub fn keep(mut self) {
+        self.kept = true;
+    }
+}
+
+/// Takes the lock of `dir` for `tool`; `None` where the file system has no locks.
+fn lock_folder(dir: &Path, tool: &str) -> Result<Option<File>, OutDirError> {
+    let file = dir.join(LOCK_FILE);
+    let failed = |source| OutDirError::Lock {
+        path: dir.to_path_buf(),
+        source,
+    };
+    // A run that lets go of the lock removes the file first: a file locked here after that
+    // removal is no longer the folder's lock, and the lock is taken again on the new one.
+    for _ in 0..100 {
+        let mut f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&file)
+            .map_err(failed)?;
+        match f.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let mut text = String::new();
+                let _ = f.read_to_string(&mut text);
+                let mut words = text.split_whitespace();
+                let pid = words.next().and_then(|w| w.parse().ok());
+                let tool = words.collect::<Vec<_>>().join(" ");
+                return Err(OutDirError::InUse {
+                    path: dir.to_path_buf(),
+                    pid,
+                    tool,
+                });
+            }
+            Err(std::fs::TryLockError::Error(e)) if e.kind() == std::io::ErrorKind::Unsupported => {
+                log::warn!(
+                    "the file system of {} has no file locks: two runs into it would not be told apart",
+                    dir.display()
+                );
+                return Ok(None);
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(failed(e)),
+        }
+        if !same_file(&f, &file) {
+            continue;
+        }
+        f.set_len(0).map_err(failed)?;
+        f.write_all(format!("{} {tool}\n", std::process::id()).as_bytes())
+            .map_err(failed)?;
+        return Ok(Some(f));
+    }
+    Err(failed(std::io::Error::other(
+        "its lock file kept being replaced",
+    )))
+}
+
+/// Whether `path` still names the open file `f`.
+#[cfg(unix)]
+fn same_file(f: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (f.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+#[cfg(not(unix))]
+fn same_file(_: &File, path: &Path) -> bool {
+    path.exists()
+}
+
+impl Drop for OutDir {
+    fn drop(&mut self) {
+        if let Some(lock) = self.lock.take() {
+            // Removed while still locked (see `lock_folder`).
+            let _ = std::fs::remove_file(self.path.join(LOCK_FILE));
+            drop(lock);
+        }
+        if self.created && !self.kept {
+            // Fails, and so keeps the folder, when anything was written into it.
+            let _ = std::fs::remove_dir(&self.path);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Passes `left` bytes on, then fails as a full disk does.
+    struct FailAfter<'a> {
+        inner: &'a mut dyn Write,
+        left: usize,
+    }
+
+    impl Write for FailAfter<'_> {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            if self.left == 0 {
+                return Err(std::io::Error::from(std::io::ErrorKind::StorageFull));
+            }
+            let n = buf.len().min(self.left);
+            self.left -= n;
+            self.inner.write(&buf[..n])
+        }
+
+        fn flush(&mut self) -> std::io::Result<()> {
+            self.inner.flush()
+        }
+    }
+
+    fn names(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn a_write_that_fails_part_way_leaves_no_file_and_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("frame_00003.png");
+        // Noise: a PNG far larger than the write buffer.
+        let img = image::RgbaImage::from_fn(128, 128, |x, y| {
+            let h = (x * 7919 + y * 104_729).wrapping_mul(2_654_435_761);
+            image::Rgba([(h >> 24) as u8, (h >> 16) as u8, (h >> 8) as u8, 255])
+        });
+        let fail = |left| {
+            write_atomic(&file, |w| {
+                let mut w = FailAfter { inner: w, left };
+                img.write_with_encoder(image::codecs::png::PngEncoder::new(&mut w))
+                    .map_err(std::io::Error::other)
+            })
+            .unwrap_err()
+        };
+        // Failing at once, after some bytes, and after more than the buffer holds.
+        for left in [0, 100, 20_000] {
+            let e = fail(left);
+            assert_eq!(e.path, file);
+            assert!(e.to_string().contains("frame_00003.png"), "{e}");
+            assert!(names(dir.path()).is_empty(), "{:?}", names(dir.path()));
+        }
+        // A file already there keeps its contents when a new write fails.
+        std::fs::write(&file, b"old frame").unwrap();
+        fail(100);
+        assert_eq!(std::fs::read(&file).unwrap(), b"old frame");
+        assert_eq!(names(dir.path()), ["frame_00003.png"]);
+        // And a whole write replaces it.
+        write_png(&file, &img).unwrap();
+        assert_eq!(image::open(&file).unwrap().to_rgba8(), img);
+        assert_eq!(names(dir.path()), ["frame_00003.png"]);
+    }
+
+    #[test]
+    fn json_and_text_are_written_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        write_json(
+            &dir.path().join("r.json"),
+            &serde_json::json!({ "a": [1, 2] }),
+        )
+        .unwrap();
+        write_text(&dir.path().join("t.csv"), "a,b\n1,2\n").unwrap();
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join("r.json")).unwrap())
+                .unwrap();
+        assert_eq!(v["a"][1], 2);
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("t.csv")).unwrap(),
+            "a,b\n1,2\n"
+        );
+        assert_eq!(names(dir.path()), ["r.json", "t.csv"]);
+        // Into a folder that does not exist: an error naming the file, nothing created.
+        let e = write_text(&dir.path().join("no/t.csv"), "x").unwrap_err();
+        assert!(e.to_string().contains("t.csv"), "{e}");
+        assert!(!dir.path().join("no").exists());
+    }
+
+    #[test]
+    fn a_held_output_folder_refuses_a_second_run_until_it_is_let_go() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("out");
+        let first = OutDir::create_for(&out, "fly").unwrap();
+        let lock = std::fs::read_to_string(out.join(LOCK_FILE)).unwrap();
+        assert_eq!(lock, format!("{} fly\n", std::process::id()));
+        // A second run (another open of the lock file: flock locks are per open file) is
+        // refused, naming the folder, the first run's process and tool, and what to do.
+        let e = match OutDir::create_for(&out, "bench lod") {
+            Err(e) => e,
+            Ok(_) => panic!("a second run was let into a held folder"),
+        };
+        let text = e.to_string();
+        assert!(matches!(e, OutDirError::InUse { pid: Some(p), .. } if p == std::process::id()));
+        for needle in [
+            out.display().to_string(),
+            format!("verdant process {} (fly)", std::process::id()),
+            "--out".to_owned(),
+        ] {
+            assert!(text.contains(&needle), "{needle:?} not in {text:?}");
+        }
+        // The refused run took nothing away: the folder and its lock are the first run's.
+        assert!(out.join(LOCK_FILE).exists());
+        // Let go (the run failed with nothing written): the folder it made is removed.
+        drop(first);
+        assert!(!out.exists());
+        // Then a second run gets in, and a kept folder loses only its lock file.
+        let second = OutDir::create_for(&out, "bench lod").unwrap();
+        std::fs::write(out.join("report.json"), "{}").unwrap();
+        second.keep();
+        assert_eq!(names(&out), ["report.json"]);
+        let third = OutDir::create(&out).unwrap();
+        drop(third);
+        assert_eq!(names(&out), ["report.json"]);
+    }
+
+    #[test]
+    fn a_stale_lock_file_does_not_hold_the_folder() {
+        // A run that was killed leaves its lock file, but no lock: the OS let go of it.
+        let tmp = tempfile::tempdir().unwrap();
+        std::fs::write(tmp.path().join(LOCK_FILE), "4000000000 fly\n").unwrap();
+        let dir = OutDir::create_for(tmp.path(), "fly").unwrap();
+        let lock = std::fs::read_to_string(tmp.path().join(LOCK_FILE)).unwrap();
+        assert_eq!(lock, format!("{} fly\n", std::process::id()));
+        dir.keep();
+        assert!(names(tmp.path()).is_empty());
+    }
+}

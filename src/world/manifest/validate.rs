@@ -1,0 +1,600 @@
+//! [`Manifest::validate`]: every number finite and within the range its field documents, with
+//! the field and the range named in the error.
+
+use std::collections::HashSet;
+use std::path::Path;
+
+use super::*;
+
+impl Manifest {
+    /// Checks that every value is finite and within what the format supports; `path` is only
+    /// used in error messages.
+    pub fn validate(&self, path: &Path) -> Result<(), WorldError> {
+        let v = Validator { path };
+        let p = &self.pyramid;
+
+        for axis in 0..2 {
+            v.positive(&format!("extent_m[{axis}]"), self.extent_m[axis])?;
+        }
+        v.positive("pyramid.root_tile_size_m", p.root_tile_size_m)?;
+        v.at_most(
+            "pyramid.root_tile_size_m",
+            p.root_tile_size_m,
+            MAX_ROOT_TILE_M,
+            " m",
+        )?;
+        for axis in 0..2 {
+            if p.root_tiles[axis] == 0 {
+                return Err(v.non_positive(&format!("pyramid.root_tiles[{axis}]"), 0.0));
+            }
+        }
+        if !(8..=1024).contains(&p.tile_cells) || !p.tile_cells.is_power_of_two() {
+            return Err(v.out_of_range(
+                "pyramid.tile_cells",
+                p.tile_cells,
+                "a power of two in 8..=1024",
+            ));
+        }
+        if p.border > 8 {
+            return Err(v.out_of_range("pyramid.border", p.border, "in 0..=8"));
+        }
+        if !(1..=12).contains(&p.stored_levels) {
+            return Err(v.out_of_range("pyramid.stored_levels", p.stored_levels, "in 1..=12"));
+        }
+        let levels = u32::from(p.stored_levels) + u32::from(p.derived_levels);
+        if levels > 24 {
+            return Err(v.out_of_range(
+                "pyramid.stored_levels + pyramid.derived_levels",
+                levels,
+                "at most 24",
+            ));
+        }
+        let roots = u64::from(p.root_tiles[0]) * u64::from(p.root_tiles[1]);
+        if roots > MAX_ROOT_TILES {
+            return Err(WorldError::TooManyTiles {
+                path: path.to_path_buf(),
+                field: "pyramid.root_tiles".into(),
+                count: roots,
+                max: MAX_ROOT_TILES,
+            });
+        }
+        for axis in 0..2 {
+            // Tile coordinates of the finest level, derived or stored, must fit a u32.
+            if u64::from(p.root_tiles[axis]) << (levels - 1) > u64::from(u32::MAX) {
+                return Err(v.out_of_range(
+                    &format!("pyramid.root_tiles[{axis}]"),
+                    p.root_tiles[axis],
+                    "small enough that the finest level's tile count fits in 32 bits",
+                ));
+            }
+        }
+        let finest = roots << (2 * (u32::from(p.stored_levels) - 1));
+        if finest > MAX_FINEST_TILES {
+            return Err(WorldError::TooManyTiles {
+                path: path.to_path_buf(),
+                field: "pyramid.root_tiles and pyramid.stored_levels".into(),
+                count: finest,
+                max: MAX_FINEST_TILES,
+            });
+        }
+        for axis in 0..2 {
+            if self.extent_m[axis] > MAX_EXTENT_M {
+                return Err(v.out_of_range(
+                    &format!("extent_m[{axis}]"),
+                    self.extent_m[axis],
+                    "at most 10,000 km (10000000 m)",
+                ));
+            }
+            let grid_m = f64::from(p.root_tiles[axis]) * p.root_tile_size_m;
+            // Allow rounding in the last digits of a value written out and read back.
+            if self.extent_m[axis] > grid_m * (1.0 + 1e-9) {
+                return Err(WorldError::ExtentBeyondGrid {
+                    path: path.to_path_buf(),
+                    axis,
+                    extent_m: self.extent_m[axis],
+                    grid_m,
+                });
+            }
+        }
+
+        let [lo, hi] = self.height_range_m;
+        v.finite("height_range_m[0]", lo)?;
+        v.finite("height_range_m[1]", hi)?;
+        if lo >= hi {
+            return Err(WorldError::BadHeightRange {
+                path: path.to_path_buf(),
+                min: lo,
+                max: hi,
+            });
+        }
+        let [plo, phi] = crate::world::PLAUSIBLE_HEIGHTS_M;
+        if f64::from(lo) < plo || f64::from(hi) > phi {
+            return Err(v.out_of_range(
+                "height_range_m",
+                format!("[{lo}, {hi}]"),
+                &format!("within [{plo}, {phi}] m, the heights of a planet's surface"),
+            ));
+        }
+
+        if self.grass_types.is_empty() {
+            return Err(WorldError::NoGrassTypes {
+                path: path.to_path_buf(),
+            });
+        }
+        if self.grass_types.len() > MAX_GRASS_TYPES {
+            return Err(v.out_of_range(
+                "grass_types",
+                format!("{} types", self.grass_types.len()),
+                &format!(
+                    "at most {MAX_GRASS_TYPES} types (the renderer draws {MAX_GRASS_TYPES} kinds \
+                     of grass)"
+                ),
+            ));
+        }
+        for (index, g) in self.grass_types.iter().enumerate() {
+            let field = |f: &str| format!("grass_types[{index}].{f}");
+            v.all_within(&field("ground_color"), &g.ground_color, [0.0, 1.0], "")?;
+            v.all_within(&field("base_color"), &g.base_color, [0.0, 1.0], "")?;
+            v.all_within(&field("tip_color"), &g.tip_color, [0.0, 1.0], "")?;
+            v.all_finite(&field("height_m"), &g.height_m)?;
+            v.all_finite(&field("width_m"), &g.width_m)?;
+            v.within(&field("stiffness"), g.stiffness, [0.0, 1.0], "")?;
+            for (name, [min, max], most) in [
+                ("height_m", g.height_m, MAX_BLADE_HEIGHT_M),
+                ("width_m", g.width_m, MAX_BLADE_WIDTH_M),
+            ] {
+                if min < 0.0 || min > max {
+                    return Err(WorldError::BadGrassRange {
+                        path: path.to_path_buf(),
+                        index,
+                        name: g.name.clone(),
+                        field: name,
+                        min,
+                        max,
+                    });
+                }
+                v.at_most(&format!("{}[1]", field(name)), max, most, " m")?;
+            }
+        }
+
+        v.validate_ambient("wind", &self.wind)?;
+        let s = &self.sky;
+        v.angle("sky.sun_azimuth_deg", s.sun_azimuth_deg)?;
+        v.within(
+            "sky.sun_elevation_deg",
+            s.sun_elevation_deg,
+            [-90.0, 90.0],
+            " degrees",
+        )?;
+        v.all_within("sky.sun_color", &s.sun_color, [0.0, MAX_SUN_INTENSITY], "")?;
+        v.all_within("sky.sky_color", &s.sky_color, [0.0, 1.0], "")?;
+        v.all_within("sky.horizon_color", &s.horizon_color, [0.0, 1.0], "")?;
+        v.positive("sky.fog_distance_m", s.fog_distance_m)?;
+        v.at_most(
+            "sky.fog_distance_m",
+            s.fog_distance_m,
+            MAX_FOG_DISTANCE_M,
+            " m",
+        )?;
+        if let Some(source) = &self.source {
+            for axis in 0..2 {
+                let field = format!("source.cell_size_m[{axis}]");
+                v.positive(&field, source.cell_size_m[axis])?;
+                v.at_most(&field, source.cell_size_m[axis], MAX_EXTENT_M, " m")?;
+            }
+            if let Some(origin) = &source.origin {
+                let most = MAX_SOURCE_COORDINATE;
+                v.all_within("source.origin", origin, [-most, most], "")?;
+            }
+        }
+
+        let mut names = HashSet::new();
+        for (pi, cam) in self.paths.iter().enumerate() {
+            if !names.insert(cam.name.as_str()) {
+                return Err(WorldError::DuplicatePath {
+                    path: path.to_path_buf(),
+                    name: cam.name.clone(),
+                });
+            }
+            let duration = format!("paths[{pi}].duration_s");
+            v.positive(&duration, cam.duration_s)?;
+            v.at_most(&duration, cam.duration_s, MAX_TIME_S, " s")?;
+            if cam.keys.len() < 2 {
+                return Err(WorldError::PathTooShort {
+                    path: path.to_path_buf(),
+                    name: cam.name.clone(),
+                    keys: cam.keys.len(),
+                });
+            }
+            for (ki, key) in cam.keys.iter().enumerate() {
+                let field = |f: &str| format!("paths[{pi}].keys[{ki}].{f}");
+                v.time(&field("t_s"), key.t_s)?;
+                v.position(&field("position_m"), &key.position_m)?;
+                v.angle(&field("yaw_deg"), key.yaw_deg)?;
+                v.within(
+                    &field("pitch_deg"),
+                    key.pitch_deg,
+                    [-90.0, 90.0],
+                    " degrees",
+                )?;
+                if ki > 0 && key.t_s <= cam.keys[ki - 1].t_s {
+                    return Err(WorldError::PathKeysOutOfOrder {
+                        path: path.to_path_buf(),
+                        name: cam.name.clone(),
+                        index: ki,
+                        t_s: key.t_s,
+                        previous_t_s: cam.keys[ki - 1].t_s,
+                    });
+                }
+            }
+        }
+        self.validate_wind_scenes(&v)?;
+        for (pi, cam) in self.paths.iter().enumerate() {
+            self.validate_path_wind(&v, pi, cam)?;
+        }
+        if let Some(g) = &self.grass_peak {
+            v.positive("grass_peak.window_m", g.window_m)?;
+            v.at_most("grass_peak.window_m", g.window_m, MAX_ROOT_TILE_M, " m")?;
+            v.non_negative("grass_peak.short_m", g.short_m)?;
+            v.at_most("grass_peak.short_m", g.short_m, MAX_BLADE_HEIGHT_M, " m")?;
+            v.finite("grass_peak.density", g.density)?;
+            if !(0.0..=2.0).contains(&g.density) {
+                return Err(v.out_of_range("grass_peak.density", g.density, "in 0..=2"));
+            }
+        }
+        if let Some(c) = &self.derive {
+            self.validate_derive(&v, c)?;
+        }
+        Ok(())
+    }
+
+    fn validate_derive(&self, v: &Validator, c: &DeriveCalibration) -> Result<(), WorldError> {
+        let most = MAX_DERIVE_LOG2;
+        v.within("derive.hurst", c.hurst, [-most, most], "")?;
+        v.non_negative("derive.fit_rms_log2", c.fit_rms_log2)?;
+        v.at_most("derive.fit_rms_log2", c.fit_rms_log2, most, "")?;
+        v.non_negative("derive.residual_rms_m", c.residual_rms_m)?;
+        let [lo, hi] = crate::world::PLAUSIBLE_HEIGHTS_M;
+        v.at_most("derive.residual_rms_m", c.residual_rms_m, hi - lo, " m")?;
+        v.non_negative("derive.decay_log2", c.decay_log2)?;
+        v.at_most("derive.decay_log2", c.decay_log2, most, "")?;
+        let levels = usize::from(self.pyramid.derived_levels);
+        if c.detail.len() != levels {
+            return Err(v.out_of_range(
+                "derive.detail",
+                format!("{} values", c.detail.len()),
+                &format!("one value per derived level ({levels})"),
+            ));
+        }
+        for (i, &d) in c.detail.iter().enumerate() {
+            let field = format!("derive.detail[{i}]");
+            v.non_negative(&field, d)?;
+            if d > MAX_DETAIL {
+                return Err(v.out_of_range(&field, d, &format!("at most {MAX_DETAIL}")));
+            }
+            if c.method == DeriveMode::Bicubic && d != 0.0 {
+                return Err(v.out_of_range(&field, d, "0 when derive.method is \"bicubic\""));
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_path_wind(
+        &self,
+        v: &Validator,
+        pi: usize,
+        cam: &CameraPath,
+    ) -> Result<(), WorldError> {
+        if let Some(name) = &cam.walker
+            && self.path(name).is_none()
+        {
+            return Err(WorldError::UnknownPathRef {
+                path: v.path.to_path_buf(),
+                field: format!("paths[{pi}].walker"),
+                name: name.clone(),
+            });
+        }
+        for (ki, key) in cam.wind.iter().enumerate() {
+            let field = |f: &str| format!("paths[{pi}].wind[{ki}].{f}");
+            v.time(&field("t_s"), key.t_s)?;
+            v.non_negative(&field("blend_s"), key.blend_s)?;
+            v.at_most(&field("blend_s"), key.blend_s, MAX_TIME_S, " s")?;
+            if self.wind_scene(&key.scene).is_none() {
+                let names: Vec<&str> = self.wind_scenes.iter().map(|s| s.name.as_str()).collect();
+                return Err(WorldError::UnknownWindSceneRef {
+                    path: v.path.to_path_buf(),
+                    field: field("scene"),
+                    name: key.scene.clone(),
+                    available: names.join(", "),
+                });
+            }
+            if ki > 0 {
+                let prev = &cam.wind[ki - 1];
+                if key.t_s < prev.t_s + prev.blend_s.max(1e-3) {
+                    return Err(v.out_of_range(
+                        &field("t_s"),
+                        key.t_s,
+                        &format!(
+                            "at least {} (the previous wind key's t_s + blend_s): a scene \
+                             change may not start before the one before it has blended in",
+                            prev.t_s + prev.blend_s.max(1e-3)
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_wind_scenes(&self, v: &Validator) -> Result<(), WorldError> {
+        let mut names = HashSet::new();
+        for (si, scene) in self.wind_scenes.iter().enumerate() {
+            if !names.insert(scene.name.as_str()) {
+                return Err(WorldError::DuplicateWindScene {
+                    path: v.path.to_path_buf(),
+                    name: scene.name.clone(),
+                });
+            }
+            v.validate_ambient(&format!("wind_scenes[{si}].ambient"), &scene.ambient)?;
+            if scene.sources.len() > MAX_WIND_SOURCES {
+                return Err(v.out_of_range(
+                    &format!("wind_scenes[{si}].sources"),
+                    format!("{} sources", scene.sources.len()),
+                    &format!("at most {MAX_WIND_SOURCES} sources"),
+                ));
+            }
+            for (ci, source) in scene.sources.iter().enumerate() {
+                self.validate_wind_source(v, &format!("wind_scenes[{si}].sources[{ci}]"), source)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_wind_source(
+        &self,
+        v: &Validator,
+        at: &str,
+        source: &WindSource,
+    ) -> Result<(), WorldError> {
+        let field = |f: &str| format!("{at}.{f}");
+        match source {
+            WindSource::Directional {
+                direction_deg,
+                speed_mps,
+                ..
+            } => {
+                v.angle(&field("direction_deg"), *direction_deg)?;
+                v.speed(&field("speed_mps"), *speed_mps)?;
+            }
+            WindSource::Omni {
+                radius_m,
+                speed_mps,
+                ..
+            } => {
+                v.radius(&field("radius_m"), *radius_m)?;
+                v.speed(&field("speed_mps"), *speed_mps)?;
+            }
+            WindSource::Vortex {
+                radius_m,
+                speed_mps,
+                inflow_mps,
+                ..
+            } => {
+                v.radius(&field("radius_m"), *radius_m)?;
+                v.speed(&field("speed_mps"), *speed_mps)?;
+                let most = MAX_WIND_SPEED_MPS;
+                v.within(&field("inflow_mps"), *inflow_mps, [-most, most], " m/s")?;
+            }
+        }
+        let (position, path_name, start_s, strength, _) = source.common();
+        if let Some(p) = position {
+            v.position(&field("position_m"), p)?;
+        }
+        match (position, path_name) {
+            (Some(_), Some(_)) => {
+                return Err(WorldError::WindSourcePlacement {
+                    path: v.path.to_path_buf(),
+                    field: at.to_string(),
+                    message: "has both position_m and path: give one".into(),
+                });
+            }
+            (None, None) if !matches!(source, WindSource::Directional { .. }) => {
+                return Err(WorldError::WindSourcePlacement {
+                    path: v.path.to_path_buf(),
+                    field: at.to_string(),
+                    message: format!("a {} source needs position_m or path", source.kind_name()),
+                });
+            }
+            _ => {}
+        }
+        if let Some(name) = path_name
+            && self.path(name).is_none()
+        {
+            return Err(WorldError::UnknownPathRef {
+                path: v.path.to_path_buf(),
+                field: field("path"),
+                name: name.clone(),
+            });
+        }
+        v.non_negative(&field("start_s"), start_s)?;
+        v.at_most(&field("start_s"), start_s, MAX_TIME_S, " s")?;
+        for (ki, key) in strength.iter().enumerate() {
+            v.all_finite(&field(&format!("strength[{ki}]")), key)?;
+            v.time(&field(&format!("strength[{ki}][0]")), key[0])?;
+            let factor = field(&format!("strength[{ki}][1]"));
+            v.non_negative(&factor, key[1])?;
+            v.at_most(&factor, key[1], MAX_WIND_STRENGTH, "")?;
+            if ki > 0 && key[0] <= strength[ki - 1][0] {
+                return Err(WorldError::StrengthKeysOutOfOrder {
+                    path: v.path.to_path_buf(),
+                    field: field("strength"),
+                    index: ki,
+                    t_s: key[0],
+                    previous_t_s: strength[ki - 1][0],
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Builds validation errors that name the manifest file.
+struct Validator<'a> {
+    path: &'a Path,
+}
+
+impl Validator<'_> {
+    fn finite(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        let value = value.into();
+        if value.is_finite() {
+            Ok(())
+        } else {
+            Err(WorldError::NonFinite {
+                path: self.path.to_path_buf(),
+                field: field.to_string(),
+                value,
+            })
+        }
+    }
+
+    fn all_finite<T: Copy + Into<f64>>(&self, field: &str, values: &[T]) -> Result<(), WorldError> {
+        for (i, &x) in values.iter().enumerate() {
+            self.finite(&format!("{field}[{i}]"), x)?;
+        }
+        Ok(())
+    }
+
+    fn positive(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        let value = value.into();
+        self.finite(field, value)?;
+        if value > 0.0 {
+            Ok(())
+        } else {
+            Err(self.non_positive(field, value))
+        }
+    }
+
+    fn non_negative(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        let value = value.into();
+        self.finite(field, value)?;
+        if value >= 0.0 {
+            Ok(())
+        } else {
+            Err(WorldError::Negative {
+                path: self.path.to_path_buf(),
+                field: field.to_string(),
+                value,
+            })
+        }
+    }
+
+    /// Refuses a finite `value` above `most` (`unit` follows the number in the message).
+    fn at_most(
+        &self,
+        field: &str,
+        value: impl Into<f64>,
+        most: f64,
+        unit: &str,
+    ) -> Result<(), WorldError> {
+        let value = value.into();
+        self.finite(field, value)?;
+        if value <= most {
+            Ok(())
+        } else {
+            Err(self.out_of_range(
+                field,
+                number(value),
+                &format!("at most {}{unit}", number(most)),
+            ))
+        }
+    }
+
+    /// Refuses a value that is not finite or lies outside `lo..=hi`.
+    fn within(
+        &self,
+        field: &str,
+        value: impl Into<f64>,
+        [lo, hi]: [f64; 2],
+        unit: &str,
+    ) -> Result<(), WorldError> {
+        let value = value.into();
+        self.finite(field, value)?;
+        if (lo..=hi).contains(&value) {
+            Ok(())
+        } else {
+            let allowed = format!("in {}..={}{unit}", number(lo), number(hi));
+            Err(self.out_of_range(field, number(value), &allowed))
+        }
+    }
+
+    fn all_within<T: Copy + Into<f64>>(
+        &self,
+        field: &str,
+        values: &[T],
+        range: [f64; 2],
+        unit: &str,
+    ) -> Result<(), WorldError> {
+        for (i, &x) in values.iter().enumerate() {
+            self.within(&format!("{field}[{i}]"), x, range, unit)?;
+        }
+        Ok(())
+    }
+
+    fn angle(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        self.within(field, value, [-MAX_ANGLE_DEG, MAX_ANGLE_DEG], " degrees")
+    }
+
+    fn time(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        self.within(field, value, [-MAX_TIME_S, MAX_TIME_S], " s")
+    }
+
+    fn position(&self, field: &str, values: &[f64]) -> Result<(), WorldError> {
+        self.all_within(field, values, [-MAX_POSITION_M, MAX_POSITION_M], " m")
+    }
+
+    fn speed(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+        let value = value.into();
+        self.non_negative(field, value)?;
+        self.at_most(field, value, MAX_WIND_SPEED_MPS, " m/s")
+    }
+
+    fn radius(&self, field: &str, value: f64) -> Result<(), WorldError> {
+        self.positive(field, value)?;
+        self.at_most(field, value, MAX_WIND_RADIUS_M, " m")
+    }
+
+    /// An ambient wind (`[wind]` or a scene's `ambient`) at `at`.
+    fn validate_ambient(&self, at: &str, a: &WindDefaults) -> Result<(), WorldError> {
+        self.angle(&format!("{at}.direction_deg"), a.direction_deg)?;
+        self.speed(&format!("{at}.speed_mps"), a.speed_mps)?;
+        self.within(&format!("{at}.gustiness"), a.gustiness, [0.0, 1.0], "")
+    }
+
+    fn non_positive(&self, field: &str, value: f64) -> WorldError {
+        WorldError::NonPositive {
+            path: self.path.to_path_buf(),
+            field: field.to_string(),
+            value,
+        }
+    }
+
+    fn out_of_range(&self, field: &str, value: impl ToString, allowed: &str) -> WorldError {
+        WorldError::OutOfRange {
+            path: self.path.to_path_buf(),
+            field: field.to_string(),
+            value: value.to_string(),
+            allowed: allowed.to_string(),
+        }
+    }
+}
+
+/// A number as messages show it: plainly, or in exponent form where plain digits would run
+/// long (1e30 rather than thirty-one digits).
+fn number(x: f64) -> String {
+    let a = x.abs();
+    if a != 0.0 && !(1e-4..1e9).contains(&a) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
