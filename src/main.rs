@@ -171,6 +171,10 @@ struct FlyArgs {
     /// the renderer's).
     #[arg(long)]
     mesh_step: Option<u32>,
+    /// Render the frames as the truth instead: supersampled K x K (1..=8) in linear light, no
+    /// LOD, the most blade segments, blades out to 4 times the view distance.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=8))]
+    truth: Option<u32>,
     #[command(flatten)]
     stream: StreamArgs,
 }
@@ -319,6 +323,8 @@ enum BenchCommand {
         counts: Vec<u64>,
         #[command(flatten)]
         timing: TimingArgs,
+        #[command(flatten)]
+        truth: TruthArgs,
     },
     /// Each grass feature's GPU cost against its contribution to the image (FLIP between the
     /// render with and without it), charted one against the other.
@@ -334,6 +340,8 @@ enum BenchCommand {
         size: (u32, u32),
         #[command(flatten)]
         timing: TimingArgs,
+        #[command(flatten)]
+        truth: TruthArgs,
     },
     /// The LOD transition benchmark: popping across the ring boundary, and GPU time against
     /// image error for a set of LOD settings, charted with the Pareto front.
@@ -352,7 +360,17 @@ enum BenchCommand {
         dolly_frames: u32,
         #[command(flatten)]
         timing: TimingArgs,
+        #[command(flatten)]
+        truth: TruthArgs,
     },
+}
+
+/// What the benchmarks measure their images against.
+#[derive(clap::Args)]
+struct TruthArgs {
+    /// Sub-samples a pixel side of the truth (supersampled in linear light), 1..=8.
+    #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
+    truth: u32,
 }
 
 /// How the benchmarks time: interleaved rounds over the settings, each measurement's frames
@@ -506,12 +524,12 @@ fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         r.adapter.name, r.adapter.backend, r.size.0, r.size.1
     );
     println!(
-        "dolly: largest jump of the error against no LOD: {:.4} FLIP on frames with ring switches, {:.4} on frames without",
+        "dolly: largest jump of the error against the truth: {:.4} FLIP on frames with ring switches, {:.4} on frames without",
         r.worst_pop, r.worst_change_without_switch
     );
     let flip = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
     println!(
-        "far band ({:.0}-{:.0} m, {} pixels) against real blades out to {:.0} m: {} FLIP with the far field, {} without",
+        "far band ({:.0}-{:.0} m, {} pixels) against the truth's blades out to {:.0} m: {} FLIP with the far field, {} without",
         r.far_band.near_m,
         r.far_band.far_m,
         r.far_band.band_pixels,
@@ -520,17 +538,18 @@ fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         flip(r.far_band.flip_no_far_field)
     );
     println!(
-        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>10} {:>7}",
-        "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "blades", "front"
+        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>9} {:>10} {:>7}",
+        "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "coarse", "blades", "front"
     );
     for s in &r.settings {
         println!(
-            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>10.0} {:>7}{}",
+            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>9.4} {:>10.0} {:>7}{}",
             s.setting.name,
             s.gpu.median_ms,
             100.0 * s.gpu.spread,
             s.frame.median_ms,
-            s.flip_mean,
+            s.vs_truth.flip,
+            s.vs_truth.coarse,
             s.blades_drawn,
             if s.pareto { "yes" } else { "" },
             if s.gpu.noisy || s.frame.noisy {
@@ -543,6 +562,12 @@ fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
     println!(
         "timing: {} rounds of {} frames after {} untimed, per view and setting",
         r.counts.rounds, r.counts.timed, r.counts.warmup
+    );
+    println!(
+        "on the front against the {k}x{k} truth: {}; by the coarse FLIP: {}",
+        r.front.join(", "),
+        r.coarse_front.join(", "),
+        k = r.truth_k
     );
     println!(
         "default setting {} the Pareto front; wrote {}",
@@ -806,6 +831,27 @@ fn bar(len: u64, what: &str) -> ProgressBar {
     pb
 }
 
+fn fly_truth(opts: FlyOptions, k: u32) -> Result<()> {
+    let mut pb: Option<ProgressBar> = None;
+    let r = verdant::tools::truth::run_fly_truth(&opts, k, &mut |p| {
+        if let FlyProgress::Frame(done, total) = p {
+            pb.get_or_insert_with(|| bar(total, "truth"))
+                .set_position(done);
+        }
+    })?;
+    println!(
+        "{} truth frames ({k}x{k} sub-samples) of {} ({}) at {}x{} in {:.1} s; wrote {}",
+        r.frames.len(),
+        r.world,
+        r.path,
+        r.size.0,
+        r.size.1,
+        r.seconds,
+        opts.out.display()
+    );
+    Ok(())
+}
+
 fn fly(opts: FlyOptions) -> Result<()> {
     let mut frames: Option<ProgressBar> = None;
     let report = run_fly(&opts, &mut |p| match p {
@@ -943,6 +989,7 @@ impl FlyArgs {
             grass_segments,
             grass_near_m,
             mesh_step,
+            truth: _,
             stream,
         } = self;
         Ok(FlyOptions {
@@ -1127,7 +1174,10 @@ fn serve(world: &str, addr: &str) -> Result<()> {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Fly(args) => fly(args.options()?),
+        Command::Fly(args) => match args.truth {
+            Some(k) => fly_truth(args.options()?, k),
+            None => fly(args.options()?),
+        },
         Command::View(args) => view(args),
         Command::Soak(args) => soak(args.options()?),
         Command::Serve { world, addr } => serve(&world, &addr),
@@ -1138,6 +1188,7 @@ fn run(cli: Cli) -> Result<()> {
                     out,
                     size,
                     timing,
+                    truth,
                 },
         } => bench_features(verdant::tools::BenchLodOptions {
             world: resolve_world(&world)?,
@@ -1146,6 +1197,7 @@ fn run(cli: Cli) -> Result<()> {
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
+            truth_k: truth.truth,
             ..Default::default()
         }),
         Command::Bench {
@@ -1159,6 +1211,7 @@ fn run(cli: Cli) -> Result<()> {
                     fov_deg,
                     counts,
                     timing,
+                    truth,
                 },
         } => bench_blades(verdant::tools::bench_blades::BenchBladesOptions {
             out,
@@ -1171,6 +1224,7 @@ fn run(cli: Cli) -> Result<()> {
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
+            truth_k: truth.truth,
         }),
         Command::Bench {
             what:
@@ -1180,6 +1234,7 @@ fn run(cli: Cli) -> Result<()> {
                     size,
                     dolly_frames,
                     timing,
+                    truth,
                 },
         } => bench_lod(verdant::tools::BenchLodOptions {
             world: resolve_world(&world)?,
@@ -1190,6 +1245,7 @@ fn run(cli: Cli) -> Result<()> {
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
             path: None,
+            truth_k: truth.truth,
         }),
         Command::Eval {
             what: EvalCommand::Derive { dem, factor, out },
