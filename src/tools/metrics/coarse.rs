@@ -7,10 +7,13 @@
 //! same statistics as much as a wrong colour. The **coarse FLIP** does not: both images are
 //! box-filtered by [`COARSE_FACTOR`] in each direction in linear light (each block of
 //! `COARSE_FACTOR` x `COARSE_FACTOR` pixels becomes its mean colour, edge blocks the mean of the
-//! pixels they have), then compared by FLIP at [`COARSE_FACTOR`] times fewer pixels per degree
-//! (the small image seen at the size of the large one). What remains is the grass's colour,
-//! cover and shading averaged over a few blades: a different draw of the same grass scores low,
-//! a shift of colour or of cover scores as high as in pixel FLIP.
+//! pixels they have), then compared by FLIP at its default viewing distance: the frame seen at an
+//! eighth of its size, where single blades are no longer resolved. (Seen at the large image's
+//! size instead, the blocks' residual noise would sit at the eye's most sensitive frequencies.)
+//! What remains is the grass's colour, cover and shading averaged over a few blades: another
+//! draw of the same grass scores low (a field of half green, half ground pixels drawn with
+//! another seed: 0.09 against 0.34 by pixel FLIP), a shift of colour or of cover scores as high
+//! as in pixel FLIP (0.52 on both for the same field in another green).
 
 use super::ImageCompareError;
 
@@ -77,8 +80,8 @@ pub fn box_filter_linear(image: &image::RgbImage, factor: u32) -> image::RgbImag
 }
 
 /// The coarse FLIP of `actual` against `reference` (see the module docs): the mean FLIP of the
-/// two images box-filtered by `factor` in linear light, at `factor` times fewer pixels per
-/// degree than [`super::flip_compare`]. 0 for identical images, up to 1.
+/// two images box-filtered by `factor` in linear light, at FLIP's default viewing distance (as
+/// [`super::flip_compare`]). 0 for identical images, up to 1.
 pub fn coarse_flip(
     reference: &image::RgbImage,
     actual: &image::RgbImage,
@@ -99,7 +102,7 @@ pub fn coarse_flip(
     let error = nv_flip::flip(
         nv_flip::FlipImageRgb8::with_data(w, h, r.as_raw()),
         nv_flip::FlipImageRgb8::with_data(w, h, a.as_raw()),
-        nv_flip::DEFAULT_PIXELS_PER_DEGREE / f as f32,
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
     );
     Ok(f64::from(nv_flip::FlipPool::from_image(&error).mean()))
 }
@@ -154,13 +157,13 @@ mod tests {
         // Another random field of the same statistics: high pixel by pixel, low coarse.
         let (p_draw, c_draw) = (pixel(&a, &b), coarse(&a, &b));
         assert!(p_draw > 0.2, "pixel FLIP of another draw {p_draw}");
-        assert!(c_draw < 0.05, "coarse FLIP of another draw {c_draw}");
-        assert!(c_draw < p_draw / 4.0, "{c_draw} against {p_draw}");
+        assert!(c_draw < 0.12, "coarse FLIP of another draw {c_draw}");
+        assert!(c_draw < p_draw / 3.0, "{c_draw} against {p_draw}");
         // The same draw in another colour: high on both.
         let shifted = field(1, w, h, [160, 120, 40]);
         let (p_shift, c_shift) = (pixel(&a, &shifted), coarse(&a, &shifted));
-        assert!(p_shift > 0.1, "pixel FLIP of a colour shift {p_shift}");
-        assert!(c_shift > 0.1, "coarse FLIP of a colour shift {c_shift}");
+        assert!(p_shift > 0.3, "pixel FLIP of a colour shift {p_shift}");
+        assert!(c_shift > 0.3, "coarse FLIP of a colour shift {c_shift}");
         assert!(c_shift > 4.0 * c_draw, "{c_shift} against {c_draw}");
         // Identical images score zero; sizes must agree.
         assert_eq!(coarse(&a, &a), 0.0);
