@@ -61,7 +61,10 @@ enum Command {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Fly(args) => cli::fly::fly(args.options()?),
+        Command::Fly(args) => match args.truth {
+            Some(k) => cli::fly::fly_truth(args.options()?, k),
+            None => cli::fly::fly(args.options()?),
+        },
         Command::View(args) => cli::view::view(args),
         Command::Soak(args) => cli::soak::soak(args.options()?),
         Command::Serve { world, addr } => cli::serve::serve(&world, &addr),

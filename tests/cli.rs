@@ -494,6 +494,8 @@ fn bench_lod_writes_its_tables_and_charts() {
             "1",
             "--rounds",
             "2",
+            "--truth",
+            "1",
             "--out",
             "b",
         ],
@@ -507,6 +509,13 @@ fn bench_lod_writes_its_tables_and_charts() {
     let dir = tmp.path().join("b");
     let dolly = std::fs::read_to_string(dir.join("dolly.csv")).unwrap();
     assert_eq!(dolly.lines().count(), 5, "{dolly}");
+    assert_eq!(
+        dolly.lines().next(),
+        Some(
+            "frame,flip_vs_truth,coarse_flip_vs_truth,jump,flip_vs_no_lod,change_lod,\
+             change_no_lod,ring_switches"
+        )
+    );
     let settings = std::fs::read_to_string(dir.join("lod_settings.csv")).unwrap();
     let header: Vec<&str> = settings.lines().next().unwrap().split(',').collect();
     // The stated columns: each timing as a median with its quartiles and spread, flagged when
@@ -521,10 +530,24 @@ fn bench_lod_writes_its_tables_and_charts() {
         "frame_spread",
         "noisy",
         "frames",
-        "flip_mean",
+        "flip_vs_truth",
+        "coarse_flip_vs_truth",
+        "flip_vs_no_lod",
         "blades_drawn",
         "coverage",
         "pareto",
+        "pareto_coarse",
+        // Every parameter a candidate default varies.
+        "high_radius_tiles",
+        "view_distance_tiles",
+        "spacing_m",
+        "segments_near",
+        "segments_high",
+        "segments_low",
+        "near_m",
+        "infill_half_m",
+        "infill_quarter_m",
+        "width_scale",
     ] {
         assert!(header.contains(&column), "no column {column} in {header:?}");
     }
@@ -560,6 +583,37 @@ fn bench_lod_writes_its_tables_and_charts() {
         value("width x1.5", "coverage") > value("width x0.67", "coverage"),
         "{settings}"
     );
+    // Against the truth: every setting errs, by both measures; the no-LOD render against itself
+    // is the old figure's zero.
+    for r in &rows {
+        for c in ["flip_vs_truth", "coarse_flip_vs_truth"] {
+            let v: f64 = r[col(c)].parse().unwrap();
+            assert!(v > 0.0 && v < 1.0, "{c} {r:?}");
+        }
+    }
+    assert_eq!(value("no LOD", "flip_vs_no_lod"), 0.0, "{settings}");
+    assert!(value("default", "flip_vs_no_lod") > 0.0, "{settings}");
+    // The report names the settings on each front, and the CSV marks the same ones.
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("bench_lod.json")).unwrap())
+            .unwrap();
+    for (key, column) in [("front", "pareto"), ("coarse_front", "pareto_coarse")] {
+        let mut named: Vec<&str> = json[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_str().unwrap())
+            .collect();
+        let mut marked: Vec<&str> = rows
+            .iter()
+            .filter(|r| r[col(column)] == "true")
+            .map(|r| r[0])
+            .collect();
+        assert!(!named.is_empty(), "{key}");
+        named.sort();
+        marked.sort();
+        assert_eq!(named, marked, "{key}");
+    }
     for r in &rows {
         let (q1, m, q3) = (
             r[col("gpu_q1_ms")].parse::<f64>().unwrap(),
@@ -591,6 +645,7 @@ fn bench_lod_writes_its_tables_and_charts() {
     for f in [
         "dolly.png",
         "lod_settings.png",
+        "lod_settings_coarse.png",
         "lod_coverage.png",
         "bench_lod.json",
     ] {
@@ -615,6 +670,8 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
             "2",
             "--rounds",
             "1",
+            "--truth",
+            "2",
             "--out",
             "b",
         ],
@@ -671,10 +728,20 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
             assert!(n(r, c) > 0.0, "{c} in {csv}");
         }
         assert!(["true", "false"].contains(&r[col("noisy")]), "{csv}");
+        // Measured against the truth by both measures, and against no LOD.
+        for c in ["flip_vs_truth", "coarse_flip_vs_truth", "flip_vs_no_lod"] {
+            assert!((0.0..1.0).contains(&n(r, c)), "{c} in {csv}");
+        }
+        assert!(n(r, "flip_vs_truth") > 0.0, "{csv}");
     }
     // Four times the blades: more drawn.
     assert!(n(&rows[1], "drawn_high") > n(&rows[0], "drawn_high"));
-    for f in ["blades_time.png", "blades_ratio.png", "bench_blades.json"] {
+    for f in [
+        "blades_time.png",
+        "blades_ratio.png",
+        "blades_error.png",
+        "bench_blades.json",
+    ] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
     // Absurd counts are refused before any GPU work, the option and its range named: too few,

@@ -119,6 +119,8 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
             "1",
             "--rounds",
             "1",
+            "--truth",
+            "1",
         ])
         .args(["--out", "b"])
         .current_dir(tmp.path())
@@ -166,6 +168,14 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
             .unwrap()
     };
     assert_eq!(contribution("all"), 0.0, "the full render against itself");
+    // Every variant, the full render included, against the truth by both measures.
+    for r in &rows {
+        for c in ["flip_vs_truth", "coarse_flip_vs_truth", "contribution_coarse_flip"] {
+            let v: f64 = r[col(c)].parse().unwrap();
+            assert!((0.0..1.0).contains(&v), "{c}: {csv}");
+        }
+        assert!(r[col("flip_vs_truth")].parse::<f64>().unwrap() > 0.0, "{csv}");
+    }
     // Every feature changes the image in these views, the walker's trail and the helicopter's
     // downwash included.
     for name in &names[1..] {
@@ -179,7 +189,7 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
             .unwrap();
         assert!(coverage > 0.0 && coverage <= 1.0, "{name}: {csv}");
     }
-    for f in ["features.png", "bench_features.json"] {
+    for f in ["features.png", "features_coarse.png", "bench_features.json"] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
 }

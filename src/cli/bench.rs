@@ -42,6 +42,8 @@ pub(crate) enum BenchCommand {
         counts: Vec<u64>,
         #[command(flatten)]
         timing: TimingArgs,
+        #[command(flatten)]
+        truth: TruthArgs,
     },
     /// Each grass feature's GPU cost against its contribution to the image (FLIP between the
     /// render with and without it), charted one against the other.
@@ -57,6 +59,8 @@ pub(crate) enum BenchCommand {
         size: (u32, u32),
         #[command(flatten)]
         timing: TimingArgs,
+        #[command(flatten)]
+        truth: TruthArgs,
     },
     /// The LOD transition benchmark: popping across the ring boundary, and GPU time against
     /// image error for a set of LOD settings, charted with the Pareto front.
@@ -75,7 +79,57 @@ pub(crate) enum BenchCommand {
         dolly_frames: u32,
         #[command(flatten)]
         timing: TimingArgs,
+        #[command(flatten)]
+        truth: TruthArgs,
     },
+    /// Anti-aliasing against the supersampled truth: sequences of consecutive 60 Hz frames
+    /// (still with wind, a dolly, a pan, a teleport) and views along the camera paths, per
+    /// method: FLIP against the truth per frame, flicker relative to the truth's, recovery
+    /// after the teleport, GPU time; charted with the Pareto front.
+    Aa {
+        /// World folder, or the name of a world under ./worlds.
+        #[arg(default_value = "santa-cruz")]
+        world: String,
+        /// Output folder.
+        #[arg(long, default_value = "out/bench-aa")]
+        out: PathBuf,
+        /// Image sizes, WIDTHxHEIGHT, comma-separated: each is measured in full.
+        #[arg(long, default_value = "960x540", value_delimiter = ',', value_parser = parse_size)]
+        size: Vec<(u32, u32)>,
+        /// Methods, comma-separated (off, taa).
+        #[arg(long, default_value = "off,taa", value_delimiter = ',', value_parser = parse_method)]
+        aa: Vec<verdant::aa::AntiAliasing>,
+        /// Measured frames of each sequence, 2..=600.
+        #[arg(long, default_value_t = 24, value_parser = clap::value_parser!(u32).range(2..=600))]
+        frames: u32,
+        /// Frames of the same motion before each sequence's measured ones, 0..=120.
+        #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=120))]
+        run_up: u32,
+        /// Sub-samples per side of the truth, 1..=8.
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
+        truth: u32,
+        /// The camera path whose first view the sequences start from.
+        #[arg(long, default_value = "meadow")]
+        path: String,
+        /// Paths of the views-along-paths part, comma-separated ("" for none).
+        #[arg(long, default_value = "meadow,tour,wind-tour", value_delimiter = ',')]
+        paths: Vec<String>,
+        #[command(flatten)]
+        timing: TimingArgs,
+    },
+}
+
+/// Parses an anti-aliasing method's name.
+fn parse_method(s: &str) -> Result<verdant::aa::AntiAliasing, String> {
+    s.trim().parse()
+}
+
+/// What the benchmarks measure their images against.
+#[derive(clap::Args, Clone, Copy)]
+pub(crate) struct TruthArgs {
+    /// Sub-samples a pixel side of the truth (supersampled in linear light), 1..=8.
+    #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
+    pub(crate) truth: u32,
 }
 
 /// How the benchmarks time: interleaved rounds over the settings, each measurement's frames
@@ -187,12 +241,12 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         r.adapter.name, r.adapter.backend, r.size.0, r.size.1
     );
     println!(
-        "dolly: largest jump of the error against no LOD: {:.4} FLIP on frames with ring switches, {:.4} on frames without",
+        "dolly: largest jump of the error against the truth: {:.4} FLIP on frames with ring switches, {:.4} on frames without",
         r.worst_pop, r.worst_change_without_switch
     );
     let flip = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
     println!(
-        "far band ({:.0}-{:.0} m, {} pixels) against real blades out to {:.0} m: {} FLIP with the far field, {} without",
+        "far band ({:.0}-{:.0} m, {} pixels) against the truth's blades out to {:.0} m: {} FLIP with the far field, {} without",
         r.far_band.near_m,
         r.far_band.far_m,
         r.far_band.band_pixels,
@@ -201,17 +255,18 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         flip(r.far_band.flip_no_far_field)
     );
     println!(
-        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>10} {:>7}",
-        "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "blades", "front"
+        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>9} {:>10} {:>7}",
+        "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "coarse", "blades", "front"
     );
     for s in &r.settings {
         println!(
-            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>10.0} {:>7}{}",
+            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>9.4} {:>10.0} {:>7}{}",
             s.setting.name,
             s.gpu.median_ms,
             100.0 * s.gpu.spread,
             s.frame.median_ms,
-            s.flip_mean,
+            s.vs_truth.flip,
+            s.vs_truth.coarse,
             s.blades_drawn,
             if s.pareto { "yes" } else { "" },
             if s.gpu.noisy || s.frame.noisy {
@@ -226,6 +281,12 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         r.counts.rounds, r.counts.timed, r.counts.warmup
     );
     println!(
+        "on the front against the {k}x{k} truth: {}; by the coarse FLIP: {}",
+        r.front.join(", "),
+        r.coarse_front.join(", "),
+        k = r.truth_k
+    );
+    println!(
         "default setting {} the Pareto front; wrote {}",
         if r.default_on_front {
             "is on"
@@ -237,6 +298,59 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
     Ok(())
 }
 
+pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result<()> {
+    let (bars, mut update) = stage_bars();
+    let r = verdant::tools::bench_aa::run_bench_aa(
+        &opts,
+        &mut verdant::tools::bench_aa::truth_reference,
+        &mut update,
+    )?;
+    finish_bars(&bars);
+    println!(
+        "{} [{}], against the {}x{} truth",
+        r.adapter.name, r.adapter.backend, r.truth_k, r.truth_k
+    );
+    println!(
+        "{:<10} {:<7} {:<9} {:>8} {:>9} {:>7} {:>9}",
+        "size", "method", "sequence", "FLIP", "flicker", "x truth", "recovery"
+    );
+    for s in &r.sequences {
+        println!(
+            "{:<10} {:<7} {:<9} {:>8.4} {:>9.2} {:>7.2} {:>9}",
+            format!("{}x{}", s.size.0, s.size.1),
+            s.method,
+            s.motion.name(),
+            s.flip_mean,
+            s.flicker,
+            s.flicker_ratio,
+            s.recovery_frames.map_or(String::new(), |n| n.to_string())
+        );
+    }
+    for p in &r.paths {
+        println!(
+            "{:<10} {:<7} path {} at {:.1} s: FLIP {:.4}",
+            format!("{}x{}", p.size.0, p.size.1),
+            p.method,
+            p.path,
+            p.t_s,
+            p.flip
+        );
+    }
+    for t in &r.timings {
+        println!(
+            "{:<10} {:<7} {} {:.3} ms (IQR {:.1}%), of which anti-aliasing {:.3} ms",
+            format!("{}x{}", t.size.0, t.size.1),
+            t.method,
+            if t.gpu { "GPU" } else { "frame" },
+            t.frame.median_ms,
+            100.0 * t.frame.spread,
+            t.aa_ms
+        );
+    }
+    println!("wrote {}", opts.out.display());
+    Ok(())
+}
+
 /// Runs the benchmark asked for.
 pub(crate) fn run(what: BenchCommand) -> Result<()> {
     match what {
@@ -245,6 +359,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             out,
             size,
             timing,
+            truth,
         } => bench_features(verdant::tools::BenchLodOptions {
             world: resolve_world(&world)?,
             out,
@@ -252,6 +367,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
+            truth_k: truth.truth,
             ..Default::default()
         }),
         BenchCommand::Blades {
@@ -263,6 +379,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             fov_deg,
             counts,
             timing,
+            truth,
         } => bench_blades(verdant::tools::bench_blades::BenchBladesOptions {
             out,
             size,
@@ -274,6 +391,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
+            truth_k: truth.truth,
         }),
         BenchCommand::Lod {
             world,
@@ -281,6 +399,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             size,
             dolly_frames,
             timing,
+            truth,
         } => bench_lod(verdant::tools::BenchLodOptions {
             world: resolve_world(&world)?,
             out,
@@ -290,6 +409,32 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
             path: None,
+            truth_k: truth.truth,
+        }),
+        BenchCommand::Aa {
+            world,
+            out,
+            size,
+            aa,
+            frames,
+            run_up,
+            truth,
+            path,
+            paths,
+            timing,
+        } => bench_aa(verdant::tools::bench_aa::BenchAaOptions {
+            world: resolve_world(&world)?,
+            out,
+            sizes: size,
+            methods: aa,
+            frames,
+            run_up,
+            truth_k: truth,
+            path,
+            paths: paths.into_iter().filter(|p| !p.is_empty()).collect(),
+            warmup_frames: timing.warmup_frames,
+            timed_frames: timing.timed_frames,
+            rounds: timing.rounds,
         }),
     }
 }

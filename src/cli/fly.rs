@@ -68,6 +68,15 @@ pub(crate) struct FlyArgs {
     /// the renderer's).
     #[arg(long)]
     pub(crate) mesh_step: Option<u32>,
+    /// Anti-aliasing: off, taa (temporal: jittered frames folded into a reprojected history;
+    /// for consecutive frames, e.g. --frames at 60 a second of the path) or msaa (the grass
+    /// multisampled, 4 samples, sub-pixel blades kept as coverage). Default: the renderer's.
+    #[arg(long)]
+    pub(crate) aa: Option<verdant::aa::AntiAliasing>,
+    /// Render the frames as the truth instead: supersampled K x K (1..=8) in linear light, no
+    /// LOD, the most blade segments, blades out to 4 times the view distance.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=8))]
+    pub(crate) truth: Option<u32>,
     #[command(flatten)]
     pub(crate) stream: StreamArgs,
 }
@@ -90,6 +99,8 @@ impl FlyArgs {
             grass_segments,
             grass_near_m,
             mesh_step,
+            aa,
+            truth: _,
             stream,
         } = self;
         // The renderer's defaults with what was given; RendererConfig::validate checks the
@@ -128,8 +139,34 @@ impl FlyArgs {
             enable,
             grass,
             mesh_step: mesh_step.unwrap_or(DEFAULT_MESH_STEP),
+            aa: aa.unwrap_or_default(),
         })
     }
+}
+
+/// `fly --truth K`: the path's frames rendered as the truth.
+pub(crate) fn fly_truth(opts: FlyOptions, k: u32) -> Result<()> {
+    let mut pb: Option<ProgressBar> = None;
+    let r = verdant::tools::truth::run_fly_truth(&opts, k, &mut |p| {
+        if let FlyProgress::Frame(done, total) = p {
+            pb.get_or_insert_with(|| bar(total, "truth"))
+                .set_position(done);
+        }
+    })?;
+    if let Some(pb) = pb {
+        pb.finish();
+    }
+    println!(
+        "{} truth frames ({k}x{k} sub-samples) of {} ({}) at {}x{} in {:.1} s; wrote {}",
+        r.frames.len(),
+        r.world,
+        r.path,
+        r.size.0,
+        r.size.1,
+        r.seconds,
+        opts.out.display()
+    );
+    Ok(())
 }
 
 pub(crate) fn fly(opts: FlyOptions) -> Result<()> {

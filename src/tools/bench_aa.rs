@@ -34,6 +34,7 @@ use crate::tools::fly::{OutDir, write_json, write_text};
 use crate::tools::metrics::{Chart, ChartPoint};
 use crate::tools::metrics::flip_compare;
 use crate::tools::report::AdapterReport;
+use crate::tools::truth::Truth;
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
 use crate::RendererConfig;
 use crate::tools::Scene;
@@ -307,6 +308,50 @@ pub trait Reference {
         time_s: f64,
         walker: Option<DVec2>,
     ) -> Result<RgbaImage>;
+
+    /// Steps the truth's wind, sway and trail through a frame that is not measured.
+    fn advance(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        time_s: f64,
+        walker: Option<DVec2>,
+    ) -> Result<()>;
+}
+
+impl Reference for Truth {
+    fn render(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        time_s: f64,
+        walker: Option<DVec2>,
+    ) -> Result<RgbaImage> {
+        Truth::render(self, ctx, camera, time_s, walker)
+    }
+
+    fn advance(
+        &mut self,
+        ctx: &GpuContext,
+        camera: &Camera,
+        time_s: f64,
+        walker: Option<DVec2>,
+    ) -> Result<()> {
+        self.scene()
+            .warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+        Truth::advance(self, ctx, camera, time_s, walker)
+    }
+}
+
+/// The truth of [`crate::tools::truth`] (k x k sub-samples in linear light, the most accurate
+/// grass), as `bench aa` measures against it.
+pub fn truth_reference(
+    ctx: &GpuContext,
+    world: &World,
+    size: (u32, u32),
+    k: u32,
+) -> Result<Box<dyn Reference>> {
+    Ok(Box::new(Truth::new(ctx, world.clone(), size.0, size.1, k)?))
 }
 
 /// Renders one frame of `scene`, its tiles brought in first.
@@ -383,26 +428,33 @@ pub fn run_bench_aa(
             for i in first..i64::from(opts.frames) {
                 let (camera, t) = motion.frame(&start, t0, i, opts.frames);
                 let walker = Some(camera.position.truncate());
-                let truth_img = reference.render(&ctx, &camera, t, walker)?;
+                let truth_img = if i >= 0 {
+                    Some(reference.render(&ctx, &camera, t, walker)?)
+                } else {
+                    reference.advance(&ctx, &camera, t, walker)?;
+                    None
+                };
                 for (m, (method, scene)) in scenes.iter_mut().enumerate() {
                     let img = frame(&ctx, scene, &camera, t)?;
-                    if i >= 0 {
+                    if let Some(truth_img) = &truth_img {
                         let change = prev[m].as_ref().map_or(0.0, |p| mean_change(p, &img));
                         let truth_change =
-                            truth_prev.as_ref().map_or(0.0, |p| mean_change(p, &truth_img));
+                            truth_prev.as_ref().map_or(0.0, |p| mean_change(p, truth_img));
                         seq[m].push(AaFrame {
                             size,
                             method: method.name().into(),
                             motion,
                             frame: i as u32,
-                            flip: flip(&truth_img, &img)?,
+                            flip: flip(truth_img, &img)?,
                             change,
                             truth_change,
                         });
                     }
                     prev[m] = Some(img);
                 }
-                truth_prev = Some(truth_img);
+                if truth_img.is_some() {
+                    truth_prev = truth_img;
+                }
             }
             for (m, (method, _)) in scenes.iter().enumerate() {
                 let f = &seq[m];
@@ -443,18 +495,23 @@ pub fn run_bench_aa(
                     let t = t_view - f64::from(r) * DT_S;
                     let camera = sample_path(path, t);
                     let walker = Some(crate::camera::walker_at(&world.manifest, path, t));
-                    let truth_img = reference.render(&ctx, &camera, t, walker)?;
+                    let truth_img = if r == 0 {
+                        Some(reference.render(&ctx, &camera, t, walker)?)
+                    } else {
+                        reference.advance(&ctx, &camera, t, walker)?;
+                        None
+                    };
                     for (method, scene) in scenes.iter_mut() {
                         scene.warm_up_report(&camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
                         scene.render_frame(&ctx, &camera, t, walker)?;
-                        if r == 0 {
+                        if let Some(truth_img) = &truth_img {
                             let img = scene.read_image(&ctx)?;
                             path_views.push(AaPathView {
                                 size,
                                 method: method.name().into(),
                                 path: path.name.clone(),
                                 t_s: t,
-                                flip: flip(&truth_img, &img)?,
+                                flip: flip(truth_img, &img)?,
                             });
                         }
                     }

@@ -4,7 +4,10 @@
 //! density, seen from a camera given by position, target and vertical field of view; swept over
 //! blade counts (the field's blades at the high-LOD spacing, 100 thousand to 10 million by
 //! default). Per count: blades considered, drawn per LOD, vertices drawn, GPU time per pass, ns
-//! per blade drawn and per vertex, and the image error against the same field drawn with no LOD.
+//! per blade drawn and per vertex, and the image error against the truth of the same field
+//! ([`crate::tools::truth`]: supersampled K x K, no LOD, the most segments) by pixel FLIP and by
+//! the coarse FLIP (see [`crate::tools::bench`]), with the old figure against the same field
+//! drawn with no LOD at the same resolution.
 //! In the same run the floor: a bare pass that draws the same number of vertices (the same
 //! instances of the same strip lengths) with a trivial shader, so that the grass draw's cost is
 //! given as a ratio to what the hardware needs for that many vertices.
@@ -25,11 +28,13 @@ use crate::gpu::GpuContext;
 use crate::grass::{BATCH_TILES, Blade};
 use crate::lod::RingSettings;
 use crate::renderer::FrameStats;
-use crate::renderer::RendererConfig;
 use crate::stream::TileSource;
+use crate::tools::bench::{Measures, rgb};
 use crate::tools::fly::{OptionError, OutDir, check_range, check_size, write_text};
 use crate::tools::metrics::{LineChart, Series, flip_compare};
 use crate::tools::timing::{FrameCounts, Timing, run_frames};
+use crate::tools::truth::Truth;
+use crate::RendererConfig;
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::{Manifest, TileData, TileId, World, WorldError};
 
@@ -56,6 +61,8 @@ pub struct BenchBladesOptions {
     pub timed_frames: Option<u32>,
     /// Interleaved rounds.
     pub rounds: Option<u32>,
+    /// Sub-samples a pixel side of the truth (`--truth`, 1..=8).
+    pub truth_k: u32,
 }
 
 impl Default for BenchBladesOptions {
@@ -71,6 +78,7 @@ impl Default for BenchBladesOptions {
             warmup_frames: None,
             timed_frames: None,
             rounds: None,
+            truth_k: crate::tools::truth::DEFAULT_K,
         }
     }
 }
@@ -127,10 +135,11 @@ impl BenchBladesOptions {
     /// Checks every option against its range (stated in the error), before any GPU work:
     /// `--size` 1..=16384 pixels a side, `--field-m` 10..=5000, `--fov-deg` between 1 and 170
     /// (both excluded), `--camera` and `--target` within 100 km of the origin in each
-    /// coordinate and at least 1 cm apart, 1..=32 `--counts` each in [`count_range`], and the
-    /// timing options (see [`crate::tools::bench::check_timing`]).
+    /// coordinate and at least 1 cm apart, 1..=32 `--counts` each in [`count_range`], `--truth`
+    /// 1..=8, and the timing options (see [`crate::tools::bench::check_timing`]).
     pub fn validate(&self) -> Result<(), OptionError> {
         check_size("--size", self.size)?;
+        crate::tools::truth::check_k("--truth", self.truth_k)?;
         check_range("--field-m", self.field_m, 10.0..=5000.0, "m")?;
         if !(self.fov_deg > 1.0 && self.fov_deg < 170.0) {
             return Err(OptionError::new(
@@ -218,7 +227,9 @@ pub struct BladesResult {
     pub ns_per_vertex: f64,
     /// The grass draw's time over the floor's.
     pub ratio_to_floor: f64,
-    /// Mean FLIP of the frame against the same field with no LOD.
+    /// Error of the frame against the truth of the same field, by both measures.
+    pub vs_truth: Measures,
+    /// Pixel FLIP of the frame against the same field with no LOD (the old figure).
     pub flip_vs_no_lod: f64,
 }
 
@@ -229,6 +240,8 @@ pub struct BenchBladesReport {
     pub adapter: AdapterReport,
     /// Image size.
     pub size: (u32, u32),
+    /// Sub-samples a pixel side of the truth.
+    pub truth_k: u32,
     /// The frame counts of the timings.
     pub counts: FrameCounts,
     /// One row per blade count.
@@ -401,8 +414,8 @@ pub fn field_camera(opts: &BenchBladesOptions, aspect: f32) -> Camera {
     Camera::with_view(eye, view, proj)
 }
 
-/// Runs the benchmark and writes `bench_blades.json`, `blades.csv`, `blades_time.png` and
-/// `blades_ratio.png` into `opts.out`.
+/// Runs the benchmark and writes `bench_blades.json`, `blades.csv`, `blades_time.png`,
+/// `blades_ratio.png` and `blades_error.png` into `opts.out`.
 pub fn run_bench_blades(
     opts: &BenchBladesOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
@@ -462,10 +475,36 @@ pub fn run_bench_blades(
         Ok(scene)
     };
 
-    // Images (and the counts) first, against the same field with no LOD.
+    // Images (and the counts) first, against the truth of the same field and against it with
+    // no LOD. The truth's blades reach four times the default view distance, or as far as the
+    // no-LOD render's where that is further (a large field); its pool slots are the count's.
+    let slots = crate::tools::truth::atlas_slots(&world, &ctx.device);
+    let truth_config = |size: (f64, u32)| {
+        let mut c = crate::tools::truth::truth_config(&world, &config(size, false), slots);
+        c.grass_rings = c.grass_rings.map(|r| {
+            let view = r.low_radius_m.max(view_m);
+            RingSettings {
+                high_radius_m: r.high_radius_m.max(view / 0.7),
+                low_radius_m: view,
+                ..r
+            }
+        });
+        c
+    };
     let mut scenes = Vec::new();
     let mut images = Vec::new();
     for (k, &size) in sizes.iter().enumerate() {
+        let mut truth = Truth::with_config(
+            &ctx,
+            world.clone(),
+            source.clone(),
+            opts.size,
+            opts.truth_k,
+            truth_config(size),
+        )?;
+        let walker = Some(camera.position.truncate());
+        let truth_image = truth.render(&ctx, &camera, 0.0, walker)?;
+        drop(truth);
         let mut reference = scene_for(size, false)?;
         reference.render(&ctx, &camera)?;
         let no_lod = reference.read_image(&ctx)?;
@@ -473,8 +512,8 @@ pub fn run_bench_blades(
         let mut scene = scene_for(size, true)?;
         let stats = scene.render(&ctx, &camera)?;
         let image = scene.read_image(&ctx)?;
-        let flip = flip_compare(&rgb(&no_lod), &rgb(&image))?.mean;
-        images.push((stats, f64::from(flip)));
+        let flip = f64::from(flip_compare(&rgb(&no_lod), &rgb(&image))?.mean);
+        images.push((stats, Measures::of(&truth_image, &image)?, flip));
         scenes.push(scene);
         progress("images", k as u64 + 1, total);
     }
@@ -533,7 +572,7 @@ pub fn run_bench_blades(
 
     let mut results = Vec::new();
     for (k, &spacing) in spacings.iter().enumerate() {
-        let (stats, flip): &(FrameStats, f64) = &images[k];
+        let (stats, vs_truth, flip): &(FrameStats, Measures, f64) = &images[k];
         let g = &stats.grass;
         let vertices = strip_vertices(g.drawn, segments);
         let draw = Timing::of(&draw_samples[k]);
@@ -564,6 +603,7 @@ pub fn run_bench_blades(
             } else {
                 0.0
             },
+            vs_truth: *vs_truth,
             flip_vs_no_lod: *flip,
         });
     }
@@ -571,16 +611,13 @@ pub fn run_bench_blades(
     let report = BenchBladesReport {
         adapter: AdapterReport::of(&ctx),
         size: opts.size,
+        truth_k: opts.truth_k,
         counts,
         results,
     };
     write_json(&opts.out.join("bench_blades.json"), &report)?;
     out_dir.keep();
     Ok(report)
-}
-
-fn rgb(img: &image::RgbaImage) -> image::RgbImage {
-    image::DynamicImage::ImageRgba8(img.clone()).to_rgb8()
 }
 
 /// Vertices of the grass draw: a strip of `2 * segments + 1` vertices a blade, per LOD.
@@ -595,12 +632,13 @@ fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<
     let mut csv = String::from(
         "blades,spacing_m,considered_high,considered_low,empty,culled,drawn_high,drawn_low,vertices,\
          generate_ms,draw_ms,draw_q1_ms,draw_q3_ms,draw_spread,frame_ms,floor_ms,floor_spread,\
-         floor_vertices,ns_per_blade,ns_per_vertex,ratio_to_floor,noisy,flip_vs_no_lod\n",
+         floor_vertices,ns_per_blade,ns_per_vertex,ratio_to_floor,noisy,flip_vs_truth,\
+         coarse_flip_vs_truth,flip_vs_no_lod\n",
     );
     for r in results {
         let _ = writeln!(
             csv,
-            "{},{:.4},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.3},{:.4},{:.3},{},{:.5}",
+            "{},{:.4},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.3},{:.4},{:.3},{},{:.5},{:.5},{:.5}",
             r.blades,
             r.spacing_m,
             r.considered[0],
@@ -623,6 +661,8 @@ fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<
             r.ns_per_vertex,
             r.ratio_to_floor,
             r.draw.noisy || r.floor.noisy,
+            r.vs_truth.flip,
+            r.vs_truth.coarse,
             r.flip_vs_no_lod
         );
     }
@@ -656,6 +696,21 @@ fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<
         series: vec![series("ratio to floor", &|r| r.ratio_to_floor)],
     }
     .write_png(&opts.out.join("blades_ratio.png"), 900, 600)?;
+    LineChart {
+        title: "Image error against blade count".into(),
+        x_label: "blades in the field".into(),
+        y_label: "FLIP".into(),
+        log_x: true,
+        log_y: false,
+        series: vec![
+            series("pixel FLIP against the truth", &|r| r.vs_truth.flip),
+            series("coarse FLIP (8x8 blocks) against the truth", &|r| {
+                r.vs_truth.coarse
+            }),
+            series("pixel FLIP against no LOD", &|r| r.flip_vs_no_lod),
+        ],
+    }
+    .write_png(&opts.out.join("blades_error.png"), 900, 600)?;
     Ok(())
 }
 

@@ -63,6 +63,8 @@ pub struct FlyOptions {
     pub grass: GrassConfig,
     /// Terrain mesh step in samples (default: the renderer's).
     pub mesh_step: u32,
+    /// How the frames are anti-aliased (default: the renderer's).
+    pub aa: crate::aa::AntiAliasing,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -107,6 +109,7 @@ impl Default for FlyOptions {
             enable: Vec::new(),
             grass: GrassConfig::default(),
             mesh_step: DEFAULT_MESH_STEP,
+            aa: Default::default(),
         }
     }
 }
@@ -137,6 +140,7 @@ impl FlyOptions {
         config.features = config.features.switched(&self.disable, &self.enable);
         config.grass = self.grass;
         config.mesh_step = self.mesh_step;
+        config.aa = self.aa;
         config.validate().map_err(SettingError::from)?;
         Ok(config)
     }

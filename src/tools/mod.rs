@@ -1,11 +1,14 @@
 //! The tools built on the engine (feature `cli`): the headless [`Scene`] (offscreen targets
-//! around a [`crate::Renderer`]), `fly` and its report, `soak`, the benchmarks (`bench lod`,
-//! `bench features`), the evaluations (`eval derive`, `eval sway`), charts and image metrics,
+//! around a [`crate::Renderer`]), `fly` and its report, `soak`, the truth the benchmarks
+//! measure against (supersampled reference frames), the benchmarks (`bench lod`,
+//! `bench features`, `bench blades`), the evaluations (`eval derive`, `eval sway`), charts and image metrics,
 //! the interactive viewer (`view`), and `serve`, a static server of a world folder.
 
 pub mod bench;
 pub mod bench_aa;
 pub mod bench_blades;
+pub mod bench_features;
+pub mod bench_lod;
 pub mod eval_derive;
 pub mod eval_sway;
 pub mod fault_proxy;
@@ -21,16 +24,19 @@ pub mod serve;
 pub mod soak;
 pub mod sway_integrators;
 pub mod timing;
+pub mod truth;
 pub mod view;
 
-pub use bench::{
-    BenchFeaturesReport, BenchLodOptions, BenchLodReport, FAR_BAND_FACTOR, FarBand, FarBandView,
-    FeatureResult, LodSetting, lod_settings, reference_setting, run_bench_features, run_bench_lod,
+pub use bench::{BenchLodOptions, Measures};
+pub use bench_features::{BenchFeaturesReport, FeatureResult, run_bench_features};
+pub use bench_lod::{
+    BenchLodReport, FAR_BAND_FACTOR, FarBand, FarBandView, LodSetting, lod_settings, run_bench_lod,
 };
 pub use fly::{FlyOptions, FlyProgress, run_fly, write_json};
 pub use report::{AdapterReport, FlyReport, FlySummary, FrameRecord};
 pub use scene::{Scene, SceneError};
 pub use soak::{SoakFaults, SoakOptions, SoakReport, TeleportRecord, resident_bytes, run_soak};
+pub use truth::Truth;
 
 use std::path::Path;
 use std::sync::Arc;

@@ -52,6 +52,8 @@ pub struct Scene {
     /// The camera of the last frame drawn with the terrain-only depth captured.
     captured: Option<Camera>,
     in_flight: std::collections::VecDeque<wgpu::SubmissionIndex>,
+    /// Sub-pixel offset of the frames drawn (see [`FrameInput::jitter_px`]).
+    jitter_px: glam::Vec2,
 }
 
 impl Scene {
@@ -104,6 +106,7 @@ impl Scene {
             last: None,
             captured: None,
             in_flight: std::collections::VecDeque::new(),
+            jitter_px: glam::Vec2::ZERO,
         })
     }
 
@@ -212,7 +215,7 @@ impl Scene {
         walker: Option<DVec2>,
     ) -> Result<(u64, wgpu::SubmissionIndex), SceneError> {
         let input = FrameInput {
-            jitter_px: glam::Vec2::ZERO,
+            jitter_px: self.jitter_px,
             camera: *camera,
             time_s,
             walker,
@@ -235,6 +238,12 @@ impl Scene {
             }
         }
         Ok((frame, submission))
+    }
+
+    /// Shifts the frames drawn from now on by `offset_px` pixels (see
+    /// [`FrameInput::jitter_px`]; zero, the default, for none).
+    pub fn set_jitter(&mut self, offset_px: glam::Vec2) {
+        self.jitter_px = offset_px;
     }
 
     /// The number of the frame prepared last.

@@ -1,13 +1,19 @@
-//! Measurements: percentiles of timings, image error by FLIP, grass coverage, and
-//! speed-against-accuracy charts.
+//! Measurements: percentiles of timings, image error by FLIP (pixel by pixel, and the coarse
+//! FLIP of [`coarse_flip`], which does not punish another random draw of the same grass), grass
+//! coverage, and speed-against-accuracy charts.
 
 mod band;
 mod chart;
+mod coarse;
 mod coverage;
 
 pub use band::{band_mask, masked_mean, ray_distances};
 
 pub use chart::{Chart, ChartError, ChartPoint, LineChart, Series, pareto_front, pareto_front_n};
+pub use coarse::{
+    COARSE_FACTOR, box_filter_linear, coarse_flip, decode_srgb8, encode_srgb8, linear_to_srgb,
+    srgb_to_linear,
+};
 pub use coverage::{COVERAGE_DISTANCE_M, COVERAGE_EPSILON, Coverage, grass_coverage};
 
 use thiserror::Error;

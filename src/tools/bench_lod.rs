@@ -1,0 +1,750 @@
+//! `verdant bench lod`: the LOD transition benchmark, measured against the truth.
+//!
+//! Every image is compared with the truth at the same camera and time
+//! ([`crate::tools::truth`]: supersampled K x K, no LOD, the most segments, blades out to four
+//! times the view distance) by pixel FLIP and by the coarse FLIP (see [`crate::tools::bench`]);
+//! the old figure against the renderer's own render without LOD at the same resolution is kept
+//! as a column.
+//!
+//! (a) Popping: a camera dolly over the meadow crosses the high/low ring boundary of many grass
+//! tiles. Each frame is rendered with the default LOD settings and compared with its truth (and
+//! with the no-LOD render). A pop would show as a jump of that error on a frame where tiles
+//! switch ring; the jumps on frames without switches are the noise floor.
+//! (b) Speed against accuracy: for a set of LOD settings (ring radii, blade spacing, segments,
+//! infill, width, view distance), GPU time per frame against the error to the truth, with the
+//! Pareto front of each measure; the default setting is marked, and the report names the
+//! settings on each front. The images are captured first; then the settings are timed in
+//! interleaved rounds, each measurement's frames back to back with nothing in between (see
+//! [`crate::tools::timing`]): a median with its interquartile range per view, a setting whose
+//! spread is above 10% flagged.
+//! (c) The far field: beyond the view distance the terrain is shaded with what the grass would
+//! show there. The truth draws real blades out to [`FAR_BAND_FACTOR`] times the default view
+//! distance; the default setting is compared with it, with the far field on and off, by the mean
+//! pixel FLIP over the band of pixels whose surface (in the truth's depth) lies between the view
+//! distance and that factor times it.
+
+use anyhow::{Context, Result, bail};
+use glam::DVec3;
+use serde::Serialize;
+
+use crate::camera::{Camera, sample_path};
+use crate::gpu::GpuContext;
+use crate::lod::RingSettings;
+use crate::tools::bench::{Bench, BenchLodOptions, Measures, flip, rgb};
+use crate::tools::fly::{OutDir, write_text};
+use crate::tools::metrics::{
+    Chart, ChartPoint, LineChart, Series, Summary, band_mask, flip_error_map, masked_mean,
+    pareto_front, ray_distances,
+};
+use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
+use crate::RendererConfig;
+use crate::tools::{AdapterReport, Scene, write_json};
+use crate::world::World;
+
+/// One LOD setting: every parameter of the grass that the benchmark varies (each a column of
+/// `lod_settings.csv`, so that a candidate default can be read off the front).
+#[derive(Clone, Debug, Serialize)]
+pub struct LodSetting {
+    /// Name in tables and charts.
+    pub name: String,
+    /// High-LOD ring radius, in grass tile edges.
+    pub high_radius_tiles: f64,
+    /// View distance (low-LOD ring radius), in grass tile edges.
+    pub view_distance_tiles: f64,
+    /// Blade spacing of the high-LOD grid, metres.
+    pub spacing_m: f32,
+    /// Blade segments near the camera, in the rest of the high ring and in the low ring.
+    pub segments: [u32; 3],
+    /// Horizontal radius of the blades drawn with the near segments, metres.
+    pub near_m: f32,
+    /// Radii of the grass infill near the camera, metres (half and quarter spacing).
+    pub infill_m: [f32; 2],
+    /// Every grass type's blade width times this.
+    pub width_scale: f32,
+}
+
+impl LodSetting {
+    /// A setting of the renderer's near radius, infill and blade width.
+    pub fn new(name: &str, high: f64, view: f64, spacing_m: f32, segments: [u32; 3]) -> Self {
+        Self {
+            name: name.into(),
+            high_radius_tiles: high,
+            view_distance_tiles: view,
+            spacing_m,
+            segments,
+            near_m: 12.0,
+            infill_m: crate::renderer::DEFAULT_INFILL_M,
+            width_scale: 1.0,
+        }
+    }
+
+    /// The same setting with blades `width_scale` times as wide.
+    pub fn with_width(mut self, width_scale: f32) -> Self {
+        self.width_scale = width_scale;
+        self
+    }
+
+    /// The same setting with the infill radii `infill_m`.
+    pub fn with_infill(mut self, infill_m: [f32; 2]) -> Self {
+        self.infill_m = infill_m;
+        self
+    }
+
+    /// The same setting with the near segments out to `near_m`.
+    pub fn with_near(mut self, near_m: f32) -> Self {
+        self.near_m = near_m;
+        self
+    }
+
+    /// The scene configuration of this setting for `world`.
+    pub fn config(&self, world: &World) -> RendererConfig {
+        let mut c = RendererConfig::for_world(world);
+        let base = RingSettings::for_pyramid(&world.manifest.pyramid);
+        let size = world.manifest.pyramid.tile_size_m(base.level);
+        c.grass_rings = Some(RingSettings {
+            high_radius_m: self.high_radius_tiles * size,
+            low_radius_m: self.view_distance_tiles * size,
+            ..base
+        });
+        c.grass.spacing_m = self.spacing_m;
+        c.grass.segments = self.segments;
+        c.grass.near_m = self.near_m;
+        c.grass.infill_m = self.infill_m;
+        c.grass.width_scale = self.width_scale;
+        c
+    }
+}
+
+/// The settings the benchmark compares; the first is the renderer's default, and "no LOD" (every
+/// tile high LOD with the near segments, out to the default view distance) is the reference of
+/// the old `flip_vs_no_lod` figure.
+pub fn lod_settings(world: &World) -> Vec<LodSetting> {
+    let d = RendererConfig::for_world(world);
+    let rings = d
+        .grass_rings
+        .unwrap_or_else(|| RingSettings::for_pyramid(&world.manifest.pyramid));
+    let size = world.manifest.pyramid.tile_size_m(rings.level);
+    let (h, v) = (rings.high_radius_m / size, rings.low_radius_m / size);
+    let (s, seg, infill) = (d.grass.spacing_m, d.grass.segments, d.grass.infill_m);
+    let new = |name: &str, high: f64, view: f64, spacing: f32, segments: [u32; 3]| {
+        LodSetting::new(name, high, view, spacing, segments)
+            .with_near(d.grass.near_m)
+            .with_infill(infill)
+            .with_width(d.grass.width_scale)
+    };
+    vec![
+        new("default", h, v, s, seg),
+        new("near ring x0.5", h * 0.5, v, s, seg),
+        new("near ring x2", h * 2.0, v, s, seg),
+        new("view x0.67", h, v * 2.0 / 3.0, s, seg),
+        new("view x1.33", h, v * 4.0 / 3.0, s, seg),
+        new("spacing x1.4", h, v, s * 1.4, seg),
+        new("spacing x0.8", h, v, s * 0.8, seg),
+        new("segments 7/7/3", h, v, s, [7, 7, 3]),
+        new("segments 5/3/2", h, v, s, [5, 3, 2]),
+        new("segments 3/2/1", h, v, s, [3, 2, 1]),
+        new("infill off", h, v, s, seg).with_infill([0.0; 2]),
+        new("infill x0.8", h, v, s, seg).with_infill(infill.map(|r| 0.8 * r)),
+        new("infill x1.2", h, v, s, seg).with_infill(infill.map(|r| 1.2 * r)),
+        new("width x0.67", h, v, s, seg).with_width(2.0 / 3.0),
+        new("width x1.5", h, v, s, seg).with_width(1.5),
+        new("no LOD", v, v, s, [seg[0]; 3]),
+    ]
+}
+
+/// Result of one setting.
+#[derive(Clone, Debug, Serialize)]
+pub struct SettingResult {
+    /// The setting.
+    pub setting: LodSetting,
+    /// GPU time per frame over all passes (mean over the views of their medians and
+    /// quartiles; the largest spread), milliseconds; zero without timestamps.
+    pub gpu: Timing,
+    /// Wall time per frame, frames back to back, milliseconds.
+    pub frame: Timing,
+    /// Mean error against the truth over the views, by both measures.
+    pub vs_truth: Measures,
+    /// Mean pixel FLIP against the "no LOD" setting's render over the views (the old figure).
+    pub flip_vs_no_lod: f64,
+    /// Blades drawn per frame (median).
+    pub blades_drawn: f64,
+    /// Grass coverage within [`crate::tools::metrics::COVERAGE_DISTANCE_M`] (see
+    /// [`crate::tools::metrics::grass_coverage`]), mean over the views, measured on the
+    /// captured frames, not the timed ones.
+    pub coverage: f64,
+    /// On the Pareto front of time against pixel FLIP against the truth.
+    pub pareto: bool,
+    /// On the Pareto front of time against the coarse FLIP against the truth.
+    pub pareto_coarse: bool,
+}
+
+/// One frame of the dolly.
+#[derive(Clone, Debug, Serialize)]
+pub struct DollyFrame {
+    /// Frame.
+    pub frame: u32,
+    /// Error of the LOD frame against the truth, by both measures.
+    pub vs_truth: Measures,
+    /// Pixel FLIP of the LOD frame against the no-LOD frame (the old figure).
+    pub flip_vs_no_lod: f64,
+    /// FLIP change from the previous LOD frame.
+    pub change_lod: f64,
+    /// FLIP change from the previous no-LOD frame.
+    pub change_no_lod: f64,
+    /// How much the pixel FLIP against the truth moved since the previous frame: a pop shows
+    /// as a jump.
+    pub jump: f64,
+    /// Grass tiles that changed ring this frame.
+    pub ring_switches: u32,
+}
+
+/// How far the truth draws real blades, in default view distances: the far band's end.
+pub const FAR_BAND_FACTOR: f64 = crate::tools::truth::REACH_FACTOR;
+
+/// The far band at one view: the default setting against the truth over the pixels whose
+/// surface lies between the view distance and [`FAR_BAND_FACTOR`] times it.
+#[derive(Clone, Debug, Serialize)]
+pub struct FarBandView {
+    /// The view (0-based, of the four along the path).
+    pub view: u32,
+    /// Pixels in the band.
+    pub band_pixels: u64,
+    /// Mean pixel FLIP over the band with the far field on (`None` when the band is empty).
+    pub flip_far_field: Option<f64>,
+    /// The same with the far field switched off.
+    pub flip_no_far_field: Option<f64>,
+}
+
+/// The far band over the views.
+#[derive(Clone, Debug, Serialize)]
+pub struct FarBand {
+    /// Where the band starts: the default view distance, metres along the view ray.
+    pub near_m: f64,
+    /// Where it ends: [`FAR_BAND_FACTOR`] times that, the truth's view distance.
+    pub far_m: f64,
+    /// Pixels in the band, all views together.
+    pub band_pixels: u64,
+    /// Mean pixel FLIP against the truth over the band's pixels of all views, far field on
+    /// (`None` if none).
+    pub flip_far_field: Option<f64>,
+    /// The same, far field off.
+    pub flip_no_far_field: Option<f64>,
+    /// Each view.
+    pub views: Vec<FarBandView>,
+}
+
+/// Everything `bench_lod.json` holds.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchLodReport {
+    /// The adapter.
+    pub adapter: AdapterReport,
+    /// Image size.
+    pub size: (u32, u32),
+    /// Sub-samples a pixel side of the truth.
+    pub truth_k: u32,
+    /// The dolly.
+    pub dolly: Vec<DollyFrame>,
+    /// Largest jump of the LOD run's pixel FLIP against the truth on a frame where grass tiles
+    /// switched ring: the popping, as a number.
+    pub worst_pop: f64,
+    /// The same on frames without switches (the noise floor of the measure).
+    pub worst_change_without_switch: f64,
+    /// The settings.
+    pub settings: Vec<SettingResult>,
+    /// Whether the default setting is on the Pareto front of pixel FLIP against the truth.
+    pub default_on_front: bool,
+    /// Whether it is on the front of the coarse FLIP.
+    pub default_on_coarse_front: bool,
+    /// The settings on the front of pixel FLIP against the truth, fastest first.
+    pub front: Vec<String>,
+    /// The settings on the front of the coarse FLIP against the truth, fastest first.
+    pub coarse_front: Vec<String>,
+    /// The frame counts of the timings.
+    pub counts: FrameCounts,
+    /// The far field against the truth's real blades out to [`FAR_BAND_FACTOR`] times the view
+    /// distance.
+    pub far_band: FarBand,
+}
+
+/// Runs the benchmark and writes `bench_lod.json`, `dolly.csv`, `dolly.png`, `lod_settings.csv`,
+/// `lod_settings.png`, `lod_settings_coarse.png`, `lod_coverage.png` and `far_band.csv` into
+/// `opts.out`.
+pub fn run_bench_lod(
+    opts: &BenchLodOptions,
+    progress: &mut dyn FnMut(&str, u64, u64),
+) -> Result<BenchLodReport> {
+    opts.validate()?;
+    let world = World::open(&opts.world)?;
+    let path = match &opts.path {
+        Some(n) => world
+            .manifest
+            .path(n)
+            .cloned()
+            .with_context(|| format!("no camera path {n:?}"))?,
+        None => match world
+            .manifest
+            .path("meadow")
+            .or(world.manifest.paths.first())
+        {
+            Some(p) => p.clone(),
+            None => bail!("world {} has no camera paths", opts.world.display()),
+        },
+    };
+    let out_dir = OutDir::create_for(&opts.out, "bench lod")?;
+    let ctx = GpuContext::new()?;
+    let bench = Bench {
+        ctx: &ctx,
+        world: &world,
+        size: opts.size,
+    };
+    let settings = lod_settings(&world);
+    // Every frame of the benchmark is drawn at time 0 (`Scene::render` keeps the last frame's
+    // time), the camera leaving the trail: so is the truth.
+    let mut truth = bench.truth(&RendererConfig::for_world(&world), opts.truth_k)?;
+
+    // (a) The dolly: forward along the path's direction, from where the path starts.
+    let start = sample_path(&path, path.keys[0].t_s);
+    let ring_m = settings[0].high_radius_tiles
+        * world
+            .manifest
+            .pyramid
+            .tile_size_m(RingSettings::for_pyramid(&world.manifest.pyramid).level);
+    // Far enough that tiles ahead cross the high/low boundary during the dolly.
+    let step = 1.5 * ring_m / f64::from(opts.dolly_frames);
+    let mut lod_scene = bench.scene(settings[0].config(&world))?;
+    let no_lod = settings
+        .iter()
+        .find(|s| s.name == "no LOD")
+        .expect("the no-LOD setting")
+        .clone();
+    let mut full_scene = bench.scene(no_lod.config(&world))?;
+    let mut dolly = Vec::new();
+    let mut prev: Option<(image::RgbaImage, image::RgbaImage)> = None;
+    let mut prev_rings: Option<Vec<(crate::world::TileId, crate::lod::Ring)>> = None;
+    for f in 0..opts.dolly_frames {
+        let fwd = start.forward();
+        let horizontal = DVec3::new(fwd.x, fwd.y, 0.0).normalize_or_zero();
+        let mut cam = start;
+        cam.position += horizontal * step * f64::from(f);
+        let (a, _) = bench.frame(&mut lod_scene, &cam)?;
+        let rings = lod_scene.grass_rings();
+        let (b, _) = bench.frame(&mut full_scene, &cam)?;
+        let t = truth.render(&ctx, &cam, 0.0, Some(cam.position.truncate()))?;
+        let switches = match &prev_rings {
+            Some(p) => rings
+                .iter()
+                .filter(|r| p.iter().any(|q| q.0 == r.0 && q.1 != r.1))
+                .count() as u32,
+            None => 0,
+        };
+        let (change_lod, change_no_lod) = match &prev {
+            Some((pa, pb)) => (flip(pa, &a)?, flip(pb, &b)?),
+            None => (0.0, 0.0),
+        };
+        let vs_truth = Measures::of(&t, &a)?;
+        let jump = dolly.last().map_or(0.0, |d: &DollyFrame| {
+            (vs_truth.flip - d.vs_truth.flip).abs()
+        });
+        dolly.push(DollyFrame {
+            frame: f,
+            vs_truth,
+            flip_vs_no_lod: flip(&b, &a)?,
+            change_lod,
+            change_no_lod,
+            jump,
+            ring_switches: switches,
+        });
+        prev = Some((a, b));
+        prev_rings = Some(rings);
+        progress("dolly", u64::from(f) + 1, u64::from(opts.dolly_frames));
+    }
+    drop((lod_scene, full_scene));
+    let worst_pop = dolly
+        .iter()
+        .skip(1)
+        .filter(|d| d.ring_switches > 0)
+        .map(|d| d.jump)
+        .fold(0.0, f64::max);
+    let worst_change_without_switch = dolly
+        .iter()
+        .skip(1)
+        .filter(|d| d.ring_switches == 0)
+        .map(|d| d.jump)
+        .fold(0.0, f64::max);
+
+    // (b) and (c): the truth at four views along the path, with the far band's masks from its
+    // depth, and the default without the far field.
+    let views: Vec<Camera> = [0.1, 0.35, 0.6, 0.85]
+        .iter()
+        .map(|u| sample_path(&path, path.keys[0].t_s + u * path.duration_s))
+        .collect();
+    let tile_m = world
+        .manifest
+        .pyramid
+        .tile_size_m(RingSettings::for_pyramid(&world.manifest.pyramid).level);
+    let near_m = settings[0].view_distance_tiles * tile_m;
+    let far_m = FAR_BAND_FACTOR * near_m;
+    let (w, h) = opts.size;
+    let (mut truths, mut masks) = (Vec::new(), Vec::new());
+    for (i, v) in views.iter().enumerate() {
+        truths.push(truth.render(&ctx, v, 0.0, Some(v.position.truncate()))?);
+        let depth = truth.read_depth(&ctx)?;
+        let inv = v.view_proj_relative(w as f32 / h as f32).inverse();
+        let distances = ray_distances(&depth, w, h, inv);
+        masks.push(band_mask(&distances, near_m as f32, far_m as f32));
+        progress("truth", i as u64 + 1, views.len() as u64);
+    }
+    drop(truth);
+    let mut config = settings[0].config(&world);
+    config.features = config.features.without(crate::features::Feature::FarField);
+    let mut scene = Scene::new(&ctx, world.clone(), w, h, config)?;
+    let mut no_far_field = Vec::new();
+    for v in &views {
+        no_far_field.push(bench.frame(&mut scene, v)?.0);
+    }
+    drop(scene);
+    progress("far band", 1, 1);
+    // Images first, every setting's scene kept for the timings.
+    let mut scenes = Vec::new();
+    let mut images = Vec::new();
+    let mut partial = Vec::new();
+    let total = settings.len() as u64;
+    for (k, s) in settings.iter().enumerate() {
+        let mut scene = bench.scene(s.config(&world))?;
+        let (mut measures, mut blades, mut coverage) = (Vec::new(), Vec::new(), Vec::new());
+        let mut own = Vec::new();
+        for (v, t) in views.iter().zip(&truths) {
+            let (img, stats, c) = bench.frame_with_coverage(&mut scene, v)?;
+            measures.push(Measures::of(t, &img)?);
+            blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
+            coverage.push(c);
+            own.push(img);
+        }
+        scenes.push(scene);
+        images.push(own);
+        partial.push((measures, blades, coverage));
+        progress("images", k as u64 + 1, total);
+    }
+    let far_band = far_band((near_m, far_m), &truths, &masks, &images[0], &no_far_field)?;
+    let no_lod_index = settings
+        .iter()
+        .position(|s| s.name == no_lod.name)
+        .expect("the no-LOD setting");
+    let mut vs_no_lod = Vec::new();
+    for own in &images {
+        let mut flips = Vec::new();
+        for (r, a) in images[no_lod_index].iter().zip(own) {
+            flips.push(flip(r, a)?);
+        }
+        vs_no_lod.push(flips.iter().sum::<f64>() / flips.len().max(1) as f64);
+    }
+    drop((truths, masks, images, no_far_field));
+    // Then the timings, in interleaved rounds.
+    let counts = FrameCounts::for_adapter(&ctx.info).with(
+        opts.warmup_frames,
+        opts.timed_frames,
+        opts.rounds,
+    );
+    let n_views = views.len();
+    let mut gpu_samples = vec![vec![Vec::new(); n_views]; settings.len()];
+    let mut wall_samples = vec![vec![Vec::new(); n_views]; settings.len()];
+    let steps = u64::from(counts.rounds) * total;
+    for round in 0..counts.rounds {
+        for (k, scene) in scenes.iter_mut().enumerate() {
+            for (vi, v) in views.iter().enumerate() {
+                let walker = Some(v.position.truncate());
+                for (stats, wall) in
+                    run_frames(&ctx, scene, v, 0.0, walker, counts.warmup, counts.timed)?
+                {
+                    gpu_samples[k][vi].push(frame_ms(&stats, wall, true));
+                    wall_samples[k][vi].push(wall);
+                }
+            }
+            progress("timing", u64::from(round) * total + k as u64 + 1, steps);
+        }
+    }
+    drop(scenes);
+    let mut results = Vec::new();
+    for (k, s) in settings.iter().enumerate() {
+        let (measures, blades, coverage) = &partial[k];
+        let timing = |samples: &[Vec<f64>]| {
+            Timing::over_views(&samples.iter().map(|v| Timing::of(v)).collect::<Vec<_>>())
+        };
+        results.push(SettingResult {
+            setting: s.clone(),
+            gpu: if ctx.timestamps {
+                timing(&gpu_samples[k])
+            } else {
+                Timing::default()
+            },
+            frame: timing(&wall_samples[k]),
+            vs_truth: Measures::mean(measures),
+            flip_vs_no_lod: vs_no_lod[k],
+            blades_drawn: Summary::of(blades).median,
+            coverage: coverage.iter().sum::<f64>() / coverage.len() as f64,
+            pareto: false,
+            pareto_coarse: false,
+        });
+    }
+    // Time is GPU time when the adapter has timestamps, else wall time.
+    let time = |r: &SettingResult| {
+        if ctx.timestamps {
+            r.gpu.median_ms
+        } else {
+            r.frame.median_ms
+        }
+    };
+    let front_of = |error: &dyn Fn(&SettingResult) -> f64| {
+        let xy: Vec<(f64, f64)> = results.iter().map(|r| (time(r), error(r))).collect();
+        let mut front = pareto_front(&xy);
+        front.sort_by(|&a, &b| xy[a].0.total_cmp(&xy[b].0));
+        front
+    };
+    let front = front_of(&|r| r.vs_truth.flip);
+    let coarse_front = front_of(&|r| r.vs_truth.coarse);
+    for &i in &front {
+        results[i].pareto = true;
+    }
+    for &i in &coarse_front {
+        results[i].pareto_coarse = true;
+    }
+    let names = |front: &[usize]| -> Vec<String> {
+        front
+            .iter()
+            .map(|&i| results[i].setting.name.clone())
+            .collect()
+    };
+    let (front, coarse_front) = (names(&front), names(&coarse_front));
+
+    write_outputs(opts, &dolly, &results, ctx.timestamps)?;
+    write_far_band(opts, &far_band)?;
+    let report = BenchLodReport {
+        adapter: AdapterReport::of(&ctx),
+        size: opts.size,
+        truth_k: opts.truth_k,
+        worst_pop,
+        worst_change_without_switch,
+        default_on_front: results[0].pareto,
+        default_on_coarse_front: results[0].pareto_coarse,
+        front,
+        coarse_front,
+        counts,
+        dolly,
+        settings: results,
+        far_band,
+    };
+    write_json(&opts.out.join("bench_lod.json"), &report)?;
+    out_dir.keep();
+    Ok(report)
+}
+
+/// The far band's figures from the truth's images and band masks, and the default setting's
+/// images with the far field on and off (all in the order of the views).
+fn far_band(
+    (near_m, far_m): (f64, f64),
+    truths: &[image::RgbaImage],
+    masks: &[Vec<bool>],
+    with: &[image::RgbaImage],
+    without: &[image::RgbaImage],
+) -> Result<FarBand> {
+    let mut views = Vec::new();
+    let (mut sum_with, mut sum_without, mut pixels) = (0.0, 0.0, 0u64);
+    for (i, (t, mask)) in truths.iter().zip(masks).enumerate() {
+        let r = rgb(t);
+        let band_pixels = mask.iter().filter(|&&m| m).count() as u64;
+        let with = masked_mean(&flip_error_map(&r, &rgb(&with[i]))?, mask);
+        let without = masked_mean(&flip_error_map(&r, &rgb(&without[i]))?, mask);
+        if let (Some(a), Some(b)) = (with, without) {
+            sum_with += a * band_pixels as f64;
+            sum_without += b * band_pixels as f64;
+            pixels += band_pixels;
+        }
+        views.push(FarBandView {
+            view: i as u32,
+            band_pixels,
+            flip_far_field: with,
+            flip_no_far_field: without,
+        });
+    }
+    let mean = |sum: f64| (pixels > 0).then(|| sum / pixels as f64);
+    Ok(FarBand {
+        near_m,
+        far_m,
+        band_pixels: pixels,
+        flip_far_field: mean(sum_with),
+        flip_no_far_field: mean(sum_without),
+        views,
+    })
+}
+
+/// Writes `far_band.csv`: one row a view, empty FLIP cells where the band is empty.
+fn write_far_band(opts: &BenchLodOptions, band: &FarBand) -> Result<()> {
+    let cell = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
+    let mut csv = String::from("view,band_pixels,flip_far_field,flip_no_far_field\n");
+    for v in &band.views {
+        csv.push_str(&format!(
+            "{},{},{},{}\n",
+            v.view,
+            v.band_pixels,
+            cell(v.flip_far_field),
+            cell(v.flip_no_far_field)
+        ));
+    }
+    write_text(&opts.out.join("far_band.csv"), &csv)?;
+    Ok(())
+}
+
+fn write_outputs(
+    opts: &BenchLodOptions,
+    dolly: &[DollyFrame],
+    results: &[SettingResult],
+    gpu: bool,
+) -> Result<()> {
+    use std::fmt::Write as _;
+    let mut csv = String::from(
+        "frame,flip_vs_truth,coarse_flip_vs_truth,jump,flip_vs_no_lod,change_lod,change_no_lod,\
+         ring_switches\n",
+    );
+    for d in dolly {
+        let _ = writeln!(
+            csv,
+            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{}",
+            d.frame,
+            d.vs_truth.flip,
+            d.vs_truth.coarse,
+            d.jump,
+            d.flip_vs_no_lod,
+            d.change_lod,
+            d.change_no_lod,
+            d.ring_switches
+        );
+    }
+    write_text(&opts.out.join("dolly.csv"), &csv)?;
+    let line =
+        |f: &dyn Fn(&DollyFrame) -> f64| dolly.iter().map(|d| (f64::from(d.frame), f(d))).collect();
+    LineChart {
+        title: "LOD dolly across the ring boundary".into(),
+        x_label: "frame".into(),
+        y_label: "FLIP".into(),
+        log_x: false,
+        log_y: false,
+        series: vec![
+            Series {
+                name: "LOD vs the truth (pixel FLIP)".into(),
+                points: line(&|d| d.vs_truth.flip),
+            },
+            Series {
+                name: "LOD vs the truth (coarse FLIP)".into(),
+                points: line(&|d| d.vs_truth.coarse),
+            },
+            Series {
+                name: "jump of the pixel FLIP".into(),
+                points: line(&|d| d.jump),
+            },
+            Series {
+                name: "LOD vs no LOD".into(),
+                points: line(&|d| d.flip_vs_no_lod),
+            },
+            Series {
+                name: "ring switches / 1000".into(),
+                points: line(&|d| f64::from(d.ring_switches) / 1000.0),
+            },
+        ],
+    }
+    .write_png(&opts.out.join("dolly.png"), 900, 600)?;
+
+    let mut csv = String::from(
+        "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,\
+         segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,gpu_ms,gpu_q1_ms,\
+         gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_vs_truth,\
+         coarse_flip_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse\n",
+    );
+    for r in results {
+        let s = &r.setting;
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
+            s.name,
+            s.high_radius_tiles,
+            s.view_distance_tiles,
+            s.spacing_m,
+            s.segments[0],
+            s.segments[1],
+            s.segments[2],
+            s.near_m,
+            s.infill_m[0],
+            s.infill_m[1],
+            s.width_scale,
+            r.gpu.median_ms,
+            r.gpu.q1_ms,
+            r.gpu.q3_ms,
+            r.gpu.spread,
+            r.frame.median_ms,
+            r.frame.spread,
+            if gpu { r.gpu.noisy } else { r.frame.noisy },
+            r.frame.frames,
+            r.vs_truth.flip,
+            r.vs_truth.coarse,
+            r.flip_vs_no_lod,
+            r.blades_drawn,
+            r.coverage,
+            r.pareto,
+            r.pareto_coarse
+        );
+    }
+    write_text(&opts.out.join("lod_settings.csv"), &csv)?;
+    let x_label = if gpu {
+        "GPU time per frame (ms)"
+    } else {
+        "frame time (ms)"
+    };
+    let time = |r: &SettingResult| {
+        if gpu {
+            r.gpu.median_ms
+        } else {
+            r.frame.median_ms
+        }
+    };
+    let chart = |title: &str, y_label: &str, y: &dyn Fn(&SettingResult) -> f64| Chart {
+        title: title.into(),
+        x_label: x_label.into(),
+        y_label: y_label.into(),
+        log_x: true,
+        log_y: false,
+        points: results
+            .iter()
+            .map(|r| ChartPoint {
+                label: if (gpu && r.gpu.noisy) || (!gpu && r.frame.noisy) {
+                    format!("{} (noisy)", r.setting.name)
+                } else {
+                    r.setting.name.clone()
+                },
+                x: time(r),
+                y: y(r),
+                chosen: r.setting.name == "default",
+            })
+            .collect(),
+    };
+    let k = opts.truth_k;
+    chart(
+        "Grass LOD settings: speed against accuracy (pixel FLIP)",
+        &format!("pixel FLIP against the {k}x{k} truth"),
+        &|r| r.vs_truth.flip,
+    )
+    .write_png(&opts.out.join("lod_settings.png"), 900, 600)?;
+    chart(
+        "Grass LOD settings: speed against accuracy (coarse FLIP, 8x8 blocks)",
+        &format!("coarse FLIP against the {k}x{k} truth"),
+        &|r| r.vs_truth.coarse,
+    )
+    .write_png(&opts.out.join("lod_settings_coarse.png"), 900, 600)?;
+    // Coverage against cost: the ground a view of the near meadow leaves bare, so that lower
+    // is better on both axes, as on the charts above.
+    chart(
+        "Grass LOD settings: ground left bare against speed",
+        "1 - grass coverage within 30 m",
+        &|r| 1.0 - r.coverage,
+    )
+    .write_png(&opts.out.join("lod_coverage.png"), 900, 600)?;
+    Ok(())
+}
