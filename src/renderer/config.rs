@@ -197,11 +197,13 @@ impl RendererConfig {
                     "above 0 m (and every radius finite)",
                 ));
             }
-            if r.low_radius_m < r.high_radius_m {
+            // A high ring reaching past the view distance is allowed: every grass tile in view
+            // is then high LOD (the truth's renders draw so).
+            if r.low_radius_m <= 0.0 {
                 return Err(ConfigError::new(
                     "grass_rings.low_radius_m",
                     r.low_radius_m,
-                    format!("at least high_radius_m ({} m)", r.high_radius_m),
+                    "above 0 m",
                 ));
             }
             if r.hysteresis_m < 0.0 {
@@ -373,9 +375,9 @@ mod tests {
                 "finite",
             ),
             (
-                with(&|c| c.grass_rings.as_mut().unwrap().low_radius_m = 1.0),
+                with(&|c| c.grass_rings.as_mut().unwrap().low_radius_m = 0.0),
                 "grass_rings.low_radius_m",
-                "at least high_radius_m",
+                "above 0 m",
             ),
             (
                 with(&|c| c.grass_rings.as_mut().unwrap().hysteresis_m = -1.0),
