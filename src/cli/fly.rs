@@ -74,7 +74,7 @@ pub(crate) struct FlyArgs {
     #[arg(long)]
     pub(crate) aa: Option<verdant::aa::AntiAliasing>,
     /// Render the frames as the truth instead: supersampled K x K (1..=8) in linear light, no
-    /// LOD, the most blade segments, blades out to 4 times the view distance.
+    /// LOD, 16 blade segments everywhere, blades out to 4 times the view distance.
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=8))]
     pub(crate) truth: Option<u32>,
     #[command(flatten)]

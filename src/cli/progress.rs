@@ -9,7 +9,12 @@ pub(crate) type StageBars = std::rc::Rc<std::cell::RefCell<Vec<(String, Progress
 pub(crate) fn stage_bars() -> (StageBars, impl FnMut(&str, u64, u64)) {
     let bars = std::rc::Rc::new(std::cell::RefCell::new(Vec::<(String, ProgressBar)>::new()));
     let inner = bars.clone();
+    // Without a terminal (a batch job's log) the bars draw nothing: a line a step instead.
+    let lines = !std::io::IsTerminal::is_terminal(&std::io::stderr());
     let update = move |stage: &str, done: u64, total: u64| {
+        if lines {
+            eprintln!("{stage}: {done}/{total}");
+        }
         let mut bars = inner.borrow_mut();
         if bars.last().is_none_or(|(s, _)| s != stage) {
             if let Some((_, pb)) = bars.last() {

@@ -406,8 +406,6 @@ pub fn run_bench_aa(
     let mut sequences = Vec::new();
     let mut path_views = Vec::new();
     let mut timings = Vec::new();
-    let total_steps = (opts.sizes.len() * Motion::ALL.len()) as u64;
-    let mut step = 0;
     for &size in &opts.sizes {
         let mut reference = truth(&ctx, &world, size, opts.truth_k)?;
         let mut scenes: Vec<(AntiAliasing, Scene)> = opts
@@ -455,6 +453,11 @@ pub fn run_bench_aa(
                 if truth_img.is_some() {
                     truth_prev = truth_img;
                 }
+                progress(
+                    &format!("{}x{} {}", size.0, size.1, motion.name()),
+                    (i - first + 1) as u64,
+                    (i64::from(opts.frames) - first) as u64,
+                );
             }
             for (m, (method, _)) in scenes.iter().enumerate() {
                 let f = &seq[m];
@@ -483,8 +486,6 @@ pub fn run_bench_aa(
                 });
             }
             frames.extend(seq.into_iter().flatten());
-            step += 1;
-            progress("sequences", step, total_steps);
         }
         // The paths: four views spread along each, reached by flight along it.
         for path in &paths {

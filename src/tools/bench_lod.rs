@@ -1,7 +1,7 @@
 //! `verdant bench lod`: the LOD transition benchmark, measured against the truth.
 //!
 //! Every image is compared with the truth at the same camera and time
-//! ([`crate::tools::truth`]: supersampled K x K, no LOD, the most segments, blades out to four
+//! ([`crate::tools::truth`]: supersampled K x K, no LOD, 16 segments everywhere, blades out to four
 //! times the view distance) by pixel FLIP and by the coarse FLIP (see [`crate::tools::bench`]);
 //! the old figure against the renderer's own render without LOD at the same resolution is kept
 //! as a column.
