@@ -3,15 +3,17 @@
 //! The engine is a library with one front door, [`Renderer`]: it draws a world's terrain and
 //! grass into the caller's colour and depth targets, recording every pass into the caller's
 //! command encoder (see `examples/embed.rs`). The command-line tools (fly, view, soak, bench,
-//! eval, bake) are built on top of it, behind the `cli` feature.
+//! eval, bake, serve) are built on top of it, behind the `cli` feature: `main.rs` parses the
+//! arguments and dispatches, and each command's arguments and printing are in `src/cli/`.
 //!
 //! Crate map, leaves first:
-//! - [`world`]: GPU-free world format: the `world.toml` manifest, [`world::TileId`] quadtree
-//!   addressing, stored tiles (EXR heights, PNG grass type and density), DEM reading (GeoTIFF,
-//!   SRTM `.hgt`, PNG + sidecar).
+//! - [`world`]: GPU-free world format: the `world.toml` manifest (its types and reading in
+//!   `world/manifest.rs`, the wind scenes and camera paths in `manifest/scenes.rs`, the checks
+//!   in `manifest/validate.rs`), [`world::TileId`] quadtree addressing, stored tiles (EXR
+//!   heights, PNG grass type and density), DEM reading (GeoTIFF, SRTM `.hgt`, PNG + sidecar).
 //! - [`camera`]: the camera (f64 position, yaw and pitch, or the caller's own matrices) and
 //!   sampling of the manifest's camera paths.
-//! - [`features`]: the grass model's switchable features.
+//! - [`features`]: the switchable features of the grass model and the terrain's look.
 //! - [`hash`]: the integer hashes (and the value noise on them) that every stage draws its
 //!   randomness from: the CPU mirror of `shaders/shared/hash.wgsl`, used by every stage's CPU
 //!   mirror.
@@ -23,7 +25,8 @@
 //! - [`stream`]: the tile service: async streamer, CPU cache, the GPU tile atlas, and child
 //!   tiles derived on the GPU (`stream/derive.rs`, mirror [`stream::derive_cpu`]), with each
 //!   derived level's detail fitted per world ([`mod@stream::calibrate`]); worlds streamed over
-//!   HTTP (`stream::HttpSource`, feature `http`).
+//!   HTTP (`stream::HttpSource`, feature `http`: the requests in `stream/http/client.rs`, the
+//!   disk cache in `stream/http/cache.rs`).
 //! - [`lod`]: which terrain tiles a camera needs, at which level, with frustum culling; grass
 //!   rings with hysteresis.
 //! - [`terrain`]: the terrain and sky: the G-buffer, shading and composite passes
@@ -39,10 +42,22 @@
 //! - [`bake`]: the baker that turns a DEM into a world (GPU-free; it fits the derived levels'
 //!   detail with [`mod@stream::calibrate`]), one module per job: resampling, painting, tiles,
 //!   authoring camera paths and wind scenes, publishing.
-//! - [`renderer`]: the frame: [`Renderer`], the order of its passes top to bottom in one place.
-//! - `tools` (feature `cli`): the headless scene, fly-throughs and their reports, soak,
-//!   benchmarks, evaluations, charts and image metrics, the interactive viewer, and `serve`
-//!   (a static server of a world folder).
+//! - [`aa`]: anti-aliasing methods ([`aa::AntiAliasing`]: off, taa, msaa): temporal
+//!   ([`aa::taa`], mirror [`aa::taa_cpu`], `shaders/aa_taa.wgsl`) and the grass multisampled
+//!   with alpha to coverage ([`aa::msaa`], mirror [`aa::msaa_cpu`], `shaders/aa_msaa.wgsl`).
+//! - [`renderer`]: the frame: [`Renderer`], the order of its passes top to bottom in one place
+//!   ([`Renderer::record`], `renderer/mod.rs`); its settings in `renderer/config.rs`
+//!   ([`RendererConfig`] with [`GrassConfig`], [`RendererOptions`];
+//!   [`RendererConfig::validate`] checks every range once, called by [`Renderer::new`]); the
+//!   frame's view, worked out once in [`Renderer::prepare`] (`renderer/view.rs`,
+//!   [`renderer::FrameView`]).
+//! - `tools` (feature `cli`): the headless scene, fly-throughs and their reports, soak, the
+//!   tools' option ranges (`tools/options.rs`) and output files (`tools/output.rs`: atomic
+//!   writes, held output folders), the supersampled truth (`tools/truth.rs`), benchmarks
+//!   (`tools/bench.rs` shared, `bench_lod.rs`, `bench_features.rs`, `bench_blades.rs`,
+//!   `bench_aa.rs`), evaluations, charts and image metrics (the coarse FLIP in
+//!   `tools/metrics/coarse.rs`), the interactive viewer, and `serve` (a static server of a
+//!   world folder).
 //!
 //! GPU stages are named by one rule. A stage `S` of module `M` is set up (its pipelines,
 //! bindings and buffers) in `src/M/S.rs`; its CPU mirror, written loop for loop apart from the
@@ -51,7 +66,8 @@
 //! file is named after the family and each pass's shader is `shaders/M_PASS.wgsl`: the
 //! terrain's G-buffer, shading and composite (`src/terrain/mod.rs`, `shaders/terrain_gbuffer.wgsl`,
 //! `terrain_shade.wgsl`, `terrain_composite.wgsl`); the frame's hole check, in
-//! `src/renderer/mod.rs` with `shaders/renderer_hole_check.wgsl`. WGSL included by more than
+//! `src/renderer/mod.rs` with `shaders/renderer_hole_check.wgsl`. Anti-aliasing follows it
+//! too: `src/aa/taa.rs`, `src/aa/taa_cpu.rs`, `shaders/aa_taa.wgsl`. WGSL included by more than
 //! one stage is in `shaders/shared/`, and its Rust mirror is named after what it computes
 //! ([`hash`] for `shared/hash.wgsl`, [`terrain::far_field`], `wind_at` in [`wind::field_cpu`]
 //! for `shared/wind_lookup.wgsl`). Files that are not stages (settings, records, the pool) keep
