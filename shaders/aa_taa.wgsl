@@ -1,12 +1,14 @@
 // Temporal anti-aliasing: each frame is drawn with its projection jittered within a pixel
 // (a Halton sequence), and this stage folds it into a history that follows the surfaces on
 // screen. Per pixel, the history is fetched where the pixel's surface was in the last frame
-// (reprojected through the depth: the closest depth of the 3x3 neighbourhood, so that thin
-// blades keep their edges), clipped toward the current frame's 3x3 neighbourhood (its mean
-// and spread in YCoCg: what the neighbourhood cannot explain is a ghost and is dropped), and
-// blended with the current sample with weight 1 / n, n the samples the history holds (at
-// most MAX_SAMPLES): a still scene converges to the box-filtered average of the jittered
-// samples, a moved one keeps only what its clipping allows. A pixel whose history falls off
+// (reprojected through the pixel's depth; in grass the nearest depth of a neighbourhood is a
+// blade's more often than not, and would drag the ground's history along with the blades),
+// clipped toward the current frame's 3x3 neighbourhood (its mean and spread in YCoCg: what
+// the neighbourhood cannot explain is a ghost and is dropped), and blended with the current
+// sample with weight 1 / n, n the samples the history holds: at most MAX_SAMPLES, fewer the
+// further the surface moved on screen (a history resampled frame after frame blurs): a still
+// scene converges to the box-filtered average of the jittered samples, a moving one keeps a
+// shorter history. A pixel whose history falls off
 // screen, and every pixel after a cut, starts again from its current sample. Two passes: the
 // resolve (compute) into the next history (linear colour, samples in alpha), then a
 // full-screen pass that writes it into the colour target. CPU mirror: src/aa/taa_cpu.rs.
@@ -25,7 +27,8 @@ struct Params {
     // x, y: target size (pixels); z: most samples a history holds; w: 1 to start every pixel
     // again (a cut, a teleport, the first frame).
     size: vec4<f32>,
-    // x: the neighbourhood's spread, in standard deviations, that bounds the history.
+    // x: the neighbourhood's spread, in standard deviations, that bounds the history; y: how
+    // fast the most samples fall with the pixels moved (most / (1 + y * pixels), at least 2).
     clip: vec4<f32>,
 }
 
@@ -126,16 +129,14 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
     let cur = load_current(p);
     var m1 = vec3<f32>(0.0);
     var m2 = vec3<f32>(0.0);
-    var closest = 0.0;
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {
-            let q = p + vec2<i32>(dx, dy);
-            let c = to_ycocg(load_current(q));
+            let c = to_ycocg(load_current(p + vec2<i32>(dx, dy)));
             m1 += c;
             m2 += c * c;
-            closest = max(closest, textureLoad(depth, clamp(q, vec2<i32>(0), size - 1), 0));
         }
     }
+    let d = textureLoad(depth, p, 0);
     let mean = m1 / 9.0;
     let sigma = sqrt(max(m2 / 9.0 - mean * mean, vec3<f32>(0.0)));
 
@@ -143,7 +144,7 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
     if params.size.w < 0.5 {
         let px = vec2<f32>(p) + 0.5;
         let ndc = vec2<f32>(px.x / params.size.x * 2.0 - 1.0, 1.0 - px.y / params.size.y * 2.0);
-        let prev = params.reproject * vec4<f32>(ndc, closest, 1.0);
+        let prev = params.reproject * vec4<f32>(ndc, d, 1.0);
         if prev.w > 0.0 {
             let pn = prev.xy / prev.w;
             let pp = vec2<f32>((pn.x * 0.5 + 0.5) * params.size.x, (0.5 - pn.y * 0.5) * params.size.y);
@@ -152,7 +153,10 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
                 if h.a >= 1.0 {
                     let g = params.clip.x;
                     let clipped = from_ycocg(clip_to_box(to_ycocg(h.rgb), mean - g * sigma, mean + g * sigma));
-                    let n = min(h.a + 1.0, params.size.z);
+                    // Pixels the surface moved since the last frame.
+                    let moved = length(pp - px);
+                    let most = max(params.size.z / (1.0 + params.clip.y * moved), 2.0);
+                    let n = min(h.a + 1.0, most);
                     out = vec4<f32>(mix(clipped, cur, 1.0 / n), n);
                 }
             }

@@ -238,6 +238,7 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
             },
             max_samples: settings.max_samples as f32,
             clip_sigma: settings.clip_sigma,
+            motion_falloff: settings.motion_falloff,
             reset: last.is_none(),
         };
         history = input.resolve();

@@ -24,6 +24,10 @@ pub struct TaaSettings {
     /// The history is clipped to the current neighbourhood's mean plus and minus this many
     /// standard deviations (per YCoCg channel).
     pub clip_sigma: f32,
+    /// A surface that moved `p` pixels since the last frame keeps at most
+    /// `max_samples / (1 + motion_falloff * p)` samples (at least 2): a history resampled
+    /// frame after frame blurs, so a moving one is kept shorter.
+    pub motion_falloff: f32,
     /// A camera that moves further than this in one frame (metres) starts every history again.
     pub cut_distance_m: f64,
     /// A camera that turns by more than this in one frame (degrees) starts every history again.
@@ -33,8 +37,9 @@ pub struct TaaSettings {
 impl Default for TaaSettings {
     fn default() -> Self {
         Self {
-            max_samples: 12,
-            clip_sigma: 1.0,
+            max_samples: 16,
+            clip_sigma: 1.25,
+            motion_falloff: 0.25,
             cut_distance_m: 20.0,
             cut_angle_deg: 30.0,
         }
@@ -50,7 +55,7 @@ pub struct TaaParams {
     pub reproject: [[f32; 4]; 4],
     /// Target width and height, most samples, 1 to start every pixel again.
     pub size: [f32; 4],
-    /// The clip's standard deviations, then padding.
+    /// The clip's standard deviations, the motion falloff, then padding.
     pub clip: [f32; 4],
 }
 
@@ -214,7 +219,7 @@ impl Taa {
                     settings.max_samples as f32,
                     1.0,
                 ],
-                clip: [settings.clip_sigma, 0.0, 0.0, 0.0],
+                clip: [settings.clip_sigma, settings.motion_falloff, 0.0, 0.0],
             },
             buffer,
             read: 0,

@@ -20,6 +20,8 @@ pub struct ResolveInput<'a> {
     pub max_samples: f32,
     /// Standard deviations of the neighbourhood the history is clipped to.
     pub clip_sigma: f32,
+    /// How fast the most samples fall with the pixels a surface moved.
+    pub motion_falloff: f32,
     /// Start every pixel again.
     pub reset: bool,
 }
@@ -86,10 +88,7 @@ impl ResolveInput<'_> {
             .flat_map(|dy| (-1..=1).map(move |dx| (dx, dy)))
             .map(|(dx, dy)| ycocg(self.at(self.current, xi + dx, yi + dy)))
             .collect();
-        let nearest = (-1..=1)
-            .flat_map(|dy| (-1..=1).map(move |dx| (dx, dy)))
-            .map(|(dx, dy)| self.at(self.depth, xi + dx, yi + dy))
-            .fold(0.0f32, f32::max);
+        let depth = self.at(self.depth, xi, yi);
         let mean = samples.iter().copied().sum::<Vec3>() / 9.0;
         let variance = samples.iter().map(|s| *s * *s).sum::<Vec3>() / 9.0 - mean * mean;
         let sigma = variance.max(Vec3::ZERO).powf(0.5);
@@ -102,7 +101,7 @@ impl ResolveInput<'_> {
             (x as f32 + 0.5) / w * 2.0 - 1.0,
             1.0 - (y as f32 + 0.5) / h * 2.0,
         );
-        let then = self.reproject * Vec4::new(ndc.x, ndc.y, nearest, 1.0);
+        let then = self.reproject * Vec4::new(ndc.x, ndc.y, depth, 1.0);
         if then.w <= 0.0 {
             return fresh;
         }
@@ -127,7 +126,10 @@ impl ResolveInput<'_> {
         } else {
             old.truncate()
         };
-        let n = (old.w + 1.0).min(self.max_samples);
+        // A surface that moved keeps a shorter history (each frame's resampling blurs it).
+        let moved = then_px.distance(Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
+        let most = (self.max_samples / (1.0 + self.motion_falloff * moved)).max(2.0);
+        let n = (old.w + 1.0).min(most);
         (kept + (current - kept) / n).extend(n)
     }
 
@@ -171,6 +173,7 @@ mod tests {
                 reproject: Mat4::IDENTITY,
                 max_samples: 1000.0,
                 clip_sigma: 1.0,
+                motion_falloff: 0.25,
                 reset: frame == 0,
             };
             history = input.resolve();
@@ -194,6 +197,7 @@ mod tests {
             reproject: Mat4::IDENTITY,
             max_samples: 12.0,
             clip_sigma: 1.0,
+            motion_falloff: 0.25,
             reset: false,
         };
         let out = input.pixel(1, 1);
@@ -215,6 +219,7 @@ mod tests {
             reproject: Mat4::from_translation(Vec3::new(4.0, 0.0, 0.0)),
             max_samples: 12.0,
             clip_sigma: 10.0,
+            motion_falloff: 0.25,
             reset: false,
         };
         assert!(input.resolve().iter().all(|p| *p == Vec4::new(0.2, 0.4, 0.6, 1.0)));

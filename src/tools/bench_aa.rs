@@ -533,7 +533,7 @@ pub fn run_bench_aa(
                     samples[m].0.push(frame_ms(&stats, wall, gpu));
                     samples[m]
                         .1
-                        .push(stats.gpu.iter().filter(|(n, _)| n.starts_with("taa")).map(|(_, ms)| ms).sum());
+                        .push(stats.gpu.iter().filter(|(n, _)| n.starts_with("taa") || n.starts_with("msaa")).map(|(_, ms)| ms).sum());
                 }
             }
             progress("timing", u64::from(round) + 1, u64::from(counts.rounds));
