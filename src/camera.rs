@@ -238,7 +238,10 @@ mod tests {
             let clip = m * p.extend(1.0);
             let ndc = clip.truncate() / clip.w;
             (
-                Vec2::new((ndc.x + 1.0) * 0.5 * w as f32, (1.0 - ndc.y) * 0.5 * h as f32),
+                Vec2::new(
+                    (ndc.x + 1.0) * 0.5 * w as f32,
+                    (1.0 - ndc.y) * 0.5 * h as f32,
+                ),
                 ndc.z,
             )
         };

@@ -39,7 +39,7 @@ fn frame(phase: u32) -> (Vec<u8>, Vec<f32>) {
     let mut depth = Vec::new();
     for y in 0..H {
         for x in 0..W {
-            let line = (x + phase) % 7 == 0 || (x + 2 * y + phase) % 11 == 0;
+            let line = (x + phase).is_multiple_of(7) || (x + 2 * y + phase).is_multiple_of(11);
             let base = [20 + (y * 3) as u8, 60 + (x * 2) as u8, 30];
             let c = if line { [230, 240, 120] } else { base };
             rgba.extend_from_slice(&[c[0], c[1], c[2], 255]);
@@ -193,7 +193,11 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
         let vp = camera.view_proj_relative(aspect);
         let (rgba, depth) = frame(step);
         write(taa.scene_view().texture(), &rgba, wgpu::TextureAspect::All);
-        write(&depth_src, bytemuck::cast_slice(&depth), wgpu::TextureAspect::All);
+        write(
+            &depth_src,
+            bytemuck::cast_slice(&depth),
+            wgpu::TextureAspect::All,
+        );
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -219,13 +223,25 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
         let reset = taa.prepare(&ctx.queue, vp, camera.position, camera.forward());
         assert_eq!(reset, step == 0);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        taa.record(&ctx.device, &mut encoder, &color_view, &depth_view, &mut timer);
+        taa.record(
+            &ctx.device,
+            &mut encoder,
+            &color_view,
+            &depth_view,
+            &mut timer,
+        );
         ctx.queue.submit([encoder.finish()]);
         let gpu = verdant::gpu::read_texture_rgba8(&ctx.device, &ctx.queue, &color).unwrap();
 
         let current: Vec<Vec3> = rgba
             .chunks(4)
-            .map(|p| Vec3::new(srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2])))
+            .map(|p| {
+                Vec3::new(
+                    srgb_to_linear(p[0]),
+                    srgb_to_linear(p[1]),
+                    srgb_to_linear(p[2]),
+                )
+            })
             .collect();
         let input = ResolveInput {
             size: (W, H),
@@ -273,7 +289,9 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
 /// A flat field of grass generated in memory at the blade spacing `spacing_m` (coarse, so
 /// that software Vulkan draws it in seconds), a camera at its edge looking across it, and the
 /// renderer's settings for it.
-fn field(spacing_m: f32) -> (
+fn field(
+    spacing_m: f32,
+) -> (
     verdant::World,
     std::sync::Arc<dyn verdant::stream::TileSource>,
     verdant::RendererConfig,

@@ -496,6 +496,8 @@ fn bench_lod_writes_its_tables_and_charts() {
             "2",
             "--truth",
             "1",
+            "--truth-reach",
+            "1.5",
             "--out",
             "b",
         ],
@@ -1354,4 +1356,63 @@ fn fly_at_a_size_beyond_the_adapters_buffers_names_the_limit() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.success(), "{stderr}");
     }
+}
+
+#[test]
+fn bench_aa_measures_every_method_against_the_truth_in_every_sequence() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = verdant(
+        &[
+            "bench",
+            "aa",
+            common::default_world().to_str().unwrap(),
+            "--size",
+            "64x36",
+            "--frames",
+            "3",
+            "--run-up",
+            "1",
+            "--truth",
+            "2",
+            "--truth-reach",
+            "1",
+            "--paths",
+            "",
+            "--warmup-frames",
+            "0",
+            "--timed-frames",
+            "1",
+            "--rounds",
+            "1",
+            "--out",
+            "a",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        out.status.success(),
+        "bench aa failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = tmp.path().join("a");
+    let seq = std::fs::read_to_string(dir.join("aa_sequences.csv")).unwrap();
+    // A row per method and sequence: off, taa, msaa by still, dolly, pan, teleport.
+    assert_eq!(seq.lines().count(), 1 + 3 * 4, "{seq}");
+    for line in seq.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let flip: f64 = f[4].parse().unwrap();
+        assert!(flip > 0.0 && flip < 1.0, "{line}");
+        // Only the teleport says how long it took to settle.
+        assert_eq!(f[3] == "teleport", !f[8].is_empty(), "{line}");
+    }
+    let frames = std::fs::read_to_string(dir.join("aa_frames.csv")).unwrap();
+    assert_eq!(frames.lines().count(), 1 + 3 * 4 * 3);
+    // No paths asked for: the table has its header only.
+    let paths = std::fs::read_to_string(dir.join("aa_paths.csv")).unwrap();
+    assert_eq!(paths.lines().count(), 1, "{paths}");
+    for f in ["aa_timing.csv", "aa.json", "aa_64x36.png"] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("against the 2x2 truth"), "{stdout}");
 }

@@ -87,6 +87,12 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
         &["bench", "blades", "--warmup-frames", "101"],
         &["--warmup-frames", "0..=100"],
     ),
+    (
+        &["bench", "aa", "--truth-reach", "0.5"],
+        &["--truth-reach", "1..=4"],
+    ),
+    (&["bench", "aa", "--frames", "1"], &["--frames", "2..=600"]),
+    (&["fly", "--aa", "fxaa"], &["--aa", "off, taa, msaa"]),
 ];
 
 #[test]

@@ -170,11 +170,18 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
     assert_eq!(contribution("all"), 0.0, "the full render against itself");
     // Every variant, the full render included, against the truth by both measures.
     for r in &rows {
-        for c in ["flip_vs_truth", "coarse_flip_vs_truth", "contribution_coarse_flip"] {
+        for c in [
+            "flip_vs_truth",
+            "coarse_flip_vs_truth",
+            "contribution_coarse_flip",
+        ] {
             let v: f64 = r[col(c)].parse().unwrap();
             assert!((0.0..1.0).contains(&v), "{c}: {csv}");
         }
-        assert!(r[col("flip_vs_truth")].parse::<f64>().unwrap() > 0.0, "{csv}");
+        assert!(
+            r[col("flip_vs_truth")].parse::<f64>().unwrap() > 0.0,
+            "{csv}"
+        );
     }
     // Every feature changes the image in these views, the walker's trail and the helicopter's
     // downwash included.

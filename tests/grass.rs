@@ -8,8 +8,8 @@ use glam::DVec3;
 use verdant::RendererConfig;
 use verdant::camera::Camera;
 use verdant::gpu::{GpuContext, GpuTimer};
-use verdant::lod::Frustum;
 use verdant::grass::{Blade, GrassRenderer, GrassStats, HiZ, TileBlades, TileJob, generate_tile};
+use verdant::lod::Frustum;
 use verdant::stream::TileAtlas;
 use verdant::world::{Manifest, TileData, TileId, World};
 

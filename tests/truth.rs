@@ -7,11 +7,11 @@ mod common;
 use std::process::Command;
 
 use glam::{DVec2, DVec3};
+use verdant::RendererConfig;
 use verdant::camera::Camera;
+use verdant::tools::Scene;
 use verdant::tools::bench_blades::flat_field;
 use verdant::tools::truth::{self, Truth, truth_config};
-use verdant::RendererConfig;
-use verdant::tools::Scene;
 
 const SIZE: (u32, u32) = (96, 64);
 const TIME_S: f64 = 1.5;

@@ -102,7 +102,10 @@ mod tests {
             assert_eq!(m.name().parse::<AntiAliasing>(), Ok(m));
         }
         let err = "msaa16".parse::<AntiAliasing>().unwrap_err();
-        assert!(err.contains("msaa16") && err.contains("off, taa, msaa"), "{err}");
+        assert!(
+            err.contains("msaa16") && err.contains("off, taa, msaa"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -118,7 +121,10 @@ mod tests {
                 .iter()
                 .filter(|p| p.x * sx > 0.0 && p.y * sy > 0.0)
                 .count();
-            assert!((n / 4 - 1..=n / 4 + 1).contains(&k), "quadrant ({sx}, {sy}): {k}");
+            assert!(
+                (n / 4 - 1..=n / 4 + 1).contains(&k),
+                "quadrant ({sx}, {sy}): {k}"
+            );
         }
         assert!(points.iter().all(|p| p.abs().max_element() < 0.5));
     }

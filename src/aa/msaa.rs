@@ -90,10 +90,12 @@ fn bind_group_with(
     layout: &wgpu::BindGroupLayout,
     depth: &wgpu::TextureView,
 ) -> wgpu::BindGroup {
-    crate::gpu::layout::bind_group_with_indices(device, "msaa depth resolve", layout, [(
-        2,
-        view_of(depth),
-    )])
+    crate::gpu::layout::bind_group_with_indices(
+        device,
+        "msaa depth resolve",
+        layout,
+        [(2, view_of(depth))],
+    )
 }
 
 impl Msaa {
@@ -225,7 +227,12 @@ impl Msaa {
     ) {
         let (scene, layout) = (&self.scene, &self.expand_layout);
         let group = self.expand_group.get(depth.texture(), |depth| {
-            bind_group(device, "msaa expand", layout, [view_of(scene), view_of(depth)])
+            bind_group(
+                device,
+                "msaa expand",
+                layout,
+                [view_of(scene), view_of(depth)],
+            )
         });
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("msaa expand"),

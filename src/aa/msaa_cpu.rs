@@ -45,7 +45,10 @@ mod tests {
         let d = 40.0;
         let (cov, widen) = blade_coverage(width, Vec3::new(d, 3.0, -1.0), vp, h);
         let expected = width / pixel_at(d);
-        assert!((cov - expected).abs() < 0.01 * expected, "{cov} vs {expected}");
+        assert!(
+            (cov - expected).abs() < 0.01 * expected,
+            "{cov} vs {expected}"
+        );
         // Drawn a pixel wide.
         assert!((width * widen - pixel_at(d)).abs() < 0.01 * pixel_at(d));
     }

@@ -235,8 +235,12 @@ impl Taa {
 
     /// Follows a resize of the targets: new textures, and every history starts again.
     pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
-        (self.scene, self.history, self.output_groups) =
-            textures(device, &self.output_layout, self.color_format, (width, height));
+        (self.scene, self.history, self.output_groups) = textures(
+            device,
+            &self.output_layout,
+            self.color_format,
+            (width, height),
+        );
         self.resolve_groups = Default::default();
         self.params.size[0] = width as f32;
         self.params.size[1] = height as f32;
@@ -273,7 +277,12 @@ impl Taa {
         let cut = match self.last {
             None => true,
             Some(last) => {
-                let angle = last.forward.dot(forward).clamp(-1.0, 1.0).acos().to_degrees();
+                let angle = last
+                    .forward
+                    .dot(forward)
+                    .clamp(-1.0, 1.0)
+                    .acos()
+                    .to_degrees();
                 (eye - last.eye).length() > self.settings.cut_distance_m
                     || angle > self.settings.cut_angle_deg
             }

@@ -222,6 +222,11 @@ mod tests {
             motion_falloff: 0.25,
             reset: false,
         };
-        assert!(input.resolve().iter().all(|p| *p == Vec4::new(0.2, 0.4, 0.6, 1.0)));
+        assert!(
+            input
+                .resolve()
+                .iter()
+                .all(|p| *p == Vec4::new(0.2, 0.4, 0.6, 1.0))
+        );
     }
 }

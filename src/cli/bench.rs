@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Subcommand;
 
-use super::args::{parse_size, parse_vec3, resolve_world};
+use super::args::{float_in, parse_size, parse_vec3, resolve_world};
 use super::progress::{finish_bars, stage_bars};
 
 #[derive(Subcommand)]
@@ -96,8 +96,8 @@ pub(crate) enum BenchCommand {
         /// Image sizes, WIDTHxHEIGHT, comma-separated: each is measured in full.
         #[arg(long, default_value = "960x540", value_delimiter = ',', value_parser = parse_size)]
         size: Vec<(u32, u32)>,
-        /// Methods, comma-separated (off, taa).
-        #[arg(long, default_value = "off,taa", value_delimiter = ',', value_parser = parse_method)]
+        /// Methods, comma-separated (off, taa, msaa).
+        #[arg(long, default_value = "off,taa,msaa", value_delimiter = ',', value_parser = parse_method)]
         aa: Vec<verdant::aa::AntiAliasing>,
         /// Measured frames of each sequence, 2..=600.
         #[arg(long, default_value_t = 24, value_parser = clap::value_parser!(u32).range(2..=600))]
@@ -105,9 +105,8 @@ pub(crate) enum BenchCommand {
         /// Frames of the same motion before each sequence's measured ones, 0..=120.
         #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=120))]
         run_up: u32,
-        /// Sub-samples per side of the truth, 1..=8.
-        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
-        truth: u32,
+        #[command(flatten)]
+        truth: TruthArgs,
         /// The camera path whose first view the sequences start from.
         #[arg(long, default_value = "meadow")]
         path: String,
@@ -130,6 +129,10 @@ pub(crate) struct TruthArgs {
     /// Sub-samples a pixel side of the truth (supersampled in linear light), 1..=8.
     #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
     pub(crate) truth: u32,
+    /// How far the truth draws blades, in default view distances, 1..=4 (less is quicker; the
+    /// far band is then measured out to this many view distances only).
+    #[arg(long, value_name = "R", default_value_t = 4.0, value_parser = float_in(1.0, 4.0))]
+    pub(crate) truth_reach: f64,
 }
 
 /// How the benchmarks time: interleaved rounds over the settings, each measurement's frames
@@ -368,6 +371,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
             truth_k: truth.truth,
+            truth_reach: truth.truth_reach,
             ..Default::default()
         }),
         BenchCommand::Blades {
@@ -410,6 +414,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             rounds: timing.rounds,
             path: None,
             truth_k: truth.truth,
+            truth_reach: truth.truth_reach,
         }),
         BenchCommand::Aa {
             world,
@@ -429,7 +434,8 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             methods: aa,
             frames,
             run_up,
-            truth_k: truth,
+            truth_k: truth.truth,
+            truth_reach: truth.truth_reach,
             path,
             paths: paths.into_iter().filter(|p| !p.is_empty()).collect(),
             warmup_frames: timing.warmup_frames,

@@ -617,8 +617,7 @@ impl GrassRenderer {
     ) {
         self.params.view_proj = view_proj.to_cols_array_2d();
         self.params.planes = [[0.0; 4]; 6];
-        for (dst, p) in self.params.planes.iter_mut().zip(frustum.planes())
-        {
+        for (dst, p) in self.params.planes.iter_mut().zip(frustum.planes()) {
             *dst = p.to_array();
         }
         self.params.camera[0] = camera_altitude;

@@ -7,11 +7,11 @@
 //! of its range with a [`ConfigError`] naming the field and the range before anything is built;
 //! the front ends do not check these ranges themselves.
 
+use crate::aa::AntiAliasing;
 use crate::features::Features;
 use crate::grass::GrassSettings;
 use crate::lod::RingSettings;
 use crate::stream::{DeriveParams, ServiceConfig};
-use crate::aa::AntiAliasing;
 use crate::world::{WindKey, World};
 
 /// Settings of the engine: streaming limits, levels of detail, grass, wind and features.

@@ -896,7 +896,9 @@ impl Renderer {
         let roots = roots.filter(|r| r.len() <= crate::terrain::MAX_ROOT_TILES);
         let root_slots: Option<Vec<u32>> = roots.as_ref().map(|r| r.iter().map(|p| p.0).collect());
         self.terrain.set_root_slots(root_slots.as_deref());
-        let terrain_tiles = self.terrain.prepare(queue, view.view_proj, camera.position, &draws);
+        let terrain_tiles = self
+            .terrain
+            .prepare(queue, view.view_proj, camera.position, &draws);
         let grass_jobs = self.grass_jobs(&view, &sel.grass);
         let grass_level = self.rings.as_ref().map_or(0, |r| r.settings.level);
         let reads: Vec<(u32, TileId)> = sel

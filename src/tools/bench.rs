@@ -22,13 +22,13 @@ use std::path::PathBuf;
 use anyhow::Result;
 use serde::Serialize;
 
+use crate::RendererConfig;
 use crate::camera::Camera;
 use crate::gpu::GpuContext;
+use crate::tools::Scene;
 use crate::tools::fly::{OptionError, check_range, check_size};
 use crate::tools::metrics::{COARSE_FACTOR, COVERAGE_DISTANCE_M, coarse_flip, flip_compare};
 use crate::tools::truth::Truth;
-use crate::RendererConfig;
-use crate::tools::Scene;
 use crate::world::World;
 
 /// What `verdant bench lod` is asked to do.
@@ -54,6 +54,10 @@ pub struct BenchLodOptions {
     /// Sub-samples a pixel side of the truth the images are measured against (`--truth`,
     /// 1..=8; see [`crate::tools::truth`]).
     pub truth_k: u32,
+    /// How far the truth draws blades, in default view distances (`--truth-reach`,
+    /// 1..=[`crate::tools::truth::REACH_FACTOR`]; less is quicker, and the far band is then
+    /// measured out to this many view distances only).
+    pub truth_reach: f64,
 }
 
 impl Default for BenchLodOptions {
@@ -68,6 +72,7 @@ impl Default for BenchLodOptions {
             rounds: None,
             path: None,
             truth_k: crate::tools::truth::DEFAULT_K,
+            truth_reach: crate::tools::truth::REACH_FACTOR,
         }
     }
 }
@@ -119,6 +124,7 @@ impl BenchLodOptions {
     pub fn validate_features(&self) -> Result<(), OptionError> {
         check_size("--size", self.size)?;
         crate::tools::truth::check_k("--truth", self.truth_k)?;
+        crate::tools::truth::check_reach("--truth-reach", self.truth_reach)?;
         check_timing(self.warmup_frames, self.timed_frames, self.rounds)
     }
 }
@@ -195,9 +201,9 @@ impl Bench<'_> {
 
     /// The truth at the benchmark's size, K = `k`, on top of `base` (its features and wind; see
     /// [`crate::tools::truth::truth_config`]).
-    pub(crate) fn truth(&self, base: &RendererConfig, k: u32) -> Result<Truth> {
+    pub(crate) fn truth(&self, base: &RendererConfig, k: u32, reach: f64) -> Result<Truth> {
         let slots = crate::tools::truth::atlas_slots(self.world, &self.ctx.device);
-        let config = crate::tools::truth::truth_config(self.world, base, slots);
+        let config = crate::tools::truth::truth_config_reaching(self.world, base, slots, reach);
         Truth::with_config(
             self.ctx,
             self.world.clone(),

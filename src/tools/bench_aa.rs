@@ -27,17 +27,17 @@ use glam::{DVec2, DVec3};
 use image::RgbaImage;
 use serde::Serialize;
 
+use crate::RendererConfig;
 use crate::aa::AntiAliasing;
 use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
-use crate::tools::fly::{OutDir, write_json, write_text};
-use crate::tools::metrics::{Chart, ChartPoint};
-use crate::tools::metrics::flip_compare;
-use crate::tools::report::AdapterReport;
-use crate::tools::truth::Truth;
-use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
-use crate::RendererConfig;
 use crate::tools::Scene;
+use crate::tools::fly::{OutDir, write_json, write_text};
+use crate::tools::metrics::flip_compare;
+use crate::tools::metrics::{Chart, ChartPoint};
+use crate::tools::report::AdapterReport;
+use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
+use crate::tools::truth::Truth;
 use crate::world::{CameraPath, World};
 
 /// Frame time of the sequences: consecutive frames at 60 Hz.
@@ -72,6 +72,8 @@ pub struct BenchAaOptions {
     pub run_up: u32,
     /// Sub-samples per side of the truth.
     pub truth_k: u32,
+    /// How far the truth draws blades, in default view distances (1..=4).
+    pub truth_reach: f64,
     /// The path whose first view the sequences start from.
     pub path: String,
     /// The paths of the paths part (none: skip it).
@@ -94,6 +96,7 @@ impl Default for BenchAaOptions {
             frames: 24,
             run_up: 16,
             truth_k: 4,
+            truth_reach: crate::tools::truth::REACH_FACTOR,
             path: "meadow".into(),
             paths: vec!["meadow".into(), "tour".into(), "wind-tour".into()],
             warmup_frames: None,
@@ -119,6 +122,8 @@ impl BenchAaOptions {
         if self.sizes.is_empty() {
             bail!("--size names no size");
         }
+        crate::tools::truth::check_k("--truth", self.truth_k)?;
+        crate::tools::truth::check_reach("--truth-reach", self.truth_reach)?;
         crate::tools::bench::check_timing(self.warmup_frames, self.timed_frames, self.rounds)?;
         Ok(())
     }
@@ -251,6 +256,8 @@ pub struct BenchAaReport {
     pub adapter: AdapterReport,
     /// Sub-samples per side of the truth.
     pub truth_k: u32,
+    /// How far the truth draws blades, in default view distances (1..=4).
+    pub truth_reach: f64,
     /// Every measured frame.
     pub frames: Vec<AaFrame>,
     /// Every sequence.
@@ -276,11 +283,7 @@ pub fn mean_change(a: &RgbaImage, b: &RgbaImage) -> f64 {
     let total: u64 = a
         .pixels()
         .zip(b.pixels())
-        .map(|(p, q)| {
-            (0..3)
-                .map(|c| u64::from(p[c].abs_diff(q[c])))
-                .sum::<u64>()
-        })
+        .map(|(p, q)| (0..3).map(|c| u64::from(p[c].abs_diff(q[c]))).sum::<u64>())
         .sum();
     total as f64 / (3 * u64::from(a.width()) * u64::from(a.height())).max(1) as f64
 }
@@ -343,6 +346,11 @@ impl Reference for Truth {
     }
 }
 
+/// Makes the reference of a run: from the GPU, the world, the size, the truth's sub-samples a
+/// side and its reach (in view distances).
+pub type MakeReference =
+    dyn FnMut(&GpuContext, &World, (u32, u32), u32, f64) -> Result<Box<dyn Reference>>;
+
 /// The truth of [`crate::tools::truth`] (k x k sub-samples in linear light, the most accurate
 /// grass), as `bench aa` measures against it.
 pub fn truth_reference(
@@ -350,17 +358,23 @@ pub fn truth_reference(
     world: &World,
     size: (u32, u32),
     k: u32,
+    reach: f64,
 ) -> Result<Box<dyn Reference>> {
-    Ok(Box::new(Truth::new(ctx, world.clone(), size.0, size.1, k)?))
+    let slots = crate::tools::truth::atlas_slots(world, &ctx.device);
+    let base = RendererConfig::for_world(world);
+    let config = crate::tools::truth::truth_config_reaching(world, &base, slots, reach);
+    Ok(Box::new(Truth::with_config(
+        ctx,
+        world.clone(),
+        std::sync::Arc::new(world.clone()),
+        size,
+        k,
+        config,
+    )?))
 }
 
 /// Renders one frame of `scene`, its tiles brought in first.
-fn frame(
-    ctx: &GpuContext,
-    scene: &mut Scene,
-    camera: &Camera,
-    time_s: f64,
-) -> Result<RgbaImage> {
+fn frame(ctx: &GpuContext, scene: &mut Scene, camera: &Camera, time_s: f64) -> Result<RgbaImage> {
     scene.warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
     scene.render_frame(ctx, camera, time_s, Some(camera.position.truncate()))?;
     Ok(scene.read_image(ctx)?)
@@ -368,7 +382,12 @@ fn frame(
 
 fn path_named(world: &World, name: &str) -> Result<CameraPath> {
     world.manifest.path(name).cloned().with_context(|| {
-        let names: Vec<&str> = world.manifest.paths.iter().map(|p| p.name.as_str()).collect();
+        let names: Vec<&str> = world
+            .manifest
+            .paths
+            .iter()
+            .map(|p| p.name.as_str())
+            .collect();
         format!(
             "world {} has no camera path {name:?} (it has: {})",
             world.dir.display(),
@@ -381,7 +400,7 @@ fn path_named(world: &World, name: &str) -> Result<CameraPath> {
 /// hears each step's name, steps done and steps in all.
 pub fn run_bench_aa(
     opts: &BenchAaOptions,
-    truth: &mut dyn FnMut(&GpuContext, &World, (u32, u32), u32) -> Result<Box<dyn Reference>>,
+    truth: &mut MakeReference,
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> Result<BenchAaReport> {
     opts.validate()?;
@@ -407,7 +426,7 @@ pub fn run_bench_aa(
     let mut path_views = Vec::new();
     let mut timings = Vec::new();
     for &size in &opts.sizes {
-        let mut reference = truth(&ctx, &world, size, opts.truth_k)?;
+        let mut reference = truth(&ctx, &world, size, opts.truth_k, opts.truth_reach)?;
         let mut scenes: Vec<(AntiAliasing, Scene)> = opts
             .methods
             .iter()
@@ -436,8 +455,9 @@ pub fn run_bench_aa(
                     let img = frame(&ctx, scene, &camera, t)?;
                     if let Some(truth_img) = &truth_img {
                         let change = prev[m].as_ref().map_or(0.0, |p| mean_change(p, &img));
-                        let truth_change =
-                            truth_prev.as_ref().map_or(0.0, |p| mean_change(p, truth_img));
+                        let truth_change = truth_prev
+                            .as_ref()
+                            .map_or(0.0, |p| mean_change(p, truth_img));
                         seq[m].push(AaFrame {
                             size,
                             method: method.name().into(),
@@ -531,9 +551,14 @@ pub fn run_bench_aa(
                     run_frames(&ctx, scene, &start, t0, walker, counts.warmup, counts.timed)?
                 {
                     samples[m].0.push(frame_ms(&stats, wall, gpu));
-                    samples[m]
-                        .1
-                        .push(stats.gpu.iter().filter(|(n, _)| n.starts_with("taa") || n.starts_with("msaa")).map(|(_, ms)| ms).sum());
+                    samples[m].1.push(
+                        stats
+                            .gpu
+                            .iter()
+                            .filter(|(n, _)| n.starts_with("taa") || n.starts_with("msaa"))
+                            .map(|(_, ms)| ms)
+                            .sum(),
+                    );
                 }
             }
             progress("timing", u64::from(round) + 1, u64::from(counts.rounds));
@@ -552,6 +577,7 @@ pub fn run_bench_aa(
     let report = BenchAaReport {
         adapter: AdapterReport::of(&ctx),
         truth_k: opts.truth_k,
+        truth_reach: opts.truth_reach,
         frames,
         sequences,
         paths: path_views,
@@ -609,9 +635,8 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
         );
     }
     write_text(&opts.out.join("aa_paths.csv"), &csv)?;
-    let mut csv = String::from(
-        "width,height,method,frame_ms,q1_ms,q3_ms,spread,noisy,frames,aa_ms,gpu\n",
-    );
+    let mut csv =
+        String::from("width,height,method,frame_ms,q1_ms,q3_ms,spread,noisy,frames,aa_ms,gpu\n");
     for t in &r.timings {
         let _ = writeln!(
             csv,
@@ -666,7 +691,11 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
             log_y: false,
             points,
         }
-        .write_png(&opts.out.join(format!("aa_{}x{}.png", size.0, size.1)), 900, 600)?;
+        .write_png(
+            &opts.out.join(format!("aa_{}x{}.png", size.0, size.1)),
+            900,
+            600,
+        )?;
     }
     Ok(())
 }

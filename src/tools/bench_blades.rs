@@ -23,6 +23,7 @@ use anyhow::{Context, Result, bail};
 use glam::{DVec2, DVec3, Vec3};
 use serde::Serialize;
 
+use crate::RendererConfig;
 use crate::camera::Camera;
 use crate::gpu::GpuContext;
 use crate::grass::{BATCH_TILES, Blade};
@@ -34,7 +35,6 @@ use crate::tools::fly::{OptionError, OutDir, check_range, check_size, write_text
 use crate::tools::metrics::{LineChart, Series, flip_compare};
 use crate::tools::timing::{FrameCounts, Timing, run_frames};
 use crate::tools::truth::Truth;
-use crate::RendererConfig;
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::{Manifest, TileData, TileId, World, WorldError};
 

@@ -9,13 +9,13 @@
 use anyhow::{Result, bail};
 use serde::Serialize;
 
+use crate::RendererConfig;
 use crate::camera::sample_path;
 use crate::gpu::GpuContext;
 use crate::tools::bench::{Bench, BenchLodOptions, Measures, warm_up};
 use crate::tools::fly::{OutDir, write_text};
 use crate::tools::metrics::{COVERAGE_DISTANCE_M, Chart, ChartPoint};
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
-use crate::RendererConfig;
 use crate::tools::{AdapterReport, write_json};
 use crate::world::World;
 
@@ -135,7 +135,11 @@ pub fn run_bench_features(
     // last frame, at the view's time, is supersampled).
     let mut truths = Vec::new();
     {
-        let mut truth = bench.truth(&variant_config(Features::all()), opts.truth_k)?;
+        let mut truth = bench.truth(
+            &variant_config(Features::all()),
+            opts.truth_k,
+            opts.truth_reach,
+        )?;
         for (i, &t) in times.iter().enumerate() {
             warm_up(truth.scene(), &sample_path(&path, t))?;
             for f in 0..lead_frames {

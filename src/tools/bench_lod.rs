@@ -27,6 +27,7 @@ use anyhow::{Context, Result, bail};
 use glam::DVec3;
 use serde::Serialize;
 
+use crate::RendererConfig;
 use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::lod::RingSettings;
@@ -37,7 +38,6 @@ use crate::tools::metrics::{
     pareto_front, ray_distances,
 };
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
-use crate::RendererConfig;
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::World;
 
@@ -300,7 +300,11 @@ pub fn run_bench_lod(
     let settings = lod_settings(&world);
     // Every frame of the benchmark is drawn at time 0 (`Scene::render` keeps the last frame's
     // time), the camera leaving the trail: so is the truth.
-    let mut truth = bench.truth(&RendererConfig::for_world(&world), opts.truth_k)?;
+    let mut truth = bench.truth(
+        &RendererConfig::for_world(&world),
+        opts.truth_k,
+        opts.truth_reach,
+    )?;
 
     // (a) The dolly: forward along the path's direction, from where the path starts.
     let start = sample_path(&path, path.keys[0].t_s);
@@ -383,7 +387,7 @@ pub fn run_bench_lod(
         .pyramid
         .tile_size_m(RingSettings::for_pyramid(&world.manifest.pyramid).level);
     let near_m = settings[0].view_distance_tiles * tile_m;
-    let far_m = FAR_BAND_FACTOR * near_m;
+    let far_m = opts.truth_reach.min(FAR_BAND_FACTOR) * near_m;
     let (w, h) = opts.size;
     let (mut truths, mut masks) = (Vec::new(), Vec::new());
     for (i, v) in views.iter().enumerate() {

@@ -29,15 +29,20 @@ use anyhow::{Context, Result, bail};
 use glam::{DVec2, Vec2};
 use serde::Serialize;
 
+use crate::RendererConfig;
 use crate::camera::{Camera, sample_path, walker_at};
 use crate::gpu::GpuContext;
 use crate::lod::RingSettings;
 use crate::stream::TileSource;
 use crate::tools::fly::{FlyOptions, FlyProgress, OptionError, OutDir, check_range, write_png};
 use crate::tools::metrics::{decode_srgb8, encode_srgb8};
-use crate::RendererConfig;
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::World;
+
+/// Checks `reach` (`option` in messages) is in 1..=[`REACH_FACTOR`].
+pub fn check_reach(option: &'static str, reach: f64) -> Result<(), OptionError> {
+    check_range(option, reach, 1.0..=REACH_FACTOR, "")
+}
 
 /// Sub-samples a pixel side of the truth unless asked otherwise (`--truth`).
 pub const DEFAULT_K: u32 = 4;
@@ -97,9 +102,21 @@ pub fn atlas_slots(world: &World, device: &wgpu::Device) -> u32 {
 /// out to [`REACH_FACTOR`] times the default view distance, [`SEGMENTS`] segments everywhere, and
 /// an atlas of `atlas_slots` slots (see [`atlas_slots`]). A `base` without grass stays without.
 pub fn truth_config(world: &World, base: &RendererConfig, atlas_slots: u32) -> RendererConfig {
+    truth_config_reaching(world, base, atlas_slots, REACH_FACTOR)
+}
+
+/// Like [`truth_config`], with blades out to `reach` (in 1..=[`REACH_FACTOR`]) times the
+/// default view distance: a cheaper truth, for quick runs on a software renderer (the far
+/// band beyond `reach` view distances is then not the truth's).
+pub fn truth_config_reaching(
+    world: &World,
+    base: &RendererConfig,
+    atlas_slots: u32,
+    reach: f64,
+) -> RendererConfig {
     let mut c = base.clone();
     let default = RingSettings::for_pyramid(&world.manifest.pyramid);
-    let view = REACH_FACTOR * default.low_radius_m;
+    let view = reach.clamp(1.0, REACH_FACTOR) * default.low_radius_m;
     // Blades the low grid drops fade over the outer 30% of the high ring
     // (`RendererConfig::grass_settings`): a ring of view / 0.7 starts that fade at the view
     // distance, where every blade is gone anyway.
@@ -442,7 +459,7 @@ mod tests {
         let white = image::RgbaImage::from_pixel(3, 2, image::Rgba([255, 255, 255, 255]));
         let m = mean_linear(&[black.clone(), white]).unwrap();
         assert!(m.pixels().all(|p| p.0 == [188, 188, 188, 255]), "{m:?}");
-        assert_eq!(mean_linear(&[black.clone()]).unwrap(), black);
+        assert_eq!(mean_linear(std::slice::from_ref(&black)).unwrap(), black);
         assert!(mean_linear(&[]).is_none());
     }
 
