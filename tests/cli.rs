@@ -1410,7 +1410,14 @@ fn bench_aa_measures_every_method_against_the_truth_in_every_sequence() {
     // No paths asked for: the table has its header only.
     let paths = std::fs::read_to_string(dir.join("aa_paths.csv")).unwrap();
     assert_eq!(paths.lines().count(), 1, "{paths}");
-    for f in ["aa_timing.csv", "aa.json", "aa_64x36.png"] {
+    for f in [
+        "aa_timing.csv",
+        "aa.json",
+        "aa_64x36.png",
+        "64x36_dolly_truth.png",
+        "64x36_dolly_taa.png",
+        "64x36_pan_msaa.png",
+    ] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
     let stdout = String::from_utf8_lossy(&out.stdout);

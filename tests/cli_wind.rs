@@ -121,6 +121,8 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
             "1",
             "--truth",
             "1",
+            "--truth-reach",
+            "1",
         ])
         .args(["--out", "b"])
         .current_dir(tmp.path())

@@ -162,7 +162,8 @@ impl RendererConfig {
     /// Checks every setting against its range, stated in the error: `lod_factor` in
     /// [`LOD_FACTOR_RANGE`], `mesh_step` a power of two in 1..=[`MAX_MESH_STEP`], the tile
     /// service's per-frame budgets at least 1, the grass rings' radii (finite, the high radius
-    /// above 0 and within the low one, the hysteresis at least 0), and [`GrassConfig::validate`].
+    /// and the low one above 0, the high one allowed past the low one, the hysteresis at least
+    /// 0), and [`GrassConfig::validate`].
     /// NaN and infinities are out of every range. What depends on the world or the adapter
     /// (atlas slots, cache size, the rings' level) is checked by [`crate::Renderer::new`].
     pub fn validate(&self) -> Result<(), ConfigError> {

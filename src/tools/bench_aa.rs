@@ -17,8 +17,9 @@
 //! flight along the path. Speed: GPU time per frame of each method (timestamp queries; the
 //! wall time without them), timed in interleaved rounds at the still view (see
 //! [`crate::tools::timing`]). Outputs: `aa_frames.csv` (every frame), `aa_sequences.csv`,
-//! `aa_paths.csv`, `aa.json`, and per size a chart of error against GPU time with the Pareto
-//! front (`aa_WxH.png`).
+//! `aa_paths.csv`, `aa.json`, per size a chart of error against GPU time with the Pareto
+//! front (`aa_WxH.png`), and the last frame of each sequence, each method's and the truth's,
+//! to look at (`WxH_SEQUENCE_METHOD.png`, `WxH_SEQUENCE_truth.png`).
 
 use std::path::PathBuf;
 
@@ -32,7 +33,7 @@ use crate::aa::AntiAliasing;
 use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::tools::Scene;
-use crate::tools::fly::{OutDir, write_json, write_text};
+use crate::tools::fly::{OutDir, write_json, write_png, write_text};
 use crate::tools::metrics::flip_compare;
 use crate::tools::metrics::{Chart, ChartPoint};
 use crate::tools::report::AdapterReport;
@@ -504,6 +505,19 @@ pub fn run_bench_aa(
                         .then(|| recovery_frames(&flips, jump))
                         .flatten(),
                 });
+            }
+            // The last frame of the sequence, each method's and the truth's, to look at.
+            let name = |what: &str| {
+                opts.out
+                    .join(format!("{}x{}_{}_{what}.png", size.0, size.1, motion.name()))
+            };
+            if let Some(img) = &truth_prev {
+                write_png(&name("truth"), img)?;
+            }
+            for (m, (method, _)) in scenes.iter().enumerate() {
+                if let Some(img) = &prev[m] {
+                    write_png(&name(method.name()), img)?;
+                }
             }
             frames.extend(seq.into_iter().flatten());
         }
