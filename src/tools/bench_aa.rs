@@ -508,8 +508,12 @@ pub fn run_bench_aa(
             }
             // The last frame of the sequence, each method's and the truth's, to look at.
             let name = |what: &str| {
-                opts.out
-                    .join(format!("{}x{}_{}_{what}.png", size.0, size.1, motion.name()))
+                opts.out.join(format!(
+                    "{}x{}_{}_{what}.png",
+                    size.0,
+                    size.1,
+                    motion.name()
+                ))
             };
             if let Some(img) = &truth_prev {
                 write_png(&name("truth"), img)?;
