@@ -33,23 +33,9 @@ fn multisampled(
     label: &str,
     format: wgpu::TextureFormat,
     usage: wgpu::TextureUsages,
-    (width, height): (u32, u32),
+    size: (u32, u32),
 ) -> wgpu::TextureView {
-    device
-        .create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width,
-                height,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: SAMPLES,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
+    crate::gpu::multisampled_texture(device, label, format, usage, size, SAMPLES)
         .create_view(&Default::default())
 }
 

@@ -40,7 +40,19 @@ pub fn target_texture(
     label: &str,
     format: wgpu::TextureFormat,
     usage: wgpu::TextureUsages,
+    size: (u32, u32),
+) -> wgpu::Texture {
+    multisampled_texture(device, label, format, usage, size, 1)
+}
+
+/// Like [`target_texture`], with `samples` samples a pixel.
+pub fn multisampled_texture(
+    device: &wgpu::Device,
+    label: &str,
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
     (width, height): (u32, u32),
+    samples: u32,
 ) -> wgpu::Texture {
     device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
@@ -50,7 +62,7 @@ pub fn target_texture(
             depth_or_array_layers: 1,
         },
         mip_level_count: 1,
-        sample_count: 1,
+        sample_count: samples,
         dimension: wgpu::TextureDimension::D2,
         format,
         usage,
