@@ -46,7 +46,8 @@
 //!   ([`aa::taa`], mirror [`aa::taa_cpu`], `shaders/aa_taa.wgsl`) and the grass multisampled
 //!   with alpha to coverage ([`aa::msaa`], mirror [`aa::msaa_cpu`], `shaders/aa_msaa.wgsl`).
 //! - [`renderer`]: the frame: [`Renderer`], the order of its passes top to bottom in one place
-//!   ([`Renderer::record`], `renderer/mod.rs`); its settings in `renderer/config.rs`
+//!   ([`Renderer::record`], `renderer/mod.rs`; the hole check in `renderer/hole_check.rs`, the
+//!   figures' readback ring in `renderer/readback.rs`); its settings in `renderer/config.rs`
 //!   ([`RendererConfig`] with [`GrassConfig`], [`RendererOptions`];
 //!   [`RendererConfig::validate`] checks every range once, called by [`Renderer::new`]); the
 //!   frame's view, worked out once in [`Renderer::prepare`] (`renderer/view.rs`,
@@ -65,8 +66,8 @@
 //! `shaders/M_S.wgsl`. Where one file sets up a family of passes that only run together, the
 //! file is named after the family and each pass's shader is `shaders/M_PASS.wgsl`: the
 //! terrain's G-buffer, shading and composite (`src/terrain/mod.rs`, `shaders/terrain_gbuffer.wgsl`,
-//! `terrain_shade.wgsl`, `terrain_composite.wgsl`); the frame's hole check, in
-//! `src/renderer/mod.rs` with `shaders/renderer_hole_check.wgsl`. Anti-aliasing follows it
+//! `terrain_shade.wgsl`, `terrain_composite.wgsl`); the frame's hole check is
+//! `src/renderer/hole_check.rs` with `shaders/renderer_hole_check.wgsl`. Anti-aliasing follows it
 //! too: `src/aa/taa.rs`, `src/aa/taa_cpu.rs`, `shaders/aa_taa.wgsl`. WGSL included by more than
 //! one stage is in `shaders/shared/`, and its Rust mirror is named after what it computes
 //! ([`hash`] for `shared/hash.wgsl`, [`terrain::far_field`], `wind_at` in [`wind::field_cpu`]

@@ -14,7 +14,7 @@
 //!
 //! Bodies are streamed and never read past the most that such a file may hold: `world.toml` at
 //! most [`MAX_MANIFEST_BYTES`] (16 MiB, as on disk), a tile file at most
-//! [`max_file_bytes`](crate::world::format::max_file_bytes) for the world's tile size (twice its
+//! [`crate::world::format::max_file_bytes`] for the world's tile size (twice its
 //! raw samples plus 64 KiB of headers: 202 KiB for a height file of the default world's
 //! 133-sample tiles). A `Content-Length` beyond the limit is refused before the body is read; a
 //! body without one (chunked or ended by closing) is cut off at the limit. Redirects are

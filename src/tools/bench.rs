@@ -43,7 +43,7 @@ pub struct BenchLodOptions {
     /// Frames of the dolly.
     pub dolly_frames: u32,
     /// Untimed frames before each measurement's timed ones (default: by adapter, see
-    /// [`FrameCounts::for_adapter`]).
+    /// [`crate::tools::timing::FrameCounts::for_adapter`]).
     pub warmup_frames: Option<u32>,
     /// Timed frames of each measurement per round (default: by adapter).
     pub timed_frames: Option<u32>,

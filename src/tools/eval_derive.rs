@@ -9,7 +9,7 @@
 //! the discrete Laplacian relative to the truth's).
 //!
 //! The calibrated method (the runtime's) fits its per-level detail to the coarse grid alone,
-//! as the baker fits a world's to its stored pyramid ([`crate::stream::calibrate`]): the truth
+//! as the baker fits a world's to its stored pyramid ([`crate::stream::calibrate()`]): the truth
 //! only scores it.
 
 use std::time::Instant;
