@@ -303,11 +303,7 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
 
 pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result<()> {
     let (bars, mut update) = stage_bars();
-    let r = verdant::tools::bench_aa::run_bench_aa(
-        &opts,
-        &mut verdant::tools::bench_aa::truth_reference,
-        &mut update,
-    )?;
+    let r = verdant::tools::bench_aa::run_bench_aa(&opts, &mut update)?;
     finish_bars(&bars);
     println!(
         "{} [{}], against the {}x{} truth",

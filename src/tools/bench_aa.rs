@@ -23,7 +23,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use glam::{DVec2, DVec3};
 use image::RgbaImage;
 use serde::Serialize;
@@ -302,76 +302,42 @@ pub fn recovery_frames(flips: &[f64], jump: usize) -> Option<u32> {
     Some(last_bad.map_or(0, |i| i as u32 + 1))
 }
 
-/// A renderer of the truth: what every method's frames are measured against.
-pub trait Reference {
-    /// The truth of `camera` at `time_s`, the trail's walker at `walker`.
-    fn render(
-        &mut self,
-        ctx: &GpuContext,
-        camera: &Camera,
-        time_s: f64,
-        walker: Option<DVec2>,
-    ) -> Result<RgbaImage>;
-
-    /// Steps the truth's wind, sway and trail through a frame that is not measured.
-    fn advance(
-        &mut self,
-        ctx: &GpuContext,
-        camera: &Camera,
-        time_s: f64,
-        walker: Option<DVec2>,
-    ) -> Result<()>;
-}
-
-impl Reference for Truth {
-    fn render(
-        &mut self,
-        ctx: &GpuContext,
-        camera: &Camera,
-        time_s: f64,
-        walker: Option<DVec2>,
-    ) -> Result<RgbaImage> {
-        Truth::render(self, ctx, camera, time_s, walker)
-    }
-
-    fn advance(
-        &mut self,
-        ctx: &GpuContext,
-        camera: &Camera,
-        time_s: f64,
-        walker: Option<DVec2>,
-    ) -> Result<()> {
-        self.scene()
-            .warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
-        Truth::advance(self, ctx, camera, time_s, walker)
-    }
-}
-
-/// Makes the reference of a run: from the GPU, the world, the size, the truth's sub-samples a
-/// side and its reach (in view distances).
-pub type MakeReference =
-    dyn FnMut(&GpuContext, &World, (u32, u32), u32, f64) -> Result<Box<dyn Reference>>;
-
-/// The truth of [`crate::tools::truth`] (k x k sub-samples in linear light, the most accurate
-/// grass), as `bench aa` measures against it.
-pub fn truth_reference(
+/// The truth of [`crate::tools::truth`] at `size` (k x k sub-samples in linear light, the most
+/// accurate grass, blades out to `reach` view distances): what every method is measured
+/// against.
+fn truth_for(
     ctx: &GpuContext,
     world: &World,
     size: (u32, u32),
     k: u32,
     reach: f64,
-) -> Result<Box<dyn Reference>> {
+) -> Result<Truth> {
     let slots = crate::tools::truth::atlas_slots(world, &ctx.device);
     let base = RendererConfig::for_world(world);
     let config = crate::tools::truth::truth_config_reaching(world, &base, slots, reach);
-    Ok(Box::new(Truth::with_config(
+    Truth::with_config(
         ctx,
         world.clone(),
         std::sync::Arc::new(world.clone()),
         size,
         k,
         config,
-    )?))
+    )
+}
+
+/// Steps the truth's wind, sway and trail through a frame that is not measured (its tiles
+/// brought in first).
+fn advance(
+    truth: &mut Truth,
+    ctx: &GpuContext,
+    camera: &Camera,
+    time_s: f64,
+    walker: Option<DVec2>,
+) -> Result<()> {
+    truth
+        .scene()
+        .warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+    truth.advance(ctx, camera, time_s, walker)
 }
 
 /// Renders one frame of `scene`, its tiles brought in first.
@@ -381,36 +347,19 @@ fn frame(ctx: &GpuContext, scene: &mut Scene, camera: &Camera, time_s: f64) -> R
     Ok(scene.read_image(ctx)?)
 }
 
-fn path_named(world: &World, name: &str) -> Result<CameraPath> {
-    world.manifest.path(name).cloned().with_context(|| {
-        let names: Vec<&str> = world
-            .manifest
-            .paths
-            .iter()
-            .map(|p| p.name.as_str())
-            .collect();
-        format!(
-            "world {} has no camera path {name:?} (it has: {})",
-            world.dir.display(),
-            names.join(", ")
-        )
-    })
-}
-
-/// Runs the benchmark, the truth rendered by what `truth` makes for each size; `progress`
+/// Runs the benchmark; `progress`
 /// hears each step's name, steps done and steps in all.
 pub fn run_bench_aa(
     opts: &BenchAaOptions,
-    truth: &mut MakeReference,
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> Result<BenchAaReport> {
     opts.validate()?;
     let world = World::open(&opts.world)?;
-    let start_path = path_named(&world, &opts.path)?;
+    let start_path = crate::tools::camera_path(&world, &opts.world, Some(&opts.path))?;
     let paths: Vec<CameraPath> = opts
         .paths
         .iter()
-        .map(|n| path_named(&world, n))
+        .map(|n| crate::tools::camera_path(&world, &opts.world, Some(n)))
         .collect::<Result<_>>()?;
     let out_dir = OutDir::create_for(&opts.out, "bench aa")?;
     let ctx = GpuContext::new()?;
@@ -427,7 +376,7 @@ pub fn run_bench_aa(
     let mut path_views = Vec::new();
     let mut timings = Vec::new();
     for &size in &opts.sizes {
-        let mut reference = truth(&ctx, &world, size, opts.truth_k, opts.truth_reach)?;
+        let mut reference = truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?;
         let mut scenes: Vec<(AntiAliasing, Scene)> = opts
             .methods
             .iter()
@@ -449,7 +398,7 @@ pub fn run_bench_aa(
                 let truth_img = if i >= 0 {
                     Some(reference.render(&ctx, &camera, t, walker)?)
                 } else {
-                    reference.advance(&ctx, &camera, t, walker)?;
+                    advance(&mut reference, &ctx, &camera, t, walker)?;
                     None
                 };
                 for (m, (method, scene)) in scenes.iter_mut().enumerate() {
@@ -537,7 +486,7 @@ pub fn run_bench_aa(
                     let truth_img = if r == 0 {
                         Some(reference.render(&ctx, &camera, t, walker)?)
                     } else {
-                        reference.advance(&ctx, &camera, t, walker)?;
+                        advance(&mut reference, &ctx, &camera, t, walker)?;
                         None
                     };
                     for (method, scene) in scenes.iter_mut() {

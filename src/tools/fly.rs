@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, mpsc};
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 
 use crate::camera::{sample_path, walker_at};
 use crate::gpu::GpuContext;
@@ -190,27 +190,7 @@ pub fn run_fly_with_source(
     progress: &mut dyn FnMut(FlyProgress),
 ) -> Result<FlyReport> {
     opts.validate()?;
-    let path = match &opts.path {
-        Some(name) => world.manifest.path(name).cloned().with_context(|| {
-            let names: Vec<&str> = world
-                .manifest
-                .paths
-                .iter()
-                .map(|p| p.name.as_str())
-                .collect();
-            format!(
-                "world {} has no camera path {name:?} (it has: {})",
-                opts.world.display(),
-                names.join(", ")
-            )
-        })?,
-        None => world
-            .manifest
-            .paths
-            .first()
-            .cloned()
-            .with_context(|| format!("world {} has no camera paths", opts.world.display()))?,
-    };
+    let path = crate::tools::camera_path(&world, &opts.world, opts.path.as_deref())?;
     // Checked before anything is written.
     let config = opts.renderer_config(&world, &path)?;
     let out_dir = OutDir::create_for(&opts.out, "fly")?;

@@ -44,6 +44,37 @@ use std::sync::Arc;
 use crate::stream::{HttpOptions, HttpSource, TileSource};
 use crate::world::World;
 
+/// The camera path `name` of `world` (opened from `location`), or its first path when `name`
+/// is `None`; a missing one is an error naming the world and the paths it has.
+pub fn camera_path(
+    world: &World,
+    location: &Path,
+    name: Option<&str>,
+) -> anyhow::Result<crate::world::CameraPath> {
+    use anyhow::Context;
+    match name {
+        Some(name) => world.manifest.path(name).cloned().with_context(|| {
+            let names: Vec<&str> = world
+                .manifest
+                .paths
+                .iter()
+                .map(|p| p.name.as_str())
+                .collect();
+            format!(
+                "world {} has no camera path {name:?} (it has: {})",
+                location.display(),
+                names.join(", ")
+            )
+        }),
+        None => world
+            .manifest
+            .paths
+            .first()
+            .cloned()
+            .with_context(|| format!("world {} has no camera paths", location.display())),
+    }
+}
+
 /// Opens a world and the source of its tiles: its folder, or, when `location` is an `http://`
 /// address, the world served there (`stream::HttpSource`).
 pub fn open_world(
@@ -59,5 +90,25 @@ pub fn open_world(
             let world = World::open(location)?;
             Ok((world.clone(), Arc::new(world)))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_camera_path_is_found_by_name_or_first_and_a_missing_one_names_the_others() {
+        let (world, _) = crate::tools::bench_blades::flat_field(200.0).unwrap();
+        let here = Path::new("field");
+        let first = camera_path(&world, here, None).unwrap();
+        assert_eq!(first.name, world.manifest.paths[0].name);
+        let named = camera_path(&world, here, Some(&first.name)).unwrap();
+        assert_eq!(named.name, first.name);
+        let err = format!("{:#}", camera_path(&world, here, Some("nope")).unwrap_err());
+        assert!(
+            err.contains("field") && err.contains("\"nope\"") && err.contains(&first.name),
+            "{err}"
+        );
     }
 }

@@ -361,17 +361,7 @@ pub fn run_fly_truth(
     }
     let started = std::time::Instant::now();
     let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
-    let path = match &opts.path {
-        Some(name) => world.manifest.path(name).cloned().with_context(|| {
-            format!("world {} has no camera path {name:?}", opts.world.display())
-        })?,
-        None => world
-            .manifest
-            .paths
-            .first()
-            .cloned()
-            .with_context(|| format!("world {} has no camera paths", opts.world.display()))?,
-    };
+    let path = crate::tools::camera_path(&world, &opts.world, opts.path.as_deref())?;
     let out_dir = OutDir::create_for(&opts.out, "fly")?;
     let ctx = GpuContext::new()?;
     let mut base = RendererConfig::for_world(&world);
