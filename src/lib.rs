@@ -82,6 +82,7 @@ pub mod gpu;
 pub mod grass;
 pub mod hash;
 pub mod lod;
+pub mod plants;
 pub mod renderer;
 pub mod shaders;
 pub mod stream;
