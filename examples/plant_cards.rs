@@ -1,5 +1,6 @@
 //! Writes the far-card picture of each plant recipe as PNG, and a contact sheet of the three side
-//! by side (each stretched back to its card's proportions, over a sky-grey background).
+//! by side (each stretched back to its card's proportions, over a sky-grey background), with the
+//! reduced level of detail drawn the same way in a second row.
 //!
 //! ```sh
 //! cargo run --example plant_cards -- out/plants [SEED]
@@ -8,7 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use image::{Rgba, RgbaImage, imageops};
-use verdant::plants::{PlantImage, Recipe, generate};
+use verdant::plants::{PlantImage, Recipe, generate, render_card};
 
 /// Each recipe's accent colour (linear RGB): a pink flower, green fern and bush leaves.
 fn accent(recipe: Recipe) -> [f32; 3] {
@@ -57,22 +58,30 @@ fn run() -> Result<(), String> {
         let width = (SHEET_HEIGHT as f32 * 2.0 * m.radius() / m.height())
             .round()
             .max(1.0) as u32;
-        tiles.push(imageops::resize(
-            &picture,
-            width,
-            SHEET_HEIGHT,
-            imageops::FilterType::Triangle,
-        ));
+        let reduced = to_image(&render_card(&plant.lods[1], plant.card_image.width))?;
+        for (row, picture) in [&picture, &reduced].into_iter().enumerate() {
+            let tile =
+                imageops::resize(picture, width, SHEET_HEIGHT, imageops::FilterType::Triangle);
+            tiles.push((row as u32, tile));
+        }
     }
 
     let gap = 16;
-    let width = tiles.iter().map(|t| t.width() + gap).sum::<u32>() + gap;
-    let mut sheet =
-        RgbaImage::from_pixel(width, SHEET_HEIGHT + 2 * gap, Rgba([196, 208, 220, 255]));
+    let width = tiles
+        .iter()
+        .filter(|t| t.0 == 0)
+        .map(|t| t.1.width() + gap)
+        .sum::<u32>()
+        + gap;
+    let height = 2 * (SHEET_HEIGHT + gap) + gap;
+    let mut sheet = RgbaImage::from_pixel(width, height, Rgba([196, 208, 220, 255]));
     let mut x = gap;
-    for tile in &tiles {
-        imageops::overlay(&mut sheet, tile, x as i64, gap as i64);
-        x += tile.width() + gap;
+    for (row, tile) in &tiles {
+        let y = gap + row * (SHEET_HEIGHT + gap);
+        imageops::overlay(&mut sheet, tile, x as i64, y as i64);
+        if *row == 1 {
+            x += tile.width() + gap;
+        }
     }
     save(&sheet, &dir.join("plants.png"))
 }

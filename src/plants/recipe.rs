@@ -348,7 +348,7 @@ fn fern(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
                     b.leaf(&leaflet, Kind::Leaf);
                 } else if j % 3 == 1 {
                     let grown = Leaf {
-                        length: leaflet.length * 1.4,
+                        length: leaflet.length * 1.6,
                         width: leaflet.width * 2.0,
                         ..leaflet
                     };
@@ -371,7 +371,7 @@ fn bush(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
         let mut br = rng.fork(1 + k);
         br.count(1, 2); // the fork count drawn above
         let az = az0 + TAU * k as f32 / count as f32 + br.range(-0.3, 0.3);
-        let el = br.range(0.75, 1.2);
+        let el = br.range(0.95, 1.3);
         let spec = Branch {
             start: azimuth(az) * 0.02,
             dir: azimuth(az) * el.cos() + Vec3::Z * el.sin(),
