@@ -283,13 +283,12 @@ mod tests {
     fn coverage_is_antialiased_and_padded() {
         // A right triangle over the frame's lower-left half: half the picture, with a diagonal
         // of partly covered pixels.
-        let mut m = PlantMesh::default();
-        m.vertices = vec![
-            vertex([-1.0, 0.0, 0.0], [0.2, 0.8, 0.1]),
-            vertex([1.0, 0.0, 0.0], [0.2, 0.8, 0.1]),
-            vertex([-1.0, 0.0, 2.0], [0.2, 0.8, 0.1]),
-        ];
-        m.indices = vec![0, 1, 2];
+        let m = PlantMesh {
+            vertices: [[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 2.0]]
+                .map(|p| vertex(p, [0.2, 0.8, 0.1]))
+                .to_vec(),
+            indices: vec![0, 1, 2],
+        };
         let img = render_card(&m, 32);
         let alpha: Vec<u8> = img.rgba.chunks_exact(4).map(|p| p[3]).collect();
         let covered: f32 = alpha.iter().map(|&a| a as f32 / 255.0).sum();

@@ -24,7 +24,7 @@ pub const CARD_SIZE: u32 = 128;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Recipe {
-    /// A thin stem with a few leaves and a head of 5-8 petals; about 1 m before scaling.
+    /// A thin stem with 2-4 leaves and a head of 5-8 petals around a centre.
     Flower,
     /// 5-9 fronds arching out from the root, leaflets tapering toward their tips.
     Fern,
@@ -36,7 +36,7 @@ impl Recipe {
     /// Every recipe, in a fixed order.
     pub const ALL: [Recipe; 3] = [Recipe::Flower, Recipe::Fern, Recipe::Bush];
 
-    /// The recipe's name, as written in settings files ("flower", "fern", "bush").
+    /// The recipe's name, as serde writes it ("flower", "fern", "bush").
     pub fn name(self) -> &'static str {
         match self {
             Recipe::Flower => "flower",
