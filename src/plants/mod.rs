@@ -2,7 +2,19 @@
 //! the same wind as the blades.
 //!
 //! - [`mesh`]: the vertex record every plant mesh uses.
+//! - `draw`: the indirect draws with the wind's bending and the shading
+//!   (`shaders/plants_draw.wgsl`); the bending mirrored in [`bend_cpu`].
+//! - `place`: placement and culling per grass tile (`shaders/plants_place.wgsl`); mirror
+//!   [`place_cpu`].
 
+pub mod bend_cpu;
 pub mod mesh;
+pub mod place_cpu;
 
 pub use mesh::{PlantImage, PlantMesh, PlantVertex};
+
+/// The built-in recipes a plant type's `mesh` may name.
+pub const RECIPES: [&str; 3] = ["flower", "fern", "bush"];
+
+/// Edge of a cell of the placement grid, metres: each cell holds at most one plant.
+pub const PLANT_CELL_M: f32 = 0.5;
