@@ -8,10 +8,16 @@
 //!   [`place_cpu`].
 
 pub mod bend_cpu;
+mod draw;
 pub mod mesh;
+mod place;
 pub mod place_cpu;
+pub mod renderer;
+pub mod set;
 
 pub use mesh::{PlantImage, PlantMesh, PlantVertex};
+pub use renderer::{PlantRenderer, PlantSettings, PlantStats};
+pub use set::{PlantError, PlantSet};
 
 /// The built-in recipes a plant type's `mesh` may name.
 pub const RECIPES: [&str; 3] = ["flower", "fern", "bush"];

@@ -340,6 +340,8 @@ pub struct FeatureSwitches {
     pub far_field: bool,
     /// Sun shadows cast by the terrain.
     pub shadows: bool,
+    /// Plants among the grass (the world's `[[plant_types]]`).
+    pub plants: bool,
 }
 
 impl Default for FeatureSwitches {
@@ -361,6 +363,7 @@ impl From<Features> for FeatureSwitches {
             ground_darkening: f.has(Feature::GroundDarkening),
             far_field: f.has(Feature::FarField),
             shadows: f.has(Feature::Shadows),
+            plants: f.has(Feature::Plants),
         }
     }
 }
@@ -378,6 +381,7 @@ impl From<&FeatureSwitches> for Features {
             (Feature::GroundDarkening, s.ground_darkening),
             (Feature::FarField, s.far_field),
             (Feature::Shadows, s.shadows),
+            (Feature::Plants, s.plants),
         ];
         on.into_iter()
             .filter(|(_, on)| !on)
