@@ -136,7 +136,8 @@ pub struct PlantRenderer {
     args: wgpu::Buffer,
     frame: PlantFrame,
     frame_buffer: wgpu::Buffer,
-    vertices: wgpu::Buffer,
+    /// The meshes (bound in `draw_group`; kept with the stage that owns them).
+    _vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
     place_group: wgpu::BindGroup,
     draw_group: wgpu::BindGroup,
@@ -410,7 +411,7 @@ impl PlantRenderer {
             args,
             frame,
             frame_buffer,
-            vertices,
+            _vertices: vertices,
             indices,
             place_group,
             draw_group,

@@ -109,6 +109,16 @@ pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, Plan
                     *c /= h;
                 }
             }
+            // Light through the leaf: the thickness texture (green, 0 thin .. 1 thick) baked
+            // into each vertex's thinness.
+            if let Some(th) = &loaded.thickness {
+                for v in &mut mesh.vertices {
+                    let g = f32::from(
+                        th.rgba[texel_index(th, v.uv) + 1],
+                    ) / 255.0;
+                    v.albedo[3] = 1.0 - g;
+                }
+            }
             let texture = loaded.base_color.unwrap_or_else(white);
             let mut textured = mesh.clone();
             // The card's picture shows the texture's colour through the vertex albedo.
@@ -134,11 +144,16 @@ pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, Plan
     })
 }
 
-/// The texel of `img` nearest `uv` (repeating), as linear 0..1 RGBA.
-fn sample(img: &PlantImage, uv: [f32; 2]) -> [f32; 4] {
+/// The byte index of the texel of `img` nearest `uv` (repeating).
+fn texel_index(img: &PlantImage, uv: [f32; 2]) -> usize {
     let x = ((uv[0].rem_euclid(1.0) * img.width as f32) as u32).min(img.width - 1);
     let y = ((uv[1].rem_euclid(1.0) * img.height as f32) as u32).min(img.height - 1);
-    let i = ((y * img.width + x) * 4) as usize;
+    ((y * img.width + x) * 4) as usize
+}
+
+/// The texel of `img` nearest `uv` (repeating), as linear 0..1 RGBA.
+fn sample(img: &PlantImage, uv: [f32; 2]) -> [f32; 4] {
+    let i = texel_index(img, uv);
     let lin = |b: u8| (f32::from(b) / 255.0).powf(2.2);
     [
         lin(img.rgba[i]),
