@@ -235,6 +235,9 @@ pub struct FrameStats {
     pub residency: ResidencyStats,
     /// Grass: tiles, blades considered, culled by each test and drawn, per LOD.
     pub grass: GrassStats,
+    /// Plants: cells considered, plants culled by each test and drawn; `None` when the frame
+    /// drew none (no plant types, or the `plants` feature off).
+    pub plants: Option<crate::plants::PlantStats>,
 }
 
 /// How long a warm-up waits with nothing loading, uploaded or derived before it gives up.
@@ -1149,8 +1152,23 @@ impl Renderer {
         self.timer.resolve(encoder);
         stats.cpu_ms = (frame.cpu_s + start.elapsed().as_secs_f64()) * 1e3;
         let counters = self.grass.as_ref().map(|g| g.renderer.stats_buffer());
-        self.readback
-            .record(encoder, &self.timer, counters, &self.holes.counter, stats);
+        let plants = self
+            .grass
+            .as_ref()
+            .and_then(|g| g.plants.as_ref())
+            .filter(|_| self.features.has(Feature::Plants))
+            .map(|p| p.stats_buffer());
+        if plants.is_some() {
+            stats.plants = Some(Default::default());
+        }
+        self.readback.record(
+            encoder,
+            &self.timer,
+            counters,
+            &self.holes.counter,
+            plants,
+            stats,
+        );
         Ok(())
     }
 
