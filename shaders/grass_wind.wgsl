@@ -10,6 +10,7 @@
 #include "shared/blade.wgsl"
 #include "shared/features.wgsl"
 #include "shared/wind_lookup.wgsl"
+#include "shared/waves.wgsl"
 
 struct DrawArgs {
     vertex_count: u32,
@@ -35,10 +36,6 @@ struct WindPass {
 // Lean of a blade on the axis of a fresh trail, blade heights: trampled nearly flat.
 const TRAIL_LEAN: f32 = 1.6;
 
-fn smooth_triangle(x: f32) -> f32 {
-    let t = abs(fract(x + 0.5) * 2.0 - 1.0);
-    return t * t * (3.0 - 2.0 * t);
-}
 
 fn sway_at(rel_xy: vec2<f32>, kind: u32) -> vec2<f32> {
     let n = i32(wind_lookup.n);

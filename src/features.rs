@@ -29,11 +29,13 @@ pub enum Feature {
     FarField,
     /// Sun shadows cast by the terrain.
     Shadows,
+    /// Plants among the grass: the world's flowers, ferns and bushes.
+    Plants,
 }
 
 impl Feature {
     /// Every feature, in bit order.
-    pub const ALL: [Feature; 10] = [
+    pub const ALL: [Feature; 11] = [
         Feature::WindSources,
         Feature::Interaction,
         Feature::DetailBending,
@@ -44,6 +46,7 @@ impl Feature {
         Feature::GroundDarkening,
         Feature::FarField,
         Feature::Shadows,
+        Feature::Plants,
     ];
 
     /// The bit of this feature in [`Features::bits`] (and in the shaders).
@@ -64,6 +67,7 @@ impl Feature {
             Feature::GroundDarkening => "ground-darkening",
             Feature::FarField => "far-field",
             Feature::Shadows => "shadows",
+            Feature::Plants => "plants",
         }
     }
 }

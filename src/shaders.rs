@@ -30,6 +30,18 @@ const SHARED: &[(&str, &str)] = &[
         include_str!("../shaders/shared/wind_lookup.wgsl"),
     ),
     (
+        "shared/tile_texels.wgsl",
+        include_str!("../shaders/shared/tile_texels.wgsl"),
+    ),
+    (
+        "shared/hiz_cull.wgsl",
+        include_str!("../shaders/shared/hiz_cull.wgsl"),
+    ),
+    (
+        "shared/waves.wgsl",
+        include_str!("../shaders/shared/waves.wgsl"),
+    ),
+    (
         "shared/output.wgsl",
         include_str!("../shaders/shared/output.wgsl"),
     ),
@@ -73,6 +85,14 @@ pub const STAGES: &[(&str, &str)] = &[
         include_str!("../shaders/terrain_contact_shadow.wgsl"),
     ),
     ("grass_hiz.wgsl", include_str!("../shaders/grass_hiz.wgsl")),
+    (
+        "plants_place.wgsl",
+        include_str!("../shaders/plants_place.wgsl"),
+    ),
+    (
+        "plants_draw.wgsl",
+        include_str!("../shaders/plants_draw.wgsl"),
+    ),
     (
         "renderer_hole_check.wgsl",
         include_str!("../shaders/renderer_hole_check.wgsl"),

@@ -11,6 +11,7 @@ const COLOR_VARIATION: u32 = 64u;
 const GROUND_DARKENING: u32 = 128u;
 const FAR_FIELD: u32 = 256u;
 const SHADOWS: u32 = 512u;
+const PLANTS: u32 = 1024u;
 
 // Whether a pass's feature bits `flags` switch on `feature`.
 fn has_feature(flags: u32, feature: u32) -> bool {

@@ -239,6 +239,7 @@ pub fn bake(
         }),
         derive: None,
         grass_peak: None,
+        plant_types: paint::default_plant_types(),
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;

@@ -15,6 +15,96 @@ use super::resample::Grid;
 /// Steepest slope that carries grass, degrees.
 pub const MAX_GRASS_SLOPE_DEG: f64 = 35.0;
 
+/// The plant types a baked world gets: two flowers, a fern and a bush among its grass types
+/// (`meadow`, `tall grass`, `dry grass`), about one plant per 3 m2 of meadow.
+pub fn default_plant_types() -> Vec<crate::world::PlantType> {
+    use crate::world::{PlantType, PlantWind};
+    #[allow(clippy::too_many_arguments)]
+    let plant = |name: &str,
+                 mesh: &str,
+                 color: [f32; 3],
+                 size_m: [f32; 2],
+                 density: &[(&str, f32)],
+                 (max_slope_deg, clump_m, clump_cover): (f32, f32, f32),
+                 seed: u32,
+                 wind: PlantWind| PlantType {
+        name: name.into(),
+        mesh: mesh.into(),
+        color,
+        size_m,
+        density: density.iter().map(|&(g, d)| (g.to_string(), d)).collect(),
+        max_slope_deg,
+        altitude_m: [-500.0, 9000.0],
+        clump_m,
+        clump_cover,
+        seed,
+        wind,
+    };
+    let flower = |hz: f32, damping: f32| PlantWind {
+        bend: 0.045,
+        stiffness: 0.3,
+        sway_spring_hz: hz,
+        sway_damping: damping,
+        detail_amplitude: 1.2,
+        ..PlantWind::default()
+    };
+    vec![
+        plant(
+            "poppy",
+            "flower",
+            [0.8, 0.1, 0.03],
+            [0.3, 0.55],
+            &[("meadow", 0.16), ("dry grass", 0.05)],
+            (35.0, 6.0, 0.5),
+            1,
+            flower(1.2, 0.25),
+        ),
+        plant(
+            "cornflower",
+            "flower",
+            [0.22, 0.3, 0.85],
+            [0.35, 0.6],
+            &[("meadow", 0.12), ("tall grass", 0.05)],
+            (35.0, 9.0, 0.4),
+            2,
+            flower(1.0, 0.3),
+        ),
+        plant(
+            "fern",
+            "fern",
+            [0.12, 0.3, 0.05],
+            [0.5, 0.9],
+            &[("meadow", 0.04), ("tall grass", 0.1)],
+            (40.0, 12.0, 0.35),
+            3,
+            PlantWind {
+                bend: 0.03,
+                stiffness: 0.4,
+                sway_spring_hz: 0.9,
+                sway_damping: 0.4,
+                ..PlantWind::default()
+            },
+        ),
+        plant(
+            "bush",
+            "bush",
+            [0.1, 0.24, 0.04],
+            [0.7, 1.4],
+            &[("meadow", 0.04), ("tall grass", 0.03), ("dry grass", 0.03)],
+            (30.0, 20.0, 0.3),
+            4,
+            PlantWind {
+                bend: 0.012,
+                stiffness: 0.75,
+                sway_spring_hz: 1.6,
+                sway_damping: 0.5,
+                detail_amplitude: 0.8,
+                ..PlantWind::default()
+            },
+        ),
+    ]
+}
+
 /// The grass types of a baked world: 0 bare rock, 1 meadow, 2 tall grass, 3 dry grass. The
 /// widths are chosen for coverage at the least cost: on an H100 at 1920x1080, doubling them
 /// from 2-3.5 cm (meadow) took the meadow's coverage within 30 m from 19% to 33% for 0.4 ms

@@ -507,22 +507,42 @@ fn occluded(
     center: Vec3,
     radius: f32,
 ) -> bool {
+    sphere_occluded(
+        view_proj,
+        params.camera,
+        params.limits[0],
+        hiz,
+        center,
+        radius,
+    )
+}
+
+/// Whether a sphere (camera-relative `center`, `radius`) is behind the terrain: its nearest
+/// depth against the farthest terrain depth of the Hi-Z texels that cover its screen footprint.
+/// `camera` is (unused, near plane, Hi-Z width, Hi-Z height), `mips` the pyramid's levels; as
+/// `occluded` in `shaders/grass_generate.wgsl` and `shaders/plants_place.wgsl`.
+pub fn sphere_occluded(
+    view_proj: &Mat4,
+    camera: [f32; 4],
+    mips: u32,
+    hiz: &HiZ,
+    center: Vec3,
+    radius: f32,
+) -> bool {
     let clip = *view_proj * center.extend(1.0);
-    let near = params.camera[1];
+    let near = camera[1];
     // Reverse-Z infinite projection: clip.w is the view distance along the axis.
     if clip.w - radius <= near {
         return false;
     }
     let ndc = [clip.x / clip.w, clip.y / clip.w];
-    let (w, h) = (params.camera[2], params.camera[3]);
+    let (w, h) = (camera[2], camera[3]);
     // Footprint half-size in pixels: the projected radius, from the projection's y scale.
-    let scale_y = params.view_proj[1][1]
-        .abs()
-        .max(params.view_proj[0][0].abs());
+    let scale_y = view_proj.col(1)[1].abs().max(view_proj.col(0)[0].abs());
     let r_px = radius * scale_y / (clip.w - radius) * 0.5 * w.max(h);
     let sx = (ndc[0] * 0.5 + 0.5) * w;
     let sy = (0.5 - ndc[1] * 0.5) * h;
-    let mips = params.limits[0].max(1);
+    let mips = mips.max(1);
     let footprint = ((2.0 * r_px).ceil() as u32).max(1);
     let mip = (if footprint <= 1 {
         0

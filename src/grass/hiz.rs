@@ -107,6 +107,11 @@ impl HiZPyramid {
     }
 
     /// A bind group of `layout` (one read-only storage buffer at binding 0) over the pyramid.
+    /// The pyramid's levels, finest first, as one buffer of floats (see [`Self::levels`]).
+    pub(crate) fn buffer(&self) -> &wgpu::Buffer {
+        &self.buffer
+    }
+
     pub(crate) fn read_group(
         &self,
         device: &wgpu::Device,

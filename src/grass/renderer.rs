@@ -309,7 +309,7 @@ fn pool_capacity(device: &wgpu::Device, asked: u32) -> u32 {
 }
 
 /// The Hi-Z levels' table of the generation constants: (offset, width, height) per level.
-fn hiz_levels(hiz: &HiZPyramid) -> [[u32; 4]; 16] {
+pub(crate) fn hiz_levels(hiz: &HiZPyramid) -> [[u32; 4]; 16] {
     let mut t = [[0u32; 4]; 16];
     for (dst, &(o, w, h)) in t.iter_mut().zip(hiz.levels()) {
         *dst = [o, w, h, 0];

@@ -4,11 +4,38 @@
 //! - [`mesh`]: the vertex record every plant mesh uses.
 //! - [`recipe`]: the procedural flowers, ferns and bushes, at two levels of detail.
 //! - [`card`]: their far level, crossed cards with a picture rendered from the mesh.
+//! - [`gltf`]: a user's plant read from a glTF 2.0 file (`.gltf` or `.glb`).
+//! - [`set`]: a world's plant types made ready for the GPU (meshes of unit height, textures).
+//! - `place`: placement and culling per grass tile (`shaders/plants_place.wgsl`); mirror
+//!   [`place_cpu`].
+//! - `draw`: the indirect draws with the wind's bending and the shading
+//!   (`shaders/plants_draw.wgsl`); the bending mirrored in [`bend_cpu`].
+//!
+//! [`renderer`] holds the instance pool and records the stages after the grass.
 
+pub mod bend_cpu;
 pub mod card;
+mod draw;
+pub mod gltf;
 pub mod mesh;
+mod place;
+pub mod place_cpu;
 pub mod recipe;
+pub mod renderer;
+pub mod set;
 
 pub use card::{crossed_cards, render_card};
+pub use gltf::{
+    LoadedPlant, MAX_PLANT_TRIANGLES, MAX_PLANT_VERTICES, MAX_TEXTURE_SIZE, PlantFileError,
+    PlantTexture, load_plant, write_plant_gltf,
+};
 pub use mesh::{PlantImage, PlantMesh, PlantVertex};
 pub use recipe::{PlantLods, Recipe, generate};
+pub use renderer::{PlantRenderer, PlantSettings, PlantStats};
+pub use set::{PlantError, PlantSet};
+
+/// The built-in recipes a plant type's `mesh` may name.
+pub const RECIPES: [&str; 3] = ["flower", "fern", "bush"];
+
+/// Edge of a cell of the placement grid, metres: each cell holds at most one plant.
+pub const PLANT_CELL_M: f32 = 0.5;

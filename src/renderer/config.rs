@@ -40,6 +40,8 @@ pub struct RendererConfig {
     pub features: Features,
     /// How the frame is anti-aliased.
     pub aa: AntiAliasing,
+    /// The plant stage's settings (its view distance and seed follow the grass's).
+    pub plants: crate::plants::PlantSettings,
 }
 
 /// The grass's own settings, the same for every world (what follows from the world, like the
@@ -156,6 +158,7 @@ impl RendererConfig {
             wind_keys: Vec::new(),
             features: Features::from(&world.manifest.features),
             aa: AntiAliasing::default(),
+            plants: Default::default(),
         }
     }
 

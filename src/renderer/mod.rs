@@ -90,6 +90,9 @@ pub enum RendererError {
     /// A tile or the manifest could not be read.
     #[error(transparent)]
     World(#[from] WorldError),
+    /// A plant type's mesh could not be made.
+    #[error(transparent)]
+    Plant(#[from] crate::plants::PlantError),
     /// A tile did not fit the atlas.
     #[error(transparent)]
     Atlas(#[from] AtlasError),
@@ -232,6 +235,9 @@ pub struct FrameStats {
     pub residency: ResidencyStats,
     /// Grass: tiles, blades considered, culled by each test and drawn, per LOD.
     pub grass: GrassStats,
+    /// Plants: cells considered, plants culled by each test and drawn; `None` when the frame
+    /// drew none (no plant types, or the `plants` feature off).
+    pub plants: Option<crate::plants::PlantStats>,
 }
 
 /// How long a warm-up waits with nothing loading, uploaded or derived before it gives up.
@@ -279,6 +285,8 @@ struct GrassStage {
     renderer: GrassRenderer,
     wind: WindField,
     sway: SwayField,
+    /// The plants among the grass (a world with `[[plant_types]]`).
+    plants: Option<crate::plants::PlantRenderer>,
 }
 
 /// What [`Renderer::prepare`] worked out for [`Renderer::record`].
@@ -457,10 +465,36 @@ impl Renderer {
                     },
                 );
                 renderer.commit_pool(device, queue);
+                let plants = if world.manifest.plant_types.is_empty() {
+                    None
+                } else {
+                    let set = crate::plants::PlantSet::build(&world.manifest, &world.dir)?;
+                    let [_, view] = [settings.view_distance_m - settings.far_fade_m, settings.view_distance_m];
+                    Some(crate::plants::PlantRenderer::new(
+                        device,
+                        queue,
+                        &world.manifest,
+                        &set,
+                        &atlas,
+                        &targets,
+                        &renderer.hiz,
+                        settings.tile_m,
+                        crate::plants::PlantSettings {
+                            view_m: [0.8 * view, view],
+                            seed: settings.seed,
+                            ..config.plants
+                        },
+                        crate::plants::renderer::PlantWindBindings {
+                            lookup: wind.lookup_uniform(),
+                            cells: wind.buffer(),
+                        },
+                    ))
+                };
                 Some(GrassStage {
                     renderer,
                     wind,
                     sway,
+                    plants,
                 })
             }
             None => None,
@@ -476,6 +510,9 @@ impl Renderer {
         let mut grass = grass;
         if let (Some(g), Some(_)) = (&mut grass, &msaa) {
             g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
+            if let Some(p) = &mut g.plants {
+                p.set_samples(device, crate::aa::msaa::SAMPLES);
+            }
         }
         Ok(Self {
             device: device.clone(),
@@ -631,6 +668,9 @@ impl Renderer {
         };
         if let Some(g) = &mut self.grass {
             g.renderer.set_samples(&self.device, samples);
+            if let Some(p) = &mut g.plants {
+                p.set_samples(&self.device, samples);
+            }
         }
     }
 
@@ -667,6 +707,9 @@ impl Renderer {
         }
         if let Some(g) = &mut self.grass {
             g.renderer.resize(&self.device, &self.queue, width, height);
+            if let Some(p) = &mut g.plants {
+                p.resize(&self.device, &g.renderer.hiz);
+            }
         }
         Ok(())
     }
@@ -932,6 +975,17 @@ impl Renderer {
                 camera.position.z as f32,
                 camera.near_m,
             );
+            if let Some(p) = &mut g.plants {
+                p.set_frame(
+                    queue,
+                    input.time_s,
+                    self.features,
+                    camera.position,
+                    view.view_proj,
+                    &view.frustum,
+                    camera.near_m,
+                );
+            }
         }
         let high = sel.grass.iter().filter(|g| g.1 == Ring::High).count() as u32;
         self.prepared = Some(Prepared {
@@ -1068,6 +1122,18 @@ impl Renderer {
                 grass_depth,
                 &mut self.timer,
             );
+            if let Some(p) = &g.plants
+                && self.features.has(Feature::Plants)
+            {
+                p.record(
+                    &self.queue,
+                    encoder,
+                    &frame.grass_jobs,
+                    grass_color,
+                    grass_depth,
+                    &mut self.timer,
+                );
+            }
         }
         if let Some(msaa) = &self.msaa {
             msaa.record_resolve(encoder, color, depth, &mut self.timer);
@@ -1086,8 +1152,23 @@ impl Renderer {
         self.timer.resolve(encoder);
         stats.cpu_ms = (frame.cpu_s + start.elapsed().as_secs_f64()) * 1e3;
         let counters = self.grass.as_ref().map(|g| g.renderer.stats_buffer());
-        self.readback
-            .record(encoder, &self.timer, counters, &self.holes.counter, stats);
+        let plants = self
+            .grass
+            .as_ref()
+            .and_then(|g| g.plants.as_ref())
+            .filter(|_| self.features.has(Feature::Plants))
+            .map(|p| p.stats_buffer());
+        if plants.is_some() {
+            stats.plants = Some(Default::default());
+        }
+        self.readback.record(
+            encoder,
+            &self.timer,
+            counters,
+            &self.holes.counter,
+            plants,
+            stats,
+        );
         Ok(())
     }
 

@@ -37,7 +37,7 @@ impl StatsRing {
             .map(|_| ReadbackSlot {
                 buffer: device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("frame figures readback"),
-                    size: timestamp_bytes + 64 + 16,
+                    size: timestamp_bytes + 64 + 16 + 32,
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
@@ -59,6 +59,7 @@ impl StatsRing {
         timer: &GpuTimer,
         counters: Option<&wgpu::Buffer>,
         holes: &wgpu::Buffer,
+        plants: Option<&wgpu::Buffer>,
         stats: FrameStats,
     ) {
         let Some(slot) = self
@@ -79,6 +80,9 @@ impl StatsRing {
             encoder.copy_buffer_to_buffer(c, 0, &slot.buffer, self.timestamp_bytes, 64);
         }
         encoder.copy_buffer_to_buffer(holes, 0, &slot.buffer, self.timestamp_bytes + 64, 16);
+        if let Some(p) = plants {
+            encoder.copy_buffer_to_buffer(p, 0, &slot.buffer, self.timestamp_bytes + 80, 32);
+        }
         slot.state.store(PENDING, Ordering::Release);
         let state = slot.state.clone();
         encoder.map_buffer_on_submit(&slot.buffer, wgpu::MapMode::Read, .., move |r| {
@@ -103,6 +107,12 @@ impl StatsRing {
                         stats.grass = GrassStats::from_counts(stats.grass.tiles, &c);
                         // Atlas reads that found another tile than expected (HoleCheck).
                         stats.residency.holes += counters.get(16).copied().unwrap_or(0);
+                        if let Some(p) = counters.get(20..28) {
+                            let p: [u32; 8] = p.try_into().unwrap_or([0; 8]);
+                            if stats.plants.is_some() {
+                                stats.plants = Some(crate::plants::PlantStats::from_counts(&p));
+                            }
+                        }
                     }
                     slot.buffer.unmap();
                     slot.state.store(FREE, Ordering::Release);

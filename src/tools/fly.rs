@@ -458,6 +458,18 @@ impl FlySummary {
             grass_drawn_high: Summary::of(&series(&|f| f64::from(f.grass.drawn[0]))),
             grass_drawn_low: Summary::of(&series(&|f| f64::from(f.grass.drawn[1]))),
             coverage: Summary::default(),
+            plants_drawn: Summary::of(
+                &frames
+                    .iter()
+                    .filter_map(|f| f.plants.map(|p| f64::from(p.drawn)))
+                    .collect::<Vec<_>>(),
+            ),
+            plants_overflow: Summary::of(
+                &frames
+                    .iter()
+                    .filter_map(|f| f.plants.map(|p| f64::from(p.overflow)))
+                    .collect::<Vec<_>>(),
+            ),
         }
     }
 }

@@ -73,6 +73,10 @@ pub struct FrameRecord {
     /// Grass: tiles, blades considered, culled by each test (distance, frustum, occlusion),
     /// overflowing and drawn, each per LOD (high, low).
     pub grass: GrassStats,
+    /// Plants: cells considered, plants culled by each test, overflowing and drawn (absent
+    /// when the frame drew none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plants: Option<crate::plants::PlantStats>,
     /// With images, the wait for this frame's tiles before it was drawn, milliseconds (0 when
     /// the camera moved too little since the last frame to need one; see `fly`'s docs).
     #[serde(default)]
@@ -92,6 +96,7 @@ impl FrameRecord {
         self.grass_tiles_low = stats.grass_tiles.1;
         self.residency = stats.residency;
         self.grass = stats.grass;
+        self.plants = stats.plants;
     }
 }
 
@@ -123,6 +128,13 @@ pub struct FlySummary {
     /// Grass coverage over the frames of `coverage` (see [`CoverageRecord`]).
     #[serde(default)]
     pub coverage: Summary,
+    /// Plant instances drawn a frame (all types and levels; a plant in a cross-fade counts
+    /// twice), over the frames that drew plants.
+    #[serde(default)]
+    pub plants_drawn: Summary,
+    /// Plant instances a frame that did not fit their region of the pool.
+    #[serde(default)]
+    pub plants_overflow: Summary,
 }
 
 /// The grass coverage of one frame: of the pixels where terrain within

@@ -123,6 +123,120 @@ pub struct Manifest {
     /// baker. Without it (older worlds) the renderer reads the finest tiles to estimate it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub grass_peak: Option<super::GrassPeak>,
+    /// Plants beyond grass (flowers, ferns, bushes, a user's glTF plants), at most
+    /// [`MAX_PLANT_TYPES`]; none by default.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub plant_types: Vec<PlantType>,
+}
+
+/// Most plant types a world has.
+pub const MAX_PLANT_TYPES: usize = 8;
+/// Largest plant, metres.
+pub const MAX_PLANT_SIZE_M: f64 = 8.0;
+/// Most plants per square metre of all types together on one grass type (the placement grid
+/// holds at most one plant per cell of [`crate::plants::PLANT_CELL_M`]).
+pub const MAX_PLANT_DENSITY: f64 = 4.0;
+
+/// One kind of plant: its mesh, where it grows and how it moves in the wind.
+///
+/// ```toml
+/// [[plant_types]]
+/// name = "poppy"
+/// mesh = "flower"              # flower, fern or bush; or a .gltf/.glb file beside world.toml
+/// color = [0.75, 0.08, 0.04]   # the recipe's accent (petals, or leaves)
+/// size_m = [0.35, 0.6]         # height range
+/// density = { meadow = 0.12 }  # plants per square metre, per grass type (by name)
+/// ```
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlantType {
+    /// Name, e.g. `poppy`.
+    pub name: String,
+    /// A built-in recipe (`flower`, `fern`, `bush`) or a glTF 2.0 file (`.gltf` or `.glb`)
+    /// relative to the manifest's folder.
+    pub mesh: String,
+    /// The recipe's accent colour, linear (0..=1): a flower's petals, a fern's or bush's leaves.
+    /// A glTF plant keeps its own colours.
+    #[serde(default = "default_plant_color")]
+    pub color: [f32; 3],
+    /// Height range, metres (0 < min <= max <= [`MAX_PLANT_SIZE_M`]).
+    pub size_m: [f32; 2],
+    /// Plants per square metre on each grass type, by the grass type's name (types not named
+    /// get none). Scaled by the grass map's density where the plant stands.
+    pub density: std::collections::BTreeMap<String, f32>,
+    /// Steepest ground it grows on, degrees (0..=90).
+    #[serde(default = "default_max_slope")]
+    pub max_slope_deg: f32,
+    /// Altitudes it grows between, metres.
+    #[serde(default = "default_altitude")]
+    pub altitude_m: [f32; 2],
+    /// Size of its clumps, metres (1..=1000): the plants gather in patches of about this size.
+    #[serde(default = "default_clump")]
+    pub clump_m: f32,
+    /// The share of the ground its patches cover, 0 (exclusive)..=1 (1: spread evenly). The
+    /// mean density stays as given: the patches are denser.
+    #[serde(default = "default_cover")]
+    pub clump_cover: f32,
+    /// Seed of the recipe's shape (a different seed, a different-looking plant).
+    #[serde(default)]
+    pub seed: u32,
+    /// How it moves in the wind.
+    #[serde(default)]
+    pub wind: PlantWind,
+}
+
+fn default_plant_color() -> [f32; 3] {
+    [0.1, 0.3, 0.05]
+}
+fn default_max_slope() -> f32 {
+    35.0
+}
+fn default_altitude() -> [f32; 2] {
+    [-500.0, 9000.0]
+}
+fn default_clump() -> f32 {
+    8.0
+}
+fn default_cover() -> f32 {
+    1.0
+}
+
+/// A plant's wind parameters: God of War's (movement scale, bend, stretch, stiffness, sway
+/// spring and damping) and Crysis' amplitudes of main and detail bending.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlantWind {
+    /// How much of the wind the plant feels, 0..=4.
+    pub movement_scale: f32,
+    /// Main bending: how far the whole plant leans per m/s of wind, in plant heights, 0..=1.
+    pub bend: f32,
+    /// How much of its length the bent plant keeps, 0..=1 (1: bends on an arc, no stretch).
+    pub stretch: f32,
+    /// Resistance to bending, 0..=1: a stiff plant leans less and sways faster.
+    pub stiffness: f32,
+    /// The sway spring's natural frequency, Hz (0.05..=10).
+    pub sway_spring_hz: f32,
+    /// The sway's damping ratio (0.01..=2: below 1 it overshoots).
+    pub sway_damping: f32,
+    /// Scale of the main bending, 0..=4.
+    pub main_amplitude: f32,
+    /// Scale of the detail bending (leaves and edges), 0..=4.
+    pub detail_amplitude: f32,
+}
+
+impl Default for PlantWind {
+    fn default() -> Self {
+        Self {
+            movement_scale: 1.0,
+            bend: 0.03,
+            stretch: 1.0,
+            stiffness: 0.5,
+            sway_spring_hz: 0.8,
+            sway_damping: 0.35,
+            main_amplitude: 1.0,
+            detail_amplitude: 1.0,
+        }
+    }
 }
 
 /// The `[source]` table: the DEM a world was baked from.
@@ -226,6 +340,8 @@ pub struct FeatureSwitches {
     pub far_field: bool,
     /// Sun shadows cast by the terrain.
     pub shadows: bool,
+    /// Plants among the grass (the world's `[[plant_types]]`).
+    pub plants: bool,
 }
 
 impl Default for FeatureSwitches {
@@ -247,6 +363,7 @@ impl From<Features> for FeatureSwitches {
             ground_darkening: f.has(Feature::GroundDarkening),
             far_field: f.has(Feature::FarField),
             shadows: f.has(Feature::Shadows),
+            plants: f.has(Feature::Plants),
         }
     }
 }
@@ -264,6 +381,7 @@ impl From<&FeatureSwitches> for Features {
             (Feature::GroundDarkening, s.ground_darkening),
             (Feature::FarField, s.far_field),
             (Feature::Shadows, s.shadows),
+            (Feature::Plants, s.plants),
         ];
         on.into_iter()
             .filter(|(_, on)| !on)

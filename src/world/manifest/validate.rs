@@ -157,6 +157,7 @@ impl Manifest {
             }
         }
 
+        self.validate_plants(&v)?;
         v.validate_ambient("wind", &self.wind)?;
         let s = &self.sky;
         v.angle("sky.sun_azimuth_deg", s.sun_azimuth_deg)?;
@@ -244,6 +245,106 @@ impl Manifest {
         }
         if let Some(c) = &self.derive {
             self.validate_derive(&v, c)?;
+        }
+        Ok(())
+    }
+
+    fn validate_plants(&self, v: &Validator) -> Result<(), WorldError> {
+        if self.plant_types.len() > MAX_PLANT_TYPES {
+            return Err(v.out_of_range(
+                "plant_types",
+                format!("{} types", self.plant_types.len()),
+                &format!("at most {MAX_PLANT_TYPES} types"),
+            ));
+        }
+        let mut names = HashSet::new();
+        let mut per_grass = vec![0.0f64; self.grass_types.len()];
+        for (index, p) in self.plant_types.iter().enumerate() {
+            let field = |f: &str| format!("plant_types[{index}].{f}");
+            if !names.insert(p.name.as_str()) {
+                return Err(v.out_of_range(
+                    &field("name"),
+                    &p.name,
+                    "a name no other plant type has",
+                ));
+            }
+            let lower = p.mesh.to_ascii_lowercase();
+            if !crate::plants::RECIPES.contains(&p.mesh.as_str())
+                && !(lower.ends_with(".gltf") || lower.ends_with(".glb"))
+            {
+                return Err(v.out_of_range(
+                    &field("mesh"),
+                    &p.mesh,
+                    &format!(
+                        "one of {} or a .gltf or .glb file",
+                        crate::plants::RECIPES.join(", ")
+                    ),
+                ));
+            }
+            v.all_within(&field("color"), &p.color, [0.0, 1.0], "")?;
+            let [lo, hi] = p.size_m;
+            v.all_finite(&field("size_m"), &p.size_m)?;
+            if !(lo > 0.0 && lo <= hi && f64::from(hi) <= MAX_PLANT_SIZE_M) {
+                return Err(v.out_of_range(
+                    &field("size_m"),
+                    format!("[{lo}, {hi}]"),
+                    &format!("0 < min <= max <= {MAX_PLANT_SIZE_M} m"),
+                ));
+            }
+            for (grass, &d) in &p.density {
+                let at = format!("{}.{grass}", field("density"));
+                let Some(g) = self.grass_types.iter().position(|t| &t.name == grass) else {
+                    let known: Vec<&str> =
+                        self.grass_types.iter().map(|t| t.name.as_str()).collect();
+                    return Err(v.out_of_range(
+                        &at,
+                        grass,
+                        &format!("a grass type's name ({})", known.join(", ")),
+                    ));
+                };
+                v.within(&at, d, [0.0, MAX_PLANT_DENSITY], " plants per m2")?;
+                per_grass[g] += f64::from(d);
+            }
+            v.within(
+                &field("max_slope_deg"),
+                p.max_slope_deg,
+                [0.0, 90.0],
+                " degrees",
+            )?;
+            v.all_finite(&field("altitude_m"), &p.altitude_m)?;
+            if p.altitude_m[0] > p.altitude_m[1] {
+                return Err(v.out_of_range(
+                    &field("altitude_m"),
+                    format!("{:?}", p.altitude_m),
+                    "min <= max",
+                ));
+            }
+            v.within(&field("clump_m"), p.clump_m, [1.0, 1000.0], " m")?;
+            v.finite(&field("clump_cover"), p.clump_cover)?;
+            if !(p.clump_cover > 0.0 && p.clump_cover <= 1.0) {
+                return Err(v.out_of_range(&field("clump_cover"), p.clump_cover, "in (0, 1]"));
+            }
+            let w = &p.wind;
+            let wf = |f: &str| format!("plant_types[{index}].wind.{f}");
+            v.within(&wf("movement_scale"), w.movement_scale, [0.0, 4.0], "")?;
+            v.within(&wf("bend"), w.bend, [0.0, 1.0], "")?;
+            v.within(&wf("stretch"), w.stretch, [0.0, 1.0], "")?;
+            v.within(&wf("stiffness"), w.stiffness, [0.0, 1.0], "")?;
+            v.within(&wf("sway_spring_hz"), w.sway_spring_hz, [0.05, 10.0], " Hz")?;
+            v.within(&wf("sway_damping"), w.sway_damping, [0.01, 2.0], "")?;
+            v.within(&wf("main_amplitude"), w.main_amplitude, [0.0, 4.0], "")?;
+            v.within(&wf("detail_amplitude"), w.detail_amplitude, [0.0, 4.0], "")?;
+        }
+        if let Some((g, &total)) = per_grass
+            .iter()
+            .enumerate()
+            .find(|(_, d)| **d > MAX_PLANT_DENSITY)
+        {
+            return Err(v.out_of_range(
+                &format!("plant_types[*].density.{}", self.grass_types[g].name),
+                format!("{total} plants per m2 in all"),
+                &format!("at most {MAX_PLANT_DENSITY} plants per m2 of all types together"),
+            ));
         }
         Ok(())
     }

@@ -1,0 +1,260 @@
+// Plants from the instance pool: one indexed indirect draw per (type, level of detail), the
+// vertices read from the plant meshes' storage buffer by index, the instance from the region's
+// slice of the pool (src/plants/place_cpu.rs has the records).
+//
+// Bending (Crysis, GPU Gems 3 ch. 16; God of War's parameters): detail bending first, in the
+// plant's own space: leaves and branches swing along the vertical by their vertex colour's b
+// (freedom) and their edges flutter along the normal by its r, from smoothed triangle waves at
+// four frequencies phased by the leaf (g) and the plant; then main bending leans the whole
+// plant along the wind (the wind field at its root, its trail's push and a sway at the type's
+// spring frequency, larger the less it is damped), the offset growing with height as Crysis'
+// bend factor, and the bent position pulled back to its length (the type's stretch). CPU mirror
+// of the bending: src/plants/bend_cpu.rs (a test runs `probe_bend` below against it).
+//
+// Shading: two-sided (the back face's normal flipped), sun and sky light, light through thin
+// leaves and petals (albedo alpha), ambient occlusion from the vertex colour's a, world-space
+// colour variation per plant, alpha-tested cards, and a dither that cross-fades two levels of
+// detail.
+
+#include "shared/hash.wgsl"
+#include "shared/features.wgsl"
+#include "shared/output.wgsl"
+#include "shared/wind_lookup.wgsl"
+#include "shared/waves.wgsl"
+
+// Multisampled targets: the cards' alpha becomes coverage instead of a hard test.
+override COVERAGE: bool = false;
+
+struct PlantWind {
+    // x: movement scale, y: bend (plant heights per m/s), z: stretch, w: main amplitude
+    main: vec4<f32>,
+    // x: detail amplitude, y: stiffness, z: sway frequency (Hz), w: damping ratio
+    detail: vec4<f32>,
+}
+
+struct PlantFrame {
+    view_proj: mat4x4<f32>,
+    // x: fog distance; y: time (s); zw: the camera's world xy modulo 4096 m
+    misc: vec4<f32>,
+    sun_dir: vec4<f32>,
+    sun_color: vec4<f32>,
+    sky_color: vec4<f32>,
+    horizon_color: vec4<f32>,
+    // x: feature bits
+    flags: vec4<u32>,
+    wind: array<PlantWind, 8>,
+    // Per type: x the texture layer of its meshes, y of its card
+    layers: array<vec4<u32>, 8>,
+}
+
+struct PlantVertex {
+    position: vec3<f32>,
+    normal: vec3<f32>,
+    // r: edge flutter, g: leaf phase, b: leaf/branch freedom, a: ambient occlusion
+    wind: vec4<f32>,
+    // rgb: albedo, a: thinness
+    albedo: vec4<f32>,
+    uv: vec2<f32>,
+}
+
+// Vertex `i` of the meshes: 16 packed floats (WGSL would pad a struct of vec3s).
+fn load_vertex(i: u32) -> PlantVertex {
+    let b = i * 16u;
+    var v: PlantVertex;
+    v.position = vec3<f32>(vertices[b], vertices[b + 1u], vertices[b + 2u]);
+    v.normal = vec3<f32>(vertices[b + 3u], vertices[b + 4u], vertices[b + 5u]);
+    v.wind = vec4<f32>(vertices[b + 6u], vertices[b + 7u], vertices[b + 8u], vertices[b + 9u]);
+    v.albedo = vec4<f32>(vertices[b + 10u], vertices[b + 11u], vertices[b + 12u], vertices[b + 13u]);
+    v.uv = vec2<f32>(vertices[b + 14u], vertices[b + 15u]);
+    return v;
+}
+
+struct PlantInstance {
+    pos: vec3<f32>,
+    yaw: f32,
+    scale: f32,
+    kind: u32,
+    hash: u32,
+    fade: f32,
+}
+
+@group(0) @binding(0) var<uniform> frame: PlantFrame;
+@group(0) @binding(1) var<storage, read> vertices: array<f32>;
+@group(0) @binding(2) var<uniform> wind_lookup: WindLookup;
+@group(0) @binding(3) var<storage, read> wind_cells: array<vec4<f32>>;
+@group(0) @binding(4) var plant_textures: texture_2d_array<f32>;
+@group(0) @binding(5) var plant_sampler: sampler;
+// A (type, level) region of the pool, chosen by a dynamic offset.
+@group(1) @binding(0) var<storage, read> instances: array<PlantInstance>;
+
+// Lean of a plant on the axis of a fresh trail, plant heights.
+const TRAIL_LEAN: f32 = 0.9;
+
+
+struct Bent {
+    position: vec3<f32>,
+    normal: vec3<f32>,
+}
+
+// Vertex `v` of an instance at `root` (relative to the camera), turned by `yaw`, of height
+// `scale`, phase `phase` (0..1), in the wind `w` (wind_at at its root: xy m/s, zw the trail's
+// push), at `time`, with the type's wind `pw` and the frame's feature bits: its position
+// relative to the camera and its normal. As bend_vertex in src/plants/bend_cpu.rs.
+fn bend(v: PlantVertex, root: vec3<f32>, yaw: f32, scale: f32, phase: f32, w: vec4<f32>, time: f32, pw: PlantWind, flags: u32) -> Bent {
+    let c = cos(yaw);
+    let s = sin(yaw);
+    var p = vec3<f32>(c * v.position.x - s * v.position.y, s * v.position.x + c * v.position.y, v.position.z) * scale;
+    let n = vec3<f32>(c * v.normal.x - s * v.normal.y, s * v.normal.x + c * v.normal.y, v.normal.z);
+    let wind = w.xy * pw.main.x;
+    let speed = length(wind);
+    let give = 1.0 - 0.6 * pw.detail.y;
+    if has_feature(flags, DETAIL_BENDING) {
+        // Crysis' detail bending: waves at four frequencies, phased per leaf and per plant.
+        let branch_phase = v.wind.g + phase;
+        let vtx_phase = dot(v.position, vec3<f32>(branch_phase));
+        let waves_in = vec2<f32>(time + vtx_phase, time + branch_phase);
+        let freq = vec4<f32>(1.975, 0.793, 0.375, 0.193) * (1.0 + pw.detail.y);
+        let waves = vec4<f32>(
+            smooth_triangle(waves_in.x * freq.x),
+            smooth_triangle(waves_in.x * freq.y),
+            smooth_triangle(waves_in.y * freq.z),
+            smooth_triangle(waves_in.y * freq.w),
+        ) * 2.0 - 1.0;
+        let sum = waves.xz + waves.yw;
+        let amount = min(speed / 5.0, 1.5) * pw.detail.x * give * scale;
+        p += vec3<f32>(n.xy * (v.wind.r * 0.04 * sum.x), v.wind.b * 0.05 * sum.y) * amount;
+    }
+    // Main bending: the lean along the wind, a sway about it at the spring's frequency (a
+    // lightly damped plant swings further), the trail's push.
+    var lean = wind * (pw.main.y * give * pw.main.w);
+    let sway = (smooth_triangle(time * pw.detail.z + phase) * 2.0 - 1.0) * 0.35 / (0.5 + pw.detail.w);
+    lean *= 1.0 + sway * min(speed / 6.0, 1.0);
+    if has_feature(flags, INTERACTION) {
+        lean += w.zw * TRAIL_LEAN;
+    }
+    let len = length(p);
+    var bf = p.z / max(scale, 1e-4) + 1.0;
+    bf = bf * bf;
+    bf = bf * bf - bf;
+    var q = p;
+    q.x += lean.x * bf * scale;
+    q.y += lean.y * bf * scale;
+    let kept = normalize(q + vec3<f32>(0.0, 0.0, 1e-6)) * len;
+    q = mix(q, kept, pw.main.z);
+    // The normal follows the lean roughly: tilted by the bend at the top.
+    let tilt = vec3<f32>(lean * bf, 0.0);
+    let n2 = normalize(n - tilt * n.z);
+    var out: Bent;
+    out.position = root + q;
+    out.normal = n2;
+    return out;
+}
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) rel_pos: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) albedo: vec4<f32>,
+    @location(3) uv: vec2<f32>,
+    // x: ambient occlusion, y: the cross-fade's fade
+    @location(4) misc: vec2<f32>,
+    @location(5) @interpolate(flat) layer: u32,
+}
+
+@vertex
+fn vs_plant(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VertexOut {
+    let inst = instances[ii];
+    let v = load_vertex(vi);
+    let t = inst.kind & 255u;
+    let level = inst.kind >> 8u;
+    let phase = rand01(inst.hash);
+    let w = wind_at(inst.pos.xy);
+    let b = bend(v, inst.pos, inst.yaw, inst.scale, phase, w, frame.misc.y, frame.wind[t], frame.flags.x);
+    var albedo = v.albedo;
+    if has_feature(frame.flags.x, COLOR_VARIATION) {
+        // Per plant, from the noise of its root's world cell and its hash.
+        let world = frame.misc.zw + inst.pos.xy;
+        let cell = vec2<i32>(floor(world / 5.0));
+        let nz = rand01(hash2(cell.x, cell.y));
+        let own = rand01(hash_u32(inst.hash ^ 77u));
+        albedo = vec4<f32>(albedo.rgb * (0.82 + 0.22 * nz + 0.14 * own), albedo.a);
+    }
+    var out: VertexOut;
+    out.clip = frame.view_proj * vec4<f32>(b.position, 1.0);
+    out.rel_pos = b.position;
+    out.normal = b.normal;
+    out.albedo = albedo;
+    out.uv = v.uv;
+    out.misc = vec2<f32>(v.wind.a, inst.fade);
+    out.layer = select(frame.layers[t].x, frame.layers[t].y, level == 2u);
+    return out;
+}
+
+// A 4x4 ordered dither in 0..1.
+fn dither(p: vec2<f32>) -> f32 {
+    let x = u32(p.x) & 3u;
+    let y = u32(p.y) & 3u;
+    let bayer = array<u32, 16>(0u, 8u, 2u, 10u, 12u, 4u, 14u, 6u, 3u, 11u, 1u, 9u, 15u, 7u, 13u, 5u);
+    return (f32(bayer[y * 4u + x]) + 0.5) / 16.0;
+}
+
+@fragment
+fn fs_plant(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    let fade = in.misc.y;
+    let d = dither(in.clip.xy);
+    if (fade >= 0.0 && d >= fade) || (fade < 0.0 && d < -fade) {
+        discard;
+    }
+    let tex = textureSample(plant_textures, plant_sampler, in.uv, in.layer);
+    var alpha = tex.a;
+    if !COVERAGE && alpha < 0.5 {
+        discard;
+    }
+    var n = normalize(in.normal);
+    if !front {
+        n = -n;
+    }
+    let albedo = in.albedo.rgb * tex.rgb;
+    let thin = in.albedo.a;
+    let sun = frame.sun_dir.xyz;
+    let to_eye = -normalize(in.rel_pos);
+    var light = frame.sun_color.rgb * max(dot(n, sun), 0.0);
+    if has_feature(frame.flags.x, TRANSLUCENCY) {
+        // Light through the leaf from behind, stronger looking toward the sun; thin parts more.
+        let back = max(dot(-n, sun), 0.0);
+        let toward_sun = pow(max(dot(-to_eye, sun), 0.0), 4.0);
+        light += frame.sun_color.rgb * back * thin * (0.3 + 0.7 * toward_sun) * vec3<f32>(1.0, 0.95, 0.6);
+    }
+    var ao = 1.0;
+    if has_feature(frame.flags.x, AMBIENT_OCCLUSION) {
+        ao = in.misc.x;
+    }
+    let ambient = frame.sky_color.rgb * (0.35 + 0.25 * n.z) * ao;
+    let lit = albedo * (light * mix(0.6, 1.0, ao) + ambient);
+    let dist = length(in.rel_pos);
+    let x = dist / frame.misc.x;
+    let fog = 1.0 - exp(-3.0 * x * x);
+    var color = output_color(mix(lit, frame.horizon_color.rgb, fog));
+    if COVERAGE {
+        color.a = alpha;
+    }
+    return color;
+}
+
+// The bending of test vertices, for the comparison with the CPU mirror: probe i bends vertex i
+// of `vertices` as instance i in the wind i.
+@group(1) @binding(1) var<storage, read> probe_instances: array<PlantInstance>;
+@group(1) @binding(2) var<storage, read> probe_winds: array<vec4<f32>>;
+@group(1) @binding(3) var<storage, read_write> probe_out: array<vec4<f32>>;
+
+@compute @workgroup_size(64, 1, 1)
+fn probe_bend(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= arrayLength(&probe_instances) {
+        return;
+    }
+    let inst = probe_instances[gid.x];
+    let t = inst.kind & 255u;
+    let b = bend(load_vertex(gid.x), inst.pos, inst.yaw, inst.scale, rand01(inst.hash), probe_winds[gid.x], frame.misc.y, frame.wind[t], frame.flags.x);
+    probe_out[gid.x * 2u] = vec4<f32>(b.position, 0.0);
+    probe_out[gid.x * 2u + 1u] = vec4<f32>(b.normal, 0.0);
+}

@@ -1,0 +1,296 @@
+// Plant placement and culling, one invocation per cell of a grass tile's placement grid (cells
+// of PLANT_CELL_M; workgroup z is the tile's job). Each cell holds at most one plant: a hash of
+// its world cell picks a type by the types' densities on the grass type and density under it
+// (scaled by the type's clumps), then the slope and altitude limits, a dithered thinning toward
+// the view distance, the frustum and the terrain's Hi-Z cull it. A survivor goes to its type's
+// level of detail by distance (a dithered cross-fade: within a band around each switch it goes
+// to both levels, each drawing a complementary share of its pixels) and is appended to that
+// (type, level)'s region of the instance pool. A second entry point turns the counters into
+// indexed indirect draws, clamped to the region's capacity, and counts the overflow.
+// CPU mirror: src/plants/place_cpu.rs.
+
+#include "shared/hash.wgsl"
+#include "shared/tile_texels.wgsl"
+#include "shared/hiz_cull.wgsl"
+
+struct PlantType {
+    // x, y: height range (m); z: cosine of the steepest slope; w: clump cell (m)
+    size: vec4<f32>,
+    // x, y: altitude range (m); z: the share of the ground its clumps cover; w: bounding
+    // radius over height (for the culling sphere)
+    limits: vec4<f32>,
+    // Plants per square metre on each of 16 grass types.
+    density: array<vec4<f32>, 4>,
+}
+
+struct Params {
+    view_proj: mat4x4<f32>,
+    planes: array<vec4<f32>, 6>,
+    // x: camera altitude, y: near plane, z, w: Hi-Z size in texels
+    camera: vec4<f32>,
+    // x: cells along a tile edge, y: tile data cells, z: border, w: seed
+    grid: vec4<u32>,
+    // x: cell edge (m), y: tile edge (m), z: start of the thinning toward the view distance
+    // (m), w: the view distance (m)
+    dims: vec4<f32>,
+    // x: switch from level 0 to 1 (m), y: from level 1 to the card (m), z: width of each
+    // cross-fade band (m)
+    lod: vec4<f32>,
+    // x: Hi-Z mips, y: instances a (type, level) region holds, z: plant types, w: grass types
+    limits: vec4<u32>,
+    hiz_levels: array<vec4<u32>, 16>,
+    types: array<PlantType, 8>,
+    // Per (type, level), type * 3 + level: index count, first index, base vertex.
+    meshes: array<vec4<u32>, 24>,
+}
+
+struct TileJob {
+    origin: vec2<f32>,
+    cell: f32,
+    layer: u32,
+    tile_x: u32,
+    tile_y: u32,
+    lod: u32,
+    slot: u32,
+}
+
+struct PlantInstance {
+    // The root, relative to the camera (m).
+    pos: vec3<f32>,
+    // Turn about the vertical (radians).
+    yaw: f32,
+    // Height (m): the unit mesh's scale.
+    scale: f32,
+    // Type, and level << 8.
+    kind: u32,
+    hash: u32,
+    // The share of the plant's pixels drawn, for the cross-fade: f > 0 keeps pixels whose
+    // dither is below f, f < 0 those at or above -f.
+    fade: f32,
+}
+
+struct DrawIndexedArgs {
+    index_count: u32,
+    instance_count: u32,
+    first_index: u32,
+    base_vertex: i32,
+    first_instance: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> jobs: array<TileJob>;
+@group(0) @binding(2) var heights: texture_2d_array<f32>;
+@group(0) @binding(3) var grass: texture_2d_array<u32>;
+@group(0) @binding(4) var<storage, read> hiz: array<f32>;
+@group(0) @binding(5) var<storage, read_write> instances: array<PlantInstance>;
+// Per (type, level): instances wanted (may exceed the capacity).
+@group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 24>;
+// The counters of `counter` in place_cpu.rs.
+@group(0) @binding(7) var<storage, read_write> stats: array<atomic<u32>, 8>;
+@group(0) @binding(8) var<storage, read_write> args: array<DrawIndexedArgs, 24>;
+
+const CONSIDERED: u32 = 0u;
+const EMPTY: u32 = 1u;
+const RULED_OUT: u32 = 2u;
+const DISTANCE: u32 = 3u;
+const FRUSTUM: u32 = 4u;
+const OCCLUSION: u32 = 5u;
+const OVERFLOW: u32 = 6u;
+const DRAWN: u32 = 7u;
+
+// Salts of the placement's hashes (as in place_cpu.rs).
+const SALT_CELL: u32 = 0x9e1a7u;
+const SALT_CLUMP: u32 = 0x5c1f3u;
+
+var<workgroup> local_stats: array<atomic<u32>, 8>;
+
+fn tally(c: u32) {
+    atomicAdd(&local_stats[c], 1u);
+}
+
+
+
+// Value noise in [0, 1) on a lattice of clump cells (integer world cells `c`, fraction `f`),
+// salted per type.
+fn clump_noise(c: vec2<i32>, f: vec2<f32>, salt: u32) -> f32 {
+    let u = f * f * (3.0 - 2.0 * f);
+    let a = rand01(hash3(u32(c.x), u32(c.y), salt));
+    let b = rand01(hash3(u32(c.x + 1), u32(c.y), salt));
+    let cc = rand01(hash3(u32(c.x), u32(c.y + 1), salt));
+    let d = rand01(hash3(u32(c.x + 1), u32(c.y + 1), salt));
+    let ab = a + (b - a) * u.x;
+    let cd = cc + (d - cc) * u.x;
+    return ab + (cd - ab) * u.y;
+}
+
+// How much denser than its mean a type grows at world cell `cell` (its clumps): 1 everywhere
+// when it covers all the ground, else 0 outside its patches and 1 / cover inside, with a soft
+// edge.
+fn clump_factor(t: u32, cell: vec2<u32>) -> f32 {
+    let cover = params.types[t].limits.z;
+    if cover >= 1.0 {
+        return 1.0;
+    }
+    let per = params.types[t].size.w / params.dims.x;
+    let p = (vec2<f32>(cell) + 0.5) / per;
+    let fl = floor(p);
+    let n = clump_noise(vec2<i32>(fl), p - fl, params.grid.w ^ SALT_CLUMP ^ (t * 0x3779u));
+    let edge = 1.0 - cover;
+    return smoothstep(edge - 0.08, edge + 0.08, n) / cover;
+}
+
+fn emit_plant(t: u32, level: u32, inst: PlantInstance) {
+    let region = t * 3u + level;
+    let index = atomicAdd(&counters[region], 1u);
+    if index < params.limits.y {
+        var i = inst;
+        i.kind = t | (level << 8u);
+        instances[region * params.limits.y + index] = i;
+    }
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn place(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(workgroup_id) wid: vec3<u32>,
+    @builtin(local_invocation_index) lid: u32,
+) {
+    if lid < 8u {
+        atomicStore(&local_stats[lid], 0u);
+    }
+    workgroupBarrier();
+    let n = params.grid.x;
+    if gid.x < n && gid.y < n {
+        place_cell(jobs[wid.z], gid.x, gid.y);
+    }
+    workgroupBarrier();
+    if lid < 8u {
+        let v = atomicLoad(&local_stats[lid]);
+        if v > 0u {
+            atomicAdd(&stats[lid], v);
+        }
+    }
+}
+
+fn place_cell(job: TileJob, gx: u32, gy: u32) {
+    let n = params.grid.x;
+    let cell_m = params.dims.x;
+    let seed = params.grid.w;
+    let world_cell = vec2<u32>(job.tile_x * n + gx, job.tile_y * n + gy);
+    let h0 = hash3(world_cell.x, world_cell.y, seed ^ SALT_CELL);
+    tally(CONSIDERED);
+    let local = (vec2<f32>(f32(gx), f32(gy)) + 0.5 + 0.9 * (vec2<f32>(rand01(hash_u32(h0 ^ 1u)), rand01(hash_u32(h0 ^ 2u))) - 0.5)) * cell_m;
+
+    // Bilinear height and density, nearest grass type, normal by central differences (as the
+    // grass's generation).
+    let border = f32(params.grid.z);
+    let tp = vec2<f32>(border, border) + local / job.cell;
+    let f0 = floor(tp);
+    let ix = i32(f0.x);
+    let iy = i32(f0.y);
+    let fx = tp.x - f0.x;
+    let fy = tp.y - f0.y;
+    let layer = job.layer;
+    let ha = h_at(ix, iy, layer) + (h_at(ix + 1, iy, layer) - h_at(ix, iy, layer)) * fx;
+    let hb = h_at(ix, iy + 1, layer) + (h_at(ix + 1, iy + 1, layer) - h_at(ix, iy + 1, layer)) * fx;
+    let ground = ha + (hb - ha) * fy;
+    let da = d_at(ix, iy, layer) + (d_at(ix + 1, iy, layer) - d_at(ix, iy, layer)) * fx;
+    let db = d_at(ix, iy + 1, layer) + (d_at(ix + 1, iy + 1, layer) - d_at(ix, iy + 1, layer)) * fx;
+    let density = da + (db - da) * fy;
+    let nx = i32(floor(tp.x + 0.5));
+    let ny = i32(floor(tp.y + 0.5));
+    let kind = min(textureLoad(grass, tile_texel(nx, ny, layer), layer, 0).r, 15u);
+
+    // One plant at most: the types' chances add up along [0, 1).
+    let u = rand01(hash_u32(h0 ^ 3u));
+    var acc = 0.0;
+    var chosen = 8u;
+    let area = cell_m * cell_m;
+    for (var t = 0u; t < params.limits.z; t++) {
+        let d = params.types[t].density[kind / 4u][kind % 4u];
+        if d <= 0.0 {
+            continue;
+        }
+        acc += d * density * area * clump_factor(t, world_cell);
+        if u < acc {
+            chosen = t;
+            break;
+        }
+    }
+    if chosen == 8u {
+        tally(EMPTY);
+        return;
+    }
+    let ty = params.types[chosen];
+    let slope_x = h_at(nx - 1, ny, layer) - h_at(nx + 1, ny, layer);
+    let slope_y = h_at(nx, ny - 1, layer) - h_at(nx, ny + 1, layer);
+    let normal = normalize(vec3<f32>(slope_x, slope_y, 2.0 * job.cell));
+    if normal.z < ty.size.z || ground < ty.limits.x || ground > ty.limits.y {
+        tally(RULED_OUT);
+        return;
+    }
+    let scale = ty.size.x + (ty.size.y - ty.size.x) * rand01(hash_u32(h0 ^ 4u));
+    let pos = vec3<f32>(job.origin + local, ground - params.camera.x);
+    let dist = length(pos);
+    let far = clamp((params.dims.w - dist) / max(params.dims.w - params.dims.z, 1e-3), 0.0, 1.0);
+    if rand01(hash_u32(h0 ^ 5u)) >= far {
+        tally(DISTANCE);
+        return;
+    }
+    let radius = scale * max(ty.limits.w, 0.5);
+    let center = pos + vec3<f32>(0.0, 0.0, 0.5 * scale);
+    for (var i = 0; i < 5; i++) {
+        let plane = params.planes[i];
+        if dot(plane.xyz, center) + plane.w < -radius {
+            tally(FRUSTUM);
+            return;
+        }
+    }
+    if occluded(center, radius) {
+        tally(OCCLUSION);
+        return;
+    }
+    var inst: PlantInstance;
+    inst.pos = pos;
+    inst.yaw = rand01(hash_u32(h0 ^ 6u)) * 6.2831855;
+    inst.scale = scale;
+    inst.hash = h0;
+    inst.fade = 1.0;
+    // The level by distance, cross-faded over a band centred on each switch.
+    let half_band = 0.5 * params.lod.z;
+    var level = 2u;
+    var t_band = -1.0;
+    if dist < params.lod.x + half_band {
+        level = 0u;
+        t_band = (dist - (params.lod.x - half_band)) / max(params.lod.z, 1e-3);
+    } else if dist < params.lod.y + half_band {
+        level = 1u;
+        t_band = (dist - (params.lod.y - half_band)) / max(params.lod.z, 1e-3);
+    }
+    if level < 2u && t_band > 0.0 {
+        // Within the band: the nearer level keeps the pixels whose dither is below 1 - t,
+        // the farther one the rest.
+        inst.fade = 1.0 - t_band;
+        emit_plant(chosen, level, inst);
+        inst.fade = -(1.0 - t_band);
+        emit_plant(chosen, level + 1u, inst);
+    } else {
+        emit_plant(chosen, level, inst);
+    }
+}
+
+// One invocation per (type, level): the indexed indirect draw from its counter, clamped to the
+// region's capacity; overflow and drawn instances go to the statistics.
+@compute @workgroup_size(24, 1, 1)
+fn finalize_draws(@builtin(local_invocation_index) region: u32) {
+    let wanted = atomicLoad(&counters[region]);
+    let drawn = min(wanted, params.limits.y);
+    let mesh = params.meshes[region];
+    var count = 0u;
+    if region / 3u < params.limits.z {
+        count = drawn;
+        atomicAdd(&stats[OVERFLOW], wanted - drawn);
+        atomicAdd(&stats[DRAWN], drawn);
+    }
+    args[region] = DrawIndexedArgs(mesh.x, count, mesh.y, i32(mesh.z), 0u);
+}

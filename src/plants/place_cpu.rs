@@ -1,0 +1,332 @@
+//! CPU mirror of the plant placement (`shaders/plants_place.wgsl`), and the records it shares
+//! with the GPU: the frame's constants, the plant types' constants and the instance.
+//!
+//! Each grass tile in view is split into cells of [`crate::plants::PLANT_CELL_M`]; a cell holds
+//! at most one plant. A hash of the cell's world address jitters its spot and draws a number
+//! that picks a type by the types' densities on the grass under it, so that the choice is the
+//! same whichever tile or frame asks (no seams, no flicker). Slope, altitude, the thinning toward
+//! the view distance, the frustum and the terrain's Hi-Z then cull it; the survivor goes to a
+//! level of detail by distance, cross-faded by a dither over a band around each switch.
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Mat4, Vec2, Vec3, Vec4};
+
+use crate::grass::{HiZ, TileJob};
+use crate::hash::{hash_u32, hash3, rand01};
+use crate::world::TileData;
+
+/// Levels of detail of a plant: the full mesh, the reduced mesh, the crossed cards.
+pub const LEVELS: usize = 3;
+/// Most plant types the stage draws ([`crate::world::MAX_PLANT_TYPES`]).
+pub const TYPES: usize = 8;
+/// Regions of the instance pool: one per (type, level), `type * LEVELS + level`.
+pub const REGIONS: usize = TYPES * LEVELS;
+
+/// Counter indices of the placement's statistics.
+pub mod counter {
+    /// Cells looked at.
+    pub const CONSIDERED: usize = 0;
+    /// Cells the draw left without a plant.
+    pub const EMPTY: usize = 1;
+    /// Plants the slope or altitude limits ruled out.
+    pub const RULED_OUT: usize = 2;
+    /// Plants thinned out toward the view distance.
+    pub const DISTANCE: usize = 3;
+    /// Plants outside the frustum.
+    pub const FRUSTUM: usize = 4;
+    /// Plants behind the terrain (Hi-Z).
+    pub const OCCLUSION: usize = 5;
+    /// Instances that did not fit their region.
+    pub const OVERFLOW: usize = 6;
+    /// Instances drawn.
+    pub const DRAWN: usize = 7;
+    /// Counters.
+    pub const COUNT: usize = 8;
+}
+
+const SALT_CELL: u32 = 0x9e1a7;
+const SALT_CLUMP: u32 = 0x5c1f3;
+
+/// A plant type's constants; mirrors `PlantType` in the shader.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PlantTypeGpu {
+    /// x, y: height range (m); z: cosine of the steepest slope; w: clump cell (m).
+    pub size: [f32; 4],
+    /// x, y: altitude range (m); z: the share of the ground its clumps cover; w: bounding
+    /// radius over height.
+    pub limits: [f32; 4],
+    /// Plants per square metre on each of 16 grass types.
+    pub density: [[f32; 4]; 4],
+}
+const _: () = assert!(std::mem::size_of::<PlantTypeGpu>() == 96);
+
+/// The placement's frame constants; mirrors `Params` in the shader.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct PlaceParams {
+    /// Camera-relative view-projection.
+    pub view_proj: [[f32; 4]; 4],
+    /// Frustum planes (left, right, bottom, top, near; the sixth unused), inward normals.
+    pub planes: [[f32; 4]; 6],
+    /// x: camera altitude (m), y: near plane (m), z, w: Hi-Z width and height (texels).
+    pub camera: [f32; 4],
+    /// x: cells along a tile edge, y: tile data cells, z: border samples, w: seed.
+    pub grid: [u32; 4],
+    /// x: cell edge (m), y: tile edge (m), z: start of the thinning toward the view distance
+    /// (m), w: the view distance (m).
+    pub dims: [f32; 4],
+    /// x: switch from level 0 to 1 (m), y: from level 1 to the cards (m), z: width of each
+    /// cross-fade band (m); w unused.
+    pub lod: [f32; 4],
+    /// x: Hi-Z mips, y: instances a region holds, z: plant types, w: grass types.
+    pub limits: [u32; 4],
+    /// Hi-Z levels: offset (floats), width, height, unused.
+    pub hiz_levels: [[u32; 4]; 16],
+    /// Per plant type.
+    pub types: [PlantTypeGpu; TYPES],
+    /// Per region: index count, first index, base vertex, unused.
+    pub meshes: [[u32; 4]; REGIONS],
+}
+const _: () =
+    assert!(std::mem::size_of::<PlaceParams>() == 64 + 96 + 16 * 5 + 256 + 96 * 8 + 16 * 24);
+
+/// One plant to draw; mirrors `PlantInstance` in the shader.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PlantInstance {
+    /// The root relative to the camera, metres.
+    pub pos: [f32; 3],
+    /// Turn about the vertical, radians.
+    pub yaw: f32,
+    /// Height, metres (the unit mesh's scale).
+    pub scale: f32,
+    /// Type in the low 8 bits, level of detail above.
+    pub kind: u32,
+    /// The cell's hash (phases and variation).
+    pub hash: u32,
+    /// The share of its pixels drawn in a cross-fade: `f > 0` keeps pixels whose dither is
+    /// below `f`, `f < 0` those at or above `-f`; 1 outside a band.
+    pub fade: f32,
+}
+const _: () = assert!(std::mem::size_of::<PlantInstance>() == 32);
+
+impl PlantInstance {
+    /// The plant type.
+    pub fn plant_type(&self) -> usize {
+        (self.kind & 0xff) as usize
+    }
+
+    /// The level of detail (0 the full mesh .. 2 the cards).
+    pub fn level(&self) -> usize {
+        (self.kind >> 8) as usize
+    }
+}
+
+/// What one tile's placement produced: every instance (before any region's capacity) and the
+/// counters (without overflow and drawn, which depend on the whole frame).
+#[derive(Clone, Debug, Default)]
+pub struct TilePlants {
+    /// Instances in cell order.
+    pub instances: Vec<PlantInstance>,
+    /// `counter::*`.
+    pub stats: [u32; counter::COUNT],
+}
+
+/// Value noise in [0, 1) on the lattice of clump cells, salted.
+fn clump_noise(c: [i32; 2], f: Vec2, salt: u32) -> f32 {
+    let u = f * f * (Vec2::splat(3.0) - 2.0 * f);
+    let r = |x: i32, y: i32| rand01(hash3(x as u32, y as u32, salt));
+    let (a, b) = (r(c[0], c[1]), r(c[0] + 1, c[1]));
+    let (cc, d) = (r(c[0], c[1] + 1), r(c[0] + 1, c[1] + 1));
+    let ab = a + (b - a) * u.x;
+    let cd = cc + (d - cc) * u.x;
+    ab + (cd - ab) * u.y
+}
+
+fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
+    let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// How much denser than its mean type `t` grows at world cell `cell`.
+fn clump_factor(params: &PlaceParams, t: usize, cell: [u32; 2]) -> f32 {
+    let ty = &params.types[t];
+    let cover = ty.limits[2];
+    if cover >= 1.0 {
+        return 1.0;
+    }
+    let per = ty.size[3] / params.dims[0];
+    let p = (Vec2::new(cell[0] as f32, cell[1] as f32) + 0.5) / per;
+    let fl = p.floor();
+    let salt = params.grid[3] ^ SALT_CLUMP ^ (t as u32).wrapping_mul(0x3779);
+    let n = clump_noise([fl.x as i32, fl.y as i32], p - fl, salt);
+    let edge = 1.0 - cover;
+    smoothstep(edge - 0.08, edge + 0.08, n) / cover
+}
+
+/// Places and culls the plants of one grass tile, as the shader does.
+pub fn place_tile(params: &PlaceParams, job: &TileJob, tile: &TileData, hiz: &HiZ) -> TilePlants {
+    let mut out = TilePlants::default();
+    let n = params.grid[0];
+    for gy in 0..n {
+        for gx in 0..n {
+            place_cell(params, job, tile, hiz, [gx, gy], &mut out);
+        }
+    }
+    out
+}
+
+fn place_cell(
+    params: &PlaceParams,
+    job: &TileJob,
+    tile: &TileData,
+    hiz: &HiZ,
+    [gx, gy]: [u32; 2],
+    out: &mut TilePlants,
+) {
+    let stats = &mut out.stats;
+    let n = params.grid[0];
+    let cell_m = params.dims[0];
+    let world_cell = [job.tile_x * n + gx, job.tile_y * n + gy];
+    let h0 = hash3(world_cell[0], world_cell[1], params.grid[3] ^ SALT_CELL);
+    stats[counter::CONSIDERED] += 1;
+    let jitter = Vec2::new(rand01(hash_u32(h0 ^ 1)), rand01(hash_u32(h0 ^ 2))) - 0.5;
+    let local = (Vec2::new(gx as f32, gy as f32) + 0.5 + 0.9 * jitter) * cell_m;
+
+    let border = params.grid[2] as f32;
+    let tp = Vec2::splat(border) + local / job.cell;
+    let s = tile.size as i32;
+    let at = |x: i32, y: i32| (y.clamp(0, s - 1) * s + x.clamp(0, s - 1)) as usize;
+    let h = |x: i32, y: i32| tile.heights[at(x, y)];
+    let d = |x: i32, y: i32| f32::from(tile.density[at(x, y)]) / 255.0;
+    let f0 = tp.floor();
+    let (ix, iy) = (f0.x as i32, f0.y as i32);
+    let (fx, fy) = (tp.x - f0.x, tp.y - f0.y);
+    let bilinear = |f: &dyn Fn(i32, i32) -> f32| {
+        let a = f(ix, iy) + (f(ix + 1, iy) - f(ix, iy)) * fx;
+        let b = f(ix, iy + 1) + (f(ix + 1, iy + 1) - f(ix, iy + 1)) * fx;
+        a + (b - a) * fy
+    };
+    let ground = bilinear(&h);
+    let density = bilinear(&d);
+    let (nx, ny) = ((tp.x + 0.5).floor() as i32, (tp.y + 0.5).floor() as i32);
+    let kind = usize::from(tile.grass_type[at(nx, ny)]).min(15);
+
+    let u = rand01(hash_u32(h0 ^ 3));
+    let mut acc = 0.0f32;
+    let mut chosen = None;
+    for t in 0..(params.limits[2] as usize).min(TYPES) {
+        let dens = params.types[t].density[kind / 4][kind % 4];
+        if dens <= 0.0 {
+            continue;
+        }
+        acc += dens * density * cell_m * cell_m * clump_factor(params, t, world_cell);
+        if u < acc {
+            chosen = Some(t);
+            break;
+        }
+    }
+    let Some(t) = chosen else {
+        stats[counter::EMPTY] += 1;
+        return;
+    };
+    let ty = &params.types[t];
+    let normal = Vec3::new(
+        h(nx - 1, ny) - h(nx + 1, ny),
+        h(nx, ny - 1) - h(nx, ny + 1),
+        2.0 * job.cell,
+    )
+    .normalize();
+    if normal.z < ty.size[2] || ground < ty.limits[0] || ground > ty.limits[1] {
+        stats[counter::RULED_OUT] += 1;
+        return;
+    }
+    let scale = ty.size[0] + (ty.size[1] - ty.size[0]) * rand01(hash_u32(h0 ^ 4));
+    let origin = Vec2::from_array(job.origin);
+    let pos = (origin + local).extend(ground - params.camera[0]);
+    let dist = pos.length();
+    let [_, _, thin_start, view] = params.dims;
+    let far = ((view - dist) / (view - thin_start).max(1e-3)).clamp(0.0, 1.0);
+    if rand01(hash_u32(h0 ^ 5)) >= far {
+        stats[counter::DISTANCE] += 1;
+        return;
+    }
+    let radius = scale * ty.limits[3].max(0.5);
+    let center = pos + Vec3::new(0.0, 0.0, 0.5 * scale);
+    let outside = params.planes[..5]
+        .iter()
+        .any(|p| Vec4::from_array(*p).truncate().dot(center) + p[3] < -radius);
+    if outside {
+        stats[counter::FRUSTUM] += 1;
+        return;
+    }
+    let view_proj = Mat4::from_cols_array_2d(&params.view_proj);
+    if crate::grass::generate_cpu::sphere_occluded(
+        &view_proj,
+        params.camera,
+        params.limits[0],
+        hiz,
+        center,
+        radius,
+    ) {
+        stats[counter::OCCLUSION] += 1;
+        return;
+    }
+    let mut inst = PlantInstance {
+        pos: pos.to_array(),
+        yaw: rand01(hash_u32(h0 ^ 6)) * std::f32::consts::TAU,
+        scale,
+        kind: t as u32,
+        hash: h0,
+        fade: 1.0,
+    };
+    let [to_1, to_card, band, _] = params.lod;
+    let half = 0.5 * band;
+    let (level, t_band) = if dist < to_1 + half {
+        (0u32, (dist - (to_1 - half)) / band.max(1e-3))
+    } else if dist < to_card + half {
+        (1, (dist - (to_card - half)) / band.max(1e-3))
+    } else {
+        (2, -1.0)
+    };
+    if level < 2 && t_band > 0.0 {
+        inst.fade = 1.0 - t_band;
+        inst.kind = t as u32 | (level << 8);
+        out.instances.push(inst);
+        inst.fade = -(1.0 - t_band);
+        inst.kind = t as u32 | ((level + 1) << 8);
+        out.instances.push(inst);
+    } else {
+        inst.kind = t as u32 | (level << 8);
+        out.instances.push(inst);
+    }
+}
+
+/// The pixels of a plant drawn in a cross-fade at dither value `dither` (0..1): see
+/// [`PlantInstance::fade`].
+pub fn keeps_pixel(fade: f32, dither: f32) -> bool {
+    if fade >= 0.0 {
+        dither < fade
+    } else {
+        dither >= -fade
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_two_levels_of_a_cross_fade_draw_every_pixel_once() {
+        for k in 1..=16 {
+            let f = k as f32 / 16.0;
+            for j in 0..64 {
+                let dither = (j as f32 + 0.5) / 64.0;
+                let near = keeps_pixel(f, dither);
+                let far = keeps_pixel(-f, dither);
+                assert!(near != far, "fade {f}, dither {dither}");
+            }
+        }
+    }
+}

@@ -1,0 +1,693 @@
+//! The plant stage on the GPU: the bounded instance pool (a region of fixed capacity per plant
+//! type and level of detail), placement and culling per grass tile in compute
+//! (`shaders/plants_place.wgsl`) and one indexed indirect draw per region
+//! (`shaders/plants_draw.wgsl`), culled against the grass's Hi-Z pyramid and bent by the grass's
+//! wind field. The pool's size is fixed when the stage is made, whatever the view: a region that
+//! fills up drops the rest of its plants and counts them as overflow.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Mat4;
+
+use crate::gpu::layout::*;
+use crate::gpu::pass::render_pass;
+use crate::gpu::pipeline::{array_view, buffer as gpu_buffer};
+use crate::gpu::{GpuTimer, Targets};
+use crate::grass::renderer::hiz_levels;
+use crate::grass::{HiZPyramid, TileJob};
+use crate::lod::Frustum;
+use crate::plants::bend_cpu::PlantWindGpu;
+use crate::plants::draw::DrawPass;
+use crate::plants::place::PlacePass;
+use crate::plants::place_cpu::{
+    LEVELS, PlaceParams, PlantInstance, PlantTypeGpu, REGIONS, TYPES, counter,
+};
+use crate::plants::set::{PlantSet, TEXTURE_SIZE, mips};
+use crate::stream::TileAtlas;
+use crate::terrain::sun_direction;
+use crate::world::Manifest;
+
+/// Bytes of an instance.
+const INSTANCE_BYTES: u64 = std::mem::size_of::<PlantInstance>() as u64;
+/// Grass tiles a frame places plants on at most (the job buffer's size).
+pub const MAX_JOBS: u32 = 1024;
+
+/// Settings of the plant stage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlantSettings {
+    /// Instances each (type, level of detail) region holds.
+    pub capacity: u32,
+    /// Distances of the switches from the full mesh to the reduced one and from that to the
+    /// cards, metres.
+    pub lod_m: [f32; 2],
+    /// Width of the dithered cross-fade band around each switch, metres.
+    pub band_m: f32,
+    /// The view distance (the grass's), and the start of the thinning before it, metres.
+    pub view_m: [f32; 2],
+    /// Seed of the placement's hashes.
+    pub seed: u32,
+}
+
+impl Default for PlantSettings {
+    fn default() -> Self {
+        Self {
+            capacity: 16_384,
+            lod_m: [18.0, 45.0],
+            band_m: 4.0,
+            view_m: [150.0, 180.0],
+            seed: 7,
+        }
+    }
+}
+
+/// Plant GPU figures of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PlantStats {
+    /// Placement cells looked at.
+    pub considered: u32,
+    /// Cells without a plant.
+    pub empty: u32,
+    /// Plants ruled out by slope or altitude.
+    pub ruled_out: u32,
+    /// Plants thinned toward the view distance.
+    pub culled_distance: u32,
+    /// Plants outside the frustum.
+    pub culled_frustum: u32,
+    /// Plants behind the terrain.
+    pub culled_occlusion: u32,
+    /// Instances that did not fit their region.
+    pub overflow: u32,
+    /// Instances drawn (a plant in a cross-fade counts twice).
+    pub drawn: u32,
+}
+
+impl PlantStats {
+    /// The figures from the 8 counters of `shaders/plants_place.wgsl`.
+    pub fn from_counts(c: &[u32; counter::COUNT]) -> Self {
+        Self {
+            considered: c[counter::CONSIDERED],
+            empty: c[counter::EMPTY],
+            ruled_out: c[counter::RULED_OUT],
+            culled_distance: c[counter::DISTANCE],
+            culled_frustum: c[counter::FRUSTUM],
+            culled_occlusion: c[counter::OCCLUSION],
+            overflow: c[counter::OVERFLOW],
+            drawn: c[counter::DRAWN],
+        }
+    }
+}
+
+/// The draw's frame constants; mirrors `PlantFrame` in the shader.
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct PlantFrame {
+    view_proj: [[f32; 4]; 4],
+    misc: [f32; 4],
+    sun_dir: [f32; 4],
+    sun_color: [f32; 4],
+    sky_color: [f32; 4],
+    horizon_color: [f32; 4],
+    flags: [u32; 4],
+    wind: [PlantWindGpu; TYPES],
+    layers: [[u32; 4]; TYPES],
+}
+const _: () = assert!(std::mem::size_of::<PlantFrame>() == 64 + 96 + 256 + 128);
+
+/// The wind buffers the plants bend in.
+#[derive(Clone, Copy)]
+pub struct PlantWindBindings<'a> {
+    /// The wind field's `WindLookup` uniform.
+    pub lookup: &'a wgpu::Buffer,
+    /// The wind field's cells.
+    pub cells: &'a wgpu::Buffer,
+}
+
+/// Pipelines, meshes, textures and the instance pool of the plant stage.
+pub struct PlantRenderer {
+    settings: PlantSettings,
+    types: u32,
+    place_pass: PlacePass,
+    draw_pass: DrawPass,
+    params: PlaceParams,
+    params_buffer: wgpu::Buffer,
+    jobs: wgpu::Buffer,
+    instances: wgpu::Buffer,
+    counters: wgpu::Buffer,
+    stats: wgpu::Buffer,
+    args: wgpu::Buffer,
+    frame: PlantFrame,
+    frame_buffer: wgpu::Buffer,
+    /// The meshes (bound in `draw_group`; kept with the stage that owns them).
+    _vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    place_group: wgpu::BindGroup,
+    draw_group: wgpu::BindGroup,
+    region_group: wgpu::BindGroup,
+    targets: Targets,
+    samples: u32,
+    atlas_views: (wgpu::TextureView, wgpu::TextureView),
+}
+
+/// Per level of detail of each type: the meshes packed into one vertex and one index buffer,
+/// with each (type, level)'s index count, first index and base vertex.
+fn pack_meshes(set: &PlantSet) -> (Vec<crate::plants::PlantVertex>, Vec<u32>, [[u32; 4]; REGIONS]) {
+    let mut vertices = Vec::new();
+    let mut indices = Vec::new();
+    let mut table = [[0u32; 4]; REGIONS];
+    for (t, m) in set.models.iter().take(TYPES).enumerate() {
+        for (l, mesh) in m.lods.iter().enumerate() {
+            table[t * LEVELS + l] = [
+                mesh.indices.len() as u32,
+                indices.len() as u32,
+                vertices.len() as u32,
+                0,
+            ];
+            vertices.extend_from_slice(&mesh.vertices);
+            indices.extend_from_slice(&mesh.indices);
+        }
+    }
+    if vertices.is_empty() {
+        vertices.push(Default::default());
+        indices.extend([0, 0, 0]);
+    }
+    (vertices, indices, table)
+}
+
+/// The per-type constants of the placement, from the manifest and the models.
+fn type_table(manifest: &Manifest, set: &PlantSet) -> [PlantTypeGpu; TYPES] {
+    let mut types = [PlantTypeGpu::default(); TYPES];
+    for (i, (t, m)) in manifest
+        .plant_types
+        .iter()
+        .zip(&set.models)
+        .take(TYPES)
+        .enumerate()
+    {
+        let mut density = [[0.0f32; 4]; 4];
+        for (g, grass) in manifest.grass_types.iter().take(16).enumerate() {
+            density[g / 4][g % 4] = t.density.get(&grass.name).copied().unwrap_or(0.0);
+        }
+        types[i] = PlantTypeGpu {
+            size: [
+                t.size_m[0],
+                t.size_m[1],
+                t.max_slope_deg.to_radians().cos(),
+                t.clump_m,
+            ],
+            limits: [t.altitude_m[0], t.altitude_m[1], t.clump_cover, m.radius_ratio],
+            density,
+        };
+    }
+    types
+}
+
+impl PlantRenderer {
+    /// The plant stage for `manifest`'s plant types (their models in `set`), placing on the
+    /// grass tiles of `atlas` (tiles of `tile_m` metres, `tile_cells` data cells and `border`
+    /// samples), drawing into `targets`, culling against `hiz`, bending in `wind`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        manifest: &Manifest,
+        set: &PlantSet,
+        atlas: &TileAtlas,
+        targets: &Targets,
+        hiz: &HiZPyramid,
+        tile_m: f32,
+        settings: PlantSettings,
+        wind: PlantWindBindings<'_>,
+    ) -> Self {
+        use wgpu::BufferUsages as U;
+        let types = set.models.len().min(TYPES) as u32;
+        let capacity = settings.capacity.max(8).div_ceil(8) * 8;
+        let settings = PlantSettings {
+            capacity,
+            ..settings
+        };
+        let buffer = |label, size: u64, usage| gpu_buffer(device, label, size, usage);
+        let cell = crate::plants::PLANT_CELL_M;
+        let p = &manifest.pyramid;
+        let (vertex_data, index_data, meshes) = pack_meshes(set);
+        let params = PlaceParams {
+            view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            planes: [[0.0; 4]; 6],
+            camera: [0.0, 0.5, targets.width as f32, targets.height as f32],
+            grid: [
+                (tile_m / cell).round().max(1.0) as u32,
+                p.tile_cells,
+                p.border,
+                settings.seed,
+            ],
+            dims: [cell, tile_m, settings.view_m[0], settings.view_m[1]],
+            lod: [settings.lod_m[0], settings.lod_m[1], settings.band_m, 0.0],
+            limits: [
+                hiz.mips(),
+                capacity,
+                types,
+                manifest.grass_types.len().min(16) as u32,
+            ],
+            hiz_levels: hiz_levels(hiz),
+            types: type_table(manifest, set),
+            meshes,
+        };
+        let params_buffer = buffer(
+            "plants params",
+            std::mem::size_of::<PlaceParams>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
+        let jobs = buffer("plants jobs", u64::from(MAX_JOBS) * 32, U::STORAGE | U::COPY_DST);
+        let region_bytes = u64::from(capacity) * INSTANCE_BYTES;
+        let instances = buffer(
+            "plants instances",
+            region_bytes * u64::from(types.max(1)) * LEVELS as u64,
+            U::STORAGE | U::COPY_SRC | U::COPY_DST,
+        );
+        let counters = buffer("plants counters", REGIONS as u64 * 4, U::STORAGE | U::COPY_DST);
+        let stats = buffer("plants stats", 32, U::STORAGE | U::COPY_DST | U::COPY_SRC);
+        let args = buffer(
+            "plants draw args",
+            REGIONS as u64 * 20,
+            U::STORAGE | U::INDIRECT | U::COPY_SRC,
+        );
+        let vertices = buffer(
+            "plants vertices",
+            std::mem::size_of_val(vertex_data.as_slice()) as u64,
+            U::STORAGE | U::COPY_DST,
+        );
+        queue.write_buffer(&vertices, 0, bytemuck::cast_slice(&vertex_data));
+        let indices = buffer(
+            "plants indices",
+            (index_data.len() * 4) as u64,
+            U::INDEX | U::COPY_DST,
+        );
+        queue.write_buffer(&indices, 0, bytemuck::cast_slice(&index_data));
+
+        // Texture layers: per type, its meshes' texture then its card's picture.
+        let layers = (2 * types).max(1);
+        let mip_count = TEXTURE_SIZE.ilog2() + 1;
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("plants textures"),
+            size: wgpu::Extent3d {
+                width: TEXTURE_SIZE,
+                height: TEXTURE_SIZE,
+                depth_or_array_layers: layers,
+            },
+            mip_level_count: mip_count,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8UnormSrgb,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        let mut frame_layers = [[0u32; 4]; TYPES];
+        for (t, m) in set.models.iter().take(TYPES).enumerate() {
+            for (k, img) in [&m.texture, &m.card].into_iter().enumerate() {
+                let layer = (2 * t + k) as u32;
+                for (level, data) in mips(img).iter().enumerate() {
+                    let size = (TEXTURE_SIZE >> level).max(1);
+                    queue.write_texture(
+                        wgpu::TexelCopyTextureInfo {
+                            texture: &texture,
+                            mip_level: level as u32,
+                            origin: wgpu::Origin3d {
+                                x: 0,
+                                y: 0,
+                                z: layer,
+                            },
+                            aspect: wgpu::TextureAspect::All,
+                        },
+                        data,
+                        wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(4 * size),
+                            rows_per_image: Some(size),
+                        },
+                        wgpu::Extent3d {
+                            width: size,
+                            height: size,
+                            depth_or_array_layers: 1,
+                        },
+                    );
+                }
+            }
+            frame_layers[t] = [2 * t as u32, 2 * t as u32 + 1, 0, 0];
+        }
+        let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("plants"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+
+        let sky = &manifest.sky;
+        let c4 = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
+        let mut wind_table = [PlantWindGpu::default(); TYPES];
+        for (i, t) in manifest.plant_types.iter().take(TYPES).enumerate() {
+            wind_table[i] = PlantWindGpu::new(&t.wind);
+        }
+        let frame = PlantFrame {
+            view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            misc: [sky.fog_distance_m, 0.0, 0.0, 0.0],
+            sun_dir: sun_direction(sky).extend(0.0).to_array(),
+            sun_color: c4(sky.sun_color),
+            sky_color: c4(sky.sky_color),
+            horizon_color: c4(sky.horizon_color),
+            flags: [crate::features::Features::all().bits(), 0, 0, 0],
+            wind: wind_table,
+            layers: frame_layers,
+        };
+        let frame_buffer = buffer(
+            "plants frame",
+            std::mem::size_of::<PlantFrame>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
+
+        let place_pass = PlacePass::new(device);
+        let draw_pass = DrawPass::new(device, targets, region_bytes, 1);
+        let atlas_views = (array_view(&atlas.heights), array_view(&atlas.grass));
+        let place_group = Self::place_group(
+            device,
+            &place_pass,
+            [&params_buffer, &jobs],
+            &atlas_views,
+            hiz,
+            [&instances, &counters, &stats, &args],
+        );
+        let draw_group = bind_group(
+            device,
+            "plants draw",
+            &draw_pass.layout,
+            [
+                frame_buffer.as_entire_binding(),
+                vertices.as_entire_binding(),
+                wind.lookup.as_entire_binding(),
+                wind.cells.as_entire_binding(),
+                view(&texture_view),
+                wgpu::BindingResource::Sampler(&sampler),
+            ],
+        );
+        let region_group = bind_group(
+            device,
+            "plants region",
+            &draw_pass.region_layout,
+            [buffer_prefix(&instances, region_bytes)],
+        );
+        Self {
+            settings,
+            types,
+            place_pass,
+            draw_pass,
+            params,
+            params_buffer,
+            jobs,
+            instances,
+            counters,
+            stats,
+            args,
+            frame,
+            frame_buffer,
+            _vertices: vertices,
+            indices,
+            place_group,
+            draw_group,
+            region_group,
+            targets: *targets,
+            samples: 1,
+            atlas_views,
+        }
+    }
+
+    fn place_group(
+        device: &wgpu::Device,
+        pass: &PlacePass,
+        [params, jobs]: [&wgpu::Buffer; 2],
+        atlas: &(wgpu::TextureView, wgpu::TextureView),
+        hiz: &HiZPyramid,
+        [instances, counters, stats, args]: [&wgpu::Buffer; 4],
+    ) -> wgpu::BindGroup {
+        bind_group(
+            device,
+            "plants place",
+            &pass.layout,
+            [
+                params.as_entire_binding(),
+                jobs.as_entire_binding(),
+                view(&atlas.0),
+                view(&atlas.1),
+                hiz.buffer().as_entire_binding(),
+                instances.as_entire_binding(),
+                counters.as_entire_binding(),
+                stats.as_entire_binding(),
+                args.as_entire_binding(),
+            ],
+        )
+    }
+
+    /// Follows a new Hi-Z pyramid (the targets were resized).
+    pub fn resize(&mut self, device: &wgpu::Device, hiz: &HiZPyramid) {
+        let (_, width, height) = hiz.levels()[0];
+        self.params.camera[2] = width as f32;
+        self.params.camera[3] = height as f32;
+        self.params.limits[0] = hiz.mips();
+        self.params.hiz_levels = hiz_levels(hiz);
+        self.place_group = Self::place_group(
+            device,
+            &self.place_pass,
+            [&self.params_buffer, &self.jobs],
+            &self.atlas_views,
+            hiz,
+            [&self.instances, &self.counters, &self.stats, &self.args],
+        );
+    }
+
+    /// Draws into targets of `samples` samples a pixel from now on.
+    pub fn set_samples(&mut self, device: &wgpu::Device, samples: u32) {
+        if samples == self.samples {
+            return;
+        }
+        self.draw_pass.pipeline = DrawPass::pipeline(
+            device,
+            &self.targets,
+            &self.draw_pass.layout,
+            &self.draw_pass.region_layout,
+            samples,
+        );
+        self.samples = samples;
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &PlantSettings {
+        &self.settings
+    }
+
+    /// Plant types drawn.
+    pub fn types(&self) -> u32 {
+        self.types
+    }
+
+    /// GPU memory of the instance pool, bytes (fixed: it does not depend on the view).
+    pub fn pool_bytes(&self) -> u64 {
+        self.instances.size() + self.counters.size() + self.args.size()
+    }
+
+    /// The placement's constants of the frame (for the CPU mirror).
+    pub fn params(&self) -> &PlaceParams {
+        &self.params
+    }
+
+    /// Sets the frame: time (seconds), switched-on features, the camera's world position, its
+    /// camera-relative view-projection and frustum, its altitude and near plane.
+    #[allow(clippy::too_many_arguments)]
+    pub fn set_frame(
+        &mut self,
+        queue: &wgpu::Queue,
+        time_s: f64,
+        features: crate::features::Features,
+        camera_world: glam::DVec3,
+        view_proj: Mat4,
+        frustum: &Frustum,
+        near: f32,
+    ) {
+        self.params.view_proj = view_proj.to_cols_array_2d();
+        for (dst, p) in self.params.planes.iter_mut().zip(frustum.planes()) {
+            *dst = p.to_array();
+        }
+        self.params.camera[0] = camera_world.z as f32;
+        self.params.camera[1] = near;
+        self.frame.view_proj = self.params.view_proj;
+        self.frame.misc[1] = (time_s % 3600.0) as f32;
+        self.frame.misc[2] = camera_world.x.rem_euclid(4096.0) as f32;
+        self.frame.misc[3] = camera_world.y.rem_euclid(4096.0) as f32;
+        self.frame.flags[0] = features.bits();
+        queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&self.params));
+        queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&self.frame));
+    }
+
+    /// The grass jobs plants are placed on: one per tile (a high-LOD tile's near job covers
+    /// part of the same tile and is left out), at most [`MAX_JOBS`].
+    pub fn plant_jobs(grass_jobs: &[TileJob]) -> Vec<TileJob> {
+        grass_jobs
+            .iter()
+            .filter(|j| j.lod != 2)
+            .take(MAX_JOBS as usize)
+            .copied()
+            .collect()
+    }
+
+    /// Records placement on the tiles of `grass_jobs` and the draws into `color` and `depth`
+    /// (loaded, not cleared).
+    pub fn record(
+        &self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        grass_jobs: &[TileJob],
+        color: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        timer: &mut GpuTimer,
+    ) {
+        encoder.clear_buffer(&self.stats, 0, None);
+        encoder.clear_buffer(&self.counters, 0, None);
+        let jobs = Self::plant_jobs(grass_jobs);
+        if !jobs.is_empty() {
+            queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&jobs));
+        }
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("plants place"),
+                timestamp_writes: timer.compute_pass("plants_place"),
+            });
+            pass.set_bind_group(0, &self.place_group, &[]);
+            if !jobs.is_empty() {
+                let n = self.params.grid[0];
+                pass.set_pipeline(&self.place_pass.place);
+                pass.dispatch_workgroups(n.div_ceil(8), n.div_ceil(8), jobs.len() as u32);
+            }
+            pass.set_pipeline(&self.place_pass.finalize);
+            pass.dispatch_workgroups(1, 1, 1);
+        }
+        let mut pass = render_pass(
+            encoder,
+            "plants draw",
+            (color, wgpu::LoadOp::Load),
+            Some((depth, wgpu::LoadOp::Load)),
+            timer.render_pass("plants_draw"),
+        );
+        pass.set_pipeline(&self.draw_pass.pipeline);
+        pass.set_bind_group(0, &self.draw_group, &[]);
+        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+        let region_bytes = u64::from(self.settings.capacity) * INSTANCE_BYTES;
+        for region in 0..(self.types as usize * LEVELS) {
+            pass.set_bind_group(1, &self.region_group, &[(region as u64 * region_bytes) as u32]);
+            pass.draw_indexed_indirect(&self.args, region as u64 * 20);
+        }
+    }
+
+    /// The buffer of the frame's counters (8 u32, `counter::*`), for a readback.
+    pub fn stats_buffer(&self) -> &wgpu::Buffer {
+        &self.stats
+    }
+
+    /// Reads the counters of the last recorded frame (for tests and tools: waits for the GPU).
+    pub fn read_stats(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> PlantStats {
+        let c: Vec<u32> = crate::gpu::read_buffer_pod(device, queue, &self.stats, ..)
+            .expect("read back the plant counters");
+        PlantStats::from_counts(&c[..counter::COUNT].try_into().expect("8 counters"))
+    }
+
+    /// Reads back the instances of every region of the last recorded frame (for tests): per
+    /// region (`type * 3 + level`), the instances its draw draws.
+    pub fn read_instances(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> Vec<Vec<PlantInstance>> {
+        let args: Vec<u32> = crate::gpu::read_buffer_pod(device, queue, &self.args, ..)
+            .expect("read back the draw arguments");
+        let all: Vec<PlantInstance> =
+            crate::gpu::read_buffer_pod(device, queue, &self.instances, ..)
+                .expect("read back the instances");
+        let cap = self.settings.capacity as usize;
+        (0..self.types as usize * LEVELS)
+            .map(|r| {
+                let n = args[r * 5 + 1] as usize;
+                all[r * cap..r * cap + n].to_vec()
+            })
+            .collect()
+    }
+
+    /// Bends `vertices` on the GPU, vertex i as `instances[i]` in the wind `winds[i]`, with the
+    /// frame's time, features and the types' wind (for the test against
+    /// [`crate::plants::bend_cpu::bend_vertex`]): per vertex, position and normal.
+    pub fn probe_bend(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        vertices: &[crate::plants::PlantVertex],
+        instances: &[PlantInstance],
+        winds: &[[f32; 4]],
+    ) -> Vec<([f32; 3], [f32; 3])> {
+        use wgpu::util::DeviceExt;
+        let module = crate::shaders::module(device, "plants_draw.wgsl");
+        let pipeline = crate::gpu::pipeline::compute_pipeline_auto(
+            device,
+            "plants probe bend",
+            &module,
+            "probe_bend",
+        );
+        let n = instances.len().min(vertices.len()).min(winds.len());
+        let init = |label, contents: &[u8], usage| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage,
+            })
+        };
+        use wgpu::BufferUsages as U;
+        let v = init("probe vertices", bytemuck::cast_slice(&vertices[..n]), U::STORAGE);
+        let i = init("probe instances", bytemuck::cast_slice(&instances[..n]), U::STORAGE);
+        let w = init("probe winds", bytemuck::cast_slice(&winds[..n]), U::STORAGE);
+        let out = gpu_buffer(device, "probe out", (n * 32) as u64, U::STORAGE | U::COPY_SRC);
+        let g0 = bind_group(
+            device,
+            "probe frame",
+            &pipeline.get_bind_group_layout(0),
+            [
+                self.frame_buffer.as_entire_binding(),
+                v.as_entire_binding(),
+            ],
+        );
+        let g1 = bind_group_with_indices(
+            device,
+            "probe",
+            &pipeline.get_bind_group_layout(1),
+            [
+                (1, i.as_entire_binding()),
+                (2, w.as_entire_binding()),
+                (3, out.as_entire_binding()),
+            ],
+        );
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &g0, &[]);
+            pass.set_bind_group(1, &g1, &[]);
+            pass.dispatch_workgroups((n as u32).div_ceil(64), 1, 1);
+        }
+        queue.submit([encoder.finish()]);
+        let r: Vec<[f32; 4]> =
+            crate::gpu::read_buffer_pod(device, queue, &out, ..).expect("read back the probe");
+        (0..n)
+            .map(|k| {
+                let p = r[2 * k];
+                let q = r[2 * k + 1];
+                ([p[0], p[1], p[2]], [q[0], q[1], q[2]])
+            })
+            .collect()
+    }
+}

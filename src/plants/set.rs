@@ -1,0 +1,223 @@
+//! A world's plants ready for the GPU: per type, its meshes at each level of detail (unit
+//! height) and its two texture layers (the mesh's texture and the card's picture), built from
+//! the manifest's `[[plant_types]]`: recipes generated, glTF files read.
+
+use std::path::{Path, PathBuf};
+
+use crate::plants::place_cpu::LEVELS;
+use crate::plants::{PlantImage, PlantMesh};
+use crate::world::Manifest;
+
+/// Edge of every plant texture layer, pixels (a card's picture is rendered at this size; a
+/// glTF base colour is resampled to it).
+pub const TEXTURE_SIZE: u32 = 128;
+
+/// A plant file that could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum PlantError {
+    /// The glTF file of a plant type could not be read.
+    #[error("plant type {name:?}: {source}")]
+    File {
+        /// The plant type.
+        name: String,
+        /// What went wrong, naming the file.
+        #[source]
+        source: crate::plants::gltf::PlantFileError,
+    },
+    /// A plant mesh that has no height.
+    #[error("plant type {name:?}: the mesh of {file} is flat (no vertex above its root)")]
+    Flat {
+        /// The plant type.
+        name: String,
+        /// The file.
+        file: PathBuf,
+    },
+}
+
+/// One plant type's meshes and pictures.
+#[derive(Clone, Debug)]
+pub struct PlantModel {
+    /// The full mesh, the reduced one and the crossed cards, each about 1 m high.
+    pub lods: [PlantMesh; LEVELS],
+    /// The meshes' texture (white for recipes, whose colours are in their vertices).
+    pub texture: PlantImage,
+    /// The cards' picture.
+    pub card: PlantImage,
+    /// Widest reach from the axis over height (for the culling sphere).
+    pub radius_ratio: f32,
+}
+
+/// The models of a world's plant types, in manifest order.
+#[derive(Clone, Debug, Default)]
+pub struct PlantSet {
+    /// One per plant type.
+    pub models: Vec<PlantModel>,
+}
+
+impl PlantSet {
+    /// Builds the models of `manifest`'s plant types; glTF files are read relative to `dir`.
+    pub fn build(manifest: &Manifest, dir: &Path) -> Result<Self, PlantError> {
+        let mut models = Vec::new();
+        for t in &manifest.plant_types {
+            models.push(model(t, dir)?);
+        }
+        Ok(Self { models })
+    }
+}
+
+fn white() -> PlantImage {
+    PlantImage {
+        width: 1,
+        height: 1,
+        rgba: vec![255; 4],
+    }
+}
+
+/// The model of plant type `t`.
+pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, PlantError> {
+    use crate::plants::recipe::{Recipe, generate};
+    let recipe = match t.mesh.as_str() {
+        "flower" => Some(Recipe::Flower),
+        "fern" => Some(Recipe::Fern),
+        "bush" => Some(Recipe::Bush),
+        _ => None,
+    };
+    let (lods, texture, card) = match recipe {
+        Some(r) => {
+            let p = generate(r, t.seed, t.color);
+            let [l0, l1] = p.lods;
+            ([l0, l1, p.card], white(), p.card_image)
+        }
+        None => {
+            let file = dir.join(&t.mesh);
+            let loaded = crate::plants::gltf::load_plant(&file).map_err(|source| {
+                PlantError::File {
+                    name: t.name.clone(),
+                    source,
+                }
+            })?;
+            let mut mesh = loaded.mesh;
+            let h = mesh.height();
+            if !(h > 1e-6) {
+                return Err(PlantError::Flat {
+                    name: t.name.clone(),
+                    file,
+                });
+            }
+            for v in &mut mesh.vertices {
+                for c in &mut v.position {
+                    *c /= h;
+                }
+            }
+            // Light through the leaf: the thickness texture (green, 0 thin .. 1 thick) baked
+            // into each vertex's thinness.
+            if let Some(th) = &loaded.thickness {
+                for v in &mut mesh.vertices {
+                    let g = f32::from(
+                        th.rgba[texel_index(th, v.uv) + 1],
+                    ) / 255.0;
+                    v.albedo[3] = 1.0 - g;
+                }
+            }
+            let texture = loaded.base_color.unwrap_or_else(white);
+            let mut textured = mesh.clone();
+            // The card's picture shows the texture's colour through the vertex albedo.
+            if texture.width > 1 {
+                for v in &mut textured.vertices {
+                    let c = sample(&texture, v.uv);
+                    for k in 0..3 {
+                        v.albedo[k] *= c[k];
+                    }
+                }
+            }
+            let card = crate::plants::card::render_card(&textured, TEXTURE_SIZE);
+            let cards = crate::plants::card::crossed_cards(&mesh);
+            ([mesh.clone(), mesh, cards], texture, card)
+        }
+    };
+    let radius_ratio = lods[0].radius() / lods[0].height().max(1e-6);
+    Ok(PlantModel {
+        lods,
+        texture: resample(&texture, TEXTURE_SIZE),
+        card: resample(&card, TEXTURE_SIZE),
+        radius_ratio,
+    })
+}
+
+/// The byte index of the texel of `img` nearest `uv` (repeating).
+fn texel_index(img: &PlantImage, uv: [f32; 2]) -> usize {
+    let x = ((uv[0].rem_euclid(1.0) * img.width as f32) as u32).min(img.width - 1);
+    let y = ((uv[1].rem_euclid(1.0) * img.height as f32) as u32).min(img.height - 1);
+    ((y * img.width + x) * 4) as usize
+}
+
+/// The texel of `img` nearest `uv` (repeating), as linear 0..1 RGBA.
+fn sample(img: &PlantImage, uv: [f32; 2]) -> [f32; 4] {
+    let i = texel_index(img, uv);
+    let lin = |b: u8| (f32::from(b) / 255.0).powf(2.2);
+    [
+        lin(img.rgba[i]),
+        lin(img.rgba[i + 1]),
+        lin(img.rgba[i + 2]),
+        f32::from(img.rgba[i + 3]) / 255.0,
+    ]
+}
+
+/// `img` resampled to `size` x `size` (nearest texel: the sizes are powers of two or a single
+/// texel, and mipmaps are built from the result).
+pub fn resample(img: &PlantImage, size: u32) -> PlantImage {
+    if img.width == size && img.height == size {
+        return img.clone();
+    }
+    let mut rgba = Vec::with_capacity((size * size * 4) as usize);
+    for y in 0..size {
+        for x in 0..size {
+            let sx = ((x as u64 * img.width as u64) / size as u64) as u32;
+            let sy = ((y as u64 * img.height as u64) / size as u64) as u32;
+            let i = ((sy * img.width + sx) * 4) as usize;
+            rgba.extend_from_slice(&img.rgba[i..i + 4]);
+        }
+    }
+    PlantImage {
+        width: size,
+        height: size,
+        rgba,
+    }
+}
+
+/// The mip chain of a square RGBA8 sRGB image (`size` a power of two), each level the 2x2
+/// mean of the one below in linear light, alpha-weighted so that transparent texels do not
+/// darken the edges.
+pub fn mips(img: &PlantImage) -> Vec<Vec<u8>> {
+    let mut levels = vec![img.rgba.clone()];
+    let mut size = img.width;
+    let to_lin = |b: u8| (f32::from(b) / 255.0).powf(2.2);
+    let to_srgb = |v: f32| (v.clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8;
+    while size > 1 {
+        let half = size / 2;
+        let prev = levels.last().expect("a level");
+        let mut next = vec![0u8; (half * half * 4) as usize];
+        for y in 0..half {
+            for x in 0..half {
+                let mut c = [0.0f32; 3];
+                let mut a = 0.0f32;
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let i = (((2 * y + dy) * size + 2 * x + dx) * 4) as usize;
+                    let w = f32::from(prev[i + 3]) / 255.0;
+                    for k in 0..3 {
+                        c[k] += to_lin(prev[i + k]) * w;
+                    }
+                    a += w;
+                }
+                let o = ((y * half + x) * 4) as usize;
+                for k in 0..3 {
+                    next[o + k] = to_srgb(if a > 0.0 { c[k] / a } else { 0.0 });
+                }
+                next[o + 3] = ((a / 4.0) * 255.0).round() as u8;
+            }
+        }
+        levels.push(next);
+        size = half;
+    }
+    levels
+}

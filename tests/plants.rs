@@ -1,0 +1,401 @@
+//! Plants on lavapipe against their CPU mirrors: placement and culling of several tiles (every
+//! instance, its type and level of detail, and the counters), the pool's bound, and the bending
+//! of the vertex stage.
+
+mod common;
+
+use glam::{DVec3, Vec4};
+use verdant::RendererConfig;
+use verdant::camera::Camera;
+use verdant::features::Features;
+use verdant::gpu::{GpuContext, GpuTimer, Targets};
+use verdant::grass::{HiZ, HiZPyramid, TileJob};
+use verdant::lod::Frustum;
+use verdant::plants::place_cpu::{LEVELS, PlantInstance, counter, place_tile};
+use verdant::plants::{PlantRenderer, PlantSet, PlantSettings};
+use verdant::stream::TileAtlas;
+use verdant::world::{Manifest, TileData, TileId, World};
+
+const ALTITUDE: f32 = 101.7;
+const W: u32 = 160;
+const H: u32 = 90;
+
+struct Rig {
+    ctx: GpuContext,
+    atlas: TileAtlas,
+    depth: wgpu::Texture,
+    color: wgpu::Texture,
+    hiz: HiZPyramid,
+    plants: PlantRenderer,
+    manifest: Manifest,
+    tile_m: f32,
+}
+
+fn targets() -> Targets {
+    Targets {
+        color_format: verdant::terrain::COLOR_FORMAT,
+        depth_format: verdant::terrain::DEPTH_FORMAT,
+        width: W,
+        height: H,
+    }
+}
+
+impl Rig {
+    fn new(capacity: u32) -> Self {
+        let ctx = common::gpu();
+        let world = World::open(&common::default_world()).unwrap();
+        assert!(
+            world.manifest.plant_types.len() >= 3,
+            "the default world has plants"
+        );
+        let manifest = world.manifest.clone();
+        let grass = RendererConfig::for_world(&world)
+            .grass_settings(&world)
+            .unwrap();
+        let atlas = TileAtlas::new(&ctx.device, manifest.pyramid.samples_per_side(), 8);
+        let target = |format, usage| {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: None,
+                size: wgpu::Extent3d {
+                    width: W,
+                    height: H,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let depth = target(
+            verdant::terrain::DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        );
+        let color = target(
+            verdant::terrain::COLOR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        );
+        let hiz = HiZPyramid::new(&ctx.device, &ctx.queue, W, H);
+        let buffer = |size, usage| {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let lookup = buffer(
+            32,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
+        let cells = buffer(8 * 8 * 16, wgpu::BufferUsages::STORAGE);
+        let set = PlantSet::build(&manifest, &world.dir).unwrap();
+        let plants = PlantRenderer::new(
+            &ctx.device,
+            &ctx.queue,
+            &manifest,
+            &set,
+            &atlas,
+            &targets(),
+            &hiz,
+            grass.tile_m,
+            PlantSettings {
+                capacity,
+                view_m: [60.0, 90.0],
+                ..Default::default()
+            },
+            verdant::plants::renderer::PlantWindBindings {
+                lookup: &lookup,
+                cells: &cells,
+            },
+        );
+        Self {
+            ctx,
+            atlas,
+            depth,
+            color,
+            hiz,
+            plants,
+            manifest,
+            tile_m: grass.tile_m,
+        }
+    }
+
+    /// Places and draws the plants of `jobs` (tiles already in the atlas) over a cleared depth
+    /// target (the terrain's occlusion, shared with the grass, is tested there); returns the
+    /// Hi-Z placement saw.
+    fn run(&mut self, camera: &Camera, jobs: &[TileJob]) -> HiZ {
+        let view_proj = camera.view_proj_relative(W as f32 / H as f32);
+        self.plants.set_frame(
+            &self.ctx.queue,
+            0.0,
+            Features::all(),
+            camera.position,
+            view_proj,
+            &Frustum::from_view_proj(view_proj),
+            camera.near_m,
+        );
+        let mut timer = GpuTimer::new(&self.ctx.device, &self.ctx.queue, false, 0);
+        let dv = self.depth.create_view(&Default::default());
+        let cv = self.color.create_view(&Default::default());
+        let mut encoder = self.ctx.device.create_command_encoder(&Default::default());
+        {
+            encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: None,
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &dv,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+        }
+        self.hiz
+            .record(&self.ctx.device, &mut encoder, &self.depth, &mut timer);
+        self.plants
+            .record(&self.ctx.queue, &mut encoder, jobs, &cv, &dv, &mut timer);
+        self.ctx.queue.submit([encoder.finish()]);
+        self.hiz.read_back(&self.ctx.device, &self.ctx.queue)
+    }
+}
+
+/// A tile of `kind` at `id`: "meadow" (rolling, meadow with patches of tall grass), "steep"
+/// (too steep for most plants), "bare" (no grass), "high" (above every plant's altitude).
+fn synthetic_tile(manifest: &Manifest, id: TileId, kind: &str) -> TileData {
+    let s = manifest.pyramid.samples_per_side();
+    let cell = manifest.pyramid.cell_size_m(id.level) as f32;
+    let n = (s * s) as usize;
+    let mut t = TileData {
+        id,
+        size: s,
+        heights: vec![100.0; n],
+        grass_type: vec![1; n],
+        density: vec![230; n],
+    };
+    for j in 0..s {
+        for i in 0..s {
+            let k = (j * s + i) as usize;
+            match kind {
+                "meadow" => {
+                    t.heights[k] = 100.0 + 0.3 * ((i as f32) * 0.4).sin() * cell;
+                    t.grass_type[k] = if (i / 9 + j / 7) % 3 == 0 { 2 } else { 1 };
+                    t.density[k] = 160 + ((i * 5 + j * 11) % 90) as u8;
+                }
+                "steep" => t.heights[k] = 100.0 + 1.2 * cell * i as f32,
+                "bare" => t.grass_type[k] = 0,
+                "high" => t.heights[k] = 9500.0,
+                other => panic!("no tile kind {other}"),
+            }
+        }
+    }
+    t
+}
+
+fn key(p: &PlantInstance) -> (u32, u32) {
+    (p.hash, p.kind)
+}
+
+#[test]
+fn gpu_placement_matches_the_cpu_mirror_on_meadow_steep_bare_and_high_tiles() {
+    let mut rig = Rig::new(16_384);
+    let level = rig.manifest.pyramid.max_level();
+    let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+    let kinds = ["meadow", "steep", "bare", "high"];
+    let tm = rig.tile_m;
+    let mut tiles = Vec::new();
+    let mut jobs = Vec::new();
+    for (k, kind) in kinds.iter().enumerate() {
+        // Side by side in front of the camera (which looks north), the first nearest.
+        let j = TileJob {
+            origin: [-0.5 * tm + tm * (k % 2) as f32 - 0.5 * tm, 2.0 + tm * (k / 2) as f32],
+            cell,
+            layer: k as u32,
+            tile_x: 5000 + k as u32,
+            tile_y: 7000,
+            lod: (k % 2) as u32,
+            slot: 0,
+        };
+        let t = synthetic_tile(&rig.manifest, TileId::new(level, j.tile_x, j.tile_y), kind);
+        rig.atlas.upload(&rig.ctx.queue, k as u32, &t).unwrap();
+        tiles.push(t);
+        jobs.push(j);
+    }
+    let camera = Camera::new(DVec3::new(0.0, 0.0, f64::from(ALTITUDE)), 90.0, -20.0);
+    let hiz = rig.run(&camera, &jobs);
+    let gpu = rig.plants.read_instances(&rig.ctx.device, &rig.ctx.queue);
+    let gpu_stats = rig.plants.read_stats(&rig.ctx.device, &rig.ctx.queue);
+    let mut cpu: Vec<PlantInstance> = Vec::new();
+    let mut stats = [0u32; counter::COUNT];
+    let mut per_tile = Vec::new();
+    for (j, t) in jobs.iter().zip(&tiles) {
+        let out = place_tile(rig.plants.params(), j, t, &hiz);
+        for (s, o) in stats.iter_mut().zip(out.stats) {
+            *s += o;
+        }
+        per_tile.push(out.instances.len());
+        cpu.extend(out.instances);
+    }
+    // The meadow tile has plants of several types at several levels; the others none.
+    assert!(per_tile[0] > 100, "meadow plants: {per_tile:?}");
+    assert_eq!(&per_tile[2..], &[0, 0], "bare and high tiles: {per_tile:?}");
+    let types: std::collections::HashSet<usize> = cpu.iter().map(|p| p.plant_type()).collect();
+    let levels: std::collections::HashSet<usize> = cpu.iter().map(|p| p.level()).collect();
+    assert!(types.len() >= 3, "types placed: {types:?}");
+    assert!(levels.len() >= 2, "levels placed: {levels:?}");
+    assert!(stats[counter::RULED_OUT] > 0, "the steep tile rules plants out");
+    assert!(stats[counter::FRUSTUM] > 0, "some plants fall outside the frustum");
+
+    let mut gpu_all: Vec<PlantInstance> = gpu.iter().flatten().copied().collect();
+    for (r, region) in gpu.iter().enumerate() {
+        for p in region {
+            assert_eq!(p.plant_type() * LEVELS + p.level(), r, "an instance in its region");
+        }
+    }
+    gpu_all.sort_by_key(key);
+    cpu.sort_by_key(key);
+    assert_eq!(gpu_all.len(), cpu.len(), "instances, GPU against CPU");
+    for (g, c) in gpu_all.iter().zip(&cpu) {
+        assert_eq!(key(g), key(c));
+        for k in 0..3 {
+            assert!((g.pos[k] - c.pos[k]).abs() < 1e-3, "{g:?} against {c:?}");
+        }
+        assert!((g.scale - c.scale).abs() < 1e-5 && (g.yaw - c.yaw).abs() < 1e-4);
+        assert!((g.fade - c.fade).abs() < 1e-4, "{g:?} against {c:?}");
+    }
+    assert_eq!(gpu_stats.considered, stats[counter::CONSIDERED]);
+    assert_eq!(gpu_stats.empty, stats[counter::EMPTY]);
+    assert_eq!(gpu_stats.ruled_out, stats[counter::RULED_OUT]);
+    assert_eq!(gpu_stats.culled_frustum, stats[counter::FRUSTUM]);
+    assert_eq!(gpu_stats.culled_distance, stats[counter::DISTANCE]);
+    assert_eq!(gpu_stats.culled_occlusion, stats[counter::OCCLUSION]);
+    assert_eq!(gpu_stats.drawn as usize, cpu.len());
+    assert_eq!(gpu_stats.overflow, 0);
+}
+
+#[test]
+fn a_full_region_drops_and_counts_the_rest_and_the_pool_does_not_grow() {
+    let mut small = Rig::new(64);
+    let level = small.manifest.pyramid.max_level();
+    let cell = small.manifest.pyramid.cell_size_m(level) as f32;
+    let tm = small.tile_m;
+    let bytes = small.plants.pool_bytes();
+    let mut jobs = Vec::new();
+    for k in 0..4u32 {
+        let t = synthetic_tile(
+            &small.manifest,
+            TileId::new(level, 100 + k, 100),
+            "meadow",
+        );
+        small.atlas.upload(&small.ctx.queue, k, &t).unwrap();
+        jobs.push(TileJob {
+            origin: [-tm + tm * (k % 2) as f32, 1.0 + tm * (k / 2) as f32],
+            cell,
+            layer: k,
+            tile_x: 100 + k,
+            tile_y: 100,
+            lod: 0,
+            slot: 0,
+        });
+    }
+    let camera = Camera::new(DVec3::new(0.0, 0.0, f64::from(ALTITUDE)), 90.0, -20.0);
+    small.run(&camera, &jobs);
+    let stats = small.plants.read_stats(&small.ctx.device, &small.ctx.queue);
+    let regions = small.plants.read_instances(&small.ctx.device, &small.ctx.queue);
+    assert!(stats.overflow > 0, "{stats:?}");
+    assert!(regions.iter().all(|r| r.len() <= 64));
+    assert_eq!(
+        stats.drawn as usize,
+        regions.iter().map(Vec::len).sum::<usize>()
+    );
+    assert_eq!(small.plants.pool_bytes(), bytes, "the pool's size is fixed");
+    // The pool's size follows the capacity and the types, never the view.
+    let types = small.manifest.plant_types.len() as u64;
+    assert!(bytes >= 64 * 32 * types * LEVELS as u64);
+}
+
+#[test]
+fn gpu_bending_matches_the_cpu_mirror() {
+    let rig = Rig::new(64);
+    let set = PlantSet::build(&rig.manifest, &common::default_world()).unwrap();
+    // Vertices of every type's full mesh (the probe bends vertex i of the packed meshes), each
+    // as a plant of some type in some wind.
+    let vertices: Vec<_> = set
+        .models
+        .iter()
+        .flat_map(|m| m.lods[0].vertices.iter().copied())
+        .take(400)
+        .collect();
+    let n = vertices.len();
+    assert!(n >= 200);
+    let types = rig.manifest.plant_types.len() as u32;
+    let instances: Vec<PlantInstance> = (0..n as u32)
+        .map(|i| PlantInstance {
+            pos: [i as f32 * 0.1 - 20.0, 5.0 + (i % 7) as f32, -1.0],
+            yaw: i as f32 * 0.37,
+            scale: 0.3 + (i % 5) as f32 * 0.2,
+            kind: i % types,
+            hash: verdant::hash::hash_u32(i),
+            fade: 1.0,
+        })
+        .collect();
+    let winds: Vec<[f32; 4]> = (0..n)
+        .map(|i| {
+            let a = i as f32 * 0.21;
+            [6.0 * a.cos(), 6.0 * a.sin(), 0.2 * (i % 3) as f32, 0.0]
+        })
+        .collect();
+    // The frame's wind constants and time come from set_frame.
+    let mut rig = rig;
+    let camera = Camera::new(DVec3::new(0.0, 0.0, 100.0), 90.0, -10.0);
+    let view_proj = camera.view_proj_relative(W as f32 / H as f32);
+    let time = 3.7;
+    rig.plants.set_frame(
+        &rig.ctx.queue,
+        time,
+        Features::all(),
+        camera.position,
+        view_proj,
+        &Frustum::from_view_proj(view_proj),
+        camera.near_m,
+    );
+    let gpu = rig
+        .plants
+        .probe_bend(&rig.ctx.device, &rig.ctx.queue, &vertices, &instances, &winds);
+    let mut moved = 0;
+    for i in 0..n {
+        let t = instances[i].plant_type();
+        let pw = verdant::plants::bend_cpu::PlantWindGpu::new(&rig.manifest.plant_types[t].wind);
+        let (p, nrm) = verdant::plants::bend_cpu::bend_vertex(
+            &vertices[i],
+            &instances[i],
+            Vec4::from_array(winds[i]),
+            time as f32,
+            &pw,
+            Features::all(),
+        );
+        let (gp, gn) = gpu[i];
+        let dp = (p - glam::Vec3::from_array(gp)).length();
+        assert!(dp < 2e-4 * (1.0 + p.length()), "vertex {i}: {p} against {gp:?}");
+        assert!((nrm - glam::Vec3::from_array(gn)).length() < 1e-3, "normal {i}");
+        let (still, _) = verdant::plants::bend_cpu::bend_vertex(
+            &vertices[i],
+            &instances[i],
+            Vec4::ZERO,
+            time as f32,
+            &pw,
+            Features::all(),
+        );
+        if (still - p).length() > 1e-3 {
+            moved += 1;
+        }
+    }
+    assert!(moved > n / 2, "the wind moves most vertices: {moved} of {n}");
+}
