@@ -844,6 +844,23 @@ impl<'p> Loader<'p> {
 fn validate(gltf: &Gltf) -> Result<(), String> {
     use gltf::json::validation::{Error, Validate};
     let root = gltf.as_json();
+    // gltf-json's own check of POSITION looks its accessor up unchecked: check the index first.
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &primitive.attributes {
+                if index.value() >= root.accessors.len() {
+                    let name = match semantic {
+                        gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                        gltf::json::validation::Checked::Invalid => "?".into(),
+                    };
+                    return Err(format!(
+                        "meshes[{m}].primitives[{p}].attributes[\"{name}\"]: accessor {} does not exist",
+                        index.value()
+                    ));
+                }
+            }
+        }
+    }
     let mut errors = Vec::new();
     root.validate(root, gltf::json::Path::new, &mut |path, error| {
         let path = path().to_string();
