@@ -504,3 +504,62 @@ fn garbled_glb_files_never_panic() {
     // Bytes of colours and padding change nothing that matters: some garbled files still load.
     assert!(loaded > 0);
 }
+
+/// JSON pointers to every number and every object member under `value`.
+fn pointers(value: &Value, at: String, numbers: &mut Vec<String>, members: &mut Vec<String>) {
+    match value {
+        Value::Number(_) => numbers.push(at),
+        Value::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                pointers(item, format!("{at}/{i}"), numbers, members);
+            }
+        }
+        Value::Object(map) => {
+            for (key, item) in map {
+                let child = format!("{at}/{key}");
+                members.push(child.clone());
+                pointers(item, child, numbers, members);
+            }
+        }
+        _ => {}
+    }
+}
+
+#[test]
+fn glb_files_with_wrong_numbers_or_missing_members_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("mutated.glb");
+    let (doc, bin) = triangle_with_texture(&png(&image(2, 2)));
+    let (mut numbers, mut members) = (Vec::new(), Vec::new());
+    pointers(&doc, String::new(), &mut numbers, &mut members);
+    for pointer in &numbers {
+        for replacement in [
+            json!(0),
+            json!(1),
+            json!(2),
+            json!(5),
+            json!(255),
+            json!(65_535),
+            json!(4_294_967_295u64),
+            json!(-1),
+            json!(1e30),
+            json!(0.5),
+        ] {
+            let mut mutated = doc.clone();
+            *mutated.pointer_mut(pointer).unwrap() = replacement;
+            load_garbled(&path, &glb(&mutated, &bin));
+        }
+    }
+    for pointer in &members {
+        let (parent, key) = pointer.rsplit_once('/').unwrap();
+        let mut mutated = doc.clone();
+        mutated
+            .pointer_mut(parent)
+            .and_then(Value::as_object_mut)
+            .unwrap()
+            .remove(key);
+        load_garbled(&path, &glb(&mutated, &bin));
+    }
+    // The scene without its BIN chunk.
+    load_garbled(&path, &glb(&doc, &[]));
+}
