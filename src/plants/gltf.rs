@@ -522,6 +522,8 @@ impl<'p> Loader<'p> {
                 let values = self
                     .read_accessor(&acc, "indices", &[Dimensions::Scalar], false)
                     .map_err(lift)?;
+                // Exact through f32 below 2^24, far above the vertex limit; larger indices are
+                // out of range whatever their rounding.
                 values.into_iter().map(|v| v as u32).collect()
             }
             None => (0..n as u32).collect(),
@@ -646,7 +648,7 @@ impl<'p> Loader<'p> {
         let path = self.path.to_owned();
         let (start, length) = (view.offset(), view.length());
         let data = self.buffer(index)?;
-        let end = start.checked_add(length).unwrap_or(usize::MAX);
+        let end = start.saturating_add(length);
         data.get(start..end).ok_or(PlantFileError::BufferTooShort {
             path,
             buffer: index,
