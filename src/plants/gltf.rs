@@ -522,6 +522,8 @@ impl<'p> Loader<'p> {
                 let values = self
                     .read_accessor(&acc, "indices", &[Dimensions::Scalar], false)
                     .map_err(lift)?;
+                // Exact through f32 below 2^24, far above the vertex limit; larger indices are
+                // out of range whatever their rounding.
                 values.into_iter().map(|v| v as u32).collect()
             }
             None => (0..n as u32).collect(),
@@ -646,7 +648,7 @@ impl<'p> Loader<'p> {
         let path = self.path.to_owned();
         let (start, length) = (view.offset(), view.length());
         let data = self.buffer(index)?;
-        let end = start.checked_add(length).unwrap_or(usize::MAX);
+        let end = start.saturating_add(length);
         data.get(start..end).ok_or(PlantFileError::BufferTooShort {
             path,
             buffer: index,
@@ -844,6 +846,23 @@ impl<'p> Loader<'p> {
 fn validate(gltf: &Gltf) -> Result<(), String> {
     use gltf::json::validation::{Error, Validate};
     let root = gltf.as_json();
+    // gltf-json's own check of POSITION looks its accessor up unchecked: check the index first.
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &primitive.attributes {
+                if index.value() >= root.accessors.len() {
+                    let name = match semantic {
+                        gltf::json::validation::Checked::Valid(s) => s.to_string(),
+                        gltf::json::validation::Checked::Invalid => "?".into(),
+                    };
+                    return Err(format!(
+                        "meshes[{m}].primitives[{p}].attributes[\"{name}\"]: accessor {} does not exist",
+                        index.value()
+                    ));
+                }
+            }
+        }
+    }
     let mut errors = Vec::new();
     root.validate(root, gltf::json::Path::new, &mut |path, error| {
         let path = path().to_string();

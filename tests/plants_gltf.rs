@@ -1,0 +1,565 @@
+//! The glTF plant loader: round trips through the writer, hand-made .glb files, every error it
+//! names, and garbled files that must give errors rather than panics.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::{Value, json};
+use verdant::plants::{
+    MAX_PLANT_TRIANGLES, MAX_PLANT_VERTICES, MAX_TEXTURE_SIZE, PlantFileError, PlantImage,
+    PlantMesh, PlantTexture, PlantVertex, load_plant, write_plant_gltf,
+};
+
+/// A glTF binary: header, JSON chunk (space padded), BIN chunk (zero padded) when not empty.
+fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
+    let mut j = serde_json::to_vec(json).unwrap();
+    while !j.len().is_multiple_of(4) {
+        j.push(b' ');
+    }
+    let mut b = bin.to_vec();
+    while !b.len().is_multiple_of(4) {
+        b.push(0);
+    }
+    let total = 12 + 8 + j.len() + if b.is_empty() { 0 } else { 8 + b.len() };
+    let mut out = Vec::new();
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(j.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&j);
+    if !b.is_empty() {
+        out.extend_from_slice(&(b.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&b);
+    }
+    out
+}
+
+/// One y-up triangle (0,0,0) (1,0,0) (0,1,0) on a node moved by (1, 2, 3), with COLOR_0 as
+/// normalised RGB bytes (stride 4) and u16 indices; POSITION has no min or max.
+fn triangle() -> (Value, Vec<u8>) {
+    let mut bin = Vec::new();
+    for p in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
+        for c in p {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for c in [[255u8, 0, 128], [0, 255, 0], [51, 102, 204]] {
+        bin.extend_from_slice(&c);
+        bin.push(0);
+    }
+    for i in [0u16, 1, 2] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    bin.extend_from_slice(&[0, 0]);
+    let doc = json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "translation": [1.0, 2.0, 3.0]}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "COLOR_0": 1}, "indices": 2}]}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"},
+            {"bufferView": 1, "componentType": 5121, "normalized": true, "count": 3, "type": "VEC3"},
+            {"bufferView": 2, "componentType": 5123, "count": 3, "type": "SCALAR"},
+        ],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 12, "byteStride": 4},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 6},
+        ],
+        "buffers": [{"byteLength": 56}],
+    });
+    (doc, bin)
+}
+
+/// `triangle()` with a PNG in the BIN chunk named as base colour and thickness texture.
+fn triangle_with_texture(png: &[u8]) -> (Value, Vec<u8>) {
+    let (mut doc, mut bin) = triangle();
+    let offset = bin.len();
+    bin.extend_from_slice(png);
+    doc["bufferViews"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"buffer": 0, "byteOffset": offset, "byteLength": png.len()}));
+    doc["buffers"][0]["byteLength"] = json!(bin.len());
+    doc["images"] = json!([{"bufferView": 3, "mimeType": "image/png"}]);
+    doc["textures"] = json!([{"source": 0}]);
+    doc["materials"] = json!([{
+        "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "baseColorFactor": [0.25, 0.5, 0.75, 1.0]},
+        "extensions": {"KHR_materials_volume": {"thicknessTexture": {"index": 0}}},
+    }]);
+    doc["extensionsUsed"] = json!(["KHR_materials_volume"]);
+    doc["meshes"][0]["primitives"][0]["material"] = json!(0);
+    (doc, bin)
+}
+
+fn image(width: u32, height: u32) -> PlantImage {
+    let rgba = (0..width * height * 4)
+        .map(|i| (i * 37 % 251) as u8)
+        .collect();
+    PlantImage {
+        width,
+        height,
+        rgba,
+    }
+}
+
+fn png(img: &PlantImage) -> Vec<u8> {
+    let mut out = std::io::Cursor::new(Vec::new());
+    image::RgbaImage::from_raw(img.width, img.height, img.rgba.clone())
+        .unwrap()
+        .write_to(&mut out, image::ImageFormat::Png)
+        .unwrap();
+    out.into_inner()
+}
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// The error, after checking that its message names the file.
+fn load_err(path: &Path) -> PlantFileError {
+    let err = load_plant(path).expect_err("the file must be refused");
+    let message = err.to_string();
+    assert!(
+        message.contains(&path.display().to_string()),
+        "{message:?} does not name {}",
+        path.display()
+    );
+    err
+}
+
+/// Two triangles of a small upright leaf in plant space (z up), each vertex painted apart.
+fn leaf() -> PlantMesh {
+    let corners = [
+        [0.0, 0.0, 0.0],
+        [0.2, 0.1, 0.3],
+        [-0.1, -0.3, 0.6],
+        [0.05, 0.4, 0.9],
+    ];
+    let vertices = corners
+        .iter()
+        .enumerate()
+        .map(|(i, &position)| {
+            let f = i as f32;
+            PlantVertex {
+                position,
+                normal: [0.0, -0.6, 0.8],
+                wind: [0.1 * f, 0.2 + 0.1 * f, 0.25 * f, 1.0 - 0.2 * f],
+                albedo: [0.2, 0.6, 0.1, 0.5],
+                uv: [0.25 * f, 1.0 - 0.25 * f],
+            }
+        })
+        .collect();
+    PlantMesh {
+        vertices,
+        indices: vec![0, 1, 2, 2, 1, 3],
+    }
+}
+
+fn close(a: [f32; 3], b: [f32; 3], eps: f32) -> bool {
+    a.iter().zip(b).all(|(x, y)| (x - y).abs() <= eps)
+}
+
+#[test]
+fn round_trip_keeps_positions_normals_uvs_and_colour_channels() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("leaf.gltf");
+    let mesh = leaf();
+    write_plant_gltf(&path, &mesh, None).unwrap();
+
+    // The file is y-up: the leaf's top (plant z 0.9) is glTF y 0.9, plant y 0.4 is glTF z -0.4.
+    let doc: Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let max = &doc["accessors"][0]["max"];
+    assert_eq!(max[1].as_f64().unwrap() as f32, 0.9);
+    assert_eq!(doc["accessors"][0]["min"][2].as_f64().unwrap() as f32, -0.4);
+
+    let plant = load_plant(&path).unwrap();
+    assert_eq!(plant.mesh.indices, mesh.indices);
+    assert_eq!(plant.mesh.vertices.len(), mesh.vertices.len());
+    for (got, want) in plant.mesh.vertices.iter().zip(&mesh.vertices) {
+        assert!(
+            close(got.position, want.position, 1e-6),
+            "{got:?} vs {want:?}"
+        );
+        assert!(close(got.normal, want.normal, 1e-6), "{got:?} vs {want:?}");
+        assert_eq!(got.uv, want.uv);
+        assert_eq!(got.wind, want.wind);
+        assert_eq!(got.albedo, [0.2, 0.6, 0.1, 0.5]);
+    }
+    assert_eq!(plant.base_color, None);
+    assert_eq!(plant.thickness, None);
+}
+
+#[test]
+fn glb_by_hand_applies_node_transform_axes_and_byte_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    let (doc, bin) = triangle();
+    let path = write(dir.path(), "tri.glb", &glb(&doc, &bin));
+    let plant = load_plant(&path).unwrap();
+    let positions: Vec<[f32; 3]> = plant.mesh.vertices.iter().map(|v| v.position).collect();
+    // glTF (x, y, z) + (1, 2, 3) then (x, -z, y).
+    assert_eq!(
+        positions,
+        vec![[1.0, -3.0, 2.0], [2.0, -3.0, 2.0], [1.0, -3.0, 3.0]]
+    );
+    assert_eq!(plant.mesh.indices, vec![0, 1, 2]);
+    for v in &plant.mesh.vertices {
+        // Computed: the triangle faces glTF +z, plant -y.
+        assert!(close(v.normal, [0.0, -1.0, 0.0], 1e-6), "{:?}", v.normal);
+        assert_eq!(v.uv, [0.0, 0.0]);
+        // No material: glTF's default white.
+        assert_eq!(v.albedo, [1.0, 1.0, 1.0, 0.5]);
+    }
+    let wind: Vec<[f32; 4]> = plant.mesh.vertices.iter().map(|v| v.wind).collect();
+    assert_eq!(
+        wind,
+        vec![
+            [1.0, 0.0, 128.0 / 255.0, 1.0],
+            [0.0, 1.0, 0.0, 1.0],
+            [0.2, 0.4, 0.8, 1.0]
+        ]
+    );
+}
+
+#[test]
+fn without_colours_freedom_grows_with_height() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut doc, bin) = triangle();
+    doc["meshes"][0]["primitives"][0]["attributes"] = json!({"POSITION": 0});
+    let path = write(dir.path(), "plain.glb", &glb(&doc, &bin));
+    let plant = load_plant(&path).unwrap();
+    let wind: Vec<[f32; 4]> = plant.mesh.vertices.iter().map(|v| v.wind).collect();
+    assert_eq!(
+        wind,
+        vec![
+            [0.0, 0.0, 2.0 / 3.0, 1.0],
+            [0.0, 0.0, 2.0 / 3.0, 1.0],
+            [0.0, 0.0, 1.0, 1.0]
+        ]
+    );
+}
+
+#[test]
+fn lines_are_skipped_and_a_mirroring_node_keeps_faces_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut doc, bin) = triangle();
+    let tri = doc["meshes"][0]["primitives"][0].clone();
+    let mut lines = tri.clone();
+    lines["mode"] = json!(1);
+    doc["meshes"][0]["primitives"] = json!([lines, tri]);
+    doc["nodes"][0]["scale"] = json!([-1.0, 1.0, 1.0]);
+    let path = write(dir.path(), "mirror.glb", &glb(&doc, &bin));
+    let plant = load_plant(&path).unwrap();
+    assert_eq!(plant.mesh.vertices.len(), 3);
+    // Mirrored in x, the winding is turned back so that the front still faces plant -y.
+    assert_eq!(plant.mesh.indices, vec![0, 2, 1]);
+    assert!(close(plant.mesh.vertices[0].normal, [0.0, -1.0, 0.0], 1e-6));
+
+    // Lines alone leave nothing to draw.
+    doc["meshes"][0]["primitives"] = json!([lines]);
+    let path = write(dir.path(), "lines.glb", &glb(&doc, &bin));
+    assert!(matches!(load_err(&path), PlantFileError::NoMesh { .. }));
+}
+
+#[test]
+fn texture_round_trip_through_a_png_beside_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("fern leaf.gltf");
+    let img = image(3, 2);
+    write_plant_gltf(&path, &leaf(), Some(&img)).unwrap();
+    assert!(dir.path().join("fern leaf_base_color.png").exists());
+    let plant = load_plant(&path).unwrap();
+    assert_eq!(plant.base_color, Some(img));
+    assert_eq!(plant.thickness, None);
+}
+
+#[test]
+fn glb_textures_from_a_buffer_view_give_base_colour_and_thickness() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = image(4, 5);
+    let (doc, bin) = triangle_with_texture(&png(&img));
+    let path = write(dir.path(), "textured.glb", &glb(&doc, &bin));
+    let plant = load_plant(&path).unwrap();
+    assert_eq!(plant.base_color.as_ref(), Some(&img));
+    assert_eq!(plant.thickness.as_ref(), Some(&img));
+    assert_eq!(plant.mesh.vertices[0].albedo, [0.25, 0.5, 0.75, 0.5]);
+}
+
+#[test]
+fn missing_file_is_a_read_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("absent.gltf");
+    match load_err(&path) {
+        PlantFileError::Read { source, .. } => {
+            assert_eq!(source.kind(), std::io::ErrorKind::NotFound)
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn text_that_is_not_gltf_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "notes.gltf", b"a fern, about knee high\n");
+    assert!(matches!(load_err(&path), PlantFileError::NotGltf { .. }));
+    // JSON, but not glTF (no asset).
+    let path = write(dir.path(), "other.gltf", b"{\"meshes\": []}");
+    assert!(matches!(load_err(&path), PlantFileError::NotGltf { .. }));
+}
+
+#[test]
+fn a_mesh_without_position_is_no_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut doc, bin) = triangle();
+    doc["meshes"][0]["primitives"][0]["attributes"] = json!({"COLOR_0": 1});
+    let path = write(dir.path(), "nopos.glb", &glb(&doc, &bin));
+    let err = load_err(&path);
+    assert!(matches!(err, PlantFileError::NoMesh { .. }), "{err}");
+    assert!(err.to_string().contains("POSITION"), "{err}");
+}
+
+#[test]
+fn too_many_vertices_names_count_and_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("huge.gltf");
+    let count = MAX_PLANT_VERTICES + 1;
+    let mesh = PlantMesh {
+        vertices: (0..count)
+            .map(|i| PlantVertex {
+                position: [i as f32 * 1e-3, 0.0, 0.0],
+                ..Default::default()
+            })
+            .collect(),
+        indices: vec![0, 1, 2],
+    };
+    write_plant_gltf(&path, &mesh, None).unwrap();
+    match load_err(&path) {
+        PlantFileError::TooManyVertices {
+            count: got, limit, ..
+        } => {
+            assert_eq!((got, limit), (count, MAX_PLANT_VERTICES));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(load_err(&path).to_string().contains("65536"));
+}
+
+#[test]
+fn too_many_triangles_names_count_and_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("dense.gltf");
+    let mut mesh = leaf();
+    mesh.indices = [0, 1, 2].repeat(MAX_PLANT_TRIANGLES + 1);
+    write_plant_gltf(&path, &mesh, None).unwrap();
+    match load_err(&path) {
+        PlantFileError::TooManyTriangles { count, limit, .. } => {
+            assert_eq!(
+                (count, limit),
+                (MAX_PLANT_TRIANGLES + 1, MAX_PLANT_TRIANGLES)
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn a_corrupt_base_colour_png_is_a_texture_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("leaf.gltf");
+    write_plant_gltf(&path, &leaf(), Some(&image(2, 2))).unwrap();
+    let png_path = dir.path().join("leaf_base_color.png");
+    let mut bytes = std::fs::read(&png_path).unwrap();
+    let len = bytes.len();
+    bytes.truncate(len / 2);
+    std::fs::write(&png_path, bytes).unwrap();
+    match load_err(&path) {
+        PlantFileError::Texture { texture, .. } => assert_eq!(texture, PlantTexture::BaseColor),
+        other => panic!("{other:?}"),
+    }
+    // Missing altogether: the same error, naming the image file.
+    std::fs::remove_file(&png_path).unwrap();
+    let err = load_err(&path);
+    assert!(matches!(err, PlantFileError::Texture { .. }), "{err}");
+    assert!(err.to_string().contains("leaf_base_color.png"), "{err}");
+}
+
+#[test]
+fn a_texture_over_the_size_limit_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let wide = image(MAX_TEXTURE_SIZE + 1, 1);
+    let (doc, bin) = triangle_with_texture(&png(&wide));
+    let path = write(dir.path(), "wide.glb", &glb(&doc, &bin));
+    match load_err(&path) {
+        PlantFileError::TextureTooLarge { width, height, .. } => {
+            assert_eq!((width, height), (MAX_TEXTURE_SIZE + 1, 1))
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn indices_out_of_range_are_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let (doc, mut bin) = triangle();
+    bin[52..54].copy_from_slice(&7u16.to_le_bytes());
+    let path = write(dir.path(), "badindex.glb", &glb(&doc, &bin));
+    match load_err(&path) {
+        PlantFileError::IndexOutOfRange {
+            index, vertices, ..
+        } => assert_eq!((index, vertices), (7, 3)),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn missing_and_short_buffers_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut doc, bin) = triangle();
+    doc["buffers"][0]["uri"] = json!("tri.bin");
+    let path = write(dir.path(), "tri.gltf", &serde_json::to_vec(&doc).unwrap());
+    let err = load_err(&path);
+    assert!(matches!(err, PlantFileError::BufferMissing { .. }), "{err}");
+    assert!(err.to_string().contains("tri.bin"), "{err}");
+
+    // Present beside the file: loads.
+    write(dir.path(), "tri.bin", &bin);
+    assert_eq!(load_plant(&path).unwrap().mesh.vertices.len(), 3);
+
+    // Shorter than the glTF says.
+    write(dir.path(), "tri.bin", &bin[..40]);
+    assert!(matches!(
+        load_err(&path),
+        PlantFileError::BufferTooShort {
+            len: 40,
+            needed: 56,
+            ..
+        }
+    ));
+
+    // A .glb whose JSON promises more than its BIN chunk holds.
+    let (mut doc, bin) = triangle();
+    doc["buffers"][0]["byteLength"] = json!(4096);
+    let path = write(dir.path(), "short.glb", &glb(&doc, &bin));
+    assert!(matches!(
+        load_err(&path),
+        PlantFileError::BufferTooShort { needed: 4096, .. }
+    ));
+}
+
+#[test]
+fn a_node_cycle_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut doc, bin) = triangle();
+    doc["nodes"][0]["children"] = json!([0]);
+    let path = write(dir.path(), "cycle.glb", &glb(&doc, &bin));
+    let err = load_err(&path);
+    assert!(err.to_string().contains("cycle"), "{err}");
+}
+
+#[test]
+fn an_accessor_past_its_view_is_a_bad_primitive() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut doc, bin) = triangle();
+    doc["accessors"][0]["count"] = json!(4);
+    doc["accessors"][1]["count"] = json!(4);
+    let path = write(dir.path(), "overrun.glb", &glb(&doc, &bin));
+    let err = load_err(&path);
+    assert!(matches!(err, PlantFileError::BadPrimitive { .. }), "{err}");
+}
+
+/// Loads a garbled file; the result may be anything but a panic.
+fn load_garbled(path: &Path, bytes: &[u8]) -> bool {
+    std::fs::write(path, bytes).unwrap();
+    load_plant(path).is_ok()
+}
+
+#[test]
+fn garbled_glb_files_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("garbled.glb");
+    let (doc, bin) = triangle_with_texture(&png(&image(2, 2)));
+    let good = glb(&doc, &bin);
+    assert!(load_garbled(&path, &good));
+    let mut loaded = 0;
+    for cut in 0..good.len() {
+        assert!(!load_garbled(&path, &good[..cut]), "cut at {cut}");
+    }
+    for at in 0..good.len() {
+        let original = good[at];
+        let mut bytes = good.clone();
+        let mut replacements = vec![0x00, 0xff, original ^ 0x5a];
+        if original.is_ascii_digit() {
+            // Numbers in the JSON: counts, offsets and indices far too large.
+            replacements.push(b'9');
+        }
+        for r in replacements {
+            bytes[at] = r;
+            loaded += usize::from(load_garbled(&path, &bytes));
+        }
+    }
+    // Bytes of colours and padding change nothing that matters: some garbled files still load.
+    assert!(loaded > 0);
+}
+
+/// JSON pointers to every number and every object member under `value`.
+fn pointers(value: &Value, at: String, numbers: &mut Vec<String>, members: &mut Vec<String>) {
+    match value {
+        Value::Number(_) => numbers.push(at),
+        Value::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                pointers(item, format!("{at}/{i}"), numbers, members);
+            }
+        }
+        Value::Object(map) => {
+            for (key, item) in map {
+                let child = format!("{at}/{key}");
+                members.push(child.clone());
+                pointers(item, child, numbers, members);
+            }
+        }
+        _ => {}
+    }
+}
+
+#[test]
+fn glb_files_with_wrong_numbers_or_missing_members_never_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("mutated.glb");
+    let (doc, bin) = triangle_with_texture(&png(&image(2, 2)));
+    let (mut numbers, mut members) = (Vec::new(), Vec::new());
+    pointers(&doc, String::new(), &mut numbers, &mut members);
+    for pointer in &numbers {
+        for replacement in [
+            json!(0),
+            json!(1),
+            json!(2),
+            json!(5),
+            json!(255),
+            json!(65_535),
+            json!(4_294_967_295u64),
+            json!(-1),
+            json!(1e30),
+            json!(0.5),
+        ] {
+            let mut mutated = doc.clone();
+            *mutated.pointer_mut(pointer).unwrap() = replacement;
+            load_garbled(&path, &glb(&mutated, &bin));
+        }
+    }
+    for pointer in &members {
+        let (parent, key) = pointer.rsplit_once('/').unwrap();
+        let mut mutated = doc.clone();
+        mutated
+            .pointer_mut(parent)
+            .and_then(Value::as_object_mut)
+            .unwrap()
+            .remove(key);
+        load_garbled(&path, &glb(&mutated, &bin));
+    }
+    // The scene without its BIN chunk.
+    load_garbled(&path, &glb(&doc, &[]));
+}
