@@ -6,38 +6,10 @@ mod common;
 use std::path::Path;
 use std::process::{Command, Output};
 
-fn verdant(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_verdant"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run verdant")
-}
-
-fn assert_fails_naming(out: &Output, needles: &[&str]) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure, stderr: {stderr}");
-    assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
-    assert!(!stderr.contains("panicked"), "panicked: {stderr}");
-    for n in needles {
-        assert!(stderr.contains(n), "stderr should mention {n:?}: {stderr}");
-    }
-}
+use common::{assert_fails_naming, verdant, world_copy};
 
 /// Soaks measure their own memory and frame times: one at a time.
 static SOAKS: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn world_copy(dir: &Path) -> std::path::PathBuf {
-    let w = dir.join("world");
-    std::fs::create_dir_all(&w).unwrap();
-    std::fs::copy(
-        common::default_world().join("world.toml"),
-        w.join("world.toml"),
-    )
-    .unwrap();
-    common::copy_dir(&common::default_world().join("tiles"), &w.join("tiles"));
-    w
-}
 
 #[test]
 fn fly_with_a_corrupt_tile_names_it() {

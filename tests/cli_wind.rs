@@ -161,7 +161,8 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
             "color-variation",
             "ground-darkening",
             "far-field",
-            "shadows"
+            "shadows",
+            "plants"
         ]
     );
     let contribution = |name: &str| -> f64 {

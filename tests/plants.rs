@@ -215,7 +215,10 @@ fn gpu_placement_matches_the_cpu_mirror_on_meadow_steep_bare_and_high_tiles() {
     for (k, kind) in kinds.iter().enumerate() {
         // Side by side in front of the camera (which looks north), the first nearest.
         let j = TileJob {
-            origin: [-0.5 * tm + tm * (k % 2) as f32 - 0.5 * tm, 2.0 + tm * (k / 2) as f32],
+            origin: [
+                -0.5 * tm + tm * (k % 2) as f32 - 0.5 * tm,
+                2.0 + tm * (k / 2) as f32,
+            ],
             cell,
             layer: k as u32,
             tile_x: 5000 + k as u32,
@@ -250,13 +253,23 @@ fn gpu_placement_matches_the_cpu_mirror_on_meadow_steep_bare_and_high_tiles() {
     let levels: std::collections::HashSet<usize> = cpu.iter().map(|p| p.level()).collect();
     assert!(types.len() >= 3, "types placed: {types:?}");
     assert!(levels.len() >= 2, "levels placed: {levels:?}");
-    assert!(stats[counter::RULED_OUT] > 0, "the steep tile rules plants out");
-    assert!(stats[counter::FRUSTUM] > 0, "some plants fall outside the frustum");
+    assert!(
+        stats[counter::RULED_OUT] > 0,
+        "the steep tile rules plants out"
+    );
+    assert!(
+        stats[counter::FRUSTUM] > 0,
+        "some plants fall outside the frustum"
+    );
 
     let mut gpu_all: Vec<PlantInstance> = gpu.iter().flatten().copied().collect();
     for (r, region) in gpu.iter().enumerate() {
         for p in region {
-            assert_eq!(p.plant_type() * LEVELS + p.level(), r, "an instance in its region");
+            assert_eq!(
+                p.plant_type() * LEVELS + p.level(),
+                r,
+                "an instance in its region"
+            );
         }
     }
     gpu_all.sort_by_key(key);
@@ -289,11 +302,7 @@ fn a_full_region_drops_and_counts_the_rest_and_the_pool_does_not_grow() {
     let bytes = small.plants.pool_bytes();
     let mut jobs = Vec::new();
     for k in 0..4u32 {
-        let t = synthetic_tile(
-            &small.manifest,
-            TileId::new(level, 100 + k, 100),
-            "meadow",
-        );
+        let t = synthetic_tile(&small.manifest, TileId::new(level, 100 + k, 100), "meadow");
         small.atlas.upload(&small.ctx.queue, k, &t).unwrap();
         jobs.push(TileJob {
             origin: [-tm + tm * (k % 2) as f32, 1.0 + tm * (k / 2) as f32],
@@ -308,7 +317,9 @@ fn a_full_region_drops_and_counts_the_rest_and_the_pool_does_not_grow() {
     let camera = Camera::new(DVec3::new(0.0, 0.0, f64::from(ALTITUDE)), 90.0, -20.0);
     small.run(&camera, &jobs);
     let stats = small.plants.read_stats(&small.ctx.device, &small.ctx.queue);
-    let regions = small.plants.read_instances(&small.ctx.device, &small.ctx.queue);
+    let regions = small
+        .plants
+        .read_instances(&small.ctx.device, &small.ctx.queue);
     assert!(stats.overflow > 0, "{stats:?}");
     assert!(regions.iter().all(|r| r.len() <= 64));
     assert_eq!(
@@ -366,9 +377,13 @@ fn gpu_bending_matches_the_cpu_mirror() {
         &Frustum::from_view_proj(view_proj),
         camera.near_m,
     );
-    let gpu = rig
-        .plants
-        .probe_bend(&rig.ctx.device, &rig.ctx.queue, &vertices, &instances, &winds);
+    let gpu = rig.plants.probe_bend(
+        &rig.ctx.device,
+        &rig.ctx.queue,
+        &vertices,
+        &instances,
+        &winds,
+    );
     let mut moved = 0;
     for i in 0..n {
         let t = instances[i].plant_type();
@@ -383,8 +398,14 @@ fn gpu_bending_matches_the_cpu_mirror() {
         );
         let (gp, gn) = gpu[i];
         let dp = (p - glam::Vec3::from_array(gp)).length();
-        assert!(dp < 2e-4 * (1.0 + p.length()), "vertex {i}: {p} against {gp:?}");
-        assert!((nrm - glam::Vec3::from_array(gn)).length() < 1e-3, "normal {i}");
+        assert!(
+            dp < 2e-4 * (1.0 + p.length()),
+            "vertex {i}: {p} against {gp:?}"
+        );
+        assert!(
+            (nrm - glam::Vec3::from_array(gn)).length() < 1e-3,
+            "normal {i}"
+        );
         let (still, _) = verdant::plants::bend_cpu::bend_vertex(
             &vertices[i],
             &instances[i],
@@ -397,5 +418,8 @@ fn gpu_bending_matches_the_cpu_mirror() {
             moved += 1;
         }
     }
-    assert!(moved > n / 2, "the wind moves most vertices: {moved} of {n}");
+    assert!(
+        moved > n / 2,
+        "the wind moves most vertices: {moved} of {n}"
+    );
 }

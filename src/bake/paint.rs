@@ -16,7 +16,7 @@ use super::resample::Grid;
 pub const MAX_GRASS_SLOPE_DEG: f64 = 35.0;
 
 /// The plant types a baked world gets: two flowers, a fern and a bush among its grass types
-/// (`meadow`, `tall grass`, `dry grass`), about one plant per 3 m2 of meadow.
+/// (`meadow`, `tall grass`, `dry grass`), about one plant per 1.5 m2 of meadow.
 pub fn default_plant_types() -> Vec<crate::world::PlantType> {
     use crate::world::{PlantType, PlantWind};
     #[allow(clippy::too_many_arguments)]
@@ -53,9 +53,9 @@ pub fn default_plant_types() -> Vec<crate::world::PlantType> {
             "poppy",
             "flower",
             [0.8, 0.1, 0.03],
-            [0.3, 0.55],
-            &[("meadow", 0.16), ("dry grass", 0.05)],
-            (35.0, 6.0, 0.5),
+            [0.35, 0.65],
+            &[("meadow", 0.45), ("dry grass", 0.12)],
+            (35.0, 8.0, 0.5),
             1,
             flower(1.2, 0.25),
         ),
@@ -63,9 +63,9 @@ pub fn default_plant_types() -> Vec<crate::world::PlantType> {
             "cornflower",
             "flower",
             [0.22, 0.3, 0.85],
-            [0.35, 0.6],
-            &[("meadow", 0.12), ("tall grass", 0.05)],
-            (35.0, 9.0, 0.4),
+            [0.4, 0.7],
+            &[("meadow", 0.3), ("tall grass", 0.1)],
+            (35.0, 10.0, 0.45),
             2,
             flower(1.0, 0.3),
         ),
@@ -74,8 +74,8 @@ pub fn default_plant_types() -> Vec<crate::world::PlantType> {
             "fern",
             [0.12, 0.3, 0.05],
             [0.5, 0.9],
-            &[("meadow", 0.04), ("tall grass", 0.1)],
-            (40.0, 12.0, 0.35),
+            &[("meadow", 0.06), ("tall grass", 0.25)],
+            (40.0, 12.0, 0.4),
             3,
             PlantWind {
                 bend: 0.03,
@@ -90,8 +90,8 @@ pub fn default_plant_types() -> Vec<crate::world::PlantType> {
             "bush",
             [0.1, 0.24, 0.04],
             [0.7, 1.4],
-            &[("meadow", 0.04), ("tall grass", 0.03), ("dry grass", 0.03)],
-            (30.0, 20.0, 0.3),
+            &[("meadow", 0.05), ("tall grass", 0.05), ("dry grass", 0.04)],
+            (30.0, 20.0, 0.35),
             4,
             PlantWind {
                 bend: 0.012,

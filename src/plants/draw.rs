@@ -37,8 +37,7 @@ impl DrawPass {
                     storage_buffer_read_only(),
                     texture_2d_array(wgpu::TextureSampleType::Float { filterable: true })
                         .visible_in(S::FRAGMENT),
-                    wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering)
-                        .into(),
+                    wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering).into(),
                 ],
             ),
         );

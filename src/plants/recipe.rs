@@ -212,9 +212,20 @@ fn flower(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
         }
     }
 
-    // The head faces up, tilted a little along the stem's lean.
+    // The head faces half sideways (40-65 degrees from the vertical, along the stem's lean), as
+    // meadow flowers turn to the light: seen from standing height a head facing straight up
+    // would be edge-on, a line of a pixel or two.
     let head = stem(1.0);
-    let axis = ((stem(1.0) - stem(0.95)).normalize() + Vec3::Z * 1.5).normalize();
+    let tilt = r.range(40f32.to_radians(), 65f32.to_radians());
+    let along = {
+        let d = (stem(1.0) - stem(0.95)).truncate();
+        if d.length() > 1e-4 {
+            d.normalize()
+        } else {
+            glam::Vec2::X
+        }
+    };
+    let axis = (along.extend(0.0) * tilt.sin() + Vec3::Z * tilt.cos()).normalize();
     let (hu, hv) = axis.any_orthonormal_pair();
     let petals = r.count(5, 8);
     let petal_len = r.range(0.14, 0.2);

@@ -149,7 +149,13 @@ pub struct PlantRenderer {
 
 /// Per level of detail of each type: the meshes packed into one vertex and one index buffer,
 /// with each (type, level)'s index count, first index and base vertex.
-fn pack_meshes(set: &PlantSet) -> (Vec<crate::plants::PlantVertex>, Vec<u32>, [[u32; 4]; REGIONS]) {
+fn pack_meshes(
+    set: &PlantSet,
+) -> (
+    Vec<crate::plants::PlantVertex>,
+    Vec<u32>,
+    [[u32; 4]; REGIONS],
+) {
     let mut vertices = Vec::new();
     let mut indices = Vec::new();
     let mut table = [[0u32; 4]; REGIONS];
@@ -193,7 +199,12 @@ fn type_table(manifest: &Manifest, set: &PlantSet) -> [PlantTypeGpu; TYPES] {
                 t.max_slope_deg.to_radians().cos(),
                 t.clump_m,
             ],
-            limits: [t.altitude_m[0], t.altitude_m[1], t.clump_cover, m.radius_ratio],
+            limits: [
+                t.altitude_m[0],
+                t.altitude_m[1],
+                t.clump_cover,
+                m.radius_ratio,
+            ],
             density,
         };
     }
@@ -255,14 +266,22 @@ impl PlantRenderer {
             std::mem::size_of::<PlaceParams>() as u64,
             U::UNIFORM | U::COPY_DST,
         );
-        let jobs = buffer("plants jobs", u64::from(MAX_JOBS) * 32, U::STORAGE | U::COPY_DST);
+        let jobs = buffer(
+            "plants jobs",
+            u64::from(MAX_JOBS) * 32,
+            U::STORAGE | U::COPY_DST,
+        );
         let region_bytes = u64::from(capacity) * INSTANCE_BYTES;
         let instances = buffer(
             "plants instances",
             region_bytes * u64::from(types.max(1)) * LEVELS as u64,
             U::STORAGE | U::COPY_SRC | U::COPY_DST,
         );
-        let counters = buffer("plants counters", REGIONS as u64 * 4, U::STORAGE | U::COPY_DST);
+        let counters = buffer(
+            "plants counters",
+            REGIONS as u64 * 4,
+            U::STORAGE | U::COPY_DST,
+        );
         let stats = buffer("plants stats", 32, U::STORAGE | U::COPY_DST | U::COPY_SRC);
         let args = buffer(
             "plants draw args",
@@ -582,7 +601,11 @@ impl PlantRenderer {
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
         let region_bytes = u64::from(self.settings.capacity) * INSTANCE_BYTES;
         for region in 0..(self.types as usize * LEVELS) {
-            pass.set_bind_group(1, &self.region_group, &[(region as u64 * region_bytes) as u32]);
+            pass.set_bind_group(
+                1,
+                &self.region_group,
+                &[(region as u64 * region_bytes) as u32],
+            );
             pass.draw_indexed_indirect(&self.args, region as u64 * 20);
         }
     }
@@ -648,18 +671,28 @@ impl PlantRenderer {
             })
         };
         use wgpu::BufferUsages as U;
-        let v = init("probe vertices", bytemuck::cast_slice(&vertices[..n]), U::STORAGE);
-        let i = init("probe instances", bytemuck::cast_slice(&instances[..n]), U::STORAGE);
+        let v = init(
+            "probe vertices",
+            bytemuck::cast_slice(&vertices[..n]),
+            U::STORAGE,
+        );
+        let i = init(
+            "probe instances",
+            bytemuck::cast_slice(&instances[..n]),
+            U::STORAGE,
+        );
         let w = init("probe winds", bytemuck::cast_slice(&winds[..n]), U::STORAGE);
-        let out = gpu_buffer(device, "probe out", (n * 32) as u64, U::STORAGE | U::COPY_SRC);
+        let out = gpu_buffer(
+            device,
+            "probe out",
+            (n * 32) as u64,
+            U::STORAGE | U::COPY_SRC,
+        );
         let g0 = bind_group(
             device,
             "probe frame",
             &pipeline.get_bind_group_layout(0),
-            [
-                self.frame_buffer.as_entire_binding(),
-                v.as_entire_binding(),
-            ],
+            [self.frame_buffer.as_entire_binding(), v.as_entire_binding()],
         );
         let g1 = bind_group_with_indices(
             device,

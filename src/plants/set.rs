@@ -90,12 +90,11 @@ pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, Plan
         }
         None => {
             let file = dir.join(&t.mesh);
-            let loaded = crate::plants::gltf::load_plant(&file).map_err(|source| {
-                PlantError::File {
+            let loaded =
+                crate::plants::gltf::load_plant(&file).map_err(|source| PlantError::File {
                     name: t.name.clone(),
                     source,
-                }
-            })?;
+                })?;
             let mut mesh = loaded.mesh;
             let h = mesh.height();
             if !(h > 1e-6) {
@@ -113,9 +112,7 @@ pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, Plan
             // into each vertex's thinness.
             if let Some(th) = &loaded.thickness {
                 for v in &mut mesh.vertices {
-                    let g = f32::from(
-                        th.rgba[texel_index(th, v.uv) + 1],
-                    ) / 255.0;
+                    let g = f32::from(th.rgba[texel_index(th, v.uv) + 1]) / 255.0;
                     v.albedo[3] = 1.0 - g;
                 }
             }

@@ -469,7 +469,10 @@ impl Renderer {
                     None
                 } else {
                     let set = crate::plants::PlantSet::build(&world.manifest, &world.dir)?;
-                    let [_, view] = [settings.view_distance_m - settings.far_fade_m, settings.view_distance_m];
+                    let [_, view] = [
+                        settings.view_distance_m - settings.far_fade_m,
+                        settings.view_distance_m,
+                    ];
                     Some(crate::plants::PlantRenderer::new(
                         device,
                         queue,

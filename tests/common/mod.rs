@@ -229,3 +229,32 @@ impl Rng {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
+
+/// A copy of the default world (manifest and tiles) in `dir/world`, for tests that damage it.
+pub fn world_copy(dir: &Path) -> PathBuf {
+    let w = dir.join("world");
+    std::fs::create_dir_all(&w).unwrap();
+    std::fs::copy(default_world().join("world.toml"), w.join("world.toml")).unwrap();
+    copy_dir(&default_world().join("tiles"), &w.join("tiles"));
+    w
+}
+
+/// The command failed with status 1, without a panic, and its stderr names every needle.
+pub fn assert_fails_naming(out: &std::process::Output, needles: &[&str]) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "expected failure, stderr: {stderr}");
+    assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
+    assert!(!stderr.contains("panicked"), "panicked: {stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "stderr should mention {n:?}: {stderr}");
+    }
+}
+
+/// Runs the `verdant` binary with `args` in `cwd`.
+pub fn verdant(args: &[&str], cwd: &Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run verdant")
+}

@@ -1,0 +1,168 @@
+//! Plants through the command line: a user's glTF plant in a world renders where its rule puts
+//! it, and bad plant files are refused by name before anything is drawn.
+
+mod common;
+
+use std::path::Path;
+
+use verdant::plants::{PlantImage, PlantMesh, PlantVertex, write_plant_gltf};
+
+/// A small plant: two crossed quads 1 m high, coloured, with Crysis' channels.
+fn small_plant() -> PlantMesh {
+    let mut vertices = Vec::new();
+    let mut indices = Vec::new();
+    for (k, (dx, dy)) in [(1.0f32, 0.0f32), (0.0, 1.0)].into_iter().enumerate() {
+        let base = vertices.len() as u32;
+        for (x, z, u, v) in [
+            (-0.3, 0.0, 0.0, 1.0),
+            (0.3, 0.0, 1.0, 1.0),
+            (0.3, 1.0, 1.0, 0.0),
+            (-0.3, 1.0, 0.0, 0.0),
+        ] {
+            vertices.push(PlantVertex {
+                position: [x * dx, x * dy, z],
+                normal: [dy, -dx, 0.0],
+                wind: [0.5, 0.25 * k as f32, z, 0.5 + 0.5 * z],
+                albedo: [0.9, 0.8, 0.1, 0.5],
+                uv: [u, v],
+            });
+        }
+        indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+    PlantMesh { vertices, indices }
+}
+
+/// The default world with its plant types replaced by one glTF plant `mesh` on the meadow.
+fn world_with_plant(dir: &Path, mesh: &str) -> std::path::PathBuf {
+    let w = common::world_copy(dir);
+    let manifest = std::fs::read_to_string(w.join("world.toml")).unwrap();
+    let start = manifest
+        .find("[[plant_types]]")
+        .expect("the world has plants");
+    let end = manifest.find("[wind]").expect("a wind table");
+    let plant = format!(
+        "[[plant_types]]\nname = \"marigold\"\nmesh = \"{mesh}\"\nsize_m = [0.4, 0.6]\n\
+         density = {{ meadow = 1.5, \"tall grass\" = 1.5, \"dry grass\" = 1.5 }}\n\n"
+    );
+    let edited = format!("{}{plant}{}", &manifest[..start], &manifest[end..]);
+    std::fs::write(w.join("world.toml"), edited).unwrap();
+    w
+}
+
+fn fly(world: &Path, dir: &Path) -> std::process::Output {
+    common::verdant(
+        &[
+            "fly",
+            world.to_str().unwrap(),
+            "--path",
+            "meadow",
+            "--frames",
+            "1",
+            "--size",
+            "160x90",
+            "--out",
+            "o",
+        ],
+        dir,
+    )
+}
+
+#[test]
+fn a_gltf_plant_renders_where_its_rule_puts_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = world_with_plant(tmp.path(), "plants/marigold.gltf");
+    std::fs::create_dir_all(w.join("plants")).unwrap();
+    let texture = PlantImage {
+        width: 4,
+        height: 4,
+        rgba: [255u8, 200, 40, 255].repeat(16),
+    };
+    write_plant_gltf(
+        &w.join("plants/marigold.gltf"),
+        &small_plant(),
+        Some(&texture),
+    )
+    .unwrap();
+    let out = fly(&w, tmp.path());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "fly failed: {stderr}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("o/report.json")).unwrap())
+            .unwrap();
+    let plants = &report["frames"][0]["plants"];
+    assert!(plants["drawn"].as_u64().unwrap() > 100, "{plants}");
+    assert_eq!(plants["overflow"].as_u64().unwrap(), 0, "{plants}");
+
+    // Without the plant on the grass types under the camera, none is drawn.
+    let manifest = std::fs::read_to_string(w.join("world.toml")).unwrap();
+    let none = manifest.replace(
+        "density = { meadow = 1.5, \"tall grass\" = 1.5, \"dry grass\" = 1.5 }",
+        "density = { bare = 1.5 }",
+    );
+    assert_ne!(manifest, none);
+    std::fs::write(w.join("world.toml"), none).unwrap();
+    let out = fly(&w, tmp.path());
+    assert!(out.status.success());
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("o/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["frames"][0]["plants"]["drawn"].as_u64(), Some(0));
+}
+
+#[test]
+fn bad_plant_files_are_refused_naming_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cases: [(&str, &dyn Fn(&Path), &[&str]); 4] = [
+        ("missing.gltf", &|_| {}, &["missing.gltf"]),
+        (
+            "notes.gltf",
+            &|p| std::fs::write(p.join("notes.gltf"), "these are my notes").unwrap(),
+            &["notes.gltf"],
+        ),
+        (
+            "flat.glb",
+            &|p| std::fs::write(p.join("flat.glb"), b"glTF\x02\x00\x00\x00").unwrap(),
+            &["flat.glb"],
+        ),
+        (
+            "broken_texture.gltf",
+            &|p| {
+                let img = PlantImage {
+                    width: 2,
+                    height: 2,
+                    rgba: vec![255; 16],
+                };
+                write_plant_gltf(&p.join("broken_texture.gltf"), &small_plant(), Some(&img))
+                    .unwrap();
+                // Every PNG beside it garbled.
+                for e in std::fs::read_dir(p).unwrap() {
+                    let f = e.unwrap().path();
+                    if f.extension().is_some_and(|x| x == "png") {
+                        std::fs::write(&f, b"\x89PNG\r\n\x1a\nbroken").unwrap();
+                    }
+                }
+            },
+            &["broken_texture.gltf", "texture"],
+        ),
+    ];
+    let w = world_with_plant(tmp.path(), "PLACEHOLDER");
+    let manifest = std::fs::read_to_string(w.join("world.toml")).unwrap();
+    for (file, make, needles) in cases {
+        make(&w);
+        std::fs::write(w.join("world.toml"), manifest.replace("PLACEHOLDER", file)).unwrap();
+        let out = fly(&w, tmp.path());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{file}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{file}: {stderr}");
+        for n in needles {
+            assert!(
+                stderr.contains(n),
+                "{file}: stderr should name {n:?}: {stderr}"
+            );
+        }
+        assert!(
+            !tmp.path().join("o/report.json").exists(),
+            "{file}: nothing is written"
+        );
+    }
+}
