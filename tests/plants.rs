@@ -4,6 +4,8 @@
 
 mod common;
 
+use std::time::Duration;
+
 use glam::{DVec3, Vec4};
 use verdant::RendererConfig;
 use verdant::camera::Camera;
@@ -422,4 +424,60 @@ fn gpu_bending_matches_the_cpu_mirror() {
         moved > n / 2,
         "the wind moves most vertices: {moved} of {n}"
     );
+}
+
+/// The plants' pool through the renderer: the same bytes on every path of the default world
+/// (the standing-height meadow, the tour's glide, the overview), with plants drawn on each
+/// path that sees grass and none overflowing at the default capacity.
+#[test]
+fn the_plant_pool_is_the_same_on_every_path() {
+    use verdant::camera::sample_path;
+    use verdant::{FrameInput, Renderer, RendererOptions};
+    let ctx = common::gpu();
+    let world = World::open(&common::default_world()).unwrap();
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let (w, h) = (96, 54);
+    let options = RendererOptions::new(&world, c, d, w, h);
+    let paths = world.manifest.paths.clone();
+    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    let bytes = renderer
+        .plant_pool_bytes()
+        .expect("the default world has plants");
+    use wgpu::TextureUsages as U;
+    let color = verdant::gpu::target_texture(&ctx.device, "c", c, U::RENDER_ATTACHMENT, (w, h));
+    let depth = verdant::gpu::target_texture(
+        &ctx.device,
+        "d",
+        d,
+        U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
+        (w, h),
+    );
+    let (cv, dv) = (
+        color.create_view(&Default::default()),
+        depth.create_view(&Default::default()),
+    );
+    let mut drawn = std::collections::BTreeMap::new();
+    for name in ["meadow", "tour", "overview"] {
+        let path = paths.iter().find(|p| p.name == name).expect(name);
+        let t_s = path.keys[path.keys.len() / 2].t_s;
+        let camera = sample_path(path, t_s);
+        renderer.warm_up(&camera, Duration::from_secs(60)).unwrap();
+        for _ in 0..3 {
+            renderer.prepare(&ctx.queue, &FrameInput::new(camera, t_s));
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            renderer.record(&mut encoder, &cv, &dv).unwrap();
+            ctx.queue.submit([encoder.finish()]);
+            ctx.wait_idle();
+        }
+        ctx.wait_idle();
+        let stats = renderer.take_stats();
+        let last = stats.last().and_then(|s| s.plants).expect("plant figures");
+        assert_eq!(last.overflow, 0, "{name}: {last:?}");
+        drawn.insert(name, last.drawn);
+        assert_eq!(renderer.plant_pool_bytes(), Some(bytes), "{name}");
+    }
+    assert!(drawn["meadow"] > 100, "{drawn:?}");
 }

@@ -6,7 +6,7 @@
 //! colour's b) and its edges flutter along the normal by r, from smoothed triangle waves at four
 //! frequencies phased by the leaf (g) and the plant. Main bending then leans the whole plant
 //! along the wind, the offset growing with height by Crysis' bend factor
-//! `((z / h + 1)^2)^2 - (z / h + 1)^2`, and pulls each point back toward its distance from the
+//! `((z / h + 1)^2)^2 - (z / h + 1)^2` (divided by 12, its value at the top), and pulls each point back toward its distance from the
 //! root (the type's stretch: 1 keeps the length exactly, so a bent plant does not grow). The lean
 //! is the wind times the type's bend and main amplitude, less for a stiff plant, with a sway
 //! about it at the type's spring frequency that a lightly damped plant makes larger, plus the
@@ -108,7 +108,7 @@ pub fn bend_vertex(
     let len = p.length();
     let mut bf = p.z / scale.max(1e-4) + 1.0;
     bf *= bf;
-    bf = bf * bf - bf;
+    bf = (bf * bf - bf) / 12.0;
     let mut q = p;
     q.x += lean.x * bf * scale;
     q.y += lean.y * bf * scale;

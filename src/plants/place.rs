@@ -1,5 +1,5 @@
 //! The plants' placement stage on the GPU (`shaders/plants_place.wgsl`): plants placed and
-//! culled per grass tile into the regions of the instance pool, then each region's indexed
+//! culled per grass tile into the regions of the instance pool, then each region's
 //! indirect draw. Its CPU mirror is [`crate::plants::place_cpu`];
 //! [`crate::plants::renderer`] binds it to the pool and records it.
 

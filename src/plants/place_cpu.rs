@@ -85,7 +85,7 @@ pub struct PlaceParams {
     pub hiz_levels: [[u32; 4]; 16],
     /// Per plant type.
     pub types: [PlantTypeGpu; TYPES],
-    /// Per region: index count, first index, base vertex, unused.
+    /// Per region: index count, first index (into the packed, global indices), unused.
     pub meshes: [[u32; 4]; REGIONS],
 }
 const _: () =

@@ -573,6 +573,15 @@ impl Renderer {
         &self.atlas
     }
 
+    /// GPU memory of the plants' instance pool, bytes (`None` without plants): fixed when the
+    /// renderer is made, whatever the view.
+    pub fn plant_pool_bytes(&self) -> Option<u64> {
+        self.grass
+            .as_ref()
+            .and_then(|g| g.plants.as_ref())
+            .map(|p| p.pool_bytes())
+    }
+
     /// The grass tiles of the last frame and their rings.
     pub fn grass_rings(&self) -> Vec<(TileId, Ring)> {
         self.rings.as_ref().map_or(Vec::new(), |r| r.current())
