@@ -29,7 +29,7 @@ impl DrawPass {
             device,
             "plants draw",
             &sequential(
-                S::VERTEX_FRAGMENT | S::COMPUTE,
+                S::VERTEX_FRAGMENT,
                 [
                     uniform_buffer(),
                     storage_buffer_read_only(),
