@@ -55,7 +55,7 @@ mod tiles;
 pub use author::{
     HELICOPTER_PATH, WALKER_PATH, WIND_TOUR_PATH, WIND_TOUR_SCENES, default_wind_scenes,
 };
-pub use paint::{MAX_GRASS_SLOPE_DEG, default_grass_types};
+pub use paint::{MAX_GRASS_SLOPE_DEG, default_grass_types, default_plant_types};
 pub use publish::CancelFlag;
 
 use author::{helicopter_path, low_path, meadow_path, overview_path, tour_path, wind_tour_paths};
@@ -239,7 +239,7 @@ pub fn bake(
         }),
         derive: None,
         grass_peak: None,
-        plant_types: paint::default_plant_types(),
+        plant_types: Vec::new(),
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;

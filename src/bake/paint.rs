@@ -15,8 +15,10 @@ use super::resample::Grid;
 /// Steepest slope that carries grass, degrees.
 pub const MAX_GRASS_SLOPE_DEG: f64 = 35.0;
 
-/// The plant types a baked world gets: two flowers, a fern and a bush among its grass types
-/// (`meadow`, `tall grass`, `dry grass`), about one plant per 1.5 m2 of meadow.
+/// A starter set of plant types for a baked world's grass types (`meadow`, `tall grass`, `dry
+/// grass`): two flowers, a fern and a bush, about one plant per 1.5 m2 of meadow. The baker does
+/// not write them yet (see the README's Plants section); `verdant::world::Manifest::plant_types`
+/// takes them as they are.
 pub fn default_plant_types() -> Vec<crate::world::PlantType> {
     use crate::world::{PlantType, PlantWind};
     #[allow(clippy::too_many_arguments)]

@@ -109,6 +109,8 @@ pub fn run_bench_features(
         .chain(
             Feature::ALL
                 .iter()
+                // A world without plant types has no plants to switch off.
+                .filter(|f| **f != Feature::Plants || !m.plant_types.is_empty())
                 .map(|f| (f.name().to_owned(), Features::all().without(*f))),
         )
         .collect();
