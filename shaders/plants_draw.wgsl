@@ -1,7 +1,6 @@
-// Plants from the instance pool: one indirect draw per (type, level of detail), each vertex
-// pulled through the meshes' index buffer from their storage buffer (`vertex_index` runs over
-// the region's indices), the instance from the region's slice of the pool
-// (src/plants/place_cpu.rs has the records).
+// Plants from the instance pool: one indexed indirect draw per (type, level of detail), the
+// vertices read from the plant meshes' storage buffer by index, the instance from the region's
+// slice of the pool (src/plants/place_cpu.rs has the records).
 //
 // Bending (Crysis, GPU Gems 3 ch. 16; God of War's parameters): detail bending first, in the
 // plant's own space: leaves and branches swing along the vertical by their vertex colour's b
@@ -85,9 +84,6 @@ struct PlantInstance {
 @group(0) @binding(3) var<storage, read> wind_cells: array<vec4<f32>>;
 @group(0) @binding(4) var plant_textures: texture_2d_array<f32>;
 @group(0) @binding(5) var plant_sampler: sampler;
-// Triangle lists, three indices each, into `vertices` (global: the meshes packed one after
-// another).
-@group(0) @binding(6) var<storage, read> indices: array<u32>;
 // A (type, level) region of the pool, chosen by a dynamic offset.
 @group(1) @binding(0) var<storage, read> instances: array<PlantInstance>;
 
@@ -170,7 +166,7 @@ struct VertexOut {
 @vertex
 fn vs_plant(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VertexOut {
     let inst = instances[ii];
-    let v = load_vertex(indices[vi]);
+    let v = load_vertex(vi);
     let t = inst.kind & 255u;
     let level = inst.kind >> 8u;
     let phase = rand01(inst.hash);

@@ -6,8 +6,7 @@
 // level of detail by distance (a dithered cross-fade: within a band around each switch it goes
 // to both levels, each drawing a complementary share of its pixels) and is appended to that
 // (type, level)'s region of the instance pool. A second entry point turns the counters into
-// indirect draws (of the region's indices, pulled by the vertex stage), clamped to the region's
-// capacity, and counts the overflow.
+// indexed indirect draws, clamped to the region's capacity, and counts the overflow.
 // CPU mirror: src/plants/place_cpu.rs.
 
 #include "shared/hash.wgsl"
@@ -41,7 +40,7 @@ struct Params {
     limits: vec4<u32>,
     hiz_levels: array<vec4<u32>, 16>,
     types: array<PlantType, 8>,
-    // Per (type, level), type * 3 + level: index count, first index.
+    // Per (type, level), type * 3 + level: index count, first index, base vertex.
     meshes: array<vec4<u32>, 24>,
 }
 
@@ -70,10 +69,11 @@ struct PlantInstance {
     fade: f32,
 }
 
-struct DrawArgs {
-    vertex_count: u32,
+struct DrawIndexedArgs {
+    index_count: u32,
     instance_count: u32,
-    first_vertex: u32,
+    first_index: u32,
+    base_vertex: i32,
     first_instance: u32,
 }
 
@@ -87,7 +87,7 @@ struct DrawArgs {
 @group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 24>;
 // The counters of `counter` in place_cpu.rs.
 @group(0) @binding(7) var<storage, read_write> stats: array<atomic<u32>, 8>;
-@group(0) @binding(8) var<storage, read_write> args: array<DrawArgs, 24>;
+@group(0) @binding(8) var<storage, read_write> args: array<DrawIndexedArgs, 24>;
 
 const CONSIDERED: u32 = 0u;
 const EMPTY: u32 = 1u;
@@ -279,7 +279,7 @@ fn place_cell(job: TileJob, gx: u32, gy: u32) {
     }
 }
 
-// One invocation per (type, level): the indirect draw from its counter, clamped to the
+// One invocation per (type, level): the indexed indirect draw from its counter, clamped to the
 // region's capacity; overflow and drawn instances go to the statistics.
 @compute @workgroup_size(24, 1, 1)
 fn finalize_draws(@builtin(local_invocation_index) region: u32) {
@@ -292,5 +292,5 @@ fn finalize_draws(@builtin(local_invocation_index) region: u32) {
         atomicAdd(&stats[OVERFLOW], wanted - drawn);
         atomicAdd(&stats[DRAWN], drawn);
     }
-    args[region] = DrawArgs(mesh.x, count, mesh.y, 0u);
+    args[region] = DrawIndexedArgs(mesh.x, count, mesh.y, i32(mesh.z), 0u);
 }

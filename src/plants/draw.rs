@@ -1,5 +1,5 @@
-//! The plants' draw stage on the GPU (`shaders/plants_draw.wgsl`): one indirect draw per (type,
-//! level of detail), its vertices pulled through the meshes' indices, bent by the wind in the vertex stage (mirrored in
+//! The plants' draw stage on the GPU (`shaders/plants_draw.wgsl`): one indexed indirect draw per
+//! (type, level of detail), bent by the wind in the vertex stage (mirrored in
 //! [`crate::plants::bend_cpu`]); [`crate::plants::renderer`] binds it and records it.
 
 use crate::gpu::Targets;
@@ -38,7 +38,6 @@ impl DrawPass {
                     texture_2d_array(wgpu::TextureSampleType::Float { filterable: true })
                         .visible_in(S::FRAGMENT),
                     wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering).into(),
-                    storage_buffer_read_only().visible_in(S::VERTEX),
                 ],
             ),
         );

@@ -1,6 +1,6 @@
 //! The plant stage on the GPU: the bounded instance pool (a region of fixed capacity per plant
 //! type and level of detail), placement and culling per grass tile in compute
-//! (`shaders/plants_place.wgsl`) and one indirect draw per region
+//! (`shaders/plants_place.wgsl`) and one indexed indirect draw per region
 //! (`shaders/plants_draw.wgsl`), culled against the grass's Hi-Z pyramid and bent by the grass's
 //! wind field. The pool's size is fixed when the stage is made, whatever the view: a region that
 //! fills up drops the rest of its plants and counts them as overflow.
@@ -138,8 +138,7 @@ pub struct PlantRenderer {
     frame_buffer: wgpu::Buffer,
     /// The meshes (bound in `draw_group`; kept with the stage that owns them).
     _vertices: wgpu::Buffer,
-    /// The meshes' indices (bound in `draw_group`).
-    _indices: wgpu::Buffer,
+    indices: wgpu::Buffer,
     place_group: wgpu::BindGroup,
     draw_group: wgpu::BindGroup,
     region_group: wgpu::BindGroup,
@@ -148,10 +147,8 @@ pub struct PlantRenderer {
     atlas_views: (wgpu::TextureView, wgpu::TextureView),
 }
 
-/// Per level of detail of each type: the meshes packed into one vertex and one index buffer
-/// (the indices global, into the packed vertices), with each (type, level)'s index count and
-/// first index. The draw pulls its vertices through the indices itself (`draw_indirect`, not
-/// an indexed draw: software Vulkan keeps memory for every indexed indirect draw).
+/// Per level of detail of each type: the meshes packed into one vertex and one index buffer,
+/// with each (type, level)'s index count, first index and base vertex.
 fn pack_meshes(
     set: &PlantSet,
 ) -> (
@@ -164,10 +161,14 @@ fn pack_meshes(
     let mut table = [[0u32; 4]; REGIONS];
     for (t, m) in set.models.iter().take(TYPES).enumerate() {
         for (l, mesh) in m.lods.iter().enumerate() {
-            table[t * LEVELS + l] = [mesh.indices.len() as u32, indices.len() as u32, 0, 0];
-            let base = vertices.len() as u32;
+            table[t * LEVELS + l] = [
+                mesh.indices.len() as u32,
+                indices.len() as u32,
+                vertices.len() as u32,
+                0,
+            ];
             vertices.extend_from_slice(&mesh.vertices);
-            indices.extend(mesh.indices.iter().map(|&i| base + i));
+            indices.extend_from_slice(&mesh.indices);
         }
     }
     if vertices.is_empty() {
@@ -284,7 +285,7 @@ impl PlantRenderer {
         let stats = buffer("plants stats", 32, U::STORAGE | U::COPY_DST | U::COPY_SRC);
         let args = buffer(
             "plants draw args",
-            REGIONS as u64 * 16,
+            REGIONS as u64 * 20,
             U::STORAGE | U::INDIRECT | U::COPY_SRC,
         );
         let vertices = buffer(
@@ -296,7 +297,7 @@ impl PlantRenderer {
         let indices = buffer(
             "plants indices",
             (index_data.len() * 4) as u64,
-            U::STORAGE | U::COPY_DST,
+            U::INDEX | U::COPY_DST,
         );
         queue.write_buffer(&indices, 0, bytemuck::cast_slice(&index_data));
 
@@ -407,7 +408,6 @@ impl PlantRenderer {
                 wind.cells.as_entire_binding(),
                 view(&texture_view),
                 wgpu::BindingResource::Sampler(&sampler),
-                indices.as_entire_binding(),
             ],
         );
         // Every byte of the pool written once, so that its memory is committed up front (a
@@ -436,7 +436,7 @@ impl PlantRenderer {
             frame,
             frame_buffer,
             _vertices: vertices,
-            _indices: indices,
+            indices,
             place_group,
             draw_group,
             region_group,
@@ -603,6 +603,7 @@ impl PlantRenderer {
         );
         pass.set_pipeline(&self.draw_pass.pipeline);
         pass.set_bind_group(0, &self.draw_group, &[]);
+        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
         let region_bytes = u64::from(self.settings.capacity) * INSTANCE_BYTES;
         for region in 0..(self.types as usize * LEVELS) {
             pass.set_bind_group(
@@ -610,7 +611,7 @@ impl PlantRenderer {
                 &self.region_group,
                 &[(region as u64 * region_bytes) as u32],
             );
-            pass.draw_indirect(&self.args, region as u64 * 16);
+            pass.draw_indexed_indirect(&self.args, region as u64 * 20);
         }
     }
 
@@ -641,7 +642,7 @@ impl PlantRenderer {
         let cap = self.settings.capacity as usize;
         (0..self.types as usize * LEVELS)
             .map(|r| {
-                let n = args[r * 4 + 1] as usize;
+                let n = args[r * 5 + 1] as usize;
                 all[r * cap..r * cap + n].to_vec()
             })
             .collect()
