@@ -35,7 +35,7 @@ pub use renderer::{PlantRenderer, PlantSettings, PlantStats};
 pub use set::{PlantError, PlantSet};
 
 /// The built-in recipes a plant type's `mesh` may name.
-pub const RECIPES: [&str; 3] = ["flower", "fern", "bush"];
+pub use crate::world::PLANT_RECIPES as RECIPES;
 
 /// Edge of a cell of the placement grid, metres: each cell holds at most one plant.
 pub const PLANT_CELL_M: f32 = 0.5;

@@ -131,10 +131,12 @@ pub struct Manifest {
 
 /// Most plant types a world has.
 pub const MAX_PLANT_TYPES: usize = 8;
+/// The built-in recipes a plant type's `mesh` may name (else a `.gltf` or `.glb` file).
+pub const PLANT_RECIPES: [&str; 3] = ["flower", "fern", "bush"];
 /// Largest plant, metres.
 pub const MAX_PLANT_SIZE_M: f64 = 8.0;
 /// Most plants per square metre of all types together on one grass type (the placement grid
-/// holds at most one plant per cell of [`crate::plants::PLANT_CELL_M`]).
+/// holds at most one plant per 0.5 m cell, the plants module's `PLANT_CELL_M`).
 pub const MAX_PLANT_DENSITY: f64 = 4.0;
 
 /// One kind of plant: its mesh, where it grows and how it moves in the wind.

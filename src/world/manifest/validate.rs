@@ -269,7 +269,7 @@ impl Manifest {
                 ));
             }
             let lower = p.mesh.to_ascii_lowercase();
-            if !crate::plants::RECIPES.contains(&p.mesh.as_str())
+            if !PLANT_RECIPES.contains(&p.mesh.as_str())
                 && !(lower.ends_with(".gltf") || lower.ends_with(".glb"))
             {
                 return Err(v.out_of_range(
@@ -277,7 +277,7 @@ impl Manifest {
                     &p.mesh,
                     &format!(
                         "one of {} or a .gltf or .glb file",
-                        crate::plants::RECIPES.join(", ")
+                        PLANT_RECIPES.join(", ")
                     ),
                 ));
             }
