@@ -1083,3 +1083,71 @@ fn manifest_floats_beyond_their_ranges_are_refused_naming_field_and_range() {
         "{err}"
     );
 }
+
+/// A plant type, and each way one can be out of range: refused naming the field.
+#[test]
+fn plant_types_are_read_and_bad_ones_named() {
+    let plant = r#"
+[[plant_types]]
+name = "poppy"
+mesh = "flower"
+size_m = [0.3, 0.5]
+density = { meadow = 0.4 }
+wind = { bend = 0.05 }
+"#;
+    let with = |p: &str| format!("{VALID}{p}");
+    let m = parse(&with(plant)).unwrap();
+    assert_eq!(m.plant_types.len(), 1);
+    assert_eq!(m.plant_types[0].density["meadow"], 0.4);
+    assert_eq!(m.plant_types[0].wind.bend, 0.05);
+    assert_eq!(m.plant_types[0].max_slope_deg, 35.0, "a default");
+    for (from, to, field) in [
+        (
+            "mesh = \"flower\"",
+            "mesh = \"tulip\"",
+            "plant_types[0].mesh",
+        ),
+        (
+            "mesh = \"flower\"",
+            "mesh = \"tulip.obj\"",
+            "plant_types[0].mesh",
+        ),
+        (
+            "size_m = [0.3, 0.5]",
+            "size_m = [0.5, 0.3]",
+            "plant_types[0].size_m",
+        ),
+        (
+            "size_m = [0.3, 0.5]",
+            "size_m = [0.0, 0.3]",
+            "plant_types[0].size_m",
+        ),
+        ("meadow = 0.4", "lawn = 0.4", "plant_types[0].density.lawn"),
+        (
+            "meadow = 0.4",
+            "meadow = 9.0",
+            "plant_types[0].density.meadow",
+        ),
+        (
+            "meadow = 0.4",
+            "meadow = nan",
+            "plant_types[0].density.meadow",
+        ),
+        ("bend = 0.05", "bend = 2.0", "plant_types[0].wind.bend"),
+    ] {
+        let text = with(&plant.replace(from, to));
+        let err = parse(&text).expect_err(to).to_string();
+        assert!(err.contains(field), "{to}: {err}");
+        assert!(err.contains("world.toml"), "{to}: {err}");
+    }
+    // Two types whose densities add up past the grid's one plant a cell.
+    let crowded = with(&format!(
+        "{}{}",
+        plant.replace("meadow = 0.4", "meadow = 3.0"),
+        plant
+            .replace("poppy", "daisy")
+            .replace("meadow = 0.4", "meadow = 3.0")
+    ));
+    let err = parse(&crowded).expect_err("crowded").to_string();
+    assert!(err.contains("density.meadow"), "{err}");
+}
