@@ -9,6 +9,7 @@
 #include "shared/hash.wgsl"
 #include "shared/blade.wgsl"
 #include "shared/tile_texels.wgsl"
+#include "shared/tile_job.wgsl"
 #include "shared/hiz_cull.wgsl"
 
 struct GrassType {
@@ -41,16 +42,6 @@ struct Params {
     // Hi-Z levels: offset (floats), width, height
     hiz_levels: array<vec4<u32>, 16>,
     types: array<GrassType, 16>,
-}
-
-struct TileJob {
-    origin: vec2<f32>,
-    cell: f32,
-    layer: u32,
-    tile_x: u32,
-    tile_y: u32,
-    lod: u32,
-    slot: u32,
 }
 
 struct Batch {
@@ -228,23 +219,10 @@ fn plant(job: TileJob, local: vec2<f32>, h0: u32, spacing: f32, band: vec2<f32>)
     let tp = vec2<f32>(border + local.x / job.cell, border + local.y / job.cell);
 
     // Bilinear height and density, nearest grass type, normal by central differences.
-    let f0 = floor(tp);
-    let ix = i32(f0.x);
-    let iy = i32(f0.y);
-    let fx = tp.x - f0.x;
-    let fy = tp.y - f0.y;
-    let layer = job.layer;
-    let ha = h_at(ix, iy, layer) + (h_at(ix + 1, iy, layer) - h_at(ix, iy, layer)) * fx;
-    let hb = h_at(ix, iy + 1, layer) + (h_at(ix + 1, iy + 1, layer) - h_at(ix, iy + 1, layer)) * fx;
-    let ground = ha + (hb - ha) * fy;
-    let da = d_at(ix, iy, layer) + (d_at(ix + 1, iy, layer) - d_at(ix, iy, layer)) * fx;
-    let db = d_at(ix, iy + 1, layer) + (d_at(ix + 1, iy + 1, layer) - d_at(ix, iy + 1, layer)) * fx;
-    let density = da + (db - da) * fy;
-    let nx = i32(floor(tp.x + 0.5));
-    let ny = i32(floor(tp.y + 0.5));
-    let slope_x = h_at(nx - 1, ny, layer) - h_at(nx + 1, ny, layer);
-    let slope_y = h_at(nx, ny - 1, layer) - h_at(nx, ny + 1, layer);
-    let normal = normalize(vec3<f32>(slope_x, slope_y, 2.0 * job.cell));
+    let hd = tile_height_density(tp, job.layer);
+    let ground = hd.x;
+    let density = hd.y;
+    let normal = tile_normal(i32(floor(tp.x + 0.5)), i32(floor(tp.y + 0.5)), job.layer, job.cell);
     // Clump: the nearest of the hashed points of the 3x3 clump cells around, and the second
     // nearest. A clump has one grass type, the map's at its point: types meet along clump
     // borders, mixed over CLUMP_BLEND_M either side.

@@ -21,6 +21,7 @@
 #include "shared/output.wgsl"
 #include "shared/wind_lookup.wgsl"
 #include "shared/waves.wgsl"
+#include "shared/plant_instance.wgsl"
 
 // Multisampled targets: the cards' alpha becomes coverage instead of a hard test.
 override COVERAGE: bool = false;
@@ -67,15 +68,6 @@ fn load_vertex(i: u32) -> PlantVertex {
     v.albedo = vec4<f32>(vertices[b + 10u], vertices[b + 11u], vertices[b + 12u], vertices[b + 13u]);
     v.uv = vec2<f32>(vertices[b + 14u], vertices[b + 15u]);
     return v;
-}
-
-struct PlantInstance {
-    pos: vec3<f32>,
-    yaw: f32,
-    scale: f32,
-    kind: u32,
-    hash: u32,
-    fade: f32,
 }
 
 @group(0) @binding(0) var<uniform> frame: PlantFrame;

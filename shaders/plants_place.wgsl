@@ -11,7 +11,9 @@
 
 #include "shared/hash.wgsl"
 #include "shared/tile_texels.wgsl"
+#include "shared/tile_job.wgsl"
 #include "shared/hiz_cull.wgsl"
+#include "shared/plant_instance.wgsl"
 
 struct PlantType {
     // x, y: height range (m); z: cosine of the steepest slope; w: clump cell (m)
@@ -42,31 +44,6 @@ struct Params {
     types: array<PlantType, 8>,
     // Per (type, level), type * 3 + level: index count, first index, base vertex.
     meshes: array<vec4<u32>, 24>,
-}
-
-struct TileJob {
-    origin: vec2<f32>,
-    cell: f32,
-    layer: u32,
-    tile_x: u32,
-    tile_y: u32,
-    lod: u32,
-    slot: u32,
-}
-
-struct PlantInstance {
-    // The root, relative to the camera (m).
-    pos: vec3<f32>,
-    // Turn about the vertical (radians).
-    yaw: f32,
-    // Height (m): the unit mesh's scale.
-    scale: f32,
-    // Type, and level << 8.
-    kind: u32,
-    hash: u32,
-    // The share of the plant's pixels drawn, for the cross-fade: f > 0 keeps pixels whose
-    // dither is below f, f < 0 those at or above -f.
-    fade: f32,
 }
 
 struct DrawIndexedArgs {
@@ -185,18 +162,10 @@ fn place_cell(job: TileJob, gx: u32, gy: u32) {
     // grass's generation).
     let border = f32(params.grid.z);
     let tp = vec2<f32>(border, border) + local / job.cell;
-    let f0 = floor(tp);
-    let ix = i32(f0.x);
-    let iy = i32(f0.y);
-    let fx = tp.x - f0.x;
-    let fy = tp.y - f0.y;
     let layer = job.layer;
-    let ha = h_at(ix, iy, layer) + (h_at(ix + 1, iy, layer) - h_at(ix, iy, layer)) * fx;
-    let hb = h_at(ix, iy + 1, layer) + (h_at(ix + 1, iy + 1, layer) - h_at(ix, iy + 1, layer)) * fx;
-    let ground = ha + (hb - ha) * fy;
-    let da = d_at(ix, iy, layer) + (d_at(ix + 1, iy, layer) - d_at(ix, iy, layer)) * fx;
-    let db = d_at(ix, iy + 1, layer) + (d_at(ix + 1, iy + 1, layer) - d_at(ix, iy + 1, layer)) * fx;
-    let density = da + (db - da) * fy;
+    let hd = tile_height_density(tp, layer);
+    let ground = hd.x;
+    let density = hd.y;
     let nx = i32(floor(tp.x + 0.5));
     let ny = i32(floor(tp.y + 0.5));
     let kind = min(textureLoad(grass, tile_texel(nx, ny, layer), layer, 0).r, 15u);
@@ -222,9 +191,7 @@ fn place_cell(job: TileJob, gx: u32, gy: u32) {
         return;
     }
     let ty = params.types[chosen];
-    let slope_x = h_at(nx - 1, ny, layer) - h_at(nx + 1, ny, layer);
-    let slope_y = h_at(nx, ny - 1, layer) - h_at(nx, ny + 1, layer);
-    let normal = normalize(vec3<f32>(slope_x, slope_y, 2.0 * job.cell));
+    let normal = tile_normal(nx, ny, layer, job.cell);
     if normal.z < ty.size.z || ground < ty.limits.x || ground > ty.limits.y {
         tally(RULED_OUT);
         return;

@@ -38,6 +38,14 @@ const SHARED: &[(&str, &str)] = &[
         include_str!("../shaders/shared/hiz_cull.wgsl"),
     ),
     (
+        "shared/tile_job.wgsl",
+        include_str!("../shaders/shared/tile_job.wgsl"),
+    ),
+    (
+        "shared/plant_instance.wgsl",
+        include_str!("../shaders/shared/plant_instance.wgsl"),
+    ),
+    (
         "shared/waves.wgsl",
         include_str!("../shaders/shared/waves.wgsl"),
     ),

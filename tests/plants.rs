@@ -56,20 +56,7 @@ impl Rig {
             .unwrap();
         let atlas = TileAtlas::new(&ctx.device, manifest.pyramid.samples_per_side(), 8);
         let target = |format, usage| {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: None,
-                size: wgpu::Extent3d {
-                    width: W,
-                    height: H,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
+            verdant::gpu::target_texture(&ctx.device, "plants test", format, usage, (W, H))
         };
         let depth = target(
             verdant::terrain::DEPTH_FORMAT,

@@ -18,3 +18,25 @@ fn h_at(x: i32, y: i32, layer: u32) -> f32 {
 fn d_at(x: i32, y: i32, layer: u32) -> f32 {
     return f32(textureLoad(grass, tile_texel(x, y, layer), layer, 0).g) / 255.0;
 }
+
+// Bilinear height (x, metres) and grass density (y, 0..1) at texel position `tp` of `layer`.
+fn tile_height_density(tp: vec2<f32>, layer: u32) -> vec2<f32> {
+    let f0 = floor(tp);
+    let ix = i32(f0.x);
+    let iy = i32(f0.y);
+    let fx = tp.x - f0.x;
+    let fy = tp.y - f0.y;
+    let ha = h_at(ix, iy, layer) + (h_at(ix + 1, iy, layer) - h_at(ix, iy, layer)) * fx;
+    let hb = h_at(ix, iy + 1, layer) + (h_at(ix + 1, iy + 1, layer) - h_at(ix, iy + 1, layer)) * fx;
+    let da = d_at(ix, iy, layer) + (d_at(ix + 1, iy, layer) - d_at(ix, iy, layer)) * fx;
+    let db = d_at(ix, iy + 1, layer) + (d_at(ix + 1, iy + 1, layer) - d_at(ix, iy + 1, layer)) * fx;
+    return vec2<f32>(ha + (hb - ha) * fy, da + (db - da) * fy);
+}
+
+// The ground's normal at texel (nx, ny) of `layer` by central differences, for texels `cell`
+// metres apart.
+fn tile_normal(nx: i32, ny: i32, layer: u32, cell: f32) -> vec3<f32> {
+    let slope_x = h_at(nx - 1, ny, layer) - h_at(nx + 1, ny, layer);
+    let slope_y = h_at(nx, ny - 1, layer) - h_at(nx, ny + 1, layer);
+    return normalize(vec3<f32>(slope_x, slope_y, 2.0 * cell));
+}

@@ -169,14 +169,15 @@ pub fn stats_lod(lod: u32) -> usize {
     usize::from(lod == 1)
 }
 
-/// Bilinear height and density and the normal at texel position `tp` of `tile`.
-struct Sample {
-    height: f32,
-    density: f32,
-    normal: Vec3,
+/// Bilinear height and density and the normal at texel position `tp` of `tile`
+/// (`tile_height_density` and `tile_normal` in `shaders/shared/tile_texels.wgsl`).
+pub(crate) struct Sample {
+    pub(crate) height: f32,
+    pub(crate) density: f32,
+    pub(crate) normal: Vec3,
 }
 
-fn sample(tile: &TileData, tp: [f32; 2], cell: f32) -> Sample {
+pub(crate) fn sample(tile: &TileData, tp: [f32; 2], cell: f32) -> Sample {
     let s = tile.size as i32;
     let at = |x: i32, y: i32| (y.clamp(0, s - 1) * s + x.clamp(0, s - 1)) as usize;
     let (fx0, fy0) = (tp[0].floor(), tp[1].floor());

@@ -196,22 +196,13 @@ fn place_cell(
 
     let border = params.grid[2] as f32;
     let tp = Vec2::splat(border) + local / job.cell;
+    // Height, density and normal as the grass's generation samples them.
+    let sampled = crate::grass::generate_cpu::sample(tile, tp.to_array(), job.cell);
+    let (ground, density) = (sampled.height, sampled.density);
     let s = tile.size as i32;
-    let at = |x: i32, y: i32| (y.clamp(0, s - 1) * s + x.clamp(0, s - 1)) as usize;
-    let h = |x: i32, y: i32| tile.heights[at(x, y)];
-    let d = |x: i32, y: i32| f32::from(tile.density[at(x, y)]) / 255.0;
-    let f0 = tp.floor();
-    let (ix, iy) = (f0.x as i32, f0.y as i32);
-    let (fx, fy) = (tp.x - f0.x, tp.y - f0.y);
-    let bilinear = |f: &dyn Fn(i32, i32) -> f32| {
-        let a = f(ix, iy) + (f(ix + 1, iy) - f(ix, iy)) * fx;
-        let b = f(ix, iy + 1) + (f(ix + 1, iy + 1) - f(ix, iy + 1)) * fx;
-        a + (b - a) * fy
-    };
-    let ground = bilinear(&h);
-    let density = bilinear(&d);
     let (nx, ny) = ((tp.x + 0.5).floor() as i32, (tp.y + 0.5).floor() as i32);
-    let kind = usize::from(tile.grass_type[at(nx, ny)]).min(15);
+    let texel = (ny.clamp(0, s - 1) * s + nx.clamp(0, s - 1)) as usize;
+    let kind = usize::from(tile.grass_type[texel]).min(15);
 
     let u = rand01(hash_u32(h0 ^ 3));
     let mut acc = 0.0f32;
@@ -232,12 +223,7 @@ fn place_cell(
         return;
     };
     let ty = &params.types[t];
-    let normal = Vec3::new(
-        h(nx - 1, ny) - h(nx + 1, ny),
-        h(nx, ny - 1) - h(nx, ny + 1),
-        2.0 * job.cell,
-    )
-    .normalize();
+    let normal = sampled.normal;
     if normal.z < ty.size[2] || ground < ty.limits[0] || ground > ty.limits[1] {
         stats[counter::RULED_OUT] += 1;
         return;
