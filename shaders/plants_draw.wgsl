@@ -70,7 +70,11 @@ fn load_vertex(i: u32) -> PlantVertex {
     return v;
 }
 
-@group(0) @binding(0) var<uniform> frame: PlantFrame;
+// The frame as a read-only storage buffer, not a uniform: lavapipe (Mesa 22.3) compiles a
+// variant of a shader specialised on the values of the uniforms its branches test (the feature
+// bits here) at every draw, and keeps each until the pipeline goes, so the process grows every
+// frame; storage buffers are never specialised. The README's Plants section has the figures.
+@group(0) @binding(0) var<storage, read> frame: PlantFrame;
 @group(0) @binding(1) var<storage, read> vertices: array<f32>;
 @group(0) @binding(2) var<uniform> wind_lookup: WindLookup;
 @group(0) @binding(3) var<storage, read> wind_cells: array<vec4<f32>>;

@@ -295,10 +295,14 @@ fn a_short_soak_with_grass_recovers_after_every_teleport_without_stalls() {
         tmp.path(),
     );
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "soak failed: {stderr}");
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("soak/soak.json")).unwrap())
-            .unwrap();
+    // The report is written on failure too: its memory timeline says what grew, and when.
+    let report = std::fs::read_to_string(tmp.path().join("soak/soak.json"));
+    assert!(
+        out.status.success(),
+        "soak failed: {stderr}\nreport: {}",
+        report.as_deref().unwrap_or("(none written)")
+    );
+    let r: serde_json::Value = serde_json::from_str(&report.unwrap()).unwrap();
     assert_eq!(r["violations"].as_array().unwrap().len(), 0, "{r}");
     assert!(
         r["grass_blades_drawn_peak"].as_u64().unwrap() > 0,

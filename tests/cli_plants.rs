@@ -60,8 +60,6 @@ fn fly(world: &Path, dir: &Path) -> std::process::Output {
             "1",
             "--size",
             "160x90",
-            "--enable",
-            "plants",
             "--out",
             "o",
         ],

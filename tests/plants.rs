@@ -427,9 +427,7 @@ fn the_plant_pool_is_the_same_on_every_path() {
         wgpu::TextureFormat::Depth32Float,
     );
     let (w, h) = (96, 54);
-    let mut options = RendererOptions::new(&world, c, d, w, h);
-    // The default world ships its plants switched off ([features] plants = false).
-    options.config.features = Features::all();
+    let options = RendererOptions::new(&world, c, d, w, h);
     let paths = world.manifest.paths.clone();
     let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
     let bytes = renderer

@@ -31,7 +31,8 @@ impl DrawPass {
             &sequential(
                 S::VERTEX_FRAGMENT,
                 [
-                    uniform_buffer(),
+                    // The frame: a storage buffer (the shader says why).
+                    storage_buffer_read_only(),
                     storage_buffer_read_only(),
                     uniform_buffer(),
                     storage_buffer_read_only(),

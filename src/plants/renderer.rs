@@ -383,7 +383,7 @@ impl PlantRenderer {
         let frame_buffer = buffer(
             "plants frame",
             std::mem::size_of::<PlantFrame>() as u64,
-            U::UNIFORM | U::COPY_DST,
+            U::STORAGE | U::COPY_DST,
         );
 
         let place_pass = PlacePass::new(device);
