@@ -30,48 +30,46 @@
 //! compares with `Greater`. The order of the frame's passes is [`Renderer::record`], top to
 //! bottom.
 
+mod config;
+mod error;
+mod frame;
 mod hole_check;
 mod readback;
+mod streaming;
+mod targets;
 mod view;
 
 use hole_check::HoleCheck;
 use readback::StatsRing;
+use targets::{check_formats, check_size};
 
-pub use view::FrameView;
-
-use std::sync::Arc;
-use std::time::Instant;
-
-use glam::{DVec2, Vec2};
-
-use crate::aa::AntiAliasing;
-use crate::aa::msaa::Msaa;
-use crate::aa::taa::{Taa, TaaSettings};
-use crate::camera::Camera;
-use crate::features::{Feature, Features};
-use crate::gpu::{GpuTimer, PassTimes, Targets};
-use crate::grass::{GrassRenderer, GrassStats, TileJob, WindBindings};
-use crate::lod::{GrassRings, Ring, TerrainLod, select_terrain};
-use crate::stream::{
-    AtlasError, DeriveJob, DeriveStage, ResidencyPlan, ResidencyStats, TileAtlas, TileService,
-    TileSource, Want,
-};
-use crate::terrain::{TerrainRenderer, TileDraw};
-use crate::wind::{SwayConfig, SwayField, WindConfig, WindError, WindField};
-use crate::world::{TileId, World, WorldError};
-
-mod config;
 pub use config::{
     ConfigError, DEFAULT_INFILL_M, DEFAULT_MESH_STEP, GrassConfig, INFILL_RANGE_M,
     LOD_FACTOR_RANGE, MAX_MESH_STEP, NEAR_RANGE_M, RendererConfig, RendererOptions,
     SPACING_RANGE_M, WIDTH_SCALE_RANGE,
 };
+pub use error::RendererError;
+pub use frame::{FrameInput, FrameStats, MissingTile, WarmUp};
+pub use streaming::WARM_UP_STALL;
+pub use targets::{DEPTH_FORMATS, hiz_bytes};
+pub use view::FrameView;
 
-/// Depth formats the renderer draws into (the Hi-Z pyramid reads them as depth textures).
-pub const DEPTH_FORMATS: [wgpu::TextureFormat; 2] = [
-    wgpu::TextureFormat::Depth32Float,
-    wgpu::TextureFormat::Depth24Plus,
-];
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::Vec2;
+
+use crate::aa::AntiAliasing;
+use crate::aa::msaa::Msaa;
+use crate::aa::taa::{Taa, TaaSettings};
+use crate::features::{Feature, Features};
+use crate::gpu::{GpuTimer, Targets};
+use crate::grass::{GrassRenderer, TileJob, WindBindings};
+use crate::lod::{GrassRings, Ring, TerrainLod};
+use crate::stream::{DeriveJob, DeriveStage, TileAtlas, TileService, TileSource};
+use crate::terrain::{TerrainRenderer, TileDraw};
+use crate::wind::{SwayConfig, SwayField, WindConfig, WindField};
+use crate::world::{TileId, World};
 
 /// Frames whose figures can be on their way back at once; a frame recorded while all of them
 /// are still on their way gets no figures (counted in [`Renderer::stats_dropped`]).
@@ -79,206 +77,6 @@ pub const READBACK_SLOTS: usize = 4;
 
 /// Delivered figures kept until taken ([`Renderer::take_stats`]); older ones are dropped.
 pub const MAX_READY_STATS: usize = 2 * READBACK_SLOTS;
-
-/// What stops a renderer from being built or a frame from being recorded.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum RendererError {
-    /// A setting is out of its range ([`RendererConfig::validate`]).
-    #[error(transparent)]
-    Config(#[from] ConfigError),
-    /// A tile or the manifest could not be read.
-    #[error(transparent)]
-    World(#[from] WorldError),
-    /// A plant type's mesh could not be made.
-    #[error(transparent)]
-    Plant(#[from] crate::plants::PlantError),
-    /// A tile did not fit the atlas.
-    #[error(transparent)]
-    Atlas(#[from] AtlasError),
-    /// The wind scene asked for does not exist or does not fit.
-    #[error(transparent)]
-    Wind(#[from] WindError),
-    /// The atlas slot count does not fit the adapter or the world.
-    #[error(
-        "an atlas of {slots} slots does not fit: it needs more slots than the world's {roots} \
-         level-0 tiles and at most the adapter's {limit} texture array layers"
-    )]
-    AtlasSlots {
-        /// Slots asked for.
-        slots: u32,
-        /// Level-0 tiles of the world (always resident).
-        roots: u32,
-        /// The adapter's `max_texture_array_layers`.
-        limit: u32,
-    },
-    /// The target size is zero or beyond the adapter's limit.
-    #[error("image size {width}x{height} is not supported (1 to {limit} pixels a side)")]
-    BadSize {
-        /// Width asked for.
-        width: u32,
-        /// Height asked for.
-        height: u32,
-        /// The adapter's `max_texture_dimension_2d`.
-        limit: u32,
-    },
-    /// The target size needs a buffer larger than the adapter allows (the grass's Hi-Z pyramid
-    /// is one storage buffer bound whole, about 5.3 bytes a pixel).
-    #[error(
-        "image size {width}x{height} needs a {what} of {bytes} bytes, more than this adapter's \
-         {limit_name} of {limit} bytes: choose a smaller size (about {max_pixels} pixels at most)"
-    )]
-    SizeBeyondLimit {
-        /// Width asked for.
-        width: u32,
-        /// Height asked for.
-        height: u32,
-        /// The buffer, in words (e.g. `Hi-Z pyramid storage buffer`).
-        what: &'static str,
-        /// Its size at this target size.
-        bytes: u64,
-        /// The adapter limit it exceeds (e.g. `max_storage_buffer_binding_size`).
-        limit_name: &'static str,
-        /// That limit.
-        limit: u64,
-        /// Roughly the most pixels (width times height) that fit.
-        max_pixels: u64,
-    },
-    /// The CPU tile cache cannot hold a single tile, so no tile could ever be uploaded.
-    #[error(
-        "a CPU tile cache of {bytes} bytes cannot hold one tile of this world ({tile_bytes} \
-         bytes): give it at least {min_mib} MiB"
-    )]
-    CacheTooSmall {
-        /// The cache's ceiling asked for.
-        bytes: u64,
-        /// Bytes of one decoded tile.
-        tile_bytes: u64,
-        /// The smallest ceiling in MiB that holds one tile.
-        min_mib: u64,
-    },
-    /// The colour format is not one the renderer draws into.
-    #[error(
-        "colour format {0:?} is not supported (use an 8-bit RGBA/BGRA format, sRGB or not, \
-         Rgb10a2Unorm, Rgba16Unorm, Rgba16Float, Rgba32Float or Rg11b10Ufloat)"
-    )]
-    ColorFormat(wgpu::TextureFormat),
-    /// The depth format is not one the renderer draws into.
-    #[error("depth format {0:?} is not supported (use Depth32Float or Depth24Plus)")]
-    DepthFormat(wgpu::TextureFormat),
-    /// A target given to [`Renderer::record`] does not match the renderer's targets.
-    #[error("the {which} target is {found}, but the renderer was made for {expected}")]
-    Target {
-        /// `"colour"` or `"depth"`.
-        which: &'static str,
-        /// What the target is.
-        found: String,
-        /// What the renderer expects.
-        expected: String,
-    },
-    /// [`Renderer::record`] was called without a [`Renderer::prepare`] before it.
-    #[error("record was called without prepare: call prepare once before each record")]
-    NotPrepared,
-    /// The capture of the terrain-only depth was asked for with a depth format whose texels
-    /// cannot be copied (use Depth32Float).
-    #[error(
-        "the terrain-only depth cannot be captured from a {0:?} target: its texels cannot be \
-         copied (use Depth32Float)"
-    )]
-    DepthCapture(wgpu::TextureFormat),
-}
-
-/// What a frame is drawn from.
-#[derive(Clone, Copy, Debug)]
-pub struct FrameInput {
-    /// The camera: a position in world metres (f64) with yaw and pitch, or with the caller's
-    /// own view and projection ([`Camera::with_view`]).
-    pub camera: Camera,
-    /// Seconds since the start: the wind and the sway springs advance by the time since the
-    /// last frame (at most 5 s).
-    pub time_s: f64,
-    /// Where the walker that leaves the trail in the grass is (world xy, metres), or `None` for
-    /// no trail this frame (the trail fades).
-    pub walker: Option<DVec2>,
-    /// Sub-pixel offset of the whole image, in pixels of the target (x right, y down; zero
-    /// for none): the projection is shifted by it, so that frames jittered within a pixel
-    /// sample the scene at different points of each pixel (supersampling by accumulation).
-    pub jitter_px: Vec2,
-}
-
-impl FrameInput {
-    /// A frame from `camera` at `time_s`, the camera leaving the trail.
-    pub fn new(camera: Camera, time_s: f64) -> Self {
-        Self {
-            camera,
-            time_s,
-            walker: Some(camera.position.truncate()),
-            jitter_px: Vec2::ZERO,
-        }
-    }
-}
-
-/// What one frame drew and what it cost; delivered a frame or two after it was recorded.
-#[derive(Clone, Debug, Default)]
-pub struct FrameStats {
-    /// The frame's number (0 for the first [`Renderer::prepare`]).
-    pub frame: u64,
-    /// Terrain tiles drawn (each from its own data or an ancestor's).
-    pub tiles_drawn: u32,
-    /// Grass tiles in the high and low rings.
-    pub grass_tiles: (u32, u32),
-    /// CPU time of prepare and record (tile selection, uploads, recording), milliseconds.
-    pub cpu_ms: f64,
-    /// GPU time per pass (empty without timestamp queries).
-    pub gpu: PassTimes,
-    /// The tile service's figures.
-    pub residency: ResidencyStats,
-    /// Grass: tiles, blades considered, culled by each test and drawn, per LOD.
-    pub grass: GrassStats,
-    /// Plants: cells considered, plants culled by each test and drawn; `None` when the frame
-    /// drew none (no plant types, or the `plants` feature off).
-    pub plants: Option<crate::plants::PlantStats>,
-}
-
-/// How long a warm-up waits with nothing loading, uploaded or derived before it gives up.
-pub const WARM_UP_STALL: std::time::Duration = std::time::Duration::from_secs(5);
-
-/// What a warm-up could not make resident.
-#[derive(Clone, Debug, Default)]
-pub struct WarmUp {
-    /// The wanted tiles that are not resident, each with the reason; empty when all are.
-    pub missing: Vec<MissingTile>,
-}
-
-/// A tile that a warm-up could not make resident.
-#[derive(Clone, Debug)]
-pub struct MissingTile {
-    /// The tile.
-    pub tile: TileId,
-    /// Why, in words (the failed load's error where there is one).
-    pub reason: String,
-}
-
-impl WarmUp {
-    /// One line per missing tile (at most `max`, then a count of the rest).
-    pub fn describe(&self, max: usize) -> Vec<String> {
-        let mut lines: Vec<String> = self
-            .missing
-            .iter()
-            .take(max)
-            .map(|m| {
-                format!(
-                    "tile L{} {}_{}: {}",
-                    m.tile.level, m.tile.x, m.tile.y, m.reason
-                )
-            })
-            .collect();
-        if self.missing.len() > max {
-            lines.push(format!("and {} more", self.missing.len() - max));
-        }
-        lines
-    }
-}
 
 /// The grass with the wind it bends in.
 struct GrassStage {
@@ -301,13 +99,6 @@ struct Prepared {
     reads: Vec<(u32, TileId)>,
     stats: FrameStats,
     cpu_s: f64,
-}
-
-/// The tiles a frame wants, before residency.
-struct Selection {
-    terrain: Vec<TileId>,
-    grass: Vec<(TileId, Ring, f64)>,
-    wants: Vec<Want>,
 }
 
 /// A world's terrain and grass, drawn into the caller's targets. See the module docs.
@@ -726,171 +517,6 @@ impl Renderer {
         Ok(())
     }
 
-    fn select(&mut self, view: &FrameView) -> Selection {
-        let camera = &view.camera;
-        let frustum = view.frustum;
-        let pyramid = &self.world.manifest.pyramid;
-        let service = &self.service;
-        let range = |id: TileId| service.height_range(id);
-        let terrain = select_terrain(pyramid, self.lod, camera.position, &frustum, &range);
-        let grass = match &mut self.rings {
-            Some(r) => r.update(pyramid, camera.position, &range),
-            None => Vec::new(),
-        };
-        // Priority: distance, doubled for what lies behind the camera.
-        let forward = camera.forward();
-        let priority = |id: TileId| {
-            let b = pyramid.bounds(id);
-            let (h0, h1) = range(id);
-            let c = glam::DVec3::new(b.center().x, b.center().y, 0.5 * f64::from(h0 + h1));
-            let to = c - camera.position;
-            let d = to.length().max(1e-3);
-            (d * (1.5 - 0.5 * forward.dot(to / d))) as f32
-        };
-        let wants = terrain
-            .iter()
-            .copied()
-            .chain(grass.iter().map(|g| g.0))
-            .map(|id| Want {
-                id,
-                priority: priority(id),
-            })
-            .collect();
-        Selection {
-            terrain,
-            grass,
-            wants,
-        }
-    }
-
-    /// Brings every tile `camera` wants into the atlas, waiting for loads and for the GPU: for
-    /// the first frame of a run or a teleport, never inside a frame loop. Gives up after
-    /// `timeout`; returns whether everything became resident. See [`Renderer::warm_up_report`]
-    /// for what is missing when not.
-    pub fn warm_up(
-        &mut self,
-        camera: &Camera,
-        timeout: std::time::Duration,
-    ) -> Result<bool, RendererError> {
-        Ok(self.warm_up_report(camera, timeout)?.missing.is_empty())
-    }
-
-    /// Like [`Renderer::warm_up`], and says which tiles are missing and why. Stops early, without
-    /// waiting for `timeout`, once every missing tile is kept out by a failed load (its own or
-    /// that of the stored ancestor it is derived from), or when nothing has moved for
-    /// [`WARM_UP_STALL`].
-    pub fn warm_up_report(
-        &mut self,
-        camera: &Camera,
-        timeout: std::time::Duration,
-    ) -> Result<WarmUp, RendererError> {
-        let start = Instant::now();
-        self.flush_unrecorded();
-        let mut last_change = Instant::now();
-        let mut last_resident = u32::MAX;
-        let view = FrameView::new(camera, Vec2::ZERO, self.targets.width, self.targets.height);
-        loop {
-            let sel = self.select(&view);
-            let plan = self.service.update(&sel.wants);
-            let busy = !plan.uploads.is_empty() || !plan.derives.is_empty();
-            let derives = self.upload(plan);
-            self.submit_derives(&derives);
-            let stats = self.service.stats();
-            if stats.resident == stats.desired {
-                let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
-                return Ok(WarmUp::default());
-            }
-            if busy || stats.resident != last_resident || stats.stream.in_flight > 0 {
-                last_change = Instant::now();
-                last_resident = stats.resident;
-            }
-            let missing: Vec<TileId> = sel
-                .wants
-                .iter()
-                .map(|w| w.id)
-                .filter(|&id| !self.service.is_resident(id))
-                .collect();
-            let all_failed = missing
-                .iter()
-                .all(|&id| self.service.blocked_by(id).is_some());
-            let stalled = last_change.elapsed() > WARM_UP_STALL;
-            if all_failed || stalled || start.elapsed() > timeout {
-                let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
-                let why_else = if stalled {
-                    "nothing was loading".to_owned()
-                } else {
-                    format!("not resident after {:.0} s", timeout.as_secs_f64())
-                };
-                let missing = missing
-                    .into_iter()
-                    .map(|tile| {
-                        let reason = match self.service.blocked_by(tile) {
-                            Some((t, e)) if t == tile => format!("failed to load: {e}"),
-                            Some((t, e)) => format!(
-                                "derived from tile L{} {}_{}, which failed to load: {e}",
-                                t.level, t.x, t.y
-                            ),
-                            None => why_else.clone(),
-                        };
-                        MissingTile { tile, reason }
-                    })
-                    .collect();
-                return Ok(WarmUp { missing });
-            }
-            if !busy {
-                std::thread::sleep(std::time::Duration::from_millis(2));
-            }
-        }
-    }
-
-    /// Records and submits derivations on their own (a batch a submission: each batch's jobs
-    /// are written to the same buffer), without waiting.
-    fn submit_derives(&mut self, derives: &[DeriveJob]) {
-        let batch = self.derive.batch().max(1) as usize;
-        let mut no_timer = GpuTimer::new(&self.device, &self.queue, false, 0);
-        for chunk in derives.chunks(batch) {
-            let mut e = self.device.create_command_encoder(&Default::default());
-            self.derive
-                .record(&self.queue, &mut e, &self.atlas, chunk, &mut no_timer);
-            self.queue.submit([e.finish()]);
-        }
-    }
-
-    /// Derivations of a frame that was prepared and never recorded: the tile service counts
-    /// those tiles as resident, so they are derived now.
-    fn flush_unrecorded(&mut self) {
-        if let Some(stale) = self.prepared.take() {
-            self.submit_derives(&stale.derives);
-        }
-    }
-
-    /// Uploads the plan's decoded tiles to the atlas; returns the derivations to record.
-    /// A tile that does not fit its slot (its size disagrees with the atlas) is logged and left
-    /// out, and the others go on: the slot keeps an identity that the hole check does not
-    /// accept, so the tile counts as a hole and is drawn from its ancestor.
-    fn upload(&mut self, plan: ResidencyPlan) -> Vec<DeriveJob> {
-        for (slot, tile) in &plan.uploads {
-            if self.skip_uploads > 0 {
-                // A fault injected by a test: the slot is given to the tile, its data never
-                // reaches the GPU.
-                self.skip_uploads -= 1;
-                self.atlas.claim(*slot, tile.id);
-                continue;
-            }
-            if let Err(e) = self.atlas.upload(&self.queue, *slot, tile) {
-                log::warn!("tile {:?} left out of the atlas: {e}", tile.id);
-            }
-        }
-        plan.derives
-    }
-
-    /// For tests of the hole count: the next `n` uploads are planned (their slots given to
-    /// their tiles) but never written to the GPU, as a lost upload would be.
-    #[doc(hidden)]
-    pub fn skip_next_uploads(&mut self, n: u32) {
-        self.skip_uploads = n;
-    }
-
     /// Gets the frame of `input` ready: collects figures of earlier frames that have come back,
     /// selects the tiles the camera needs, plans residency with the tile service (loads are
     /// requested, finished ones uploaded), and writes the frame's uniforms. Never waits for the
@@ -1210,157 +836,4 @@ impl Renderer {
         let _ = self.device.poll(wgpu::PollType::Poll);
         self.readback.collect(&self.timer);
     }
-
-    fn check_targets(
-        &self,
-        color: &wgpu::TextureView,
-        depth: &wgpu::TextureView,
-    ) -> Result<(), RendererError> {
-        let t = &self.targets;
-        let size = |tex: &wgpu::Texture| (tex.width(), tex.height());
-        let describe = |tex: &wgpu::Texture| {
-            format!(
-                "{}x{} {:?} with {:?}",
-                tex.width(),
-                tex.height(),
-                tex.format(),
-                tex.usage()
-            )
-        };
-        let c = color.texture();
-        if size(c) != (t.width, t.height) {
-            return Err(RendererError::Target {
-                which: "colour",
-                found: describe(c),
-                expected: format!("{}x{}", t.width, t.height),
-            });
-        }
-        let d = depth.texture();
-        let mut usage =
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-        if self.terrain_depth.is_some() {
-            usage |= wgpu::TextureUsages::COPY_SRC;
-        }
-        if size(d) != (t.width, t.height)
-            || d.format() != t.depth_format
-            || !d.usage().contains(usage)
-        {
-            return Err(RendererError::Target {
-                which: "depth",
-                found: describe(d),
-                expected: format!(
-                    "{}x{} {:?} with {:?}",
-                    t.width, t.height, t.depth_format, usage
-                ),
-            });
-        }
-        Ok(())
-    }
-
-    /// The generation jobs of the grass tiles that have their own data resident and are in view.
-    fn grass_jobs(&self, view: &FrameView, grass: &[(TileId, Ring, f64)]) -> Vec<TileJob> {
-        let pyramid = &self.world.manifest.pyramid;
-        let (camera, frustum) = (&view.camera, &view.frustum);
-        let near_m = self
-            .grass
-            .as_ref()
-            .map_or(0.0, |g| g.renderer.settings().near_m);
-        let mut jobs = Vec::new();
-        for &(id, ring, _) in grass {
-            let Some((src, slot)) = self.service.draw_source(id) else {
-                continue;
-            };
-            if src != id {
-                continue; // no grass until the tile's own data is there
-            }
-            let b = pyramid.bounds(id);
-            let (h0, h1) = self.service.height_range(id);
-            let tallest = 1.5f64;
-            let min = glam::DVec3::new(b.min.x, b.min.y, f64::from(h0)) - camera.position;
-            let max = glam::DVec3::new(b.max.x, b.max.y, f64::from(h1) + tallest) - camera.position;
-            if !frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
-                continue;
-            }
-            let rel = b.min - camera.position.truncate();
-            let job = TileJob {
-                origin: [rel.x as f32, rel.y as f32],
-                cell: pyramid.cell_size_m(id.level) as f32,
-                layer: slot,
-                tile_x: id.x,
-                tile_y: id.y,
-                lod: u32::from(ring == Ring::Low),
-                slot: 0,
-            };
-            jobs.push(job);
-            // A high-LOD tile within the near radius: a second job for its blades there.
-            let c = camera.position.truncate();
-            let nearest = c.clamp(b.min, b.max) - c;
-            if ring == Ring::High && nearest.length() < f64::from(near_m) {
-                jobs.push(TileJob { lod: 2, ..job });
-            }
-        }
-        jobs
-    }
-}
-
-fn check_formats(targets: &Targets) -> Result<(), RendererError> {
-    if crate::shaders::encode_srgb_for(targets.color_format).is_none() {
-        return Err(RendererError::ColorFormat(targets.color_format));
-    }
-    if !DEPTH_FORMATS.contains(&targets.depth_format) {
-        return Err(RendererError::DepthFormat(targets.depth_format));
-    }
-    Ok(())
-}
-
-/// Refuses a target size that the adapter cannot serve: beyond its largest 2D texture, or (with
-/// grass) a Hi-Z pyramid larger than the largest storage buffer binding or buffer. Checked here,
-/// against this device's limits, so that no wgpu validation error can follow.
-fn check_size(
-    device: &wgpu::Device,
-    width: u32,
-    height: u32,
-    grass: bool,
-) -> Result<(), RendererError> {
-    let limits = device.limits();
-    let limit = limits.max_texture_dimension_2d;
-    if width == 0 || height == 0 || width > limit || height > limit {
-        return Err(RendererError::BadSize {
-            width,
-            height,
-            limit,
-        });
-    }
-    if grass {
-        let bytes = hiz_bytes(width, height);
-        let (limit_name, limit) =
-            if limits.max_storage_buffer_binding_size <= limits.max_buffer_size {
-                (
-                    "max_storage_buffer_binding_size",
-                    limits.max_storage_buffer_binding_size,
-                )
-            } else {
-                ("max_buffer_size", limits.max_buffer_size)
-            };
-        if bytes > limit {
-            let pixels = u64::from(width) * u64::from(height);
-            return Err(RendererError::SizeBeyondLimit {
-                width,
-                height,
-                what: "Hi-Z pyramid storage buffer",
-                bytes,
-                limit_name,
-                limit,
-                max_pixels: (pixels as f64 * limit as f64 / bytes as f64) as u64,
-            });
-        }
-    }
-    Ok(())
-}
-
-/// Bytes of the Hi-Z pyramid of a `width` x `height` target (f32 levels down to 1x1).
-pub fn hiz_bytes(width: u32, height: u32) -> u64 {
-    (0..crate::grass::hiz::mip_count(width, height))
-        .map(|m| u64::from((width >> m).max(1)) * u64::from((height >> m).max(1)) * 4)
-        .sum()
 }

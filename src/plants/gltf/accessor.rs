@@ -1,0 +1,269 @@
+//! The file's data: buffers (the binary chunk, a data URI or a file beside the glTF file),
+//! buffer views and accessors, each read checked against the bytes there are.
+
+use std::path::Path;
+
+use base64::Engine as _;
+use gltf::accessor::{DataType, Dimensions};
+use percent_encoding::percent_decode_str;
+
+use super::load::Loader;
+use super::{MAX_PLANT_TRIANGLES, PlantFileError};
+
+/// A problem inside an accessor, before the primitive it belongs to is known.
+pub(super) enum AccessorError {
+    Plant(PlantFileError),
+    Bad(String),
+}
+
+impl From<PlantFileError> for AccessorError {
+    fn from(e: PlantFileError) -> Self {
+        Self::Plant(e)
+    }
+}
+
+impl Loader<'_> {
+    /// The data of a buffer, read when first asked for.
+    fn buffer(&self, index: usize) -> Result<&[u8], PlantFileError> {
+        if self.buffers.get(index).is_some_and(|b| b.get().is_none()) {
+            let buffer =
+                self.gltf
+                    .buffers()
+                    .nth(index)
+                    .ok_or_else(|| PlantFileError::BufferMissing {
+                        path: self.path.to_owned(),
+                        buffer: index,
+                        reason: "no such buffer".into(),
+                    })?;
+            let missing = |reason: String| PlantFileError::BufferMissing {
+                path: self.path.to_owned(),
+                buffer: index,
+                reason,
+            };
+            let data = match buffer.source() {
+                gltf::buffer::Source::Bin => self
+                    .gltf
+                    .blob
+                    .clone()
+                    .ok_or_else(|| missing("the file has no binary chunk".into()))?,
+                gltf::buffer::Source::Uri(uri) => read_uri(self.path, uri).map_err(missing)?,
+            };
+            if data.len() < buffer.length() {
+                return Err(PlantFileError::BufferTooShort {
+                    path: self.path.to_owned(),
+                    buffer: index,
+                    len: data.len(),
+                    needed: buffer.length(),
+                });
+            }
+            let _ = self.buffers[index].set(data);
+        }
+        Ok(self
+            .buffers
+            .get(index)
+            .and_then(|b| b.get())
+            .map_or(&[], Vec::as_slice))
+    }
+
+    /// The bytes of a buffer view, checked against its buffer.
+    pub(super) fn view_bytes(&self, view: &gltf::buffer::View) -> Result<&[u8], PlantFileError> {
+        let index = view.buffer().index();
+        let path = self.path.to_owned();
+        let (start, length) = (view.offset(), view.length());
+        let data = self.buffer(index)?;
+        let end = start.saturating_add(length);
+        data.get(start..end).ok_or(PlantFileError::BufferTooShort {
+            path,
+            buffer: index,
+            len: data.len(),
+            needed: end,
+        })
+    }
+
+    /// An accessor's values, component by component, as f32 (integers normalised to 0..1 or
+    /// -1..1 when the accessor says so or `normalize` asks).
+    pub(super) fn read_accessor(
+        &self,
+        acc: &gltf::Accessor,
+        name: &str,
+        dims: &[Dimensions],
+        normalize: bool,
+    ) -> Result<Vec<f32>, AccessorError> {
+        let dimensions = acc.dimensions();
+        if !dims.contains(&dimensions) {
+            return Err(AccessorError::Bad(format!(
+                "{name} must be {}, not {dimensions:?}",
+                dims.iter()
+                    .map(|d| format!("{d:?}"))
+                    .collect::<Vec<_>>()
+                    .join(" or ")
+            )));
+        }
+        let normalize = normalize || acc.normalized();
+        let data_type = acc.data_type();
+        let components = dimensions.multiplicity();
+        let component_size = data_type.size();
+        let element = components * component_size;
+        let count = acc.count();
+        // The vertex and triangle limits were checked against counts before; this guards the
+        // allocation of an accessor that no limit counted.
+        if count > MAX_PLANT_TRIANGLES * 3 {
+            return Err(AccessorError::Bad(format!(
+                "{name} has {count} entries, more than any plant within the limits needs"
+            )));
+        }
+        let mut values = vec![0.0f32; count * components];
+        if count == 0 {
+            return Ok(values);
+        }
+        if let Some(view) = acc.view() {
+            let stride = view.stride().unwrap_or(element);
+            if stride < element {
+                return Err(AccessorError::Bad(format!(
+                    "{name}'s byte stride {stride} is less than its element size {element}"
+                )));
+            }
+            let offset = acc.offset();
+            let bytes = self.view_bytes(&view)?;
+            let needed = stride
+                .checked_mul(count - 1)
+                .and_then(|x| x.checked_add(offset))
+                .and_then(|x| x.checked_add(element));
+            if needed.is_none_or(|needed| needed > bytes.len()) {
+                return Err(AccessorError::Bad(format!(
+                    "{name} reads past the end of buffer view {} ({} bytes)",
+                    view.index(),
+                    bytes.len()
+                )));
+            }
+            for i in 0..count {
+                let at = offset + i * stride;
+                for c in 0..components {
+                    values[i * components + c] =
+                        component(&bytes[at + c * component_size..], data_type, normalize);
+                }
+            }
+        }
+        if let Some(sparse) = acc.sparse() {
+            let sc = sparse.count();
+            if sc > count {
+                return Err(AccessorError::Bad(format!(
+                    "{name} has {sc} sparse entries, more than its {count} entries"
+                )));
+            }
+            let indices = sparse.indices();
+            let index_size = indices.index_type().size();
+            let index_type = match indices.index_type() {
+                gltf::accessor::sparse::IndexType::U8 => DataType::U8,
+                gltf::accessor::sparse::IndexType::U16 => DataType::U16,
+                gltf::accessor::sparse::IndexType::U32 => DataType::U32,
+            };
+            let index_offset = indices.offset();
+            let index_bytes = self.view_bytes(&indices.view())?.to_vec();
+            let vals = sparse.values();
+            let value_offset = vals.offset();
+            let value_bytes = self.view_bytes(&vals.view())?;
+            let fits = |offset: usize, size: usize, len: usize| {
+                sc.checked_mul(size)
+                    .and_then(|x| x.checked_add(offset))
+                    .is_some_and(|end| end <= len)
+            };
+            if !fits(index_offset, index_size, index_bytes.len())
+                || !fits(value_offset, element, value_bytes.len())
+            {
+                return Err(AccessorError::Bad(format!(
+                    "{name}'s sparse data reads past the end of its buffer views"
+                )));
+            }
+            for k in 0..sc {
+                let target = component(
+                    &index_bytes[index_offset + k * index_size..],
+                    index_type,
+                    false,
+                );
+                let target = target as usize;
+                if target >= count {
+                    return Err(AccessorError::Bad(format!(
+                        "{name} has sparse index {target}, out of range for its {count} entries"
+                    )));
+                }
+                let at = value_offset + k * element;
+                for c in 0..components {
+                    values[target * components + c] = component(
+                        &value_bytes[at + c * component_size..],
+                        data_type,
+                        normalize,
+                    );
+                }
+            }
+        }
+        Ok(values)
+    }
+}
+
+/// One component at the start of `bytes` (the caller has checked there are enough).
+fn component(bytes: &[u8], data_type: DataType, normalize: bool) -> f32 {
+    let b = |n: usize| bytes.get(n).copied().unwrap_or(0);
+    match data_type {
+        DataType::I8 => {
+            let v = b(0) as i8 as f32;
+            if normalize { (v / 127.0).max(-1.0) } else { v }
+        }
+        DataType::U8 => {
+            let v = b(0) as f32;
+            if normalize { v / 255.0 } else { v }
+        }
+        DataType::I16 => {
+            let v = i16::from_le_bytes([b(0), b(1)]) as f32;
+            if normalize {
+                (v / 32767.0).max(-1.0)
+            } else {
+                v
+            }
+        }
+        DataType::U16 => {
+            let v = u16::from_le_bytes([b(0), b(1)]) as f32;
+            if normalize { v / 65535.0 } else { v }
+        }
+        DataType::U32 => u32::from_le_bytes([b(0), b(1), b(2), b(3)]) as f32,
+        DataType::F32 => f32::from_le_bytes([b(0), b(1), b(2), b(3)]),
+    }
+}
+
+/// The bytes a glTF URI names: a base64 data URI, or a file relative to the glTF file.
+pub(super) fn read_uri(gltf_path: &Path, uri: &str) -> Result<Vec<u8>, String> {
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let Some((header, data)) = rest.split_once(',') else {
+            return Err("a data URI without a comma".into());
+        };
+        if !header.ends_with(";base64") {
+            return Err("a data URI that is not base64".into());
+        }
+        return base64::engine::general_purpose::STANDARD
+            .decode(data)
+            .map_err(|e| format!("a data URI with bad base64: {e}"));
+    }
+    let name = percent_decode_str(uri)
+        .decode_utf8()
+        .map_err(|_| format!("{uri:?} is not UTF-8 once percent-decoded"))?;
+    // Only files beside the glTF file (or below it); no schemes, no absolute paths.
+    let relative = Path::new(name.as_ref());
+    if name.contains(':') || relative.is_absolute() {
+        return Err(format!("{uri:?} is not a relative file name"));
+    }
+    let file = gltf_path.parent().unwrap_or(Path::new(".")).join(relative);
+    std::fs::read(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normalised_components() {
+        assert_eq!(component(&[255], DataType::U8, true), 1.0);
+        assert_eq!(component(&[0x80], DataType::I8, true), -1.0);
+        assert_eq!(component(&[0xff, 0xff], DataType::U16, true), 1.0);
+        assert_eq!(component(&[7, 0, 0, 0], DataType::U32, false), 7.0);
+    }
+}

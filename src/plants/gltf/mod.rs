@@ -1,0 +1,231 @@
+//! A user's plant from a glTF 2.0 file (`.gltf` with external or data-URI buffers, or `.glb`),
+//! read into one [`PlantMesh`] with its base colour and thickness textures.
+//!
+//! What is read:
+//!
+//! - every triangle primitive (`TRIANGLES`, `TRIANGLE_STRIP`, `TRIANGLE_FAN`) of every mesh
+//!   reachable from the default scene's nodes (the first scene when none is named, every mesh
+//!   when the file has no scene), with the node transforms applied. Points and lines are skipped
+//!   with a warning; so are primitives without `POSITION`.
+//! - glTF is y-up, plant space z-up (x east, y north): a point (x, y, z) of the file becomes
+//!   (x, -z, y); normals likewise. The file's origin stays the plant's root.
+//! - `POSITION` is required; `NORMAL` is optional (smooth normals are computed when absent);
+//!   `TEXCOORD_0` is optional ((0, 0) when absent); `COLOR_0` is optional and carries the
+//!   bending channels of [`PlantVertex::wind`](super::PlantVertex::wind) (r edge flutter,
+//!   g phase, b leaf or branch freedom, a ambient occlusion; RGB or RGBA, float or normalised
+//!   integers). Without it a vertex gets r 0, g 0, b = its height over the mesh's height, a 1.
+//! - albedo: the material's `baseColorFactor` rgb (linear); albedo.a (thinness) is 0.5.
+//! - the base colour texture (`pbrMetallicRoughness.baseColorTexture`) and the thickness texture
+//!   (`KHR_materials_volume.thicknessTexture`, thickness in its green channel) of the first
+//!   material that has one, decoded from PNG to RGBA8; from a file beside the glTF, a data URI
+//!   or a buffer view.
+//!
+//! Limits: at most [`MAX_PLANT_VERTICES`] vertices and [`MAX_PLANT_TRIANGLES`] triangles after
+//! merging, textures at most [`MAX_TEXTURE_SIZE`] pixels a side. Any input, however malformed,
+//! gives a [`PlantFileError`] naming the file, never a panic.
+//!
+//! The loader is in `load.rs` (the scene's primitives, the mesh, the textures), the reading of
+//! buffers, views and accessors in `accessor.rs`, the document's check in `validate.rs`;
+//! [`write_plant_gltf`] (`write.rs`) writes a plant back as glTF (the tests make their plant
+//! files with it).
+
+mod accessor;
+mod load;
+mod validate;
+mod write;
+
+use std::fmt;
+use std::io;
+use std::path::{Path, PathBuf};
+
+use thiserror::Error;
+
+use super::mesh::{PlantImage, PlantMesh};
+
+pub use write::write_plant_gltf;
+
+/// The most vertices a plant may have after its primitives are merged.
+pub const MAX_PLANT_VERTICES: usize = 65_536;
+/// The most triangles a plant may have after its primitives are merged.
+pub const MAX_PLANT_TRIANGLES: usize = 131_072;
+/// The largest width and height of a plant's texture, pixels.
+pub const MAX_TEXTURE_SIZE: u32 = 4096;
+/// The thinness (albedo.a) given to every vertex of a loaded plant.
+pub const DEFAULT_THINNESS: f32 = 0.5;
+
+/// A plant read from a glTF file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoadedPlant {
+    /// All triangle primitives merged, in plant space (z up).
+    pub mesh: PlantMesh,
+    /// The base colour texture (sRGB, alpha for cut-outs), when the file has one.
+    pub base_color: Option<PlantImage>,
+    /// The `KHR_materials_volume` thickness texture (thickness in green), when the file has one.
+    pub thickness: Option<PlantImage>,
+}
+
+/// Which of a plant's textures an error is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlantTexture {
+    /// `pbrMetallicRoughness.baseColorTexture`.
+    BaseColor,
+    /// `KHR_materials_volume.thicknessTexture`.
+    Thickness,
+}
+
+impl fmt::Display for PlantTexture {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::BaseColor => "base colour",
+            Self::Thickness => "thickness",
+        })
+    }
+}
+
+/// Why a plant file could not be loaded. Every message names the file.
+#[derive(Debug, Error)]
+pub enum PlantFileError {
+    /// The file is missing or unreadable.
+    #[error("cannot read plant file {}: {source}", path.display())]
+    Read {
+        /// The glTF file.
+        path: PathBuf,
+        /// The reason.
+        #[source]
+        source: io::Error,
+    },
+    /// The file is not glTF 2.0 (or breaks its rules).
+    #[error("plant file {} is not valid glTF 2.0: {reason}", path.display())]
+    NotGltf {
+        /// The glTF file.
+        path: PathBuf,
+        /// The parser's reason.
+        reason: String,
+    },
+    /// No triangle primitive with `POSITION` was found.
+    #[error(
+        "plant file {} has no triangle mesh with POSITION reachable from its scene",
+        path.display()
+    )]
+    NoMesh {
+        /// The glTF file.
+        path: PathBuf,
+    },
+    /// More than [`MAX_PLANT_VERTICES`] vertices.
+    #[error(
+        "plant file {} has {count} vertices, more than the limit of {limit}",
+        path.display()
+    )]
+    TooManyVertices {
+        /// The glTF file.
+        path: PathBuf,
+        /// Vertices in all primitives together.
+        count: usize,
+        /// [`MAX_PLANT_VERTICES`].
+        limit: usize,
+    },
+    /// More than [`MAX_PLANT_TRIANGLES`] triangles.
+    #[error(
+        "plant file {} has {count} triangles, more than the limit of {limit}",
+        path.display()
+    )]
+    TooManyTriangles {
+        /// The glTF file.
+        path: PathBuf,
+        /// Triangles in all primitives together.
+        count: usize,
+        /// [`MAX_PLANT_TRIANGLES`].
+        limit: usize,
+    },
+    /// A texture could not be read or decoded.
+    #[error("plant file {}: the {texture} texture does not decode: {reason}", path.display())]
+    Texture {
+        /// The glTF file.
+        path: PathBuf,
+        /// Which texture.
+        texture: PlantTexture,
+        /// Why.
+        reason: String,
+    },
+    /// A texture is larger than [`MAX_TEXTURE_SIZE`] on a side.
+    #[error(
+        "plant file {}: the {texture} texture is {width}x{height} pixels, larger than the limit of {limit}x{limit}",
+        path.display()
+    )]
+    TextureTooLarge {
+        /// The glTF file.
+        path: PathBuf,
+        /// Which texture.
+        texture: PlantTexture,
+        /// Its width, pixels.
+        width: u32,
+        /// Its height, pixels.
+        height: u32,
+        /// [`MAX_TEXTURE_SIZE`].
+        limit: u32,
+    },
+    /// A buffer's data could not be read.
+    #[error("plant file {}: buffer {buffer} is missing: {reason}", path.display())]
+    BufferMissing {
+        /// The glTF file.
+        path: PathBuf,
+        /// The buffer's index.
+        buffer: usize,
+        /// Why (the file or data URI and the reason).
+        reason: String,
+    },
+    /// A buffer holds fewer bytes than the file says, or than a view or accessor reads.
+    #[error(
+        "plant file {}: buffer {buffer} is too short: it holds {len} bytes, {needed} are needed",
+        path.display()
+    )]
+    BufferTooShort {
+        /// The glTF file.
+        path: PathBuf,
+        /// The buffer's index.
+        buffer: usize,
+        /// Bytes it holds.
+        len: usize,
+        /// Bytes needed.
+        needed: usize,
+    },
+    /// A primitive's index refers past its vertices.
+    #[error(
+        "plant file {}: mesh {mesh} primitive {primitive} has index {index}, out of range for its {vertices} vertices",
+        path.display()
+    )]
+    IndexOutOfRange {
+        /// The glTF file.
+        path: PathBuf,
+        /// The mesh's index.
+        mesh: usize,
+        /// The primitive's index within the mesh.
+        primitive: usize,
+        /// The offending index.
+        index: u32,
+        /// Vertices of the primitive.
+        vertices: usize,
+    },
+    /// A primitive's data does not fit the rules (types, counts, strides, finite values).
+    #[error("plant file {}: mesh {mesh} primitive {primitive}: {problem}", path.display())]
+    BadPrimitive {
+        /// The glTF file.
+        path: PathBuf,
+        /// The mesh's index.
+        mesh: usize,
+        /// The primitive's index within the mesh.
+        primitive: usize,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+/// Reads a plant from a glTF 2.0 file (`.gltf` or `.glb`); see the module docs for what is read
+/// and the limits.
+pub fn load_plant(path: &Path) -> Result<LoadedPlant, PlantFileError> {
+    let bytes = std::fs::read(path).map_err(|source| PlantFileError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    load::Loader::new(path, &bytes)?.load()
+}

@@ -1,0 +1,117 @@
+//! What stops a renderer from being built or a frame from being recorded.
+
+use super::ConfigError;
+use crate::stream::AtlasError;
+use crate::wind::WindError;
+use crate::world::WorldError;
+
+/// What stops a renderer from being built or a frame from being recorded.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RendererError {
+    /// A setting is out of its range
+    /// ([`RendererConfig::validate`](super::RendererConfig::validate)).
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// A tile or the manifest could not be read.
+    #[error(transparent)]
+    World(#[from] WorldError),
+    /// A plant type's mesh could not be made.
+    #[error(transparent)]
+    Plant(#[from] crate::plants::PlantError),
+    /// A tile did not fit the atlas.
+    #[error(transparent)]
+    Atlas(#[from] AtlasError),
+    /// The wind scene asked for does not exist or does not fit.
+    #[error(transparent)]
+    Wind(#[from] WindError),
+    /// The atlas slot count does not fit the adapter or the world.
+    #[error(
+        "an atlas of {slots} slots does not fit: it needs more slots than the world's {roots} \
+         level-0 tiles and at most the adapter's {limit} texture array layers"
+    )]
+    AtlasSlots {
+        /// Slots asked for.
+        slots: u32,
+        /// Level-0 tiles of the world (always resident).
+        roots: u32,
+        /// The adapter's `max_texture_array_layers`.
+        limit: u32,
+    },
+    /// The target size is zero or beyond the adapter's limit.
+    #[error("image size {width}x{height} is not supported (1 to {limit} pixels a side)")]
+    BadSize {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+        /// The adapter's `max_texture_dimension_2d`.
+        limit: u32,
+    },
+    /// The target size needs a buffer larger than the adapter allows (the grass's Hi-Z pyramid
+    /// is one storage buffer bound whole, about 5.3 bytes a pixel).
+    #[error(
+        "image size {width}x{height} needs a {what} of {bytes} bytes, more than this adapter's \
+         {limit_name} of {limit} bytes: choose a smaller size (about {max_pixels} pixels at most)"
+    )]
+    SizeBeyondLimit {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+        /// The buffer, in words (e.g. `Hi-Z pyramid storage buffer`).
+        what: &'static str,
+        /// Its size at this target size.
+        bytes: u64,
+        /// The adapter limit it exceeds (e.g. `max_storage_buffer_binding_size`).
+        limit_name: &'static str,
+        /// That limit.
+        limit: u64,
+        /// Roughly the most pixels (width times height) that fit.
+        max_pixels: u64,
+    },
+    /// The CPU tile cache cannot hold a single tile, so no tile could ever be uploaded.
+    #[error(
+        "a CPU tile cache of {bytes} bytes cannot hold one tile of this world ({tile_bytes} \
+         bytes): give it at least {min_mib} MiB"
+    )]
+    CacheTooSmall {
+        /// The cache's ceiling asked for.
+        bytes: u64,
+        /// Bytes of one decoded tile.
+        tile_bytes: u64,
+        /// The smallest ceiling in MiB that holds one tile.
+        min_mib: u64,
+    },
+    /// The colour format is not one the renderer draws into.
+    #[error(
+        "colour format {0:?} is not supported (use an 8-bit RGBA/BGRA format, sRGB or not, \
+         Rgb10a2Unorm, Rgba16Unorm, Rgba16Float, Rgba32Float or Rg11b10Ufloat)"
+    )]
+    ColorFormat(wgpu::TextureFormat),
+    /// The depth format is not one the renderer draws into.
+    #[error("depth format {0:?} is not supported (use Depth32Float or Depth24Plus)")]
+    DepthFormat(wgpu::TextureFormat),
+    /// A target given to [`Renderer::record`](super::Renderer::record) does not match the
+    /// renderer's targets.
+    #[error("the {which} target is {found}, but the renderer was made for {expected}")]
+    Target {
+        /// `"colour"` or `"depth"`.
+        which: &'static str,
+        /// What the target is.
+        found: String,
+        /// What the renderer expects.
+        expected: String,
+    },
+    /// [`Renderer::record`](super::Renderer::record) was called without a
+    /// [`Renderer::prepare`](super::Renderer::prepare) before it.
+    #[error("record was called without prepare: call prepare once before each record")]
+    NotPrepared,
+    /// The capture of the terrain-only depth was asked for with a depth format whose texels
+    /// cannot be copied (use Depth32Float).
+    #[error(
+        "the terrain-only depth cannot be captured from a {0:?} target: its texels cannot be \
+         copied (use Depth32Float)"
+    )]
+    DepthCapture(wgpu::TextureFormat),
+}

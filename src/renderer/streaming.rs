@@ -1,0 +1,241 @@
+//! Tile residency and streaming: the tiles a frame wants, uploads of loaded tiles to the atlas,
+//! derivations of child tiles, the warm-up that waits for them all, and the grass jobs of the
+//! tiles that are resident.
+
+use std::time::Instant;
+
+use glam::Vec2;
+
+use super::{FrameView, MissingTile, Renderer, RendererError, WarmUp};
+use crate::camera::Camera;
+use crate::gpu::GpuTimer;
+use crate::grass::TileJob;
+use crate::lod::{Ring, select_terrain};
+use crate::stream::{DeriveJob, ResidencyPlan, Want};
+use crate::world::TileId;
+
+/// How long a warm-up waits with nothing loading, uploaded or derived before it gives up.
+pub const WARM_UP_STALL: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// The tiles a frame wants, before residency.
+pub(super) struct Selection {
+    pub(super) terrain: Vec<TileId>,
+    pub(super) grass: Vec<(TileId, Ring, f64)>,
+    pub(super) wants: Vec<Want>,
+}
+
+impl Renderer {
+    pub(super) fn select(&mut self, view: &FrameView) -> Selection {
+        let camera = &view.camera;
+        let frustum = view.frustum;
+        let pyramid = &self.world.manifest.pyramid;
+        let service = &self.service;
+        let range = |id: TileId| service.height_range(id);
+        let terrain = select_terrain(pyramid, self.lod, camera.position, &frustum, &range);
+        let grass = match &mut self.rings {
+            Some(r) => r.update(pyramid, camera.position, &range),
+            None => Vec::new(),
+        };
+        // Priority: distance, doubled for what lies behind the camera.
+        let forward = camera.forward();
+        let priority = |id: TileId| {
+            let b = pyramid.bounds(id);
+            let (h0, h1) = range(id);
+            let c = glam::DVec3::new(b.center().x, b.center().y, 0.5 * f64::from(h0 + h1));
+            let to = c - camera.position;
+            let d = to.length().max(1e-3);
+            (d * (1.5 - 0.5 * forward.dot(to / d))) as f32
+        };
+        let wants = terrain
+            .iter()
+            .copied()
+            .chain(grass.iter().map(|g| g.0))
+            .map(|id| Want {
+                id,
+                priority: priority(id),
+            })
+            .collect();
+        Selection {
+            terrain,
+            grass,
+            wants,
+        }
+    }
+
+    /// Brings every tile `camera` wants into the atlas, waiting for loads and for the GPU: for
+    /// the first frame of a run or a teleport, never inside a frame loop. Gives up after
+    /// `timeout`; returns whether everything became resident. See [`Renderer::warm_up_report`]
+    /// for what is missing when not.
+    pub fn warm_up(
+        &mut self,
+        camera: &Camera,
+        timeout: std::time::Duration,
+    ) -> Result<bool, RendererError> {
+        Ok(self.warm_up_report(camera, timeout)?.missing.is_empty())
+    }
+
+    /// Like [`Renderer::warm_up`], and says which tiles are missing and why. Stops early, without
+    /// waiting for `timeout`, once every missing tile is kept out by a failed load (its own or
+    /// that of the stored ancestor it is derived from), or when nothing has moved for
+    /// [`WARM_UP_STALL`].
+    pub fn warm_up_report(
+        &mut self,
+        camera: &Camera,
+        timeout: std::time::Duration,
+    ) -> Result<WarmUp, RendererError> {
+        let start = Instant::now();
+        self.flush_unrecorded();
+        let mut last_change = Instant::now();
+        let mut last_resident = u32::MAX;
+        let view = FrameView::new(camera, Vec2::ZERO, self.targets.width, self.targets.height);
+        loop {
+            let sel = self.select(&view);
+            let plan = self.service.update(&sel.wants);
+            let busy = !plan.uploads.is_empty() || !plan.derives.is_empty();
+            let derives = self.upload(plan);
+            self.submit_derives(&derives);
+            let stats = self.service.stats();
+            if stats.resident == stats.desired {
+                let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+                return Ok(WarmUp::default());
+            }
+            if busy || stats.resident != last_resident || stats.stream.in_flight > 0 {
+                last_change = Instant::now();
+                last_resident = stats.resident;
+            }
+            let missing: Vec<TileId> = sel
+                .wants
+                .iter()
+                .map(|w| w.id)
+                .filter(|&id| !self.service.is_resident(id))
+                .collect();
+            let all_failed = missing
+                .iter()
+                .all(|&id| self.service.blocked_by(id).is_some());
+            let stalled = last_change.elapsed() > WARM_UP_STALL;
+            if all_failed || stalled || start.elapsed() > timeout {
+                let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+                let why_else = if stalled {
+                    "nothing was loading".to_owned()
+                } else {
+                    format!("not resident after {:.0} s", timeout.as_secs_f64())
+                };
+                let missing = missing
+                    .into_iter()
+                    .map(|tile| {
+                        let reason = match self.service.blocked_by(tile) {
+                            Some((t, e)) if t == tile => format!("failed to load: {e}"),
+                            Some((t, e)) => format!(
+                                "derived from tile L{} {}_{}, which failed to load: {e}",
+                                t.level, t.x, t.y
+                            ),
+                            None => why_else.clone(),
+                        };
+                        MissingTile { tile, reason }
+                    })
+                    .collect();
+                return Ok(WarmUp { missing });
+            }
+            if !busy {
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+        }
+    }
+
+    /// Records and submits derivations on their own (a batch a submission: each batch's jobs
+    /// are written to the same buffer), without waiting.
+    fn submit_derives(&mut self, derives: &[DeriveJob]) {
+        let batch = self.derive.batch().max(1) as usize;
+        let mut no_timer = GpuTimer::new(&self.device, &self.queue, false, 0);
+        for chunk in derives.chunks(batch) {
+            let mut e = self.device.create_command_encoder(&Default::default());
+            self.derive
+                .record(&self.queue, &mut e, &self.atlas, chunk, &mut no_timer);
+            self.queue.submit([e.finish()]);
+        }
+    }
+
+    /// Derivations of a frame that was prepared and never recorded: the tile service counts
+    /// those tiles as resident, so they are derived now.
+    pub(super) fn flush_unrecorded(&mut self) {
+        if let Some(stale) = self.prepared.take() {
+            self.submit_derives(&stale.derives);
+        }
+    }
+
+    /// Uploads the plan's decoded tiles to the atlas; returns the derivations to record.
+    /// A tile that does not fit its slot (its size disagrees with the atlas) is logged and left
+    /// out, and the others go on: the slot keeps an identity that the hole check does not
+    /// accept, so the tile counts as a hole and is drawn from its ancestor.
+    pub(super) fn upload(&mut self, plan: ResidencyPlan) -> Vec<DeriveJob> {
+        for (slot, tile) in &plan.uploads {
+            if self.skip_uploads > 0 {
+                // A fault injected by a test: the slot is given to the tile, its data never
+                // reaches the GPU.
+                self.skip_uploads -= 1;
+                self.atlas.claim(*slot, tile.id);
+                continue;
+            }
+            if let Err(e) = self.atlas.upload(&self.queue, *slot, tile) {
+                log::warn!("tile {:?} left out of the atlas: {e}", tile.id);
+            }
+        }
+        plan.derives
+    }
+
+    /// For tests of the hole count: the next `n` uploads are planned (their slots given to
+    /// their tiles) but never written to the GPU, as a lost upload would be.
+    #[doc(hidden)]
+    pub fn skip_next_uploads(&mut self, n: u32) {
+        self.skip_uploads = n;
+    }
+
+    /// The generation jobs of the grass tiles that have their own data resident and are in view.
+    pub(super) fn grass_jobs(
+        &self,
+        view: &FrameView,
+        grass: &[(TileId, Ring, f64)],
+    ) -> Vec<TileJob> {
+        let pyramid = &self.world.manifest.pyramid;
+        let (camera, frustum) = (&view.camera, &view.frustum);
+        let near_m = self
+            .grass
+            .as_ref()
+            .map_or(0.0, |g| g.renderer.settings().near_m);
+        let mut jobs = Vec::new();
+        for &(id, ring, _) in grass {
+            let Some((src, slot)) = self.service.draw_source(id) else {
+                continue;
+            };
+            if src != id {
+                continue; // no grass until the tile's own data is there
+            }
+            let b = pyramid.bounds(id);
+            let (h0, h1) = self.service.height_range(id);
+            let tallest = 1.5f64;
+            let min = glam::DVec3::new(b.min.x, b.min.y, f64::from(h0)) - camera.position;
+            let max = glam::DVec3::new(b.max.x, b.max.y, f64::from(h1) + tallest) - camera.position;
+            if !frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
+                continue;
+            }
+            let rel = b.min - camera.position.truncate();
+            let job = TileJob {
+                origin: [rel.x as f32, rel.y as f32],
+                cell: pyramid.cell_size_m(id.level) as f32,
+                layer: slot,
+                tile_x: id.x,
+                tile_y: id.y,
+                lod: u32::from(ring == Ring::Low),
+                slot: 0,
+            };
+            jobs.push(job);
+            // A high-LOD tile within the near radius: a second job for its blades there.
+            let c = camera.position.truncate();
+            let nearest = c.clamp(b.min, b.max) - c;
+            if ring == Ring::High && nearest.length() < f64::from(near_m) {
+                jobs.push(TileJob { lod: 2, ..job });
+            }
+        }
+        jobs
+    }
+}
