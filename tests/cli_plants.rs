@@ -112,7 +112,9 @@ fn a_gltf_plant_renders_where_its_rule_puts_it() {
 #[test]
 fn bad_plant_files_are_refused_naming_the_file() {
     let tmp = tempfile::tempdir().unwrap();
-    let cases: [(&str, &dyn Fn(&Path), &[&str]); 4] = [
+    // (the file, how it is broken, what the error must name)
+    type Case<'a> = (&'a str, &'a dyn Fn(&Path), &'a [&'a str]);
+    let cases: [Case; 4] = [
         ("missing.gltf", &|_| {}, &["missing.gltf"]),
         (
             "notes.gltf",

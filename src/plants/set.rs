@@ -97,7 +97,7 @@ pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, Plan
                 })?;
             let mut mesh = loaded.mesh;
             let h = mesh.height();
-            if !(h > 1e-6) {
+            if h.is_nan() || h <= 1e-6 {
                 return Err(PlantError::Flat {
                     name: t.name.clone(),
                     file,
@@ -122,8 +122,8 @@ pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, Plan
             if texture.width > 1 {
                 for v in &mut textured.vertices {
                     let c = sample(&texture, v.uv);
-                    for k in 0..3 {
-                        v.albedo[k] *= c[k];
+                    for (a, c) in v.albedo.iter_mut().zip(c).take(3) {
+                        *a *= c;
                     }
                 }
             }

@@ -268,10 +268,10 @@ impl Manifest {
                     "a name no other plant type has",
                 ));
             }
-            let lower = p.mesh.to_ascii_lowercase();
-            if !PLANT_RECIPES.contains(&p.mesh.as_str())
-                && !(lower.ends_with(".gltf") || lower.ends_with(".glb"))
-            {
+            let gltf = std::path::Path::new(&p.mesh)
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb"));
+            if !PLANT_RECIPES.contains(&p.mesh.as_str()) && !gltf {
                 return Err(v.out_of_range(
                     &field("mesh"),
                     &p.mesh,
