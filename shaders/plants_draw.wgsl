@@ -70,16 +70,18 @@ fn load_vertex(i: u32) -> PlantVertex {
     return v;
 }
 
-// The frame as a read-only storage buffer, not a uniform: lavapipe (Mesa 22.3) compiles a
-// variant of a shader specialised on the values of the uniforms its branches test (the feature
-// bits here) at every draw, and keeps each until the pipeline goes, so the process grows every
-// frame; storage buffers are never specialised. The README's Plants section has the figures.
-@group(0) @binding(0) var<storage, read> frame: PlantFrame;
+@group(0) @binding(0) var<uniform> frame: PlantFrame;
 @group(0) @binding(1) var<storage, read> vertices: array<f32>;
 @group(0) @binding(2) var<uniform> wind_lookup: WindLookup;
 @group(0) @binding(3) var<storage, read> wind_cells: array<vec4<f32>>;
 @group(0) @binding(4) var plant_textures: texture_2d_array<f32>;
 @group(0) @binding(5) var plant_sampler: sampler;
+// The same frame record read as a storage buffer, for the feature bits that branches test:
+// lavapipe (Mesa 22.3) compiles a variant of a shader specialised on the values of the uniforms
+// its branches test at every draw, and keeps each until the pipeline goes, so the process grew
+// every frame; storage buffers are never specialised. The rest stays a uniform (the constant
+// cache on GPUs). The README's Plants section has the figures.
+@group(0) @binding(6) var<storage, read> frame_bits: PlantFrame;
 // A (type, level) region of the pool, chosen by a dynamic offset.
 @group(1) @binding(0) var<storage, read> instances: array<PlantInstance>;
 
@@ -167,9 +169,9 @@ fn vs_plant(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     let level = inst.kind >> 8u;
     let phase = rand01(inst.hash);
     let w = wind_at(inst.pos.xy);
-    let b = bend(v, inst.pos, inst.yaw, inst.scale, phase, w, frame.misc.y, frame.wind[t], frame.flags.x);
+    let b = bend(v, inst.pos, inst.yaw, inst.scale, phase, w, frame.misc.y, frame.wind[t], frame_bits.flags.x);
     var albedo = v.albedo;
-    if has_feature(frame.flags.x, COLOR_VARIATION) {
+    if has_feature(frame_bits.flags.x, COLOR_VARIATION) {
         // Per plant, from the noise of its root's world cell and its hash.
         let world = frame.misc.zw + inst.pos.xy;
         let cell = vec2<i32>(floor(world / 5.0));
@@ -217,14 +219,14 @@ fn fs_plant(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) v
     let sun = frame.sun_dir.xyz;
     let to_eye = -normalize(in.rel_pos);
     var light = frame.sun_color.rgb * max(dot(n, sun), 0.0);
-    if has_feature(frame.flags.x, TRANSLUCENCY) {
+    if has_feature(frame_bits.flags.x, TRANSLUCENCY) {
         // Light through the leaf from behind, stronger looking toward the sun; thin parts more.
         let back = max(dot(-n, sun), 0.0);
         let toward_sun = pow(max(dot(-to_eye, sun), 0.0), 4.0);
         light += frame.sun_color.rgb * back * thin * (0.3 + 0.7 * toward_sun) * vec3<f32>(1.0, 0.95, 0.6);
     }
     var ao = 1.0;
-    if has_feature(frame.flags.x, AMBIENT_OCCLUSION) {
+    if has_feature(frame_bits.flags.x, AMBIENT_OCCLUSION) {
         ao = in.misc.x;
     }
     let ambient = frame.sky_color.rgb * (0.35 + 0.25 * n.z) * ao;
@@ -252,7 +254,7 @@ fn probe_bend(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let inst = probe_instances[gid.x];
     let t = inst.kind & 255u;
-    let b = bend(load_vertex(gid.x), inst.pos, inst.yaw, inst.scale, rand01(inst.hash), probe_winds[gid.x], frame.misc.y, frame.wind[t], frame.flags.x);
+    let b = bend(load_vertex(gid.x), inst.pos, inst.yaw, inst.scale, rand01(inst.hash), probe_winds[gid.x], frame.misc.y, frame.wind[t], frame_bits.flags.x);
     probe_out[gid.x * 2u] = vec4<f32>(b.position, 0.0);
     probe_out[gid.x * 2u + 1u] = vec4<f32>(b.normal, 0.0);
 }

@@ -526,6 +526,8 @@ fn bench_lod_writes_its_tables_and_charts() {
         "infill_half_m",
         "infill_quarter_m",
         "width_scale",
+        "plant_lod_near_m",
+        "plant_lod_far_m",
     ] {
         assert!(header.contains(&column), "no column {column} in {header:?}");
     }

@@ -44,12 +44,18 @@ fn targets() -> Targets {
 
 impl Rig {
     fn new(capacity: u32) -> Self {
-        let ctx = common::gpu();
-        let world = World::open(&common::default_world()).unwrap();
+        let rig = Self::with_world(&common::default_world(), capacity);
         assert!(
-            world.manifest.plant_types.len() >= 3,
+            rig.manifest.plant_types.len() >= 3,
             "the default world has plants"
         );
+        rig
+    }
+
+    /// The rig over the world in `dir`, with regions of `capacity` instances.
+    fn with_world(dir: &std::path::Path, capacity: u32) -> Self {
+        let ctx = common::gpu();
+        let world = World::open(dir).unwrap();
         let manifest = world.manifest.clone();
         let grass = RendererConfig::for_world(&world)
             .grass_settings(&world)
@@ -192,9 +198,18 @@ fn key(p: &PlantInstance) -> (u32, u32) {
     (p.hash, p.kind)
 }
 
-#[test]
-fn gpu_placement_matches_the_cpu_mirror_on_meadow_steep_bare_and_high_tiles() {
-    let mut rig = Rig::new(16_384);
+/// Tiles of the four kinds side by side in front of the camera, placed on the GPU and by the
+/// CPU mirror: the GPU's instances (sorted), the CPU's (sorted), the CPU's counters, the
+/// instances per tile, and the GPU's counters.
+struct Placed {
+    gpu: Vec<PlantInstance>,
+    cpu: Vec<PlantInstance>,
+    stats: [u32; counter::COUNT],
+    per_tile: Vec<usize>,
+    gpu_stats: verdant::plants::renderer::PlantStats,
+}
+
+fn place_four_tiles(rig: &mut Rig) -> Placed {
     let level = rig.manifest.pyramid.max_level();
     let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
     let kinds = ["meadow", "steep", "bare", "high"];
@@ -235,22 +250,6 @@ fn gpu_placement_matches_the_cpu_mirror_on_meadow_steep_bare_and_high_tiles() {
         per_tile.push(out.instances.len());
         cpu.extend(out.instances);
     }
-    // The meadow tile has plants of several types at several levels; the others none.
-    assert!(per_tile[0] > 100, "meadow plants: {per_tile:?}");
-    assert_eq!(&per_tile[2..], &[0, 0], "bare and high tiles: {per_tile:?}");
-    let types: std::collections::HashSet<usize> = cpu.iter().map(|p| p.plant_type()).collect();
-    let levels: std::collections::HashSet<usize> = cpu.iter().map(|p| p.level()).collect();
-    assert!(types.len() >= 3, "types placed: {types:?}");
-    assert!(levels.len() >= 2, "levels placed: {levels:?}");
-    assert!(
-        stats[counter::RULED_OUT] > 0,
-        "the steep tile rules plants out"
-    );
-    assert!(
-        stats[counter::FRUSTUM] > 0,
-        "some plants fall outside the frustum"
-    );
-
     let mut gpu_all: Vec<PlantInstance> = gpu.iter().flatten().copied().collect();
     for (r, region) in gpu.iter().enumerate() {
         for p in region {
@@ -263,8 +262,21 @@ fn gpu_placement_matches_the_cpu_mirror_on_meadow_steep_bare_and_high_tiles() {
     }
     gpu_all.sort_by_key(key);
     cpu.sort_by_key(key);
+    Placed {
+        gpu: gpu_all,
+        cpu,
+        stats,
+        per_tile,
+        gpu_stats,
+    }
+}
+
+/// The GPU's placement is the CPU mirror's: the same instances (type, level, position, size,
+/// turn, fade) and the same counters.
+fn assert_same_placement(p: &Placed) {
+    let (gpu_all, cpu, stats, gpu_stats) = (&p.gpu, &p.cpu, &p.stats, &p.gpu_stats);
     assert_eq!(gpu_all.len(), cpu.len(), "instances, GPU against CPU");
-    for (g, c) in gpu_all.iter().zip(&cpu) {
+    for (g, c) in gpu_all.iter().zip(cpu) {
         assert_eq!(key(g), key(c));
         for k in 0..3 {
             assert!((g.pos[k] - c.pos[k]).abs() < 1e-3, "{g:?} against {c:?}");
@@ -280,6 +292,54 @@ fn gpu_placement_matches_the_cpu_mirror_on_meadow_steep_bare_and_high_tiles() {
     assert_eq!(gpu_stats.culled_occlusion, stats[counter::OCCLUSION]);
     assert_eq!(gpu_stats.drawn as usize, cpu.len());
     assert_eq!(gpu_stats.overflow, 0);
+}
+
+#[test]
+fn gpu_placement_matches_the_cpu_mirror_on_meadow_steep_bare_and_high_tiles() {
+    let mut rig = Rig::new(16_384);
+    let placed = place_four_tiles(&mut rig);
+    let (cpu, stats, per_tile) = (&placed.cpu, &placed.stats, &placed.per_tile);
+    // The meadow tile has plants of several types at several levels; the others none.
+    assert!(per_tile[0] > 100, "meadow plants: {per_tile:?}");
+    assert_eq!(&per_tile[2..], &[0, 0], "bare and high tiles: {per_tile:?}");
+    let types: std::collections::HashSet<usize> = cpu.iter().map(|p| p.plant_type()).collect();
+    let levels: std::collections::HashSet<usize> = cpu.iter().map(|p| p.level()).collect();
+    assert!(types.len() >= 3, "types placed: {types:?}");
+    assert!(levels.len() >= 2, "levels placed: {levels:?}");
+    assert!(
+        stats[counter::RULED_OUT] > 0,
+        "the steep tile rules plants out"
+    );
+    assert!(
+        stats[counter::FRUSTUM] > 0,
+        "some plants fall outside the frustum"
+    );
+    assert_same_placement(&placed);
+}
+
+#[test]
+fn a_gltf_plant_is_placed_where_its_rule_puts_it_as_the_cpu_mirror_places_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = common::world_with_plant(tmp.path(), "plants/marigold.gltf");
+    std::fs::create_dir_all(w.join("plants")).unwrap();
+    verdant::plants::write_plant_gltf(
+        &w.join("plants/marigold.gltf"),
+        &common::small_plant(),
+        None,
+    )
+    .unwrap();
+    let mut rig = Rig::with_world(&w, 16_384);
+    assert_eq!(rig.manifest.plant_types.len(), 1);
+    let placed = place_four_tiles(&mut rig);
+    // The one type grows on the meadow tile, at both mesh levels and as cards, and nowhere on
+    // the bare and high tiles.
+    let per_tile = &placed.per_tile;
+    assert!(per_tile[0] > 100, "marigolds on the meadow: {per_tile:?}");
+    assert_eq!(&per_tile[2..], &[0, 0], "bare and high tiles: {per_tile:?}");
+    assert!(placed.cpu.iter().all(|p| p.plant_type() == 0));
+    let levels: std::collections::HashSet<usize> = placed.cpu.iter().map(|p| p.level()).collect();
+    assert!(levels.len() >= 2, "levels placed: {levels:?}");
+    assert_same_placement(&placed);
 }
 
 #[test]

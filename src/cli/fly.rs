@@ -64,6 +64,10 @@ pub(crate) struct FlyArgs {
     /// renderer's).
     #[arg(long)]
     pub(crate) grass_near_m: Option<f32>,
+    /// Plants' level-of-detail switches NEAR,FAR, metres: the full mesh out to NEAR, the
+    /// reduced mesh out to FAR, crossed cards beyond (default: the renderer's, 18,45).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) plant_lod_m: Option<Vec<f32>>,
     /// Terrain mesh: one vertex every this many samples of a tile (1, 2, 4, ...; default:
     /// the renderer's).
     #[arg(long)]
@@ -98,6 +102,7 @@ impl FlyArgs {
             grass_infill_m,
             grass_segments,
             grass_near_m,
+            plant_lod_m,
             mesh_step,
             aa,
             truth: _,
@@ -125,6 +130,11 @@ impl FlyArgs {
         if let Some(r) = grass_near_m {
             grass.near_m = r;
         }
+        let plant_lod_m = match plant_lod_m.as_deref() {
+            None => verdant::plants::PlantSettings::default().lod_m,
+            Some(&[near, far]) => [near, far],
+            Some(v) => bail!("--plant-lod-m takes two distances, NEAR,FAR, not {v:?}"),
+        };
         Ok(FlyOptions {
             world: resolve_world(&world)?,
             http: stream.http(),
@@ -140,6 +150,7 @@ impl FlyArgs {
             grass,
             mesh_step: mesh_step.unwrap_or(DEFAULT_MESH_STEP),
             aa: aa.unwrap_or_default(),
+            plant_lod_m,
         })
     }
 }

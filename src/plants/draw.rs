@@ -31,14 +31,15 @@ impl DrawPass {
             &sequential(
                 S::VERTEX_FRAGMENT,
                 [
-                    // The frame: a storage buffer (the shader says why).
-                    storage_buffer_read_only(),
+                    uniform_buffer(),
                     storage_buffer_read_only(),
                     uniform_buffer(),
                     storage_buffer_read_only(),
                     texture_2d_array(wgpu::TextureSampleType::Float { filterable: true })
                         .visible_in(S::FRAGMENT),
                     wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering).into(),
+                    // The frame again, for the feature bits (the shader says why).
+                    storage_buffer_read_only(),
                 ],
             ),
         );

@@ -383,7 +383,7 @@ impl PlantRenderer {
         let frame_buffer = buffer(
             "plants frame",
             std::mem::size_of::<PlantFrame>() as u64,
-            U::STORAGE | U::COPY_DST,
+            U::UNIFORM | U::STORAGE | U::COPY_DST,
         );
 
         let place_pass = PlacePass::new(device);
@@ -408,6 +408,7 @@ impl PlantRenderer {
                 wind.cells.as_entire_binding(),
                 view(&texture_view),
                 wgpu::BindingResource::Sampler(&sampler),
+                frame_buffer.as_entire_binding(),
             ],
         );
         // Every byte of the pool written once, so that its memory is committed up front (a
@@ -693,11 +694,15 @@ impl PlantRenderer {
             (n * 32) as u64,
             U::STORAGE | U::COPY_SRC,
         );
-        let g0 = bind_group(
+        let g0 = bind_group_with_indices(
             device,
             "probe frame",
             &pipeline.get_bind_group_layout(0),
-            [self.frame_buffer.as_entire_binding(), v.as_entire_binding()],
+            [
+                (0, self.frame_buffer.as_entire_binding()),
+                (1, v.as_entire_binding()),
+                (6, self.frame_buffer.as_entire_binding()),
+            ],
         );
         let g1 = bind_group_with_indices(
             device,

@@ -123,6 +123,9 @@ impl ConfigError {
     }
 }
 
+/// The farthest switch between the plants' levels of detail, metres.
+pub const MAX_PLANT_LOD_M: f32 = 10_000.0;
+
 /// `value` must lie in `range` (NaN never does); `unit` follows the range in the error.
 fn check<T>(
     field: &'static str,
@@ -166,7 +169,8 @@ impl RendererConfig {
     /// [`LOD_FACTOR_RANGE`], `mesh_step` a power of two in 1..=[`MAX_MESH_STEP`], the tile
     /// service's per-frame budgets at least 1, the grass rings' radii (finite, the high radius
     /// and the low one above 0, the high one allowed past the low one, the hysteresis at least
-    /// 0), and [`GrassConfig::validate`].
+    /// 0), the plants' level-of-detail switches (`0 < near <= far <=` [`MAX_PLANT_LOD_M`]) and
+    /// [`GrassConfig::validate`].
     /// NaN and infinities are out of every range. What depends on the world or the adapter
     /// (atlas slots, cache size, the rings' level) is checked by [`crate::Renderer::new`].
     pub fn validate(&self) -> Result<(), ConfigError> {
@@ -217,6 +221,14 @@ impl RendererConfig {
                     "at least 0 m",
                 ));
             }
+        }
+        let [near, far] = self.plants.lod_m;
+        if !(near > 0.0 && near <= far && far <= MAX_PLANT_LOD_M) {
+            return Err(ConfigError::new(
+                "plants.lod_m",
+                self.plants.lod_m,
+                format!("NEAR,FAR with 0 < NEAR <= FAR <= {MAX_PLANT_LOD_M} m"),
+            ));
         }
         self.grass.validate()
     }

@@ -61,6 +61,9 @@ pub struct LodSetting {
     pub infill_m: [f32; 2],
     /// Every grass type's blade width times this.
     pub width_scale: f32,
+    /// The plants' switches from the full mesh to the reduced one and from that to the cards,
+    /// metres.
+    pub plant_lod_m: [f32; 2],
 }
 
 impl LodSetting {
@@ -75,7 +78,14 @@ impl LodSetting {
             near_m: 12.0,
             infill_m: crate::renderer::DEFAULT_INFILL_M,
             width_scale: 1.0,
+            plant_lod_m: crate::plants::PlantSettings::default().lod_m,
         }
+    }
+
+    /// The same setting with the plants' level-of-detail switches at `plant_lod_m`.
+    pub fn with_plant_lod(mut self, plant_lod_m: [f32; 2]) -> Self {
+        self.plant_lod_m = plant_lod_m;
+        self
     }
 
     /// The same setting with blades `width_scale` times as wide.
@@ -111,6 +121,7 @@ impl LodSetting {
         c.grass.near_m = self.near_m;
         c.grass.infill_m = self.infill_m;
         c.grass.width_scale = self.width_scale;
+        c.plants.lod_m = self.plant_lod_m;
         c
     }
 }
@@ -131,7 +142,9 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             .with_near(d.grass.near_m)
             .with_infill(infill)
             .with_width(d.grass.width_scale)
+            .with_plant_lod(d.plants.lod_m)
     };
+    let plant_lod = d.plants.lod_m;
     vec![
         new("default", h, v, s, seg),
         new("near ring x0.5", h * 0.5, v, s, seg),
@@ -148,7 +161,10 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         new("infill x1.2", h, v, s, seg).with_infill(infill.map(|r| 1.2 * r)),
         new("width x0.67", h, v, s, seg).with_width(2.0 / 3.0),
         new("width x1.5", h, v, s, seg).with_width(1.5),
-        new("no LOD", v, v, s, [seg[0]; 3]),
+        new("plants lod x0.5", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 0.5 * m)),
+        new("plants lod x2", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 2.0 * m)),
+        // Every plant its full mesh out to the view distance.
+        new("no LOD", v, v, s, [seg[0]; 3]).with_plant_lod([crate::renderer::MAX_PLANT_LOD_M; 2]),
     ]
 }
 
@@ -659,7 +675,8 @@ fn write_outputs(
 
     let mut csv = String::from(
         "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,\
-         segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,gpu_ms,gpu_q1_ms,\
+         segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,plant_lod_near_m,\
+         plant_lod_far_m,gpu_ms,gpu_q1_ms,\
          gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_vs_truth,\
          coarse_flip_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse\n",
     );
@@ -667,7 +684,7 @@ fn write_outputs(
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -679,6 +696,8 @@ fn write_outputs(
             s.infill_m[0],
             s.infill_m[1],
             s.width_scale,
+            s.plant_lod_m[0],
+            s.plant_lod_m[1],
             r.gpu.median_ms,
             r.gpu.q1_ms,
             r.gpu.q3_ms,

@@ -65,6 +65,9 @@ pub struct FlyOptions {
     pub mesh_step: u32,
     /// How the frames are anti-aliased (default: the renderer's).
     pub aa: crate::aa::AntiAliasing,
+    /// Distances of the plants' switches from the full mesh to the reduced one and from that
+    /// to the cards, metres (default: the renderer's).
+    pub plant_lod_m: [f32; 2],
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -110,6 +113,7 @@ impl Default for FlyOptions {
             grass: GrassConfig::default(),
             mesh_step: DEFAULT_MESH_STEP,
             aa: Default::default(),
+            plant_lod_m: crate::plants::PlantSettings::default().lod_m,
         }
     }
 }
@@ -141,6 +145,7 @@ impl FlyOptions {
         config.grass = self.grass;
         config.mesh_step = self.mesh_step;
         config.aa = self.aa;
+        config.plants.lod_m = self.plant_lod_m;
         config.validate().map_err(SettingError::from)?;
         Ok(config)
     }
@@ -166,6 +171,7 @@ impl From<ConfigError> for SettingError {
             "grass.segments" => "--grass-segments",
             "grass.near_m" => "--grass-near-m",
             "mesh_step" => "--mesh-step",
+            "plants.lod_m" => "--plant-lod-m",
             field => field,
         };
         Self { option, source }
@@ -564,6 +570,16 @@ mod tests {
                 with(&|o| o.grass.infill_m = [5.0, 10.0]),
                 "--grass-infill-m",
                 "no larger than the half-spacing one",
+            ),
+            (
+                with(&|o| o.plant_lod_m = [45.0, 18.0]),
+                "--plant-lod-m",
+                "0 < NEAR <= FAR <= 10000 m",
+            ),
+            (
+                with(&|o| o.plant_lod_m = [f32::NAN, 18.0]),
+                "--plant-lod-m",
+                "0 < NEAR <= FAR <= 10000 m",
             ),
             (
                 with(&|o| o.grass.segments = [1, 0, 3]),

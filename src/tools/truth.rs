@@ -99,8 +99,8 @@ pub fn atlas_slots(world: &World, device: &wgpu::Device) -> u32 {
 /// The truth's settings on top of `base` (its features, wind and grass; the service's limits at
 /// least as large): no LOD (every grass tile high LOD, the high ring reaching so far beyond the
 /// view distance that the fade of the blades the low grid drops never starts within it), blades
-/// out to [`REACH_FACTOR`] times the default view distance, [`SEGMENTS`] segments everywhere, and
-/// an atlas of `atlas_slots` slots (see [`atlas_slots`]). A `base` without grass stays without.
+/// out to [`REACH_FACTOR`] times the default view distance, [`SEGMENTS`] segments everywhere, every
+/// plant its full mesh, and an atlas of `atlas_slots` slots (see [`atlas_slots`]). A `base` without grass stays without.
 pub fn truth_config(world: &World, base: &RendererConfig, atlas_slots: u32) -> RendererConfig {
     truth_config_reaching(world, base, atlas_slots, REACH_FACTOR)
 }
@@ -126,6 +126,10 @@ pub fn truth_config_reaching(
         ..r
     });
     c.grass.segments = [SEGMENTS; 3];
+    // Every plant its full mesh, wherever it grows; the pool's regions large enough for the
+    // plants out to the truth's reach.
+    c.plants.lod_m = [crate::renderer::MAX_PLANT_LOD_M; 2];
+    c.plants.capacity = base.plants.capacity.saturating_mul(4);
     // The sub-samples are the anti-aliasing: each one a plain frame.
     c.aa = crate::aa::AntiAliasing::Off;
     c.service.atlas_slots = c.service.atlas_slots.max(atlas_slots);

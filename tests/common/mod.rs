@@ -258,3 +258,45 @@ pub fn verdant(args: &[&str], cwd: &Path) -> std::process::Output {
         .output()
         .expect("run verdant")
 }
+
+/// A small plant: two crossed quads 1 m high, coloured, with Crysis' channels.
+pub fn small_plant() -> verdant::plants::PlantMesh {
+    let mut vertices = Vec::new();
+    let mut indices = Vec::new();
+    for (k, (dx, dy)) in [(1.0f32, 0.0f32), (0.0, 1.0)].into_iter().enumerate() {
+        let base = vertices.len() as u32;
+        for (x, z, u, v) in [
+            (-0.3, 0.0, 0.0, 1.0),
+            (0.3, 0.0, 1.0, 1.0),
+            (0.3, 1.0, 1.0, 0.0),
+            (-0.3, 1.0, 0.0, 0.0),
+        ] {
+            vertices.push(verdant::plants::PlantVertex {
+                position: [x * dx, x * dy, z],
+                normal: [dy, -dx, 0.0],
+                wind: [0.5, 0.25 * k as f32, z, 0.5 + 0.5 * z],
+                albedo: [0.9, 0.8, 0.1, 0.5],
+                uv: [u, v],
+            });
+        }
+        indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+    verdant::plants::PlantMesh { vertices, indices }
+}
+
+/// The default world with its plant types replaced by one glTF plant `mesh` on the meadow.
+pub fn world_with_plant(dir: &Path, mesh: &str) -> std::path::PathBuf {
+    let w = world_copy(dir);
+    let manifest = std::fs::read_to_string(w.join("world.toml")).unwrap();
+    let start = manifest
+        .find("[[plant_types]]")
+        .expect("the world has plants");
+    let end = manifest.find("[wind]").expect("a wind table");
+    let plant = format!(
+        "[[plant_types]]\nname = \"marigold\"\nmesh = \"{mesh}\"\nsize_m = [0.4, 0.6]\n\
+         density = {{ meadow = 1.5, \"tall grass\" = 1.5, \"dry grass\" = 1.5 }}\n\n"
+    );
+    let edited = format!("{}{plant}{}", &manifest[..start], &manifest[end..]);
+    std::fs::write(w.join("world.toml"), edited).unwrap();
+    w
+}
