@@ -11,6 +11,7 @@
 #include "shared/features.wgsl"
 #include "shared/wind_lookup.wgsl"
 #include "shared/waves.wgsl"
+#include "shared/sway_lookup.wgsl"
 
 struct DrawArgs {
     vertex_count: u32,
@@ -36,17 +37,6 @@ struct WindPass {
 // Lean of a blade on the axis of a fresh trail, blade heights: trampled nearly flat.
 const TRAIL_LEAN: f32 = 1.6;
 
-
-fn sway_at(rel_xy: vec2<f32>, kind: u32) -> vec2<f32> {
-    let n = i32(wind_lookup.n);
-    let half = n / 2;
-    let c = vec2<i32>(floor((wind_lookup.camera_offset + rel_xy) / wind_lookup.cell_m));
-    let r = clamp(c, vec2<i32>(-half, -half), vec2<i32>(half - 1, half - 1));
-    let w = wind_lookup.origin_cell + r;
-    let x = ((w.x % n) + n) % n;
-    let y = ((w.y % n) + n) % n;
-    return sway[(u32(y) * wind_lookup.n + u32(x)) * 4u + min(kind, 3u)].xy;
-}
 
 fn value_noise(p: vec2<f32>) -> f32 {
     let fl = floor(p);
@@ -74,7 +64,7 @@ fn apply_wind(@builtin(global_invocation_id) gid: vec3<u32>) {
     let root = vec2<f32>(b.pos_x, b.pos_y);
     let kind = b.kind & 255u;
     let w = wind_at(root);
-    var lean = sway_at(root, kind) * b.wind;
+    var lean = sway_at(root, min(kind, 3u)) * b.wind;
     if has_feature(pass_params.flags.x, INTERACTION) {
         lean += w.zw * TRAIL_LEAN;
     }

@@ -6,9 +6,11 @@
 // plant's own space: leaves and branches swing along the vertical by their vertex colour's b
 // (freedom) and their edges flutter along the normal by its r, from smoothed triangle waves at
 // four frequencies phased by the leaf (g) and the plant; then main bending leans the whole
-// plant along the wind (the wind field at its root, its trail's push and a sway at the type's
-// spring frequency, larger the less it is damped), the offset growing with height as Crysis'
-// bend factor, and the bent position pulled back to its length (the type's stretch). CPU mirror
+// plant by its type's sway spring in the wind cell at its root (God of War's sway spring and
+// damping: the spring's state, advanced each frame by shaders/wind_sway.wgsl toward the lean
+// the wind asks for, overshoots and swings back after a gust) and its trail's push, the offset
+// growing with height as Crysis' bend factor, and the bent position pulled back to its length
+// (the type's stretch). CPU mirror
 // of the bending: src/plants/bend_cpu.rs (a test runs `probe_bend` below against it).
 //
 // Shading: two-sided (the back face's normal flipped), sun and sky light, light through thin
@@ -21,6 +23,7 @@
 #include "shared/output.wgsl"
 #include "shared/wind_lookup.wgsl"
 #include "shared/waves.wgsl"
+#include "shared/sway_lookup.wgsl"
 #include "shared/plant_instance.wgsl"
 
 // Multisampled targets: the cards' alpha becomes coverage instead of a hard test.
@@ -82,6 +85,9 @@ fn load_vertex(i: u32) -> PlantVertex {
 // every frame; storage buffers are never specialised. The rest stays a uniform (the constant
 // cache on GPUs). The README's Plants section has the figures.
 @group(0) @binding(6) var<storage, read> frame_bits: PlantFrame;
+// The sway springs' state (src/wind/sway.rs): per wind cell, the grass's slots then the plant
+// types'.
+@group(0) @binding(7) var<storage, read> sway: array<vec4<f32>>;
 // A (type, level) region of the pool, chosen by a dynamic offset.
 @group(1) @binding(0) var<storage, read> instances: array<PlantInstance>;
 
@@ -96,9 +102,10 @@ struct Bent {
 
 // Vertex `v` of an instance at `root` (relative to the camera), turned by `yaw`, of height
 // `scale`, phase `phase` (0..1), in the wind `w` (wind_at at its root: xy m/s, zw the trail's
-// push), at `time`, with the type's wind `pw` and the frame's feature bits: its position
-// relative to the camera and its normal. As bend_vertex in src/plants/bend_cpu.rs.
-fn bend(v: PlantVertex, root: vec3<f32>, yaw: f32, scale: f32, phase: f32, w: vec4<f32>, time: f32, pw: PlantWind, flags: u32) -> Bent {
+// push), leaning `sway_lean` (its type's sway spring at its root, plant heights), at `time`,
+// with the type's wind `pw` and the frame's feature bits: its position relative to the camera
+// and its normal. As bend_vertex in src/plants/bend_cpu.rs.
+fn bend(v: PlantVertex, root: vec3<f32>, yaw: f32, scale: f32, phase: f32, w: vec4<f32>, sway_lean: vec2<f32>, time: f32, pw: PlantWind, flags: u32) -> Bent {
     let c = cos(yaw);
     let s = sin(yaw);
     var p = vec3<f32>(c * v.position.x - s * v.position.y, s * v.position.x + c * v.position.y, v.position.z) * scale;
@@ -122,11 +129,8 @@ fn bend(v: PlantVertex, root: vec3<f32>, yaw: f32, scale: f32, phase: f32, w: ve
         let amount = min(speed / 5.0, 1.5) * pw.detail.x * give * scale;
         p += vec3<f32>(n.xy * (v.wind.r * 0.04 * sum.x), v.wind.b * 0.05 * sum.y) * amount;
     }
-    // Main bending: the lean along the wind, a sway about it at the spring's frequency (a
-    // lightly damped plant swings further), the trail's push.
-    var lean = wind * (pw.main.y * give * pw.main.w);
-    let sway = (smooth_triangle(time * pw.detail.z + phase) * 2.0 - 1.0) * 0.35 / (0.5 + pw.detail.w);
-    lean *= 1.0 + sway * min(speed / 6.0, 1.0);
+    // Main bending: the lean of the type's sway spring, the trail's push.
+    var lean = sway_lean;
     if has_feature(flags, INTERACTION) {
         lean += w.zw * TRAIL_LEAN;
     }
@@ -169,7 +173,8 @@ fn vs_plant(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     let level = inst.kind >> 8u;
     let phase = rand01(inst.hash);
     let w = wind_at(inst.pos.xy);
-    let b = bend(v, inst.pos, inst.yaw, inst.scale, phase, w, frame.misc.y, frame.wind[t], frame_bits.flags.x);
+    let sway_lean = sway_at(inst.pos.xy, PLANT_SWAY_SLOT + t);
+    let b = bend(v, inst.pos, inst.yaw, inst.scale, phase, w, sway_lean, frame.misc.y, frame.wind[t], frame_bits.flags.x);
     var albedo = v.albedo;
     if has_feature(frame_bits.flags.x, COLOR_VARIATION) {
         // Per plant, from the noise of its root's world cell and its hash.
@@ -246,6 +251,7 @@ fn fs_plant(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) v
 @group(1) @binding(1) var<storage, read> probe_instances: array<PlantInstance>;
 @group(1) @binding(2) var<storage, read> probe_winds: array<vec4<f32>>;
 @group(1) @binding(3) var<storage, read_write> probe_out: array<vec4<f32>>;
+@group(1) @binding(4) var<storage, read> probe_leans: array<vec2<f32>>;
 
 @compute @workgroup_size(64, 1, 1)
 fn probe_bend(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -254,7 +260,7 @@ fn probe_bend(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let inst = probe_instances[gid.x];
     let t = inst.kind & 255u;
-    let b = bend(load_vertex(gid.x), inst.pos, inst.yaw, inst.scale, rand01(inst.hash), probe_winds[gid.x], frame.misc.y, frame.wind[t], frame_bits.flags.x);
+    let b = bend(load_vertex(gid.x), inst.pos, inst.yaw, inst.scale, rand01(inst.hash), probe_winds[gid.x], probe_leans[gid.x], frame.misc.y, frame.wind[t], frame_bits.flags.x);
     probe_out[gid.x * 2u] = vec4<f32>(b.position, 0.0);
     probe_out[gid.x * 2u + 1u] = vec4<f32>(b.normal, 0.0);
 }

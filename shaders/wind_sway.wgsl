@@ -1,18 +1,21 @@
-// The sway of the grass: per wind cell and grass type, a damped spring (stiffness, damping per
+// The sway of the grass and the plants: per wind cell and slot (the grass types' four, then
+// the plant types'), a damped spring (stiffness, damping per
 // type) driven toward a bend proportional to the cell's wind, advanced by the exact solution of
 // the spring over the frame's time step (stable at any step: see `verdant eval sway`). The step
 // matrix of each type is computed on the CPU for the frame's dt. CPU mirror: update_sway in
 // src/wind/sway_cpu.rs.
+
+#include "shared/sway_slots.wgsl"
 
 struct SwayParams {
     // The camera's world cell (as the wind field's lookup), and the field's size.
     origin_cell: vec2<i32>,
     n: u32,
     types: u32,
-    // Per type: the step matrix applied to (x - target, v), row-major.
-    step: array<vec4<f32>, 4>,
-    // Per type: x = bend per m/s of wind, y = largest bend (both in blade heights).
-    gain: array<vec4<f32>, 4>,
+    // Per slot: the step matrix applied to (x - target, v), row-major.
+    step: array<vec4<f32>, SWAY_SLOTS>,
+    // Per slot: x = bend per m/s of wind, y = largest bend (blade or plant heights).
+    gain: array<vec4<f32>, SWAY_SLOTS>,
 }
 
 // A read-only storage buffer, not a uniform: Mesa's lavapipe (22.x) inlines uniform values that
@@ -20,7 +23,7 @@ struct SwayParams {
 // Same layout, same results.
 @group(0) @binding(0) var<storage, read> params: SwayParams;
 @group(0) @binding(1) var<storage, read> wind_cells: array<vec4<f32>>;
-// Per cell and type: xy bend (blade heights), zw its velocity.
+// Per cell and slot: xy bend (blade or plant heights), zw its velocity.
 @group(0) @binding(2) var<storage, read_write> sway: array<vec4<f32>>;
 // Per cell: the world cell the sway state belongs to.
 @group(0) @binding(3) var<storage, read_write> owners: array<vec2<i32>>;
@@ -49,7 +52,7 @@ fn update_sway(@builtin(global_invocation_id) gid: vec3<u32>) {
     let fresh = any(owners[index] != world);
     owners[index] = world;
     for (var t = 0u; t < params.types; t++) {
-        let k = index * 4u + t;
+        let k = index * SWAY_SLOTS + t;
         let goal = target_bend(wind, t);
         if fresh {
             sway[k] = vec4<f32>(goal, 0.0, 0.0);

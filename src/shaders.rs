@@ -50,6 +50,14 @@ const SHARED: &[(&str, &str)] = &[
         include_str!("../shaders/shared/waves.wgsl"),
     ),
     (
+        "shared/sway_slots.wgsl",
+        include_str!("../shaders/shared/sway_slots.wgsl"),
+    ),
+    (
+        "shared/sway_lookup.wgsl",
+        include_str!("../shaders/shared/sway_lookup.wgsl"),
+    ),
+    (
         "shared/output.wgsl",
         include_str!("../shaders/shared/output.wgsl"),
     ),

@@ -46,7 +46,10 @@ fn still_lookup() -> verdant::wind::WindLookup {
 /// off, as the rig's GPU runs them.
 fn cpu_blades(rig: &Rig, job: &TileJob, tile: &TileData, hiz: &HiZ) -> TileBlades {
     let mut out = generate_tile(rig.grass.params(), job, tile, hiz);
-    let (cells, sway) = (vec![[0.0f32; 4]; 64], vec![[0.0f32; 4]; 256]);
+    let (cells, sway) = (
+        vec![[0.0f32; 4]; 64],
+        vec![[0.0f32; 4]; 64 * verdant::wind::SWAY_TYPES],
+    );
     verdant::grass::wind_cpu::apply_wind(
         rig.grass.wind_params(),
         &still_lookup(),
@@ -144,7 +147,10 @@ impl Rig {
         ctx.queue
             .write_buffer(&lookup, 0, bytemuck::bytes_of(&still_lookup()));
         let cells = still(8 * 8 * 16, wgpu::BufferUsages::STORAGE);
-        let sway = still(8 * 8 * 4 * 16, wgpu::BufferUsages::STORAGE);
+        let sway = still(
+            8 * 8 * verdant::wind::SWAY_TYPES as u64 * 16,
+            wgpu::BufferUsages::STORAGE,
+        );
         let grass = GrassRenderer::new(
             &ctx.device,
             &ctx.queue,

@@ -86,6 +86,10 @@ impl Rig {
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         );
         let cells = buffer(8 * 8 * 16, wgpu::BufferUsages::STORAGE);
+        let sway = buffer(
+            8 * 8 * verdant::wind::SWAY_TYPES as u64 * 16,
+            wgpu::BufferUsages::STORAGE,
+        );
         let set = PlantSet::build(&manifest, &world.dir).unwrap();
         let plants = PlantRenderer::new(
             &ctx.device,
@@ -104,6 +108,7 @@ impl Rig {
             verdant::plants::renderer::PlantWindBindings {
                 lookup: &lookup,
                 cells: &cells,
+                sway: &sway,
             },
         );
         Self {
@@ -412,6 +417,13 @@ fn gpu_bending_matches_the_cpu_mirror() {
             [6.0 * a.cos(), 6.0 * a.sin(), 0.2 * (i % 3) as f32, 0.0]
         })
         .collect();
+    // The sway springs' leans at the roots (plant heights), as the sway stage leaves them.
+    let leans: Vec<[f32; 2]> = (0..n)
+        .map(|i| {
+            let a = i as f32 * 0.47;
+            [0.3 * a.cos(), 0.3 * a.sin()]
+        })
+        .collect();
     // The frame's wind constants and time come from set_frame.
     let mut rig = rig;
     let camera = Camera::new(DVec3::new(0.0, 0.0, 100.0), 90.0, -10.0);
@@ -432,6 +444,7 @@ fn gpu_bending_matches_the_cpu_mirror() {
         &vertices,
         &instances,
         &winds,
+        &leans,
     );
     let mut moved = 0;
     for i in 0..n {
@@ -441,6 +454,7 @@ fn gpu_bending_matches_the_cpu_mirror() {
             &vertices[i],
             &instances[i],
             Vec4::from_array(winds[i]),
+            glam::Vec2::from_array(leans[i]),
             time as f32,
             &pw,
             Features::all(),
@@ -459,6 +473,7 @@ fn gpu_bending_matches_the_cpu_mirror() {
             &vertices[i],
             &instances[i],
             Vec4::ZERO,
+            glam::Vec2::ZERO,
             time as f32,
             &pw,
             Features::all(),

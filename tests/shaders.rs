@@ -121,3 +121,21 @@ fn feature_bits_in_wgsl_match_the_rust_ones() {
         assert_eq!(value, feature.bit(), "{constant}");
     }
 }
+
+#[test]
+fn sway_slots_in_wgsl_match_the_rust_ones() {
+    let text = verdant::shaders::shared("shared/sway_slots.wgsl").expect("sway slots piece");
+    let constant = |name: &str| -> usize {
+        let prefix = format!("const {name}: u32 = ");
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&prefix))
+            .unwrap_or_else(|| panic!("shared/sway_slots.wgsl has no {name}"));
+        line.trim_start_matches(&prefix)
+            .trim_end_matches("u;")
+            .parse()
+            .unwrap_or_else(|_| panic!("cannot read {line:?}"))
+    };
+    assert_eq!(constant("SWAY_SLOTS"), verdant::wind::SWAY_TYPES);
+    assert_eq!(constant("PLANT_SWAY_SLOT"), verdant::wind::GRASS_SWAY_TYPES);
+}

@@ -35,21 +35,6 @@ fn smooth_triangle(x: f32) -> f32 {
     t * t * (3.0 - 2.0 * t)
 }
 
-fn sway_at(lookup: &WindLookup, sway: &[[f32; 4]], rel: Vec2, kind: u32) -> Vec2 {
-    let n = lookup.n as i32;
-    let half = n / 2;
-    let off = Vec2::from_array(lookup.camera_offset);
-    let c = ((off + rel) / lookup.cell_m).floor();
-    let (cx, cy) = (
-        (c.x as i32).clamp(-half, half - 1),
-        (c.y as i32).clamp(-half, half - 1),
-    );
-    let (wx, wy) = (lookup.origin_cell[0] + cx, lookup.origin_cell[1] + cy);
-    let (x, y) = (wx.rem_euclid(n) as u32, wy.rem_euclid(n) as u32);
-    let s = sway[((y * lookup.n + x) * 4 + kind.min(3)) as usize];
-    Vec2::new(s[0], s[1])
-}
-
 fn unpack_rgb(c: u32) -> [f32; 3] {
     [
         (c & 255) as f32 / 255.0,
@@ -71,7 +56,7 @@ pub fn apply_wind(
         let root = Vec2::new(b.pos[0], b.pos[1]);
         let kind = b.kind & 255;
         let w = wind_at(lookup, cells, root);
-        let mut lean = sway_at(lookup, sway, root, kind) * b.wind;
+        let mut lean = crate::wind::sway_at(lookup, sway, root, kind.min(3)) * b.wind;
         if has(INTERACTION) {
             lean += Vec2::new(w[2], w[3]) * TRAIL_LEAN;
         }

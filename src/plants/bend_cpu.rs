@@ -8,9 +8,9 @@
 //! along the wind, the offset growing with height by Crysis' bend factor
 //! `((z / h + 1)^2)^2 - (z / h + 1)^2` (divided by 12, its value at the top), and pulls each point back toward its distance from the
 //! root (the type's stretch: 1 keeps the length exactly, so a bent plant does not grow). The lean
-//! is the wind times the type's bend and main amplitude, less for a stiff plant, with a sway
-//! about it at the type's spring frequency that a lightly damped plant makes larger, plus the
-//! trail's push.
+//! is the state of the type's sway spring in the wind cell at the plant's root (driven toward
+//! the wind times the type's bend and main amplitude, less for a stiff plant: see
+//! [`crate::wind::plant_lean_gain`]), plus the trail's push.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3, Vec4};
@@ -59,12 +59,14 @@ pub fn wave(x: f32) -> f32 {
 }
 
 /// Vertex `v` of `inst` in the wind `w` (the wind field at its root: xy m/s, zw the trail's
-/// push) at `time_s`, for a type of wind `pw`: its position relative to the camera and its
-/// normal.
+/// push), leaning `sway_lean` (its type's sway spring at its root, plant heights: see
+/// [`crate::wind::sway_at`]) at `time_s`, for a type of wind `pw`: its position relative to the
+/// camera and its normal.
 pub fn bend_vertex(
     v: &PlantVertex,
     inst: &PlantInstance,
     w: Vec4,
+    sway_lean: Vec2,
     time_s: f32,
     pw: &PlantWindGpu,
     features: Features,
@@ -99,9 +101,7 @@ pub fn bend_vertex(
             b * 0.05 * sum[1],
         ) * amount;
     }
-    let mut lean = wind * (pw.main[1] * give * pw.main[3]);
-    let sway = (wave(time_s * pw.detail[2] + phase) * 2.0 - 1.0) * 0.35 / (0.5 + pw.detail[3]);
-    lean *= 1.0 + sway * (speed / 6.0).min(1.0);
+    let mut lean = sway_lean;
     if features.has(Feature::Interaction) {
         lean += Vec2::new(w.z, w.w) * TRAIL_LEAN;
     }
@@ -163,20 +163,34 @@ mod tests {
         let inst = instance();
         let root = Vec3::from_array(inst.pos);
         let wind = Vec4::new(8.0, 2.0, 0.0, 0.0);
-        let (at_root, _) = bend_vertex(&vertex(0.0), &inst, wind, 1.0, &pw, Features::none());
+        // The lean the type's spring settles at in this wind.
+        let gain = crate::wind::plant_lean_gain(&crate::world::PlantWind {
+            bend: 0.08,
+            ..Default::default()
+        });
+        let lean = Vec2::new(wind.x, wind.y) * gain;
+        let (at_root, _) = bend_vertex(&vertex(0.0), &inst, wind, lean, 1.0, &pw, Features::none());
         assert!(
             (at_root - root - Vec3::new(0.05 * 0.7f32.cos(), 0.05 * 0.7f32.sin(), 0.0) * 0.8)
                 .length()
                 < 1e-3
         );
         let top = vertex(1.0);
-        let (still, _) = bend_vertex(&top, &inst, Vec4::ZERO, 1.0, &pw, Features::none());
-        let (bent, _) = bend_vertex(&top, &inst, wind, 1.0, &pw, Features::none());
+        let (still, _) = bend_vertex(
+            &top,
+            &inst,
+            Vec4::ZERO,
+            Vec2::ZERO,
+            1.0,
+            &pw,
+            Features::none(),
+        );
+        let (bent, _) = bend_vertex(&top, &inst, wind, lean, 1.0, &pw, Features::none());
         // Leaned downwind, at the same distance from the root.
-        let lean = (bent - still).truncate();
+        let moved = (bent - still).truncate();
         assert!(
-            lean.dot(Vec2::new(8.0, 2.0)) > 0.05,
-            "leans downwind: {lean}"
+            moved.dot(Vec2::new(8.0, 2.0)) > 0.05,
+            "leans downwind: {moved}"
         );
         assert!(((bent - root).length() - (still - root).length()).abs() < 1e-4);
         assert!(bent.z < still.z, "a leaning plant's top comes down");
@@ -192,11 +206,13 @@ mod tests {
         stiff.wind = [0.0, 0.3, 0.0, 1.0];
         free.wind = [1.0, 0.3, 1.0, 1.0];
         let moved = |v: &PlantVertex| {
-            let (a, _) = bend_vertex(v, &inst, wind, 2.0, &pw, Features::all());
+            let lean = Vec2::new(0.2, 0.0);
+            let (a, _) = bend_vertex(v, &inst, wind, lean, 2.0, &pw, Features::all());
             let (b, _) = bend_vertex(
                 v,
                 &inst,
                 wind,
+                lean,
                 2.0,
                 &pw,
                 Features::none().with(Feature::Interaction),

@@ -8,7 +8,7 @@ use crate::gpu::pipeline::render_pipeline;
 
 /// The draws of the pool's regions (`shaders/plants_draw.wgsl`).
 pub(crate) struct DrawPass {
-    /// Group 0: the frame, the meshes, the wind, the textures.
+    /// Group 0: the frame, the meshes, the wind, the textures, the sway springs.
     pub(crate) layout: wgpu::BindGroupLayout,
     /// Group 1: a region of the pool, by a dynamic offset.
     pub(crate) region_layout: wgpu::BindGroupLayout,
@@ -39,6 +39,8 @@ impl DrawPass {
                         .visible_in(S::FRAGMENT),
                     wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering).into(),
                     // The frame again, for the feature bits (the shader says why).
+                    storage_buffer_read_only(),
+                    // The sway springs' state.
                     storage_buffer_read_only(),
                 ],
             ),

@@ -119,6 +119,9 @@ pub struct PlantWindBindings<'a> {
     pub lookup: &'a wgpu::Buffer,
     /// The wind field's cells.
     pub cells: &'a wgpu::Buffer,
+    /// The sway springs' state (`crate::wind::SwayField::buffer`), whose slots after
+    /// [`crate::wind::GRASS_SWAY_TYPES`] are the plant types'.
+    pub sway: &'a wgpu::Buffer,
 }
 
 /// Pipelines, meshes, textures and the instance pool of the plant stage.
@@ -409,6 +412,7 @@ impl PlantRenderer {
                 view(&texture_view),
                 wgpu::BindingResource::Sampler(&sampler),
                 frame_buffer.as_entire_binding(),
+                wind.sway.as_entire_binding(),
             ],
         );
         // Every byte of the pool written once, so that its memory is committed up front (a
@@ -659,6 +663,7 @@ impl PlantRenderer {
         vertices: &[crate::plants::PlantVertex],
         instances: &[PlantInstance],
         winds: &[[f32; 4]],
+        leans: &[[f32; 2]],
     ) -> Vec<([f32; 3], [f32; 3])> {
         use wgpu::util::DeviceExt;
         let module = crate::shaders::module(device, "plants_draw.wgsl");
@@ -668,7 +673,11 @@ impl PlantRenderer {
             &module,
             "probe_bend",
         );
-        let n = instances.len().min(vertices.len()).min(winds.len());
+        let n = instances
+            .len()
+            .min(vertices.len())
+            .min(winds.len())
+            .min(leans.len());
         let init = |label, contents: &[u8], usage| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -688,6 +697,7 @@ impl PlantRenderer {
             U::STORAGE,
         );
         let w = init("probe winds", bytemuck::cast_slice(&winds[..n]), U::STORAGE);
+        let l = init("probe leans", bytemuck::cast_slice(&leans[..n]), U::STORAGE);
         let out = gpu_buffer(
             device,
             "probe out",
@@ -712,6 +722,7 @@ impl PlantRenderer {
                 (1, i.as_entire_binding()),
                 (2, w.as_entire_binding()),
                 (3, out.as_entire_binding()),
+                (4, l.as_entire_binding()),
             ],
         );
         let mut encoder = device.create_command_encoder(&Default::default());

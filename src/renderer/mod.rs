@@ -281,6 +281,7 @@ impl Renderer {
                         crate::plants::renderer::PlantWindBindings {
                             lookup: wind.lookup_uniform(),
                             cells: wind.buffer(),
+                            sway: sway.buffer(),
                         },
                     ))
                 };

@@ -30,5 +30,8 @@ pub use config::{
 pub use field::WindField;
 pub use field_cpu::{WindFieldCpu, ambient_at};
 pub use spring::{ExactStep, RENDERER_INTEGRATOR, SwaySpring, SwayState};
-pub use sway::{SWAY_TYPES, SwayConfig, SwayField, SwayParams};
-pub use sway_cpu::update_sway;
+pub use sway::{
+    GRASS_SWAY_TYPES, PLANT_SWAY_TYPES, SWAY_TYPES, SwayConfig, SwayField, SwayParams,
+    plant_lean_gain,
+};
+pub use sway_cpu::{sway_at, update_sway};

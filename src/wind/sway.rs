@@ -1,5 +1,6 @@
-//! The sway of the grass on the GPU (`shaders/wind_sway.wgsl`): for every cell of the wind
-//! field and every grass type, a damped spring ([`crate::wind::spring`]) driven toward a bend
+//! The sway of the grass and the plants on the GPU (`shaders/wind_sway.wgsl`): for every cell
+//! of the wind field, every grass type (slots 0..[`GRASS_SWAY_TYPES`]) and every plant type
+//! (the slots after them), a damped spring ([`crate::wind::spring`]) driven toward a bend
 //! proportional to the cell's wind, advanced each frame by the exact step of
 //! [`RENDERER_INTEGRATOR`] (stable at every step the renderer can meet, a 0.5 s hitch
 //! included). Its CPU mirror is [`crate::wind::sway_cpu::update_sway`].
@@ -15,8 +16,12 @@ use crate::gpu::GpuTimer;
 use crate::gpu::layout::bind_group;
 use crate::gpu::pipeline::{buffer, compute_pipeline_auto};
 
-/// Grass types the sway keeps state for.
-pub const SWAY_TYPES: usize = 4;
+/// Grass types the sway keeps state for (slots `0..GRASS_SWAY_TYPES`).
+pub const GRASS_SWAY_TYPES: usize = 4;
+/// Plant types the sway keeps state for (slots `GRASS_SWAY_TYPES..SWAY_TYPES`).
+pub const PLANT_SWAY_TYPES: usize = crate::world::MAX_PLANT_TYPES;
+/// Spring slots per cell: the grass types', then the plant types'.
+pub const SWAY_TYPES: usize = GRASS_SWAY_TYPES + PLANT_SWAY_TYPES;
 
 /// The stage's uniform; mirrors `SwayParams` in the shader.
 #[repr(C)]
@@ -26,29 +31,36 @@ pub struct SwayParams {
     pub origin_cell: [i32; 2],
     /// Cells along a side.
     pub n: u32,
-    /// Grass types with state.
+    /// Slots with state (the grass types', then the plant types' after
+    /// [`GRASS_SWAY_TYPES`]).
     pub types: u32,
     /// Per type, the step matrix for `(x - target, v)`, row-major.
     pub step: [[f32; 4]; SWAY_TYPES],
     /// Per type: bend per m/s of wind, largest bend (blade heights).
     pub gain: [[f32; 4]; SWAY_TYPES],
 }
-const _: () = assert!(std::mem::size_of::<SwayParams>() == 16 + 64 + 64);
+const _: () = assert!(std::mem::size_of::<SwayParams>() == 16 + 2 * 16 * SWAY_TYPES);
 
-/// Per-type springs and gains of a world's grass.
+/// Per-slot springs and gains of a world's grass types and plant types.
 #[derive(Clone, Debug)]
 pub struct SwayConfig {
-    /// Spring per type.
+    /// Spring per slot.
     pub springs: Vec<SwaySpring>,
-    /// Bend per m/s of wind per type (blade heights).
+    /// Bend per m/s of wind per slot (blade heights for grass, plant heights for plants).
     pub gains: Vec<f32>,
-    /// Largest bend per type.
+    /// Largest bend per slot.
     pub max_bend: Vec<f32>,
 }
 
+/// Largest lean of a plant's top on its sway spring, plant heights (its length is kept by the
+/// stretch).
+pub const PLANT_MAX_LEAN: f32 = 1.5;
+
 impl SwayConfig {
-    /// From the manifest's grass types (their `stiffness`), at most [`SWAY_TYPES`]: softer grass
-    /// bends further in the same wind.
+    /// From the manifest's grass types (their `stiffness`), at most [`GRASS_SWAY_TYPES`]: softer
+    /// grass bends further in the same wind; then, in the slots after [`GRASS_SWAY_TYPES`], its
+    /// plant types: the spring of their `sway_spring_hz` and `sway_damping`, driven toward the
+    /// lean of their main bending (see [`plant_lean_gain`]).
     pub fn from_manifest(manifest: &crate::world::Manifest) -> Self {
         let types: Vec<f32> = manifest
             .grass_types
@@ -56,7 +68,7 @@ impl SwayConfig {
             .take(SWAY_TYPES)
             .map(|t| t.stiffness)
             .collect();
-        Self {
+        let mut c = Self {
             springs: types.iter().map(|&s| SwaySpring::from_grass(s)).collect(),
             gains: types
                 .iter()
@@ -66,7 +78,23 @@ impl SwayConfig {
                 .iter()
                 .map(|&s| 1.1 - 0.5 * s.clamp(0.0, 1.0))
                 .collect(),
+        };
+        if !manifest.plant_types.is_empty() {
+            // The plants' slots start after every grass slot, used or not.
+            while c.springs.len() < GRASS_SWAY_TYPES {
+                c.springs.push(SwaySpring::from_grass(0.5));
+                c.gains.push(0.0);
+                c.max_bend.push(0.0);
+            }
+            for p in manifest.plant_types.iter().take(PLANT_SWAY_TYPES) {
+                let w = &p.wind;
+                c.springs
+                    .push(SwaySpring::from_frequency(w.sway_spring_hz, w.sway_damping));
+                c.gains.push(plant_lean_gain(w));
+                c.max_bend.push(PLANT_MAX_LEAN);
+            }
         }
+        c
     }
 
     /// The uniform for a frame of `dt_s` seconds around the field described by `lookup`.
@@ -90,6 +118,13 @@ impl SwayConfig {
         }
         p
     }
+}
+
+/// Lean of a plant's top per m/s of wind at rest on its spring, plant heights: the wind it feels
+/// (movement scale) times its bend, less for a stiff plant (`1 - 0.6 stiffness`), times its main
+/// amplitude. The plants' vertex stage bends by the spring's state (`shaders/plants_draw.wgsl`).
+pub fn plant_lean_gain(w: &crate::world::PlantWind) -> f32 {
+    w.movement_scale * w.bend * (1.0 - 0.6 * w.stiffness) * w.main_amplitude
 }
 
 /// The sway stage's pipeline and buffers.
@@ -211,5 +246,50 @@ impl SwayField {
             bytemuck::pod_collect_to_vec(&read(&self.sway)),
             bytemuck::pod_collect_to_vec(&read(&self.owners)),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn default_manifest() -> crate::world::Manifest {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz");
+        crate::world::World::open(&dir).unwrap().manifest
+    }
+
+    #[test]
+    fn plant_types_take_the_slots_after_the_grass_with_their_own_springs() {
+        let m = default_manifest();
+        assert!(!m.plant_types.is_empty());
+        let c = SwayConfig::from_manifest(&m);
+        assert_eq!(c.springs.len(), GRASS_SWAY_TYPES + m.plant_types.len());
+        for (k, p) in m.plant_types.iter().enumerate() {
+            let slot = GRASS_SWAY_TYPES + k;
+            let w = &p.wind;
+            assert_eq!(
+                c.springs[slot],
+                SwaySpring::from_frequency(w.sway_spring_hz, w.sway_damping)
+            );
+            assert_eq!(c.gains[slot], plant_lean_gain(w));
+            assert_eq!(c.max_bend[slot], PLANT_MAX_LEAN);
+        }
+        let p = c.params(&WindLookup::zeroed(), 1.0 / 60.0);
+        assert_eq!(p.types as usize, c.springs.len());
+        // A lightly damped plant's spring keeps more of its velocity over a frame than a
+        // heavily damped one's of the same frequency.
+        let step = |zeta: f32| {
+            RENDERER_INTEGRATOR.amplification(&SwaySpring::from_frequency(1.0, zeta), 1.0 / 60.0)[1]
+                [1]
+        };
+        assert!(step(0.1) > step(1.0));
+    }
+
+    #[test]
+    fn a_world_without_plants_keeps_only_its_grass_slots() {
+        let mut m = default_manifest();
+        m.plant_types.clear();
+        let c = SwayConfig::from_manifest(&m);
+        assert_eq!(c.springs.len(), m.grass_types.len().min(GRASS_SWAY_TYPES));
     }
 }

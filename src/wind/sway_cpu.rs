@@ -1,6 +1,9 @@
 //! CPU mirror of `shaders/wind_sway.wgsl` (the GPU stage: [`crate::wind::sway`]), written loop
 //! for loop like the shader but independently of it; the tests compare the two.
 
+use glam::Vec2;
+
+use super::config::WindLookup;
 use super::sway::{SWAY_TYPES, SwayParams};
 
 /// CPU mirror of the shader: advances `sway` (per cell and type: bend xy, velocity zw) and
@@ -47,4 +50,22 @@ pub fn update_sway(
             }
         }
     }
+}
+
+/// The bend of `slot` in the cell under the point `rel` metres from the camera, from the sway
+/// state `sway` of the field described by `lookup`: the mirror of `sway_at` in
+/// `shaders/shared/sway_lookup.wgsl`.
+pub fn sway_at(lookup: &WindLookup, sway: &[[f32; 4]], rel: Vec2, slot: u32) -> Vec2 {
+    let n = lookup.n as i32;
+    let half = n / 2;
+    let off = Vec2::from_array(lookup.camera_offset);
+    let c = ((off + rel) / lookup.cell_m).floor();
+    let (cx, cy) = (
+        (c.x as i32).clamp(-half, half - 1),
+        (c.y as i32).clamp(-half, half - 1),
+    );
+    let (wx, wy) = (lookup.origin_cell[0] + cx, lookup.origin_cell[1] + cy);
+    let (x, y) = (wx.rem_euclid(n) as u32, wy.rem_euclid(n) as u32);
+    let s = sway[((y * lookup.n + x) * SWAY_TYPES as u32 + slot) as usize];
+    Vec2::new(s[0], s[1])
 }
