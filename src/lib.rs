@@ -37,8 +37,9 @@
 //!   (`grass/wind.rs`, mirror [`grass::wind_cpu`]), the draw (`grass/draw.rs`, the blade's shape
 //!   mirrored in [`grass::blade`]); the instance pool that records them ([`grass::renderer`]).
 //! - [`wind`]: the wind field around the camera (ambient noise, sources, trail;
-//!   [`wind::field`], mirror [`wind::field_cpu`]) and the sway springs ([`wind::spring`]) in it
-//!   ([`wind::sway`], mirror [`wind::sway_cpu`]); the wind scenes of a world made ready to run.
+//!   [`wind::field`], mirror [`wind::field_cpu`]) and the sway springs ([`wind::spring`]) of the
+//!   grass and plant types in it ([`wind::sway`], mirror [`wind::sway_cpu`]); the wind scenes of a
+//!   world made ready to run.
 //! - [`plants`]: plants beyond grass (flowers, ferns, bushes), placed per grass tile on the GPU
 //!   and bent by the grass's wind: the vertex record and mesh every plant uses ([`plants::mesh`]),
 //!   the procedural recipes ([`plants::recipe`]: flower, fern and bush at two levels of detail,
