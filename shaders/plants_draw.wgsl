@@ -32,7 +32,7 @@ override COVERAGE: bool = false;
 struct PlantWind {
     // x: movement scale, y: bend (plant heights per m/s), z: stretch, w: main amplitude
     main: vec4<f32>,
-    // x: detail amplitude, y: stiffness, z: sway frequency (Hz), w: damping ratio
+    // x: detail amplitude, y: stiffness, zw: unused (the sway spring is wind_sway.wgsl's)
     detail: vec4<f32>,
 }
 

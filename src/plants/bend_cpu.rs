@@ -25,7 +25,8 @@ use crate::plants::place_cpu::PlantInstance;
 pub struct PlantWindGpu {
     /// x: movement scale, y: bend (plant heights per m/s), z: stretch, w: main amplitude.
     pub main: [f32; 4],
-    /// x: detail amplitude, y: stiffness, z: sway frequency (Hz), w: damping ratio.
+    /// x: detail amplitude, y: stiffness, zw: unused (the type's sway spring is the sway
+    /// stage's: [`crate::wind::SwayConfig`]).
     pub detail: [f32; 4],
 }
 
@@ -34,12 +35,7 @@ impl PlantWindGpu {
     pub fn new(w: &crate::world::PlantWind) -> Self {
         Self {
             main: [w.movement_scale, w.bend, w.stretch, w.main_amplitude],
-            detail: [
-                w.detail_amplitude,
-                w.stiffness,
-                w.sway_spring_hz,
-                w.sway_damping,
-            ],
+            detail: [w.detail_amplitude, w.stiffness, 0.0, 0.0],
         }
     }
 }
