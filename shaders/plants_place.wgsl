@@ -1,8 +1,12 @@
-// Plant placement and culling, one invocation per cell of a grass tile's placement grid (cells
-// of PLANT_CELL_M; workgroup z is the tile's job). Each cell holds at most one plant: a hash of
-// its world cell picks a type by the types' densities on the grass type and density under it
-// (scaled by the type's clumps), then the slope and altitude limits, a dithered thinning toward
-// the view distance, the frustum and the terrain's Hi-Z cull it. A survivor goes to its type's
+// Plant placement and culling, one invocation per cell of a job's placement grid (cells of
+// PLANT_CELL_M; workgroup z is the job). A job is a grass tile's worth of cells read from a tile
+// in the atlas: the grass tile's own data (a near job), or beyond the grass a coarser terrain
+// tile's (a far job). Each cell holds at most one plant: a hash of its world cell picks a type by
+// the types' densities on the grass type and density under it (scaled by the type's clumps),
+// then the slope and altitude limits, the hand-over at the view distance (a near job keeps a
+// plant with a chance falling to 0 over the thinning band, by the plant's own number; a far job
+// keeps exactly the others, thinned again toward the end of the cards' reach), the frustum and
+// the terrain's Hi-Z cull it. A survivor goes to its type's
 // level of detail by distance (a dithered cross-fade: within a band around each switch it goes
 // to both levels, each drawing a complementary share of its pixels) and is appended to that
 // (type, level)'s region of the instance pool. A second entry point turns the counters into
@@ -11,9 +15,26 @@
 
 #include "shared/hash.wgsl"
 #include "shared/tile_texels.wgsl"
-#include "shared/tile_job.wgsl"
 #include "shared/hiz_cull.wgsl"
 #include "shared/plant_instance.wgsl"
+
+// Mirrors PlantJob in src/plants/place_cpu.rs.
+struct PlantJob {
+    // The job's south-west corner relative to the camera (m).
+    origin: vec2<f32>,
+    // The job's corner in its data tile, in data cells from the tile's corner.
+    texel: vec2<f32>,
+    cell: f32,
+    layer: u32,
+    // The job's address at the grass level.
+    tile_x: u32,
+    tile_y: u32,
+    // 0: a grass tile's job, 1: a far job.
+    far: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
 
 struct PlantType {
     // x, y: height range (m); z: cosine of the steepest slope; w: clump cell (m)
@@ -38,6 +59,8 @@ struct Params {
     // x: switch from level 0 to 1 (m), y: from level 1 to the card (m), z: width of each
     // cross-fade band (m)
     lod: vec4<f32>,
+    // Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m)
+    cards: vec4<f32>,
     // x: Hi-Z mips, y: instances a (type, level) region holds, z: plant types, w: grass types
     limits: vec4<u32>,
     hiz_levels: array<vec4<u32>, 16>,
@@ -55,7 +78,7 @@ struct DrawIndexedArgs {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
-@group(0) @binding(1) var<storage, read> jobs: array<TileJob>;
+@group(0) @binding(1) var<storage, read> jobs: array<PlantJob>;
 @group(0) @binding(2) var heights: texture_2d_array<f32>;
 @group(0) @binding(3) var grass: texture_2d_array<u32>;
 @group(0) @binding(4) var<storage, read> hiz: array<f32>;
@@ -149,23 +172,31 @@ fn place(
     }
 }
 
-fn place_cell(job: TileJob, gx: u32, gy: u32) {
+fn place_cell(job: PlantJob, gx: u32, gy: u32) {
     let n = params.grid.x;
     let cell_m = params.dims.x;
     let seed = params.grid.w;
     let world_cell = vec2<u32>(job.tile_x * n + gx, job.tile_y * n + gy);
     let h0 = hash3(world_cell.x, world_cell.y, seed ^ SALT_CELL);
-    tally(CONSIDERED);
     let local = (vec2<f32>(f32(gx), f32(gy)) + 0.5 + 0.9 * (vec2<f32>(rand01(hash_u32(h0 ^ 1u)), rand01(hash_u32(h0 ^ 2u))) - 0.5)) * cell_m;
 
     // Bilinear height and density, nearest grass type, normal by central differences (as the
     // grass's generation).
     let border = f32(params.grid.z);
-    let tp = vec2<f32>(border, border) + local / job.cell;
+    let tp = vec2<f32>(border, border) + job.texel + local / job.cell;
     let layer = job.layer;
     let hd = tile_height_density(tp, layer);
     let ground = hd.x;
     let density = hd.y;
+    let pos = vec3<f32>(job.origin + local, ground - params.camera.x);
+    let dist = length(pos);
+    // The hand-over at the view distance: a far job leaves (uncounted) the near job's plants.
+    let near = clamp((params.dims.w - dist) / max(params.dims.w - params.dims.z, 1e-3), 0.0, 1.0);
+    let handed = rand01(hash_u32(h0 ^ 5u));
+    if job.far != 0u && handed < near {
+        return;
+    }
+    tally(CONSIDERED);
     let nx = i32(floor(tp.x + 0.5));
     let ny = i32(floor(tp.y + 0.5));
     let kind = min(textureLoad(grass, tile_texel(nx, ny, layer), layer, 0).r, 15u);
@@ -197,10 +228,13 @@ fn place_cell(job: TileJob, gx: u32, gy: u32) {
         return;
     }
     let scale = ty.size.x + (ty.size.y - ty.size.x) * rand01(hash_u32(h0 ^ 4u));
-    let pos = vec3<f32>(job.origin + local, ground - params.camera.x);
-    let dist = length(pos);
-    let far = clamp((params.dims.w - dist) / max(params.dims.w - params.dims.z, 1e-3), 0.0, 1.0);
-    if rand01(hash_u32(h0 ^ 5u)) >= far {
+    var kept = handed < near;
+    if job.far != 0u {
+        // Beyond the view distance: thinned out toward the end of the cards' reach.
+        let reach = clamp((params.cards.y - dist) / max(params.cards.y - params.cards.x, 1e-3), 0.0, 1.0);
+        kept = rand01(hash_u32(h0 ^ 7u)) < reach;
+    }
+    if !kept {
         tally(DISTANCE);
         return;
     }

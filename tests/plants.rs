@@ -13,7 +13,7 @@ use verdant::features::Features;
 use verdant::gpu::{GpuContext, GpuTimer, Targets};
 use verdant::grass::{HiZ, HiZPyramid, TileJob};
 use verdant::lod::Frustum;
-use verdant::plants::place_cpu::{LEVELS, PlantInstance, counter, place_tile};
+use verdant::plants::place_cpu::{LEVELS, PlantInstance, PlantJob, counter, place_tile};
 use verdant::plants::{PlantRenderer, PlantSet, PlantSettings};
 use verdant::stream::TileAtlas;
 use verdant::world::{Manifest, TileData, TileId, World};
@@ -102,6 +102,7 @@ impl Rig {
             grass.tile_m,
             PlantSettings {
                 capacity,
+                lod_m: [18.0, 45.0],
                 view_m: [60.0, 90.0],
                 ..Default::default()
             },
@@ -126,7 +127,7 @@ impl Rig {
     /// Places and draws the plants of `jobs` (tiles already in the atlas) over a cleared depth
     /// target (the terrain's occlusion, shared with the grass, is tested there); returns the
     /// Hi-Z placement saw.
-    fn run(&mut self, camera: &Camera, jobs: &[TileJob]) -> HiZ {
+    fn run(&mut self, camera: &Camera, jobs: &[PlantJob]) -> HiZ {
         let view_proj = camera.view_proj_relative(W as f32 / H as f32);
         self.plants.set_frame(
             &self.ctx.queue,
@@ -212,6 +213,7 @@ struct Placed {
     stats: [u32; counter::COUNT],
     per_tile: Vec<usize>,
     gpu_stats: verdant::plants::renderer::PlantStats,
+    hiz: HiZ,
 }
 
 fn place_four_tiles(rig: &mut Rig) -> Placed {
@@ -219,8 +221,7 @@ fn place_four_tiles(rig: &mut Rig) -> Placed {
     let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
     let kinds = ["meadow", "steep", "bare", "high"];
     let tm = rig.tile_m;
-    let mut tiles = Vec::new();
-    let mut jobs = Vec::new();
+    let mut work = Vec::new();
     for (k, kind) in kinds.iter().enumerate() {
         // Side by side in front of the camera (which looks north), the first nearest.
         let j = TileJob {
@@ -236,10 +237,18 @@ fn place_four_tiles(rig: &mut Rig) -> Placed {
             slot: 0,
         };
         let t = synthetic_tile(&rig.manifest, TileId::new(level, j.tile_x, j.tile_y), kind);
-        rig.atlas.upload(&rig.ctx.queue, k as u32, &t).unwrap();
-        tiles.push(t);
-        jobs.push(j);
+        work.push((PlantJob::near(&j), t));
     }
+    place_jobs(rig, &work)
+}
+
+/// Uploads each job's data tile to the atlas slot the job names, places the jobs on the GPU
+/// and by the CPU mirror, from a camera 1.7 m above the tiles looking north.
+fn place_jobs(rig: &mut Rig, work: &[(PlantJob, TileData)]) -> Placed {
+    for (j, t) in work {
+        rig.atlas.upload(&rig.ctx.queue, j.layer, t).unwrap();
+    }
+    let jobs: Vec<PlantJob> = work.iter().map(|w| w.0).collect();
     let camera = Camera::new(DVec3::new(0.0, 0.0, f64::from(ALTITUDE)), 90.0, -20.0);
     let hiz = rig.run(&camera, &jobs);
     let gpu = rig.plants.read_instances(&rig.ctx.device, &rig.ctx.queue);
@@ -247,7 +256,7 @@ fn place_four_tiles(rig: &mut Rig) -> Placed {
     let mut cpu: Vec<PlantInstance> = Vec::new();
     let mut stats = [0u32; counter::COUNT];
     let mut per_tile = Vec::new();
-    for (j, t) in jobs.iter().zip(&tiles) {
+    for (j, t) in work {
         let out = place_tile(rig.plants.params(), j, t, &hiz);
         for (s, o) in stats.iter_mut().zip(out.stats) {
             *s += o;
@@ -273,6 +282,7 @@ fn place_four_tiles(rig: &mut Rig) -> Placed {
         stats,
         per_tile,
         gpu_stats,
+        hiz,
     }
 }
 
@@ -323,6 +333,77 @@ fn gpu_placement_matches_the_cpu_mirror_on_meadow_steep_bare_and_high_tiles() {
 }
 
 #[test]
+fn far_jobs_take_over_at_the_view_distance_and_match_the_cpu_mirror() {
+    let mut rig = Rig::new(16_384);
+    let level = rig.manifest.pyramid.max_level();
+    let p = rig.manifest.pyramid.clone();
+    let tm = rig.tile_m;
+    // A grass tile across the hand-over (60..90 m ahead), a far job over the same data, and a
+    // far job beyond the view distance reading a quarter of a coarser tile.
+    let near = PlantJob::near(&TileJob {
+        origin: [-0.5 * tm, 40.0],
+        cell: p.cell_size_m(level) as f32,
+        layer: 0,
+        tile_x: 5000,
+        tile_y: 7000,
+        lod: 0,
+        slot: 0,
+    });
+    let same = PlantJob { far: 1, ..near };
+    let half = (p.tile_cells / 2) as f32;
+    let coarse = PlantJob {
+        origin: [-0.5 * tm, 40.0 + tm],
+        texel: [half, half],
+        cell: p.cell_size_m(level - 1) as f32,
+        layer: 1,
+        tile_x: 5000,
+        tile_y: 7001,
+        far: 1,
+        pad: [0; 3],
+    };
+    let fine = synthetic_tile(&rig.manifest, TileId::new(level, 5000, 7000), "meadow");
+    let parent = synthetic_tile(&rig.manifest, TileId::new(level - 1, 2500, 3500), "meadow");
+    let work = [(near, fine.clone()), (same, fine.clone()), (coarse, parent)];
+    let placed = place_jobs(&mut rig, &work);
+    assert_same_placement(&placed);
+    let per_tile = &placed.per_tile;
+    assert!(
+        per_tile.iter().all(|&n| n > 20),
+        "plants per job: {per_tile:?}"
+    );
+
+    let params = *rig.plants.params();
+    let [_, _, start, view] = params.dims;
+    let hiz = &placed.hiz;
+    let dist = |i: &PlantInstance| glam::Vec3::from(i.pos).length();
+    let hashes = |v: &[PlantInstance]| -> std::collections::BTreeSet<u32> {
+        v.iter().map(|i| i.hash).collect()
+    };
+    let by_near = place_tile(&params, &near, &fine, hiz).instances;
+    let by_far = place_tile(&params, &same, &fine, hiz).instances;
+    assert!(by_near.iter().all(|i| dist(i) < view));
+    assert!(by_far.iter().all(|i| dist(i) > start));
+    assert!(
+        hashes(&by_near).is_disjoint(&hashes(&by_far)),
+        "no plant placed by both"
+    );
+    // Without the far thinning, the two jobs place together what one job without the
+    // hand-over places.
+    let mut whole = params;
+    whole.dims[2] = 1e6;
+    whole.dims[3] = 2e6;
+    let mut unthinned = params;
+    unthinned.cards = [1e6, 2e6, 0.0, 0.0];
+    let all = hashes(&place_tile(&whole, &near, &fine, hiz).instances);
+    let mut parts = hashes(&by_near);
+    parts.extend(hashes(&place_tile(&unthinned, &same, &fine, hiz).instances));
+    assert_eq!(parts, all);
+    // Beyond the view distance every plant is a card.
+    let beyond = place_tile(&params, &coarse, &work[2].1, hiz).instances;
+    assert!(beyond.iter().all(|i| i.level() == 2 && dist(i) > view));
+}
+
+#[test]
 fn a_gltf_plant_is_placed_where_its_rule_puts_it_as_the_cpu_mirror_places_it() {
     let tmp = tempfile::tempdir().unwrap();
     let w = common::world_with_plant(tmp.path(), "plants/marigold.gltf");
@@ -358,7 +439,7 @@ fn a_full_region_drops_and_counts_the_rest_and_the_pool_does_not_grow() {
     for k in 0..4u32 {
         let t = synthetic_tile(&small.manifest, TileId::new(level, 100 + k, 100), "meadow");
         small.atlas.upload(&small.ctx.queue, k, &t).unwrap();
-        jobs.push(TileJob {
+        jobs.push(PlantJob::near(&TileJob {
             origin: [-tm + tm * (k % 2) as f32, 1.0 + tm * (k / 2) as f32],
             cell,
             layer: k,
@@ -366,7 +447,7 @@ fn a_full_region_drops_and_counts_the_rest_and_the_pool_does_not_grow() {
             tile_y: 100,
             lod: 0,
             slot: 0,
-        });
+        }));
     }
     let camera = Camera::new(DVec3::new(0.0, 0.0, f64::from(ALTITUDE)), 90.0, -20.0);
     small.run(&camera, &jobs);

@@ -1,12 +1,18 @@
 //! CPU mirror of the plant placement (`shaders/plants_place.wgsl`), and the records it shares
 //! with the GPU: the frame's constants, the plant types' constants and the instance.
 //!
-//! Each grass tile in view is split into cells of [`crate::plants::PLANT_CELL_M`]; a cell holds
-//! at most one plant. A hash of the cell's world address jitters its spot and draws a number
+//! Each job (a grass tile in view, or beyond the grass a tile's share of a coarser terrain tile:
+//! [`PlantJob`]) is split into cells of [`crate::plants::PLANT_CELL_M`]; a cell holds at most one
+//! plant. A hash of the cell's world address jitters its spot and draws a number
 //! that picks a type by the types' densities on the grass under it, so that the choice is the
-//! same whichever tile or frame asks (no seams, no flicker). Slope, altitude, the thinning toward
-//! the view distance, the frustum and the terrain's Hi-Z then cull it; the survivor goes to a
-//! level of detail by distance, cross-faded by a dither over a band around each switch.
+//! same whichever tile or frame asks (no seams, no flicker). Slope, altitude, the hand-over at the
+//! view distance, the frustum and the terrain's Hi-Z then cull it; the survivor goes to a level
+//! of detail by distance, cross-faded by a dither over a band around each switch.
+//!
+//! The hand-over: a grass tile's job keeps a plant with the chance that falls from 1 to 0 over
+//! the thinning band before the view distance (by the plant's own dithered number); a far job
+//! keeps exactly the others, thinned again toward the end of the cards' reach. Each plant near
+//! the view distance is therefore placed by one job, whichever side of the band it falls.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec2, Vec3, Vec4};
@@ -30,7 +36,8 @@ pub mod counter {
     pub const EMPTY: usize = 1;
     /// Plants the slope or altitude limits ruled out.
     pub const RULED_OUT: usize = 2;
-    /// Plants thinned out toward the view distance.
+    /// Plants thinned out toward the view distance (a grass tile's job) or toward the end of the
+    /// cards' reach (a far job).
     pub const DISTANCE: usize = 3;
     /// Plants outside the frustum.
     pub const FRUSTUM: usize = 4;
@@ -79,6 +86,8 @@ pub struct PlaceParams {
     /// x: switch from level 0 to 1 (m), y: from level 1 to the cards (m), z: width of each
     /// cross-fade band (m); w unused.
     pub lod: [f32; 4],
+    /// Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m); zw unused.
+    pub cards: [f32; 4],
     /// x: Hi-Z mips, y: instances a region holds, z: plant types, w: grass types.
     pub limits: [u32; 4],
     /// Hi-Z levels: offset (floats), width, height, unused.
@@ -89,7 +98,7 @@ pub struct PlaceParams {
     pub meshes: [[u32; 4]; REGIONS],
 }
 const _: () =
-    assert!(std::mem::size_of::<PlaceParams>() == 64 + 96 + 16 * 5 + 256 + 96 * 8 + 16 * 24);
+    assert!(std::mem::size_of::<PlaceParams>() == 64 + 96 + 16 * 6 + 256 + 96 * 8 + 16 * 24);
 
 /// One plant to draw; mirrors `PlantInstance` in the shader.
 #[repr(C)]
@@ -120,6 +129,49 @@ impl PlantInstance {
     /// The level of detail (0 the full mesh .. 2 the cards).
     pub fn level(&self) -> usize {
         (self.kind >> 8) as usize
+    }
+}
+
+/// One job of the placement: a grass tile's worth of cells (its address at the grass level), read
+/// from a tile's data in the atlas: the grass tile's own (a near job) or a coarser terrain tile
+/// that holds it (a far job, which places only beyond the grass's hand-over); mirrors `PlantJob`
+/// in the shader.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct PlantJob {
+    /// The job's south-west corner relative to the camera, metres.
+    pub origin: [f32; 2],
+    /// The job's corner in its data tile, data cells from the tile's own corner (0 for a grass
+    /// tile's own data).
+    pub texel: [f32; 2],
+    /// Cell size of the data tile, metres.
+    pub cell: f32,
+    /// Atlas slot of the data tile.
+    pub layer: u32,
+    /// The job's address at the grass level.
+    pub tile_x: u32,
+    /// The job's address at the grass level.
+    pub tile_y: u32,
+    /// 0: a grass tile's job (plants up to the view distance); 1: a far job (beyond it).
+    pub far: u32,
+    /// Padding to 48 bytes.
+    pub pad: [u32; 3],
+}
+const _: () = assert!(std::mem::size_of::<PlantJob>() == 48);
+
+impl PlantJob {
+    /// The near job of a grass tile's generation job.
+    pub fn near(job: &TileJob) -> Self {
+        Self {
+            origin: job.origin,
+            texel: [0.0; 2],
+            cell: job.cell,
+            layer: job.layer,
+            tile_x: job.tile_x,
+            tile_y: job.tile_y,
+            far: 0,
+            pad: [0; 3],
+        }
     }
 }
 
@@ -165,8 +217,8 @@ fn clump_factor(params: &PlaceParams, t: usize, cell: [u32; 2]) -> f32 {
     smoothstep(edge - 0.08, edge + 0.08, n) / cover
 }
 
-/// Places and culls the plants of one grass tile, as the shader does.
-pub fn place_tile(params: &PlaceParams, job: &TileJob, tile: &TileData, hiz: &HiZ) -> TilePlants {
+/// Places and culls the plants of one job (its data tile `tile`), as the shader does.
+pub fn place_tile(params: &PlaceParams, job: &PlantJob, tile: &TileData, hiz: &HiZ) -> TilePlants {
     let mut out = TilePlants::default();
     let n = params.grid[0];
     for gy in 0..n {
@@ -179,7 +231,7 @@ pub fn place_tile(params: &PlaceParams, job: &TileJob, tile: &TileData, hiz: &Hi
 
 fn place_cell(
     params: &PlaceParams,
-    job: &TileJob,
+    job: &PlantJob,
     tile: &TileData,
     hiz: &HiZ,
     [gx, gy]: [u32; 2],
@@ -190,15 +242,26 @@ fn place_cell(
     let cell_m = params.dims[0];
     let world_cell = [job.tile_x * n + gx, job.tile_y * n + gy];
     let h0 = hash3(world_cell[0], world_cell[1], params.grid[3] ^ SALT_CELL);
-    stats[counter::CONSIDERED] += 1;
     let jitter = Vec2::new(rand01(hash_u32(h0 ^ 1)), rand01(hash_u32(h0 ^ 2))) - 0.5;
     let local = (Vec2::new(gx as f32, gy as f32) + 0.5 + 0.9 * jitter) * cell_m;
 
     let border = params.grid[2] as f32;
-    let tp = Vec2::splat(border) + local / job.cell;
+    let tp = Vec2::splat(border) + Vec2::from_array(job.texel) + local / job.cell;
     // Height, density and normal as the grass's generation samples them.
     let sampled = crate::grass::generate_cpu::sample(tile, tp.to_array(), job.cell);
     let (ground, density) = (sampled.height, sampled.density);
+    let origin = Vec2::from_array(job.origin);
+    let pos = (origin + local).extend(ground - params.camera[0]);
+    let dist = pos.length();
+    // The hand-over at the view distance: the grass tile's job keeps the plants whose number is
+    // below `near`, a far job the rest (and does not count the others: they are the near job's).
+    let [_, _, thin_start, view] = params.dims;
+    let near = ((view - dist) / (view - thin_start).max(1e-3)).clamp(0.0, 1.0);
+    let handed = rand01(hash_u32(h0 ^ 5));
+    if job.far != 0 && handed < near {
+        return;
+    }
+    stats[counter::CONSIDERED] += 1;
     let s = tile.size as i32;
     let (nx, ny) = ((tp.x + 0.5).floor() as i32, (tp.y + 0.5).floor() as i32);
     let texel = (ny.clamp(0, s - 1) * s + nx.clamp(0, s - 1)) as usize;
@@ -229,12 +292,15 @@ fn place_cell(
         return;
     }
     let scale = ty.size[0] + (ty.size[1] - ty.size[0]) * rand01(hash_u32(h0 ^ 4));
-    let origin = Vec2::from_array(job.origin);
-    let pos = (origin + local).extend(ground - params.camera[0]);
-    let dist = pos.length();
-    let [_, _, thin_start, view] = params.dims;
-    let far = ((view - dist) / (view - thin_start).max(1e-3)).clamp(0.0, 1.0);
-    if rand01(hash_u32(h0 ^ 5)) >= far {
+    let kept = if job.far == 0 {
+        handed < near
+    } else {
+        // Beyond the view distance: thinned out toward the end of the cards' reach.
+        let [start, end, _, _] = params.cards;
+        let reach = ((end - dist) / (end - start).max(1e-3)).clamp(0.0, 1.0);
+        rand01(hash_u32(h0 ^ 7)) < reach
+    };
+    if !kept {
         stats[counter::DISTANCE] += 1;
         return;
     }

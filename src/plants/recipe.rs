@@ -64,8 +64,9 @@ pub struct PlantLods {
 /// bush (the stems' colour is the recipe's own). Channels are clamped to 0..=1, a non-finite one
 /// reads as 0.
 ///
-/// Triangle budgets of `lods[0]`: a flower at most 300, a fern 600, a bush 900; `lods[1]` has
-/// about a third of those.
+/// Triangle budgets of `lods[0]`: a flower at most 300, a fern 600, a bush 900; of the reduced
+/// `lods[1]`, drawn from a few tens of metres to the view distance where most plants are: a
+/// flower 24, a fern 80, a bush 140.
 pub fn generate(recipe: Recipe, seed: u32, colour: [f32; 3]) -> PlantLods {
     let [(l0, _), (l1, _)] = build(recipe, seed, colour);
     PlantLods {
@@ -163,13 +164,13 @@ fn flower(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
     let lean = r.range(0.03, 0.14);
     let head_z = r.range(0.78, 0.9);
     let stem = |t: f32| lean_dir * (lean * t * t) + Vec3::Z * (head_z * t);
-    let segs = if full { 5 } else { 2 };
+    let segs = if full { 5 } else { 1 };
     let path: Vec<Vec3> = (0..=segs).map(|i| stem(i as f32 / segs as f32)).collect();
     let stem_b = 0.3;
     b.tube(
         &path,
         [0.008, 0.005],
-        if full { 6 } else { 4 },
+        if full { 6 } else { 3 },
         rgba(green, WOODY),
         r.f(),
         [0.0, stem_b],
@@ -199,7 +200,7 @@ fn flower(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
         };
         if full {
             b.leaf(&leaf, Kind::Leaf);
-        } else if i % 3 == 0 {
+        } else if i == 0 {
             b.leaf(
                 &Leaf {
                     length: length * 1.15,
@@ -230,11 +231,14 @@ fn flower(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
     let petals = r.count(5, 8);
     let petal_len = r.range(0.14, 0.2);
     let petal_width = petal_len * r.range(0.45, 0.65);
+    // The reduced head has five petals at most, widened to fill the same ring.
+    let shown = if full { petals } else { petals.min(5) };
+    let petal_width = petal_width * petals as f32 / shown as f32;
     let opening = r.range(0.25, 0.6);
     let spin = r.range(0.0, TAU);
-    for p in 0..petals {
+    for p in 0..shown {
         let mut pr = rng.fork(100 + p);
-        let a = spin + TAU * p as f32 / petals as f32 + pr.range(-0.15, 0.15);
+        let a = spin + TAU * p as f32 / shown as f32 + pr.range(-0.15, 0.15);
         let radial = hu * a.cos() + hv * a.sin();
         let el = opening + pr.range(-0.1, 0.1);
         let petal = Leaf {
@@ -251,20 +255,24 @@ fn flower(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
             phase: pr.f(),
             b: [stem_b, 1.0],
         };
-        // Every petal stays at both levels (a third of a head would not read as a flower); the
-        // reduced one makes each a folded quad.
+        // The reduced head keeps a whole ring of petals (a third of a head would not read as a
+        // flower), each a folded quad.
         b.leaf(&petal, Kind::Petal);
     }
     let centre = rgba([0.45, 0.28, 0.03], 0.3);
-    b.centre(
-        head + axis * 0.006,
-        axis,
-        petal_len * 0.22,
-        if full { 6 } else { 4 },
-        centre,
-        r.f(),
-        stem_b,
-    );
+    let (centre_phase, centre_radius) = (r.f(), petal_len * 0.22);
+    // The centre is a pixel or less where the reduced mesh is drawn.
+    if full {
+        b.centre(
+            head + axis * 0.006,
+            axis,
+            centre_radius,
+            6,
+            centre,
+            centre_phase,
+            stem_b,
+        );
+    }
 }
 
 fn fern(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
@@ -302,6 +310,25 @@ fn fern(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
             curve[i].lerp(curve[i + 1], x - i as f32)
         };
         let up = |t: f32| dir(t).cross(side);
+        if !full {
+            // The reduced frond: one arching blade the width of its leaflets' reach.
+            let frond = Leaf {
+                base: Vec3::ZERO,
+                dir: dir(0.0),
+                up: up(0.0),
+                length: len,
+                width: len * 0.3,
+                droop: 0.7 * (e0 - e1),
+                cup: 0.1,
+                widest: 0.35,
+                segments: 3,
+                albedo: rgba(tint(colour, fr.range(0.85, 1.1)), THIN),
+                phase: fr.f(),
+                b: [0.0, 1.0],
+            };
+            b.leaf(&frond, Kind::Leaf);
+            continue;
+        }
 
         // The rachis: a flat ribbon facing up, tapering.
         let first = b.mesh.vertices.len();
@@ -418,8 +445,8 @@ fn branch(b: &mut Builder, rng: &Rng, br: &Branch, colour: [f32; 3], per_twig: u
     let segs = if full && br.level == 0 { 2 } else { 1 };
     let bark = rgba(tint([0.1, 0.065, 0.035], r.range(0.85, 1.15)), WOODY);
     let phase = r.f();
-    // The reduced level leaves out the thinnest twigs (inside the leaves).
-    if full || br.level < 2 {
+    // The reduced level keeps the boughs only (the rest is inside the leaves).
+    if full || br.level == 0 {
         let path: Vec<Vec3> = (0..=segs).map(|i| at(i as f32 / segs as f32)).collect();
         b.tube(
             &path,
@@ -486,11 +513,13 @@ fn branch(b: &mut Builder, rng: &Rng, br: &Branch, colour: [f32; 3], per_twig: u
         };
         if full {
             b.leaf(&leaf, Kind::Leaf);
-        } else if i % 3 == 0 {
+        } else if i % 8 == 0 {
+            // One leaf in eight, grown (more across than along, to keep the crown's outline) to
+            // keep most of its cover.
             b.leaf(
                 &Leaf {
-                    length: length * 1.45,
-                    width: leaf.width * 1.45,
+                    length: length * 1.7,
+                    width: leaf.width * 2.8,
                     ..leaf
                 },
                 Kind::Leaf,

@@ -19,7 +19,7 @@ use crate::plants::bend_cpu::PlantWindGpu;
 use crate::plants::draw::DrawPass;
 use crate::plants::place::PlacePass;
 use crate::plants::place_cpu::{
-    LEVELS, PlaceParams, PlantInstance, PlantTypeGpu, REGIONS, TYPES, counter,
+    LEVELS, PlaceParams, PlantInstance, PlantJob, PlantTypeGpu, REGIONS, TYPES, counter,
 };
 use crate::plants::set::{PlantSet, TEXTURE_SIZE, mips};
 use crate::stream::TileAtlas;
@@ -41,8 +41,12 @@ pub struct PlantSettings {
     pub lod_m: [f32; 2],
     /// Width of the dithered cross-fade band around each switch, metres.
     pub band_m: f32,
-    /// The view distance (the grass's), and the start of the thinning before it, metres.
+    /// The start of the thinning before the view distance, and the view distance (the grass's),
+    /// metres: the grass tiles' jobs hand their plants over to the far jobs there.
     pub view_m: [f32; 2],
+    /// How far the far jobs' plants (cards by default) reach, in view distances: they thin out
+    /// from the view distance to this many times it (1: none beyond the view distance).
+    pub card_reach: f32,
     /// Seed of the placement's hashes.
     pub seed: u32,
 }
@@ -51,9 +55,10 @@ impl Default for PlantSettings {
     fn default() -> Self {
         Self {
             capacity: 16_384,
-            lod_m: [18.0, 45.0],
+            lod_m: [25.0, 150.0],
             band_m: 4.0,
-            view_m: [150.0, 180.0],
+            view_m: [120.0, 150.0],
+            card_reach: 2.0,
             seed: 7,
         }
     }
@@ -254,6 +259,12 @@ impl PlantRenderer {
             ],
             dims: [cell, tile_m, settings.view_m[0], settings.view_m[1]],
             lod: [settings.lod_m[0], settings.lod_m[1], settings.band_m, 0.0],
+            cards: [
+                settings.view_m[1],
+                settings.view_m[1] * settings.card_reach.max(1.0),
+                0.0,
+                0.0,
+            ],
             limits: [
                 hiz.mips(),
                 capacity,
@@ -271,7 +282,7 @@ impl PlantRenderer {
         );
         let jobs = buffer(
             "plants jobs",
-            u64::from(MAX_JOBS) * 32,
+            u64::from(MAX_JOBS) * std::mem::size_of::<PlantJob>() as u64,
             U::STORAGE | U::COPY_DST,
         );
         let region_bytes = u64::from(capacity) * INSTANCE_BYTES;
@@ -557,33 +568,35 @@ impl PlantRenderer {
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&self.frame));
     }
 
-    /// The grass jobs plants are placed on: one per tile (a high-LOD tile's near job covers
-    /// part of the same tile and is left out), at most [`MAX_JOBS`].
-    pub fn plant_jobs(grass_jobs: &[TileJob]) -> Vec<TileJob> {
+    /// The jobs of a frame: one per grass tile (a high-LOD tile's near job covers part of the
+    /// same tile and is left out), then the far jobs, at most [`MAX_JOBS`] in all (the nearest
+    /// first: the far jobs come sorted by distance).
+    pub fn plant_jobs(grass_jobs: &[TileJob], far_jobs: &[PlantJob]) -> Vec<PlantJob> {
         grass_jobs
             .iter()
             .filter(|j| j.lod != 2)
+            .map(PlantJob::near)
+            .chain(far_jobs.iter().copied())
             .take(MAX_JOBS as usize)
-            .copied()
             .collect()
     }
 
-    /// Records placement on the tiles of `grass_jobs` and the draws into `color` and `depth`
-    /// (loaded, not cleared).
+    /// Records placement on `jobs` (see [`PlantRenderer::plant_jobs`]; those past
+    /// [`MAX_JOBS`] are left out) and the draws into `color` and `depth` (loaded, not cleared).
     pub fn record(
         &self,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
-        grass_jobs: &[TileJob],
+        jobs: &[PlantJob],
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
         timer: &mut GpuTimer,
     ) {
         encoder.clear_buffer(&self.stats, 0, None);
         encoder.clear_buffer(&self.counters, 0, None);
-        let jobs = Self::plant_jobs(grass_jobs);
+        let jobs = &jobs[..jobs.len().min(MAX_JOBS as usize)];
         if !jobs.is_empty() {
-            queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&jobs));
+            queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(jobs));
         }
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {

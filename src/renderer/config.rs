@@ -126,6 +126,9 @@ impl ConfigError {
 /// The farthest switch between the plants' levels of detail, metres.
 pub const MAX_PLANT_LOD_M: f32 = 10_000.0;
 
+/// The farthest the plants' cards reach, in view distances ([`crate::plants::PlantSettings`]).
+pub const MAX_CARD_REACH: f32 = 16.0;
+
 /// `value` must lie in `range` (NaN never does); `unit` follows the range in the error.
 fn check<T>(
     field: &'static str,
@@ -169,7 +172,8 @@ impl RendererConfig {
     /// [`LOD_FACTOR_RANGE`], `mesh_step` a power of two in 1..=[`MAX_MESH_STEP`], the tile
     /// service's per-frame budgets at least 1, the grass rings' radii (finite, the high radius
     /// and the low one above 0, the high one allowed past the low one, the hysteresis at least
-    /// 0), the plants' level-of-detail switches (`0 < near <= far <=` [`MAX_PLANT_LOD_M`]) and
+    /// 0), the plants' level-of-detail switches (`0 < near <= far <=` [`MAX_PLANT_LOD_M`]), their
+    /// cards' reach (1 to [`MAX_CARD_REACH`] view distances) and
     /// [`GrassConfig::validate`].
     /// NaN and infinities are out of every range. What depends on the world or the adapter
     /// (atlas slots, cache size, the rings' level) is checked by [`crate::Renderer::new`].
@@ -228,6 +232,14 @@ impl RendererConfig {
                 "plants.lod_m",
                 self.plants.lod_m,
                 format!("NEAR,FAR with 0 < NEAR <= FAR <= {MAX_PLANT_LOD_M} m"),
+            ));
+        }
+        let reach = self.plants.card_reach;
+        if !(1.0..=MAX_CARD_REACH).contains(&reach) {
+            return Err(ConfigError::new(
+                "plants.card_reach",
+                reach,
+                format!("1 to {MAX_CARD_REACH} view distances"),
             ));
         }
         self.grass.validate()

@@ -45,7 +45,7 @@ use targets::{check_formats, check_size};
 
 pub use config::{
     ConfigError, DEFAULT_INFILL_M, DEFAULT_MESH_STEP, GrassConfig, INFILL_RANGE_M,
-    LOD_FACTOR_RANGE, MAX_MESH_STEP, MAX_PLANT_LOD_M, NEAR_RANGE_M, RendererConfig,
+    LOD_FACTOR_RANGE, MAX_CARD_REACH, MAX_MESH_STEP, MAX_PLANT_LOD_M, NEAR_RANGE_M, RendererConfig,
     RendererOptions, SPACING_RANGE_M, WIDTH_SCALE_RANGE,
 };
 pub use error::RendererError;
@@ -94,6 +94,8 @@ struct Prepared {
     derives: Vec<DeriveJob>,
     terrain_tiles: u32,
     grass_jobs: Vec<TileJob>,
+    /// The plants' jobs (near and far).
+    plant_jobs: Vec<crate::plants::place_cpu::PlantJob>,
     /// The atlas slots the frame reads and the tiles it expects there (terrain draws and
     /// grass jobs), checked against the atlas on the GPU.
     reads: Vec<(u32, TileId)>,
@@ -585,6 +587,7 @@ impl Renderer {
             .terrain
             .prepare(queue, view.view_proj, camera.position, &draws);
         let grass_jobs = self.grass_jobs(&view, &sel.grass);
+        let plant_jobs = self.plant_jobs(&view, &sel.terrain, &grass_jobs);
         let grass_level = self.rings.as_ref().map_or(0, |r| r.settings.level);
         let reads: Vec<(u32, TileId)> = sel
             .terrain
@@ -633,6 +636,7 @@ impl Renderer {
             derives,
             terrain_tiles,
             grass_jobs,
+            plant_jobs,
             reads,
             stats: FrameStats {
                 frame: self.frame,
@@ -767,7 +771,7 @@ impl Renderer {
                 p.record(
                     &self.queue,
                     encoder,
-                    &frame.grass_jobs,
+                    &frame.plant_jobs,
                     grass_color,
                     grass_depth,
                     &mut self.timer,

@@ -11,6 +11,7 @@ use crate::camera::Camera;
 use crate::gpu::GpuTimer;
 use crate::grass::TileJob;
 use crate::lod::{Ring, select_terrain};
+use crate::plants::place_cpu::PlantJob;
 use crate::stream::{DeriveJob, ResidencyPlan, Want};
 use crate::world::TileId;
 
@@ -237,5 +238,98 @@ impl Renderer {
             }
         }
         jobs
+    }
+}
+
+impl Renderer {
+    /// The plants' jobs of a frame: one per grass tile of `grass_jobs`, then the far jobs: the
+    /// grass-level tiles between the start of the grass's hand-over and the end of the cards'
+    /// reach that are in view, each read from the terrain tile of `terrain` that holds it (its
+    /// own data, or its nearest resident ancestor's), nearest first. Empty without plants.
+    pub(super) fn plant_jobs(
+        &self,
+        view: &FrameView,
+        terrain: &[TileId],
+        grass_jobs: &[TileJob],
+    ) -> Vec<PlantJob> {
+        let (Some(plants), Some(rings)) = (
+            self.grass.as_ref().and_then(|g| g.plants.as_ref()),
+            self.rings.as_ref(),
+        ) else {
+            return Vec::new();
+        };
+        let settings = plants.settings();
+        let pyramid = &self.world.manifest.pyramid;
+        let level = rings.settings.level;
+        let size = pyramid.tile_size_m(level);
+        let (inner, outer) = (
+            f64::from(settings.view_m[0]),
+            f64::from(settings.view_m[1] * settings.card_reach.max(1.0)),
+        );
+        let eye = view.camera.position;
+        // The tallest plant, for the boxes' tops.
+        let tallest = 1.5f64;
+        let mut far: Vec<(f64, PlantJob)> = Vec::new();
+        for &id in terrain {
+            if id.level > level || outer <= inner {
+                continue;
+            }
+            let Some((src, slot)) = self.service.draw_source(id) else {
+                continue;
+            };
+            let (h0, h1) = self.service.height_range(id);
+            let (z0, z1) = (f64::from(h0), f64::from(h1) + tallest);
+            let boxed = |b: crate::world::Bounds| {
+                let min = glam::DVec3::new(b.min.x, b.min.y, z0) - eye;
+                let max = glam::DVec3::new(b.max.x, b.max.y, z1) - eye;
+                let near = glam::DVec3::ZERO.clamp(min, max).length();
+                let far = min.abs().max(max.abs()).length();
+                (min, max, near, far)
+            };
+            if boxed(pyramid.bounds(id)).2 >= outer {
+                continue;
+            }
+            let src_bounds = pyramid.bounds(src);
+            let src_cell = pyramid.cell_size_m(src.level);
+            let k = 1u32 << (level - id.level);
+            // The grass-level tiles inside `id` within reach of the eye.
+            let clip = |lo: u32, c: f64| {
+                let first = ((c - outer) / size).floor() as i64;
+                let last = ((c + outer) / size).floor() as i64;
+                (first.max(i64::from(lo)), last.min(i64::from(lo + k) - 1))
+            };
+            let ((x0, x1), (y0, y1)) = (clip(id.x * k, eye.x), clip(id.y * k, eye.y));
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    let (x, y) = (x as u32, y as u32);
+                    let sub = TileId::new(level, x, y);
+                    let b = pyramid.bounds(sub);
+                    let (min, max, near, far_d) = boxed(b);
+                    if near >= outer || far_d <= inner {
+                        continue;
+                    }
+                    if !view.frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
+                        continue;
+                    }
+                    let texel = (b.min - src_bounds.min) / src_cell;
+                    far.push((
+                        near,
+                        PlantJob {
+                            origin: [(b.min.x - eye.x) as f32, (b.min.y - eye.y) as f32],
+                            texel: [texel.x as f32, texel.y as f32],
+                            cell: src_cell as f32,
+                            layer: slot,
+                            tile_x: x,
+                            tile_y: y,
+                            far: 1,
+                            pad: [0; 3],
+                        },
+                    ));
+                }
+            }
+        }
+        far.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let far: Vec<PlantJob> = far.into_iter().map(|f| f.1).collect();
+        crate::plants::PlantRenderer::plant_jobs(grass_jobs, &far)
     }
 }
