@@ -16,7 +16,9 @@
 // Shading: two-sided (the back face's normal flipped), sun and sky light, light through thin
 // leaves and petals (albedo alpha), ambient occlusion from the vertex colour's a, world-space
 // colour variation per plant, alpha-tested cards, and a dither that cross-fades two levels of
-// detail.
+// detail. The full meshes are lit per pixel (vs_plant, fs_plant); the reduced meshes and the
+// cards, a few pixels each, per vertex (vs_plant_far, fs_plant_far), which on the H100 costs
+// less: the rasteriser's share of the draw follows what each vertex hands on.
 
 #include "shared/hash.wgsl"
 #include "shared/features.wgsl"
@@ -165,8 +167,8 @@ struct VertexOut {
     @location(5) @interpolate(flat) layer: u32,
 }
 
-@vertex
-fn vs_plant(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VertexOut {
+// Vertex `vi` of instance `ii`, bent, with what its shading needs.
+fn plant_vertex(vi: u32, ii: u32) -> VertexOut {
     let inst = instances[ii];
     let v = load_vertex(vi);
     let t = inst.kind & 255u;
@@ -195,6 +197,11 @@ fn vs_plant(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     return out;
 }
 
+@vertex
+fn vs_plant(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VertexOut {
+    return plant_vertex(vi, ii);
+}
+
 // A 4x4 ordered dither in 0..1.
 fn dither(p: vec2<f32>) -> f32 {
     let x = u32(p.x) & 3u;
@@ -203,11 +210,43 @@ fn dither(p: vec2<f32>) -> f32 {
     return (f32(bayer[y * 4u + x]) + 0.5) / 16.0;
 }
 
+// Whether a pixel at `p` of a plant cross-faded by `fade` is drawn (as keeps_pixel in
+// src/plants/place_cpu.rs).
+fn keeps_pixel(fade: f32, p: vec2<f32>) -> bool {
+    let d = dither(p);
+    return (fade >= 0.0 && d < fade) || (fade < 0.0 && d >= -fade);
+}
+
+// Sun and sky light on a plant's surface of `albedo` and thinness `thin` with the normal `n`
+// (facing the viewer), ambient occlusion `ao`, at `rel_pos` from the camera: linear, before
+// the fog and the texture.
+fn shade(albedo: vec3<f32>, thin: f32, n: vec3<f32>, ao_in: f32, rel_pos: vec3<f32>) -> vec3<f32> {
+    let sun = frame.sun_dir.xyz;
+    let to_eye = -normalize(rel_pos);
+    var light = frame.sun_color.rgb * max(dot(n, sun), 0.0);
+    if has_feature(frame_bits.flags.x, TRANSLUCENCY) {
+        // Light through the leaf from behind, stronger looking toward the sun; thin parts more.
+        let back = max(dot(-n, sun), 0.0);
+        let toward_sun = pow(max(dot(-to_eye, sun), 0.0), 4.0);
+        light += frame.sun_color.rgb * back * thin * (0.3 + 0.7 * toward_sun) * vec3<f32>(1.0, 0.95, 0.6);
+    }
+    var ao = 1.0;
+    if has_feature(frame_bits.flags.x, AMBIENT_OCCLUSION) {
+        ao = ao_in;
+    }
+    let ambient = frame.sky_color.rgb * (0.35 + 0.25 * n.z) * ao;
+    return albedo * (light * mix(0.6, 1.0, ao) + ambient);
+}
+
+// The fog's share of a colour at `rel_pos` from the camera.
+fn fog_at(rel_pos: vec3<f32>) -> f32 {
+    let x = length(rel_pos) / frame.misc.x;
+    return 1.0 - exp(-3.0 * x * x);
+}
+
 @fragment
 fn fs_plant(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
-    let fade = in.misc.y;
-    let d = dither(in.clip.xy);
-    if (fade >= 0.0 && d >= fade) || (fade < 0.0 && d < -fade) {
+    if !keeps_pixel(in.misc.y, in.clip.xy) {
         discard;
     }
     let tex = textureSample(plant_textures, plant_sampler, in.uv, in.layer);
@@ -219,27 +258,53 @@ fn fs_plant(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) v
     if !front {
         n = -n;
     }
-    let albedo = in.albedo.rgb * tex.rgb;
-    let thin = in.albedo.a;
-    let sun = frame.sun_dir.xyz;
-    let to_eye = -normalize(in.rel_pos);
-    var light = frame.sun_color.rgb * max(dot(n, sun), 0.0);
-    if has_feature(frame_bits.flags.x, TRANSLUCENCY) {
-        // Light through the leaf from behind, stronger looking toward the sun; thin parts more.
-        let back = max(dot(-n, sun), 0.0);
-        let toward_sun = pow(max(dot(-to_eye, sun), 0.0), 4.0);
-        light += frame.sun_color.rgb * back * thin * (0.3 + 0.7 * toward_sun) * vec3<f32>(1.0, 0.95, 0.6);
+    let lit = shade(in.albedo.rgb * tex.rgb, in.albedo.a, n, in.misc.x, in.rel_pos);
+    var color = output_color(mix(lit, frame.horizon_color.rgb, fog_at(in.rel_pos)));
+    if COVERAGE {
+        color.a = alpha;
     }
-    var ao = 1.0;
-    if has_feature(frame_bits.flags.x, AMBIENT_OCCLUSION) {
-        ao = in.misc.x;
+    return color;
+}
+
+// The reduced meshes and the cards, a few pixels each: lit per vertex (two-sided by the side
+// the camera sees), so that a vertex hands the rasteriser a colour, not the shading's inputs.
+struct FarOut {
+    @builtin(position) clip: vec4<f32>,
+    // Lit, linear, before the texture and the fog
+    @location(0) color: vec3<f32>,
+    @location(1) uv: vec2<f32>,
+    // x: the cross-fade's fade, y: the fog's share
+    @location(2) misc: vec2<f32>,
+    @location(3) @interpolate(flat) layer: u32,
+}
+
+@vertex
+fn vs_plant_far(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> FarOut {
+    let v = plant_vertex(vi, ii);
+    var n = v.normal;
+    if dot(n, v.rel_pos) > 0.0 {
+        n = -n;
     }
-    let ambient = frame.sky_color.rgb * (0.35 + 0.25 * n.z) * ao;
-    let lit = albedo * (light * mix(0.6, 1.0, ao) + ambient);
-    let dist = length(in.rel_pos);
-    let x = dist / frame.misc.x;
-    let fog = 1.0 - exp(-3.0 * x * x);
-    var color = output_color(mix(lit, frame.horizon_color.rgb, fog));
+    var out: FarOut;
+    out.clip = v.clip;
+    out.color = shade(v.albedo.rgb, v.albedo.a, n, v.misc.x, v.rel_pos);
+    out.uv = v.uv;
+    out.misc = vec2<f32>(v.misc.y, fog_at(v.rel_pos));
+    out.layer = v.layer;
+    return out;
+}
+
+@fragment
+fn fs_plant_far(in: FarOut) -> @location(0) vec4<f32> {
+    if !keeps_pixel(in.misc.x, in.clip.xy) {
+        discard;
+    }
+    let tex = textureSample(plant_textures, plant_sampler, in.uv, in.layer);
+    var alpha = tex.a;
+    if !COVERAGE && alpha < 0.5 {
+        discard;
+    }
+    var color = output_color(mix(in.color * tex.rgb, frame.horizon_color.rgb, in.misc.y));
     if COVERAGE {
         color.a = alpha;
     }

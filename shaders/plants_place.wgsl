@@ -59,7 +59,8 @@ struct Params {
     // x: switch from level 0 to 1 (m), y: from level 1 to the card (m), z: width of each
     // cross-fade band (m)
     lod: vec4<f32>,
-    // Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m)
+    // Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m); z: where
+    // the plants start to thin out with distance, survivors grown to keep the cover (m)
     cards: vec4<f32>,
     // x: Hi-Z mips, y: instances a (type, level) region holds, z: plant types, w: grass types
     limits: vec4<u32>,
@@ -101,6 +102,8 @@ const DRAWN: u32 = 7u;
 // Salts of the placement's hashes (as in place_cpu.rs).
 const SALT_CELL: u32 = 0x9e1a7u;
 const SALT_CLUMP: u32 = 0x5c1f3u;
+// The fewest plants the thinning with distance keeps (as place_cpu.rs).
+const MIN_KEEP: f32 = 0.5;
 
 var<workgroup> local_stats: array<atomic<u32>, 8>;
 
@@ -227,17 +230,21 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
         tally(RULED_OUT);
         return;
     }
-    let scale = ty.size.x + (ty.size.y - ty.size.x) * rand01(hash_u32(h0 ^ 4u));
+    var scale = ty.size.x + (ty.size.y - ty.size.x) * rand01(hash_u32(h0 ^ 4u));
     var kept = handed < near;
     if job.far != 0u {
         // Beyond the view distance: thinned out toward the end of the cards' reach.
         let reach = clamp((params.cards.y - dist) / max(params.cards.y - params.cards.x, 1e-3), 0.0, 1.0);
         kept = rand01(hash_u32(h0 ^ 7u)) < reach;
     }
-    if !kept {
+    // Beyond params.cards.z the plants thin out as the square of the distance (at most
+    // 1 - MIN_KEEP of them go), each survivor grown to keep the cover.
+    let keep = max(min(1.0, params.cards.z * params.cards.z / max(dist * dist, 1e-6)), MIN_KEEP);
+    if !kept || rand01(hash_u32(h0 ^ 8u)) >= keep {
         tally(DISTANCE);
         return;
     }
+    scale = scale / sqrt(keep);
     let radius = scale * max(ty.limits.w, 0.5);
     let center = pos + vec3<f32>(0.0, 0.0, 0.5 * scale);
     for (var i = 0; i < 5; i++) {

@@ -393,7 +393,8 @@ fn far_jobs_take_over_at_the_view_distance_and_match_the_cpu_mirror() {
     whole.dims[2] = 1e6;
     whole.dims[3] = 2e6;
     let mut unthinned = params;
-    unthinned.cards = [1e6, 2e6, 0.0, 0.0];
+    unthinned.cards[0] = 1e6;
+    unthinned.cards[1] = 2e6;
     let all = hashes(&place_tile(&whole, &near, &fine, hiz).instances);
     let mut parts = hashes(&by_near);
     parts.extend(hashes(&place_tile(&unthinned, &same, &fine, hiz).instances));
@@ -401,6 +402,14 @@ fn far_jobs_take_over_at_the_view_distance_and_match_the_cpu_mirror() {
     // Beyond the view distance every plant is a card.
     let beyond = place_tile(&params, &coarse, &work[2].1, hiz).instances;
     assert!(beyond.iter().all(|i| i.level() == 2 && dist(i) > view));
+    // There half the plants are left (the thinning with distance), each grown by the square
+    // root of 2.
+    let [thin, keep] = [params.cards[2], verdant::plants::place_cpu::MIN_KEEP];
+    assert!(thin * thin / (view * view) < keep);
+    for i in &beyond {
+        let [lo, hi] = [0, 1].map(|k| params.types[i.plant_type()].size[k] / keep.sqrt());
+        assert!(i.scale >= lo - 1e-4 && i.scale <= hi + 1e-4, "{i:?}");
+    }
 }
 
 #[test]

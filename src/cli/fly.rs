@@ -65,9 +65,18 @@ pub(crate) struct FlyArgs {
     #[arg(long)]
     pub(crate) grass_near_m: Option<f32>,
     /// Plants' level-of-detail switches NEAR,FAR, metres: the full mesh out to NEAR, the
-    /// reduced mesh out to FAR, crossed cards beyond (default: the renderer's, 18,45).
+    /// reduced mesh out to FAR, crossed cards beyond (default: the renderer's, 25,150).
     #[arg(long, value_delimiter = ',')]
     pub(crate) plant_lod_m: Option<Vec<f32>>,
+    /// How far plants reach beyond the grass, in view distances: thinning out from the view
+    /// distance to this many times it, 1..=16 (1: none beyond the grass; default: the
+    /// renderer's, 2).
+    #[arg(long)]
+    pub(crate) plant_card_reach: Option<f32>,
+    /// Beyond this distance, metres, plants thin out as the square of the distance, down to
+    /// half of them, the survivors grown to keep the cover (default: the renderer's, 50).
+    #[arg(long)]
+    pub(crate) plant_thin_m: Option<f32>,
     /// Terrain mesh: one vertex every this many samples of a tile (1, 2, 4, ...; default:
     /// the renderer's).
     #[arg(long)]
@@ -103,6 +112,8 @@ impl FlyArgs {
             grass_segments,
             grass_near_m,
             plant_lod_m,
+            plant_card_reach,
+            plant_thin_m,
             mesh_step,
             aa,
             truth: _,
@@ -151,6 +162,9 @@ impl FlyArgs {
             mesh_step: mesh_step.unwrap_or(DEFAULT_MESH_STEP),
             aa: aa.unwrap_or_default(),
             plant_lod_m,
+            plant_card_reach: plant_card_reach
+                .unwrap_or(verdant::plants::PlantSettings::default().card_reach),
+            plant_thin_m: plant_thin_m.unwrap_or(verdant::plants::PlantSettings::default().thin_m),
         })
     }
 }

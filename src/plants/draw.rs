@@ -1,6 +1,7 @@
 //! The plants' draw stage on the GPU (`shaders/plants_draw.wgsl`): one indexed indirect draw per
 //! (type, level of detail), bent by the wind in the vertex stage (mirrored in
-//! [`crate::plants::bend_cpu`]); [`crate::plants::renderer`] binds it and records it.
+//! [`crate::plants::bend_cpu`]); the full meshes lit per pixel, the reduced meshes and the cards
+//! per vertex; [`crate::plants::renderer`] binds it and records it.
 
 use crate::gpu::Targets;
 use crate::gpu::layout::*;
@@ -12,7 +13,9 @@ pub(crate) struct DrawPass {
     pub(crate) layout: wgpu::BindGroupLayout,
     /// Group 1: a region of the pool, by a dynamic offset.
     pub(crate) region_layout: wgpu::BindGroupLayout,
-    pub(crate) pipeline: wgpu::RenderPipeline,
+    /// The full meshes' pipeline (lit per pixel), then the reduced meshes' and cards' (lit per
+    /// vertex).
+    pub(crate) pipelines: [wgpu::RenderPipeline; 2],
 }
 
 impl DrawPass {
@@ -53,38 +56,40 @@ impl DrawPass {
                 [storage_buffer_read_only().dynamic().min_size(region_bytes)],
             ),
         );
-        let pipeline = Self::pipeline(device, targets, &layout, &region_layout, samples);
+        let pipelines = Self::pipelines(device, targets, &layout, &region_layout, samples);
         Self {
             layout,
             region_layout,
-            pipeline,
+            pipelines,
         }
     }
 
-    /// The pipeline over the two layouts, for targets of `samples` samples a pixel.
-    pub(crate) fn pipeline(
+    /// The pipelines over the two layouts (see [`DrawPass::pipelines`]), for targets of
+    /// `samples` samples a pixel.
+    pub(crate) fn pipelines(
         device: &wgpu::Device,
         targets: &Targets,
         layout: &wgpu::BindGroupLayout,
         region_layout: &wgpu::BindGroupLayout,
         samples: u32,
-    ) -> wgpu::RenderPipeline {
+    ) -> [wgpu::RenderPipeline; 2] {
         let module = crate::shaders::module(device, "plants_draw.wgsl");
         let coverage = if samples > 1 { 1.0 } else { 0.0 };
         let fs_constants = [
             ("ENCODE_SRGB", targets.encode_srgb()),
             ("COVERAGE", coverage),
         ];
-        render_pipeline(
-            "plants draw",
-            &module,
-            ("vs_plant", "fs_plant"),
-            targets.color_format,
-        )
-        .layouts(&[layout, region_layout])
-        .constants(&[], &fs_constants)
-        .depth(targets.depth_format, true, wgpu::CompareFunction::Greater)
-        .multisample(samples, samples > 1)
-        .build(device)
+        [
+            ("plants draw", ("vs_plant", "fs_plant")),
+            ("plants draw far", ("vs_plant_far", "fs_plant_far")),
+        ]
+        .map(|(label, entries)| {
+            render_pipeline(label, &module, entries, targets.color_format)
+                .layouts(&[layout, region_layout])
+                .constants(&[], &fs_constants)
+                .depth(targets.depth_format, true, wgpu::CompareFunction::Greater)
+                .multisample(samples, samples > 1)
+                .build(device)
+        })
     }
 }

@@ -54,6 +54,10 @@ pub mod counter {
 const SALT_CELL: u32 = 0x9e1a7;
 const SALT_CLUMP: u32 = 0x5c1f3;
 
+/// The fewest plants the thinning with distance keeps ([`crate::plants::PlantSettings::thin_m`]):
+/// at most half go, each survivor grown by at most the square root of 2.
+pub const MIN_KEEP: f32 = 0.5;
+
 /// A plant type's constants; mirrors `PlantType` in the shader.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -86,7 +90,9 @@ pub struct PlaceParams {
     /// x: switch from level 0 to 1 (m), y: from level 1 to the cards (m), z: width of each
     /// cross-fade band (m); w unused.
     pub lod: [f32; 4],
-    /// Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m); zw unused.
+    /// Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m); z: where
+    /// the plants start to thin out with distance, survivors grown to keep the cover (m); w
+    /// unused.
     pub cards: [f32; 4],
     /// x: Hi-Z mips, y: instances a region holds, z: plant types, w: grass types.
     pub limits: [u32; 4],
@@ -291,7 +297,7 @@ fn place_cell(
         stats[counter::RULED_OUT] += 1;
         return;
     }
-    let scale = ty.size[0] + (ty.size[1] - ty.size[0]) * rand01(hash_u32(h0 ^ 4));
+    let mut scale = ty.size[0] + (ty.size[1] - ty.size[0]) * rand01(hash_u32(h0 ^ 4));
     let kept = if job.far == 0 {
         handed < near
     } else {
@@ -300,10 +306,14 @@ fn place_cell(
         let reach = ((end - dist) / (end - start).max(1e-3)).clamp(0.0, 1.0);
         rand01(hash_u32(h0 ^ 7)) < reach
     };
-    if !kept {
+    // Beyond `cards[2]` the plants thin out as the square of the distance, each survivor grown
+    // to keep the cover.
+    let keep = (params.cards[2] * params.cards[2] / (dist * dist).max(1e-6)).clamp(MIN_KEEP, 1.0);
+    if !kept || rand01(hash_u32(h0 ^ 8)) >= keep {
         stats[counter::DISTANCE] += 1;
         return;
     }
+    scale /= keep.sqrt();
     let radius = scale * ty.limits[3].max(0.5);
     let center = pos + Vec3::new(0.0, 0.0, 0.5 * scale);
     let outside = params.planes[..5]

@@ -47,6 +47,10 @@ pub struct PlantSettings {
     /// How far the far jobs' plants (cards by default) reach, in view distances: they thin out
     /// from the view distance to this many times it (1: none beyond the view distance).
     pub card_reach: f32,
+    /// Beyond this distance (metres) plants thin out as the square of the distance, down to
+    /// half of them ([`crate::plants::place_cpu::MIN_KEEP`]), each survivor grown to keep the
+    /// cover: a few pixels each there, they cost the draw per plant, not per pixel.
+    pub thin_m: f32,
     /// Seed of the placement's hashes.
     pub seed: u32,
 }
@@ -59,6 +63,7 @@ impl Default for PlantSettings {
             band_m: 4.0,
             view_m: [120.0, 150.0],
             card_reach: 2.0,
+            thin_m: 50.0,
             seed: 7,
         }
     }
@@ -262,7 +267,7 @@ impl PlantRenderer {
             cards: [
                 settings.view_m[1],
                 settings.view_m[1] * settings.card_reach.max(1.0),
-                0.0,
+                settings.thin_m,
                 0.0,
             ],
             limits: [
@@ -510,7 +515,7 @@ impl PlantRenderer {
         if samples == self.samples {
             return;
         }
-        self.draw_pass.pipeline = DrawPass::pipeline(
+        self.draw_pass.pipelines = DrawPass::pipelines(
             device,
             &self.targets,
             &self.draw_pass.layout,
@@ -619,17 +624,23 @@ impl PlantRenderer {
             Some((depth, wgpu::LoadOp::Load)),
             timer.render_pass("plants_draw"),
         );
-        pass.set_pipeline(&self.draw_pass.pipeline);
         pass.set_bind_group(0, &self.draw_group, &[]);
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
         let region_bytes = u64::from(self.settings.capacity) * INSTANCE_BYTES;
-        for region in 0..(self.types as usize * LEVELS) {
-            pass.set_bind_group(
-                1,
-                &self.region_group,
-                &[(region as u64 * region_bytes) as u32],
-            );
-            pass.draw_indexed_indirect(&self.args, region as u64 * 20);
+        // The full meshes first, then the rest: one pipeline switch.
+        for (pipeline, levels) in self.draw_pass.pipelines.iter().zip([0..1, 1..LEVELS]) {
+            pass.set_pipeline(pipeline);
+            for t in 0..self.types as usize {
+                for level in levels.clone() {
+                    let region = t * LEVELS + level;
+                    pass.set_bind_group(
+                        1,
+                        &self.region_group,
+                        &[(region as u64 * region_bytes) as u32],
+                    );
+                    pass.draw_indexed_indirect(&self.args, region as u64 * 20);
+                }
+            }
         }
     }
 

@@ -173,7 +173,8 @@ impl RendererConfig {
     /// service's per-frame budgets at least 1, the grass rings' radii (finite, the high radius
     /// and the low one above 0, the high one allowed past the low one, the hysteresis at least
     /// 0), the plants' level-of-detail switches (`0 < near <= far <=` [`MAX_PLANT_LOD_M`]), their
-    /// cards' reach (1 to [`MAX_CARD_REACH`] view distances) and
+    /// cards' reach (1 to [`MAX_CARD_REACH`] view distances), the start of their thinning with
+    /// distance (above 0, at most [`MAX_PLANT_LOD_M`]) and
     /// [`GrassConfig::validate`].
     /// NaN and infinities are out of every range. What depends on the world or the adapter
     /// (atlas slots, cache size, the rings' level) is checked by [`crate::Renderer::new`].
@@ -232,6 +233,14 @@ impl RendererConfig {
                 "plants.lod_m",
                 self.plants.lod_m,
                 format!("NEAR,FAR with 0 < NEAR <= FAR <= {MAX_PLANT_LOD_M} m"),
+            ));
+        }
+        let thin = self.plants.thin_m;
+        if !(thin > 0.0 && thin <= MAX_PLANT_LOD_M) {
+            return Err(ConfigError::new(
+                "plants.thin_m",
+                thin,
+                format!("above 0, at most {MAX_PLANT_LOD_M} m"),
             ));
         }
         let reach = self.plants.card_reach;

@@ -68,6 +68,10 @@ pub struct FlyOptions {
     /// Distances of the plants' switches from the full mesh to the reduced one and from that
     /// to the cards, metres (default: the renderer's).
     pub plant_lod_m: [f32; 2],
+    /// How far plants reach beyond the grass, in view distances (default: the renderer's).
+    pub plant_card_reach: f32,
+    /// Where plants start to thin out with distance, metres (default: the renderer's).
+    pub plant_thin_m: f32,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -114,6 +118,8 @@ impl Default for FlyOptions {
             mesh_step: DEFAULT_MESH_STEP,
             aa: Default::default(),
             plant_lod_m: crate::plants::PlantSettings::default().lod_m,
+            plant_card_reach: crate::plants::PlantSettings::default().card_reach,
+            plant_thin_m: crate::plants::PlantSettings::default().thin_m,
         }
     }
 }
@@ -146,6 +152,8 @@ impl FlyOptions {
         config.mesh_step = self.mesh_step;
         config.aa = self.aa;
         config.plants.lod_m = self.plant_lod_m;
+        config.plants.card_reach = self.plant_card_reach;
+        config.plants.thin_m = self.plant_thin_m;
         config.validate().map_err(SettingError::from)?;
         Ok(config)
     }
@@ -172,6 +180,8 @@ impl From<ConfigError> for SettingError {
             "grass.near_m" => "--grass-near-m",
             "mesh_step" => "--mesh-step",
             "plants.lod_m" => "--plant-lod-m",
+            "plants.card_reach" => "--plant-card-reach",
+            "plants.thin_m" => "--plant-thin-m",
             field => field,
         };
         Self { option, source }

@@ -129,8 +129,9 @@ pub fn truth_config_reaching(
     // Every plant its full mesh, wherever it grows; the pool's regions large enough for the
     // plants out to the truth's reach.
     c.plants.lod_m = [crate::renderer::MAX_PLANT_LOD_M; 2];
-    // Its meshes reach as far as its blades: no cards beyond.
+    // Its meshes reach as far as its blades, none thinned: no cards beyond.
     c.plants.card_reach = 1.0;
+    c.plants.thin_m = crate::renderer::MAX_PLANT_LOD_M;
     c.plants.capacity = base.plants.capacity.saturating_mul(4);
     // The sub-samples are the anti-aliasing: each one a plain frame.
     c.aa = crate::aa::AntiAliasing::Off;
