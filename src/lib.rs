@@ -40,15 +40,15 @@
 //!   [`wind::field`], mirror [`wind::field_cpu`]) and the sway springs ([`wind::spring`]) of the
 //!   grass and plant types in it ([`wind::sway`], mirror [`wind::sway_cpu`]); the wind scenes of a
 //!   world made ready to run.
-//! - [`plants`]: plants beyond grass (flowers, ferns, bushes), placed per grass tile on the GPU
-//!   and bent by the grass's wind: the vertex record and mesh every plant uses ([`plants::mesh`]),
+//! - [`plants`]: plants beyond grass (flowers, ferns, bushes), placed on the GPU per grass tile
+//!   and, past the grass, per grass-level tile of the terrain's tiles, and bent by the grass's wind: the vertex record and mesh every plant uses ([`plants::mesh`]),
 //!   the procedural recipes ([`plants::recipe`]: flower, fern and bush at two levels of detail,
 //!   built of the leaves, tubes and random streams in `plants/recipe/shapes.rs`), their far cards
 //!   ([`plants::card`]: crossed cards with a picture rendered from the mesh), a user's plant read
 //!   from glTF 2.0 ([`plants::gltf`]: the loader in `gltf/load.rs`, buffers and accessors in
 //!   `gltf/accessor.rs`, the document's check in `gltf/validate.rs`, the writer in
 //!   `gltf/write.rs`), a world's plant types made ready for the GPU ([`plants::set`]), placement
-//!   and culling per grass tile (`plants/place.rs`, mirror [`plants::place_cpu`],
+//!   and culling per job (`plants/place.rs`, mirror [`plants::place_cpu`],
 //!   `shaders/plants_place.wgsl`), the draw (`plants/draw.rs`, the bending mirrored in
 //!   [`plants::bend_cpu`], `shaders/plants_draw.wgsl`); the instance pool that records them
 //!   ([`plants::renderer`]).
@@ -61,7 +61,7 @@
 //! - [`renderer`]: the frame: [`Renderer`], the order of its passes top to bottom in one place
 //!   ([`Renderer::record`], `renderer/mod.rs`; the hole check in `renderer/hole_check.rs`, the
 //!   figures' readback ring in `renderer/readback.rs`); tile residency and streaming (the tiles a
-//!   frame wants, uploads, derivations, [`Renderer::warm_up`], the grass jobs) in
+//!   frame wants, uploads, derivations, [`Renderer::warm_up`], the grass and plant jobs) in
 //!   `renderer/streaming.rs`; the frame's records ([`FrameInput`], [`FrameStats`], [`WarmUp`]) in
 //!   `renderer/frame.rs`, [`RendererError`] in `renderer/error.rs`, the targets' formats and size
 //!   checks in `renderer/targets.rs`; its settings in `renderer/config.rs`

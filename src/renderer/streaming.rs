@@ -1,6 +1,7 @@
 //! Tile residency and streaming: the tiles a frame wants, uploads of loaded tiles to the atlas,
-//! derivations of child tiles, the warm-up that waits for them all, and the grass jobs of the
-//! tiles that are resident.
+//! derivations of child tiles, the warm-up that waits for them all, the grass jobs of the
+//! tiles that are resident, and the plants' jobs (the grass tiles', then the far ones read from
+//! the terrain's tiles).
 
 use std::time::Instant;
 
