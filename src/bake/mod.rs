@@ -45,6 +45,7 @@ use crate::world::manifest::{Manifest, Sky, WindDefaults, WorldSource};
 use crate::world::tile::Pyramid;
 
 mod author;
+pub mod cover;
 mod paint;
 mod publish;
 mod resample;
@@ -98,6 +99,9 @@ pub struct BakeOptions {
     /// Replace the world (`world.toml` and `tiles/`) in `out` if `out` exists and is not empty
     /// (otherwise such a folder is refused).
     pub replace: bool,
+    /// A land-cover map and the table of what grows on its classes (a file, or a built-in
+    /// table's name): see [`cover`]. `None`: the procedural rule paints everywhere.
+    pub land_cover: Option<(PathBuf, PathBuf)>,
     /// Stops the bake when set (checked between rows and between tiles): the bake then fails
     /// with [`WorldError::Cancelled`], removes its staging folder and leaves `out` as it was.
     pub cancel: Option<CancelFlag>,
@@ -114,6 +118,7 @@ impl Default for BakeOptions {
             stored_levels: 3,
             seed: 1,
             replace: false,
+            land_cover: None,
             cancel: None,
         }
     }
@@ -236,6 +241,12 @@ pub fn bake(
             samples: [dem.width, dem.height],
             cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
             nodata_filled: dem.nodata_filled,
+            land_cover: opts
+                .land_cover
+                .as_ref()
+                .map(|(map, _)| file_name(map))
+                .unwrap_or_default(),
+            cover_table: String::new(),
         }),
         derive: None,
         grass_peak: None,
@@ -243,6 +254,18 @@ pub fn bake(
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;
+    let cover = match &opts.land_cover {
+        None => None,
+        Some((map, table_path)) => {
+            let table = cover::CoverTable::load(table_path)?;
+            let map = cover::CoverMap::load(map, &dem, &table, table_path, &manifest.grass_types)?;
+            if let Some(s) = &mut manifest.source {
+                s.cover_table = format!("{} ({})", table.name, file_name(table_path));
+            }
+            Some(map)
+        }
+    };
+    cancelled()?;
 
     let grid = Grid::resample(&dem, &manifest.pyramid, &opts.dem, &cancelled, progress)?;
     let height_range = grid.height_range();
@@ -250,7 +273,13 @@ pub fn bake(
     manifest.derive = Some(grid.calibrate(extent, manifest.pyramid.derived_levels));
     cancelled()?;
 
-    let mut painted = grid.paint(height_range, opts.seed, &cancelled, progress)?;
+    let mut painted = grid.paint(
+        height_range,
+        opts.seed,
+        cover.as_ref(),
+        &cancelled,
+        progress,
+    )?;
     painted.cancel = opts.cancel.clone();
     check_painted_types(&painted, &manifest, &manifest_path)?;
     progress(BakeStage::Paths, 0, 2);

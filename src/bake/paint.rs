@@ -177,10 +177,13 @@ impl Painted {
 }
 
 impl Grid {
+    /// Paints every sample: from `cover` where it has a class there (the slope rule still
+    /// holds), by the procedural rule elsewhere.
     pub(super) fn paint(
         self,
         height_range: [f32; 2],
         seed: u64,
+        cover: Option<&super::cover::CoverMap>,
         cancelled: &dyn Fn() -> Result<(), WorldError>,
         progress: &mut dyn FnMut(BakeStage, u64, u64),
     ) -> Result<Painted, WorldError> {
@@ -191,8 +194,12 @@ impl Grid {
         for b in 0..self.height {
             for a in 0..self.width {
                 let altitude = (f64::from(self.at(a, b) - height_range[0]) / span).clamp(0.0, 1.0);
-                let (t, d) =
-                    paint_sample(self.slope_deg(a, b), altitude, self.position(a, b), seed);
+                let (slope, p) = (self.slope_deg(a, b), self.position(a, b));
+                let (t, d) = match cover.and_then(|c| c.paint_at(p)) {
+                    Some(_) if slope > MAX_GRASS_SLOPE_DEG => (0, 0),
+                    Some(painted) => painted,
+                    None => paint_sample(slope, altitude, p, seed),
+                };
                 grass_type[b * self.width + a] = t;
                 density[b * self.width + a] = d;
             }

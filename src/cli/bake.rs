@@ -43,6 +43,15 @@ pub(crate) struct BakeArgs {
     /// (otherwise it is refused); its other files are kept.
     #[arg(long)]
     pub(crate) replace: bool,
+    /// A land-cover map: a GeoTIFF of one uint8 or uint16 band in the DEM's coordinate system,
+    /// or a grayscale PNG that spans the DEM. Its classes choose the grass where it has data
+    /// (the procedural rule paints the rest). Needs --cover-table.
+    #[arg(long, requires = "cover_table")]
+    pub(crate) land_cover: Option<PathBuf>,
+    /// What grows on each class of --land-cover: a TOML table, or a built-in one by name
+    /// (esa-worldcover, nlcd).
+    #[arg(long, requires = "land_cover")]
+    pub(crate) cover_table: Option<PathBuf>,
 }
 
 pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
@@ -56,6 +65,8 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         levels,
         seed,
         replace,
+        land_cover,
+        cover_table,
     } = args;
     let opts = BakeOptions {
         dem,
@@ -67,6 +78,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         stored_levels: levels,
         seed,
         replace,
+        land_cover: land_cover.zip(cover_table),
         cancel: Some(
             verdant::bake::CancelFlag::on_termination_signals()
                 .context("installing the SIGINT and SIGTERM handlers")?,

@@ -1,7 +1,7 @@
 //! Digital elevation models, read by [`Dem::load`] in any of three formats, told apart by the
 //! file's content (not its name):
 //!
-//! - **GeoTIFF** (`geotiff.rs`): one band of int16, uint16, int32, float32 or float64,
+//! - **GeoTIFF** (`geotiff.rs`): one band of uint8, int16, uint16, int32, float32 or float64,
 //!   strips or tiles, uncompressed, Deflate, LZW or PackBits, with or without a predictor; the
 //!   cell size from the GeoTIFF tags, nodata from the `GDAL_NODATA` tag.
 //! - **SRTM `.hgt`** (`hgt.rs`): 3601x3601 (1 arc-second) or 1201x1201 (3 arc-second)
@@ -239,6 +239,7 @@ impl Dem {
             format: DemFormat::PngSidecar,
             crs: String::new(),
             origin: None,
+            pixel_size: None,
             nodata_filled: 0,
         })
     }

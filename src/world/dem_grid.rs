@@ -60,6 +60,9 @@ pub struct Dem {
     /// The south-west sample's coordinates in that coordinate system (x/longitude first), where
     /// the file gives them.
     pub origin: Option<[f64; 2]>,
+    /// Spacing of the samples in that coordinate system's units (x then y, both positive),
+    /// where the file gives them: what places another raster in the same system on this one.
+    pub pixel_size: Option<[f64; 2]>,
     /// Nodata samples that were filled from the heights around them.
     pub nodata_filled: u64,
 }

@@ -583,6 +583,26 @@ pub enum WorldError {
         max_fraction: f64,
     },
 
+    /// A land-cover map that cannot be used: a format, CRS or extent the baker cannot place on
+    /// the DEM, or classes its table does not list.
+    #[error("{}: land cover: {problem}", path.display())]
+    LandCover {
+        /// The map.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+
+    /// A land-cover table that cannot be used: bad TOML, a grass type the world does not have,
+    /// a density out of range, a class listed twice.
+    #[error("{}: cover table: {problem}", path.display())]
+    CoverTable {
+        /// The table (or the built-in table's name).
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+
     /// A file fetched from a world served over HTTP could not be had: the server said no, the
     /// connection failed or stalled, or the body was cut short (the error names the URL).
     #[error(transparent)]
@@ -649,7 +669,9 @@ impl WorldError {
             | FileTooLarge { path, .. }
             | OutputNotEmpty { path }
             | Cancelled { path }
-            | PublishFailed { path, .. } => Some(path),
+            | PublishFailed { path, .. }
+            | LandCover { path, .. }
+            | CoverTable { path, .. } => Some(path),
             BadOption { .. } | Fetch(_) => None,
         }
     }

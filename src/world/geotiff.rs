@@ -2,7 +2,8 @@
 //! compression, Deflate, LZW or PackBits; horizontal and floating-point predictors); this module
 //! reads the GeoTIFF tags on top of it.
 //!
-//! - One band of int16, uint16, int32, float32 or float64.
+//! - One band of uint8, int16, uint16, int32, float32 or float64 (uint8 for class rasters such
+//!   as land cover, read through the same path).
 //! - Cell size from `ModelPixelScale` (with `ModelTiepoint` for the origin) or from an unrotated
 //!   `ModelTransformation`. Rows are mapped north-up (a grid stored south row first is flipped).
 //! - The GeoKey directory says whether the grid is projected (x/y in metres, or in feet, which
@@ -89,6 +90,7 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
     let bits = tag_u16(Tag::BitsPerSample)?.unwrap_or(1);
     let sample_format = tag_u16(Tag::SampleFormat)?.unwrap_or(1);
     let sample = match (sample_format, bits) {
+        (1, 8) => SampleType::U8,
         (1, 16) => SampleType::U16,
         (2, 16) => SampleType::I16,
         (2, 32) => SampleType::I32,
@@ -104,7 +106,8 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
             return Err(unsupported(
                 path,
                 format!(
-                    "sample type {kind}{b}: heights must be int16, uint16, int32, float32 or float64"
+                    "sample type {kind}{b}: samples must be uint8, int16, uint16, int32, float32 or \
+                     float64"
                 ),
             ));
         }
@@ -189,6 +192,12 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
     // The nodata value as the file's own type would hold it, so that a float32 grid with
     // nodata "-3.4028234663852886e+38" matches its samples exactly.
     let mut raw: Vec<f32> = match values {
+        DecodingResult::U8(v) => {
+            let nd = nodata.filter(|n| n.fract() == 0.0 && (0.0..=255.0).contains(n));
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
+                .collect()
+        }
         DecodingResult::I16(v) => {
             let nd = nodata.filter(|n| n.fract() == 0.0 && (-32768.0..=32767.0).contains(n));
             v.iter()
@@ -260,6 +269,7 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
         format: DemFormat::Geotiff,
         crs: grid.crs,
         origin: grid.origin,
+        pixel_size: grid.pixel_size,
         nodata_filled: 0,
     })
 }
@@ -298,6 +308,8 @@ struct GridPlacement {
     flip_cols: bool,
     crs: String,
     origin: Option<[f64; 2]>,
+    /// Spacing in the coordinate system's units (x, y).
+    pixel_size: Option<[f64; 2]>,
 }
 
 impl GeoTags {
@@ -405,6 +417,7 @@ impl GeoTags {
                     flip_cols: false,
                     crs: String::new(),
                     origin: None,
+                    pixel_size: None,
                 });
             }
             return Err(WorldError::NoGeoreference {
@@ -456,6 +469,7 @@ impl GeoTags {
             flip_cols,
             crs,
             origin,
+            pixel_size: Some(size),
         };
         match (model, keys) {
             (Some(MODEL_GEOGRAPHIC), Some(k)) => {
@@ -761,6 +775,7 @@ fn decode_lzw(
 /// The sample types read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum SampleType {
+    U8,
     U16,
     I16,
     I32,
@@ -771,6 +786,7 @@ enum SampleType {
 impl SampleType {
     fn name(self) -> &'static str {
         match self {
+            SampleType::U8 => "uint8",
             SampleType::U16 => "uint16",
             SampleType::I16 => "int16",
             SampleType::I32 => "int32",
@@ -787,6 +803,7 @@ impl SampleType {
     fn typed(self, bits: Vec<u64>) -> DecodingResult {
         let it = bits.into_iter();
         match self {
+            SampleType::U8 => DecodingResult::U8(it.map(|v| v as u8).collect()),
             SampleType::U16 => DecodingResult::U16(it.map(|v| v as u16).collect()),
             SampleType::I16 => DecodingResult::I16(it.map(|v| v as u16 as i16).collect()),
             SampleType::I32 => DecodingResult::I32(it.map(|v| v as u32 as i32).collect()),

@@ -97,6 +97,7 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
         format: DemFormat::SrtmHgt,
         crs: "EPSG:4326 (WGS 84), geographic (degrees)".into(),
         origin,
+        pixel_size: Some([1.0 / f64::from(side - 1); 2]),
         nodata_filled: 0,
     })
 }

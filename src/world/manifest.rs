@@ -264,6 +264,12 @@ pub struct WorldSource {
     /// Nodata samples filled from the heights around them.
     #[serde(default)]
     pub nodata_filled: u64,
+    /// The land-cover map the grass was painted from, where one was given (its file name).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub land_cover: String,
+    /// The table of what grows on its classes: its product name and file (or built-in name).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub cover_table: String,
 }
 
 /// Detail amplitude of every derived level in a world whose manifest has no `[derive]` table

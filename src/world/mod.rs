@@ -18,7 +18,7 @@ mod dem_grid;
 pub mod error;
 pub mod format;
 pub mod fuzz;
-mod geotiff;
+pub(crate) mod geotiff;
 pub mod grass_density;
 mod hgt;
 pub mod manifest;

@@ -1,0 +1,315 @@
+//! Bakes with a land-cover map: its classes choose the grass where it has data, placed by the
+//! maps' georeferencing whatever their size and extent; bad maps and tables are refused by name.
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec2;
+use tiff::encoder::{TiffEncoder, colortype};
+use tiff::tags::Tag;
+use verdant::bake::{BakeOptions, bake};
+
+mod common;
+
+/// The DEM: 65 x 65 samples of 20 m, UTM zone 33N, its top-left corner at these coordinates.
+const DEM_SIZE: u32 = 65;
+const DEM_CELL: f64 = 20.0;
+const DEM_CORNER: [f64; 2] = [400_000.0, 4_101_300.0];
+/// The map: 100 x 60 samples of 10 m, its top-left corner here (east of the DEM's, and
+/// reaching past the DEM's east edge).
+const MAP_SIZE: [u32; 2] = [100, 60];
+const MAP_CELL: f64 = 10.0;
+const MAP_CORNER: [f64; 2] = [400_300.0, 4_100_900.0];
+/// GeoKeys: projected, pixel is area, EPSG `epsg`.
+fn keys(epsg: u16) -> Vec<u16> {
+    [
+        [1, 1, 0, 3],
+        [1024, 0, 1, 1],
+        [1025, 0, 1, 1],
+        [3072, 0, 1, epsg],
+    ]
+    .concat()
+}
+
+/// Writes a one-band GeoTIFF of `data` (rows from the north) with its top-left corner at
+/// `corner` and cells of `cell` metres in EPSG `epsg`.
+fn write_geotiff<C: colortype::ColorType>(
+    path: &Path,
+    size: [u32; 2],
+    cell: f64,
+    corner: [f64; 2],
+    epsg: u16,
+    data: &[C::Inner],
+) where
+    [C::Inner]: tiff::encoder::TiffValue,
+{
+    let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut enc = TiffEncoder::new(&mut file).unwrap();
+    let mut image = enc.new_image::<C>(size[0], size[1]).unwrap();
+    let d = image.encoder();
+    d.write_tag(Tag::ModelPixelScaleTag, &[cell, cell, 0.0][..])
+        .unwrap();
+    d.write_tag(
+        Tag::ModelTiepointTag,
+        &[0.0, 0.0, 0.0, corner[0], corner[1], 0.0][..],
+    )
+    .unwrap();
+    d.write_tag(Tag::GeoKeyDirectoryTag, &keys(epsg)[..])
+        .unwrap();
+    image.write_data(data).unwrap();
+}
+
+/// A gently sloping DEM (about 3 degrees: grass everywhere).
+fn write_dem(dir: &Path) -> PathBuf {
+    let n = DEM_SIZE as usize;
+    let heights: Vec<i16> = (0..n * n)
+        .map(|k| (100.0 + 0.05 * DEM_CELL * (k % n) as f64).round() as i16)
+        .collect();
+    let path = dir.join("dem.tif");
+    write_geotiff::<colortype::GrayI16>(
+        &path,
+        [DEM_SIZE; 2],
+        DEM_CELL,
+        DEM_CORNER,
+        32633,
+        &heights,
+    );
+    path
+}
+
+/// The map's class at its column `c` and row `r` (from the north): grassland, water and
+/// cropland in thirds west to east, nodata in the ten northern rows.
+fn class_at(c: u32, r: u32) -> u8 {
+    if r < 10 {
+        0
+    } else if c < 33 {
+        30
+    } else if c < 66 {
+        80
+    } else {
+        40
+    }
+}
+
+fn write_map(dir: &Path, epsg: u16, corner: [f64; 2], extra: Option<u8>) -> PathBuf {
+    let [w, h] = MAP_SIZE;
+    let mut data: Vec<u8> = (0..h)
+        .flat_map(|r| (0..w).map(move |c| class_at(c, r)))
+        .collect();
+    if let Some(code) = extra {
+        data[(30 * w + 5) as usize] = code;
+    }
+    let path = dir.join(format!("cover_{epsg}.tif"));
+    write_geotiff::<colortype::Gray8>(&path, MAP_SIZE, MAP_CELL, corner, epsg, &data);
+    path
+}
+
+fn opts(dem: &Path, out: &Path, cover: Option<(PathBuf, PathBuf)>) -> BakeOptions {
+    BakeOptions {
+        dem: dem.to_path_buf(),
+        out: out.to_path_buf(),
+        name: Some("cover".into()),
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        seed: 5,
+        land_cover: cover,
+        ..Default::default()
+    }
+}
+
+/// Every finest-level sample inside the DEM: its world position and its grass type and
+/// density.
+fn finest_samples(world: &Path) -> Vec<(DVec2, u8, u8)> {
+    let terrain = common::Terrain::load(world);
+    let p = &terrain.world.manifest.pyramid;
+    let level = p.stored_levels - 1;
+    let extent = terrain.world.manifest.extent_m;
+    let mut out = Vec::new();
+    for (id, tile) in &terrain.tiles {
+        if id.level != level {
+            continue;
+        }
+        for j in p.border..tile.size - p.border {
+            for i in p.border..tile.size - p.border {
+                let pos = p.sample_position(*id, i, j);
+                if pos.x <= extent[0] && pos.y <= extent[1] {
+                    let k = tile.index(i, j);
+                    out.push((pos, tile.grass_type[k], tile.density[k]));
+                }
+            }
+        }
+    }
+    out.sort_by(|a, b| (a.0.x, a.0.y).partial_cmp(&(b.0.x, b.0.y)).unwrap());
+    out
+}
+
+#[test]
+fn a_land_cover_map_paints_its_classes_where_it_has_data_and_the_rule_elsewhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path());
+    let map = write_map(dir.path(), 32633, MAP_CORNER, None);
+    let with = dir.path().join("with");
+    let without = dir.path().join("without");
+    bake(
+        &opts(
+            &dem,
+            &with,
+            Some((map.clone(), PathBuf::from("esa-worldcover"))),
+        ),
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    bake(&opts(&dem, &without, None), &mut |_, _, _| {}).unwrap();
+    let a = finest_samples(&with);
+    let b = finest_samples(&without);
+    assert_eq!(a.len(), b.len());
+    // The DEM's south-west sample, in the coordinate system.
+    let sw = DVec2::new(
+        DEM_CORNER[0] + 0.5 * DEM_CELL,
+        DEM_CORNER[1] - (f64::from(DEM_SIZE) - 0.5) * DEM_CELL,
+    );
+    let (mut by_class, mut by_rule) = ([0; 3], 0);
+    for ((pos, t, d), (_, t0, d0)) in a.iter().zip(&b) {
+        let model = sw + *pos;
+        let c = (model.x - (MAP_CORNER[0] + 0.5 * MAP_CELL)) / MAP_CELL;
+        let r = ((MAP_CORNER[1] - 0.5 * MAP_CELL) - model.y) / MAP_CELL;
+        let inside = c > -0.5
+            && r > -0.5
+            && c < f64::from(MAP_SIZE[0]) - 0.5
+            && r < f64::from(MAP_SIZE[1]) - 0.5;
+        let near_edge = |x: f64, edges: &[f64]| edges.iter().any(|e| (x - e).abs() < 1.5);
+        if !inside || (r.round() as u32) < 10 {
+            // Outside the map or where it says nodata: the procedural rule, as without it
+            // (away from the map's edges, where the nearest sample is ambiguous).
+            if !near_edge(r, &[-0.5, 9.5]) && !near_edge(c, &[-0.5, 99.5]) {
+                assert_eq!((t, d), (t0, d0), "at {pos}");
+                by_rule += 1;
+            }
+            continue;
+        }
+        if near_edge(c, &[32.5, 65.5]) || near_edge(r, &[9.5]) {
+            continue;
+        }
+        let (want, k) = match class_at(c.round() as u32, r.round() as u32) {
+            30 => ((1, 230), 0), // grassland: meadow at 0.9
+            80 => ((0, 0), 1),   // water: nothing grows
+            40 => ((2, 204), 2), // cropland: tall grass at 0.8
+            other => panic!("class {other}"),
+        };
+        assert_eq!((*t, *d), want, "at {pos} (map column {c:.1}, row {r:.1})");
+        by_class[k] += 1;
+    }
+    assert!(by_class.iter().all(|&n| n > 30), "{by_class:?}");
+    assert!(by_rule > 500, "{by_rule} samples painted by the rule");
+    // The manifest says where the grass came from.
+    let manifest = std::fs::read_to_string(with.join("world.toml")).unwrap();
+    assert!(
+        manifest.contains("land_cover = \"cover_32633.tif\""),
+        "{manifest}"
+    );
+    assert!(
+        manifest.contains("ESA WorldCover (esa-worldcover)"),
+        "{manifest}"
+    );
+}
+
+#[test]
+fn a_png_map_spans_the_dem() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path());
+    // West half grassland, east half water.
+    let img = image::GrayImage::from_fn(32, 16, |x, _| image::Luma([if x < 16 { 30 } else { 80 }]));
+    let png = dir.path().join("hand-drawn.png");
+    img.save(&png).unwrap();
+    let out = dir.path().join("w");
+    bake(
+        &opts(&dem, &out, Some((png, PathBuf::from("esa-worldcover")))),
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    let extent = (f64::from(DEM_SIZE) - 1.0) * DEM_CELL;
+    let (mut west, mut east) = (0, 0);
+    for (pos, t, d) in finest_samples(&out) {
+        if pos.x < 0.45 * extent {
+            assert_eq!((t, d), (1, 230), "at {pos}");
+            west += 1;
+        } else if pos.x > 0.55 * extent {
+            assert_eq!((t, d), (0, 0), "at {pos}");
+            east += 1;
+        }
+    }
+    assert!(west > 500 && east > 500, "{west} {east}");
+}
+
+#[test]
+fn bad_maps_and_tables_are_refused_naming_the_file_and_nothing_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path());
+    let esa = PathBuf::from("esa-worldcover");
+    let lawn = dir.path().join("lawn.toml");
+    std::fs::write(
+        &lawn,
+        "name = \"lawns\"\n[[class]]\ncode = 30\nname = \"lawn\"\ngrass = \"lawn\"\ndensity = 1.0\n",
+    )
+    .unwrap();
+    let cases = [
+        (
+            write_map(dir.path(), 32634, MAP_CORNER, None),
+            esa.clone(),
+            vec![
+                "cover_32634.tif",
+                "coordinate system",
+                "EPSG:32634",
+                "EPSG:32633",
+            ],
+        ),
+        (
+            {
+                let far = dir.path().join("far");
+                std::fs::create_dir_all(&far).unwrap();
+                write_map(&far, 32633, [500_000.0, 4_000_000.0], None)
+            },
+            esa.clone(),
+            vec!["cover_32633.tif", "does not overlap"],
+        ),
+        (
+            {
+                let odd = dir.path().join("odd");
+                std::fs::create_dir_all(&odd).unwrap();
+                write_map(&odd, 32633, MAP_CORNER, Some(77))
+            },
+            esa.clone(),
+            vec!["cover_32633.tif", "77 (1 samples)", "does not list"],
+        ),
+        (
+            write_map(dir.path(), 32633, MAP_CORNER, None),
+            lawn.clone(),
+            vec![
+                "lawn.toml",
+                "\"lawn\"",
+                "not one of the world's grass types",
+            ],
+        ),
+        (
+            dir.path().join("missing.tif"),
+            esa.clone(),
+            vec!["missing.tif"],
+        ),
+        (
+            dem.clone(),
+            PathBuf::from("no-such-table"),
+            vec!["no-such-table", "esa-worldcover, nlcd"],
+        ),
+    ];
+    for (k, (map, table, wants)) in cases.into_iter().enumerate() {
+        let out = dir.path().join(format!("out{k}"));
+        let e = match bake(&opts(&dem, &out, Some((map, table))), &mut |_, _, _| {}) {
+            Ok(_) => panic!("case {k} baked"),
+            Err(e) => e.to_string(),
+        };
+        for w in wants {
+            assert!(e.contains(w), "case {k}: {e:?} lacks {w:?}");
+        }
+        assert!(!out.exists(), "case {k}: nothing written");
+    }
+}
