@@ -53,8 +53,9 @@
 //!   [`plants::bend_cpu`], `shaders/plants_draw.wgsl`); the instance pool that records them
 //!   ([`plants::renderer`]).
 //! - [`bake`]: the baker that turns a DEM into a world (GPU-free; it fits the derived levels'
-//!   detail with [`mod@stream::calibrate`]), one module per job: resampling, painting, tiles,
-//!   authoring camera paths and wind scenes, publishing.
+//!   detail with [`mod@stream::calibrate`]), one module per job: resampling, painting (from the
+//!   procedural rule or a land-cover map, [`bake::cover`]), tiles, authoring camera paths and
+//!   wind scenes, publishing.
 //! - [`aa`]: anti-aliasing methods ([`aa::AntiAliasing`]: off, taa, msaa): temporal
 //!   ([`aa::taa`], mirror [`aa::taa_cpu`], `shaders/aa_taa.wgsl`) and the grass multisampled
 //!   with alpha to coverage ([`aa::msaa`], mirror [`aa::msaa_cpu`], `shaders/aa_msaa.wgsl`).
