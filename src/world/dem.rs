@@ -2,8 +2,8 @@
 //! file's content (not its name):
 //!
 //! - **GeoTIFF** (`geotiff.rs`): one band of uint8, int16, uint16, int32, float32 or float64,
-//!   strips or tiles, uncompressed, Deflate, LZW or PackBits, with or without a predictor; the
-//!   cell size from the GeoTIFF tags, nodata from the `GDAL_NODATA` tag.
+//!   strips or tiles, uncompressed, Deflate, LZW, PackBits or Zstandard, with or without a
+//!   predictor; the cell size from the GeoTIFF tags, nodata from the `GDAL_NODATA` tag.
 //! - **SRTM `.hgt`** (`hgt.rs`): 3601x3601 (1 arc-second) or 1201x1201 (3 arc-second)
 //!   big-endian int16 samples, origin from the file name, voids (-32768) as nodata.
 //! - **PNG + sidecar**: a 16-bit grayscale PNG (first row = north) and a JSON file of the same

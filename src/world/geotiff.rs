@@ -2,6 +2,7 @@
 //! compression, Deflate, LZW or PackBits; horizontal and floating-point predictors); this module
 //! reads the GeoTIFF tags on top of it.
 //!
+//! - Uncompressed, Deflate, LZW, PackBits or Zstandard chunks.
 //! - One band of uint8, int16, uint16, int32, float32 or float64 (uint8 for class rasters such
 //!   as land cover, read through the same path).
 //! - Cell size from `ModelPixelScale` (with `ModelTiepoint` for the origin) or from an unrotated
@@ -12,7 +13,8 @@
 //!   are converted to metres.
 //! - Nodata from the `GDAL_NODATA` tag; NaN and infinite heights count as nodata too.
 //!
-//! LZW chunks are decompressed here, whole, rather than by the `tiff` crate: its streaming LZW
+//! Zstandard chunks (which the `tiff` crate reads only through the C library) are decompressed
+//! here by `ruzstd`, whole, as LZW chunks are, rather than by the `tiff` crate: its streaming LZW
 //! reader (weezl 0.1 with `yield_on_full_buffer`) can stop short of a chunk's end when one code
 //! decodes to more bytes than a row holds, which happens in the flat, repetitive areas and the
 //! padded edge tiles that real DEMs have.
@@ -113,12 +115,12 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
         }
     };
     let compression = tag_u16(Tag::Compression)?.unwrap_or(1);
-    if !matches!(compression, 1 | 5 | 8 | 32946 | 32773) {
+    if !matches!(compression, 1 | 5 | 8 | 32946 | 32773 | ZSTD) {
         return Err(unsupported(
             path,
             format!(
-                "compression {} ({compression}): the baker reads uncompressed, Deflate, LZW and \
-                 PackBits TIFFs (gdal_translate -co COMPRESS=DEFLATE converts one)",
+                "compression {} ({compression}): the baker reads uncompressed, Deflate, LZW, \
+                 PackBits and Zstandard TIFFs (gdal_translate -co COMPRESS=DEFLATE converts one)",
                 compression_name(compression)
             ),
         ));
@@ -139,7 +141,7 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
     let chunks = check_chunks_inside(path, &mut decoder, file_len)?;
 
     let geo = GeoTags::read(path, &mut decoder)?;
-    let values = if compression == 5 {
+    let values = if compression == 5 || compression == ZSTD {
         let chunk_size = match decoder.get_chunk_type() {
             ChunkType::Tile => {
                 let mut tag_u32 = |tag: Tag| -> Result<u32, WorldError> {
@@ -175,7 +177,12 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
             big_endian: decoder.byte_order() == ByteOrder::BigEndian,
             predictor,
         };
-        let bits = decode_lzw(path, &layout, &chunks)?;
+        let codec = if compression == ZSTD {
+            Codec::Zstd
+        } else {
+            Codec::Lzw
+        };
+        let bits = decode_chunks(path, &layout, &chunks, codec)?;
         sample.typed(bits)
     } else {
         decoder.read_image().map_err(|e| tiff_error(path, e))?
@@ -695,10 +702,48 @@ struct ChunkLayout {
 
 /// Decompresses every LZW chunk whole and undoes its predictor; returns each sample's bit
 /// pattern (in the low `sample_bytes` bytes), row 0 first.
-fn decode_lzw(
+/// The TIFF compression code of Zstandard.
+const ZSTD: u16 = 50000;
+
+/// The codecs whose chunks are decompressed here, whole.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Codec {
+    Lzw,
+    Zstd,
+}
+
+impl Codec {
+    fn name(self) -> &'static str {
+        match self {
+            Codec::Lzw => "LZW",
+            Codec::Zstd => "Zstandard",
+        }
+    }
+
+    /// The chunk's bytes, at most `limit` of them (a chunk never holds more; a stream that
+    /// would is cut there and found short or long by the caller).
+    fn decode(self, packed: &[u8], limit: usize) -> Result<Vec<u8>, String> {
+        match self {
+            Codec::Lzw => weezl::decode::Decoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
+                .decode(packed)
+                .map_err(|e| format!("{e:?}")),
+            Codec::Zstd => {
+                let decoder =
+                    ruzstd::decoding::StreamingDecoder::new(packed).map_err(|e| e.to_string())?;
+                let mut out = Vec::new();
+                std::io::Read::read_to_end(&mut decoder.take(limit as u64 + 1), &mut out)
+                    .map_err(|e| e.to_string())?;
+                Ok(out)
+            }
+        }
+    }
+}
+
+fn decode_chunks(
     path: &Path,
     layout: &ChunkLayout,
     chunks: &[(u64, u64)],
+    codec: Codec,
 ) -> Result<Vec<u64>, WorldError> {
     let [cw, ch] = layout.chunk_size.map(|v| v as usize);
     let (w, h) = (layout.width as usize, layout.height as usize);
@@ -725,15 +770,16 @@ fn decode_lzw(
         file.seek(SeekFrom::Start(offset))
             .and_then(|_| file.read_exact(&mut packed))
             .map_err(|e| WorldError::io(path, e))?;
-        let data = weezl::decode::Decoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
-            .decode(&packed)
-            .map_err(|e| corrupt(path, format!("LZW chunk {index}: {e:?}")))?;
         let rows = ch.min(h - y0);
+        let data = codec
+            .decode(&packed, cw * ch * b)
+            .map_err(|e| corrupt(path, format!("{} chunk {index}: {e}", codec.name())))?;
         if data.len() < rows * cw * b {
             return Err(corrupt(
                 path,
                 format!(
-                    "LZW chunk {index} holds {} bytes, {} expected",
+                    "{} chunk {index} holds {} bytes, {} expected",
+                    codec.name(),
                     data.len(),
                     rows * cw * b
                 ),
