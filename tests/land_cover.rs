@@ -313,3 +313,54 @@ fn bad_maps_and_tables_are_refused_naming_the_file_and_nothing_is_written() {
         assert!(!out.exists(), "case {k}: nothing written");
     }
 }
+
+#[test]
+fn a_density_map_scales_the_cover_and_a_mask_clears_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path());
+    let save = |name: &str, f: &dyn Fn(u32, u32) -> u8| {
+        let path = dir.path().join(name);
+        image::GrayImage::from_fn(64, 64, |x, y| image::Luma([f(x, y)]))
+            .save(&path)
+            .unwrap();
+        path
+    };
+    // Grassland everywhere; full density in the west, half in the east; a road across the
+    // middle (rows 30 to 33 from the north).
+    let cover = save("cover.png", &|_, _| 30);
+    let density = save("density.png", &|x, _| if x < 32 { 255 } else { 128 });
+    let mask = save("road.png", &|_, y| u8::from((30..34).contains(&y)));
+    let out = dir.path().join("w");
+    let mut o = opts(&dem, &out, Some((cover, PathBuf::from("esa-worldcover"))));
+    o.density_map = Some(density);
+    o.mask = Some(mask);
+    bake(&o, &mut |_, _, _| {}).unwrap();
+    let extent = (f64::from(DEM_SIZE) - 1.0) * DEM_CELL;
+    let half = (230.0f64 * 128.0 / 255.0).round() as u8;
+    let mut seen = [0; 3];
+    for (pos, t, d) in finest_samples(&out) {
+        // The maps' column and row from the north.
+        let (c, r) = (pos.x / extent * 63.0, 63.0 - pos.y / extent * 63.0);
+        if (c - 31.5).abs() < 1.5 || (r - 29.5).abs() < 1.5 || (r - 33.5).abs() < 1.5 {
+            continue;
+        }
+        let want = if (30.0..34.0).contains(&r.round()) {
+            seen[2] += 1;
+            (0, 0)
+        } else if c < 31.5 {
+            seen[0] += 1;
+            (1, 230)
+        } else {
+            seen[1] += 1;
+            (1, half)
+        };
+        assert_eq!((t, d), want, "at {pos} (column {c:.1}, row {r:.1})");
+    }
+    assert!(seen.iter().all(|&n| n > 20), "{seen:?}");
+    let manifest = std::fs::read_to_string(out.join("world.toml")).unwrap();
+    assert!(
+        manifest.contains("density_map = \"density.png\""),
+        "{manifest}"
+    );
+    assert!(manifest.contains("mask = \"road.png\""), "{manifest}");
+}

@@ -16,6 +16,8 @@
 //! - Where the map does not reach, or says nodata, the procedural rule paints as before. The
 //!   slope rule holds everywhere: no grass on ground steeper than
 //!   [`super::paint::MAX_GRASS_SLOPE_DEG`], whatever the class.
+//! - **Value maps** ([`ValueMap`]), placed the same way: a density map (0 to 1) scales the
+//!   painted cover, a mask (not 0) clears it.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -186,14 +188,9 @@ fn map_error(path: &Path, problem: impl ToString) -> WorldError {
 
 /// A land-cover map placed on the DEM, with its table resolved for the world's grass types.
 pub struct CoverMap {
-    width: usize,
-    height: usize,
+    placed: Placed,
     /// Class codes, row 0 north; `None` where the map says nodata.
     codes: Vec<Option<u32>>,
-    /// World position (metres from the DEM's south-west sample) to map column and row from the
-    /// south: `column = a.x + b.x * x`, `row = a.y + b.y * y`.
-    a: DVec2,
-    b: DVec2,
     /// Per code: grass type and density byte.
     painted: BTreeMap<u32, (u8, u8)>,
     /// The file, for the manifest's record.
@@ -216,9 +213,75 @@ impl CoverMap {
     ) -> Result<CoverMap, WorldError> {
         let painted = table.resolve(table_path, grass_types)?;
         let raster = read_map(path)?;
+        let placed = Placed::on(&raster, dem, path)?;
+        let nodata: std::collections::BTreeSet<u32> = table.nodata.iter().copied().collect();
+        let codes: Vec<Option<u32>> = raster
+            .values
+            .iter()
+            .map(|v| {
+                v.filter(|v| *v >= 0.0 && v.fract() == 0.0 && *v <= f64::from(u32::MAX))
+                    .map(|v| v as u32)
+                    .filter(|c| !nodata.contains(c))
+            })
+            .collect();
+        let mut unknown: BTreeMap<u32, usize> = BTreeMap::new();
+        for c in codes.iter().flatten() {
+            if !painted.contains_key(c) {
+                *unknown.entry(*c).or_default() += 1;
+            }
+        }
+        if !unknown.is_empty() {
+            let listed: Vec<String> = unknown
+                .iter()
+                .take(NAMED_UNKNOWN)
+                .map(|(c, n)| format!("{c} ({n} samples)"))
+                .collect();
+            return Err(map_error(
+                path,
+                format!(
+                    "classes the table {} does not list: {}{}",
+                    table_path.display(),
+                    listed.join(", "),
+                    if unknown.len() > NAMED_UNKNOWN {
+                        format!(" and {} more", unknown.len() - NAMED_UNKNOWN)
+                    } else {
+                        String::new()
+                    }
+                ),
+            ));
+        }
+        Ok(CoverMap {
+            placed,
+            codes,
+            painted,
+            file: path.to_path_buf(),
+            table_name: table.name.clone(),
+        })
+    }
+
+    /// The grass type and density byte the map paints at world position `p` (metres from the
+    /// DEM's south-west sample), or `None` where it does not reach or says nodata.
+    pub fn paint_at(&self, p: DVec2) -> Option<(u8, u8)> {
+        let code = self.codes[self.placed.index_at(p)?]?;
+        self.painted.get(&code).copied()
+    }
+}
+
+/// A raster placed on the DEM: its size, and world position (metres from the DEM's south-west
+/// sample) to its column and row from the south, `column = a.x + b.x * x`, `row = a.y + b.y * y`.
+struct Placed {
+    width: usize,
+    height: usize,
+    a: DVec2,
+    b: DVec2,
+}
+
+impl Placed {
+    /// Places `raster` (read from `path`) on `dem` by their georeferencing, or over the whole
+    /// DEM where the raster has none; refuses what cannot be placed or does not overlap.
+    fn on(raster: &Raster, dem: &Dem, path: &Path) -> Result<Placed, WorldError> {
         let (w, h) = (raster.width as usize, raster.height as usize);
         let [ex, ey] = dem.extent_m();
-        // Column and row (from the south) of the map at the DEM's posts.
         let (a, b) = match (
             raster.origin.zip(raster.pixel_size),
             dem.origin.zip(dem.pixel_size),
@@ -265,61 +328,89 @@ impl CoverMap {
                 ),
             ));
         }
-        let nodata: std::collections::BTreeSet<u32> = table.nodata.iter().copied().collect();
-        let codes: Vec<Option<u32>> = raster
-            .values
-            .iter()
-            .map(|v| v.filter(|c| !nodata.contains(c)))
-            .collect();
-        let mut unknown: BTreeMap<u32, usize> = BTreeMap::new();
-        for c in codes.iter().flatten() {
-            if !painted.contains_key(c) {
-                *unknown.entry(*c).or_default() += 1;
-            }
-        }
-        if !unknown.is_empty() {
-            let listed: Vec<String> = unknown
-                .iter()
-                .take(NAMED_UNKNOWN)
-                .map(|(c, n)| format!("{c} ({n} samples)"))
-                .collect();
-            return Err(map_error(
-                path,
-                format!(
-                    "classes the table {} does not list: {}{}",
-                    table_path.display(),
-                    listed.join(", "),
-                    if unknown.len() > NAMED_UNKNOWN {
-                        format!(" and {} more", unknown.len() - NAMED_UNKNOWN)
-                    } else {
-                        String::new()
-                    }
-                ),
-            ));
-        }
-        Ok(CoverMap {
+        Ok(Placed {
             width: w,
             height: h,
-            codes,
             a,
             b,
-            painted,
-            file: path.to_path_buf(),
-            table_name: table.name.clone(),
         })
     }
 
-    /// The grass type and density byte the map paints at world position `p` (metres from the
-    /// DEM's south-west sample), or `None` where it does not reach or says nodata.
-    pub fn paint_at(&self, p: DVec2) -> Option<(u8, u8)> {
+    /// The index (row 0 north) of the sample nearest world position `p`, `None` beyond the map.
+    fn index_at(&self, p: DVec2) -> Option<usize> {
         let q = self.a + self.b * p;
         let (c, r) = (q.x.round(), q.y.round());
         if c < 0.0 || r < 0.0 || c >= self.width as f64 || r >= self.height as f64 {
             return None;
         }
-        let row_from_north = self.height - 1 - r as usize;
-        let code = self.codes[row_from_north * self.width + c as usize]?;
-        self.painted.get(&code).copied()
+        Some((self.height - 1 - r as usize) * self.width + c as usize)
+    }
+}
+
+/// A map of one value a sample, placed on the DEM: a density map (0 to 1: the grass map's cover
+/// is multiplied by it) or a mask (nothing grows where it is not 0).
+pub struct ValueMap {
+    placed: Placed,
+    /// Values row 0 north, scaled to 0..=1 for a density map; `None` where the file says
+    /// nodata.
+    values: Vec<Option<f64>>,
+    /// The file.
+    pub file: PathBuf,
+}
+
+impl ValueMap {
+    /// A density map: an 8- or 16-bit grayscale PNG (0 to its largest value), or a GeoTIFF of
+    /// values from 0 to 1 (a float band), 0 to 255 or 0 to 65535 (an integer band: which, by its
+    /// largest value). Refuses negative values and what [`CoverMap::load`] refuses.
+    pub fn density(path: &Path, dem: &Dem) -> Result<ValueMap, WorldError> {
+        let raster = read_map(path)?;
+        let placed = Placed::on(&raster, dem, path)?;
+        let max = raster
+            .values
+            .iter()
+            .flatten()
+            .fold(0.0f64, |m, &v| m.max(v));
+        if raster.values.iter().flatten().any(|&v| v < 0.0) {
+            return Err(map_error(path, "a density map holds values below 0"));
+        }
+        let full = if raster.full > 1.0 || max <= 1.0 {
+            raster.full
+        } else if max <= 255.0 {
+            255.0
+        } else {
+            65535.0
+        };
+        let values = raster
+            .values
+            .iter()
+            .map(|v| v.map(|v| (v / full).min(1.0)))
+            .collect();
+        Ok(ValueMap {
+            placed,
+            values,
+            file: path.to_path_buf(),
+        })
+    }
+
+    /// A mask: nothing grows where its value is not 0 (nodata masks nothing).
+    pub fn mask(path: &Path, dem: &Dem) -> Result<ValueMap, WorldError> {
+        let raster = read_map(path)?;
+        let placed = Placed::on(&raster, dem, path)?;
+        let values = raster
+            .values
+            .iter()
+            .map(|v| v.map(|v| if v != 0.0 { 1.0 } else { 0.0 }))
+            .collect();
+        Ok(ValueMap {
+            placed,
+            values,
+            file: path.to_path_buf(),
+        })
+    }
+
+    /// The value at world position `p`, `None` beyond the map or where it says nodata.
+    pub fn at(&self, p: DVec2) -> Option<f64> {
+        self.values[self.placed.index_at(p)?]
     }
 }
 
@@ -337,12 +428,14 @@ fn or_unstated(crs: &str) -> &str {
     if crs.is_empty() { "not stated" } else { crs }
 }
 
-/// A class raster as read: codes row 0 north (`None`: the file's nodata), and its
+/// A raster as read: values row 0 north (`None`: the file's nodata), the value that means
+/// "full" in its format (255 in an 8-bit PNG, 65535 in a 16-bit one, 1 in a GeoTIFF), and its
 /// georeferencing where it has any.
 struct Raster {
     width: u32,
     height: u32,
-    values: Vec<Option<u32>>,
+    values: Vec<Option<f64>>,
+    full: f64,
     crs: String,
     origin: Option<[f64; 2]>,
     pixel_size: Option<[f64; 2]>,
@@ -372,12 +465,13 @@ fn read_map(path: &Path) -> Result<Raster, WorldError> {
         let values = g
             .heights
             .iter()
-            .map(|&v| (v.is_finite() && v >= 0.0).then_some(v.round() as u32))
+            .map(|&v| v.is_finite().then_some(f64::from(v)))
             .collect();
         return Ok(Raster {
             width: g.width,
             height: g.height,
             values,
+            full: 1.0,
             crs: g.crs,
             origin: g.origin,
             pixel_size: g.pixel_size,
@@ -385,8 +479,7 @@ fn read_map(path: &Path) -> Result<Raster, WorldError> {
     }
     Err(map_error(
         path,
-        "not a PNG or a TIFF (a land-cover map is a GeoTIFF of one uint8 or uint16 band, or a \
-         grayscale PNG)",
+        "not a PNG or a TIFF (a map is a GeoTIFF of one band, or a grayscale PNG)",
     ))
 }
 
@@ -412,24 +505,28 @@ fn read_png(path: &Path) -> Result<Raster, WorldError> {
             format!("{width}x{height} samples: at least 2x2 and at most {MAX_MAP_SAMPLES}"),
         ));
     }
-    let values = match img {
-        image::DynamicImage::ImageLuma8(g) => g.into_raw().into_iter().map(u32::from).collect(),
-        image::DynamicImage::ImageLuma16(g) => g.into_raw().into_iter().map(u32::from).collect(),
+    let (values, full): (Vec<u32>, f64) = match img {
+        image::DynamicImage::ImageLuma8(g) => {
+            (g.into_raw().into_iter().map(u32::from).collect(), 255.0)
+        }
+        image::DynamicImage::ImageLuma16(g) => {
+            (g.into_raw().into_iter().map(u32::from).collect(), 65535.0)
+        }
         other => {
             return Err(map_error(
                 path,
                 format!(
-                    "a {:?} PNG: a class map is grayscale, 8 or 16 bits, one class code a pixel",
+                    "a {:?} PNG: a map is grayscale, 8 or 16 bits, one value a pixel",
                     other.color()
                 ),
             ));
         }
     };
-    let values: Vec<u32> = values;
     Ok(Raster {
         width,
         height,
-        values: values.into_iter().map(Some).collect(),
+        values: values.into_iter().map(|v| Some(f64::from(v))).collect(),
+        full,
         crs: String::new(),
         origin: None,
         pixel_size: None,

@@ -102,6 +102,10 @@ pub struct BakeOptions {
     /// A land-cover map and the table of what grows on its classes (a file, or a built-in
     /// table's name): see [`cover`]. `None`: the procedural rule paints everywhere.
     pub land_cover: Option<(PathBuf, PathBuf)>,
+    /// A density map (0 to 1) that scales the painted grass cover: see [`cover::ValueMap`].
+    pub density_map: Option<PathBuf>,
+    /// A mask: nothing grows where it is not 0 (roads, paths, yards).
+    pub mask: Option<PathBuf>,
     /// Stops the bake when set (checked between rows and between tiles): the bake then fails
     /// with [`WorldError::Cancelled`], removes its staging folder and leaves `out` as it was.
     pub cancel: Option<CancelFlag>,
@@ -119,6 +123,8 @@ impl Default for BakeOptions {
             seed: 1,
             replace: false,
             land_cover: None,
+            density_map: None,
+            mask: None,
             cancel: None,
         }
     }
@@ -247,6 +253,12 @@ pub fn bake(
                 .map(|(map, _)| file_name(map))
                 .unwrap_or_default(),
             cover_table: String::new(),
+            density_map: opts
+                .density_map
+                .as_deref()
+                .map(file_name)
+                .unwrap_or_default(),
+            mask: opts.mask.as_deref().map(file_name).unwrap_or_default(),
         }),
         derive: None,
         grass_peak: None,
@@ -265,6 +277,14 @@ pub fn bake(
             Some(map)
         }
     };
+    let density = match &opts.density_map {
+        Some(p) => Some(cover::ValueMap::density(p, &dem)?),
+        None => None,
+    };
+    let mask = match &opts.mask {
+        Some(p) => Some(cover::ValueMap::mask(p, &dem)?),
+        None => None,
+    };
     cancelled()?;
 
     let grid = Grid::resample(&dem, &manifest.pyramid, &opts.dem, &cancelled, progress)?;
@@ -273,13 +293,12 @@ pub fn bake(
     manifest.derive = Some(grid.calibrate(extent, manifest.pyramid.derived_levels));
     cancelled()?;
 
-    let mut painted = grid.paint(
-        height_range,
-        opts.seed,
-        cover.as_ref(),
-        &cancelled,
-        progress,
-    )?;
+    let maps = paint::PaintMaps {
+        cover: cover.as_ref(),
+        density: density.as_ref(),
+        mask: mask.as_ref(),
+    };
+    let mut painted = grid.paint(height_range, opts.seed, &maps, &cancelled, progress)?;
     painted.cancel = opts.cancel.clone();
     check_painted_types(&painted, &manifest, &manifest_path)?;
     progress(BakeStage::Paths, 0, 2);

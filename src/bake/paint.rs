@@ -152,6 +152,17 @@ pub fn default_grass_types() -> Vec<GrassType> {
         },
     ]
 }
+/// The maps a bake paints from besides the procedural rule (see [`super::cover`]).
+#[derive(Default)]
+pub(super) struct PaintMaps<'a> {
+    /// Land cover: its classes choose grass type and density.
+    pub(super) cover: Option<&'a super::cover::CoverMap>,
+    /// Density, 0 to 1: scales the painted cover.
+    pub(super) density: Option<&'a super::cover::ValueMap>,
+    /// Mask: nothing grows where it is not 0.
+    pub(super) mask: Option<&'a super::cover::ValueMap>,
+}
+
 /// The finest grid with grass painted on it.
 pub(super) struct Painted {
     pub(super) grid: Grid,
@@ -177,13 +188,14 @@ impl Painted {
 }
 
 impl Grid {
-    /// Paints every sample: from `cover` where it has a class there (the slope rule still
-    /// holds), by the procedural rule elsewhere.
+    /// Paints every sample: from the land-cover map where it has a class there (the slope rule
+    /// still holds), by the procedural rule elsewhere; then the density map scales the cover and
+    /// the mask clears it.
     pub(super) fn paint(
         self,
         height_range: [f32; 2],
         seed: u64,
-        cover: Option<&super::cover::CoverMap>,
+        maps: &PaintMaps<'_>,
         cancelled: &dyn Fn() -> Result<(), WorldError>,
         progress: &mut dyn FnMut(BakeStage, u64, u64),
     ) -> Result<Painted, WorldError> {
@@ -195,11 +207,18 @@ impl Grid {
             for a in 0..self.width {
                 let altitude = (f64::from(self.at(a, b) - height_range[0]) / span).clamp(0.0, 1.0);
                 let (slope, p) = (self.slope_deg(a, b), self.position(a, b));
-                let (t, d) = match cover.and_then(|c| c.paint_at(p)) {
+                let (t, d) = match maps.cover.and_then(|c| c.paint_at(p)) {
                     Some(_) if slope > MAX_GRASS_SLOPE_DEG => (0, 0),
                     Some(painted) => painted,
                     None => paint_sample(slope, altitude, p, seed),
                 };
+                let masked = maps.mask.and_then(|m| m.at(p)).is_some_and(|v| v != 0.0);
+                let d = match maps.density.and_then(|m| m.at(p)) {
+                    _ if masked => 0,
+                    Some(v) => (f64::from(d) * v).round() as u8,
+                    None => d,
+                };
+                let t = if d == 0 { 0 } else { t };
                 grass_type[b * self.width + a] = t;
                 density[b * self.width + a] = d;
             }

@@ -52,6 +52,15 @@ pub(crate) struct BakeArgs {
     /// (esa-worldcover, nlcd).
     #[arg(long, requires = "land_cover")]
     pub(crate) cover_table: Option<PathBuf>,
+    /// A density map that scales the grass cover: a grayscale PNG spanning the DEM (0 to its
+    /// largest value), or a GeoTIFF in the DEM's coordinate system (0..1 floats, or 0..255 or
+    /// 0..65535 integers).
+    #[arg(long)]
+    pub(crate) density_map: Option<PathBuf>,
+    /// A mask: nothing grows where it is not 0 (a PNG spanning the DEM, or a GeoTIFF in its
+    /// coordinate system).
+    #[arg(long)]
+    pub(crate) mask: Option<PathBuf>,
 }
 
 pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
@@ -67,6 +76,8 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         replace,
         land_cover,
         cover_table,
+        density_map,
+        mask,
     } = args;
     let opts = BakeOptions {
         dem,
@@ -79,6 +90,8 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         seed,
         replace,
         land_cover: land_cover.zip(cover_table),
+        density_map,
+        mask,
         cancel: Some(
             verdant::bake::CancelFlag::on_termination_signals()
                 .context("installing the SIGINT and SIGTERM handlers")?,

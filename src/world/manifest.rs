@@ -270,6 +270,12 @@ pub struct WorldSource {
     /// The table of what grows on its classes: its product name and file (or built-in name).
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub cover_table: String,
+    /// The density map that scaled the grass cover, where one was given (its file name).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub density_map: String,
+    /// The mask where nothing grows, where one was given (its file name).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub mask: String,
 }
 
 /// Detail amplitude of every derived level in a world whose manifest has no `[derive]` table
