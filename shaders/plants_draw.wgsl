@@ -244,26 +244,38 @@ fn fog_at(rel_pos: vec3<f32>) -> f32 {
     return 1.0 - exp(-3.0 * x * x);
 }
 
+// The texture at `uv` of `layer` for a pixel at `pixel` of a plant cross-faded by `fade`;
+// the pixel is discarded where the cross-fade or (without coverage) the alpha test leaves it out.
+fn cut_out(uv: vec2<f32>, layer: u32, fade: f32, pixel: vec2<f32>) -> vec4<f32> {
+    if !keeps_pixel(fade, pixel) {
+        discard;
+    }
+    let tex = textureSample(plant_textures, plant_sampler, uv, layer);
+    if !COVERAGE && tex.a < 0.5 {
+        discard;
+    }
+    return tex;
+}
+
+// The pixel's colour: `lit` with the fog's share `fog`, and `alpha` as coverage when
+// multisampled.
+fn finish(lit: vec3<f32>, fog: f32, alpha: f32) -> vec4<f32> {
+    var color = output_color(mix(lit, frame.horizon_color.rgb, fog));
+    if COVERAGE {
+        color.a = alpha;
+    }
+    return color;
+}
+
 @fragment
 fn fs_plant(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
-    if !keeps_pixel(in.misc.y, in.clip.xy) {
-        discard;
-    }
-    let tex = textureSample(plant_textures, plant_sampler, in.uv, in.layer);
-    var alpha = tex.a;
-    if !COVERAGE && alpha < 0.5 {
-        discard;
-    }
+    let tex = cut_out(in.uv, in.layer, in.misc.y, in.clip.xy);
     var n = normalize(in.normal);
     if !front {
         n = -n;
     }
     let lit = shade(in.albedo.rgb * tex.rgb, in.albedo.a, n, in.misc.x, in.rel_pos);
-    var color = output_color(mix(lit, frame.horizon_color.rgb, fog_at(in.rel_pos)));
-    if COVERAGE {
-        color.a = alpha;
-    }
-    return color;
+    return finish(lit, fog_at(in.rel_pos), tex.a);
 }
 
 // The reduced meshes and the cards, a few pixels each: lit per vertex (two-sided by the side
@@ -296,19 +308,8 @@ fn vs_plant_far(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32
 
 @fragment
 fn fs_plant_far(in: FarOut) -> @location(0) vec4<f32> {
-    if !keeps_pixel(in.misc.x, in.clip.xy) {
-        discard;
-    }
-    let tex = textureSample(plant_textures, plant_sampler, in.uv, in.layer);
-    var alpha = tex.a;
-    if !COVERAGE && alpha < 0.5 {
-        discard;
-    }
-    var color = output_color(mix(in.color * tex.rgb, frame.horizon_color.rgb, in.misc.y));
-    if COVERAGE {
-        color.a = alpha;
-    }
-    return color;
+    let tex = cut_out(in.uv, in.layer, in.misc.x, in.clip.xy);
+    return finish(in.color * tex.rgb, in.misc.y, tex.a);
 }
 
 // The bending of test vertices, for the comparison with the CPU mirror: probe i bends vertex i

@@ -213,20 +213,26 @@ fn a_land_cover_map_paints_its_classes_where_it_has_data_and_the_rule_elsewhere(
     );
 }
 
-#[test]
-fn a_png_map_spans_the_dem() {
-    let dir = tempfile::tempdir().unwrap();
-    let dem = write_dem(dir.path());
-    // West half grassland, east half water.
+/// Bakes, into `dir/name`, the DEM with a PNG map spanning it: grassland in its west half,
+/// water in its east half (the boundary at x = 640 m).
+fn halves_world(dir: &Path, name: &str) -> PathBuf {
+    let dem = write_dem(dir);
     let img = image::GrayImage::from_fn(32, 16, |x, _| image::Luma([if x < 16 { 30 } else { 80 }]));
-    let png = dir.path().join("hand-drawn.png");
+    let png = dir.join("halves.png");
     img.save(&png).unwrap();
-    let out = dir.path().join("w");
+    let out = dir.join(name);
     bake(
         &opts(&dem, &out, Some((png, PathBuf::from("esa-worldcover")))),
         &mut |_, _, _| {},
     )
     .unwrap();
+    out
+}
+
+#[test]
+fn a_png_map_spans_the_dem() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = halves_world(dir.path(), "w");
     let extent = (f64::from(DEM_SIZE) - 1.0) * DEM_CELL;
     let (mut west, mut east) = (0, 0);
     for (pos, t, d) in finest_samples(&out) {
@@ -374,17 +380,7 @@ fn a_frame_over_a_class_boundary_shows_the_grassland_green_and_the_water_bare() 
     use verdant::camera::Camera;
     use verdant::tools::Scene;
     let dir = tempfile::tempdir().unwrap();
-    let dem = write_dem(dir.path());
-    // West half grassland, east half water, the boundary at x = 640 m.
-    let img = image::GrayImage::from_fn(32, 16, |x, _| image::Luma([if x < 16 { 30 } else { 80 }]));
-    let png = dir.path().join("halves.png");
-    img.save(&png).unwrap();
-    let out = dir.path().join("w");
-    bake(
-        &opts(&dem, &out, Some((png, PathBuf::from("esa-worldcover")))),
-        &mut |_, _, _| {},
-    )
-    .unwrap();
+    let out = halves_world(dir.path(), "w");
     let ctx = common::gpu();
     let world = verdant::World::open(&out).unwrap();
     let config = RendererConfig::for_world(&world);
