@@ -345,17 +345,23 @@ fn server_faults_are_counted_once_and_leave_no_hole() {
     let s = service.stats();
     assert_eq!(s.faults, 4);
     assert_eq!(s.stream.failed, 4);
-    // The 500 was retried once; the 404 and the non-tile were not retried; the body cut short
-    // was tried 1 + 2 times; the stall was given up after its deadline, not retried.
-    assert_eq!(server.asked("/tiles/L2/1_0.type.png"), 2);
+    // The 404 and the non-tile were not retried; the stall was given up after its deadline,
+    // not retried; the 500 was retried (once) and the body cut short tried 1 + 2 times.
     assert_eq!(server.asked("/tiles/L2/0_0.height.exr"), 1);
     assert_eq!(server.asked("/tiles/L1/0_0.type.png"), 1);
-    assert_eq!(server.asked("/tiles/L2/3_0.height.exr"), 3);
     assert_eq!(server.asked("/tiles/L2/2_0.density.png"), 1);
-    // Those three retries at least: a connection that this test server drops under load is a
-    // transient failure too, and is retried like one.
+    let flaky_asked = server.asked("/tiles/L2/1_0.type.png");
+    let truncated_asked = server.asked("/tiles/L2/3_0.height.exr");
+    assert!(flaky_asked >= 2 && truncated_asked >= 3);
+    // Those three retries at least. A connection that this test server drops or answers late
+    // under load (the tests beside this one keep both cores busy) is a transient failure too,
+    // retried like one: every request beyond those three is such a retry.
     let retries = source.stats().retries;
-    assert!(retries > 2, "{retries} retries");
+    let extra = (flaky_asked - 2) + (truncated_asked - 3);
+    assert!(
+        retries >= 3 + u64::from(extra),
+        "{retries} retries for {flaky_asked} and {truncated_asked} requests"
+    );
 }
 
 /// The same faults on tiles all over the world, on the GPU: every frame draws without a hole

@@ -122,6 +122,10 @@ impl LodSetting {
         c.grass.infill_m = self.infill_m;
         c.grass.width_scale = self.width_scale;
         c.plants.lod_m = self.plant_lod_m;
+        if self.plant_lod_m[0] >= crate::renderer::MAX_PLANT_LOD_M {
+            // No level of detail for the plants: no thinning with distance either.
+            c.plants.thin_m = crate::renderer::MAX_PLANT_LOD_M;
+        }
         c
     }
 }
