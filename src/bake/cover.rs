@@ -20,7 +20,7 @@
 //!   painted cover, a mask (not 0) clears it.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::DVec2;
 use serde::Deserialize;
@@ -193,10 +193,6 @@ pub struct CoverMap {
     codes: Vec<Option<u32>>,
     /// Per code: grass type and density byte.
     painted: BTreeMap<u32, (u8, u8)>,
-    /// The file, for the manifest's record.
-    pub file: PathBuf,
-    /// The table's product name.
-    pub table_name: String,
 }
 
 impl CoverMap {
@@ -254,8 +250,6 @@ impl CoverMap {
             placed,
             codes,
             painted,
-            file: path.to_path_buf(),
-            table_name: table.name.clone(),
         })
     }
 
@@ -354,8 +348,6 @@ pub struct ValueMap {
     /// Values row 0 north, scaled to 0..=1 for a density map; `None` where the file says
     /// nodata.
     values: Vec<Option<f64>>,
-    /// The file.
-    pub file: PathBuf,
 }
 
 impl ValueMap {
@@ -363,49 +355,45 @@ impl ValueMap {
     /// values from 0 to 1 (a float band), 0 to 255 or 0 to 65535 (an integer band: which, by its
     /// largest value). Refuses negative values and what [`CoverMap::load`] refuses.
     pub fn density(path: &Path, dem: &Dem) -> Result<ValueMap, WorldError> {
-        let raster = read_map(path)?;
-        let placed = Placed::on(&raster, dem, path)?;
-        let max = raster
-            .values
-            .iter()
-            .flatten()
-            .fold(0.0f64, |m, &v| m.max(v));
-        if raster.values.iter().flatten().any(|&v| v < 0.0) {
-            return Err(map_error(path, "a density map holds values below 0"));
-        }
-        let full = if raster.full > 1.0 || max <= 1.0 {
-            raster.full
-        } else if max <= 255.0 {
-            255.0
-        } else {
-            65535.0
-        };
-        let values = raster
-            .values
-            .iter()
-            .map(|v| v.map(|v| (v / full).min(1.0)))
-            .collect();
-        Ok(ValueMap {
-            placed,
-            values,
-            file: path.to_path_buf(),
+        Self::read(path, dem, |raster| {
+            if raster.values.iter().flatten().any(|&v| v < 0.0) {
+                return Err(map_error(path, "a density map holds values below 0"));
+            }
+            let max = raster
+                .values
+                .iter()
+                .flatten()
+                .fold(0.0f64, |m, &v| m.max(v));
+            let full = if raster.full > 1.0 || max <= 1.0 {
+                raster.full
+            } else if max <= 255.0 {
+                255.0
+            } else {
+                65535.0
+            };
+            Ok(Box::new(move |v| (v / full).min(1.0)))
         })
     }
 
     /// A mask: nothing grows where its value is not 0 (nodata masks nothing).
     pub fn mask(path: &Path, dem: &Dem) -> Result<ValueMap, WorldError> {
+        Self::read(path, dem, |_| {
+            Ok(Box::new(|v| if v != 0.0 { 1.0 } else { 0.0 }))
+        })
+    }
+
+    /// Reads the map at `path`, places it on `dem`, and maps each value by what `scale` makes
+    /// of the raster.
+    fn read(
+        path: &Path,
+        dem: &Dem,
+        scale: impl FnOnce(&Raster) -> Result<Box<dyn Fn(f64) -> f64>, WorldError>,
+    ) -> Result<ValueMap, WorldError> {
         let raster = read_map(path)?;
         let placed = Placed::on(&raster, dem, path)?;
-        let values = raster
-            .values
-            .iter()
-            .map(|v| v.map(|v| if v != 0.0 { 1.0 } else { 0.0 }))
-            .collect();
-        Ok(ValueMap {
-            placed,
-            values,
-            file: path.to_path_buf(),
-        })
+        let f = scale(&raster)?;
+        let values = raster.values.iter().map(|v| v.map(&f)).collect();
+        Ok(ValueMap { placed, values })
     }
 
     /// The value at world position `p`, `None` beyond the map or where it says nodata.

@@ -267,12 +267,15 @@ impl Renderer {
             f64::from(settings.view_m[0]),
             f64::from(settings.view_m[1] * settings.card_reach.max(1.0)),
         );
+        if outer <= inner {
+            return crate::plants::PlantRenderer::plant_jobs(grass_jobs, &[]);
+        }
         let eye = view.camera.position;
         // The tallest plant, for the boxes' tops.
         let tallest = 1.5f64;
         let mut far: Vec<(f64, PlantJob)> = Vec::new();
         for &id in terrain {
-            if id.level > level || outer <= inner {
+            if id.level > level {
                 continue;
             }
             let Some((src, slot)) = self.service.draw_source(id) else {
