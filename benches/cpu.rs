@@ -115,6 +115,7 @@ fn cache(c: &mut Criterion) {
             heights: vec![0.0; n],
             grass_type: vec![1; n],
             density: vec![255; n],
+            material: Vec::new(),
         })
     };
     let one = tile(0, 0).byte_size() as u64;

@@ -1,7 +1,7 @@
 // Derives child tiles from their parents in the tile atlas: Catmull-Rom upsampling of the
 // parent's smooth heights (the parent less its own detail, recomputed here) plus slope-scaled
 // high-pass detail noise between the parent's samples, at the child level's amplitude (fitted per world;
-// zero for stored levels), that fades to zero near tile edges; grass type from one of the
+// zero for stored levels), that fades to zero near tile edges; grass type and terrain material from one of the
 // nearest parent samples, density as their rounded mean. CPU mirror: src/stream/derive_cpu.rs.
 //
 // One dispatch derives several tiles: workgroup z is the job index.
@@ -181,7 +181,8 @@ fn derive_child(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgrou
     let pick = hash4(u32(sx), u32(sy), job.child_level, seed ^ 0x9e3779b9u);
     let tx = ix + fx * i32(pick & 1u);
     let ty = iy + fy * i32((pick >> 1u) & 1u);
-    let kind = textureLoad(parent_grass, clamp_texel(tx, ty), layer, 0).r;
+    // The grass type and the terrain material of one nearest parent sample.
+    let picked = textureLoad(parent_grass, clamp_texel(tx, ty), layer, 0);
 
     var sum = 0u;
     for (var a = 0; a <= fy; a++) {
@@ -193,5 +194,5 @@ fn derive_child(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgrou
     let d = (sum + count / 2u) / count;
 
     textureStore(out_heights, vec2<i32>(i, j), job.out_layer, vec4<f32>(h, 0.0, 0.0, 0.0));
-    textureStore(out_grass, vec2<i32>(i, j), job.out_layer, vec4<u32>(kind, d, 0u, 0u));
+    textureStore(out_grass, vec2<i32>(i, j), job.out_layer, vec4<u32>(picked.r, d, picked.b, 0u));
 }

@@ -61,6 +61,7 @@ fn tile_seeds() -> (TileCheck, [Vec<u8>; 3]) {
         heights: (0..n).map(|k| (k % 101) as f32).collect(),
         grass_type: (0..n).map(|k| (k % 3) as u8).collect(),
         density: (0..n).map(|k| (k * 7 % 256) as u8).collect(),
+        material: Vec::new(),
     };
     write_tile(dir.path(), &pyramid, &tile).unwrap();
     let read = |kind| std::fs::read(tile_path(dir.path(), id, kind)).unwrap();
@@ -69,6 +70,7 @@ fn tile_seeds() -> (TileCheck, [Vec<u8>; 3]) {
         options: ReadOptions {
             height_range_m: [0.0, 100.0],
             grass_type_count: 3,
+            materials: false,
         },
     };
     (

@@ -70,6 +70,7 @@ fn synthetic_tile(manifest: &Manifest, id: TileId, kind: &str) -> TileData {
         heights: vec![100.0; n],
         grass_type: vec![1; n],
         density: vec![255; n],
+        material: Vec::new(),
     };
     for j in 0..s {
         for i in 0..s {

@@ -7,6 +7,7 @@ use glam::DVec2;
 use tiff::encoder::{TiffEncoder, colortype};
 use tiff::tags::Tag;
 use verdant::bake::{BakeOptions, bake};
+use verdant::world::Material;
 
 mod common;
 
@@ -19,8 +20,17 @@ const DEM_CORNER: [f64; 2] = [400_000.0, 4_101_300.0];
 const MAP_SIZE: [u32; 2] = [100, 60];
 const MAP_CELL: f64 = 10.0;
 const MAP_CORNER: [f64; 2] = [400_300.0, 4_100_900.0];
-/// GeoKeys: projected, pixel is area, EPSG `epsg`.
+/// GeoKeys: projected, pixel is area, EPSG `epsg`; or geographic (degrees) for EPSG:4326.
 fn keys(epsg: u16) -> Vec<u16> {
+    if epsg == 4326 {
+        return [
+            [1, 1, 0, 3],
+            [1024, 0, 1, 2],
+            [1025, 0, 1, 1],
+            [2048, 0, 1, 4326],
+        ]
+        .concat();
+    }
     [
         [1, 1, 0, 3],
         [1024, 0, 1, 1],
@@ -35,7 +45,7 @@ fn keys(epsg: u16) -> Vec<u16> {
 fn write_geotiff<C: colortype::ColorType>(
     path: &Path,
     size: [u32; 2],
-    cell: f64,
+    cell: [f64; 2],
     corner: [f64; 2],
     epsg: u16,
     data: &[C::Inner],
@@ -46,7 +56,7 @@ fn write_geotiff<C: colortype::ColorType>(
     let mut enc = TiffEncoder::new(&mut file).unwrap();
     let mut image = enc.new_image::<C>(size[0], size[1]).unwrap();
     let d = image.encoder();
-    d.write_tag(Tag::ModelPixelScaleTag, &[cell, cell, 0.0][..])
+    d.write_tag(Tag::ModelPixelScaleTag, &[cell[0], cell[1], 0.0][..])
         .unwrap();
     d.write_tag(
         Tag::ModelTiepointTag,
@@ -68,7 +78,7 @@ fn write_dem(dir: &Path) -> PathBuf {
     write_geotiff::<colortype::GrayI16>(
         &path,
         [DEM_SIZE; 2],
-        DEM_CELL,
+        [DEM_CELL; 2],
         DEM_CORNER,
         32633,
         &heights,
@@ -99,7 +109,7 @@ fn write_map(dir: &Path, epsg: u16, corner: [f64; 2], extra: Option<u8>) -> Path
         data[(30 * w + 5) as usize] = code;
     }
     let path = dir.join(format!("cover_{epsg}.tif"));
-    write_geotiff::<colortype::Gray8>(&path, MAP_SIZE, MAP_CELL, corner, epsg, &data);
+    write_geotiff::<colortype::Gray8>(&path, MAP_SIZE, [MAP_CELL; 2], corner, epsg, &data);
     path
 }
 
@@ -117,9 +127,9 @@ fn opts(dem: &Path, out: &Path, cover: Option<(PathBuf, PathBuf)>) -> BakeOption
     }
 }
 
-/// Every finest-level sample inside the DEM: its world position and its grass type and
-/// density.
-fn finest_samples(world: &Path) -> Vec<(DVec2, u8, u8)> {
+/// Every finest-level sample inside the DEM: its world position, its grass type and density,
+/// and its material byte.
+fn finest_samples(world: &Path) -> Vec<(DVec2, u8, u8, u8)> {
     let terrain = common::Terrain::load(world);
     let p = &terrain.world.manifest.pyramid;
     let level = p.stored_levels - 1;
@@ -134,7 +144,12 @@ fn finest_samples(world: &Path) -> Vec<(DVec2, u8, u8)> {
                 let pos = p.sample_position(*id, i, j);
                 if pos.x <= extent[0] && pos.y <= extent[1] {
                     let k = tile.index(i, j);
-                    out.push((pos, tile.grass_type[k], tile.density[k]));
+                    out.push((
+                        pos,
+                        tile.grass_type[k],
+                        tile.density[k],
+                        tile.material_at(k),
+                    ));
                 }
             }
         }
@@ -169,7 +184,8 @@ fn a_land_cover_map_paints_its_classes_where_it_has_data_and_the_rule_elsewhere(
         DEM_CORNER[1] - (f64::from(DEM_SIZE) - 0.5) * DEM_CELL,
     );
     let (mut by_class, mut by_rule) = ([0; 3], 0);
-    for ((pos, t, d), (_, t0, d0)) in a.iter().zip(&b) {
+    for ((pos, t, d, m), (_, t0, d0, m0)) in a.iter().zip(&b) {
+        assert_eq!(*m0, 0, "no map, no material");
         let model = sw + *pos;
         let c = (model.x - (MAP_CORNER[0] + 0.5 * MAP_CELL)) / MAP_CELL;
         let r = ((MAP_CORNER[1] - 0.5 * MAP_CELL) - model.y) / MAP_CELL;
@@ -182,7 +198,7 @@ fn a_land_cover_map_paints_its_classes_where_it_has_data_and_the_rule_elsewhere(
             // Outside the map or where it says nodata: the procedural rule, as without it
             // (away from the map's edges, where the nearest sample is ambiguous).
             if !near_edge(r, &[-0.5, 9.5]) && !near_edge(c, &[-0.5, 99.5]) {
-                assert_eq!((t, d), (t0, d0), "at {pos}");
+                assert_eq!((t, d, m), (t0, d0, &0), "at {pos}");
                 by_rule += 1;
             }
             continue;
@@ -191,12 +207,17 @@ fn a_land_cover_map_paints_its_classes_where_it_has_data_and_the_rule_elsewhere(
             continue;
         }
         let (want, k) = match class_at(c.round() as u32, r.round() as u32) {
-            30 => ((1, 230), 0), // grassland: meadow at 0.9
-            80 => ((0, 0), 1),   // water: nothing grows
-            40 => ((2, 204), 2), // cropland: tall grass at 0.8
+            30 => ((1, 230, Material::Default), 0), // grassland: meadow at 0.9
+            80 => ((0, 0, Material::Water), 1),     // water: nothing grows
+            40 => ((2, 204, Material::Crops), 2),   // cropland: tall grass at 0.8, on crops
             other => panic!("class {other}"),
         };
-        assert_eq!((*t, *d), want, "at {pos} (map column {c:.1}, row {r:.1})");
+        let want = (want.0, want.1, want.2 as u8);
+        assert_eq!(
+            (*t, *d, *m),
+            want,
+            "at {pos} (map column {c:.1}, row {r:.1})"
+        );
         by_class[k] += 1;
     }
     assert!(by_class.iter().all(|&n| n > 30), "{by_class:?}");
@@ -211,6 +232,101 @@ fn a_land_cover_map_paints_its_classes_where_it_has_data_and_the_rule_elsewhere(
         manifest.contains("ESA WorldCover (esa-worldcover)"),
         "{manifest}"
     );
+    // Its tiles carry materials; the world baked without a map has none.
+    assert!(manifest.contains("materials = true"), "{manifest}");
+    let plain = std::fs::read_to_string(without.join("world.toml")).unwrap();
+    assert!(!plain.contains("materials"), "{plain}");
+    assert!(with.join("tiles/L0/0_0.material.png").exists());
+    assert!(!without.join("tiles/L0/0_0.material.png").exists());
+}
+
+#[test]
+fn a_map_in_geographic_coordinates_is_reprojected_onto_a_utm_dem() {
+    use proj4rs::Proj;
+    use proj4rs::adaptors::transform_xy;
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path());
+    let (utm, geo) = (
+        Proj::from_epsg_code(32633).unwrap(),
+        Proj::from_epsg_code(4326).unwrap(),
+    );
+    // The DEM's south-west sample in UTM, and the class of a UTM point: grassland, water and
+    // cropland in bands 400 m wide west to east, nodata north of the DEM's middle row.
+    let sw = DVec2::new(
+        DEM_CORNER[0] + 0.5 * DEM_CELL,
+        DEM_CORNER[1] - (f64::from(DEM_SIZE) - 0.5) * DEM_CELL,
+    );
+    let class = |p: DVec2| -> u8 {
+        let q = p - sw;
+        if q.y > 640.0 {
+            0
+        } else if q.x < 400.0 {
+            30
+        } else if q.x < 800.0 {
+            80
+        } else {
+            40
+        }
+    };
+    // The map: 0.0002 degree samples (about 16 m by 22 m there) over the DEM and 100 m around
+    // it, its corners found by projecting the DEM's.
+    let to_geo = |p: DVec2| {
+        let (lon, lat) = transform_xy(&utm, &geo, p.x, p.y).unwrap();
+        DVec2::new(lon.to_degrees(), lat.to_degrees())
+    };
+    let span = (f64::from(DEM_SIZE) - 1.0) * DEM_CELL;
+    let corners = [
+        DVec2::new(-100.0, -100.0),
+        DVec2::new(span + 100.0, -100.0),
+        DVec2::new(-100.0, span + 100.0),
+        DVec2::new(span + 100.0, span + 100.0),
+    ]
+    .map(|c| to_geo(sw + c));
+    let lo = corners.iter().fold(DVec2::MAX, |a, c| a.min(*c));
+    let hi = corners.iter().fold(DVec2::MIN, |a, c| a.max(*c));
+    let step = 0.0002;
+    let size = [
+        ((hi.x - lo.x) / step).ceil() as u32,
+        ((hi.y - lo.y) / step).ceil() as u32,
+    ];
+    let mut data = Vec::new();
+    for r in 0..size[1] {
+        for c in 0..size[0] {
+            let lon = lo.x + (f64::from(c) + 0.5) * step;
+            let lat = hi.y - (f64::from(r) + 0.5) * step;
+            let (x, y) = transform_xy(&geo, &utm, lon.to_radians(), lat.to_radians()).unwrap();
+            data.push(class(DVec2::new(x, y)));
+        }
+    }
+    let map = dir.path().join("cover_4326.tif");
+    write_geotiff::<colortype::Gray8>(&map, size, [step; 2], [lo.x, hi.y], 4326, &data);
+    let out = dir.path().join("geo");
+    bake(
+        &opts(&dem, &out, Some((map, PathBuf::from("esa-worldcover")))),
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    let mut seen = [0; 4];
+    for (pos, t, d, m) in finest_samples(&out) {
+        // Away from the bands' borders by more than a map sample.
+        let near = |v: f64, edges: &[f64]| edges.iter().any(|e| (v - e).abs() < 30.0);
+        if near(pos.x, &[400.0, 800.0]) || near(pos.y, &[640.0]) {
+            continue;
+        }
+        let (want, k) = match class(sw + pos) {
+            0 => {
+                seen[3] += 1;
+                continue; // nodata: the procedural rule
+            }
+            30 => ((1, 230, 0), 0),
+            80 => ((0, 0, Material::Water as u8), 1),
+            40 => ((2, 204, Material::Crops as u8), 2),
+            other => panic!("class {other}"),
+        };
+        assert_eq!((t, d, m), want, "at {pos}");
+        seen[k] += 1;
+    }
+    assert!(seen.iter().all(|&n| n > 100), "{seen:?}");
 }
 
 /// Bakes, into `dir/name`, the DEM with a PNG map spanning it: grassland in its west half,
@@ -235,12 +351,12 @@ fn a_png_map_spans_the_dem() {
     let out = halves_world(dir.path(), "w");
     let extent = (f64::from(DEM_SIZE) - 1.0) * DEM_CELL;
     let (mut west, mut east) = (0, 0);
-    for (pos, t, d) in finest_samples(&out) {
+    for (pos, t, d, m) in finest_samples(&out) {
         if pos.x < 0.45 * extent {
-            assert_eq!((t, d), (1, 230), "at {pos}");
+            assert_eq!((t, d, m), (1, 230, 0), "at {pos}");
             west += 1;
         } else if pos.x > 0.55 * extent {
-            assert_eq!((t, d), (0, 0), "at {pos}");
+            assert_eq!((t, d, m), (0, 0, Material::Water as u8), "at {pos}");
             east += 1;
         }
     }
@@ -260,12 +376,19 @@ fn bad_maps_and_tables_are_refused_naming_the_file_and_nothing_is_written() {
     .unwrap();
     let cases = [
         (
+            // The next zone east: reprojected, it lies 600 km away.
             write_map(dir.path(), 32634, MAP_CORNER, None),
             esa.clone(),
+            vec!["cover_32634.tif", "does not overlap", "EPSG:32634"],
+        ),
+        (
+            // A user-defined projection: no EPSG code to reproject it by.
+            write_map(dir.path(), 32767, MAP_CORNER, None),
+            esa.clone(),
             vec![
-                "cover_32634.tif",
+                "cover_32767.tif",
                 "coordinate system",
-                "EPSG:32634",
+                "has no EPSG code",
                 "EPSG:32633",
             ],
         ),
@@ -344,7 +467,7 @@ fn a_density_map_scales_the_cover_and_a_mask_clears_it() {
     let extent = (f64::from(DEM_SIZE) - 1.0) * DEM_CELL;
     let half = (230.0f64 * 128.0 / 255.0).round() as u8;
     let mut seen = [0; 3];
-    for (pos, t, d) in finest_samples(&out) {
+    for (pos, t, d, _) in finest_samples(&out) {
         // The maps' column and row from the north.
         let (c, r) = (pos.x / extent * 63.0, 63.0 - pos.y / extent * 63.0);
         if (c - 31.5).abs() < 1.5 || (r - 29.5).abs() < 1.5 || (r - 33.5).abs() < 1.5 {
@@ -375,7 +498,7 @@ fn a_density_map_scales_the_cover_and_a_mask_clears_it() {
 /// grassland half, bare ground on the water half (GPU, software Vulkan in CI; from 60 m the
 /// ground's colour shows the grass type, the blades being nearer the camera than that).
 #[test]
-fn a_frame_over_a_class_boundary_shows_the_grassland_green_and_the_water_bare() {
+fn a_frame_over_a_class_boundary_shows_the_grassland_green_and_the_water_as_its_cpu_mirror() {
     use verdant::RendererConfig;
     use verdant::camera::Camera;
     use verdant::tools::Scene;
@@ -406,11 +529,59 @@ fn a_frame_over_a_class_boundary_shows_the_grassland_green_and_the_water_bare() 
         sum / f64::from((x1 - x0) * h)
     };
     let (west, east) = (green(0, w / 2 - 8), green(w / 2 + 8, w));
-    if west <= east + 10.0 {
+    // The water, pixel by pixel, against the CPU mirror of its shading: where each pixel's ray
+    // meets the DEM's plane (z = 100 + x / 20) at least 40 m east of the boundary (the classes'
+    // border there is drawn from samples 20 m apart), the Fresnel mix of the sky's reflection
+    // and the dark body, fogged.
+    let light = verdant::terrain::material::SkyLight::of(&scene.world().manifest.sky);
+    let inv = camera.view_proj_relative(w as f32 / h as f32).inverse();
+    let to_srgb = |c: f32| {
+        let c = c.clamp(0.0, 1.0);
+        let s = if c <= 0.003_130_8 {
+            12.92 * c
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        };
+        s * 255.0
+    };
+    let (mut n, mut sum, mut worst) = (0u32, 0.0f32, 0.0f32);
+    for y in 0..h {
+        for x in 0..w {
+            let ndc = glam::Vec2::new(
+                (x as f32 + 0.5) / w as f32 * 2.0 - 1.0,
+                1.0 - (y as f32 + 0.5) / h as f32 * 2.0,
+            );
+            let p = inv * glam::Vec4::new(ndc.x, ndc.y, 0.5, 1.0);
+            let v = (p.truncate() / p.w).normalize();
+            let d = v.as_dvec3();
+            // camera + t d on z = 100 + x / 20.
+            let c = camera.position;
+            let t = (100.0 + c.x / 20.0 - c.z) / (d.z - d.x / 20.0);
+            if c.x + t * d.x < 680.0 {
+                continue;
+            }
+            let want = light.fogged(
+                verdant::terrain::material::water_color(v, 1.0, &light),
+                v,
+                (t * d.length()) as f32,
+            );
+            let got = image.get_pixel(x, y).0;
+            for k in 0..3 {
+                let e = (to_srgb(want[k]) - f32::from(got[k])).abs();
+                sum += e;
+                worst = worst.max(e);
+            }
+            n += 1;
+        }
+    }
+    let mean = sum / (3 * n.max(1)) as f32;
+    eprintln!("water against its CPU mirror: {n} pixels, mean error {mean:.2}, worst {worst:.1}");
+    if west <= east + 10.0 || n < 500 || mean > 1.0 || worst > 3.0 {
         let p = common::failure_dir().join("land_cover_boundary.png");
         image.save(&p).unwrap();
         panic!(
-            "west {west:.1} against east {east:.1} (frame in {})",
+            "green west {west:.1} against east {east:.1}; water against its CPU mirror over \
+             {n} pixels: mean error {mean:.2}, worst {worst:.1} of 255 (frame in {})",
             p.display()
         );
     }

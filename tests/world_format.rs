@@ -464,6 +464,7 @@ fn random_tile(id: TileId, size: u32, seed: u64) -> TileData {
             .collect(),
         grass_type: (0..n).map(|_| (rng.next_u64() % 4) as u8).collect(),
         density: (0..n).map(|_| rng.next_u64() as u8).collect(),
+        material: Vec::new(),
     }
 }
 
@@ -768,6 +769,7 @@ fn grass_types_beyond_the_manifest_are_refused() {
     let options = ReadOptions {
         height_range_m: RANGE,
         grass_type_count: 3,
+        materials: false,
     };
     let err = read_tile_with(dir.path(), &p, id, &options).unwrap_err();
     assert!(
@@ -865,6 +867,7 @@ fn low_bit_depth_maps_read_as_their_values() {
         let options = ReadOptions {
             height_range_m: RANGE,
             grass_type_count: 4,
+            materials: false,
         };
         let tile = read_tile_with(dir.path(), &p, id, &options)
             .unwrap_or_else(|e| panic!("{bits}-bit maps: {e}"));

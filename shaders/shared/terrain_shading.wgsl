@@ -69,6 +69,7 @@ fn fog_color(view_dir: vec3<f32>) -> vec3<f32> {
 
 // ---- Terrain shading, per pixel (CPU mirror of the far field: src/terrain/far_field.rs) ----
 
+// Rock and soil (CPU mirror: src/terrain/material.rs).
 const ROCK: vec3<f32> = vec3<f32>(0.25, 0.23, 0.20);
 // How much of the clump's tint the ground under grass takes.
 const GROUND_TINT: f32 = 0.8;
@@ -96,9 +97,72 @@ fn noise_value(p: vec2<f32>) -> f32 {
     return noise_grad(p).x;
 }
 
-fn grass_texel(t: vec2<i32>, layer: u32) -> vec2<u32> {
+// A sample's grass type (x), density (y) and terrain material (z).
+fn grass_texel(t: vec2<i32>, layer: u32) -> vec3<u32> {
     let size = vec2<i32>(textureDimensions(grass));
-    return textureLoad(grass, clamp(t, vec2<i32>(0), size - 1), layer, 0).rg;
+    return textureLoad(grass, clamp(t, vec2<i32>(0), size - 1), layer, 0).rgb;
+}
+
+// ---- Terrain materials (src/world/material.rs; CPU mirror: src/terrain/material.rs) ----
+
+const MATERIAL_SOIL: u32 = 1u;
+const MATERIAL_CROPS: u32 = 2u;
+const MATERIAL_ROCK: u32 = 3u;
+const MATERIAL_SAND: u32 = 4u;
+const MATERIAL_WATER: u32 = 5u;
+const MATERIAL_ROAD: u32 = 6u;
+const MATERIAL_SNOW: u32 = 7u;
+const CROP_SOIL: vec3<f32> = vec3<f32>(0.30, 0.23, 0.15);
+const SAND: vec3<f32> = vec3<f32>(0.55, 0.47, 0.33);
+const ROAD: vec3<f32> = vec3<f32>(0.11, 0.11, 0.115);
+const SNOW: vec3<f32> = vec3<f32>(0.82, 0.86, 0.92);
+// The bed seen through water, and how much of the light it sends back up.
+const WATER_BODY: vec3<f32> = vec3<f32>(0.015, 0.035, 0.04);
+const WATER_F0: f32 = 0.02;
+// Furrow spacing of crops, metres (rows run north-south).
+const CROP_ROW_M: f32 = 1.2;
+
+// The albedo of material `m` (not the default, not water) at world xy, for a pixel footprint
+// of `footprint` metres along the ground (stretched by the grazing view): crops' furrows fade
+// out before they shrink below two pixels.
+fn material_albedo(m: u32, world: vec2<f32>, footprint: f32) -> vec3<f32> {
+    switch m {
+        case MATERIAL_SOIL: {
+            return SOIL;
+        }
+        case MATERIAL_CROPS: {
+            let vis = clamp(CROP_ROW_M / (2.0 * footprint) - 1.0, 0.0, 1.0);
+            let row = 0.5 + 0.5 * cos(6.2831853 * world.x / CROP_ROW_M);
+            return CROP_SOIL * (1.0 + 0.35 * vis * (row - 0.5));
+        }
+        case MATERIAL_ROCK: {
+            return ROCK;
+        }
+        case MATERIAL_SAND: {
+            return SAND;
+        }
+        case MATERIAL_ROAD: {
+            return ROAD;
+        }
+        case MATERIAL_SNOW: {
+            return SNOW;
+        }
+        default: {
+            return SOIL;
+        }
+    }
+}
+
+// Water seen along the unit direction `v` (from the camera), a flat surface: the sky mirrored
+// by Schlick's Fresnel term (0.02 head-on), over a dark body lit by the sun (the fraction
+// `sun_vis` of it) and the sky dome.
+fn water_color(v: vec3<f32>, sun_vis: f32) -> vec3<f32> {
+    let cos_v = clamp(-v.z, 0.0, 1.0);
+    let fresnel = WATER_F0 + (1.0 - WATER_F0) * pow(1.0 - cos_v, 5.0);
+    let mirrored = vec3<f32>(v.xy, abs(v.z));
+    let dome = mix(frame.sky_color.rgb, frame.horizon_color.rgb, 0.5);
+    let body = WATER_BODY * (frame.sun_color.rgb * max(frame.sun_dir.z, 0.0) * sun_vis + 0.45 * dome);
+    return mix(body, sky_color(mirrored), fresnel);
 }
 
 // The tint of the Voronoi clump around `rel_xy` (metres from the camera): the nearest of the
@@ -252,13 +316,20 @@ struct Maps {
     grass_col: vec3<f32>,
     cover: f32,
     growth_blend: f32,
+    // The weight of the samples whose material is water.
+    water: f32,
 }
 
-fn add_corner(m: ptr<function, Maps>, g: vec2<u32>, w: f32, t_far: f32, sin_e: f32) {
+fn add_corner(m: ptr<function, Maps>, g: vec3<u32>, w: f32, t_far: f32, sin_e: f32, world: vec2<f32>, footprint: f32) {
     let kind = min(g.x, frame.grid.z - 1u);
     let d = f32(g.y) / 255.0;
     var a = mix(SOIL, frame.ground_colors[kind].rgb, d);
-    if kind == 0u {
+    if g.z == MATERIAL_WATER {
+        (*m).water += w;
+        a = WATER_BODY;
+    } else if g.z != 0u {
+        a = material_albedo(g.z, world, footprint);
+    } else if kind == 0u {
         a = ROCK;
     } else if (frame.grid.w & GROUND_DARKENING) != 0u {
         a *= mix(1.0, 0.6, d);
@@ -310,11 +381,13 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
     let ci = vec2<i32>(cell);
     let t_far = frame.clump_offset.z;
     let sin_e = abs(rel.z) / max(dist, 1e-3);
+    let footprint = 0.004 * dist + 1e-3;
+    let ground_footprint = footprint / max(sin_e, 0.1);
     var m = Maps();
-    add_corner(&m, grass_texel(ci, layer), (1.0 - sw.x) * (1.0 - sw.y), t_far, sin_e);
-    add_corner(&m, grass_texel(ci + vec2<i32>(1, 0), layer), sw.x * (1.0 - sw.y), t_far, sin_e);
-    add_corner(&m, grass_texel(ci + vec2<i32>(0, 1), layer), (1.0 - sw.x) * sw.y, t_far, sin_e);
-    add_corner(&m, grass_texel(ci + vec2<i32>(1, 1), layer), sw.x * sw.y, t_far, sin_e);
+    add_corner(&m, grass_texel(ci, layer), (1.0 - sw.x) * (1.0 - sw.y), t_far, sin_e, world.xy, ground_footprint);
+    add_corner(&m, grass_texel(ci + vec2<i32>(1, 0), layer), sw.x * (1.0 - sw.y), t_far, sin_e, world.xy, ground_footprint);
+    add_corner(&m, grass_texel(ci + vec2<i32>(0, 1), layer), (1.0 - sw.x) * sw.y, t_far, sin_e, world.xy, ground_footprint);
+    add_corner(&m, grass_texel(ci + vec2<i32>(1, 1), layer), sw.x * sw.y, t_far, sin_e, world.xy, ground_footprint);
     var ground = m.ground;
     var grass_col = m.grass_col;
     var cover = m.cover;
@@ -328,7 +401,6 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
     // each faded out before its features shrink below a pixel.
     var detail = 0.0;
     var slope_noise = vec2<f32>(0.0);
-    let footprint = 0.004 * dist + 1e-3;
     let o1 = octave(world.xy, 23.0, 0.10, footprint);
     let o2 = octave(world.xy + 19.1, 4.7, 0.08, footprint);
     let o3 = octave(world.xy + 38.2, 0.9, 0.07, footprint);
@@ -337,10 +409,11 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
     let n = normalize(n_terrain - vec3<f32>(slope_noise, 0.0));
 
     // Materials: rock on steep slopes (the border moved by noise), soil where it is steep
-    // enough to thin the grass.
+    // enough to thin the grass; neither on water.
     let slope = 1.0 - n_terrain.z;
-    let rock_w = smoothstep(0.26, 0.40, slope + (wn - 0.5) * 0.12);
-    let soil_w = smoothstep(0.10, 0.22, slope + (wn2 - 0.5) * 0.08) * 0.6;
+    let dry = 1.0 - min(m.water, 1.0);
+    let rock_w = smoothstep(0.26, 0.40, slope + (wn - 0.5) * 0.12) * dry;
+    let soil_w = smoothstep(0.10, 0.22, slope + (wn2 - 0.5) * 0.08) * 0.6 * dry;
     ground = mix(ground, SOIL * 0.9, soil_w * (1.0 - rock_w));
     ground = mix(ground, ROCK * (0.9 + 0.3 * wn2), rock_w);
     cover *= (1.0 - rock_w) * (1.0 - 0.5 * soil_w);
@@ -385,6 +458,12 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
         let albedo = grass_col * tint * (1.0 + 0.5 * detail);
         let grass_lit = far_grass_light(albedo, growth, t_far, sun_vis);
         lit = mix(lit, grass_lit, min(cover, 1.0));
+    }
+
+    // Water: a flat mirror of the sky over a dark body, blended in by the same noisy weights
+    // as the other maps (so shores are not straight texel edges).
+    if m.water > 0.0 {
+        lit = mix(lit, water_color(rel / max(dist, 1e-3), sun_vis), min(m.water, 1.0));
     }
 
     // Clear near the camera, 95% fog at the manifest's fog distance.

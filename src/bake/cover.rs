@@ -10,7 +10,9 @@
 //!   Each sample of the finest grid takes the class of the map's nearest sample.
 //! - **The table**: TOML, `name`, `nodata` (class codes that say "no data here") and one
 //!   `[[class]]` per code: `code`, `name`, `grass` (one of the world's grass types, or "none":
-//!   nothing grows) and `density` (the grass map's cover there, 0 to 1). Tables for ESA
+//!   nothing grows), `density` (the grass map's cover there, 0 to 1) and, optionally,
+//!   `material` (the ground: soil, crops, rock, sand, water, road, snow; by default the grass
+//!   type's ground, as without a map). Tables for ESA
 //!   WorldCover and NLCD ship with verdant (`worlds/cover-tables/`), by the names
 //!   `esa-worldcover` and `nlcd`.
 //! - Where the map does not reach, or says nodata, the procedural rule paints as before. The
@@ -28,6 +30,7 @@ use serde::Deserialize;
 use crate::world::dem::Dem;
 use crate::world::error::WorldError;
 use crate::world::manifest::GrassType;
+use crate::world::material::Material;
 
 /// The tables that ship with verdant: name, TOML.
 pub const BUILT_IN_TABLES: [(&str, &str); 2] = [
@@ -71,6 +74,21 @@ pub struct CoverClass {
     pub grass: String,
     /// The grass map's cover there, 0 to 1.
     pub density: f64,
+    /// The ground's material there, by name (`crate::world::Material`: soil, crops, rock,
+    /// sand, water, road, snow, or default: the grass type's ground); default when absent.
+    #[serde(default)]
+    pub material: Option<String>,
+}
+
+/// What a class paints on a sample: grass type index, density byte and material byte.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ClassPaint {
+    /// Index into the world's grass types (0 where nothing grows).
+    pub grass_type: u8,
+    /// Grass density, 0..=255 (0 where nothing grows).
+    pub density: u8,
+    /// The ground's material byte (`crate::world::Material`).
+    pub material: u8,
 }
 
 impl CoverTable {
@@ -110,8 +128,8 @@ impl CoverTable {
         Ok(table)
     }
 
-    /// Refuses a table without classes, a code listed twice (or as both a class and nodata)
-    /// and a density that is not a number in 0..=1.
+    /// Refuses a table without classes, a code listed twice (or as both a class and nodata),
+    /// a density that is not a number in 0..=1 and a material verdant does not know.
     fn check(&self, path: &Path) -> Result<(), WorldError> {
         if self.classes.is_empty() {
             return Err(table_error(path, "no [[class]] entries"));
@@ -133,17 +151,30 @@ impl CoverTable {
                     ),
                 ));
             }
+            if let Some(m) = &c.material
+                && Material::from_name(m).is_none()
+            {
+                return Err(table_error(
+                    path,
+                    format!(
+                        "class {} ({}): material \"{m}\" is not one of verdant's materials ({})",
+                        c.code,
+                        c.name,
+                        Material::names()
+                    ),
+                ));
+            }
         }
         Ok(())
     }
 
-    /// Per class code, the grass type index and the density byte, for a world of
-    /// `grass_types`: a grass type the world does not have is refused, naming the class.
+    /// Per class code, what it paints, for a world of `grass_types`: a grass type the world
+    /// does not have is refused, naming the class.
     fn resolve(
         &self,
         path: &Path,
         grass_types: &[GrassType],
-    ) -> Result<BTreeMap<u32, (u8, u8)>, WorldError> {
+    ) -> Result<BTreeMap<u32, ClassPaint>, WorldError> {
         let mut out = BTreeMap::new();
         for c in &self.classes {
             let painted = if c.grass == "none" {
@@ -166,7 +197,19 @@ impl CoverTable {
                 let byte = (c.density * 255.0).round() as u8;
                 if byte == 0 { (0, 0) } else { (t as u8, byte) }
             };
-            out.insert(c.code, painted);
+            let material = c
+                .material
+                .as_deref()
+                .and_then(Material::from_name)
+                .unwrap_or(Material::Default);
+            out.insert(
+                c.code,
+                ClassPaint {
+                    grass_type: painted.0,
+                    density: painted.1,
+                    material: material as u8,
+                },
+            );
         }
         Ok(out)
     }
@@ -191,11 +234,19 @@ pub struct CoverMap {
     placed: Placed,
     /// Class codes, row 0 north; `None` where the map says nodata.
     codes: Vec<Option<u32>>,
-    /// Per code: grass type and density byte.
-    painted: BTreeMap<u32, (u8, u8)>,
+    /// Per code: what it paints.
+    painted: BTreeMap<u32, ClassPaint>,
 }
 
 impl CoverMap {
+    /// Whether any class of its table names a material other than the default (the world's
+    /// tiles then carry a material map).
+    pub fn has_materials(&self) -> bool {
+        self.painted
+            .values()
+            .any(|c| c.material != Material::Default as u8)
+    }
+
     /// Reads the map at `path`, places it on `dem` and resolves `table` for `grass_types`.
     /// Refuses a map that cannot be placed (another coordinate system, no overlap with the
     /// DEM, a georeferenced map on a DEM without georeferencing) and one that holds codes the
@@ -253,21 +304,145 @@ impl CoverMap {
         })
     }
 
-    /// The grass type and density byte the map paints at world position `p` (metres from the
-    /// DEM's south-west sample), or `None` where it does not reach or says nodata.
-    pub fn paint_at(&self, p: DVec2) -> Option<(u8, u8)> {
+    /// What the map paints at world position `p` (metres from the DEM's south-west sample), or
+    /// `None` where it does not reach or says nodata.
+    pub fn paint_at(&self, p: DVec2) -> Option<ClassPaint> {
         let code = self.codes[self.placed.index_at(p)?]?;
         self.painted.get(&code).copied()
     }
 }
 
 /// A raster placed on the DEM: its size, and world position (metres from the DEM's south-west
-/// sample) to its column and row from the south, `column = a.x + b.x * x`, `row = a.y + b.y * y`.
+/// sample) to its column and row from the south.
 struct Placed {
     width: usize,
     height: usize,
-    a: DVec2,
-    b: DVec2,
+    to_raster: ToRaster,
+}
+
+/// World position to a raster's column and row (from the south).
+enum ToRaster {
+    /// In the DEM's coordinate system (or spanning it): `a + b * p`.
+    Linear { a: DVec2, b: DVec2 },
+    /// In another coordinate system: the column and row at the nodes of a lattice over the
+    /// DEM, `step` metres apart from `origin`, `nodes.x` across, interpolated bilinearly
+    /// between them (a projection is smooth over a lattice cell; the nodes are exact).
+    Lattice {
+        origin: DVec2,
+        step: f64,
+        nodes: [usize; 2],
+        at: Vec<DVec2>,
+    },
+}
+
+/// Lattice cells across the DEM's longer side for a reprojected map.
+const LATTICE_CELLS: f64 = 256.0;
+
+impl ToRaster {
+    fn map(&self, p: DVec2) -> DVec2 {
+        match self {
+            ToRaster::Linear { a, b } => *a + *b * p,
+            ToRaster::Lattice {
+                origin,
+                step,
+                nodes,
+                at,
+            } => {
+                let g = ((p - *origin) / *step).clamp(
+                    DVec2::ZERO,
+                    DVec2::new((nodes[0] - 1) as f64, (nodes[1] - 1) as f64),
+                );
+                let i = (g.x.floor() as usize).min(nodes[0] - 2);
+                let j = (g.y.floor() as usize).min(nodes[1] - 2);
+                let f = g - DVec2::new(i as f64, j as f64);
+                let n = |i: usize, j: usize| at[j * nodes[0] + i];
+                let south = n(i, j).lerp(n(i + 1, j), f.x);
+                let north = n(i, j + 1).lerp(n(i + 1, j + 1), f.x);
+                south.lerp(north, f.y)
+            }
+        }
+    }
+}
+
+/// The EPSG code of a coordinate system's description (`EPSG:32610, projected ...`), if any.
+fn epsg_code(crs: &str) -> Option<u16> {
+    crs_key(crs).strip_prefix("EPSG:")?.parse().ok()
+}
+
+/// The lattice that places a raster in coordinate system `raster_crs` (`origin` its
+/// south-west sample, `size` its spacing) on `dem` in another: world metres -> the DEM's
+/// coordinates -> geographic -> the raster's coordinates -> its samples, by `proj4rs` at every
+/// node. `None` with the reason where either system is unknown or a node does not transform.
+fn reprojection_lattice(
+    raster_crs: &str,
+    origin: [f64; 2],
+    size: [f64; 2],
+    dem: &Dem,
+    dem_origin: [f64; 2],
+    dem_size: [f64; 2],
+) -> Result<ToRaster, String> {
+    let proj = |crs: &str| {
+        let code = epsg_code(crs).ok_or_else(|| {
+            format!(
+                "\"{}\" has no EPSG code, so the baker cannot reproject it",
+                or_unstated(crs)
+            )
+        })?;
+        proj4rs::Proj::from_epsg_code(code)
+            .map_err(|e| format!("EPSG:{code} is not a coordinate system the baker knows ({e})"))
+    };
+    let (from, to) = (proj(&dem.crs)?, proj(raster_crs)?);
+    let [ex, ey] = dem.extent_m();
+    let step = ex.max(ey).max(1e-6) / LATTICE_CELLS;
+    // One node beyond each edge, so that every sample of the DEM is inside the lattice.
+    let origin_m = DVec2::splat(-step);
+    let nodes = [
+        (ex / step).ceil() as usize + 3,
+        (ey / step).ceil() as usize + 3,
+    ];
+    let per_m = DVec2::new(dem_size[0] / dem.cell_ew_m, dem_size[1] / dem.cell_ns_m);
+    let mut at = Vec::with_capacity(nodes[0] * nodes[1]);
+    for j in 0..nodes[1] {
+        for i in 0..nodes[0] {
+            let p = origin_m + DVec2::new(i as f64, j as f64) * step;
+            let q = DVec2::from(dem_origin) + p * per_m;
+            let radians = |v: DVec2, latlong: bool| {
+                if latlong {
+                    DVec2::new(v.x.to_radians(), v.y.to_radians())
+                } else {
+                    v
+                }
+            };
+            let q = radians(q, from.is_latlong());
+            let (x, y) = proj4rs::adaptors::transform_xy(&from, &to, q.x, q.y).map_err(|e| {
+                format!(
+                    "a point of the DEM ({:.0} m east, {:.0} m north of its south-west corner)                      does not transform from {} to {} ({e})",
+                    p.x,
+                    p.y,
+                    crs_key(&dem.crs),
+                    crs_key(raster_crs)
+                )
+            })?;
+            let r = if to.is_latlong() {
+                DVec2::new(x.to_degrees(), y.to_degrees())
+            } else {
+                DVec2::new(x, y)
+            };
+            if !r.is_finite() {
+                return Err(format!(
+                    "a point of the DEM ({:.0} m east, {:.0} m north of its south-west corner)                      falls off the map's projection",
+                    p.x, p.y
+                ));
+            }
+            at.push((r - DVec2::from(origin)) / DVec2::from(size));
+        }
+    }
+    Ok(ToRaster::Lattice {
+        origin: origin_m,
+        step,
+        nodes,
+        at,
+    })
 }
 
 impl Placed {
@@ -276,14 +451,14 @@ impl Placed {
     fn on(raster: &Raster, dem: &Dem, path: &Path) -> Result<Placed, WorldError> {
         let (w, h) = (raster.width as usize, raster.height as usize);
         let [ex, ey] = dem.extent_m();
-        let (a, b) = match (
+        let to_raster = match (
             raster.origin.zip(raster.pixel_size),
             dem.origin.zip(dem.pixel_size),
         ) {
-            (None, _) => (
-                DVec2::ZERO,
-                DVec2::new((w - 1) as f64 / ex.max(1e-9), (h - 1) as f64 / ey.max(1e-9)),
-            ),
+            (None, _) => ToRaster::Linear {
+                a: DVec2::ZERO,
+                b: DVec2::new((w - 1) as f64 / ex.max(1e-9), (h - 1) as f64 / ey.max(1e-9)),
+            },
             (Some(_), None) => {
                 return Err(map_error(
                     path,
@@ -291,48 +466,82 @@ impl Placed {
                      (a map without georeferencing spans the DEM exactly)",
                 ));
             }
-            (Some((mo, ms)), Some((d_o, ds))) => {
-                if crs_key(&raster.crs) != crs_key(&dem.crs) {
-                    return Err(map_error(
+            (Some((mo, ms)), Some((d_o, ds))) if crs_key(&raster.crs) != crs_key(&dem.crs) => {
+                reprojection_lattice(&raster.crs, mo, ms, dem, d_o, ds).map_err(|why| {
+                    map_error(
                         path,
                         format!(
-                            "its coordinate system ({}) is not the DEM's ({}): reproject it to the \
-                             DEM's first (gdalwarp -t_srs ... -r near)",
+                            "its coordinate system ({}) is not the DEM's ({}), and {why}: \
+                             reproject it to the DEM's first (gdalwarp -t_srs ... -r near)",
                             or_unstated(&raster.crs),
                             or_unstated(&dem.crs)
                         ),
-                    ));
-                }
+                    )
+                })?
+            }
+            (Some((mo, ms)), Some((d_o, ds))) => {
                 // World metres -> the DEM's units -> the map's samples.
                 let per_m = DVec2::new(ds[0] / dem.cell_ew_m, ds[1] / dem.cell_ns_m);
                 let a = (DVec2::from(d_o) - DVec2::from(mo)) / DVec2::from(ms);
-                (a, per_m / DVec2::from(ms))
+                ToRaster::Linear {
+                    a,
+                    b: per_m / DVec2::from(ms),
+                }
             }
         };
-        // The map's extent in world metres against the DEM's.
-        let lo = (DVec2::splat(-0.5) - a) / b;
-        let hi = (DVec2::new(w as f64 - 0.5, h as f64 - 0.5) - a) / b;
-        if hi.x < 0.0 || hi.y < 0.0 || lo.x > ex || lo.y > ey {
-            return Err(map_error(
-                path,
-                format!(
-                    "it does not overlap the DEM: it spans {:.0}..{:.0} m east and {:.0}..{:.0} m \
-                     north of the DEM's south-west corner, the DEM 0..{ex:.0} and 0..{ey:.0}",
-                    lo.x, hi.x, lo.y, hi.y
-                ),
-            ));
-        }
-        Ok(Placed {
+        let placed = Placed {
             width: w,
             height: h,
-            a,
-            b,
-        })
+            to_raster,
+        };
+        match &placed.to_raster {
+            ToRaster::Linear { a, b } => {
+                // The map's extent in world metres against the DEM's.
+                let lo = (DVec2::splat(-0.5) - *a) / *b;
+                let hi = (DVec2::new(w as f64 - 0.5, h as f64 - 0.5) - *a) / *b;
+                if hi.x < 0.0 || hi.y < 0.0 || lo.x > ex || lo.y > ey {
+                    return Err(map_error(
+                        path,
+                        format!(
+                            "it does not overlap the DEM: it spans {:.0}..{:.0} m east and \
+                             {:.0}..{:.0} m north of the DEM's south-west corner, the DEM \
+                             0..{ex:.0} and 0..{ey:.0}",
+                            lo.x, hi.x, lo.y, hi.y
+                        ),
+                    ));
+                }
+            }
+            ToRaster::Lattice { at, .. } => {
+                let inside = |q: &DVec2| {
+                    q.x > -0.5 && q.y > -0.5 && q.x < w as f64 - 0.5 && q.y < h as f64 - 0.5
+                };
+                if !at.iter().any(inside) {
+                    let (lo, hi) = at.iter().fold(
+                        (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+                        |(lo, hi), q| (lo.min(*q), hi.max(*q)),
+                    );
+                    return Err(map_error(
+                        path,
+                        format!(
+                            "it does not overlap the DEM: reprojected into the map's \
+                             coordinate system ({}), the DEM spans its columns {:.0}..{:.0} \
+                             and rows {:.0}..{:.0} from the south, the map 0..{w} and 0..{h}",
+                            crs_key(&raster.crs),
+                            lo.x,
+                            hi.x,
+                            lo.y,
+                            hi.y
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(placed)
     }
 
     /// The index (row 0 north) of the sample nearest world position `p`, `None` beyond the map.
     fn index_at(&self, p: DVec2) -> Option<usize> {
-        let q = self.a + self.b * p;
+        let q = self.to_raster.map(p);
         let (c, r) = (q.x.round(), q.y.round());
         if c < 0.0 || r < 0.0 || c >= self.width as f64 || r >= self.height as f64 {
             return None;
@@ -541,7 +750,7 @@ mod tests {
                 .iter()
                 .find(|c| c.name.starts_with("Grassland"))
                 .unwrap();
-            assert_eq!(r[&grass.code].0, 1, "{name}: meadow");
+            assert_eq!(r[&grass.code].grass_type, 1, "{name}: meadow");
         }
     }
 
@@ -568,6 +777,10 @@ mod tests {
             ),
             (format!("{head}{}", class(1, "meadow", 1.5)), "0..=1"),
             (format!("{head}class = []\n"), "no [[class]]"),
+            (
+                format!("{head}{}material = \"lava\"\n", class(1, "meadow", 0.5)),
+                "material \"lava\" is not one of verdant's materials (default, soil",
+            ),
             ("name = 3".to_owned(), "cover table"),
         ] {
             let e = case(&text).unwrap_err().to_string();

@@ -263,6 +263,7 @@ pub fn bake(
         derive: None,
         grass_peak: None,
         plant_types: Vec::new(),
+        materials: false,
     };
     // Refuse absurd sizes before allocating anything.
     manifest.validate(&manifest_path)?;
@@ -301,6 +302,7 @@ pub fn bake(
     let mut painted = grid.paint(height_range, opts.seed, &maps, &cancelled, progress)?;
     painted.cancel = opts.cancel.clone();
     check_painted_types(&painted, &manifest, &manifest_path)?;
+    manifest.materials = !painted.material.is_empty();
     progress(BakeStage::Paths, 0, 2);
     let overview = overview_path(&painted, extent);
     progress(BakeStage::Paths, 1, 2);

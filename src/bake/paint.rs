@@ -168,6 +168,8 @@ pub(super) struct Painted {
     pub(super) grid: Grid,
     pub(super) grass_type: Vec<u8>,
     pub(super) density: Vec<u8>,
+    /// Terrain material bytes, where the land-cover table names materials; else empty.
+    pub(super) material: Vec<u8>,
     /// The bake's cancel flag, which the long searches for camera paths check as they go.
     pub(super) cancel: Option<CancelFlag>,
 }
@@ -190,7 +192,7 @@ impl Painted {
 impl Grid {
     /// Paints every sample: from the land-cover map where it has a class there (the slope rule
     /// still holds), by the procedural rule elsewhere; then the density map scales the cover and
-    /// the mask clears it.
+    /// the mask clears it. The class's material is the ground's (the mask leaves it).
     pub(super) fn paint(
         self,
         height_range: [f32; 2],
@@ -202,16 +204,22 @@ impl Grid {
         let n = self.width * self.height;
         let mut grass_type = vec![0u8; n];
         let mut density = vec![0u8; n];
+        let with_materials = maps.cover.is_some_and(|c| c.has_materials());
+        let mut material = vec![0u8; if with_materials { n } else { 0 }];
         let span = f64::from(height_range[1] - height_range[0]);
         for b in 0..self.height {
             for a in 0..self.width {
                 let altitude = (f64::from(self.at(a, b) - height_range[0]) / span).clamp(0.0, 1.0);
                 let (slope, p) = (self.slope_deg(a, b), self.position(a, b));
-                let (t, d) = match maps.cover.and_then(|c| c.paint_at(p)) {
+                let class = maps.cover.and_then(|c| c.paint_at(p));
+                let (t, d) = match class {
                     Some(_) if slope > MAX_GRASS_SLOPE_DEG => (0, 0),
-                    Some(painted) => painted,
+                    Some(c) => (c.grass_type, c.density),
                     None => paint_sample(slope, altitude, p, seed),
                 };
+                if let (Some(m), Some(c)) = (material.get_mut(b * self.width + a), class) {
+                    *m = c.material;
+                }
                 let masked = maps.mask.and_then(|m| m.at(p)).is_some_and(|v| v != 0.0);
                 let d = match maps.density.and_then(|m| m.at(p)) {
                     _ if masked => 0,
@@ -231,6 +239,7 @@ impl Grid {
             grid: self,
             grass_type,
             density,
+            material,
             cancel: None,
         })
     }

@@ -65,6 +65,7 @@ fn painted_indices_beyond_the_types_are_refused() {
         grid,
         grass_type: vec![0, 1, 2, 3],
         density: vec![9; 4],
+        material: Vec::new(),
         cancel: None,
     };
     let mut manifest = crate::world::Manifest::parse(

@@ -84,6 +84,7 @@ pub(super) fn cut_tile(pyramid: &Pyramid, painted: &Painted, id: TileId) -> Tile
         heights: Vec::with_capacity(n),
         grass_type: Vec::with_capacity(n),
         density: Vec::with_capacity(n),
+        material: Vec::with_capacity(if painted.material.is_empty() { 0 } else { n }),
     };
     for j in 0..i64::from(size) {
         let b = ((i64::from(id.y) * cells + j - border) * step + grid.margin) as usize;
@@ -93,6 +94,9 @@ pub(super) fn cut_tile(pyramid: &Pyramid, painted: &Painted, id: TileId) -> Tile
             tile.heights.push(grid.heights[k]);
             tile.grass_type.push(painted.grass_type[k]);
             tile.density.push(painted.density[k]);
+            if let Some(&m) = painted.material.get(k) {
+                tile.material.push(m);
+            }
         }
     }
     tile

@@ -9,7 +9,8 @@ use crate::world::{TileData, TileId};
 pub struct TileAtlas {
     /// Heights, `R32Float`, metres.
     pub heights: wgpu::Texture,
-    /// Grass, `Rgba8Uint`: r = type index, g = density (0..=255), b and a unused.
+    /// Grass, `Rgba8Uint`: r = type index, g = density (0..=255), b = terrain material
+    /// (`crate::world::Material`), a unused.
     pub grass: wgpu::Texture,
     /// Per slot, the identity of what was last written into it on the GPU, as
     /// `[level, x, y, generation]` u32s (16 bytes a slot): an upload writes it with the tile's
@@ -188,21 +189,29 @@ impl TileAtlas {
     ) -> Result<TileData, crate::gpu::ReadbackError> {
         let h = crate::gpu::read_texture_layer(device, queue, &self.heights, slot)?;
         let g = crate::gpu::read_texture_layer(device, queue, &self.grass, slot)?;
+        let material: Vec<u8> = g.chunks_exact(4).map(|t| t[2]).collect();
         Ok(TileData {
             id,
             size: self.size,
             heights: bytemuck::pod_collect_to_vec(&h),
             grass_type: g.chunks_exact(4).map(|t| t[0]).collect(),
             density: g.chunks_exact(4).map(|t| t[1]).collect(),
+            // All default reads back as no material map, as a world without one stores it.
+            material: if material.iter().all(|&m| m == 0) {
+                Vec::new()
+            } else {
+                material
+            },
         })
     }
 }
 
-/// Interleaves a tile's grass type and density into the atlas's RGBA8 texels.
+/// Interleaves a tile's grass type, density and material into the atlas's RGBA8 texels.
 pub fn pack_grass(tile: &TileData) -> Vec<u8> {
     tile.grass_type
         .iter()
         .zip(&tile.density)
-        .flat_map(|(&t, &d)| [t, d, 0, 0])
+        .enumerate()
+        .flat_map(|(k, (&t, &d))| [t, d, tile.material_at(k), 0])
         .collect()
 }

@@ -8,7 +8,7 @@
 //! [`crate::stream::calibrate::calibrate`], stored in the manifest's `[derive]`
 //! table) and faded to zero toward the tile edges. Every term is a function of the global
 //! sample position and of parent samples that neighbouring tiles share, so
-//! neighbours derive identical edge and border values. Grass type is taken from one of the
+//! neighbours derive identical edge and border values. Grass type and terrain material are taken from one of the
 //! nearest parent samples (picked by a hash, so types stay crisp and clump), density is the
 //! rounded mean of the nearest parent samples.
 //!
@@ -176,6 +176,7 @@ pub fn derive_child(
     let mut heights = vec![0.0f32; len];
     let mut grass_type = vec![0u8; len];
     let mut density = vec![0u8; len];
+    let mut material = vec![0u8; if parent.material.is_empty() { 0 } else { len }];
     for j in 0..s {
         for i in 0..s {
             // Position in half parent texels.
@@ -231,7 +232,14 @@ pub fn derive_child(
             heights[o] = h;
             grass_type[o] = parent.grass_type[at(tx, ty)];
             density[o] = ((sum + count / 2) / count) as u8;
+            if let Some(m) = material.get_mut(o) {
+                *m = parent.material[at(tx, ty)];
+            }
         }
+    }
+    // All default is no material map (as the atlas reads it back).
+    if material.iter().all(|&m| m == 0) {
+        material.clear();
     }
     TileData {
         id: child,
@@ -239,6 +247,7 @@ pub fn derive_child(
         heights,
         grass_type,
         density,
+        material,
     }
 }
 

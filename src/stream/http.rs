@@ -38,7 +38,9 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
-use crate::world::format::{decode_density, decode_grass_types, decode_heights, max_file_bytes};
+use crate::world::format::{
+    decode_density, decode_grass_types, decode_heights, decode_material, max_file_bytes,
+};
 use crate::world::manifest::MAX_MANIFEST_BYTES;
 use crate::world::{Manifest, ReadOptions, TileData, TileFile, TileId, World, WorldError};
 
@@ -379,7 +381,7 @@ impl TileSource for HttpSource {
         self.load_cancellable(id, &AtomicBool::new(false))
     }
 
-    /// Fetches the three files one after another; once `cancelled` is set, no further request
+    /// Fetches the tile's files one after another; once `cancelled` is set, no further request
     /// (file or retry) is sent.
     fn load_cancellable(&self, id: TileId, cancelled: &AtomicBool) -> Result<TileData, WorldError> {
         let pyramid = &self.manifest.pyramid;
@@ -393,6 +395,7 @@ impl TileSource for HttpSource {
         let options = ReadOptions {
             height_range_m: self.manifest.height_range_m,
             grass_type_count: self.manifest.grass_types.len(),
+            materials: self.manifest.materials,
         };
         let get = |kind| -> Result<(Vec<u8>, String), WorldError> {
             let url = self.tile_url(id, kind);
@@ -407,12 +410,19 @@ impl TileSource for HttpSource {
         let grass_type = decode_grass_types(&bytes, size, &options, Path::new(&url))?;
         let (bytes, url) = get(TileFile::Density)?;
         let density = decode_density(&bytes, size, Path::new(&url))?;
+        let material = if options.materials {
+            let (bytes, url) = get(TileFile::Material)?;
+            decode_material(&bytes, size, Path::new(&url))?
+        } else {
+            Vec::new()
+        };
         Ok(TileData {
             id,
             size,
             heights,
             grass_type,
             density,
+            material,
         })
     }
 }

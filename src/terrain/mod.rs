@@ -24,6 +24,7 @@ use crate::world::{Manifest, Pyramid, Sky, TileId};
 pub mod contact_shadow;
 pub mod contact_shadow_cpu;
 pub mod far_field;
+pub mod material;
 
 /// Colour target format of the headless tools and the reference images (any format of
 /// [`crate::shaders::encode_srgb_for`] works).

@@ -361,6 +361,7 @@ impl TileSource for FlatField {
             heights,
             grass_type,
             density: vec![255; n],
+            material: Vec::new(),
         })
     }
 }

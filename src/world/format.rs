@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 use super::error::WorldError;
 use super::tile::{Pyramid, TileId};
 
-/// The three files of a stored tile.
+/// The files of a stored tile: three, and a fourth in worlds with terrain materials.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum TileFile {
     /// Heights, `.height.exr`.
@@ -36,10 +36,13 @@ pub enum TileFile {
     Type,
     /// Grass density, `.density.png`.
     Density,
+    /// Terrain materials (`crate::world::Material`), `.material.png`: only in worlds whose
+    /// manifest says `materials = true`.
+    Material,
 }
 
 impl TileFile {
-    /// All three, in the order height, type, density.
+    /// The three every tile has, in the order height, type, density.
     pub const ALL: [TileFile; 3] = [TileFile::Height, TileFile::Type, TileFile::Density];
 
     fn suffix(self) -> &'static str {
@@ -47,6 +50,7 @@ impl TileFile {
             TileFile::Height => "height.exr",
             TileFile::Type => "type.png",
             TileFile::Density => "density.png",
+            TileFile::Material => "material.png",
         }
     }
 }
@@ -72,6 +76,9 @@ pub struct TileData {
     pub grass_type: Vec<u8>,
     /// Grass density, 0..=255 for 0..=1, same layout.
     pub density: Vec<u8>,
+    /// Terrain material bytes (`crate::world::Material`), same layout; empty in a world
+    /// without materials (every sample then [`crate::world::Material::Default`]).
+    pub material: Vec<u8>,
 }
 
 impl TileData {
@@ -97,6 +104,12 @@ impl TileData {
             + self.heights.len() * std::mem::size_of::<f32>()
             + self.grass_type.len()
             + self.density.len()
+            + self.material.len()
+    }
+
+    /// The material byte of sample `k` (0 where the tile has no material map).
+    pub fn material_at(&self, k: usize) -> u8 {
+        self.material.get(k).copied().unwrap_or(0)
     }
 }
 
@@ -108,9 +121,12 @@ pub struct ReadOptions {
     pub height_range_m: [f32; 2],
     /// Number of grass types in the manifest; larger type indices are refused.
     pub grass_type_count: usize,
+    /// Whether the world's tiles have a material map (the manifest's `materials`), read and
+    /// checked then.
+    pub materials: bool,
 }
 
-/// Writes the three files of `tile`, each through a temporary file renamed into place.
+/// Writes the files of `tile` (the material map only where it has one), each through a temporary file renamed into place.
 pub fn write_tile(world_dir: &Path, pyramid: &Pyramid, tile: &TileData) -> Result<(), WorldError> {
     let size = pyramid.samples_per_side();
     let n = size as usize * size as usize;
@@ -126,13 +142,15 @@ pub fn write_tile(world_dir: &Path, pyramid: &Pyramid, tile: &TileData) -> Resul
         || tile.heights.len() != n
         || tile.grass_type.len() != n
         || tile.density.len() != n
+        || !(tile.material.is_empty() || tile.material.len() == n)
     {
         return Err(bad(format!(
-            "expected {size}x{size} samples ({n} per map), found size {} with {} heights, {} types, {} densities",
+            "expected {size}x{size} samples ({n} per map), found size {} with {} heights, {} types, {} densities, {} materials",
             tile.size,
             tile.heights.len(),
             tile.grass_type.len(),
-            tile.density.len()
+            tile.density.len(),
+            tile.material.len()
         )));
     }
     if let Some(k) = tile.heights.iter().position(|h| !h.is_finite()) {
@@ -150,7 +168,11 @@ pub fn write_tile(world_dir: &Path, pyramid: &Pyramid, tile: &TileData) -> Resul
     for (kind, data) in [
         (TileFile::Type, &tile.grass_type),
         (TileFile::Density, &tile.density),
+        (TileFile::Material, &tile.material),
     ] {
+        if data.is_empty() {
+            continue;
+        }
         let path = tile_path(world_dir, tile.id, kind);
         let png = encode_png_l8(&north_first(data, size), size).map_err(|message| {
             WorldError::BadTileData {
@@ -164,7 +186,7 @@ pub fn write_tile(world_dir: &Path, pyramid: &Pyramid, tile: &TileData) -> Resul
 }
 
 /// Reads and checks a stored tile. Heights are checked against `height_range_m`; grass type
-/// indices are not checked (use [`read_tile_with`] for that).
+/// indices are not checked and no material map is read (use [`read_tile_with`] for that).
 pub fn read_tile(
     world_dir: &Path,
     pyramid: &Pyramid,
@@ -174,6 +196,7 @@ pub fn read_tile(
     let options = ReadOptions {
         height_range_m,
         grass_type_count: 256,
+        materials: false,
     };
     read_tile_with(world_dir, pyramid, id, &options)
 }
@@ -202,12 +225,20 @@ pub fn read_tile_with(
     let path = tile_path(world_dir, id, TileFile::Density);
     let bytes = read_regular(&path, max_file_bytes(TileFile::Density, size))?;
     let density = decode_density(&bytes, size, &path)?;
+    let material = if options.materials {
+        let path = tile_path(world_dir, id, TileFile::Material);
+        let bytes = read_regular(&path, max_file_bytes(TileFile::Material, size))?;
+        decode_material(&bytes, size, &path)?
+    } else {
+        Vec::new()
+    };
     Ok(TileData {
         id,
         size,
         heights,
         grass_type,
         density,
+        material,
     })
 }
 
@@ -271,6 +302,29 @@ pub fn decode_grass_types(
     Ok(grass_type)
 }
 
+/// Decodes a tile's material map into south-first material bytes, each a
+/// [`crate::world::Material`].
+pub fn decode_material(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<u8>, WorldError> {
+    let material = south_first(&decode_png_l8(bytes, size, path)?, size);
+    if let Some(k) = material
+        .iter()
+        .position(|&m| usize::from(m) >= crate::world::MATERIAL_COUNT)
+    {
+        return Err(WorldError::BadTileData {
+            path: path.to_path_buf(),
+            message: format!(
+                "material {} at sample (i={}, j={}) is not one of the {} materials ({})",
+                material[k],
+                k as u32 % size,
+                k as u32 / size,
+                crate::world::MATERIAL_COUNT,
+                crate::world::Material::names()
+            ),
+        });
+    }
+    Ok(material)
+}
+
 /// Decodes a tile's density map into south-first densities.
 pub fn decode_density(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<u8>, WorldError> {
     Ok(south_first(&decode_png_l8(bytes, size, path)?, size))
@@ -282,7 +336,7 @@ pub fn max_file_bytes(kind: TileFile, size: u32) -> u64 {
     let samples = u64::from(size) * u64::from(size);
     let bytes_per_sample = match kind {
         TileFile::Height => 4,
-        TileFile::Type | TileFile::Density => 1,
+        TileFile::Type | TileFile::Density | TileFile::Material => 1,
     };
     2 * samples * bytes_per_sample + (64 << 10)
 }

@@ -127,6 +127,11 @@ pub struct Manifest {
     /// [`MAX_PLANT_TYPES`]; none by default.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub plant_types: Vec<PlantType>,
+    /// Whether every stored tile has a terrain material map (`{x}_{y}.material.png`, see
+    /// [`super::Material`]), baked from a land-cover table that names materials. Without one
+    /// (the default, and every world baked before materials) the ground follows the grass types.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub materials: bool,
 }
 
 /// Most plant types a world has.

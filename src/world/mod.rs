@@ -11,6 +11,8 @@
 //! worlds/NAME/tiles/L{level}/{x}_{y}.height.exr  heights (f32)
 //! worlds/NAME/tiles/L{level}/{x}_{y}.type.png    grass type index (8-bit)
 //! worlds/NAME/tiles/L{level}/{x}_{y}.density.png grass density (8-bit)
+//! worlds/NAME/tiles/L{level}/{x}_{y}.material.png terrain material (8-bit; only in worlds
+//!                                                 whose manifest says `materials = true`)
 //! ```
 
 pub mod dem;
@@ -22,6 +24,7 @@ pub(crate) mod geotiff;
 pub mod grass_density;
 mod hgt;
 pub mod manifest;
+pub mod material;
 pub mod nodata;
 pub mod tile;
 
@@ -39,6 +42,7 @@ pub use manifest::{
     MAX_PLANT_TYPES, MAX_WIND_SOURCES, Manifest, PLANT_RECIPES, PlantType, PlantWind, Sky,
     SourcePlacement, WindDefaults, WindKey, WindScene, WindSource, WorldSource,
 };
+pub use material::{MATERIAL_COUNT, Material};
 pub use tile::{Bounds, Pyramid, TileId};
 
 /// Heights a world may hold, metres: Earth's surface spans about -10,935 m (the Challenger
@@ -74,6 +78,7 @@ impl World {
         let options = ReadOptions {
             height_range_m: self.manifest.height_range_m,
             grass_type_count: self.manifest.grass_types.len(),
+            materials: self.manifest.materials,
         };
         read_tile_with(&self.dir, &self.manifest.pyramid, id, &options)
     }
