@@ -10,7 +10,8 @@
 //! - [`world`]: GPU-free world format: the `world.toml` manifest (its types and reading in
 //!   `world/manifest.rs`, the wind scenes and camera paths in `manifest/scenes.rs`, the checks
 //!   in `manifest/validate.rs`), [`world::TileId`] quadtree addressing, stored tiles (EXR
-//!   heights, PNG grass type and density), DEM reading (GeoTIFF, SRTM `.hgt`, PNG + sidecar).
+//!   heights, PNG grass type and density, and terrain materials, [`world::Material`], where a
+//!   land-cover table names them), DEM reading (GeoTIFF, SRTM `.hgt`, PNG + sidecar).
 //! - [`camera`]: the camera (f64 position, yaw and pitch, or the caller's own matrices) and
 //!   sampling of the manifest's camera paths.
 //! - [`features`]: the switchable features of the grass model and the terrain's look.
@@ -31,7 +32,8 @@
 //!   rings with hysteresis.
 //! - [`terrain`]: the terrain and sky: the G-buffer, shading and composite passes
 //!   (`terrain/mod.rs`), the contact shadows ([`terrain::contact_shadow`], mirror
-//!   [`terrain::contact_shadow_cpu`]) and the far field's mirror ([`terrain::far_field`]).
+//!   [`terrain::contact_shadow_cpu`]), the far field's mirror ([`terrain::far_field`]) and the
+//!   terrain materials' ([`terrain::material`]: their albedos, water, the sky and the fog).
 //! - [`grass`]: GPU grass: Hi-Z ([`grass::hiz`], mirror [`grass::hiz_cpu`]), generation and
 //!   culling (`grass/generate.rs`, mirror [`grass::generate_cpu`]), the wind on each blade
 //!   (`grass/wind.rs`, mirror [`grass::wind_cpu`]), the draw (`grass/draw.rs`, the blade's shape

@@ -742,9 +742,14 @@ mod tests {
             assert!(t.classes.len() >= 10, "{name}");
             let r = t.resolve(Path::new(name), &types).unwrap();
             assert_eq!(r.len(), t.classes.len());
-            // Water grows nothing; grassland grows meadow.
+            // Water grows nothing and is water; grassland grows meadow.
             let water = t.classes.iter().find(|c| c.name.contains("ater")).unwrap();
-            assert_eq!(r[&water.code], (0, 0), "{name}");
+            let want = ClassPaint {
+                grass_type: 0,
+                density: 0,
+                material: Material::Water as u8,
+            };
+            assert_eq!(r[&water.code], want, "{name}");
             let grass = t
                 .classes
                 .iter()
@@ -790,5 +795,26 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("esa-worldcover, nlcd"), "{e}");
+    }
+
+    #[test]
+    fn the_coordinate_systems_of_land_cover_products_are_known_and_transform_in_radians() {
+        use proj4rs::Proj;
+        for code in [4326, 4269, 3857, 5070, 32610, 32633, 32733, 26910, 3035] {
+            assert!(Proj::from_epsg_code(code).is_ok(), "EPSG:{code}");
+        }
+        // 45 N on UTM 33N's central meridian (15 E): 0.9996 of the meridian arc, 4,984,944.4 m.
+        let (geo, utm) = (
+            Proj::from_epsg_code(4326).unwrap(),
+            Proj::from_epsg_code(32633).unwrap(),
+        );
+        assert!(geo.is_latlong() && !utm.is_latlong());
+        let (x, y) =
+            proj4rs::adaptors::transform_xy(&geo, &utm, 15f64.to_radians(), 45f64.to_radians())
+                .unwrap();
+        assert!((x - 500_000.0).abs() < 0.01, "{x}");
+        assert!((y - 4_982_950.4).abs() < 0.5, "{y}");
+        assert_eq!(epsg_code("EPSG:32633, projected (metres)"), Some(32633));
+        assert_eq!(epsg_code("projected (metres)"), None);
     }
 }
