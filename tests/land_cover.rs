@@ -586,3 +586,57 @@ fn a_frame_over_a_class_boundary_shows_the_grassland_green_and_the_water_as_its_
         );
     }
 }
+
+/// The committed world made with a land-cover map: its tiles hold every material its map was
+/// drawn with (the bay's water, the parcels' crops and soil, the roads, the hills' default
+/// ground), and a frame over the shore from its tour renders on software Vulkan.
+#[test]
+fn the_baylands_world_carries_its_materials_and_renders() {
+    use verdant::RendererConfig;
+    use verdant::tools::Scene;
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/baylands");
+    let terrain = common::Terrain::load(&dir);
+    assert!(terrain.world.manifest.materials);
+    let mut counts = [0usize; verdant::world::MATERIAL_COUNT];
+    for tile in terrain.tiles.values() {
+        for &m in &tile.material {
+            counts[usize::from(m)] += 1;
+        }
+    }
+    for m in [
+        Material::Default,
+        Material::Soil,
+        Material::Crops,
+        Material::Water,
+        Material::Road,
+    ] {
+        assert!(counts[m as usize] > 1000, "{m}: {counts:?}");
+    }
+    let ctx = common::gpu();
+    let world = terrain.world.clone();
+    let camera = verdant::camera::sample_path(&world.manifest.paths[0], 0.0);
+    let config = RendererConfig::for_world(&world);
+    let (w, h) = (96u32, 54u32);
+    let mut scene = Scene::new(&ctx, world, w, h, config).unwrap();
+    assert!(
+        scene
+            .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
+            .unwrap()
+    );
+    scene.render(&ctx, &camera).unwrap();
+    let image = scene.read_image(&ctx).unwrap();
+    // The lower half is ground (greens and browns), not sky: its blue is below its red or green.
+    let (mut ground, mut n) = (0, 0);
+    for y in h / 2..h {
+        for x in 0..w {
+            let [r, g, b, _] = image.get_pixel(x, y).0;
+            ground += usize::from(b < r.max(g));
+            n += 1;
+        }
+    }
+    if ground * 10 < n * 9 {
+        let p = common::failure_dir().join("baylands_tour.png");
+        image.save(&p).unwrap();
+        panic!("{ground} of {n} ground pixels (frame in {})", p.display());
+    }
+}
