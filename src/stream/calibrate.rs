@@ -58,6 +58,35 @@ pub const SCALE_INVARIANT_TREND_LOG2: f64 = 0.25;
 /// down to 25 m), which coarse octaves under-state: the finest measured fall is continued, and
 /// at least this.
 pub const MIN_DECAY_LOG2: f64 = 0.7;
+/// Fewest octaves [`calibrate`] calibrates from the prior with (where fewer than
+/// [`MIN_FIT_OCTAVES`] are measurable): two, for a Hurst exponent to check and the finest
+/// octave's amplitude to compare with the prior's.
+pub const MIN_PRIOR_OCTAVES: usize = 2;
+/// Cell size of the project's DEMs, at which the prior's amplitudes were measured, metres: the
+/// mean of the SRTM tile N37W123's 24.585 m east-west and 30.888 m north-south.
+pub const PRIOR_CELL_M: f64 = 27.74;
+/// The prior's amplitude (log2) for a level of [`PRIOR_CELL_M`] cells one step below its data
+/// (2^-2.39 = 0.19). Measured as the roughness-matching amplitude ([`detail_at_depth`]) of the
+/// project's DEMs at their own resolution: `santa_cruz_1024.png`,
+/// `tests/data/east_bay_768.png` and two 1024 x 1024 windows of land of `sf_bay_3601.png`
+/// (rows 0-1023 and 2200-3223 of columns 2400-3423), -2.52 to -2.35 at depth 1. The line
+/// through their depths 1 to 4 (-2.39 at depth 1, slope [`PRIOR_GROWTH_LOG2`]) is within
+/// 0.13 log2 of every measurement.
+pub const PRIOR_DETAIL_LOG2: f64 = -2.39;
+/// Growth (log2) of the prior's amplitude per step deeper below the data, at the same cell:
+/// the slope of that line (the four DEMs measure -2.41, -2.01, -1.72 and -1.36 on average at
+/// depths 1 to 4).
+pub const PRIOR_GROWTH_LOG2: f64 = 0.34;
+/// Fall (log2) of the prior's amplitude per octave finer level: the slope of the same DEMs'
+/// amplitudes against log2 of the level's cell, at depths 1 to 4, on the DEMs and their
+/// subsamples by 2, 4 and 8 (16 slopes of 0.57 to 0.99, mean 0.71); below [`PRIOR_CELL_M`],
+/// where nothing measures it, continued as the fit's least fall [`MIN_DECAY_LOG2`] is.
+pub const PRIOR_FALL_LOG2: f64 = 0.7;
+/// Largest distance (log2) of the finest octave's measured amplitude from the prior's at its
+/// cell for which the prior describes the terrain: 74 crops of 400 x 400 samples of the same
+/// DEMs (every 156 samples, at most 2% sea) subsampled by 4 and 8 measure -0.52 to +0.23; the
+/// DEMs and their subsamples by 2, 4 and 8, -0.35 to +0.04.
+pub const PRIOR_TOLERANCE_LOG2: f64 = 1.0;
 /// Smallest grid a measured octave's parent may be, samples a side.
 const MIN_OCTAVE_SAMPLES: usize = 12;
 /// Samples kept clear of the grid's edges in the statistics (clamping flattens them).
@@ -291,6 +320,81 @@ fn fit_line_weighted(points: &[(f64, f64, f64)]) -> f64 {
     if sxx > 0.0 { sxy / sxx } else { 0.0 }
 }
 
+/// The prior's amplitude (log2) for a level `depth` steps below its data whose cells are
+/// `cell_m` (metres): [`PRIOR_DETAIL_LOG2`], growing by [`PRIOR_GROWTH_LOG2`] a step deeper,
+/// and falling by [`PRIOR_FALL_LOG2`] an octave finer than [`PRIOR_CELL_M`] (rising an octave
+/// coarser).
+pub fn prior_detail_log2(depth: u32, cell_m: f64) -> f64 {
+    PRIOR_DETAIL_LOG2 + PRIOR_GROWTH_LOG2 * (f64::from(depth) - 1.0)
+        - PRIOR_FALL_LOG2 * (PRIOR_CELL_M / cell_m).log2()
+}
+
+/// [`calibrate`] where fewer than [`MIN_FIT_OCTAVES`] octaves are measurable (at least
+/// [`MIN_PRIOR_OCTAVES`], not flat): the amplitudes come from the prior measured on the
+/// project's DEMs ([`prior_detail_log2`] at each derived level's cell), which the grid checks.
+/// The grid's own amplitudes are not used: on 400 x 400 crops of those DEMs subsampled by 8
+/// (50 samples a side, two octaves), what they measure at 200 to 250 m does not predict what
+/// a level three steps finer needs (correlations -0.09 to -0.06 over 74 crops), while that
+/// need varies little (0.08 log2 standard deviation). Falls back to plain bicubic where the
+/// octaves' `H` is outside 0..=1.5, where Catmull-Rom alone is as rough as the finest octave,
+/// or where the finest octave's amplitude is more than [`PRIOR_TOLERANCE_LOG2`] from the
+/// prior's at its cell (terrain unlike the prior's).
+fn calibrate_from_prior(
+    field: &HeightField<'_>,
+    octaves: &[OctaveFit],
+    mut table: DeriveCalibration,
+) -> DeriveCalibration {
+    let n = octaves.len();
+    let points: Vec<(f64, f64)> = octaves
+        .iter()
+        .map(|o| (f64::from(o.octave), o.residual_rms_m.max(1e-9).log2()))
+        .collect();
+    let (hurst, _, fit_rms) = fit_line(&points);
+    table.hurst = hurst;
+    table.fit_rms_log2 = fit_rms;
+    let too_few = format!("{n} octaves measurable, {MIN_FIT_OCTAVES} needed for the fit");
+    if !(0.0..=1.5).contains(&hurst) {
+        table.note = format!(
+            "poor fit: {too_few}, and H {hurst:.3} over them is outside 0..1.5; plain bicubic"
+        );
+        return table;
+    }
+    if octaves[0].detail <= 0.0 {
+        table.note = format!(
+            "{too_few}; H {hurst:.3}, but Catmull-Rom alone is as rough as the data; plain \
+             bicubic"
+        );
+        return table;
+    }
+    let cell = 0.5 * (field.cell_m.0 + field.cell_m.1);
+    let finest = f64::from(octaves[0].detail);
+    let expected = prior_detail_log2(1, cell).exp2();
+    if (finest.log2() - expected.log2()).abs() > PRIOR_TOLERANCE_LOG2 {
+        table.note = format!(
+            "unlike the prior's terrain: {too_few}; the finest octave needs amplitude \
+             {finest:.3}, the prior {expected:.3} at {cell:.1} m cells (more than \
+             {PRIOR_TOLERANCE_LOG2} log2 apart); plain bicubic"
+        );
+        return table;
+    }
+    for (s, d) in table.detail.iter_mut().enumerate() {
+        let depth = s as u32 + 1;
+        let level_cell = cell / f64::from(depth).exp2();
+        *d = (prior_detail_log2(depth, level_cell).exp2() as f32).min(MAX_DETAIL);
+    }
+    table.decay_log2 = PRIOR_FALL_LOG2;
+    table.method = DeriveMode::Fractal;
+    table.note = format!(
+        "fractal from the prior: {too_few}; H {hurst:.3}, finest octave's amplitude {finest:.3} \
+         (the prior's {expected:.3}); amplitudes from the prior measured on the project's SRTM \
+         DEMs: {:.3} for a level of {PRIOR_CELL_M} m one step below its data, growing \
+         {PRIOR_GROWTH_LOG2} log2 a step deeper and falling {PRIOR_FALL_LOG2} log2 an octave \
+         finer",
+        PRIOR_DETAIL_LOG2.exp2()
+    );
+    table
+}
+
 /// Fits the detail of `derived_levels` levels finer than `field` (a world's finest stored
 /// level, or the coarse grid `verdant eval derive` is given) to the field itself.
 ///
@@ -309,10 +413,16 @@ fn fit_line_weighted(points: &[(f64, f64, f64)]) -> f64 {
 ///    lowered by the finest measured fall per octave, at least [`MIN_DECAY_LOG2`]
 ///    (`decay_log2`).
 ///
+/// With fewer than [`MIN_FIT_OCTAVES`] octaves (a grid of 45 to 88 samples a side: a DEM of
+/// 400 samples subsampled by 8), the amplitudes come from a prior measured on the project's
+/// DEMs instead, checked against the finest octave (`calibrate_from_prior`; `method` stays
+/// `fractal`, `note` says so and states the prior).
+///
 /// Falls back to plain bicubic (`method = "bicubic"`, every amplitude 0, the reason in
-/// `note`) with fewer than [`MIN_FIT_OCTAVES`] octaves, on flat terrain (finest residual
+/// `note`) with fewer than [`MIN_PRIOR_OCTAVES`] octaves, on flat terrain (finest residual
 /// under [`FLAT_RESIDUAL_M`]), where the fit is poor (`H` outside 0..=1.5, deviation above
-/// [`MAX_FIT_RMS_LOG2`]), or where Catmull-Rom alone is as rough as the data.
+/// [`MAX_FIT_RMS_LOG2`]), where Catmull-Rom alone is as rough as the data, or, from the prior,
+/// on terrain unlike the prior's.
 pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> DeriveCalibration {
     let octaves = measure_octaves(field, FIT_OCTAVES, seed);
     let residual_rms_m = octaves.first().map_or(0.0, |o| o.residual_rms_m);
@@ -326,9 +436,10 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
         decay_log2: 0.0,
         detail: vec![0.0; usize::from(derived_levels)],
     };
-    if octaves.len() < MIN_FIT_OCTAVES {
+    if octaves.len() < MIN_PRIOR_OCTAVES {
         table.note = format!(
-            "too few levels: {} octaves measurable, {MIN_FIT_OCTAVES} needed; plain bicubic",
+            "too few levels: {} octaves measurable, {MIN_FIT_OCTAVES} needed for the fit and \
+             {MIN_PRIOR_OCTAVES} for the prior; plain bicubic",
             octaves.len()
         );
         return table;
@@ -339,6 +450,9 @@ pub fn calibrate(field: &HeightField<'_>, derived_levels: u8, seed: u32) -> Deri
              {FLAT_RESIDUAL_M} m; plain bicubic"
         );
         return table;
+    }
+    if octaves.len() < MIN_FIT_OCTAVES {
+        return calibrate_from_prior(field, &octaves, table);
     }
     let points: Vec<(f64, f64)> = octaves
         .iter()
@@ -494,6 +608,131 @@ mod tests {
                 })
                 .sum()
         })
+    }
+
+    /// The default world's source DEM (1024 x 1024 samples of 24.585 m x 30.888 m), every
+    /// `step`-th sample of its `side`-sample window at (`x0`, `y0`): heights and cell.
+    fn santa_cruz(x0: usize, y0: usize, side: usize, step: usize) -> (Vec<f32>, (f64, f64)) {
+        let dem = crate::world::Dem::load(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("worlds/santa-cruz/source/santa_cruz_1024.png"),
+        )
+        .unwrap();
+        let w = dem.width as usize;
+        let heights = (y0..y0 + side)
+            .step_by(step)
+            .flat_map(|y| (x0..x0 + side).step_by(step).map(move |x| (x, y)))
+            .map(|(x, y)| dem.heights[y * w + x])
+            .collect();
+        let k = step as f64;
+        (heights, (dem.cell_ew_m * k, dem.cell_ns_m * k))
+    }
+
+    fn square(heights: &[f32], cell_m: (f64, f64)) -> HeightField<'_> {
+        let side = (heights.len() as f64).sqrt() as usize;
+        assert_eq!(side * side, heights.len());
+        HeightField {
+            width: side,
+            height: side,
+            cell_m,
+            heights,
+        }
+    }
+
+    #[test]
+    fn the_prior_matches_the_dem_it_was_measured_on() {
+        // The roughness-matching amplitude of the default world's DEM at its own resolution,
+        // one to four steps below it, against the prior's at that cell.
+        let (heights, cell) = santa_cruz(0, 0, 1024, 1);
+        let field = square(&heights, cell);
+        for depth in 1..=4 {
+            let measured = f64::from(detail_at_depth(&field, depth, 1).unwrap()).log2();
+            let prior = prior_detail_log2(depth, 0.5 * (cell.0 + cell.1));
+            assert!(
+                (measured - prior).abs() < 0.15,
+                "depth {depth}: measured {measured:.3}, prior {prior:.3} (log2)"
+            );
+        }
+    }
+
+    #[test]
+    fn two_octaves_take_their_detail_from_the_prior() {
+        // A 400-sample window of the default world's DEM, every 8th sample: 50 x 50 samples of
+        // about 220 m, two octaves measurable.
+        let (heights, cell) = santa_cruz(0, 0, 400, 8);
+        let table = calibrate(&square(&heights, cell), 6, 1);
+        assert_eq!(table.octaves, 2);
+        assert_eq!(table.method, DeriveMode::Fractal, "{}", table.note);
+        assert!(
+            table.note.starts_with("fractal from the prior"),
+            "{}",
+            table.note
+        );
+        assert!(
+            table.note.contains("2 octaves measurable"),
+            "{}",
+            table.note
+        );
+        assert!((0.0..=1.5).contains(&table.hurst), "{}", table.note);
+        assert_eq!(table.decay_log2, PRIOR_FALL_LOG2);
+        let mean_cell = 0.5 * (cell.0 + cell.1);
+        for (s, &d) in table.detail.iter().enumerate() {
+            let depth = s as u32 + 1;
+            let want = prior_detail_log2(depth, mean_cell / f64::from(depth).exp2()).exp2();
+            assert!((f64::from(d) - want).abs() < 1e-6, "{:?}", table.detail);
+        }
+        // Three steps below, at the DEM's own cell, the prior asks for about 0.3.
+        assert!(
+            (0.28..=0.33).contains(&table.detail[2]),
+            "{:?}",
+            table.detail
+        );
+        // The amplitudes fall level by level below the data.
+        assert!(
+            table.detail.windows(2).all(|w| w[1] < w[0]),
+            "{:?}",
+            table.detail
+        );
+    }
+
+    #[test]
+    fn the_same_terrain_at_finer_cells_is_unlike_the_prior() {
+        // The 50 x 50 grid above, said to be of 25 m cells: its amplitudes are those of 220 m
+        // SRTM, eight times what 25 m SRTM needs.
+        let (heights, _) = santa_cruz(0, 0, 400, 8);
+        let table = calibrate(&square(&heights, (25.0, 25.0)), 3, 1);
+        assert_eq!(table.method, DeriveMode::Bicubic, "{}", table.note);
+        assert!(table.note.starts_with("unlike the prior"), "{}", table.note);
+        assert_eq!(table.detail, vec![0.0; 3]);
+    }
+
+    #[test]
+    fn flat_and_featureless_small_grids_fall_back_to_plain_bicubic() {
+        // Two octaves of a level grid and of a tilted plane: flat.
+        for plane in [
+            field(50, 50, |_, _| 100.0),
+            field(50, 50, |x, y| 100.0 + 0.5 * x as f32 + 0.25 * y as f32),
+        ] {
+            let table = calibrate(&square(&plane, (200.0, 250.0)), 3, 1);
+            assert_eq!(table.method, DeriveMode::Bicubic);
+            assert!(table.note.starts_with("flat"), "{}", table.note);
+            assert_eq!(table.detail, vec![0.0; 3]);
+        }
+        // Two octaves of white noise: its residual does not grow with scale (H below 0).
+        let noise = field(50, 50, |x, y| 100.0 * unit(hash4(x as u32, y as u32, 3, 4)));
+        let table = calibrate(&square(&noise, (200.0, 250.0)), 3, 1);
+        assert_eq!(table.method, DeriveMode::Bicubic, "{}", table.note);
+        assert!(table.note.starts_with("poor fit"), "{}", table.note);
+        assert_eq!(table.detail, vec![0.0; 3]);
+    }
+
+    #[test]
+    fn the_default_worlds_dem_is_fitted_without_the_prior() {
+        // Four octaves: the fit, as baked into the default world.
+        let (heights, cell) = santa_cruz(0, 0, 1024, 1);
+        let table = calibrate(&square(&heights, cell), 1, 1);
+        assert_eq!(table.octaves, 4);
+        assert!(table.note.starts_with("fractal: H"), "{}", table.note);
     }
 
     #[test]

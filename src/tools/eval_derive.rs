@@ -724,6 +724,51 @@ mod tests {
     }
 
     #[test]
+    fn calibrated_method_keeps_400_sample_dems_rough_at_bicubic_height_error() {
+        // Three 400 x 400 windows of the default world's DEM: at factor 4 the coarse grid
+        // (100 samples a side) has three octaves to fit; at factor 8 (50 a side) two, and the
+        // amplitudes come from the prior.
+        let dem = Dem::load(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("worlds/santa-cruz/source/santa_cruz_1024.png"),
+        )
+        .unwrap();
+        let full = dem_grid(&dem);
+        for (x0, y0) in [(0, 0), (624, 0), (624, 624)] {
+            let side = 400;
+            let truth = Grid {
+                width: side,
+                height: side,
+                cell: full.cell,
+                data: (y0..y0 + side)
+                    .flat_map(|y| &full.data[y * full.width + x0..y * full.width + x0 + side])
+                    .copied()
+                    .collect(),
+            };
+            for factor in [4, 8] {
+                let bicubic = evaluate(&truth, factor, DeriveMethod::Bicubic, 1);
+                let r = evaluate_calibrated(&truth, factor, 1);
+                let fit = r.fit.as_ref().unwrap();
+                let at = format!("window ({x0}, {y0}) factor {factor}: {}", fit.note);
+                assert!(
+                    (0.8..=1.25).contains(&r.roughness_ratio),
+                    "{at}: roughness {:.3} of the truth's",
+                    r.roughness_ratio
+                );
+                assert!(
+                    r.rmse_m <= 1.15 * bicubic.rmse_m,
+                    "{at}: RMSE {:.3} m, bicubic {:.3} m",
+                    r.rmse_m,
+                    bicubic.rmse_m
+                );
+                if factor == 8 {
+                    assert!(fit.note.starts_with("fractal from the prior"), "{at}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn bicubic_beats_bilinear_beats_nearest_on_smooth_terrain() {
         let t = smooth_grid();
         let r: Vec<f64> = [

@@ -296,8 +296,10 @@ pub const MAX_DETAIL: f32 = 100.0;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DeriveCalibration {
-    /// `fractal`: derived levels add detail at `detail`; `bicubic`: the fit was poor (too few
-    /// levels, flat or irregular terrain) and derived levels are plain Catmull-Rom.
+    /// `fractal`: derived levels add detail at `detail` (fitted, or, where the data has too
+    /// few octaves to fit, from the prior measured on the project's DEMs: `note` says which);
+    /// `bicubic`: the fit was poor (too few levels, flat or irregular terrain) and derived
+    /// levels are plain Catmull-Rom.
     pub method: DeriveMode,
     /// What the fit found, or why it fell back to plain bicubic.
     pub note: String,
