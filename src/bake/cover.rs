@@ -28,6 +28,7 @@ use glam::DVec2;
 use serde::Deserialize;
 
 use crate::world::dem::Dem;
+use crate::world::dem_grid::crs_key;
 use crate::world::error::WorldError;
 use crate::world::manifest::GrassType;
 use crate::world::material::Material;
@@ -608,16 +609,6 @@ impl ValueMap {
     /// The value at world position `p`, `None` beyond the map or where it says nodata.
     pub fn at(&self, p: DVec2) -> Option<f64> {
         self.values[self.placed.index_at(p)?]
-    }
-}
-
-/// The part of a coordinate system's description that identifies it: its EPSG code where it
-/// has one, else the whole description.
-fn crs_key(crs: &str) -> &str {
-    if crs.starts_with("EPSG:") {
-        crs.split([',', ' ']).next().unwrap_or(crs)
-    } else {
-        crs
     }
 }
 

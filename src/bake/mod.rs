@@ -1,7 +1,9 @@
 //! The baker: turns a DEM ([`Dem`]) into a world: a pyramid of stored tiles and `world.toml`.
 //!
 //! 0. The DEM is read ([`Dem::load_with`]: GeoTIFF, SRTM `.hgt` or PNG + sidecar, told apart
-//!    by content) and its nodata samples are filled from the valid heights around them.
+//!    by content; several files, a folder or a VRT joined into one by
+//!    [`crate::world::mosaic`]) and its nodata samples are filled from the valid heights around
+//!    them.
 //! 1. The DEM is resampled (Catmull-Rom bicubic in its own, non-square grid) to square cells at
 //!    the finest stored level, over the whole root grid plus a margin for the tile borders of
 //!    every level. Beyond the DEM the height of the nearest edge point is repeated.
@@ -76,6 +78,9 @@ pub struct BakeOptions {
     /// The DEM: a GeoTIFF, an SRTM `.hgt` tile, or a 16-bit PNG whose sidecar sits beside it
     /// with the extension `.json`.
     pub dem: PathBuf,
+    /// More DEM files joined to `dem` into one on their georeferencing (see
+    /// [`crate::world::mosaic`]); `dem` itself may also be a folder of DEM files or a GDAL VRT.
+    pub more_dems: Vec<PathBuf>,
     /// Spacing of the DEM's samples in metres (east-west, north-south), in place of what the
     /// file says; needed for a TIFF without GeoTIFF tags.
     pub dem_cell_size_m: Option<[f64; 2]>,
@@ -114,6 +119,7 @@ impl Default for BakeOptions {
     fn default() -> Self {
         BakeOptions {
             dem: PathBuf::new(),
+            more_dems: Vec::new(),
             dem_cell_size_m: None,
             out: PathBuf::new(),
             name: None,
@@ -193,8 +199,11 @@ pub fn bake(
     };
 
     progress(BakeStage::LoadDem, 0, 1);
-    let dem = Dem::load_with(
-        &opts.dem,
+    let dems: Vec<PathBuf> = std::iter::once(opts.dem.clone())
+        .chain(opts.more_dems.iter().cloned())
+        .collect();
+    let dem = crate::world::mosaic::load_dems(
+        &dems,
         &DemOptions {
             cell_size_m: opts.dem_cell_size_m,
         },
@@ -240,7 +249,11 @@ pub fn bake(
         wind_scenes: Vec::new(),
         features: Default::default(),
         source: Some(WorldSource {
-            file: file_name(&opts.dem),
+            file: std::iter::once(&opts.dem)
+                .chain(&opts.more_dems)
+                .map(|p| file_name(p))
+                .collect::<Vec<_>>()
+                .join(", "),
             format: dem.format,
             crs: dem.crs.clone(),
             origin: dem.origin,

@@ -14,9 +14,10 @@ use super::progress::bar;
 #[derive(clap::Args)]
 pub(crate) struct BakeArgs {
     /// The DEM: a GeoTIFF, an SRTM .hgt tile, or a 16-bit PNG whose sidecar is the .json of
-    /// the same stem. The format is told from the content.
-    #[arg(long)]
-    pub(crate) dem: PathBuf,
+    /// the same stem (the format is told from the content); or, to join several on their
+    /// georeferencing, --dem repeated, a folder of them, or a GDAL VRT mosaic.
+    #[arg(long, required = true)]
+    pub(crate) dem: Vec<PathBuf>,
     /// Spacing of the DEM's samples in metres, M or EW,NS, in place of what the file says
     /// (needed for a TIFF without GeoTIFF tags).
     #[arg(long, value_name = "M|EW,NS", value_parser = parse_cell_size)]
@@ -79,8 +80,10 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         density_map,
         mask,
     } = args;
+    let mut dems = dem.into_iter();
     let opts = BakeOptions {
-        dem,
+        dem: dems.next().unwrap_or_default(),
+        more_dems: dems.collect(),
         dem_cell_size_m: dem_cell_size,
         out,
         name,

@@ -77,6 +77,10 @@ pub(crate) enum BenchCommand {
         /// Frames of the dolly, 2..=1000.
         #[arg(long, default_value_t = 48, value_parser = clap::value_parser!(u32).range(2..=1000))]
         dolly_frames: u32,
+        /// Only these settings, by name, comma-separated (default: all; "default" and "no LOD"
+        /// are always measured).
+        #[arg(long, value_delimiter = ',')]
+        settings: Vec<String>,
         #[command(flatten)]
         timing: TimingArgs,
         #[command(flatten)]
@@ -398,6 +402,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             out,
             size,
             dolly_frames,
+            settings,
             timing,
             truth,
         } => bench_lod(verdant::tools::BenchLodOptions {
@@ -411,6 +416,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             path: None,
             truth_k: truth.truth,
             truth_reach: truth.truth_reach,
+            settings,
         }),
         BenchCommand::Aa {
             world,

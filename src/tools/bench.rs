@@ -58,6 +58,9 @@ pub struct BenchLodOptions {
     /// 1..=[`crate::tools::truth::REACH_FACTOR`]; less is quicker, and the far band is then
     /// measured out to this many view distances only).
     pub truth_reach: f64,
+    /// Which of `bench lod`'s settings to measure, by name (`--settings`; empty: all of
+    /// them). "default" and "no LOD", the references, are always measured.
+    pub settings: Vec<String>,
 }
 
 impl Default for BenchLodOptions {
@@ -73,6 +76,7 @@ impl Default for BenchLodOptions {
             path: None,
             truth_k: crate::tools::truth::DEFAULT_K,
             truth_reach: crate::tools::truth::REACH_FACTOR,
+            settings: Vec::new(),
         }
     }
 }

@@ -172,6 +172,27 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
     ]
 }
 
+/// The settings of `all` named in `names` (all of them where `names` is empty), "default" and
+/// "no LOD" always among them; a name that is not a setting is refused, listing them.
+pub fn chosen_settings(all: Vec<LodSetting>, names: &[String]) -> Result<Vec<LodSetting>> {
+    if let Some(unknown) = names.iter().find(|n| !all.iter().any(|s| &s.name == *n)) {
+        let known: Vec<&str> = all.iter().map(|s| s.name.as_str()).collect();
+        bail!(
+            "--settings: no setting {unknown:?}; the settings are: {}",
+            known.join(", ")
+        );
+    }
+    Ok(all
+        .into_iter()
+        .filter(|s| {
+            names.is_empty()
+                || s.name == "default"
+                || s.name == "no LOD"
+                || names.iter().any(|n| *n == s.name)
+        })
+        .collect())
+}
+
 /// Result of one setting.
 #[derive(Clone, Debug, Serialize)]
 pub struct SettingResult {
@@ -317,7 +338,7 @@ pub fn run_bench_lod(
         world: &world,
         size: opts.size,
     };
-    let settings = lod_settings(&world);
+    let settings = chosen_settings(lod_settings(&world), &opts.settings)?;
     // Every frame of the benchmark is drawn at time 0 (`Scene::render` keeps the last frame's
     // time), the camera leaving the trail: so is the truth.
     let mut truth = bench.truth(
@@ -774,4 +795,32 @@ fn write_outputs(
     )
     .write_png(&opts.out.join("lod_coverage.png"), 900, 600)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chosen_settings_keep_the_references_and_refuse_unknown_names() {
+        let s = |n: &str| LodSetting::new(n, 1.0, 2.0, 0.1, [5, 3, 2]);
+        let all = vec![
+            s("default"),
+            s("spacing x0.8"),
+            s("width x1.5"),
+            s("no LOD"),
+        ];
+        let names = |v: &[&str]| v.iter().map(|n| n.to_string()).collect::<Vec<_>>();
+        let picked = chosen_settings(all.clone(), &names(&["width x1.5"])).unwrap();
+        let picked: Vec<&str> = picked.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(picked, ["default", "width x1.5", "no LOD"]);
+        assert_eq!(chosen_settings(all.clone(), &[]).unwrap().len(), 4);
+        let e = chosen_settings(all, &names(&["width x9"]))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("\"width x9\"") && e.contains("spacing x0.8"),
+            "{e}"
+        );
+    }
 }

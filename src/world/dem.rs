@@ -88,6 +88,32 @@ impl Dem {
 
     /// [`Dem::load`] with options.
     pub fn load_with(path: &Path, options: &DemOptions) -> Result<Dem, WorldError> {
+        let mut dem = Dem::load_unfilled(path, options)?;
+        dem.fill_nodata(path)?;
+        Ok(dem)
+    }
+
+    /// Fills the nodata samples (NaN) from the heights around them, counting them in
+    /// `nodata_filled`; refuses a DEM with more than [`MAX_NODATA_FRACTION`] nodata, naming
+    /// `path`.
+    pub(crate) fn fill_nodata(&mut self, path: &Path) -> Result<(), WorldError> {
+        let total = self.heights.len() as u64;
+        let nodata = self.heights.iter().filter(|h| h.is_nan()).count() as u64;
+        if nodata as f64 > MAX_NODATA_FRACTION * total as f64 {
+            return Err(WorldError::TooMuchNodata {
+                path: path.to_path_buf(),
+                nodata,
+                total,
+                max_fraction: MAX_NODATA_FRACTION,
+            });
+        }
+        self.nodata_filled =
+            fill_nodata(self.width as usize, self.height as usize, &mut self.heights);
+        Ok(())
+    }
+
+    /// Reads a DEM as its file has it: nodata samples stay NaN.
+    pub(crate) fn load_unfilled(path: &Path, options: &DemOptions) -> Result<Dem, WorldError> {
         if let Some(cell) = options.cell_size_m {
             for (axis, value) in cell.into_iter().enumerate() {
                 let field = format!("DEM cell size option [{axis}]");
@@ -116,17 +142,6 @@ impl Dem {
             dem.cell_ew_m = ew;
             dem.cell_ns_m = ns;
         }
-        let total = dem.heights.len() as u64;
-        let nodata = dem.heights.iter().filter(|h| h.is_nan()).count() as u64;
-        if nodata as f64 > MAX_NODATA_FRACTION * total as f64 {
-            return Err(WorldError::TooMuchNodata {
-                path: path.to_path_buf(),
-                nodata,
-                total,
-                max_fraction: MAX_NODATA_FRACTION,
-            });
-        }
-        dem.nodata_filled = fill_nodata(dem.width as usize, dem.height as usize, &mut dem.heights);
         Ok(dem)
     }
 

@@ -8,6 +8,16 @@ use serde::{Deserialize, Serialize};
 
 use super::error::WorldError;
 
+/// The part of a coordinate system's description that identifies it: its EPSG code where it
+/// has one (`EPSG:32610`), else the whole description.
+pub(crate) fn crs_key(crs: &str) -> &str {
+    if crs.starts_with("EPSG:") {
+        crs.split([',', ' ']).next().unwrap_or(crs)
+    } else {
+        crs
+    }
+}
+
 /// Most samples a DEM may have (16384 x 16384): its heights alone take 1 GiB.
 pub const MAX_DEM_SAMPLES: u64 = 1 << 28;
 

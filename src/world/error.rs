@@ -583,6 +583,16 @@ pub enum WorldError {
         max_fraction: f64,
     },
 
+    /// DEM files that cannot be joined into one: another coordinate system, no georeferencing,
+    /// overlaps that disagree, a gap between them, a VRT or folder that names no DEM.
+    #[error("{}: joining DEM files: {problem}", path.display())]
+    DemMosaic {
+        /// The file (or VRT, or folder) the problem is with.
+        path: PathBuf,
+        /// What is wrong, naming the other file where there is one.
+        problem: String,
+    },
+
     /// A land-cover map that cannot be used: a format, CRS or extent the baker cannot place on
     /// the DEM, or classes its table does not list.
     #[error("{}: land cover: {problem}", path.display())]
@@ -671,6 +681,7 @@ impl WorldError {
             | Cancelled { path }
             | PublishFailed { path, .. }
             | LandCover { path, .. }
+            | DemMosaic { path, .. }
             | CoverTable { path, .. } => Some(path),
             BadOption { .. } | Fetch(_) => None,
         }

@@ -16,7 +16,7 @@
 //! ```
 
 pub mod dem;
-mod dem_grid;
+pub(crate) mod dem_grid;
 pub mod error;
 pub mod format;
 pub mod fuzz;
@@ -25,6 +25,7 @@ pub mod grass_density;
 mod hgt;
 pub mod manifest;
 pub mod material;
+pub mod mosaic;
 pub mod nodata;
 pub mod tile;
 

@@ -1,0 +1,414 @@
+//! Many DEM files as one: adjacent SRTM `.hgt` tiles or GeoTIFF tiles joined on their
+//! georeferencing into one [`Dem`] (`verdant bake --dem A --dem B ...`, a folder of them, or a
+//! GDAL VRT mosaic that lists them).
+//!
+//! - Every file must be georeferenced, in one coordinate system (the same EPSG code).
+//! - The joined grid has the finest spacing among the files; a coarser file is sampled
+//!   bilinearly onto it (its nodata stays nodata).
+//! - **Overlaps**: the first file listed (a folder's in name order, a VRT's in its order) gives
+//!   the heights where files overlap; the others must agree with it there within
+//!   [`OVERLAP_TOLERANCE_M`] (adjacent SRTM tiles share their edge rows exactly), else the join
+//!   is refused naming both files.
+//! - **Gaps**: ground no file covers is nodata, filled like the files' own voids, as long as no
+//!   gap runs more than [`MAX_GAP_SAMPLES`] samples along a row or column; a wider one (files
+//!   that are not neighbours) is refused, naming where it is.
+//! - A VRT's sources are its `SourceFilename`s (relative to the VRT where it says so), joined by
+//!   their own georeferencing as `gdalbuildvrt` lays them out; the VRT's own grid and windows
+//!   are not read.
+//!
+//! The joined heights are held in memory whole, like a single file's.
+
+use std::path::{Path, PathBuf};
+
+use super::dem::DemOptions;
+use super::dem_grid::{Dem, MAX_DEM_SAMPLES, metres_per_degree};
+use super::error::WorldError;
+
+/// Largest difference between two files' heights where they overlap, metres.
+pub const OVERLAP_TOLERANCE_M: f32 = 1.0;
+/// Widest gap between files filled as nodata, samples along a row or column.
+pub const MAX_GAP_SAMPLES: usize = 16;
+/// Most files joined.
+pub const MAX_MOSAIC_FILES: usize = 4096;
+/// Largest VRT read, bytes.
+const MAX_VRT_BYTES: u64 = 16 << 20;
+
+fn mosaic_error(path: &Path, problem: impl ToString) -> WorldError {
+    WorldError::DemMosaic {
+        path: path.to_path_buf(),
+        problem: problem.to_string(),
+    }
+}
+
+/// The DEM files that `dems` name: each a file, a folder (its `.hgt`, `.tif`, `.tiff` files and
+/// its `.png` files with a `.json` sidecar, in name order) or a GDAL `.vrt` (its sources).
+pub fn dem_files(dems: &[PathBuf]) -> Result<Vec<PathBuf>, WorldError> {
+    let mut files = Vec::new();
+    for d in dems {
+        if d.is_dir() {
+            let entries = std::fs::read_dir(d).map_err(|e| WorldError::io(d, e))?;
+            let mut found: Vec<PathBuf> = entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.is_file() && is_dem_file(p))
+                .collect();
+            found.sort();
+            if found.is_empty() {
+                return Err(mosaic_error(
+                    d,
+                    "the folder holds no DEM file (.hgt, .tif, .tiff, or .png with a .json sidecar)",
+                ));
+            }
+            files.extend(found);
+        } else if has_extension(d, "vrt") {
+            files.extend(vrt_sources(d)?);
+        } else {
+            files.push(d.clone());
+        }
+        if files.len() > MAX_MOSAIC_FILES {
+            return Err(mosaic_error(
+                d,
+                format!("more than {MAX_MOSAIC_FILES} DEM files"),
+            ));
+        }
+    }
+    Ok(files)
+}
+
+fn has_extension(p: &Path, ext: &str) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case(ext))
+}
+
+fn is_dem_file(p: &Path) -> bool {
+    ["hgt", "tif", "tiff"].iter().any(|e| has_extension(p, e))
+        || (has_extension(p, "png") && p.with_extension("json").is_file())
+}
+
+/// The source files of a GDAL VRT, in its order, each once.
+fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
+    let bytes = super::format::read_regular(vrt, MAX_VRT_BYTES)?;
+    let text =
+        String::from_utf8(bytes).map_err(|e| mosaic_error(vrt, format!("not UTF-8: {e}")))?;
+    let doc = roxmltree::Document::parse(&text)
+        .map_err(|e| mosaic_error(vrt, format!("not a VRT (XML): {e}")))?;
+    let root = doc.root_element();
+    if root.tag_name().name() != "VRTDataset" {
+        return Err(mosaic_error(
+            vrt,
+            format!(
+                "not a VRT: its root is <{}>, not <VRTDataset>",
+                root.tag_name().name()
+            ),
+        ));
+    }
+    let base = vrt.parent().unwrap_or(Path::new("."));
+    let mut out: Vec<PathBuf> = Vec::new();
+    for node in root
+        .descendants()
+        .filter(|n| n.has_tag_name("SourceFilename"))
+    {
+        let name = node.text().unwrap_or("").trim();
+        if name.is_empty() {
+            return Err(mosaic_error(vrt, "a <SourceFilename> is empty"));
+        }
+        if name.starts_with("/vsi") || name.contains("://") {
+            return Err(mosaic_error(
+                vrt,
+                format!("source {name:?}: only local files are read"),
+            ));
+        }
+        let relative = node.attribute("relativeToVRT") == Some("1");
+        let p = if relative {
+            base.join(name)
+        } else {
+            PathBuf::from(name)
+        };
+        if !out.contains(&p) {
+            out.push(p);
+        }
+    }
+    if out.is_empty() {
+        return Err(mosaic_error(vrt, "the VRT names no source file"));
+    }
+    Ok(out)
+}
+
+/// One file's grid in the shared coordinate system.
+struct Part {
+    path: PathBuf,
+    dem: Dem,
+    /// South-west sample and spacing, in the coordinate system.
+    origin: [f64; 2],
+    size: [f64; 2],
+}
+
+impl Part {
+    /// The file's height at coordinates `(x, y)`: bilinear between its samples (exact on
+    /// them), NaN where a sample used is nodata; `None` outside it.
+    fn at(&self, x: f64, y: f64) -> Option<f32> {
+        let (w, h) = (self.dem.width as usize, self.dem.height as usize);
+        let c = (x - self.origin[0]) / self.size[0];
+        let r = (y - self.origin[1]) / self.size[1]; // from the south
+        const EPS: f64 = 1e-6;
+        if c < -EPS || r < -EPS || c > (w - 1) as f64 + EPS || r > (h - 1) as f64 + EPS {
+            return None;
+        }
+        let c = c.clamp(0.0, (w - 1) as f64);
+        let r = r.clamp(0.0, (h - 1) as f64);
+        let snap = |v: f64| {
+            if (v - v.round()).abs() < EPS {
+                v.round()
+            } else {
+                v
+            }
+        };
+        let (c, r) = (snap(c), snap(r));
+        let (c0, r0) = (c.floor() as usize, r.floor() as usize);
+        let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
+        let (fc, fr) = ((c - c0 as f64) as f32, (r - r0 as f64) as f32);
+        // Rows are stored north first.
+        let v = |c: usize, r: usize| self.dem.heights[(h - 1 - r) * w + c];
+        if fc == 0.0 && fr == 0.0 {
+            return Some(v(c0, r0));
+        }
+        let south = v(c0, r0) * (1.0 - fc) + v(c1, r0) * fc;
+        let north = v(c0, r1) * (1.0 - fc) + v(c1, r1) * fc;
+        Some(south * (1.0 - fr) + north * fr)
+    }
+}
+
+/// Loads the DEMs `dems` name ([`dem_files`]) as one [`Dem`]: a single file as
+/// [`Dem::load_with`] reads it, several joined (see the module docs). Nodata is filled after the
+/// join, so voids and gaps at the seams are filled from both sides.
+pub fn load_dems(dems: &[PathBuf], options: &DemOptions) -> Result<Dem, WorldError> {
+    let files = dem_files(dems)?;
+    let named = dems.first().cloned().unwrap_or_default();
+    match files.as_slice() {
+        [] => Err(mosaic_error(&named, "no DEM file given")),
+        [one] => Dem::load_with(one, options),
+        _ => {
+            let mut dem = join(&files, options)?;
+            dem.fill_nodata(&named)?;
+            Ok(dem)
+        }
+    }
+}
+
+fn join(files: &[PathBuf], options: &DemOptions) -> Result<Dem, WorldError> {
+    let mut parts: Vec<Part> = Vec::with_capacity(files.len());
+    for f in files {
+        let dem = Dem::load_unfilled(f, options)?;
+        let (Some(origin), Some(size)) = (dem.origin, dem.pixel_size) else {
+            return Err(mosaic_error(
+                f,
+                "it has no georeferencing, so it cannot be joined to the other DEM files",
+            ));
+        };
+        if let Some(first) = parts.first()
+            && crate::world::dem_grid::crs_key(&first.dem.crs)
+                != crate::world::dem_grid::crs_key(&dem.crs)
+        {
+            return Err(mosaic_error(
+                f,
+                format!(
+                    "its coordinate system ({}) is not that of {} ({}): reproject them to one \
+                     first (gdalwarp -t_srs ...)",
+                    or_unstated(&dem.crs),
+                    first.path.display(),
+                    or_unstated(&first.dem.crs)
+                ),
+            ));
+        }
+        parts.push(Part {
+            path: f.clone(),
+            dem,
+            origin,
+            size,
+        });
+    }
+    // The joined grid: the finest spacing, over every file's extent.
+    let size = [0, 1].map(|a| {
+        parts
+            .iter()
+            .map(|p| p.size[a])
+            .fold(f64::INFINITY, f64::min)
+    });
+    let lo = [0, 1].map(|a| {
+        parts
+            .iter()
+            .map(|p| p.origin[a])
+            .fold(f64::INFINITY, f64::min)
+    });
+    let hi = [0, 1].map(|a| {
+        parts
+            .iter()
+            .map(|p| {
+                let n = if a == 0 { p.dem.width } else { p.dem.height };
+                p.origin[a] + f64::from(n - 1) * p.size[a]
+            })
+            .fold(f64::NEG_INFINITY, f64::max)
+    });
+    let n = [0, 1].map(|a| ((hi[a] - lo[a]) / size[a]).round() as u64 + 1);
+    let first = &parts[0].path;
+    if n[0] * n[1] > MAX_DEM_SAMPLES {
+        return Err(mosaic_error(
+            first,
+            format!(
+                "the {} files joined make {} x {} samples, more than the {MAX_DEM_SAMPLES} a \
+                 DEM may have",
+                parts.len(),
+                n[0],
+                n[1]
+            ),
+        ));
+    }
+    let (w, h) = (n[0] as usize, n[1] as usize);
+    let mut heights = vec![f32::NAN; w * h];
+    let mut owner = vec![u32::MAX; w * h];
+    // Overlaps: per pair (first file, later file), samples that disagree and the worst.
+    let mut disagree: Option<(usize, usize, u64, f32)> = None;
+    for (k, part) in parts.iter().enumerate() {
+        // The part's window of the joined grid.
+        let pw = f64::from(part.dem.width - 1) * part.size[0];
+        let ph = f64::from(part.dem.height - 1) * part.size[1];
+        let c0 = ((part.origin[0] - lo[0]) / size[0] - 1e-6).ceil().max(0.0) as usize;
+        let c1 = (((part.origin[0] + pw - lo[0]) / size[0] + 1e-6).floor() as usize).min(w - 1);
+        let r0 = ((part.origin[1] - lo[1]) / size[1] - 1e-6).ceil().max(0.0) as usize;
+        let r1 = (((part.origin[1] + ph - lo[1]) / size[1] + 1e-6).floor() as usize).min(h - 1);
+        for r in r0..=r1 {
+            let y = lo[1] + r as f64 * size[1];
+            for c in c0..=c1 {
+                let x = lo[0] + c as f64 * size[0];
+                let Some(v) = part.at(x, y) else { continue };
+                let i = (h - 1 - r) * w + c;
+                if owner[i] == u32::MAX {
+                    owner[i] = k as u32;
+                    heights[i] = v;
+                } else if heights[i].is_finite() && v.is_finite() {
+                    let d = (heights[i] - v).abs();
+                    if d > OVERLAP_TOLERANCE_M {
+                        let o = owner[i] as usize;
+                        let e = disagree.get_or_insert((o, k, 0, 0.0));
+                        if (e.0, e.1) == (o, k) {
+                            e.2 += 1;
+                            e.3 = e.3.max(d);
+                        }
+                    }
+                } else if heights[i].is_nan() {
+                    // The first file's void: the later file fills it.
+                    heights[i] = v;
+                }
+            }
+        }
+    }
+    if let Some((a, b, count, worst)) = disagree {
+        return Err(mosaic_error(
+            &parts[b].path,
+            format!(
+                "where it overlaps {} their heights differ by more than {OVERLAP_TOLERANCE_M} m \
+                 at {count} samples (by up to {worst:.1} m): the files are not the same data \
+                 (the first file listed is kept where files overlap, and the others must agree \
+                 with it)",
+                parts[a].path.display()
+            ),
+        ));
+    }
+    // Gaps: runs of samples no file covers, along rows and columns.
+    let longest_run = |at: &dyn Fn(usize) -> bool, len: usize| -> (usize, usize) {
+        let (mut best, mut best_end, mut run) = (0, 0, 0);
+        for k in 0..len {
+            if at(k) {
+                run += 1;
+                if run > best {
+                    best = run;
+                    best_end = k;
+                }
+            } else {
+                run = 0;
+            }
+        }
+        (best, best_end)
+    };
+    for r in 0..h {
+        let (run, end) = longest_run(&|c| owner[r * w + c] == u32::MAX, w);
+        if run > MAX_GAP_SAMPLES {
+            return Err(gap_error(&parts, run, lo, size, [end, h - 1 - r]));
+        }
+    }
+    for c in 0..w {
+        let (run, end) = longest_run(&|r| owner[r * w + c] == u32::MAX, h);
+        if run > MAX_GAP_SAMPLES {
+            return Err(gap_error(&parts, run, lo, size, [c, h - 1 - end]));
+        }
+    }
+    // Metres per sample: from the first file, at the joined grid's centre latitude where the
+    // coordinates are degrees.
+    let p0 = &parts[0];
+    let mut cell = [
+        p0.dem.cell_ew_m / p0.size[0] * size[0],
+        p0.dem.cell_ns_m / p0.size[1] * size[1],
+    ];
+    if p0.dem.crs.contains("geographic") {
+        let [m_ew, m_ns] = metres_per_degree(0.5 * (lo[1] + hi[1]));
+        cell = [m_ew * size[0], m_ns * size[1]];
+    }
+    let names: Vec<String> = parts
+        .iter()
+        .map(|p| {
+            p.path
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+        })
+        .collect();
+    let mut sources: Vec<&str> = parts.iter().map(|p| p.dem.source.as_str()).collect();
+    sources.dedup();
+    Ok(Dem {
+        width: w as u32,
+        height: h as u32,
+        cell_ew_m: cell[0],
+        cell_ns_m: cell[1],
+        heights,
+        place: p0.dem.place.clone(),
+        source: format!(
+            "{} files joined ({}){}",
+            parts.len(),
+            names.join(", "),
+            if sources.iter().all(|s| s.is_empty()) {
+                String::new()
+            } else {
+                format!(": {}", sources.join("; "))
+            }
+        ),
+        format: p0.dem.format,
+        crs: p0.dem.crs.clone(),
+        origin: Some(lo),
+        pixel_size: Some(size),
+        nodata_filled: 0,
+    })
+}
+
+fn gap_error(
+    parts: &[Part],
+    run: usize,
+    lo: [f64; 2],
+    size: [f64; 2],
+    at: [usize; 2],
+) -> WorldError {
+    let x = lo[0] + at[0] as f64 * size[0];
+    let y = lo[1] + at[1] as f64 * size[1];
+    let names: Vec<String> = parts.iter().map(|p| p.path.display().to_string()).collect();
+    mosaic_error(
+        &parts[0].path,
+        format!(
+            "no file covers a gap {run} samples long (more than the {MAX_GAP_SAMPLES} filled as \
+             nodata) ending at ({x:.6}, {y:.6}) in their coordinate system: the files ({}) are \
+             not neighbours",
+            names.join(", ")
+        ),
+    )
+}
+
+fn or_unstated(crs: &str) -> &str {
+    if crs.is_empty() { "not stated" } else { crs }
+}

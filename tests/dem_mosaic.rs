@@ -1,0 +1,348 @@
+//! Many DEM files as one: adjacent SRTM `.hgt` tiles and a GDAL VRT of GeoTIFF tiles joined on
+//! their georeferencing, with no step at the joins, baked into one world; files that do not
+//! join are refused, naming them.
+
+use std::path::{Path, PathBuf};
+
+use tiff::encoder::{TiffEncoder, colortype};
+use tiff::tags::Tag;
+use verdant::bake::{BakeOptions, bake};
+use verdant::world::DemOptions;
+use verdant::world::mosaic::load_dems;
+
+mod common;
+
+/// A smooth landscape over longitude and latitude (degrees), whole metres.
+fn landscape(lon: f64, lat: f64) -> i16 {
+    (300.0 + 180.0 * (lon * 2.1).sin() * (lat * 1.7).cos() + 60.0 * (lon * 7.3 + lat * 5.1).sin())
+        .round() as i16
+}
+
+/// Writes the 3-arc-second `.hgt` tile whose south-west corner is (`lon`, `lat`), from
+/// [`landscape`]: 1201 samples a side, rows from the north, sharing its edges with its
+/// neighbours.
+fn write_hgt(dir: &Path, lon: i32, lat: i32) -> PathBuf {
+    let name = format!(
+        "{}{:02}{}{:03}.hgt",
+        if lat >= 0 { 'N' } else { 'S' },
+        lat.abs(),
+        if lon >= 0 { 'E' } else { 'W' },
+        lon.abs()
+    );
+    let mut bytes = Vec::with_capacity(1201 * 1201 * 2);
+    for r in 0..1201 {
+        for c in 0..1201 {
+            let x = f64::from(lon) + f64::from(c) / 1200.0;
+            let y = f64::from(lat + 1) - f64::from(r) / 1200.0;
+            bytes.extend_from_slice(&landscape(x, y).to_be_bytes());
+        }
+    }
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// The largest change between neighbouring samples of `heights` (rows of `w`), along rows and
+/// along columns, skipping column `skip_col` and row `skip_row` (the joins) on either side.
+fn steps(heights: &[f32], w: usize, h: usize, seam_col: usize, seam_row: usize) -> (f32, f32) {
+    let (mut inside, mut seam) = (0.0f32, 0.0f32);
+    for r in 0..h {
+        for c in 1..w {
+            let d = (heights[r * w + c] - heights[r * w + c - 1]).abs();
+            if c == seam_col || c == seam_col + 1 {
+                seam = seam.max(d);
+            } else {
+                inside = inside.max(d);
+            }
+        }
+    }
+    for r in 1..h {
+        for c in 0..w {
+            let d = (heights[r * w + c] - heights[(r - 1) * w + c]).abs();
+            if r == seam_row || r == seam_row + 1 {
+                seam = seam.max(d);
+            } else {
+                inside = inside.max(d);
+            }
+        }
+    }
+    (inside, seam)
+}
+
+fn small_bake(dem: &Path, more: Vec<PathBuf>, out: &Path, cell: f64) {
+    bake(
+        &BakeOptions {
+            dem: dem.to_path_buf(),
+            more_dems: more,
+            out: out.to_path_buf(),
+            name: Some("joined".into()),
+            cell_size_m: Some(cell),
+            tile_cells: 32,
+            stored_levels: 2,
+            ..Default::default()
+        },
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+}
+
+#[test]
+fn four_adjacent_hgt_tiles_bake_into_one_world_with_no_step_at_the_joins() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiles = dir.path().join("srtm");
+    std::fs::create_dir_all(&tiles).unwrap();
+    for (lon, lat) in [(-123, 37), (-122, 37), (-123, 38), (-122, 38)] {
+        write_hgt(&tiles, lon, lat);
+    }
+    // The folder, joined: 2401 samples a side over two degrees, every sample the landscape's.
+    let dem = load_dems(std::slice::from_ref(&tiles), &DemOptions::default()).unwrap();
+    assert_eq!((dem.width, dem.height), (2401, 2401));
+    assert_eq!(dem.origin, Some([-123.0, 37.0]));
+    assert!(dem.source.starts_with("4 files joined"), "{}", dem.source);
+    assert!(dem.crs.contains("4326"), "{}", dem.crs);
+    for (c, r) in [(0, 0), (1200, 1200), (1201, 17), (2400, 2400), (600, 1900)] {
+        let want = landscape(-123.0 + c as f64 / 1200.0, 39.0 - r as f64 / 1200.0);
+        assert_eq!(dem.heights[r * 2401 + c], f32::from(want), "at ({c}, {r})");
+    }
+    // No step at the joins (column and row 1200): the change across them is within the
+    // change between neighbouring samples anywhere else.
+    let (inside, seam) = steps(&dem.heights, 2401, 2401, 1200, 1200);
+    assert!(
+        seam <= inside,
+        "step at the joins {seam} m, elsewhere at most {inside} m"
+    );
+    // Cells in metres at the joined grid's centre latitude (38 degrees N).
+    assert!((dem.cell_ns_m - 92.5).abs() < 0.5, "{}", dem.cell_ns_m);
+    assert!((dem.cell_ew_m - 73.0).abs() < 0.5, "{}", dem.cell_ew_m);
+
+    // The same files listed one by one bake into one world.
+    let files: Vec<PathBuf> = ["N37W123", "N37W122", "N38W123", "N38W122"]
+        .iter()
+        .map(|n| tiles.join(format!("{n}.hgt")))
+        .collect();
+    let out = dir.path().join("world");
+    small_bake(&files[0], files[1..].to_vec(), &out, 1000.0);
+    let world = verdant::World::open(&out).unwrap();
+    let [ex, ey] = world.manifest.extent_m;
+    assert!((ex - 2400.0 * dem.cell_ew_m).abs() < 1.0, "{ex}");
+    assert!((ey - 2400.0 * dem.cell_ns_m).abs() < 1.0, "{ey}");
+    let toml = std::fs::read_to_string(out.join("world.toml")).unwrap();
+    assert!(toml.contains("4 files joined"), "{toml}");
+}
+
+/// GeoKeys: projected, pixel is area, EPSG `epsg`.
+fn keys(epsg: u16) -> Vec<u16> {
+    [
+        [1, 1, 0, 3],
+        [1024, 0, 1, 1],
+        [1025, 0, 1, 1],
+        [3072, 0, 1, epsg],
+    ]
+    .concat()
+}
+
+/// Writes a GeoTIFF tile of `n` x `n` samples of 20 m in EPSG `epsg`, its north-west sample's
+/// corner at (`x0`, `y0`), heights from `f` of the sample's centre (plus `offset`).
+fn write_tile(path: &Path, epsg: u16, n: u32, x0: f64, y0: f64, offset: f32) {
+    let cell = 20.0;
+    let data: Vec<f32> = (0..n * n)
+        .map(|k| {
+            let (c, r) = (f64::from(k % n), f64::from(k / n));
+            let (x, y) = (x0 + (c + 0.5) * cell, y0 - (r + 0.5) * cell);
+            (100.0 + 40.0 * (x / 300.0).sin() + 25.0 * (y / 170.0).cos()) as f32 + offset
+        })
+        .collect();
+    let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut enc = TiffEncoder::new(&mut file).unwrap();
+    let mut image = enc.new_image::<colortype::Gray32Float>(n, n).unwrap();
+    let d = image.encoder();
+    d.write_tag(Tag::ModelPixelScaleTag, &[cell, cell, 0.0][..])
+        .unwrap();
+    d.write_tag(Tag::ModelTiepointTag, &[0.0, 0.0, 0.0, x0, y0, 0.0][..])
+        .unwrap();
+    d.write_tag(Tag::GeoKeyDirectoryTag, &keys(epsg)[..])
+        .unwrap();
+    image.write_data(&data).unwrap();
+}
+
+/// Four 33 x 33 tiles of 20 m in a 2 x 2 grid, sharing their edge samples (640 m apart).
+fn write_four(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for (i, j) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+        let p = dir.join(format!("tile_{i}_{j}.tif"));
+        write_tile(
+            &p,
+            32633,
+            33,
+            400_000.0 + 640.0 * f64::from(i),
+            4_100_000.0 - 640.0 * f64::from(j),
+            0.0,
+        );
+        out.push(p);
+    }
+    out
+}
+
+fn write_vrt(path: &Path, sources: &[&str]) {
+    let mut xml = String::from(
+        "<VRTDataset rasterXSize=\"65\" rasterYSize=\"65\">\n  <SRS>EPSG:32633</SRS>\n  \
+         <VRTRasterBand dataType=\"Float32\" band=\"1\">\n",
+    );
+    for s in sources {
+        xml.push_str(&format!(
+            "    <SimpleSource>\n      <SourceFilename relativeToVRT=\"1\">{s}</SourceFilename>\n      \
+             <SourceBand>1</SourceBand>\n    </SimpleSource>\n"
+        ));
+    }
+    xml.push_str("  </VRTRasterBand>\n</VRTDataset>\n");
+    std::fs::write(path, xml).unwrap();
+}
+
+#[test]
+fn a_vrt_of_geotiff_tiles_joins_them_with_no_step_and_bakes() {
+    let dir = tempfile::tempdir().unwrap();
+    write_four(dir.path());
+    let vrt = dir.path().join("mosaic.vrt");
+    write_vrt(
+        &vrt,
+        &[
+            "tile_0_0.tif",
+            "tile_1_0.tif",
+            "tile_0_1.tif",
+            "tile_1_1.tif",
+        ],
+    );
+    let dem = load_dems(std::slice::from_ref(&vrt), &DemOptions::default()).unwrap();
+    assert_eq!((dem.width, dem.height), (65, 65));
+    assert_eq!((dem.cell_ew_m, dem.cell_ns_m), (20.0, 20.0));
+    let (inside, seam) = steps(&dem.heights, 65, 65, 32, 32);
+    assert!(
+        seam <= inside,
+        "step at the joins {seam} m, elsewhere at most {inside} m"
+    );
+    // Every sample is the landscape at its centre, whichever tile gave it.
+    let whole = dir.path().join("whole.tif");
+    write_tile(&whole, 32633, 65, 400_000.0, 4_100_000.0, 0.0);
+    let one = verdant::world::Dem::load(&whole).unwrap();
+    assert_eq!(dem.origin, one.origin);
+    let worst = dem
+        .heights
+        .iter()
+        .zip(&one.heights)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-3, "{worst}");
+    let out = dir.path().join("world");
+    small_bake(&vrt, Vec::new(), &out, 20.0);
+    verdant::World::open(&out).unwrap();
+}
+
+#[test]
+fn files_that_do_not_join_are_refused_naming_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let four = write_four(dir.path());
+    let case = |name: &str, files: Vec<PathBuf>, wants: &[&str]| {
+        let e = load_dems(&files, &DemOptions::default())
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        for w in wants {
+            assert!(e.contains(w), "{name}: {e:?} lacks {w:?}");
+        }
+        // The baker refuses them too, and writes nothing.
+        let out = dir.path().join(format!("out_{name}"));
+        let baked = bake(
+            &BakeOptions {
+                dem: files[0].clone(),
+                more_dems: files[1..].to_vec(),
+                out: out.clone(),
+                ..Default::default()
+            },
+            &mut |_, _, _| {},
+        );
+        assert!(baked.is_err(), "{name}");
+        assert!(!out.exists(), "{name}: nothing written");
+    };
+    // Another coordinate system.
+    let other = dir.path().join("zone34.tif");
+    write_tile(&other, 32634, 33, 400_640.0, 4_100_000.0, 0.0);
+    case(
+        "crs",
+        vec![four[0].clone(), other.clone()],
+        &["zone34.tif", "EPSG:32634", "tile_0_0.tif", "EPSG:32633"],
+    );
+    // Overlapping, 5 m apart.
+    let shifted = dir.path().join("shifted.tif");
+    write_tile(&shifted, 32633, 33, 400_320.0, 4_100_000.0, 5.0);
+    case(
+        "overlap",
+        vec![four[0].clone(), shifted],
+        &[
+            "shifted.tif",
+            "tile_0_0.tif",
+            "differ by more than 1 m",
+            "5.0 m",
+        ],
+    );
+    // Far apart.
+    let far = dir.path().join("far.tif");
+    write_tile(&far, 32633, 33, 410_000.0, 4_100_000.0, 0.0);
+    case(
+        "gap",
+        vec![four[0].clone(), far],
+        &["gap", "tile_0_0.tif", "far.tif", "not neighbours"],
+    );
+    // A DEM without georeferencing.
+    let png = common::write_dem(
+        dir.path(),
+        "plain",
+        [33, 33],
+        [20.0, 20.0],
+        [0.0, 1.0],
+        |_, _| 100.0,
+    );
+    case(
+        "plain",
+        vec![four[0].clone(), png],
+        &["plain.png", "no georeferencing"],
+    );
+    // A VRT that names nothing, and one that is not XML.
+    let empty = dir.path().join("empty.vrt");
+    write_vrt(&empty, &[]);
+    case("empty", vec![empty], &["empty.vrt", "names no source file"]);
+    let junk = dir.path().join("junk.vrt");
+    std::fs::write(&junk, "not xml at all <").unwrap();
+    case("junk", vec![junk], &["junk.vrt", "not a VRT"]);
+}
+
+#[test]
+fn bake_takes_the_dem_repeated_on_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let four = write_four(dir.path());
+    let mut args = vec!["bake".to_owned()];
+    for f in &four {
+        args.extend(["--dem".to_owned(), f.to_str().unwrap().to_owned()]);
+    }
+    args.extend(
+        [
+            "--out",
+            "w",
+            "--cell-size",
+            "20",
+            "--tile-cells",
+            "32",
+            "--levels",
+            "2",
+        ]
+        .map(str::to_owned),
+    );
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = common::verdant(&args, dir.path());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let world = verdant::World::open(&dir.path().join("w")).unwrap();
+    assert_eq!(world.manifest.extent_m, [1280.0, 1280.0]);
+}
