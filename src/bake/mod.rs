@@ -51,6 +51,7 @@ pub mod cover;
 mod paint;
 mod publish;
 mod resample;
+pub mod shard;
 #[cfg(test)]
 mod tests;
 mod tiles;
@@ -65,7 +66,9 @@ use author::{helicopter_path, low_path, meadow_path, overview_path, tour_path, w
 use paint::check_painted_types;
 use publish::{Staging, check_out, resolve_out};
 use resample::Grid;
-use tiles::{grass_peak, write_all_tiles};
+use tiles::{grass_peak, write_all_tiles, write_tiles};
+
+pub use shard::ShardStep;
 
 /// Shared samples beyond each tile edge in baked worlds.
 pub const BAKE_BORDER: u32 = 2;
@@ -114,6 +117,8 @@ pub struct BakeOptions {
     /// Stops the bake when set (checked between rows and between tiles): the bake then fails
     /// with [`WorldError::Cancelled`], removes its staging folder and leaves `out` as it was.
     pub cancel: Option<CancelFlag>,
+    /// One shard of a sharded bake, or its finish (see [`shard`]); `None`: the whole bake.
+    pub shard: Option<ShardStep>,
 }
 impl Default for BakeOptions {
     fn default() -> Self {
@@ -132,6 +137,7 @@ impl Default for BakeOptions {
             density_map: None,
             mask: None,
             cancel: None,
+            shard: None,
         }
     }
 }
@@ -155,9 +161,9 @@ pub enum BakeStage {
 }
 
 /// What a bake did.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BakeReport {
-    /// Tiles written (each is three files).
+    /// Tiles written (each is three files, four with materials).
     pub tiles_written: u64,
     /// Stored levels.
     pub levels: u8,
@@ -175,6 +181,9 @@ pub struct BakeReport {
     pub dem_cell_size_m: [f64; 2],
     /// Nodata samples of the DEM filled from the heights around them.
     pub nodata_filled: u64,
+    /// A shard that was already done (its record matched): nothing was run again.
+    #[serde(default)]
+    pub already_done: bool,
 }
 
 /// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
@@ -187,6 +196,26 @@ pub fn bake(
     let manifest_path = opts.out.join("world.toml");
     check_options(opts)?;
     let out = resolve_out(&opts.out)?;
+    let parts = match opts.shard {
+        None => None,
+        Some(step) => {
+            let dems: Vec<PathBuf> = std::iter::once(opts.dem.clone())
+                .chain(opts.more_dems.iter().cloned())
+                .collect();
+            let files = crate::world::mosaic::dem_files(&dems)?;
+            let parts = shard::Parts::open(&out, step.count(), shard::fingerprint(opts, &files)?)?;
+            match step {
+                ShardStep::Shard { index, .. } => {
+                    if let Some(mut report) = parts.done(index) {
+                        report.already_done = true;
+                        return Ok(report);
+                    }
+                }
+                ShardStep::Finish { .. } => parts.check_all_done()?,
+            }
+            Some((step, parts))
+        }
+    };
     let cancelled = || {
         let stop = opts.cancel.as_ref().is_some_and(CancelFlag::is_cancelled);
         if stop {
@@ -332,26 +361,7 @@ pub fn bake(
     manifest.validate(&manifest_path)?;
     cancelled()?;
 
-    let staging = Staging::begin(&out, &opts.out, opts.replace)?;
-    let tiles_written = write_all_tiles(
-        staging.world(),
-        &manifest.pyramid,
-        &painted,
-        &cancelled,
-        progress,
-    )?;
-
-    progress(BakeStage::WriteManifest, 0, 1);
-    write_atomic(
-        &staging.world().join("world.toml"),
-        manifest.to_toml().as_bytes(),
-    )?;
-    // The last chance to stop: once the world is being moved into place, it is finished.
-    cancelled()?;
-    staging.publish()?;
-    progress(BakeStage::WriteManifest, 1, 1);
-
-    Ok(BakeReport {
+    let report = |tiles_written| BakeReport {
         tiles_written,
         levels: manifest.pyramid.stored_levels,
         extent_m: extent,
@@ -361,7 +371,65 @@ pub fn bake(
         dem_samples: [dem.width, dem.height],
         dem_cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
         nodata_filled: dem.nodata_filled,
-    })
+        already_done: false,
+    };
+    // A sharded bake: a shard writes its share into the parts folder and records it; the
+    // finish writes the tiles that cross shards there and publishes them with the manifest.
+    let pyramid = &manifest.pyramid;
+    let mut moved_in = None;
+    if let Some((step, parts)) = &parts {
+        let share = |want: Option<u32>| -> Vec<crate::world::tile::TileId> {
+            tiles::stored_tiles(pyramid)
+                .into_iter()
+                .filter(|&id| shard::owner(pyramid, step.count(), id) == want)
+                .collect()
+        };
+        match *step {
+            ShardStep::Shard { index, .. } => {
+                let tiles = share(Some(index));
+                let n = write_tiles(&parts.dir, pyramid, &painted, tiles, &cancelled, progress)?;
+                let report = report(n);
+                parts.mark_done(index, &report)?;
+                return Ok(report);
+            }
+            ShardStep::Finish { .. } => {
+                write_tiles(
+                    &parts.dir,
+                    pyramid,
+                    &painted,
+                    share(None),
+                    &cancelled,
+                    progress,
+                )?;
+                moved_in = Some(parts.dir.join("tiles"));
+            }
+        }
+    }
+
+    let staging = Staging::begin(&out, &opts.out, opts.replace)?;
+    let tiles_written = match &moved_in {
+        Some(tiles) => {
+            let to = staging.world().join("tiles");
+            std::fs::rename(tiles, &to).map_err(|e| WorldError::io(tiles, e))?;
+            tiles::stored_tiles(pyramid).len() as u64
+        }
+        None => write_all_tiles(staging.world(), pyramid, &painted, &cancelled, progress)?,
+    };
+
+    progress(BakeStage::WriteManifest, 0, 1);
+    write_atomic(
+        &staging.world().join("world.toml"),
+        manifest.to_toml().as_bytes(),
+    )?;
+    // The last chance to stop: once the world is being moved into place, it is finished.
+    cancelled()?;
+    staging.publish()?;
+    if let Some((_, parts)) = &parts {
+        // The world is out; its parts are spent.
+        let _ = std::fs::remove_dir_all(&parts.dir);
+    }
+    progress(BakeStage::WriteManifest, 1, 1);
+    Ok(report(tiles_written))
 }
 
 /// Rounds a cell size to 1, 2, 2.5 or 5 times a power of ten, whichever is nearest in ratio.
@@ -425,6 +493,9 @@ pub(super) fn round_to(v: f64, decimals: usize) -> f64 {
 
 /// Refuses bake options out of range before anything is read, naming the option.
 fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
+    if let Some(step) = opts.shard {
+        step.check()?;
+    }
     let t = opts.tile_cells;
     if !(8..=1024).contains(&t) || !t.is_power_of_two() {
         return Err(WorldError::bad_option(

@@ -12,8 +12,17 @@ use crate::world::tile::{Pyramid, TileId};
 use super::BakeStage;
 use super::paint::Painted;
 
-/// Cuts every stored tile from the painted grid and writes it, on as many threads as the
-/// machine offers; stops between tiles when `cancelled` says so.
+/// Every stored tile, level by level (coarsest first), rows south to north, west to east.
+pub(super) fn stored_tiles(pyramid: &Pyramid) -> Vec<TileId> {
+    (0..pyramid.stored_levels)
+        .flat_map(|level| {
+            let [nx, ny] = pyramid.tiles_at(level);
+            (0..ny).flat_map(move |y| (0..nx).map(move |x| TileId::new(level, x, y)))
+        })
+        .collect()
+}
+
+/// Cuts every stored tile from the painted grid and writes it (see [`write_tiles`]).
 pub(super) fn write_all_tiles(
     out: &Path,
     pyramid: &Pyramid,
@@ -21,12 +30,26 @@ pub(super) fn write_all_tiles(
     cancelled: &(dyn Fn() -> Result<(), WorldError> + Sync),
     progress: &mut dyn FnMut(BakeStage, u64, u64),
 ) -> Result<u64, WorldError> {
-    let tiles: Vec<TileId> = (0..pyramid.stored_levels)
-        .flat_map(|level| {
-            let [nx, ny] = pyramid.tiles_at(level);
-            (0..ny).flat_map(move |y| (0..nx).map(move |x| TileId::new(level, x, y)))
-        })
-        .collect();
+    write_tiles(
+        out,
+        pyramid,
+        painted,
+        stored_tiles(pyramid),
+        cancelled,
+        progress,
+    )
+}
+
+/// Cuts `tiles` from the painted grid and writes them, on as many threads as the machine
+/// offers; stops between tiles when `cancelled` says so.
+pub(super) fn write_tiles(
+    out: &Path,
+    pyramid: &Pyramid,
+    painted: &Painted,
+    tiles: Vec<TileId>,
+    cancelled: &(dyn Fn() -> Result<(), WorldError> + Sync),
+    progress: &mut dyn FnMut(BakeStage, u64, u64),
+) -> Result<u64, WorldError> {
     let total = tiles.len() as u64;
     progress(BakeStage::WriteTiles, 0, total);
     let threads = std::thread::available_parallelism()

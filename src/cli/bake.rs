@@ -62,6 +62,26 @@ pub(crate) struct BakeArgs {
     /// coordinate system).
     #[arg(long)]
     pub(crate) mask: Option<PathBuf>,
+    /// Bake only shard I of N (I from 0 to N-1, e.g. a Kubernetes indexed Job's
+    /// JOB_COMPLETION_INDEX) into a parts folder beside --out; --finish-shards N publishes the
+    /// world once every shard is done. Re-running a finished shard does nothing.
+    #[arg(long, value_name = "I/N", value_parser = parse_shard, conflicts_with = "finish_shards")]
+    pub(crate) shard: Option<(u32, u32)>,
+    /// Finish a bake of N shards: the tiles that cross shards, then the world moved into --out
+    /// with its world.toml last. Refused while any shard is not done.
+    #[arg(long, value_name = "N")]
+    pub(crate) finish_shards: Option<u32>,
+}
+
+fn parse_shard(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("{s:?}: expected I/N, e.g. 0/4 (shard I of N, I from 0 to N-1)");
+    let (i, n) = s.split_once('/').ok_or_else(bad)?;
+    let (i, n): (u32, u32) = (
+        i.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    // The range is the baker's to check (`ShardStep::check`), with the other options.
+    Ok((i, n))
 }
 
 pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
@@ -79,7 +99,14 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         cover_table,
         density_map,
         mask,
+        shard,
+        finish_shards,
     } = args;
+    let shard = match (shard, finish_shards) {
+        (Some((index, count)), _) => Some(verdant::bake::ShardStep::Shard { index, count }),
+        (None, Some(count)) => Some(verdant::bake::ShardStep::Finish { count }),
+        (None, None) => None,
+    };
     let mut dems = dem.into_iter();
     let opts = BakeOptions {
         dem: dems.next().unwrap_or_default(),
@@ -99,6 +126,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
             verdant::bake::CancelFlag::on_termination_signals()
                 .context("installing the SIGINT and SIGTERM handlers")?,
         ),
+        shard,
     };
     let mut current: Option<(String, ProgressBar)> = None;
     let report = bake(&opts, &mut |stage, done, total| {
@@ -118,6 +146,13 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
     if let Some((_, pb)) = current {
         pb.finish();
     }
+    if report.already_done {
+        println!(
+            "shard already done: nothing to do ({} tiles written by its earlier run)",
+            report.tiles_written
+        );
+        return Ok(());
+    }
     println!(
         "read {} ({}, {}x{} samples of {:.3} m x {:.3} m, {} nodata samples filled)",
         opts.dem.display(),
@@ -128,12 +163,20 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         report.dem_cell_size_m[1],
         report.nodata_filled
     );
-    println!(
-        "baked {} tiles in {} levels into {} in {:.1} s",
-        report.tiles_written,
-        report.levels,
-        opts.out.display(),
-        report.seconds
-    );
+    match opts.shard {
+        Some(verdant::bake::ShardStep::Shard { index, count }) => println!(
+            "baked shard {index} of {count}: {} tiles into {} in {:.1} s",
+            report.tiles_written,
+            verdant::bake::shard::parts_dir(&opts.out).display(),
+            report.seconds
+        ),
+        _ => println!(
+            "baked {} tiles in {} levels into {} in {:.1} s",
+            report.tiles_written,
+            report.levels,
+            opts.out.display(),
+            report.seconds
+        ),
+    }
     Ok(())
 }

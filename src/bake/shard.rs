@@ -1,0 +1,255 @@
+//! Sharded bakes, for a batch engine: `verdant bake ... --shard I/N` writes only shard `I`'s
+//! share of the tiles into a parts folder beside the output (`PARENT/.NAME.shards/`), and
+//! `verdant bake ... --finish-shards N`, once every shard is done, writes the tiles that cross
+//! shards, moves the tiles into the output and writes `world.toml` last, so that a world is never
+//! seen half-made.
+//!
+//! - **The shares.** The tiles of the *split level* (the coarsest level with at least four
+//!   tiles a shard, else the finest) are dealt out in row-major runs, `N` runs of nearly equal
+//!   length; a shard writes its split-level tiles and every finer tile under them. The few
+//!   coarser tiles, which cross shards, are the finish step's.
+//! - **Idempotent.** Tiles are written atomically (a temporary file renamed into place), and a
+//!   shard records `done/I-of-N.json` last: a killed shard leaves no record, and its re-run
+//!   writes its share again; a shard whose record matches its options is not run again. The
+//!   record and the folder carry a fingerprint of the bake's options and of its input files
+//!   (size and modification time), so that shards of different bakes are never mixed: a parts
+//!   folder of another bake is refused, naming it.
+//! - **The same world.** Every shard computes the whole bake (the heights, the paint, the
+//!   manifest) and writes only its tiles, so the sharded world is byte for byte the unsharded
+//!   one (`tests/bake_shards.rs`). The heights are still held whole in memory by each shard.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::world::error::WorldError;
+use crate::world::format::write_atomic;
+use crate::world::tile::{Pyramid, TileId};
+
+use super::{BakeOptions, BakeReport};
+
+/// Most shards a bake is split into.
+pub const MAX_SHARDS: u32 = 10_000;
+
+/// What part of a sharded bake a run does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShardStep {
+    /// Shard `index` (0-based) of `count`: its share of the tiles, into the parts folder.
+    Shard {
+        /// This shard, `0..count`.
+        index: u32,
+        /// How many shards.
+        count: u32,
+    },
+    /// The finish: the tiles that cross shards, then the world published whole.
+    Finish {
+        /// How many shards there were.
+        count: u32,
+    },
+}
+
+impl ShardStep {
+    /// The shard count.
+    pub fn count(self) -> u32 {
+        match self {
+            ShardStep::Shard { count, .. } | ShardStep::Finish { count } => count,
+        }
+    }
+
+    /// Refuses a count outside `1..=MAX_SHARDS` and an index not below the count.
+    pub fn check(self) -> Result<(), WorldError> {
+        let count = self.count();
+        if !(1..=MAX_SHARDS).contains(&count) {
+            return Err(WorldError::bad_option(
+                "--shard",
+                count,
+                format!("a shard count in 1..={MAX_SHARDS}"),
+            ));
+        }
+        if let ShardStep::Shard { index, count } = self
+            && index >= count
+        {
+            return Err(WorldError::bad_option(
+                "--shard",
+                format!("{index}/{count}"),
+                format!("I/N with I in 0..{count}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The parts folder of a sharded bake into `out` (resolved): `PARENT/.NAME.shards`.
+pub fn parts_dir(out: &Path) -> PathBuf {
+    let name = out
+        .file_name()
+        .map_or_else(|| "world".into(), |n| n.to_string_lossy().into_owned());
+    out.with_file_name(format!(".{name}.shards"))
+}
+
+/// The level whose tiles are dealt out: the coarsest with at least four tiles a shard, else the
+/// finest stored level.
+pub fn split_level(pyramid: &Pyramid, count: u32) -> u8 {
+    let finest = pyramid.stored_levels - 1;
+    (0..=finest)
+        .find(|&l| {
+            let [nx, ny] = pyramid.tiles_at(l);
+            u64::from(nx) * u64::from(ny) >= 4 * u64::from(count)
+        })
+        .unwrap_or(finest)
+}
+
+/// The shard that writes tile `id`, or `None` for a tile coarser than the split level (the
+/// finish step's).
+pub fn owner(pyramid: &Pyramid, count: u32, id: TileId) -> Option<u32> {
+    let level = split_level(pyramid, count);
+    let a = id.ancestor_at(level)?;
+    let [nx, ny] = pyramid.tiles_at(level);
+    let total = u64::from(nx) * u64::from(ny);
+    let k = u64::from(a.y) * u64::from(nx) + u64::from(a.x);
+    Some((k * u64::from(count) / total) as u32)
+}
+
+/// FNV-1a, 64 bits: a fingerprint that is the same in every build.
+fn fnv(bytes: &[u8], mut h: u64) -> u64 {
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// A fingerprint of what a bake makes: its options (but not where it writes or how it is run)
+/// and the size and modification time of every input file.
+pub fn fingerprint(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, WorldError> {
+    let mut text = format!(
+        "dem {:?} more {:?} dem_cell {:?} name {:?} cell {:?} tile_cells {} levels {} seed {} \
+         cover {:?} density {:?} mask {:?}\n",
+        opts.dem,
+        opts.more_dems,
+        opts.dem_cell_size_m,
+        opts.name,
+        opts.cell_size_m,
+        opts.tile_cells,
+        opts.stored_levels,
+        opts.seed,
+        opts.land_cover,
+        opts.density_map,
+        opts.mask
+    );
+    let mut inputs: Vec<&Path> = dem_files.iter().map(PathBuf::as_path).collect();
+    if let Some((map, table)) = &opts.land_cover {
+        inputs.push(map);
+        if table.is_file() {
+            inputs.push(table);
+        }
+    }
+    inputs.extend(opts.density_map.as_deref());
+    inputs.extend(opts.mask.as_deref());
+    for p in inputs {
+        let meta = std::fs::metadata(p).map_err(|e| WorldError::io(p, e))?;
+        let modified = meta
+            .modified()
+            .ok()
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map_or(0, |d| d.as_nanos());
+        text.push_str(&format!("{} {} {modified}\n", p.display(), meta.len()));
+    }
+    Ok(format!(
+        "{:016x}",
+        fnv(text.as_bytes(), 0xcbf2_9ce4_8422_2325)
+    ))
+}
+
+/// What a finished shard records.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct Done {
+    fingerprint: String,
+    report: BakeReport,
+}
+
+/// The parts folder of one sharded bake.
+pub(super) struct Parts {
+    pub(super) dir: PathBuf,
+    fingerprint: String,
+    count: u32,
+}
+
+const FINGERPRINT_FILE: &str = "fingerprint";
+
+impl Parts {
+    /// Opens (creating it where it does not exist) the parts folder for a bake into `out` of
+    /// `count` shards; refuses one that holds another bake's parts.
+    pub(super) fn open(out: &Path, count: u32, fingerprint: String) -> Result<Parts, WorldError> {
+        let dir = parts_dir(out);
+        std::fs::create_dir_all(&dir).map_err(|e| WorldError::io(&dir, e))?;
+        let record = format!("{fingerprint} {count}\n");
+        let file = dir.join(FINGERPRINT_FILE);
+        match std::fs::read_to_string(&file) {
+            Ok(found) if found == record => {}
+            Ok(found) => {
+                return Err(WorldError::bad_option(
+                    "--shard",
+                    dir.display(),
+                    format!(
+                        "the parts of the same bake (options, input files and shard count): \
+                         this folder holds another bake's ({}); finish that bake, or remove \
+                         the folder",
+                        found.trim()
+                    ),
+                ));
+            }
+            Err(_) => write_atomic(&file, record.as_bytes())?,
+        }
+        Ok(Parts {
+            dir,
+            fingerprint,
+            count,
+        })
+    }
+
+    fn done_path(&self, index: u32) -> PathBuf {
+        self.dir
+            .join("done")
+            .join(format!("{index}-of-{}.json", self.count))
+    }
+
+    /// The report of shard `index` if it is done (for this bake).
+    pub(super) fn done(&self, index: u32) -> Option<BakeReport> {
+        let text = std::fs::read_to_string(self.done_path(index)).ok()?;
+        let done: Done = serde_json::from_str(&text).ok()?;
+        (done.fingerprint == self.fingerprint).then_some(done.report)
+    }
+
+    /// Records shard `index` as done, with its report.
+    pub(super) fn mark_done(&self, index: u32, report: &BakeReport) -> Result<(), WorldError> {
+        let done = Done {
+            fingerprint: self.fingerprint.clone(),
+            report: report.clone(),
+        };
+        let text = serde_json::to_string_pretty(&done).unwrap_or_default();
+        write_atomic(&self.done_path(index), text.as_bytes())
+    }
+
+    /// Refuses to finish while any shard is not done, naming them.
+    pub(super) fn check_all_done(&self) -> Result<(), WorldError> {
+        let missing: Vec<String> = (0..self.count)
+            .filter(|&i| self.done(i).is_none())
+            .map(|i| i.to_string())
+            .collect();
+        if missing.is_empty() {
+            return Ok(());
+        }
+        Err(WorldError::bad_option(
+            "--finish-shards",
+            self.count,
+            format!(
+                "every shard done first: shard{} {} of {} not done (run them with --shard I/{})",
+                if missing.len() == 1 { "" } else { "s" },
+                missing.join(", "),
+                self.count,
+                self.count
+            ),
+        ))
+    }
+}

@@ -1,0 +1,211 @@
+//! Sharded bakes: shards run in any order and a finish step make the world byte for byte as the
+//! unsharded bake does; the world appears only after the finish; a killed shard is re-run
+//! alone; a finished shard is not run again; parts of another bake are refused.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use verdant::bake::{BakeOptions, BakeStage, CancelFlag, ShardStep, bake};
+
+mod common;
+
+fn dem(dir: &Path) -> PathBuf {
+    common::write_dem(
+        dir,
+        "hills",
+        [161, 161],
+        [20.0, 20.0],
+        [0.0, 0.1],
+        |x, y| 200.0 + 60.0 * (x / 410.0).sin() * (y / 530.0).cos() + 0.01 * x,
+    )
+}
+
+fn opts(dem: &Path, out: &Path, shard: Option<ShardStep>) -> BakeOptions {
+    BakeOptions {
+        dem: dem.to_path_buf(),
+        out: out.to_path_buf(),
+        name: Some("hills".into()),
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 3,
+        shard,
+        ..Default::default()
+    }
+}
+
+/// Every file under `dir` (relative path -> bytes).
+fn files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.insert(
+                    p.strip_prefix(dir).unwrap().to_path_buf(),
+                    std::fs::read(&p).unwrap(),
+                );
+            }
+        }
+    }
+    out
+}
+
+fn run(o: &BakeOptions) -> Result<verdant::bake::BakeReport, verdant::world::WorldError> {
+    bake(o, &mut |_, _, _| {})
+}
+
+#[test]
+fn shards_and_their_finish_make_the_unsharded_world_byte_for_byte() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = dem(dir.path());
+    let whole = dir.path().join("whole");
+    run(&opts(&dem, &whole, None)).unwrap();
+
+    let out = dir.path().join("sharded");
+    let parts = verdant::bake::shard::parts_dir(&out);
+    let count = 3;
+    let mut written = 0;
+    for index in [2, 0, 1] {
+        let r = run(&opts(&dem, &out, Some(ShardStep::Shard { index, count }))).unwrap();
+        assert!(!r.already_done);
+        assert!(r.tiles_written > 0, "shard {index} wrote nothing");
+        written += r.tiles_written;
+        // Nothing is published before the finish.
+        assert!(!out.exists(), "the world appeared before the finish");
+    }
+    assert!(parts.is_dir());
+    let r = run(&opts(&dem, &out, Some(ShardStep::Finish { count }))).unwrap();
+    let all = r.tiles_written;
+    assert!(
+        written < all,
+        "the finish writes the tiles that cross shards"
+    );
+    assert!(
+        !parts.exists(),
+        "the parts folder is removed once the world is out"
+    );
+    let (a, b) = (files(&whole), files(&out));
+    assert_eq!(
+        a.keys().collect::<Vec<_>>(),
+        b.keys().collect::<Vec<_>>(),
+        "the same files"
+    );
+    for (k, v) in &a {
+        assert!(b[k] == *v, "{} differs", k.display());
+    }
+    assert!(a.len() as u64 >= 3 * all);
+}
+
+#[test]
+fn a_killed_shard_is_rerun_alone_and_a_finished_one_is_not_run_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = dem(dir.path());
+    let out = dir.path().join("w");
+    let count = 2;
+    let shard = |index| Some(ShardStep::Shard { index, count });
+    run(&opts(&dem, &out, shard(0))).unwrap();
+    // Shard 1 is stopped after its first tile.
+    let cancel = CancelFlag::new();
+    let mut o = opts(&dem, &out, shard(1));
+    o.cancel = Some(cancel.clone());
+    let killed = bake(&o, &mut |stage, done, _| {
+        if stage == BakeStage::WriteTiles && done >= 1 {
+            cancel.cancel();
+        }
+    });
+    assert!(killed.is_err());
+    // The finish is refused, naming the shard that is not done; nothing is published.
+    let e = run(&opts(&dem, &out, Some(ShardStep::Finish { count })))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("shard 1 of 2 not done"), "{e}");
+    assert!(!out.exists());
+    // Shard 0 again: already done, nothing written.
+    let parts = verdant::bake::shard::parts_dir(&out);
+    let before = files(&parts);
+    let again = run(&opts(&dem, &out, shard(0))).unwrap();
+    assert!(again.already_done);
+    assert_eq!(files(&parts), before);
+    // Shard 1 re-run alone, then the finish.
+    run(&opts(&dem, &out, shard(1))).unwrap();
+    run(&opts(&dem, &out, Some(ShardStep::Finish { count }))).unwrap();
+    verdant::World::open(&out).unwrap();
+}
+
+#[test]
+fn parts_of_another_bake_and_bad_shards_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = dem(dir.path());
+    let out = dir.path().join("w");
+    run(&opts(
+        &dem,
+        &out,
+        Some(ShardStep::Shard { index: 0, count: 2 }),
+    ))
+    .unwrap();
+    // Another seed is another bake: its shard is refused, naming the parts folder.
+    let mut other = opts(&dem, &out, Some(ShardStep::Shard { index: 1, count: 2 }));
+    other.seed = 7;
+    let e = run(&other).unwrap_err().to_string();
+    assert!(e.contains(".w.shards") && e.contains("another bake"), "{e}");
+    // So is another shard count.
+    let e = run(&opts(
+        &dem,
+        &out,
+        Some(ShardStep::Shard { index: 1, count: 3 }),
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("another bake"), "{e}");
+    for (step, want) in [
+        (ShardStep::Shard { index: 2, count: 2 }, "2/2"),
+        (ShardStep::Shard { index: 0, count: 0 }, "1..=10000"),
+        (ShardStep::Finish { count: 0 }, "1..=10000"),
+    ] {
+        let e = run(&opts(&dem, &dir.path().join("x"), Some(step)))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(want), "{e}");
+    }
+}
+
+#[test]
+fn the_command_line_runs_shards_and_the_finish() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = dem(dir.path());
+    let dem = dem.to_str().unwrap();
+    let base = [
+        "bake",
+        "--dem",
+        dem,
+        "--out",
+        "w",
+        "--cell-size",
+        "20",
+        "--tile-cells",
+        "16",
+    ];
+    for i in ["0/2", "1/2"] {
+        let out = common::verdant(&[&base[..], &["--shard", i]].concat(), dir.path());
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(String::from_utf8_lossy(&out.stdout).contains("baked shard"));
+    }
+    let again = common::verdant(&[&base[..], &["--shard", "1/2"]].concat(), dir.path());
+    assert!(String::from_utf8_lossy(&again.stdout).contains("already done"));
+    let out = common::verdant(&[&base[..], &["--finish-shards", "2"]].concat(), dir.path());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    verdant::World::open(&dir.path().join("w")).unwrap();
+    let bad = common::verdant(&[&base[..], &["--shard", "2/2"]].concat(), dir.path());
+    common::assert_fails_naming(&bad, &["--shard", "2/2"]);
+}
