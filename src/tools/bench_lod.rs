@@ -185,10 +185,7 @@ pub fn chosen_settings(all: Vec<LodSetting>, names: &[String]) -> Result<Vec<Lod
     Ok(all
         .into_iter()
         .filter(|s| {
-            names.is_empty()
-                || s.name == "default"
-                || s.name == "no LOD"
-                || names.iter().any(|n| *n == s.name)
+            names.is_empty() || s.name == "default" || s.name == "no LOD" || names.contains(&s.name)
         })
         .collect())
 }
