@@ -11,7 +11,8 @@
 //!   `world/manifest.rs`, the wind scenes and camera paths in `manifest/scenes.rs`, the checks
 //!   in `manifest/validate.rs`), [`world::TileId`] quadtree addressing, stored tiles (EXR
 //!   heights, PNG grass type and density, and terrain materials, [`world::Material`], where a
-//!   land-cover table names them), DEM reading (GeoTIFF, SRTM `.hgt`, PNG + sidecar).
+//!   land-cover table names them), DEM reading (GeoTIFF, SRTM `.hgt`, PNG + sidecar; many files
+//!   joined into one by [`world::mosaic`]).
 //! - [`camera`]: the camera (f64 position, yaw and pitch, or the caller's own matrices) and
 //!   sampling of the manifest's camera paths.
 //! - [`features`]: the switchable features of the grass model and the terrain's look.
@@ -57,7 +58,7 @@
 //! - [`bake`]: the baker that turns a DEM into a world (GPU-free; it fits the derived levels'
 //!   detail with [`mod@stream::calibrate`]), one module per job: resampling, painting (from the
 //!   procedural rule or a land-cover map, [`bake::cover`]), tiles, authoring camera paths and
-//!   wind scenes, publishing.
+//!   wind scenes, publishing, and sharded bakes for a batch engine ([`bake::shard`]).
 //! - [`aa`]: anti-aliasing methods ([`aa::AntiAliasing`]: off, taa, msaa): temporal
 //!   ([`aa::taa`], mirror [`aa::taa_cpu`], `shaders/aa_taa.wgsl`) and the grass multisampled
 //!   with alpha to coverage ([`aa::msaa`], mirror [`aa::msaa_cpu`], `shaders/aa_msaa.wgsl`).
