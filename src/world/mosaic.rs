@@ -28,7 +28,7 @@ use super::error::WorldError;
 pub const OVERLAP_TOLERANCE_M: f32 = 1.0;
 /// Widest gap between files filled as nodata, samples along a row or column.
 pub const MAX_GAP_SAMPLES: usize = 16;
-/// Most files joined.
+/// Most files joined (below `u16::MAX`, the join's record of which file gave a sample).
 pub const MAX_MOSAIC_FILES: usize = 4096;
 /// Largest VRT read, bytes.
 const MAX_VRT_BYTES: u64 = 16 << 20;
@@ -265,7 +265,8 @@ fn join(files: &[PathBuf], options: &DemOptions) -> Result<Dem, WorldError> {
     }
     let (w, h) = (n[0] as usize, n[1] as usize);
     let mut heights = vec![f32::NAN; w * h];
-    let mut owner = vec![u32::MAX; w * h];
+    // The file that gave each sample (u16: at most MAX_MOSAIC_FILES files).
+    let mut owner = vec![u16::MAX; w * h];
     // Overlaps: per pair (first file, later file), samples that disagree and the worst.
     let mut disagree: Option<(usize, usize, u64, f32)> = None;
     for (k, part) in parts.iter().enumerate() {
@@ -282,8 +283,8 @@ fn join(files: &[PathBuf], options: &DemOptions) -> Result<Dem, WorldError> {
                 let x = lo[0] + c as f64 * size[0];
                 let Some(v) = part.at(x, y) else { continue };
                 let i = (h - 1 - r) * w + c;
-                if owner[i] == u32::MAX {
-                    owner[i] = k as u32;
+                if owner[i] == u16::MAX {
+                    owner[i] = k as u16;
                     heights[i] = v;
                 } else if heights[i].is_finite() && v.is_finite() {
                     let d = (heights[i] - v).abs();
@@ -331,13 +332,13 @@ fn join(files: &[PathBuf], options: &DemOptions) -> Result<Dem, WorldError> {
         (best, best_end)
     };
     for r in 0..h {
-        let (run, end) = longest_run(&|c| owner[r * w + c] == u32::MAX, w);
+        let (run, end) = longest_run(&|c| owner[r * w + c] == u16::MAX, w);
         if run > MAX_GAP_SAMPLES {
             return Err(gap_error(&parts, run, lo, size, [end, h - 1 - r]));
         }
     }
     for c in 0..w {
-        let (run, end) = longest_run(&|r| owner[r * w + c] == u32::MAX, h);
+        let (run, end) = longest_run(&|r| owner[r * w + c] == u16::MAX, h);
         if run > MAX_GAP_SAMPLES {
             return Err(gap_error(&parts, run, lo, size, [c, h - 1 - end]));
         }
