@@ -55,7 +55,8 @@ pub fn dem_files(dems: &[PathBuf]) -> Result<Vec<PathBuf>, WorldError> {
             if found.is_empty() {
                 return Err(mosaic_error(
                     d,
-                    "the folder holds no DEM file (.hgt, .tif, .tiff, or .png with a .json sidecar)",
+                    "it is a folder with no DEM file in it (.hgt, .tif, .tiff, or .png with a \
+                     .json sidecar)",
                 ));
             }
             files.extend(found);
