@@ -211,7 +211,14 @@ pub fn bake(
                         return Ok(report);
                     }
                 }
-                ShardStep::Finish { .. } => parts.check_all_done()?,
+                ShardStep::Finish { .. } => {
+                    parts.check_all_done()?;
+                    // Where no tile crosses shards, the shards' manifest is all the finish
+                    // needs: the world is published without being computed again.
+                    if let Some(report) = finish_from_parts(&parts, &out, opts, step.count())? {
+                        return Ok(report);
+                    }
+                }
             }
             Some((step, parts))
         }
@@ -386,6 +393,7 @@ pub fn bake(
         };
         match *step {
             ShardStep::Shard { index, .. } => {
+                write_atomic(&parts.dir.join("world.toml"), manifest.to_toml().as_bytes())?;
                 let tiles = share(Some(index));
                 let n = write_tiles(&parts.dir, pyramid, &painted, tiles, &cancelled, progress)?;
                 let report = report(n);
@@ -430,6 +438,44 @@ pub fn bake(
     }
     progress(BakeStage::WriteManifest, 1, 1);
     Ok(report(tiles_written))
+}
+
+/// The finish of a sharded bake whose tiles all belong to shards: the manifest the shards wrote
+/// into the parts folder is published with their tiles, nothing computed again. `None` where
+/// tiles cross shards (or the parts hold no manifest): the finish then bakes them.
+fn finish_from_parts(
+    parts: &shard::Parts,
+    out: &Path,
+    opts: &BakeOptions,
+    count: u32,
+) -> Result<Option<BakeReport>, WorldError> {
+    let path = parts.dir.join("world.toml");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return Ok(None);
+    };
+    let manifest = Manifest::parse(&text, &path)?;
+    let pyramid = &manifest.pyramid;
+    let all = tiles::stored_tiles(pyramid);
+    if all
+        .iter()
+        .any(|&id| shard::owner(pyramid, count, id).is_none())
+    {
+        return Ok(None);
+    }
+    let Some(mut report) = parts.done(0) else {
+        return Ok(None);
+    };
+    let start = Instant::now();
+    let staging = Staging::begin(out, &opts.out, opts.replace)?;
+    let tiles = parts.dir.join("tiles");
+    let to = staging.world().join("tiles");
+    std::fs::rename(&tiles, &to).map_err(|e| WorldError::io(&tiles, e))?;
+    write_atomic(&staging.world().join("world.toml"), text.as_bytes())?;
+    staging.publish()?;
+    let _ = std::fs::remove_dir_all(&parts.dir);
+    report.tiles_written = all.len() as u64;
+    report.seconds = start.elapsed().as_secs_f64();
+    Ok(Some(report))
 }
 
 /// Rounds a cell size to 1, 2, 2.5 or 5 times a power of ten, whichever is nearest in ratio.
