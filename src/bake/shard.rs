@@ -15,8 +15,10 @@
 //!   (size and modification time), so that shards of different bakes are never mixed: a parts
 //!   folder of another bake is refused, naming it.
 //! - **The same world.** Every shard computes the whole bake (the heights, the paint, the
-//!   manifest) and writes only its tiles, so the sharded world is byte for byte the unsharded
-//!   one (`tests/bake_shards.rs`). The heights are still held whole in memory by each shard.
+//!   manifest) and writes only its tiles and the manifest, so the sharded world is byte for
+//!   byte the unsharded one (`tests/bake_shards.rs`); the finish computes the bake again only
+//!   where tiles cross shards, and otherwise publishes the shards' manifest. The heights are
+//!   still held whole in memory by each shard.
 
 use std::path::{Path, PathBuf};
 
