@@ -44,9 +44,10 @@ pub(crate) struct BakeArgs {
     /// (otherwise it is refused); its other files are kept.
     #[arg(long)]
     pub(crate) replace: bool,
-    /// A land-cover map: a GeoTIFF of one uint8 or uint16 band in the DEM's coordinate system,
-    /// or a grayscale PNG that spans the DEM. Its classes choose the grass where it has data
-    /// (the procedural rule paints the rest). Needs --cover-table.
+    /// A land-cover map: a GeoTIFF of one uint8 or uint16 band (placed by its georeferencing,
+    /// reprojected by EPSG code where its coordinate system is not the DEM's), or a grayscale
+    /// PNG that spans the DEM. Its classes choose the grass and the ground's material where it
+    /// has data (the procedural rule paints the rest). Needs --cover-table.
     #[arg(long, requires = "cover_table")]
     pub(crate) land_cover: Option<PathBuf>,
     /// What grows on each class of --land-cover: a TOML table, or a built-in one by name
@@ -54,12 +55,12 @@ pub(crate) struct BakeArgs {
     #[arg(long, requires = "land_cover")]
     pub(crate) cover_table: Option<PathBuf>,
     /// A density map that scales the grass cover: a grayscale PNG spanning the DEM (0 to its
-    /// largest value), or a GeoTIFF in the DEM's coordinate system (0..1 floats, or 0..255 or
-    /// 0..65535 integers).
+    /// largest value), or a GeoTIFF placed like --land-cover (0..1 floats, or 0..255 or 0..65535
+    /// integers).
     #[arg(long)]
     pub(crate) density_map: Option<PathBuf>,
-    /// A mask: nothing grows where it is not 0 (a PNG spanning the DEM, or a GeoTIFF in its
-    /// coordinate system).
+    /// A mask: nothing grows where it is not 0 (a PNG spanning the DEM, or a GeoTIFF placed like
+    /// --land-cover).
     #[arg(long)]
     pub(crate) mask: Option<PathBuf>,
     /// Bake only shard I of N (I from 0 to N-1, e.g. a Kubernetes indexed Job's
