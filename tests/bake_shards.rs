@@ -2,12 +2,13 @@
 //! unsharded bake does; the world appears only after the finish; a killed shard is re-run
 //! alone; a finished shard is not run again; parts of another bake are refused.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use verdant::bake::{BakeOptions, BakeStage, CancelFlag, ShardStep, bake};
 
 mod common;
+
+use common::read_all_files;
 
 fn dem(dir: &Path) -> PathBuf {
     common::write_dem(
@@ -31,26 +32,6 @@ fn opts(dem: &Path, out: &Path, shard: Option<ShardStep>) -> BakeOptions {
         shard,
         ..Default::default()
     }
-}
-
-/// Every file under `dir` (relative path -> bytes).
-fn files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                out.insert(
-                    p.strip_prefix(dir).unwrap().to_path_buf(),
-                    std::fs::read(&p).unwrap(),
-                );
-            }
-        }
-    }
-    out
 }
 
 fn run(o: &BakeOptions) -> Result<verdant::bake::BakeReport, verdant::world::WorldError> {
@@ -94,7 +75,7 @@ fn shards_and_their_finish_make_the_unsharded_world_byte_for_byte() {
             !parts.exists(),
             "the parts folder is removed once the world is out"
         );
-        let (a, b) = (files(&whole), files(&out));
+        let (a, b) = (read_all_files(&whole), read_all_files(&out));
         assert_eq!(
             a.keys().collect::<Vec<_>>(),
             b.keys().collect::<Vec<_>>(),
@@ -133,10 +114,10 @@ fn a_killed_shard_is_rerun_alone_and_a_finished_one_is_not_run_again() {
     assert!(!out.exists());
     // Shard 0 again: already done, nothing written.
     let parts = verdant::bake::shard::parts_dir(&out);
-    let before = files(&parts);
+    let before = read_all_files(&parts);
     let again = run(&opts(&dem, &out, shard(0))).unwrap();
     assert!(again.already_done);
-    assert_eq!(files(&parts), before);
+    assert_eq!(read_all_files(&parts), before);
     // Shard 1 re-run alone, then the finish.
     run(&opts(&dem, &out, shard(1))).unwrap();
     run(&opts(&dem, &out, Some(ShardStep::Finish { count }))).unwrap();

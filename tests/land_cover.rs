@@ -535,15 +535,7 @@ fn a_frame_over_a_class_boundary_shows_the_grassland_green_and_the_water_as_its_
     // and the dark body, fogged.
     let light = verdant::terrain::material::SkyLight::of(&scene.world().manifest.sky);
     let inv = camera.view_proj_relative(w as f32 / h as f32).inverse();
-    let to_srgb = |c: f32| {
-        let c = c.clamp(0.0, 1.0);
-        let s = if c <= 0.003_130_8 {
-            12.92 * c
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        };
-        s * 255.0
-    };
+    let to_srgb = |c: f32| 255.0 * verdant::tools::metrics::linear_to_srgb(c);
     let (mut n, mut sum, mut worst) = (0u32, 0.0f32, 0.0f32);
     for y in 0..h {
         for x in 0..w {

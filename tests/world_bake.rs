@@ -7,7 +7,7 @@ mod common;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use common::{Terrain, write_dem, write_sidecar};
+use common::{Terrain, read_all_files, write_dem, write_sidecar};
 use glam::DVec2;
 use verdant::bake::{BakeOptions, BakeStage, bake};
 use verdant::world::{Dem, TileId, WorldError};
@@ -194,23 +194,6 @@ fn cliffs_are_bare_and_flat_ground_is_grassy() {
     }
     assert!(on_wall > 100, "{on_wall} samples on the wall");
     assert!(grassy > 1000, "{grassy} grassy samples on flat ground");
-}
-
-fn read_all_files(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for entry in std::fs::read_dir(&d).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else {
-                let rel = path.strip_prefix(dir).unwrap().to_path_buf();
-                out.insert(rel, std::fs::read(&path).unwrap());
-            }
-        }
-    }
-    out
 }
 
 #[test]

@@ -28,7 +28,7 @@ use glam::DVec2;
 use serde::Deserialize;
 
 use crate::world::dem::Dem;
-use crate::world::dem_grid::crs_key;
+use crate::world::dem_grid::{crs_key, or_unstated};
 use crate::world::error::WorldError;
 use crate::world::manifest::GrassType;
 use crate::world::material::Material;
@@ -610,10 +610,6 @@ impl ValueMap {
     pub fn at(&self, p: DVec2) -> Option<f64> {
         self.values[self.placed.index_at(p)?]
     }
-}
-
-fn or_unstated(crs: &str) -> &str {
-    if crs.is_empty() { "not stated" } else { crs }
 }
 
 /// A raster as read: values row 0 north (`None`: the file's nodata), the value that means

@@ -196,13 +196,13 @@ pub fn bake(
     let manifest_path = opts.out.join("world.toml");
     check_options(opts)?;
     let out = resolve_out(&opts.out)?;
+    let dems: Vec<PathBuf> = std::iter::once(opts.dem.clone())
+        .chain(opts.more_dems.iter().cloned())
+        .collect();
+    let files = crate::world::mosaic::dem_files(&dems)?;
     let parts = match opts.shard {
         None => None,
         Some(step) => {
-            let dems: Vec<PathBuf> = std::iter::once(opts.dem.clone())
-                .chain(opts.more_dems.iter().cloned())
-                .collect();
-            let files = crate::world::mosaic::dem_files(&dems)?;
             let parts = shard::Parts::open(&out, step.count(), shard::fingerprint(opts, &files)?)?;
             match step {
                 ShardStep::Shard { index, .. } => {
@@ -235,11 +235,9 @@ pub fn bake(
     };
 
     progress(BakeStage::LoadDem, 0, 1);
-    let dems: Vec<PathBuf> = std::iter::once(opts.dem.clone())
-        .chain(opts.more_dems.iter().cloned())
-        .collect();
-    let dem = crate::world::mosaic::load_dems(
-        &dems,
+    let dem = crate::world::mosaic::load_files(
+        &files,
+        &opts.dem,
         &DemOptions {
             cell_size_m: opts.dem_cell_size_m,
         },
@@ -285,8 +283,8 @@ pub fn bake(
         wind_scenes: Vec::new(),
         features: Default::default(),
         source: Some(WorldSource {
-            file: std::iter::once(&opts.dem)
-                .chain(&opts.more_dems)
+            file: dems
+                .iter()
                 .map(|p| file_name(p))
                 .collect::<Vec<_>>()
                 .join(", "),

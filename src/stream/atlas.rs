@@ -189,19 +189,13 @@ impl TileAtlas {
     ) -> Result<TileData, crate::gpu::ReadbackError> {
         let h = crate::gpu::read_texture_layer(device, queue, &self.heights, slot)?;
         let g = crate::gpu::read_texture_layer(device, queue, &self.grass, slot)?;
-        let material: Vec<u8> = g.chunks_exact(4).map(|t| t[2]).collect();
         Ok(TileData {
             id,
             size: self.size,
             heights: bytemuck::pod_collect_to_vec(&h),
             grass_type: g.chunks_exact(4).map(|t| t[0]).collect(),
             density: g.chunks_exact(4).map(|t| t[1]).collect(),
-            // All default reads back as no material map, as a world without one stores it.
-            material: if material.iter().all(|&m| m == 0) {
-                Vec::new()
-            } else {
-                material
-            },
+            material: TileData::material_map(g.chunks_exact(4).map(|t| t[2]).collect()),
         })
     }
 }

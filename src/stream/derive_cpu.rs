@@ -237,17 +237,13 @@ pub fn derive_child(
             }
         }
     }
-    // All default is no material map (as the atlas reads it back).
-    if material.iter().all(|&m| m == 0) {
-        material.clear();
-    }
     TileData {
         id: child,
         size: parent.size,
         heights,
         grass_type,
         density,
-        material,
+        material: TileData::material_map(material),
     }
 }
 

@@ -18,6 +18,11 @@ pub(crate) fn crs_key(crs: &str) -> &str {
     }
 }
 
+/// A coordinate system's description for messages: "not stated" where it is empty.
+pub(crate) fn or_unstated(crs: &str) -> &str {
+    if crs.is_empty() { "not stated" } else { crs }
+}
+
 /// Most samples a DEM may have (16384 x 16384): its heights alone take 1 GiB.
 pub const MAX_DEM_SAMPLES: u64 = 1 << 28;
 

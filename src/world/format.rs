@@ -107,6 +107,16 @@ impl TileData {
             + self.material.len()
     }
 
+    /// `material` as a tile holds it: a map of only the default material is no map (as a world
+    /// without materials stores it), so that tiles compare equal however they were made.
+    pub fn material_map(material: Vec<u8>) -> Vec<u8> {
+        if material.iter().all(|&m| m == 0) {
+            Vec::new()
+        } else {
+            material
+        }
+    }
+
     /// The material byte of sample `k` (0 where the tile has no material map).
     pub fn material_at(&self, k: usize) -> u8 {
         self.material.get(k).copied().unwrap_or(0)

@@ -21,7 +21,7 @@
 use std::path::{Path, PathBuf};
 
 use super::dem::DemOptions;
-use super::dem_grid::{Dem, MAX_DEM_SAMPLES, metres_per_degree};
+use super::dem_grid::{Dem, MAX_DEM_SAMPLES, crs_key, metres_per_degree, or_unstated};
 use super::error::WorldError;
 
 /// Largest difference between two files' heights where they overlap, metres.
@@ -183,14 +183,23 @@ impl Part {
 /// [`Dem::load_with`] reads it, several joined (see the module docs). Nodata is filled after the
 /// join, so voids and gaps at the seams are filled from both sides.
 pub fn load_dems(dems: &[PathBuf], options: &DemOptions) -> Result<Dem, WorldError> {
-    let files = dem_files(dems)?;
     let named = dems.first().cloned().unwrap_or_default();
-    match files.as_slice() {
-        [] => Err(mosaic_error(&named, "no DEM file given")),
+    load_files(&dem_files(dems)?, &named, options)
+}
+
+/// Loads DEM files that [`dem_files`] listed as one [`Dem`] (see [`load_dems`]); `named` is
+/// what the user gave, for the errors that concern them all.
+pub fn load_files(
+    files: &[PathBuf],
+    named: &Path,
+    options: &DemOptions,
+) -> Result<Dem, WorldError> {
+    match files {
+        [] => Err(mosaic_error(named, "no DEM file given")),
         [one] => Dem::load_with(one, options),
         _ => {
-            let mut dem = join(&files, options)?;
-            dem.fill_nodata(&named)?;
+            let mut dem = join(files, options)?;
+            dem.fill_nodata(named)?;
             Ok(dem)
         }
     }
@@ -207,8 +216,7 @@ fn join(files: &[PathBuf], options: &DemOptions) -> Result<Dem, WorldError> {
             ));
         };
         if let Some(first) = parts.first()
-            && crate::world::dem_grid::crs_key(&first.dem.crs)
-                != crate::world::dem_grid::crs_key(&dem.crs)
+            && crs_key(&first.dem.crs) != crs_key(&dem.crs)
         {
             return Err(mosaic_error(
                 f,
@@ -409,8 +417,4 @@ fn gap_error(
             names.join(", ")
         ),
     )
-}
-
-fn or_unstated(crs: &str) -> &str {
-    if crs.is_empty() { "not stated" } else { crs }
 }

@@ -300,3 +300,21 @@ pub fn world_with_plant(dir: &Path, mesh: &str) -> std::path::PathBuf {
     std::fs::write(w.join("world.toml"), edited).unwrap();
     w
 }
+
+/// Every file under `dir`: its path relative to `dir`, and its bytes.
+pub fn read_all_files(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let rel = path.strip_prefix(dir).unwrap().to_path_buf();
+                out.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    out
+}
