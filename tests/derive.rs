@@ -77,6 +77,7 @@ fn assert_matches_mirror(gpu: &TileData, cpu: &TileData) {
         gpu.id
     );
     assert_eq!(gpu.density, cpu.density, "{:?}: densities differ", gpu.id);
+    assert_eq!(gpu.material, cpu.material, "{:?}: materials differ", gpu.id);
     eprintln!(
         "{:?}: largest GPU-CPU height difference {worst:e} m",
         gpu.id
@@ -87,9 +88,16 @@ fn assert_matches_mirror(gpu: &TileData, cpu: &TileData) {
 fn gpu_derivation_matches_the_cpu_mirror_over_two_generations() {
     let world = World::open(&common::default_world()).unwrap();
     let rig = Rig::new(&world, 16);
-    // A steep tile in the mountains and a flat one in the valley.
+    // A steep tile in the mountains and a flat one in the valley, the latter with a material
+    // map of every material in a pattern (the default world has none).
     for (slot0, parent_id) in [(0u32, TileId::new(2, 3, 5)), (8, TileId::new(2, 7, 10))] {
-        let parent = world.load_tile(parent_id).unwrap();
+        let mut parent = world.load_tile(parent_id).unwrap();
+        if slot0 == 8 {
+            let n = parent.heights.len();
+            parent.material = (0..n)
+                .map(|k| ((k * 7 + k / 13) % verdant::world::MATERIAL_COUNT) as u8)
+                .collect();
+        }
         rig.atlas.upload(&rig.ctx.queue, slot0, &parent).unwrap();
         let children = parent_id.children();
         let jobs: Vec<DeriveJob> = children
