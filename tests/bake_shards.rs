@@ -149,6 +149,28 @@ fn parts_of_another_bake_and_bad_shards_are_refused() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("another bake"), "{e}");
+    // A folder of the parts' name that a bake did not make is never adopted (the finish
+    // removes the parts folder): its files stay.
+    let mine = dir.path().join("m");
+    let theirs = verdant::bake::shard::parts_dir(&mine);
+    std::fs::create_dir_all(&theirs).unwrap();
+    std::fs::write(theirs.join("notes.txt"), "keep me").unwrap();
+    let e = run(&opts(
+        &dem,
+        &mine,
+        Some(ShardStep::Shard { index: 0, count: 2 }),
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains(".m.shards") && e.contains("not a sharded bake's"),
+        "{e}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(theirs.join("notes.txt")).unwrap(),
+        "keep me"
+    );
+    assert!(!theirs.join("fingerprint").exists());
     for (step, want) in [
         (ShardStep::Shard { index: 2, count: 2 }, "2/2"),
         (ShardStep::Shard { index: 0, count: 0 }, "1..=10000"),

@@ -201,7 +201,25 @@ impl Parts {
                     ),
                 ));
             }
-            Err(_) => write_atomic(&file, record.as_bytes())?,
+            Err(_) => {
+                // A folder of that name that is not a bake's parts (it holds anything but
+                // another shard's fingerprint being written) is the user's: never adopted, so
+                // that the finish, which removes the parts folder, removes nothing of theirs.
+                let theirs = std::fs::read_dir(&dir)
+                    .map_err(|e| WorldError::io(&dir, e))?
+                    .filter_map(Result::ok)
+                    .any(|e| !e.file_name().to_string_lossy().starts_with(".fingerprint."));
+                if theirs {
+                    return Err(WorldError::bad_option(
+                        "--shard",
+                        dir.display(),
+                        "a folder for the shards' parts: this one exists and holds files that \
+                         are not a sharded bake's; move it away"
+                            .into(),
+                    ));
+                }
+                write_atomic(&file, record.as_bytes())?;
+            }
         }
         Ok(Parts {
             dir,
