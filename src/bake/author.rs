@@ -131,7 +131,7 @@ fn keys_along(
     let mut keys: Vec<CameraKey> = Vec::with_capacity(points.len());
     for k in 0..=last {
         let around = &points[k.saturating_sub(1)..=(k + 1).min(last)];
-        let z = max_terrain_along(grid, around, half_width, grid.cell * 0.5) + clearance;
+        let z = max_terrain_along(grid, around, half_width, grid.spacing() * 0.5) + clearance;
         let ahead = points[(k + 1).min(last)] - points[k.saturating_sub(1)];
         let mut yaw = ahead.y.atan2(ahead.x).to_degrees();
         if let Some(prev) = keys.last() {
@@ -399,8 +399,8 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
         let i = painted.index_at(p);
         (painted.grass_type[i], f64::from(painted.density[i]) / 255.0)
     };
-    let steps = (REACH_M / grid.cell).round() as i64;
-    let ring = (AROUND_M / grid.cell).ceil() as i64;
+    let steps = (REACH_M / grid.spacing()).round() as i64;
+    let ring = (AROUND_M / grid.spacing()).ceil() as i64;
     let mut best = (
         f64::NEG_INFINITY,
         f64::INFINITY,
@@ -411,7 +411,7 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
             break;
         }
         for i in -steps..=steps {
-            let p = near + DVec2::new(i as f64, j as f64) * grid.cell;
+            let p = near + DVec2::new(i as f64, j as f64) * grid.spacing();
             if !inside(p) {
                 continue;
             }
@@ -419,7 +419,7 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
             let mut count = 0.0;
             for b in -ring..=ring {
                 for a in -ring..=ring {
-                    let q = p + DVec2::new(a as f64, b as f64) * grid.cell;
+                    let q = p + DVec2::new(a as f64, b as f64) * grid.spacing();
                     if q.distance(p) > AROUND_M {
                         continue;
                     }

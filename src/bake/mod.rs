@@ -49,9 +49,12 @@ use crate::world::tile::Pyramid;
 mod author;
 pub mod cover;
 mod paint;
+pub mod plan;
 mod publish;
 mod resample;
 pub mod shard;
+mod source;
+mod survey;
 #[cfg(test)]
 mod tests;
 mod tiles;
@@ -64,9 +67,10 @@ pub use publish::CancelFlag;
 
 use author::{helicopter_path, low_path, meadow_path, overview_path, tour_path, wind_tour_paths};
 use paint::check_painted_types;
+use plan::Plan;
 use publish::{Staging, check_out, resolve_out};
-use resample::Grid;
-use tiles::{grass_peak, write_all_tiles, write_tiles};
+use source::DemSource;
+use tiles::produce;
 
 pub use shard::ShardStep;
 
@@ -119,6 +123,10 @@ pub struct BakeOptions {
     pub cancel: Option<CancelFlag>,
     /// One shard of a sharded bake, or its finish (see [`shard`]); `None`: the whole bake.
     pub shard: Option<ShardStep>,
+    /// The most memory the bake may hold, MiB (see [`plan`]); the result does not depend on
+    /// it, except for the camera paths and the derivation's calibration of worlds too large
+    /// to hold whole.
+    pub memory_mib: u64,
 }
 impl Default for BakeOptions {
     fn default() -> Self {
@@ -138,6 +146,7 @@ impl Default for BakeOptions {
             mask: None,
             cancel: None,
             shard: None,
+            memory_mib: plan::DEFAULT_MEMORY_MIB,
         }
     }
 }
@@ -148,9 +157,11 @@ impl Default for BakeOptions {
 pub enum BakeStage {
     /// Reading the DEM (total 1).
     LoadDem,
-    /// Resampling the DEM to the finest grid (total = grid rows).
+    /// Surveying the finest grid: the DEM resampled square by square for the height range, the
+    /// calibration and the coarse subsample (total = squares).
     Resample,
-    /// Painting grass type and density (total = grid rows).
+    /// Painting grass type and density on the coarse subsample (total = its rows); the blocks
+    /// are painted as their tiles are written.
     Paint,
     /// Computing camera paths (total = paths).
     Paths,
@@ -184,6 +195,18 @@ pub struct BakeReport {
     /// A shard that was already done (its record matched): nothing was run again.
     #[serde(default)]
     pub already_done: bool,
+    /// The densest grass of the finest tiles this bake wrote (the manifest's `grass_peak`).
+    #[serde(default)]
+    pub grass_peak: f32,
+    /// The memory limit the bake was planned for, MiB.
+    #[serde(default)]
+    pub memory_limit_mib: u64,
+    /// What the plan expected to hold at most, MiB.
+    #[serde(default)]
+    pub planned_mib: u64,
+    /// The process's peak resident memory when the bake ended, MiB (0 where unknown).
+    #[serde(default)]
+    pub peak_memory_mib: f64,
 }
 
 /// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
@@ -235,7 +258,7 @@ pub fn bake(
     };
 
     progress(BakeStage::LoadDem, 0, 1);
-    let dem = crate::world::mosaic::load_files(
+    let source = DemSource::open(
         &files,
         &opts.dem,
         &DemOptions {
@@ -243,14 +266,17 @@ pub fn bake(
         },
     )?;
     progress(BakeStage::LoadDem, 1, 1);
-    check_dem_heights(&dem, &opts.dem)?;
+    if let DemSource::Whole(dem) = &source {
+        check_dem_heights(dem, &opts.dem)?;
+    }
+    let dem = source.header();
     cancelled()?;
 
     let cell = match opts.cell_size_m {
         Some(c) => c,
         None => nice_cell_size(dem.cell_ew_m.min(dem.cell_ns_m)),
     };
-    check_cell_size(&dem, &opts.dem, opts.cell_size_m, cell)?;
+    check_cell_size(dem, &opts.dem, opts.cell_size_m, cell)?;
 
     // Millimetres are plenty, and keep the manifest free of float noise.
     let extent = dem.extent_m().map(|e| round_to(e, 3));
@@ -272,7 +298,7 @@ pub fn bake(
         .unwrap_or_else(|| default_name(&out, &opts.dem));
     let mut manifest = Manifest {
         name,
-        description: description(&dem, &opts.dem, cell),
+        description: description(dem, &opts.dem, cell),
         extent_m: extent,
         pyramid,
         height_range_m: [0.0, 1.0],
@@ -318,7 +344,7 @@ pub fn bake(
         None => None,
         Some((map, table_path)) => {
             let table = cover::CoverTable::load(table_path)?;
-            let map = cover::CoverMap::load(map, &dem, &table, table_path, &manifest.grass_types)?;
+            let map = cover::CoverMap::load(map, dem, &table, table_path, &manifest.grass_types)?;
             if let Some(s) = &mut manifest.source {
                 s.cover_table = format!("{} ({})", table.name, file_name(table_path));
             }
@@ -326,19 +352,35 @@ pub fn bake(
         }
     };
     let density = match &opts.density_map {
-        Some(p) => Some(cover::ValueMap::density(p, &dem)?),
+        Some(p) => Some(cover::ValueMap::density(p, dem)?),
         None => None,
     };
     let mask = match &opts.mask {
-        Some(p) => Some(cover::ValueMap::mask(p, &dem)?),
+        Some(p) => Some(cover::ValueMap::mask(p, dem)?),
         None => None,
     };
     cancelled()?;
 
-    let grid = Grid::resample(&dem, &manifest.pyramid, &opts.dem, &cancelled, progress)?;
-    let height_range = grid.height_range();
+    let data_samples = extent
+        .iter()
+        .map(|e| (e / cell).floor() as u64 + 1)
+        .product::<u64>();
+    let plan = Plan::new(opts.memory_mib, &manifest.pyramid, &source, data_samples)?;
+    source.set_cache(plan.cached[0], plan.cached[1]);
+    let survey = survey::survey(
+        &source,
+        &plan,
+        extent,
+        manifest.pyramid.derived_levels,
+        &cancelled,
+        progress,
+    )?;
+    let height_range = survey.height_range;
     manifest.height_range_m = height_range;
-    manifest.derive = Some(grid.calibrate(extent, manifest.pyramid.derived_levels));
+    manifest.derive = Some(survey.calibration);
+    if let Some(s) = &mut manifest.source {
+        s.nodata_filled = source.nodata_filled();
+    }
     cancelled()?;
 
     let maps = paint::PaintMaps {
@@ -346,10 +388,19 @@ pub fn bake(
         density: density.as_ref(),
         mask: mask.as_ref(),
     };
-    let mut painted = grid.paint(height_range, opts.seed, &maps, &cancelled, progress)?;
+    let slopes = survey.slopes;
+    let mut painted = survey.coarse.paint(
+        height_range,
+        opts.seed,
+        &maps,
+        &|g, a, b| slopes[b * g.width + a],
+        &cancelled,
+        progress,
+    )?;
+    drop(slopes);
     painted.cancel = opts.cancel.clone();
     check_painted_types(&painted, &manifest, &manifest_path)?;
-    manifest.materials = !painted.material.is_empty();
+    manifest.materials = maps.cover.is_some_and(|c| c.has_materials());
     progress(BakeStage::Paths, 0, 2);
     let overview = overview_path(&painted, extent);
     progress(BakeStage::Paths, 1, 2);
@@ -362,26 +413,48 @@ pub fn bake(
     progress(BakeStage::Paths, 2, 2);
     manifest.paths = vec![tour, overview, low, meadow, helicopter, wind_tour, walker];
     manifest.wind_scenes = default_wind_scenes();
-    manifest.grass_peak = Some(grass_peak(&manifest, &painted));
+    manifest.grass_peak = Some(grass_peak(&manifest.pyramid, 0.0));
     manifest.validate(&manifest_path)?;
     cancelled()?;
 
-    let report = |tiles_written| BakeReport {
+    let nodata_filled = source.nodata_filled();
+    let (dem_format, dem_samples) = (dem.format, [dem.width, dem.height]);
+    let dem_cell_size_m = [dem.cell_ew_m, dem.cell_ns_m];
+    let report = |tiles_written, peak| BakeReport {
         tiles_written,
-        levels: manifest.pyramid.stored_levels,
+        levels: opts.stored_levels,
         extent_m: extent,
         height_range_m: height_range,
         seconds: start.elapsed().as_secs_f64(),
-        dem_format: dem.format,
-        dem_samples: [dem.width, dem.height],
-        dem_cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
-        nodata_filled: dem.nodata_filled,
+        dem_format,
+        dem_samples,
+        dem_cell_size_m,
+        nodata_filled,
         already_done: false,
+        grass_peak: peak,
+        memory_limit_mib: opts.memory_mib,
+        planned_mib: plan.peak_bytes.div_ceil(1 << 20),
+        peak_memory_mib: peak_memory_mib(),
+    };
+    let paint_inputs = tiles::BlockPaint {
+        height_range,
+        seed: opts.seed,
+        maps: &maps,
+    };
+    let producer = tiles::Producer {
+        out: &out,
+        pyramid: &manifest.pyramid.clone(),
+        dem: &source,
+        plan: &plan,
+        coarse: &painted,
+        paint: &paint_inputs,
+        manifest: &manifest,
     };
     // A sharded bake: a shard writes its share into the parts folder and records it; the
     // finish writes the tiles that cross shards there and publishes them with the manifest.
     let pyramid = &manifest.pyramid;
     let mut moved_in = None;
+    let mut peak = 0f32;
     if let Some((step, parts)) = &parts {
         let share = |want: Option<u32>| -> Vec<crate::world::tile::TileId> {
             tiles::stored_tiles(pyramid)
@@ -389,24 +462,25 @@ pub fn bake(
                 .filter(|&id| shard::owner(pyramid, step.count(), id) == want)
                 .collect()
         };
+        let producer = tiles::Producer {
+            out: &parts.dir,
+            ..producer
+        };
         match *step {
             ShardStep::Shard { index, .. } => {
+                let (n, peak) = produce(&producer, share(Some(index)), &cancelled, progress)?;
+                let mut manifest = manifest.clone();
+                manifest.grass_peak = Some(grass_peak(pyramid, peak));
                 write_atomic(&parts.dir.join("world.toml"), manifest.to_toml().as_bytes())?;
-                let tiles = share(Some(index));
-                let n = write_tiles(&parts.dir, pyramid, &painted, tiles, &cancelled, progress)?;
-                let report = report(n);
+                let report = report(n, peak);
                 parts.mark_done(index, &report)?;
                 return Ok(report);
             }
-            ShardStep::Finish { .. } => {
-                write_tiles(
-                    &parts.dir,
-                    pyramid,
-                    &painted,
-                    share(None),
-                    &cancelled,
-                    progress,
-                )?;
+            ShardStep::Finish { count } => {
+                let (_, own) = produce(&producer, share(None), &cancelled, progress)?;
+                peak = (0..count)
+                    .filter_map(|i| parts.done(i))
+                    .fold(own, |p, r| p.max(r.grass_peak));
                 moved_in = Some(parts.dir.join("tiles"));
             }
         }
@@ -419,8 +493,22 @@ pub fn bake(
             std::fs::rename(tiles, &to).map_err(|e| WorldError::io(tiles, e))?;
             tiles::stored_tiles(pyramid).len() as u64
         }
-        None => write_all_tiles(staging.world(), pyramid, &painted, &cancelled, progress)?,
+        None => {
+            let producer = tiles::Producer {
+                out: staging.world(),
+                ..producer
+            };
+            let (n, p) = produce(
+                &producer,
+                tiles::stored_tiles(pyramid),
+                &cancelled,
+                progress,
+            )?;
+            peak = p;
+            n
+        }
     };
+    manifest.grass_peak = Some(grass_peak(pyramid, peak));
 
     progress(BakeStage::WriteManifest, 0, 1);
     write_atomic(
@@ -435,7 +523,29 @@ pub fn bake(
         let _ = std::fs::remove_dir_all(&parts.dir);
     }
     progress(BakeStage::WriteManifest, 1, 1);
-    Ok(report(tiles_written))
+    Ok(report(tiles_written, peak))
+}
+
+/// The manifest's record of the densest grass, `density` over windows of the finest grass
+/// tiles (`Pyramid::max_level`).
+fn grass_peak(pyramid: &Pyramid, density: f32) -> crate::world::GrassPeak {
+    crate::world::GrassPeak {
+        window_m: pyramid.tile_size_m(pyramid.max_level()),
+        short_m: crate::world::grass_density::SHORT_GRASS_M,
+        density,
+    }
+}
+
+/// The process's peak resident memory so far, MiB (Linux's `VmHWM`; 0 where unknown).
+pub fn peak_memory_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
 }
 
 /// The finish of a sharded bake whose tiles all belong to shards: the manifest the shards wrote
@@ -451,8 +561,8 @@ fn finish_from_parts(
     let Ok(text) = std::fs::read_to_string(&path) else {
         return Ok(None);
     };
-    let manifest = Manifest::parse(&text, &path)?;
-    let pyramid = &manifest.pyramid;
+    let mut manifest = Manifest::parse(&text, &path)?;
+    let pyramid = &manifest.pyramid.clone();
     let all = tiles::stored_tiles(pyramid);
     if all
         .iter()
@@ -463,6 +573,12 @@ fn finish_from_parts(
     let Some(mut report) = parts.done(0) else {
         return Ok(None);
     };
+    // Each shard knows the densest grass of its own tiles only.
+    let peak = (0..count)
+        .filter_map(|i| parts.done(i))
+        .fold(0f32, |p, r| p.max(r.grass_peak));
+    manifest.grass_peak = Some(grass_peak(pyramid, peak));
+    let text = manifest.to_toml();
     let start = Instant::now();
     let staging = Staging::begin(out, &opts.out, opts.replace)?;
     let tiles = parts.dir.join("tiles");
@@ -473,6 +589,8 @@ fn finish_from_parts(
     let _ = std::fs::remove_dir_all(&parts.dir);
     report.tiles_written = all.len() as u64;
     report.seconds = start.elapsed().as_secs_f64();
+    report.grass_peak = peak;
+    report.peak_memory_mib = peak_memory_mib();
     Ok(Some(report))
 }
 

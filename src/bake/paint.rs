@@ -182,10 +182,7 @@ impl Painted {
 
     /// Index of the painted sample nearest `p` (metres; clamped to the grid).
     pub(super) fn index_at(&self, p: DVec2) -> usize {
-        let g = &self.grid;
-        let a = ((p.x / g.cell).round() as i64 + g.margin).clamp(0, g.width as i64 - 1);
-        let b = ((p.y / g.cell).round() as i64 + g.margin).clamp(0, g.height as i64 - 1);
-        b as usize * g.width + a as usize
+        self.grid.index_at(p)
     }
 }
 
@@ -193,11 +190,13 @@ impl Grid {
     /// Paints every sample: from the land-cover map where it has a class there (the slope rule
     /// still holds), by the procedural rule elsewhere; then the density map scales the cover and
     /// the mask clears it. The class's material is the ground's (the mask leaves it).
+    /// `slope_deg` gives each sample's slope (measured on the finest grid).
     pub(super) fn paint(
         self,
         height_range: [f32; 2],
         seed: u64,
         maps: &PaintMaps<'_>,
+        slope_deg: &dyn Fn(&Grid, usize, usize) -> f64,
         cancelled: &dyn Fn() -> Result<(), WorldError>,
         progress: &mut dyn FnMut(BakeStage, u64, u64),
     ) -> Result<Painted, WorldError> {
@@ -210,7 +209,7 @@ impl Grid {
         for b in 0..self.height {
             for a in 0..self.width {
                 let altitude = (f64::from(self.at(a, b) - height_range[0]) / span).clamp(0.0, 1.0);
-                let (slope, p) = (self.slope_deg(a, b), self.position(a, b));
+                let (slope, p) = (slope_deg(&self, a, b), self.position(a, b));
                 let class = maps.cover.and_then(|c| c.paint_at(p));
                 let (t, d) = match class {
                     Some(_) if slope > MAX_GRASS_SLOPE_DEG => (0, 0),

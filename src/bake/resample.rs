@@ -1,74 +1,108 @@
-//! Step 1 of the bake: the DEM resampled to square cells at the finest stored level, and the
-//! derivation calibration fitted to the resulting pyramid.
-
-use std::path::Path;
+//! Step 1 of the bake: the DEM resampled to square cells at the finest stored level.
+//!
+//! The finest grid spans the whole root grid plus a margin for the border samples of every
+//! coarser level. It is never held whole: [`Grid`] is a window of it (a block, resampled where a
+//! part of the bake needs it) or a subsample of it (every `stride`-th sample, for the camera
+//! paths and the coarse levels). Global sample `(a, b)` lies at world position
+//! `(a - margin, b - margin) * cell`, and its height is a pure function of that position, so
+//! every window agrees with every other where they overlap.
 
 use glam::DVec2;
 
-use crate::stream::{DeriveParams, HeightField, calibrate};
-use crate::world::dem::Dem;
 use crate::world::error::WorldError;
-use crate::world::manifest::DeriveCalibration;
 use crate::world::tile::Pyramid;
 
-use super::BakeStage;
+use super::source::DemSource;
 
-/// Largest finest-level grid the baker will hold in memory, samples.
-const MAX_GRID_SAMPLES: u64 = 1 << 30;
-/// The finest stored level over the whole root grid, with a margin wide enough for the border
-/// samples of every coarser level. Array index `(a, b)` is global sample `(a - margin,
-/// b - margin)` at world position `(a - margin, b - margin) * cell`.
+/// The whole finest grid's shape.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Shape {
+    /// Samples west-east and south-north.
+    pub(super) size: [i64; 2],
+    /// Samples beyond the root grid on every side.
+    pub(super) margin: i64,
+    /// Cell size, metres.
+    pub(super) cell: f64,
+    pub(super) finest: u8,
+}
+
+impl Shape {
+    pub(super) fn of(pyramid: &Pyramid) -> Shape {
+        let finest = pyramid.stored_levels - 1;
+        let margin = i64::from(pyramid.border) << finest;
+        let tiles = pyramid.tiles_at(finest);
+        let size = tiles.map(|n| i64::from(n) * i64::from(pyramid.tile_cells) + 1 + 2 * margin);
+        Shape {
+            size,
+            margin,
+            cell: pyramid.cell_size_m(finest),
+            finest,
+        }
+    }
+
+    /// World position of global sample `(a, b)`, metres.
+    pub(super) fn position(&self, a: i64, b: i64) -> DVec2 {
+        DVec2::new((a - self.margin) as f64, (b - self.margin) as f64) * self.cell
+    }
+
+    /// The global samples of tile `id` (its borders included), inclusive, per axis.
+    pub(super) fn tile_span(
+        &self,
+        pyramid: &Pyramid,
+        id: crate::world::tile::TileId,
+    ) -> [[i64; 2]; 2] {
+        let step = 1i64 << (self.finest - id.level);
+        let (cells, border) = (i64::from(pyramid.tile_cells), i64::from(pyramid.border));
+        [id.x, id.y].map(|t| {
+            let t = i64::from(t);
+            [
+                (t * cells - border) * step + self.margin,
+                ((t + 1) * cells + border) * step + self.margin,
+            ]
+        })
+    }
+}
+
+/// A window or a subsample of the finest grid (see the module docs). Local sample `(a, b)` is
+/// global sample `origin + (a, b) * stride`.
 pub(super) struct Grid {
     pub(super) width: usize,
     pub(super) height: usize,
-    pub(super) margin: i64,
-    pub(super) cell: f64,
-    pub(super) finest: u8,
+    pub(super) origin: [i64; 2],
+    pub(super) stride: i64,
+    pub(super) shape: Shape,
     pub(super) heights: Vec<f32>,
 }
 
 impl Grid {
+    /// Resamples the DEM over global samples `span` (inclusive, per axis; clamped to the grid).
     pub(super) fn resample(
-        dem: &Dem,
-        pyramid: &Pyramid,
-        dem_path: &Path,
-        cancelled: &dyn Fn() -> Result<(), WorldError>,
-        progress: &mut dyn FnMut(BakeStage, u64, u64),
+        dem: &DemSource,
+        shape: Shape,
+        span: [[i64; 2]; 2],
     ) -> Result<Grid, WorldError> {
-        let finest = pyramid.stored_levels - 1;
-        let margin = i64::from(pyramid.border) << finest;
-        let [nx, ny] = pyramid.tiles_at(finest);
-        let cells = |n: u32| i64::from(n) * i64::from(pyramid.tile_cells);
-        let width = (cells(nx) + 1 + 2 * margin) as usize;
-        let height = (cells(ny) + 1 + 2 * margin) as usize;
-        if width as u64 * height as u64 > MAX_GRID_SAMPLES {
-            return Err(WorldError::OutOfRange {
-                path: dem_path.to_path_buf(),
-                field: "finest grid (root grid / cell size)".into(),
-                value: format!("{width}x{height} samples"),
-                allowed: format!("at most {MAX_GRID_SAMPLES} samples"),
-            });
-        }
-        let cell = pyramid.cell_size_m(finest);
-        let mut heights = vec![0f32; width * height];
-        let total = height as u64;
-        for (b, row) in heights.chunks_exact_mut(width).enumerate() {
-            let y = (b as i64 - margin) as f64 * cell;
-            for (a, h) in row.iter_mut().enumerate() {
-                let x = (a as i64 - margin) as f64 * cell;
-                *h = dem.sample(x, y) as f32;
-            }
-            if b % 64 == 0 || b + 1 == height {
-                cancelled()?;
-                progress(BakeStage::Resample, b as u64 + 1, total);
+        let span = [0, 1].map(|k| [span[k][0].max(0), span[k][1].min(shape.size[k] - 1)]);
+        let (lo, hi) = (
+            shape.position(span[0][0], span[1][0]),
+            shape.position(span[0][1], span[1][1]),
+        );
+        let window = dem.window([lo.x, hi.x], [lo.y, hi.y])?;
+        let width = (span[0][1] - span[0][0] + 1) as usize;
+        let height = (span[1][1] - span[1][0] + 1) as usize;
+        let mut heights = Vec::with_capacity(width * height);
+        for b in span[1][0]..=span[1][1] {
+            let y = (b - shape.margin) as f64 * shape.cell;
+            for a in span[0][0]..=span[0][1] {
+                let x = (a - shape.margin) as f64 * shape.cell;
+                heights.push(window.sample(x, y) as f32);
             }
         }
         Ok(Grid {
             width,
             height,
-            margin,
-            cell,
-            finest,
+            origin: [span[0][0], span[1][0]],
+            stride: 1,
+            shape,
             heights,
         })
     }
@@ -77,51 +111,38 @@ impl Grid {
         self.heights[b * self.width + a]
     }
 
-    /// Fits the detail of the derived levels to the data area of the finest stored level (the
-    /// coarser stored levels are its subsamples): see [`calibrate`].
-    pub(super) fn calibrate(&self, extent: [f64; 2], derived_levels: u8) -> DeriveCalibration {
-        let m = self.margin as usize;
-        let samples = |e: f64, n: usize| ((e / self.cell).floor() as usize + 1).min(n - m);
-        let (w, h) = (
-            samples(extent[0], self.width),
-            samples(extent[1], self.height),
-        );
-        let mut heights = Vec::with_capacity(w * h);
-        for b in m..m + h {
-            let row = b * self.width + m;
-            heights.extend_from_slice(&self.heights[row..row + w]);
-        }
-        calibrate(
-            &HeightField {
-                width: w,
-                height: h,
-                cell_m: (self.cell, self.cell),
-                heights: &heights,
-            },
-            derived_levels,
-            DeriveParams::default().seed,
-        )
+    /// Metres between neighbouring local samples.
+    pub(super) fn spacing(&self) -> f64 {
+        self.shape.cell * self.stride as f64
     }
 
-    /// Min and max of all samples; an empty range is widened to 1 m.
-    pub(super) fn height_range(&self) -> [f32; 2] {
-        let (lo, hi) = self
-            .heights
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &h| {
-                (lo.min(h), hi.max(h))
-            });
-        if lo < hi {
-            [lo, hi]
-        } else {
-            [lo - 0.5, hi + 0.5]
-        }
+    /// Local index of global sample `(a, b)`, which must lie on this grid.
+    pub(super) fn local(&self, a: i64, b: i64) -> usize {
+        let la = (a - self.origin[0]) / self.stride;
+        let lb = (b - self.origin[1]) / self.stride;
+        lb as usize * self.width + la as usize
+    }
+
+    /// Local samples from `p` (metres) to the grid's (0, 0), per axis, before rounding.
+    fn offset(&self) -> [i64; 2] {
+        [0, 1].map(|k| (self.shape.margin - self.origin[k]) / self.stride)
+    }
+
+    /// Index of the sample nearest `p` (metres; clamped to the grid).
+    pub(super) fn index_at(&self, p: DVec2) -> usize {
+        let s = self.spacing();
+        let o = self.offset();
+        let a = ((p.x / s).round() as i64 + o[0]).clamp(0, self.width as i64 - 1);
+        let b = ((p.y / s).round() as i64 + o[1]).clamp(0, self.height as i64 - 1);
+        b as usize * self.width + a as usize
     }
 
     /// Height at world position `p` by bilinear interpolation, clamped to the grid.
     pub(super) fn height_bilinear(&self, p: DVec2) -> f64 {
-        let u = (p.x / self.cell + self.margin as f64).clamp(0.0, (self.width - 1) as f64);
-        let v = (p.y / self.cell + self.margin as f64).clamp(0.0, (self.height - 1) as f64);
+        let s = self.spacing();
+        let o = self.offset();
+        let u = (p.x / s + o[0] as f64).clamp(0.0, (self.width - 1) as f64);
+        let v = (p.y / s + o[1] as f64).clamp(0.0, (self.height - 1) as f64);
         let (a, b) = (
             (u.floor() as usize).min(self.width - 2),
             (v.floor() as usize).min(self.height - 2),
@@ -133,23 +154,33 @@ impl Grid {
         south * (1.0 - fv) + north * fv
     }
 
-    /// Slope at sample `(a, b)` in degrees, from central differences (one-sided at the grid's
-    /// edge).
+    /// Slope at local sample `(a, b)` of a window (stride 1) in degrees, from central
+    /// differences (one-sided at the whole grid's edge). Exact where the window holds the
+    /// sample's neighbours.
     pub(super) fn slope_deg(&self, a: usize, b: usize) -> f64 {
-        let d = |lo: usize, hi: usize, get: &dyn Fn(usize) -> f32| {
-            f64::from(get(hi) - get(lo)) / ((hi - lo) as f64 * self.cell)
+        let cell = self.shape.cell;
+        let d = |lo: i64, hi: i64, get: &dyn Fn(i64) -> f32| {
+            f64::from(get(hi) - get(lo)) / ((hi - lo) as f64 * cell)
         };
-        let (a0, a1) = (a.saturating_sub(1), (a + 1).min(self.width - 1));
-        let (b0, b1) = (b.saturating_sub(1), (b + 1).min(self.height - 1));
-        let dx = d(a0, a1, &|i| self.at(i, b));
-        let dy = d(b0, b1, &|j| self.at(a, j));
+        let [ga, gb] = [self.origin[0] + a as i64, self.origin[1] + b as i64];
+        let clamp = |g: i64, k: usize, n: usize| {
+            let lo = self.origin[k].max(0);
+            let hi = (self.origin[k] + n as i64 - 1).min(self.shape.size[k] - 1);
+            [(g - 1).max(lo), (g + 1).min(hi)]
+        };
+        let [a0, a1] = clamp(ga, 0, self.width);
+        let [b0, b1] = clamp(gb, 1, self.height);
+        let local = |g: i64, k: usize| (g - self.origin[k]) as usize;
+        let dx = d(a0, a1, &|i| self.at(local(i, 0), b));
+        let dy = d(b0, b1, &|j| self.at(a, local(j, 1)));
         (dx * dx + dy * dy).sqrt().atan().to_degrees()
     }
 
+    /// World position of local sample `(a, b)`.
     pub(super) fn position(&self, a: usize, b: usize) -> DVec2 {
-        DVec2::new(
-            (a as i64 - self.margin) as f64,
-            (b as i64 - self.margin) as f64,
-        ) * self.cell
+        self.shape.position(
+            self.origin[0] + a as i64 * self.stride,
+            self.origin[1] + b as i64 * self.stride,
+        )
     }
 }

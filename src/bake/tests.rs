@@ -53,12 +53,17 @@ fn painted_indices_name_the_types_written() {
 /// A painted index beyond the manifest's types is refused before anything is written.
 #[test]
 fn painted_indices_beyond_the_types_are_refused() {
-    let grid = Grid {
+    let grid = resample::Grid {
         width: 2,
         height: 2,
-        margin: 0,
-        cell: 1.0,
-        finest: 0,
+        origin: [0, 0],
+        stride: 1,
+        shape: resample::Shape {
+            size: [2, 2],
+            margin: 0,
+            cell: 1.0,
+            finest: 0,
+        },
         heights: vec![0.0; 4],
     };
     let mut painted = Painted {

@@ -1,7 +1,9 @@
-//! Steps 3 and 4 of the bake: every stored tile cut from the one painted grid, borders
-//! included, and written; and the densest grass over the finest tiles, for the manifest.
+//! Steps 3 and 4 of the bake: every stored tile cut, borders included, from a painted block of
+//! the finest grid or from its painted subsample, and written; and the densest grass over the
+//! finest tiles, for the manifest.
 
 use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 
 use crate::world::error::WorldError;
@@ -10,7 +12,10 @@ use crate::world::manifest::Manifest;
 use crate::world::tile::{Pyramid, TileId};
 
 use super::BakeStage;
-use super::paint::Painted;
+use super::paint::{PaintMaps, Painted};
+use super::plan::Plan;
+use super::resample::Grid;
+use super::source::DemSource;
 
 /// Every stored tile, level by level (coarsest first), rows south to north, west to east.
 pub(super) fn stored_tiles(pyramid: &Pyramid) -> Vec<TileId> {
@@ -22,52 +27,107 @@ pub(super) fn stored_tiles(pyramid: &Pyramid) -> Vec<TileId> {
         .collect()
 }
 
-/// Cuts every stored tile from the painted grid and writes it (see [`write_tiles`]).
-pub(super) fn write_all_tiles(
-    out: &Path,
-    pyramid: &Pyramid,
-    painted: &Painted,
-    cancelled: &(dyn Fn() -> Result<(), WorldError> + Sync),
-    progress: &mut dyn FnMut(BakeStage, u64, u64),
-) -> Result<u64, WorldError> {
-    write_tiles(
-        out,
-        pyramid,
-        painted,
-        stored_tiles(pyramid),
-        cancelled,
-        progress,
-    )
+/// What [`produce`] makes tiles from.
+pub(super) struct Producer<'a> {
+    pub(super) out: &'a Path,
+    pub(super) pyramid: &'a Pyramid,
+    pub(super) dem: &'a DemSource,
+    pub(super) plan: &'a Plan,
+    /// The painted subsample of the finest grid that the coarse levels are cut from.
+    pub(super) coarse: &'a Painted,
+    pub(super) paint: &'a BlockPaint<'a>,
+    /// The grass types, for the densest grass of the finest tiles.
+    pub(super) manifest: &'a Manifest,
 }
 
-/// Cuts `tiles` from the painted grid and writes them, on as many threads as the machine
-/// offers; stops between tiles when `cancelled` says so.
-pub(super) fn write_tiles(
-    out: &Path,
-    pyramid: &Pyramid,
-    painted: &Painted,
+/// How a block is painted: the inputs of [`Grid::paint`] besides the grid.
+pub(super) struct BlockPaint<'a> {
+    pub(super) height_range: [f32; 2],
+    pub(super) seed: u64,
+    pub(super) maps: &'a PaintMaps<'a>,
+}
+
+/// One piece of work: a tile cut from the coarse subsample, or a block of the finest grid
+/// resampled and painted and the tiles inside it cut from it.
+enum Work {
+    Coarse(TileId),
+    Block(TileId, Vec<TileId>),
+}
+
+/// Makes `tiles` and writes them into `out`, on as many threads as the plan allows; stops
+/// between tiles when `cancelled` says so. Returns the tiles written and the densest grass
+/// of the finest ones among them (see [`crate::world::GrassPeak`]).
+pub(super) fn produce(
+    p: &Producer<'_>,
     tiles: Vec<TileId>,
     cancelled: &(dyn Fn() -> Result<(), WorldError> + Sync),
     progress: &mut dyn FnMut(BakeStage, u64, u64),
-) -> Result<u64, WorldError> {
+) -> Result<(u64, f32), WorldError> {
+    use crate::world::grass_density::{SHORT_GRASS_M, split_shares, tile_peak, window_cells};
+    let pyramid = p.pyramid;
     let total = tiles.len() as u64;
     progress(BakeStage::WriteTiles, 0, total);
-    let threads = std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(1)
-        .min(8);
-    let (tx, rx) = mpsc::channel::<Result<(), WorldError>>();
+    let mut work: Vec<Work> = Vec::new();
+    let mut blocks: std::collections::BTreeMap<TileId, Vec<TileId>> = Default::default();
+    for id in tiles {
+        if p.plan.coarse_level(id.level) {
+            work.push(Work::Coarse(id));
+        } else {
+            let up = id.level - p.plan.block_level;
+            let block = TileId::new(p.plan.block_level, id.x >> up, id.y >> up);
+            blocks.entry(block).or_default().push(id);
+        }
+    }
+    work.extend(blocks.into_iter().map(|(b, ids)| Work::Block(b, ids)));
+    let finest = pyramid.stored_levels - 1;
+    let window = window_cells(pyramid, pyramid.tile_size_m(pyramid.max_level()));
+    let split = split_shares(&p.manifest.grass_types, SHORT_GRASS_M);
+    let write = |tile: TileData| -> Result<f32, WorldError> {
+        cancelled()?;
+        let peak = if tile.id.level == finest {
+            tile_peak(&tile, pyramid, window, &split)
+        } else {
+            0.0
+        };
+        write_tile(p.out, pyramid, &tile)?;
+        Ok(peak)
+    };
+    let next = AtomicUsize::new(0);
+    let (tx, rx) = mpsc::sync_channel::<Result<f32, WorldError>>(64);
     let mut first_error = None;
+    let mut peak = 0f32;
     std::thread::scope(|scope| {
-        for t in 0..threads {
+        for _ in 0..p.plan.threads {
             let tx = tx.clone();
-            let tiles = &tiles;
+            let (work, next, write) = (&work, &next, &write);
             scope.spawn(move || {
-                for &id in tiles.iter().skip(t).step_by(threads) {
-                    let result = cancelled()
-                        .and_then(|()| write_tile(out, pyramid, &cut_tile(pyramid, painted, id)));
-                    let failed = result.is_err();
-                    if tx.send(result).is_err() || failed {
+                while let Some(item) = work.get(next.fetch_add(1, Ordering::Relaxed)) {
+                    let failed = match item {
+                        Work::Coarse(id) => {
+                            let result = write(cut_tile(pyramid, p.coarse, *id));
+                            let failed = result.is_err();
+                            tx.send(result).is_err() || failed
+                        }
+                        Work::Block(block, ids) => match paint_block(p, *block, cancelled) {
+                            Err(e) => {
+                                let _ = tx.send(Err(e));
+                                true
+                            }
+                            Ok(painted) => {
+                                let mut failed = false;
+                                for &id in ids {
+                                    let result = write(cut_tile(pyramid, &painted, id));
+                                    failed = result.is_err();
+                                    if tx.send(result).is_err() || failed {
+                                        failed = true;
+                                        break;
+                                    }
+                                }
+                                failed
+                            }
+                        },
+                    };
+                    if failed {
                         break;
                     }
                 }
@@ -77,7 +137,8 @@ pub(super) fn write_tiles(
         let mut done = 0;
         for result in rx {
             match result {
-                Ok(()) => {
+                Ok(p) => {
+                    peak = peak.max(p);
                     done += 1;
                     progress(BakeStage::WriteTiles, done, total);
                 }
@@ -89,17 +150,44 @@ pub(super) fn write_tiles(
     });
     match first_error {
         Some(e) => Err(e),
-        None => Ok(total),
+        None => Ok((total, peak)),
     }
 }
 
-/// The samples of tile `id`, taken from the finest grid every `2^(finest - level)` samples.
+/// Block `id` of the finest grid (its tile's samples, borders included, and a ring for the
+/// slopes) resampled and painted.
+fn paint_block(
+    p: &Producer<'_>,
+    id: TileId,
+    cancelled: &dyn Fn() -> Result<(), WorldError>,
+) -> Result<Painted, WorldError> {
+    cancelled()?;
+    let span = p
+        .plan
+        .shape
+        .tile_span(p.pyramid, id)
+        .map(|[lo, hi]| [lo - 1, hi + 1]);
+    let grid = Grid::resample(p.dem, p.plan.shape, span)?;
+    let paint = p.paint;
+    grid.paint(
+        paint.height_range,
+        paint.seed,
+        paint.maps,
+        &|g, a, b| g.slope_deg(a, b),
+        cancelled,
+        &mut |_, _, _| {},
+    )
+}
+
+/// The samples of tile `id`, taken from the finest grid every `2^(finest - level)` samples,
+/// from a painted window or subsample that holds them.
 pub(super) fn cut_tile(pyramid: &Pyramid, painted: &Painted, id: TileId) -> TileData {
     let grid = &painted.grid;
     let size = pyramid.samples_per_side();
-    let step = 1i64 << (grid.finest - id.level);
+    let step = 1i64 << (grid.shape.finest - id.level);
     let border = i64::from(pyramid.border);
     let cells = i64::from(pyramid.tile_cells);
+    let margin = grid.shape.margin;
     let n = size as usize * size as usize;
     let mut tile = TileData {
         id,
@@ -110,10 +198,10 @@ pub(super) fn cut_tile(pyramid: &Pyramid, painted: &Painted, id: TileId) -> Tile
         material: Vec::with_capacity(if painted.material.is_empty() { 0 } else { n }),
     };
     for j in 0..i64::from(size) {
-        let b = ((i64::from(id.y) * cells + j - border) * step + grid.margin) as usize;
+        let b = (i64::from(id.y) * cells + j - border) * step + margin;
         for i in 0..i64::from(size) {
-            let a = ((i64::from(id.x) * cells + i - border) * step + grid.margin) as usize;
-            let k = b * grid.width + a;
+            let a = (i64::from(id.x) * cells + i - border) * step + margin;
+            let k = grid.local(a, b);
             tile.heights.push(grid.heights[k]);
             tile.grass_type.push(painted.grass_type[k]);
             tile.density.push(painted.density[k]);
@@ -123,28 +211,4 @@ pub(super) fn cut_tile(pyramid: &Pyramid, painted: &Painted, id: TileId) -> Tile
         }
     }
     tile
-}
-
-/// The densest grass of the finest stored level over windows of the finest grass tiles
-/// (`Pyramid::max_level`), for the manifest's `grass_peak`.
-pub(super) fn grass_peak(manifest: &Manifest, painted: &Painted) -> crate::world::GrassPeak {
-    use crate::world::grass_density::{SHORT_GRASS_M, split_shares, tile_peak, window_cells};
-    let pyramid = &manifest.pyramid;
-    let level = pyramid.stored_levels - 1;
-    let window_m = pyramid.tile_size_m(pyramid.max_level());
-    let window = window_cells(pyramid, window_m);
-    let split = split_shares(&manifest.grass_types, SHORT_GRASS_M);
-    let [nx, ny] = pyramid.tiles_at(level);
-    let mut density = 0.0f32;
-    for y in 0..ny {
-        for x in 0..nx {
-            let tile = cut_tile(pyramid, painted, TileId::new(level, x, y));
-            density = density.max(tile_peak(&tile, pyramid, window, &split));
-        }
-    }
-    crate::world::GrassPeak {
-        window_m,
-        short_m: SHORT_GRASS_M,
-        density,
-    }
 }

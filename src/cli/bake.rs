@@ -72,6 +72,11 @@ pub(crate) struct BakeArgs {
     /// with its world.toml last. Refused while any shard is not done.
     #[arg(long, value_name = "N")]
     pub(crate) finish_shards: Option<u32>,
+    /// The most memory the bake may hold, MiB: it reads a mosaic's files a chunk at a time and
+    /// makes the finer levels block by block, so any world bakes within it (a single DEM file
+    /// is held whole and counts against it).
+    #[arg(long, value_name = "MIB", default_value_t = verdant::bake::plan::DEFAULT_MEMORY_MIB)]
+    pub(crate) memory_mib: u64,
 }
 
 fn parse_shard(s: &str) -> Result<(u32, u32), String> {
@@ -102,6 +107,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         mask,
         shard,
         finish_shards,
+        memory_mib,
     } = args;
     let shard = match (shard, finish_shards) {
         (Some((index, count)), _) => Some(verdant::bake::ShardStep::Shard { index, count }),
@@ -128,6 +134,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
                 .context("installing the SIGINT and SIGTERM handlers")?,
         ),
         shard,
+        memory_mib,
     };
     let mut current: Option<(String, ProgressBar)> = None;
     let report = bake(&opts, &mut |stage, done, total| {
@@ -179,5 +186,9 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
             report.seconds
         ),
     }
+    println!(
+        "memory: peak {:.0} MiB resident (limit {} MiB, planned {} MiB)",
+        report.peak_memory_mib, report.memory_limit_mib, report.planned_mib
+    );
     Ok(())
 }

@@ -91,36 +91,83 @@ impl Dem {
         ]
     }
 
-    /// Height at sample column `c` (from the west) and row `r` from the SOUTH, clamped to the
-    /// DEM's edges.
-    fn post(&self, c: i64, r: i64) -> f64 {
-        let c = c.clamp(0, i64::from(self.width) - 1) as usize;
-        let r = r.clamp(0, i64::from(self.height) - 1) as usize;
-        let row_from_north = self.height as usize - 1 - r;
-        f64::from(self.heights[row_from_north * self.width as usize + c])
-    }
-
     /// Height at world position `(x, y)` (metres from the south-west sample) by bicubic
     /// (Catmull-Rom) interpolation in the DEM's grid. Positions beyond the DEM take the height
     /// at the nearest point of its edge.
     pub fn sample(&self, x: f64, y: f64) -> f64 {
+        let w = self.width as usize;
+        bicubic(self, x, y, |c, r| self.heights[r * w + c])
+    }
+
+    /// The posts (columns from the west, rows from the NORTH, end exclusive) that
+    /// [`Dem::sample`] reads for positions in `x` by `y` (metres, as for `sample`).
+    pub fn posts_for(&self, x: [f64; 2], y: [f64; 2]) -> ([usize; 2], [usize; 2]) {
         let [ex, ey] = self.extent_m();
-        let u = x.clamp(0.0, ex) / self.cell_ew_m;
-        let v = y.clamp(0.0, ey) / self.cell_ns_m;
-        let (c0, r0) = (u.floor(), v.floor());
-        let (fu, fv) = (u - c0, v - r0);
-        let (c0, r0) = (c0 as i64, r0 as i64);
-        let wu = catmull_rom_weights(fu);
-        let wv = catmull_rom_weights(fv);
-        let mut h = 0.0;
-        for (dr, wr) in wv.iter().enumerate() {
-            let mut row = 0.0;
-            for (dc, wc) in wu.iter().enumerate() {
-                row += wc * self.post(c0 + dc as i64 - 1, r0 + dr as i64 - 1);
-            }
-            h += wr * row;
+        let span = |v: [f64; 2], e: f64, cell: f64, n: u32| {
+            let lo = (v[0].clamp(0.0, e) / cell).floor() as i64 - 1;
+            let hi = (v[1].clamp(0.0, e) / cell).floor() as i64 + 2;
+            let n = i64::from(n);
+            [
+                lo.clamp(0, n - 1) as usize,
+                (hi.clamp(0, n - 1) + 1) as usize,
+            ]
+        };
+        let cols = span(x, ex, self.cell_ew_m, self.width);
+        let south = span(y, ey, self.cell_ns_m, self.height);
+        let h = self.height as usize;
+        (cols, [h - south[1], h - south[0]])
+    }
+}
+
+/// Bicubic (Catmull-Rom) height at `(x, y)` in the grid `dem` describes (its size and
+/// spacing; its heights are not read), the posts read through `post(column, row from the
+/// north)`, clamped to the grid's edges.
+pub(crate) fn bicubic(dem: &Dem, x: f64, y: f64, post: impl Fn(usize, usize) -> f32) -> f64 {
+    let [ex, ey] = dem.extent_m();
+    let u = x.clamp(0.0, ex) / dem.cell_ew_m;
+    let v = y.clamp(0.0, ey) / dem.cell_ns_m;
+    let (c0, r0) = (u.floor(), v.floor());
+    let (fu, fv) = (u - c0, v - r0);
+    let (c0, r0) = (c0 as i64, r0 as i64);
+    let wu = catmull_rom_weights(fu);
+    let wv = catmull_rom_weights(fv);
+    let (w, h) = (i64::from(dem.width), i64::from(dem.height));
+    // Column `c` (from the west) and row `r` from the SOUTH, clamped to the edges.
+    let at = |c: i64, r: i64| {
+        let c = c.clamp(0, w - 1) as usize;
+        let r = r.clamp(0, h - 1) as usize;
+        f64::from(post(c, h as usize - 1 - r))
+    };
+    let mut height = 0.0;
+    for (dr, wr) in wv.iter().enumerate() {
+        let mut row = 0.0;
+        for (dc, wc) in wu.iter().enumerate() {
+            row += wc * at(c0 + dc as i64 - 1, r0 + dr as i64 - 1);
         }
-        h
+        height += wr * row;
+    }
+    height
+}
+
+/// A window of a DEM's posts: enough of it to sample positions inside the window exactly as the
+/// whole DEM would ([`Dem::posts_for`]).
+pub struct DemWindow<'a> {
+    /// The whole DEM's size and spacing (its heights need not be held).
+    pub dem: &'a Dem,
+    /// The window's first column (from the west) and first row (from the north).
+    pub first: [usize; 2],
+    /// Columns in the window.
+    pub width: usize,
+    /// Its heights, row-major, north first.
+    pub heights: Vec<f32>,
+}
+
+impl DemWindow<'_> {
+    /// [`Dem::sample`] at `(x, y)`, which must read only posts inside the window.
+    pub fn sample(&self, x: f64, y: f64) -> f64 {
+        bicubic(self.dem, x, y, |c, r| {
+            self.heights[(r - self.first[1]) * self.width + (c - self.first[0])]
+        })
     }
 }
 

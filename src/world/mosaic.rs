@@ -135,20 +135,21 @@ fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
     Ok(out)
 }
 
-/// One file's grid in the shared coordinate system.
+/// One file's grid in the shared coordinate system; its heights are read when needed.
 struct Part {
     path: PathBuf,
-    dem: Dem,
+    width: usize,
+    height: usize,
     /// South-west sample and spacing, in the coordinate system.
     origin: [f64; 2],
     size: [f64; 2],
 }
 
 impl Part {
-    /// The file's height at coordinates `(x, y)`: bilinear between its samples (exact on
-    /// them), NaN where a sample used is nodata; `None` outside it.
-    fn at(&self, x: f64, y: f64) -> Option<f32> {
-        let (w, h) = (self.dem.width as usize, self.dem.height as usize);
+    /// The file's height at coordinates `(x, y)` from its `heights` (north first): bilinear
+    /// between its samples (exact on them), NaN where a sample used is nodata; `None` outside it.
+    fn at(&self, heights: &[f32], x: f64, y: f64) -> Option<f32> {
+        let (w, h) = (self.width, self.height);
         let c = (x - self.origin[0]) / self.size[0];
         let r = (y - self.origin[1]) / self.size[1]; // from the south
         const EPS: f64 = 1e-6;
@@ -169,7 +170,7 @@ impl Part {
         let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
         let (fc, fr) = ((c - c0 as f64) as f32, (r - r0 as f64) as f32);
         // Rows are stored north first.
-        let v = |c: usize, r: usize| self.dem.heights[(h - 1 - r) * w + c];
+        let v = |c: usize, r: usize| heights[(h - 1 - r) * w + c];
         if fc == 0.0 && fr == 0.0 {
             return Some(v(c0, r0));
         }
@@ -198,204 +199,300 @@ pub fn load_files(
         [] => Err(mosaic_error(named, "no DEM file given")),
         [one] => Dem::load_with(one, options),
         _ => {
-            let mut dem = join(files, options)?;
+            let layout = Layout::open(files, options, MAX_DEM_SAMPLES)?;
+            let all = [0, layout.header.width as usize];
+            let rows = [0, layout.header.height as usize];
+            let heights = layout.region(all, rows, &|k| layout.read(k))?;
+            let mut dem = layout.header.clone();
+            dem.heights = heights;
             dem.fill_nodata(named)?;
             Ok(dem)
         }
     }
 }
 
-fn join(files: &[PathBuf], options: &DemOptions) -> Result<Dem, WorldError> {
-    let mut parts: Vec<Part> = Vec::with_capacity(files.len());
-    for f in files {
-        let dem = Dem::load_unfilled(f, options)?;
-        let (Some(origin), Some(size)) = (dem.origin, dem.pixel_size) else {
-            return Err(mosaic_error(
-                f,
-                "it has no georeferencing, so it cannot be joined to the other DEM files",
-            ));
+/// Where several DEM files lie on their joined grid, from their headers; the heights of any
+/// window of the grid are read from the files by [`Layout::region`].
+pub struct Layout {
+    parts: Vec<Part>,
+    options: DemOptions,
+    /// The joined grid: its size, spacing and georeferencing; its heights are left empty.
+    pub header: Dem,
+    /// The joined grid's south-west sample and spacing, in the coordinate system.
+    lo: [f64; 2],
+    size: [f64; 2],
+}
+
+impl Layout {
+    /// Reads the files one at a time for their georeferencing (their heights are dropped) and
+    /// lays them out on the joined grid; refuses files in different coordinate systems, files
+    /// without georeferencing, and a joined grid of more than `max_samples`.
+    pub fn open(
+        files: &[PathBuf],
+        options: &DemOptions,
+        max_samples: u64,
+    ) -> Result<Layout, WorldError> {
+        let mut parts: Vec<Part> = Vec::with_capacity(files.len());
+        let mut first: Option<Dem> = None;
+        for f in files {
+            let mut dem = Dem::load_unfilled(f, options)?;
+            let (Some(origin), Some(size)) = (dem.origin, dem.pixel_size) else {
+                return Err(mosaic_error(
+                    f,
+                    "it has no georeferencing, so it cannot be joined to the other DEM files",
+                ));
+            };
+            if let Some(first) = &first
+                && crs_key(&first.crs) != crs_key(&dem.crs)
+            {
+                return Err(mosaic_error(
+                    f,
+                    format!(
+                        "its coordinate system ({}) is not that of {} ({}): reproject them to \
+                         one first (gdalwarp -t_srs ...)",
+                        or_unstated(&dem.crs),
+                        parts[0].path.display(),
+                        or_unstated(&first.crs)
+                    ),
+                ));
+            }
+            parts.push(Part {
+                path: f.clone(),
+                width: dem.width as usize,
+                height: dem.height as usize,
+                origin,
+                size,
+            });
+            dem.heights = Vec::new();
+            first.get_or_insert(dem);
+        }
+        let Some(p0) = first else {
+            return Err(mosaic_error(Path::new(""), "no DEM file given"));
         };
-        if let Some(first) = parts.first()
-            && crs_key(&first.dem.crs) != crs_key(&dem.crs)
-        {
+        // The joined grid: the finest spacing, over every file's extent.
+        let fold = |f: &dyn Fn(&Part, usize) -> f64, init: f64, pick: fn(f64, f64) -> f64| {
+            [0, 1].map(|a| parts.iter().map(|p| f(p, a)).fold(init, pick))
+        };
+        let size = fold(&|p, a| p.size[a], f64::INFINITY, f64::min);
+        let lo = fold(&|p, a| p.origin[a], f64::INFINITY, f64::min);
+        let hi = fold(
+            &|p, a| {
+                let n = if a == 0 { p.width } else { p.height };
+                p.origin[a] + (n - 1) as f64 * p.size[a]
+            },
+            f64::NEG_INFINITY,
+            f64::max,
+        );
+        let n = [0, 1].map(|a| ((hi[a] - lo[a]) / size[a]).round() as u64 + 1);
+        if n[0] * n[1] > max_samples {
             return Err(mosaic_error(
-                f,
+                &parts[0].path,
                 format!(
-                    "its coordinate system ({}) is not that of {} ({}): reproject them to one \
-                     first (gdalwarp -t_srs ...)",
-                    or_unstated(&dem.crs),
-                    first.path.display(),
-                    or_unstated(&first.dem.crs)
+                    "the {} files joined make {} x {} samples, more than the {max_samples} a \
+                     DEM may have",
+                    parts.len(),
+                    n[0],
+                    n[1]
                 ),
             ));
         }
-        parts.push(Part {
-            path: f.clone(),
-            dem,
-            origin,
-            size,
-        });
-    }
-    // The joined grid: the finest spacing, over every file's extent.
-    let size = [0, 1].map(|a| {
-        parts
-            .iter()
-            .map(|p| p.size[a])
-            .fold(f64::INFINITY, f64::min)
-    });
-    let lo = [0, 1].map(|a| {
-        parts
-            .iter()
-            .map(|p| p.origin[a])
-            .fold(f64::INFINITY, f64::min)
-    });
-    let hi = [0, 1].map(|a| {
-        parts
+        // Metres per sample: from the first file, at the joined grid's centre latitude where
+        // the coordinates are degrees.
+        let mut cell = [
+            p0.cell_ew_m / parts[0].size[0] * size[0],
+            p0.cell_ns_m / parts[0].size[1] * size[1],
+        ];
+        if p0.crs.contains("geographic") {
+            let [m_ew, m_ns] = metres_per_degree(0.5 * (lo[1] + hi[1]));
+            cell = [m_ew * size[0], m_ns * size[1]];
+        }
+        let names: Vec<String> = parts
             .iter()
             .map(|p| {
-                let n = if a == 0 { p.dem.width } else { p.dem.height };
-                p.origin[a] + f64::from(n - 1) * p.size[a]
+                p.path
+                    .file_name()
+                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
             })
-            .fold(f64::NEG_INFINITY, f64::max)
-    });
-    let n = [0, 1].map(|a| ((hi[a] - lo[a]) / size[a]).round() as u64 + 1);
-    let first = &parts[0].path;
-    if n[0] * n[1] > MAX_DEM_SAMPLES {
-        return Err(mosaic_error(
-            first,
-            format!(
-                "the {} files joined make {} x {} samples, more than the {MAX_DEM_SAMPLES} a \
-                 DEM may have",
+            .collect();
+        let header = Dem {
+            width: n[0] as u32,
+            height: n[1] as u32,
+            cell_ew_m: cell[0],
+            cell_ns_m: cell[1],
+            heights: Vec::new(),
+            place: p0.place.clone(),
+            source: format!(
+                "{} files joined ({}){}",
                 parts.len(),
-                n[0],
-                n[1]
+                names.join(", "),
+                if p0.source.is_empty() {
+                    String::new()
+                } else {
+                    format!(": {}", p0.source)
+                }
             ),
-        ));
+            format: p0.format,
+            crs: p0.crs.clone(),
+            origin: Some(lo),
+            pixel_size: Some(size),
+            nodata_filled: 0,
+        };
+        Ok(Layout {
+            parts,
+            options: options.clone(),
+            header,
+            lo,
+            size,
+        })
     }
-    let (w, h) = (n[0] as usize, n[1] as usize);
-    let mut heights = vec![f32::NAN; w * h];
-    // The file that gave each sample (u16: at most MAX_MOSAIC_FILES files).
-    let mut owner = vec![u16::MAX; w * h];
-    // Overlaps: per pair (first file, later file), samples that disagree and the worst.
-    let mut disagree: Option<(usize, usize, u64, f32)> = None;
-    for (k, part) in parts.iter().enumerate() {
-        // The part's window of the joined grid.
-        let pw = f64::from(part.dem.width - 1) * part.size[0];
-        let ph = f64::from(part.dem.height - 1) * part.size[1];
+
+    /// The heights of file `k`, as the file has them (nodata NaN).
+    pub fn read(&self, k: usize) -> Result<std::sync::Arc<Vec<f32>>, WorldError> {
+        let dem = Dem::load_unfilled(&self.parts[k].path, &self.options)?;
+        Ok(std::sync::Arc::new(dem.heights))
+    }
+
+    /// The largest file's samples.
+    pub fn largest_file_samples(&self) -> u64 {
+        self.parts
+            .iter()
+            .map(|p| (p.width * p.height) as u64)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The files whose samples fall in columns `cols` and rows `rows` (from the north, ends
+    /// exclusive) of the joined grid.
+    pub fn files_in(&self, cols: [usize; 2], rows: [usize; 2]) -> Vec<usize> {
+        (0..self.parts.len())
+            .filter(|&k| {
+                let (c, r) = self.window_of(k);
+                let h = self.header.height as usize;
+                // The part's rows from the north.
+                let rn = [h - 1 - r[1], h - 1 - r[0]];
+                c[0] < cols[1] && c[1] >= cols[0] && rn[0] < rows[1] && rn[1] >= rows[0]
+            })
+            .collect()
+    }
+
+    /// File `k`'s columns and rows (from the SOUTH) on the joined grid, inclusive.
+    fn window_of(&self, k: usize) -> ([usize; 2], [usize; 2]) {
+        let part = &self.parts[k];
+        let (w, h) = (self.header.width as usize, self.header.height as usize);
+        let (lo, size) = (self.lo, self.size);
+        let pw = (part.width - 1) as f64 * part.size[0];
+        let ph = (part.height - 1) as f64 * part.size[1];
         let c0 = ((part.origin[0] - lo[0]) / size[0] - 1e-6).ceil().max(0.0) as usize;
         let c1 = (((part.origin[0] + pw - lo[0]) / size[0] + 1e-6).floor() as usize).min(w - 1);
         let r0 = ((part.origin[1] - lo[1]) / size[1] - 1e-6).ceil().max(0.0) as usize;
         let r1 = (((part.origin[1] + ph - lo[1]) / size[1] + 1e-6).floor() as usize).min(h - 1);
-        for r in r0..=r1 {
-            let y = lo[1] + r as f64 * size[1];
-            for c in c0..=c1 {
-                let x = lo[0] + c as f64 * size[0];
-                let Some(v) = part.at(x, y) else { continue };
-                let i = (h - 1 - r) * w + c;
-                if owner[i] == u16::MAX {
-                    owner[i] = k as u16;
-                    heights[i] = v;
-                } else if heights[i].is_finite() && v.is_finite() {
-                    let d = (heights[i] - v).abs();
-                    if d > OVERLAP_TOLERANCE_M {
-                        let o = owner[i] as usize;
-                        let e = disagree.get_or_insert((o, k, 0, 0.0));
-                        if (e.0, e.1) == (o, k) {
-                            e.2 += 1;
-                            e.3 = e.3.max(d);
+        ([c0, c1], [r0, r1])
+    }
+
+    /// The joined heights of columns `cols` and rows `rows` (from the north, ends exclusive),
+    /// row-major, north first: the first file listed where files overlap, NaN where no file
+    /// covers a sample or a file has a void there. `data(k)` gives file `k`'s heights. Refuses
+    /// overlaps that disagree and gaps of more than [`MAX_GAP_SAMPLES`] inside the window.
+    pub fn region(
+        &self,
+        cols: [usize; 2],
+        rows: [usize; 2],
+        data: &dyn Fn(usize) -> Result<std::sync::Arc<Vec<f32>>, WorldError>,
+    ) -> Result<Vec<f32>, WorldError> {
+        let (lo, size) = (self.lo, self.size);
+        let h = self.header.height as usize;
+        let (rw, rh) = (cols[1] - cols[0], rows[1] - rows[0]);
+        let mut heights = vec![f32::NAN; rw * rh];
+        // The file that gave each sample (u16: at most MAX_MOSAIC_FILES files).
+        let mut owner = vec![u16::MAX; rw * rh];
+        // Overlaps: per pair (first file, later file), samples that disagree and the worst.
+        let mut disagree: Option<(usize, usize, u64, f32)> = None;
+        for k in self.files_in(cols, rows) {
+            let part = &self.parts[k];
+            let values = data(k)?;
+            let ([c0, c1], [r0, r1]) = self.window_of(k);
+            // The window's rows from the south: h - rows[1] ..= h - 1 - rows[0].
+            let (s0, s1) = ((h - rows[1]).max(r0), (h - 1 - rows[0]).min(r1));
+            let (c0, c1) = (c0.max(cols[0]), c1.min(cols[1] - 1));
+            for r in s0..=s1 {
+                let y = lo[1] + r as f64 * size[1];
+                for c in c0..=c1 {
+                    let x = lo[0] + c as f64 * size[0];
+                    let Some(v) = part.at(&values, x, y) else {
+                        continue;
+                    };
+                    let i = (h - 1 - r - rows[0]) * rw + (c - cols[0]);
+                    if owner[i] == u16::MAX {
+                        owner[i] = k as u16;
+                        heights[i] = v;
+                    } else if heights[i].is_finite() && v.is_finite() {
+                        let d = (heights[i] - v).abs();
+                        if d > OVERLAP_TOLERANCE_M {
+                            let o = owner[i] as usize;
+                            let e = disagree.get_or_insert((o, k, 0, 0.0));
+                            if (e.0, e.1) == (o, k) {
+                                e.2 += 1;
+                                e.3 = e.3.max(d);
+                            }
                         }
+                    } else if heights[i].is_nan() {
+                        // The first file's void: the later file fills it.
+                        heights[i] = v;
                     }
-                } else if heights[i].is_nan() {
-                    // The first file's void: the later file fills it.
-                    heights[i] = v;
                 }
             }
         }
-    }
-    if let Some((a, b, count, worst)) = disagree {
-        return Err(mosaic_error(
-            &parts[b].path,
-            format!(
-                "where it overlaps {} their heights differ by more than {OVERLAP_TOLERANCE_M} m \
-                 at {count} samples (by up to {worst:.1} m): the files are not the same data \
-                 (the first file listed is kept where files overlap, and the others must agree \
-                 with it)",
-                parts[a].path.display()
-            ),
-        ));
-    }
-    // Gaps: runs of samples no file covers, along rows and columns.
-    let longest_run = |at: &dyn Fn(usize) -> bool, len: usize| -> (usize, usize) {
-        let (mut best, mut best_end, mut run) = (0, 0, 0);
-        for k in 0..len {
-            if at(k) {
-                run += 1;
-                if run > best {
-                    best = run;
-                    best_end = k;
+        if let Some((a, b, count, worst)) = disagree {
+            return Err(mosaic_error(
+                &self.parts[b].path,
+                format!(
+                    "where it overlaps {} their heights differ by more than \
+                     {OVERLAP_TOLERANCE_M} m at {count} samples (by up to {worst:.1} m): the \
+                     files are not the same data (the first file listed is kept where files \
+                     overlap, and the others must agree with it)",
+                    self.parts[a].path.display()
+                ),
+            ));
+        }
+        // Gaps: runs of samples no file covers, along rows and columns.
+        let longest_run = |at: &dyn Fn(usize) -> bool, len: usize| -> (usize, usize) {
+            let (mut best, mut best_end, mut run) = (0, 0, 0);
+            for k in 0..len {
+                if at(k) {
+                    run += 1;
+                    if run > best {
+                        best = run;
+                        best_end = k;
+                    }
+                } else {
+                    run = 0;
                 }
-            } else {
-                run = 0;
+            }
+            (best, best_end)
+        };
+        let gap = |run, c: usize, r: usize| {
+            gap_error(
+                &self.parts,
+                run,
+                lo,
+                size,
+                [cols[0] + c, h - 1 - (rows[0] + r)],
+            )
+        };
+        for r in 0..rh {
+            let (run, end) = longest_run(&|c| owner[r * rw + c] == u16::MAX, rw);
+            if run > MAX_GAP_SAMPLES {
+                return Err(gap(run, end, r));
             }
         }
-        (best, best_end)
-    };
-    for r in 0..h {
-        let (run, end) = longest_run(&|c| owner[r * w + c] == u16::MAX, w);
-        if run > MAX_GAP_SAMPLES {
-            return Err(gap_error(&parts, run, lo, size, [end, h - 1 - r]));
-        }
-    }
-    for c in 0..w {
-        let (run, end) = longest_run(&|r| owner[r * w + c] == u16::MAX, h);
-        if run > MAX_GAP_SAMPLES {
-            return Err(gap_error(&parts, run, lo, size, [c, h - 1 - end]));
-        }
-    }
-    // Metres per sample: from the first file, at the joined grid's centre latitude where the
-    // coordinates are degrees.
-    let p0 = &parts[0];
-    let mut cell = [
-        p0.dem.cell_ew_m / p0.size[0] * size[0],
-        p0.dem.cell_ns_m / p0.size[1] * size[1],
-    ];
-    if p0.dem.crs.contains("geographic") {
-        let [m_ew, m_ns] = metres_per_degree(0.5 * (lo[1] + hi[1]));
-        cell = [m_ew * size[0], m_ns * size[1]];
-    }
-    let names: Vec<String> = parts
-        .iter()
-        .map(|p| {
-            p.path
-                .file_name()
-                .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
-        })
-        .collect();
-    let mut sources: Vec<&str> = parts.iter().map(|p| p.dem.source.as_str()).collect();
-    sources.dedup();
-    Ok(Dem {
-        width: w as u32,
-        height: h as u32,
-        cell_ew_m: cell[0],
-        cell_ns_m: cell[1],
-        heights,
-        place: p0.dem.place.clone(),
-        source: format!(
-            "{} files joined ({}){}",
-            parts.len(),
-            names.join(", "),
-            if sources.iter().all(|s| s.is_empty()) {
-                String::new()
-            } else {
-                format!(": {}", sources.join("; "))
+        for c in 0..rw {
+            let (run, end) = longest_run(&|r| owner[r * rw + c] == u16::MAX, rh);
+            if run > MAX_GAP_SAMPLES {
+                return Err(gap(run, c, end));
             }
-        ),
-        format: p0.dem.format,
-        crs: p0.dem.crs.clone(),
-        origin: Some(lo),
-        pixel_size: Some(size),
-        nodata_filled: 0,
-    })
+        }
+        Ok(heights)
+    }
 }
 
 fn gap_error(

@@ -1,0 +1,179 @@
+//! How a bake spends its memory limit ([`super::BakeOptions::memory_mib`]).
+//!
+//! Nothing a bake holds grows with the world beyond what the limit allows:
+//!
+//! - the **coarse subsample**: every `stride`-th sample of the finest grid, heights, slopes and
+//!   paint, from which the camera paths are computed and the coarse levels are cut (the stride
+//!   is the smallest power of two whose subsample fits half of what is left; a world small
+//!   enough is held whole, `stride` 1, and then every tile is cut from it);
+//! - the **blocks**: the finer levels are made block by block, a block being a tile of the
+//!   coarsest level the subsample cannot give, resampled and painted with its borders, one
+//!   block a thread;
+//! - the **calibration sample**: the derivation is fitted on the data area, or on a window of
+//!   it centred on the world where the whole would not fit;
+//! - the DEM: a single file whole; a mosaic's files and chunks in caches (see
+//!   [`super::source`]).
+
+use crate::world::error::WorldError;
+use crate::world::tile::Pyramid;
+
+use super::resample::Shape;
+use super::source::DemSource;
+
+/// The default memory limit, MiB.
+pub const DEFAULT_MEMORY_MIB: u64 = 2048;
+/// What the process needs besides the bake's own data (code, allocator, encoders), bytes.
+const BASE_BYTES: u64 = 40 << 20;
+/// Bytes a sample of the coarse subsample takes: height, slope, grass type, density, material.
+const COARSE_SAMPLE_BYTES: u64 = 4 + 8 + 3;
+/// Bytes a sample of a block takes: height and paint.
+const BLOCK_SAMPLE_BYTES: u64 = 4 + 3;
+/// Bytes a sample of the calibration window takes, the fit's levels included.
+const CALIBRATION_SAMPLE_BYTES: u64 = 40;
+/// Samples a side of the survey's squares.
+pub(super) const SURVEY_SIDE: i64 = 256;
+
+/// How a bake spends its memory (see the module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Plan {
+    pub(super) shape: Shape,
+    /// Finest samples between the coarse subsample's samples (a power of two).
+    pub(super) stride: i64,
+    /// Levels finer than the coarse ones are made in blocks, tiles of this level.
+    pub(super) block_level: u8,
+    /// Threads making blocks (and surveying).
+    pub(super) threads: usize,
+    /// Most samples the calibration window may have.
+    pub(super) calibration_samples: u64,
+    /// Files and chunks a mosaic keeps cached.
+    pub(super) cached: [usize; 2],
+    /// What the plan expects the bake to hold at most, bytes.
+    pub(super) peak_bytes: u64,
+}
+
+impl Plan {
+    /// Whether tiles of `level` are cut from the coarse subsample.
+    pub(super) fn coarse_level(&self, level: u8) -> bool {
+        level < self.block_level
+    }
+
+    /// The coarse subsample's first global sample per axis and its samples per axis.
+    pub(super) fn coarse_grid(&self) -> ([i64; 2], [usize; 2]) {
+        coarse_grid(&self.shape, self.stride)
+    }
+
+    /// Plans a bake of `pyramid` from `dem` within `limit_mib`; refuses a limit too small for
+    /// the smallest plan, naming what it would need.
+    pub(super) fn new(
+        limit_mib: u64,
+        pyramid: &Pyramid,
+        dem: &DemSource,
+        data_samples: u64,
+    ) -> Result<Plan, WorldError> {
+        let shape = Shape::of(pyramid);
+        let limit = limit_mib.saturating_mul(1 << 20);
+        let cores = std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1)
+            .min(8);
+        let [file, chunk, making] = dem.cache_unit_bytes();
+        // The DEM: a whole one, or one chunk being made per thread with a file and a few
+        // chunks cached.
+        let dem_bytes = |threads: u64| {
+            dem.resident_bytes() + threads * making + if making > 0 { file + 4 * chunk } else { 0 }
+        };
+        let fixed = |threads: u64| BASE_BYTES + dem_bytes(threads);
+        let too_small = |need: u64| {
+            WorldError::bad_option(
+                "--memory-mib",
+                limit_mib,
+                format!(
+                    "at least {} for this world and DEM (a bake holds {} there)",
+                    need.div_ceil(1 << 20),
+                    "its DEM, a sample of the data area, a subsample of the finest grid and \
+                     one block a thread"
+                ),
+            )
+        };
+        let calibration = |left: u64| {
+            (left / 8 / CALIBRATION_SAMPLE_BYTES)
+                .min(data_samples)
+                .max(1 << 16)
+        };
+        // The stride: the smallest power of two whose subsample fits half of what is left.
+        let finest = shape.finest;
+        let left1 = limit.saturating_sub(fixed(1));
+        let calibration_samples = calibration(left1);
+        let left = left1.saturating_sub(calibration_samples * CALIBRATION_SAMPLE_BYTES);
+        let mut stride = 1i64;
+        let coarse_bytes = |s: i64| {
+            let (_, n) = coarse_grid(&shape, s);
+            n[0] as u64 * n[1] as u64 * COARSE_SAMPLE_BYTES
+        };
+        let coarsest = |s: i64| coarse_grid(&shape, s).1.iter().all(|&n| n >= 2);
+        while coarse_bytes(stride) > left / 2 && coarsest(stride * 2) {
+            stride *= 2;
+        }
+        // Levels whose samples are every `stride`-th finest sample or sparser come from the
+        // subsample; the finer ones from blocks of the coarsest of them.
+        let steps = stride.trailing_zeros() as u8;
+        let block_level = (finest + 1).saturating_sub(steps);
+        let block_bytes = if block_level < pyramid.stored_levels {
+            let id = crate::world::tile::TileId::new(block_level, 0, 0);
+            let [a, b] = shape.tile_span(pyramid, id);
+            let samples = (a[1] - a[0] + 3) as u64 * (b[1] - b[0] + 3) as u64;
+            // The block, its DEM window (at most as fine as the DEM's posts) and a tile's files.
+            let header = dem.header();
+            let metres = (a[1] - a[0] + 3) as f64 * shape.cell;
+            let posts = (metres / header.cell_ew_m + 4.0) * (metres / header.cell_ns_m + 4.0);
+            samples * BLOCK_SAMPLE_BYTES + posts as u64 * 4 + (4 << 20)
+        } else {
+            0
+        };
+        let used = |threads: u64| {
+            fixed(threads)
+                + calibration_samples * CALIBRATION_SAMPLE_BYTES
+                + coarse_bytes(stride)
+                + threads * block_bytes
+        };
+        let mut threads = cores as u64;
+        while threads > 1 && used(threads) > limit {
+            threads -= 1;
+        }
+        let need = used(1);
+        if need > limit || (stride > 1 && coarse_bytes(stride) > left / 2) {
+            return Err(too_small(need.max(limit + 1)));
+        }
+        let spare = limit - used(threads);
+        let cached = match (spare / 2).checked_div(chunk) {
+            Some(chunks) => [1 + (spare / 2 / file.max(1)) as usize, 4 + chunks as usize],
+            None => [0, 0],
+        };
+        let peak_bytes = used(threads)
+            + cached[0].saturating_sub(1) as u64 * file
+            + cached[1].saturating_sub(4) as u64 * chunk;
+        Ok(Plan {
+            shape,
+            stride,
+            block_level,
+            threads: threads as usize,
+            calibration_samples,
+            cached,
+            peak_bytes,
+        })
+    }
+}
+
+/// The subsample of `shape` every `stride` samples that keeps the world's origin on it: its
+/// first global sample per axis and its samples per axis.
+fn coarse_grid(shape: &Shape, stride: i64) -> ([i64; 2], [usize; 2]) {
+    let first = shape.margin.rem_euclid(stride);
+    let n = shape.size.map(|s| {
+        if s > first {
+            ((s - 1 - first) / stride + 1) as usize
+        } else {
+            1
+        }
+    });
+    ([first; 2], n)
+}

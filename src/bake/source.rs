@@ -1,0 +1,287 @@
+//! Where a bake reads its DEM: one file held whole, or many files joined
+//! ([`crate::world::mosaic`]) and read a chunk at a time, so that a mosaic of any size is baked
+//! in bounded memory.
+//!
+//! A mosaic is cut into chunks of [`CHUNK`] x [`CHUNK`] samples of the joined grid. A chunk's
+//! heights are the join of the files over the chunk and [`FILL_MARGIN`] samples around it, its
+//! voids and the gaps between files filled there ([`crate::world::nodata`]), cropped to the
+//! chunk: a sample's value depends only on where it lies, never on which part of the bake asks
+//! for it, so neighbouring tiles agree however the work is split. Files and filled chunks are
+//! kept in small least-recently-used caches whose sizes the memory limit sets.
+
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use lru::LruCache;
+
+use crate::world::dem::{Dem, DemOptions, MAX_NODATA_FRACTION};
+use crate::world::dem_grid::DemWindow;
+use crate::world::error::WorldError;
+use crate::world::mosaic::Layout;
+
+/// Samples a side of a mosaic's chunk.
+pub(super) const CHUNK: usize = 1024;
+/// Samples around a chunk that its void filling sees (more than the widest gap between files).
+pub(super) const FILL_MARGIN: usize = 256;
+/// Most samples a mosaic may have (a bake refuses more than 65,536 cells a side anyway).
+const MAX_MOSAIC_SAMPLES: u64 = 1 << 36;
+
+/// A bake's DEM.
+pub(super) enum DemSource {
+    /// One file, read and filled whole.
+    Whole(Dem),
+    /// Several files, read in chunks.
+    Mosaic(Box<Mosaic>),
+}
+
+/// Several DEM files joined and read in chunks (see the module docs).
+pub(super) struct Mosaic {
+    layout: Layout,
+    named: PathBuf,
+    files: Mutex<LruCache<usize, Arc<Vec<f32>>>>,
+    chunks: Mutex<LruCache<[usize; 2], Arc<Vec<f32>>>>,
+    /// Voids filled in each chunk, once it has been made.
+    filled: Mutex<Vec<Option<u64>>>,
+}
+
+impl DemSource {
+    /// Opens the DEM files: one is read whole, several are laid out from their headers.
+    pub(super) fn open(
+        files: &[PathBuf],
+        named: &Path,
+        options: &DemOptions,
+    ) -> Result<DemSource, WorldError> {
+        match files {
+            [] | [_] => Ok(DemSource::Whole(crate::world::mosaic::load_files(
+                files, named, options,
+            )?)),
+            _ => {
+                let layout = Layout::open(files, options, MAX_MOSAIC_SAMPLES)?;
+                let n = chunks_across(&layout.header);
+                Ok(DemSource::Mosaic(Box::new(Mosaic {
+                    layout,
+                    named: named.to_path_buf(),
+                    files: Mutex::new(LruCache::new(std::num::NonZeroUsize::MIN)),
+                    chunks: Mutex::new(LruCache::new(std::num::NonZeroUsize::MIN)),
+                    filled: Mutex::new(vec![None; n[0] * n[1]]),
+                })))
+            }
+        }
+    }
+
+    /// The DEM's size, spacing and georeferencing (a mosaic's heights are left empty).
+    pub(super) fn header(&self) -> &Dem {
+        match self {
+            DemSource::Whole(dem) => dem,
+            DemSource::Mosaic(m) => &m.layout.header,
+        }
+    }
+
+    /// Bytes held whatever the caches hold: a whole DEM's heights.
+    pub(super) fn resident_bytes(&self) -> u64 {
+        match self {
+            DemSource::Whole(dem) => dem.heights.len() as u64 * 4,
+            DemSource::Mosaic(_) => 0,
+        }
+    }
+
+    /// Bytes one cached file and one cached chunk take, and the peak of making one chunk; zero
+    /// for a whole DEM.
+    pub(super) fn cache_unit_bytes(&self) -> [u64; 3] {
+        match self {
+            DemSource::Whole(_) => [0; 3],
+            DemSource::Mosaic(m) => {
+                let region = (CHUNK + 2 * FILL_MARGIN).pow(2) as u64;
+                // The joined region (heights and owners), the fill's pyramid (values and
+                // weights, a third more) and the file being read.
+                let making = region * (4 + 2) + region * 8 * 4 / 3 + m.file_bytes();
+                [m.file_bytes(), (CHUNK * CHUNK * 4) as u64, making]
+            }
+        }
+    }
+
+    /// Sets how many files and chunks a mosaic keeps (at least one of each).
+    pub(super) fn set_cache(&self, files: usize, chunks: usize) {
+        if let DemSource::Mosaic(m) = self {
+            let n = |k: usize| {
+                std::num::NonZeroUsize::new(k.max(1)).unwrap_or(std::num::NonZeroUsize::MIN)
+            };
+            lock(&m.files).resize(n(files));
+            lock(&m.chunks).resize(n(chunks));
+        }
+    }
+
+    /// The posts [`DemWindow::sample`] needs for positions in `x` by `y` (metres from the
+    /// south-west sample).
+    pub(super) fn window(&self, x: [f64; 2], y: [f64; 2]) -> Result<DemWindow<'_>, WorldError> {
+        let header = self.header();
+        let (cols, rows) = header.posts_for(x, y);
+        let width = cols[1] - cols[0];
+        let heights = match self {
+            DemSource::Whole(dem) => {
+                let w = dem.width as usize;
+                let mut out = Vec::with_capacity(width * (rows[1] - rows[0]));
+                for r in rows[0]..rows[1] {
+                    out.extend_from_slice(&dem.heights[r * w + cols[0]..r * w + cols[1]]);
+                }
+                out
+            }
+            DemSource::Mosaic(m) => m.window(cols, rows)?,
+        };
+        Ok(DemWindow {
+            dem: header,
+            first: [cols[0], rows[0]],
+            width,
+            heights,
+        })
+    }
+
+    /// Voids filled so far (a mosaic counts each chunk once it is made).
+    pub(super) fn nodata_filled(&self) -> u64 {
+        match self {
+            DemSource::Whole(dem) => dem.nodata_filled,
+            DemSource::Mosaic(m) => lock(&m.filled).iter().flatten().sum(),
+        }
+    }
+
+    /// Refuses a mosaic more than [`MAX_NODATA_FRACTION`] of which was void (once every chunk
+    /// has been made).
+    pub(super) fn check_nodata(&self) -> Result<(), WorldError> {
+        let header = self.header();
+        let total = u64::from(header.width) * u64::from(header.height);
+        let nodata = self.nodata_filled();
+        match self {
+            DemSource::Mosaic(m) if nodata as f64 > MAX_NODATA_FRACTION * total as f64 => {
+                Err(WorldError::TooMuchNodata {
+                    path: m.named.clone(),
+                    nodata,
+                    total,
+                    max_fraction: MAX_NODATA_FRACTION,
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Chunks across and down a grid.
+fn chunks_across(header: &Dem) -> [usize; 2] {
+    [header.width, header.height].map(|n| (n as usize).div_ceil(CHUNK))
+}
+
+impl Mosaic {
+    fn file_bytes(&self) -> u64 {
+        self.layout.largest_file_samples() * 4
+    }
+
+    /// Columns `cols` and rows `rows` (from the north, ends exclusive), north first.
+    fn window(&self, cols: [usize; 2], rows: [usize; 2]) -> Result<Vec<f32>, WorldError> {
+        let (w, h) = (cols[1] - cols[0], rows[1] - rows[0]);
+        let mut out = vec![0f32; w * h];
+        for cj in rows[0] / CHUNK..rows[1].div_ceil(CHUNK) {
+            for ci in cols[0] / CHUNK..cols[1].div_ceil(CHUNK) {
+                let chunk = self.chunk([ci, cj])?;
+                let cw = self.chunk_size([ci, cj])[0];
+                let (c0, c1) = ((ci * CHUNK).max(cols[0]), ((ci + 1) * CHUNK).min(cols[1]));
+                let (r0, r1) = ((cj * CHUNK).max(rows[0]), ((cj + 1) * CHUNK).min(rows[1]));
+                for r in r0..r1 {
+                    let from = (r - cj * CHUNK) * cw + (c0 - ci * CHUNK);
+                    let to = (r - rows[0]) * w + (c0 - cols[0]);
+                    out[to..to + (c1 - c0)].copy_from_slice(&chunk[from..from + (c1 - c0)]);
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    fn chunk_size(&self, at: [usize; 2]) -> [usize; 2] {
+        let n = [self.layout.header.width, self.layout.header.height];
+        [0, 1].map(|a| ((at[a] + 1) * CHUNK).min(n[a] as usize) - at[a] * CHUNK)
+    }
+
+    /// Chunk `at` (columns, rows from the north), from the cache or made.
+    fn chunk(&self, at: [usize; 2]) -> Result<Arc<Vec<f32>>, WorldError> {
+        if let Some(c) = lock(&self.chunks).get(&at) {
+            return Ok(c.clone());
+        }
+        let chunk = Arc::new(self.make_chunk(at)?);
+        lock(&self.chunks).put(at, chunk.clone());
+        Ok(chunk)
+    }
+
+    fn file(&self, k: usize) -> Result<Arc<Vec<f32>>, WorldError> {
+        if let Some(f) = lock(&self.files).get(&k) {
+            return Ok(f.clone());
+        }
+        let f = self.layout.read(k)?;
+        lock(&self.files).put(k, f.clone());
+        Ok(f)
+    }
+
+    /// Joins the files over the chunk and its margin, fills the voids there, keeps the chunk.
+    fn make_chunk(&self, at: [usize; 2]) -> Result<Vec<f32>, WorldError> {
+        let header = &self.layout.header;
+        let n = [header.width as usize, header.height as usize];
+        let size = self.chunk_size(at);
+        let core = [0, 1].map(|a| [at[a] * CHUNK, at[a] * CHUNK + size[a]]);
+        let region = [0, 1].map(|a| {
+            [
+                core[a][0].saturating_sub(FILL_MARGIN),
+                (core[a][1] + FILL_MARGIN).min(n[a]),
+            ]
+        });
+        let mut heights = self
+            .layout
+            .region(region[0], region[1], &|k| self.file(k))?;
+        let rw = region[0][1] - region[0][0];
+        let rh = region[1][1] - region[1][0];
+        let voids_in_core = |heights: &[f32]| {
+            (core[1][0]..core[1][1])
+                .map(|r| {
+                    let row = (r - region[1][0]) * rw;
+                    heights[row + core[0][0] - region[0][0]..row + core[0][1] - region[0][0]]
+                        .iter()
+                        .filter(|h| h.is_nan())
+                        .count() as u64
+                })
+                .sum::<u64>()
+        };
+        let voids = voids_in_core(&heights);
+        if heights.iter().all(|h| h.is_nan()) {
+            return Err(WorldError::TooMuchNodata {
+                path: self.named.clone(),
+                nodata: (rw * rh) as u64,
+                total: (rw * rh) as u64,
+                max_fraction: MAX_NODATA_FRACTION,
+            });
+        }
+        crate::world::nodata::fill_nodata(rw, rh, &mut heights);
+        let mut out = Vec::with_capacity(size[0] * size[1]);
+        for r in core[1][0]..core[1][1] {
+            let row = (r - region[1][0]) * rw;
+            out.extend_from_slice(
+                &heights[row + core[0][0] - region[0][0]..row + core[0][1] - region[0][0]],
+            );
+        }
+        if let Some((k, &h)) = out.iter().enumerate().find(|(_, h)| {
+            let [lo, hi] = crate::world::PLAUSIBLE_HEIGHTS_M;
+            !(lo..=hi).contains(&f64::from(**h))
+        }) {
+            return Err(WorldError::ImplausibleHeight {
+                path: crate::world::dem::sidecar_path(&self.named),
+                dem: self.named.clone(),
+                column: (core[0][0] + k % size[0]) as u32,
+                row: (core[1][0] + k / size[0]) as u32,
+                value: f64::from(h),
+                range: crate::world::PLAUSIBLE_HEIGHTS_M,
+            });
+        }
+        let across = chunks_across(header)[0];
+        lock(&self.filled)[at[1] * across + at[0]] = Some(voids);
+        Ok(out)
+    }
+}
