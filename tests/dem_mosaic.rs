@@ -346,3 +346,68 @@ fn bake_takes_the_dem_repeated_on_the_command_line() {
     let world = verdant::World::open(&dir.path().join("w")).unwrap();
     assert_eq!(world.manifest.extent_m, [1280.0, 1280.0]);
 }
+
+/// The peak memory a `verdant bake` run printed, MiB.
+fn bake_peak_mib(dir: &Path, out: &str, limit: Option<&str>) -> f64 {
+    let mut args = vec![
+        "bake",
+        "--dem",
+        "srtm",
+        "--out",
+        out,
+        "--name",
+        "joined",
+        "--cell-size",
+        "75",
+        "--tile-cells",
+        "256",
+        "--levels",
+        "2",
+    ];
+    if let Some(limit) = limit {
+        args.extend(["--memory-mib", limit]);
+    }
+    let run = common::verdant(&args, dir);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let line = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("memory: peak "))
+        .unwrap_or_else(|| panic!("no memory line in {stdout}"));
+    line.split(' ').next().unwrap().parse().unwrap()
+}
+
+/// A mosaic of four tiles (5.8 million samples, 7 million cells of 75 m) bakes within a limit
+/// well below what its bake takes when the limit lets it hold the finest grid whole, and into
+/// the same tiles.
+#[test]
+fn a_mosaic_bakes_within_its_memory_limit_into_the_same_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiles = dir.path().join("srtm");
+    std::fs::create_dir_all(&tiles).unwrap();
+    for (lon, lat) in [(-123, 37), (-122, 37), (-123, 38), (-122, 38)] {
+        write_hgt(&tiles, lon, lat);
+    }
+    let whole = bake_peak_mib(dir.path(), "whole", None);
+    let limit = 160.0;
+    let bounded = bake_peak_mib(dir.path(), "bounded", Some("160"));
+    assert!(
+        bounded <= limit,
+        "peak {bounded} MiB over the limit of {limit}"
+    );
+    assert!(
+        whole > 1.5 * limit,
+        "held whole the bake takes {whole} MiB: the limit of {limit} tests nothing"
+    );
+    let a = common::read_all_files(&dir.path().join("whole/tiles"));
+    let b = common::read_all_files(&dir.path().join("bounded/tiles"));
+    assert_eq!(a.len(), b.len());
+    assert!(a.len() > 100, "{} tile files", a.len());
+    for (name, bytes) in &a {
+        assert!(b.get(name) == Some(bytes), "{name:?} differs");
+    }
+}

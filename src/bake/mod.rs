@@ -104,7 +104,8 @@ pub struct BakeOptions {
     pub cell_size_m: Option<f64>,
     /// Cells per tile edge (power of two, 8..=1024).
     pub tile_cells: u32,
-    /// Stored levels (1..=12).
+    /// Stored levels (1..=12), or 0: as many as the world needs, at least 3, for its level-0
+    /// tiles to number at most [`MAX_AUTO_ROOT_TILES`] (the runtime keeps them all resident).
     pub stored_levels: u8,
     /// Seed of the grass noise.
     pub seed: u64,
@@ -280,7 +281,11 @@ pub fn bake(
 
     // Millimetres are plenty, and keep the manifest free of float noise.
     let extent = dem.extent_m().map(|e| round_to(e, 3));
-    let finest = opts.stored_levels.saturating_sub(1);
+    let levels = match opts.stored_levels {
+        0 => auto_levels(extent, cell, opts.tile_cells),
+        n => n,
+    };
+    let finest = levels - 1;
     let root_size = cell * f64::from(opts.tile_cells) * 2f64.powi(i32::from(finest));
     let root_tiles =
         extent.map(|e| ((e / root_size).ceil().max(1.0)).min(f64::from(u32::MAX)) as u32);
@@ -289,7 +294,7 @@ pub fn bake(
         root_tiles,
         tile_cells: opts.tile_cells,
         border: BAKE_BORDER,
-        stored_levels: opts.stored_levels,
+        stored_levels: levels,
         derived_levels: BAKE_DERIVED_LEVELS,
     };
     let name = opts
@@ -422,7 +427,7 @@ pub fn bake(
     let dem_cell_size_m = [dem.cell_ew_m, dem.cell_ns_m];
     let report = |tiles_written, peak| BakeReport {
         tiles_written,
-        levels: opts.stored_levels,
+        levels,
         extent_m: extent,
         height_range_m: height_range,
         seconds: start.elapsed().as_secs_f64(),
@@ -594,6 +599,21 @@ fn finish_from_parts(
     Ok(Some(report))
 }
 
+/// Most level-0 tiles a bake that chooses its levels ([`BakeOptions::stored_levels`] 0) leaves.
+pub const MAX_AUTO_ROOT_TILES: u64 = 64;
+
+/// The fewest stored levels, at least 3 and at most 12, that leave a world of `extent` metres
+/// at `cell` metres and `tile_cells` cells a tile at most [`MAX_AUTO_ROOT_TILES`] level-0 tiles.
+pub fn auto_levels(extent: [f64; 2], cell: f64, tile_cells: u32) -> u8 {
+    (3..=12u8)
+        .find(|&levels| {
+            let root = cell * f64::from(tile_cells) * 2f64.powi(i32::from(levels) - 1);
+            let n = extent.map(|e| (e / root).ceil().max(1.0));
+            n[0] * n[1] <= MAX_AUTO_ROOT_TILES as f64
+        })
+        .unwrap_or(12)
+}
+
 /// Rounds a cell size to 1, 2, 2.5 or 5 times a power of ten, whichever is nearest in ratio.
 pub fn nice_cell_size(c: f64) -> f64 {
     if !(c.is_finite() && c > 0.0) {
@@ -666,11 +686,11 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
             "a power of two in 8..=1024".into(),
         ));
     }
-    if !(1..=12).contains(&opts.stored_levels) {
+    if !(0..=12).contains(&opts.stored_levels) {
         return Err(WorldError::bad_option(
             "--levels",
             opts.stored_levels,
-            "in 1..=12".into(),
+            "in 1..=12 (0: as many as the world needs)".into(),
         ));
     }
     if let Some(c) = opts.cell_size_m

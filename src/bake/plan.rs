@@ -177,3 +177,103 @@ fn coarse_grid(shape: &Shape, stride: i64) -> ([i64; 2], [usize; 2]) {
     });
     ([first; 2], n)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::dem::{Dem, DemFormat};
+
+    /// A DEM header of `n` x `n` samples of `cell` metres (no heights held).
+    fn header(n: u32, cell: f64) -> DemSource {
+        DemSource::Whole(Dem {
+            width: n,
+            height: n,
+            cell_ew_m: cell,
+            cell_ns_m: cell,
+            heights: Vec::new(),
+            place: String::new(),
+            source: String::new(),
+            format: DemFormat::SrtmHgt,
+            crs: String::new(),
+            origin: None,
+            pixel_size: None,
+            nodata_filled: 0,
+        })
+    }
+
+    fn pyramid(cells: f64, cell: f64, levels: u8) -> Pyramid {
+        let root = cell * 128.0 * f64::from(1u32 << (levels - 1));
+        let n = (cells * cell / root).ceil() as u32;
+        Pyramid {
+            root_tile_size_m: root,
+            root_tiles: [n, n],
+            tile_cells: 128,
+            border: 2,
+            stored_levels: levels,
+            derived_levels: 6,
+        }
+    }
+
+    /// However large the world, the plan holds what it expects within the limit, and what it
+    /// holds stops growing with the world: the subsample thins, the blocks stay one tile.
+    #[test]
+    fn the_plan_stays_within_the_limit_whatever_the_world() {
+        for limit in [256u64, 2048] {
+            let mut last_stride = 0;
+            for cells in [1_000.0, 8_000.0, 30_000.0, 65_000.0] {
+                let dem = header(cells as u32, 25.0);
+                let p = pyramid(cells, 25.0, 3);
+                let plan = Plan::new(limit, &p, &dem, (cells * cells) as u64).unwrap();
+                assert!(
+                    plan.peak_bytes <= limit << 20,
+                    "{cells} cells at {limit} MiB: plans {} MiB",
+                    plan.peak_bytes >> 20
+                );
+                assert!(
+                    plan.stride >= last_stride,
+                    "the subsample thins as the world grows"
+                );
+                last_stride = plan.stride;
+                let (_, n) = plan.coarse_grid();
+                assert!(n[0] as u64 * n[1] as u64 * COARSE_SAMPLE_BYTES <= limit << 19);
+                if plan.stride > 1 {
+                    assert!(
+                        plan.block_level < 3,
+                        "blocks are made below the coarse levels"
+                    );
+                }
+            }
+            assert!(
+                last_stride > 1,
+                "a 65,000-cell world is not held whole in {limit} MiB"
+            );
+        }
+        // A small world is held whole, every level cut from it.
+        let plan = Plan::new(
+            2048,
+            &pyramid(1000.0, 25.0, 3),
+            &header(1000, 25.0),
+            1 << 20,
+        )
+        .unwrap();
+        assert_eq!((plan.stride, plan.block_level), (1, 3));
+        assert!(plan.coarse_level(2));
+    }
+
+    /// A limit too small for even one block is refused, naming the option and what is needed.
+    #[test]
+    fn a_limit_too_small_is_refused_naming_what_it_needs() {
+        let e = Plan::new(
+            8,
+            &pyramid(30_000.0, 25.0, 3),
+            &header(30_000, 25.0),
+            1 << 20,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("--memory-mib 8") && e.contains("at least"),
+            "{e}"
+        );
+    }
+}

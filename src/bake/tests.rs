@@ -162,3 +162,19 @@ fn noise_is_deterministic_and_bounded() {
         fbm(DVec2::new(0.5, 0.5), 2, 3)
     );
 }
+
+/// A bake that chooses its levels keeps the level-0 tiles few enough to keep resident, and
+/// small worlds at the three levels they always had.
+#[test]
+fn automatic_levels_keep_the_root_tiles_few() {
+    // Santa Cruz: 25.6 km at 25 m.
+    assert_eq!(auto_levels([25_575.0, 25_575.0], 25.0, 128), 3);
+    // Sixteen 1-arc-second tiles: 356 x 445 km at 25 m: 980 root tiles at 3 levels, 63 at 5.
+    assert_eq!(auto_levels([346_500.0, 444_000.0], 25.0, 128), 5);
+    for extent in [1e3, 1e5, 1e6, 1e7] {
+        let levels = auto_levels([extent, extent], 10.0, 128);
+        let root = 10.0 * 128.0 * 2f64.powi(i32::from(levels) - 1);
+        let n = (extent / root).ceil();
+        assert!(n * n <= MAX_AUTO_ROOT_TILES as f64 || levels == 12, "{extent}: {levels}");
+    }
+}

@@ -34,9 +34,10 @@ pub(crate) struct BakeArgs {
     /// Cells per tile edge (a power of two).
     #[arg(long, default_value_t = 128)]
     pub(crate) tile_cells: u32,
-    /// Stored levels of the tile pyramid.
-    #[arg(long, default_value_t = 3)]
-    pub(crate) levels: u8,
+    /// Stored levels of the tile pyramid (default: as many as the world needs, at least 3, for
+    /// at most 64 level-0 tiles, which a viewer keeps resident).
+    #[arg(long)]
+    pub(crate) levels: Option<u8>,
     /// Seed of the grass-painting noise.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u64,
@@ -123,7 +124,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         name,
         cell_size_m: cell_size,
         tile_cells,
-        stored_levels: levels,
+        stored_levels: levels.unwrap_or(0),
         seed,
         replace,
         land_cover: land_cover.zip(cover_table),
