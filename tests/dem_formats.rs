@@ -595,6 +595,41 @@ fn assert_heights_match(label: &str, got: &Dem, want: &Dem, tolerance: f64) {
     );
 }
 
+/// Windows of rows of `path` read on their own (as a bake reads a large or remote file) hold
+/// exactly the heights of those rows of the whole file, `dem`; and the header agrees.
+fn assert_windows_match(label: &str, path: &Path, dem: &Dem) {
+    let (header, rows) = verdant::world::window::Rows::open(path, &DemOptions::default(), 1 << 30)
+        .unwrap_or_else(|e| panic!("{label}: {e}"));
+    assert_eq!(
+        [header.width, header.height],
+        [dem.width, dem.height],
+        "{label}"
+    );
+    assert_eq!(
+        (
+            header.cell_ew_m,
+            header.cell_ns_m,
+            header.origin,
+            &header.crs
+        ),
+        (dem.cell_ew_m, dem.cell_ns_m, dem.origin, &dem.crs),
+        "{label}"
+    );
+    let (w, h) = (dem.width as usize, dem.height as usize);
+    for [a, b] in [[0, 1], [3, 20], [h / 2 - 5, h / 2 + 9], [h - 4, h], [0, h]] {
+        let got = rows.read([a, b]).unwrap_or_else(|e| panic!("{label}: {e}"));
+        let want = &dem.heights[a * w..b * w];
+        assert!(
+            got.len() == want.len()
+                && got
+                    .iter()
+                    .zip(want)
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+            "{label}: rows {a}..{b} read on their own differ from the whole file's"
+        );
+    }
+}
+
 /// Bakes `dem` into `dir/name` with small tiles: 20 m cells, 16-cell tiles, two levels.
 fn small_bake(dem: &Path, dir: &Path, name: &str, dem_cell: Option<[f64; 2]>) -> World {
     let out = dir.join(name);
@@ -678,6 +713,7 @@ fn every_sample_type_layout_and_compression_reads_like_the_png() {
                     assert_eq!(dem.nodata_filled, 0, "{label}");
                     assert!(dem.crs.contains("EPSG:32610"), "{label}: {}", dem.crs);
                     assert_heights_match(&label, &dem, &want, PNG_TOLERANCE_M);
+                    assert_windows_match(&label, &path, &dem);
                     read += 1;
                 }
             }
@@ -886,6 +922,7 @@ fn a_transformation_in_feet_stored_south_up_reads_north_up_in_metres() {
     );
     // The south-west sample is the first one stored: x and y of the first pixel's centre.
     assert_eq!(dem.origin, Some([6_000_015.0, 2_000_020.0]));
+    assert_windows_match("south-up feet", &tif, &dem);
 }
 
 /// Nodata samples (GDAL_NODATA) are filled from the heights around them and counted; valid

@@ -411,3 +411,90 @@ fn a_mosaic_bakes_within_its_memory_limit_into_the_same_tiles() {
         assert!(b.get(name) == Some(bytes), "{name:?} differs");
     }
 }
+
+/// Every file of a world baked into `out`, for comparing bakes byte for byte.
+fn world_files(out: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+    common::read_all_files(&out.join("tiles"))
+}
+
+/// DEMs over HTTP: a GeoTIFF at an `http://` address, and a VRT whose sources are addresses
+/// (GDAL's `/vsicurl/` names among them), read with range requests, bake into the same tiles
+/// as the same files on disk; a server that does not answer range requests, and an address
+/// with no file behind it, are refused naming the address.
+#[test]
+fn geotiffs_over_http_bake_like_the_files_on_disk() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = dir.path().join("served");
+    std::fs::create_dir_all(&served).unwrap();
+    write_four(&served);
+    let whole = served.join("whole.tif");
+    write_tile(&whole, 32633, 65, 400_000.0, 4_100_000.0, 0.0);
+    let server = verdant::tools::serve::WorldServer::start_folder(&served, "127.0.0.1:0").unwrap();
+    let url = server.url();
+    let url = url.trim_end_matches('/');
+
+    // One GeoTIFF.
+    let (local, remote) = (dir.path().join("local"), dir.path().join("remote"));
+    small_bake(&whole, Vec::new(), &local, 20.0);
+    small_bake(
+        Path::new(&format!("{url}/whole.tif")),
+        Vec::new(),
+        &remote,
+        20.0,
+    );
+    assert_eq!(world_files(&local), world_files(&remote));
+    let toml = std::fs::read_to_string(remote.join("world.toml")).unwrap();
+    assert!(toml.contains("whole.tif"), "{toml}");
+
+    // A VRT of the four tiles, on disk and over HTTP.
+    let names = [
+        "tile_0_0.tif",
+        "tile_1_0.tif",
+        "tile_0_1.tif",
+        "tile_1_1.tif",
+    ];
+    let vrt = dir.path().join("local.vrt");
+    let on_disk: Vec<String> = names
+        .iter()
+        .map(|n| served.join(n).to_str().unwrap().to_owned())
+        .collect();
+    write_vrt(
+        &vrt,
+        &on_disk.iter().map(String::as_str).collect::<Vec<_>>(),
+    );
+    let vrt_http = dir.path().join("http.vrt");
+    let addresses: Vec<String> = names
+        .iter()
+        .enumerate()
+        .map(|(k, n)| {
+            if k % 2 == 0 {
+                format!("/vsicurl/{url}/{n}")
+            } else {
+                format!("{url}/{n}")
+            }
+        })
+        .collect();
+    write_vrt(
+        &vrt_http,
+        &addresses.iter().map(String::as_str).collect::<Vec<_>>(),
+    );
+    let (a, b) = (dir.path().join("vrt_local"), dir.path().join("vrt_http"));
+    small_bake(&vrt, Vec::new(), &a, 20.0);
+    small_bake(&vrt_http, Vec::new(), &b, 20.0);
+    assert_eq!(world_files(&a), world_files(&b));
+
+    // Refusals name the address.
+    let missing = format!("{url}/nothing.tif");
+    let err = bake(
+        &BakeOptions {
+            dem: PathBuf::from(&missing),
+            out: dir.path().join("never"),
+            ..Default::default()
+        },
+        &mut |_, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains(&missing) && err.contains("404"), "{err}");
+    assert!(!dir.path().join("never").exists());
+}

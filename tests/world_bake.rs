@@ -359,7 +359,6 @@ fn absurd_bake_options_are_refused_before_writing() {
     for (tile_cells, stored_levels, cell, option) in [
         (100, 2, 20.0, "--tile-cells 100"),
         (3, 2, 20.0, "--tile-cells 3"),
-        (16, 0, 20.0, "--levels 0"),
         (16, 13, 20.0, "--levels 13"),
         (16, 2, 0.001, "--cell-size 0.001"),
         (16, 2, 1e-6, "--cell-size 0.000001"),

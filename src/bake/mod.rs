@@ -265,6 +265,7 @@ pub fn bake(
         &DemOptions {
             cell_size_m: opts.dem_cell_size_m,
         },
+        opts.memory_mib,
     )?;
     progress(BakeStage::LoadDem, 1, 1);
     if let DemSource::Whole(dem) = &source {
@@ -371,7 +372,7 @@ pub fn bake(
         .map(|e| (e / cell).floor() as u64 + 1)
         .product::<u64>();
     let plan = Plan::new(opts.memory_mib, &manifest.pyramid, &source, data_samples)?;
-    source.set_cache(plan.cached[0], plan.cached[1]);
+    source.set_cache(plan.cached);
     let survey = survey::survey(
         &source,
         &plan,
@@ -726,9 +727,9 @@ fn check_cell_size(
         return Ok(());
     }
     let allowed = format!(
-        "at least {least} m for this DEM ({:.3} x {:.3} m; a bake resamples to at least 1 mm \
-         cells and at most {MAX_BAKE_CELLS} cells a side)",
-        extent[0], extent[1]
+        "at least {least} m for this DEM ({}x{} samples, {:.3} x {:.3} m; a bake resamples to \
+         at least 1 mm cells and at most {MAX_BAKE_CELLS} cells a side)",
+        dem.width, dem.height, extent[0], extent[1]
     );
     match option {
         Some(c) => Err(WorldError::bad_option("--cell-size", c, allowed)),

@@ -45,8 +45,8 @@ pub(super) struct Plan {
     pub(super) threads: usize,
     /// Most samples the calibration window may have.
     pub(super) calibration_samples: u64,
-    /// Files and chunks a mosaic keeps cached.
-    pub(super) cached: [usize; 2],
+    /// Chunks a mosaic keeps cached.
+    pub(super) cached: usize,
     /// What the plan expects the bake to hold at most, bytes.
     pub(super) peak_bytes: u64,
 }
@@ -76,12 +76,9 @@ impl Plan {
             .map(|n| n.get())
             .unwrap_or(1)
             .min(8);
-        let [file, chunk, making] = dem.cache_unit_bytes();
-        // The DEM: a whole one, or one chunk being made per thread with a file and a few
-        // chunks cached.
-        let dem_bytes = |threads: u64| {
-            dem.resident_bytes() + threads * making + if making > 0 { file + 4 * chunk } else { 0 }
-        };
+        let [chunk, making] = dem.cache_unit_bytes();
+        // The DEM: a whole one, or one chunk being made per thread and a few chunks cached.
+        let dem_bytes = |threads: u64| dem.resident_bytes() + threads * making + 4 * chunk;
         let fixed = |threads: u64| BASE_BYTES + dem_bytes(threads);
         let too_small = |need: u64| {
             WorldError::bad_option(
@@ -146,12 +143,10 @@ impl Plan {
         }
         let spare = limit - used(threads);
         let cached = match (spare / 2).checked_div(chunk) {
-            Some(chunks) => [1 + (spare / 2 / file.max(1)) as usize, 4 + chunks as usize],
-            None => [0, 0],
+            Some(chunks) => 4 + chunks as usize,
+            None => 0,
         };
-        let peak_bytes = used(threads)
-            + cached[0].saturating_sub(1) as u64 * file
-            + cached[1].saturating_sub(4) as u64 * chunk;
+        let peak_bytes = used(threads) + cached.saturating_sub(4) as u64 * chunk;
         Ok(Plan {
             shape,
             stride,

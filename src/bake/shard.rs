@@ -149,6 +149,11 @@ pub fn fingerprint(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, 
     inputs.extend(opts.density_map.as_deref());
     inputs.extend(opts.mask.as_deref());
     for p in inputs {
+        if crate::world::window::is_remote(p) {
+            // An address: its name only (the server's file is not asked for here).
+            text.push_str(&format!("{}\n", p.display()));
+            continue;
+        }
         let meta = std::fs::metadata(p).map_err(|e| WorldError::io(p, e))?;
         let modified = meta
             .modified()

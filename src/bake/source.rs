@@ -14,7 +14,7 @@ use std::sync::{Arc, Mutex};
 
 use lru::LruCache;
 
-use crate::world::dem::{Dem, DemOptions, MAX_NODATA_FRACTION};
+use crate::world::dem::{Dem, DemFormat, DemOptions, MAX_NODATA_FRACTION};
 use crate::world::dem_grid::DemWindow;
 use crate::world::error::WorldError;
 use crate::world::mosaic::Layout;
@@ -38,35 +38,47 @@ pub(super) enum DemSource {
 pub(super) struct Mosaic {
     layout: Layout,
     named: PathBuf,
-    files: Mutex<LruCache<usize, Arc<Vec<f32>>>>,
     chunks: Mutex<LruCache<[usize; 2], Arc<Vec<f32>>>>,
     /// Voids filled in each chunk, once it has been made.
     filled: Mutex<Vec<Option<u64>>>,
 }
 
 impl DemSource {
-    /// Opens the DEM files: one is read whole, several are laid out from their headers.
+    /// Opens the DEM files: a local file small enough for a quarter of `memory_mib` is read
+    /// whole (and filled whole); a larger one, a remote one and several are laid out from their
+    /// headers and read in chunks.
     pub(super) fn open(
         files: &[PathBuf],
         named: &Path,
         options: &DemOptions,
+        memory_mib: u64,
     ) -> Result<DemSource, WorldError> {
-        match files {
-            [] | [_] => Ok(DemSource::Whole(crate::world::mosaic::load_files(
-                files, named, options,
-            )?)),
-            _ => {
-                let layout = Layout::open(files, options, MAX_MOSAIC_SAMPLES)?;
-                let n = chunks_across(&layout.header);
-                Ok(DemSource::Mosaic(Box::new(Mosaic {
-                    layout,
-                    named: named.to_path_buf(),
-                    files: Mutex::new(LruCache::new(std::num::NonZeroUsize::MIN)),
-                    chunks: Mutex::new(LruCache::new(std::num::NonZeroUsize::MIN)),
-                    filled: Mutex::new(vec![None; n[0] * n[1]]),
-                })))
+        if let [one] = files
+            && !crate::world::window::is_remote(one)
+        {
+            // Held whole: the heights, and the fill's pyramid where there are voids.
+            let (header, _) = crate::world::window::Rows::open(one, options, MAX_MOSAIC_SAMPLES)?;
+            let bytes = u64::from(header.width) * u64::from(header.height) * 4 * 3;
+            if bytes <= (memory_mib << 20) / 4 || header.format == DemFormat::PngSidecar {
+                return Ok(DemSource::Whole(crate::world::mosaic::load_files(
+                    files, named, options,
+                )?));
             }
         }
+        if files.is_empty() {
+            return Err(WorldError::DemMosaic {
+                path: named.to_path_buf(),
+                problem: "no DEM file given".into(),
+            });
+        }
+        let layout = Layout::open(files, options, MAX_MOSAIC_SAMPLES)?;
+        let n = chunks_across(&layout.header);
+        Ok(DemSource::Mosaic(Box::new(Mosaic {
+            layout,
+            named: named.to_path_buf(),
+            chunks: Mutex::new(LruCache::new(std::num::NonZeroUsize::MIN)),
+            filled: Mutex::new(vec![None; n[0] * n[1]]),
+        })))
     }
 
     /// The DEM's size, spacing and georeferencing (a mosaic's heights are left empty).
@@ -85,29 +97,32 @@ impl DemSource {
         }
     }
 
-    /// Bytes one cached file and one cached chunk take, and the peak of making one chunk; zero
-    /// for a whole DEM.
-    pub(super) fn cache_unit_bytes(&self) -> [u64; 3] {
+    /// Bytes one cached chunk takes and the peak of making one; zero for a whole DEM.
+    pub(super) fn cache_unit_bytes(&self) -> [u64; 2] {
         match self {
-            DemSource::Whole(_) => [0; 3],
+            DemSource::Whole(_) => [0; 2],
             DemSource::Mosaic(m) => {
-                let region = (CHUNK + 2 * FILL_MARGIN).pow(2) as u64;
+                let side = CHUNK + 2 * FILL_MARGIN;
+                let region = (side * side) as u64;
                 // The joined region (heights and owners), the fill's pyramid (values and
-                // weights, a third more) and the file being read.
-                let making = region * (4 + 2) + region * 8 * 4 / 3 + m.file_bytes();
-                [m.file_bytes(), (CHUNK * CHUNK * 4) as u64, making]
+                // weights, a third more) and the rows of one file read for it (a strip or a
+                // row of tiles more, decoded as 8-byte patterns and then as heights).
+                let rows = (side + m.layout.largest_chunk_rows()) as u64;
+                let file = m.layout.widest_file() as u64 * rows * (8 + 4);
+                [
+                    (CHUNK * CHUNK * 4) as u64,
+                    region * (4 + 2) + region * 8 * 4 / 3 + file,
+                ]
             }
         }
     }
 
-    /// Sets how many files and chunks a mosaic keeps (at least one of each).
-    pub(super) fn set_cache(&self, files: usize, chunks: usize) {
+    /// Sets how many chunks a mosaic keeps (at least one).
+    pub(super) fn set_cache(&self, chunks: usize) {
         if let DemSource::Mosaic(m) = self {
-            let n = |k: usize| {
-                std::num::NonZeroUsize::new(k.max(1)).unwrap_or(std::num::NonZeroUsize::MIN)
-            };
-            lock(&m.files).resize(n(files));
-            lock(&m.chunks).resize(n(chunks));
+            let n =
+                std::num::NonZeroUsize::new(chunks.max(1)).unwrap_or(std::num::NonZeroUsize::MIN);
+            lock(&m.chunks).resize(n);
         }
     }
 
@@ -174,10 +189,6 @@ fn chunks_across(header: &Dem) -> [usize; 2] {
 }
 
 impl Mosaic {
-    fn file_bytes(&self) -> u64 {
-        self.layout.largest_file_samples() * 4
-    }
-
     /// Columns `cols` and rows `rows` (from the north, ends exclusive), north first.
     fn window(&self, cols: [usize; 2], rows: [usize; 2]) -> Result<Vec<f32>, WorldError> {
         let (w, h) = (cols[1] - cols[0], rows[1] - rows[0]);
@@ -213,15 +224,6 @@ impl Mosaic {
         Ok(chunk)
     }
 
-    fn file(&self, k: usize) -> Result<Arc<Vec<f32>>, WorldError> {
-        if let Some(f) = lock(&self.files).get(&k) {
-            return Ok(f.clone());
-        }
-        let f = self.layout.read(k)?;
-        lock(&self.files).put(k, f.clone());
-        Ok(f)
-    }
-
     /// Joins the files over the chunk and its margin, fills the voids there, keeps the chunk.
     fn make_chunk(&self, at: [usize; 2]) -> Result<Vec<f32>, WorldError> {
         let header = &self.layout.header;
@@ -234,9 +236,7 @@ impl Mosaic {
                 (core[a][1] + FILL_MARGIN).min(n[a]),
             ]
         });
-        let mut heights = self
-            .layout
-            .region(region[0], region[1], &|k| self.file(k))?;
+        let mut heights = self.layout.region(region[0], region[1])?;
         let rw = region[0][1] - region[0][0];
         let rh = region[1][1] - region[1][0];
         let voids_in_core = |heights: &[f32]| {

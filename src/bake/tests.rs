@@ -175,6 +175,9 @@ fn automatic_levels_keep_the_root_tiles_few() {
         let levels = auto_levels([extent, extent], 10.0, 128);
         let root = 10.0 * 128.0 * 2f64.powi(i32::from(levels) - 1);
         let n = (extent / root).ceil();
-        assert!(n * n <= MAX_AUTO_ROOT_TILES as f64 || levels == 12, "{extent}: {levels}");
+        assert!(
+            n * n <= MAX_AUTO_ROOT_TILES as f64 || levels == 12,
+            "{extent}: {levels}"
+        );
     }
 }

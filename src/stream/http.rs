@@ -52,6 +52,67 @@ mod client;
 use cache::DiskCache;
 use client::Client;
 
+/// A file on an HTTP server read in byte ranges (a Cloud-Optimised GeoTIFF or an `.hgt` tile a
+/// bake reads in windows), with the tile client's deadlines and retries; nothing is cached.
+pub struct RangeFile {
+    client: client::Client,
+    url: String,
+    len: u64,
+}
+
+impl RangeFile {
+    /// Opens `url`: its first byte is asked for, to learn its length (and that the server
+    /// answers range requests).
+    pub fn open(url: &str, options: HttpOptions) -> Result<RangeFile, WorldError> {
+        options.validate()?;
+        let client = client::Client {
+            options,
+            cache: None,
+            redirects_seen: Mutex::new(HashSet::new()),
+            requests: AtomicU64::new(0),
+            retries: AtomicU64::new(0),
+            cache_hits: AtomicU64::new(0),
+            bytes: AtomicU64::new(0),
+            range_total: AtomicU64::new(0),
+        };
+        client.fetch_range(url, 1, None, Some([0, 1]))?;
+        let len = client.range_total.load(Ordering::Relaxed);
+        Ok(RangeFile {
+            client,
+            url: url.to_owned(),
+            len,
+        })
+    }
+
+    /// The file's length in bytes.
+    pub fn len(&self) -> u64 {
+        self.len
+    }
+
+    /// Whether the file is empty.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// `count` bytes from `offset` (within the file).
+    pub fn read_at(&self, offset: u64, count: u64) -> Result<Vec<u8>, WorldError> {
+        if count == 0 {
+            return Ok(Vec::new());
+        }
+        Ok(self
+            .client
+            .fetch_range(&self.url, count, None, Some([offset, count]))?)
+    }
+
+    /// Requests sent, bytes received.
+    pub fn stats(&self) -> (u64, u64) {
+        (
+            self.client.requests.load(Ordering::Relaxed),
+            self.client.bytes.load(Ordering::Relaxed),
+        )
+    }
+}
+
 /// The longest deadline of one request that [`HttpOptions::timeout`] may ask for: one hour.
 pub const MAX_TIMEOUT: Duration = Duration::from_secs(3600);
 
@@ -330,6 +391,7 @@ impl HttpSource {
             retries: AtomicU64::new(0),
             cache_hits: AtomicU64::new(0),
             bytes: AtomicU64::new(0),
+            range_total: AtomicU64::new(0),
         };
         let manifest_url = format!("{base}world.toml");
         let bytes = client.fetch(&manifest_url, MAX_MANIFEST_BYTES, None)?;

@@ -1,7 +1,8 @@
 //! `verdant serve`: a small static file server for a world folder, for trying worlds over HTTP
 //! locally. It answers `GET` and `HEAD` with the file's content type, an `ETag` and a
 //! `Last-Modified`, and a conditional `GET` (`If-None-Match`, `If-Modified-Since`) whose file
-//! has not changed with `304 Not Modified`. Production puts the world folder behind any
+//! has not changed with `304 Not Modified`; a `Range` request (one range) gets `206 Partial
+//! Content` with those bytes. Production puts the world folder behind any
 //! ordinary HTTP server, object store or CDN instead.
 
 use std::net::SocketAddr;
@@ -29,6 +30,12 @@ impl WorldServer {
         if !root.join("world.toml").is_file() {
             bail!("{}: no world.toml: not a world folder", root.display());
         }
+        WorldServer::start_folder(root, addr)
+    }
+
+    /// Serves any folder `root` on `addr`: a world's source files (DEMs a bake reads over
+    /// HTTP in byte ranges) as well as a world.
+    pub fn start_folder(root: &Path, addr: &str) -> Result<WorldServer> {
         let root = Arc::new(
             root.canonicalize()
                 .with_context(|| format!("{}: cannot open", root.display()))?,
@@ -165,13 +172,65 @@ fn answer(root: &Path, request: Request) -> std::io::Result<()> {
         }
         return request.respond(response);
     }
-    let body = std::fs::read(&file)?;
-    let mut response =
-        Response::from_data(body).with_header(header("Content-Type", content_type(&file)));
+    let len = meta.len();
+    let (status, span) = match value("Range").map(|r| byte_range(&r, len)) {
+        None => (200, None),
+        Some(Some(span)) => (206, Some(span)),
+        Some(None) => {
+            return request.respond(
+                Response::empty(416)
+                    .with_header(header("Content-Range", &format!("bytes */{len}"))),
+            );
+        }
+    };
+    let body = match span {
+        None => std::fs::read(&file)?,
+        Some([first, last]) => {
+            use std::os::unix::fs::FileExt;
+            let mut buf = vec![0u8; (last - first + 1) as usize];
+            std::fs::File::open(&file)?.read_exact_at(&mut buf, first)?;
+            buf
+        }
+    };
+    let mut response = Response::from_data(body)
+        .with_status_code(status)
+        .with_header(header("Content-Type", content_type(&file)))
+        .with_header(header("Accept-Ranges", "bytes"));
+    if let Some([first, last]) = span {
+        response = response.with_header(header(
+            "Content-Range",
+            &format!("bytes {first}-{last}/{len}"),
+        ));
+    }
     for h in validators {
         response = response.with_header(h);
     }
     request.respond(response)
+}
+
+/// The bytes (first, last, inclusive) that a `Range` header asks of a file of `len` bytes: one
+/// range, `bytes=A-B`, `bytes=A-` or `bytes=-N`; `None` where it cannot be satisfied (the
+/// server then answers 416).
+fn byte_range(value: &str, len: u64) -> Option<[u64; 2]> {
+    let spec = value.trim().strip_prefix("bytes=")?;
+    if spec.contains(',') || len == 0 {
+        return None;
+    }
+    let (a, b) = spec.split_once('-')?;
+    let (a, b) = (a.trim(), b.trim());
+    let [first, last] = if a.is_empty() {
+        let n: u64 = b.parse().ok()?;
+        [len.saturating_sub(n), len - 1]
+    } else {
+        let first: u64 = a.parse().ok()?;
+        let last = if b.is_empty() {
+            len - 1
+        } else {
+            b.parse::<u64>().ok()?.min(len - 1)
+        };
+        [first, last]
+    };
+    (first <= last && first < len).then_some([first, last])
 }
 
 fn truncate_to_seconds(t: SystemTime) -> SystemTime {
@@ -180,4 +239,28 @@ fn truncate_to_seconds(t: SystemTime) -> SystemTime {
         .map(|d| d.as_secs())
         .unwrap_or(0);
     UNIX_EPOCH + std::time::Duration::from_secs(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::byte_range;
+
+    #[test]
+    fn ranges_are_read_as_rfc_9110_writes_them() {
+        assert_eq!(byte_range("bytes=0-0", 10), Some([0, 0]));
+        assert_eq!(byte_range("bytes=2-5", 10), Some([2, 5]));
+        assert_eq!(byte_range("bytes=7-", 10), Some([7, 9]));
+        assert_eq!(byte_range("bytes=-3", 10), Some([7, 9]));
+        assert_eq!(byte_range("bytes=4-100", 10), Some([4, 9]));
+        for bad in [
+            "bytes=10-12",
+            "bytes=5-2",
+            "bytes=0-1,4-5",
+            "items=0-1",
+            "bytes=a-b",
+        ] {
+            assert_eq!(byte_range(bad, 10), None, "{bad}");
+        }
+        assert_eq!(byte_range("bytes=0-0", 0), None);
+    }
 }

@@ -112,8 +112,8 @@ impl Dem {
         Ok(())
     }
 
-    /// Reads a DEM as its file has it: nodata samples stay NaN.
-    pub(crate) fn load_unfilled(path: &Path, options: &DemOptions) -> Result<Dem, WorldError> {
+    /// Refuses a cell-size option that is not finite and positive, naming `path`.
+    pub(crate) fn check_cell_option(path: &Path, options: &DemOptions) -> Result<(), WorldError> {
         if let Some(cell) = options.cell_size_m {
             for (axis, value) in cell.into_iter().enumerate() {
                 let field = format!("DEM cell size option [{axis}]");
@@ -133,6 +133,12 @@ impl Dem {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// Reads a DEM as its file has it: nodata samples stay NaN.
+    pub(crate) fn load_unfilled(path: &Path, options: &DemOptions) -> Result<Dem, WorldError> {
+        Dem::check_cell_option(path, options)?;
         let mut dem = match sniff(path)? {
             DemFormat::PngSidecar => Dem::load_png_sidecar(path)?,
             DemFormat::Geotiff => super::geotiff::load(path, options.cell_size_m)?,

@@ -19,9 +19,8 @@
 //! decodes to more bytes than a row holds, which happens in the flat, repetitive areas and the
 //! padded edge tiles that real DEMs have.
 
-use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use tiff::TiffError;
 use tiff::decoder::{ChunkType, Decoder, DecodingResult, Limits};
@@ -58,16 +57,29 @@ const ANGULAR_DEGREE: u16 = 9102;
 const USER_DEFINED: u16 = 32767;
 
 /// Reads a GeoTIFF DEM; nodata samples become NaN.
-pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, WorldError> {
-    let (file, file_len) = super::format::open_regular(path)?;
-    let mut limits = Limits::default();
-    limits.decoding_buffer_size = (MAX_DEM_SAMPLES * 8) as usize;
-    limits.ifd_value_size = 64 << 20;
-    let mut decoder = Decoder::new(BufReader::new(file))
-        .map_err(|e| tiff_error(path, e))?
-        .with_limits(limits);
+/// What a GeoTIFF's header says: its size, sample type, compression and chunks.
+struct Header {
+    width: u32,
+    height: u32,
+    bits: u16,
+    sample: SampleType,
+    compression: u16,
+    predictor: u16,
+    chunks: Vec<(u64, u64)>,
+}
+
+/// Reads the header of the TIFF `decoder` reads (of `file_len` bytes), refusing what is not
+/// read; `max_samples` bounds its size.
+fn read_header<R: Read + Seek>(
+    path: &Path,
+    decoder: &mut Decoder<R>,
+    file_len: u64,
+    max_samples: u64,
+) -> Result<Header, WorldError> {
     let (width, height) = decoder.dimensions().map_err(|e| tiff_error(path, e))?;
-    check_grid_size(path, u64::from(width), u64::from(height))?;
+    if width < 2 || height < 2 || u64::from(width) * u64::from(height) > max_samples {
+        check_grid_size(path, u64::from(width), u64::from(height))?;
+    }
 
     let mut tag_u16 = |tag: Tag| -> Result<Option<u16>, WorldError> {
         match decoder.find_tag(tag).map_err(|e| tiff_error(path, e))? {
@@ -138,108 +150,99 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
             format!("the floating-point predictor on {} samples", sample.name()),
         ));
     }
-    let chunks = check_chunks_inside(path, &mut decoder, file_len)?;
+    let chunks = check_chunks_inside(path, decoder, file_len)?;
+    Ok(Header {
+        width,
+        height,
+        bits,
+        sample,
+        compression,
+        predictor,
+        chunks,
+    })
+}
+
+/// The layout of the chunks of the image `decoder` reads.
+fn chunk_layout<R: Read + Seek>(
+    path: &Path,
+    decoder: &mut Decoder<R>,
+    h: &Header,
+) -> Result<ChunkLayout, WorldError> {
+    let (width, height) = (h.width, h.height);
+    let chunk_size = match decoder.get_chunk_type() {
+        ChunkType::Tile => {
+            let mut tag_u32 = |tag: Tag| -> Result<u32, WorldError> {
+                decoder
+                    .get_tag_u32(tag)
+                    .map_err(|e| tiff_error(path, e))
+                    .and_then(|v| {
+                        if v == 0 {
+                            Err(corrupt(path, format!("{tag:?} is 0")))
+                        } else {
+                            Ok(v)
+                        }
+                    })
+            };
+            [tag_u32(Tag::TileWidth)?, tag_u32(Tag::TileLength)?]
+        }
+        ChunkType::Strip => {
+            let rows = match decoder
+                .find_tag_unsigned::<u32>(Tag::RowsPerStrip)
+                .map_err(|e| tiff_error(path, e))?
+            {
+                Some(0) | None => height,
+                Some(r) => r.min(height),
+            };
+            [width, rows]
+        }
+    };
+    Ok(ChunkLayout {
+        width,
+        height,
+        chunk_size,
+        sample_bytes: usize::from(h.bits / 8),
+        big_endian: decoder.byte_order() == ByteOrder::BigEndian,
+        predictor: h.predictor,
+    })
+}
+
+fn limits() -> Limits {
+    let mut limits = Limits::default();
+    limits.decoding_buffer_size = (MAX_DEM_SAMPLES * 8) as usize;
+    limits.ifd_value_size = 64 << 20;
+    limits
+}
+
+pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, WorldError> {
+    let (file, file_len) = super::format::open_regular(path)?;
+    let mut decoder = Decoder::new(BufReader::new(file))
+        .map_err(|e| tiff_error(path, e))?
+        .with_limits(limits());
+    let header = read_header(path, &mut decoder, file_len, MAX_DEM_SAMPLES)?;
+    let Header {
+        width,
+        height,
+        bits: _,
+        sample,
+        compression,
+        predictor: _,
+        ref chunks,
+    } = header;
 
     let geo = GeoTags::read(path, &mut decoder)?;
     let values = if compression == 5 || compression == ZSTD {
-        let chunk_size = match decoder.get_chunk_type() {
-            ChunkType::Tile => {
-                let mut tag_u32 = |tag: Tag| -> Result<u32, WorldError> {
-                    decoder
-                        .get_tag_u32(tag)
-                        .map_err(|e| tiff_error(path, e))
-                        .and_then(|v| {
-                            if v == 0 {
-                                Err(corrupt(path, format!("{tag:?} is 0")))
-                            } else {
-                                Ok(v)
-                            }
-                        })
-                };
-                [tag_u32(Tag::TileWidth)?, tag_u32(Tag::TileLength)?]
-            }
-            ChunkType::Strip => {
-                let rows = match decoder
-                    .find_tag_unsigned::<u32>(Tag::RowsPerStrip)
-                    .map_err(|e| tiff_error(path, e))?
-                {
-                    Some(0) | None => height,
-                    Some(r) => r.min(height),
-                };
-                [width, rows]
-            }
-        };
-        let layout = ChunkLayout {
-            width,
-            height,
-            chunk_size,
-            sample_bytes: usize::from(bits / 8),
-            big_endian: decoder.byte_order() == ByteOrder::BigEndian,
-            predictor,
-        };
+        let layout = chunk_layout(path, &mut decoder, &header)?;
         let codec = if compression == ZSTD {
             Codec::Zstd
         } else {
             Codec::Lzw
         };
-        let bits = decode_chunks(path, &layout, &chunks, codec)?;
+        let bits = decode_chunks(path, &layout, chunks, codec)?;
         sample.typed(bits)
     } else {
         decoder.read_image().map_err(|e| tiff_error(path, e))?
     };
-    let nodata = geo.nodata;
-    let vertical = geo.vertical_unit_m;
-    let to_height = |v: f64, nodata_hit: bool| -> f32 {
-        if nodata_hit || !v.is_finite() {
-            f32::NAN
-        } else {
-            (v * vertical) as f32
-        }
-    };
-    // The nodata value as the file's own type would hold it, so that a float32 grid with
-    // nodata "-3.4028234663852886e+38" matches its samples exactly.
-    let mut raw: Vec<f32> = match values {
-        DecodingResult::U8(v) => {
-            let nd = nodata.filter(|n| n.fract() == 0.0 && (0.0..=255.0).contains(n));
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
-                .collect()
-        }
-        DecodingResult::I16(v) => {
-            let nd = nodata.filter(|n| n.fract() == 0.0 && (-32768.0..=32767.0).contains(n));
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
-                .collect()
-        }
-        DecodingResult::U16(v) => {
-            let nd = nodata.filter(|n| n.fract() == 0.0 && (0.0..=65535.0).contains(n));
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
-                .collect()
-        }
-        DecodingResult::I32(v) => {
-            let nd = nodata.filter(|n| n.fract() == 0.0 && n.abs() <= 2_147_483_648.0);
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
-                .collect()
-        }
-        DecodingResult::F32(v) => {
-            let nd = nodata.map(|n| n as f32);
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(x) == nd))
-                .collect()
-        }
-        DecodingResult::F64(v) => v.iter().map(|&x| to_height(x, Some(x) == nodata)).collect(),
-        _ => {
-            return Err(unsupported(
-                path,
-                format!(
-                    "the decoder returned another sample type than the {} declared",
-                    sample.name()
-                ),
-            ));
-        }
-    };
+    let mut raw = heights_of(path, values, sample, geo.nodata, geo.vertical_unit_m)?;
     let (w, h) = (width as usize, height as usize);
     if raw.len() != w * h {
         return Err(corrupt(
@@ -320,7 +323,7 @@ struct GridPlacement {
 }
 
 impl GeoTags {
-    fn read(path: &Path, d: &mut Decoder<BufReader<File>>) -> Result<GeoTags, WorldError> {
+    fn read<R: Read + Seek>(path: &Path, d: &mut Decoder<R>) -> Result<GeoTags, WorldError> {
         let mut doubles = |tag: Tag| -> Result<Option<Vec<f64>>, WorldError> {
             match d.find_tag(tag).map_err(|e| tiff_error(path, e))? {
                 None => Ok(None),
@@ -652,9 +655,9 @@ fn compression_name(code: u16) -> &'static str {
 
 /// Refuses a file whose strips or tiles reach past its end (a truncated download), with the
 /// chunk named, before any decoding. Returns each chunk's offset and byte count.
-fn check_chunks_inside(
+fn check_chunks_inside<R: Read + Seek>(
     path: &Path,
-    d: &mut Decoder<BufReader<File>>,
+    d: &mut Decoder<R>,
     file_len: u64,
 ) -> Result<Vec<(u64, u64)>, WorldError> {
     let (kind, offsets_tag, counts_tag) = match d.get_chunk_type() {
@@ -708,6 +711,9 @@ const ZSTD: u16 = 50000;
 /// The codecs whose chunks are decompressed here, whole.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Codec {
+    None,
+    Deflate,
+    PackBits,
     Lzw,
     Zstd,
 }
@@ -715,6 +721,9 @@ enum Codec {
 impl Codec {
     fn name(self) -> &'static str {
         match self {
+            Codec::None => "uncompressed",
+            Codec::Deflate => "Deflate",
+            Codec::PackBits => "PackBits",
             Codec::Lzw => "LZW",
             Codec::Zstd => "Zstandard",
         }
@@ -724,6 +733,30 @@ impl Codec {
     /// would is cut there and found short or long by the caller).
     fn decode(self, packed: &[u8], limit: usize) -> Result<Vec<u8>, String> {
         match self {
+            Codec::None => Ok(packed[..packed.len().min(limit)].to_vec()),
+            Codec::Deflate => {
+                miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(packed, limit)
+                    .map_err(|e| format!("{:?}", e.status))
+            }
+            Codec::PackBits => {
+                let mut out = Vec::with_capacity(limit);
+                let mut i = 0;
+                while i < packed.len() && out.len() < limit {
+                    let n = packed[i] as i8;
+                    i += 1;
+                    if n >= 0 {
+                        let end = (i + n as usize + 1).min(packed.len());
+                        out.extend_from_slice(&packed[i..end]);
+                        i = end;
+                    } else if n != -128 {
+                        let Some(&b) = packed.get(i) else { break };
+                        out.extend(std::iter::repeat_n(b, (1 - isize::from(n)) as usize));
+                        i += 1;
+                    }
+                }
+                out.truncate(limit);
+                Ok(out)
+            }
             Codec::Lzw => weezl::decode::Decoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
                 .decode(packed)
                 .map_err(|e| format!("{e:?}")),
@@ -745,6 +778,35 @@ fn decode_chunks(
     chunks: &[(u64, u64)],
     codec: Codec,
 ) -> Result<Vec<u64>, WorldError> {
+    let (mut file, _) = super::format::open_regular(path)?;
+    let mut read = |offset: u64, count: u64| -> Result<Vec<u8>, WorldError> {
+        let mut packed = vec![0u8; count as usize];
+        file.seek(SeekFrom::Start(offset))
+            .and_then(|_| file.read_exact(&mut packed))
+            .map_err(|e| WorldError::io(path, e))?;
+        Ok(packed)
+    };
+    decode_rows(
+        path,
+        layout,
+        chunks,
+        codec,
+        &mut read,
+        [0, layout.height as usize],
+    )
+}
+
+/// Decodes the chunks that hold image rows `rows` (from the first row stored, end exclusive),
+/// their bytes read by `read(offset, count)`; returns those rows' samples' bit patterns (in the
+/// low `sample_bytes` bytes), first row first.
+fn decode_rows(
+    path: &Path,
+    layout: &ChunkLayout,
+    chunks: &[(u64, u64)],
+    codec: Codec,
+    read: &mut dyn FnMut(u64, u64) -> Result<Vec<u8>, WorldError>,
+    rows: [usize; 2],
+) -> Result<Vec<u64>, WorldError> {
     let [cw, ch] = layout.chunk_size.map(|v| v as usize);
     let (w, h) = (layout.width as usize, layout.height as usize);
     let across = w.div_ceil(cw);
@@ -761,31 +823,33 @@ fn decode_chunks(
     } else {
         (1u64 << (8 * b)) - 1
     };
-    let (mut file, _) = super::format::open_regular(path)?;
-    let mut out = vec![0u64; w * h];
+    let mut out = vec![0u64; w * (rows[1] - rows[0])];
     let mut row = vec![0u64; cw];
-    for (index, &(offset, count)) in chunks.iter().take(expected).enumerate() {
+    let first = (rows[0] / ch) * across;
+    let last = rows[1].div_ceil(ch) * across;
+    for (index, &(offset, count)) in chunks.iter().enumerate().take(last).skip(first) {
         let (x0, y0) = ((index % across) * cw, (index / across) * ch);
-        let mut packed = vec![0u8; count as usize];
-        file.seek(SeekFrom::Start(offset))
-            .and_then(|_| file.read_exact(&mut packed))
-            .map_err(|e| WorldError::io(path, e))?;
-        let rows = ch.min(h - y0);
+        let packed = read(offset, count)?;
+        let chunk_rows = ch.min(h - y0);
         let data = codec
             .decode(&packed, cw * ch * b)
             .map_err(|e| corrupt(path, format!("{} chunk {index}: {e}", codec.name())))?;
-        if data.len() < rows * cw * b {
+        if data.len() < chunk_rows * cw * b {
             return Err(corrupt(
                 path,
                 format!(
                     "{} chunk {index} holds {} bytes, {} expected",
                     codec.name(),
                     data.len(),
-                    rows * cw * b
+                    chunk_rows * cw * b
                 ),
             ));
         }
-        for (r, bytes) in data.chunks_exact(cw * b).take(rows).enumerate() {
+        for (r, bytes) in data.chunks_exact(cw * b).take(chunk_rows).enumerate() {
+            let y = y0 + r;
+            if y < rows[0] || y >= rows[1] {
+                continue;
+            }
             if layout.predictor == 3 {
                 // Floating-point predictor: byte differences along the row, over byte planes
                 // (most significant first).
@@ -810,12 +874,197 @@ fn decode_chunks(
                     }
                 }
             }
-            let y = y0 + r;
             let n = cw.min(w - x0);
-            out[y * w + x0..y * w + x0 + n].copy_from_slice(&row[..n]);
+            let at = (y - rows[0]) * w + x0;
+            out[at..at + n].copy_from_slice(&row[..n]);
         }
     }
     Ok(out)
+}
+
+/// Heights in metres from decoded samples: nodata (the value as the file's own type would hold
+/// it, so that a float32 grid with nodata "-3.4028234663852886e+38" matches its samples
+/// exactly), NaN and infinities become NaN.
+fn heights_of(
+    path: &Path,
+    values: DecodingResult,
+    sample: SampleType,
+    nodata: Option<f64>,
+    vertical: f64,
+) -> Result<Vec<f32>, WorldError> {
+    let to_height = |v: f64, nodata_hit: bool| -> f32 {
+        if nodata_hit || !v.is_finite() {
+            f32::NAN
+        } else {
+            (v * vertical) as f32
+        }
+    };
+    let raw: Vec<f32> = match values {
+        DecodingResult::U8(v) => {
+            let nd = nodata.filter(|n| n.fract() == 0.0 && (0.0..=255.0).contains(n));
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
+                .collect()
+        }
+        DecodingResult::I16(v) => {
+            let nd = nodata.filter(|n| n.fract() == 0.0 && (-32768.0..=32767.0).contains(n));
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
+                .collect()
+        }
+        DecodingResult::U16(v) => {
+            let nd = nodata.filter(|n| n.fract() == 0.0 && (0.0..=65535.0).contains(n));
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
+                .collect()
+        }
+        DecodingResult::I32(v) => {
+            let nd = nodata.filter(|n| n.fract() == 0.0 && n.abs() <= 2_147_483_648.0);
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
+                .collect()
+        }
+        DecodingResult::F32(v) => {
+            let nd = nodata.map(|n| n as f32);
+            v.iter()
+                .map(|&x| to_height(f64::from(x), Some(x) == nd))
+                .collect()
+        }
+        DecodingResult::F64(v) => v.iter().map(|&x| to_height(x, Some(x) == nodata)).collect(),
+        _ => {
+            return Err(unsupported(
+                path,
+                format!(
+                    "the decoder returned another sample type than the {} declared",
+                    sample.name()
+                ),
+            ));
+        }
+    };
+    Ok(raw)
+}
+
+/// A GeoTIFF read a window of rows at a time ([`super::window`]): only the strips or tiles
+/// that hold the rows asked for are read and decoded.
+pub(crate) struct TiffWindows {
+    path: PathBuf,
+    layout: ChunkLayout,
+    chunks: Vec<(u64, u64)>,
+    codec: Codec,
+    sample: SampleType,
+    nodata: Option<f64>,
+    vertical: f64,
+    flip_rows: bool,
+    flip_cols: bool,
+}
+
+/// Opens the GeoTIFF that `reader` reads (`len` bytes; `path` names it in errors) for reading in
+/// windows: its header and georeferencing (the returned [`Dem`] holds no heights), up to
+/// `max_samples` samples.
+pub(crate) fn open_windows<R: Read + Seek>(
+    path: &Path,
+    reader: R,
+    len: u64,
+    cell_override: Option<[f64; 2]>,
+    max_samples: u64,
+) -> Result<(Dem, TiffWindows), WorldError> {
+    let mut decoder = Decoder::new(reader)
+        .map_err(|e| tiff_error(path, e))?
+        .with_limits(limits());
+    let header = read_header(path, &mut decoder, len, max_samples)?;
+    let layout = chunk_layout(path, &mut decoder, &header)?;
+    let codec = match header.compression {
+        1 => Codec::None,
+        5 => Codec::Lzw,
+        8 | 32946 => Codec::Deflate,
+        32773 => Codec::PackBits,
+        _ => Codec::Zstd,
+    };
+    let geo = GeoTags::read(path, &mut decoder)?;
+    let grid = geo.grid(path, header.width, header.height, cell_override.is_some())?;
+    let [cell_ew_m, cell_ns_m] = cell_override.unwrap_or(grid.cell_m);
+    let dem = Dem {
+        width: header.width,
+        height: header.height,
+        cell_ew_m,
+        cell_ns_m,
+        heights: Vec::new(),
+        place: String::new(),
+        source: format!(
+            "{} GeoTIFF, compression {}",
+            header.sample.name(),
+            compression_name(header.compression)
+        ),
+        format: DemFormat::Geotiff,
+        crs: grid.crs,
+        origin: grid.origin,
+        pixel_size: grid.pixel_size,
+        nodata_filled: 0,
+    };
+    Ok((
+        dem,
+        TiffWindows {
+            path: path.to_path_buf(),
+            layout,
+            chunks: header.chunks,
+            codec,
+            sample: header.sample,
+            nodata: geo.nodata,
+            vertical: geo.vertical_unit_m,
+            flip_rows: grid.flip_rows,
+            flip_cols: grid.flip_cols,
+        },
+    ))
+}
+
+impl TiffWindows {
+    /// Rows in a strip or a tile.
+    pub(crate) fn chunk_rows(&self) -> usize {
+        self.layout.chunk_size[1] as usize
+    }
+
+    /// Heights of rows `rows` (from the north, end exclusive), every column, nodata NaN; the
+    /// file's bytes read by `read(offset, count)`.
+    pub(crate) fn rows(
+        &self,
+        read: &mut dyn FnMut(u64, u64) -> Result<Vec<u8>, WorldError>,
+        rows: [usize; 2],
+    ) -> Result<Vec<f32>, WorldError> {
+        let (w, h) = (self.layout.width as usize, self.layout.height as usize);
+        let stored = if self.flip_rows {
+            [h - rows[1], h - rows[0]]
+        } else {
+            rows
+        };
+        let bits = decode_rows(
+            &self.path,
+            &self.layout,
+            &self.chunks,
+            self.codec,
+            read,
+            stored,
+        )?;
+        let mut out = heights_of(
+            &self.path,
+            self.sample.typed(bits),
+            self.sample,
+            self.nodata,
+            self.vertical,
+        )?;
+        if self.flip_rows {
+            let n = rows[1] - rows[0];
+            for r in 0..n / 2 {
+                let (north, south) = out.split_at_mut((n - 1 - r) * w);
+                north[r * w..(r + 1) * w].swap_with_slice(&mut south[..w]);
+            }
+        }
+        if self.flip_cols {
+            for row in out.chunks_exact_mut(w) {
+                row.reverse();
+            }
+        }
+        Ok(out)
+    }
 }
 
 /// The sample types read.

@@ -65,6 +65,29 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
             bytes: bytes.len() as u64,
         });
     }
+    let mut dem = header(path, side, cell_override)?;
+    dem.heights = heights(&bytes);
+    Ok(dem)
+}
+
+/// Heights from an `.hgt` tile's big-endian samples; voids become NaN.
+pub(crate) fn heights(bytes: &[u8]) -> Vec<f32> {
+    bytes
+        .chunks_exact(2)
+        .map(|b| match i16::from_be_bytes([b[0], b[1]]) {
+            VOID => f32::NAN,
+            h => f32::from(h),
+        })
+        .collect()
+}
+
+/// An `.hgt` tile's grid of `side` samples a side (its heights left empty). Without
+/// `cell_override` the name must give the tile's origin (its latitude sets the cell size).
+pub(crate) fn header(
+    path: &Path,
+    side: u32,
+    cell_override: Option<[f64; 2]>,
+) -> Result<Dem, WorldError> {
     let origin = origin_from_name(path);
     let [cell_ew_m, cell_ns_m] = match (origin, cell_override) {
         (_, Some(cell)) => cell,
@@ -78,20 +101,13 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
             });
         }
     };
-    let heights = bytes
-        .chunks_exact(2)
-        .map(|b| match i16::from_be_bytes([b[0], b[1]]) {
-            VOID => f32::NAN,
-            h => f32::from(h),
-        })
-        .collect();
     let arc_seconds = 3600 / (side - 1);
     Ok(Dem {
         width: side,
         height: side,
         cell_ew_m,
         cell_ns_m,
-        heights,
+        heights: Vec::new(),
         place: String::new(),
         source: format!("SRTM {arc_seconds} arc-second tile"),
         format: DemFormat::SrtmHgt,

@@ -28,6 +28,7 @@ pub mod material;
 pub mod mosaic;
 pub mod nodata;
 pub mod tile;
+pub mod window;
 
 use std::path::{Path, PathBuf};
 

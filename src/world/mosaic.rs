@@ -45,7 +45,9 @@ fn mosaic_error(path: &Path, problem: impl ToString) -> WorldError {
 pub fn dem_files(dems: &[PathBuf]) -> Result<Vec<PathBuf>, WorldError> {
     let mut files = Vec::new();
     for d in dems {
-        if d.is_dir() {
+        if super::window::is_remote(d) && !has_extension(d, "vrt") {
+            files.push(d.clone());
+        } else if d.is_dir() {
             let entries = std::fs::read_dir(d).map_err(|e| WorldError::io(d, e))?;
             let mut found: Vec<PathBuf> = entries
                 .filter_map(|e| e.ok().map(|e| e.path()))
@@ -88,7 +90,11 @@ fn is_dem_file(p: &Path) -> bool {
 
 /// The source files of a GDAL VRT, in its order, each once.
 fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
-    let bytes = super::format::read_regular(vrt, MAX_VRT_BYTES)?;
+    let bytes = if super::window::is_remote(vrt) {
+        super::window::read_remote(vrt, MAX_VRT_BYTES)?
+    } else {
+        super::format::read_regular(vrt, MAX_VRT_BYTES)?
+    };
     let text =
         String::from_utf8(bytes).map_err(|e| mosaic_error(vrt, format!("not UTF-8: {e}")))?;
     let doc = roxmltree::Document::parse(&text)
@@ -113,14 +119,21 @@ fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
         if name.is_empty() {
             return Err(mosaic_error(vrt, "a <SourceFilename> is empty"));
         }
-        if name.starts_with("/vsi") || name.contains("://") {
+        // GDAL's name for a file read over HTTP.
+        let name = name.strip_prefix("/vsicurl/").unwrap_or(name);
+        if name.starts_with("/vsi") || (name.contains("://") && !name.starts_with("http://")) {
             return Err(mosaic_error(
                 vrt,
-                format!("source {name:?}: only local files are read"),
+                format!(
+                    "source {name:?}: only files and plain http:// addresses are read (download \
+                     it, or serve it over http://)"
+                ),
             ));
         }
         let relative = node.attribute("relativeToVRT") == Some("1");
-        let p = if relative {
+        let p = if name.starts_with("http://") {
+            PathBuf::from(name)
+        } else if relative {
             base.join(name)
         } else {
             PathBuf::from(name)
@@ -138,6 +151,7 @@ fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
 /// One file's grid in the shared coordinate system; its heights are read when needed.
 struct Part {
     path: PathBuf,
+    rows: super::window::Rows,
     width: usize,
     height: usize,
     /// South-west sample and spacing, in the coordinate system.
@@ -146,9 +160,10 @@ struct Part {
 }
 
 impl Part {
-    /// The file's height at coordinates `(x, y)` from its `heights` (north first): bilinear
-    /// between its samples (exact on them), NaN where a sample used is nodata; `None` outside it.
-    fn at(&self, heights: &[f32], x: f64, y: f64) -> Option<f32> {
+    /// The file's height at coordinates `(x, y)` from `heights`, its rows from row `first` (from
+    /// the north) on: bilinear between its samples (exact on them), NaN where a sample used is
+    /// nodata; `None` outside it.
+    fn at(&self, heights: &[f32], first: usize, x: f64, y: f64) -> Option<f32> {
         let (w, h) = (self.width, self.height);
         let c = (x - self.origin[0]) / self.size[0];
         let r = (y - self.origin[1]) / self.size[1]; // from the south
@@ -170,7 +185,7 @@ impl Part {
         let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
         let (fc, fr) = ((c - c0 as f64) as f32, (r - r0 as f64) as f32);
         // Rows are stored north first.
-        let v = |c: usize, r: usize| heights[(h - 1 - r) * w + c];
+        let v = |c: usize, r: usize| heights[(h - 1 - r - first) * w + c];
         if fc == 0.0 && fr == 0.0 {
             return Some(v(c0, r0));
         }
@@ -202,7 +217,7 @@ pub fn load_files(
             let layout = Layout::open(files, options, MAX_DEM_SAMPLES)?;
             let all = [0, layout.header.width as usize];
             let rows = [0, layout.header.height as usize];
-            let heights = layout.region(all, rows, &|k| layout.read(k))?;
+            let heights = layout.region(all, rows)?;
             let mut dem = layout.header.clone();
             dem.heights = heights;
             dem.fill_nodata(named)?;
@@ -215,7 +230,6 @@ pub fn load_files(
 /// window of the grid are read from the files by [`Layout::region`].
 pub struct Layout {
     parts: Vec<Part>,
-    options: DemOptions,
     /// The joined grid: its size, spacing and georeferencing; its heights are left empty.
     pub header: Dem,
     /// The joined grid's south-west sample and spacing, in the coordinate system.
@@ -235,7 +249,7 @@ impl Layout {
         let mut parts: Vec<Part> = Vec::with_capacity(files.len());
         let mut first: Option<Dem> = None;
         for f in files {
-            let mut dem = Dem::load_unfilled(f, options)?;
+            let (dem, rows) = super::window::Rows::open(f, options, max_samples)?;
             let (Some(origin), Some(size)) = (dem.origin, dem.pixel_size) else {
                 return Err(mosaic_error(
                     f,
@@ -258,12 +272,12 @@ impl Layout {
             }
             parts.push(Part {
                 path: f.clone(),
+                rows,
                 width: dem.width as usize,
                 height: dem.height as usize,
                 origin,
                 size,
             });
-            dem.heights = Vec::new();
             first.get_or_insert(dem);
         }
         let Some(p0) = first else {
@@ -339,24 +353,22 @@ impl Layout {
         };
         Ok(Layout {
             parts,
-            options: options.clone(),
             header,
             lo,
             size,
         })
     }
 
-    /// The heights of file `k`, as the file has them (nodata NaN).
-    pub fn read(&self, k: usize) -> Result<std::sync::Arc<Vec<f32>>, WorldError> {
-        let dem = Dem::load_unfilled(&self.parts[k].path, &self.options)?;
-        Ok(std::sync::Arc::new(dem.heights))
+    /// The widest file's samples a row.
+    pub fn widest_file(&self) -> usize {
+        self.parts.iter().map(|p| p.width).max().unwrap_or(0)
     }
 
-    /// The largest file's samples.
-    pub fn largest_file_samples(&self) -> u64 {
+    /// The most rows a file reads beyond those asked for (a strip's or a tile's rows).
+    pub fn largest_chunk_rows(&self) -> usize {
         self.parts
             .iter()
-            .map(|p| (p.width * p.height) as u64)
+            .map(|p| p.rows.chunk_rows().unwrap_or(p.height))
             .max()
             .unwrap_or(0)
     }
@@ -393,12 +405,7 @@ impl Layout {
     /// row-major, north first: the first file listed where files overlap, NaN where no file
     /// covers a sample or a file has a void there. `data(k)` gives file `k`'s heights. Refuses
     /// overlaps that disagree and gaps of more than [`MAX_GAP_SAMPLES`] inside the window.
-    pub fn region(
-        &self,
-        cols: [usize; 2],
-        rows: [usize; 2],
-        data: &dyn Fn(usize) -> Result<std::sync::Arc<Vec<f32>>, WorldError>,
-    ) -> Result<Vec<f32>, WorldError> {
+    pub fn region(&self, cols: [usize; 2], rows: [usize; 2]) -> Result<Vec<f32>, WorldError> {
         let (lo, size) = (self.lo, self.size);
         let h = self.header.height as usize;
         let (rw, rh) = (cols[1] - cols[0], rows[1] - rows[0]);
@@ -409,16 +416,27 @@ impl Layout {
         let mut disagree: Option<(usize, usize, u64, f32)> = None;
         for k in self.files_in(cols, rows) {
             let part = &self.parts[k];
-            let values = data(k)?;
             let ([c0, c1], [r0, r1]) = self.window_of(k);
             // The window's rows from the south: h - rows[1] ..= h - 1 - rows[0].
             let (s0, s1) = ((h - rows[1]).max(r0), (h - 1 - rows[0]).min(r1));
             let (c0, c1) = (c0.max(cols[0]), c1.min(cols[1] - 1));
+            if s0 > s1 || c0 > c1 {
+                continue;
+            }
+            // The file's rows those need (from its south, with the next for the bilinear), read.
+            let ph = part.height;
+            let row_of = |r: usize| (lo[1] + r as f64 * size[1] - part.origin[1]) / part.size[1];
+            let south = [
+                (row_of(s0).floor().max(0.0) as usize).min(ph - 1),
+                (row_of(s1).ceil().max(0.0) as usize + 1).min(ph - 1),
+            ];
+            let first = ph - 1 - south[1];
+            let values = part.rows.read([first, ph - south[0]])?;
             for r in s0..=s1 {
                 let y = lo[1] + r as f64 * size[1];
                 for c in c0..=c1 {
                     let x = lo[0] + c as f64 * size[0];
-                    let Some(v) = part.at(&values, x, y) else {
+                    let Some(v) = part.at(&values, first, x, y) else {
                         continue;
                     };
                     let i = (h - 1 - r - rows[0]) * rw + (c - cols[0]);

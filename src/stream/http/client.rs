@@ -24,6 +24,8 @@ pub(super) struct Client {
     pub(super) retries: AtomicU64,
     pub(super) cache_hits: AtomicU64,
     pub(super) bytes: AtomicU64,
+    /// The whole length of the file the last range request read part of.
+    pub(super) range_total: AtomicU64,
 }
 
 impl Client {
@@ -35,10 +37,26 @@ impl Client {
         max: u64,
         cancelled: Option<&AtomicBool>,
     ) -> Result<Vec<u8>, HttpError> {
-        let cached = self
-            .cache
-            .as_ref()
-            .and_then(|c| c.lock().ok().and_then(|mut c| c.get(url, max)));
+        self.fetch_range(url, max, cancelled, None)
+    }
+
+    /// [`Client::fetch`], or with `range` (first byte, bytes) those bytes of the file by a range
+    /// request, which the server must answer with exactly them (`206 Partial Content`); ranges
+    /// bypass the disk cache. Returns the body and, for a range, the file's whole length.
+    pub(super) fn fetch_range(
+        &self,
+        url: &str,
+        max: u64,
+        cancelled: Option<&AtomicBool>,
+        range: Option<[u64; 2]>,
+    ) -> Result<Vec<u8>, HttpError> {
+        let cached = if range.is_some() {
+            None
+        } else {
+            self.cache
+                .as_ref()
+                .and_then(|c| c.lock().ok().and_then(|mut c| c.get(url, max)))
+        };
         let is_cancelled = || cancelled.is_some_and(|c| c.load(Ordering::Relaxed));
         let mut attempt = 0;
         loop {
@@ -47,7 +65,7 @@ impl Client {
             }
             attempt += 1;
             self.requests.fetch_add(1, Ordering::Relaxed);
-            match self.fetch_once(url, max, attempt, &cached) {
+            match self.fetch_once(url, max, attempt, &cached, range) {
                 Ok(bytes) => return Ok(bytes),
                 Err(e) if attempt <= self.options.retries && is_transient(&e) => {
                     self.retries.fetch_add(1, Ordering::Relaxed);
@@ -78,6 +96,7 @@ impl Client {
         max: u64,
         attempts: u32,
         cached: &Option<(Validator, Vec<u8>)>,
+        range: Option<[u64; 2]>,
     ) -> Result<Vec<u8>, HttpError> {
         let timeout_s = self.options.timeout_s();
         let mut request = minreq::get(url)
@@ -85,6 +104,10 @@ impl Client {
             .with_max_redirects(MAX_REDIRECTS)
             .with_max_headers_size(MAX_HEAD_BYTES)
             .with_max_status_line_length(MAX_HEAD_BYTES);
+        if let Some([first, count]) = range {
+            let last = first + count.max(1) - 1;
+            request = request.with_header("Range", format!("bytes={first}-{last}"));
+        }
         if let Some((validator, _)) = cached {
             request = match validator {
                 Validator::ETag(tag) => request.with_header("If-None-Match", tag.as_str()),
@@ -141,6 +164,48 @@ impl Client {
                 reason: response.reason_phrase.clone(),
                 attempts,
             });
+        }
+        if let Some([first, count]) = range {
+            let bad = |message: String| HttpError::BadResponse {
+                url: url.into(),
+                message,
+            };
+            if response.status_code != 206 {
+                return Err(bad(format!(
+                    "HTTP {} to a range request: the server must answer range requests \
+                     (206 Partial Content) for a DEM to be read in windows",
+                    response.status_code
+                )));
+            }
+            // "bytes FIRST-LAST/TOTAL"
+            let header = response
+                .headers
+                .get("content-range")
+                .cloned()
+                .unwrap_or_default();
+            let parsed = header
+                .trim()
+                .strip_prefix("bytes ")
+                .and_then(|r| r.split_once('/'))
+                .and_then(|(span, total)| {
+                    let (a, b) = span.split_once('-')?;
+                    Some((
+                        a.parse::<u64>().ok()?,
+                        b.parse::<u64>().ok()?,
+                        total.parse::<u64>().ok()?,
+                    ))
+                });
+            match parsed {
+                Some((a, b, total)) if a == first && b + 1 == first + count.max(1) => {
+                    self.range_total.store(total, Ordering::Relaxed);
+                }
+                _ => {
+                    return Err(bad(format!(
+                        "Content-Range {header:?} to a request for bytes {first}-{}",
+                        first + count.max(1) - 1
+                    )));
+                }
+            }
         }
         // minreq has refused a Content-Length that is not a number; chunked bodies have none.
         let expected = response
@@ -202,7 +267,7 @@ impl Client {
                 attempts,
             });
         }
-        if let (Some(cache), Some(validator)) = (&self.cache, validator)
+        if let (Some(cache), Some(validator), None) = (&self.cache, validator, range)
             && let Ok(mut cache) = cache.lock()
         {
             cache.put(url, &validator, &body);

@@ -1,0 +1,281 @@
+//! DEM files read a window of rows at a time, so that a bake never holds a whole large file:
+//! an SRTM `.hgt` tile by seeking to its rows, a GeoTIFF (striped or tiled, a Cloud-Optimised
+//! GeoTIFF among them) by reading and decoding only the strips or tiles that hold the rows. A
+//! file may also be an `http://` address: its header and its chunks are then read with range
+//! requests, with the tile client's deadlines and retries. PNG DEMs are read whole each time
+//! (they are small: a PNG has no index to read a part of it by).
+
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+use super::dem::{Dem, DemOptions};
+use super::dem_grid::DemFormat;
+use super::error::WorldError;
+
+/// Whether `path` names a file on an HTTP server rather than on disk.
+pub fn is_remote(path: &Path) -> bool {
+    path.to_str()
+        .is_some_and(|s| s.starts_with("http://") || s.starts_with("https://"))
+}
+
+/// The whole of a remote file of at most `max` bytes (a VRT).
+pub(crate) fn read_remote(path: &Path, max: u64) -> Result<Vec<u8>, WorldError> {
+    let src = open_source(path)?;
+    if src.len() > max {
+        return Err(WorldError::FileTooLarge {
+            path: path.to_path_buf(),
+            size: src.len(),
+            max,
+        });
+    }
+    src.read_at(0, src.len())
+}
+
+/// Bytes of a file, local or remote, read at any offset.
+trait ReadAt: Send + Sync {
+    fn read_at(&self, offset: u64, count: u64) -> Result<Vec<u8>, WorldError>;
+    fn len(&self) -> u64;
+}
+
+struct LocalFile {
+    path: PathBuf,
+    file: std::fs::File,
+    len: u64,
+}
+
+impl ReadAt for LocalFile {
+    fn read_at(&self, offset: u64, count: u64) -> Result<Vec<u8>, WorldError> {
+        use std::os::unix::fs::FileExt;
+        let mut buf = vec![0u8; count as usize];
+        self.file
+            .read_exact_at(&mut buf, offset)
+            .map_err(|e| WorldError::io(&self.path, e))?;
+        Ok(buf)
+    }
+    fn len(&self) -> u64 {
+        self.len
+    }
+}
+
+#[cfg(feature = "http")]
+impl ReadAt for crate::stream::http::RangeFile {
+    fn read_at(&self, offset: u64, count: u64) -> Result<Vec<u8>, WorldError> {
+        crate::stream::http::RangeFile::read_at(self, offset, count)
+    }
+    fn len(&self) -> u64 {
+        crate::stream::http::RangeFile::len(self)
+    }
+}
+
+fn open_source(path: &Path) -> Result<Box<dyn ReadAt>, WorldError> {
+    if is_remote(path) {
+        #[cfg(feature = "http")]
+        {
+            let url = path.to_string_lossy();
+            let file = crate::stream::http::RangeFile::open(&url, Default::default())?;
+            return Ok(Box::new(file));
+        }
+        #[cfg(not(feature = "http"))]
+        return Err(WorldError::DemMosaic {
+            path: path.to_path_buf(),
+            problem: "this build reads no HTTP addresses (the http feature is off)".into(),
+        });
+    }
+    let (file, len) = super::format::open_regular(path)?;
+    Ok(Box::new(LocalFile {
+        path: path.to_path_buf(),
+        file,
+        len,
+    }))
+}
+
+/// Bytes of a [`ReadAt`] as [`Read`] + [`Seek`], in blocks, for the TIFF decoder's many small
+/// reads of a header.
+struct Blocks<'a> {
+    src: &'a dyn ReadAt,
+    pos: u64,
+    block: Option<(u64, Vec<u8>)>,
+}
+
+/// Bytes a block of [`Blocks`] reads at once.
+const BLOCK: u64 = 64 << 10;
+
+impl Read for Blocks<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let len = self.src.len();
+        if self.pos >= len || buf.is_empty() {
+            return Ok(0);
+        }
+        let start = self.pos / BLOCK * BLOCK;
+        if self.block.as_ref().is_none_or(|(at, _)| *at != start) {
+            let bytes = self
+                .src
+                .read_at(start, BLOCK.min(len - start))
+                .map_err(std::io::Error::other)?;
+            self.block = Some((start, bytes));
+        }
+        let (_, bytes) = self.block.as_ref().expect("just read");
+        let from = (self.pos - start) as usize;
+        let n = buf.len().min(bytes.len() - from);
+        buf[..n].copy_from_slice(&bytes[from..from + n]);
+        self.pos += n as u64;
+        Ok(n)
+    }
+}
+
+impl Seek for Blocks<'_> {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        let len = self.src.len() as i128;
+        let pos = match to {
+            SeekFrom::Start(p) => i128::from(p),
+            SeekFrom::End(d) => len + i128::from(d),
+            SeekFrom::Current(d) => i128::from(self.pos) + i128::from(d),
+        };
+        if pos < 0 {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "seek before the start",
+            ));
+        }
+        self.pos = pos as u64;
+        Ok(self.pos)
+    }
+}
+
+/// A DEM file opened for reading in windows of rows.
+pub struct Rows {
+    path: PathBuf,
+    kind: Kind,
+}
+
+enum Kind {
+    Png(DemOptions),
+    Hgt {
+        src: Box<dyn ReadAt>,
+        side: usize,
+    },
+    Tiff {
+        src: Box<dyn ReadAt>,
+        tiff: super::geotiff::TiffWindows,
+    },
+}
+
+impl Rows {
+    /// Opens `path` (a file or an `http://` address): its header and georeferencing (the
+    /// returned [`Dem`] holds no heights). The format is told from the content (and, for an
+    /// `.hgt` tile, from its size); a grid of more than `max_samples` is refused.
+    pub fn open(
+        path: &Path,
+        options: &DemOptions,
+        max_samples: u64,
+    ) -> Result<(Dem, Rows), WorldError> {
+        Dem::check_cell_option(path, options)?;
+        let src = open_source(path)?;
+        let head = src.read_at(0, 8.min(src.len()))?;
+        let (mut dem, kind) = if head.starts_with(b"\x89PNG\r\n\x1a\n") {
+            if is_remote(path) {
+                return Err(WorldError::DemMosaic {
+                    path: path.to_path_buf(),
+                    problem: "a PNG DEM is read from disk only: over HTTP a DEM is a GeoTIFF \
+                              (Cloud-Optimised or not) or an .hgt tile"
+                        .into(),
+                });
+            }
+            let mut dem = Dem::load_unfilled(path, options)?;
+            dem.heights = Vec::new();
+            (dem, Kind::Png(options.clone()))
+        } else if [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"]
+            .iter()
+            .any(|magic| head.starts_with(*magic))
+        {
+            let len = src.len();
+            let (dem, tiff) = {
+                let reader = Blocks {
+                    src: src.as_ref(),
+                    pos: 0,
+                    block: None,
+                };
+                super::geotiff::open_windows(path, reader, len, options.cell_size_m, max_samples)?
+            };
+            (dem, Kind::Tiff { src, tiff })
+        } else {
+            let len = src.len();
+            let Some(side) = super::hgt::side_for_size(len) else {
+                return Err(
+                    if path
+                        .extension()
+                        .is_some_and(|e| e.eq_ignore_ascii_case("hgt"))
+                    {
+                        WorldError::HgtSize {
+                            path: path.to_path_buf(),
+                            bytes: len,
+                        }
+                    } else {
+                        let hex: Vec<String> = head.iter().map(|b| format!("{b:02x}")).collect();
+                        WorldError::UnknownDemFormat {
+                            path: path.to_path_buf(),
+                            found: format!("{len} bytes starting with {}", hex.join(" ")),
+                        }
+                    },
+                );
+            };
+            let dem = super::hgt::header(path, side, options.cell_size_m)?;
+            (
+                dem,
+                Kind::Hgt {
+                    src,
+                    side: side as usize,
+                },
+            )
+        };
+        if let Some([ew, ns]) = options.cell_size_m {
+            dem.cell_ew_m = ew;
+            dem.cell_ns_m = ns;
+        }
+        Ok((
+            dem,
+            Rows {
+                path: path.to_path_buf(),
+                kind,
+            },
+        ))
+    }
+
+    /// Heights of rows `rows` (from the north, end exclusive), every column, nodata NaN.
+    pub fn read(&self, rows: [usize; 2]) -> Result<Vec<f32>, WorldError> {
+        match &self.kind {
+            Kind::Png(options) => {
+                let dem = Dem::load_unfilled(&self.path, options)?;
+                let w = dem.width as usize;
+                Ok(dem.heights[rows[0] * w..rows[1] * w].to_vec())
+            }
+            Kind::Hgt { src, side } => {
+                let bytes = src.read_at(
+                    (rows[0] * side * 2) as u64,
+                    ((rows[1] - rows[0]) * side * 2) as u64,
+                )?;
+                Ok(super::hgt::heights(&bytes))
+            }
+            Kind::Tiff { src, tiff } => tiff.rows(&mut |o, n| src.read_at(o, n), rows),
+        }
+    }
+
+    /// Rows read at once beyond those asked for: a strip's or a tile's; `None` for a PNG,
+    /// which is read whole.
+    pub fn chunk_rows(&self) -> Option<usize> {
+        match &self.kind {
+            Kind::Png(_) => None,
+            Kind::Hgt { .. } => Some(0),
+            Kind::Tiff { tiff, .. } => Some(tiff.chunk_rows()),
+        }
+    }
+
+    /// The file's format.
+    pub fn format(&self) -> DemFormat {
+        match self.kind {
+            Kind::Png(_) => DemFormat::PngSidecar,
+            Kind::Hgt { .. } => DemFormat::SrtmHgt,
+            Kind::Tiff { .. } => DemFormat::Geotiff,
+        }
+    }
+}
