@@ -432,12 +432,27 @@ impl Layout {
             ];
             let first = ph - 1 - south[1];
             let values = part.rows.read([first, ph - south[0]])?;
+            // A file on the joined grid's own spacing, a whole number of samples from its
+            // corner (adjacent SRTM tiles): its samples are copied, as `at` would give them.
+            let offset = |a: usize| (part.origin[a] - lo[a]) / size[a];
+            let aligned =
+                part.size == size && (0..2).all(|a| (offset(a) - offset(a).round()).abs() < 1e-9);
+            let (dc, dr) = (offset(0).round() as i64, offset(1).round() as i64);
             for r in s0..=s1 {
                 let y = lo[1] + r as f64 * size[1];
                 for c in c0..=c1 {
-                    let x = lo[0] + c as f64 * size[0];
-                    let Some(v) = part.at(&values, first, x, y) else {
-                        continue;
+                    let v = if aligned {
+                        let (pc, pr) = (c as i64 - dc, r as i64 - dr);
+                        if pc < 0 || pr < 0 || pc >= part.width as i64 || pr >= ph as i64 {
+                            continue;
+                        }
+                        values[(ph - 1 - pr as usize - first) * part.width + pc as usize]
+                    } else {
+                        let x = lo[0] + c as f64 * size[0];
+                        let Some(v) = part.at(&values, first, x, y) else {
+                            continue;
+                        };
+                        v
                     };
                     let i = (h - 1 - r - rows[0]) * rw + (c - cols[0]);
                     if owner[i] == u16::MAX {
