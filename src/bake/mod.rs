@@ -1,22 +1,28 @@
 //! The baker: turns a DEM ([`Dem`]) into a world: a pyramid of stored tiles and `world.toml`.
 //!
-//! 0. The DEM is read ([`Dem::load_with`]: GeoTIFF, SRTM `.hgt` or PNG + sidecar, told apart
-//!    by content; several files, a folder or a VRT joined into one by
-//!    [`crate::world::mosaic`]) and its nodata samples are filled from the valid heights around
-//!    them.
-//! 1. The DEM is resampled (Catmull-Rom bicubic in its own, non-square grid) to square cells at
-//!    the finest stored level, over the whole root grid plus a margin for the tile borders of
-//!    every level. Beyond the DEM the height of the nearest edge point is repeated.
-//! 2. Grass type and density are painted on that grid from slope, altitude and value noise
-//!    seeded by [`BakeOptions::seed`]: no grass where the slope exceeds 35 degrees, lush meadow
-//!    and tall grass low down, dry grass high up and on dry (noise) ground.
+//! 0. The DEM is opened ([`source`]): a file small enough for a quarter of the memory limit
+//!    is read whole ([`Dem::load_with`]: GeoTIFF, SRTM `.hgt` or PNG + sidecar, told apart by
+//!    content) and its nodata samples filled; a larger one, one over HTTP, and several files
+//!    (a folder or a VRT, joined by [`crate::world::mosaic`]) are read in filled chunks of
+//!    their joined grid, each file a window of rows at a time ([`crate::world::window`]).
+//! 1. The finest grid: the DEM resampled (Catmull-Rom bicubic in its own, non-square grid) to
+//!    square cells at the finest stored level, over the whole root grid plus a margin for the
+//!    tile borders of every level; beyond the DEM the height of the nearest edge point is
+//!    repeated. It is never held whole ([`plan`]): a survey streams it once for the height
+//!    range, the calibration window and a subsample (every `stride`-th sample, the whole grid
+//!    where it fits), and the finer levels are resampled again block by block.
+//! 2. Grass type and density are painted from slope (measured on the finest grid), altitude and
+//!    value noise seeded by [`BakeOptions::seed`]: no grass where the slope exceeds 35 degrees,
+//!    lush meadow and tall grass low down, dry grass high up and on dry (noise) ground. A
+//!    sample's paint depends only on where it lies.
 //! 3. Coarser levels are point samples of the finest grid: the sample at level `L` is the
 //!    sample at the same position at level `L + 1` (every other one). Coarse and fine tiles
 //!    therefore agree exactly where their samples coincide, so a fine tile morphed to its
 //!    parent's resolution meets the parent without cracks, and children derived from a parent
 //!    start from the parent's own values.
-//! 4. Every tile of every stored level is cut from that one global grid (borders included), so
-//!    neighbours share identical edge and border samples, and written through temporary files.
+//! 4. Every tile is cut (borders included) from the painted subsample or from a painted block
+//!    of the finest grid, which agree wherever they overlap, so neighbours share identical edge
+//!    and border samples; tiles are written through temporary files.
 //! 5. Seven camera paths are computed from the terrain ("tour", the default, "overview", "low",
 //!    "meadow", "helicopter", and "wind-tour" with its "walker"), four wind scenes are added
 //!    ("calm", "breeze", "storm" and "helicopter", see [`default_wind_scenes`]; the wind tour
@@ -32,10 +38,12 @@
 //! same output folder removes the staging folders of bakes that were killed (whose lock is
 //! free) and leaves those of running bakes alone.
 //!
-//! The stages live in submodules: `resample` (the DEM to the finest square grid and the
-//! derivation calibration), `paint` (grass types and density), `tiles` (cutting and writing
-//! the pyramid), `author` (camera paths and wind scenes) and `publish` (the staging folder,
-//! the safe replacement of `world.toml` and `tiles/`, and cancellation).
+//! The stages live in submodules: `plan` (how the memory limit is spent), `source` (the DEM
+//! whole or in chunks), `survey` (the one pass over the whole grid), `resample` (windows and
+//! subsamples of the finest grid), `paint` (grass types and density), `tiles` (blocks, cutting
+//! and writing the pyramid), `author` (camera paths and wind scenes), `shard` (sharded bakes)
+//! and `publish` (the staging folder, the safe replacement of `world.toml` and `tiles/`, and
+//! cancellation).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

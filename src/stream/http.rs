@@ -32,10 +32,9 @@
 //! This module holds the options, the errors and the source; the requests and their bounded
 //! reading are in `http/client.rs`, the disk cache in `http/cache.rs`.
 
-use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use crate::world::format::{
@@ -65,16 +64,7 @@ impl RangeFile {
     /// answers range requests).
     pub fn open(url: &str, options: HttpOptions) -> Result<RangeFile, WorldError> {
         options.validate()?;
-        let client = client::Client {
-            options,
-            cache: None,
-            redirects_seen: Mutex::new(HashSet::new()),
-            requests: AtomicU64::new(0),
-            retries: AtomicU64::new(0),
-            cache_hits: AtomicU64::new(0),
-            bytes: AtomicU64::new(0),
-            range_total: AtomicU64::new(0),
-        };
+        let client = client::Client::new(options, None);
         client.fetch_range(url, 1, None, Some([0, 1]))?;
         let len = client.range_total.load(Ordering::Relaxed);
         Ok(RangeFile {
@@ -383,16 +373,7 @@ impl HttpSource {
             Some(c) => Some(Mutex::new(DiskCache::open(c)?)),
             None => None,
         };
-        let client = Client {
-            options,
-            cache,
-            redirects_seen: Mutex::new(HashSet::new()),
-            requests: AtomicU64::new(0),
-            retries: AtomicU64::new(0),
-            cache_hits: AtomicU64::new(0),
-            bytes: AtomicU64::new(0),
-            range_total: AtomicU64::new(0),
-        };
+        let client = Client::new(options, cache);
         let manifest_url = format!("{base}world.toml");
         let bytes = client.fetch(&manifest_url, MAX_MANIFEST_BYTES, None)?;
         let path = Path::new(&manifest_url);

@@ -16,7 +16,8 @@
 //!   their own georeferencing as `gdalbuildvrt` lays them out; the VRT's own grid and windows
 //!   are not read.
 //!
-//! The joined heights are held in memory whole, like a single file's.
+//! [`load_dems`] holds the joined heights whole, like a single file's; a bake reads them a
+//! window at a time through [`Layout::region`] (see `bake::source`).
 
 use std::path::{Path, PathBuf};
 

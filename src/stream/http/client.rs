@@ -29,6 +29,20 @@ pub(super) struct Client {
 }
 
 impl Client {
+    /// A client with these options and this disk cache, its counters at zero.
+    pub(super) fn new(options: HttpOptions, cache: Option<Mutex<DiskCache>>) -> Client {
+        Client {
+            options,
+            cache,
+            redirects_seen: Mutex::new(HashSet::new()),
+            requests: AtomicU64::new(0),
+            retries: AtomicU64::new(0),
+            cache_hits: AtomicU64::new(0),
+            bytes: AtomicU64::new(0),
+            range_total: AtomicU64::new(0),
+        }
+    }
+
     /// Fetches one file of at most `max` bytes (through the cache when there is one),
     /// retrying transient failures.
     pub(super) fn fetch(
