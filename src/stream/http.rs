@@ -89,9 +89,19 @@ impl RangeFile {
         if count == 0 {
             return Ok(Vec::new());
         }
-        Ok(self
+        let body = self
             .client
-            .fetch_range(&self.url, count, None, Some([offset, count]))?)
+            .fetch_range(&self.url, count, None, Some([offset, count]))?;
+        if body.len() as u64 != count {
+            return Err(HttpError::Truncated {
+                url: self.url.clone(),
+                expected: count,
+                received: body.len() as u64,
+                attempts: 1,
+            }
+            .into());
+        }
+        Ok(body)
     }
 
     /// Requests sent, bytes received.

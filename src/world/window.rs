@@ -247,7 +247,16 @@ impl Rows {
             Kind::Png(options) => {
                 let dem = Dem::load_unfilled(&self.path, options)?;
                 let w = dem.width as usize;
-                Ok(dem.heights[rows[0] * w..rows[1] * w].to_vec())
+                dem.heights
+                    .get(rows[0] * w..rows[1] * w)
+                    .map(<[f32]>::to_vec)
+                    .ok_or_else(|| WorldError::DemMosaic {
+                        path: self.path.clone(),
+                        problem: format!(
+                            "it has {} rows now, not the {} it had when the bake began",
+                            dem.height, rows[1]
+                        ),
+                    })
             }
             Kind::Hgt { src, side } => {
                 let bytes = src.read_at(
