@@ -116,6 +116,11 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         (None, Some(count)) => Some(verdant::bake::ShardStep::Finish { count }),
         (None, None) => None,
     };
+    if levels == Some(0) {
+        anyhow::bail!(
+            "--levels 0: must be in 1..=12 (leave --levels out for as many as the world needs)"
+        );
+    }
     let mut dems = dem.into_iter();
     let opts = BakeOptions {
         dem: dems.next().unwrap_or_default(),
