@@ -53,13 +53,13 @@ pub(super) fn survey(
         let e = extent[k];
         ((e / shape.cell).floor() as i64 + 1).min(shape.size[k] - m)
     });
-    let cal_w = data[0]
-        .min((plan.calibration_samples as f64).sqrt().ceil() as i64)
-        .max(1);
+    // All of it where it fits, else about a square of the samples allowed.
     let cal_w = if data[0] * data[1] <= plan.calibration_samples as i64 {
         data[0]
     } else {
-        cal_w
+        data[0]
+            .min((plan.calibration_samples as f64).sqrt().ceil() as i64)
+            .max(1)
     };
     let cal_h = data[1].min(plan.calibration_samples as i64 / cal_w).max(1);
     let cal_at = [m + (data[0] - cal_w) / 2, m + (data[1] - cal_h) / 2];

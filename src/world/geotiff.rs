@@ -252,17 +252,7 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
     }
 
     let grid = geo.grid(path, width, height, cell_override.is_some())?;
-    if grid.flip_rows {
-        for r in 0..h / 2 {
-            let (north, south) = raw.split_at_mut((h - 1 - r) * w);
-            north[r * w..(r + 1) * w].swap_with_slice(&mut south[..w]);
-        }
-    }
-    if grid.flip_cols {
-        for row in raw.chunks_exact_mut(w) {
-            row.reverse();
-        }
-    }
+    north_up(&mut raw, w, grid.flip_rows, grid.flip_cols);
     let [cell_ew_m, cell_ns_m] = cell_override.unwrap_or(grid.cell_m);
     Ok(Dem {
         width,
@@ -1051,19 +1041,25 @@ impl TiffWindows {
             self.nodata,
             self.vertical,
         )?;
-        if self.flip_rows {
-            let n = rows[1] - rows[0];
-            for r in 0..n / 2 {
-                let (north, south) = out.split_at_mut((n - 1 - r) * w);
-                north[r * w..(r + 1) * w].swap_with_slice(&mut south[..w]);
-            }
-        }
-        if self.flip_cols {
-            for row in out.chunks_exact_mut(w) {
-                row.reverse();
-            }
-        }
+        north_up(&mut out, w, self.flip_rows, self.flip_cols);
         Ok(out)
+    }
+}
+
+/// Turns rows of `w` samples stored south first (`flip_rows`) or east first (`flip_cols`)
+/// north up and west first, in place.
+fn north_up(heights: &mut [f32], w: usize, flip_rows: bool, flip_cols: bool) {
+    let h = heights.len() / w;
+    if flip_rows {
+        for r in 0..h / 2 {
+            let (north, south) = heights.split_at_mut((h - 1 - r) * w);
+            north[r * w..(r + 1) * w].swap_with_slice(&mut south[..w]);
+        }
+    }
+    if flip_cols {
+        for row in heights.chunks_exact_mut(w) {
+            row.reverse();
+        }
     }
 }
 

@@ -9,7 +9,6 @@ use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use super::dem::{Dem, DemOptions};
-use super::dem_grid::DemFormat;
 use super::error::WorldError;
 
 /// Whether `path` names a file on an HTTP server rather than on disk.
@@ -276,15 +275,6 @@ impl Rows {
             Kind::Png(_) => None,
             Kind::Hgt { .. } => Some(0),
             Kind::Tiff { tiff, .. } => Some(tiff.chunk_rows()),
-        }
-    }
-
-    /// The file's format.
-    pub fn format(&self) -> DemFormat {
-        match self.kind {
-            Kind::Png(_) => DemFormat::PngSidecar,
-            Kind::Hgt { .. } => DemFormat::SrtmHgt,
-            Kind::Tiff { .. } => DemFormat::Geotiff,
         }
     }
 }
