@@ -329,14 +329,26 @@ pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result
             s.recovery_frames.map_or(String::new(), |n| n.to_string())
         );
     }
+    // The paths: each method's and each bound's mean over the path's views.
+    let mut rows: Vec<(String, &str, &str, bool, f64, u32)> = Vec::new();
     for p in &r.paths {
+        let size = format!("{}x{}", p.size.0, p.size.1);
+        match rows
+            .iter_mut()
+            .find(|x| x.0 == size && x.1 == p.method && x.2 == p.path)
+        {
+            Some(x) => {
+                x.4 += p.flip;
+                x.5 += 1;
+            }
+            None => rows.push((size, &p.method, &p.path, p.bound, p.flip, 1)),
+        }
+    }
+    for (size, method, path, bound, sum, n) in rows {
         println!(
-            "{:<10} {:<7} path {} at {:.1} s: FLIP {:.4}",
-            format!("{}x{}", p.size.0, p.size.1),
-            p.method,
-            p.path,
-            p.t_s,
-            p.flip
+            "{size:<10} {method:<11} path {path:<10} FLIP {:.4} over {n} views{}",
+            sum / f64::from(n),
+            if bound { " (bound)" } else { "" }
         );
     }
     for t in &r.timings {

@@ -14,7 +14,10 @@
 //!
 //! The **paths** part measures what a user flies: at four times spread along each named path
 //! (default: meadow, tour, wind-tour), FLIP against the truth after [`PATH_RUN_UP`] frames of
-//! flight along the path. Speed: GPU time per frame of each method (timestamp queries; the
+//! flight along the path, and beside the methods two bounds ([`Bound`]) that say where their
+//! error comes from: the default frame supersampled like the truth (what the frame draws
+//! differently from the truth, which no anti-aliasing removes) and the truth's grass at 2 x 2
+//! sub-samples (what four samples a pixel leave of the aliasing). Speed: GPU time per frame of each method (timestamp queries; the
 //! wall time without them), timed in interleaved rounds at the still view (see
 //! [`crate::tools::timing`]). Outputs: `aa_frames.csv` (every frame), `aa_sequences.csv`,
 //! `aa_paths.csv`, `aa.json`, per size a chart of error against GPU time with the Pareto
@@ -225,14 +228,89 @@ pub struct AaSequence {
 pub struct AaPathView {
     /// Image size.
     pub size: (u32, u32),
-    /// The method.
+    /// The method, or the bound (see [`Bound`]).
     pub method: String,
+    /// Whether `method` names a bound rather than a method.
+    pub bound: bool,
     /// The path.
     pub path: String,
     /// Time along it, seconds.
     pub t_s: f64,
     /// FLIP against the truth.
     pub flip: f64,
+}
+
+/// What the paths part measures beside the methods, to say where their error comes from: two
+/// renders of the same views that no real-time method is, each drawn as the truth is (K x K
+/// sub-samples averaged in linear light, stepped through the same frames).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bound {
+    /// The default frame's settings (LOD, segments, view distance, far field, plants' levels)
+    /// supersampled K x K like the truth: a perfect anti-aliasing of what the default frame
+    /// draws. Its error is what the frame draws differently from the truth; no anti-aliasing
+    /// method of that frame gets below it.
+    DefaultSupersampled,
+    /// The truth's settings with 2 x 2 sub-samples: the exact grass at four full samples a
+    /// pixel. Its error is what four samples a pixel leave of the aliasing.
+    Truth2x2,
+}
+
+impl Bound {
+    /// Both, in report order.
+    pub const ALL: [Bound; 2] = [Bound::DefaultSupersampled, Bound::Truth2x2];
+
+    /// The name in reports (`k`: the truth's sub-samples a side).
+    pub fn name(self, k: u32) -> String {
+        match self {
+            Bound::DefaultSupersampled => format!("default-{k}x{k}"),
+            Bound::Truth2x2 => "truth-2x2".into(),
+        }
+    }
+
+    /// The bound's settings and sub-samples a side, the truth's being `k` x `k` with blades
+    /// out to `reach` view distances and `atlas_slots` slots.
+    pub fn config(
+        self,
+        world: &World,
+        k: u32,
+        reach: f64,
+        atlas_slots: u32,
+    ) -> (RendererConfig, u32) {
+        let base = RendererConfig::for_world(world);
+        match self {
+            Bound::DefaultSupersampled => (
+                RendererConfig {
+                    aa: AntiAliasing::Off,
+                    ..base
+                },
+                k,
+            ),
+            Bound::Truth2x2 => (
+                crate::tools::truth::truth_config_reaching(world, &base, atlas_slots, reach),
+                2,
+            ),
+        }
+    }
+
+    fn renderer(
+        self,
+        ctx: &GpuContext,
+        world: &World,
+        size: (u32, u32),
+        k: u32,
+        reach: f64,
+    ) -> Result<Truth> {
+        let slots = crate::tools::truth::atlas_slots(world, &ctx.device);
+        let (config, k) = self.config(world, k, reach, slots);
+        Truth::with_config(
+            ctx,
+            world.clone(),
+            std::sync::Arc::new(world.clone()),
+            size,
+            k,
+            config,
+        )
+    }
 }
 
 /// A method's speed at one size.
@@ -474,7 +552,21 @@ pub fn run_bench_aa(
             }
             frames.extend(seq.into_iter().flatten());
         }
-        // The paths: four views spread along each, reached by flight along it.
+        // The paths: four views spread along each, reached by flight along it; the bounds
+        // step through the same frames as the truth.
+        let mut bounds: Vec<(Bound, Truth)> = if paths.is_empty() {
+            Vec::new()
+        } else {
+            Bound::ALL
+                .iter()
+                .map(|&b| {
+                    Ok((
+                        b,
+                        b.renderer(&ctx, &world, size, opts.truth_k, opts.truth_reach)?,
+                    ))
+                })
+                .collect::<Result<_>>()?
+        };
         for path in &paths {
             let (a, b) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
             for j in 0..4 {
@@ -489,6 +581,21 @@ pub fn run_bench_aa(
                         advance(&mut reference, &ctx, &camera, t, walker)?;
                         None
                     };
+                    for (bound, renderer) in bounds.iter_mut() {
+                        if let Some(truth_img) = &truth_img {
+                            let img = renderer.render(&ctx, &camera, t, walker)?;
+                            path_views.push(AaPathView {
+                                size,
+                                method: bound.name(opts.truth_k),
+                                bound: true,
+                                path: path.name.clone(),
+                                t_s: t,
+                                flip: flip(truth_img, &img)?,
+                            });
+                        } else {
+                            advance(renderer, &ctx, &camera, t, walker)?;
+                        }
+                    }
                     for (method, scene) in scenes.iter_mut() {
                         scene.warm_up_report(&camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
                         scene.render_frame(&ctx, &camera, t, walker)?;
@@ -497,6 +604,7 @@ pub fn run_bench_aa(
                             path_views.push(AaPathView {
                                 size,
                                 method: method.name().into(),
+                                bound: false,
                                 path: path.name.clone(),
                                 t_s: t,
                                 flip: flip(truth_img, &img)?,
@@ -507,6 +615,7 @@ pub fn run_bench_aa(
             }
             progress(&format!("path {}", path.name), 1, 1);
         }
+        drop(bounds);
         drop(reference);
         // Speed: interleaved rounds at the still view.
         let mut samples: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); scenes.len()];
@@ -593,12 +702,12 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
         );
     }
     write_text(&opts.out.join("aa_sequences.csv"), &csv)?;
-    let mut csv = String::from("width,height,method,path,t_s,flip\n");
+    let mut csv = String::from("width,height,method,bound,path,t_s,flip\n");
     for p in &r.paths {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{:.3},{:.5}",
-            p.size.0, p.size.1, p.method, p.path, p.t_s, p.flip
+            "{},{},{},{},{},{:.3},{:.5}",
+            p.size.0, p.size.1, p.method, p.bound, p.path, p.t_s, p.flip
         );
     }
     write_text(&opts.out.join("aa_paths.csv"), &csv)?;
@@ -679,6 +788,32 @@ mod tests {
         assert_eq!(recovery_frames(&flips, 2), Some(3));
         assert_eq!(recovery_frames(&[0.05; 8], 4), Some(0));
         assert_eq!(recovery_frames(&[0.05; 8], 8), None);
+    }
+
+    #[test]
+    fn the_bounds_are_the_default_supersampled_and_the_truth_at_two_by_two() {
+        let world = World::open(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz"),
+        )
+        .unwrap();
+        let default = RendererConfig::for_world(&world);
+        let (c, k) = Bound::DefaultSupersampled.config(&world, 4, 4.0, 985);
+        // The default frame as it is, only without anti-aliasing: its sub-samples are that.
+        assert_eq!(k, 4);
+        assert_eq!(c.aa, AntiAliasing::Off);
+        assert_eq!(c.grass.segments, default.grass.segments);
+        let reach = |c: &RendererConfig| c.grass_rings.map(|r| (r.high_radius_m, r.low_radius_m));
+        assert_eq!(reach(&c), reach(&default));
+        assert_eq!(c.plants.lod_m, default.plants.lod_m);
+        let (c, k) = Bound::Truth2x2.config(&world, 4, 4.0, 985);
+        let truth = crate::tools::truth::truth_config_reaching(&world, &default, 985, 4.0);
+        assert_eq!(k, 2);
+        assert_eq!(c.grass.segments, truth.grass.segments);
+        assert_eq!(reach(&c), reach(&truth));
+        assert_eq!(c.plants.lod_m, truth.plants.lod_m);
+        assert_ne!(reach(&c), reach(&default));
+        assert_eq!(Bound::DefaultSupersampled.name(4), "default-4x4");
+        assert_eq!(Bound::Truth2x2.name(4), "truth-2x2");
     }
 
     #[test]
