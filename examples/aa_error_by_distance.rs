@@ -1,0 +1,177 @@
+//! Where the error against the truth comes from, by distance from the camera.
+//!
+//! `cargo run --release --example aa_error_by_distance -- [WIDTH HEIGHT [PATH [OUT]]]`
+//! (defaults 480 270 meadow out/error-by-distance): one view of the default world's path (the
+//! meadow's first; 30% along any other), after six frames of the same wind for every render,
+//! drawn as the 4x4 truth and as: the truth at 8x8 (the truth's own sampling error), with blades
+//! out to one and two view distances, at one sample and at 2x2; the default frame's settings
+//! supersampled 4x4 (a perfect anti-aliasing of the default frame); and the default frame with
+//! each anti-aliasing method. Prints each one's mean FLIP against the truth over the frame and
+//! over bands of distance (from the truth's depth) with the bands' share of the frame, and
+//! writes every image into OUT.
+use anyhow::Result;
+use std::sync::Arc;
+use verdant::RendererConfig;
+use verdant::aa::AntiAliasing;
+use verdant::camera::sample_path;
+use verdant::gpu::GpuContext;
+use verdant::tools::Scene;
+use verdant::tools::metrics::{band_mask, flip_error_map, masked_mean, ray_distances};
+use verdant::tools::truth::{Truth, atlas_slots, truth_config_reaching};
+use verdant::world::World;
+
+fn rgb(i: &image::RgbaImage) -> image::RgbImage {
+    image::DynamicImage::ImageRgba8(i.clone()).to_rgb8()
+}
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let number = |i: usize, default: u32| -> Result<u32> {
+        match args.get(i) {
+            Some(s) => s
+                .parse()
+                .map_err(|e| anyhow::anyhow!("argument {i} ({s:?}) is not a size: {e}")),
+            None => Ok(default),
+        }
+    };
+    let (w, h) = (number(1, 480)?, number(2, 270)?);
+    let pathname = args.get(3).cloned().unwrap_or("meadow".into());
+    let out = std::path::PathBuf::from(
+        args.get(4)
+            .cloned()
+            .unwrap_or("out/error-by-distance".into()),
+    );
+    std::fs::create_dir_all(&out)?;
+    let wdir = std::path::PathBuf::from("worlds/santa-cruz");
+    let world = World::open(&wdir)?;
+    let path = verdant::tools::camera_path(&world, &wdir, Some(&pathname))?;
+    let t0 = path.keys[0].t_s
+        + 0.3
+            * (path.keys[path.keys.len() - 1].t_s - path.keys[0].t_s)
+            * if pathname == "meadow" { 0.0 } else { 1.0 };
+    let cam = sample_path(&path, t0);
+    let ctx = GpuContext::new()?;
+    let slots = atlas_slots(&world, &ctx.device);
+    let base = RendererConfig::for_world(&world);
+    let run_up = 6;
+    let dt = 1.0 / 60.0;
+    let walker = Some(cam.position.truncate());
+    let mut truths: Vec<(String, Truth)> = Vec::new();
+    let mk = |name: &str, cfg: RendererConfig, k: u32| -> Result<(String, Truth)> {
+        Ok((
+            name.to_string(),
+            Truth::with_config(&ctx, world.clone(), Arc::new(world.clone()), (w, h), k, cfg)?,
+        ))
+    };
+    truths.push(mk(
+        "truth",
+        truth_config_reaching(&world, &base, slots, 4.0),
+        4,
+    )?);
+    truths.push(mk(
+        "truth_k8",
+        truth_config_reaching(&world, &base, slots, 4.0),
+        8,
+    )?);
+    truths.push(mk(
+        "truth_reach1",
+        truth_config_reaching(&world, &base, slots, 1.0),
+        4,
+    )?);
+    truths.push(mk(
+        "truth_reach2",
+        truth_config_reaching(&world, &base, slots, 2.0),
+        4,
+    )?);
+    truths.push(mk(
+        "truth_1x",
+        truth_config_reaching(&world, &base, slots, 4.0),
+        1,
+    )?);
+    truths.push(mk(
+        "truth_2x2",
+        truth_config_reaching(&world, &base, slots, 4.0),
+        2,
+    )?);
+    let mut d = base.clone();
+    d.aa = AntiAliasing::Off;
+    d.service.atlas_slots = d.service.atlas_slots.max(slots);
+    truths.push(mk("default_4x4", d.clone(), 4)?);
+    let mut scenes: Vec<(String, Scene)> = Vec::new();
+    for m in [AntiAliasing::Off, AntiAliasing::Msaa, AntiAliasing::Taa] {
+        let mut c = base.clone();
+        c.aa = m;
+        scenes.push((
+            m.name().to_string(),
+            Scene::new(&ctx, world.clone(), w, h, c)?,
+        ));
+    }
+    let mut imgs: Vec<(String, image::RgbaImage)> = Vec::new();
+    let mut depth = Vec::new();
+    for i in -(run_up as i64)..=0 {
+        let t = t0 + i as f64 * dt;
+        for (name, tr) in truths.iter_mut() {
+            tr.scene()
+                .warm_up_report(&cam, std::time::Duration::from_secs(60))?;
+            if i < 0 {
+                tr.advance(&ctx, &cam, t, walker)?;
+            } else {
+                let img = tr.render(&ctx, &cam, t, walker)?;
+                if name == "truth" {
+                    depth = tr.read_depth(&ctx)?;
+                }
+                imgs.push((name.clone(), img));
+            }
+        }
+        for (name, sc) in scenes.iter_mut() {
+            sc.warm_up_report(&cam, std::time::Duration::from_secs(60))?;
+            sc.render_frame(&ctx, &cam, t, walker)?;
+            if i == 0 {
+                imgs.push((name.clone(), sc.read_image(&ctx)?));
+            }
+        }
+    }
+    let inv = cam.view_proj_relative(w as f32 / h as f32).inverse();
+    let dist = ray_distances(&depth, w, h, inv);
+    let bands = [
+        (0.0, 10.0),
+        (10.0, 25.0),
+        (25.0, 60.0),
+        (60.0, 150.0),
+        (150.0, 600.0),
+        (600.0, 1e9),
+    ];
+    let masks: Vec<Vec<bool>> = bands.iter().map(|&(a, b)| band_mask(&dist, a, b)).collect();
+    let truth = imgs[0].1.clone();
+    print!("{:14} {:>7}", "render", "FLIP");
+    for (a, b) in bands {
+        print!(" {:>9}", format!("{a}-{b}"));
+    }
+    println!();
+    print!("{:14} {:>7}", "share", "");
+    for m in &masks {
+        print!(
+            " {:>9.3}",
+            m.iter().filter(|&&x| x).count() as f64 / m.len() as f64
+        );
+    }
+    println!();
+    for (name, img) in &imgs {
+        img.save(out.join(format!("{pathname}_{w}x{h}_{name}.png")))?;
+        if name == "truth" {
+            continue;
+        }
+        let e = flip_error_map(&rgb(&truth), &rgb(img))?;
+        let mean = e.iter().map(|&v| v as f64).sum::<f64>() / e.len() as f64;
+        print!("{:14} {:>7.4}", name, mean);
+        for m in &masks {
+            print!(
+                " {:>9}",
+                masked_mean(&e, m).map_or("-".into(), |v| format!("{v:.4}"))
+            );
+        }
+        println!();
+        // mean colour difference (linear) in each band
+    }
+    Ok(())
+}
