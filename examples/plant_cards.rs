@@ -17,6 +17,8 @@ fn accent(recipe: Recipe) -> [f32; 3] {
         Recipe::Flower => [0.8, 0.12, 0.3],
         Recipe::Fern => [0.1, 0.32, 0.05],
         Recipe::Bush => [0.08, 0.24, 0.04],
+        Recipe::Broadleaf => [0.09, 0.22, 0.04],
+        Recipe::Conifer => [0.04, 0.13, 0.05],
     }
 }
 

@@ -1,5 +1,6 @@
 //! Plants through the command line: a user's glTF plant in a world renders where its rule puts
-//! it, and bad plant files are refused by name before anything is drawn.
+//! it, trees of both recipes stand against the sky, and bad plant files are refused by name
+//! before anything is drawn.
 
 mod common;
 
@@ -124,6 +125,80 @@ fn bad_plant_files_are_refused_naming_the_file() {
         assert!(
             !tmp.path().join("o/report.json").exists(),
             "{file}: nothing is written"
+        );
+    }
+}
+
+/// The frame's rows above the horizon: the top `share` of the image, as RGB.
+fn top_rows(png: &Path, share: f64) -> Vec<[u8; 3]> {
+    let img = image::open(png).unwrap().to_rgb8();
+    let rows = (f64::from(img.height()) * share) as u32;
+    (0..rows)
+        .flat_map(|y| (0..img.width()).map(move |x| (x, y)))
+        .map(|(x, y)| img.get_pixel(x, y).0)
+        .collect()
+}
+
+#[test]
+fn trees_of_both_recipes_stand_against_the_sky() {
+    let tmp = tempfile::tempdir().unwrap();
+    // The meadow with a broadleaf of 8-12 m at one plant to 500 m2 (and its usual plants gone).
+    let w = world_with_plant(tmp.path(), "broadleaf");
+    let manifest = std::fs::read_to_string(w.join("world.toml")).unwrap();
+    let trees = manifest
+        .replace("size_m = [0.4, 0.6]", "size_m = [8.0, 12.0]")
+        .replace(
+            "density = { meadow = 1.5, \"tall grass\" = 1.5, \"dry grass\" = 1.5 }",
+            "density = { meadow = 0.002, \"tall grass\" = 0.002, \"dry grass\" = 0.002 }",
+        );
+    assert_ne!(manifest, trees);
+    let bare = trees.replace(
+        "density = { meadow = 0.002, \"tall grass\" = 0.002, \"dry grass\" = 0.002 }",
+        "density = { bare = 0.002 }",
+    );
+    let mut skies = Vec::new();
+    for (what, text) in [
+        ("broadleaf", trees.clone()),
+        (
+            "conifer",
+            trees.replace("mesh = \"broadleaf\"", "mesh = \"conifer\""),
+        ),
+        ("none", bare),
+    ] {
+        std::fs::write(w.join("world.toml"), &text).unwrap();
+        let out = fly(&w, tmp.path());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "fly with {what} failed: {stderr}");
+        let report: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(tmp.path().join("o/report.json")).unwrap(),
+        )
+        .unwrap();
+        let plants = &report["frames"][0]["plants"];
+        if what == "none" {
+            assert_eq!(plants["drawn"].as_u64(), Some(0), "{plants}");
+        } else {
+            assert!(plants["drawn"].as_u64().unwrap() > 5, "{what}: {plants}");
+            assert_eq!(plants["overflow"].as_u64(), Some(0), "{what}: {plants}");
+        }
+        skies.push(top_rows(&tmp.path().join("o/frame_00000.png"), 0.4));
+    }
+    // Trees rise above the horizon: part of the sky is hidden by each kind, and the crowns
+    // are darker than the sky they hide.
+    for (k, what) in ["broadleaf", "conifer"].iter().enumerate() {
+        let (with, without) = (&skies[k], &skies[2]);
+        let hidden = with
+            .iter()
+            .zip(without)
+            .filter(|(a, b)| {
+                let sum = |p: &[u8; 3]| p.iter().map(|&c| u32::from(c)).sum::<u32>();
+                sum(a) + 90 < sum(b)
+            })
+            .count();
+        let share = hidden as f64 / with.len() as f64;
+        assert!(
+            (0.01..0.6).contains(&share),
+            "{what}: {:.1}% of the sky hidden",
+            share * 100.0
         );
     }
 }

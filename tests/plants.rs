@@ -14,7 +14,7 @@ use verdant::gpu::{GpuContext, GpuTimer, Targets};
 use verdant::grass::{HiZ, HiZPyramid, TileJob};
 use verdant::lod::Frustum;
 use verdant::plants::place_cpu::{LEVELS, PlantInstance, PlantJob, counter, place_tile};
-use verdant::plants::{PlantRenderer, PlantSet, PlantSettings};
+use verdant::plants::{PlantRenderer, PlantSet, PlantSettings, Recipe, generate};
 use verdant::stream::TileAtlas;
 use verdant::world::{Manifest, TileData, TileId, World};
 
@@ -483,12 +483,18 @@ fn gpu_bending_matches_the_cpu_mirror() {
     let set = PlantSet::build(&rig.manifest, &common::default_world()).unwrap();
     // Vertices of every type's full mesh (the probe bends vertex i of the packed meshes), each
     // as a plant of some type in some wind.
-    let vertices: Vec<_> = set
+    let mut vertices: Vec<_> = set
         .models
         .iter()
         .flat_map(|m| m.lods[0].vertices.iter().copied())
         .take(400)
         .collect();
+    // And the trees' (trunk, branches and leaf clusters), drawn at a tree's scale below.
+    let small = vertices.len();
+    for recipe in [Recipe::Broadleaf, Recipe::Conifer] {
+        let tree = generate(recipe, 5, [0.1, 0.25, 0.05]);
+        vertices.extend(tree.lods[0].vertices.iter().step_by(17).take(60));
+    }
     let n = vertices.len();
     assert!(n >= 200);
     let types = rig.manifest.plant_types.len() as u32;
@@ -496,7 +502,11 @@ fn gpu_bending_matches_the_cpu_mirror() {
         .map(|i| PlantInstance {
             pos: [i as f32 * 0.1 - 20.0, 5.0 + (i % 7) as f32, -1.0],
             yaw: i as f32 * 0.37,
-            scale: 0.3 + (i % 5) as f32 * 0.2,
+            scale: if (i as usize) < small {
+                0.3 + (i % 5) as f32 * 0.2
+            } else {
+                6.0 + (i % 5) as f32 * 4.0
+            },
             kind: i % types,
             hash: verdant::hash::hash_u32(i),
             fade: 1.0,

@@ -1,4 +1,5 @@
-//! Procedural plant meshes: flowers, ferns and broadleaf bushes, with Crysis' bending channels
+//! Procedural plant meshes: flowers, ferns, broadleaf bushes and trees (a broadleaf and a
+//! conifer, [`trees`]), with Crysis' bending channels
 //! (GPU Gems 3, ch. 16) painted into their vertices, at two levels of detail plus a far card.
 //!
 //! Every random choice of a leaf, frond or branch is drawn from a stream of its own (keyed by the
@@ -14,6 +15,7 @@ use super::card::{crossed_cards, render_card};
 use super::mesh::{PlantImage, PlantMesh};
 
 mod shapes;
+mod trees;
 
 use shapes::{Builder, Leaf, Rng, THIN, WOODY, azimuth, lerp, rgba, tint};
 
@@ -30,19 +32,42 @@ pub enum Recipe {
     Fern,
     /// Forking branches with leaves clustered toward their ends, about as wide as high.
     Bush,
+    /// A broadleaf tree: a trunk forking into limbs, a broad crown of leaf clusters.
+    Broadleaf,
+    /// A conifer: a trunk to the top, whorls of drooping branches in a cone, sprays of needles.
+    Conifer,
 }
 
 impl Recipe {
     /// Every recipe, in a fixed order.
-    pub const ALL: [Recipe; 3] = [Recipe::Flower, Recipe::Fern, Recipe::Bush];
+    pub const ALL: [Recipe; 5] = [
+        Recipe::Flower,
+        Recipe::Fern,
+        Recipe::Bush,
+        Recipe::Broadleaf,
+        Recipe::Conifer,
+    ];
 
-    /// The recipe's name, as serde writes it ("flower", "fern", "bush").
+    /// The recipe's name, as serde writes it ("flower", "fern", "bush", "broadleaf",
+    /// "conifer").
     pub fn name(self) -> &'static str {
         match self {
             Recipe::Flower => "flower",
             Recipe::Fern => "fern",
             Recipe::Bush => "bush",
+            Recipe::Broadleaf => "broadleaf",
+            Recipe::Conifer => "conifer",
         }
+    }
+
+    /// The recipe named `name`, if any.
+    pub fn from_name(name: &str) -> Option<Recipe> {
+        Recipe::ALL.into_iter().find(|r| r.name() == name)
+    }
+
+    /// Whether the recipe is a tree (drawn at a tree's size: metres, not decimetres).
+    pub fn is_tree(self) -> bool {
+        matches!(self, Recipe::Broadleaf | Recipe::Conifer)
     }
 }
 
@@ -64,9 +89,10 @@ pub struct PlantLods {
 /// bush (the stems' colour is the recipe's own). Channels are clamped to 0..=1, a non-finite one
 /// reads as 0.
 ///
-/// Triangle budgets of `lods[0]`: a flower at most 300, a fern 600, a bush 900; of the reduced
-/// `lods[1]`, drawn from a few tens of metres to the view distance where most plants are: a
-/// flower 24, a fern 80, a bush 140.
+/// Triangle budgets of `lods[0]`: a flower at most 300, a fern 600, a bush 900, a broadleaf tree
+/// 3000, a conifer 2000; of the reduced `lods[1]`, drawn from a few tens of metres to the view
+/// distance where most plants are: a flower 24, a fern 80, a bush 140, a broadleaf 450, a
+/// conifer 120.
 pub fn generate(recipe: Recipe, seed: u32, colour: [f32; 3]) -> PlantLods {
     let [(l0, _), (l1, _)] = build(recipe, seed, colour);
     PlantLods {
@@ -115,6 +141,8 @@ fn build(recipe: Recipe, seed: u32, colour: [f32; 3]) -> [(PlantMesh, Vec<Part>)
             Recipe::Flower => flower(&rng, colour, lod, &mut b),
             Recipe::Fern => fern(&rng, colour, lod, &mut b),
             Recipe::Bush => bush(&rng, colour, lod, &mut b),
+            Recipe::Broadleaf => trees::broadleaf(&rng, colour, lod, &mut b),
+            Recipe::Conifer => trees::conifer(&rng, colour, lod, &mut b),
         }
         (b.mesh, b.parts)
     });
@@ -122,6 +150,7 @@ fn build(recipe: Recipe, seed: u32, colour: [f32; 3]) -> [(PlantMesh, Vec<Part>)
         Recipe::Flower => (0.9, 1.05),
         Recipe::Fern => (0.85, 1.0),
         Recipe::Bush => (0.7, 0.95),
+        Recipe::Broadleaf | Recipe::Conifer => (0.95, 1.05),
     };
     let target = rng.fork(u32::MAX).range(lo, hi);
     // One factor for both levels, so that they keep the same size.
@@ -145,6 +174,18 @@ fn ao(recipe: Recipe, p: Vec3, height: f32, radius: f32) -> f32 {
         Recipe::Bush => {
             let d = Vec3::new(r, 0.0, (z - 0.35) / 0.65).length();
             smoothstep(0.15, 0.9, d) * smoothstep(-0.05, 0.35, z)
+        }
+        // Distance from the crown's core, an ellipsoid about the forks and above them.
+        Recipe::Broadleaf => {
+            // The trunk stands in the crown's shade.
+            let d = Vec3::new(r, 0.0, (z - 0.62) / 0.4).length();
+            smoothstep(0.2, 0.95, d) * smoothstep(-0.05, 0.5, z)
+        }
+        // Toward the trunk inside the cone, and the top open to the sky.
+        Recipe::Conifer => {
+            let cone = 0.36 * (1.0 - z) + 0.03;
+            let p = p.truncate().length() / (cone * radius / 0.36).max(1e-3);
+            smoothstep(0.0, 0.9, p).max(smoothstep(0.75, 1.0, z)) * smoothstep(-0.05, 0.25, z)
         }
         Recipe::Flower | Recipe::Fern => smoothstep(0.0, 0.55, z.max(0.8 * r)),
     };
@@ -418,6 +459,7 @@ fn bush(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
             level: 0,
             forks: forks[k as usize],
             b: 0.0,
+            leaf_len: [0.12, 0.17],
         };
         branch(b, &br.fork(7), &spec, colour, per_twig, lod);
     }
@@ -432,6 +474,8 @@ struct Branch {
     forks: u32,
     /// Bending freedom at the start.
     b: f32,
+    /// The leaves' length range.
+    leaf_len: [f32; 2],
 }
 
 fn branch(b: &mut Builder, rng: &Rng, br: &Branch, colour: [f32; 3], per_twig: u32, lod: usize) {
@@ -474,6 +518,7 @@ fn branch(b: &mut Builder, rng: &Rng, br: &Branch, colour: [f32; 3], per_twig: u
                 level: br.level + 1,
                 forks: br.forks,
                 b: end_b,
+                leaf_len: br.leaf_len,
             };
             branch(b, &rng.fork(n), &child, colour, per_twig, lod);
         }
@@ -490,7 +535,7 @@ fn branch(b: &mut Builder, rng: &Rng, br: &Branch, colour: [f32; 3], per_twig: u
         let u = (i as f32 + lr.f()) / leaves as f32;
         let t = 1.0 - (1.0 - u).powi(2) * (1.0 - from);
         let dir = (br.dir * 0.5 + lr.dir() * 0.9 + out * 0.3 + Vec3::Z * 0.2).normalize_or(br.dir);
-        let length = lr.range(0.12, 0.17);
+        let length = lr.range(br.leaf_len[0], br.leaf_len[1]);
         let leaf = Leaf {
             base: at(t),
             dir,

@@ -76,12 +76,7 @@ fn white() -> PlantImage {
 /// The model of plant type `t`.
 pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, PlantError> {
     use crate::plants::recipe::{Recipe, generate};
-    let recipe = match t.mesh.as_str() {
-        "flower" => Some(Recipe::Flower),
-        "fern" => Some(Recipe::Fern),
-        "bush" => Some(Recipe::Bush),
-        _ => None,
-    };
+    let recipe = Recipe::from_name(&t.mesh);
     let (lods, texture, card) = match recipe {
         Some(r) => {
             let p = generate(r, t.seed, t.color);

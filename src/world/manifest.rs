@@ -137,9 +137,9 @@ pub struct Manifest {
 /// Most plant types a world has.
 pub const MAX_PLANT_TYPES: usize = 8;
 /// The built-in recipes a plant type's `mesh` may name (else a `.gltf` or `.glb` file).
-pub const PLANT_RECIPES: [&str; 3] = ["flower", "fern", "bush"];
-/// Largest plant, metres.
-pub const MAX_PLANT_SIZE_M: f64 = 8.0;
+pub const PLANT_RECIPES: [&str; 5] = ["flower", "fern", "bush", "broadleaf", "conifer"];
+/// Largest plant, metres (a tall tree).
+pub const MAX_PLANT_SIZE_M: f64 = 60.0;
 /// Most plants per square metre of all types together on one grass type (the placement grid
 /// holds at most one plant per 0.5 m cell, the plants module's `PLANT_CELL_M`).
 pub const MAX_PLANT_DENSITY: f64 = 4.0;
@@ -149,7 +149,7 @@ pub const MAX_PLANT_DENSITY: f64 = 4.0;
 /// ```toml
 /// [[plant_types]]
 /// name = "poppy"
-/// mesh = "flower"              # flower, fern or bush; or a .gltf/.glb file beside world.toml
+/// mesh = "flower"              # flower, fern, bush, broadleaf or conifer; or a .gltf/.glb file
 /// color = [0.75, 0.08, 0.04]   # the recipe's accent (petals, or leaves)
 /// size_m = [0.35, 0.6]         # height range
 /// density = { meadow = 0.12 }  # plants per square metre, per grass type (by name)
@@ -159,10 +159,11 @@ pub const MAX_PLANT_DENSITY: f64 = 4.0;
 pub struct PlantType {
     /// Name, e.g. `poppy`.
     pub name: String,
-    /// A built-in recipe (`flower`, `fern`, `bush`) or a glTF 2.0 file (`.gltf` or `.glb`)
-    /// relative to the manifest's folder.
+    /// A built-in recipe (`flower`, `fern`, `bush`, and the trees `broadleaf` and `conifer`)
+    /// or a glTF 2.0 file (`.gltf` or `.glb`) relative to the manifest's folder.
     pub mesh: String,
-    /// The recipe's accent colour, linear (0..=1): a flower's petals, a fern's or bush's leaves.
+    /// The recipe's accent colour, linear (0..=1): a flower's petals, a fern's, bush's or
+    /// tree's leaves (a conifer's needles).
     /// A glTF plant keeps its own colours.
     #[serde(default = "default_plant_color")]
     pub color: [f32; 3],
