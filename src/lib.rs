@@ -43,10 +43,10 @@
 //!   [`wind::field`], mirror [`wind::field_cpu`]) and the sway springs ([`wind::spring`]) of the
 //!   grass and plant types in it ([`wind::sway`], mirror [`wind::sway_cpu`]); the wind scenes of a
 //!   world made ready to run.
-//! - [`plants`]: plants beyond grass (flowers, ferns, bushes), placed on the GPU per grass tile
+//! - [`plants`]: plants beyond grass (flowers, ferns, bushes, trees), placed on the GPU per grass tile
 //!   and, past the grass, per grass-level tile of the terrain's tiles, and bent by the grass's wind: the vertex record and mesh every plant uses ([`plants::mesh`]),
-//!   the procedural recipes ([`plants::recipe`]: flower, fern and bush at two levels of detail,
-//!   built of the leaves, tubes and random streams in `plants/recipe/shapes.rs`), their far cards
+//!   the procedural recipes ([`plants::recipe`]: flower, fern, bush, and the broadleaf and
+//!   conifer trees of `plants/recipe/trees.rs`, at two levels of detail, built of the leaves, tubes and random streams in `plants/recipe/shapes.rs`), their far cards
 //!   ([`plants::card`]: crossed cards with a picture rendered from the mesh), a user's plant read
 //!   from glTF 2.0 ([`plants::gltf`]: the loader in `gltf/load.rs`, buffers and accessors in
 //!   `gltf/accessor.rs`, the document's check in `gltf/validate.rs`, the writer in
