@@ -5,7 +5,8 @@
 // Bending (Crysis, GPU Gems 3 ch. 16; God of War's parameters): detail bending first, in the
 // plant's own space: leaves and branches swing along the vertical by their vertex colour's b
 // (freedom) and their edges flutter along the normal by its r, from smoothed triangle waves at
-// four frequencies phased by the leaf (g) and the plant; then main bending leans the whole
+// four frequencies phased by the leaf (g) and the plant, as strong as the wind felt or, when it
+// has dropped, as the wind the sway spring still remembers (leaf lag); then main bending leans the whole
 // plant by its type's sway spring in the wind cell at its root (God of War's sway spring and
 // damping: the spring's state, advanced each frame by shaders/wind_sway.wgsl toward the lean
 // the wind asks for, overshoots and swings back after a gust) and its trail's push, the offset
@@ -112,9 +113,17 @@ fn bend(v: PlantVertex, root: vec3<f32>, yaw: f32, scale: f32, phase: f32, w: ve
     let s = sin(yaw);
     var p = vec3<f32>(c * v.position.x - s * v.position.y, s * v.position.x + c * v.position.y, v.position.z) * scale;
     let n = vec3<f32>(c * v.normal.x - s * v.normal.y, s * v.normal.x + c * v.normal.y, v.normal.z);
-    let wind = w.xy * pw.main.x;
-    let speed = length(wind);
     let give = 1.0 - 0.6 * pw.detail.y;
+    // Leaf lag (God of War): the leaves answer the wind at once and keep moving after it drops,
+    // for as long as the type's sway spring still leans: the spring's lean over the lean per
+    // felt m/s is the wind the plant remembers, decaying with the spring's damping.
+    let felt = length(w.xy * pw.main.x);
+    let per_felt = pw.main.y * give * pw.main.w;
+    var remembered = 0.0;
+    if per_felt > 1e-6 {
+        remembered = length(sway_lean) / per_felt;
+    }
+    let speed = max(felt, remembered);
     if has_feature(flags, DETAIL_BENDING) {
         // Crysis' detail bending: waves at four frequencies, phased per leaf and per plant.
         let branch_phase = v.wind.g + phase;

@@ -4,7 +4,8 @@
 //! Detail bending (Crysis, GPU Gems 3 ch. 16) moves each vertex in the plant's own space by its
 //! painted channels: a leaf or branch swings along the vertical by its freedom (the vertex
 //! colour's b) and its edges flutter along the normal by r, from smoothed triangle waves at four
-//! frequencies phased by the leaf (g) and the plant. Main bending then leans the whole plant
+//! frequencies phased by the leaf (g) and the plant, as strongly as the wind felt now or, after
+//! it drops, the wind the sway spring remembers ([`remembered_wind`]: leaf lag). Main bending then leans the whole plant
 //! along the wind, the offset growing with height by Crysis' bend factor
 //! `((z / h + 1)^2)^2 - (z / h + 1)^2` (divided by 12, its value at the top), and pulls each point back toward its distance from the
 //! root (the type's stretch: 1 keeps the length exactly, so a bent plant does not grow). The lean
@@ -37,6 +38,20 @@ impl PlantWindGpu {
             main: [w.movement_scale, w.bend, w.stretch, w.main_amplitude],
             detail: [w.detail_amplitude, w.stiffness, 0.0, 0.0],
         }
+    }
+}
+
+/// The wind a plant still feels through its sway spring, m/s: the spring's lean over the lean
+/// it takes per felt m/s at rest (its bend, less for a stiff plant, times its main amplitude;
+/// the movement scale is the felt wind's). God of War's leaf lag: the detail bending follows the
+/// larger of the wind felt now and this, so the leaves keep moving after a gust drops, for as
+/// long as the spring still leans, fading with its damping; 0 for a plant that does not lean.
+pub fn remembered_wind(sway_lean: Vec2, pw: &PlantWindGpu) -> f32 {
+    let per_felt = pw.main[1] * (1.0 - 0.6 * pw.detail[1]) * pw.main[3];
+    if per_felt > 1e-6 {
+        sway_lean.length() / per_felt
+    } else {
+        0.0
     }
 }
 
@@ -73,9 +88,9 @@ pub fn bend_vertex(
     let phase = crate::hash::rand01(inst.hash);
     let mut p = turn(v.position) * scale;
     let n = turn(v.normal);
-    let wind = Vec2::new(w.x, w.y) * pw.main[0];
-    let speed = wind.length();
     let give = 1.0 - 0.6 * pw.detail[1];
+    let felt = (Vec2::new(w.x, w.y) * pw.main[0]).length();
+    let speed = felt.max(remembered_wind(sway_lean, pw));
     if features.has(Feature::DetailBending) {
         let [r, g, b, _] = v.wind;
         let branch_phase = g + phase;
@@ -217,5 +232,83 @@ mod tests {
         };
         assert_eq!(moved(&stiff), 0.0);
         assert!(moved(&free) > 1e-3, "{}", moved(&free));
+    }
+
+    #[test]
+    fn leaves_keep_moving_after_the_wind_drops_while_the_spring_leans() {
+        // A tree's wind: a slow, lightly damped sway spring.
+        let wind = crate::world::PlantWind {
+            bend: 0.004,
+            stiffness: 0.8,
+            sway_spring_hz: 0.3,
+            sway_damping: 0.3,
+            detail_amplitude: 0.12,
+            ..Default::default()
+        };
+        let pw = PlantWindGpu::new(&wind);
+        let gain = crate::wind::plant_lean_gain(&wind);
+        let spring = crate::wind::SwaySpring::from_frequency(0.3, 0.3);
+        let inst = PlantInstance {
+            scale: 12.0,
+            ..instance()
+        };
+        let mut leaf = vertex(0.8);
+        leaf.wind = [1.0, 0.3, 1.0, 1.0];
+        // The flutter of the leaf: its displacement by detail bending at a few times around
+        // `t`, the largest.
+        let flutter = |w: Vec4, lean: Vec2, t: f32| {
+            (0..8)
+                .map(|k| {
+                    let at = t + k as f32 * 0.37;
+                    let (a, _) = bend_vertex(&leaf, &inst, w, lean, at, &pw, Features::all());
+                    let (b, _) = bend_vertex(
+                        &leaf,
+                        &inst,
+                        w,
+                        lean,
+                        at,
+                        &pw,
+                        Features::none().with(Feature::Interaction),
+                    );
+                    (a - b).length()
+                })
+                .fold(0.0, f32::max)
+        };
+        // Settled in an 8 m/s wind, the spring leans as the wind asks: what it remembers is
+        // the wind felt, so the flutter is the wind's own.
+        let gust = Vec4::new(8.0, 0.0, 0.0, 0.0);
+        let settled = Vec2::new(8.0 * gain, 0.0);
+        assert!((remembered_wind(settled, &pw) - 8.0).abs() < 1e-3);
+        let in_gust = flutter(gust, settled, 1.0);
+        assert!(in_gust > 0.01, "{in_gust}");
+        // The wind drops to nothing: the spring swings back over seconds, and the leaves keep
+        // moving as long as it leans, less and less.
+        let mut state = [
+            crate::wind::SwayState {
+                x: settled.x,
+                v: 0.0,
+            },
+            crate::wind::SwayState::default(),
+        ];
+        let dt = 1.0 / 60.0;
+        let mut after = Vec::new();
+        for frame in 1..=600 {
+            state = state.map(|s| crate::wind::RENDERER_INTEGRATOR.step(&spring, s, 0.0, dt));
+            if frame % 60 == 0 {
+                let lean = Vec2::new(state[0].x, 0.0);
+                after.push((lean.length(), flutter(Vec4::ZERO, lean, frame as f32 * dt)));
+            }
+        }
+        // In the three seconds after the drop (the spring swinging back through upright and
+        // overshooting) the leaves still move, at most as much as in the gust.
+        let early = after[..3].iter().map(|a| a.1).fold(0.0, f32::max);
+        assert!(early > 0.2 * in_gust && early <= in_gust * 1.001, "{after:?}");
+        // Ten seconds after it, the spring has nearly settled and so have the leaves.
+        let (lean, last) = after[after.len() - 1];
+        assert!(lean < 0.05 * settled.x && last < 0.1 * early, "{after:?}");
+        // No lean, no wind: no flutter (no lag without a state to carry it).
+        assert_eq!(flutter(Vec4::ZERO, Vec2::ZERO, 3.0), 0.0);
+        let rigid = PlantWindGpu::new(&crate::world::PlantWind { bend: 0.0, ..wind });
+        assert_eq!(remembered_wind(Vec2::new(0.3, 0.0), &rigid), 0.0);
     }
 }
