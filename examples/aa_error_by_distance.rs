@@ -7,8 +7,8 @@
 //! out to one and two view distances, at one sample and at 2x2; the default frame's settings
 //! supersampled 4x4 (a perfect anti-aliasing of the default frame); and the default frame with
 //! each anti-aliasing method. Prints each one's mean FLIP against the truth over the frame and
-//! over bands of distance (from the truth's depth) with the bands' share of the frame, and
-//! writes every image into OUT.
+//! over bands of distance (from the truth's depth) with the bands' share of the frame, each
+//! one's mean luminance over the truth's in each band, and writes every image into OUT.
 use anyhow::Result;
 use std::sync::Arc;
 use verdant::RendererConfig;
@@ -171,7 +171,31 @@ fn main() -> Result<()> {
             );
         }
         println!();
-        // mean colour difference (linear) in each band
+    }
+    // Brightness by band: the mean linear luminance of each render over the truth's (a
+    // systematic difference, not aliasing, moves it away from 1).
+    let luminance = |img: &image::RgbaImage, mask: &[bool]| -> Option<f64> {
+        let (mut sum, mut n) = (0.0, 0u64);
+        for (p, &m) in img.pixels().zip(mask) {
+            if m {
+                let l = |c: u8| f64::from(verdant::tools::metrics::decode_srgb8(c));
+                sum += 0.2126 * l(p[0]) + 0.7152 * l(p[1]) + 0.0722 * l(p[2]);
+                n += 1;
+            }
+        }
+        (n > 0).then(|| sum / n as f64)
+    };
+    println!("mean luminance over the truth's, by band");
+    for (name, img) in &imgs {
+        print!("{:14} {:>7}", name, "");
+        for m in &masks {
+            let v = match (luminance(img, m), luminance(&truth, m)) {
+                (Some(a), Some(b)) if b > 0.0 => format!("{:.3}", a / b),
+                _ => "-".into(),
+            };
+            print!(" {v:>9}");
+        }
+        println!();
     }
     Ok(())
 }
