@@ -148,7 +148,8 @@ fn answer(
             stream.write_all(head(&format!("{code} Fault"), 0).as_bytes())?;
         }
         (Reply::Stall, _) => {
-            std::thread::sleep(Duration::from_secs(4));
+            // Long past any deadline a test sets (the thread is left to sleep it out).
+            std::thread::sleep(Duration::from_secs(30));
             stream.write_all(head("503 Too Late", 0).as_bytes())?;
         }
         (Reply::Garbage, _) => {
@@ -300,17 +301,23 @@ fn server_faults_are_counted_once_and_leave_no_hole() {
         },
     );
     // A deadline long enough that no healthy request misses it while the tests beside this
-    // one keep both cores busy rendering (4 s was once missed by a healthy tile on two busy
-    // cores): only the stall may run into it.
+    // one keep both cores busy rendering: only the stall (which answers 30 s late) may run
+    // into it. (With a 4 s stall and a 4 s deadline, a late answer under load was a 503 that
+    // the client retried: extra failed loads.)
     let options = HttpOptions {
-        timeout: Duration::from_secs(10),
+        timeout: Duration::from_secs(8),
         ..quick_options()
     };
     let (world, source) = HttpSource::open(&server.url, options).unwrap();
     let source = Arc::new(source);
     let pyramid = world.manifest.pyramid.clone();
-    let (mut service, _) =
-        TileService::new(&pyramid, source.clone(), ServiceConfig::default()).unwrap();
+    // The service tries a failed tile again after a while (5 s by default): later than this
+    // test runs, so that each fault is loaded once here however long the stall takes.
+    let config = ServiceConfig {
+        fault_retry_s: 60.0,
+        ..ServiceConfig::default()
+    };
+    let (mut service, _) = TileService::new(&pyramid, source.clone(), config).unwrap();
     let wants: Vec<Want> = [not_found, flaky, stalled, truncated, garbage, healthy]
         .iter()
         .map(|&id| Want { id, priority: 1.0 })
@@ -345,7 +352,7 @@ fn server_faults_are_counted_once_and_leave_no_hole() {
     }
     let s = service.stats();
     assert_eq!(s.faults, 4);
-    assert_eq!(s.stream.failed, 4);
+    assert_eq!(s.stream.failed, 4, "{s:?}");
     // The 404 and the non-tile were not retried; the stall was given up after its deadline,
     // not retried; the 500 was retried (once) and the body cut short tried 1 + 2 times.
     assert_eq!(server.asked("/tiles/L2/0_0.height.exr"), 1);
