@@ -302,7 +302,10 @@ mod tests {
         // In the three seconds after the drop (the spring swinging back through upright and
         // overshooting) the leaves still move, at most as much as in the gust.
         let early = after[..3].iter().map(|a| a.1).fold(0.0, f32::max);
-        assert!(early > 0.2 * in_gust && early <= in_gust * 1.001, "{after:?}");
+        assert!(
+            early > 0.2 * in_gust && early <= in_gust * 1.001,
+            "{after:?}"
+        );
         // Ten seconds after it, the spring has nearly settled and so have the leaves.
         let (lean, last) = after[after.len() - 1];
         assert!(lean < 0.05 * settled.x && last < 0.1 * early, "{after:?}");
