@@ -302,14 +302,7 @@ impl Bound {
     ) -> Result<Truth> {
         let slots = crate::tools::truth::atlas_slots(world, &ctx.device);
         let (config, k) = self.config(world, k, reach, slots);
-        Truth::with_config(
-            ctx,
-            world.clone(),
-            std::sync::Arc::new(world.clone()),
-            size,
-            k,
-            config,
-        )
+        supersampled(ctx, world, size, k, config)
     }
 }
 
@@ -393,6 +386,18 @@ fn truth_for(
     let slots = crate::tools::truth::atlas_slots(world, &ctx.device);
     let base = RendererConfig::for_world(world);
     let config = crate::tools::truth::truth_config_reaching(world, &base, slots, reach);
+    supersampled(ctx, world, size, k, config)
+}
+
+/// A renderer of `world`'s frames at `size` drawn with `config`, k x k sub-samples each
+/// averaged in linear light (the truth's machinery, whatever the settings).
+fn supersampled(
+    ctx: &GpuContext,
+    world: &World,
+    size: (u32, u32),
+    k: u32,
+    config: RendererConfig,
+) -> Result<Truth> {
     Truth::with_config(
         ctx,
         world.clone(),
