@@ -50,7 +50,8 @@ struct PlantFrame {
     // x: feature bits
     flags: vec4<u32>,
     wind: array<PlantWind, 8>,
-    // Per type: x the texture layer of its meshes, y of its card
+    // Per type: x the texture layer of its meshes, y of its card, z its index among the
+    // world's plant types (its sway spring's slot)
     layers: array<vec4<u32>, 8>,
 }
 
@@ -184,7 +185,7 @@ fn plant_vertex(vi: u32, ii: u32) -> VertexOut {
     let level = inst.kind >> 8u;
     let phase = rand01(inst.hash);
     let w = wind_at(inst.pos.xy);
-    let sway_lean = sway_at(inst.pos.xy, PLANT_SWAY_SLOT + t);
+    let sway_lean = sway_at(inst.pos.xy, PLANT_SWAY_SLOT + frame.layers[t].z);
     let b = bend(v, inst.pos, inst.yaw, inst.scale, phase, w, sway_lean, frame.misc.y, frame.wind[t], frame_bits.flags.x);
     var albedo = v.albedo;
     if has_feature(frame_bits.flags.x, COLOR_VARIATION) {

@@ -31,9 +31,14 @@ struct PlantJob {
     tile_y: u32,
     // 0: a grass tile's job, 1: a far job.
     far: u32,
-    pad0: u32,
+    // Cells along the job's edge (0: params.grid.x); its address counts jobs of this size.
+    cells: u32,
     pad1: u32,
     pad2: u32,
+}
+
+fn job_cells(job: PlantJob) -> u32 {
+    return select(job.cells, params.grid.x, job.cells == 0u);
 }
 
 struct PlantType {
@@ -60,7 +65,8 @@ struct Params {
     // cross-fade band (m)
     lod: vec4<f32>,
     // Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m); z: where
-    // the plants start to thin out with distance, survivors grown to keep the cover (m)
+    // the plants start to thin out with distance, survivors grown to keep the cover (m); w: the
+    // fewest of them that thinning keeps
     cards: vec4<f32>,
     // x: Hi-Z mips, y: instances a (type, level) region holds, z: plant types, w: grass types
     limits: vec4<u32>,
@@ -102,8 +108,6 @@ const DRAWN: u32 = 7u;
 // Salts of the placement's hashes (as in place_cpu.rs).
 const SALT_CELL: u32 = 0x9e1a7u;
 const SALT_CLUMP: u32 = 0x5c1f3u;
-// The fewest plants the thinning with distance keeps (as place_cpu.rs).
-const MIN_KEEP: f32 = 0.5;
 
 var<workgroup> local_stats: array<atomic<u32>, 8>;
 
@@ -162,9 +166,10 @@ fn place(
         atomicStore(&local_stats[lid], 0u);
     }
     workgroupBarrier();
-    let n = params.grid.x;
+    let job = jobs[wid.z];
+    let n = job_cells(job);
     if gid.x < n && gid.y < n {
-        place_cell(jobs[wid.z], gid.x, gid.y);
+        place_cell(job, gid.x, gid.y);
     }
     workgroupBarrier();
     if lid < 8u {
@@ -176,7 +181,7 @@ fn place(
 }
 
 fn place_cell(job: PlantJob, gx: u32, gy: u32) {
-    let n = params.grid.x;
+    let n = job_cells(job);
     let cell_m = params.dims.x;
     let seed = params.grid.w;
     let world_cell = vec2<u32>(job.tile_x * n + gx, job.tile_y * n + gy);
@@ -238,8 +243,8 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
         kept = rand01(hash_u32(h0 ^ 7u)) < reach;
     }
     // Beyond params.cards.z the plants thin out as the square of the distance (at most
-    // 1 - MIN_KEEP of them go), each survivor grown to keep the cover.
-    let keep = max(min(1.0, params.cards.z * params.cards.z / max(dist * dist, 1e-6)), MIN_KEEP);
+    // 1 - params.cards.w of them go), each survivor grown to keep the cover.
+    let keep = max(min(1.0, params.cards.z * params.cards.z / max(dist * dist, 1e-6)), params.cards.w);
     if !kept || rand01(hash_u32(h0 ^ 8u)) >= keep {
         tally(DISTANCE);
         return;

@@ -31,11 +31,14 @@ pub enum Feature {
     Shadows,
     /// Plants among the grass: the world's flowers, ferns and bushes.
     Plants,
+    /// Trees: the world's plant types of at least [`crate::world::TREE_MIN_HEIGHT_M`], placed
+    /// on a coarser grid out to the fog.
+    Trees,
 }
 
 impl Feature {
     /// Every feature, in bit order.
-    pub const ALL: [Feature; 11] = [
+    pub const ALL: [Feature; 12] = [
         Feature::WindSources,
         Feature::Interaction,
         Feature::DetailBending,
@@ -47,6 +50,7 @@ impl Feature {
         Feature::FarField,
         Feature::Shadows,
         Feature::Plants,
+        Feature::Trees,
     ];
 
     /// The bit of this feature in [`Features::bits`] (and in the shaders).
@@ -68,6 +72,7 @@ impl Feature {
             Feature::FarField => "far-field",
             Feature::Shadows => "shadows",
             Feature::Plants => "plants",
+            Feature::Trees => "trees",
         }
     }
 }

@@ -10,21 +10,30 @@ use common::{small_plant, world_with_plant};
 use verdant::plants::{PlantImage, write_plant_gltf};
 
 fn fly(world: &Path, dir: &Path) -> std::process::Output {
+    fly_path(world, dir, "meadow", "160x90")
+}
+
+/// `verdant fly WORLD --path PATH --frames 1 --size SIZE --out o` in `dir`.
+fn fly_path(world: &Path, dir: &Path, path: &str, size: &str) -> std::process::Output {
     common::verdant(
         &[
             "fly",
             world.to_str().unwrap(),
             "--path",
-            "meadow",
+            path,
             "--frames",
             "1",
             "--size",
-            "160x90",
+            size,
             "--out",
             "o",
         ],
         dir,
     )
+}
+
+fn report(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("o/report.json")).unwrap()).unwrap()
 }
 
 #[test]
@@ -169,16 +178,15 @@ fn trees_of_both_recipes_stand_against_the_sky() {
         let out = fly(&w, tmp.path());
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(out.status.success(), "fly with {what} failed: {stderr}");
-        let report: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(tmp.path().join("o/report.json")).unwrap(),
-        )
-        .unwrap();
-        let plants = &report["frames"][0]["plants"];
+        let report = report(tmp.path());
+        // Types this tall are trees: drawn by the trees' layer, none by the plants'.
+        assert!(report["frames"][0]["plants"].is_null(), "{what}");
+        let trees = &report["frames"][0]["trees"];
         if what == "none" {
-            assert_eq!(plants["drawn"].as_u64(), Some(0), "{plants}");
+            assert_eq!(trees["drawn"].as_u64(), Some(0), "{trees}");
         } else {
-            assert!(plants["drawn"].as_u64().unwrap() > 5, "{what}: {plants}");
-            assert_eq!(plants["overflow"].as_u64(), Some(0), "{what}: {plants}");
+            assert!(trees["drawn"].as_u64().unwrap() > 5, "{what}: {trees}");
+            assert_eq!(trees["overflow"].as_u64(), Some(0), "{what}: {trees}");
         }
         skies.push(top_rows(&tmp.path().join("o/frame_00000.png"), 0.4));
     }
@@ -201,4 +209,63 @@ fn trees_of_both_recipes_stand_against_the_sky() {
             share * 100.0
         );
     }
+}
+
+#[test]
+fn trees_stand_on_the_tours_far_ridges() {
+    // The tour's first frame looks down from 400 m and more over the ground: everything in it
+    // lies beyond the plants' reach (twice the grass's view distance), where only the trees'
+    // own layer draws.
+    let tmp = tempfile::tempdir().unwrap();
+    let w = common::world_with_trees(tmp.path(), "conifer", 0.01);
+    let manifest = std::fs::read_to_string(w.join("world.toml")).unwrap();
+    let mut frames = Vec::new();
+    for (what, text) in [
+        ("trees", manifest.clone()),
+        (
+            "none",
+            manifest.replace(
+                "density = { meadow = 0.01, \"tall grass\" = 0.01, \"dry grass\" = 0.01 }",
+                "density = { bare = 0.01 }",
+            ),
+        ),
+    ] {
+        assert!(what == "trees" || text != manifest);
+        std::fs::write(w.join("world.toml"), &text).unwrap();
+        let out = fly_path(&w, tmp.path(), "tour", "320x180");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "fly with {what} failed: {stderr}");
+        let report = report(tmp.path());
+        let trees = report["frames"][0]["trees"].clone();
+        let drawn = trees["drawn"].as_u64().unwrap();
+        if what == "trees" {
+            assert!(drawn > 5000, "{trees}");
+            assert_eq!(trees["overflow"].as_u64(), Some(0), "{trees}");
+        }
+        frames.push((
+            image::open(tmp.path().join("o/frame_00000.png"))
+                .unwrap()
+                .to_rgb8(),
+            drawn,
+        ));
+    }
+    assert!(
+        frames[1].1 < 100,
+        "only the bare ground's trees: {}",
+        frames[1].1
+    );
+    // The trees cover a share of the ground, scattered over the slopes.
+    let (with, without) = (&frames[0].0, &frames[1].0);
+    let sum = |p: &image::Rgb<u8>| p.0.iter().map(|&c| i32::from(c)).sum::<i32>();
+    let changed = with
+        .pixels()
+        .zip(without.pixels())
+        .filter(|(a, b)| (sum(a) - sum(b)).abs() > 30)
+        .count();
+    let share = changed as f64 / (with.width() * with.height()) as f64;
+    assert!(
+        (0.02..0.6).contains(&share),
+        "{:.1}% of the frame changed by the trees",
+        share * 100.0
+    );
 }

@@ -14,7 +14,7 @@ use verdant::gpu::{GpuContext, GpuTimer, Targets};
 use verdant::grass::{HiZ, HiZPyramid, TileJob};
 use verdant::lod::Frustum;
 use verdant::plants::place_cpu::{LEVELS, PlantInstance, PlantJob, counter, place_tile};
-use verdant::plants::{PlantRenderer, PlantSet, PlantSettings, Recipe, generate};
+use verdant::plants::{PlantLayer, PlantRenderer, PlantSet, PlantSettings, Recipe, generate};
 use verdant::stream::TileAtlas;
 use verdant::world::{Manifest, TileData, TileId, World};
 
@@ -54,6 +54,21 @@ impl Rig {
 
     /// The rig over the world in `dir`, with regions of `capacity` instances.
     fn with_world(dir: &std::path::Path, capacity: u32) -> Self {
+        Self::with_layer(dir, PlantLayer::Plants, |_| PlantSettings {
+            capacity,
+            lod_m: [18.0, 45.0],
+            view_m: [60.0, 90.0],
+            ..Default::default()
+        })
+    }
+
+    /// The rig of `layer` over the world in `dir`, with the settings `settings` makes for grass
+    /// tiles of the given edge (metres).
+    fn with_layer(
+        dir: &std::path::Path,
+        layer: PlantLayer,
+        settings: impl FnOnce(f32) -> PlantSettings,
+    ) -> Self {
         let ctx = common::gpu();
         let world = World::open(dir).unwrap();
         let manifest = world.manifest.clone();
@@ -96,16 +111,12 @@ impl Rig {
             &ctx.queue,
             &manifest,
             &set,
+            layer,
             &atlas,
             &targets(),
             &hiz,
             grass.tile_m,
-            PlantSettings {
-                capacity,
-                lod_m: [18.0, 45.0],
-                view_m: [60.0, 90.0],
-                ..Default::default()
-            },
+            settings(grass.tile_m),
             verdant::plants::renderer::PlantWindBindings {
                 lookup: &lookup,
                 cells: &cells,
@@ -169,7 +180,8 @@ impl Rig {
 }
 
 /// A tile of `kind` at `id`: "meadow" (rolling, meadow with patches of tall grass), "steep"
-/// (too steep for most plants), "bare" (no grass), "high" (above every plant's altitude).
+/// (too steep for most plants), "bare" (no grass), "high" (above every plant's altitude),
+/// "flat" (level meadow, the same at every level).
 fn synthetic_tile(manifest: &Manifest, id: TileId, kind: &str) -> TileData {
     let s = manifest.pyramid.samples_per_side();
     let cell = manifest.pyramid.cell_size_m(id.level) as f32;
@@ -194,6 +206,7 @@ fn synthetic_tile(manifest: &Manifest, id: TileId, kind: &str) -> TileData {
                 "steep" => t.heights[k] = 100.0 + 1.2 * cell * i as f32,
                 "bare" => t.grass_type[k] = 0,
                 "high" => t.heights[k] = 9500.0,
+                "flat" => {}
                 other => panic!("no tile kind {other}"),
             }
         }
@@ -360,7 +373,8 @@ fn far_jobs_take_over_at_the_view_distance_and_match_the_cpu_mirror() {
         tile_x: 5000,
         tile_y: 7001,
         far: 1,
-        pad: [0; 3],
+        cells: 0,
+        pad: [0; 2],
     };
     let fine = synthetic_tile(&rig.manifest, TileId::new(level, 5000, 7000), "meadow");
     let parent = synthetic_tile(&rig.manifest, TileId::new(level - 1, 2500, 3500), "meadow");
@@ -405,11 +419,108 @@ fn far_jobs_take_over_at_the_view_distance_and_match_the_cpu_mirror() {
     assert!(beyond.iter().all(|i| i.level() == 2 && dist(i) > view));
     // There half the plants are left (the thinning with distance), each grown by the square
     // root of 2.
-    let [thin, keep] = [params.cards[2], verdant::plants::place_cpu::MIN_KEEP];
+    let [thin, keep] = [params.cards[2], params.cards[3]];
+    assert_eq!(keep, verdant::plants::place_cpu::MIN_KEEP);
     assert!(thin * thin / (view * view) < keep);
     for i in &beyond {
         let [lo, hi] = [0, 1].map(|k| params.types[i.plant_type()].size[k] / keep.sqrt());
         assert!(i.scale >= lo - 1e-4 && i.scale <= hi + 1e-4, "{i:?}");
+    }
+}
+
+#[test]
+fn tree_jobs_of_every_size_place_one_grid_of_trees_as_the_cpu_mirror_does() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = common::world_with_trees(tmp.path(), "broadleaf", 0.02);
+    let mut rig = Rig::with_layer(&w, PlantLayer::Trees, |tile_m| PlantSettings {
+        lod_m: [30.0, 60.0],
+        ..PlantSettings::trees(tile_m, 3000.0)
+    });
+    let p = rig.manifest.pyramid.clone();
+    let g = p.max_level();
+    let params = *rig.plants.params();
+    let cell_m = params.dims[0];
+    let per_tile = (rig.tile_m / cell_m).round() as u32;
+    assert!(
+        (rig.tile_m / cell_m - per_tile as f32).abs() < 1e-4 && (4.0..=6.0).contains(&cell_m),
+        "tree cells of {cell_m} m divide the grass tile of {} m",
+        rig.tile_m
+    );
+    assert!(
+        params.grid[0] >= 4 * per_tile,
+        "jobs of several grass tiles"
+    );
+    // A grass tile's job, its parent's job (four grass tiles, the first that one), and 1.2 km
+    // ahead a job three levels up, each reading its own level of a level meadow.
+    let job = |level: u8, x: u32, y: u32, origin: [f32; 2], layer: u32| PlantJob {
+        origin,
+        texel: [0.0; 2],
+        cell: p.cell_size_m(level) as f32,
+        layer,
+        tile_x: x,
+        tile_y: y,
+        far: 0,
+        cells: per_tile << (g - level),
+        pad: [0; 2],
+    };
+    let a = job(g, 5000, 7000, [-25.0, 30.0], 0);
+    let b = job(g - 1, 2500, 3500, [-25.0, 30.0], 1);
+    let c = job(g - 3, 625, 876, [-200.0, 1200.0], 2);
+    let work: Vec<(PlantJob, TileData)> = [a, b, c]
+        .iter()
+        .map(|j| {
+            let level = g - (j.cells / per_tile).ilog2() as u8;
+            let id = TileId::new(level, j.tile_x, j.tile_y);
+            (*j, synthetic_tile(&rig.manifest, id, "flat"))
+        })
+        .collect();
+    let placed = place_jobs(&mut rig, &work);
+    assert_same_placement(&placed);
+    let hiz = &placed.hiz;
+    let trees = |j: &PlantJob, t: &TileData| place_tile(&params, j, t, hiz).instances;
+    let (in_a, in_b, in_c) = (
+        trees(&a, &work[0].1),
+        trees(&b, &work[1].1),
+        trees(&c, &work[2].1),
+    );
+    assert!(
+        in_a.len() > 10 && in_c.len() > 10,
+        "{} and {}",
+        in_a.len(),
+        in_c.len()
+    );
+    // The parent's job places, over the grass tile, exactly the grass tile's trees.
+    let square = |i: &PlantInstance| {
+        i.pos[0] >= -25.0
+            && i.pos[0] < -25.0 + rig.tile_m
+            && i.pos[1] >= 30.0
+            && i.pos[1] < 30.0 + rig.tile_m
+    };
+    let mut over_a: Vec<PlantInstance> = in_b.iter().filter(|i| square(i)).copied().collect();
+    assert!(in_a.iter().all(square));
+    let mut own = in_a.clone();
+    for v in [&mut own, &mut over_a] {
+        v.sort_by_key(key);
+    }
+    assert_eq!(own.len(), over_a.len(), "trees of the tile, by either job");
+    for (x, y) in own.iter().zip(&over_a) {
+        assert_eq!(key(x), key(y));
+        assert!((glam::Vec3::from(x.pos) - glam::Vec3::from(y.pos)).length() < 1e-3);
+        assert_eq!(x.scale, y.scale);
+    }
+    // 1.2 km ahead: cards only, thinned to the fewest the thinning keeps, each grown to keep
+    // the cover.
+    let keep = params.cards[3];
+    assert!((keep - 1.0 / 6.0).abs() < 1e-6, "{keep}");
+    let mut unthinned = params;
+    unthinned.cards[2] = 1e6;
+    let all = place_tile(&unthinned, &c, &work[2].1, hiz).instances.len() as f32;
+    let share = in_c.len() as f32 / all;
+    assert!((share - keep).abs() < 0.06, "{share} of {all} kept");
+    for i in &in_c {
+        assert_eq!(i.level(), 2, "{i:?}");
+        let [lo, hi] = [0, 1].map(|k| params.types[0].size[k] / keep.sqrt());
+        assert!(i.scale >= lo - 1e-3 && i.scale <= hi + 1e-3, "{i:?}");
     }
 }
 
@@ -594,10 +705,29 @@ fn gpu_bending_matches_the_cpu_mirror() {
 /// path that sees grass and none overflowing at the default capacity.
 #[test]
 fn the_plant_pool_is_the_same_on_every_path() {
+    let drawn = pool_on_every_path(&common::default_world(), PlantLayer::Plants);
+    assert!(drawn["meadow"] > 100, "{drawn:?}");
+}
+
+#[test]
+fn the_tree_pool_is_the_same_on_every_path() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = common::world_with_trees(tmp.path(), "broadleaf", 0.02);
+    let drawn = pool_on_every_path(&w, PlantLayer::Trees);
+    // From the tour's height the trees reach the fog: far more of them than on the meadow.
+    assert!(drawn["tour"] > 20_000 && drawn["meadow"] > 100, "{drawn:?}");
+}
+
+/// Renders the middle of the meadow, the tour and the overview with the world in `dir` (at a
+/// small size): `layer`'s pool keeps its size, nothing overflows; the instances drawn per path.
+fn pool_on_every_path(
+    dir: &std::path::Path,
+    layer: PlantLayer,
+) -> std::collections::BTreeMap<&'static str, u32> {
     use verdant::camera::sample_path;
     use verdant::{FrameInput, Renderer, RendererOptions};
     let ctx = common::gpu();
-    let world = World::open(&common::default_world()).unwrap();
+    let world = World::open(dir).unwrap();
     let (c, d) = (
         wgpu::TextureFormat::Rgba8UnormSrgb,
         wgpu::TextureFormat::Depth32Float,
@@ -606,9 +736,11 @@ fn the_plant_pool_is_the_same_on_every_path() {
     let options = RendererOptions::new(&world, c, d, w, h);
     let paths = world.manifest.paths.clone();
     let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
-    let bytes = renderer
-        .plant_pool_bytes()
-        .expect("the default world has plants");
+    let pool = |r: &Renderer| match layer {
+        PlantLayer::Plants => r.plant_pool_bytes(),
+        PlantLayer::Trees => r.tree_pool_bytes(),
+    };
+    let bytes = pool(&renderer).expect("the world has the layer's types");
     use wgpu::TextureUsages as U;
     let color = verdant::gpu::target_texture(&ctx.device, "c", c, U::RENDER_ATTACHMENT, (w, h));
     let depth = verdant::gpu::target_texture(
@@ -637,10 +769,16 @@ fn the_plant_pool_is_the_same_on_every_path() {
         }
         ctx.wait_idle();
         let stats = renderer.take_stats();
-        let last = stats.last().and_then(|s| s.plants).expect("plant figures");
+        let last = stats
+            .last()
+            .and_then(|s| match layer {
+                PlantLayer::Plants => s.plants,
+                PlantLayer::Trees => s.trees,
+            })
+            .expect("the layer's figures");
         assert_eq!(last.overflow, 0, "{name}: {last:?}");
         drawn.insert(name, last.drawn);
-        assert_eq!(renderer.plant_pool_bytes(), Some(bytes), "{name}");
+        assert_eq!(pool(&renderer), Some(bytes), "{name}");
     }
-    assert!(drawn["meadow"] > 100, "{drawn:?}");
+    drawn
 }

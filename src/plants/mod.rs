@@ -31,7 +31,7 @@ pub use gltf::{
 };
 pub use mesh::{PlantImage, PlantMesh, PlantVertex};
 pub use recipe::{PlantLods, Recipe, generate};
-pub use renderer::{PlantRenderer, PlantSettings, PlantStats};
+pub use renderer::{PlantLayer, PlantRenderer, PlantSettings, PlantStats};
 pub use set::{PlantError, PlantSet};
 
 /// The built-in recipes a plant type's `mesh` may name.

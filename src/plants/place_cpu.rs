@@ -54,8 +54,9 @@ pub mod counter {
 const SALT_CELL: u32 = 0x9e1a7;
 const SALT_CLUMP: u32 = 0x5c1f3;
 
-/// The fewest plants the thinning with distance keeps ([`crate::plants::PlantSettings::thin_m`]):
-/// at most half go, each survivor grown by at most the square root of 2.
+/// The fewest plants the thinning with distance keeps by default
+/// ([`crate::plants::PlantSettings::min_keep`]): at most half go, each survivor grown by at most
+/// the square root of 2.
 pub const MIN_KEEP: f32 = 0.5;
 
 /// A plant type's constants; mirrors `PlantType` in the shader.
@@ -91,8 +92,8 @@ pub struct PlaceParams {
     /// cross-fade band (m); w unused.
     pub lod: [f32; 4],
     /// Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m); z: where
-    /// the plants start to thin out with distance, survivors grown to keep the cover (m); w
-    /// unused.
+    /// the plants start to thin out with distance, survivors grown to keep the cover (m); w: the
+    /// fewest of them the thinning keeps.
     pub cards: [f32; 4],
     /// x: Hi-Z mips, y: instances a region holds, z: plant types, w: grass types.
     pub limits: [u32; 4],
@@ -160,8 +161,12 @@ pub struct PlantJob {
     pub tile_y: u32,
     /// 0: a grass tile's job (plants up to the view distance); 1: a far job (beyond it).
     pub far: u32,
+    /// Cells along the job's edge; 0: the grid's (`PlaceParams::grid[0]`). The job's address
+    /// (`tile_x`, `tile_y`) counts jobs of this size, so that a cell's world address, and with
+    /// it its plant, is the same whatever the size of the job that places it.
+    pub cells: u32,
     /// Padding to 48 bytes.
-    pub pad: [u32; 3],
+    pub pad: [u32; 2],
 }
 const _: () = assert!(std::mem::size_of::<PlantJob>() == 48);
 
@@ -176,7 +181,8 @@ impl PlantJob {
             tile_x: job.tile_x,
             tile_y: job.tile_y,
             far: 0,
-            pad: [0; 3],
+            cells: 0,
+            pad: [0; 2],
         }
     }
 }
@@ -223,10 +229,21 @@ fn clump_factor(params: &PlaceParams, t: usize, cell: [u32; 2]) -> f32 {
     smoothstep(edge - 0.08, edge + 0.08, n) / cover
 }
 
+impl PlantJob {
+    /// Cells along the job's edge.
+    pub fn cells(&self, params: &PlaceParams) -> u32 {
+        if self.cells == 0 {
+            params.grid[0]
+        } else {
+            self.cells
+        }
+    }
+}
+
 /// Places and culls the plants of one job (its data tile `tile`), as the shader does.
 pub fn place_tile(params: &PlaceParams, job: &PlantJob, tile: &TileData, hiz: &HiZ) -> TilePlants {
     let mut out = TilePlants::default();
-    let n = params.grid[0];
+    let n = job.cells(params);
     for gy in 0..n {
         for gx in 0..n {
             place_cell(params, job, tile, hiz, [gx, gy], &mut out);
@@ -244,7 +261,7 @@ fn place_cell(
     out: &mut TilePlants,
 ) {
     let stats = &mut out.stats;
-    let n = params.grid[0];
+    let n = job.cells(params);
     let cell_m = params.dims[0];
     let world_cell = [job.tile_x * n + gx, job.tile_y * n + gy];
     let h0 = hash3(world_cell[0], world_cell[1], params.grid[3] ^ SALT_CELL);
@@ -308,7 +325,8 @@ fn place_cell(
     };
     // Beyond `cards[2]` the plants thin out as the square of the distance, each survivor grown
     // to keep the cover.
-    let keep = (params.cards[2] * params.cards[2] / (dist * dist).max(1e-6)).clamp(MIN_KEEP, 1.0);
+    let keep =
+        (params.cards[2] * params.cards[2] / (dist * dist).max(1e-6)).clamp(params.cards[3], 1.0);
     if !kept || rand01(hash_u32(h0 ^ 8)) >= keep {
         stats[counter::DISTANCE] += 1;
         return;

@@ -31,6 +31,50 @@ const INSTANCE_BYTES: u64 = std::mem::size_of::<PlantInstance>() as u64;
 /// Grass tiles a frame places plants on at most (the job buffer's size).
 pub const MAX_JOBS: u32 = 1024;
 
+/// Which of a world's plant types a plant stage draws.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlantLayer {
+    /// The plants among the grass (lower than [`crate::world::TREE_MIN_HEIGHT_M`]).
+    Plants,
+    /// The trees, placed on a coarser grid out to the fog.
+    Trees,
+}
+
+impl PlantLayer {
+    /// Whether the layer draws `t`.
+    pub fn includes(self, t: &crate::world::PlantType) -> bool {
+        t.is_tree() == (self == PlantLayer::Trees)
+    }
+
+    /// The indices of `manifest`'s plant types the layer draws (at most [`TYPES`]).
+    pub fn types(self, manifest: &Manifest) -> Vec<usize> {
+        manifest
+            .plant_types
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| self.includes(t))
+            .map(|(i, _)| i)
+            .take(TYPES)
+            .collect()
+    }
+
+    /// The name of its passes' timings (`NAME_place`, `NAME_draw`).
+    pub fn name(self) -> &'static str {
+        match self {
+            PlantLayer::Plants => "plants",
+            PlantLayer::Trees => "trees",
+        }
+    }
+
+    /// The feature that switches it on.
+    pub fn feature(self) -> crate::features::Feature {
+        match self {
+            PlantLayer::Plants => crate::features::Feature::Plants,
+            PlantLayer::Trees => crate::features::Feature::Trees,
+        }
+    }
+}
+
 /// Settings of the plant stage.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlantSettings {
@@ -51,6 +95,12 @@ pub struct PlantSettings {
     /// half of them ([`crate::plants::place_cpu::MIN_KEEP`]), each survivor grown to keep the
     /// cover: a few pixels each there, they cost the draw per plant, not per pixel.
     pub thin_m: f32,
+    /// The fewest plants that thinning keeps (0 < `min_keep` <= 1): each survivor grows by at
+    /// most one over its square root.
+    pub min_keep: f32,
+    /// Edge of a cell of the placement grid, metres (each holds at most one plant); it must
+    /// divide the grass tile's edge.
+    pub cell_m: f32,
     /// Seed of the placement's hashes.
     pub seed: u32,
 }
@@ -64,10 +114,41 @@ impl Default for PlantSettings {
             view_m: [120.0, 150.0],
             card_reach: 2.0,
             thin_m: 50.0,
+            min_keep: crate::plants::place_cpu::MIN_KEEP,
+            cell_m: crate::plants::PLANT_CELL_M,
             seed: 7,
         }
     }
 }
+
+impl PlantSettings {
+    /// The trees' defaults for grass tiles of `tile_m` metres and fog at `fog_m`: cells of
+    /// about [`TREE_CELL_M`] (dividing the tile), the full mesh to 60 m, the reduced one to
+    /// 300 m, cards to the fog (thinning out over its last tenth); beyond 400 m a tree is kept
+    /// with a chance falling as the square of the distance, to no fewer than one in six, each
+    /// grown to keep the forest's cover.
+    pub fn trees(tile_m: f32, fog_m: f32) -> Self {
+        let per_tile = (tile_m / TREE_CELL_M).round().max(1.0);
+        Self {
+            capacity: 131_072,
+            lod_m: [60.0, 300.0],
+            band_m: 10.0,
+            view_m: [0.9 * fog_m, fog_m],
+            card_reach: 1.0,
+            thin_m: 400.0,
+            min_keep: 1.0 / 6.0,
+            cell_m: tile_m / per_tile,
+            seed: 7,
+        }
+    }
+}
+
+/// The trees' placement cell, metres (about: [`PlantSettings::trees`] rounds it to divide the
+/// grass tile).
+pub const TREE_CELL_M: f32 = 5.0;
+/// Most cells along the edge of a tree job: a coarser terrain tile is split into jobs of at
+/// most this many cells a side.
+pub const MAX_TREE_JOB_CELLS: u32 = 96;
 
 /// Plant GPU figures of one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -136,6 +217,7 @@ pub struct PlantWindBindings<'a> {
 
 /// Pipelines, meshes, textures and the instance pool of the plant stage.
 pub struct PlantRenderer {
+    layer: PlantLayer,
     settings: PlantSettings,
     types: u32,
     place_pass: PlacePass,
@@ -160,10 +242,12 @@ pub struct PlantRenderer {
     atlas_views: (wgpu::TextureView, wgpu::TextureView),
 }
 
-/// Per level of detail of each type: the meshes packed into one vertex and one index buffer,
-/// with each (type, level)'s index count, first index and base vertex.
+/// Per level of detail of each type of `ids` (indices into `set`): the meshes packed into one
+/// vertex and one index buffer, with each (type, level)'s index count, first index and base
+/// vertex.
 fn pack_meshes(
     set: &PlantSet,
+    ids: &[usize],
 ) -> (
     Vec<crate::plants::PlantVertex>,
     Vec<u32>,
@@ -172,8 +256,8 @@ fn pack_meshes(
     let mut vertices = Vec::new();
     let mut indices = Vec::new();
     let mut table = [[0u32; 4]; REGIONS];
-    for (t, m) in set.models.iter().take(TYPES).enumerate() {
-        for (l, mesh) in m.lods.iter().enumerate() {
+    for (t, &id) in ids.iter().take(TYPES).enumerate() {
+        for (l, mesh) in set.models[id].lods.iter().enumerate() {
             table[t * LEVELS + l] = [
                 mesh.indices.len() as u32,
                 indices.len() as u32,
@@ -191,16 +275,12 @@ fn pack_meshes(
     (vertices, indices, table)
 }
 
-/// The per-type constants of the placement, from the manifest and the models.
-fn type_table(manifest: &Manifest, set: &PlantSet) -> [PlantTypeGpu; TYPES] {
+/// The per-type constants of the placement for the types `ids`, from the manifest and the
+/// models.
+fn type_table(manifest: &Manifest, set: &PlantSet, ids: &[usize]) -> [PlantTypeGpu; TYPES] {
     let mut types = [PlantTypeGpu::default(); TYPES];
-    for (i, (t, m)) in manifest
-        .plant_types
-        .iter()
-        .zip(&set.models)
-        .take(TYPES)
-        .enumerate()
-    {
+    for (i, &id) in ids.iter().take(TYPES).enumerate() {
+        let (t, m) = (&manifest.plant_types[id], &set.models[id]);
         let mut density = [[0.0f32; 4]; 4];
         for (g, grass) in manifest.grass_types.iter().take(16).enumerate() {
             density[g / 4][g % 4] = t.density.get(&grass.name).copied().unwrap_or(0.0);
@@ -224,16 +304,27 @@ fn type_table(manifest: &Manifest, set: &PlantSet) -> [PlantTypeGpu; TYPES] {
     types
 }
 
+/// Cells along the edge of the largest tree job for grass tiles of `per_tile` cells: the tile's
+/// cells doubled while they stay within [`MAX_TREE_JOB_CELLS`].
+pub fn tree_job_cells(per_tile: u32) -> u32 {
+    let mut n = per_tile.max(1);
+    while n * 2 <= MAX_TREE_JOB_CELLS {
+        n *= 2;
+    }
+    n
+}
+
 impl PlantRenderer {
-    /// The plant stage for `manifest`'s plant types (their models in `set`), placing on the
-    /// grass tiles of `atlas` (tiles of `tile_m` metres, `tile_cells` data cells and `border`
-    /// samples), drawing into `targets`, culling against `hiz`, bending in `wind`.
+    /// The plant stage for `manifest`'s plant types of `layer` (their models in `set`), placing
+    /// on the tiles of `atlas` (grass tiles of `tile_m` metres), drawing into `targets`, culling
+    /// against `hiz`, bending in `wind`.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         manifest: &Manifest,
         set: &PlantSet,
+        layer: PlantLayer,
         atlas: &TileAtlas,
         targets: &Targets,
         hiz: &HiZPyramid,
@@ -242,22 +333,27 @@ impl PlantRenderer {
         wind: PlantWindBindings<'_>,
     ) -> Self {
         use wgpu::BufferUsages as U;
-        let types = set.models.len().min(TYPES) as u32;
+        let ids = layer.types(manifest);
+        let types = ids.len() as u32;
         let capacity = settings.capacity.max(8).div_ceil(8) * 8;
         let settings = PlantSettings {
             capacity,
             ..settings
         };
         let buffer = |label, size: u64, usage| gpu_buffer(device, label, size, usage);
-        let cell = crate::plants::PLANT_CELL_M;
+        let cell = settings.cell_m;
+        let per_tile = (tile_m / cell).round().max(1.0) as u32;
         let p = &manifest.pyramid;
-        let (vertex_data, index_data, meshes) = pack_meshes(set);
+        let (vertex_data, index_data, meshes) = pack_meshes(set, &ids);
         let params = PlaceParams {
             view_proj: Mat4::IDENTITY.to_cols_array_2d(),
             planes: [[0.0; 4]; 6],
             camera: [0.0, 0.5, targets.width as f32, targets.height as f32],
             grid: [
-                (tile_m / cell).round().max(1.0) as u32,
+                match layer {
+                    PlantLayer::Plants => per_tile,
+                    PlantLayer::Trees => tree_job_cells(per_tile),
+                },
                 p.tile_cells,
                 p.border,
                 settings.seed,
@@ -268,7 +364,7 @@ impl PlantRenderer {
                 settings.view_m[1],
                 settings.view_m[1] * settings.card_reach.max(1.0),
                 settings.thin_m,
-                0.0,
+                settings.min_keep,
             ],
             limits: [
                 hiz.mips(),
@@ -277,7 +373,7 @@ impl PlantRenderer {
                 manifest.grass_types.len().min(16) as u32,
             ],
             hiz_levels: hiz_levels(hiz),
-            types: type_table(manifest, set),
+            types: type_table(manifest, set, &ids),
             meshes,
         };
         let params_buffer = buffer(
@@ -338,7 +434,8 @@ impl PlantRenderer {
             view_formats: &[],
         });
         let mut frame_layers = [[0u32; 4]; TYPES];
-        for (t, m) in set.models.iter().take(TYPES).enumerate() {
+        for (t, &id) in ids.iter().enumerate() {
+            let m = &set.models[id];
             for (k, img) in [&m.texture, &m.card].into_iter().enumerate() {
                 let layer = (2 * t + k) as u32;
                 for (level, data) in mips(img).iter().enumerate() {
@@ -368,7 +465,7 @@ impl PlantRenderer {
                     );
                 }
             }
-            frame_layers[t] = [2 * t as u32, 2 * t as u32 + 1, 0, 0];
+            frame_layers[t] = [2 * t as u32, 2 * t as u32 + 1, id as u32, 0];
         }
         let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
@@ -385,8 +482,8 @@ impl PlantRenderer {
         let sky = &manifest.sky;
         let c4 = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
         let mut wind_table = [PlantWindGpu::default(); TYPES];
-        for (i, t) in manifest.plant_types.iter().take(TYPES).enumerate() {
-            wind_table[i] = PlantWindGpu::new(&t.wind);
+        for (i, &id) in ids.iter().enumerate() {
+            wind_table[i] = PlantWindGpu::new(&manifest.plant_types[id].wind);
         }
         let frame = PlantFrame {
             view_proj: Mat4::IDENTITY.to_cols_array_2d(),
@@ -443,6 +540,7 @@ impl PlantRenderer {
             [buffer_prefix(&instances, region_bytes)],
         );
         Self {
+            layer,
             settings,
             types,
             place_pass,
@@ -523,6 +621,11 @@ impl PlantRenderer {
             samples,
         );
         self.samples = samples;
+    }
+
+    /// The plant types it draws.
+    pub fn layer(&self) -> PlantLayer {
+        self.layer
     }
 
     /// The settings.
@@ -606,7 +709,10 @@ impl PlantRenderer {
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("plants place"),
-                timestamp_writes: timer.compute_pass("plants_place"),
+                timestamp_writes: timer.compute_pass(match self.layer {
+                    PlantLayer::Plants => "plants_place",
+                    PlantLayer::Trees => "trees_place",
+                }),
             });
             pass.set_bind_group(0, &self.place_group, &[]);
             if !jobs.is_empty() {
@@ -622,7 +728,10 @@ impl PlantRenderer {
             "plants draw",
             (color, wgpu::LoadOp::Load),
             Some((depth, wgpu::LoadOp::Load)),
-            timer.render_pass("plants_draw"),
+            timer.render_pass(match self.layer {
+                PlantLayer::Plants => "plants_draw",
+                PlantLayer::Trees => "trees_draw",
+            }),
         );
         pass.set_bind_group(0, &self.draw_group, &[]);
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);

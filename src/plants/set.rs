@@ -177,10 +177,32 @@ pub fn resample(img: &PlantImage, size: u32) -> PlantImage {
     }
 }
 
+/// The alpha test's cut-off (`shaders/plants_draw.wgsl` discards below it).
+pub const ALPHA_CUTOFF: f32 = 0.5;
+
+/// The share of texels of an RGBA8 level whose alpha, times `scale`, passes the alpha test.
+pub fn coverage(rgba: &[u8], scale: f32) -> f32 {
+    let texels = rgba.len() / 4;
+    if texels == 0 {
+        return 0.0;
+    }
+    let cut = ALPHA_CUTOFF * 255.0;
+    let passing = rgba
+        .chunks_exact(4)
+        .filter(|t| f32::from(t[3]) * scale >= cut)
+        .count();
+    passing as f32 / texels as f32
+}
+
 /// The mip chain of a square RGBA8 sRGB image (`size` a power of two), each level the 2x2
 /// mean of the one below in linear light, alpha-weighted so that transparent texels do not
-/// darken the edges.
+/// darken the edges. Each level's alpha is then scaled so that as many of its texels pass the
+/// alpha test as of the full-size image's (Castaño's coverage-preserving mipmaps): without it a
+/// sparse crown of leaves averages below the cut-off and a far tree's card thins to a few
+/// scattered texels.
 pub fn mips(img: &PlantImage) -> Vec<Vec<u8>> {
+    let target = coverage(&img.rgba, 1.0);
+    let mut scaled: Vec<(usize, Vec<u8>)> = Vec::new();
     let mut levels = vec![img.rgba.clone()];
     let mut size = img.width;
     let to_lin = |b: u8| (f32::from(b) / 255.0).powf(2.2);
@@ -208,8 +230,116 @@ pub fn mips(img: &PlantImage) -> Vec<Vec<u8>> {
                 next[o + 3] = ((a / 4.0) * 255.0).round() as u8;
             }
         }
+        // The unscaled alpha goes on down the chain (each level the mean of the image); the
+        // stored level gets the scale that keeps its coverage.
+        let mut stored = next.clone();
+        let scale = coverage_scale(&next, target);
+        if scale != 1.0 {
+            for t in stored.chunks_exact_mut(4) {
+                t[3] = (f32::from(t[3]) * scale).round().min(255.0) as u8;
+            }
+        }
+        // The unscaled level stays for the next average; the stored one replaces it at the end.
         levels.push(next);
+        scaled.push((levels.len() - 1, stored));
         size = half;
     }
+    for (k, level) in scaled {
+        levels[k] = level;
+    }
     levels
+}
+
+/// The alpha scale with which `rgba`'s coverage comes nearest `target`: a bisection over
+/// 1/16..16 (coverage rises with the scale).
+fn coverage_scale(rgba: &[u8], target: f32) -> f32 {
+    if target <= 0.0 || (coverage(rgba, 1.0) - target).abs() < 1e-6 {
+        return 1.0;
+    }
+    let (mut lo, mut hi) = (1.0f32 / 16.0, 16.0f32);
+    for _ in 0..24 {
+        let mid = (lo * hi).sqrt();
+        if coverage(rgba, mid) < target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let err = |s: f32| (coverage(rgba, s) - target).abs();
+    if err(lo) < err(hi) { lo } else { hi }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sparse crown: one texel in three opaque, scattered, in a disc.
+    fn sparse_crown(size: u32) -> PlantImage {
+        let mut rgba = vec![0u8; (size * size * 4) as usize];
+        let c = size as f32 / 2.0;
+        for y in 0..size {
+            for x in 0..size {
+                let (dx, dy) = (x as f32 + 0.5 - c, y as f32 + 0.5 - c);
+                let inside = dx * dx + dy * dy < 0.8 * c * c;
+                let leaf = crate::hash::hash3(x, y, 5).is_multiple_of(3);
+                if inside && leaf {
+                    let i = ((y * size + x) * 4) as usize;
+                    rgba[i..i + 4].copy_from_slice(&[40, 90, 20, 255]);
+                }
+            }
+        }
+        PlantImage {
+            width: size,
+            height: size,
+            rgba,
+        }
+    }
+
+    #[test]
+    fn mips_keep_a_sparse_crowns_coverage_and_colour() {
+        let img = sparse_crown(128);
+        let levels = mips(&img);
+        assert_eq!(levels.len(), 8);
+        let base = coverage(&levels[0], 1.0);
+        assert!((0.15..0.3).contains(&base), "{base}");
+        for (k, level) in levels.iter().enumerate().take(6).skip(1) {
+            let c = coverage(level, 1.0);
+            assert!(
+                (c - base).abs() < 0.3 * base,
+                "level {k}: {c:.3} of the texels pass the alpha test, the image {base:.3}"
+            );
+            // Where there is any leaf the colour stays the leaves'.
+            for t in level.chunks_exact(4).filter(|t| t[3] > 0) {
+                assert!(t[0].abs_diff(40) <= 2 && t[1].abs_diff(90) <= 2, "{t:?}");
+            }
+        }
+        // The plain 2x2 mean would lose the crown: its alpha averages below the cut-off.
+        let mean = |rgba: &[u8]| -> Vec<u8> {
+            let (s, h) = (128usize, 64usize);
+            let mut out = vec![0u8; h * h * 4];
+            for y in 0..h {
+                for x in 0..h {
+                    let a: u32 = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                        .iter()
+                        .map(|(dx, dy)| u32::from(rgba[((2 * y + dy) * s + 2 * x + dx) * 4 + 3]))
+                        .sum();
+                    out[(y * h + x) * 4 + 3] = (a / 4) as u8;
+                }
+            }
+            out
+        };
+        assert!(coverage(&mean(&levels[0]), 1.0) < 0.5 * base);
+    }
+
+    #[test]
+    fn mips_of_an_opaque_image_are_opaque() {
+        let img = PlantImage {
+            width: 8,
+            height: 8,
+            rgba: vec![200; 8 * 8 * 4],
+        };
+        for level in mips(&img) {
+            assert!(level.chunks_exact(4).all(|t| t[3] == 200), "{level:?}");
+        }
+    }
 }

@@ -42,6 +42,9 @@ pub struct RendererConfig {
     pub aa: AntiAliasing,
     /// The plant stage's settings (its view distance and seed follow the grass's).
     pub plants: crate::plants::PlantSettings,
+    /// The trees' settings (`None`: [`crate::plants::PlantSettings::trees`] for the world's
+    /// grass tiles and fog; the seed follows the grass's).
+    pub trees: Option<crate::plants::PlantSettings>,
 }
 
 /// The grass's own settings, the same for every world (what follows from the world, like the
@@ -165,6 +168,7 @@ impl RendererConfig {
             features: Features::from(&world.manifest.features),
             aa: AntiAliasing::default(),
             plants: Default::default(),
+            trees: None,
         }
     }
 
@@ -250,6 +254,30 @@ impl RendererConfig {
                 reach,
                 format!("1 to {MAX_CARD_REACH} view distances"),
             ));
+        }
+        if let Some(t) = &self.trees {
+            let [near, far] = t.lod_m;
+            if !(near > 0.0 && near <= far && far <= MAX_PLANT_LOD_M) {
+                return Err(ConfigError::new(
+                    "trees.lod_m",
+                    t.lod_m,
+                    format!("NEAR,FAR with 0 < NEAR <= FAR <= {MAX_PLANT_LOD_M} m"),
+                ));
+            }
+            if !(t.min_keep > 0.0 && t.min_keep <= 1.0) {
+                return Err(ConfigError::new(
+                    "trees.min_keep",
+                    t.min_keep,
+                    "above 0, at most 1",
+                ));
+            }
+            if !(t.cell_m >= crate::plants::PLANT_CELL_M && t.cell_m <= 64.0) {
+                return Err(ConfigError::new(
+                    "trees.cell_m",
+                    t.cell_m,
+                    format!("{} to 64 m", crate::plants::PLANT_CELL_M),
+                ));
+            }
         }
         self.grass.validate()
     }

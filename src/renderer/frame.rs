@@ -59,6 +59,9 @@ pub struct FrameStats {
     /// Plants: cells considered, plants culled by each test and drawn; `None` when the frame
     /// drew none (no plant types, or the `plants` feature off).
     pub plants: Option<crate::plants::PlantStats>,
+    /// Trees, as `plants`; `None` when the frame drew none (no tree types, or the `trees`
+    /// feature off).
+    pub trees: Option<crate::plants::PlantStats>,
 }
 
 /// What a warm-up could not make resident.

@@ -83,8 +83,10 @@ struct GrassStage {
     renderer: GrassRenderer,
     wind: WindField,
     sway: SwayField,
-    /// The plants among the grass (a world with `[[plant_types]]`).
+    /// The plants among the grass (a world with `[[plant_types]]` lower than trees).
     plants: Option<crate::plants::PlantRenderer>,
+    /// The trees (a world with tree types), out to the fog.
+    trees: Option<crate::plants::PlantRenderer>,
 }
 
 /// What [`Renderer::prepare`] worked out for [`Renderer::record`].
@@ -96,6 +98,8 @@ struct Prepared {
     grass_jobs: Vec<TileJob>,
     /// The plants' jobs (near and far).
     plant_jobs: Vec<crate::plants::place_cpu::PlantJob>,
+    /// The trees' jobs.
+    tree_jobs: Vec<crate::plants::place_cpu::PlantJob>,
     /// The atlas slots the frame reads and the tiles it expects there (terrain draws and
     /// grass jobs), checked against the atlas on the GPU.
     reads: Vec<(u32, TileId)>,
@@ -258,40 +262,61 @@ impl Renderer {
                     },
                 );
                 renderer.commit_pool(device, queue);
-                let plants = if world.manifest.plant_types.is_empty() {
+                let set = if world.manifest.plant_types.is_empty() {
                     None
                 } else {
-                    let set = crate::plants::PlantSet::build(&world.manifest, &world.dir)?;
-                    let [_, view] = [
-                        settings.view_distance_m - settings.far_fade_m,
-                        settings.view_distance_m,
-                    ];
-                    Some(crate::plants::PlantRenderer::new(
-                        device,
-                        queue,
-                        &world.manifest,
-                        &set,
-                        &atlas,
-                        &targets,
-                        &renderer.hiz,
-                        settings.tile_m,
-                        crate::plants::PlantSettings {
-                            view_m: [0.8 * view, view],
-                            seed: settings.seed,
-                            ..config.plants
-                        },
-                        crate::plants::renderer::PlantWindBindings {
-                            lookup: wind.lookup_uniform(),
-                            cells: wind.buffer(),
-                            sway: sway.buffer(),
-                        },
-                    ))
+                    Some(crate::plants::PlantSet::build(&world.manifest, &world.dir)?)
                 };
+                let view = settings.view_distance_m;
+                let wind_bindings = crate::plants::renderer::PlantWindBindings {
+                    lookup: wind.lookup_uniform(),
+                    cells: wind.buffer(),
+                    sway: sway.buffer(),
+                };
+                let layer = |layer: crate::plants::PlantLayer, s: crate::plants::PlantSettings| {
+                    let set = set.as_ref()?;
+                    (!layer.types(&world.manifest).is_empty()).then(|| {
+                        crate::plants::PlantRenderer::new(
+                            device,
+                            queue,
+                            &world.manifest,
+                            set,
+                            layer,
+                            &atlas,
+                            &targets,
+                            &renderer.hiz,
+                            settings.tile_m,
+                            s,
+                            wind_bindings,
+                        )
+                    })
+                };
+                let plants = layer(
+                    crate::plants::PlantLayer::Plants,
+                    crate::plants::PlantSettings {
+                        view_m: [0.8 * view, view],
+                        seed: settings.seed,
+                        ..config.plants
+                    },
+                );
+                let trees = layer(
+                    crate::plants::PlantLayer::Trees,
+                    crate::plants::PlantSettings {
+                        seed: settings.seed,
+                        ..config.trees.unwrap_or_else(|| {
+                            crate::plants::PlantSettings::trees(
+                                settings.tile_m,
+                                world.manifest.sky.fog_distance_m,
+                            )
+                        })
+                    },
+                );
                 Some(GrassStage {
                     renderer,
                     wind,
                     sway,
                     plants,
+                    trees,
                 })
             }
             None => None,
@@ -307,7 +332,7 @@ impl Renderer {
         let mut grass = grass;
         if let (Some(g), Some(_)) = (&mut grass, &msaa) {
             g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
-            if let Some(p) = &mut g.plants {
+            for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
                 p.set_samples(device, crate::aa::msaa::SAMPLES);
             }
         }
@@ -373,6 +398,15 @@ impl Renderer {
         self.grass
             .as_ref()
             .and_then(|g| g.plants.as_ref())
+            .map(|p| p.pool_bytes())
+    }
+
+    /// GPU memory of the trees' instance pool, bytes (`None` without trees): fixed when the
+    /// renderer is made, whatever the view.
+    pub fn tree_pool_bytes(&self) -> Option<u64> {
+        self.grass
+            .as_ref()
+            .and_then(|g| g.trees.as_ref())
             .map(|p| p.pool_bytes())
     }
 
@@ -474,7 +508,7 @@ impl Renderer {
         };
         if let Some(g) = &mut self.grass {
             g.renderer.set_samples(&self.device, samples);
-            if let Some(p) = &mut g.plants {
+            for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
                 p.set_samples(&self.device, samples);
             }
         }
@@ -513,7 +547,7 @@ impl Renderer {
         }
         if let Some(g) = &mut self.grass {
             g.renderer.resize(&self.device, &self.queue, width, height);
-            if let Some(p) = &mut g.plants {
+            for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
                 p.resize(&self.device, &g.renderer.hiz);
             }
         }
@@ -588,6 +622,7 @@ impl Renderer {
             .prepare(queue, view.view_proj, camera.position, &draws);
         let grass_jobs = self.grass_jobs(&view, &sel.grass);
         let plant_jobs = self.plant_jobs(&view, &sel.terrain, &grass_jobs);
+        let tree_jobs = self.tree_jobs(&view, &sel.terrain);
         let grass_level = self.rings.as_ref().map_or(0, |r| r.settings.level);
         let reads: Vec<(u32, TileId)> = sel
             .terrain
@@ -617,7 +652,7 @@ impl Renderer {
                 camera.position.z as f32,
                 camera.near_m,
             );
-            if let Some(p) = &mut g.plants {
+            for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
                 p.set_frame(
                     queue,
                     input.time_s,
@@ -637,6 +672,7 @@ impl Renderer {
             terrain_tiles,
             grass_jobs,
             plant_jobs,
+            tree_jobs,
             reads,
             stats: FrameStats {
                 frame: self.frame,
@@ -765,17 +801,19 @@ impl Renderer {
                 grass_depth,
                 &mut self.timer,
             );
-            if let Some(p) = &g.plants
-                && self.features.has(Feature::Plants)
-            {
-                p.record(
-                    &self.queue,
-                    encoder,
-                    &frame.plant_jobs,
-                    grass_color,
-                    grass_depth,
-                    &mut self.timer,
-                );
+            for (p, jobs) in [(&g.plants, &frame.plant_jobs), (&g.trees, &frame.tree_jobs)] {
+                if let Some(p) = p
+                    && self.features.has(p.layer().feature())
+                {
+                    p.record(
+                        &self.queue,
+                        encoder,
+                        jobs,
+                        grass_color,
+                        grass_depth,
+                        &mut self.timer,
+                    );
+                }
             }
         }
         if let Some(msaa) = &self.msaa {
@@ -804,12 +842,21 @@ impl Renderer {
         if plants.is_some() {
             stats.plants = Some(Default::default());
         }
+        let trees = self
+            .grass
+            .as_ref()
+            .and_then(|g| g.trees.as_ref())
+            .filter(|_| self.features.has(Feature::Trees))
+            .map(|p| p.stats_buffer());
+        if trees.is_some() {
+            stats.trees = Some(Default::default());
+        }
         self.readback.record(
             encoder,
             &self.timer,
             counters,
             &self.holes.counter,
-            plants,
+            [plants, trees],
             stats,
         );
         Ok(())

@@ -37,7 +37,7 @@ impl StatsRing {
             .map(|_| ReadbackSlot {
                 buffer: device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("frame figures readback"),
-                    size: timestamp_bytes + 64 + 16 + 32,
+                    size: timestamp_bytes + 64 + 16 + 64,
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
@@ -59,7 +59,7 @@ impl StatsRing {
         timer: &GpuTimer,
         counters: Option<&wgpu::Buffer>,
         holes: &wgpu::Buffer,
-        plants: Option<&wgpu::Buffer>,
+        plants: [Option<&wgpu::Buffer>; 2],
         stats: FrameStats,
     ) {
         let Some(slot) = self
@@ -80,8 +80,12 @@ impl StatsRing {
             encoder.copy_buffer_to_buffer(c, 0, &slot.buffer, self.timestamp_bytes, 64);
         }
         encoder.copy_buffer_to_buffer(holes, 0, &slot.buffer, self.timestamp_bytes + 64, 16);
-        if let Some(p) = plants {
-            encoder.copy_buffer_to_buffer(p, 0, &slot.buffer, self.timestamp_bytes + 80, 32);
+        // The plants' counters, then the trees'.
+        for (k, p) in plants.into_iter().enumerate() {
+            if let Some(p) = p {
+                let at = self.timestamp_bytes + 80 + 32 * k as u64;
+                encoder.copy_buffer_to_buffer(p, 0, &slot.buffer, at, 32);
+            }
         }
         slot.state.store(PENDING, Ordering::Release);
         let state = slot.state.clone();
@@ -107,11 +111,18 @@ impl StatsRing {
                         stats.grass = GrassStats::from_counts(stats.grass.tiles, &c);
                         // Atlas reads that found another tile than expected (HoleCheck).
                         stats.residency.holes += counters.get(16).copied().unwrap_or(0);
-                        if let Some(p) = counters.get(20..28) {
-                            let p: [u32; 8] = p.try_into().unwrap_or([0; 8]);
-                            if stats.plants.is_some() {
-                                stats.plants = Some(crate::plants::PlantStats::from_counts(&p));
-                            }
+                        let read = |at: usize| {
+                            let p: [u32; 8] = counters
+                                .get(at..at + 8)
+                                .and_then(|p| p.try_into().ok())
+                                .unwrap_or([0; 8]);
+                            crate::plants::PlantStats::from_counts(&p)
+                        };
+                        if stats.plants.is_some() {
+                            stats.plants = Some(read(20));
+                        }
+                        if stats.trees.is_some() {
+                            stats.trees = Some(read(28));
                         }
                     }
                     slot.buffer.unmap();

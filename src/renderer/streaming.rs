@@ -326,7 +326,8 @@ impl Renderer {
                             tile_x: x,
                             tile_y: y,
                             far: 1,
-                            pad: [0; 3],
+                            cells: 0,
+                            pad: [0; 2],
                         },
                     ));
                 }
@@ -335,5 +336,100 @@ impl Renderer {
         far.sort_by(|a, b| a.0.total_cmp(&b.0));
         let far: Vec<PlantJob> = far.into_iter().map(|f| f.1).collect();
         crate::plants::PlantRenderer::plant_jobs(grass_jobs, &far)
+    }
+}
+
+impl Renderer {
+    /// The trees' jobs of a frame: the terrain's tiles in view out to the trees' reach (the fog),
+    /// each read from the tile the terrain draws it from. A tile finer than the grass level
+    /// gives way to its grass-level ancestor (one job for all of them), a coarse tile is split
+    /// into jobs of at most [`crate::plants::renderer::MAX_TREE_JOB_CELLS`] cells a side.
+    /// Every job's cells are cells of the one grid of the trees
+    /// ([`crate::plants::PlantSettings::cell_m`]), so that a tree stands where it stands
+    /// whichever job places it. Nearest first, at most [`crate::plants::renderer::MAX_JOBS`].
+    /// Empty without trees.
+    pub(super) fn tree_jobs(&self, view: &FrameView, terrain: &[TileId]) -> Vec<PlantJob> {
+        let (Some(trees), Some(rings)) = (
+            self.grass.as_ref().and_then(|g| g.trees.as_ref()),
+            self.rings.as_ref(),
+        ) else {
+            return Vec::new();
+        };
+        let settings = trees.settings();
+        let pyramid = &self.world.manifest.pyramid;
+        let grass_level = rings.settings.level;
+        let per_tile = (pyramid.tile_size_m(grass_level) as f32 / settings.cell_m)
+            .round()
+            .max(1.0) as u32;
+        let most = trees.params().grid[0];
+        // The coarsest level whose tiles are jobs whole.
+        let job_level =
+            grass_level - (most / per_tile).max(1).ilog2().min(u32::from(grass_level)) as u8;
+        let outer = f64::from(settings.view_m[1]);
+        let eye = view.camera.position;
+        let tallest = self
+            .world
+            .manifest
+            .plant_types
+            .iter()
+            .filter(|t| t.is_tree())
+            .map(|t| f64::from(t.size_m[1]))
+            .fold(0.0, f64::max);
+        let mut seen = std::collections::HashSet::new();
+        let mut jobs: Vec<(f64, PlantJob)> = Vec::new();
+        for &id in terrain {
+            let id = id.ancestor_at(grass_level.min(id.level)).unwrap_or(id);
+            if !seen.insert(id) {
+                continue;
+            }
+            let Some((src, slot)) = self.service.draw_source(id) else {
+                continue;
+            };
+            let (h0, h1) = self.service.height_range(id);
+            let (z0, z1) = (f64::from(h0), f64::from(h1) + tallest);
+            let boxed = |b: crate::world::Bounds| {
+                let min = glam::DVec3::new(b.min.x, b.min.y, z0) - eye;
+                let max = glam::DVec3::new(b.max.x, b.max.y, z1) - eye;
+                (min, max, glam::DVec3::ZERO.clamp(min, max).length())
+            };
+            if boxed(pyramid.bounds(id)).2 >= outer {
+                continue;
+            }
+            let src_bounds = pyramid.bounds(src);
+            let src_cell = pyramid.cell_size_m(src.level);
+            let level = id.level.max(job_level);
+            let k = 1u32 << (level - id.level);
+            let cells = per_tile << (grass_level - level);
+            for y in id.y * k..(id.y + 1) * k {
+                for x in id.x * k..(id.x + 1) * k {
+                    let sub = TileId::new(level, x, y);
+                    let b = pyramid.bounds(sub);
+                    let (min, max, near) = boxed(b);
+                    if near >= outer || !view.frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
+                        continue;
+                    }
+                    let texel = (b.min - src_bounds.min) / src_cell;
+                    jobs.push((
+                        near,
+                        PlantJob {
+                            origin: [(b.min.x - eye.x) as f32, (b.min.y - eye.y) as f32],
+                            texel: [texel.x as f32, texel.y as f32],
+                            cell: src_cell as f32,
+                            layer: slot,
+                            tile_x: x,
+                            tile_y: y,
+                            far: 0,
+                            cells,
+                            pad: [0; 2],
+                        },
+                    ));
+                }
+            }
+        }
+        jobs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        jobs.into_iter()
+            .map(|j| j.1)
+            .take(crate::plants::renderer::MAX_JOBS as usize)
+            .collect()
     }
 }

@@ -109,8 +109,12 @@ pub fn run_bench_features(
         .chain(
             Feature::ALL
                 .iter()
-                // A world without plant types has no plants to switch off.
-                .filter(|f| **f != Feature::Plants || !m.plant_types.is_empty())
+                // A world without plants (or trees) has none to switch off.
+                .filter(|f| match f {
+                    Feature::Plants => m.plant_types.iter().any(|t| !t.is_tree()),
+                    Feature::Trees => m.plant_types.iter().any(|t| t.is_tree()),
+                    _ => true,
+                })
                 .map(|f| (f.name().to_owned(), Features::all().without(*f))),
         )
         .collect();

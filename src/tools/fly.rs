@@ -486,6 +486,18 @@ impl FlySummary {
                     .filter_map(|f| f.plants.map(|p| f64::from(p.overflow)))
                     .collect::<Vec<_>>(),
             ),
+            trees_drawn: Summary::of(
+                &frames
+                    .iter()
+                    .filter_map(|f| f.trees.map(|p| f64::from(p.drawn)))
+                    .collect::<Vec<_>>(),
+            ),
+            trees_overflow: Summary::of(
+                &frames
+                    .iter()
+                    .filter_map(|f| f.trees.map(|p| f64::from(p.overflow)))
+                    .collect::<Vec<_>>(),
+            ),
         }
     }
 }

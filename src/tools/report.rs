@@ -77,6 +77,9 @@ pub struct FrameRecord {
     /// when the frame drew none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plants: Option<crate::plants::PlantStats>,
+    /// Trees, as `plants` (absent when the frame drew none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trees: Option<crate::plants::PlantStats>,
     /// With images, the wait for this frame's tiles before it was drawn, milliseconds (0 when
     /// the camera moved too little since the last frame to need one; see `fly`'s docs).
     #[serde(default)]
@@ -97,6 +100,7 @@ impl FrameRecord {
         self.residency = stats.residency;
         self.grass = stats.grass;
         self.plants = stats.plants;
+        self.trees = stats.trees;
     }
 }
 
@@ -135,6 +139,13 @@ pub struct FlySummary {
     /// Plant instances a frame that did not fit their region of the pool.
     #[serde(default)]
     pub plants_overflow: Summary,
+    /// Tree instances drawn a frame (all types and levels; a tree in a cross-fade counts
+    /// twice), over the frames that drew trees.
+    #[serde(default)]
+    pub trees_drawn: Summary,
+    /// Tree instances a frame that did not fit their region of the pool.
+    #[serde(default)]
+    pub trees_overflow: Summary,
 }
 
 /// The grass coverage of one frame: of the pixels where terrain within

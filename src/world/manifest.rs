@@ -140,6 +140,9 @@ pub const MAX_PLANT_TYPES: usize = 8;
 pub const PLANT_RECIPES: [&str; 5] = ["flower", "fern", "bush", "broadleaf", "conifer"];
 /// Largest plant, metres (a tall tree).
 pub const MAX_PLANT_SIZE_M: f64 = 60.0;
+/// A plant type that grows this tall (the top of its height range, metres) is a tree: it is
+/// placed on the trees' coarser grid and drawn out to the fog, not among the grass.
+pub const TREE_MIN_HEIGHT_M: f32 = 4.0;
 /// Most plants per square metre of all types together on one grass type (the placement grid
 /// holds at most one plant per 0.5 m cell, the plants module's `PLANT_CELL_M`).
 pub const MAX_PLANT_DENSITY: f64 = 4.0;
@@ -191,6 +194,13 @@ pub struct PlantType {
     /// How it moves in the wind.
     #[serde(default)]
     pub wind: PlantWind,
+}
+
+impl PlantType {
+    /// Whether the type is a tree ([`TREE_MIN_HEIGHT_M`]).
+    pub fn is_tree(&self) -> bool {
+        self.size_m[1] >= TREE_MIN_HEIGHT_M
+    }
 }
 
 fn default_plant_color() -> [f32; 3] {

@@ -42,7 +42,7 @@ pub use manifest::{
     CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, DeriveCalibration, DeriveMode, FeatureSwitches,
     GrassType, LEGACY_DETAIL, MAX_DETAIL, MAX_GRASS_TYPES, MAX_PLANT_DENSITY, MAX_PLANT_SIZE_M,
     MAX_PLANT_TYPES, MAX_WIND_SOURCES, Manifest, PLANT_RECIPES, PlantType, PlantWind, Sky,
-    SourcePlacement, WindDefaults, WindKey, WindScene, WindSource, WorldSource,
+    SourcePlacement, TREE_MIN_HEIGHT_M, WindDefaults, WindKey, WindScene, WindSource, WorldSource,
 };
 pub use material::{MATERIAL_COUNT, Material};
 pub use tile::{Bounds, Pyramid, TileId};

@@ -301,6 +301,24 @@ pub fn world_with_plant(dir: &Path, mesh: &str) -> std::path::PathBuf {
     w
 }
 
+/// A copy of the default world in `dir` whose only plant type is a tree of `mesh` (a recipe),
+/// 8-12 m tall, at `density` trees per square metre on every grass type but bare.
+pub fn world_with_trees(dir: &Path, mesh: &str, density: f32) -> std::path::PathBuf {
+    let w = world_with_plant(dir, mesh);
+    let manifest = std::fs::read_to_string(w.join("world.toml")).unwrap();
+    let trees = manifest
+        .replace("size_m = [0.4, 0.6]", "size_m = [8.0, 12.0]")
+        .replace(
+            "density = { meadow = 1.5, \"tall grass\" = 1.5, \"dry grass\" = 1.5 }",
+            &format!(
+                "density = {{ meadow = {density}, \"tall grass\" = {density}, \"dry grass\" = {density} }}"
+            ),
+        );
+    assert_ne!(manifest, trees, "the tree's size and density are set");
+    std::fs::write(w.join("world.toml"), trees).unwrap();
+    w
+}
+
 /// Every file under `dir`: its path relative to `dir`, and its bytes.
 pub fn read_all_files(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
     let mut out = std::collections::BTreeMap::new();

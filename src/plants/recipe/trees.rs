@@ -58,7 +58,7 @@ pub(super) fn broadleaf(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder
             level: 0,
             forks: 2,
             b: 0.06,
-            leaf_len: [0.07, 0.1],
+            leaf_len: [0.1, 0.14],
         };
         branch(b, &lr.fork(7), &spec, colour, per_twig.max(8), lod);
     }
