@@ -123,15 +123,15 @@ impl Default for PlantSettings {
 
 impl PlantSettings {
     /// The trees' defaults for grass tiles of `tile_m` metres and fog at `fog_m`: cells of
-    /// about [`TREE_CELL_M`] (dividing the tile), the full mesh to 60 m, the reduced one to
-    /// 300 m, cards to the fog (thinning out over its last tenth); beyond 400 m a tree is kept
+    /// about [`TREE_CELL_M`] (dividing the tile), the full mesh to 30 m, the reduced one to
+    /// 150 m, cards to the fog (thinning out over its last tenth); beyond 400 m a tree is kept
     /// with a chance falling as the square of the distance, to no fewer than one in six, each
     /// grown to keep the forest's cover.
     pub fn trees(tile_m: f32, fog_m: f32) -> Self {
         let per_tile = (tile_m / TREE_CELL_M).round().max(1.0);
         Self {
             capacity: 131_072,
-            lod_m: [60.0, 300.0],
+            lod_m: [30.0, 150.0],
             band_m: 10.0,
             view_m: [0.9 * fog_m, fog_m],
             card_reach: 1.0,
