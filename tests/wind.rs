@@ -1224,6 +1224,12 @@ fn path_wind_keys_walkers_and_features_parse_and_bad_ones_are_named() {
     assert!(!f.has(Feature::Specular) && !f.has(Feature::GroundDarkening));
     assert!(f.has(Feature::Translucency) && f.has(Feature::Interaction));
     assert_eq!(parse(&m.to_toml()).unwrap(), m, "round trip");
+    let no_trees = text.replace(
+        "ground-darkening = false",
+        "ground-darkening = false\ntrees = false",
+    );
+    let f = Features::from(&parse(&no_trees).unwrap().features);
+    assert!(!f.has(Feature::Trees) && f.has(Feature::Plants));
     // Without a [features] table, everything is on.
     assert_eq!(
         Features::from(&parse(SMALL).unwrap().features),

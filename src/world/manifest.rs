@@ -372,8 +372,10 @@ pub struct FeatureSwitches {
     pub far_field: bool,
     /// Sun shadows cast by the terrain.
     pub shadows: bool,
-    /// Plants among the grass (the world's `[[plant_types]]`).
+    /// Plants among the grass (the world's `[[plant_types]]` lower than trees).
     pub plants: bool,
+    /// Trees (the world's `[[plant_types]]` of at least [`TREE_MIN_HEIGHT_M`]).
+    pub trees: bool,
 }
 
 impl Default for FeatureSwitches {
@@ -396,6 +398,7 @@ impl From<Features> for FeatureSwitches {
             far_field: f.has(Feature::FarField),
             shadows: f.has(Feature::Shadows),
             plants: f.has(Feature::Plants),
+            trees: f.has(Feature::Trees),
         }
     }
 }
@@ -414,6 +417,7 @@ impl From<&FeatureSwitches> for Features {
             (Feature::FarField, s.far_field),
             (Feature::Shadows, s.shadows),
             (Feature::Plants, s.plants),
+            (Feature::Trees, s.trees),
         ];
         on.into_iter()
             .filter(|(_, on)| !on)
