@@ -47,7 +47,7 @@ struct PlantFrame {
     sun_color: vec4<f32>,
     sky_color: vec4<f32>,
     horizon_color: vec4<f32>,
-    // x: feature bits
+    // x: feature bits, y: 1 where the cards are billboards (the trees' layer)
     flags: vec4<u32>,
     wind: array<PlantWind, 8>,
     // Per type: x the texture layer of its meshes, y of its card, z its index among the
@@ -183,10 +183,26 @@ fn plant_vertex(vi: u32, ii: u32) -> VertexOut {
     let v = load_vertex(vi);
     let t = inst.kind & 255u;
     let level = inst.kind >> 8u;
+    var yaw = inst.yaw;
+    var out: VertexOut;
+    if level == 2u && frame.flags.y != 0u {
+        // Billboards (the trees' cards): the first quad turned to face the camera, the second
+        // dropped (its triangles collapse to a point and are culled): half the triangles and
+        // none of the crossed quads' overdraw of each other.
+        if v.normal.x > 0.5 {
+            out.clip = vec4<f32>(0.0);
+            return out;
+        }
+        let to_eye = -inst.pos.xy;
+        if dot(to_eye, to_eye) > 1e-6 {
+            let d = normalize(to_eye);
+            yaw = atan2(d.x, -d.y);
+        }
+    }
     let phase = rand01(inst.hash);
     let w = wind_at(inst.pos.xy);
     let sway_lean = sway_at(inst.pos.xy, PLANT_SWAY_SLOT + frame.layers[t].z);
-    let b = bend(v, inst.pos, inst.yaw, inst.scale, phase, w, sway_lean, frame.misc.y, frame.wind[t], frame_bits.flags.x);
+    let b = bend(v, inst.pos, yaw, inst.scale, phase, w, sway_lean, frame.misc.y, frame.wind[t], frame_bits.flags.x);
     var albedo = v.albedo;
     if has_feature(frame_bits.flags.x, COLOR_VARIATION) {
         // Per plant, from the noise of its root's world cell and its hash.
@@ -196,7 +212,6 @@ fn plant_vertex(vi: u32, ii: u32) -> VertexOut {
         let own = rand01(hash_u32(inst.hash ^ 77u));
         albedo = vec4<f32>(albedo.rgb * (0.82 + 0.22 * nz + 0.14 * own), albedo.a);
     }
-    var out: VertexOut;
     out.clip = frame.view_proj * vec4<f32>(b.position, 1.0);
     out.rel_pos = b.position;
     out.normal = b.normal;

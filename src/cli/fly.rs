@@ -77,6 +77,20 @@ pub(crate) struct FlyArgs {
     /// half of them, the survivors grown to keep the cover (default: the renderer's, 50).
     #[arg(long)]
     pub(crate) plant_thin_m: Option<f32>,
+    /// Trees' level-of-detail switches NEAR,FAR, metres: the full mesh out to NEAR, the
+    /// reduced mesh out to FAR, crossed cards beyond, to the fog (default: the renderer's,
+    /// 30,150).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) tree_lod_m: Option<Vec<f32>>,
+    /// Beyond this distance, metres, trees thin out as the square of the distance, down to
+    /// --tree-min-keep of them, the survivors grown to keep the cover (default: the
+    /// renderer's, 400).
+    #[arg(long)]
+    pub(crate) tree_thin_m: Option<f32>,
+    /// The fewest trees the thinning keeps, above 0 and at most 1 (default: the renderer's,
+    /// 1/6).
+    #[arg(long)]
+    pub(crate) tree_min_keep: Option<f32>,
     /// Terrain mesh: one vertex every this many samples of a tile (1, 2, 4, ...; default:
     /// the renderer's).
     #[arg(long)]
@@ -114,6 +128,9 @@ impl FlyArgs {
             plant_lod_m,
             plant_card_reach,
             plant_thin_m,
+            tree_lod_m,
+            tree_thin_m,
+            tree_min_keep,
             mesh_step,
             aa,
             truth: _,
@@ -146,6 +163,11 @@ impl FlyArgs {
             Some(&[near, far]) => [near, far],
             Some(v) => bail!("--plant-lod-m takes two distances, NEAR,FAR, not {v:?}"),
         };
+        let tree_lod_m = match tree_lod_m.as_deref() {
+            None => None,
+            Some(&[near, far]) => Some([near, far]),
+            Some(v) => bail!("--tree-lod-m takes two distances, NEAR,FAR, not {v:?}"),
+        };
         Ok(FlyOptions {
             world: resolve_world(&world)?,
             http: stream.http(),
@@ -165,6 +187,9 @@ impl FlyArgs {
             plant_card_reach: plant_card_reach
                 .unwrap_or(verdant::plants::PlantSettings::default().card_reach),
             plant_thin_m: plant_thin_m.unwrap_or(verdant::plants::PlantSettings::default().thin_m),
+            tree_lod_m,
+            tree_thin_m,
+            tree_min_keep,
         })
     }
 }

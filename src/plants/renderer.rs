@@ -492,7 +492,12 @@ impl PlantRenderer {
             sun_color: c4(sky.sun_color),
             sky_color: c4(sky.sky_color),
             horizon_color: c4(sky.horizon_color),
-            flags: [crate::features::Features::all().bits(), 0, 0, 0],
+            flags: [
+                crate::features::Features::all().bits(),
+                u32::from(layer == PlantLayer::Trees),
+                0,
+                0,
+            ],
             wind: wind_table,
             layers: frame_layers,
         };

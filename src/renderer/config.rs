@@ -264,6 +264,13 @@ impl RendererConfig {
                     format!("NEAR,FAR with 0 < NEAR <= FAR <= {MAX_PLANT_LOD_M} m"),
                 ));
             }
+            if !(t.thin_m > 0.0 && t.thin_m <= MAX_PLANT_LOD_M) {
+                return Err(ConfigError::new(
+                    "trees.thin_m",
+                    t.thin_m,
+                    format!("above 0, at most {MAX_PLANT_LOD_M} m"),
+                ));
+            }
             if !(t.min_keep > 0.0 && t.min_keep <= 1.0) {
                 return Err(ConfigError::new(
                     "trees.min_keep",
@@ -280,6 +287,16 @@ impl RendererConfig {
             }
         }
         self.grass.validate()
+    }
+
+    /// The trees' settings for `world`: [`Self::trees`], else
+    /// [`crate::plants::PlantSettings::trees`] for its grass tiles and fog. `None` without
+    /// grass rings.
+    pub fn tree_settings(&self, world: &World) -> Option<crate::plants::PlantSettings> {
+        let grass = self.grass_settings(world)?;
+        Some(self.trees.unwrap_or_else(|| {
+            crate::plants::PlantSettings::trees(grass.tile_m, world.manifest.sky.fog_distance_m)
+        }))
     }
 
     /// Grass settings that follow the rings: blades the low grid drops fade out over the outer

@@ -72,6 +72,12 @@ pub struct FlyOptions {
     pub plant_card_reach: f32,
     /// Where plants start to thin out with distance, metres (default: the renderer's).
     pub plant_thin_m: f32,
+    /// The trees' level-of-detail switches, metres (default: the renderer's).
+    pub tree_lod_m: Option<[f32; 2]>,
+    /// Where trees start to thin out with distance, metres (default: the renderer's).
+    pub tree_thin_m: Option<f32>,
+    /// The fewest trees the thinning keeps (default: the renderer's).
+    pub tree_min_keep: Option<f32>,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -120,6 +126,9 @@ impl Default for FlyOptions {
             plant_lod_m: crate::plants::PlantSettings::default().lod_m,
             plant_card_reach: crate::plants::PlantSettings::default().card_reach,
             plant_thin_m: crate::plants::PlantSettings::default().thin_m,
+            tree_lod_m: None,
+            tree_thin_m: None,
+            tree_min_keep: None,
         }
     }
 }
@@ -154,6 +163,12 @@ impl FlyOptions {
         config.plants.lod_m = self.plant_lod_m;
         config.plants.card_reach = self.plant_card_reach;
         config.plants.thin_m = self.plant_thin_m;
+        if let Some(mut t) = config.tree_settings(world) {
+            t.lod_m = self.tree_lod_m.unwrap_or(t.lod_m);
+            t.thin_m = self.tree_thin_m.unwrap_or(t.thin_m);
+            t.min_keep = self.tree_min_keep.unwrap_or(t.min_keep);
+            config.trees = Some(t);
+        }
         config.validate().map_err(SettingError::from)?;
         Ok(config)
     }
@@ -182,6 +197,9 @@ impl From<ConfigError> for SettingError {
             "plants.lod_m" => "--plant-lod-m",
             "plants.card_reach" => "--plant-card-reach",
             "plants.thin_m" => "--plant-thin-m",
+            "trees.lod_m" => "--tree-lod-m",
+            "trees.thin_m" => "--tree-thin-m",
+            "trees.min_keep" => "--tree-min-keep",
             field => field,
         };
         Self { option, source }
@@ -566,7 +584,18 @@ mod tests {
         let world =
             World::open(&Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz")).unwrap();
         let path = world.manifest.paths[0].clone();
-        fly_options().renderer_config(&world, &path).unwrap();
+        let config = fly_options().renderer_config(&world, &path).unwrap();
+        let trees = config
+            .trees
+            .expect("the trees' settings, for the world's grass");
+        assert_eq!(trees.lod_m, [30.0, 150.0]);
+        let set = FlyOptions {
+            tree_lod_m: Some([20.0, 90.0]),
+            tree_min_keep: Some(0.25),
+            ..fly_options()
+        };
+        let trees = set.renderer_config(&world, &path).unwrap().trees.unwrap();
+        assert_eq!((trees.lod_m, trees.min_keep), ([20.0, 90.0], 0.25));
         let with = |f: &dyn Fn(&mut FlyOptions)| {
             let mut o = fly_options();
             f(&mut o);
@@ -615,6 +644,21 @@ mod tests {
             ),
             (with(&|o| o.mesh_step = 0), "--mesh-step", "1..=16"),
             (with(&|o| o.mesh_step = 32), "--mesh-step", "1..=16"),
+            (
+                with(&|o| o.tree_lod_m = Some([200.0, 100.0])),
+                "--tree-lod-m",
+                "0 < NEAR <= FAR <= 10000 m",
+            ),
+            (
+                with(&|o| o.tree_thin_m = Some(-1.0)),
+                "--tree-thin-m",
+                "at most 10000 m",
+            ),
+            (
+                with(&|o| o.tree_min_keep = Some(0.0)),
+                "--tree-min-keep",
+                "above 0, at most 1",
+            ),
         ];
         for (opts, option, range) in cases {
             let e = opts.renderer_config(&world, &path).unwrap_err();
