@@ -532,6 +532,8 @@ fn bench_lod_writes_its_tables_and_charts() {
         "width_scale",
         "plant_lod_near_m",
         "plant_lod_far_m",
+        "tree_lod_near_m",
+        "tree_lod_far_m",
     ] {
         assert!(header.contains(&column), "no column {column} in {header:?}");
     }

@@ -64,6 +64,8 @@ pub struct LodSetting {
     /// The plants' switches from the full mesh to the reduced one and from that to the cards,
     /// metres.
     pub plant_lod_m: [f32; 2],
+    /// The trees' switches, metres (`None`: the renderer's; a world without trees).
+    pub tree_lod_m: Option<[f32; 2]>,
 }
 
 impl LodSetting {
@@ -79,7 +81,14 @@ impl LodSetting {
             infill_m: crate::renderer::DEFAULT_INFILL_M,
             width_scale: 1.0,
             plant_lod_m: crate::plants::PlantSettings::default().lod_m,
+            tree_lod_m: None,
         }
+    }
+
+    /// The same setting with the trees' level-of-detail switches at `tree_lod_m`.
+    pub fn with_tree_lod(mut self, tree_lod_m: [f32; 2]) -> Self {
+        self.tree_lod_m = Some(tree_lod_m);
+        self
     }
 
     /// The same setting with the plants' level-of-detail switches at `plant_lod_m`.
@@ -126,6 +135,9 @@ impl LodSetting {
             // No level of detail for the plants: no thinning with distance either.
             c.plants.thin_m = crate::renderer::MAX_PLANT_LOD_M;
         }
+        if let (Some(lod_m), Some(trees)) = (self.tree_lod_m, c.tree_settings(world)) {
+            c.trees = Some(crate::plants::PlantSettings { lod_m, ..trees });
+        }
         c
     }
 }
@@ -149,7 +161,7 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             .with_plant_lod(d.plants.lod_m)
     };
     let plant_lod = d.plants.lod_m;
-    vec![
+    let mut all = vec![
         new("default", h, v, s, seg),
         new("near ring x0.5", h * 0.5, v, s, seg),
         new("near ring x2", h * 2.0, v, s, seg),
@@ -169,7 +181,18 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         new("plants lod x2", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 2.0 * m)),
         // Every plant its full mesh out to the view distance.
         new("no LOD", v, v, s, [seg[0]; 3]).with_plant_lod([crate::renderer::MAX_PLANT_LOD_M; 2]),
-    ]
+    ];
+    // A world with trees: their switches at half and twice the default's.
+    if world.manifest.plant_types.iter().any(|t| t.is_tree())
+        && let Some(trees) = d.tree_settings(world)
+    {
+        let at = all.len() - 1;
+        for (name, k) in [("trees lod x0.5", 0.5f32), ("trees lod x2", 2.0)] {
+            let lod = trees.lod_m.map(|m| k * m);
+            all.insert(at, new(name, h, v, s, seg).with_tree_lod(lod));
+        }
+    }
+    all
 }
 
 /// The settings of `all` named in `names` (all of them where `names` is empty), "default" and
@@ -698,7 +721,7 @@ fn write_outputs(
     let mut csv = String::from(
         "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,\
          segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,plant_lod_near_m,\
-         plant_lod_far_m,gpu_ms,gpu_q1_ms,\
+         plant_lod_far_m,tree_lod_near_m,tree_lod_far_m,gpu_ms,gpu_q1_ms,\
          gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_vs_truth,\
          coarse_flip_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse\n",
     );
@@ -706,7 +729,7 @@ fn write_outputs(
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -720,6 +743,8 @@ fn write_outputs(
             s.width_scale,
             s.plant_lod_m[0],
             s.plant_lod_m[1],
+            s.tree_lod_m.map_or(String::new(), |m| m[0].to_string()),
+            s.tree_lod_m.map_or(String::new(), |m| m[1].to_string()),
             r.gpu.median_ms,
             r.gpu.q1_ms,
             r.gpu.q3_ms,
@@ -819,5 +844,30 @@ mod tests {
             e.contains("\"width x9\"") && e.contains("spacing x0.8"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_world_with_trees_gets_the_trees_lod_settings() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz");
+        let mut world = World::open(&dir).unwrap();
+        let names =
+            |w: &World| -> Vec<String> { lod_settings(w).into_iter().map(|s| s.name).collect() };
+        assert!(!names(&world).iter().any(|n| n.starts_with("trees")));
+        let mut oak = world.manifest.plant_types[0].clone();
+        oak.size_m = [8.0, 12.0];
+        world.manifest.plant_types.push(oak);
+        let settings = lod_settings(&world);
+        let half = settings
+            .iter()
+            .find(|s| s.name == "trees lod x0.5")
+            .unwrap();
+        let default = RendererConfig::for_world(&world)
+            .tree_settings(&world)
+            .unwrap();
+        assert_eq!(half.tree_lod_m, Some(default.lod_m.map(|m| 0.5 * m)));
+        let trees = half.config(&world).trees.unwrap();
+        assert_eq!(trees.lod_m, default.lod_m.map(|m| 0.5 * m));
+        assert_eq!(trees.min_keep, default.min_keep);
+        assert_eq!(settings.last().unwrap().name, "no LOD");
     }
 }

@@ -100,7 +100,8 @@ pub fn atlas_slots(world: &World, device: &wgpu::Device) -> u32 {
 /// least as large): no LOD (every grass tile high LOD, the high ring reaching so far beyond the
 /// view distance that the fade of the blades the low grid drops never starts within it), blades
 /// out to [`REACH_FACTOR`] times the default view distance, [`SEGMENTS`] segments everywhere, every
-/// plant its full mesh, and an atlas of `atlas_slots` slots (see [`atlas_slots`]). A `base` without grass stays without.
+/// plant its full mesh, every tree its full mesh out to [`TREE_MESH_M`] and none thinned, and
+/// an atlas of `atlas_slots` slots (see [`atlas_slots`]). A `base` without grass stays without.
 pub fn truth_config(world: &World, base: &RendererConfig, atlas_slots: u32) -> RendererConfig {
     truth_config_reaching(world, base, atlas_slots, REACH_FACTOR)
 }
@@ -133,12 +134,26 @@ pub fn truth_config_reaching(
     c.plants.card_reach = 1.0;
     c.plants.thin_m = crate::renderer::MAX_PLANT_LOD_M;
     c.plants.capacity = base.plants.capacity.saturating_mul(4);
+    // The trees: full meshes out to TREE_MESH_M, cards beyond (a tree there is a few pixels),
+    // none thinned out; four times the regions.
+    if let Some(t) = base.tree_settings(world) {
+        c.trees = Some(crate::plants::PlantSettings {
+            lod_m: [TREE_MESH_M; 2],
+            thin_m: crate::renderer::MAX_PLANT_LOD_M,
+            min_keep: 1.0,
+            capacity: t.capacity.saturating_mul(4),
+            ..t
+        });
+    }
     // The sub-samples are the anti-aliasing: each one a plain frame.
     c.aa = crate::aa::AntiAliasing::Off;
     c.service.atlas_slots = c.service.atlas_slots.max(atlas_slots);
     c.service.cache_bytes = c.service.cache_bytes.max(CACHE_BYTES);
     c
 }
+
+/// How far the truth draws every tree's full mesh, metres (cards beyond, none thinned).
+pub const TREE_MESH_M: f32 = 1000.0;
 
 /// A running mean of images in linear light.
 #[derive(Clone, Debug)]
@@ -472,5 +487,21 @@ mod tests {
         // A high-LOD tile near the camera can get a second job: at most 4 of them.
         assert!(n + 4 <= crate::grass::renderer::MAX_JOBS, "{n}");
         assert!(n + TERRAIN_SLOTS <= crate::terrain::GBUFFER_MAX_SLOTS);
+    }
+
+    #[test]
+    fn the_truths_trees_are_full_meshes_none_thinned() {
+        let world = World::open(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz"),
+        )
+        .unwrap();
+        let base = RendererConfig::for_world(&world);
+        let default = base.tree_settings(&world).unwrap();
+        let t = truth_config(&world, &base, 64).trees.unwrap();
+        assert_eq!(t.lod_m, [TREE_MESH_M; 2]);
+        assert!(t.lod_m[0] > default.lod_m[1] && t.min_keep == 1.0);
+        assert_eq!(t.capacity, 4 * default.capacity);
+        assert_eq!((t.cell_m, t.view_m), (default.cell_m, default.view_m));
+        truth_config(&world, &base, 64).validate().unwrap();
     }
 }
