@@ -111,6 +111,15 @@ pub(crate) fn soak(opts: SoakOptions) -> Result<()> {
         r.atlas_peak_slots,
         r.atlas_slots
     );
+    if r.plants_drawn_peak + r.trees_drawn_peak > 0 {
+        println!(
+            "most drawn in a frame: {} blades, {} plants, {} trees; {} plant and tree instances overflowed",
+            r.grass_blades_drawn_peak,
+            r.plants_drawn_peak,
+            r.trees_drawn_peak,
+            r.plants_overflow_total
+        );
+    }
     println!(
         "loads: {} completed, {} cancelled, {} failed; {} evictions; cache hit rate {:.0}%; \
          full detail {} after a teleport (median of {})",

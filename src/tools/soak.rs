@@ -140,6 +140,16 @@ pub struct SoakReport {
     /// Most grass blades drawn in a frame (0 without grass).
     #[serde(default)]
     pub grass_blades_drawn_peak: u64,
+    /// Most plant and tree instances drawn in a frame (0 without them).
+    #[serde(default)]
+    pub plants_drawn_peak: u64,
+    /// Most tree instances drawn in a frame (0 without trees).
+    #[serde(default)]
+    pub trees_drawn_peak: u64,
+    /// Plant and tree instances that did not fit their pool's regions, over all frames (the
+    /// pools are fixed: a view that wants more drops the rest).
+    #[serde(default)]
+    pub plants_overflow_total: u64,
     /// Longest frame, wall time, milliseconds.
     #[serde(default)]
     pub longest_frame_ms: f64,
@@ -481,6 +491,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let mut rss_peak = 0u64;
     let mut longest_frame_ms = 0.0f64;
     let mut blades_peak = 0u64;
+    let (mut plants_peak, mut trees_peak, mut plants_overflow) = (0u64, 0u64, 0u64);
     let (mut cache_peak, mut atlas_peak, mut holes_after_settle) = (0u64, 0u32, 0u32);
     let mut violations = Violations::default();
     let mut rss_timeline: Thinned<(u32, u64, u64)> = Thinned::new(MAX_SOAK_RECORDS);
@@ -552,6 +563,15 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         longest_frame_ms = longest_frame_ms.max(ms);
         let drawn = u64::from(stats.grass.drawn[0]) + u64::from(stats.grass.drawn[1]);
         blades_peak = blades_peak.max(drawn);
+        for (p, peak) in [
+            (stats.plants, &mut plants_peak),
+            (stats.trees, &mut trees_peak),
+        ] {
+            if let Some(p) = p {
+                *peak = (*peak).max(u64::from(p.drawn));
+                plants_overflow += u64::from(p.overflow);
+            }
+        }
         if ms > opts.max_stall_ms {
             violations.push(format!(
                 "frame {frame}: took {ms:.0} ms, longer than the {:.0} ms a frame may stall",
@@ -735,6 +755,9 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         atlas_peak_slots: atlas_peak,
         holes_after_settle,
         grass_blades_drawn_peak: blades_peak,
+        plants_drawn_peak: plants_peak,
+        trees_drawn_peak: trees_peak,
+        plants_overflow_total: plants_overflow,
         longest_frame_ms,
         max_recovery_frames: opts.max_recovery_frames,
         max_stall_ms: opts.max_stall_ms,
