@@ -170,7 +170,8 @@ pub struct PlantType {
     /// A glTF plant keeps its own colours.
     #[serde(default = "default_plant_color")]
     pub color: [f32; 3],
-    /// Height range, metres (0 < min <= max <= [`MAX_PLANT_SIZE_M`]).
+    /// Height range, metres (0 < min <= max <= [`MAX_PLANT_SIZE_M`]); a type whose range
+    /// reaches [`TREE_MIN_HEIGHT_M`] is a tree.
     pub size_m: [f32; 2],
     /// Plants per square metre on each grass type, by the grass type's name (types not named
     /// get none). Scaled by the grass map's density where the plant stands.
