@@ -158,16 +158,9 @@ impl FlyArgs {
         if let Some(r) = grass_near_m {
             grass.near_m = r;
         }
-        let plant_lod_m = match plant_lod_m.as_deref() {
-            None => verdant::plants::PlantSettings::default().lod_m,
-            Some(&[near, far]) => [near, far],
-            Some(v) => bail!("--plant-lod-m takes two distances, NEAR,FAR, not {v:?}"),
-        };
-        let tree_lod_m = match tree_lod_m.as_deref() {
-            None => None,
-            Some(&[near, far]) => Some([near, far]),
-            Some(v) => bail!("--tree-lod-m takes two distances, NEAR,FAR, not {v:?}"),
-        };
+        let plant_lod_m = near_far("--plant-lod-m", plant_lod_m)?
+            .unwrap_or(verdant::plants::PlantSettings::default().lod_m);
+        let tree_lod_m = near_far("--tree-lod-m", tree_lod_m)?;
         Ok(FlyOptions {
             world: resolve_world(&world)?,
             http: stream.http(),
@@ -279,4 +272,13 @@ pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
     }
     println!("wrote {}", opts.out.join("report.json").display());
     Ok(())
+}
+
+/// The two distances NEAR,FAR of `option`, if given.
+fn near_far(option: &str, given: Option<Vec<f32>>) -> Result<Option<[f32; 2]>> {
+    match given.as_deref() {
+        None => Ok(None),
+        Some(&[near, far]) => Ok(Some([near, far])),
+        Some(v) => bail!("{option} takes two distances, NEAR,FAR, not {v:?}"),
+    }
 }

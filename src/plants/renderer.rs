@@ -58,11 +58,11 @@ impl PlantLayer {
             .collect()
     }
 
-    /// The name of its passes' timings (`NAME_place`, `NAME_draw`).
-    pub fn name(self) -> &'static str {
+    /// The names of its passes' timings: placement, draw.
+    pub fn pass_names(self) -> [&'static str; 2] {
         match self {
-            PlantLayer::Plants => "plants",
-            PlantLayer::Trees => "trees",
+            PlantLayer::Plants => ["plants_place", "plants_draw"],
+            PlantLayer::Trees => ["trees_place", "trees_draw"],
         }
     }
 
@@ -714,10 +714,7 @@ impl PlantRenderer {
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("plants place"),
-                timestamp_writes: timer.compute_pass(match self.layer {
-                    PlantLayer::Plants => "plants_place",
-                    PlantLayer::Trees => "trees_place",
-                }),
+                timestamp_writes: timer.compute_pass(self.layer.pass_names()[0]),
             });
             pass.set_bind_group(0, &self.place_group, &[]);
             if !jobs.is_empty() {
@@ -733,10 +730,7 @@ impl PlantRenderer {
             "plants draw",
             (color, wgpu::LoadOp::Load),
             Some((depth, wgpu::LoadOp::Load)),
-            timer.render_pass(match self.layer {
-                PlantLayer::Plants => "plants_draw",
-                PlantLayer::Trees => "trees_draw",
-            }),
+            timer.render_pass(self.layer.pass_names()[1]),
         );
         pass.set_bind_group(0, &self.draw_group, &[]);
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);

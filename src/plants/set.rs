@@ -202,14 +202,15 @@ pub fn coverage(rgba: &[u8], scale: f32) -> f32 {
 /// scattered texels.
 pub fn mips(img: &PlantImage) -> Vec<Vec<u8>> {
     let target = coverage(&img.rgba, 1.0);
-    let mut scaled: Vec<(usize, Vec<u8>)> = Vec::new();
     let mut levels = vec![img.rgba.clone()];
+    // Each level is the mean of the unscaled one below (the image's own mean alpha); the level
+    // stored gets the scale that keeps its coverage.
+    let mut prev = img.rgba.clone();
     let mut size = img.width;
     let to_lin = |b: u8| (f32::from(b) / 255.0).powf(2.2);
     let to_srgb = |v: f32| (v.clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8;
     while size > 1 {
         let half = size / 2;
-        let prev = levels.last().expect("a level");
         let mut next = vec![0u8; (half * half * 4) as usize];
         for y in 0..half {
             for x in 0..half {
@@ -230,8 +231,6 @@ pub fn mips(img: &PlantImage) -> Vec<Vec<u8>> {
                 next[o + 3] = ((a / 4.0) * 255.0).round() as u8;
             }
         }
-        // The unscaled alpha goes on down the chain (each level the mean of the image); the
-        // stored level gets the scale that keeps its coverage.
         let mut stored = next.clone();
         let scale = coverage_scale(&next, target);
         if scale != 1.0 {
@@ -239,13 +238,9 @@ pub fn mips(img: &PlantImage) -> Vec<Vec<u8>> {
                 t[3] = (f32::from(t[3]) * scale).round().min(255.0) as u8;
             }
         }
-        // The unscaled level stays for the next average; the stored one replaces it at the end.
-        levels.push(next);
-        scaled.push((levels.len() - 1, stored));
+        levels.push(stored);
+        prev = next;
         size = half;
-    }
-    for (k, level) in scaled {
-        levels[k] = level;
     }
     levels
 }

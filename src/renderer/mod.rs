@@ -833,24 +833,18 @@ impl Renderer {
         self.timer.resolve(encoder);
         stats.cpu_ms = (frame.cpu_s + start.elapsed().as_secs_f64()) * 1e3;
         let counters = self.grass.as_ref().map(|g| g.renderer.stats_buffer());
-        let plants = self
+        // The counters of each plant layer that drew this frame.
+        let [plants, trees] = self
             .grass
             .as_ref()
-            .and_then(|g| g.plants.as_ref())
-            .filter(|_| self.features.has(Feature::Plants))
-            .map(|p| p.stats_buffer());
-        if plants.is_some() {
-            stats.plants = Some(Default::default());
-        }
-        let trees = self
-            .grass
-            .as_ref()
-            .and_then(|g| g.trees.as_ref())
-            .filter(|_| self.features.has(Feature::Trees))
-            .map(|p| p.stats_buffer());
-        if trees.is_some() {
-            stats.trees = Some(Default::default());
-        }
+            .map_or([None, None], |g| [g.plants.as_ref(), g.trees.as_ref()])
+            .map(|layer| {
+                layer
+                    .filter(|p| self.features.has(p.layer().feature()))
+                    .map(|p| p.stats_buffer())
+            });
+        stats.plants = plants.map(|_| Default::default());
+        stats.trees = trees.map(|_| Default::default());
         self.readback.record(
             encoder,
             &self.timer,

@@ -283,13 +283,7 @@ impl Renderer {
             };
             let (h0, h1) = self.service.height_range(id);
             let (z0, z1) = (f64::from(h0), f64::from(h1) + tallest);
-            let boxed = |b: crate::world::Bounds| {
-                let min = glam::DVec3::new(b.min.x, b.min.y, z0) - eye;
-                let max = glam::DVec3::new(b.max.x, b.max.y, z1) - eye;
-                let near = glam::DVec3::ZERO.clamp(min, max).length();
-                let far = min.abs().max(max.abs()).length();
-                (min, max, near, far)
-            };
+            let boxed = |b| eye_box(b, [z0, z1], eye);
             if boxed(pyramid.bounds(id)).2 >= outer {
                 continue;
             }
@@ -315,21 +309,8 @@ impl Renderer {
                     if !view.frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
                         continue;
                     }
-                    let texel = (b.min - src_bounds.min) / src_cell;
-                    far.push((
-                        near,
-                        PlantJob {
-                            origin: [(b.min.x - eye.x) as f32, (b.min.y - eye.y) as f32],
-                            texel: [texel.x as f32, texel.y as f32],
-                            cell: src_cell as f32,
-                            layer: slot,
-                            tile_x: x,
-                            tile_y: y,
-                            far: 1,
-                            cells: 0,
-                            pad: [0; 2],
-                        },
-                    ));
+                    let job = job_reading(sub, b, (src_bounds, src_cell, slot), eye);
+                    far.push((near, PlantJob { far: 1, ..job }));
                 }
             }
         }
@@ -387,11 +368,7 @@ impl Renderer {
             };
             let (h0, h1) = self.service.height_range(id);
             let (z0, z1) = (f64::from(h0), f64::from(h1) + tallest);
-            let boxed = |b: crate::world::Bounds| {
-                let min = glam::DVec3::new(b.min.x, b.min.y, z0) - eye;
-                let max = glam::DVec3::new(b.max.x, b.max.y, z1) - eye;
-                (min, max, glam::DVec3::ZERO.clamp(min, max).length())
-            };
+            let boxed = |b| eye_box(b, [z0, z1], eye);
             if boxed(pyramid.bounds(id)).2 >= outer {
                 continue;
             }
@@ -404,25 +381,12 @@ impl Renderer {
                 for x in id.x * k..(id.x + 1) * k {
                     let sub = TileId::new(level, x, y);
                     let b = pyramid.bounds(sub);
-                    let (min, max, near) = boxed(b);
+                    let (min, max, near, _) = boxed(b);
                     if near >= outer || !view.frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
                         continue;
                     }
-                    let texel = (b.min - src_bounds.min) / src_cell;
-                    jobs.push((
-                        near,
-                        PlantJob {
-                            origin: [(b.min.x - eye.x) as f32, (b.min.y - eye.y) as f32],
-                            texel: [texel.x as f32, texel.y as f32],
-                            cell: src_cell as f32,
-                            layer: slot,
-                            tile_x: x,
-                            tile_y: y,
-                            far: 0,
-                            cells,
-                            pad: [0; 2],
-                        },
-                    ));
+                    let job = job_reading(sub, b, (src_bounds, src_cell, slot), eye);
+                    jobs.push((near, PlantJob { cells, ..job }));
                 }
             }
         }
@@ -431,5 +395,41 @@ impl Renderer {
             .map(|j| j.1)
             .take(crate::plants::renderer::MAX_JOBS as usize)
             .collect()
+    }
+}
+
+/// The box of ground `b` between heights `z` relative to `eye`: its corners, and the nearest and
+/// farthest distance of any of its points from the eye.
+fn eye_box(
+    b: crate::world::Bounds,
+    [z0, z1]: [f64; 2],
+    eye: glam::DVec3,
+) -> (glam::DVec3, glam::DVec3, f64, f64) {
+    let min = glam::DVec3::new(b.min.x, b.min.y, z0) - eye;
+    let max = glam::DVec3::new(b.max.x, b.max.y, z1) - eye;
+    let near = glam::DVec3::ZERO.clamp(min, max).length();
+    let far = min.abs().max(max.abs()).length();
+    (min, max, near, far)
+}
+
+/// A plant job over tile `id` (bounds `b`) read from the data tile of bounds, cell size and
+/// atlas slot `src`: a near job of the grid's size (`far` and `cells` 0), for the caller to set.
+fn job_reading(
+    id: TileId,
+    b: crate::world::Bounds,
+    (src_bounds, src_cell, slot): (crate::world::Bounds, f64, u32),
+    eye: glam::DVec3,
+) -> PlantJob {
+    let texel = (b.min - src_bounds.min) / src_cell;
+    PlantJob {
+        origin: [(b.min.x - eye.x) as f32, (b.min.y - eye.y) as f32],
+        texel: [texel.x as f32, texel.y as f32],
+        cell: src_cell as f32,
+        layer: slot,
+        tile_x: id.x,
+        tile_y: id.y,
+        far: 0,
+        cells: 0,
+        pad: [0; 2],
     }
 }

@@ -459,6 +459,15 @@ impl FlySummary {
     /// Summarises the frames of a fly-through.
     pub fn of(frames: &[FrameRecord]) -> Self {
         let series = |f: &dyn Fn(&FrameRecord) -> f64| frames.iter().map(f).collect::<Vec<f64>>();
+        // A plant layer's figure over the frames that drew the layer.
+        let layer = |f: &dyn Fn(&FrameRecord) -> Option<u32>| {
+            Summary::of(
+                &frames
+                    .iter()
+                    .filter_map(|r| f(r).map(f64::from))
+                    .collect::<Vec<_>>(),
+            )
+        };
         let mut gpu_ms = BTreeMap::new();
         let passes: std::collections::BTreeSet<&String> =
             frames.iter().flat_map(|f| f.gpu_ms.keys()).collect();
@@ -492,30 +501,10 @@ impl FlySummary {
             grass_drawn_high: Summary::of(&series(&|f| f64::from(f.grass.drawn[0]))),
             grass_drawn_low: Summary::of(&series(&|f| f64::from(f.grass.drawn[1]))),
             coverage: Summary::default(),
-            plants_drawn: Summary::of(
-                &frames
-                    .iter()
-                    .filter_map(|f| f.plants.map(|p| f64::from(p.drawn)))
-                    .collect::<Vec<_>>(),
-            ),
-            plants_overflow: Summary::of(
-                &frames
-                    .iter()
-                    .filter_map(|f| f.plants.map(|p| f64::from(p.overflow)))
-                    .collect::<Vec<_>>(),
-            ),
-            trees_drawn: Summary::of(
-                &frames
-                    .iter()
-                    .filter_map(|f| f.trees.map(|p| f64::from(p.drawn)))
-                    .collect::<Vec<_>>(),
-            ),
-            trees_overflow: Summary::of(
-                &frames
-                    .iter()
-                    .filter_map(|f| f.trees.map(|p| f64::from(p.overflow)))
-                    .collect::<Vec<_>>(),
-            ),
+            plants_drawn: layer(&|f| f.plants.map(|p| p.drawn)),
+            plants_overflow: layer(&|f| f.plants.map(|p| p.overflow)),
+            trees_drawn: layer(&|f| f.trees.map(|p| p.drawn)),
+            trees_overflow: layer(&|f| f.trees.map(|p| p.overflow)),
         }
     }
 }
