@@ -47,7 +47,8 @@ struct PlantFrame {
     sun_color: vec4<f32>,
     sky_color: vec4<f32>,
     horizon_color: vec4<f32>,
-    // x: feature bits, y: 1 where the cards are billboards (the trees' layer)
+    // x: feature bits, y: 1 where the cards are billboards (the trees' layer), z: 1 when drawing
+    // a shadow map (billboards turned to the sun; view_proj is a cascade's)
     flags: vec4<u32>,
     wind: array<PlantWind, 8>,
     // Per type: x the texture layer of its meshes, y of its card, z its index among the
@@ -193,7 +194,8 @@ fn plant_vertex(vi: u32, ii: u32) -> VertexOut {
             out.clip = vec4<f32>(0.0);
             return out;
         }
-        let to_eye = -inst.pos.xy;
+        // Toward the camera, or in a shadow map toward the sun (its silhouette is the shadow).
+        let to_eye = select(-inst.pos.xy, frame.sun_dir.xy, frame.flags.z != 0u);
         if dot(to_eye, to_eye) > 1e-6 {
             let d = normalize(to_eye);
             yaw = atan2(d.x, -d.y);
@@ -335,6 +337,31 @@ fn vs_plant_far(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32
 fn fs_plant_far(in: FarOut) -> @location(0) vec4<f32> {
     let tex = cut_out(in.uv, in.layer, in.misc.x, in.clip.xy);
     return finish(in.color * tex.rgb, in.misc.y, tex.a);
+}
+
+// The trees' depth in a shadow map's cascade (src/plants/shadow.rs): the same bent vertices,
+// the same cut-out and cross-fade, no colour.
+struct ShadowOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+    @location(1) fade: f32,
+    @location(2) @interpolate(flat) layer: u32,
+}
+
+@vertex
+fn vs_plant_shadow(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> ShadowOut {
+    let v = plant_vertex(vi, ii);
+    var out: ShadowOut;
+    out.clip = v.clip;
+    out.uv = v.uv;
+    out.fade = v.misc.y;
+    out.layer = v.layer;
+    return out;
+}
+
+@fragment
+fn fs_plant_shadow(in: ShadowOut) {
+    _ = cut_out(in.uv, in.layer, in.fade, in.clip.xy);
 }
 
 // The bending of test vertices, for the comparison with the CPU mirror: probe i bends vertex i

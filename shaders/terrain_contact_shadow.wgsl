@@ -6,6 +6,10 @@
 // factors, per pixel in a compute pass over the target (1 where unshadowed, and beyond the
 // fade distance without a march), then a full-screen pass that multiplies the colour target by
 // them (blending). CPU mirror: src/terrain/contact_shadow_cpu.rs.
+//
+// The same factors take the trees' shadows from their cascaded shadow map (src/plants/shadow.rs,
+// drawn by the trees' shadow casters): the pixel is as shaded as the larger of its contact
+// shadow and its tree shadow. CPU mirror of that lookup: ShadowUniform::sun_seen.
 
 #include "shared/full_screen.wgsl"
 
@@ -30,6 +34,20 @@ struct Params {
 // The factors: written by the compute pass, read by the full-screen pass.
 @group(0) @binding(2) var factors_out: texture_storage_2d<r32float, write>;
 @group(0) @binding(3) var factors: texture_2d<f32>;
+
+// Mirrors ShadowUniform in src/plants/shadow.rs.
+struct TreeShadow {
+    matrices: array<mat4x4<f32>, 4>,
+    far: vec4<f32>,
+    bias: vec4<f32>,
+    // x: cascades (0: none this frame), y: the map's edge in texels
+    info: vec4<u32>,
+    // x: where the shadows start to fade (m), y: where they are gone
+    fade: vec4<f32>,
+}
+
+@group(0) @binding(4) var tree_map: texture_depth_2d_array;
+@group(0) @binding(5) var<uniform> tree_shadow: TreeShadow;
 
 // The camera-relative point under pixel centre `px` at depth `d`.
 fn unproject(px: vec2<f32>, d: f32) -> vec3<f32> {
@@ -73,7 +91,51 @@ fn sun_seen(px: vec2<i32>, p: vec3<f32>) -> f32 {
     return 1.0;
 }
 
-// The colour's factor at pixel px: 1 in full sun, the shade in full contact shadow.
+// The sun's share at the camera-relative point p under the trees: 1 in full sun, 0 where every
+// texel of the lookup (the tent of three bilinear taps: 4 x 4 texels weighted 1-f, 1, 1, f) in
+// the cascade of its distance is nearer the sun. As ShadowUniform::sun_seen.
+fn tree_sun_seen(p: vec3<f32>) -> f32 {
+    let count = tree_shadow.info.x;
+    if count == 0u {
+        return 1.0;
+    }
+    let dist = length(p);
+    if dist >= tree_shadow.fade.y {
+        return 1.0;
+    }
+    var c = 0u;
+    while c + 1u < count && dist >= tree_shadow.far[c] {
+        c += 1u;
+    }
+    let s = tree_shadow.matrices[c] * vec4<f32>(p, 1.0);
+    let size = i32(tree_shadow.info.y);
+    let t = vec2<f32>((s.x * 0.5 + 0.5) * f32(size) - 0.5, (0.5 - s.y * 0.5) * f32(size) - 0.5);
+    let reference = s.z + tree_shadow.bias[c];
+    let i = floor(t);
+    let f = t - i;
+    let wx = array<f32, 4>(1.0 - f.x, 1.0, 1.0, f.x);
+    let wy = array<f32, 4>(1.0 - f.y, 1.0, 1.0, f.y);
+    var lit = 0.0;
+    for (var j = 0; j < 4; j++) {
+        for (var k = 0; k < 4; k++) {
+            let x = i32(i.x) - 1 + k;
+            let y = i32(i.y) - 1 + j;
+            var texel = 0.0;
+            if x >= 0 && y >= 0 && x < size && y < size {
+                texel = textureLoad(tree_map, vec2<i32>(x, y), c, 0);
+            }
+            if reference >= texel {
+                lit += wx[k] * wy[j];
+            }
+        }
+    }
+    lit /= 9.0;
+    let fade = clamp((dist - tree_shadow.fade.x) / max(tree_shadow.fade.y - tree_shadow.fade.x, 1e-3), 0.0, 1.0);
+    return lit + (1.0 - lit) * fade;
+}
+
+// The colour's factor at pixel px: 1 in full sun, the shade in full shadow (the larger of the
+// contact shadow, with `params.march.w` steps, none at 0, and the trees' shadow).
 fn factor_at(px: vec2<i32>) -> f32 {
     let d = textureLoad(depth, px, 0);
     if d <= 0.0 {
@@ -81,11 +143,13 @@ fn factor_at(px: vec2<i32>) -> f32 {
     }
     let p = unproject(vec2<f32>(px) + 0.5, d);
     let dist = length(p);
-    if dist >= params.size.z {
-        return 1.0;
+    var shadow = 0.0;
+    if dist < params.size.z && params.march.w > 0.0 {
+        let fade = 1.0 - smoothstep(params.size.w, params.size.z, dist);
+        shadow = (1.0 - sun_seen(px, p)) * fade;
     }
-    let fade = 1.0 - smoothstep(params.size.w, params.size.z, dist);
-    return mix(1.0, params.march.z, (1.0 - sun_seen(px, p)) * fade);
+    shadow = max(shadow, 1.0 - tree_sun_seen(p));
+    return mix(1.0, params.march.z, shadow);
 }
 
 @compute @workgroup_size(8, 8)

@@ -34,11 +34,14 @@ pub enum Feature {
     /// Trees: the world's plant types of at least [`crate::world::TREE_MIN_HEIGHT_M`], placed
     /// on a coarser grid out to the fog.
     Trees,
+    /// The trees' sun shadows on everything near the camera, from a cascaded shadow map
+    /// ([`crate::plants::shadow`]).
+    TreeShadows,
 }
 
 impl Feature {
     /// Every feature, in bit order.
-    pub const ALL: [Feature; 12] = [
+    pub const ALL: [Feature; 13] = [
         Feature::WindSources,
         Feature::Interaction,
         Feature::DetailBending,
@@ -51,6 +54,7 @@ impl Feature {
         Feature::Shadows,
         Feature::Plants,
         Feature::Trees,
+        Feature::TreeShadows,
     ];
 
     /// The bit of this feature in [`Features::bits`] (and in the shaders).
@@ -73,6 +77,7 @@ impl Feature {
             Feature::Shadows => "shadows",
             Feature::Plants => "plants",
             Feature::Trees => "trees",
+            Feature::TreeShadows => "tree-shadows",
         }
     }
 }

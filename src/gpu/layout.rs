@@ -123,6 +123,11 @@ pub fn texture_depth_2d() -> Binding {
     texture(TextureSampleType::Depth, TextureViewDimension::D2)
 }
 
+/// `texture_depth_2d_array`.
+pub fn texture_depth_2d_array() -> Binding {
+    texture(TextureSampleType::Depth, TextureViewDimension::D2Array)
+}
+
 /// `texture_storage_2d<format, write>`.
 pub fn texture_storage_2d(format: wgpu::TextureFormat) -> Binding {
     BindingType::StorageTexture {

@@ -90,7 +90,7 @@ pub struct RenderPipelineBuilder<'a> {
     label: &'a str,
     module: &'a ShaderModule,
     entries: (&'a str, &'a str),
-    target: wgpu::ColorTargetState,
+    target: Option<wgpu::ColorTargetState>,
     layouts: &'a [&'a BindGroupLayout],
     constants: (Constants<'a>, Constants<'a>),
     primitive: wgpu::PrimitiveState,
@@ -111,7 +111,7 @@ pub fn render_pipeline<'a>(
         label,
         module,
         entries: (vertex, fragment),
-        target: target.into(),
+        target: Some(target.into()),
         layouts: &[],
         constants: (&[], &[]),
         primitive: Default::default(),
@@ -130,6 +130,14 @@ impl<'a> RenderPipelineBuilder<'a> {
     pub fn constants(self, vertex: Constants<'a>, fragment: Constants<'a>) -> Self {
         Self {
             constants: (vertex, fragment),
+            ..self
+        }
+    }
+
+    /// No colour target: a depth-only pass (a shadow map).
+    pub fn depth_only(self) -> Self {
+        Self {
+            target: None,
             ..self
         }
     }
@@ -192,6 +200,7 @@ impl<'a> RenderPipelineBuilder<'a> {
     /// The pipeline.
     pub fn build(self, device: &wgpu::Device) -> wgpu::RenderPipeline {
         let layout = pipeline_layout(device, self.label, self.layouts);
+        let targets: Vec<Option<wgpu::ColorTargetState>> = self.target.into_iter().map(Some).collect();
         let options = |constants| wgpu::PipelineCompilationOptions {
             constants,
             ..Default::default()
@@ -212,7 +221,7 @@ impl<'a> RenderPipelineBuilder<'a> {
                 module: self.module,
                 entry_point: Some(self.entries.1),
                 compilation_options: options(self.constants.1),
-                targets: &[Some(self.target)],
+                targets: &targets,
             }),
             multiview_mask: None,
             cache: None,

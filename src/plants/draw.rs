@@ -27,6 +27,20 @@ impl DrawPass {
         region_bytes: u64,
         samples: u32,
     ) -> Self {
+        let (layout, region_layout) = Self::layouts(device, region_bytes);
+        let pipelines = Self::pipelines(device, targets, &layout, &region_layout, samples);
+        Self {
+            layout,
+            region_layout,
+            pipelines,
+        }
+    }
+
+    /// Group 0's and group 1's layouts, for regions of `region_bytes`.
+    fn layouts(
+        device: &wgpu::Device,
+        region_bytes: u64,
+    ) -> (wgpu::BindGroupLayout, wgpu::BindGroupLayout) {
         use wgpu::ShaderStages as S;
         let layout = bind_group_layout(
             device,
@@ -56,7 +70,31 @@ impl DrawPass {
                 [storage_buffer_read_only().dynamic().min_size(region_bytes)],
             ),
         );
-        let pipelines = Self::pipelines(device, targets, &layout, &region_layout, samples);
+        (layout, region_layout)
+    }
+
+    /// The draw of a shadow caster: the same layouts, one depth-only pipeline for every level
+    /// (`vs_plant_shadow`, `fs_plant_shadow`) into a [`crate::plants::shadow::SHADOW_FORMAT`]
+    /// layer.
+    pub(crate) fn new_shadow(device: &wgpu::Device, region_bytes: u64) -> Self {
+        let (layout, region_layout) = Self::layouts(device, region_bytes);
+        let module = crate::shaders::module(device, "plants_draw.wgsl");
+        let pipelines = [(), ()].map(|_| {
+            render_pipeline(
+                "plants shadow draw",
+                &module,
+                ("vs_plant_shadow", "fs_plant_shadow"),
+                wgpu::TextureFormat::Rgba8Unorm,
+            )
+            .depth_only()
+            .layouts(&[&layout, &region_layout])
+            .depth(
+                crate::plants::shadow::SHADOW_FORMAT,
+                true,
+                wgpu::CompareFunction::Greater,
+            )
+            .build(device)
+        });
         Self {
             layout,
             region_layout,

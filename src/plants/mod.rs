@@ -10,6 +10,7 @@
 //!   [`place_cpu`].
 //! - `draw`: the indirect draws with the wind's bending and the shading
 //!   (`shaders/plants_draw.wgsl`); the bending mirrored in [`bend_cpu`].
+//! - [`shadow`]: the trees' cascaded shadow map (drawn by a caster instance of the stage).
 //!
 //! [`renderer`] holds the instance pool and records the stages after the grass.
 
@@ -23,6 +24,7 @@ pub mod place_cpu;
 pub mod recipe;
 pub mod renderer;
 pub mod set;
+pub mod shadow;
 
 pub use card::{crossed_cards, render_card};
 pub use gltf::{

@@ -231,6 +231,9 @@ pub struct PlantRenderer {
     args: wgpu::Buffer,
     frame: PlantFrame,
     frame_buffer: wgpu::Buffer,
+    /// A shadow caster's frame record and draw bind group per cascade (empty for a stage
+    /// that draws into the frame).
+    casts: Vec<(wgpu::Buffer, wgpu::BindGroup)>,
     /// The meshes (bound in `draw_group`; kept with the stage that owns them).
     _vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
@@ -331,6 +334,60 @@ impl PlantRenderer {
         tile_m: f32,
         settings: PlantSettings,
         wind: PlantWindBindings<'_>,
+    ) -> Self {
+        Self::build(
+            device, queue, manifest, set, layer, atlas, targets, hiz, tile_m, settings, wind, 0,
+        )
+    }
+
+    /// A stage that draws the trees' depth into the `cascades` layers of a shadow map
+    /// ([`crate::plants::shadow`]) instead of into the frame: the trees' placement with
+    /// `settings`, culled by the cascades' box ([`PlantRenderer::set_shadow_frame`]) and not
+    /// by the terrain's Hi-Z, and their draw with the cards turned to the sun, depth only.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new_caster(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        manifest: &Manifest,
+        set: &PlantSet,
+        atlas: &TileAtlas,
+        targets: &Targets,
+        hiz: &HiZPyramid,
+        tile_m: f32,
+        settings: PlantSettings,
+        wind: PlantWindBindings<'_>,
+        cascades: u32,
+    ) -> Self {
+        Self::build(
+            device,
+            queue,
+            manifest,
+            set,
+            PlantLayer::Trees,
+            atlas,
+            targets,
+            hiz,
+            tile_m,
+            settings,
+            wind,
+            cascades.max(1),
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn build(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        manifest: &Manifest,
+        set: &PlantSet,
+        layer: PlantLayer,
+        atlas: &TileAtlas,
+        targets: &Targets,
+        hiz: &HiZPyramid,
+        tile_m: f32,
+        settings: PlantSettings,
+        wind: PlantWindBindings<'_>,
+        cascades: u32,
     ) -> Self {
         use wgpu::BufferUsages as U;
         let ids = layer.types(manifest);
@@ -495,7 +552,7 @@ impl PlantRenderer {
             flags: [
                 crate::features::Features::all().bits(),
                 u32::from(layer == PlantLayer::Trees),
-                0,
+                u32::from(cascades > 0),
                 0,
             ],
             wind: wind_table,
@@ -508,7 +565,11 @@ impl PlantRenderer {
         );
 
         let place_pass = PlacePass::new(device);
-        let draw_pass = DrawPass::new(device, targets, region_bytes, 1);
+        let draw_pass = if cascades > 0 {
+            DrawPass::new_shadow(device, region_bytes)
+        } else {
+            DrawPass::new(device, targets, region_bytes, 1)
+        };
         let atlas_views = (array_view(&atlas.heights), array_view(&atlas.grass));
         let place_group = Self::place_group(
             device,
@@ -518,21 +579,35 @@ impl PlantRenderer {
             hiz,
             [&instances, &counters, &stats, &args],
         );
-        let draw_group = bind_group(
-            device,
-            "plants draw",
-            &draw_pass.layout,
-            [
-                frame_buffer.as_entire_binding(),
-                vertices.as_entire_binding(),
-                wind.lookup.as_entire_binding(),
-                wind.cells.as_entire_binding(),
-                view(&texture_view),
-                wgpu::BindingResource::Sampler(&sampler),
-                frame_buffer.as_entire_binding(),
-                wind.sway.as_entire_binding(),
-            ],
-        );
+        let draw_group_of = |frame: &wgpu::Buffer| {
+            bind_group(
+                device,
+                "plants draw",
+                &draw_pass.layout,
+                [
+                    frame.as_entire_binding(),
+                    vertices.as_entire_binding(),
+                    wind.lookup.as_entire_binding(),
+                    wind.cells.as_entire_binding(),
+                    view(&texture_view),
+                    wgpu::BindingResource::Sampler(&sampler),
+                    frame.as_entire_binding(),
+                    wind.sway.as_entire_binding(),
+                ],
+            )
+        };
+        let draw_group = draw_group_of(&frame_buffer);
+        let casts = (0..cascades)
+            .map(|_| {
+                let b = buffer(
+                    "plants shadow frame",
+                    std::mem::size_of::<PlantFrame>() as u64,
+                    U::UNIFORM | U::STORAGE | U::COPY_DST,
+                );
+                let g = draw_group_of(&b);
+                (b, g)
+            })
+            .collect();
         // Every byte of the pool written once, so that its memory is committed up front (a
         // driver may commit pages on first use, which would look like growth later).
         let mut encoder = device.create_command_encoder(&Default::default());
@@ -559,6 +634,7 @@ impl PlantRenderer {
             args,
             frame,
             frame_buffer,
+            casts,
             _vertices: vertices,
             indices,
             place_group,
@@ -615,7 +691,7 @@ impl PlantRenderer {
 
     /// Draws into targets of `samples` samples a pixel from now on.
     pub fn set_samples(&mut self, device: &wgpu::Device, samples: u32) {
-        if samples == self.samples {
+        if samples == self.samples || !self.casts.is_empty() {
             return;
         }
         self.draw_pass.pipelines = DrawPass::pipelines(
@@ -681,6 +757,111 @@ impl PlantRenderer {
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&self.frame));
     }
 
+    /// Sets a shadow caster's frame ([`PlantRenderer::new_caster`]): time, features, the
+    /// camera's world position, the box of the cascades (`caster_box`, camera-relative, whose
+    /// sides and sun-facing side cull the trees) and each cascade's view-projection.
+    pub fn set_shadow_frame(
+        &mut self,
+        queue: &wgpu::Queue,
+        time_s: f64,
+        features: crate::features::Features,
+        camera_world: glam::DVec3,
+        caster_box: Mat4,
+        cascades: &[crate::plants::shadow::Cascade],
+    ) {
+        // No occlusion test: a near plane no orthographic point is beyond.
+        self.set_frame(
+            queue,
+            time_s,
+            features,
+            camera_world,
+            caster_box,
+            &Frustum::from_view_proj(caster_box),
+            f32::MAX,
+        );
+        for ((buffer, _), c) in self.casts.iter().zip(cascades) {
+            let frame = PlantFrame {
+                view_proj: c.view_proj.to_cols_array_2d(),
+                ..self.frame
+            };
+            queue.write_buffer(buffer, 0, bytemuck::bytes_of(&frame));
+        }
+    }
+
+    /// Records a shadow caster's placement on `jobs` and its draws into each of `cascades`
+    /// layers of `map` (cleared here).
+    pub fn record_shadow(
+        &self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        jobs: &[PlantJob],
+        map: &crate::plants::shadow::TreeShadowMap,
+        cascades: usize,
+        timer: &mut GpuTimer,
+    ) {
+        self.record_place(queue, encoder, jobs, timer, "tree_shadows_place");
+        for (i, (_, group)) in self.casts.iter().enumerate().take(cascades) {
+            let mut pass = crate::gpu::pass::depth_pass(
+                encoder,
+                "tree shadows draw",
+                map.layer(i),
+                timer.render_pass("tree_shadows_draw"),
+            );
+            self.record_draws(&mut pass, group);
+        }
+    }
+
+    /// Records the placement of `jobs` (see [`PlantRenderer::record`]).
+    fn record_place(
+        &self,
+        queue: &wgpu::Queue,
+        encoder: &mut wgpu::CommandEncoder,
+        jobs: &[PlantJob],
+        timer: &mut GpuTimer,
+        name: &str,
+    ) {
+        encoder.clear_buffer(&self.stats, 0, None);
+        encoder.clear_buffer(&self.counters, 0, None);
+        let jobs = &jobs[..jobs.len().min(MAX_JOBS as usize)];
+        if !jobs.is_empty() {
+            queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(jobs));
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("plants place"),
+            timestamp_writes: timer.compute_pass(name),
+        });
+        pass.set_bind_group(0, &self.place_group, &[]);
+        if !jobs.is_empty() {
+            let n = self.params.grid[0];
+            pass.set_pipeline(&self.place_pass.place);
+            pass.dispatch_workgroups(n.div_ceil(8), n.div_ceil(8), jobs.len() as u32);
+        }
+        pass.set_pipeline(&self.place_pass.finalize);
+        pass.dispatch_workgroups(1, 1, 1);
+    }
+
+    /// Records the indirect draw of every (type, level) region with the draw bind group `group`.
+    fn record_draws(&self, pass: &mut wgpu::RenderPass<'_>, group: &wgpu::BindGroup) {
+        pass.set_bind_group(0, group, &[]);
+        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+        let region_bytes = u64::from(self.settings.capacity) * INSTANCE_BYTES;
+        // The full meshes first, then the rest: one pipeline switch.
+        for (pipeline, levels) in self.draw_pass.pipelines.iter().zip([0..1, 1..LEVELS]) {
+            pass.set_pipeline(pipeline);
+            for t in 0..self.types as usize {
+                for level in levels.clone() {
+                    let region = t * LEVELS + level;
+                    pass.set_bind_group(
+                        1,
+                        &self.region_group,
+                        &[(region as u64 * region_bytes) as u32],
+                    );
+                    pass.draw_indexed_indirect(&self.args, region as u64 * 20);
+                }
+            }
+        }
+    }
+
     /// The jobs of a frame: one per grass tile (a high-LOD tile's near job covers part of the
     /// same tile and is left out), then the far jobs, at most [`MAX_JOBS`] in all (the nearest
     /// first: the far jobs come sorted by distance).
@@ -705,26 +886,7 @@ impl PlantRenderer {
         depth: &wgpu::TextureView,
         timer: &mut GpuTimer,
     ) {
-        encoder.clear_buffer(&self.stats, 0, None);
-        encoder.clear_buffer(&self.counters, 0, None);
-        let jobs = &jobs[..jobs.len().min(MAX_JOBS as usize)];
-        if !jobs.is_empty() {
-            queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(jobs));
-        }
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("plants place"),
-                timestamp_writes: timer.compute_pass(self.layer.pass_names()[0]),
-            });
-            pass.set_bind_group(0, &self.place_group, &[]);
-            if !jobs.is_empty() {
-                let n = self.params.grid[0];
-                pass.set_pipeline(&self.place_pass.place);
-                pass.dispatch_workgroups(n.div_ceil(8), n.div_ceil(8), jobs.len() as u32);
-            }
-            pass.set_pipeline(&self.place_pass.finalize);
-            pass.dispatch_workgroups(1, 1, 1);
-        }
+        self.record_place(queue, encoder, jobs, timer, self.layer.pass_names()[0]);
         let mut pass = render_pass(
             encoder,
             "plants draw",
@@ -732,24 +894,7 @@ impl PlantRenderer {
             Some((depth, wgpu::LoadOp::Load)),
             timer.render_pass(self.layer.pass_names()[1]),
         );
-        pass.set_bind_group(0, &self.draw_group, &[]);
-        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
-        let region_bytes = u64::from(self.settings.capacity) * INSTANCE_BYTES;
-        // The full meshes first, then the rest: one pipeline switch.
-        for (pipeline, levels) in self.draw_pass.pipelines.iter().zip([0..1, 1..LEVELS]) {
-            pass.set_pipeline(pipeline);
-            for t in 0..self.types as usize {
-                for level in levels.clone() {
-                    let region = t * LEVELS + level;
-                    pass.set_bind_group(
-                        1,
-                        &self.region_group,
-                        &[(region as u64 * region_bytes) as u32],
-                    );
-                    pass.draw_indexed_indirect(&self.args, region as u64 * 20);
-                }
-            }
-        }
+        self.record_draws(&mut pass, &self.draw_group);
     }
 
     /// The buffer of the frame's counters (8 u32, `counter::*`), for a readback.

@@ -45,6 +45,8 @@ pub struct RendererConfig {
     /// The trees' settings (`None`: [`crate::plants::PlantSettings::trees`] for the world's
     /// grass tiles and fog; the seed follows the grass's).
     pub trees: Option<crate::plants::PlantSettings>,
+    /// The trees' shadow map (`None`: no tree shadows, and no map's memory).
+    pub tree_shadows: Option<crate::plants::shadow::TreeShadows>,
 }
 
 /// The grass's own settings, the same for every world (what follows from the world, like the
@@ -169,6 +171,7 @@ impl RendererConfig {
             aa: AntiAliasing::default(),
             plants: Default::default(),
             trees: None,
+            tree_shadows: Some(Default::default()),
         }
     }
 
@@ -285,6 +288,11 @@ impl RendererConfig {
                     format!("{} to 64 m", crate::plants::PLANT_CELL_M),
                 ));
             }
+        }
+        if let Some(s) = &self.tree_shadows
+            && let Err(range) = s.validate()
+        {
+            return Err(ConfigError::new("tree_shadows", s, range));
         }
         self.grass.validate()
     }

@@ -87,6 +87,8 @@ struct GrassStage {
     plants: Option<crate::plants::PlantRenderer>,
     /// The trees (a world with tree types), out to the fog.
     trees: Option<crate::plants::PlantRenderer>,
+    /// The trees that cast into the shadow map (with the trees and tree shadows).
+    casters: Option<crate::plants::PlantRenderer>,
 }
 
 /// What [`Renderer::prepare`] worked out for [`Renderer::record`].
@@ -100,6 +102,9 @@ struct Prepared {
     plant_jobs: Vec<crate::plants::place_cpu::PlantJob>,
     /// The trees' jobs.
     tree_jobs: Vec<crate::plants::place_cpu::PlantJob>,
+    /// The shadow casters' jobs, with the frame's cascades (none without tree shadows).
+    caster_jobs: Vec<crate::plants::place_cpu::PlantJob>,
+    cascades: usize,
     /// The atlas slots the frame reads and the tiles it expects there (terrain draws and
     /// grass jobs), checked against the atlas on the GPU.
     reads: Vec<(u32, TileId)>,
@@ -117,6 +122,8 @@ pub struct Renderer {
     derive: DeriveStage,
     terrain: TerrainRenderer,
     contact_shadows: crate::terrain::contact_shadow::ContactShadowPass,
+    /// The trees' shadow map (a texel, never drawn, without tree shadows).
+    tree_shadow_map: crate::plants::shadow::TreeShadowMap,
     lod: TerrainLod,
     rings: Option<GrassRings>,
     grass: Option<GrassStage>,
@@ -311,12 +318,37 @@ impl Renderer {
                         })
                     },
                 );
+                // The shadow casters: the trees' own placement within the shadows' reach (and a
+                // little beyond, for the trees just outside that cast into it).
+                let casters = match (&set, &trees, &config.tree_shadows) {
+                    (Some(set), Some(t), Some(shadows)) => {
+                        Some(crate::plants::PlantRenderer::new_caster(
+                            device,
+                            queue,
+                            &world.manifest,
+                            set,
+                            &atlas,
+                            &targets,
+                            &renderer.hiz,
+                            settings.tile_m,
+                            crate::plants::PlantSettings {
+                                capacity: crate::plants::shadow::CASTER_CAPACITY,
+                                view_m: [shadows.distance_m + 20.0, shadows.distance_m + 40.0],
+                                ..*t.settings()
+                            },
+                            wind_bindings,
+                            shadows.cascades,
+                        ))
+                    }
+                    _ => None,
+                };
                 Some(GrassStage {
                     renderer,
                     wind,
                     sway,
                     plants,
                     trees,
+                    casters,
                 })
             }
             None => None,
@@ -329,6 +361,12 @@ impl Renderer {
             .then(|| Taa::new(device, &targets, TaaSettings::default()));
         let msaa = (config.aa == AntiAliasing::Msaa && grass.is_some())
             .then(|| Msaa::new(device, &targets));
+        let tree_shadow_map = crate::plants::shadow::TreeShadowMap::new(
+            device,
+            config
+                .tree_shadows
+                .filter(|_| grass.as_ref().is_some_and(|g| g.casters.is_some())),
+        );
         let mut grass = grass;
         if let (Some(g), Some(_)) = (&mut grass, &msaa) {
             g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
@@ -352,6 +390,7 @@ impl Renderer {
             derive,
             terrain,
             contact_shadows,
+            tree_shadow_map,
             targets,
             features: config.features,
             timer,
@@ -635,12 +674,36 @@ impl Renderer {
             )
             .chain(roots.into_iter().flatten())
             .collect();
+        let sun = crate::terrain::sun_direction(&self.world.manifest.sky);
         self.contact_shadows.prepare(
             queue,
             view.view_proj,
-            crate::terrain::sun_direction(&self.world.manifest.sky),
+            sun,
             (self.targets.width, self.targets.height),
+            self.features.has(Feature::Shadows),
         );
+        // The trees' shadows: the cascades of this view, the casters in their box.
+        let shadows = self.tree_shadow_map.settings().copied().filter(|_| {
+            self.features.has(Feature::Trees) && self.features.has(Feature::TreeShadows)
+        });
+        let (cascades, caster_box) = match shadows {
+            Some(s) => {
+                let c = s.cascades(camera.position, view.view_proj.inverse(), sun);
+                let b = crate::plants::shadow::TreeShadows::caster_box(&c, sun);
+                (c, b)
+            }
+            None => (Vec::new(), glam::Mat4::IDENTITY),
+        };
+        let caster_jobs = match shadows {
+            Some(s) => self.caster_jobs(
+                camera.position,
+                &crate::lod::Frustum::from_view_proj(caster_box),
+                f64::from(s.distance_m),
+            ),
+            None => Vec::new(),
+        };
+        self.tree_shadow_map
+            .set(queue, shadows.is_some().then_some(cascades.as_slice()));
         if let Some(g) = &mut self.grass {
             let ambient_speed = g.wind.config().ambient_at(input.time_s).speed_mps as f32;
             g.renderer
@@ -663,6 +726,16 @@ impl Renderer {
                     camera.near_m,
                 );
             }
+            if let (Some(c), false) = (&mut g.casters, cascades.is_empty()) {
+                c.set_shadow_frame(
+                    queue,
+                    input.time_s,
+                    self.features,
+                    camera.position,
+                    caster_box,
+                    &cascades,
+                );
+            }
         }
         let high = sel.grass.iter().filter(|g| g.1 == Ring::High).count() as u32;
         self.prepared = Some(Prepared {
@@ -673,6 +746,8 @@ impl Renderer {
             grass_jobs,
             plant_jobs,
             tree_jobs,
+            caster_jobs,
+            cascades: cascades.len(),
             reads,
             stats: FrameStats {
                 frame: self.frame,
@@ -820,10 +895,28 @@ impl Renderer {
             msaa.record_resolve(encoder, color, depth, &mut self.timer);
         }
         let scene = if self.msaa.is_some() { color } else { scene };
-        // 7. Contact shadows: the grass's (and everything's) short shadows, from the depth.
-        if self.features.has(Feature::Shadows) {
-            self.contact_shadows
-                .record(&self.device, encoder, scene, depth, &mut self.timer);
+        // 7. Shadows: the trees' shadow map drawn, then the grass's (and everything's) short
+        // contact shadows from the depth and the trees' from the map, applied together.
+        let tree_shadows = frame.cascades > 0 && self.tree_shadow_map.active();
+        if tree_shadows && let Some(c) = self.grass.as_ref().and_then(|g| g.casters.as_ref()) {
+            c.record_shadow(
+                &self.queue,
+                encoder,
+                &frame.caster_jobs,
+                &self.tree_shadow_map,
+                frame.cascades,
+                &mut self.timer,
+            );
+        }
+        if self.features.has(Feature::Shadows) || tree_shadows {
+            self.contact_shadows.record(
+                &self.device,
+                encoder,
+                scene,
+                depth,
+                &self.tree_shadow_map,
+                &mut self.timer,
+            );
         }
         // 8. Temporal anti-aliasing: the frame against its history, into `color`.
         if let Some(taa) = &mut self.taa {

@@ -398,6 +398,70 @@ impl Renderer {
     }
 }
 
+impl Renderer {
+    /// The jobs of the trees' shadow casters: every grass-level tile within `distance` (and
+    /// the casters' margin) of `eye` whose box meets the cascades' box `frustum`, read from the
+    /// tile the terrain would draw it from, nearest first.
+    pub(super) fn caster_jobs(
+        &self,
+        eye: glam::DVec3,
+        frustum: &crate::lod::Frustum,
+        distance: f64,
+    ) -> Vec<PlantJob> {
+        let (Some(casters), Some(rings)) = (
+            self.grass.as_ref().and_then(|g| g.casters.as_ref()),
+            self.rings.as_ref(),
+        ) else {
+            return Vec::new();
+        };
+        let settings = casters.settings();
+        let pyramid = &self.world.manifest.pyramid;
+        let level = rings.settings.level;
+        let tile = pyramid.tile_size_m(level);
+        let per_tile = (tile as f32 / settings.cell_m).round().max(1.0) as u32;
+        let reach = distance + 40.0;
+        let tallest = self
+            .world
+            .manifest
+            .plant_types
+            .iter()
+            .filter(|t| t.is_tree())
+            .map(|t| f64::from(t.size_m[1]))
+            .fold(0.0, f64::max);
+        let origin = pyramid.bounds(TileId::new(level, 0, 0)).min;
+        let [cols, rows] = pyramid.tiles_at(level);
+        let range = |e: f64, o: f64, n: u32| {
+            let a = ((e - reach - o) / tile).floor().max(0.0) as u32;
+            let b = (((e + reach - o) / tile).floor().max(0.0) as u32).min(n.saturating_sub(1));
+            a..=b
+        };
+        let mut jobs: Vec<(f64, PlantJob)> = Vec::new();
+        for y in range(eye.y, origin.y, rows) {
+            for x in range(eye.x, origin.x, cols) {
+                let id = TileId::new(level, x, y);
+                let Some((src, slot)) = self.service.draw_source(id) else {
+                    continue;
+                };
+                let (h0, h1) = self.service.height_range(id);
+                let b = pyramid.bounds(id);
+                let (min, max, near, _) =
+                    eye_box(b, [f64::from(h0), f64::from(h1) + tallest], eye);
+                if near >= reach || !frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
+                    continue;
+                }
+                let src_info = (pyramid.bounds(src), pyramid.cell_size_m(src.level), slot);
+                let job = job_reading(id, b, src_info, eye);
+                jobs.push((near, PlantJob { cells: per_tile, ..job }));
+            }
+        }
+        jobs.sort_by(|a, b| a.0.total_cmp(&b.0));
+        jobs.into_iter()
+            .map(|j| j.1)
+            .take(crate::plants::renderer::MAX_JOBS as usize)
+            .collect()
+    }
+}
+
 /// The box of ground `b` between heights `z` relative to `eye`: its corners, and the nearest and
 /// farthest distance of any of its points from the eye.
 fn eye_box(

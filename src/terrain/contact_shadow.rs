@@ -110,12 +110,15 @@ impl ContactShadowPass {
         let compute_layout = bind_group_layout(
             device,
             "contact shadows",
-            &sequential(
+            &with_indices(
                 wgpu::ShaderStages::COMPUTE,
                 [
-                    uniform_buffer(),
-                    texture_depth_2d(),
-                    texture_storage_2d(FACTOR_FORMAT),
+                    (0, uniform_buffer()),
+                    (1, texture_depth_2d()),
+                    (2, texture_storage_2d(FACTOR_FORMAT)),
+                    // Binding 3 is the apply pass's; 4 and 5 the trees' shadow map.
+                    (4, texture_depth_2d_array()),
+                    (5, uniform_buffer()),
                 ],
             ),
         );
@@ -212,14 +215,21 @@ impl ContactShadowPass {
         &self.settings
     }
 
-    /// Writes the frame's camera (camera-relative `view_proj`), sun and target size.
+    /// Writes the frame's camera (camera-relative `view_proj`), sun and target size, and
+    /// whether the contact shadows are on (`contact`; off, the pass applies only the trees').
     pub fn prepare(
         &mut self,
         queue: &wgpu::Queue,
         view_proj: Mat4,
         sun_dir: Vec3,
         (width, height): (u32, u32),
+        contact: bool,
     ) {
+        self.params.march[3] = if contact {
+            self.settings.steps as f32
+        } else {
+            0.0
+        };
         self.params.view_proj = view_proj.to_cols_array_2d();
         self.params.inv_view_proj = view_proj.inverse().to_cols_array_2d();
         self.params.sun_dir = sun_dir.extend(0.0).to_array();
@@ -228,27 +238,31 @@ impl ContactShadowPass {
         queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&self.params));
     }
 
-    /// Records the passes: the factors found in `depth` (compute, `contact_shadows`), then
-    /// `color` multiplied by them (`contact_shadows_apply`). The compute pass's bind group is
-    /// made again only when the depth texture changes (or the targets are resized).
+    /// Records the passes: the factors found in `depth` and the trees' shadow `map`
+    /// (compute, `contact_shadows`), then `color` multiplied by them (`contact_shadows_apply`).
+    /// The compute pass's bind group is made again only when the depth texture changes (or
+    /// the targets are resized); `map` must be the same every frame.
     pub fn record(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
         depth: &wgpu::TextureView,
+        map: &crate::plants::shadow::TreeShadowMap,
         timer: &mut crate::gpu::GpuTimer,
     ) {
         let texture = depth.texture();
         let group = self.bound.get(texture, |depth| {
-            bind_group(
+            bind_group_with_indices(
                 device,
                 "contact shadows",
                 &self.compute_layout,
                 [
-                    self.buffer.as_entire_binding(),
-                    view_of(depth),
-                    view_of(&self.factors),
+                    (0, self.buffer.as_entire_binding()),
+                    (1, view_of(depth)),
+                    (2, view_of(&self.factors)),
+                    (4, view_of(map.view())),
+                    (5, map.buffer().as_entire_binding()),
                 ],
             )
         });

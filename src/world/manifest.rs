@@ -377,6 +377,8 @@ pub struct FeatureSwitches {
     pub plants: bool,
     /// Trees (the world's `[[plant_types]]` of at least [`TREE_MIN_HEIGHT_M`]).
     pub trees: bool,
+    /// The trees' shadows from a shadow map.
+    pub tree_shadows: bool,
 }
 
 impl Default for FeatureSwitches {
@@ -400,6 +402,7 @@ impl From<Features> for FeatureSwitches {
             shadows: f.has(Feature::Shadows),
             plants: f.has(Feature::Plants),
             trees: f.has(Feature::Trees),
+            tree_shadows: f.has(Feature::TreeShadows),
         }
     }
 }
@@ -419,6 +422,7 @@ impl From<&FeatureSwitches> for Features {
             (Feature::Shadows, s.shadows),
             (Feature::Plants, s.plants),
             (Feature::Trees, s.trees),
+            (Feature::TreeShadows, s.tree_shadows),
         ];
         on.into_iter()
             .filter(|(_, on)| !on)
