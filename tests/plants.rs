@@ -741,6 +741,9 @@ fn pool_on_every_path(
         PlantLayer::Trees => r.tree_pool_bytes(),
     };
     let bytes = pool(&renderer).expect("the world has the layer's types");
+    // With trees, the shadow map and its casters' pool too.
+    let shadow_bytes = renderer.tree_shadow_bytes();
+    assert_eq!(shadow_bytes.is_some(), layer == PlantLayer::Trees);
     use wgpu::TextureUsages as U;
     let color = verdant::gpu::target_texture(&ctx.device, "c", c, U::RENDER_ATTACHMENT, (w, h));
     let depth = verdant::gpu::target_texture(
@@ -779,6 +782,15 @@ fn pool_on_every_path(
         assert_eq!(last.overflow, 0, "{name}: {last:?}");
         drawn.insert(name, last.drawn);
         assert_eq!(pool(&renderer), Some(bytes), "{name}");
+        assert_eq!(renderer.tree_shadow_bytes(), shadow_bytes, "{name}");
+        if layer == PlantLayer::Trees {
+            let casters = renderer.read_shadow_casters();
+            assert!(
+                casters.len() < verdant::plants::shadow::CASTER_CAPACITY as usize,
+                "{name}: {} casters",
+                casters.len()
+            );
+        }
     }
     drawn
 }

@@ -201,3 +201,127 @@ fn contact_shadows_match_their_cpu_mirror() {
         "GPU and CPU agree on only {fraction:.4} of the pixels"
     );
 }
+
+/// The trees' shadow map (`src/plants/shadow.rs`, drawn by the trees' shadow casters, looked
+/// up in `shaders/terrain_contact_shadow.wgsl`) against its CPU mirror
+/// (`ShadowUniform::sun_seen`): a frame among trees drawn with and without tree shadows (the
+/// contact shadows off in both), whose ratio is the lookup's factor, against the factors the
+/// mirror finds in the frame's depth and the map read back. And against geometry: every
+/// ground or leaf point the map shades has a caster toward the sun, within a tree's height of
+/// it and a crown's reach of the tree's axis.
+#[test]
+fn tree_shadows_match_their_cpu_mirror_and_fall_from_the_trees() {
+    use verdant::World;
+    use verdant::features::Feature;
+    use verdant::terrain::contact_shadow::ContactShadows;
+
+    let ctx = common::gpu();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = common::world_with_trees(tmp.path(), "broadleaf", 0.003);
+    let world = World::open(&dir).unwrap();
+    let (w, h) = (192u32, 108u32);
+    // Over the meadow at 25 m, looking down across the sun's direction at the trees.
+    let path = world
+        .manifest
+        .paths
+        .iter()
+        .find(|p| p.name == "meadow")
+        .unwrap();
+    let mut camera = verdant::camera::sample_path(path, path.keys[0].t_s);
+    camera.position.z += 25.0;
+    camera.pitch_deg = -35.0;
+    let render = |features: verdant::features::Features| {
+        let mut config = RendererConfig::for_world(&world);
+        config.features = features;
+        let mut scene = Scene::new(&ctx, world.clone(), w, h, config).unwrap();
+        assert!(
+            scene
+                .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
+                .unwrap()
+        );
+        scene.render_at(&ctx, &camera, 1.0).unwrap();
+        let image = scene.read_image(&ctx).unwrap();
+        let depth = scene.read_depth(&ctx).unwrap();
+        let r = scene.renderer();
+        let maps = r
+            .tree_shadow_map()
+            .read_layers(&ctx.device, &ctx.queue)
+            .unwrap();
+        let uniform = *r.tree_shadow_map().uniform();
+        let casters = r.read_shadow_casters();
+        (image, depth, maps, uniform, casters)
+    };
+    let all = RendererConfig::for_world(&world)
+        .features
+        .without(Feature::Shadows);
+    let (lit, depth, _, off, _) = render(all.without(Feature::TreeShadows));
+    assert_eq!(off.info[0], 0, "no cascades with tree shadows off");
+    let (shaded, depth_shaded, maps, uniform, casters) = render(all);
+    assert_eq!(depth, depth_shaded, "the two frames must be the same scene");
+    assert_eq!(uniform.info[0], 2, "two cascades");
+    assert!(casters.len() > 20, "{} casters", casters.len());
+
+    let shade = ContactShadows::default().shade;
+    let sun = sun_direction(&world.manifest.sky);
+    let vp = camera.view_proj_relative(w as f32 / h as f32);
+    let inv = vp.inverse();
+    // A caster toward the sun from p: the ray within 1.5 heights meets the tree's crown
+    // cylinder (0.7 of its height about its axis, root to top).
+    let cast_on = |p: glam::Vec3| {
+        casters.iter().any(|t| {
+            let root = glam::Vec3::from(t.pos);
+            (0..=60).any(|i| {
+                let q = p + sun * (i as f32 / 40.0 * t.scale / sun.z.max(0.2));
+                (q.truncate() - root.truncate()).length() < 0.7 * t.scale
+                    && q.z >= root.z - 0.5
+                    && q.z <= root.z + 1.05 * t.scale
+            })
+        })
+    };
+    let (mut agree, mut counted, mut shadowed, mut explained) = (0usize, 0usize, 0usize, 0usize);
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let d = depth[i];
+            if d <= 0.0 {
+                continue;
+            }
+            let ndc = glam::Vec2::new(
+                (x as f32 + 0.5) / w as f32 * 2.0 - 1.0,
+                1.0 - (y as f32 + 0.5) / h as f32 * 2.0,
+            );
+            let p = inv.project_point3(glam::Vec3::new(ndc.x, ndc.y, d));
+            let f = 1.0 + (shade - 1.0) * (1.0 - uniform.sun_seen(&maps, p));
+            let (a, b) = (
+                &lit.as_raw()[i * 4..i * 4 + 3],
+                &shaded.as_raw()[i * 4..i * 4 + 3],
+            );
+            let (la, lb) = (srgb_to_linear(a[1]), srgb_to_linear(b[1]));
+            if la < 0.02 {
+                continue;
+            }
+            counted += 1;
+            if (lb / la - f).abs() < 0.08 {
+                agree += 1;
+            }
+            if f < 0.5 * (1.0 + shade) {
+                shadowed += 1;
+                if cast_on(p) {
+                    explained += 1;
+                }
+            }
+        }
+    }
+    let fraction = agree as f64 / counted.max(1) as f64;
+    let cast = explained as f64 / shadowed.max(1) as f64;
+    eprintln!(
+        "{shadowed} of {counted} pixels in tree shadow, {cast:.4} of them under a caster; \
+         GPU and CPU agree on {fraction:.4}"
+    );
+    assert!(
+        shadowed > counted / 50,
+        "too few shadowed pixels to test: {shadowed} of {counted}"
+    );
+    assert!(fraction > 0.98, "GPU and CPU agree on only {fraction:.4}");
+    assert!(cast > 0.97, "only {cast:.4} of the shadow lies under a tree");
+}

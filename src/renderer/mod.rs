@@ -449,6 +449,34 @@ impl Renderer {
             .map(|p| p.pool_bytes())
     }
 
+    /// GPU memory of the trees' shadows, bytes: the shadow map and the casters' instance pool
+    /// (`None` without tree shadows); fixed when the renderer is made, whatever the view.
+    pub fn tree_shadow_bytes(&self) -> Option<u64> {
+        let casters = self.grass.as_ref().and_then(|g| g.casters.as_ref())?;
+        Some(casters.pool_bytes() + self.tree_shadow_map.bytes())
+    }
+
+    /// The trees' shadow map, with the last prepared frame's cascades.
+    pub fn tree_shadow_map(&self) -> &crate::plants::shadow::TreeShadowMap {
+        &self.tree_shadow_map
+    }
+
+    /// The trees that cast into the shadow map in the last submitted frame, each root
+    /// relative to that frame's camera (for tests and tools: waits for the GPU; empty without
+    /// tree shadows).
+    pub fn read_shadow_casters(&self) -> Vec<crate::plants::place_cpu::PlantInstance> {
+        self.grass
+            .as_ref()
+            .and_then(|g| g.casters.as_ref())
+            .map(|c| {
+                c.read_instances(&self.device, &self.queue)
+                    .into_iter()
+                    .flatten()
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
     /// The grass tiles of the last frame and their rings.
     pub fn grass_rings(&self) -> Vec<(TileId, Ring)> {
         self.rings.as_ref().map_or(Vec::new(), |r| r.current())
