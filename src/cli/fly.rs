@@ -91,6 +91,20 @@ pub(crate) struct FlyArgs {
     /// 1/6).
     #[arg(long)]
     pub(crate) tree_min_keep: Option<f32>,
+    /// How far from the camera the trees' shadows reach, metres (10 to 2000; default 160).
+    #[arg(long)]
+    pub(crate) tree_shadow_m: Option<f32>,
+    /// Edge of each cascade of the trees' shadow map, texels (256 to 8192; default 1024).
+    #[arg(long)]
+    pub(crate) tree_shadow_size: Option<u32>,
+    /// Cascades of the trees' shadow map (1 to 4; default 2).
+    #[arg(long)]
+    pub(crate) tree_shadow_cascades: Option<u32>,
+    /// The shadow casters' level-of-detail switches NEAR,FAR, metres: the full mesh out to
+    /// NEAR (0: none), the reduced mesh out to FAR, the card turned to the sun beyond
+    /// (default 0,25).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) tree_shadow_lod_m: Option<Vec<f32>>,
     /// Terrain mesh: one vertex every this many samples of a tile (1, 2, 4, ...; default:
     /// the renderer's).
     #[arg(long)]
@@ -131,6 +145,10 @@ impl FlyArgs {
             tree_lod_m,
             tree_thin_m,
             tree_min_keep,
+            tree_shadow_m,
+            tree_shadow_size,
+            tree_shadow_cascades,
+            tree_shadow_lod_m,
             mesh_step,
             aa,
             truth: _,
@@ -161,6 +179,19 @@ impl FlyArgs {
         let plant_lod_m = near_far("--plant-lod-m", plant_lod_m)?
             .unwrap_or(verdant::plants::PlantSettings::default().lod_m);
         let tree_lod_m = near_far("--tree-lod-m", tree_lod_m)?;
+        let mut tree_shadows = verdant::plants::shadow::TreeShadows::default();
+        if let Some(m) = tree_shadow_m {
+            tree_shadows.distance_m = m;
+        }
+        if let Some(n) = tree_shadow_size {
+            tree_shadows.size = n;
+        }
+        if let Some(n) = tree_shadow_cascades {
+            tree_shadows.cascades = n;
+        }
+        if let Some(m) = near_far("--tree-shadow-lod-m", tree_shadow_lod_m)? {
+            tree_shadows.lod_m = m;
+        }
         Ok(FlyOptions {
             world: resolve_world(&world)?,
             http: stream.http(),
@@ -183,6 +214,7 @@ impl FlyArgs {
             tree_lod_m,
             tree_thin_m,
             tree_min_keep,
+            tree_shadows,
         })
     }
 }

@@ -49,6 +49,10 @@ pub struct TreeShadows {
     /// How far a receiving point is moved toward the sun before the comparison, in texels of its
     /// cascade (against shadow acne on the leaves that cast).
     pub bias_texels: f32,
+    /// The casters' level-of-detail switches NEAR,FAR, metres from the camera: the full mesh
+    /// out to NEAR (0: none), the reduced mesh out to FAR (0: none), the card turned to the sun
+    /// beyond. A shadow needs less than the tree it falls from.
+    pub lod_m: [f32; 2],
 }
 
 impl Default for TreeShadows {
@@ -56,9 +60,10 @@ impl Default for TreeShadows {
         Self {
             distance_m: 160.0,
             cascades: 2,
-            size: 2048,
+            size: 1024,
             split: 0.25,
             bias_texels: 2.0,
+            lod_m: [0.0, 25.0],
         }
     }
 }
@@ -102,39 +107,37 @@ fn ortho(basis: (Vec3, Vec3, Vec3), c: Vec3, r: f32, [lo, hi]: [f32; 2]) -> Mat4
 }
 
 impl TreeShadows {
-    /// Whether the settings are usable: the message says which is not.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.distance_m.is_finite() && self.distance_m >= 10.0) {
-            return Err(format!(
-                "tree shadows' distance {} m: must be at least 10 m",
-                self.distance_m
-            ));
+    /// Whether the settings are usable; the error names the setting and its range.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        if !(self.distance_m.is_finite() && (10.0..=2000.0).contains(&self.distance_m)) {
+            return Err(("tree_shadows.distance_m", "10 to 2000 m".into()));
         }
         if !(1..=MAX_CASCADES as u32).contains(&self.cascades) {
-            return Err(format!(
-                "tree shadows' cascades {}: must be 1 to {MAX_CASCADES}",
-                self.cascades
-            ));
+            return Err(("tree_shadows.cascades", format!("1 to {MAX_CASCADES}")));
         }
         if !(256..=8192).contains(&self.size) {
-            return Err(format!(
-                "tree shadows' map size {}: must be 256 to 8192 texels",
-                self.size
-            ));
+            return Err(("tree_shadows.size", "256 to 8192 texels".into()));
         }
         if !(self.split > 0.0 && self.split < 1.0) {
-            return Err(format!(
-                "tree shadows' split {}: must be between 0 and 1",
-                self.split
-            ));
+            return Err(("tree_shadows.split", "between 0 and 1".into()));
         }
         if !(self.bias_texels.is_finite() && self.bias_texels >= 0.0) {
-            return Err(format!(
-                "tree shadows' bias {} texels: must be 0 or more",
-                self.bias_texels
+            return Err(("tree_shadows.bias_texels", "0 or more texels".into()));
+        }
+        let [near, far] = self.lod_m;
+        if !(near >= 0.0 && near <= far && far <= 10_000.0) {
+            return Err((
+                "tree_shadows.lod_m",
+                "NEAR,FAR with 0 <= NEAR <= FAR <= 10000 m".into(),
             ));
         }
         Ok(())
+    }
+
+    /// The casters' switches as the placement takes them, for cross-fade bands of `band_m`: a
+    /// switch at 0 moved below the camera, band and all, so that no caster takes that level.
+    pub fn placement_lod_m(&self, band_m: f32) -> [f32; 2] {
+        self.lod_m.map(|m| if m <= 0.0 { -band_m } else { m })
     }
 
     /// Where cascade `i` ends, metres from the camera.
@@ -577,9 +580,16 @@ mod tests {
                 },
                 "distance",
             ),
+            (
+                TreeShadows {
+                    lod_m: [30.0, 20.0],
+                    ..Default::default()
+                },
+                "lod_m",
+            ),
         ] {
-            let e = s.validate().unwrap_err();
-            assert!(e.contains(word), "{e}");
+            let (field, range) = s.validate().unwrap_err();
+            assert!(field.contains(word), "{field}: {range}");
         }
     }
 }

@@ -290,9 +290,9 @@ impl RendererConfig {
             }
         }
         if let Some(s) = &self.tree_shadows
-            && let Err(range) = s.validate()
+            && let Err((field, range)) = s.validate()
         {
-            return Err(ConfigError::new("tree_shadows", s, range));
+            return Err(ConfigError::new(field, s, range));
         }
         self.grass.validate()
     }

@@ -334,6 +334,7 @@ impl Renderer {
                             crate::plants::PlantSettings {
                                 capacity: crate::plants::shadow::CASTER_CAPACITY,
                                 view_m: [shadows.distance_m + 20.0, shadows.distance_m + 40.0],
+                                lod_m: shadows.placement_lod_m(t.settings().band_m),
                                 ..*t.settings()
                             },
                             wind_bindings,

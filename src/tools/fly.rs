@@ -78,6 +78,8 @@ pub struct FlyOptions {
     pub tree_thin_m: Option<f32>,
     /// The fewest trees the thinning keeps (default: the renderer's).
     pub tree_min_keep: Option<f32>,
+    /// The trees' shadows (used where the renderer has them: a world with trees).
+    pub tree_shadows: crate::plants::shadow::TreeShadows,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -129,6 +131,7 @@ impl Default for FlyOptions {
             tree_lod_m: None,
             tree_thin_m: None,
             tree_min_keep: None,
+            tree_shadows: Default::default(),
         }
     }
 }
@@ -169,6 +172,9 @@ impl FlyOptions {
             t.min_keep = self.tree_min_keep.unwrap_or(t.min_keep);
             config.trees = Some(t);
         }
+        if config.tree_shadows.is_some() {
+            config.tree_shadows = Some(self.tree_shadows);
+        }
         config.validate().map_err(SettingError::from)?;
         Ok(config)
     }
@@ -200,6 +206,10 @@ impl From<ConfigError> for SettingError {
             "trees.lod_m" => "--tree-lod-m",
             "trees.thin_m" => "--tree-thin-m",
             "trees.min_keep" => "--tree-min-keep",
+            "tree_shadows.distance_m" => "--tree-shadow-m",
+            "tree_shadows.size" => "--tree-shadow-size",
+            "tree_shadows.cascades" => "--tree-shadow-cascades",
+            "tree_shadows.lod_m" => "--tree-shadow-lod-m",
             field => field,
         };
         Self { option, source }
