@@ -168,3 +168,120 @@ fn the_far_field_continues_the_blades_at_the_ring_and_matches_its_cpu_mirror() {
         "far field {fg} vs blades {b}: delta E {delta_e:.2}"
     );
 }
+
+/// The far field under trees (their canopy's shade beyond the shadow map, `canopy_depth` in
+/// `src/plants/shadow.rs`): on a flat field with trees spread evenly, the ground's far field
+/// against its CPU mirror lit with the sun's share the canopy leaves, and darker than the same
+/// field's without tree shadows.
+#[test]
+fn the_far_field_darkens_under_a_forest_as_its_cpu_mirror_says() {
+    use verdant::features::Feature;
+    use verdant::plants::shadow::canopy_depth;
+
+    let ctx = common::gpu();
+    let (mut world, source) = flat_field(1200.0).unwrap();
+    let tree: verdant::world::PlantType = toml::from_str(
+        "name = \"oak\"\nmesh = \"broadleaf\"\nsize_m = [8.0, 12.0]\n\
+         density = { meadow = 0.002 }\nclump_cover = 1.0\n",
+    )
+    .unwrap();
+    world.manifest.plant_types.push(tree);
+    let config = RendererConfig::for_world(&world);
+    let settings = config.grass_settings(&world).unwrap();
+    let shadows = config.tree_shadows.unwrap();
+    let view = f64::from(settings.view_distance_m);
+    let (w, h) = (320u32, 180u32);
+    // 30 m over the field, looking at the ground 350-700 m away.
+    let mut camera = Camera::new(DVec3::new(200.0, 200.0, 30.0), 45.0, -4.0);
+    camera.fov_y_deg = 6.0;
+    let render = |features: verdant::features::Features| {
+        let mut config = RendererConfig::for_world(&world);
+        config.features = features;
+        let mut scene =
+            Scene::with_source(&ctx, world.clone(), source.clone(), w, h, config).unwrap();
+        assert!(
+            scene
+                .warm_up(&ctx, &camera, std::time::Duration::from_secs(60))
+                .unwrap()
+        );
+        scene.render(&ctx, &camera).unwrap();
+        (
+            scene.read_image(&ctx).unwrap(),
+            scene.read_depth(&ctx).unwrap(),
+        )
+    };
+    let all = config.features;
+    let (shaded, depth) = render(all);
+    let (open, _) = render(all.without(Feature::TreeShadows));
+    let points = ground_points(&camera, w, h);
+    let vp = camera.view_proj_relative(w as f32 / h as f32);
+
+    let sky = &world.manifest.sky;
+    let light = Light {
+        sun_dir: sun_direction(sky),
+        sun_color: Vec3::from_array(sky.sun_color),
+        sky_color: Vec3::from_array(sky.sky_color),
+        ambient_occlusion: true,
+        translucency: true,
+        specular: true,
+    };
+    let set = verdant::plants::PlantSet::build(&world.manifest, &world.dir).unwrap();
+    let trees = config.tree_settings(&world).unwrap();
+    let tau = canopy_depth(&world.manifest, &set, trees.cell_m, light.sun_dir)[1];
+    let meadow = &world.manifest.grass_types[1];
+    let blade = Vec3::from_array(meadow.base_color)
+        .lerp(Vec3::from_array(meadow.tip_color), far_field::FAR_T);
+    let (mut gpu, mut cpu, mut bare) = (Vec::new(), Vec::new(), Vec::new());
+    for (i, p) in points.iter().enumerate() {
+        let Some(p) = *p else { continue };
+        let rel = (p - camera.position).as_vec3();
+        let dist = rel.length();
+        let faded_at = f64::from(far_field::far_distance(dist, (camera.position.z - p.z) as f32));
+        if faded_at < view + 25.0 {
+            continue;
+        }
+        // The ground, not a tree in front of it: the depth is the ground's.
+        let c = vp * rel.extend(1.0);
+        if (depth[i] - c.z / c.w).abs() > 1e-3 * depth[i].max(1e-6) {
+            continue;
+        }
+        let linear = |img: &image::RgbaImage| {
+            let px = &img.as_raw()[i * 4..i * 4 + 3];
+            Vec3::new(
+                srgb_to_linear(px[0]),
+                srgb_to_linear(px[1]),
+                srgb_to_linear(px[2]),
+            )
+        };
+        gpu.push(linear(&shaded));
+        bare.push(linear(&open));
+        let xy = DVec2::new(p.x, p.y);
+        let world_mod = DVec2::new(xy.x.rem_euclid(4096.0), xy.y.rem_euclid(4096.0));
+        let clump = Vec3::ONE.lerp(
+            far_field::clump_tint(xy, settings.clump_m, settings.seed),
+            far_field::clump_visibility(dist, settings.clump_m),
+        );
+        let albedo = blade * clump * far_field::color_variation(world_mod.as_vec2());
+        let fade = [0.9 * shadows.distance_m, shadows.distance_m];
+        let sun_vis = 1.0
+            - far_field::tree_canopy_shade(tau, 1.0) * far_field::tree_canopy_fade_in(dist, fade);
+        let lit = far_field::light_far_grass(albedo, Vec3::Z, far_field::FAR_T, sun_vis, &light);
+        let x = dist / sky.fog_distance_m;
+        let fog = 1.0 - (-3.0 * x * x).exp();
+        let v = rel / dist;
+        let fog_color = Vec3::from_array(sky.horizon_color)
+            .lerp(Vec3::from_array(sky.sun_color), 0.35 * v.dot(light.sun_dir).max(0.0).powf(8.0));
+        cpu.push(lit.lerp(fog_color, fog));
+    }
+    assert!(gpu.len() > 2000, "{} far-field ground pixels", gpu.len());
+    let (g, c, b) = (mean(&gpu), mean(&cpu), mean(&bare));
+    let shade = far_field::tree_canopy_shade(tau, 1.0);
+    eprintln!("canopy shades {shade:.3} of the ground: far field {g} (GPU), {c} (CPU), {b} without");
+    assert!(shade > 0.2 && shade < 0.8, "a canopy to measure: {shade}");
+    let rel = ((g - c).abs() / c).max_element();
+    assert!(rel < 0.04, "far field under trees GPU {g} vs CPU mirror {c}: {rel:.3}");
+    assert!(
+        g.y < 0.9 * b.y,
+        "the canopy darkens the far field: {g} against {b} without"
+    );
+}

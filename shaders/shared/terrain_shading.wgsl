@@ -42,6 +42,12 @@ struct Frame {
     roots: vec4<u32>,
     // Atlas slot of root tile (x, y) at index y * roots.x + x, four to a vector.
     root_slots: array<vec4<u32>, 16>,
+    // Per grass type, four to a vector: the depth of the trees' canopy shade at full grass
+    // density (src/plants/shadow.rs, canopy_depth).
+    tree_canopy: array<vec4<f32>, 4>,
+    // x, y: where the canopy's shade fades in (the trees' shadow map fades out), m; z: 1 when
+    // the world has tree shadows.
+    tree_canopy_fade: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -311,6 +317,18 @@ fn sun_visibility(tex: vec2<f32>, layer: u32, texel_m: f32, world: vec3<f32>) ->
 }
 
 // The maps of one of the four grass samples around a pixel, added in with weight w.
+// 0 within the trees' shadow map, rising to 1 over its fade-out (as canopy_fade_in in
+// src/terrain/far_field.rs).
+fn tree_canopy_fade_in(dist: f32) -> f32 {
+    return clamp((dist - frame.tree_canopy_fade.x) / max(frame.tree_canopy_fade.y - frame.tree_canopy_fade.x, 1e-3), 0.0, 1.0);
+}
+
+// The share of the ground shaded by a canopy of depth `tau` (at full density) over grass of
+// density `d` (as tree_canopy_shade in src/terrain/far_field.rs).
+fn tree_canopy_shade(tau: f32, d: f32) -> f32 {
+    return 1.0 - exp(-tau * d);
+}
+
 struct Maps {
     ground: vec3<f32>,
     grass_col: vec3<f32>,
@@ -318,6 +336,8 @@ struct Maps {
     growth_blend: f32,
     // The weight of the samples whose material is water.
     water: f32,
+    // The share of the ground the trees' canopy shades.
+    tree_canopy: f32,
 }
 
 fn add_corner(m: ptr<function, Maps>, g: vec3<u32>, w: f32, t_far: f32, sin_e: f32, world: vec2<f32>, footprint: f32) {
@@ -335,6 +355,9 @@ fn add_corner(m: ptr<function, Maps>, g: vec3<u32>, w: f32, t_far: f32, sin_e: f
         a *= mix(1.0, 0.6, d);
     }
     (*m).ground += w * a;
+    if g.z != MATERIAL_WATER {
+        (*m).tree_canopy += w * tree_canopy_shade(frame.tree_canopy[kind / 4u][kind % 4u], d);
+    }
     if kind != 0u {
         let c = far_cover(d, sin_e) * w;
         (*m).grass_col += c * mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t_far);
@@ -439,6 +462,10 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
     if (frame.grid.w & SHADOWS) != 0u {
         let surface = vec3<f32>(world.xy, height_at(tex, layer));
         sun_vis = sun_visibility(tex, layer, texel_m, surface);
+    }
+    // Beyond the trees' shadow map, their canopy's shade as the share of the ground it covers.
+    if frame.tree_canopy_fade.z > 0.0 && (frame.grid.w & (TREES | TREE_SHADOWS)) == (TREES | TREE_SHADOWS) {
+        sun_vis *= 1.0 - m.tree_canopy * tree_canopy_fade_in(dist);
     }
     let sun = frame.sun_dir.xyz;
     let lambert = max(dot(n, sun), 0.0) * sun_vis;

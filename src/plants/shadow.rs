@@ -228,6 +228,57 @@ impl TreeShadows {
     }
 }
 
+/// The share of a crown's disc (its widest reach about the axis) that its leaves shade.
+pub const CROWN_FILL: f32 = 0.6;
+
+/// Per grass type, the depth of the trees' canopy shade at full grass density, for the ground
+/// beyond the shadow map ([`crate::terrain::far_field::tree_canopy_shade`] turns it into the
+/// share of ground in shade, `1 - exp(-depth * density)`). Each tree type shades, of the ground
+/// its patches cover (its `clump_cover`), the share `1 - exp(-n a)` that trees at random leave in
+/// shade: `n` its trees a square metre there (its density, at most one tree in a placement cell
+/// of `cell_m` for all types together), `a` the shadow of a crown on the ground, [`CROWN_FILL`]
+/// of the disc of the mean height times its type's reach over height, stretched by the sun at
+/// `sun` (toward it) as a sphere's shadow is. The types shade independently of one another.
+pub fn canopy_depth(
+    manifest: &crate::world::Manifest,
+    set: &crate::plants::PlantSet,
+    cell_m: f32,
+    sun: Vec3,
+) -> [f32; crate::world::MAX_GRASS_TYPES] {
+    let mut depth = [0.0f32; crate::world::MAX_GRASS_TYPES];
+    let stretch = 1.0 / sun.normalize().z.max(0.2);
+    for (g, grass) in manifest
+        .grass_types
+        .iter()
+        .take(crate::world::MAX_GRASS_TYPES)
+        .enumerate()
+    {
+        // (trees a square metre, the crown's shadow in square metres, the patches' cover)
+        let trees: Vec<(f32, f32, f32)> = manifest
+            .plant_types
+            .iter()
+            .zip(&set.models)
+            .filter(|(t, _)| t.is_tree())
+            .filter_map(|(t, m)| {
+                let density = t.density.get(&grass.name).copied().unwrap_or(0.0);
+                let r = m.radius_ratio * 0.5 * (t.size_m[0] + t.size_m[1]);
+                let shadow = std::f32::consts::PI * r * r * CROWN_FILL * stretch;
+                (density > 0.0).then_some((density, shadow, t.clump_cover.clamp(1e-3, 1.0)))
+            })
+            .collect();
+        let chance: f32 = trees.iter().map(|t| t.0 * cell_m * cell_m).sum();
+        let scale = if chance > 1.0 { 1.0 / chance } else { 1.0 };
+        depth[g] = trees
+            .iter()
+            .map(|&(n, a, c)| {
+                let shaded = c * (1.0 - (-n * scale * a / c).exp());
+                -(1.0 - shaded).max(1e-6).ln()
+            })
+            .sum();
+    }
+    depth
+}
+
 /// The shadow map's uniform (`TreeShadow` in `shaders/terrain_contact_shadow.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]

@@ -89,6 +89,8 @@ struct GrassStage {
     trees: Option<crate::plants::PlantRenderer>,
     /// The trees that cast into the shadow map (with the trees and tree shadows).
     casters: Option<crate::plants::PlantRenderer>,
+    /// With trees: the depth of their canopy's shade per grass type.
+    canopy: Option<[f32; crate::world::MAX_GRASS_TYPES]>,
 }
 
 /// What [`Renderer::prepare`] worked out for [`Renderer::record`].
@@ -343,6 +345,14 @@ impl Renderer {
                     }
                     _ => None,
                 };
+                let canopy = set.as_ref().zip(trees.as_ref()).map(|(set, t)| {
+                    crate::plants::shadow::canopy_depth(
+                        &world.manifest,
+                        set,
+                        t.settings().cell_m,
+                        crate::terrain::sun_direction(&world.manifest.sky),
+                    )
+                });
                 Some(GrassStage {
                     renderer,
                     wind,
@@ -350,6 +360,7 @@ impl Renderer {
                     plants,
                     trees,
                     casters,
+                    canopy,
                 })
             }
             None => None,
@@ -368,6 +379,13 @@ impl Renderer {
                 .tree_shadows
                 .filter(|_| grass.as_ref().is_some_and(|g| g.casters.is_some())),
         );
+        // Beyond the map, the canopy's shade on the ground.
+        if let (Some(s), Some(tau)) = (
+            tree_shadow_map.settings(),
+            grass.as_ref().and_then(|g| g.canopy),
+        ) {
+            terrain.set_canopy(tau, [0.9 * s.distance_m, s.distance_m]);
+        }
         let mut grass = grass;
         if let (Some(g), Some(_)) = (&mut grass, &msaa) {
             g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);

@@ -140,6 +140,19 @@ pub fn light_far_grass(albedo: Vec3, n: Vec3, t: f32, sun_vis: f32, light: &Ligh
     albedo * (sun * (0.6 + 0.4 * ao) + ambient) * CANOPY_SHADE + light.sun_color * sheen
 }
 
+/// The share of the ground shaded by the trees' canopy of depth `tau` (per grass type at full
+/// density, [`crate::plants::shadow::canopy_depth`]) over grass of density `d` (0..1): trees
+/// stand in proportion to the density, their shadows overlapping at random.
+pub fn tree_canopy_shade(tau: f32, d: f32) -> f32 {
+    1.0 - (-tau * d).exp()
+}
+
+/// How much of the canopy's shade a point at `dist` metres gets: none within the trees' shadow
+/// map, all beyond its fade-out `[start, end]`, linear between.
+pub fn tree_canopy_fade_in(dist: f32, [start, end]: [f32; 2]) -> f32 {
+    ((dist - start) / (end - start).max(1e-3)).clamp(0.0, 1.0)
+}
+
 /// The growth direction of a blade of `growth_blend` on terrain of normal `n`.
 pub fn growth_direction(n: Vec3, growth_blend: f32) -> Vec3 {
     (Vec3::Z + (n - Vec3::Z) * growth_blend).normalize()

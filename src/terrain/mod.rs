@@ -74,8 +74,10 @@ struct FrameUniforms {
     tip_colors: [[f32; 4]; MAX_GRASS_TYPES],
     roots: [u32; 4],
     root_slots: [[u32; 4]; MAX_ROOT_TILES / 4],
+    canopy: [[f32; 4]; MAX_GRASS_TYPES / 4],
+    canopy_fade: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 1344);
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 1424);
 
 /// Most root (level-0) tiles whose heights the long shadow rays march over; a world with more
 /// has terrain shadows from each tile's own heights only.
@@ -372,6 +374,8 @@ impl TerrainRenderer {
             tip_colors,
             roots: [roots[0], roots[1], root_cell.to_bits(), 0],
             root_slots: [[0; 4]; MAX_ROOT_TILES / 4],
+            canopy: [[0.0; 4]; MAX_GRASS_TYPES / 4],
+            canopy_fade: [0.0; 4],
         };
         Self {
             gbuffer,
@@ -431,6 +435,18 @@ impl TerrainRenderer {
 
     /// Sets the switched-on features (the terrain reads ground darkening, the far field and
     /// shadows).
+    /// The trees' canopy over the ground beyond their shadow map: per grass type, the depth
+    /// `tau` of the canopy's shade at full grass density (see
+    /// [`crate::plants::shadow::canopy_depth`]), faded in between `fade` metres (the shadow
+    /// map's fade-out); all zero: none.
+    pub fn set_canopy(&mut self, tau: [f32; MAX_GRASS_TYPES], fade: [f32; 2]) {
+        for (g, t) in tau.iter().enumerate() {
+            self.uniforms.canopy[g / 4][g % 4] = *t;
+        }
+        let on = tau.iter().any(|t| *t > 0.0);
+        self.uniforms.canopy_fade = [fade[0], fade[1], f32::from(u8::from(on)), 0.0];
+    }
+
     pub fn set_features(&mut self, features: crate::features::Features) {
         self.uniforms.grid[3] = features.bits();
     }
