@@ -825,9 +825,12 @@ impl Renderer {
     ///    With multisampling (`aa_msaa.wgsl`), the frame so far is copied into every sample of
     ///    the stage's multisampled targets first, the blades drawn there with alpha to
     ///    coverage, and colour and depth resolved into `color` and `depth` after;
-    /// 7. contact shadows, with the `shadows` feature: each pixel's factor, less than 1 where a
-    ///    short ray toward the sun is blocked in the depth buffer (compute), then the colour
-    ///    multiplied by it (a full-screen pass; both `terrain_contact_shadow.wgsl`);
+    /// 7. shadows: with trees and the `tree-shadows` feature, the trees' shadow map first (its
+    ///    casters placed around the camera and drawn depth-only into each cascade,
+    ///    `plants_place.wgsl`, `plants_draw.wgsl`); then each pixel's factor, less than 1 where
+    ///    a short ray toward the sun is blocked in the depth buffer (with the `shadows`
+    ///    feature) or the trees' map shades its point (compute), then the colour multiplied by
+    ///    it (a full-screen pass; both `terrain_contact_shadow.wgsl`);
     /// 8. with temporal anti-aliasing (passes 5-7 then draw into its own texture, with a
     ///    jittered projection): the frame folded into the reprojected history (compute,
     ///    `aa_taa.wgsl`), and the result written into `color`;
