@@ -499,7 +499,7 @@ fn bench_lod_writes_its_tables_and_charts() {
         dolly.lines().next(),
         Some(
             "frame,flip_vs_truth,coarse_flip_vs_truth,jump,flip_vs_no_lod,change_lod,\
-             change_no_lod,ring_switches"
+             change_no_lod,ring_switches,tree_switches"
         )
     );
     let settings = std::fs::read_to_string(dir.join("lod_settings.csv")).unwrap();

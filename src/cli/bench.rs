@@ -248,9 +248,12 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         r.adapter.name, r.adapter.backend, r.size.0, r.size.1
     );
     println!(
-        "dolly: largest jump of the error against the truth: {:.4} FLIP on frames with ring switches, {:.4} on frames without",
+        "dolly: largest jump of the error against the truth: {:.4} FLIP on frames with ring switches, {:.4} on frames without a switch",
         r.worst_pop, r.worst_change_without_switch
     );
+    if let Some(t) = r.worst_tree_pop {
+        println!("dolly: {t:.4} FLIP on frames where trees switched level (and no ring)");
+    }
     let flip = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
     println!(
         "far band ({:.0}-{:.0} m, {} pixels) against the truth's blades out to {:.0} m: {} FLIP with the far field, {} without",

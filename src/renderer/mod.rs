@@ -480,6 +480,22 @@ impl Renderer {
         &self.tree_shadow_map
     }
 
+    /// The trees drawn in the last submitted frame, each root relative to that frame's camera,
+    /// a tree inside a cross-fade band once per level it is drawn at (for tests and tools:
+    /// waits for the GPU; empty without trees).
+    pub fn read_tree_instances(&self) -> Vec<crate::plants::place_cpu::PlantInstance> {
+        self.grass
+            .as_ref()
+            .and_then(|g| g.trees.as_ref())
+            .map(|t| {
+                t.read_instances(&self.device, &self.queue)
+                    .into_iter()
+                    .flatten()
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
     /// The trees that cast into the shadow map in the last submitted frame, each root
     /// relative to that frame's camera (for tests and tools: waits for the GPU; empty without
     /// tree shadows).

@@ -9,7 +9,10 @@
 //! (a) Popping: a camera dolly over the meadow crosses the high/low ring boundary of many grass
 //! tiles. Each frame is rendered with the default LOD settings and compared with its truth (and
 //! with the no-LOD render). A pop would show as a jump of that error on a frame where tiles
-//! switch ring; the jumps on frames without switches are the noise floor.
+//! switch ring; the jumps on frames without switches are the noise floor. In a world with trees
+//! the dolly also counts the trees whose levels of detail changed each frame (the renderer's
+//! tree instances read back): the jumps on frames where trees switched and no grass tile did are
+//! the trees' popping.
 //! (b) Speed against accuracy: for a set of LOD settings (ring radii, blade spacing, segments,
 //! infill, width, view distance), GPU time per frame against the error to the truth, with the
 //! Pareto front of each measure; the default setting is marked, and the report names the
@@ -257,6 +260,34 @@ pub struct DollyFrame {
     pub jump: f64,
     /// Grass tiles that changed ring this frame.
     pub ring_switches: u32,
+    /// Trees in view in this frame and the last whose levels of detail changed (the set of
+    /// levels a tree is drawn at: one, or two inside a cross-fade band).
+    pub tree_switches: u32,
+}
+
+/// The levels of detail each tree of `instances` (roots relative to `eye`) is drawn at, a bit
+/// per level, by its root's world position to the centimetre.
+pub fn tree_levels(
+    instances: &[crate::plants::place_cpu::PlantInstance],
+    eye: DVec3,
+) -> std::collections::HashMap<(i64, i64), u8> {
+    let mut out = std::collections::HashMap::new();
+    for i in instances {
+        let x = ((eye.x + f64::from(i.pos[0])) * 100.0).round() as i64;
+        let y = ((eye.y + f64::from(i.pos[1])) * 100.0).round() as i64;
+        *out.entry((x, y)).or_insert(0u8) |= 1 << (i.kind >> 8).min(7);
+    }
+    out
+}
+
+/// Trees of `now` also in `before` whose levels changed.
+pub fn tree_switches(
+    before: &std::collections::HashMap<(i64, i64), u8>,
+    now: &std::collections::HashMap<(i64, i64), u8>,
+) -> u32 {
+    now.iter()
+        .filter(|(k, v)| before.get(k).is_some_and(|b| b != *v))
+        .count() as u32
 }
 
 /// How far the truth draws real blades, in default view distances: the far band's end.
@@ -308,7 +339,11 @@ pub struct BenchLodReport {
     /// Largest jump of the LOD run's pixel FLIP against the truth on a frame where grass tiles
     /// switched ring: the popping, as a number.
     pub worst_pop: f64,
-    /// The same on frames without switches (the noise floor of the measure).
+    /// The same on frames where trees switched level and no grass tile ring (`None` without
+    /// such frames: a world without trees).
+    pub worst_tree_pop: Option<f64>,
+    /// The same on frames without switches of either (the noise floor of the measure; 0 when
+    /// every frame had one).
     pub worst_change_without_switch: f64,
     /// The settings.
     pub settings: Vec<SettingResult>,
@@ -386,6 +421,7 @@ pub fn run_bench_lod(
     let mut dolly = Vec::new();
     let mut prev: Option<(image::RgbaImage, image::RgbaImage)> = None;
     let mut prev_rings: Option<Vec<(crate::world::TileId, crate::lod::Ring)>> = None;
+    let mut prev_trees: Option<std::collections::HashMap<(i64, i64), u8>> = None;
     for f in 0..opts.dolly_frames {
         let fwd = start.forward();
         let horizontal = DVec3::new(fwd.x, fwd.y, 0.0).normalize_or_zero();
@@ -393,6 +429,7 @@ pub fn run_bench_lod(
         cam.position += horizontal * step * f64::from(f);
         let (a, _) = bench.frame(&mut lod_scene, &cam)?;
         let rings = lod_scene.grass_rings();
+        let trees = tree_levels(&lod_scene.renderer().read_tree_instances(), cam.position);
         let (b, _) = bench.frame(&mut full_scene, &cam)?;
         let t = truth.render(&ctx, &cam, 0.0, Some(cam.position.truncate()))?;
         let switches = match &prev_rings {
@@ -418,9 +455,11 @@ pub fn run_bench_lod(
             change_no_lod,
             jump,
             ring_switches: switches,
+            tree_switches: prev_trees.as_ref().map_or(0, |p| tree_switches(p, &trees)),
         });
         prev = Some((a, b));
         prev_rings = Some(rings);
+        prev_trees = Some(trees);
         progress("dolly", u64::from(f) + 1, u64::from(opts.dolly_frames));
     }
     drop((lod_scene, full_scene));
@@ -430,10 +469,16 @@ pub fn run_bench_lod(
         .filter(|d| d.ring_switches > 0)
         .map(|d| d.jump)
         .fold(0.0, f64::max);
+    let worst_tree_pop = dolly
+        .iter()
+        .skip(1)
+        .filter(|d| d.tree_switches > 0 && d.ring_switches == 0)
+        .map(|d| d.jump)
+        .reduce(f64::max);
     let worst_change_without_switch = dolly
         .iter()
         .skip(1)
-        .filter(|d| d.ring_switches == 0)
+        .filter(|d| d.ring_switches == 0 && d.tree_switches == 0)
         .map(|d| d.jump)
         .fold(0.0, f64::max);
 
@@ -588,6 +633,7 @@ pub fn run_bench_lod(
         size: opts.size,
         truth_k: opts.truth_k,
         worst_pop,
+        worst_tree_pop,
         worst_change_without_switch,
         default_on_front: results[0].pareto,
         default_on_coarse_front: results[0].pareto_coarse,
@@ -668,12 +714,12 @@ fn write_outputs(
     use std::fmt::Write as _;
     let mut csv = String::from(
         "frame,flip_vs_truth,coarse_flip_vs_truth,jump,flip_vs_no_lod,change_lod,change_no_lod,\
-         ring_switches\n",
+         ring_switches,tree_switches\n",
     );
     for d in dolly {
         let _ = writeln!(
             csv,
-            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{}",
+            "{},{:.5},{:.5},{:.5},{:.5},{:.5},{:.5},{},{}",
             d.frame,
             d.vs_truth.flip,
             d.vs_truth.coarse,
@@ -681,7 +727,8 @@ fn write_outputs(
             d.flip_vs_no_lod,
             d.change_lod,
             d.change_no_lod,
-            d.ring_switches
+            d.ring_switches,
+            d.tree_switches
         );
     }
     write_text(&opts.out.join("dolly.csv"), &csv)?;
@@ -821,6 +868,33 @@ fn write_outputs(
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn a_tree_switches_when_its_levels_change_and_not_when_it_comes_into_view() {
+        use crate::plants::place_cpu::PlantInstance;
+        let tree = |x: f32, level: u32| PlantInstance {
+            pos: [x, 5.0, 0.0],
+            yaw: 0.0,
+            scale: 10.0,
+            kind: level << 8,
+            hash: 0,
+            fade: 1.0,
+        };
+        let eye = DVec3::new(1000.0, 2000.0, 50.0);
+        let a = tree_levels(&[tree(10.0, 0), tree(20.0, 1), tree(30.0, 1)], eye);
+        // The camera moved 1 m east: the same trees, relative positions 1 m less; the first
+        // now in a band (both levels), the third gone, a fourth come into view.
+        let eye2 = eye + DVec3::X;
+        let b = tree_levels(
+            &[tree(9.0, 0), tree(9.0, 1), tree(19.0, 1), tree(39.0, 2)],
+            eye2,
+        );
+        assert_eq!(a.len(), 3);
+        assert_eq!(b[&(101_000, 200_500)], 0b11);
+        assert_eq!(tree_switches(&a, &b), 1);
+        assert_eq!(tree_switches(&a, &a), 0);
+    }
+
     use super::*;
 
     #[test]
