@@ -236,7 +236,10 @@ fn the_far_field_darkens_under_a_forest_as_its_cpu_mirror_says() {
         let Some(p) = *p else { continue };
         let rel = (p - camera.position).as_vec3();
         let dist = rel.length();
-        let faded_at = f64::from(far_field::far_distance(dist, (camera.position.z - p.z) as f32));
+        let faded_at = f64::from(far_field::far_distance(
+            dist,
+            (camera.position.z - p.z) as f32,
+        ));
         if faded_at < view + 25.0 {
             continue;
         }
@@ -269,17 +272,24 @@ fn the_far_field_darkens_under_a_forest_as_its_cpu_mirror_says() {
         let x = dist / sky.fog_distance_m;
         let fog = 1.0 - (-3.0 * x * x).exp();
         let v = rel / dist;
-        let fog_color = Vec3::from_array(sky.horizon_color)
-            .lerp(Vec3::from_array(sky.sun_color), 0.35 * v.dot(light.sun_dir).max(0.0).powf(8.0));
+        let fog_color = Vec3::from_array(sky.horizon_color).lerp(
+            Vec3::from_array(sky.sun_color),
+            0.35 * v.dot(light.sun_dir).max(0.0).powf(8.0),
+        );
         cpu.push(lit.lerp(fog_color, fog));
     }
     assert!(gpu.len() > 2000, "{} far-field ground pixels", gpu.len());
     let (g, c, b) = (mean(&gpu), mean(&cpu), mean(&bare));
     let shade = far_field::tree_canopy_shade(tau, 1.0);
-    eprintln!("canopy shades {shade:.3} of the ground: far field {g} (GPU), {c} (CPU), {b} without");
+    eprintln!(
+        "canopy shades {shade:.3} of the ground: far field {g} (GPU), {c} (CPU), {b} without"
+    );
     assert!(shade > 0.2 && shade < 0.8, "a canopy to measure: {shade}");
     let rel = ((g - c).abs() / c).max_element();
-    assert!(rel < 0.04, "far field under trees GPU {g} vs CPU mirror {c}: {rel:.3}");
+    assert!(
+        rel < 0.04,
+        "far field under trees GPU {g} vs CPU mirror {c}: {rel:.3}"
+    );
     assert!(
         g.y < 0.9 * b.y,
         "the canopy darkens the far field: {g} against {b} without"

@@ -328,5 +328,8 @@ fn tree_shadows_match_their_cpu_mirror_and_fall_from_the_trees() {
         "too few shadowed pixels to test: {shadowed} of {counted}"
     );
     assert!(fraction > 0.98, "GPU and CPU agree on only {fraction:.4}");
-    assert!(cast > 0.97, "only {cast:.4} of the shadow lies under a tree");
+    assert!(
+        cast > 0.97,
+        "only {cast:.4} of the shadow lies under a tree"
+    );
 }

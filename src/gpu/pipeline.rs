@@ -200,7 +200,8 @@ impl<'a> RenderPipelineBuilder<'a> {
     /// The pipeline.
     pub fn build(self, device: &wgpu::Device) -> wgpu::RenderPipeline {
         let layout = pipeline_layout(device, self.label, self.layouts);
-        let targets: Vec<Option<wgpu::ColorTargetState>> = self.target.into_iter().map(Some).collect();
+        let targets: Vec<Option<wgpu::ColorTargetState>> =
+            self.target.into_iter().map(Some).collect();
         let options = |constants| wgpu::PipelineCompilationOptions {
             constants,
             ..Default::default()

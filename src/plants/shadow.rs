@@ -166,10 +166,8 @@ impl TreeShadows {
         (0..self.cascades.clamp(1, MAX_CASCADES as u32))
             .map(|i| {
                 let far = self.far_m(i);
-                let points: Vec<Vec3> = corners
-                    .iter()
-                    .flat_map(|d| [*d * near, *d * far])
-                    .collect();
+                let points: Vec<Vec3> =
+                    corners.iter().flat_map(|d| [*d * near, *d * far]).collect();
                 near = far;
                 let centre = points.iter().copied().sum::<Vec3>() / points.len() as f32;
                 let r = points
@@ -363,7 +361,8 @@ impl ShadowUniform {
             }
         }
         lit /= 9.0;
-        let fade = ((dist - self.fade[0]) / (self.fade[1] - self.fade[0]).max(1e-3)).clamp(0.0, 1.0);
+        let fade =
+            ((dist - self.fade[0]) / (self.fade[1] - self.fade[0]).max(1e-3)).clamp(0.0, 1.0);
         lit + (1.0 - lit) * fade
     }
 }
@@ -546,7 +545,9 @@ mod tests {
         for (ca, cb) in a.iter().zip(&b) {
             assert_eq!(ca.texel_m, cb.texel_m);
             let pa = ca.view_proj.project_point3((world_point - eye).as_vec3());
-            let pb = cb.view_proj.project_point3((world_point - eye - step).as_vec3());
+            let pb = cb
+                .view_proj
+                .project_point3((world_point - eye - step).as_vec3());
             let texels = (pa.truncate() - pb.truncate()).abs() * s.size as f32 / 2.0;
             let whole = (texels - texels.round()).abs();
             assert!(

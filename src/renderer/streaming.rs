@@ -444,14 +444,19 @@ impl Renderer {
                 };
                 let (h0, h1) = self.service.height_range(id);
                 let b = pyramid.bounds(id);
-                let (min, max, near, _) =
-                    eye_box(b, [f64::from(h0), f64::from(h1) + tallest], eye);
+                let (min, max, near, _) = eye_box(b, [f64::from(h0), f64::from(h1) + tallest], eye);
                 if near >= reach || !frustum.intersects_box(min.as_vec3(), max.as_vec3()) {
                     continue;
                 }
                 let src_info = (pyramid.bounds(src), pyramid.cell_size_m(src.level), slot);
                 let job = job_reading(id, b, src_info, eye);
-                jobs.push((near, PlantJob { cells: per_tile, ..job }));
+                jobs.push((
+                    near,
+                    PlantJob {
+                        cells: per_tile,
+                        ..job
+                    },
+                ));
             }
         }
         jobs.sort_by(|a, b| a.0.total_cmp(&b.0));
