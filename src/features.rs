@@ -37,11 +37,13 @@ pub enum Feature {
     /// The trees' sun shadows on everything near the camera, from a cascaded shadow map
     /// ([`crate::plants::shadow`]).
     TreeShadows,
+    /// Leaves shed by the trees and carried by the wind ([`crate::plants::particles`]).
+    Particles,
 }
 
 impl Feature {
     /// Every feature, in bit order.
-    pub const ALL: [Feature; 13] = [
+    pub const ALL: [Feature; 14] = [
         Feature::WindSources,
         Feature::Interaction,
         Feature::DetailBending,
@@ -55,6 +57,7 @@ impl Feature {
         Feature::Plants,
         Feature::Trees,
         Feature::TreeShadows,
+        Feature::Particles,
     ];
 
     /// The bit of this feature in [`Features::bits`] (and in the shaders).
@@ -78,6 +81,7 @@ impl Feature {
             Feature::Plants => "plants",
             Feature::Trees => "trees",
             Feature::TreeShadows => "tree-shadows",
+            Feature::Particles => "particles",
         }
     }
 }

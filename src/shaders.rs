@@ -109,6 +109,7 @@ pub const STAGES: &[(&str, &str)] = &[
         "plants_draw.wgsl",
         include_str!("../shaders/plants_draw.wgsl"),
     ),
+    ("particles.wgsl", include_str!("../shaders/particles.wgsl")),
     (
         "renderer_hole_check.wgsl",
         include_str!("../shaders/renderer_hole_check.wgsl"),

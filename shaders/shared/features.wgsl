@@ -14,6 +14,7 @@ const SHADOWS: u32 = 512u;
 const PLANTS: u32 = 1024u;
 const TREES: u32 = 2048u;
 const TREE_SHADOWS: u32 = 4096u;
+const PARTICLES: u32 = 8192u;
 
 // Whether a pass's feature bits `flags` switch on `feature`.
 fn has_feature(flags: u32, feature: u32) -> bool {

@@ -10,6 +10,8 @@
 //!   [`place_cpu`].
 //! - `draw`: the indirect draws with the wind's bending and the shading
 //!   (`shaders/plants_draw.wgsl`); the bending mirrored in [`bend_cpu`].
+//! - [`particles`]: leaves shed by the trees and carried by the wind (mirror
+//!   [`particles_cpu`]).
 //! - [`shadow`]: the trees' cascaded shadow map (drawn by a caster instance of the stage).
 //!
 //! [`renderer`] holds the instance pool and records the stages after the grass.
@@ -19,6 +21,8 @@ pub mod card;
 mod draw;
 pub mod gltf;
 pub mod mesh;
+pub mod particles;
+pub mod particles_cpu;
 mod place;
 pub mod place_cpu;
 pub mod recipe;

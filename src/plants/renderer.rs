@@ -897,6 +897,16 @@ impl PlantRenderer {
         self.record_draws(&mut pass, &self.draw_group);
     }
 
+    /// The instance pool (regions of [`PlantSettings::capacity`] instances, type * 3 + level).
+    pub fn instance_buffer(&self) -> &wgpu::Buffer {
+        &self.instances
+    }
+
+    /// The indexed indirect draws of the regions (20 bytes each, written by the placement).
+    pub fn args_buffer(&self) -> &wgpu::Buffer {
+        &self.args
+    }
+
     /// The buffer of the frame's counters (8 u32, `counter::*`), for a readback.
     pub fn stats_buffer(&self) -> &wgpu::Buffer {
         &self.stats

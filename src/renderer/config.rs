@@ -47,6 +47,8 @@ pub struct RendererConfig {
     pub trees: Option<crate::plants::PlantSettings>,
     /// The trees' shadow map (`None`: no tree shadows, and no map's memory).
     pub tree_shadows: Option<crate::plants::shadow::TreeShadows>,
+    /// The leaves the trees shed (`None`: none, and no pool).
+    pub particles: Option<crate::plants::particles::ParticleSettings>,
 }
 
 /// The grass's own settings, the same for every world (what follows from the world, like the
@@ -172,6 +174,7 @@ impl RendererConfig {
             plants: Default::default(),
             trees: None,
             tree_shadows: Some(Default::default()),
+            particles: Some(Default::default()),
         }
     }
 
@@ -293,6 +296,11 @@ impl RendererConfig {
             && let Err((field, range)) = s.validate()
         {
             return Err(ConfigError::new(field, s, range));
+        }
+        if let Some(p) = &self.particles
+            && let Err((field, range)) = p.validate()
+        {
+            return Err(ConfigError::new(field, p, range));
         }
         self.grass.validate()
     }

@@ -91,6 +91,8 @@ struct GrassStage {
     casters: Option<crate::plants::PlantRenderer>,
     /// With trees: the depth of their canopy's shade per grass type.
     canopy: Option<[f32; crate::world::MAX_GRASS_TYPES]>,
+    /// With trees: the leaves they shed.
+    particles: Option<crate::plants::particles::ParticleStage>,
 }
 
 /// What [`Renderer::prepare`] worked out for [`Renderer::record`].
@@ -353,6 +355,33 @@ impl Renderer {
                         crate::terrain::sun_direction(&world.manifest.sky),
                     )
                 });
+                let particles = match (&trees, &config.particles) {
+                    (Some(t), Some(p)) => {
+                        let colors: Vec<[f32; 3]> = crate::plants::PlantLayer::Trees
+                            .types(&world.manifest)
+                            .iter()
+                            .map(|&i| world.manifest.plant_types[i].color)
+                            .collect();
+                        Some(crate::plants::particles::ParticleStage::new(
+                            device,
+                            &targets,
+                            *p,
+                            crate::plants::particles::TreeSource {
+                                instances: t.instance_buffer(),
+                                args: t.args_buffer(),
+                                capacity: t.settings().capacity,
+                                types: t.types(),
+                            },
+                            crate::plants::particles::ParticleWind {
+                                lookup: wind.lookup_uniform(),
+                                cells: wind.buffer(),
+                            },
+                            &colors,
+                            &world.manifest.sky,
+                        ))
+                    }
+                    _ => None,
+                };
                 Some(GrassStage {
                     renderer,
                     wind,
@@ -361,6 +390,7 @@ impl Renderer {
                     trees,
                     casters,
                     canopy,
+                    particles,
                 })
             }
             None => None,
@@ -390,6 +420,9 @@ impl Renderer {
         if let (Some(g), Some(_)) = (&mut grass, &msaa) {
             g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
             for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
+                p.set_samples(device, crate::aa::msaa::SAMPLES);
+            }
+            if let Some(p) = &mut g.particles {
                 p.set_samples(device, crate::aa::msaa::SAMPLES);
             }
         }
@@ -493,6 +526,16 @@ impl Renderer {
                     .flatten()
                     .collect()
             })
+            .unwrap_or_default()
+    }
+
+    /// The leaves' pool after the last submitted frame, positions relative to that frame's
+    /// camera (for tests and tools: waits for the GPU; empty without trees).
+    pub fn read_particles(&self) -> Vec<crate::plants::particles_cpu::Particle> {
+        self.grass
+            .as_ref()
+            .and_then(|g| g.particles.as_ref())
+            .map(|p| p.read_particles(&self.device, &self.queue))
             .unwrap_or_default()
     }
 
@@ -611,6 +654,9 @@ impl Renderer {
         if let Some(g) = &mut self.grass {
             g.renderer.set_samples(&self.device, samples);
             for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
+                p.set_samples(&self.device, samples);
+            }
+            if let Some(p) = &mut g.particles {
                 p.set_samples(&self.device, samples);
             }
         }
@@ -789,6 +835,9 @@ impl Renderer {
                     camera.near_m,
                 );
             }
+            if let Some(p) = &mut g.particles {
+                p.set_frame(queue, camera.position, view.view_proj, dt);
+            }
             if let (Some(c), false) = (&mut g.casters, cascades.is_empty()) {
                 c.set_shadow_frame(
                     queue,
@@ -955,6 +1004,13 @@ impl Renderer {
                         &mut self.timer,
                     );
                 }
+            }
+            if let Some(p) = &g.particles
+                && g.trees.is_some()
+                && self.features.has(Feature::Trees)
+                && self.features.has(Feature::Particles)
+            {
+                p.record(encoder, grass_color, grass_depth, &mut self.timer);
             }
         }
         if let Some(msaa) = &self.msaa {

@@ -112,7 +112,7 @@ pub fn run_bench_features(
                 // A world without plants (or trees) has none to switch off.
                 .filter(|f| match f {
                     Feature::Plants => m.plant_types.iter().any(|t| !t.is_tree()),
-                    Feature::Trees | Feature::TreeShadows => {
+                    Feature::Trees | Feature::TreeShadows | Feature::Particles => {
                         m.plant_types.iter().any(|t| t.is_tree())
                     }
                     _ => true,

@@ -379,6 +379,8 @@ pub struct FeatureSwitches {
     pub trees: bool,
     /// The trees' shadows from a shadow map.
     pub tree_shadows: bool,
+    /// Leaves shed by the trees, carried by the wind.
+    pub particles: bool,
 }
 
 impl Default for FeatureSwitches {
@@ -403,6 +405,7 @@ impl From<Features> for FeatureSwitches {
             plants: f.has(Feature::Plants),
             trees: f.has(Feature::Trees),
             tree_shadows: f.has(Feature::TreeShadows),
+            particles: f.has(Feature::Particles),
         }
     }
 }
@@ -423,6 +426,7 @@ impl From<&FeatureSwitches> for Features {
             (Feature::Plants, s.plants),
             (Feature::Trees, s.trees),
             (Feature::TreeShadows, s.tree_shadows),
+            (Feature::Particles, s.particles),
         ];
         on.into_iter()
             .filter(|(_, on)| !on)

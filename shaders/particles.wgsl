@@ -1,0 +1,214 @@
+// Wind-carried leaves (src/plants/particles.rs): a bounded pool of particles shed by the trees,
+// each stepped once a frame in the same wind field the grass and the plants bend in (a gust
+// sends them flying, the helicopter's downwash scatters them), and drawn as small leaves turned
+// to the camera. One compute pass steps every particle: one whose life is over, or that has
+// fallen to the ground it was shed over, is shed again from a tree of the frame's instance pool
+// (the nearest trees: full and reduced meshes), from a point in its crown; the rest move toward
+// the wind plus their own flutter, sinking at their fall speed, with the exact solution of that
+// drag over the frame's time. Positions are relative to the camera (moved by the camera's step
+// each frame). CPU mirror: src/plants/particles_cpu.rs.
+
+#include "shared/hash.wgsl"
+#include "shared/output.wgsl"
+#include "shared/wind_lookup.wgsl"
+#include "shared/plant_instance.wgsl"
+
+// Mirrors Particle in src/plants/particles_cpu.rs.
+struct Particle {
+    // Relative to the camera (m); age (s)
+    pos: vec3<f32>,
+    age: f32,
+    // m/s; life (s; 0: not shed yet; below 0: waiting in the pool that long before it is
+    // shed, drawn nowhere)
+    vel: vec3<f32>,
+    life: f32,
+    // The ground under the tree it was shed from (camera-relative z, m); the tree's type; its
+    // seed; its spin phase
+    ground: f32,
+    kind: u32,
+    seed: u32,
+    spin: f32,
+}
+
+// Mirrors ParticleParams in src/plants/particles_cpu.rs.
+struct Params {
+    view_proj: mat4x4<f32>,
+    // xyz: how far the camera moved since the last step (m); w: the step's time (s)
+    delta: vec4<f32>,
+    // x: drag (1/s), y: fall speed (m/s), z: flutter (m/s), w: the leaf's size (m)
+    motion: vec4<f32>,
+    // x, y: life range (s); z: fog distance (m); w: 1 to shed every particle again (a teleport)
+    life: vec4<f32>,
+    // x: particles, y: tree types, z: instances a (type, level) region holds, w: the frame's seed
+    counts: vec4<u32>,
+    // x: leaves in the air per tree near the camera (the rest of the pool waits), yzw: unused
+    shed: vec4<f32>,
+    sun_dir: vec4<f32>,
+    sun_color: vec4<f32>,
+    sky_color: vec4<f32>,
+    horizon_color: vec4<f32>,
+    // Per tree type, its leaves' colour.
+    colors: array<vec4<f32>, 8>,
+}
+
+struct DrawIndexedArgs {
+    index_count: u32,
+    instance_count: u32,
+    first_index: u32,
+    base_vertex: i32,
+    first_instance: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read_write> particles: array<Particle>;
+@group(0) @binding(2) var<uniform> wind_lookup: WindLookup;
+@group(0) @binding(3) var<storage, read> wind_cells: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> trees: array<PlantInstance>;
+@group(0) @binding(5) var<storage, read> tree_args: array<DrawIndexedArgs>;
+// The pool again, read-only, for the draw (a vertex stage cannot see a writable buffer).
+@group(1) @binding(0) var<storage, read> leaves: array<Particle>;
+
+const TAU: f32 = 6.2831853;
+
+// The trees of the frame a particle can be shed from: per type, its full and reduced meshes.
+fn tree_count(t: u32, level: u32) -> u32 {
+    return min(tree_args[t * 3u + level].instance_count, params.counts.z);
+}
+
+// Shed particle `i` again, from a tree picked by its hash, or, to keep about params.shed.x
+// leaves in the air per tree near the camera, leave it waiting in the pool for a life's time
+// (as shed in particles_cpu.rs).
+fn shed(i: u32) -> Particle {
+    var p: Particle;
+    let h = hash3(i, params.counts.w, 0x1eafu);
+    var total = 0u;
+    for (var t = 0u; t < params.counts.y; t++) {
+        total += tree_count(t, 0u) + tree_count(t, 1u);
+    }
+    p.seed = h;
+    p.age = 0.0;
+    p.vel = vec3<f32>(0.0);
+    p.pos = vec3<f32>(0.0);
+    p.ground = 0.0;
+    p.kind = 0u;
+    p.spin = 0.0;
+    let life = mix(params.life.x, params.life.y, rand01(hash_u32(h ^ 5u)));
+    let chance = min(1.0, f32(total) * params.shed.x / f32(max(params.counts.x, 1u)));
+    if total == 0u || rand01(hash_u32(h ^ 7u)) >= chance {
+        // Waiting in the pool for a life's time, drawn nowhere.
+        p.life = -life;
+        return p;
+    }
+    var k = hash_u32(h ^ 1u) % total;
+    var region = 0u;
+    var found = false;
+    for (var t = 0u; t < params.counts.y && !found; t++) {
+        for (var level = 0u; level < 2u && !found; level++) {
+            let n = tree_count(t, level);
+            if k < n {
+                region = t * 3u + level;
+                p.kind = t;
+                found = true;
+            } else {
+                k -= n;
+            }
+        }
+    }
+    let tree = trees[region * params.counts.z + k];
+    let a = TAU * rand01(hash_u32(h ^ 2u));
+    let r = 0.35 * tree.scale * sqrt(rand01(hash_u32(h ^ 3u)));
+    let z = (0.5 + 0.4 * rand01(hash_u32(h ^ 4u))) * tree.scale;
+    p.pos = tree.pos + vec3<f32>(r * cos(a), r * sin(a), z);
+    p.ground = tree.pos.z;
+    p.life = life;
+    p.spin = rand01(hash_u32(h ^ 6u));
+    return p;
+}
+
+// One step of a particle in the air over `dt` (as step in particles_cpu.rs): its velocity
+// relaxes toward the wind plus its flutter, less its fall speed, at the drag's rate, exactly.
+fn step(p_in: Particle, dt: f32) -> Particle {
+    var p = p_in;
+    let w = wind_at(p.pos.xy);
+    let phase = rand01(p.seed) * TAU;
+    let t = p.age + phase;
+    let flutter = vec3<f32>(cos(2.1 * t), sin(1.7 * t), 0.5 * sin(3.3 * t)) * params.motion.z;
+    let target_vel = vec3<f32>(w.xy, 0.0) + flutter - vec3<f32>(0.0, 0.0, params.motion.y);
+    let k = 1.0 - exp(-params.motion.x * dt);
+    let v0 = p.vel;
+    p.vel = target_vel + (v0 - target_vel) * (1.0 - k);
+    // The position over the step: the integral of the relaxing velocity.
+    let drag = max(params.motion.x, 1e-4);
+    p.pos += target_vel * dt + (v0 - target_vel) * (k / drag);
+    p.age += dt;
+    return p;
+}
+
+@compute @workgroup_size(64)
+fn cs_step(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= params.counts.x {
+        return;
+    }
+    var p = particles[i];
+    p.pos -= params.delta.xyz;
+    p.ground -= params.delta.z;
+    if params.life.w > 0.5 || p.age >= abs(p.life) || (p.life > 0.0 && p.pos.z < p.ground) {
+        particles[i] = shed(i);
+    } else if p.life > 0.0 {
+        particles[i] = step(p, params.delta.w);
+    } else {
+        p.age += params.delta.w;
+        particles[i] = p;
+    }
+}
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) uv: vec2<f32>,
+    @location(1) color: vec3<f32>,
+    @location(2) fog: f32,
+}
+
+// A leaf: a quad turned to the camera, spinning as it falls, lit by the sun and the sky from
+// both sides.
+@vertex
+fn vs_particle(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VertexOut {
+    var out: VertexOut;
+    let p = leaves[ii];
+    if p.life <= 0.0 || p.age >= p.life {
+        out.clip = vec4<f32>(0.0);
+        return out;
+    }
+    let corner = vec2<f32>(f32(vi & 1u), f32(vi >> 1u)) * 2.0 - 1.0;
+    let to_eye = normalize(-p.pos);
+    var right = cross(vec3<f32>(0.0, 0.0, 1.0), to_eye);
+    if dot(right, right) < 1e-6 {
+        right = vec3<f32>(1.0, 0.0, 0.0);
+    }
+    right = normalize(right);
+    let up = cross(to_eye, right);
+    let a = TAU * (p.spin + 0.4 * p.age);
+    let c = vec2<f32>(cos(a), sin(a));
+    let r = vec2<f32>(corner.x * c.x - corner.y * c.y, corner.x * c.y + corner.y * c.x);
+    let size = params.motion.w;
+    let world = p.pos + (right * r.x + up * r.y * 0.6) * size;
+    out.clip = params.view_proj * vec4<f32>(world, 1.0);
+    out.uv = corner;
+    let albedo = params.colors[min(p.kind, 7u)].rgb;
+    let light = params.sun_color.rgb * (0.35 + 0.4 * abs(params.sun_dir.z)) + params.sky_color.rgb * 0.4;
+    out.color = albedo * light;
+    let x = length(p.pos) / params.life.z;
+    out.fog = 1.0 - exp(-3.0 * x * x);
+    return out;
+}
+
+@fragment
+fn fs_particle(in: VertexOut) -> @location(0) vec4<f32> {
+    // A leaf's outline: an ellipse pointed at both ends.
+    let q = vec2<f32>(in.uv.x, in.uv.y * (1.0 + 0.6 * abs(in.uv.x)));
+    if dot(q, q) > 1.0 {
+        discard;
+    }
+    return output_color(mix(in.color, params.horizon_color.rgb, in.fog));
+}
