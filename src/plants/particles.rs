@@ -40,9 +40,9 @@ impl Default for ParticleSettings {
             drag: 1.5,
             fall_mps: 0.8,
             flutter_mps: 0.5,
-            size_m: 0.08,
+            size_m: 0.1,
             life_s: [4.0, 10.0],
-            per_tree: 2.0,
+            per_tree: 8.0,
         }
     }
 }
