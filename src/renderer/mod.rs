@@ -887,6 +887,8 @@ impl Renderer {
     /// 6. grass in batches of 4 jobs (a tile, or a near tile's blades within the near radius):
     ///    generation and culling, then the wind on each blade (compute, `grass_generate.wgsl`,
     ///    `grass_wind.wgsl`), then one indirect draw per job (`grass_draw.wgsl`);
+    ///    then the plants and the trees (`plants_place.wgsl`, `plants_draw.wgsl`) and the
+    ///    leaves the trees shed (`particles.wgsl`).
     ///    With multisampling (`aa_msaa.wgsl`), the frame so far is copied into every sample of
     ///    the stage's multisampled targets first, the blades drawn there with alpha to
     ///    coverage, and colour and depth resolved into `color` and `depth` after;
