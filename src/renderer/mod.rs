@@ -517,9 +517,17 @@ impl Renderer {
     /// a tree inside a cross-fade band once per level it is drawn at (for tests and tools:
     /// waits for the GPU; empty without trees).
     pub fn read_tree_instances(&self) -> Vec<crate::plants::place_cpu::PlantInstance> {
+        self.read_layer(|g| g.trees.as_ref())
+    }
+
+    /// Every instance the plant stage that `stage` picks drew in the last submitted frame.
+    fn read_layer(
+        &self,
+        stage: impl Fn(&GrassStage) -> Option<&crate::plants::PlantRenderer>,
+    ) -> Vec<crate::plants::place_cpu::PlantInstance> {
         self.grass
             .as_ref()
-            .and_then(|g| g.trees.as_ref())
+            .and_then(stage)
             .map(|t| {
                 t.read_instances(&self.device, &self.queue)
                     .into_iter()
@@ -543,16 +551,7 @@ impl Renderer {
     /// relative to that frame's camera (for tests and tools: waits for the GPU; empty without
     /// tree shadows).
     pub fn read_shadow_casters(&self) -> Vec<crate::plants::place_cpu::PlantInstance> {
-        self.grass
-            .as_ref()
-            .and_then(|g| g.casters.as_ref())
-            .map(|c| {
-                c.read_instances(&self.device, &self.queue)
-                    .into_iter()
-                    .flatten()
-                    .collect()
-            })
-            .unwrap_or_default()
+        self.read_layer(|g| g.casters.as_ref())
     }
 
     /// The grass tiles of the last frame and their rings.

@@ -348,14 +348,7 @@ impl Renderer {
             grass_level - (most / per_tile).max(1).ilog2().min(u32::from(grass_level)) as u8;
         let outer = f64::from(settings.view_m[1]);
         let eye = view.camera.position;
-        let tallest = self
-            .world
-            .manifest
-            .plant_types
-            .iter()
-            .filter(|t| t.is_tree())
-            .map(|t| f64::from(t.size_m[1]))
-            .fold(0.0, f64::max);
+        let tallest = self.tallest_tree_m();
         let mut seen = std::collections::HashSet::new();
         let mut jobs: Vec<(f64, PlantJob)> = Vec::new();
         for &id in terrain {
@@ -399,6 +392,18 @@ impl Renderer {
 }
 
 impl Renderer {
+    /// The height of the world's tallest tree, metres (0 without trees): how far above its
+    /// ground a tile's trees reach.
+    fn tallest_tree_m(&self) -> f64 {
+        self.world
+            .manifest
+            .plant_types
+            .iter()
+            .filter(|t| t.is_tree())
+            .map(|t| f64::from(t.size_m[1]))
+            .fold(0.0, f64::max)
+    }
+
     /// The jobs of the trees' shadow casters: every grass-level tile within `distance` (and
     /// the casters' margin) of `eye` whose box meets the cascades' box `frustum`, read from the
     /// tile the terrain would draw it from, nearest first.
@@ -420,14 +425,7 @@ impl Renderer {
         let tile = pyramid.tile_size_m(level);
         let per_tile = (tile as f32 / settings.cell_m).round().max(1.0) as u32;
         let reach = distance + 40.0;
-        let tallest = self
-            .world
-            .manifest
-            .plant_types
-            .iter()
-            .filter(|t| t.is_tree())
-            .map(|t| f64::from(t.size_m[1]))
-            .fold(0.0, f64::max);
+        let tallest = self.tallest_tree_m();
         let origin = pyramid.bounds(TileId::new(level, 0, 0)).min;
         let [cols, rows] = pyramid.tiles_at(level);
         let range = |e: f64, o: f64, n: u32| {
