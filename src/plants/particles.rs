@@ -48,30 +48,37 @@ impl Default for ParticleSettings {
 }
 
 impl ParticleSettings {
-    /// Whether the settings are usable; the error names the setting and its range.
-    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+    /// Whether the settings are usable; the error names the setting, its value and its range.
+    pub fn validate(&self) -> Result<(), (&'static str, String, String)> {
+        let bad = |field, value: f32, range: &str| Err((field, value.to_string(), range.into()));
         if !(1..=MAX_PARTICLES).contains(&self.count) {
-            return Err(("particles.count", format!("1 to {MAX_PARTICLES}")));
+            let range = format!("1 to {MAX_PARTICLES}");
+            return Err(("particles.count", self.count.to_string(), range));
         }
         let positive = |v: f32| v.is_finite() && v > 0.0;
+        let at_least_0 = |v: f32| v.is_finite() && v >= 0.0;
         if !positive(self.drag) {
-            return Err(("particles.drag", "above 0 (1/s)".into()));
+            return bad("particles.drag", self.drag, "above 0 (1/s)");
         }
-        if !(self.fall_mps.is_finite() && self.fall_mps >= 0.0) {
-            return Err(("particles.fall_mps", "0 or more m/s".into()));
+        if !at_least_0(self.fall_mps) {
+            return bad("particles.fall_mps", self.fall_mps, "0 or more m/s");
         }
-        if !(self.flutter_mps.is_finite() && self.flutter_mps >= 0.0) {
-            return Err(("particles.flutter_mps", "0 or more m/s".into()));
+        if !at_least_0(self.flutter_mps) {
+            return bad("particles.flutter_mps", self.flutter_mps, "0 or more m/s");
         }
         if !positive(self.size_m) {
-            return Err(("particles.size_m", "above 0 m".into()));
+            return bad("particles.size_m", self.size_m, "above 0 m");
         }
-        if !(self.per_tree.is_finite() && self.per_tree >= 0.0) {
-            return Err(("particles.per_tree", "0 or more leaves".into()));
+        if !at_least_0(self.per_tree) {
+            return bad("particles.per_tree", self.per_tree, "0 or more leaves");
         }
         let [a, b] = self.life_s;
         if !(positive(a) && a <= b && b.is_finite()) {
-            return Err(("particles.life_s", "MIN,MAX with 0 < MIN <= MAX".into()));
+            return Err((
+                "particles.life_s",
+                format!("{a},{b}"),
+                "MIN,MAX with 0 < MIN <= MAX".into(),
+            ));
         }
         Ok(())
     }
@@ -399,7 +406,7 @@ mod tests {
             ),
         ];
         for (s, word) in bad {
-            let (field, _) = s.validate().unwrap_err();
+            let (field, _, _) = s.validate().unwrap_err();
             assert!(field.contains(word), "{field}");
         }
     }

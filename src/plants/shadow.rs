@@ -107,29 +107,45 @@ fn ortho(basis: (Vec3, Vec3, Vec3), c: Vec3, r: f32, [lo, hi]: [f32; 2]) -> Mat4
 }
 
 impl TreeShadows {
-    /// Whether the settings are usable; the error names the setting and its range.
-    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+    /// Whether the settings are usable; the error names the setting, its value and its range.
+    pub fn validate(&self) -> Result<(), (&'static str, String, String)> {
+        let bad = |field, value: String, range: &str| Err((field, value, range.to_owned()));
         if !(self.distance_m.is_finite() && (10.0..=2000.0).contains(&self.distance_m)) {
-            return Err(("tree_shadows.distance_m", "10 to 2000 m".into()));
+            return bad(
+                "tree_shadows.distance_m",
+                self.distance_m.to_string(),
+                "10 to 2000 m",
+            );
         }
         if !(1..=MAX_CASCADES as u32).contains(&self.cascades) {
-            return Err(("tree_shadows.cascades", format!("1 to {MAX_CASCADES}")));
+            let range = format!("1 to {MAX_CASCADES}");
+            return bad("tree_shadows.cascades", self.cascades.to_string(), &range);
         }
         if !(256..=8192).contains(&self.size) {
-            return Err(("tree_shadows.size", "256 to 8192 texels".into()));
+            return bad(
+                "tree_shadows.size",
+                self.size.to_string(),
+                "256 to 8192 texels",
+            );
         }
         if !(self.split > 0.0 && self.split < 1.0) {
-            return Err(("tree_shadows.split", "between 0 and 1".into()));
+            return bad(
+                "tree_shadows.split",
+                self.split.to_string(),
+                "between 0 and 1",
+            );
         }
         if !(self.bias_texels.is_finite() && self.bias_texels >= 0.0) {
-            return Err(("tree_shadows.bias_texels", "0 or more texels".into()));
+            let value = self.bias_texels.to_string();
+            return bad("tree_shadows.bias_texels", value, "0 or more texels");
         }
         let [near, far] = self.lod_m;
         if !(near >= 0.0 && near <= far && far <= 10_000.0) {
-            return Err((
+            return bad(
                 "tree_shadows.lod_m",
-                "NEAR,FAR with 0 <= NEAR <= FAR <= 10000 m".into(),
-            ));
+                format!("{near},{far}"),
+                "NEAR,FAR with 0 <= NEAR <= FAR <= 10000 m",
+            );
         }
         Ok(())
     }
@@ -640,8 +656,8 @@ mod tests {
                 "lod_m",
             ),
         ] {
-            let (field, range) = s.validate().unwrap_err();
-            assert!(field.contains(word), "{field}: {range}");
+            let (field, value, range) = s.validate().unwrap_err();
+            assert!(field.contains(word), "{field} = {value}: {range}");
         }
     }
 }

@@ -292,15 +292,17 @@ impl RendererConfig {
                 ));
             }
         }
-        if let Some(s) = &self.tree_shadows
-            && let Err((field, range)) = s.validate()
+        let checked = [
+            self.tree_shadows.map(|s| s.validate()),
+            self.particles.map(|p| p.validate()),
+        ];
+        if let Some(Err((field, value, range))) = checked.into_iter().flatten().find(Result::is_err)
         {
-            return Err(ConfigError::new(field, s, range));
-        }
-        if let Some(p) = &self.particles
-            && let Err((field, range)) = p.validate()
-        {
-            return Err(ConfigError::new(field, p, range));
+            return Err(ConfigError {
+                field,
+                value,
+                range,
+            });
         }
         self.grass.validate()
     }

@@ -658,6 +658,26 @@ mod tests {
                 "--tree-min-keep",
                 "above 0, at most 1",
             ),
+            (
+                with(&|o| o.tree_shadows.size = 100),
+                "--tree-shadow-size",
+                "tree_shadows.size = 100 is out of range: it must be 256 to 8192 texels",
+            ),
+            (
+                with(&|o| o.tree_shadows.cascades = 5),
+                "--tree-shadow-cascades",
+                "= 5 is out of range: it must be 1 to 4",
+            ),
+            (
+                with(&|o| o.tree_shadows.distance_m = f32::NAN),
+                "--tree-shadow-m",
+                "10 to 2000 m",
+            ),
+            (
+                with(&|o| o.tree_shadows.lod_m = [30.0, 20.0]),
+                "--tree-shadow-lod-m",
+                "= 30,20 is out of range: it must be NEAR,FAR with 0 <= NEAR <= FAR <= 10000 m",
+            ),
         ];
         for (opts, option, range) in cases {
             let e = opts.renderer_config(&world, &path).unwrap_err();
