@@ -229,17 +229,23 @@ fn vs_plant(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     return plant_vertex(vi, ii);
 }
 
-// A 4x4 ordered dither in 0..1.
+// A 4x4 ordered dither in 0..1: Bayer's matrix (0 8 2 10 / 12 4 14 6 / 3 11 1 9 / 15 7 13 5),
+// its entry the bits of x ^ y and y interleaved and reversed, computed rather than looked up in
+// a table (which would be indexed per pixel from memory).
 fn dither(p: vec2<f32>) -> f32 {
     let x = u32(p.x) & 3u;
     let y = u32(p.y) & 3u;
-    let bayer = array<u32, 16>(0u, 8u, 2u, 10u, 12u, 4u, 14u, 6u, 3u, 11u, 1u, 9u, 15u, 7u, 13u, 5u);
-    return (f32(bayer[y * 4u + x]) + 0.5) / 16.0;
+    let a = x ^ y;
+    let bayer = ((a & 1u) << 3u) | ((y & 1u) << 2u) | (a & 2u) | ((y & 2u) >> 1u);
+    return (f32(bayer) + 0.5) / 16.0;
 }
 
 // Whether a pixel at `p` of a plant cross-faded by `fade` is drawn (as keeps_pixel in
 // src/plants/place_cpu.rs).
 fn keeps_pixel(fade: f32, p: vec2<f32>) -> bool {
+    if fade >= 1.0 {
+        return true;
+    }
     let d = dither(p);
     return (fade >= 0.0 && d < fade) || (fade < 0.0 && d >= -fade);
 }

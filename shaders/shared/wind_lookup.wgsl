@@ -18,28 +18,42 @@ struct WindLookup {
     _pad: vec2<f32>,
 }
 
-// The cell rel_cell cells from the camera's cell, clamped to the field's edge.
-fn wind_cell(rel_cell: vec2<i32>) -> vec4<f32> {
-    let n = i32(wind_lookup.n);
-    let half = n / 2;
-    let r = clamp(rel_cell, vec2<i32>(-half, -half), vec2<i32>(half - 1, half - 1));
-    let w = wind_lookup.origin_cell + r;
-    let x = ((w.x % n) + n) % n;
-    let y = ((w.y % n) + n) % n;
-    return wind_cells[u32(y) * wind_lookup.n + u32(x)];
+// The column or row of the field's ring buffer holding the world cell `w` (0..n).
+fn wind_wrap(w: i32, n: i32) -> i32 {
+    return ((w % n) + n) % n;
 }
 
 // The wind at rel_xy metres from the camera (x east, y north): bilinear between the four
-// nearest cell centres.
+// nearest cell centres, each clamped to the field's edge. One wrap per axis (the second cell
+// is the next one, or the same at the edge): the draws call this per vertex.
 fn wind_at(rel_xy: vec2<f32>) -> vec4<f32> {
     let p = (wind_lookup.camera_offset + rel_xy) / wind_lookup.cell_m - vec2<f32>(0.5, 0.5);
     let fl = floor(p);
     let f = p - fl;
     let c = vec2<i32>(fl);
-    let v00 = wind_cell(c);
-    let v10 = wind_cell(c + vec2<i32>(1, 0));
-    let v01 = wind_cell(c + vec2<i32>(0, 1));
-    let v11 = wind_cell(c + vec2<i32>(1, 1));
+    let n = i32(wind_lookup.n);
+    let half = n / 2;
+    let lo = vec2<i32>(-half, -half);
+    let hi = vec2<i32>(half - 1, half - 1);
+    let r0 = clamp(c, lo, hi);
+    let step = clamp(c + vec2<i32>(1, 1), lo, hi) - r0;
+    let w = wind_lookup.origin_cell + r0;
+    let x0 = wind_wrap(w.x, n);
+    let y0 = wind_wrap(w.y, n);
+    var x1 = x0 + step.x;
+    if x1 >= n {
+        x1 -= n;
+    }
+    var y1 = y0 + step.y;
+    if y1 >= n {
+        y1 -= n;
+    }
+    let row0 = u32(y0) * wind_lookup.n;
+    let row1 = u32(y1) * wind_lookup.n;
+    let v00 = wind_cells[row0 + u32(x0)];
+    let v10 = wind_cells[row0 + u32(x1)];
+    let v01 = wind_cells[row1 + u32(x0)];
+    let v11 = wind_cells[row1 + u32(x1)];
     let bottom = v00 + (v10 - v00) * f.x;
     let top = v01 + (v11 - v01) * f.x;
     return bottom + (top - bottom) * f.y;

@@ -60,6 +60,172 @@ pub fn crossed_cards(mesh: &PlantMesh) -> PlantMesh {
     card
 }
 
+/// The smallest mip level (texels a side) whose opaque texels the trimmed billboard keeps
+/// inside it. Coarser levels are drawn only where the card is under about this many pixels: a
+/// texel they pass beyond the outline reaches past it by less than a quarter of a pixel there.
+const TRIM_FINEST_SIDE: usize = 8;
+
+/// Most corners of a trimmed billboard.
+pub const TRIM_CORNERS: usize = 6;
+
+/// One vertical quad in the x-z plane (facing -y, as [`crossed_cards`]' first), trimmed to the
+/// outline of its picture: a convex polygon of at most [`TRIM_CORNERS`] corners holding every
+/// point where the alpha test can pass, at any mip level in `levels` down to 8 x 8 texels (each
+/// level an RGBA8 square, `levels[0]` the full picture; a texel passing the test reaches one
+/// texel around its centre through bilinear filtering). The trees' cards are billboards turned
+/// to the camera; trimmed, they cost the rasteriser the crown's outline instead of its box
+/// (about half of a conifer's box is empty sky). The corners keep the quad's uv, wind and albedo
+/// mapping. Falls back to the whole quad where nothing in `levels` is opaque.
+pub fn trimmed_billboard(mesh: &PlantMesh, levels: &[Vec<u8>]) -> PlantMesh {
+    let (r, h) = extent(mesh);
+    let cut = (super::set::ALPHA_CUTOFF * 255.0).ceil() as u8;
+    // Points in (u, up) = (u, 1 - v), 0..1 each.
+    let mut points = Vec::new();
+    for level in levels {
+        let side = ((level.len() / 4) as f64).sqrt() as usize;
+        if side < TRIM_FINEST_SIDE || side * side * 4 != level.len() {
+            continue;
+        }
+        passing_boxes(level, side, cut, &mut points);
+    }
+    let mut outline = convex_hull(points);
+    if outline.len() < 3 {
+        outline = vec![Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y];
+    }
+    let outline = reduce_polygon(outline, TRIM_CORNERS);
+    let mut card = PlantMesh::default();
+    for q in &outline {
+        let (u, v) = (q.x, 1.0 - q.y);
+        let p = Vec3::X * (r * (2.0 * u - 1.0)) + Vec3::Z * (h * (1.0 - v));
+        card.vertices.push(PlantVertex {
+            position: p.into(),
+            normal: Vec3::NEG_Y.into(),
+            wind: [0.0, 0.5, 1.0 - v, 1.0],
+            albedo: [1.0, 1.0, 1.0, CARD_THINNESS],
+            uv: [u, v],
+        });
+    }
+    // A fan, counter-clockwise from the front as the quads.
+    for i in 1..outline.len() as u32 - 1 {
+        card.indices.extend([0, i, i + 1]);
+    }
+    card
+}
+
+/// Adds to `points` (as (u, 1 - v)) the corners of every box of a grid over the square RGBA8
+/// `level` (`side` texels a side) where the sampler's bilinear filter (clamped to the edge) can
+/// reach `cut`. The grid's lines run through the texel centres (and the edges), so each box lies
+/// within one bilinear cell, where the filter's largest value is at a corner: a box is kept when
+/// any corner passes, and the boxes kept hold every point that passes.
+fn passing_boxes(level: &[u8], side: usize, cut: u8, points: &mut Vec<Vec2>) {
+    let alpha = |x: usize, y: usize| f32::from(level[(y * side + x) * 4 + 3]);
+    // Bilinear alpha at texel-centre coordinate `c` (0 at the first centre), clamped.
+    let filtered = |c: Vec2| {
+        let c = c.clamp(Vec2::ZERO, Vec2::splat((side - 1) as f32));
+        let (x0, y0) = (c.x.floor() as usize, c.y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(side - 1), (y0 + 1).min(side - 1));
+        let f = c - Vec2::new(x0 as f32, y0 as f32);
+        let top = alpha(x0, y0) * (1.0 - f.x) + alpha(x1, y0) * f.x;
+        let bottom = alpha(x0, y1) * (1.0 - f.x) + alpha(x1, y1) * f.x;
+        top * (1.0 - f.y) + bottom * f.y
+    };
+    // Grid lines, in texel-centre coordinates: the edge, the centres with `m` steps between
+    // them, the other edge. Fine levels reach a texel at most: whole cells will do.
+    let m = if side >= 64 { 1 } else { 4 };
+    let mut lines = vec![-0.5f32];
+    for i in 0..(side - 1) * m + 1 {
+        lines.push(i as f32 / m as f32);
+    }
+    lines.push(side as f32 - 0.5);
+    let values: Vec<f32> = lines
+        .iter()
+        .flat_map(|&y| lines.iter().map(move |&x| (x, y)))
+        .map(|(x, y)| filtered(Vec2::new(x, y)))
+        .collect();
+    let n = lines.len();
+    let to_uv = |x: f32, y: f32| {
+        let uv = (Vec2::new(x, y) + 0.5) / side as f32;
+        Vec2::new(uv.x, 1.0 - uv.y)
+    };
+    let cut = f32::from(cut);
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)];
+            if corners.iter().any(|&(a, b)| values[b * n + a] >= cut) {
+                points.extend(corners.iter().map(|&(a, b)| to_uv(lines[a], lines[b])));
+            }
+        }
+    }
+}
+
+/// The convex hull of `points`, counter-clockwise, without collinear points (Andrew's monotone
+/// chain).
+fn convex_hull(mut points: Vec<Vec2>) -> Vec<Vec2> {
+    points.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    points.dedup();
+    if points.len() < 3 {
+        return points;
+    }
+    let mut hull: Vec<Vec2> = Vec::new();
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &Vec2>> = if pass == 0 {
+            Box::new(points.iter())
+        } else {
+            Box::new(points.iter().rev())
+        };
+        for &p in iter {
+            while hull.len() >= start + 2
+                && edge(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// `polygon` (convex, counter-clockwise) cut down to at most `corners` corners, still holding
+/// all of it and inside the unit square: each step drops the edge whose neighbours, extended to
+/// meet, add the least area. Stops early where no edge can go.
+fn reduce_polygon(mut polygon: Vec<Vec2>, corners: usize) -> Vec<Vec2> {
+    const SLACK: f32 = 1e-4;
+    while polygon.len() > corners.max(3) {
+        let n = polygon.len();
+        let mut best: Option<(f32, usize, Vec2)> = None;
+        for i in 0..n {
+            // Edge i runs from a to b; its neighbours come into a and go out of b.
+            let (before, a) = (polygon[(i + n - 1) % n], polygon[i]);
+            let (b, after) = (polygon[(i + 1) % n], polygon[(i + 2) % n]);
+            let (d1, d2) = (a - before, after - b);
+            let denom = d1.perp_dot(d2);
+            if denom <= 1e-12 {
+                continue; // the neighbours do not meet beyond the edge
+            }
+            let t = (b - a).perp_dot(d2) / denom;
+            if t < 0.0 {
+                continue;
+            }
+            let p = a + d1 * t;
+            if p.cmplt(Vec2::splat(-SLACK)).any() || p.cmpgt(Vec2::splat(1.0 + SLACK)).any() {
+                continue;
+            }
+            let added = edge(a, p, b).abs() * 0.5;
+            if best.is_none_or(|(area, _, _)| added < area) {
+                best = Some((added, i, p.clamp(Vec2::ZERO, Vec2::ONE)));
+            }
+        }
+        let Some((_, i, p)) = best else {
+            break;
+        };
+        polygon[i] = p;
+        polygon.remove((i + 1) % n);
+    }
+    polygon
+}
+
 /// Renders `mesh` from the side into a `size` x `size` sRGB RGBA8 picture for
 /// [`crossed_cards`]: orthographic, looking along +y with x to the right and z up, framed to the
 /// card's box (so the picture is stretched to a square; the card stretches it back).
@@ -227,6 +393,65 @@ mod tests {
     fn pixel(img: &PlantImage, x: u32, y: u32) -> [u8; 4] {
         let i = ((y * img.width + x) * 4) as usize;
         img.rgba[i..i + 4].try_into().unwrap()
+    }
+
+    /// Area of a polygon of uv corners (either winding).
+    fn uv_area(card: &PlantMesh) -> f32 {
+        let c: Vec<Vec2> = card.vertices.iter().map(|v| Vec2::from(v.uv)).collect();
+        (0..c.len())
+            .map(|i| c[i].perp_dot(c[(i + 1) % c.len()]))
+            .sum::<f32>()
+            .abs()
+            * 0.5
+    }
+
+    #[test]
+    fn trimmed_billboards_hold_every_opaque_texel_in_less_than_the_box() {
+        use crate::plants::set::{TEXTURE_SIZE, mips, resample};
+        for (recipe, most_area) in [(Recipe::Conifer, 0.62), (Recipe::Broadleaf, 0.62)] {
+            let p = generate(recipe, 7, [0.1, 0.3, 0.05]);
+            let levels = mips(&resample(&p.card_image, TEXTURE_SIZE));
+            let card = trimmed_billboard(&p.lods[0], &levels);
+            let n = card.vertices.len();
+            assert!((3..=TRIM_CORNERS).contains(&n), "{recipe:?}: {n} corners");
+            assert_eq!(card.triangles(), n - 2);
+            let corners: Vec<Vec2> = card.vertices.iter().map(|v| Vec2::from(v.uv)).collect();
+            // Every texel that passes the test, at every level down to 8 x 8, is inside.
+            let inside = |q: Vec2| {
+                (0..n).all(|i| {
+                    let (a, b) = (corners[i], corners[(i + 1) % n]);
+                    // Clockwise in uv (v points down): inside is to the right.
+                    (b - a).perp_dot(q - a) <= 1e-4
+                })
+            };
+            for level in levels.iter().filter(|l| l.len() >= 8 * 8 * 4) {
+                let side = ((level.len() / 4) as f64).sqrt() as usize;
+                for (i, t) in level.chunks_exact(4).enumerate() {
+                    if t[3] >= 128 {
+                        let c = Vec2::new((i % side) as f32 + 0.5, (i / side) as f32 + 0.5)
+                            / side as f32;
+                        assert!(inside(c), "{recipe:?}: texel {i} of the {side} level is cut");
+                    }
+                }
+            }
+            let area = uv_area(&card);
+            assert!(area < most_area, "{recipe:?}: the billboard covers {area} of its box");
+            eprintln!("{recipe:?}: {n} corners, {area:.3} of the box");
+            // The corners keep the quad's mapping: position from uv, wind rising with height.
+            let (r, h) = (p.lods[0].radius(), p.lods[0].height());
+            for v in &card.vertices {
+                let [u, w] = v.uv;
+                let want = [r * (2.0 * u - 1.0), 0.0, h * (1.0 - w)];
+                for k in 0..3 {
+                    assert!((v.position[k] - want[k]).abs() < 1e-4 * h.max(r));
+                }
+                assert!((v.wind[2] - (1.0 - w)).abs() < 1e-6);
+            }
+        }
+        // A picture with nothing opaque keeps the whole quad.
+        let empty = vec![vec![0u8; 16 * 16 * 4], vec![0u8; 8 * 8 * 4]];
+        let whole = trimmed_billboard(&generate(Recipe::Conifer, 1, [0.1; 3]).lods[0], &empty);
+        assert!((uv_area(&whole) - 1.0).abs() < 1e-6);
     }
 
     #[test]

@@ -383,6 +383,15 @@ fn place_cell(
     }
 }
 
+/// The cross-fade's 4x4 ordered dither at pixel (`x`, `y`), in 0..1: Bayer's matrix, computed
+/// from the bits as `dither` in `shaders/plants_draw.wgsl` computes it.
+pub fn dither(x: u32, y: u32) -> f32 {
+    let (x, y) = (x & 3, y & 3);
+    let a = x ^ y;
+    let bayer = ((a & 1) << 3) | ((y & 1) << 2) | (a & 2) | ((y & 2) >> 1);
+    (bayer as f32 + 0.5) / 16.0
+}
+
 /// The pixels of a plant drawn in a cross-fade at dither value `dither` (0..1): see
 /// [`PlantInstance::fade`].
 pub fn keeps_pixel(fade: f32, dither: f32) -> bool {
@@ -396,6 +405,18 @@ pub fn keeps_pixel(fade: f32, dither: f32) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_dither_is_bayers_matrix() {
+        let bayer = [[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15, 7, 13, 5]];
+        for (y, row) in bayer.iter().enumerate() {
+            for (x, &b) in row.iter().enumerate() {
+                let want = (b as f32 + 0.5) / 16.0;
+                assert_eq!(dither(x as u32, y as u32), want, "({x}, {y})");
+                assert_eq!(dither(x as u32 + 4, y as u32 + 8), want);
+            }
+        }
+    }
 
     #[test]
     fn the_two_levels_of_a_cross_fade_draw_every_pixel_once() {

@@ -128,10 +128,16 @@ pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, Plan
         }
     };
     let radius_ratio = lods[0].radius() / lods[0].height().max(1e-6);
+    let card = resample(&card, TEXTURE_SIZE);
+    let mut lods = lods;
+    if t.is_tree() {
+        // A tree's card is a billboard: one quad, trimmed to the picture's outline.
+        lods[2] = crate::plants::card::trimmed_billboard(&lods[0], &mips(&card));
+    }
     Ok(PlantModel {
         lods,
         texture: resample(&texture, TEXTURE_SIZE),
-        card: resample(&card, TEXTURE_SIZE),
+        card,
         radius_ratio,
     })
 }
