@@ -308,9 +308,9 @@ fn a_short_soak_with_grass_recovers_after_every_teleport_without_stalls() {
         r["grass_blades_drawn_peak"].as_u64().unwrap() > 0,
         "no grass drawn"
     );
-    // The default world's plants, none overflowing; it has no trees.
+    // The default world's plants and trees, none overflowing.
     assert!(r["plants_drawn_peak"].as_u64().unwrap() > 0, "{r}");
-    assert_eq!(r["trees_drawn_peak"].as_u64(), Some(0));
+    assert!(r["trees_drawn_peak"].as_u64().unwrap() > 0, "{r}");
     assert_eq!(r["plants_overflow_total"].as_u64(), Some(0));
     let teleports = r["teleports"].as_array().unwrap();
     assert_eq!(teleports.len(), 1);

@@ -31,6 +31,18 @@ const INSTANCE_BYTES: u64 = std::mem::size_of::<PlantInstance>() as u64;
 /// Grass tiles a frame places plants on at most (the job buffer's size).
 pub const MAX_JOBS: u32 = 1024;
 
+/// Largest instance pool of one plant stage, bytes: a storage buffer bound whole, within the
+/// 128 MiB every wgpu device binds.
+pub const MAX_POOL_BYTES: u64 = 128 << 20;
+
+/// The most instances a (type, level) region of a pool for `types` plant types can hold within
+/// [`MAX_POOL_BYTES`] (a multiple of 8). A stage asked for more gets this many.
+pub fn max_capacity(types: u32) -> u32 {
+    let regions = u64::from(types.max(1)) * LEVELS as u64;
+    let most = MAX_POOL_BYTES / (regions * INSTANCE_BYTES);
+    (most.min(u64::from(u32::MAX)) as u32) / 8 * 8
+}
+
 /// Which of a world's plant types a plant stage draws.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PlantLayer {
@@ -130,7 +142,7 @@ impl PlantSettings {
     pub fn trees(tile_m: f32, fog_m: f32) -> Self {
         let per_tile = (tile_m / TREE_CELL_M).round().max(1.0);
         Self {
-            capacity: 131_072,
+            capacity: 262_144,
             lod_m: [30.0, 150.0],
             band_m: 10.0,
             view_m: [0.9 * fog_m, fog_m],
@@ -392,7 +404,7 @@ impl PlantRenderer {
         use wgpu::BufferUsages as U;
         let ids = layer.types(manifest);
         let types = ids.len() as u32;
-        let capacity = settings.capacity.max(8).div_ceil(8) * 8;
+        let capacity = (settings.capacity.max(8).div_ceil(8) * 8).min(max_capacity(types));
         let settings = PlantSettings {
             capacity,
             ..settings

@@ -926,6 +926,9 @@ mod tests {
         let mut world = World::open(&dir).unwrap();
         let names =
             |w: &World| -> Vec<String> { lod_settings(w).into_iter().map(|s| s.name).collect() };
+        // The default world has trees; without them there are no tree settings.
+        assert!(names(&world).iter().any(|n| n == "trees lod x0.5"));
+        world.manifest.plant_types.retain(|t| !t.is_tree());
         assert!(!names(&world).iter().any(|n| n.starts_with("trees")));
         let mut oak = world.manifest.plant_types[0].clone();
         oak.size_m = [8.0, 12.0];

@@ -192,7 +192,10 @@ fn answer(root: &Path, request: Request) -> std::io::Result<()> {
             buf
         }
     };
+    // The whole body is in memory: always a Content-Length, never chunked (tiny_http chunks
+    // bodies over 32 KiB by default, such as a world manifest with many paths).
     let mut response = Response::from_data(body)
+        .with_chunked_threshold(usize::MAX)
         .with_status_code(status)
         .with_header(header("Content-Type", content_type(&file)))
         .with_header(header("Accept-Ranges", "bytes"));

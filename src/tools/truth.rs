@@ -135,13 +135,17 @@ pub fn truth_config_reaching(
     c.plants.thin_m = crate::renderer::MAX_PLANT_LOD_M;
     c.plants.capacity = base.plants.capacity.saturating_mul(4);
     // The trees: full meshes out to TREE_MESH_M, cards beyond (a tree there is a few pixels),
-    // none thinned out; four times the regions.
+    // none thinned out; four times the regions, as far as a pool can be bound.
     if let Some(t) = base.tree_settings(world) {
+        let types = world.manifest.plant_types.iter().filter(|t| t.is_tree()).count();
         c.trees = Some(crate::plants::PlantSettings {
             lod_m: [TREE_MESH_M; 2],
             thin_m: crate::renderer::MAX_PLANT_LOD_M,
             min_keep: 1.0,
-            capacity: t.capacity.saturating_mul(4),
+            capacity: t
+                .capacity
+                .saturating_mul(4)
+                .min(crate::plants::renderer::max_capacity(types as u32)),
             ..t
         });
     }
@@ -500,7 +504,15 @@ mod tests {
         let t = truth_config(&world, &base, 64).trees.unwrap();
         assert_eq!(t.lod_m, [TREE_MESH_M; 2]);
         assert!(t.lod_m[0] > default.lod_m[1] && t.min_keep == 1.0);
-        assert_eq!(t.capacity, 4 * default.capacity);
+        // Four times the default's regions, within what a pool binds: the default world's
+        // three tree types get 466,032 instances a region.
+        let types = world.manifest.plant_types.iter().filter(|t| t.is_tree()).count() as u32;
+        assert_eq!(types, 3);
+        assert_eq!(
+            t.capacity,
+            (4 * default.capacity).min(crate::plants::renderer::max_capacity(types))
+        );
+        assert_eq!(t.capacity, 466_032);
         assert_eq!((t.cell_m, t.view_m), (default.cell_m, default.view_m));
         truth_config(&world, &base, 64).validate().unwrap();
     }
