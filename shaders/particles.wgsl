@@ -1,12 +1,13 @@
-// Wind-carried leaves (src/plants/particles.rs): a bounded pool of particles shed by the trees,
-// each stepped once a frame in the same wind field the grass and the plants bend in (a gust
-// sends them flying, the helicopter's downwash scatters them), and drawn as small leaves turned
-// to the camera. One compute pass steps every particle: one whose life is over, or that has
-// fallen to the ground it was shed over, is shed again from a tree of the frame's instance pool
-// (the nearest trees: full and reduced meshes), from a point in its crown; the rest move toward
-// the wind plus their own flutter, sinking at their fall speed, with the exact solution of that
-// drag over the frame's time. Positions are relative to the camera (moved by the camera's step
-// each frame). CPU mirror: src/plants/particles_cpu.rs.
+// Wind-carried leaves and petals (src/plants/particles.rs): a bounded pool of particles shed by
+// the trees and the flowers, each stepped once a frame in the same wind field the grass and the
+// plants bend in (a gust sends them flying, the helicopter's downwash scatters them), and drawn
+// as small leaves turned to the camera. One compute pass steps every particle: one whose life is
+// over, or that has fallen to the ground it was shed over, is shed again from a tree of the
+// frame's instance pool (the nearest trees: full and reduced meshes), from a point in its crown,
+// or from the head of a flower of the plants' pool (a petal); the rest move toward the wind plus
+// their own flutter, sinking at their fall speed, with the exact solution of that drag over the
+// frame's time. Positions are relative to the camera (moved by the camera's step each frame).
+// CPU mirror: src/plants/particles_cpu.rs.
 
 #include "shared/hash.wgsl"
 #include "shared/output.wgsl"
@@ -41,14 +42,18 @@ struct Params {
     life: vec4<f32>,
     // x: particles, y: tree types, z: instances a (type, level) region holds, w: the frame's seed
     counts: vec4<u32>,
-    // x: leaves in the air per tree near the camera (the rest of the pool waits), yzw: unused
+    // x: leaves in the air per tree near the camera (the rest of the pool waits), y: petals in
+    // the air per flower near the camera, zw: unused
     shed: vec4<f32>,
+    // x: the plants' layer's types, y: instances a (type, level) region of its pool holds,
+    // z: a bit per type that sheds petals, w: a tree's tickets in the draw to a flower's one
+    flowers: vec4<u32>,
     sun_dir: vec4<f32>,
     sun_color: vec4<f32>,
     sky_color: vec4<f32>,
     horizon_color: vec4<f32>,
-    // Per tree type, its leaves' colour.
-    colors: array<vec4<f32>, 8>,
+    // Per tree type, its leaves' colour; then per type of the plants' layer, its petals'.
+    colors: array<vec4<f32>, 16>,
 }
 
 struct DrawIndexedArgs {
@@ -65,25 +70,45 @@ struct DrawIndexedArgs {
 @group(0) @binding(3) var<storage, read> wind_cells: array<vec4<f32>>;
 @group(0) @binding(4) var<storage, read> trees: array<PlantInstance>;
 @group(0) @binding(5) var<storage, read> tree_args: array<DrawIndexedArgs>;
+// The plants' instance pool and draws, for the flowers' petals.
+@group(0) @binding(6) var<storage, read> plants: array<PlantInstance>;
+@group(0) @binding(7) var<storage, read> plant_args: array<DrawIndexedArgs>;
 // The pool again, read-only, for the draw (a vertex stage cannot see a writable buffer).
 @group(1) @binding(0) var<storage, read> leaves: array<Particle>;
 
 const TAU: f32 = 6.2831853;
+// A petal's kind is this plus its flower's type.
+const PETAL: u32 = 8u;
 
 // The trees of the frame a particle can be shed from: per type, its full and reduced meshes.
 fn tree_count(t: u32, level: u32) -> u32 {
     return min(tree_args[t * 3u + level].instance_count, params.counts.z);
 }
 
-// Shed particle `i` again, from a tree picked by its hash, or, to keep about params.shed.x
-// leaves in the air per tree near the camera, leave it waiting in the pool for a life's time
-// (as shed in particles_cpu.rs).
+// The flowers of the frame a petal can be shed from: per type that sheds, its full and reduced
+// meshes.
+fn flower_count(t: u32, level: u32) -> u32 {
+    if params.shed.y <= 0.0 || ((params.flowers.z >> t) & 1u) == 0u {
+        return 0u;
+    }
+    return min(plant_args[t * 3u + level].instance_count, params.flowers.y);
+}
+
+// Shed particle `i` again, from a tree or a flower picked by its hash (a tree with
+// params.flowers.w tickets to a flower's one), or, to keep about params.shed.x leaves in the air
+// per tree and params.shed.y petals per flower near the camera, leave it waiting in the pool for
+// a life's time (as shed in particles_cpu.rs).
 fn shed(i: u32) -> Particle {
     var p: Particle;
     let h = hash3(i, params.counts.w, 0x1eafu);
-    var total = 0u;
+    var tree_total = 0u;
     for (var t = 0u; t < params.counts.y; t++) {
-        total += tree_count(t, 0u) + tree_count(t, 1u);
+        tree_total += tree_count(t, 0u) + tree_count(t, 1u);
+    }
+    let plant_types = min(params.flowers.x, 8u);
+    var flower_total = 0u;
+    for (var t = 0u; t < plant_types; t++) {
+        flower_total += flower_count(t, 0u) + flower_count(t, 1u);
     }
     p.seed = h;
     p.age = 0.0;
@@ -93,33 +118,66 @@ fn shed(i: u32) -> Particle {
     p.kind = 0u;
     p.spin = 0.0;
     let life = mix(params.life.x, params.life.y, rand01(hash_u32(h ^ 5u)));
-    let chance = min(1.0, f32(total) * params.shed.x / f32(max(params.counts.x, 1u)));
-    if total == 0u || rand01(hash_u32(h ^ 7u)) >= chance {
+    let expected = f32(tree_total) * params.shed.x + f32(flower_total) * params.shed.y;
+    let chance = min(1.0, expected / f32(max(params.counts.x, 1u)));
+    if tree_total + flower_total == 0u || rand01(hash_u32(h ^ 7u)) >= chance {
         // Waiting in the pool for a life's time, drawn nowhere.
         p.life = -life;
         return p;
     }
-    var k = hash_u32(h ^ 1u) % total;
-    var region = 0u;
+    let tickets = max(params.flowers.w, 1u);
+    let tree_tickets = tree_total * tickets;
+    var k = hash_u32(h ^ 1u) % (tree_tickets + flower_total);
+    let a = TAU * rand01(hash_u32(h ^ 2u));
+    let near = sqrt(rand01(hash_u32(h ^ 3u)));
+    let spot = rand01(hash_u32(h ^ 4u));
+    var source: PlantInstance;
+    var r = 0.0;
+    var z = 0.0;
     var found = false;
-    for (var t = 0u; t < params.counts.y && !found; t++) {
-        for (var level = 0u; level < 2u && !found; level++) {
-            let n = tree_count(t, level);
-            if k < n {
-                region = t * 3u + level;
-                p.kind = t;
-                found = true;
-            } else {
-                k -= n;
+    if k < tree_tickets {
+        k = k / tickets;
+        var region = 0u;
+        for (var t = 0u; t < params.counts.y && !found; t++) {
+            for (var level = 0u; level < 2u && !found; level++) {
+                let n = tree_count(t, level);
+                if k < n {
+                    region = t * 3u + level;
+                    p.kind = t;
+                    found = true;
+                } else {
+                    k -= n;
+                }
             }
         }
+        source = trees[region * params.counts.z + k];
+        // In the crown: within 0.35 of its height of the axis, from half to 0.9 of it up.
+        r = 0.35 * near;
+        z = 0.5 + 0.4 * spot;
+    } else {
+        k -= tree_tickets;
+        var region = 0u;
+        for (var t = 0u; t < plant_types && !found; t++) {
+            for (var level = 0u; level < 2u && !found; level++) {
+                let n = flower_count(t, level);
+                if k < n {
+                    region = t * 3u + level;
+                    p.kind = PETAL + t;
+                    found = true;
+                } else {
+                    k -= n;
+                }
+            }
+        }
+        source = plants[region * params.flowers.y + k];
+        // At the flower head: within 0.15 of its height of the stem, 0.75 to 0.95 of it up.
+        r = 0.15 * near;
+        z = 0.75 + 0.2 * spot;
     }
-    let tree = trees[region * params.counts.z + k];
-    let a = TAU * rand01(hash_u32(h ^ 2u));
-    let r = 0.35 * tree.scale * sqrt(rand01(hash_u32(h ^ 3u)));
-    let z = (0.5 + 0.4 * rand01(hash_u32(h ^ 4u))) * tree.scale;
-    p.pos = tree.pos + vec3<f32>(r * cos(a), r * sin(a), z);
-    p.ground = tree.pos.z;
+    r = r * source.scale;
+    z = z * source.scale;
+    p.pos = source.pos + vec3<f32>(r * cos(a), r * sin(a), z);
+    p.ground = source.pos.z;
     p.life = life;
     p.spin = rand01(hash_u32(h ^ 6u));
     return p;
@@ -191,11 +249,12 @@ fn vs_particle(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32)
     let a = TAU * (p.spin + 0.4 * p.age);
     let c = vec2<f32>(cos(a), sin(a));
     let r = vec2<f32>(corner.x * c.x - corner.y * c.y, corner.x * c.y + corner.y * c.x);
-    let size = params.motion.w;
+    // A petal is half a leaf's size.
+    let size = select(params.motion.w, 0.5 * params.motion.w, p.kind >= PETAL);
     let world = p.pos + (right * r.x + up * r.y * 0.6) * size;
     out.clip = params.view_proj * vec4<f32>(world, 1.0);
     out.uv = corner;
-    let albedo = params.colors[min(p.kind, 7u)].rgb;
+    let albedo = params.colors[min(p.kind, 15u)].rgb;
     let light = params.sun_color.rgb * (0.35 + 0.4 * abs(params.sun_dir.z)) + params.sky_color.rgb * 0.4;
     out.color = albedo * light;
     let x = length(p.pos) / params.life.z;

@@ -1,6 +1,6 @@
-//! The leaves the trees shed (`shaders/particles.wgsl`) against their CPU mirror
-//! (`src/plants/particles_cpu.rs`): one step of a pool in a wind field and over trees made up
-//! here, on software Vulkan; and through the renderer, a forest's leaves in the air around the
+//! The leaves the trees and the petals the flowers shed (`shaders/particles.wgsl`) against their
+//! CPU mirror (`src/plants/particles_cpu.rs`): one step of a pool in a wind field and over trees
+//! and flowers made up here, on software Vulkan; and through the renderer, a forest's leaves in the air around the
 //! camera, drawn and carried downwind.
 
 mod common;
@@ -8,7 +8,9 @@ mod common;
 use glam::Vec3;
 use verdant::gpu::Targets;
 use verdant::hash::{hash_u32, rand01};
-use verdant::plants::particles::{ParticleSettings, ParticleStage, ParticleWind, TreeSource};
+use verdant::plants::particles::{
+    FlowerSource, ParticleSettings, ParticleStage, ParticleWind, TreeSource,
+};
 use verdant::plants::particles_cpu::{self, Particle, ParticleParams};
 use verdant::plants::place_cpu::PlantInstance;
 use verdant::wind::WindLookup;
@@ -66,6 +68,30 @@ fn one_step_of_the_leaves_matches_the_cpu_mirror() {
     let drawn: Vec<u32> = (0..6).map(|r| args[r * 5 + 1]).collect();
     let trees_buffer = buffer("trees", bytemuck::cast_slice(&trees), U::STORAGE);
     let args_buffer = buffer("args", bytemuck::cast_slice(&args), U::STORAGE);
+    // Two plant types, regions of 8: type 0 (no petals) with 3 full meshes, type 1 (a flower)
+    // with 4 full and 2 reduced ones.
+    let flower = |x: f32, y: f32, kind: u32| PlantInstance {
+        scale: 0.6,
+        ..tree(x, y, -1.0, kind)
+    };
+    let mut plants = vec![flower(0.0, 0.0, 0); (2 * 3 * cap) as usize];
+    for (k, fern) in plants.iter_mut().take(3).enumerate() {
+        *fern = flower(-40.0 + k as f32, 3.0, 0);
+    }
+    for k in 0..4 {
+        plants[(3 * cap) as usize + k] = flower(20.0 + 2.0 * k as f32, -7.0, 1);
+    }
+    for k in 0..2 {
+        plants[(4 * cap) as usize + k] = flower(-15.0 - 2.0 * k as f32, -9.0, 1 | 1 << 8);
+    }
+    let mut plant_args = [0u32; 6 * 5];
+    plant_args[1] = 3;
+    plant_args[3 * 5 + 1] = 4;
+    plant_args[4 * 5 + 1] = 2;
+    let plant_drawn: Vec<u32> = (0..6).map(|r| plant_args[r * 5 + 1]).collect();
+    let plants_buffer = buffer("plants", bytemuck::cast_slice(&plants), U::STORAGE);
+    let plant_args_buffer = buffer("plant args", bytemuck::cast_slice(&plant_args), U::STORAGE);
+    let petals = [None, Some([0.8, 0.1, 0.03])];
 
     let settings = ParticleSettings {
         count: 256,
@@ -88,6 +114,12 @@ fn one_step_of_the_leaves_matches_the_cpu_mirror() {
             capacity: cap,
             types: 2,
         },
+        Some(FlowerSource {
+            instances: &plants_buffer,
+            args: &plant_args_buffer,
+            capacity: cap,
+            petals: &petals,
+        }),
         ParticleWind {
             lookup: &lookup_buffer,
             cells: &cells_buffer,
@@ -116,17 +148,24 @@ fn one_step_of_the_leaves_matches_the_cpu_mirror() {
     let params = ParticleParams {
         delta: [0.4, -0.3, 0.05, 1.0 / 60.0],
         counts: [settings.count, 2, cap, 77],
-        // Every shed particle flies (5 trees, 100 leaves each, over a pool of 256).
-        shed: [100.0, 0.0, 0.0, 0.0],
+        // Every shed particle flies (5 trees, 100 leaves each, and 6 flowers, 30 petals each,
+        // over a pool of 256); a tree has 3 tickets to a flower's 1.
+        shed: [100.0, 30.0, 0.0, 0.0],
+        flowers: [2, cap, 0b10, 3],
         ..*stage.params()
     };
+    assert_eq!(stage.params().flowers[..3], [2, cap, 0b10]);
     stage.write_params(queue, params);
     let mut timer = verdant::gpu::GpuTimer::new(device, queue, false, 4);
     let mut encoder = device.create_command_encoder(&Default::default());
     stage.record_step(&mut encoder, &mut timer);
     queue.submit([encoder.finish()]);
     let gpu = stage.read_particles(device, queue);
-    let cpu = particles_cpu::advance(&particles, &params, &trees, &drawn, &|p| {
+    let flowers = particles_cpu::Flowers {
+        instances: &plants,
+        drawn: &plant_drawn,
+    };
+    let cpu = particles_cpu::advance(&particles, &params, &trees, &drawn, Some(flowers), &|p| {
         wind_at(&lookup, &cells, p)
     });
     let mut shed = 0;
@@ -144,12 +183,44 @@ fn one_step_of_the_leaves_matches_the_cpu_mirror() {
     }
     // 32 over their life, 29 below their ground, some both.
     assert!(shed > 50, "{shed} shed again");
-    // Each shed leaf starts in the crown of a tree drawn this frame.
+    // Each shed leaf starts in the crown of a tree drawn this frame, each petal at the head of
+    // a flower drawn this frame (type 1's; type 0 sheds none).
     let drawn_trees: Vec<&PlantInstance> = trees[..3]
         .iter()
         .chain(&trees[(4 * cap) as usize..(4 * cap + 2) as usize])
         .collect();
-    for c in cpu.iter().filter(|c| c.age == 0.0 && c.life > 0.0) {
+    let drawn_flowers: Vec<&PlantInstance> = plants[(3 * cap) as usize..(3 * cap + 4) as usize]
+        .iter()
+        .chain(&plants[(4 * cap) as usize..(4 * cap + 2) as usize])
+        .collect();
+    let new: Vec<&Particle> = cpu
+        .iter()
+        .filter(|c| c.age == 0.0 && c.life > 0.0)
+        .collect();
+    let petals: Vec<&&Particle> = new
+        .iter()
+        .filter(|c| c.kind >= particles_cpu::PETAL)
+        .collect();
+    assert!(
+        petals.len() > 5 && petals.len() < new.len() / 2,
+        "{} petals of {} shed",
+        petals.len(),
+        new.len()
+    );
+    for c in &petals {
+        assert_eq!(c.kind, particles_cpu::PETAL + 1);
+        let p = Vec3::from(c.pos);
+        assert!(
+            drawn_flowers.iter().any(|f| {
+                let root = Vec3::from(f.pos);
+                (p.truncate() - root.truncate()).length() <= 0.15 * f.scale + 1e-3
+                    && p.z >= root.z + 0.75 * f.scale - 1e-3
+                    && p.z <= root.z + 0.95 * f.scale + 1e-3
+            }),
+            "petal at {p} on no flower"
+        );
+    }
+    for c in new.iter().filter(|c| c.kind < particles_cpu::PETAL) {
         let p = Vec3::from(c.pos);
         assert!(
             drawn_trees.iter().any(|t| {
@@ -163,9 +234,10 @@ fn one_step_of_the_leaves_matches_the_cpu_mirror() {
     }
 }
 
-/// Through the renderer: a second and a half of 16 Hz frames standing among trees, the leaves in the
-/// air are about the settings' eight a tree near the camera, each above the ground it was shed
-/// over, and carried: moving sideways faster than they flutter, not only falling.
+/// Through the renderer: a second and a half of 16 Hz frames standing among trees at the meadow,
+/// the leaves in the air are about the settings' eight a tree near the camera, the meadow's
+/// flowers shed some petals, each above the ground it was shed over, and carried: moving
+/// sideways faster than they flutter, not only falling.
 #[test]
 fn a_forests_leaves_fly_in_the_wind_around_the_camera() {
     use glam::DVec3;
@@ -174,6 +246,14 @@ fn a_forests_leaves_fly_in_the_wind_around_the_camera() {
     let ctx = common::gpu();
     let tmp = tempfile::tempdir().unwrap();
     let dir = common::world_with_trees(tmp.path(), "broadleaf", 0.004);
+    // And poppies, whose petals fly too.
+    let manifest = std::fs::read_to_string(dir.join("world.toml")).unwrap();
+    let at = manifest.find("[wind]").unwrap();
+    let poppy = "[[plant_types]]\nname = \"poppy\"\nmesh = \"flower\"\n\
+                 color = [0.8, 0.1, 0.03]\nsize_m = [0.35, 0.65]\n\
+                 density = { meadow = 0.45, \"tall grass\" = 0.3 }\n\n";
+    let edited = format!("{}{poppy}{}", &manifest[..at], &manifest[at..]);
+    std::fs::write(dir.join("world.toml"), edited).unwrap();
     let world = World::open(&dir).unwrap();
     let toward = f64::from(world.manifest.wind.direction_deg).to_radians();
     let path = world
@@ -221,18 +301,23 @@ fn a_forests_leaves_fly_in_the_wind_around_the_camera() {
         .count();
     let pool = renderer.read_particles();
     let flying: Vec<_> = pool.iter().filter(|p| p.life > 0.0).collect();
+    let leaves = flying
+        .iter()
+        .filter(|p| p.kind < particles_cpu::PETAL)
+        .count();
+    // The meadow's poppies and cornflowers shed petals too.
+    let petals = flying.len() - leaves;
     eprintln!(
-        "{} of {} leaves in the air over {trees} near trees",
-        flying.len(),
+        "{leaves} leaves and {petals} petals of {} in the air over {trees} near trees",
         pool.len()
     );
     assert_eq!(pool.len(), 4096, "the pool's size is fixed");
     assert!(trees > 20, "{trees} trees near the camera");
     assert!(
-        flying.len() > 2 * trees && flying.len() < 16 * trees + 50,
-        "{} leaves for {trees} trees",
-        flying.len()
+        leaves > 2 * trees && leaves < 16 * trees + 50,
+        "{leaves} leaves for {trees} trees"
     );
+    assert!(petals > 0 && petals < leaves, "{petals} petals");
     for p in &flying {
         assert!(p.pos[2] >= p.ground - 0.2, "{p:?} below its ground");
         assert!(glam::Vec3::from(p.pos).length() < 400.0, "{p:?} far away");

@@ -106,7 +106,10 @@ fn committed_world_manifest_parses_and_validates() {
         .map(|t| t.name.as_str())
         .collect();
     assert_eq!(trees, ["oak", "fir", "valley oak"]);
-    assert_eq!(m.plant_types[4].altitude_m[0], m.plant_types[6].altitude_m[1]);
+    assert_eq!(
+        m.plant_types[4].altitude_m[0],
+        m.plant_types[6].altitude_m[1]
+    );
     assert!(m.height_range_m[0] >= 0.0 && m.height_range_m[1] <= 1000.0);
     // The baker fitted the derived levels' detail: one amplitude per derived level.
     let fit = m.derive.as_ref().expect("a [derive] table");

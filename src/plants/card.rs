@@ -430,20 +430,26 @@ mod tests {
                     if t[3] >= 128 {
                         let c = Vec2::new((i % side) as f32 + 0.5, (i / side) as f32 + 0.5)
                             / side as f32;
-                        assert!(inside(c), "{recipe:?}: texel {i} of the {side} level is cut");
+                        assert!(
+                            inside(c),
+                            "{recipe:?}: texel {i} of the {side} level is cut"
+                        );
                     }
                 }
             }
             let area = uv_area(&card);
-            assert!(area < most_area, "{recipe:?}: the billboard covers {area} of its box");
+            assert!(
+                area < most_area,
+                "{recipe:?}: the billboard covers {area} of its box"
+            );
             eprintln!("{recipe:?}: {n} corners, {area:.3} of the box");
             // The corners keep the quad's mapping: position from uv, wind rising with height.
             let (r, h) = (p.lods[0].radius(), p.lods[0].height());
             for v in &card.vertices {
                 let [u, w] = v.uv;
                 let want = [r * (2.0 * u - 1.0), 0.0, h * (1.0 - w)];
-                for k in 0..3 {
-                    assert!((v.position[k] - want[k]).abs() < 1e-4 * h.max(r));
+                for (got, want) in v.position.iter().zip(want) {
+                    assert!((got - want).abs() < 1e-4 * h.max(r));
                 }
                 assert!((v.wind[2] - (1.0 - w)).abs() < 1e-6);
             }

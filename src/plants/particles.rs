@@ -1,5 +1,5 @@
-//! Wind-carried leaves on the GPU (`shaders/particles.wgsl`): a bounded pool of particles shed
-//! by the trees near the camera and carried by the same wind field as the grass and the plants
+//! Wind-carried leaves and petals on the GPU (`shaders/particles.wgsl`): a bounded pool of
+//! particles shed by the trees and the flowers near the camera and carried by the same wind field as the grass and the plants
 //! (God of War's particles follow the interactive wind: a gust sends them flying, the
 //! helicopter's downwash scatters them). One compute pass steps the pool each frame; one draw
 //! turns each live particle into a small leaf facing the camera. The pool's size is fixed when
@@ -11,7 +11,7 @@ use crate::gpu::layout::*;
 use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{buffer, compute_pipeline, render_pipeline};
 use crate::gpu::{GpuTimer, Targets};
-use crate::plants::particles_cpu::{Particle, ParticleParams};
+use crate::plants::particles_cpu::{PETAL, Particle, ParticleParams};
 
 /// Settings of the leaves.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -31,6 +31,9 @@ pub struct ParticleSettings {
     /// Leaves in the air per tree near the camera (those drawn with a full or reduced mesh),
     /// as far as the pool goes.
     pub per_tree: f32,
+    /// Petals in the air per flower near the camera (a plant of the `flower` recipe drawn with
+    /// a full or reduced mesh), as far as the pool goes.
+    pub per_flower: f32,
 }
 
 impl Default for ParticleSettings {
@@ -43,6 +46,7 @@ impl Default for ParticleSettings {
             size_m: 0.1,
             life_s: [4.0, 10.0],
             per_tree: 8.0,
+            per_flower: 0.02,
         }
     }
 }
@@ -71,6 +75,9 @@ impl ParticleSettings {
         }
         if !at_least_0(self.per_tree) {
             return bad("particles.per_tree", self.per_tree, "0 or more leaves");
+        }
+        if !at_least_0(self.per_flower) {
+            return bad("particles.per_flower", self.per_flower, "0 or more petals");
         }
         let [a, b] = self.life_s;
         if !(positive(a) && a <= b && b.is_finite()) {
@@ -103,6 +110,20 @@ pub struct TreeSource<'a> {
     pub types: u32,
 }
 
+/// The buffers of the plants' stage that the petals are shed from.
+#[derive(Clone, Copy)]
+pub struct FlowerSource<'a> {
+    /// The plants' instance pool.
+    pub instances: &'a wgpu::Buffer,
+    /// Its indexed indirect draws, one per (type, level) region.
+    pub args: &'a wgpu::Buffer,
+    /// Instances a region holds.
+    pub capacity: u32,
+    /// Per type of the plants' layer (at most 8): its petals' colour where it sheds petals (a
+    /// flower), `None` where it does not.
+    pub petals: &'a [Option<[f32; 3]>],
+}
+
 /// The wind the leaves fly in: the wind field's lookup uniform and cells.
 #[derive(Clone, Copy)]
 pub struct ParticleWind<'a> {
@@ -131,12 +152,15 @@ pub struct ParticleStage {
 
 impl ParticleStage {
     /// The stage for `targets`, its leaves shed from `trees` (of the world's tree types, whose
-    /// leaf colours are `colors`) and carried by `wind`.
+    /// leaf colours are `colors`) and its petals from `flowers` where the world has any, carried
+    /// by `wind`.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         device: &wgpu::Device,
         targets: &Targets,
         settings: ParticleSettings,
         trees: TreeSource<'_>,
+        flowers: Option<FlowerSource<'_>>,
         wind: ParticleWind<'_>,
         colors: &[[f32; 3]],
         sky: &crate::world::Sky,
@@ -152,6 +176,8 @@ impl ParticleStage {
                     uniform_buffer(),
                     storage_buffer(),
                     uniform_buffer(),
+                    storage_buffer_read_only(),
+                    storage_buffer_read_only(),
                     storage_buffer_read_only(),
                     storage_buffer_read_only(),
                     storage_buffer_read_only(),
@@ -195,6 +221,11 @@ impl ParticleStage {
                 wind.cells.as_entire_binding(),
                 trees.instances.as_entire_binding(),
                 trees.args.as_entire_binding(),
+                // Without flowers the trees' buffers stand in, never read (no type sheds).
+                flowers
+                    .map_or(trees.instances, |f| f.instances)
+                    .as_entire_binding(),
+                flowers.map_or(trees.args, |f| f.args).as_entire_binding(),
             ],
         );
         let draw_groups = [
@@ -212,10 +243,33 @@ impl ParticleStage {
             ),
         ];
         let c4 = |c: [f32; 3]| [c[0], c[1], c[2], 1.0];
-        let mut leaf_colors = [[0.0; 4]; 8];
+        let mut leaf_colors = [[0.0; 4]; 16];
         for (dst, c) in leaf_colors.iter_mut().zip(colors) {
             *dst = c4(*c);
         }
+        // The flowers: a bit per type that sheds, its petals' colour; a tree's tickets in the
+        // draw against a flower's one, so that each sheds its share.
+        let petals = flowers.map_or(&[][..], |f| f.petals);
+        let mut mask = 0u32;
+        for (t, c) in petals.iter().enumerate().take(8) {
+            if let Some(c) = c {
+                mask |= 1 << t;
+                leaf_colors[PETAL as usize + t] = c4(*c);
+            }
+        }
+        let tickets = if settings.per_flower > 0.0 {
+            (settings.per_tree / settings.per_flower)
+                .round()
+                .clamp(1.0, 256.0) as u32
+        } else {
+            1
+        };
+        let flower_table = [
+            petals.len().min(8) as u32,
+            flowers.map_or(0, |f| f.capacity),
+            mask,
+            tickets,
+        ];
         let params = ParticleParams {
             view_proj: Mat4::IDENTITY.to_cols_array_2d(),
             delta: [0.0; 4],
@@ -232,7 +286,8 @@ impl ParticleStage {
                 0.0,
             ],
             counts: [settings.count, trees.types, trees.capacity, 0],
-            shed: [settings.per_tree, 0.0, 0.0, 0.0],
+            shed: [settings.per_tree, settings.per_flower, 0.0, 0.0],
+            flowers: flower_table,
             sun_dir: crate::terrain::sun_direction(sky).extend(0.0).to_array(),
             sun_color: c4(sky.sun_color),
             sky_color: c4(sky.sky_color),

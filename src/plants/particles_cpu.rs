@@ -1,6 +1,6 @@
 //! CPU mirror of the particles' step (`shaders/particles.wgsl`, the GPU stage:
-//! [`crate::plants::particles`]): the records the GPU keeps, a particle shed from a tree, and one
-//! step of a particle in the wind; a test compares them with the GPU's on software Vulkan.
+//! [`crate::plants::particles`]): the records the GPU keeps, a particle shed from a tree (a
+//! leaf) or a flower (a petal), and one step of a particle in the wind; a test compares them with the GPU's on software Vulkan.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -23,7 +23,8 @@ pub struct Particle {
     pub life: f32,
     /// The camera-relative height of the ground under the tree it was shed from, metres.
     pub ground: f32,
-    /// The tree's type (its index among the world's tree types).
+    /// A leaf: its tree's type (its index among the world's tree types); a petal: [`PETAL`]
+    /// plus its flower's type (its index among the plants' layer's types).
     pub kind: u32,
     /// Its seed.
     pub seed: u32,
@@ -47,8 +48,14 @@ pub struct ParticleParams {
     /// x: particles, y: tree types, z: instances a (type, level) region holds, w: the
     /// frame's seed.
     pub counts: [u32; 4],
-    /// x: leaves in the air per tree near the camera (the rest of the pool waits).
+    /// x: leaves in the air per tree near the camera (the rest of the pool waits); y: petals
+    /// in the air per flower near the camera.
     pub shed: [f32; 4],
+    /// The flowers petals are shed from: x: the plants' layer's types, y: instances a (type,
+    /// level) region of its pool holds, z: a bit per type that sheds petals (a flower), w: the
+    /// tickets a tree near the camera has in the draw against a flower's one (about
+    /// `shed.x / shed.y`, at least 1).
+    pub flowers: [u32; 4],
     /// Toward the sun.
     pub sun_dir: [f32; 4],
     /// The sun's colour.
@@ -57,59 +64,119 @@ pub struct ParticleParams {
     pub sky_color: [f32; 4],
     /// The horizon's (fog's) colour.
     pub horizon_color: [f32; 4],
-    /// Per tree type, its leaves' colour.
-    pub colors: [[f32; 4]; 8],
+    /// Per tree type, its leaves' colour; then per type of the plants' layer, its petals'.
+    pub colors: [[f32; 4]; 16],
 }
 
 const TAU: f32 = std::f32::consts::TAU;
 
-/// Particle `i` shed from the trees of the frame: `trees` is the trees' instance pool (regions
-/// of `params.counts[2]` instances, type * 3 + level) and `drawn[r]` the instances in region
-/// `r`; a tree of a full or reduced mesh is picked by the particle's hash and the particle put
-/// in its crown. So that about `params.shed[0]` leaves a tree are in the air, the particle is
-/// shed only with the chance of that many over the pool's size, else (and with no such tree)
-/// it waits in the pool for a life's time (a negative life).
-pub fn shed(i: u32, params: &ParticleParams, trees: &[PlantInstance], drawn: &[u32]) -> Particle {
+/// A petal's kind is this plus its flower's type.
+pub const PETAL: u32 = 8;
+
+/// The flowers of the frame: the plants' instance pool (regions of `params.flowers[1]`
+/// instances, type * 3 + level) and the instances drawn in each region.
+#[derive(Clone, Copy, Debug)]
+pub struct Flowers<'a> {
+    /// The plants' instance pool.
+    pub instances: &'a [PlantInstance],
+    /// Instances drawn per region.
+    pub drawn: &'a [u32],
+}
+
+/// The instances drawn in (`t`, `level`)'s region of a pool of `cap` a region.
+fn drawn_in(drawn: &[u32], cap: u32, t: u32, level: u32) -> u32 {
+    drawn
+        .get((t * 3 + level) as usize)
+        .copied()
+        .unwrap_or(0)
+        .min(cap)
+}
+
+/// Particle `i` shed from the trees of the frame, or from its flowers: `trees` is the trees'
+/// instance pool (regions of `params.counts[2]` instances, type * 3 + level) and `drawn[r]` the
+/// instances in region `r`; `flowers` the plants' (only the types with their bit in
+/// `params.flowers[2]` shed). A tree or flower of a full or reduced mesh is picked by the
+/// particle's hash (a tree with `params.flowers[3]` tickets to a flower's one), and the particle
+/// put in its crown (a leaf) or its flower head (a petal). So that about `params.shed[0]` leaves
+/// a tree and `params.shed[1]` petals a flower are in the air, the particle is shed only with
+/// the chance of that many over the pool's size, else (and with no tree or flower) it waits in
+/// the pool for a life's time (a negative life).
+pub fn shed(
+    i: u32,
+    params: &ParticleParams,
+    trees: &[PlantInstance],
+    drawn: &[u32],
+    flowers: Option<Flowers<'_>>,
+) -> Particle {
     let cap = params.counts[2];
-    let count = |t: u32, level: u32| {
-        drawn
-            .get((t * 3 + level) as usize)
-            .copied()
-            .unwrap_or(0)
-            .min(cap)
-    };
     let h = hash3(i, params.counts[3], 0x1eaf);
     let types = params.counts[1];
-    let total: u32 = (0..types).map(|t| count(t, 0) + count(t, 1)).sum();
+    let tree_total: u32 = (0..types)
+        .map(|t| drawn_in(drawn, cap, t, 0) + drawn_in(drawn, cap, t, 1))
+        .sum();
+    let [plant_types, plant_cap, mask, tickets] = params.flowers;
+    let sheds = |t: u32| params.shed[1] > 0.0 && (mask >> t) & 1 == 1;
+    let flower_drawn = flowers.map_or(&[][..], |f| f.drawn);
+    let flower_total: u32 = (0..plant_types.min(8))
+        .filter(|&t| sheds(t))
+        .map(|t| drawn_in(flower_drawn, plant_cap, t, 0) + drawn_in(flower_drawn, plant_cap, t, 1))
+        .sum();
     let mut p = Particle {
         seed: h,
         ..Default::default()
     };
     let life = params.life[0] + (params.life[1] - params.life[0]) * rand01(hash_u32(h ^ 5));
-    let chance = (total as f32 * params.shed[0] / params.counts[0].max(1) as f32).min(1.0);
-    if total == 0 || rand01(hash_u32(h ^ 7)) >= chance {
+    let expected = tree_total as f32 * params.shed[0] + flower_total as f32 * params.shed[1];
+    let chance = (expected / params.counts[0].max(1) as f32).min(1.0);
+    if tree_total + flower_total == 0 || rand01(hash_u32(h ^ 7)) >= chance {
         p.life = -life;
         return p;
     }
-    let mut k = hash_u32(h ^ 1) % total;
-    let mut region = 0;
-    'pick: for t in 0..types {
-        for level in 0..2 {
-            let n = count(t, level);
-            if k < n {
-                region = t * 3 + level;
-                p.kind = t;
-                break 'pick;
-            }
-            k -= n;
-        }
-    }
-    let tree = &trees[(region * cap + k) as usize];
+    let tickets = tickets.max(1);
+    let tree_tickets = tree_total * tickets;
+    let mut k = hash_u32(h ^ 1) % (tree_tickets + flower_total);
     let a = TAU * rand01(hash_u32(h ^ 2));
-    let r = 0.35 * tree.scale * rand01(hash_u32(h ^ 3)).sqrt();
-    let z = (0.5 + 0.4 * rand01(hash_u32(h ^ 4))) * tree.scale;
-    p.pos = (Vec3::from(tree.pos) + Vec3::new(r * a.cos(), r * a.sin(), z)).to_array();
-    p.ground = tree.pos[2];
+    let (near, spot) = (rand01(hash_u32(h ^ 3)).sqrt(), rand01(hash_u32(h ^ 4)));
+    let from = if k < tree_tickets {
+        k /= tickets;
+        let mut region = 0;
+        'pick: for t in 0..types {
+            for level in 0..2 {
+                let n = drawn_in(drawn, cap, t, level);
+                if k < n {
+                    region = t * 3 + level;
+                    p.kind = t;
+                    break 'pick;
+                }
+                k -= n;
+            }
+        }
+        let tree = &trees[(region * cap + k) as usize];
+        // In the crown: within 0.35 of its height of the axis, from half to 0.9 of it up.
+        (tree, 0.35 * near, 0.5 + 0.4 * spot)
+    } else {
+        k -= tree_tickets;
+        let mut region = 0;
+        'flower: for t in (0..plant_types.min(8)).filter(|&t| sheds(t)) {
+            for level in 0..2 {
+                let n = drawn_in(flower_drawn, plant_cap, t, level);
+                if k < n {
+                    region = t * 3 + level;
+                    p.kind = PETAL + t;
+                    break 'flower;
+                }
+                k -= n;
+            }
+        }
+        let flower =
+            &flowers.expect("flowers were counted").instances[(region * plant_cap + k) as usize];
+        // At the flower head: within 0.15 of its height of the stem, 0.75 to 0.95 of it up.
+        (flower, 0.15 * near, 0.75 + 0.2 * spot)
+    };
+    let (plant, r, z) = from;
+    let (r, z) = (r * plant.scale, z * plant.scale);
+    p.pos = (Vec3::from(plant.pos) + Vec3::new(r * a.cos(), r * a.sin(), z)).to_array();
+    p.ground = plant.pos[2];
     p.life = life;
     p.spin = rand01(hash_u32(h ^ 6));
     p
@@ -144,6 +211,7 @@ pub fn advance(
     params: &ParticleParams,
     trees: &[PlantInstance],
     drawn: &[u32],
+    flowers: Option<Flowers<'_>>,
     wind_at: &dyn Fn(glam::Vec2) -> [f32; 4],
 ) -> Vec<Particle> {
     let d = Vec3::new(params.delta[0], params.delta[1], params.delta[2]);
@@ -158,7 +226,7 @@ pub fn advance(
                 || p.age >= p.life.abs()
                 || (p.life > 0.0 && p.pos[2] < p.ground)
             {
-                shed(i as u32, params, trees, drawn)
+                shed(i as u32, params, trees, drawn, flowers)
             } else if p.life > 0.0 {
                 let w = wind_at(glam::Vec2::new(p.pos[0], p.pos[1]));
                 step(&p, params.delta[3], params, [w[0], w[1]])
@@ -234,7 +302,7 @@ mod tests {
         let drawn = [2, 0, 0, 0, 1, 0];
         let mut kinds = [0; 2];
         for i in 0..200 {
-            let leaf = shed(i, &p, &trees, &drawn);
+            let leaf = shed(i, &p, &trees, &drawn, None);
             kinds[leaf.kind as usize] += 1;
             let from = [30.0f32, -30.0, 60.0]
                 .into_iter()
@@ -247,7 +315,10 @@ mod tests {
             assert!((3.0..=9.0).contains(&leaf.life));
         }
         assert!(kinds[0] > 100 && kinds[1] > 30, "{kinds:?}");
-        assert!(shed(0, &p, &trees, &[0; 6]).life < 0.0, "no tree: waiting");
+        assert!(
+            shed(0, &p, &trees, &[0; 6], None).life < 0.0,
+            "no tree: waiting"
+        );
         // Two leaves a tree of three over a pool of 16: about 6 in 16 shed, the rest waiting.
         let few = ParticleParams {
             shed: [2.0, 0.0, 0.0, 0.0],
@@ -255,8 +326,78 @@ mod tests {
             ..p
         };
         let flying = (0..1600)
-            .filter(|&i| shed(i, &few, &trees, &drawn).life > 0.0)
+            .filter(|&i| shed(i, &few, &trees, &drawn, None).life > 0.0)
             .count();
         assert!((500..700).contains(&flying), "{flying} of 1600 shed");
+    }
+
+    #[test]
+    fn petals_come_from_the_flowers_heads_in_their_share() {
+        let plant = |x: f32, scale: f32, kind: u32| PlantInstance {
+            pos: [x, 10.0, -3.0],
+            yaw: 0.0,
+            scale,
+            kind,
+            hash: 0,
+            fade: 1.0,
+        };
+        // One tree (type 0, full mesh); plant type 0 a fern (no petals), type 1 a flower:
+        // regions of 4, the fern's 3 full meshes, the flower's 2 reduced ones.
+        let mut trees = vec![plant(0.0, 12.0, 99); 24];
+        trees[0] = plant(30.0, 12.0, 0);
+        let drawn = [1, 0, 0, 0, 0, 0];
+        let mut plants = vec![plant(0.0, 0.5, 99); 24];
+        for (k, fern) in plants.iter_mut().take(3).enumerate() {
+            *fern = plant(-50.0 - k as f32, 0.8, 0);
+        }
+        plants[4 * 4] = plant(70.0, 0.5, 1 | 1 << 8);
+        plants[4 * 4 + 1] = plant(71.0, 0.5, 1 | 1 << 8);
+        let plant_drawn = [3, 0, 0, 0, 2, 0];
+        let flowers = Flowers {
+            instances: &plants,
+            drawn: &plant_drawn,
+        };
+        // A tree has 4 tickets to a flower's one: 4 of 6 particles are leaves, 2 petals.
+        let p = ParticleParams {
+            motion: [2.0, 0.7, 0.3, 0.1],
+            life: [3.0, 9.0, 3000.0, 0.0],
+            counts: [16, 1, 4, 7],
+            shed: [100.0, 25.0, 0.0, 0.0],
+            flowers: [2, 4, 0b10, 4],
+            ..Default::default()
+        };
+        let (mut leaves, mut petals) = (0, 0);
+        for i in 0..600 {
+            let q = shed(i, &p, &trees, &drawn, Some(flowers));
+            assert!(q.life > 0.0);
+            if q.kind == 0 {
+                leaves += 1;
+                assert!((q.pos[0] - 30.0).abs() <= 0.35 * 12.0 + 1e-4);
+            } else {
+                petals += 1;
+                assert_eq!(q.kind, PETAL + 1, "only the flower type sheds petals");
+                assert!(q.pos[0] > 69.0 - 0.1 && q.pos[0] < 71.0 + 0.1, "{q:?}");
+                let up = q.pos[2] + 3.0;
+                assert!(
+                    (0.75 * 0.5 - 1e-4..=0.95 * 0.5 + 1e-4).contains(&up),
+                    "{q:?}"
+                );
+                assert_eq!(q.ground, -3.0);
+            }
+        }
+        assert!(
+            (150..250).contains(&petals) && leaves + petals == 600,
+            "{petals} petals"
+        );
+        // Without petals asked for, every particle is a leaf.
+        let none = ParticleParams {
+            shed: [100.0, 0.0, 0.0, 0.0],
+            ..p
+        };
+        assert!((0..200).all(|i| shed(i, &none, &trees, &drawn, Some(flowers)).kind == 0));
+        // Flowers alone shed petals; nothing near, nothing shed.
+        let no_tree = [0; 6];
+        assert!((0..100).all(|i| shed(i, &p, &trees, &no_tree, Some(flowers)).kind == PETAL + 1));
+        assert!(shed(0, &p, &trees, &no_tree, None).life < 0.0);
     }
 }

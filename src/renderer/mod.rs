@@ -362,6 +362,26 @@ impl Renderer {
                             .iter()
                             .map(|&i| world.manifest.plant_types[i].color)
                             .collect();
+                        // Petals from the plants of the `flower` recipe, in their accent colour.
+                        let petals: Vec<Option<[f32; 3]>> = crate::plants::PlantLayer::Plants
+                            .types(&world.manifest)
+                            .iter()
+                            .map(|&i| &world.manifest.plant_types[i])
+                            .map(|t| {
+                                let flower = crate::plants::recipe::Recipe::from_name(&t.mesh)
+                                    == Some(crate::plants::recipe::Recipe::Flower);
+                                flower.then_some(t.color)
+                            })
+                            .collect();
+                        let flowers =
+                            plants
+                                .as_ref()
+                                .map(|f| crate::plants::particles::FlowerSource {
+                                    instances: f.instance_buffer(),
+                                    args: f.args_buffer(),
+                                    capacity: f.settings().capacity,
+                                    petals: &petals,
+                                });
                         Some(crate::plants::particles::ParticleStage::new(
                             device,
                             &targets,
@@ -372,6 +392,7 @@ impl Renderer {
                                 capacity: t.settings().capacity,
                                 types: t.types(),
                             },
+                            flowers,
                             crate::plants::particles::ParticleWind {
                                 lookup: wind.lookup_uniform(),
                                 cells: wind.buffer(),

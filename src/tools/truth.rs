@@ -137,7 +137,12 @@ pub fn truth_config_reaching(
     // The trees: full meshes out to TREE_MESH_M, cards beyond (a tree there is a few pixels),
     // none thinned out; four times the regions, as far as a pool can be bound.
     if let Some(t) = base.tree_settings(world) {
-        let types = world.manifest.plant_types.iter().filter(|t| t.is_tree()).count();
+        let types = world
+            .manifest
+            .plant_types
+            .iter()
+            .filter(|t| t.is_tree())
+            .count();
         c.trees = Some(crate::plants::PlantSettings {
             lod_m: [TREE_MESH_M; 2],
             thin_m: crate::renderer::MAX_PLANT_LOD_M,
@@ -506,7 +511,12 @@ mod tests {
         assert!(t.lod_m[0] > default.lod_m[1] && t.min_keep == 1.0);
         // Four times the default's regions, within what a pool binds: the default world's
         // three tree types get 466,032 instances a region.
-        let types = world.manifest.plant_types.iter().filter(|t| t.is_tree()).count() as u32;
+        let types = world
+            .manifest
+            .plant_types
+            .iter()
+            .filter(|t| t.is_tree())
+            .count() as u32;
         assert_eq!(types, 3);
         assert_eq!(
             t.capacity,
