@@ -162,7 +162,10 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
             "ground-darkening",
             "far-field",
             "shadows",
-            "plants"
+            "plants",
+            "trees",
+            "tree-shadows",
+            "particles"
         ]
     );
     let contribution = |name: &str| -> f64 {
