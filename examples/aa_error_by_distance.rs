@@ -1,12 +1,13 @@
 //! Where the error against the truth comes from, by distance from the camera.
 //!
-//! `cargo run --release --example aa_error_by_distance -- [WIDTH HEIGHT [PATH [OUT]]]`
+//! `cargo run --release --example aa_error_by_distance -- [WIDTH HEIGHT [PATH [OUT [WIDEN]]]]`
 //! (defaults 480 270 meadow out/error-by-distance): one view of the default world's path (the
 //! meadow's first; 30% along any other), after six frames of the same wind for every render,
 //! drawn as the 4x4 truth and as: the truth at 8x8 (the truth's own sampling error), with blades
 //! out to one and two view distances, at one sample and at 2x2; the default frame's settings
 //! supersampled 4x4 (a perfect anti-aliasing of the default frame); and the default frame with
-//! each anti-aliasing method. Prints each one's mean FLIP against the truth over the frame and
+//! each anti-aliasing method; WIDEN, a comma-separated list of the low ring's widenings
+//! (`GrassConfig::lod_widen`), adds the default frame supersampled 4x4 with each. Prints each one's mean FLIP against the truth over the frame and
 //! over bands of distance (from the truth's depth) with the bands' share of the frame, each
 //! one's mean luminance over the truth's in each band, and writes every image into OUT.
 use anyhow::Result;
@@ -97,6 +98,16 @@ fn main() -> Result<()> {
     d.aa = AntiAliasing::Off;
     d.service.atlas_slots = d.service.atlas_slots.max(slots);
     truths.push(mk("default_4x4", d.clone(), 4)?);
+    if let Some(list) = args.get(5) {
+        for k in list.split(',') {
+            let k: f32 = k
+                .parse()
+                .map_err(|e| anyhow::anyhow!("widening {k:?} is not a number: {e}"))?;
+            let mut dk = d.clone();
+            dk.grass.lod_widen = k;
+            truths.push(mk(&format!("default_4x4_w{k}"), dk, 4)?);
+        }
+    }
     let mut scenes: Vec<(String, Scene)> = Vec::new();
     for m in [AntiAliasing::Off, AntiAliasing::Msaa, AntiAliasing::Taa] {
         let mut c = base.clone();

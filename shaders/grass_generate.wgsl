@@ -34,7 +34,8 @@ struct Params {
     // Infill near the camera: x, y: fade band of the quarter-spacing points; z, w: of the
     // half-spacing points (w <= 0: no infill)
     infill: vec4<f32>,
-    // x: horizontal radius of the near blades (job LOD 2, drawn with the most segments)
+    // x: horizontal radius of the near blades (job LOD 2, drawn with the most segments); y: the
+    // low grid's widening (its blades this many times as wide in the low ring)
     near: vec4<f32>,
     // x: Hi-Z mips, y: slot capacity, z: grass types, w: blade segments, 8 bits each: near
     // blades, the rest of the high ring, the low ring
@@ -136,6 +137,20 @@ fn generate(
     }
 }
 
+// How many times its own width a blade is drawn: 1 but for the blades the low grid keeps, which
+// widen to params.near.y over the band in which the others fade out (params.ranges.xy) and are
+// that wide in the low ring.
+fn widening(lod: u32, kept: bool, dist: f32) -> f32 {
+    if !kept {
+        return 1.0;
+    }
+    var t = 1.0;
+    if lod != 1u {
+        t = clamp((dist - params.ranges.x) / max(params.ranges.y - params.ranges.x, 1e-3), 0.0, 1.0);
+    }
+    return 1.0 + (params.near.y - 1.0) * t;
+}
+
 // The statistics' LOD of a job's: near blades (LOD 2) count as high LOD (0).
 fn stats_lod(lod: u32) -> u32 {
     return select(0u, 1u, lod == 1u);
@@ -166,7 +181,7 @@ fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
     if job.lod != 1u && (gx % 2u == 1u || gy % 2u == 1u) {
         band = params.ranges.xy;
     }
-    plant(job, (cell + 0.5) * spacing + jitter, h0, spacing, band);
+    plant(job, (cell + 0.5) * spacing + jitter, h0, spacing, band, band.y <= 0.0);
 
     if job.lod == 1u || params.infill.w <= 0.0 {
         return;
@@ -194,14 +209,17 @@ fn generate_point(job: TileJob, gx: u32, gy: u32, lod: u32) {
                 (rand01(hash_u32(h ^ 1u)) - 0.5) * 0.9 * sub,
                 (rand01(hash_u32(h ^ 2u)) - 0.5) * 0.9 * sub,
             );
-            plant(job, (cell + offset) * spacing + jit, h, sub, select(params.infill.xy, params.infill.zw, half));
+            plant(job, (cell + offset) * spacing + jit, h, sub, select(params.infill.xy, params.infill.zw, half), false);
         }
     }
 }
 
 // A blade at `local` (metres from the tile's corner) with its hash `h0`, of a grid of `spacing`,
-// shrinking away over the distance band `band` (none where band.y <= 0).
-fn plant(job: TileJob, local: vec2<f32>, h0: u32, spacing: f32, band: vec2<f32>) {
+// shrinking away over the distance band `band` (none where band.y <= 0). A blade of the low
+// grid (`kept`) widens over the LOD fade band as the blades it stands for shrink, to
+// params.near.y times its width at the ring switch and in the low ring: a quarter of the blades
+// keeps the ground's cover.
+fn plant(job: TileJob, local: vec2<f32>, h0: u32, spacing: f32, band: vec2<f32>, kept: bool) {
     // A high-LOD tile near the camera has two jobs: the near one (LOD 2) takes its blades within
     // params.near.x of the camera, the other (LOD 0) the rest.
     if job.lod != 1u && (length(job.origin + local) < params.near.x) != (job.lod == 2u) {
@@ -277,7 +295,7 @@ fn plant(job: TileJob, local: vec2<f32>, h0: u32, spacing: f32, band: vec2<f32>)
         count(EMPTY);
         return;
     }
-    let width = ty.width.x + (ty.width.y - ty.width.x) * rand01(hash_u32(h0 ^ 9u));
+    var width = ty.width.x + (ty.width.y - ty.width.x) * rand01(hash_u32(h0 ^ 9u));
     let up = vec3<f32>(0.0, 0.0, 1.0);
     let growth = normalize(up + (normal - up) * ty.growth_blend);
     let pos = vec3<f32>(job.origin.x + local.x, job.origin.y + local.y, ground - params.camera.x);
@@ -295,6 +313,7 @@ fn plant(job: TileJob, local: vec2<f32>, h0: u32, spacing: f32, band: vec2<f32>)
         count(DISTANCE);
         return;
     }
+    width *= widening(job.lod, kept, dist);
 
     let center = pos + growth * (0.5 * height);
     let radius = 0.6 * height + width;

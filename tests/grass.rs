@@ -451,7 +451,7 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
     // radius, each once.
     assert!(!flat[1].blades.is_empty(), "no near blades");
     let mut whole = *rig.grass.params();
-    whole.near = [0.0; 4];
+    whole.near[0] = 0.0;
     let all = generate_tile(&whole, &jobs[0], &tiles[0], &hiz);
     let mut split: Vec<_> = flat.iter().flat_map(|b| b.blades.iter().map(key)).collect();
     let mut one: Vec<_> = all.blades.iter().map(key).collect();
@@ -562,6 +562,9 @@ fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
     );
     let mut params = *rig.grass.params();
     params.ranges = [1e6, 2e6, 3e6, 4e6]; // no distance culling, no fade
+    // The low ring's blades at their own width first (widened, their culling spheres grow).
+    let k = params.near[1];
+    params.near[1] = 1.0;
     let h = generate_tile(&params, &high, &flat, &hiz);
     let l = generate_tile(&params, &low, &flat, &hiz);
     assert!(!l.blades.is_empty() && l.blades.len() < h.blades.len());
@@ -579,6 +582,55 @@ fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
     // About a quarter of the high blades survive at low LOD (every other point each way).
     let ratio = l.blades.len() as f64 / h.blades.len() as f64;
     assert!((0.2..0.3).contains(&ratio), "low/high ratio {ratio}");
+    // In the low ring they are drawn lod_widen times as wide, keeping the others' cover.
+    assert_eq!(k, verdant::renderer::DEFAULT_LOD_WIDEN);
+    assert!(k > 1.0);
+    params.near[1] = k;
+    let l = generate_tile(&params, &low, &flat, &hiz);
+    let twins = l.blades.iter().filter(|b| high_at.contains_key(&b.hash)).count();
+    assert!(twins as f64 >= 0.98 * l.blades.len() as f64);
+    for b in l.blades.iter().filter(|b| high_at.contains_key(&b.hash)) {
+        let twin = high_at[&b.hash];
+        assert!(
+            (b.width - k * twin.width).abs() <= 1e-6 * b.width,
+            "low-LOD blade {} m wide, its high-LOD twin {} m",
+            b.width,
+            twin.width
+        );
+    }
+    // Within the LOD fade band the blades the low grid keeps widen toward it as the others
+    // shrink: here the band spans the tile.
+    let dists: Vec<f32> = h.blades.iter().map(|b| glam::Vec3::from(b.pos).length()).collect();
+    let (near, far) = dists
+        .iter()
+        .fold((f32::MAX, 0f32), |(a, b), &d| (a.min(d), b.max(d)));
+    let mut banded = params;
+    banded.ranges[0] = near;
+    banded.ranges[1] = far + 1.0;
+    let hb = generate_tile(&banded, &high, &flat, &hiz);
+    let kept: std::collections::HashSet<u32> = l.blades.iter().map(|b| b.hash).collect();
+    let (mut widened, mut shrunk) = (0, 0);
+    for b in hb.blades.iter().filter(|b| high_at.contains_key(&b.hash)) {
+        // (A short blade's second half stands beside it with its width: the ratios hold.)
+        let own = high_at[&b.hash].width;
+        if kept.contains(&b.hash) {
+            assert!(
+                b.width >= own * 0.999 && b.width <= k * own * 1.001 && b.fade == 1.0,
+                "a kept blade {} m wide, its own width {own} m",
+                b.width
+            );
+            widened += usize::from(b.width > own * 1.01);
+        } else {
+            assert!(
+                (b.width - own * b.fade).abs() <= 1e-6 && b.fade < 1.0,
+                "a dropped blade {} m wide at fade {}, its own width {own} m",
+                b.width,
+                b.fade
+            );
+            shrunk += usize::from(b.width < own * 0.99);
+        }
+    }
+    assert!(widened > 10 && shrunk > 10, "{widened} widened, {shrunk} shrunk");
     // The GPU agrees: its low slot holds the CPU's low blades.
     let (_, gpu_low) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 1);
     let cpu_low = cpu_blades(&rig, &low, &flat, &hiz);

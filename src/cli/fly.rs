@@ -64,6 +64,10 @@ pub(crate) struct FlyArgs {
     /// renderer's).
     #[arg(long)]
     pub(crate) grass_near_m: Option<f32>,
+    /// How many times as wide the low ring's blades are drawn (the blades the low grid keeps
+    /// widen to it as the others fade out), 1..=4 (default: the renderer's).
+    #[arg(long)]
+    pub(crate) grass_lod_widen: Option<f32>,
     /// Plants' level-of-detail switches NEAR,FAR, metres: the full mesh out to NEAR, the
     /// reduced mesh out to FAR, crossed cards beyond (default: the renderer's, 25,150).
     #[arg(long, value_delimiter = ',')]
@@ -139,6 +143,7 @@ impl FlyArgs {
             grass_infill_m,
             grass_segments,
             grass_near_m,
+            grass_lod_widen,
             plant_lod_m,
             plant_card_reach,
             plant_thin_m,
@@ -175,6 +180,9 @@ impl FlyArgs {
         }
         if let Some(r) = grass_near_m {
             grass.near_m = r;
+        }
+        if let Some(k) = grass_lod_widen {
+            grass.lod_widen = k;
         }
         let plant_lod_m = near_far("--plant-lod-m", plant_lod_m)?
             .unwrap_or(verdant::plants::PlantSettings::default().lod_m);

@@ -61,7 +61,8 @@ pub struct GenerateParams {
     /// quarter-spacing points shrink away (gone at y); z, w: the same for the half-spacing
     /// points. No infill where w <= 0.
     pub infill: [f32; 4],
-    /// x: horizontal radius of the near blades (see [`TileJob::lod`]); y, z, w: unused.
+    /// x: horizontal radius of the near blades (see [`TileJob::lod`]); y: the low grid's
+    /// widening (see [`widening`]); z, w: unused.
     pub near: [f32; 4],
     /// x: Hi-Z mip count, y: slot capacity (blades), z: grass type count, w: blade segments,
     /// high LOD in the low 16 bits, low LOD in the high 16.
@@ -200,6 +201,20 @@ pub(crate) fn sample(tile: &TileData, tp: [f32; 2], cell: f32) -> Sample {
     }
 }
 
+/// How many times its own width a blade of the low grid at `dist` metres from the camera is
+/// drawn, in a job of LOD `lod`: in the low ring (LOD 1) `params.near[1]`; in the high ring
+/// rising from 1 to that over the band in which the blades the low grid drops shrink away
+/// (`params.ranges[0..2]`), so that the blades left keep the cover of those gone.
+pub fn widening(params: &GenerateParams, lod: u32, dist: f32) -> f32 {
+    let k = params.near[1];
+    if lod == 1 {
+        return k;
+    }
+    let [start, end, _, _] = params.ranges;
+    let t = ((dist - start) / (end - start).max(1e-3)).clamp(0.0, 1.0);
+    1.0 + (k - 1.0) * t
+}
+
 /// Generates and culls the blades of one tile, as the shader does.
 pub fn generate_tile(
     params: &GenerateParams,
@@ -251,7 +266,8 @@ pub fn generate_tile(
                 (cell[0] + 0.5) * spacing + jitter[0],
                 (cell[1] + 0.5) * spacing + jitter[1],
             ];
-            ctx.plant(local, h0, spacing, band, &mut out, &mut stats);
+            let kept = band[1] <= 0.0;
+            ctx.plant(local, h0, spacing, band, kept, &mut out, &mut stats);
 
             // Infill: near the camera, the cell's quarters and sixteenths.
             let [q0, q1, h0_start, h1] = params.infill;
@@ -293,7 +309,7 @@ pub fn generate_tile(
                             + (rand01(hash_u32(h ^ 2)) - 0.5) * 0.9 * sub,
                     ];
                     let band = if half { [h0_start, h1] } else { [q0, q1] };
-                    ctx.plant(local, h, sub, band, &mut out, &mut stats);
+                    ctx.plant(local, h, sub, band, false, &mut out, &mut stats);
                 }
             }
         }
@@ -319,13 +335,16 @@ struct PlantContext<'a> {
 
 impl PlantContext<'_> {
     /// A blade at `local` (metres from the tile's corner) with its hash `h0`, of a grid of
-    /// `spacing`, shrinking away over the distance band `band` (none where `band[1] <= 0`).
+    /// `spacing`, shrinking away over the distance band `band` (none where `band[1] <= 0`);
+    /// `kept`: a point of the low grid, widened (see [`widening`]).
+    #[allow(clippy::too_many_arguments)]
     fn plant(
         &self,
         local: [f32; 2],
         h0: u32,
         spacing: f32,
         band: [f32; 2],
+        kept: bool,
         out: &mut TileBlades,
         stats: &mut [u32; counter::COUNT],
     ) {
@@ -429,6 +448,11 @@ impl PlantContext<'_> {
             stats[counter::DISTANCE] += 1;
             return;
         }
+        let width = if kept {
+            width * widening(params, job.lod, dist)
+        } else {
+            width
+        };
 
         // Frustum: the blade's bounding sphere against each plane.
         let center = pos + growth * (0.5 * height);

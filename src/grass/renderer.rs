@@ -72,6 +72,10 @@ pub struct GrassSettings {
     /// Horizontal radius of the near blades, metres: the high-LOD tiles it reaches get a second
     /// job for their blades within it.
     pub near_m: f32,
+    /// The blades of the low-LOD grid are this many times as wide in the low ring: over the
+    /// band in which the blades the low grid drops fade out, the ones it keeps widen from their
+    /// own width to this, so that a quarter of the blades keeps the ground's cover.
+    pub lod_widen: f32,
 }
 
 impl GrassSettings {
@@ -388,7 +392,7 @@ fn generate_params(
             let (q, h) = (band(quarter), band(half));
             [q[0], q[1], h[0], h[1]]
         },
-        near: [settings.near_m, 0.0, 0.0, 0.0],
+        near: [settings.near_m, settings.lod_widen, 0.0, 0.0],
         limits: [
             hiz.mips(),
             capacity,

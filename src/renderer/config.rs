@@ -71,6 +71,10 @@ pub struct GrassConfig {
     /// Horizontal radius of the blades drawn with the most segments, metres
     /// ([`NEAR_RANGE_M`]).
     pub near_m: f32,
+    /// How many times as wide the blades of the low-LOD grid are drawn in the low ring
+    /// ([`LOD_WIDEN_RANGE`]; see [`GrassSettings::lod_widen`]): a quarter of the blades keeping
+    /// the ground's cover. 1 draws them at their own width.
+    pub lod_widen: f32,
     /// Blades a slot of the grass pool holds (at least 1); `None`: enough for the world's
     /// densest grass tile (found by reading its finest stored tiles).
     pub capacity: Option<u32>,
@@ -84,6 +88,10 @@ pub const DEFAULT_MESH_STEP: u32 = 2;
 
 /// Blade spacing, metres.
 pub const SPACING_RANGE_M: std::ops::RangeInclusive<f32> = 0.02..=5.0;
+/// The low grid's widening in the low ring.
+pub const LOD_WIDEN_RANGE: std::ops::RangeInclusive<f32> = 1.0..=4.0;
+/// The default widening of the low grid's blades in the low ring.
+pub const DEFAULT_LOD_WIDEN: f32 = 2.0;
 /// Blade width scale.
 pub const WIDTH_SCALE_RANGE: std::ops::RangeInclusive<f32> = 0.05..=20.0;
 /// Each infill radius, metres.
@@ -103,6 +111,7 @@ impl Default for GrassConfig {
             infill_m: DEFAULT_INFILL_M,
             segments: [5, 3, 3],
             near_m: 12.0,
+            lod_widen: DEFAULT_LOD_WIDEN,
             capacity: None,
         }
     }
@@ -337,6 +346,7 @@ impl RendererConfig {
             seed: 0x9a55,
             segments: g.segments,
             near_m: g.near_m,
+            lod_widen: g.lod_widen,
         })
     }
 }
@@ -345,7 +355,8 @@ impl GrassConfig {
     /// Checks every grass setting against its range, stated in the error: `spacing_m` in
     /// [`SPACING_RANGE_M`], `width_scale` in [`WIDTH_SCALE_RANGE`], each of `infill_m` in
     /// [`INFILL_RANGE_M`] with the second no larger than the first, each of `segments` in
-    /// 1..=[`GrassSettings::MAX_SEGMENTS`], `near_m` in [`NEAR_RANGE_M`], `capacity` at least 1.
+    /// 1..=[`GrassSettings::MAX_SEGMENTS`], `near_m` in [`NEAR_RANGE_M`], `lod_widen` in
+    /// [`LOD_WIDEN_RANGE`], `capacity` at least 1.
     pub fn validate(&self) -> Result<(), ConfigError> {
         check("grass.spacing_m", self.spacing_m, &SPACING_RANGE_M, " m")?;
         check(
@@ -382,6 +393,7 @@ impl GrassConfig {
             ));
         }
         check("grass.near_m", self.near_m, &NEAR_RANGE_M, " m")?;
+        check("grass.lod_widen", self.lod_widen, &LOD_WIDEN_RANGE, "")?;
         if let Some(c) = self.capacity {
             check("grass.capacity", c, &(1..=u32::MAX), " blades")?;
         }

@@ -64,6 +64,8 @@ pub struct LodSetting {
     pub infill_m: [f32; 2],
     /// Every grass type's blade width times this.
     pub width_scale: f32,
+    /// How many times as wide the low ring's blades are drawn (`GrassConfig::lod_widen`).
+    pub lod_widen: f32,
     /// The plants' switches from the full mesh to the reduced one and from that to the cards,
     /// metres.
     pub plant_lod_m: [f32; 2],
@@ -83,6 +85,7 @@ impl LodSetting {
             near_m: 12.0,
             infill_m: crate::renderer::DEFAULT_INFILL_M,
             width_scale: 1.0,
+            lod_widen: crate::renderer::DEFAULT_LOD_WIDEN,
             plant_lod_m: crate::plants::PlantSettings::default().lod_m,
             tree_lod_m: None,
         }
@@ -103,6 +106,12 @@ impl LodSetting {
     /// The same setting with blades `width_scale` times as wide.
     pub fn with_width(mut self, width_scale: f32) -> Self {
         self.width_scale = width_scale;
+        self
+    }
+
+    /// The same setting with the low ring's blades `lod_widen` times as wide.
+    pub fn with_lod_widen(mut self, lod_widen: f32) -> Self {
+        self.lod_widen = lod_widen;
         self
     }
 
@@ -133,6 +142,7 @@ impl LodSetting {
         c.grass.near_m = self.near_m;
         c.grass.infill_m = self.infill_m;
         c.grass.width_scale = self.width_scale;
+        c.grass.lod_widen = self.lod_widen;
         c.plants.lod_m = self.plant_lod_m;
         if self.plant_lod_m[0] >= crate::renderer::MAX_PLANT_LOD_M {
             // No level of detail for the plants: no thinning with distance either.
@@ -161,6 +171,7 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             .with_near(d.grass.near_m)
             .with_infill(infill)
             .with_width(d.grass.width_scale)
+            .with_lod_widen(d.grass.lod_widen)
             .with_plant_lod(d.plants.lod_m)
     };
     let plant_lod = d.plants.lod_m;
@@ -180,10 +191,16 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         new("infill x1.2", h, v, s, seg).with_infill(infill.map(|r| 1.2 * r)),
         new("width x0.67", h, v, s, seg).with_width(2.0 / 3.0),
         new("width x1.5", h, v, s, seg).with_width(1.5),
+        new("low ring unwidened", h, v, s, seg).with_lod_widen(1.0),
+        new("low ring widened x2", h, v, s, seg).with_lod_widen(2.0),
         new("plants lod x0.5", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 0.5 * m)),
         new("plants lod x2", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 2.0 * m)),
         // Every plant its full mesh out to the view distance.
-        new("no LOD", v, v, s, [seg[0]; 3]).with_plant_lod([crate::renderer::MAX_PLANT_LOD_M; 2]),
+        // (Its blades that the low grid would drop fade out before the view distance, as they
+        // always have: nothing widens for them.)
+        new("no LOD", v, v, s, [seg[0]; 3])
+            .with_plant_lod([crate::renderer::MAX_PLANT_LOD_M; 2])
+            .with_lod_widen(1.0),
     ];
     // A world with trees: their switches at half and twice the default's.
     if world.manifest.plant_types.iter().any(|t| t.is_tree())

@@ -127,6 +127,8 @@ pub fn truth_config_reaching(
         ..r
     });
     c.grass.segments = [SEGMENTS; 3];
+    // Every blade at its own width (the rings above leave no low ring to widen anyway).
+    c.grass.lod_widen = 1.0;
     // Every plant its full mesh, wherever it grows; the pool's regions large enough for the
     // plants out to the truth's reach.
     c.plants.lod_m = [crate::renderer::MAX_PLANT_LOD_M; 2];
