@@ -534,6 +534,7 @@ fn bench_lod_writes_its_tables_and_charts() {
         "infill_half_m",
         "infill_quarter_m",
         "width_scale",
+        "lod_widen",
         "plant_lod_near_m",
         "plant_lod_far_m",
         "tree_lod_near_m",

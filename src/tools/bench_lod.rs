@@ -784,7 +784,7 @@ fn write_outputs(
 
     let mut csv = String::from(
         "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,\
-         segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,plant_lod_near_m,\
+         segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,lod_widen,plant_lod_near_m,\
          plant_lod_far_m,tree_lod_near_m,tree_lod_far_m,gpu_ms,gpu_q1_ms,\
          gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_vs_truth,\
          coarse_flip_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse\n",
@@ -793,7 +793,7 @@ fn write_outputs(
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -805,6 +805,7 @@ fn write_outputs(
             s.infill_m[0],
             s.infill_m[1],
             s.width_scale,
+            s.lod_widen,
             s.plant_lod_m[0],
             s.plant_lod_m[1],
             s.tree_lod_m.map_or(String::new(), |m| m[0].to_string()),
