@@ -73,7 +73,7 @@ pub struct GrassConfig {
     pub near_m: f32,
     /// How many times as wide the blades of the low-LOD grid are drawn in the low ring
     /// ([`LOD_WIDEN_RANGE`]; see [`GrassSettings::lod_widen`]): a quarter of the blades keeping
-    /// the ground's cover. 1 draws them at their own width.
+    /// the ground's cover. 1 ([`DEFAULT_LOD_WIDEN`]) draws them at their own width.
     pub lod_widen: f32,
     /// Blades a slot of the grass pool holds (at least 1); `None`: enough for the world's
     /// densest grass tile (found by reading its finest stored tiles).
@@ -90,8 +90,10 @@ pub const DEFAULT_MESH_STEP: u32 = 2;
 pub const SPACING_RANGE_M: std::ops::RangeInclusive<f32> = 0.02..=5.0;
 /// The low grid's widening in the low ring.
 pub const LOD_WIDEN_RANGE: std::ops::RangeInclusive<f32> = 1.0..=4.0;
-/// The default widening of the low grid's blades in the low ring.
-pub const DEFAULT_LOD_WIDEN: f32 = 2.0;
+/// The default widening of the low grid's blades in the low ring: none. Widened, the low ring
+/// comes nearer the truth's cover, but its blades then meet the far field at the view distance
+/// with a colour step the eye sees (the far field was fitted to the unwidened blades).
+pub const DEFAULT_LOD_WIDEN: f32 = 1.0;
 /// Blade width scale.
 pub const WIDTH_SCALE_RANGE: std::ops::RangeInclusive<f32> = 0.05..=20.0;
 /// Each infill radius, metres.

@@ -191,8 +191,8 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         new("infill x1.2", h, v, s, seg).with_infill(infill.map(|r| 1.2 * r)),
         new("width x0.67", h, v, s, seg).with_width(2.0 / 3.0),
         new("width x1.5", h, v, s, seg).with_width(1.5),
-        new("low ring unwidened", h, v, s, seg).with_lod_widen(1.0),
         new("low ring widened x2", h, v, s, seg).with_lod_widen(2.0),
+        new("low ring widened x3", h, v, s, seg).with_lod_widen(3.0),
         new("plants lod x0.5", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 0.5 * m)),
         new("plants lod x2", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 2.0 * m)),
         // Every plant its full mesh out to the view distance.
