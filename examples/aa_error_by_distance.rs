@@ -7,9 +7,10 @@
 //! out to one and two view distances, at one sample and at 2x2; the default frame's settings
 //! supersampled 4x4 (a perfect anti-aliasing of the default frame); and the default frame with
 //! each anti-aliasing method; WIDEN, a comma-separated list of the low ring's widenings
-//! (`GrassConfig::lod_widen`), adds the default frame supersampled 4x4 with each. Prints each one's mean FLIP against the truth over the frame and
-//! over bands of distance (from the truth's depth) with the bands' share of the frame, each
-//! one's mean luminance over the truth's in each band, and writes every image into OUT.
+//! (`GrassConfig::lod_widen`), adds the default frame supersampled 4x4 with each. Prints each
+//! one's mean FLIP against the truth over the frame and over bands of distance (from the
+//! truth's depth) with the bands' share of the frame, each one's mean luminance over the
+//! truth's in each band, and writes every image into OUT.
 use anyhow::Result;
 use std::sync::Arc;
 use verdant::RendererConfig;

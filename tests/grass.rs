@@ -95,14 +95,22 @@ fn synthetic_tile(manifest: &Manifest, id: TileId, kind: &str) -> TileData {
     t
 }
 
+/// The low ring's widening of the tests that check it on the GPU (the default draws no widening).
+const LOD_WIDEN: f32 = 2.0;
+
 impl Rig {
     fn new(capacity: Option<u32>) -> Self {
+        Self::with_lod_widen(capacity, verdant::renderer::DEFAULT_LOD_WIDEN)
+    }
+
+    /// A rig whose low ring's blades are `lod_widen` times as wide.
+    fn with_lod_widen(capacity: Option<u32>, lod_widen: f32) -> Self {
         let ctx = common::gpu();
         let world = World::open(&common::default_world()).unwrap();
         let manifest = world.manifest.clone();
-        let settings = RendererConfig::for_world(&world)
-            .grass_settings(&world)
-            .unwrap();
+        let mut config = RendererConfig::for_world(&world);
+        config.grass.lod_widen = lod_widen;
+        let settings = config.grass_settings(&world).unwrap();
         let atlas = TileAtlas::new(&ctx.device, manifest.pyramid.samples_per_side(), 8);
         let target = |format, usage| {
             ctx.device.create_texture(&wgpu::TextureDescriptor {
@@ -375,7 +383,9 @@ fn assert_blades_match(gpu: &[Blade], cpu: &[Blade], what: &str) {
 
 #[test]
 fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles() {
-    let mut rig = Rig::new(None);
+    // The low ring widened, so that the widening (the low job, the high tiles' fade band) is
+    // compared too.
+    let mut rig = Rig::with_lod_widen(None, LOD_WIDEN);
     let level = rig.manifest.pyramid.max_level();
     let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
     // The flat tile's near blades are a job of their own (LOD 2), in the second half's slot.
@@ -543,7 +553,7 @@ fn more_tiles_than_slots_are_all_drawn() {
 
 #[test]
 fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
-    let mut rig = Rig::new(None);
+    let mut rig = Rig::with_lod_widen(None, LOD_WIDEN);
     let level = rig.manifest.pyramid.max_level();
     let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
     let flat = synthetic_tile(&rig.manifest, TileId::new(level, 7, 9), "flat");
@@ -554,9 +564,9 @@ fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
     let low = TileJob { lod: 1, ..high };
     let (_, hiz) = rig.run(
         &Camera::new(
-            DVec3::new(0.0, 0.0, f64::from(ALTITUDE) + 60.0),
+            DVec3::new(0.0, 0.0, f64::from(ALTITUDE) + 10.0),
             90.0,
-            -60.0,
+            -10.0,
         ),
         &[high, low],
     );
@@ -584,11 +594,14 @@ fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
     assert!((0.2..0.3).contains(&ratio), "low/high ratio {ratio}");
     // Widened (GrassConfig::lod_widen), in the low ring they are drawn that many times as
     // wide, keeping the others' cover.
-    assert_eq!(k, verdant::renderer::DEFAULT_LOD_WIDEN);
-    let k = 2.0;
+    assert_eq!(k, LOD_WIDEN);
     params.near[1] = k;
     let l = generate_tile(&params, &low, &flat, &hiz);
-    let twins = l.blades.iter().filter(|b| high_at.contains_key(&b.hash)).count();
+    let twins = l
+        .blades
+        .iter()
+        .filter(|b| high_at.contains_key(&b.hash))
+        .count();
     assert!(twins as f64 >= 0.98 * l.blades.len() as f64);
     for b in l.blades.iter().filter(|b| high_at.contains_key(&b.hash)) {
         let twin = high_at[&b.hash];
@@ -601,7 +614,11 @@ fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
     }
     // Within the LOD fade band the blades the low grid keeps widen toward it as the others
     // shrink: here the band spans the tile.
-    let dists: Vec<f32> = h.blades.iter().map(|b| glam::Vec3::from(b.pos).length()).collect();
+    let dists: Vec<f32> = h
+        .blades
+        .iter()
+        .map(|b| glam::Vec3::from(b.pos).length())
+        .collect();
     let (near, far) = dists
         .iter()
         .fold((f32::MAX, 0f32), |(a, b), &d| (a.min(d), b.max(d)));
@@ -631,10 +648,19 @@ fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
             shrunk += usize::from(b.width < own * 0.99);
         }
     }
-    assert!(widened > 10 && shrunk > 10, "{widened} widened, {shrunk} shrunk");
-    // The GPU agrees: its low slot holds the CPU's low blades.
+    assert!(
+        widened > 10 && shrunk > 10,
+        "{widened} widened, {shrunk} shrunk"
+    );
+    // The GPU agrees: its low slot holds the CPU's low blades, widened.
     let (_, gpu_low) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 1);
     let cpu_low = cpu_blades(&rig, &low, &flat, &hiz);
+    assert!(!cpu_low.blades.is_empty(), "no low-LOD blade in view");
+    assert!(
+        cpu_low.blades.iter().any(|b| high_at.contains_key(&b.hash)
+            && (b.width - k * high_at[&b.hash].width).abs() <= 1e-6 * b.width),
+        "no widened blade in the low slot"
+    );
     assert_blades_match(&gpu_low, &cpu_low.blades, "low LOD");
 }
 

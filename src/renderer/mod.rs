@@ -44,10 +44,10 @@ use readback::StatsRing;
 use targets::{check_formats, check_size};
 
 pub use config::{
-    ConfigError, DEFAULT_INFILL_M, DEFAULT_LOD_WIDEN, DEFAULT_MESH_STEP, GrassConfig, INFILL_RANGE_M,
-    LOD_WIDEN_RANGE,
-    LOD_FACTOR_RANGE, MAX_CARD_REACH, MAX_MESH_STEP, MAX_PLANT_LOD_M, NEAR_RANGE_M, RendererConfig,
-    RendererOptions, SPACING_RANGE_M, WIDTH_SCALE_RANGE,
+    ConfigError, DEFAULT_INFILL_M, DEFAULT_LOD_WIDEN, DEFAULT_MESH_STEP, GrassConfig,
+    INFILL_RANGE_M, LOD_FACTOR_RANGE, LOD_WIDEN_RANGE, MAX_CARD_REACH, MAX_MESH_STEP,
+    MAX_PLANT_LOD_M, NEAR_RANGE_M, RendererConfig, RendererOptions, SPACING_RANGE_M,
+    WIDTH_SCALE_RANGE,
 };
 pub use error::RendererError;
 pub use frame::{FrameInput, FrameStats, MissingTile, WarmUp};
