@@ -42,12 +42,15 @@ struct Frame {
     roots: vec4<u32>,
     // Atlas slot of root tile (x, y) at index y * roots.x + x, four to a vector.
     root_slots: array<vec4<u32>, 16>,
-    // Per grass type, four to a vector: the depth of the trees' canopy shade at full grass
-    // density (src/plants/shadow.rs, canopy_depth).
-    tree_canopy: array<vec4<f32>, 4>,
+    // Per band of altitude, per grass type, four to a vector ([band * 4 + kind / 4]): the depth
+    // of the trees' canopy shade at full grass density (src/plants/shadow.rs, canopy_depth).
+    tree_canopy: array<vec4<f32>, 32>,
     // x, y: where the canopy's shade fades in (the trees' shadow map fades out), m; z: 1 when
     // the world has tree shadows.
     tree_canopy_fade: vec4<f32>,
+    // The altitude bands' edges, m, rising (unused ones huge): band i lies between edges i - 1
+    // and i.
+    tree_canopy_edges: array<vec4<f32>, 2>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
@@ -214,40 +217,62 @@ fn color_variation(rel_xy: vec2<f32>) -> vec3<f32> {
 
 // Grass seen from afar, lit as shaders/grass_draw.wgsl lights a blade at position t whose
 // normal has turned to its growth direction `n` (as far blades' normals do): the mean of a
-// blade's front (lit by the sun) and back (lit through the blade when translucency is on),
-// dimmed by CANOPY_SHADE for the blades' shade on each other, plus the sheen of the blades'
-// specular highlights on average (SHEEN of the sun, when specular is on).
-const CANOPY_SHADE: f32 = 0.75;
+// blade's front (lit by the sun) and back (lit through the blade when translucency is on)
+// over the part of the blades seen, whose colour is a0 and colour times position along the
+// blade a1 (see visible_moments), plus the sheen of the blades' specular highlights on
+// average (SHEEN of the sun, when specular is on).
 const SHEEN: f32 = 0.005;
 
-fn far_grass_light(albedo: vec3<f32>, n: vec3<f32>, t: f32, sun_vis: f32) -> vec3<f32> {
+fn far_grass_light(a0: vec3<f32>, a1: vec3<f32>, n: vec3<f32>, sun_vis: f32) -> vec3<f32> {
     let sun = frame.sun_dir.xyz;
     let diffuse = max(dot(n, sun), 0.0) * sun_vis;
     var through = vec3<f32>(0.0);
     if (frame.grid.w & TRANSLUCENCY) != 0u {
         through = 0.25 * vec3<f32>(0.9, 1.0, 0.55);
     }
-    var ao = 1.0;
-    if (frame.grid.w & AMBIENT_OCCLUSION) != 0u {
-        ao = mix(0.3, 1.0, t);
-    }
     let light = frame.sun_color.rgb * diffuse * 0.5 * (vec3<f32>(1.0) + through);
-    let ambient = frame.sky_color.rgb * 0.35 * ao;
+    let ambient = frame.sky_color.rgb * 0.35;
     var sheen = 0.0;
     if (frame.grid.w & SPECULAR) != 0u {
         sheen = SHEEN * diffuse;
     }
-    return albedo * (light * mix(0.6, 1.0, ao) + ambient) * CANOPY_SHADE + frame.sun_color.rgb * sheen;
+    // A blade's light at t: light (0.6 + 0.4 ao) + ambient ao, with ao rising from 0.3 at the
+    // root to 1 at the tip: a flat part and a part rising with t.
+    if (frame.grid.w & AMBIENT_OCCLUSION) != 0u {
+        return a0 * (light * 0.72 + ambient * 0.3) + a1 * (light * 0.28 + ambient * 0.7) + frame.sun_color.rgb * sheen;
+    }
+    return a0 * (light + ambient) + frame.sun_color.rgb * sheen;
 }
 
-// How much of the ground the far field's grass of density d hides, seen at an elevation whose
-// sine is sin_e: blades stand up, so a grazing view sees only grass and a view from above
-// sees the ground between them (Beer-Lambert through the grass layer, COVER_TAU of optical
-// depth straight down at full density).
-const COVER_TAU: f32 = 0.25;
+// The mean projection of a blade's area across the view per unit of its area (Ross's
+// G-function), fitted against the truth's far blades (BLADE_PROJECTION in
+// src/terrain/far_field.rs).
+const BLADE_PROJECTION: f32 = 0.55;
 
-fn far_cover(d: f32, sin_e: f32) -> f32 {
-    return 1.0 - exp(-COVER_TAU * d / max(sin_e, 0.02));
+// The optical depth of the grass layer along a view whose angle to the ground has the sine
+// sin_e, for grass of blade area index `area` (one side of the blades per square metre of
+// ground) at density d.
+fn grass_depth(area: f32, d: f32, sin_e: f32) -> f32 {
+    return BLADE_PROJECTION * area * d / max(sin_e, 1e-3);
+}
+
+// The error function, to 1.5e-7 (Abramowitz and Stegun 7.1.26), for x >= 0.
+fn erf_pos(x: f32) -> f32 {
+    let t = 1.0 / (1.0 + 0.3275911 * x);
+    let poly = t * (0.2548296 + t * (-0.28449674 + t * (1.4214137 + t * (-1.4531521 + t * 1.0614054))));
+    return 1.0 - poly * exp(-x * x);
+}
+
+// The mean position along the blades (0 root, 1 tip) of what a view of optical depth `depth`
+// sees of them (x) and its mean square (y): a blade is a triangle, hidden at 1 - t = s by the
+// blades above in proportion to s^2, so the part seen at s is weighted by s exp(-depth s^2).
+fn visible_moments(depth: f32) -> vec2<f32> {
+    let u = clamp(depth, 0.05, 60.0);
+    let e = exp(-u);
+    let r = sqrt(u);
+    let s1 = (0.88622693 * erf_pos(r) / r - e) / (1.0 - e);
+    let s2 = 1.0 / u - e / (1.0 - e);
+    return vec2<f32>(1.0 - s1, 1.0 - 2.0 * s1 + s2);
 }
 
 // Bilinear height of the root (level-0) tiles at world xy, or a very low height off the world.
@@ -329,9 +354,16 @@ fn tree_canopy_shade(tau: f32, d: f32) -> f32 {
     return 1.0 - exp(-tau * d);
 }
 
+// Metres of distance toward the grass's view-distance fade per metre the camera stands above
+// (ELEVATION_DISTANCE in src/terrain/far_field.rs).
+const ELEVATION_DISTANCE: f32 = 3.0;
+
 struct Maps {
     ground: vec3<f32>,
-    grass_col: vec3<f32>,
+    // The grass's colour over the part of the blades seen, and that times the position along
+    // the blade (see visible_moments), weighted by cover.
+    grass_a0: vec3<f32>,
+    grass_a1: vec3<f32>,
     cover: f32,
     growth_blend: f32,
     // The weight of the samples whose material is water.
@@ -340,7 +372,7 @@ struct Maps {
     tree_canopy: f32,
 }
 
-fn add_corner(m: ptr<function, Maps>, g: vec3<u32>, w: f32, t_far: f32, sin_e: f32, world: vec2<f32>, footprint: f32) {
+fn add_corner(m: ptr<function, Maps>, g: vec3<u32>, w: f32, sin_e: f32, world: vec2<f32>, footprint: f32, band: u32) {
     let kind = min(g.x, frame.grid.z - 1u);
     let d = f32(g.y) / 255.0;
     var a = mix(SOIL, frame.ground_colors[kind].rgb, d);
@@ -356,11 +388,17 @@ fn add_corner(m: ptr<function, Maps>, g: vec3<u32>, w: f32, t_far: f32, sin_e: f
     }
     (*m).ground += w * a;
     if g.z != MATERIAL_WATER {
-        (*m).tree_canopy += w * tree_canopy_shade(frame.tree_canopy[kind / 4u][kind % 4u], d);
+        (*m).tree_canopy += w * tree_canopy_shade(frame.tree_canopy[band * 4u + kind / 4u][kind % 4u], d);
     }
     if kind != 0u {
-        let c = far_cover(d, sin_e) * w;
-        (*m).grass_col += c * mix(frame.base_colors[kind].rgb, frame.tip_colors[kind].rgb, t_far);
+        // The tip colours' w: the type's blade area index at full density.
+        let depth = grass_depth(frame.tip_colors[kind].w, d, sin_e);
+        let c = (1.0 - exp(-depth)) * w;
+        let mt = visible_moments(depth);
+        let base = frame.base_colors[kind].rgb;
+        let rise = frame.tip_colors[kind].rgb - base;
+        (*m).grass_a0 += c * (base + rise * mt.x);
+        (*m).grass_a1 += c * (base * mt.x + rise * mt.y);
         (*m).growth_blend += c * frame.base_colors[kind].w;
         (*m).cover += c;
     }
@@ -402,22 +440,38 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
     let fw = clamp(f + (vec2<f32>(wn, wn2) - 0.5) * 0.9, vec2<f32>(0.0), vec2<f32>(1.0));
     let sw = smoothstep(vec2<f32>(0.3), vec2<f32>(0.7), fw);
     let ci = vec2<i32>(cell);
-    let t_far = frame.clump_offset.z;
-    let sin_e = abs(rel.z) / max(dist, 1e-3);
+    // The sine of the view's angle to the ground.
+    let sin_e = abs(dot(rel, n_terrain)) / max(dist, 1e-3);
     let footprint = 0.004 * dist + 1e-3;
     let ground_footprint = footprint / max(sin_e, 0.1);
+    // The band of altitude whose trees shade the ground beyond their shadow map.
+    var band = 0u;
+    for (var i = 0u; i < 7u; i++) {
+        if world.z >= frame.tree_canopy_edges[i / 4u][i % 4u] {
+            band += 1u;
+        }
+    }
     var m = Maps();
-    add_corner(&m, grass_texel(ci, layer), (1.0 - sw.x) * (1.0 - sw.y), t_far, sin_e, world.xy, ground_footprint);
-    add_corner(&m, grass_texel(ci + vec2<i32>(1, 0), layer), sw.x * (1.0 - sw.y), t_far, sin_e, world.xy, ground_footprint);
-    add_corner(&m, grass_texel(ci + vec2<i32>(0, 1), layer), (1.0 - sw.x) * sw.y, t_far, sin_e, world.xy, ground_footprint);
-    add_corner(&m, grass_texel(ci + vec2<i32>(1, 1), layer), sw.x * sw.y, t_far, sin_e, world.xy, ground_footprint);
+    add_corner(&m, grass_texel(ci, layer), (1.0 - sw.x) * (1.0 - sw.y), sin_e, world.xy, ground_footprint, band);
+    add_corner(&m, grass_texel(ci + vec2<i32>(1, 0), layer), sw.x * (1.0 - sw.y), sin_e, world.xy, ground_footprint, band);
+    add_corner(&m, grass_texel(ci + vec2<i32>(0, 1), layer), (1.0 - sw.x) * sw.y, sin_e, world.xy, ground_footprint, band);
+    add_corner(&m, grass_texel(ci + vec2<i32>(1, 1), layer), sw.x * sw.y, sin_e, world.xy, ground_footprint, band);
     var ground = m.ground;
-    var grass_col = m.grass_col;
+    var grass_a0 = m.grass_a0;
+    var grass_a1 = m.grass_a1;
     var cover = m.cover;
     var growth_blend = m.growth_blend;
     if cover > 0.0 {
-        grass_col /= cover;
+        grass_a0 /= cover;
+        grass_a1 /= cover;
         growth_blend /= cover;
+    }
+    // A renderer that keeps the ground bare between its blades shows the far field only
+    // where they fade out (by the fade's distance: the distance plus ELEVATION_DISTANCE
+    // times the height below the camera, as grass_generate.wgsl fades them).
+    if frame.clump_offset.z < 0.5 {
+        let far_dist = dist + ELEVATION_DISTANCE * max(-rel.z, 0.0);
+        cover *= clamp((far_dist - frame.grass_view.z) / max(frame.grass_view.w - frame.grass_view.z, 1e-3), 0.0, 1.0);
     }
 
     // Close-range detail: three octaves of world-space noise in the ground's colour and normal,
@@ -482,8 +536,8 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
     if (frame.grid.w & FAR_FIELD) != 0u && cover > 0.0 {
         let up = vec3<f32>(0.0, 0.0, 1.0);
         let growth = normalize(up + (n_terrain - up) * growth_blend);
-        let albedo = grass_col * tint * (1.0 + 0.5 * detail);
-        let grass_lit = far_grass_light(albedo, growth, t_far, sun_vis);
+        let albedo_scale = tint * (1.0 + 0.5 * detail);
+        let grass_lit = far_grass_light(grass_a0 * albedo_scale, grass_a1 * albedo_scale, growth, sun_vis);
         lit = mix(lit, grass_lit, min(cover, 1.0));
     }
 

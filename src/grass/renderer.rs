@@ -76,6 +76,10 @@ pub struct GrassSettings {
     /// band in which the blades the low grid drops fade out, the ones it keeps widen from their
     /// own width to this, so that a quarter of the blades keeps the ground's cover.
     pub lod_widen: f32,
+    /// Whether the far field lies under the blades (the gaps between near blades read as
+    /// grass), or only where they fade out before the view distance (the ground between them
+    /// bare, as a field of real blades has it: the truth's setting).
+    pub far_field_under_blades: bool,
 }
 
 impl GrassSettings {

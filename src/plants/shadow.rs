@@ -245,19 +245,93 @@ impl TreeShadows {
 /// The share of a crown's disc (its widest reach about the axis) that its leaves shade.
 pub const CROWN_FILL: f32 = 0.6;
 
-/// Per grass type, the depth of the trees' canopy shade at full grass density, for the ground
-/// beyond the shadow map ([`crate::terrain::far_field::tree_canopy_shade`] turns it into the
-/// share of ground in shade, `1 - exp(-depth * density)`). Each tree type shades, of the ground
-/// its patches cover (its `clump_cover`), the share `1 - exp(-n a)` that trees at random leave in
-/// shade: `n` its trees a square metre there (its density, at most one tree in a placement cell
-/// of `cell_m` for all types together), `a` the shadow of a crown on the ground, [`CROWN_FILL`]
-/// of the disc of the mean height times its type's reach over height, stretched by the sun at
-/// `sun` (toward it) as a sphere's shadow is. The types shade independently of one another.
+/// Most bands of altitude the canopy's shade tells apart (the trees' altitude limits are
+/// their edges).
+pub const CANOPY_BANDS: usize = 8;
+
+/// The depth of the trees' canopy shade per band of altitude and grass type (see
+/// [`canopy_depth`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CanopyDepth {
+    /// The bands' edges, metres, rising; unused ones at `f32::MAX`. Band `i` lies between edge
+    /// `i - 1` and edge `i`.
+    pub edges: [f32; CANOPY_BANDS - 1],
+    /// Per band, per grass type, the depth at full grass density.
+    pub depth: [[f32; crate::world::MAX_GRASS_TYPES]; CANOPY_BANDS],
+}
+
+impl CanopyDepth {
+    /// The band holding `altitude_m`.
+    pub fn band(&self, altitude_m: f32) -> usize {
+        self.edges.iter().filter(|&&e| altitude_m >= e).count()
+    }
+
+    /// The depth over grass type `grass` at `altitude_m`.
+    pub fn at(&self, grass: usize, altitude_m: f32) -> f32 {
+        self.depth[self.band(altitude_m)][grass]
+    }
+
+    /// Whether any band of any grass type is shaded.
+    pub fn any(&self) -> bool {
+        self.depth.iter().flatten().any(|&d| d > 0.0)
+    }
+}
+
+/// Per band of altitude and grass type, the depth of the trees' canopy shade at full grass
+/// density, for the ground beyond the shadow map ([`crate::terrain::far_field::tree_canopy_shade`]
+/// turns it into the share of ground in shade, `1 - exp(-depth * density)`). The bands' edges
+/// are the tree types' altitude limits (at most [`CANOPY_BANDS`] bands: with more limits, some
+/// are left out), and a band counts the types that grow at its middle. Each tree type shades,
+/// of the ground its patches cover (its `clump_cover`), the share `1 - exp(-n a)` that trees at
+/// random leave in shade: `n` its trees a square metre there (its density, at most one tree in
+/// a placement cell of `cell_m` for all types of the band together), `a` the shadow of a crown
+/// on the ground, [`CROWN_FILL`] of the disc of the mean height times its type's reach over
+/// height, stretched by the sun at `sun` (toward it) as a sphere's shadow is. The types shade
+/// independently of one another.
 pub fn canopy_depth(
     manifest: &crate::world::Manifest,
     set: &crate::plants::PlantSet,
     cell_m: f32,
     sun: Vec3,
+) -> CanopyDepth {
+    let mut limits: Vec<f32> = manifest
+        .plant_types
+        .iter()
+        .filter(|t| t.is_tree())
+        .flat_map(|t| t.altitude_m)
+        .filter(|a| a.is_finite())
+        .collect();
+    limits.sort_by(f32::total_cmp);
+    limits.dedup();
+    if limits.len() > CANOPY_BANDS - 1 {
+        let n = limits.len();
+        limits = (0..CANOPY_BANDS - 1)
+            .map(|i| limits[i * (n - 1) / (CANOPY_BANDS - 2)])
+            .collect();
+    }
+    let mut edges = [f32::MAX; CANOPY_BANDS - 1];
+    edges[..limits.len()].copy_from_slice(&limits);
+    let mut depth = [[0.0f32; crate::world::MAX_GRASS_TYPES]; CANOPY_BANDS];
+    for (band, row) in depth.iter_mut().enumerate().take(limits.len() + 1) {
+        // The band's middle (a metre beyond its one edge for the first and the last).
+        let middle = match (band.checked_sub(1).map(|i| limits[i]), limits.get(band)) {
+            (Some(lo), Some(&hi)) => 0.5 * (lo + hi),
+            (Some(lo), None) => lo + 1.0,
+            (None, Some(&hi)) => hi - 1.0,
+            (None, None) => 0.0,
+        };
+        *row = canopy_depth_at(manifest, set, cell_m, sun, middle);
+    }
+    CanopyDepth { edges, depth }
+}
+
+/// [`canopy_depth`]'s depths at one altitude, per grass type.
+fn canopy_depth_at(
+    manifest: &crate::world::Manifest,
+    set: &crate::plants::PlantSet,
+    cell_m: f32,
+    sun: Vec3,
+    altitude_m: f32,
 ) -> [f32; crate::world::MAX_GRASS_TYPES] {
     let mut depth = [0.0f32; crate::world::MAX_GRASS_TYPES];
     let stretch = 1.0 / sun.normalize().z.max(0.2);
@@ -272,7 +346,9 @@ pub fn canopy_depth(
             .plant_types
             .iter()
             .zip(&set.models)
-            .filter(|(t, _)| t.is_tree())
+            .filter(|(t, _)| {
+                t.is_tree() && (t.altitude_m[0]..=t.altitude_m[1]).contains(&altitude_m)
+            })
             .filter_map(|(t, m)| {
                 let density = t.density.get(&grass.name).copied().unwrap_or(0.0);
                 let r = m.radius_ratio * 0.5 * (t.size_m[0] + t.size_m[1]);
@@ -508,6 +584,55 @@ impl TreeShadowMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_canopy_shades_each_band_of_altitude_with_the_trees_that_grow_there() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz");
+        let world = crate::world::World::open(&dir).unwrap();
+        let set = crate::plants::PlantSet::build(&world.manifest, &world.dir).unwrap();
+        let sun = Vec3::new(0.3, 0.2, 0.8);
+        let all = canopy_depth(&world.manifest, &set, 5.0, sun);
+        // The default world's trees: valley oaks below 90 m, oaks from 90 to 800 m, firs from
+        // 250 to 1000 m.
+        for e in [90.0, 250.0, 800.0, 1000.0] {
+            assert!(all.edges.contains(&e), "{:?}", all.edges);
+        }
+        let tall = world
+            .manifest
+            .grass_types
+            .iter()
+            .position(|g| g.name == "tall grass")
+            .unwrap();
+        // Each band against the depth of a world holding only the types that grow there.
+        let only = |names: &[&str]| {
+            let mut m = world.manifest.clone();
+            let keep: Vec<bool> = m
+                .plant_types
+                .iter()
+                .map(|t| !t.is_tree() || names.contains(&t.name.as_str()))
+                .collect();
+            let mut k = keep.iter();
+            m.plant_types.retain(|_| *k.next().unwrap());
+            let models = set
+                .models
+                .iter()
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(m, _)| m.clone())
+                .collect();
+            let s = crate::plants::PlantSet { models };
+            canopy_depth(&m, &s, 5.0, sun)
+        };
+        let valley = only(&["valley oak"]).at(tall, 50.0);
+        assert!((all.at(tall, 50.0) - valley).abs() < 1e-6);
+        let woods = only(&["oak", "fir"]).at(tall, 500.0);
+        assert!((all.at(tall, 500.0) - woods).abs() < 1e-6);
+        // The valley's few oaks shade a fortieth of what the mountains' woods do (0.03 against
+        // 1.2 over tall grass); above the trees, nothing.
+        assert!(valley > 0.0 && valley < 0.05 * woods, "{valley} vs {woods}");
+        assert!(all.at(tall, 150.0) < woods);
+        assert_eq!(all.at(tall, 1200.0), 0.0);
+    }
 
     fn camera_inv(yaw_deg: f64) -> Mat4 {
         let c = crate::camera::Camera::new(DVec3::new(0.0, 0.0, 2.0), yaw_deg, -10.0);

@@ -78,6 +78,11 @@ pub struct GrassConfig {
     /// Blades a slot of the grass pool holds (at least 1); `None`: enough for the world's
     /// densest grass tile (found by reading its finest stored tiles).
     pub capacity: Option<u32>,
+    /// Whether the far field lies under the blades too (the default), filling the gaps between
+    /// them with what the grass shows from afar, or only where the blades fade out at the view
+    /// distance, the ground bare between them (the truth's way: see
+    /// [`GrassSettings::far_field_under_blades`]).
+    pub far_field_under_blades: bool,
 }
 
 /// Default radii of the grass infill near the camera (half and quarter spacing), metres.
@@ -115,6 +120,7 @@ impl Default for GrassConfig {
             near_m: 12.0,
             lod_widen: DEFAULT_LOD_WIDEN,
             capacity: None,
+            far_field_under_blades: true,
         }
     }
 }
@@ -349,6 +355,7 @@ impl RendererConfig {
             segments: g.segments,
             near_m: g.near_m,
             lod_widen: g.lod_widen,
+            far_field_under_blades: g.far_field_under_blades,
         })
     }
 }

@@ -90,8 +90,8 @@ struct GrassStage {
     trees: Option<crate::plants::PlantRenderer>,
     /// The trees that cast into the shadow map (with the trees and tree shadows).
     casters: Option<crate::plants::PlantRenderer>,
-    /// With trees: the depth of their canopy's shade per grass type.
-    canopy: Option<[f32; crate::world::MAX_GRASS_TYPES]>,
+    /// With trees: the depth of their canopy's shade per band of altitude and grass type.
+    canopy: Option<crate::plants::shadow::CanopyDepth>,
     /// With trees: the leaves they shed.
     particles: Option<crate::plants::particles::ParticleStage>,
 }
@@ -436,7 +436,7 @@ impl Renderer {
             tree_shadow_map.settings(),
             grass.as_ref().and_then(|g| g.canopy),
         ) {
-            terrain.set_canopy(tau, [0.9 * s.distance_m, s.distance_m]);
+            terrain.set_canopy(&tau, [0.9 * s.distance_m, s.distance_m]);
         }
         let mut grass = grass;
         if let (Some(g), Some(_)) = (&mut grass, &msaa) {

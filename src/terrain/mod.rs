@@ -18,6 +18,7 @@ use crate::gpu::layout::*;
 use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{DepthBound, array_view, buffer, compute_pipeline, render_pipeline};
 use crate::gpu::{GpuTimer, Targets};
+use crate::plants::shadow::{CANOPY_BANDS, CanopyDepth};
 use crate::stream::TileAtlas;
 use crate::world::{Manifest, Pyramid, Sky, TileId};
 
@@ -74,10 +75,11 @@ struct FrameUniforms {
     tip_colors: [[f32; 4]; MAX_GRASS_TYPES],
     roots: [u32; 4],
     root_slots: [[u32; 4]; MAX_ROOT_TILES / 4],
-    canopy: [[f32; 4]; MAX_GRASS_TYPES / 4],
+    canopy: [[f32; 4]; MAX_GRASS_TYPES / 4 * CANOPY_BANDS],
     canopy_fade: [f32; 4],
+    canopy_edges: [[f32; 4]; CANOPY_BANDS / 4],
 }
-const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 1424);
+const _: () = assert!(std::mem::size_of::<FrameUniforms>() == 1904);
 
 /// Most root (level-0) tiles whose heights the long shadow rays march over; a world with more
 /// has terrain shadows from each tile's own heights only.
@@ -203,6 +205,8 @@ pub struct TerrainRenderer {
     max_tiles: u32,
     uniforms: FrameUniforms,
     clump_m: f64,
+    /// Each grass type's blade area index at one blade a square metre.
+    blade_area: [f32; MAX_GRASS_TYPES],
 }
 
 impl TerrainRenderer {
@@ -328,6 +332,13 @@ impl TerrainRenderer {
         let mut ground_colors = [[0.0; 4]; MAX_GRASS_TYPES];
         let mut base_colors = [[0.0; 4]; MAX_GRASS_TYPES];
         let mut tip_colors = [[0.0; 4]; MAX_GRASS_TYPES];
+        // Each type's blade area at one blade a square metre; times the blades a square metre
+        // (the default grid's until the grass's settings come) in the tip colours' w.
+        let mut blade_area = [0.0; MAX_GRASS_TYPES];
+        let default_density = {
+            let g = crate::renderer::GrassConfig::default();
+            g.width_scale / (g.spacing_m * g.spacing_m)
+        };
         for (i, t) in manifest
             .grass_types
             .iter()
@@ -338,7 +349,8 @@ impl TerrainRenderer {
             ground_colors[i] = [c[0], c[1], c[2], 1.0];
             let (b, tip) = (t.base_color, t.tip_color);
             base_colors[i] = [b[0], b[1], b[2], far_field::growth_blend(t.stiffness)];
-            tip_colors[i] = [tip[0], tip[1], tip[2], 1.0];
+            blade_area[i] = far_field::blade_area_index(t.width_m, t.height_m, 1.0, 1.0);
+            tip_colors[i] = [tip[0], tip[1], tip[2], blade_area[i] * default_density];
         }
         let roots = manifest.pyramid.root_tiles;
         let root_cell = manifest.pyramid.cell_size_m(0) as f32;
@@ -369,13 +381,15 @@ impl TerrainRenderer {
             camera_world: [0.0; 4],
             grass_view: [0.0; 4],
             clump: [0, 0, 0, 1.0f32.to_bits()],
-            clump_offset: [0.0, 0.0, far_field::FAR_T, 0.0],
+            // z: 1 where the far field lies under the blades too, 0 where only past their fade.
+            clump_offset: [0.0, 0.0, 1.0, 0.0],
             base_colors,
             tip_colors,
             roots: [roots[0], roots[1], root_cell.to_bits(), 0],
             root_slots: [[0; 4]; MAX_ROOT_TILES / 4],
-            canopy: [[0.0; 4]; MAX_GRASS_TYPES / 4],
+            canopy: [[0.0; 4]; MAX_GRASS_TYPES / 4 * CANOPY_BANDS],
             canopy_fade: [0.0; 4],
+            canopy_edges: [[f32::MAX; 4]; CANOPY_BANDS / 4],
         };
         Self {
             gbuffer,
@@ -395,12 +409,14 @@ impl TerrainRenderer {
             max_tiles,
             uniforms,
             clump_m: 1.0,
+            blade_area,
         }
     }
 
     /// Sets what the far field shows of the grass: the dithered fade to the view distance, the
-    /// clump cells and seed of `settings`; `None` (no grass drawn) shows the far field
-    /// everywhere.
+    /// clump cells and seed of `settings`, the blades' area a square metre of ground (their
+    /// spacing and width), and whether it lies under the blades; `None` (no grass drawn) shows
+    /// the far field everywhere.
     pub fn set_grass(&mut self, settings: Option<&crate::grass::GrassSettings>) {
         match settings {
             Some(g) => {
@@ -408,11 +424,17 @@ impl TerrainRenderer {
                 self.uniforms.grass_view[3] = g.view_distance_m;
                 self.uniforms.clump[2] = g.seed;
                 self.uniforms.clump[3] = g.clump_m.to_bits();
+                self.uniforms.clump_offset[2] = if g.far_field_under_blades { 1.0 } else { 0.0 };
                 self.clump_m = f64::from(g.clump_m);
+                let density = g.width_scale / (g.spacing_m * g.spacing_m).max(1e-6);
+                for (tip, area) in self.uniforms.tip_colors.iter_mut().zip(self.blade_area) {
+                    tip[3] = area * density;
+                }
             }
             None => {
                 self.uniforms.grass_view[2] = 0.0;
                 self.uniforms.grass_view[3] = 0.0;
+                self.uniforms.clump_offset[2] = 1.0;
             }
         }
     }
@@ -433,20 +455,27 @@ impl TerrainRenderer {
         }
     }
 
-    /// Sets the switched-on features (the terrain reads ground darkening, the far field and
-    /// shadows).
-    /// The trees' canopy over the ground beyond their shadow map: per grass type, the depth
-    /// `tau` of the canopy's shade at full grass density (see
+    /// The trees' canopy over the ground beyond their shadow map: per band of altitude and
+    /// grass type, the depth `tau` of the canopy's shade at full grass density (see
     /// [`crate::plants::shadow::canopy_depth`]), faded in between `fade` metres (the shadow
     /// map's fade-out); all zero: none.
-    pub fn set_canopy(&mut self, tau: [f32; MAX_GRASS_TYPES], fade: [f32; 2]) {
-        for (g, t) in tau.iter().enumerate() {
-            self.uniforms.canopy[g / 4][g % 4] = *t;
+    pub fn set_canopy(&mut self, tau: &CanopyDepth, fade: [f32; 2]) {
+        for (band, row) in tau.depth.iter().enumerate() {
+            for (g, t) in row.iter().enumerate() {
+                self.uniforms.canopy[band * MAX_GRASS_TYPES / 4 + g / 4][g % 4] = *t;
+            }
         }
-        let on = tau.iter().any(|t| *t > 0.0);
+        let mut edges = [f32::MAX; CANOPY_BANDS];
+        edges[..CANOPY_BANDS - 1].copy_from_slice(&tau.edges);
+        for (i, e) in edges.iter().enumerate() {
+            self.uniforms.canopy_edges[i / 4][i % 4] = *e;
+        }
+        let on = tau.any();
         self.uniforms.canopy_fade = [fade[0], fade[1], f32::from(u8::from(on)), 0.0];
     }
 
+    /// Sets the switched-on features (the terrain reads ground darkening, the far field and
+    /// shadows).
     pub fn set_features(&mut self, features: crate::features::Features) {
         self.uniforms.grid[3] = features.bits();
     }

@@ -129,6 +129,8 @@ pub fn truth_config_reaching(
     c.grass.segments = [SEGMENTS; 3];
     // Every blade at its own width (the rings above leave no low ring to widen anyway).
     c.grass.lod_widen = 1.0;
+    // Real blades over bare ground: the far field only where they end.
+    c.grass.far_field_under_blades = false;
     // Every plant its full mesh, wherever it grows; the pool's regions large enough for the
     // plants out to the truth's reach.
     c.plants.lod_m = [crate::renderer::MAX_PLANT_LOD_M; 2];
