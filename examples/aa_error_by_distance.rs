@@ -1,13 +1,17 @@
 //! Where the error against the truth comes from, by distance from the camera.
 //!
-//! `cargo run --release --example aa_error_by_distance -- [WIDTH HEIGHT [PATH [OUT [WIDEN]]]]`
+//! `cargo run --release --example aa_error_by_distance -- [WIDTH HEIGHT [PATH [OUT [WIDEN [PARTS]]]]]`
 //! (defaults 480 270 meadow out/error-by-distance): one view of the default world's path (the
 //! meadow's first; 30% along any other), after six frames of the same wind for every render,
 //! drawn as the 4x4 truth and as: the truth at 8x8 (the truth's own sampling error), with blades
 //! out to one and two view distances, at one sample and at 2x2; the default frame's settings
 //! supersampled 4x4 (a perfect anti-aliasing of the default frame); and the default frame with
 //! each anti-aliasing method; WIDEN, a comma-separated list of the low ring's widenings
-//! (`GrassConfig::lod_widen`), adds the default frame supersampled 4x4 with each. Prints each
+//! (`GrassConfig::lod_widen`), adds the default frame supersampled 4x4 with each (an empty
+//! list, none); PARTS, a comma-separated list of `segments`, `rings`, `plants` and `trees`,
+//! adds the default frame supersampled 4x4 with that part of the truth's settings (blades out
+//! to one view distance): the blade segments, the grass rings (no LOD), every plant's full mesh
+//! unthinned, every tree's. Prints each
 //! one's mean FLIP against the truth over the frame and over bands of distance (from the
 //! truth's depth) with the bands' share of the frame, each one's mean luminance over the
 //! truth's in each band, and writes every image into OUT.
@@ -99,7 +103,7 @@ fn main() -> Result<()> {
     d.aa = AntiAliasing::Off;
     d.service.atlas_slots = d.service.atlas_slots.max(slots);
     truths.push(mk("default_4x4", d.clone(), 4)?);
-    if let Some(list) = args.get(5) {
+    if let Some(list) = args.get(5).filter(|l| !l.is_empty()) {
         for k in list.split(',') {
             let k: f32 = k
                 .parse()
@@ -107,6 +111,22 @@ fn main() -> Result<()> {
             let mut dk = d.clone();
             dk.grass.lod_widen = k;
             truths.push(mk(&format!("default_4x4_w{k}"), dk, 4)?);
+        }
+    }
+    if let Some(list) = args.get(6) {
+        let t1 = truth_config_reaching(&world, &base, slots, 1.0);
+        for part in list.split(',') {
+            let mut dp = d.clone();
+            match part {
+                "segments" => dp.grass.segments = t1.grass.segments,
+                "rings" => dp.grass_rings = t1.grass_rings,
+                "plants" => dp.plants = t1.plants,
+                "trees" => dp.trees = t1.trees,
+                other => {
+                    anyhow::bail!("part {other:?} is not one of segments, rings, plants, trees")
+                }
+            }
+            truths.push(mk(&format!("default_4x4_{part}"), dp, 4)?);
         }
     }
     let mut scenes: Vec<(String, Scene)> = Vec::new();
