@@ -20,7 +20,6 @@ use verdant::camera::Camera;
 use verdant::features::Feature;
 use verdant::gpu::GpuContext;
 use verdant::terrain::far_field::{self, Light};
-use verdant::terrain::sun_direction;
 use verdant::tools::bench_blades::flat_field;
 use verdant::tools::metrics::decode_srgb8;
 use verdant::tools::truth::{Truth, atlas_slots, truth_config};
@@ -86,14 +85,7 @@ fn main() -> Result<()> {
             ("bare", bare),
         ];
         let sky = &world.manifest.sky;
-        let light = Light {
-            sun_dir: sun_direction(sky),
-            sun_color: Vec3::from_array(sky.sun_color),
-            sky_color: Vec3::from_array(sky.sky_color),
-            ambient_occlusion: true,
-            translucency: true,
-            specular: true,
-        };
+        let light = Light::of_sky(sky);
         let gt = &world.manifest.grass_types[1];
         for z in [1.7f64, 3.0, 6.0, 10.0, 20.0, 40.0, 80.0] {
             let aim = 1.8 * view;

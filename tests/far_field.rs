@@ -9,7 +9,6 @@ use glam::{DVec2, DVec3, Vec3, Vec4};
 use verdant::RendererConfig;
 use verdant::camera::Camera;
 use verdant::terrain::far_field::{self, Light};
-use verdant::terrain::sun_direction;
 use verdant::tools::bench_blades::flat_field;
 use verdant::tools::scene::Scene;
 
@@ -101,17 +100,15 @@ fn the_far_field_shows_what_real_blades_would_and_matches_its_cpu_mirror() {
     let mut reach = verdant::tools::truth::truth_config_reaching(&world, &config, slots, 2.0);
     reach.grass.segments = config.grass.segments;
     let real = render(reach);
+    // The ground bare between the blades, as the truth keeps it: the far field only where the
+    // blades fade out.
+    let mut between_config = config.clone();
+    between_config.grass.far_field_under_blades = false;
+    let between = render(between_config);
     let points = ground_points(&camera, w, h);
 
     let sky = &world.manifest.sky;
-    let light = Light {
-        sun_dir: sun_direction(sky),
-        sun_color: Vec3::from_array(sky.sun_color),
-        sky_color: Vec3::from_array(sky.sky_color),
-        ambient_occlusion: true,
-        translucency: true,
-        specular: true,
-    };
+    let light = Light::of_sky(sky);
     let meadow = &world.manifest.grass_types[1];
     let area = far_field::blade_area_index(
         meadow.width_m,
@@ -133,6 +130,9 @@ fn the_far_field_shows_what_real_blades_would_and_matches_its_cpu_mirror() {
 
     let (mut blades, mut far_gpu, mut far_cpu) = (Vec::new(), Vec::new(), Vec::new());
     let (mut near_real, mut far_real) = (Vec::new(), Vec::new());
+    // Pixels before the blades' fade (where the bare-between frame should be the frame without
+    // the far field) and past it (the frame with it), and those of them that differ.
+    let (mut checked, mut differ) = ([0usize; 2], [0usize; 2]);
     for (i, p) in points.iter().enumerate() {
         let Some(p) = *p else { continue };
         let linear = |img: &image::RgbaImage| {
@@ -150,6 +150,21 @@ fn the_far_field_shows_what_real_blades_would_and_matches_its_cpu_mirror() {
             dist,
             (camera.position.z - p.z) as f32,
         ));
+        let shown =
+            far_field::under_blades_fade_in(faded_at as f32, [fade_start as f32, view as f32]);
+        if shown == 0.0 || shown == 1.0 {
+            let end = usize::from(shown == 1.0);
+            let expected = if end == 1 { &image } else { &bare };
+            let px = |img: &image::RgbaImage| img.as_raw()[i * 4..i * 4 + 3].to_vec();
+            checked[end] += 1;
+            if px(&between)
+                .iter()
+                .zip(px(expected))
+                .any(|(a, b)| a.abs_diff(b) > 2)
+            {
+                differ[end] += 1;
+            }
+        }
         let dist = f64::from(dist);
         // Blades at full density just before their fade; the far field past its end, where
         // the last blades (0.7 m at most, seen from 6 m) no longer stand in front of it.
@@ -183,6 +198,18 @@ fn the_far_field_shows_what_real_blades_would_and_matches_its_cpu_mirror() {
         "bands too thin: {} and {} pixels",
         blades.len(),
         far_gpu.len()
+    );
+    // Kept bare between the blades, the frame is the one without the far field before their
+    // fade and the one with it past the view distance (the mirror's fade-in at 0 and 1).
+    assert!(checked[0] > 500 && checked[1] > 500, "{checked:?} pixels");
+    assert!(
+        differ == [0, 0],
+        "bare between the blades: {} of {} pixels before their fade differ from the frame \
+         without the far field, {} of {} past it from the frame with it",
+        differ[0],
+        checked[0],
+        differ[1],
+        checked[1]
     );
     let (b, fg, fc) = (mean(&blades), mean(&far_gpu), mean(&far_cpu));
     let (br, fr) = (mean(&near_real), mean(&far_real));
@@ -279,14 +306,7 @@ fn the_far_field_darkens_under_a_forest_as_its_cpu_mirror_says() {
     let vp = camera.view_proj_relative(w as f32 / h as f32);
 
     let sky = &world.manifest.sky;
-    let light = Light {
-        sun_dir: sun_direction(sky),
-        sun_color: Vec3::from_array(sky.sun_color),
-        sky_color: Vec3::from_array(sky.sky_color),
-        ambient_occlusion: true,
-        translucency: true,
-        specular: true,
-    };
+    let light = Light::of_sky(sky);
     let set = verdant::plants::PlantSet::build(&world.manifest, &world.dir).unwrap();
     let trees = config.tree_settings(&world).unwrap();
     let tau = canopy_depth(&world.manifest, &set, trees.cell_m, light.sun_dir).at(1, 0.0);

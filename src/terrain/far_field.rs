@@ -171,6 +171,20 @@ pub struct Light {
     pub specular: bool,
 }
 
+impl Light {
+    /// The sun and sky of `sky`, every lighting feature of the blades on.
+    pub fn of_sky(sky: &crate::world::Sky) -> Self {
+        Self {
+            sun_dir: crate::terrain::sun_direction(sky),
+            sun_color: Vec3::from_array(sky.sun_color),
+            sky_color: Vec3::from_array(sky.sky_color),
+            ambient_occlusion: true,
+            translucency: true,
+            specular: true,
+        }
+    }
+}
+
 /// Far blades of the colours `albedo` (from [`visible_albedo`], times any tint) with their
 /// normals turned to their growth direction `n`, lit by `light` with the fraction `sun_vis` of
 /// the sun seen, as `shaders/grass_draw.wgsl` lights a blade at position t: the mean of the

@@ -332,13 +332,8 @@ impl TerrainRenderer {
         let mut ground_colors = [[0.0; 4]; MAX_GRASS_TYPES];
         let mut base_colors = [[0.0; 4]; MAX_GRASS_TYPES];
         let mut tip_colors = [[0.0; 4]; MAX_GRASS_TYPES];
-        // Each type's blade area at one blade a square metre; times the blades a square metre
-        // (the default grid's until the grass's settings come) in the tip colours' w.
+        // Each type's blade area at one blade a square metre (see `set_blade_density`).
         let mut blade_area = [0.0; MAX_GRASS_TYPES];
-        let default_density = {
-            let g = crate::renderer::GrassConfig::default();
-            g.width_scale / (g.spacing_m * g.spacing_m)
-        };
         for (i, t) in manifest
             .grass_types
             .iter()
@@ -350,7 +345,7 @@ impl TerrainRenderer {
             let (b, tip) = (t.base_color, t.tip_color);
             base_colors[i] = [b[0], b[1], b[2], far_field::growth_blend(t.stiffness)];
             blade_area[i] = far_field::blade_area_index(t.width_m, t.height_m, 1.0, 1.0);
-            tip_colors[i] = [tip[0], tip[1], tip[2], blade_area[i] * default_density];
+            tip_colors[i] = [tip[0], tip[1], tip[2], 0.0];
         }
         let roots = manifest.pyramid.root_tiles;
         let root_cell = manifest.pyramid.cell_size_m(0) as f32;
@@ -391,7 +386,7 @@ impl TerrainRenderer {
             canopy_fade: [0.0; 4],
             canopy_edges: [[f32::MAX; 4]; CANOPY_BANDS / 4],
         };
-        Self {
+        let mut terrain = Self {
             gbuffer,
             shade,
             shade_layout,
@@ -410,6 +405,20 @@ impl TerrainRenderer {
             uniforms,
             clump_m: 1.0,
             blade_area,
+        };
+        // The default grid's until the grass's settings come.
+        let grass = crate::renderer::GrassConfig::default();
+        terrain.set_blade_density(grass.spacing_m, grass.width_scale);
+        terrain
+    }
+
+    /// Puts each grass type's blade area index at full density into the tip colours' w: its
+    /// blade area at one blade a square metre times the blades a square metre of the grid
+    /// spaced and widened as `spacing_m` and `width_scale` say.
+    fn set_blade_density(&mut self, spacing_m: f32, width_scale: f32) {
+        let density = width_scale / (spacing_m * spacing_m).max(1e-6);
+        for (tip, area) in self.uniforms.tip_colors.iter_mut().zip(self.blade_area) {
+            tip[3] = area * density;
         }
     }
 
@@ -426,10 +435,7 @@ impl TerrainRenderer {
                 self.uniforms.clump[3] = g.clump_m.to_bits();
                 self.uniforms.clump_offset[2] = if g.far_field_under_blades { 1.0 } else { 0.0 };
                 self.clump_m = f64::from(g.clump_m);
-                let density = g.width_scale / (g.spacing_m * g.spacing_m).max(1e-6);
-                for (tip, area) in self.uniforms.tip_colors.iter_mut().zip(self.blade_area) {
-                    tip[3] = area * density;
-                }
+                self.set_blade_density(g.spacing_m, g.width_scale);
             }
             None => {
                 self.uniforms.grass_view[2] = 0.0;
@@ -465,9 +471,8 @@ impl TerrainRenderer {
                 self.uniforms.canopy[band * MAX_GRASS_TYPES / 4 + g / 4][g % 4] = *t;
             }
         }
-        let mut edges = [f32::MAX; CANOPY_BANDS];
-        edges[..CANOPY_BANDS - 1].copy_from_slice(&tau.edges);
-        for (i, e) in edges.iter().enumerate() {
+        // The last of the uniform's edges is never used: it stays huge.
+        for (i, e) in tau.edges.iter().enumerate() {
             self.uniforms.canopy_edges[i / 4][i % 4] = *e;
         }
         let on = tau.any();
