@@ -21,6 +21,11 @@ override SEGMENTS: u32 = 7u;
 // wide, its true width becoming the share of the pixel's samples it covers (its alpha), so
 // that it fades with distance instead of popping in and out of pixels.
 override COVERAGE: bool = false;
+// How far each vertex of the strip moves out of the curve, times its second derivative
+// (across the curve) and the segment's parameter step squared: 3/4 of a chord's sag (k L^2 / 8),
+// the shift that minimises the chords' mean distance from a parabolic arc. 0 keeps the
+// vertices on the curve (src/grass/blade.rs, `strip_centre`).
+const STRADDLE: f32 = 0.09375;
 
 struct GrassFrame {
     view_proj: mat4x4<f32>,
@@ -61,6 +66,11 @@ fn bezier(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>, t: f32) ->
 fn bezier_tangent(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>, t: f32) -> vec3<f32> {
     let u = 1.0 - t;
     return (p1 - p0) * (3.0 * u * u) + (p2 - p1) * (6.0 * u * t) + (p3 - p2) * (3.0 * t * t);
+}
+
+// Second derivative of a cubic Bezier.
+fn bezier_second(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>, t: f32) -> vec3<f32> {
+    return (p2 - 2.0 * p1 + p0) * (6.0 * (1.0 - t)) + (p3 - 2.0 * p2 + p1) * (6.0 * t);
 }
 
 // Mean of chord and control polygon of one piece of a curve.
@@ -128,8 +138,19 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
         t = 1.0;
         side_sign = 0.0;
     }
-    let p = root + bezier(vec3<f32>(0.0), c1, c2, c3, t);
-    let tangent = normalize(bezier_tangent(vec3<f32>(0.0), c1, c2, c3, t) + up * 1e-4);
+    let d1 = bezier_tangent(vec3<f32>(0.0), c1, c2, c3, t);
+    let tangent = normalize(d1 + up * 1e-4);
+    // The strip's chords cut inside the curve by up to its sag (a segment of length L on a
+    // curve of curvature k sags k L^2 / 8, as much as a blade is wide near the camera): each
+    // vertex between root and tip moves out by 3/4 of its segments' sag, so that the chords
+    // straddle the curve, the blade's coverage halving its error.
+    var bulge = vec3<f32>(0.0);
+    if t > 0.0 && t < 1.0 {
+        let d2 = bezier_second(vec3<f32>(0.0), c1, c2, c3, t);
+        let dt = 1.0 / f32(SEGMENTS);
+        bulge = -(d2 - tangent * dot(d2, tangent)) * (STRADDLE * dt * dt);
+    }
+    let p = root + bezier(vec3<f32>(0.0), c1, c2, c3, t) + bulge;
     var n = normalize(cross(side, tangent));
 
     // Seen edge-on, a blade turns a little toward the viewer so that it keeps some width.
