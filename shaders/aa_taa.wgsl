@@ -1,8 +1,11 @@
 // Temporal anti-aliasing: each frame is drawn with its projection jittered within a pixel
 // (a Halton sequence), and this stage folds it into a history that follows the surfaces on
-// screen. Per pixel, the history is fetched where the pixel's surface was in the last frame
-// (reprojected through the pixel's depth; in grass the nearest depth of a neighbourhood is a
-// blade's more often than not, and would drag the ground's history along with the blades),
+// screen. Per pixel, the history is fetched where the pixel's surface was in the last frame:
+// a grass blade's own motion where a blade is the pixel's surface (the draw evaluates each
+// blade's wind a frame ago: its sway spring, sway and flutter), elsewhere the pixel
+// reprojected through its depth (the camera's move; in grass the nearest depth of a
+// neighbourhood is a blade's more often than not, and would drag the ground's history along
+// with the blades),
 // clipped toward the current frame's 3x3 neighbourhood (its mean and spread in YCoCg: what
 // the neighbourhood cannot explain is a ghost and is dropped), and blended with the current
 // sample with weight 1 / n, n the samples the history holds: at most MAX_SAMPLES, fewer the
@@ -39,6 +42,14 @@ struct Params {
 @group(0) @binding(4) var history_out: texture_storage_2d<rgba16float, write>;
 // The full-screen pass's input: the history just written.
 @group(0) @binding(5) var resolved: texture_2d<f32>;
+// The blades' motion vectors (shaders/grass_draw.wgsl, fs_blade_motion): xy the pixels the
+// blade's point moved since the last frame, z its depth, w 1 where a blade wrote them.
+@group(0) @binding(6) var motion: texture_2d<f32>;
+
+// How far (relative) the frame's depth may lie from the depth a blade wrote with its motion
+// (stored at half precision) for the motion to be the pixel's: beyond it, something drawn
+// after the grass covers the blade, and the pixel is reprojected through its depth.
+const MOTION_DEPTH_TOLERANCE: f32 = 2e-3;
 
 fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
     let lo = c / 12.92;
@@ -143,22 +154,30 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
     var out = vec4<f32>(cur, 1.0);
     if params.size.w < 0.5 {
         let px = vec2<f32>(p) + 0.5;
-        let ndc = vec2<f32>(px.x / params.size.x * 2.0 - 1.0, 1.0 - px.y / params.size.y * 2.0);
-        let prev = params.reproject * vec4<f32>(ndc, d, 1.0);
-        if prev.w > 0.0 {
-            let pn = prev.xy / prev.w;
-            let pp = vec2<f32>((pn.x * 0.5 + 0.5) * params.size.x, (0.5 - pn.y * 0.5) * params.size.y);
-            if all(pp >= vec2<f32>(0.0)) && all(pp < params.size.xy) {
-                let h = sample_history(pp);
-                if h.a >= 1.0 {
-                    let g = params.clip.x;
-                    let clipped = from_ycocg(clip_to_box(to_ycocg(h.rgb), mean - g * sigma, mean + g * sigma));
-                    // Pixels the surface moved since the last frame.
-                    let moved = length(pp - px);
-                    let most = max(params.size.z / (1.0 + params.clip.y * moved), 2.0);
-                    let n = min(h.a + 1.0, most);
-                    out = vec4<f32>(mix(clipped, cur, 1.0 / n), n);
-                }
+        // Where the pixel's surface was: a blade's own motion where a blade is the pixel's
+        // surface, else the pixel reprojected through its depth (the camera's move alone).
+        var pp = vec2<f32>(-1.0);
+        let m = textureLoad(motion, p, 0);
+        if m.w > 0.5 && abs(m.z - d) <= MOTION_DEPTH_TOLERANCE * d {
+            pp = px - m.xy;
+        } else {
+            let ndc = vec2<f32>(px.x / params.size.x * 2.0 - 1.0, 1.0 - px.y / params.size.y * 2.0);
+            let prev = params.reproject * vec4<f32>(ndc, d, 1.0);
+            if prev.w > 0.0 {
+                let pn = prev.xy / prev.w;
+                pp = vec2<f32>((pn.x * 0.5 + 0.5) * params.size.x, (0.5 - pn.y * 0.5) * params.size.y);
+            }
+        }
+        if all(pp >= vec2<f32>(0.0)) && all(pp < params.size.xy) {
+            let h = sample_history(pp);
+            if h.a >= 1.0 {
+                let g = params.clip.x;
+                let clipped = from_ycocg(clip_to_box(to_ycocg(h.rgb), mean - g * sigma, mean + g * sigma));
+                // Pixels the surface moved since the last frame.
+                let moved = length(pp - px);
+                let most = max(params.size.z / (1.0 + params.clip.y * moved), 2.0);
+                let n = min(h.a + 1.0, most);
+                out = vec4<f32>(mix(clipped, cur, 1.0 / n), n);
             }
         }
     }

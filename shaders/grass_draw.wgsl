@@ -29,7 +29,7 @@ const STRADDLE: f32 = 0.09375;
 
 struct GrassFrame {
     view_proj: mat4x4<f32>,
-    // x: fog distance; y: the target's height in pixels
+    // x: fog distance; y, z: the target's height and width in pixels
     misc: vec4<f32>,
     sun_dir: vec4<f32>,
     sun_color: vec4<f32>,
@@ -40,6 +40,10 @@ struct GrassFrame {
     // rgb colour; w: gloss exponent (base) and specular strength (tip)
     base_colors: array<vec4<f32>, 16>,
     tip_colors: array<vec4<f32>, 16>,
+    // The motion vectors' (vs_blade_motion): this frame's view-projection unjittered, and the
+    // last frame's, both from this frame's camera-relative positions.
+    unjittered: mat4x4<f32>,
+    last_view_proj: mat4x4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: GrassFrame;
@@ -56,6 +60,32 @@ struct VertexOut {
     // The share of a pixel the blade's width covers (1 unless COVERAGE and the blade is
     // narrower than a pixel).
     @location(4) @interpolate(flat) coverage: f32,
+}
+
+// VertexOut with the blade's point in this frame's and the last frame's clip space
+// (unjittered): the temporal anti-aliasing's motion vectors.
+struct MotionVertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) rel_pos: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) color: vec3<f32>,
+    @location(3) misc: vec4<f32>,
+    @location(4) @interpolate(flat) coverage: f32,
+    @location(5) now: vec4<f32>,
+    @location(6) last: vec4<f32>,
+}
+
+struct MotionOut {
+    @location(0) color: vec4<f32>,
+    // xy: the pixels the blade's point moved since the last frame; z: its depth (the resolve
+    // takes the motion only where the frame's depth is still the blade's); w: 1 (written).
+    @location(1) motion: vec4<f32>,
+}
+
+// A vertex of a blade, and how far it moved since the last frame.
+struct BladeVertex {
+    out: VertexOut,
+    moved: vec3<f32>,
 }
 
 fn bezier(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>, t: f32) -> vec3<f32> {
@@ -103,6 +133,25 @@ fn bezier_length(p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>, p3: vec3<f32>) -> 
 
 @vertex
 fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> VertexOut {
+    return blade_vertex(vi, ii).out;
+}
+
+@vertex
+fn vs_blade_motion(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) -> MotionVertexOut {
+    let v = blade_vertex(vi, ii);
+    var out: MotionVertexOut;
+    out.clip = v.out.clip;
+    out.rel_pos = v.out.rel_pos;
+    out.normal = v.out.normal;
+    out.color = v.out.color;
+    out.misc = v.out.misc;
+    out.coverage = v.out.coverage;
+    out.now = frame.unjittered * vec4<f32>(v.out.rel_pos, 1.0);
+    out.last = frame.last_view_proj * vec4<f32>(v.out.rel_pos - v.moved, 1.0);
+    return out;
+}
+
+fn blade_vertex(vi: u32, ii: u32) -> BladeVertex {
     let b = blades[ii];
     let root = vec3<f32>(b.pos_x, b.pos_y, b.pos_z);
     let up = vec3<f32>(b.growth_x, b.growth_y, sqrt(max(1.0 - b.growth_x * b.growth_x - b.growth_y * b.growth_y, 0.0)));
@@ -126,6 +175,9 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     let p1 = up * (h / 3.0) + side * (b.side_curve * 0.15 * h) + bend * (0.15 * h);
     let p2 = p3 - (up * cos(tip_angle) + fwd * sin(tip_angle)) * (h / 3.0) + side * (b.side_curve * 0.15 * h) - bend * (0.4 * h);
     let scale = h / max(bezier_length(vec3<f32>(0.0), p1, p2, p3), 1e-6);
+    // The bend's change over the last frame (the wind pass's), moving the control points as
+    // the bend does (linear in it; the length's rescaling kept).
+    let moved_bend = (vec3<f32>(b.moved_lean_x, b.moved_lean_y, 0.0) + side * (0.06 * b.moved_sway)) * (h * scale);
     let c1 = p1 * scale;
     let c2 = p2 * scale;
     let c3 = p3 * scale;
@@ -174,7 +226,8 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     }
     var pos = p + width_dir * (0.5 * bw * side_sign);
     // Edge flutter: the blade's edges move along its normal, more toward the tip.
-    pos += n * (flutter * 0.03 * h * t * abs(side_sign));
+    let flutter_step = n * (0.03 * h * t * abs(side_sign));
+    pos += flutter_step * flutter;
     // Rounded cross-section: normals lean outward toward the edges; far away they blend toward
     // the ground's (the growth direction), as a field of blades reads from a distance.
     n = normalize(n + width_dir * (0.35 * side_sign));
@@ -186,6 +239,8 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     // Gust highlights: where the wind runs above the ambient speed, tips catch more light.
     let gust = b.fade;
 
+    let moved = bezier(vec3<f32>(0.0), moved_bend * 0.15, moved_bend * 0.6, moved_bend, t)
+        + flutter_step * b.moved_flutter;
     var out: VertexOut;
     out.clip = frame.view_proj * vec4<f32>(pos, 1.0);
     out.rel_pos = pos;
@@ -193,18 +248,36 @@ fn vs_blade(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32) ->
     out.color = color;
     out.misc = vec4<f32>(t, gust * t, frame.tip_colors[kind].w, frame.base_colors[kind].w);
     out.coverage = coverage;
-    return out;
+    return BladeVertex(out, moved);
 }
 
 @fragment
 fn fs_blade(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
-    var n = normalize(in.normal);
+    return shade_blade(in.rel_pos, in.normal, in.color, in.misc, in.coverage, front);
+}
+
+// The pixels a point moved on screen, from its unjittered clip positions now and then.
+fn motion_px(now: vec4<f32>, last: vec4<f32>) -> vec2<f32> {
+    let d = now.xy / now.w - last.xy / max(last.w, 1e-6);
+    return vec2<f32>(0.5 * d.x * frame.misc.z, -0.5 * d.y * frame.misc.y);
+}
+
+@fragment
+fn fs_blade_motion(in: MotionVertexOut, @builtin(front_facing) front: bool) -> MotionOut {
+    var out: MotionOut;
+    out.color = shade_blade(in.rel_pos, in.normal, in.color, in.misc, in.coverage, front);
+    out.motion = vec4<f32>(motion_px(in.now, in.last), in.clip.z, 1.0);
+    return out;
+}
+
+fn shade_blade(rel_pos: vec3<f32>, normal: vec3<f32>, base: vec3<f32>, misc: vec4<f32>, coverage: f32, front: bool) -> vec4<f32> {
+    var n = normalize(normal);
     if !front {
         n = -n;
     }
-    let t = in.misc.x;
+    let t = misc.x;
     let sun = frame.sun_dir.xyz;
-    let to_eye = -normalize(in.rel_pos);
+    let to_eye = -normalize(rel_pos);
     let diffuse = max(dot(n, sun), 0.0);
     var light = frame.sun_color.rgb * diffuse;
     if has_feature(frame.flags.x, TRANSLUCENCY) {
@@ -218,18 +291,18 @@ fn fs_blade(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) v
         ao = mix(0.3, 1.0, t);
     }
     let ambient = frame.sky_color.rgb * (0.35 + 0.25 * n.z) * ao;
-    var lit = in.color * (light * mix(0.6, 1.0, ao) + ambient) * (1.0 + 0.5 * in.misc.y);
+    var lit = base * (light * mix(0.6, 1.0, ao) + ambient) * (1.0 + 0.5 * misc.y);
     if has_feature(frame.flags.x, SPECULAR) {
         let half_dir = normalize(sun + to_eye);
-        let spec = pow(max(dot(n, half_dir), 0.0), in.misc.w) * in.misc.z * (0.5 + t);
+        let spec = pow(max(dot(n, half_dir), 0.0), misc.w) * misc.z * (0.5 + t);
         lit += frame.sun_color.rgb * spec;
     }
-    let dist = length(in.rel_pos);
+    let dist = length(rel_pos);
     let x = dist / frame.misc.x;
     let fog = 1.0 - exp(-3.0 * x * x);
     var color = output_color(mix(lit, frame.horizon_color.rgb, fog));
     if COVERAGE {
-        color.a = in.coverage;
+        color.a = coverage;
     }
     return color;
 }

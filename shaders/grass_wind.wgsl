@@ -25,6 +25,8 @@ struct WindPass {
     misc: vec4<f32>,
     // x: feature bits, y: slot capacity
     flags: vec4<u32>,
+    // x: the frame's time step (s): the blades' motion over it
+    motion: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> pass_params: WindPass;
@@ -52,6 +54,15 @@ fn value_noise(p: vec2<f32>) -> f32 {
     return ab + (cd - ab) * u.y;
 }
 
+// Detail bending at `time` of a blade of phase `phase`: its whole-blade sway and its edge
+// flutter, before they are scaled by the wind's amount.
+fn detail_bending(time: f32, phase: f32) -> vec2<f32> {
+    return vec2<f32>(
+        smooth_triangle(time * 0.193 + phase) + smooth_triangle(time * 0.375 + phase * 1.3) - 1.0,
+        smooth_triangle(time * 1.975 + phase * 3.1) + smooth_triangle(time * 0.793 + phase * 2.7) - 1.0,
+    );
+}
+
 // Workgroup y is the slot of the half; x runs over the slot's blades.
 @compute @workgroup_size(64, 1, 1)
 fn apply_wind(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -64,19 +75,26 @@ fn apply_wind(@builtin(global_invocation_id) gid: vec3<u32>) {
     let root = vec2<f32>(b.pos_x, b.pos_y);
     let kind = b.kind & 255u;
     let w = wind_at(root);
-    var lean = sway_at(root, min(kind, 3u)) * b.wind;
+    let spring = sway_state_at(root, min(kind, 3u));
+    let dt = pass_params.motion.x;
+    var lean = spring.xy * b.wind;
+    // The spring's bend a frame ago, from its velocity (the trail's push changes slowly).
+    let moved_lean = spring.zw * (dt * b.wind);
     if has_feature(pass_params.flags.x, INTERACTION) {
         lean += w.zw * TRAIL_LEAN;
     }
     let speed = length(w.xy);
     var blade_sway = 0.0;
     var flutter = 0.0;
+    var moved_detail = vec2<f32>(0.0);
     if has_feature(pass_params.flags.x, DETAIL_BENDING) {
         let phase = f32(b.hash & 1023u) / 1023.0;
         let time = pass_params.misc.x;
         let amount = min(speed / 5.0, 1.5) * b.wind;
-        blade_sway = (smooth_triangle(time * 0.193 + phase) + smooth_triangle(time * 0.375 + phase * 1.3) - 1.0) * amount;
-        flutter = (smooth_triangle(time * 1.975 + phase * 3.1) + smooth_triangle(time * 0.793 + phase * 2.7) - 1.0) * amount;
+        let now = detail_bending(time, phase);
+        blade_sway = now.x * amount;
+        flutter = now.y * amount;
+        moved_detail = (now - detail_bending(time - dt, phase)) * amount;
     }
     if has_feature(pass_params.flags.x, COLOR_VARIATION) {
         let world = pass_params.misc.zw + root;
@@ -88,6 +106,10 @@ fn apply_wind(@builtin(global_invocation_id) gid: vec3<u32>) {
     b.lean_y = lean.y;
     b.sway = blade_sway;
     b.flutter = flutter;
+    b.moved_lean_x = moved_lean.x;
+    b.moved_lean_y = moved_lean.y;
+    b.moved_sway = moved_detail.x;
+    b.moved_flutter = moved_detail.y;
     b.fade = clamp(speed / max(pass_params.misc.y, 0.5) - 1.0, 0.0, 1.0);
     blades[index] = b;
 }

@@ -55,6 +55,64 @@ fn frame(phase: u32) -> (Vec<u8>, Vec<f32>) {
     (rgba, depth)
 }
 
+/// A half float's bits, for values in its normal range or 0 (the mantissa truncated).
+fn f16_bits(v: f32) -> u16 {
+    if v == 0.0 {
+        return 0;
+    }
+    let b = v.to_bits();
+    let exp = ((b >> 23) & 0xff) as i32 - 127 + 15;
+    assert!(
+        (1..31).contains(&exp),
+        "{v} is outside a half float's normal range"
+    );
+    (((b >> 16) & 0x8000) | ((exp as u32) << 10) | ((b >> 13) & 0x3ff)) as u16
+}
+
+/// The value of a half float's bits (normal range or 0).
+fn f16_value(h: u16) -> f32 {
+    if h & 0x7fff == 0 {
+        return 0.0;
+    }
+    let (sign, exp, man) = (
+        (h >> 15) as u32,
+        ((h >> 10) & 0x1f) as u32,
+        (h & 0x3ff) as u32,
+    );
+    f32::from_bits((sign << 31) | ((exp + 127 - 15) << 23) | (man << 13))
+}
+
+/// Blades' motion vectors over `depth`: every third pixel moved by a step that changes with
+/// `phase`, at its own depth (the blade is the pixel's surface), and on the left half some
+/// pixels whose depth is not the frame's (a blade covered by something drawn after it). As
+/// half floats, and as the values those hold.
+fn motion(phase: u32, depth: &[f32]) -> (Vec<u16>, Vec<Vec4>) {
+    let mut bits = Vec::new();
+    for y in 0..H {
+        for x in 0..W {
+            let d = depth[(y * W + x) as usize];
+            let m = match (x + y + phase) % 3 {
+                0 if d > 0.0 => [1.5, -0.75 + 0.5 * phase as f32, d, 1.0],
+                1 if d > 0.0 && x < W / 2 => [-2.0, 1.0, 0.5 * d, 1.0],
+                _ => [0.0; 4],
+            };
+            bits.extend(m.map(f16_bits));
+        }
+    }
+    let values = bits
+        .chunks(4)
+        .map(|c| {
+            Vec4::new(
+                f16_value(c[0]),
+                f16_value(c[1]),
+                f16_value(c[2]),
+                f16_value(c[3]),
+            )
+        })
+        .collect();
+    (bits, values)
+}
+
 const DEPTH_IN: &str = r#"
 @group(0) @binding(0) var values: texture_2d<f32>;
 
@@ -180,7 +238,8 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
     };
 
     // A camera that holds still, then moves sideways and turns a little: the history is
-    // reprojected by the depth, clipped, and blended.
+    // reprojected by the depth (or by the blades' motion where they are the pixel's surface),
+    // clipped, and blended.
     let mut camera = Camera::new(DVec3::new(0.0, 0.0, 10.0), 0.0, -5.0);
     let aspect = W as f32 / H as f32;
     let mut history = vec![Vec4::ZERO; (W * H) as usize];
@@ -197,6 +256,22 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
             &depth_src,
             bytemuck::cast_slice(&depth),
             wgpu::TextureAspect::All,
+        );
+        let (motion_bits, motion) = motion(step, &depth);
+        ctx.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: taa.motion_view().texture(),
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytemuck::cast_slice(&motion_bits),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(8 * W),
+                rows_per_image: Some(H),
+            },
+            size,
         );
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         {
@@ -248,6 +323,7 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
             current: &current,
             depth: &depth,
             history: &history,
+            motion: &motion,
             reproject: match last {
                 Some((lvp, leye)) => reprojection(lvp, leye, vp, camera.position),
                 None => Mat4::IDENTITY,

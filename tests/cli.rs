@@ -738,8 +738,8 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
     // Absurd counts are refused before any GPU work, the option and its range named: too few,
     // and too many for the grass pool's slots (once wrapped to a pool of 2,370,457,856 blades).
     for (count, range) in [
-        ("10", "1000..=214681104"),
-        ("1000000000000", "1000..=214681104"),
+        ("10", "1000..=178917376"),
+        ("1000000000000", "1000..=178917376"),
     ] {
         let bad = verdant(
             &["bench", "blades", "--counts", count, "--out", "bad"],

@@ -267,9 +267,15 @@ impl Rig {
         self.grass
             .hiz
             .record(&self.ctx.device, &mut encoder, &self.depth, &mut timer);
-        let tiles = self
-            .grass
-            .record(&self.ctx.queue, &mut encoder, jobs, &cv, &dv, &mut timer);
+        let tiles = self.grass.record(
+            &self.ctx.queue,
+            &mut encoder,
+            jobs,
+            &cv,
+            None,
+            &dv,
+            &mut timer,
+        );
         self.ctx.queue.submit([encoder.finish()]);
         let stats = self
             .grass
@@ -547,7 +553,7 @@ fn more_tiles_than_slots_are_all_drawn() {
     assert_eq!(stats.drawn, drawn, "every tile's blades are drawn");
     assert_eq!(
         rig.grass.pool_bytes(),
-        2 * (4 * u64::from(rig.grass.capacity()) * 80 + 16 + 64)
+        2 * (4 * u64::from(rig.grass.capacity()) * 96 + 16 + 64)
     );
 }
 
@@ -766,6 +772,8 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
             verdant::features::Features::all(),
             world_cam,
         );
+        // The blades' motion over the frame's step, for the motion vectors.
+        grass.set_motion(1.0 / 30.0, view_proj, view_proj);
         grass.set_camera(
             &ctx.queue,
             view_proj,
@@ -810,7 +818,7 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
         grass
             .hiz
             .record(&ctx.device, &mut encoder, &depth, &mut timer);
-        grass.record(&ctx.queue, &mut encoder, &[job], &cv, &dv, &mut timer);
+        grass.record(&ctx.queue, &mut encoder, &[job], &cv, None, &dv, &mut timer);
         ctx.queue.submit([encoder.finish()]);
         ctx.wait_idle();
     }
@@ -848,14 +856,23 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
     );
     let mut worst = 0.0f32;
     let mut max_lean = 0.0f32;
+    let mut max_moved = [0.0f32; 3];
     for (a, b) in g.iter().zip(&cpu) {
         assert_eq!(a.hash, b.hash);
         for (x, y) in [a.lean[0], a.lean[1], a.sway, a.flutter, a.fade]
             .iter()
-            .zip([b.lean[0], b.lean[1], b.sway, b.flutter, b.fade])
+            .chain(&a.moved)
+            .zip(
+                [b.lean[0], b.lean[1], b.sway, b.flutter, b.fade]
+                    .iter()
+                    .chain(&b.moved),
+            )
         {
             worst = worst.max((x - y).abs());
         }
+        max_moved[0] = max_moved[0].max(a.moved[0].hypot(a.moved[1]));
+        max_moved[1] = max_moved[1].max(a.moved[2].abs());
+        max_moved[2] = max_moved[2].max(a.moved[3].abs());
         for s in [0, 8, 16] {
             let (ca, cb) = ((a.color >> s) & 255, (b.color >> s) & 255);
             assert!(ca.abs_diff(cb) <= 1, "colour channels differ: {ca} vs {cb}");
@@ -873,6 +890,12 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
     assert!(
         max_lean > 0.05,
         "the storm should lean the blades: {max_lean}"
+    );
+    // In the storm every part of the blades' motion is there to compare: the springs' lean,
+    // the sway and the flutter each changed over the step.
+    assert!(
+        max_moved.iter().all(|&m| m > 1e-3),
+        "the blades' motion over the step (lean, sway, flutter): {max_moved:?}"
     );
 }
 

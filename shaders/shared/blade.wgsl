@@ -1,5 +1,5 @@
 // The blade record of the instance pool, shared by grass_generate.wgsl, grass_wind.wgsl and
-// grass_draw.wgsl (each includes it). Mirrors `Blade` in src/grass/blade.rs (80 bytes).
+// grass_draw.wgsl (each includes it). Mirrors `Blade` in src/grass/blade.rs (96 bytes).
 struct Blade {
     pos_x: f32, pos_y: f32, pos_z: f32,
     facing: f32,
@@ -20,6 +20,12 @@ struct Blade {
     lean_y: f32,
     sway: f32,
     flutter: f32,
+    // Written by the wind pass: how much the lean (x, y), the sway and the flutter changed over
+    // the last frame (the draw's motion vectors).
+    moved_lean_x: f32,
+    moved_lean_y: f32,
+    moved_sway: f32,
+    moved_flutter: f32,
 }
 
 // A blade's packed colour (8 bits a channel, red lowest) as linear RGB.

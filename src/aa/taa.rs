@@ -6,14 +6,19 @@
 use glam::{DMat4, DVec3, Mat4, Vec2};
 
 use crate::gpu::layout::{
-    UNFILTERABLE_FLOAT, bind_group, bind_group_layout, sequential, texture_2d, texture_depth_2d,
-    texture_storage_2d, uniform_buffer, view as view_of, with_indices,
+    UNFILTERABLE_FLOAT, bind_group_layout, texture_2d, texture_depth_2d, texture_storage_2d,
+    uniform_buffer, view as view_of, with_indices,
 };
 use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{DepthBound, buffer, compute_pipeline_with_constants, render_pipeline};
 
 /// Format of the history: linear colour in rgb, the samples it holds in alpha.
 pub const HISTORY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// The format of the blades' motion vectors (`MotionOut` in `shaders/grass_draw.wgsl`): the
+/// pixels a blade's point moved since the last frame (x, y), its depth (z), and 1 where a
+/// blade wrote it (w; 0 elsewhere: the resolve reprojects those pixels through their depth).
+pub const MOTION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 /// Settings of the temporal anti-aliasing.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,7 +43,10 @@ impl Default for TaaSettings {
     fn default() -> Self {
         Self {
             max_samples: 16,
-            clip_sigma: 1.25,
+            // Measured against the truth (README, `bench aa`): 1.25 drops too much history in
+            // the grass's thin blades (a still view flickers 1.6 times the truth's), 4 keeps
+            // ghosts 3 frames after a teleport; 2.5 between.
+            clip_sigma: 2.5,
             motion_falloff: 0.25,
             cut_distance_m: 20.0,
             cut_angle_deg: 30.0,
@@ -88,6 +96,8 @@ pub struct Taa {
     output_layout: wgpu::BindGroupLayout,
     color_format: wgpu::TextureFormat,
     scene: wgpu::TextureView,
+    /// The blades' motion vectors ([`MOTION_FORMAT`]), cleared every frame.
+    motion: wgpu::TextureView,
     history: [wgpu::TextureView; 2],
     output_groups: [wgpu::BindGroup; 2],
     resolve_groups: [DepthBound; 2],
@@ -96,6 +106,9 @@ pub struct Taa {
     /// The history the next resolve reads (it writes the other).
     read: usize,
     last: Option<LastView>,
+    /// The last frame's unjittered view-projection from this frame's camera-relative
+    /// positions (this frame's own after a cut).
+    last_view_proj: Mat4,
     /// Frames prepared: the index into the jitter sequence.
     frames: u64,
 }
@@ -139,6 +152,16 @@ fn textures(
     (scene, history, groups)
 }
 
+/// The blades' motion vectors at `size` ([`MOTION_FORMAT`]).
+fn motion_texture(device: &wgpu::Device, size: (u32, u32)) -> wgpu::TextureView {
+    // Copies in are for tests that set motion of their own.
+    let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+        | wgpu::TextureUsages::TEXTURE_BINDING
+        | wgpu::TextureUsages::COPY_DST;
+    crate::gpu::target_texture(device, "taa motion", MOTION_FORMAT, usage, size)
+        .create_view(&Default::default())
+}
+
 impl Taa {
     /// The stage for `targets`, with `settings`.
     pub fn new(
@@ -150,14 +173,16 @@ impl Taa {
         let resolve_layout = bind_group_layout(
             device,
             "taa resolve",
-            &sequential(
+            &with_indices(
                 wgpu::ShaderStages::COMPUTE,
                 [
-                    uniform_buffer(),
-                    texture_2d(UNFILTERABLE_FLOAT),
-                    texture_depth_2d(),
-                    texture_2d(UNFILTERABLE_FLOAT),
-                    texture_storage_2d(HISTORY_FORMAT),
+                    (0, uniform_buffer()),
+                    (1, texture_2d(UNFILTERABLE_FLOAT)),
+                    (2, texture_depth_2d()),
+                    (3, texture_2d(UNFILTERABLE_FLOAT)),
+                    (4, texture_storage_2d(HISTORY_FORMAT)),
+                    // The blades' motion (binding 5 is the output pass's).
+                    (6, texture_2d(UNFILTERABLE_FLOAT)),
                 ],
             ),
         );
@@ -208,6 +233,7 @@ impl Taa {
             output_layout,
             color_format: targets.color_format,
             scene,
+            motion: motion_texture(device, (targets.width, targets.height)),
             history,
             output_groups,
             resolve_groups: Default::default(),
@@ -224,6 +250,7 @@ impl Taa {
             buffer,
             read: 0,
             last: None,
+            last_view_proj: Mat4::IDENTITY,
             frames: 0,
         }
     }
@@ -241,6 +268,7 @@ impl Taa {
             self.color_format,
             (width, height),
         );
+        self.motion = motion_texture(device, (width, height));
         self.resolve_groups = Default::default();
         self.params.size[0] = width as f32;
         self.params.size[1] = height as f32;
@@ -256,6 +284,30 @@ impl Taa {
     /// The texture the frame's passes draw into instead of the caller's colour target.
     pub fn scene_view(&self) -> &wgpu::TextureView {
         &self.scene
+    }
+
+    /// The texture the blades write their motion vectors into ([`MOTION_FORMAT`]; cleared by
+    /// [`Self::record_clear_motion`]).
+    pub fn motion_view(&self) -> &wgpu::TextureView {
+        &self.motion
+    }
+
+    /// The last frame's unjittered view-projection from this frame's camera-relative
+    /// positions, as the last [`Self::prepare`] found it (this frame's own after a cut): what
+    /// the blades' motion vectors are taken against.
+    pub fn last_view_proj(&self) -> Mat4 {
+        self.last_view_proj
+    }
+
+    /// Records the clearing of the motion vectors: no blade has written any yet.
+    pub fn record_clear_motion(&self, encoder: &mut wgpu::CommandEncoder) {
+        render_pass(
+            encoder,
+            "taa motion clear",
+            (&self.motion, wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT)),
+            None,
+            None,
+        );
     }
 
     /// The sub-pixel offset of the next frame to prepare.
@@ -292,6 +344,10 @@ impl Taa {
             _ => Mat4::IDENTITY,
         }
         .to_cols_array_2d();
+        self.last_view_proj = match self.last {
+            Some(last) if !cut => reprojection(last.view_proj, last.eye, Mat4::IDENTITY, eye),
+            _ => view_proj,
+        };
         self.params.size[3] = if cut { 1.0 } else { 0.0 };
         queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&self.params));
         self.last = Some(LastView {
@@ -316,23 +372,25 @@ impl Taa {
     ) {
         let (read, write) = (self.read, 1 - self.read);
         let texture = depth.texture();
-        let (scene, history, buffer, layout) = (
+        let (scene, history, buffer, layout, motion) = (
             &self.scene,
             &self.history,
             &self.buffer,
             &self.resolve_layout,
+            &self.motion,
         );
         let group = self.resolve_groups[read].get(texture, |depth| {
-            bind_group(
+            crate::gpu::layout::bind_group_with_indices(
                 device,
                 "taa resolve",
                 layout,
                 [
-                    buffer.as_entire_binding(),
-                    view_of(scene),
-                    view_of(depth),
-                    view_of(&history[read]),
-                    view_of(&history[write]),
+                    (0, buffer.as_entire_binding()),
+                    (1, view_of(scene)),
+                    (2, view_of(depth)),
+                    (3, view_of(&history[read])),
+                    (4, view_of(&history[write])),
+                    (6, view_of(motion)),
                 ],
             )
         });

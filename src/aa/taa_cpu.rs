@@ -14,6 +14,10 @@ pub struct ResolveInput<'a> {
     pub depth: &'a [f32],
     /// The last history: linear colour, and in `w` the samples it holds (0: none).
     pub history: &'a [Vec4],
+    /// The blades' motion vectors ([`crate::aa::taa::MOTION_FORMAT`]): the pixels a blade's
+    /// point moved since the last frame (x, y), its depth (z), 1 where a blade wrote it (w).
+    /// Empty: none anywhere.
+    pub motion: &'a [Vec4],
     /// See [`crate::aa::taa::reprojection`].
     pub reproject: Mat4,
     /// Most samples a history holds.
@@ -25,6 +29,10 @@ pub struct ResolveInput<'a> {
     /// Start every pixel again.
     pub reset: bool,
 }
+
+/// How far (relative) the frame's depth may lie from a blade's motion vector's depth for the
+/// motion to be the pixel's (the shader's `MOTION_DEPTH_TOLERANCE`).
+pub const MOTION_DEPTH_TOLERANCE: f32 = 2e-3;
 
 /// Luma and the two chroma differences.
 fn ycocg(c: Vec3) -> Vec3 {
@@ -97,16 +105,24 @@ impl ResolveInput<'_> {
             return fresh;
         }
         let (w, h) = (self.size.0 as f32, self.size.1 as f32);
-        let ndc = Vec2::new(
-            (x as f32 + 0.5) / w * 2.0 - 1.0,
-            1.0 - (y as f32 + 0.5) / h * 2.0,
-        );
-        let then = self.reproject * Vec4::new(ndc.x, ndc.y, depth, 1.0);
-        if then.w <= 0.0 {
-            return fresh;
-        }
-        let then_ndc = Vec2::new(then.x, then.y) / then.w;
-        let then_px = Vec2::new((then_ndc.x + 1.0) * 0.5 * w, (1.0 - then_ndc.y) * 0.5 * h);
+        let centre_px = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+        // A blade's own motion where the blade is still the pixel's surface (its depth is the
+        // frame's), else the pixel's depth reprojected.
+        let blade = (!self.motion.is_empty())
+            .then(|| self.at(self.motion, xi, yi))
+            .filter(|m| m.w > 0.5 && (m.z - depth).abs() <= MOTION_DEPTH_TOLERANCE * depth);
+        let then_px = match blade {
+            Some(m) => centre_px - Vec2::new(m.x, m.y),
+            None => {
+                let ndc = Vec2::new(centre_px.x / w * 2.0 - 1.0, 1.0 - centre_px.y / h * 2.0);
+                let then = self.reproject * Vec4::new(ndc.x, ndc.y, depth, 1.0);
+                if then.w <= 0.0 {
+                    return fresh;
+                }
+                let then_ndc = Vec2::new(then.x, then.y) / then.w;
+                Vec2::new((then_ndc.x + 1.0) * 0.5 * w, (1.0 - then_ndc.y) * 0.5 * h)
+            }
+        };
         if then_px.x < 0.0 || then_px.y < 0.0 || then_px.x >= w || then_px.y >= h {
             return fresh;
         }
@@ -127,7 +143,7 @@ impl ResolveInput<'_> {
             old.truncate()
         };
         // A surface that moved keeps a shorter history (each frame's resampling blurs it).
-        let moved = then_px.distance(Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
+        let moved = then_px.distance(centre_px);
         let most = (self.max_samples / (1.0 + self.motion_falloff * moved)).max(2.0);
         let n = (old.w + 1.0).min(most);
         (kept + (current - kept) / n).extend(n)
@@ -166,6 +182,7 @@ mod tests {
                 current[12] = Vec3::ONE;
             }
             let input = ResolveInput {
+                motion: &[],
                 size,
                 current: &current,
                 depth: &depth,
@@ -190,6 +207,7 @@ mod tests {
         let current = flat(size, Vec3::new(0.1, 0.1, 0.1));
         let history = vec![Vec4::new(1.0, 1.0, 1.0, 8.0); 9];
         let input = ResolveInput {
+            motion: &[],
             size,
             current: &current,
             depth: &[0.5; 9],
@@ -212,6 +230,7 @@ mod tests {
         let history = vec![Vec4::new(0.9, 0.9, 0.9, 5.0); 8];
         // Everything moved two screens to the right: no history is on screen.
         let input = ResolveInput {
+            motion: &[],
             size,
             current: &current,
             depth: &[0.5; 8],

@@ -1,4 +1,4 @@
-//! Render passes over one colour target and at most one depth target, each loaded or cleared
+//! Render passes over one colour target (or a few) and at most one depth target, each loaded or cleared
 //! as the pass asks and always stored: the only kind of render pass the stages record.
 
 /// A render pass labelled `label` into `color`, and `depth` when given, with their load
@@ -6,22 +6,36 @@
 pub fn render_pass<'e>(
     encoder: &'e mut wgpu::CommandEncoder,
     label: &str,
-    (color, color_load): (&wgpu::TextureView, wgpu::LoadOp<wgpu::Color>),
+    color: (&wgpu::TextureView, wgpu::LoadOp<wgpu::Color>),
+    depth: Option<(&wgpu::TextureView, wgpu::LoadOp<f32>)>,
+    timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
+) -> wgpu::RenderPass<'e> {
+    render_pass_into(encoder, label, &[color], depth, timestamp_writes)
+}
+
+/// [`render_pass`] into several colour targets (the grass's colour and its motion vectors).
+pub fn render_pass_into<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    colors: &[(&wgpu::TextureView, wgpu::LoadOp<wgpu::Color>)],
     depth: Option<(&wgpu::TextureView, wgpu::LoadOp<f32>)>,
     timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
 ) -> wgpu::RenderPass<'e> {
     let store = wgpu::StoreOp::Store;
+    let color_attachments: Vec<_> = colors
+        .iter()
+        .map(|&(view, load)| {
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load, store },
+            })
+        })
+        .collect();
     encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
         label: Some(label),
-        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-            view: color,
-            depth_slice: None,
-            resolve_target: None,
-            ops: wgpu::Operations {
-                load: color_load,
-                store,
-            },
-        })],
+        color_attachments: &color_attachments,
         depth_stencil_attachment: depth.map(|(view, load)| {
             wgpu::RenderPassDepthStencilAttachment {
                 view,

@@ -91,6 +91,7 @@ pub struct RenderPipelineBuilder<'a> {
     module: &'a ShaderModule,
     entries: (&'a str, &'a str),
     target: Option<wgpu::ColorTargetState>,
+    second: Option<wgpu::ColorTargetState>,
     layouts: &'a [&'a BindGroupLayout],
     constants: (Constants<'a>, Constants<'a>),
     primitive: wgpu::PrimitiveState,
@@ -112,6 +113,7 @@ pub fn render_pipeline<'a>(
         module,
         entries: (vertex, fragment),
         target: Some(target.into()),
+        second: None,
         layouts: &[],
         constants: (&[], &[]),
         primitive: Default::default(),
@@ -130,6 +132,14 @@ impl<'a> RenderPipelineBuilder<'a> {
     pub fn constants(self, vertex: Constants<'a>, fragment: Constants<'a>) -> Self {
         Self {
             constants: (vertex, fragment),
+            ..self
+        }
+    }
+
+    /// A second colour target, of `format`, written whole.
+    pub fn second_target(self, format: wgpu::TextureFormat) -> Self {
+        Self {
+            second: Some(format.into()),
             ..self
         }
     }
@@ -200,8 +210,12 @@ impl<'a> RenderPipelineBuilder<'a> {
     /// The pipeline.
     pub fn build(self, device: &wgpu::Device) -> wgpu::RenderPipeline {
         let layout = pipeline_layout(device, self.label, self.layouts);
-        let targets: Vec<Option<wgpu::ColorTargetState>> =
-            self.target.into_iter().map(Some).collect();
+        let targets: Vec<Option<wgpu::ColorTargetState>> = self
+            .target
+            .into_iter()
+            .chain(self.second)
+            .map(Some)
+            .collect();
         let options = |constants| wgpu::PipelineCompilationOptions {
             constants,
             ..Default::default()

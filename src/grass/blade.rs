@@ -42,8 +42,11 @@ pub struct Blade {
     pub sway: f32,
     /// Edge flutter, likewise.
     pub flutter: f32,
+    /// How much the lean (x, y), the sway and the flutter changed over the last frame; written
+    /// by the wind pass, for the draw's motion vectors.
+    pub moved: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<Blade>() == 80);
+const _: () = assert!(std::mem::size_of::<Blade>() == 96);
 
 impl Blade {
     /// The growth direction as a unit vector.

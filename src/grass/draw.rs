@@ -2,6 +2,7 @@
 //! slot's blades. The blade's shape has its CPU mirror in [`crate::grass::blade`];
 //! [`crate::grass::renderer`] binds the stage to its pool and records it.
 
+use crate::aa::taa::MOTION_FORMAT;
 use crate::gpu::Targets;
 use crate::gpu::layout::*;
 use crate::gpu::pipeline::render_pipeline;
@@ -42,7 +43,7 @@ impl DrawPass {
                 ],
             ),
         );
-        let [near, high, low] = Self::pipelines(device, targets, segments, &layout, samples);
+        let [near, high, low] = Self::pipelines(device, targets, segments, &layout, samples, false);
         Self {
             near,
             high,
@@ -52,13 +53,15 @@ impl DrawPass {
     }
 
     /// The three pipelines (near, high LOD, low LOD) over `layout`, for targets of `samples`
-    /// samples a pixel.
+    /// samples a pixel; with `motion`, each also writes its blades' motion vectors into a
+    /// second target of [`MOTION_FORMAT`] (`vs_blade_motion`, `fs_blade_motion`).
     pub(crate) fn pipelines(
         device: &wgpu::Device,
         targets: &Targets,
         segments: [u32; 3],
         layout: &wgpu::BindGroupLayout,
         samples: u32,
+        motion: bool,
     ) -> [wgpu::RenderPipeline; 3] {
         let module = crate::shaders::module(device, "grass_draw.wgsl");
         let coverage = if samples > 1 { 1.0 } else { 0.0 };
@@ -70,18 +73,23 @@ impl DrawPass {
                 ("ENCODE_SRGB", targets.encode_srgb()),
                 ("COVERAGE", coverage),
             ];
-            render_pipeline(
-                label,
-                &module,
-                ("vs_blade", "fs_blade"),
-                targets.color_format,
-            )
-            .layouts(&[layout])
-            .constants(&constants, &fs_constants)
-            .triangle_strips()
-            .depth(targets.depth_format, true, wgpu::CompareFunction::Greater)
-            .multisample(samples, samples > 1)
-            .build(device)
+            let entries = if motion {
+                ("vs_blade_motion", "fs_blade_motion")
+            } else {
+                ("vs_blade", "fs_blade")
+            };
+            let layouts = [layout];
+            let builder = render_pipeline(label, &module, entries, targets.color_format)
+                .layouts(&layouts)
+                .constants(&constants, &fs_constants)
+                .triangle_strips()
+                .depth(targets.depth_format, true, wgpu::CompareFunction::Greater)
+                .multisample(samples, samples > 1);
+            if motion {
+                builder.second_target(MOTION_FORMAT).build(device)
+            } else {
+                builder.build(device)
+            }
         };
         let [near, high, low] = segments;
         [

@@ -500,6 +500,7 @@ impl PlantContext<'_> {
             lean: [0.0; 2],
             sway: 0.0,
             flutter: 0.0,
+            moved: [0.0; 4],
         };
         let emit = |b: Blade, out: &mut TileBlades| {
             if out.wanted < capacity {

@@ -11,7 +11,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
 use crate::gpu::layout::*;
-use crate::gpu::pass::render_pass;
+use crate::gpu::pass::render_pass_into;
 use crate::gpu::pipeline::{array_view, buffer as gpu_buffer};
 use crate::gpu::{GpuTimer, Targets};
 use crate::grass::draw::DrawPass;
@@ -160,8 +160,12 @@ struct DrawFrame {
     flags: [u32; 4],
     base_colors: [[f32; 4]; 16],
     tip_colors: [[f32; 4]; 16],
+    // This frame's view-projection unjittered and the last frame's, from this frame's
+    // camera-relative positions (the motion vectors').
+    unjittered: [[f32; 4]; 4],
+    last_view_proj: [[f32; 4]; 4],
 }
-const _: () = assert!(std::mem::size_of::<DrawFrame>() == 64 + 96 + 512);
+const _: () = assert!(std::mem::size_of::<DrawFrame>() == 64 + 96 + 512 + 128);
 
 struct Half {
     blades: wgpu::Buffer,
@@ -207,6 +211,8 @@ pub struct GrassRenderer {
     /// The targets the blades are drawn into, and their samples a pixel.
     targets: Targets,
     samples: u32,
+    /// Whether the blades write their motion vectors (for the temporal anti-aliasing).
+    motion: bool,
 }
 
 /// What a half of the pool binds besides its own buffers.
@@ -297,7 +303,7 @@ impl Half {
 /// binds in a half of the pool.
 fn pool_capacity(device: &wgpu::Device, asked: u32) -> u32 {
     // Slots start at multiples of 256 bytes (the storage offset alignment): 16 blades of
-    // 80 bytes are 1280 bytes.
+    // 96 bytes are 1536 bytes.
     let capacity = asked.max(16).div_ceil(16) * 16;
     // A half of the pool is bound whole: a world of coarse cells (large grass tiles) can
     // ask for more than the device binds. Its densest tiles then overflow, clamped and
@@ -428,6 +434,8 @@ impl DrawFrame {
             flags: [crate::features::Features::all().bits(), 0, 0, 0],
             base_colors,
             tip_colors,
+            unjittered: Mat4::IDENTITY.to_cols_array_2d(),
+            last_view_proj: Mat4::IDENTITY.to_cols_array_2d(),
         }
     }
 }
@@ -520,6 +528,7 @@ impl GrassRenderer {
             wind_params: WindPassParams {
                 misc: [0.0; 4],
                 flags: [crate::features::Features::all().bits(), capacity, 0, 0],
+                motion: [0.0; 4],
             },
             wind_params_buffer,
             halves,
@@ -527,6 +536,7 @@ impl GrassRenderer {
             hiz,
             targets: *targets,
             samples: 1,
+            motion: false,
         }
     }
 
@@ -543,8 +553,36 @@ impl GrassRenderer {
             self.settings.segments,
             &self.draw_pass.layout,
             samples,
+            self.motion,
         );
         self.samples = samples;
+    }
+
+    /// Whether the blades write their motion vectors from now on: then [`Self::record`] takes
+    /// a target of [`crate::aa::taa::MOTION_FORMAT`] beside the colour.
+    pub fn set_motion_vectors(&mut self, device: &wgpu::Device, on: bool) {
+        if on == self.motion {
+            return;
+        }
+        self.motion = on;
+        [self.draw_pass.near, self.draw_pass.high, self.draw_pass.low] = DrawPass::pipelines(
+            device,
+            &self.targets,
+            self.settings.segments,
+            &self.draw_pass.layout,
+            self.samples,
+            on,
+        );
+    }
+
+    /// Sets what the blades' motion over the last frame is taken from (before
+    /// [`Self::set_camera`], which uploads it): the frame's time step (the wind on each blade
+    /// a step ago), this frame's unjittered view-projection and the last frame's, both from
+    /// this frame's camera-relative positions.
+    pub fn set_motion(&mut self, dt_s: f32, unjittered: Mat4, last_view_proj: Mat4) {
+        self.wind_params.motion[0] = dt_s;
+        self.draw_frame.unjittered = unjittered.to_cols_array_2d();
+        self.draw_frame.last_view_proj = last_view_proj.to_cols_array_2d();
     }
 
     /// Follows a resize of the targets to `width` x `height`: a new Hi-Z pyramid of that size.
@@ -631,8 +669,10 @@ impl GrassRenderer {
         self.params.camera[0] = camera_altitude;
         self.params.camera[1] = near;
         self.draw_frame.view_proj = self.params.view_proj;
-        // The target's height, for the blades' width in pixels.
+        // The target's height, for the blades' width in pixels, and its width, for their
+        // motion in pixels.
         self.draw_frame.misc[1] = self.params.camera[3];
+        self.draw_frame.misc[2] = self.params.camera[2];
         queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&self.params));
         queue.write_buffer(
             &self.draw_frame_buffer,
@@ -647,13 +687,17 @@ impl GrassRenderer {
     }
 
     /// Records generation and drawing of `jobs` in batches of 4 (their `slot` fields are set
-    /// here), into `color` and `depth` (loaded, not cleared). Returns the tiles per LOD.
+    /// here), into `color` and `depth` (loaded, not cleared), and with motion vectors on
+    /// ([`Self::set_motion_vectors`]) the blades' motion into `motion` (loaded). Returns the
+    /// tiles per LOD.
+    #[allow(clippy::too_many_arguments)]
     pub fn record(
         &self,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         jobs: &[TileJob],
         color: &wgpu::TextureView,
+        motion: Option<&wgpu::TextureView>,
         depth: &wgpu::TextureView,
         timer: &mut GpuTimer,
     ) -> [u32; 2] {
@@ -702,10 +746,14 @@ impl GrassRenderer {
                 pass.set_bind_group(0, &half.wind, &[]);
                 pass.dispatch_workgroups_indirect(&half.wind_dispatch, 0);
             }
-            let mut pass = render_pass(
+            let colors: &[_] = match motion.filter(|_| self.motion) {
+                Some(m) => &[(color, wgpu::LoadOp::Load), (m, wgpu::LoadOp::Load)],
+                None => &[(color, wgpu::LoadOp::Load)],
+            };
+            let mut pass = render_pass_into(
                 encoder,
                 "grass draw",
-                (color, wgpu::LoadOp::Load),
+                colors,
                 Some((depth, wgpu::LoadOp::Load)),
                 timer.render_pass("grass_draw"),
             );

@@ -19,8 +19,10 @@ pub struct WindPassParams {
     pub misc: [f32; 4],
     /// x: feature bits, y: slot capacity.
     pub flags: [u32; 4],
+    /// x: the frame's time step (s), over which the blades' motion is taken.
+    pub motion: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<WindPassParams>() == 32);
+const _: () = assert!(std::mem::size_of::<WindPassParams>() == 48);
 
 /// Lean of a blade on the axis of a fresh trail, blade heights (trampled nearly flat); the
 /// shader has the same constant.
@@ -56,24 +58,36 @@ pub fn apply_wind(
         let root = Vec2::new(b.pos[0], b.pos[1]);
         let kind = b.kind & 255;
         let w = wind_at(lookup, cells, root);
-        let mut lean = crate::wind::sway_at(lookup, sway, root, kind.min(3)) * b.wind;
+        let spring = crate::wind::sway_state_at(lookup, sway, root, kind.min(3));
+        let dt = p.motion[0];
+        let mut lean = Vec2::new(spring[0], spring[1]) * b.wind;
+        // A frame ago the spring stood back by its velocity times the step.
+        let moved_lean = Vec2::new(spring[2], spring[3]) * dt * b.wind;
         if has(INTERACTION) {
             lean += Vec2::new(w[2], w[3]) * TRAIL_LEAN;
         }
         let speed = Vec2::new(w[0], w[1]).length();
         let (mut blade_sway, mut flutter) = (0.0f32, 0.0f32);
+        let mut moved_detail = [0.0f32; 2];
         if has(DETAIL_BENDING) {
             let phase = (b.hash & 1023) as f32 / 1023.0;
             let time = p.misc[0];
             let amount = (speed / 5.0).min(1.5) * b.wind;
-            blade_sway = (smooth_triangle(time * 0.193 + phase)
-                + smooth_triangle(time * 0.375 + phase * 1.3)
-                - 1.0)
-                * amount;
-            flutter = (smooth_triangle(time * 1.975 + phase * 3.1)
-                + smooth_triangle(time * 0.793 + phase * 2.7)
-                - 1.0)
-                * amount;
+            let sway_wave = |time: f32| {
+                smooth_triangle(time * 0.193 + phase) + smooth_triangle(time * 0.375 + phase * 1.3)
+                    - 1.0
+            };
+            let flutter_wave = |time: f32| {
+                smooth_triangle(time * 1.975 + phase * 3.1)
+                    + smooth_triangle(time * 0.793 + phase * 2.7)
+                    - 1.0
+            };
+            blade_sway = sway_wave(time) * amount;
+            flutter = flutter_wave(time) * amount;
+            moved_detail = [
+                (sway_wave(time) - sway_wave(time - dt)) * amount,
+                (flutter_wave(time) - flutter_wave(time - dt)) * amount,
+            ];
         }
         if has(COLOR_VARIATION) {
             let world = Vec2::new(p.misc[2], p.misc[3]) + root;
@@ -86,6 +100,7 @@ pub fn apply_wind(
         b.lean = lean.to_array();
         b.sway = blade_sway;
         b.flutter = flutter;
+        b.moved = [moved_lean.x, moved_lean.y, moved_detail[0], moved_detail[1]];
         b.fade = (speed / p.misc[1].max(0.5) - 1.0).clamp(0.0, 1.0);
     }
 }

@@ -439,6 +439,9 @@ impl Renderer {
             terrain.set_canopy(&tau, [0.9 * s.distance_m, s.distance_m]);
         }
         let mut grass = grass;
+        if let (Some(g), Some(_)) = (&mut grass, &taa) {
+            g.renderer.set_motion_vectors(device, true);
+        }
         if let (Some(g), Some(_)) = (&mut grass, &msaa) {
             g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
             for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
@@ -674,6 +677,8 @@ impl Renderer {
         };
         if let Some(g) = &mut self.grass {
             g.renderer.set_samples(&self.device, samples);
+            g.renderer
+                .set_motion_vectors(&self.device, self.taa.is_some());
             for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
                 p.set_samples(&self.device, samples);
             }
@@ -838,6 +843,11 @@ impl Renderer {
             let ambient_speed = g.wind.config().ambient_at(input.time_s).speed_mps as f32;
             g.renderer
                 .set_frame(input.time_s, ambient_speed, self.features, camera.position);
+            let last_view_proj = self
+                .taa
+                .as_ref()
+                .map_or(view.unjittered, |t| t.last_view_proj());
+            g.renderer.set_motion(dt, view.unjittered, last_view_proj);
             g.renderer.set_camera(
                 queue,
                 view.view_proj,
@@ -1005,12 +1015,19 @@ impl Renderer {
             Some(m) => (m.color_view(), m.depth_view()),
             None => (scene, depth),
         };
+        // The blades' motion vectors, for the temporal anti-aliasing: cleared, then written by
+        // the blades drawn.
+        let motion = self.taa.as_ref().map(|t| t.motion_view());
+        if let Some(t) = &self.taa {
+            t.record_clear_motion(encoder);
+        }
         if let Some(g) = &self.grass {
             stats.grass.tiles = g.renderer.record(
                 &self.queue,
                 encoder,
                 &frame.grass_jobs,
                 grass_color,
+                motion,
                 grass_depth,
                 &mut self.timer,
             );

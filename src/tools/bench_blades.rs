@@ -120,7 +120,7 @@ pub fn slot_blades(count: u64, field_m: f64, tile_m: f64) -> Option<u64> {
 
 /// The blade counts `--counts` takes for a field `field_m` metres wide of grass tiles `tile_m`
 /// metres wide: at least 1000 and at least one blade a grass tile (`(field_m / tile_m)^2`), and
-/// at most the count whose grass tiles need [`MAX_SLOT_BLADES`] blades a slot (214,681,104 for
+/// at most the count whose grass tiles need [`MAX_SLOT_BLADES`] blades a slot (178,917,376 for
 /// the default 200 m field).
 pub fn count_range(field_m: f64, tile_m: f64) -> std::ops::RangeInclusive<u64> {
     let tiles_a_side = field_m / tile_m;
@@ -909,13 +909,13 @@ mod tests {
     #[test]
     fn slot_sizes_near_the_bound_do_not_wrap() {
         // The largest slot fits a u32 with room for the renderer's rounding up to 16.
-        assert_eq!(MAX_SLOT_BLADES, 13_421_772);
+        assert_eq!(MAX_SLOT_BLADES, 11_184_810);
         let range = count_range(200.0, FIELD_TILE_M);
         assert_eq!(*range.start(), 1000);
-        assert_eq!(*range.end(), 214_681_104);
+        assert_eq!(*range.end(), 178_917_376);
         let top = slot_blades(*range.end(), 200.0, FIELD_TILE_M).unwrap();
         assert!(top <= MAX_SLOT_BLADES, "{top}");
-        assert_eq!(top, 3663 * 3663);
+        assert_eq!(top, 3344 * 3344);
         // One past the bound needs no more (the grid rounds), but the counts beyond it do, and
         // they are counted in 64 bits: 10^12 blades are 250,000^2 a slot, not that wrapped
         // to 2,370,457,856 in 32 bits.
@@ -954,7 +954,7 @@ mod tests {
             },
             &[
                 "--counts 1000000000000",
-                "1000..=214681104",
+                "1000..=178917376",
                 "--field-m 200",
             ],
         );

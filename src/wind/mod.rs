@@ -34,4 +34,4 @@ pub use sway::{
     GRASS_SWAY_TYPES, PLANT_SWAY_TYPES, SWAY_TYPES, SwayConfig, SwayField, SwayParams,
     plant_lean_gain,
 };
-pub use sway_cpu::{sway_at, update_sway};
+pub use sway_cpu::{sway_at, sway_state_at, update_sway};

@@ -56,6 +56,14 @@ pub fn update_sway(
 /// state `sway` of the field described by `lookup`: the mirror of `sway_at` in
 /// `shaders/shared/sway_lookup.wgsl`.
 pub fn sway_at(lookup: &WindLookup, sway: &[[f32; 4]], rel: Vec2, slot: u32) -> Vec2 {
+    let s = sway_state_at(lookup, sway, rel, slot);
+    Vec2::new(s[0], s[1])
+}
+
+/// The spring of `slot` in the cell under the point `rel` metres from the camera: its bend
+/// (x, y) and the bend's velocity per second (z, w), as `sway_state_at` in
+/// `shaders/shared/sway_lookup.wgsl`.
+pub fn sway_state_at(lookup: &WindLookup, sway: &[[f32; 4]], rel: Vec2, slot: u32) -> [f32; 4] {
     let n = lookup.n as i32;
     let half = n / 2;
     let off = Vec2::from_array(lookup.camera_offset);
@@ -66,6 +74,5 @@ pub fn sway_at(lookup: &WindLookup, sway: &[[f32; 4]], rel: Vec2, slot: u32) -> 
     );
     let (wx, wy) = (lookup.origin_cell[0] + cx, lookup.origin_cell[1] + cy);
     let (x, y) = (wx.rem_euclid(n) as u32, wy.rem_euclid(n) as u32);
-    let s = sway[((y * lookup.n + x) * SWAY_TYPES as u32 + slot) as usize];
-    Vec2::new(s[0], s[1])
+    sway[((y * lookup.n + x) * SWAY_TYPES as u32 + slot) as usize]
 }
