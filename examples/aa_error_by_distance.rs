@@ -11,7 +11,7 @@
 //! list, none); PARTS, a comma-separated list of `segments`, `rings`, `plants` and `trees`,
 //! adds the default frame supersampled 4x4 with that part of the truth's settings (blades out
 //! to one view distance): the blade segments, the grass rings (no LOD), every plant's full mesh
-//! unthinned, every tree's. Prints each
+//! unthinned, every tree's; `segments=NEAR/HIGH/LOW` adds it with those blade segments. Prints each
 //! one's mean FLIP against the truth over the frame and over bands of distance (from the
 //! truth's depth) with the bands' share of the frame, each one's mean luminance over the
 //! truth's in each band, and writes every image into OUT.
@@ -122,11 +122,25 @@ fn main() -> Result<()> {
                 "rings" => dp.grass_rings = t1.grass_rings,
                 "plants" => dp.plants = t1.plants,
                 "trees" => dp.trees = t1.trees,
-                other => {
-                    anyhow::bail!("part {other:?} is not one of segments, rings, plants, trees")
-                }
+                other => match other.strip_prefix("segments=") {
+                    Some(list) => {
+                        let n: Vec<u32> = list
+                            .split('/')
+                            .map(|n| n.parse())
+                            .collect::<Result<_, _>>()
+                            .map_err(|e| anyhow::anyhow!("part {other:?}: {e}"))?;
+                        let [near, high, low] = n[..] else {
+                            anyhow::bail!("part {other:?}: segments=NEAR/HIGH/LOW")
+                        };
+                        dp.grass.segments = [near, high, low];
+                    }
+                    None => anyhow::bail!(
+                        "part {other:?} is not one of segments, segments=NEAR/HIGH/LOW, rings, \
+                         plants, trees"
+                    ),
+                },
             }
-            truths.push(mk(&format!("default_4x4_{part}"), dp, 4)?);
+            truths.push(mk(&format!("default_4x4_{}", part.replace(['/', '='], "_")), dp, 4)?);
         }
     }
     let mut scenes: Vec<(String, Scene)> = Vec::new();
