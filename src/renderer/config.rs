@@ -40,6 +40,8 @@ pub struct RendererConfig {
     pub features: Features,
     /// How the frame is anti-aliased.
     pub aa: AntiAliasing,
+    /// The temporal anti-aliasing's settings (with `aa` at [`AntiAliasing::Taa`]).
+    pub taa: crate::aa::taa::TaaSettings,
     /// The plant stage's settings (its view distance and seed follow the grass's).
     pub plants: crate::plants::PlantSettings,
     /// The trees' settings (`None`: [`crate::plants::PlantSettings::trees`] for the world's
@@ -188,6 +190,7 @@ impl RendererConfig {
             wind_keys: Vec::new(),
             features: Features::from(&world.manifest.features),
             aa: AntiAliasing::default(),
+            taa: Default::default(),
             plants: Default::default(),
             trees: None,
             tree_shadows: Some(Default::default()),

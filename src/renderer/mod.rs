@@ -148,6 +148,8 @@ pub struct Renderer {
     /// The temporal anti-aliasing, when on: the frame is drawn into its texture and resolved
     /// into the caller's colour target.
     taa: Option<Taa>,
+    /// The settings a temporal anti-aliasing switched on later starts with.
+    taa_settings: TaaSettings,
     /// The multisampling of the grass, when on: terrain and sky are drawn into its texture,
     /// the blades into its multisampled targets, resolved into the caller's.
     msaa: Option<Msaa>,
@@ -421,8 +423,7 @@ impl Renderer {
         let timer = GpuTimer::new(device, queue, timestamps, 64);
         let readback = StatsRing::new(device, timer.capacity_bytes());
         let holes = HoleCheck::new(device, &atlas);
-        let taa = (config.aa == AntiAliasing::Taa)
-            .then(|| Taa::new(device, &targets, TaaSettings::default()));
+        let taa = (config.aa == AntiAliasing::Taa).then(|| Taa::new(device, &targets, config.taa));
         let msaa = (config.aa == AntiAliasing::Msaa && grass.is_some())
             .then(|| Msaa::new(device, &targets));
         let tree_shadow_map = crate::plants::shadow::TreeShadowMap::new(
@@ -439,8 +440,9 @@ impl Renderer {
             terrain.set_canopy(&tau, [0.9 * s.distance_m, s.distance_m]);
         }
         let mut grass = grass;
-        if let (Some(g), Some(_)) = (&mut grass, &taa) {
-            g.renderer.set_motion_vectors(device, true);
+        if let (Some(g), Some(t)) = (&mut grass, &taa) {
+            g.renderer
+                .set_motion_vectors(device, t.settings().blade_motion);
         }
         if let (Some(g), Some(_)) = (&mut grass, &msaa) {
             g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
@@ -479,6 +481,7 @@ impl Renderer {
             prepared: None,
             terrain_depth: None,
             taa,
+            taa_settings: config.taa,
             msaa,
         })
     }
@@ -667,7 +670,7 @@ impl Renderer {
             return;
         }
         self.taa = (aa == AntiAliasing::Taa)
-            .then(|| Taa::new(&self.device, &self.targets, TaaSettings::default()));
+            .then(|| Taa::new(&self.device, &self.targets, self.taa_settings));
         self.msaa = (aa == AntiAliasing::Msaa && self.grass.is_some())
             .then(|| Msaa::new(&self.device, &self.targets));
         let samples = if self.msaa.is_some() {
@@ -675,10 +678,10 @@ impl Renderer {
         } else {
             1
         };
+        let blade_motion = self.blade_motion();
         if let Some(g) = &mut self.grass {
             g.renderer.set_samples(&self.device, samples);
-            g.renderer
-                .set_motion_vectors(&self.device, self.taa.is_some());
+            g.renderer.set_motion_vectors(&self.device, blade_motion);
             for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
                 p.set_samples(&self.device, samples);
             }
@@ -686,6 +689,12 @@ impl Renderer {
                 p.set_samples(&self.device, samples);
             }
         }
+    }
+
+    /// Whether the blades write their motion vectors (temporal anti-aliasing with
+    /// [`TaaSettings::blade_motion`]).
+    fn blade_motion(&self) -> bool {
+        self.taa.as_ref().is_some_and(|t| t.settings().blade_motion)
     }
 
     /// How the frame is anti-aliased (multisampling asked for without grass is off: it
@@ -1017,8 +1026,9 @@ impl Renderer {
         };
         // The blades' motion vectors, for the temporal anti-aliasing: cleared, then written by
         // the blades drawn.
-        let motion = self.taa.as_ref().map(|t| t.motion_view());
-        if let Some(t) = &self.taa {
+        let motion_taa = self.taa.as_ref().filter(|t| t.settings().blade_motion);
+        let motion = motion_taa.map(|t| t.motion_view());
+        if let Some(t) = motion_taa {
             t.record_clear_motion(encoder);
         }
         if let Some(g) = &self.grass {
