@@ -140,7 +140,11 @@ fn main() -> Result<()> {
                     ),
                 },
             }
-            truths.push(mk(&format!("default_4x4_{}", part.replace(['/', '='], "_")), dp, 4)?);
+            truths.push(mk(
+                &format!("default_4x4_{}", part.replace(['/', '='], "_")),
+                dp,
+                4,
+            )?);
         }
     }
     let mut scenes: Vec<(String, Scene)> = Vec::new();
