@@ -3,7 +3,9 @@
 // near radius, 3 (7 vertices) for the rest of the high ring and for the low ring. The shape
 // is a cubic Bezier bent by the wind and scaled to keep its length (CPU mirror of the shape:
 // src/grass/blade.rs). The blade record, the feature bits and the colour output are
-// included from shaders/shared/.
+// included from shaders/shared/. With the temporal anti-aliasing's blade motion on, the
+// pipelines take vs_blade_motion and fs_blade_motion, which also write each blade's motion
+// over the last frame into a second target (src/aa/taa.rs, MOTION_FORMAT).
 //
 // Bending (after Crysis): main bending leans the whole blade by its cell's sway (a damped spring
 // per grass type, shaders/wind_sway.wgsl) plus the trail's push; detail bending adds whole-blade
