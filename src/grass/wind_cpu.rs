@@ -82,11 +82,12 @@ pub fn apply_wind(
                     + smooth_triangle(time * 0.793 + phase * 2.7)
                     - 1.0
             };
-            blade_sway = sway_wave(time) * amount;
-            flutter = flutter_wave(time) * amount;
+            let (sway_now, flutter_now) = (sway_wave(time), flutter_wave(time));
+            blade_sway = sway_now * amount;
+            flutter = flutter_now * amount;
             moved_detail = [
-                (sway_wave(time) - sway_wave(time - dt)) * amount,
-                (flutter_wave(time) - flutter_wave(time - dt)) * amount,
+                (sway_now - sway_wave(time - dt)) * amount,
+                (flutter_now - flutter_wave(time - dt)) * amount,
             ];
         }
         if has(COLOR_VARIATION) {
