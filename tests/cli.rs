@@ -588,6 +588,8 @@ fn bench_lod_writes_its_tables_and_charts() {
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("bench_lod.json")).unwrap())
             .unwrap();
+    // One sample a pixel unless --supersample says otherwise.
+    assert_eq!(json["supersample"], 1);
     for (key, column) in [("front", "pareto"), ("coarse_front", "pareto_coarse")] {
         let mut named: Vec<&str> = json[key]
             .as_array()

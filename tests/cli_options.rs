@@ -80,6 +80,10 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
     ),
     (&["bench", "lod", "--rounds", "0"], &["--rounds", "1..=100"]),
     (
+        &["bench", "lod", "--supersample", "9"],
+        &["--supersample", "1..=8"],
+    ),
+    (
         &["bench", "features", "--timed-frames", "0"],
         &["--timed-frames", "1..=150"],
     ),
@@ -92,6 +96,27 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
         &["--truth-reach", "1..=4"],
     ),
     (&["bench", "aa", "--frames", "1"], &["--frames", "2..=600"]),
+    (
+        &["bench", "aa", "--taa-samples", "16,1"],
+        &["--taa-samples", "2..=256"],
+    ),
+    (
+        &["bench", "aa", "--taa-clip", "20"],
+        &["--taa-clip", "0.25..=16"],
+    ),
+    (
+        &["bench", "aa", "--sequences", "still,jump"],
+        &["--sequences", "still, dolly, pan, teleport"],
+    ),
+    (
+        &["bench", "aa", "--taa-blade-motion", "yes"],
+        &["--taa-blade-motion", "neither on nor off"],
+    ),
+    (
+        &["fly", "--taa-samples", "300"],
+        &["--taa-samples", "2..=256"],
+    ),
+    (&["fly", "--taa-clip", "nan"], &["--taa-clip", "0.25..=16"]),
     (&["fly", "--aa", "fxaa"], &["--aa", "off, taa, msaa"]),
 ];
 

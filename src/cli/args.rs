@@ -85,6 +85,40 @@ pub(crate) fn parse_mib(s: &str) -> Result<u64, String> {
     Ok(mib)
 }
 
+/// The temporal anti-aliasing's settings (they apply with `--aa taa`).
+#[derive(clap::Args, Clone, Copy, Debug, Default)]
+pub(crate) struct TaaArgs {
+    /// With --aa taa: the most samples a pixel's history holds, 2..=256 (default 16). More
+    /// steadies a still view and lags longer behind a moving one.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..=256))]
+    pub(crate) taa_samples: Option<u32>,
+    /// With --aa taa: the history is clipped to the current neighbourhood's mean plus and
+    /// minus SIGMA standard deviations, 0.25..=16 (default 2.5). Less drops ghosts sooner and
+    /// lets the jitter through.
+    #[arg(long, value_name = "SIGMA", value_parser = float_in(0.25, 16.0))]
+    pub(crate) taa_clip: Option<f64>,
+    /// With --aa taa: the grass blades write their own motion vectors (their wind over the
+    /// frame) for the temporal resolve, instead of being reprojected through their depth.
+    /// Off by default (at 60 frames a second in a breeze they gain little for their cost).
+    #[arg(long)]
+    pub(crate) taa_blade_motion: bool,
+}
+
+impl TaaArgs {
+    /// The renderer's defaults with what was given.
+    pub(crate) fn settings(&self) -> verdant::aa::taa::TaaSettings {
+        let mut s = verdant::aa::taa::TaaSettings::default();
+        if let Some(n) = self.taa_samples {
+            s.max_samples = n;
+        }
+        if let Some(c) = self.taa_clip {
+            s.clip_sigma = c as f32;
+        }
+        s.blade_motion = self.taa_blade_motion;
+        s
+    }
+}
+
 /// A parser of a finite number in `lo..=hi` whose error states the range.
 pub(crate) fn float_in(
     lo: f64,

@@ -81,6 +81,12 @@ pub(crate) enum BenchCommand {
         /// are always measured).
         #[arg(long, value_delimiter = ',')]
         settings: Vec<String>,
+        /// Draw the settings' images at the four views (and the far band's) K x K sub-samples a
+        /// pixel, as the truth is, 1..=8 (1: one sample, the frame as it is): their error is
+        /// then what each setting draws differently from the truth, not its aliasing. The
+        /// timings stay the setting's own frame.
+        #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=8))]
+        supersample: u32,
         #[command(flatten)]
         timing: TimingArgs,
         #[command(flatten)]
@@ -106,7 +112,8 @@ pub(crate) enum BenchCommand {
         /// Measured frames of each sequence, 2..=600.
         #[arg(long, default_value_t = 24, value_parser = clap::value_parser!(u32).range(2..=600))]
         frames: u32,
-        /// Frames of the same motion before each sequence's measured ones, 0..=120.
+        /// Frames of the same motion before each sequence's measured ones, and of flight
+        /// before each view of the paths, 0..=120.
         #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=120))]
         run_up: u32,
         #[command(flatten)]
@@ -117,9 +124,77 @@ pub(crate) enum BenchCommand {
         /// Paths of the views-along-paths part, comma-separated ("" for none).
         #[arg(long, default_value = "meadow,tour,wind-tour", value_delimiter = ',')]
         paths: Vec<String>,
+        /// The sequences, comma-separated (still, dolly, pan, teleport).
+        #[arg(long, default_value = "still,dolly,pan,teleport", value_delimiter = ',', value_parser = parse_motion)]
+        sequences: Vec<verdant::tools::bench_aa::Motion>,
+        /// With taa: the most samples a pixel's history holds, 2..=256, comma-separated: each
+        /// (with each --taa-clip) is measured as a method of its own (default 16).
+        #[arg(long, value_name = "N,...", value_delimiter = ',', value_parser = clap::value_parser!(u32).range(2..=256))]
+        taa_samples: Vec<u32>,
+        /// With taa: the history's clip, standard deviations of the neighbourhood, 0.25..=16,
+        /// comma-separated (default 2.5).
+        #[arg(long, value_name = "SIGMA,...", value_delimiter = ',', value_parser = float_in(0.25, 16.0))]
+        taa_clip: Vec<f64>,
+        /// With taa: how fast a moving surface's history shortens (at most N / (1 + F x pixels
+        /// moved) samples), 0..=16, comma-separated (default 0.25).
+        #[arg(long, value_name = "F,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
+        taa_falloff: Vec<f64>,
+        /// With taa: the grass blades write their own motion vectors ("on,off" measures both).
+        #[arg(long, value_name = "on|off,...", value_delimiter = ',', value_parser = parse_on_off)]
+        taa_blade_motion: Vec<bool>,
         #[command(flatten)]
         timing: TimingArgs,
     },
+}
+
+/// Parses a sequence's name.
+fn parse_motion(s: &str) -> Result<verdant::tools::bench_aa::Motion, String> {
+    verdant::tools::bench_aa::Motion::from_name(s)
+        .ok_or_else(|| format!("{s:?} is not a sequence (still, dolly, pan, teleport)"))
+}
+
+/// `on` or `off`.
+fn parse_on_off(s: &str) -> Result<bool, String> {
+    match s.trim() {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("{s:?} is neither on nor off")),
+    }
+}
+
+/// Every combination of the given history lengths, clips, falloffs and motion vectors (the
+/// defaults where none is given).
+fn taa_variants(
+    samples: &[u32],
+    clips: &[f64],
+    falloffs: &[f64],
+    blade_motion: &[bool],
+) -> Vec<verdant::aa::taa::TaaSettings> {
+    let base = verdant::aa::taa::TaaSettings::default();
+    fn or<T: Copy>(given: &[T], default: T) -> Vec<T> {
+        if given.is_empty() {
+            vec![default]
+        } else {
+            given.to_vec()
+        }
+    }
+    let mut out = Vec::new();
+    for n in or(samples, base.max_samples) {
+        for c in or(clips, f64::from(base.clip_sigma)) {
+            for f in or(falloffs, f64::from(base.motion_falloff)) {
+                for mv in or(blade_motion, base.blade_motion) {
+                    out.push(verdant::aa::taa::TaaSettings {
+                        max_samples: n,
+                        clip_sigma: c as f32,
+                        motion_falloff: f as f32,
+                        blade_motion: mv,
+                        ..base
+                    });
+                }
+            }
+        }
+    }
+    out
 }
 
 /// Parses an anti-aliasing method's name.
@@ -290,6 +365,13 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         "timing: {} rounds of {} frames after {} untimed, per view and setting",
         r.counts.rounds, r.counts.timed, r.counts.warmup
     );
+    if r.supersample > 1 {
+        println!(
+            "the settings' images supersampled {k}x{k} (their content against the truth's; \
+             times of their own frames)",
+            k = r.supersample
+        );
+    }
     println!(
         "on the front against the {k}x{k} truth: {}; by the coarse FLIP: {}",
         r.front.join(", "),
@@ -418,6 +500,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             size,
             dolly_frames,
             settings,
+            supersample,
             timing,
             truth,
         } => bench_lod(verdant::tools::BenchLodOptions {
@@ -432,6 +515,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             truth_k: truth.truth,
             truth_reach: truth.truth_reach,
             settings,
+            supersample,
         }),
         BenchCommand::Aa {
             world,
@@ -443,6 +527,11 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             truth,
             path,
             paths,
+            sequences,
+            taa_samples,
+            taa_clip,
+            taa_falloff,
+            taa_blade_motion,
             timing,
         } => bench_aa(verdant::tools::bench_aa::BenchAaOptions {
             world: resolve_world(&world)?,
@@ -455,6 +544,8 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             truth_reach: truth.truth_reach,
             path,
             paths: paths.into_iter().filter(|p| !p.is_empty()).collect(),
+            motions: sequences,
+            taa: taa_variants(&taa_samples, &taa_clip, &taa_falloff, &taa_blade_motion),
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,

@@ -8,7 +8,7 @@ use indicatif::ProgressBar;
 use verdant::renderer::{DEFAULT_MESH_STEP, GrassConfig};
 use verdant::tools::{FlyOptions, FlyProgress, run_fly};
 
-use super::args::{MAX_FRAMES, StreamArgs, parse_size, resolve_world};
+use super::args::{MAX_FRAMES, StreamArgs, TaaArgs, parse_size, resolve_world};
 use super::progress::bar;
 
 // The options of `verdant fly`.
@@ -118,11 +118,8 @@ pub(crate) struct FlyArgs {
     /// multisampled, 4 samples, sub-pixel blades kept as coverage). Default: the renderer's.
     #[arg(long)]
     pub(crate) aa: Option<verdant::aa::AntiAliasing>,
-    /// With --aa taa: the grass blades write their own motion vectors (their wind over the
-    /// frame) for the temporal resolve, instead of being reprojected through their depth.
-    /// Off by default (at 60 frames a second in a breeze they gain little for their cost).
-    #[arg(long)]
-    pub(crate) taa_blade_motion: bool,
+    #[command(flatten)]
+    pub(crate) taa: TaaArgs,
     /// Render the frames as the truth instead: supersampled K x K (1..=8) in linear light, no
     /// LOD, 16 blade segments everywhere, blades out to 4 times the view distance.
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=8))]
@@ -161,7 +158,7 @@ impl FlyArgs {
             tree_shadow_lod_m,
             mesh_step,
             aa,
-            taa_blade_motion,
+            taa,
             truth: _,
             stream,
         } = self;
@@ -221,7 +218,7 @@ impl FlyArgs {
             grass,
             mesh_step: mesh_step.unwrap_or(DEFAULT_MESH_STEP),
             aa: aa.unwrap_or_default(),
-            taa_blade_motion,
+            taa: taa.settings(),
             plant_lod_m,
             plant_card_reach: plant_card_reach
                 .unwrap_or(verdant::plants::PlantSettings::default().card_reach),

@@ -204,7 +204,8 @@ impl RendererConfig {
     /// and the low one above 0, the high one allowed past the low one, the hysteresis at least
     /// 0), the plants' level-of-detail switches (`0 < near <= far <=` [`MAX_PLANT_LOD_M`]), their
     /// cards' reach (1 to [`MAX_CARD_REACH`] view distances), the start of their thinning with
-    /// distance (above 0, at most [`MAX_PLANT_LOD_M`]) and
+    /// distance (above 0, at most [`MAX_PLANT_LOD_M`]), the temporal anti-aliasing's history
+    /// (2..=256 samples, its clip 0.25..=16 standard deviations, its motion falloff 0..=16) and
     /// [`GrassConfig::validate`].
     /// NaN and infinities are out of every range. What depends on the world or the adapter
     /// (atlas slots, cache size, the rings' level) is checked by [`crate::Renderer::new`].
@@ -312,6 +313,14 @@ impl RendererConfig {
                 ));
             }
         }
+        check("taa.max_samples", self.taa.max_samples, &(2..=256), "")?;
+        check("taa.clip_sigma", self.taa.clip_sigma, &(0.25..=16.0), "")?;
+        check(
+            "taa.motion_falloff",
+            self.taa.motion_falloff,
+            &(0.0..=16.0),
+            "",
+        )?;
         let checked = [
             self.tree_shadows.map(|s| s.validate()),
             self.particles.map(|p| p.validate()),
@@ -548,6 +557,16 @@ mod tests {
                 "grass.capacity",
                 "1..=4294967295 blades",
             ),
+            (
+                with(&|c| c.taa.max_samples = 1),
+                "taa.max_samples",
+                "2..=256",
+            ),
+            (
+                with(&|c| c.taa.clip_sigma = f32::NAN),
+                "taa.clip_sigma",
+                "0.25..=16",
+            ),
         ];
         for (config, field, range) in cases {
             let e = config.validate().unwrap_err();
@@ -569,6 +588,8 @@ mod tests {
         c.grass.segments = [GrassSettings::MAX_SEGMENTS, 1, 1];
         c.grass.near_m = 200.0;
         c.grass.capacity = Some(1);
+        c.taa.max_samples = 256;
+        c.taa.clip_sigma = 0.25;
         c.validate().unwrap();
         let mut c = base;
         c.grass_rings = None;

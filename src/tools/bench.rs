@@ -61,6 +61,12 @@ pub struct BenchLodOptions {
     /// Which of `bench lod`'s settings to measure, by name (`--settings`; empty: all of
     /// them). "default" and "no LOD", the references, are always measured.
     pub settings: Vec<String>,
+    /// `bench lod --supersample K` (1..=8; 1, the default: off): the settings' images at the
+    /// four views (and the far band's) are drawn K x K sub-samples a pixel in linear light, as
+    /// the truth is, so that their error against the truth is what each setting draws
+    /// differently (its content), not how one sample a pixel aliases it. The timings stay the
+    /// setting's own frame.
+    pub supersample: u32,
 }
 
 impl Default for BenchLodOptions {
@@ -77,6 +83,7 @@ impl Default for BenchLodOptions {
             truth_k: crate::tools::truth::DEFAULT_K,
             truth_reach: crate::tools::truth::REACH_FACTOR,
             settings: Vec::new(),
+            supersample: 1,
         }
     }
 }
@@ -115,6 +122,7 @@ impl BenchLodOptions {
     /// 2..=1000, `--truth` 1..=8, and the timing options (see [`check_timing`]).
     pub fn validate(&self) -> Result<(), OptionError> {
         self.validate_features()?;
+        check_range("--supersample", self.supersample, 1..=8, "")?;
         check_range(
             "--dolly-frames",
             self.dolly_frames,
@@ -201,6 +209,19 @@ impl Bench<'_> {
         warm_up(scene, camera)?;
         let stats = scene.render(self.ctx, camera)?;
         Ok((scene.read_image(self.ctx)?, stats))
+    }
+
+    /// `config`'s frames at the benchmark's size supersampled `k` x `k` in linear light (the
+    /// truth's machinery with the setting's own grass).
+    pub(crate) fn supersampled(&self, config: RendererConfig, k: u32) -> Result<Truth> {
+        Truth::with_config(
+            self.ctx,
+            self.world.clone(),
+            std::sync::Arc::new(self.world.clone()),
+            self.size,
+            k,
+            config,
+        )
     }
 
     /// The truth at the benchmark's size, K = `k`, on top of `base` (its features and wind; see
@@ -306,6 +327,14 @@ mod tests {
             ),
             (BenchLodOptions { truth_k: 0, ..d() }, "--truth 0", "1..=8"),
             (BenchLodOptions { truth_k: 9, ..d() }, "--truth 9", "1..=8"),
+            (
+                BenchLodOptions {
+                    supersample: 0,
+                    ..d()
+                },
+                "--supersample 0",
+                "1..=8",
+            ),
         ];
         for (opts, option, range) in cases {
             let e = opts.validate().unwrap_err().to_string();

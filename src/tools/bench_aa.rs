@@ -13,7 +13,7 @@
 //! back within 10% of its steady value (the mean of the sequence's last quarter).
 //!
 //! The **paths** part measures what a user flies: at four times spread along each named path
-//! (default: meadow, tour, wind-tour), FLIP against the truth after [`PATH_RUN_UP`] frames of
+//! (default: meadow, tour, wind-tour), FLIP against the truth after the run-up's frames of
 //! flight along the path, and beside the methods two bounds ([`Bound`]) that say where their
 //! error comes from: the default frame supersampled like the truth (what the frame draws
 //! differently from the truth, which no anti-aliasing removes) and the truth's grass at 2 x 2
@@ -33,6 +33,7 @@ use serde::Serialize;
 
 use crate::RendererConfig;
 use crate::aa::AntiAliasing;
+use crate::aa::taa::TaaSettings;
 use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::tools::Scene;
@@ -52,8 +53,6 @@ pub const DOLLY_MPS: f64 = 7.4;
 pub const PAN_DEG_PER_S: f64 = 30.0;
 /// How far the teleport jumps along the view, metres (past any method's cut threshold).
 pub const TELEPORT_M: f64 = 60.0;
-/// Frames of flight before each measured view of the paths part.
-pub const PATH_RUN_UP: u32 = 8;
 /// The most frames of a sequence (`--frames`).
 pub const MAX_FRAMES: u32 = 600;
 /// The most run-up frames (`--run-up`).
@@ -82,6 +81,12 @@ pub struct BenchAaOptions {
     pub path: String,
     /// The paths of the paths part (none: skip it).
     pub paths: Vec<String>,
+    /// The sequences measured, in report order.
+    pub motions: Vec<Motion>,
+    /// The temporal method's settings: each is measured as a method of its own (named
+    /// `taa` when there is one, else by its samples, clip and falloff, `taa-n32-c2.5-f0.25`,
+    /// `-mv` added with the blades' motion vectors).
+    pub taa: Vec<TaaSettings>,
     /// Untimed frames before each timing measurement (default: by adapter).
     pub warmup_frames: Option<u32>,
     /// Timed frames per measurement and round (default: by adapter).
@@ -103,6 +108,8 @@ impl Default for BenchAaOptions {
             truth_reach: crate::tools::truth::REACH_FACTOR,
             path: "meadow".into(),
             paths: vec!["meadow".into(), "tour".into(), "wind-tour".into()],
+            motions: Motion::ALL.to_vec(),
+            taa: vec![TaaSettings::default()],
             warmup_frames: None,
             timed_frames: None,
             rounds: None,
@@ -123,6 +130,12 @@ impl BenchAaOptions {
         if self.methods.is_empty() {
             bail!("--aa names no method");
         }
+        if self.motions.is_empty() {
+            bail!("--sequences names no sequence");
+        }
+        if self.taa.is_empty() {
+            bail!("no temporal settings given");
+        }
         if self.sizes.is_empty() {
             bail!("--size names no size");
         }
@@ -130,6 +143,32 @@ impl BenchAaOptions {
         crate::tools::truth::check_reach("--truth-reach", self.truth_reach)?;
         crate::tools::bench::check_timing(self.warmup_frames, self.timed_frames, self.rounds)?;
         Ok(())
+    }
+}
+
+impl BenchAaOptions {
+    /// The renderers measured: each method, the temporal one once per settings, with the name
+    /// it is reported under.
+    pub fn variants(&self) -> Vec<(String, AntiAliasing, TaaSettings)> {
+        let mut out = Vec::new();
+        for &m in &self.methods {
+            if m == AntiAliasing::Taa && self.taa.len() > 1 {
+                for t in &self.taa {
+                    let name = format!(
+                        "{}-n{}-c{}-f{}{}",
+                        m.name(),
+                        t.max_samples,
+                        t.clip_sigma,
+                        t.motion_falloff,
+                        if t.blade_motion { "-mv" } else { "" }
+                    );
+                    out.push((name, m, *t));
+                }
+            } else {
+                out.push((m.name().to_string(), m, self.taa[0]));
+            }
+        }
+        out
     }
 }
 
@@ -150,6 +189,11 @@ pub enum Motion {
 impl Motion {
     /// Every motion, in report order.
     pub const ALL: [Motion; 4] = [Motion::Still, Motion::Dolly, Motion::Pan, Motion::Teleport];
+
+    /// The motion named `name` (as in reports).
+    pub fn from_name(name: &str) -> Option<Motion> {
+        Motion::ALL.into_iter().find(|m| m.name() == name.trim())
+    }
 
     /// The name in reports.
     pub fn name(self) -> &'static str {
@@ -460,16 +504,20 @@ pub fn run_bench_aa(
     let mut timings = Vec::new();
     for &size in &opts.sizes {
         let mut reference = truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?;
-        let mut scenes: Vec<(AntiAliasing, Scene)> = opts
-            .methods
-            .iter()
-            .map(|&m| {
+        let mut scenes: Vec<(String, Scene)> = opts
+            .variants()
+            .into_iter()
+            .map(|(name, m, taa)| {
                 let mut config = RendererConfig::for_world(&world);
                 config.aa = m;
-                Ok((m, Scene::new(&ctx, world.clone(), size.0, size.1, config)?))
+                config.taa = taa;
+                Ok((
+                    name,
+                    Scene::new(&ctx, world.clone(), size.0, size.1, config)?,
+                ))
             })
             .collect::<Result<_>>()?;
-        for motion in Motion::ALL {
+        for &motion in &opts.motions {
             // Every method and the truth step through the same frames together.
             let mut truth_prev: Option<RgbaImage> = None;
             let mut prev: Vec<Option<RgbaImage>> = vec![None; scenes.len()];
@@ -493,7 +541,7 @@ pub fn run_bench_aa(
                             .map_or(0.0, |p| mean_change(p, truth_img));
                         seq[m].push(AaFrame {
                             size,
-                            method: method.name().into(),
+                            method: method.clone(),
                             motion,
                             frame: i as u32,
                             flip: flip(truth_img, &img)?,
@@ -527,7 +575,7 @@ pub fn run_bench_aa(
                 let flips: Vec<f64> = f.iter().map(|x| x.flip).collect();
                 sequences.push(AaSequence {
                     size,
-                    method: method.name().into(),
+                    method: method.clone(),
                     motion,
                     flip_mean: flips.iter().sum::<f64>() / n.max(1.0),
                     flicker,
@@ -552,7 +600,7 @@ pub fn run_bench_aa(
             }
             for (m, (method, _)) in scenes.iter().enumerate() {
                 if let Some(img) = &prev[m] {
-                    write_png(&name(method.name()), img)?;
+                    write_png(&name(method), img)?;
                 }
             }
             frames.extend(seq.into_iter().flatten());
@@ -576,7 +624,7 @@ pub fn run_bench_aa(
             let (a, b) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
             for j in 0..4 {
                 let t_view = a + (b - a) * (0.125 + 0.25 * f64::from(j));
-                for r in (0..=PATH_RUN_UP).rev() {
+                for r in (0..=opts.run_up).rev() {
                     let t = t_view - f64::from(r) * DT_S;
                     let camera = sample_path(path, t);
                     let walker = Some(crate::camera::walker_at(&world.manifest, path, t));
@@ -608,7 +656,7 @@ pub fn run_bench_aa(
                             let img = scene.read_image(&ctx)?;
                             path_views.push(AaPathView {
                                 size,
-                                method: method.name().into(),
+                                method: method.clone(),
                                 bound: false,
                                 path: path.name.clone(),
                                 t_s: t,
@@ -648,7 +696,7 @@ pub fn run_bench_aa(
             let aa = Timing::of(&samples[m].1);
             timings.push(AaTiming {
                 size,
-                method: method.name().into(),
+                method: method.clone(),
                 frame: Timing::of(&samples[m].0),
                 aa_ms: if gpu { aa.median_ms } else { 0.0 },
                 gpu,
@@ -819,6 +867,46 @@ mod tests {
         assert_ne!(reach(&c), reach(&default));
         assert_eq!(Bound::DefaultSupersampled.name(4), "default-4x4");
         assert_eq!(Bound::Truth2x2.name(4), "truth-2x2");
+    }
+
+    #[test]
+    fn each_temporal_setting_is_a_method_of_its_own_named_by_its_settings() {
+        let base = TaaSettings::default();
+        let mut opts = BenchAaOptions::default();
+        let names = |o: &BenchAaOptions| -> Vec<String> {
+            o.variants().into_iter().map(|(n, _, _)| n).collect()
+        };
+        assert_eq!(names(&opts), ["off", "taa", "msaa"]);
+        opts.taa = vec![
+            TaaSettings {
+                max_samples: 32,
+                ..base
+            },
+            TaaSettings {
+                blade_motion: true,
+                motion_falloff: 0.5,
+                ..base
+            },
+        ];
+        let v = opts.variants();
+        let n: Vec<&str> = v.iter().map(|(n, _, _)| n.as_str()).collect();
+        assert_eq!(
+            n,
+            [
+                "off",
+                "taa-n32-c2.5-f1",
+                &format!("taa-n{}-c2.5-f0.5-mv", base.max_samples),
+                "msaa"
+            ]
+        );
+        assert_eq!(v[1].2.max_samples, 32);
+        assert!(v[2].2.blade_motion && v[2].1 == AntiAliasing::Taa);
+        // Names fit file names and CSV cells.
+        assert!(n.iter().all(|s| !s.contains([',', ':', '/', ' '])));
+        opts.motions.clear();
+        assert!(opts.validate().is_err());
+        assert_eq!(Motion::from_name(" pan"), Some(Motion::Pan));
+        assert_eq!(Motion::from_name("jump"), None);
     }
 
     #[test]

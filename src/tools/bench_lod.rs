@@ -183,6 +183,7 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         new("view x1.33", h, v * 4.0 / 3.0, s, seg),
         new("spacing x1.4", h, v, s * 1.4, seg),
         new("spacing x0.8", h, v, s * 0.8, seg),
+        new("segments 7/3/3", h, v, s, [7, 3, 3]),
         new("segments 7/7/3", h, v, s, [7, 7, 3]),
         new("segments 5/3/2", h, v, s, [5, 3, 2]),
         new("segments 3/2/1", h, v, s, [3, 2, 1]),
@@ -351,6 +352,8 @@ pub struct BenchLodReport {
     pub size: (u32, u32),
     /// Sub-samples a pixel side of the truth.
     pub truth_k: u32,
+    /// Sub-samples a pixel side of the settings' measured images (1: the frame as it is).
+    pub supersample: u32,
     /// The dolly.
     pub dolly: Vec<DollyFrame>,
     /// Largest jump of the LOD run's pixel FLIP against the truth on a frame where grass tiles
@@ -524,12 +527,18 @@ pub fn run_bench_lod(
     drop(truth);
     let mut config = settings[0].config(&world);
     config.features = config.features.without(crate::features::Feature::FarField);
-    let mut scene = Scene::new(&ctx, world.clone(), w, h, config)?;
     let mut no_far_field = Vec::new();
-    for v in &views {
-        no_far_field.push(bench.frame(&mut scene, v)?.0);
+    if opts.supersample > 1 {
+        let mut ss = bench.supersampled(config, opts.supersample)?;
+        for v in &views {
+            no_far_field.push(ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?);
+        }
+    } else {
+        let mut scene = Scene::new(&ctx, world.clone(), w, h, config)?;
+        for v in &views {
+            no_far_field.push(bench.frame(&mut scene, v)?.0);
+        }
     }
-    drop(scene);
     progress("far band", 1, 1);
     // Images first, every setting's scene kept for the timings.
     let mut scenes = Vec::new();
@@ -540,8 +549,18 @@ pub fn run_bench_lod(
         let mut scene = bench.scene(s.config(&world))?;
         let (mut measures, mut blades, mut coverage) = (Vec::new(), Vec::new(), Vec::new());
         let mut own = Vec::new();
+        // With --supersample, the images measured are the setting's frames supersampled;
+        // the blades drawn and the coverage stay the frame's own.
+        let mut ss = if opts.supersample > 1 {
+            Some(bench.supersampled(s.config(&world), opts.supersample)?)
+        } else {
+            None
+        };
         for (v, t) in views.iter().zip(&truths) {
-            let (img, stats, c) = bench.frame_with_coverage(&mut scene, v)?;
+            let (mut img, stats, c) = bench.frame_with_coverage(&mut scene, v)?;
+            if let Some(ss) = &mut ss {
+                img = ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?;
+            }
             measures.push(Measures::of(t, &img)?);
             blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
             coverage.push(c);
@@ -649,6 +668,7 @@ pub fn run_bench_lod(
         adapter: AdapterReport::of(&ctx),
         size: opts.size,
         truth_k: opts.truth_k,
+        supersample: opts.supersample,
         worst_pop,
         worst_tree_pop,
         worst_change_without_switch,

@@ -65,9 +65,8 @@ pub struct FlyOptions {
     pub mesh_step: u32,
     /// How the frames are anti-aliased (default: the renderer's).
     pub aa: crate::aa::AntiAliasing,
-    /// With temporal anti-aliasing, whether the blades write their own motion vectors
-    /// ([`crate::aa::taa::TaaSettings::blade_motion`]).
-    pub taa_blade_motion: bool,
+    /// The temporal anti-aliasing's settings (with `aa` taa).
+    pub taa: crate::aa::taa::TaaSettings,
     /// Distances of the plants' switches from the full mesh to the reduced one and from that
     /// to the cards, metres (default: the renderer's).
     pub plant_lod_m: [f32; 2],
@@ -128,7 +127,7 @@ impl Default for FlyOptions {
             grass: GrassConfig::default(),
             mesh_step: DEFAULT_MESH_STEP,
             aa: Default::default(),
-            taa_blade_motion: false,
+            taa: Default::default(),
             plant_lod_m: crate::plants::PlantSettings::default().lod_m,
             plant_card_reach: crate::plants::PlantSettings::default().card_reach,
             plant_thin_m: crate::plants::PlantSettings::default().thin_m,
@@ -167,7 +166,7 @@ impl FlyOptions {
         config.grass = self.grass;
         config.mesh_step = self.mesh_step;
         config.aa = self.aa;
-        config.taa.blade_motion = self.taa_blade_motion;
+        config.taa = self.taa;
         config.plants.lod_m = self.plant_lod_m;
         config.plants.card_reach = self.plant_card_reach;
         config.plants.thin_m = self.plant_thin_m;
