@@ -229,14 +229,7 @@ impl Bench<'_> {
     pub(crate) fn truth(&self, base: &RendererConfig, k: u32, reach: f64) -> Result<Truth> {
         let slots = crate::tools::truth::atlas_slots(self.world, &self.ctx.device);
         let config = crate::tools::truth::truth_config_reaching(self.world, base, slots, reach);
-        Truth::with_config(
-            self.ctx,
-            self.world.clone(),
-            std::sync::Arc::new(self.world.clone()),
-            self.size,
-            k,
-            config,
-        )
+        self.supersampled(config, k)
     }
 
     /// Like [`Bench::frame`], with the frame's grass coverage (the capture of the terrain-only
