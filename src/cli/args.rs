@@ -88,7 +88,7 @@ pub(crate) fn parse_mib(s: &str) -> Result<u64, String> {
 /// The temporal anti-aliasing's settings (they apply with `--aa taa`).
 #[derive(clap::Args, Clone, Copy, Debug, Default)]
 pub(crate) struct TaaArgs {
-    /// With --aa taa: the most samples a pixel's history holds, 2..=256 (default 16). More
+    /// With --aa taa: the most samples a pixel's history holds, 2..=256 (default 24). More
     /// steadies a still view and lags longer behind a moving one.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..=256))]
     pub(crate) taa_samples: Option<u32>,

@@ -127,8 +127,9 @@ pub(crate) enum BenchCommand {
         /// The sequences, comma-separated (still, dolly, pan, teleport).
         #[arg(long, default_value = "still,dolly,pan,teleport", value_delimiter = ',', value_parser = parse_motion)]
         sequences: Vec<verdant::tools::bench_aa::Motion>,
-        /// With taa: the most samples a pixel's history holds, 2..=256, comma-separated: each
-        /// (with each --taa-clip) is measured as a method of its own (default 16).
+        /// With taa: the most samples a pixel's history holds, 2..=256, comma-separated (default
+        /// 24): every combination with the other --taa-* lists is measured as a method of its
+        /// own.
         #[arg(long, value_name = "N,...", value_delimiter = ',', value_parser = clap::value_parser!(u32).range(2..=256))]
         taa_samples: Vec<u32>,
         /// With taa: the history's clip, standard deviations of the neighbourhood, 0.25..=16,
@@ -136,7 +137,7 @@ pub(crate) enum BenchCommand {
         #[arg(long, value_name = "SIGMA,...", value_delimiter = ',', value_parser = float_in(0.25, 16.0))]
         taa_clip: Vec<f64>,
         /// With taa: how fast a moving surface's history shortens (at most N / (1 + F x pixels
-        /// moved) samples), 0..=16, comma-separated (default 0.25).
+        /// moved) samples), 0..=16, comma-separated (default 1).
         #[arg(long, value_name = "F,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
         taa_falloff: Vec<f64>,
         /// With taa: the grass blades write their own motion vectors ("on,off" measures both).

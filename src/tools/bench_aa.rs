@@ -144,9 +144,7 @@ impl BenchAaOptions {
         crate::tools::bench::check_timing(self.warmup_frames, self.timed_frames, self.rounds)?;
         Ok(())
     }
-}
 
-impl BenchAaOptions {
     /// The renderers measured: each method, the temporal one once per settings, with the name
     /// it is reported under.
     pub fn variants(&self) -> Vec<(String, AntiAliasing, TaaSettings)> {
