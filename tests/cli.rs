@@ -590,6 +590,10 @@ fn bench_lod_writes_its_tables_and_charts() {
             .unwrap();
     // One sample a pixel unless --supersample says otherwise.
     assert_eq!(json["supersample"], 1);
+    // Then the images measured are the settings' own frames.
+    for s in json["settings"].as_array().unwrap() {
+        assert_eq!(s["flip_frame_vs_truth"], s["vs_truth"]["flip"], "{s}");
+    }
     for (key, column) in [("front", "pareto"), ("coarse_front", "pareto_coarse")] {
         let mut named: Vec<&str> = json[key]
             .as_array()
@@ -644,6 +648,76 @@ fn bench_lod_writes_its_tables_and_charts() {
     ] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
+}
+
+/// bench lod's `--supersample K`: the images measured are the settings' frames drawn K x K
+/// sub-samples a pixel, so each setting errs less against the truth than its own one-sample
+/// frames do (reported beside), while what the frames draw (their blades) stays the frames' own.
+#[test]
+fn bench_lod_supersampled_measures_the_settings_content() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = verdant(
+        &[
+            "bench",
+            "lod",
+            common::default_world().to_str().unwrap(),
+            "--size",
+            "96x54",
+            "--dolly-frames",
+            "2",
+            "--warmup-frames",
+            "0",
+            "--timed-frames",
+            "1",
+            "--rounds",
+            "1",
+            "--truth",
+            "2",
+            "--truth-reach",
+            "1",
+            "--settings",
+            "default",
+            "--supersample",
+            "2",
+            "--out",
+            "b",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        out.status.success(),
+        "bench lod --supersample 2 failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = tmp.path().join("b");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("bench_lod.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["supersample"], 2);
+    let settings = json["settings"].as_array().unwrap();
+    let names: Vec<&str> = settings
+        .iter()
+        .map(|s| s["setting"]["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["default", "no LOD"]);
+    let csv = std::fs::read_to_string(dir.join("lod_settings.csv")).unwrap();
+    for s in settings {
+        let name = s["setting"]["name"].as_str().unwrap();
+        let supersampled = s["vs_truth"]["flip"].as_f64().unwrap();
+        let one = s["flip_frame_vs_truth"].as_f64().unwrap();
+        assert!(
+            supersampled > 0.0 && supersampled < one,
+            "{name}: supersampled 2x2 errs {supersampled}, its frame {one}\n{csv}"
+        );
+        // The frame's own blades, whatever the images measured.
+        assert!(s["blades_drawn"].as_f64().unwrap() > 0.0, "{name}");
+    }
+    assert!(csv.lines().next().unwrap().contains("flip_frame_vs_truth"));
+    // No LOD draws more blades than the default: the frames' own counts.
+    assert!(
+        settings[1]["blades_drawn"].as_f64().unwrap()
+            > settings[0]["blades_drawn"].as_f64().unwrap()
+    );
 }
 
 #[test]

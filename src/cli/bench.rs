@@ -341,18 +341,19 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         flip(r.far_band.flip_no_far_field)
     );
     println!(
-        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>9} {:>10} {:>7}",
-        "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "coarse", "blades", "front"
+        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>9} {:>9} {:>10} {:>7}",
+        "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "coarse", "FLIP 1x", "blades", "front"
     );
     for s in &r.settings {
         println!(
-            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>9.4} {:>10.0} {:>7}{}",
+            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>9.4} {:>9.4} {:>10.0} {:>7}{}",
             s.setting.name,
             s.gpu.median_ms,
             100.0 * s.gpu.spread,
             s.frame.median_ms,
             s.vs_truth.flip,
             s.vs_truth.coarse,
+            s.flip_frame_vs_truth,
             s.blades_drawn,
             if s.pareto { "yes" } else { "" },
             if s.gpu.noisy || s.frame.noisy {
@@ -369,7 +370,7 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
     if r.supersample > 1 {
         println!(
             "the settings' images supersampled {k}x{k} (their content against the truth's; \
-             times of their own frames)",
+             FLIP 1x and the times of their own frames)",
             k = r.supersample
         );
     }

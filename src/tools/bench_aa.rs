@@ -41,7 +41,7 @@ use crate::tools::fly::{OutDir, write_json, write_png, write_text};
 use crate::tools::metrics::flip_compare;
 use crate::tools::metrics::{Chart, ChartPoint};
 use crate::tools::report::AdapterReport;
-use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
+use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_frames};
 use crate::tools::truth::Truth;
 use crate::world::{CameraPath, World};
 
@@ -670,6 +670,9 @@ pub fn run_bench_aa(
         drop(reference);
         // Speed: interleaved rounds at the still view.
         let mut samples: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); scenes.len()];
+        if let Some((_, scene)) = scenes.first_mut() {
+            ramp_up(&ctx, scene, &start, t0, Some(start.position.truncate()))?;
+        }
         for round in 0..counts.rounds {
             for (m, (_, scene)) in scenes.iter_mut().enumerate() {
                 scene.warm_up_report(&start, crate::tools::fly::FIRST_FRAME_WAIT)?;

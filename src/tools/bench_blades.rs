@@ -33,7 +33,7 @@ use crate::stream::TileSource;
 use crate::tools::bench::{Measures, rgb};
 use crate::tools::fly::{OptionError, OutDir, check_range, check_size, write_text};
 use crate::tools::metrics::{LineChart, Series, flip_compare};
-use crate::tools::timing::{FrameCounts, Timing, run_frames};
+use crate::tools::timing::{FrameCounts, Timing, ramp_up, run_frames};
 use crate::tools::truth::Truth;
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::{Manifest, TileData, TileId, World, WorldError};
@@ -530,6 +530,9 @@ pub fn run_bench_blades(
     let mut draw_samples = vec![Vec::new(); spacings.len()];
     let mut floor_samples = vec![Vec::new(); spacings.len()];
     let mut floor_vertices = vec![0u64; spacings.len()];
+    if let Some(scene) = scenes.first_mut() {
+        ramp_up(&ctx, scene, &camera, 0.0, Some(camera.position.truncate()))?;
+    }
     for round in 0..counts.rounds {
         for (k, scene) in scenes.iter_mut().enumerate() {
             let walker = Some(camera.position.truncate());

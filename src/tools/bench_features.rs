@@ -15,7 +15,7 @@ use crate::gpu::GpuContext;
 use crate::tools::bench::{Bench, BenchLodOptions, Measures, warm_up};
 use crate::tools::fly::{OutDir, write_text};
 use crate::tools::metrics::{COVERAGE_DISTANCE_M, Chart, ChartPoint};
-use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
+use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_frames};
 use crate::tools::{AdapterReport, write_json};
 use crate::world::World;
 
@@ -182,6 +182,9 @@ pub fn run_bench_features(
     }
     // Timed frames hold each view's time: the same image every frame.
     let mut samples = vec![vec![Vec::new(); times.len()]; variants.len()];
+    if let (Some(scene), Some(&t)) = (scenes.first_mut(), times.first()) {
+        ramp_up(&ctx, scene, &sample_path(&path, t), t, Some(walker_at(t)))?;
+    }
     for round in 0..counts.rounds {
         for (k, scene) in scenes.iter_mut().enumerate() {
             for (vi, &t) in times.iter().enumerate() {

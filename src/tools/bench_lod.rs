@@ -40,7 +40,7 @@ use crate::tools::metrics::{
     Chart, ChartPoint, LineChart, Series, Summary, band_mask, flip_error_map, masked_mean,
     pareto_front, ray_distances,
 };
-use crate::tools::timing::{FrameCounts, Timing, frame_ms, run_frames};
+use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_frames};
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::World;
 
@@ -246,6 +246,10 @@ pub struct SettingResult {
     pub frame: Timing,
     /// Mean error against the truth over the views, by both measures.
     pub vs_truth: Measures,
+    /// Mean pixel FLIP of the setting's own frames (one sample a pixel) against the truth: the
+    /// same as `vs_truth.flip` unless `--supersample` measured supersampled images, when the
+    /// difference is what one sample a pixel adds to what the setting draws.
+    pub flip_frame_vs_truth: f64,
     /// Mean pixel FLIP against the "no LOD" setting's render over the views (the old figure).
     pub flip_vs_no_lod: f64,
     /// Blades drawn per frame (median).
@@ -528,12 +532,15 @@ pub fn run_bench_lod(
     let mut config = settings[0].config(&world);
     config.features = config.features.without(crate::features::Feature::FarField);
     let mut no_far_field = Vec::new();
-    if opts.supersample > 1 {
+    // With the truth's blades out to the view distance only (`--truth-reach 1`) the band is
+    // empty, and the default without the far field is not drawn.
+    let band = far_m > near_m;
+    if band && opts.supersample > 1 {
         let mut ss = bench.supersampled(config, opts.supersample)?;
         for v in &views {
             no_far_field.push(ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?);
         }
-    } else {
+    } else if band {
         let mut scene = Scene::new(&ctx, world.clone(), w, h, config)?;
         for v in &views {
             no_far_field.push(bench.frame(&mut scene, v)?.0);
@@ -549,6 +556,7 @@ pub fn run_bench_lod(
         let mut scene = bench.scene(s.config(&world))?;
         let (mut measures, mut blades, mut coverage) = (Vec::new(), Vec::new(), Vec::new());
         let mut own = Vec::new();
+        let mut frame_flips = Vec::new();
         // With --supersample, the images measured are the setting's frames supersampled;
         // the blades drawn and the coverage stay the frame's own.
         let mut ss = if opts.supersample > 1 {
@@ -559,16 +567,21 @@ pub fn run_bench_lod(
         for (v, t) in views.iter().zip(&truths) {
             let (mut img, stats, c) = bench.frame_with_coverage(&mut scene, v)?;
             if let Some(ss) = &mut ss {
+                frame_flips.push(flip(t, &img)?);
                 img = ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?;
             }
-            measures.push(Measures::of(t, &img)?);
+            let m = Measures::of(t, &img)?;
+            if ss.is_none() {
+                frame_flips.push(m.flip);
+            }
+            measures.push(m);
             blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
             coverage.push(c);
             own.push(img);
         }
         scenes.push(scene);
         images.push(own);
-        partial.push((measures, blades, coverage));
+        partial.push((measures, blades, coverage, frame_flips));
         progress("images", k as u64 + 1, total);
     }
     let far_band = far_band((near_m, far_m), &truths, &masks, &images[0], &no_far_field)?;
@@ -595,6 +608,15 @@ pub fn run_bench_lod(
     let mut gpu_samples = vec![vec![Vec::new(); n_views]; settings.len()];
     let mut wall_samples = vec![vec![Vec::new(); n_views]; settings.len()];
     let steps = u64::from(counts.rounds) * total;
+    if let Some(scene) = scenes.first_mut() {
+        ramp_up(
+            &ctx,
+            scene,
+            &views[0],
+            0.0,
+            Some(views[0].position.truncate()),
+        )?;
+    }
     for round in 0..counts.rounds {
         for (k, scene) in scenes.iter_mut().enumerate() {
             for (vi, v) in views.iter().enumerate() {
@@ -612,7 +634,7 @@ pub fn run_bench_lod(
     drop(scenes);
     let mut results = Vec::new();
     for (k, s) in settings.iter().enumerate() {
-        let (measures, blades, coverage) = &partial[k];
+        let (measures, blades, coverage, frame_flips) = &partial[k];
         let timing = |samples: &[Vec<f64>]| {
             Timing::over_views(&samples.iter().map(|v| Timing::of(v)).collect::<Vec<_>>())
         };
@@ -625,6 +647,7 @@ pub fn run_bench_lod(
             },
             frame: timing(&wall_samples[k]),
             vs_truth: Measures::mean(measures),
+            flip_frame_vs_truth: frame_flips.iter().sum::<f64>() / frame_flips.len().max(1) as f64,
             flip_vs_no_lod: vs_no_lod[k],
             blades_drawn: Summary::of(blades).median,
             coverage: coverage.iter().sum::<f64>() / coverage.len() as f64,
@@ -698,10 +721,17 @@ fn far_band(
     let mut views = Vec::new();
     let (mut sum_with, mut sum_without, mut pixels) = (0.0, 0.0, 0u64);
     for (i, (t, mask)) in truths.iter().zip(masks).enumerate() {
-        let r = rgb(t);
         let band_pixels = mask.iter().filter(|&&m| m).count() as u64;
-        let with = masked_mean(&flip_error_map(&r, &rgb(&with[i]))?, mask);
-        let without = masked_mean(&flip_error_map(&r, &rgb(&without[i]))?, mask);
+        let (with, without) = match without.get(i) {
+            Some(without) if band_pixels > 0 => {
+                let r = rgb(t);
+                (
+                    masked_mean(&flip_error_map(&r, &rgb(&with[i]))?, mask),
+                    masked_mean(&flip_error_map(&r, &rgb(without))?, mask),
+                )
+            }
+            _ => (None, None),
+        };
         if let (Some(a), Some(b)) = (with, without) {
             sum_with += a * band_pixels as f64;
             sum_without += b * band_pixels as f64;
@@ -807,13 +837,13 @@ fn write_outputs(
          segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,lod_widen,plant_lod_near_m,\
          plant_lod_far_m,tree_lod_near_m,tree_lod_far_m,gpu_ms,gpu_q1_ms,\
          gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_vs_truth,\
-         coarse_flip_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse\n",
+         coarse_flip_vs_truth,flip_frame_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse\n",
     );
     for r in results {
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -840,6 +870,7 @@ fn write_outputs(
             r.frame.frames,
             r.vs_truth.flip,
             r.vs_truth.coarse,
+            r.flip_frame_vs_truth,
             r.flip_vs_no_lod,
             r.blades_drawn,
             r.coverage,

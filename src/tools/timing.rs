@@ -162,6 +162,33 @@ pub fn run_frames(
     Ok(out)
 }
 
+/// Wall time, milliseconds, that the benchmarks render untimed on a GPU before their first
+/// timed measurement: a GPU that sat idle (while the truth was read back, or the images were
+/// measured on the CPU) runs its first frames at low clocks, and a first measurement of a few
+/// frames would read slow (bench aa's `off` once read 16.7 ms for 4.05).
+pub const RAMP_MS: f64 = 1500.0;
+
+/// Renders `camera` back to back, untimed, for [`RAMP_MS`] of wall time on a GPU so that its
+/// clocks have risen before the first timed measurement; nothing on a software renderer, which
+/// has no clocks to raise. Returns the frames rendered.
+pub fn ramp_up(
+    ctx: &GpuContext,
+    scene: &mut Scene,
+    camera: &Camera,
+    time_s: f64,
+    walker: Option<DVec2>,
+) -> Result<u32> {
+    if ctx.info.device_type == wgpu::DeviceType::Cpu {
+        return Ok(0);
+    }
+    let start = std::time::Instant::now();
+    let mut frames = 0;
+    while start.elapsed().as_secs_f64() * 1e3 < RAMP_MS {
+        frames += run_frames(ctx, scene, camera, time_s, walker, 0, 10)?.len() as u32;
+    }
+    Ok(frames)
+}
+
 fn collect(
     scene: &mut Scene,
     first_timed: Option<u64>,
