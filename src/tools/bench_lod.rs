@@ -534,16 +534,17 @@ pub fn run_bench_lod(
     let mut no_far_field = Vec::new();
     // With the truth's blades out to the view distance only (`--truth-reach 1`) the band is
     // empty, and the default without the far field is not drawn.
-    let band = far_m > near_m;
-    if band && opts.supersample > 1 {
-        let mut ss = bench.supersampled(config, opts.supersample)?;
-        for v in &views {
-            no_far_field.push(ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?);
-        }
-    } else if band {
-        let mut scene = Scene::new(&ctx, world.clone(), w, h, config)?;
-        for v in &views {
-            no_far_field.push(bench.frame(&mut scene, v)?.0);
+    if far_m > near_m {
+        if opts.supersample > 1 {
+            let mut ss = bench.supersampled(config, opts.supersample)?;
+            for v in &views {
+                no_far_field.push(ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?);
+            }
+        } else {
+            let mut scene = Scene::new(&ctx, world.clone(), w, h, config)?;
+            for v in &views {
+                no_far_field.push(bench.frame(&mut scene, v)?.0);
+            }
         }
     }
     progress("far band", 1, 1);
@@ -566,15 +567,15 @@ pub fn run_bench_lod(
         };
         for (v, t) in views.iter().zip(&truths) {
             let (mut img, stats, c) = bench.frame_with_coverage(&mut scene, v)?;
-            if let Some(ss) = &mut ss {
-                frame_flips.push(flip(t, &img)?);
-                img = ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?;
-            }
-            let m = Measures::of(t, &img)?;
-            if ss.is_none() {
-                frame_flips.push(m.flip);
-            }
-            measures.push(m);
+            let frame = Measures::of(t, &img)?;
+            frame_flips.push(frame.flip);
+            measures.push(match &mut ss {
+                Some(ss) => {
+                    img = ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?;
+                    Measures::of(t, &img)?
+                }
+                None => frame,
+            });
             blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
             coverage.push(c);
             own.push(img);
