@@ -539,6 +539,7 @@ fn bench_lod_writes_its_tables_and_charts() {
         "plant_lod_far_m",
         "tree_lod_near_m",
         "tree_lod_far_m",
+        "tree_thin_m",
     ] {
         assert!(header.contains(&column), "no column {column} in {header:?}");
     }

@@ -71,6 +71,9 @@ pub struct LodSetting {
     pub plant_lod_m: [f32; 2],
     /// The trees' switches, metres (`None`: the renderer's; a world without trees).
     pub tree_lod_m: Option<[f32; 2]>,
+    /// Where the trees start to thin out with distance, metres (`None`: the renderer's; a world
+    /// without trees).
+    pub tree_thin_m: Option<f32>,
 }
 
 impl LodSetting {
@@ -88,7 +91,14 @@ impl LodSetting {
             lod_widen: crate::renderer::DEFAULT_LOD_WIDEN,
             plant_lod_m: crate::plants::PlantSettings::default().lod_m,
             tree_lod_m: None,
+            tree_thin_m: None,
         }
+    }
+
+    /// The same setting with the trees thinning out from `tree_thin_m` metres.
+    pub fn with_tree_thin(mut self, tree_thin_m: f32) -> Self {
+        self.tree_thin_m = Some(tree_thin_m);
+        self
     }
 
     /// The same setting with the trees' level-of-detail switches at `tree_lod_m`.
@@ -148,8 +158,12 @@ impl LodSetting {
             // No level of detail for the plants: no thinning with distance either.
             c.plants.thin_m = crate::renderer::MAX_PLANT_LOD_M;
         }
-        if let (Some(lod_m), Some(trees)) = (self.tree_lod_m, c.tree_settings(world)) {
-            c.trees = Some(crate::plants::PlantSettings { lod_m, ..trees });
+        if let Some(trees) = c.tree_settings(world) {
+            c.trees = Some(crate::plants::PlantSettings {
+                lod_m: self.tree_lod_m.unwrap_or(trees.lod_m),
+                thin_m: self.tree_thin_m.unwrap_or(trees.thin_m),
+                ..trees
+            });
         }
         c
     }
@@ -203,7 +217,8 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             .with_plant_lod([crate::renderer::MAX_PLANT_LOD_M; 2])
             .with_lod_widen(1.0),
     ];
-    // A world with trees: their switches at half and twice the default's.
+    // A world with trees: their switches at half and twice the default's, and their thinning
+    // from half the default's distance.
     if world.manifest.plant_types.iter().any(|t| t.is_tree())
         && let Some(trees) = d.tree_settings(world)
     {
@@ -212,6 +227,11 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             let lod = trees.lod_m.map(|m| k * m);
             all.insert(at, new(name, h, v, s, seg).with_tree_lod(lod));
         }
+        let at = all.len() - 1;
+        all.insert(
+            at,
+            new("trees thin x0.5", h, v, s, seg).with_tree_thin(0.5 * trees.thin_m),
+        );
     }
     all
 }
@@ -836,7 +856,7 @@ fn write_outputs(
     let mut csv = String::from(
         "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,\
          segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,lod_widen,plant_lod_near_m,\
-         plant_lod_far_m,tree_lod_near_m,tree_lod_far_m,gpu_ms,gpu_q1_ms,\
+         plant_lod_far_m,tree_lod_near_m,tree_lod_far_m,tree_thin_m,gpu_ms,gpu_q1_ms,\
          gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_vs_truth,\
          coarse_flip_vs_truth,flip_frame_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse\n",
     );
@@ -844,7 +864,7 @@ fn write_outputs(
         let s = &r.setting;
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -861,6 +881,7 @@ fn write_outputs(
             s.plant_lod_m[1],
             s.tree_lod_m.map_or(String::new(), |m| m[0].to_string()),
             s.tree_lod_m.map_or(String::new(), |m| m[1].to_string()),
+            s.tree_thin_m.map_or(String::new(), |m| m.to_string()),
             r.gpu.median_ms,
             r.gpu.q1_ms,
             r.gpu.q3_ms,
@@ -1015,6 +1036,16 @@ mod tests {
         let trees = half.config(&world).trees.unwrap();
         assert_eq!(trees.lod_m, default.lod_m.map(|m| 0.5 * m));
         assert_eq!(trees.min_keep, default.min_keep);
+        assert_eq!(trees.thin_m, default.thin_m);
+        let thin = settings
+            .iter()
+            .find(|s| s.name == "trees thin x0.5")
+            .unwrap()
+            .config(&world)
+            .trees
+            .unwrap();
+        assert_eq!(thin.thin_m, 0.5 * default.thin_m);
+        assert_eq!(thin.lod_m, default.lod_m);
         assert_eq!(settings.last().unwrap().name, "no LOD");
     }
 }
