@@ -11,7 +11,10 @@
 //! list, none); PARTS, a comma-separated list of `segments`, `rings`, `plants` and `trees`,
 //! adds the default frame supersampled 4x4 with that part of the truth's settings (blades out
 //! to one view distance): the blade segments, the grass rings (no LOD), every plant's full mesh
-//! unthinned, every tree's; `segments=NEAR/HIGH/LOW` adds it with those blade segments. Prints each
+//! unthinned, every tree's; `trees_meshes` the trees' meshes as far as the truth's (thinned as the
+//! default's); and with values, the default frame with those: `segments=NEAR/HIGH/LOW` blade
+//! segments, `trees_thin=METRES/KEEP` the trees' thinning (`PlantSettings::thin_m`, `min_keep`),
+//! `trees_lod=NEAR/FAR` and `plants_lod=NEAR/FAR` the switches, `plants_thin=METRES`. Prints each
 //! one's mean FLIP against the truth over the frame and over bands of distance (from the
 //! truth's depth) with the bands' share of the frame, each one's mean luminance over the
 //! truth's in each band, and writes every image into OUT.
@@ -117,28 +120,52 @@ fn main() -> Result<()> {
         let t1 = truth_config_reaching(&world, &base, slots, 1.0);
         for part in list.split(',') {
             let mut dp = d.clone();
-            match part {
-                "segments" => dp.grass.segments = t1.grass.segments,
-                "rings" => dp.grass_rings = t1.grass_rings,
-                "plants" => dp.plants = t1.plants,
-                "trees" => dp.trees = t1.trees,
-                other => match other.strip_prefix("segments=") {
-                    Some(list) => {
-                        let n: Vec<u32> = list
-                            .split('/')
-                            .map(|n| n.parse())
-                            .collect::<Result<_, _>>()
-                            .map_err(|e| anyhow::anyhow!("part {other:?}: {e}"))?;
-                        let [near, high, low] = n[..] else {
-                            anyhow::bail!("part {other:?}: segments=NEAR/HIGH/LOW")
-                        };
-                        dp.grass.segments = [near, high, low];
+            let trees = base.tree_settings(&world);
+            let usage = "segments, segments=NEAR/HIGH/LOW, rings, plants, trees, trees_meshes, \
+                         trees_thin=METRES/KEEP, trees_lod=NEAR/FAR, plants_lod=NEAR/FAR, \
+                         plants_thin=METRES";
+            match part.split_once('=') {
+                None => match part {
+                    "segments" => dp.grass.segments = t1.grass.segments,
+                    "rings" => dp.grass_rings = t1.grass_rings,
+                    "plants" => dp.plants = t1.plants,
+                    "trees" => dp.trees = t1.trees,
+                    "trees_meshes" => {
+                        dp.trees = trees.map(|t| verdant::plants::PlantSettings {
+                            lod_m: t1.trees.map_or(t.lod_m, |u| u.lod_m),
+                            ..t
+                        })
                     }
-                    None => anyhow::bail!(
-                        "part {other:?} is not one of segments, segments=NEAR/HIGH/LOW, rings, \
-                         plants, trees"
-                    ),
+                    other => anyhow::bail!("part {other:?} is not one of {usage}"),
                 },
+                Some((name, values)) => {
+                    let v: Vec<f32> = values
+                        .split('/')
+                        .map(|n| n.parse())
+                        .collect::<Result<_, _>>()
+                        .map_err(|e| anyhow::anyhow!("part {part:?}: {e}"))?;
+                    let with = |f: &dyn Fn(&mut verdant::plants::PlantSettings)| {
+                        trees.map(|mut t| {
+                            f(&mut t);
+                            t
+                        })
+                    };
+                    match (name, &v[..]) {
+                        ("segments", &[near, high, low]) => {
+                            dp.grass.segments = [near, high, low].map(|n| n as u32)
+                        }
+                        ("trees_thin", &[m, k]) => {
+                            dp.trees = with(&|t| {
+                                t.thin_m = m;
+                                t.min_keep = k;
+                            })
+                        }
+                        ("trees_lod", &[a, b]) => dp.trees = with(&|t| t.lod_m = [a, b]),
+                        ("plants_lod", &[a, b]) => dp.plants.lod_m = [a, b],
+                        ("plants_thin", &[m]) => dp.plants.thin_m = m,
+                        _ => anyhow::bail!("part {part:?} is not one of {usage}"),
+                    }
+                }
             }
             truths.push(mk(
                 &format!("default_4x4_{}", part.replace(['/', '='], "_")),
