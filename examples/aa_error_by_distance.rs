@@ -25,7 +25,9 @@ use verdant::aa::AntiAliasing;
 use verdant::camera::sample_path;
 use verdant::gpu::GpuContext;
 use verdant::tools::Scene;
-use verdant::tools::metrics::{band_mask, flip_error_map, masked_mean, ray_distances};
+use verdant::tools::metrics::{
+    band_mask, flip_error_map, masked_luminance, masked_mean, ray_distances,
+};
 use verdant::tools::truth::{Truth, atlas_slots, truth_config_reaching};
 use verdant::world::World;
 
@@ -251,22 +253,11 @@ fn main() -> Result<()> {
     }
     // Brightness by band: the mean linear luminance of each render over the truth's (a
     // systematic difference, not aliasing, moves it away from 1).
-    let luminance = |img: &image::RgbaImage, mask: &[bool]| -> Option<f64> {
-        let (mut sum, mut n) = (0.0, 0u64);
-        for (p, &m) in img.pixels().zip(mask) {
-            if m {
-                let l = |c: u8| f64::from(verdant::tools::metrics::decode_srgb8(c));
-                sum += 0.2126 * l(p[0]) + 0.7152 * l(p[1]) + 0.0722 * l(p[2]);
-                n += 1;
-            }
-        }
-        (n > 0).then(|| sum / n as f64)
-    };
     println!("mean luminance over the truth's, by band");
     for (name, img) in &imgs {
         print!("{:14} {:>7}", name, "");
         for m in &masks {
-            let v = match (luminance(img, m), luminance(&truth, m)) {
+            let v = match (masked_luminance(img, m), masked_luminance(&truth, m)) {
                 (Some(a), Some(b)) if b > 0.0 => format!("{:.3}", a / b),
                 _ => "-".into(),
             };

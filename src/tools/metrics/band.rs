@@ -60,9 +60,38 @@ pub fn masked_mean(values: &[f32], mask: &[bool]) -> Option<f64> {
     (n > 0).then(|| sum / n as f64)
 }
 
+/// Mean linear luminance (Rec. 709 weights) of the sRGB8 `image` over the pixels `mask`
+/// selects (row-major, one per pixel); `None` when it selects none.
+pub fn masked_luminance(image: &image::RgbaImage, mask: &[bool]) -> Option<f64> {
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    for (p, &m) in image.pixels().zip(mask) {
+        if m {
+            let l = |c: u8| f64::from(super::decode_srgb8(c));
+            sum += 0.2126 * l(p[0]) + 0.7152 * l(p[1]) + 0.0722 * l(p[2]);
+            n += 1;
+        }
+    }
+    (n > 0).then(|| sum / n as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn luminance_is_linear_and_counts_only_the_masked_pixels() {
+        let mut img = image::RgbaImage::new(2, 1);
+        img.put_pixel(0, 0, image::Rgba([255, 255, 255, 255]));
+        // sRGB 188 is about 0.5 in linear light.
+        img.put_pixel(1, 0, image::Rgba([188, 188, 188, 255]));
+        let white = masked_luminance(&img, &[true, false]).unwrap();
+        assert!((white - 1.0).abs() < 1e-6, "{white}");
+        let grey = masked_luminance(&img, &[false, true]).unwrap();
+        assert!((grey - 0.5).abs() < 0.01, "{grey}");
+        let both = masked_luminance(&img, &[true, true]).unwrap();
+        assert!((both - 0.5 * (white + grey)).abs() < 1e-9);
+        assert_eq!(masked_luminance(&img, &[false, false]), None);
+    }
 
     #[test]
     fn distances_follow_the_ray_and_the_band_selects_them() {

@@ -7,7 +7,7 @@ mod chart;
 mod coarse;
 mod coverage;
 
-pub use band::{band_mask, masked_mean, ray_distances};
+pub use band::{band_mask, masked_luminance, masked_mean, ray_distances};
 
 pub use chart::{Chart, ChartError, ChartPoint, LineChart, Series, pareto_front, pareto_front_n};
 pub use coarse::{
