@@ -249,12 +249,16 @@ fn trees_stand_on_the_tours_far_ridges() {
             drawn,
         ));
     }
+    // The bare ground's few trees: under one in twenty-five of the grassland's.
     assert!(
-        frames[1].1 < 100,
-        "only the bare ground's trees: {}",
-        frames[1].1
+        frames[1].1 * 25 < frames[0].1,
+        "only the bare ground's trees: {} against {}",
+        frames[1].1,
+        frames[0].1
     );
-    // The trees cover a share of the ground, scattered over the slopes.
+    // The trees cover a share of the ground, scattered over the slopes (at 320x180 the trees
+    // within the 800 m where none is thinned or grown are a pixel or two, and change the
+    // pixels they fall in by less than the threshold more often than the grown ones did).
     let (with, without) = (&frames[0].0, &frames[1].0);
     let sum = |p: &image::Rgb<u8>| p.0.iter().map(|&c| i32::from(c)).sum::<i32>();
     let changed = with
@@ -264,7 +268,7 @@ fn trees_stand_on_the_tours_far_ridges() {
         .count();
     let share = changed as f64 / (with.width() * with.height()) as f64;
     assert!(
-        (0.02..0.6).contains(&share),
+        (0.01..0.6).contains(&share),
         "{:.1}% of the frame changed by the trees",
         share * 100.0
     );

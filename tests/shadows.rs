@@ -257,7 +257,21 @@ fn tree_shadows_match_their_cpu_mirror_and_fall_from_the_trees() {
     let (lit, depth, _, off, _) = render(all.without(Feature::TreeShadows));
     assert_eq!(off.info[0], 0, "no cascades with tree shadows off");
     let (shaded, depth_shaded, maps, uniform, casters) = render(all);
-    assert_eq!(depth, depth_shaded, "the two frames must be the same scene");
+    // The two frames must be the same scene. On software Vulkan a handful of pixels on the
+    // silhouettes of full-mesh crowns 45-65 m away take one crown's depth in one frame and the
+    // one behind it in another (seen between two frames with the same settings too); those are
+    // left out of the comparison below.
+    let moved: Vec<bool> = depth
+        .iter()
+        .zip(&depth_shaded)
+        .map(|(a, b)| a != b)
+        .collect();
+    let n_moved = moved.iter().filter(|&&m| m).count();
+    assert!(
+        n_moved * 1000 <= depth.len(),
+        "the two frames must be the same scene: {n_moved} of {} pixels' depth differ",
+        depth.len()
+    );
     assert_eq!(uniform.info[0], 2, "two cascades");
     assert!(casters.len() > 20, "{} casters", casters.len());
 
@@ -283,7 +297,7 @@ fn tree_shadows_match_their_cpu_mirror_and_fall_from_the_trees() {
         for x in 0..w {
             let i = (y * w + x) as usize;
             let d = depth[i];
-            if d <= 0.0 {
+            if d <= 0.0 || moved[i] {
                 continue;
             }
             let ndc = glam::Vec2::new(

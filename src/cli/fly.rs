@@ -83,12 +83,12 @@ pub(crate) struct FlyArgs {
     pub(crate) plant_thin_m: Option<f32>,
     /// Trees' level-of-detail switches NEAR,FAR, metres: the full mesh out to NEAR, the
     /// reduced mesh out to FAR, crossed cards beyond, to the fog (default: the renderer's,
-    /// 30,150).
+    /// 60,300).
     #[arg(long, value_delimiter = ',')]
     pub(crate) tree_lod_m: Option<Vec<f32>>,
     /// Beyond this distance, metres, trees thin out as the square of the distance, down to
     /// --tree-min-keep of them, the survivors grown to keep the cover (default: the
-    /// renderer's, 400).
+    /// renderer's, 800).
     #[arg(long)]
     pub(crate) tree_thin_m: Option<f32>,
     /// The fewest trees the thinning keeps, above 0 and at most 1 (default: the renderer's,

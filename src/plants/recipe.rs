@@ -272,9 +272,11 @@ fn flower(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
     let petals = r.count(5, 8);
     let petal_len = r.range(0.14, 0.2);
     let petal_width = petal_len * r.range(0.45, 0.65);
-    // The reduced head has five petals at most, widened to fill the same ring.
+    // The reduced head has five petals at most, widened to fill the same ring, and a third
+    // wider again: its single-quad petals lose the full ones' cupped, overlapping spread (seen
+    // from above the reduced head covered 0.6-0.8 of the full one's area without it).
     let shown = if full { petals } else { petals.min(5) };
-    let petal_width = petal_width * petals as f32 / shown as f32;
+    let petal_width = petal_width * petals as f32 / shown as f32 * if full { 1.0 } else { 1.35 };
     let opening = r.range(0.25, 0.6);
     let spin = r.range(0.0, TAU);
     for p in 0..shown {
@@ -352,13 +354,15 @@ fn fern(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) {
         };
         let up = |t: f32| dir(t).cross(side);
         if !full {
-            // The reduced frond: one arching blade the width of its leaflets' reach.
+            // The reduced frond: one arching blade, narrower than its leaflets' reach (their
+            // gaps leave most of it open: at the full reach the reduced fern covered about twice
+            // the full one's area).
             let frond = Leaf {
                 base: Vec3::ZERO,
                 dir: dir(0.0),
                 up: up(0.0),
                 length: len,
-                width: len * 0.3,
+                width: len * 0.12,
                 droop: 0.7 * (e0 - e1),
                 cup: 0.1,
                 widest: 0.35,
@@ -560,11 +564,12 @@ fn branch(b: &mut Builder, rng: &Rng, br: &Branch, colour: [f32; 3], per_twig: u
             b.leaf(&leaf, Kind::Leaf);
         } else if i % 8 == 0 {
             // One leaf in eight, grown (more across than along, to keep the crown's outline) to
-            // keep most of its cover.
+            // keep about its cover (wider, the crowns covered up to 1.5 times the full ones' area
+            // from above).
             b.leaf(
                 &Leaf {
                     length: length * 1.7,
-                    width: leaf.width * 2.8,
+                    width: leaf.width * 2.3,
                     ..leaf
                 },
                 Kind::Leaf,

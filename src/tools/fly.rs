@@ -592,7 +592,7 @@ mod tests {
         let trees = config
             .trees
             .expect("the trees' settings, for the world's grass");
-        assert_eq!(trees.lod_m, [30.0, 150.0]);
+        assert_eq!(trees.lod_m, [60.0, 300.0]);
         assert_eq!(trees.thin_m, crate::plants::renderer::TREE_THIN_M);
         let set = FlyOptions {
             tree_lod_m: Some([20.0, 90.0]),

@@ -273,3 +273,47 @@ fn card_matches_the_full_mesh() {
     assert!((p.card.height() - p.lods[0].height()).abs() < 1e-6);
     assert!((p.card.radius() - p.lods[0].radius()).abs() < 1e-6);
 }
+
+/// The area a mesh covers seen from the side (looking along +y) and from above, square metres:
+/// its card picture's coverage times the picture's box (from above, the mesh turned so that its
+/// y axis stands up).
+fn covered_area(mesh: &PlantMesh) -> [f32; 2] {
+    let area = |m: &PlantMesh| {
+        let img = crate::plants::card::render_card(m, 96);
+        let alpha: f32 = img
+            .rgba
+            .chunks_exact(4)
+            .map(|p| f32::from(p[3]) / 255.0)
+            .sum();
+        let share = alpha / (img.width * img.height) as f32;
+        share * 2.0 * m.radius().max(1e-3) * m.height().max(1e-3)
+    };
+    let reach = mesh.radius();
+    let mut above = mesh.clone();
+    for v in &mut above.vertices {
+        let [x, y, z] = v.position;
+        v.position = [x, z, y + reach];
+    }
+    [area(mesh), area(&above)]
+}
+
+#[test]
+fn the_reduced_level_covers_about_what_the_full_mesh_covers() {
+    // Where the reduced mesh is drawn a plant is a few pixels: what it covers there is its
+    // colour's weight against the ground behind it, so the reduced level keeps the full
+    // mesh's cover, from the side and from above, within the spread of the seeds.
+    for recipe in Recipe::ALL {
+        for seed in seeds() {
+            let [(l0, _), (l1, _)] = build(recipe, seed, ACCENT);
+            let (full, reduced) = (covered_area(&l0), covered_area(&l1));
+            for (view, (f, r)) in ["side", "above"].iter().zip(full.iter().zip(&reduced)) {
+                let k = r / f;
+                assert!(
+                    (0.6..1.4).contains(&k),
+                    "{recipe:?} {seed} from {view}: the reduced level covers {r:.3} m2, the full \
+                     mesh {f:.3} m2 ({k:.2}x)"
+                );
+            }
+        }
+    }
+}

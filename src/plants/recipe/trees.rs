@@ -146,7 +146,9 @@ pub(super) fn conifer(rng: &Rng, colour: [f32; 3], lod: usize, b: &mut Builder) 
                 let (length, width) = if full {
                     (len * sr.range(0.42, 0.5), len * sr.range(0.4, 0.5))
                 } else {
-                    (len * 1.05, len * 0.75)
+                    // One spray for a whorl's five, as wide as their fan (narrower, the reduced
+                    // fir covered 0.6-0.75 of the full one's area).
+                    (len * 1.05, len * 1.3)
                 };
                 b.leaf(
                     &Leaf {
