@@ -14,7 +14,8 @@
 //! unthinned, every tree's; `trees_meshes` the trees' meshes as far as the truth's (thinned as the
 //! default's); and with values, the default frame with those: `segments=NEAR/HIGH/LOW` blade
 //! segments, `trees_thin=METRES/KEEP` the trees' thinning (`PlantSettings::thin_m`, `min_keep`),
-//! `trees_lod=NEAR/FAR` and `plants_lod=NEAR/FAR` the switches, `plants_thin=METRES`. Prints each
+//! `trees_lod=NEAR/FAR` and `plants_lod=NEAR/FAR` the switches, `plants_thin=METRES`, `view=SCALE`
+//! the grass's view distance times SCALE (the far field standing in beyond it). Prints each
 //! one's mean FLIP against the truth over the frame and over bands of distance (from the
 //! truth's depth) with the bands' share of the frame, each one's mean luminance over the
 //! truth's in each band, and writes every image into OUT.
@@ -125,7 +126,7 @@ fn main() -> Result<()> {
             let trees = base.tree_settings(&world);
             let usage = "segments, segments=NEAR/HIGH/LOW, rings, plants, trees, trees_meshes, \
                          trees_thin=METRES/KEEP, trees_lod=NEAR/FAR, plants_lod=NEAR/FAR, \
-                         plants_thin=METRES";
+                         plants_thin=METRES, view=SCALE";
             match part.split_once('=') {
                 None => match part {
                     "segments" => dp.grass.segments = t1.grass.segments,
@@ -165,6 +166,15 @@ fn main() -> Result<()> {
                         ("trees_lod", &[a, b]) => dp.trees = with(&|t| t.lod_m = [a, b]),
                         ("plants_lod", &[a, b]) => dp.plants.lod_m = [a, b],
                         ("plants_thin", &[m]) => dp.plants.thin_m = m,
+                        ("view", &[k]) if k > 0.0 => {
+                            let r = dp.grass_rings.unwrap_or_else(|| {
+                                verdant::lod::RingSettings::for_pyramid(&world.manifest.pyramid)
+                            });
+                            dp.grass_rings = Some(verdant::lod::RingSettings {
+                                low_radius_m: r.low_radius_m * f64::from(k),
+                                ..r
+                            });
+                        }
                         _ => anyhow::bail!("part {part:?} is not one of {usage}"),
                     }
                 }
