@@ -27,14 +27,10 @@ use verdant::camera::sample_path;
 use verdant::gpu::GpuContext;
 use verdant::tools::Scene;
 use verdant::tools::metrics::{
-    band_mask, flip_error_map, masked_luminance, masked_mean, ray_distances,
+    band_mask, flip_error_map, masked_luminance, masked_mean, ray_distances, rgb,
 };
 use verdant::tools::truth::{Truth, atlas_slots, truth_config_reaching};
 use verdant::world::World;
-
-fn rgb(i: &image::RgbaImage) -> image::RgbImage {
-    image::DynamicImage::ImageRgba8(i.clone()).to_rgb8()
-}
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();

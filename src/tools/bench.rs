@@ -141,10 +141,7 @@ impl BenchLodOptions {
     }
 }
 
-/// The RGB channels of `img`.
-pub(crate) fn rgb(img: &image::RgbaImage) -> image::RgbImage {
-    image::DynamicImage::ImageRgba8(img.clone()).to_rgb8()
-}
+pub(crate) use crate::tools::metrics::rgb;
 
 /// Mean pixel FLIP of `b` against `a`.
 pub(crate) fn flip(a: &image::RgbaImage, b: &image::RgbaImage) -> Result<f64> {

@@ -38,8 +38,8 @@ use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::tools::Scene;
 use crate::tools::fly::{OutDir, write_json, write_png, write_text};
-use crate::tools::metrics::flip_compare;
 use crate::tools::metrics::{Chart, ChartPoint};
+use crate::tools::metrics::{flip_compare, rgb};
 use crate::tools::report::AdapterReport;
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_frames};
 use crate::tools::truth::Truth;
@@ -382,10 +382,6 @@ pub struct BenchAaReport {
     pub timings: Vec<AaTiming>,
     /// Timing frame counts.
     pub counts: FrameCounts,
-}
-
-fn rgb(img: &RgbaImage) -> image::RgbImage {
-    image::DynamicImage::ImageRgba8(img.clone()).to_rgb8()
 }
 
 fn flip(reference: &RgbaImage, actual: &RgbaImage) -> Result<f64> {

@@ -18,6 +18,11 @@ pub use coverage::{COVERAGE_DISTANCE_M, COVERAGE_EPSILON, Coverage, grass_covera
 
 use thiserror::Error;
 
+/// The RGB channels of `img` (what the FLIP measures compare).
+pub fn rgb(img: &image::RgbaImage) -> image::RgbImage {
+    image::DynamicImage::ImageRgba8(img.clone()).to_rgb8()
+}
+
 /// The `q`-quantile (0..=1) of `values` by linear interpolation between order statistics.
 /// `None` when there are no finite values.
 pub fn percentile(values: &[f64], q: f64) -> Option<f64> {
