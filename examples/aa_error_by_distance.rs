@@ -1,6 +1,6 @@
 //! Where the error against the truth comes from, by distance from the camera.
 //!
-//! `cargo run --release --example aa_error_by_distance -- [WIDTH HEIGHT [PATH [OUT [WIDEN [PARTS]]]]]`
+//! `cargo run --release --example aa_error_by_distance -- [WIDTH HEIGHT [PATH [OUT [WIDEN [PARTS [RUN_UP [WIND [TAA]]]]]]]]`
 //! (defaults 480 270 meadow out/error-by-distance): one view of the default world's path (the
 //! meadow's first; 30% along any other), after six frames of the same wind for every render,
 //! drawn as the 4x4 truth and as: the truth at 8x8 (the truth's own sampling error), with blades
@@ -15,10 +15,16 @@
 //! default's); and with values, the default frame with those: `segments=NEAR/HIGH/LOW` blade
 //! segments, `trees_thin=METRES/KEEP` the trees' thinning (`PlantSettings::thin_m`, `min_keep`),
 //! `trees_lod=NEAR/FAR` and `plants_lod=NEAR/FAR` the switches, `plants_thin=METRES`, `view=SCALE`
-//! the grass's view distance times SCALE (the far field standing in beyond it). Prints each
+//! the grass's view distance times SCALE (the far field standing in beyond it); `k=K` the default
+//! frame supersampled K x K (at K other than 4, sampled elsewhere in the pixel than the truth's
+//! sub-samples). Prints each
 //! one's mean FLIP against the truth over the frame and over bands of distance (from the
 //! truth's depth) with the bands' share of the frame, each one's mean luminance over the
-//! truth's in each band, and writes every image into OUT.
+//! truth's in each band, and writes every image into OUT. RUN_UP (default 6) is the frames drawn
+//! before the measured one (a temporal method's history fills over them); WIND names the
+//! world's wind scene for every render (default: the renderer's); TAA, a comma-separated list
+//! of `SIGMA/SAMPLES[/MOTION]`, adds the temporal method with those settings
+//! (`TaaSettings::clip_sigma`, `max_samples`; MOTION 1 turns `blade_motion` on).
 use anyhow::Result;
 use std::sync::Arc;
 use verdant::RendererConfig;
@@ -60,8 +66,16 @@ fn main() -> Result<()> {
     let cam = sample_path(&path, t0);
     let ctx = GpuContext::new()?;
     let slots = atlas_slots(&world, &ctx.device);
-    let base = RendererConfig::for_world(&world);
-    let run_up = 6;
+    let mut base = RendererConfig::for_world(&world);
+    let run_up: i64 = match args.get(7).filter(|a| !a.is_empty()) {
+        Some(n) => n
+            .parse()
+            .map_err(|e| anyhow::anyhow!("run-up {n:?} is not a count: {e}"))?,
+        None => 6,
+    };
+    if let Some(scene) = args.get(8).filter(|a| !a.is_empty()) {
+        base.wind_scene = Some(scene.clone());
+    }
     let dt = 1.0 / 60.0;
     let walker = Some(cam.position.truncate());
     let mut truths: Vec<(String, Truth)> = Vec::new();
@@ -115,14 +129,23 @@ fn main() -> Result<()> {
             truths.push(mk(&format!("default_4x4_w{k}"), dk, 4)?);
         }
     }
-    if let Some(list) = args.get(6) {
+    if let Some(list) = args.get(6).filter(|l| !l.is_empty()) {
         let t1 = truth_config_reaching(&world, &base, slots, 1.0);
         for part in list.split(',') {
+            if let Some(k) = part.strip_prefix("k=") {
+                // The default frame supersampled k x k: at k other than the truth's 4 its
+                // sub-samples lie elsewhere in the pixel than the truth's.
+                let k: u32 = k
+                    .parse()
+                    .map_err(|e| anyhow::anyhow!("part {part:?}: {e}"))?;
+                truths.push(mk(&format!("default_{k}x{k}"), d.clone(), k)?);
+                continue;
+            }
             let mut dp = d.clone();
             let trees = base.tree_settings(&world);
             let usage = "segments, segments=NEAR/HIGH/LOW, rings, plants, trees, trees_meshes, \
                          trees_thin=METRES/KEEP, trees_lod=NEAR/FAR, plants_lod=NEAR/FAR, \
-                         plants_thin=METRES, view=SCALE";
+                         plants_thin=METRES, view=SCALE, k=K";
             match part.split_once('=') {
                 None => match part {
                     "segments" => dp.grass.segments = t1.grass.segments,
@@ -191,9 +214,37 @@ fn main() -> Result<()> {
             Scene::new(&ctx, world.clone(), w, h, c)?,
         ));
     }
+    for variant in args
+        .get(9)
+        .iter()
+        .flat_map(|l| l.split(','))
+        .filter(|v| !v.is_empty())
+    {
+        let v: Vec<f32> = variant
+            .split('/')
+            .map(|n| n.parse())
+            .collect::<Result<_, _>>()
+            .map_err(|e| anyhow::anyhow!("taa variant {variant:?}: {e}"))?;
+        let mut c = base.clone();
+        c.aa = AntiAliasing::Taa;
+        match v[..] {
+            [sigma, n] | [sigma, n, _] if n >= 2.0 => {
+                c.taa.clip_sigma = sigma;
+                c.taa.max_samples = n as u32;
+                c.taa.blade_motion = v.get(2).is_some_and(|&m| m > 0.0);
+            }
+            _ => anyhow::bail!("taa variant {variant:?} is not SIGMA/SAMPLES[/MOTION]"),
+        }
+        c.validate()
+            .map_err(|e| anyhow::anyhow!("taa variant {variant:?}: {e}"))?;
+        scenes.push((
+            format!("taa_{}", variant.replace('/', "_")),
+            Scene::new(&ctx, world.clone(), w, h, c)?,
+        ));
+    }
     let mut imgs: Vec<(String, image::RgbaImage)> = Vec::new();
     let mut depth = Vec::new();
-    for i in -(run_up as i64)..=0 {
+    for i in -run_up..=0 {
         let t = t0 + i as f64 * dt;
         for (name, tr) in truths.iter_mut() {
             tr.scene()

@@ -1,5 +1,5 @@
 // Grass blades from the instance pool: one indirect draw per generation job, a triangle strip
-// per blade. SEGMENTS is set per pipeline: by default 5 (11 vertices) for the blades within the
+// per blade. SEGMENTS is set per pipeline: by default 7 (15 vertices) for the blades within the
 // near radius, 3 (7 vertices) for the rest of the high ring and for the low ring. The shape
 // is a cubic Bezier bent by the wind and scaled to keep its length (CPU mirror of the shape:
 // src/grass/blade.rs). The blade record, the feature bits and the colour output are
