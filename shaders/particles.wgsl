@@ -7,6 +7,12 @@
 // or from the head of a flower of the plants' pool (a petal); the rest move toward the wind plus
 // their own flutter, sinking at their fall speed, with the exact solution of that drag over the
 // frame's time. Positions are relative to the camera (moved by the camera's step each frame).
+// The pools' order is their placement's atomic appends, which differs from run to run: so that a
+// frame sheds the same particles whatever that order, three passes before the step pick, per
+// bucket of PICK_BUCKETS, the tree and the flower with the largest key (a hash of the plant's
+// own hash, its position and the frame's seed, never of its place in the pool), and list the
+// picked ones in the buckets' order; a particle is shed from the plant of that list its hash
+// chooses.
 // CPU mirror: src/plants/particles_cpu.rs.
 
 #include "shared/hash.wgsl"
@@ -73,12 +79,20 @@ struct DrawIndexedArgs {
 // The plants' instance pool and draws, for the flowers' petals.
 @group(0) @binding(6) var<storage, read> plants: array<PlantInstance>;
 @group(0) @binding(7) var<storage, read> plant_args: array<DrawIndexedArgs>;
+// Per pool (trees, then flowers) and bucket, the largest key of a plant in it (0: none); then
+// the region << 24 | index, plus 1, of the plant that holds it (the largest where keys tie);
+// then per pool the picked plants in the buckets' order; then per pool their number.
+@group(0) @binding(8) var<storage, read_write> picks: array<atomic<u32>>;
 // The pool again, read-only, for the draw (a vertex stage cannot see a writable buffer).
 @group(1) @binding(0) var<storage, read> leaves: array<Particle>;
 
 const TAU: f32 = 6.2831853;
 // A petal's kind is this plus its flower's type.
 const PETAL: u32 = 8u;
+// Buckets of the picks per pool.
+const PICK_BUCKETS: u32 = 1024u;
+// The most instances of a region the picks see (an index takes 24 bits).
+const PICK_INDICES: u32 = 16777216u;
 
 // The trees of the frame a particle can be shed from: per type, its full and reduced meshes.
 fn tree_count(t: u32, level: u32) -> u32 {
@@ -95,9 +109,9 @@ fn flower_count(t: u32, level: u32) -> u32 {
 }
 
 // Shed particle `i` again, from a tree or a flower picked by its hash (a tree with
-// params.flowers.w tickets to a flower's one), or, to keep about params.shed.x leaves in the air
-// per tree and params.shed.y petals per flower near the camera, leave it waiting in the pool for
-// a life's time (as shed in particles_cpu.rs).
+// params.flowers.w tickets to a flower's one; the plant from the picks), or, to keep about
+// params.shed.x leaves in the air per tree and params.shed.y petals per flower near the camera,
+// leave it waiting in the pool for a life's time (as shed in particles_cpu.rs).
 fn shed(i: u32) -> Particle {
     var p: Particle;
     let h = hash3(i, params.counts.w, 0x1eafu);
@@ -127,49 +141,30 @@ fn shed(i: u32) -> Particle {
     }
     let tickets = max(params.flowers.w, 1u);
     let tree_tickets = tree_total * tickets;
-    var k = hash_u32(h ^ 1u) % (tree_tickets + flower_total);
+    let k = hash_u32(h ^ 1u) % (tree_tickets + flower_total);
     let a = TAU * rand01(hash_u32(h ^ 2u));
     let near = sqrt(rand01(hash_u32(h ^ 3u)));
     let spot = rand01(hash_u32(h ^ 4u));
+    let pool = select(1u, 0u, k < tree_tickets);
+    let picked = pick(pool, hash_u32(h ^ 8u));
+    if picked == 0u {
+        p.life = -life;
+        return p;
+    }
+    let region = (picked - 1u) >> 24u;
+    let index = (picked - 1u) & (PICK_INDICES - 1u);
     var source: PlantInstance;
     var r = 0.0;
     var z = 0.0;
-    var found = false;
-    if k < tree_tickets {
-        k = k / tickets;
-        var region = 0u;
-        for (var t = 0u; t < params.counts.y && !found; t++) {
-            for (var level = 0u; level < 2u && !found; level++) {
-                let n = tree_count(t, level);
-                if k < n {
-                    region = t * 3u + level;
-                    p.kind = t;
-                    found = true;
-                } else {
-                    k -= n;
-                }
-            }
-        }
-        source = trees[region * params.counts.z + k];
+    if pool == 0u {
+        source = trees[region * params.counts.z + index];
+        p.kind = region / 3u;
         // In the crown: within 0.35 of its height of the axis, from half to 0.9 of it up.
         r = 0.35 * near;
         z = 0.5 + 0.4 * spot;
     } else {
-        k -= tree_tickets;
-        var region = 0u;
-        for (var t = 0u; t < plant_types && !found; t++) {
-            for (var level = 0u; level < 2u && !found; level++) {
-                let n = flower_count(t, level);
-                if k < n {
-                    region = t * 3u + level;
-                    p.kind = PETAL + t;
-                    found = true;
-                } else {
-                    k -= n;
-                }
-            }
-        }
-        source = plants[region * params.flowers.y + k];
+        source = plants[region * params.flowers.y + index];
+        p.kind = PETAL + region / 3u;
         // At the flower head: within 0.15 of its height of the stem, 0.75 to 0.95 of it up.
         r = 0.15 * near;
         z = 0.75 + 0.2 * spot;
@@ -181,6 +176,104 @@ fn shed(i: u32) -> Particle {
     p.life = life;
     p.spin = rand01(hash_u32(h ^ 6u));
     return p;
+}
+
+// A plant's key in the picks: of its own hash, its position and the frame's seed, never 0 (as
+// pick_key in particles_cpu.rs).
+fn pick_key(plant: PlantInstance) -> u32 {
+    let h = hash3(plant.hash ^ params.counts.w, bitcast<u32>(plant.pos.x), bitcast<u32>(plant.pos.y));
+    return max(h, 1u);
+}
+
+// The plant at index `i` of `region` of pool `pool` (0 trees, 1 flowers) takes part in the picks: in the first pass
+// its key bids for its bucket; in the second, the plant whose key won writes where it lies.
+fn bid(pool: u32, region: u32, i: u32, plant: PlantInstance, second: bool) {
+    let key = pick_key(plant);
+    let slot = pool * PICK_BUCKETS + key % PICK_BUCKETS;
+    if !second {
+        atomicMax(&picks[slot], key);
+    } else if atomicLoad(&picks[slot]) == key {
+        atomicMax(&picks[2u * PICK_BUCKETS + slot], ((region << 24u) | i) + 1u);
+    }
+}
+
+// Every tree and flower particles can be shed from, at index `i` of its region.
+fn bid_all(i: u32, second: bool) {
+    if i >= PICK_INDICES {
+        return;
+    }
+    for (var t = 0u; t < params.counts.y; t++) {
+        for (var level = 0u; level < 2u; level++) {
+            if i < tree_count(t, level) {
+                let region = t * 3u + level;
+                bid(0u, region, i, trees[region * params.counts.z + i], second);
+            }
+        }
+    }
+    for (var t = 0u; t < min(params.flowers.x, 8u); t++) {
+        for (var level = 0u; level < 2u; level++) {
+            if i < flower_count(t, level) {
+                let region = t * 3u + level;
+                bid(1u, region, i, plants[region * params.flowers.y + i], second);
+            }
+        }
+    }
+}
+
+@compute @workgroup_size(64)
+fn cs_pick_keys(@builtin(global_invocation_id) id: vec3<u32>) {
+    bid_all(id.x, false);
+}
+
+@compute @workgroup_size(64)
+fn cs_pick_plants(@builtin(global_invocation_id) id: vec3<u32>) {
+    bid_all(id.x, true);
+}
+
+var<workgroup> bucket_counts: array<u32, 64>;
+
+// The picked plants of pool workgroup_id.x listed in the buckets' order: each of 64
+// invocations counts the picks of 16 buckets, the first sums the counts before each, and each
+// writes its own where they start.
+@compute @workgroup_size(64)
+fn cs_pick_list(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l: u32) {
+    let pool = wg.x;
+    let per = PICK_BUCKETS / 64u;
+    let start = 2u * PICK_BUCKETS + pool * PICK_BUCKETS + l * per;
+    var n = 0u;
+    for (var j = 0u; j < per; j++) {
+        n += select(0u, 1u, atomicLoad(&picks[start + j]) != 0u);
+    }
+    bucket_counts[l] = n;
+    workgroupBarrier();
+    if l == 0u {
+        var total = 0u;
+        for (var j = 0u; j < 64u; j++) {
+            let c = bucket_counts[j];
+            bucket_counts[j] = total;
+            total += c;
+        }
+        atomicStore(&picks[6u * PICK_BUCKETS + pool], total);
+    }
+    workgroupBarrier();
+    var at = 4u * PICK_BUCKETS + pool * PICK_BUCKETS + bucket_counts[l];
+    for (var j = 0u; j < per; j++) {
+        let got = atomicLoad(&picks[start + j]);
+        if got != 0u {
+            atomicStore(&picks[at], got);
+            at += 1u;
+        }
+    }
+}
+
+// The plant picked for a particle of pool `pool` whose hash is `h`: of the pool's picked
+// plants, the one at h modulo their number (region << 24 | index, plus 1; 0: none at all).
+fn pick(pool: u32, h: u32) -> u32 {
+    let n = atomicLoad(&picks[6u * PICK_BUCKETS + pool]);
+    if n == 0u {
+        return 0u;
+    }
+    return atomicLoad(&picks[4u * PICK_BUCKETS + pool * PICK_BUCKETS + h % n]);
 }
 
 // One step of a particle in the air over `dt` (as step in particles_cpu.rs): its velocity

@@ -11,7 +11,7 @@ use crate::gpu::layout::*;
 use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{buffer, compute_pipeline, render_pipeline};
 use crate::gpu::{GpuTimer, Targets};
-use crate::plants::particles_cpu::{PETAL, Particle, ParticleParams};
+use crate::plants::particles_cpu::{PETAL, PICK_BUCKETS, PICK_INDICES, Particle, ParticleParams};
 
 /// Settings of the leaves.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -141,6 +141,10 @@ pub struct ParticleStage {
     particles: wgpu::Buffer,
     group: wgpu::BindGroup,
     step: wgpu::ComputePipeline,
+    pick_keys: wgpu::ComputePipeline,
+    pick_plants: wgpu::ComputePipeline,
+    pick_list: wgpu::ComputePipeline,
+    picks: wgpu::Buffer,
     draw_layouts: [wgpu::BindGroupLayout; 2],
     draw_groups: [wgpu::BindGroup; 2],
     draw: wgpu::RenderPipeline,
@@ -181,6 +185,7 @@ impl ParticleStage {
                     storage_buffer_read_only(),
                     storage_buffer_read_only(),
                     storage_buffer_read_only(),
+                    storage_buffer(),
                 ],
             ),
         );
@@ -198,6 +203,35 @@ impl ParticleStage {
         ];
         let module = crate::shaders::module(device, "particles.wgsl");
         let step = compute_pipeline(device, "particles step", &module, "cs_step", &[&layout]);
+        let pick_keys = compute_pipeline(
+            device,
+            "particles pick keys",
+            &module,
+            "cs_pick_keys",
+            &[&layout],
+        );
+        let pick_plants = compute_pipeline(
+            device,
+            "particles pick plants",
+            &module,
+            "cs_pick_plants",
+            &[&layout],
+        );
+        let pick_list = compute_pipeline(
+            device,
+            "particles pick list",
+            &module,
+            "cs_pick_list",
+            &[&layout],
+        );
+        // Per class and bucket, the largest key and the plant that holds it; per class, the
+        // picked plants listed and their number.
+        let picks = buffer(
+            device,
+            "particles picks",
+            u64::from(6 * PICK_BUCKETS + 2) * 4,
+            U::STORAGE | U::COPY_DST,
+        );
         let params_buffer = buffer(
             device,
             "particles params",
@@ -226,6 +260,7 @@ impl ParticleStage {
                     .map_or(trees.instances, |f| f.instances)
                     .as_entire_binding(),
                 flowers.map_or(trees.args, |f| f.args).as_entire_binding(),
+                picks.as_entire_binding(),
             ],
         );
         let draw_groups = [
@@ -302,6 +337,10 @@ impl ParticleStage {
             particles,
             group,
             step,
+            pick_keys,
+            pick_plants,
+            pick_list,
+            picks,
             draw_layouts,
             draw_groups,
             draw,
@@ -389,14 +428,27 @@ impl ParticleStage {
         queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&self.params));
     }
 
-    /// Records the step (compute).
+    /// Records the step (compute): the picks of the plants particles are shed from
+    /// ([`crate::plants::particles_cpu::Picks`]), over the largest region of the two pools,
+    /// then the particles.
     pub fn record_step(&self, encoder: &mut wgpu::CommandEncoder, timer: &mut GpuTimer) {
+        encoder.clear_buffer(&self.picks, 0, None);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("particles step"),
             timestamp_writes: timer.compute_pass("particles_step"),
         });
-        pass.set_pipeline(&self.step);
         pass.set_bind_group(0, &self.group, &[]);
+        let region = self.params.counts[2]
+            .max(self.params.flowers[1])
+            .clamp(1, PICK_INDICES);
+        for pipeline in [&self.pick_keys, &self.pick_plants] {
+            pass.set_pipeline(pipeline);
+            pass.dispatch_workgroups(region.div_ceil(64), 1, 1);
+        }
+        // One workgroup a class lists its picks.
+        pass.set_pipeline(&self.pick_list);
+        pass.dispatch_workgroups(2, 1, 1);
+        pass.set_pipeline(&self.step);
         pass.dispatch_workgroups(self.settings.count.div_ceil(64), 1, 1);
     }
 

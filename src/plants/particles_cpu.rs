@@ -73,6 +73,110 @@ const TAU: f32 = std::f32::consts::TAU;
 /// A petal's kind is this plus its flower's type.
 pub const PETAL: u32 = 8;
 
+/// Buckets of the picks per class (trees, flowers): see [`Picks`].
+pub const PICK_BUCKETS: u32 = 1024;
+
+/// The most instances of a region the picks see (an index takes 24 bits of a pick).
+pub const PICK_INDICES: u32 = 1 << 24;
+
+/// The plants a frame's particles are shed from, whatever the order of the pools (their
+/// placement's atomic appends differ from run to run): per class (0 trees, 1 flowers) and
+/// bucket of [`PICK_BUCKETS`], the plant with the largest [`pick_key`] among those whose key
+/// falls in the bucket, as its region << 24 | index, plus 1 (where keys tie, the largest); the
+/// picked plants of each class are listed in the buckets' order, and a particle is shed from
+/// the one its hash chooses. Mirrors the shader's `cs_pick_keys`, `cs_pick_plants` and
+/// `cs_pick_list`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Picks {
+    keys: Vec<u32>,
+    plants: Vec<u32>,
+    lists: [Vec<(u32, u32)>; 2],
+}
+
+/// A plant's key in the picks: a hash of its own hash, its position and the frame's `seed`,
+/// never 0; nothing of where it lies in its pool.
+pub fn pick_key(plant: &PlantInstance, seed: u32) -> u32 {
+    hash3(
+        plant.hash ^ seed,
+        plant.pos[0].to_bits(),
+        plant.pos[1].to_bits(),
+    )
+    .max(1)
+}
+
+impl Picks {
+    /// The picks over the frame's trees (`trees`, `drawn` as in [`shed`]) and flowers.
+    pub fn new(
+        params: &ParticleParams,
+        trees: &[PlantInstance],
+        drawn: &[u32],
+        flowers: Option<Flowers<'_>>,
+    ) -> Self {
+        let b = PICK_BUCKETS as usize;
+        let mut picks = Picks {
+            keys: vec![0; 2 * b],
+            plants: vec![0; 2 * b],
+            lists: [Vec::new(), Vec::new()],
+        };
+        let seed = params.counts[3];
+        let mut bid = |class: usize, region: u32, i: u32, plant: &PlantInstance| {
+            let key = pick_key(plant, seed);
+            let slot = class * b + (key % PICK_BUCKETS) as usize;
+            let packed = ((region << 24) | i) + 1;
+            if key > picks.keys[slot] || (key == picks.keys[slot] && packed > picks.plants[slot]) {
+                picks.keys[slot] = key;
+                picks.plants[slot] = packed;
+            }
+        };
+        let cap = params.counts[2];
+        for t in 0..params.counts[1] {
+            for level in 0..2 {
+                let region = t * 3 + level;
+                for i in 0..drawn_in(drawn, cap, t, level).min(PICK_INDICES) {
+                    bid(0, region, i, &trees[(region * cap + i) as usize]);
+                }
+            }
+        }
+        if let Some(f) = flowers {
+            let [types, plant_cap, mask, _] = params.flowers;
+            for t in (0..types.min(8)).filter(|&t| params.shed[1] > 0.0 && (mask >> t) & 1 == 1) {
+                for level in 0..2 {
+                    let region = t * 3 + level;
+                    for i in 0..drawn_in(f.drawn, plant_cap, t, level).min(PICK_INDICES) {
+                        bid(
+                            1,
+                            region,
+                            i,
+                            &f.instances[(region * plant_cap + i) as usize],
+                        );
+                    }
+                }
+            }
+        }
+        for class in 0..2 {
+            picks.lists[class] = picks.plants[class * b..(class + 1) * b]
+                .iter()
+                .filter(|&&p| p != 0)
+                .map(|&p| ((p - 1) >> 24, (p - 1) & (PICK_INDICES - 1)))
+                .collect();
+        }
+        picks
+    }
+
+    /// The picked plants of `class` (0 trees, 1 flowers) in the buckets' order, each as
+    /// (region, index).
+    pub fn list(&self, class: usize) -> &[(u32, u32)] {
+        &self.lists[class]
+    }
+
+    /// The plant picked for a particle of `class` whose hash is `h`: of the class's list, the
+    /// one at `h` modulo its length; `None` with none.
+    pub fn pick(&self, class: usize, h: u32) -> Option<(u32, u32)> {
+        let list = self.list(class);
+        (!list.is_empty()).then(|| list[(h % list.len() as u32) as usize])
+    }
+}
+
 /// The flowers of the frame: the plants' instance pool (regions of `params.flowers[1]`
 /// instances, type * 3 + level) and the instances drawn in each region.
 #[derive(Clone, Copy, Debug)]
@@ -95,15 +199,29 @@ fn drawn_in(drawn: &[u32], cap: u32, t: u32, level: u32) -> u32 {
 /// Particle `i` shed from the trees of the frame, or from its flowers: `trees` is the trees'
 /// instance pool (regions of `params.counts[2]` instances, type * 3 + level) and `drawn[r]` the
 /// instances in region `r`; `flowers` the plants' (only the types with their bit in
-/// `params.flowers[2]` shed). A tree or flower of a full or reduced mesh is picked by the
-/// particle's hash (a tree with `params.flowers[3]` tickets to a flower's one), and the particle
-/// put in its crown (a leaf) or its flower head (a petal). So that about `params.shed[0]` leaves
-/// a tree and `params.shed[1]` petals a flower are in the air, the particle is shed only with
-/// the chance of that many over the pool's size, else (and with no tree or flower) it waits in
-/// the pool for a life's time (a negative life).
+/// `params.flowers[2]` shed). The particle's hash chooses between the trees and the flowers (a
+/// tree with `params.flowers[3]` tickets to a flower's one) and a bucket of the frame's
+/// [`Picks`], whose plant of a full or reduced mesh it is shed from, put in its crown (a leaf) or
+/// its flower head (a petal). So that about `params.shed[0]` leaves a tree and `params.shed[1]`
+/// petals a flower are in the air, the particle is shed only with the chance of that many over
+/// the pool's size, else (and with no tree or flower) it waits in the pool for a life's time (a
+/// negative life). (Builds the picks: [`shed_from`] takes them made once for many particles.)
 pub fn shed(
     i: u32,
     params: &ParticleParams,
+    trees: &[PlantInstance],
+    drawn: &[u32],
+    flowers: Option<Flowers<'_>>,
+) -> Particle {
+    let picks = Picks::new(params, trees, drawn, flowers);
+    shed_from(i, params, &picks, trees, drawn, flowers)
+}
+
+/// [`shed`] with the frame's `picks` (of the same pools) made beforehand.
+pub fn shed_from(
+    i: u32,
+    params: &ParticleParams,
+    picks: &Picks,
     trees: &[PlantInstance],
     drawn: &[u32],
     flowers: Option<Flowers<'_>>,
@@ -134,42 +252,23 @@ pub fn shed(
     }
     let tickets = tickets.max(1);
     let tree_tickets = tree_total * tickets;
-    let mut k = hash_u32(h ^ 1) % (tree_tickets + flower_total);
+    let k = hash_u32(h ^ 1) % (tree_tickets + flower_total);
     let a = TAU * rand01(hash_u32(h ^ 2));
     let (near, spot) = (rand01(hash_u32(h ^ 3)).sqrt(), rand01(hash_u32(h ^ 4)));
-    let from = if k < tree_tickets {
-        k /= tickets;
-        let mut region = 0;
-        'pick: for t in 0..types {
-            for level in 0..2 {
-                let n = drawn_in(drawn, cap, t, level);
-                if k < n {
-                    region = t * 3 + level;
-                    p.kind = t;
-                    break 'pick;
-                }
-                k -= n;
-            }
-        }
-        let tree = &trees[(region * cap + k) as usize];
+    let class = if k < tree_tickets { 0 } else { 1 };
+    let Some((region, index)) = picks.pick(class, hash_u32(h ^ 8)) else {
+        p.life = -life;
+        return p;
+    };
+    let from = if class == 0 {
+        p.kind = region / 3;
+        let tree = &trees[(region * cap + index) as usize];
         // In the crown: within 0.35 of its height of the axis, from half to 0.9 of it up.
         (tree, 0.35 * near, 0.5 + 0.4 * spot)
     } else {
-        k -= tree_tickets;
-        let mut region = 0;
-        'flower: for t in (0..plant_types.min(8)).filter(|&t| sheds(t)) {
-            for level in 0..2 {
-                let n = drawn_in(flower_drawn, plant_cap, t, level);
-                if k < n {
-                    region = t * 3 + level;
-                    p.kind = PETAL + t;
-                    break 'flower;
-                }
-                k -= n;
-            }
-        }
-        let flower =
-            &flowers.expect("flowers were counted").instances[(region * plant_cap + k) as usize];
+        p.kind = PETAL + region / 3;
+        let flower = &flowers.expect("flowers were counted").instances
+            [(region * plant_cap + index) as usize];
         // At the flower head: within 0.15 of its height of the stem, 0.75 to 0.95 of it up.
         (flower, 0.15 * near, 0.75 + 0.2 * spot)
     };
@@ -215,6 +314,7 @@ pub fn advance(
     wind_at: &dyn Fn(glam::Vec2) -> [f32; 4],
 ) -> Vec<Particle> {
     let d = Vec3::new(params.delta[0], params.delta[1], params.delta[2]);
+    let picks = Picks::new(params, trees, drawn, flowers);
     particles
         .iter()
         .enumerate()
@@ -226,7 +326,7 @@ pub fn advance(
                 || p.age >= p.life.abs()
                 || (p.life > 0.0 && p.pos[2] < p.ground)
             {
-                shed(i as u32, params, trees, drawn, flowers)
+                shed_from(i as u32, params, &picks, trees, drawn, flowers)
             } else if p.life > 0.0 {
                 let w = wind_at(glam::Vec2::new(p.pos[0], p.pos[1]));
                 step(&p, params.delta[3], params, [w[0], w[1]])
@@ -329,6 +429,112 @@ mod tests {
             .filter(|&i| shed(i, &few, &trees, &drawn, None).life > 0.0)
             .count();
         assert!((500..700).contains(&flying), "{flying} of 1600 shed");
+    }
+
+    #[test]
+    fn the_sheds_do_not_depend_on_the_order_of_the_pools() {
+        // Two types of 40 trees (full and reduced meshes) in regions of 64, and a flower type
+        // of 30, each with its own hash and place; the same pools shuffled within each region.
+        let plant = |x: f32, y: f32, scale: f32, kind: u32, hash: u32| PlantInstance {
+            pos: [x, y, -2.0 + 0.01 * x],
+            yaw: 0.0,
+            scale,
+            kind,
+            hash,
+            fade: 1.0,
+        };
+        let cap = 64u32;
+        let mut trees = vec![plant(0.0, 0.0, 1.0, 99, 0); 6 * cap as usize];
+        let drawn = [25, 15, 0, 30, 10, 0];
+        for (r, &n) in drawn.iter().enumerate() {
+            for i in 0..n {
+                let x = (r * 100 + i as usize) as f32;
+                trees[r * cap as usize + i as usize] =
+                    plant(x, 0.5 * x, 10.0, (r / 3) as u32, hash_u32(x.to_bits()));
+            }
+        }
+        let mut plants = vec![plant(0.0, 0.0, 0.5, 99, 0); 3 * cap as usize];
+        let plant_drawn = [20, 10, 0];
+        for (r, &n) in plant_drawn.iter().enumerate() {
+            for i in 0..n {
+                let x = -(r as f32 * 50.0 + i as f32) - 1.0;
+                plants[r * cap as usize + i as usize] = plant(x, 3.0, 0.5, 0, i % 3);
+            }
+        }
+        let p = ParticleParams {
+            motion: [2.0, 0.7, 0.3, 0.1],
+            life: [3.0, 9.0, 3000.0, 0.0],
+            counts: [500, 2, cap, 12345],
+            shed: [3.0, 1.0, 0.0, 0.0],
+            flowers: [1, cap, 0b1, 3],
+            ..Default::default()
+        };
+        let shuffled = |pool: &[PlantInstance], counts: &[u32], salt: u32| {
+            let mut out = pool.to_vec();
+            for (r, &n) in counts.iter().enumerate() {
+                let region = &mut out[r * cap as usize..][..n as usize];
+                region.sort_by_key(|q| hash_u32(q.hash ^ q.pos[0].to_bits() ^ salt));
+            }
+            out
+        };
+        let sheds = |trees: &[PlantInstance], plants: &[PlantInstance]| -> Vec<Particle> {
+            let flowers = Flowers {
+                instances: plants,
+                drawn: &plant_drawn,
+            };
+            advance(
+                &vec![Particle::default(); 500],
+                &p,
+                trees,
+                &drawn,
+                Some(flowers),
+                &|_| [0.0; 4],
+            )
+        };
+        let first = sheds(&trees, &plants);
+        for salt in [1, 2, 3] {
+            let again = sheds(
+                &shuffled(&trees, &drawn, salt),
+                &shuffled(&plants, &plant_drawn, salt),
+            );
+            assert_eq!(first, again, "shuffle {salt}");
+        }
+        // They come from many plants of both kinds (the picks keep nearly every plant at this
+        // size), about in proportion: 3 tickets a tree, 1 a flower.
+        let flying: Vec<&Particle> = first.iter().filter(|q| q.life > 0.0).collect();
+        let petals = flying.iter().filter(|q| q.kind >= PETAL).count();
+        let leaves = flying.len() - petals;
+        assert!(flying.len() > 200, "{} flying", flying.len());
+        let share = petals as f32 / flying.len() as f32;
+        assert!(
+            (0.06..0.16).contains(&share),
+            "{petals} petals of {}",
+            flying.len()
+        );
+        let sources: std::collections::HashSet<u32> =
+            flying.iter().map(|q| q.ground.to_bits()).collect();
+        assert!(
+            sources.len() > 60,
+            "{} plants shed {leaves} leaves and {petals} petals",
+            sources.len()
+        );
+        // The frame's seed draws other picks.
+        let picks = Picks::new(&p, &trees, &drawn, None);
+        assert!(
+            picks.list(0).len() >= 75 && picks.list(0).len() <= 80,
+            "{}",
+            picks.list(0).len()
+        );
+        let other = Picks::new(
+            &ParticleParams {
+                counts: [500, 2, cap, 777],
+                ..p
+            },
+            &trees,
+            &drawn,
+            None,
+        );
+        assert_ne!(picks.list(0), other.list(0));
     }
 
     #[test]
