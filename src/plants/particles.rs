@@ -438,9 +438,11 @@ impl ParticleStage {
             timestamp_writes: timer.compute_pass("particles_step"),
         });
         pass.set_bind_group(0, &self.group, &[]);
+        // A region holds at most a pool's bound over three levels (`MAX_POOL_BYTES`, 1.4
+        // million instances): one dispatch reaches it.
         let region = self.params.counts[2]
             .max(self.params.flowers[1])
-            .clamp(1, PICK_INDICES);
+            .clamp(1, PICK_INDICES.min(65_535 * 64));
         for pipeline in [&self.pick_keys, &self.pick_plants] {
             pass.set_pipeline(pipeline);
             pass.dispatch_workgroups(region.div_ceil(64), 1, 1);
@@ -485,6 +487,14 @@ impl ParticleStage {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_picks_reach_the_largest_region_in_one_dispatch() {
+        // The largest region a pool can have (one type: three levels share the bound) fits
+        // the picks' dispatch of at most 65,535 workgroups of 64 and their 24-bit indices.
+        let most = crate::plants::renderer::max_capacity(1);
+        assert!(most <= 65_535 * 64 && most < PICK_INDICES, "{most}");
+    }
 
     #[test]
     fn settings_out_of_range_say_which() {
