@@ -185,8 +185,9 @@ fn pick_key(plant: PlantInstance) -> u32 {
     return max(h, 1u);
 }
 
-// The plant at index `i` of `region` of pool `pool` (0 trees, 1 flowers) takes part in the picks: in the first pass
-// its key bids for its bucket; in the second, the plant whose key won writes where it lies.
+// The plant at index `i` of `region` of pool `pool` (0 trees, 1 flowers) takes part in the
+// picks: in the first pass its key bids for its bucket; in the second, the plant whose key won
+// writes where it lies.
 fn bid(pool: u32, region: u32, i: u32, plant: PlantInstance, second: bool) {
     let key = pick_key(plant);
     let slot = pool * PICK_BUCKETS + key % PICK_BUCKETS;

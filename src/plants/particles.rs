@@ -203,27 +203,10 @@ impl ParticleStage {
         ];
         let module = crate::shaders::module(device, "particles.wgsl");
         let step = compute_pipeline(device, "particles step", &module, "cs_step", &[&layout]);
-        let pick_keys = compute_pipeline(
-            device,
-            "particles pick keys",
-            &module,
-            "cs_pick_keys",
-            &[&layout],
-        );
-        let pick_plants = compute_pipeline(
-            device,
-            "particles pick plants",
-            &module,
-            "cs_pick_plants",
-            &[&layout],
-        );
-        let pick_list = compute_pipeline(
-            device,
-            "particles pick list",
-            &module,
-            "cs_pick_list",
-            &[&layout],
-        );
+        // The picks' three passes (see particles_cpu::Picks).
+        let [pick_keys, pick_plants, pick_list] =
+            ["cs_pick_keys", "cs_pick_plants", "cs_pick_list"]
+                .map(|entry| compute_pipeline(device, entry, &module, entry, &[&layout]));
         // Per class and bucket, the largest key and the plant that holds it; per class, the
         // picked plants listed and their number.
         let picks = buffer(
@@ -491,9 +474,10 @@ mod tests {
     #[test]
     fn the_picks_reach_the_largest_region_in_one_dispatch() {
         // The largest region a pool can have (one type: three levels share the bound) fits
-        // the picks' dispatch of at most 65,535 workgroups of 64 and their 24-bit indices.
+        // the picks' dispatch of at most 65,535 workgroups of 64 (and so their 24-bit indices).
         let most = crate::plants::renderer::max_capacity(1);
-        assert!(most <= 65_535 * 64 && most < PICK_INDICES, "{most}");
+        assert!(most <= 65_535 * 64, "{most}");
+        const { assert!(65_535 * 64 < PICK_INDICES) };
     }
 
     #[test]

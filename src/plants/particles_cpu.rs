@@ -88,8 +88,6 @@ pub const PICK_INDICES: u32 = 1 << 24;
 /// `cs_pick_list`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Picks {
-    keys: Vec<u32>,
-    plants: Vec<u32>,
     lists: [Vec<(u32, u32)>; 2],
 }
 
@@ -113,19 +111,15 @@ impl Picks {
         flowers: Option<Flowers<'_>>,
     ) -> Self {
         let b = PICK_BUCKETS as usize;
-        let mut picks = Picks {
-            keys: vec![0; 2 * b],
-            plants: vec![0; 2 * b],
-            lists: [Vec::new(), Vec::new()],
-        };
+        let (mut keys, mut plants) = (vec![0u32; 2 * b], vec![0u32; 2 * b]);
         let seed = params.counts[3];
         let mut bid = |class: usize, region: u32, i: u32, plant: &PlantInstance| {
             let key = pick_key(plant, seed);
             let slot = class * b + (key % PICK_BUCKETS) as usize;
             let packed = ((region << 24) | i) + 1;
-            if key > picks.keys[slot] || (key == picks.keys[slot] && packed > picks.plants[slot]) {
-                picks.keys[slot] = key;
-                picks.plants[slot] = packed;
+            if key > keys[slot] || (key == keys[slot] && packed > plants[slot]) {
+                keys[slot] = key;
+                plants[slot] = packed;
             }
         };
         let cap = params.counts[2];
@@ -153,14 +147,16 @@ impl Picks {
                 }
             }
         }
-        for class in 0..2 {
-            picks.lists[class] = picks.plants[class * b..(class + 1) * b]
+        let list = |class: usize| {
+            plants[class * b..(class + 1) * b]
                 .iter()
                 .filter(|&&p| p != 0)
                 .map(|&p| ((p - 1) >> 24, (p - 1) & (PICK_INDICES - 1)))
-                .collect();
+                .collect()
+        };
+        Picks {
+            lists: [list(0), list(1)],
         }
-        picks
     }
 
     /// The picked plants of `class` (0 trees, 1 flowers) in the buckets' order, each as
