@@ -132,8 +132,8 @@ impl Picks {
             }
         }
         if let Some(f) = flowers {
-            let [types, plant_cap, mask, _] = params.flowers;
-            for t in (0..types.min(8)).filter(|&t| params.shed[1] > 0.0 && (mask >> t) & 1 == 1) {
+            let [types, plant_cap, _, _] = params.flowers;
+            for t in (0..types.min(8)).filter(|&t| sheds_petals(params, t)) {
                 for level in 0..2 {
                     let region = t * 3 + level;
                     for i in 0..drawn_in(f.drawn, plant_cap, t, level).min(PICK_INDICES) {
@@ -173,6 +173,12 @@ impl Picks {
     }
 }
 
+/// Whether type `t` of the plants' layer sheds petals this frame (its bit in `params.flowers[2]`,
+/// and petals asked for).
+fn sheds_petals(params: &ParticleParams, t: u32) -> bool {
+    params.shed[1] > 0.0 && (params.flowers[2] >> t) & 1 == 1
+}
+
 /// The flowers of the frame: the plants' instance pool (regions of `params.flowers[1]`
 /// instances, type * 3 + level) and the instances drawn in each region.
 #[derive(Clone, Copy, Debug)]
@@ -196,9 +202,9 @@ fn drawn_in(drawn: &[u32], cap: u32, t: u32, level: u32) -> u32 {
 /// instance pool (regions of `params.counts[2]` instances, type * 3 + level) and `drawn[r]` the
 /// instances in region `r`; `flowers` the plants' (only the types with their bit in
 /// `params.flowers[2]` shed). The particle's hash chooses between the trees and the flowers (a
-/// tree with `params.flowers[3]` tickets to a flower's one) and a bucket of the frame's
-/// [`Picks`], whose plant of a full or reduced mesh it is shed from, put in its crown (a leaf) or
-/// its flower head (a petal). So that about `params.shed[0]` leaves a tree and `params.shed[1]`
+/// tree with `params.flowers[3]` tickets to a flower's one) and a plant of that kind from the
+/// frame's [`Picks`] (full or reduced meshes), and it is put in its crown (a leaf) or its
+/// flower head (a petal). So that about `params.shed[0]` leaves a tree and `params.shed[1]`
 /// petals a flower are in the air, the particle is shed only with the chance of that many over
 /// the pool's size, else (and with no tree or flower) it waits in the pool for a life's time (a
 /// negative life). (Builds the picks: [`shed_from`] takes them made once for many particles.)
@@ -228,11 +234,10 @@ pub fn shed_from(
     let tree_total: u32 = (0..types)
         .map(|t| drawn_in(drawn, cap, t, 0) + drawn_in(drawn, cap, t, 1))
         .sum();
-    let [plant_types, plant_cap, mask, tickets] = params.flowers;
-    let sheds = |t: u32| params.shed[1] > 0.0 && (mask >> t) & 1 == 1;
+    let [plant_types, plant_cap, _, tickets] = params.flowers;
     let flower_drawn = flowers.map_or(&[][..], |f| f.drawn);
     let flower_total: u32 = (0..plant_types.min(8))
-        .filter(|&t| sheds(t))
+        .filter(|&t| sheds_petals(params, t))
         .map(|t| drawn_in(flower_drawn, plant_cap, t, 0) + drawn_in(flower_drawn, plant_cap, t, 1))
         .sum();
     let mut p = Particle {
