@@ -11,7 +11,12 @@
 // sample with weight 1 / n, n the samples the history holds: at most MAX_SAMPLES, fewer the
 // further the surface moved on screen (a history resampled frame after frame blurs): a still
 // scene converges to the box-filtered average of the jittered samples, a moving one keeps a
-// shorter history. A pixel whose history falls off
+// shorter history. Beside the history, each pixel keeps its samples' own spread over time
+// (an exponentially weighted variance per YCoCg channel, resampled from the nearest texel):
+// with `clip.z` above 0, the clip's box also reaches the current sample plus and minus that
+// many of the pixel's own standard deviations, so that a blade thinner than a pixel, which
+// the current neighbourhood's samples missed but the pixel's past samples caught, is not
+// clipped out of the history. A pixel whose history falls off
 // screen, and every pixel after a cut, starts again from its current sample. Two passes: the
 // resolve (compute) into the next history (linear colour, samples in alpha), then a
 // full-screen pass that writes it into the colour target. CPU mirror: src/aa/taa_cpu.rs.
@@ -31,7 +36,9 @@ struct Params {
     // again (a cut, a teleport, the first frame).
     size: vec4<f32>,
     // x: the neighbourhood's spread, in standard deviations, that bounds the history; y: how
-    // fast the most samples fall with the pixels moved (most / (1 + y * pixels), at least 2).
+    // fast the most samples fall with the pixels moved (most / (1 + y * pixels), at least 2);
+    // z: the pixel's own spread over time, in standard deviations around the current sample,
+    // that the box also reaches (0: the neighbourhood's box alone).
     clip: vec4<f32>,
 }
 
@@ -45,11 +52,20 @@ struct Params {
 // The blades' motion vectors (shaders/grass_draw.wgsl, fs_blade_motion): xy the pixels the
 // blade's point moved since the last frame, z its depth, w 1 where a blade wrote them.
 @group(0) @binding(6) var motion: texture_2d<f32>;
+// The pixels' own spread over time: the variance of their samples per YCoCg channel (xyz),
+// read from the last frame's and written for the next.
+@group(0) @binding(7) var spread: texture_2d<f32>;
+@group(0) @binding(8) var spread_out: texture_storage_2d<rgba16float, write>;
 
 // How far (relative) the frame's depth may lie from the depth a blade wrote with its motion
 // (stored at half precision) for the motion to be the pixel's: beyond it, something drawn
 // after the grass covers the blade, and the pixel is reprojected through its depth.
 const MOTION_DEPTH_TOLERANCE: f32 = 2e-3;
+
+// The pixels a surface may move in a frame and still reach for its own spread over time (the
+// reach falls linearly to nothing there): past it, blades at other depths slide past each
+// other within the pixel, and its past samples were of other blades.
+const SPREAD_MOTION_PX: f32 = 0.5;
 
 fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
     let lo = c / 12.92;
@@ -118,16 +134,17 @@ fn sample_history(pos: vec2<f32>) -> vec4<f32> {
 }
 
 // Moves `h` toward the box's centre until it lies inside the box (clipping, not clamping:
-// the colour keeps its hue as it is pulled in).
-fn clip_to_box(h: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec3<f32> {
+// the colour keeps its hue as it is pulled in). Returns the point and how many times its
+// offset from the centre was shortened (1 where it was inside).
+fn clip_to_box(h: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec4<f32> {
     let center = 0.5 * (hi + lo);
     let extent = max(0.5 * (hi - lo), vec3<f32>(1e-5));
     let d = h - center;
     let m = max(max(abs(d.x) / extent.x, abs(d.y) / extent.y), abs(d.z) / extent.z);
     if m > 1.0 {
-        return center + d / m;
+        return vec4<f32>(center + d / m, m);
     }
-    return h;
+    return vec4<f32>(h, 1.0);
 }
 
 @compute @workgroup_size(8, 8)
@@ -152,6 +169,7 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
     let sigma = sqrt(max(m2 / 9.0 - mean * mean, vec3<f32>(0.0)));
 
     var out = vec4<f32>(cur, 1.0);
+    var var_out = vec3<f32>(0.0);
     if params.size.w < 0.5 {
         let px = vec2<f32>(p) + 0.5;
         // Where the pixel's surface was: a blade's own motion where a blade is the pixel's
@@ -172,16 +190,35 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
             let h = sample_history(pp);
             if h.a >= 1.0 {
                 let g = params.clip.x;
-                let clipped = from_ycocg(clip_to_box(to_ycocg(h.rgb), mean - g * sigma, mean + g * sigma));
+                var lo = mean - g * sigma;
+                var hi = mean + g * sigma;
+                let c = to_ycocg(cur);
+                let q = clamp(vec2<i32>(floor(pp)), vec2<i32>(0), size - 1);
+                let own = max(textureLoad(spread, q, 0).xyz, vec3<f32>(0.0));
                 // Pixels the surface moved since the last frame.
                 let moved = length(pp - px);
+                if params.clip.z > 0.0 {
+                    // A moving surface's past samples were of other blades (its parallax
+                    // uncovers others): the pixel's spread reaches less the further it moved,
+                    // and not at all from SPREAD_MOTION_PX on.
+                    let reach = params.clip.z * sqrt(own) * max(1.0 - moved / SPREAD_MOTION_PX, 0.0);
+                    lo = min(lo, c - reach);
+                    hi = max(hi, c + reach);
+                }
+                let clipped = clip_to_box(to_ycocg(h.rgb), lo, hi);
                 let most = max(params.size.z / (1.0 + params.clip.y * moved), 2.0);
                 let n = min(h.a + 1.0, most);
-                out = vec4<f32>(mix(clipped, cur, 1.0 / n), n);
+                let a = 1.0 / n;
+                out = vec4<f32>(mix(from_ycocg(clipped.xyz), cur, a), n);
+                // The spread shrinks with the history's clipped offset, then takes in the
+                // current sample (an exponentially weighted variance).
+                let e = c - clipped.xyz;
+                var_out = (1.0 - a) * (own / (clipped.w * clipped.w) + a * e * e);
             }
         }
     }
     textureStore(history_out, p, out);
+    textureStore(spread_out, p, vec4<f32>(var_out, 0.0));
 }
 
 @fragment

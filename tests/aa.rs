@@ -131,13 +131,26 @@ fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
 #[test]
 fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
     let ctx = common::gpu();
+    // The default clip, and the clip that also reaches the pixel's own spread over time.
+    for pixel_spread in [0.0, 2.5] {
+        resolve_matches_mirror(
+            &ctx,
+            TaaSettings {
+                pixel_spread,
+                ..TaaSettings::default()
+            },
+        );
+    }
+}
+
+/// The resolve on the GPU with `settings` against its CPU mirror over six frames.
+fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings) {
     let targets = Targets {
         color_format: wgpu::TextureFormat::Rgba8UnormSrgb,
         depth_format: wgpu::TextureFormat::Depth32Float,
         width: W,
         height: H,
     };
-    let settings = TaaSettings::default();
     let mut taa = Taa::new(&ctx.device, &targets, settings);
     let size = wgpu::Extent3d {
         width: W,
@@ -243,6 +256,7 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
     let mut camera = Camera::new(DVec3::new(0.0, 0.0, 10.0), 0.0, -5.0);
     let aspect = W as f32 / H as f32;
     let mut history = vec![Vec4::ZERO; (W * H) as usize];
+    let mut spread = vec![Vec4::ZERO; (W * H) as usize];
     let mut last: Option<(Mat4, DVec3)> = None;
     for step in 0..6u32 {
         if step >= 3 {
@@ -323,6 +337,8 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
             current: &current,
             depth: &depth,
             history: &history,
+            spread: &spread,
+            pixel_spread: settings.pixel_spread,
             motion: &motion,
             reproject: match last {
                 Some((lvp, leye)) => reprojection(lvp, leye, vp, camera.position),
@@ -333,7 +349,7 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
             motion_falloff: settings.motion_falloff,
             reset: last.is_none(),
         };
-        history = input.resolve();
+        (history, spread) = input.resolve_with_spread();
         last = Some((vp, camera.position));
 
         let mut worst = 0.0f32;
@@ -353,7 +369,8 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
         // The GPU keeps its history in half floats: a level or two of 255 apart at most.
         assert!(
             worst <= 2.5 && mean < 0.3,
-            "frame {step}: GPU and CPU differ by up to {worst} (mean {mean}) levels"
+            "frame {step}, pixel spread {}: GPU and CPU differ by up to {worst} (mean {mean}) levels",
+            settings.pixel_spread
         );
         // After the first frame the history matters: the output is not the current frame.
         if step > 0 {

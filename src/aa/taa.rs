@@ -15,6 +15,10 @@ use crate::gpu::pipeline::{DepthBound, buffer, compute_pipeline_with_constants, 
 /// Format of the history: linear colour in rgb, the samples it holds in alpha.
 pub const HISTORY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
+/// Format of the pixels' own spread over time, kept beside the history: the variance of their
+/// samples per YCoCg channel in rgb (alpha unused).
+pub const SPREAD_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
 /// The format of the blades' motion vectors (`MotionOut` in `shaders/grass_draw.wgsl`): the
 /// pixels a blade's point moved since the last frame (x, y), its depth (z), and 1 where a
 /// blade wrote it (w; 0 elsewhere: the resolve reprojects those pixels through their depth).
@@ -45,6 +49,15 @@ pub struct TaaSettings {
     /// second target cost 0.40 ms of grass drawing at 1920x1080 (NVIDIA H200). A storm, or a
     /// low frame rate, moves blades further.
     pub blade_motion: bool,
+    /// The clip's box also reaches the current sample plus and minus this many of the pixel's
+    /// own standard deviations over time (its samples' exponentially weighted spread, kept
+    /// beside the history): a blade thinner than a pixel that the pixel's past samples caught
+    /// and the current neighbourhood missed stays in the history. The reach falls with the
+    /// pixels the surface moved, to nothing at half a pixel
+    /// ([`crate::aa::taa_cpu::SPREAD_MOTION_PX`]): blades at other depths then slide past
+    /// each other, and the pixel's past samples saw other blades. 0: the neighbourhood's box
+    /// alone.
+    pub pixel_spread: f32,
 }
 
 impl Default for TaaSettings {
@@ -66,6 +79,7 @@ impl Default for TaaSettings {
             cut_distance_m: 20.0,
             cut_angle_deg: 30.0,
             blade_motion: false,
+            pixel_spread: 0.0,
         }
     }
 }
@@ -79,7 +93,8 @@ pub struct TaaParams {
     pub reproject: [[f32; 4]; 4],
     /// Target width and height, most samples, 1 to start every pixel again.
     pub size: [f32; 4],
-    /// The clip's standard deviations, the motion falloff, then padding.
+    /// The clip's standard deviations, the motion falloff, the pixel's own spread's standard
+    /// deviations, then padding.
     pub clip: [f32; 4],
 }
 
@@ -111,11 +126,10 @@ pub struct Taa {
     output: wgpu::RenderPipeline,
     output_layout: wgpu::BindGroupLayout,
     color_format: wgpu::TextureFormat,
-    scene: wgpu::TextureView,
     /// The blades' motion vectors ([`MOTION_FORMAT`]), cleared every frame.
     motion: wgpu::TextureView,
-    history: [wgpu::TextureView; 2],
-    output_groups: [wgpu::BindGroup; 2],
+    /// The frame's texture, the histories and spreads, the output's bind groups.
+    textures: Textures,
     resolve_groups: [DepthBound; 2],
     params: TaaParams,
     buffer: wgpu::Buffer,
@@ -129,18 +143,14 @@ pub struct Taa {
     frames: u64,
 }
 
-/// The stage's textures at `size`: the frame's, the two histories, and the output pass's bind
-/// groups over the histories.
+/// The stage's textures at `size`: the frame's, the two histories, the two spreads beside them,
+/// and the output pass's bind groups over the histories.
 fn textures(
     device: &wgpu::Device,
     output_layout: &wgpu::BindGroupLayout,
     color_format: wgpu::TextureFormat,
     size: (u32, u32),
-) -> (
-    wgpu::TextureView,
-    [wgpu::TextureView; 2],
-    [wgpu::BindGroup; 2],
-) {
+) -> Textures {
     // Copies in are for tests that set a frame of their own.
     let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
         | wgpu::TextureUsages::TEXTURE_BINDING
@@ -157,7 +167,17 @@ fn textures(
         )
         .create_view(&Default::default())
     });
-    let groups = [0, 1].map(|i| {
+    let spread = [0, 1].map(|i| {
+        crate::gpu::target_texture(
+            device,
+            &format!("taa spread {i}"),
+            SPREAD_FORMAT,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
+            size,
+        )
+        .create_view(&Default::default())
+    });
+    let output_groups = [0, 1].map(|i| {
         crate::gpu::layout::bind_group_with_indices(
             device,
             "taa output",
@@ -165,7 +185,20 @@ fn textures(
             [(5, view_of(&history[i]))],
         )
     });
-    (scene, history, groups)
+    Textures {
+        scene,
+        history,
+        spread,
+        output_groups,
+    }
+}
+
+/// What [`textures`] makes.
+struct Textures {
+    scene: wgpu::TextureView,
+    history: [wgpu::TextureView; 2],
+    spread: [wgpu::TextureView; 2],
+    output_groups: [wgpu::BindGroup; 2],
 }
 
 /// The blades' motion vectors at `size` ([`MOTION_FORMAT`]).
@@ -199,6 +232,8 @@ impl Taa {
                     (4, texture_storage_2d(HISTORY_FORMAT)),
                     // The blades' motion (binding 5 is the output pass's).
                     (6, texture_2d(UNFILTERABLE_FLOAT)),
+                    (7, texture_2d(UNFILTERABLE_FLOAT)),
+                    (8, texture_storage_2d(SPREAD_FORMAT)),
                 ],
             ),
         );
@@ -235,7 +270,7 @@ impl Taa {
             std::mem::size_of::<TaaParams>() as u64,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         );
-        let (scene, history, output_groups) = textures(
+        let textures = textures(
             device,
             &output_layout,
             targets.color_format,
@@ -248,10 +283,8 @@ impl Taa {
             output,
             output_layout,
             color_format: targets.color_format,
-            scene,
             motion: motion_texture(device, (targets.width, targets.height)),
-            history,
-            output_groups,
+            textures,
             resolve_groups: Default::default(),
             params: TaaParams {
                 reproject: Mat4::IDENTITY.to_cols_array_2d(),
@@ -261,7 +294,12 @@ impl Taa {
                     settings.max_samples as f32,
                     1.0,
                 ],
-                clip: [settings.clip_sigma, settings.motion_falloff, 0.0, 0.0],
+                clip: [
+                    settings.clip_sigma,
+                    settings.motion_falloff,
+                    settings.pixel_spread,
+                    0.0,
+                ],
             },
             buffer,
             read: 0,
@@ -278,7 +316,7 @@ impl Taa {
 
     /// Follows a resize of the targets: new textures, and every history starts again.
     pub fn resize(&mut self, device: &wgpu::Device, width: u32, height: u32) {
-        (self.scene, self.history, self.output_groups) = textures(
+        self.textures = textures(
             device,
             &self.output_layout,
             self.color_format,
@@ -299,7 +337,7 @@ impl Taa {
 
     /// The texture the frame's passes draw into instead of the caller's colour target.
     pub fn scene_view(&self) -> &wgpu::TextureView {
-        &self.scene
+        &self.textures.scene
     }
 
     /// The texture the blades write their motion vectors into ([`MOTION_FORMAT`]; cleared by
@@ -388,9 +426,10 @@ impl Taa {
     ) {
         let (read, write) = (self.read, 1 - self.read);
         let texture = depth.texture();
-        let (scene, history, buffer, layout, motion) = (
-            &self.scene,
-            &self.history,
+        let (scene, history, spread, buffer, layout, motion) = (
+            &self.textures.scene,
+            &self.textures.history,
+            &self.textures.spread,
             &self.buffer,
             &self.resolve_layout,
             &self.motion,
@@ -407,6 +446,8 @@ impl Taa {
                     (3, view_of(&history[read])),
                     (4, view_of(&history[write])),
                     (6, view_of(motion)),
+                    (7, view_of(&spread[read])),
+                    (8, view_of(&spread[write])),
                 ],
             )
         });
@@ -428,7 +469,7 @@ impl Taa {
             timer.render_pass("taa_output"),
         );
         pass.set_pipeline(&self.output);
-        pass.set_bind_group(0, &self.output_groups[write], &[]);
+        pass.set_bind_group(0, &self.textures.output_groups[write], &[]);
         pass.draw(0..3, 0..1);
         self.read = write;
     }

@@ -18,6 +18,9 @@ pub struct ResolveInput<'a> {
     /// point moved since the last frame (x, y), its depth (z), 1 where a blade wrote it (w).
     /// Empty: none anywhere.
     pub motion: &'a [Vec4],
+    /// The last frame's spreads: each pixel's samples' variance over time per YCoCg channel
+    /// (xyz). Empty: none anywhere.
+    pub spread: &'a [Vec4],
     /// See [`crate::aa::taa::reprojection`].
     pub reproject: Mat4,
     /// Most samples a history holds.
@@ -26,6 +29,9 @@ pub struct ResolveInput<'a> {
     pub clip_sigma: f32,
     /// How fast the most samples fall with the pixels a surface moved.
     pub motion_falloff: f32,
+    /// Standard deviations of the pixel's own spread, around the current sample, that the
+    /// clip's box also reaches (0: none).
+    pub pixel_spread: f32,
     /// Start every pixel again.
     pub reset: bool,
 }
@@ -33,6 +39,10 @@ pub struct ResolveInput<'a> {
 /// How far (relative) the frame's depth may lie from a blade's motion vector's depth for the
 /// motion to be the pixel's (the shader's `MOTION_DEPTH_TOLERANCE`).
 pub const MOTION_DEPTH_TOLERANCE: f32 = 2e-3;
+
+/// The pixels a surface may move in a frame and still reach for its own spread (the shader's
+/// `SPREAD_MOTION_PX`): the reach falls linearly to nothing there.
+pub const SPREAD_MOTION_PX: f32 = 0.5;
 
 /// Luma and the two chroma differences.
 fn ycocg(c: Vec3) -> Vec3 {
@@ -90,6 +100,11 @@ impl ResolveInput<'_> {
 
     /// The next history at pixel (x, y).
     pub fn pixel(&self, x: u32, y: u32) -> Vec4 {
+        self.pixel_and_spread(x, y).0
+    }
+
+    /// The next history at pixel (x, y), and the pixel's spread for the next frame.
+    pub fn pixel_and_spread(&self, x: u32, y: u32) -> (Vec4, Vec3) {
         let (xi, yi) = (x as i64, y as i64);
         let current = self.at(self.current, xi, yi);
         let samples: Vec<Vec3> = (-1..=1)
@@ -100,7 +115,7 @@ impl ResolveInput<'_> {
         let mean = samples.iter().copied().sum::<Vec3>() / 9.0;
         let variance = samples.iter().map(|s| *s * *s).sum::<Vec3>() / 9.0 - mean * mean;
         let sigma = variance.max(Vec3::ZERO).powf(0.5);
-        let fresh = current.extend(1.0);
+        let fresh = (current.extend(1.0), Vec3::ZERO);
         if self.reset {
             return fresh;
         }
@@ -130,32 +145,64 @@ impl ResolveInput<'_> {
         if old.w < 1.0 {
             return fresh;
         }
+        // The pixel's own spread over time, from the texel the surface was in.
+        let own = if self.spread.is_empty() {
+            Vec3::ZERO
+        } else {
+            self.at(self.spread, then_px.x as i64, then_px.y as i64)
+                .truncate()
+                .max(Vec3::ZERO)
+        };
+        let now = ycocg(current);
+        let moved = then_px.distance(centre_px);
+        // The box: the neighbourhood's spread around its mean, reaching the current sample's
+        // own spread where that is asked for, less for a surface that moved (the pixel's
+        // past samples then saw other blades).
+        let mut lo = mean - self.clip_sigma * sigma;
+        let mut hi = mean + self.clip_sigma * sigma;
+        if self.pixel_spread > 0.0 {
+            let reach =
+                self.pixel_spread * own.powf(0.5) * (1.0 - moved / SPREAD_MOTION_PX).max(0.0);
+            lo = lo.min(now - reach);
+            hi = hi.max(now + reach);
+        }
         // Pull the history toward the box's centre along the line to it, just far enough.
-        let lo = mean - self.clip_sigma * sigma;
-        let hi = mean + self.clip_sigma * sigma;
         let centre = (lo + hi) * 0.5;
         let half = ((hi - lo) * 0.5).max(Vec3::splat(1e-5));
         let offset = ycocg(old.truncate()) - centre;
         let outside = (offset.abs() / half).max_element();
-        let kept = if outside > 1.0 {
-            rgb(centre + offset / outside)
+        let (kept, shortened) = if outside > 1.0 {
+            (centre + offset / outside, outside)
         } else {
-            old.truncate()
+            (ycocg(old.truncate()), 1.0)
         };
         // A surface that moved keeps a shorter history (each frame's resampling blurs it).
-        let moved = then_px.distance(centre_px);
         let most = (self.max_samples / (1.0 + self.motion_falloff * moved)).max(2.0);
         let n = (old.w + 1.0).min(most);
-        (kept + (current - kept) / n).extend(n)
+        let weight = 1.0 / n;
+        let kept_rgb = rgb(kept);
+        // The spread shrinks as the history was pulled in, then takes in the current sample
+        // (the exponentially weighted variance of the samples).
+        let error = now - kept;
+        let spread = (1.0 - weight) * (own / (shortened * shortened) + weight * error * error);
+        ((kept_rgb + (current - kept_rgb) * weight).extend(n), spread)
     }
 
     /// The next history, every pixel.
     pub fn resolve(&self) -> Vec<Vec4> {
+        self.resolve_with_spread().0
+    }
+
+    /// The next history and the next spreads (xyz; w 0), every pixel.
+    pub fn resolve_with_spread(&self) -> (Vec<Vec4>, Vec<Vec4>) {
         let (w, h) = self.size;
         (0..h)
             .flat_map(|y| (0..w).map(move |x| (x, y)))
-            .map(|(x, y)| self.pixel(x, y))
-            .collect()
+            .map(|(x, y)| {
+                let (history, spread) = self.pixel_and_spread(x, y);
+                (history, spread.extend(0.0))
+            })
+            .unzip()
     }
 }
 
@@ -183,6 +230,8 @@ mod tests {
             }
             let input = ResolveInput {
                 motion: &[],
+                spread: &[],
+                pixel_spread: 0.0,
                 size,
                 current: &current,
                 depth: &depth,
@@ -199,6 +248,80 @@ mod tests {
         assert_eq!(history[12].w, 40.0);
     }
 
+    /// A pixel that sees a white blade in one sample out of four while its whole
+    /// neighbourhood is black in the other three: the history after `frames` frames.
+    fn sub_pixel_blade(pixel_spread: f32, frames: u32) -> Vec4 {
+        let size = (5, 5);
+        let depth = vec![0.5; 25];
+        let mut history = vec![Vec4::ZERO; 25];
+        let mut spread = vec![Vec4::ZERO; 25];
+        for frame in 0..frames {
+            let mut current = flat(size, Vec3::ZERO);
+            if frame % 4 == 0 {
+                current[12] = Vec3::ONE;
+            }
+            let input = ResolveInput {
+                motion: &[],
+                spread: &spread,
+                pixel_spread,
+                size,
+                current: &current,
+                depth: &depth,
+                history: &history,
+                reproject: Mat4::IDENTITY,
+                max_samples: 1000.0,
+                clip_sigma: 2.5,
+                motion_falloff: 0.25,
+                reset: frame == 0,
+            };
+            (history, spread) = input.resolve_with_spread();
+        }
+        history[12]
+    }
+
+    #[test]
+    fn the_pixels_own_spread_keeps_a_blade_the_neighbourhood_missed() {
+        // Clipped to the neighbourhood alone, the history is pulled to black in every frame
+        // that misses the blade: it holds far less than the quarter the pixel covers.
+        let clipped = sub_pixel_blade(0.0, 81);
+        assert!(clipped.x < 0.15, "{clipped}");
+        // With the pixel's own spread, the frames that miss the blade are explained by the
+        // pixel's past: it converges to the box filter's quarter.
+        let kept = sub_pixel_blade(2.5, 81);
+        assert!((kept.x - 0.25).abs() < 0.04, "{kept}");
+    }
+
+    #[test]
+    fn a_ghost_the_pixel_never_showed_is_clipped_with_its_own_spread_too() {
+        // The history says white, with no spread of its own, where the pixel and its
+        // neighbourhood are black: the pixel's past cannot explain it, and it goes.
+        let size = (3, 3);
+        let current = flat(size, Vec3::new(0.1, 0.1, 0.1));
+        let history = vec![Vec4::new(1.0, 1.0, 1.0, 8.0); 9];
+        let spread = vec![Vec4::new(1e-4, 1e-5, 1e-5, 0.0); 9];
+        let input = ResolveInput {
+            motion: &[],
+            spread: &spread,
+            pixel_spread: 2.5,
+            size,
+            current: &current,
+            depth: &[0.5; 9],
+            history: &history,
+            reproject: Mat4::IDENTITY,
+            max_samples: 12.0,
+            clip_sigma: 1.0,
+            motion_falloff: 0.25,
+            reset: false,
+        };
+        let (out, own) = input.pixel_and_spread(1, 1);
+        // At most its own small spread (2.5 x 0.01 in luma) above the black it now shows.
+        assert!(
+            (out.truncate() - Vec3::splat(0.1)).max_element() < 0.03,
+            "{out}"
+        );
+        assert!(own.max_element() < 1e-3, "{own}");
+    }
+
     #[test]
     fn a_ghost_outside_the_neighbourhood_is_clipped_away() {
         // The history says white where the whole neighbourhood is now black: it is pulled to
@@ -208,6 +331,8 @@ mod tests {
         let history = vec![Vec4::new(1.0, 1.0, 1.0, 8.0); 9];
         let input = ResolveInput {
             motion: &[],
+            spread: &[],
+            pixel_spread: 0.0,
             size,
             current: &current,
             depth: &[0.5; 9],
@@ -231,6 +356,8 @@ mod tests {
         // Everything moved two screens to the right: no history is on screen.
         let input = ResolveInput {
             motion: &[],
+            spread: &[],
+            pixel_spread: 0.0,
             size,
             current: &current,
             depth: &[0.5; 8],

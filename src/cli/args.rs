@@ -102,6 +102,11 @@ pub(crate) struct TaaArgs {
     /// Off by default (at 60 frames a second in a breeze they gain little for their cost).
     #[arg(long)]
     pub(crate) taa_blade_motion: bool,
+    /// With --aa taa: the history's clip also reaches the current sample plus and minus K of
+    /// the pixel's own standard deviations over time, 0..=16 (default 0: the neighbourhood's
+    /// alone). Keeps blades thinner than a pixel that the neighbourhood missed.
+    #[arg(long, value_name = "K", value_parser = float_in(0.0, 16.0))]
+    pub(crate) taa_pixel_spread: Option<f64>,
 }
 
 impl TaaArgs {
@@ -115,6 +120,9 @@ impl TaaArgs {
             s.clip_sigma = c as f32;
         }
         s.blade_motion = self.taa_blade_motion;
+        if let Some(k) = self.taa_pixel_spread {
+            s.pixel_spread = k as f32;
+        }
         s
     }
 }

@@ -143,6 +143,10 @@ pub(crate) enum BenchCommand {
         /// With taa: the grass blades write their own motion vectors ("on,off" measures both).
         #[arg(long, value_name = "on|off,...", value_delimiter = ',', value_parser = parse_on_off)]
         taa_blade_motion: Vec<bool>,
+        /// With taa: the clip's reach around the current sample, in the pixel's own standard
+        /// deviations over time, 0..=16, comma-separated (default 0).
+        #[arg(long, value_name = "K,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
+        taa_pixel_spread: Vec<f64>,
         #[command(flatten)]
         timing: TimingArgs,
     },
@@ -163,13 +167,14 @@ fn parse_on_off(s: &str) -> Result<bool, String> {
     }
 }
 
-/// Every combination of the given history lengths, clips, falloffs and motion vectors (the
-/// defaults where none is given).
+/// Every combination of the given history lengths, clips, falloffs, motion vectors and pixel
+/// spreads (the defaults where none is given).
 fn taa_variants(
     samples: &[u32],
     clips: &[f64],
     falloffs: &[f64],
     blade_motion: &[bool],
+    spreads: &[f64],
 ) -> Vec<verdant::aa::taa::TaaSettings> {
     let base = verdant::aa::taa::TaaSettings::default();
     fn or<T: Copy>(given: &[T], default: T) -> Vec<T> {
@@ -184,13 +189,16 @@ fn taa_variants(
         for c in or(clips, f64::from(base.clip_sigma)) {
             for f in or(falloffs, f64::from(base.motion_falloff)) {
                 for mv in or(blade_motion, base.blade_motion) {
-                    out.push(verdant::aa::taa::TaaSettings {
-                        max_samples: n,
-                        clip_sigma: c as f32,
-                        motion_falloff: f as f32,
-                        blade_motion: mv,
-                        ..base
-                    });
+                    for k in or(spreads, f64::from(base.pixel_spread)) {
+                        out.push(verdant::aa::taa::TaaSettings {
+                            max_samples: n,
+                            clip_sigma: c as f32,
+                            motion_falloff: f as f32,
+                            blade_motion: mv,
+                            pixel_spread: k as f32,
+                            ..base
+                        });
+                    }
                 }
             }
         }
@@ -534,6 +542,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             taa_clip,
             taa_falloff,
             taa_blade_motion,
+            taa_pixel_spread,
             timing,
         } => bench_aa(verdant::tools::bench_aa::BenchAaOptions {
             world: resolve_world(&world)?,
@@ -547,7 +556,13 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             path,
             paths: paths.into_iter().filter(|p| !p.is_empty()).collect(),
             motions: sequences,
-            taa: taa_variants(&taa_samples, &taa_clip, &taa_falloff, &taa_blade_motion),
+            taa: taa_variants(
+                &taa_samples,
+                &taa_clip,
+                &taa_falloff,
+                &taa_blade_motion,
+                &taa_pixel_spread,
+            ),
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,

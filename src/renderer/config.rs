@@ -325,6 +325,7 @@ impl RendererConfig {
             &(0.0..=16.0),
             "",
         )?;
+        check("taa.pixel_spread", self.taa.pixel_spread, &(0.0..=16.0), "")?;
         let checked = [
             self.tree_shadows.map(|s| s.validate()),
             self.particles.map(|p| p.validate()),

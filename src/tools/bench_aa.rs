@@ -153,12 +153,17 @@ impl BenchAaOptions {
             if m == AntiAliasing::Taa && self.taa.len() > 1 {
                 for t in &self.taa {
                     let name = format!(
-                        "{}-n{}-c{}-f{}{}",
+                        "{}-n{}-c{}-f{}{}{}",
                         m.name(),
                         t.max_samples,
                         t.clip_sigma,
                         t.motion_falloff,
-                        if t.blade_motion { "-mv" } else { "" }
+                        if t.blade_motion { "-mv" } else { "" },
+                        if t.pixel_spread > 0.0 {
+                            format!("-s{}", t.pixel_spread)
+                        } else {
+                            String::new()
+                        }
                     );
                     out.push((name, m, *t));
                 }
