@@ -11,7 +11,10 @@
 // sample with weight 1 / n, n the samples the history holds: at most MAX_SAMPLES, fewer the
 // further the surface moved on screen (a history resampled frame after frame blurs): a still
 // scene converges to the box-filtered average of the jittered samples, a moving one keeps a
-// shorter history. Beside the history, each pixel keeps its samples' own spread over time
+// shorter history, and shorter still by its parallax (what it moved beyond the camera's turn:
+// where the camera moves, blades at other depths slide past each other within a pixel and
+// its history mixes blades that are no longer there; a turn moves every depth alike, and its
+// history stays good). Beside the history, each pixel keeps its samples' own spread over time
 // (an exponentially weighted variance per YCoCg channel, resampled from the nearest texel):
 // with `clip.z` above 0, the clip's box also reaches the current sample plus and minus that
 // many of the pixel's own standard deviations, so that a blade thinner than a pixel, which
@@ -38,7 +41,8 @@ struct Params {
     // x: the neighbourhood's spread, in standard deviations, that bounds the history; y: how
     // fast the most samples fall with the pixels moved (most / (1 + y * pixels), at least 2);
     // z: the pixel's own spread over time, in standard deviations around the current sample,
-    // that the box also reaches (0: the neighbourhood's box alone).
+    // that the box also reaches (0: the neighbourhood's box alone); w: how much faster the
+    // most samples fall with the pixels of parallax (most / (1 + y * pixels + w * parallax)).
     clip: vec4<f32>,
 }
 
@@ -66,6 +70,18 @@ const MOTION_DEPTH_TOLERANCE: f32 = 2e-3;
 // reach falls linearly to nothing there): past it, blades at other depths slide past each
 // other within the pixel, and its past samples were of other blades.
 const SPREAD_MOTION_PX: f32 = 0.5;
+
+// Where the pixel at `px` (pixel position) with reverse-Z depth `d` was in the last frame, in
+// pixels; negative where it lay behind the last camera.
+fn reproject(px: vec2<f32>, d: f32) -> vec2<f32> {
+    let ndc = vec2<f32>(px.x / params.size.x * 2.0 - 1.0, 1.0 - px.y / params.size.y * 2.0);
+    let prev = params.reproject * vec4<f32>(ndc, d, 1.0);
+    if prev.w <= 0.0 {
+        return vec2<f32>(-1.0);
+    }
+    let pn = prev.xy / prev.w;
+    return vec2<f32>((pn.x * 0.5 + 0.5) * params.size.x, (0.5 - pn.y * 0.5) * params.size.y);
+}
 
 fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
     let lo = c / 12.92;
@@ -179,13 +195,12 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
         if m.w > 0.5 && abs(m.z - d) <= MOTION_DEPTH_TOLERANCE * d {
             pp = px - m.xy;
         } else {
-            let ndc = vec2<f32>(px.x / params.size.x * 2.0 - 1.0, 1.0 - px.y / params.size.y * 2.0);
-            let prev = params.reproject * vec4<f32>(ndc, d, 1.0);
-            if prev.w > 0.0 {
-                let pn = prev.xy / prev.w;
-                pp = vec2<f32>((pn.x * 0.5 + 0.5) * params.size.x, (0.5 - pn.y * 0.5) * params.size.y);
-            }
+            pp = reproject(px, d);
         }
+        // Where a point at infinity behind the pixel was: the camera's turn alone. What the
+        // surface moved beyond that is parallax (the camera's move against the depth) or the
+        // blade's own motion: blades at other depths slid past each other within the pixel.
+        let turned = reproject(px, 0.0);
         if all(pp >= vec2<f32>(0.0)) && all(pp < params.size.xy) {
             let h = sample_history(pp);
             if h.a >= 1.0 {
@@ -197,6 +212,7 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
                 let own = max(textureLoad(spread, q, 0).xyz, vec3<f32>(0.0));
                 // Pixels the surface moved since the last frame.
                 let moved = length(pp - px);
+                let parallax = select(moved, length(pp - turned), turned.x >= 0.0);
                 if params.clip.z > 0.0 {
                     // A moving surface's past samples were of other blades (its parallax
                     // uncovers others): the pixel's spread reaches less the further it moved,
@@ -206,7 +222,7 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
                     hi = max(hi, c + reach);
                 }
                 let clipped = clip_to_box(to_ycocg(h.rgb), lo, hi);
-                let most = max(params.size.z / (1.0 + params.clip.y * moved), 2.0);
+                let most = max(params.size.z / (1.0 + params.clip.y * moved + params.clip.w * parallax), 2.0);
                 let n = min(h.a + 1.0, most);
                 let a = 1.0 / n;
                 out = vec4<f32>(mix(from_ycocg(clipped.xyz), cur, a), n);

@@ -131,12 +131,14 @@ fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
 #[test]
 fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
     let ctx = common::gpu();
-    // The default clip, and the clip that also reaches the pixel's own spread over time.
-    for pixel_spread in [0.0, 2.5] {
+    // The default clip, and the clip that also reaches the pixel's own spread over time with
+    // a history that shortens with parallax.
+    for (pixel_spread, parallax_falloff) in [(0.0, 0.0), (2.5, 2.0)] {
         resolve_matches_mirror(
             &ctx,
             TaaSettings {
                 pixel_spread,
+                parallax_falloff,
                 ..TaaSettings::default()
             },
         );
@@ -339,6 +341,7 @@ fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings)
             history: &history,
             spread: &spread,
             pixel_spread: settings.pixel_spread,
+            parallax_falloff: settings.parallax_falloff,
             motion: &motion,
             reproject: match last {
                 Some((lvp, leye)) => reprojection(lvp, leye, vp, camera.position),
@@ -369,8 +372,7 @@ fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings)
         // The GPU keeps its history in half floats: a level or two of 255 apart at most.
         assert!(
             worst <= 2.5 && mean < 0.3,
-            "frame {step}, pixel spread {}: GPU and CPU differ by up to {worst} (mean {mean}) levels",
-            settings.pixel_spread
+            "frame {step}, {settings:?}: GPU and CPU differ by up to {worst} (mean {mean}) levels"
         );
         // After the first frame the history matters: the output is not the current frame.
         if step > 0 {

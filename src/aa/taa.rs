@@ -58,6 +58,12 @@ pub struct TaaSettings {
     /// each other, and the pixel's past samples saw other blades. 0: the neighbourhood's box
     /// alone.
     pub pixel_spread: f32,
+    /// A surface with `q` pixels of parallax (what it moved beyond the camera's turn: the
+    /// camera's move against its depth, or a blade's own motion) keeps at most
+    /// `max_samples / (1 + motion_falloff * p + parallax_falloff * q)` samples: blades at
+    /// other depths slide past each other within the pixel, and its history mixes blades that
+    /// are no longer there, where a turn moves every depth alike.
+    pub parallax_falloff: f32,
 }
 
 impl Default for TaaSettings {
@@ -80,6 +86,7 @@ impl Default for TaaSettings {
             cut_angle_deg: 30.0,
             blade_motion: false,
             pixel_spread: 0.0,
+            parallax_falloff: 0.0,
         }
     }
 }
@@ -94,7 +101,7 @@ pub struct TaaParams {
     /// Target width and height, most samples, 1 to start every pixel again.
     pub size: [f32; 4],
     /// The clip's standard deviations, the motion falloff, the pixel's own spread's standard
-    /// deviations, then padding.
+    /// deviations, the parallax falloff.
     pub clip: [f32; 4],
 }
 
@@ -298,7 +305,7 @@ impl Taa {
                     settings.clip_sigma,
                     settings.motion_falloff,
                     settings.pixel_spread,
-                    0.0,
+                    settings.parallax_falloff,
                 ],
             },
             buffer,

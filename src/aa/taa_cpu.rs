@@ -32,6 +32,9 @@ pub struct ResolveInput<'a> {
     /// Standard deviations of the pixel's own spread, around the current sample, that the
     /// clip's box also reaches (0: none).
     pub pixel_spread: f32,
+    /// How much faster the most samples fall with the pixels of parallax (what a surface
+    /// moved beyond the camera's turn).
+    pub parallax_falloff: f32,
     /// Start every pixel again.
     pub reset: bool,
 }
@@ -126,17 +129,22 @@ impl ResolveInput<'_> {
         let blade = (!self.motion.is_empty())
             .then(|| self.at(self.motion, xi, yi))
             .filter(|m| m.w > 0.5 && (m.z - depth).abs() <= MOTION_DEPTH_TOLERANCE * depth);
-        let then_px = match blade {
-            Some(m) => centre_px - Vec2::new(m.x, m.y),
-            None => {
-                let ndc = Vec2::new(centre_px.x / w * 2.0 - 1.0, 1.0 - centre_px.y / h * 2.0);
-                let then = self.reproject * Vec4::new(ndc.x, ndc.y, depth, 1.0);
-                if then.w <= 0.0 {
-                    return fresh;
-                }
+        // Where a point at this pixel and depth was in the last frame (None: behind the
+        // last camera).
+        let back = |depth: f32| {
+            let ndc = Vec2::new(centre_px.x / w * 2.0 - 1.0, 1.0 - centre_px.y / h * 2.0);
+            let then = self.reproject * Vec4::new(ndc.x, ndc.y, depth, 1.0);
+            (then.w > 0.0).then(|| {
                 let then_ndc = Vec2::new(then.x, then.y) / then.w;
                 Vec2::new((then_ndc.x + 1.0) * 0.5 * w, (1.0 - then_ndc.y) * 0.5 * h)
-            }
+            })
+        };
+        let then_px = match blade {
+            Some(m) => centre_px - Vec2::new(m.x, m.y),
+            None => match back(depth) {
+                Some(p) => p,
+                None => return fresh,
+            },
         };
         if then_px.x < 0.0 || then_px.y < 0.0 || then_px.x >= w || then_px.y >= h {
             return fresh;
@@ -155,6 +163,9 @@ impl ResolveInput<'_> {
         };
         let now = ycocg(current);
         let moved = then_px.distance(centre_px);
+        // What it moved beyond the camera's turn (a point at infinity, reverse-Z depth 0,
+        // moves by the turn alone).
+        let parallax = back(0.0).map_or(moved, |turned| then_px.distance(turned));
         // The box: the neighbourhood's spread around its mean, reaching the current sample's
         // own spread where that is asked for, less for a surface that moved (the pixel's
         // past samples then saw other blades).
@@ -177,7 +188,9 @@ impl ResolveInput<'_> {
             (ycocg(old.truncate()), 1.0)
         };
         // A surface that moved keeps a shorter history (each frame's resampling blurs it).
-        let most = (self.max_samples / (1.0 + self.motion_falloff * moved)).max(2.0);
+        let most = (self.max_samples
+            / (1.0 + self.motion_falloff * moved + self.parallax_falloff * parallax))
+            .max(2.0);
         let n = (old.w + 1.0).min(most);
         let weight = 1.0 / n;
         let kept_rgb = rgb(kept);
@@ -232,6 +245,7 @@ mod tests {
                 motion: &[],
                 spread: &[],
                 pixel_spread: 0.0,
+                parallax_falloff: 0.0,
                 size,
                 current: &current,
                 depth: &depth,
@@ -264,6 +278,7 @@ mod tests {
                 motion: &[],
                 spread: &spread,
                 pixel_spread,
+                parallax_falloff: 0.0,
                 size,
                 current: &current,
                 depth: &depth,
@@ -303,6 +318,7 @@ mod tests {
             motion: &[],
             spread: &spread,
             pixel_spread: 2.5,
+            parallax_falloff: 0.0,
             size,
             current: &current,
             depth: &[0.5; 9],
@@ -333,6 +349,7 @@ mod tests {
             motion: &[],
             spread: &[],
             pixel_spread: 0.0,
+            parallax_falloff: 0.0,
             size,
             current: &current,
             depth: &[0.5; 9],
@@ -348,6 +365,56 @@ mod tests {
         assert_eq!(out.w, 9.0);
     }
 
+    /// The samples the history holds after one frame at pixel (32, 24) of a flat 64 x 48
+    /// scene 25 m away whose history held 20, the last camera `last`, the current `now`.
+    fn samples_after(last: crate::Camera, now: crate::Camera, parallax_falloff: f32) -> f32 {
+        let size = (64, 48);
+        let aspect = 64.0 / 48.0;
+        let current = flat(size, Vec3::splat(0.3));
+        // Reverse-Z with an infinite far plane: depth = near / distance.
+        let depth = vec![now.near_m / 25.0; 64 * 48];
+        let history = vec![Vec4::new(0.3, 0.3, 0.3, 20.0); 64 * 48];
+        let input = ResolveInput {
+            motion: &[],
+            spread: &[],
+            pixel_spread: 0.0,
+            parallax_falloff,
+            size,
+            current: &current,
+            depth: &depth,
+            history: &history,
+            reproject: crate::aa::taa::reprojection(
+                last.view_proj_relative(aspect),
+                last.position,
+                now.view_proj_relative(aspect),
+                now.position,
+            ),
+            max_samples: 24.0,
+            clip_sigma: 2.5,
+            motion_falloff: 1.0,
+            reset: false,
+        };
+        input.pixel(32, 24).w
+    }
+
+    #[test]
+    fn parallax_shortens_the_history_and_a_turn_does_not() {
+        let camera = crate::Camera::new(glam::DVec3::new(0.0, 0.0, 10.0), 0.0, -5.0);
+        let mut turned = camera;
+        turned.yaw_deg += 0.2;
+        let mut moved = camera;
+        moved.position += glam::DVec3::new(0.1, 0.1, 0.0);
+        // A turn moves the pixel's surface as far as a point at infinity: no parallax.
+        let turn = samples_after(camera, turned, 0.0);
+        assert!(turn < 21.0, "the turn moved nothing: {turn}");
+        assert_eq!(samples_after(camera, turned, 4.0), turn);
+        // A move shifts the surface against the infinity behind it: a shorter history.
+        let plain = samples_after(camera, moved, 0.0);
+        let short = samples_after(camera, moved, 4.0);
+        assert!(plain > 1.0 && short > 1.0, "{plain} {short}");
+        assert!(short < plain - 1.0, "{short} against {plain}");
+    }
+
     #[test]
     fn history_that_comes_from_off_screen_starts_again() {
         let size = (4, 2);
@@ -358,6 +425,7 @@ mod tests {
             motion: &[],
             spread: &[],
             pixel_spread: 0.0,
+            parallax_falloff: 0.0,
             size,
             current: &current,
             depth: &[0.5; 8],

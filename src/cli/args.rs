@@ -107,6 +107,11 @@ pub(crate) struct TaaArgs {
     /// alone). Keeps blades thinner than a pixel that the neighbourhood missed.
     #[arg(long, value_name = "K", value_parser = float_in(0.0, 16.0))]
     pub(crate) taa_pixel_spread: Option<f64>,
+    /// With --aa taa: how much faster a surface's history shortens with its parallax (what it
+    /// moved beyond the camera's turn), 0..=16: at most N / (1 + pixels moved + F x pixels of
+    /// parallax) samples.
+    #[arg(long, value_name = "F", value_parser = float_in(0.0, 16.0))]
+    pub(crate) taa_parallax_falloff: Option<f64>,
 }
 
 impl TaaArgs {
@@ -122,6 +127,9 @@ impl TaaArgs {
         s.blade_motion = self.taa_blade_motion;
         if let Some(k) = self.taa_pixel_spread {
             s.pixel_spread = k as f32;
+        }
+        if let Some(f) = self.taa_parallax_falloff {
+            s.parallax_falloff = f as f32;
         }
         s
     }

@@ -147,6 +147,11 @@ pub(crate) enum BenchCommand {
         /// deviations over time, 0..=16, comma-separated (default 0).
         #[arg(long, value_name = "K,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
         taa_pixel_spread: Vec<f64>,
+        /// With taa: how much faster a surface's history shortens with its parallax (at most
+        /// N / (1 + F x pixels moved + P x pixels of parallax) samples), 0..=16,
+        /// comma-separated.
+        #[arg(long, value_name = "P,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
+        taa_parallax_falloff: Vec<f64>,
         #[command(flatten)]
         timing: TimingArgs,
     },
@@ -167,14 +172,15 @@ fn parse_on_off(s: &str) -> Result<bool, String> {
     }
 }
 
-/// Every combination of the given history lengths, clips, falloffs, motion vectors and pixel
-/// spreads (the defaults where none is given).
+/// Every combination of the given history lengths, clips, falloffs, motion vectors, pixel
+/// spreads and parallax falloffs (the defaults where none is given).
 fn taa_variants(
     samples: &[u32],
     clips: &[f64],
     falloffs: &[f64],
     blade_motion: &[bool],
     spreads: &[f64],
+    parallax: &[f64],
 ) -> Vec<verdant::aa::taa::TaaSettings> {
     let base = verdant::aa::taa::TaaSettings::default();
     fn or<T: Copy>(given: &[T], default: T) -> Vec<T> {
@@ -190,14 +196,17 @@ fn taa_variants(
             for f in or(falloffs, f64::from(base.motion_falloff)) {
                 for mv in or(blade_motion, base.blade_motion) {
                     for k in or(spreads, f64::from(base.pixel_spread)) {
-                        out.push(verdant::aa::taa::TaaSettings {
-                            max_samples: n,
-                            clip_sigma: c as f32,
-                            motion_falloff: f as f32,
-                            blade_motion: mv,
-                            pixel_spread: k as f32,
-                            ..base
-                        });
+                        for p in or(parallax, f64::from(base.parallax_falloff)) {
+                            out.push(verdant::aa::taa::TaaSettings {
+                                max_samples: n,
+                                clip_sigma: c as f32,
+                                motion_falloff: f as f32,
+                                blade_motion: mv,
+                                pixel_spread: k as f32,
+                                parallax_falloff: p as f32,
+                                ..base
+                            });
+                        }
                     }
                 }
             }
@@ -543,6 +552,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             taa_falloff,
             taa_blade_motion,
             taa_pixel_spread,
+            taa_parallax_falloff,
             timing,
         } => bench_aa(verdant::tools::bench_aa::BenchAaOptions {
             world: resolve_world(&world)?,
@@ -562,6 +572,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
                 &taa_falloff,
                 &taa_blade_motion,
                 &taa_pixel_spread,
+                &taa_parallax_falloff,
             ),
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,

@@ -326,6 +326,12 @@ impl RendererConfig {
             "",
         )?;
         check("taa.pixel_spread", self.taa.pixel_spread, &(0.0..=16.0), "")?;
+        check(
+            "taa.parallax_falloff",
+            self.taa.parallax_falloff,
+            &(0.0..=16.0),
+            "",
+        )?;
         let checked = [
             self.tree_shadows.map(|s| s.validate()),
             self.particles.map(|p| p.validate()),

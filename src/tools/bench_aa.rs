@@ -153,7 +153,7 @@ impl BenchAaOptions {
             if m == AntiAliasing::Taa && self.taa.len() > 1 {
                 for t in &self.taa {
                     let name = format!(
-                        "{}-n{}-c{}-f{}{}{}",
+                        "{}-n{}-c{}-f{}{}{}{}",
                         m.name(),
                         t.max_samples,
                         t.clip_sigma,
@@ -161,6 +161,11 @@ impl BenchAaOptions {
                         if t.blade_motion { "-mv" } else { "" },
                         if t.pixel_spread > 0.0 {
                             format!("-s{}", t.pixel_spread)
+                        } else {
+                            String::new()
+                        },
+                        if t.parallax_falloff > 0.0 {
+                            format!("-p{}", t.parallax_falloff)
                         } else {
                             String::new()
                         }
