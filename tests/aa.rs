@@ -131,9 +131,9 @@ fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
 #[test]
 fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
     let ctx = common::gpu();
-    // The default clip, and the clip that also reaches the pixel's own spread over time with
-    // a history that shortens with parallax.
-    for (pixel_spread, parallax_falloff) in [(0.0, 0.0), (2.5, 2.0)] {
+    // The neighbourhood's clip with and without a history that shortens with parallax, and
+    // the clip that also reaches the pixel's own spread over time.
+    for (pixel_spread, parallax_falloff) in [(0.0, 0.0), (0.0, 2.0), (2.5, 2.0)] {
         resolve_matches_mirror(
             &ctx,
             TaaSettings {

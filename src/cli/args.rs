@@ -109,7 +109,7 @@ pub(crate) struct TaaArgs {
     pub(crate) taa_pixel_spread: Option<f64>,
     /// With --aa taa: how much faster a surface's history shortens with its parallax (what it
     /// moved beyond the camera's turn), 0..=16: at most N / (1 + pixels moved + F x pixels of
-    /// parallax) samples.
+    /// parallax) samples (default 2).
     #[arg(long, value_name = "F", value_parser = float_in(0.0, 16.0))]
     pub(crate) taa_parallax_falloff: Option<f64>,
 }

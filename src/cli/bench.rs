@@ -149,7 +149,7 @@ pub(crate) enum BenchCommand {
         taa_pixel_spread: Vec<f64>,
         /// With taa: how much faster a surface's history shortens with its parallax (at most
         /// N / (1 + F x pixels moved + P x pixels of parallax) samples), 0..=16,
-        /// comma-separated.
+        /// comma-separated (default 2).
         #[arg(long, value_name = "P,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
         taa_parallax_falloff: Vec<f64>,
         #[command(flatten)]

@@ -901,8 +901,8 @@ mod tests {
             n,
             [
                 "off",
-                "taa-n32-c2.5-f1",
-                &format!("taa-n{}-c2.5-f0.5-mv", base.max_samples),
+                "taa-n32-c2.5-f1-p2",
+                &format!("taa-n{}-c2.5-f0.5-mv-p2", base.max_samples),
                 "msaa"
             ]
         );
