@@ -23,9 +23,10 @@
 //! truth's in each band, and writes every image into OUT. RUN_UP (default 6) is the frames drawn
 //! before the measured one (a temporal method's history fills over them); WIND names the
 //! world's wind scene for every render (default: the renderer's); TAA, a comma-separated list
-//! of `SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX]]]`, adds the temporal method with those
-//! settings (`TaaSettings::clip_sigma`, `max_samples`; MOTION 1 turns `blade_motion` on;
-//! SPREAD is `pixel_spread`, PARALLAX `parallax_falloff`).
+//! of `SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX[/MIN[/RECONSTRUCT]]]]]`, adds the temporal
+//! method with those settings (`TaaSettings::clip_sigma`, `max_samples`; MOTION 1 turns
+//! `blade_motion` on; SPREAD is `pixel_spread`, PARALLAX `parallax_falloff`, MIN
+//! `min_samples`, RECONSTRUCT `reconstruct_px`).
 use anyhow::Result;
 use std::sync::Arc;
 use verdant::RendererConfig;
@@ -229,15 +230,18 @@ fn main() -> Result<()> {
         let mut c = base.clone();
         c.aa = AntiAliasing::Taa;
         match v[..] {
-            [sigma, n] | [sigma, n, _] | [sigma, n, _, _] | [sigma, n, _, _, _] if n >= 2.0 => {
+            [sigma, n, ..] if n >= 2.0 && v.len() <= 7 =>
+            {
                 c.taa.clip_sigma = sigma;
                 c.taa.max_samples = n as u32;
                 c.taa.blade_motion = v.get(2).is_some_and(|&m| m > 0.0);
                 c.taa.pixel_spread = v.get(3).copied().unwrap_or(0.0);
                 c.taa.parallax_falloff = v.get(4).copied().unwrap_or(0.0);
+                c.taa.min_samples = v.get(5).copied().unwrap_or(2.0);
+                c.taa.reconstruct_px = v.get(6).copied().unwrap_or(0.0);
             }
             _ => anyhow::bail!(
-                "taa variant {variant:?} is not SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX]]]"
+                "taa variant {variant:?} is not SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX[/MIN[/RECONSTRUCT]]]]]"
             ),
         }
         c.validate()

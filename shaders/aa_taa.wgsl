@@ -39,14 +39,23 @@ struct Params {
     // again (a cut, a teleport, the first frame).
     size: vec4<f32>,
     // x: the neighbourhood's spread, in standard deviations, that bounds the history; y: how
-    // fast the most samples fall with the pixels moved (most / (1 + y * pixels), at least 2);
+    // fast the most samples fall with the pixels moved (most / (1 + y * pixels), at least
+    // hold.x);
     // z: the pixel's own spread over time, in standard deviations around the current sample,
     // that the box also reaches (0: the neighbourhood's box alone); w: how much faster the
     // most samples fall with the pixels of parallax (most / (1 + y * pixels + w * parallax)).
     clip: vec4<f32>,
+    // x: the fewest samples a moving surface's history keeps (1: the current sample alone
+    // where the history would only blur it); yz: the current frame's jitter (pixels, x right,
+    // y down: its sample of a pixel shows the scene at the pixel's centre minus it); w: the
+    // standard deviation (pixels) of the Gaussian that reconstructs the current frame at each
+    // pixel's centre from its 3x3 samples (0: the pixel's own sample).
+    hold: vec4<f32>,
 }
 
-@group(0) @binding(0) var<uniform> params: Params;
+// Read-only storage, not uniform: software Vulkan (lavapipe) compiles and keeps a variant of a
+// shader for every value of the uniforms its branches depend on, and these change every frame.
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var current: texture_2d<f32>;
 @group(0) @binding(2) var depth: texture_depth_2d;
 @group(0) @binding(3) var history: texture_2d<f32>;
@@ -170,15 +179,30 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(p >= size) {
         return;
     }
-    let cur = load_current(p);
+    var cur = load_current(p);
     var m1 = vec3<f32>(0.0);
     var m2 = vec3<f32>(0.0);
+    // The current frame at the pixel's centre: each sample shows the scene the jitter away
+    // from its pixel's centre, weighted by a Gaussian of its distance from this one's.
+    var rsum = vec3<f32>(0.0);
+    var rweight = 0.0;
+    let rs = params.hold.w;
     for (var dy = -1; dy <= 1; dy++) {
         for (var dx = -1; dx <= 1; dx++) {
-            let c = to_ycocg(load_current(p + vec2<i32>(dx, dy)));
+            let s = load_current(p + vec2<i32>(dx, dy));
+            let c = to_ycocg(s);
             m1 += c;
             m2 += c * c;
+            if rs > 0.0 {
+                let o = vec2<f32>(f32(dx), f32(dy)) - params.hold.yz;
+                let w = exp(-dot(o, o) / (2.0 * rs * rs));
+                rsum += w * s;
+                rweight += w;
+            }
         }
+    }
+    if rs > 0.0 && rweight > 0.0 {
+        cur = rsum / rweight;
     }
     let d = textureLoad(depth, p, 0);
     let mean = m1 / 9.0;
@@ -222,7 +246,7 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
                     hi = max(hi, c + reach);
                 }
                 let clipped = clip_to_box(to_ycocg(h.rgb), lo, hi);
-                let most = max(params.size.z / (1.0 + params.clip.y * moved + params.clip.w * parallax), 2.0);
+                let most = max(params.size.z / (1.0 + params.clip.y * moved + params.clip.w * parallax), params.hold.x);
                 let n = min(h.a + 1.0, most);
                 let a = 1.0 / n;
                 out = vec4<f32>(mix(from_ycocg(clipped.xyz), cur, a), n);

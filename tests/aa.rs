@@ -131,14 +131,25 @@ fn fs(@builtin(position) pos: vec4<f32>) -> @builtin(frag_depth) f32 {
 #[test]
 fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
     let ctx = common::gpu();
-    // The neighbourhood's clip with and without a history that shortens with parallax, and
-    // the clip that also reaches the pixel's own spread over time.
-    for (pixel_spread, parallax_falloff) in [(0.0, 0.0), (0.0, 2.0), (2.5, 2.0)] {
+    // The neighbourhood's clip with and without a history that shortens with parallax, the
+    // clip that also reaches the pixel's own spread over time, and a short history that a
+    // surface moving far enough drops down to its current sample, reconstructed at the
+    // pixels' centres from the jittered samples.
+    for (pixel_spread, parallax_falloff, max_samples, min_samples, reconstruct_px) in [
+        (0.0, 0.0, 24, 2.0, 0.0),
+        (0.0, 2.0, 24, 2.0, 0.0),
+        (2.5, 2.0, 24, 2.0, 0.0),
+        (0.0, 2.0, 8, 1.0, 0.0),
+        (0.0, 2.0, 8, 1.0, 0.4),
+    ] {
         resolve_matches_mirror(
             &ctx,
             TaaSettings {
                 pixel_spread,
                 parallax_falloff,
+                max_samples,
+                min_samples,
+                reconstruct_px,
                 ..TaaSettings::default()
             },
         );
@@ -342,6 +353,9 @@ fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings)
             spread: &spread,
             pixel_spread: settings.pixel_spread,
             parallax_falloff: settings.parallax_falloff,
+            min_samples: settings.min_samples,
+            jitter: verdant::aa::jitter(u64::from(step)),
+            reconstruct_px: settings.reconstruct_px,
             motion: &motion,
             reproject: match last {
                 Some((lvp, leye)) => reprojection(lvp, leye, vp, camera.position),

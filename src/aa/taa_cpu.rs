@@ -35,6 +35,14 @@ pub struct ResolveInput<'a> {
     /// How much faster the most samples fall with the pixels of parallax (what a surface
     /// moved beyond the camera's turn).
     pub parallax_falloff: f32,
+    /// The fewest samples a moving surface's history keeps.
+    pub min_samples: f32,
+    /// The current frame's jitter (pixels, x right, y down): its sample of a pixel shows the
+    /// scene at the pixel's centre minus it.
+    pub jitter: Vec2,
+    /// The standard deviation (pixels) of the Gaussian that reconstructs the current frame
+    /// at each pixel's centre from its 3x3 samples (0: the pixel's own sample).
+    pub reconstruct_px: f32,
     /// Start every pixel again.
     pub reset: bool,
 }
@@ -101,6 +109,28 @@ impl ResolveInput<'_> {
         }
     }
 
+    /// The current frame's value at the centre of pixel (x, y): its own sample, or with
+    /// [`Self::reconstruct_px`] the Gaussian-weighted mean of its 3x3 samples by their
+    /// scene positions' distance from the centre.
+    fn current_at_centre(&self, x: i64, y: i64) -> Vec3 {
+        if self.reconstruct_px <= 0.0 {
+            return self.at(self.current, x, y);
+        }
+        let mut sum = Vec3::ZERO;
+        let mut weight = 0.0;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let offset = Vec2::new(dx as f32, dy as f32) - self.jitter;
+                let w = (-offset.length_squared()
+                    / (2.0 * self.reconstruct_px * self.reconstruct_px))
+                    .exp();
+                sum += w * self.at(self.current, x + dx, y + dy);
+                weight += w;
+            }
+        }
+        sum / weight
+    }
+
     /// The next history at pixel (x, y).
     pub fn pixel(&self, x: u32, y: u32) -> Vec4 {
         self.pixel_and_spread(x, y).0
@@ -109,7 +139,7 @@ impl ResolveInput<'_> {
     /// The next history at pixel (x, y), and the pixel's spread for the next frame.
     pub fn pixel_and_spread(&self, x: u32, y: u32) -> (Vec4, Vec3) {
         let (xi, yi) = (x as i64, y as i64);
-        let current = self.at(self.current, xi, yi);
+        let current = self.current_at_centre(xi, yi);
         let samples: Vec<Vec3> = (-1..=1)
             .flat_map(|dy| (-1..=1).map(move |dx| (dx, dy)))
             .map(|(dx, dy)| ycocg(self.at(self.current, xi + dx, yi + dy)))
@@ -190,7 +220,7 @@ impl ResolveInput<'_> {
         // A surface that moved keeps a shorter history (each frame's resampling blurs it).
         let most = (self.max_samples
             / (1.0 + self.motion_falloff * moved + self.parallax_falloff * parallax))
-            .max(2.0);
+            .max(self.min_samples);
         let n = (old.w + 1.0).min(most);
         let weight = 1.0 / n;
         let kept_rgb = rgb(kept);
@@ -246,6 +276,9 @@ mod tests {
                 spread: &[],
                 pixel_spread: 0.0,
                 parallax_falloff: 0.0,
+                min_samples: 2.0,
+                jitter: Vec2::ZERO,
+                reconstruct_px: 0.0,
                 size,
                 current: &current,
                 depth: &depth,
@@ -279,6 +312,9 @@ mod tests {
                 spread: &spread,
                 pixel_spread,
                 parallax_falloff: 0.0,
+                min_samples: 2.0,
+                jitter: Vec2::ZERO,
+                reconstruct_px: 0.0,
                 size,
                 current: &current,
                 depth: &depth,
@@ -319,6 +355,9 @@ mod tests {
             spread: &spread,
             pixel_spread: 2.5,
             parallax_falloff: 0.0,
+            min_samples: 2.0,
+            jitter: Vec2::ZERO,
+            reconstruct_px: 0.0,
             size,
             current: &current,
             depth: &[0.5; 9],
@@ -350,6 +389,9 @@ mod tests {
             spread: &[],
             pixel_spread: 0.0,
             parallax_falloff: 0.0,
+            min_samples: 2.0,
+            jitter: Vec2::ZERO,
+            reconstruct_px: 0.0,
             size,
             current: &current,
             depth: &[0.5; 9],
@@ -367,7 +409,12 @@ mod tests {
 
     /// The samples the history holds after one frame at pixel (32, 24) of a flat 64 x 48
     /// scene 25 m away whose history held 20, the last camera `last`, the current `now`.
-    fn samples_after(last: crate::Camera, now: crate::Camera, parallax_falloff: f32) -> f32 {
+    fn samples_after(
+        last: crate::Camera,
+        now: crate::Camera,
+        parallax_falloff: f32,
+        min_samples: f32,
+    ) -> f32 {
         let size = (64, 48);
         let aspect = 64.0 / 48.0;
         let current = flat(size, Vec3::splat(0.3));
@@ -379,6 +426,9 @@ mod tests {
             spread: &[],
             pixel_spread: 0.0,
             parallax_falloff,
+            min_samples,
+            jitter: Vec2::ZERO,
+            reconstruct_px: 0.0,
             size,
             current: &current,
             depth: &depth,
@@ -405,14 +455,80 @@ mod tests {
         let mut moved = camera;
         moved.position += glam::DVec3::new(0.1, 0.1, 0.0);
         // A turn moves the pixel's surface as far as a point at infinity: no parallax.
-        let turn = samples_after(camera, turned, 0.0);
+        let turn = samples_after(camera, turned, 0.0, 2.0);
         assert!(turn < 21.0, "the turn moved nothing: {turn}");
-        assert_eq!(samples_after(camera, turned, 4.0), turn);
+        assert_eq!(samples_after(camera, turned, 4.0, 2.0), turn);
         // A move shifts the surface against the infinity behind it: a shorter history.
-        let plain = samples_after(camera, moved, 0.0);
-        let short = samples_after(camera, moved, 4.0);
+        let plain = samples_after(camera, moved, 0.0, 2.0);
+        let short = samples_after(camera, moved, 4.0, 2.0);
         assert!(plain > 1.0 && short > 1.0, "{plain} {short}");
         assert!(short < plain - 1.0, "{short} against {plain}");
+    }
+
+    #[test]
+    fn a_surface_that_moved_far_keeps_the_fewest_samples_asked_for() {
+        let camera = crate::Camera::new(glam::DVec3::new(0.0, 0.0, 10.0), 0.0, -5.0);
+        let mut far = camera;
+        far.position += glam::DVec3::new(0.0, 8.0, 0.0);
+        // Moved so far that the longest history it may keep is under one sample.
+        assert_eq!(samples_after(camera, far, 2.0, 2.0), 2.0);
+        assert_eq!(samples_after(camera, far, 2.0, 1.0), 1.0);
+        // A small move keeps more than either floor, whichever is asked for.
+        let mut near = camera;
+        near.position += glam::DVec3::new(0.0, 0.1, 0.0);
+        let (two, one) = (
+            samples_after(camera, near, 2.0, 2.0),
+            samples_after(camera, near, 2.0, 1.0),
+        );
+        assert!(two > 2.0 && two == one, "{two} {one}");
+    }
+
+    #[test]
+    fn the_current_frame_is_reconstructed_at_the_pixels_centres_not_the_jitters() {
+        // A ramp across the frame drawn with its samples shifted by the jitter: each pixel's
+        // own sample shows the ramp 0.4 pixels left of its centre.
+        let size = (8, 3);
+        let jitter = Vec2::new(0.4, 0.0);
+        let ramp = |x: f32| 0.1 + 0.05 * x;
+        let current: Vec<Vec3> = (0..3)
+            .flat_map(|_| (0..8).map(|x| Vec3::splat(ramp(x as f32 + 0.5 - jitter.x))))
+            .collect();
+        let input = |reconstruct_px| ResolveInput {
+            motion: &[],
+            spread: &[],
+            pixel_spread: 0.0,
+            parallax_falloff: 0.0,
+            min_samples: 2.0,
+            jitter,
+            reconstruct_px,
+            size,
+            current: &current,
+            depth: &[0.5; 24],
+            history: &[Vec4::ZERO; 24],
+            reproject: Mat4::IDENTITY,
+            max_samples: 24.0,
+            clip_sigma: 2.5,
+            motion_falloff: 1.0,
+            reset: true,
+        };
+        let truth = ramp(4.5);
+        let own = (input(0.0).pixel(4, 1).x - truth).abs();
+        let rebuilt = (input(0.4).pixel(4, 1).x - truth).abs();
+        assert!((own - 0.02).abs() < 1e-5, "{own}");
+        assert!(rebuilt < own / 4.0, "{rebuilt} against {own}");
+        // With no jitter the reconstruction is symmetric: the ramp's centre exactly.
+        let still = ResolveInput {
+            jitter: Vec2::ZERO,
+            ..input(0.4)
+        };
+        let centred: Vec<Vec3> = (0..3)
+            .flat_map(|_| (0..8).map(|x| Vec3::splat(ramp(x as f32 + 0.5))))
+            .collect();
+        let still = ResolveInput {
+            current: &centred,
+            ..still
+        };
+        assert!((still.pixel(4, 1).x - truth).abs() < 1e-6);
     }
 
     #[test]
@@ -426,6 +542,9 @@ mod tests {
             spread: &[],
             pixel_spread: 0.0,
             parallax_falloff: 0.0,
+            min_samples: 2.0,
+            jitter: Vec2::ZERO,
+            reconstruct_px: 0.0,
             size,
             current: &current,
             depth: &[0.5; 8],

@@ -112,6 +112,16 @@ pub(crate) struct TaaArgs {
     /// parallax) samples (default 2).
     #[arg(long, value_name = "F", value_parser = float_in(0.0, 16.0))]
     pub(crate) taa_parallax_falloff: Option<f64>,
+    /// With --aa taa: the fewest samples a moving surface's history keeps, 1..=256 and at
+    /// most --taa-samples (default 1: a surface that moved far leans on its current sample
+    /// alone, where a resampled history would only blur it; 2 keeps half a history).
+    #[arg(long, value_name = "M", value_parser = float_in(1.0, 256.0))]
+    pub(crate) taa_min_samples: Option<f64>,
+    /// With --aa taa: reconstruct the current frame at each pixel's centre from its 3x3
+    /// jittered samples with a Gaussian of this standard deviation in pixels, 0..=2 (default
+    /// 0.45; 0: each pixel's own sample, which lies the jitter away from its centre).
+    #[arg(long, value_name = "PX", value_parser = float_in(0.0, 2.0))]
+    pub(crate) taa_reconstruct: Option<f64>,
 }
 
 impl TaaArgs {
@@ -130,6 +140,12 @@ impl TaaArgs {
         }
         if let Some(f) = self.taa_parallax_falloff {
             s.parallax_falloff = f as f32;
+        }
+        if let Some(m) = self.taa_min_samples {
+            s.min_samples = m as f32;
+        }
+        if let Some(r) = self.taa_reconstruct {
+            s.reconstruct_px = r as f32;
         }
         s
     }

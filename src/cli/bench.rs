@@ -152,6 +152,15 @@ pub(crate) enum BenchCommand {
         /// comma-separated (default 2).
         #[arg(long, value_name = "P,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
         taa_parallax_falloff: Vec<f64>,
+        /// With taa: the fewest samples a moving surface's history keeps, 1..=256 and at most
+        /// the history's length, comma-separated (default 1).
+        #[arg(long, value_name = "M,...", value_delimiter = ',', value_parser = float_in(1.0, 256.0))]
+        taa_min_samples: Vec<f64>,
+        /// With taa: the standard deviation (pixels) of the Gaussian that reconstructs the
+        /// current frame at each pixel's centre from its 3x3 jittered samples, 0..=2,
+        /// comma-separated (default 0.45; 0: each pixel's own sample).
+        #[arg(long, value_name = "PX,...", value_delimiter = ',', value_parser = float_in(0.0, 2.0))]
+        taa_reconstruct: Vec<f64>,
         #[command(flatten)]
         timing: TimingArgs,
     },
@@ -173,7 +182,8 @@ fn parse_on_off(s: &str) -> Result<bool, String> {
 }
 
 /// Every combination of the given history lengths, clips, falloffs, motion vectors, pixel
-/// spreads and parallax falloffs (the defaults where none is given).
+/// spreads, parallax falloffs, fewest samples and reconstructions (the defaults where none is
+/// given).
 fn taa_variants(
     samples: &[u32],
     clips: &[f64],
@@ -181,6 +191,8 @@ fn taa_variants(
     blade_motion: &[bool],
     spreads: &[f64],
     parallax: &[f64],
+    least: &[f64],
+    reconstruct: &[f64],
 ) -> Vec<verdant::aa::taa::TaaSettings> {
     let base = verdant::aa::taa::TaaSettings::default();
     fn or<T: Copy>(given: &[T], default: T) -> Vec<T> {
@@ -197,15 +209,21 @@ fn taa_variants(
                 for mv in or(blade_motion, base.blade_motion) {
                     for k in or(spreads, f64::from(base.pixel_spread)) {
                         for p in or(parallax, f64::from(base.parallax_falloff)) {
-                            out.push(verdant::aa::taa::TaaSettings {
-                                max_samples: n,
-                                clip_sigma: c as f32,
-                                motion_falloff: f as f32,
-                                blade_motion: mv,
-                                pixel_spread: k as f32,
-                                parallax_falloff: p as f32,
-                                ..base
-                            });
+                            for m in or(least, f64::from(base.min_samples)) {
+                                for r in or(reconstruct, f64::from(base.reconstruct_px)) {
+                                    out.push(verdant::aa::taa::TaaSettings {
+                                        max_samples: n,
+                                        clip_sigma: c as f32,
+                                        motion_falloff: f as f32,
+                                        blade_motion: mv,
+                                        pixel_spread: k as f32,
+                                        parallax_falloff: p as f32,
+                                        min_samples: m as f32,
+                                        reconstruct_px: r as f32,
+                                        ..base
+                                    });
+                                }
+                            }
                         }
                     }
                 }
@@ -553,6 +571,8 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             taa_blade_motion,
             taa_pixel_spread,
             taa_parallax_falloff,
+            taa_min_samples,
+            taa_reconstruct,
             timing,
         } => bench_aa(verdant::tools::bench_aa::BenchAaOptions {
             world: resolve_world(&world)?,
@@ -573,6 +593,8 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
                 &taa_blade_motion,
                 &taa_pixel_spread,
                 &taa_parallax_falloff,
+                &taa_min_samples,
+                &taa_reconstruct,
             ),
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,

@@ -33,6 +33,9 @@ pub(crate) struct ViewArgs {
     /// Wind scene to start with (default: the path's wind keys, else breeze).
     #[arg(long)]
     pub(crate) wind: Option<String>,
+    /// Anti-aliasing to start with: off (the default), taa or msaa; T cycles through them.
+    #[arg(long)]
+    pub(crate) aa: Option<verdant::aa::AntiAliasing>,
     #[command(flatten)]
     pub(crate) stream: StreamArgs,
 }
@@ -47,6 +50,7 @@ pub(crate) fn view(args: ViewArgs) -> Result<()> {
         frames,
         screenshot,
         wind,
+        aa,
         stream,
     } = args;
     let summary = verdant::tools::view::run_view(verdant::tools::view::ViewOptions {
@@ -60,6 +64,7 @@ pub(crate) fn view(args: ViewArgs) -> Result<()> {
         screenshot: screenshot.clone(),
         service: stream.service(),
         wind_scene: wind,
+        aa,
     })?;
     println!(
         "{} frames, median {:.1} ms a frame ({:.1} fps) on {}",

@@ -38,7 +38,8 @@ pub struct RendererConfig {
     pub wind_keys: Vec<WindKey>,
     /// The switched-on features of the grass model.
     pub features: Features,
-    /// How the frame is anti-aliased.
+    /// How the frame is anti-aliased: none by default ([`AntiAliasing::Off`], one sample at
+    /// each pixel's centre); [`AntiAliasing::Taa`] for consecutive frames.
     pub aa: AntiAliasing,
     /// The temporal anti-aliasing's settings (with `aa` at [`AntiAliasing::Taa`]).
     pub taa: crate::aa::taa::TaaSettings,
@@ -332,6 +333,18 @@ impl RendererConfig {
             &(0.0..=16.0),
             "",
         )?;
+        check(
+            "taa.min_samples",
+            self.taa.min_samples,
+            &(1.0..=self.taa.max_samples as f32),
+            " (at most taa.max_samples)",
+        )?;
+        check(
+            "taa.reconstruct_px",
+            self.taa.reconstruct_px,
+            &(0.0..=2.0),
+            " pixels",
+        )?;
         let checked = [
             self.tree_shadows.map(|s| s.validate()),
             self.particles.map(|p| p.validate()),
@@ -578,6 +591,24 @@ mod tests {
                 "taa.clip_sigma",
                 "0.25..=16",
             ),
+            (
+                with(&|c| c.taa.min_samples = 0.5),
+                "taa.min_samples",
+                "1..=24 (at most taa.max_samples)",
+            ),
+            (
+                with(&|c| {
+                    c.taa.max_samples = 4;
+                    c.taa.min_samples = 5.0;
+                }),
+                "taa.min_samples",
+                "1..=4 (at most taa.max_samples)",
+            ),
+            (
+                with(&|c| c.taa.reconstruct_px = 2.5),
+                "taa.reconstruct_px",
+                "0..=2 pixels",
+            ),
         ];
         for (config, field, range) in cases {
             let e = config.validate().unwrap_err();
@@ -601,6 +632,8 @@ mod tests {
         c.grass.capacity = Some(1);
         c.taa.max_samples = 256;
         c.taa.clip_sigma = 0.25;
+        c.taa.min_samples = 256.0;
+        c.taa.reconstruct_px = 2.0;
         c.validate().unwrap();
         let mut c = base;
         c.grass_rings = None;

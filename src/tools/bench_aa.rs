@@ -153,7 +153,7 @@ impl BenchAaOptions {
             if m == AntiAliasing::Taa && self.taa.len() > 1 {
                 for t in &self.taa {
                     let name = format!(
-                        "{}-n{}-c{}-f{}{}{}{}",
+                        "{}-n{}-c{}-f{}{}{}{}{}{}",
                         m.name(),
                         t.max_samples,
                         t.clip_sigma,
@@ -166,6 +166,16 @@ impl BenchAaOptions {
                         },
                         if t.parallax_falloff > 0.0 {
                             format!("-p{}", t.parallax_falloff)
+                        } else {
+                            String::new()
+                        },
+                        if t.min_samples == 2.0 {
+                            String::new()
+                        } else {
+                            format!("-l{}", t.min_samples)
+                        },
+                        if t.reconstruct_px > 0.0 {
+                            format!("-r{}", t.reconstruct_px)
                         } else {
                             String::new()
                         }
@@ -901,8 +911,8 @@ mod tests {
             n,
             [
                 "off",
-                "taa-n32-c2.5-f1-p2",
-                &format!("taa-n{}-c2.5-f0.5-mv-p2", base.max_samples),
+                "taa-n32-c2.5-f1-p2-l1-r0.45",
+                &format!("taa-n{}-c2.5-f0.5-mv-p2-l1-r0.45", base.max_samples),
                 "msaa"
             ]
         );

@@ -253,6 +253,12 @@ impl Truth {
         config: RendererConfig,
     ) -> Result<Self> {
         check_k("--truth", k)?;
+        // The sub-samples are the anti-aliasing, each a plain frame: a temporal method would
+        // fold them into its history.
+        let config = RendererConfig {
+            aa: crate::aa::AntiAliasing::Off,
+            ..config
+        };
         let scene = Scene::with_source(ctx, world, source, width, height, config)
             .context("the truth's renderer")?;
         Ok(Self { scene, k })

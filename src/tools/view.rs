@@ -49,6 +49,8 @@ pub struct ViewOptions {
     pub service: ServiceConfig,
     /// Wind scene to start with (default: the path's wind keys, else `breeze`).
     pub wind_scene: Option<String>,
+    /// Anti-aliasing to start with (default: the renderer's); T cycles through the methods.
+    pub aa: Option<crate::aa::AntiAliasing>,
 }
 
 /// What a viewing session measured.
@@ -219,6 +221,9 @@ impl Viewer {
         let mut rc = RendererConfig::for_world(&world);
         rc.service = self.opts.service;
         rc.wind_scene = self.opts.wind_scene.clone();
+        if let Some(aa) = self.opts.aa {
+            rc.aa = aa;
+        }
         if rc.wind_scene.is_none() {
             rc.wind_keys = path.wind.clone();
         }
@@ -410,6 +415,13 @@ impl State {
                 self.overlay = !self.overlay;
                 self.renderer.set_overlay(self.overlay);
             }
+            KeyCode::KeyT => {
+                use crate::aa::AntiAliasing;
+                let all = AntiAliasing::ALL;
+                let now = self.renderer.anti_aliasing();
+                let i = all.iter().position(|&m| m == now).unwrap_or(0);
+                self.renderer.set_anti_aliasing(all[(i + 1) % all.len()]);
+            }
             KeyCode::KeyV => {
                 let vsync = self.config.present_mode != wgpu::PresentMode::Fifo;
                 let caps = self.surface.get_capabilities(&self.ctx.adapter);
@@ -498,10 +510,11 @@ impl State {
             ));
         }
         title.push_str(&format!(
-            " | {} {:.0} m/s | wind {}{}",
+            " | {} {:.0} m/s | wind {} | aa {}{}",
             if self.following { "path" } else { "free" },
             self.speed_mps,
             self.wind_scene,
+            self.renderer.anti_aliasing(),
             if self.overlay { " | overlay" } else { "" }
         ));
         self.window.set_title(&title);
