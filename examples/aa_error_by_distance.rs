@@ -230,8 +230,7 @@ fn main() -> Result<()> {
         let mut c = base.clone();
         c.aa = AntiAliasing::Taa;
         match v[..] {
-            [sigma, n, ..] if n >= 2.0 && v.len() <= 7 =>
-            {
+            [sigma, n, ..] if n >= 2.0 && v.len() <= 7 => {
                 c.taa.clip_sigma = sigma;
                 c.taa.max_samples = n as u32;
                 c.taa.blade_motion = v.get(2).is_some_and(|&m| m > 0.0);

@@ -6,8 +6,8 @@
 use glam::{DMat4, DVec3, Mat4, Vec2};
 
 use crate::gpu::layout::{
-    UNFILTERABLE_FLOAT, bind_group_layout, texture_2d, texture_depth_2d, texture_storage_2d,
-    storage_buffer_read_only, view as view_of, with_indices,
+    UNFILTERABLE_FLOAT, bind_group_layout, storage_buffer_read_only, texture_2d, texture_depth_2d,
+    texture_storage_2d, view as view_of, with_indices,
 };
 use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{DepthBound, buffer, compute_pipeline_with_constants, render_pipeline};

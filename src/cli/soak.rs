@@ -35,6 +35,9 @@ pub(crate) struct SoakArgs {
     /// Fly without grass and its wind: the streaming system alone.
     #[arg(long)]
     pub(crate) no_grass: bool,
+    /// Anti-aliasing while flying: off, taa or msaa (default: the renderer's).
+    #[arg(long)]
+    pub(crate) aa: Option<verdant::aa::AntiAliasing>,
     /// A teleport must reach full detail within this many frames, 1..=100000, or within
     /// the simulated time they stand for (0.1 s each) of wall time, on a machine that
     /// renders faster than that.
@@ -65,6 +68,7 @@ impl SoakArgs {
             size,
             out,
             no_grass,
+            aa,
             max_recovery_frames,
             max_stall_ms,
             faults,
@@ -80,6 +84,7 @@ impl SoakArgs {
             out,
             service: stream.service(),
             no_grass,
+            aa: aa.unwrap_or_default(),
             max_recovery_frames,
             max_stall_ms,
             faults,

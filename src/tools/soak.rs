@@ -46,6 +46,8 @@ pub struct SoakOptions {
     pub service: crate::stream::ServiceConfig,
     /// Fly without grass (and so without its wind): the streaming system alone.
     pub no_grass: bool,
+    /// How the frames are anti-aliased.
+    pub aa: crate::aa::AntiAliasing,
     /// Resident memory may grow this much after the warm-up, bytes (allocator noise); see
     /// [`SoakReport::rss_growth_bytes`].
     pub rss_tolerance_bytes: u64,
@@ -83,6 +85,7 @@ impl Default for SoakOptions {
             max_stall_ms: 5000.0,
             service: crate::stream::ServiceConfig::default(),
             no_grass: false,
+            aa: crate::aa::AntiAliasing::default(),
             faults: 0.0,
             fault_period_s: 2.0,
         }
@@ -467,6 +470,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let ctx = GpuContext::new()?;
     let mut config = RendererConfig::for_world(&world);
     config.service = opts.service;
+    config.aa = opts.aa;
     if opts.no_grass {
         config.grass_rings = None;
     }
