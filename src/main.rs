@@ -26,10 +26,11 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Render PNG frames along a camera path and write report.json.
-    Fly(FlyArgs),
+    Fly(Box<FlyArgs>),
     /// Open a window on a world: drag the mouse to look, WASD to fly, Q/E down and up, Shift
     /// faster, the wheel or +/- for speed, P to follow the camera path (N: next path), 1-9 for
-    /// the wind scenes, L for the LOD overlay, V for vsync, Esc to quit. Figures in the title.
+    /// the wind scenes, L for the LOD overlay, T for the anti-aliasing, V for vsync, Esc to
+    /// quit. Figures in the title.
     View(ViewArgs),
     /// Fly fast with random turns and teleports; check the streaming ceilings, holes and memory.
     /// Writes soak.json and exits non-zero if a check failed.

@@ -127,43 +127,51 @@ pub(crate) enum BenchCommand {
         /// The sequences, comma-separated (still, dolly, pan, teleport).
         #[arg(long, default_value = "still,dolly,pan,teleport", value_delimiter = ',', value_parser = parse_motion)]
         sequences: Vec<verdant::tools::bench_aa::Motion>,
-        /// With taa: the most samples a pixel's history holds, 2..=256, comma-separated (default
-        /// 24): every combination with the other --taa-* lists is measured as a method of its
-        /// own.
-        #[arg(long, value_name = "N,...", value_delimiter = ',', value_parser = clap::value_parser!(u32).range(2..=256))]
-        taa_samples: Vec<u32>,
-        /// With taa: the history's clip, standard deviations of the neighbourhood, 0.25..=16,
-        /// comma-separated (default 2.5).
-        #[arg(long, value_name = "SIGMA,...", value_delimiter = ',', value_parser = float_in(0.25, 16.0))]
-        taa_clip: Vec<f64>,
-        /// With taa: how fast a moving surface's history shortens (at most N / (1 + F x pixels
-        /// moved) samples), 0..=16, comma-separated (default 1).
-        #[arg(long, value_name = "F,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
-        taa_falloff: Vec<f64>,
-        /// With taa: the grass blades write their own motion vectors ("on,off" measures both).
-        #[arg(long, value_name = "on|off,...", value_delimiter = ',', value_parser = parse_on_off)]
-        taa_blade_motion: Vec<bool>,
-        /// With taa: the clip's reach around the current sample, in the pixel's own standard
-        /// deviations over time, 0..=16, comma-separated (default 0).
-        #[arg(long, value_name = "K,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
-        taa_pixel_spread: Vec<f64>,
-        /// With taa: how much faster a surface's history shortens with its parallax (at most
-        /// N / (1 + F x pixels moved + P x pixels of parallax) samples), 0..=16,
-        /// comma-separated (default 2).
-        #[arg(long, value_name = "P,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
-        taa_parallax_falloff: Vec<f64>,
-        /// With taa: the fewest samples a moving surface's history keeps, 1..=256 and at most
-        /// the history's length, comma-separated (default 1).
-        #[arg(long, value_name = "M,...", value_delimiter = ',', value_parser = float_in(1.0, 256.0))]
-        taa_min_samples: Vec<f64>,
-        /// With taa: the standard deviation (pixels) of the Gaussian that reconstructs the
-        /// current frame at each pixel's centre from its 3x3 jittered samples, 0..=2,
-        /// comma-separated (default 0.45; 0: each pixel's own sample).
-        #[arg(long, value_name = "PX,...", value_delimiter = ',', value_parser = float_in(0.0, 2.0))]
-        taa_reconstruct: Vec<f64>,
+        #[command(flatten)]
+        taa: Box<TaaLists>,
         #[command(flatten)]
         timing: TimingArgs,
     },
+}
+
+/// The temporal method's settings as lists: every combination is measured as a method of its
+/// own.
+#[derive(clap::Args)]
+pub(crate) struct TaaLists {
+    /// With taa: the most samples a pixel's history holds, 2..=256, comma-separated (default
+    /// 24): every combination with the other --taa-* lists is measured as a method of its
+    /// own.
+    #[arg(long, value_name = "N,...", value_delimiter = ',', value_parser = clap::value_parser!(u32).range(2..=256))]
+    pub(crate) taa_samples: Vec<u32>,
+    /// With taa: the history's clip, standard deviations of the neighbourhood, 0.25..=16,
+    /// comma-separated (default 2.5).
+    #[arg(long, value_name = "SIGMA,...", value_delimiter = ',', value_parser = float_in(0.25, 16.0))]
+    pub(crate) taa_clip: Vec<f64>,
+    /// With taa: how fast a moving surface's history shortens (at most N / (1 + F x pixels
+    /// moved) samples), 0..=16, comma-separated (default 1).
+    #[arg(long, value_name = "F,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
+    pub(crate) taa_falloff: Vec<f64>,
+    /// With taa: the grass blades write their own motion vectors ("on,off" measures both).
+    #[arg(long, value_name = "on|off,...", value_delimiter = ',', value_parser = parse_on_off)]
+    pub(crate) taa_blade_motion: Vec<bool>,
+    /// With taa: the clip's reach around the current sample, in the pixel's own standard
+    /// deviations over time, 0..=16, comma-separated (default 0).
+    #[arg(long, value_name = "K,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
+    pub(crate) taa_pixel_spread: Vec<f64>,
+    /// With taa: how much faster a surface's history shortens with its parallax (at most
+    /// N / (1 + F x pixels moved + P x pixels of parallax) samples), 0..=16,
+    /// comma-separated (default 2).
+    #[arg(long, value_name = "P,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
+    pub(crate) taa_parallax_falloff: Vec<f64>,
+    /// With taa: the fewest samples a moving surface's history keeps, 1..=256 and at most
+    /// the history's length, comma-separated (default 1).
+    #[arg(long, value_name = "M,...", value_delimiter = ',', value_parser = float_in(1.0, 256.0))]
+    pub(crate) taa_min_samples: Vec<f64>,
+    /// With taa: the standard deviation (pixels) of the Gaussian that reconstructs the
+    /// current frame at each pixel's centre from its 3x3 jittered samples, 0..=2,
+    /// comma-separated (default 0.45; 0: each pixel's own sample).
+    #[arg(long, value_name = "PX,...", value_delimiter = ',', value_parser = float_in(0.0, 2.0))]
+    pub(crate) taa_reconstruct: Vec<f64>,
 }
 
 /// Parses a sequence's name.
@@ -184,16 +192,17 @@ fn parse_on_off(s: &str) -> Result<bool, String> {
 /// Every combination of the given history lengths, clips, falloffs, motion vectors, pixel
 /// spreads, parallax falloffs, fewest samples and reconstructions (the defaults where none is
 /// given).
-fn taa_variants(
-    samples: &[u32],
-    clips: &[f64],
-    falloffs: &[f64],
-    blade_motion: &[bool],
-    spreads: &[f64],
-    parallax: &[f64],
-    least: &[f64],
-    reconstruct: &[f64],
-) -> Vec<verdant::aa::taa::TaaSettings> {
+fn taa_variants(lists: &TaaLists) -> Vec<verdant::aa::taa::TaaSettings> {
+    let TaaLists {
+        taa_samples: samples,
+        taa_clip: clips,
+        taa_falloff: falloffs,
+        taa_blade_motion: blade_motion,
+        taa_pixel_spread: spreads,
+        taa_parallax_falloff: parallax,
+        taa_min_samples: least,
+        taa_reconstruct: reconstruct,
+    } = lists;
     let base = verdant::aa::taa::TaaSettings::default();
     fn or<T: Copy>(given: &[T], default: T) -> Vec<T> {
         if given.is_empty() {
@@ -565,14 +574,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             path,
             paths,
             sequences,
-            taa_samples,
-            taa_clip,
-            taa_falloff,
-            taa_blade_motion,
-            taa_pixel_spread,
-            taa_parallax_falloff,
-            taa_min_samples,
-            taa_reconstruct,
+            taa,
             timing,
         } => bench_aa(verdant::tools::bench_aa::BenchAaOptions {
             world: resolve_world(&world)?,
@@ -586,16 +588,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             path,
             paths: paths.into_iter().filter(|p| !p.is_empty()).collect(),
             motions: sequences,
-            taa: taa_variants(
-                &taa_samples,
-                &taa_clip,
-                &taa_falloff,
-                &taa_blade_motion,
-                &taa_pixel_spread,
-                &taa_parallax_falloff,
-                &taa_min_samples,
-                &taa_reconstruct,
-            ),
+            taa: taa_variants(&taa),
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
