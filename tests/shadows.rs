@@ -143,6 +143,8 @@ fn contact_shadows_match_their_cpu_mirror() {
     let render = |features| {
         let mut config = RendererConfig::for_world(&world);
         config.features = features;
+        // Each pixel against the mirror's shadow at its centre: one sample there.
+        config.aa = verdant::aa::AntiAliasing::Off;
         let settings = config.grass_settings(&world).unwrap();
         config.grass.capacity = Some(settings.grid() * settings.grid());
         let mut scene =
@@ -233,6 +235,8 @@ fn tree_shadows_match_their_cpu_mirror_and_fall_from_the_trees() {
     let render = |features: verdant::features::Features| {
         let mut config = RendererConfig::for_world(&world);
         config.features = features;
+        // Each pixel against the mirror's shadow at its centre: one sample there.
+        config.aa = verdant::aa::AntiAliasing::Off;
         let mut scene = Scene::new(&ctx, world.clone(), w, h, config).unwrap();
         assert!(
             scene
