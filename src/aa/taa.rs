@@ -449,7 +449,7 @@ impl Taa {
         };
         self.params.size[3] = if cut { 1.0 } else { 0.0 };
         // The frame being resolved was drawn with the jitter [`Self::next_jitter`] gave.
-        let jitter = super::jitter(self.frames);
+        let jitter = self.next_jitter();
         self.params.hold[1] = jitter.x;
         self.params.hold[2] = jitter.y;
         queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&self.params));
