@@ -34,9 +34,9 @@ pub struct TaaSettings {
     /// standard deviations (per YCoCg channel).
     pub clip_sigma: f32,
     /// A surface that moved `p` pixels since the last frame keeps at most
-    /// `max_samples / (1 + motion_falloff * p)` samples (at least [`Self::min_samples`]; fewer with its parallax,
-    /// [`Self::parallax_falloff`]): a history resampled frame after frame blurs, so a moving
-    /// one is kept shorter.
+    /// `max_samples / (1 + motion_falloff * p)` samples (at least [`Self::min_samples`];
+    /// fewer with its parallax, [`Self::parallax_falloff`]): a history resampled frame after
+    /// frame blurs, so a moving one is kept shorter.
     pub motion_falloff: f32,
     /// A camera that moves further than this in one frame (metres) starts every history again.
     pub cut_distance_m: f64,

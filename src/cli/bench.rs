@@ -193,53 +193,42 @@ fn parse_on_off(s: &str) -> Result<bool, String> {
 /// spreads, parallax falloffs, fewest samples and reconstructions (the defaults where none is
 /// given).
 fn taa_variants(lists: &TaaLists) -> Vec<verdant::aa::taa::TaaSettings> {
-    let TaaLists {
-        taa_samples: samples,
-        taa_clip: clips,
-        taa_falloff: falloffs,
-        taa_blade_motion: blade_motion,
-        taa_pixel_spread: spreads,
-        taa_parallax_falloff: parallax,
-        taa_min_samples: least,
-        taa_reconstruct: reconstruct,
-    } = lists;
-    let base = verdant::aa::taa::TaaSettings::default();
-    fn or<T: Copy>(given: &[T], default: T) -> Vec<T> {
-        if given.is_empty() {
-            vec![default]
-        } else {
-            given.to_vec()
+    use verdant::aa::taa::TaaSettings;
+    /// Every setting of `out` once for each of `values` (the outer lists vary slowest), or
+    /// `out` as it is where none is given.
+    fn times<T: Copy>(
+        out: Vec<TaaSettings>,
+        values: &[T],
+        set: fn(&mut TaaSettings, T),
+    ) -> Vec<TaaSettings> {
+        if values.is_empty() {
+            return out;
         }
+        out.into_iter()
+            .flat_map(|s| {
+                values.iter().map(move |&v| {
+                    let mut s = s;
+                    set(&mut s, v);
+                    s
+                })
+            })
+            .collect()
     }
-    let mut out = Vec::new();
-    for n in or(samples, base.max_samples) {
-        for c in or(clips, f64::from(base.clip_sigma)) {
-            for f in or(falloffs, f64::from(base.motion_falloff)) {
-                for mv in or(blade_motion, base.blade_motion) {
-                    for k in or(spreads, f64::from(base.pixel_spread)) {
-                        for p in or(parallax, f64::from(base.parallax_falloff)) {
-                            for m in or(least, f64::from(base.min_samples)) {
-                                for r in or(reconstruct, f64::from(base.reconstruct_px)) {
-                                    out.push(verdant::aa::taa::TaaSettings {
-                                        max_samples: n,
-                                        clip_sigma: c as f32,
-                                        motion_falloff: f as f32,
-                                        blade_motion: mv,
-                                        pixel_spread: k as f32,
-                                        parallax_falloff: p as f32,
-                                        min_samples: m as f32,
-                                        reconstruct_px: r as f32,
-                                        ..base
-                                    });
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-        }
-    }
-    out
+    let out = vec![TaaSettings::default()];
+    let out = times(out, &lists.taa_samples, |s, n| s.max_samples = n);
+    let out = times(out, &lists.taa_clip, |s, c| s.clip_sigma = c as f32);
+    let out = times(out, &lists.taa_falloff, |s, f| s.motion_falloff = f as f32);
+    let out = times(out, &lists.taa_blade_motion, |s, m| s.blade_motion = m);
+    let out = times(out, &lists.taa_pixel_spread, |s, k| {
+        s.pixel_spread = k as f32
+    });
+    let out = times(out, &lists.taa_parallax_falloff, |s, p| {
+        s.parallax_falloff = p as f32
+    });
+    let out = times(out, &lists.taa_min_samples, |s, m| s.min_samples = m as f32);
+    times(out, &lists.taa_reconstruct, |s, r| {
+        s.reconstruct_px = r as f32
+    })
 }
 
 /// Parses an anti-aliasing method's name.
@@ -593,5 +582,53 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Lists {
+        #[command(flatten)]
+        taa: TaaLists,
+    }
+
+    #[test]
+    fn every_combination_of_the_taa_lists_with_the_first_list_varying_slowest() {
+        let lists = Lists::parse_from([
+            "bench",
+            "--taa-samples",
+            "16,32",
+            "--taa-reconstruct",
+            "0,0.45,0.6",
+        ])
+        .taa;
+        let v = taa_variants(&lists);
+        let got: Vec<(u32, f32)> = v
+            .iter()
+            .map(|s| (s.max_samples, s.reconstruct_px))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (16, 0.0),
+                (16, 0.45),
+                (16, 0.6),
+                (32, 0.0),
+                (32, 0.45),
+                (32, 0.6)
+            ]
+        );
+        // What no list names keeps the renderer's default.
+        let base = verdant::aa::taa::TaaSettings::default();
+        assert!(v.iter().all(|s| s.min_samples == base.min_samples
+            && s.parallax_falloff == base.parallax_falloff
+            && s.clip_sigma == base.clip_sigma));
+        let none = taa_variants(&Lists::parse_from(["bench"]).taa);
+        assert_eq!(none.len(), 1);
+        assert_eq!(none[0].max_samples, base.max_samples);
     }
 }
