@@ -63,7 +63,8 @@ struct Params {
 // The full-screen pass's input: the history just written.
 @group(0) @binding(5) var resolved: texture_2d<f32>;
 // The blades' motion vectors (shaders/grass_draw.wgsl, fs_blade_motion): xy the pixels the
-// blade's point moved since the last frame, z its depth, w 1 where a blade wrote them.
+// blade's point moved since the last frame, z its depth, w 1 where a blade wrote them, 2 where
+// a falling leaf marked its pixel (shaders/particles.wgsl, fs_particle_mark).
 @group(0) @binding(6) var motion: texture_2d<f32>;
 // The pixels' own spread over time: the variance of their samples per YCoCg channel (xyz),
 // read from the last frame's and written for the next.
@@ -210,13 +211,18 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
 
     var out = vec4<f32>(cur, 1.0);
     var var_out = vec3<f32>(0.0);
-    if params.size.w < 0.5 {
+    // The pixel's motion vector, where what wrote it is still the pixel's surface: a blade's
+    // own motion (w 1), or a mark that the surface's history does not hold it (w 2: a falling
+    // leaf, shaders/particles.wgsl), which starts the pixel again from its current sample.
+    let m = textureLoad(motion, p, 0);
+    let own_motion = m.w > 0.5 && abs(m.z - d) <= MOTION_DEPTH_TOLERANCE * d;
+    let reactive = own_motion && m.w > 1.5;
+    if params.size.w < 0.5 && !reactive {
         let px = vec2<f32>(p) + 0.5;
         // Where the pixel's surface was: a blade's own motion where a blade is the pixel's
         // surface, else the pixel reprojected through its depth (the camera's move alone).
         var pp = vec2<f32>(-1.0);
-        let m = textureLoad(motion, p, 0);
-        if m.w > 0.5 && abs(m.z - d) <= MOTION_DEPTH_TOLERANCE * d {
+        if own_motion {
             pp = px - m.xy;
         } else {
             pp = reproject(px, d);

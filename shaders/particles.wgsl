@@ -356,12 +356,30 @@ fn vs_particle(@builtin(vertex_index) vi: u32, @builtin(instance_index) ii: u32)
     return out;
 }
 
+// Whether a fragment lies outside the leaf's outline, an ellipse pointed at both ends.
+fn outside_leaf(in: VertexOut) -> bool {
+    let q = vec2<f32>(in.uv.x, in.uv.y * (1.0 + 0.6 * abs(in.uv.x)));
+    return dot(q, q) > 1.0;
+}
+
 @fragment
 fn fs_particle(in: VertexOut) -> @location(0) vec4<f32> {
-    // A leaf's outline: an ellipse pointed at both ends.
-    let q = vec2<f32>(in.uv.x, in.uv.y * (1.0 + 0.6 * abs(in.uv.x)));
-    if dot(q, q) > 1.0 {
+    if outside_leaf(in) {
         discard;
     }
     return output_color(mix(in.color, params.horizon_color.rgb, in.fog));
+}
+
+// With temporal anti-aliasing, a second draw of the leaves marks their pixels in the motion
+// vectors' target (w = 2, at the leaf's depth) as ones whose history does not hold them. A
+// leaf a pixel or two wide moves on its own and spins; reprojected through its depth, its
+// pixel's history is the ground or the grass behind it, which the neighbourhood's clip keeps,
+// and the leaf would show at 1 / n of its colour. The resolve (shaders/aa_taa.wgsl) takes a
+// marked pixel's current sample alone.
+@fragment
+fn fs_particle_mark(in: VertexOut) -> @location(0) vec4<f32> {
+    if outside_leaf(in) {
+        discard;
+    }
+    return vec4<f32>(0.0, 0.0, in.clip.z, 2.0);
 }

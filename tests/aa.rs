@@ -84,8 +84,9 @@ fn f16_value(h: u16) -> f32 {
 
 /// Blades' motion vectors over `depth`: every third pixel moved by a step that changes with
 /// `phase`, at its own depth (the blade is the pixel's surface), and on the left half some
-/// pixels whose depth is not the frame's (a blade covered by something drawn after it). As
-/// half floats, and as the values those hold.
+/// pixels whose depth is not the frame's (a blade covered by something drawn after it); among
+/// the rest, falling leaves' marks, at the pixel's depth and not. As half floats, and as the
+/// values those hold.
 fn motion(phase: u32, depth: &[f32]) -> (Vec<u16>, Vec<Vec4>) {
     let mut bits = Vec::new();
     for y in 0..H {
@@ -94,6 +95,10 @@ fn motion(phase: u32, depth: &[f32]) -> (Vec<u16>, Vec<Vec4>) {
             let m = match (x + y + phase) % 3 {
                 0 if d > 0.0 => [1.5, -0.75 + 0.5 * phase as f32, d, 1.0],
                 1 if d > 0.0 && x < W / 2 => [-2.0, 1.0, 0.5 * d, 1.0],
+                // Falling leaves' marks: the pixel's current sample alone, where the leaf is
+                // still its surface, and not under something drawn over it.
+                2 if d > 0.0 && (x * 7 + y * 5 + phase) % 4 == 0 => [0.0, 0.0, d, 2.0],
+                2 if d > 0.0 && (x * 7 + y * 5 + phase) % 4 == 1 => [0.0, 0.0, 0.5 * d, 2.0],
                 _ => [0.0; 4],
             };
             bits.extend(m.map(f16_bits));

@@ -18,7 +18,10 @@ fn default_world_matches_reference_image() {
         .path("overview")
         .expect("the default world has an overview path")
         .clone();
-    let config = RendererConfig::for_world(&world);
+    let mut config = RendererConfig::for_world(&world);
+    // The reference is the scene's shading, one sample at each pixel's centre (the temporal
+    // method's own tests are in tests/aa.rs).
+    config.aa = verdant::aa::AntiAliasing::Off;
     let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
     let t = path.keys[0].t_s + 0.3 * (path.keys[path.keys.len() - 1].t_s - path.keys[0].t_s);
     let camera = sample_path(&path, t);
@@ -147,7 +150,10 @@ fn grassy_meadow_matches_reference_image() {
         .path("meadow")
         .expect("the default world has a meadow path")
         .clone();
-    let config = RendererConfig::for_world(&world);
+    let mut config = RendererConfig::for_world(&world);
+    // The reference is the scene's shading, one sample at each pixel's centre (the temporal
+    // method's own tests are in tests/aa.rs).
+    config.aa = verdant::aa::AntiAliasing::Off;
     let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
     let camera = sample_path(&path, path.keys[0].t_s + 0.4 * path.duration_s);
     assert!(
@@ -183,6 +189,8 @@ fn meadow_in_wind(scene_name: &str) -> image::RgbaImage {
         .clone();
     let mut config = RendererConfig::for_world(&world);
     config.wind_scene = Some(scene_name.to_owned());
+    // One sample at each pixel's centre, as the references were drawn.
+    config.aa = verdant::aa::AntiAliasing::Off;
     let mut scene = Scene::new(&ctx, world, 256, 144, config).expect("build the scene");
     let camera = sample_path(&path, path.keys[0].t_s + 0.6 * path.duration_s);
     assert!(

@@ -79,7 +79,10 @@ fn bgra_unorm_and_depth24_targets_render_the_reference() {
         wgpu::TextureFormat::Bgra8Unorm,
         wgpu::TextureFormat::Depth24Plus,
     );
-    let options = RendererOptions::new(&world, color, depth, 256, 144);
+    let mut options = RendererOptions::new(&world, color, depth, 256, 144);
+    // The reference is the scene's shading, one sample at each pixel's centre (the temporal
+    // method's own tests are in tests/aa.rs).
+    options.config.aa = verdant::aa::AntiAliasing::Off;
     let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
     assert!(renderer.warm_up(&camera, Duration::from_secs(60)).unwrap());
     let t = targets(&ctx.device, color, depth, (256, 144));
@@ -98,7 +101,10 @@ fn a_resized_renderer_renders_the_reference_at_its_new_size() {
         wgpu::TextureFormat::Rgba8Unorm,
         wgpu::TextureFormat::Depth32Float,
     );
-    let options = RendererOptions::new(&world, color, depth, 96, 200);
+    let mut options = RendererOptions::new(&world, color, depth, 96, 200);
+    // The reference is the scene's shading, one sample at each pixel's centre (the temporal
+    // method's own tests are in tests/aa.rs).
+    options.config.aa = verdant::aa::AntiAliasing::Off;
     let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
     assert!(renderer.warm_up(&camera, Duration::from_secs(60)).unwrap());
     let small = targets(&ctx.device, color, depth, (96, 200));

@@ -21,15 +21,16 @@ pub mod taa_cpu;
 /// How the frame is anti-aliased.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum AntiAliasing {
-    /// None: one sample at each pixel's centre. The default, for now: the temporal method
-    /// errs less against the truth in every sequence and along every path `bench aa`
-    /// measures (README), but a single still frame, as the tools and tests draw, is only its
-    /// first, reconstructed sample.
-    #[default]
+    /// None: one sample at each pixel's centre. A single still frame of a scene, where no
+    /// history could build up, is drawn best so.
     Off,
     /// Temporal: a jittered projection every frame, folded into a reprojected, clipped
-    /// history ([`taa::Taa`]). For consecutive frames: at 960x540 and 1920x1080 it costs 2.7%
-    /// and 6.8% of the frame's GPU time.
+    /// history ([`taa::Taa`]). The default: against the truth it errs less than no
+    /// anti-aliasing in every sequence and along every path `bench aa` measures, at 960x540
+    /// and 1920x1080, for 2.7% and 6.8% of the frame's GPU time (README). Its first frame, or
+    /// the first after a cut, is the current frame alone, reconstructed at the pixels'
+    /// centres.
+    #[default]
     Taa,
     /// Multisampling of the grass, four samples a pixel, each blade's sub-pixel width kept as
     /// coverage ([`msaa::Msaa`]).

@@ -15,8 +15,9 @@ pub struct ResolveInput<'a> {
     /// The last history: linear colour, and in `w` the samples it holds (0: none).
     pub history: &'a [Vec4],
     /// The blades' motion vectors ([`crate::aa::taa::MOTION_FORMAT`]): the pixels a blade's
-    /// point moved since the last frame (x, y), its depth (z), 1 where a blade wrote it (w).
-    /// Empty: none anywhere.
+    /// point moved since the last frame (x, y), its depth (z), 1 where a blade wrote it (w), 2
+    /// where a falling leaf marked its pixel as one whose history does not hold it (the pixel
+    /// starts again from its current sample). Empty: none anywhere.
     pub motion: &'a [Vec4],
     /// The last frame's spreads: each pixel's samples' variance over time per YCoCg channel
     /// (xyz). Empty: none anywhere.
@@ -152,13 +153,20 @@ impl ResolveInput<'_> {
         if self.reset {
             return fresh;
         }
-        let (w, h) = (self.size.0 as f32, self.size.1 as f32);
-        let centre_px = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-        // A blade's own motion where the blade is still the pixel's surface (its depth is the
-        // frame's), else the pixel's depth reprojected.
-        let blade = (!self.motion.is_empty())
+        // The pixel's motion vector where what wrote it is still the pixel's surface (the
+        // frame's depth is its own).
+        let written = (!self.motion.is_empty())
             .then(|| self.at(self.motion, xi, yi))
             .filter(|m| m.w > 0.5 && (m.z - depth).abs() <= MOTION_DEPTH_TOLERANCE * depth);
+        // A falling leaf's mark: its history does not hold it.
+        if written.is_some_and(|m| m.w > 1.5) {
+            return fresh;
+        }
+        let (w, h) = (self.size.0 as f32, self.size.1 as f32);
+        let centre_px = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+        // A blade's own motion where the blade is still the pixel's surface, else the pixel's
+        // depth reprojected.
+        let blade = written;
         // Where a point at this pixel and depth was in the last frame (None: behind the
         // last camera).
         let back = |depth: f32| {
@@ -293,6 +301,52 @@ mod tests {
         }
         assert!((history[12].x - 0.25).abs() < 0.02, "{}", history[12]);
         assert_eq!(history[12].w, 40.0);
+    }
+
+    #[test]
+    fn a_leaf_marked_in_the_motion_vectors_shows_its_current_sample_alone() {
+        // A still green field with a long history; a small leaf (a bright pixel) appears in
+        // the middle. Reprojected through its depth, the pixel's history is the field, which the
+        // neighbourhood (the leaf and eight green pixels) keeps: the leaf would show at 1 / n.
+        let size = (5, 5);
+        let green = Vec3::new(0.1, 0.3, 0.05);
+        let leaf = Vec3::new(0.9, 0.6, 0.2);
+        let mut current = flat(size, green);
+        current[12] = leaf;
+        let depth = vec![0.5; 25];
+        let history = vec![green.extend(24.0); 25];
+        let marked = |w: f32, z: f32| {
+            let mut m = vec![Vec4::ZERO; 25];
+            m[12] = Vec4::new(0.0, 0.0, z, w);
+            m
+        };
+        let resolve = |motion: &[Vec4]| {
+            ResolveInput {
+                motion,
+                spread: &[],
+                pixel_spread: 0.0,
+                parallax_falloff: 2.0,
+                min_samples: 1.0,
+                jitter: Vec2::ZERO,
+                reconstruct_px: 0.0,
+                size,
+                current: &current,
+                depth: &depth,
+                history: &history,
+                reproject: Mat4::IDENTITY,
+                max_samples: 24.0,
+                clip_sigma: 2.5,
+                motion_falloff: 1.0,
+                reset: false,
+            }
+            .pixel(2, 2)
+        };
+        let unmarked = resolve(&[]);
+        assert!((unmarked.x - leaf.x).abs() > 0.5, "{unmarked}");
+        assert_eq!(resolve(&marked(2.0, 0.5)), leaf.extend(1.0));
+        // A mark under something drawn over the leaf since (the frame's depth is not the
+        // mark's) is not the pixel's: its history is blended as before.
+        assert_eq!(resolve(&marked(2.0, 0.25)), unmarked);
     }
 
     /// A pixel that sees a white blade in one sample out of four while its whole

@@ -57,6 +57,10 @@ pub(crate) enum BenchCommand {
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "480x270", value_parser = parse_size)]
         size: (u32, u32),
+        /// Anti-aliasing of every variant's frames: off, taa or msaa (default: the renderer's,
+        /// taa).
+        #[arg(long)]
+        aa: Option<verdant::aa::AntiAliasing>,
         #[command(flatten)]
         timing: TimingArgs,
         #[command(flatten)]
@@ -493,12 +497,14 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             world,
             out,
             size,
+            aa,
             timing,
             truth,
         } => bench_features(verdant::tools::BenchLodOptions {
             world: resolve_world(&world)?,
             out,
             size,
+            aa,
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
@@ -551,6 +557,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             truth_reach: truth.truth_reach,
             settings,
             supersample,
+            aa: None,
         }),
         BenchCommand::Aa {
             world,

@@ -33,7 +33,7 @@ pub(crate) struct ViewArgs {
     /// Wind scene to start with (default: the path's wind keys, else breeze).
     #[arg(long)]
     pub(crate) wind: Option<String>,
-    /// Anti-aliasing to start with: off (the default), taa or msaa; T cycles through them.
+    /// Anti-aliasing to start with: taa (the default), off or msaa; T cycles through them.
     #[arg(long)]
     pub(crate) aa: Option<verdant::aa::AntiAliasing>,
     #[command(flatten)]

@@ -8,7 +8,7 @@
 use glam::{DVec3, Mat4};
 
 use crate::gpu::layout::*;
-use crate::gpu::pass::render_pass;
+use crate::gpu::pass::render_pass_into;
 use crate::gpu::pipeline::{buffer, compute_pipeline, render_pipeline};
 use crate::gpu::{GpuTimer, Targets};
 use crate::plants::particles_cpu::{PETAL, PICK_BUCKETS, PICK_INDICES, Particle, ParticleParams};
@@ -150,6 +150,9 @@ pub struct ParticleStage {
     draw: wgpu::RenderPipeline,
     targets: Targets,
     samples: u32,
+    /// With temporal anti-aliasing ([`Self::set_reactive`]): the leaves drawn again into its
+    /// motion vectors, marking their pixels.
+    mark: Option<wgpu::RenderPipeline>,
     last_eye: Option<DVec3>,
     frame: u32,
 }
@@ -329,6 +332,7 @@ impl ParticleStage {
             draw,
             targets: *targets,
             samples: 1,
+            mark: None,
             last_eye: None,
             frame: 0,
         }
@@ -355,6 +359,30 @@ impl ParticleStage {
         .build(device)
     }
 
+    /// The leaves drawn again into the temporal anti-aliasing's motion vectors, where the
+    /// draw left each leaf's depth.
+    fn mark_pipeline(
+        device: &wgpu::Device,
+        module: &wgpu::ShaderModule,
+        [params, pool]: &[wgpu::BindGroupLayout; 2],
+        targets: &Targets,
+    ) -> wgpu::RenderPipeline {
+        render_pipeline(
+            "particles mark",
+            module,
+            ("vs_particle", "fs_particle_mark"),
+            crate::aa::taa::MOTION_FORMAT,
+        )
+        .layouts(&[params, pool])
+        .triangle_strips()
+        .depth(
+            targets.depth_format,
+            false,
+            wgpu::CompareFunction::GreaterEqual,
+        )
+        .build(device)
+    }
+
     /// Draws into targets of `samples` samples a pixel from now on.
     pub fn set_samples(&mut self, device: &wgpu::Device, samples: u32) {
         if samples == self.samples {
@@ -363,6 +391,26 @@ impl ParticleStage {
         let module = crate::shaders::module(device, "particles.wgsl");
         self.draw = Self::pipeline(device, &module, &self.draw_layouts, &self.targets, samples);
         self.samples = samples;
+    }
+
+    /// Whether the leaves also mark their pixels in the temporal anti-aliasing's motion
+    /// vectors from now on ([`crate::aa::taa::MOTION_FORMAT`]: w = 2 at the leaf's depth, a
+    /// pixel whose history does not hold what it shows; `shaders/aa_taa.wgsl` takes its current
+    /// sample alone): then [`Self::record`] takes that target beside the colour. Single-sampled
+    /// targets only.
+    pub fn set_reactive(&mut self, device: &wgpu::Device, on: bool) {
+        if on == self.mark.is_some() {
+            return;
+        }
+        self.mark = on.then(|| {
+            let module = crate::shaders::module(device, "particles.wgsl");
+            Self::mark_pipeline(device, &module, &self.draw_layouts, &self.targets)
+        });
+    }
+
+    /// Whether the leaves mark their pixels in the motion vectors ([`Self::set_reactive`]).
+    pub fn reactive(&self) -> bool {
+        self.mark.is_some()
     }
 
     /// The settings.
@@ -437,27 +485,49 @@ impl ParticleStage {
         pass.dispatch_workgroups(self.settings.count.div_ceil(64), 1, 1);
     }
 
-    /// Records the step, then the leaves' draw into `color` and `depth` (loaded).
+    /// Records the step, then the leaves' draw into `color` and `depth` (loaded), and with
+    /// [`Self::set_reactive`] their marks into `motion` (loaded).
+    ///
+    /// # Panics
+    /// With [`Self::set_reactive`] on and no `motion`.
     pub fn record(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         color: &wgpu::TextureView,
+        motion: Option<&wgpu::TextureView>,
         depth: &wgpu::TextureView,
         timer: &mut GpuTimer,
     ) {
         self.record_step(encoder, timer);
-        let mut pass = render_pass(
-            encoder,
-            "particles draw",
-            (color, wgpu::LoadOp::Load),
-            Some((depth, wgpu::LoadOp::Load)),
-            timer.render_pass("particles_draw"),
-        );
-        pass.set_pipeline(&self.draw);
-        // Four vertices a leaf, as a strip.
-        pass.set_bind_group(0, &self.draw_groups[0], &[]);
-        pass.set_bind_group(1, &self.draw_groups[1], &[]);
-        pass.draw(0..4, 0..self.settings.count);
+        let load = wgpu::LoadOp::Load;
+        {
+            let mut pass = render_pass_into(
+                encoder,
+                "particles draw",
+                &[(color, load)],
+                Some((depth, wgpu::LoadOp::Load)),
+                timer.render_pass("particles_draw"),
+            );
+            pass.set_pipeline(&self.draw);
+            // Four vertices a leaf, as a strip.
+            pass.set_bind_group(0, &self.draw_groups[0], &[]);
+            pass.set_bind_group(1, &self.draw_groups[1], &[]);
+            pass.draw(0..4, 0..self.settings.count);
+        }
+        if let Some(mark) = &self.mark {
+            let motion = motion.expect("the leaves' marks need the motion vectors");
+            let mut pass = render_pass_into(
+                encoder,
+                "particles mark",
+                &[(motion, load)],
+                Some((depth, wgpu::LoadOp::Load)),
+                None,
+            );
+            pass.set_pipeline(mark);
+            pass.set_bind_group(0, &self.draw_groups[0], &[]);
+            pass.set_bind_group(1, &self.draw_groups[1], &[]);
+            pass.draw(0..4, 0..self.settings.count);
+        }
     }
 
     /// Reads the pool back (for tests and tools: waits for the GPU).

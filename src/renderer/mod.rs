@@ -443,6 +443,9 @@ impl Renderer {
         if let (Some(g), Some(t)) = (&mut grass, &taa) {
             g.renderer
                 .set_motion_vectors(device, t.settings().blade_motion);
+            if let Some(p) = &mut g.particles {
+                p.set_reactive(device, true);
+            }
         }
         if let (Some(g), Some(_)) = (&mut grass, &msaa) {
             g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
@@ -687,6 +690,7 @@ impl Renderer {
             }
             if let Some(p) = &mut g.particles {
                 p.set_samples(&self.device, samples);
+                p.set_reactive(&self.device, self.taa.is_some());
             }
         }
     }
@@ -1024,13 +1028,18 @@ impl Renderer {
             Some(m) => (m.color_view(), m.depth_view()),
             None => (scene, depth),
         };
-        // The blades' motion vectors, for the temporal anti-aliasing: cleared, then written by
-        // the blades drawn.
-        let motion_taa = self.taa.as_ref().filter(|t| t.settings().blade_motion);
-        let motion = motion_taa.map(|t| t.motion_view());
+        // The motion vectors, for the temporal anti-aliasing: cleared, then written by the
+        // blades drawn (with `blade_motion`), and marked where the falling leaves are drawn
+        // (their pixels' history does not hold them).
+        let leaves = self.grass.as_ref().is_some_and(|g| g.particles.is_some());
+        let motion_taa = self
+            .taa
+            .as_ref()
+            .filter(|t| t.settings().blade_motion || leaves);
         if let Some(t) = motion_taa {
             t.record_clear_motion(encoder);
         }
+        let motion = motion_taa.map(|t| t.motion_view());
         if let Some(g) = &self.grass {
             stats.grass.tiles = g.renderer.record(
                 &self.queue,
@@ -1060,7 +1069,7 @@ impl Renderer {
                 && self.features.has(Feature::Trees)
                 && self.features.has(Feature::Particles)
             {
-                p.record(encoder, grass_color, grass_depth, &mut self.timer);
+                p.record(encoder, grass_color, motion, grass_depth, &mut self.timer);
             }
         }
         if let Some(msaa) = &self.msaa {

@@ -67,6 +67,9 @@ pub struct BenchLodOptions {
     /// differently (its content), not how one sample a pixel aliases it. The timings stay the
     /// setting's own frame.
     pub supersample: u32,
+    /// `bench features --aa METHOD`: the anti-aliasing of every variant's frames (None: the
+    /// renderer's default).
+    pub aa: Option<crate::aa::AntiAliasing>,
 }
 
 impl Default for BenchLodOptions {
@@ -84,6 +87,7 @@ impl Default for BenchLodOptions {
             truth_reach: crate::tools::truth::REACH_FACTOR,
             settings: Vec::new(),
             supersample: 1,
+            aa: None,
         }
     }
 }

@@ -53,6 +53,8 @@ pub struct BenchFeaturesReport {
     pub size: (u32, u32),
     /// Sub-samples a pixel side of the truth.
     pub truth_k: u32,
+    /// The variants' anti-aliasing (`off`, `taa`, `msaa`).
+    pub anti_aliasing: String,
     /// The full render first, then one row per feature switched off.
     pub features: Vec<FeatureResult>,
 }
@@ -137,6 +139,9 @@ pub fn run_bench_features(
         config.features = features;
         config.wind_scene = scene_name.clone();
         config.wind_keys = path.wind.clone();
+        if let Some(aa) = opts.aa {
+            config.aa = aa;
+        }
         config
     };
     // The truth at each view, after the same lead-in as the variants (plain frames: only the
@@ -298,6 +303,7 @@ pub fn run_bench_features(
         adapter: AdapterReport::of(&ctx),
         size: opts.size,
         truth_k: opts.truth_k,
+        anti_aliasing: opts.aa.unwrap_or_default().name().to_owned(),
         features,
     };
     write_json(&opts.out.join("bench_features.json"), &report)?;
