@@ -97,7 +97,7 @@ fn motion(phase: u32, depth: &[f32]) -> (Vec<u16>, Vec<Vec4>) {
                 1 if d > 0.0 && x < W / 2 => [-2.0, 1.0, 0.5 * d, 1.0],
                 // Falling leaves' marks: the pixel's current sample alone, where the leaf is
                 // still its surface, and not under something drawn over it.
-                2 if d > 0.0 && (x * 7 + y * 5 + phase) % 4 == 0 => [0.0, 0.0, d, 2.0],
+                2 if d > 0.0 && (x * 7 + y * 5 + phase).is_multiple_of(4) => [0.0, 0.0, d, 2.0],
                 2 if d > 0.0 && (x * 7 + y * 5 + phase) % 4 == 1 => [0.0, 0.0, 0.5 * d, 2.0],
                 _ => [0.0; 4],
             };

@@ -38,8 +38,9 @@ pub struct RendererConfig {
     pub wind_keys: Vec<WindKey>,
     /// The switched-on features of the grass model.
     pub features: Features,
-    /// How the frame is anti-aliased: none by default ([`AntiAliasing::Off`], one sample at
-    /// each pixel's centre); [`AntiAliasing::Taa`] for consecutive frames.
+    /// How the frame is anti-aliased: temporally by default ([`AntiAliasing::Taa`], for
+    /// consecutive frames; a single frame, or the first after a cut, is its current sample
+    /// alone); [`AntiAliasing::Off`] draws one sample at each pixel's centre.
     pub aa: AntiAliasing,
     /// The temporal anti-aliasing's settings (with `aa` at [`AntiAliasing::Taa`]).
     pub taa: crate::aa::taa::TaaSettings,
