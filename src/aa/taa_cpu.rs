@@ -164,9 +164,6 @@ impl ResolveInput<'_> {
         }
         let (w, h) = (self.size.0 as f32, self.size.1 as f32);
         let centre_px = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-        // A blade's own motion where the blade is still the pixel's surface, else the pixel's
-        // depth reprojected.
-        let blade = written;
         // Where a point at this pixel and depth was in the last frame (None: behind the
         // last camera).
         let back = |depth: f32| {
@@ -177,7 +174,9 @@ impl ResolveInput<'_> {
                 Vec2::new((then_ndc.x + 1.0) * 0.5 * w, (1.0 - then_ndc.y) * 0.5 * h)
             })
         };
-        let then_px = match blade {
+        // A blade's own motion where the blade is still the pixel's surface, else the pixel's
+        // depth reprojected.
+        let then_px = match written {
             Some(m) => centre_px - Vec2::new(m.x, m.y),
             None => match back(depth) {
                 Some(p) => p,

@@ -8,7 +8,7 @@
 use glam::{DVec3, Mat4};
 
 use crate::gpu::layout::*;
-use crate::gpu::pass::render_pass_into;
+use crate::gpu::pass::render_pass;
 use crate::gpu::pipeline::{buffer, compute_pipeline, render_pipeline};
 use crate::gpu::{GpuTimer, Targets};
 use crate::plants::particles_cpu::{PETAL, PICK_BUCKETS, PICK_INDICES, Particle, ParticleParams};
@@ -408,11 +408,6 @@ impl ParticleStage {
         });
     }
 
-    /// Whether the leaves mark their pixels in the motion vectors ([`Self::set_reactive`]).
-    pub fn reactive(&self) -> bool {
-        self.mark.is_some()
-    }
-
     /// The settings.
     pub fn settings(&self) -> &ParticleSettings {
         &self.settings
@@ -499,35 +494,43 @@ impl ParticleStage {
         timer: &mut GpuTimer,
     ) {
         self.record_step(encoder, timer);
-        let load = wgpu::LoadOp::Load;
-        {
-            let mut pass = render_pass_into(
-                encoder,
-                "particles draw",
-                &[(color, load)],
-                Some((depth, wgpu::LoadOp::Load)),
-                timer.render_pass("particles_draw"),
-            );
-            pass.set_pipeline(&self.draw);
-            // Four vertices a leaf, as a strip.
-            pass.set_bind_group(0, &self.draw_groups[0], &[]);
-            pass.set_bind_group(1, &self.draw_groups[1], &[]);
-            pass.draw(0..4, 0..self.settings.count);
-        }
+        let timestamps = timer.render_pass("particles_draw");
+        self.draw_leaves(
+            encoder,
+            "particles draw",
+            &self.draw,
+            color,
+            depth,
+            timestamps,
+        );
         if let Some(mark) = &self.mark {
             let motion = motion.expect("the leaves' marks need the motion vectors");
-            let mut pass = render_pass_into(
-                encoder,
-                "particles mark",
-                &[(motion, load)],
-                Some((depth, wgpu::LoadOp::Load)),
-                None,
-            );
-            pass.set_pipeline(mark);
-            pass.set_bind_group(0, &self.draw_groups[0], &[]);
-            pass.set_bind_group(1, &self.draw_groups[1], &[]);
-            pass.draw(0..4, 0..self.settings.count);
+            self.draw_leaves(encoder, "particles mark", mark, motion, depth, None);
         }
+    }
+
+    /// One pass drawing every leaf with `pipeline` into `target` and `depth` (both loaded).
+    fn draw_leaves(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        label: &str,
+        pipeline: &wgpu::RenderPipeline,
+        target: &wgpu::TextureView,
+        depth: &wgpu::TextureView,
+        timestamps: Option<wgpu::RenderPassTimestampWrites<'_>>,
+    ) {
+        let mut pass = render_pass(
+            encoder,
+            label,
+            (target, wgpu::LoadOp::Load),
+            Some((depth, wgpu::LoadOp::Load)),
+            timestamps,
+        );
+        pass.set_pipeline(pipeline);
+        // Four vertices a leaf, as a strip.
+        pass.set_bind_group(0, &self.draw_groups[0], &[]);
+        pass.set_bind_group(1, &self.draw_groups[1], &[]);
+        pass.draw(0..4, 0..self.settings.count);
     }
 
     /// Reads the pool back (for tests and tools: waits for the GPU).
