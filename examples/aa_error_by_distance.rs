@@ -37,7 +37,7 @@ use verdant::tools::Scene;
 use verdant::tools::metrics::{
     band_mask, flip_error_map, masked_luminance, masked_mean, ray_distances, rgb,
 };
-use verdant::tools::truth::{Truth, atlas_slots, truth_config_reaching};
+use verdant::tools::truth::{REACH_FACTOR, Truth, atlas_slots, truth_config_reaching};
 use verdant::world::World;
 
 fn main() -> Result<()> {
@@ -89,12 +89,12 @@ fn main() -> Result<()> {
     };
     truths.push(mk(
         "truth",
-        truth_config_reaching(&world, &base, slots, 4.0),
+        truth_config_reaching(&world, &base, slots, REACH_FACTOR),
         4,
     )?);
     truths.push(mk(
         "truth_k8",
-        truth_config_reaching(&world, &base, slots, 4.0),
+        truth_config_reaching(&world, &base, slots, REACH_FACTOR),
         8,
     )?);
     truths.push(mk(
@@ -109,12 +109,12 @@ fn main() -> Result<()> {
     )?);
     truths.push(mk(
         "truth_1x",
-        truth_config_reaching(&world, &base, slots, 4.0),
+        truth_config_reaching(&world, &base, slots, REACH_FACTOR),
         1,
     )?);
     truths.push(mk(
         "truth_2x2",
-        truth_config_reaching(&world, &base, slots, 4.0),
+        truth_config_reaching(&world, &base, slots, REACH_FACTOR),
         2,
     )?);
     let mut d = base.clone();

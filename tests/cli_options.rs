@@ -93,7 +93,7 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
     ),
     (
         &["bench", "aa", "--truth-reach", "0.5"],
-        &["--truth-reach", "1..=4"],
+        &["--truth-reach", "1..=6"],
     ),
     (&["bench", "aa", "--frames", "1"], &["--frames", "2..=600"]),
     (

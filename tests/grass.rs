@@ -566,7 +566,7 @@ fn the_low_lod_grid_is_a_subset_of_the_high_lod_grid() {
     rig.atlas.upload(&rig.ctx.queue, 0, &flat).unwrap();
     // Far from the camera, but before the view distance: no LOD fade, little culling.
     let mut high = job(0, 0, 0, cell);
-    high.origin = [-25.0, 70.0];
+    high.origin = [-25.0, 45.0];
     let low = TileJob { lod: 1, ..high };
     let (_, hiz) = rig.run(
         &Camera::new(

@@ -246,9 +246,10 @@ pub(crate) struct TruthArgs {
     /// Sub-samples a pixel side of the truth (supersampled in linear light), 1..=8.
     #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
     pub(crate) truth: u32,
-    /// How far the truth draws blades, in default view distances, 1..=4 (less is quicker; the
-    /// far band is then measured out to this many view distances only).
-    #[arg(long, value_name = "R", default_value_t = 4.0, value_parser = float_in(1.0, 4.0))]
+    /// How far the truth draws blades, in default view distances, 1..=6 (100 m each in the
+    /// default world; less is quicker, and the far band is then measured out to this many view
+    /// distances only).
+    #[arg(long, value_name = "R", default_value_t = verdant::tools::truth::REACH_FACTOR, value_parser = float_in(1.0, verdant::tools::truth::REACH_FACTOR))]
     pub(crate) truth_reach: f64,
 }
 

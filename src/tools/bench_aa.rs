@@ -75,7 +75,7 @@ pub struct BenchAaOptions {
     pub run_up: u32,
     /// Sub-samples per side of the truth.
     pub truth_k: u32,
-    /// How far the truth draws blades, in default view distances (1..=4).
+    /// How far the truth draws blades, in default view distances (1..=[`crate::tools::truth::REACH_FACTOR`]).
     pub truth_reach: f64,
     /// The path whose first view the sequences start from.
     pub path: String,
@@ -390,7 +390,7 @@ pub struct BenchAaReport {
     pub adapter: AdapterReport,
     /// Sub-samples per side of the truth.
     pub truth_k: u32,
-    /// How far the truth draws blades, in default view distances (1..=4).
+    /// How far the truth draws blades, in default view distances (1..=[`crate::tools::truth::REACH_FACTOR`]).
     pub truth_reach: f64,
     /// Every measured frame.
     pub frames: Vec<AaFrame>,

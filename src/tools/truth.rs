@@ -10,7 +10,7 @@
 //! It is drawn with the most accurate settings ([`truth_config`]): no LOD (every grass tile high
 //! LOD, with no fade of the blades the low grid would drop), [`SEGMENTS`] blade segments
 //! everywhere (curves true to a millimetre), and blades out to [`REACH_FACTOR`] times the default
-//! view distance. The grass is a pure function of the world, the time and the camera: the first
+//! view distance (600 m in the default world). The grass is a pure function of the world, the time and the camera: the first
 //! sub-sample of a frame advances the wind and the sway by the time since the last frame, the
 //! others at the same time advance nothing (the renderer's time step is 0), so that a sequence of
 //! truth frames steps exactly like the frames it judges, and re-rendering a sub-sample is exact.
@@ -48,8 +48,11 @@ pub fn check_reach(option: &'static str, reach: f64) -> Result<(), OptionError> 
 pub const DEFAULT_K: u32 = 4;
 /// The most sub-samples a pixel side (`--truth`): 64 renders a frame.
 pub const MAX_K: u32 = 8;
-/// How far the truth draws blades, in default view distances.
-pub const REACH_FACTOR: f64 = 4.0;
+/// How far the truth draws blades, in default view distances: 600 m in the default world, whose
+/// view distance is 100 m ([`crate::lod::DEFAULT_VIEW_TILES`] grass tiles of 50 m). The truth was
+/// defined as four view distances when the view distance was three tiles; the factor grew as the
+/// view distance shrank, so that the truth stayed the same scene.
+pub const REACH_FACTOR: f64 = 6.0;
 /// Blade segments of the truth everywhere: a blade's polyline then lies within a millimetre of
 /// its curve (a tenth of the default's near segments' error), under a pixel from a metre away
 /// at 1920x1080, at a quarter of the vertices of the 64 the grass draw allows.
@@ -501,7 +504,7 @@ mod tests {
         )
         .unwrap();
         let n = grass_tiles_bound(&world);
-        // 50 m tiles, 4 x 150 m + 5 m of hysteresis: 13 tiles each side of the camera's.
+        // 50 m tiles, 6 x 100 m + 5 m of hysteresis: 13 tiles each side of the camera's.
         assert_eq!(n, 27 * 27);
         // A high-LOD tile near the camera can get a second job: at most 4 of them.
         assert!(n + 4 <= crate::grass::renderer::MAX_JOBS, "{n}");

@@ -209,7 +209,28 @@ impl Chart {
                         .legend(|(x, y)| {
                             PathElement::new(vec![(x, y), (x + 18, y)], RGBColor(120, 170, 120))
                         });
-                    for p in &self.points {
+                    let texts: Vec<String> = self
+                        .points
+                        .iter()
+                        .map(|p| {
+                            if p.chosen && p.label != "default" {
+                                format!("{} (default)", p.label)
+                            } else {
+                                p.label.clone()
+                            }
+                        })
+                        .collect();
+                    let anchors: Vec<(i32, i32)> = self
+                        .points
+                        .iter()
+                        .map(|p| chart.backend_coord(&(p.x, p.y)))
+                        .collect();
+                    let widths: Vec<i32> = texts
+                        .iter()
+                        .map(|t| LABEL_CHAR_PX * t.chars().count() as i32)
+                        .collect();
+                    let offsets = place_labels(&anchors, &widths);
+                    for ((p, text), offset) in self.points.iter().zip(texts).zip(offsets) {
                         let color = if p.chosen {
                             RGBColor(200, 40, 40)
                         } else {
@@ -221,20 +242,18 @@ impl Chart {
                                 EmptyElement::at((p.x, p.y))
                                     + Circle::new((0, 0), size, color.filled())
                                     + Text::new(
-                                        if p.chosen {
-                                            format!("{} (default)", p.label)
-                                        } else {
-                                            p.label.clone()
-                                        },
-                                        (8, -16),
+                                        text,
+                                        offset,
                                         ("sans-serif", 13).into_font().color(&color),
                                     ),
                             ))
                             .map_err(|e| err(e.to_string()))?;
                     }
+                    // The lower left holds no point of a speed-against-accuracy chart whose
+                    // axes start at 0 (a point there would beat every other).
                     chart
                         .configure_series_labels()
-                        .position(SeriesLabelPosition::UpperRight)
+                        .position(SeriesLabelPosition::LowerLeft)
                         .background_style(WHITE.mix(0.8))
                         .border_style(BLACK)
                         .label_font(("sans-serif", 13))
@@ -253,6 +272,58 @@ impl Chart {
         let img = image::RgbImage::from_raw(width, height, buf).expect("buffer holds the image");
         Ok(crate::tools::fly::write_png(path, &img)?)
     }
+}
+
+/// Width of a label's character at the charts' 13-point font, pixels (about; a label's box is
+/// its characters times this).
+const LABEL_CHAR_PX: i32 = 7;
+/// Height of a label's box, pixels.
+const LABEL_HEIGHT_PX: i32 = 15;
+
+/// Where each point's label goes, as an offset in pixels from the point (`anchors`, the points
+/// on the chart) to the label's top left corner, for labels `widths` pixels wide: above and to
+/// the right of its point unless that box overlaps a label placed before it or another point,
+/// then the first free one of: below right, higher, lower, and the same to the left (the first
+/// one if none is free). Points are placed in the order given.
+pub fn place_labels(anchors: &[(i32, i32)], widths: &[i32]) -> Vec<(i32, i32)> {
+    const POINT_PX: i32 = 6;
+    let overlaps = |a: (i32, i32, i32, i32), b: (i32, i32, i32, i32)| {
+        a.0 < b.2 && b.0 < a.2 && a.1 < b.3 && b.1 < a.3
+    };
+    let mut placed: Vec<(i32, i32, i32, i32)> = Vec::new();
+    let mut out = Vec::with_capacity(anchors.len());
+    for (i, (&(x, y), &w)) in anchors.iter().zip(widths).enumerate() {
+        let h = LABEL_HEIGHT_PX;
+        let candidates = [
+            (8, -16),
+            (8, 2),
+            (8, -16 - h),
+            (8, 2 + h),
+            (-8 - w, -16),
+            (-8 - w, 2),
+            (-8 - w, -16 - h),
+            (-8 - w, 2 + h),
+        ];
+        let free = |&(dx, dy): &(i32, i32)| {
+            let b = (x + dx, y + dy, x + dx + w, y + dy + h);
+            !placed.iter().any(|&p| overlaps(p, b))
+                && !anchors.iter().enumerate().any(|(j, &(px, py))| {
+                    j != i
+                        && overlaps(
+                            (px - POINT_PX, py - POINT_PX, px + POINT_PX, py + POINT_PX),
+                            b,
+                        )
+                })
+        };
+        let (dx, dy) = candidates
+            .iter()
+            .copied()
+            .find(|c| free(c))
+            .unwrap_or(candidates[0]);
+        placed.push((x + dx, y + dy, x + dx + w, y + dy + h));
+        out.push((dx, dy));
+    }
+    out
 }
 
 /// A named line of a [`LineChart`].
@@ -388,6 +459,39 @@ impl LineChart {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn labels_of_nearby_points_do_not_overlap() {
+        // Three points a few pixels apart, as the view distances and the default of bench lod's
+        // front at 1920x1080 stood, and one far from them.
+        let anchors = [(300, 66), (318, 66), (345, 66), (600, 400)];
+        let widths = [70, 120, 70, 50];
+        let offsets = place_labels(&anchors, &widths);
+        assert_eq!(offsets[3], (8, -16), "a lone point keeps the usual place");
+        assert!(offsets[..3].iter().any(|&o| o != (8, -16)));
+        let boxes: Vec<(i32, i32, i32, i32)> = anchors
+            .iter()
+            .zip(&widths)
+            .zip(&offsets)
+            .map(|((&(x, y), &w), &(dx, dy))| {
+                (x + dx, y + dy, x + dx + w, y + dy + LABEL_HEIGHT_PX)
+            })
+            .collect();
+        // No label over another, nor over a point other than its own.
+        for (i, b) in boxes.iter().enumerate() {
+            for (j, &(px, py)) in anchors.iter().enumerate() {
+                let inside = b.0 < px + 6 && px - 6 < b.2 && b.1 < py + 6 && py - 6 < b.3;
+                assert!(i == j || !inside, "label {i} covers point {j}");
+            }
+        }
+        for i in 0..boxes.len() {
+            for j in 0..i {
+                let (a, b) = (boxes[i], boxes[j]);
+                let overlap = a.0 < b.2 && b.0 < a.2 && a.1 < b.3 && b.1 < a.3;
+                assert!(!overlap, "labels {i} and {j} overlap: {a:?} {b:?}");
+            }
+        }
+    }
 
     #[test]
     fn pareto_front_keeps_what_nothing_beats() {
