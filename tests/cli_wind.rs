@@ -196,8 +196,12 @@ fn bench_features_charts_every_feature_in_the_wind_tour() {
         );
     }
     // Every feature changes the image in these views, the walker's trail and the helicopter's
-    // downwash included.
-    for name in &names[1..] {
+    // downwash included; but the falling leaves: at 128x72 a leaf is a pixel or less, and
+    // whether one covers a pixel's centre in the measured frames is chance (it did with the
+    // grass's view distance at 150 m, not at 100 m: which flowers and trees shed them follows
+    // the plants' pool). `tests/particles.rs` checks that the leaves are drawn, at 192x108
+    // among trees.
+    for name in names[1..].iter().filter(|n| **n != "particles") {
         assert!(contribution(name) > 0.0, "{name} changes nothing: {csv}");
     }
     // Grass coverage of the captured views: grass covers part of the near terrain whatever

@@ -235,7 +235,8 @@ fn one_step_of_the_leaves_matches_the_cpu_mirror() {
 }
 
 /// Through the renderer: a second and a half of 16 Hz frames standing among trees at the meadow,
-/// the leaves in the air are about the settings' eight a tree near the camera, the meadow's
+/// the leaves are drawn (the last frame differs from the same frames without them), the leaves
+/// in the air are about the settings' eight a tree near the camera, the meadow's
 /// flowers shed some petals, each above the ground it was shed over, and carried: moving
 /// sideways faster than they flutter, not only falling.
 #[test]
@@ -268,32 +269,56 @@ fn a_forests_leaves_fly_in_the_wind_around_the_camera() {
         wgpu::TextureFormat::Rgba8UnormSrgb,
         wgpu::TextureFormat::Depth32Float,
     );
-    let (w, h) = (96, 54);
-    let options = RendererOptions::new(&world, c, d, w, h);
-    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
-    use wgpu::TextureUsages as U;
-    let color = verdant::gpu::target_texture(&ctx.device, "c", c, U::RENDER_ATTACHMENT, (w, h));
-    let depth = verdant::gpu::target_texture(
-        &ctx.device,
-        "d",
-        d,
-        U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
-        (w, h),
-    );
-    let (cv, dv) = (
-        color.create_view(&Default::default()),
-        depth.create_view(&Default::default()),
-    );
-    renderer
-        .warm_up(&camera, std::time::Duration::from_secs(60))
-        .unwrap();
-    for f in 0..24 {
-        renderer.prepare(&ctx.queue, &FrameInput::new(camera, f64::from(f) / 16.0));
-        let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        renderer.record(&mut encoder, &cv, &dv).unwrap();
-        ctx.queue.submit([encoder.finish()]);
-        ctx.wait_idle();
-    }
+    let (w, h) = (192, 108);
+    // The same frames with the leaves and without: the renderer after them and its last frame.
+    let fly = |features: verdant::features::Features| {
+        let mut options = RendererOptions::new(&world, c, d, w, h);
+        options.config.features = features;
+        let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world.clone(), options).unwrap();
+        use wgpu::TextureUsages as U;
+        let color = verdant::gpu::target_texture(
+            &ctx.device,
+            "c",
+            c,
+            U::RENDER_ATTACHMENT | U::COPY_SRC,
+            (w, h),
+        );
+        let depth = verdant::gpu::target_texture(
+            &ctx.device,
+            "d",
+            d,
+            U::RENDER_ATTACHMENT | U::TEXTURE_BINDING,
+            (w, h),
+        );
+        let (cv, dv) = (
+            color.create_view(&Default::default()),
+            depth.create_view(&Default::default()),
+        );
+        renderer
+            .warm_up(&camera, std::time::Duration::from_secs(60))
+            .unwrap();
+        for f in 0..24 {
+            renderer.prepare(&ctx.queue, &FrameInput::new(camera, f64::from(f) / 16.0));
+            let mut encoder = ctx.device.create_command_encoder(&Default::default());
+            renderer.record(&mut encoder, &cv, &dv).unwrap();
+            ctx.queue.submit([encoder.finish()]);
+            ctx.wait_idle();
+        }
+        let pixels = verdant::gpu::read_texture_rgba8(&ctx.device, &ctx.queue, &color).unwrap();
+        (renderer, pixels)
+    };
+    let all = verdant::features::Features::all();
+    let (renderer, with_leaves) = fly(all);
+    // Drawn: among the trees, leaves a few metres from the camera cover whole pixels of the
+    // frame (the rest of the scene is the same function of the world, the time and the camera).
+    let (_, without) = fly(all.without(verdant::features::Feature::Particles));
+    let changed = with_leaves
+        .chunks(4)
+        .zip(without.chunks(4))
+        .filter(|(a, b)| a.iter().zip(b.iter()).any(|(x, y)| x.abs_diff(*y) > 8))
+        .count();
+    eprintln!("{changed} of {} pixels changed by the leaves", w * h);
+    assert!(changed >= 5, "the leaves cover {changed} pixels");
     let trees = renderer
         .read_tree_instances()
         .iter()
