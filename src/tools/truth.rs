@@ -512,6 +512,24 @@ mod tests {
     }
 
     #[test]
+    fn the_truth_reaches_600_m_in_the_default_world_whatever_the_view_distance() {
+        // The truth is the scene every figure is measured against: its blades reached four view
+        // distances of 150 m when it was defined, and reach the same 600 m with the view distance
+        // at 100 m.
+        let world = World::open(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz"),
+        )
+        .unwrap();
+        let base = RendererConfig::for_world(&world);
+        assert_eq!(base.grass_rings.unwrap().low_radius_m, 100.0);
+        let truth = truth_config(&world, &base, 512);
+        assert_eq!(truth.grass_rings.unwrap().low_radius_m, 600.0);
+        // A quicker truth, out to one view distance: the default's.
+        let near = truth_config_reaching(&world, &base, 512, 1.0);
+        assert_eq!(near.grass_rings.unwrap().low_radius_m, 100.0);
+    }
+
+    #[test]
     fn the_truths_trees_are_full_meshes_none_thinned() {
         let world = World::open(
             &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz"),
