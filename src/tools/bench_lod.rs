@@ -259,15 +259,9 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
     // A setting that draws what the default draws (as "segments 7/3/3" does while those are
     // the default's) would be the default's twin: measured twice, the two differ by the timing's
     // noise alone, and one would put the other off the front.
-    let default = all[0].clone();
-    let mut i = 1;
-    while i < all.len() {
-        if all[i].same_as(&default) {
-            all.remove(i);
-        } else {
-            i += 1;
-        }
-    }
+    let default = all.remove(0);
+    all.retain(|s| !s.same_as(&default));
+    all.insert(0, default);
     all
 }
 
