@@ -280,7 +280,7 @@ fn a_short_soak_with_grass_recovers_after_every_teleport_without_stalls() {
     // loaded 2-core machine: about 0.4 s a frame at 64x36, 2 s seen under load), memory flat
     // after the warm-up within the soak's 12 MiB (3 MiB seen). One sample a pixel (`--aa off`):
     // with the temporal method and grass, software Vulkan's process has stepped up once by
-    // 23-41 MiB at a frame that differs from run to run, and stayed flat after (in 3 of 9 runs,
+    // 23-41 MiB at a frame that differs from run to run, and stayed flat after (in 3 of 14 runs,
     // flat in the others: README, "The temporal method as the default"); the temporal stage's
     // own memory is bounded by `a_short_soak_holds_its_ceilings_and_its_memory`.
     let out = verdant(
