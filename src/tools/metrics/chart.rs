@@ -290,9 +290,18 @@ pub fn place_labels(anchors: &[(i32, i32)], widths: &[i32]) -> Vec<(i32, i32)> {
     let overlaps = |a: (i32, i32, i32, i32), b: (i32, i32, i32, i32)| {
         a.0 < b.2 && b.0 < a.2 && a.1 < b.3 && b.1 < a.3
     };
+    // A point far off the chart (a value the axes cannot place maps to the ends of i32) must
+    // not overflow the boxes' sums.
+    const FAR: i32 = 1 << 20;
+    let anchors: Vec<(i32, i32)> = anchors
+        .iter()
+        .map(|&(x, y)| (x.clamp(-FAR, FAR), y.clamp(-FAR, FAR)))
+        .collect();
+    let anchors = &anchors[..];
     let mut placed: Vec<(i32, i32, i32, i32)> = Vec::new();
     let mut out = Vec::with_capacity(anchors.len());
     for (i, (&(x, y), &w)) in anchors.iter().zip(widths).enumerate() {
+        let w = w.clamp(0, FAR);
         let h = LABEL_HEIGHT_PX;
         let candidates = [
             (8, -16),
@@ -469,6 +478,9 @@ mod tests {
         let offsets = place_labels(&anchors, &widths);
         assert_eq!(offsets[3], (8, -16), "a lone point keeps the usual place");
         assert!(offsets[..3].iter().any(|&o| o != (8, -16)));
+        // Points the axes map to the ends of the coordinates do not overflow.
+        let far = place_labels(&[(i32::MAX, i32::MIN), (i32::MIN, 0)], &[i32::MAX, 40]);
+        assert_eq!(far.len(), 2);
         let boxes: Vec<(i32, i32, i32, i32)> = anchors
             .iter()
             .zip(&widths)
