@@ -492,6 +492,9 @@ fn bench_lod_writes_its_tables_and_charts() {
             // measured): a test-sized run, not the whole chart.
             "--settings",
             "spacing x0.8,infill off,infill x0.8,infill x1.2,width x0.67,width x1.5",
+            // A flight of two frames along the tour (the default path), per round.
+            "--flight-frames",
+            "2",
             "--out",
             "b",
         ],
@@ -550,6 +553,12 @@ fn bench_lod_writes_its_tables_and_charts() {
         "tree_lod_near_m",
         "tree_lod_far_m",
         "tree_thin_m",
+        // The flight's frames: median, 99th percentile, largest, and its front.
+        "flight_median_ms",
+        "flight_p99_ms",
+        "flight_max_ms",
+        "flight_frames",
+        "pareto_flight",
     ] {
         assert!(header.contains(&column), "no column {column} in {header:?}");
     }
@@ -605,7 +614,13 @@ fn bench_lod_writes_its_tables_and_charts() {
     for s in json["settings"].as_array().unwrap() {
         assert_eq!(s["flip_frame_vs_truth"], s["vs_truth"]["flip"], "{s}");
     }
-    for (key, column) in [("front", "pareto"), ("coarse_front", "pareto_coarse")] {
+    assert_eq!(json["flight_path"], "tour");
+    assert!(json["default_on_flight_front"].is_boolean(), "{json}");
+    for (key, column) in [
+        ("front", "pareto"),
+        ("coarse_front", "pareto_coarse"),
+        ("flight_front", "pareto_flight"),
+    ] {
         let mut named: Vec<&str> = json[key]
             .as_array()
             .unwrap()
@@ -631,6 +646,14 @@ fn bench_lod_writes_its_tables_and_charts() {
         assert!(q1 <= m && m <= q3 && m > 0.0, "{r:?}");
         assert!(r[col("frame_ms")].parse::<f64>().unwrap() > 0.0, "{r:?}");
         assert!(["true", "false"].contains(&r[col("noisy")]), "{r:?}");
+        // Two rounds of the two-frame flight.
+        let (median, p99, max) = (
+            r[col("flight_median_ms")].parse::<f64>().unwrap(),
+            r[col("flight_p99_ms")].parse::<f64>().unwrap(),
+            r[col("flight_max_ms")].parse::<f64>().unwrap(),
+        );
+        assert!(0.0 < median && median <= p99 && p99 <= max, "{r:?}");
+        assert_eq!(r[col("flight_frames")], "4", "{r:?}");
     }
     // The far band: real blades out to four times the view distance against the default with
     // the far field on and off, over the pixels between the two distances.
@@ -655,6 +678,7 @@ fn bench_lod_writes_its_tables_and_charts() {
         "lod_settings.png",
         "lod_settings_coarse.png",
         "lod_coverage.png",
+        "lod_settings_flight.png",
         "bench_lod.json",
     ] {
         assert!(dir.join(f).is_file(), "{f} missing");
@@ -690,6 +714,8 @@ fn bench_lod_supersampled_measures_the_settings_content() {
             "default",
             "--supersample",
             "2",
+            "--flight",
+            "",
             "--out",
             "b",
         ],

@@ -84,6 +84,10 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
         &["--supersample", "1..=8"],
     ),
     (
+        &["bench", "lod", "--flight-frames", "1"],
+        &["--flight-frames", "2..=2000"],
+    ),
+    (
         &["bench", "features", "--timed-frames", "0"],
         &["--timed-frames", "1..=150"],
     ),

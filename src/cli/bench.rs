@@ -91,6 +91,14 @@ pub(crate) enum BenchCommand {
         /// timings stay the setting's own frame.
         #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=8))]
         supersample: u32,
+        /// The camera path each setting is also timed along, frame after frame, for the
+        /// median and the 99th percentile of its frames' times (default: "tour" where the world
+        /// has it, else the views' path; "" for none).
+        #[arg(long, value_name = "PATH")]
+        flight: Option<String>,
+        /// Frames of the flight, evenly spaced along the whole path, 2..=2000.
+        #[arg(long, default_value_t = verdant::tools::bench::DEFAULT_FLIGHT_FRAMES, value_parser = clap::value_parser!(u32).range(2..=2000))]
+        flight_frames: u32,
         #[command(flatten)]
         timing: TimingArgs,
         #[command(flatten)]
@@ -378,13 +386,25 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         flip(r.far_band.flip_far_field),
         flip(r.far_band.flip_no_far_field)
     );
+    let unit = if r.adapter.timestamps { "GPU" } else { "frame" };
     println!(
-        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>9} {:>9} {:>10} {:>7}",
-        "setting", "GPU ms", "IQR %", "frame ms", "FLIP", "coarse", "FLIP 1x", "blades", "front"
+        "{:<16} {:>9} {:>8} {:>10} {:>9} {:>9} {:>9} {:>10} {:>7} {:>11} {:>10}",
+        "setting",
+        "GPU ms",
+        "IQR %",
+        "frame ms",
+        "FLIP",
+        "coarse",
+        "FLIP 1x",
+        "blades",
+        "front",
+        "flight med",
+        "flight p99"
     );
+    let ms = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
     for s in &r.settings {
         println!(
-            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>9.4} {:>9.4} {:>10.0} {:>7}{}",
+            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>9.4} {:>9.4} {:>10.0} {:>7} {:>11} {:>10}{}",
             s.setting.name,
             s.gpu.median_ms,
             100.0 * s.gpu.spread,
@@ -394,6 +414,8 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
             s.flip_frame_vs_truth,
             s.blades_drawn,
             if s.pareto { "yes" } else { "" },
+            ms(s.flight.map(|f| f.median_ms)),
+            ms(s.flight.map(|f| f.p99_ms)),
             if s.gpu.noisy || s.frame.noisy {
                 "  (spread above 10%)"
             } else {
@@ -418,6 +440,19 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
         r.coarse_front.join(", "),
         k = r.truth_k
     );
+    if let Some(p) = &r.flight_path {
+        println!(
+            "flight: {} frames along the path {p:?} per round ({unit} time per frame, after an \
+             untimed flight); on the front of its p99 against the pixel FLIP: {}{}",
+            r.flight_frames,
+            r.flight_front.join(", "),
+            if r.default_on_flight_front == Some(false) {
+                " (the default is not on it)"
+            } else {
+                ""
+            }
+        );
+    }
     println!(
         "default setting {} the Pareto front; wrote {}",
         if r.default_on_front {
@@ -543,6 +578,8 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             dolly_frames,
             settings,
             supersample,
+            flight,
+            flight_frames,
             timing,
             truth,
         } => bench_lod(verdant::tools::BenchLodOptions {
@@ -559,6 +596,8 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             settings,
             supersample,
             aa: None,
+            flight,
+            flight_frames,
         }),
         BenchCommand::Aa {
             world,

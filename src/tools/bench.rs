@@ -70,7 +70,20 @@ pub struct BenchLodOptions {
     /// `bench features --aa METHOD`: the anti-aliasing of every variant's frames (None: the
     /// renderer's default).
     pub aa: Option<crate::aa::AntiAliasing>,
+    /// `bench lod --flight PATH`: the camera path each setting is also timed along, frame
+    /// after frame (`None`: "tour" where the world has it, else the views' own path; `Some("")`:
+    /// no flight). A setting's cost can lie where its four still views do not look: a forest
+    /// passed on the way, a long view over the hills.
+    pub flight: Option<String>,
+    /// Frames of the flight, evenly spaced along the whole path (`--flight-frames`,
+    /// 2..=[`MAX_FLIGHT_FRAMES`]).
+    pub flight_frames: u32,
 }
+
+/// The most frames of bench lod's flight (`--flight-frames`).
+pub const MAX_FLIGHT_FRAMES: u32 = 2000;
+/// bench lod's flight's frames by default.
+pub const DEFAULT_FLIGHT_FRAMES: u32 = 120;
 
 impl Default for BenchLodOptions {
     fn default() -> Self {
@@ -88,6 +101,8 @@ impl Default for BenchLodOptions {
             settings: Vec::new(),
             supersample: 1,
             aa: None,
+            flight: None,
+            flight_frames: DEFAULT_FLIGHT_FRAMES,
         }
     }
 }
@@ -123,10 +138,17 @@ pub fn check_timing(
 
 impl BenchLodOptions {
     /// Checks the options of `bench lod`: `--size` 1..=16384 pixels a side, `--dolly-frames`
-    /// 2..=1000, `--truth` 1..=8, and the timing options (see [`check_timing`]).
+    /// 2..=1000, `--flight-frames` 2..=2000, `--supersample` and `--truth` 1..=8, and the
+    /// timing options (see [`check_timing`]).
     pub fn validate(&self) -> Result<(), OptionError> {
         self.validate_features()?;
         check_range("--supersample", self.supersample, 1..=8, "")?;
+        check_range(
+            "--flight-frames",
+            self.flight_frames,
+            2..=MAX_FLIGHT_FRAMES,
+            "",
+        )?;
         check_range(
             "--dolly-frames",
             self.dolly_frames,
@@ -294,6 +316,14 @@ mod tests {
                 },
                 "--size 0x0",
                 "1..=16384",
+            ),
+            (
+                BenchLodOptions {
+                    flight_frames: 1,
+                    ..d()
+                },
+                "--flight-frames 1",
+                "2..=2000",
             ),
             (
                 BenchLodOptions {

@@ -19,7 +19,13 @@
 //! settings on each front. The images are captured first; then the settings are timed in
 //! interleaved rounds, each measurement's frames back to back with nothing in between (see
 //! [`crate::tools::timing`]): a median with its interquartile range per view, a setting whose
-//! spread is above 10% flagged.
+//! spread is above 10% flagged. Each setting is also timed along a flight (the "tour" path by
+//! default, `--flight`): its frames, evenly spaced along the whole path, one after the other
+//! after an untimed flight that streamed the path's tiles in; the median and the 99th
+//! percentile of their GPU times, with a third front of the p99 against the pixel FLIP. A
+//! setting's cost can lie where the four still views do not look: the trees' mesh switches at
+//! twice the default's cost 0.02 ms there and 5.7 ms at the tour's p99, where it starts in a
+//! forest.
 //! (c) The far field: beyond the view distance the terrain is shaded with what the grass would
 //! show there. The truth draws real blades out to [`FAR_BAND_FACTOR`] times the default view
 //! distance; the default setting is compared with it, with the far field on and off, by the mean
@@ -40,7 +46,7 @@ use crate::tools::metrics::{
     Chart, ChartPoint, LineChart, Series, Summary, band_mask, flip_error_map, masked_mean,
     pareto_front, ray_distances,
 };
-use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_frames};
+use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_flight, run_frames};
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::World;
 
@@ -222,6 +228,7 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         new("segments 7/3/3", h, v, s, [7, 3, 3]),
         new("segments 7/7/3", h, v, s, [7, 7, 3]),
         new("segments 9/3/3", h, v, s, [9, 3, 3]),
+        new("segments 11/3/3", h, v, s, [11, 3, 3]),
         new("segments 5/3/2", h, v, s, [5, 3, 2]),
         new("segments 3/2/1", h, v, s, [3, 2, 1]),
         new("infill off", h, v, s, seg).with_infill([0.0; 2]),
@@ -311,6 +318,37 @@ pub struct SettingResult {
     pub pareto: bool,
     /// On the Pareto front of time against the coarse FLIP against the truth.
     pub pareto_coarse: bool,
+    /// GPU time per frame along the flight (wall time without timestamps); `None` without a
+    /// flight.
+    pub flight: Option<FlightTiming>,
+    /// On the Pareto front of the flight's p99 against pixel FLIP against the truth.
+    pub pareto_flight: bool,
+}
+
+/// A setting's time per frame along the flight, over every round's frames, milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct FlightTiming {
+    /// Median.
+    pub median_ms: f64,
+    /// 99th percentile: the frames where the setting costs most.
+    pub p99_ms: f64,
+    /// Largest.
+    pub max_ms: f64,
+    /// Frames measured.
+    pub frames: usize,
+}
+
+impl FlightTiming {
+    /// The timing of `samples`, milliseconds.
+    pub fn of(samples: &[f64]) -> Self {
+        let s = Summary::of(samples);
+        Self {
+            median_ms: s.median,
+            p99_ms: s.p99,
+            max_ms: if samples.is_empty() { 0.0 } else { s.max },
+            frames: samples.len(),
+        }
+    }
 }
 
 /// One frame of the dolly.
@@ -428,6 +466,15 @@ pub struct BenchLodReport {
     pub front: Vec<String>,
     /// The settings on the front of the coarse FLIP against the truth, fastest first.
     pub coarse_front: Vec<String>,
+    /// The camera path of the flight (`None`: no flight).
+    pub flight_path: Option<String>,
+    /// Frames of each flight.
+    pub flight_frames: u32,
+    /// The settings on the front of the flight's p99 time against pixel FLIP, fastest first
+    /// (empty without a flight).
+    pub flight_front: Vec<String>,
+    /// Whether the default setting is on that front (`None` without a flight).
+    pub default_on_flight_front: Option<bool>,
     /// The frame counts of the timings.
     pub counts: FrameCounts,
     /// The far field against the truth's real blades out to [`FAR_BAND_FACTOR`] times the view
@@ -436,8 +483,8 @@ pub struct BenchLodReport {
 }
 
 /// Runs the benchmark and writes `bench_lod.json`, `dolly.csv`, `dolly.png`, `lod_settings.csv`,
-/// `lod_settings.png`, `lod_settings_coarse.png`, `lod_coverage.png` and `far_band.csv` into
-/// `opts.out`.
+/// `lod_settings.png`, `lod_settings_coarse.png`, `lod_coverage.png`, `far_band.csv` and, with a
+/// flight, `lod_settings_flight.png` into `opts.out`.
 pub fn run_bench_lod(
     opts: &BenchLodOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
@@ -459,6 +506,7 @@ pub fn run_bench_lod(
             None => bail!("world {} has no camera paths", opts.world.display()),
         },
     };
+    let flight = flight_path(&world, &opts.flight, &path)?;
     let out_dir = OutDir::create_for(&opts.out, "bench lod")?;
     let ctx = GpuContext::new()?;
     let bench = Bench {
@@ -681,6 +729,31 @@ pub fn run_bench_lod(
             progress("timing", u64::from(round) * total + k as u64 + 1, steps);
         }
     }
+    let mut flight_samples = vec![Vec::new(); settings.len()];
+    if let Some(fp) = &flight {
+        let shots = flight_shots(fp, opts.flight_frames);
+        // One untimed flight each, every frame's tiles waited for: the timed ones find the
+        // path streamed in (as far as the tile cache holds it).
+        for (k, scene) in scenes.iter_mut().enumerate() {
+            for (camera, _, _) in &shots {
+                scene.warm_up(&ctx, camera, FLIGHT_TILE_WAIT)?;
+            }
+            run_flight(&ctx, scene, &shots)?;
+            progress("flight", k as u64 + 1, total + steps);
+        }
+        for round in 0..counts.rounds {
+            for (k, scene) in scenes.iter_mut().enumerate() {
+                for (stats, wall) in run_flight(&ctx, scene, &shots)? {
+                    flight_samples[k].push(frame_ms(&stats, wall, ctx.timestamps));
+                }
+                progress(
+                    "flight",
+                    total + u64::from(round) * total + k as u64 + 1,
+                    total + steps,
+                );
+            }
+        }
+    }
     drop(scenes);
     let mut results = Vec::new();
     for (k, s) in settings.iter().enumerate() {
@@ -703,6 +776,10 @@ pub fn run_bench_lod(
             coverage: coverage.iter().sum::<f64>() / coverage.len() as f64,
             pareto: false,
             pareto_coarse: false,
+            flight: flight
+                .as_ref()
+                .map(|_| FlightTiming::of(&flight_samples[k])),
+            pareto_flight: false,
         });
     }
     // Time is GPU time when the adapter has timestamps, else wall time.
@@ -721,11 +798,25 @@ pub fn run_bench_lod(
     };
     let front = front_of(&|r| r.vs_truth.flip);
     let coarse_front = front_of(&|r| r.vs_truth.coarse);
+    let flight_front = if flight.is_some() {
+        let xy: Vec<(f64, f64)> = results
+            .iter()
+            .map(|r| (r.flight.map_or(0.0, |f| f.p99_ms), r.vs_truth.flip))
+            .collect();
+        let mut front = pareto_front(&xy);
+        front.sort_by(|&a, &b| xy[a].0.total_cmp(&xy[b].0));
+        front
+    } else {
+        Vec::new()
+    };
     for &i in &front {
         results[i].pareto = true;
     }
     for &i in &coarse_front {
         results[i].pareto_coarse = true;
+    }
+    for &i in &flight_front {
+        results[i].pareto_flight = true;
     }
     let names = |front: &[usize]| -> Vec<String> {
         front
@@ -733,7 +824,8 @@ pub fn run_bench_lod(
             .map(|&i| results[i].setting.name.clone())
             .collect()
     };
-    let (front, coarse_front) = (names(&front), names(&coarse_front));
+    let (front, coarse_front, flight_front) =
+        (names(&front), names(&coarse_front), names(&flight_front));
 
     write_outputs(opts, &dolly, &results, ctx.timestamps)?;
     write_far_band(opts, &far_band)?;
@@ -749,6 +841,10 @@ pub fn run_bench_lod(
         default_on_coarse_front: results[0].pareto_coarse,
         front,
         coarse_front,
+        flight_path: flight.as_ref().map(|p| p.name.clone()),
+        flight_frames: opts.flight_frames,
+        default_on_flight_front: flight.as_ref().map(|_| results[0].pareto_flight),
+        flight_front,
         counts,
         dolly,
         settings: results,
@@ -757,6 +853,53 @@ pub fn run_bench_lod(
     write_json(&opts.out.join("bench_lod.json"), &report)?;
     out_dir.keep();
     Ok(report)
+}
+
+/// The longest bench lod waits for a flight frame's tiles in its untimed flight.
+const FLIGHT_TILE_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// The flight's path: `asked` by name (`Some("")`: none), else "tour" where the world has it,
+/// else the views' own path.
+fn flight_path(
+    world: &World,
+    asked: &Option<String>,
+    views: &crate::world::CameraPath,
+) -> Result<Option<crate::world::CameraPath>> {
+    match asked.as_deref() {
+        Some("") => Ok(None),
+        Some(name) => match world.manifest.path(name) {
+            Some(p) => Ok(Some(p.clone())),
+            None => {
+                let known: Vec<&str> = world
+                    .manifest
+                    .paths
+                    .iter()
+                    .map(|p| p.name.as_str())
+                    .collect();
+                bail!(
+                    "--flight: the world has no camera path {name:?}; its paths are: {}",
+                    known.join(", ")
+                )
+            }
+        },
+        None => Ok(Some(world.manifest.path("tour").unwrap_or(views).clone())),
+    }
+}
+
+/// The flight's frames: `frames` cameras evenly spaced along the whole of `path`, each drawn at
+/// time 0 (as every frame of the benchmark) with the trail at the camera.
+pub fn flight_shots(
+    path: &crate::world::CameraPath,
+    frames: u32,
+) -> Vec<(Camera, f64, Option<glam::DVec2>)> {
+    let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
+    let last = f64::from(frames.max(2) - 1);
+    (0..frames)
+        .map(|i| {
+            let camera = sample_path(path, t0 + (t1 - t0) * f64::from(i) / last);
+            (camera, 0.0, Some(camera.position.truncate()))
+        })
+        .collect()
 }
 
 /// The far band's figures from the truth's images and band masks, and the default setting's
@@ -887,13 +1030,15 @@ fn write_outputs(
          segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,lod_widen,plant_lod_near_m,\
          plant_lod_far_m,tree_lod_near_m,tree_lod_far_m,tree_thin_m,gpu_ms,gpu_q1_ms,\
          gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_vs_truth,\
-         coarse_flip_vs_truth,flip_frame_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse\n",
+         coarse_flip_vs_truth,flip_frame_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse,\
+         flight_median_ms,flight_p99_ms,flight_max_ms,flight_frames,pareto_flight\n",
     );
     for r in results {
         let s = &r.setting;
+        let flight = |f: fn(&FlightTiming) -> String| r.flight.as_ref().map_or(String::new(), f);
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{},{},{},{},{},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -926,7 +1071,12 @@ fn write_outputs(
             r.blades_drawn,
             r.coverage,
             r.pareto,
-            r.pareto_coarse
+            r.pareto_coarse,
+            flight(|f| format!("{:.4}", f.median_ms)),
+            flight(|f| format!("{:.4}", f.p99_ms)),
+            flight(|f| format!("{:.4}", f.max_ms)),
+            flight(|f| f.frames.to_string()),
+            r.pareto_flight
         );
     }
     write_text(&opts.out.join("lod_settings.csv"), &csv)?;
@@ -983,6 +1133,24 @@ fn write_outputs(
         &|r| 1.0 - r.coverage,
     )
     .write_png(&opts.out.join("lod_coverage.png"), 900, 600)?;
+    // The flight's worst frames against the error: the cost a setting has where the four
+    // views do not look.
+    if results.iter().all(|r| r.flight.is_some()) {
+        let mut c = chart(
+            "Grass LOD settings along the flight: 99th percentile frame against accuracy",
+            &format!("pixel FLIP against the {k}x{k} truth"),
+            &|r| r.vs_truth.flip,
+        );
+        c.x_label = format!(
+            "{} time of the flight's 99th percentile frame (ms)",
+            if gpu { "GPU" } else { "wall" }
+        );
+        for (p, r) in c.points.iter_mut().zip(results) {
+            p.x = r.flight.map_or(0.0, |f| f.p99_ms);
+            p.label.clone_from(&r.setting.name);
+        }
+        c.write_png(&opts.out.join("lod_settings_flight.png"), 900, 600)?;
+    }
     Ok(())
 }
 
@@ -1061,6 +1229,42 @@ mod tests {
         let mut other = all[0].clone();
         other.tree_thin_m = Some(1.0);
         assert!(!other.same_as(&all[0]));
+    }
+
+    #[test]
+    fn the_flight_is_the_tour_unless_asked_and_an_unknown_path_is_refused_naming_the_paths() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz");
+        let mut world = World::open(&dir).unwrap();
+        let meadow = world.manifest.path("meadow").unwrap().clone();
+        let name = |asked: Option<&str>, w: &World| {
+            flight_path(w, &asked.map(String::from), &meadow)
+                .unwrap()
+                .map(|p| p.name)
+        };
+        assert_eq!(name(None, &world).as_deref(), Some("tour"));
+        assert_eq!(
+            name(Some("wind-tour"), &world).as_deref(),
+            Some("wind-tour")
+        );
+        assert_eq!(name(Some(""), &world), None);
+        let err = flight_path(&world, &Some("nowhere".into()), &meadow)
+            .unwrap_err()
+            .to_string();
+        for says in ["--flight", "\"nowhere\"", "tour", "meadow", "wind-tour"] {
+            assert!(err.contains(says), "{err}");
+        }
+        // A world without a tour flies the views' path.
+        world.manifest.paths.retain(|p| p.name != "tour");
+        assert_eq!(name(None, &world).as_deref(), Some("meadow"));
+        // The shots run evenly over the whole path, its first and last keys included.
+        let shots = flight_shots(&meadow, 5);
+        assert_eq!(shots.len(), 5);
+        let (first, last) = (&meadow.keys[0], &meadow.keys[meadow.keys.len() - 1]);
+        let at = |t| crate::camera::sample_path(&meadow, t).position;
+        assert_eq!(shots[0].0.position, at(first.t_s));
+        assert_eq!(shots[4].0.position, at(last.t_s));
+        assert_eq!(shots[2].0.position, at(0.5 * (first.t_s + last.t_s)));
+        assert!(shots.iter().all(|s| s.1 == 0.0));
     }
 
     #[test]

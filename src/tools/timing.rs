@@ -136,13 +136,37 @@ pub fn run_frames(
     warmup: u32,
     timed: u32,
 ) -> Result<Vec<(FrameStats, f64)>> {
+    run_shots(ctx, scene, warmup, timed, |_| (*camera, time_s, walker))
+}
+
+/// Renders a flight, the cameras of `shots` one after the other, back to back as
+/// [`run_frames`] renders one view, and returns every frame's figures with its wall time from
+/// the previous frame, milliseconds.
+pub fn run_flight(
+    ctx: &GpuContext,
+    scene: &mut Scene,
+    shots: &[(Camera, f64, Option<DVec2>)],
+) -> Result<Vec<(FrameStats, f64)>> {
+    run_shots(ctx, scene, 0, shots.len() as u32, |i| shots[i as usize])
+}
+
+/// `warmup + timed` frames back to back, frame `i` drawn as `shot(i)` says (camera, time,
+/// walker); the timed frames' figures.
+fn run_shots(
+    ctx: &GpuContext,
+    scene: &mut Scene,
+    warmup: u32,
+    timed: u32,
+    shot: impl Fn(u32) -> (Camera, f64, Option<DVec2>),
+) -> Result<Vec<(FrameStats, f64)>> {
     let total = warmup + timed;
     let mut first_timed = None;
     let mut walls = Vec::with_capacity(total as usize);
     let mut out = Vec::with_capacity(timed as usize);
     let mut last = std::time::Instant::now();
     for i in 0..total {
-        let (frame, _) = scene.submit_frame(ctx, camera, time_s, walker)?;
+        let (camera, time_s, walker) = shot(i);
+        let (frame, _) = scene.submit_frame(ctx, &camera, time_s, walker)?;
         if i == warmup {
             first_timed = Some(frame);
         }
