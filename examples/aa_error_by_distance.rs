@@ -17,7 +17,8 @@
 //! `trees_lod=NEAR/FAR` and `plants_lod=NEAR/FAR` the switches, `plants_thin=METRES`, `view=SCALE`
 //! the grass's view distance times SCALE (the far field standing in beyond it); `k=K` the default
 //! frame supersampled K x K (at K other than 4, sampled elsewhere in the pixel than the truth's
-//! sub-samples). Prints each
+//! sub-samples); parts joined by `+` (`segments=9/3/3+view=0.67`) make one frame with all of
+//! them. Prints each
 //! one's mean FLIP against the truth over the frame and over bands of distance (from the
 //! truth's depth) with the bands' share of the frame, each one's mean luminance over the
 //! truth's in each band, and writes every image into OUT. RUN_UP (default 6) is the frames drawn
@@ -144,64 +145,67 @@ fn main() -> Result<()> {
                 continue;
             }
             let mut dp = d.clone();
-            let trees = base.tree_settings(&world);
             let usage = "segments, segments=NEAR/HIGH/LOW, rings, plants, trees, trees_meshes, \
                          trees_thin=METRES/KEEP, trees_lod=NEAR/FAR, plants_lod=NEAR/FAR, \
                          plants_thin=METRES, view=SCALE, k=K";
-            match part.split_once('=') {
-                None => match part {
-                    "segments" => dp.grass.segments = t1.grass.segments,
-                    "rings" => dp.grass_rings = t1.grass_rings,
-                    "plants" => dp.plants = t1.plants,
-                    "trees" => dp.trees = t1.trees,
-                    "trees_meshes" => {
-                        dp.trees = trees.map(|t| verdant::plants::PlantSettings {
-                            lod_m: t1.trees.map_or(t.lod_m, |u| u.lod_m),
-                            ..t
-                        })
-                    }
-                    other => anyhow::bail!("part {other:?} is not one of {usage}"),
-                },
-                Some((name, values)) => {
-                    let v: Vec<f32> = values
-                        .split('/')
-                        .map(|n| n.parse())
-                        .collect::<Result<_, _>>()
-                        .map_err(|e| anyhow::anyhow!("part {part:?}: {e}"))?;
-                    let with = |f: &dyn Fn(&mut verdant::plants::PlantSettings)| {
-                        trees.map(|mut t| {
-                            f(&mut t);
-                            t
-                        })
-                    };
-                    match (name, &v[..]) {
-                        ("segments", &[near, high, low]) => {
-                            dp.grass.segments = [near, high, low].map(|n| n as u32)
-                        }
-                        ("trees_thin", &[m, k]) => {
-                            dp.trees = with(&|t| {
-                                t.thin_m = m;
-                                t.min_keep = k;
+            // Parts joined by `+` apply together to one frame.
+            for part in part.split('+') {
+                let trees = dp.tree_settings(&world);
+                match part.split_once('=') {
+                    None => match part {
+                        "segments" => dp.grass.segments = t1.grass.segments,
+                        "rings" => dp.grass_rings = t1.grass_rings,
+                        "plants" => dp.plants = t1.plants,
+                        "trees" => dp.trees = t1.trees,
+                        "trees_meshes" => {
+                            dp.trees = trees.map(|t| verdant::plants::PlantSettings {
+                                lod_m: t1.trees.map_or(t.lod_m, |u| u.lod_m),
+                                ..t
                             })
                         }
-                        ("trees_lod", &[a, b]) => dp.trees = with(&|t| t.lod_m = [a, b]),
-                        ("plants_lod", &[a, b]) => dp.plants.lod_m = [a, b],
-                        ("plants_thin", &[m]) => dp.plants.thin_m = m,
-                        ("view", &[k]) if k > 0.0 => {
-                            let r = dp.grass_rings.unwrap_or_else(|| {
-                                verdant::lod::RingSettings::for_pyramid(&world.manifest.pyramid)
-                            });
-                            dp.grass_rings = Some(verdant::lod::RingSettings {
-                                low_radius_m: r.low_radius_m * f64::from(k),
-                                ..r
-                            });
+                        other => anyhow::bail!("part {other:?} is not one of {usage}"),
+                    },
+                    Some((name, values)) => {
+                        let v: Vec<f32> = values
+                            .split('/')
+                            .map(|n| n.parse())
+                            .collect::<Result<_, _>>()
+                            .map_err(|e| anyhow::anyhow!("part {part:?}: {e}"))?;
+                        let with = |f: &dyn Fn(&mut verdant::plants::PlantSettings)| {
+                            trees.map(|mut t| {
+                                f(&mut t);
+                                t
+                            })
+                        };
+                        match (name, &v[..]) {
+                            ("segments", &[near, high, low]) => {
+                                dp.grass.segments = [near, high, low].map(|n| n as u32)
+                            }
+                            ("trees_thin", &[m, k]) => {
+                                dp.trees = with(&|t| {
+                                    t.thin_m = m;
+                                    t.min_keep = k;
+                                })
+                            }
+                            ("trees_lod", &[a, b]) => dp.trees = with(&|t| t.lod_m = [a, b]),
+                            ("plants_lod", &[a, b]) => dp.plants.lod_m = [a, b],
+                            ("plants_thin", &[m]) => dp.plants.thin_m = m,
+                            ("view", &[k]) if k > 0.0 => {
+                                let r = dp.grass_rings.unwrap_or_else(|| {
+                                    verdant::lod::RingSettings::for_pyramid(&world.manifest.pyramid)
+                                });
+                                dp.grass_rings = Some(verdant::lod::RingSettings {
+                                    low_radius_m: r.low_radius_m * f64::from(k),
+                                    ..r
+                                });
+                            }
+                            _ => anyhow::bail!("part {part:?} is not one of {usage}"),
                         }
-                        _ => anyhow::bail!("part {part:?} is not one of {usage}"),
                     }
                 }
             }
             truths.push(mk(
-                &format!("default_4x4_{}", part.replace(['/', '='], "_")),
+                &format!("default_4x4_{}", part.replace(['/', '=', '+'], "_")),
                 dp,
                 4,
             )?);
