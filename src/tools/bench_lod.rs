@@ -506,7 +506,7 @@ pub fn run_bench_lod(
             None => bail!("world {} has no camera paths", opts.world.display()),
         },
     };
-    let flight = flight_path(&world, &opts.flight, &path)?;
+    let flight = flight_path(&world, &opts.world, &opts.flight, &path)?;
     let out_dir = OutDir::create_for(&opts.out, "bench lod")?;
     let ctx = GpuContext::new()?;
     let bench = Bench {
@@ -862,26 +862,15 @@ const FLIGHT_TILE_WAIT: std::time::Duration = std::time::Duration::from_secs(30)
 /// else the views' own path.
 fn flight_path(
     world: &World,
+    location: &std::path::Path,
     asked: &Option<String>,
     views: &crate::world::CameraPath,
 ) -> Result<Option<crate::world::CameraPath>> {
     match asked.as_deref() {
         Some("") => Ok(None),
-        Some(name) => match world.manifest.path(name) {
-            Some(p) => Ok(Some(p.clone())),
-            None => {
-                let known: Vec<&str> = world
-                    .manifest
-                    .paths
-                    .iter()
-                    .map(|p| p.name.as_str())
-                    .collect();
-                bail!(
-                    "--flight: the world has no camera path {name:?}; its paths are: {}",
-                    known.join(", ")
-                )
-            }
-        },
+        Some(name) => Ok(Some(
+            crate::tools::camera_path(world, location, Some(name)).context("--flight")?,
+        )),
         None => Ok(Some(world.manifest.path("tour").unwrap_or(views).clone())),
     }
 }
@@ -1237,7 +1226,7 @@ mod tests {
         let mut world = World::open(&dir).unwrap();
         let meadow = world.manifest.path("meadow").unwrap().clone();
         let name = |asked: Option<&str>, w: &World| {
-            flight_path(w, &asked.map(String::from), &meadow)
+            flight_path(w, &dir, &asked.map(String::from), &meadow)
                 .unwrap()
                 .map(|p| p.name)
         };
@@ -1247,9 +1236,10 @@ mod tests {
             Some("wind-tour")
         );
         assert_eq!(name(Some(""), &world), None);
-        let err = flight_path(&world, &Some("nowhere".into()), &meadow)
-            .unwrap_err()
-            .to_string();
+        let err = format!(
+            "{:#}",
+            flight_path(&world, &dir, &Some("nowhere".into()), &meadow).unwrap_err()
+        );
         for says in ["--flight", "\"nowhere\"", "tour", "meadow", "wind-tour"] {
             assert!(err.contains(says), "{err}");
         }
