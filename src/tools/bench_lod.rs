@@ -790,22 +790,18 @@ pub fn run_bench_lod(
             r.frame.median_ms
         }
     };
-    let front_of = |error: &dyn Fn(&SettingResult) -> f64| {
+    let front_of = |time: &dyn Fn(&SettingResult) -> f64, error: &dyn Fn(&SettingResult) -> f64| {
         let xy: Vec<(f64, f64)> = results.iter().map(|r| (time(r), error(r))).collect();
         let mut front = pareto_front(&xy);
         front.sort_by(|&a, &b| xy[a].0.total_cmp(&xy[b].0));
         front
     };
-    let front = front_of(&|r| r.vs_truth.flip);
-    let coarse_front = front_of(&|r| r.vs_truth.coarse);
+    let front = front_of(&time, &|r| r.vs_truth.flip);
+    let coarse_front = front_of(&time, &|r| r.vs_truth.coarse);
     let flight_front = if flight.is_some() {
-        let xy: Vec<(f64, f64)> = results
-            .iter()
-            .map(|r| (r.flight.map_or(0.0, |f| f.p99_ms), r.vs_truth.flip))
-            .collect();
-        let mut front = pareto_front(&xy);
-        front.sort_by(|&a, &b| xy[a].0.total_cmp(&xy[b].0));
-        front
+        front_of(&|r| r.flight.map_or(0.0, |f| f.p99_ms), &|r| {
+            r.vs_truth.flip
+        })
     } else {
         Vec::new()
     };
