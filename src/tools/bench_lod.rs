@@ -339,13 +339,13 @@ pub struct FlightTiming {
 }
 
 impl FlightTiming {
-    /// The timing of `samples`, milliseconds.
+    /// The timing of `samples`, milliseconds (all zero when there are none).
     pub fn of(samples: &[f64]) -> Self {
         let s = Summary::of(samples);
         Self {
             median_ms: s.median,
             p99_ms: s.p99,
-            max_ms: if samples.is_empty() { 0.0 } else { s.max },
+            max_ms: s.max,
             frames: samples.len(),
         }
     }
