@@ -615,6 +615,8 @@ fn bench_lod_writes_its_tables_and_charts() {
         assert_eq!(s["flip_frame_vs_truth"], s["vs_truth"]["flip"], "{s}");
     }
     assert_eq!(json["flight_path"], "tour");
+    // The views are the meadow's unless another path is asked for.
+    assert_eq!(json["path"], "meadow");
     assert!(json["default_on_flight_front"].is_boolean(), "{json}");
     for (key, column) in [
         ("front", "pareto"),
@@ -689,6 +691,31 @@ fn bench_lod_writes_its_tables_and_charts() {
 /// sub-samples a pixel, so each setting errs less against the truth than its own one-sample
 /// frames do (reported beside), while what the frames draw (their blades) stays the frames' own.
 #[test]
+fn bench_lod_refuses_an_unknown_path_naming_the_paths_and_writes_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::default_world();
+    for option in ["--path", "--flight"] {
+        let out = verdant(
+            &[
+                "bench",
+                "lod",
+                world.to_str().unwrap(),
+                option,
+                "nowhere",
+                "--out",
+                "b",
+            ],
+            tmp.path(),
+        );
+        assert_fails_naming(&out, &[option, "\"nowhere\"", "meadow", "wind-tour"]);
+        assert!(
+            !tmp.path().join("b").exists(),
+            "{option}: an output folder was left"
+        );
+    }
+}
+
+#[test]
 fn bench_lod_supersampled_measures_the_settings_content() {
     let tmp = tempfile::tempdir().unwrap();
     let out = verdant(
@@ -716,6 +743,9 @@ fn bench_lod_supersampled_measures_the_settings_content() {
             "2",
             "--flight",
             "",
+            // The views along another path than the meadow's.
+            "--path",
+            "wind-tour",
             "--out",
             "b",
         ],
@@ -731,6 +761,7 @@ fn bench_lod_supersampled_measures_the_settings_content() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("bench_lod.json")).unwrap())
             .unwrap();
     assert_eq!(json["supersample"], 2);
+    assert_eq!(json["path"], "wind-tour");
     let settings = json["settings"].as_array().unwrap();
     let names: Vec<&str> = settings
         .iter()

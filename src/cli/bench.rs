@@ -91,6 +91,10 @@ pub(crate) enum BenchCommand {
         /// timings stay the setting's own frame.
         #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=8))]
         supersample: u32,
+        /// The camera path whose start the dolly leaves from and along which the four views
+        /// are spread (default: "meadow", else the world's first path).
+        #[arg(long, value_name = "PATH")]
+        path: Option<String>,
         /// The camera path each setting is also timed along, frame after frame, for the
         /// median and the 99th percentile of its frames' times (default: "tour" where the world
         /// has it, else the views' path; "" for none).
@@ -366,8 +370,8 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
     let r = verdant::tools::run_bench_lod(&opts, &mut update)?;
     finish_bars(&bars);
     println!(
-        "{} [{}], {}x{}",
-        r.adapter.name, r.adapter.backend, r.size.0, r.size.1
+        "{} [{}], {}x{}, the views along the path {:?}",
+        r.adapter.name, r.adapter.backend, r.size.0, r.size.1, r.path
     );
     println!(
         "dolly: largest jump of the error against the truth: {:.4} FLIP on frames with ring switches, {:.4} on frames without a switch",
@@ -578,6 +582,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             dolly_frames,
             settings,
             supersample,
+            path,
             flight,
             flight_frames,
             timing,
@@ -590,7 +595,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
-            path: None,
+            path,
             truth_k: truth.truth,
             truth_reach: truth.truth_reach,
             settings,
