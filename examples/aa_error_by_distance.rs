@@ -1,6 +1,6 @@
 //! Where the error against the truth comes from, by distance from the camera.
 //!
-//! `cargo run --release --example aa_error_by_distance -- [WIDTH HEIGHT [PATH [OUT [WIDEN [PARTS [RUN_UP [WIND [TAA]]]]]]]]`
+//! `cargo run --release --example aa_error_by_distance -- [WIDTH HEIGHT [PATH [OUT [WIDEN [PARTS [RUN_UP [WIND [TAA [REFS]]]]]]]]]`
 //! (defaults 480 270 meadow out/error-by-distance): one view of the default world's path (the
 //! meadow's first; 30% along any other), after six frames of the same wind for every render,
 //! drawn as the 4x4 truth and as: the truth at 8x8 (the truth's own sampling error), with blades
@@ -18,7 +18,8 @@
 //! the grass's view distance times SCALE (the far field standing in beyond it); `k=K` the default
 //! frame supersampled K x K (at K other than 4, sampled elsewhere in the pixel than the truth's
 //! sub-samples); parts joined by `+` (`segments=9/3/3+view=0.67`) make one frame with all of
-//! them. Prints each
+//! them; a part prefixed `taa:` (`taa:segments=9/3/3+view=0.67`) is the default frame with
+//! those settings drawn with the temporal method instead of supersampled. Prints each
 //! one's mean FLIP against the truth over the frame and over bands of distance (from the
 //! truth's depth) with the bands' share of the frame, each one's mean luminance over the
 //! truth's in each band, and writes every image into OUT. RUN_UP (default 6) is the frames drawn
@@ -27,7 +28,11 @@
 //! of `SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX[/MIN[/RECONSTRUCT]]]]]`, adds the temporal
 //! method with those settings (`TaaSettings::clip_sigma`, `max_samples`; MOTION 1 turns
 //! `blade_motion` on; SPREAD is `pixel_spread`, PARALLAX `parallax_falloff`, MIN
-//! `min_samples`, RECONSTRUCT `reconstruct_px`).
+//! `min_samples`, RECONSTRUCT `reconstruct_px`). REFS (default `all`) names the standard renders
+//! drawn besides the truth, comma-separated, of `truth_k8`, `truth_reach1`, `truth_reach2`,
+//! `truth_1x`, `truth_2x2`, `default_4x4`, `off`, `msaa` and `taa` (`none` for none):
+//! `truth_k8` alone is 64 renders with blades to the truth's reach, and on a software renderer
+//! the renders asked for are what a view's minutes are spent on.
 use anyhow::Result;
 use std::sync::Arc;
 use verdant::RendererConfig;
@@ -88,40 +93,56 @@ fn main() -> Result<()> {
             Truth::with_config(&ctx, world.clone(), Arc::new(world.clone()), (w, h), k, cfg)?,
         ))
     };
+    const REFS: [&str; 9] = [
+        "truth_k8",
+        "truth_reach1",
+        "truth_reach2",
+        "truth_1x",
+        "truth_2x2",
+        "default_4x4",
+        "off",
+        "msaa",
+        "taa",
+    ];
+    let refs: Vec<&str> = match args.get(10).map(String::as_str) {
+        None | Some("all") => REFS.to_vec(),
+        Some("none") => Vec::new(),
+        Some(list) => {
+            let v: Vec<&str> = list.split(',').collect();
+            if let Some(bad) = v.iter().find(|r| !REFS.contains(r)) {
+                anyhow::bail!("REFS: {bad:?} is not one of all, none, {}", REFS.join(", "));
+            }
+            v
+        }
+    };
     truths.push(mk(
         "truth",
         truth_config_reaching(&world, &base, slots, REACH_FACTOR),
         4,
     )?);
-    truths.push(mk(
-        "truth_k8",
-        truth_config_reaching(&world, &base, slots, REACH_FACTOR),
-        8,
-    )?);
-    truths.push(mk(
-        "truth_reach1",
-        truth_config_reaching(&world, &base, slots, 1.0),
-        4,
-    )?);
-    truths.push(mk(
-        "truth_reach2",
-        truth_config_reaching(&world, &base, slots, 2.0),
-        4,
-    )?);
-    truths.push(mk(
-        "truth_1x",
-        truth_config_reaching(&world, &base, slots, REACH_FACTOR),
-        1,
-    )?);
-    truths.push(mk(
-        "truth_2x2",
-        truth_config_reaching(&world, &base, slots, REACH_FACTOR),
-        2,
-    )?);
+    for (name, reach, k) in [
+        ("truth_k8", REACH_FACTOR, 8),
+        ("truth_reach1", 1.0, 4),
+        ("truth_reach2", 2.0, 4),
+        ("truth_1x", REACH_FACTOR, 1),
+        ("truth_2x2", REACH_FACTOR, 2),
+    ] {
+        if refs.contains(&name) {
+            truths.push(mk(
+                name,
+                truth_config_reaching(&world, &base, slots, reach),
+                k,
+            )?);
+        }
+    }
     let mut d = base.clone();
     d.aa = AntiAliasing::Off;
     d.service.atlas_slots = d.service.atlas_slots.max(slots);
-    truths.push(mk("default_4x4", d.clone(), 4)?);
+    if refs.contains(&"default_4x4") {
+        truths.push(mk("default_4x4", d.clone(), 4)?);
+    }
+    // The parts drawn with the temporal method, made into scenes below.
+    let mut taa_parts: Vec<(String, RendererConfig)> = Vec::new();
     if let Some(list) = args.get(5).filter(|l| !l.is_empty()) {
         for k in list.split(',') {
             let k: f32 = k
@@ -144,6 +165,10 @@ fn main() -> Result<()> {
                 truths.push(mk(&format!("default_{k}x{k}"), d.clone(), k)?);
                 continue;
             }
+            let (temporal, part) = match part.strip_prefix("taa:") {
+                Some(p) => (true, p),
+                None => (false, part),
+            };
             let mut dp = d.clone();
             let usage = "segments, segments=NEAR/HIGH/LOW, rings, plants, trees, trees_meshes, \
                          trees_thin=METRES/KEEP, trees_lod=NEAR/FAR, plants_lod=NEAR/FAR, \
@@ -204,21 +229,29 @@ fn main() -> Result<()> {
                     }
                 }
             }
-            truths.push(mk(
-                &format!("default_4x4_{}", part.replace(['/', '=', '+'], "_")),
-                dp,
-                4,
-            )?);
+            let label = part.replace(['/', '=', '+'], "_");
+            if temporal {
+                dp.aa = AntiAliasing::Taa;
+                taa_parts.push((format!("taa_{label}"), dp));
+            } else {
+                truths.push(mk(&format!("default_4x4_{label}"), dp, 4)?);
+            }
         }
     }
     let mut scenes: Vec<(String, Scene)> = Vec::new();
     for m in [AntiAliasing::Off, AntiAliasing::Msaa, AntiAliasing::Taa] {
+        if !refs.contains(&m.name()) {
+            continue;
+        }
         let mut c = base.clone();
         c.aa = m;
         scenes.push((
             m.name().to_string(),
             Scene::new(&ctx, world.clone(), w, h, c)?,
         ));
+    }
+    for (name, c) in taa_parts {
+        scenes.push((name, Scene::new(&ctx, world.clone(), w, h, c)?));
     }
     for variant in args
         .get(9)
