@@ -687,9 +687,8 @@ fn bench_lod_writes_its_tables_and_charts() {
     }
 }
 
-/// bench lod's `--supersample K`: the images measured are the settings' frames drawn K x K
-/// sub-samples a pixel, so each setting errs less against the truth than its own one-sample
-/// frames do (reported beside), while what the frames draw (their blades) stays the frames' own.
+/// bench lod's `--path` and `--flight` each name a camera path: an unknown one is refused
+/// before anything is written, naming the world's paths.
 #[test]
 fn bench_lod_refuses_an_unknown_path_naming_the_paths_and_writes_nothing() {
     let tmp = tempfile::tempdir().unwrap();
@@ -715,6 +714,9 @@ fn bench_lod_refuses_an_unknown_path_naming_the_paths_and_writes_nothing() {
     }
 }
 
+/// bench lod's `--supersample K`: the images measured are the settings' frames drawn K x K
+/// sub-samples a pixel, so each setting errs less against the truth than its own one-sample
+/// frames do (reported beside), while what the frames draw (their blades) stays the frames' own.
 #[test]
 fn bench_lod_supersampled_measures_the_settings_content() {
     let tmp = tempfile::tempdir().unwrap();
