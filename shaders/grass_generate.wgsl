@@ -87,7 +87,7 @@ const EMITTED: u32 = 5u;
 const CLUMP_BLEND_M: f32 = 0.4;
 // Metres of distance toward the view distance's fade per metre the camera stands above a blade
 // (as ELEVATION_DISTANCE in src/terrain/far_field.rs).
-const ELEVATION_DISTANCE: f32 = 3.0;
+const ELEVATION_DISTANCE: f32 = 1.0;
 const OVERFLOW: u32 = 6u;
 const DRAWN: u32 = 7u;
 

@@ -356,7 +356,7 @@ fn tree_canopy_shade(tau: f32, d: f32) -> f32 {
 
 // Metres of distance toward the grass's view-distance fade per metre the camera stands above
 // (ELEVATION_DISTANCE in src/terrain/far_field.rs).
-const ELEVATION_DISTANCE: f32 = 3.0;
+const ELEVATION_DISTANCE: f32 = 1.0;
 
 struct Maps {
     ground: vec3<f32>,
