@@ -1558,3 +1558,90 @@ fn bench_aa_measures_every_method_against_the_truth_in_every_sequence() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("against the 2x2 truth"), "{stdout}");
 }
+
+#[test]
+fn bench_aa_measures_bench_lods_settings_as_methods_of_their_own_and_refuses_unknown_ones() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::default_world();
+    let args = |settings: &str, out: &str| -> Vec<String> {
+        [
+            "bench",
+            "aa",
+            world.to_str().unwrap(),
+            "--size",
+            "64x36",
+            "--aa",
+            "off",
+            "--sequences",
+            "still",
+            "--frames",
+            "2",
+            "--run-up",
+            "0",
+            "--truth",
+            "2",
+            "--truth-reach",
+            "1",
+            "--paths",
+            "",
+            "--warmup-frames",
+            "0",
+            "--timed-frames",
+            "1",
+            "--rounds",
+            "1",
+            "--settings",
+            settings,
+            "--out",
+            out,
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    // An unknown name: refused before anything is written, naming the settings.
+    let a = args("segments 9/3/3 view x0.67,nowhere", "bad");
+    let out = verdant(
+        &a.iter().map(String::as_str).collect::<Vec<_>>(),
+        tmp.path(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("\"nowhere\"") && stderr.contains("segments 9/3/3 view x0.67"),
+        "{stderr}"
+    );
+    assert!(!tmp.path().join("bad").exists());
+    // The default is measured once even when named.
+    let a = args("default,segments 9/3/3 view x0.67", "a");
+    let out = verdant(
+        &a.iter().map(String::as_str).collect::<Vec<_>>(),
+        tmp.path(),
+    );
+    assert!(
+        out.status.success(),
+        "bench aa failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = tmp.path().join("a");
+    let seq = std::fs::read_to_string(dir.join("aa_sequences.csv")).unwrap();
+    let methods: Vec<&str> = seq
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(2).unwrap())
+        .collect();
+    assert_eq!(methods, ["off", "off+segments-9-3-3-view-x0.67"], "{seq}");
+    let timing = std::fs::read_to_string(dir.join("aa_timing.csv")).unwrap();
+    assert_eq!(timing.lines().count(), 3, "{timing}");
+    // The setting's frame is drawn with its own settings: not the default's image.
+    let img = |m: &str| image::open(dir.join(format!("64x36_still_{m}.png"))).unwrap();
+    assert_ne!(
+        img("off").to_rgb8().into_raw(),
+        img("off+segments-9-3-3-view-x0.67").to_rgb8().into_raw()
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("aa.json")).unwrap()).unwrap();
+    assert_eq!(json["settings"][0]["name"], "segments 9/3/3 view x0.67");
+    assert_eq!(json["settings"][0]["segments"][0], 9);
+    assert_eq!(json["settings"].as_array().unwrap().len(), 1);
+}

@@ -143,6 +143,11 @@ pub(crate) enum BenchCommand {
         /// The sequences, comma-separated (still, dolly, pan, teleport).
         #[arg(long, default_value = "still,dolly,pan,teleport", value_delimiter = ',', value_parser = parse_motion)]
         sequences: Vec<verdant::tools::bench_aa::Motion>,
+        /// bench lod's settings, by name, comma-separated: each method is measured with each
+        /// of them too, reported as METHOD+SETTING (its spaces and slashes as dashes:
+        /// taa+segments-9-3-3-view-x0.67); the default's settings are always measured.
+        #[arg(long, value_delimiter = ',')]
+        settings: Vec<String>,
         #[command(flatten)]
         taa: Box<TaaLists>,
         #[command(flatten)]
@@ -477,13 +482,22 @@ pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result
         "{} [{}], against the {}x{} truth",
         r.adapter.name, r.adapter.backend, r.truth_k, r.truth_k
     );
+    // The method column as wide as its longest name (a setting's is long).
+    let w = r
+        .timings
+        .iter()
+        .map(|t| t.method.len())
+        .chain(r.paths.iter().map(|p| p.method.len()))
+        .max()
+        .unwrap_or(0)
+        .max(11);
     println!(
-        "{:<10} {:<7} {:<9} {:>8} {:>9} {:>7} {:>9}",
+        "{:<10} {:<w$} {:<9} {:>8} {:>9} {:>7} {:>9}",
         "size", "method", "sequence", "FLIP", "flicker", "x truth", "recovery"
     );
     for s in &r.sequences {
         println!(
-            "{:<10} {:<7} {:<9} {:>8.4} {:>9.2} {:>7.2} {:>9}",
+            "{:<10} {:<w$} {:<9} {:>8.4} {:>9.2} {:>7.2} {:>9}",
             format!("{}x{}", s.size.0, s.size.1),
             s.method,
             s.motion.name(),
@@ -510,14 +524,14 @@ pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result
     }
     for (size, method, path, bound, sum, n) in rows {
         println!(
-            "{size:<10} {method:<11} path {path:<10} FLIP {:.4} over {n} views{}",
+            "{size:<10} {method:<w$} path {path:<10} FLIP {:.4} over {n} views{}",
             sum / f64::from(n),
             if bound { " (bound)" } else { "" }
         );
     }
     for t in &r.timings {
         println!(
-            "{:<10} {:<7} {} {:.3} ms (IQR {:.1}%), of which anti-aliasing {:.3} ms",
+            "{:<10} {:<w$} {} {:.3} ms (IQR {:.1}%), of which anti-aliasing {:.3} ms",
             format!("{}x{}", t.size.0, t.size.1),
             t.method,
             if t.gpu { "GPU" } else { "frame" },
@@ -615,6 +629,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             path,
             paths,
             sequences,
+            settings,
             taa,
             timing,
         } => bench_aa(verdant::tools::bench_aa::BenchAaOptions {
@@ -630,6 +645,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             paths: paths.into_iter().filter(|p| !p.is_empty()).collect(),
             motions: sequences,
             taa: taa_variants(&taa),
+            settings,
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,

@@ -22,7 +22,9 @@
 //! [`crate::tools::timing`]). Outputs: `aa_frames.csv` (every frame), `aa_sequences.csv`,
 //! `aa_paths.csv`, `aa.json`, per size a chart of error against GPU time with the Pareto
 //! front (`aa_WxH.png`), and the last frame of each sequence, each method's and the truth's,
-//! to look at (`WxH_SEQUENCE_METHOD.png`, `WxH_SEQUENCE_truth.png`).
+//! to look at (`WxH_SEQUENCE_METHOD.png`, `WxH_SEQUENCE_truth.png`). With bench lod's settings
+//! named (`--settings`), each method is measured with each of them too, as a method of its own
+//! (`METHOD+SETTING`, [`setting_label`]).
 
 use std::path::PathBuf;
 
@@ -87,6 +89,10 @@ pub struct BenchAaOptions {
     /// `taa` when there is one, else by its samples, clip and falloff, `taa-n32-c2.5-f0.25`,
     /// `-mv` added with the blades' motion vectors).
     pub taa: Vec<TaaSettings>,
+    /// bench lod's settings ([`crate::tools::bench_lod::lod_settings`]), by name: each method
+    /// is measured with each of them too, as a method of its own named `METHOD+SETTING`
+    /// ([`setting_label`]); the renderer's default settings are always measured.
+    pub settings: Vec<String>,
     /// Untimed frames before each timing measurement (default: by adapter).
     pub warmup_frames: Option<u32>,
     /// Timed frames per measurement and round (default: by adapter).
@@ -110,6 +116,7 @@ impl Default for BenchAaOptions {
             paths: vec!["meadow".into(), "tour".into(), "wind-tour".into()],
             motions: Motion::ALL.to_vec(),
             taa: vec![TaaSettings::default()],
+            settings: Vec::new(),
             warmup_frames: None,
             timed_frames: None,
             rounds: None,
@@ -188,6 +195,21 @@ impl BenchAaOptions {
         }
         out
     }
+}
+
+/// A bench lod setting's name as it is written after a method's (`taa+segments-9-3-3-view-x0.67`):
+/// every character but letters, digits and dots a dash, so that it fits file names and CSV
+/// cells.
+pub fn setting_label(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '.' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect()
 }
 
 /// The motions of the sequences.
@@ -400,6 +422,8 @@ pub struct BenchAaReport {
     pub paths: Vec<AaPathView>,
     /// Speed.
     pub timings: Vec<AaTiming>,
+    /// The bench lod settings measured besides the default (`--settings`).
+    pub settings: Vec<crate::tools::bench_lod::LodSetting>,
     /// Timing frame counts.
     pub counts: FrameCounts,
 }
@@ -502,6 +526,21 @@ pub fn run_bench_aa(
         .iter()
         .map(|n| crate::tools::camera_path(&world, &opts.world, Some(n)))
         .collect::<Result<_>>()?;
+    // The default's settings, then each named one (the default named too is measured once).
+    let named: Vec<String> = opts
+        .settings
+        .iter()
+        .filter(|n| n.as_str() != "default")
+        .cloned()
+        .collect();
+    let settings = crate::tools::bench_lod::named_settings(
+        &crate::tools::bench_lod::lod_settings(&world),
+        &named,
+    )?;
+    let mut configs = vec![(String::new(), RendererConfig::for_world(&world))];
+    for s in &settings {
+        configs.push((format!("+{}", setting_label(&s.name)), s.config(&world)));
+    }
     let out_dir = OutDir::create_for(&opts.out, "bench aa")?;
     let ctx = GpuContext::new()?;
     let gpu = ctx.timestamps;
@@ -521,10 +560,15 @@ pub fn run_bench_aa(
         let mut scenes: Vec<(String, Scene)> = opts
             .variants()
             .into_iter()
-            .map(|(name, m, taa)| {
-                let mut config = RendererConfig::for_world(&world);
-                config.aa = m;
-                config.taa = taa;
+            .flat_map(|(name, m, taa)| {
+                configs.iter().map(move |(suffix, config)| {
+                    let mut config = config.clone();
+                    config.aa = m;
+                    config.taa = taa;
+                    (format!("{name}{suffix}"), config)
+                })
+            })
+            .map(|(name, config)| {
                 Ok((
                     name,
                     Scene::new(&ctx, world.clone(), size.0, size.1, config)?,
@@ -728,6 +772,7 @@ pub fn run_bench_aa(
         sequences,
         paths: path_views,
         timings,
+        settings,
         counts,
     };
     write_outputs(opts, &report)?;
@@ -924,6 +969,21 @@ mod tests {
         assert!(opts.validate().is_err());
         assert_eq!(Motion::from_name(" pan"), Some(Motion::Pan));
         assert_eq!(Motion::from_name("jump"), None);
+    }
+
+    #[test]
+    fn a_settings_label_fits_file_names_and_csv_cells() {
+        assert_eq!(
+            setting_label("segments 9/3/3 view x0.67"),
+            "segments-9-3-3-view-x0.67"
+        );
+        assert_eq!(setting_label("no LOD"), "no-LOD");
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz");
+        let world = World::open(&dir).unwrap();
+        for s in crate::tools::bench_lod::lod_settings(&world) {
+            let l = setting_label(&s.name);
+            assert!(!l.contains([',', ':', '/', ' ', '+']), "{l}");
+        }
     }
 
     #[test]

@@ -278,19 +278,32 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
 /// The settings of `all` named in `names` (all of them where `names` is empty), "default" and
 /// "no LOD" always among them; a name that is not a setting is refused, listing them.
 pub fn chosen_settings(all: Vec<LodSetting>, names: &[String]) -> Result<Vec<LodSetting>> {
-    if let Some(unknown) = names.iter().find(|n| !all.iter().any(|s| &s.name == *n)) {
-        let known: Vec<&str> = all.iter().map(|s| s.name.as_str()).collect();
-        bail!(
-            "--settings: no setting {unknown:?}; the settings are: {}",
-            known.join(", ")
-        );
-    }
+    named_settings(&all, names)?;
     Ok(all
         .into_iter()
         .filter(|s| {
             names.is_empty() || s.name == "default" || s.name == "no LOD" || names.contains(&s.name)
         })
         .collect())
+}
+
+/// The settings of `all` named in `names`, in the order named and each once; a name that is
+/// not a setting is refused, listing them.
+pub fn named_settings(all: &[LodSetting], names: &[String]) -> Result<Vec<LodSetting>> {
+    let mut out: Vec<LodSetting> = Vec::new();
+    for name in names {
+        let Some(setting) = all.iter().find(|s| &s.name == name) else {
+            let known: Vec<&str> = all.iter().map(|s| s.name.as_str()).collect();
+            bail!(
+                "--settings: no setting {name:?}; the settings are: {}",
+                known.join(", ")
+            );
+        };
+        if !out.iter().any(|s| &s.name == name) {
+            out.push(setting.clone());
+        }
+    }
+    Ok(out)
 }
 
 /// Result of one setting.
@@ -1186,13 +1199,19 @@ mod tests {
         let picked: Vec<&str> = picked.iter().map(|s| s.name.as_str()).collect();
         assert_eq!(picked, ["default", "width x1.5", "no LOD"]);
         assert_eq!(chosen_settings(all.clone(), &[]).unwrap().len(), 4);
-        let e = chosen_settings(all, &names(&["width x9"]))
+        let e = chosen_settings(all.clone(), &names(&["width x9"]))
             .unwrap_err()
             .to_string();
         assert!(
             e.contains("\"width x9\"") && e.contains("spacing x0.8"),
             "{e}"
         );
+        // Named: in the order named, each once, and nothing else.
+        let named = named_settings(&all, &names(&["no LOD", "spacing x0.8", "no LOD"])).unwrap();
+        let named: Vec<&str> = named.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(named, ["no LOD", "spacing x0.8"]);
+        assert!(named_settings(&all, &[]).unwrap().is_empty());
+        assert!(named_settings(&all, &names(&["spacing x0.8", "nothing"])).is_err());
     }
 
     #[test]
