@@ -1645,3 +1645,48 @@ fn bench_aa_measures_bench_lods_settings_as_methods_of_their_own_and_refuses_unk
     assert_eq!(json["settings"][0]["segments"][0], 9);
     assert_eq!(json["settings"].as_array().unwrap().len(), 1);
 }
+
+#[test]
+fn bench_aa_stopped_part_way_keeps_the_sequences_it_measured() {
+    let tmp = tempfile::tempdir().unwrap();
+    // The dolly's last frame cannot be written (a folder stands in its place): the run fails
+    // there, after the still sequence, and says which file.
+    let dir = tmp.path().join("a");
+    std::fs::create_dir_all(dir.join("64x36_dolly_off.png")).unwrap();
+    let out = verdant(
+        &[
+            "bench",
+            "aa",
+            common::default_world().to_str().unwrap(),
+            "--size",
+            "64x36",
+            "--aa",
+            "off",
+            "--sequences",
+            "still,dolly",
+            "--frames",
+            "2",
+            "--run-up",
+            "0",
+            "--truth",
+            "2",
+            "--truth-reach",
+            "1",
+            "--paths",
+            "",
+            "--out",
+            "a",
+        ],
+        tmp.path(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("64x36_dolly_off.png"), "{stderr}");
+    let seq = std::fs::read_to_string(dir.join("aa_sequences.csv")).unwrap();
+    let rows: Vec<&str> = seq.lines().skip(1).collect();
+    assert_eq!(rows.len(), 1, "{seq}");
+    assert!(rows[0].contains(",off,still,"), "{seq}");
+    let frames = std::fs::read_to_string(dir.join("aa_frames.csv")).unwrap();
+    assert_eq!(frames.lines().count(), 1 + 2, "{frames}");
+    assert!(!dir.join("aa.json").exists());
+}

@@ -24,7 +24,8 @@
 //! front (`aa_WxH.png`), and the last frame of each sequence, each method's and the truth's,
 //! to look at (`WxH_SEQUENCE_METHOD.png`, `WxH_SEQUENCE_truth.png`). With bench lod's settings
 //! named (`--settings`), each method is measured with each of them too, as a method of its own
-//! (`METHOD+SETTING`, [`setting_label`]).
+//! (`METHOD+SETTING`, [`setting_label`]). The tables are written after each sequence and path
+//! as well as at the end ([`write_tables`]): a run stopped part-way keeps what it measured.
 
 use std::path::PathBuf;
 
@@ -662,6 +663,7 @@ pub fn run_bench_aa(
                 }
             }
             frames.extend(seq.into_iter().flatten());
+            write_tables(&opts.out, &frames, &sequences, &path_views)?;
         }
         // The paths: four views spread along each, reached by flight along it; the bounds
         // step through the same frames as the truth.
@@ -724,6 +726,7 @@ pub fn run_bench_aa(
                     }
                 }
             }
+            write_tables(&opts.out, &frames, &sequences, &path_views)?;
             progress(&format!("path {}", path.name), 1, 1);
         }
         drop(bounds);
@@ -780,10 +783,18 @@ pub fn run_bench_aa(
     Ok(report)
 }
 
-fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
+/// Writes the per-frame, per-sequence and per-path tables (`aa_frames.csv`, `aa_sequences.csv`,
+/// `aa_paths.csv`) into `out`: at the end, and after each sequence and path as the run goes, so
+/// that a run stopped part-way keeps what it measured.
+pub fn write_tables(
+    out: &std::path::Path,
+    frames: &[AaFrame],
+    sequences: &[AaSequence],
+    paths: &[AaPathView],
+) -> Result<()> {
     use std::fmt::Write as _;
     let mut csv = String::from("width,height,method,motion,frame,flip,change,truth_change\n");
-    for f in &r.frames {
+    for f in frames {
         let _ = writeln!(
             csv,
             "{},{},{},{},{},{:.5},{:.4},{:.4}",
@@ -797,11 +808,11 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
             f.truth_change
         );
     }
-    write_text(&opts.out.join("aa_frames.csv"), &csv)?;
+    write_text(&out.join("aa_frames.csv"), &csv)?;
     let mut csv = String::from(
         "width,height,method,motion,flip_mean,flicker,truth_flicker,flicker_ratio,recovery_frames\n",
     );
-    for s in &r.sequences {
+    for s in sequences {
         let _ = writeln!(
             csv,
             "{},{},{},{},{:.5},{:.4},{:.4},{:.4},{}",
@@ -816,16 +827,22 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
             s.recovery_frames.map_or(String::new(), |n| n.to_string())
         );
     }
-    write_text(&opts.out.join("aa_sequences.csv"), &csv)?;
+    write_text(&out.join("aa_sequences.csv"), &csv)?;
     let mut csv = String::from("width,height,method,bound,path,t_s,flip\n");
-    for p in &r.paths {
+    for p in paths {
         let _ = writeln!(
             csv,
             "{},{},{},{},{},{:.3},{:.5}",
             p.size.0, p.size.1, p.method, p.bound, p.path, p.t_s, p.flip
         );
     }
-    write_text(&opts.out.join("aa_paths.csv"), &csv)?;
+    write_text(&out.join("aa_paths.csv"), &csv)?;
+    Ok(())
+}
+
+fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
+    use std::fmt::Write as _;
+    write_tables(&opts.out, &r.frames, &r.sequences, &r.paths)?;
     let mut csv =
         String::from("width,height,method,frame_ms,q1_ms,q3_ms,spread,noisy,frames,aa_ms,gpu\n");
     for t in &r.timings {
