@@ -1493,37 +1493,41 @@ fn fly_at_a_size_beyond_the_adapters_buffers_names_the_limit() {
     }
 }
 
+/// `bench aa` on the default world at its smallest: 64x36, two frames a sequence with no
+/// run-up, the truth 2x2 out to one view distance, no paths, one timed frame; then `extra`.
+fn tiny_bench_aa(dir: &Path, extra: &[&str]) -> Output {
+    let world = common::default_world();
+    let mut args = vec![
+        "bench",
+        "aa",
+        world.to_str().unwrap(),
+        "--size",
+        "64x36",
+        "--frames",
+        "2",
+        "--run-up",
+        "0",
+        "--truth",
+        "2",
+        "--truth-reach",
+        "1",
+        "--paths",
+        "",
+        "--warmup-frames",
+        "0",
+        "--timed-frames",
+        "1",
+        "--rounds",
+        "1",
+    ];
+    args.extend_from_slice(extra);
+    verdant(&args, dir)
+}
+
 #[test]
 fn bench_aa_measures_every_method_against_the_truth_in_every_sequence() {
     let tmp = tempfile::tempdir().unwrap();
-    let out = verdant(
-        &[
-            "bench",
-            "aa",
-            common::default_world().to_str().unwrap(),
-            "--size",
-            "64x36",
-            "--frames",
-            "2",
-            "--run-up",
-            "0",
-            "--truth",
-            "2",
-            "--truth-reach",
-            "1",
-            "--paths",
-            "",
-            "--warmup-frames",
-            "0",
-            "--timed-frames",
-            "1",
-            "--rounds",
-            "1",
-            "--out",
-            "a",
-        ],
-        tmp.path(),
-    );
+    let out = tiny_bench_aa(tmp.path(), &["--out", "a"]);
     assert!(
         out.status.success(),
         "bench aa failed: {}",
@@ -1562,49 +1566,21 @@ fn bench_aa_measures_every_method_against_the_truth_in_every_sequence() {
 #[test]
 fn bench_aa_measures_bench_lods_settings_as_methods_of_their_own_and_refuses_unknown_ones() {
     let tmp = tempfile::tempdir().unwrap();
-    let world = common::default_world();
-    let args = |settings: &str, out: &str| -> Vec<String> {
-        [
-            "bench",
-            "aa",
-            world.to_str().unwrap(),
-            "--size",
-            "64x36",
+    let run = |settings: &str, out: &str| {
+        let extra = [
             "--aa",
             "off",
             "--sequences",
             "still",
-            "--frames",
-            "2",
-            "--run-up",
-            "0",
-            "--truth",
-            "2",
-            "--truth-reach",
-            "1",
-            "--paths",
-            "",
-            "--warmup-frames",
-            "0",
-            "--timed-frames",
-            "1",
-            "--rounds",
-            "1",
             "--settings",
             settings,
             "--out",
             out,
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect()
+        ];
+        tiny_bench_aa(tmp.path(), &extra)
     };
     // An unknown name: refused before anything is written, naming the settings.
-    let a = args("segments 9/3/3 view x0.67,nowhere", "bad");
-    let out = verdant(
-        &a.iter().map(String::as_str).collect::<Vec<_>>(),
-        tmp.path(),
-    );
+    let out = run("segments 9/3/3 view x0.67,nowhere", "bad");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(
@@ -1613,11 +1589,7 @@ fn bench_aa_measures_bench_lods_settings_as_methods_of_their_own_and_refuses_unk
     );
     assert!(!tmp.path().join("bad").exists());
     // The default is measured once even when named.
-    let a = args("default,segments 9/3/3 view x0.67", "a");
-    let out = verdant(
-        &a.iter().map(String::as_str).collect::<Vec<_>>(),
-        tmp.path(),
-    );
+    let out = run("default,segments 9/3/3 view x0.67", "a");
     assert!(
         out.status.success(),
         "bench aa failed: {}",
@@ -1653,32 +1625,8 @@ fn bench_aa_stopped_part_way_keeps_the_sequences_it_measured() {
     // there, after the still sequence, and says which file.
     let dir = tmp.path().join("a");
     std::fs::create_dir_all(dir.join("64x36_dolly_off.png")).unwrap();
-    let out = verdant(
-        &[
-            "bench",
-            "aa",
-            common::default_world().to_str().unwrap(),
-            "--size",
-            "64x36",
-            "--aa",
-            "off",
-            "--sequences",
-            "still,dolly",
-            "--frames",
-            "2",
-            "--run-up",
-            "0",
-            "--truth",
-            "2",
-            "--truth-reach",
-            "1",
-            "--paths",
-            "",
-            "--out",
-            "a",
-        ],
-        tmp.path(),
-    );
+    let extra = ["--aa", "off", "--sequences", "still,dolly", "--out", "a"];
+    let out = tiny_bench_aa(tmp.path(), &extra);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("64x36_dolly_off.png"), "{stderr}");
