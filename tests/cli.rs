@@ -1580,16 +1580,16 @@ fn bench_aa_measures_bench_lods_settings_as_methods_of_their_own_and_refuses_unk
         tiny_bench_aa(tmp.path(), &extra)
     };
     // An unknown name: refused before anything is written, naming the settings.
-    let out = run("segments 9/3/3 view x0.67,nowhere", "bad");
+    let out = run("segments 7/3/3 view x1.5,nowhere", "bad");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(
-        stderr.contains("\"nowhere\"") && stderr.contains("segments 9/3/3 view x0.67"),
+        stderr.contains("\"nowhere\"") && stderr.contains("segments 7/3/3 view x1.5"),
         "{stderr}"
     );
     assert!(!tmp.path().join("bad").exists());
     // The default is measured once even when named.
-    let out = run("default,segments 9/3/3 view x0.67", "a");
+    let out = run("default,segments 7/3/3 view x1.5", "a");
     assert!(
         out.status.success(),
         "bench aa failed: {}",
@@ -1602,19 +1602,19 @@ fn bench_aa_measures_bench_lods_settings_as_methods_of_their_own_and_refuses_unk
         .skip(1)
         .map(|l| l.split(',').nth(2).unwrap())
         .collect();
-    assert_eq!(methods, ["off", "off+segments-9-3-3-view-x0.67"], "{seq}");
+    assert_eq!(methods, ["off", "off+segments-7-3-3-view-x1.5"], "{seq}");
     let timing = std::fs::read_to_string(dir.join("aa_timing.csv")).unwrap();
     assert_eq!(timing.lines().count(), 3, "{timing}");
     // The setting's frame is drawn with its own settings: not the default's image.
     let img = |m: &str| image::open(dir.join(format!("64x36_still_{m}.png"))).unwrap();
     assert_ne!(
         img("off").to_rgb8().into_raw(),
-        img("off+segments-9-3-3-view-x0.67").to_rgb8().into_raw()
+        img("off+segments-7-3-3-view-x1.5").to_rgb8().into_raw()
     );
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("aa.json")).unwrap()).unwrap();
-    assert_eq!(json["settings"][0]["name"], "segments 9/3/3 view x0.67");
-    assert_eq!(json["settings"][0]["segments"][0], 9);
+    assert_eq!(json["settings"][0]["name"], "segments 7/3/3 view x1.5");
+    assert_eq!(json["settings"][0]["segments"][0], 7);
     assert_eq!(json["settings"].as_array().unwrap().len(), 1);
 }
 

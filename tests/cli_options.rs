@@ -97,7 +97,7 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
     ),
     (
         &["bench", "aa", "--truth-reach", "0.5"],
-        &["--truth-reach", "1..=6"],
+        &["--truth-reach", "1..=9"],
     ),
     (&["bench", "aa", "--frames", "1"], &["--frames", "2..=600"]),
     (

@@ -168,8 +168,10 @@ fn grassy_meadow_matches_reference_image() {
         "too few high-LOD blades: {:?}",
         stats.grass
     );
+    // The low ring is the band from the high ring's 50 m to the view distance's 67 m: in this
+    // view a strip of blades at twice the spacing before the far field.
     assert!(
-        stats.grass.drawn[1] > 1000,
+        stats.grass.drawn[1] > 100,
         "too few low-LOD blades: {:?}",
         stats.grass
     );

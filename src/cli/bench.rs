@@ -145,7 +145,7 @@ pub(crate) enum BenchCommand {
         sequences: Vec<verdant::tools::bench_aa::Motion>,
         /// bench lod's settings, by name, comma-separated: each method is measured with each
         /// of them too, reported as METHOD+SETTING (its spaces and slashes as dashes:
-        /// taa+segments-9-3-3-view-x0.67); the default's settings are always measured.
+        /// taa+segments-7-3-3-view-x1.5); the default's settings are always measured.
         #[arg(long, value_delimiter = ',')]
         settings: Vec<String>,
         #[command(flatten)]
@@ -263,7 +263,7 @@ pub(crate) struct TruthArgs {
     /// Sub-samples a pixel side of the truth (supersampled in linear light), 1..=8.
     #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
     pub(crate) truth: u32,
-    /// How far the truth draws blades, in default view distances, 1..=6 (100 m each in the
+    /// How far the truth draws blades, in default view distances, 1..=9 (67 m each in the
     /// default world; less is quicker, and the far band is then measured out to this many view
     /// distances only).
     #[arg(long, value_name = "R", default_value_t = verdant::tools::truth::REACH_FACTOR, value_parser = float_in(1.0, verdant::tools::truth::REACH_FACTOR))]

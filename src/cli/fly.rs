@@ -121,7 +121,7 @@ pub(crate) struct FlyArgs {
     #[command(flatten)]
     pub(crate) taa: TaaArgs,
     /// Render the frames as the truth instead: supersampled K x K (1..=8) in linear light, no
-    /// LOD, 16 blade segments everywhere, blades out to 6 times the view distance (600 m in the
+    /// LOD, 16 blade segments everywhere, blades out to 9 times the view distance (600 m in the
     /// default world).
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=8))]
     pub(crate) truth: Option<u32>,

@@ -120,11 +120,10 @@ impl Default for GrassConfig {
             spacing_m: 0.25,
             width_scale: 1.0,
             infill_m: DEFAULT_INFILL_M,
-            // Picked from bench lod's front with the settings' images supersampled (their
-            // content against the truth, README): 7 near segments err 0.0578 where 5 erred
-            // 0.0626, for 0.24 ms at 960x540 (NVIDIA H200), the front's knee; 7 / 7 / 3 gains
-            // 0.0013 more for 0.59 ms more.
-            segments: [7, 3, 3],
+            // Picked from bench lod's front against the truth: 7 near segments erred 0.0578
+            // where 5 erred 0.0626, for 0.24 ms at 960x540 (NVIDIA H200), the front's knee; 9
+            // came with the shorter view distance (DEFAULT_VIEW_TILES), which pays for them.
+            segments: [9, 3, 3],
             near_m: 12.0,
             lod_widen: DEFAULT_LOD_WIDEN,
             capacity: None,

@@ -198,7 +198,7 @@ impl BenchAaOptions {
     }
 }
 
-/// A bench lod setting's name as it is written after a method's (`taa+segments-9-3-3-view-x0.67`):
+/// A bench lod setting's name as it is written after a method's (`taa+segments-7-3-3-view-x1.5`):
 /// every character but letters, digits and dots a dash, so that it fits file names and CSV
 /// cells.
 pub fn setting_label(name: &str) -> String {
@@ -991,8 +991,8 @@ mod tests {
     #[test]
     fn a_settings_label_fits_file_names_and_csv_cells() {
         assert_eq!(
-            setting_label("segments 9/3/3 view x0.67"),
-            "segments-9-3-3-view-x0.67"
+            setting_label("segments 7/3/3 view x1.5"),
+            "segments-7-3-3-view-x1.5"
         );
         assert_eq!(setting_label("no LOD"), "no-LOD");
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz");

@@ -221,16 +221,17 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         new("near ring x2", h * 2.0, v, s, seg),
         new("view x0.67", h, v * 2.0 / 3.0, s, seg),
         new("view x1.33", h, v * 4.0 / 3.0, s, seg),
-        // The view distance before it was shortened to two tiles (150 m in the default world).
+        // The view distance before it was shortened to four thirds of a tile (100 m in the
+        // default world).
         new("view x1.5", h, v * 1.5, s, seg),
         new("spacing x1.4", h, v, s * 1.4, seg),
         new("spacing x0.8", h, v, s * 0.8, seg),
         new("segments 7/3/3", h, v, s, [7, 3, 3]),
         new("segments 7/7/3", h, v, s, [7, 7, 3]),
         new("segments 9/3/3", h, v, s, [9, 3, 3]),
-        // Both of the front's cheaper gains at once: the blades ending at two thirds of the
-        // view distance pay for two more near segments.
-        new("segments 9/3/3 view x0.67", h, v * 2.0 / 3.0, s, [9, 3, 3]),
+        // The default before its view distance was shortened to pay for two more near segments
+        // (7 near segments, 100 m in the default world).
+        new("segments 7/3/3 view x1.5", h, v * 1.5, s, [7, 3, 3]),
         new("segments 11/3/3", h, v, s, [11, 3, 3]),
         new("segments 5/3/2", h, v, s, [5, 3, 2]),
         new("segments 3/2/1", h, v, s, [3, 2, 1]),
@@ -1220,7 +1221,7 @@ mod tests {
         let world = World::open(&dir).unwrap();
         let all = lod_settings(&world);
         assert_eq!(all[0].name, "default");
-        // The default's own segments (7/3/3) are not measured a second time under their name.
+        // The default's own segments (9/3/3) are not measured a second time under their name.
         let seg = RendererConfig::for_world(&world).grass.segments;
         let twin = format!("segments {}/{}/{}", seg[0], seg[1], seg[2]);
         assert!(!all.iter().any(|s| s.name == twin), "{twin} measured twice");

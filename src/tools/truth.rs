@@ -49,10 +49,10 @@ pub const DEFAULT_K: u32 = 4;
 /// The most sub-samples a pixel side (`--truth`): 64 renders a frame.
 pub const MAX_K: u32 = 8;
 /// How far the truth draws blades, in default view distances: 600 m in the default world, whose
-/// view distance is 100 m ([`crate::lod::DEFAULT_VIEW_TILES`] grass tiles of 50 m). The truth was
+/// view distance is 67 m ([`crate::lod::DEFAULT_VIEW_TILES`] grass tiles of 50 m). The truth was
 /// defined as four view distances when the view distance was three tiles; the factor grew as the
-/// view distance shrank, so that the truth stayed the same scene.
-pub const REACH_FACTOR: f64 = 6.0;
+/// view distance shrank (6 at two tiles), so that the truth stayed the same scene.
+pub const REACH_FACTOR: f64 = 9.0;
 /// Blade segments of the truth everywhere: a blade's polyline then lies within a millimetre of
 /// its curve (a tenth of the default's near segments' error), under a pixel from a metre away
 /// at 1920x1080, at a quarter of the vertices of the 64 the grass draw allows.
@@ -504,7 +504,7 @@ mod tests {
         )
         .unwrap();
         let n = grass_tiles_bound(&world);
-        // 50 m tiles, 6 x 100 m + 5 m of hysteresis: 13 tiles each side of the camera's.
+        // 50 m tiles, 9 x 67 m + 5 m of hysteresis: 13 tiles each side of the camera's.
         assert_eq!(n, 27 * 27);
         // A high-LOD tile near the camera can get a second job: at most 4 of them.
         assert!(n + 4 <= crate::grass::renderer::MAX_JOBS, "{n}");
@@ -514,19 +514,21 @@ mod tests {
     #[test]
     fn the_truth_reaches_600_m_in_the_default_world_whatever_the_view_distance() {
         // The truth is the scene every figure is measured against: its blades reached four view
-        // distances of 150 m when it was defined, and reach the same 600 m with the view distance
-        // at 100 m.
+        // distances of 150 m when it was defined, six of 100 m later, and reach the same 600 m
+        // with the view distance at 67 m.
         let world = World::open(
             &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz"),
         )
         .unwrap();
         let base = RendererConfig::for_world(&world);
-        assert_eq!(base.grass_rings.unwrap().low_radius_m, 100.0);
+        let view = base.grass_rings.unwrap().low_radius_m;
+        assert!((view - 200.0 / 3.0).abs() < 1e-9, "{view}");
         let truth = truth_config(&world, &base, 512);
-        assert_eq!(truth.grass_rings.unwrap().low_radius_m, 600.0);
+        let reach = truth.grass_rings.unwrap().low_radius_m;
+        assert!((reach - 600.0).abs() < 1e-9, "{reach}");
         // A quicker truth, out to one view distance: the default's.
         let near = truth_config_reaching(&world, &base, 512, 1.0);
-        assert_eq!(near.grass_rings.unwrap().low_radius_m, 100.0);
+        assert_eq!(near.grass_rings.unwrap().low_radius_m, view);
     }
 
     #[test]
