@@ -5,7 +5,7 @@
 //! out/far_field_fit.csv 320 180, every grass type): for each grass type of the default world, on a flat field of
 //! that type at full density lit by the world's sky and moved by its wind (no fog), from
 //! cameras 1.7 to 80 m up looking over the ground 1.8 view distances away, renders the 4x4
-//! truth (blades out to four view distances), the default frame supersampled 4x4 and the
+//! truth (blades out to nine view distances, 600 m), the default frame supersampled 4x4 and the
 //! same without the far field (the bare ground it covers). Each row is one band of distance
 //! beyond the view distance (where the default shows the far field only): the pixels' count,
 //! mean distance and sine of the view's elevation, the three renders' mean linear colours, and
@@ -145,7 +145,11 @@ fn main() -> Result<()> {
                         }
                         let ground = camera.position + d * (-camera.position.z / d.z);
                         let dist = (ground - camera.position).length();
-                        let faded_at = f64::from(far_field::far_distance(dist as f32, z as f32));
+                        let faded_at = f64::from(far_field::far_distance(
+                            dist as f32,
+                            z as f32,
+                            far_field::ELEVATION_DISTANCE,
+                        ));
                         if !(lo..hi).contains(&faded_at) {
                             continue;
                         }

@@ -1,5 +1,5 @@
 // Grass blades from the instance pool: one indirect draw per generation job, a triangle strip
-// per blade. SEGMENTS is set per pipeline: by default 7 (15 vertices) for the blades within the
+// per blade. SEGMENTS is set per pipeline: by default 9 (19 vertices) for the blades within the
 // near radius, 3 (7 vertices) for the rest of the high ring and for the low ring. The shape
 // is a cubic Bezier bent by the wind and scaled to keep its length (CPU mirror of the shape:
 // src/grass/blade.rs). The blade record, the feature bits and the colour output are
@@ -18,7 +18,7 @@
 #include "shared/features.wgsl"
 #include "shared/output.wgsl"
 
-override SEGMENTS: u32 = 7u;
+override SEGMENTS: u32 = 9u;
 // Multisampled targets with alpha to coverage: a blade narrower than a pixel is drawn a pixel
 // wide, its true width becoming the share of the pixel's samples it covers (its alpha), so
 // that it fades with distance instead of popping in and out of pixels.

@@ -35,7 +35,9 @@ struct Params {
     // half-spacing points (w <= 0: no infill)
     infill: vec4<f32>,
     // x: horizontal radius of the near blades (job LOD 2, drawn with the most segments); y: the
-    // low grid's widening (its blades this many times as wide in the low ring)
+    // low grid's widening (its blades this many times as wide in the low ring); z: metres toward
+    // the view distance's fade per metre the camera stands above a blade (far_distance in
+    // src/terrain/far_field.rs)
     near: vec4<f32>,
     // x: Hi-Z mips, y: slot capacity, z: grass types, w: blade segments, 8 bits each: near
     // blades, the rest of the high ring, the low ring
@@ -85,9 +87,6 @@ const EMITTED: u32 = 5u;
 // Metres (in the difference of the distances to the two nearest clump points) over which the
 // grass types of two clumps mix.
 const CLUMP_BLEND_M: f32 = 0.4;
-// Metres of distance toward the view distance's fade per metre the camera stands above a blade
-// (as ELEVATION_DISTANCE in src/terrain/far_field.rs).
-const ELEVATION_DISTANCE: f32 = 1.0;
 const OVERFLOW: u32 = 6u;
 const DRAWN: u32 = 7u;
 
@@ -306,8 +305,8 @@ fn plant(job: TileJob, local: vec2<f32>, h0: u32, spacing: f32, band: vec2<f32>,
         fade = clamp((band.y - dist) / (band.y - band.x), 0.0, 1.0);
     }
     // Seen from above, far blades are specks the far field shows better: each metre the
-    // camera stands above a blade counts as ELEVATION_DISTANCE more metres toward the fade.
-    let far_dist = dist + ELEVATION_DISTANCE * max(-pos.z, 0.0);
+    // camera stands above a blade counts as params.near.z more metres toward the fade.
+    let far_dist = dist + params.near.z * max(-pos.z, 0.0);
     let far = clamp((params.ranges.w - far_dist) / (params.ranges.w - params.ranges.z), 0.0, 1.0);
     if fade <= 0.0 || rand01(hash_u32(h0 ^ 11u)) >= far {
         count(DISTANCE);

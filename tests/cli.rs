@@ -657,7 +657,7 @@ fn bench_lod_writes_its_tables_and_charts() {
         assert!(0.0 < median && median <= p99 && p99 <= max, "{r:?}");
         assert_eq!(r[col("flight_frames")], "4", "{r:?}");
     }
-    // The far band: real blades out to four times the view distance against the default with
+    // The far band: real blades out to `--truth-reach` (here 1.5) view distances against the default with
     // the far field on and off, over the pixels between the two distances.
     let band = std::fs::read_to_string(dir.join("far_band.csv")).unwrap();
     let mut lines = band.lines();

@@ -166,6 +166,7 @@ fn the_far_field_shows_what_real_blades_would_and_matches_its_cpu_mirror() {
         let faded_at = f64::from(far_field::far_distance(
             dist,
             (camera.position.z - p.z) as f32,
+            settings.elevation_fade,
         ));
         let shown =
             far_field::under_blades_fade_in(faded_at as f32, [fade_start as f32, view as f32]);
@@ -344,6 +345,7 @@ fn the_far_field_darkens_under_a_forest_as_its_cpu_mirror_says() {
         let faded_at = f64::from(far_field::far_distance(
             dist,
             (camera.position.z - p.z) as f32,
+            settings.elevation_fade,
         ));
         if faded_at < view + 25.0 {
             continue;

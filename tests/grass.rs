@@ -105,11 +105,19 @@ impl Rig {
 
     /// A rig whose low ring's blades are `lod_widen` times as wide.
     fn with_lod_widen(capacity: Option<u32>, lod_widen: f32) -> Self {
+        Self::with_grass(capacity, |g| g.lod_widen = lod_widen)
+    }
+
+    /// A rig with the default grass settings changed by `change`.
+    fn with_grass(
+        capacity: Option<u32>,
+        change: impl FnOnce(&mut verdant::renderer::GrassConfig),
+    ) -> Self {
         let ctx = common::gpu();
         let world = World::open(&common::default_world()).unwrap();
         let manifest = world.manifest.clone();
         let mut config = RendererConfig::for_world(&world);
-        config.grass.lod_widen = lod_widen;
+        change(&mut config.grass);
         let settings = config.grass_settings(&world).unwrap();
         let atlas = TileAtlas::new(&ctx.device, manifest.pyramid.samples_per_side(), 8);
         let target = |format, usage| {
@@ -484,6 +492,47 @@ fn gpu_generation_matches_the_cpu_mirror_on_flat_steep_empty_and_densest_tiles()
     ] {
         assert!(s[c] > 0, "no blade was culled by {name}: {s:?}");
     }
+}
+
+/// The blades' fade at the view distance counts the camera's height above them
+/// (`GrassConfig::elevation_fade` metres a metre), on the GPU as its mirror says: seen from 12 m
+/// above a flat tile, the more each metre counts, the nearer the blades end.
+#[test]
+fn the_far_fade_by_the_cameras_height_matches_the_cpu_mirror() {
+    let mut drawn = Vec::new();
+    for k in [0.0f32, 1.0, 3.0] {
+        let mut rig = Rig::with_grass(None, |g| g.elevation_fade = k);
+        assert_eq!(rig.grass.params().near[2], k);
+        let level = rig.manifest.pyramid.max_level();
+        let cell = rig.manifest.pyramid.cell_size_m(level) as f32;
+        let flat = synthetic_tile(&rig.manifest, TileId::new(level, 3, 5), "flat");
+        rig.atlas.upload(&rig.ctx.queue, 0, &flat).unwrap();
+        // A tile from 5 m ahead of the camera to past the view distance.
+        let mut tile = job(0, 0, 0, cell);
+        tile.origin = [-25.0, 5.0];
+        let camera = Camera::new(DVec3::new(0.0, 0.0, 112.0), 90.0, -12.0);
+        let (stats, hiz) = rig.run(&camera, &[tile]);
+        let cpu = cpu_blades(&rig, &tile, &flat, &hiz);
+        let (_, gpu) = rig.grass.read_slot(&rig.ctx.device, &rig.ctx.queue, 0, 0);
+        assert_blades_match(&gpu, &cpu.blades, &format!("elevation fade {k}"));
+        assert_eq!(stats.to_generate_stats(), cpu.stats, "elevation fade {k}");
+        // Every blade drawn stands before the view distance by its fade's distance.
+        let view = rig.grass.params().ranges[3];
+        for b in &cpu.blades {
+            let p = glam::Vec3::from_array(b.pos);
+            let faded_at = verdant::terrain::far_field::far_distance(p.length(), -p.z, k);
+            assert!(
+                faded_at < view,
+                "elevation fade {k}: a blade at {faded_at} m"
+            );
+        }
+        drawn.push(cpu.blades.len());
+    }
+    eprintln!("blades drawn with the term at 0, 1 and 3: {drawn:?}");
+    assert!(
+        drawn[0] > drawn[1] && drawn[1] > drawn[2] && drawn[2] > 0,
+        "blades drawn with the term at 0, 1 and 3: {drawn:?}"
+    );
 }
 
 #[test]

@@ -31,8 +31,10 @@ struct Frame {
     // x, y: the camera's clump cell (floor of its xy over the clump cell), as i32 bits; z: the
     // grass seed; w: the clump cell (m) as f32 bits.
     clump: vec4<u32>,
-    // x, y: the camera's xy minus its clump cell's south-west corner (m); z: the far field's
-    // blade position t (0 root .. 1 tip) whose colour it shows; w: unused.
+    // x, y: the camera's xy minus its clump cell's south-west corner (m); z: 1 where the far
+    // field lies under the blades too, 0 where only past their fade; w: metres toward the
+    // grass's fade per metre the camera stands above (far_distance in
+    // src/terrain/far_field.rs).
     clump_offset: vec4<f32>,
     // Per grass type: rgb the colour of blade base and tip, w of base: the growth blend.
     base_colors: array<vec4<f32>, 16>,
@@ -354,10 +356,6 @@ fn tree_canopy_shade(tau: f32, d: f32) -> f32 {
     return 1.0 - exp(-tau * d);
 }
 
-// Metres of distance toward the grass's view-distance fade per metre the camera stands above
-// (ELEVATION_DISTANCE in src/terrain/far_field.rs).
-const ELEVATION_DISTANCE: f32 = 1.0;
-
 struct Maps {
     ground: vec3<f32>,
     // The grass's colour over the part of the blades seen, and that times the position along
@@ -467,10 +465,10 @@ fn shade_terrain(rel: vec3<f32>, tex: vec2<f32>, layer: u32, texel_m: f32, level
         growth_blend /= cover;
     }
     // A renderer that keeps the ground bare between its blades shows the far field only
-    // where they fade out (by the fade's distance: the distance plus ELEVATION_DISTANCE
-    // times the height below the camera, as grass_generate.wgsl fades them).
+    // where they fade out (by the fade's distance: the distance plus clump_offset.w times
+    // the height below the camera, as grass_generate.wgsl fades them).
     if frame.clump_offset.z < 0.5 {
-        let far_dist = dist + ELEVATION_DISTANCE * max(-rel.z, 0.0);
+        let far_dist = dist + frame.clump_offset.w * max(-rel.z, 0.0);
         cover *= clamp((far_dist - frame.grass_view.z) / max(frame.grass_view.w - frame.grass_view.z, 1e-3), 0.0, 1.0);
     }
 

@@ -68,6 +68,11 @@ pub(crate) struct FlyArgs {
     /// widen to it as the others fade out), 1..=4 (default: the renderer's).
     #[arg(long)]
     pub(crate) grass_lod_widen: Option<f32>,
+    /// Metres toward the blades' fade at the view distance per metre the camera stands above a
+    /// blade, 0..=8 (default: the renderer's, 1): from 1 / (1 + K) of the view distance up no
+    /// blade is drawn, the far field showing the grass below; 0 fades them by distance alone.
+    #[arg(long, value_name = "K")]
+    pub(crate) grass_elevation_fade: Option<f32>,
     /// Plants' level-of-detail switches NEAR,FAR, metres: the full mesh out to NEAR, the
     /// reduced mesh out to FAR, crossed cards beyond (default: the renderer's, 25,150).
     #[arg(long, value_delimiter = ',')]
@@ -147,6 +152,7 @@ impl FlyArgs {
             grass_segments,
             grass_near_m,
             grass_lod_widen,
+            grass_elevation_fade,
             plant_lod_m,
             plant_card_reach,
             plant_thin_m,
@@ -187,6 +193,9 @@ impl FlyArgs {
         }
         if let Some(k) = grass_lod_widen {
             grass.lod_widen = k;
+        }
+        if let Some(k) = grass_elevation_fade {
+            grass.elevation_fade = k;
         }
         let plant_lod_m = near_far("--plant-lod-m", plant_lod_m)?
             .unwrap_or(verdant::plants::PlantSettings::default().lod_m);

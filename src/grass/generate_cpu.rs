@@ -62,7 +62,8 @@ pub struct GenerateParams {
     /// points. No infill where w <= 0.
     pub infill: [f32; 4],
     /// x: horizontal radius of the near blades (see [`TileJob::lod`]); y: the low grid's
-    /// widening (see [`widening`]); z, w: unused.
+    /// widening (see [`widening`]); z: metres toward the fade at the view distance per metre the
+    /// camera stands above a blade ([`crate::terrain::far_field::far_distance`]); w: unused.
     pub near: [f32; 4],
     /// x: Hi-Z mip count, y: slot capacity (blades), z: grass type count, w: blade segments,
     /// high LOD in the low 16 bits, low LOD in the high 16.
@@ -442,7 +443,8 @@ impl PlantContext<'_> {
             fade = ((band[1] - dist) / (band[1] - band[0])).clamp(0.0, 1.0);
         }
         // Seen from above, far blades are specks the far field shows better.
-        let far_dist = crate::terrain::far_field::far_distance(dist, (-pos.z).max(0.0));
+        let far_dist =
+            crate::terrain::far_field::far_distance(dist, (-pos.z).max(0.0), params.near[2]);
         let far = ((view_dist - far_dist) / (view_dist - dither_start)).clamp(0.0, 1.0);
         if fade <= 0.0 || rand01(hash_u32(h0 ^ 11)) >= far {
             stats[counter::DISTANCE] += 1;

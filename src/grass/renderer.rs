@@ -76,6 +76,9 @@ pub struct GrassSettings {
     /// band in which the blades the low grid drops fade out, the ones it keeps widen from their
     /// own width to this, so that a quarter of the blades keeps the ground's cover.
     pub lod_widen: f32,
+    /// Metres toward the fade at the view distance per metre the camera stands above a blade
+    /// ([`crate::terrain::far_field::far_distance`]).
+    pub elevation_fade: f32,
     /// Whether the far field lies under the blades (the gaps between near blades read as
     /// grass), or only where they fade out before the view distance (the ground between them
     /// bare, as a field of real blades has it: the truth's setting).
@@ -402,7 +405,12 @@ fn generate_params(
             let (q, h) = (band(quarter), band(half));
             [q[0], q[1], h[0], h[1]]
         },
-        near: [settings.near_m, settings.lod_widen, 0.0, 0.0],
+        near: [
+            settings.near_m,
+            settings.lod_widen,
+            settings.elevation_fade,
+            0.0,
+        ],
         limits: [
             hiz.mips(),
             capacity,

@@ -79,6 +79,11 @@ pub struct GrassConfig {
     /// ([`LOD_WIDEN_RANGE`]; see [`GrassSettings::lod_widen`]): a quarter of the blades keeping
     /// the ground's cover. 1 ([`DEFAULT_LOD_WIDEN`]) draws them at their own width.
     pub lod_widen: f32,
+    /// Metres toward the blades' fade at the view distance per metre the camera stands above a
+    /// blade ([`ELEVATION_FADE_RANGE`]; [`crate::terrain::far_field::ELEVATION_DISTANCE`] by
+    /// default): from 1 / (1 + this) of the view distance up no blade is drawn, the far field
+    /// showing the grass below; 0 fades them by their distance alone.
+    pub elevation_fade: f32,
     /// Blades a slot of the grass pool holds (at least 1); `None`: enough for the world's
     /// densest grass tile (found by reading its finest stored tiles).
     pub capacity: Option<u32>,
@@ -103,6 +108,8 @@ pub const LOD_WIDEN_RANGE: std::ops::RangeInclusive<f32> = 1.0..=4.0;
 /// comes nearer the truth's cover, but its blades then meet the far field at the view distance
 /// with a colour step the eye sees (the far field was fitted to the unwidened blades).
 pub const DEFAULT_LOD_WIDEN: f32 = 1.0;
+/// Metres toward the blades' fade per metre the camera stands above them.
+pub const ELEVATION_FADE_RANGE: std::ops::RangeInclusive<f32> = 0.0..=8.0;
 /// Blade width scale.
 pub const WIDTH_SCALE_RANGE: std::ops::RangeInclusive<f32> = 0.05..=20.0;
 /// Each infill radius, metres.
@@ -126,6 +133,7 @@ impl Default for GrassConfig {
             segments: [9, 3, 3],
             near_m: 12.0,
             lod_widen: DEFAULT_LOD_WIDEN,
+            elevation_fade: crate::terrain::far_field::ELEVATION_DISTANCE,
             capacity: None,
             far_field_under_blades: true,
         }
@@ -391,6 +399,7 @@ impl RendererConfig {
             segments: g.segments,
             near_m: g.near_m,
             lod_widen: g.lod_widen,
+            elevation_fade: g.elevation_fade,
             far_field_under_blades: g.far_field_under_blades,
         })
     }
@@ -439,6 +448,12 @@ impl GrassConfig {
         }
         check("grass.near_m", self.near_m, &NEAR_RANGE_M, " m")?;
         check("grass.lod_widen", self.lod_widen, &LOD_WIDEN_RANGE, "")?;
+        check(
+            "grass.elevation_fade",
+            self.elevation_fade,
+            &ELEVATION_FADE_RANGE,
+            " m a metre",
+        )?;
         if let Some(c) = self.capacity {
             check("grass.capacity", c, &(1..=u32::MAX), " blades")?;
         }

@@ -93,17 +93,18 @@ pub fn visible_albedo(base: Vec3, tip: Vec3, depth: f32) -> [Vec3; 2] {
 }
 
 /// Metres of distance toward the grass's view-distance fade per metre the camera stands above
-/// a blade: seen from above, far blades are sub-pixel specks that the far field shows better,
-/// so from half the view distance up (33 m by default) none are drawn. It was 3 (none from a
-/// quarter of it up) until `bench aa` along the paths found 1 nearer the truth from the
-/// helicopter's height and as near elsewhere (README, "The far fade's elevation term").
+/// a blade, by default (`GrassConfig::elevation_fade`): seen from above, far blades are
+/// sub-pixel specks that the far field shows better, so from half the view distance up (33 m
+/// by default) none are drawn. It was 3 (none from a quarter of it up) until `bench aa` along
+/// the paths found 1 nearer the truth from the helicopter's height and as near elsewhere
+/// (README, "The far fade's elevation term").
 pub const ELEVATION_DISTANCE: f32 = 1.0;
 
 /// The distance that the grass's fade at the view distance goes by, for a point `dist`
-/// metres from the camera and `below_m` metres below it: `dist` plus [`ELEVATION_DISTANCE`]
-/// times `below_m`.
-pub fn far_distance(dist: f32, below_m: f32) -> f32 {
-    dist + ELEVATION_DISTANCE * below_m.max(0.0)
+/// metres from the camera and `below_m` metres below it: `dist` plus `elevation` (metres per
+/// metre, [`ELEVATION_DISTANCE`] by default) times `below_m`.
+pub fn far_distance(dist: f32, below_m: f32, elevation: f32) -> f32 {
+    dist + elevation * below_m.max(0.0)
 }
 
 /// How much of the clump tint shows at `dist` metres from the camera, for clump cells of
@@ -290,10 +291,15 @@ mod tests {
 
     #[test]
     fn the_grass_fade_goes_by_distance_plus_the_height_below_the_camera() {
-        assert_eq!(far_distance(100.0, 0.0), 100.0);
-        assert_eq!(far_distance(100.0, 10.0), 100.0 + 10.0 * ELEVATION_DISTANCE);
+        assert_eq!(far_distance(100.0, 0.0, ELEVATION_DISTANCE), 100.0);
+        assert_eq!(
+            far_distance(100.0, 10.0, ELEVATION_DISTANCE),
+            100.0 + 10.0 * ELEVATION_DISTANCE
+        );
+        assert_eq!(far_distance(100.0, 10.0, 3.0), 130.0);
+        assert_eq!(far_distance(100.0, 10.0, 0.0), 100.0);
         // A point above the camera is not nearer than it is.
-        assert_eq!(far_distance(100.0, -10.0), 100.0);
+        assert_eq!(far_distance(100.0, -10.0, 3.0), 100.0);
     }
 
     #[test]

@@ -376,8 +376,9 @@ impl TerrainRenderer {
             camera_world: [0.0; 4],
             grass_view: [0.0; 4],
             clump: [0, 0, 0, 1.0f32.to_bits()],
-            // z: 1 where the far field lies under the blades too, 0 where only past their fade.
-            clump_offset: [0.0, 0.0, 1.0, 0.0],
+            // z: 1 where the far field lies under the blades too, 0 where only past their fade;
+            // w: the grass fade's metres per metre the camera stands above.
+            clump_offset: [0.0, 0.0, 1.0, far_field::ELEVATION_DISTANCE],
             base_colors,
             tip_colors,
             roots: [roots[0], roots[1], root_cell.to_bits(), 0],
@@ -434,6 +435,7 @@ impl TerrainRenderer {
                 self.uniforms.clump[2] = g.seed;
                 self.uniforms.clump[3] = g.clump_m.to_bits();
                 self.uniforms.clump_offset[2] = if g.far_field_under_blades { 1.0 } else { 0.0 };
+                self.uniforms.clump_offset[3] = g.elevation_fade;
                 self.clump_m = f64::from(g.clump_m);
                 self.set_blade_density(g.spacing_m, g.width_scale);
             }

@@ -2,8 +2,9 @@
 //!
 //! Every image error the benchmarks report is measured against the truth
 //! ([`crate::tools::truth`]): the same camera at the same time, supersampled K x K in linear light
-//! with the most accurate settings (no LOD, 16 blade segments everywhere, blades out to four times the
-//! view distance). Two measures are reported side by side ([`Measures`]):
+//! with the most accurate settings (no LOD, 16 blade segments everywhere, blades out to
+//! [`crate::tools::truth::REACH_FACTOR`] (nine) times the default view distance, 600 m in the
+//! default world). Two measures are reported side by side ([`Measures`]):
 //! - **pixel FLIP** (`flip_vs_truth`): NVIDIA's FLIP pixel by pixel; it sees aliasing, blur and
 //!   every blade out of place;
 //! - **coarse FLIP** (`coarse_flip_vs_truth`): FLIP of both images box-filtered 8 x 8 in linear

@@ -477,7 +477,7 @@ pub fn run_bench_blades(
     };
 
     // Images (and the counts) first, against the truth of the same field and against it with
-    // no LOD. The truth's blades reach six times the default view distance, or as far as the
+    // no LOD. The truth's blades reach nine times the default view distance, or as far as the
     // no-LOD render's where that is further (a large field); its pool slots are the count's.
     let slots = crate::tools::truth::atlas_slots(&world, &ctx.device);
     let truth_config = |size: (f64, u32)| {

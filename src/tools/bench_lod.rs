@@ -1,8 +1,8 @@
 //! `verdant bench lod`: the LOD transition benchmark, measured against the truth.
 //!
 //! Every image is compared with the truth at the same camera and time
-//! ([`crate::tools::truth`]: supersampled K x K, no LOD, 16 segments everywhere, blades out to four
-//! times the view distance) by pixel FLIP and by the coarse FLIP (see [`crate::tools::bench`]);
+//! ([`crate::tools::truth`]: supersampled K x K, no LOD, 16 segments everywhere, blades out to nine
+//! times the default view distance, 600 m in the default world) by pixel FLIP and by the coarse FLIP (see [`crate::tools::bench`]);
 //! the old figure against the renderer's own render without LOD at the same resolution is kept
 //! as a column.
 //!
@@ -72,6 +72,9 @@ pub struct LodSetting {
     pub width_scale: f32,
     /// How many times as wide the low ring's blades are drawn (`GrassConfig::lod_widen`).
     pub lod_widen: f32,
+    /// Metres toward the blades' fade per metre the camera stands above them
+    /// (`GrassConfig::elevation_fade`).
+    pub elevation_fade: f32,
     /// The plants' switches from the full mesh to the reduced one and from that to the cards,
     /// metres.
     pub plant_lod_m: [f32; 2],
@@ -95,6 +98,7 @@ impl LodSetting {
                 s.infill_m,
                 s.width_scale,
                 s.lod_widen,
+                s.elevation_fade,
                 s.plant_lod_m,
                 s.tree_lod_m,
                 s.tree_thin_m,
@@ -115,6 +119,7 @@ impl LodSetting {
             infill_m: crate::renderer::DEFAULT_INFILL_M,
             width_scale: 1.0,
             lod_widen: crate::renderer::DEFAULT_LOD_WIDEN,
+            elevation_fade: crate::terrain::far_field::ELEVATION_DISTANCE,
             plant_lod_m: crate::plants::PlantSettings::default().lod_m,
             tree_lod_m: None,
             tree_thin_m: None,
@@ -151,6 +156,13 @@ impl LodSetting {
         self
     }
 
+    /// The same setting with `elevation_fade` metres toward the blades' fade per metre the
+    /// camera stands above them.
+    pub fn with_elevation_fade(mut self, elevation_fade: f32) -> Self {
+        self.elevation_fade = elevation_fade;
+        self
+    }
+
     /// The same setting with the infill radii `infill_m`.
     pub fn with_infill(mut self, infill_m: [f32; 2]) -> Self {
         self.infill_m = infill_m;
@@ -179,6 +191,7 @@ impl LodSetting {
         c.grass.infill_m = self.infill_m;
         c.grass.width_scale = self.width_scale;
         c.grass.lod_widen = self.lod_widen;
+        c.grass.elevation_fade = self.elevation_fade;
         c.plants.lod_m = self.plant_lod_m;
         if self.plant_lod_m[0] >= crate::renderer::MAX_PLANT_LOD_M {
             // No level of detail for the plants: no thinning with distance either.
@@ -212,6 +225,7 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             .with_infill(infill)
             .with_width(d.grass.width_scale)
             .with_lod_widen(d.grass.lod_widen)
+            .with_elevation_fade(d.grass.elevation_fade)
             .with_plant_lod(d.plants.lod_m)
     };
     let plant_lod = d.plants.lod_m;
@@ -242,6 +256,9 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         new("width x1.5", h, v, s, seg).with_width(1.5),
         new("low ring widened x2", h, v, s, seg).with_lod_widen(2.0),
         new("low ring widened x3", h, v, s, seg).with_lod_widen(3.0),
+        // The far fade's elevation term as it was (3), and none (blades fade by distance alone).
+        new("elevation fade x3", h, v, s, seg).with_elevation_fade(3.0 * d.grass.elevation_fade),
+        new("elevation fade x0", h, v, s, seg).with_elevation_fade(0.0),
         new("plants lod x0.5", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 0.5 * m)),
         new("plants lod x2", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 2.0 * m)),
         // Every plant its full mesh out to the view distance.
@@ -267,7 +284,7 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             new("trees thin x0.5", h, v, s, seg).with_tree_thin(0.5 * trees.thin_m),
         );
     }
-    // A setting that draws what the default draws (as "segments 7/3/3" does while those are
+    // A setting that draws what the default draws (as "segments 9/3/3" does while those are
     // the default's) would be the default's twin: measured twice, the two differ by the timing's
     // noise alone, and one would put the other off the front.
     let default = all.remove(0);
@@ -1028,7 +1045,7 @@ fn write_outputs(
 
     let mut csv = String::from(
         "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,\
-         segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,lod_widen,plant_lod_near_m,\
+         segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,lod_widen,elevation_fade,plant_lod_near_m,\
          plant_lod_far_m,tree_lod_near_m,tree_lod_far_m,tree_thin_m,gpu_ms,gpu_q1_ms,\
          gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_vs_truth,\
          coarse_flip_vs_truth,flip_frame_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse,\
@@ -1039,7 +1056,7 @@ fn write_outputs(
         let flight = |f: fn(&FlightTiming) -> String| r.flight.as_ref().map_or(String::new(), f);
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{},{},{},{},{},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -1052,6 +1069,7 @@ fn write_outputs(
             s.infill_m[1],
             s.width_scale,
             s.lod_widen,
+            s.elevation_fade,
             s.plant_lod_m[0],
             s.plant_lod_m[1],
             s.tree_lod_m.map_or(String::new(), |m| m[0].to_string()),
