@@ -96,6 +96,10 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
         &["--warmup-frames", "0..=100"],
     ),
     (
+        &["fly", "--grass-view-m", "5"],
+        &["--grass-view-m", "10..=300"],
+    ),
+    (
         &["bench", "aa", "--truth-reach", "0.5"],
         &["--truth-reach", "1..=9"],
     ),

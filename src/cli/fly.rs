@@ -8,7 +8,7 @@ use indicatif::ProgressBar;
 use verdant::renderer::{DEFAULT_MESH_STEP, GrassConfig};
 use verdant::tools::{FlyOptions, FlyProgress, run_fly};
 
-use super::args::{MAX_FRAMES, StreamArgs, TaaArgs, parse_size, resolve_world};
+use super::args::{MAX_FRAMES, StreamArgs, TaaArgs, float_in, parse_size, resolve_world};
 use super::progress::bar;
 
 // The options of `verdant fly`.
@@ -73,6 +73,11 @@ pub(crate) struct FlyArgs {
     /// blade is drawn, the far field showing the grass below; 0 fades them by distance alone.
     #[arg(long, value_name = "K")]
     pub(crate) grass_elevation_fade: Option<f32>,
+    /// The grass's view distance, metres, 10..=300: the blades end there and the far field
+    /// stands in for them beyond; the plants' meshes and cards follow it (default: the
+    /// renderer's, four thirds of a grass tile, 67 m in the default world).
+    #[arg(long, value_name = "M", value_parser = float_in(10.0, 300.0))]
+    pub(crate) grass_view_m: Option<f64>,
     /// Plants' level-of-detail switches NEAR,FAR, metres: the full mesh out to NEAR, the
     /// reduced mesh out to FAR, crossed cards beyond (default: the renderer's, 25,150).
     #[arg(long, value_delimiter = ',')]
@@ -153,6 +158,7 @@ impl FlyArgs {
             grass_near_m,
             grass_lod_widen,
             grass_elevation_fade,
+            grass_view_m,
             plant_lod_m,
             plant_card_reach,
             plant_thin_m,
@@ -226,6 +232,7 @@ impl FlyArgs {
             disable,
             enable,
             grass,
+            grass_view_m,
             mesh_step: mesh_step.unwrap_or(DEFAULT_MESH_STEP),
             aa: aa.unwrap_or_default(),
             taa: taa.settings(),

@@ -61,6 +61,9 @@ pub struct FlyOptions {
     pub enable: Vec<crate::features::Feature>,
     /// The grass's settings (default: the renderer's).
     pub grass: GrassConfig,
+    /// The grass's view distance, metres (`None`: the renderer's, [`crate::lod::DEFAULT_VIEW_TILES`]
+    /// grass tiles).
+    pub grass_view_m: Option<f64>,
     /// Terrain mesh step in samples (default: the renderer's).
     pub mesh_step: u32,
     /// How the frames are anti-aliased (default: the renderer's).
@@ -125,6 +128,7 @@ impl Default for FlyOptions {
             disable: Vec::new(),
             enable: Vec::new(),
             grass: GrassConfig::default(),
+            grass_view_m: None,
             mesh_step: DEFAULT_MESH_STEP,
             aa: Default::default(),
             taa: Default::default(),
@@ -164,6 +168,9 @@ impl FlyOptions {
         config.wind_keys = path.wind.clone();
         config.features = config.features.switched(&self.disable, &self.enable);
         config.grass = self.grass;
+        if let (Some(m), Some(rings)) = (self.grass_view_m, config.grass_rings.as_mut()) {
+            rings.low_radius_m = m;
+        }
         config.mesh_step = self.mesh_step;
         config.aa = self.aa;
         config.taa = self.taa;
@@ -205,6 +212,7 @@ impl From<ConfigError> for SettingError {
             "grass.near_m" => "--grass-near-m",
             "grass.lod_widen" => "--grass-lod-widen",
             "grass.elevation_fade" => "--grass-elevation-fade",
+            "grass_rings.low_radius_m" => "--grass-view-m",
             "mesh_step" => "--mesh-step",
             "plants.lod_m" => "--plant-lod-m",
             "plants.card_reach" => "--plant-card-reach",
@@ -590,6 +598,21 @@ mod tests {
             World::open(&Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz")).unwrap();
         let path = world.manifest.paths[0].clone();
         let config = fly_options().renderer_config(&world, &path).unwrap();
+        // The grass's view distance: the renderer's unless given.
+        let rings = config.grass_rings.unwrap();
+        assert_eq!(
+            rings,
+            RendererConfig::for_world(&world).grass_rings.unwrap()
+        );
+        let far = FlyOptions {
+            grass_view_m: Some(100.0),
+            ..fly_options()
+        }
+        .renderer_config(&world, &path)
+        .unwrap();
+        let far_rings = far.grass_rings.unwrap();
+        assert_eq!(far_rings.low_radius_m, 100.0);
+        assert_eq!(far_rings.high_radius_m, rings.high_radius_m);
         let trees = config
             .trees
             .expect("the trees' settings, for the world's grass");
