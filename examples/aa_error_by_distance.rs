@@ -28,7 +28,9 @@
 //! of `SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX[/MIN[/RECONSTRUCT]]]]]`, adds the temporal
 //! method with those settings (`TaaSettings::clip_sigma`, `max_samples`; MOTION 1 turns
 //! `blade_motion` on; SPREAD is `pixel_spread`, PARALLAX `parallax_falloff`, MIN
-//! `min_samples`, RECONSTRUCT `reconstruct_px`). REFS (default `all`) names the standard renders
+//! `min_samples`, RECONSTRUCT `reconstruct_px`; the fields left out keep the renderer's defaults,
+//! `TaaSettings::default()`; before, PARALLAX, MIN and RECONSTRUCT left out were 0, 2 and 0).
+//! REFS (default `all`) names the standard renders
 //! drawn besides the truth, comma-separated, of `truth_k8`, `truth_reach1`, `truth_reach2`,
 //! `truth_1x`, `truth_2x2`, `default_4x4`, `off`, `msaa` and `taa` (`none` for none):
 //! `truth_k8` alone is 64 renders with blades to the truth's reach, and on a software renderer
@@ -268,13 +270,15 @@ fn main() -> Result<()> {
         c.aa = AntiAliasing::Taa;
         match v[..] {
             [sigma, n, ..] if n >= 2.0 && v.len() <= 7 => {
+                // The fields left out keep the renderer's defaults.
+                let d = base.taa.clone();
                 c.taa.clip_sigma = sigma;
                 c.taa.max_samples = n as u32;
-                c.taa.blade_motion = v.get(2).is_some_and(|&m| m > 0.0);
-                c.taa.pixel_spread = v.get(3).copied().unwrap_or(0.0);
-                c.taa.parallax_falloff = v.get(4).copied().unwrap_or(0.0);
-                c.taa.min_samples = v.get(5).copied().unwrap_or(2.0);
-                c.taa.reconstruct_px = v.get(6).copied().unwrap_or(0.0);
+                c.taa.blade_motion = v.get(2).map_or(d.blade_motion, |&m| m > 0.0);
+                c.taa.pixel_spread = v.get(3).copied().unwrap_or(d.pixel_spread);
+                c.taa.parallax_falloff = v.get(4).copied().unwrap_or(d.parallax_falloff);
+                c.taa.min_samples = v.get(5).copied().unwrap_or(d.min_samples);
+                c.taa.reconstruct_px = v.get(6).copied().unwrap_or(d.reconstruct_px);
             }
             _ => anyhow::bail!(
                 "taa variant {variant:?} is not SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX[/MIN[/RECONSTRUCT]]]]]"
