@@ -25,10 +25,10 @@
 //! truth's in each band, and writes every image into OUT. RUN_UP (default 6) is the frames drawn
 //! before the measured one (a temporal method's history fills over them); WIND names the
 //! world's wind scene for every render (default: the renderer's); TAA, a comma-separated list
-//! of `SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX[/MIN[/RECONSTRUCT]]]]]`, adds the temporal
+//! of `SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX[/MIN[/RECONSTRUCT[/SWAY]]]]]]`, adds the temporal
 //! method with those settings (`TaaSettings::clip_sigma`, `max_samples`; MOTION 1 turns
 //! `blade_motion` on; SPREAD is `pixel_spread`, PARALLAX `parallax_falloff`, MIN
-//! `min_samples`, RECONSTRUCT `reconstruct_px`; the fields left out keep the renderer's defaults,
+//! `min_samples`, RECONSTRUCT `reconstruct_px`, SWAY `sway_falloff`; the fields left out keep the renderer's defaults,
 //! `TaaSettings::default()`; before, PARALLAX, MIN and RECONSTRUCT left out were 0, 2 and 0).
 //! REFS (default `all`) names the standard renders
 //! drawn besides the truth, comma-separated, of `truth_k8`, `truth_reach1`, `truth_reach2`,
@@ -269,9 +269,9 @@ fn main() -> Result<()> {
         let mut c = base.clone();
         c.aa = AntiAliasing::Taa;
         match v[..] {
-            [sigma, n, ..] if n >= 2.0 && v.len() <= 7 => {
+            [sigma, n, ..] if n >= 2.0 && v.len() <= 8 => {
                 // The fields left out keep the renderer's defaults.
-                let d = base.taa.clone();
+                let d = base.taa;
                 c.taa.clip_sigma = sigma;
                 c.taa.max_samples = n as u32;
                 c.taa.blade_motion = v.get(2).map_or(d.blade_motion, |&m| m > 0.0);
@@ -279,9 +279,10 @@ fn main() -> Result<()> {
                 c.taa.parallax_falloff = v.get(4).copied().unwrap_or(d.parallax_falloff);
                 c.taa.min_samples = v.get(5).copied().unwrap_or(d.min_samples);
                 c.taa.reconstruct_px = v.get(6).copied().unwrap_or(d.reconstruct_px);
+                c.taa.sway_falloff = v.get(7).copied().unwrap_or(d.sway_falloff);
             }
             _ => anyhow::bail!(
-                "taa variant {variant:?} is not SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX[/MIN[/RECONSTRUCT]]]]]"
+                "taa variant {variant:?} is not SIGMA/SAMPLES[/MOTION[/SPREAD[/PARALLAX[/MIN[/RECONSTRUCT[/SWAY]]]]]]"
             ),
         }
         c.validate()

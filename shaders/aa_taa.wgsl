@@ -14,7 +14,9 @@
 // shorter history, and shorter still by its parallax (what it moved beyond the camera's turn:
 // where the camera moves, blades at other depths slide past each other within a pixel and
 // its history mixes blades that are no longer there; a turn moves every depth alike, and its
-// history stays good). Beside the history, each pixel keeps its samples' own spread over time
+// history stays good), and, where a blade wrote its motion vector, by its own sway in the
+// wind (`sway.x`: a swaying blade is never quite where its resampled history shows it).
+// Beside the history, each pixel keeps its samples' own spread over time
 // (an exponentially weighted variance per YCoCg channel, resampled from the nearest texel):
 // with `clip.z` above 0, the clip's box also reaches the current sample plus and minus that
 // many of the pixel's own standard deviations, so that a blade thinner than a pixel, which
@@ -51,6 +53,10 @@ struct Params {
     // standard deviation (pixels) of the Gaussian that reconstructs the current frame at each
     // pixel's centre from its 3x3 samples (0: the pixel's own sample).
     hold: vec4<f32>,
+    // x: how much faster the most samples fall with the pixels of a blade's own motion (its
+    // motion vector beyond where its depth alone would have taken it: the wind's sway), most /
+    // (1 + y * pixels + w * parallax + x * sway); yzw: unused.
+    sway: vec4<f32>,
 }
 
 // Read-only storage, not uniform: software Vulkan (lavapipe) compiles and keeps a variant of a
@@ -221,11 +227,16 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
         let px = vec2<f32>(p) + 0.5;
         // Where the pixel's surface was: a blade's own motion where a blade is the pixel's
         // surface, else the pixel reprojected through its depth (the camera's move alone).
-        var pp = vec2<f32>(-1.0);
+        var pp = reproject(px, d);
+        // A blade's own motion beyond the camera's move (its sway in the wind), in pixels.
+        var sway = 0.0;
         if own_motion {
+            let still = pp;
             pp = px - m.xy;
-        } else {
-            pp = reproject(px, d);
+            // (reproject's mark for a point behind the last camera: no sway to measure.)
+            if any(still != vec2<f32>(-1.0)) {
+                sway = length(pp - still);
+            }
         }
         // Where a point at infinity behind the pixel was: the camera's turn alone. What the
         // surface moved beyond that is parallax (the camera's move against the depth) or the
@@ -252,7 +263,7 @@ fn cs_taa_resolve(@builtin(global_invocation_id) id: vec3<u32>) {
                     hi = max(hi, c + reach);
                 }
                 let clipped = clip_to_box(to_ycocg(h.rgb), lo, hi);
-                let most = max(params.size.z / (1.0 + params.clip.y * moved + params.clip.w * parallax), params.hold.x);
+                let most = max(params.size.z / (1.0 + params.clip.y * moved + params.clip.w * parallax + params.sway.x * sway), params.hold.x);
                 let n = min(h.a + 1.0, most);
                 let a = 1.0 / n;
                 out = vec4<f32>(mix(from_ycocg(clipped.xyz), cur, a), n);

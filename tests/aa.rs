@@ -140,12 +140,14 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
     // clip that also reaches the pixel's own spread over time, and a short history that a
     // surface moving far enough drops down to its current sample, reconstructed at the
     // pixels' centres from the jittered samples.
-    for (pixel_spread, parallax_falloff, max_samples, min_samples, reconstruct_px) in [
-        (0.0, 0.0, 24, 2.0, 0.0),
-        (0.0, 2.0, 24, 2.0, 0.0),
-        (2.5, 2.0, 24, 2.0, 0.0),
-        (0.0, 2.0, 8, 1.0, 0.0),
-        (0.0, 2.0, 8, 1.0, 0.4),
+    // The last: a history that shortens with the blades' own motion (their sway) too.
+    for (pixel_spread, parallax_falloff, max_samples, min_samples, reconstruct_px, sway_falloff) in [
+        (0.0, 0.0, 24, 2.0, 0.0, 0.0),
+        (0.0, 2.0, 24, 2.0, 0.0, 0.0),
+        (2.5, 2.0, 24, 2.0, 0.0, 0.0),
+        (0.0, 2.0, 8, 1.0, 0.0, 0.0),
+        (0.0, 2.0, 8, 1.0, 0.4, 0.0),
+        (0.0, 2.0, 24, 1.0, 0.45, 4.0),
     ] {
         resolve_matches_mirror(
             &ctx,
@@ -155,6 +157,7 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
                 max_samples,
                 min_samples,
                 reconstruct_px,
+                sway_falloff,
                 ..TaaSettings::default()
             },
         );
@@ -361,6 +364,7 @@ fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings)
             min_samples: settings.min_samples,
             jitter: verdant::aa::jitter(u64::from(step)),
             reconstruct_px: settings.reconstruct_px,
+            sway_falloff: settings.sway_falloff,
             motion: &motion,
             reproject: match last {
                 Some((lvp, leye)) => reprojection(lvp, leye, vp, camera.position),

@@ -77,6 +77,15 @@ pub struct TaaSettings {
     /// their pixels' centres, and a short history (a moving surface's) would otherwise show
     /// the image shifted by the last few jitters. 0: each pixel's own sample.
     pub reconstruct_px: f32,
+    /// With [`Self::blade_motion`]: a blade whose own motion (its motion vector beyond where
+    /// the pixel's depth alone would have taken it: its sway in the wind) moved `s` pixels
+    /// keeps at most `max_samples / (1 + motion_falloff * p + parallax_falloff * q +
+    /// sway_falloff * s)` samples. A swaying blade changes its bend and its light from frame
+    /// to frame, and its resampled history lags it; a still view of grass in the wind erred
+    /// less against the truth the shorter the history (README, "The history against the
+    /// wind's sway"), while ground, stems and far blades keep the long history that averages
+    /// the jitter. 0 (the default): the sway counts only as parallax.
+    pub sway_falloff: f32,
 }
 
 impl Default for TaaSettings {
@@ -116,6 +125,8 @@ impl Default for TaaSettings {
             // more than no anti-aliasing in motion at 1920x1080; 0.45 lowers every sequence's
             // error at both sizes, 0.6 blurs more than it gains (960x540).
             reconstruct_px: 0.45,
+            // Not yet measured in sequences (README, "The history against the wind's sway").
+            sway_falloff: 0.0,
         }
     }
 }
@@ -135,6 +146,8 @@ pub struct TaaParams {
     /// The fewest samples a moving surface's history keeps, the current frame's jitter
     /// (pixels, x right, y down), the reconstruction's standard deviation (pixels; 0: none).
     pub hold: [f32; 4],
+    /// The sway falloff; the rest unused.
+    pub sway: [f32; 4],
 }
 
 /// The matrix that takes a pixel of the current frame (normalised coordinates of the
@@ -345,6 +358,7 @@ impl Taa {
                     settings.parallax_falloff,
                 ],
                 hold: [settings.min_samples, 0.0, 0.0, settings.reconstruct_px],
+                sway: [settings.sway_falloff, 0.0, 0.0, 0.0],
             },
             buffer,
             read: 0,

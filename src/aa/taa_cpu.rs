@@ -44,6 +44,9 @@ pub struct ResolveInput<'a> {
     /// The standard deviation (pixels) of the Gaussian that reconstructs the current frame
     /// at each pixel's centre from its 3x3 samples (0: the pixel's own sample).
     pub reconstruct_px: f32,
+    /// How much faster the most samples fall with the pixels of a blade's own motion (its
+    /// motion vector beyond where its depth alone would have taken it).
+    pub sway_falloff: f32,
     /// Start every pixel again.
     pub reset: bool,
 }
@@ -175,11 +178,14 @@ impl ResolveInput<'_> {
             })
         };
         // A blade's own motion where the blade is still the pixel's surface, else the pixel's
-        // depth reprojected.
-        let then_px = match written {
-            Some(m) => centre_px - Vec2::new(m.x, m.y),
+        // depth reprojected; and what the blade moved beyond that reprojection (its sway).
+        let (then_px, sway) = match written {
+            Some(m) => {
+                let own = centre_px - Vec2::new(m.x, m.y);
+                (own, back(depth).map_or(0.0, |still| own.distance(still)))
+            }
             None => match back(depth) {
-                Some(p) => p,
+                Some(p) => (p, 0.0),
                 None => return fresh,
             },
         };
@@ -226,7 +232,10 @@ impl ResolveInput<'_> {
         };
         // A surface that moved keeps a shorter history (each frame's resampling blurs it).
         let most = (self.max_samples
-            / (1.0 + self.motion_falloff * moved + self.parallax_falloff * parallax))
+            / (1.0
+                + self.motion_falloff * moved
+                + self.parallax_falloff * parallax
+                + self.sway_falloff * sway))
             .max(self.min_samples);
         let n = (old.w + 1.0).min(most);
         let weight = 1.0 / n;
@@ -286,6 +295,7 @@ mod tests {
                 min_samples: 2.0,
                 jitter: Vec2::ZERO,
                 reconstruct_px: 0.0,
+                sway_falloff: 0.0,
                 size,
                 current: &current,
                 depth: &depth,
@@ -328,6 +338,7 @@ mod tests {
                 min_samples: 1.0,
                 jitter: Vec2::ZERO,
                 reconstruct_px: 0.0,
+                sway_falloff: 0.0,
                 size,
                 current: &current,
                 depth: &depth,
@@ -368,6 +379,7 @@ mod tests {
                 min_samples: 2.0,
                 jitter: Vec2::ZERO,
                 reconstruct_px: 0.0,
+                sway_falloff: 0.0,
                 size,
                 current: &current,
                 depth: &depth,
@@ -411,6 +423,7 @@ mod tests {
             min_samples: 2.0,
             jitter: Vec2::ZERO,
             reconstruct_px: 0.0,
+            sway_falloff: 0.0,
             size,
             current: &current,
             depth: &[0.5; 9],
@@ -445,6 +458,7 @@ mod tests {
             min_samples: 2.0,
             jitter: Vec2::ZERO,
             reconstruct_px: 0.0,
+            sway_falloff: 0.0,
             size,
             current: &current,
             depth: &[0.5; 9],
@@ -482,6 +496,7 @@ mod tests {
             min_samples,
             jitter: Vec2::ZERO,
             reconstruct_px: 0.0,
+            sway_falloff: 0.0,
             size,
             current: &current,
             depth: &depth,
@@ -516,6 +531,68 @@ mod tests {
         let short = samples_after(camera, moved, 4.0, 2.0);
         assert!(plain > 1.0 && short > 1.0, "{plain} {short}");
         assert!(short < plain - 1.0, "{short} against {plain}");
+    }
+
+    #[test]
+    fn a_blades_own_sway_shortens_its_history_and_the_cameras_move_does_not() {
+        // A still camera; a blade's pixel whose motion vector says it moved `m` pixels, where
+        // its depth alone says it stayed (the wind's sway).
+        let size = (9, 9);
+        let current = flat(size, Vec3::splat(0.3));
+        let depth = vec![0.2; 81];
+        let history = vec![Vec4::new(0.3, 0.3, 0.3, 20.0); 81];
+        let samples = |m: f32, sway_falloff: f32| {
+            let mut motion = vec![Vec4::ZERO; 81];
+            motion[40] = Vec4::new(m, 0.0, 0.2, 1.0);
+            ResolveInput {
+                motion: &motion,
+                spread: &[],
+                pixel_spread: 0.0,
+                parallax_falloff: 0.0,
+                min_samples: 1.0,
+                jitter: Vec2::ZERO,
+                reconstruct_px: 0.0,
+                sway_falloff,
+                size,
+                current: &current,
+                depth: &depth,
+                history: &history,
+                reproject: Mat4::IDENTITY,
+                max_samples: 24.0,
+                clip_sigma: 2.5,
+                motion_falloff: 0.0,
+                reset: false,
+            }
+            .pixel(4, 4)
+            .w
+        };
+        // No sway, or no falloff for it: the whole history (20 samples, one more now).
+        assert_eq!(samples(0.0, 4.0), 21.0);
+        assert_eq!(samples(0.5, 0.0), 21.0);
+        // Half a pixel of sway at a falloff of 4: at most 24 / 3 samples.
+        assert_eq!(samples(0.5, 4.0), 8.0);
+        // A pixel that moved with the camera (no motion vector: its depth reprojected) has no
+        // sway, however far it moved.
+        let moved = ResolveInput {
+            motion: &[],
+            spread: &[],
+            pixel_spread: 0.0,
+            parallax_falloff: 0.0,
+            min_samples: 1.0,
+            jitter: Vec2::ZERO,
+            reconstruct_px: 0.0,
+            sway_falloff: 4.0,
+            size,
+            current: &current,
+            depth: &depth,
+            history: &history,
+            reproject: Mat4::from_translation(glam::Vec3::new(0.1, 0.0, 0.0)),
+            max_samples: 24.0,
+            clip_sigma: 2.5,
+            motion_falloff: 0.0,
+            reset: false,
+        };
+        assert_eq!(moved.pixel(4, 4).w, 21.0);
     }
 
     #[test]
@@ -554,6 +631,7 @@ mod tests {
             min_samples: 2.0,
             jitter,
             reconstruct_px,
+            sway_falloff: 0.0,
             size,
             current: &current,
             depth: &[0.5; 24],
@@ -598,6 +676,7 @@ mod tests {
             min_samples: 2.0,
             jitter: Vec2::ZERO,
             reconstruct_px: 0.0,
+            sway_falloff: 0.0,
             size,
             current: &current,
             depth: &[0.5; 8],

@@ -122,6 +122,11 @@ pub(crate) struct TaaArgs {
     /// 0.45; 0: each pixel's own sample, which lies the jitter away from its centre).
     #[arg(long, value_name = "PX", value_parser = float_in(0.0, 2.0))]
     pub(crate) taa_reconstruct: Option<f64>,
+    /// With --aa taa and --taa-blade-motion: how much faster a blade's history shortens with
+    /// its own sway in the wind (its motion vector beyond the camera's move), 0..=16: at most
+    /// N / (1 + pixels moved + P x pixels of parallax + S x pixels of sway) samples (default 0).
+    #[arg(long, value_name = "S", value_parser = float_in(0.0, 16.0))]
+    pub(crate) taa_sway_falloff: Option<f64>,
 }
 
 impl TaaArgs {
@@ -146,6 +151,9 @@ impl TaaArgs {
         }
         if let Some(r) = self.taa_reconstruct {
             s.reconstruct_px = r as f32;
+        }
+        if let Some(w) = self.taa_sway_falloff {
+            s.sway_falloff = w as f32;
         }
         s
     }

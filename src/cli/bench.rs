@@ -193,6 +193,11 @@ pub(crate) struct TaaLists {
     /// comma-separated (default 0.45; 0: each pixel's own sample).
     #[arg(long, value_name = "PX,...", value_delimiter = ',', value_parser = float_in(0.0, 2.0))]
     pub(crate) taa_reconstruct: Vec<f64>,
+    /// With taa and the blades' motion vectors: how much faster a blade's history shortens
+    /// with its own sway in the wind (at most N / (1 + F x pixels moved + P x pixels of
+    /// parallax + S x pixels of sway) samples), 0..=16, comma-separated (default 0).
+    #[arg(long, value_name = "S,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
+    pub(crate) taa_sway_falloff: Vec<f64>,
 }
 
 /// Parses a sequence's name.
@@ -211,8 +216,8 @@ fn parse_on_off(s: &str) -> Result<bool, String> {
 }
 
 /// Every combination of the given history lengths, clips, falloffs, motion vectors, pixel
-/// spreads, parallax falloffs, fewest samples and reconstructions (the defaults where none is
-/// given).
+/// spreads, parallax falloffs, fewest samples, reconstructions and sway falloffs (the defaults
+/// where none is given).
 fn taa_variants(lists: &TaaLists) -> Vec<verdant::aa::taa::TaaSettings> {
     use verdant::aa::taa::TaaSettings;
     /// Every setting of `out` once for each of `values` (the outer lists vary slowest), or
@@ -247,8 +252,11 @@ fn taa_variants(lists: &TaaLists) -> Vec<verdant::aa::taa::TaaSettings> {
         s.parallax_falloff = p as f32
     });
     let out = times(out, &lists.taa_min_samples, |s, m| s.min_samples = m as f32);
-    times(out, &lists.taa_reconstruct, |s, r| {
+    let out = times(out, &lists.taa_reconstruct, |s, r| {
         s.reconstruct_px = r as f32
+    });
+    times(out, &lists.taa_sway_falloff, |s, w| {
+        s.sway_falloff = w as f32
     })
 }
 
@@ -698,5 +706,22 @@ mod tests {
         let none = taa_variants(&Lists::parse_from(["bench"]).taa);
         assert_eq!(none.len(), 1);
         assert_eq!(none[0].max_samples, base.max_samples);
+        // The sway falloff, the last list: varies fastest, and is refused out of range.
+        let sway = taa_variants(
+            &Lists::parse_from([
+                "bench",
+                "--taa-blade-motion",
+                "off,on",
+                "--taa-sway-falloff",
+                "0,4",
+            ])
+            .taa,
+        );
+        let got: Vec<(bool, f32)> = sway
+            .iter()
+            .map(|s| (s.blade_motion, s.sway_falloff))
+            .collect();
+        assert_eq!(got, [(false, 0.0), (false, 4.0), (true, 0.0), (true, 4.0)]);
+        assert!(Lists::try_parse_from(["bench", "--taa-sway-falloff", "17"]).is_err());
     }
 }

@@ -341,6 +341,7 @@ impl RendererConfig {
             &(0.0..=16.0),
             "",
         )?;
+        check("taa.sway_falloff", self.taa.sway_falloff, &(0.0..=16.0), "")?;
         check(
             "taa.min_samples",
             self.taa.min_samples,
@@ -624,6 +625,11 @@ mod tests {
                 "taa.reconstruct_px",
                 "0..=2 pixels",
             ),
+            (
+                with(&|c| c.taa.sway_falloff = -1.0),
+                "taa.sway_falloff",
+                "0..=16",
+            ),
         ];
         for (config, field, range) in cases {
             let e = config.validate().unwrap_err();
@@ -649,6 +655,7 @@ mod tests {
         c.taa.clip_sigma = 0.25;
         c.taa.min_samples = 256.0;
         c.taa.reconstruct_px = 2.0;
+        c.taa.sway_falloff = 16.0;
         c.validate().unwrap();
         let mut c = base;
         c.grass_rings = None;

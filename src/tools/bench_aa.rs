@@ -161,7 +161,7 @@ impl BenchAaOptions {
             if m == AntiAliasing::Taa && self.taa.len() > 1 {
                 for t in &self.taa {
                     let name = format!(
-                        "{}-n{}-c{}-f{}{}{}{}{}{}",
+                        "{}-n{}-c{}-f{}{}{}{}{}{}{}",
                         m.name(),
                         t.max_samples,
                         t.clip_sigma,
@@ -184,6 +184,11 @@ impl BenchAaOptions {
                         },
                         if t.reconstruct_px > 0.0 {
                             format!("-r{}", t.reconstruct_px)
+                        } else {
+                            String::new()
+                        },
+                        if t.sway_falloff > 0.0 {
+                            format!("-w{}", t.sway_falloff)
                         } else {
                             String::new()
                         }
@@ -964,6 +969,7 @@ mod tests {
             TaaSettings {
                 blade_motion: true,
                 motion_falloff: 0.5,
+                sway_falloff: 4.0,
                 ..base
             },
         ];
@@ -974,7 +980,7 @@ mod tests {
             [
                 "off",
                 "taa-n32-c2.5-f1-p2-l1-r0.45",
-                &format!("taa-n{}-c2.5-f0.5-mv-p2-l1-r0.45", base.max_samples),
+                &format!("taa-n{}-c2.5-f0.5-mv-p2-l1-r0.45-w4", base.max_samples),
                 "msaa"
             ]
         );
