@@ -140,16 +140,19 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
     // clip that also reaches the pixel's own spread over time, and a short history that a
     // surface moving far enough drops down to its current sample, reconstructed at the
     // pixels' centres from the jittered samples.
-    // The last: a history that shortens with the blades' own motion (their sway) too.
+    // The last two: the defaults, and a history that shortens with the blades' own motion
+    // (their sway) too.
+    let mut outputs = Vec::new();
     for (pixel_spread, parallax_falloff, max_samples, min_samples, reconstruct_px, sway_falloff) in [
         (0.0, 0.0, 24, 2.0, 0.0, 0.0),
         (0.0, 2.0, 24, 2.0, 0.0, 0.0),
         (2.5, 2.0, 24, 2.0, 0.0, 0.0),
         (0.0, 2.0, 8, 1.0, 0.0, 0.0),
         (0.0, 2.0, 8, 1.0, 0.4, 0.0),
+        (0.0, 2.0, 24, 1.0, 0.45, 0.0),
         (0.0, 2.0, 24, 1.0, 0.45, 4.0),
     ] {
-        resolve_matches_mirror(
+        outputs.push(resolve_matches_mirror(
             &ctx,
             TaaSettings {
                 pixel_spread,
@@ -160,12 +163,24 @@ fn the_gpu_resolve_matches_its_cpu_mirror_over_a_moving_sequence() {
                 sway_falloff,
                 ..TaaSettings::default()
             },
-        );
+        ));
     }
+    // The sway's falloff changes what the GPU resolves where blades wrote their motion.
+    let (plain, sway) = (&outputs[outputs.len() - 2], &outputs[outputs.len() - 1]);
+    let differ = plain
+        .iter()
+        .zip(sway)
+        .filter(|(a, b)| a.abs_diff(**b) > 1)
+        .count();
+    assert!(
+        differ > 100,
+        "the sway falloff changed only {differ} channels"
+    );
 }
 
-/// The resolve on the GPU with `settings` against its CPU mirror over six frames.
-fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings) {
+/// The resolve on the GPU with `settings` against its CPU mirror over six frames; returns the
+/// GPU's frames, one after another (RGBA8).
+fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings) -> Vec<u8> {
     let targets = Targets {
         color_format: wgpu::TextureFormat::Rgba8UnormSrgb,
         depth_format: wgpu::TextureFormat::Depth32Float,
@@ -279,6 +294,7 @@ fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings)
     let mut history = vec![Vec4::ZERO; (W * H) as usize];
     let mut spread = vec![Vec4::ZERO; (W * H) as usize];
     let mut last: Option<(Mat4, DVec3)> = None;
+    let mut frames = Vec::new();
     for step in 0..6u32 {
         if step >= 3 {
             camera.position.y += 0.3;
@@ -401,7 +417,9 @@ fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings)
         if step > 0 {
             assert!(changed > 50, "frame {step}: only {changed} pixels blended");
         }
+        frames.extend_from_slice(&gpu);
     }
+    frames
 }
 
 /// A flat field of grass generated in memory at the blade spacing `spacing_m` (coarse, so
