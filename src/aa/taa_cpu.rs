@@ -535,15 +535,17 @@ mod tests {
 
     #[test]
     fn a_blades_own_sway_shortens_its_history_and_the_cameras_move_does_not() {
-        // A still camera; a blade's pixel whose motion vector says it moved `m` pixels, where
-        // its depth alone says it stayed (the wind's sway).
+        // A blade's pixel whose motion vector (if any) says it moved `m` pixels, where the
+        // camera's move (`reproject`) says it moved as its depth does.
         let size = (9, 9);
         let current = flat(size, Vec3::splat(0.3));
         let depth = vec![0.2; 81];
         let history = vec![Vec4::new(0.3, 0.3, 0.3, 20.0); 81];
-        let samples = |m: f32, sway_falloff: f32| {
+        let samples = |m: Option<f32>, reproject: Mat4, sway_falloff: f32| {
             let mut motion = vec![Vec4::ZERO; 81];
-            motion[40] = Vec4::new(m, 0.0, 0.2, 1.0);
+            if let Some(m) = m {
+                motion[40] = Vec4::new(m, 0.0, 0.2, 1.0);
+            }
             ResolveInput {
                 motion: &motion,
                 spread: &[],
@@ -557,7 +559,7 @@ mod tests {
                 current: &current,
                 depth: &depth,
                 history: &history,
-                reproject: Mat4::IDENTITY,
+                reproject,
                 max_samples: 24.0,
                 clip_sigma: 2.5,
                 motion_falloff: 0.0,
@@ -566,33 +568,20 @@ mod tests {
             .pixel(4, 4)
             .w
         };
+        let still = Mat4::IDENTITY;
         // No sway, or no falloff for it: the whole history (20 samples, one more now).
-        assert_eq!(samples(0.0, 4.0), 21.0);
-        assert_eq!(samples(0.5, 0.0), 21.0);
+        assert_eq!(samples(Some(0.0), still, 4.0), 21.0);
+        assert_eq!(samples(Some(0.5), still, 0.0), 21.0);
         // Half a pixel of sway at a falloff of 4: at most 24 / 3 samples.
-        assert_eq!(samples(0.5, 4.0), 8.0);
+        assert_eq!(samples(Some(0.5), still, 4.0), 8.0);
         // A pixel that moved with the camera (no motion vector: its depth reprojected) has no
         // sway, however far it moved.
-        let moved = ResolveInput {
-            motion: &[],
-            spread: &[],
-            pixel_spread: 0.0,
-            parallax_falloff: 0.0,
-            min_samples: 1.0,
-            jitter: Vec2::ZERO,
-            reconstruct_px: 0.0,
-            sway_falloff: 4.0,
-            size,
-            current: &current,
-            depth: &depth,
-            history: &history,
-            reproject: Mat4::from_translation(glam::Vec3::new(0.1, 0.0, 0.0)),
-            max_samples: 24.0,
-            clip_sigma: 2.5,
-            motion_falloff: 0.0,
-            reset: false,
-        };
-        assert_eq!(moved.pixel(4, 4).w, 21.0);
+        let moved = Mat4::from_translation(glam::Vec3::new(0.1, 0.0, 0.0));
+        assert_eq!(samples(None, moved, 4.0), 21.0);
+        // Nor has a blade whose motion vector is the camera's move (0.1 of the frame's half
+        // width: 0.45 pixels); the same vector with a still camera is all sway.
+        assert!((samples(Some(-0.45), moved, 4.0) - 21.0).abs() < 1e-3);
+        assert!(samples(Some(-0.45), still, 4.0) < 9.0);
     }
 
     #[test]
