@@ -100,6 +100,16 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
         &["--grass-view-m", "10..=300"],
     ),
     (
+        &["fly", "--taa-blade-motion", "--taa-sway-falloff", "17"],
+        &["--taa-sway-falloff", "0..=16"],
+    ),
+    // The sway is measured by the blades' motion vectors: without them the option is refused.
+    (&["fly", "--taa-sway-falloff", "4"], &["--taa-blade-motion"]),
+    (
+        &["bench", "aa", "--taa-sway-falloff", "0,20"],
+        &["--taa-sway-falloff", "0..=16"],
+    ),
+    (
         &["bench", "aa", "--truth-reach", "0.5"],
         &["--truth-reach", "1..=9"],
     ),

@@ -125,7 +125,7 @@ pub(crate) struct TaaArgs {
     /// With --aa taa and --taa-blade-motion: how much faster a blade's history shortens with
     /// its own sway in the wind (its motion vector beyond the camera's move), 0..=16: at most
     /// N / (1 + pixels moved + P x pixels of parallax + S x pixels of sway) samples (default 0).
-    #[arg(long, value_name = "S", value_parser = float_in(0.0, 16.0))]
+    #[arg(long, value_name = "S", value_parser = float_in(0.0, 16.0), requires = "taa_blade_motion")]
     pub(crate) taa_sway_falloff: Option<f64>,
 }
 

@@ -195,7 +195,8 @@ pub(crate) struct TaaLists {
     pub(crate) taa_reconstruct: Vec<f64>,
     /// With taa and the blades' motion vectors: how much faster a blade's history shortens
     /// with its own sway in the wind (at most N / (1 + F x pixels moved + P x pixels of
-    /// parallax + S x pixels of sway) samples), 0..=16, comma-separated (default 0).
+    /// parallax + S x pixels of sway) samples), 0..=16, comma-separated (default 0; without
+    /// the motion vectors it changes nothing).
     #[arg(long, value_name = "S,...", value_delimiter = ',', value_parser = float_in(0.0, 16.0))]
     pub(crate) taa_sway_falloff: Vec<f64>,
 }
