@@ -432,8 +432,10 @@ fn far_jobs_take_over_at_the_view_distance_and_match_the_cpu_mirror() {
 fn tree_jobs_of_every_size_place_one_grid_of_trees_as_the_cpu_mirror_does() {
     let tmp = tempfile::tempdir().unwrap();
     let w = common::world_with_trees(tmp.path(), "broadleaf", 0.02);
+    // The thinning from 800 m, so that the job 1.2 km ahead (below) lies where it thins.
     let mut rig = Rig::with_layer(&w, PlantLayer::Trees, |tile_m| PlantSettings {
         lod_m: [30.0, 60.0],
+        thin_m: 800.0,
         ..PlantSettings::trees(tile_m, 3000.0)
     });
     let p = rig.manifest.pyramid.clone();

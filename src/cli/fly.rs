@@ -98,7 +98,7 @@ pub(crate) struct FlyArgs {
     pub(crate) tree_lod_m: Option<Vec<f32>>,
     /// Beyond this distance, metres, trees thin out as the square of the distance, down to
     /// --tree-min-keep of them, the survivors grown to keep the cover (default: the
-    /// renderer's, 800).
+    /// renderer's, 1600).
     #[arg(long)]
     pub(crate) tree_thin_m: Option<f32>,
     /// The fewest trees the thinning keeps, above 0 and at most 1 (default: the renderer's,

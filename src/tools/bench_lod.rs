@@ -78,6 +78,11 @@ pub struct LodSetting {
     /// The plants' switches from the full mesh to the reduced one and from that to the cards,
     /// metres.
     pub plant_lod_m: [f32; 2],
+    /// How far the plants' far jobs (their cards) reach, in view distances
+    /// (`PlantSettings::card_reach`).
+    pub plant_card_reach: f32,
+    /// Where the plants start to thin out with distance, metres (`PlantSettings::thin_m`).
+    pub plant_thin_m: f32,
     /// The trees' switches, metres (`None`: the renderer's; a world without trees).
     pub tree_lod_m: Option<[f32; 2]>,
     /// Where the trees start to thin out with distance, metres (`None`: the renderer's; a world
@@ -99,7 +104,7 @@ impl LodSetting {
                 s.width_scale,
                 s.lod_widen,
                 s.elevation_fade,
-                s.plant_lod_m,
+                (s.plant_lod_m, s.plant_card_reach, s.plant_thin_m),
                 s.tree_lod_m,
                 s.tree_thin_m,
             )
@@ -121,6 +126,8 @@ impl LodSetting {
             lod_widen: crate::renderer::DEFAULT_LOD_WIDEN,
             elevation_fade: crate::terrain::far_field::ELEVATION_DISTANCE,
             plant_lod_m: crate::plants::PlantSettings::default().lod_m,
+            plant_card_reach: crate::plants::PlantSettings::default().card_reach,
+            plant_thin_m: crate::plants::PlantSettings::default().thin_m,
             tree_lod_m: None,
             tree_thin_m: None,
         }
@@ -141,6 +148,19 @@ impl LodSetting {
     /// The same setting with the plants' level-of-detail switches at `plant_lod_m`.
     pub fn with_plant_lod(mut self, plant_lod_m: [f32; 2]) -> Self {
         self.plant_lod_m = plant_lod_m;
+        self
+    }
+
+    /// The same setting with the plants' cards reaching `card_reach` view distances, the
+    /// instance pool's regions grown with the area they reach (as far as a pool can be bound).
+    pub fn with_plant_card_reach(mut self, card_reach: f32) -> Self {
+        self.plant_card_reach = card_reach;
+        self
+    }
+
+    /// The same setting with the plants thinning out from `thin_m` metres.
+    pub fn with_plant_thin(mut self, thin_m: f32) -> Self {
+        self.plant_thin_m = thin_m;
         self
     }
 
@@ -193,6 +213,22 @@ impl LodSetting {
         c.grass.lod_widen = self.lod_widen;
         c.grass.elevation_fade = self.elevation_fade;
         c.plants.lod_m = self.plant_lod_m;
+        let default_reach = c.plants.card_reach;
+        c.plants.card_reach = self.plant_card_reach;
+        if self.plant_card_reach > default_reach {
+            // The cards' ring grows as the square of its reach: so do the regions, within
+            // what a pool can bind.
+            let k = (self.plant_card_reach / default_reach).powi(2);
+            let types = world
+                .manifest
+                .plant_types
+                .iter()
+                .filter(|t| !t.is_tree())
+                .count();
+            c.plants.capacity = ((c.plants.capacity as f32 * k) as u32)
+                .min(crate::plants::renderer::max_capacity(types as u32));
+        }
+        c.plants.thin_m = self.plant_thin_m;
         if self.plant_lod_m[0] >= crate::renderer::MAX_PLANT_LOD_M {
             // No level of detail for the plants: no thinning with distance either.
             c.plants.thin_m = crate::renderer::MAX_PLANT_LOD_M;
@@ -227,6 +263,8 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             .with_lod_widen(d.grass.lod_widen)
             .with_elevation_fade(d.grass.elevation_fade)
             .with_plant_lod(d.plants.lod_m)
+            .with_plant_card_reach(d.plants.card_reach)
+            .with_plant_thin(d.plants.thin_m)
     };
     let plant_lod = d.plants.lod_m;
     let mut all = vec![
@@ -261,6 +299,16 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
         new("elevation fade x0", h, v, s, seg).with_elevation_fade(0.0),
         new("plants lod x0.5", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 0.5 * m)),
         new("plants lod x2", h, v, s, seg).with_plant_lod(plant_lod.map(|m| 2.0 * m)),
+        // The plants' cards out to twice and to 4.5 times their default reach (twice the view
+        // distance: 4.5 times is the truth's reach of nine view distances), and their thinning
+        // with distance from twice its default distance, and none.
+        new("plant cards x2", h, v, s, seg).with_plant_card_reach(2.0 * d.plants.card_reach),
+        new("plant cards x4.5", h, v, s, seg).with_plant_card_reach(4.5 * d.plants.card_reach),
+        new("plants thin x2", h, v, s, seg).with_plant_thin(2.0 * d.plants.thin_m),
+        new("plants thin off", h, v, s, seg).with_plant_thin(crate::renderer::MAX_PLANT_LOD_M),
+        new("plant cards x4.5 thin off", h, v, s, seg)
+            .with_plant_card_reach(4.5 * d.plants.card_reach)
+            .with_plant_thin(crate::renderer::MAX_PLANT_LOD_M),
         // Every plant its full mesh out to the view distance.
         // (Its blades that the low grid would drop fade out before the view distance, as they
         // always have: nothing widens for them.)
@@ -269,7 +317,7 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             .with_lod_widen(1.0),
     ];
     // A world with trees: their switches at half and twice the default's, and their thinning
-    // from half the default's distance.
+    // from half and twice the default's distance.
     if world.manifest.plant_types.iter().any(|t| t.is_tree())
         && let Some(trees) = d.tree_settings(world)
     {
@@ -278,11 +326,10 @@ pub fn lod_settings(world: &World) -> Vec<LodSetting> {
             let lod = trees.lod_m.map(|m| k * m);
             all.insert(at, new(name, h, v, s, seg).with_tree_lod(lod));
         }
-        let at = all.len() - 1;
-        all.insert(
-            at,
-            new("trees thin x0.5", h, v, s, seg).with_tree_thin(0.5 * trees.thin_m),
-        );
+        for (name, k) in [("trees thin x0.5", 0.5f32), ("trees thin x2", 2.0)] {
+            let at = all.len() - 1;
+            all.insert(at, new(name, h, v, s, seg).with_tree_thin(k * trees.thin_m));
+        }
     }
     // A setting that draws what the default draws (as "segments 9/3/3" does while those are
     // the default's) would be the default's twin: measured twice, the two differ by the timing's
@@ -1046,7 +1093,7 @@ fn write_outputs(
     let mut csv = String::from(
         "setting,high_radius_tiles,view_distance_tiles,spacing_m,segments_near,segments_high,\
          segments_low,near_m,infill_half_m,infill_quarter_m,width_scale,lod_widen,elevation_fade,plant_lod_near_m,\
-         plant_lod_far_m,tree_lod_near_m,tree_lod_far_m,tree_thin_m,gpu_ms,gpu_q1_ms,\
+         plant_lod_far_m,plant_card_reach,plant_thin_m,tree_lod_near_m,tree_lod_far_m,tree_thin_m,gpu_ms,gpu_q1_ms,\
          gpu_q3_ms,gpu_spread,frame_ms,frame_spread,noisy,frames,flip_vs_truth,\
          coarse_flip_vs_truth,flip_frame_vs_truth,flip_vs_no_lod,blades_drawn,coverage,pareto,pareto_coarse,\
          flight_median_ms,flight_p99_ms,flight_max_ms,flight_frames,pareto_flight\n",
@@ -1056,7 +1103,7 @@ fn write_outputs(
         let flight = |f: fn(&FlightTiming) -> String| r.flight.as_ref().map_or(String::new(), f);
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{},{},{},{},{},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -1072,6 +1119,8 @@ fn write_outputs(
             s.elevation_fade,
             s.plant_lod_m[0],
             s.plant_lod_m[1],
+            s.plant_card_reach,
+            s.plant_thin_m,
             s.tree_lod_m.map_or(String::new(), |m| m[0].to_string()),
             s.tree_lod_m.map_or(String::new(), |m| m[1].to_string()),
             s.tree_thin_m.map_or(String::new(), |m| m.to_string()),
@@ -1329,5 +1378,50 @@ mod tests {
         assert_eq!(thin.thin_m, 0.5 * default.thin_m);
         assert_eq!(thin.lod_m, default.lod_m);
         assert_eq!(settings.last().unwrap().name, "no LOD");
+    }
+
+    /// The plants' cards reach farther with a pool grown for the ring they cover (within what a
+    /// pool can bind), and their thinning can move or go; the default keeps the renderer's.
+    #[test]
+    fn the_plant_card_and_thinning_settings_reach_the_plant_stage() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz");
+        let world = World::open(&dir).unwrap();
+        let settings = lod_settings(&world);
+        let config = |name: &str| {
+            settings
+                .iter()
+                .find(|s| s.name == name)
+                .unwrap_or_else(|| panic!("no setting {name:?}"))
+                .config(&world)
+                .plants
+        };
+        let d = RendererConfig::for_world(&world).plants;
+        assert_eq!(config("default"), d);
+        let far = config("plant cards x4.5");
+        assert_eq!(far.card_reach, 4.5 * d.card_reach);
+        assert!(far.capacity > 4 * d.capacity, "{} regions", far.capacity);
+        let types = world
+            .manifest
+            .plant_types
+            .iter()
+            .filter(|t| !t.is_tree())
+            .count();
+        assert!(far.capacity <= crate::plants::renderer::max_capacity(types as u32));
+        assert_eq!(far.thin_m, d.thin_m);
+        assert_eq!(config("plants thin x2").thin_m, 2.0 * d.thin_m);
+        assert_eq!(config("plants thin x2").card_reach, d.card_reach);
+        let both = config("plant cards x4.5 thin off");
+        assert_eq!(both.thin_m, crate::renderer::MAX_PLANT_LOD_M);
+        assert_eq!(both.card_reach, far.card_reach);
+        // Not the default's twin: each is measured.
+        for name in ["plant cards x2", "plants thin off"] {
+            assert!(
+                !settings
+                    .iter()
+                    .find(|s| s.name == name)
+                    .unwrap()
+                    .same_as(&settings[0])
+            );
+        }
     }
 }
