@@ -219,14 +219,9 @@ impl LodSetting {
             // The cards' ring grows as the square of its reach: so do the regions, within
             // what a pool can bind.
             let k = (self.plant_card_reach / default_reach).powi(2);
-            let types = world
-                .manifest
-                .plant_types
-                .iter()
-                .filter(|t| !t.is_tree())
-                .count();
+            let types = crate::plants::PlantLayer::Plants.types(&world.manifest);
             c.plants.capacity = ((c.plants.capacity as f32 * k) as u32)
-                .min(crate::plants::renderer::max_capacity(types as u32));
+                .min(crate::plants::renderer::max_capacity(types.len() as u32));
         }
         c.plants.thin_m = self.plant_thin_m;
         if self.plant_lod_m[0] >= crate::renderer::MAX_PLANT_LOD_M {
@@ -1400,13 +1395,8 @@ mod tests {
         let far = config("plant cards x4.5");
         assert_eq!(far.card_reach, 4.5 * d.card_reach);
         assert!(far.capacity > 4 * d.capacity, "{} regions", far.capacity);
-        let types = world
-            .manifest
-            .plant_types
-            .iter()
-            .filter(|t| !t.is_tree())
-            .count();
-        assert!(far.capacity <= crate::plants::renderer::max_capacity(types as u32));
+        let types = crate::plants::PlantLayer::Plants.types(&world.manifest);
+        assert!(far.capacity <= crate::plants::renderer::max_capacity(types.len() as u32));
         assert_eq!(far.thin_m, d.thin_m);
         assert_eq!(config("plants thin x2").thin_m, 2.0 * d.thin_m);
         assert_eq!(config("plants thin x2").card_reach, d.card_reach);
