@@ -108,9 +108,11 @@ pub(crate) fn soak(opts: SoakOptions) -> Result<()> {
         r.frames, r.seconds, r.speed_mps, r.adapter.name, r.frame_ms.median, r.frame_ms.p99
     );
     println!(
-        "peak RSS {:.1} MiB, growth after warm-up {:.1} MiB; cache peak {:.1} of {:.1} MiB; atlas peak {} of {} slots",
+        "peak RSS {:.1} MiB, growth after warm-up {:.1} MiB (halves {:.1} and {:.1} MiB); cache peak {:.1} of {:.1} MiB; atlas peak {} of {} slots",
         mib(r.rss_peak_bytes),
         mib(r.rss_growth_bytes),
+        r.rss_growth_halves_bytes[0] as f64 / 1048576.0,
+        r.rss_growth_halves_bytes[1] as f64 / 1048576.0,
         mib(r.cache_peak_bytes),
         mib(r.cache_ceiling_bytes),
         r.atlas_peak_slots,
