@@ -1551,6 +1551,10 @@ fn bench_aa_measures_every_method_against_the_truth_in_every_sequence() {
         assert!(flip > 0.0 && flip < 1.0, "{line}");
         // Only the teleport says how long it took to settle.
         assert_eq!(f[3] == "teleport", !f[8].is_empty(), "{line}");
+        // The coarse measure beside it: blocks of 8 x 8 pixels average away much of the
+        // sampling's error, so it errs less than pixel FLIP but not nothing.
+        let coarse: f64 = f[9].parse().unwrap();
+        assert!(coarse > 0.0 && coarse < flip, "{line}");
     }
     let frames = std::fs::read_to_string(dir.join("aa_frames.csv")).unwrap();
     assert_eq!(frames.lines().count(), 1 + 3 * 4 * 2);

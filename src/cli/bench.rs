@@ -501,23 +501,24 @@ pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result
         .unwrap_or(0)
         .max(11);
     println!(
-        "{:<10} {:<w$} {:<9} {:>8} {:>9} {:>7} {:>9}",
-        "size", "method", "sequence", "FLIP", "flicker", "x truth", "recovery"
+        "{:<10} {:<w$} {:<9} {:>8} {:>8} {:>9} {:>7} {:>9}",
+        "size", "method", "sequence", "FLIP", "coarse", "flicker", "x truth", "recovery"
     );
     for s in &r.sequences {
         println!(
-            "{:<10} {:<w$} {:<9} {:>8.4} {:>9.2} {:>7.2} {:>9}",
+            "{:<10} {:<w$} {:<9} {:>8.4} {:>8.4} {:>9.2} {:>7.2} {:>9}",
             format!("{}x{}", s.size.0, s.size.1),
             s.method,
             s.motion.name(),
             s.flip_mean,
+            s.coarse_flip_mean,
             s.flicker,
             s.flicker_ratio,
             s.recovery_frames.map_or(String::new(), |n| n.to_string())
         );
     }
     // The paths: each method's and each bound's mean over the path's views.
-    let mut rows: Vec<(String, &str, &str, bool, f64, u32)> = Vec::new();
+    let mut rows: Vec<(String, &str, &str, bool, [f64; 2], u32)> = Vec::new();
     for p in &r.paths {
         let size = format!("{}x{}", p.size.0, p.size.1);
         match rows
@@ -525,16 +526,25 @@ pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result
             .find(|x| x.0 == size && x.1 == p.method && x.2 == p.path)
         {
             Some(x) => {
-                x.4 += p.flip;
+                x.4[0] += p.flip;
+                x.4[1] += p.coarse_flip;
                 x.5 += 1;
             }
-            None => rows.push((size, &p.method, &p.path, p.bound, p.flip, 1)),
+            None => rows.push((
+                size,
+                &p.method,
+                &p.path,
+                p.bound,
+                [p.flip, p.coarse_flip],
+                1,
+            )),
         }
     }
-    for (size, method, path, bound, sum, n) in rows {
+    for (size, method, path, bound, sums, n) in rows {
         println!(
-            "{size:<10} {method:<w$} path {path:<10} FLIP {:.4} over {n} views{}",
-            sum / f64::from(n),
+            "{size:<10} {method:<w$} path {path:<10} FLIP {:.4}, coarse {:.4} over {n} views{}",
+            sums[0] / f64::from(n),
+            sums[1] / f64::from(n),
             if bound { " (bound)" } else { "" }
         );
     }

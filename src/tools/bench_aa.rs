@@ -41,8 +41,8 @@ use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::tools::Scene;
 use crate::tools::fly::{OutDir, write_json, write_png, write_text};
+use crate::tools::metrics::{COARSE_FACTOR, coarse_flip, flip_compare, rgb};
 use crate::tools::metrics::{Chart, ChartPoint};
-use crate::tools::metrics::{flip_compare, rgb};
 use crate::tools::report::AdapterReport;
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_frames};
 use crate::tools::truth::Truth;
@@ -285,6 +285,9 @@ pub struct AaFrame {
     pub frame: u32,
     /// Mean FLIP against the truth.
     pub flip: f64,
+    /// The coarse FLIP against the truth (at the scale where single blades are no longer
+    /// resolved: [`crate::tools::metrics::coarse_flip`]).
+    pub coarse_flip: f64,
     /// Mean absolute change from the previous frame, 0..255 (0 on the first).
     pub change: f64,
     /// The truth's change from its previous frame.
@@ -302,6 +305,8 @@ pub struct AaSequence {
     pub motion: Motion,
     /// Mean FLIP against the truth over its frames.
     pub flip_mean: f64,
+    /// Mean coarse FLIP against the truth over its frames.
+    pub coarse_flip_mean: f64,
     /// Mean change between consecutive frames (0..255).
     pub flicker: f64,
     /// The truth's.
@@ -328,6 +333,8 @@ pub struct AaPathView {
     pub t_s: f64,
     /// FLIP against the truth.
     pub flip: f64,
+    /// The coarse FLIP against the truth.
+    pub coarse_flip: f64,
 }
 
 /// What the paths part measures beside the methods, to say where their error comes from: two
@@ -434,8 +441,13 @@ pub struct BenchAaReport {
     pub counts: FrameCounts,
 }
 
-fn flip(reference: &RgbaImage, actual: &RgbaImage) -> Result<f64> {
-    Ok(f64::from(flip_compare(&rgb(reference), &rgb(actual))?.mean))
+/// Pixel FLIP and coarse FLIP of `actual` against `reference`.
+fn flips(reference: &RgbaImage, actual: &RgbaImage) -> Result<(f64, f64)> {
+    let (reference, actual) = (rgb(reference), rgb(actual));
+    Ok((
+        f64::from(flip_compare(&reference, &actual)?.mean),
+        coarse_flip(&reference, &actual, COARSE_FACTOR)?,
+    ))
 }
 
 /// Mean absolute difference of the RGB channels, 0..255.
@@ -603,12 +615,14 @@ pub fn run_bench_aa(
                         let truth_change = truth_prev
                             .as_ref()
                             .map_or(0.0, |p| mean_change(p, truth_img));
+                        let (flip, coarse_flip) = flips(truth_img, &img)?;
                         seq[m].push(AaFrame {
                             size,
                             method: method.clone(),
                             motion,
                             frame: i as u32,
-                            flip: flip(truth_img, &img)?,
+                            flip,
+                            coarse_flip,
                             change,
                             truth_change,
                         });
@@ -642,6 +656,7 @@ pub fn run_bench_aa(
                     method: method.clone(),
                     motion,
                     flip_mean: flips.iter().sum::<f64>() / n.max(1.0),
+                    coarse_flip_mean: f.iter().map(|x| x.coarse_flip).sum::<f64>() / n.max(1.0),
                     flicker,
                     truth_flicker,
                     flicker_ratio: flicker / truth_flicker.max(1e-9),
@@ -702,13 +717,15 @@ pub fn run_bench_aa(
                     for (bound, renderer) in bounds.iter_mut() {
                         if let Some(truth_img) = &truth_img {
                             let img = renderer.render(&ctx, &camera, t, walker)?;
+                            let (flip, coarse_flip) = flips(truth_img, &img)?;
                             path_views.push(AaPathView {
                                 size,
                                 method: bound.name(opts.truth_k),
                                 bound: true,
                                 path: path.name.clone(),
                                 t_s: t,
-                                flip: flip(truth_img, &img)?,
+                                flip,
+                                coarse_flip,
                             });
                         } else {
                             advance(renderer, &ctx, &camera, t, walker)?;
@@ -719,13 +736,15 @@ pub fn run_bench_aa(
                         scene.render_frame(&ctx, &camera, t, walker)?;
                         if let Some(truth_img) = &truth_img {
                             let img = scene.read_image(&ctx)?;
+                            let (flip, coarse_flip) = flips(truth_img, &img)?;
                             path_views.push(AaPathView {
                                 size,
                                 method: method.clone(),
                                 bound: false,
                                 path: path.name.clone(),
                                 t_s: t,
-                                flip: flip(truth_img, &img)?,
+                                flip,
+                                coarse_flip,
                             });
                         }
                     }
@@ -798,11 +817,12 @@ pub fn write_tables(
     paths: &[AaPathView],
 ) -> Result<()> {
     use std::fmt::Write as _;
-    let mut csv = String::from("width,height,method,motion,frame,flip,change,truth_change\n");
+    let mut csv =
+        String::from("width,height,method,motion,frame,flip,change,truth_change,coarse_flip\n");
     for f in frames {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{:.5},{:.4},{:.4}",
+            "{},{},{},{},{},{:.5},{:.4},{:.4},{:.5}",
             f.size.0,
             f.size.1,
             f.method,
@@ -810,17 +830,19 @@ pub fn write_tables(
             f.frame,
             f.flip,
             f.change,
-            f.truth_change
+            f.truth_change,
+            f.coarse_flip
         );
     }
     write_text(&out.join("aa_frames.csv"), &csv)?;
     let mut csv = String::from(
-        "width,height,method,motion,flip_mean,flicker,truth_flicker,flicker_ratio,recovery_frames\n",
+        "width,height,method,motion,flip_mean,flicker,truth_flicker,flicker_ratio,recovery_frames,\
+         coarse_flip_mean\n",
     );
     for s in sequences {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{:.5},{:.4},{:.4},{:.4},{}",
+            "{},{},{},{},{:.5},{:.4},{:.4},{:.4},{},{:.5}",
             s.size.0,
             s.size.1,
             s.method,
@@ -829,16 +851,17 @@ pub fn write_tables(
             s.flicker,
             s.truth_flicker,
             s.flicker_ratio,
-            s.recovery_frames.map_or(String::new(), |n| n.to_string())
+            s.recovery_frames.map_or(String::new(), |n| n.to_string()),
+            s.coarse_flip_mean
         );
     }
     write_text(&out.join("aa_sequences.csv"), &csv)?;
-    let mut csv = String::from("width,height,method,bound,path,t_s,flip\n");
+    let mut csv = String::from("width,height,method,bound,path,t_s,flip,coarse_flip\n");
     for p in paths {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{:.3},{:.5}",
-            p.size.0, p.size.1, p.method, p.bound, p.path, p.t_s, p.flip
+            "{},{},{},{},{},{:.3},{:.5},{:.5}",
+            p.size.0, p.size.1, p.method, p.bound, p.path, p.t_s, p.flip, p.coarse_flip
         );
     }
     write_text(&out.join("aa_paths.csv"), &csv)?;
