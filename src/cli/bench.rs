@@ -518,34 +518,47 @@ pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result
         );
     }
     // The paths: each method's and each bound's mean over the path's views.
-    let mut rows: Vec<(String, &str, &str, bool, [f64; 2], u32)> = Vec::new();
+    struct PathRow<'a> {
+        size: String,
+        method: &'a str,
+        path: &'a str,
+        bound: bool,
+        sums: [f64; 2],
+        views: u32,
+    }
+    let mut rows: Vec<PathRow> = Vec::new();
     for p in &r.paths {
         let size = format!("{}x{}", p.size.0, p.size.1);
         match rows
             .iter_mut()
-            .find(|x| x.0 == size && x.1 == p.method && x.2 == p.path)
+            .find(|x| x.size == size && x.method == p.method && x.path == p.path)
         {
             Some(x) => {
-                x.4[0] += p.flip;
-                x.4[1] += p.coarse_flip;
-                x.5 += 1;
+                x.sums[0] += p.flip;
+                x.sums[1] += p.coarse_flip;
+                x.views += 1;
             }
-            None => rows.push((
+            None => rows.push(PathRow {
                 size,
-                &p.method,
-                &p.path,
-                p.bound,
-                [p.flip, p.coarse_flip],
-                1,
-            )),
+                method: &p.method,
+                path: &p.path,
+                bound: p.bound,
+                sums: [p.flip, p.coarse_flip],
+                views: 1,
+            }),
         }
     }
-    for (size, method, path, bound, sums, n) in rows {
+    for x in rows {
+        let n = f64::from(x.views);
         println!(
-            "{size:<10} {method:<w$} path {path:<10} FLIP {:.4}, coarse {:.4} over {n} views{}",
-            sums[0] / f64::from(n),
-            sums[1] / f64::from(n),
-            if bound { " (bound)" } else { "" }
+            "{:<10} {:<w$} path {:<10} FLIP {:.4}, coarse {:.4} over {} views{}",
+            x.size,
+            x.method,
+            x.path,
+            x.sums[0] / n,
+            x.sums[1] / n,
+            x.views,
+            if x.bound { " (bound)" } else { "" }
         );
     }
     for t in &r.timings {

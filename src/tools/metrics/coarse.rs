@@ -60,23 +60,71 @@ pub fn encode_srgb8(v: f32) -> u8 {
 /// `factor` pixels becomes the mean of its pixels' linear colours, encoded back to sRGB (the
 /// blocks of the right and bottom edges hold fewer pixels). A factor of 0 is taken as 1.
 pub fn box_filter_linear(image: &image::RgbImage, factor: u32) -> image::RgbImage {
-    let f = factor.max(1);
-    let (w, h) = image.dimensions();
-    let (bw, bh) = (w.div_ceil(f), h.div_ceil(f));
-    let mut sums = vec![[0.0f32; 3]; (bw * bh) as usize];
-    let mut counts = vec![0u32; (bw * bh) as usize];
-    for (x, y, p) in image.enumerate_pixels() {
-        let i = ((y / f) * bw + x / f) as usize;
-        for c in 0..3 {
-            sums[i][c] += decode_srgb8(p[c]);
-        }
-        counts[i] += 1;
-    }
-    image::RgbImage::from_fn(bw, bh, |x, y| {
-        let i = (y * bw + x) as usize;
-        let n = counts[i].max(1) as f32;
-        image::Rgb(sums[i].map(|s| encode_srgb8(s / n)))
+    let blocks = Blocks::of(image, factor);
+    image::RgbImage::from_fn(blocks.width, blocks.height, |x, y| {
+        let i = (y * blocks.width + x) as usize;
+        image::Rgb(blocks.mean[i].map(encode_srgb8))
     })
+}
+
+/// The blocks of `factor` x `factor` pixels of an image (those of the right and bottom edges
+/// hold fewer), with each one's mean and standard deviation of linear light per channel.
+pub(super) struct Blocks {
+    /// The block side, pixels (at least 1).
+    pub factor: u32,
+    /// Blocks a row.
+    pub width: u32,
+    /// Rows of blocks.
+    pub height: u32,
+    /// Mean linear colour of each block, row by row.
+    pub mean: Vec<[f32; 3]>,
+    /// Standard deviation of each block's linear colour, per channel.
+    pub spread: Vec<[f32; 3]>,
+}
+
+impl Blocks {
+    /// The blocks of `image` (a factor of 0 taken as 1).
+    pub fn of(image: &image::RgbImage, factor: u32) -> Self {
+        let f = factor.max(1);
+        let (w, h) = image.dimensions();
+        let (bw, bh) = (w.div_ceil(f), h.div_ceil(f));
+        let mut sums = vec![[0.0f64; 3]; (bw * bh) as usize];
+        let mut squares = vec![[0.0f64; 3]; (bw * bh) as usize];
+        let mut counts = vec![0u32; (bw * bh) as usize];
+        for (x, y, p) in image.enumerate_pixels() {
+            let i = ((y / f) * bw + x / f) as usize;
+            for c in 0..3 {
+                let v = f64::from(decode_srgb8(p[c]));
+                sums[i][c] += v;
+                squares[i][c] += v * v;
+            }
+            counts[i] += 1;
+        }
+        let n = |i: usize| f64::from(counts[i].max(1));
+        let mean: Vec<[f32; 3]> = (0..sums.len())
+            .map(|i| sums[i].map(|s| (s / n(i)) as f32))
+            .collect();
+        let spread = (0..sums.len())
+            .map(|i| {
+                std::array::from_fn(|c| {
+                    let m = sums[i][c] / n(i);
+                    (squares[i][c] / n(i) - m * m).max(0.0).sqrt() as f32
+                })
+            })
+            .collect();
+        Self {
+            factor: f,
+            width: bw,
+            height: bh,
+            mean,
+            spread,
+        }
+    }
+
+    /// The block that holds pixel (`x`, `y`).
+    pub fn index(&self, x: u32, y: u32) -> usize {
+        ((y / self.factor) * self.width + x / self.factor) as usize
+    }
 }
 
 /// The coarse FLIP of `actual` against `reference` (see the module docs): the mean FLIP of the

@@ -1,11 +1,13 @@
 //! Measurements: percentiles of timings, image error by FLIP (pixel by pixel, and the coarse
 //! FLIP of [`coarse_flip`], which does not punish another random draw of the same grass), grass
-//! coverage, and speed-against-accuracy charts.
+//! coverage, where an error lies by scale ([`with_block_means_of`], [`with_block_spread_of`]),
+//! and speed-against-accuracy charts.
 
 mod band;
 mod chart;
 mod coarse;
 mod coverage;
+mod scale;
 
 pub use band::{band_mask, masked_luminance, masked_mean, ray_distances};
 
@@ -15,6 +17,7 @@ pub use coarse::{
     srgb_to_linear,
 };
 pub use coverage::{COVERAGE_DISTANCE_M, COVERAGE_EPSILON, Coverage, grass_coverage};
+pub use scale::{with_block_means_of, with_block_spread_of};
 
 use thiserror::Error;
 
