@@ -135,12 +135,7 @@ pub fn coarse_flip(
     actual: &image::RgbImage,
     factor: u32,
 ) -> Result<f64, ImageCompareError> {
-    if reference.dimensions() != actual.dimensions() {
-        return Err(ImageCompareError::SizeMismatch {
-            reference: reference.dimensions(),
-            actual: actual.dimensions(),
-        });
-    }
+    super::same_size(reference, actual)?;
     let f = factor.max(1);
     let (r, a) = (
         box_filter_linear(reference, f),

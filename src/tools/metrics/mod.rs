@@ -81,6 +81,21 @@ pub enum ImageCompareError {
     },
 }
 
+/// Two images to compare must be of one size.
+fn same_size(
+    reference: &image::RgbImage,
+    actual: &image::RgbImage,
+) -> Result<(), ImageCompareError> {
+    if reference.dimensions() == actual.dimensions() {
+        Ok(())
+    } else {
+        Err(ImageCompareError::SizeMismatch {
+            reference: reference.dimensions(),
+            actual: actual.dimensions(),
+        })
+    }
+}
+
 /// The FLIP error of an image against its reference.
 #[derive(Clone, Debug)]
 pub struct FlipResult {
@@ -99,12 +114,7 @@ pub fn flip_compare(
     reference: &image::RgbImage,
     actual: &image::RgbImage,
 ) -> Result<FlipResult, ImageCompareError> {
-    if reference.dimensions() != actual.dimensions() {
-        return Err(ImageCompareError::SizeMismatch {
-            reference: reference.dimensions(),
-            actual: actual.dimensions(),
-        });
-    }
+    same_size(reference, actual)?;
     let (w, h) = reference.dimensions();
     let r = nv_flip::FlipImageRgb8::with_data(w, h, reference.as_raw());
     let a = nv_flip::FlipImageRgb8::with_data(w, h, actual.as_raw());
@@ -125,12 +135,7 @@ pub fn flip_error_map(
     reference: &image::RgbImage,
     actual: &image::RgbImage,
 ) -> Result<Vec<f32>, ImageCompareError> {
-    if reference.dimensions() != actual.dimensions() {
-        return Err(ImageCompareError::SizeMismatch {
-            reference: reference.dimensions(),
-            actual: actual.dimensions(),
-        });
-    }
+    same_size(reference, actual)?;
     let (w, h) = reference.dimensions();
     let r = nv_flip::FlipImageRgb8::with_data(w, h, reference.as_raw());
     let a = nv_flip::FlipImageRgb8::with_data(w, h, actual.as_raw());

@@ -14,22 +14,8 @@
 //! the blades; if that raises pixel FLIP, the texture's part of the error cannot be taken away
 //! that way.
 
-use super::ImageCompareError;
 use super::coarse::{Blocks, decode_srgb8, encode_srgb8};
-
-fn same_size(
-    reference: &image::RgbImage,
-    actual: &image::RgbImage,
-) -> Result<(), ImageCompareError> {
-    if reference.dimensions() == actual.dimensions() {
-        Ok(())
-    } else {
-        Err(ImageCompareError::SizeMismatch {
-            reference: reference.dimensions(),
-            actual: actual.dimensions(),
-        })
-    }
-}
+use super::{ImageCompareError, same_size};
 
 /// `actual` with each `factor` x `factor` block's mean colour taken from `reference`, in linear
 /// light: each pixel moved by the difference of the two blocks' means (clamped to the displayable
