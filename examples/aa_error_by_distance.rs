@@ -11,11 +11,13 @@
 //! list, none); PARTS, a comma-separated list of `segments`, `rings`, `plants` and `trees`,
 //! adds the default frame supersampled 4x4 with that part of the truth's settings (blades out
 //! to one view distance): the blade segments, the grass rings (no LOD), every plant's full mesh
-//! unthinned, every tree's; `trees_meshes` the trees' meshes as far as the truth's (thinned as the
-//! default's); and with values, the default frame with those: `segments=NEAR/HIGH/LOW` blade
-//! segments, `trees_thin=METRES/KEEP` the trees' thinning (`PlantSettings::thin_m`, `min_keep`),
-//! `trees_lod=NEAR/FAR` and `plants_lod=NEAR/FAR` the switches, `plants_thin=METRES`, `view=SCALE`
-//! the grass's view distance times SCALE (the far field standing in beyond it); `k=K` the default
+//! unthinned, every tree's; `truth` every setting of the truth's at its whole reach (with
+//! `taa:`, the temporal method drawing the truth's content); `trees_meshes` the trees' meshes as
+//! far as the truth's (thinned as the default's); and with values, the default frame with
+//! those: `segments=NEAR/HIGH/LOW` blade segments, `trees_thin=METRES/KEEP` the trees'
+//! thinning (`PlantSettings::thin_m`, `min_keep`), `trees_lod=NEAR/FAR` and
+//! `plants_lod=NEAR/FAR` the switches, `plants_thin=METRES`, `view=SCALE` the grass's view
+//! distance times SCALE (the far field standing in beyond it); `k=K` the default
 //! frame supersampled K x K (at K other than 4, sampled elsewhere in the pixel than the truth's
 //! sub-samples); parts joined by `+` (`segments=9/3/3+view=0.67`) make one frame with all of
 //! them; a part prefixed `taa:` (`taa:segments=9/3/3+view=0.67`) is the default frame with
@@ -172,14 +174,16 @@ fn main() -> Result<()> {
                 None => (false, part),
             };
             let mut dp = d.clone();
-            let usage = "segments, segments=NEAR/HIGH/LOW, rings, plants, trees, trees_meshes, \
-                         trees_thin=METRES/KEEP, trees_lod=NEAR/FAR, plants_lod=NEAR/FAR, \
-                         plants_thin=METRES, view=SCALE, k=K";
+            let usage = "truth, segments, segments=NEAR/HIGH/LOW, rings, plants, trees, \
+                         trees_meshes, trees_thin=METRES/KEEP, trees_lod=NEAR/FAR, \
+                         plants_lod=NEAR/FAR, plants_thin=METRES, view=SCALE, k=K";
             // Parts joined by `+` apply together to one frame.
             for part in part.split('+') {
                 let trees = dp.tree_settings(&world);
                 match part.split_once('=') {
                     None => match part {
+                        // Every setting of the truth's, at its whole reach.
+                        "truth" => dp = truth_config_reaching(&world, &base, slots, REACH_FACTOR),
                         "segments" => dp.grass.segments = t1.grass.segments,
                         "rings" => dp.grass_rings = t1.grass_rings,
                         "plants" => dp.plants = t1.plants,
