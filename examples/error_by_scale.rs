@@ -49,10 +49,15 @@ fn main() -> Result<()> {
                 verdant::tools::metrics::COARSE_FACTOR
             )?
         );
+        let mut means8 = None;
         for b in BLOCKS {
-            print!(" {:>7.4}", flip(&with_block_means_of(&img, &truth, b)?)?);
+            let means = with_block_means_of(&img, &truth, b)?;
+            print!(" {:>7.4}", flip(&means)?);
+            if b == 8 {
+                means8 = Some(means);
+            }
         }
-        let means8 = with_block_means_of(&img, &truth, 8)?;
+        let means8 = means8.expect("BLOCKS holds 8");
         let mut spread = [0.0; 2];
         for seed in 1..=3 {
             spread[0] += flip(&with_block_spread_of(&img, &truth, 8, seed)?)? / 3.0;

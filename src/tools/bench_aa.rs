@@ -650,18 +650,19 @@ pub fn run_bench_aa(
                 let k = changes.len().max(1) as f64;
                 let flicker = changes.iter().map(|x| x.change).sum::<f64>() / k;
                 let truth_flicker = changes.iter().map(|x| x.truth_change).sum::<f64>() / k;
-                let flips: Vec<f64> = f.iter().map(|x| x.flip).collect();
+                let frame_flips: Vec<f64> = f.iter().map(|x| x.flip).collect();
+                let mean = |of: fn(&AaFrame) -> f64| f.iter().map(of).sum::<f64>() / n.max(1.0);
                 sequences.push(AaSequence {
                     size,
                     method: method.clone(),
                     motion,
-                    flip_mean: flips.iter().sum::<f64>() / n.max(1.0),
-                    coarse_flip_mean: f.iter().map(|x| x.coarse_flip).sum::<f64>() / n.max(1.0),
+                    flip_mean: mean(|x| x.flip),
+                    coarse_flip_mean: mean(|x| x.coarse_flip),
                     flicker,
                     truth_flicker,
                     flicker_ratio: flicker / truth_flicker.max(1e-9),
                     recovery_frames: (motion == Motion::Teleport)
-                        .then(|| recovery_frames(&flips, jump))
+                        .then(|| recovery_frames(&frame_flips, jump))
                         .flatten(),
                 });
             }
