@@ -36,7 +36,8 @@
 //! drawn besides the truth, comma-separated, of `truth_k8`, `truth_reach1`, `truth_reach2`,
 //! `truth_1x`, `truth_2x2`, `default_4x4`, `off`, `msaa` and `taa` (`none` for none):
 //! `truth_k8` alone is 64 renders with blades to the truth's reach, and on a software renderer
-//! the renders asked for are what a view's minutes are spent on.
+//! the renders asked for are what a view's minutes are spent on. With `truth_k8`, every render
+//! (the 4x4 truth among them) is also measured against the truth at 8x8.
 use anyhow::Result;
 use std::sync::Arc;
 use verdant::RendererConfig;
@@ -361,6 +362,23 @@ fn main() -> Result<()> {
             );
         }
         println!();
+    }
+    // With the truth at 8x8 drawn: every render against it too, the 4x4 truth among them (the
+    // 4x4 truth's own sampling error: what an exact frame would err against the 4x4 truth).
+    if let Some((_, k8)) = imgs.iter().find(|(n, _)| n == "truth_k8") {
+        println!("against the truth at 8x8");
+        for (name, img) in imgs.iter().filter(|(n, _)| n != "truth_k8") {
+            let e = flip_error_map(&rgb(k8), &rgb(img))?;
+            let mean = e.iter().map(|&v| v as f64).sum::<f64>() / e.len() as f64;
+            print!("{:14} {:>7.4}", name, mean);
+            for m in &masks {
+                print!(
+                    " {:>9}",
+                    masked_mean(&e, m).map_or("-".into(), |v| format!("{v:.4}"))
+                );
+            }
+            println!();
+        }
     }
     // Brightness by band: the mean linear luminance of each render over the truth's (a
     // systematic difference, not aliasing, moves it away from 1).
