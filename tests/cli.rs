@@ -1631,6 +1631,49 @@ fn bench_aa_measures_bench_lods_settings_as_methods_of_their_own_and_refuses_unk
 }
 
 #[test]
+fn bench_aa_measures_the_paths_views_with_the_bounds_and_the_truths_own_noise() {
+    let tmp = tempfile::tempdir().unwrap();
+    let extra = [
+        "--aa",
+        "off",
+        "--sequences",
+        "still",
+        "--paths",
+        "meadow",
+        "--truth-noise",
+        "--out",
+        "a",
+    ];
+    let out = tiny_bench_aa(tmp.path(), &extra);
+    assert!(
+        out.status.success(),
+        "bench aa failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let paths = std::fs::read_to_string(tmp.path().join("a/aa_paths.csv")).unwrap();
+    let flips = |method: &str| -> Vec<f64> {
+        paths
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .filter(|f| f[2] == method && f[4] == "meadow")
+            .map(|f| f[6].parse().unwrap())
+            .collect()
+    };
+    // Four views of the meadow for the method and each bound: with the truth at 2x2, the
+    // bound truth-2x2 is the truth drawn again by a renderer of its own (within a hundredth of
+    // it), and the truth's own noise, the truth at 4x4 against it, errs less than one sample
+    // a pixel.
+    let (off, same, finer) = (flips("off"), flips("truth-2x2"), flips("truth-4x4"));
+    assert_eq!(flips("default-2x2").len(), 4, "{paths}");
+    assert_eq!((off.len(), same.len(), finer.len()), (4, 4, 4), "{paths}");
+    assert!(same.iter().all(|&f| f < 0.01), "{paths}");
+    for (f, o) in finer.iter().zip(&off) {
+        assert!(*f > 0.0 && f < o, "{paths}");
+    }
+}
+
+#[test]
 fn bench_aa_stopped_part_way_keeps_the_sequences_it_measured() {
     let tmp = tempfile::tempdir().unwrap();
     // The dolly's last frame cannot be written (a folder stands in its place): the run fails

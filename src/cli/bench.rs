@@ -134,6 +134,11 @@ pub(crate) enum BenchCommand {
         run_up: u32,
         #[command(flatten)]
         truth: TruthArgs,
+        /// The paths part also measures the truth's own sampling error: the truth at twice its
+        /// sub-samples a side (8x8 for the 4x4 truth; four times its renders), reported as the
+        /// bound truth-8x8. Its FLIP against the truth is about what an exact frame would err.
+        #[arg(long)]
+        truth_noise: bool,
         /// The camera path whose first view the sequences start from.
         #[arg(long, default_value = "meadow")]
         path: String,
@@ -658,6 +663,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             frames,
             run_up,
             truth,
+            truth_noise,
             path,
             paths,
             sequences,
@@ -673,6 +679,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             run_up,
             truth_k: truth.truth,
             truth_reach: truth.truth_reach,
+            truth_noise,
             path,
             paths: paths.into_iter().filter(|p| !p.is_empty()).collect(),
             motions: sequences,

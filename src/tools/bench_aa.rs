@@ -17,7 +17,8 @@
 //! flight along the path, and beside the methods two bounds ([`Bound`]) that say where their
 //! error comes from: the default frame supersampled like the truth (what the frame draws
 //! differently from the truth, which no anti-aliasing removes) and the truth's grass at 2 x 2
-//! sub-samples (what four samples a pixel leave of the aliasing). Speed: GPU time per frame of each method (timestamp queries; the
+//! sub-samples (what four samples a pixel leave of the aliasing); with `--truth-noise` a third,
+//! the truth at twice its sub-samples a side (the truth's own sampling error). Speed: GPU time per frame of each method (timestamp queries; the
 //! wall time without them), timed in interleaved rounds at the still view (see
 //! [`crate::tools::timing`]). Outputs: `aa_frames.csv` (every frame), `aa_sequences.csv`,
 //! `aa_paths.csv`, `aa.json`, per size a chart of error against GPU time with the Pareto
@@ -80,6 +81,10 @@ pub struct BenchAaOptions {
     pub truth_k: u32,
     /// How far the truth draws blades, in default view distances (1..=[`crate::tools::truth::REACH_FACTOR`]).
     pub truth_reach: f64,
+    /// Whether the paths part also measures the truth's own sampling error
+    /// ([`Bound::TruthFiner`]: the truth at twice its sub-samples a side, four times its
+    /// renders), with 2..=[`crate::tools::truth::MAX_K`] / 2 sub-samples a side of the truth.
+    pub truth_noise: bool,
     /// The path whose first view the sequences start from.
     pub path: String,
     /// The paths of the paths part (none: skip it).
@@ -113,6 +118,7 @@ impl Default for BenchAaOptions {
             run_up: 16,
             truth_k: 4,
             truth_reach: crate::tools::truth::REACH_FACTOR,
+            truth_noise: false,
             path: "meadow".into(),
             paths: vec!["meadow".into(), "tour".into(), "wind-tour".into()],
             motions: Motion::ALL.to_vec(),
@@ -149,6 +155,24 @@ impl BenchAaOptions {
         }
         crate::tools::truth::check_k("--truth", self.truth_k)?;
         crate::tools::truth::check_reach("--truth-reach", self.truth_reach)?;
+        if self.truth_noise && self.truth_k < 2 {
+            bail!(
+                "--truth-noise draws the truth at twice its sub-samples a side: at --truth 1 that \
+                 is the bound truth-2x2 already"
+            );
+        }
+        if self.truth_noise && 2 * self.truth_k > crate::tools::truth::MAX_K {
+            bail!(
+                "--truth-noise draws the truth at twice its sub-samples a side: --truth {} would \
+                 need {}, more than {}",
+                self.truth_k,
+                2 * self.truth_k,
+                crate::tools::truth::MAX_K
+            );
+        }
+        if self.truth_noise && self.paths.is_empty() {
+            bail!("--truth-noise is measured on the paths' views, and --paths names none");
+        }
         crate::tools::bench::check_timing(self.warmup_frames, self.timed_frames, self.rounds)?;
         Ok(())
     }
@@ -338,8 +362,9 @@ pub struct AaPathView {
 }
 
 /// What the paths part measures beside the methods, to say where their error comes from: two
-/// renders of the same views that no real-time method is, each drawn as the truth is (K x K
-/// sub-samples averaged in linear light, stepped through the same frames).
+/// renders of the same views that no real-time method is (three with `--truth-noise`), each
+/// drawn as the truth is (sub-samples averaged in linear light, stepped through the same
+/// frames).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Bound {
     /// The default frame's settings (LOD, segments, view distance, far field, plants' levels)
@@ -350,17 +375,34 @@ pub enum Bound {
     /// The truth's settings with 2 x 2 sub-samples: the exact grass at four full samples a
     /// pixel. Its error is what four samples a pixel leave of the aliasing.
     Truth2x2,
+    /// The truth itself at twice its sub-samples a side (8 x 8 for the 4 x 4 truth), placed
+    /// elsewhere in the pixel than the truth's: its error against the truth is the truth's own
+    /// sampling error, about what an exact frame would err against the truth (a little more:
+    /// its own sampling error, a quarter of the truth's variance, is in it). No frame gets
+    /// much below it. Measured with `--truth-noise` only: it is four times the truth's renders.
+    TruthFiner,
 }
 
 impl Bound {
-    /// Both, in report order.
+    /// The two measured unless asked for more, in report order.
     pub const ALL: [Bound; 2] = [Bound::DefaultSupersampled, Bound::Truth2x2];
+
+    /// The bounds measured, in report order: [`Self::ALL`], and with `truth_noise`
+    /// [`Bound::TruthFiner`] after them.
+    pub fn measured(truth_noise: bool) -> Vec<Bound> {
+        let mut v = Self::ALL.to_vec();
+        if truth_noise {
+            v.push(Bound::TruthFiner);
+        }
+        v
+    }
 
     /// The name in reports (`k`: the truth's sub-samples a side).
     pub fn name(self, k: u32) -> String {
         match self {
             Bound::DefaultSupersampled => format!("default-{k}x{k}"),
             Bound::Truth2x2 => "truth-2x2".into(),
+            Bound::TruthFiner => format!("truth-{0}x{0}", 2 * k),
         }
     }
 
@@ -385,6 +427,10 @@ impl Bound {
             Bound::Truth2x2 => (
                 crate::tools::truth::truth_config_reaching(world, &base, atlas_slots, reach),
                 2,
+            ),
+            Bound::TruthFiner => (
+                crate::tools::truth::truth_config_reaching(world, &base, atlas_slots, reach),
+                2 * k,
             ),
         }
     }
@@ -691,9 +737,9 @@ pub fn run_bench_aa(
         let mut bounds: Vec<(Bound, Truth)> = if paths.is_empty() {
             Vec::new()
         } else {
-            Bound::ALL
-                .iter()
-                .map(|&b| {
+            Bound::measured(opts.truth_noise)
+                .into_iter()
+                .map(|b| {
                     Ok((
                         b,
                         b.renderer(&ctx, &world, size, opts.truth_k, opts.truth_reach)?,
@@ -975,6 +1021,38 @@ mod tests {
         assert_ne!(reach(&c), reach(&default));
         assert_eq!(Bound::DefaultSupersampled.name(4), "default-4x4");
         assert_eq!(Bound::Truth2x2.name(4), "truth-2x2");
+        // The truth's own sampling error: the truth's settings at twice its sub-samples a side,
+        // measured only when asked for.
+        let (c, k) = Bound::TruthFiner.config(&world, 4, 4.0, 985);
+        assert_eq!(k, 8);
+        assert_eq!(c.grass.segments, truth.grass.segments);
+        assert_eq!(reach(&c), reach(&truth));
+        assert_eq!(c.plants.lod_m, truth.plants.lod_m);
+        assert_eq!(Bound::TruthFiner.name(4), "truth-8x8");
+        assert_eq!(Bound::TruthFiner.name(2), "truth-4x4");
+        assert_eq!(Bound::measured(false), Bound::ALL);
+        assert_eq!(Bound::measured(true).last(), Some(&Bound::TruthFiner));
+    }
+
+    #[test]
+    fn the_truths_noise_needs_room_for_twice_its_sub_samples_and_a_path() {
+        let mut opts = BenchAaOptions {
+            truth_noise: true,
+            ..BenchAaOptions::default()
+        };
+        assert!(opts.validate().is_ok());
+        opts.truth_k = 8;
+        let e = opts.validate().unwrap_err().to_string();
+        assert!(e.contains("--truth 8") && e.contains("16"), "{e}");
+        opts.truth_k = 1;
+        let e = opts.validate().unwrap_err().to_string();
+        assert!(e.contains("--truth 1") && e.contains("truth-2x2"), "{e}");
+        opts.truth_k = 4;
+        opts.paths.clear();
+        let e = opts.validate().unwrap_err().to_string();
+        assert!(e.contains("--truth-noise") && e.contains("--paths"), "{e}");
+        opts.truth_noise = false;
+        assert!(opts.validate().is_ok());
     }
 
     #[test]
