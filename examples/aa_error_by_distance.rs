@@ -347,12 +347,9 @@ fn main() -> Result<()> {
         );
     }
     println!();
-    for (name, img) in &imgs {
-        img.save(out.join(format!("{pathname}_{w}x{h}_{name}.png")))?;
-        if name == "truth" {
-            continue;
-        }
-        let e = flip_error_map(&rgb(&truth), &rgb(img))?;
+    // A render's row: its mean FLIP against `reference` over the frame and in each band.
+    let row = |reference: &image::RgbaImage, name: &str, img: &image::RgbaImage| -> Result<()> {
+        let e = flip_error_map(&rgb(reference), &rgb(img))?;
         let mean = e.iter().map(|&v| v as f64).sum::<f64>() / e.len() as f64;
         print!("{:14} {:>7.4}", name, mean);
         for m in &masks {
@@ -362,22 +359,20 @@ fn main() -> Result<()> {
             );
         }
         println!();
+        Ok(())
+    };
+    for (name, img) in &imgs {
+        img.save(out.join(format!("{pathname}_{w}x{h}_{name}.png")))?;
+        if name != "truth" {
+            row(&truth, name, img)?;
+        }
     }
     // With the truth at 8x8 drawn: every render against it too, the 4x4 truth among them (the
     // 4x4 truth's own sampling error: what an exact frame would err against the 4x4 truth).
     if let Some((_, k8)) = imgs.iter().find(|(n, _)| n == "truth_k8") {
         println!("against the truth at 8x8");
         for (name, img) in imgs.iter().filter(|(n, _)| n != "truth_k8") {
-            let e = flip_error_map(&rgb(k8), &rgb(img))?;
-            let mean = e.iter().map(|&v| v as f64).sum::<f64>() / e.len() as f64;
-            print!("{:14} {:>7.4}", name, mean);
-            for m in &masks {
-                print!(
-                    " {:>9}",
-                    masked_mean(&e, m).map_or("-".into(), |v| format!("{v:.4}"))
-                );
-            }
-            println!();
+            row(k8, name, img)?;
         }
     }
     // Brightness by band: the mean linear luminance of each render over the truth's (a
