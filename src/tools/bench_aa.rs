@@ -14,7 +14,8 @@
 //!
 //! The **paths** part measures what a user flies: at four times spread along each named path
 //! (default: meadow, tour, wind-tour), FLIP against the truth after the run-up's frames of
-//! flight along the path, and beside the methods two bounds ([`Bound`]) that say where their
+//! flight along the path, every renderer started afresh for it (a frame carries state into the
+//! next, and the sequences would leave theirs in the truth and the methods only), and beside the methods two bounds ([`Bound`]) that say where their
 //! error comes from: the default frame supersampled like the truth (what the frame draws
 //! differently from the truth, which no anti-aliasing removes) and the truth's grass at 2 x 2
 //! sub-samples (what four samples a pixel leave of the aliasing); with `--truth-noise` a third,
@@ -621,24 +622,26 @@ pub fn run_bench_aa(
     let mut timings = Vec::new();
     for &size in &opts.sizes {
         let mut reference = truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?;
-        let mut scenes: Vec<(String, Scene)> = opts
-            .variants()
-            .into_iter()
-            .flat_map(|(name, m, taa)| {
-                configs.iter().map(move |(suffix, config)| {
-                    let mut config = config.clone();
-                    config.aa = m;
-                    config.taa = taa;
-                    (format!("{name}{suffix}"), config)
+        let make_scenes = || -> Result<Vec<(String, Scene)>> {
+            opts.variants()
+                .into_iter()
+                .flat_map(|(name, m, taa)| {
+                    configs.iter().map(move |(suffix, config)| {
+                        let mut config = config.clone();
+                        config.aa = m;
+                        config.taa = taa;
+                        (format!("{name}{suffix}"), config)
+                    })
                 })
-            })
-            .map(|(name, config)| {
-                Ok((
-                    name,
-                    Scene::new(&ctx, world.clone(), size.0, size.1, config)?,
-                ))
-            })
-            .collect::<Result<_>>()?;
+                .map(|(name, config)| {
+                    Ok((
+                        name,
+                        Scene::new(&ctx, world.clone(), size.0, size.1, config)?,
+                    ))
+                })
+                .collect()
+        };
+        let mut scenes = make_scenes()?;
         for &motion in &opts.motions {
             // Every method and the truth step through the same frames together.
             let mut truth_prev: Option<RgbaImage> = None;
@@ -733,7 +736,18 @@ pub fn run_bench_aa(
             write_tables(&opts.out, &frames, &sequences, &path_views)?;
         }
         // The paths: four views spread along each, reached by flight along it; the bounds
-        // step through the same frames as the truth.
+        // step through the same frames as the truth. Every renderer starts them fresh, as the
+        // bounds do: a frame carries state into the next (the wind field's attack and release,
+        // the walker's fading trail, the sway springs), and the sequences left theirs in the
+        // truth and the methods.
+        let mut reference = if paths.is_empty() {
+            reference
+        } else {
+            drop(reference);
+            scenes.clear();
+            scenes = make_scenes()?;
+            truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?
+        };
         let mut bounds: Vec<(Bound, Truth)> = if paths.is_empty() {
             Vec::new()
         } else {
