@@ -15,12 +15,13 @@
 //! The **paths** part measures what a user flies: at four times spread along each named path
 //! (default: meadow, tour, wind-tour), FLIP against the truth after the run-up's frames of
 //! flight along the path, every renderer started afresh for it (a frame carries state into the
-//! next, and the sequences would leave theirs in the truth and the methods only), and beside the methods two bounds ([`Bound`]) that say where their
-//! error comes from: the default frame supersampled like the truth (what the frame draws
-//! differently from the truth, which no anti-aliasing removes) and the truth's grass at 2 x 2
-//! sub-samples (what four samples a pixel leave of the aliasing); with `--truth-noise` a third,
-//! the truth at twice its sub-samples a side (the truth's own sampling error). Speed: GPU time per frame of each method (timestamp queries; the
-//! wall time without them), timed in interleaved rounds at the still view (see
+//! next, and the sequences would leave theirs in the truth and the methods only), and beside
+//! the methods two bounds ([`Bound`]) that say where their error comes from: the default frame
+//! supersampled like the truth (what the frame draws differently from the truth, which no
+//! anti-aliasing removes) and the truth's grass at 2 x 2 sub-samples (what four samples a pixel
+//! leave of the aliasing); with `--truth-noise` a third, the truth at twice its sub-samples a
+//! side (the truth's own sampling error). Speed: GPU time per frame of each method (timestamp
+//! queries; the wall time without them), timed in interleaved rounds at the still view (see
 //! [`crate::tools::timing`]). Outputs: `aa_frames.csv` (every frame), `aa_sequences.csv`,
 //! `aa_paths.csv`, `aa.json`, per size a chart of error against GPU time with the Pareto
 //! front (`aa_WxH.png`), and the last frame of each sequence, each method's and the truth's,
@@ -425,13 +426,9 @@ impl Bound {
                 },
                 k,
             ),
-            Bound::Truth2x2 => (
+            Bound::Truth2x2 | Bound::TruthFiner => (
                 crate::tools::truth::truth_config_reaching(world, &base, atlas_slots, reach),
-                2,
-            ),
-            Bound::TruthFiner => (
-                crate::tools::truth::truth_config_reaching(world, &base, atlas_slots, reach),
-                2 * k,
+                if self == Bound::Truth2x2 { 2 } else { 2 * k },
             ),
         }
     }
@@ -740,18 +737,14 @@ pub fn run_bench_aa(
         // bounds do: a frame carries state into the next (the wind field's attack and release,
         // the walker's fading trail, the sway springs), and the sequences left theirs in the
         // truth and the methods.
-        let mut reference = if paths.is_empty() {
-            reference
+        let (mut reference, mut bounds): (Truth, Vec<(Bound, Truth)>) = if paths.is_empty() {
+            (reference, Vec::new())
         } else {
             drop(reference);
             scenes.clear();
             scenes = make_scenes()?;
-            truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?
-        };
-        let mut bounds: Vec<(Bound, Truth)> = if paths.is_empty() {
-            Vec::new()
-        } else {
-            Bound::measured(opts.truth_noise)
+            let truth = truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?;
+            let bounds = Bound::measured(opts.truth_noise)
                 .into_iter()
                 .map(|b| {
                     Ok((
@@ -759,7 +752,8 @@ pub fn run_bench_aa(
                         b.renderer(&ctx, &world, size, opts.truth_k, opts.truth_reach)?,
                     ))
                 })
-                .collect::<Result<_>>()?
+                .collect::<Result<_>>()?;
+            (truth, bounds)
         };
         for path in &paths {
             let (a, b) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
