@@ -1528,6 +1528,13 @@ fn tiny_bench_aa(dir: &Path, extra: &[&str]) -> Output {
         "--rounds",
         "1",
     ];
+    // An option given in `extra` replaces the default's (the truth's sub-samples, say).
+    while let Some(at) = args
+        .iter()
+        .position(|a| a.starts_with("--") && extra.contains(a))
+    {
+        args.drain(at..at + 2);
+    }
     args.extend_from_slice(extra);
     verdant(&args, dir)
 }
@@ -1672,6 +1679,53 @@ fn bench_aa_measures_the_paths_views_with_the_bounds_and_the_truths_own_noise() 
     for (f, o) in finer.iter().zip(&off) {
         assert!(*f > 0.0 && f < o, "{paths}");
     }
+}
+
+#[test]
+fn bench_aa_draws_the_truths_content_as_a_setting() {
+    let tmp = tempfile::tempdir().unwrap();
+    // With the truth at one sample a pixel (at the pixels' centres), the truth's content drawn
+    // without anti-aliasing is the truth itself, in the sequence and along the path alike.
+    let extra = [
+        "--truth",
+        "1",
+        "--aa",
+        "off",
+        "--sequences",
+        "still",
+        "--paths",
+        "meadow",
+        "--settings",
+        "truth content",
+        "--out",
+        "a",
+    ];
+    let out = tiny_bench_aa(tmp.path(), &extra);
+    assert!(
+        out.status.success(),
+        "bench aa failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = tmp.path().join("a");
+    let column = |file: &str, method_col: usize, method: &str, col: usize| -> Vec<f64> {
+        std::fs::read_to_string(dir.join(file))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(str::to_owned).collect::<Vec<_>>())
+            .filter(|f| f[method_col] == method)
+            .map(|f| f[col].parse().unwrap())
+            .collect()
+    };
+    let content = column("aa_paths.csv", 2, "off+truth-content", 6);
+    let off = column("aa_paths.csv", 2, "off", 6);
+    assert_eq!((content.len(), off.len()), (4, 4));
+    assert!(content.iter().all(|&f| f == 0.0), "{content:?}");
+    assert!(off.iter().any(|&f| f > 0.0), "{off:?}");
+    let still = column("aa_sequences.csv", 2, "off+truth-content", 4);
+    assert_eq!(still, vec![0.0]);
+    // It is timed like every method.
+    assert_eq!(column("aa_timing.csv", 2, "off+truth-content", 3).len(), 1);
 }
 
 #[test]

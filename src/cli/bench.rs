@@ -150,7 +150,9 @@ pub(crate) enum BenchCommand {
         sequences: Vec<verdant::tools::bench_aa::Motion>,
         /// bench lod's settings, by name, comma-separated: each method is measured with each
         /// of them too, reported as METHOD+SETTING (its spaces and slashes as dashes:
-        /// taa+segments-7-3-3-view-x1.5); the default's settings are always measured.
+        /// taa+segments-7-3-3-view-x1.5); the default's settings are always measured. "truth
+        /// content" draws the truth's content (its settings at its reach) at one sample a
+        /// pixel: what the scene the truth draws costs, and how each method samples it.
         #[arg(long, value_delimiter = ',')]
         settings: Vec<String>,
         #[command(flatten)]

@@ -100,6 +100,7 @@ pub struct BenchAaOptions {
     /// bench lod's settings ([`crate::tools::bench_lod::lod_settings`]), by name: each method
     /// is measured with each of them too, as a method of its own named `METHOD+SETTING`
     /// ([`setting_label`]); the renderer's default settings are always measured.
+    /// [`TRUTH_CONTENT`] among them is the truth's content at one sample a pixel.
     pub settings: Vec<String>,
     /// Untimed frames before each timing measurement (default: by adapter).
     pub warmup_frames: Option<u32>,
@@ -520,6 +521,21 @@ pub fn recovery_frames(flips: &[f64], jump: usize) -> Option<u32> {
 /// The truth of [`crate::tools::truth`] at `size` (k x k sub-samples in linear light, the most
 /// accurate grass, blades out to `reach` view distances): what every method is measured
 /// against.
+/// The name of the setting (`--settings`) that draws the truth's content at one sample a
+/// pixel: every setting of the truth's at its reach (blades at full density and the most
+/// segments out to it, every plant's and tree's mesh, no far field under the blades), so that
+/// the methods are measured on the scene the truth draws, and its GPU time says what drawing
+/// that scene costs.
+pub const TRUTH_CONTENT: &str = "truth content";
+
+/// The renderer's settings drawing the truth's content out to `reach` view distances, at one
+/// sample a pixel ([`TRUTH_CONTENT`]).
+fn truth_content_config(ctx: &GpuContext, world: &World, reach: f64) -> RendererConfig {
+    let slots = crate::tools::truth::atlas_slots(world, &ctx.device);
+    let base = RendererConfig::for_world(world);
+    crate::tools::truth::truth_config_reaching(world, &base, slots, reach)
+}
+
 fn truth_for(
     ctx: &GpuContext,
     world: &World,
@@ -527,10 +543,7 @@ fn truth_for(
     k: u32,
     reach: f64,
 ) -> Result<Truth> {
-    let slots = crate::tools::truth::atlas_slots(world, &ctx.device);
-    let base = RendererConfig::for_world(world);
-    let config = crate::tools::truth::truth_config_reaching(world, &base, slots, reach);
-    supersampled(ctx, world, size, k, config)
+    supersampled(ctx, world, size, k, truth_content_config(ctx, world, reach))
 }
 
 /// A renderer of `world`'s frames at `size` drawn with `config`, k x k sub-samples each
@@ -588,23 +601,30 @@ pub fn run_bench_aa(
         .iter()
         .map(|n| crate::tools::camera_path(&world, &opts.world, Some(n)))
         .collect::<Result<_>>()?;
-    // The default's settings, then each named one (the default named too is measured once).
+    // The default's settings, then each named one (the default named too is measured once),
+    // then the truth's content where it is named.
     let named: Vec<String> = opts
         .settings
         .iter()
-        .filter(|n| n.as_str() != "default")
+        .filter(|n| n.as_str() != "default" && n.as_str() != TRUTH_CONTENT)
         .cloned()
         .collect();
     let settings = crate::tools::bench_lod::named_settings(
         &crate::tools::bench_lod::lod_settings(&world),
         &named,
     )?;
+    let out_dir = OutDir::create_for(&opts.out, "bench aa")?;
+    let ctx = GpuContext::new()?;
     let mut configs = vec![(String::new(), RendererConfig::for_world(&world))];
     for s in &settings {
         configs.push((format!("+{}", setting_label(&s.name)), s.config(&world)));
     }
-    let out_dir = OutDir::create_for(&opts.out, "bench aa")?;
-    let ctx = GpuContext::new()?;
+    if opts.settings.iter().any(|n| n == TRUTH_CONTENT) {
+        configs.push((
+            format!("+{}", setting_label(TRUTH_CONTENT)),
+            truth_content_config(&ctx, &world, opts.truth_reach),
+        ));
+    }
     let gpu = ctx.timestamps;
     let counts = FrameCounts::for_adapter(&ctx.adapter.get_info()).with(
         opts.warmup_frames,
