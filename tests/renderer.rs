@@ -658,3 +658,41 @@ fn the_terrain_depth_capture_needs_a_depth_target_it_can_copy() {
         "{e}"
     );
 }
+
+#[test]
+fn passes_past_the_timers_room_are_counted_untimed_and_a_frame_has_room_for_every_batch() {
+    let ctx = verdant::gpu::GpuContext::new().expect("a GPU adapter (software Vulkan will do)");
+    assert!(ctx.timestamps, "the adapter has no timestamp queries");
+    let mut timer = verdant::gpu::GpuTimer::new(&ctx.device, &ctx.queue, true, 2);
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    for frame in 0..2 {
+        timer.begin_frame();
+        for i in 0..3 {
+            let writes = timer.compute_pass(&format!("pass {i}"));
+            assert_eq!(writes.is_some(), i < 2, "frame {frame}, pass {i}");
+            drop(encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: None,
+                timestamp_writes: writes,
+            }));
+        }
+        assert_eq!(timer.names(), ["pass 0", "pass 1"]);
+        // Counted afresh each frame.
+        assert_eq!(timer.untimed(), 1);
+    }
+    timer.resolve(&mut encoder);
+    ctx.queue.submit([encoder.finish()]);
+    // The renderer's timer: two passes for every batch of the most grass jobs a frame takes.
+    let batches = verdant::grass::renderer::MAX_JOBS.div_ceil(verdant::grass::BATCH_TILES);
+    assert!(verdant::renderer::MAX_TIMED_PASSES >= 2 * batches + 32);
+    // and a query set of that many is one the device makes.
+    let scope = ctx.device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let full = verdant::gpu::GpuTimer::new(
+        &ctx.device,
+        &ctx.queue,
+        true,
+        verdant::renderer::MAX_TIMED_PASSES,
+    );
+    let error = pollster::block_on(scope.pop());
+    assert!(error.is_none(), "{error:?}");
+    assert!(full.enabled());
+}

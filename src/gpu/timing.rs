@@ -13,6 +13,10 @@ pub type PassTimes = Vec<(String, f64)>;
 pub struct GpuTimer {
     inner: Option<TimerInner>,
     names: Vec<String>,
+    /// Passes of this frame that asked for timestamps beyond the timer's room.
+    untimed: u32,
+    /// Whether the log has said that passes went untimed.
+    warned: bool,
 }
 
 struct TimerInner {
@@ -48,6 +52,8 @@ impl GpuTimer {
         Self {
             inner,
             names: Vec::new(),
+            untimed: 0,
+            warned: false,
         }
     }
 
@@ -59,12 +65,27 @@ impl GpuTimer {
     /// Starts a new frame: forgets the passes of the last one.
     pub fn begin_frame(&mut self) {
         self.names.clear();
+        self.untimed = 0;
+    }
+
+    /// How many passes of this frame asked for timestamps when the timer had no room left:
+    /// their time is missing from [`Self::times`], so the frame's sum falls short of it.
+    pub fn untimed(&self) -> u32 {
+        self.untimed
     }
 
     fn next_pair(&mut self, name: &str) -> Option<(&wgpu::QuerySet, u32)> {
         let inner = self.inner.as_ref()?;
         let index = self.names.len() as u32;
         if index >= inner.max_passes {
+            if !self.warned {
+                log::warn!(
+                    "GPU timing: pass {name:?} and those after it go untimed, past the {} a frame has room for",
+                    inner.max_passes
+                );
+                self.warned = true;
+            }
+            self.untimed += 1;
             return None;
         }
         self.names.push(name.to_owned());

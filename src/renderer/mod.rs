@@ -76,6 +76,14 @@ use crate::world::{TileId, World};
 /// are still on their way gets no figures (counted in [`Renderer::stats_dropped`]).
 pub const READBACK_SLOTS: usize = 4;
 
+/// Passes a frame can time: two for each batch of grass jobs (generation and drawing; the
+/// most jobs a frame takes, [`crate::grass::renderer::MAX_JOBS`], in batches of
+/// [`crate::grass::BATCH_TILES`]), and room for every other stage's. A frame of the truth's
+/// content (blades out to nine view distances) has more than 64 passes; a pass past the room
+/// would go untimed ([`GpuTimer::untimed`]) and the frame's GPU time fall short.
+pub const MAX_TIMED_PASSES: u32 =
+    2 * crate::grass::renderer::MAX_JOBS.div_ceil(crate::grass::BATCH_TILES) + 64;
+
 /// Delivered figures kept until taken ([`Renderer::take_stats`]); older ones are dropped.
 pub const MAX_READY_STATS: usize = 2 * READBACK_SLOTS;
 
@@ -420,7 +428,7 @@ impl Renderer {
             None => None,
         };
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let timer = GpuTimer::new(device, queue, timestamps, 64);
+        let timer = GpuTimer::new(device, queue, timestamps, MAX_TIMED_PASSES);
         let readback = StatsRing::new(device, timer.capacity_bytes());
         let holes = HoleCheck::new(device, &atlas);
         let taa = (config.aa == AntiAliasing::Taa).then(|| Taa::new(device, &targets, config.taa));
