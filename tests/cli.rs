@@ -1724,8 +1724,11 @@ fn bench_aa_draws_the_truths_content_as_a_setting() {
     assert!(off.iter().any(|&f| f > 0.0), "{off:?}");
     let still = column("aa_sequences.csv", 2, "off+truth-content", 4);
     assert_eq!(still, vec![0.0]);
-    // It is timed like every method.
+    // It is timed like every method, and the report says it was measured.
     assert_eq!(column("aa_timing.csv", 2, "off+truth-content", 3).len(), 1);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("aa.json")).unwrap()).unwrap();
+    assert_eq!(report["truth_content"], serde_json::Value::Bool(true));
 }
 
 #[test]

@@ -482,6 +482,8 @@ pub struct BenchAaReport {
     pub timings: Vec<AaTiming>,
     /// The bench lod settings measured besides the default (`--settings`).
     pub settings: Vec<crate::tools::bench_lod::LodSetting>,
+    /// Whether the truth's content was measured as a setting too ([`TRUTH_CONTENT`]).
+    pub truth_content: bool,
     /// Timing frame counts.
     pub counts: FrameCounts,
 }
@@ -875,6 +877,7 @@ pub fn run_bench_aa(
         paths: path_views,
         timings,
         settings,
+        truth_content: opts.settings.iter().any(|n| n == TRUTH_CONTENT),
         counts,
     };
     write_outputs(opts, &report)?;
