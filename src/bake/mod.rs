@@ -1,6 +1,6 @@
 //! The baker: turns a DEM ([`Dem`]) into a world: a pyramid of stored tiles and `world.toml`.
 //!
-//! 0. The DEM is opened ([`source`]): a file small enough for a quarter of the memory limit
+//! 0. The DEM is opened (`source`): a file small enough for a quarter of the memory limit
 //!    is read whole ([`Dem::load_with`]: GeoTIFF, SRTM `.hgt` or PNG + sidecar, told apart by
 //!    content) and its nodata samples filled; a larger one, one over HTTP, and several files
 //!    (a folder or a VRT, joined by [`crate::world::mosaic`]) are read in filled chunks of

@@ -12,7 +12,7 @@
 //! - the **calibration sample**: the derivation is fitted on the data area, or on a window of
 //!   it centred on the world where the whole would not fit;
 //! - the DEM: a single file whole; a mosaic's files and chunks in caches (see
-//!   [`super::source`]).
+//!   `super::source`).
 
 use crate::world::error::WorldError;
 use crate::world::tile::Pyramid;

@@ -1,5 +1,5 @@
 //! Procedural plant meshes: flowers, ferns, broadleaf bushes and trees (a broadleaf and a
-//! conifer, [`trees`]), with Crysis' bending channels
+//! conifer, `trees`), with Crysis' bending channels
 //! (GPU Gems 3, ch. 16) painted into their vertices, at two levels of detail plus a far card.
 //!
 //! Every random choice of a leaf, frond or branch is drawn from a stream of its own (keyed by the

@@ -68,11 +68,11 @@ fn erf(x: f32) -> f32 {
 }
 
 /// The mean position along the blades of what a view of optical depth `depth` sees of them,
-/// and its mean square (x: E[t], y: E[t^2]; 0 root, 1 tip). A blade is a triangle narrowing to
+/// and its mean square (x: `E[t]`, y: `E[t^2]`; 0 root, 1 tip). A blade is a triangle narrowing to
 /// its tip, so the blades above the height of position t hide it in proportion to (1 - t)^2:
 /// the part seen at 1 - t = s is weighted by s exp(-depth s^2), the blade's width there times
 /// the chance of seeing it. Grazing views see the tips; views from above see the blades whole
-/// (E[t] 1/3, the triangle's own mean).
+/// (`E[t]` 1/3, the triangle's own mean).
 pub fn visible_moments(depth: f32) -> Vec2 {
     let u = depth.clamp(0.05, 60.0);
     let e = (-u).exp();
@@ -84,8 +84,8 @@ pub fn visible_moments(depth: f32) -> Vec2 {
 }
 
 /// What the far field's grass of a type shows at a view of optical depth `depth`, before its
-/// light: the mean of the blade's colour from `base` (root) to `tip` over the part seen ([0]),
-/// and the mean of that colour times the position along the blade ([1]), which the blades'
+/// light: the mean of the blade's colour from `base` (root) to `tip` over the part seen (`[0]`),
+/// and the mean of that colour times the position along the blade (`[1]`), which the blades'
 /// light needs, since their ambient occlusion rises from root to tip.
 pub fn visible_albedo(base: Vec3, tip: Vec3, depth: f32) -> [Vec3; 2] {
     let m = visible_moments(depth);
