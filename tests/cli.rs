@@ -1637,6 +1637,19 @@ fn bench_aa_measures_bench_lods_settings_as_methods_of_their_own_and_refuses_unk
     assert_eq!(json["settings"].as_array().unwrap().len(), 1);
 }
 
+/// Column `col` of the rows of bench aa's table `file` in `dir` whose method (the third
+/// column of every table) is `method`, as numbers.
+fn aa_column(dir: &Path, file: &str, method: &str, col: usize) -> Vec<f64> {
+    std::fs::read_to_string(dir.join(file))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|f| f[2] == method)
+        .map(|f| f[col].parse().unwrap())
+        .collect()
+}
+
 #[test]
 fn bench_aa_measures_the_paths_views_with_the_bounds_and_the_truths_own_noise() {
     let tmp = tempfile::tempdir().unwrap();
@@ -1657,16 +1670,10 @@ fn bench_aa_measures_the_paths_views_with_the_bounds_and_the_truths_own_noise() 
         "bench aa failed: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let paths = std::fs::read_to_string(tmp.path().join("a/aa_paths.csv")).unwrap();
-    let flips = |method: &str| -> Vec<f64> {
-        paths
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').collect::<Vec<_>>())
-            .filter(|f| f[2] == method && f[4] == "meadow")
-            .map(|f| f[6].parse().unwrap())
-            .collect()
-    };
+    let dir = tmp.path().join("a");
+    let paths = std::fs::read_to_string(dir.join("aa_paths.csv")).unwrap();
+    // (Only the meadow is measured: every row is one of its views.)
+    let flips = |method: &str| aa_column(&dir, "aa_paths.csv", method, 6);
     // Four views of the meadow for the method and each bound: with the truth at 2x2, the
     // bound truth-2x2 is the truth drawn again by a renderer of its own, from the same fresh
     // start (the sequence before left its state in the truth and the method, and the paths
@@ -1707,25 +1714,18 @@ fn bench_aa_draws_the_truths_content_as_a_setting() {
         String::from_utf8_lossy(&out.stderr)
     );
     let dir = tmp.path().join("a");
-    let column = |file: &str, method_col: usize, method: &str, col: usize| -> Vec<f64> {
-        std::fs::read_to_string(dir.join(file))
-            .unwrap()
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').map(str::to_owned).collect::<Vec<_>>())
-            .filter(|f| f[method_col] == method)
-            .map(|f| f[col].parse().unwrap())
-            .collect()
-    };
-    let content = column("aa_paths.csv", 2, "off+truth-content", 6);
-    let off = column("aa_paths.csv", 2, "off", 6);
+    let content = aa_column(&dir, "aa_paths.csv", "off+truth-content", 6);
+    let off = aa_column(&dir, "aa_paths.csv", "off", 6);
     assert_eq!((content.len(), off.len()), (4, 4));
     assert!(content.iter().all(|&f| f == 0.0), "{content:?}");
     assert!(off.iter().any(|&f| f > 0.0), "{off:?}");
-    let still = column("aa_sequences.csv", 2, "off+truth-content", 4);
+    let still = aa_column(&dir, "aa_sequences.csv", "off+truth-content", 4);
     assert_eq!(still, vec![0.0]);
     // It is timed like every method, and the report says it was measured.
-    assert_eq!(column("aa_timing.csv", 2, "off+truth-content", 3).len(), 1);
+    assert_eq!(
+        aa_column(&dir, "aa_timing.csv", "off+truth-content", 3).len(),
+        1
+    );
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("aa.json")).unwrap()).unwrap();
     assert_eq!(report["truth_content"], serde_json::Value::Bool(true));

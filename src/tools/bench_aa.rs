@@ -520,9 +520,6 @@ pub fn recovery_frames(flips: &[f64], jump: usize) -> Option<u32> {
     Some(last_bad.map_or(0, |i| i as u32 + 1))
 }
 
-/// The truth of [`crate::tools::truth`] at `size` (k x k sub-samples in linear light, the most
-/// accurate grass, blades out to `reach` view distances): what every method is measured
-/// against.
 /// The name of the setting (`--settings`) that draws the truth's content at one sample a
 /// pixel: every setting of the truth's at its reach (blades at full density and the most
 /// segments out to it, every plant's and tree's mesh, no far field under the blades), so that
@@ -538,6 +535,9 @@ fn truth_content_config(ctx: &GpuContext, world: &World, reach: f64) -> Renderer
     crate::tools::truth::truth_config_reaching(world, &base, slots, reach)
 }
 
+/// The truth of [`crate::tools::truth`] at `size` (k x k sub-samples in linear light, the most
+/// accurate grass, blades out to `reach` view distances): what every method is measured
+/// against.
 fn truth_for(
     ctx: &GpuContext,
     world: &World,
@@ -605,6 +605,7 @@ pub fn run_bench_aa(
         .collect::<Result<_>>()?;
     // The default's settings, then each named one (the default named too is measured once),
     // then the truth's content where it is named.
+    let truth_content = opts.settings.iter().any(|n| n == TRUTH_CONTENT);
     let named: Vec<String> = opts
         .settings
         .iter()
@@ -621,7 +622,7 @@ pub fn run_bench_aa(
     for s in &settings {
         configs.push((format!("+{}", setting_label(&s.name)), s.config(&world)));
     }
-    if opts.settings.iter().any(|n| n == TRUTH_CONTENT) {
+    if truth_content {
         configs.push((
             format!("+{}", setting_label(TRUTH_CONTENT)),
             truth_content_config(&ctx, &world, opts.truth_reach),
@@ -877,7 +878,7 @@ pub fn run_bench_aa(
         paths: path_views,
         timings,
         settings,
-        truth_content: opts.settings.iter().any(|n| n == TRUTH_CONTENT),
+        truth_content,
         counts,
     };
     write_outputs(opts, &report)?;
