@@ -275,16 +275,15 @@ fn a_short_soak_with_grass_recovers_after_every_teleport_without_stalls() {
     let tmp = tempfile::tempdir().unwrap();
     // 20 s of flight with grass and its wind (generation, draw and per-blade wind passes every
     // frame, with their uniform buffers), a teleport at 10 s, so that the memory check's last
-    // quarter (15-20 s) comes after the teleport's reload. Bounds: full detail within 30
-    // frames of a teleport (8 seen), no frame over 10 s of wall time (software Vulkan on a
-    // loaded 2-core machine: about 0.4 s a frame at 64x36, 2 s seen under load), no memory
-    // growth that goes on after the warm-up beyond the soak's 12 MiB (3 MiB seen). Software
-    // Vulkan's process has now and then stepped up once by 23-41 MiB at a frame that differs
-    // from run to run and stayed flat after, with `taa` and once with `--aa off` (README, "The
-    // temporal method as the default"): the check counts growth in both halves of the run, so
-    // such a step passes and a leak does not
-    // (`a_steady_leak_counts_and_a_step_that_holds_does_not`).
-    // One sample a pixel (`--aa off`): the temporal stage's own memory is bounded by
+    // quarter (15-20 s) comes after the teleport's reload. Bounds: full detail within 30 frames of
+    // a teleport (8 seen), no frame over 10 s of wall time (software Vulkan on a loaded 2-core
+    // machine: about 0.4 s a frame at 64x36, 2 s seen under load), no memory growth that goes on
+    // after the warm-up beyond the soak's 12 MiB (3 MiB seen). Software Vulkan's process has now
+    // and then stepped up once by 23-41 MiB at a frame that differs from run to run and stayed flat
+    // after, with `taa` and once with `--aa off` (docs/anti-aliasing.md, "The temporal method as
+    // the default"): the check counts growth in both halves of the run, so such a step passes and a
+    // leak does not (`a_steady_leak_counts_and_a_step_that_holds_does_not`). One sample a pixel
+    // (`--aa off`): the temporal stage's own memory is bounded by
     // `a_short_soak_holds_its_ceilings_and_its_memory`.
     let out = verdant(
         &[

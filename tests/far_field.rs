@@ -64,12 +64,12 @@ fn the_far_field_shows_what_real_blades_would_and_matches_its_cpu_mirror() {
     let ctx = common::gpu();
     let (world, source) = flat_field(800.0).unwrap();
     let mut config = RendererConfig::for_world(&world);
-    // The blades end at two grass tiles (100 m), so that the band before their fade lies in the
-    // low ring, past the high ring's thinning. With the default's 67 m that band lies on the
-    // high ring's thinning (35-50 m), where the low grid's dropped blades fade out over the far
-    // field: there the blades err a delta E of 2.5 against real ones, as much with the blades
-    // ending at 67 m as at 100 m (the same blades at those distances; README, "Nine near
-    // segments and a 67 m view as the default").
+    // The blades end at two grass tiles (100 m), so that the band before their fade lies in the low
+    // ring, past the high ring's thinning. With the default's 67 m that band lies on the high
+    // ring's thinning (35-50 m), where the low grid's dropped blades fade out over the far field:
+    // there the blades err a delta E of 2.5 against real ones, as much with the blades ending at 67
+    // m as at 100 m (the same blades at those distances; docs/anti-aliasing.md, "Nine near segments
+    // and a 67 m view as the default").
     let mut rings = config.grass_rings.unwrap();
     rings.low_radius_m = 2.0 * rings.high_radius_m;
     config.grass_rings = Some(rings);

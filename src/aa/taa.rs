@@ -42,16 +42,16 @@ pub struct TaaSettings {
     pub cut_distance_m: f64,
     /// A camera that turns by more than this in one frame (degrees) starts every history again.
     pub cut_angle_deg: f64,
-    /// Whether the grass blades write their own motion vectors (their wind over the frame)
-    /// for the resolve, where otherwise a blade's pixel is reprojected through its depth (the
-    /// camera's move alone). Off by default: measured on the meadow at 60 frames a second in
-    /// its breeze, a blade moves a small part of a pixel a frame and the motion vectors
-    /// changed the error and the flicker by less than 0.001 and 0.01 (README), while their
-    /// second target cost 0.40 ms of grass drawing at 1920x1080 (NVIDIA H200); measured again
-    /// in every sequence and along the paths, they took 5% from the still view's error at
-    /// 1920x1080 and 1-3% from the wind tour's, nothing from the meadow's and the tour's, for
-    /// 0.54 ms (9% of the frame; README, "The history against the wind's sway"). A storm, or a
-    /// low frame rate, moves blades further.
+    /// Whether the grass blades write their own motion vectors (their wind over the frame) for the
+    /// resolve, where otherwise a blade's pixel is reprojected through its depth (the camera's move
+    /// alone). Off by default: measured on the meadow at 60 frames a second in its breeze, a blade
+    /// moves a small part of a pixel a frame and the motion vectors changed the error and the
+    /// flicker by less than 0.001 and 0.01 (docs/anti-aliasing.md), while their second target cost
+    /// 0.40 ms of grass drawing at 1920x1080 (NVIDIA H200); measured again in every sequence and
+    /// along the paths, they took 5% from the still view's error at 1920x1080 and 1-3% from the
+    /// wind tour's, nothing from the meadow's and the tour's, for 0.54 ms (9% of the frame;
+    /// docs/anti-aliasing.md, "The history against the wind's sway"). A storm, or a low frame rate,
+    /// moves blades further.
     pub blade_motion: bool,
     /// The clip's box also reaches the current sample plus and minus this many of the pixel's
     /// own standard deviations over time (its samples' exponentially weighted spread, kept
@@ -80,31 +80,31 @@ pub struct TaaSettings {
     /// their pixels' centres, and a short history (a moving surface's) would otherwise show
     /// the image shifted by the last few jitters. 0: each pixel's own sample.
     pub reconstruct_px: f32,
-    /// With [`Self::blade_motion`]: a blade whose own motion (its motion vector beyond where
-    /// the pixel's depth alone would have taken it: its sway in the wind) moved `s` pixels
-    /// keeps at most `max_samples / (1 + motion_falloff * p + parallax_falloff * q +
-    /// sway_falloff * s)` samples. A swaying blade changes its bend and its light from frame
-    /// to frame, and its resampled history lags it; a still view of grass in the wind erred
-    /// less against the truth the shorter the history (README, "The history against the
-    /// wind's sway"), while ground, stems and far blades keep the long history that averages
-    /// the jitter. 0 (the default): the sway counts only as parallax. Measured in `bench aa`
-    /// at 960x540 and 1920x1080, 4 and 16 changed every sequence and path by at most 0.0007
-    /// FLIP but the wind tour at 1920x1080 (1.6% less at 16): the blades sway too little a
-    /// frame for it to shorten their history much.
+    /// With [`Self::blade_motion`]: a blade whose own motion (its motion vector beyond where the
+    /// pixel's depth alone would have taken it: its sway in the wind) moved `s` pixels keeps at
+    /// most `max_samples / (1 + motion_falloff * p + parallax_falloff * q + sway_falloff * s)`
+    /// samples. A swaying blade changes its bend and its light from frame to frame, and its
+    /// resampled history lags it; a still view of grass in the wind erred less against the truth
+    /// the shorter the history (docs/anti-aliasing.md, "The history against the wind's sway"),
+    /// while ground, stems and far blades keep the long history that averages the jitter. 0 (the
+    /// default): the sway counts only as parallax. Measured in `bench aa` at 960x540 and 1920x1080,
+    /// 4 and 16 changed every sequence and path by at most 0.0007 FLIP but the wind tour at
+    /// 1920x1080 (1.6% less at 16): the blades sway too little a frame for it to shorten their
+    /// history much.
     pub sway_falloff: f32,
 }
 
 impl Default for TaaSettings {
     fn default() -> Self {
         Self {
-            // Measured against the truth (README, `bench aa` with 36 frames of run-up): a
-            // still view's history of 16 lets the jitter through (flicker 1.26 times the
+            // Measured against the truth (docs/anti-aliasing.md, `bench aa` with 36 frames of
+            // run-up): a still view's history of 16 lets the jitter through (flicker 1.26 times the
             // truth's), 20 gives 1.02, 28 0.75 at a higher error (the wind's sway lags); 24
             // between.
             max_samples: 24,
-            // Measured against the truth (README, `bench aa`): 1.25 drops too much history in
-            // the grass's thin blades (a still view flickers 1.6 times the truth's), 4 keeps
-            // ghosts 3 frames after a teleport; 2.5 between.
+            // Measured against the truth (docs/anti-aliasing.md, `bench aa`): 1.25 drops too much
+            // history in the grass's thin blades (a still view flickers 1.6 times the truth's), 4
+            // keeps ghosts 3 frames after a teleport; 2.5 between.
             clip_sigma: 2.5,
             // A moving surface's history shortens fast: at 1 (half the samples at a pixel
             // moved) the dolly errs 0.090 against the truth where 0.25 erred 0.110 (less
@@ -113,25 +113,26 @@ impl Default for TaaSettings {
             cut_distance_m: 20.0,
             cut_angle_deg: 30.0,
             blade_motion: false,
-            // Measured against the truth (README, `bench aa`): off, the spread takes 7% off
-            // a still view's error at 960x540 but nothing at 1920x1080, and costs the meadow's
-            // path 2%.
+            // Measured against the truth (docs/anti-aliasing.md, `bench aa`): off, the spread takes
+            // 7% off a still view's error at 960x540 but nothing at 1920x1080, and costs the
+            // meadow's path 2%.
             pixel_spread: 0.0,
-            // Measured against the truth (README, `bench aa`): 2 takes 4-5% off the dolly's
-            // and the meadow path's error at 960x540 and 1920x1080 and leaves the pan's,
+            // Measured against the truth (docs/anti-aliasing.md, `bench aa`): 2 takes 4-5% off the
+            // dolly's and the meadow path's error at 960x540 and 1920x1080 and leaves the pan's,
             // where a falloff of 3 for every motion cost the pan 14%.
             parallax_falloff: 2.0,
-            // Measured against the truth (README, `bench aa`), with the reconstruction: at
-            // 1920x1080 a floor of 1 takes the dolly from 0.0785 to 0.0729 and the meadow's
-            // path from 0.0828 to 0.0763 (no anti-aliasing: 0.0770 and 0.0797); at 960x540 it
-            // costs them 0.0017 and 0.0014.
+            // Measured against the truth (docs/anti-aliasing.md, `bench aa`), with the
+            // reconstruction: at 1920x1080 a floor of 1 takes the dolly from 0.0785 to 0.0729 and
+            // the meadow's path from 0.0828 to 0.0763 (no anti-aliasing: 0.0770 and 0.0797); at
+            // 960x540 it costs them 0.0017 and 0.0014.
             min_samples: 1.0,
-            // Measured against the truth (README, `bench aa`): without it a short history
-            // shows the image shifted by the last few jitters, and the temporal method erred
-            // more than no anti-aliasing in motion at 1920x1080; 0.45 lowers every sequence's
+            // Measured against the truth (docs/anti-aliasing.md, `bench aa`): without it a short
+            // history shows the image shifted by the last few jitters, and the temporal method
+            // erred more than no anti-aliasing in motion at 1920x1080; 0.45 lowers every sequence's
             // error at both sizes, 0.6 blurs more than it gains (960x540).
             reconstruct_px: 0.45,
-            // Not yet measured in sequences (README, "The history against the wind's sway").
+            // Measured in `bench aa`: off (docs/anti-aliasing.md, "The history against the
+            // wind's sway").
             sway_falloff: 0.0,
         }
     }

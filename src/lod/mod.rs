@@ -123,12 +123,13 @@ pub enum Ring {
     Low,
 }
 
-/// The grass's default view distance in grass tiles (67 m in the default world, whose grass
-/// tiles are 50 m wide): beyond it the far field stands in for the blades. It was 3 tiles until
-/// `bench lod` against the truth found two as accurate for 10% less of the frame's time, and 2
-/// until the blades ending at two thirds of that paid for 9 near segments instead of 7 and still
-/// cost 3% less, nearer the truth on the meadow and the tour and farther on the wind tour (README,
-/// "A shorter view distance" and "Nine near segments and a 67 m view as the default").
+/// The grass's default view distance in grass tiles (67 m in the default world, whose grass tiles
+/// are 50 m wide): beyond it the far field stands in for the blades. It was 3 tiles until `bench
+/// lod` against the truth found two as accurate for 10% less of the frame's time, and 2 until the
+/// blades ending at two thirds of that paid for 9 near segments instead of 7 and still cost 3%
+/// less, nearer the truth on the meadow and the tour and farther on the wind tour
+/// (docs/anti-aliasing.md, "A shorter view distance" and "Nine near segments and a 67 m view as the
+/// default").
 pub const DEFAULT_VIEW_TILES: f64 = 4.0 / 3.0;
 
 /// Settings of the grass rings.

@@ -145,7 +145,7 @@ impl PlantSettings {
             capacity: 262_144,
             // Against the truth's meshes, switches at 30/150 m erred 15% more in bench lod's
             // views (a valley oak 30-60 m away drawn as one leaf in eight) for no measurable
-            // time (README, "The skyline's trees").
+            // time (docs/anti-aliasing.md, "The skyline's trees").
             lod_m: [60.0, 300.0],
             band_m: 10.0,
             view_m: [0.9 * fog_m, fog_m],
@@ -158,14 +158,14 @@ impl PlantSettings {
     }
 }
 
-/// Where the trees start to thin out with distance by default, metres. Measured against the
-/// truth (every tree out to 1,000 m, none thinned): thinning from 400 m grew the skyline's few
-/// kept oaks up to 2.4 times their size, a row of large dark crowns where the truth has many
-/// small ones; from 800 m the default frame supersampled erred 15% less on the meadow for the
-/// same median GPU time (see README, "The skyline's trees"), and from 1,600 m the temporal
-/// frame errs 1.9-2.3% less along the three paths at 960x540 and 1920x1080 for 0.06 ms more
-/// on the tour's mean frame, none on the meadow's (README, "The skyline's trees, thinned from
-/// 1,600 m").
+/// Where the trees start to thin out with distance by default, metres. Measured against the truth
+/// (every tree out to 1,000 m, none thinned): thinning from 400 m grew the skyline's few kept oaks
+/// up to 2.4 times their size, a row of large dark crowns where the truth has many small ones; from
+/// 800 m the default frame supersampled erred 15% less on the meadow for the same median GPU time
+/// (see docs/anti-aliasing.md, "The skyline's trees"), and from 1,600 m the temporal frame errs
+/// 1.9-2.3% less along the three paths at 960x540 and 1920x1080 for 0.06 ms more on the tour's mean
+/// frame, none on the meadow's (docs/anti-aliasing.md, "The skyline's trees, thinned from 1,600
+/// m").
 pub const TREE_THIN_M: f32 = 1600.0;
 
 /// The trees' placement cell, metres (about: [`PlantSettings::trees`] rounds it to divide the

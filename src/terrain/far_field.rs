@@ -97,7 +97,7 @@ pub fn visible_albedo(base: Vec3, tip: Vec3, depth: f32) -> [Vec3; 2] {
 /// sub-pixel specks that the far field shows better, so from half the view distance up (33 m
 /// by default) none are drawn. It was 3 (none from a quarter of it up) until `bench aa` along
 /// the paths found 1 nearer the truth from the helicopter's height and as near elsewhere
-/// (README, "The far fade's elevation term").
+/// (docs/anti-aliasing.md, "The far fade's elevation term").
 pub const ELEVATION_DISTANCE: f32 = 1.0;
 
 /// The distance that the grass's fade at the view distance goes by, for a point `dist`

@@ -674,16 +674,15 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     }
     // Memory growth: the resident size's floor just after the warm-up, midway, and over the last
     // quarter of the run; a leak grows in both halves. The floor (the 10th percentile of each
-    // window), because drivers allocate and free scratch memory in bursts: on lavapipe the
-    // resident size swings by 40 MiB between frames, enough to move a window's median by as
-    // much under load, while a leak lifts the floor. The CPU cache's own growth is taken out,
-    // since it has its ceiling. Frames while a teleport's reload is under way (up to
-    // MIN_SETTLED_FRAMES of them kept when a window has too few others) are left out: the burst
-    // of uploads, decodes and derivations holds transient memory that the allocator may keep a
-    // while, which is not a leak. A single step that holds afterwards is not one either:
-    // software Vulkan's process has stepped up once by 23-41 MiB at a frame that differs from
-    // run to run, after `malloc_trim`, and stayed flat (README, "The temporal method as the
-    // default").
+    // window), because drivers allocate and free scratch memory in bursts: on lavapipe the resident
+    // size swings by 40 MiB between frames, enough to move a window's median by as much under load,
+    // while a leak lifts the floor. The CPU cache's own growth is taken out, since it has its
+    // ceiling. Frames while a teleport's reload is under way (up to MIN_SETTLED_FRAMES of them kept
+    // when a window has too few others) are left out: the burst of uploads, decodes and derivations
+    // holds transient memory that the allocator may keep a while, which is not a leak. A single
+    // step that holds afterwards is not one either: software Vulkan's process has stepped up once
+    // by 23-41 MiB at a frame that differs from run to run, after `malloc_trim`, and stayed flat
+    // (docs/anti-aliasing.md, "The temporal method as the default").
     let [early, mid, late] = memory_windows(frames, warmup_frames).expect("checked before the run");
     let window = |range: &std::ops::Range<u32>| {
         let all: Vec<&FrameSample> = samples
