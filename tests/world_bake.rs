@@ -671,6 +671,49 @@ fn replace_keeps_every_unrelated_file_however_the_folder_is_spelled() {
     }
 }
 
+/// `--replace` deletes the replaced `tiles/` whole, so it refuses a `tiles/` that holds anything
+/// a bake does not write there (the DEM being baked, someone's notes, a folder of photos), naming
+/// the file, and leaves every file where it was; a `tiles/` of tile files alone is replaced.
+#[test]
+fn replace_refuses_a_tiles_folder_holding_files_that_are_not_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let w = dir.path().join("w");
+    std::fs::create_dir_all(w.join("tiles")).unwrap();
+    // The DEM being baked, inside the tiles folder it would replace.
+    let dem = write_dem(&w.join("tiles"), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let before = read_all_files(&w);
+    let err = bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(err, WorldError::ForeignInTiles { .. }), "{err}");
+    assert!(err.to_string().contains("--replace would delete"), "{err}");
+    assert_eq!(read_all_files(&w), before, "a refused bake changed the folder");
+
+    // Tile-named files in other places, a level that is a file, a tile that is a folder.
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let cases: [(&str, bool); 6] = [
+        ("tiles/kitchen/a.jpg", true),
+        ("tiles/L0/notes.txt", true),
+        ("tiles/0_0.height.exr", true),
+        ("tiles/L0/0_0.height.exr.bak", true),
+        ("tiles/L0/0_0.height.exr/x", true),
+        ("tiles/L3/12_7.material.png", false),
+    ];
+    for (file, refused) in cases {
+        let w = dir.path().join("case");
+        let _ = std::fs::remove_dir_all(&w);
+        std::fs::create_dir_all(w.join(file).parent().unwrap()).unwrap();
+        std::fs::write(w.join(file), "mine").unwrap();
+        let result = bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {});
+        match (result, refused) {
+            (Err(WorldError::ForeignInTiles { path, .. }), true) => {
+                assert!(w.join(file).exists(), "{file} was deleted");
+                assert!(w.join(file).starts_with(&path), "{file}: blamed {}", path.display());
+            }
+            (Ok(_), false) => assert!(!w.join(file).exists(), "{file}: a stale tile was kept"),
+            (r, _) => panic!("{file}: {:?}", r.map(|_| ())),
+        }
+    }
+}
+
 /// A bake that fails, before writing (a bad DEM) or while writing tiles (cancelled part-way),
 /// leaves the folder exactly as it was: its world and every other file.
 #[test]

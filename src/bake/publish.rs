@@ -56,7 +56,9 @@ impl PartialEq for CancelFlag {
         Arc::ptr_eq(&self.0, &other.0)
     }
 }
-/// Refuses an output folder that exists and is not empty, unless it is to be replaced.
+/// Refuses an output folder that exists and is not empty, unless it is to be replaced; and a
+/// folder to be replaced whose `tiles/` holds anything that is not a tile verdant writes (the
+/// replaced `tiles/` is deleted whole).
 pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
     match std::fs::read_dir(out) {
         Ok(mut entries) => {
@@ -64,6 +66,12 @@ pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
                 return Err(WorldError::OutputNotEmpty {
                     path: out.to_path_buf(),
                 });
+            }
+            let tiles = out.join("tiles");
+            match crate::world::format::first_foreign_in_tiles(&tiles) {
+                Ok(None) => {}
+                Ok(Some(path)) => return Err(WorldError::ForeignInTiles { path, tiles }),
+                Err(e) => return Err(WorldError::io(&tiles, e)),
             }
             Ok(())
         }

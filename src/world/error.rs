@@ -460,6 +460,23 @@ pub enum WorldError {
         path: PathBuf,
     },
 
+    /// `--replace` would delete a file or folder in the output folder's `tiles/` that is not a
+    /// tile verdant writes (`L{level}/{x}_{y}.height.exr`, `.type.png`, `.density.png`,
+    /// `.material.png`): the folder is not a world's, or someone else's files are in it.
+    #[error(
+        "{}: --replace would delete this, and it is not a tile that verdant writes (tiles/ \
+         holds only L<level>/<x>_<y>.height.exr, .type.png, .density.png and .material.png); \
+         move it out of {}, or bake into another folder",
+        path.display(),
+        tiles.display()
+    )]
+    ForeignInTiles {
+        /// The first such file or folder found.
+        path: PathBuf,
+        /// The output folder's `tiles/`.
+        tiles: PathBuf,
+    },
+
     /// The bake was cancelled (its cancel flag was set, e.g. by SIGINT or SIGTERM) before the
     /// new world was put in place; the output folder was left as it was.
     #[error("{}: bake cancelled; the output folder was left as it was", path.display())]
@@ -678,6 +695,7 @@ impl WorldError {
             | NotARegularFile { path, .. }
             | FileTooLarge { path, .. }
             | OutputNotEmpty { path }
+            | ForeignInTiles { path, .. }
             | Cancelled { path }
             | PublishFailed { path, .. }
             | LandCover { path, .. }

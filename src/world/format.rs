@@ -55,6 +55,55 @@ impl TileFile {
     }
 }
 
+/// Whether `name` is a tile file's name, `{x}_{y}.{kind}` ([`tile_path`]).
+pub fn is_tile_file_name(name: &str) -> bool {
+    let kinds = TileFile::ALL.into_iter().chain([TileFile::Material]);
+    kinds.into_iter().any(|k| {
+        name.strip_suffix(k.suffix())
+            .and_then(|s| s.strip_suffix('.'))
+            .and_then(|xy| xy.split_once('_'))
+            .is_some_and(|(x, y)| x.parse::<u32>().is_ok() && y.parse::<u32>().is_ok())
+    })
+}
+
+/// The first entry of `tiles` (a world's `tiles/` folder) that is not what a bake writes there:
+/// anything but folders `L{level}` holding regular files named by [`is_tile_file_name`]. None
+/// when there is none (or `tiles` does not exist, or is a symlink: replacing it removes the link
+/// alone).
+pub fn first_foreign_in_tiles(tiles: &Path) -> std::io::Result<Option<PathBuf>> {
+    match std::fs::symlink_metadata(tiles) {
+        Ok(m) if m.file_type().is_symlink() => return Ok(None),
+        Ok(m) if !m.is_dir() => return Ok(Some(tiles.to_path_buf())),
+        Ok(_) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e),
+    }
+    let levels = match std::fs::read_dir(tiles) {
+        Ok(levels) => levels,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e),
+    };
+    for level in levels {
+        let level = level?;
+        let name = level.file_name();
+        let is_level = name
+            .to_str()
+            .and_then(|n| n.strip_prefix('L'))
+            .is_some_and(|n| n.parse::<u8>().is_ok());
+        if !is_level || !level.file_type()?.is_dir() {
+            return Ok(Some(level.path()));
+        }
+        for file in std::fs::read_dir(level.path())? {
+            let file = file?;
+            let named = file.file_name().to_str().is_some_and(is_tile_file_name);
+            if !named || !file.file_type()?.is_file() {
+                return Ok(Some(file.path()));
+            }
+        }
+    }
+    Ok(None)
+}
+
 /// Where a tile file lives: `world_dir/tiles/L{level}/{x}_{y}.{kind}`.
 pub fn tile_path(world_dir: &Path, id: TileId, kind: TileFile) -> PathBuf {
     world_dir
