@@ -1750,3 +1750,64 @@ fn bench_aa_stopped_part_way_keeps_the_sequences_it_measured() {
     assert_eq!(frames.lines().count(), 1 + 2, "{frames}");
     assert!(!dir.join("aa.json").exists());
 }
+
+/// A run's files never go where they would mix with or overwrite a world's: `--out` the root of
+/// the file system, a world's own folder (however spelled) or a folder in its `tiles/` is
+/// refused before anything is written, naming the folder and what it is.
+#[test]
+fn output_folders_that_are_a_world_or_the_root_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = world_copy(tmp.path());
+    let before = common::read_all_files(&w);
+    let cases = [
+        ("/", "the root of the file system"),
+        ("world", "a world's folder"),
+        ("world/.", "a world's folder"),
+        ("world/tiles/..", "a world's folder"),
+        ("world/tiles/L0", "inside a world's tiles/"),
+        ("world/tiles/L7/new", "inside a world's tiles/"),
+    ];
+    for (out, why) in cases {
+        let run = verdant(
+            &[
+                "fly", "world", "--frames", "1", "--size", "16x9", "--out", out,
+            ],
+            tmp.path(),
+        );
+        assert_fails_naming(&run, &[out, why, "choose another --out"]);
+    }
+    assert_eq!(
+        common::read_all_files(&w),
+        before,
+        "a refused run wrote into the world"
+    );
+}
+
+/// `view --screenshot FILE` is checked before the window opens: a `.png` in an existing folder
+/// that is not a world's, replacing only an earlier PNG; the world's manifest, a tile, a folder
+/// or a user's text file named `.png` are refused and left as they were.
+#[test]
+fn a_screenshot_never_replaces_a_world_file_or_a_file_that_is_not_a_png() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = world_copy(tmp.path());
+    std::fs::write(tmp.path().join("notes.png"), "my notes").unwrap();
+    std::fs::create_dir(tmp.path().join("shots.png")).unwrap();
+    let before = common::read_all_files(tmp.path());
+    let cases = [
+        ("world/world.toml", "must name a .png file"),
+        ("world/shot.png", "a world's folder"),
+        ("world/tiles/L0/0_0.type.png", "inside a world's tiles/"),
+        ("missing/shot.png", "does not exist"),
+        ("notes.png", "exists and is not a PNG image"),
+        ("shots.png", "is a folder"),
+    ];
+    for (file, why) in cases {
+        let run = verdant(
+            &["view", "world", "--frames", "1", "--screenshot", file],
+            tmp.path(),
+        );
+        assert_fails_naming(&run, &["--screenshot", file, why]);
+    }
+    assert_eq!(common::read_all_files(tmp.path()), before);
+    assert!(w.join("world.toml").is_file());
+}

@@ -680,12 +680,23 @@ fn replace_refuses_a_tiles_folder_holding_files_that_are_not_tiles() {
     let w = dir.path().join("w");
     std::fs::create_dir_all(w.join("tiles")).unwrap();
     // The DEM being baked, inside the tiles folder it would replace.
-    let dem = write_dem(&w.join("tiles"), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let dem = write_dem(
+        &w.join("tiles"),
+        "hills",
+        DEM_SIZE,
+        DEM_CELLS,
+        DEM_SCALE,
+        hills,
+    );
     let before = read_all_files(&w);
     let err = bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {}).unwrap_err();
     assert!(matches!(err, WorldError::ForeignInTiles { .. }), "{err}");
     assert!(err.to_string().contains("--replace would delete"), "{err}");
-    assert_eq!(read_all_files(&w), before, "a refused bake changed the folder");
+    assert_eq!(
+        read_all_files(&w),
+        before,
+        "a refused bake changed the folder"
+    );
 
     // Tile-named files in other places, a level that is a file, a tile that is a folder.
     let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
@@ -706,7 +717,11 @@ fn replace_refuses_a_tiles_folder_holding_files_that_are_not_tiles() {
         match (result, refused) {
             (Err(WorldError::ForeignInTiles { path, .. }), true) => {
                 assert!(w.join(file).exists(), "{file} was deleted");
-                assert!(w.join(file).starts_with(&path), "{file}: blamed {}", path.display());
+                assert!(
+                    w.join(file).starts_with(&path),
+                    "{file}: blamed {}",
+                    path.display()
+                );
             }
             (Ok(_), false) => assert!(!w.join(file).exists(), "{file}: a stale tile was kept"),
             (r, _) => panic!("{file}: {:?}", r.map(|_| ())),

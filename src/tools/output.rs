@@ -139,6 +139,45 @@ pub enum OutDirError {
         /// The other run's tool (`fly`, `bench lod`, ...), when its lock file says.
         tool: String,
     },
+    /// The folder is one no run writes into: the root of the file system, a world's own folder
+    /// or a world's `tiles/`.
+    #[error("{}: {why}; choose another --out", path.display())]
+    Refused {
+        /// The folder.
+        path: PathBuf,
+        /// What it is.
+        why: &'static str,
+    },
+}
+
+/// Why `path` is no place for a run's files, if it is not: the root of the file system, a
+/// world's folder (one holding `world.toml`), or anything inside a world's `tiles/`. A run
+/// writes `report.json`, frames and tables there by their own names, and a world's files are
+/// not to be mixed with them or overwritten.
+pub fn refused_output(path: &Path) -> Option<&'static str> {
+    let absolute = std::path::absolute(path).ok()?;
+    // The longest part that exists, symlinks followed: `w/.`, `w/tiles/..` are `w`.
+    let mut existing = absolute.as_path();
+    let resolved = loop {
+        if let Ok(p) = existing.canonicalize() {
+            break p;
+        }
+        existing = existing.parent()?;
+    };
+    if resolved.parent().is_none() && existing == absolute {
+        return Some("the root of the file system");
+    }
+    if existing == absolute && resolved.join("world.toml").is_file() {
+        return Some("a world's folder (it holds world.toml)");
+    }
+    let mut up = resolved.as_path();
+    while let Some(parent) = up.parent() {
+        if up.file_name().is_some_and(|n| n == "tiles") && parent.join("world.toml").is_file() {
+            return Some("inside a world's tiles/");
+        }
+        up = parent;
+    }
+    None
 }
 
 fn owner_words(pid: Option<u32>, tool: &str) -> String {
@@ -175,6 +214,12 @@ impl OutDir {
     /// Creates `path` (and its parents) where needed and locks it for `tool` (`fly`,
     /// `bench lod`, ...), which a refused second run names.
     pub fn create_for(path: &Path, tool: &str) -> Result<Self, OutDirError> {
+        if let Some(why) = refused_output(path) {
+            return Err(OutDirError::Refused {
+                path: path.to_path_buf(),
+                why,
+            });
+        }
         let created = !path.exists();
         std::fs::create_dir_all(path).map_err(|source| OutDirError::Create {
             path: path.to_path_buf(),

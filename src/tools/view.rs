@@ -7,7 +7,7 @@
 //! Escape quits. Live figures (frame time, GPU time per pass, blades drawn, tiles resident) are
 //! in the window's title.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -72,6 +72,9 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
     }
     if opts.screenshot.is_some() && opts.frames.is_none() {
         bail!("--screenshot needs --frames N (the frame to capture)");
+    }
+    if let Some(file) = &opts.screenshot {
+        check_screenshot(file)?;
     }
     let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
     if world.manifest.paths.is_empty() {
@@ -591,6 +594,52 @@ impl Viewer {
 }
 
 /// Writes the window's current image (an RGBA or BGRA 8-bit texture) to a PNG file.
+/// Checks `--screenshot FILE` before anything is drawn: a `.png` in an existing folder that is
+/// no world's (nor inside a world's `tiles/`), and, where the file exists already, a PNG image
+/// (a screenshot of an earlier run), never a file of another kind.
+fn check_screenshot(file: &Path) -> Result<()> {
+    let shown = file.display();
+    if !file
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        bail!("--screenshot {shown}: must name a .png file");
+    }
+    let parent = match file.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !parent.is_dir() {
+        bail!(
+            "--screenshot {shown}: the folder {} does not exist",
+            parent.display()
+        );
+    }
+    if let Some(why) = crate::tools::output::refused_output(parent) {
+        bail!("--screenshot {shown}: its folder is {why}; write the screenshot elsewhere");
+    }
+    match std::fs::symlink_metadata(file) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => bail!("--screenshot {shown}: {e}"),
+        Ok(m) if m.is_dir() => bail!("--screenshot {shown}: is a folder"),
+        Ok(m) if !m.is_file() => bail!("--screenshot {shown}: exists and is not a regular file"),
+        Ok(_) => {
+            let mut head = [0u8; 8];
+            let is_png = std::fs::File::open(file)
+                .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head))
+                .is_ok()
+                && head == *b"\x89PNG\r\n\x1a\n";
+            if !is_png {
+                bail!(
+                    "--screenshot {shown}: exists and is not a PNG image; a screenshot replaces \
+                     only an earlier screenshot"
+                );
+            }
+            Ok(())
+        }
+    }
+}
+
 fn save_screenshot(
     ctx: &GpuContext,
     texture: &wgpu::Texture,
