@@ -54,6 +54,11 @@ pub(super) fn fnv1a64(bytes: &[u8]) -> u64 {
 /// The most bytes of a cache entry's metadata (a URL, a validator and a checksum).
 pub(super) const MAX_META_BYTES: u64 = 16 << 10;
 
+/// Whether `name` is a key of the cache ([`DiskCache::key`]): 16 lowercase hexadecimal digits.
+fn is_key(name: &str) -> bool {
+    name.len() == 16 && name.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+}
+
 /// Fetched bodies on disk, one `{key}.body` and `{key}.meta` per URL, the key a hash of the
 /// URL. The metadata holds three lines: the URL, the validator, and `fnv1a64 {hex} {length}`
 /// of the body. Each is written to a temporary file and renamed into place, the body before
@@ -86,10 +91,14 @@ impl DiskCache {
         for entry in std::fs::read_dir(&config.dir).map_err(err)? {
             let Ok(entry) = entry else { continue };
             let name = entry.file_name().to_string_lossy().into_owned();
-            let Some(key) = name.strip_suffix(".body") else {
+            // Only the cache's own entries, named by their key: a user's files in the folder
+            // (`thesis.body`, say) are neither counted nor ever removed.
+            let Some(key) = name.strip_suffix(".body").filter(|k| is_key(k)) else {
                 continue;
             };
-            if let Ok(meta) = entry.metadata() {
+            if let Ok(meta) = entry.metadata()
+                && meta.is_file()
+            {
                 cache.entries.insert(key.to_string(), (meta.len(), 0));
                 cache.bytes += meta.len();
             }
@@ -98,6 +107,7 @@ impl DiskCache {
         Ok(cache)
     }
 
+    /// The key of `url`: 16 hexadecimal digits ([`is_key`]).
     pub(super) fn key(url: &str) -> String {
         format!("{:016x}", fnv1a64(url.as_bytes()))
     }
@@ -264,6 +274,43 @@ mod tests {
         };
         let cache = DiskCache::open(&small).unwrap();
         assert!(cache.bytes <= 100 && cache.entries.len() == 1);
+    }
+
+    /// The cache shares its folder with whatever else is there: a user's `thesis.body` and
+    /// `thesis.meta`, a key-named folder, other files, are neither counted nor removed, however
+    /// little room the cache has.
+    #[test]
+    fn files_in_the_cache_folder_that_are_not_its_entries_are_left_alone() {
+        let tmp = tempfile::tempdir().unwrap();
+        let mine: [(&str, &[u8]); 4] = [
+            ("thesis.body", &[9; 5000]),
+            ("thesis.meta", b"my notes"),
+            ("0123456789ABCDEF.body", &[8; 300]),
+            ("keep.txt", b"keep"),
+        ];
+        for (name, bytes) in mine {
+            std::fs::write(tmp.path().join(name), bytes).unwrap();
+        }
+        std::fs::create_dir(tmp.path().join("0123456789abcdef.body")).unwrap();
+        let config = HttpCacheConfig {
+            dir: tmp.path().to_path_buf(),
+            max_bytes: 150,
+        };
+        let mut cache = DiskCache::open(&config).unwrap();
+        assert_eq!((cache.bytes, cache.entries.len()), (0, 0));
+        let tag = Validator::ETag("\"a\"".into());
+        for i in 0..5 {
+            cache.put(&format!("http://h/{i}"), &tag, &[1; 100]);
+        }
+        assert!(cache.bytes <= 150);
+        for (name, bytes) in mine {
+            assert_eq!(
+                std::fs::read(tmp.path().join(name)).unwrap(),
+                bytes,
+                "{name}"
+            );
+        }
+        assert!(tmp.path().join("0123456789abcdef.body").is_dir());
     }
 
     /// A body that its metadata does not match (a flipped byte, another length, a body larger
