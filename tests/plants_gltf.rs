@@ -301,6 +301,49 @@ fn missing_file_is_a_read_error() {
     }
 }
 
+/// A plant file, or a buffer it names, that is a device, a FIFO or larger than a plant's file
+/// may be is refused by name without being read: no hang, no memory run out.
+#[cfg(unix)]
+#[test]
+fn special_and_oversized_plant_files_are_refused_without_reading_them() {
+    use verdant::plants::gltf::MAX_PLANT_FILE_BYTES;
+    let dir = tempfile::tempdir().unwrap();
+    let zero = dir.path().join("zero.glb");
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    let fifo = dir.path().join("fifo.glb");
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let huge = dir.path().join("huge.glb");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(MAX_PLANT_FILE_BYTES + 1)
+        .unwrap();
+    for (path, words) in [
+        (&zero, "not a regular file (a character device)"),
+        (&fifo, "not a regular file (a FIFO)"),
+        (&huge, "more than the 268435456"),
+    ] {
+        let err = load_err(path);
+        assert!(matches!(err, PlantFileError::Read { .. }), "{err}");
+        let text = err.to_string();
+        assert!(
+            text.contains(words) && text.contains(&*path.to_string_lossy()),
+            "{text}"
+        );
+    }
+    // A buffer beside the glTF file that is a FIFO.
+    let (mut doc, _) = triangle();
+    doc["buffers"][0]["uri"] = json!("fifo.glb");
+    let path = write(dir.path(), "tri.gltf", &serde_json::to_vec(&doc).unwrap());
+    let err = load_err(&path).to_string();
+    assert!(err.contains("fifo.glb") && err.contains("a FIFO"), "{err}");
+}
+
 #[test]
 fn text_that_is_not_gltf_is_refused() {
     let dir = tempfile::tempdir().unwrap();

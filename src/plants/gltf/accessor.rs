@@ -252,7 +252,7 @@ pub(super) fn read_uri(gltf_path: &Path, uri: &str) -> Result<Vec<u8>, String> {
         return Err(format!("{uri:?} is not a relative file name"));
     }
     let file = gltf_path.parent().unwrap_or(Path::new(".")).join(relative);
-    std::fs::read(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
+    super::read_plant_file(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
 }
 
 #[cfg(test)]

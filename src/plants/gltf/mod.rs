@@ -50,6 +50,27 @@ pub const MAX_PLANT_VERTICES: usize = 65_536;
 pub const MAX_PLANT_TRIANGLES: usize = 131_072;
 /// The largest width and height of a plant's texture, pixels.
 pub const MAX_TEXTURE_SIZE: u32 = 4096;
+/// The most bytes a plant's glTF file, or a buffer or image file it names, may hold: room for
+/// the most vertices and triangles and a texture of the largest size many times over. A file
+/// that is not a regular file (a FIFO, a device) is refused before it is opened.
+pub const MAX_PLANT_FILE_BYTES: u64 = 256 << 20;
+
+/// Reads a file of a plant (its glTF file, or a buffer or image beside it): a regular file of
+/// at most [`MAX_PLANT_FILE_BYTES`], the reason otherwise in words.
+pub(crate) fn read_plant_file(path: &Path) -> Result<Vec<u8>, io::Error> {
+    use crate::world::WorldError;
+    crate::world::format::read_regular(path, MAX_PLANT_FILE_BYTES).map_err(|e| match e {
+        WorldError::NotARegularFile { kind, .. } => {
+            io::Error::other(format!("not a regular file ({kind})"))
+        }
+        WorldError::FileTooLarge { size, max, .. } => io::Error::other(format!(
+            "{size} bytes, more than the {max} that a plant's file may hold"
+        )),
+        WorldError::Io { source, .. } => source,
+        WorldError::MissingFile { .. } => io::Error::from(io::ErrorKind::NotFound),
+        e => io::Error::other(e.to_string()),
+    })
+}
 /// The thinness (albedo.a) given to every vertex of a loaded plant.
 pub const DEFAULT_THINNESS: f32 = 0.5;
 
@@ -223,7 +244,7 @@ pub enum PlantFileError {
 /// Reads a plant from a glTF 2.0 file (`.gltf` or `.glb`); see the module docs for what is read
 /// and the limits.
 pub fn load_plant(path: &Path) -> Result<LoadedPlant, PlantFileError> {
-    let bytes = std::fs::read(path).map_err(|source| PlantFileError::Read {
+    let bytes = read_plant_file(path).map_err(|source| PlantFileError::Read {
         path: path.to_owned(),
         source,
     })?;
