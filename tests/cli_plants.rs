@@ -274,3 +274,55 @@ fn trees_stand_on_the_tours_far_ridges() {
         share * 100.0
     );
 }
+
+/// A world over HTTP fetches its glTF plants from its server like its tiles, the texture the
+/// glTF file names beside it too, and draws what the world's folder draws.
+#[test]
+fn a_gltf_plant_over_http_renders_what_the_folder_renders() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = world_with_plant(tmp.path(), "plants/marigold.gltf");
+    std::fs::create_dir_all(w.join("plants")).unwrap();
+    let texture = PlantImage {
+        width: 4,
+        height: 4,
+        rgba: [255u8, 200, 40, 255].repeat(16),
+    };
+    write_plant_gltf(
+        &w.join("plants/marigold.gltf"),
+        &small_plant(),
+        Some(&texture),
+    )
+    .unwrap();
+    let server = verdant::tools::serve::WorldServer::start(&w, "127.0.0.1:0").unwrap();
+    let local = fly(&w, tmp.path());
+    assert!(
+        local.status.success(),
+        "{}",
+        String::from_utf8_lossy(&local.stderr)
+    );
+    let frame = |dir: &str| image::open(tmp.path().join(dir).join("frame_00000.png")).unwrap();
+    let local_frame = frame("o").to_rgb8();
+    std::fs::remove_dir_all(tmp.path().join("o")).unwrap();
+    let remote = fly(Path::new(&server.url()), tmp.path());
+    assert!(
+        remote.status.success(),
+        "{}",
+        String::from_utf8_lossy(&remote.stderr)
+    );
+    let flip = verdant::tools::metrics::flip_compare(&local_frame, &frame("o").to_rgb8()).unwrap();
+    assert!(
+        flip.mean < 1e-3,
+        "FLIP {} between the folder's frame and HTTP's",
+        flip.mean
+    );
+
+    // Without its texture on the server, the plant is refused, naming the texture's address.
+    std::fs::remove_file(w.join("plants/marigold_base_color.png")).unwrap();
+    let remote = fly(Path::new(&server.url()), tmp.path());
+    let stderr = String::from_utf8_lossy(&remote.stderr);
+    assert!(!remote.status.success());
+    assert!(
+        stderr.contains("marigold") && stderr.contains(&server.url()),
+        "{stderr}"
+    );
+}

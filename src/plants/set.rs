@@ -57,9 +57,19 @@ pub struct PlantSet {
 impl PlantSet {
     /// Builds the models of `manifest`'s plant types; glTF files are read relative to `dir`.
     pub fn build(manifest: &Manifest, dir: &Path) -> Result<Self, PlantError> {
+        Self::build_with(manifest, dir, &crate::plants::gltf::read_plant_file)
+    }
+
+    /// Like [`PlantSet::build`], each glTF file (and the buffers and images it names) read by
+    /// `read`, by its path under `dir`: a world over HTTP fetches them from its server.
+    pub fn build_with(
+        manifest: &Manifest,
+        dir: &Path,
+        read: &crate::plants::gltf::PlantFileReader<'_>,
+    ) -> Result<Self, PlantError> {
         let mut models = Vec::new();
         for t in &manifest.plant_types {
-            models.push(model(t, dir)?);
+            models.push(model_with(t, dir, read)?);
         }
         Ok(Self { models })
     }
@@ -75,6 +85,15 @@ fn white() -> PlantImage {
 
 /// The model of plant type `t`.
 pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, PlantError> {
+    model_with(t, dir, &crate::plants::gltf::read_plant_file)
+}
+
+/// Like [`model`], a glTF file read by `read` ([`PlantSet::build_with`]).
+pub fn model_with(
+    t: &crate::world::PlantType,
+    dir: &Path,
+    read: &crate::plants::gltf::PlantFileReader<'_>,
+) -> Result<PlantModel, PlantError> {
     use crate::plants::recipe::{Recipe, generate};
     let recipe = Recipe::from_name(&t.mesh);
     let (lods, texture, card) = match recipe {
@@ -85,11 +104,12 @@ pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, Plan
         }
         None => {
             let file = dir.join(&t.mesh);
-            let loaded =
-                crate::plants::gltf::load_plant(&file).map_err(|source| PlantError::File {
+            let loaded = crate::plants::gltf::load_plant_from(&file, read).map_err(|source| {
+                PlantError::File {
                     name: t.name.clone(),
                     source,
-                })?;
+                }
+            })?;
             let mut mesh = loaded.mesh;
             let h = mesh.height();
             if h.is_nan() || h <= 1e-6 {

@@ -220,7 +220,7 @@ impl Renderer {
             });
         }
         let atlas = TileAtlas::new(device, pyramid.samples_per_side(), slots);
-        let (service, plan) = TileService::new(&pyramid, source, config.service)?;
+        let (service, plan) = TileService::new(&pyramid, source.clone(), config.service)?;
         for (slot, tile) in &plan.uploads {
             atlas.upload(queue, *slot, tile)?;
         }
@@ -287,7 +287,24 @@ impl Renderer {
                 let set = if world.manifest.plant_types.is_empty() {
                     None
                 } else {
-                    Some(crate::plants::PlantSet::build(&world.manifest, &world.dir)?)
+                    // glTF plants come from where the tiles do (a world over HTTP fetches them).
+                    let read = |path: &std::path::Path| -> std::io::Result<Vec<u8>> {
+                        let name = path.strip_prefix(&world.dir).unwrap_or(path);
+                        source
+                            .read_file(name, crate::plants::gltf::MAX_PLANT_FILE_BYTES)
+                            .map_err(|e| match e {
+                                crate::world::WorldError::Io { source, .. } => source,
+                                crate::world::WorldError::MissingFile { .. } => {
+                                    std::io::Error::from(std::io::ErrorKind::NotFound)
+                                }
+                                e => std::io::Error::other(e.to_string()),
+                            })
+                    };
+                    Some(crate::plants::PlantSet::build_with(
+                        &world.manifest,
+                        &world.dir,
+                        &read,
+                    )?)
                 };
                 let view = settings.view_distance_m;
                 let wind_bindings = crate::plants::renderer::PlantWindBindings {

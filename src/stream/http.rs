@@ -429,9 +429,44 @@ impl HttpSource {
     }
 }
 
+/// What a part of a file's address percent-encodes: everything but RFC 3986's unreserved
+/// characters (letters, digits, `-`, `.`, `_`, `~`).
+const UNRESERVED_KEPT: &percent_encoding::AsciiSet = &percent_encoding::NON_ALPHANUMERIC
+    .remove(b'-')
+    .remove(b'.')
+    .remove(b'_')
+    .remove(b'~');
+
 impl TileSource for HttpSource {
     fn load(&self, id: TileId) -> Result<TileData, WorldError> {
         self.load_cancellable(id, &AtomicBool::new(false))
+    }
+
+    /// Fetches `{base}{name}`, each part of `name` percent-encoded; a name that leaves the
+    /// world's folder (`..`, an absolute path) is refused without a request.
+    fn read_file(&self, name: &Path, max: u64) -> Result<Vec<u8>, WorldError> {
+        use std::path::Component;
+        let mut parts = Vec::new();
+        for c in name.components() {
+            match c {
+                Component::Normal(part) => parts.push(
+                    percent_encoding::utf8_percent_encode(&part.to_string_lossy(), UNRESERVED_KEPT)
+                        .to_string(),
+                ),
+                Component::CurDir => {}
+                _ => {
+                    return Err(WorldError::Io {
+                        path: PathBuf::from(format!("{}{}", self.base, name.display())),
+                        source: std::io::Error::new(
+                            std::io::ErrorKind::InvalidInput,
+                            "a world's file is named relative to its folder, within it",
+                        ),
+                    });
+                }
+            }
+        }
+        let url = format!("{}{}", self.base, parts.join("/"));
+        Ok(self.client.fetch(&url, max, None)?)
     }
 
     /// Fetches the tile's files one after another; once `cancelled` is set, no further request

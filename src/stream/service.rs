@@ -11,6 +11,7 @@
 //! ([`Streamer::want_retrying`]).
 
 use std::collections::{HashMap, HashSet};
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
@@ -32,11 +33,28 @@ pub trait TileSource: Send + Sync + 'static {
         let _ = cancelled;
         self.load(id)
     }
+
+    /// Reads another file of the world, `name` relative to its folder (a plant's glTF file, or
+    /// a buffer or image that file names), of at most `max` bytes. The default serves none.
+    fn read_file(&self, name: &Path, max: u64) -> Result<Vec<u8>, WorldError> {
+        let _ = max;
+        Err(WorldError::Io {
+            path: name.to_path_buf(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::Unsupported,
+                "this tile source serves no files besides tiles",
+            ),
+        })
+    }
 }
 
 impl TileSource for World {
     fn load(&self, id: TileId) -> Result<TileData, WorldError> {
         self.load_tile(id)
+    }
+
+    fn read_file(&self, name: &Path, max: u64) -> Result<Vec<u8>, WorldError> {
+        crate::world::format::read_regular(&self.dir.join(name), max)
     }
 }
 

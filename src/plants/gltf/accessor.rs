@@ -46,7 +46,9 @@ impl Loader<'_> {
                     .blob
                     .clone()
                     .ok_or_else(|| missing("the file has no binary chunk".into()))?,
-                gltf::buffer::Source::Uri(uri) => read_uri(self.path, uri).map_err(missing)?,
+                gltf::buffer::Source::Uri(uri) => {
+                    read_uri(self.path, uri, self.read).map_err(missing)?
+                }
             };
             if data.len() < buffer.length() {
                 return Err(PlantFileError::BufferTooShort {
@@ -231,7 +233,11 @@ fn component(bytes: &[u8], data_type: DataType, normalize: bool) -> f32 {
 }
 
 /// The bytes a glTF URI names: a base64 data URI, or a file relative to the glTF file.
-pub(super) fn read_uri(gltf_path: &Path, uri: &str) -> Result<Vec<u8>, String> {
+pub(super) fn read_uri(
+    gltf_path: &Path,
+    uri: &str,
+    read: &super::PlantFileReader<'_>,
+) -> Result<Vec<u8>, String> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let Some((header, data)) = rest.split_once(',') else {
             return Err("a data URI without a comma".into());
@@ -252,7 +258,7 @@ pub(super) fn read_uri(gltf_path: &Path, uri: &str) -> Result<Vec<u8>, String> {
         return Err(format!("{uri:?} is not a relative file name"));
     }
     let file = gltf_path.parent().unwrap_or(Path::new(".")).join(relative);
-    super::read_plant_file(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
+    read(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
 }
 
 #[cfg(test)]

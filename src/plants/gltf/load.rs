@@ -32,13 +32,19 @@ struct Instance<'a> {
 
 pub(super) struct Loader<'p> {
     pub(super) path: &'p Path,
+    /// Reads the files the glTF names.
+    pub(super) read: &'p super::PlantFileReader<'p>,
     pub(super) gltf: Gltf,
     /// Buffer data by index, read when first needed.
     pub(super) buffers: Vec<OnceCell<Vec<u8>>>,
 }
 
 impl<'p> Loader<'p> {
-    pub(super) fn new(path: &'p Path, bytes: &[u8]) -> Result<Self, PlantFileError> {
+    pub(super) fn new(
+        path: &'p Path,
+        bytes: &[u8],
+        read: &'p super::PlantFileReader<'p>,
+    ) -> Result<Self, PlantFileError> {
         let not_gltf = |reason: String| PlantFileError::NotGltf {
             path: path.to_owned(),
             reason,
@@ -64,6 +70,7 @@ impl<'p> Loader<'p> {
         let buffers = vec![OnceCell::new(); gltf.buffers().len()];
         Ok(Self {
             path,
+            read,
             gltf,
             buffers,
         })
@@ -414,7 +421,7 @@ impl<'p> Loader<'p> {
                     })?;
                 self.view_bytes(&view)?.to_vec()
             }
-            (None, Some(uri)) => read_uri(self.path, uri).map_err(&fail)?,
+            (None, Some(uri)) => read_uri(self.path, uri, self.read).map_err(&fail)?,
             (None, None) => {
                 return Err(fail(format!(
                     "image {image_index} has neither uri nor bufferView"

@@ -57,7 +57,7 @@ pub const MAX_PLANT_FILE_BYTES: u64 = 256 << 20;
 
 /// Reads a file of a plant (its glTF file, or a buffer or image beside it): a regular file of
 /// at most [`MAX_PLANT_FILE_BYTES`], the reason otherwise in words.
-pub(crate) fn read_plant_file(path: &Path) -> Result<Vec<u8>, io::Error> {
+pub fn read_plant_file(path: &Path) -> Result<Vec<u8>, io::Error> {
     use crate::world::WorldError;
     crate::world::format::read_regular(path, MAX_PLANT_FILE_BYTES).map_err(|e| match e {
         WorldError::NotARegularFile { kind, .. } => {
@@ -244,9 +244,22 @@ pub enum PlantFileError {
 /// Reads a plant from a glTF 2.0 file (`.gltf` or `.glb`); see the module docs for what is read
 /// and the limits.
 pub fn load_plant(path: &Path) -> Result<LoadedPlant, PlantFileError> {
-    let bytes = read_plant_file(path).map_err(|source| PlantFileError::Read {
+    load_plant_from(path, &read_plant_file)
+}
+
+/// Reads a plant's file by its path: [`read_plant_file`] for files on disk, or a world's other
+/// store (a world over HTTP fetches its plants like its tiles).
+pub type PlantFileReader<'r> = dyn Fn(&Path) -> Result<Vec<u8>, io::Error> + 'r;
+
+/// Like [`load_plant`], with the glTF file and the buffers and images it names read by `read`
+/// (each by its path: `path`, or the name the file gives joined to `path`'s folder).
+pub fn load_plant_from(
+    path: &Path,
+    read: &PlantFileReader<'_>,
+) -> Result<LoadedPlant, PlantFileError> {
+    let bytes = read(path).map_err(|source| PlantFileError::Read {
         path: path.to_owned(),
         source,
     })?;
-    load::Loader::new(path, &bytes)?.load()
+    load::Loader::new(path, &bytes, read)?.load()
 }
