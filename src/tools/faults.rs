@@ -67,6 +67,10 @@ impl FileFaultCounts {
     }
 }
 
+/// The file that marks a faulty copy as verdant's own scratch, so that a copy left by an
+/// interrupted run is removed by the next.
+const COPY_MARKER: &str = ".verdant-faulty-copy";
+
 /// A copy of a world whose tile files are broken and restored.
 pub struct FileFaults {
     original: PathBuf,
@@ -87,12 +91,40 @@ impl FileFaults {
             rate.is_finite() && (0.0..=1.0).contains(&rate),
             "--faults must be in 0..=1, not {rate}"
         );
+        let resolved = |p: &Path| std::path::absolute(p).and_then(|p| p.canonicalize());
+        if let (Ok(world), Some(Ok(parent))) = (resolved(original), copy.parent().map(resolved))
+            && parent.starts_with(&world)
+        {
+            anyhow::bail!(
+                "{}: the faulty copy of the world would go inside the world it copies ({}); \
+                 choose an --out outside it",
+                copy.display(),
+                original.display()
+            );
+        }
+        if copy.join(COPY_MARKER).is_file() {
+            // A copy of an earlier run that was stopped before it could remove it (Ctrl-C, a
+            // kill): scratch, in a folder this run holds locked.
+            std::fs::remove_dir_all(copy).with_context(|| {
+                format!(
+                    "cannot remove {}, the faulty copy an interrupted run left",
+                    copy.display()
+                )
+            })?;
+            eprintln!(
+                "removed {}, the faulty copy of the world that an interrupted run left",
+                copy.display()
+            );
+        }
         anyhow::ensure!(
             !copy.exists(),
-            "{} exists already: the faulty copy of the world goes there",
+            "{} exists already and is not a faulty copy of a world that verdant made: the \
+             faulty copy goes there; move it away or choose another --out",
             copy.display()
         );
-        if let Err(e) = copy_dir(original, copy) {
+        if let Err(e) = copy_dir(original, copy)
+            .and_then(|()| std::fs::write(copy.join(COPY_MARKER), b"a faulty copy of a world\n"))
+        {
             // A partial copy is this run's own (the folder did not exist): not left behind.
             let _ = std::fs::remove_dir_all(copy);
             return Err(anyhow::Error::new(e)
@@ -277,6 +309,46 @@ mod tests {
         assert!(f.files.iter().all(|rel| !rel.starts_with("tiles/L0")));
         drop(f);
         assert!(!copy.exists(), "the faulty copy is removed");
+    }
+
+    /// A copy left by a run that was stopped before it could remove it is removed by the next
+    /// run; a folder of the same name that verdant did not make is refused and kept; a copy
+    /// inside the world it copies is refused before anything is copied.
+    #[test]
+    fn a_left_copy_is_replaced_and_a_foreign_folder_or_a_copy_inside_the_world_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        let copy = tmp.path().join("w");
+        let first = FileFaults::new(&world(), &copy, 0.5, 1).unwrap();
+        // As if the run were killed: the copy stays.
+        std::mem::forget(first);
+        std::fs::write(copy.join("tiles/L1/0_0.height.exr"), "broken").unwrap();
+        let second = FileFaults::new(&world(), &copy, 0.5, 1).unwrap();
+        assert_eq!(
+            std::fs::read(copy.join("tiles/L1/0_0.height.exr")).unwrap(),
+            std::fs::read(world().join("tiles/L1/0_0.height.exr")).unwrap()
+        );
+        drop(second);
+        assert!(!copy.exists());
+
+        std::fs::create_dir(&copy).unwrap();
+        std::fs::write(copy.join("mine.txt"), "mine").unwrap();
+        let err = FileFaults::new(&world(), &copy, 0.5, 1)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains("not a faulty copy"), "{err}");
+        assert_eq!(
+            std::fs::read_to_string(copy.join("mine.txt")).unwrap(),
+            "mine"
+        );
+
+        let w = tmp.path().join("world");
+        copy_dir(&world(), &w).unwrap();
+        let inside = w.join("soak/.world-with-faults");
+        std::fs::create_dir_all(inside.parent().unwrap()).unwrap();
+        let err = format!("{:#}", FileFaults::new(&w, &inside, 0.5, 1).err().unwrap());
+        assert!(err.contains("inside the world it copies"), "{err}");
+        assert!(!inside.exists());
     }
 
     #[test]
