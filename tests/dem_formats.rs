@@ -1611,3 +1611,44 @@ fn special_files_as_dems_or_sidecars_are_refused_without_hanging() {
         assert!(!out_dir.exists());
     }
 }
+
+/// A GeoTIFF or an SRTM tile carries its own heights and cells: when a bake refuses them (a
+/// height beyond a planet's, a cell too fine for the bake), it blames the DEM itself, not a
+/// sidecar that does not exist, and gives its figures short.
+#[test]
+fn implausible_heights_and_cells_of_a_dem_without_a_sidecar_blame_the_dem() {
+    let dir = tempfile::tempdir().unwrap();
+    let spike = dir.path().join("spike.tif");
+    let mut heights = grid(Sample::F32);
+    heights[5 * SIZE[0] as usize + 7] = 1e30;
+    let spec = TiffSpec::new(Sample::F32, Layout::Strips { rows: 8 }, Compression::None);
+    write_tiff(&spike, &spec, SIZE[0], SIZE[1], &heights);
+    // Near the pole a cell is under a metre east-west and 93 m north-south.
+    let polar = dir.path().join("N89W122.hgt");
+    write_hgt(&polar, hgt_height);
+    for (dem, says) in [
+        (&spike, &["height 1.000e30 m at column 7, row 5"][..]),
+        (
+            &polar,
+            &["its cells = 0.8123 x 93.0", "or pass --cell-size"][..],
+        ),
+    ] {
+        let opts = BakeOptions {
+            dem: dem.clone(),
+            out: dir.path().join("out"),
+            tile_cells: 16,
+            stored_levels: 2,
+            ..Default::default()
+        };
+        let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+        let message = err.to_string();
+        assert_eq!(err.path(), Some(dem.as_path()), "{message}");
+        assert!(
+            !message.contains(".json") && !message.contains("height_offset_m"),
+            "{message}"
+        );
+        for needle in says {
+            assert!(message.contains(needle), "{message:?} lacks {needle:?}");
+        }
+    }
+}

@@ -735,16 +735,27 @@ fn check_cell_size(
         return Ok(());
     }
     let allowed = format!(
-        "at least {least} m for this DEM ({}x{} samples, {:.3} x {:.3} m; a bake resamples to \
-         at least 1 mm cells and at most {MAX_BAKE_CELLS} cells a side)",
-        dem.width, dem.height, extent[0], extent[1]
+        "at least {} m for this DEM ({}x{} samples, {} x {} m; a bake resamples to at least 1 mm \
+         cells and at most {MAX_BAKE_CELLS} cells a side)",
+        crate::world::error::short_number(least),
+        dem.width,
+        dem.height,
+        crate::world::error::short_number(extent[0]),
+        crate::world::error::short_number(extent[1])
     );
     match option {
         Some(c) => Err(WorldError::bad_option("--cell-size", c, allowed)),
         None => Err(WorldError::OutOfRange {
-            path: crate::world::dem::sidecar_path(dem_path),
-            field: "cell_size_m".into(),
-            value: format!("{} x {}", dem.cell_ew_m, dem.cell_ns_m),
+            path: crate::world::dem::sidecar_of(dem_path).unwrap_or_else(|| dem_path.to_path_buf()),
+            field: match crate::world::dem::sidecar_of(dem_path) {
+                Some(_) => "cell_size_m".into(),
+                None => "its cells".into(),
+            },
+            value: format!(
+                "{} x {}",
+                crate::world::error::short_number(dem.cell_ew_m),
+                crate::world::error::short_number(dem.cell_ns_m)
+            ),
             allowed: format!("{allowed}, or pass --cell-size"),
         }),
     }
@@ -761,7 +772,7 @@ fn check_dem_heights(dem: &Dem, dem_path: &Path) -> Result<(), WorldError> {
     match bad {
         None => Ok(()),
         Some(k) => Err(WorldError::ImplausibleHeight {
-            path: crate::world::dem::sidecar_path(dem_path),
+            path: crate::world::dem::sidecar_of(dem_path).unwrap_or_else(|| dem_path.to_path_buf()),
             dem: dem_path.to_path_buf(),
             column: k as u32 % dem.width,
             row: k as u32 / dem.width,

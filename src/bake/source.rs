@@ -272,7 +272,8 @@ impl Mosaic {
             !(lo..=hi).contains(&f64::from(**h))
         }) {
             return Err(WorldError::ImplausibleHeight {
-                path: crate::world::dem::sidecar_path(&self.named),
+                path: crate::world::dem::sidecar_of(&self.named)
+                    .unwrap_or_else(|| self.named.clone()),
                 dem: self.named.clone(),
                 column: (core[0][0] + k % size[0]) as u32,
                 row: (core[1][0] + k / size[0]) as u32,

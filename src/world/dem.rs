@@ -78,6 +78,14 @@ pub fn sidecar_path(png_path: &Path) -> PathBuf {
     png_path.with_extension("json")
 }
 
+/// The sidecar of `dem` if it has one: a 16-bit PNG's heights and cells are given by its JSON
+/// sidecar, where a GeoTIFF, an SRTM tile or a VRT carries its own.
+pub fn sidecar_of(dem: &Path) -> Option<PathBuf> {
+    dem.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+        .then(|| sidecar_path(dem))
+}
+
 impl Dem {
     /// Loads a DEM in any of the formats read (see the module docs), telling them apart by
     /// content, and fills its nodata samples. The DEM and its sidecar must be regular files (a

@@ -404,15 +404,17 @@ pub enum WorldError {
     },
 
     /// A DEM's height lies outside the heights of a planet's surface (a wrong offset or scale in
-    /// its sidecar).
+    /// its sidecar, or a broken file).
     #[error(
-        "{}: height {value} m at column {column}, row {row} of {} (height_offset_m + \
-         height_scale_m x the sample) is outside [{}, {}] m, the heights of a planet's surface: \
-         check height_offset_m and height_scale_m",
-        path.display(), dem.display(), range[0], range[1]
+        "{}: height {} m at column {column}, row {row} of {} {}is outside [{}, {}] m, \
+         the heights of a planet's surface{}",
+        path.display(), short_number(*value), dem.display(),
+        if path == dem { "" } else { "(height_offset_m + height_scale_m x the sample) " },
+        range[0], range[1],
+        if path == dem { "" } else { ": check height_offset_m and height_scale_m" }
     )]
     ImplausibleHeight {
-        /// The sidecar holding the offset and scale.
+        /// The sidecar holding the offset and scale, or the DEM itself where it has none.
         path: PathBuf,
         /// The DEM image.
         dem: PathBuf,
@@ -717,5 +719,22 @@ impl WorldError {
                 source,
             }
         }
+    }
+}
+
+/// A number for a message, short whatever its size: at most four decimals, and in scientific
+/// notation beyond a million or below a thousandth (a sidecar's 1e300 is not 301 digits).
+pub fn short_number(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() || (1e-3..1e6).contains(&a) {
+        let s = format!("{v:.4}");
+        let s = if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        };
+        if s == "-0" { "0".into() } else { s }
+    } else {
+        format!("{v:.3e}")
     }
 }
