@@ -889,10 +889,13 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
         assert!(dir.join(f).is_file(), "{f} missing");
     }
     // Absurd counts are refused before any GPU work, the option and its range named: too few,
-    // and too many for the grass pool's slots (once wrapped to a pool of 2,370,457,856 blades).
+    // too many for the grass pool's slots (once wrapped to a pool of 2,370,457,856 blades), and
+    // either end of the range of spacings the renderer draws (5 m and 2 cm).
     for (count, range) in [
-        ("10", "1000..=178917376"),
-        ("1000000000000", "1000..=178917376"),
+        ("10", "1600..=100000004"),
+        ("1000", "1600..=100000004"),
+        ("178917376", "1600..=100000004"),
+        ("1000000000000", "1600..=100000004"),
     ] {
         let bad = verdant(
             &["bench", "blades", "--counts", count, "--out", "bad"],

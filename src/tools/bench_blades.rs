@@ -119,15 +119,32 @@ pub fn slot_blades(count: u64, field_m: f64, tile_m: f64) -> Option<u64> {
 }
 
 /// The blade counts `--counts` takes for a field `field_m` metres wide of grass tiles `tile_m`
-/// metres wide: at least 1000 and at least one blade a grass tile (`(field_m / tile_m)^2`), and
-/// at most the count whose grass tiles need [`MAX_SLOT_BLADES`] blades a slot (178,917,376 for
-/// the default 200 m field).
+/// metres wide: at least 1000, at least one blade a grass tile (`(field_m / tile_m)^2`) and no
+/// wider spacing than the renderer draws ([`crate::renderer::SPACING_RANGE_M`], 5 m); at most
+/// the count whose grass tiles need [`MAX_SLOT_BLADES`] blades a slot, and no finer spacing than
+/// the renderer draws (2 cm): 1,600..=100,000,004 for the default 200 m field.
 pub fn count_range(field_m: f64, tile_m: f64) -> std::ops::RangeInclusive<u64> {
     let tiles_a_side = field_m / tile_m;
-    let min = ((tiles_a_side * tiles_a_side).ceil() as u64).max(1000);
+    let spacing = crate::renderer::SPACING_RANGE_M;
+    // The counts whose spacing, as the renderer takes it (f32), is within its range.
+    let drawn = |n: u64| spacing.contains(&(field_spacing_m(n, field_m) as f32));
+    let mut widest = (field_m / f64::from(*spacing.end()))
+        .powi(2)
+        .round()
+        .max(1.0) as u64;
+    while !drawn(widest) && widest < u64::MAX / 2 {
+        widest += 1;
+    }
+    let mut finest = (field_m / f64::from(*spacing.start())).powi(2).round() as u64;
+    while !drawn(finest) && finest > widest {
+        finest -= 1;
+    }
+    let min = ((tiles_a_side * tiles_a_side).ceil() as u64)
+        .max(1000)
+        .max(widest);
     // A grid of at most `side` points a tile edge: `side^2` blades fit a slot.
     let side = MAX_SLOT_BLADES.isqrt() as f64;
-    let max = (side * tiles_a_side).powi(2).floor() as u64;
+    let max = ((side * tiles_a_side).powi(2).floor() as u64).min(finest);
     min..=max
 }
 
@@ -181,9 +198,9 @@ impl BenchBladesOptions {
                 n,
                 format!(
                     "in {}..={} with --field-m {} (at least one blade a {FIELD_TILE_M} m grass \
-                     tile, and at most {MAX_SLOT_BLADES} blades a tile: the most a slot of the \
-                     grass pool holds, {BATCH_TILES} slots being bound in one GPU buffer of at \
-                     most 4 GiB)",
+                     tile, blades 2 cm to 5 m apart as the renderer draws them, and at most \
+                     {MAX_SLOT_BLADES} blades a tile: the most a slot of the grass pool holds, \
+                     {BATCH_TILES} slots being bound in one GPU buffer of at most 4 GiB)",
                     range.start(),
                     range.end(),
                     self.field_m
@@ -914,11 +931,10 @@ mod tests {
         // The largest slot fits a u32 with room for the renderer's rounding up to 16.
         assert_eq!(MAX_SLOT_BLADES, 11_184_810);
         let range = count_range(200.0, FIELD_TILE_M);
-        assert_eq!(*range.start(), 1000);
-        assert_eq!(*range.end(), 178_917_376);
         let top = slot_blades(*range.end(), 200.0, FIELD_TILE_M).unwrap();
         assert!(top <= MAX_SLOT_BLADES, "{top}");
-        assert_eq!(top, 3344 * 3344);
+        // In the default field the renderer's finest spacing, 2 cm, binds first: 2,500^2.
+        assert_eq!(top, 2500 * 2500);
         // One past the bound needs no more (the grid rounds), but the counts beyond it do, and
         // they are counted in 64 bits: 10^12 blades are 250,000^2 a slot, not that wrapped
         // to 2,370,457,856 in 32 bits.
@@ -934,10 +950,17 @@ mod tests {
                 let slot = slot_blades(n, field, FIELD_TILE_M).unwrap();
                 assert!((1..=MAX_SLOT_BLADES).contains(&slot), "{field} {n} {slot}");
                 assert!(field_spacing_m(n, field) <= FIELD_TILE_M, "{field} {n}");
+                let spacing = field_spacing_m(n, field) as f32;
+                assert!(
+                    crate::renderer::SPACING_RANGE_M.contains(&spacing),
+                    "{field} {n} {spacing}"
+                );
             }
         }
-        // A big field needs a blade a tile: 100 x 100 tiles.
-        assert_eq!(*count_range(5000.0, FIELD_TILE_M).start(), 10_000);
+        // A big field needs a blade a tile (100 x 100 tiles) and no wider spacing than 5 m.
+        assert_eq!(*count_range(5000.0, FIELD_TILE_M).start(), 1_000_000);
+        // 100,000,004 blades are 1.99999996 cm apart, 2 cm as the renderer's f32 takes it.
+        assert_eq!(count_range(200.0, FIELD_TILE_M), 1_600..=100_000_004);
     }
 
     #[test]
@@ -952,12 +975,12 @@ mod tests {
         let d = BenchBladesOptions::default;
         bad(
             BenchBladesOptions {
-                counts: vec![1000, 1_000_000_000_000],
+                counts: vec![1600, 1_000_000_000_000],
                 ..d()
             },
             &[
                 "--counts 1000000000000",
-                "1000..=178917376",
+                "1600..=100000004",
                 "--field-m 200",
             ],
         );
@@ -966,7 +989,7 @@ mod tests {
                 counts: vec![10],
                 ..d()
             },
-            &["--counts 10", "1000..="],
+            &["--counts 10", "1600..="],
         );
         bad(
             BenchBladesOptions {
