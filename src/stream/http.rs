@@ -63,6 +63,7 @@ impl RangeFile {
     /// Opens `url`: its first byte is asked for, to learn its length (and that the server
     /// answers range requests).
     pub fn open(url: &str, options: HttpOptions) -> Result<RangeFile, WorldError> {
+        check_authority(url)?;
         options.validate()?;
         let client = client::Client::new(options, None);
         client.fetch_range(url, 1, None, Some([0, 1]))?;
@@ -336,6 +337,45 @@ pub struct HttpStats {
     pub bytes: u64,
 }
 
+/// Refuses an `http://` address whose host is missing or whose port is not a number in
+/// 1..=65535, before any request: the HTTP client would otherwise try the wrong port (99999
+/// wrapped to 34463) or a lookup of nothing.
+fn check_authority(url: &str) -> Result<(), HttpError> {
+    let bad = |problem| HttpError::BadUrl {
+        url: url.into(),
+        problem,
+    };
+    let rest = url.get("http://".len()..).unwrap_or("");
+    let authority = rest.split(['/', '?', '#']).next().unwrap_or("");
+    let host_port = authority.rsplit_once('@').map_or(authority, |(_, h)| h);
+    let (host, port) = if let Some(v6) = host_port.strip_prefix('[') {
+        let Some((host, after)) = v6.split_once(']') else {
+            return Err(bad("an IPv6 host without its closing ]"));
+        };
+        match after {
+            "" => (host, None),
+            _ => match after.strip_prefix(':') {
+                Some(port) => (host, Some(port)),
+                None => return Err(bad("expected http://[IPv6]:PORT/PATH")),
+            },
+        }
+    } else {
+        match host_port.rsplit_once(':') {
+            Some((host, port)) => (host, Some(port)),
+            None => (host_port, None),
+        }
+    };
+    if host.is_empty() {
+        return Err(bad("no host: expected http://HOST[:PORT]/PATH"));
+    }
+    if let Some(port) = port
+        && !port.parse::<u16>().is_ok_and(|p| p > 0)
+    {
+        return Err(bad("the port must be a number in 1..=65535"));
+    }
+    Ok(())
+}
+
 /// Whether a world argument is an HTTP address rather than a folder.
 pub fn is_url(s: &str) -> bool {
     let lower = s.get(..8).unwrap_or(s).to_ascii_lowercase();
@@ -377,6 +417,7 @@ impl HttpSource {
             }
             .into());
         }
+        check_authority(url)?;
         options.validate()?;
         let base = format!("{}/", url.trim_end_matches('/'));
         let cache = match &options.cache {
@@ -518,6 +559,43 @@ impl TileSource for HttpSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Addresses with no host or a port outside 1..=65535 are refused before any request;
+    /// hosts by name, IPv4 and IPv6 with or without a port pass.
+    #[test]
+    fn an_address_without_a_host_or_with_a_bad_port_is_refused() {
+        for bad in [
+            "http:///",
+            "http://:8000/w",
+            "http://127.0.0.1:99999/",
+            "http://127.0.0.1:0/",
+            "http://127.0.0.1:/",
+            "http://h:80x/",
+            "http://[::1",
+            "http://[::1]x/",
+        ] {
+            let err = check_authority(bad).err().map(|e| e.to_string());
+            assert!(
+                err.as_deref().is_some_and(|e| e.starts_with(bad)),
+                "{bad}: {err:?}"
+            );
+            let open = HttpSource::open(bad, HttpOptions::default()).err().unwrap();
+            assert!(
+                open.to_string().contains("not a world address"),
+                "{bad}: {open}"
+            );
+        }
+        for good in [
+            "http://localhost/",
+            "http://example.org:8080/worlds/a?x=1",
+            "http://10.0.0.1:65535",
+            "http://[::1]/w",
+            "http://[::1]:8000/w",
+            "http://user@host:1/w",
+        ] {
+            assert!(check_authority(good).is_ok(), "{good}");
+        }
+    }
 
     /// The wait doubles from the backoff and stops at its ceiling; no `Duration` overflows.
     #[test]
