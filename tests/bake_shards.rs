@@ -174,7 +174,14 @@ fn parts_of_another_bake_and_bad_shards_are_refused() {
     for (step, want) in [
         (ShardStep::Shard { index: 2, count: 2 }, "2/2"),
         (ShardStep::Shard { index: 0, count: 0 }, "1..=10000"),
-        (ShardStep::Finish { count: 0 }, "1..=10000"),
+        (
+            ShardStep::Finish { count: 0 },
+            "--finish-shards 0: must be a shard count",
+        ),
+        (
+            ShardStep::Shard { index: 0, count: 0 },
+            "--shard 0: must be a shard count",
+        ),
     ] {
         let e = run(&opts(&dem, &dir.path().join("x"), Some(step)))
             .unwrap_err()

@@ -464,6 +464,21 @@ fn a_density_map_scales_the_cover_and_a_mask_clears_it() {
     o.density_map = Some(density);
     o.mask = Some(mask);
     bake(&o, &mut |_, _, _| {}).unwrap();
+    // A colour picture given as the density map, or as the mask, is refused as that map.
+    let colour = dir.path().join("colour.png");
+    image::RgbImage::new(8, 8).save(&colour).unwrap();
+    for (map, what) in [
+        ("density", "density map: a Rgb8 PNG"),
+        ("mask", "mask: a Rgb8 PNG"),
+    ] {
+        let mut bad = opts(&dem, &dir.path().join("bad"), None);
+        match map {
+            "density" => bad.density_map = Some(colour.clone()),
+            _ => bad.mask = Some(colour.clone()),
+        }
+        let e = bake(&bad, &mut |_, _, _| {}).unwrap_err().to_string();
+        assert!(e.contains("colour.png") && e.contains(what), "{e}");
+    }
     let extent = (f64::from(DEM_SIZE) - 1.0) * DEM_CELL;
     let half = (230.0f64 * 128.0 / 255.0).round() as u8;
     let mut seen = [0; 3];

@@ -363,6 +363,18 @@ fn absurd_bake_options_are_refused_before_writing() {
         (16, 2, 0.001, "--cell-size 0.001"),
         (16, 2, 1e-6, "--cell-size 0.000001"),
         (16, 2, -5.0, "--cell-size -5"),
+        (
+            16,
+            2,
+            1e12,
+            "--cell-size, --tile-cells and --levels 1.000e12 m, 16, 2",
+        ),
+        (
+            8,
+            12,
+            20.0,
+            "--cell-size, --tile-cells and --levels 20 m, 8, 12",
+        ),
     ] {
         let opts = BakeOptions {
             dem: dem.clone(),

@@ -226,7 +226,20 @@ fn table_error(path: &Path, problem: impl ToString) -> WorldError {
 fn map_error(path: &Path, problem: impl ToString) -> WorldError {
     WorldError::LandCover {
         path: path.to_path_buf(),
+        what: "land cover",
         problem: problem.to_string(),
+    }
+}
+
+/// `e` with a land-cover map's errors said of the map `what` is (a density map, a mask).
+fn as_map(e: WorldError, what: &'static str) -> WorldError {
+    match e {
+        WorldError::LandCover { path, problem, .. } => WorldError::LandCover {
+            path,
+            what,
+            problem,
+        },
+        e => e,
     }
 }
 
@@ -565,9 +578,9 @@ impl ValueMap {
     /// values from 0 to 1 (a float band), 0 to 255 or 0 to 65535 (an integer band: which, by its
     /// largest value). Refuses negative values and what [`CoverMap::load`] refuses.
     pub fn density(path: &Path, dem: &Dem) -> Result<ValueMap, WorldError> {
-        Self::read(path, dem, |raster| {
+        Self::read(path, dem, "density map", |raster| {
             if raster.values.iter().flatten().any(|&v| v < 0.0) {
-                return Err(map_error(path, "a density map holds values below 0"));
+                return Err(map_error(path, "it holds values below 0"));
             }
             let max = raster
                 .values
@@ -587,7 +600,7 @@ impl ValueMap {
 
     /// A mask: nothing grows where its value is not 0 (nodata masks nothing).
     pub fn mask(path: &Path, dem: &Dem) -> Result<ValueMap, WorldError> {
-        Self::read(path, dem, |_| {
+        Self::read(path, dem, "mask", |_| {
             Ok(Box::new(|v| if v != 0.0 { 1.0 } else { 0.0 }))
         })
     }
@@ -597,11 +610,12 @@ impl ValueMap {
     fn read(
         path: &Path,
         dem: &Dem,
+        what: &'static str,
         scale: impl FnOnce(&Raster) -> Result<Box<dyn Fn(f64) -> f64>, WorldError>,
     ) -> Result<ValueMap, WorldError> {
-        let raster = read_map(path)?;
-        let placed = Placed::on(&raster, dem, path)?;
-        let f = scale(&raster)?;
+        let raster = read_map(path).map_err(|e| as_map(e, what))?;
+        let placed = Placed::on(&raster, dem, path).map_err(|e| as_map(e, what))?;
+        let f = scale(&raster).map_err(|e| as_map(e, what))?;
         let values = raster.values.iter().map(|v| v.map(&f)).collect();
         Ok(ValueMap { placed, values })
     }

@@ -352,8 +352,39 @@ pub fn bake(
         plant_types: Vec::new(),
         materials: false,
     };
-    // Refuse absurd sizes before allocating anything.
-    manifest.validate(&manifest_path)?;
+    // Refuse absurd sizes before allocating anything, naming the options that made them: the
+    // manifest is not written yet, so its fields would name nothing the user gave.
+    manifest.validate(&manifest_path).map_err(|e| {
+        let given = format!(
+            "{} m, {}, {}",
+            crate::world::error::short_number(cell),
+            opts.tile_cells,
+            levels
+        );
+        match e {
+            WorldError::OutOfRange { field, allowed, .. } if field.starts_with("pyramid.") => {
+                WorldError::bad_option(
+                    "--cell-size, --tile-cells and --levels",
+                    given,
+                    format!(
+                        "such that the world's {} (the cell x the tile's cells x 2^(levels - \
+                         1): {} m for the root tile) is {allowed}",
+                        field.trim_start_matches("pyramid."),
+                        crate::world::error::short_number(root_size)
+                    ),
+                )
+            }
+            WorldError::TooManyTiles { count, max, .. } => WorldError::bad_option(
+                "--cell-size, --tile-cells and --levels",
+                given,
+                format!(
+                    "such that the finest stored level has at most {max} tiles ({count} with \
+                     these; fewer levels or more cells a tile)"
+                ),
+            ),
+            e => e,
+        }
+    })?;
     let cover = match &opts.land_cover {
         None => None,
         Some((map, table_path)) => {

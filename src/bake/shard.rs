@@ -62,8 +62,12 @@ impl ShardStep {
     pub fn check(self) -> Result<(), WorldError> {
         let count = self.count();
         if !(1..=MAX_SHARDS).contains(&count) {
+            let option = match self {
+                ShardStep::Shard { .. } => "--shard",
+                ShardStep::Finish { .. } => "--finish-shards",
+            };
             return Err(WorldError::bad_option(
-                "--shard",
+                option,
                 count,
                 format!("a shard count in 1..={MAX_SHARDS}"),
             ));

@@ -612,12 +612,14 @@ pub enum WorldError {
         problem: String,
     },
 
-    /// A land-cover map that cannot be used: a format, CRS or extent the baker cannot place on
-    /// the DEM, or classes its table does not list.
-    #[error("{}: land cover: {problem}", path.display())]
+    /// A land-cover map (or a density map, or a mask) that cannot be used: a format, CRS or
+    /// extent the baker cannot place on the DEM, or classes its table does not list.
+    #[error("{}: {what}: {problem}", path.display())]
     LandCover {
         /// The map.
         path: PathBuf,
+        /// Which map it is: `land cover`, `density map` or `mask`.
+        what: &'static str,
         /// What is wrong.
         problem: String,
     },
