@@ -1814,3 +1814,35 @@ fn a_screenshot_never_replaces_a_world_file_or_a_file_that_is_not_a_png() {
     assert_eq!(common::read_all_files(tmp.path()), before);
     assert!(w.join("world.toml").is_file());
 }
+
+/// A world given as its manifest, a bake into a file or through a symlink to nothing: each is
+/// refused at once, saying what the path is, and nothing is written.
+#[test]
+fn a_file_where_a_folder_is_wanted_is_named_for_what_it_is() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = world_copy(tmp.path());
+    let run = verdant(&["fly", "world/world.toml", "--frames", "1"], tmp.path());
+    assert_fails_naming(&run, &["world/world.toml", "it is a file", "(here: world)"]);
+    let dem = tmp.path().join("dem.png");
+    std::fs::copy(w.join("tiles/L0/0_0.density.png"), &dem).unwrap();
+    let before = std::fs::read(&dem).unwrap();
+    let run = verdant(
+        &["bake", "--dem", "dem.png", "--out", "dem.png"],
+        tmp.path(),
+    );
+    assert_fails_naming(
+        &run,
+        &["--out dem.png", "must be a folder (this is a file)"],
+    );
+    assert_eq!(std::fs::read(&dem).unwrap(), before);
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("nowhere/at/all", tmp.path().join("dangling")).unwrap();
+        let run = verdant(
+            &["bake", "--dem", "dem.png", "--out", "dangling"],
+            tmp.path(),
+        );
+        assert_fails_naming(&run, &["--out dangling", "points to nothing"]);
+        assert!(!tmp.path().join("nowhere").exists());
+    }
+}

@@ -60,6 +60,23 @@ impl PartialEq for CancelFlag {
 /// folder to be replaced whose `tiles/` holds anything that is not a tile verdant writes (the
 /// replaced `tiles/` is deleted whole).
 pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
+    match std::fs::symlink_metadata(out) {
+        Ok(m) if m.file_type().is_symlink() && std::fs::metadata(out).is_err() => {
+            return Err(WorldError::bad_option(
+                "--out",
+                out.display(),
+                "a folder, or a symlink to one (this one points to nothing)".into(),
+            ));
+        }
+        Ok(_) if !out.is_dir() => {
+            return Err(WorldError::bad_option(
+                "--out",
+                out.display(),
+                "a folder (this is a file)".into(),
+            ));
+        }
+        _ => {}
+    }
     match std::fs::read_dir(out) {
         Ok(mut entries) => {
             if entries.next().is_some() && !replace {

@@ -241,6 +241,17 @@ pub(crate) fn resolve_world(arg: &str) -> Result<PathBuf> {
             direct.display(),
             c.display()
         ),
+        None if direct.is_file() => bail!(
+            "no world at {}: it is a file; a world is the folder that holds world.toml and \
+             tiles/{}",
+            direct.display(),
+            match direct.parent() {
+                Some(p) if direct.file_name().is_some_and(|n| n == "world.toml") => {
+                    format!(" (here: {})", p.display())
+                }
+                _ => String::new(),
+            }
+        ),
         None => bail!("no world at {}: no such folder", direct.display()),
     }
 }

@@ -66,13 +66,18 @@ pub(crate) fn view(args: ViewArgs) -> Result<()> {
         wind_scene: wind,
         aa,
     })?;
-    println!(
-        "{} frames, median {:.1} ms a frame ({:.1} fps) on {}",
-        summary.frames,
-        summary.median_frame_ms,
-        1e3 / summary.median_frame_ms.max(1e-3),
-        summary.adapter
-    );
+    if summary.frames < 2 {
+        // One frame has no time between frames to take a median of.
+        println!("{} frame on {}", summary.frames, summary.adapter);
+    } else {
+        println!(
+            "{} frames, median {:.1} ms a frame ({:.1} fps) on {}",
+            summary.frames,
+            summary.median_frame_ms,
+            1e3 / summary.median_frame_ms.max(1e-3),
+            summary.adapter
+        );
+    }
     if let Some(file) = screenshot {
         println!("wrote {}", file.display());
     }
