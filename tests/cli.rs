@@ -1084,6 +1084,12 @@ fn bake_into_an_existing_world_needs_replace() {
         world.join("tiles/L1/stale.txt").exists(),
         "a refused bake touched the world"
     );
+    // A file in tiles/ that no bake writes is refused by name, not deleted with the old tiles.
+    let out = bake(&["--replace"]);
+    assert_fails_naming(&out, &["tiles/L1/stale.txt", "--replace would delete this"]);
+    std::fs::remove_file(world.join("tiles/L1/stale.txt")).unwrap();
+    // A stale tile of the old world goes with it.
+    std::fs::write(world.join("tiles/L1/9_9.height.exr"), "stale").unwrap();
     let out = bake(&["--replace"]);
     assert!(
         out.status.success(),
@@ -1091,8 +1097,8 @@ fn bake_into_an_existing_world_needs_replace() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(
-        !world.join("tiles/L1/stale.txt").exists(),
-        "a stale file was kept"
+        !world.join("tiles/L1/9_9.height.exr").exists(),
+        "a stale tile was kept"
     );
     // Bad options name themselves, not the world.toml that does not exist yet.
     for (option, value) in [("--levels", "0"), ("--tile-cells", "3")] {
