@@ -313,6 +313,34 @@ fn files_that_do_not_join_are_refused_naming_them() {
     let junk = dir.path().join("junk.vrt");
     std::fs::write(&junk, "not xml at all <").unwrap();
     case("junk", vec![junk], &["junk.vrt", "not a VRT"]);
+    // A VRT of VRTs (itself among them).
+    let nested = dir.path().join("nested.vrt");
+    write_vrt(&nested, &["nested.vrt"]);
+    case(
+        "nested",
+        vec![nested],
+        &["nested.vrt", "is itself a VRT", "DEM files"],
+    );
+    // A folder of DEMs with one that is not a regular file: named, not skipped.
+    #[cfg(unix)]
+    {
+        let folder = dir.path().join("with_fifo");
+        std::fs::create_dir(&folder).unwrap();
+        std::fs::copy(&four[0], folder.join("tile_0_0.tif")).unwrap();
+        let fifo = folder.join("N37W122.hgt");
+        assert!(
+            std::process::Command::new("mkfifo")
+                .arg(&fifo)
+                .status()
+                .unwrap()
+                .success()
+        );
+        case(
+            "fifo",
+            vec![folder],
+            &["N37W122.hgt", "not a regular file (a FIFO)"],
+        );
+    }
 }
 
 #[test]

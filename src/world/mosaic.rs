@@ -52,8 +52,13 @@ pub fn dem_files(dems: &[PathBuf]) -> Result<Vec<PathBuf>, WorldError> {
             let entries = std::fs::read_dir(d).map_err(|e| WorldError::io(d, e))?;
             let mut found: Vec<PathBuf> = entries
                 .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.is_file() && is_dem_file(p))
+                .filter(|p| is_dem_file(p))
                 .collect();
+            // A file named as a DEM that is not a regular file (a FIFO, a device, a symlink to
+            // nothing) is refused by name rather than skipped unseen.
+            if let Some(odd) = found.iter().find(|p| !p.is_file()) {
+                crate::world::format::open_regular(odd)?;
+            }
             found.sort();
             if found.is_empty() {
                 return Err(mosaic_error(
@@ -139,6 +144,16 @@ fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
         } else {
             PathBuf::from(name)
         };
+        if has_extension(&p, "vrt") {
+            return Err(mosaic_error(
+                vrt,
+                format!(
+                    "its source {} is itself a VRT: a VRT's sources are DEM files (.hgt, .tif, \
+                     .tiff or .png with a .json sidecar)",
+                    p.display()
+                ),
+            ));
+        }
         if !out.contains(&p) {
             out.push(p);
         }
