@@ -1376,6 +1376,30 @@ fn eval_derive_refuses_a_factor_too_large_for_the_dem() {
         !tmp.path().join("ev").exists(),
         "an output folder was written"
     );
+    // Heights beyond a planet's (a sidecar's scale of 1e30) are refused as the baker refuses
+    // them, naming the sidecar, before anything is written.
+    let png = common::write_dem(
+        tmp.path(),
+        "huge",
+        [65, 65],
+        [10.0, 10.0],
+        [0.0, 1.0],
+        |x, y| 100.0 + x * 0.1 + y * 0.05,
+    );
+    common::write_sidecar(tmp.path(), "huge", [65, 65], [10.0, 10.0], [0.0, 1e30]);
+    let out = verdant(
+        &[
+            "eval",
+            "derive",
+            "--dem",
+            png.to_str().unwrap(),
+            "--out",
+            "ev",
+        ],
+        tmp.path(),
+    );
+    assert_fails_naming(&out, &["huge.json", "a planet's surface"]);
+    assert!(!tmp.path().join("ev").exists());
 }
 
 #[test]

@@ -794,7 +794,7 @@ fn check_cell_size(
 
 /// Refuses a DEM whose heights leave [`crate::world::PLAUSIBLE_HEIGHTS_M`] (a wrong offset or scale in
 /// its sidecar), naming the sidecar.
-fn check_dem_heights(dem: &Dem, dem_path: &Path) -> Result<(), WorldError> {
+pub(crate) fn check_dem_heights(dem: &Dem, dem_path: &Path) -> Result<(), WorldError> {
     let [lo, hi] = crate::world::PLAUSIBLE_HEIGHTS_M;
     let bad = dem.heights.iter().position(|&h| {
         let h = f64::from(h);

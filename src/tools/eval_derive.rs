@@ -592,7 +592,8 @@ pub fn min_side(factor: usize) -> usize {
 /// Runs `eval derive` on the DEM at `dem_path` downsampled by `factor` and writes its CSV and
 /// charts into `out` ([`write_results`]). `progress` hears each method's name before it runs,
 /// with the methods done and their total. Refuses a factor that is not a power of two from 2
-/// to 64, a DEM too small for it, and results that are not finite (then nothing is written).
+/// to 64, a DEM too small for it or with heights beyond a planet's surface, and results that
+/// are not finite (then nothing is written).
 pub fn run_derive_eval(
     dem_path: &std::path::Path,
     factor: usize,
@@ -604,6 +605,8 @@ pub fn run_derive_eval(
         bail!("--factor must be a power of two from 2 to 64, got {factor}");
     }
     let dem = Dem::load(dem_path)?;
+    // Heights no planet has (a wrong scale in a sidecar) are refused as the baker refuses them.
+    crate::bake::check_dem_heights(&dem, dem_path)?;
     let side = dem.width.min(dem.height) as usize;
     let needed = min_side(factor);
     if side < needed {
