@@ -1799,6 +1799,12 @@ fn output_folders_that_are_a_world_or_the_root_are_refused() {
         ("world/tiles/..", "a world's folder"),
         ("world/tiles/L0", "inside a world's tiles/"),
         ("world/tiles/L7/new", "inside a world's tiles/"),
+        // Through a folder that does not exist and back out of it.
+        ("missing/../world", "a world's folder"),
+        (
+            "missing/deeper/../../world/tiles/L0",
+            "inside a world's tiles/",
+        ),
     ];
     for (out, why) in cases {
         let run = verdant(
@@ -1825,6 +1831,16 @@ fn a_screenshot_never_replaces_a_world_file_or_a_file_that_is_not_a_png() {
     let w = world_copy(tmp.path());
     std::fs::write(tmp.path().join("notes.png"), "my notes").unwrap();
     std::fs::create_dir(tmp.path().join("shots.png")).unwrap();
+    std::fs::create_dir(w.join("source")).unwrap();
+    // A 16-bit DEM outside any world, and a grey map: PNGs, but not screenshots.
+    std::fs::copy(
+        w.join("tiles/L0/0_0.density.png"),
+        tmp.path().join("map.png"),
+    )
+    .unwrap();
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::new(4, 4)
+        .save(tmp.path().join("dem.png"))
+        .unwrap();
     let before = common::read_all_files(tmp.path());
     let cases = [
         ("world/world.toml", "must name a .png file"),
@@ -1833,6 +1849,12 @@ fn a_screenshot_never_replaces_a_world_file_or_a_file_that_is_not_a_png() {
         ("missing/shot.png", "does not exist"),
         ("notes.png", "exists and is not a PNG image"),
         ("shots.png", "is a folder"),
+        ("world/source/shot.png", "inside the world"),
+        ("missing/../world/shot.png", "does not exist"),
+        ("dem.png", "is not a screenshot"),
+        ("map.png", "is not a screenshot"),
+        ("shot.png/", "must name a .png file"),
+        ("notes.png/shot.png", "is not a folder"),
     ];
     for (file, why) in cases {
         let run = verdant(

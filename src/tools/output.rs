@@ -150,34 +150,10 @@ pub enum OutDirError {
     },
 }
 
-/// Why `path` is no place for a run's files, if it is not: the root of the file system, a
-/// world's folder (one holding `world.toml`), or anything inside a world's `tiles/`. A run
-/// writes `report.json`, frames and tables there by their own names, and a world's files are
-/// not to be mixed with them or overwritten.
+/// Why `path` is no place for a run's files, if it is not
+/// ([`crate::world::format::refused_output`]).
 pub fn refused_output(path: &Path) -> Option<&'static str> {
-    let absolute = std::path::absolute(path).ok()?;
-    // The longest part that exists, symlinks followed: `w/.`, `w/tiles/..` are `w`.
-    let mut existing = absolute.as_path();
-    let resolved = loop {
-        if let Ok(p) = existing.canonicalize() {
-            break p;
-        }
-        existing = existing.parent()?;
-    };
-    if resolved.parent().is_none() && existing == absolute {
-        return Some("the root of the file system");
-    }
-    if existing == absolute && resolved.join("world.toml").is_file() {
-        return Some("a world's folder (it holds world.toml)");
-    }
-    let mut up = resolved.as_path();
-    while let Some(parent) = up.parent() {
-        if up.file_name().is_some_and(|n| n == "tiles") && parent.join("world.toml").is_file() {
-            return Some("inside a world's tiles/");
-        }
-        up = parent;
-    }
-    None
+    crate::world::format::refused_output(path)
 }
 
 fn owner_words(pid: Option<u32>, tool: &str) -> String {

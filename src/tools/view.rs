@@ -593,15 +593,17 @@ impl Viewer {
     }
 }
 
-/// Writes the window's current image (an RGBA or BGRA 8-bit texture) to a PNG file.
 /// Checks `--screenshot FILE` before anything is drawn: a `.png` in an existing folder that is
-/// no world's (nor inside a world's `tiles/`), and, where the file exists already, a PNG image
-/// (a screenshot of an earlier run), never a file of another kind.
+/// in no world (a world's folder or any folder below it), and, where the file exists already,
+/// an 8-bit RGBA PNG without a JSON sidecar beside it (what a screenshot is), never a file of
+/// another kind: not a DEM, a map or a picture of another kind.
 fn check_screenshot(file: &Path) -> Result<()> {
     let shown = file.display();
-    if !file
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    let trailing_slash = file.as_os_str().as_encoded_bytes().ends_with(b"/");
+    if trailing_slash
+        || !file
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"))
     {
         bail!("--screenshot {shown}: must name a .png file");
     }
@@ -609,6 +611,9 @@ fn check_screenshot(file: &Path) -> Result<()> {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
+    if parent.exists() && !parent.is_dir() {
+        bail!("--screenshot {shown}: {} is not a folder", parent.display());
+    }
     if !parent.is_dir() {
         bail!(
             "--screenshot {shown}: the folder {} does not exist",
@@ -618,21 +623,42 @@ fn check_screenshot(file: &Path) -> Result<()> {
     if let Some(why) = crate::tools::output::refused_output(parent) {
         bail!("--screenshot {shown}: its folder is {why}; write the screenshot elsewhere");
     }
+    let resolved = crate::world::format::resolve_lexically(parent);
+    if let Some(world) = resolved
+        .iter()
+        .flat_map(|p| p.ancestors())
+        .find(|a| a.join("world.toml").is_file())
+    {
+        bail!(
+            "--screenshot {shown}: its folder is inside the world {}; write the screenshot \
+             elsewhere",
+            world.display()
+        );
+    }
     match std::fs::symlink_metadata(file) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => bail!("--screenshot {shown}: {e}"),
         Ok(m) if m.is_dir() => bail!("--screenshot {shown}: is a folder"),
         Ok(m) if !m.is_file() => bail!("--screenshot {shown}: exists and is not a regular file"),
         Ok(_) => {
-            let mut head = [0u8; 8];
-            let is_png = std::fs::File::open(file)
+            // The signature, then IHDR: length, "IHDR", width, height, bit depth, colour type.
+            let mut head = [0u8; 26];
+            let read = std::fs::File::open(file)
                 .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head))
-                .is_ok()
-                && head == *b"\x89PNG\r\n\x1a\n";
+                .is_ok();
+            let is_png = read && head[..8] == *b"\x89PNG\r\n\x1a\n" && &head[12..16] == b"IHDR";
             if !is_png {
                 bail!(
                     "--screenshot {shown}: exists and is not a PNG image; a screenshot replaces \
                      only an earlier screenshot"
+                );
+            }
+            let rgba8 = head[24] == 8 && head[25] == 6;
+            if !rgba8 || file.with_extension("json").exists() {
+                bail!(
+                    "--screenshot {shown}: exists and is not a screenshot (an 8-bit RGBA PNG \
+                     without a .json sidecar: this one may be a DEM, a map or a picture); a \
+                     screenshot replaces only an earlier screenshot"
                 );
             }
             Ok(())
@@ -640,6 +666,7 @@ fn check_screenshot(file: &Path) -> Result<()> {
     }
 }
 
+/// Writes the window's current image (an RGBA or BGRA 8-bit texture) to a PNG file.
 fn save_screenshot(
     ctx: &GpuContext,
     texture: &wgpu::Texture,

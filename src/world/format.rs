@@ -764,3 +764,50 @@ fn decode_png_l8(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<u8>, WorldE
     )?;
     Ok(png.bytes)
 }
+
+/// Why `path` is no place for a run's files, if it is not: the root of the file system, a
+/// world's folder (one holding `world.toml`), or anything inside a world's `tiles/`. A run
+/// writes `report.json`, frames and tables there by their own names, and a world's files are
+/// not to be mixed with them or overwritten.
+pub fn refused_output(path: &Path) -> Option<&'static str> {
+    let resolved = resolve_lexically(path)?;
+    if resolved.parent().is_none() {
+        return Some("the root of the file system");
+    }
+    if resolved.join("world.toml").is_file() {
+        return Some("a world's folder (it holds world.toml)");
+    }
+    let mut up = resolved.as_path();
+    while let Some(parent) = up.parent() {
+        if up.file_name().is_some_and(|n| n == "tiles") && parent.join("world.toml").is_file() {
+            return Some("inside a world's tiles/");
+        }
+        up = parent;
+    }
+    None
+}
+
+/// `path` made absolute: its longest part that exists canonicalised (symlinks followed), the
+/// rest appended with `.` dropped and `..` taken lexically (what does not exist holds no
+/// symlinks), so that `missing/../w` is `w` and `w/tiles/..` is `w`.
+pub fn resolve_lexically(path: &Path) -> Option<PathBuf> {
+    use std::path::Component;
+    let absolute = std::path::absolute(path).ok()?;
+    let components: Vec<Component> = absolute.components().collect();
+    for n in (1..=components.len()).rev() {
+        let prefix: PathBuf = components[..n].iter().collect();
+        if let Ok(mut resolved) = prefix.canonicalize() {
+            for c in &components[n..] {
+                match c {
+                    Component::Normal(name) => resolved.push(name),
+                    Component::ParentDir => {
+                        resolved.pop();
+                    }
+                    _ => {}
+                }
+            }
+            return Some(resolved);
+        }
+    }
+    None
+}

@@ -80,6 +80,12 @@ impl DiskCache {
             path: config.dir.clone(),
             source,
         };
+        // Never among a world's files: the cache writes and evicts its entries there.
+        if let Some(why) = crate::world::format::refused_output(&config.dir) {
+            return Err(err(std::io::Error::other(format!(
+                "it is {why}; give the cache a folder of its own"
+            ))));
+        }
         std::fs::create_dir_all(&config.dir).map_err(err)?;
         let mut cache = DiskCache {
             dir: config.dir.clone(),
@@ -311,6 +317,33 @@ mod tests {
             );
         }
         assert!(tmp.path().join("0123456789abcdef.body").is_dir());
+    }
+
+    /// A cache is refused a world's folder or a folder in its `tiles/`, however spelled, and
+    /// writes nothing there.
+    #[test]
+    fn a_cache_in_a_worlds_folder_is_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        let w = tmp.path().join("w");
+        std::fs::create_dir_all(w.join("tiles/L0")).unwrap();
+        std::fs::write(w.join("world.toml"), "name = \"w\"").unwrap();
+        for dir in [
+            w.clone(),
+            w.join("tiles/L0"),
+            tmp.path().join("gone/../w/tiles/L9"),
+        ] {
+            let config = HttpCacheConfig {
+                dir: dir.clone(),
+                max_bytes: 1 << 20,
+            };
+            let err = DiskCache::open(&config).err().map(|e| e.to_string());
+            assert!(
+                err.as_deref()
+                    .is_some_and(|e| e.contains("a folder of its own")),
+                "{dir:?}: {err:?}"
+            );
+        }
+        assert!(!w.join("tiles/L9").exists() && !tmp.path().join("gone").exists());
     }
 
     /// A body that its metadata does not match (a flipped byte, another length, a body larger
