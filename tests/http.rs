@@ -543,6 +543,84 @@ fn the_server_answers_with_content_types_and_conditional_gets() {
     }
 }
 
+/// The server sends a file from disk as it goes, never whole into memory: a HEAD of a 16 GiB
+/// (sparse) file answers its length at once, and a range of it its bytes; a percent-encoded
+/// name is decoded (`my%20plants/`), and `%2e%2e` is still `..`, refused. A world whose
+/// manifest is not a regular file, or leads out of the folder, is refused at the start.
+#[test]
+fn the_server_streams_files_decodes_names_and_checks_its_world_at_the_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("files");
+    std::fs::create_dir_all(root.join("my plants")).unwrap();
+    std::fs::write(root.join("my plants/fern one.txt"), "a fern").unwrap();
+    let huge = std::fs::File::create(root.join("huge.bin")).unwrap();
+    huge.set_len(16 << 30).unwrap();
+    drop(huge);
+    let server = WorldServer::start_folder(&root, "127.0.0.1:0").unwrap();
+    let ask = |request: String| -> (String, Vec<u8>) {
+        let mut s = TcpStream::connect(server.addr()).unwrap();
+        s.write_all(request.as_bytes()).unwrap();
+        let mut all = Vec::new();
+        s.read_to_end(&mut all).unwrap();
+        let split = all.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+        (
+            String::from_utf8_lossy(&all[..split]).into_owned(),
+            all[split + 4..].to_vec(),
+        )
+    };
+    let start = Instant::now();
+    let (head, body) =
+        ask("HEAD /huge.bin HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n".into());
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    assert!(head.contains("Content-Length: 17179869184"), "{head}");
+    assert!(body.is_empty());
+    let (head, body) = ask(
+        "GET /huge.bin HTTP/1.1\r\nHost: x\r\nRange: bytes=17179869180-\r\nConnection: close\r\n\r\n"
+            .into(),
+    );
+    assert!(head.starts_with("HTTP/1.1 206"), "{head}");
+    assert_eq!(body, [0; 4]);
+    assert!(
+        start.elapsed() < Duration::from_secs(10),
+        "{:?}",
+        start.elapsed()
+    );
+    let get = |path: &str| {
+        ask(format!(
+            "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        ))
+    };
+    let (head, body) = get("/my%20plants/fern%20one.txt");
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    assert_eq!(body, b"a fern");
+    for refused in [
+        "/%2e%2e/files/huge.bin",
+        "/my%20plants/%2E%2E/huge.bin",
+        "/a%00b",
+        "/%ff",
+    ] {
+        let (head, _) = get(refused);
+        assert!(head.starts_with("HTTP/1.1 404"), "{refused}: {head}");
+    }
+
+    // A manifest that is a folder, or a symlink out of the world: refused before serving.
+    let w = dir.path().join("w");
+    std::fs::create_dir_all(w.join("world.toml")).unwrap();
+    let err = WorldServer::start(&w, "127.0.0.1:0")
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("not a regular file"), "{err}");
+    std::fs::remove_dir(w.join("world.toml")).unwrap();
+    std::fs::write(dir.path().join("elsewhere.toml"), "name = \"x\"").unwrap();
+    std::os::unix::fs::symlink(dir.path().join("elsewhere.toml"), w.join("world.toml")).unwrap();
+    let err = WorldServer::start(&w, "127.0.0.1:0")
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("a symlink out of the folder"), "{err}");
+}
+
 /// `verdant serve` in one process and `verdant fly http://...` in another, as the README says;
 /// an address where nothing listens is refused with a message that names it.
 #[test]

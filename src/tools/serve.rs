@@ -27,10 +27,34 @@ impl WorldServer {
     /// Serves the folder `root` (which must hold a `world.toml`) on `addr` (port 0 picks a free
     /// one) from worker threads of its own.
     pub fn start(root: &Path, addr: &str) -> Result<WorldServer> {
-        if !root.join("world.toml").is_file() {
+        let manifest = root.join("world.toml");
+        let Ok(meta) = std::fs::metadata(&manifest) else {
             bail!("{}: no world.toml: not a world folder", root.display());
+        };
+        if !meta.is_file() {
+            bail!(
+                "{}: not a regular file; a world's manifest is served only from one",
+                manifest.display()
+            );
         }
-        WorldServer::start_folder(root, addr)
+        let server = WorldServer::start_folder(root, addr)?;
+        // What the server would answer for it: a manifest that is a symlink out of the folder
+        // is not followed, and the world would be served without it.
+        let real_root = root
+            .canonicalize()
+            .with_context(|| root.display().to_string())?;
+        for name in ["world.toml", "tiles"] {
+            if let Ok(real) = root.join(name).canonicalize()
+                && !real.starts_with(&real_root)
+            {
+                bail!(
+                    "{}: a symlink out of the folder, which the server does not follow; copy \
+                     it into the world",
+                    root.join(name).display()
+                );
+            }
+        }
+        Ok(server)
     }
 
     /// Serves any folder `root` on `addr`: a world's source files (DEMs a bake reads over
@@ -111,9 +135,15 @@ pub fn content_type(path: &Path) -> &'static str {
 
 /// The file under `root` that a request path names, if it names one inside it.
 fn resolve(root: &Path, url: &str) -> Option<PathBuf> {
-    let path = url.split(['?', '#']).next().unwrap_or("");
+    let raw = url.split(['?', '#']).next().unwrap_or("");
+    // Percent-encoded names (a plant file `my%20fern.gltf`) are decoded first, then checked
+    // like any other: `%2e%2e` is `..` and refused, a NUL never reaches the file system.
+    let path = percent_encoding::percent_decode_str(raw)
+        .decode_utf8()
+        .ok()?
+        .into_owned();
     let relative = Path::new(path.trim_start_matches('/'));
-    if path.contains('%')
+    if path.contains('\0')
         || relative
             .components()
             .any(|c| !matches!(c, Component::Normal(_)))
@@ -183,22 +213,24 @@ fn answer(root: &Path, request: Request) -> std::io::Result<()> {
             );
         }
     };
-    let body = match span {
-        None => std::fs::read(&file)?,
-        Some([first, last]) => {
-            use std::os::unix::fs::FileExt;
-            let mut buf = vec![0u8; (last - first + 1) as usize];
-            std::fs::File::open(&file)?.read_exact_at(&mut buf, first)?;
-            buf
-        }
-    };
-    // The whole body is in memory: always a Content-Length, never chunked (tiny_http chunks
-    // bodies over 32 KiB by default, such as a world manifest with many paths).
-    let mut response = Response::from_data(body)
-        .with_chunked_threshold(usize::MAX)
-        .with_status_code(status)
-        .with_header(header("Content-Type", content_type(&file)))
-        .with_header(header("Accept-Ranges", "bytes"));
+    // The body is read from the file as it is sent (never whole into memory, and not at all
+    // for HEAD), with a Content-Length, never chunked (tiny_http chunks bodies over 32 KiB by
+    // default, such as a world manifest with many paths).
+    let [first, last] = span.unwrap_or([0, len.saturating_sub(1)]);
+    let length = if len == 0 { 0 } else { last - first + 1 };
+    let mut reader = std::fs::File::open(&file)?;
+    std::io::Seek::seek(&mut reader, std::io::SeekFrom::Start(first))?;
+    let body = std::io::Read::take(reader, length);
+    let mut response = Response::new(
+        tiny_http::StatusCode(status),
+        Vec::new(),
+        body,
+        usize::try_from(length).ok(),
+        None,
+    )
+    .with_chunked_threshold(usize::MAX)
+    .with_header(header("Content-Type", content_type(&file)))
+    .with_header(header("Accept-Ranges", "bytes"));
     if let Some([first, last]) = span {
         response = response.with_header(header(
             "Content-Range",
