@@ -258,7 +258,9 @@ fn bake_into_a_non_empty_folder_is_refused_unless_replaced_as_a_whole() {
     let out = dir.path().join("w");
     std::fs::create_dir_all(out.join("tiles/L5")).unwrap();
     std::fs::write(out.join("tiles/L5/0_0.height.exr"), "stale").unwrap();
-    std::fs::write(out.join("world.toml"), "old").unwrap();
+    // An old manifest that no longer validates, but is a world's (it has a [pyramid] table).
+    let old = b"[pyramid]\nold = true\n";
+    std::fs::write(out.join("world.toml"), old).unwrap();
     std::fs::create_dir_all(out.join("source")).unwrap();
     std::fs::write(out.join("source/notes.txt"), "keep me").unwrap();
     let mut opts = BakeOptions {
@@ -272,13 +274,13 @@ fn bake_into_a_non_empty_folder_is_refused_unless_replaced_as_a_whole() {
     let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
     assert!(matches!(err, WorldError::OutputNotEmpty { .. }), "{err}");
     assert!(err.to_string().contains("--replace"), "{err}");
-    assert_eq!(std::fs::read(out.join("world.toml")).unwrap(), b"old");
+    assert_eq!(std::fs::read(out.join("world.toml")).unwrap(), old);
     // A bake that fails after its checks leaves the old folder as it was and no temporary one.
     opts.replace = true;
     let good_dem = opts.dem.clone();
     opts.dem = dir.path().join("missing.png");
     bake(&opts, &mut |_, _, _| {}).unwrap_err();
-    assert_eq!(std::fs::read(out.join("world.toml")).unwrap(), b"old");
+    assert_eq!(std::fs::read(out.join("world.toml")).unwrap(), old);
     opts.dem = good_dem;
     // Told to replace it, the bake replaces the folder as a whole: nothing stale stays.
     let mut written_into_out = false;
@@ -708,6 +710,25 @@ fn replace_refuses_a_tiles_folder_holding_files_that_are_not_tiles() {
         read_all_files(&w),
         before,
         "a refused bake changed the folder"
+    );
+
+    // A world.toml that is not a world's manifest (notes, a DEM named so) is not replaced.
+    let notes = dir.path().join("notes");
+    std::fs::create_dir_all(&notes).unwrap();
+    std::fs::write(notes.join("world.toml"), "my notes about worlds\n").unwrap();
+    let dem_elsewhere = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let err = bake(
+        &replace_opts(dem_elsewhere, notes.clone()),
+        &mut |_, _, _| {},
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string().contains("not one: no [pyramid] table"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(notes.join("world.toml")).unwrap(),
+        "my notes about worlds\n"
     );
 
     // Tile-named files in other places, a level that is a file, a tile that is a folder.

@@ -84,6 +84,16 @@ pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
                     path: out.to_path_buf(),
                 });
             }
+            let manifest = out.join("world.toml");
+            if std::fs::symlink_metadata(&manifest).is_ok() && !is_a_manifest(&manifest) {
+                return Err(WorldError::bad_option(
+                    "--replace",
+                    manifest.display(),
+                    "a world's manifest to replace (this is not one: no [pyramid] table); \
+                     move it away, or bake into another folder"
+                        .into(),
+                ));
+            }
             let tiles = out.join("tiles");
             match crate::world::format::first_foreign_in_tiles(&tiles) {
                 Ok(None) => {}
@@ -96,6 +106,17 @@ pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
         Err(e) => Err(WorldError::io(out, e)),
     }
 }
+/// Whether `path` is a world's manifest, as far as replacing it goes: a regular TOML file of at
+/// most [`crate::world::manifest::MAX_MANIFEST_BYTES`] with a `[pyramid]` table (one that an
+/// older or newer version wrote, or that no longer validates, is still a world's).
+fn is_a_manifest(path: &Path) -> bool {
+    crate::world::format::read_regular(path, crate::world::manifest::MAX_MANIFEST_BYTES)
+        .ok()
+        .and_then(|bytes| String::from_utf8(bytes).ok())
+        .and_then(|text| text.parse::<toml::Table>().ok())
+        .is_some_and(|t| t.get("pyramid").is_some_and(toml::Value::is_table))
+}
+
 /// `out` made absolute, without `.` or `..` components or a trailing slash: the longest part
 /// that exists is canonicalised (symlinks followed) and the rest appended. The staging folder
 /// goes beside this path, so that it is never inside the output folder however `--out` is
