@@ -257,15 +257,33 @@ impl Drop for FileFaults {
     }
 }
 
+/// Copies the folder `from` to `to`, following symlinks (a world whose `tiles/` is a link to
+/// another disk is copied whole), at most [`MAX_COPY_DEPTH`] folders deep (a symlink loop ends
+/// there with an error).
 fn copy_dir(from: &Path, to: &Path) -> std::io::Result<()> {
+    copy_dir_within(from, to, MAX_COPY_DEPTH)
+}
+
+/// How deep [`copy_dir`] goes: a world is `tiles/L{level}/` deep.
+const MAX_COPY_DEPTH: u32 = 8;
+
+fn copy_dir_within(from: &Path, to: &Path, depth: u32) -> std::io::Result<()> {
+    if depth == 0 {
+        return Err(std::io::Error::other(format!(
+            "{}: folders nested deeper than {MAX_COPY_DEPTH} (a symlink loop?)",
+            from.display()
+        )));
+    }
     std::fs::create_dir_all(to)?;
     for entry in std::fs::read_dir(from)? {
         let entry = entry?;
         let target = to.join(entry.file_name());
-        let kind = entry.file_type()?;
-        if kind.is_dir() {
-            copy_dir(&entry.path(), &target)?;
-        } else if kind.is_file() {
+        let Ok(meta) = std::fs::metadata(entry.path()) else {
+            continue;
+        };
+        if meta.is_dir() {
+            copy_dir_within(&entry.path(), &target, depth - 1)?;
+        } else if meta.is_file() {
             std::fs::copy(entry.path(), &target)?;
         }
     }
@@ -349,6 +367,20 @@ mod tests {
         let err = format!("{:#}", FileFaults::new(&w, &inside, 0.5, 1).err().unwrap());
         assert!(err.contains("inside the world it copies"), "{err}");
         assert!(!inside.exists());
+    }
+
+    /// A world whose `tiles/` is a symlink (to another disk, say) is copied whole.
+    #[cfg(unix)]
+    #[test]
+    fn a_world_with_symlinked_tiles_is_copied_whole() {
+        let tmp = tempfile::tempdir().unwrap();
+        let w = tmp.path().join("world");
+        std::fs::create_dir(&w).unwrap();
+        std::fs::copy(world().join("world.toml"), w.join("world.toml")).unwrap();
+        std::os::unix::fs::symlink(world().join("tiles"), w.join("tiles")).unwrap();
+        let faults = FileFaults::new(&w, &tmp.path().join("copy"), 0.5, 1).unwrap();
+        assert!(faults.counts().files > 0);
+        assert!(tmp.path().join("copy/tiles/L0").is_dir());
     }
 
     #[test]
