@@ -1138,6 +1138,27 @@ wind = { bend = 0.05 }
             "size_m = [0.0, 0.3]",
             "plant_types[0].size_m",
         ),
+        ("name = \"poppy\"", "name = \" \"", "plant_types[0].name"),
+        (
+            "size_m = [0.3, 0.5]",
+            "size_m = [1e-30, 1e-30]",
+            "plant_types[0].size_m",
+        ),
+        (
+            "mesh = \"flower\"",
+            "mesh = \"../../elsewhere/fern.glb\"",
+            "plant_types[0].mesh",
+        ),
+        (
+            "mesh = \"flower\"",
+            "mesh = \"/srv/plants/fern.gltf\"",
+            "plant_types[0].mesh",
+        ),
+        (
+            "mesh = \"flower\"",
+            "mesh = \"plants/../plants/fern.gltf\"",
+            "plant_types[0].mesh",
+        ),
         ("meadow = 0.4", "lawn = 0.4", "plant_types[0].density.lawn"),
         (
             "meadow = 0.4",

@@ -140,6 +140,8 @@ pub const MAX_PLANT_TYPES: usize = 8;
 pub const PLANT_RECIPES: [&str; 5] = ["flower", "fern", "bush", "broadleaf", "conifer"];
 /// Largest plant, metres (a tall tree).
 pub const MAX_PLANT_SIZE_M: f64 = 60.0;
+/// The smallest plant a type may give, metres: a centimetre (smaller is no plant to draw).
+pub const MIN_PLANT_SIZE_M: f64 = 0.01;
 /// A plant type that grows this tall (the top of its height range, metres) is a tree: it is
 /// placed on the trees' coarser grid and drawn out to the fog, not among the grass.
 pub const TREE_MIN_HEIGHT_M: f32 = 4.0;

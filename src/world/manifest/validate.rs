@@ -261,6 +261,9 @@ impl Manifest {
         let mut per_grass = vec![0.0f64; self.grass_types.len()];
         for (index, p) in self.plant_types.iter().enumerate() {
             let field = |f: &str| format!("plant_types[{index}].{f}");
+            if p.name.trim().is_empty() {
+                return Err(v.out_of_range(&field("name"), &p.name, "a name, not empty"));
+            }
             if !names.insert(p.name.as_str()) {
                 return Err(v.out_of_range(
                     &field("name"),
@@ -271,6 +274,19 @@ impl Manifest {
             let gltf = std::path::Path::new(&p.mesh)
                 .extension()
                 .is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb"));
+            // A glTF file is named relative to the world's folder and stays inside it: the
+            // same file on disk and over HTTP, and no world reads files beyond its own.
+            let inside = std::path::Path::new(&p.mesh)
+                .components()
+                .all(|c| matches!(c, std::path::Component::Normal(_)));
+            if gltf && !inside {
+                return Err(v.out_of_range(
+                    &field("mesh"),
+                    &p.mesh,
+                    "a .gltf or .glb file inside the world's folder, named relative to it \
+                     without . or .. (plants/fern.gltf)",
+                ));
+            }
             if !PLANT_RECIPES.contains(&p.mesh.as_str()) && !gltf {
                 return Err(v.out_of_range(
                     &field("mesh"),
@@ -284,11 +300,12 @@ impl Manifest {
             v.all_within(&field("color"), &p.color, [0.0, 1.0], "")?;
             let [lo, hi] = p.size_m;
             v.all_finite(&field("size_m"), &p.size_m)?;
-            if !(lo > 0.0 && lo <= hi && f64::from(hi) <= MAX_PLANT_SIZE_M) {
+            if !(f64::from(lo) >= MIN_PLANT_SIZE_M && lo <= hi && f64::from(hi) <= MAX_PLANT_SIZE_M)
+            {
                 return Err(v.out_of_range(
                     &field("size_m"),
                     format!("[{lo}, {hi}]"),
-                    &format!("0 < min <= max <= {MAX_PLANT_SIZE_M} m"),
+                    &format!("{MIN_PLANT_SIZE_M} m <= min <= max <= {MAX_PLANT_SIZE_M} m"),
                 ));
             }
             for (grass, &d) in &p.density {
