@@ -904,6 +904,26 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
         assert_fails_naming(&bad, &[&format!("--counts {count}"), range]);
         assert!(!tmp.path().join("bad").exists());
     }
+    // A field whose tiles, all in view, need more atlas slots than the GPU binds is refused
+    // at once, naming the option (it failed after a minute, "the field's tiles did not load").
+    let bad = verdant_within(
+        &[
+            "bench",
+            "blades",
+            "--field-m",
+            "4000",
+            "--counts",
+            "640000",
+            "--out",
+            "bad",
+        ],
+        tmp.path(),
+        std::time::Duration::from_secs(60),
+    );
+    assert_fails_naming(
+        &bad,
+        &["--field-m 4000", "atlas slots", "take a smaller field"],
+    );
 }
 
 /// Runs verdant with a deadline: kills it and fails the test if it runs longer.

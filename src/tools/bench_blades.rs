@@ -453,8 +453,25 @@ pub fn run_bench_blades(
     // The whole field in view: the far corner from the camera is inside the view distance.
     let corner = DVec3::new(opts.field_m, opts.field_m, 0.0) - DVec3::from_array(opts.camera_m);
     let view_m = (corner.length() * 1.3).max(4.0 * tile_m);
+    // The whole field is in view, so every stored tile of it is resident at once: the atlas
+    // holds them all, or the field is refused for this GPU before anything is drawn.
+    let most_slots = ctx
+        .device
+        .limits()
+        .max_texture_array_layers
+        .min(crate::terrain::GBUFFER_MAX_SLOTS);
+    let field_tiles = world.manifest.pyramid.stored_tile_count();
+    if field_tiles > u64::from(most_slots) {
+        bail!(
+            "--field-m {}: the field's {field_tiles} tiles, all in view, need more atlas slots \
+             than this GPU binds ({most_slots}); take a smaller field",
+            opts.field_m
+        );
+    }
+    let field_slots = (field_tiles as u32 + 16).min(most_slots);
     let config = |(spacing, slot): (f64, u32), lod: bool| -> RendererConfig {
         let mut c = RendererConfig::for_world(&world);
+        c.service.atlas_slots = c.service.atlas_slots.max(field_slots);
         c.grass_rings = Some(RingSettings {
             high_radius_m: if lod { 2.0 * tile_m } else { view_m },
             low_radius_m: view_m,
