@@ -144,9 +144,27 @@ fn keys(epsg: u16) -> Vec<u16> {
 /// Writes a GeoTIFF tile of `n` x `n` samples of 20 m in EPSG `epsg`, its north-west sample's
 /// corner at (`x0`, `y0`), heights from `f` of the sample's centre (plus `offset`).
 fn write_tile(path: &Path, epsg: u16, n: u32, x0: f64, y0: f64, offset: f32) {
+    write_tile_with(path, epsg, n, x0, y0, offset, None);
+}
+
+/// [`write_tile`] with one sample (column, row from the north) set to a height of its own.
+fn write_tile_with(
+    path: &Path,
+    epsg: u16,
+    n: u32,
+    x0: f64,
+    y0: f64,
+    offset: f32,
+    spike: Option<(u32, u32, f32)>,
+) {
     let cell = 20.0;
     let data: Vec<f32> = (0..n * n)
         .map(|k| {
+            if let Some((sc, sr, h)) = spike
+                && k == sr * n + sc
+            {
+                return h;
+            }
             let (c, r) = (f64::from(k % n), f64::from(k / n));
             let (x, y) = (x0 + (c + 0.5) * cell, y0 - (r + 0.5) * cell);
             (100.0 + 40.0 * (x / 300.0).sin() + 25.0 * (y / 170.0).cos()) as f32 + offset
@@ -525,4 +543,38 @@ fn geotiffs_over_http_bake_like_the_files_on_disk() {
     .to_string();
     assert!(err.contains(&missing) && err.contains("404"), "{err}");
     assert!(!dir.path().join("never").exists());
+}
+
+/// A height beyond a planet's in one file of a mosaic is blamed on that file, at its own
+/// column and row, not on the first file given.
+#[test]
+fn an_implausible_height_in_a_mosaic_names_the_file_it_is_in() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut four = write_four(dir.path());
+    // One sample of the south-east tile 300,000 km up.
+    write_tile_with(
+        &four[3],
+        32633,
+        33,
+        400_640.0,
+        4_099_360.0,
+        0.0,
+        Some((5, 7, 3e8)),
+    );
+    let err = bake(
+        &BakeOptions {
+            dem: four.remove(0),
+            more_dems: four,
+            out: dir.path().join("out"),
+            ..Default::default()
+        },
+        &mut |_, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("column 5, row 7 of") && err.contains("tile_1_1.tif is outside"),
+        "{err}"
+    );
+    assert!(!dir.path().join("out").exists());
 }

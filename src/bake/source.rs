@@ -271,12 +271,21 @@ impl Mosaic {
             let [lo, hi] = crate::world::PLAUSIBLE_HEIGHTS_M;
             !(lo..=hi).contains(&f64::from(**h))
         }) {
+            // Blamed on the file that gives the sample, at its own column and row.
+            let (column, row) = (
+                (core[0][0] + k % size[0]) as u32,
+                (core[1][0] + k / size[0]) as u32,
+            );
+            let (file, column, row) = self
+                .layout
+                .file_at(column, row)
+                .map(|(f, c, r)| (f.to_path_buf(), c, r))
+                .unwrap_or_else(|| (self.named.clone(), column, row));
             return Err(WorldError::ImplausibleHeight {
-                path: crate::world::dem::sidecar_of(&self.named)
-                    .unwrap_or_else(|| self.named.clone()),
-                dem: self.named.clone(),
-                column: (core[0][0] + k % size[0]) as u32,
-                row: (core[1][0] + k / size[0]) as u32,
+                path: crate::world::dem::sidecar_of(&file).unwrap_or_else(|| file.clone()),
+                dem: file,
+                column,
+                row,
                 value: f64::from(h),
                 range: crate::world::PLAUSIBLE_HEIGHTS_M,
             });

@@ -129,7 +129,7 @@ pub const MAX_REDIRECTS: usize = 5;
 #[non_exhaustive]
 pub enum HttpError {
     /// The world's address is not a plain `http://` URL.
-    #[error("{url}: not a world address: {problem}")]
+    #[error("{url}: not an address verdant can fetch: {problem}")]
     BadUrl {
         /// The address given.
         url: String,
@@ -581,7 +581,8 @@ mod tests {
             );
             let open = HttpSource::open(bad, HttpOptions::default()).err().unwrap();
             assert!(
-                open.to_string().contains("not a world address"),
+                open.to_string()
+                    .contains("not an address verdant can fetch"),
                 "{bad}: {open}"
             );
         }

@@ -417,6 +417,24 @@ impl Layout {
         ([c0, c1], [r0, r1])
     }
 
+    /// The file that gives the joined grid's sample at `column` (from the west) and `row` (from
+    /// the north), the first listed where files overlap, with the sample's column and row in
+    /// that file (nearest); `None` where no file covers it.
+    pub fn file_at(&self, column: u32, row: u32) -> Option<(&std::path::Path, u32, u32)> {
+        let h = self.header.height as f64;
+        let x = self.lo[0] + f64::from(column) * self.size[0];
+        let y = self.lo[1] + (h - 1.0 - f64::from(row)) * self.size[1];
+        self.parts.iter().find_map(|p| {
+            let c = (x - p.origin[0]) / p.size[0];
+            let r = (y - p.origin[1]) / p.size[1];
+            let inside = |v: f64, n: usize| v > -0.5 && v < n as f64 - 0.5;
+            (inside(c, p.width) && inside(r, p.height)).then(|| {
+                let from_north = p.height as f64 - 1.0 - r.round();
+                (p.path.as_path(), c.round() as u32, from_north as u32)
+            })
+        })
+    }
+
     /// The joined heights of columns `cols` and rows `rows` (from the north, ends exclusive),
     /// row-major, north first: the first file listed where files overlap, NaN where no file
     /// covers a sample or a file has a void there. `data(k)` gives file `k`'s heights. Refuses
