@@ -355,6 +355,10 @@ pub fn bake(
     // Refuse absurd sizes before allocating anything, naming the options that made them: the
     // manifest is not written yet, so its fields would name nothing the user gave.
     manifest.validate(&manifest_path).map_err(|e| {
+        let options = match opts.cell_size_m {
+            Some(_) => "--cell-size, --tile-cells and --levels",
+            None => "the DEM's cell (or --cell-size), --tile-cells and --levels",
+        };
         let given = format!(
             "{} m, {}, {}",
             crate::world::error::short_number(cell),
@@ -364,7 +368,7 @@ pub fn bake(
         match e {
             WorldError::OutOfRange { field, allowed, .. } if field.starts_with("pyramid.") => {
                 WorldError::bad_option(
-                    "--cell-size, --tile-cells and --levels",
+                    options,
                     given,
                     format!(
                         "such that the world's {} (the cell x the tile's cells x 2^(levels - \
@@ -375,7 +379,7 @@ pub fn bake(
                 )
             }
             WorldError::TooManyTiles { count, max, .. } => WorldError::bad_option(
-                "--cell-size, --tile-cells and --levels",
+                options,
                 given,
                 format!(
                     "such that the finest stored level has at most {max} tiles ({count} with \
