@@ -119,7 +119,7 @@ fn a_failed_publish_puts_the_previous_world_back() {
     let out = dir.path().canonicalize().unwrap().join("w");
     std::fs::create_dir_all(out.join("tiles/L0")).unwrap();
     std::fs::write(out.join("tiles/L0/0_0.type.png"), "old tile").unwrap();
-    std::fs::write(out.join("world.toml"), "old manifest").unwrap();
+    std::fs::write(out.join("world.toml"), "[pyramid] # old manifest").unwrap();
     std::fs::write(out.join("notes.txt"), "mine").unwrap();
     let staging = Staging::begin(&out, &out, true).unwrap();
     let dir_of_staging = staging.dir.clone();
@@ -131,7 +131,7 @@ fn a_failed_publish_puts_the_previous_world_back() {
     assert!(err.to_string().contains("world.toml"), "{err}");
     assert_eq!(
         std::fs::read(out.join("world.toml")).unwrap(),
-        b"old manifest"
+        b"[pyramid] # old manifest"
     );
     assert_eq!(
         std::fs::read(out.join("tiles/L0/0_0.type.png")).unwrap(),
