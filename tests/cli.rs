@@ -992,8 +992,7 @@ fn bad_tiles_at_the_finest_level_are_faults_and_the_fly_goes_on() {
             }
             _ => {
                 std::fs::remove_file(&type_map).unwrap();
-                let made = Command::new("mkfifo").arg(&type_map).status().unwrap();
-                assert!(made.success());
+                common::mkfifo(&type_map);
             }
         }
         n += 1;

@@ -36,10 +36,10 @@ fn report(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("o/report.json")).unwrap()).unwrap()
 }
 
-#[test]
-fn a_gltf_plant_renders_where_its_rule_puts_it() {
-    let tmp = tempfile::tempdir().unwrap();
-    let w = world_with_plant(tmp.path(), "plants/marigold.gltf");
+/// A copy of the default world whose only plant is a user's glTF marigold,
+/// `plants/marigold.gltf` with its texture beside it.
+fn marigold_world(dir: &Path) -> std::path::PathBuf {
+    let w = world_with_plant(dir, "plants/marigold.gltf");
     std::fs::create_dir_all(w.join("plants")).unwrap();
     let texture = PlantImage {
         width: 4,
@@ -52,6 +52,13 @@ fn a_gltf_plant_renders_where_its_rule_puts_it() {
         Some(&texture),
     )
     .unwrap();
+    w
+}
+
+#[test]
+fn a_gltf_plant_renders_where_its_rule_puts_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = marigold_world(tmp.path());
     let out = fly(&w, tmp.path());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "fly failed: {stderr}");
@@ -280,19 +287,7 @@ fn trees_stand_on_the_tours_far_ridges() {
 #[test]
 fn a_gltf_plant_over_http_renders_what_the_folder_renders() {
     let tmp = tempfile::tempdir().unwrap();
-    let w = world_with_plant(tmp.path(), "plants/marigold.gltf");
-    std::fs::create_dir_all(w.join("plants")).unwrap();
-    let texture = PlantImage {
-        width: 4,
-        height: 4,
-        rgba: [255u8, 200, 40, 255].repeat(16),
-    };
-    write_plant_gltf(
-        &w.join("plants/marigold.gltf"),
-        &small_plant(),
-        Some(&texture),
-    )
-    .unwrap();
+    let w = marigold_world(tmp.path());
     let server = verdant::tools::serve::WorldServer::start(&w, "127.0.0.1:0").unwrap();
     let local = fly(&w, tmp.path());
     assert!(

@@ -1546,15 +1546,6 @@ fn within<T: Send + 'static>(seconds: u64, f: impl FnOnce() -> T + Send + 'stati
         .expect("the reader hung")
 }
 
-#[cfg(unix)]
-fn mkfifo(path: &Path) {
-    let status = Command::new("mkfifo")
-        .arg(path)
-        .status()
-        .expect("run mkfifo");
-    assert!(status.success(), "mkfifo {}", path.display());
-}
-
 /// A DEM or a sidecar that is a FIFO (or another special file) is refused at once, by name:
 /// opening a FIFO would wait for a writer for ever.
 #[cfg(unix)]
@@ -1564,14 +1555,14 @@ fn special_files_as_dems_or_sidecars_are_refused_without_hanging() {
     let mut cases: Vec<(PathBuf, PathBuf, &str)> = Vec::new();
     for name in ["fifo.tif", "fifo.png", "N37W123.hgt"] {
         let path = dir.path().join(name);
-        mkfifo(&path);
+        common::mkfifo(&path);
         cases.push((path.clone(), path, "a FIFO"));
     }
     // A good PNG whose sidecar is a FIFO.
     let png = write_png_twin(dir.path(), "twin", SIZE, CELL, &grid(Sample::F32));
     let sidecar = dir.path().join("twin.json");
     std::fs::remove_file(&sidecar).unwrap();
-    mkfifo(&sidecar);
+    common::mkfifo(&sidecar);
     cases.push((png, sidecar, "a FIFO"));
     // A folder named like a DEM.
     let folder = dir.path().join("folder.tif");

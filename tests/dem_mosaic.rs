@@ -346,13 +346,7 @@ fn files_that_do_not_join_are_refused_naming_them() {
         std::fs::create_dir(&folder).unwrap();
         std::fs::copy(&four[0], folder.join("tile_0_0.tif")).unwrap();
         let fifo = folder.join("N37W122.hgt");
-        assert!(
-            std::process::Command::new("mkfifo")
-                .arg(&fifo)
-                .status()
-                .unwrap()
-                .success()
-        );
+        common::mkfifo(&fifo);
         case(
             "fifo",
             vec![folder],

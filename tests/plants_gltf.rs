@@ -1,6 +1,8 @@
 //! The glTF plant loader: round trips through the writer, hand-made .glb files, every error it
 //! names, and garbled files that must give errors rather than panics.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
@@ -311,13 +313,7 @@ fn special_and_oversized_plant_files_are_refused_without_reading_them() {
     let zero = dir.path().join("zero.glb");
     std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
     let fifo = dir.path().join("fifo.glb");
-    assert!(
-        std::process::Command::new("mkfifo")
-            .arg(&fifo)
-            .status()
-            .unwrap()
-            .success()
-    );
+    common::mkfifo(&fifo);
     let huge = dir.path().join("huge.glb");
     std::fs::File::create(&huge)
         .unwrap()

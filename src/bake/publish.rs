@@ -1,7 +1,7 @@
 //! Publishing a bake: the staging folder beside the output folder, the safe replacement of
 //! `world.toml` and `tiles/`, the clean-up of killed bakes' staging folders, and cancellation.
 
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, SystemTime};
@@ -132,33 +132,11 @@ pub(super) fn resolve_out(out: &Path) -> Result<PathBuf, WorldError> {
     if out.as_os_str().is_empty() {
         return Err(not_a_folder());
     }
-    let absolute = std::path::absolute(out).map_err(|e| WorldError::io(out, e))?;
-    let components: Vec<Component> = absolute.components().collect();
-    let mut resolved = None;
-    for n in (1..=components.len()).rev() {
-        let prefix: PathBuf = components[..n].iter().collect();
-        match prefix.canonicalize() {
-            Ok(base) => {
-                resolved = Some((base, n));
-                break;
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(WorldError::io(out, e)),
-        }
-    }
-    let Some((mut path, n)) = resolved else {
+    let Some(path) =
+        crate::world::format::resolve_lexically(out).map_err(|e| WorldError::io(out, e))?
+    else {
         return Err(not_a_folder());
     };
-    // What does not exist yet holds no symlinks, so `..` may be taken lexically.
-    for c in &components[n..] {
-        match c {
-            Component::Normal(name) => path.push(name),
-            Component::ParentDir => {
-                path.pop();
-            }
-            _ => {}
-        }
-    }
     if path.file_name().is_none() || path.parent().is_none() {
         return Err(not_a_folder());
     }

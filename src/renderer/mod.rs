@@ -292,13 +292,7 @@ impl Renderer {
                         let name = path.strip_prefix(&world.dir).unwrap_or(path);
                         source
                             .read_file(name, crate::plants::gltf::MAX_PLANT_FILE_BYTES)
-                            .map_err(|e| match e {
-                                crate::world::WorldError::Io { source, .. } => source,
-                                crate::world::WorldError::MissingFile { .. } => {
-                                    std::io::Error::from(std::io::ErrorKind::NotFound)
-                                }
-                                e => std::io::Error::other(e.to_string()),
-                            })
+                            .map_err(crate::plants::gltf::plant_file_io_error)
                     };
                     Some(crate::plants::PlantSet::build_with(
                         &world.manifest,

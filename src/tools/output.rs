@@ -150,12 +150,6 @@ pub enum OutDirError {
     },
 }
 
-/// Why `path` is no place for a run's files, if it is not
-/// ([`crate::world::format::refused_output`]).
-pub fn refused_output(path: &Path) -> Option<&'static str> {
-    crate::world::format::refused_output(path)
-}
-
 fn owner_words(pid: Option<u32>, tool: &str) -> String {
     match (pid, tool.is_empty()) {
         (Some(pid), false) => format!("verdant process {pid} ({tool})"),
@@ -190,7 +184,7 @@ impl OutDir {
     /// Creates `path` (and its parents) where needed and locks it for `tool` (`fly`,
     /// `bench lod`, ...), which a refused second run names.
     pub fn create_for(path: &Path, tool: &str) -> Result<Self, OutDirError> {
-        if let Some(why) = refused_output(path) {
+        if let Some(why) = crate::world::format::refused_output(path) {
             return Err(OutDirError::Refused {
                 path: path.to_path_buf(),
                 why,

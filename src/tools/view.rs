@@ -620,10 +620,12 @@ fn check_screenshot(file: &Path) -> Result<()> {
             parent.display()
         );
     }
-    if let Some(why) = crate::tools::output::refused_output(parent) {
+    if let Some(why) = crate::world::format::refused_output(parent) {
         bail!("--screenshot {shown}: its folder is {why}; write the screenshot elsewhere");
     }
-    let resolved = crate::world::format::resolve_lexically(parent);
+    let resolved = crate::world::format::resolve_lexically(parent)
+        .ok()
+        .flatten();
     if let Some(world) = resolved
         .iter()
         .flat_map(|p| p.ancestors())

@@ -78,12 +78,7 @@ pub fn first_foreign_in_tiles(tiles: &Path) -> std::io::Result<Option<PathBuf>> 
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(e),
     }
-    let levels = match std::fs::read_dir(tiles) {
-        Ok(levels) => levels,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e),
-    };
-    for level in levels {
+    for level in std::fs::read_dir(tiles)? {
         let level = level?;
         let name = level.file_name();
         let is_level = name
@@ -770,7 +765,7 @@ fn decode_png_l8(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<u8>, WorldE
 /// writes `report.json`, frames and tables there by their own names, and a world's files are
 /// not to be mixed with them or overwritten.
 pub fn refused_output(path: &Path) -> Option<&'static str> {
-    let resolved = resolve_lexically(path)?;
+    let resolved = resolve_lexically(path).ok().flatten()?;
     if resolved.parent().is_none() {
         return Some("the root of the file system");
     }
@@ -789,25 +784,30 @@ pub fn refused_output(path: &Path) -> Option<&'static str> {
 
 /// `path` made absolute: its longest part that exists canonicalised (symlinks followed), the
 /// rest appended with `.` dropped and `..` taken lexically (what does not exist holds no
-/// symlinks), so that `missing/../w` is `w` and `w/tiles/..` is `w`.
-pub fn resolve_lexically(path: &Path) -> Option<PathBuf> {
+/// symlinks), so that `missing/../w` is `w` and `w/tiles/..` is `w`. `None` where no part of
+/// it exists; an error other than a missing part is returned.
+pub fn resolve_lexically(path: &Path) -> std::io::Result<Option<PathBuf>> {
     use std::path::Component;
-    let absolute = std::path::absolute(path).ok()?;
+    let absolute = std::path::absolute(path)?;
     let components: Vec<Component> = absolute.components().collect();
     for n in (1..=components.len()).rev() {
         let prefix: PathBuf = components[..n].iter().collect();
-        if let Ok(mut resolved) = prefix.canonicalize() {
-            for c in &components[n..] {
-                match c {
-                    Component::Normal(name) => resolved.push(name),
-                    Component::ParentDir => {
-                        resolved.pop();
+        match prefix.canonicalize() {
+            Ok(mut resolved) => {
+                for c in &components[n..] {
+                    match c {
+                        Component::Normal(name) => resolved.push(name),
+                        Component::ParentDir => {
+                            resolved.pop();
+                        }
+                        _ => {}
                     }
-                    _ => {}
                 }
+                return Ok(Some(resolved));
             }
-            return Some(resolved);
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e),
         }
     }
-    None
+    Ok(None)
 }

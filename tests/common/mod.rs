@@ -336,3 +336,13 @@ pub fn read_all_files(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>
     }
     out
 }
+
+/// Makes a FIFO at `path` (`mkfifo`): a file that a reader opening it waits on for a writer.
+#[cfg(unix)]
+pub fn mkfifo(path: &Path) {
+    let status = std::process::Command::new("mkfifo")
+        .arg(path)
+        .status()
+        .expect("run mkfifo");
+    assert!(status.success(), "mkfifo {}", path.display());
+}

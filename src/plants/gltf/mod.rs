@@ -58,8 +58,14 @@ pub const MAX_PLANT_FILE_BYTES: u64 = 256 << 20;
 /// Reads a file of a plant (its glTF file, or a buffer or image beside it): a regular file of
 /// at most [`MAX_PLANT_FILE_BYTES`], the reason otherwise in words.
 pub fn read_plant_file(path: &Path) -> Result<Vec<u8>, io::Error> {
+    crate::world::format::read_regular(path, MAX_PLANT_FILE_BYTES).map_err(plant_file_io_error)
+}
+
+/// A world's error reading a plant's file, as the I/O error [`PlantFileError::Read`] gives
+/// after the file's name: the reason alone, without the path again.
+pub fn plant_file_io_error(e: crate::world::WorldError) -> io::Error {
     use crate::world::WorldError;
-    crate::world::format::read_regular(path, MAX_PLANT_FILE_BYTES).map_err(|e| match e {
+    match e {
         WorldError::NotARegularFile { kind, .. } => {
             io::Error::other(format!("not a regular file ({kind})"))
         }
@@ -69,7 +75,7 @@ pub fn read_plant_file(path: &Path) -> Result<Vec<u8>, io::Error> {
         WorldError::Io { source, .. } => source,
         WorldError::MissingFile { .. } => io::Error::from(io::ErrorKind::NotFound),
         e => io::Error::other(e.to_string()),
-    })
+    }
 }
 /// The thinness (albedo.a) given to every vertex of a loaded plant.
 pub const DEFAULT_THINNESS: f32 = 0.5;
