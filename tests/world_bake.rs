@@ -808,7 +808,8 @@ fn a_failed_bake_leaves_the_folder_as_it_was() {
     assert!(staging_folders(dir.path()).is_empty());
 }
 
-/// A cancelled bake into a new folder creates nothing, and leaves no staging folder.
+/// A cancelled bake into a new folder creates nothing (nor the parents it lacked), and leaves
+/// no staging folder.
 #[test]
 fn a_cancelled_bake_leaves_no_staging_folder() {
     let dir = tempfile::tempdir().unwrap();
@@ -838,6 +839,27 @@ fn a_cancelled_bake_leaves_no_staging_folder() {
         assert!(!out.exists(), "{stage:?}");
         assert!(staging_folders(dir.path()).is_empty(), "{stage:?}");
     }
+    // Into a folder whose parents are missing too: none of them is left behind.
+    let cancel = verdant::bake::CancelFlag::new();
+    let opts = BakeOptions {
+        cancel: Some(cancel.clone()),
+        ..replace_opts(dem.clone(), dir.path().join("a/b/new"))
+    };
+    let err = bake(&opts, &mut |s, _, _| {
+        if s == BakeStage::Paint {
+            cancel.cancel();
+        }
+    })
+    .unwrap_err();
+    assert!(matches!(err, WorldError::Cancelled { .. }), "{err}");
+    assert!(!dir.path().join("a").exists());
+    // A bake that succeeds keeps them.
+    bake(
+        &replace_opts(dem, dir.path().join("a/b/new")),
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert!(dir.path().join("a/b/new/world.toml").is_file());
 }
 
 /// The next bake beside an output folder removes the staging folders of killed bakes (their

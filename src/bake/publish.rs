@@ -166,6 +166,9 @@ pub(super) struct Staging {
     pub(super) _lock: std::fs::File,
     /// Leave the staging folder in place (it holds the only copy of the replaced world).
     pub(super) keep: bool,
+    /// The folders above the output that this bake created, the deepest first: removed again,
+    /// while empty, when the bake ends without a world in them.
+    pub(super) parents_made: Vec<PathBuf>,
 }
 
 impl Staging {
@@ -181,16 +184,21 @@ impl Staging {
             ));
         };
         let name = name.to_string_lossy();
+        let parents_made = crate::world::format::missing_folders(parent);
         std::fs::create_dir_all(parent).map_err(|e| WorldError::io(parent, e))?;
         remove_stale_staging(parent, &name);
         static NEXT: AtomicU64 = AtomicU64::new(0);
         let n = NEXT.fetch_add(1, Ordering::Relaxed);
         let dir = parent.join(format!(".{name}.baking.{}-{n}", std::process::id()));
-        std::fs::create_dir(&dir).map_err(|e| WorldError::io(&dir, e))?;
+        if let Err(e) = std::fs::create_dir(&dir) {
+            crate::world::format::remove_empty_folders(&parents_made);
+            return Err(WorldError::io(&dir, e));
+        }
         let lock = match lock_staging(&dir) {
             Ok(lock) => lock,
             Err(e) => {
                 let _ = std::fs::remove_dir_all(&dir);
+                crate::world::format::remove_empty_folders(&parents_made);
                 return Err(e);
             }
         };
@@ -201,6 +209,7 @@ impl Staging {
             replace,
             _lock: lock,
             keep: false,
+            parents_made,
         };
         std::fs::create_dir(&staging.world).map_err(|e| WorldError::io(&staging.world, e))?;
         Ok(staging)
@@ -280,6 +289,8 @@ impl Drop for Staging {
     fn drop(&mut self) {
         if !self.keep {
             let _ = std::fs::remove_dir_all(&self.dir);
+            // A published world is in them, so they stay.
+            crate::world::format::remove_empty_folders(&self.parents_made);
         }
     }
 }

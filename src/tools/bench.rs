@@ -118,6 +118,16 @@ pub const MAX_ROUNDS: u32 = 100;
 /// The most frames of the dolly (`--dolly-frames`).
 pub const MAX_DOLLY_FRAMES: u32 = 1000;
 
+/// The first item of `items` that comes again later in it: a list option naming one size,
+/// method or setting twice would measure it twice and report it as two.
+pub fn repeated<T: PartialEq>(items: &[T]) -> Option<&T> {
+    items
+        .iter()
+        .enumerate()
+        .find(|(i, a)| items[i + 1..].contains(a))
+        .map(|(_, a)| a)
+}
+
 /// Checks the timing options of a benchmark: `--warmup-frames` 0..=100, `--timed-frames`
 /// 1..=150, `--rounds` 1..=100 (those not given take the adapter's defaults, which lie within).
 pub fn check_timing(

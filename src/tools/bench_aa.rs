@@ -156,6 +156,25 @@ impl BenchAaOptions {
         if self.sizes.is_empty() {
             bail!("--size names no size");
         }
+        use crate::tools::bench::repeated;
+        if let Some((w, h)) = repeated(&self.sizes) {
+            bail!("--size lists {w}x{h} twice");
+        }
+        if let Some(m) = repeated(&self.methods) {
+            bail!("--aa lists {} twice", m.name());
+        }
+        if let Some(m) = repeated(&self.motions) {
+            bail!("--sequences lists {} twice", m.name());
+        }
+        if let Some(p) = repeated(&self.paths) {
+            bail!("--paths lists {p:?} twice");
+        }
+        if let Some(s) = repeated(&self.settings) {
+            bail!("--settings lists {s:?} twice");
+        }
+        if repeated(&self.taa).is_some() {
+            bail!("the --taa-* lists give one temporal setting twice: a value is listed twice");
+        }
         crate::tools::truth::check_k("--truth", self.truth_k)?;
         crate::tools::truth::check_reach("--truth-reach", self.truth_reach)?;
         if self.truth_noise && self.truth_k < 2 {
@@ -1085,6 +1104,62 @@ mod tests {
         assert!(e.contains("--truth-noise") && e.contains("--paths"), "{e}");
         opts.truth_noise = false;
         assert!(opts.validate().is_ok());
+    }
+
+    #[test]
+    fn a_list_naming_one_thing_twice_is_refused_naming_the_option_and_the_thing() {
+        let ok = BenchAaOptions::default();
+        assert!(ok.validate().is_ok());
+        let cases: [(BenchAaOptions, &str); 6] = [
+            (
+                BenchAaOptions {
+                    sizes: vec![(64, 36), (96, 54), (64, 36)],
+                    ..BenchAaOptions::default()
+                },
+                "--size lists 64x36 twice",
+            ),
+            (
+                BenchAaOptions {
+                    methods: vec![AntiAliasing::Taa, AntiAliasing::Off, AntiAliasing::Taa],
+                    ..BenchAaOptions::default()
+                },
+                "--aa lists taa twice",
+            ),
+            (
+                BenchAaOptions {
+                    motions: vec![Motion::Pan, Motion::Pan],
+                    ..BenchAaOptions::default()
+                },
+                "--sequences lists pan twice",
+            ),
+            (
+                BenchAaOptions {
+                    paths: vec!["tour".into(), "meadow".into(), "tour".into()],
+                    ..BenchAaOptions::default()
+                },
+                "--paths lists \"tour\" twice",
+            ),
+            (
+                BenchAaOptions {
+                    settings: vec!["no LOD".into(), "no LOD".into()],
+                    ..BenchAaOptions::default()
+                },
+                "--settings lists \"no LOD\" twice",
+            ),
+            (
+                BenchAaOptions {
+                    taa: vec![TaaSettings::default(); 2],
+                    ..BenchAaOptions::default()
+                },
+                "--taa-* lists",
+            ),
+        ];
+        for (opts, needle) in cases {
+            let e = opts.validate().unwrap_err().to_string();
+            assert!(e.contains(needle), "{needle:?} not in {e:?}");
+        }
+        assert_eq!(crate::tools::bench::repeated(&[1, 2, 3]), None);
+        assert_eq!(crate::tools::bench::repeated(&[1, 2, 3, 2, 1]), Some(&1));
     }
 
     #[test]

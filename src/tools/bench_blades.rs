@@ -154,46 +154,49 @@ impl BenchBladesOptions {
     /// (both excluded), `--camera` and `--target` within 100 km of the origin in each
     /// coordinate and at least 1 cm apart, 1..=32 `--counts` each in [`count_range`], `--truth`
     /// 1..=8, and the timing options (see [`crate::tools::bench::check_timing`]).
-    pub fn validate(&self) -> Result<(), OptionError> {
+    pub fn validate(&self) -> Result<()> {
         check_size("--size", self.size)?;
         crate::tools::truth::check_k("--truth", self.truth_k)?;
         check_range("--field-m", self.field_m, 10.0..=5000.0, "m")?;
         if !(self.fov_deg > 1.0 && self.fov_deg < 170.0) {
-            return Err(OptionError::new(
+            return Err(anyhow::Error::from(OptionError::new(
                 "--fov-deg",
                 self.fov_deg,
                 "between 1 and 170 degrees, both excluded",
-            ));
+            )));
         }
         for (option, v) in [("--camera", self.camera_m), ("--target", self.target_m)] {
             if !v.iter().all(|c| c.abs() <= MAX_COORDINATE_M) {
-                return Err(OptionError::new(
+                return Err(anyhow::Error::from(OptionError::new(
                     option,
                     format!("{},{},{}", v[0], v[1], v[2]),
                     format!("X,Y,Z each in -{MAX_COORDINATE_M}..={MAX_COORDINATE_M} m"),
-                ));
+                )));
             }
         }
         let eye = DVec3::from_array(self.camera_m);
         let target = DVec3::from_array(self.target_m);
         if eye.distance(target) < 0.01 {
             let v = self.target_m;
-            return Err(OptionError::new(
+            return Err(anyhow::Error::from(OptionError::new(
                 "--target",
                 format!("{},{},{}", v[0], v[1], v[2]),
                 "at least 0.01 m from --camera",
-            ));
+            )));
         }
         if !(1..=MAX_SWEEP_COUNTS).contains(&self.counts.len()) {
-            return Err(OptionError::new(
+            return Err(anyhow::Error::from(OptionError::new(
                 "--counts",
                 format!("{:?}", self.counts),
                 format!("1..={MAX_SWEEP_COUNTS} blade counts"),
-            ));
+            )));
+        }
+        if let Some(n) = crate::tools::bench::repeated(&self.counts) {
+            anyhow::bail!("--counts lists {n} twice");
         }
         let range = count_range(self.field_m, FIELD_TILE_M);
         if let Some(&n) = self.counts.iter().find(|n| !range.contains(n)) {
-            return Err(OptionError::new(
+            return Err(anyhow::Error::from(OptionError::new(
                 "--counts",
                 n,
                 format!(
@@ -205,9 +208,10 @@ impl BenchBladesOptions {
                     range.end(),
                     self.field_m
                 ),
-            ));
+            )));
         }
-        crate::tools::bench::check_timing(self.warmup_frames, self.timed_frames, self.rounds)
+        crate::tools::bench::check_timing(self.warmup_frames, self.timed_frames, self.rounds)?;
+        Ok(())
     }
 }
 
@@ -1007,6 +1011,13 @@ mod tests {
                 ..d()
             },
             &["--counts 10", "1600..="],
+        );
+        bad(
+            BenchBladesOptions {
+                counts: vec![5000, 9000, 5000],
+                ..d()
+            },
+            &["--counts lists 5000 twice"],
         );
         bad(
             BenchBladesOptions {

@@ -161,11 +161,13 @@ fn owner_words(pid: Option<u32>, tool: &str) -> String {
 /// An output folder held by a run. Its lock file ([`LOCK_FILE`]) is locked with an OS file lock
 /// for as long as the `OutDir` lives, so that a second run into the same folder is refused
 /// instead of mixing its files with this one's; the OS releases the lock when the process ends,
-/// however it ends. If the run created the folder and fails before writing anything into it,
-/// the folder is removed again (only while empty), so an early failure leaves no trace.
+/// however it ends. If the run created the folder (and any of its parents) and fails before
+/// writing anything into it, the folders it created are removed again (only while empty), so an
+/// early failure leaves no trace.
 pub struct OutDir {
     path: PathBuf,
-    created: bool,
+    /// The folders this run created, the deepest first: `path` and the parents it lacked.
+    created: Vec<PathBuf>,
     kept: bool,
     lock: Option<File>,
 }
@@ -190,7 +192,7 @@ impl OutDir {
                 why,
             });
         }
-        let created = !path.exists();
+        let created = crate::world::format::missing_folders(path);
         std::fs::create_dir_all(path).map_err(|source| OutDirError::Create {
             path: path.to_path_buf(),
             source,
@@ -292,9 +294,9 @@ impl Drop for OutDir {
             let _ = std::fs::remove_file(self.path.join(LOCK_FILE));
             drop(lock);
         }
-        if self.created && !self.kept {
-            // Fails, and so keeps the folder, when anything was written into it.
-            let _ = std::fs::remove_dir(&self.path);
+        if !self.kept {
+            // Keeps each folder that anything was written into, and those above it.
+            crate::world::format::remove_empty_folders(&self.created);
         }
     }
 }
@@ -427,6 +429,27 @@ mod tests {
         let third = OutDir::create(&out).unwrap();
         drop(third);
         assert_eq!(names(&out), ["report.json"]);
+    }
+
+    #[test]
+    fn a_failed_run_removes_the_parent_folders_it_made_and_only_those() {
+        let tmp = tempfile::tempdir().unwrap();
+        // zz/yy/out, none of it there: a run that fails with nothing written leaves no zz.
+        let out = tmp.path().join("zz/yy/out");
+        drop(OutDir::create_for(&out, "fly").unwrap());
+        assert!(names(tmp.path()).is_empty(), "{:?}", names(tmp.path()));
+        // A parent that was there stays; so do the ones holding something else by then.
+        std::fs::create_dir(tmp.path().join("zz")).unwrap();
+        let dir = OutDir::create_for(&out, "fly").unwrap();
+        std::fs::write(tmp.path().join("zz/yy/note.txt"), "mine").unwrap();
+        drop(dir);
+        assert_eq!(names(&tmp.path().join("zz/yy")), ["note.txt"]);
+        assert!(!out.exists());
+        // A kept run keeps them all.
+        let kept = tmp.path().join("a/b");
+        let dir = OutDir::create_for(&kept, "fly").unwrap();
+        dir.keep();
+        assert!(kept.is_dir());
     }
 
     #[test]

@@ -782,6 +782,26 @@ pub fn refused_output(path: &Path) -> Option<&'static str> {
     None
 }
 
+/// The folders of `path` that do not exist yet, the deepest first (`path` itself included):
+/// what `create_dir_all(path)` would make, for [`remove_empty_folders`] to take back.
+pub fn missing_folders(path: &Path) -> Vec<PathBuf> {
+    path.ancestors()
+        .filter(|a| !a.as_os_str().is_empty())
+        .take_while(|a| std::fs::symlink_metadata(a).is_err())
+        .map(Path::to_path_buf)
+        .collect()
+}
+
+/// Removes `folders` (the deepest first, as [`missing_folders`] gives them) while they are
+/// empty: the first that holds anything is kept, with every folder above it.
+pub fn remove_empty_folders(folders: &[PathBuf]) {
+    for dir in folders {
+        if std::fs::remove_dir(dir).is_err() {
+            break;
+        }
+    }
+}
+
 /// `path` made absolute: its longest part that exists canonicalised (symlinks followed), the
 /// rest appended with `.` dropped and `..` taken lexically (what does not exist holds no
 /// symlinks), so that `missing/../w` is `w` and `w/tiles/..` is `w`. `None` where no part of
