@@ -798,6 +798,38 @@ fn geotiffs_bake_to_the_heights_of_the_png_twin() {
     }
 }
 
+/// A geographic grid within a degree of a pole is refused as one to reproject, one beyond the
+/// poles as off the globe; both name the file.
+#[test]
+fn a_geographic_geotiff_at_a_pole_or_beyond_is_refused_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let heights = grid(Sample::F32);
+    let step = 1.0 / 3600.0;
+    for (corner_lat, needles) in [
+        (
+            89.97,
+            &["89.9", "within a degree of the pole", "reproject"][..],
+        ),
+        (95.0, &["94.9", "off the globe"][..]),
+    ] {
+        let mut spec = TiffSpec::new(Sample::F32, Layout::Strips { rows: 8 }, Compression::None);
+        spec.geo = Geo::Scale {
+            scale: [step, step],
+            corner: [10.0, corner_lat],
+            keys: geographic_keys(),
+        };
+        let tif = dir.path().join(format!("pole{corner_lat}.tif"));
+        write_tiff(&tif, &spec, SIZE[0], SIZE[1], &heights);
+        let e = Dem::load(&tif).unwrap_err().to_string();
+        for n in needles
+            .iter()
+            .chain(&[tif.file_name().unwrap().to_str().unwrap()])
+        {
+            assert!(e.contains(n), "{n:?} not in {e:?}");
+        }
+    }
+}
+
 /// A geographic grid (degrees) gets its cell sizes in metres at its centre latitude, east-west
 /// and north-south apart, and bakes like a PNG twin with those cell sizes.
 #[test]

@@ -497,10 +497,21 @@ impl GeoTags {
                         problem: "the geographic grid has no ModelTiepoint, so its latitude".into(),
                     });
                 };
-                if !(-89.0..=89.0).contains(&lat) {
+                if !(-90.0..=90.0).contains(&lat) {
                     return Err(corrupt(
                         path,
                         format!("the grid's centre latitude {lat} degrees is off the globe"),
+                    ));
+                }
+                if !(-89.0..=89.0).contains(&lat) {
+                    return Err(unsupported(
+                        path,
+                        format!(
+                            "a geographic grid centred at latitude {lat} degrees, within a degree \
+                             of the pole, where degrees of longitude shrink too fast to read as \
+                             a flat grid: reproject it to metres first (gdalwarp -t_srs with a \
+                             polar projection)"
+                        ),
                     ));
                 }
                 let [m_ew, m_ns] = metres_per_degree(lat);
