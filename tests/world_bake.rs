@@ -655,6 +655,135 @@ fn staging_folders(dir: &Path) -> Vec<String> {
         .collect()
 }
 
+/// What a user adds to a baked manifest by hand: two plant types (one with a sub-table, both
+/// with comments) and a camera path the bake does not write.
+const HAND_MADE: &str = r#"
+# Flowers on the meadow, added by hand.
+[[plant_types]]
+name = "poppy"
+mesh = "flower"
+color = [0.8, 0.1, 0.03]
+size_m = [0.35, 0.65]
+density = { meadow = 0.4 }
+seed = 1
+
+# A bush, its wind in a table of its own.
+[[plant_types]]
+name = "bush"
+mesh = "bush"
+color = [0.1, 0.24, 0.04]
+size_m = [0.7, 1.4]
+density = { "tall grass" = 0.05 }
+seed = 4
+[plant_types.wind]
+bend = 0.012
+stiffness = 0.75
+
+# My own flight.
+[[paths]]
+name = "my-flight"
+duration_s = 10.0
+[[paths.keys]]
+t_s = 0.0
+position_m = [100.0, 100.0, 600.0]
+yaw_deg = 45.0
+pitch_deg = -10.0
+[[paths.keys]]
+t_s = 10.0
+position_m = [900.0, 900.0, 600.0]
+yaw_deg = 45.0
+pitch_deg = -10.0
+"#;
+
+/// `--replace` keeps the replaced manifest's plant types and its camera paths of other names
+/// than the bake's, as the user wrote them (comments too), and checks them against the new
+/// world; `--fresh-manifest` drops them; parts that do not fit the new world are refused
+/// before anything is replaced, naming the manifest, the field and the way out.
+#[test]
+fn replace_keeps_the_hand_made_plants_and_paths_of_the_manifest() {
+    use verdant::world::Manifest;
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let w = dir.path().join("w");
+    bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {}).unwrap();
+    let toml = w.join("world.toml");
+    let baked = Manifest::from_path(&toml).unwrap();
+    assert!(baked.plant_types.is_empty());
+    let mut text = std::fs::read_to_string(&toml).unwrap();
+    text.push_str(HAND_MADE);
+    std::fs::write(&toml, &text).unwrap();
+    let edited = Manifest::from_path(&toml).unwrap();
+    assert_eq!(edited.plant_types.len(), 2);
+
+    // Re-baked with another seed: the bake's parts are new, the hand-made ones kept.
+    let report = bake(
+        &BakeOptions {
+            seed: 5,
+            ..replace_opts(dem.clone(), w.clone())
+        },
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!(report.carried.plant_types, ["poppy", "bush"]);
+    assert_eq!(report.carried.paths, ["my-flight"]);
+    let rebaked_text = std::fs::read_to_string(&toml).unwrap();
+    let rebaked = Manifest::from_path(&toml).unwrap();
+    assert_eq!(rebaked.plant_types, edited.plant_types);
+    let names = |m: &Manifest| m.paths.iter().map(|p| p.name.clone()).collect::<Vec<_>>();
+    assert_eq!(names(&rebaked), names(&edited));
+    assert!(rebaked.path("my-flight") == edited.path("my-flight"));
+    // The bake's own paths are the new bake's (the seed moved its meadow), not the old ones.
+    assert!(rebaked.path("meadow") != edited.path("meadow"));
+    for comment in [
+        "# Flowers on the meadow",
+        "# A bush, its wind",
+        "# My own flight.",
+    ] {
+        assert!(rebaked_text.contains(comment), "{comment:?} lost");
+    }
+    // Baked again, the hand-made parts are not doubled.
+    bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {}).unwrap();
+    let again = Manifest::from_path(&toml).unwrap();
+    assert_eq!(again.plant_types, edited.plant_types);
+    assert_eq!(names(&again), names(&edited));
+    assert!(
+        again.paths == edited.paths,
+        "the seed-7 bake's paths and my-flight"
+    );
+
+    // A plant on a grass type the world lacks: refused, the folder as it was.
+    let mut bad = std::fs::read_to_string(&toml).unwrap();
+    bad = bad.replace("density = { meadow = 0.4 }", "density = { moss = 0.4 }");
+    std::fs::write(&toml, &bad).unwrap();
+    let before = read_all_files(&w);
+    let e = bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(e, WorldError::Carry { .. }), "{e}");
+    let msg = e.to_string();
+    for needle in [
+        toml.display().to_string(),
+        "plant_types[0].density.moss".into(),
+        "--fresh-manifest".into(),
+    ] {
+        assert!(msg.contains(&needle), "{needle:?} not in {msg:?}");
+    }
+    assert_eq!(read_all_files(&w), before);
+    assert!(staging_folders(dir.path()).is_empty());
+
+    // --fresh-manifest writes the bake's manifest alone.
+    let report = bake(
+        &BakeOptions {
+            fresh_manifest: true,
+            ..replace_opts(dem, w.clone())
+        },
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert!(report.carried.is_empty());
+    let fresh = Manifest::from_path(&toml).unwrap();
+    assert!(fresh.plant_types.is_empty());
+    assert!(fresh.paths == baked.paths, "the bake's paths alone");
+}
+
 /// `--replace` replaces the world (world.toml, tiles/) and nothing else, however the output
 /// folder is spelled (`w/.`, `w/`, `w/notes/..`): every other file and folder stays where it
 /// was, byte for byte, and no staging folder is left, inside or beside it.

@@ -55,6 +55,7 @@ use crate::world::manifest::{Manifest, Sky, WindDefaults, WorldSource};
 use crate::world::tile::Pyramid;
 
 mod author;
+mod carry;
 pub mod cover;
 mod paint;
 pub mod plan;
@@ -70,6 +71,7 @@ mod tiles;
 pub use author::{
     HELICOPTER_PATH, WALKER_PATH, WIND_TOUR_PATH, WIND_TOUR_SCENES, default_wind_scenes,
 };
+pub use carry::Carried;
 pub use paint::{MAX_GRASS_SLOPE_DEG, default_grass_types, default_plant_types};
 pub use publish::CancelFlag;
 
@@ -120,6 +122,10 @@ pub struct BakeOptions {
     /// Replace the world (`world.toml` and `tiles/`) in `out` if `out` exists and is not empty
     /// (otherwise such a folder is refused).
     pub replace: bool,
+    /// With `replace`: write the baked manifest alone. Without it, the replaced `world.toml`'s
+    /// plant types and its camera paths of names the bake does not write are kept (see
+    /// [`Carried`]).
+    pub fresh_manifest: bool,
     /// A land-cover map and the table of what grows on its classes (a file, or a built-in
     /// table's name): see [`cover`]. `None`: the procedural rule paints everywhere.
     pub land_cover: Option<(PathBuf, PathBuf)>,
@@ -150,6 +156,7 @@ impl Default for BakeOptions {
             stored_levels: 3,
             seed: 1,
             replace: false,
+            fresh_manifest: false,
             land_cover: None,
             density_map: None,
             mask: None,
@@ -216,6 +223,9 @@ pub struct BakeReport {
     /// The process's peak resident memory when the bake ended, MiB (0 where unknown).
     #[serde(default)]
     pub peak_memory_mib: f64,
+    /// What was kept of the replaced manifest (nothing for a new world).
+    #[serde(default)]
+    pub carried: Carried,
 }
 
 /// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
@@ -484,6 +494,7 @@ pub fn bake(
         memory_limit_mib: opts.memory_mib,
         planned_mib: plan.peak_bytes.div_ceil(1 << 20),
         peak_memory_mib: peak_memory_mib(),
+        carried: Carried::default(),
     };
     let paint_inputs = tiles::BlockPaint {
         height_range,
@@ -560,10 +571,8 @@ pub fn bake(
     manifest.grass_peak = Some(grass_peak(pyramid, peak));
 
     progress(BakeStage::WriteManifest, 0, 1);
-    write_atomic(
-        &staging.world().join("world.toml"),
-        manifest.to_toml().as_bytes(),
-    )?;
+    let (text, carried) = manifest_text(&manifest, &out, opts)?;
+    write_atomic(&staging.world().join("world.toml"), text.as_bytes())?;
     // The last chance to stop: once the world is being moved into place, it is finished.
     cancelled()?;
     staging.publish()?;
@@ -572,7 +581,33 @@ pub fn bake(
         let _ = std::fs::remove_dir_all(&parts.dir);
     }
     progress(BakeStage::WriteManifest, 1, 1);
-    Ok(report(tiles_written, peak))
+    Ok(BakeReport {
+        carried,
+        ..report(tiles_written, peak)
+    })
+}
+
+/// The manifest to publish into `out` (resolved): `manifest`, and with `--replace` (unless
+/// `--fresh-manifest`) what the replaced `world.toml` keeps ([`carry::carry`]); it is named in
+/// errors as the user spelled `--out`.
+fn manifest_text(
+    manifest: &Manifest,
+    out: &Path,
+    opts: &BakeOptions,
+) -> Result<(String, Carried), WorldError> {
+    let text = manifest.to_toml();
+    let old = out.join("world.toml");
+    if !opts.replace || opts.fresh_manifest || std::fs::symlink_metadata(&old).is_err() {
+        return Ok((text, Carried::default()));
+    }
+    let shown = opts.out.join("world.toml");
+    let bytes =
+        crate::world::format::read_regular(&shown, crate::world::manifest::MAX_MANIFEST_BYTES)?;
+    let old_text = String::from_utf8(bytes).map_err(|e| WorldError::ManifestSyntax {
+        path: shown.clone(),
+        message: format!("not UTF-8 text: {e}"),
+    })?;
+    carry::carry(&text, &old_text, &shown)
 }
 
 /// The manifest's record of the densest grass, `density` over windows of the finest grass
@@ -627,7 +662,7 @@ fn finish_from_parts(
         .filter_map(|i| parts.done(i))
         .fold(0f32, |p, r| p.max(r.grass_peak));
     manifest.grass_peak = Some(grass_peak(pyramid, peak));
-    let text = manifest.to_toml();
+    let (text, carried) = manifest_text(&manifest, out, opts)?;
     let start = Instant::now();
     let staging = Staging::begin(out, &opts.out, opts.replace)?;
     let tiles = parts.dir.join("tiles");
@@ -640,6 +675,7 @@ fn finish_from_parts(
     report.seconds = start.elapsed().as_secs_f64();
     report.grass_peak = peak;
     report.peak_memory_mib = peak_memory_mib();
+    report.carried = carried;
     Ok(Some(report))
 }
 

@@ -45,6 +45,11 @@ pub(crate) struct BakeArgs {
     /// (otherwise it is refused); its other files are kept.
     #[arg(long)]
     pub(crate) replace: bool,
+    /// With --replace: write the baked world.toml alone. Without it, the replaced world.toml's
+    /// plant types and its camera paths of names the bake does not write (hand-made ones) are
+    /// kept, comments and all, and checked against the new world.
+    #[arg(long, requires = "replace")]
+    pub(crate) fresh_manifest: bool,
     /// A land-cover map: a GeoTIFF of one uint8 or uint16 band (placed by its georeferencing,
     /// reprojected by EPSG code where its coordinate system is not the DEM's), or a grayscale
     /// PNG that spans the DEM. Its classes choose the grass and the ground's material where it
@@ -103,6 +108,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         levels,
         seed,
         replace,
+        fresh_manifest,
         land_cover,
         cover_table,
         density_map,
@@ -133,6 +139,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         stored_levels: levels.unwrap_or(0),
         seed,
         replace,
+        fresh_manifest,
         land_cover: land_cover.zip(cover_table),
         density_map,
         mask,
@@ -197,5 +204,29 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         "memory: peak {:.0} MiB resident (limit {} MiB, planned {} MiB)",
         report.peak_memory_mib, report.memory_limit_mib, report.planned_mib
     );
+    let carried = &report.carried;
+    if !carried.is_empty() {
+        let list = |names: &[String]| {
+            names
+                .iter()
+                .map(|n| format!("\"{n}\""))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        println!(
+            "kept from the replaced world.toml: {} plant type(s){}{} and {} camera path(s){}{} \
+             (--fresh-manifest drops them)",
+            carried.plant_types.len(),
+            if carried.plant_types.is_empty() {
+                ""
+            } else {
+                " "
+            },
+            list(&carried.plant_types),
+            carried.paths.len(),
+            if carried.paths.is_empty() { "" } else { " " },
+            list(&carried.paths),
+        );
+    }
     Ok(())
 }

@@ -479,6 +479,21 @@ pub enum WorldError {
         tiles: PathBuf,
     },
 
+    /// `bake --replace` keeps the replaced manifest's plant types and the camera paths a bake
+    /// does not write, and they do not fit the new world (or the manifest does not read).
+    #[error(
+        "{source}\n(bake --replace keeps the plant types and the camera paths of other names \
+         than the bake's from {}: mend them there, or pass --fresh-manifest to bake without them)",
+        path.display()
+    )]
+    Carry {
+        /// The replaced manifest.
+        path: PathBuf,
+        /// Why its parts do not fit.
+        #[source]
+        source: Box<WorldError>,
+    },
+
     /// The bake was cancelled (its cancel flag was set, e.g. by SIGINT or SIGTERM) before the
     /// new world was put in place; the output folder was left as it was.
     #[error("{}: bake cancelled; the output folder was left as it was", path.display())]
@@ -700,6 +715,7 @@ impl WorldError {
             | FileTooLarge { path, .. }
             | OutputNotEmpty { path }
             | ForeignInTiles { path, .. }
+            | Carry { path, .. }
             | Cancelled { path }
             | PublishFailed { path, .. }
             | LandCover { path, .. }
