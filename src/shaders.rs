@@ -195,9 +195,10 @@ pub fn module(device: &wgpu::Device, name: &str) -> wgpu::ShaderModule {
 }
 
 /// Whether a colour target of `format` needs the shader to encode sRGB itself (the
-/// `ENCODE_SRGB` override of `shared/output.wgsl`): plain 8-bit unorm targets do; sRGB targets
-/// encode on store and float targets hold linear values. `None` for formats the renderer does
-/// not draw into.
+/// `ENCODE_SRGB` override of `shared/output.wgsl`): plain unorm targets do (8-bit RGBA and
+/// BGRA, `Rgb10a2Unorm`, `Rgba16Unorm`); sRGB targets encode on store and the float targets
+/// (`Rgba16Float`, `Rgba32Float`, `Rg11b10Ufloat`) hold linear values. `None` for formats the
+/// renderer does not draw into.
 pub fn encode_srgb_for(format: wgpu::TextureFormat) -> Option<bool> {
     use wgpu::TextureFormat as F;
     match format {

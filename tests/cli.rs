@@ -1134,8 +1134,13 @@ fn bake_into_an_existing_world_needs_replace() {
             ],
             tmp.path(),
         );
-        assert_fails_naming(&out, &[&format!("{option} {value}")]);
-        assert!(!String::from_utf8_lossy(&out.stderr).contains("world.toml"));
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains(option) && stderr.contains(&format!("'{value}'")),
+            "{stderr}"
+        );
+        assert!(!stderr.contains("world.toml"));
         assert!(!fresh.exists());
     }
 }

@@ -136,6 +136,22 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
     ),
     (&["fly", "--taa-clip", "nan"], &["--taa-clip", "0.25..=16"]),
     (&["fly", "--aa", "fxaa"], &["--aa", "off, taa, msaa"]),
+    (
+        &["bench", "blades", "--field-m", "5001"],
+        &["--field-m", "10..=5000"],
+    ),
+    (
+        &["bench", "blades", "--fov-deg", "170"],
+        &["--fov-deg", "between 1 and 170"],
+    ),
+    (
+        &["bake", "--dem", "d.png", "--out", "w", "--levels", "0"],
+        &["--levels", "1..=12"],
+    ),
+    (
+        &["bake", "--dem", "d.png", "--out", "w", "--tile-cells", "96"],
+        &["--tile-cells", "a power of two in 8..=1024"],
+    ),
 ];
 
 #[test]
@@ -187,6 +203,8 @@ fn every_numeric_option_states_its_range_in_its_help() {
                 "--rounds",
             ][..],
         ),
+        (&["bench", "blades"][..], &["--field-m", "--counts"][..]),
+        (&["bake"][..], &["--tile-cells", "--levels"][..]),
     ] {
         let mut args = sub.to_vec();
         args.push("--help");

@@ -171,6 +171,40 @@ pub(crate) fn float_in(
     }
 }
 
+/// A number strictly between `lo` and `hi`.
+pub(crate) fn float_between(
+    lo: f64,
+    hi: f64,
+) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
+    move |s: &str| match s.trim().parse::<f64>() {
+        Ok(v) if v > lo && v < hi => Ok(v),
+        Ok(_) => Err(format!(
+            "{} is out of range (between {lo} and {hi}, both excluded)",
+            s.trim()
+        )),
+        Err(_) => Err(format!(
+            "{s:?} is not a number (expected between {lo} and {hi})"
+        )),
+    }
+}
+
+/// A power of two in `lo..=hi`.
+pub(crate) fn power_of_two_in(
+    lo: u32,
+    hi: u32,
+) -> impl Fn(&str) -> Result<u32, String> + Clone + Send + Sync {
+    move |s: &str| match s.trim().parse::<u32>() {
+        Ok(v) if v.is_power_of_two() && (lo..=hi).contains(&v) => Ok(v),
+        Ok(_) => Err(format!(
+            "{} is out of range (a power of two in {lo}..={hi})",
+            s.trim()
+        )),
+        Err(_) => Err(format!(
+            "{s:?} is not a number (expected a power of two in {lo}..={hi})"
+        )),
+    }
+}
+
 pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])

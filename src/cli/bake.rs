@@ -31,12 +31,12 @@ pub(crate) struct BakeArgs {
     /// Cell size of the finest stored level, metres (default: from the DEM).
     #[arg(long)]
     pub(crate) cell_size: Option<f64>,
-    /// Cells per tile edge (a power of two).
-    #[arg(long, default_value_t = 128)]
+    /// Cells per tile edge, a power of two in 8..=1024.
+    #[arg(long, default_value_t = 128, value_parser = super::args::power_of_two_in(8, 1024))]
     pub(crate) tile_cells: u32,
-    /// Stored levels of the tile pyramid (default: as many as the world needs, at least 3, for
-    /// at most 64 level-0 tiles, which a viewer keeps resident).
-    #[arg(long)]
+    /// Stored levels of the tile pyramid, 1..=12 (default: as many as the world needs, at
+    /// least 3, for at most 64 level-0 tiles, which a viewer keeps resident).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=12))]
     pub(crate) levels: Option<u8>,
     /// Seed of the grass-painting noise.
     #[arg(long, default_value_t = 1)]
@@ -122,11 +122,6 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         (None, Some(count)) => Some(verdant::bake::ShardStep::Finish { count }),
         (None, None) => None,
     };
-    if levels == Some(0) {
-        anyhow::bail!(
-            "--levels 0: must be in 1..=12 (leave --levels out for as many as the world needs)"
-        );
-    }
     let mut dems = dem.into_iter();
     let opts = BakeOptions {
         dem: dems.next().unwrap_or_default(),

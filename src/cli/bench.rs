@@ -21,19 +21,22 @@ pub(crate) enum BenchCommand {
         /// Image size, WIDTHxHEIGHT.
         #[arg(long, default_value = "1920x1080", value_parser = parse_size)]
         size: (u32, u32),
-        /// Edge of the square field, metres.
-        #[arg(long, default_value_t = 200.0)]
+        /// Edge of the square field, metres, 10..=5000.
+        #[arg(long, default_value_t = 200.0, value_parser = float_in(10.0, 5000.0))]
         field_m: f64,
-        /// Camera position X,Y,Z in metres (x east, y north, z up).
+        /// Camera position X,Y,Z in metres (x east, y north, z up), each within 100 km of the
+        /// origin.
         #[arg(long, default_value = "-20,-20,15", value_parser = parse_vec3)]
         camera: [f64; 3],
-        /// The point the camera looks at, X,Y,Z in metres.
+        /// The point the camera looks at, X,Y,Z in metres, each within 100 km of the origin and
+        /// at least 1 cm from --camera.
         #[arg(long, default_value = "100,100,0", value_parser = parse_vec3)]
         target: [f64; 3],
-        /// Vertical field of view, degrees.
-        #[arg(long, default_value_t = 45.0)]
+        /// Vertical field of view, degrees, between 1 and 170 (both excluded).
+        #[arg(long, default_value_t = 45.0, value_parser = super::args::float_between(1.0, 170.0))]
         fov_deg: f64,
-        /// Blade counts of the sweep, comma-separated.
+        /// Blade counts of the sweep, comma-separated, 1 to 32 of them, each in the range that
+        /// keeps blades 2 cm to 5 m apart in the field (1600..=100000004 in the default 200 m).
         #[arg(
             long,
             value_delimiter = ',',

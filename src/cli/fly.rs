@@ -38,7 +38,8 @@ pub(crate) struct FlyArgs {
     pub(crate) wind: Option<String>,
     /// Features to switch off, comma-separated: wind-sources, interaction,
     /// detail-bending, translucency, specular, ambient-occlusion, color-variation,
-    /// ground-darkening, far-field, shadows, plants (on top of the manifest's [features] table).
+    /// ground-darkening, far-field, shadows, plants, trees, tree-shadows, particles (on top of
+    /// the manifest's [features] table).
     #[arg(long, value_delimiter = ',')]
     pub(crate) disable: Vec<verdant::features::Feature>,
     /// Grass features to switch on that the manifest's [features] table switches off,

@@ -19,8 +19,8 @@ pub(crate) struct SoakArgs {
     /// Simulated flight time, seconds (0.1 s a frame), 1..=604800 (a week).
     #[arg(long, default_value_t = 60.0, value_parser = float_in(1.0, 604_800.0))]
     pub(crate) seconds: f64,
-    /// Camera speed, metres a second, 0..=1000 (and less than a world's width in 20
-    /// frames: the camera must stay over the world).
+    /// Camera speed, metres a second, 0..=1000 (and at most 4% of the world's width a frame,
+    /// 0.1 s: the camera must stay over the world).
     #[arg(long, default_value_t = 50.0, value_parser = float_in(0.0, 1000.0))]
     pub(crate) speed: f64,
     /// Seed of the turns and teleports.

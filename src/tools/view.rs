@@ -3,8 +3,8 @@
 //! Keys: drag with the left mouse button to look around; W A S D fly, Q and E down and up,
 //! Shift four times faster, the mouse wheel (or `+` and `-`) sets the speed; P follows the
 //! manifest's camera path (again to fly free from there), N takes the next path; 1 to 9 choose
-//! the manifest's wind scenes; L shows the tile levels and grass rings; V switches vsync;
-//! Escape quits. Live figures (frame time, GPU time per pass, blades drawn, tiles resident) are
+//! the manifest's wind scenes; L shows the tile levels and grass rings; T steps through the
+//! anti-aliasing methods; V switches vsync; Escape quits. Live figures (frame time, GPU time per pass, blades drawn, tiles resident) are
 //! in the window's title.
 
 use std::path::{Path, PathBuf};

@@ -488,7 +488,7 @@ impl CellState {
     };
 }
 
-/// The uniform a shader that reads the field binds (`WindLookup` in `shaders/wind_lookup.wgsl`).
+/// The uniform a shader that reads the field binds (`WindLookup` in `shaders/shared/wind_lookup.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct WindLookup {

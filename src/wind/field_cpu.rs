@@ -1,5 +1,5 @@
 //! CPU mirror of `shaders/wind_field.wgsl` (entry point `update_wind`) and of
-//! `shaders/wind_lookup.wgsl` (`wind_at`), written loop for loop like the shaders but on their
+//! `shaders/shared/wind_lookup.wgsl` (`wind_at`), written loop for loop like the shaders but on their
 //! own, in f32: the tests feed both the same [`FieldParams`] and compare.
 //!
 //! [`WindFieldCpu`] runs the field on the CPU frame by frame, as [`super::WindField`] does on
@@ -206,7 +206,7 @@ pub fn update_wind(p: &FieldParams, state: &mut [CellState], cells: &mut [[f32; 
     }
 }
 
-/// The mirror of `wind_at` in `shaders/wind_lookup.wgsl`: the field `cells` read at `rel_xy`
+/// The mirror of `wind_at` in `shaders/shared/wind_lookup.wgsl`: the field `cells` read at `rel_xy`
 /// metres from the camera, bilinear between the nearest cell centres.
 pub fn wind_at(lookup: &WindLookup, cells: &[[f32; 4]], rel_xy: Vec2) -> [f32; 4] {
     let n = lookup.n as i32;

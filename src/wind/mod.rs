@@ -10,7 +10,7 @@
 //! - [`field`]: the wind field on the GPU ([`WindField`], `shaders/wind_field.wgsl`): ambient
 //!   noise that never repeats, sources (directional, omni, vortex), decay toward the ambient
 //!   wind and the walker's trail, in a toroidal grid of cells that follows the camera; how
-//!   another shader reads it (`shaders/wind_lookup.wgsl`).
+//!   another shader reads it (`shaders/shared/wind_lookup.wgsl`).
 //! - [`field_cpu`]: its CPU mirror ([`WindFieldCpu`], [`ambient_at`]).
 //! - [`sway`]: the springs advanced on the GPU ([`SwayField`], `shaders/wind_sway.wgsl`), per
 //!   cell of the field and grass type.

@@ -65,7 +65,7 @@ impl SwayConfig {
         let types: Vec<f32> = manifest
             .grass_types
             .iter()
-            .take(SWAY_TYPES)
+            .take(GRASS_SWAY_TYPES)
             .map(|t| t.stiffness)
             .collect();
         let mut c = Self {
@@ -291,5 +291,28 @@ mod tests {
         m.plant_types.clear();
         let c = SwayConfig::from_manifest(&m);
         assert_eq!(c.springs.len(), m.grass_types.len().min(GRASS_SWAY_TYPES));
+    }
+
+    #[test]
+    fn grass_types_beyond_the_grass_slots_leave_the_plants_slots_to_the_plants() {
+        // Six grass types (types 4 and 5 share type 3's spring, as the shader reads them):
+        // the plants still start at slot GRASS_SWAY_TYPES.
+        let mut m = default_manifest();
+        let mut extra = m.grass_types[1].clone();
+        extra.stiffness = 0.05;
+        m.grass_types.push(extra.clone());
+        m.grass_types.push(extra);
+        let c = SwayConfig::from_manifest(&m);
+        assert_eq!(c.springs.len(), GRASS_SWAY_TYPES + m.plant_types.len());
+        let w = &m.plant_types[0].wind;
+        assert_eq!(
+            c.springs[GRASS_SWAY_TYPES],
+            SwaySpring::from_frequency(w.sway_spring_hz, w.sway_damping)
+        );
+        m.plant_types.clear();
+        assert_eq!(
+            SwayConfig::from_manifest(&m).springs.len(),
+            GRASS_SWAY_TYPES
+        );
     }
 }
