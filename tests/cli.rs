@@ -1047,6 +1047,61 @@ fn a_world_without_grass_peak_sizes_its_pool_past_bad_tiles() {
     assert!(damaged >= 64 && damaged <= full, "{damaged} of {full}");
 }
 
+/// A world whose `[grass_peak]` understates its grass (a hand-edited or stale manifest) gets
+/// a pool too small for its densest tiles: the blades that do not fit are counted in the
+/// report's summary and the run warns, naming the table; the world as baked overflows nothing.
+#[test]
+fn grass_that_overflows_its_pool_is_reported_and_warned_of() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = common::world_copy(tmp.path());
+    let fly = |name: &str| {
+        let out = verdant(
+            &[
+                "fly",
+                w.to_str().unwrap(),
+                "--path",
+                "meadow",
+                "--frames",
+                "1",
+                "--size",
+                "64x36",
+                "--out",
+                name,
+            ],
+            tmp.path(),
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{stderr}");
+        let report: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(tmp.path().join(name).join("report.json")).unwrap(),
+        )
+        .unwrap();
+        (
+            report["summary"]["grass_overflow"]["max"].as_f64().unwrap(),
+            stderr,
+        )
+    };
+    let (overflow, stderr) = fly("baked");
+    assert_eq!(overflow, 0.0);
+    assert!(!stderr.contains("grass_peak"), "{stderr}");
+    let toml = w.join("world.toml");
+    let text = std::fs::read_to_string(&toml).unwrap();
+    let at = text.find("[grass_peak]").unwrap();
+    let line = text[at..].find("density = ").unwrap() + at;
+    let end = text[line..].find('\n').unwrap() + line;
+    std::fs::write(
+        &toml,
+        format!("{}density = 0.001{}", &text[..line], &text[end..]),
+    )
+    .unwrap();
+    let (overflow, stderr) = fly("understated");
+    assert!(overflow > 0.0);
+    assert!(
+        stderr.contains("did not fit the grass pool") && stderr.contains("[grass_peak]"),
+        "{stderr}"
+    );
+}
+
 #[test]
 fn a_cache_of_no_bytes_is_refused_and_a_huge_one_does_not_wrap() {
     let tmp = tempfile::tempdir().unwrap();

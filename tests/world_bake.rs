@@ -225,6 +225,48 @@ fn bake_is_deterministic_and_leaves_no_temporary_files() {
     assert!(files_a == files_b, "tile files differ between two bakes");
 }
 
+/// DEMs the paths were not designed for: a strip three cells wide, a patch of two by two, and
+/// lidar-fine cells (5 cm, where the search for the wind scenes' tall grass once grew with the
+/// inverse fourth power of the cell and took hours). Each bakes, and every key of every path
+/// lies over the data area.
+#[test]
+fn small_narrow_and_fine_dems_get_paths_over_their_own_ground() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, size, cell) in [
+        ("strip", [3, 1000], [25.0, 25.0]),
+        ("patch", [2, 2], [25.0, 25.0]),
+        ("lidar", [100, 100], [0.05, 0.05]),
+    ] {
+        let dem = write_dem(dir.path(), name, size, cell, DEM_SCALE, |x, y| {
+            200.0 + 3.0 * (x / 7.0).sin() * (y / 11.0).cos()
+        });
+        let out = dir.path().join(format!("w_{name}"));
+        let report = bake(
+            &BakeOptions {
+                dem,
+                out: out.clone(),
+                ..Default::default()
+            },
+            &mut |_, _, _| {},
+        )
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(report.tiles_written > 0, "{name}");
+        let m = verdant::world::Manifest::from_path(&out.join("world.toml")).unwrap();
+        let [ex, ey] = m.extent_m;
+        assert!(m.paths.len() >= 7, "{name}");
+        for p in &m.paths {
+            for k in &p.keys {
+                let [x, y, _] = k.position_m;
+                assert!(
+                    (0.0..=ex).contains(&x) && (0.0..=ey).contains(&y),
+                    "{name}: path {} has a key at {x},{y} outside 0..{ex} x 0..{ey}",
+                    p.name
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn camera_paths_clear_the_terrain() {
     let dir = tempfile::tempdir().unwrap();
@@ -282,6 +324,13 @@ fn bake_into_a_non_empty_folder_is_refused_unless_replaced_as_a_whole() {
     bake(&opts, &mut |_, _, _| {}).unwrap_err();
     assert_eq!(std::fs::read(out.join("world.toml")).unwrap(), old);
     opts.dem = good_dem;
+    // This manifest is not one a bake can keep plants and paths of: told to replace it, the
+    // bake says so, and writes a fresh manifest when told to.
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(err, WorldError::Carry { .. }), "{err}");
+    assert!(err.to_string().contains("--fresh-manifest"), "{err}");
+    assert_eq!(std::fs::read(out.join("world.toml")).unwrap(), old);
+    opts.fresh_manifest = true;
     // Told to replace it, the bake replaces the folder as a whole: nothing stale stays.
     let mut written_into_out = false;
     bake(&opts, &mut |stage, _, _| {

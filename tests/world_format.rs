@@ -440,6 +440,44 @@ fn manifest_bad_camera_paths() {
     );
 }
 
+/// Texts of a manifest are printed to terminals and window titles: a control character (an
+/// escape sequence that would recolour the terminal or retitle it, from a world fetched over
+/// HTTP say) is refused naming the field; tabs and line breaks in a description are fine.
+#[test]
+fn control_characters_in_a_manifests_texts_are_refused() {
+    for (from, to, field, code) in [
+        (
+            "name = \"test\"",
+            "name = \"a\\u001b[31mred\"",
+            "name",
+            "U+001B",
+        ),
+        (
+            "name = \"overview\"",
+            "name = \"over\\u0007view\"",
+            "paths[0].name",
+            "U+0007",
+        ),
+        (
+            "name = \"meadow\"",
+            "name = \"mea\\u009bdow\"",
+            "grass_types[1].name",
+            "U+009B",
+        ),
+    ] {
+        let e = broken(from, to).to_string();
+        for needle in [field, code, "control character"] {
+            assert!(e.contains(needle), "{needle:?} not in {e:?}");
+        }
+    }
+    let ok = VALID.replacen(
+        "description = \"a small test world\"",
+        "description = \"two lines,\\n\\tindented\"",
+        1,
+    );
+    assert!(parse(&ok).is_ok());
+}
+
 #[test]
 fn missing_world_dir_and_manifest() {
     let dir = tempfile::tempdir().unwrap();

@@ -94,6 +94,14 @@ pub fn default_wind_scenes() -> Vec<WindScene> {
 }
 
 /// Highest terrain within `half_width` of the polyline through `points`, sampled every `step`.
+/// The finest step, metres, at which a path's clearance is checked.
+const MIN_CLEARANCE_STEP_M: f64 = 1.0;
+
+/// The finest step, metres, of the search for the wind scenes' patch of tall grass: its
+/// candidates and the samples around each. Fine DEMs (lidar at 0.5 m) would otherwise make the
+/// search grow with the inverse fourth power of the cell (hours at 0.5 m).
+const MIN_SPOT_STEP_M: f64 = 10.0;
+
 fn max_terrain_along(grid: &Grid, points: &[DVec2], half_width: f64, step: f64) -> f64 {
     let mut best = f64::NEG_INFINITY;
     for w in points.windows(2) {
@@ -121,17 +129,26 @@ fn max_terrain_along(grid: &Grid, points: &[DVec2], half_width: f64, step: f64) 
 /// the terrain under it by at least `clearance` too.
 fn keys_along(
     grid: &Grid,
+    extent: [f64; 2],
     points: &[DVec2],
     times: &[f64],
     clearance: f64,
     half_width: f64,
     pitch_deg: f64,
 ) -> Vec<CameraKey> {
+    // Over the data area: a world smaller or narrower than a path's design (a strip of DEM, a
+    // few cells) still gets its keys above its own ground, not over nothing.
+    let e = DVec2::from(extent);
+    let points: Vec<DVec2> = points.iter().map(|p| p.clamp(DVec2::ZERO, e)).collect();
+    let points = points.as_slice();
     let last = points.len() - 1;
     let mut keys: Vec<CameraKey> = Vec::with_capacity(points.len());
     for k in 0..=last {
         let around = &points[k.saturating_sub(1)..=(k + 1).min(last)];
-        let z = max_terrain_along(grid, around, half_width, grid.spacing() * 0.5) + clearance;
+        // Half a cell, but no finer than a metre: a lidar DEM's 10 cm cells would otherwise
+        // take millions of samples a key for a clearance of metres.
+        let step = (grid.spacing() * 0.5).max(MIN_CLEARANCE_STEP_M);
+        let z = max_terrain_along(grid, around, half_width, step) + clearance;
         let ahead = points[(k + 1).min(last)] - points[k.saturating_sub(1)];
         let mut yaw = ahead.y.atan2(ahead.x).to_degrees();
         if let Some(prev) = keys.last() {
@@ -176,7 +193,15 @@ pub(super) fn overview_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         name: "overview".into(),
         duration_s: DURATION,
         walker: None,
-        keys: keys_along(grid, &points, &times, OVERVIEW_CLEARANCE_M, 150.0, -14.0),
+        keys: keys_along(
+            grid,
+            extent,
+            &points,
+            &times,
+            OVERVIEW_CLEARANCE_M,
+            150.0,
+            -14.0,
+        ),
         wind: Vec::new(),
     }
 }
@@ -247,7 +272,7 @@ pub(super) fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         name: "low".into(),
         duration_s: DURATION,
         walker: None,
-        keys: keys_along(grid, &points, &times, LOW_CLEARANCE_M, 20.0, -8.0),
+        keys: keys_along(grid, extent, &points, &times, LOW_CLEARANCE_M, 20.0, -8.0),
         wind: Vec::new(),
     }
 }
@@ -340,7 +365,7 @@ pub(super) fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         clearance.push(MEADOW_CLEARANCE_M);
         pitch.push(-6.0);
     }
-    let mut keys = keys_along(grid, &points, &times, 0.0, 2.0, 0.0);
+    let mut keys = keys_along(grid, extent, &points, &times, 0.0, 2.0, 0.0);
     for (k, key) in keys.iter_mut().enumerate() {
         key.position_m[2] = round_to(key.position_m[2] + clearance[k], 2);
         key.pitch_deg = round_to(pitch[k], 2);
@@ -373,7 +398,7 @@ pub(super) fn meadow_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         name: "meadow".into(),
         duration_s: DURATION,
         walker: None,
-        keys: keys_along(grid, &points, &times, MEADOW_CLEARANCE_M, 2.0, -6.0),
+        keys: keys_along(grid, extent, &points, &times, MEADOW_CLEARANCE_M, 2.0, -6.0),
         wind: Vec::new(),
     }
 }
@@ -399,8 +424,9 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
         let i = painted.index_at(p);
         (painted.grass_type[i], f64::from(painted.density[i]) / 255.0)
     };
-    let steps = (REACH_M / grid.spacing()).round() as i64;
-    let ring = (AROUND_M / grid.spacing()).ceil() as i64;
+    let step = grid.spacing().max(MIN_SPOT_STEP_M);
+    let steps = (REACH_M / step).round() as i64;
+    let ring = (AROUND_M / step).ceil() as i64;
     let mut best = (
         f64::NEG_INFINITY,
         f64::INFINITY,
@@ -411,7 +437,7 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
             break;
         }
         for i in -steps..=steps {
-            let p = near + DVec2::new(i as f64, j as f64) * grid.spacing();
+            let p = near + DVec2::new(i as f64, j as f64) * step;
             if !inside(p) {
                 continue;
             }
@@ -419,7 +445,7 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
             let mut count = 0.0;
             for b in -ring..=ring {
                 for a in -ring..=ring {
-                    let q = p + DVec2::new(a as f64, b as f64) * grid.spacing();
+                    let q = p + DVec2::new(a as f64, b as f64) * step;
                     if q.distance(p) > AROUND_M {
                         continue;
                     }
@@ -465,7 +491,15 @@ pub(super) fn helicopter_path(painted: &Painted, extent: [f64; 2]) -> CameraPath
         name: HELICOPTER_PATH.into(),
         duration_s: DURATION,
         walker: None,
-        keys: keys_along(grid, &points, &times, HELICOPTER_CLEARANCE_M, 5.0, -30.0),
+        keys: keys_along(
+            grid,
+            extent,
+            &points,
+            &times,
+            HELICOPTER_CLEARANCE_M,
+            5.0,
+            -30.0,
+        ),
         wind: Vec::new(),
     }
 }
@@ -510,7 +544,15 @@ pub(super) fn wind_tour_paths(painted: &Painted, extent: [f64; 2]) -> (CameraPat
         .iter()
         .map(|t| c + side * SIDE_M + dir * (DRIFT_M * (t / WIND_TOUR_S - 0.5)))
         .collect();
-    let mut keys = keys_along(grid, &camera_points, &times, CLEARANCE_M, 1.0, -24.0);
+    let mut keys = keys_along(
+        grid,
+        extent,
+        &camera_points,
+        &times,
+        CLEARANCE_M,
+        1.0,
+        -24.0,
+    );
     for k in &mut keys {
         k.yaw_deg = yaw;
     }
@@ -524,7 +566,7 @@ pub(super) fn wind_tour_paths(painted: &Painted, extent: [f64; 2]) -> (CameraPat
         name: WALKER_PATH.into(),
         duration_s: WIND_TOUR_S,
         walker: None,
-        keys: keys_along(grid, &walk_points, &times, 1.7, 0.0, 0.0),
+        keys: keys_along(grid, extent, &walk_points, &times, 1.7, 0.0, 0.0),
         wind: Vec::new(),
     };
     let tour = CameraPath {

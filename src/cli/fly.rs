@@ -322,6 +322,15 @@ pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
         "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",
         s.grass_considered.median, s.grass_drawn_high.median, s.grass_drawn_low.median
     );
+    if s.grass_overflow.max > 0.0 {
+        log::warn!(
+            "grass: up to {:.0} blades a frame (median {:.0}) did not fit the grass pool and \
+             were not drawn: the world's [grass_peak] density understates its grass (rebake \
+             it, or remove [grass_peak] to have it measured from the tiles)",
+            s.grass_overflow.max,
+            s.grass_overflow.median
+        );
+    }
     println!(
         "grass coverage within {:.0} m: median {:.1}%, mean {:.1}% over {} frames",
         verdant::tools::metrics::COVERAGE_DISTANCE_M,

@@ -524,6 +524,9 @@ impl FlySummary {
             })),
             grass_drawn_high: Summary::of(&series(&|f| f64::from(f.grass.drawn[0]))),
             grass_drawn_low: Summary::of(&series(&|f| f64::from(f.grass.drawn[1]))),
+            grass_overflow: Summary::of(&series(&|f| {
+                f64::from(f.grass.overflow[0]) + f64::from(f.grass.overflow[1])
+            })),
             coverage: Summary::default(),
             plants_drawn: layer(&|f| f.plants.map(|p| p.drawn)),
             plants_overflow: layer(&|f| f.plants.map(|p| p.overflow)),

@@ -129,6 +129,10 @@ pub struct FlySummary {
     pub grass_drawn_high: Summary,
     /// Grass blades drawn a frame at low LOD.
     pub grass_drawn_low: Summary,
+    /// Grass blades a frame, both LODs, that passed every test but did not fit their tile's
+    /// slot of the pool (0 unless the world's `[grass_peak]` understates its grass).
+    #[serde(default)]
+    pub grass_overflow: Summary,
     /// Grass coverage over the frames of `coverage` (see [`CoverageRecord`]).
     #[serde(default)]
     pub coverage: Summary,

@@ -511,6 +511,19 @@ impl Manifest {
             path: path.to_path_buf(),
             message: e.to_string().trim_end().to_string(),
         })?;
+        if let Some((field, c)) = control_character(&manifest) {
+            return Err(WorldError::OutOfRange {
+                path: path.to_path_buf(),
+                field,
+                value: format!(
+                    "a text holding the control character U+{:04X}",
+                    u32::from(c)
+                ),
+                allowed: "text without control characters (tabs and line breaks aside): a \
+                          world's names are printed to terminals and window titles"
+                    .into(),
+            });
+        }
         manifest.validate(path)?;
         Ok(manifest)
     }
@@ -530,4 +543,39 @@ impl Manifest {
     pub fn wind_scene(&self, name: &str) -> Option<&WindScene> {
         self.wind_scenes.iter().find(|s| s.name == name)
     }
+}
+
+/// The first text of `manifest` holding a control character other than a tab or a line break
+/// (an escape sequence in a world's name would drive the terminal that prints it), as the
+/// field's path (`paths[2].name`) and the character.
+fn control_character(manifest: &Manifest) -> Option<(String, char)> {
+    fn walk(v: &serde_json::Value, at: &str) -> Option<(String, char)> {
+        match v {
+            serde_json::Value::String(t) => t
+                .chars()
+                .find(|c| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
+                .map(|c| (at.to_owned(), c)),
+            serde_json::Value::Array(a) => a
+                .iter()
+                .enumerate()
+                .find_map(|(i, v)| walk(v, &format!("{at}[{i}]"))),
+            serde_json::Value::Object(o) => o.iter().find_map(|(k, v)| {
+                // A map's keys are texts too (a plant's density by grass type's name).
+                if let Some(c) = k
+                    .chars()
+                    .find(|c| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
+                {
+                    return Some((format!("{at}.{k:?}"), c));
+                }
+                let at = if at.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{at}.{k}")
+                };
+                walk(v, &at)
+            }),
+            _ => None,
+        }
+    }
+    walk(&serde_json::to_value(manifest).ok()?, "")
 }

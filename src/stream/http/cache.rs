@@ -72,6 +72,9 @@ pub(super) struct DiskCache {
     pub(super) clock: u64,
     /// Key to (body bytes, last use).
     pub(super) entries: HashMap<String, (u64, u64)>,
+    /// A write has failed and been reported: later failures (a full disk fails every write)
+    /// are not reported again.
+    pub(super) warned: bool,
 }
 
 impl DiskCache {
@@ -86,6 +89,11 @@ impl DiskCache {
                 "it is {why}; give the cache a folder of its own"
             ))));
         }
+        if std::fs::metadata(&config.dir).is_ok_and(|m| !m.is_dir()) {
+            return Err(err(std::io::Error::other(
+                "it is a file, not a folder; give the cache a folder of its own",
+            )));
+        }
         std::fs::create_dir_all(&config.dir).map_err(err)?;
         let mut cache = DiskCache {
             dir: config.dir.clone(),
@@ -93,10 +101,19 @@ impl DiskCache {
             bytes: 0,
             clock: 0,
             entries: HashMap::new(),
+            warned: false,
         };
         for entry in std::fs::read_dir(&config.dir).map_err(err)? {
             let Ok(entry) = entry else { continue };
             let name = entry.file_name().to_string_lossy().into_owned();
+            // A write that was cut short (a full disk, a killed run) left its temporary.
+            if [".body.tmp", ".meta.tmp"]
+                .iter()
+                .any(|t| name.strip_suffix(t).is_some_and(is_key))
+            {
+                let _ = std::fs::remove_file(entry.path());
+                continue;
+            }
             // Only the cache's own entries, named by their key: a user's files in the folder
             // (`thesis.body`, say) are neither counted nor ever removed.
             let Some(key) = name.strip_suffix(".body").filter(|k| is_key(k)) else {
@@ -208,8 +225,17 @@ impl DiskCache {
                 .and_then(|()| std::fs::rename(&tmp, self.path(&key, suffix)))
         };
         if let Err(e) = write("body", body).and_then(|()| write("meta", meta.as_bytes())) {
-            log::warn!("{}: tile cache: {e}", self.dir.display());
-            let _ = std::fs::remove_file(self.path(&key, "body"));
+            if !self.warned {
+                log::warn!(
+                    "{}: tile cache: {e}; tiles that cannot be cached are fetched again when \
+                     next needed (further failures are not reported)",
+                    self.dir.display()
+                );
+                self.warned = true;
+            }
+            for suffix in ["body.tmp", "meta.tmp", "body", "meta"] {
+                let _ = std::fs::remove_file(self.path(&key, suffix));
+            }
             return;
         }
         self.clock += 1;
@@ -317,6 +343,56 @@ mod tests {
             );
         }
         assert!(tmp.path().join("0123456789abcdef.body").is_dir());
+    }
+
+    /// A write that fails (here the entry's metadata cannot be put in place: a folder stands
+    /// at its name) leaves neither the body nor a temporary; temporaries a killed run left are
+    /// swept when the cache opens, a user's files of like names kept; a file as the cache's
+    /// folder is refused saying so.
+    #[test]
+    fn a_failed_write_leaves_no_temporaries_and_old_ones_are_swept() {
+        let tmp = tempfile::tempdir().unwrap();
+        let config = HttpCacheConfig {
+            dir: tmp.path().join("cache"),
+            max_bytes: 1 << 20,
+        };
+        let mut cache = DiskCache::open(&config).unwrap();
+        let key = DiskCache::key("http://h/a");
+        std::fs::create_dir_all(config.dir.join(format!("{key}.meta/x"))).unwrap();
+        cache.put("http://h/a", &Validator::ETag("\"a\"".into()), &[1; 100]);
+        assert!(cache.warned);
+        assert_eq!(cache.bytes, 0);
+        let names = |d: &Path| {
+            let mut v: Vec<String> = std::fs::read_dir(d)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        assert_eq!(names(&config.dir), [format!("{key}.meta")]);
+        // Temporaries of a killed run go when the cache opens; a user's file stays.
+        std::fs::write(config.dir.join("00000000000000ff.body.tmp"), [0; 10]).unwrap();
+        std::fs::write(config.dir.join("00000000000000ff.meta.tmp"), "x").unwrap();
+        std::fs::write(config.dir.join("draft.body.tmp"), "mine").unwrap();
+        drop(cache);
+        let cache = DiskCache::open(&config).unwrap();
+        assert_eq!(cache.bytes, 0);
+        assert_eq!(
+            names(&config.dir),
+            [format!("{key}.meta"), "draft.body.tmp".to_owned()]
+        );
+        // A file where the folder should be.
+        let file = tmp.path().join("afile");
+        std::fs::write(&file, "x").unwrap();
+        let e = DiskCache::open(&HttpCacheConfig {
+            dir: file,
+            max_bytes: 1 << 20,
+        })
+        .err()
+        .map(|e| e.to_string())
+        .unwrap();
+        assert!(e.contains("afile") && e.contains("not a folder"), "{e}");
     }
 
     /// A cache is refused a world's folder or a folder in its `tiles/`, however spelled, and
