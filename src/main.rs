@@ -17,7 +17,7 @@ use cli::view::ViewArgs;
 
 /// Streaming open-world terrain with GPU grass.
 #[derive(Parser)]
-#[command(version, about)]
+#[command(version, about, allow_negative_numbers = true)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -26,18 +26,22 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Render PNG frames along a camera path and write report.json.
+    #[command(allow_negative_numbers = true)]
     Fly(Box<FlyArgs>),
     /// Open a window on a world: drag the mouse to look, WASD to fly, Q/E down and up, Shift
     /// faster, the wheel or +/- for speed, P to follow the camera path (N: next path), 1-9 for
     /// the wind scenes, L for the LOD overlay, T for the anti-aliasing, V for vsync, Esc to
     /// quit. Figures in the title.
+    #[command(allow_negative_numbers = true)]
     View(ViewArgs),
     /// Fly fast with random turns and teleports; check the streaming ceilings, holes and memory.
     /// Writes soak.json and exits non-zero if a check failed.
+    #[command(allow_negative_numbers = true)]
     Soak(SoakArgs),
     /// Serve a world folder over HTTP (GET and HEAD, content types, ETag and Last-Modified,
     /// conditional GET), for `verdant fly http://HOST:PORT/` and the like. For production, put
     /// the folder behind any ordinary HTTP server, object store or CDN.
+    #[command(allow_negative_numbers = true)]
     Serve {
         /// World folder, or the name of a world under ./worlds.
         #[arg(default_value = "santa-cruz")]
@@ -47,16 +51,19 @@ enum Command {
         addr: String,
     },
     /// Benchmarks of the renderer.
+    #[command(allow_negative_numbers = true)]
     Bench {
         #[command(subcommand)]
         what: BenchCommand,
     },
     /// Measure methods against real data and chart speed against accuracy.
+    #[command(allow_negative_numbers = true)]
     Eval {
         #[command(subcommand)]
         what: EvalCommand,
     },
     /// Bake a DEM (GeoTIFF, SRTM .hgt, or 16-bit PNG with a JSON sidecar) into a world folder.
+    #[command(allow_negative_numbers = true)]
     Bake(BakeArgs),
 }
 

@@ -136,6 +136,9 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
     ),
     (&["fly", "--taa-clip", "nan"], &["--taa-clip", "0.25..=16"]),
     (&["fly", "--aa", "fxaa"], &["--aa", "off, taa, msaa"]),
+    // A negative number is a value like any other, refused by its range.
+    (&["soak", "--speed", "-1"], &["--speed", "0..=1000"]),
+    (&["fly", "--frames", "-3"], &["--frames", "1..=4294967295"]),
     (
         &["bench", "blades", "--field-m", "5001"],
         &["--field-m", "10..=5000"],
@@ -283,5 +286,54 @@ fn renderer_settings_out_of_range_are_refused_by_the_library_naming_the_option()
             );
         }
         assert!(!out.exists(), "{args:?} wrote its output folder");
+    }
+}
+
+/// What the command line cannot check alone is checked before any work, exit code 1, naming
+/// the option: a feature both switched off and on, a temporal setting out of range for another
+/// (`--taa-min-samples` above `--taa-samples`); and negative coordinates are values, not
+/// options (`--camera -5,0,15` reaches the check of `--counts`).
+#[test]
+fn options_checked_together_name_the_option() {
+    for (args, says) in [
+        (
+            &["fly", "--disable", "plants,shadows", "--enable", "shadows"][..],
+            &["--disable and --enable both name shadows"][..],
+        ),
+        (
+            &[
+                "bench",
+                "aa",
+                "--size",
+                "32x18",
+                "--taa-samples",
+                "2",
+                "--taa-min-samples",
+                "10",
+            ][..],
+            &["--taa-min-samples", "1..=2"][..],
+        ),
+        (
+            &["fly", "--aa", "off", "--taa-clip", "3"][..],
+            &["--taa-clip", "--aa off"][..],
+        ),
+        (
+            &["bench", "aa", "--aa", "off,msaa", "--taa-samples", "8,16"][..],
+            &["--taa-*", "--aa does not list taa"][..],
+        ),
+        (
+            &["bench", "blades", "--camera", "-5,0,15", "--counts", "1"][..],
+            &["--counts 1", "1600..="][..],
+        ),
+    ] {
+        let (code, stderr) = run(args);
+        assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+        assert_eq!(code, Some(1), "{args:?} exited {code:?}: {stderr}");
+        for s in says {
+            assert!(
+                stderr.contains(s),
+                "{args:?}: the error does not say {s:?}: {stderr}"
+            );
+        }
     }
 }

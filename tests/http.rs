@@ -53,6 +53,8 @@ enum Reply {
     Truncated,
     /// A 200 whose body is not an image.
     Garbage,
+    /// The connection closed without a word.
+    Hangup,
 }
 
 /// A hand-written HTTP/1.1 server over a world folder that injects faults, delays every
@@ -144,6 +146,7 @@ fn answer(
         format!("HTTP/1.1 {status}\r\nContent-Length: {len}\r\nConnection: close\r\n\r\n")
     };
     match (reply(&path, n), body) {
+        (Reply::Hangup, _) => {}
         (Reply::Status(code), _) => {
             stream.write_all(head(&format!("{code} Fault"), 0).as_bytes())?;
         }
@@ -1078,6 +1081,23 @@ fn many_retries_against_a_failing_server_end_within_their_bound() {
     assert_eq!(server.asked("/world.toml"), 31);
     assert!(took >= waits, "{took:?}: the retries did not wait");
     assert!(took < waits + Duration::from_secs(5), "{took:?}");
+}
+
+/// A server that hangs up without a reply is retried, and reported as that, not as the
+/// "HTTP 503" the client library stands in for a missing status line.
+#[test]
+fn a_server_that_hangs_up_is_reported_as_one() {
+    let server = FaultServer::start(common::default_world(), Duration::ZERO, |_, _| {
+        Reply::Hangup
+    });
+    let e = HttpSource::open(&server.url, quick_options())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("without an HTTP reply") && e.contains("3 attempt(s)") && !e.contains("503"),
+        "{e}"
+    );
+    assert_eq!(server.asked("/world.toml"), 3);
 }
 
 /// `verdant fly` says on stderr what it retries, why and when.

@@ -137,10 +137,20 @@ impl CoverTable {
         }
         let mut seen = std::collections::BTreeSet::new();
         for c in &self.classes {
-            if !seen.insert(c.code) || self.nodata.contains(&c.code) {
+            if !seen.insert(c.code) {
                 return Err(table_error(
                     path,
                     format!("class {} is listed more than once", c.code),
+                ));
+            }
+            if self.nodata.contains(&c.code) {
+                return Err(table_error(
+                    path,
+                    format!(
+                        "code {} is listed both in nodata and as a [[class]]: it is one or the \
+                         other",
+                        c.code
+                    ),
                 ));
             }
             if !(0.0..=1.0).contains(&c.density) {
@@ -780,6 +790,10 @@ mod tests {
             (
                 format!("{head}{}{}", class(1, "meadow", 0.5), class(1, "none", 0.0)),
                 "more than once",
+            ),
+            (
+                format!("{head}nodata = [1]\n{}", class(1, "meadow", 0.5)),
+                "both in nodata and as a [[class]]",
             ),
             (format!("{head}{}", class(1, "meadow", 1.5)), "0..=1"),
             (format!("{head}class = []\n"), "no [[class]]"),

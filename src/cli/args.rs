@@ -130,6 +130,25 @@ pub(crate) struct TaaArgs {
 }
 
 impl TaaArgs {
+    /// The first of the temporal method's options given, if any.
+    pub(crate) fn first_given(&self) -> Option<&'static str> {
+        [
+            (self.taa_samples.is_some(), "--taa-samples"),
+            (self.taa_clip.is_some(), "--taa-clip"),
+            (self.taa_blade_motion, "--taa-blade-motion"),
+            (self.taa_pixel_spread.is_some(), "--taa-pixel-spread"),
+            (
+                self.taa_parallax_falloff.is_some(),
+                "--taa-parallax-falloff",
+            ),
+            (self.taa_min_samples.is_some(), "--taa-min-samples"),
+            (self.taa_reconstruct.is_some(), "--taa-reconstruct"),
+            (self.taa_sway_falloff.is_some(), "--taa-sway-falloff"),
+        ]
+        .into_iter()
+        .find_map(|(given, name)| given.then_some(name))
+    }
+
     /// The renderer's defaults with what was given.
     pub(crate) fn settings(&self) -> verdant::aa::taa::TaaSettings {
         let mut s = verdant::aa::taa::TaaSettings::default();

@@ -14,6 +14,7 @@ pub(crate) enum BenchCommand {
     /// The grass renderers' benchmark: a flat field of one grass type generated in memory,
     /// swept over blade counts; GPU time per pass, ns per blade and per vertex, the ratio to a
     /// bare pass drawing as many vertices, and the image error against no LOD.
+    #[command(allow_negative_numbers = true)]
     Blades {
         /// Output folder.
         #[arg(long, default_value = "out/bench-blades")]
@@ -26,11 +27,11 @@ pub(crate) enum BenchCommand {
         field_m: f64,
         /// Camera position X,Y,Z in metres (x east, y north, z up), each within 100 km of the
         /// origin.
-        #[arg(long, default_value = "-20,-20,15", value_parser = parse_vec3)]
+        #[arg(long, default_value = "-20,-20,15", value_parser = parse_vec3, allow_hyphen_values = true)]
         camera: [f64; 3],
         /// The point the camera looks at, X,Y,Z in metres, each within 100 km of the origin and
         /// at least 1 cm from --camera.
-        #[arg(long, default_value = "100,100,0", value_parser = parse_vec3)]
+        #[arg(long, default_value = "100,100,0", value_parser = parse_vec3, allow_hyphen_values = true)]
         target: [f64; 3],
         /// Vertical field of view, degrees, between 1 and 170 (both excluded).
         #[arg(long, default_value_t = 45.0, value_parser = super::args::float_between(1.0, 170.0))]
@@ -50,6 +51,7 @@ pub(crate) enum BenchCommand {
     },
     /// Each grass feature's GPU cost against its contribution to the image (FLIP between the
     /// render with and without it), charted one against the other.
+    #[command(allow_negative_numbers = true)]
     Features {
         /// World folder, or the name of a world under ./worlds.
         #[arg(default_value = "santa-cruz")]
@@ -71,6 +73,7 @@ pub(crate) enum BenchCommand {
     },
     /// The LOD transition benchmark: popping across the ring boundary, and GPU time against
     /// image error for a set of LOD settings, charted with the Pareto front.
+    #[command(allow_negative_numbers = true)]
     Lod {
         /// World folder, or the name of a world under ./worlds.
         #[arg(default_value = "santa-cruz")]
@@ -115,6 +118,7 @@ pub(crate) enum BenchCommand {
     /// (still with wind, a dolly, a pan, a teleport) and views along the camera paths, per
     /// method: FLIP against the truth per frame, flicker relative to the truth's, recovery
     /// after the teleport, GPU time; charted with the Pareto front.
+    #[command(allow_negative_numbers = true)]
     Aa {
         /// World folder, or the name of a world under ./worlds.
         #[arg(default_value = "santa-cruz")]
@@ -675,25 +679,34 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             settings,
             taa,
             timing,
-        } => bench_aa(verdant::tools::bench_aa::BenchAaOptions {
-            world: resolve_world(&world)?,
-            out,
-            sizes: size,
-            methods: aa,
-            frames,
-            run_up,
-            truth_k: truth.truth,
-            truth_reach: truth.truth_reach,
-            truth_noise,
-            path,
-            paths: paths.into_iter().filter(|p| !p.is_empty()).collect(),
-            motions: sequences,
-            taa: taa_variants(&taa),
-            settings,
-            warmup_frames: timing.warmup_frames,
-            timed_frames: timing.timed_frames,
-            rounds: timing.rounds,
-        }),
+        } => {
+            let set = taa_variants(&taa) != [verdant::aa::taa::TaaSettings::default()];
+            if set && !aa.contains(&verdant::aa::AntiAliasing::Taa) {
+                anyhow::bail!(
+                    "the --taa-* lists set the temporal anti-aliasing, and --aa does not list \
+                     taa: leave them out, or add taa to --aa"
+                );
+            }
+            bench_aa(verdant::tools::bench_aa::BenchAaOptions {
+                world: resolve_world(&world)?,
+                out,
+                sizes: size,
+                methods: aa,
+                frames,
+                run_up,
+                truth_k: truth.truth,
+                truth_reach: truth.truth_reach,
+                truth_noise,
+                path,
+                paths: paths.into_iter().filter(|p| !p.is_empty()).collect(),
+                motions: sequences,
+                taa: taa_variants(&taa),
+                settings,
+                warmup_frames: timing.warmup_frames,
+                timed_frames: timing.timed_frames,
+                rounds: timing.rounds,
+            })
+        }
     }
 }
 

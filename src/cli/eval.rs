@@ -13,6 +13,7 @@ pub(crate) enum EvalCommand {
     /// Downsample a DEM by K, derive it back with each method (nearest, bilinear, bicubic,
     /// bicubic + fixed detail, and the calibrated detail fitted to the coarse grid), and chart
     /// height and slope error against time per tile.
+    #[command(allow_negative_numbers = true)]
     Derive {
         /// The DEM's PNG (16-bit, with its JSON sidecar).
         #[arg(long)]
@@ -27,6 +28,7 @@ pub(crate) enum EvalCommand {
     /// Step the grass sway spring (stiff and soft presets) with explicit Euler, semi-implicit
     /// Euler and the exact solution at frame times from 1/240 s to 1/5 s and at a 0.5 s hitch;
     /// chart error against cost and where each blows up.
+    #[command(allow_negative_numbers = true)]
     Sway {
         /// Output folder for sway.csv and the charts.
         #[arg(long, default_value = "out/eval-sway")]

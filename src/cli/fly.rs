@@ -176,6 +176,21 @@ impl FlyArgs {
             truth: _,
             stream,
         } = self;
+        if let (Some(m), Some(option)) = (aa, taa.first_given())
+            && m != verdant::aa::AntiAliasing::Taa
+        {
+            bail!(
+                "{option} sets the temporal anti-aliasing, and --aa {} turns it off: leave it \
+                 out, or fly with --aa taa",
+                m.name()
+            );
+        }
+        if let Some(f) = disable.iter().find(|f| enable.contains(f)) {
+            bail!(
+                "--disable and --enable both name {}: a feature is switched one way or the other",
+                f.name()
+            );
+        }
         // The renderer's defaults with what was given; RendererConfig::validate checks the
         // ranges.
         let mut grass = GrassConfig::default();

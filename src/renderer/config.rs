@@ -326,34 +326,7 @@ impl RendererConfig {
                 ));
             }
         }
-        check("taa.max_samples", self.taa.max_samples, &(2..=256), "")?;
-        check("taa.clip_sigma", self.taa.clip_sigma, &(0.25..=16.0), "")?;
-        check(
-            "taa.motion_falloff",
-            self.taa.motion_falloff,
-            &(0.0..=16.0),
-            "",
-        )?;
-        check("taa.pixel_spread", self.taa.pixel_spread, &(0.0..=16.0), "")?;
-        check(
-            "taa.parallax_falloff",
-            self.taa.parallax_falloff,
-            &(0.0..=16.0),
-            "",
-        )?;
-        check("taa.sway_falloff", self.taa.sway_falloff, &(0.0..=16.0), "")?;
-        check(
-            "taa.min_samples",
-            self.taa.min_samples,
-            &(1.0..=self.taa.max_samples as f32),
-            " (at most taa.max_samples)",
-        )?;
-        check(
-            "taa.reconstruct_px",
-            self.taa.reconstruct_px,
-            &(0.0..=2.0),
-            " pixels",
-        )?;
+        self.taa.validate()?;
         let checked = [
             self.tree_shadows.map(|s| s.validate()),
             self.particles.map(|p| p.validate()),
@@ -403,6 +376,38 @@ impl RendererConfig {
             elevation_fade: g.elevation_fade,
             far_field_under_blades: g.far_field_under_blades,
         })
+    }
+}
+
+impl crate::aa::taa::TaaSettings {
+    /// Checks every setting of the temporal method against its range, stated in the error:
+    /// `max_samples` 2..=256, `clip_sigma` 0.25..=16, the falloffs and `pixel_spread` 0..=16,
+    /// `min_samples` 1..=`max_samples`, `reconstruct_px` 0..=2.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check("taa.max_samples", self.max_samples, &(2..=256), "")?;
+        check("taa.clip_sigma", self.clip_sigma, &(0.25..=16.0), "")?;
+        check("taa.motion_falloff", self.motion_falloff, &(0.0..=16.0), "")?;
+        check("taa.pixel_spread", self.pixel_spread, &(0.0..=16.0), "")?;
+        check(
+            "taa.parallax_falloff",
+            self.parallax_falloff,
+            &(0.0..=16.0),
+            "",
+        )?;
+        check("taa.sway_falloff", self.sway_falloff, &(0.0..=16.0), "")?;
+        check(
+            "taa.min_samples",
+            self.min_samples,
+            &(1.0..=self.max_samples as f32),
+            " (at most taa.max_samples)",
+        )?;
+        check(
+            "taa.reconstruct_px",
+            self.reconstruct_px,
+            &(0.0..=2.0),
+            " pixels",
+        )?;
+        Ok(())
     }
 }
 

@@ -172,6 +172,10 @@ impl BenchAaOptions {
         if let Some(s) = repeated(&self.settings) {
             bail!("--settings lists {s:?} twice");
         }
+        for t in &self.taa {
+            t.validate()
+                .map_err(crate::tools::fly::SettingError::from)?;
+        }
         if repeated(&self.taa).is_some() {
             bail!("the --taa-* lists give one temporal setting twice: a value is listed twice");
         }

@@ -224,6 +224,14 @@ impl From<ConfigError> for SettingError {
             "tree_shadows.size" => "--tree-shadow-size",
             "tree_shadows.cascades" => "--tree-shadow-cascades",
             "tree_shadows.lod_m" => "--tree-shadow-lod-m",
+            "taa.max_samples" => "--taa-samples",
+            "taa.clip_sigma" => "--taa-clip",
+            "taa.motion_falloff" => "--taa-falloff",
+            "taa.pixel_spread" => "--taa-pixel-spread",
+            "taa.parallax_falloff" => "--taa-parallax-falloff",
+            "taa.sway_falloff" => "--taa-sway-falloff",
+            "taa.min_samples" => "--taa-min-samples",
+            "taa.reconstruct_px" => "--taa-reconstruct",
             field => field,
         };
         Self { option, source }

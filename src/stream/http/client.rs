@@ -171,6 +171,20 @@ impl Client {
             self.cache_hits.fetch_add(1, Ordering::Relaxed);
             return Ok(body.clone());
         }
+        // minreq stands a 503 in for a reply without a status line: the server closed the
+        // connection unanswered, or does not speak HTTP. Said so, and retried as a transport
+        // failure is.
+        if response.status_code == 503
+            && response.reason_phrase == "Server did not provide a status line"
+        {
+            return Err(HttpError::Transport {
+                url: url.into(),
+                attempts,
+                message: "the server closed the connection without an HTTP reply (no status \
+                          line: it answered nothing, or not in HTTP)"
+                    .into(),
+            });
+        }
         if !(200..300).contains(&response.status_code) {
             return Err(HttpError::Status {
                 url: url.into(),
