@@ -1083,6 +1083,34 @@ fn many_retries_against_a_failing_server_end_within_their_bound() {
     assert!(took < waits + Duration::from_secs(5), "{took:?}");
 }
 
+/// A server that sends no `ETag` or `Last-Modified` cannot have its files revalidated: the
+/// disk cache keeps none of them, and says so once, naming the server.
+#[test]
+fn a_server_without_validators_is_not_cached_and_it_is_said_once() {
+    let logs = warnings();
+    let server = FaultServer::start(common::default_world(), Duration::ZERO, |_, _| Reply::File);
+    let tmp = tempfile::tempdir().unwrap();
+    let cache = tmp.path().join("cache");
+    let options = HttpOptions {
+        cache: Some(HttpCacheConfig {
+            dir: cache.clone(),
+            max_bytes: 16 << 20,
+        }),
+        ..quick_options()
+    };
+    let (_, source) = HttpSource::open(&server.url, options).unwrap();
+    source.load(TileId::new(2, 1, 1)).unwrap();
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 0);
+    let said: Vec<String> = logs
+        .lock()
+        .unwrap()
+        .iter()
+        .filter(|l| l.contains(&server.url) && l.contains("no ETag or Last-Modified"))
+        .cloned()
+        .collect();
+    assert_eq!(said.len(), 1, "{said:?}");
+}
+
 /// A server that hangs up without a reply is retried, and reported as that, not as the
 /// "HTTP 503" the client library stands in for a missing status line.
 #[test]

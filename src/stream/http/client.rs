@@ -26,6 +26,8 @@ pub(super) struct Client {
     pub(super) bytes: AtomicU64,
     /// The whole length of the file the last range request read part of.
     pub(super) range_total: AtomicU64,
+    /// A file came without a validator and so could not be cached: said once.
+    pub(super) uncacheable_told: std::sync::atomic::AtomicBool,
 }
 
 impl Client {
@@ -40,6 +42,7 @@ impl Client {
             cache_hits: AtomicU64::new(0),
             bytes: AtomicU64::new(0),
             range_total: AtomicU64::new(0),
+            uncacheable_told: std::sync::atomic::AtomicBool::new(false),
         }
     }
 
@@ -295,10 +298,21 @@ impl Client {
                 attempts,
             });
         }
-        if let (Some(cache), Some(validator), None) = (&self.cache, validator, range)
-            && let Ok(mut cache) = cache.lock()
-        {
-            cache.put(url, &validator, &body);
+        match (&self.cache, validator, range) {
+            (Some(cache), Some(validator), None) => {
+                if let Ok(mut cache) = cache.lock() {
+                    cache.put(url, &validator, &body);
+                }
+            }
+            (Some(_), None, None) => {
+                if !self.uncacheable_told.swap(true, Ordering::Relaxed) {
+                    log::warn!(
+                        "{url}: the server sends no ETag or Last-Modified, so its files cannot \
+                         be revalidated and the disk cache keeps none of them"
+                    );
+                }
+            }
+            _ => {}
         }
         Ok(body)
     }
