@@ -1102,6 +1102,40 @@ fn grass_that_overflows_its_pool_is_reported_and_warned_of() {
     );
 }
 
+/// A path that never shows the world (here 40 km out of it) flies, and the run says that no
+/// frame drew any terrain.
+#[test]
+fn a_path_outside_the_world_is_warned_of() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = common::world_copy(tmp.path());
+    let toml = w.join("world.toml");
+    let mut text = std::fs::read_to_string(&toml).unwrap();
+    text.push_str(
+        "\n[[paths]]\nname = \"away\"\nduration_s = 2.0\n\
+         [[paths.keys]]\nt_s = 0.0\nposition_m = [-40000.0, -40000.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n\
+         [[paths.keys]]\nt_s = 2.0\nposition_m = [-40010.0, -40010.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n",
+    );
+    std::fs::write(&toml, text).unwrap();
+    let out = verdant(
+        &[
+            "fly",
+            w.to_str().unwrap(),
+            "--path",
+            "away",
+            "--frames",
+            "1",
+            "--size",
+            "32x18",
+            "--out",
+            "away",
+        ],
+        tmp.path(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(stderr.contains("no frame drew any terrain"), "{stderr}");
+}
+
 #[test]
 fn a_cache_of_no_bytes_is_refused_and_a_huge_one_does_not_wrap() {
     let tmp = tempfile::tempdir().unwrap();

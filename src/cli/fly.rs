@@ -337,6 +337,12 @@ pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
         "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",
         s.grass_considered.median, s.grass_drawn_high.median, s.grass_drawn_low.median
     );
+    if s.tiles_drawn.max == 0.0 {
+        log::warn!(
+            "no frame drew any terrain: the camera path runs outside the world or looks away \
+             from it (see the camera positions in report.json)"
+        );
+    }
     if s.grass_overflow.max > 0.0 {
         log::warn!(
             "grass: up to {:.0} blades a frame (median {:.0}) did not fit the grass pool and \
