@@ -15,6 +15,20 @@ fn run(args: &[&str]) -> (Option<i32>, String) {
     )
 }
 
+/// Runs `verdant ARGS` and checks that it was refused with exit code `code`, without a panic,
+/// its error saying each of `says`.
+fn assert_refused(args: &[&str], code: i32, says: &[&str]) {
+    let (got, stderr) = run(args);
+    assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+    assert_eq!(got, Some(code), "{args:?} exited {got:?}: {stderr}");
+    for s in says {
+        assert!(
+            stderr.contains(s),
+            "{args:?}: the error does not say {s:?}: {stderr}"
+        );
+    }
+}
+
 /// Each case: the arguments, and what the error must say (the option and its range).
 const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
     // A timeout that overflowed the deadline's arithmetic (it panicked).
@@ -160,15 +174,7 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
 #[test]
 fn out_of_range_options_are_refused_with_their_range() {
     for (args, says) in OUT_OF_RANGE {
-        let (code, stderr) = run(args);
-        assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
-        assert_eq!(code, Some(2), "{args:?} exited {code:?}: {stderr}");
-        for s in *says {
-            assert!(
-                stderr.contains(s),
-                "{args:?}: the error does not say {s:?}: {stderr}"
-            );
-        }
+        assert_refused(args, 2, says);
     }
 }
 
@@ -276,15 +282,7 @@ fn renderer_settings_out_of_range_are_refused_by_the_library_naming_the_option()
     ] {
         let mut all = vec!["fly", "--frames", "1", "--out", out_arg];
         all.extend_from_slice(args);
-        let (code, stderr) = run(&all);
-        assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
-        assert_eq!(code, Some(1), "{args:?} exited {code:?}: {stderr}");
-        for s in says {
-            assert!(
-                stderr.contains(s),
-                "{args:?}: the error does not say {s:?}: {stderr}"
-            );
-        }
+        assert_refused(&all, 1, says);
         assert!(!out.exists(), "{args:?} wrote its output folder");
     }
 }
@@ -326,14 +324,6 @@ fn options_checked_together_name_the_option() {
             &["--counts 1", "1600..="][..],
         ),
     ] {
-        let (code, stderr) = run(args);
-        assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
-        assert_eq!(code, Some(1), "{args:?} exited {code:?}: {stderr}");
-        for s in says {
-            assert!(
-                stderr.contains(s),
-                "{args:?}: the error does not say {s:?}: {stderr}"
-            );
-        }
+        assert_refused(args, 1, says);
     }
 }

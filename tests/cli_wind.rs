@@ -77,7 +77,7 @@ fn the_wind_tour_changes_scenes_and_its_walker_leaves_the_trail() {
         "--disable",
         "specular,translucency",
         "--enable",
-        "specular",
+        "shadows",
     ]);
     let report = fly(&args, tmp.path());
     for f in report["frames"].as_array().unwrap() {

@@ -30,6 +30,17 @@ use verdant::world::format::max_file_bytes;
 use verdant::world::manifest::MAX_MANIFEST_BYTES;
 use verdant::world::{TileFile, TileId, World};
 
+/// [`quick_options`] with a disk cache of 16 MiB in `dir`.
+fn cached_options(dir: &Path) -> HttpOptions {
+    HttpOptions {
+        cache: Some(HttpCacheConfig {
+            dir: dir.to_path_buf(),
+            max_bytes: 16 << 20,
+        }),
+        ..quick_options()
+    }
+}
+
 /// Short deadlines keep the fault tests fast.
 fn quick_options() -> HttpOptions {
     HttpOptions {
@@ -1004,13 +1015,7 @@ fn a_damaged_cache_entry_is_fetched_again_and_rewritten() {
     let ours = WorldServer::start(&dir, "127.0.0.1:0").unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let cache = tmp.path().join("cache");
-    let options = HttpOptions {
-        cache: Some(HttpCacheConfig {
-            dir: cache.clone(),
-            max_bytes: 16 << 20,
-        }),
-        ..quick_options()
-    };
+    let options = cached_options(&cache);
     let id = TileId::new(2, 1, 1);
     let local = World::open(&dir).unwrap();
     let (_, first) = HttpSource::open(&ours.url(), options.clone()).unwrap();
@@ -1091,13 +1096,7 @@ fn a_server_without_validators_is_not_cached_and_it_is_said_once() {
     let server = FaultServer::start(common::default_world(), Duration::ZERO, |_, _| Reply::File);
     let tmp = tempfile::tempdir().unwrap();
     let cache = tmp.path().join("cache");
-    let options = HttpOptions {
-        cache: Some(HttpCacheConfig {
-            dir: cache.clone(),
-            max_bytes: 16 << 20,
-        }),
-        ..quick_options()
-    };
+    let options = cached_options(&cache);
     let (_, source) = HttpSource::open(&server.url, options).unwrap();
     source.load(TileId::new(2, 1, 1)).unwrap();
     assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 0);

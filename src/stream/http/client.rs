@@ -304,13 +304,11 @@ impl Client {
                     cache.put(url, &validator, &body);
                 }
             }
-            (Some(_), None, None) => {
-                if !self.uncacheable_told.swap(true, Ordering::Relaxed) {
-                    log::warn!(
-                        "{url}: the server sends no ETag or Last-Modified, so its files cannot \
-                         be revalidated and the disk cache keeps none of them"
-                    );
-                }
+            (Some(_), None, None) if !self.uncacheable_told.swap(true, Ordering::Relaxed) => {
+                log::warn!(
+                    "{url}: the server sends no ETag or Last-Modified, so its files cannot be \
+                     revalidated and the disk cache keeps none of them"
+                );
             }
             _ => {}
         }
