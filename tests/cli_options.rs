@@ -316,8 +316,12 @@ fn options_checked_together_name_the_option() {
             &["--taa-clip", "--aa off"][..],
         ),
         (
-            &["bench", "aa", "--aa", "off,msaa", "--taa-samples", "8,16"][..],
-            &["--taa-*", "--aa does not list taa"][..],
+            &["bench", "aa", "--aa", "off,msaa", "--taa-samples", "24"][..],
+            &["--taa-samples", "--aa does not list taa"][..],
+        ),
+        (
+            &["bench", "aa", "--taa-clip", "2,3,2"][..],
+            &["--taa-clip lists 2 twice"][..],
         ),
         (
             &["bench", "blades", "--camera", "-5,0,15", "--counts", "1"][..],

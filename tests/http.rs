@@ -1104,7 +1104,7 @@ fn a_server_without_validators_is_not_cached_and_it_is_said_once() {
         .lock()
         .unwrap()
         .iter()
-        .filter(|l| l.contains(&server.url) && l.contains("no ETag or Last-Modified"))
+        .filter(|l| l.contains(&server.url) && l.contains("without an ETag or Last-Modified"))
         .cloned()
         .collect();
     assert_eq!(said.len(), 1, "{said:?}");

@@ -805,8 +805,13 @@ fn replace_keeps_the_hand_made_plants_and_paths_of_the_manifest() {
     bad = bad.replace("density = { meadow = 0.4 }", "density = { moss = 0.4 }");
     std::fs::write(&toml, &bad).unwrap();
     let before = read_all_files(&w);
-    let e = bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {}).unwrap_err();
+    let mut wrote_tiles = false;
+    let e = bake(&replace_opts(dem.clone(), w.clone()), &mut |stage, _, _| {
+        wrote_tiles |= stage == BakeStage::WriteTiles;
+    })
+    .unwrap_err();
     assert!(matches!(e, WorldError::Carry { .. }), "{e}");
+    assert!(!wrote_tiles, "refused only after the tiles were baked");
     let msg = e.to_string();
     for needle in [
         toml.display().to_string(),
@@ -1024,7 +1029,8 @@ fn a_cancelled_bake_leaves_no_staging_folder() {
         ..replace_opts(dem.clone(), dir.path().join("a/b/new"))
     };
     let err = bake(&opts, &mut |s, _, _| {
-        if s == BakeStage::Paint {
+        // Once the staging folder, and the parents it needed, exist.
+        if s == BakeStage::WriteTiles {
             cancel.cancel();
         }
     })

@@ -93,7 +93,6 @@ pub fn default_wind_scenes() -> Vec<WindScene> {
     ]
 }
 
-/// Highest terrain within `half_width` of the polyline through `points`, sampled every `step`.
 /// The finest step, metres, at which a path's clearance is checked.
 const MIN_CLEARANCE_STEP_M: f64 = 1.0;
 
@@ -102,6 +101,7 @@ const MIN_CLEARANCE_STEP_M: f64 = 1.0;
 /// search grow with the inverse fourth power of the cell (hours at 0.5 m).
 const MIN_SPOT_STEP_M: f64 = 10.0;
 
+/// Highest terrain within `half_width` of the polyline through `points`, sampled every `step`.
 fn max_terrain_along(grid: &Grid, points: &[DVec2], half_width: f64, step: f64) -> f64 {
     let mut best = f64::NEG_INFINITY;
     for w in points.windows(2) {

@@ -99,7 +99,11 @@ pub(super) fn carry(
     let from_serde = || {
         #[derive(serde::Serialize)]
         struct Extra<'a> {
+            // An empty list would be written as a plain key (`paths = []`), which after the
+            // new manifest's last table would land inside it.
+            #[serde(skip_serializing_if = "<[_]>::is_empty")]
             plant_types: &'a [PlantType],
+            #[serde(skip_serializing_if = "Vec::is_empty")]
             paths: Vec<&'a CameraPath>,
         }
         let extra = Extra {

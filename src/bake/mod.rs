@@ -474,6 +474,11 @@ pub fn bake(
     manifest.wind_scenes = default_wind_scenes();
     manifest.grass_peak = Some(grass_peak(&manifest.pyramid, 0.0));
     manifest.validate(&manifest_path)?;
+    // What --replace keeps of the old manifest must fit this world: found out now, before the
+    // tiles, and again when the manifest is written (a shard writes none).
+    if !matches!(opts.shard, Some(ShardStep::Shard { .. })) {
+        manifest_text(&manifest, &out, opts)?;
+    }
     cancelled()?;
 
     let nodata_filled = source.nodata_filled();
@@ -662,9 +667,9 @@ fn finish_from_parts(
         .filter_map(|i| parts.done(i))
         .fold(0f32, |p, r| p.max(r.grass_peak));
     manifest.grass_peak = Some(grass_peak(pyramid, peak));
-    let (text, carried) = manifest_text(&manifest, out, opts)?;
     let start = Instant::now();
     let staging = Staging::begin(out, &opts.out, opts.replace)?;
+    let (text, carried) = manifest_text(&manifest, out, opts)?;
     let tiles = parts.dir.join("tiles");
     let to = staging.world().join("tiles");
     std::fs::rename(&tiles, &to).map_err(|e| WorldError::io(&tiles, e))?;

@@ -215,6 +215,55 @@ pub(crate) struct TaaLists {
     pub(crate) taa_sway_falloff: Vec<f64>,
 }
 
+impl TaaLists {
+    /// Refuses a list that names a value twice (naming the option and the value), and any list
+    /// given when the methods (`with_taa` false) do not include the temporal one.
+    fn check(&self, with_taa: bool) -> Result<()> {
+        fn twice<T: PartialEq + std::fmt::Display>(option: &str, v: &[T]) -> Result<()> {
+            match verdant::tools::bench::repeated(v) {
+                Some(x) => anyhow::bail!("{option} lists {x} twice"),
+                None => Ok(()),
+            }
+        }
+        let on_off: Vec<&str> = self
+            .taa_blade_motion
+            .iter()
+            .map(|&m| if m { "on" } else { "off" })
+            .collect();
+        let lists: [(&str, bool); 9] = [
+            ("--taa-samples", self.taa_samples.is_empty()),
+            ("--taa-clip", self.taa_clip.is_empty()),
+            ("--taa-falloff", self.taa_falloff.is_empty()),
+            ("--taa-blade-motion", on_off.is_empty()),
+            ("--taa-pixel-spread", self.taa_pixel_spread.is_empty()),
+            (
+                "--taa-parallax-falloff",
+                self.taa_parallax_falloff.is_empty(),
+            ),
+            ("--taa-min-samples", self.taa_min_samples.is_empty()),
+            ("--taa-reconstruct", self.taa_reconstruct.is_empty()),
+            ("--taa-sway-falloff", self.taa_sway_falloff.is_empty()),
+        ];
+        if let Some((option, _)) = lists.iter().find(|(_, empty)| !empty)
+            && !with_taa
+        {
+            anyhow::bail!(
+                "{option} sets the temporal anti-aliasing, and --aa does not list taa: leave it \
+                 out, or add taa to --aa"
+            );
+        }
+        twice("--taa-samples", &self.taa_samples)?;
+        twice("--taa-clip", &self.taa_clip)?;
+        twice("--taa-falloff", &self.taa_falloff)?;
+        twice("--taa-blade-motion", &on_off)?;
+        twice("--taa-pixel-spread", &self.taa_pixel_spread)?;
+        twice("--taa-parallax-falloff", &self.taa_parallax_falloff)?;
+        twice("--taa-min-samples", &self.taa_min_samples)?;
+        twice("--taa-reconstruct", &self.taa_reconstruct)?;
+        twice("--taa-sway-falloff", &self.taa_sway_falloff)
+    }
+}
+
 /// Parses a sequence's name.
 fn parse_motion(s: &str) -> Result<verdant::tools::bench_aa::Motion, String> {
     verdant::tools::bench_aa::Motion::from_name(s)
@@ -680,13 +729,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             taa,
             timing,
         } => {
-            let set = taa_variants(&taa) != [verdant::aa::taa::TaaSettings::default()];
-            if set && !aa.contains(&verdant::aa::AntiAliasing::Taa) {
-                anyhow::bail!(
-                    "the --taa-* lists set the temporal anti-aliasing, and --aa does not list \
-                     taa: leave them out, or add taa to --aa"
-                );
-            }
+            taa.check(aa.contains(&verdant::aa::AntiAliasing::Taa))?;
             bench_aa(verdant::tools::bench_aa::BenchAaOptions {
                 world: resolve_world(&world)?,
                 out,

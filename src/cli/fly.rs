@@ -346,8 +346,9 @@ pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
     if s.grass_overflow.max > 0.0 {
         log::warn!(
             "grass: up to {:.0} blades a frame (median {:.0}) did not fit the grass pool and \
-             were not drawn: the world's [grass_peak] density understates its grass (rebake \
-             it, or remove [grass_peak] to have it measured from the tiles)",
+             were not drawn: the pool is sized by the world's [grass_peak] density (or, without \
+             it, the tiles' densest grass) and capped by the adapter's buffers; a [grass_peak] \
+             that understates the grass is mended by re-baking, or by removing the table",
             s.grass_overflow.max,
             s.grass_overflow.median
         );

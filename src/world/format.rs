@@ -785,9 +785,17 @@ pub fn refused_output(path: &Path) -> Option<&'static str> {
 /// The folders of `path` that do not exist yet, the deepest first (`path` itself included):
 /// what `create_dir_all(path)` would make, for [`remove_empty_folders`] to take back.
 pub fn missing_folders(path: &Path) -> Vec<PathBuf> {
-    path.ancestors()
+    // Resolved first, so that `new/../out` and `x/.` name the folders themselves.
+    let resolved = resolve_lexically(path)
+        .ok()
+        .flatten()
+        .unwrap_or_else(|| path.to_path_buf());
+    resolved
+        .ancestors()
         .filter(|a| !a.as_os_str().is_empty())
-        .take_while(|a| std::fs::symlink_metadata(a).is_err())
+        .take_while(|a| {
+            std::fs::symlink_metadata(a).is_err_and(|e| e.kind() == std::io::ErrorKind::NotFound)
+        })
         .map(Path::to_path_buf)
         .collect()
 }

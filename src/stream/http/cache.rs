@@ -59,6 +59,26 @@ fn is_key(name: &str) -> bool {
     name.len() == 16 && name.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
 }
 
+/// How old a temporary of the cache must be to be taken for one a killed run left.
+const STALE_TEMPORARY: std::time::Duration = std::time::Duration::from_secs(60);
+
+/// Whether `name` is a temporary of the cache's own: `KEY.body.PID.tmp` or `KEY.meta.PID.tmp`
+/// (or, as earlier builds named them, without the `PID`).
+fn is_temporary(name: &str) -> bool {
+    let Some(rest) = name.strip_suffix(".tmp") else {
+        return false;
+    };
+    let mut parts = rest.splitn(3, '.');
+    let (Some(key), Some(kind)) = (parts.next(), parts.next()) else {
+        return false;
+    };
+    is_key(key)
+        && matches!(kind, "body" | "meta")
+        && parts
+            .next()
+            .is_none_or(|pid| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+}
+
 /// Fetched bodies on disk, one `{key}.body` and `{key}.meta` per URL, the key a hash of the
 /// URL. The metadata holds three lines: the URL, the validator, and `fnv1a64 {hex} {length}`
 /// of the body. Each is written to a temporary file and renamed into place, the body before
@@ -106,12 +126,18 @@ impl DiskCache {
         for entry in std::fs::read_dir(&config.dir).map_err(err)? {
             let Ok(entry) = entry else { continue };
             let name = entry.file_name().to_string_lossy().into_owned();
-            // A write that was cut short (a full disk, a killed run) left its temporary.
-            if [".body.tmp", ".meta.tmp"]
-                .iter()
-                .any(|t| name.strip_suffix(t).is_some_and(is_key))
-            {
-                let _ = std::fs::remove_file(entry.path());
+            // A write that was cut short (a killed run) left its temporary: removed once it is
+            // a minute old, so that another run writing into the same cache keeps its own.
+            if is_temporary(&name) {
+                let stale = entry
+                    .metadata()
+                    .and_then(|m| m.modified())
+                    .ok()
+                    .and_then(|t| t.elapsed().ok())
+                    .is_some_and(|age| age >= STALE_TEMPORARY);
+                if stale {
+                    let _ = std::fs::remove_file(entry.path());
+                }
                 continue;
             }
             // Only the cache's own entries, named by their key: a user's files in the folder
@@ -219,10 +245,12 @@ impl DiskCache {
             validator.to_line(),
             fnv1a64(body)
         );
+        // Named by the process too: two runs may share a cache.
+        let dir = self.dir.clone();
+        let tmp = |suffix: &str| dir.join(format!("{key}.{suffix}.{}.tmp", std::process::id()));
         let write = |suffix: &str, bytes: &[u8]| {
-            let tmp = self.path(&key, &format!("{suffix}.tmp"));
-            std::fs::write(&tmp, bytes)
-                .and_then(|()| std::fs::rename(&tmp, self.path(&key, suffix)))
+            std::fs::write(tmp(suffix), bytes)
+                .and_then(|()| std::fs::rename(tmp(suffix), self.path(&key, suffix)))
         };
         if let Err(e) = write("body", body).and_then(|()| write("meta", meta.as_bytes())) {
             if !self.warned {
@@ -233,7 +261,8 @@ impl DiskCache {
                 );
                 self.warned = true;
             }
-            for suffix in ["body.tmp", "meta.tmp", "body", "meta"] {
+            for suffix in ["body", "meta"] {
+                let _ = std::fs::remove_file(tmp(suffix));
                 let _ = std::fs::remove_file(self.path(&key, suffix));
             }
             return;
@@ -371,16 +400,28 @@ mod tests {
             v
         };
         assert_eq!(names(&config.dir), [format!("{key}.meta")]);
-        // Temporaries of a killed run go when the cache opens; a user's file stays.
-        std::fs::write(config.dir.join("00000000000000ff.body.tmp"), [0; 10]).unwrap();
-        std::fs::write(config.dir.join("00000000000000ff.meta.tmp"), "x").unwrap();
-        std::fs::write(config.dir.join("draft.body.tmp"), "mine").unwrap();
+        // Temporaries of a killed run go when the cache opens, once a minute old; a young one
+        // (another run's, writing now) and a user's file stay.
+        let old = std::time::SystemTime::now() - std::time::Duration::from_secs(120);
+        for name in [
+            "00000000000000ff.body.tmp",
+            "00000000000000ff.meta.4242.tmp",
+            "draft.body.tmp",
+        ] {
+            let f = std::fs::File::create(config.dir.join(name)).unwrap();
+            f.set_modified(old).unwrap();
+        }
+        std::fs::write(config.dir.join("00000000000000aa.body.77.tmp"), "now").unwrap();
         drop(cache);
         let cache = DiskCache::open(&config).unwrap();
         assert_eq!(cache.bytes, 0);
         assert_eq!(
             names(&config.dir),
-            [format!("{key}.meta"), "draft.body.tmp".to_owned()]
+            [
+                "00000000000000aa.body.77.tmp".to_owned(),
+                format!("{key}.meta"),
+                "draft.body.tmp".to_owned()
+            ]
         );
         // A file where the folder should be.
         let file = tmp.path().join("afile");

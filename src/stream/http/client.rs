@@ -306,8 +306,8 @@ impl Client {
             }
             (Some(_), None, None) if !self.uncacheable_told.swap(true, Ordering::Relaxed) => {
                 log::warn!(
-                    "{url}: the server sends no ETag or Last-Modified, so its files cannot be \
-                     revalidated and the disk cache keeps none of them"
+                    "{url}: sent without an ETag or Last-Modified, so it cannot be revalidated \
+                     and the disk cache does not keep it, nor any other file sent so (said once)"
                 );
             }
             _ => {}
