@@ -728,10 +728,19 @@ seed = 4
 bend = 0.012
 stiffness = 0.75
 
+# My own wind, and a flight in it.
+[[wind_scenes]]
+name = "gale"
+[wind_scenes.ambient]
+direction_deg = 90.0
+speed_mps = 18.0
+gustiness = 0.6
+
 # My own flight.
 [[paths]]
 name = "my-flight"
 duration_s = 10.0
+wind = [{ t_s = 0.0, scene = "gale" }]
 [[paths.keys]]
 t_s = 0.0
 position_m = [100.0, 100.0, 600.0]
@@ -775,6 +784,18 @@ fn replace_keeps_the_hand_made_plants_and_paths_of_the_manifest() {
     .unwrap();
     assert_eq!(report.carried.plant_types, ["poppy", "bush"]);
     assert_eq!(report.carried.paths, ["my-flight"]);
+    assert_eq!(report.carried.wind_scenes, ["gale"]);
+    assert!(!report.carried.rewritten && report.carried.paths_outside.is_empty());
+    // The seed moved the bake's meadow, and with it its paths: said, and the bake's kept.
+    assert!(
+        report
+            .carried
+            .replaced
+            .iter()
+            .any(|r| r == "path \"meadow\""),
+        "{:?}",
+        report.carried.replaced
+    );
     let rebaked_text = std::fs::read_to_string(&toml).unwrap();
     let rebaked = Manifest::from_path(&toml).unwrap();
     assert_eq!(rebaked.plant_types, edited.plant_types);
@@ -783,9 +804,11 @@ fn replace_keeps_the_hand_made_plants_and_paths_of_the_manifest() {
     assert!(rebaked.path("my-flight") == edited.path("my-flight"));
     // The bake's own paths are the new bake's (the seed moved its meadow), not the old ones.
     assert!(rebaked.path("meadow") != edited.path("meadow"));
+    assert!(rebaked.wind_scene("gale") == edited.wind_scene("gale"));
     for comment in [
         "# Flowers on the meadow",
         "# A bush, its wind",
+        "# My own wind",
         "# My own flight.",
     ] {
         assert!(rebaked_text.contains(comment), "{comment:?} lost");
@@ -822,6 +845,20 @@ fn replace_keeps_the_hand_made_plants_and_paths_of_the_manifest() {
     }
     assert_eq!(read_all_files(&w), before);
     assert!(staging_folders(dir.path()).is_empty());
+    // A kept path naming a wind scene nobody has: the error names the field.
+    let bad = std::fs::read_to_string(&toml)
+        .unwrap()
+        .replace("density = { moss = 0.4 }", "density = { meadow = 0.4 }")
+        .replace("scene = \"gale\" }", "scene = \"squall\" }");
+    std::fs::write(&toml, &bad).unwrap();
+    let msg = bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {})
+        .unwrap_err()
+        .to_string();
+    // The old manifest itself no longer reads: its own index is named.
+    let at = format!("paths[{}].wind[0].scene", baked.paths.len());
+    for needle in ["squall", at.as_str(), "--fresh-manifest"] {
+        assert!(msg.contains(needle), "{needle:?} not in {msg:?}");
+    }
 
     // --fresh-manifest writes the bake's manifest alone.
     let report = bake(
@@ -905,10 +942,7 @@ fn replace_refuses_a_tiles_folder_holding_files_that_are_not_tiles() {
         &mut |_, _, _| {},
     )
     .unwrap_err();
-    assert!(
-        err.to_string().contains("not one: no [pyramid] table"),
-        "{err}"
-    );
+    assert!(err.to_string().contains("not one: not TOML"), "{err}");
     assert_eq!(
         std::fs::read_to_string(notes.join("world.toml")).unwrap(),
         "my notes about worlds\n"

@@ -606,11 +606,19 @@ fn manifest_text(
         return Ok((text, Carried::default()));
     }
     let shown = opts.out.join("world.toml");
-    let bytes =
-        crate::world::format::read_regular(&shown, crate::world::manifest::MAX_MANIFEST_BYTES)?;
-    let old_text = String::from_utf8(bytes).map_err(|e| WorldError::ManifestSyntax {
+    let refuse = |e: WorldError| WorldError::Carry {
         path: shown.clone(),
-        message: format!("not UTF-8 text: {e}"),
+        kept: String::new(),
+        source: Box::new(e),
+    };
+    let bytes =
+        crate::world::format::read_regular(&shown, crate::world::manifest::MAX_MANIFEST_BYTES)
+            .map_err(refuse)?;
+    let old_text = String::from_utf8(bytes).map_err(|e| {
+        refuse(WorldError::ManifestSyntax {
+            path: shown.clone(),
+            message: format!("not UTF-8 text: {e}"),
+        })
     })?;
     carry::carry(&text, &old_text, &shown)
 }

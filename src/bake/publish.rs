@@ -85,13 +85,16 @@ pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
                 });
             }
             let manifest = out.join("world.toml");
-            if std::fs::symlink_metadata(&manifest).is_ok() && !is_a_manifest(&manifest) {
+            if std::fs::symlink_metadata(&manifest).is_ok()
+                && let Some(why) = not_a_manifest(&manifest)
+            {
                 return Err(WorldError::bad_option(
                     "--replace",
                     manifest.display(),
-                    "a world's manifest to replace (this is not one: no [pyramid] table); \
-                     move it away, or bake into another folder"
-                        .into(),
+                    format!(
+                        "a world's manifest to replace (this is not one: {why}); move it away, \
+                         or bake into another folder"
+                    ),
                 ));
             }
             let tiles = out.join("tiles");
@@ -106,15 +109,35 @@ pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
         Err(e) => Err(WorldError::io(out, e)),
     }
 }
-/// Whether `path` is a world's manifest, as far as replacing it goes: a regular TOML file of at
-/// most [`crate::world::manifest::MAX_MANIFEST_BYTES`] with a `[pyramid]` table (one that an
-/// older or newer version wrote, or that no longer validates, is still a world's).
-fn is_a_manifest(path: &Path) -> bool {
-    crate::world::format::read_regular(path, crate::world::manifest::MAX_MANIFEST_BYTES)
-        .ok()
-        .and_then(|bytes| String::from_utf8(bytes).ok())
-        .and_then(|text| text.parse::<toml::Table>().ok())
-        .is_some_and(|t| t.get("pyramid").is_some_and(toml::Value::is_table))
+/// Why `path` is not a world's manifest, as far as replacing it goes; `None` for a regular
+/// file of at most [`crate::world::manifest::MAX_MANIFEST_BYTES`] with a `[pyramid]` table (one
+/// that an older or newer version wrote, or that no longer validates, is still a world's, and
+/// so is one damaged by hand that still has its `[pyramid]` header).
+fn not_a_manifest(path: &Path) -> Option<String> {
+    let bytes = match crate::world::format::read_regular(
+        path,
+        crate::world::manifest::MAX_MANIFEST_BYTES,
+    ) {
+        Ok(bytes) => bytes,
+        Err(WorldError::MissingFile { .. }) => {
+            return Some("a symlink to nothing".into());
+        }
+        Err(WorldError::NotARegularFile { .. }) => return Some("not a regular file".into()),
+        Err(WorldError::FileTooLarge { size, max, .. }) => {
+            return Some(format!("{size} bytes, more than a manifest's {max}"));
+        }
+        Err(e) => return Some(e.to_string()),
+    };
+    let text = String::from_utf8_lossy(&bytes);
+    match text.parse::<toml::Table>() {
+        Ok(t) if t.get("pyramid").is_some_and(toml::Value::is_table) => None,
+        Ok(_) => Some("no [pyramid] table".into()),
+        Err(_) if text.lines().any(|l| l.trim() == "[pyramid]") => None,
+        Err(e) => Some(format!(
+            "not TOML: {}",
+            e.to_string().lines().next().unwrap_or_default()
+        )),
+    }
 }
 
 /// `out` made absolute, without `.` or `..` components or a trailing slash: the longest part

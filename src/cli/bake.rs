@@ -208,19 +208,38 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
                 .collect::<Vec<_>>()
                 .join(", ")
         };
+        let part = |what: &str, names: &[String]| {
+            (!names.is_empty()).then(|| format!("{} {what} ({})", names.len(), list(names)))
+        };
+        let parts: Vec<String> = [
+            part("plant type(s)", &carried.plant_types),
+            part("camera path(s)", &carried.paths),
+            part("wind scene(s)", &carried.wind_scenes),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
         println!(
-            "kept from the replaced world.toml: {} plant type(s){}{} and {} camera path(s){}{} \
-             (--fresh-manifest drops them)",
-            carried.plant_types.len(),
-            if carried.plant_types.is_empty() {
-                ""
+            "kept from the replaced world.toml: {}{} (--fresh-manifest drops them)",
+            parts.join(", "),
+            if carried.rewritten {
+                "; written out from the parsed manifest, every field spelt out and their \
+                 comments not kept (the old text could not be split by table)"
             } else {
-                " "
-            },
-            list(&carried.plant_types),
-            carried.paths.len(),
-            if carried.paths.is_empty() { "" } else { " " },
-            list(&carried.paths),
+                ""
+            }
+        );
+        if !carried.paths_outside.is_empty() {
+            log::warn!(
+                "kept camera path(s) {} run outside the new world's data area",
+                list(&carried.paths_outside)
+            );
+        }
+    }
+    if !carried.replaced.is_empty() {
+        println!(
+            "the bake wrote its own {} over the replaced world.toml's, which differed",
+            carried.replaced.join(", ")
         );
     }
     Ok(())

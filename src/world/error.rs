@@ -482,13 +482,18 @@ pub enum WorldError {
     /// `bake --replace` keeps the replaced manifest's plant types and the camera paths a bake
     /// does not write, and they do not fit the new world (or the manifest does not read).
     #[error(
-        "{source}\n(bake --replace keeps the plant types and the camera paths of other names \
-         than the bake's from {}: mend them there, or pass --fresh-manifest to bake without them)",
-        path.display()
+        "{source}\n(bake --replace keeps the plant types, and the camera paths and wind scenes \
+         of other names than the bake's, from {}{}: mend them there, or pass --fresh-manifest to \
+         bake without them)",
+        path.display(),
+        if kept.is_empty() { String::new() } else { format!("; in the new manifest {kept}") }
     )]
     Carry {
         /// The replaced manifest.
         path: PathBuf,
+        /// Where the kept parts stand in the new manifest (`paths[7] is its path "x"`), for an
+        /// error that names them by index; empty where none were placed yet.
+        kept: String,
         /// Why its parts do not fit.
         #[source]
         source: Box<WorldError>,

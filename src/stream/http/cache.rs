@@ -180,10 +180,15 @@ impl DiskCache {
                 Some(found)
             }
             Err(problem) => {
-                log::warn!(
-                    "{}: cached copy of {url} dropped ({problem}); fetching it again",
-                    self.dir.display()
-                );
+                // Gone whole (another run sharing the cache evicted it) is a plain miss;
+                // anything else is damage, said.
+                let gone = !self.path(&key, "meta").exists() && !self.path(&key, "body").exists();
+                if !gone {
+                    log::warn!(
+                        "{}: cached copy of {url} dropped ({problem}); fetching it again",
+                        self.dir.display()
+                    );
+                }
                 self.remove(&key);
                 None
             }
