@@ -148,6 +148,11 @@ fn bake_writes_a_world_that_flies() {
 
 /// Runs `verdant fly ARGS --out fly` in `dir`, which must succeed, and reads its report.
 fn fly_report(args: &[&str], dir: &Path) -> serde_json::Value {
+    fly_report_and_stderr(args, dir).0
+}
+
+/// `verdant fly ARGS --out fly` in `dir`, which must succeed: its report and its stderr.
+fn fly_report_and_stderr(args: &[&str], dir: &Path) -> (serde_json::Value, String) {
     let args: Vec<&str> = ["fly"]
         .iter()
         .chain(args)
@@ -155,12 +160,12 @@ fn fly_report(args: &[&str], dir: &Path) -> serde_json::Value {
         .copied()
         .collect();
     let out = verdant(&args, dir);
-    assert!(
-        out.status.success(),
-        "fly failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_str(&std::fs::read_to_string(dir.join("fly/report.json")).unwrap()).unwrap()
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "fly failed: {stderr}");
+    let report =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("fly/report.json")).unwrap())
+            .unwrap();
+    (report, stderr)
 }
 
 /// The frames of `fly --frames 6 --path PATH` on the default world, from its report.
@@ -1054,10 +1059,9 @@ fn a_world_without_grass_peak_sizes_its_pool_past_bad_tiles() {
 fn grass_that_overflows_its_pool_is_reported_and_warned_of() {
     let tmp = tempfile::tempdir().unwrap();
     let w = common::world_copy(tmp.path());
-    let fly = |name: &str| {
-        let out = verdant(
+    let fly = || {
+        let (report, stderr) = fly_report_and_stderr(
             &[
-                "fly",
                 w.to_str().unwrap(),
                 "--path",
                 "meadow",
@@ -1065,23 +1069,15 @@ fn grass_that_overflows_its_pool_is_reported_and_warned_of() {
                 "1",
                 "--size",
                 "64x36",
-                "--out",
-                name,
             ],
             tmp.path(),
         );
-        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-        assert!(out.status.success(), "{stderr}");
-        let report: serde_json::Value = serde_json::from_str(
-            &std::fs::read_to_string(tmp.path().join(name).join("report.json")).unwrap(),
-        )
-        .unwrap();
         (
             report["summary"]["grass_overflow"]["max"].as_f64().unwrap(),
             stderr,
         )
     };
-    let (overflow, stderr) = fly("baked");
+    let (overflow, stderr) = fly();
     assert_eq!(overflow, 0.0);
     assert!(!stderr.contains("grass_peak"), "{stderr}");
     let toml = w.join("world.toml");
@@ -1094,7 +1090,7 @@ fn grass_that_overflows_its_pool_is_reported_and_warned_of() {
         format!("{}density = 0.001{}", &text[..line], &text[end..]),
     )
     .unwrap();
-    let (overflow, stderr) = fly("understated");
+    let (overflow, stderr) = fly();
     assert!(overflow > 0.0);
     assert!(
         stderr.contains("did not fit the grass pool") && stderr.contains("[grass_peak]"),
@@ -1116,9 +1112,8 @@ fn a_path_outside_the_world_is_warned_of() {
          [[paths.keys]]\nt_s = 2.0\nposition_m = [-40010.0, -40010.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n",
     );
     std::fs::write(&toml, text).unwrap();
-    let out = verdant(
+    let (_, stderr) = fly_report_and_stderr(
         &[
-            "fly",
             w.to_str().unwrap(),
             "--path",
             "away",
@@ -1126,13 +1121,9 @@ fn a_path_outside_the_world_is_warned_of() {
             "1",
             "--size",
             "32x18",
-            "--out",
-            "away",
         ],
         tmp.path(),
     );
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("no frame drew any terrain"), "{stderr}");
 }
 

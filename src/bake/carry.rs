@@ -1,10 +1,9 @@
 //! What a re-bake keeps of the manifest it replaces: the parts a bake never writes. A bake
 //! derives the pyramid, the grass types, the wind, the sky and its own camera paths and wind
 //! scenes from the DEM; the plant types and any camera path or wind scene of another name were
-//! written by hand, and a
-//! `bake --replace` that dropped them would lose the user's work. They are carried into the new
-//! `world.toml` as their own text (comments kept), and the whole is checked as the world it
-//! makes before anything is replaced.
+//! written by hand, and a `bake --replace` that dropped them would lose the user's work. They
+//! are carried into the new `world.toml` as their own text (comments kept), and the whole is
+//! checked as the world it makes before anything is replaced.
 
 use std::path::Path;
 

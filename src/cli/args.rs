@@ -178,16 +178,26 @@ impl TaaArgs {
     }
 }
 
+/// A parser of a number `T` for which `ok` holds, whose error states `range` (in words).
+fn number_where<T: std::str::FromStr>(
+    range: String,
+    ok: impl Fn(&T) -> bool + Clone + Send + Sync,
+) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync {
+    move |s: &str| match s.trim().parse::<T>() {
+        Ok(v) if ok(&v) => Ok(v),
+        Ok(_) => Err(format!("{} is out of range ({range})", s.trim())),
+        Err(_) => Err(format!("{s:?} is not a number (expected {range})")),
+    }
+}
+
 /// A parser of a finite number in `lo..=hi` whose error states the range.
 pub(crate) fn float_in(
     lo: f64,
     hi: f64,
 ) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
-    move |s: &str| match s.trim().parse::<f64>() {
-        Ok(v) if v.is_finite() && (lo..=hi).contains(&v) => Ok(v),
-        Ok(_) => Err(format!("{} is out of range ({lo}..={hi})", s.trim())),
-        Err(_) => Err(format!("{s:?} is not a number (expected {lo}..={hi})")),
-    }
+    number_where(format!("{lo}..={hi}"), move |v: &f64| {
+        v.is_finite() && (lo..=hi).contains(v)
+    })
 }
 
 /// A number strictly between `lo` and `hi`.
@@ -195,16 +205,10 @@ pub(crate) fn float_between(
     lo: f64,
     hi: f64,
 ) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
-    move |s: &str| match s.trim().parse::<f64>() {
-        Ok(v) if v > lo && v < hi => Ok(v),
-        Ok(_) => Err(format!(
-            "{} is out of range (between {lo} and {hi}, both excluded)",
-            s.trim()
-        )),
-        Err(_) => Err(format!(
-            "{s:?} is not a number (expected between {lo} and {hi})"
-        )),
-    }
+    number_where(
+        format!("between {lo} and {hi}, both excluded"),
+        move |&v: &f64| v > lo && v < hi,
+    )
 }
 
 /// A power of two in `lo..=hi`.
@@ -212,16 +216,9 @@ pub(crate) fn power_of_two_in(
     lo: u32,
     hi: u32,
 ) -> impl Fn(&str) -> Result<u32, String> + Clone + Send + Sync {
-    move |s: &str| match s.trim().parse::<u32>() {
-        Ok(v) if v.is_power_of_two() && (lo..=hi).contains(&v) => Ok(v),
-        Ok(_) => Err(format!(
-            "{} is out of range (a power of two in {lo}..={hi})",
-            s.trim()
-        )),
-        Err(_) => Err(format!(
-            "{s:?} is not a number (expected a power of two in {lo}..={hi})"
-        )),
-    }
+    number_where(format!("a power of two in {lo}..={hi}"), move |&v: &u32| {
+        v.is_power_of_two() && (lo..=hi).contains(&v)
+    })
 }
 
 pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {

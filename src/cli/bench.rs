@@ -219,48 +219,37 @@ impl TaaLists {
     /// Refuses a list that names a value twice (naming the option and the value), and any list
     /// given when the methods (`with_taa` false) do not include the temporal one.
     fn check(&self, with_taa: bool) -> Result<()> {
-        fn twice<T: PartialEq + std::fmt::Display>(option: &str, v: &[T]) -> Result<()> {
-            match verdant::tools::bench::repeated(v) {
-                Some(x) => anyhow::bail!("{option} lists {x} twice"),
-                None => Ok(()),
+        fn shown<T: std::fmt::Display>(v: &[T]) -> Vec<String> {
+            v.iter().map(ToString::to_string).collect()
+        }
+        let on_off = |v: &[bool]| -> Vec<String> {
+            v.iter()
+                .map(|&m| if m { "on" } else { "off" }.to_owned())
+                .collect()
+        };
+        let lists = [
+            ("--taa-samples", shown(&self.taa_samples)),
+            ("--taa-clip", shown(&self.taa_clip)),
+            ("--taa-falloff", shown(&self.taa_falloff)),
+            ("--taa-blade-motion", on_off(&self.taa_blade_motion)),
+            ("--taa-pixel-spread", shown(&self.taa_pixel_spread)),
+            ("--taa-parallax-falloff", shown(&self.taa_parallax_falloff)),
+            ("--taa-min-samples", shown(&self.taa_min_samples)),
+            ("--taa-reconstruct", shown(&self.taa_reconstruct)),
+            ("--taa-sway-falloff", shown(&self.taa_sway_falloff)),
+        ];
+        for (option, values) in &lists {
+            if !values.is_empty() && !with_taa {
+                anyhow::bail!(
+                    "{option} sets the temporal anti-aliasing, and --aa does not list taa: \
+                     leave it out, or add taa to --aa"
+                );
+            }
+            if let Some(v) = verdant::tools::bench::repeated(values) {
+                anyhow::bail!("{option} lists {v} twice");
             }
         }
-        let on_off: Vec<&str> = self
-            .taa_blade_motion
-            .iter()
-            .map(|&m| if m { "on" } else { "off" })
-            .collect();
-        let lists: [(&str, bool); 9] = [
-            ("--taa-samples", self.taa_samples.is_empty()),
-            ("--taa-clip", self.taa_clip.is_empty()),
-            ("--taa-falloff", self.taa_falloff.is_empty()),
-            ("--taa-blade-motion", on_off.is_empty()),
-            ("--taa-pixel-spread", self.taa_pixel_spread.is_empty()),
-            (
-                "--taa-parallax-falloff",
-                self.taa_parallax_falloff.is_empty(),
-            ),
-            ("--taa-min-samples", self.taa_min_samples.is_empty()),
-            ("--taa-reconstruct", self.taa_reconstruct.is_empty()),
-            ("--taa-sway-falloff", self.taa_sway_falloff.is_empty()),
-        ];
-        if let Some((option, _)) = lists.iter().find(|(_, empty)| !empty)
-            && !with_taa
-        {
-            anyhow::bail!(
-                "{option} sets the temporal anti-aliasing, and --aa does not list taa: leave it \
-                 out, or add taa to --aa"
-            );
-        }
-        twice("--taa-samples", &self.taa_samples)?;
-        twice("--taa-clip", &self.taa_clip)?;
-        twice("--taa-falloff", &self.taa_falloff)?;
-        twice("--taa-blade-motion", &on_off)?;
-        twice("--taa-pixel-spread", &self.taa_pixel_spread)?;
-        twice("--taa-parallax-falloff", &self.taa_parallax_falloff)?;
-        twice("--taa-min-samples", &self.taa_min_samples)?;
-        twice("--taa-reconstruct", &self.taa_reconstruct)?;
-        twice("--taa-sway-falloff", &self.taa_sway_falloff)
+        Ok(())
     }
 }
 

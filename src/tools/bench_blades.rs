@@ -159,44 +159,48 @@ impl BenchBladesOptions {
         crate::tools::truth::check_k("--truth", self.truth_k)?;
         check_range("--field-m", self.field_m, 10.0..=5000.0, "m")?;
         if !(self.fov_deg > 1.0 && self.fov_deg < 170.0) {
-            return Err(anyhow::Error::from(OptionError::new(
+            return Err(OptionError::new(
                 "--fov-deg",
                 self.fov_deg,
                 "between 1 and 170 degrees, both excluded",
-            )));
+            )
+            .into());
         }
         for (option, v) in [("--camera", self.camera_m), ("--target", self.target_m)] {
             if !v.iter().all(|c| c.abs() <= MAX_COORDINATE_M) {
-                return Err(anyhow::Error::from(OptionError::new(
+                return Err(OptionError::new(
                     option,
                     format!("{},{},{}", v[0], v[1], v[2]),
                     format!("X,Y,Z each in -{MAX_COORDINATE_M}..={MAX_COORDINATE_M} m"),
-                )));
+                )
+                .into());
             }
         }
         let eye = DVec3::from_array(self.camera_m);
         let target = DVec3::from_array(self.target_m);
         if eye.distance(target) < 0.01 {
             let v = self.target_m;
-            return Err(anyhow::Error::from(OptionError::new(
+            return Err(OptionError::new(
                 "--target",
                 format!("{},{},{}", v[0], v[1], v[2]),
                 "at least 0.01 m from --camera",
-            )));
+            )
+            .into());
         }
         if !(1..=MAX_SWEEP_COUNTS).contains(&self.counts.len()) {
-            return Err(anyhow::Error::from(OptionError::new(
+            return Err(OptionError::new(
                 "--counts",
                 format!("{:?}", self.counts),
                 format!("1..={MAX_SWEEP_COUNTS} blade counts"),
-            )));
+            )
+            .into());
         }
         if let Some(n) = crate::tools::bench::repeated(&self.counts) {
             anyhow::bail!("--counts lists {n} twice");
         }
         let range = count_range(self.field_m, FIELD_TILE_M);
         if let Some(&n) = self.counts.iter().find(|n| !range.contains(n)) {
-            return Err(anyhow::Error::from(OptionError::new(
+            return Err(OptionError::new(
                 "--counts",
                 n,
                 format!(
@@ -208,7 +212,8 @@ impl BenchBladesOptions {
                     range.end(),
                     self.field_m
                 ),
-            )));
+            )
+            .into());
         }
         crate::tools::bench::check_timing(self.warmup_frames, self.timed_frames, self.rounds)?;
         Ok(())

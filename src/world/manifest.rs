@@ -549,22 +549,20 @@ impl Manifest {
 /// (an escape sequence in a world's name would drive the terminal that prints it), as the
 /// field's path (`paths[2].name`) and the character.
 fn control_character(manifest: &Manifest) -> Option<(String, char)> {
+    fn forbidden(t: &str) -> Option<char> {
+        t.chars()
+            .find(|c| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
+    }
     fn walk(v: &serde_json::Value, at: &str) -> Option<(String, char)> {
         match v {
-            serde_json::Value::String(t) => t
-                .chars()
-                .find(|c| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
-                .map(|c| (at.to_owned(), c)),
+            serde_json::Value::String(t) => forbidden(t).map(|c| (at.to_owned(), c)),
             serde_json::Value::Array(a) => a
                 .iter()
                 .enumerate()
                 .find_map(|(i, v)| walk(v, &format!("{at}[{i}]"))),
             serde_json::Value::Object(o) => o.iter().find_map(|(k, v)| {
                 // A map's keys are texts too (a plant's density by grass type's name).
-                if let Some(c) = k
-                    .chars()
-                    .find(|c| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
-                {
+                if let Some(c) = forbidden(k) {
                     return Some((format!("{at}.{k:?}"), c));
                 }
                 let at = if at.is_empty() {
