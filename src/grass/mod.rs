@@ -34,6 +34,11 @@ pub use renderer::{
 
 use crate::world::{World, WorldError};
 
+/// The high-LOD grid's blade spacing by default, metres (the low-LOD grid's is twice this).
+pub const DEFAULT_SPACING_M: f32 = 0.25;
+/// What every grass type's blade width is scaled by, by default.
+pub const DEFAULT_WIDTH_SCALE: f32 = 1.0;
+
 /// The blades a slot must hold: the densest grass tile's count, infill included. A point of the grid carries
 /// grass with the densest window's mean density, and grass whose type can be shorter than the
 /// split height is counted twice. The density comes from the manifest's `grass_peak`, worked

@@ -78,7 +78,7 @@ pub const TRIM_CORNERS: usize = 6;
 /// mapping. Falls back to the whole quad where nothing in `levels` is opaque.
 pub fn trimmed_billboard(mesh: &PlantMesh, levels: &[Vec<u8>]) -> PlantMesh {
     let (r, h) = extent(mesh);
-    let cut = (super::set::ALPHA_CUTOFF * 255.0).ceil() as u8;
+    let cut = (super::mesh::ALPHA_CUTOFF * 255.0).ceil() as u8;
     // Points in (u, up) = (u, 1 - v), 0..1 each.
     let mut points = Vec::new();
     for level in levels {

@@ -2,6 +2,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
+/// The alpha test's cut-off of the plants' textures (`shaders/plants_draw.wgsl` discards below
+/// it).
+pub const ALPHA_CUTOFF: f32 = 0.5;
+
 /// One vertex of a plant mesh, in the plant's own space: metres, z up, the root at the origin,
 /// for a plant of scale 1 (the placement scales each instance to its size).
 ///

@@ -203,16 +203,13 @@ pub fn resample(img: &PlantImage, size: u32) -> PlantImage {
     }
 }
 
-/// The alpha test's cut-off (`shaders/plants_draw.wgsl` discards below it).
-pub const ALPHA_CUTOFF: f32 = 0.5;
-
 /// The share of texels of an RGBA8 level whose alpha, times `scale`, passes the alpha test.
 pub fn coverage(rgba: &[u8], scale: f32) -> f32 {
     let texels = rgba.len() / 4;
     if texels == 0 {
         return 0.0;
     }
-    let cut = ALPHA_CUTOFF * 255.0;
+    let cut = super::mesh::ALPHA_CUTOFF * 255.0;
     let passing = rgba
         .chunks_exact(4)
         .filter(|t| f32::from(t[3]) * scale >= cut)

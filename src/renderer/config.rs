@@ -124,8 +124,8 @@ pub const MAX_MESH_STEP: u32 = 16;
 impl Default for GrassConfig {
     fn default() -> Self {
         Self {
-            spacing_m: 0.25,
-            width_scale: 1.0,
+            spacing_m: crate::grass::DEFAULT_SPACING_M,
+            width_scale: crate::grass::DEFAULT_WIDTH_SCALE,
             infill_m: DEFAULT_INFILL_M,
             // Picked from bench lod's front against the truth: 7 near segments erred 0.0578
             // where 5 erred 0.0626, for 0.24 ms at 960x540 (NVIDIA H200), the front's knee; 9

@@ -408,8 +408,10 @@ impl TerrainRenderer {
             blade_area,
         };
         // The default grid's until the grass's settings come.
-        let grass = crate::renderer::GrassConfig::default();
-        terrain.set_blade_density(grass.spacing_m, grass.width_scale);
+        terrain.set_blade_density(
+            crate::grass::DEFAULT_SPACING_M,
+            crate::grass::DEFAULT_WIDTH_SCALE,
+        );
         terrain
     }
 

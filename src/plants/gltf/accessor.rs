@@ -1,13 +1,15 @@
-//! The file's data: buffers (the binary chunk, a data URI or a file beside the glTF file),
+//! The opened file and its data: buffers (the binary chunk, a data URI or a file beside the glTF file),
 //! buffer views and accessors, each read checked against the bytes there are.
 
+use std::cell::OnceCell;
 use std::path::Path;
 
 use base64::Engine as _;
+use gltf::Gltf;
 use gltf::accessor::{DataType, Dimensions};
 use percent_encoding::percent_decode_str;
 
-use super::load::Loader;
+use super::validate::validate;
 use super::{MAX_PLANT_TRIANGLES, PlantFileError};
 
 /// A problem inside an accessor, before the primitive it belongs to is known.
@@ -19,6 +21,54 @@ pub(super) enum AccessorError {
 impl From<PlantFileError> for AccessorError {
     fn from(e: PlantFileError) -> Self {
         Self::Plant(e)
+    }
+}
+
+/// An opened glTF file: its JSON checked, its buffers read when first asked for.
+pub(super) struct Loader<'p> {
+    pub(super) path: &'p Path,
+    /// Reads the files the glTF names.
+    pub(super) read: &'p super::PlantFileReader<'p>,
+    pub(super) gltf: Gltf,
+    /// Buffer data by index, read when first needed.
+    pub(super) buffers: Vec<OnceCell<Vec<u8>>>,
+}
+
+impl<'p> Loader<'p> {
+    pub(super) fn new(
+        path: &'p Path,
+        bytes: &[u8],
+        read: &'p super::PlantFileReader<'p>,
+    ) -> Result<Self, PlantFileError> {
+        let not_gltf = |reason: String| PlantFileError::NotGltf {
+            path: path.to_owned(),
+            reason,
+        };
+        // The glb reader subtracts the header's size from its length field unchecked.
+        if bytes.starts_with(b"glTF") {
+            let length = bytes
+                .get(8..12)
+                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+            match length {
+                None => return Err(not_gltf("the binary header is cut short".into())),
+                Some(n) if n < 12 => {
+                    return Err(not_gltf(format!(
+                        "the binary header gives a length of {n} bytes"
+                    )));
+                }
+                Some(_) => {}
+            }
+        }
+        let gltf =
+            Gltf::from_slice_without_validation(bytes).map_err(|e| not_gltf(e.to_string()))?;
+        validate(&gltf).map_err(not_gltf)?;
+        let buffers = vec![OnceCell::new(); gltf.buffers().len()];
+        Ok(Self {
+            path,
+            read,
+            gltf,
+            buffers,
+        })
     }
 }
 

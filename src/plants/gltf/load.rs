@@ -1,18 +1,15 @@
 //! The loader: the scene's triangle primitives gathered with their transforms, read into one
 //! mesh in plant space, and the plant's textures decoded.
 
-use std::cell::OnceCell;
 use std::io::Cursor;
-use std::path::Path;
 
 use glam::{Mat3, Mat4, Vec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
-use gltf::{Gltf, Semantic};
+use gltf::Semantic;
 use image::ImageDecoder as _;
 
-use super::accessor::{AccessorError, read_uri};
-use super::validate::validate;
+use super::accessor::{AccessorError, Loader, read_uri};
 use super::{
     DEFAULT_THINNESS, LoadedPlant, MAX_PLANT_TRIANGLES, MAX_PLANT_VERTICES, MAX_TEXTURE_SIZE,
     PlantFileError, PlantTexture,
@@ -30,52 +27,7 @@ struct Instance<'a> {
     transform: Mat4,
 }
 
-pub(super) struct Loader<'p> {
-    pub(super) path: &'p Path,
-    /// Reads the files the glTF names.
-    pub(super) read: &'p super::PlantFileReader<'p>,
-    pub(super) gltf: Gltf,
-    /// Buffer data by index, read when first needed.
-    pub(super) buffers: Vec<OnceCell<Vec<u8>>>,
-}
-
-impl<'p> Loader<'p> {
-    pub(super) fn new(
-        path: &'p Path,
-        bytes: &[u8],
-        read: &'p super::PlantFileReader<'p>,
-    ) -> Result<Self, PlantFileError> {
-        let not_gltf = |reason: String| PlantFileError::NotGltf {
-            path: path.to_owned(),
-            reason,
-        };
-        // The glb reader subtracts the header's size from its length field unchecked.
-        if bytes.starts_with(b"glTF") {
-            let length = bytes
-                .get(8..12)
-                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-            match length {
-                None => return Err(not_gltf("the binary header is cut short".into())),
-                Some(n) if n < 12 => {
-                    return Err(not_gltf(format!(
-                        "the binary header gives a length of {n} bytes"
-                    )));
-                }
-                Some(_) => {}
-            }
-        }
-        let gltf =
-            Gltf::from_slice_without_validation(bytes).map_err(|e| not_gltf(e.to_string()))?;
-        validate(&gltf).map_err(not_gltf)?;
-        let buffers = vec![OnceCell::new(); gltf.buffers().len()];
-        Ok(Self {
-            path,
-            read,
-            gltf,
-            buffers,
-        })
-    }
-
+impl Loader<'_> {
     pub(super) fn load(self) -> Result<LoadedPlant, PlantFileError> {
         let instances = self.instances()?;
         let path = self.path.to_owned();

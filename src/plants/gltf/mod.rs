@@ -267,5 +267,5 @@ pub fn load_plant_from(
         path: path.to_owned(),
         source,
     })?;
-    load::Loader::new(path, &bytes, read)?.load()
+    accessor::Loader::new(path, &bytes, read)?.load()
 }
