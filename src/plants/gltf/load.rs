@@ -4,9 +4,9 @@
 use std::io::Cursor;
 
 use glam::{Mat3, Mat4, Vec3};
+use gltf::Semantic;
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
-use gltf::Semantic;
 use image::ImageDecoder as _;
 
 use super::accessor::{AccessorError, Loader, read_uri};

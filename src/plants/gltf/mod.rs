@@ -25,7 +25,7 @@
 //! gives a [`PlantFileError`] naming the file, never a panic.
 //!
 //! The loader is in `load.rs` (the scene's primitives, the mesh, the textures), the reading of
-//! buffers, views and accessors in `accessor.rs`, the document's check in `validate.rs`;
+//! buffers, views and accessors (and the opening of the file) in `accessor.rs`, the document's check in `validate.rs`;
 //! [`write_plant_gltf`] (`write.rs`) writes a plant back as glTF (the tests make their plant
 //! files with it).
 
