@@ -24,9 +24,9 @@
 //! merging, textures at most [`MAX_TEXTURE_SIZE`] pixels a side. Any input, however malformed,
 //! gives a [`PlantFileError`] naming the file, never a panic.
 //!
-//! The loader is in `load.rs` (the scene's primitives, the mesh, the textures), the reading of
-//! buffers, views and accessors (and the opening of the file) in `accessor.rs`, the document's check in `validate.rs`;
-//! [`write_plant_gltf`] (`write.rs`) writes a plant back as glTF (the tests make their plant
+//! The loader is in `load.rs` (the scene's primitives, the mesh, the textures), the file's
+//! opening and the reading of its buffers, views and accessors in `accessor.rs`, the
+//! document's check in `validate.rs`; [`write_plant_gltf`] (`write.rs`) writes a plant back as glTF (the tests make their plant
 //! files with it).
 
 mod accessor;
