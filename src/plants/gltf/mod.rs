@@ -26,8 +26,8 @@
 //!
 //! The loader is in `load.rs` (the scene's primitives, the mesh, the textures), the file's
 //! opening and the reading of its buffers, views and accessors in `accessor.rs`, the
-//! document's check in `validate.rs`; [`write_plant_gltf`] (`write.rs`) writes a plant back as glTF (the tests make their plant
-//! files with it).
+//! document's check in `validate.rs`; [`write_plant_gltf`] (`write.rs`) writes a plant back as
+//! glTF (the tests make their plant files with it).
 
 mod accessor;
 mod load;
