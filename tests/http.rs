@@ -635,6 +635,123 @@ fn the_server_streams_files_decodes_names_and_checks_its_world_at_the_start() {
     assert!(err.contains("a symlink out of the folder"), "{err}");
 }
 
+/// What the server holds is bounded whatever its clients do: connections past its workers and
+/// queue are answered `503` at once, a client that sends nothing or trickles its request is
+/// closed when the head's time is up (and its place freed), a head past its bytes is answered
+/// `431` without being read on, a request that is not HTTP `400`, and the server still answers
+/// after all of it.
+#[test]
+fn the_server_holds_its_connections_and_request_heads_within_bounds() {
+    use verdant::tools::serve::{MAX_HEAD_BYTES, ServeLimits, WORKERS};
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("a.txt"), "a").unwrap();
+    let head_time = Duration::from_millis(1000);
+    let queued = 8;
+    let server = WorldServer::start_with(
+        dir.path(),
+        "127.0.0.1:0",
+        ServeLimits {
+            head: head_time,
+            write: Duration::from_secs(2),
+            queued,
+        },
+    )
+    .unwrap();
+    let read_all = |s: &mut TcpStream| -> String {
+        s.set_nonblocking(false).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        let mut all = Vec::new();
+        let _ = s.read_to_end(&mut all);
+        String::from_utf8_lossy(&all).into_owned()
+    };
+    let get = || {
+        let mut s = TcpStream::connect(server.addr()).unwrap();
+        s.write_all(b"GET /a.txt HTTP/1.1\r\nHost: x\r\n\r\n")
+            .unwrap();
+        read_all(&mut s)
+    };
+    assert!(get().starts_with("HTTP/1.1 200 OK"));
+
+    // Idle connections: no more than the workers and the queue are held (which ones depends on
+    // how fast the workers take theirs); the rest are turned away at once.
+    let extra = 40;
+    let mut conns: Vec<TcpStream> = (0..WORKERS + queued + extra)
+        .map(|_| TcpStream::connect(server.addr()).unwrap())
+        .collect();
+    std::thread::sleep(head_time / 4);
+    let (mut held, mut refused) = (Vec::new(), 0);
+    for mut s in conns.drain(..) {
+        s.set_nonblocking(true).unwrap();
+        let mut first = [0u8; 64];
+        match s.read(&mut first) {
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => held.push(s),
+            Ok(n) => {
+                let answer = String::from_utf8_lossy(&first[..n]).into_owned() + &read_all(&mut s);
+                assert!(
+                    answer.starts_with("HTTP/1.1 503 Service Unavailable")
+                        && answer.contains("Retry-After: 1"),
+                    "{answer}"
+                );
+                refused += 1;
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+    assert!(held.len() <= WORKERS + queued, "{} held", held.len());
+    assert!(refused >= extra, "{refused} refused");
+    // The held ones are closed when their time is up, the queue's after the workers' (each
+    // worker closes one a head's time), and the server answers again.
+    let start = Instant::now();
+    for mut s in held {
+        assert_eq!(read_all(&mut s), "", "an idle connection got an answer");
+    }
+    assert!(start.elapsed() < 4 * head_time, "{:?}", start.elapsed());
+    assert!(get().starts_with("HTTP/1.1 200 OK"));
+
+    // A client that trickles its head is closed when its time is up, however it trickles.
+    let mut slow = TcpStream::connect(server.addr()).unwrap();
+    let start = Instant::now();
+    let closed = loop {
+        if slow.write_all(b"G").is_err() || start.elapsed() > 4 * head_time {
+            break start.elapsed();
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(closed <= 3 * head_time, "{closed:?}");
+
+    // A head past its bytes: 431, the rest unread (a gigabyte would otherwise be read).
+    let mut big = TcpStream::connect(server.addr()).unwrap();
+    big.write_all(b"GET /a.txt HTTP/1.1\r\nX-Big: ").unwrap();
+    let filler = vec![b'a'; MAX_HEAD_BYTES];
+    let _ = big.write_all(&filler);
+    let answer = read_all(&mut big);
+    assert!(
+        answer.starts_with("HTTP/1.1 431 Request Header Fields Too Large"),
+        "{answer}"
+    );
+    // Too many header lines, and a request that is not HTTP.
+    let mut many = TcpStream::connect(server.addr()).unwrap();
+    let mut request = String::from("GET /a.txt HTTP/1.1\r\n");
+    for i in 0..200 {
+        request.push_str(&format!("X-{i}: a\r\n"));
+    }
+    request.push_str("\r\n");
+    many.write_all(request.as_bytes()).unwrap();
+    assert!(read_all(&mut many).starts_with("HTTP/1.1 431"));
+    let mut junk = TcpStream::connect(server.addr()).unwrap();
+    junk.write_all(b"\x16\x03\x01 hello\r\n\r\n").unwrap();
+    assert!(read_all(&mut junk).starts_with("HTTP/1.1 400 Bad Request"));
+    let mut post = TcpStream::connect(server.addr()).unwrap();
+    post.write_all(b"POST /a.txt HTTP/1.1\r\nContent-Length: 0\r\n\r\n")
+        .unwrap();
+    let answer = read_all(&mut post);
+    assert!(
+        answer.starts_with("HTTP/1.1 405") && answer.contains("Allow: GET, HEAD"),
+        "{answer}"
+    );
+    assert!(get().starts_with("HTTP/1.1 200 OK"));
+}
+
 /// `verdant serve` in one process and `verdant fly http://...` in another, as the README says;
 /// an address where nothing listens is refused with a message that names it.
 #[test]

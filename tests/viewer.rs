@@ -159,7 +159,6 @@ fn a_crate_without_default_features_compiles_no_tools() {
         "winit",
         "anyhow",
         "env_logger",
-        "tiny_http",
         "httpdate",
     ] {
         assert!(

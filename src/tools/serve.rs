@@ -5,21 +5,53 @@
 //! Content` with those bytes. Production puts the world folder behind any
 //! ordinary HTTP server, object store or CDN instead.
 
-use std::net::SocketAddr;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::path::{Component, Path, PathBuf};
-use std::sync::Arc;
-use std::time::{SystemTime, UNIX_EPOCH};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, Result, bail};
-use tiny_http::{Header, Method, Request, Response};
 
 /// Requests answered at once.
-const WORKERS: usize = 8;
+pub const WORKERS: usize = 8;
+/// Connections accepted and waiting for a worker, by default; one past these is answered `503
+/// Service Unavailable` (with `Retry-After`) and closed at once.
+pub const QUEUED: usize = 64;
+/// The most bytes of a request's line and headers; more is answered `431`.
+pub const MAX_HEAD_BYTES: usize = 64 * 1024;
+/// The most header lines of a request; more is answered `431`.
+pub const MAX_HEADERS: usize = 100;
+
+/// The server's limits in time and waiting connections.
+#[derive(Clone, Copy, Debug)]
+pub struct ServeLimits {
+    /// The longest a client may take to send its request's head, from the moment a worker
+    /// takes its connection (a client that sends nothing, or trickles, is closed after it).
+    pub head: Duration,
+    /// The longest one write of the answer may wait on a client that does not read.
+    pub write: Duration,
+    /// Connections accepted and waiting for a worker (at least 1; [`QUEUED`] by default).
+    pub queued: usize,
+}
+
+impl Default for ServeLimits {
+    fn default() -> Self {
+        Self {
+            head: Duration::from_secs(10),
+            write: Duration::from_secs(30),
+            queued: QUEUED,
+        }
+    }
+}
 
 /// A running server; dropping it stops it.
 pub struct WorldServer {
-    server: Arc<tiny_http::Server>,
     addr: SocketAddr,
+    stop: Arc<AtomicBool>,
+    acceptor: Option<std::thread::JoinHandle<()>>,
     workers: Vec<std::thread::JoinHandle<()>>,
 }
 
@@ -60,32 +92,42 @@ impl WorldServer {
     /// Serves any folder `root` on `addr`: a world's source files (DEMs a bake reads over
     /// HTTP in byte ranges) as well as a world.
     pub fn start_folder(root: &Path, addr: &str) -> Result<WorldServer> {
+        WorldServer::start_with(root, addr, ServeLimits::default())
+    }
+
+    /// [`Self::start_folder`] with limits of the caller's.
+    ///
+    /// What the server holds is bounded whatever its clients do: [`WORKERS`] threads answer
+    /// requests, one more accepts connections into a queue of `limits.queued` (a connection
+    /// past it is answered `503` and closed), a request's head is read within `limits.head` and
+    /// at most [`MAX_HEAD_BYTES`], and every connection is closed after its one answer.
+    pub fn start_with(root: &Path, addr: &str, limits: ServeLimits) -> Result<WorldServer> {
         let root = Arc::new(
             root.canonicalize()
                 .with_context(|| format!("{}: cannot open", root.display()))?,
         );
-        let server = tiny_http::Server::http(addr)
-            .map_err(|e| anyhow::anyhow!("cannot listen on {addr}: {e}"))?;
-        let addr = server
-            .server_addr()
-            .to_ip()
+        let listener =
+            TcpListener::bind(addr).map_err(|e| anyhow::anyhow!("cannot listen on {addr}: {e}"))?;
+        let addr = listener
+            .local_addr()
             .context("the server has no IP address")?;
-        let server = Arc::new(server);
+        let (tx, rx) = sync_channel::<TcpStream>(limits.queued.max(1));
+        let rx = Arc::new(Mutex::new(rx));
         let workers = (0..WORKERS)
             .map(|_| {
-                let (server, root) = (Arc::clone(&server), Arc::clone(&root));
-                std::thread::spawn(move || {
-                    while let Ok(request) = server.recv() {
-                        if let Err(e) = answer(&root, request) {
-                            log::debug!("serve: {e}");
-                        }
-                    }
-                })
+                let (rx, root) = (Arc::clone(&rx), Arc::clone(&root));
+                std::thread::spawn(move || work(&root, &rx, limits))
             })
             .collect();
+        let stop = Arc::new(AtomicBool::new(false));
+        let acceptor = {
+            let stop = Arc::clone(&stop);
+            std::thread::spawn(move || accept(&listener, &tx, &stop))
+        };
         Ok(WorldServer {
-            server,
             addr,
+            stop,
+            acceptor: Some(acceptor),
             workers,
         })
     }
@@ -102,21 +144,252 @@ impl WorldServer {
 
     /// Serves until the process ends.
     pub fn wait(mut self) {
-        for w in self.workers.drain(..) {
-            let _ = w.join();
+        if let Some(a) = self.acceptor.take() {
+            let _ = a.join();
         }
     }
 }
 
 impl Drop for WorldServer {
     fn drop(&mut self) {
-        for _ in 0..self.workers.len() {
-            self.server.unblock();
+        self.stop.store(true, Ordering::SeqCst);
+        // The acceptor wakes on a connection of its own, sees the flag and drops the queue's
+        // sender; the workers end when the queue is empty.
+        let _ = TcpStream::connect_timeout(&self.addr, Duration::from_secs(1));
+        if let Some(a) = self.acceptor.take() {
+            let _ = a.join();
         }
         for w in self.workers.drain(..) {
             let _ = w.join();
         }
     }
+}
+
+/// Accepts connections into the workers' queue until `stop`; a connection the queue has no
+/// room for is answered `503` and closed here. An accept that fails (out of file descriptors)
+/// is logged and retried after a pause: the server goes on.
+fn accept(listener: &TcpListener, queue: &SyncSender<TcpStream>, stop: &AtomicBool) {
+    let mut told = false;
+    loop {
+        let stream = listener.accept();
+        if stop.load(Ordering::SeqCst) {
+            return;
+        }
+        match stream {
+            Ok((stream, _)) => match queue.try_send(stream) {
+                Ok(()) => {}
+                Err(TrySendError::Full(mut stream)) => {
+                    let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
+                    let _ = stream.write_all(
+                        b"HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\n\
+                          Content-Length: 0\r\nConnection: close\r\n\r\n",
+                    );
+                    let _ = stream.shutdown(Shutdown::Both);
+                }
+                Err(TrySendError::Disconnected(_)) => return,
+            },
+            Err(e) => {
+                if !told {
+                    log::warn!("serve: cannot accept a connection ({e}); trying again");
+                    told = true;
+                }
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        }
+    }
+}
+
+fn work(root: &Path, queue: &Mutex<Receiver<TcpStream>>, limits: ServeLimits) {
+    loop {
+        // The lock is held only while waiting for the next connection.
+        let next = match queue.lock() {
+            Ok(rx) => rx.recv(),
+            Err(_) => return,
+        };
+        let Ok(stream) = next else { return };
+        if let Err(e) = serve_connection(root, stream, limits) {
+            log::debug!("serve: {e}");
+        }
+    }
+}
+
+/// A request's line and headers.
+struct Head {
+    method: String,
+    target: String,
+    headers: Vec<(String, String)>,
+}
+
+impl Head {
+    /// The value of the first header of `name` (any case).
+    fn value(&self, name: &str) -> Option<&str> {
+        self.headers
+            .iter()
+            .find(|(n, _)| n.eq_ignore_ascii_case(name))
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+/// Why a request's head was not read.
+enum HeadError {
+    /// Not HTTP: answered `400`.
+    Bad,
+    /// Past [`MAX_HEAD_BYTES`] or [`MAX_HEADERS`]: answered `431`.
+    TooLarge,
+    /// The client closed, or took longer than its time: nothing is answered.
+    Gone(std::io::Error),
+}
+
+/// Reads a request's head within `limit` of time and [`MAX_HEAD_BYTES`].
+fn read_head(stream: &TcpStream, limit: Duration) -> Result<Head, HeadError> {
+    let deadline = Instant::now() + limit;
+    let mut reader = BufReader::new(Deadline { stream, deadline }).take(MAX_HEAD_BYTES as u64);
+    let mut lines = Vec::new();
+    loop {
+        let mut line = Vec::new();
+        let n = reader
+            .read_until(b'\n', &mut line)
+            .map_err(HeadError::Gone)?;
+        if n == 0 || !line.ends_with(b"\n") {
+            return Err(if reader.limit() == 0 {
+                HeadError::TooLarge
+            } else {
+                HeadError::Gone(std::io::ErrorKind::UnexpectedEof.into())
+            });
+        }
+        while matches!(line.last(), Some(b'\n' | b'\r')) {
+            line.pop();
+        }
+        if line.is_empty() {
+            if lines.is_empty() {
+                continue; // blank lines before a request line are allowed (RFC 9112, 2.2)
+            }
+            break;
+        }
+        if lines.len() > MAX_HEADERS {
+            return Err(HeadError::TooLarge);
+        }
+        lines.push(String::from_utf8(line).map_err(|_| HeadError::Bad)?);
+    }
+    let mut parts = lines[0].split(' ');
+    let (Some(method), Some(target), Some(version), None) =
+        (parts.next(), parts.next(), parts.next(), parts.next())
+    else {
+        return Err(HeadError::Bad);
+    };
+    if method.is_empty() || !version.starts_with("HTTP/1.") {
+        return Err(HeadError::Bad);
+    }
+    let mut headers = Vec::with_capacity(lines.len() - 1);
+    for line in &lines[1..] {
+        let (name, value) = line.split_once(':').ok_or(HeadError::Bad)?;
+        if name.is_empty() || name.contains([' ', '\t']) {
+            return Err(HeadError::Bad);
+        }
+        headers.push((name.to_string(), value.trim().to_string()));
+    }
+    Ok(Head {
+        method: method.to_string(),
+        target: target.to_string(),
+        headers,
+    })
+}
+
+/// A stream read with one deadline for the whole of what is read through it.
+struct Deadline<'s> {
+    stream: &'s TcpStream,
+    deadline: Instant,
+}
+
+impl Read for Deadline<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let left = self.deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(std::io::ErrorKind::TimedOut.into());
+        }
+        self.stream.set_read_timeout(Some(left))?;
+        let mut stream = self.stream;
+        stream.read(buf)
+    }
+}
+
+/// An answer's status line and headers, ahead of its body.
+struct Answer {
+    status: u16,
+    headers: Vec<(&'static str, String)>,
+}
+
+impl Answer {
+    fn new(status: u16) -> Self {
+        Self {
+            status,
+            headers: Vec::new(),
+        }
+    }
+
+    fn with(mut self, name: &'static str, value: impl Into<String>) -> Self {
+        self.headers.push((name, value.into()));
+        self
+    }
+
+    /// Writes the head, with `Content-Length: length` (none for a `304`) and `Connection:
+    /// close`.
+    fn write_head(&self, out: &mut impl Write, length: u64) -> std::io::Result<()> {
+        let mut head = format!("HTTP/1.1 {} {}\r\n", self.status, reason(self.status));
+        for (name, value) in &self.headers {
+            head.push_str(&format!("{name}: {value}\r\n"));
+        }
+        head.push_str(&format!(
+            "Date: {}\r\n",
+            httpdate::fmt_http_date(SystemTime::now())
+        ));
+        if self.status != 304 {
+            head.push_str(&format!("Content-Length: {length}\r\n"));
+        }
+        head.push_str("Connection: close\r\n\r\n");
+        out.write_all(head.as_bytes())
+    }
+
+    /// Writes the head and `body` (none for `HEAD`).
+    fn send(&self, out: &mut impl Write, body: &[u8], head_only: bool) -> std::io::Result<()> {
+        self.write_head(out, body.len() as u64)?;
+        if !head_only {
+            out.write_all(body)?;
+        }
+        out.flush()
+    }
+}
+
+fn reason(status: u16) -> &'static str {
+    match status {
+        200 => "OK",
+        206 => "Partial Content",
+        304 => "Not Modified",
+        400 => "Bad Request",
+        404 => "Not Found",
+        405 => "Method Not Allowed",
+        416 => "Range Not Satisfiable",
+        431 => "Request Header Fields Too Large",
+        503 => "Service Unavailable",
+        _ => "",
+    }
+}
+
+/// Answers the one request of a connection, then closes it.
+fn serve_connection(root: &Path, stream: TcpStream, limits: ServeLimits) -> std::io::Result<()> {
+    stream.set_write_timeout(Some(limits.write))?;
+    let mut out = std::io::BufWriter::new(&stream);
+    let result = match read_head(&stream, limits.head) {
+        Ok(head) => answer(root, &head, &mut out),
+        Err(HeadError::Bad) => Answer::new(400).send(&mut out, b"bad request\n", false),
+        Err(HeadError::TooLarge) => {
+            Answer::new(431).send(&mut out, b"request head too large\n", false)
+        }
+        Err(HeadError::Gone(e)) => Err(e),
+    };
+    drop(out);
+    let _ = stream.shutdown(Shutdown::Both);
+    result
 }
 
 /// The content type of a world's file.
@@ -156,16 +429,20 @@ fn resolve(root: &Path, url: &str) -> Option<PathBuf> {
     (real.starts_with(root) && real.is_file()).then_some(real)
 }
 
-fn header(name: &str, value: &str) -> Header {
-    Header::from_bytes(name.as_bytes(), value.as_bytes()).expect("ASCII header")
-}
-
-fn answer(root: &Path, request: Request) -> std::io::Result<()> {
-    if !matches!(request.method(), Method::Get | Method::Head) {
-        return request.respond(Response::empty(405).with_header(header("Allow", "GET, HEAD")));
+fn answer(root: &Path, request: &Head, out: &mut impl Write) -> std::io::Result<()> {
+    let head_only = request.method == "HEAD";
+    if !head_only && request.method != "GET" {
+        return Answer::new(405)
+            .with("Allow", "GET, HEAD")
+            .send(out, b"", false);
     }
-    let Some(file) = resolve(root, request.url()) else {
-        return request.respond(Response::from_string("not found\n").with_status_code(404));
+    // An absolute target (`http://host/path`, as a proxy sends) is read as its path.
+    let target = match request.target.split_once("://") {
+        Some((_, rest)) => &rest[rest.find('/').unwrap_or(rest.len())..],
+        None => request.target.as_str(),
+    };
+    let Some(file) = resolve(root, target) else {
+        return Answer::new(404).send(out, b"not found\n", head_only);
     };
     let meta = std::fs::metadata(&file)?;
     let modified = meta.modified().unwrap_or(UNIX_EPOCH);
@@ -175,72 +452,52 @@ fn answer(root: &Path, request: Request) -> std::io::Result<()> {
         .unwrap_or(0);
     let etag = format!("\"{:x}-{:x}\"", meta.len(), nanos);
     let last_modified = httpdate::fmt_http_date(modified);
-    let value = |name: &'static str| {
-        request
-            .headers()
-            .iter()
-            .find(|h| h.field.equiv(name))
-            .map(|h| h.value.as_str().to_string())
-    };
     // If-None-Match wins over If-Modified-Since (RFC 9110, 13.2.2).
-    let not_modified = match value("If-None-Match") {
+    let not_modified = match request.value("If-None-Match") {
         Some(tags) => tags
             .split(',')
             .any(|t| t.trim() == "*" || t.trim().trim_start_matches("W/") == etag),
-        None => value("If-Modified-Since")
-            .and_then(|d| httpdate::parse_http_date(&d).ok())
+        None => request
+            .value("If-Modified-Since")
+            .and_then(|d| httpdate::parse_http_date(d).ok())
             .is_some_and(|since| truncate_to_seconds(modified) <= since),
     };
-    let validators = [
-        header("ETag", &etag),
-        header("Last-Modified", &last_modified),
-    ];
     if not_modified {
-        let mut response = Response::empty(304);
-        for h in validators {
-            response = response.with_header(h);
-        }
-        return request.respond(response);
+        return Answer::new(304)
+            .with("ETag", etag)
+            .with("Last-Modified", last_modified)
+            .send(out, b"", true);
     }
     let len = meta.len();
-    let (status, span) = match value("Range").map(|r| byte_range(&r, len)) {
+    let (status, span) = match request.value("Range").map(|r| byte_range(r, len)) {
         None => (200, None),
         Some(Some(span)) => (206, Some(span)),
         Some(None) => {
-            return request.respond(
-                Response::empty(416)
-                    .with_header(header("Content-Range", &format!("bytes */{len}"))),
-            );
+            return Answer::new(416)
+                .with("Content-Range", format!("bytes */{len}"))
+                .send(out, b"", false);
         }
     };
     // The body is read from the file as it is sent (never whole into memory, and not at all
-    // for HEAD), with a Content-Length, never chunked (tiny_http chunks bodies over 32 KiB by
-    // default, such as a world manifest with many paths).
+    // for HEAD), with a Content-Length.
     let [first, last] = span.unwrap_or([0, len.saturating_sub(1)]);
     let length = if len == 0 { 0 } else { last - first + 1 };
-    let mut reader = std::fs::File::open(&file)?;
-    std::io::Seek::seek(&mut reader, std::io::SeekFrom::Start(first))?;
-    let body = std::io::Read::take(reader, length);
-    let mut response = Response::new(
-        tiny_http::StatusCode(status),
-        Vec::new(),
-        body,
-        usize::try_from(length).ok(),
-        None,
-    )
-    .with_chunked_threshold(usize::MAX)
-    .with_header(header("Content-Type", content_type(&file)))
-    .with_header(header("Accept-Ranges", "bytes"));
+    let mut answer = Answer::new(status)
+        .with("Content-Type", content_type(&file))
+        .with("Accept-Ranges", "bytes");
     if let Some([first, last]) = span {
-        response = response.with_header(header(
-            "Content-Range",
-            &format!("bytes {first}-{last}/{len}"),
-        ));
+        answer = answer.with("Content-Range", format!("bytes {first}-{last}/{len}"));
     }
-    for h in validators {
-        response = response.with_header(h);
+    let answer = answer
+        .with("ETag", etag)
+        .with("Last-Modified", last_modified);
+    let mut reader = std::fs::File::open(&file)?;
+    answer.write_head(out, length)?;
+    if !head_only {
+        std::io::Seek::seek(&mut reader, std::io::SeekFrom::Start(first))?;
+        std::io::copy(&mut reader.take(length), out)?;
     }
-    request.respond(response)
+    out.flush()
 }
 
 /// The bytes (first, last, inclusive) that a `Range` header asks of a file of `len` bytes: one
