@@ -216,6 +216,8 @@ struct TiffSpec {
     ifd_first: bool,
     /// Width and height written in the directory, if not the grid's own.
     claimed_size: Option<[u32; 2]>,
+    /// Tile width and length written in the directory, if not the layout's own.
+    claimed_tile: Option<[u32; 2]>,
 }
 
 impl TiffSpec {
@@ -235,6 +237,7 @@ impl TiffSpec {
             nodata: None,
             ifd_first: false,
             claimed_size: None,
+            claimed_tile: None,
         }
     }
 }
@@ -421,6 +424,7 @@ fn write_tiff(path: &Path, spec: &TiffSpec, width: u32, height: u32, heights: &[
             (273, 279)
         }
         Layout::Tiles { width, height } => {
+            let [width, height] = spec.claimed_tile.unwrap_or([width, height]);
             entries.push(e.longs(322, &[width]));
             entries.push(e.longs(323, &[height]));
             (324, 325)
@@ -1286,6 +1290,27 @@ fn bad_cases() -> Vec<BadCase> {
             },
             |e| matches!(e, WorldError::OutOfRange { .. }),
             &["200000x150000", "at most"],
+        ),
+        tiff_case(
+            "huge-tiles.tif",
+            |s| {
+                // Tiles the directory says are 4 billion samples a side (each chunk would
+                // decode to exabytes): refused before anything is allocated for one.
+                // One tile, written as 80 x 64 (the grid is 65 x 57), so that the directory's
+                // count of tiles agrees.
+                s.layout = Layout::Tiles {
+                    width: 80,
+                    height: 64,
+                };
+                s.claimed_tile = Some([0xFFFF_FFF0, 0xFFFF_FFF0]);
+                // LZW and Zstandard chunks are decoded by the reader's own code.
+                s.compression = Compression::Lzw;
+            },
+            |e| matches!(e, WorldError::CorruptImage { .. }),
+            &[
+                "chunks of 4294967280x4294967280 samples",
+                "at most 2048 MiB a chunk",
+            ],
         ),
         tiff_case(
             "rotated.tif",

@@ -163,6 +163,10 @@ fn read_header<R: Read + Seek>(
 }
 
 /// The layout of the chunks of the image `decoder` reads.
+/// The most bytes one chunk (tile or strip) may decode to: a tile of 16384 x 16384 samples of
+/// 8 bytes, or a single strip of 23,000 x 23,000 samples of 4 bytes.
+const MAX_CHUNK_BYTES: u64 = 2 << 30;
+
 fn chunk_layout<R: Read + Seek>(
     path: &Path,
     decoder: &mut Decoder<R>,
@@ -196,6 +200,20 @@ fn chunk_layout<R: Read + Seek>(
             [width, rows]
         }
     };
+    // A chunk is decoded whole: its size is checked before anything is allocated for it.
+    let chunk_bytes =
+        u128::from(chunk_size[0]) * u128::from(chunk_size[1]) * u128::from(h.bits / 8);
+    if chunk_bytes > u128::from(MAX_CHUNK_BYTES) {
+        return Err(corrupt(
+            path,
+            format!(
+                "chunks of {}x{} samples ({chunk_bytes} bytes decoded), at most {} MiB a chunk",
+                chunk_size[0],
+                chunk_size[1],
+                MAX_CHUNK_BYTES >> 20
+            ),
+        ));
+    }
     Ok(ChunkLayout {
         width,
         height,
@@ -758,9 +776,28 @@ impl Codec {
                 out.truncate(limit);
                 Ok(out)
             }
-            Codec::Lzw => weezl::decode::Decoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
-                .decode(packed)
-                .map_err(|e| format!("{e:?}")),
+            Codec::Lzw => {
+                // Into a buffer of the chunk's size: what the codes would expand to beyond it
+                // (a small file can claim gigabytes) is never produced.
+                let mut decoder =
+                    weezl::decode::Decoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8);
+                let mut out = vec![0u8; limit];
+                let (mut input, mut filled) = (packed, 0);
+                while filled < limit {
+                    let step = decoder.decode_bytes(input, &mut out[filled..]);
+                    input = &input[step.consumed_in..];
+                    filled += step.consumed_out;
+                    match step.status.map_err(|e| format!("{e:?}"))? {
+                        weezl::LzwStatus::Done => break,
+                        weezl::LzwStatus::NoProgress => {
+                            return Err("the data ends without an end code".into());
+                        }
+                        weezl::LzwStatus::Ok => {}
+                    }
+                }
+                out.truncate(filled);
+                Ok(out)
+            }
             Codec::Zstd => {
                 let decoder =
                     ruzstd::decoding::StreamingDecoder::new(packed).map_err(|e| e.to_string())?;
@@ -1141,5 +1178,45 @@ fn tiff_error(path: &Path, e: TiffError) -> WorldError {
             allowed: format!("at most {MAX_DEM_SAMPLES} samples"),
         },
         other => corrupt(path, other.to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Codec;
+
+    /// A chunk decodes to at most the bytes its tile or strip holds, however far its codes
+    /// would expand: 40 MB of zeros packed into a few kilobytes of LZW give the 4 KiB asked
+    /// for, not 40 MB (Deflate stops at the limit and refuses the chunk).
+    #[test]
+    fn a_chunk_decodes_to_at_most_its_size() {
+        let zeros = vec![0u8; 40 << 20];
+        let mut lzw = Vec::new();
+        weezl::encode::Encoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
+            .into_vec(&mut lzw)
+            .encode_all(&zeros)
+            .status
+            .unwrap();
+        assert!(lzw.len() < zeros.len() / 100, "{}", lzw.len());
+        let deflate = miniz_oxide::deflate::compress_to_vec_zlib(&zeros, 6);
+        assert_eq!(Codec::Lzw.decode(&lzw, 4096).unwrap(), vec![0u8; 4096]);
+        // Deflate refuses a chunk that expands past its size.
+        let deflated = Codec::Deflate.decode(&deflate, 4096);
+        assert!(deflated.is_err(), "{:?}", deflated.map(|v| v.len()));
+        // Whole, short and cut-off streams as before: all of a small one, an error for codes
+        // that end without their end code.
+        let small: Vec<u8> = (0..3000u32).map(|i| (i * 7 % 251) as u8).collect();
+        let mut packed = Vec::new();
+        weezl::encode::Encoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
+            .into_vec(&mut packed)
+            .encode_all(&small)
+            .status
+            .unwrap();
+        assert_eq!(Codec::Lzw.decode(&packed, 3000).unwrap(), small);
+        assert_eq!(Codec::Lzw.decode(&packed, 100_000).unwrap(), small);
+        let cut = Codec::Lzw
+            .decode(&packed[..packed.len() / 2], 3000)
+            .unwrap_err();
+        assert!(cut.contains("end code"), "{cut}");
     }
 }
