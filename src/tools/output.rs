@@ -229,13 +229,31 @@ fn lock_folder(dir: &Path, tool: &str) -> Result<Option<File>, OutDirError> {
     // A run that lets go of the lock removes the file first: a file locked here after that
     // removal is no longer the folder's lock, and the lock is taken again on the new one.
     for _ in 0..100 {
-        let mut f = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(&file)
-            .map_err(failed)?;
+        // Never through a symbolic link: the lock is truncated and written, and a link would
+        // have that done to whatever file it leads to.
+        let not_regular = || {
+            failed(std::io::Error::other(
+                "it is not a regular file (a symbolic link, a folder or a device); remove it if \
+                 no run of verdant is writing here",
+            ))
+        };
+        if std::fs::symlink_metadata(&file).is_ok_and(|m| !m.is_file()) {
+            return Err(not_regular());
+        }
+        let mut options = std::fs::OpenOptions::new();
+        options.read(true).write(true).create(true).truncate(false);
+        #[cfg(unix)]
+        std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NOFOLLOW);
+        let mut f = options.open(&file).map_err(|e| {
+            #[cfg(unix)]
+            if e.raw_os_error() == Some(libc::ELOOP) {
+                return not_regular();
+            }
+            failed(e)
+        })?;
+        if !f.metadata().map_err(failed)?.is_file() {
+            return Err(not_regular());
+        }
         match f.try_lock() {
             Ok(()) => {}
             Err(std::fs::TryLockError::WouldBlock) => {
@@ -429,6 +447,41 @@ mod tests {
         let third = OutDir::create(&out).unwrap();
         drop(third);
         assert_eq!(names(&out), ["report.json"]);
+    }
+
+    /// A lock file that is a symbolic link is never followed (the lock is truncated and
+    /// written: the file it leads to would be lost), nor is a folder in its place taken: the
+    /// run is refused, saying what is wrong, and the link and its target are as they were.
+    #[test]
+    fn a_lock_file_that_is_not_a_regular_file_is_refused_and_left_alone() {
+        let tmp = tempfile::tempdir().unwrap();
+        let precious = tmp.path().join("thesis.txt");
+        std::fs::write(&precious, "my thesis").unwrap();
+        let out = tmp.path().join("out");
+        std::fs::create_dir(&out).unwrap();
+        std::os::unix::fs::symlink(&precious, out.join(LOCK_FILE)).unwrap();
+        let dangling = tmp.path().join("out2");
+        std::fs::create_dir(&dangling).unwrap();
+        std::os::unix::fs::symlink(tmp.path().join("nothing"), dangling.join(LOCK_FILE)).unwrap();
+        let folder = tmp.path().join("out3");
+        std::fs::create_dir_all(folder.join(LOCK_FILE)).unwrap();
+        for dir in [&out, &dangling, &folder] {
+            let e = match OutDir::create_for(dir, "eval sway") {
+                Err(e) => e.to_string(),
+                Ok(_) => panic!(
+                    "{}: a run took a lock that is not a regular file",
+                    dir.display()
+                ),
+            };
+            assert!(
+                e.contains("not a regular file") && e.contains(LOCK_FILE),
+                "{e}"
+            );
+        }
+        assert_eq!(std::fs::read_to_string(&precious).unwrap(), "my thesis");
+        assert!(out.join(LOCK_FILE).is_symlink());
+        assert!(!tmp.path().join("nothing").exists());
+        assert!(folder.join(LOCK_FILE).is_dir());
     }
 
     #[test]
