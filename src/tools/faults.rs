@@ -122,7 +122,7 @@ impl FileFaults {
              faulty copy goes there; move it away or choose another --out",
             copy.display()
         );
-        if let Err(e) = copy_dir(original, copy)
+        if let Err(e) = copy_world(original, copy)
             .and_then(|()| std::fs::write(copy.join(COPY_MARKER), b"a faulty copy of a world\n"))
         {
             // A partial copy is this run's own (the folder did not exist): not left behind.
@@ -257,6 +257,44 @@ impl Drop for FileFaults {
     }
 }
 
+/// Makes the faulty copy of the world `from` at `to`: its `world.toml` and its `tiles/` copied
+/// (the files the faults damage), everything else in the folder (plant files, sources, notes)
+/// linked to where it is, never copied: a link to a large folder (or to `/`) costs nothing.
+fn copy_world(from: &Path, to: &Path) -> std::io::Result<()> {
+    std::fs::create_dir_all(to)?;
+    for entry in std::fs::read_dir(from)? {
+        let entry = entry?;
+        let name = entry.file_name();
+        let target = to.join(&name);
+        if name == "world.toml" {
+            std::fs::copy(entry.path(), &target)?;
+        } else if name == "tiles" {
+            copy_dir(&entry.path(), &target)?;
+        } else {
+            link_or_copy(&entry.path(), &target)?;
+        }
+    }
+    Ok(())
+}
+
+/// A link at `to` to what `from` leads to (a file or folder read, never written, by a run).
+#[cfg(unix)]
+fn link_or_copy(from: &Path, to: &Path) -> std::io::Result<()> {
+    match from.canonicalize() {
+        Ok(real) => std::os::unix::fs::symlink(real, to),
+        Err(_) => Ok(()), // a dangling link: nothing to read there
+    }
+}
+
+#[cfg(not(unix))]
+fn link_or_copy(from: &Path, to: &Path) -> std::io::Result<()> {
+    match std::fs::metadata(from) {
+        Ok(m) if m.is_dir() => copy_dir(from, to),
+        Ok(m) if m.is_file() => std::fs::copy(from, to).map(|_| ()),
+        _ => Ok(()),
+    }
+}
+
 /// Copies the folder `from` to `to`, following symlinks (a world whose `tiles/` is a link to
 /// another disk is copied whole), at most [`MAX_COPY_DEPTH`] folders deep (a symlink loop ends
 /// there with an error).
@@ -367,6 +405,42 @@ mod tests {
         let err = format!("{:#}", FileFaults::new(&w, &inside, 0.5, 1).err().unwrap());
         assert!(err.contains("inside the world it copies"), "{err}");
         assert!(!inside.exists());
+    }
+
+    /// Only what the faults damage is copied: a world folder holding (or linking to) a large
+    /// folder beside its tiles costs no more disk, and what is there is still read through the
+    /// copy.
+    #[cfg(unix)]
+    #[test]
+    fn the_faulty_copy_copies_the_tiles_and_links_the_rest() {
+        let tmp = tempfile::tempdir().unwrap();
+        let w = tmp.path().join("world");
+        copy_dir(&world(), &w).unwrap();
+        let big = tmp.path().join("big");
+        std::fs::create_dir_all(big.join("a/b")).unwrap();
+        let blob = std::fs::File::create(big.join("a/b/blob.bin")).unwrap();
+        blob.set_len(64 << 30).unwrap(); // 64 GiB, sparse: a copy would fill the disk
+        drop(blob);
+        std::os::unix::fs::symlink(&big, w.join("extra")).unwrap();
+        std::os::unix::fs::symlink(big.join("a/b/blob.bin"), w.join("blob_link.bin")).unwrap();
+        std::fs::create_dir(w.join("plants")).unwrap();
+        std::fs::write(w.join("plants/fern.txt"), "a fern").unwrap();
+        let copy = tmp.path().join("copy");
+        let f = FileFaults::new(&w, &copy, 0.5, 3).unwrap();
+        assert!(!copy.join("world.toml").is_symlink());
+        assert!(!copy.join("tiles").is_symlink() && copy.join("tiles").is_dir());
+        for linked in ["extra", "blob_link.bin", "plants", "source"] {
+            assert!(copy.join(linked).is_symlink(), "{linked} was copied");
+        }
+        assert_eq!(
+            std::fs::read_to_string(copy.join("plants/fern.txt")).unwrap(),
+            "a fern"
+        );
+        drop(f);
+        // The copy goes; what it linked to stays.
+        assert!(!copy.exists());
+        assert!(big.join("a/b/blob.bin").is_file());
+        assert!(w.join("plants/fern.txt").is_file());
     }
 
     /// A world whose `tiles/` is a symlink (to another disk, say) is copied whole.
