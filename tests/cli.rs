@@ -1127,6 +1127,37 @@ fn a_path_outside_the_world_is_warned_of() {
     assert!(stderr.contains("no frame drew any terrain"), "{stderr}");
 }
 
+/// A fly into a folder where an earlier run left more frames says which of them are not this
+/// run's (and leaves them: they may be kept on purpose); a run that overwrites them all says
+/// nothing.
+#[test]
+fn frames_an_earlier_run_left_in_the_output_folder_are_warned_of() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = common::default_world();
+    let w = w.to_str().unwrap();
+    let small = ["--size", "32x18", "--path", "meadow"];
+    let args = |frames: &'static str| -> Vec<&str> {
+        [w, "--frames", frames]
+            .iter()
+            .chain(&small)
+            .copied()
+            .collect()
+    };
+    let (_, stderr) = fly_report_and_stderr(&args("4"), tmp.path());
+    assert!(!stderr.contains("earlier run"), "{stderr}");
+    let (_, stderr) = fly_report_and_stderr(&args("2"), tmp.path());
+    assert!(
+        stderr.contains(
+            "holds 2 frame images of an earlier run that this run does not write \
+                         (frame_00002.png to frame_00003.png)"
+        ),
+        "{stderr}"
+    );
+    assert!(tmp.path().join("fly/frame_00003.png").is_file());
+    let (_, stderr) = fly_report_and_stderr(&args("4"), tmp.path());
+    assert!(!stderr.contains("earlier run"), "{stderr}");
+}
+
 #[test]
 fn a_cache_of_no_bytes_is_refused_and_a_huge_one_does_not_wrap() {
     let tmp = tempfile::tempdir().unwrap();

@@ -302,6 +302,19 @@ pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
                 eprintln!("  {m}");
             }
         }
+        FlyProgress::StaleFrames(count, first, last) => {
+            let which = if count == 1 {
+                first
+            } else {
+                format!("{first} to {last}")
+            };
+            eprintln!(
+                "warning: {} holds {count} frame image{} of an earlier run that this run does not \
+                 write ({which}): they are not frames of this run's report",
+                opts.out.display(),
+                if count == 1 { "" } else { "s" }
+            );
+        }
         FlyProgress::Frame(done, total) => {
             let pb = frames.get_or_insert_with(|| {
                 eprintln!("rendering {total} frames");

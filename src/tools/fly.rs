@@ -95,6 +95,29 @@ pub enum FlyProgress {
     WarmUpIncomplete(Vec<String>),
     /// Frames rendered so far, of a total.
     Frame(u64, u64),
+    /// Frame images in the output folder that this run does not write (an earlier run's):
+    /// how many, and the first and last of their names.
+    StaleFrames(usize, String, String),
+}
+
+/// The frame images (`frame_NNNNN.png`) in `dir` that a run writing `written` of them leaves as
+/// they were, by name, in order.
+pub fn stale_frames(dir: &Path, written: u32) -> Vec<String> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut stale: Vec<String> = entries
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|name| {
+            name.strip_prefix("frame_")
+                .and_then(|n| n.strip_suffix(".png"))
+                .filter(|n| n.len() >= 5 && n.bytes().all(|b| b.is_ascii_digit()))
+                .and_then(|n| n.parse::<u64>().ok())
+                .is_some_and(|i| i >= u64::from(written))
+        })
+        .collect();
+    stale.sort();
+    stale
 }
 
 /// A written frame whose camera moved farther than this since the last frame waits for its
@@ -260,6 +283,14 @@ pub fn run_fly_with_source(
     // Checked before anything is written.
     let config = opts.renderer_config(&world, &path)?;
     let out_dir = OutDir::create_for(&opts.out, "fly")?;
+    let stale = stale_frames(&opts.out, if opts.write_images { opts.frames } else { 0 });
+    if let (Some(first), Some(last)) = (stale.first(), stale.last()) {
+        progress(FlyProgress::StaleFrames(
+            stale.len(),
+            first.clone(),
+            last.clone(),
+        ));
+    }
 
     let ctx = GpuContext::new()?;
     let world_name = world.manifest.name.clone();
