@@ -279,6 +279,20 @@ fn sustained_growth(floors: [(f64, f64); 3]) -> ([f64; 2], f64) {
     (halves, (2.0 * halves[0].min(halves[1])).max(0.0))
 }
 
+/// The shortest `--seconds` whose memory windows fall after the warm-up and apart, to a tenth
+/// of a second, rounded up (so that the value suggested runs).
+fn shortest_soak_s(opts: &SoakOptions) -> f64 {
+    let runs = |s: f64| {
+        let (f, w) = soak_frames(opts, s);
+        memory_windows(f as u32, w).is_some()
+    };
+    let mut tenths = 1u32;
+    while !runs(f64::from(tenths) / 10.0) && tenths < 10 * 604_800 {
+        tenths += 1;
+    }
+    f64::from(tenths) / 10.0
+}
+
 /// Frames of a soak of `seconds` and its warm-up.
 fn soak_frames(opts: &SoakOptions, seconds: f64) -> (f64, u32) {
     let frames = (seconds / opts.dt_s).ceil();
@@ -427,14 +441,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         f64::from(u32::MAX) * opts.dt_s
     );
     if memory_windows(frames_f as u32, warmup_frames).is_none() {
-        // The shortest run whose memory windows fall after the warm-up and apart.
-        let mut min_s = opts.seconds;
-        while {
-            let (f, w) = soak_frames(opts, min_s);
-            memory_windows(f as u32, w).is_none()
-        } {
-            min_s += opts.dt_s;
-        }
+        let min_s = shortest_soak_s(opts);
         anyhow::bail!(
             "--seconds {} is too short for the memory check: the warm-up alone takes {:.1} s; \
              use --seconds {:.1} or more",
@@ -830,6 +837,29 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The shortest soak that a too-short one is told to use runs, and a tenth of a second
+    /// less does not.
+    #[test]
+    fn the_shortest_soak_suggested_runs() {
+        for dt_s in [1.0 / 60.0, 1.0 / 30.0, 0.05] {
+            let opts = SoakOptions {
+                dt_s,
+                ..SoakOptions::default()
+            };
+            let runs = |s: f64| {
+                let (f, w) = soak_frames(&opts, s);
+                memory_windows(f as u32, w).is_some()
+            };
+            let s = shortest_soak_s(&opts);
+            assert!(runs(s), "{s} s at {dt_s} s a frame");
+            let before = ((s * 10.0).round() - 1.0) / 10.0;
+            assert!(
+                !runs(before),
+                "{s} s at {dt_s} s a frame is not the shortest"
+            );
+        }
+    }
 
     fn teleport(frames: Option<u32>, seconds: Option<f64>) -> TeleportRecord {
         TeleportRecord {
