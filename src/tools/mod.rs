@@ -54,16 +54,10 @@ pub fn camera_path(
     use anyhow::Context;
     match name {
         Some(name) => world.manifest.path(name).cloned().with_context(|| {
-            let names: Vec<&str> = world
-                .manifest
-                .paths
-                .iter()
-                .map(|p| p.name.as_str())
-                .collect();
             format!(
                 "world {} has no camera path {name:?} (it has: {})",
                 location.display(),
-                names.join(", ")
+                crate::world::name_list(world.manifest.paths.iter().map(|p| p.name.as_str()))
             )
         }),
         None => world

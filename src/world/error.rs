@@ -234,7 +234,7 @@ pub enum WorldError {
         field: String,
         /// The name referred to.
         name: String,
-        /// The scenes the world has, comma-separated.
+        /// The scenes the world has (see [`crate::world::name_list`]).
         available: String,
     },
 

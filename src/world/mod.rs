@@ -51,6 +51,23 @@ pub use tile::{Bounds, Pyramid, TileId};
 /// Deep) to 8,849 m (Everest); a height beyond this range is a wrong offset or scale.
 pub const PLAUSIBLE_HEIGHTS_M: [f64; 2] = [-12_000.0, 10_000.0];
 
+/// Names listed in a message: the first dozen, then how many more (a manifest may name
+/// thousands of paths or scenes, and an error line should stay readable).
+pub fn name_list<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
+    const SHOWN: usize = 12;
+    let names: Vec<&str> = names.into_iter().collect();
+    let mut text = names
+        .iter()
+        .take(SHOWN)
+        .map(|n| format!("{n:?}"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    if names.len() > SHOWN {
+        text.push_str(&format!(" and {} more", names.len() - SHOWN));
+    }
+    text
+}
+
 /// An opened world: its directory and its validated manifest.
 #[derive(Clone, Debug, PartialEq)]
 pub struct World {
@@ -97,5 +114,18 @@ impl World {
     /// The path to one of a tile's files.
     pub fn tile_path(&self, id: TileId, kind: TileFile) -> PathBuf {
         tile_path(&self.dir, id, kind)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_name_list_shows_a_dozen_and_counts_the_rest() {
+        assert_eq!(super::name_list(["tour", "meadow"]), "\"tour\", \"meadow\"");
+        let many: Vec<String> = (0..40_000).map(|i| format!("p{i}")).collect();
+        let text = super::name_list(many.iter().map(String::as_str));
+        assert!(text.starts_with("\"p0\", \"p1\""), "{text}");
+        assert!(text.ends_with("\"p11\" and 39988 more"), "{text}");
+        assert!(text.len() < 120, "{text}");
     }
 }

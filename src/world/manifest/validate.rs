@@ -418,12 +418,13 @@ impl Manifest {
             v.non_negative(&field("blend_s"), key.blend_s)?;
             v.at_most(&field("blend_s"), key.blend_s, MAX_TIME_S, " s")?;
             if self.wind_scene(&key.scene).is_none() {
-                let names: Vec<&str> = self.wind_scenes.iter().map(|s| s.name.as_str()).collect();
                 return Err(WorldError::UnknownWindSceneRef {
                     path: v.path.to_path_buf(),
                     field: field("scene"),
                     name: key.scene.clone(),
-                    available: names.join(", "),
+                    available: crate::world::name_list(
+                        self.wind_scenes.iter().map(|s| s.name.as_str()),
+                    ),
                 });
             }
             if ki > 0 {
