@@ -53,16 +53,28 @@ pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<
         "method", "RMSE m", "max m", "slope deg", "bias deg", "rough", "ms/tile"
     );
     for r in &report.results {
+        let rough = if r.roughness_ratio.is_nan() {
+            "-".to_owned()
+        } else {
+            format!("{:.3}", r.roughness_ratio)
+        };
         println!(
-            "{:<22} {:>9.3} {:>9.2} {:>10.3} {:>10.3} {:>9.3} {:>11.4}  {}",
+            "{:<22} {:>9.3} {:>9.2} {:>10.3} {:>10.3} {:>9} {:>11.4}  {}",
             r.method,
             r.rmse_m,
             r.max_m,
             r.slope_rmse_deg,
             r.slope_bias_deg,
-            r.roughness_ratio,
+            rough,
             r.ms_per_tile,
             r.parameters()
+        );
+    }
+    if report.results.iter().any(|r| r.roughness_ratio.is_nan()) {
+        println!(
+            "roughness: not measured, the DEM is smoother than the {} mm of curvature a ratio \
+             is measured against (a plane)",
+            verdant::tools::eval_derive::MIN_ROUGHNESS_M * 1e3
         );
     }
     if let Some(fit) = report.calibration() {

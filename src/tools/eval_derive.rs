@@ -233,7 +233,9 @@ pub struct MethodResult {
     pub slope_rmse_deg: f64,
     /// Mean slope of the result minus the truth's, degrees (negative: flattened).
     pub slope_bias_deg: f64,
-    /// Spread of the Laplacian relative to the truth's (1 = as rough as the truth).
+    /// Spread of the Laplacian relative to the truth's (1 = as rough as the truth); NaN where
+    /// the truth has no roughness to compare with (a spread under [`MIN_ROUGHNESS_M`]: a
+    /// plane, a constant).
     pub roughness_ratio: f64,
     /// CPU time per derived 133 x 133 tile, milliseconds (median of repeats).
     pub ms_per_tile: f64,
@@ -342,7 +344,7 @@ pub fn evaluate(truth: &Grid, factor: usize, method: DeriveMethod, repeats: usiz
         max_m: max,
         slope_rmse_deg: (slope_se / n).sqrt(),
         slope_bias_deg: (slope_sum_f - slope_sum_t) / n,
-        roughness_ratio: spread(&lap_f) / spread(&lap_t).max(1e-12),
+        roughness_ratio: roughness_ratio(spread(&lap_f), spread(&lap_t)),
         ms_per_tile: ms / tiles,
         detail,
         fit: None,
@@ -453,6 +455,19 @@ pub fn legacy_method() -> DeriveMethod {
     DeriveMethod::InheritedDetail(LEGACY_DETAIL)
 }
 
+/// The least spread of the truth's Laplacian (metres) against which a roughness ratio is
+/// measured: a millimetre, below any DEM's quantisation; a smoother truth (a plane, whose
+/// Laplacian is rounding noise) has no roughness to be a ratio of.
+pub const MIN_ROUGHNESS_M: f64 = 1e-3;
+
+fn roughness_ratio(result: f64, truth: f64) -> f64 {
+    if truth >= MIN_ROUGHNESS_M {
+        result / truth
+    } else {
+        f64::NAN
+    }
+}
+
 /// Name of the runtime's method in a calibrated world (what charts and tables mark).
 pub const RUNTIME_METHOD: &str = "calibrated";
 
@@ -467,7 +482,12 @@ pub fn joint_front(results: &[MethodResult]) -> Vec<usize> {
                 r.rmse_m,
                 r.slope_rmse_deg,
                 r.slope_bias_deg.abs(),
-                (1.0 - r.roughness_ratio).abs(),
+                // Not measured (a truth without roughness): the same for every method.
+                if r.roughness_ratio.is_nan() {
+                    0.0
+                } else {
+                    (1.0 - r.roughness_ratio).abs()
+                },
             ]
         })
         .collect();
@@ -769,6 +789,41 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A plane has no roughness: no method's roughness is a ratio of it (it was 3e9 of the
+    /// plane's rounding noise), and the front is drawn from the other measures.
+    #[test]
+    fn a_plane_has_no_roughness_ratio() {
+        let (w, h) = (65, 49);
+        let plane = Grid {
+            width: w,
+            height: h,
+            cell: (30.0, 30.0),
+            data: (0..w * h).map(|k| 10.0 * (k % w) as f32).collect(),
+        };
+        let results: Vec<MethodResult> = [
+            DeriveMethod::Bilinear,
+            DeriveMethod::Bicubic,
+            DeriveMethod::BicubicDetail(0.25),
+        ]
+        .iter()
+        .map(|&m| evaluate(&plane, 4, m, 1))
+        .collect();
+        for r in &results {
+            assert!(
+                r.roughness_ratio.is_nan(),
+                "{}: {}",
+                r.method,
+                r.roughness_ratio
+            );
+        }
+        assert!(!joint_front(&results).is_empty());
+        assert!(
+            evaluate(&smooth_grid(), 4, DeriveMethod::Bicubic, 1)
+                .roughness_ratio
+                .is_finite()
+        );
     }
 
     #[test]
