@@ -475,7 +475,12 @@ fn eval_derive_refuses_a_bad_factor() {
         ],
         tmp.path(),
     );
-    assert_fails_naming(&out, &["--factor", "3"]);
+    // A usage error, as every option's range is (exit 2).
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    for needle in ["--factor", "3", "a power of two in 2..=64"] {
+        assert!(stderr.contains(needle), "{needle:?}: {stderr}");
+    }
 }
 
 #[test]

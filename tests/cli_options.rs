@@ -213,7 +213,11 @@ fn every_numeric_option_states_its_range_in_its_help() {
             ][..],
         ),
         (&["bench", "blades"][..], &["--field-m", "--counts"][..]),
-        (&["bake"][..], &["--tile-cells", "--levels"][..]),
+        (
+            &["bake"][..],
+            &["--tile-cells", "--levels", "--memory-mib"][..],
+        ),
+        (&["eval", "derive"][..], &["--factor"][..]),
     ] {
         let mut args = sub.to_vec();
         args.push("--help");
@@ -330,4 +334,10 @@ fn options_checked_together_name_the_option() {
     ] {
         assert_refused(args, 1, says);
     }
+    // One option that needs another is a usage error, said by the command line itself.
+    assert_refused(
+        &["view", "--screenshot", "shot.png"],
+        2,
+        &["--screenshot", "--frames"],
+    );
 }

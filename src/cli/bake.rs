@@ -78,9 +78,9 @@ pub(crate) struct BakeArgs {
     /// with its world.toml last. Refused while any shard is not done.
     #[arg(long, value_name = "N")]
     pub(crate) finish_shards: Option<u32>,
-    /// The most memory the bake may hold, MiB: it reads a mosaic's files a chunk at a time and
-    /// makes the finer levels block by block, so any world bakes within it (a single DEM file
-    /// is held whole and counts against it).
+    /// The most memory the bake may hold, MiB, 1..=1048576: it reads a mosaic's files a chunk
+    /// at a time and makes the finer levels block by block, so any world bakes within it (a
+    /// single DEM file is held whole and counts against it).
     #[arg(long, value_name = "MIB", default_value_t = verdant::bake::plan::DEFAULT_MEMORY_MIB,
           value_parser = super::args::parse_mib)]
     pub(crate) memory_mib: u64,

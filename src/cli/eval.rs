@@ -18,9 +18,9 @@ pub(crate) enum EvalCommand {
         /// The DEM's PNG (16-bit, with its JSON sidecar).
         #[arg(long)]
         dem: PathBuf,
-        /// Downsampling factor, a power of two.
-        #[arg(long, default_value_t = 4)]
-        factor: usize,
+        /// Downsampling factor, a power of two in 2..=64.
+        #[arg(long, default_value_t = 4, value_parser = super::args::power_of_two_in(2, 64))]
+        factor: u32,
         /// Output folder for derive.csv and the charts.
         #[arg(long, default_value = "out/eval-derive")]
         out: PathBuf,
@@ -160,7 +160,7 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
 /// Runs the evaluation asked for.
 pub(crate) fn run(what: EvalCommand) -> Result<()> {
     match what {
-        EvalCommand::Derive { dem, factor, out } => eval_derive(&dem, factor, &out),
+        EvalCommand::Derive { dem, factor, out } => eval_derive(&dem, factor as usize, &out),
         EvalCommand::Sway { out } => eval_sway(&out),
     }
 }

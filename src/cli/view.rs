@@ -28,7 +28,7 @@ pub(crate) struct ViewArgs {
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
     pub(crate) frames: Option<u32>,
     /// Write the last of --frames N frames to this PNG file.
-    #[arg(long)]
+    #[arg(long, requires = "frames")]
     pub(crate) screenshot: Option<PathBuf>,
     /// Wind scene to start with (default: the path's wind keys, else breeze).
     #[arg(long)]
