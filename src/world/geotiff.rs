@@ -1190,13 +1190,17 @@ mod tests {
     /// for, not 40 MB (Deflate stops at the limit and refuses the chunk).
     #[test]
     fn a_chunk_decodes_to_at_most_its_size() {
+        let lzw_of = |data: &[u8]| {
+            let mut packed = Vec::new();
+            weezl::encode::Encoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
+                .into_vec(&mut packed)
+                .encode_all(data)
+                .status
+                .unwrap();
+            packed
+        };
         let zeros = vec![0u8; 40 << 20];
-        let mut lzw = Vec::new();
-        weezl::encode::Encoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
-            .into_vec(&mut lzw)
-            .encode_all(&zeros)
-            .status
-            .unwrap();
+        let lzw = lzw_of(&zeros);
         assert!(lzw.len() < zeros.len() / 100, "{}", lzw.len());
         let deflate = miniz_oxide::deflate::compress_to_vec_zlib(&zeros, 6);
         assert_eq!(Codec::Lzw.decode(&lzw, 4096).unwrap(), vec![0u8; 4096]);
@@ -1206,12 +1210,7 @@ mod tests {
         // Whole, short and cut-off streams as before: all of a small one, an error for codes
         // that end without their end code.
         let small: Vec<u8> = (0..3000u32).map(|i| (i * 7 % 251) as u8).collect();
-        let mut packed = Vec::new();
-        weezl::encode::Encoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8)
-            .into_vec(&mut packed)
-            .encode_all(&small)
-            .status
-            .unwrap();
+        let packed = lzw_of(&small);
         assert_eq!(Codec::Lzw.decode(&packed, 3000).unwrap(), small);
         assert_eq!(Codec::Lzw.decode(&packed, 100_000).unwrap(), small);
         let cut = Codec::Lzw
