@@ -635,6 +635,122 @@ fn the_server_streams_files_decodes_names_and_checks_its_world_at_the_start() {
     assert!(err.contains("a symlink out of the folder"), "{err}");
 }
 
+/// One request to `addr`, answered within 5 s: the answer's head and body.
+fn ask_server(addr: std::net::SocketAddr, request: &str) -> (String, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    s.write_all(request.as_bytes()).unwrap();
+    let mut all = Vec::new();
+    s.read_to_end(&mut all)
+        .unwrap_or_else(|e| panic!("{request:?}: no answer: {e}"));
+    let split = all
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .unwrap_or_else(|| panic!("{request:?}: answered {all:?}"));
+    (
+        String::from_utf8_lossy(&all[..split]).into_owned(),
+        all[split + 4..].to_vec(),
+    )
+}
+
+/// A file dated 1960, which an HTTP date cannot write, is served without a `Last-Modified` and with an `ETag` of its own, never a panic: asked 20 times (more than the
+/// server has workers), it is answered every time, and so is another file after it.
+#[test]
+fn files_dated_before_1970_are_served_and_cost_no_worker() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let date = |name: &str, body: &str, t: std::time::SystemTime| {
+        std::fs::write(root.join(name), body).unwrap();
+        let f = std::fs::File::options()
+            .write(true)
+            .open(root.join(name))
+            .unwrap();
+        f.set_modified(t).unwrap();
+    };
+    let epoch = std::time::UNIX_EPOCH;
+    date(
+        "old.txt",
+        "sixties",
+        epoch - Duration::from_secs(315_619_200),
+    );
+    date(
+        "older.txt",
+        "fifties",
+        epoch - Duration::from_secs(500_000_000),
+    );
+    std::fs::write(root.join("new.txt"), "today").unwrap();
+    let server = WorldServer::start_folder(root, "127.0.0.1:0").unwrap();
+    let get = |path: &str| {
+        ask_server(
+            server.addr(),
+            &format!("GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"),
+        )
+    };
+    let etag = |head: &str| {
+        head.lines()
+            .find_map(|l| l.strip_prefix("ETag: "))
+            .unwrap_or_else(|| panic!("no ETag: {head}"))
+            .to_string()
+    };
+    for _ in 0..20 {
+        let (head, body) = get("/old.txt");
+        assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+        assert!(!head.contains("Last-Modified"), "{head}");
+        assert_eq!(body, b"sixties");
+    }
+    let (old, _) = get("/old.txt");
+    let (older, _) = get("/older.txt");
+    assert_ne!(etag(&old), etag(&older), "two pre-1970 files of one length");
+    // Revalidation by the tag still works for them; by a date, never.
+    let (head, _) = ask_server(
+        server.addr(),
+        &format!(
+            "GET /old.txt HTTP/1.1\r\nHost: x\r\nIf-None-Match: {}\r\n\r\n",
+            etag(&old)
+        ),
+    );
+    assert!(head.starts_with("HTTP/1.1 304"), "{head}");
+    let (head, _) = ask_server(
+        server.addr(),
+        "GET /old.txt HTTP/1.1\r\nHost: x\r\nIf-Modified-Since: Sun, 06 Nov 1994 08:49:37 GMT\r\n\r\n",
+    );
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    let (head, body) = get("/new.txt");
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    assert!(head.contains("Last-Modified: "), "{head}");
+    assert_eq!(body, b"today");
+}
+
+/// `Range` as RFC 9110 has it: the unit in any case, another unit or several ranges answered
+/// with the whole file (`200`), and only one well-formed range of bytes that misses the file
+/// answered `416`.
+#[test]
+fn the_server_ignores_ranges_it_does_not_serve_and_refuses_only_those_past_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("ten.bin"), b"0123456789").unwrap();
+    let server = WorldServer::start_folder(dir.path(), "127.0.0.1:0").unwrap();
+    let range = |value: &str| {
+        ask_server(
+            server.addr(),
+            &format!("GET /ten.bin HTTP/1.1\r\nHost: x\r\nRange: {value}\r\n\r\n"),
+        )
+    };
+    let (head, body) = range("BYTES=0-1");
+    assert!(head.starts_with("HTTP/1.1 206"), "{head}");
+    assert!(head.contains("Content-Range: bytes 0-1/10"), "{head}");
+    assert_eq!(body, b"01");
+    for whole in ["items=0-1", "bytes=0-1,4-5", "bytes=x-y"] {
+        let (head, body) = range(whole);
+        assert!(head.starts_with("HTTP/1.1 200"), "{whole}: {head}");
+        assert!(!head.contains("Content-Range"), "{whole}: {head}");
+        assert_eq!(body, b"0123456789", "{whole}");
+    }
+    let (head, body) = range("bytes=10-");
+    assert!(head.starts_with("HTTP/1.1 416"), "{head}");
+    assert!(head.contains("Content-Range: bytes */10"), "{head}");
+    assert!(body.is_empty());
+}
+
 /// What the server holds is bounded whatever its clients do: connections past its workers and
 /// queue are answered `503` at once, a client that sends nothing or trickles its request is
 /// closed when the head's time is up (and its place freed), a head past its bytes is answered
