@@ -1456,6 +1456,53 @@ fn redirects_are_bounded_and_a_move_to_another_host_is_warned() {
     assert_eq!(endless.asked.load(Ordering::SeqCst), 6, "{e}");
 }
 
+/// A world's address with a query (a signed URL's token) and a fragment, its scheme in upper
+/// case: every file's name goes onto the path, the query after it on every request, and the
+/// fragment nowhere.
+#[test]
+fn file_names_go_onto_the_path_and_every_request_keeps_the_query() {
+    let asked = Arc::new(Mutex::new(Vec::<String>::new()));
+    let a = asked.clone();
+    let server = RawServer::start(move |target, stream, _| {
+        a.lock().unwrap().push(target.to_string());
+        match target
+            .strip_suffix("?sig=A%2Fb&x=1")
+            .and_then(|p| p.strip_prefix("/Worlds/W/"))
+        {
+            Some(name) => world_file(stream, name),
+            None => stream.write_all(b"HTTP/1.1 403 Forbidden\r\nContent-Length: 0\r\n\r\n"),
+        }
+    });
+    let url = format!("HTTP://{}/Worlds/W?sig=A%2Fb&x=1#view", server.authority);
+    let (world, source) = HttpSource::open(&url, quick_options()).unwrap();
+    let local = World::open(&common::default_world()).unwrap();
+    assert_eq!(world.manifest, local.manifest);
+    let id = TileId::new(0, 0, 0);
+    assert_eq!(source.load(id).unwrap(), local.load_tile(id).unwrap());
+    let name = Path::new("tiles/L0/0_0.type.png");
+    assert_eq!(
+        source.read_file(name, 1 << 20).unwrap(),
+        std::fs::read(common::default_world().join(name)).unwrap()
+    );
+    let asked = asked.lock().unwrap().clone();
+    assert_eq!(asked[0], "/Worlds/W/world.toml?sig=A%2Fb&x=1", "{asked:?}");
+    assert_eq!(
+        asked[1], "/Worlds/W/tiles/L0/0_0.height.exr?sig=A%2Fb&x=1",
+        "{asked:?}"
+    );
+    assert_eq!(asked.len(), 5, "{asked:?}");
+    assert!(
+        asked
+            .iter()
+            .all(|t| t.starts_with("/Worlds/W/") && t.ends_with("?sig=A%2Fb&x=1")),
+        "{asked:?}"
+    );
+    assert_eq!(
+        source.base_url(),
+        format!("http://{}/Worlds/W/", server.authority)
+    );
+}
+
 /// Through the proxy at rate 0, every file passes unchanged: from a server under a path (the
 /// world at `/santa-cruz/`), with `Last-Modified` revalidation (a `304`) through it.
 #[test]
