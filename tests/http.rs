@@ -1540,6 +1540,61 @@ fn the_fault_proxy_at_rate_zero_passes_everything_through() {
     );
 }
 
+/// A soak with faults of a world over HTTP where no server listens reports what a soak without
+/// faults does: the user's address and the connection refused, not the fault proxy's `502` at
+/// an address of its own.
+#[test]
+fn a_soak_with_faults_reports_the_worlds_address_and_its_real_error() {
+    let nowhere = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}/", nowhere.local_addr().unwrap());
+    drop(nowhere);
+    let tmp = tempfile::tempdir().unwrap();
+    let soak = |faults| {
+        let options = verdant::tools::SoakOptions {
+            world: PathBuf::from(&url),
+            http: HttpOptions {
+                retries: 0,
+                ..quick_options()
+            },
+            out: tmp.path().join(format!("soak-{faults}")),
+            faults,
+            ..Default::default()
+        };
+        format!(
+            "{:#}",
+            verdant::tools::run_soak(&options, &mut |_, _| {}).unwrap_err()
+        )
+    };
+    let (without, with) = (soak(0.0), soak(0.2));
+    assert!(
+        without.contains(&format!("{url}world.toml")) && without.contains("refused"),
+        "{without}"
+    );
+    assert_eq!(with, without);
+}
+
+/// The proxy keeps the query of the world's address (a signed URL's token) on every request it
+/// passes upstream.
+#[test]
+fn the_fault_proxy_keeps_the_query_of_the_worlds_address() {
+    let asked = Arc::new(Mutex::new(Vec::<String>::new()));
+    let a = asked.clone();
+    let server = RawServer::start(move |target, stream, _| {
+        a.lock().unwrap().push(target.to_string());
+        match target.strip_suffix("?sig=1") {
+            Some(name) => world_file(stream, name.trim_start_matches("/w/")),
+            None => stream.write_all(b"HTTP/1.1 403 Forbidden\r\nContent-Length: 0\r\n\r\n"),
+        }
+    });
+    let proxy = FaultProxy::start(&format!("{}w?sig=1", server.url), 0.0, 1).unwrap();
+    let (world, _) = HttpSource::open(&proxy.url(), quick_options()).unwrap();
+    assert_eq!(
+        world.manifest,
+        World::open(&common::default_world()).unwrap().manifest
+    );
+    assert_eq!(*asked.lock().unwrap(), ["/w/world.toml?sig=1"]);
+}
+
 /// The fault a client error is, by its typed error.
 fn fault_of(e: &verdant::world::WorldError) -> Fault {
     let verdant::world::WorldError::Fetch(inner) = e else {

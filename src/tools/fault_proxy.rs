@@ -159,6 +159,9 @@ struct Upstream {
     authority: String,
     /// The world's path, starting and ending with `/`.
     base: String,
+    /// The world address's query without its `?` (a signed URL's token), sent on every request
+    /// after the client's own; empty if none.
+    query: String,
 }
 
 impl Upstream {
@@ -170,6 +173,8 @@ impl Upstream {
             .with_context(|| {
                 format!("{url}: the upstream must be a plain http://HOST[:PORT]/PATH/")
             })?;
+        let rest = rest.split('#').next().unwrap_or(rest);
+        let (rest, query) = rest.split_once('?').unwrap_or((rest, ""));
         let (authority, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
         if authority.is_empty() {
             bail!("{url}: the upstream address has no host");
@@ -194,6 +199,7 @@ impl Upstream {
             addrs,
             authority: authority.to_string(),
             base,
+            query: query.to_string(),
         })
     }
 
@@ -531,6 +537,11 @@ fn forward(shared: &Shared, head: &str, relative: &str, query: &str) -> std::io:
         .next()
         .and_then(|l| l.split_whitespace().next())
         .unwrap_or("GET");
+    let query = match (query.strip_prefix('?').unwrap_or(query), up.query.as_str()) {
+        ("", "") => String::new(),
+        (q, "") | ("", q) => format!("?{q}"),
+        (client, world) => format!("?{world}&{client}"),
+    };
     let mut request = format!("{method} {}{relative}{query} HTTP/1.1\r\n", up.base);
     for line in lines.take_while(|l| !l.is_empty()) {
         let name = line.split(':').next().unwrap_or("").trim();
@@ -704,8 +715,17 @@ mod tests {
         assert_eq!(up.authority, "127.0.0.1:8080");
         assert_eq!(up.base, "/worlds/santa-cruz/");
         assert_eq!(up.addrs, vec!["127.0.0.1:8080".parse().unwrap()]);
+        assert_eq!(up.query, "");
         let up = Upstream::parse("HTTP://127.0.0.1:9/").unwrap();
         assert_eq!(up.base, "/");
+        let up = Upstream::parse("http://127.0.0.1:9?sig=a%2F#top").unwrap();
+        assert_eq!(
+            (up.authority.as_str(), up.base.as_str()),
+            ("127.0.0.1:9", "/")
+        );
+        assert_eq!(up.query, "sig=a%2F");
+        let up = Upstream::parse("http://127.0.0.1:9/w/?x=1&y=2#f?z").unwrap();
+        assert_eq!((up.base.as_str(), up.query.as_str()), ("/w/", "x=1&y=2"));
         assert_eq!(
             Upstream::parse("http://127.0.0.1").unwrap().addrs[0].port(),
             80
