@@ -1669,6 +1669,71 @@ fn every_tile_request_faults_at_rate_one_each_kind_a_named_error() {
     assert!(start.elapsed() < Duration::from_secs(2));
 }
 
+/// A ranged read sets aside no more than it asked for, and little of that before the bytes
+/// come: a server that claims a file of 16 EiB and answers a read of 8 EiB with a matching
+/// `Content-Length`, then a few bytes, is a body cut short (the client once reserved the whole
+/// `Content-Length` at once: a panic here, an abort for one a little smaller, and memory
+/// promised away for one smaller still). A reply longer than asked is refused.
+#[test]
+fn a_ranged_read_allocates_no_more_than_it_asked_for() {
+    use verdant::stream::http::RangeFile;
+    const CLAIMED: u64 = u64::MAX;
+    const HUGE: u64 = 1 << 63;
+    let reads = Arc::new(Mutex::new(HashMap::<String, u32>::new()));
+    let server = RawServer::start(move |path, stream, _| {
+        let nth = {
+            let mut reads = reads.lock().unwrap();
+            let n = reads.entry(path.to_string()).or_insert(0);
+            *n += 1;
+            *n
+        };
+        if nth == 1 {
+            // RangeFile::open asks for the first byte, to learn the length.
+            return write!(
+                stream,
+                "HTTP/1.1 206 Partial Content\r\nContent-Range: bytes 0-0/{CLAIMED}\r\n\
+                 Content-Length: 1\r\n\r\nx"
+            );
+        }
+        match path {
+            "/huge" => {
+                write!(
+                    stream,
+                    "HTTP/1.1 206 Partial Content\r\nContent-Range: bytes 0-{}/{CLAIMED}\r\n\
+                     Content-Length: {HUGE}\r\n\r\n",
+                    HUGE - 1
+                )?;
+                stream.write_all(&[7; 1000])
+            }
+            "/long" => stream.write_all(
+                b"HTTP/1.1 206 Partial Content\r\nContent-Range: bytes 0-9/100\r\n\
+                  Content-Length: 20\r\n\r\n01234567890123456789",
+            ),
+            _ => stream.write_all(
+                b"HTTP/1.1 206 Partial Content\r\nContent-Range: bytes 0-9/100\r\n\
+                  Connection: close\r\n\r\n01234567890123456789",
+            ),
+        }
+    });
+    let options = HttpOptions {
+        retries: 0,
+        ..quick_options()
+    };
+    let huge = RangeFile::open(&format!("{}huge", server.url), options.clone()).unwrap();
+    assert_eq!(huge.len(), CLAIMED);
+    let e = huge.read_at(0, HUGE).unwrap_err().to_string();
+    assert!(e.contains("huge") && e.contains("cut short"), "{e}");
+    for longer in ["long", "unsized"] {
+        let file = RangeFile::open(&format!("{}{longer}", server.url), options.clone()).unwrap();
+        let e = file.read_at(0, 10).unwrap_err().to_string();
+        assert!(
+            e.contains(longer) && e.contains("more than the 10")
+                || e.contains("longer than the 10"),
+            "{longer}: {e}"
+        );
+    }
+}
+
 /// A chunked body whose connection closes mid-chunk is a body cut short, retried like one (the
 /// client once took the part it had for the whole file).
 #[test]

@@ -14,8 +14,9 @@
 //!
 //! Bounded: connections are served by a fixed pool of [`FaultOptions::workers`] threads from a
 //! queue of twice as many; when both are full, new connections wait in the kernel's backlog.
+//! Requests are counted for at most [`MAX_ASKED_PATHS`] paths.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::io::{Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream, ToSocketAddrs};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -38,6 +39,12 @@ const UPSTREAM_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// The most bytes of an upstream body held for a short-body fault (a tile file is far smaller).
 const MAX_HELD_BODY: usize = 16 << 20;
+
+/// The most tile paths whose requests the proxy counts (for the choice of each request's
+/// fault); past it the path asked first is forgotten, and its next request counts as its first
+/// again. A soak asks the same few thousand files over and over; a client that asks ever new
+/// paths does not grow the proxy.
+pub const MAX_ASKED_PATHS: usize = 16 << 10;
 
 /// The longest stall allowed, and so the longest client deadline a stall outlasts: one hour.
 pub const MAX_STALL: Duration = Duration::from_secs(3600);
@@ -226,7 +233,33 @@ struct Shared {
     stop: AtomicBool,
     counts: Mutex<FaultCounts>,
     /// Times each path has been asked, so that each request of a path has its own choice.
-    asked: Mutex<HashMap<String, u64>>,
+    asked: Mutex<AskedPaths>,
+}
+
+/// Times each tile path has been asked, for at most [`MAX_ASKED_PATHS`] paths.
+#[derive(Default)]
+struct AskedPaths {
+    counts: HashMap<String, u64>,
+    /// The paths in `counts`, first asked first: the next to forget at the front.
+    order: VecDeque<String>,
+}
+
+impl AskedPaths {
+    /// Counts one more request of `path` and returns its number (1 for the first).
+    fn ask(&mut self, path: &str) -> u64 {
+        if let Some(n) = self.counts.get_mut(path) {
+            *n += 1;
+            return *n;
+        }
+        if self.order.len() >= MAX_ASKED_PATHS
+            && let Some(oldest) = self.order.pop_front()
+        {
+            self.counts.remove(&oldest);
+        }
+        self.order.push_back(path.to_string());
+        self.counts.insert(path.to_string(), 1);
+        1
+    }
 }
 
 /// A running fault-injecting proxy; see the module docs. Dropping it stops it (stalls end,
@@ -288,7 +321,7 @@ impl FaultProxy {
             options,
             stop: AtomicBool::new(false),
             counts: Mutex::new(FaultCounts::default()),
-            asked: Mutex::new(HashMap::new()),
+            asked: Mutex::new(AskedPaths::default()),
         });
         let (tx, rx) = sync_channel::<TcpStream>(2 * workers);
         let rx = Arc::new(Mutex::new(rx));
@@ -417,12 +450,11 @@ fn serve(shared: &Shared, mut client: TcpStream) -> std::io::Result<()> {
         .iter()
         .any(|p| relative.starts_with(p.as_str()));
     let fault = if relative.starts_with("tiles/") && !spared {
-        let nth = {
-            let mut asked = shared.asked.lock().unwrap_or_else(|e| e.into_inner());
-            let n = asked.entry(path.to_string()).or_insert(0);
-            *n += 1;
-            *n
-        };
+        let nth = shared
+            .asked
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .ask(path);
         choose(shared.options.seed, path, nth, shared.options.rate)
     } else {
         None
@@ -696,6 +728,25 @@ mod tests {
                 .count();
             assert!((300..500).contains(&n), "{kind:?}: {n} of 2000");
         }
+    }
+
+    /// Requests of ever new paths keep at most [`MAX_ASKED_PATHS`] counts, forgetting the path
+    /// asked first; a path still counted goes on from its count.
+    #[test]
+    fn the_paths_counted_are_bounded() {
+        let mut asked = AskedPaths::default();
+        let path = |i: usize| format!("/tiles/L9/{i}_0.height.exr");
+        assert_eq!((asked.ask(&path(0)), asked.ask(&path(0))), (1, 2));
+        for i in 1..MAX_ASKED_PATHS + 100 {
+            assert_eq!(asked.ask(&path(i)), 1);
+        }
+        assert_eq!(asked.counts.len(), MAX_ASKED_PATHS);
+        assert_eq!(asked.order.len(), MAX_ASKED_PATHS);
+        let last = path(MAX_ASKED_PATHS + 99);
+        assert_eq!(asked.ask(&last), 2, "still counted");
+        // The first 100 are forgotten: counted from 1 again.
+        assert_eq!(asked.ask(&path(0)), 1);
+        assert_eq!(asked.counts.len(), MAX_ASKED_PATHS);
     }
 
     #[test]
