@@ -635,6 +635,122 @@ fn the_server_streams_files_decodes_names_and_checks_its_world_at_the_start() {
     assert!(err.contains("a symlink out of the folder"), "{err}");
 }
 
+/// One request to `addr`, answered within 5 s: the answer's head and body.
+fn ask_server(addr: std::net::SocketAddr, request: &str) -> (String, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    s.write_all(request.as_bytes()).unwrap();
+    let mut all = Vec::new();
+    s.read_to_end(&mut all)
+        .unwrap_or_else(|e| panic!("{request:?}: no answer: {e}"));
+    let split = all
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .unwrap_or_else(|| panic!("{request:?}: answered {all:?}"));
+    (
+        String::from_utf8_lossy(&all[..split]).into_owned(),
+        all[split + 4..].to_vec(),
+    )
+}
+
+/// A file dated 1960, which an HTTP date cannot write, is served without a `Last-Modified` and with an `ETag` of its own, never a panic: asked 20 times (more than the
+/// server has workers), it is answered every time, and so is another file after it.
+#[test]
+fn files_dated_before_1970_are_served_and_cost_no_worker() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let date = |name: &str, body: &str, t: std::time::SystemTime| {
+        std::fs::write(root.join(name), body).unwrap();
+        let f = std::fs::File::options()
+            .write(true)
+            .open(root.join(name))
+            .unwrap();
+        f.set_modified(t).unwrap();
+    };
+    let epoch = std::time::UNIX_EPOCH;
+    date(
+        "old.txt",
+        "sixties",
+        epoch - Duration::from_secs(315_619_200),
+    );
+    date(
+        "older.txt",
+        "fifties",
+        epoch - Duration::from_secs(500_000_000),
+    );
+    std::fs::write(root.join("new.txt"), "today").unwrap();
+    let server = WorldServer::start_folder(root, "127.0.0.1:0").unwrap();
+    let get = |path: &str| {
+        ask_server(
+            server.addr(),
+            &format!("GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"),
+        )
+    };
+    let etag = |head: &str| {
+        head.lines()
+            .find_map(|l| l.strip_prefix("ETag: "))
+            .unwrap_or_else(|| panic!("no ETag: {head}"))
+            .to_string()
+    };
+    for _ in 0..20 {
+        let (head, body) = get("/old.txt");
+        assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+        assert!(!head.contains("Last-Modified"), "{head}");
+        assert_eq!(body, b"sixties");
+    }
+    let (old, _) = get("/old.txt");
+    let (older, _) = get("/older.txt");
+    assert_ne!(etag(&old), etag(&older), "two pre-1970 files of one length");
+    // Revalidation by the tag still works for them; by a date, never.
+    let (head, _) = ask_server(
+        server.addr(),
+        &format!(
+            "GET /old.txt HTTP/1.1\r\nHost: x\r\nIf-None-Match: {}\r\n\r\n",
+            etag(&old)
+        ),
+    );
+    assert!(head.starts_with("HTTP/1.1 304"), "{head}");
+    let (head, _) = ask_server(
+        server.addr(),
+        "GET /old.txt HTTP/1.1\r\nHost: x\r\nIf-Modified-Since: Sun, 06 Nov 1994 08:49:37 GMT\r\n\r\n",
+    );
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    let (head, body) = get("/new.txt");
+    assert!(head.starts_with("HTTP/1.1 200"), "{head}");
+    assert!(head.contains("Last-Modified: "), "{head}");
+    assert_eq!(body, b"today");
+}
+
+/// `Range` as RFC 9110 has it: the unit in any case, another unit or several ranges answered
+/// with the whole file (`200`), and only one well-formed range of bytes that misses the file
+/// answered `416`.
+#[test]
+fn the_server_ignores_ranges_it_does_not_serve_and_refuses_only_those_past_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("ten.bin"), b"0123456789").unwrap();
+    let server = WorldServer::start_folder(dir.path(), "127.0.0.1:0").unwrap();
+    let range = |value: &str| {
+        ask_server(
+            server.addr(),
+            &format!("GET /ten.bin HTTP/1.1\r\nHost: x\r\nRange: {value}\r\n\r\n"),
+        )
+    };
+    let (head, body) = range("BYTES=0-1");
+    assert!(head.starts_with("HTTP/1.1 206"), "{head}");
+    assert!(head.contains("Content-Range: bytes 0-1/10"), "{head}");
+    assert_eq!(body, b"01");
+    for whole in ["items=0-1", "bytes=0-1,4-5", "bytes=x-y"] {
+        let (head, body) = range(whole);
+        assert!(head.starts_with("HTTP/1.1 200"), "{whole}: {head}");
+        assert!(!head.contains("Content-Range"), "{whole}: {head}");
+        assert_eq!(body, b"0123456789", "{whole}");
+    }
+    let (head, body) = range("bytes=10-");
+    assert!(head.starts_with("HTTP/1.1 416"), "{head}");
+    assert!(head.contains("Content-Range: bytes */10"), "{head}");
+    assert!(body.is_empty());
+}
+
 /// What the server holds is bounded whatever its clients do: connections past its workers and
 /// queue are answered `503` at once, a client that sends nothing or trickles its request is
 /// closed when the head's time is up (and its place freed), a head past its bytes is answered
@@ -1340,6 +1456,53 @@ fn redirects_are_bounded_and_a_move_to_another_host_is_warned() {
     assert_eq!(endless.asked.load(Ordering::SeqCst), 6, "{e}");
 }
 
+/// A world's address with a query (a signed URL's token) and a fragment, its scheme in upper
+/// case: every file's name goes onto the path, the query after it on every request, and the
+/// fragment nowhere.
+#[test]
+fn file_names_go_onto_the_path_and_every_request_keeps_the_query() {
+    let asked = Arc::new(Mutex::new(Vec::<String>::new()));
+    let a = asked.clone();
+    let server = RawServer::start(move |target, stream, _| {
+        a.lock().unwrap().push(target.to_string());
+        match target
+            .strip_suffix("?sig=A%2Fb&x=1")
+            .and_then(|p| p.strip_prefix("/Worlds/W/"))
+        {
+            Some(name) => world_file(stream, name),
+            None => stream.write_all(b"HTTP/1.1 403 Forbidden\r\nContent-Length: 0\r\n\r\n"),
+        }
+    });
+    let url = format!("HTTP://{}/Worlds/W?sig=A%2Fb&x=1#view", server.authority);
+    let (world, source) = HttpSource::open(&url, quick_options()).unwrap();
+    let local = World::open(&common::default_world()).unwrap();
+    assert_eq!(world.manifest, local.manifest);
+    let id = TileId::new(0, 0, 0);
+    assert_eq!(source.load(id).unwrap(), local.load_tile(id).unwrap());
+    let name = Path::new("tiles/L0/0_0.type.png");
+    assert_eq!(
+        source.read_file(name, 1 << 20).unwrap(),
+        std::fs::read(common::default_world().join(name)).unwrap()
+    );
+    let asked = asked.lock().unwrap().clone();
+    assert_eq!(asked[0], "/Worlds/W/world.toml?sig=A%2Fb&x=1", "{asked:?}");
+    assert_eq!(
+        asked[1], "/Worlds/W/tiles/L0/0_0.height.exr?sig=A%2Fb&x=1",
+        "{asked:?}"
+    );
+    assert_eq!(asked.len(), 5, "{asked:?}");
+    assert!(
+        asked
+            .iter()
+            .all(|t| t.starts_with("/Worlds/W/") && t.ends_with("?sig=A%2Fb&x=1")),
+        "{asked:?}"
+    );
+    assert_eq!(
+        source.base_url(),
+        format!("http://{}/Worlds/W/", server.authority)
+    );
+}
+
 /// Through the proxy at rate 0, every file passes unchanged: from a server under a path (the
 /// world at `/santa-cruz/`), with `Last-Modified` revalidation (a `304`) through it.
 #[test]
@@ -1375,6 +1538,61 @@ fn the_fault_proxy_at_rate_zero_passes_everything_through() {
         (requests, requests, 0),
         "{c:?}"
     );
+}
+
+/// A soak with faults of a world over HTTP where no server listens reports what a soak without
+/// faults does: the user's address and the connection refused, not the fault proxy's `502` at
+/// an address of its own.
+#[test]
+fn a_soak_with_faults_reports_the_worlds_address_and_its_real_error() {
+    let nowhere = TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}/", nowhere.local_addr().unwrap());
+    drop(nowhere);
+    let tmp = tempfile::tempdir().unwrap();
+    let soak = |faults| {
+        let options = verdant::tools::SoakOptions {
+            world: PathBuf::from(&url),
+            http: HttpOptions {
+                retries: 0,
+                ..quick_options()
+            },
+            out: tmp.path().join(format!("soak-{faults}")),
+            faults,
+            ..Default::default()
+        };
+        format!(
+            "{:#}",
+            verdant::tools::run_soak(&options, &mut |_, _| {}).unwrap_err()
+        )
+    };
+    let (without, with) = (soak(0.0), soak(0.2));
+    assert!(
+        without.contains(&format!("{url}world.toml")) && without.contains("refused"),
+        "{without}"
+    );
+    assert_eq!(with, without);
+}
+
+/// The proxy keeps the query of the world's address (a signed URL's token) on every request it
+/// passes upstream.
+#[test]
+fn the_fault_proxy_keeps_the_query_of_the_worlds_address() {
+    let asked = Arc::new(Mutex::new(Vec::<String>::new()));
+    let a = asked.clone();
+    let server = RawServer::start(move |target, stream, _| {
+        a.lock().unwrap().push(target.to_string());
+        match target.strip_suffix("?sig=1") {
+            Some(name) => world_file(stream, name.trim_start_matches("/w/")),
+            None => stream.write_all(b"HTTP/1.1 403 Forbidden\r\nContent-Length: 0\r\n\r\n"),
+        }
+    });
+    let proxy = FaultProxy::start(&format!("{}w?sig=1", server.url), 0.0, 1).unwrap();
+    let (world, _) = HttpSource::open(&proxy.url(), quick_options()).unwrap();
+    assert_eq!(
+        world.manifest,
+        World::open(&common::default_world()).unwrap().manifest
+    );
+    assert_eq!(*asked.lock().unwrap(), ["/w/world.toml?sig=1"]);
 }
 
 /// The fault a client error is, by its typed error.
@@ -1449,6 +1667,71 @@ fn every_tile_request_faults_at_rate_one_each_kind_a_named_error() {
     let start = Instant::now();
     drop(proxy);
     assert!(start.elapsed() < Duration::from_secs(2));
+}
+
+/// A ranged read sets aside no more than it asked for, and little of that before the bytes
+/// come: a server that claims a file of 16 EiB and answers a read of 8 EiB with a matching
+/// `Content-Length`, then a few bytes, is a body cut short (the client once reserved the whole
+/// `Content-Length` at once: a panic here, an abort for one a little smaller, and memory
+/// promised away for one smaller still). A reply longer than asked is refused.
+#[test]
+fn a_ranged_read_allocates_no_more_than_it_asked_for() {
+    use verdant::stream::http::RangeFile;
+    const CLAIMED: u64 = u64::MAX;
+    const HUGE: u64 = 1 << 63;
+    let reads = Arc::new(Mutex::new(HashMap::<String, u32>::new()));
+    let server = RawServer::start(move |path, stream, _| {
+        let nth = {
+            let mut reads = reads.lock().unwrap();
+            let n = reads.entry(path.to_string()).or_insert(0);
+            *n += 1;
+            *n
+        };
+        if nth == 1 {
+            // RangeFile::open asks for the first byte, to learn the length.
+            return write!(
+                stream,
+                "HTTP/1.1 206 Partial Content\r\nContent-Range: bytes 0-0/{CLAIMED}\r\n\
+                 Content-Length: 1\r\n\r\nx"
+            );
+        }
+        match path {
+            "/huge" => {
+                write!(
+                    stream,
+                    "HTTP/1.1 206 Partial Content\r\nContent-Range: bytes 0-{}/{CLAIMED}\r\n\
+                     Content-Length: {HUGE}\r\n\r\n",
+                    HUGE - 1
+                )?;
+                stream.write_all(&[7; 1000])
+            }
+            "/long" => stream.write_all(
+                b"HTTP/1.1 206 Partial Content\r\nContent-Range: bytes 0-9/100\r\n\
+                  Content-Length: 20\r\n\r\n01234567890123456789",
+            ),
+            _ => stream.write_all(
+                b"HTTP/1.1 206 Partial Content\r\nContent-Range: bytes 0-9/100\r\n\
+                  Connection: close\r\n\r\n01234567890123456789",
+            ),
+        }
+    });
+    let options = HttpOptions {
+        retries: 0,
+        ..quick_options()
+    };
+    let huge = RangeFile::open(&format!("{}huge", server.url), options.clone()).unwrap();
+    assert_eq!(huge.len(), CLAIMED);
+    let e = huge.read_at(0, HUGE).unwrap_err().to_string();
+    assert!(e.contains("huge") && e.contains("cut short"), "{e}");
+    for longer in ["long", "unsized"] {
+        let file = RangeFile::open(&format!("{}{longer}", server.url), options.clone()).unwrap();
+        let e = file.read_at(0, 10).unwrap_err().to_string();
+        assert!(
+            e.contains(longer) && e.contains("more than the 10")
+                || e.contains("longer than the 10"),
+            "{longer}: {e}"
+        );
+    }
 }
 
 /// A chunked body whose connection closes mid-chunk is a body cut short, retried like one (the

@@ -1,6 +1,8 @@
 //! Worlds streamed over HTTP: [`HttpSource`], a [`TileSource`] that fetches a world's static
 //! files (`world.toml`, `tiles/L{level}/{x}_{y}.{kind}`) from any HTTP server, object store or
-//! CDN, and decodes them with the same checks as files on disk.
+//! CDN, and decodes them with the same checks as files on disk. A file's name goes onto the
+//! address's path; a query in the address (a signed URL's token) is kept on every file's URL,
+//! a fragment dropped, and the scheme and host are taken in any case.
 //!
 //! Each load runs on one of the streamer's blocking threads (at most `max_in_flight` at once),
 //! so the streamer's priorities, its bound on loads in flight and its cancellation apply
@@ -65,6 +67,7 @@ impl RangeFile {
     pub fn open(url: &str, options: HttpOptions) -> Result<RangeFile, WorldError> {
         check_authority(url)?;
         options.validate()?;
+        let url = &WorldUrl::normalize(url);
         let client = client::Client::new(options, None);
         client.fetch_range(url, 1, None, Some([0, 1]))?;
         let len = client.range_total.load(Ordering::Relaxed);
@@ -382,9 +385,59 @@ pub fn is_url(s: &str) -> bool {
     lower.starts_with("http://") || lower.starts_with("https://")
 }
 
+/// A world's address, split so that a file's name can be joined onto it: the name goes onto
+/// the path, and the query (a signed CDN or object-store URL carries its token there) after it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct WorldUrl {
+    /// `http://host[:port]/path/`: the scheme and host in lower case, the path as given and
+    /// ending in `/`.
+    base: String,
+    /// `?query` as given, or empty.
+    query: String,
+}
+
+impl WorldUrl {
+    /// Splits `url` (already checked to be `http://` with a host); its fragment, which names
+    /// nothing on the server, is dropped.
+    fn parse(url: &str) -> WorldUrl {
+        let url = Self::normalize(url);
+        let (path, query) = url.split_at(url.find('?').unwrap_or(url.len()));
+        WorldUrl {
+            base: format!("{}/", path.trim_end_matches('/')),
+            query: if query == "?" { "" } else { query }.to_string(),
+        }
+    }
+
+    /// `url` with its scheme and host in lower case (which they are in any case, RFC 3986 6.2.2.1;
+    /// the client library refuses an upper-case scheme) and without its fragment.
+    fn normalize(url: &str) -> String {
+        let url = url.split('#').next().unwrap_or(url);
+        let Some((scheme, rest)) = url.split_once("://") else {
+            return url.to_string();
+        };
+        let end = rest.find(['/', '?']).unwrap_or(rest.len());
+        let (authority, after) = rest.split_at(end);
+        // The user's name and password, if any, keep their case.
+        let (user, host) = match authority.rsplit_once('@') {
+            Some((user, host)) => (format!("{user}@"), host),
+            None => (String::new(), authority),
+        };
+        format!(
+            "{}://{user}{}{after}",
+            scheme.to_ascii_lowercase(),
+            host.to_ascii_lowercase()
+        )
+    }
+
+    /// The URL of the world's file `name` (relative, `/`-separated, already percent-encoded).
+    fn join(&self, name: &str) -> String {
+        format!("{}{name}{}", self.base, self.query)
+    }
+}
+
 /// A world's tiles fetched over HTTP; see the module docs.
 pub struct HttpSource {
-    base: String,
+    url: WorldUrl,
     manifest: Manifest,
     client: Client,
 }
@@ -392,7 +445,7 @@ pub struct HttpSource {
 impl std::fmt::Debug for HttpSource {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("HttpSource")
-            .field("base", &self.base)
+            .field("base", &self.url.base)
             .field("options", &self.client.options)
             .finish_non_exhaustive()
     }
@@ -419,13 +472,13 @@ impl HttpSource {
         }
         check_authority(url)?;
         options.validate()?;
-        let base = format!("{}/", url.trim_end_matches('/'));
+        let url = WorldUrl::parse(url);
         let cache = match &options.cache {
             Some(c) => Some(Mutex::new(DiskCache::open(c)?)),
             None => None,
         };
         let client = Client::new(options, cache);
-        let manifest_url = format!("{base}world.toml");
+        let manifest_url = url.join("world.toml");
         let bytes = client.fetch(&manifest_url, MAX_MANIFEST_BYTES, None)?;
         let path = Path::new(&manifest_url);
         let text = String::from_utf8(bytes).map_err(|e| WorldError::ManifestSyntax {
@@ -434,22 +487,23 @@ impl HttpSource {
         })?;
         let manifest = Manifest::parse(&text, path)?;
         let world = World {
-            dir: PathBuf::from(base.clone()),
+            dir: PathBuf::from(&url.base),
             manifest: manifest.clone(),
         };
         Ok((
             world,
             HttpSource {
-                base,
+                url,
                 manifest,
                 client,
             },
         ))
     }
 
-    /// The world's address, ending in `/`.
+    /// The world's address, ending in `/`: its scheme and host in lower case, without its query
+    /// (which every file's URL carries) or fragment.
     pub fn base_url(&self) -> &str {
-        &self.base
+        &self.url.base
     }
 
     /// The counters now.
@@ -466,7 +520,7 @@ impl HttpSource {
     /// The URL of one of a tile's files.
     pub fn tile_url(&self, id: TileId, kind: TileFile) -> String {
         let path = crate::world::tile_path(Path::new(""), id, kind);
-        format!("{}{}", self.base, path.to_string_lossy().replace('\\', "/"))
+        self.url.join(&path.to_string_lossy().replace('\\', "/"))
     }
 }
 
@@ -483,8 +537,8 @@ impl TileSource for HttpSource {
         self.load_cancellable(id, &AtomicBool::new(false))
     }
 
-    /// Fetches `{base}{name}`, each part of `name` percent-encoded; a name that leaves the
-    /// world's folder (`..`, an absolute path) is refused without a request.
+    /// Fetches `{base}{name}{query}`, each part of `name` percent-encoded; a name that leaves
+    /// the world's folder (`..`, an absolute path) is refused without a request.
     fn read_file(&self, name: &Path, max: u64) -> Result<Vec<u8>, WorldError> {
         use std::path::Component;
         let mut parts = Vec::new();
@@ -497,7 +551,7 @@ impl TileSource for HttpSource {
                 Component::CurDir => {}
                 _ => {
                     return Err(WorldError::Io {
-                        path: PathBuf::from(format!("{}{}", self.base, name.display())),
+                        path: PathBuf::from(format!("{}{}", self.url.base, name.display())),
                         source: std::io::Error::new(
                             std::io::ErrorKind::InvalidInput,
                             "a world's file is named relative to its folder, within it",
@@ -506,7 +560,7 @@ impl TileSource for HttpSource {
                 }
             }
         }
-        let url = format!("{}{}", self.base, parts.join("/"));
+        let url = self.url.join(&parts.join("/"));
         Ok(self.client.fetch(&url, max, None)?)
     }
 
@@ -516,7 +570,7 @@ impl TileSource for HttpSource {
         let pyramid = &self.manifest.pyramid;
         if !pyramid.is_stored(id) {
             return Err(WorldError::TileNotStored {
-                path: PathBuf::from(&self.base),
+                path: PathBuf::from(&self.url.base),
                 id,
             });
         }
@@ -637,6 +691,48 @@ mod tests {
         assert!(e.to_string().contains("1..=3600 s"), "{e}");
         // Never more than the range, whatever is asked: minreq adds it to an Instant.
         assert_eq!(with(Duration::MAX).timeout_s(), 3600);
+    }
+
+    #[test]
+    fn file_names_join_the_path_before_the_query_and_the_fragment_goes() {
+        for (url, base, query) in [
+            ("http://h/w/", "http://h/w/", ""),
+            ("http://h/w", "http://h/w/", ""),
+            ("http://h", "http://h/", ""),
+            ("http://h?x=1", "http://h/", "?x=1"),
+            (
+                "http://h:8/w/?x=1&sig=A%2Fb",
+                "http://h:8/w/",
+                "?x=1&sig=A%2Fb",
+            ),
+            ("http://h/w?", "http://h/w/", ""),
+            ("http://h/w#top", "http://h/w/", ""),
+            ("http://h/w#a?b", "http://h/w/", ""),
+            ("http://h/w?x=1#f", "http://h/w/", "?x=1"),
+            (
+                "HTTP://Example.ORG:80/Worlds/A/?Sig=XyZ",
+                "http://example.org:80/Worlds/A/",
+                "?Sig=XyZ",
+            ),
+            (
+                "Http://Me:PassWord@HOST/W",
+                "http://Me:PassWord@host/W/",
+                "",
+            ),
+            ("http://[::ABCD]:8/w", "http://[::abcd]:8/w/", ""),
+        ] {
+            let parsed = WorldUrl::parse(url);
+            assert_eq!(
+                (parsed.base.as_str(), parsed.query.as_str()),
+                (base, query),
+                "{url}"
+            );
+        }
+        let url = WorldUrl::parse("HTTP://H/w/?t=1#x");
+        assert_eq!(
+            url.join("tiles/L0/0_0.height.exr"),
+            "http://h/w/tiles/L0/0_0.height.exr?t=1"
+        );
     }
 
     #[test]

@@ -14,8 +14,9 @@
 //!
 //! Bounded: connections are served by a fixed pool of [`FaultOptions::workers`] threads from a
 //! queue of twice as many; when both are full, new connections wait in the kernel's backlog.
+//! Requests are counted for at most [`MAX_ASKED_PATHS`] paths.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::io::{Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream, ToSocketAddrs};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -38,6 +39,12 @@ const UPSTREAM_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// The most bytes of an upstream body held for a short-body fault (a tile file is far smaller).
 const MAX_HELD_BODY: usize = 16 << 20;
+
+/// The most tile paths whose requests the proxy counts (for the choice of each request's
+/// fault); past it the path asked first is forgotten, and its next request counts as its first
+/// again. A soak asks the same few thousand files over and over; a client that asks ever new
+/// paths does not grow the proxy.
+pub const MAX_ASKED_PATHS: usize = 16 << 10;
 
 /// The longest stall allowed, and so the longest client deadline a stall outlasts: one hour.
 pub const MAX_STALL: Duration = Duration::from_secs(3600);
@@ -159,6 +166,9 @@ struct Upstream {
     authority: String,
     /// The world's path, starting and ending with `/`.
     base: String,
+    /// The world address's query without its `?` (a signed URL's token), sent on every request
+    /// after the client's own; empty if none.
+    query: String,
 }
 
 impl Upstream {
@@ -170,6 +180,8 @@ impl Upstream {
             .with_context(|| {
                 format!("{url}: the upstream must be a plain http://HOST[:PORT]/PATH/")
             })?;
+        let rest = rest.split('#').next().unwrap_or(rest);
+        let (rest, query) = rest.split_once('?').unwrap_or((rest, ""));
         let (authority, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
         if authority.is_empty() {
             bail!("{url}: the upstream address has no host");
@@ -194,6 +206,7 @@ impl Upstream {
             addrs,
             authority: authority.to_string(),
             base,
+            query: query.to_string(),
         })
     }
 
@@ -220,7 +233,33 @@ struct Shared {
     stop: AtomicBool,
     counts: Mutex<FaultCounts>,
     /// Times each path has been asked, so that each request of a path has its own choice.
-    asked: Mutex<HashMap<String, u64>>,
+    asked: Mutex<AskedPaths>,
+}
+
+/// Times each tile path has been asked, for at most [`MAX_ASKED_PATHS`] paths.
+#[derive(Default)]
+struct AskedPaths {
+    counts: HashMap<String, u64>,
+    /// The paths in `counts`, first asked first: the next to forget at the front.
+    order: VecDeque<String>,
+}
+
+impl AskedPaths {
+    /// Counts one more request of `path` and returns its number (1 for the first).
+    fn ask(&mut self, path: &str) -> u64 {
+        if let Some(n) = self.counts.get_mut(path) {
+            *n += 1;
+            return *n;
+        }
+        if self.order.len() >= MAX_ASKED_PATHS
+            && let Some(oldest) = self.order.pop_front()
+        {
+            self.counts.remove(&oldest);
+        }
+        self.order.push_back(path.to_string());
+        self.counts.insert(path.to_string(), 1);
+        1
+    }
 }
 
 /// A running fault-injecting proxy; see the module docs. Dropping it stops it (stalls end,
@@ -282,7 +321,7 @@ impl FaultProxy {
             options,
             stop: AtomicBool::new(false),
             counts: Mutex::new(FaultCounts::default()),
-            asked: Mutex::new(HashMap::new()),
+            asked: Mutex::new(AskedPaths::default()),
         });
         let (tx, rx) = sync_channel::<TcpStream>(2 * workers);
         let rx = Arc::new(Mutex::new(rx));
@@ -411,12 +450,11 @@ fn serve(shared: &Shared, mut client: TcpStream) -> std::io::Result<()> {
         .iter()
         .any(|p| relative.starts_with(p.as_str()));
     let fault = if relative.starts_with("tiles/") && !spared {
-        let nth = {
-            let mut asked = shared.asked.lock().unwrap_or_else(|e| e.into_inner());
-            let n = asked.entry(path.to_string()).or_insert(0);
-            *n += 1;
-            *n
-        };
+        let nth = shared
+            .asked
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .ask(path);
         choose(shared.options.seed, path, nth, shared.options.rate)
     } else {
         None
@@ -531,6 +569,11 @@ fn forward(shared: &Shared, head: &str, relative: &str, query: &str) -> std::io:
         .next()
         .and_then(|l| l.split_whitespace().next())
         .unwrap_or("GET");
+    let query = match (query.strip_prefix('?').unwrap_or(query), up.query.as_str()) {
+        ("", "") => String::new(),
+        (q, "") | ("", q) => format!("?{q}"),
+        (client, world) => format!("?{world}&{client}"),
+    };
     let mut request = format!("{method} {}{relative}{query} HTTP/1.1\r\n", up.base);
     for line in lines.take_while(|l| !l.is_empty()) {
         let name = line.split(':').next().unwrap_or("").trim();
@@ -687,6 +730,25 @@ mod tests {
         }
     }
 
+    /// Requests of ever new paths keep at most [`MAX_ASKED_PATHS`] counts, forgetting the path
+    /// asked first; a path still counted goes on from its count.
+    #[test]
+    fn the_paths_counted_are_bounded() {
+        let mut asked = AskedPaths::default();
+        let path = |i: usize| format!("/tiles/L9/{i}_0.height.exr");
+        assert_eq!((asked.ask(&path(0)), asked.ask(&path(0))), (1, 2));
+        for i in 1..MAX_ASKED_PATHS + 100 {
+            assert_eq!(asked.ask(&path(i)), 1);
+        }
+        assert_eq!(asked.counts.len(), MAX_ASKED_PATHS);
+        assert_eq!(asked.order.len(), MAX_ASKED_PATHS);
+        let last = path(MAX_ASKED_PATHS + 99);
+        assert_eq!(asked.ask(&last), 2, "still counted");
+        // The first 100 are forgotten: counted from 1 again.
+        assert_eq!(asked.ask(&path(0)), 1);
+        assert_eq!(asked.counts.len(), MAX_ASKED_PATHS);
+    }
+
     #[test]
     fn chunked_bodies_are_joined() {
         assert_eq!(
@@ -704,8 +766,17 @@ mod tests {
         assert_eq!(up.authority, "127.0.0.1:8080");
         assert_eq!(up.base, "/worlds/santa-cruz/");
         assert_eq!(up.addrs, vec!["127.0.0.1:8080".parse().unwrap()]);
+        assert_eq!(up.query, "");
         let up = Upstream::parse("HTTP://127.0.0.1:9/").unwrap();
         assert_eq!(up.base, "/");
+        let up = Upstream::parse("http://127.0.0.1:9?sig=a%2F#top").unwrap();
+        assert_eq!(
+            (up.authority.as_str(), up.base.as_str()),
+            ("127.0.0.1:9", "/")
+        );
+        assert_eq!(up.query, "sig=a%2F");
+        let up = Upstream::parse("http://127.0.0.1:9/w/?x=1&y=2#f?z").unwrap();
+        assert_eq!((up.base.as_str(), up.query.as_str()), ("/w/", "x=1&y=2"));
         assert_eq!(
             Upstream::parse("http://127.0.0.1").unwrap().addrs[0].port(),
             80

@@ -1,9 +1,9 @@
 //! `verdant serve`: a small static file server for a world folder, for trying worlds over HTTP
 //! locally. It answers `GET` and `HEAD` with the file's content type, an `ETag` and a
 //! `Last-Modified`, and a conditional `GET` (`If-None-Match`, `If-Modified-Since`) whose file
-//! has not changed with `304 Not Modified`; a `Range` request (one range) gets `206 Partial
-//! Content` with those bytes. Production puts the world folder behind any
-//! ordinary HTTP server, object store or CDN instead.
+//! has not changed with `304 Not Modified`; a `Range` request (one range of bytes) gets `206
+//! Partial Content` with those bytes. Production puts the world folder behind any ordinary HTTP
+//! server, object store or CDN instead.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
@@ -116,7 +116,9 @@ impl WorldServer {
         let workers = (0..WORKERS)
             .map(|_| {
                 let (rx, root) = (Arc::clone(&rx), Arc::clone(&root));
-                std::thread::spawn(move || work(&root, &rx, limits))
+                std::thread::spawn(move || {
+                    work(&rx, |stream| serve_connection(&root, stream, limits));
+                })
             })
             .collect();
         let stop = Arc::new(AtomicBool::new(false));
@@ -199,16 +201,32 @@ fn accept(listener: &TcpListener, queue: &SyncSender<TcpStream>, stop: &AtomicBo
     }
 }
 
-fn work(root: &Path, queue: &Mutex<Receiver<TcpStream>>, limits: ServeLimits) {
+/// Answers connections from `queue` with `answer` until the queue's sender is gone. A panic in
+/// answering one connection is caught and logged, and the worker goes on with the next: a
+/// request that trips a bug must not take a worker (of only [`WORKERS`]) with it.
+fn work<T>(queue: &Mutex<Receiver<T>>, answer: impl Fn(T) -> std::io::Result<()>) {
     loop {
-        // The lock is held only while waiting for the next connection.
+        // The lock is held only while waiting for the next connection; a worker that panicked
+        // while holding it does not poison it (the panic is caught outside the lock).
         let next = match queue.lock() {
             Ok(rx) => rx.recv(),
             Err(_) => return,
         };
-        let Ok(stream) = next else { return };
-        if let Err(e) = serve_connection(root, stream, limits) {
-            log::debug!("serve: {e}");
+        let Ok(connection) = next else { return };
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| answer(connection))) {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => log::debug!("serve: {e}"),
+            Err(panic) => {
+                let what = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "a panic without a message".into());
+                log::error!(
+                    "serve: answering a connection panicked ({what}); it was closed and the \
+                     worker goes on"
+                );
+            }
         }
     }
 }
@@ -339,10 +357,10 @@ impl Answer {
         for (name, value) in &self.headers {
             head.push_str(&format!("{name}: {value}\r\n"));
         }
-        head.push_str(&format!(
-            "Date: {}\r\n",
-            httpdate::fmt_http_date(SystemTime::now())
-        ));
+        // A clock set before 1970 (or past 9999) sends no Date rather than a panic.
+        if let Some(now) = http_date(SystemTime::now()) {
+            head.push_str(&format!("Date: {now}\r\n"));
+        }
         if self.status != 304 {
             head.push_str(&format!("Content-Length: {length}\r\n"));
         }
@@ -446,33 +464,35 @@ fn answer(root: &Path, request: &Head, out: &mut impl Write) -> std::io::Result<
     };
     let meta = std::fs::metadata(&file)?;
     let modified = meta.modified().unwrap_or(UNIX_EPOCH);
-    let nanos = modified
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
-    let etag = format!("\"{:x}-{:x}\"", meta.len(), nanos);
-    let last_modified = httpdate::fmt_http_date(modified);
+    let etag = entity_tag(meta.len(), modified);
+    // None for a file dated before 1970 or from the year 10000 on, which HTTP dates cannot
+    // write: such a file has no Last-Modified, and If-Modified-Since is not asked of it.
+    let last_modified = http_date(modified);
     // If-None-Match wins over If-Modified-Since (RFC 9110, 13.2.2).
     let not_modified = match request.value("If-None-Match") {
         Some(tags) => tags
             .split(',')
             .any(|t| t.trim() == "*" || t.trim().trim_start_matches("W/") == etag),
-        None => request
-            .value("If-Modified-Since")
-            .and_then(|d| httpdate::parse_http_date(d).ok())
-            .is_some_and(|since| truncate_to_seconds(modified) <= since),
+        None => {
+            last_modified.is_some()
+                && request
+                    .value("If-Modified-Since")
+                    .and_then(|d| httpdate::parse_http_date(d).ok())
+                    .is_some_and(|since| truncate_to_seconds(modified) <= since)
+        }
     };
     if not_modified {
-        return Answer::new(304)
-            .with("ETag", etag)
-            .with("Last-Modified", last_modified)
-            .send(out, b"", true);
+        let mut answer = Answer::new(304).with("ETag", etag);
+        if let Some(date) = last_modified {
+            answer = answer.with("Last-Modified", date);
+        }
+        return answer.send(out, b"", true);
     }
     let len = meta.len();
     let (status, span) = match request.value("Range").map(|r| byte_range(r, len)) {
-        None => (200, None),
-        Some(Some(span)) => (206, Some(span)),
-        Some(None) => {
+        None | Some(RangeAsk::Whole) => (200, None),
+        Some(RangeAsk::Part(span)) => (206, Some(span)),
+        Some(RangeAsk::Unsatisfiable) => {
             return Answer::new(416)
                 .with("Content-Range", format!("bytes */{len}"))
                 .send(out, b"", false);
@@ -488,9 +508,10 @@ fn answer(root: &Path, request: &Head, out: &mut impl Write) -> std::io::Result<
     if let Some([first, last]) = span {
         answer = answer.with("Content-Range", format!("bytes {first}-{last}/{len}"));
     }
-    let answer = answer
-        .with("ETag", etag)
-        .with("Last-Modified", last_modified);
+    answer = answer.with("ETag", etag);
+    if let Some(date) = last_modified {
+        answer = answer.with("Last-Modified", date);
+    }
     let mut reader = std::fs::File::open(&file)?;
     answer.write_head(out, length)?;
     if !head_only {
@@ -500,29 +521,73 @@ fn answer(root: &Path, request: &Head, out: &mut impl Write) -> std::io::Result<
     out.flush()
 }
 
-/// The bytes (first, last, inclusive) that a `Range` header asks of a file of `len` bytes: one
-/// range, `bytes=A-B`, `bytes=A-` or `bytes=-N`; `None` where it cannot be satisfied (the
-/// server then answers 416).
-fn byte_range(value: &str, len: u64) -> Option<[u64; 2]> {
-    let spec = value.trim().strip_prefix("bytes=")?;
-    if spec.contains(',') || len == 0 {
-        return None;
-    }
-    let (a, b) = spec.split_once('-')?;
-    let (a, b) = (a.trim(), b.trim());
-    let [first, last] = if a.is_empty() {
-        let n: u64 = b.parse().ok()?;
-        [len.saturating_sub(n), len - 1]
-    } else {
-        let first: u64 = a.parse().ok()?;
-        let last = if b.is_empty() {
-            len - 1
-        } else {
-            b.parse::<u64>().ok()?.min(len - 1)
-        };
-        [first, last]
+/// What a `Range` header asks of a file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum RangeAsk {
+    /// Nothing the server acts on: another unit than bytes (which RFC 9110, 14.2, says to
+    /// ignore), several ranges (which the server may answer whole), or a header that is not a
+    /// range: answered `200` with the whole file.
+    Whole,
+    /// The bytes (first, last, inclusive): answered `206`.
+    Part([u64; 2]),
+    /// One range of bytes, well formed, that misses the file (it starts at or past its end,
+    /// or is a suffix of 0 bytes): answered `416`.
+    Unsatisfiable,
+}
+
+/// What the `Range` header `value` asks of a file of `len` bytes (RFC 9110, 14.1 and 14.2): one
+/// range `bytes=A-B`, `bytes=A-` or `bytes=-N`, its unit in any case.
+fn byte_range(value: &str, len: u64) -> RangeAsk {
+    let Some((unit, spec)) = value.trim().split_once('=') else {
+        return RangeAsk::Whole;
     };
-    (first <= last && first < len).then_some([first, last])
+    if !unit.eq_ignore_ascii_case("bytes") || spec.contains(',') {
+        return RangeAsk::Whole;
+    }
+    let Some((a, b)) = spec.trim().split_once('-') else {
+        return RangeAsk::Whole;
+    };
+    // Digits only (`parse` would take `+5`); a number too large for u64 is past any file.
+    let number = |s: &str| {
+        (!s.is_empty() && s.bytes().all(|c| c.is_ascii_digit()))
+            .then(|| s.parse::<u64>().unwrap_or(u64::MAX))
+    };
+    let (first, last) = match (number(a.trim()), number(b.trim())) {
+        // A suffix: the last N bytes, the whole file if it is shorter.
+        (None, Some(n)) if a.trim().is_empty() => {
+            if n == 0 || len == 0 {
+                return RangeAsk::Unsatisfiable;
+            }
+            (len.saturating_sub(n), len - 1)
+        }
+        (Some(first), None) if b.trim().is_empty() => (first, u64::MAX),
+        // A last byte before the first is an invalid range, ignored like other invalid ones.
+        (Some(first), Some(last)) if first <= last => (first, last),
+        _ => return RangeAsk::Whole,
+    };
+    if first >= len {
+        return RangeAsk::Unsatisfiable;
+    }
+    RangeAsk::Part([first, last.min(len - 1)])
+}
+
+/// `t` as an HTTP date (`Sun, 06 Nov 1994 08:49:37 GMT`), or `None` outside what `httpdate`
+/// writes (it panics on those): before 1970, or from the year 10000 on.
+fn http_date(t: SystemTime) -> Option<String> {
+    // 10000-01-01T00:00:00Z, in seconds from the epoch: the first instant httpdate refuses.
+    const YEAR_10000_S: u64 = 253_402_300_800;
+    let since = t.duration_since(UNIX_EPOCH).ok()?;
+    (since.as_secs() < YEAR_10000_S).then(|| httpdate::fmt_http_date(t))
+}
+
+/// The `ETag` of a file of `len` bytes modified at `modified`: its length and its time in
+/// nanoseconds from the epoch, signed (`-` before it for a file dated before 1970), so that
+/// every time has its own tag.
+fn entity_tag(len: u64, modified: SystemTime) -> String {
+    match modified.duration_since(UNIX_EPOCH) {
+        Ok(after) => format!("\"{len:x}-{:x}\"", after.as_nanos()),
+        Err(before) => format!("\"{len:x}--{:x}\"", before.duration().as_nanos()),
+    }
 }
 
 fn truncate_to_seconds(t: SystemTime) -> SystemTime {
@@ -535,24 +600,88 @@ fn truncate_to_seconds(t: SystemTime) -> SystemTime {
 
 #[cfg(test)]
 mod tests {
-    use super::byte_range;
+    use super::*;
 
     #[test]
     fn ranges_are_read_as_rfc_9110_writes_them() {
-        assert_eq!(byte_range("bytes=0-0", 10), Some([0, 0]));
-        assert_eq!(byte_range("bytes=2-5", 10), Some([2, 5]));
-        assert_eq!(byte_range("bytes=7-", 10), Some([7, 9]));
-        assert_eq!(byte_range("bytes=-3", 10), Some([7, 9]));
-        assert_eq!(byte_range("bytes=4-100", 10), Some([4, 9]));
-        for bad in [
-            "bytes=10-12",
-            "bytes=5-2",
-            "bytes=0-1,4-5",
-            "items=0-1",
-            "bytes=a-b",
+        use RangeAsk::{Part, Unsatisfiable, Whole};
+        for (value, asked) in [
+            ("bytes=0-0", Part([0, 0])),
+            ("bytes=2-5", Part([2, 5])),
+            ("bytes=7-", Part([7, 9])),
+            ("bytes=-3", Part([7, 9])),
+            ("bytes=-30", Part([0, 9])),
+            ("bytes=4-100", Part([4, 9])),
+            ("bytes=4-99999999999999999999999", Part([4, 9])),
+            // The unit is case-insensitive.
+            ("BYTES=0-1", Part([0, 1])),
+            ("Bytes=3-", Part([3, 9])),
+            // One well-formed range of bytes that misses the file.
+            ("bytes=10-12", Unsatisfiable),
+            ("bytes=10-", Unsatisfiable),
+            ("bytes=99999999999999999999999-", Unsatisfiable),
+            ("bytes=-0", Unsatisfiable),
+            // Another unit, several ranges, or no range at all: ignored, the whole file.
+            ("items=0-1", Whole),
+            ("bytes=0-1,4-5", Whole),
+            ("bytes=a-b", Whole),
+            ("bytes=5-2", Whole),
+            ("bytes=+1-2", Whole),
+            ("bytes=-", Whole),
+            ("bytes=3", Whole),
+            ("bytes", Whole),
         ] {
-            assert_eq!(byte_range(bad, 10), None, "{bad}");
+            assert_eq!(byte_range(value, 10), asked, "{value}");
         }
-        assert_eq!(byte_range("bytes=0-0", 0), None);
+        assert_eq!(byte_range("bytes=0-0", 0), Unsatisfiable);
+        assert_eq!(byte_range("bytes=-1", 0), Unsatisfiable);
+        assert_eq!(byte_range("items=0-0", 0), Whole);
+    }
+
+    #[test]
+    fn times_http_dates_cannot_write_have_no_date_and_tags_of_their_own() {
+        let at = |s: i64| {
+            if s >= 0 {
+                UNIX_EPOCH + Duration::from_secs(s as u64)
+            } else {
+                UNIX_EPOCH - Duration::from_secs(s.unsigned_abs())
+            }
+        };
+        assert_eq!(
+            http_date(at(784_111_777)).as_deref(),
+            Some("Sun, 06 Nov 1994 08:49:37 GMT")
+        );
+        assert_eq!(
+            http_date(at(253_402_300_799)).as_deref(),
+            Some("Fri, 31 Dec 9999 23:59:59 GMT")
+        );
+        for s in [-1, -315_619_200, 253_402_300_800, 300_000_000_000] {
+            assert_eq!(http_date(at(s)), None, "{s}");
+        }
+        let tags: std::collections::HashSet<String> = [-315_619_200, -1, 0, 1, 253_402_300_800]
+            .into_iter()
+            .map(|s| entity_tag(10, at(s)))
+            .collect();
+        assert_eq!(tags.len(), 5, "{tags:?}");
+        assert_eq!(entity_tag(10, at(-1)), "\"a--3b9aca00\"");
+    }
+
+    /// A worker whose answer panics goes on with the next connection: every connection after
+    /// a panic is still answered, by one worker.
+    #[test]
+    fn a_worker_survives_a_panic_in_an_answer() {
+        let (tx, rx) = sync_channel::<u32>(32);
+        for n in 0..20 {
+            tx.send(n).unwrap();
+        }
+        drop(tx);
+        let answered = Mutex::new(Vec::new());
+        work(&Mutex::new(rx), |n| {
+            assert!(n % 2 == 0, "connection {n} trips a bug");
+            answered.lock().unwrap().push(n);
+            Ok(())
+        });
+        let evens: Vec<u32> = (0..20).step_by(2).collect();
+        assert_eq!(answered.into_inner().unwrap(), evens);
     }
 }

@@ -464,8 +464,12 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         None
     };
     // Over HTTP, through a proxy that fails a share of tile requests (level 0 spared: the tile
-    // service loads it once, before the first frame, and keeps it).
+    // service loads it once, before the first frame, and keeps it). The world is opened at the
+    // user's address first, so that a server that is not there, or serves no world, is reported
+    // as without --faults (that address and the real error), not as the proxy's 502 at an
+    // address of its own.
     let proxy = if opts.faults > 0.0 && is_url {
+        crate::tools::open_world(&opts.world, &opts.http)?;
         Some(crate::tools::fault_proxy::FaultProxy::start_with(
             &opts.world.to_string_lossy(),
             crate::tools::fault_proxy::FaultOptions {
@@ -486,7 +490,15 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         (_, Some(p)) => PathBuf::from(p.url()),
         _ => opts.world.clone(),
     };
-    let (world, source) = crate::tools::open_world(&location, &opts.http)?;
+    let (world, source) =
+        crate::tools::open_world(&location, &opts.http).map_err(|e| match &proxy {
+            Some(p) => e.context(format!(
+                "{}: through the soak's fault proxy at {}",
+                opts.world.display(),
+                p.url()
+            )),
+            None => e,
+        })?;
     let [ex, ey] = world.manifest.extent_m;
     // The pull toward the middle keeps the camera over the world only while a frame's step is
     // well inside the margin it turns at.

@@ -1,7 +1,7 @@
 //! The requests of an [`super::HttpSource`]: deadlines, retries with backoff, redirects, and
 //! bodies read no further than the most a file may hold, through the disk cache.
 
-use std::collections::HashSet;
+use std::collections::VecDeque;
 use std::io::Read;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -14,12 +14,23 @@ use super::{HttpError, HttpOptions, MAX_REDIRECTS};
 /// refused rather than buffered).
 const MAX_HEAD_BYTES: usize = 64 << 10;
 
+/// The most bytes set aside for a body before any of it arrives. Past it the body grows only as
+/// its bytes come: a `Content-Length` (or a range asked for) of terabytes costs nothing until
+/// the server sends them, and the body never outgrows its `max` in any case.
+const MAX_PREALLOCATED: u64 = 1 << 20;
+
+/// The most pairs of hosts whose redirect is remembered as reported; past it the oldest is
+/// forgotten (and warned of again if it comes back), so that a server that redirects to ever
+/// new hosts does not grow the client.
+pub(super) const MAX_REDIRECT_PAIRS: usize = 64;
+
 /// The requests, their retries, the cache and the counters.
 pub(super) struct Client {
     pub(super) options: HttpOptions,
     pub(super) cache: Option<Mutex<DiskCache>>,
-    /// Pairs of hosts (from, to) whose redirect has been reported.
-    pub(super) redirects_seen: Mutex<HashSet<(String, String)>>,
+    /// Pairs of hosts (from, to) whose redirect has been reported, oldest first; at most
+    /// [`MAX_REDIRECT_PAIRS`].
+    pub(super) redirects_seen: Mutex<VecDeque<(String, String)>>,
     pub(super) requests: AtomicU64,
     pub(super) retries: AtomicU64,
     pub(super) cache_hits: AtomicU64,
@@ -36,7 +47,7 @@ impl Client {
         Client {
             options,
             cache,
-            redirects_seen: Mutex::new(HashSet::new()),
+            redirects_seen: Mutex::new(VecDeque::new()),
             requests: AtomicU64::new(0),
             retries: AtomicU64::new(0),
             cache_hits: AtomicU64::new(0),
@@ -196,6 +207,11 @@ impl Client {
                 attempts,
             });
         }
+        // A range's body is what was asked, whatever the server claims of the file's length.
+        let max = match range {
+            Some([_, count]) => max.min(count.max(1)),
+            None => max,
+        };
         if let Some([first, count]) = range {
             let bad = |message: String| HttpError::BadResponse {
                 url: url.into(),
@@ -257,7 +273,7 @@ impl Client {
             .get("transfer-encoding")
             .is_some_and(|v| v.trim().eq_ignore_ascii_case("chunked"));
         let validator = Validator::from_headers(&response.headers);
-        let capacity = expected.unwrap_or(64 << 10).min(max);
+        let capacity = expected.unwrap_or(64 << 10).min(max).min(MAX_PREALLOCATED);
         let mut body = Vec::with_capacity(capacity as usize);
         // One byte past the limit tells a body that is too long from one that just fits.
         let read = Read::take(&mut response, max.saturating_add(1)).read_to_end(&mut body);
@@ -324,8 +340,12 @@ impl Client {
         }
         let pair = (from.to_string(), to.to_string());
         if let Ok(mut seen) = self.redirects_seen.lock()
-            && seen.insert(pair)
+            && !seen.contains(&pair)
         {
+            if seen.len() >= MAX_REDIRECT_PAIRS {
+                seen.pop_front();
+            }
+            seen.push_back(pair);
             log::warn!(
                 "{asked}: redirected from host {from} to host {to} ({answered}); \
                  further redirects between these hosts are followed silently"
@@ -371,5 +391,30 @@ mod tests {
         );
         assert_eq!(host_of("http://b.example?x=1"), "b.example");
         assert_eq!(host_of("http://c"), "c");
+    }
+
+    /// Redirects to ever new hosts keep at most [`MAX_REDIRECT_PAIRS`] pairs, the newest: the
+    /// oldest are forgotten first.
+    #[test]
+    fn the_redirects_remembered_are_bounded() {
+        let client = Client::new(HttpOptions::default(), None);
+        for i in 0..200 {
+            client.note_redirect("http://a/w.toml", &format!("http://b{i}/w.toml"));
+            client.note_redirect("http://a/w.toml", "http://a/again");
+        }
+        let seen = client.redirects_seen.lock().unwrap();
+        assert_eq!(seen.len(), MAX_REDIRECT_PAIRS);
+        let to: Vec<&str> = seen.iter().map(|(_, to)| to.as_str()).collect();
+        let newest: Vec<String> = (200 - MAX_REDIRECT_PAIRS..200)
+            .map(|i| format!("b{i}"))
+            .collect();
+        assert_eq!(to, newest);
+        drop(seen);
+        // One seen again is not remembered twice.
+        client.note_redirect("http://a/x", "http://b199/x");
+        assert_eq!(
+            client.redirects_seen.lock().unwrap().len(),
+            MAX_REDIRECT_PAIRS
+        );
     }
 }
