@@ -501,6 +501,100 @@ fn implausible_dem_heights_and_cells_blame_the_sidecar() {
     assert!(!err.contains("world.toml"), "{err}");
 }
 
+/// A `--name` holding a control character is refused before anything is read or written,
+/// naming the option, and the escape never reaches the terminal raw.
+#[test]
+fn a_name_with_a_control_character_is_refused_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let out = dir.path().join("w");
+    let opts = BakeOptions {
+        dem,
+        out: out.clone(),
+        name: Some("a\x1bb".into()),
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        ..Default::default()
+    };
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(err, WorldError::BadOption { .. }), "{err}");
+    let text = err.to_string();
+    assert!(
+        text.starts_with("--name") && text.contains("U+001B") && !text.contains('\x1b'),
+        "{text}"
+    );
+    assert!(!out.exists());
+
+    let run = verdant_cli(
+        &[
+            "bake",
+            "--dem",
+            "hills.png",
+            "--out",
+            "w",
+            "--name",
+            "a\x1bb",
+        ],
+        dir.path(),
+    );
+    common::assert_fails_naming(&run, &["--name", "control character"]);
+    assert!(!run.stderr.contains(&0x1b) && !run.stdout.contains(&0x1b));
+    assert!(!out.exists());
+    assert!(staging_folders(dir.path()).is_empty());
+}
+
+/// Control characters in a DEM's file name and its sidecar's texts are no fault of the user's:
+/// the bake replaces them with U+FFFD in what the manifest records, and the world it writes
+/// loads; nothing it prints holds them raw.
+#[test]
+fn control_characters_in_a_dem_name_and_sidecar_are_replaced() {
+    let dir = tempfile::tempdir().unwrap();
+    let name = "dem\x1b[31m";
+    let png = write_dem(dir.path(), name, [20, 16], [5.0, 5.0], [0.0, 1.0], hills);
+    let sidecar = dir.path().join(format!("{name}.json"));
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&sidecar).unwrap()).unwrap();
+    json["place"] = "Ring\x07 hills".into();
+    json["source"] = "Survey\x1b]0;title\x07.".into();
+    std::fs::write(&sidecar, json.to_string()).unwrap();
+
+    let out = dir.path().join("w");
+    let opts = BakeOptions {
+        dem: png.clone(),
+        out: out.clone(),
+        tile_cells: 8,
+        stored_levels: 1,
+        ..Default::default()
+    };
+    bake(&opts, &mut |_, _, _| {}).unwrap();
+    let world = verdant::world::World::open(&out).unwrap();
+    let m = &world.manifest;
+    assert!(
+        m.description
+            .starts_with("Ring\u{FFFD} hills. Baked from dem\u{FFFD}[31m.png")
+            && m.description.ends_with("Survey\u{FFFD}]0;title\u{FFFD}."),
+        "{}",
+        m.description
+    );
+    let source = m.source.as_ref().unwrap();
+    assert_eq!(source.file, "dem\u{FFFD}[31m.png");
+
+    let run = verdant_cli(
+        &["bake", "--dem", png.to_str().unwrap(), "--out", "cli"],
+        dir.path(),
+    );
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("dem\\u{1b}[31m.png"), "{stdout}");
+    assert!(!run.stderr.contains(&0x1b) && !run.stdout.contains(&0x1b));
+    verdant::world::World::open(&dir.path().join("cli")).unwrap();
+}
+
 #[test]
 fn a_manifest_with_heights_beyond_a_planet_is_refused() {
     let dir = tempfile::tempdir().unwrap();

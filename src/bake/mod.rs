@@ -51,7 +51,9 @@ use std::time::Instant;
 use crate::world::dem::{Dem, DemFormat, DemOptions};
 use crate::world::error::WorldError;
 use crate::world::format::write_atomic;
-use crate::world::manifest::{Manifest, Sky, WindDefaults, WorldSource};
+use crate::world::manifest::{
+    Manifest, Sky, WindDefaults, WorldSource, forbidden_control, without_control_characters,
+};
 use crate::world::tile::Pyramid;
 
 mod author;
@@ -339,7 +341,7 @@ pub fn bake(
                 .collect::<Vec<_>>()
                 .join(", "),
             format: dem.format,
-            crs: dem.crs.clone(),
+            crs: without_control_characters(&dem.crs),
             origin: dem.origin,
             samples: [dem.width, dem.height],
             cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
@@ -405,7 +407,11 @@ pub fn bake(
             let table = cover::CoverTable::load(table_path)?;
             let map = cover::CoverMap::load(map, dem, &table, table_path, &manifest.grass_types)?;
             if let Some(s) = &mut manifest.source {
-                s.cover_table = format!("{} ({})", table.name, file_name(table_path));
+                s.cover_table = without_control_characters(&format!(
+                    "{} ({})",
+                    table.name,
+                    file_name(table_path)
+                ));
             }
             Some(map)
         }
@@ -720,20 +726,26 @@ pub fn nice_cell_size(c: f64) -> f64 {
         .unwrap_or(c)
 }
 
-/// The name of the (resolved) output folder, else the DEM's stem.
+/// The name of the (resolved) output folder, else the DEM's stem; its control characters
+/// replaced by U+FFFD.
 fn default_name(out: &Path, dem: &Path) -> String {
     out.file_name()
         .or_else(|| dem.file_stem())
-        .map(|n| n.to_string_lossy().into_owned())
+        .map(|n| without_control_characters(&n.to_string_lossy()))
         .unwrap_or_else(|| "world".into())
 }
 
+/// The file name of `path` as the manifest records it: its control characters replaced by
+/// U+FFFD (a file's name is no fault of the user's, and must not reach a terminal raw).
 fn file_name(path: &Path) -> String {
     path.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
+        .map(|n| without_control_characters(&n.to_string_lossy()))
         .unwrap_or_default()
 }
 
+/// The manifest's description of a baked world: the sidecar's `place`, the DEM and the cell
+/// size, the nodata filled and the sidecar's `source`; its control characters (from a file's
+/// name or its sidecar) replaced by U+FFFD.
 fn description(dem: &Dem, dem_path: &Path, cell: f64) -> String {
     let file = file_name(dem_path);
     let mut text = String::new();
@@ -759,7 +771,7 @@ fn description(dem: &Dem, dem_path: &Path, cell: f64) -> String {
         text.push(' ');
         text.push_str(&dem.source);
     }
-    text
+    without_control_characters(&text)
 }
 /// `v` rounded to `decimals` places, as the f64 nearest that decimal (so it prints short).
 pub(super) fn round_to(v: f64, decimals: usize) -> f64 {
@@ -784,6 +796,19 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
             "--levels",
             opts.stored_levels,
             "in 1..=12 (0: as many as the world needs)".into(),
+        ));
+    }
+    if let Some(name) = &opts.name
+        && let Some(c) = name.chars().find(|&c| forbidden_control(c))
+    {
+        return Err(WorldError::bad_option(
+            "--name",
+            format!("{name:?}"),
+            format!(
+                "a name without control characters (U+{:04X} here; tabs and line breaks \
+                 aside): a world's name is printed to terminals and window titles",
+                u32::from(c)
+            ),
         ));
     }
     if let Some(c) = opts.cell_size_m
