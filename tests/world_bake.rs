@@ -595,6 +595,58 @@ fn control_characters_in_a_dem_name_and_sidecar_are_replaced() {
     verdant::world::World::open(&dir.path().join("cli")).unwrap();
 }
 
+/// Writes a flat 16-bit PNG DEM of `side` x `side` samples and its sidecar, row by row (a
+/// constant image compresses to a small file, however many samples it holds).
+fn write_flat_png(dir: &Path, name: &str, side: u32) -> PathBuf {
+    use std::io::Write;
+    let path = dir.join(format!("{name}.png"));
+    let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    let mut encoder = png::Encoder::new(file, side, side);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(png::BitDepth::Sixteen);
+    encoder.set_compression(png::Compression::Fast);
+    let mut writer = encoder.write_header().unwrap();
+    let mut stream = writer.stream_writer().unwrap();
+    let row = vec![0u8; side as usize * 2];
+    for _ in 0..side {
+        stream.write_all(&row).unwrap();
+    }
+    stream.finish().unwrap();
+    write_sidecar(dir, name, [side, side], [1.0, 1.0], [100.0, 1.0]);
+    path
+}
+
+/// A PNG DEM too large for `--memory-mib` is refused from its header, before a sample is
+/// decoded (it was decoded whole first, past the limit), naming the option and what it needs.
+#[test]
+fn a_png_dem_over_the_memory_limit_is_refused_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    // 8192 x 8192 samples: 384 MiB of samples and heights while decoded, in a file of 1 MB.
+    let png = write_flat_png(dir.path(), "flat", 8192);
+    assert!(std::fs::metadata(&png).unwrap().len() < 4 << 20);
+    let out = dir.path().join("w");
+    let opts = BakeOptions {
+        dem: png,
+        out: out.clone(),
+        memory_mib: 128,
+        ..Default::default()
+    };
+    let start = std::time::Instant::now();
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    let seconds = start.elapsed().as_secs_f64();
+    assert!(matches!(err, WorldError::BadOption { .. }), "{err}");
+    let text = err.to_string();
+    assert!(
+        text.starts_with("--memory-mib 128: must be at least 4")
+            && text.contains("8192x8192 samples")
+            && text.contains("decoded whole"),
+        "{text}"
+    );
+    // Decoding 64 Mi samples takes seconds; reading a header, milliseconds.
+    assert!(seconds < 0.5, "refused after {seconds} s: {text}");
+    assert!(!out.exists());
+}
+
 #[test]
 fn a_manifest_with_heights_beyond_a_planet_is_refused() {
     let dir = tempfile::tempdir().unwrap();

@@ -180,8 +180,8 @@ impl Rows {
                         .into(),
                 });
             }
-            let mut dem = Dem::load_unfilled(path, options)?;
-            dem.heights = Vec::new();
+            // The header and sidecar alone: the samples are decoded when they are read.
+            let (dem, _) = Dem::png_sidecar_header(path)?;
             (dem, Kind::Png(options.clone()))
         } else if [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"]
             .iter()
