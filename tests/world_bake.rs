@@ -501,6 +501,50 @@ fn implausible_dem_heights_and_cells_blame_the_sidecar() {
     assert!(!err.contains("world.toml"), "{err}");
 }
 
+/// A DEM cell size too small for a bake that came from `--dem-cell-size` is blamed on the
+/// option, not on the sidecar that said otherwise.
+#[test]
+fn a_too_small_dem_cell_size_option_is_named_not_the_sidecar() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = write_dem(dir.path(), "hills", [20, 16], [5.0, 5.0], [0.0, 1.0], hills);
+    let out = dir.path().join("w");
+    let opts = BakeOptions {
+        dem: png,
+        dem_cell_size_m: Some([1e-4, 1e-4]),
+        out: out.clone(),
+        tile_cells: 8,
+        stored_levels: 1,
+        ..Default::default()
+    };
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(err, WorldError::BadOption { .. }), "{err}");
+    let text = err.to_string();
+    assert!(
+        text.starts_with("--dem-cell-size 1.000e-4 x 1.000e-4: must be at least"),
+        "{text}"
+    );
+    assert!(
+        !text.contains("hills.json") && !text.contains("cell_size_m"),
+        "{text}"
+    );
+    assert!(!out.exists());
+
+    let run = verdant_cli(
+        &[
+            "bake",
+            "--dem",
+            "hills.png",
+            "--out",
+            "w",
+            "--dem-cell-size",
+            "0.0001",
+        ],
+        dir.path(),
+    );
+    common::assert_fails_naming(&run, &["--dem-cell-size"]);
+    assert!(!String::from_utf8_lossy(&run.stderr).contains("hills.json"));
+}
+
 /// A `--name` holding a control character is refused before anything is read or written,
 /// naming the option, and the escape never reaches the terminal raw.
 #[test]

@@ -298,7 +298,7 @@ pub fn bake(
         Some(c) => c,
         None => nice_cell_size(dem.cell_ew_m.min(dem.cell_ns_m)),
     };
-    check_cell_size(dem, &opts.dem, opts.cell_size_m, cell)?;
+    check_cell_size(dem, opts, cell)?;
 
     // Millimetres are plenty, and keep the manifest free of float noise.
     let extent = dem.extent_m().map(|e| round_to(e, 3));
@@ -830,13 +830,10 @@ pub const MIN_BAKE_CELL_M: f64 = 1e-3;
 pub const MAX_BAKE_CELLS: f64 = 65_536.0;
 
 /// Refuses a cell size (given, or the DEM's own) below a millimetre or resampling the DEM to
-/// more than [`MAX_BAKE_CELLS`] a side, naming the option or the sidecar's field.
-fn check_cell_size(
-    dem: &Dem,
-    dem_path: &Path,
-    option: Option<f64>,
-    cell: f64,
-) -> Result<(), WorldError> {
+/// more than [`MAX_BAKE_CELLS`] a side, naming the option it came from (`--cell-size`, or
+/// `--dem-cell-size` for the DEM's own) or else the sidecar's field.
+fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), WorldError> {
+    let dem_path = opts.dem.as_path();
     let extent = dem.extent_m();
     let cells = extent[0].max(extent[1]) / cell;
     let least = (extent[0].max(extent[1]) / MAX_BAKE_CELLS).max(MIN_BAKE_CELL_M);
@@ -852,19 +849,28 @@ fn check_cell_size(
         crate::world::error::short_number(extent[0]),
         crate::world::error::short_number(extent[1])
     );
-    match option {
-        Some(c) => Err(WorldError::bad_option("--cell-size", c, allowed)),
-        None => Err(WorldError::OutOfRange {
+    let cells = |[ew, ns]: [f64; 2]| {
+        format!(
+            "{} x {}",
+            crate::world::error::short_number(ew),
+            crate::world::error::short_number(ns)
+        )
+    };
+    match (opts.cell_size_m, opts.dem_cell_size_m) {
+        (Some(c), _) => Err(WorldError::bad_option("--cell-size", c, allowed)),
+        // The DEM's cells came from the option, not from the file or its sidecar.
+        (None, Some(given)) => Err(WorldError::bad_option(
+            "--dem-cell-size",
+            cells(given),
+            format!("{allowed}, or pass --cell-size"),
+        )),
+        (None, None) => Err(WorldError::OutOfRange {
             path: crate::world::dem::sidecar_of(dem_path).unwrap_or_else(|| dem_path.to_path_buf()),
             field: match crate::world::dem::sidecar_of(dem_path) {
                 Some(_) => "cell_size_m".into(),
                 None => "its cells".into(),
             },
-            value: format!(
-                "{} x {}",
-                crate::world::error::short_number(dem.cell_ew_m),
-                crate::world::error::short_number(dem.cell_ns_m)
-            ),
+            value: cells([dem.cell_ew_m, dem.cell_ns_m]),
             allowed: format!("{allowed}, or pass --cell-size"),
         }),
     }
