@@ -104,7 +104,8 @@ fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", error_chain(&e));
+            // A file's name in the message must not drive the terminal.
+            eprintln!("error: {}", cli::terminal_safe(&error_chain(&e)));
             ExitCode::FAILURE
         }
     }

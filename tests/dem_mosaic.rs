@@ -387,6 +387,48 @@ fn bake_takes_the_dem_repeated_on_the_command_line() {
     assert_eq!(world.manifest.extent_m, [1280.0, 1280.0]);
 }
 
+/// A mosaic of more files than the process may hold open bakes: its files are opened when read
+/// and only a few kept open (one descriptor a file ran out at the usual limit of 1024).
+#[cfg(unix)]
+#[test]
+fn a_mosaic_of_more_files_than_open_descriptors_bakes() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiles = dir.path().join("tiles");
+    std::fs::create_dir(&tiles).unwrap();
+    // 20 x 15 tiles of 5 x 5 samples of 20 m, sharing their edge samples (80 m apart).
+    for i in 0..20 {
+        for j in 0..15 {
+            write_tile(
+                &tiles.join(format!("t_{i:02}_{j:02}.tif")),
+                32633,
+                5,
+                400_000.0 + 80.0 * f64::from(i),
+                4_100_000.0 - 80.0 * f64::from(j),
+                0.0,
+            );
+        }
+    }
+    let run = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(
+            "ulimit -n 128 && exec \"$0\" bake --dem tiles --out w --cell-size 20 \
+             --tile-cells 16 --levels 2",
+        )
+        .arg(env!("CARGO_BIN_EXE_verdant"))
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let world = verdant::World::open(&dir.path().join("w")).unwrap();
+    assert_eq!(world.manifest.extent_m, [1600.0, 1200.0]);
+    let source = world.manifest.source.as_ref().unwrap();
+    assert_eq!(source.samples, [81, 61]);
+}
+
 /// The peak memory a `verdant bake` run printed, MiB.
 fn bake_peak_mib(dir: &Path, out: &str, limit: Option<&str>) -> f64 {
     let mut args = vec![

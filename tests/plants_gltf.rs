@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 use verdant::plants::{
-    MAX_PLANT_TRIANGLES, MAX_PLANT_VERTICES, MAX_TEXTURE_SIZE, PlantFileError, PlantImage,
-    PlantMesh, PlantTexture, PlantVertex, load_plant, write_plant_gltf,
+    MAX_PLANT_BUFFER_BYTES, MAX_PLANT_TRIANGLES, MAX_PLANT_VERTICES, MAX_TEXTURE_SIZE,
+    PlantFileError, PlantImage, PlantMesh, PlantTexture, PlantVertex, load_plant, write_plant_gltf,
 };
 
 /// A glTF binary: header, JSON chunk (space padded), BIN chunk (zero padded) when not empty.
@@ -487,6 +487,100 @@ fn missing_and_short_buffers_are_errors() {
         load_err(&path),
         PlantFileError::BufferTooShort { needed: 4096, .. }
     ));
+}
+
+/// Loads `path` with a reader that counts the reads of each file.
+fn load_counting(
+    path: &Path,
+) -> (
+    Result<verdant::plants::LoadedPlant, PlantFileError>,
+    std::collections::HashMap<PathBuf, usize>,
+) {
+    let reads = std::cell::RefCell::new(std::collections::HashMap::new());
+    let result = verdant::plants::load_plant_from(path, &|p: &Path| {
+        *reads.borrow_mut().entry(p.to_owned()).or_insert(0) += 1;
+        verdant::plants::read_plant_file(p)
+    });
+    (result, reads.into_inner())
+}
+
+/// Buffers naming the same file are read once: a small file listing many of them cannot make
+/// the loader read (and hold) a large file again and again.
+#[test]
+fn buffers_naming_one_file_read_it_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut doc, bin) = triangle();
+    write(dir.path(), "tri.bin", &bin);
+    doc["buffers"] = json!(vec![json!({"uri": "tri.bin", "byteLength": 56}); 20]);
+    for view in 0..3 {
+        doc["bufferViews"][view]["buffer"] = json!(view * 7);
+    }
+    let path = write(dir.path(), "tri.gltf", &serde_json::to_vec(&doc).unwrap());
+    let (plant, reads) = load_counting(&path);
+    assert_eq!(plant.unwrap().mesh.vertices.len(), 3);
+    assert_eq!(
+        reads.get(&dir.path().join("tri.bin")),
+        Some(&1),
+        "{reads:?}"
+    );
+}
+
+/// The buffers of a plant together may hold at most MAX_PLANT_BUFFER_BYTES: declared larger,
+/// the file is refused before a buffer is read; larger in their files than declared, once the
+/// files read pass it.
+#[test]
+fn buffers_over_the_total_limit_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mut doc, bin) = triangle();
+    // Two files of the triangle's bytes followed by a sparse 130 MiB: 260 MiB together.
+    for name in ["a.bin", "b.bin"] {
+        let file = write(dir.path(), name, &bin);
+        std::fs::File::options()
+            .write(true)
+            .open(&file)
+            .unwrap()
+            .set_len(130 << 20)
+            .unwrap();
+    }
+    doc["buffers"] = json!([
+        {"uri": "a.bin", "byteLength": 130 << 20},
+        {"uri": "b.bin", "byteLength": 130 << 20},
+    ]);
+    for view in 1..3 {
+        doc["bufferViews"][view]["buffer"] = json!(1);
+    }
+    let path = write(dir.path(), "big.gltf", &serde_json::to_vec(&doc).unwrap());
+    let (result, reads) = load_counting(&path);
+    let err = result.unwrap_err();
+    assert!(
+        matches!(err, PlantFileError::BuffersTooLarge { bytes, limit, .. }
+            if bytes == 260 << 20 && limit == MAX_PLANT_BUFFER_BYTES),
+        "{err}"
+    );
+    let text = err.to_string();
+    assert!(
+        text.contains("big.gltf") && text.contains(&MAX_PLANT_BUFFER_BYTES.to_string()),
+        "{text}"
+    );
+    assert_eq!(reads.len(), 1, "only the glTF file is read: {reads:?}");
+
+    // Declared small, the files hold the same: refused once the second is read.
+    doc["buffers"][0]["byteLength"] = json!(56);
+    doc["buffers"][1]["byteLength"] = json!(56);
+    std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let err = load_err(&path);
+    assert!(
+        matches!(err, PlantFileError::BuffersTooLarge { bytes, .. } if bytes == 260 << 20),
+        "{err}"
+    );
+
+    // One of them alone is within the limit, and loads.
+    doc["buffers"] = json!([{"uri": "a.bin", "byteLength": 56}]);
+    for view in 0..3 {
+        doc["bufferViews"][view]["buffer"] = json!(0);
+    }
+    std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    assert_eq!(load_plant(&path).unwrap().mesh.vertices.len(), 3);
 }
 
 #[test]

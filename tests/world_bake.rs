@@ -501,6 +501,196 @@ fn implausible_dem_heights_and_cells_blame_the_sidecar() {
     assert!(!err.contains("world.toml"), "{err}");
 }
 
+/// A DEM cell size too small for a bake that came from `--dem-cell-size` is blamed on the
+/// option, not on the sidecar that said otherwise.
+#[test]
+fn a_too_small_dem_cell_size_option_is_named_not_the_sidecar() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = write_dem(dir.path(), "hills", [20, 16], [5.0, 5.0], [0.0, 1.0], hills);
+    let out = dir.path().join("w");
+    let opts = BakeOptions {
+        dem: png,
+        dem_cell_size_m: Some([1e-4, 1e-4]),
+        out: out.clone(),
+        tile_cells: 8,
+        stored_levels: 1,
+        ..Default::default()
+    };
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(err, WorldError::BadOption { .. }), "{err}");
+    let text = err.to_string();
+    assert!(
+        text.starts_with("--dem-cell-size 1.000e-4 x 1.000e-4: must be at least"),
+        "{text}"
+    );
+    assert!(
+        !text.contains("hills.json") && !text.contains("cell_size_m"),
+        "{text}"
+    );
+    assert!(!out.exists());
+
+    let run = verdant_cli(
+        &[
+            "bake",
+            "--dem",
+            "hills.png",
+            "--out",
+            "w",
+            "--dem-cell-size",
+            "0.0001",
+        ],
+        dir.path(),
+    );
+    common::assert_fails_naming(&run, &["--dem-cell-size"]);
+    assert!(!String::from_utf8_lossy(&run.stderr).contains("hills.json"));
+}
+
+/// A `--name` holding a control character is refused before anything is read or written,
+/// naming the option, and the escape never reaches the terminal raw.
+#[test]
+fn a_name_with_a_control_character_is_refused_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let out = dir.path().join("w");
+    let opts = BakeOptions {
+        dem,
+        out: out.clone(),
+        name: Some("a\x1bb".into()),
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        ..Default::default()
+    };
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    assert!(matches!(err, WorldError::BadOption { .. }), "{err}");
+    let text = err.to_string();
+    assert!(
+        text.starts_with("--name") && text.contains("U+001B") && !text.contains('\x1b'),
+        "{text}"
+    );
+    assert!(!out.exists());
+
+    let run = verdant_cli(
+        &[
+            "bake",
+            "--dem",
+            "hills.png",
+            "--out",
+            "w",
+            "--name",
+            "a\x1bb",
+        ],
+        dir.path(),
+    );
+    common::assert_fails_naming(&run, &["--name", "control character"]);
+    assert!(!run.stderr.contains(&0x1b) && !run.stdout.contains(&0x1b));
+    assert!(!out.exists());
+    assert!(staging_folders(dir.path()).is_empty());
+}
+
+/// Control characters in a DEM's file name and its sidecar's texts are no fault of the user's:
+/// the bake replaces them with U+FFFD in what the manifest records, and the world it writes
+/// loads; nothing it prints holds them raw.
+#[test]
+fn control_characters_in_a_dem_name_and_sidecar_are_replaced() {
+    let dir = tempfile::tempdir().unwrap();
+    let name = "dem\x1b[31m";
+    let png = write_dem(dir.path(), name, [20, 16], [5.0, 5.0], [0.0, 1.0], hills);
+    let sidecar = dir.path().join(format!("{name}.json"));
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&sidecar).unwrap()).unwrap();
+    json["place"] = "Ring\x07 hills".into();
+    json["source"] = "Survey\x1b]0;title\x07.".into();
+    std::fs::write(&sidecar, json.to_string()).unwrap();
+
+    let out = dir.path().join("w");
+    let opts = BakeOptions {
+        dem: png.clone(),
+        out: out.clone(),
+        tile_cells: 8,
+        stored_levels: 1,
+        ..Default::default()
+    };
+    bake(&opts, &mut |_, _, _| {}).unwrap();
+    let world = verdant::world::World::open(&out).unwrap();
+    let m = &world.manifest;
+    assert!(
+        m.description
+            .starts_with("Ring\u{FFFD} hills. Baked from dem\u{FFFD}[31m.png")
+            && m.description.ends_with("Survey\u{FFFD}]0;title\u{FFFD}."),
+        "{}",
+        m.description
+    );
+    let source = m.source.as_ref().unwrap();
+    assert_eq!(source.file, "dem\u{FFFD}[31m.png");
+
+    let run = verdant_cli(
+        &["bake", "--dem", png.to_str().unwrap(), "--out", "cli"],
+        dir.path(),
+    );
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("dem\\u{1b}[31m.png"), "{stdout}");
+    assert!(!run.stderr.contains(&0x1b) && !run.stdout.contains(&0x1b));
+    verdant::world::World::open(&dir.path().join("cli")).unwrap();
+}
+
+/// Writes a flat 16-bit PNG DEM of `side` x `side` samples and its sidecar, row by row (a
+/// constant image compresses to a small file, however many samples it holds).
+fn write_flat_png(dir: &Path, name: &str, side: u32) -> PathBuf {
+    use std::io::Write;
+    let path = dir.join(format!("{name}.png"));
+    let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    let mut encoder = png::Encoder::new(file, side, side);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(png::BitDepth::Sixteen);
+    encoder.set_compression(png::Compression::Fast);
+    let mut writer = encoder.write_header().unwrap();
+    let mut stream = writer.stream_writer().unwrap();
+    let row = vec![0u8; side as usize * 2];
+    for _ in 0..side {
+        stream.write_all(&row).unwrap();
+    }
+    stream.finish().unwrap();
+    write_sidecar(dir, name, [side, side], [1.0, 1.0], [100.0, 1.0]);
+    path
+}
+
+/// A PNG DEM too large for `--memory-mib` is refused from its header, before a sample is
+/// decoded (it was decoded whole first, past the limit), naming the option and what it needs.
+#[test]
+fn a_png_dem_over_the_memory_limit_is_refused_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    // 8192 x 8192 samples: 384 MiB of samples and heights while decoded, in a file of 1 MB.
+    let png = write_flat_png(dir.path(), "flat", 8192);
+    assert!(std::fs::metadata(&png).unwrap().len() < 4 << 20);
+    let out = dir.path().join("w");
+    let opts = BakeOptions {
+        dem: png,
+        out: out.clone(),
+        memory_mib: 128,
+        ..Default::default()
+    };
+    let start = std::time::Instant::now();
+    let err = bake(&opts, &mut |_, _, _| {}).unwrap_err();
+    let seconds = start.elapsed().as_secs_f64();
+    assert!(matches!(err, WorldError::BadOption { .. }), "{err}");
+    let text = err.to_string();
+    assert!(
+        text.starts_with("--memory-mib 128: must be at least 4")
+            && text.contains("8192x8192 samples")
+            && text.contains("decoded whole"),
+        "{text}"
+    );
+    // Decoding 64 Mi samples takes seconds; reading a header, milliseconds.
+    assert!(seconds < 0.5, "refused after {seconds} s: {text}");
+    assert!(!out.exists());
+}
+
 #[test]
 fn a_manifest_with_heights_beyond_a_planet_is_refused() {
     let dir = tempfile::tempdir().unwrap();

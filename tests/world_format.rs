@@ -476,6 +476,30 @@ fn control_characters_in_a_manifests_texts_are_refused() {
         1,
     );
     assert!(parse(&ok).is_ok());
+
+    // Validation checks it too, not only parsing: what a bake validates, its loader accepts.
+    let mut m = parse(VALID).unwrap();
+    m.source = Some(verdant::world::manifest::WorldSource {
+        file: "dem.png".into(),
+        format: verdant::world::DemFormat::PngSidecar,
+        crs: String::new(),
+        origin: None,
+        samples: [2, 2],
+        cell_size_m: [1.0, 1.0],
+        nodata_filled: 0,
+        land_cover: "cover.tif".into(),
+        cover_table: "ESA\u{1b}[2J WorldCover".into(),
+        density_map: String::new(),
+        mask: String::new(),
+    });
+    let e = m.validate(toml_path()).unwrap_err().to_string();
+    for needle in ["source.cover_table", "U+001B", "control character"] {
+        assert!(e.contains(needle), "{needle:?} not in {e:?}");
+    }
+    assert_eq!(
+        verdant::world::manifest::without_control_characters("a\u{1b}b\tc\n"),
+        "a\u{FFFD}b\tc\n"
+    );
 }
 
 #[test]

@@ -51,7 +51,9 @@ use std::time::Instant;
 use crate::world::dem::{Dem, DemFormat, DemOptions};
 use crate::world::error::WorldError;
 use crate::world::format::write_atomic;
-use crate::world::manifest::{Manifest, Sky, WindDefaults, WorldSource};
+use crate::world::manifest::{
+    Manifest, Sky, WindDefaults, WorldSource, forbidden_control, without_control_characters,
+};
 use crate::world::tile::Pyramid;
 
 mod author;
@@ -296,7 +298,7 @@ pub fn bake(
         Some(c) => c,
         None => nice_cell_size(dem.cell_ew_m.min(dem.cell_ns_m)),
     };
-    check_cell_size(dem, &opts.dem, opts.cell_size_m, cell)?;
+    check_cell_size(dem, opts, cell)?;
 
     // Millimetres are plenty, and keep the manifest free of float noise.
     let extent = dem.extent_m().map(|e| round_to(e, 3));
@@ -339,7 +341,7 @@ pub fn bake(
                 .collect::<Vec<_>>()
                 .join(", "),
             format: dem.format,
-            crs: dem.crs.clone(),
+            crs: without_control_characters(&dem.crs),
             origin: dem.origin,
             samples: [dem.width, dem.height],
             cell_size_m: [dem.cell_ew_m, dem.cell_ns_m],
@@ -405,7 +407,11 @@ pub fn bake(
             let table = cover::CoverTable::load(table_path)?;
             let map = cover::CoverMap::load(map, dem, &table, table_path, &manifest.grass_types)?;
             if let Some(s) = &mut manifest.source {
-                s.cover_table = format!("{} ({})", table.name, file_name(table_path));
+                s.cover_table = without_control_characters(&format!(
+                    "{} ({})",
+                    table.name,
+                    file_name(table_path)
+                ));
             }
             Some(map)
         }
@@ -720,20 +726,26 @@ pub fn nice_cell_size(c: f64) -> f64 {
         .unwrap_or(c)
 }
 
-/// The name of the (resolved) output folder, else the DEM's stem.
+/// The name of the (resolved) output folder, else the DEM's stem; its control characters
+/// replaced by U+FFFD.
 fn default_name(out: &Path, dem: &Path) -> String {
     out.file_name()
         .or_else(|| dem.file_stem())
-        .map(|n| n.to_string_lossy().into_owned())
+        .map(|n| without_control_characters(&n.to_string_lossy()))
         .unwrap_or_else(|| "world".into())
 }
 
+/// The file name of `path` as the manifest records it: its control characters replaced by
+/// U+FFFD (a file's name is no fault of the user's, and must not reach a terminal raw).
 fn file_name(path: &Path) -> String {
     path.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
+        .map(|n| without_control_characters(&n.to_string_lossy()))
         .unwrap_or_default()
 }
 
+/// The manifest's description of a baked world: the sidecar's `place`, the DEM and the cell
+/// size, the nodata filled and the sidecar's `source`; its control characters (from a file's
+/// name or its sidecar) replaced by U+FFFD.
 fn description(dem: &Dem, dem_path: &Path, cell: f64) -> String {
     let file = file_name(dem_path);
     let mut text = String::new();
@@ -759,7 +771,7 @@ fn description(dem: &Dem, dem_path: &Path, cell: f64) -> String {
         text.push(' ');
         text.push_str(&dem.source);
     }
-    text
+    without_control_characters(&text)
 }
 /// `v` rounded to `decimals` places, as the f64 nearest that decimal (so it prints short).
 pub(super) fn round_to(v: f64, decimals: usize) -> f64 {
@@ -786,6 +798,19 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
             "in 1..=12 (0: as many as the world needs)".into(),
         ));
     }
+    if let Some(name) = &opts.name
+        && let Some(c) = name.chars().find(|&c| forbidden_control(c))
+    {
+        return Err(WorldError::bad_option(
+            "--name",
+            format!("{name:?}"),
+            format!(
+                "a name without control characters (U+{:04X} here; tabs and line breaks \
+                 aside): a world's name is printed to terminals and window titles",
+                u32::from(c)
+            ),
+        ));
+    }
     if let Some(c) = opts.cell_size_m
         && !(c.is_finite() && c > 0.0)
     {
@@ -805,13 +830,10 @@ pub const MIN_BAKE_CELL_M: f64 = 1e-3;
 pub const MAX_BAKE_CELLS: f64 = 65_536.0;
 
 /// Refuses a cell size (given, or the DEM's own) below a millimetre or resampling the DEM to
-/// more than [`MAX_BAKE_CELLS`] a side, naming the option or the sidecar's field.
-fn check_cell_size(
-    dem: &Dem,
-    dem_path: &Path,
-    option: Option<f64>,
-    cell: f64,
-) -> Result<(), WorldError> {
+/// more than [`MAX_BAKE_CELLS`] a side, naming the option it came from (`--cell-size`, or
+/// `--dem-cell-size` for the DEM's own) or else the sidecar's field.
+fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), WorldError> {
+    let dem_path = opts.dem.as_path();
     let extent = dem.extent_m();
     let cells = extent[0].max(extent[1]) / cell;
     let least = (extent[0].max(extent[1]) / MAX_BAKE_CELLS).max(MIN_BAKE_CELL_M);
@@ -827,19 +849,28 @@ fn check_cell_size(
         crate::world::error::short_number(extent[0]),
         crate::world::error::short_number(extent[1])
     );
-    match option {
-        Some(c) => Err(WorldError::bad_option("--cell-size", c, allowed)),
-        None => Err(WorldError::OutOfRange {
+    let cells = |[ew, ns]: [f64; 2]| {
+        format!(
+            "{} x {}",
+            crate::world::error::short_number(ew),
+            crate::world::error::short_number(ns)
+        )
+    };
+    match (opts.cell_size_m, opts.dem_cell_size_m) {
+        (Some(c), _) => Err(WorldError::bad_option("--cell-size", c, allowed)),
+        // The DEM's cells came from the option, not from the file or its sidecar.
+        (None, Some(given)) => Err(WorldError::bad_option(
+            "--dem-cell-size",
+            cells(given),
+            format!("{allowed}, or pass --cell-size"),
+        )),
+        (None, None) => Err(WorldError::OutOfRange {
             path: crate::world::dem::sidecar_of(dem_path).unwrap_or_else(|| dem_path.to_path_buf()),
             field: match crate::world::dem::sidecar_of(dem_path) {
                 Some(_) => "cell_size_m".into(),
                 None => "its cells".into(),
             },
-            value: format!(
-                "{} x {}",
-                crate::world::error::short_number(dem.cell_ew_m),
-                crate::world::error::short_number(dem.cell_ns_m)
-            ),
+            value: cells([dem.cell_ew_m, dem.cell_ns_m]),
             allowed: format!("{allowed}, or pass --cell-size"),
         }),
     }

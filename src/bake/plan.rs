@@ -23,7 +23,7 @@ use super::source::DemSource;
 /// The default memory limit, MiB.
 pub const DEFAULT_MEMORY_MIB: u64 = 2048;
 /// What the process needs besides the bake's own data (code, allocator, encoders), bytes.
-const BASE_BYTES: u64 = 40 << 20;
+pub(super) const BASE_BYTES: u64 = 40 << 20;
 /// Bytes a sample of the coarse subsample takes: height, slope, grass type, density, material.
 const COARSE_SAMPLE_BYTES: u64 = 4 + 8 + 3;
 /// Bytes a sample of a block takes: height and paint.

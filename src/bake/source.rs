@@ -43,6 +43,36 @@ pub(super) struct Mosaic {
     filled: Mutex<Vec<Option<u64>>>,
 }
 
+/// Refuses a PNG DEM (`header`, `samples` of them) that the memory limit cannot hold while it
+/// is decoded: its file, its 16-bit samples and their heights at once, besides the process's
+/// own; the limit is named with what it would take.
+fn check_whole_png(
+    path: &Path,
+    header: &Dem,
+    samples: u64,
+    memory_mib: u64,
+) -> Result<(), WorldError> {
+    let file = std::fs::metadata(path)
+        .map_err(|e| WorldError::io(path, e))?
+        .len();
+    let need = super::plan::BASE_BYTES + file + samples * (2 + 4);
+    if need <= memory_mib.saturating_mul(1 << 20) {
+        return Ok(());
+    }
+    Err(WorldError::bad_option(
+        "--memory-mib",
+        memory_mib,
+        format!(
+            "at least {} for this DEM ({}: {}x{} samples; a PNG DEM is decoded whole, its file, \
+             16-bit samples and heights held at once; a GeoTIFF is read in windows)",
+            need.div_ceil(1 << 20),
+            path.display(),
+            header.width,
+            header.height
+        ),
+    ))
+}
+
 impl DemSource {
     /// Opens the DEM files: a local file small enough for a quarter of `memory_mib` is read
     /// whole (and filled whole); a larger one, a remote one and several are laid out from their
@@ -58,7 +88,12 @@ impl DemSource {
         {
             // Held whole: the heights, and the fill's pyramid where there are voids.
             let (header, _) = crate::world::window::Rows::open(one, options, MAX_MOSAIC_SAMPLES)?;
-            let bytes = u64::from(header.width) * u64::from(header.height) * 4 * 3;
+            let samples = u64::from(header.width) * u64::from(header.height);
+            let bytes = samples * 4 * 3;
+            if header.format == DemFormat::PngSidecar {
+                // A PNG is decoded whole: weighed from its header before a sample is decoded.
+                check_whole_png(one, &header, samples, memory_mib)?;
+            }
             if bytes <= (memory_mib << 20) / 4 || header.format == DemFormat::PngSidecar {
                 return Ok(DemSource::Whole(crate::world::mosaic::load_files(
                     files, named, options,

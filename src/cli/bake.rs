@@ -9,6 +9,7 @@ use verdant::bake::{BakeOptions, bake};
 
 use super::args::parse_cell_size;
 use super::progress::bar;
+use super::shown;
 
 // The options of `verdant bake`.
 #[derive(clap::Args)]
@@ -159,7 +160,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
             pb.set_position(done);
         }
     })
-    .with_context(|| format!("baking {}", opts.dem.display()))?;
+    .with_context(|| format!("baking {}", shown(&opts.dem)))?;
     if let Some((_, pb)) = current {
         pb.finish();
     }
@@ -172,7 +173,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
     }
     println!(
         "read {} ({}, {}x{} samples of {:.3} m x {:.3} m, {} nodata samples filled)",
-        opts.dem.display(),
+        shown(&opts.dem),
         report.dem_format.name(),
         report.dem_samples[0],
         report.dem_samples[1],
@@ -184,14 +185,14 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         Some(verdant::bake::ShardStep::Shard { index, count }) => println!(
             "baked shard {index} of {count}: {} tiles into {} in {:.1} s",
             report.tiles_written,
-            verdant::bake::shard::parts_dir(&opts.out).display(),
+            shown(&verdant::bake::shard::parts_dir(&opts.out)),
             report.seconds
         ),
         _ => println!(
             "baked {} tiles in {} levels into {} in {:.1} s",
             report.tiles_written,
             report.levels,
-            opts.out.display(),
+            shown(&opts.out),
             report.seconds
         ),
     }

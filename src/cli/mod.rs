@@ -10,3 +10,22 @@ pub(crate) mod progress;
 pub(crate) mod serve;
 pub(crate) mod soak;
 pub(crate) mod view;
+
+/// `text` safe to print to a terminal: every control character but a tab or a line break
+/// written as an escape (`\u{1b}`), so that a file's name cannot drive the terminal.
+pub(crate) fn terminal_safe(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if verdant::world::manifest::forbidden_control(c) {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// A path as [`terminal_safe`] prints it.
+pub(crate) fn shown(path: &std::path::Path) -> String {
+    terminal_safe(&path.display().to_string())
+}

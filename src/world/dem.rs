@@ -159,10 +159,13 @@ impl Dem {
         Ok(dem)
     }
 
-    /// Loads a 16-bit PNG DEM and its sidecar, checking that they agree.
-    fn load_png_sidecar(png_path: &Path) -> Result<Dem, WorldError> {
+    /// A PNG DEM's size, spacing and texts from its sidecar, checked against the PNG's header
+    /// (its heights left empty, nothing decoded: a caller can weigh the file before reading
+    /// it), with the sidecar's height offset and scale.
+    pub(crate) fn png_sidecar_header(png_path: &Path) -> Result<(Dem, [f64; 2]), WorldError> {
         let sidecar_file = sidecar_path(png_path);
-        let png_bytes = read_regular(png_path, MAX_DEM_PNG_BYTES)?;
+        // The PNG first, so that a missing or unreadable DEM is named before its sidecar.
+        let (file, _) = open_regular(png_path)?;
         let text = match read_regular(&sidecar_file, MAX_SIDECAR_BYTES) {
             Ok(bytes) => String::from_utf8(bytes).map_err(|e| WorldError::BadSidecar {
                 path: sidecar_file.clone(),
@@ -229,16 +232,11 @@ impl Dem {
             }
         }
 
-        let png = decode_png(
-            &png_bytes,
-            png_path,
-            image::ColorType::L16,
-            "16-bit grayscale",
-            None,
-        )?;
+        // The header alone: its size, read without decoding a sample.
+        let [width, height] = super::format::png_dimensions(file, png_path)?;
         for (field, side, img) in [
-            ("width", sidecar.width, png.width),
-            ("height", sidecar.height, png.height),
+            ("width", sidecar.width, width),
+            ("height", sidecar.height, height),
         ] {
             if side != img {
                 return Err(WorldError::SidecarMismatch {
@@ -249,20 +247,12 @@ impl Dem {
                 });
             }
         }
-        let heights = png
-            .bytes
-            .chunks_exact(2)
-            .map(|b| {
-                let v = u16::from_ne_bytes([b[0], b[1]]);
-                (sidecar.height_offset_m + sidecar.height_scale_m * f64::from(v)) as f32
-            })
-            .collect();
-        Ok(Dem {
-            width: png.width,
-            height: png.height,
+        let dem = Dem {
+            width,
+            height,
             cell_ew_m: sidecar.cell_size_m.east_west,
             cell_ns_m: sidecar.cell_size_m.north_south,
-            heights,
+            heights: Vec::new(),
             place: sidecar.place,
             source: sidecar.source,
             format: DemFormat::PngSidecar,
@@ -270,7 +260,31 @@ impl Dem {
             origin: None,
             pixel_size: None,
             nodata_filled: 0,
-        })
+        };
+        Ok((dem, [sidecar.height_offset_m, sidecar.height_scale_m]))
+    }
+
+    /// Loads a 16-bit PNG DEM and its sidecar, checking that they agree.
+    fn load_png_sidecar(png_path: &Path) -> Result<Dem, WorldError> {
+        let (mut dem, [offset, scale]) = Dem::png_sidecar_header(png_path)?;
+        let png_bytes = read_regular(png_path, MAX_DEM_PNG_BYTES)?;
+        let png = decode_png(
+            &png_bytes,
+            png_path,
+            image::ColorType::L16,
+            "16-bit grayscale",
+            Some([dem.width, dem.height]),
+        )?;
+        drop(png_bytes);
+        dem.heights = png
+            .bytes
+            .chunks_exact(2)
+            .map(|b| {
+                let v = u16::from_ne_bytes([b[0], b[1]]);
+                (offset + scale * f64::from(v)) as f32
+            })
+            .collect();
+        Ok(dem)
     }
 }
 

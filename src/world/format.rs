@@ -637,10 +637,24 @@ pub(crate) fn encode_png(
     Ok(out)
 }
 
-/// A decoded PNG: dimensions and raw bytes in the colour type asked for.
+/// A PNG's width and height from its header, read from `file` without decoding a pixel (a
+/// caller weighs the image before holding it).
+pub(crate) fn png_dimensions(file: std::fs::File, path: &Path) -> Result<[u32; 2], WorldError> {
+    guarded(|| {
+        png::Decoder::new(std::io::BufReader::new(file))
+            .read_header_info()
+            .map(|info| [info.width, info.height])
+            .map_err(|e| e.to_string())
+    })
+    .map_err(|message| WorldError::CorruptImage {
+        path: path.to_path_buf(),
+        format: "PNG",
+        message,
+    })
+}
+
+/// A decoded PNG: its raw bytes in the colour type asked for.
 pub(crate) struct DecodedPng {
-    pub width: u32,
-    pub height: u32,
     pub bytes: Vec<u8>,
 }
 
@@ -715,11 +729,7 @@ pub(crate) fn decode_png(
             let scale = 255 / ((1u8 << bits) - 1);
             buf.iter_mut().for_each(|v| *v /= scale);
         }
-        Ok(Ok(DecodedPng {
-            width,
-            height,
-            bytes: buf,
-        }))
+        Ok(Ok(DecodedPng { bytes: buf }))
     });
     result.map_err(corrupt)?
 }

@@ -511,19 +511,6 @@ impl Manifest {
             path: path.to_path_buf(),
             message: e.to_string().trim_end().to_string(),
         })?;
-        if let Some((field, c)) = control_character(&manifest) {
-            return Err(WorldError::OutOfRange {
-                path: path.to_path_buf(),
-                field,
-                value: format!(
-                    "a text holding the control character U+{:04X}",
-                    u32::from(c)
-                ),
-                allowed: "text without control characters (tabs and line breaks aside): a \
-                          world's names are printed to terminals and window titles"
-                    .into(),
-            });
-        }
         manifest.validate(path)?;
         Ok(manifest)
     }
@@ -545,13 +532,26 @@ impl Manifest {
     }
 }
 
-/// The first text of `manifest` holding a control character other than a tab or a line break
-/// (an escape sequence in a world's name would drive the terminal that prints it), as the
-/// field's path (`paths[2].name`) and the character.
+/// Whether `c` is a control character a manifest's text may not hold: any but a tab or a line
+/// break (an escape sequence in a world's name would drive the terminal that prints it).
+pub fn forbidden_control(c: char) -> bool {
+    c.is_control() && !matches!(c, '\t' | '\n' | '\r')
+}
+
+/// `text` with every control character a manifest may not hold ([`forbidden_control`]) replaced
+/// by U+FFFD: for texts a bake takes from files (their names, a sidecar's `place`), which are
+/// no fault of the user's and should not stop a bake.
+pub fn without_control_characters(text: &str) -> String {
+    text.chars()
+        .map(|c| if forbidden_control(c) { '\u{FFFD}' } else { c })
+        .collect()
+}
+
+/// The first text of `manifest` holding a control character it may not hold
+/// ([`forbidden_control`]), as the field's path (`paths[2].name`) and the character.
 fn control_character(manifest: &Manifest) -> Option<(String, char)> {
     fn forbidden(t: &str) -> Option<char> {
-        t.chars()
-            .find(|c| c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
+        t.chars().find(|&c| forbidden_control(c))
     }
     fn walk(v: &serde_json::Value, at: &str) -> Option<(String, char)> {
         match v {

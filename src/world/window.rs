@@ -3,7 +3,9 @@
 //! GeoTIFF among them) by reading and decoding only the strips or tiles that hold the rows. A
 //! file may also be an `http://` address: its header and its chunks are then read with range
 //! requests, with the tile client's deadlines and retries. PNG DEMs are read whole each time
-//! (they are small: a PNG has no index to read a part of it by).
+//! (they are small: a PNG has no index to read a part of it by). A file on disk is opened when
+//! read, and only the [`MAX_OPEN_DEM_FILES`] read last are kept open, so that a mosaic of
+//! thousands of files stays within the process's limit of open files.
 
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -36,17 +38,87 @@ trait ReadAt: Send + Sync {
     fn len(&self) -> u64;
 }
 
+/// A file on disk, opened when read: its handle is kept in [`HANDLES`] while it is among the
+/// most recently read, so that a mosaic of thousands of files holds a bounded number open (one
+/// each overran the usual limit of 1024 descriptors a process).
 struct LocalFile {
     path: PathBuf,
-    file: std::fs::File,
+    /// Its key in [`HANDLES`].
+    id: u64,
     len: u64,
+}
+
+/// Most local DEM files held open at once (besides those being read this moment).
+pub const MAX_OPEN_DEM_FILES: usize = 64;
+
+/// The open handles of the most recently read [`LocalFile`]s, by their ids.
+static HANDLES: std::sync::Mutex<Option<lru::LruCache<u64, std::sync::Arc<std::fs::File>>>> =
+    std::sync::Mutex::new(None);
+
+/// The next [`LocalFile`]'s id.
+static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// Runs `f` on the handle cache (created on first use), even after a panic elsewhere.
+fn with_handles<T>(
+    f: impl FnOnce(&mut lru::LruCache<u64, std::sync::Arc<std::fs::File>>) -> T,
+) -> T {
+    let mut guard = HANDLES
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let cache = guard.get_or_insert_with(|| {
+        lru::LruCache::new(
+            std::num::NonZeroUsize::new(MAX_OPEN_DEM_FILES).unwrap_or(std::num::NonZeroUsize::MIN),
+        )
+    });
+    f(cache)
+}
+
+impl LocalFile {
+    /// Opens `path` (a regular file), keeping its handle among the recent ones.
+    fn open(path: &Path) -> Result<LocalFile, WorldError> {
+        let (file, len) = super::format::open_regular(path)?;
+        let id = NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        with_handles(|h| h.put(id, std::sync::Arc::new(file)));
+        Ok(LocalFile {
+            path: path.to_path_buf(),
+            id,
+            len,
+        })
+    }
+
+    /// The file's handle: the kept one, or the file opened again (and kept) where it was let
+    /// go; refused if the file's length changed meanwhile.
+    fn handle(&self) -> Result<std::sync::Arc<std::fs::File>, WorldError> {
+        if let Some(file) = with_handles(|h| h.get(&self.id).cloned()) {
+            return Ok(file);
+        }
+        let (file, len) = super::format::open_regular(&self.path)?;
+        if len != self.len {
+            return Err(WorldError::DemMosaic {
+                path: self.path.clone(),
+                problem: format!(
+                    "it holds {len} bytes now, not the {} it held when it was first read",
+                    self.len
+                ),
+            });
+        }
+        let file = std::sync::Arc::new(file);
+        with_handles(|h| h.put(self.id, std::sync::Arc::clone(&file)));
+        Ok(file)
+    }
+}
+
+impl Drop for LocalFile {
+    fn drop(&mut self) {
+        with_handles(|h| h.pop(&self.id));
+    }
 }
 
 impl ReadAt for LocalFile {
     fn read_at(&self, offset: u64, count: u64) -> Result<Vec<u8>, WorldError> {
         use std::os::unix::fs::FileExt;
         let mut buf = vec![0u8; count as usize];
-        self.file
+        self.handle()?
             .read_exact_at(&mut buf, offset)
             .map_err(|e| WorldError::io(&self.path, e))?;
         Ok(buf)
@@ -80,12 +152,7 @@ fn open_source(path: &Path) -> Result<Box<dyn ReadAt>, WorldError> {
             problem: "this build reads no HTTP addresses (the http feature is off)".into(),
         });
     }
-    let (file, len) = super::format::open_regular(path)?;
-    Ok(Box::new(LocalFile {
-        path: path.to_path_buf(),
-        file,
-        len,
-    }))
+    Ok(Box::new(LocalFile::open(path)?))
 }
 
 /// Bytes of a [`ReadAt`] as [`Read`] + [`Seek`], in blocks, for the TIFF decoder's many small
@@ -180,8 +247,8 @@ impl Rows {
                         .into(),
                 });
             }
-            let mut dem = Dem::load_unfilled(path, options)?;
-            dem.heights = Vec::new();
+            // The header and sidecar alone: the samples are decoded when they are read.
+            let (dem, _) = Dem::png_sidecar_header(path)?;
             (dem, Kind::Png(options.clone()))
         } else if [b"II*\0", b"MM\0*", b"II+\0", b"MM\0+"]
             .iter()

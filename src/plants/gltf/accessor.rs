@@ -1,8 +1,10 @@
 //! The opened file and its data: buffers (the binary chunk, a data URI or a file beside the glTF file),
 //! buffer views and accessors, each read checked against the bytes there are.
 
-use std::cell::OnceCell;
+use std::cell::{Cell, OnceCell};
+use std::collections::HashMap;
 use std::path::Path;
+use std::rc::Rc;
 
 use base64::Engine as _;
 use gltf::Gltf;
@@ -10,7 +12,7 @@ use gltf::accessor::{DataType, Dimensions};
 use percent_encoding::percent_decode_str;
 
 use super::validate::validate;
-use super::{MAX_PLANT_TRIANGLES, PlantFileError};
+use super::{MAX_PLANT_BUFFER_BYTES, MAX_PLANT_TRIANGLES, PlantFileError};
 
 /// A problem inside an accessor, before the primitive it belongs to is known.
 pub(super) enum AccessorError {
@@ -30,8 +32,22 @@ pub(super) struct Loader<'p> {
     /// Reads the files the glTF names.
     pub(super) read: &'p super::PlantFileReader<'p>,
     pub(super) gltf: Gltf,
-    /// Buffer data by index, read when first needed.
-    pub(super) buffers: Vec<OnceCell<Vec<u8>>>,
+    /// Buffer data by index, read when first needed; buffers of the same source share it.
+    buffers: Vec<OnceCell<Rc<Vec<u8>>>>,
+    /// For each buffer, the first buffer of its source ([`source_key`]).
+    first_of_source: Vec<usize>,
+    /// Bytes read for the buffers so far (each source once), against
+    /// [`MAX_PLANT_BUFFER_BYTES`].
+    read_bytes: Cell<u64>,
+}
+
+/// What a buffer's bytes come from, buffers of the same key sharing one read: its URI, or the
+/// binary chunk.
+fn source_key<'a>(buffer: &gltf::Buffer<'a>) -> Option<&'a str> {
+    match buffer.source() {
+        gltf::buffer::Source::Bin => None,
+        gltf::buffer::Source::Uri(uri) => Some(uri),
+    }
 }
 
 impl<'p> Loader<'p> {
@@ -62,18 +78,44 @@ impl<'p> Loader<'p> {
         let gltf =
             Gltf::from_slice_without_validation(bytes).map_err(|e| not_gltf(e.to_string()))?;
         validate(&gltf).map_err(not_gltf)?;
+        // Buffers of one source are read once; the largest length declared for each source,
+        // together, must fit the limit before anything is read.
+        let mut first: HashMap<Option<&str>, (usize, u64)> = HashMap::new();
+        let mut first_of_source = Vec::new();
+        for buffer in gltf.buffers() {
+            let length = buffer.length() as u64;
+            let entry = first
+                .entry(source_key(&buffer))
+                .or_insert((buffer.index(), length));
+            entry.1 = entry.1.max(length);
+            first_of_source.push(entry.0);
+        }
+        let declared = first
+            .values()
+            .fold(0u64, |sum, &(_, length)| sum.saturating_add(length));
+        if declared > MAX_PLANT_BUFFER_BYTES {
+            return Err(PlantFileError::BuffersTooLarge {
+                path: path.to_owned(),
+                bytes: declared,
+                limit: MAX_PLANT_BUFFER_BYTES,
+            });
+        }
+        drop(first);
         let buffers = vec![OnceCell::new(); gltf.buffers().len()];
         Ok(Self {
             path,
             read,
             gltf,
             buffers,
+            first_of_source,
+            read_bytes: Cell::new(0),
         })
     }
 }
 
 impl Loader<'_> {
-    /// The data of a buffer, read when first asked for.
+    /// The data of a buffer, read when first asked for (once for all the buffers of its source);
+    /// refused once the buffers read pass [`MAX_PLANT_BUFFER_BYTES`] together.
     fn buffer(&self, index: usize) -> Result<&[u8], PlantFileError> {
         if self.buffers.get(index).is_some_and(|b| b.get().is_none()) {
             let buffer =
@@ -90,14 +132,38 @@ impl Loader<'_> {
                 buffer: index,
                 reason,
             };
-            let data = match buffer.source() {
-                gltf::buffer::Source::Bin => self
-                    .gltf
-                    .blob
-                    .clone()
-                    .ok_or_else(|| missing("the file has no binary chunk".into()))?,
-                gltf::buffer::Source::Uri(uri) => {
-                    read_uri(self.path, uri, self.read).map_err(missing)?
+            let first = self.first_of_source.get(index).copied().unwrap_or(index);
+            let shared = match self.buffers.get(first).and_then(OnceCell::get) {
+                Some(data) if first != index => Some(Rc::clone(data)),
+                _ => None,
+            };
+            let data = match shared {
+                Some(data) => data,
+                None => {
+                    let data = match buffer.source() {
+                        gltf::buffer::Source::Bin => self
+                            .gltf
+                            .blob
+                            .clone()
+                            .ok_or_else(|| missing("the file has no binary chunk".into()))?,
+                        gltf::buffer::Source::Uri(uri) => {
+                            read_uri(self.path, uri, self.read).map_err(missing)?
+                        }
+                    };
+                    let total = self.read_bytes.get().saturating_add(data.len() as u64);
+                    if total > MAX_PLANT_BUFFER_BYTES {
+                        return Err(PlantFileError::BuffersTooLarge {
+                            path: self.path.to_owned(),
+                            bytes: total,
+                            limit: MAX_PLANT_BUFFER_BYTES,
+                        });
+                    }
+                    self.read_bytes.set(total);
+                    let data = Rc::new(data);
+                    if first != index {
+                        let _ = self.buffers[first].set(Rc::clone(&data));
+                    }
+                    data
                 }
             };
             if data.len() < buffer.length() {
@@ -114,7 +180,7 @@ impl Loader<'_> {
             .buffers
             .get(index)
             .and_then(|b| b.get())
-            .map_or(&[], Vec::as_slice))
+            .map_or(&[], |data| data.as_slice()))
     }
 
     /// The bytes of a buffer view, checked against its buffer.

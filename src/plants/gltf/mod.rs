@@ -54,6 +54,11 @@ pub const MAX_TEXTURE_SIZE: u32 = 4096;
 /// the most vertices and triangles and a texture of the largest size many times over. A file
 /// that is not a regular file (a FIFO, a device) is refused before it is opened.
 pub const MAX_PLANT_FILE_BYTES: u64 = 256 << 20;
+/// The most bytes all the buffers of a plant's file may hold together (as their files and data
+/// URIs hold them, and as the file declares them): a file listing many buffers, or many large
+/// ones, is refused before it makes the loader hold more. Buffers naming the same file (or data
+/// URI, or the binary chunk) share one read and count once.
+pub const MAX_PLANT_BUFFER_BYTES: u64 = 256 << 20;
 
 /// Reads a file of a plant (its glTF file, or a buffer or image beside it): a regular file of
 /// at most [`MAX_PLANT_FILE_BYTES`], the reason otherwise in words.
@@ -200,6 +205,20 @@ pub enum PlantFileError {
         buffer: usize,
         /// Why (the file or data URI and the reason).
         reason: String,
+    },
+    /// The file's buffers together hold (or declare) more than [`MAX_PLANT_BUFFER_BYTES`].
+    #[error(
+        "plant file {}: its buffers hold {bytes} bytes or more together, more than the limit of \
+         {limit} (MAX_PLANT_BUFFER_BYTES) for all the buffers of a plant",
+        path.display()
+    )]
+    BuffersTooLarge {
+        /// The glTF file.
+        path: PathBuf,
+        /// Bytes of the buffers read or declared when the limit was passed.
+        bytes: u64,
+        /// [`MAX_PLANT_BUFFER_BYTES`].
+        limit: u64,
     },
     /// A buffer holds fewer bytes than the file says, or than a view or accessor reads.
     #[error(

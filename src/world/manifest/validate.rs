@@ -7,11 +7,24 @@ use std::path::Path;
 use super::*;
 
 impl Manifest {
-    /// Checks that every value is finite and within what the format supports; `path` is only
-    /// used in error messages.
+    /// Checks that every value is finite and within what the format supports, and that no text
+    /// holds a control character ([`forbidden_control`]); `path` is only used in error
+    /// messages.
     pub fn validate(&self, path: &Path) -> Result<(), WorldError> {
         let v = Validator { path };
         let p = &self.pyramid;
+        // Checked here, not only when parsing, so that a bake refuses what its own loader would.
+        if let Some((field, c)) = control_character(self) {
+            return Err(v.out_of_range(
+                &field,
+                format!(
+                    "a text holding the control character U+{:04X}",
+                    u32::from(c)
+                ),
+                "text without control characters (tabs and line breaks aside): a world's names \
+                 are printed to terminals and window titles",
+            ));
+        }
 
         for axis in 0..2 {
             v.positive(&format!("extent_m[{axis}]"), self.extent_m[axis])?;
