@@ -15,8 +15,11 @@ use super::error::WorldError;
 
 /// Whether `path` names a file on an HTTP server rather than on disk.
 pub fn is_remote(path: &Path) -> bool {
-    path.to_str()
-        .is_some_and(|s| s.starts_with("http://") || s.starts_with("https://"))
+    // The scheme in any case, as URLs have it (`HTTP://host/dem.tif` is remote too).
+    path.to_str().is_some_and(|s| {
+        let scheme = s.get(..8).unwrap_or(s).to_ascii_lowercase();
+        scheme.starts_with("http://") || scheme.starts_with("https://")
+    })
 }
 
 /// The whole of a remote file of at most `max` bytes (a VRT).
@@ -342,6 +345,20 @@ impl Rows {
             Kind::Png(_) => None,
             Kind::Hgt { .. } => Some(0),
             Kind::Tiff { tiff, .. } => Some(tiff.chunk_rows()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn an_address_is_remote_in_any_case_of_its_scheme() {
+        use std::path::Path;
+        for remote in ["http://h/d.tif", "HTTP://h/d.tif", "Https://h/d.tif"] {
+            assert!(super::is_remote(Path::new(remote)), "{remote}");
+        }
+        for local in ["dem/http.tif", "http:/d.tif", "d.tif", ""] {
+            assert!(!super::is_remote(Path::new(local)), "{local}");
         }
     }
 }
