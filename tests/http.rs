@@ -633,6 +633,20 @@ fn the_server_streams_files_decodes_names_and_checks_its_world_at_the_start() {
         .unwrap()
         .to_string();
     assert!(err.contains("a symlink out of the folder"), "{err}");
+    // So is a level of its tiles linked out of it.
+    std::fs::remove_file(w.join("world.toml")).unwrap();
+    std::fs::write(w.join("world.toml"), "name = \"x\"").unwrap();
+    std::fs::create_dir_all(w.join("tiles")).unwrap();
+    std::fs::create_dir_all(dir.path().join("L2real")).unwrap();
+    std::os::unix::fs::symlink(dir.path().join("L2real"), w.join("tiles/L2")).unwrap();
+    let err = WorldServer::start(&w, "127.0.0.1:0")
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("tiles/L2: a symlink out of the folder"),
+        "{err}"
+    );
 }
 
 /// One request to `addr`, answered within 5 s: the answer's head and body.
@@ -858,7 +872,7 @@ fn the_server_holds_its_connections_and_request_heads_within_bounds() {
     junk.write_all(b"\x16\x03\x01 hello\r\n\r\n").unwrap();
     assert!(read_all(&mut junk).starts_with("HTTP/1.1 400 Bad Request"));
     let mut post = TcpStream::connect(server.addr()).unwrap();
-    post.write_all(b"POST /a.txt HTTP/1.1\r\nContent-Length: 0\r\n\r\n")
+    post.write_all(b"POST /a.txt HTTP/1.1\r\nHost: x\r\nContent-Length: 0\r\n\r\n")
         .unwrap();
     let answer = read_all(&mut post);
     assert!(
@@ -866,6 +880,76 @@ fn the_server_holds_its_connections_and_request_heads_within_bounds() {
         "{answer}"
     );
     assert!(get().starts_with("HTTP/1.1 200 OK"));
+}
+
+/// Requests as RFC 9112 has them: a target's query may hold anything (`?u=http://h/x` is not
+/// an absolute target), an HTTP/1.1 request without a Host and a target that is neither a path
+/// nor absolute are 400, bytes past ASCII in a header's value are kept, and a Range under an
+/// If-Range of another version is answered whole.
+#[test]
+fn the_server_reads_requests_as_rfc_9112_has_them() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("a.txt"), "0123456789").unwrap();
+    std::fs::write(dir.path().join("world.toml"), "other").unwrap();
+    let server = WorldServer::start_folder(dir.path(), "127.0.0.1:0").unwrap();
+    let ask = |request: &[u8]| -> String {
+        let mut s = TcpStream::connect(server.addr()).unwrap();
+        s.write_all(request).unwrap();
+        let mut all = Vec::new();
+        let _ = s.read_to_end(&mut all);
+        String::from_utf8_lossy(&all).into_owned()
+    };
+    let answer = ask(b"GET /a.txt?u=http://h/world.toml HTTP/1.1\r\nHost: x\r\n\r\n");
+    assert!(
+        answer.starts_with("HTTP/1.1 200") && answer.ends_with("0123456789"),
+        "{answer}"
+    );
+    let answer = ask(b"GET http://x/a.txt HTTP/1.1\r\nHost: x\r\n\r\n");
+    assert!(answer.ends_with("0123456789"), "{answer}");
+    for bad in [
+        &b"GET /a.txt HTTP/1.1\r\n\r\n"[..],
+        b"GET a.txt HTTP/1.1\r\nHost: x\r\n\r\n",
+        b"GET /a.txt HTTP/1.\r\nHost: x\r\n\r\n",
+    ] {
+        let answer = ask(bad);
+        assert!(
+            answer.starts_with("HTTP/1.1 400"),
+            "{}: {answer}",
+            String::from_utf8_lossy(bad)
+        );
+    }
+    assert!(ask(b"GET /a.txt HTTP/1.0\r\n\r\n").starts_with("HTTP/1.1 200"));
+    let answer = ask(b"GET /a.txt HTTP/1.1\r\nHost: x\r\nX-Name: caf\xe9\r\n\r\n");
+    assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+    // If-Range: the range of the version the client holds, else the whole file.
+    let head = ask(b"HEAD /a.txt HTTP/1.1\r\nHost: x\r\n\r\n");
+    let etag = head
+        .lines()
+        .find_map(|l| l.strip_prefix("ETag: "))
+        .unwrap()
+        .to_owned();
+    let ranged = |if_range: &str| {
+        ask(format!(
+            "GET /a.txt HTTP/1.1\r\nHost: x\r\nRange: bytes=0-1\r\nIf-Range: {if_range}\r\n\r\n"
+        )
+        .as_bytes())
+    };
+    let answer = ranged(&etag);
+    assert!(
+        answer.starts_with("HTTP/1.1 206") && answer.ends_with("\r\n\r\n01"),
+        "{answer}"
+    );
+    for other in [
+        "\"stale\"",
+        "Thu, 01 Jan 1998 00:00:00 GMT",
+        &format!("W/{etag}"),
+    ] {
+        let answer = ranged(other);
+        assert!(
+            answer.starts_with("HTTP/1.1 200") && answer.ends_with("0123456789"),
+            "{other}: {answer}"
+        );
+    }
 }
 
 /// `verdant serve` in one process and `verdant fly http://...` in another, as the README says;
@@ -1354,7 +1438,10 @@ fn a_server_that_hangs_up_is_reported_as_one() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("without an HTTP reply") && e.contains("3 attempt(s)") && !e.contains("503"),
+        // (`HTTP 503`: the port in the address may hold the digits 503.)
+        e.contains("without an HTTP reply")
+            && e.contains("3 attempt(s)")
+            && !e.contains("HTTP 503"),
         "{e}"
     );
     assert_eq!(server.asked("/world.toml"), 3);

@@ -738,9 +738,8 @@ fn default_name(out: &Path, dem: &Path) -> String {
 /// The file name of `path` as the manifest records it: its control characters replaced by
 /// U+FFFD (a file's name is no fault of the user's, and must not reach a terminal raw).
 fn file_name(path: &Path) -> String {
-    path.file_name()
-        .map(|n| without_control_characters(&n.to_string_lossy()))
-        .unwrap_or_default()
+    // An address's query (a signed URL's token) and fragment are not written into the manifest.
+    without_control_characters(&crate::world::window::file_name_of(path))
 }
 
 /// The manifest's description of a baked world: the sidecar's `place`, the DEM and the cell

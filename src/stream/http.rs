@@ -350,11 +350,26 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
     };
     let rest = url.get("http://".len()..).unwrap_or("");
     let authority = rest.split(['/', '?', '#']).next().unwrap_or("");
-    let host_port = authority.rsplit_once('@').map_or(authority, |(_, h)| h);
+    if let Some((_, host)) = authority.rsplit_once('@') {
+        // Named without the credentials: they are not printed either.
+        return Err(HttpError::BadUrl {
+            url: format!("http://…@{host}/"),
+            problem: "credentials in the address are not sent (the HTTP client does not, and \
+                      plain HTTP would carry them in the clear): serve the world at an address \
+                      without them",
+        });
+    }
+    let host_port = authority;
     let (host, port) = if let Some(v6) = host_port.strip_prefix('[') {
         let Some((host, after)) = v6.split_once(']') else {
             return Err(bad("an IPv6 host without its closing ]"));
         };
+        if !host.is_empty() {
+            return Err(bad(
+                "an IPv6 address as the host, which the HTTP client cannot reach: use a host \
+                 name that resolves to it (localhost for ::1)",
+            ));
+        }
         match after {
             "" => (host, None),
             _ => match after.strip_prefix(':') {
@@ -614,8 +629,9 @@ impl TileSource for HttpSource {
 mod tests {
     use super::*;
 
-    /// Addresses with no host or a port outside 1..=65535 are refused before any request;
-    /// hosts by name, IPv4 and IPv6 with or without a port pass.
+    /// Addresses with no host or a port outside 1..=65535, an IPv6 address as the host (the
+    /// client cannot reach one) and credentials are refused before any request; hosts by name
+    /// and IPv4 with or without a port pass.
     #[test]
     fn an_address_without_a_host_or_with_a_bad_port_is_refused() {
         for bad in [
@@ -627,6 +643,8 @@ mod tests {
             "http://h:80x/",
             "http://[::1",
             "http://[::1]x/",
+            "http://[::1]/w",
+            "http://[::1]:8000/w",
         ] {
             let err = check_authority(bad).err().map(|e| e.to_string());
             assert!(
@@ -644,12 +662,17 @@ mod tests {
             "http://localhost/",
             "http://example.org:8080/worlds/a?x=1",
             "http://10.0.0.1:65535",
-            "http://[::1]/w",
-            "http://[::1]:8000/w",
-            "http://user@host:1/w",
         ] {
             assert!(check_authority(good).is_ok(), "{good}");
         }
+        // Credentials are refused, and not repeated in the message.
+        let err = check_authority("http://user:secret@host:1/w")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("credentials") && !err.contains("secret"),
+            "{err}"
+        );
     }
 
     /// The wait doubles from the backoff and stops at its ceiling; no `Duration` overflows.

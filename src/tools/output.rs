@@ -193,10 +193,18 @@ impl OutDir {
             });
         }
         let created = crate::world::format::missing_folders(path);
-        std::fs::create_dir_all(path).map_err(|source| OutDirError::Create {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        // The folder as resolved first (`new/.` names `new`, which `create_dir_all` of the
+        // path as given does not make), then as given (which the tools write through).
+        let resolved = crate::world::format::resolve_lexically(path).ok().flatten();
+        resolved
+            .iter()
+            .map(PathBuf::as_path)
+            .chain([path])
+            .try_for_each(std::fs::create_dir_all)
+            .map_err(|source| OutDirError::Create {
+                path: path.to_path_buf(),
+                source,
+            })?;
         // From here on, dropping `dir` removes a folder this run created.
         let mut dir = Self {
             path: path.to_path_buf(),
@@ -251,8 +259,18 @@ fn lock_folder(dir: &Path, tool: &str) -> Result<Option<File>, OutDirError> {
             }
             failed(e)
         })?;
-        if !f.metadata().map_err(failed)?.is_file() {
+        let meta = f.metadata().map_err(failed)?;
+        if !meta.is_file() {
             return Err(not_regular());
+        }
+        // A hard link is a regular file that is also another name's: truncated here, that
+        // file would be lost too.
+        #[cfg(unix)]
+        if std::os::unix::fs::MetadataExt::nlink(&meta) > 1 {
+            return Err(failed(std::io::Error::other(
+                "it has other names (a hard link to another file); remove it if no run of \
+                 verdant is writing here",
+            )));
         }
         match f.try_lock() {
             Ok(()) => {}
@@ -478,10 +496,30 @@ mod tests {
                 "{e}"
             );
         }
+        // A hard link to the file: refused too.
+        let linked = tmp.path().join("out4");
+        std::fs::create_dir(&linked).unwrap();
+        std::fs::hard_link(&precious, linked.join(LOCK_FILE)).unwrap();
+        let e = match OutDir::create_for(&linked, "fly") {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("a run took a lock that is a hard link"),
+        };
+        assert!(e.contains("hard link") && e.contains(LOCK_FILE), "{e}");
         assert_eq!(std::fs::read_to_string(&precious).unwrap(), "my thesis");
         assert!(out.join(LOCK_FILE).is_symlink());
         assert!(!tmp.path().join("nothing").exists());
         assert!(folder.join(LOCK_FILE).is_dir());
+    }
+
+    /// An output folder named with a trailing `.` is made and used like the folder itself.
+    #[test]
+    fn an_output_folder_named_through_a_dot_is_made() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("o6/.");
+        let dir = OutDir::create_for(&out, "fly").unwrap();
+        std::fs::write(out.join("report.json"), "{}").unwrap();
+        dir.keep();
+        assert_eq!(names(&tmp.path().join("o6")), ["report.json"]);
     }
 
     #[test]

@@ -75,8 +75,18 @@ impl WorldServer {
         let real_root = root
             .canonicalize()
             .with_context(|| root.display().to_string())?;
-        for name in ["world.toml", "tiles"] {
-            if let Ok(real) = root.join(name).canonicalize()
+        // The manifest, the tiles' folder and its levels' folders (a level linked to another
+        // disk would be answered 404 file by file).
+        let levels = std::fs::read_dir(root.join("tiles"))
+            .into_iter()
+            .flatten()
+            .flatten()
+            .map(|e| Path::new("tiles").join(e.file_name()));
+        for name in [PathBuf::from("world.toml"), PathBuf::from("tiles")]
+            .into_iter()
+            .chain(levels)
+        {
+            if let Ok(real) = root.join(&name).canonicalize()
                 && !real.starts_with(&real_root)
             {
                 bail!(
@@ -287,7 +297,8 @@ fn read_head(stream: &TcpStream, limit: Duration) -> Result<Head, HeadError> {
         if lines.len() > MAX_HEADERS {
             return Err(HeadError::TooLarge);
         }
-        lines.push(String::from_utf8(line).map_err(|_| HeadError::Bad)?);
+        // Bytes past ASCII in a header's value (obs-text, RFC 9110 5.5) are kept, not refused.
+        lines.push(String::from_utf8_lossy(&line).into_owned());
     }
     let mut parts = lines[0].split(' ');
     let (Some(method), Some(target), Some(version), None) =
@@ -295,7 +306,12 @@ fn read_head(stream: &TcpStream, limit: Duration) -> Result<Head, HeadError> {
     else {
         return Err(HeadError::Bad);
     };
-    if method.is_empty() || !version.starts_with("HTTP/1.") {
+    let origin_form = target.starts_with('/');
+    let absolute_form = target.starts_with("http://") || target.starts_with("https://");
+    if method.is_empty()
+        || !matches!(version, "HTTP/1.0" | "HTTP/1.1")
+        || !(origin_form || absolute_form)
+    {
         return Err(HeadError::Bad);
     }
     let mut headers = Vec::with_capacity(lines.len() - 1);
@@ -305,6 +321,10 @@ fn read_head(stream: &TcpStream, limit: Duration) -> Result<Head, HeadError> {
             return Err(HeadError::Bad);
         }
         headers.push((name.to_string(), value.trim().to_string()));
+    }
+    // An HTTP/1.1 request names its host (RFC 9112, 3.2).
+    if version == "HTTP/1.1" && !headers.iter().any(|(n, _)| n.eq_ignore_ascii_case("Host")) {
+        return Err(HeadError::Bad);
     }
     Ok(Head {
         method: method.to_string(),
@@ -454,9 +474,14 @@ fn answer(root: &Path, request: &Head, out: &mut impl Write) -> std::io::Result<
             .with("Allow", "GET, HEAD")
             .send(out, b"", false);
     }
-    // An absolute target (`http://host/path`, as a proxy sends) is read as its path.
-    let target = match request.target.split_once("://") {
-        Some((_, rest)) => &rest[rest.find('/').unwrap_or(rest.len())..],
+    // An absolute target (`http://host/path`, as a proxy sends) is read as its path; a target
+    // that starts with `/` is a path whatever its query holds.
+    let target = match request
+        .target
+        .strip_prefix("http://")
+        .or_else(|| request.target.strip_prefix("https://"))
+    {
+        Some(rest) => &rest[rest.find('/').unwrap_or(rest.len())..],
         None => request.target.as_str(),
     };
     let Some(file) = resolve(root, target) else {
@@ -489,7 +514,16 @@ fn answer(root: &Path, request: &Head, out: &mut impl Write) -> std::io::Result<
         return answer.send(out, b"", true);
     }
     let len = meta.len();
-    let (status, span) = match request.value("Range").map(|r| byte_range(r, len)) {
+    // If-Range (RFC 9110, 13.1.5): the range only of the version the client holds (its tag,
+    // or its date when the file has one); another version is sent whole.
+    let range = request
+        .value("Range")
+        .filter(|_| match request.value("If-Range") {
+            None => true,
+            Some(tag) if tag.trim_start().starts_with('"') => tag.trim() == etag,
+            Some(date) => last_modified.as_deref() == Some(date.trim()),
+        });
+    let (status, span) = match range.map(|r| byte_range(r, len)) {
         None | Some(RangeAsk::Whole) => (200, None),
         Some(RangeAsk::Part(span)) => (206, Some(span)),
         Some(RangeAsk::Unsatisfiable) => {

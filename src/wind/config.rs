@@ -335,17 +335,18 @@ impl WindConfig {
     /// radii, times and angles beyond their documented ranges).
     pub fn from_scene(manifest: &Manifest, scene_name: Option<&str>) -> Result<Self, WindError> {
         let scene = match scene_name {
-            Some(name) => Some(manifest.wind_scene(name).ok_or_else(|| {
-                WindError::UnknownScene {
-                    name: name.to_string(),
-                    available: manifest
-                        .wind_scenes
-                        .iter()
-                        .map(|s| s.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", "),
-                }
-            })?),
+            Some(name) => {
+                Some(
+                    manifest
+                        .wind_scene(name)
+                        .ok_or_else(|| WindError::UnknownScene {
+                            name: name.to_string(),
+                            available: crate::world::name_list(
+                                manifest.wind_scenes.iter().map(|s| s.name.as_str()),
+                            ),
+                        })?,
+                )
+            }
             None => manifest.wind_scene("breeze"),
         };
         let Some(scene) = scene else {

@@ -338,11 +338,7 @@ impl Layout {
         }
         let names: Vec<String> = parts
             .iter()
-            .map(|p| {
-                p.path
-                    .file_name()
-                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
-            })
+            .map(|p| super::window::file_name_of(&p.path))
             .collect();
         let header = Dem {
             width: n[0] as u32,

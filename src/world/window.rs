@@ -22,6 +22,18 @@ pub fn is_remote(path: &Path) -> bool {
     })
 }
 
+/// The name of the file `path` names: its last part, and for an address its path's last part
+/// without the query (a signed URL's token) or the fragment.
+pub fn file_name_of(path: &Path) -> String {
+    if is_remote(path) {
+        let text = path.to_string_lossy();
+        let no_query = text.split(['?', '#']).next().unwrap_or("");
+        return no_query.rsplit('/').next().unwrap_or("").to_owned();
+    }
+    path.file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+}
+
 /// The whole of a remote file of at most `max` bytes (a VRT).
 pub(crate) fn read_remote(path: &Path, max: u64) -> Result<Vec<u8>, WorldError> {
     let src = open_source(path)?;
@@ -359,6 +371,13 @@ mod tests {
         }
         for local in ["dem/http.tif", "http:/d.tif", "d.tif", ""] {
             assert!(!super::is_remote(Path::new(local)), "{local}");
+        }
+        for (path, name) in [
+            ("http://h/a/N37W123.hgt?sig=SECRET%2Fb#x", "N37W123.hgt"),
+            ("HTTP://h/d.tif#frag", "d.tif"),
+            ("dem/d?.tif", "d?.tif"),
+        ] {
+            assert_eq!(super::file_name_of(Path::new(path)), name, "{path}");
         }
     }
 }
