@@ -148,8 +148,12 @@ impl DiskCache {
             if let Ok(meta) = entry.metadata()
                 && meta.is_file()
             {
-                cache.entries.insert(key.to_string(), (meta.len(), 0));
-                cache.bytes += meta.len();
+                // The entry's bytes on disk: its body and its metadata file.
+                let meta_len = std::fs::metadata(config.dir.join(format!("{key}.meta")))
+                    .map_or(0, |m| m.len());
+                let size = meta.len() + meta_len;
+                cache.entries.insert(key.to_string(), (size, 0));
+                cache.bytes += size;
             }
         }
         cache.evict(0);
@@ -238,18 +242,21 @@ impl DiskCache {
     }
 
     pub(super) fn put(&mut self, url: &str, validator: &Validator, body: &[u8]) {
-        let size = body.len() as u64;
+        let meta = format!(
+            "{url}\n{}\nfnv1a64 {:016x} {}\n",
+            validator.to_line(),
+            fnv1a64(body),
+            body.len()
+        );
+        // What the entry holds on disk, its metadata included (an entry of an empty body
+        // costs its metadata's bytes).
+        let size = (body.len() + meta.len()) as u64;
         if size > self.max_bytes {
             return;
         }
         let key = Self::key(url);
         self.remove(&key);
         self.evict(size);
-        let meta = format!(
-            "{url}\n{}\nfnv1a64 {:016x} {size}\n",
-            validator.to_line(),
-            fnv1a64(body)
-        );
         // Named by the process too: two runs may share a cache.
         let dir = self.dir.clone();
         let tmp = |suffix: &str| dir.join(format!("{key}.{suffix}.{}.tmp", std::process::id()));
@@ -310,17 +317,25 @@ mod tests {
     #[test]
     fn the_disk_cache_stays_within_its_bytes_and_drops_the_least_recently_used() {
         let tmp = tempfile::tempdir().unwrap();
+        // Each entry is its 100 bytes and about 50 of metadata: two fit, not three.
         let config = HttpCacheConfig {
             dir: tmp.path().join("cache"),
-            max_bytes: 250,
+            max_bytes: 400,
         };
         let mut cache = DiskCache::open(&config).unwrap();
         let tag = Validator::ETag("\"a\"".into());
         cache.put("http://h/a", &tag, &[1; 100]);
         cache.put("http://h/b", &tag, &[2; 100]);
+        assert_eq!(cache.entries.len(), 2);
         assert!(cache.get("http://h/a", 1000).is_some()); // a is now more recent than b
         cache.put("http://h/c", &tag, &[3; 100]);
-        assert!(cache.bytes <= 250);
+        assert!(cache.bytes <= 400);
+        // What the cache counts is what its folder holds.
+        let on_disk: u64 = std::fs::read_dir(&config.dir)
+            .unwrap()
+            .map(|e| e.unwrap().metadata().unwrap().len())
+            .sum();
+        assert_eq!(cache.bytes, on_disk);
         assert!(
             cache.get("http://h/b", 1000).is_none(),
             "b was the least recently used"
@@ -330,16 +345,29 @@ mod tests {
             cache.get("http://h/c", 1000).unwrap(),
             (tag.clone(), vec![3; 100])
         );
-        cache.put("http://h/huge", &tag, &[0; 300]);
+        cache.put("http://h/huge", &tag, &[0; 400]);
         assert!(cache.get("http://h/huge", 1000).is_none());
+        // Empty bodies cost their metadata: they cannot fill the folder past its bytes.
+        for i in 0..100 {
+            cache.put(&format!("http://h/empty{i}"), &tag, &[]);
+        }
+        assert!(
+            cache.bytes <= 400 && cache.entries.len() < 10,
+            "{}",
+            cache.entries.len()
+        );
         // Reopened, it finds its files and still keeps within its bytes.
         drop(cache);
         let small = HttpCacheConfig {
-            max_bytes: 100,
+            max_bytes: 200,
             ..config
         };
         let cache = DiskCache::open(&small).unwrap();
-        assert!(cache.bytes <= 100 && cache.entries.len() == 1);
+        assert!(
+            cache.bytes <= 200 && !cache.entries.is_empty(),
+            "{}",
+            cache.bytes
+        );
     }
 
     /// The cache shares its folder with whatever else is there: a user's `thesis.body` and
