@@ -1163,6 +1163,65 @@ fn frames_an_earlier_run_left_in_the_output_folder_are_warned_of() {
     assert!(!stderr.contains("earlier run"), "{stderr}");
 }
 
+/// An atlas larger than the device can hold (2048 slots of 1041-sample tiles: 17 GB) is an
+/// error naming `--atlas-slots`, never the device's fatal error (it panicked); a device that
+/// can hold it flies.
+#[test]
+fn an_atlas_the_device_cannot_hold_is_an_error_not_a_panic() {
+    let tmp = tempfile::tempdir().unwrap();
+    let png = common::write_dem(
+        tmp.path(),
+        "d",
+        [129, 129],
+        [8.0, 8.0],
+        [0.0, 1.0],
+        |x, y| 100.0 + 0.01 * x + 0.02 * y,
+    );
+    let bake = verdant(
+        &[
+            "bake",
+            "--dem",
+            png.to_str().unwrap(),
+            "--out",
+            "w",
+            "--tile-cells",
+            "1024",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        bake.status.success(),
+        "{}",
+        String::from_utf8_lossy(&bake.stderr)
+    );
+    let out = verdant(
+        &[
+            "fly",
+            "w",
+            "--atlas-slots",
+            "2048",
+            "--frames",
+            "1",
+            "--size",
+            "32x18",
+            "--no-images",
+            "--out",
+            "f",
+        ],
+        tmp.path(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    if !out.status.success() {
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(
+            stderr.contains("an atlas of 2048 slots needs 17348050944 bytes of GPU memory")
+                && stderr.contains("--atlas-slots"),
+            "{stderr}"
+        );
+    }
+}
+
 #[test]
 fn a_cache_of_no_bytes_is_refused_and_a_huge_one_does_not_wrap() {
     let tmp = tempfile::tempdir().unwrap();

@@ -38,6 +38,19 @@ pub enum RendererError {
         /// The adapter's `max_texture_array_layers`.
         limit: u32,
     },
+    /// The device could not hold the atlas.
+    #[error(
+        "an atlas of {slots} slots needs {bytes} bytes of GPU memory, which the device could not \
+         give ({reason}): choose fewer --atlas-slots"
+    )]
+    AtlasMemory {
+        /// Slots asked for.
+        slots: u32,
+        /// The atlas's bytes (heights and grass maps).
+        bytes: u64,
+        /// The device's error.
+        reason: String,
+    },
     /// The target size is zero or beyond the adapter's limit.
     #[error("image size {width}x{height} is not supported (1 to {limit} pixels a side)")]
     BadSize {

@@ -219,7 +219,19 @@ impl Renderer {
                 min_mib: tile_bytes.div_ceil(1 << 20),
             });
         }
+        // The atlas is the renderer's largest allocation (slots x side^2 x 8 bytes: 17.8 GB at
+        // 2048 slots of 1041-sample tiles): a device that cannot hold it says so here, as an
+        // error naming the slots, not as a fatal error of the device.
+        let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let atlas = TileAtlas::new(device, pyramid.samples_per_side(), slots);
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            let side = u64::from(pyramid.samples_per_side());
+            return Err(RendererError::AtlasMemory {
+                slots,
+                bytes: u64::from(slots) * side * side * 8,
+                reason: e.to_string(),
+            });
+        }
         let (service, plan) = TileService::new(&pyramid, source.clone(), config.service)?;
         for (slot, tile) in &plan.uploads {
             atlas.upload(queue, *slot, tile)?;
