@@ -168,6 +168,10 @@ pub struct OutDir {
     path: PathBuf,
     /// The folders this run created, the deepest first: `path` and the parents it lacked.
     created: Vec<PathBuf>,
+    /// Folders made only because `path` was spelled through them (`new` of `new/../out`): the
+    /// tools write through `path` as given, so they stand while the run does, and go with it
+    /// (while empty), kept or not.
+    passed_through: Vec<PathBuf>,
     kept: bool,
     lock: Option<File>,
 }
@@ -193,6 +197,7 @@ impl OutDir {
             });
         }
         let created = crate::world::format::missing_folders(path);
+        let passed_through = passed_through(path, &created);
         // The folder as resolved first (`new/.` names `new`, which `create_dir_all` of the
         // path as given does not make), then as given (which the tools write through).
         let resolved = crate::world::format::resolve_lexically(path).ok().flatten();
@@ -209,6 +214,7 @@ impl OutDir {
         let mut dir = Self {
             path: path.to_path_buf(),
             created,
+            passed_through,
             kept: false,
             lock: None,
         };
@@ -334,7 +340,23 @@ impl Drop for OutDir {
             // Keeps each folder that anything was written into, and those above it.
             crate::world::format::remove_empty_folders(&self.created);
         }
+        crate::world::format::remove_empty_folders(&self.passed_through);
     }
+}
+
+/// The folders that `create_dir_all(path)` makes besides those of the resolved path
+/// (`created`): each missing folder that `path` names on the way (`new` of `new/../out`),
+/// resolved, the deepest first. None of them exists before the run.
+fn passed_through(path: &Path, created: &[PathBuf]) -> Vec<PathBuf> {
+    use std::path::Component;
+    path.ancestors()
+        .filter(|a| matches!(a.components().next_back(), Some(Component::Normal(_))))
+        .filter_map(|a| crate::world::format::resolve_lexically(a).ok().flatten())
+        .filter(|r| {
+            std::fs::symlink_metadata(r).is_err_and(|e| e.kind() == std::io::ErrorKind::NotFound)
+                && !created.contains(r)
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -509,6 +531,25 @@ mod tests {
         assert!(out.join(LOCK_FILE).is_symlink());
         assert!(!tmp.path().join("nothing").exists());
         assert!(folder.join(LOCK_FILE).is_dir());
+    }
+
+    /// An output folder spelled through a folder that does not exist (`nn/../outx`) leaves no
+    /// `nn` behind, whether the run writes and keeps its folder or fails; a folder of that
+    /// name that was there stays.
+    #[test]
+    fn an_output_folder_spelled_through_a_new_folder_leaves_it_behind_no_more() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("nn/../outx");
+        let dir = OutDir::create_for(&out, "fly").unwrap();
+        std::fs::write(out.join("report.json"), "{}").unwrap();
+        dir.keep();
+        assert_eq!(names(tmp.path()), ["outx"]);
+        assert_eq!(names(&tmp.path().join("outx")), ["report.json"]);
+        drop(OutDir::create_for(&tmp.path().join("mm/../outy"), "fly").unwrap());
+        assert_eq!(names(tmp.path()), ["outx"]);
+        std::fs::create_dir(tmp.path().join("kept")).unwrap();
+        drop(OutDir::create_for(&tmp.path().join("kept/../outz"), "fly").unwrap());
+        assert_eq!(names(tmp.path()), ["kept", "outx"]);
     }
 
     /// An output folder named with a trailing `.` is made and used like the folder itself.
