@@ -236,6 +236,45 @@ fn world_copy(parent: &std::path::Path) -> std::path::PathBuf {
     dir
 }
 
+/// The level-0 tiles are handed over one by one as they load, each held by nothing else
+/// (the service keeps none of them), so that a world of thousands of roots is never in memory
+/// at once; a load that fails ends the start with its error.
+#[test]
+fn level_0_tiles_are_handed_over_as_they_load() {
+    let w = World::open(&common::default_world()).unwrap();
+    let pyramid = w.manifest.pyramid.clone();
+    let [nx, ny] = pyramid.tiles_at(0);
+    let mut seen = Vec::new();
+    let service = TileService::start(
+        &pyramid,
+        Arc::new(w),
+        ServiceConfig::default(),
+        |slot, tile| {
+            seen.push((slot, Arc::strong_count(&tile)));
+            Ok::<(), WorldError>(())
+        },
+    )
+    .unwrap();
+    assert_eq!(seen.len() as u32, nx * ny);
+    assert!(seen.iter().all(|&(_, refs)| refs == 1), "{seen:?}");
+    for (x, y) in (0..ny).flat_map(|y| (0..nx).map(move |x| (x, y))) {
+        assert!(service.is_resident(TileId::new(0, x, y)));
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = world_copy(tmp.path());
+    std::fs::remove_file(dir.join("tiles/L0/0_0.height.exr")).unwrap();
+    let w = World::open(&dir).unwrap();
+    let mut calls = 0;
+    let e = TileService::start(&pyramid, Arc::new(w), ServiceConfig::default(), |_, _| {
+        calls += 1;
+        Ok::<(), WorldError>(())
+    })
+    .err()
+    .unwrap();
+    assert!(e.to_string().contains("0_0.height.exr"), "{e}");
+    assert_eq!(calls, 0);
+}
+
 /// A missing and a corrupt tile file: the frame loop keeps going, the tiles are drawn from
 /// their ancestors, and each fault is reported once.
 #[test]

@@ -76,6 +76,10 @@ use crate::world::{TileId, World};
 /// are still on their way gets no figures (counted in [`Renderer::stats_dropped`]).
 pub const READBACK_SLOTS: usize = 4;
 
+/// Level-0 tiles uploaded between flushes of the queue's staged copies when the renderer
+/// starts (a world of thousands of roots holds at most this many at once).
+const ROOT_UPLOAD_BATCH: u32 = 16;
+
 /// Passes a frame can time: two for each batch of grass jobs (generation and drawing; the
 /// most jobs a frame takes, [`crate::grass::renderer::MAX_JOBS`], in batches of
 /// [`crate::grass::BATCH_TILES`]), and room for every other stage's. A frame of the truth's
@@ -232,10 +236,19 @@ impl Renderer {
                 reason: e.to_string(),
             });
         }
-        let (service, plan) = TileService::new(&pyramid, source.clone(), config.service)?;
-        for (slot, tile) in &plan.uploads {
-            atlas.upload(queue, *slot, tile)?;
-        }
+        // The level-0 tiles go to the atlas as they load, the queue's staged copies flushed
+        // every few tiles: however many the world has, a few are in memory at once.
+        let mut staged = 0;
+        let service =
+            TileService::start(&pyramid, source.clone(), config.service, |slot, tile| {
+                atlas.upload(queue, slot, &tile)?;
+                staged += 1;
+                if staged % ROOT_UPLOAD_BATCH == 0 {
+                    queue.submit(std::iter::empty());
+                    let _ = device.poll(wgpu::PollType::wait_indefinitely());
+                }
+                Ok::<(), RendererError>(())
+            })?;
         let derive = DeriveStage::new(
             device,
             queue,

@@ -146,12 +146,29 @@ pub struct TileService {
 
 impl TileService {
     /// Starts the streamer and makes the level-0 tiles resident (loaded here, once, before the
-    /// first frame). The returned plan uploads them.
+    /// first frame). The returned plan uploads them; [`Self::start`] hands each to the caller
+    /// as it is loaded instead, so that they are never all in memory at once.
     pub fn new(
         pyramid: &Pyramid,
         source: Arc<dyn TileSource>,
         config: ServiceConfig,
     ) -> Result<(Self, ResidencyPlan), crate::world::WorldError> {
+        let mut plan = ResidencyPlan::default();
+        let service = Self::start(pyramid, source, config, |slot, tile| {
+            plan.uploads.push((slot, tile));
+            Ok::<(), crate::world::WorldError>(())
+        })?;
+        Ok((service, plan))
+    }
+
+    /// [`Self::new`], each level-0 tile given to `upload` with its atlas slot as soon as it is
+    /// loaded (and dropped after, unless `upload` keeps it).
+    pub fn start<E: From<crate::world::WorldError>>(
+        pyramid: &Pyramid,
+        source: Arc<dyn TileSource>,
+        config: ServiceConfig,
+        mut upload: impl FnMut(u32, Arc<TileData>) -> Result<(), E>,
+    ) -> Result<Self, E> {
         let [nx, ny] = pyramid.tiles_at(0);
         let roots = nx * ny;
         // Level 0 stays resident for good: the atlas needs a slot more than it.
@@ -160,15 +177,15 @@ impl TileService {
                 "atlas slots",
                 config.atlas_slots,
                 format!("more than the world's {roots} level-0 tiles"),
-            ));
+            )
+            .into());
         }
-        let mut plan = ResidencyPlan::default();
         let mut slots = vec![None; config.atlas_slots as usize];
         let mut resident = HashMap::new();
         for y in 0..ny {
             for x in 0..nx {
                 let id = TileId::new(0, x, y);
-                let tile = Arc::new(source.load(id)?);
+                let tile = Arc::new(source.load(id).map_err(E::from)?);
                 let index = y * nx + x;
                 let (min_h, max_h) = height_range(&tile);
                 slots[index as usize] = Some(id);
@@ -181,7 +198,7 @@ impl TileService {
                         max_h,
                     },
                 );
-                plan.uploads.push((index, tile));
+                upload(index, tile)?;
             }
         }
         let streamer =
@@ -189,22 +206,19 @@ impl TileService {
                 path: "tile streamer".into(),
                 source: e,
             })?;
-        Ok((
-            Self {
-                pyramid: pyramid.clone(),
-                config,
-                streamer,
-                cache: TileCache::new(config.cache_bytes),
-                slots,
-                resident,
-                failed: HashMap::new(),
-                healed: 0,
-                frame: 0,
-                evictions: 0,
-                last: ResidencyStats::default(),
-            },
-            plan,
-        ))
+        Ok(Self {
+            pyramid: pyramid.clone(),
+            config,
+            streamer,
+            cache: TileCache::new(config.cache_bytes),
+            slots,
+            resident,
+            failed: HashMap::new(),
+            healed: 0,
+            frame: 0,
+            evictions: 0,
+            last: ResidencyStats::default(),
+        })
     }
 
     /// The configuration.
