@@ -1163,6 +1163,58 @@ fn frames_an_earlier_run_left_in_the_output_folder_are_warned_of() {
     assert!(!stderr.contains("earlier run"), "{stderr}");
 }
 
+/// A world of huge grass tiles (a bake at 10 km cells: its finest tiles are 160 km wide) asks
+/// more blades a side of one dispatch than a device allows: an error naming what to change,
+/// not the device's fatal validation error (it panicked).
+#[test]
+fn grass_tiles_too_large_to_place_are_an_error_not_a_panic() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dem = common::root().join("worlds/santa-cruz/source/santa_cruz_1024.png");
+    let bake = verdant(
+        &[
+            "bake",
+            "--dem",
+            dem.to_str().unwrap(),
+            "--out",
+            "w",
+            "--tile-cells",
+            "1024",
+            "--levels",
+            "1",
+            "--cell-size",
+            "10000",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        bake.status.success(),
+        "{}",
+        String::from_utf8_lossy(&bake.stderr)
+    );
+    let out = verdant(
+        &[
+            "fly",
+            "w",
+            "--frames",
+            "1",
+            "--size",
+            "32x18",
+            "--no-images",
+            "--out",
+            "f",
+        ],
+        tmp.path(),
+    );
+    common::assert_fails_naming(
+        &out,
+        &[
+            "grass tiles (its finest) are 160000 m wide",
+            "--grass-spacing-m",
+            "--cell-size",
+        ],
+    );
+}
+
 /// An atlas larger than the device can hold (2048 slots of 1041-sample tiles: 17 GB) is an
 /// error naming `--atlas-slots`, never the device's fatal error (it panicked); a device that
 /// can hold it flies.

@@ -307,7 +307,6 @@ impl Half {
 fn pool_capacity(device: &wgpu::Device, asked: u32) -> u32 {
     // Slots start at multiples of 256 bytes (the storage offset alignment): 16 blades of
     // 96 bytes are 1536 bytes.
-    let capacity = asked.max(16).div_ceil(16) * 16;
     // A half of the pool is bound whole: a world of coarse cells (large grass tiles) can
     // ask for more than the device binds. Its densest tiles then overflow, clamped and
     // counted, instead of the pool failing.
@@ -316,13 +315,37 @@ fn pool_capacity(device: &wgpu::Device, asked: u32) -> u32 {
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size);
     let most = (bind_limit / (u64::from(BATCH_TILES) * BLADE_BYTES)) as u32 / 16 * 16;
-    if capacity > most {
+    let (capacity, over) = capacity_within(asked, most);
+    if over {
         log::warn!(
-            "the grass pool needs {capacity} blades a slot, more than the device binds \
-             ({most}); the densest grass tiles will overflow"
+            "the grass pool needs {} blades a slot, more than the device binds ({most}); the \
+             densest grass tiles will overflow",
+            asked.max(16)
         );
     }
-    capacity.min(most).max(16)
+    capacity
+}
+
+/// `asked` rounded up to whole slots of 16 blades and held to `most` (itself whole slots, at
+/// least one); and whether it was held. Saturating: a world of huge tiles asks for as many as
+/// `u32` counts, which rounded up would wrap to 0.
+fn capacity_within(asked: u32, most: u32) -> (u32, bool) {
+    let capacity = asked.max(16).div_ceil(16).saturating_mul(16);
+    (capacity.min(most).max(16), capacity > most)
+}
+
+#[cfg(test)]
+mod pool_tests {
+    #[test]
+    fn the_pool_asked_for_is_rounded_up_and_held_without_wrapping() {
+        use super::capacity_within;
+        assert_eq!(capacity_within(0, 4096), (16, false));
+        assert_eq!(capacity_within(17, 4096), (32, false));
+        assert_eq!(capacity_within(5000, 4096), (4096, true));
+        for huge in [u32::MAX, u32::MAX - 15, u32::MAX - 16] {
+            assert_eq!(capacity_within(huge, 349_520), (349_520, true), "{huge}");
+        }
+    }
 }
 
 /// The Hi-Z levels' table of the generation constants: (offset, width, height) per level.

@@ -51,6 +51,25 @@ pub enum RendererError {
         /// The device's error.
         reason: String,
     },
+    /// The world's grass tiles are too large for the device to place their blades or plants.
+    #[error(
+        "the world's grass tiles (its finest) are {tile_m} m wide: {grid} {what} positions a side \
+         at {cell_m} m apart, more than this device places in one pass ({most} a side); bake the \
+         world with finer tiles (a smaller --cell-size or more levels) or space the blades wider \
+         (--grass-spacing-m)"
+    )]
+    TileGrid {
+        /// What is placed: `blade` or `plant`.
+        what: &'static str,
+        /// The grass tile's width, metres.
+        tile_m: f32,
+        /// The spacing of the grid, metres.
+        cell_m: f32,
+        /// Positions a side.
+        grid: u64,
+        /// The most positions a side the device dispatches.
+        most: u64,
+    },
     /// The target size is zero or beyond the adapter's limit.
     #[error("image size {width}x{height} is not supported (1 to {limit} pixels a side)")]
     BadSize {

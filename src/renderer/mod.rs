@@ -76,6 +76,28 @@ use crate::world::{TileId, World};
 /// are still on their way gets no figures (counted in [`Renderer::stats_dropped`]).
 pub const READBACK_SLOTS: usize = 4;
 
+/// Refuses a grass tile of `tile_m` whose grid of `cell_m` needs more workgroups of 8 points
+/// a side than the device dispatches (`limit` a dimension).
+fn check_tile_grid(
+    what: &'static str,
+    tile_m: f32,
+    cell_m: f32,
+    limit: u32,
+) -> Result<(), RendererError> {
+    let grid = (f64::from(tile_m) / f64::from(cell_m)).round().max(1.0);
+    let most = u64::from(limit) * 8;
+    if grid > most as f64 {
+        return Err(RendererError::TileGrid {
+            what,
+            tile_m,
+            cell_m,
+            grid: grid as u64,
+            most,
+        });
+    }
+    Ok(())
+}
+
 /// Level-0 tiles uploaded between flushes of the queue's staged copies when the renderer
 /// starts (a world of thousands of roots holds at most this many at once).
 const ROOT_UPLOAD_BATCH: u32 = 16;
@@ -274,6 +296,13 @@ impl Renderer {
         );
         let grass = match config.grass_settings(&world) {
             Some(settings) => {
+                // One workgroup of 8 x 8 points a dispatch; a world of huge finest tiles (a
+                // coarse bake) asks for more than a device dispatches.
+                let dispatch = limits.max_compute_workgroups_per_dimension;
+                check_tile_grid("blade", settings.tile_m, settings.spacing_m, dispatch)?;
+                if !world.manifest.plant_types.is_empty() {
+                    check_tile_grid("plant", settings.tile_m, config.plants.cell_m, dispatch)?;
+                }
                 let mut wind_config = match &config.wind_scene {
                     None if !config.wind_keys.is_empty() => {
                         WindConfig::from_keys(&world.manifest, &config.wind_keys)?
