@@ -1163,6 +1163,32 @@ fn frames_an_earlier_run_left_in_the_output_folder_are_warned_of() {
     assert!(!stderr.contains("earlier run"), "{stderr}");
 }
 
+/// A first frame that wants more tiles than the atlas holds says so, naming --atlas-slots
+/// (it said "nothing was loading").
+#[test]
+fn a_first_frame_larger_than_the_atlas_names_the_atlas() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = common::default_world();
+    let (_, stderr) = fly_report_and_stderr(
+        &[
+            w.to_str().unwrap(),
+            "--atlas-slots",
+            "24",
+            "--frames",
+            "1",
+            "--size",
+            "32x18",
+            "--no-images",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        stderr.contains("the atlas is full (all 24 slots hold tiles this view wants more)")
+            && stderr.contains("--atlas-slots"),
+        "{stderr}"
+    );
+}
+
 /// A world of huge grass tiles (a bake at 10 km cells: its finest tiles are 160 km wide) asks
 /// more blades a side of one dispatch than a device allows: an error naming what to change,
 /// not the device's fatal validation error (it panicked).

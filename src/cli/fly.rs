@@ -310,7 +310,7 @@ pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
             };
             eprintln!(
                 "warning: {} holds {count} frame image{} of an earlier run that this run does not \
-                 write ({which}): they are not frames of this run's report",
+                 write ({which}), which this run's report does not describe",
                 opts.out.display(),
                 if count == 1 { "" } else { "s" }
             );

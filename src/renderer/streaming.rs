@@ -117,7 +117,15 @@ impl Renderer {
             let stalled = last_change.elapsed() > WARM_UP_STALL;
             if all_failed || stalled || start.elapsed() > timeout {
                 let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
-                let why_else = if stalled {
+                let slots = self.service.config().atlas_slots;
+                let why_else = if stalled && stats.atlas_used >= slots {
+                    // Every slot holds a tile the view wants more: the atlas is too small for
+                    // this view, not the loading stuck.
+                    format!(
+                        "the atlas is full (all {slots} slots hold tiles this view wants more); \
+                         give it more slots (--atlas-slots)"
+                    )
+                } else if stalled {
                     "nothing was loading".to_owned()
                 } else {
                     format!("not resident after {:.0} s", timeout.as_secs_f64())
