@@ -359,8 +359,7 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
                       without them",
         });
     }
-    let host_port = authority;
-    let (host, port) = if let Some(v6) = host_port.strip_prefix('[') {
+    let (host, port) = if let Some(v6) = authority.strip_prefix('[') {
         let Some((host, after)) = v6.split_once(']') else {
             return Err(bad("an IPv6 host without its closing ]"));
         };
@@ -378,9 +377,9 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
             },
         }
     } else {
-        match host_port.rsplit_once(':') {
+        match authority.rsplit_once(':') {
             Some((host, port)) => (host, Some(port)),
-            None => (host_port, None),
+            None => (authority, None),
         }
     };
     if host.is_empty() {
@@ -396,8 +395,7 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
 
 /// Whether a world argument is an HTTP address rather than a folder.
 pub fn is_url(s: &str) -> bool {
-    let lower = s.get(..8).unwrap_or(s).to_ascii_lowercase();
-    lower.starts_with("http://") || lower.starts_with("https://")
+    crate::world::window::is_remote(std::path::Path::new(s))
 }
 
 /// A world's address, split so that a file's name can be joined onto it: the name goes onto
