@@ -19,7 +19,7 @@ pub(crate) enum BenchCommand {
         /// Output folder.
         #[arg(long, default_value = "out/bench-blades")]
         out: PathBuf,
-        /// Image size, WIDTHxHEIGHT.
+        /// Image size, WIDTHxHEIGHT, 1..=16384 pixels a side.
         #[arg(long, default_value = "1920x1080", value_parser = parse_size)]
         size: (u32, u32),
         /// Edge of the square field, metres, 10..=5000.
@@ -59,7 +59,7 @@ pub(crate) enum BenchCommand {
         /// Output folder.
         #[arg(long, default_value = "out/bench-features")]
         out: PathBuf,
-        /// Image size, WIDTHxHEIGHT.
+        /// Image size, WIDTHxHEIGHT, 1..=16384 pixels a side.
         #[arg(long, default_value = "480x270", value_parser = parse_size)]
         size: (u32, u32),
         /// Anti-aliasing of every variant's frames: off, taa or msaa (default: the renderer's,
@@ -81,7 +81,7 @@ pub(crate) enum BenchCommand {
         /// Output folder.
         #[arg(long, default_value = "out/bench-lod")]
         out: PathBuf,
-        /// Image size, WIDTHxHEIGHT.
+        /// Image size, WIDTHxHEIGHT, 1..=16384 pixels a side.
         #[arg(long, default_value = "480x270", value_parser = parse_size)]
         size: (u32, u32),
         /// Frames of the dolly, 2..=1000.
@@ -126,7 +126,7 @@ pub(crate) enum BenchCommand {
         /// Output folder.
         #[arg(long, default_value = "out/bench-aa")]
         out: PathBuf,
-        /// Image sizes, WIDTHxHEIGHT, comma-separated: each is measured in full.
+        /// Image sizes, WIDTHxHEIGHT (1..=16384 pixels a side), comma-separated: each is measured in full.
         #[arg(long, default_value = "960x540", value_delimiter = ',', value_parser = parse_size)]
         size: Vec<(u32, u32)>,
         /// Methods, comma-separated (off, taa, msaa).

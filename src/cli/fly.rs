@@ -23,7 +23,7 @@ pub(crate) struct FlyArgs {
     /// Frames to render, spread evenly over the path, 1..=4294967295.
     #[arg(long, default_value_t = 240, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAMES))]
     pub(crate) frames: u32,
-    /// Image size, WIDTHxHEIGHT.
+    /// Image size, WIDTHxHEIGHT, 1..=16384 pixels a side.
     #[arg(long, default_value = "640x360", value_parser = parse_size)]
     pub(crate) size: (u32, u32),
     /// Output folder.

@@ -26,7 +26,7 @@ pub(crate) struct SoakArgs {
     /// Seed of the turns and teleports.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u64,
-    /// Image size, WIDTHxHEIGHT.
+    /// Image size, WIDTHxHEIGHT, 1..=16384 pixels a side.
     #[arg(long, default_value = "320x180", value_parser = parse_size)]
     pub(crate) size: (u32, u32),
     /// Output folder.

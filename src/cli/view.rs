@@ -12,7 +12,7 @@ pub(crate) struct ViewArgs {
     /// World folder, the name of a world under ./worlds, or a world's http:// address.
     #[arg(default_value = "santa-cruz")]
     pub(crate) world: String,
-    /// Window size, WIDTHxHEIGHT.
+    /// Window size, WIDTHxHEIGHT, 1..=16384 pixels a side.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub(crate) size: (u32, u32),
     /// Present as fast as possible instead of waiting for the display's refresh.

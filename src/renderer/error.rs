@@ -51,6 +51,23 @@ pub enum RendererError {
         /// The device's error.
         reason: String,
     },
+    /// The device could not hold the renderer's other allocations, sized by the target size
+    /// and the grass's, plants' and trees' settings.
+    #[error(
+        "{what} at {width}x{height} need more GPU memory than the device could give ({reason}): \
+         choose a smaller --size, a shorter --grass-view-m, a larger --grass-spacing-m, a \
+         smaller --tree-shadow-size or --aa off"
+    )]
+    DeviceMemory {
+        /// What was being made, in words.
+        what: &'static str,
+        /// The target width.
+        width: u32,
+        /// The target height.
+        height: u32,
+        /// The device's error.
+        reason: String,
+    },
     /// The world's grass tiles are too large for the device to place their blades or plants.
     #[error(
         "the world's grass tiles (its finest) are {tile_m} m wide: {grid} {what} positions a side \

@@ -271,6 +271,10 @@ impl Renderer {
                 }
                 Ok::<(), RendererError>(())
             })?;
+        // Everything else the renderer allocates (targets of the frame's size, the grass's,
+        // plants' and trees' pools, the shadow map, the anti-aliasing's targets) is sized by
+        // options too: a device that cannot hold it is an error naming them.
+        let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let derive = DeriveStage::new(
             device,
             queue,
@@ -529,7 +533,7 @@ impl Renderer {
                 p.set_samples(device, crate::aa::msaa::SAMPLES);
             }
         }
-        Ok(Self {
+        let renderer = Self {
             device: device.clone(),
             queue: queue.clone(),
             lod: TerrainLod {
@@ -559,7 +563,16 @@ impl Renderer {
             taa,
             taa_settings: config.taa,
             msaa,
-        })
+        };
+        match pollster::block_on(memory.pop()) {
+            Some(e) => Err(RendererError::DeviceMemory {
+                what: "the renderer's targets and pools",
+                width: targets.width,
+                height: targets.height,
+                reason: e.to_string(),
+            }),
+            None => Ok(renderer),
+        }
     }
 
     /// The world being drawn.
@@ -741,14 +754,28 @@ impl Renderer {
 
     /// Switches anti-aliasing to `aa` from the next frame (a temporal method starts its
     /// history from scratch).
-    pub fn set_anti_aliasing(&mut self, aa: AntiAliasing) {
+    ///
+    /// A device that cannot hold the method's targets is an error, and the frame keeps the
+    /// method it had.
+    pub fn set_anti_aliasing(&mut self, aa: AntiAliasing) -> Result<(), RendererError> {
         if aa == self.anti_aliasing() {
-            return;
+            return Ok(());
         }
-        self.taa = (aa == AntiAliasing::Taa)
+        let memory = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let taa = (aa == AntiAliasing::Taa)
             .then(|| Taa::new(&self.device, &self.targets, self.taa_settings));
-        self.msaa = (aa == AntiAliasing::Msaa && self.grass.is_some())
+        let msaa = (aa == AntiAliasing::Msaa && self.grass.is_some())
             .then(|| Msaa::new(&self.device, &self.targets));
+        if let Some(e) = pollster::block_on(memory.pop()) {
+            return Err(RendererError::DeviceMemory {
+                what: "the anti-aliasing's targets",
+                width: self.targets.width,
+                height: self.targets.height,
+                reason: e.to_string(),
+            });
+        }
+        self.taa = taa;
+        self.msaa = msaa;
         let samples = if self.msaa.is_some() {
             crate::aa::msaa::SAMPLES
         } else {
@@ -766,6 +793,7 @@ impl Renderer {
                 p.set_reactive(&self.device, self.taa.is_some());
             }
         }
+        Ok(())
     }
 
     /// Whether the blades write their motion vectors (temporal anti-aliasing with
@@ -787,11 +815,32 @@ impl Renderer {
     }
 
     /// Follows a resize of the targets (the next frame draws at the new size).
+    ///
+    /// A device that cannot hold the targets at the new size is an error, and the renderer
+    /// keeps drawing at the size it had.
     pub fn resize(&mut self, width: u32, height: u32) -> Result<(), RendererError> {
         check_size(&self.device, width, height, self.grass.is_some())?;
         if (width, height) == (self.targets.width, self.targets.height) {
             return Ok(());
         }
+        let (old_width, old_height) = (self.targets.width, self.targets.height);
+        let memory = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        self.resize_targets(width, height);
+        if let Some(e) = pollster::block_on(memory.pop()) {
+            // The targets made at the new size are let go before the old size's are made again.
+            self.resize_targets(old_width, old_height);
+            return Err(RendererError::DeviceMemory {
+                what: "the renderer's targets",
+                width,
+                height,
+                reason: e.to_string(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Makes every target of the frame's size again at `width` x `height`.
+    fn resize_targets(&mut self, width: u32, height: u32) {
         self.targets.width = width;
         self.targets.height = height;
         if self.terrain_depth.is_some() {
@@ -811,7 +860,6 @@ impl Renderer {
                 p.resize(&self.device, &g.renderer.hiz);
             }
         }
-        Ok(())
     }
 
     /// Gets the frame of `input` ready: collects figures of earlier frames that have come back,

@@ -423,7 +423,9 @@ impl State {
                 let all = AntiAliasing::ALL;
                 let now = self.renderer.anti_aliasing();
                 let i = all.iter().position(|&m| m == now).unwrap_or(0);
-                self.renderer.set_anti_aliasing(all[(i + 1) % all.len()]);
+                if let Err(e) = self.renderer.set_anti_aliasing(all[(i + 1) % all.len()]) {
+                    log::warn!("{e}");
+                }
             }
             KeyCode::KeyV => {
                 let vsync = self.config.present_mode != wgpu::PresentMode::Fifo;
