@@ -334,20 +334,6 @@ fn capacity_within(asked: u32, most: u32) -> (u32, bool) {
     (capacity.min(most).max(16), capacity > most)
 }
 
-#[cfg(test)]
-mod pool_tests {
-    #[test]
-    fn the_pool_asked_for_is_rounded_up_and_held_without_wrapping() {
-        use super::capacity_within;
-        assert_eq!(capacity_within(0, 4096), (16, false));
-        assert_eq!(capacity_within(17, 4096), (32, false));
-        assert_eq!(capacity_within(5000, 4096), (4096, true));
-        for huge in [u32::MAX, u32::MAX - 15, u32::MAX - 16] {
-            assert_eq!(capacity_within(huge, 349_520), (349_520, true), "{huge}");
-        }
-    }
-}
-
 /// The Hi-Z levels' table of the generation constants: (offset, width, height) per level.
 pub(crate) fn hiz_levels(hiz: &HiZPyramid) -> [[u32; 4]; 16] {
     let mut t = [[0u32; 4]; 16];
@@ -843,5 +829,19 @@ impl GrassRenderer {
             crate::gpu::read_buffer_pod(device, queue, &h.blades, start..start + slot_bytes)
                 .expect("read back the blades");
         (a, all[..a[1] as usize].to_vec())
+    }
+}
+
+#[cfg(test)]
+mod pool_tests {
+    #[test]
+    fn the_pool_asked_for_is_rounded_up_and_held_without_wrapping() {
+        use super::capacity_within;
+        assert_eq!(capacity_within(0, 4096), (16, false));
+        assert_eq!(capacity_within(17, 4096), (32, false));
+        assert_eq!(capacity_within(5000, 4096), (4096, true));
+        for huge in [u32::MAX, u32::MAX - 15, u32::MAX - 16] {
+            assert_eq!(capacity_within(huge, 349_520), (349_520, true), "{huge}");
+        }
     }
 }
