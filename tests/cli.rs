@@ -1189,11 +1189,12 @@ fn a_first_frame_larger_than_the_atlas_names_the_atlas() {
     );
 }
 
-/// A world of huge grass tiles (a bake at 10 km cells: its finest tiles are 160 km wide) asks
-/// more blades a side of one dispatch than a device allows: an error naming what to change,
-/// not the device's fatal validation error (it panicked).
+/// A coarse DEM gets the derived levels that bring its finest tiles (the grass's) within 64 m:
+/// a bake at 10 km cells in 1024-cell tiles had six, leaving tiles of 160 km, a grass view of
+/// 213 km and blades past what a device places in one pass (it panicked). A manifest edited back
+/// to fewer is refused before any GPU work, naming the field and the counts that fit.
 #[test]
-fn grass_tiles_too_large_to_place_are_an_error_not_a_panic() {
+fn a_coarse_bake_derives_levels_down_to_grass_sized_tiles() {
     let tmp = tempfile::tempdir().unwrap();
     let dem = common::root().join("worlds/santa-cruz/source/santa_cruz_1024.png");
     let bake = verdant(
@@ -1217,28 +1218,42 @@ fn grass_tiles_too_large_to_place_are_an_error_not_a_panic() {
         "{}",
         String::from_utf8_lossy(&bake.stderr)
     );
-    let out = verdant(
-        &[
-            "fly",
-            "w",
-            "--frames",
-            "1",
-            "--size",
-            "32x18",
-            "--no-images",
-            "--out",
-            "f",
-        ],
-        tmp.path(),
-    );
-    common::assert_fails_naming(
-        &out,
-        &[
-            "grass tiles (its finest) are 160000 m wide",
-            "--grass-spacing-m",
-            "--cell-size",
-        ],
-    );
+    let manifest = tmp.path().join("w/world.toml");
+    let world = verdant::world::World::open(&tmp.path().join("w")).unwrap();
+    let pyramid = &world.manifest.pyramid;
+    assert_eq!(pyramid.derived_levels, 18);
+    let finest = pyramid.tile_size_m(pyramid.max_level());
+    assert!((32.0..=64.0).contains(&finest), "{finest} m");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    for (derived, fits) in [
+        (6, "(they are 160000 m): 14..=23"),
+        (0, "(they are 10240000 m): 14..=23"),
+    ] {
+        // The pyramid is checked before the derived levels' detail (one value a level).
+        let edited = text.replace(
+            "derived_levels = 18",
+            &format!("derived_levels = {derived}"),
+        );
+        std::fs::write(&manifest, edited).unwrap();
+        let out = verdant(
+            &[
+                "fly",
+                "w",
+                "--frames",
+                "1",
+                "--size",
+                "32x18",
+                "--no-images",
+                "--out",
+                "f",
+            ],
+            tmp.path(),
+        );
+        common::assert_fails_naming(
+            &out,
+            &["pyramid.derived_levels", "0.5 to 1024 m wide", fits],
+        );
+    }
 }
 
 /// An atlas larger than the device can hold (2048 slots of 1041-sample tiles: 17 GB) is an

@@ -992,7 +992,9 @@ fn manifest_with_more_grass_types_than_the_renderer_draws_is_refused() {
     assert_eq!(MAX_GRASS_TYPES, 16);
     let meadow = &VALID[VALID.rfind("[[grass_types]]").unwrap()..VALID.find("[[paths]]").unwrap()];
     let with_types = |count: usize| -> String {
-        let extra = meadow.repeat(count - 2);
+        let extra: String = (2..count)
+            .map(|i| meadow.replace("name = \"meadow\"", &format!("name = \"meadow {i}\"")))
+            .collect();
         VALID.replacen("[[paths]]", &format!("{extra}[[paths]]"), 1)
     };
     let m = parse(&with_types(16)).unwrap();
@@ -1249,4 +1251,109 @@ wind = { bend = 0.05 }
     ));
     let err = parse(&crowded).expect_err("crowded").to_string();
     assert!(err.contains("density.meadow"), "{err}");
+}
+
+/// The finest tiles, where the grass grows, are 0.5 to 1024 m wide: a pyramid outside that is
+/// refused naming `pyramid.derived_levels` and the counts that fit (tiles of kilometres made a
+/// frame that never finished, tiles of centimetres an error about a renderer setting).
+#[test]
+fn the_finest_tiles_are_grass_sized() {
+    // 512 m roots, two stored levels: the stored finest tiles are 256 m.
+    for (to, fits) in [
+        ("derived_levels = 10", "(they are 0.25 m): 0..=9"),
+        (
+            "derived_levels = 0\nroot_tile_size_m = 4096.0",
+            "(they are 2048 m): 1..=12",
+        ),
+    ] {
+        let text = VALID
+            .replacen("derived_levels = 1", to.split('\n').next().unwrap(), 1)
+            .replacen(
+                "root_tile_size_m = 512.0",
+                to.split('\n').nth(1).unwrap_or("root_tile_size_m = 512.0"),
+                1,
+            );
+        let err = parse(&text).unwrap_err();
+        let message = err.to_string();
+        assert!(
+            matches!(err, WorldError::OutOfRange { ref field, .. } if field == "pyramid.derived_levels"),
+            "{to}: {message}"
+        );
+        assert!(
+            message.contains("0.5 to 1024 m wide") && message.contains(fits),
+            "{message}"
+        );
+    }
+    for ok in ["derived_levels = 0", "derived_levels = 9"] {
+        parse(&VALID.replacen("derived_levels = 1", ok, 1)).unwrap();
+    }
+}
+
+/// A fixed-size array of another length is refused, naming the line (extra values, even of
+/// the wrong type, were ignored).
+#[test]
+fn arrays_of_the_wrong_length_are_refused() {
+    for (from, to, expected) in [
+        (
+            "extent_m = [900.0, 1000.0]",
+            "extent_m = [900.0, 1000.0, 5.0]",
+            "an array of 2 values",
+        ),
+        (
+            "ground_color = [0.1, 0.2, 0.05]",
+            "ground_color = [0.1, 0.2]",
+            "an array of 3 values",
+        ),
+        (
+            "root_tiles = [2, 2]",
+            "root_tiles = [2, 2, 2]",
+            "an array of 2 values",
+        ),
+        (
+            "position_m = [10.0, 10.0, 600.0]",
+            "position_m = [10.0, 10.0, 600.0, 1.0]",
+            "an array of 3 values",
+        ),
+    ] {
+        let message = broken(from, to).to_string();
+        assert!(
+            message.contains(expected) && message.contains(to),
+            "{message}"
+        );
+    }
+}
+
+/// Grass types are named by plant types and cover tables: each name must be one and not empty;
+/// the world's, its paths' and its wind scenes' names must not be empty either.
+#[test]
+fn names_are_not_empty_and_grass_types_differ() {
+    for (from, to, field, expected) in [
+        (
+            "name = \"meadow\"",
+            "name = \"bare\"",
+            "grass_types[1].name",
+            "no other grass type",
+        ),
+        (
+            "name = \"meadow\"",
+            "name = \" \"",
+            "grass_types[1].name",
+            "not empty",
+        ),
+        ("name = \"test\"", "name = \"\"", "name", "not empty"),
+        (
+            "name = \"overview\"",
+            "name = \"\"",
+            "paths[0].name",
+            "not empty",
+        ),
+    ] {
+        let err = broken(from, to);
+        let message = err.to_string();
+        assert!(
+            matches!(err, WorldError::OutOfRange { field: ref f, .. } if f == field),
+            "{to}: {message}"
+        );
+        assert!(message.contains(expected), "{message}");
+    }
 }

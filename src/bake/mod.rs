@@ -88,8 +88,29 @@ pub use shard::ShardStep;
 
 /// Shared samples beyond each tile edge in baked worlds.
 pub const BAKE_BORDER: u32 = 2;
-/// Levels finer than the stored ones that baked worlds ask the runtime to derive.
+/// Levels finer than the stored ones that baked worlds ask the runtime to derive, at the least:
+/// a coarser DEM gets more ([`derived_levels_for`]).
 pub const BAKE_DERIVED_LEVELS: u8 = 6;
+
+/// Widest finest tile (the grass's) a bake aims for, metres: a DEM coarse enough that six
+/// derived levels leave wider tiles gets more derived levels, up to the 24 levels a pyramid
+/// holds (the default world's tiles are 50 m; an SRTM bake's at 30 m cells 60 m).
+pub const BAKE_GRASS_TILE_M: f64 = 64.0;
+
+/// Derived levels for stored finest tiles `stored_finest_m` wide under `stored_levels`:
+/// [`BAKE_DERIVED_LEVELS`], or as many more as bring the finest tiles within
+/// [`BAKE_GRASS_TILE_M`], within 24 levels in all.
+pub fn derived_levels_for(stored_finest_m: f64, stored_levels: u8) -> u8 {
+    let halvings = (stored_finest_m / BAKE_GRASS_TILE_M).log2().ceil();
+    let wanted = if halvings.is_finite() {
+        halvings.clamp(0.0, 24.0) as u8
+    } else {
+        0
+    };
+    wanted
+        .max(BAKE_DERIVED_LEVELS)
+        .min(24u8.saturating_sub(stored_levels))
+}
 
 /// What to bake, and how.
 #[derive(Clone, Debug, PartialEq)]
@@ -316,7 +337,7 @@ pub fn bake(
         tile_cells: opts.tile_cells,
         border: BAKE_BORDER,
         stored_levels: levels,
-        derived_levels: BAKE_DERIVED_LEVELS,
+        derived_levels: derived_levels_for(cell * f64::from(opts.tile_cells), levels),
     };
     let name = opts
         .name

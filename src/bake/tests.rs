@@ -181,3 +181,19 @@ fn automatic_levels_keep_the_root_tiles_few() {
         );
     }
 }
+
+/// Six derived levels, or as many more as bring the finest tiles within 64 m, within 24
+/// levels in all.
+#[test]
+fn coarse_dems_get_the_derived_levels_that_make_grass_sized_tiles() {
+    use super::derived_levels_for;
+    // SRTM at 30 m cells in 128-cell tiles: 3,840 m tiles, six levels make 60 m.
+    assert_eq!(derived_levels_for(30.0 * 128.0, 3), 6);
+    // Finer data keeps six.
+    assert_eq!(derived_levels_for(1.0 * 128.0, 3), 6);
+    // A 1 km global DEM: 128 km tiles, eleven levels make 62.5 m.
+    assert_eq!(derived_levels_for(1000.0 * 128.0, 2), 11);
+    // Within 24 levels in all.
+    assert_eq!(derived_levels_for(1.0e7, 20), 4);
+    assert_eq!(derived_levels_for(1.0e7, 24), 0);
+}

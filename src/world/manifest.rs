@@ -42,6 +42,14 @@ pub const MAX_ROOT_TILE_M: f64 = 100_000_000.0;
 /// Most grass types a world may have: the renderer's table of types holds this many, so a type
 /// index beyond it could not be drawn as its own type.
 pub const MAX_GRASS_TYPES: usize = 16;
+/// Narrowest tile of the finest level (where the grass grows), metres: the trees' placement
+/// cells are at least half a metre.
+pub const MIN_GRASS_TILE_M: f64 = 0.5;
+/// Widest tile of the finest level, metres. The grass's view distance is 4/3 of a tile and its
+/// blades are placed a tile at a time: at 1024 m a frame places some 20 times the blades of the
+/// default world's 50 m tiles per tile (a world of 3.2 km tiles did not draw its first frame in
+/// five minutes on software Vulkan).
+pub const MAX_GRASS_TILE_M: f64 = 1024.0;
 /// Tallest grass blade, metres (`grass_types[].height_m`, `grass_peak.short_m`).
 pub const MAX_BLADE_HEIGHT_M: f64 = 10.0;
 /// Widest grass blade at its root, metres (`grass_types[].width_m`).
@@ -85,10 +93,12 @@ pub struct Manifest {
     pub description: String,
     /// Size of the data area from the SW corner, metres (x, y); may be smaller than the root
     /// grid, whose remainder repeats the data's edge.
+    #[serde(deserialize_with = "exact")]
     pub extent_m: [f64; 2],
     /// The tile pyramid.
     pub pyramid: Pyramid,
     /// Lowest and highest stored height, metres.
+    #[serde(deserialize_with = "exact")]
     pub height_range_m: [f32; 2],
     /// Grass types; index 0 is bare ground. Tile type maps index into this list. At least 1
     /// and at most [`MAX_GRASS_TYPES`] (16).
@@ -170,10 +180,11 @@ pub struct PlantType {
     /// The recipe's accent colour, linear (0..=1): a flower's petals, a fern's, bush's or
     /// tree's leaves (a conifer's needles).
     /// A glTF plant keeps its own colours.
-    #[serde(default = "default_plant_color")]
+    #[serde(deserialize_with = "exact", default = "default_plant_color")]
     pub color: [f32; 3],
     /// Height range, metres (0 < min <= max <= [`MAX_PLANT_SIZE_M`]); a type whose range
     /// reaches [`TREE_MIN_HEIGHT_M`] is a tree.
+    #[serde(deserialize_with = "exact")]
     pub size_m: [f32; 2],
     /// Plants per square metre on each grass type, by the grass type's name (types not named
     /// get none). Scaled by the grass map's density where the plant stands.
@@ -182,7 +193,7 @@ pub struct PlantType {
     #[serde(default = "default_max_slope")]
     pub max_slope_deg: f32,
     /// Altitudes it grows between, metres.
-    #[serde(default = "default_altitude")]
+    #[serde(deserialize_with = "exact", default = "default_altitude")]
     pub altitude_m: [f32; 2],
     /// Size of its clumps, metres (1..=1000): the plants gather in patches of about this size.
     #[serde(default = "default_clump")]
@@ -274,11 +285,17 @@ pub struct WorldSource {
     pub crs: String,
     /// The DEM's south-west sample in that coordinate system (x or longitude first), where the
     /// file gives it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        deserialize_with = "exact_opt",
+        skip_serializing_if = "Option::is_none"
+    )]
     pub origin: Option<[f64; 2]>,
     /// Samples in the DEM, west-east and south-north.
+    #[serde(deserialize_with = "exact")]
     pub samples: [u32; 2],
     /// Spacing of the DEM's samples in metres, east-west and north-south.
+    #[serde(deserialize_with = "exact")]
     pub cell_size_m: [f64; 2],
     /// Nodata samples filled from the heights around them.
     #[serde(default)]
@@ -443,15 +460,20 @@ pub struct GrassType {
     /// Name, e.g. `meadow`.
     pub name: String,
     /// Colour of the ground under this type (each component in 0..=1).
+    #[serde(deserialize_with = "exact")]
     pub ground_color: [f32; 3],
     /// Colour at a blade's root (0..=1).
+    #[serde(deserialize_with = "exact")]
     pub base_color: [f32; 3],
     /// Colour at a blade's tip (0..=1).
+    #[serde(deserialize_with = "exact")]
     pub tip_color: [f32; 3],
     /// Blade height range, metres (min, max; 0 <= min <= max <= [`MAX_BLADE_HEIGHT_M`]).
+    #[serde(deserialize_with = "exact")]
     pub height_m: [f32; 2],
     /// Blade width range at the root, metres (min, max; 0 <= min <= max <=
     /// [`MAX_BLADE_WIDTH_M`]).
+    #[serde(deserialize_with = "exact")]
     pub width_m: [f32; 2],
     /// Resistance to bending in the wind, 0..=1: 0 bends freely, 1 barely moves.
     pub stiffness: f32,
@@ -467,10 +489,13 @@ pub struct Sky {
     /// Sun height above the horizon, degrees, -90..=90.
     pub sun_elevation_deg: f32,
     /// Sunlight colour (linear RGB, may exceed 1 for intensity: 0..=[`MAX_SUN_INTENSITY`]).
+    #[serde(deserialize_with = "exact")]
     pub sun_color: [f32; 3],
     /// Sky colour overhead (0..=1).
+    #[serde(deserialize_with = "exact")]
     pub sky_color: [f32; 3],
     /// Sky colour at the horizon, also the fog colour (0..=1).
+    #[serde(deserialize_with = "exact")]
     pub horizon_color: [f32; 3],
     /// Distance at which fog hides the terrain completely, metres (above 0, at most
     /// [`MAX_FOG_DISTANCE_M`]).
@@ -489,6 +514,37 @@ impl Default for Sky {
             fog_distance_m: 12_000.0,
         }
     }
+}
+
+/// Reads a fixed-size array of a manifest, refusing an array of another length (serde's
+/// arrays read the first values and ignore any after them: `sun_color = [1, 0.9, 0.8, 99]` was
+/// taken for a colour).
+pub(crate) fn exact<'de, D, T, const N: usize>(d: D) -> Result<[T; N], D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    let values = Vec::<T>::deserialize(d)?;
+    let found = values.len();
+    values.try_into().map_err(|_| {
+        serde::de::Error::invalid_length(found, &format!("an array of {N} values").as_str())
+    })
+}
+
+/// [`exact`] for an optional array.
+pub(crate) fn exact_opt<'de, D, T, const N: usize>(d: D) -> Result<Option<[T; N]>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    Option::<Vec<T>>::deserialize(d)?
+        .map(|values| {
+            let found = values.len();
+            values.try_into().map_err(|_| {
+                serde::de::Error::invalid_length(found, &format!("an array of {N} values").as_str())
+            })
+        })
+        .transpose()
 }
 
 /// The largest `world.toml` read, bytes.

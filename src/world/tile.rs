@@ -109,6 +109,7 @@ pub struct Pyramid {
     /// Edge length of a level-0 tile, metres.
     pub root_tile_size_m: f64,
     /// Level-0 grid: tiles along x (east) and y (north).
+    #[serde(deserialize_with = "crate::world::manifest::exact")]
     pub root_tiles: [u32; 2],
     /// Cells per tile edge (a power of two, e.g. 128).
     pub tile_cells: u32,

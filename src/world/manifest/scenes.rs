@@ -302,6 +302,7 @@ pub struct CameraKey {
     /// Time from the start of the path, seconds (within +-[`MAX_TIME_S`](super::MAX_TIME_S)).
     pub t_s: f64,
     /// Absolute position, metres (x east, y north, z up; each within +-[`MAX_POSITION_M`](super::MAX_POSITION_M)).
+    #[serde(deserialize_with = "super::exact")]
     pub position_m: [f64; 3],
     /// Heading, degrees counter-clockwise from east (0 looks east, 90 north; within
     /// +-[`MAX_ANGLE_DEG`](super::MAX_ANGLE_DEG)).

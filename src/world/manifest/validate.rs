@@ -110,6 +110,8 @@ impl Manifest {
             }
         }
 
+        v.grass_tiles(p)?;
+
         let [lo, hi] = self.height_range_m;
         v.finite("height_range_m[0]", lo)?;
         v.finite("height_range_m[1]", hi)?;
@@ -144,8 +146,23 @@ impl Manifest {
                 ),
             ));
         }
+        if self.name.trim().is_empty() {
+            return Err(v.out_of_range("name", "\"\"", "a name, not empty"));
+        }
+        // Plant types and cover tables name grass types: each name must say which.
+        let mut grass_names = HashSet::new();
         for (index, g) in self.grass_types.iter().enumerate() {
             let field = |f: &str| format!("grass_types[{index}].{f}");
+            if g.name.trim().is_empty() {
+                return Err(v.out_of_range(&field("name"), &g.name, "a name, not empty"));
+            }
+            if !grass_names.insert(g.name.as_str()) {
+                return Err(v.out_of_range(
+                    &field("name"),
+                    &g.name,
+                    "a name no other grass type has",
+                ));
+            }
             v.all_within(&field("ground_color"), &g.ground_color, [0.0, 1.0], "")?;
             v.all_within(&field("base_color"), &g.base_color, [0.0, 1.0], "")?;
             v.all_within(&field("tip_color"), &g.tip_color, [0.0, 1.0], "")?;
@@ -204,6 +221,13 @@ impl Manifest {
 
         let mut names = HashSet::new();
         for (pi, cam) in self.paths.iter().enumerate() {
+            if cam.name.trim().is_empty() {
+                return Err(v.out_of_range(
+                    &format!("paths[{pi}].name"),
+                    &cam.name,
+                    "a name, not empty",
+                ));
+            }
             if !names.insert(cam.name.as_str()) {
                 return Err(WorldError::DuplicatePath {
                     path: path.to_path_buf(),
@@ -461,6 +485,13 @@ impl Manifest {
     fn validate_wind_scenes(&self, v: &Validator) -> Result<(), WorldError> {
         let mut names = HashSet::new();
         for (si, scene) in self.wind_scenes.iter().enumerate() {
+            if scene.name.trim().is_empty() {
+                return Err(v.out_of_range(
+                    &format!("wind_scenes[{si}].name"),
+                    &scene.name,
+                    "a name, not empty",
+                ));
+            }
             if !names.insert(scene.name.as_str()) {
                 return Err(WorldError::DuplicateWindScene {
                     path: v.path.to_path_buf(),
@@ -708,6 +739,34 @@ impl Validator<'_> {
             field: field.to_string(),
             value,
         }
+    }
+
+    /// Refuses a pyramid whose finest tiles (the grass's) are outside [`MIN_GRASS_TILE_M`] to
+    /// [`MAX_GRASS_TILE_M`], naming `pyramid.derived_levels` and the values that would fit.
+    fn grass_tiles(&self, p: &crate::world::Pyramid) -> Result<(), WorldError> {
+        let finest = p.tile_size_m(p.max_level());
+        if (MIN_GRASS_TILE_M..=MAX_GRASS_TILE_M).contains(&finest) {
+            return Ok(());
+        }
+        // Derived levels halve the finest tile each: those that bring it within the range.
+        let stored_finest = p.tile_size_m(p.stored_levels.saturating_sub(1));
+        let most_derived = 24 - i32::from(p.stored_levels);
+        let least = (stored_finest / MAX_GRASS_TILE_M).log2().ceil().max(0.0) as i32;
+        let most = ((stored_finest / MIN_GRASS_TILE_M).log2().floor() as i32).min(most_derived);
+        let fits = if least <= most {
+            format!("{least}..={most} for this pyramid")
+        } else {
+            "none for this pyramid's root tiles and stored levels".to_owned()
+        };
+        Err(self.out_of_range(
+            "pyramid.derived_levels",
+            p.derived_levels,
+            &format!(
+                "a count that makes the finest tiles, where the grass grows, {MIN_GRASS_TILE_M} to \
+                 {MAX_GRASS_TILE_M} m wide (they are {} m): {fits}",
+                number(finest)
+            ),
+        ))
     }
 
     fn out_of_range(&self, field: &str, value: impl ToString, allowed: &str) -> WorldError {
