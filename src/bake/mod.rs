@@ -99,17 +99,21 @@ pub const BAKE_GRASS_TILE_M: f64 = 64.0;
 
 /// Derived levels for stored finest tiles `stored_finest_m` wide under `stored_levels`:
 /// [`BAKE_DERIVED_LEVELS`], or as many more as bring the finest tiles within
-/// [`BAKE_GRASS_TILE_M`], within 24 levels in all.
+/// [`BAKE_GRASS_TILE_M`], within 24 levels in all; fewer where data finer than the grass needs
+/// would leave tiles narrower than [`MIN_GRASS_TILE_M`](crate::world::manifest::MIN_GRASS_TILE_M)
+/// (lidar at 5 cm cells gets three).
 pub fn derived_levels_for(stored_finest_m: f64, stored_levels: u8) -> u8 {
-    let halvings = (stored_finest_m / BAKE_GRASS_TILE_M).log2().ceil();
-    let wanted = if halvings.is_finite() {
-        halvings.clamp(0.0, 24.0) as u8
-    } else {
-        0
+    let halvings = |tile_m: f64| {
+        let h = (stored_finest_m / tile_m).log2();
+        if h.is_finite() {
+            h.clamp(0.0, 24.0)
+        } else {
+            0.0
+        }
     };
-    wanted
-        .max(BAKE_DERIVED_LEVELS)
-        .min(24u8.saturating_sub(stored_levels))
+    let wanted = (halvings(BAKE_GRASS_TILE_M).ceil() as u8).max(BAKE_DERIVED_LEVELS);
+    let finest = halvings(crate::world::manifest::MIN_GRASS_TILE_M).floor() as u8;
+    wanted.min(finest).min(24u8.saturating_sub(stored_levels))
 }
 
 /// What to bake, and how.

@@ -193,6 +193,9 @@ fn coarse_dems_get_the_derived_levels_that_make_grass_sized_tiles() {
     assert_eq!(derived_levels_for(1.0 * 128.0, 3), 6);
     // A 1 km global DEM: 128 km tiles, eleven levels make 62.5 m.
     assert_eq!(derived_levels_for(1000.0 * 128.0, 2), 11);
+    // Lidar at 5 cm cells: 6.4 m tiles, three levels make 0.8 m (four would be 0.4 m).
+    assert_eq!(derived_levels_for(0.05 * 128.0, 3), 3);
+    assert_eq!(derived_levels_for(0.001 * 128.0, 3), 0);
     // Within 24 levels in all.
     assert_eq!(derived_levels_for(1.0e7, 20), 4);
     assert_eq!(derived_levels_for(1.0e7, 24), 0);
