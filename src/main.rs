@@ -103,6 +103,10 @@ fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.downcast_ref::<cli::Interrupted>().is_some() => {
+            eprintln!("interrupted: {}", cli::terminal_safe(&error_chain(&e)));
+            ExitCode::from(130)
+        }
         Err(e) => {
             // A file's name in the message must not drive the terminal.
             eprintln!("error: {}", cli::terminal_safe(&error_chain(&e)));

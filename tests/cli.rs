@@ -2190,3 +2190,61 @@ fn a_file_where_a_folder_is_wanted_is_named_for_what_it_is() {
         assert!(!tmp.path().join("nowhere").exists());
     }
 }
+
+/// Ctrl-C (SIGINT) during `fly` ends the flight after the frame under way and writes the
+/// report of the frames flown, marked interrupted, with status 130 (it died with nothing
+/// written but the frames).
+#[test]
+fn an_interrupted_fly_reports_the_frames_it_flew() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::root().join("worlds/santa-cruz");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args([
+            "fly",
+            world.to_str().unwrap(),
+            "--frames",
+            "100000",
+            "--size",
+            "16x9",
+            "--disable",
+            "trees,plants,particles,tree-shadows",
+            "--out",
+            "f",
+        ])
+        .current_dir(tmp.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let second = tmp.path().join("f/frame_00001.png");
+    let start = std::time::Instant::now();
+    while !second.exists() {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(300),
+            "no frame in 300 s"
+        );
+        assert!(child.try_wait().unwrap().is_none(), "fly ended early");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("f/report.json")).unwrap()).unwrap();
+    assert_eq!(report["interrupted"], true);
+    let flown = report["frames_flown"].as_u64().unwrap();
+    assert!((2..100_000).contains(&flown), "{flown}");
+    assert_eq!(report["frames"].as_array().unwrap().len() as u64, flown);
+    assert!(
+        stderr.contains(&format!(
+            "interrupted: stopped after {flown} of 100000 frames"
+        )),
+        "{stderr}"
+    );
+}

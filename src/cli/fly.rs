@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 
 use verdant::renderer::{DEFAULT_MESH_STEP, GrassConfig};
@@ -260,6 +260,7 @@ impl FlyArgs {
             tree_thin_m,
             tree_min_keep,
             tree_shadows,
+            stop: None,
         })
     }
 }
@@ -289,7 +290,13 @@ pub(crate) fn fly_truth(opts: FlyOptions, k: u32) -> Result<()> {
     Ok(())
 }
 
-pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
+pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
+    // Ctrl-C ends the flight after the frame under way, writing what was flown; a second one
+    // ends the process at once.
+    opts.stop = Some(
+        verdant::bake::CancelFlag::on_termination_signals()
+            .context("installing the SIGINT and SIGTERM handlers")?,
+    );
     let mut frames: Option<ProgressBar> = None;
     let report = run_fly(&opts, &mut |p| match p {
         FlyProgress::WarmingUp => eprintln!("loading the first frame's tiles"),
@@ -324,7 +331,11 @@ pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
         }
     })?;
     if let Some(pb) = frames {
-        pb.finish();
+        if report.interrupted {
+            pb.abandon();
+        } else {
+            pb.finish();
+        }
     }
     let s = &report.summary;
     println!(
@@ -377,6 +388,15 @@ pub(crate) fn fly(opts: FlyOptions) -> Result<()> {
         println!("gpu {pass}: median {:.3} ms, p99 {:.3} ms", t.median, t.p99);
     }
     println!("wrote {}", opts.out.join("report.json").display());
+    if report.interrupted {
+        return Err(super::Interrupted(format!(
+            "stopped after {} of {} frames; {} describes those",
+            report.frames_flown,
+            opts.frames,
+            opts.out.join("report.json").display()
+        ))
+        .into());
+    }
     Ok(())
 }
 

@@ -13,6 +13,19 @@ pub(crate) mod view;
 
 /// `text` safe to print to a terminal: every control character but a tab or a line break
 /// written as an escape (`\u{1b}`), so that a file's name cannot drive the terminal.
+/// A run stopped by Ctrl-C (SIGINT) or SIGTERM after writing what it had: the process exits
+/// with status 130, as a shell reports a command ended by SIGINT.
+#[derive(Debug)]
+pub(crate) struct Interrupted(pub(crate) String);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
 pub(crate) fn terminal_safe(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     for c in text.chars() {

@@ -85,6 +85,9 @@ pub struct FlyOptions {
     pub tree_min_keep: Option<f32>,
     /// The trees' shadows (used where the renderer has them: a world with trees).
     pub tree_shadows: crate::plants::shadow::TreeShadows,
+    /// A flag that ends the flight early (Ctrl-C on the command line): the frames flown so far
+    /// are written and reported, the report marked [`FlyReport::interrupted`].
+    pub stop: Option<crate::bake::CancelFlag>,
 }
 
 /// Progress of a fly-through, for a progress bar.
@@ -162,6 +165,7 @@ impl Default for FlyOptions {
             tree_thin_m: None,
             tree_min_keep: None,
             tree_shadows: Default::default(),
+            stop: None,
         }
     }
 }
@@ -335,7 +339,12 @@ pub fn run_fly_with_source(
     let mut coverage = Thinned::new(MAX_REPORT_FRAMES);
     scene.set_coverage_capture(opts.write_images)?;
     let mut last_position = path_start_position(&path);
+    let mut interrupted = false;
     for i in 0..opts.frames {
+        if opts.stop.as_ref().is_some_and(|s| s.is_cancelled()) {
+            interrupted = true;
+            break;
+        }
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
         let camera = sample_path(&path, t_s);
         // Frames written far apart along the path (a short fly-through) wait, boundedly, for
@@ -402,8 +411,8 @@ pub fn run_fly_with_source(
         .join()
         .map_err(|_| anyhow::anyhow!("the frame writer thread panicked"))??;
     // Without images, the coverage of a few frames drawn again after the timed flight, each
-    // after a warm-up (it is a jump back along the path).
-    if !opts.write_images {
+    // after a warm-up (it is a jump back along the path); not after an interrupted one.
+    if !opts.write_images && !interrupted {
         scene.set_coverage_capture(true)?;
         let n = opts.frames.min(COVERAGE_FRAMES);
         let span = f64::from(opts.frames - 1);
@@ -439,6 +448,7 @@ pub fn run_fly_with_source(
         records.totals,
     );
     report.warm_up_missing = warm_up_missing;
+    report.interrupted = interrupted;
     report.coverage = coverage.into_items();
     let fractions: Vec<f64> = report.coverage.iter().map(|c| c.coverage).collect();
     report.summary.coverage = Summary::of(&fractions);

@@ -188,6 +188,10 @@ pub struct FlyReport {
     /// Frames flown.
     #[serde(default)]
     pub frames_flown: u64,
+    /// Whether the flight was stopped before its last frame ([`crate::tools::FlyOptions::stop`],
+    /// Ctrl-C): the report covers the frames flown.
+    #[serde(default)]
+    pub interrupted: bool,
     /// Every how many frames one is kept in `frames`: 1, unless the run was longer than
     /// [`MAX_REPORT_FRAMES`] frames (then the kept frames are an evenly spaced sample).
     #[serde(default)]
@@ -251,6 +255,7 @@ impl FlyReport {
             adapter,
             summary,
             frames_flown: frames.seen(),
+            interrupted: false,
             frame_stride: frames.stride(),
             warm_up_missing: Vec::new(),
             frames: frames.into_items(),
