@@ -583,6 +583,108 @@ fn buffers_over_the_total_limit_are_refused() {
     assert_eq!(load_plant(&path).unwrap().mesh.vertices.len(), 3);
 }
 
+/// Loads `path` with a reader that lists the files it is asked for.
+fn load_listing(
+    path: &Path,
+) -> (
+    Result<verdant::plants::LoadedPlant, PlantFileError>,
+    Vec<PathBuf>,
+) {
+    let reads = std::cell::RefCell::new(Vec::new());
+    let result = verdant::plants::load_plant_from(path, &|p: &Path| {
+        reads.borrow_mut().push(p.to_owned());
+        verdant::plants::read_plant_file(p)
+    });
+    (result, reads.into_inner())
+}
+
+/// A buffer or image is read from the glTF file's folder or below it, never through `..`
+/// (percent-encoded or not), an absolute path, a scheme or a backslash: the URI is refused by
+/// name before any file it names is asked for, whatever reads the files (disk or HTTP).
+#[test]
+fn uris_leaving_the_gltf_files_folder_are_refused_before_any_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let plants = dir.path().join("world").join("plants");
+    std::fs::create_dir_all(plants.join("sub")).unwrap();
+    let (doc, bin) = triangle();
+    let outside = write(dir.path(), "outside.bin", &bin);
+    write(&dir.path().join("world"), "outside.bin", &bin);
+    write(&plants.join("sub"), "tri.bin", &bin);
+    let outside_png = png(&image(2, 2));
+    write(&dir.path().join("world"), "outside.png", &outside_png);
+    let path = plants.join("tri.gltf");
+
+    let refused = [
+        "../../outside.bin".to_owned(),
+        "../outside.bin".into(),
+        "..%2F..%2Foutside.bin".into(),
+        "%2e%2e/%2E%2E/outside.bin".into(),
+        "sub/../../outside.bin".into(),
+        "sub/%2e%2e%2f%2e%2e/outside.bin".into(),
+        "..".into(),
+        "..\\outside.bin".into(),
+        "..%5Coutside.bin".into(),
+        "sub\\tri.bin".into(),
+        outside.display().to_string(),
+        format!("file://{}", outside.display()),
+    ];
+    for uri in &refused {
+        let mut doc = doc.clone();
+        doc["buffers"][0]["uri"] = json!(uri);
+        std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+        let (result, reads) = load_listing(&path);
+        let err = result.expect_err(uri);
+        assert!(matches!(err, PlantFileError::BadUri { .. }), "{uri}: {err}");
+        let text = err.to_string();
+        assert!(
+            text.contains(&path.display().to_string()) && text.contains(&format!("{uri:?}")),
+            "{text}"
+        );
+        assert_eq!(reads, [path.clone()], "{uri}");
+    }
+
+    // An image's URI, and a buffer no view uses, are checked too.
+    let (mut textured, tbin) = triangle_with_texture(&outside_png);
+    textured["buffers"][0]["uri"] = json!("sub/tex.bin");
+    write(&plants.join("sub"), "tex.bin", &tbin);
+    textured["images"] = json!([{"uri": "%2E%2E/outside.png"}]);
+    std::fs::write(&path, serde_json::to_vec(&textured).unwrap()).unwrap();
+    let (result, reads) = load_listing(&path);
+    let err = result.unwrap_err();
+    assert!(err.to_string().contains("%2E%2E/outside.png"), "{err}");
+    assert_eq!(reads, [path.clone()]);
+    let mut unused = doc.clone();
+    unused["buffers"][0]["uri"] = json!("sub/tri.bin");
+    unused["buffers"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"uri": "../outside.bin", "byteLength": 56}));
+    std::fs::write(&path, serde_json::to_vec(&unused).unwrap()).unwrap();
+    let (result, reads) = load_listing(&path);
+    assert!(matches!(result, Err(PlantFileError::BadUri { .. })));
+    assert_eq!(reads, [path.clone()]);
+
+    // Files in the folder or below it, however spelt, load.
+    for uri in [
+        "sub/tri.bin",
+        "./sub/tri.bin",
+        "sub%2Ftri.bin",
+        "%73ub/./tri.bin",
+    ] {
+        let mut doc = doc.clone();
+        doc["buffers"][0]["uri"] = json!(uri);
+        std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+        let (result, _) = load_listing(&path);
+        assert_eq!(result.expect(uri).mesh.vertices.len(), 3, "{uri}");
+    }
+    textured["images"] = json!([{"uri": "sub/..%2Fsub/x.png"}]);
+    std::fs::write(&path, serde_json::to_vec(&textured).unwrap()).unwrap();
+    assert!(matches!(
+        load_listing(&path).0,
+        Err(PlantFileError::BadUri { .. })
+    ));
+}
+
 #[test]
 fn a_node_cycle_is_refused() {
     let dir = tempfile::tempdir().unwrap();

@@ -3,7 +3,7 @@
 
 use std::cell::{Cell, OnceCell};
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Component, Path, PathBuf};
 use std::rc::Rc;
 
 use base64::Engine as _;
@@ -78,6 +78,18 @@ impl<'p> Loader<'p> {
         let gltf =
             Gltf::from_slice_without_validation(bytes).map_err(|e| not_gltf(e.to_string()))?;
         validate(&gltf).map_err(not_gltf)?;
+        // Every file the document names, used or not, before any is read.
+        let root = gltf.as_json();
+        let uris = root.buffers.iter().filter_map(|b| b.uri.as_deref());
+        for uri in uris.chain(root.images.iter().filter_map(|i| i.uri.as_deref())) {
+            if !uri.starts_with("data:") {
+                file_name(uri).map_err(|reason| PlantFileError::BadUri {
+                    path: path.to_owned(),
+                    uri: uri.to_owned(),
+                    reason,
+                })?;
+            }
+        }
         // Buffers of one source are read once; the largest length declared for each source,
         // together, must fit the limit before anything is read.
         let mut first: HashMap<Option<&str>, (usize, u64)> = HashMap::new();
@@ -348,7 +360,44 @@ fn component(bytes: &[u8], data_type: DataType, normalize: bool) -> f32 {
     }
 }
 
-/// The bytes a glTF URI names: a base64 data URI, or a file relative to the glTF file.
+/// The file a URI that is not a data URI names, percent-decoded, relative to the glTF file's
+/// folder: it must stay in that folder or below it, so that a plant reads no file beyond its
+/// world's (on disk or over HTTP). Refused: a `..` segment (percent-encoded or not), an
+/// absolute path, a scheme (any `:`), a backslash (a separator on some systems and servers).
+fn file_name(uri: &str) -> Result<PathBuf, String> {
+    let name = percent_decode_str(uri)
+        .decode_utf8()
+        .map_err(|_| "it is not UTF-8 once percent-decoded".to_owned())?;
+    if name.contains(':') {
+        return Err(
+            "it has a scheme or a drive: only names relative to the glTF file are read".into(),
+        );
+    }
+    if name.contains('\\') {
+        return Err("it has a backslash (a URI's folders are separated by /)".into());
+    }
+    let relative = Path::new(name.as_ref());
+    for c in relative.components() {
+        match c {
+            Component::Normal(_) | Component::CurDir => {}
+            Component::ParentDir => {
+                return Err(
+                    "it has a .. segment once percent-decoded: it leaves the glTF file's folder"
+                        .into(),
+                );
+            }
+            Component::RootDir | Component::Prefix(_) => {
+                return Err(
+                    "it is an absolute path: only names relative to the glTF file are read".into(),
+                );
+            }
+        }
+    }
+    Ok(relative.to_owned())
+}
+
+/// The bytes a glTF URI names: a base64 data URI, or a file in the glTF file's folder or below
+/// it ([`file_name`]).
 pub(super) fn read_uri(
     gltf_path: &Path,
     uri: &str,
@@ -365,14 +414,8 @@ pub(super) fn read_uri(
             .decode(data)
             .map_err(|e| format!("a data URI with bad base64: {e}"));
     }
-    let name = percent_decode_str(uri)
-        .decode_utf8()
-        .map_err(|_| format!("{uri:?} is not UTF-8 once percent-decoded"))?;
-    // Only files beside the glTF file (or below it); no schemes, no absolute paths.
-    let relative = Path::new(name.as_ref());
-    if name.contains(':') || relative.is_absolute() {
-        return Err(format!("{uri:?} is not a relative file name"));
-    }
+    let relative =
+        file_name(uri).map_err(|reason| format!("the URI {uri:?} is refused: {reason}"))?;
     let file = gltf_path.parent().unwrap_or(Path::new(".")).join(relative);
     read(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
 }
@@ -387,5 +430,38 @@ mod tests {
         assert_eq!(component(&[0x80], DataType::I8, true), -1.0);
         assert_eq!(component(&[0xff, 0xff], DataType::U16, true), 1.0);
         assert_eq!(component(&[7, 0, 0, 0], DataType::U32, false), 7.0);
+    }
+
+    #[test]
+    fn file_names_stay_in_the_gltf_files_folder() {
+        for ok in [
+            "a.bin",
+            "./a.bin",
+            "sub/a.bin",
+            "sub%2Fa.bin",
+            "a..b.bin",
+            "...",
+            "%252e%252e/a",
+        ] {
+            assert!(file_name(ok).is_ok(), "{ok}");
+        }
+        for bad in [
+            "..",
+            "../a.bin",
+            "sub/../../a.bin",
+            "..%2Fa.bin",
+            "%2e%2e/a.bin",
+            "%2E%2E%2Fa.bin",
+            "sub/%2e%2e",
+            "..\\a.bin",
+            "..%5ca.bin",
+            "/etc/passwd",
+            "%2Fetc%2Fpasswd",
+            "file:a.bin",
+            "C:a.bin",
+            "%ff.bin",
+        ] {
+            assert!(file_name(bad).is_err(), "{bad}");
+        }
     }
 }

@@ -21,8 +21,10 @@
 //!   or a buffer view.
 //!
 //! Limits: at most [`MAX_PLANT_VERTICES`] vertices and [`MAX_PLANT_TRIANGLES`] triangles after
-//! merging, textures at most [`MAX_TEXTURE_SIZE`] pixels a side. Any input, however malformed,
-//! gives a [`PlantFileError`] naming the file, never a panic.
+//! merging, textures at most [`MAX_TEXTURE_SIZE`] pixels a side. Buffers and images are read
+//! from data URIs, the binary chunk, or files in the glTF file's folder or below it (never
+//! through `..`). Any input, however malformed, gives a [`PlantFileError`] naming the file,
+//! never a panic.
 //!
 //! The loader is in `load.rs` (the scene's primitives, the mesh, the textures), the file's
 //! opening and the reading of its buffers, views and accessors in `accessor.rs`, the
@@ -195,6 +197,18 @@ pub enum PlantFileError {
         height: u32,
         /// [`MAX_TEXTURE_SIZE`].
         limit: u32,
+    },
+    /// A buffer or image names a file the loader does not read: one outside the glTF file's
+    /// folder (a `..` segment, percent-encoded or not), an absolute path, a scheme, or a name
+    /// with a backslash. Every URI of the file is checked before anything is read.
+    #[error("plant file {}: the URI {uri:?} is refused: {reason}", path.display())]
+    BadUri {
+        /// The glTF file.
+        path: PathBuf,
+        /// The URI as the file gives it.
+        uri: String,
+        /// Why.
+        reason: String,
     },
     /// A buffer's data could not be read.
     #[error("plant file {}: buffer {buffer} is missing: {reason}", path.display())]
