@@ -12,7 +12,7 @@ use gltf::accessor::{DataType, Dimensions};
 use percent_encoding::percent_decode_str;
 
 use super::validate::validate;
-use super::{MAX_PLANT_BUFFER_BYTES, MAX_PLANT_TRIANGLES, PlantFileError};
+use super::{MAX_PLANT_BUFFER_BYTES, MAX_PLANT_JSON_BYTES, MAX_PLANT_TRIANGLES, PlantFileError};
 
 /// A problem inside an accessor, before the primitive it belongs to is known.
 pub(super) enum AccessorError {
@@ -74,6 +74,16 @@ impl<'p> Loader<'p> {
                 }
                 Some(_) => {}
             }
+        }
+        // Parsed, the JSON takes many times its size: its structure is counted first.
+        let json = json_part(bytes);
+        let structure = json_structure_bytes(json);
+        if structure > MAX_PLANT_JSON_BYTES {
+            return Err(PlantFileError::JsonTooLarge {
+                path: path.to_owned(),
+                bytes: structure,
+                limit: MAX_PLANT_JSON_BYTES,
+            });
         }
         let gltf =
             Gltf::from_slice_without_validation(bytes).map_err(|e| not_gltf(e.to_string()))?;
@@ -360,6 +370,44 @@ fn component(bytes: &[u8], data_type: DataType, normalize: bool) -> f32 {
     }
 }
 
+/// The JSON the glTF parser reads from a file: all of a `.gltf`, the first chunk of a `.glb`
+/// (as far as the file holds it).
+fn json_part(bytes: &[u8]) -> &[u8] {
+    if !bytes.starts_with(b"glTF") {
+        return bytes;
+    }
+    let length = bytes
+        .get(12..16)
+        .map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+    let start = 20.min(bytes.len());
+    &bytes[start..start.saturating_add(length).min(bytes.len())]
+}
+
+/// The bytes of `json` outside its strings' contents, whitespace left out: what the parser
+/// makes objects, arrays, numbers and keys of. A string's quotes count; what lies between them
+/// (escapes included) does not. Bytes that are not JSON count like structure.
+fn json_structure_bytes(json: &[u8]) -> u64 {
+    let mut count = 0u64;
+    let mut in_string = false;
+    let mut escaped = false;
+    for &b in json {
+        if in_string {
+            if escaped {
+                escaped = false;
+            } else if b == b'\\' {
+                escaped = true;
+            } else if b == b'"' {
+                in_string = false;
+                count += 1;
+            }
+        } else if !matches!(b, b' ' | b'\t' | b'\n' | b'\r') {
+            in_string = b == b'"';
+            count += 1;
+        }
+    }
+    count
+}
+
 /// The file a URI that is not a data URI names, percent-decoded, relative to the glTF file's
 /// folder: it must stay in that folder or below it, so that a plant reads no file beyond its
 /// world's (on disk or over HTTP). Refused: a `..` segment (percent-encoded or not), an
@@ -430,6 +478,27 @@ mod tests {
         assert_eq!(component(&[0x80], DataType::I8, true), -1.0);
         assert_eq!(component(&[0xff, 0xff], DataType::U16, true), 1.0);
         assert_eq!(component(&[7, 0, 0, 0], DataType::U32, false), 7.0);
+    }
+
+    #[test]
+    fn json_structure_leaves_out_strings_and_whitespace() {
+        assert_eq!(json_structure_bytes(b"{}"), 2);
+        assert_eq!(json_structure_bytes(b" {\n\t\"uri\" : \"a b\" }\r\n"), 7);
+        // An escaped quote or backslash stays inside its string.
+        assert_eq!(json_structure_bytes(br#"["a\"],[", "\\", 1]"#), 9);
+        // A string left open counts its opening quote only.
+        assert_eq!(json_structure_bytes(br#"[1,"abc"#), 4);
+    }
+
+    #[test]
+    fn json_part_of_a_glb_is_its_first_chunk() {
+        let mut glb = b"glTF\x02\0\0\0\0\0\0\0\x04\0\0\0JSON[1] ".to_vec();
+        glb.extend_from_slice(b"\x04\0\0\0BIN\0[[[[");
+        assert_eq!(json_part(&glb), b"[1] ");
+        assert_eq!(json_part(b"{\"a\":1}"), b"{\"a\":1}");
+        // A chunk longer than the file: as much as it holds; a header cut short: nothing.
+        assert_eq!(json_part(&glb[..22]), b"[1");
+        assert_eq!(json_part(&glb[..14]), b"");
     }
 
     #[test]
