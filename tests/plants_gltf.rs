@@ -583,6 +583,228 @@ fn buffers_over_the_total_limit_are_refused() {
     assert_eq!(load_plant(&path).unwrap().mesh.vertices.len(), 3);
 }
 
+/// Loads `path` with a reader that lists the files it is asked for.
+fn load_listing(
+    path: &Path,
+) -> (
+    Result<verdant::plants::LoadedPlant, PlantFileError>,
+    Vec<PathBuf>,
+) {
+    let reads = std::cell::RefCell::new(Vec::new());
+    let result = verdant::plants::load_plant_from(path, &|p: &Path| {
+        reads.borrow_mut().push(p.to_owned());
+        verdant::plants::read_plant_file(p)
+    });
+    (result, reads.into_inner())
+}
+
+/// A buffer or image is read from the glTF file's folder or below it, never through `..`
+/// (percent-encoded or not), an absolute path, a scheme or a backslash: the URI is refused by
+/// name before any file it names is asked for, whatever reads the files (disk or HTTP).
+#[test]
+fn uris_leaving_the_gltf_files_folder_are_refused_before_any_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let plants = dir.path().join("world").join("plants");
+    std::fs::create_dir_all(plants.join("sub")).unwrap();
+    let (doc, bin) = triangle();
+    let outside = write(dir.path(), "outside.bin", &bin);
+    write(&dir.path().join("world"), "outside.bin", &bin);
+    write(&plants.join("sub"), "tri.bin", &bin);
+    let outside_png = png(&image(2, 2));
+    write(&dir.path().join("world"), "outside.png", &outside_png);
+    let path = plants.join("tri.gltf");
+
+    let refused = [
+        "../../outside.bin".to_owned(),
+        "../outside.bin".into(),
+        "..%2F..%2Foutside.bin".into(),
+        "%2e%2e/%2E%2E/outside.bin".into(),
+        "sub/../../outside.bin".into(),
+        "sub/%2e%2e%2f%2e%2e/outside.bin".into(),
+        "..".into(),
+        "..\\outside.bin".into(),
+        "..%5Coutside.bin".into(),
+        "sub\\tri.bin".into(),
+        outside.display().to_string(),
+        format!("file://{}", outside.display()),
+    ];
+    for uri in &refused {
+        let mut doc = doc.clone();
+        doc["buffers"][0]["uri"] = json!(uri);
+        std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+        let (result, reads) = load_listing(&path);
+        let err = result.expect_err(uri);
+        assert!(matches!(err, PlantFileError::BadUri { .. }), "{uri}: {err}");
+        let text = err.to_string();
+        assert!(
+            text.contains(&path.display().to_string()) && text.contains(&format!("{uri:?}")),
+            "{text}"
+        );
+        assert_eq!(reads, [path.clone()], "{uri}");
+    }
+
+    // An image's URI, and a buffer no view uses, are checked too.
+    let (mut textured, tbin) = triangle_with_texture(&outside_png);
+    textured["buffers"][0]["uri"] = json!("sub/tex.bin");
+    write(&plants.join("sub"), "tex.bin", &tbin);
+    textured["images"] = json!([{"uri": "%2E%2E/outside.png"}]);
+    std::fs::write(&path, serde_json::to_vec(&textured).unwrap()).unwrap();
+    let (result, reads) = load_listing(&path);
+    let err = result.unwrap_err();
+    assert!(err.to_string().contains("%2E%2E/outside.png"), "{err}");
+    assert_eq!(reads, [path.clone()]);
+    let mut unused = doc.clone();
+    unused["buffers"][0]["uri"] = json!("sub/tri.bin");
+    unused["buffers"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"uri": "../outside.bin", "byteLength": 56}));
+    std::fs::write(&path, serde_json::to_vec(&unused).unwrap()).unwrap();
+    let (result, reads) = load_listing(&path);
+    assert!(matches!(result, Err(PlantFileError::BadUri { .. })));
+    assert_eq!(reads, [path.clone()]);
+
+    // Files in the folder or below it, however spelt, load.
+    for uri in [
+        "sub/tri.bin",
+        "./sub/tri.bin",
+        "sub%2Ftri.bin",
+        "%73ub/./tri.bin",
+    ] {
+        let mut doc = doc.clone();
+        doc["buffers"][0]["uri"] = json!(uri);
+        std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+        let (result, _) = load_listing(&path);
+        assert_eq!(result.expect(uri).mesh.vertices.len(), 3, "{uri}");
+    }
+    textured["images"] = json!([{"uri": "sub/..%2Fsub/x.png"}]);
+    std::fs::write(&path, serde_json::to_vec(&textured).unwrap()).unwrap();
+    assert!(matches!(
+        load_listing(&path).0,
+        Err(PlantFileError::BadUri { .. })
+    ));
+}
+
+/// The JSON's bytes outside its strings' contents, whitespace left out (the loader's own count
+/// is checked against this one).
+fn json_structure(json: &[u8]) -> u64 {
+    let text = std::str::from_utf8(json).unwrap();
+    let mut count = 0;
+    let mut chars = text.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            '"' => {
+                count += 2;
+                while let Some(c) = chars.next() {
+                    match c {
+                        '\\' => {
+                            chars.next();
+                        }
+                        '"' => break,
+                        _ => {}
+                    }
+                }
+            }
+            c if c.is_ascii_whitespace() => {}
+            c => count += c.len_utf8() as u64,
+        }
+    }
+    count
+}
+
+/// `doc` with a member the loader ignores, `"padding": [0,0,...]`, sized so that the JSON holds
+/// `structure` bytes besides its strings and whitespace.
+fn padded(doc: &Value, structure: u64) -> Vec<u8> {
+    let mut doc = doc.clone();
+    doc["padding"] = json!([]);
+    let base = serde_json::to_vec(&doc).unwrap();
+    let extra = structure - json_structure(&base);
+    // "[]" becomes "[0]" (1 byte more) or "[10]" (2), and each ",0" after adds 2.
+    let first = if extra % 2 == 1 { "0" } else { "10" };
+    let mut items = first.to_owned();
+    items.push_str(&",0".repeat(((extra - first.len() as u64) / 2) as usize));
+    let text = String::from_utf8(base).unwrap();
+    let json = text.replacen("\"padding\":[]", &format!("\"padding\":[{items}]"), 1);
+    assert_eq!(json_structure(json.as_bytes()), structure);
+    json.into_bytes()
+}
+
+/// A plant's JSON holds at most MAX_PLANT_JSON_BYTES besides its strings' contents and
+/// whitespace, counted before it is parsed (parsed, a JSON of `{}` nodes takes some 64 times its
+/// size); the data URIs of a .gltf and the BIN chunk of a .glb do not count.
+#[test]
+fn json_over_its_limit_is_refused_before_parsing() {
+    use base64::Engine as _;
+    use verdant::plants::MAX_PLANT_JSON_BYTES;
+    let dir = tempfile::tempdir().unwrap();
+    let (mut doc, bin) = triangle();
+    let uri = |bytes: &[u8]| {
+        format!(
+            "data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(bytes)
+        )
+    };
+    doc["buffers"][0]["uri"] = json!(uri(&bin));
+
+    // At the limit: loads. One byte over: refused by name, size and limit.
+    let path = write(dir.path(), "at.gltf", &padded(&doc, MAX_PLANT_JSON_BYTES));
+    assert_eq!(load_plant(&path).unwrap().mesh.vertices.len(), 3);
+    let path = write(
+        dir.path(),
+        "over.gltf",
+        &padded(&doc, MAX_PLANT_JSON_BYTES + 1),
+    );
+    let err = load_err(&path);
+    assert!(
+        matches!(err, PlantFileError::JsonTooLarge { bytes, limit, .. }
+            if bytes == MAX_PLANT_JSON_BYTES + 1 && limit == MAX_PLANT_JSON_BYTES),
+        "{err}"
+    );
+    let text = err.to_string();
+    assert!(
+        text.contains(&format!("{}", MAX_PLANT_JSON_BYTES + 1))
+            && text.contains(&format!("{MAX_PLANT_JSON_BYTES}")),
+        "{text}"
+    );
+
+    // Not parsed: a document of empty nodes, cut short, is refused for its size rather than
+    // as broken JSON.
+    let nodes = MAX_PLANT_JSON_BYTES / 3 + 1;
+    let mut cut = b"{\"nodes\":[".to_vec();
+    cut.extend_from_slice(&b"{},".repeat(nodes as usize));
+    let path = write(dir.path(), "nodes.gltf", &cut);
+    assert!(
+        matches!(load_err(&path), PlantFileError::JsonTooLarge { .. }),
+        "{path:?}"
+    );
+
+    // Whitespace and strings do not count: a .gltf with a buffer of twice the limit in a data
+    // URI, pretty-printed, loads.
+    let mut big = bin.clone();
+    big.resize(2 * MAX_PLANT_JSON_BYTES as usize, 0);
+    let mut embedded = doc.clone();
+    embedded["buffers"][0]["uri"] = json!(uri(&big));
+    embedded["buffers"][0]["byteLength"] = json!(big.len());
+    let text = serde_json::to_vec_pretty(&embedded).unwrap();
+    assert!(text.len() as u64 > 2 * MAX_PLANT_JSON_BYTES);
+    let path = write(dir.path(), "embedded.gltf", &text);
+    assert_eq!(load_plant(&path).unwrap().mesh.vertices.len(), 3);
+
+    // A .glb's JSON chunk likewise; its BIN chunk does not count.
+    let (doc, bin) = triangle();
+    let over: Value = serde_json::from_slice(&padded(&doc, MAX_PLANT_JSON_BYTES + 1)).unwrap();
+    let path = write(dir.path(), "over.glb", &glb(&over, &bin));
+    let err = load_err(&path);
+    assert!(
+        matches!(err, PlantFileError::JsonTooLarge { bytes, .. } if bytes == MAX_PLANT_JSON_BYTES + 1),
+        "{err}"
+    );
+    let mut big_doc = doc.clone();
+    big_doc["buffers"][0]["byteLength"] = json!(big.len());
+    let path = write(dir.path(), "big_bin.glb", &glb(&big_doc, &big));
+    assert_eq!(load_plant(&path).unwrap().mesh.vertices.len(), 3);
+}
+
 #[test]
 fn a_node_cycle_is_refused() {
     let dir = tempfile::tempdir().unwrap();

@@ -32,9 +32,9 @@ pub mod shadow;
 
 pub use card::{crossed_cards, render_card};
 pub use gltf::{
-    LoadedPlant, MAX_PLANT_BUFFER_BYTES, MAX_PLANT_TRIANGLES, MAX_PLANT_VERTICES, MAX_TEXTURE_SIZE,
-    PlantFileError, PlantFileReader, PlantTexture, load_plant, load_plant_from, read_plant_file,
-    write_plant_gltf,
+    LoadedPlant, MAX_PLANT_BUFFER_BYTES, MAX_PLANT_JSON_BYTES, MAX_PLANT_TRIANGLES,
+    MAX_PLANT_VERTICES, MAX_TEXTURE_SIZE, PlantFileError, PlantFileReader, PlantTexture,
+    load_plant, load_plant_from, read_plant_file, write_plant_gltf,
 };
 pub use mesh::{PlantImage, PlantMesh, PlantVertex};
 pub use recipe::{PlantLods, Recipe, generate};

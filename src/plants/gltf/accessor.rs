@@ -3,7 +3,7 @@
 
 use std::cell::{Cell, OnceCell};
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Component, Path, PathBuf};
 use std::rc::Rc;
 
 use base64::Engine as _;
@@ -12,7 +12,7 @@ use gltf::accessor::{DataType, Dimensions};
 use percent_encoding::percent_decode_str;
 
 use super::validate::validate;
-use super::{MAX_PLANT_BUFFER_BYTES, MAX_PLANT_TRIANGLES, PlantFileError};
+use super::{MAX_PLANT_BUFFER_BYTES, MAX_PLANT_JSON_BYTES, MAX_PLANT_TRIANGLES, PlantFileError};
 
 /// A problem inside an accessor, before the primitive it belongs to is known.
 pub(super) enum AccessorError {
@@ -75,9 +75,31 @@ impl<'p> Loader<'p> {
                 Some(_) => {}
             }
         }
+        // Parsed, the JSON takes many times its size: its structure is counted first.
+        let json = json_part(bytes);
+        let structure = json_structure_bytes(json);
+        if structure > MAX_PLANT_JSON_BYTES {
+            return Err(PlantFileError::JsonTooLarge {
+                path: path.to_owned(),
+                bytes: structure,
+                limit: MAX_PLANT_JSON_BYTES,
+            });
+        }
         let gltf =
             Gltf::from_slice_without_validation(bytes).map_err(|e| not_gltf(e.to_string()))?;
         validate(&gltf).map_err(not_gltf)?;
+        // Every file the document names, used or not, before any is read.
+        let root = gltf.as_json();
+        let uris = root.buffers.iter().filter_map(|b| b.uri.as_deref());
+        for uri in uris.chain(root.images.iter().filter_map(|i| i.uri.as_deref())) {
+            if !uri.starts_with("data:") {
+                file_name(uri).map_err(|reason| PlantFileError::BadUri {
+                    path: path.to_owned(),
+                    uri: uri.to_owned(),
+                    reason,
+                })?;
+            }
+        }
         // Buffers of one source are read once; the largest length declared for each source,
         // together, must fit the limit before anything is read.
         let mut first: HashMap<Option<&str>, (usize, u64)> = HashMap::new();
@@ -348,7 +370,82 @@ fn component(bytes: &[u8], data_type: DataType, normalize: bool) -> f32 {
     }
 }
 
-/// The bytes a glTF URI names: a base64 data URI, or a file relative to the glTF file.
+/// The JSON the glTF parser reads from a file: all of a `.gltf`, the first chunk of a `.glb`
+/// (as far as the file holds it).
+fn json_part(bytes: &[u8]) -> &[u8] {
+    if !bytes.starts_with(b"glTF") {
+        return bytes;
+    }
+    let length = bytes
+        .get(12..16)
+        .map_or(0, |b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+    let start = 20.min(bytes.len());
+    &bytes[start..start.saturating_add(length).min(bytes.len())]
+}
+
+/// The bytes of `json` outside its strings' contents, whitespace left out: what the parser
+/// makes objects, arrays, numbers and keys of. A string's quotes count; what lies between them
+/// (escapes included) does not. Bytes that are not JSON count like structure.
+fn json_structure_bytes(json: &[u8]) -> u64 {
+    let mut count = 0u64;
+    let mut in_string = false;
+    let mut escaped = false;
+    for &b in json {
+        if in_string {
+            if escaped {
+                escaped = false;
+            } else if b == b'\\' {
+                escaped = true;
+            } else if b == b'"' {
+                in_string = false;
+                count += 1;
+            }
+        } else if !matches!(b, b' ' | b'\t' | b'\n' | b'\r') {
+            in_string = b == b'"';
+            count += 1;
+        }
+    }
+    count
+}
+
+/// The file a URI that is not a data URI names, percent-decoded, relative to the glTF file's
+/// folder: it must stay in that folder or below it, so that a plant reads no file beyond its
+/// world's (on disk or over HTTP). Refused: a `..` segment (percent-encoded or not), an
+/// absolute path, a scheme (any `:`), a backslash (a separator on some systems and servers).
+fn file_name(uri: &str) -> Result<PathBuf, String> {
+    let name = percent_decode_str(uri)
+        .decode_utf8()
+        .map_err(|_| "it is not UTF-8 once percent-decoded".to_owned())?;
+    if name.contains(':') {
+        return Err(
+            "it has a scheme or a drive: only names relative to the glTF file are read".into(),
+        );
+    }
+    if name.contains('\\') {
+        return Err("it has a backslash (a URI's folders are separated by /)".into());
+    }
+    let relative = Path::new(name.as_ref());
+    for c in relative.components() {
+        match c {
+            Component::Normal(_) | Component::CurDir => {}
+            Component::ParentDir => {
+                return Err(
+                    "it has a .. segment once percent-decoded: it leaves the glTF file's folder"
+                        .into(),
+                );
+            }
+            Component::RootDir | Component::Prefix(_) => {
+                return Err(
+                    "it is an absolute path: only names relative to the glTF file are read".into(),
+                );
+            }
+        }
+    }
+    Ok(relative.to_owned())
+}
+
+/// The bytes a glTF URI names: a base64 data URI, or a file in the glTF file's folder or below
+/// it ([`file_name`]).
 pub(super) fn read_uri(
     gltf_path: &Path,
     uri: &str,
@@ -365,14 +462,8 @@ pub(super) fn read_uri(
             .decode(data)
             .map_err(|e| format!("a data URI with bad base64: {e}"));
     }
-    let name = percent_decode_str(uri)
-        .decode_utf8()
-        .map_err(|_| format!("{uri:?} is not UTF-8 once percent-decoded"))?;
-    // Only files beside the glTF file (or below it); no schemes, no absolute paths.
-    let relative = Path::new(name.as_ref());
-    if name.contains(':') || relative.is_absolute() {
-        return Err(format!("{uri:?} is not a relative file name"));
-    }
+    let relative =
+        file_name(uri).map_err(|reason| format!("the URI {uri:?} is refused: {reason}"))?;
     let file = gltf_path.parent().unwrap_or(Path::new(".")).join(relative);
     read(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))
 }
@@ -387,5 +478,59 @@ mod tests {
         assert_eq!(component(&[0x80], DataType::I8, true), -1.0);
         assert_eq!(component(&[0xff, 0xff], DataType::U16, true), 1.0);
         assert_eq!(component(&[7, 0, 0, 0], DataType::U32, false), 7.0);
+    }
+
+    #[test]
+    fn json_structure_leaves_out_strings_and_whitespace() {
+        assert_eq!(json_structure_bytes(b"{}"), 2);
+        assert_eq!(json_structure_bytes(b" {\n\t\"uri\" : \"a b\" }\r\n"), 7);
+        // An escaped quote or backslash stays inside its string.
+        assert_eq!(json_structure_bytes(br#"["a\"],[", "\\", 1]"#), 9);
+        // A string left open counts its opening quote only.
+        assert_eq!(json_structure_bytes(br#"[1,"abc"#), 4);
+    }
+
+    #[test]
+    fn json_part_of_a_glb_is_its_first_chunk() {
+        let mut glb = b"glTF\x02\0\0\0\0\0\0\0\x04\0\0\0JSON[1] ".to_vec();
+        glb.extend_from_slice(b"\x04\0\0\0BIN\0[[[[");
+        assert_eq!(json_part(&glb), b"[1] ");
+        assert_eq!(json_part(b"{\"a\":1}"), b"{\"a\":1}");
+        // A chunk longer than the file: as much as it holds; a header cut short: nothing.
+        assert_eq!(json_part(&glb[..22]), b"[1");
+        assert_eq!(json_part(&glb[..14]), b"");
+    }
+
+    #[test]
+    fn file_names_stay_in_the_gltf_files_folder() {
+        for ok in [
+            "a.bin",
+            "./a.bin",
+            "sub/a.bin",
+            "sub%2Fa.bin",
+            "a..b.bin",
+            "...",
+            "%252e%252e/a",
+        ] {
+            assert!(file_name(ok).is_ok(), "{ok}");
+        }
+        for bad in [
+            "..",
+            "../a.bin",
+            "sub/../../a.bin",
+            "..%2Fa.bin",
+            "%2e%2e/a.bin",
+            "%2E%2E%2Fa.bin",
+            "sub/%2e%2e",
+            "..\\a.bin",
+            "..%5ca.bin",
+            "/etc/passwd",
+            "%2Fetc%2Fpasswd",
+            "file:a.bin",
+            "C:a.bin",
+            "%ff.bin",
+        ] {
+            assert!(file_name(bad).is_err(), "{bad}");
+        }
     }
 }

@@ -21,8 +21,11 @@
 //!   or a buffer view.
 //!
 //! Limits: at most [`MAX_PLANT_VERTICES`] vertices and [`MAX_PLANT_TRIANGLES`] triangles after
-//! merging, textures at most [`MAX_TEXTURE_SIZE`] pixels a side. Any input, however malformed,
-//! gives a [`PlantFileError`] naming the file, never a panic.
+//! merging, textures at most [`MAX_TEXTURE_SIZE`] pixels a side, a JSON of at most
+//! [`MAX_PLANT_JSON_BYTES`] besides its strings' contents and whitespace. Buffers and images
+//! are read from data URIs, the binary chunk, or files in the glTF file's folder or below it
+//! (never through `..`). Any input, however malformed, gives a [`PlantFileError`] naming the
+//! file, never a panic.
 //!
 //! The loader is in `load.rs` (the scene's primitives, the mesh, the textures), the file's
 //! opening and the reading of its buffers, views and accessors in `accessor.rs`, the
@@ -59,6 +62,14 @@ pub const MAX_PLANT_FILE_BYTES: u64 = 256 << 20;
 /// ones, is refused before it makes the loader hold more. Buffers naming the same file (or data
 /// URI, or the binary chunk) share one read and count once.
 pub const MAX_PLANT_BUFFER_BYTES: u64 = 256 << 20;
+/// The most bytes the JSON of a plant's file (a `.gltf` file, or a `.glb`'s JSON chunk) may
+/// hold besides the contents of its strings and its whitespace, checked before it is parsed.
+/// Parsed, each of these bytes can cost some 64 bytes of memory (`{},` is a node of about
+/// 190): at 4 MiB a file of empty nodes peaks at about 260 MiB, as much as one plant file may
+/// hold. A plant's document is far smaller (10,000 nodes, each named, moved and turned, take
+/// about 1 MiB). Strings cost about their own size and are left to [`MAX_PLANT_FILE_BYTES`]:
+/// the data URIs of a `.gltf` with its buffers and images inside it do not count.
+pub const MAX_PLANT_JSON_BYTES: u64 = 4 << 20;
 
 /// Reads a file of a plant (its glTF file, or a buffer or image beside it): a regular file of
 /// at most [`MAX_PLANT_FILE_BYTES`], the reason otherwise in words.
@@ -195,6 +206,33 @@ pub enum PlantFileError {
         height: u32,
         /// [`MAX_TEXTURE_SIZE`].
         limit: u32,
+    },
+    /// The file's JSON holds more than [`MAX_PLANT_JSON_BYTES`] besides its strings' contents
+    /// and whitespace; it is refused before it is parsed.
+    #[error(
+        "plant file {}: its JSON holds {bytes} bytes besides its strings' contents and \
+         whitespace, more than the limit of {limit} (MAX_PLANT_JSON_BYTES)",
+        path.display()
+    )]
+    JsonTooLarge {
+        /// The glTF file.
+        path: PathBuf,
+        /// The JSON's bytes outside its strings, whitespace left out.
+        bytes: u64,
+        /// [`MAX_PLANT_JSON_BYTES`].
+        limit: u64,
+    },
+    /// A buffer or image names a file the loader does not read: one outside the glTF file's
+    /// folder (a `..` segment, percent-encoded or not), an absolute path, a scheme, or a name
+    /// with a backslash. Every URI of the file is checked before anything is read.
+    #[error("plant file {}: the URI {uri:?} is refused: {reason}", path.display())]
+    BadUri {
+        /// The glTF file.
+        path: PathBuf,
+        /// The URI as the file gives it.
+        uri: String,
+        /// Why.
+        reason: String,
     },
     /// A buffer's data could not be read.
     #[error("plant file {}: buffer {buffer} is missing: {reason}", path.display())]
