@@ -36,7 +36,10 @@
 //! ([`BakeOptions::cancel`]) removes it and leaves the output folder as it was. A bake holds
 //! an OS lock on a file in its staging folder while it runs, so that the next bake beside the
 //! same output folder removes the staging folders of bakes that were killed (whose lock is
-//! free) and leaves those of running bakes alone.
+//! free) and leaves those of running bakes alone. A bake killed while moving its world in is
+//! put right first, from the record its staging folder holds: the folder gets back the world
+//! it held (and a sharded bake's parts folder its tiles), or, where the new `world.toml` was
+//! already in, the world stays published.
 //!
 //! The stages live in submodules: `plan` (how the memory limit is spent), `source` (the DEM
 //! whole or in chunks), `survey` (the one pass over the whole grid), `resample` (windows and
@@ -228,6 +231,10 @@ pub struct BakeReport {
     /// What was kept of the replaced manifest (nothing for a new world).
     #[serde(default)]
     pub carried: Carried,
+    /// What the bake put right before it began, one note each: a bake into the same folder
+    /// that was killed while moving its world in (see [`bake`]). Also logged as warnings.
+    #[serde(default)]
+    pub recovered: Vec<String>,
 }
 
 /// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
@@ -240,6 +247,13 @@ pub fn bake(
     let manifest_path = opts.out.join("world.toml");
     check_options(opts)?;
     let out = resolve_out(&opts.out)?;
+    // A bake into the same folder that was killed while moving its world in is put right
+    // first, so that the folder is judged (and a sharded bake's parts opened) as it was.
+    let recovered = publish::remove_stale_staging(&out);
+    for note in &recovered {
+        log::warn!("{note}");
+    }
+    check_out(&opts.out, opts.replace)?;
     let dems: Vec<PathBuf> = std::iter::once(opts.dem.clone())
         .chain(opts.more_dems.iter().cloned())
         .collect();
@@ -252,6 +266,7 @@ pub fn bake(
                 ShardStep::Shard { index, .. } => {
                     if let Some(mut report) = parts.done(index) {
                         report.already_done = true;
+                        report.recovered = recovered;
                         return Ok(report);
                     }
                 }
@@ -260,7 +275,10 @@ pub fn bake(
                     // Where no tile crosses shards, the shards' manifest is all the finish
                     // needs: the world is published without being computed again.
                     if let Some(report) = finish_from_parts(&parts, &out, opts, step.count())? {
-                        return Ok(report);
+                        return Ok(BakeReport {
+                            recovered,
+                            ..report
+                        });
                     }
                 }
             }
@@ -424,6 +442,11 @@ pub fn bake(
         Some(p) => Some(cover::ValueMap::mask(p, dem)?),
         None => None,
     };
+    if let Some((ShardStep::Finish { .. }, parts)) = &parts {
+        // Before the survey: a finish that cannot publish fails at once.
+        let materials = cover.as_ref().is_some_and(|c| c.has_materials());
+        parts.check_tiles(&manifest.pyramid, materials)?;
+    }
     cancelled()?;
 
     let data_samples = extent
@@ -506,6 +529,7 @@ pub fn bake(
         planned_mib: plan.peak_bytes.div_ceil(1 << 20),
         peak_memory_mib: peak_memory_mib(),
         carried: Carried::default(),
+        recovered: recovered.clone(),
     };
     let paint_inputs = tiles::BlockPaint {
         height_range,
@@ -524,7 +548,10 @@ pub fn bake(
     // A sharded bake: a shard writes its share into the parts folder and records it; the
     // finish writes the tiles that cross shards there and publishes them with the manifest.
     let pyramid = &manifest.pyramid;
-    let mut moved_in = None;
+    // The fingerprint record of the parts folder whose tiles a finish publishes: they stay
+    // there until the publish moves them into the output folder, so that a finish that fails
+    // or is stopped before then leaves them for the next.
+    let mut from_parts = None;
     let mut peak = 0f32;
     if let Some((step, parts)) = &parts {
         let share = |want: Option<u32>| -> Vec<crate::world::tile::TileId> {
@@ -552,18 +579,14 @@ pub fn bake(
                 peak = (0..count)
                     .filter_map(|i| parts.done(i))
                     .fold(own, |p, r| p.max(r.grass_peak));
-                moved_in = Some(parts.dir.join("tiles"));
+                from_parts = Some(parts.record());
             }
         }
     }
 
     let staging = Staging::begin(&out, &opts.out, opts.replace)?;
-    let tiles_written = match &moved_in {
-        Some(tiles) => {
-            let to = staging.world().join("tiles");
-            std::fs::rename(tiles, &to).map_err(|e| WorldError::io(tiles, e))?;
-            tiles::stored_tiles(pyramid).len() as u64
-        }
+    let tiles_written = match &from_parts {
+        Some(_) => tiles::stored_tiles(pyramid).len() as u64,
         None => {
             let producer = tiles::Producer {
                 out: staging.world(),
@@ -586,11 +609,8 @@ pub fn bake(
     write_atomic(&staging.world().join("world.toml"), text.as_bytes())?;
     // The last chance to stop: once the world is being moved into place, it is finished.
     cancelled()?;
-    staging.publish()?;
-    if let Some((_, parts)) = &parts {
-        // The world is out; its parts are spent.
-        let _ = std::fs::remove_dir_all(&parts.dir);
-    }
+    // The world goes out; a sharded bake's parts are then spent, and removed.
+    staging.publish(from_parts.as_deref())?;
     progress(BakeStage::WriteManifest, 1, 1);
     Ok(BakeReport {
         carried,
@@ -681,15 +701,14 @@ fn finish_from_parts(
         .filter_map(|i| parts.done(i))
         .fold(0f32, |p, r| p.max(r.grass_peak));
     manifest.grass_peak = Some(grass_peak(pyramid, peak));
+    parts.check_tiles(pyramid, manifest.materials)?;
     let start = Instant::now();
     let staging = Staging::begin(out, &opts.out, opts.replace)?;
     let (text, carried) = manifest_text(&manifest, out, opts)?;
-    let tiles = parts.dir.join("tiles");
-    let to = staging.world().join("tiles");
-    std::fs::rename(&tiles, &to).map_err(|e| WorldError::io(&tiles, e))?;
     write_atomic(&staging.world().join("world.toml"), text.as_bytes())?;
-    staging.publish()?;
-    let _ = std::fs::remove_dir_all(&parts.dir);
+    // The shards' tiles go straight from the parts folder into the output folder, and the
+    // parts folder is removed once they are in.
+    staging.publish(Some(&parts.record()))?;
     report.tiles_written = all.len() as u64;
     report.seconds = start.elapsed().as_secs_f64();
     report.grass_peak = peak;
@@ -819,7 +838,7 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
             "a positive number of metres".into(),
         ));
     }
-    check_out(&opts.out, opts.replace)
+    Ok(())
 }
 
 /// Smallest cell a bake resamples to, metres.
