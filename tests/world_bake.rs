@@ -1126,6 +1126,48 @@ fn a_replace_killed_while_publishing_is_put_right_by_the_next_bake() {
     assert!(staging_folders(dir.path()).is_empty());
 }
 
+/// A bake into a world's `tiles/` (or a folder inside it) is refused before anything is read,
+/// naming the world, as the other tools refuse it: its files would be mixed with the tiles.
+#[test]
+fn bake_into_a_worlds_tiles_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let w = hills_world(dir.path());
+    let dem = dir.path().join("hills.png");
+    let before = read_all_files(&w);
+    for out in [w.join("tiles"), w.join("tiles/L0"), w.join("tiles/new")] {
+        for replace in [true, false] {
+            let e = bake(
+                &BakeOptions {
+                    replace,
+                    ..replace_opts(dem.clone(), out.clone())
+                },
+                &mut |_, _, _| {},
+            )
+            .unwrap_err()
+            .to_string();
+            assert!(
+                e.starts_with("--out") && e.contains("tiles/") && e.contains(&*w.to_string_lossy()),
+                "{}: {e}",
+                out.display()
+            );
+        }
+    }
+    assert_eq!(read_all_files(&w), before);
+    let run = verdant_cli(
+        &[
+            "bake",
+            "--dem",
+            "hills.png",
+            "--out",
+            "hills/tiles",
+            "--replace",
+        ],
+        dir.path(),
+    );
+    common::assert_fails_naming(&run, &["--out", "hills/tiles", "tiles/"]);
+    assert_eq!(read_all_files(&w), before);
+}
+
 /// `--replace` replaces the world (world.toml, tiles/) and nothing else, however the output
 /// folder is spelled (`w/.`, `w/`, `w/notes/..`): every other file and folder stays where it
 /// was, byte for byte, and no staging folder is left, inside or beside it.

@@ -60,6 +60,17 @@ impl PartialEq for CancelFlag {
 /// folder to be replaced whose `tiles/` holds anything that is not a tile verdant writes (the
 /// replaced `tiles/` is deleted whole).
 pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
+    if let Some(world) = crate::world::format::world_whose_tiles_hold(out) {
+        return Err(WorldError::bad_option(
+            "--out",
+            out.display(),
+            format!(
+                "a folder outside a world's tiles/ (this one is inside {}'s tiles/, which a \
+                 world's files would be mixed into); bake into another folder",
+                world.display()
+            ),
+        ));
+    }
     match std::fs::symlink_metadata(out) {
         Ok(m) if m.file_type().is_symlink() && std::fs::metadata(out).is_err() => {
             return Err(WorldError::bad_option(
