@@ -1168,6 +1168,54 @@ fn bake_into_a_worlds_tiles_is_refused() {
     assert_eq!(read_all_files(&w), before);
 }
 
+/// A DEM whose cells span more cells of the bake's (its smaller cell, rounded) than a bake
+/// makes is refused naming that: the extent and the cells across, not a cell too small.
+#[test]
+fn a_dem_spanning_too_many_bake_cells_is_refused_saying_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = write_dem(
+        dir.path(),
+        "wide",
+        [20, 16],
+        [1e9, 20.0],
+        [0.0, 1.0],
+        |_, y| 100.0 + y / 100.0,
+    );
+    let opts = BakeOptions {
+        dem: png.clone(),
+        out: dir.path().join("w"),
+        tile_cells: 8,
+        ..Default::default()
+    };
+    let e = bake(&opts, &mut |_, _, _| {}).unwrap_err().to_string();
+    for needle in [
+        "wide.json",
+        "cell_size_m",
+        "1.900e10",
+        "of the bake's cells a side",
+        "9.500e8 cells of 20 m",
+        "--cell-size",
+    ] {
+        assert!(e.contains(needle), "{needle:?} not in {e}");
+    }
+    assert!(!e.contains("must be at least"), "{e}");
+    // The same cells from --dem-cell-size: the option is named.
+    let e = bake(
+        &BakeOptions {
+            dem_cell_size_m: Some([1e9, 20.0]),
+            ..opts
+        },
+        &mut |_, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.starts_with("--dem-cell-size") && e.contains("of the bake's cells a side"),
+        "{e}"
+    );
+    assert!(!e.contains("must be at least"), "{e}");
+}
+
 /// `--replace` replaces the world (world.toml, tiles/) and nothing else, however the output
 /// folder is spelled (`w/.`, `w/`, `w/notes/..`): every other file and folder stays where it
 /// was, byte for byte, and no staging folder is left, inside or beside it.

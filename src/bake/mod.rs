@@ -849,8 +849,12 @@ pub const MAX_BAKE_CELLS: f64 = 65_536.0;
 
 /// Refuses a cell size (given, or the DEM's own) below a millimetre or resampling the DEM to
 /// more than [`MAX_BAKE_CELLS`] a side, naming the option it came from (`--cell-size`, or
-/// `--dem-cell-size` for the DEM's own) or else the sidecar's field.
+/// `--dem-cell-size` for the DEM's own) or else the sidecar's field. Where the cell is the
+/// DEM's own and too many cells span the DEM, the DEM's cells may each be large enough: the
+/// bake's cell is the smaller of them, and the extent comes from the larger; the error then
+/// says so.
 fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), WorldError> {
+    use crate::world::error::short_number;
     let dem_path = opts.dem.as_path();
     let extent = dem.extent_m();
     let cells = extent[0].max(extent[1]) / cell;
@@ -858,29 +862,43 @@ fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), World
     if cell >= MIN_BAKE_CELL_M && cells <= MAX_BAKE_CELLS {
         return Ok(());
     }
-    let allowed = format!(
-        "at least {} m for this DEM ({}x{} samples, {} x {} m; a bake resamples to at least 1 mm \
-         cells and at most {MAX_BAKE_CELLS} cells a side)",
-        crate::world::error::short_number(least),
-        dem.width,
-        dem.height,
-        crate::world::error::short_number(extent[0]),
-        crate::world::error::short_number(extent[1])
-    );
-    let cells = |[ew, ns]: [f64; 2]| {
+    let allowed = if cell >= MIN_BAKE_CELL_M && opts.cell_size_m.is_none() {
         format!(
-            "{} x {}",
-            crate::world::error::short_number(ew),
-            crate::world::error::short_number(ns)
+            "cells over which the DEM spans at most {MAX_BAKE_CELLS} of the bake's cells a \
+             side: its {}x{} samples span {} x {} m, {} cells of {} m (the smaller cell, \
+             rounded); correct them, or pass --cell-size {} or more",
+            dem.width,
+            dem.height,
+            short_number(extent[0]),
+            short_number(extent[1]),
+            short_number(cells),
+            short_number(cell),
+            short_number(least)
+        )
+    } else {
+        format!(
+            "at least {} m for this DEM ({}x{} samples, {} x {} m; a bake resamples to at least \
+             1 mm cells and at most {MAX_BAKE_CELLS} cells a side)",
+            short_number(least),
+            dem.width,
+            dem.height,
+            short_number(extent[0]),
+            short_number(extent[1])
         )
     };
+    let cells = |[ew, ns]: [f64; 2]| format!("{} x {}", short_number(ew), short_number(ns));
     match (opts.cell_size_m, opts.dem_cell_size_m) {
         (Some(c), _) => Err(WorldError::bad_option("--cell-size", c, allowed)),
         // The DEM's cells came from the option, not from the file or its sidecar.
-        (None, Some(given)) => Err(WorldError::bad_option(
+        (None, Some(given)) if cell < MIN_BAKE_CELL_M => Err(WorldError::bad_option(
             "--dem-cell-size",
             cells(given),
             format!("{allowed}, or pass --cell-size"),
+        )),
+        (None, Some(given)) => Err(WorldError::bad_option(
+            "--dem-cell-size",
+            cells(given),
+            allowed,
         )),
         (None, None) => Err(WorldError::OutOfRange {
             path: crate::world::dem::sidecar_of(dem_path).unwrap_or_else(|| dem_path.to_path_buf()),
@@ -889,7 +907,11 @@ fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), World
                 None => "its cells".into(),
             },
             value: cells([dem.cell_ew_m, dem.cell_ns_m]),
-            allowed: format!("{allowed}, or pass --cell-size"),
+            allowed: if cell < MIN_BAKE_CELL_M {
+                format!("{allowed}, or pass --cell-size")
+            } else {
+                allowed
+            },
         }),
     }
 }
