@@ -1,6 +1,7 @@
 //! Sharded bakes: shards run in any order and a finish step make the world byte for byte as the
 //! unsharded bake does; the world appears only after the finish; a killed shard is re-run
-//! alone; a finished shard is not run again; parts of another bake are refused.
+//! alone; a finished shard is not run again; a stopped finish keeps the shards' tiles; a finish
+//! refuses shards whose tiles are missing; parts of another bake are refused.
 
 use std::path::{Path, PathBuf};
 
@@ -122,6 +123,109 @@ fn a_killed_shard_is_rerun_alone_and_a_finished_one_is_not_run_again() {
     run(&opts(&dem, &out, shard(1))).unwrap();
     run(&opts(&dem, &out, Some(ShardStep::Finish { count }))).unwrap();
     verdant::World::open(&out).unwrap();
+}
+
+/// Every tile file under `dir`'s `tiles/`, relative to `dir`.
+fn tile_files(dir: &Path) -> Vec<PathBuf> {
+    read_all_files(dir)
+        .into_keys()
+        .filter(|p| p.starts_with("tiles"))
+        .collect()
+}
+
+/// A finish stopped after it wrote its own tiles, as it writes the manifest, leaves the
+/// shards' tiles in the parts folder and publishes nothing; the next finish makes the whole
+/// world.
+#[test]
+fn a_stopped_finish_keeps_the_shards_tiles_for_the_next() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = dem(dir.path());
+    let whole = dir.path().join("whole");
+    run(&opts(&dem, &whole, None)).unwrap();
+    // Three shards: the roots cross shards, so the finish bakes them before it publishes.
+    let count = 3;
+    let out = dir.path().join("w");
+    let parts = verdant::bake::shard::parts_dir(&out);
+    for index in 0..count {
+        run(&opts(&dem, &out, Some(ShardStep::Shard { index, count }))).unwrap();
+    }
+    let shards_tiles = tile_files(&parts);
+    assert!(!shards_tiles.is_empty());
+    let cancel = CancelFlag::new();
+    let mut o = opts(&dem, &out, Some(ShardStep::Finish { count }));
+    o.cancel = Some(cancel.clone());
+    let stopped = bake(&o, &mut |stage, _, _| {
+        if stage == BakeStage::WriteManifest {
+            cancel.cancel();
+        }
+    });
+    assert!(stopped.is_err(), "the finish was to be stopped");
+    assert!(!out.exists(), "nothing is published");
+    let kept = tile_files(&parts);
+    for file in &shards_tiles {
+        assert!(kept.contains(file), "{} lost", file.display());
+    }
+    let staging: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".w.") && n != ".w.shards")
+        .collect();
+    assert!(staging.is_empty(), "{staging:?}");
+
+    run(&opts(&dem, &out, Some(ShardStep::Finish { count }))).unwrap();
+    assert!(!parts.exists());
+    assert!(
+        read_all_files(&whole) == read_all_files(&out),
+        "the world after a stopped finish differs from the unsharded one"
+    );
+}
+
+/// A finish refuses to publish while a shard recorded done lacks any of its tile files,
+/// naming the file and telling to run the shard again, which then bakes its tiles again.
+#[test]
+fn a_finish_refuses_shards_whose_tiles_are_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = dem(dir.path());
+    let whole = dir.path().join("whole");
+    run(&opts(&dem, &whole, None)).unwrap();
+    // Two shards: the finish publishes the shards' manifest; three: it bakes the roots first.
+    for count in [2, 3] {
+        let out = dir.path().join(format!("w{count}"));
+        let parts = verdant::bake::shard::parts_dir(&out);
+        for index in 0..count {
+            run(&opts(&dem, &out, Some(ShardStep::Shard { index, count }))).unwrap();
+        }
+        // The last tile file of the finest level goes missing.
+        let gone = tile_files(&parts)
+            .into_iter()
+            .rfind(|p| p.starts_with("tiles/L2"))
+            .unwrap();
+        std::fs::remove_file(parts.join(&gone)).unwrap();
+        let e = run(&opts(&dem, &out, Some(ShardStep::Finish { count })))
+            .unwrap_err()
+            .to_string();
+        let name = gone.file_name().unwrap().to_string_lossy();
+        assert!(
+            e.contains(&*name) && e.contains(&format!("--shard I/{count}")),
+            "{count} shards: {e}"
+        );
+        assert!(!out.exists(), "{count} shards: nothing is published");
+        // The shard that lost it is run again; the others are done.
+        let rerun: Vec<u32> = (0..count)
+            .filter(|&index| {
+                !run(&opts(&dem, &out, Some(ShardStep::Shard { index, count })))
+                    .unwrap()
+                    .already_done
+            })
+            .collect();
+        assert_eq!(rerun.len(), 1, "{count} shards: run again {rerun:?}");
+        assert!(e.contains(&format!("shard {} of {count}", rerun[0])), "{e}");
+        run(&opts(&dem, &out, Some(ShardStep::Finish { count }))).unwrap();
+        assert!(
+            read_all_files(&whole) == read_all_files(&out),
+            "{count} shards: the world differs from the unsharded one"
+        );
+    }
 }
 
 #[test]

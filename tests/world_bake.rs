@@ -1065,6 +1065,157 @@ fn replace_keeps_the_hand_made_plants_and_paths_of_the_manifest() {
     assert!(fresh.paths == baked.paths, "the bake's paths alone");
 }
 
+/// A `--replace` killed while moving its world in, after the old `world.toml` went aside and
+/// before the new one came in, leaves the folder without a manifest: the next bake puts the
+/// old world back first, says so, and keeps the hand-made parts of its manifest as ever.
+#[test]
+fn a_replace_killed_while_publishing_is_put_right_by_the_next_bake() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let w = dir.path().join("w");
+    bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {}).unwrap();
+    let toml = w.join("world.toml");
+    let mut text = std::fs::read_to_string(&toml).unwrap();
+    text.push_str(HAND_MADE);
+    std::fs::write(&toml, &text).unwrap();
+    std::fs::write(w.join("notes.txt"), "mine").unwrap();
+    let before = read_all_files(&w);
+    // The staging folder of the killed bake (whose lock nobody holds any more): its new world,
+    // and the old manifest moved aside into previous/.
+    let staging = dir.path().join(".w.baking.4242-0");
+    common::copy_dir(&w.join("tiles"), &staging.join("world/tiles"));
+    std::fs::write(staging.join("world/world.toml"), "[pyramid] # new").unwrap();
+    std::fs::write(staging.join("lock"), "").unwrap();
+    std::fs::create_dir_all(staging.join("previous")).unwrap();
+    std::fs::rename(&toml, staging.join("previous/world.toml")).unwrap();
+    let kept = staging.join("previous/world.toml");
+
+    // Any bake into the folder puts it right first: this one is refused afterwards, the old
+    // world back in place.
+    let refused = verdant_cli(
+        &[
+            "bake",
+            "--dem",
+            "hills.png",
+            "--out",
+            "w",
+            "--cell-size",
+            "20",
+        ],
+        dir.path(),
+    );
+    common::assert_fails_naming(&refused, &["not empty"]);
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(said.contains("put the previous world.toml back"), "{said}");
+    assert!(!kept.exists() && !staging.exists());
+    assert_eq!(read_all_files(&w), before, "the folder as it was before");
+
+    // Killed again at the same point: the next --replace keeps the hand-made parts.
+    common::copy_dir(&w.join("tiles"), &staging.join("world/tiles"));
+    std::fs::write(staging.join("world/world.toml"), "[pyramid] # new").unwrap();
+    std::fs::write(staging.join("lock"), "").unwrap();
+    std::fs::create_dir_all(staging.join("previous")).unwrap();
+    std::fs::rename(&toml, staging.join("previous/world.toml")).unwrap();
+    let report = bake(&replace_opts(dem, w.clone()), &mut |_, _, _| {}).unwrap();
+    assert_eq!(report.carried.plant_types, ["poppy", "bush"]);
+    assert_eq!(report.carried.paths, ["my-flight"]);
+    assert_eq!(
+        std::fs::read_to_string(w.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert!(staging_folders(dir.path()).is_empty());
+}
+
+/// A bake into a world's `tiles/` (or a folder inside it) is refused before anything is read,
+/// naming the world, as the other tools refuse it: its files would be mixed with the tiles.
+#[test]
+fn bake_into_a_worlds_tiles_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let w = hills_world(dir.path());
+    let dem = dir.path().join("hills.png");
+    let before = read_all_files(&w);
+    for out in [w.join("tiles"), w.join("tiles/L0"), w.join("tiles/new")] {
+        for replace in [true, false] {
+            let e = bake(
+                &BakeOptions {
+                    replace,
+                    ..replace_opts(dem.clone(), out.clone())
+                },
+                &mut |_, _, _| {},
+            )
+            .unwrap_err()
+            .to_string();
+            assert!(
+                e.starts_with("--out") && e.contains("tiles/") && e.contains(&*w.to_string_lossy()),
+                "{}: {e}",
+                out.display()
+            );
+        }
+    }
+    assert_eq!(read_all_files(&w), before);
+    let run = verdant_cli(
+        &[
+            "bake",
+            "--dem",
+            "hills.png",
+            "--out",
+            "hills/tiles",
+            "--replace",
+        ],
+        dir.path(),
+    );
+    common::assert_fails_naming(&run, &["--out", "hills/tiles", "tiles/"]);
+    assert_eq!(read_all_files(&w), before);
+}
+
+/// A DEM whose cells span more cells of the bake's (its smaller cell, rounded) than a bake
+/// makes is refused naming that: the extent and the cells across, not a cell too small.
+#[test]
+fn a_dem_spanning_too_many_bake_cells_is_refused_saying_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = write_dem(
+        dir.path(),
+        "wide",
+        [20, 16],
+        [1e9, 20.0],
+        [0.0, 1.0],
+        |_, y| 100.0 + y / 100.0,
+    );
+    let opts = BakeOptions {
+        dem: png.clone(),
+        out: dir.path().join("w"),
+        tile_cells: 8,
+        ..Default::default()
+    };
+    let e = bake(&opts, &mut |_, _, _| {}).unwrap_err().to_string();
+    for needle in [
+        "wide.json",
+        "cell_size_m",
+        "1.900e10",
+        "of the bake's cells a side",
+        "9.500e8 cells of 20 m",
+        "--cell-size",
+    ] {
+        assert!(e.contains(needle), "{needle:?} not in {e}");
+    }
+    assert!(!e.contains("must be at least"), "{e}");
+    // The same cells from --dem-cell-size: the option is named.
+    let e = bake(
+        &BakeOptions {
+            dem_cell_size_m: Some([1e9, 20.0]),
+            ..opts
+        },
+        &mut |_, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.starts_with("--dem-cell-size") && e.contains("of the bake's cells a side"),
+        "{e}"
+    );
+    assert!(!e.contains("must be at least"), "{e}");
+}
+
 /// `--replace` replaces the world (world.toml, tiles/) and nothing else, however the output
 /// folder is spelled (`w/.`, `w/`, `w/notes/..`): every other file and folder stays where it
 /// was, byte for byte, and no staging folder is left, inside or beside it.

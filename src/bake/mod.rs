@@ -36,7 +36,10 @@
 //! ([`BakeOptions::cancel`]) removes it and leaves the output folder as it was. A bake holds
 //! an OS lock on a file in its staging folder while it runs, so that the next bake beside the
 //! same output folder removes the staging folders of bakes that were killed (whose lock is
-//! free) and leaves those of running bakes alone.
+//! free) and leaves those of running bakes alone. A bake killed while moving its world in is
+//! put right first, from the record its staging folder holds: the folder gets back the world
+//! it held (and a sharded bake's parts folder its tiles), or, where the new `world.toml` was
+//! already in, the world stays published.
 //!
 //! The stages live in submodules: `plan` (how the memory limit is spent), `source` (the DEM
 //! whole or in chunks), `survey` (the one pass over the whole grid), `resample` (windows and
@@ -253,6 +256,10 @@ pub struct BakeReport {
     /// What was kept of the replaced manifest (nothing for a new world).
     #[serde(default)]
     pub carried: Carried,
+    /// What the bake put right before it began, one note each: a bake into the same folder
+    /// that was killed while moving its world in (see [`bake`]). Also logged as warnings.
+    #[serde(default)]
+    pub recovered: Vec<String>,
 }
 
 /// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
@@ -265,6 +272,13 @@ pub fn bake(
     let manifest_path = opts.out.join("world.toml");
     check_options(opts)?;
     let out = resolve_out(&opts.out)?;
+    // A bake into the same folder that was killed while moving its world in is put right
+    // first, so that the folder is judged (and a sharded bake's parts opened) as it was.
+    let recovered = publish::remove_stale_staging(&out);
+    for note in &recovered {
+        log::warn!("{note}");
+    }
+    check_out(&opts.out, opts.replace)?;
     let dems: Vec<PathBuf> = std::iter::once(opts.dem.clone())
         .chain(opts.more_dems.iter().cloned())
         .collect();
@@ -277,6 +291,7 @@ pub fn bake(
                 ShardStep::Shard { index, .. } => {
                     if let Some(mut report) = parts.done(index) {
                         report.already_done = true;
+                        report.recovered = recovered;
                         return Ok(report);
                     }
                 }
@@ -285,7 +300,10 @@ pub fn bake(
                     // Where no tile crosses shards, the shards' manifest is all the finish
                     // needs: the world is published without being computed again.
                     if let Some(report) = finish_from_parts(&parts, &out, opts, step.count())? {
-                        return Ok(report);
+                        return Ok(BakeReport {
+                            recovered,
+                            ..report
+                        });
                     }
                 }
             }
@@ -449,6 +467,11 @@ pub fn bake(
         Some(p) => Some(cover::ValueMap::mask(p, dem)?),
         None => None,
     };
+    if let Some((ShardStep::Finish { .. }, parts)) = &parts {
+        // Before the survey: a finish that cannot publish fails at once.
+        let materials = cover.as_ref().is_some_and(|c| c.has_materials());
+        parts.check_tiles(&manifest.pyramid, materials)?;
+    }
     cancelled()?;
 
     let data_samples = extent
@@ -531,6 +554,7 @@ pub fn bake(
         planned_mib: plan.peak_bytes.div_ceil(1 << 20),
         peak_memory_mib: peak_memory_mib(),
         carried: Carried::default(),
+        recovered: recovered.clone(),
     };
     let paint_inputs = tiles::BlockPaint {
         height_range,
@@ -549,7 +573,10 @@ pub fn bake(
     // A sharded bake: a shard writes its share into the parts folder and records it; the
     // finish writes the tiles that cross shards there and publishes them with the manifest.
     let pyramid = &manifest.pyramid;
-    let mut moved_in = None;
+    // The fingerprint record of the parts folder whose tiles a finish publishes: they stay
+    // there until the publish moves them into the output folder, so that a finish that fails
+    // or is stopped before then leaves them for the next.
+    let mut from_parts = None;
     let mut peak = 0f32;
     if let Some((step, parts)) = &parts {
         let share = |want: Option<u32>| -> Vec<crate::world::tile::TileId> {
@@ -577,18 +604,14 @@ pub fn bake(
                 peak = (0..count)
                     .filter_map(|i| parts.done(i))
                     .fold(own, |p, r| p.max(r.grass_peak));
-                moved_in = Some(parts.dir.join("tiles"));
+                from_parts = Some(parts.record());
             }
         }
     }
 
     let staging = Staging::begin(&out, &opts.out, opts.replace)?;
-    let tiles_written = match &moved_in {
-        Some(tiles) => {
-            let to = staging.world().join("tiles");
-            std::fs::rename(tiles, &to).map_err(|e| WorldError::io(tiles, e))?;
-            tiles::stored_tiles(pyramid).len() as u64
-        }
+    let tiles_written = match &from_parts {
+        Some(_) => tiles::stored_tiles(pyramid).len() as u64,
         None => {
             let producer = tiles::Producer {
                 out: staging.world(),
@@ -611,11 +634,8 @@ pub fn bake(
     write_atomic(&staging.world().join("world.toml"), text.as_bytes())?;
     // The last chance to stop: once the world is being moved into place, it is finished.
     cancelled()?;
-    staging.publish()?;
-    if let Some((_, parts)) = &parts {
-        // The world is out; its parts are spent.
-        let _ = std::fs::remove_dir_all(&parts.dir);
-    }
+    // The world goes out; a sharded bake's parts are then spent, and removed.
+    staging.publish(from_parts.as_deref())?;
     progress(BakeStage::WriteManifest, 1, 1);
     Ok(BakeReport {
         carried,
@@ -706,15 +726,14 @@ fn finish_from_parts(
         .filter_map(|i| parts.done(i))
         .fold(0f32, |p, r| p.max(r.grass_peak));
     manifest.grass_peak = Some(grass_peak(pyramid, peak));
+    parts.check_tiles(pyramid, manifest.materials)?;
     let start = Instant::now();
     let staging = Staging::begin(out, &opts.out, opts.replace)?;
     let (text, carried) = manifest_text(&manifest, out, opts)?;
-    let tiles = parts.dir.join("tiles");
-    let to = staging.world().join("tiles");
-    std::fs::rename(&tiles, &to).map_err(|e| WorldError::io(&tiles, e))?;
     write_atomic(&staging.world().join("world.toml"), text.as_bytes())?;
-    staging.publish()?;
-    let _ = std::fs::remove_dir_all(&parts.dir);
+    // The shards' tiles go straight from the parts folder into the output folder, and the
+    // parts folder is removed once they are in.
+    staging.publish(Some(&parts.record()))?;
     report.tiles_written = all.len() as u64;
     report.seconds = start.elapsed().as_secs_f64();
     report.grass_peak = peak;
@@ -844,7 +863,7 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
             "a positive number of metres".into(),
         ));
     }
-    check_out(&opts.out, opts.replace)
+    Ok(())
 }
 
 /// Smallest cell a bake resamples to, metres.
@@ -855,8 +874,12 @@ pub const MAX_BAKE_CELLS: f64 = 65_536.0;
 
 /// Refuses a cell size (given, or the DEM's own) below a millimetre or resampling the DEM to
 /// more than [`MAX_BAKE_CELLS`] a side, naming the option it came from (`--cell-size`, or
-/// `--dem-cell-size` for the DEM's own) or else the sidecar's field.
+/// `--dem-cell-size` for the DEM's own) or else the sidecar's field. Where the cell is the
+/// DEM's own and too many cells span the DEM, the DEM's cells may each be large enough: the
+/// bake's cell is the smaller of them, and the extent comes from the larger; the error then
+/// says so.
 fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), WorldError> {
+    use crate::world::error::short_number;
     let dem_path = opts.dem.as_path();
     let extent = dem.extent_m();
     let cells = extent[0].max(extent[1]) / cell;
@@ -864,29 +887,43 @@ fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), World
     if cell >= MIN_BAKE_CELL_M && cells <= MAX_BAKE_CELLS {
         return Ok(());
     }
-    let allowed = format!(
-        "at least {} m for this DEM ({}x{} samples, {} x {} m; a bake resamples to at least 1 mm \
-         cells and at most {MAX_BAKE_CELLS} cells a side)",
-        crate::world::error::short_number(least),
-        dem.width,
-        dem.height,
-        crate::world::error::short_number(extent[0]),
-        crate::world::error::short_number(extent[1])
-    );
-    let cells = |[ew, ns]: [f64; 2]| {
+    let allowed = if cell >= MIN_BAKE_CELL_M && opts.cell_size_m.is_none() {
         format!(
-            "{} x {}",
-            crate::world::error::short_number(ew),
-            crate::world::error::short_number(ns)
+            "cells over which the DEM spans at most {MAX_BAKE_CELLS} of the bake's cells a \
+             side: its {}x{} samples span {} x {} m, {} cells of {} m (the smaller cell, \
+             rounded); correct them, or pass --cell-size {} or more",
+            dem.width,
+            dem.height,
+            short_number(extent[0]),
+            short_number(extent[1]),
+            short_number(cells),
+            short_number(cell),
+            short_number(least)
+        )
+    } else {
+        format!(
+            "at least {} m for this DEM ({}x{} samples, {} x {} m; a bake resamples to at least \
+             1 mm cells and at most {MAX_BAKE_CELLS} cells a side)",
+            short_number(least),
+            dem.width,
+            dem.height,
+            short_number(extent[0]),
+            short_number(extent[1])
         )
     };
+    let cells = |[ew, ns]: [f64; 2]| format!("{} x {}", short_number(ew), short_number(ns));
     match (opts.cell_size_m, opts.dem_cell_size_m) {
         (Some(c), _) => Err(WorldError::bad_option("--cell-size", c, allowed)),
         // The DEM's cells came from the option, not from the file or its sidecar.
-        (None, Some(given)) => Err(WorldError::bad_option(
+        (None, Some(given)) if cell < MIN_BAKE_CELL_M => Err(WorldError::bad_option(
             "--dem-cell-size",
             cells(given),
             format!("{allowed}, or pass --cell-size"),
+        )),
+        (None, Some(given)) => Err(WorldError::bad_option(
+            "--dem-cell-size",
+            cells(given),
+            allowed,
         )),
         (None, None) => Err(WorldError::OutOfRange {
             path: crate::world::dem::sidecar_of(dem_path).unwrap_or_else(|| dem_path.to_path_buf()),
@@ -895,7 +932,11 @@ fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), World
                 None => "its cells".into(),
             },
             value: cells([dem.cell_ew_m, dem.cell_ns_m]),
-            allowed: format!("{allowed}, or pass --cell-size"),
+            allowed: if cell < MIN_BAKE_CELL_M {
+                format!("{allowed}, or pass --cell-size")
+            } else {
+                allowed
+            },
         }),
     }
 }

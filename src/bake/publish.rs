@@ -60,6 +60,17 @@ impl PartialEq for CancelFlag {
 /// folder to be replaced whose `tiles/` holds anything that is not a tile verdant writes (the
 /// replaced `tiles/` is deleted whole).
 pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
+    if let Some(world) = crate::world::format::world_whose_tiles_hold(out) {
+        return Err(WorldError::bad_option(
+            "--out",
+            out.display(),
+            format!(
+                "a folder outside a world's tiles/ (this one is inside {}'s tiles/, which a \
+                 world's files would be mixed into); bake into another folder",
+                world.display()
+            ),
+        ));
+    }
     match std::fs::symlink_metadata(out) {
         Ok(m) if m.file_type().is_symlink() && std::fs::metadata(out).is_err() => {
             return Err(WorldError::bad_option(
@@ -171,15 +182,125 @@ const STAGING_LOCK: &str = "lock";
 const STAGING_WORLD: &str = "world";
 /// The folder in a staging folder that the replaced world is moved to while the new one goes in.
 const STAGING_PREVIOUS: &str = "previous";
+/// The record of a publish in a staging folder ([`Journal`]), written before its first move.
+const STAGING_JOURNAL: &str = "publishing.json";
+/// Where a published sharded bake's parts folder goes, to be removed with the staging folder.
+const STAGING_SPENT_PARTS: &str = "parts";
 /// A staging folder without a lock file belongs to a bake that is just starting, unless it was
 /// last changed longer ago than this (folders of older versions, which had no lock).
 const UNLOCKED_STAGING_GRACE: Duration = Duration::from_secs(60);
 
+/// What a publish records in its staging folder before it moves anything: what the next bake
+/// needs to put right a publish whose bake was killed ([`remove_stale_staging`]). The moves
+/// themselves are always the same ([`moves`]); which of them were done is told by where the
+/// files are.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+struct Journal {
+    /// The fingerprint record of the sharded bake whose parts folder's `tiles/` are the new
+    /// tiles ([`super::shard::parts_dir`]); `None`: the new tiles are in the staging folder.
+    parts: Option<String>,
+    /// Whether the publish created the output folder.
+    created: bool,
+}
+
+/// The moves of a publish into `out` from the staging folder `dir`, in order, each as
+/// (from, to): the replaced world's `world.toml` and `tiles/` aside into `previous/` (where it
+/// has them), the new `tiles/` in, and the new `world.toml` in, last. Each is one rename, and
+/// each is done exactly when its `to` exists and its `from` does not, taken from the last move
+/// back (see [`undo`]); once the last is done, the world is published.
+fn moves(out: &Path, dir: &Path, journal: &Journal) -> [(PathBuf, PathBuf); 4] {
+    let previous = dir.join(STAGING_PREVIOUS);
+    let world = dir.join(STAGING_WORLD);
+    let new_tiles = match journal.parts {
+        Some(_) => super::shard::parts_dir(out).join("tiles"),
+        None => world.join("tiles"),
+    };
+    [
+        (out.join("world.toml"), previous.join("world.toml")),
+        (out.join("tiles"), previous.join("tiles")),
+        (new_tiles, out.join("tiles")),
+        (world.join("world.toml"), out.join("world.toml")),
+    ]
+}
+
+/// Whether anything (a symlink included) is at `path`.
+fn exists(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok()
+}
+
+/// Whether the move `from` -> `to` of a publish is done, once every later move is undone.
+fn is_moved((from, to): &(PathBuf, PathBuf)) -> bool {
+    exists(to) && !exists(from)
+}
+
+/// Moves back what an unfinished publish moved, the last move first: afterwards the output
+/// folder holds what it held before the publish (and the new tiles are where they came from).
+/// Returns the indices (in [`moves`]) of the moves undone, or the move that could not be.
+fn undo(moves: &[(PathBuf, PathBuf); 4]) -> Result<Vec<usize>, (PathBuf, std::io::Error)> {
+    let mut undone = Vec::new();
+    for (k, step) in moves.iter().enumerate().rev() {
+        if is_moved(step) {
+            let (from, to) = step;
+            std::fs::rename(to, from).map_err(|e| (to.clone(), e))?;
+            undone.push(k);
+        }
+    }
+    Ok(undone)
+}
+
+/// Removes a sharded bake's parts folder once its world is published (moved into the staging
+/// folder `dir`, which is removed whole later), if it is still the one whose fingerprint record
+/// is `record`.
+fn spend_parts(out: &Path, dir: &Path, record: &str) {
+    let parts = super::shard::parts_dir(out);
+    let file = parts.join(super::shard::FINGERPRINT_FILE);
+    if std::fs::read_to_string(file).is_ok_and(|found| found == record)
+        && std::fs::rename(&parts, dir.join(STAGING_SPENT_PARTS)).is_err()
+    {
+        let _ = std::fs::remove_dir_all(&parts);
+    }
+}
+
+/// Removes the staging folder `dir` of a bake into `out`: first renamed to a name that no bake
+/// looks into (`.NAME.removing.*`), so that a removal cut short never leaves a staging folder
+/// half there for the next bake to misread.
+fn discard(out: &Path, dir: &Path) {
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let doomed = dir.with_file_name(format!(".{name}.removing.{}-{n}", std::process::id()));
+    let target = match std::fs::rename(dir, &doomed) {
+        Ok(()) => doomed,
+        Err(_) => dir.to_path_buf(),
+    };
+    let _ = std::fs::remove_dir_all(target);
+}
+
+/// Whether `file_name` is that of a staging folder (`kind` "baking") or of one being removed
+/// ("removing") of a bake into the folder named `name`: `.NAME.baking.PID-N` (`.NAME.baking.PID`
+/// in older versions), and not one of another folder whose name starts with it
+/// (`.NAME.baking.x.baking.PID-N`, of `NAME.baking.x`).
+fn is_staging_name(file_name: &str, name: &str, kind: &str) -> bool {
+    file_name
+        .strip_prefix(&format!(".{name}.{kind}."))
+        .is_some_and(|rest| {
+            !rest.is_empty()
+                && [".baking.", ".removing.", ".previous."]
+                    .iter()
+                    .all(|other| !rest.contains(other))
+        })
+}
+
 /// A world being baked in a staging folder beside its output folder,
 /// `PARENT/.NAME.baking.PID-N/`: `lock` (locked while the bake runs), `world/` (the new world)
-/// and, while [`Staging::publish`] runs, `previous/` (the world it replaces). Publishing moves
-/// `world.toml` and `tiles/` alone into the output folder, so that no other file of that folder
-/// is ever moved; the staging folder is removed when the bake ends, however it ends.
+/// and, while [`Staging::publish`] runs, `publishing.json` (its [`Journal`]) and `previous/`
+/// (the world it replaces). Publishing moves `world.toml` and `tiles/` alone into the output
+/// folder, so that no other file of that folder is ever moved; the staging folder is removed
+/// when the bake ends, however it ends, and a bake killed while publishing is put right by the
+/// next bake into the same folder ([`remove_stale_staging`]).
 pub(super) struct Staging {
     pub(super) out: PathBuf,
     pub(super) dir: PathBuf,
@@ -195,8 +316,9 @@ pub(super) struct Staging {
 }
 
 impl Staging {
-    /// Creates the staging folder beside `out` (resolved by [`resolve_out`]), first removing
-    /// the staging folders of killed bakes into the same output folder.
+    /// Creates the staging folder beside `out` (resolved by [`resolve_out`]), first putting
+    /// right the staging folders of killed bakes into the same output folder
+    /// ([`remove_stale_staging`], whose notes are logged as warnings).
     pub(super) fn begin(out: &Path, shown: &Path, replace: bool) -> Result<Self, WorldError> {
         check_out(out, replace)?;
         let (Some(name), Some(parent)) = (out.file_name(), out.parent()) else {
@@ -209,7 +331,9 @@ impl Staging {
         let name = name.to_string_lossy();
         let parents_made = crate::world::format::missing_folders(parent);
         std::fs::create_dir_all(parent).map_err(|e| WorldError::io(parent, e))?;
-        remove_stale_staging(parent, &name);
+        for note in remove_stale_staging(out) {
+            log::warn!("{note}");
+        }
         static NEXT: AtomicU64 = AtomicU64::new(0);
         let n = NEXT.fetch_add(1, Ordering::Relaxed);
         let dir = parent.join(format!(".{name}.baking.{}-{n}", std::process::id()));
@@ -243,48 +367,59 @@ impl Staging {
         &self.world
     }
 
-    /// Moves the baked world into the output folder: the replaced world's `world.toml` and
-    /// `tiles/` (if any) aside into the staging folder, then the new `tiles/` and, last, the new
-    /// `world.toml` in. Nothing else in the output folder is touched. If a step fails, what was
-    /// moved is moved back.
-    pub(super) fn publish(mut self) -> Result<(), WorldError> {
+    /// Moves the baked world into the output folder ([`moves`]): the replaced world's
+    /// `world.toml` and `tiles/` (if any) aside into the staging folder, then the new `tiles/`
+    /// and, last, the new `world.toml` in. The new tiles come from the staging folder, or with
+    /// `parts` (the fingerprint record of a sharded bake's parts folder) from the parts folder,
+    /// which is removed once the world is in: a finish that fails before then leaves the
+    /// shards' tiles where they were. Nothing else in the output folder is touched. If a step
+    /// fails, what was moved is moved back; if the bake is killed meanwhile, the next bake into
+    /// the same folder does that ([`remove_stale_staging`]).
+    pub(super) fn publish(mut self, parts: Option<&str>) -> Result<(), WorldError> {
         check_out(&self.out, self.replace)?;
-        let created = !self.out.exists();
-        std::fs::create_dir_all(&self.out).map_err(|e| WorldError::io(&self.out, e))?;
-        let previous = self.dir.join(STAGING_PREVIOUS);
-        std::fs::create_dir(&previous).map_err(|e| WorldError::io(&previous, e))?;
-        // Each move done, as (where it is now, where it came from).
-        let mut moved: Vec<(PathBuf, PathBuf)> = Vec::new();
-        let mut step = |from: PathBuf, to: PathBuf| -> Result<(), (PathBuf, std::io::Error)> {
-            std::fs::rename(&from, &to).map_err(|e| (from.clone(), e))?;
-            moved.push((to, from));
-            Ok(())
+        let journal = Journal {
+            parts: parts.map(str::to_owned),
+            created: !self.out.exists(),
         };
+        let remove_created = |out: &Path| {
+            if journal.created {
+                let _ = std::fs::remove_dir(out);
+            }
+        };
+        std::fs::create_dir_all(&self.out).map_err(|e| WorldError::io(&self.out, e))?;
+        let text = serde_json::to_string(&journal).unwrap_or_default();
+        let prepared =
+            crate::world::format::write_atomic(&self.dir.join(STAGING_JOURNAL), text.as_bytes())
+                .and_then(|()| {
+                    let previous = self.dir.join(STAGING_PREVIOUS);
+                    std::fs::create_dir(&previous).map_err(|e| WorldError::io(&previous, e))
+                });
+        if let Err(e) = prepared {
+            remove_created(&self.out);
+            return Err(e);
+        }
+        let moves = moves(&self.out, &self.dir, &journal);
         // The old manifest goes first and the new one comes last, so that the folder never
         // holds a manifest over tiles it does not describe.
         let mut result = Ok(());
-        for name in ["world.toml", "tiles"] {
-            let old = self.out.join(name);
-            if result.is_ok() && old.symlink_metadata().is_ok() {
-                result = step(old, previous.join(name));
+        for (k, (from, to)) in moves.iter().enumerate() {
+            // The replaced world's files are moved aside only where it has them.
+            if k < 2 && !exists(from) {
+                continue;
             }
-        }
-        for name in ["tiles", "world.toml"] {
-            if result.is_ok() {
-                result = step(self.world.join(name), self.out.join(name));
+            if let Err(e) = std::fs::rename(from, to) {
+                result = Err((from.clone(), e));
+                break;
             }
         }
         let Err((failed, source)) = result else {
+            if let Some(record) = parts {
+                spend_parts(&self.out, &self.dir, record);
+            }
             return Ok(());
         };
-        let restored = moved
-            .iter()
-            .rev()
-            .all(|(now, was)| std::fs::rename(now, was).is_ok());
-        if restored {
-            if created {
-                let _ = std::fs::remove_dir(&self.out);
-            }
+        if undo(&moves).is_ok() {
+            remove_created(&self.out);
             return Err(WorldError::io(&failed, source));
         }
         // The previous world is in the staging folder: keep it, under a name that no later
@@ -311,7 +446,7 @@ impl Staging {
 impl Drop for Staging {
     fn drop(&mut self) {
         if !self.keep {
-            let _ = std::fs::remove_dir_all(&self.dir);
+            discard(&self.out, &self.dir);
             // A published world is in them, so they stay.
             crate::world::format::remove_empty_folders(&self.parents_made);
         }
@@ -329,19 +464,33 @@ fn lock_staging(dir: &Path) -> Result<std::fs::File, WorldError> {
     Ok(file)
 }
 
-/// Removes the staging folders of bakes into `parent/name` that no running bake holds: those
-/// whose lock file can be locked (its bake was killed), and those without one that were last
-/// changed over [`UNLOCKED_STAGING_GRACE`] ago. Best effort: a folder that cannot be removed
-/// is left for the next bake.
-fn remove_stale_staging(parent: &Path, name: &str) {
-    let prefix = format!(".{name}.baking.");
-    let Ok(entries) = std::fs::read_dir(parent) else {
-        return;
+/// Puts right and removes the staging folders of bakes into `out` (resolved) that no running
+/// bake holds: those whose lock file can be locked (its bake was killed), and those without one
+/// that were last changed over [`UNLOCKED_STAGING_GRACE`] ago. A bake killed while publishing
+/// ([`Staging::publish`]) is put right first ([`recover_publish`]): the folder gets back the
+/// world it held, or where the new `world.toml` was already in, the publish is finished. Best
+/// effort: a folder that cannot be put right or removed is left for the next bake. Returns a
+/// note, for the user, of each thing put right or left.
+pub(super) fn remove_stale_staging(out: &Path) -> Vec<String> {
+    let (Some(name), Some(parent)) = (out.file_name(), out.parent()) else {
+        return Vec::new();
     };
+    let name = name.to_string_lossy();
+    let Ok(entries) = std::fs::read_dir(parent) else {
+        return Vec::new();
+    };
+    let mut notes = Vec::new();
     for entry in entries.flatten() {
-        if !entry.file_name().to_string_lossy().starts_with(&prefix)
-            || !entry.file_type().is_ok_and(|t| t.is_dir())
-        {
+        let file_name = entry.file_name().to_string_lossy().into_owned();
+        if !entry.file_type().is_ok_and(|t| t.is_dir()) {
+            continue;
+        }
+        if is_staging_name(&file_name, &name, "removing") {
+            // A removal that was cut short: nothing in it is read any more.
+            let _ = std::fs::remove_dir_all(entry.path());
+            continue;
+        }
+        if !is_staging_name(&file_name, &name, "baking") {
             continue;
         }
         let dir = entry.path();
@@ -362,9 +511,261 @@ fn remove_stale_staging(parent: &Path, name: &str) {
             Err(_) => false,
         };
         if stale {
-            // Removed while the lock is held, so that no bake can take the folder meanwhile.
-            let _ = std::fs::remove_dir_all(&dir);
+            // Put right and removed while the lock is held, so that no bake can take the
+            // folder meanwhile.
+            match recover_publish(out, &dir) {
+                Ok(note) => {
+                    notes.extend(note);
+                    discard(out, &dir);
+                }
+                Err(note) => notes.push(note),
+            }
         }
         drop(lock);
+    }
+    notes
+}
+
+/// Puts right the output folder `out` after a bake killed while publishing from the staging
+/// folder `dir` (one that holds a [`Journal`], or `previous/` where an older version wrote
+/// none): where the new `world.toml` is in, the world is published and what is left is the
+/// publish's own clean-up (the spent parts folder of a sharded bake); otherwise every move done
+/// is undone ([`undo`]), so that the folder holds the world it held before and a sharded bake's
+/// tiles are back in its parts folder. Returns a note of what was done (none where nothing
+/// was moved), or, where a move could not be undone, a note saying so: the staging folder,
+/// which then holds part of a world, is to be kept.
+fn recover_publish(out: &Path, dir: &Path) -> Result<Option<String>, String> {
+    let journal = match std::fs::read_to_string(dir.join(STAGING_JOURNAL)) {
+        Ok(text) => serde_json::from_str(&text).unwrap_or_default(),
+        Err(_) if exists(&dir.join(STAGING_PREVIOUS)) => Journal::default(),
+        Err(_) => return Ok(None),
+    };
+    let moves = moves(out, dir, &journal);
+    if is_moved(&moves[3]) {
+        if let Some(record) = &journal.parts {
+            spend_parts(out, dir, record);
+        }
+        return Ok(Some(format!(
+            "{}: a bake was killed just after moving its world in; its clean-up is done now \
+             (the world it replaced is removed, as that bake would have)",
+            out.display()
+        )));
+    }
+    let undone = undo(&moves).map_err(|(path, e)| {
+        format!(
+            "{}: a bake was killed while moving its world in, and {} could not be moved back \
+             ({e}); {} is kept, with the world it replaced in previous/",
+            out.display(),
+            path.display(),
+            dir.display()
+        )
+    })?;
+    if journal.created {
+        // Removed only while empty.
+        let _ = std::fs::remove_dir(out);
+    }
+    if undone.is_empty() {
+        return Ok(None);
+    }
+    let what: Vec<String> = undone
+        .iter()
+        .map(|k| match (k, &journal.parts) {
+            (0, _) => "put the previous world.toml back".to_string(),
+            (1, _) => "put the previous tiles/ back".to_string(),
+            (2, Some(_)) => format!(
+                "moved the shards' tiles back into {}",
+                super::shard::parts_dir(out).display()
+            ),
+            (2, None) => "took the new tiles/ out".to_string(),
+            _ => "took the new world.toml out".to_string(),
+        })
+        .collect();
+    Ok(Some(format!(
+        "{}: a bake was killed while moving its world in; {}: the folder holds what it held \
+         before that bake",
+        out.display(),
+        what.join(", ")
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const OLD_MANIFEST: &str = "[pyramid] # old";
+    const NEW_MANIFEST: &str = "[pyramid] # new";
+    const RECORD: &str = "0123456789abcdef 2\n";
+
+    fn write(path: &Path, text: &str) {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, text).unwrap();
+    }
+
+    fn read(path: &Path) -> String {
+        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    }
+
+    /// The folder `base/w` as a bake killed while publishing leaves it: the old world (if
+    /// `old_world`) and `notes.txt` in it, the staging folder `.w.baking.4242-0` holding the
+    /// new world (its tiles there, or in the parts folder where `sharded`), its record (unless
+    /// `journal` is false, as older versions wrote none) and `previous/`, and the first `done`
+    /// of the publish's moves done. Returns the output folder, the staging folder and whether
+    /// anything was moved.
+    fn killed_publish(
+        base: &Path,
+        sharded: bool,
+        old_world: bool,
+        journal: bool,
+        done: usize,
+    ) -> (PathBuf, PathBuf, bool) {
+        let out = base.join("w");
+        std::fs::create_dir_all(&out).unwrap();
+        write(&out.join("notes.txt"), "mine");
+        if old_world {
+            write(&out.join("world.toml"), OLD_MANIFEST);
+            write(&out.join("tiles/L0/0_0.type.png"), "old tile");
+        }
+        let dir = base.join(".w.baking.4242-0");
+        write(&dir.join(STAGING_LOCK), "");
+        write(&dir.join(STAGING_WORLD).join("world.toml"), NEW_MANIFEST);
+        let record = Journal {
+            parts: sharded.then(|| RECORD.to_string()),
+            created: !old_world,
+        };
+        if sharded {
+            let parts = super::super::shard::parts_dir(&out);
+            write(&parts.join(super::super::shard::FINGERPRINT_FILE), RECORD);
+            write(&parts.join("done/0-of-2.json"), "{}");
+            write(&parts.join("tiles/L0/0_0.type.png"), "new tile");
+        } else {
+            write(&dir.join("world/tiles/L0/0_0.type.png"), "new tile");
+        }
+        if journal {
+            write(
+                &dir.join(STAGING_JOURNAL),
+                &serde_json::to_string(&record).unwrap(),
+            );
+        }
+        std::fs::create_dir(dir.join(STAGING_PREVIOUS)).unwrap();
+        let mut moved = false;
+        for (k, (from, to)) in moves(&out, &dir, &record).iter().enumerate().take(done) {
+            if k < 2 && !exists(from) {
+                continue;
+            }
+            std::fs::rename(from, to).unwrap();
+            moved = true;
+        }
+        (out, dir, moved)
+    }
+
+    /// A bake killed at any point of its publish is put right by the next: before the new
+    /// manifest is in, the folder gets back the world it held (and a sharded bake's parts
+    /// folder its tiles); after, the new world stays. The replaced world is never lost, and
+    /// the folder's other files are never touched.
+    #[test]
+    fn a_publish_killed_at_any_move_is_put_right() {
+        for sharded in [false, true] {
+            for old_world in [true, false] {
+                for journal in [true, false] {
+                    if sharded && !journal {
+                        // Older versions moved the shards' tiles into the staging folder.
+                        continue;
+                    }
+                    for done in 0..=4 {
+                        let case = format!(
+                            "sharded {sharded}, old world {old_world}, record {journal}, \
+                             {done} moves done"
+                        );
+                        let tmp = tempfile::tempdir().unwrap();
+                        let base = tmp.path().canonicalize().unwrap();
+                        let (out, dir, moved) =
+                            killed_publish(&base, sharded, old_world, journal, done);
+                        let parts = super::super::shard::parts_dir(&out);
+                        let notes = remove_stale_staging(&out);
+                        assert!(!dir.exists(), "{case}: the staging folder is removed");
+                        assert_eq!(notes.len(), usize::from(moved), "{case}: {notes:?}");
+                        assert_eq!(read(&out.join("notes.txt")), "mine", "{case}");
+                        let left: Vec<String> = std::fs::read_dir(&base)
+                            .unwrap()
+                            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                            .filter(|n| n.starts_with(".w."))
+                            .collect();
+                        if done == 4 {
+                            assert_eq!(read(&out.join("world.toml")), NEW_MANIFEST, "{case}");
+                            assert_eq!(
+                                read(&out.join("tiles/L0/0_0.type.png")),
+                                "new tile",
+                                "{case}"
+                            );
+                            assert!(left.is_empty(), "{case}: {left:?}");
+                            continue;
+                        }
+                        if old_world {
+                            assert_eq!(read(&out.join("world.toml")), OLD_MANIFEST, "{case}");
+                            assert_eq!(
+                                read(&out.join("tiles/L0/0_0.type.png")),
+                                "old tile",
+                                "{case}"
+                            );
+                        } else {
+                            assert!(!out.join("world.toml").exists(), "{case}");
+                            assert!(!out.join("tiles").exists(), "{case}");
+                        }
+                        if sharded {
+                            assert_eq!(
+                                read(&parts.join("tiles/L0/0_0.type.png")),
+                                "new tile",
+                                "{case}: the shards' tiles are back in their parts folder"
+                            );
+                            assert_eq!(left, [".w.shards"], "{case}");
+                        } else {
+                            assert!(left.is_empty(), "{case}: {left:?}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// A sharded bake's publish that fails leaves the shards' tiles in their parts folder and
+    /// the output folder as it was; one that succeeds removes the parts folder.
+    #[test]
+    fn a_failed_publish_of_shards_leaves_their_tiles_in_the_parts_folder() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().canonicalize().unwrap().join("w");
+        write(&out.join("world.toml"), OLD_MANIFEST);
+        write(&out.join("tiles/L0/0_0.type.png"), "old tile");
+        let parts = super::super::shard::parts_dir(&out);
+        write(&parts.join(super::super::shard::FINGERPRINT_FILE), RECORD);
+        write(&parts.join("tiles/L0/0_0.type.png"), "new tile");
+        // The new world lacks its manifest: the last move fails.
+        let staging = Staging::begin(&out, &out, true).unwrap();
+        let err = staging.publish(Some(RECORD)).unwrap_err();
+        assert!(err.to_string().contains("world.toml"), "{err}");
+        assert_eq!(read(&parts.join("tiles/L0/0_0.type.png")), "new tile");
+        assert_eq!(read(&out.join("world.toml")), OLD_MANIFEST);
+        assert_eq!(read(&out.join("tiles/L0/0_0.type.png")), "old tile");
+
+        let staging = Staging::begin(&out, &out, true).unwrap();
+        write(&staging.world().join("world.toml"), NEW_MANIFEST);
+        staging.publish(Some(RECORD)).unwrap();
+        assert_eq!(read(&out.join("world.toml")), NEW_MANIFEST);
+        assert_eq!(read(&out.join("tiles/L0/0_0.type.png")), "new tile");
+        assert!(!parts.exists());
+        let left = std::fs::read_dir(out.parent().unwrap()).unwrap().count();
+        assert_eq!(left, 1, "only the output folder is left");
+    }
+
+    /// Only the staging folders of the output folder itself are taken for its own, not those
+    /// of a folder whose name begins with its name.
+    #[test]
+    fn staging_names_belong_to_one_output_folder() {
+        assert!(is_staging_name(".w.baking.12-0", "w", "baking"));
+        assert!(is_staging_name(".w.removing.12-3", "w", "removing"));
+        assert!(!is_staging_name(".w.baking.x.baking.12-0", "w", "baking"));
+        assert!(is_staging_name(".w.baking.12", "w", "baking"));
+        assert!(!is_staging_name(".w.baking.x.removing.12-0", "w", "baking"));
+        assert!(!is_staging_name(".w.baking.", "w", "baking"));
+        assert!(!is_staging_name(".w.previous.12-0", "w", "baking"));
     }
 }

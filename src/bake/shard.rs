@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::world::error::WorldError;
-use crate::world::format::write_atomic;
+use crate::world::format::{TileFile, tile_path, write_atomic};
 use crate::world::tile::{Pyramid, TileId};
 
 use super::{BakeOptions, BakeReport};
@@ -172,6 +172,11 @@ pub fn fingerprint(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, 
     ))
 }
 
+/// The fingerprint record of a bake of `count` shards.
+fn record(fingerprint: &str, count: u32) -> String {
+    format!("{fingerprint} {count}\n")
+}
+
 /// What a finished shard records.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 struct Done {
@@ -186,7 +191,8 @@ pub(super) struct Parts {
     count: u32,
 }
 
-const FINGERPRINT_FILE: &str = "fingerprint";
+/// The file in a parts folder that holds its bake's fingerprint record ([`Parts::record`]).
+pub(super) const FINGERPRINT_FILE: &str = "fingerprint";
 
 impl Parts {
     /// Opens (creating it where it does not exist) the parts folder for a bake into `out` of
@@ -194,7 +200,7 @@ impl Parts {
     pub(super) fn open(out: &Path, count: u32, fingerprint: String) -> Result<Parts, WorldError> {
         let dir = parts_dir(out);
         std::fs::create_dir_all(&dir).map_err(|e| WorldError::io(&dir, e))?;
-        let record = format!("{fingerprint} {count}\n");
+        let record = record(&fingerprint, count);
         let file = dir.join(FINGERPRINT_FILE);
         match std::fs::read_to_string(&file) {
             Ok(found) if found == record => {}
@@ -235,6 +241,11 @@ impl Parts {
             fingerprint,
             count,
         })
+    }
+
+    /// What the parts folder's fingerprint file holds.
+    pub(super) fn record(&self) -> String {
+        record(&self.fingerprint, self.count)
     }
 
     fn done_path(&self, index: u32) -> PathBuf {
@@ -280,5 +291,47 @@ impl Parts {
                 self.count
             ),
         ))
+    }
+
+    /// Refuses to finish where a shard recorded done lacks any of its tiles' files in the parts
+    /// folder (a finish of an older version that was stopped, a file removed by hand): the
+    /// world would be published without them. Names the first file missing and every shard
+    /// missing one, and removes those shards' records, so that running them again writes
+    /// their tiles again.
+    pub(super) fn check_tiles(&self, pyramid: &Pyramid, materials: bool) -> Result<(), WorldError> {
+        let kinds: Vec<TileFile> = TileFile::ALL
+            .into_iter()
+            .chain(materials.then_some(TileFile::Material))
+            .collect();
+        let mut missing = std::collections::BTreeSet::new();
+        let mut first = None;
+        for id in super::tiles::stored_tiles(pyramid) {
+            let Some(shard) = owner(pyramid, self.count, id) else {
+                continue;
+            };
+            if missing.contains(&shard) {
+                continue;
+            }
+            let absent = kinds
+                .iter()
+                .map(|&kind| tile_path(&self.dir, id, kind))
+                .find(|path| !path.is_file());
+            if let Some(path) = absent {
+                missing.insert(shard);
+                first.get_or_insert(path);
+            }
+        }
+        let Some(path) = first else {
+            return Ok(());
+        };
+        for &shard in &missing {
+            let _ = std::fs::remove_file(self.done_path(shard));
+        }
+        Err(WorldError::ShardTilesMissing {
+            path,
+            parts: self.dir.clone(),
+            shards: missing.into_iter().collect(),
+            count: self.count,
+        })
     }
 }

@@ -127,7 +127,7 @@ fn a_failed_publish_puts_the_previous_world_back() {
     // The new world lacks its manifest: the last move fails.
     std::fs::create_dir_all(staging.world().join("tiles/L0")).unwrap();
     std::fs::write(staging.world().join("tiles/L0/0_0.type.png"), "new tile").unwrap();
-    let err = staging.publish().unwrap_err();
+    let err = staging.publish(None).unwrap_err();
     assert!(err.to_string().contains("world.toml"), "{err}");
     assert_eq!(
         std::fs::read(out.join("world.toml")).unwrap(),
@@ -143,7 +143,7 @@ fn a_failed_publish_puts_the_previous_world_back() {
     // Into a new folder: nothing is left at all.
     let new = dir.path().canonicalize().unwrap().join("new");
     let staging = Staging::begin(&new, &new, false).unwrap();
-    assert!(staging.publish().is_err());
+    assert!(staging.publish(None).is_err());
     assert!(!new.exists());
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
     assert_eq!(left.len(), 1, "{left:?}");

@@ -507,6 +507,33 @@ pub enum WorldError {
         path: PathBuf,
     },
 
+    /// A sharded bake's finish found a tile file missing from the parts folder of a shard
+    /// recorded done: the world would be published without it. The records of the shards
+    /// missing files are removed, so that they can be run again.
+    #[error(
+        "{}: missing from the parts of the sharded bake in {}, though shard{} {} of {count} {} \
+         recorded done; {} record{} removed: run {} again (--shard I/{count}), then \
+         --finish-shards {count}",
+        path.display(),
+        parts.display(),
+        if shards.len() == 1 { "" } else { "s" },
+        shards.iter().map(u32::to_string).collect::<Vec<_>>().join(", "),
+        if shards.len() == 1 { "is" } else { "are" },
+        if shards.len() == 1 { "its" } else { "their" },
+        if shards.len() == 1 { " is" } else { "s are" },
+        if shards.len() == 1 { "it" } else { "them" },
+    )]
+    ShardTilesMissing {
+        /// The first tile file found missing.
+        path: PathBuf,
+        /// The parts folder.
+        parts: PathBuf,
+        /// The shards that lack tile files, each recorded done.
+        shards: Vec<u32>,
+        /// How many shards the bake has.
+        count: u32,
+    },
+
     /// Putting a baked world in place failed, and so did putting the previous world back: its
     /// `world.toml` and `tiles/` are kept in a folder beside the output folder.
     #[error(
@@ -723,6 +750,7 @@ impl WorldError {
             | Carry { path, .. }
             | Cancelled { path }
             | PublishFailed { path, .. }
+            | ShardTilesMissing { path, .. }
             | LandCover { path, .. }
             | DemMosaic { path, .. }
             | CoverTable { path, .. } => Some(path),

@@ -782,10 +782,20 @@ pub fn refused_output(path: &Path) -> Option<&'static str> {
     if resolved.join("world.toml").is_file() {
         return Some("a world's folder (it holds world.toml)");
     }
+    if world_whose_tiles_hold(&resolved).is_some() {
+        return Some("inside a world's tiles/");
+    }
+    None
+}
+
+/// The world folder (one holding `world.toml`) whose `tiles/` is `path` or holds it, if any;
+/// `path` is resolved first ([`resolve_lexically`]), so that `w/tiles/L0/..` is inside `w`'s.
+pub fn world_whose_tiles_hold(path: &Path) -> Option<PathBuf> {
+    let resolved = resolve_lexically(path).ok().flatten()?;
     let mut up = resolved.as_path();
     while let Some(parent) = up.parent() {
         if up.file_name().is_some_and(|n| n == "tiles") && parent.join("world.toml").is_file() {
-            return Some("inside a world's tiles/");
+            return Some(parent.to_path_buf());
         }
         up = parent;
     }
