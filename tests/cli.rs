@@ -2248,3 +2248,31 @@ fn an_interrupted_fly_reports_the_frames_it_flew() {
         "{stderr}"
     );
 }
+
+/// A device that cannot give the memory of the renderer's targets (here software Vulkan in a
+/// process held to 1.6 GB of address space, asked for 4096x4096 frames) is an error naming the
+/// size and what to change, status 1: the failed texture's views raised a validation error that
+/// panicked.
+#[test]
+fn targets_the_device_cannot_hold_are_an_error_not_a_panic() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::root().join("worlds/santa-cruz");
+    let script = format!(
+        "ulimit -v {}; exec '{}' fly '{}' --size 4096x4096 --frames 1 --no-images --out f",
+        1600 * 1024,
+        env!("CARGO_BIN_EXE_verdant"),
+        world.display()
+    );
+    let out = std::process::Command::new("sh")
+        .args(["-c", &script])
+        .current_dir(tmp.path())
+        .output()
+        .unwrap();
+    common::assert_fails_naming(
+        &out,
+        &[
+            "at 4096x4096: the device could not give the GPU memory they need",
+            "--size",
+        ],
+    );
+}

@@ -54,9 +54,9 @@ pub enum RendererError {
     /// The device could not hold the renderer's other allocations, sized by the target size
     /// and the grass's, plants' and trees' settings.
     #[error(
-        "{what} at {width}x{height} need more GPU memory than the device could give ({reason}): \
-         choose a smaller --size, a shorter --grass-view-m, a larger --grass-spacing-m, a \
-         smaller --tree-shadow-size or --aa off"
+        "{what} at {width}x{height}: the device could not give the GPU memory they need \
+         ({reason}): choose a smaller --size, a shorter --grass-view-m, a larger \
+         --grass-spacing-m, a smaller --tree-shadow-size or --aa off"
     )]
     DeviceMemory {
         /// What was being made, in words.

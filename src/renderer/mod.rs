@@ -78,6 +78,29 @@ pub const READBACK_SLOTS: usize = 4;
 
 /// Refuses a grass tile of `tile_m` whose grid of `cell_m` needs more workgroups of 8 points
 /// a side than the device dispatches (`limit` a dimension).
+/// Runs `make`, which allocates GPU memory, turning the device's out-of-memory error into
+/// `error(reason)`. An object the device could not allocate is invalid, and using it (a view of
+/// the texture, a bind group) raises validation errors: those are taken with the out-of-memory
+/// error. A validation error without one is a defect, and panics as wgpu's own handler does.
+pub fn catch_out_of_memory<T>(
+    device: &wgpu::Device,
+    make: impl FnOnce() -> Result<T, RendererError>,
+    error: impl FnOnce(String) -> RendererError,
+) -> Result<T, RendererError> {
+    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let made = make();
+    let out_of_memory = pollster::block_on(memory.pop());
+    let invalid = pollster::block_on(validation.pop());
+    if let Some(e) = out_of_memory {
+        return Err(error(e.to_string()));
+    }
+    if let Some(e) = invalid {
+        panic!("wgpu error: {e}");
+    }
+    made
+}
+
 fn check_tile_grid(
     what: &'static str,
     tile_m: f32,
@@ -248,16 +271,18 @@ impl Renderer {
         // The atlas is the renderer's largest allocation (slots x side^2 x 8 bytes: 17.8 GB at
         // 2048 slots of 1041-sample tiles): a device that cannot hold it says so here, as an
         // error naming the slots, not as a fatal error of the device.
-        let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let atlas = TileAtlas::new(device, pyramid.samples_per_side(), slots);
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            let side = u64::from(pyramid.samples_per_side());
-            return Err(RendererError::AtlasMemory {
-                slots,
-                bytes: u64::from(slots) * side * side * 8,
-                reason: e.to_string(),
-            });
-        }
+        let atlas = catch_out_of_memory(
+            device,
+            || Ok(TileAtlas::new(device, pyramid.samples_per_side(), slots)),
+            |reason| {
+                let side = u64::from(pyramid.samples_per_side());
+                RendererError::AtlasMemory {
+                    slots,
+                    bytes: u64::from(slots) * side * side * 8,
+                    reason,
+                }
+            },
+        )?;
         // The level-0 tiles go to the atlas as they load, the queue's staged copies flushed
         // every few tiles: however many the world has, a few are in memory at once.
         let mut staged = 0;
@@ -274,305 +299,307 @@ impl Renderer {
         // Everything else the renderer allocates (targets of the frame's size, the grass's,
         // plants' and trees' pools, the shadow map, the anti-aliasing's targets) is sized by
         // options too: a device that cannot hold it is an error naming them.
-        let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let derive = DeriveStage::new(
-            device,
-            queue,
-            &pyramid,
-            &config.derive,
-            &atlas,
-            config.service.derives_per_frame,
-        );
-        let mut terrain = TerrainRenderer::new(
-            device,
-            &world.manifest,
-            &atlas,
-            &targets,
-            4096,
-            config.mesh_step,
-        );
-        terrain.set_features(config.features);
-        terrain.set_grass(config.grass_settings(&world).as_ref());
-        let contact_shadows = crate::terrain::contact_shadow::ContactShadowPass::new(
-            device,
-            &targets,
-            crate::terrain::contact_shadow::ContactShadows::default(),
-        );
-        let grass = match config.grass_settings(&world) {
-            Some(settings) => {
-                // One workgroup of 8 x 8 points a dispatch; a world of huge finest tiles (a
-                // coarse bake) asks for more than a device dispatches.
-                let dispatch = limits.max_compute_workgroups_per_dimension;
-                check_tile_grid("blade", settings.tile_m, settings.spacing_m, dispatch)?;
-                if !world.manifest.plant_types.is_empty() {
-                    check_tile_grid("plant", settings.tile_m, config.plants.cell_m, dispatch)?;
-                }
-                let mut wind_config = match &config.wind_scene {
-                    None if !config.wind_keys.is_empty() => {
-                        WindConfig::from_keys(&world.manifest, &config.wind_keys)?
+        let (width, height) = (targets.width, targets.height);
+        let make = move || -> Result<Self, RendererError> {
+            let derive = DeriveStage::new(
+                device,
+                queue,
+                &pyramid,
+                &config.derive,
+                &atlas,
+                config.service.derives_per_frame,
+            );
+            let mut terrain = TerrainRenderer::new(
+                device,
+                &world.manifest,
+                &atlas,
+                &targets,
+                4096,
+                config.mesh_step,
+            );
+            terrain.set_features(config.features);
+            terrain.set_grass(config.grass_settings(&world).as_ref());
+            let contact_shadows = crate::terrain::contact_shadow::ContactShadowPass::new(
+                device,
+                &targets,
+                crate::terrain::contact_shadow::ContactShadows::default(),
+            );
+            let grass = match config.grass_settings(&world) {
+                Some(settings) => {
+                    // One workgroup of 8 x 8 points a dispatch; a world of huge finest tiles (a
+                    // coarse bake) asks for more than a device dispatches.
+                    let dispatch = limits.max_compute_workgroups_per_dimension;
+                    check_tile_grid("blade", settings.tile_m, settings.spacing_m, dispatch)?;
+                    if !world.manifest.plant_types.is_empty() {
+                        check_tile_grid("plant", settings.tile_m, config.plants.cell_m, dispatch)?;
                     }
-                    scene => WindConfig::from_scene(&world.manifest, scene.as_deref())?,
-                };
-                wind_config.sources = config.features.has(Feature::WindSources);
-                wind_config.trail = config.features.has(Feature::Interaction);
-                let wind = WindField::new(device, queue, &wind_config);
-                let sway = SwayField::new(
-                    device,
-                    SwayConfig::from_manifest(&world.manifest),
-                    wind_config.cells,
-                    wind.buffer(),
-                );
-                sway.reset(queue);
-                let capacity = match config.grass.capacity {
-                    Some(c) => c,
-                    None => crate::grass::estimate_capacity(&world, &settings)?,
-                };
-                let renderer = GrassRenderer::new(
-                    device,
-                    queue,
-                    &world.manifest,
-                    &atlas,
-                    &targets,
-                    settings,
-                    capacity,
-                    WindBindings {
+                    let mut wind_config = match &config.wind_scene {
+                        None if !config.wind_keys.is_empty() => {
+                            WindConfig::from_keys(&world.manifest, &config.wind_keys)?
+                        }
+                        scene => WindConfig::from_scene(&world.manifest, scene.as_deref())?,
+                    };
+                    wind_config.sources = config.features.has(Feature::WindSources);
+                    wind_config.trail = config.features.has(Feature::Interaction);
+                    let wind = WindField::new(device, queue, &wind_config);
+                    let sway = SwayField::new(
+                        device,
+                        SwayConfig::from_manifest(&world.manifest),
+                        wind_config.cells,
+                        wind.buffer(),
+                    );
+                    sway.reset(queue);
+                    let capacity = match config.grass.capacity {
+                        Some(c) => c,
+                        None => crate::grass::estimate_capacity(&world, &settings)?,
+                    };
+                    let renderer = GrassRenderer::new(
+                        device,
+                        queue,
+                        &world.manifest,
+                        &atlas,
+                        &targets,
+                        settings,
+                        capacity,
+                        WindBindings {
+                            lookup: wind.lookup_uniform(),
+                            cells: wind.buffer(),
+                            sway: sway.buffer(),
+                        },
+                    );
+                    renderer.commit_pool(device, queue);
+                    let set = if world.manifest.plant_types.is_empty() {
+                        None
+                    } else {
+                        // glTF plants come from where the tiles do (a world over HTTP fetches them).
+                        let read = |path: &std::path::Path| -> std::io::Result<Vec<u8>> {
+                            let name = path.strip_prefix(&world.dir).unwrap_or(path);
+                            source
+                                .read_file(name, crate::plants::gltf::MAX_PLANT_FILE_BYTES)
+                                .map_err(crate::plants::gltf::plant_file_io_error)
+                        };
+                        Some(crate::plants::PlantSet::build_with(
+                            &world.manifest,
+                            &world.dir,
+                            &read,
+                        )?)
+                    };
+                    let view = settings.view_distance_m;
+                    let wind_bindings = crate::plants::renderer::PlantWindBindings {
                         lookup: wind.lookup_uniform(),
                         cells: wind.buffer(),
                         sway: sway.buffer(),
-                    },
-                );
-                renderer.commit_pool(device, queue);
-                let set = if world.manifest.plant_types.is_empty() {
-                    None
-                } else {
-                    // glTF plants come from where the tiles do (a world over HTTP fetches them).
-                    let read = |path: &std::path::Path| -> std::io::Result<Vec<u8>> {
-                        let name = path.strip_prefix(&world.dir).unwrap_or(path);
-                        source
-                            .read_file(name, crate::plants::gltf::MAX_PLANT_FILE_BYTES)
-                            .map_err(crate::plants::gltf::plant_file_io_error)
                     };
-                    Some(crate::plants::PlantSet::build_with(
-                        &world.manifest,
-                        &world.dir,
-                        &read,
-                    )?)
-                };
-                let view = settings.view_distance_m;
-                let wind_bindings = crate::plants::renderer::PlantWindBindings {
-                    lookup: wind.lookup_uniform(),
-                    cells: wind.buffer(),
-                    sway: sway.buffer(),
-                };
-                let layer = |layer: crate::plants::PlantLayer, s: crate::plants::PlantSettings| {
-                    let set = set.as_ref()?;
-                    (!layer.types(&world.manifest).is_empty()).then(|| {
-                        crate::plants::PlantRenderer::new(
-                            device,
-                            queue,
-                            &world.manifest,
-                            set,
-                            layer,
-                            &atlas,
-                            &targets,
-                            &renderer.hiz,
-                            settings.tile_m,
-                            s,
-                            wind_bindings,
-                        )
-                    })
-                };
-                let plants = layer(
-                    crate::plants::PlantLayer::Plants,
-                    crate::plants::PlantSettings {
-                        view_m: [0.8 * view, view],
-                        seed: settings.seed,
-                        ..config.plants
-                    },
-                );
-                let trees = layer(
-                    crate::plants::PlantLayer::Trees,
-                    crate::plants::PlantSettings {
-                        seed: settings.seed,
-                        ..config.trees.unwrap_or_else(|| {
-                            crate::plants::PlantSettings::trees(
+                    let layer = |layer: crate::plants::PlantLayer,
+                                 s: crate::plants::PlantSettings| {
+                        let set = set.as_ref()?;
+                        (!layer.types(&world.manifest).is_empty()).then(|| {
+                            crate::plants::PlantRenderer::new(
+                                device,
+                                queue,
+                                &world.manifest,
+                                set,
+                                layer,
+                                &atlas,
+                                &targets,
+                                &renderer.hiz,
                                 settings.tile_m,
-                                world.manifest.sky.fog_distance_m,
+                                s,
+                                wind_bindings,
                             )
                         })
-                    },
-                );
-                // The shadow casters: the trees' own placement within the shadows' reach (and a
-                // little beyond, for the trees just outside that cast into it).
-                let casters = match (&set, &trees, &config.tree_shadows) {
-                    (Some(set), Some(t), Some(shadows)) => {
-                        Some(crate::plants::PlantRenderer::new_caster(
-                            device,
-                            queue,
+                    };
+                    let plants = layer(
+                        crate::plants::PlantLayer::Plants,
+                        crate::plants::PlantSettings {
+                            view_m: [0.8 * view, view],
+                            seed: settings.seed,
+                            ..config.plants
+                        },
+                    );
+                    let trees = layer(
+                        crate::plants::PlantLayer::Trees,
+                        crate::plants::PlantSettings {
+                            seed: settings.seed,
+                            ..config.trees.unwrap_or_else(|| {
+                                crate::plants::PlantSettings::trees(
+                                    settings.tile_m,
+                                    world.manifest.sky.fog_distance_m,
+                                )
+                            })
+                        },
+                    );
+                    // The shadow casters: the trees' own placement within the shadows' reach (and a
+                    // little beyond, for the trees just outside that cast into it).
+                    let casters = match (&set, &trees, &config.tree_shadows) {
+                        (Some(set), Some(t), Some(shadows)) => {
+                            Some(crate::plants::PlantRenderer::new_caster(
+                                device,
+                                queue,
+                                &world.manifest,
+                                set,
+                                &atlas,
+                                &targets,
+                                &renderer.hiz,
+                                settings.tile_m,
+                                crate::plants::PlantSettings {
+                                    capacity: crate::plants::shadow::CASTER_CAPACITY,
+                                    view_m: [shadows.distance_m + 20.0, shadows.distance_m + 40.0],
+                                    lod_m: shadows.placement_lod_m(t.settings().band_m),
+                                    ..*t.settings()
+                                },
+                                wind_bindings,
+                                shadows.cascades,
+                            ))
+                        }
+                        _ => None,
+                    };
+                    let canopy = set.as_ref().zip(trees.as_ref()).map(|(set, t)| {
+                        crate::plants::shadow::canopy_depth(
                             &world.manifest,
                             set,
-                            &atlas,
-                            &targets,
-                            &renderer.hiz,
-                            settings.tile_m,
-                            crate::plants::PlantSettings {
-                                capacity: crate::plants::shadow::CASTER_CAPACITY,
-                                view_m: [shadows.distance_m + 20.0, shadows.distance_m + 40.0],
-                                lod_m: shadows.placement_lod_m(t.settings().band_m),
-                                ..*t.settings()
-                            },
-                            wind_bindings,
-                            shadows.cascades,
-                        ))
-                    }
-                    _ => None,
-                };
-                let canopy = set.as_ref().zip(trees.as_ref()).map(|(set, t)| {
-                    crate::plants::shadow::canopy_depth(
-                        &world.manifest,
-                        set,
-                        t.settings().cell_m,
-                        crate::terrain::sun_direction(&world.manifest.sky),
-                    )
-                });
-                let particles = match (&trees, &config.particles) {
-                    (Some(t), Some(p)) => {
-                        let colors: Vec<[f32; 3]> = crate::plants::PlantLayer::Trees
-                            .types(&world.manifest)
-                            .iter()
-                            .map(|&i| world.manifest.plant_types[i].color)
-                            .collect();
-                        // Petals from the plants of the `flower` recipe, in their accent colour.
-                        let petals: Vec<Option<[f32; 3]>> = crate::plants::PlantLayer::Plants
-                            .types(&world.manifest)
-                            .iter()
-                            .map(|&i| &world.manifest.plant_types[i])
-                            .map(|t| {
-                                let flower = crate::plants::recipe::Recipe::from_name(&t.mesh)
-                                    == Some(crate::plants::recipe::Recipe::Flower);
-                                flower.then_some(t.color)
-                            })
-                            .collect();
-                        let flowers =
-                            plants
-                                .as_ref()
-                                .map(|f| crate::plants::particles::FlowerSource {
-                                    instances: f.instance_buffer(),
-                                    args: f.args_buffer(),
-                                    capacity: f.settings().capacity,
-                                    petals: &petals,
-                                });
-                        Some(crate::plants::particles::ParticleStage::new(
-                            device,
-                            &targets,
-                            *p,
-                            crate::plants::particles::TreeSource {
-                                instances: t.instance_buffer(),
-                                args: t.args_buffer(),
-                                capacity: t.settings().capacity,
-                                types: t.types(),
-                            },
-                            flowers,
-                            crate::plants::particles::ParticleWind {
-                                lookup: wind.lookup_uniform(),
-                                cells: wind.buffer(),
-                            },
-                            &colors,
-                            &world.manifest.sky,
-                        ))
-                    }
-                    _ => None,
-                };
-                Some(GrassStage {
-                    renderer,
-                    wind,
-                    sway,
-                    plants,
-                    trees,
-                    casters,
-                    canopy,
-                    particles,
-                })
+                            t.settings().cell_m,
+                            crate::terrain::sun_direction(&world.manifest.sky),
+                        )
+                    });
+                    let particles = match (&trees, &config.particles) {
+                        (Some(t), Some(p)) => {
+                            let colors: Vec<[f32; 3]> = crate::plants::PlantLayer::Trees
+                                .types(&world.manifest)
+                                .iter()
+                                .map(|&i| world.manifest.plant_types[i].color)
+                                .collect();
+                            // Petals from the plants of the `flower` recipe, in their accent colour.
+                            let petals: Vec<Option<[f32; 3]>> = crate::plants::PlantLayer::Plants
+                                .types(&world.manifest)
+                                .iter()
+                                .map(|&i| &world.manifest.plant_types[i])
+                                .map(|t| {
+                                    let flower = crate::plants::recipe::Recipe::from_name(&t.mesh)
+                                        == Some(crate::plants::recipe::Recipe::Flower);
+                                    flower.then_some(t.color)
+                                })
+                                .collect();
+                            let flowers =
+                                plants
+                                    .as_ref()
+                                    .map(|f| crate::plants::particles::FlowerSource {
+                                        instances: f.instance_buffer(),
+                                        args: f.args_buffer(),
+                                        capacity: f.settings().capacity,
+                                        petals: &petals,
+                                    });
+                            Some(crate::plants::particles::ParticleStage::new(
+                                device,
+                                &targets,
+                                *p,
+                                crate::plants::particles::TreeSource {
+                                    instances: t.instance_buffer(),
+                                    args: t.args_buffer(),
+                                    capacity: t.settings().capacity,
+                                    types: t.types(),
+                                },
+                                flowers,
+                                crate::plants::particles::ParticleWind {
+                                    lookup: wind.lookup_uniform(),
+                                    cells: wind.buffer(),
+                                },
+                                &colors,
+                                &world.manifest.sky,
+                            ))
+                        }
+                        _ => None,
+                    };
+                    Some(GrassStage {
+                        renderer,
+                        wind,
+                        sway,
+                        plants,
+                        trees,
+                        casters,
+                        canopy,
+                        particles,
+                    })
+                }
+                None => None,
+            };
+            let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+            let timer = GpuTimer::new(device, queue, timestamps, MAX_TIMED_PASSES);
+            let readback = StatsRing::new(device, timer.capacity_bytes());
+            let holes = HoleCheck::new(device, &atlas);
+            let taa =
+                (config.aa == AntiAliasing::Taa).then(|| Taa::new(device, &targets, config.taa));
+            let msaa = (config.aa == AntiAliasing::Msaa && grass.is_some())
+                .then(|| Msaa::new(device, &targets));
+            let tree_shadow_map = crate::plants::shadow::TreeShadowMap::new(
+                device,
+                config
+                    .tree_shadows
+                    .filter(|_| grass.as_ref().is_some_and(|g| g.casters.is_some())),
+            );
+            // Beyond the map, the canopy's shade on the ground.
+            if let (Some(s), Some(tau)) = (
+                tree_shadow_map.settings(),
+                grass.as_ref().and_then(|g| g.canopy),
+            ) {
+                terrain.set_canopy(&tau, [0.9 * s.distance_m, s.distance_m]);
             }
-            None => None,
+            let mut grass = grass;
+            if let (Some(g), Some(t)) = (&mut grass, &taa) {
+                g.renderer
+                    .set_motion_vectors(device, t.settings().blade_motion);
+                if let Some(p) = &mut g.particles {
+                    p.set_reactive(device, true);
+                }
+            }
+            if let (Some(g), Some(_)) = (&mut grass, &msaa) {
+                g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
+                for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
+                    p.set_samples(device, crate::aa::msaa::SAMPLES);
+                }
+                if let Some(p) = &mut g.particles {
+                    p.set_samples(device, crate::aa::msaa::SAMPLES);
+                }
+            }
+            let renderer = Self {
+                device: device.clone(),
+                queue: queue.clone(),
+                lod: TerrainLod {
+                    lod_factor: config.lod_factor,
+                    max_level: pyramid.max_level(),
+                },
+                rings: config.grass_rings.map(GrassRings::new),
+                grass,
+                mesh_step: config.mesh_step,
+                world,
+                service,
+                atlas,
+                derive,
+                terrain,
+                contact_shadows,
+                tree_shadow_map,
+                targets,
+                features: config.features,
+                timer,
+                readback,
+                holes,
+                skip_uploads: 0,
+                time_s: None,
+                frame: 0,
+                prepared: None,
+                terrain_depth: None,
+                taa,
+                taa_settings: config.taa,
+                msaa,
+            };
+            Ok(renderer)
         };
-        let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let timer = GpuTimer::new(device, queue, timestamps, MAX_TIMED_PASSES);
-        let readback = StatsRing::new(device, timer.capacity_bytes());
-        let holes = HoleCheck::new(device, &atlas);
-        let taa = (config.aa == AntiAliasing::Taa).then(|| Taa::new(device, &targets, config.taa));
-        let msaa = (config.aa == AntiAliasing::Msaa && grass.is_some())
-            .then(|| Msaa::new(device, &targets));
-        let tree_shadow_map = crate::plants::shadow::TreeShadowMap::new(
-            device,
-            config
-                .tree_shadows
-                .filter(|_| grass.as_ref().is_some_and(|g| g.casters.is_some())),
-        );
-        // Beyond the map, the canopy's shade on the ground.
-        if let (Some(s), Some(tau)) = (
-            tree_shadow_map.settings(),
-            grass.as_ref().and_then(|g| g.canopy),
-        ) {
-            terrain.set_canopy(&tau, [0.9 * s.distance_m, s.distance_m]);
-        }
-        let mut grass = grass;
-        if let (Some(g), Some(t)) = (&mut grass, &taa) {
-            g.renderer
-                .set_motion_vectors(device, t.settings().blade_motion);
-            if let Some(p) = &mut g.particles {
-                p.set_reactive(device, true);
-            }
-        }
-        if let (Some(g), Some(_)) = (&mut grass, &msaa) {
-            g.renderer.set_samples(device, crate::aa::msaa::SAMPLES);
-            for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
-                p.set_samples(device, crate::aa::msaa::SAMPLES);
-            }
-            if let Some(p) = &mut g.particles {
-                p.set_samples(device, crate::aa::msaa::SAMPLES);
-            }
-        }
-        let renderer = Self {
-            device: device.clone(),
-            queue: queue.clone(),
-            lod: TerrainLod {
-                lod_factor: config.lod_factor,
-                max_level: pyramid.max_level(),
-            },
-            rings: config.grass_rings.map(GrassRings::new),
-            grass,
-            mesh_step: config.mesh_step,
-            world,
-            service,
-            atlas,
-            derive,
-            terrain,
-            contact_shadows,
-            tree_shadow_map,
-            targets,
-            features: config.features,
-            timer,
-            readback,
-            holes,
-            skip_uploads: 0,
-            time_s: None,
-            frame: 0,
-            prepared: None,
-            terrain_depth: None,
-            taa,
-            taa_settings: config.taa,
-            msaa,
-        };
-        match pollster::block_on(memory.pop()) {
-            Some(e) => Err(RendererError::DeviceMemory {
-                what: "the renderer's targets and pools",
-                width: targets.width,
-                height: targets.height,
-                reason: e.to_string(),
-            }),
-            None => Ok(renderer),
-        }
+        catch_out_of_memory(device, make, |reason| RendererError::DeviceMemory {
+            what: "the renderer's targets and pools",
+            width,
+            height,
+            reason,
+        })
     }
 
     /// The world being drawn.
@@ -731,7 +758,17 @@ impl Renderer {
         {
             return Err(RendererError::DepthCapture(format));
         } else if self.terrain_depth.is_none() {
-            self.terrain_depth = Some(self.depth_copy());
+            let copy = catch_out_of_memory(
+                &self.device,
+                || Ok(self.depth_copy()),
+                |reason| RendererError::DeviceMemory {
+                    what: "the terrain-only depth",
+                    width: self.targets.width,
+                    height: self.targets.height,
+                    reason,
+                },
+            )?;
+            self.terrain_depth = Some(copy);
         }
         Ok(())
     }
@@ -761,19 +798,22 @@ impl Renderer {
         if aa == self.anti_aliasing() {
             return Ok(());
         }
-        let memory = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let taa = (aa == AntiAliasing::Taa)
-            .then(|| Taa::new(&self.device, &self.targets, self.taa_settings));
-        let msaa = (aa == AntiAliasing::Msaa && self.grass.is_some())
-            .then(|| Msaa::new(&self.device, &self.targets));
-        if let Some(e) = pollster::block_on(memory.pop()) {
-            return Err(RendererError::DeviceMemory {
+        let (taa, msaa) = catch_out_of_memory(
+            &self.device,
+            || {
+                let taa = (aa == AntiAliasing::Taa)
+                    .then(|| Taa::new(&self.device, &self.targets, self.taa_settings));
+                let msaa = (aa == AntiAliasing::Msaa && self.grass.is_some())
+                    .then(|| Msaa::new(&self.device, &self.targets));
+                Ok((taa, msaa))
+            },
+            |reason| RendererError::DeviceMemory {
                 what: "the anti-aliasing's targets",
                 width: self.targets.width,
                 height: self.targets.height,
-                reason: e.to_string(),
-            });
-        }
+                reason,
+            },
+        )?;
         self.taa = taa;
         self.msaa = msaa;
         let samples = if self.msaa.is_some() {
@@ -824,19 +864,37 @@ impl Renderer {
             return Ok(());
         }
         let (old_width, old_height) = (self.targets.width, self.targets.height);
-        let memory = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        self.resize_targets(width, height);
-        if let Some(e) = pollster::block_on(memory.pop()) {
-            // The targets made at the new size are let go before the old size's are made again.
-            self.resize_targets(old_width, old_height);
-            return Err(RendererError::DeviceMemory {
+        let device = self.device.clone();
+        let resized = catch_out_of_memory(
+            &device,
+            || {
+                self.resize_targets(width, height);
+                Ok(())
+            },
+            |reason| RendererError::DeviceMemory {
                 what: "the renderer's targets",
                 width,
                 height,
-                reason: e.to_string(),
-            });
+                reason,
+            },
+        );
+        if resized.is_err() {
+            // The targets made at the new size are let go before the old size's are made again.
+            catch_out_of_memory(
+                &device,
+                || {
+                    self.resize_targets(old_width, old_height);
+                    Ok(())
+                },
+                |reason| RendererError::DeviceMemory {
+                    what: "the renderer's targets, made again at the size they had,",
+                    width: old_width,
+                    height: old_height,
+                    reason,
+                },
+            )?;
         }
-        Ok(())
+        resized
     }
 
     /// Makes every target of the frame's size again at `width` x `height`.

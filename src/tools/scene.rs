@@ -85,22 +85,36 @@ impl Scene {
         let target = |label, format, usage| {
             crate::gpu::target_texture(&ctx.device, label, format, usage, (width, height))
         };
-        let color = target(
-            "color",
-            COLOR_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-        );
-        let depth = target(
-            "depth",
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
-        );
+        let (color, depth, color_view, depth_view) = crate::renderer::catch_out_of_memory(
+            &ctx.device,
+            || {
+                let color = target(
+                    "color",
+                    COLOR_FORMAT,
+                    wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+                );
+                let depth = target(
+                    "depth",
+                    DEPTH_FORMAT,
+                    wgpu::TextureUsages::RENDER_ATTACHMENT
+                        | wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::COPY_SRC,
+                );
+                let color_view = color.create_view(&Default::default());
+                let depth_view = depth.create_view(&Default::default());
+                Ok((color, depth, color_view, depth_view))
+            },
+            |reason| crate::renderer::RendererError::DeviceMemory {
+                what: "the frame's colour and depth targets",
+                width,
+                height,
+                reason,
+            },
+        )?;
         Ok(Self {
             renderer,
-            color_view: color.create_view(&Default::default()),
-            depth_view: depth.create_view(&Default::default()),
+            color_view,
+            depth_view,
             depth,
             color,
             last: None,
