@@ -300,8 +300,9 @@ fn bake_into_a_non_empty_folder_is_refused_unless_replaced_as_a_whole() {
     let out = dir.path().join("w");
     std::fs::create_dir_all(out.join("tiles/L5")).unwrap();
     std::fs::write(out.join("tiles/L5/0_0.height.exr"), "stale").unwrap();
-    // An old manifest that no longer validates, but is a world's (it has a [pyramid] table).
-    let old = b"[pyramid]\nold = true\n";
+    // An old manifest that no longer validates, but is a world's (it has a [pyramid] table),
+    // with a plant type that does not read.
+    let old = b"[pyramid]\nold = true\n\n[[plant_types]]\nname = 3\n";
     std::fs::write(out.join("world.toml"), old).unwrap();
     std::fs::create_dir_all(out.join("source")).unwrap();
     std::fs::write(out.join("source/notes.txt"), "keep me").unwrap();
@@ -1585,4 +1586,37 @@ fn cli_sigterm_during_a_bake_cleans_up() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(!staging.exists(), "{} is left", staging.display());
     assert!(!dir.path().join("w").exists());
+}
+
+/// An old manifest that a newer loader refuses outside the parts a bake keeps (a colour of four
+/// values, a pyramid whose finest tiles are too small) is re-baked with `--replace` keeping its
+/// plant types, paths and wind scenes: only they are read from it (it was refused whole, and
+/// re-baking, the mend, needed `--fresh-manifest`, which drops them).
+#[test]
+fn replace_keeps_the_hand_made_parts_of_a_manifest_refused_elsewhere() {
+    use verdant::world::Manifest;
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let w = dir.path().join("w");
+    bake(&replace_opts(dem.clone(), w.clone()), &mut |_, _, _| {}).unwrap();
+    let toml = w.join("world.toml");
+    let baked = std::fs::read_to_string(&toml).unwrap();
+    let derived = Manifest::from_path(&toml).unwrap().pyramid.derived_levels;
+    let old = baked
+        .replacen("sun_color = [", "sun_color = [99.0, ", 1)
+        .replacen(
+            &format!("derived_levels = {derived}"),
+            "derived_levels = 20",
+            1,
+        )
+        + HAND_MADE;
+    std::fs::write(&toml, &old).unwrap();
+    assert!(Manifest::from_path(&toml).is_err());
+    let report = bake(&replace_opts(dem, w.clone()), &mut |_, _, _| {}).unwrap();
+    assert_eq!(report.carried.plant_types, ["poppy", "bush"]);
+    assert_eq!(report.carried.paths, ["my-flight"]);
+    assert_eq!(report.carried.wind_scenes, ["gale"]);
+    let rebaked = Manifest::from_path(&toml).unwrap();
+    assert_eq!(rebaked.pyramid.derived_levels, derived);
+    assert_eq!(rebaked.plant_types.len(), 2);
 }

@@ -58,6 +58,34 @@ struct Block {
     text: String,
 }
 
+/// The parts of an old manifest that a bake keeps. Only they are read (the rest is the bake's
+/// again), so that an old manifest that a newer loader refuses elsewhere (its pyramid, a
+/// colour) can still be re-baked with its hand-made parts; they are checked as parts of the new
+/// manifest.
+#[derive(serde::Deserialize)]
+struct KeptParts {
+    #[serde(default)]
+    plant_types: Vec<PlantType>,
+    #[serde(default)]
+    paths: Vec<CameraPath>,
+    #[serde(default)]
+    wind_scenes: Vec<WindScene>,
+}
+
+fn kept_parts(old_text: &str, old_path: &Path) -> Result<KeptParts, WorldError> {
+    let syntax = |message: String| WorldError::ManifestSyntax {
+        path: old_path.to_path_buf(),
+        message: message.trim_end().to_owned(),
+    };
+    let mut table: toml::Table = old_text
+        .parse()
+        .map_err(|e: toml::de::Error| syntax(e.to_string()))?;
+    table.retain(|key, _| ["plant_types", "paths", "wind_scenes"].contains(&&key[..]));
+    toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| syntax(e.to_string()))
+}
+
 /// `new_text` (the manifest a bake wrote) with the plant types of `old_text`, and its camera
 /// paths and wind scenes whose names the new one lacks. `old_path` names the replaced manifest
 /// in errors: a manifest that does not parse, or a carried part that does not fit the new world
@@ -73,7 +101,7 @@ pub(super) fn carry(
         kept,
         source: Box::new(e),
     };
-    let old = Manifest::parse(old_text, old_path).map_err(|e| refuse(e, String::new()))?;
+    let old = kept_parts(old_text, old_path).map_err(|e| refuse(e, String::new()))?;
     let new = Manifest::parse(new_text, old_path).map_err(|e| refuse(e, String::new()))?;
     let kept_paths: Vec<&CameraPath> = old
         .paths
