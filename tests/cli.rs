@@ -2193,11 +2193,28 @@ fn a_file_where_a_folder_is_wanted_is_named_for_what_it_is() {
 
 /// Ctrl-C (SIGINT) during `fly` ends the flight after the frame under way and writes the
 /// report of the frames flown, marked interrupted, with status 130 (it died with nothing
-/// written but the frames).
+/// written but the frames); frames of an earlier, longer run left beyond them are warned of.
 #[test]
 fn an_interrupted_fly_reports_the_frames_it_flew() {
     let tmp = tempfile::tempdir().unwrap();
     let world = common::root().join("worlds/santa-cruz");
+    let earlier = verdant(
+        &[
+            "fly",
+            world.to_str().unwrap(),
+            "--frames",
+            "40",
+            "--size",
+            "16x9",
+            "--disable",
+            "trees,plants,particles,tree-shadows",
+            "--out",
+            "f",
+        ],
+        tmp.path(),
+    );
+    assert!(earlier.status.success());
+    let started = std::time::SystemTime::now();
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_verdant"))
         .args([
             "fly",
@@ -2218,7 +2235,12 @@ fn an_interrupted_fly_reports_the_frames_it_flew() {
         .unwrap();
     let second = tmp.path().join("f/frame_00001.png");
     let start = std::time::Instant::now();
-    while !second.exists() {
+    let rewritten = || {
+        std::fs::metadata(&second)
+            .and_then(|m| m.modified())
+            .is_ok_and(|t| t > started)
+    };
+    while !rewritten() {
         assert!(
             start.elapsed() < std::time::Duration::from_secs(300),
             "no frame in 300 s"
@@ -2244,6 +2266,13 @@ fn an_interrupted_fly_reports_the_frames_it_flew() {
     assert!(
         stderr.contains(&format!(
             "interrupted: stopped after {flown} of 100000 frames"
+        )),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains(&format!(
+            "frame images of an earlier run beyond the {flown} this run wrote \
+             (frame_{flown:05}.png to frame_00039.png)"
         )),
         "{stderr}"
     );

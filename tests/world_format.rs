@@ -1223,6 +1223,11 @@ wind = { bend = 0.05 }
             "mesh = \"plants/../plants/fern.gltf\"",
             "plant_types[0].mesh",
         ),
+        (
+            "mesh = \"flower\"",
+            "mesh = '..\\x.gltf'",
+            "plant_types[0].mesh",
+        ),
         ("meadow = 0.4", "lawn = 0.4", "plant_types[0].density.lawn"),
         (
             "meadow = 0.4",

@@ -266,7 +266,11 @@ impl FlyArgs {
 }
 
 /// `fly --truth K`: the path's frames rendered as the truth.
-pub(crate) fn fly_truth(opts: FlyOptions, k: u32) -> Result<()> {
+pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
+    opts.stop = Some(
+        verdant::bake::CancelFlag::on_termination_signals()
+            .context("installing the SIGINT and SIGTERM handlers")?,
+    );
     let mut pb: Option<ProgressBar> = None;
     let r = verdant::tools::truth::run_fly_truth(&opts, k, &mut |p| {
         if let FlyProgress::Frame(done, total) = p {
@@ -287,6 +291,15 @@ pub(crate) fn fly_truth(opts: FlyOptions, k: u32) -> Result<()> {
         r.seconds,
         opts.out.display()
     );
+    if r.interrupted {
+        return Err(super::Interrupted(format!(
+            "stopped after {} of {} frames; {} describes those",
+            r.frames.len(),
+            opts.frames,
+            opts.out.join("truth.json").display()
+        ))
+        .into());
+    }
     Ok(())
 }
 
@@ -336,6 +349,30 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
         } else {
             pb.finish();
         }
+    }
+    if report.interrupted {
+        // Frames of an earlier, longer run beyond those this one wrote are not this run's.
+        let written = if opts.write_images {
+            u32::try_from(report.frames_flown).unwrap_or(u32::MAX)
+        } else {
+            0
+        };
+        let stale = verdant::tools::fly::stale_frames(&opts.out, written);
+        if let (Some(first), Some(last)) = (stale.first(), stale.last()) {
+            eprintln!(
+                "warning: {} holds {} frame images of an earlier run beyond the {written} this \
+                 run wrote ({first} to {last}), which its report does not describe",
+                opts.out.display(),
+                stale.len()
+            );
+        }
+    }
+    if report.interrupted && report.frames_flown == 0 {
+        return Err(super::Interrupted(format!(
+            "stopped before the first frame; {} records no frame",
+            opts.out.join("report.json").display()
+        ))
+        .into());
     }
     let s = &report.summary;
     println!(

@@ -411,12 +411,19 @@ pub fn run_fly_with_source(
         .join()
         .map_err(|_| anyhow::anyhow!("the frame writer thread panicked"))??;
     // Without images, the coverage of a few frames drawn again after the timed flight, each
-    // after a warm-up (it is a jump back along the path); not after an interrupted one.
+    // after a warm-up (it is a jump back along the path); not after an interrupted one, and
+    // cut short by a stop asked for meanwhile.
+    let stopped = || opts.stop.as_ref().is_some_and(|s| s.is_cancelled());
+    interrupted |= stopped();
     if !opts.write_images && !interrupted {
         scene.set_coverage_capture(true)?;
         let n = opts.frames.min(COVERAGE_FRAMES);
         let span = f64::from(opts.frames - 1);
         for k in 0..n {
+            if stopped() {
+                interrupted = true;
+                break;
+            }
             let i = if n > 1 {
                 (span * f64::from(k) / f64::from(n - 1)).round() as u32
             } else {

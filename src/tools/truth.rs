@@ -387,6 +387,10 @@ pub struct TruthReport {
     pub seconds: f64,
     /// The frames.
     pub frames: Vec<TruthFrame>,
+    /// Whether the run was stopped before its last frame ([`FlyOptions::stop`], Ctrl-C): the
+    /// report covers the frames written.
+    #[serde(default)]
+    pub interrupted: bool,
 }
 
 /// `verdant fly --truth K`: the path's frames (the same times, cameras, walker and wind as
@@ -423,7 +427,12 @@ pub fn run_fly_truth(
     let last = f64::from(opts.frames.max(2) - 1);
     let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
     let mut frames = Vec::new();
+    let mut interrupted = false;
     for i in 0..opts.frames {
+        if opts.stop.as_ref().is_some_and(|s| s.is_cancelled()) {
+            interrupted = true;
+            break;
+        }
         let t_s = t0 + (t1 - t0) * f64::from(i) / last;
         let camera = sample_path(&path, t_s);
         let walker = walker_at(&manifest, &path, t_s);
@@ -445,6 +454,7 @@ pub fn run_fly_truth(
         adapter: AdapterReport::of(&ctx),
         seconds: started.elapsed().as_secs_f64(),
         frames,
+        interrupted,
     };
     write_json(&opts.out.join("truth.json"), &report)?;
     out_dir.keep();

@@ -313,15 +313,17 @@ impl Manifest {
                 .is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb"));
             // A glTF file is named relative to the world's folder and stays inside it: the
             // same file on disk and over HTTP, and no world reads files beyond its own.
+            // A backslash is a separator on some servers and file systems: not in a name.
             let inside = std::path::Path::new(&p.mesh)
                 .components()
-                .all(|c| matches!(c, std::path::Component::Normal(_)));
+                .all(|c| matches!(c, std::path::Component::Normal(_)))
+                && !p.mesh.contains('\\');
             if gltf && !inside {
                 return Err(v.out_of_range(
                     &field("mesh"),
                     &p.mesh,
                     "a .gltf or .glb file inside the world's folder, named relative to it \
-                     without . or .. (plants/fern.gltf)",
+                     with / between folders, without . or .. (plants/fern.gltf)",
                 ));
             }
             if !PLANT_RECIPES.contains(&p.mesh.as_str()) && !gltf {
@@ -763,7 +765,8 @@ impl Validator<'_> {
             p.derived_levels,
             &format!(
                 "a count that makes the finest tiles, where the grass grows, {MIN_GRASS_TILE_M} to \
-                 {MAX_GRASS_TILE_M} m wide (they are {} m): {fits}",
+                 {MAX_GRASS_TILE_M} m wide (they are {} m): {fits}, with one value a derived level \
+                 in [derive] detail",
                 number(finest)
             ),
         ))
