@@ -2305,3 +2305,65 @@ fn targets_the_device_cannot_hold_are_an_error_not_a_panic() {
         ],
     );
 }
+
+/// Ctrl-C (SIGINT) during `soak` ends it after the frame under way: the frames flown are
+/// checked and written to soak.json, marked interrupted, with a violation saying the checks
+/// cover those alone, and status 130 (it died with no report).
+#[test]
+fn an_interrupted_soak_reports_the_frames_it_flew() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::root().join("worlds/santa-cruz");
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args([
+            "soak",
+            world.to_str().unwrap(),
+            "--no-grass",
+            "--size",
+            "32x18",
+            "--seconds",
+            "600",
+            "--out",
+            "s",
+        ])
+        .current_dir(tmp.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The lock is taken once the options are checked; frames follow within seconds.
+    let lock = tmp.path().join("s/.verdant.lock");
+    let start = std::time::Instant::now();
+    while !lock.exists() {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(120),
+            "no output folder"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    std::thread::sleep(std::time::Duration::from_secs(8));
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("s/soak.json")).unwrap()).unwrap();
+    assert_eq!(report["interrupted"], true);
+    let frames = report["frames"].as_u64().unwrap();
+    assert!(frames < 6000, "{frames}");
+    assert!((report["seconds"].as_f64().unwrap() - frames as f64 * 0.1).abs() < 1e-6);
+    assert!(
+        stderr.contains(&format!(
+            "the soak was stopped after {frames} of 6000 frames"
+        )),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains(&format!("interrupted: stopped after {frames} frames")),
+        "{stderr}"
+    );
+}

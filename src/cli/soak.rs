@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use indicatif::ProgressBar;
 
 use verdant::tools::{SoakOptions, run_soak};
@@ -93,14 +93,24 @@ impl SoakArgs {
     }
 }
 
-pub(crate) fn soak(opts: SoakOptions) -> Result<()> {
+pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
+    // Ctrl-C ends the soak after the frame under way, checking and reporting what was flown; a
+    // second one ends the process at once.
+    opts.stop = Some(
+        verdant::bake::CancelFlag::on_termination_signals()
+            .context("installing the SIGINT and SIGTERM handlers")?,
+    );
     let mut pb: Option<ProgressBar> = None;
     let r = run_soak(&opts, &mut |done, total| {
         pb.get_or_insert_with(|| bar(total, "frames"))
             .set_position(done);
     })?;
     if let Some(pb) = pb {
-        pb.finish();
+        if r.interrupted {
+            pb.abandon();
+        } else {
+            pb.finish();
+        }
     }
     let mib = |b: u64| b as f64 / 1048576.0;
     println!(
@@ -155,6 +165,14 @@ pub(crate) fn soak(opts: SoakOptions) -> Result<()> {
     if !r.violations.is_empty() {
         for v in r.violations.iter().take(20) {
             eprintln!("violation: {v}");
+        }
+        if r.interrupted {
+            return Err(super::Interrupted(format!(
+                "stopped after {} frames; {} describes those",
+                r.frames,
+                opts.out.join("soak.json").display()
+            ))
+            .into());
         }
         bail!("the soak failed {} check(s)", r.violation_count);
     }

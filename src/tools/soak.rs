@@ -64,6 +64,9 @@ pub struct SoakOptions {
     /// Simulated time between rounds of file faults (each restores the last round's files and
     /// breaks a fresh set), seconds.
     pub fault_period_s: f64,
+    /// A flag that ends the soak early (Ctrl-C on the command line): the frames flown are
+    /// checked and reported, the report marked [`SoakReport::interrupted`].
+    pub stop: Option<crate::bake::CancelFlag>,
 }
 
 impl Default for SoakOptions {
@@ -88,6 +91,7 @@ impl Default for SoakOptions {
             aa: crate::aa::AntiAliasing::default(),
             faults: 0.0,
             fault_period_s: 2.0,
+            stop: None,
         }
     }
 }
@@ -202,6 +206,10 @@ pub struct SoakReport {
     /// The faults injected and what they did (None without `--faults`).
     #[serde(default)]
     pub faults: Option<SoakFaults>,
+    /// Whether the soak was stopped before its last frame ([`SoakOptions::stop`], Ctrl-C):
+    /// `frames` and `seconds` are what was flown, and the checks cover those.
+    #[serde(default)]
+    pub interrupted: bool,
 }
 
 /// The faults of a soak with `--faults`, and what the tile service made of them.
@@ -525,7 +533,9 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let (width, height) = opts.size;
     let mut scene = Scene::with_source(&ctx, world, source, width, height, config.clone())?;
 
-    let frames = frames_f as u32;
+    let planned = frames_f as u32;
+    // The frames flown: all planned, or those before a stop.
+    let mut frames = planned;
     let teleport_every = ((opts.teleport_every_s / opts.dt_s).round() as u32).max(1);
     let mut rng = Rng(opts.seed);
     let random_spot =
@@ -552,7 +562,11 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let mut fault_blocked_peak = 0u32;
     let mut frames_over_world = 0u32;
 
-    for frame in 0..frames {
+    for frame in 0..planned {
+        if opts.stop.as_ref().is_some_and(|s| s.is_cancelled()) {
+            frames = frame;
+            break;
+        }
         let t = f64::from(frame) * opts.dt_s;
         if let Some(f) = file_faults.as_mut()
             && frame % fault_every == 0
@@ -678,7 +692,14 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             settled,
         });
         last = Some(stats.residency);
-        progress(u64::from(frame) + 1, u64::from(frames));
+        progress(u64::from(frame) + 1, u64::from(planned));
+    }
+    let interrupted = frames < planned;
+    if interrupted {
+        violations.push(format!(
+            "the soak was stopped after {frames} of {planned} frames: its checks cover those \
+             alone"
+        ));
     }
     if let Some(done) = current_teleport.take() {
         let since_last_s = teleport_start.1.elapsed().as_secs_f64();
@@ -702,7 +723,9 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     // step that holds afterwards is not one either: software Vulkan's process has stepped up once
     // by 23-41 MiB at a frame that differs from run to run, after `malloc_trim`, and stayed flat
     // (docs/anti-aliasing.md, "The temporal method as the default").
-    let [early, mid, late] = memory_windows(frames, warmup_frames).expect("checked before the run");
+    // A soak stopped early may be too short for them: the memory is then not checked.
+    let windows = memory_windows(frames, warmup_frames);
+    let [early, mid, late] = windows.clone().unwrap_or([0..0, 0..0, 0..0]);
     let window = |range: &std::ops::Range<u32>| {
         let all: Vec<&FrameSample> = samples
             .items()
@@ -726,7 +749,9 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let (halves, growth) = sustained_growth(floors);
     let rss_growth = growth as u64;
     let mib = |b: f64| b / 1048576.0;
-    if floors.iter().any(|f| f.0 <= 0.0) {
+    if windows.is_none() {
+        // Stopped before the memory's windows were flown: the stop's violation says so.
+    } else if floors.iter().any(|f| f.0 <= 0.0) {
         violations.push(format!(
             "resident memory could not be measured after the warm-up (frames {}..{}, {}..{} and \
              {}..{}): the memory check cannot pass without it",
@@ -794,7 +819,11 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         world: name,
         adapter: AdapterReport::of(&ctx),
         frames,
-        seconds: opts.seconds,
+        seconds: if interrupted {
+            f64::from(frames) * opts.dt_s
+        } else {
+            opts.seconds
+        },
         speed_mps: opts.speed_mps,
         seed: opts.seed,
         frame_ms: Summary::of(
@@ -840,6 +869,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         violations: violations.listed,
         frames_over_world,
         faults,
+        interrupted,
     };
     write_json(&opts.out.join("soak.json"), &report)?;
     out_dir.keep();
