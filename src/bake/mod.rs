@@ -60,6 +60,7 @@ use crate::world::manifest::{
 use crate::world::tile::Pyramid;
 
 mod author;
+mod cancel;
 mod carry;
 pub mod cover;
 mod paint;
@@ -76,9 +77,9 @@ mod tiles;
 pub use author::{
     HELICOPTER_PATH, WALKER_PATH, WIND_TOUR_PATH, WIND_TOUR_SCENES, default_wind_scenes,
 };
+pub use cancel::CancelFlag;
 pub use carry::Carried;
 pub use paint::{MAX_GRASS_SLOPE_DEG, default_grass_types, default_plant_types};
-pub use publish::CancelFlag;
 
 use author::{helicopter_path, low_path, meadow_path, overview_path, tour_path, wind_tour_paths};
 use paint::check_painted_types;

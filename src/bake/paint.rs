@@ -9,7 +9,7 @@ use crate::world::error::WorldError;
 use crate::world::manifest::{GrassType, Manifest};
 
 use super::BakeStage;
-use super::publish::CancelFlag;
+use super::cancel::CancelFlag;
 use super::resample::Grid;
 
 /// Steepest slope that carries grass, degrees.

@@ -18,12 +18,10 @@ use crate::world::error::WorldError;
 use crate::world::tile::Pyramid;
 
 use super::resample::Shape;
-use super::source::DemSource;
+use super::source::{BASE_BYTES, DemSource};
 
 /// The default memory limit, MiB.
 pub const DEFAULT_MEMORY_MIB: u64 = 2048;
-/// What the process needs besides the bake's own data (code, allocator, encoders), bytes.
-pub(super) const BASE_BYTES: u64 = 40 << 20;
 /// Bytes a sample of the coarse subsample takes: height, slope, grass type, density, material.
 const COARSE_SAMPLE_BYTES: u64 = 4 + 8 + 3;
 /// Bytes a sample of a block takes: height and paint.

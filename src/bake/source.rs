@@ -19,6 +19,9 @@ use crate::world::dem_grid::DemWindow;
 use crate::world::error::WorldError;
 use crate::world::mosaic::Layout;
 
+/// What the process needs besides the bake's own data (code, allocator, encoders), bytes.
+pub(super) const BASE_BYTES: u64 = 40 << 20;
+
 /// Samples a side of a mosaic's chunk.
 pub(super) const CHUNK: usize = 1024;
 /// Samples around a chunk that its void filling sees (more than the widest gap between files).
@@ -55,7 +58,7 @@ fn check_whole_png(
     let file = std::fs::metadata(path)
         .map_err(|e| WorldError::io(path, e))?
         .len();
-    let need = super::plan::BASE_BYTES + file + samples * (2 + 4);
+    let need = BASE_BYTES + file + samples * (2 + 4);
     if need <= memory_mib.saturating_mul(1 << 20) {
         return Ok(());
     }

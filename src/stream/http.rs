@@ -395,7 +395,7 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
 
 /// Whether a world argument is an HTTP address rather than a folder.
 pub fn is_url(s: &str) -> bool {
-    crate::world::window::is_remote(std::path::Path::new(s))
+    crate::world::format::is_remote(std::path::Path::new(s))
 }
 
 /// A world's address, split so that a file's name can be joined onto it: the name goes onto

@@ -27,6 +27,15 @@ use std::path::{Path, PathBuf};
 use super::error::WorldError;
 use super::tile::{Pyramid, TileId};
 
+/// Whether `path` names a file on an HTTP server rather than on disk.
+pub fn is_remote(path: &Path) -> bool {
+    // The scheme in any case, as URLs have it (`HTTP://host/dem.tif` is remote too).
+    path.to_str().is_some_and(|s| {
+        let scheme = s.get(..8).unwrap_or(s).to_ascii_lowercase();
+        scheme.starts_with("http://") || scheme.starts_with("https://")
+    })
+}
+
 /// The files of a stored tile: three, and a fourth in worlds with terrain materials.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum TileFile {

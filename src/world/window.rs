@@ -13,14 +13,7 @@ use std::path::{Path, PathBuf};
 use super::dem::{Dem, DemOptions};
 use super::error::WorldError;
 
-/// Whether `path` names a file on an HTTP server rather than on disk.
-pub fn is_remote(path: &Path) -> bool {
-    // The scheme in any case, as URLs have it (`HTTP://host/dem.tif` is remote too).
-    path.to_str().is_some_and(|s| {
-        let scheme = s.get(..8).unwrap_or(s).to_ascii_lowercase();
-        scheme.starts_with("http://") || scheme.starts_with("https://")
-    })
-}
+pub use super::format::is_remote;
 
 /// The name of the file `path` names: its last part, and for an address its path's last part
 /// without the query (a signed URL's token) or the fragment.
