@@ -2248,17 +2248,7 @@ fn an_interrupted_fly_reports_the_frames_it_flew() {
         assert!(child.try_wait().unwrap().is_none(), "fly ended early");
         std::thread::sleep(std::time::Duration::from_millis(100));
     }
-    let kill = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success());
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(130), "{stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(tmp.path().join("f/report.json")).unwrap()).unwrap();
+    let (stderr, report) = interrupt(child, &tmp.path().join("f/report.json"));
     assert_eq!(report["interrupted"], true);
     let flown = report["frames_flown"].as_u64().unwrap();
     assert!((2..100_000).contains(&flown), "{flown}");
@@ -2341,17 +2331,7 @@ fn an_interrupted_soak_reports_the_frames_it_flew() {
         std::thread::sleep(std::time::Duration::from_millis(100));
     }
     std::thread::sleep(std::time::Duration::from_secs(8));
-    let kill = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success());
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(130), "{stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(tmp.path().join("s/soak.json")).unwrap()).unwrap();
+    let (stderr, report) = interrupt(child, &tmp.path().join("s/soak.json"));
     assert_eq!(report["interrupted"], true);
     let frames = report["frames"].as_u64().unwrap();
     assert!(frames < 6000, "{frames}");
@@ -2366,4 +2346,20 @@ fn an_interrupted_soak_reports_the_frames_it_flew() {
         stderr.contains(&format!("interrupted: stopped after {frames} frames")),
         "{stderr}"
     );
+}
+
+/// Sends SIGINT to `child`, waits for it, checks that it ended with status 130 and no panic, and
+/// returns its stderr and the report it wrote at `report`.
+fn interrupt(child: std::process::Child, report: &Path) -> (String, serde_json::Value) {
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let report = serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
+    (stderr, report)
 }
