@@ -29,8 +29,9 @@ pub(crate) struct BakeArgs {
     /// World name (default: the output folder's name).
     #[arg(long)]
     pub(crate) name: Option<String>,
-    /// Cell size of the finest stored level, metres (default: from the DEM): at least 0.001,
-    /// and at most 65536 cells across the DEM a side.
+    /// Cell size of the finest stored level, metres (default: from the DEM): at least 0.001
+    /// and at least 0.5 / --tile-cells (the finest tiles, where the grass grows, are at least
+    /// 0.5 m wide), and at most 65536 cells across the DEM a side.
     #[arg(long)]
     pub(crate) cell_size: Option<f64>,
     /// Cells per tile edge, a power of two in 8..=1024.
