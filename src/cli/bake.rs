@@ -141,10 +141,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         land_cover: land_cover.zip(cover_table),
         density_map,
         mask,
-        cancel: Some(
-            verdant::bake::CancelFlag::on_termination_signals()
-                .context("installing the SIGINT and SIGTERM handlers")?,
-        ),
+        cancel: Some(super::stop_on_signals()?),
         shard,
         memory_mib,
     };

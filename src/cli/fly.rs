@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use indicatif::ProgressBar;
 
 use verdant::renderer::{DEFAULT_MESH_STEP, GrassConfig};
@@ -267,10 +267,7 @@ impl FlyArgs {
 
 /// `fly --truth K`: the path's frames rendered as the truth.
 pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
-    opts.stop = Some(
-        verdant::bake::CancelFlag::on_termination_signals()
-            .context("installing the SIGINT and SIGTERM handlers")?,
-    );
+    opts.stop = Some(super::stop_on_signals()?);
     let mut pb: Option<ProgressBar> = None;
     let r = verdant::tools::truth::run_fly_truth(&opts, k, &mut |p| {
         if let FlyProgress::Frame(done, total) = p {
@@ -306,10 +303,7 @@ pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
 pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
     // Ctrl-C ends the flight after the frame under way, writing what was flown; a second one
     // ends the process at once.
-    opts.stop = Some(
-        verdant::bake::CancelFlag::on_termination_signals()
-            .context("installing the SIGINT and SIGTERM handlers")?,
-    );
+    opts.stop = Some(super::stop_on_signals()?);
     let mut frames: Option<ProgressBar> = None;
     let report = run_fly(&opts, &mut |p| match p {
         FlyProgress::WarmingUp => eprintln!("loading the first frame's tiles"),

@@ -13,6 +13,14 @@ pub(crate) mod view;
 
 /// `text` safe to print to a terminal: every control character but a tab or a line break
 /// written as an escape (`\u{1b}`), so that a file's name cannot drive the terminal.
+/// The flag that Ctrl-C (SIGINT) and SIGTERM set for a long run (a bake, a flight, a soak),
+/// which then stops cleanly; a second signal ends the process at once.
+pub(crate) fn stop_on_signals() -> anyhow::Result<verdant::bake::CancelFlag> {
+    use anyhow::Context;
+    verdant::bake::CancelFlag::on_termination_signals()
+        .context("installing the SIGINT and SIGTERM handlers")
+}
+
 /// A run stopped by Ctrl-C (SIGINT) or SIGTERM after writing what it had: the process exits
 /// with status 130, as a shell reports a command ended by SIGINT.
 #[derive(Debug)]

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use indicatif::ProgressBar;
 
 use verdant::tools::{SoakOptions, run_soak};
@@ -96,10 +96,7 @@ impl SoakArgs {
 pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
     // Ctrl-C ends the soak after the frame under way, checking and reporting what was flown; a
     // second one ends the process at once.
-    opts.stop = Some(
-        verdant::bake::CancelFlag::on_termination_signals()
-            .context("installing the SIGINT and SIGTERM handlers")?,
-    );
+    opts.stop = Some(super::stop_on_signals()?);
     let mut pb: Option<ProgressBar> = None;
     let r = run_soak(&opts, &mut |done, total| {
         pb.get_or_insert_with(|| bar(total, "frames"))

@@ -101,6 +101,22 @@ pub fn catch_out_of_memory<T>(
     made
 }
 
+/// [`catch_out_of_memory`] for what the target size and the settings size: the error names
+/// `what` and the size.
+pub fn allocate_at_size<T>(
+    device: &wgpu::Device,
+    what: &'static str,
+    (width, height): (u32, u32),
+    make: impl FnOnce() -> Result<T, RendererError>,
+) -> Result<T, RendererError> {
+    catch_out_of_memory(device, make, |reason| RendererError::DeviceMemory {
+        what,
+        width,
+        height,
+        reason,
+    })
+}
+
 fn check_tile_grid(
     what: &'static str,
     tile_m: f32,
@@ -594,12 +610,12 @@ impl Renderer {
             };
             Ok(renderer)
         };
-        catch_out_of_memory(device, make, |reason| RendererError::DeviceMemory {
-            what: "the renderer's targets and pools",
-            width,
-            height,
-            reason,
-        })
+        allocate_at_size(
+            device,
+            "the renderer's targets and pools",
+            (width, height),
+            make,
+        )
     }
 
     /// The world being drawn.
@@ -758,16 +774,10 @@ impl Renderer {
         {
             return Err(RendererError::DepthCapture(format));
         } else if self.terrain_depth.is_none() {
-            let copy = catch_out_of_memory(
-                &self.device,
-                || Ok(self.depth_copy()),
-                |reason| RendererError::DeviceMemory {
-                    what: "the terrain-only depth",
-                    width: self.targets.width,
-                    height: self.targets.height,
-                    reason,
-                },
-            )?;
+            let size = (self.targets.width, self.targets.height);
+            let copy = allocate_at_size(&self.device, "the terrain-only depth", size, || {
+                Ok(self.depth_copy())
+            })?;
             self.terrain_depth = Some(copy);
         }
         Ok(())
@@ -798,22 +808,15 @@ impl Renderer {
         if aa == self.anti_aliasing() {
             return Ok(());
         }
-        let (taa, msaa) = catch_out_of_memory(
-            &self.device,
-            || {
+        let size = (self.targets.width, self.targets.height);
+        let (taa, msaa) =
+            allocate_at_size(&self.device, "the anti-aliasing's targets", size, || {
                 let taa = (aa == AntiAliasing::Taa)
                     .then(|| Taa::new(&self.device, &self.targets, self.taa_settings));
                 let msaa = (aa == AntiAliasing::Msaa && self.grass.is_some())
                     .then(|| Msaa::new(&self.device, &self.targets));
                 Ok((taa, msaa))
-            },
-            |reason| RendererError::DeviceMemory {
-                what: "the anti-aliasing's targets",
-                width: self.targets.width,
-                height: self.targets.height,
-                reason,
-            },
-        )?;
+            })?;
         self.taa = taa;
         self.msaa = msaa;
         let samples = if self.msaa.is_some() {
@@ -863,35 +866,21 @@ impl Renderer {
         if (width, height) == (self.targets.width, self.targets.height) {
             return Ok(());
         }
-        let (old_width, old_height) = (self.targets.width, self.targets.height);
+        let old = (self.targets.width, self.targets.height);
         let device = self.device.clone();
-        let resized = catch_out_of_memory(
-            &device,
-            || {
-                self.resize_targets(width, height);
+        let resize_to = |r: &mut Self, (w, h): (u32, u32), what| {
+            allocate_at_size(&device, what, (w, h), || {
+                r.resize_targets(w, h);
                 Ok(())
-            },
-            |reason| RendererError::DeviceMemory {
-                what: "the renderer's targets",
-                width,
-                height,
-                reason,
-            },
-        );
+            })
+        };
+        let resized = resize_to(self, (width, height), "the renderer's targets");
         if resized.is_err() {
             // The targets made at the new size are let go before the old size's are made again.
-            catch_out_of_memory(
-                &device,
-                || {
-                    self.resize_targets(old_width, old_height);
-                    Ok(())
-                },
-                |reason| RendererError::DeviceMemory {
-                    what: "the renderer's targets, made again at the size they had,",
-                    width: old_width,
-                    height: old_height,
-                    reason,
-                },
+            resize_to(
+                self,
+                old,
+                "the renderer's targets, made again at the size they had,",
             )?;
         }
         resized

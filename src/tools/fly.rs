@@ -339,9 +339,10 @@ pub fn run_fly_with_source(
     let mut coverage = Thinned::new(MAX_REPORT_FRAMES);
     scene.set_coverage_capture(opts.write_images)?;
     let mut last_position = path_start_position(&path);
+    let stopped = || opts.stop.as_ref().is_some_and(|s| s.is_cancelled());
     let mut interrupted = false;
     for i in 0..opts.frames {
-        if opts.stop.as_ref().is_some_and(|s| s.is_cancelled()) {
+        if stopped() {
             interrupted = true;
             break;
         }
@@ -413,7 +414,6 @@ pub fn run_fly_with_source(
     // Without images, the coverage of a few frames drawn again after the timed flight, each
     // after a warm-up (it is a jump back along the path); not after an interrupted one, and
     // cut short by a stop asked for meanwhile.
-    let stopped = || opts.stop.as_ref().is_some_and(|s| s.is_cancelled());
     interrupted |= stopped();
     if !opts.write_images && !interrupted {
         scene.set_coverage_capture(true)?;

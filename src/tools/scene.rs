@@ -85,8 +85,10 @@ impl Scene {
         let target = |label, format, usage| {
             crate::gpu::target_texture(&ctx.device, label, format, usage, (width, height))
         };
-        let (color, depth, color_view, depth_view) = crate::renderer::catch_out_of_memory(
+        let (color, depth, color_view, depth_view) = crate::renderer::allocate_at_size(
             &ctx.device,
+            "the frame's colour and depth targets",
+            (width, height),
             || {
                 let color = target(
                     "color",
@@ -103,12 +105,6 @@ impl Scene {
                 let color_view = color.create_view(&Default::default());
                 let depth_view = depth.create_view(&Default::default());
                 Ok((color, depth, color_view, depth_view))
-            },
-            |reason| crate::renderer::RendererError::DeviceMemory {
-                what: "the frame's colour and depth targets",
-                width,
-                height,
-                reason,
             },
         )?;
         Ok(Self {

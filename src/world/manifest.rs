@@ -524,11 +524,7 @@ where
     D: serde::Deserializer<'de>,
     T: Deserialize<'de>,
 {
-    let values = Vec::<T>::deserialize(d)?;
-    let found = values.len();
-    values.try_into().map_err(|_| {
-        serde::de::Error::invalid_length(found, &format!("an array of {N} values").as_str())
-    })
+    array_of(Vec::<T>::deserialize(d)?)
 }
 
 /// [`exact`] for an optional array.
@@ -537,14 +533,15 @@ where
     D: serde::Deserializer<'de>,
     T: Deserialize<'de>,
 {
-    Option::<Vec<T>>::deserialize(d)?
-        .map(|values| {
-            let found = values.len();
-            values.try_into().map_err(|_| {
-                serde::de::Error::invalid_length(found, &format!("an array of {N} values").as_str())
-            })
-        })
-        .transpose()
+    Option::<Vec<T>>::deserialize(d)?.map(array_of).transpose()
+}
+
+/// `values` as an array of `N`, or an error of their count.
+fn array_of<T, E: serde::de::Error, const N: usize>(values: Vec<T>) -> Result<[T; N], E> {
+    let found = values.len();
+    values
+        .try_into()
+        .map_err(|_| E::invalid_length(found, &format!("an array of {N} values").as_str()))
 }
 
 /// The largest `world.toml` read, bytes.

@@ -146,16 +146,12 @@ impl Manifest {
                 ),
             ));
         }
-        if self.name.trim().is_empty() {
-            return Err(v.out_of_range("name", "\"\"", "a name, not empty"));
-        }
+        v.non_empty_name("name", &self.name)?;
         // Plant types and cover tables name grass types: each name must say which.
         let mut grass_names = HashSet::new();
         for (index, g) in self.grass_types.iter().enumerate() {
             let field = |f: &str| format!("grass_types[{index}].{f}");
-            if g.name.trim().is_empty() {
-                return Err(v.out_of_range(&field("name"), &g.name, "a name, not empty"));
-            }
+            v.non_empty_name(&field("name"), &g.name)?;
             if !grass_names.insert(g.name.as_str()) {
                 return Err(v.out_of_range(
                     &field("name"),
@@ -221,13 +217,7 @@ impl Manifest {
 
         let mut names = HashSet::new();
         for (pi, cam) in self.paths.iter().enumerate() {
-            if cam.name.trim().is_empty() {
-                return Err(v.out_of_range(
-                    &format!("paths[{pi}].name"),
-                    &cam.name,
-                    "a name, not empty",
-                ));
-            }
+            v.non_empty_name(&format!("paths[{pi}].name"), &cam.name)?;
             if !names.insert(cam.name.as_str()) {
                 return Err(WorldError::DuplicatePath {
                     path: path.to_path_buf(),
@@ -298,9 +288,7 @@ impl Manifest {
         let mut per_grass = vec![0.0f64; self.grass_types.len()];
         for (index, p) in self.plant_types.iter().enumerate() {
             let field = |f: &str| format!("plant_types[{index}].{f}");
-            if p.name.trim().is_empty() {
-                return Err(v.out_of_range(&field("name"), &p.name, "a name, not empty"));
-            }
+            v.non_empty_name(&field("name"), &p.name)?;
             if !names.insert(p.name.as_str()) {
                 return Err(v.out_of_range(
                     &field("name"),
@@ -487,13 +475,7 @@ impl Manifest {
     fn validate_wind_scenes(&self, v: &Validator) -> Result<(), WorldError> {
         let mut names = HashSet::new();
         for (si, scene) in self.wind_scenes.iter().enumerate() {
-            if scene.name.trim().is_empty() {
-                return Err(v.out_of_range(
-                    &format!("wind_scenes[{si}].name"),
-                    &scene.name,
-                    "a name, not empty",
-                ));
-            }
+            v.non_empty_name(&format!("wind_scenes[{si}].name"), &scene.name)?;
             if !names.insert(scene.name.as_str()) {
                 return Err(WorldError::DuplicateWindScene {
                     path: v.path.to_path_buf(),
@@ -770,6 +752,14 @@ impl Validator<'_> {
                 number(finest)
             ),
         ))
+    }
+
+    /// Refuses a name that is empty or only blanks.
+    fn non_empty_name(&self, field: &str, name: &str) -> Result<(), WorldError> {
+        if name.trim().is_empty() {
+            return Err(self.out_of_range(field, format!("{name:?}"), "a name, not empty"));
+        }
+        Ok(())
     }
 
     fn out_of_range(&self, field: &str, value: impl ToString, allowed: &str) -> WorldError {
