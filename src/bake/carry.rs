@@ -80,7 +80,7 @@ fn kept_parts(old_text: &str, old_path: &Path) -> Result<KeptParts, WorldError> 
     let mut table: toml::Table = old_text
         .parse()
         .map_err(|e: toml::de::Error| syntax(e.to_string()))?;
-    table.retain(|key, _| ["plant_types", "paths", "wind_scenes"].contains(&&key[..]));
+    table.retain(|key, _| ["plant_types", "paths", "wind_scenes"].contains(&key));
     toml::Value::Table(table)
         .try_into()
         .map_err(|e: toml::de::Error| syntax(e.to_string()))
