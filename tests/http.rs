@@ -1846,3 +1846,71 @@ fn a_chunked_body_cut_short_is_retried() {
     assert_eq!(cut.load(Ordering::SeqCst), 2, "cut once, then asked again");
     assert_eq!(source.stats().retries, 1);
 }
+
+/// Ctrl-C while `verdant fly` waits for the first frame's tiles from a server that does not
+/// answer ends the run at once with its report (no frames, interrupted, status 130), instead of
+/// after the warm-up's minute.
+#[test]
+fn an_interrupted_warm_up_ends_the_fly_at_once() {
+    let server = FaultServer::start(common::default_world(), Duration::ZERO, |path, _| {
+        // The level-0 tiles are loaded with the world; the finer ones are the warm-up's.
+        if path.starts_with("/tiles/") && !path.starts_with("/tiles/L0/") {
+            Reply::Stall
+        } else {
+            Reply::File
+        }
+    });
+    let tmp = tempfile::tempdir().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["fly", &server.url, "--frames", "3", "--size", "16x9"])
+        .arg("--out")
+        .arg(tmp.path().join("out"))
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Read stderr on a thread: the warm-up's line says the run is waiting for tiles.
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if line.contains("loading the first frame's tiles") {
+                let _ = tx.send(());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    if rx.recv_timeout(Duration::from_secs(120)).is_err() {
+        let _ = child.kill();
+        panic!("no warm-up within 120 s:\n{}", reader.join().unwrap());
+    }
+    // A tile request out and stalled: the warm-up is waiting.
+    let asked = Instant::now();
+    let stalled = |p: &String| p.starts_with("/tiles/") && !p.starts_with("/tiles/L0/");
+    while !server.asked.lock().unwrap().keys().any(stalled) {
+        assert!(asked.elapsed() < Duration::from_secs(60), "no tile asked for");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let stopped = Instant::now();
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let status = child.wait().unwrap();
+    let took = stopped.elapsed();
+    let stderr = reader.join().unwrap();
+    assert_eq!(status.code(), Some(130), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    // The tiles stall for 30 s and the warm-up waits up to 60: the stop must not wait for them.
+    assert!(took < Duration::from_secs(15), "{took:?}\n{stderr}");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("out/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["interrupted"], true);
+    assert_eq!(report["frames_flown"], 0);
+    assert!(stderr.contains("interrupted: stopped before the first frame"), "{stderr}");
+}

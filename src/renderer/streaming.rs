@@ -85,6 +85,18 @@ impl Renderer {
         camera: &Camera,
         timeout: std::time::Duration,
     ) -> Result<WarmUp, RendererError> {
+        self.warm_up_until(camera, timeout, &|| false)
+    }
+
+    /// Like [`Renderer::warm_up_report`], and also stops, within a few milliseconds, once
+    /// `stop` returns true (a user's Ctrl-C while tiles come slowly over a network): the tiles
+    /// not yet resident are then missing, for the reason that the warm-up was stopped.
+    pub fn warm_up_until(
+        &mut self,
+        camera: &Camera,
+        timeout: std::time::Duration,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<WarmUp, RendererError> {
         let start = Instant::now();
         self.flush_unrecorded();
         let mut last_change = Instant::now();
@@ -115,10 +127,13 @@ impl Renderer {
                 .iter()
                 .all(|&id| self.service.blocked_by(id).is_some());
             let stalled = last_change.elapsed() > WARM_UP_STALL;
-            if all_failed || stalled || start.elapsed() > timeout {
+            let stopped = stop();
+            if all_failed || stalled || stopped || start.elapsed() > timeout {
                 let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
                 let slots = self.service.config().atlas_slots;
-                let why_else = if stalled && stats.atlas_used >= slots {
+                let why_else = if stopped {
+                    "the warm-up was stopped before it was resident".to_owned()
+                } else if stalled && stats.atlas_used >= slots {
                     // Every slot holds a tile the view wants more: the atlas is too small for
                     // this view, not the loading stuck.
                     format!(

@@ -302,17 +302,23 @@ pub fn run_fly_with_source(
     let mut scene = Scene::with_source(&ctx, world, source, width, height, config)?;
     // The first frame starts with its tiles resident; after that, streaming keeps up or the
     // report shows that it did not.
+    // A stop asked for (Ctrl-C) ends the warm-up too, and then the run before its first frame.
+    let stopped = || opts.stop.as_ref().is_some_and(|s| s.is_cancelled());
     progress(FlyProgress::WarmingUp);
-    let warm_up = scene.warm_up_report(&sample_path(&path, path.keys[0].t_s), first_frame_wait)?;
-    check_streaming(
-        &opts.world,
-        &scene.world().manifest.pyramid,
-        &scene.service().stats(),
-        &warm_up,
-    )?;
-    let warm_up_missing = warm_up.describe(20);
-    if !warm_up_missing.is_empty() {
-        progress(FlyProgress::WarmUpIncomplete(warm_up_missing.clone()));
+    let first_camera = sample_path(&path, path.keys[0].t_s);
+    let warm_up = scene.warm_up_until(&first_camera, first_frame_wait, &stopped)?;
+    let mut warm_up_missing = Vec::new();
+    if !stopped() {
+        check_streaming(
+            &opts.world,
+            &scene.world().manifest.pyramid,
+            &scene.service().stats(),
+            &warm_up,
+        )?;
+        warm_up_missing = warm_up.describe(20);
+        if !warm_up_missing.is_empty() {
+            progress(FlyProgress::WarmUpIncomplete(warm_up_missing.clone()));
+        }
     }
 
     // PNG encoding runs beside the renderer; the bounded channel keeps at most a few frames queued.
@@ -339,7 +345,6 @@ pub fn run_fly_with_source(
     let mut coverage = Thinned::new(MAX_REPORT_FRAMES);
     scene.set_coverage_capture(opts.write_images)?;
     let mut last_position = path_start_position(&path);
-    let stopped = || opts.stop.as_ref().is_some_and(|s| s.is_cancelled());
     let mut interrupted = false;
     for i in 0..opts.frames {
         if stopped() {
@@ -354,7 +359,7 @@ pub fn run_fly_with_source(
         let mut wait = (0.0, 0u32);
         if opts.write_images && camera.position.distance(last_position) > WAIT_JUMP_M {
             let waited = Instant::now();
-            let report = scene.warm_up_report(&camera, FRAME_TILE_WAIT)?;
+            let report = scene.warm_up_until(&camera, FRAME_TILE_WAIT, &stopped)?;
             wait = (
                 waited.elapsed().as_secs_f64() * 1e3,
                 report.missing.len() as u32,
@@ -431,7 +436,7 @@ pub fn run_fly_with_source(
             };
             let t_s = t0 + (t1 - t0) * f64::from(i) / last;
             let camera = sample_path(&path, t_s);
-            scene.warm_up_report(&camera, std::time::Duration::from_secs(30))?;
+            scene.warm_up_until(&camera, std::time::Duration::from_secs(30), &stopped)?;
             let walker_xy = walker_at(&scene.world().manifest, &path, t_s);
             scene.render_frame(&ctx, &camera, t_s, Some(walker_xy))?;
             let c = scene.coverage(&ctx, COVERAGE_DISTANCE_M)?;

@@ -175,6 +175,17 @@ impl Scene {
         Ok(self.renderer.warm_up_report(camera, timeout)?)
     }
 
+    /// Like [`Scene::warm_up_report`], stopping early once `stop` returns true (see
+    /// [`Renderer::warm_up_until`]).
+    pub fn warm_up_until(
+        &mut self,
+        camera: &Camera,
+        timeout: std::time::Duration,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<crate::renderer::WarmUp, SceneError> {
+        Ok(self.renderer.warm_up_until(camera, timeout, stop)?)
+    }
+
     /// Draws one frame from `camera` at the time of the last frame (the wind stands still).
     pub fn render(&mut self, ctx: &GpuContext, camera: &Camera) -> Result<FrameStats, SceneError> {
         let t = self.last.map_or(0.0, |(_, t)| t);
