@@ -59,9 +59,19 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
     // A soak camera that left the world at once.
     (&["soak", "--speed", "1e300"], &["--speed", "0..=1000"]),
     (&["soak", "--speed", "NaN"], &["--speed", "0..=1000"]),
-    (&["soak", "--seconds", "inf"], &["--seconds", "1..=604800"]),
-    (&["soak", "--seconds=-5"], &["--seconds", "1..=604800"]),
-    (&["soak", "--seconds", "0.5"], &["--seconds", "1..=604800"]),
+    (
+        &["soak", "--seconds", "inf"],
+        &["--seconds", "4.6..=604800"],
+    ),
+    (&["soak", "--seconds=-5"], &["--seconds", "4.6..=604800"]),
+    (
+        &["soak", "--seconds", "0.5"],
+        &["--seconds", "4.6..=604800"],
+    ),
+    (
+        &["soak", "--seconds", "4.5"],
+        &["--seconds", "4.6..=604800"],
+    ),
     (
         &["soak", "--max-stall-ms", "0"],
         &["--max-stall-ms", "1..=3600000"],

@@ -1891,7 +1891,10 @@ fn an_interrupted_warm_up_ends_the_fly_at_once() {
     let asked = Instant::now();
     let stalled = |p: &String| p.starts_with("/tiles/") && !p.starts_with("/tiles/L0/");
     while !server.asked.lock().unwrap().keys().any(stalled) {
-        assert!(asked.elapsed() < Duration::from_secs(60), "no tile asked for");
+        assert!(
+            asked.elapsed() < Duration::from_secs(60),
+            "no tile asked for"
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     let stopped = Instant::now();
@@ -1912,5 +1915,8 @@ fn an_interrupted_warm_up_ends_the_fly_at_once() {
             .unwrap();
     assert_eq!(report["interrupted"], true);
     assert_eq!(report["frames_flown"], 0);
-    assert!(stderr.contains("interrupted: stopped before the first frame"), "{stderr}");
+    assert!(
+        stderr.contains("interrupted: stopped before the first frame"),
+        "{stderr}"
+    );
 }

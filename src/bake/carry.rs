@@ -77,13 +77,10 @@ fn kept_parts(old_text: &str, old_path: &Path) -> Result<KeptParts, WorldError> 
         path: old_path.to_path_buf(),
         message: message.trim_end().to_owned(),
     };
-    let mut table: toml::Table = old_text
-        .parse()
-        .map_err(|e: toml::de::Error| syntax(e.to_string()))?;
+    let error = |e: toml::de::Error| syntax(crate::world::manifest::toml_error(old_text, &e));
+    let mut table: toml::Table = old_text.parse().map_err(error)?;
     table.retain(|key, _| ["plant_types", "paths", "wind_scenes"].contains(&key));
-    toml::Value::Table(table)
-        .try_into()
-        .map_err(|e: toml::de::Error| syntax(e.to_string()))
+    toml::Value::Table(table).try_into().map_err(error)
 }
 
 /// `new_text` (the manifest a bake wrote) with the plant types of `old_text`, and its camera

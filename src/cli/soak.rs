@@ -16,8 +16,9 @@ pub(crate) struct SoakArgs {
     /// World folder, the name of a world under ./worlds, or a world's http:// address.
     #[arg(default_value = "santa-cruz")]
     pub(crate) world: String,
-    /// Simulated flight time, seconds (0.1 s a frame), 1..=604800 (a week).
-    #[arg(long, default_value_t = 60.0, value_parser = float_in(1.0, 604_800.0))]
+    /// Simulated flight time, seconds (0.1 s a frame), 4.6..=604800 (a week; the least leaves
+    /// room for the memory check after the warm-up's 3 s).
+    #[arg(long, default_value_t = 60.0, value_parser = float_in(verdant::tools::soak::MIN_SOAK_S, 604_800.0))]
     pub(crate) seconds: f64,
     /// Camera speed, metres a second, 0..=1000 (and at most 4% of the world's width a frame,
     /// 0.1 s: the camera must stay over the world).

@@ -139,6 +139,15 @@ pub enum OutDirError {
         /// The other run's tool (`fly`, `bench lod`, ...), when its lock file says.
         tool: String,
     },
+    /// The folder, or a folder above it, is something else: a file, or a symbolic link to
+    /// nothing.
+    #[error("{}: {what}, so no output folder can be made there; choose another --out", path.display())]
+    NotAFolder {
+        /// The folder.
+        path: PathBuf,
+        /// What stands in the way, in words.
+        what: String,
+    },
     /// The folder is one no run writes into: the root of the file system, a world's own folder
     /// or a world's `tiles/`.
     #[error("{}: {why}; choose another --out", path.display())]
@@ -148,6 +157,35 @@ pub enum OutDirError {
         /// What it is.
         why: &'static str,
     },
+}
+
+/// What keeps `path` from being a folder, if anything does: the nearest of it and the folders
+/// above it that exists (following links) or is a link, when that is not a folder.
+fn not_a_folder(path: &Path) -> Option<String> {
+    let path = crate::world::format::resolve_lexically(path)
+        .ok()
+        .flatten()
+        .unwrap_or_else(|| path.to_path_buf());
+    let nearest = path
+        .ancestors()
+        .filter(|a| !a.as_os_str().is_empty())
+        .find(|a| std::fs::symlink_metadata(a).is_ok())?;
+    let who = if nearest == path {
+        "it".to_owned()
+    } else {
+        format!("the folder above it, {},", nearest.display())
+    };
+    match std::fs::metadata(nearest) {
+        Ok(m) if m.is_dir() => None,
+        Ok(_) => Some(format!("{who} is a file, not a folder")),
+        Err(_) => {
+            let to = std::fs::read_link(nearest).ok()?;
+            Some(format!(
+                "{who} is a symbolic link to {}, which does not exist",
+                to.display()
+            ))
+        }
+    }
 }
 
 fn owner_words(pid: Option<u32>, tool: &str) -> String {
@@ -206,9 +244,15 @@ impl OutDir {
             .map(PathBuf::as_path)
             .chain([path])
             .try_for_each(std::fs::create_dir_all)
-            .map_err(|source| OutDirError::Create {
-                path: path.to_path_buf(),
-                source,
+            .map_err(|source| match not_a_folder(path) {
+                Some(what) => OutDirError::NotAFolder {
+                    path: path.to_path_buf(),
+                    what,
+                },
+                None => OutDirError::Create {
+                    path: path.to_path_buf(),
+                    source,
+                },
             })?;
         // From here on, dropping `dir` removes a folder this run created.
         let mut dir = Self {
@@ -382,6 +426,40 @@ mod tests {
         fn flush(&mut self) -> std::io::Result<()> {
             self.inner.flush()
         }
+    }
+
+    /// An --out that is a file, lies under a file, or is a link to nothing is refused saying
+    /// which (it was the bare OS error "File exists"), and nothing is touched.
+    #[test]
+    fn an_out_that_is_no_folder_is_refused_saying_what_it_is() {
+        let tmp = tempfile::tempdir().unwrap();
+        let file = tmp.path().join("notes.txt");
+        std::fs::write(&file, "mine").unwrap();
+        let link = tmp.path().join("dangling");
+        std::os::unix::fs::symlink(tmp.path().join("nowhere"), &link).unwrap();
+        let cases = [
+            (file.clone(), "it is a file, not a folder".to_owned()),
+            (
+                file.join("out"),
+                format!("the folder above it, {}, is a file", file.display()),
+            ),
+            (
+                link.clone(),
+                format!(
+                    "it is a symbolic link to {}, which does not exist",
+                    tmp.path().join("nowhere").display()
+                ),
+            ),
+        ];
+        for (out, said) in cases {
+            let e = OutDir::create_for(&out, "fly").err().unwrap();
+            let text = e.to_string();
+            assert!(matches!(e, OutDirError::NotAFolder { .. }), "{text}");
+            assert!(text.contains(&said) && text.contains("--out"), "{text}");
+        }
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine");
+        assert!(!tmp.path().join("nowhere").exists());
+        assert_eq!(names(tmp.path()), ["dangling", "notes.txt"]);
     }
 
     fn names(dir: &Path) -> Vec<String> {

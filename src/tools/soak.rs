@@ -287,6 +287,10 @@ fn sustained_growth(floors: [(f64, f64); 3]) -> ([f64; 2], f64) {
     (halves, (2.0 * halves[0].min(halves[1])).max(0.0))
 }
 
+/// The shortest soak, seconds, with the default frame time and warm-up: the least `soak
+/// --seconds` takes ([`shortest_soak_s`] of the defaults; a test keeps the two equal).
+pub const MIN_SOAK_S: f64 = 4.6;
+
 /// The shortest `--seconds` whose memory windows fall after the warm-up and apart, to a tenth
 /// of a second, rounded up (so that the value suggested runs).
 fn shortest_soak_s(opts: &SoakOptions) -> f64 {
@@ -916,6 +920,13 @@ mod tests {
         let mut v = Violations::default();
         check_recovery(t, end, 50, 0.1, &mut v);
         v.count
+    }
+
+    #[test]
+    fn the_shortest_soak_is_the_one_the_command_line_takes() {
+        assert_eq!(shortest_soak_s(&SoakOptions::default()), MIN_SOAK_S);
+        let (frames, warmup) = soak_frames(&SoakOptions::default(), MIN_SOAK_S);
+        assert!(memory_windows(frames as u32, warmup).is_some());
     }
 
     #[test]

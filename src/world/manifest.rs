@@ -547,6 +547,61 @@ fn array_of<T, E: serde::de::Error, const N: usize>(values: Vec<T>) -> Result<[T
 /// The largest `world.toml` read, bytes.
 pub const MAX_MANIFEST_BYTES: u64 = 16 << 20;
 
+/// The most characters of the offending line that a TOML error quotes, either side of the
+/// error's column.
+const TOML_ERROR_QUOTE_CHARS: usize = 60;
+
+/// A TOML parse error of `text` in words: where it is, the offending line quoted around the
+/// error's column (at most [`TOML_ERROR_QUOTE_CHARS`] characters each side, control characters
+/// escaped) and what is wrong. The parser's own message quotes the whole line, escaped, so that a
+/// file of one long line (a damaged or hostile manifest, up to 16 MiB over HTTP) made an error
+/// several times its size.
+pub fn toml_error(text: &str, e: &toml::de::Error) -> String {
+    let message = e.message().trim_end();
+    let Some(span) = e.span() else {
+        return message.to_owned();
+    };
+    let start = span.start.min(text.len());
+    let start = (0..=start)
+        .rev()
+        .find(|&i| text.is_char_boundary(i))
+        .unwrap_or(0);
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = text[start..].find('\n').map_or(text.len(), |i| start + i);
+    let line_no = text[..line_start].matches('\n').count() + 1;
+    let before: Vec<char> = text[line_start..start].chars().collect();
+    let column = before.len() + 1;
+    let skip = before.len().saturating_sub(TOML_ERROR_QUOTE_CHARS);
+    let after: String = text[start..line_end]
+        .chars()
+        .take(TOML_ERROR_QUOTE_CHARS)
+        .collect();
+    let escape = |s: &str| -> String {
+        s.chars()
+            .map(|c| {
+                if c.is_control() {
+                    c.escape_debug().to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect()
+    };
+    let head = escape(&before[skip..].iter().collect::<String>());
+    let head = if skip > 0 { format!("...{head}") } else { head };
+    let tail = escape(&after);
+    let tail = if start + after.len() < line_end {
+        format!("{tail}...")
+    } else {
+        tail
+    };
+    let marker = " ".repeat(head.chars().count());
+    format!(
+        "TOML parse error at line {line_no}, column {column}\n  |\n  | {head}{tail}\n  | \
+         {marker}^\n{message}"
+    )
+}
+
 impl Manifest {
     /// Reads, parses and validates a manifest file.
     pub fn from_path(path: &Path) -> Result<Manifest, WorldError> {
@@ -562,7 +617,7 @@ impl Manifest {
     pub fn parse(text: &str, path: &Path) -> Result<Manifest, WorldError> {
         let manifest: Manifest = toml::from_str(text).map_err(|e| WorldError::ManifestSyntax {
             path: path.to_path_buf(),
-            message: e.to_string().trim_end().to_string(),
+            message: toml_error(text, &e),
         })?;
         manifest.validate(path)?;
         Ok(manifest)
