@@ -293,6 +293,52 @@ fn camera_paths_clear_the_terrain() {
     }
 }
 
+/// The paths clear the ground the renderer draws near the camera (the finest derived level),
+/// not only the stored grid's bilinear surface: between the samples of coarse cells the two
+/// part by metres (by 45 m at 10 km cells, where the meadow glide flew underground and drew no
+/// grass). A dome baked at 400 m cells, whose drawn ground rises up to 20 m above the bilinear.
+#[test]
+fn camera_paths_clear_the_drawn_ground_of_coarse_cells() {
+    let dir = tempfile::tempdir().unwrap();
+    let dome = |x: f64, y: f64| 300.0 - ((x - 1000.0).powi(2) + (y - 975.0).powi(2)) / 4000.0;
+    let dem = write_dem(dir.path(), "dome", DEM_SIZE, DEM_CELLS, DEM_SCALE, dome);
+    let out = dir.path().join("coarse");
+    let opts = BakeOptions {
+        dem,
+        out: out.clone(),
+        cell_size_m: Some(400.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        seed: 7,
+        ..Default::default()
+    };
+    bake(&opts, &mut |_, _, _| {}).unwrap();
+    let terrain = Terrain::load(&out);
+    let m = &terrain.world.manifest;
+    let lowest: Vec<(&str, f64, f64)> = [
+        ("overview", 200.0),
+        ("low", 30.0),
+        ("helicopter", 15.0),
+        ("wind-tour", 5.0),
+        ("walker", 1.0),
+        ("tour", 1.0),
+        ("meadow", 1.0),
+    ]
+    .into_iter()
+    .map(|(name, least)| {
+        let c = terrain.drawn_clearances(m.path(name).unwrap(), 10);
+        (name, least, c.into_iter().fold(f64::INFINITY, f64::min))
+    })
+    .collect();
+    assert!(
+        lowest.iter().all(|&(_, least, c)| c >= least),
+        "(path, least, lowest clearance): {lowest:?}"
+    );
+    // Clear of the ground, and still low over it.
+    let meadow = terrain.drawn_clearances(m.path("meadow").unwrap(), 10);
+    assert!(meadow.iter().all(|&c| c < 5.0), "{meadow:?}");
+}
+
 #[test]
 fn bake_into_a_non_empty_folder_is_refused_unless_replaced_as_a_whole() {
     let dir = tempfile::tempdir().unwrap();

@@ -117,7 +117,7 @@ fn max_terrain_along(grid: &Grid, points: &[DVec2], half_width: f64, step: f64) 
         for s in 0..=n {
             let c = p + d * (s as f64 / n as f64);
             for o in [-1.0, -0.5, 0.0, 0.5, 1.0] {
-                best = best.max(grid.height_bilinear(c + side * (o * half_width)));
+                best = best.max(grid.height(c + side * (o * half_width)));
             }
         }
     }
@@ -235,7 +235,7 @@ fn grassy_line(painted: &Painted, extent: [f64; 2]) -> (DVec2, DVec2) {
                 for s in 0..=n {
                     let p = c + dir * LENGTH * (s as f64 / n as f64 - 0.5);
                     cover += density_at(p);
-                    let z = grid.height_bilinear(p);
+                    let z = grid.height(p);
                     lo = lo.min(z);
                     hi = hi.max(z);
                 }
@@ -248,7 +248,7 @@ fn grassy_line(painted: &Painted, extent: [f64; 2]) -> (DVec2, DVec2) {
     }
     let (_, c, mut dir) = best;
     // Fly toward the higher ground, so that the view ahead holds hills rather than plain.
-    if grid.height_bilinear(c - dir * 3000.0) > grid.height_bilinear(c + dir * 3000.0) {
+    if grid.height(c - dir * 3000.0) > grid.height(c + dir * 3000.0) {
         dir = -dir;
     }
     (c, dir)
@@ -307,14 +307,14 @@ pub(super) fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
             if !(2000.0..=8000.0).contains(&r) || !inside(p) {
                 continue;
             }
-            let h = grid.height_bilinear(p);
+            let h = grid.height(p);
             if h > best {
                 best = h;
                 start = Some(p);
             }
         }
     }
-    let meadow_h = grid.height_bilinear(meadow_start);
+    let meadow_h = grid.height(meadow_start);
     let start = match start {
         Some(p) if best > meadow_h + 100.0 => p,
         _ => {
@@ -453,7 +453,7 @@ fn tall_grass_spot(painted: &Painted, extent: [f64; 2], near: DVec2) -> DVec2 {
                     if kind == 2 {
                         score += density;
                     }
-                    let z = grid.height_bilinear(q);
+                    let z = grid.height(q);
                     (lo, hi) = (lo.min(z), hi.max(z));
                     count += 1.0;
                 }

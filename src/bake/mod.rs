@@ -24,10 +24,12 @@
 //!    of the finest grid, which agree wherever they overlap, so neighbours share identical edge
 //!    and border samples; tiles are written through temporary files.
 //! 5. Seven camera paths are computed from the terrain ("tour", the default, "overview", "low",
-//!    "meadow", "helicopter", and "wind-tour" with its "walker"), four wind scenes are added
-//!    ("calm", "breeze", "storm" and "helicopter", see [`default_wind_scenes`]; the wind tour
-//!    shows them in turn), and `world.toml` is written last, so a world with a manifest is a
-//!    complete world.
+//!    "meadow", "helicopter", and "wind-tour" with its "walker"), their heights above the ground
+//!    the renderer draws (the finest derived level, Catmull-Rom halvings of the finest grid, not
+//!    its bilinear surface, tens of metres off between cells kilometres wide), four wind scenes
+//!    are added ("calm", "breeze", "storm" and "helicopter", see [`default_wind_scenes`]; the
+//!    wind tour shows them in turn), and `world.toml` is written last, so a world with a
+//!    manifest is a complete world.
 //!
 //! The bake is deterministic: the same DEM, options and seed give byte-identical files.
 //!

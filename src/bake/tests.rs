@@ -63,6 +63,7 @@ fn painted_indices_beyond_the_types_are_refused() {
             margin: 0,
             cell: 1.0,
             finest: 0,
+            derived: 0,
         },
         heights: vec![0.0; 4],
     };
@@ -199,4 +200,93 @@ fn coarse_dems_get_the_derived_levels_that_make_grass_sized_tiles() {
     // Within 24 levels in all.
     assert_eq!(derived_levels_for(1.0e7, 20), 4);
     assert_eq!(derived_levels_for(1.0e7, 24), 0);
+}
+
+/// The height the camera paths are fitted to is the ground the renderer draws: the finest
+/// derived level, as the derivation's CPU mirror makes it from the stored tile, at its samples
+/// and between them, on relief that curves strongly from cell to cell (where the grid's
+/// bilinear surface lies metres off it: 45 m below it at 10 km cells, the paths underground).
+#[test]
+fn path_heights_are_the_drawn_ground_of_the_finest_derived_level() {
+    use crate::stream::{DeriveParams, derive_child};
+    use crate::world::{TileData, TileId};
+    let pyramid = Pyramid {
+        root_tile_size_m: 80.0,
+        root_tiles: [1, 1],
+        tile_cells: 8,
+        border: 2,
+        stored_levels: 1,
+        derived_levels: 3,
+    };
+    let shape = resample::Shape::of(&pyramid);
+    let side = shape.size[0] as usize;
+    let mut heights = Vec::with_capacity(side * side);
+    for b in 0..side {
+        for a in 0..side {
+            let (x, y) = (a as f32, b as f32);
+            let bumps = ((7 * a + 13 * b) % 5) as f32;
+            heights.push(300.0 + 80.0 * (1.3 * x + 0.7 * y).sin() + 40.0 * bumps);
+        }
+    }
+    let grid = resample::Grid {
+        width: side,
+        height: side,
+        origin: [0, 0],
+        stride: 1,
+        shape,
+        heights: heights.clone(),
+    };
+    // The stored tile's samples are the grid's: both start a border before the world.
+    let root = TileId::new(0, 0, 0);
+    let samples = side * side;
+    let stored = TileData {
+        id: root,
+        size: pyramid.samples_per_side(),
+        heights,
+        grass_type: vec![0; samples],
+        density: vec![0; samples],
+        material: Vec::new(),
+    };
+    let params = DeriveParams::default().bicubic();
+    let mut level = vec![stored];
+    for _ in 0..pyramid.derived_levels {
+        level = level
+            .iter()
+            .flat_map(|parent| {
+                parent
+                    .id
+                    .children()
+                    .map(|c| derive_child(&pyramid, parent, c, &params))
+            })
+            .collect();
+    }
+    // Away from the grid's edges (3 cells: the reach of the halvings), where the derivation
+    // repeats its tiles' edge samples.
+    let cell = pyramid.cell_size_m(0);
+    let inside = |p: DVec2| p.min_element() >= cell && p.max_element() <= 7.0 * cell;
+    let mut checked = 0;
+    for tile in &level {
+        let n = pyramid.tile_cells + pyramid.border;
+        for j in pyramid.border..n {
+            for i in pyramid.border..n {
+                let p = pyramid.sample_position(tile.id, i, j);
+                if !inside(p) {
+                    continue;
+                }
+                let h = |i, j| f64::from(tile.height_at(i, j));
+                // At the sample, and in the middle of its cell (drawn bilinearly).
+                let mid = 0.25 * (h(i, j) + h(i + 1, j) + h(i, j + 1) + h(i + 1, j + 1));
+                let half = DVec2::splat(0.5 * pyramid.cell_size_m(tile.id.level));
+                for (q, drawn) in [(p, h(i, j)), (p + half, mid)] {
+                    let fitted = grid.height(q);
+                    assert!(
+                        (fitted - drawn).abs() < 1e-3,
+                        "at {q}: fitted {fitted} m, drawn {drawn} m"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked > 1000, "{checked}");
 }

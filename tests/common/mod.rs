@@ -169,6 +169,8 @@ pub fn write_sidecar(
 pub struct Terrain {
     pub world: World,
     pub tiles: HashMap<TileId, TileData>,
+    /// Derived tiles made so far by [`Terrain::drawn_height`].
+    derived: std::cell::RefCell<HashMap<TileId, TileData>>,
 }
 
 impl Terrain {
@@ -178,7 +180,11 @@ impl Terrain {
             .stored_tiles()
             .map(|id| (id, world.load_tile(id).unwrap()))
             .collect();
-        Terrain { world, tiles }
+        Terrain {
+            world,
+            tiles,
+            derived: Default::default(),
+        }
     }
 
     /// Height at `p` by bilinear interpolation in the finest stored level.
@@ -197,20 +203,65 @@ impl Terrain {
         s * (1.0 - fv) + n * fv
     }
 
-    /// Clearance of the camera above the terrain at `samples` points per key interval along
-    /// `path`, with positions interpolated linearly between keys.
-    pub fn clearances(&self, path: &CameraPath, samples: usize) -> Vec<f64> {
-        let mut out = Vec::new();
-        for w in path.keys.windows(2) {
-            let (a, b) = (w[0].position_m, w[1].position_m);
-            for s in 0..samples {
-                let t = s as f64 / samples as f64;
-                let p: [f64; 3] = std::array::from_fn(|k| a[k] + (b[k] - a[k]) * t);
-                out.push(p[2] - self.height(DVec2::new(p[0], p[1])));
-            }
-        }
-        out
+    /// Height at `p` of the ground the renderer draws near the camera: the finest derived
+    /// level, derived from the stored tiles by the derivation's CPU mirror
+    /// (`verdant::stream::derive_child`, with the manifest's detail), sampled bilinearly.
+    pub fn drawn_height(&self, p: DVec2) -> f64 {
+        let pyramid = &self.world.manifest.pyramid;
+        let level = pyramid.max_level();
+        let id = pyramid.tile_at(level, p).expect("point inside the world");
+        let tile = self.drawn_tile(id);
+        let cell = pyramid.cell_size_m(level);
+        let u = (p - pyramid.bounds(id).min) / cell + f64::from(pyramid.border);
+        let (i, j) = (u.x.floor() as u32, u.y.floor() as u32);
+        let (fu, fv) = (u.x - f64::from(i), u.y - f64::from(j));
+        let h = |i, j| f64::from(tile.height_at(i, j));
+        let s = h(i, j) * (1.0 - fu) + h(i + 1, j) * fu;
+        let n = h(i, j + 1) * (1.0 - fu) + h(i + 1, j + 1) * fu;
+        s * (1.0 - fv) + n * fv
     }
+
+    /// Tile `id`: stored, or derived from its parent (kept for the next lookups).
+    fn drawn_tile(&self, id: TileId) -> TileData {
+        if let Some(t) = self.tiles.get(&id) {
+            return t.clone();
+        }
+        if let Some(t) = self.derived.borrow().get(&id) {
+            return t.clone();
+        }
+        let parent = self.drawn_tile(id.parent().expect("a stored ancestor"));
+        let manifest = &self.world.manifest;
+        let params = verdant::stream::DeriveParams::for_manifest(manifest);
+        let tile = verdant::stream::derive_child(&manifest.pyramid, &parent, id, &params);
+        self.derived.borrow_mut().insert(id, tile.clone());
+        tile
+    }
+
+    /// Clearance of the camera above the terrain (the finest stored level) at `samples` points
+    /// per key interval along `path`, with positions interpolated linearly between keys.
+    pub fn clearances(&self, path: &CameraPath, samples: usize) -> Vec<f64> {
+        clearances(path, samples, |p| self.height(p))
+    }
+
+    /// [`Terrain::clearances`] above the ground drawn near the camera
+    /// ([`Terrain::drawn_height`]).
+    pub fn drawn_clearances(&self, path: &CameraPath, samples: usize) -> Vec<f64> {
+        clearances(path, samples, |p| self.drawn_height(p))
+    }
+}
+
+/// Clearance of the camera above `ground` at `samples` points per key interval along `path`.
+fn clearances(path: &CameraPath, samples: usize, ground: impl Fn(DVec2) -> f64) -> Vec<f64> {
+    let mut out = Vec::new();
+    for w in path.keys.windows(2) {
+        let (a, b) = (w[0].position_m, w[1].position_m);
+        for s in 0..samples {
+            let t = s as f64 / samples as f64;
+            let p: [f64; 3] = std::array::from_fn(|k| a[k] + (b[k] - a[k]) * t);
+            out.push(p[2] - ground(DVec2::new(p[0], p[1])));
+        }
+    }
+    out
 }
 
 /// A tiny deterministic random generator (xorshift64*).
