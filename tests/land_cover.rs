@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec2;
-use tiff::encoder::{TiffEncoder, colortype};
+use tiff::encoder::{Compression, TiffEncoder, colortype};
 use tiff::tags::Tag;
 use verdant::bake::{BakeOptions, bake};
 use verdant::world::Material;
@@ -52,10 +52,49 @@ fn write_geotiff<C: colortype::ColorType>(
 ) where
     [C::Inner]: tiff::encoder::TiffValue,
 {
+    write_geotiff_as::<C>(
+        path,
+        size,
+        cell,
+        corner,
+        epsg,
+        data,
+        Compression::Uncompressed,
+        false,
+    );
+}
+
+/// [`write_geotiff`] with its chunks compressed by `compression` and, with `palette`, as a
+/// colour-mapped image (PhotometricInterpretation 3, RGBPalette, and a ColorMap of as many
+/// entries as its samples' bits give), as land-cover products are distributed.
+#[allow(clippy::too_many_arguments)]
+fn write_geotiff_as<C: colortype::ColorType>(
+    path: &Path,
+    size: [u32; 2],
+    cell: [f64; 2],
+    corner: [f64; 2],
+    epsg: u16,
+    data: &[C::Inner],
+    compression: Compression,
+    palette: bool,
+) where
+    [C::Inner]: tiff::encoder::TiffValue,
+{
     let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
-    let mut enc = TiffEncoder::new(&mut file).unwrap();
+    let mut enc = TiffEncoder::new(&mut file)
+        .unwrap()
+        .with_compression(compression);
     let mut image = enc.new_image::<C>(size[0], size[1]).unwrap();
     let d = image.encoder();
+    if palette {
+        // Red, then green, then blue, 16 bits each: an entry's colour from its index.
+        let entries = 1usize << C::BITS_PER_SAMPLE[0];
+        let colour_map: Vec<u16> = (0..3)
+            .flat_map(|band| (0..entries).map(move |i| ((i * 40503 + band * 9973) % 65536) as u16))
+            .collect();
+        d.write_tag(Tag::PhotometricInterpretation, 3u16).unwrap();
+        d.write_tag(Tag::ColorMap, &colour_map[..]).unwrap();
+    }
     d.write_tag(Tag::ModelPixelScaleTag, &[cell[0], cell[1], 0.0][..])
         .unwrap();
     d.write_tag(
@@ -443,6 +482,152 @@ fn bad_maps_and_tables_are_refused_naming_the_file_and_nothing_is_written() {
     }
 }
 
+/// A map's classes as [`class_at`] lays them out, rows from the north, as `T`.
+fn map_codes<T>(of: impl Fn(u8) -> T) -> Vec<T> {
+    let [w, h] = MAP_SIZE;
+    (0..h)
+        .flat_map(|r| (0..w).map(move |c| class_at(c, r)))
+        .map(of)
+        .collect()
+}
+
+#[test]
+fn a_palette_map_is_read_by_its_indices_as_class_codes() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path());
+    let esa = PathBuf::from("esa-worldcover");
+    let gray = write_map(dir.path(), 32633, MAP_CORNER, None);
+    let baked = |map: PathBuf, name: &str| {
+        let out = dir.path().join(name);
+        bake(
+            &opts(&dem, &out, Some((map, esa.clone()))),
+            &mut |_, _, _| {},
+        )
+        .unwrap();
+        finest_samples(&out)
+    };
+    let want = baked(gray, "gray");
+    // 8-bit indices, Deflate; 16-bit indices, LZW (decompressed by verdant itself); both with
+    // a colour table whose colours are nothing like the codes.
+    let palette8 = dir.path().join("palette8.tif");
+    write_geotiff_as::<colortype::Gray8>(
+        &palette8,
+        MAP_SIZE,
+        [MAP_CELL; 2],
+        MAP_CORNER,
+        32633,
+        &map_codes(|c| c),
+        Compression::Deflate(Default::default()),
+        true,
+    );
+    let palette16 = dir.path().join("palette16.tif");
+    write_geotiff_as::<colortype::Gray16>(
+        &palette16,
+        MAP_SIZE,
+        [MAP_CELL; 2],
+        MAP_CORNER,
+        32633,
+        &map_codes(u16::from),
+        Compression::Lzw,
+        true,
+    );
+    assert_eq!(baked(palette8, "palette8"), want, "8-bit palette");
+    assert_eq!(baked(palette16, "palette16"), want, "16-bit palette");
+
+    // A palette PNG spans the DEM as a grayscale one does: its indices are the codes.
+    let halves = finest_samples(&halves_world(dir.path(), "halves"));
+    let png_path = dir.path().join("halves_palette.png");
+    let mut encoder = png::Encoder::new(
+        std::io::BufWriter::new(std::fs::File::create(&png_path).unwrap()),
+        32,
+        16,
+    );
+    encoder.set_color(png::ColorType::Indexed);
+    encoder.set_depth(png::BitDepth::Eight);
+    encoder.set_palette(
+        (0..256 * 3)
+            .map(|i| (i * 37 % 256) as u8)
+            .collect::<Vec<u8>>(),
+    );
+    let indices: Vec<u8> = (0..16)
+        .flat_map(|_| (0..32).map(|x| if x < 16 { 30 } else { 80 }))
+        .collect();
+    let mut writer = encoder.write_header().unwrap();
+    writer.write_image_data(&indices).unwrap();
+    writer.finish().unwrap();
+    assert_eq!(baked(png_path, "halves_palette"), halves, "palette PNG");
+}
+
+#[test]
+fn a_map_of_floats_or_signed_or_wide_integers_is_refused_naming_its_sample_type() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path());
+    // The map placed as `write_map` places it, its samples of type `C`.
+    fn typed<C: colortype::ColorType>(dir: &Path, name: &str, data: &[C::Inner]) -> PathBuf
+    where
+        [C::Inner]: tiff::encoder::TiffValue,
+    {
+        let path = dir.join(name);
+        write_geotiff::<C>(&path, MAP_SIZE, [MAP_CELL; 2], MAP_CORNER, 32633, data);
+        path
+    }
+    let d = dir.path();
+    let cases = [
+        // Whole class codes as floats: they were once read as codes.
+        (
+            typed::<colortype::Gray32Float>(d, "float32.tif", &map_codes(f32::from)),
+            "float32",
+        ),
+        // Values that are no codes: they were once read as nodata, and the map ignored.
+        (
+            typed::<colortype::Gray32Float>(d, "negative.tif", &map_codes(|_| -30.0)),
+            "float32",
+        ),
+        (
+            typed::<colortype::Gray64Float>(d, "nan.tif", &map_codes(|_| f64::NAN)),
+            "float64",
+        ),
+        (
+            typed::<colortype::Gray64Float>(d, "huge.tif", &map_codes(|_| 1e300)),
+            "float64",
+        ),
+        // A code no 16 bits hold (once read through f32 as 2147483648).
+        (
+            typed::<colortype::GrayI32>(d, "int32.tif", &map_codes(|_| i32::MAX)),
+            "int32",
+        ),
+        (
+            typed::<colortype::Gray32>(d, "uint32.tif", &map_codes(u32::from)),
+            "uint32",
+        ),
+        (
+            typed::<colortype::GrayI16>(d, "int16.tif", &map_codes(i16::from)),
+            "int16",
+        ),
+    ];
+    for (map, sample) in cases {
+        let name = map.file_name().unwrap().to_string_lossy().into_owned();
+        let out = dir.path().join(format!("out_{name}"));
+        let e = match bake(
+            &opts(&dem, &out, Some((map, PathBuf::from("esa-worldcover")))),
+            &mut |_, _, _| {},
+        ) {
+            Ok(_) => panic!("{name} baked"),
+            Err(e) => e.to_string(),
+        };
+        for w in [
+            name.as_str(),
+            "land cover",
+            &format!("its band is {sample}"),
+            "uint8 or uint16",
+            "gdal_translate -ot UInt16",
+        ] {
+            assert!(e.contains(w), "{name}: {e:?} lacks {w:?}");
+        }
+        assert!(!out.exists(), "{name}: nothing written");
+    }
+}
+
 #[test]
 fn a_density_map_scales_the_cover_and_a_mask_clears_it() {
     let dir = tempfile::tempdir().unwrap();
@@ -468,8 +653,8 @@ fn a_density_map_scales_the_cover_and_a_mask_clears_it() {
     let colour = dir.path().join("colour.png");
     image::RgbImage::new(8, 8).save(&colour).unwrap();
     for (map, what) in [
-        ("density", "density map: a Rgb8 PNG"),
-        ("mask", "mask: a Rgb8 PNG"),
+        ("density", "density map: the PNG is 8-bit RGB"),
+        ("mask", "mask: the PNG is 8-bit RGB"),
     ] {
         let mut bad = opts(&dem, &dir.path().join("bad"), None);
         match map {

@@ -3,11 +3,13 @@
 //! wherever the map has a class.
 //!
 //! - **The map**: a GeoTIFF of one uint8 or uint16 band (ESA WorldCover, NLCD and most
-//!   land-cover products), or an 8- or 16-bit grayscale PNG. A georeferenced GeoTIFF is placed
-//!   on the DEM by both files' georeferencing, which must be in the same coordinate system (the
-//!   EPSG code, or the same words where there is none); its size, resolution and extent are its
-//!   own. A PNG, or a GeoTIFF without georeferencing, spans the DEM exactly (first row north).
-//!   Each sample of the finest grid takes the class of the map's nearest sample.
+//!   land-cover products), or an 8- or 16-bit grayscale PNG; a palette image (a GeoTIFF band with
+//!   a colour table, a palette PNG) is read by its indices. Codes are read exactly, as integers;
+//!   a band of another sample type (float, signed, 32-bit) is refused, naming it. A georeferenced
+//!   GeoTIFF is placed on the DEM by both files' georeferencing (reprojected by their EPSG codes
+//!   where their coordinate systems differ); its size, resolution and extent are its own. A
+//!   PNG, or a GeoTIFF without georeferencing, spans the DEM exactly (first row north). Each
+//!   sample of the finest grid takes the class of the map's nearest sample.
 //! - **The table**: TOML, `name`, `nodata` (class codes that say "no data here") and one
 //!   `[[class]]` per code: `code`, `name`, `grass` (one of the world's grass types, or "none":
 //!   nothing grows), `density` (the grass map's cover there, 0 to 1) and, optionally,
@@ -272,9 +274,10 @@ impl CoverMap {
     }
 
     /// Reads the map at `path`, places it on `dem` and resolves `table` for `grass_types`.
-    /// Refuses a map that cannot be placed (another coordinate system, no overlap with the
-    /// DEM, a georeferenced map on a DEM without georeferencing) and one that holds codes the
-    /// table does not list, naming them.
+    /// Refuses a map whose samples are not unsigned integers of at most 16 bits (a float or
+    /// signed band, naming its type), one that cannot be placed (another coordinate system, no
+    /// overlap with the DEM, a georeferenced map on a DEM without georeferencing) and one that
+    /// holds codes the table does not list, naming them.
     pub fn load(
         path: &Path,
         dem: &Dem,
@@ -283,17 +286,13 @@ impl CoverMap {
         grass_types: &[GrassType],
     ) -> Result<CoverMap, WorldError> {
         let painted = table.resolve(table_path, grass_types)?;
-        let raster = read_map(path)?;
+        let raster = read_classes(path)?;
         let placed = Placed::on(&raster, dem, path)?;
         let nodata: std::collections::BTreeSet<u32> = table.nodata.iter().copied().collect();
         let codes: Vec<Option<u32>> = raster
             .values
-            .iter()
-            .map(|v| {
-                v.filter(|v| *v >= 0.0 && v.fract() == 0.0 && *v <= f64::from(u32::MAX))
-                    .map(|v| v as u32)
-                    .filter(|c| !nodata.contains(c))
-            })
+            .into_iter()
+            .map(|c| c.filter(|c| !nodata.contains(c)))
             .collect();
         let mut unknown: BTreeMap<u32, usize> = BTreeMap::new();
         for c in codes.iter().flatten() {
@@ -472,7 +471,7 @@ fn reprojection_lattice(
 impl Placed {
     /// Places `raster` (read from `path`) on `dem` by their georeferencing, or over the whole
     /// DEM where the raster has none; refuses what cannot be placed or does not overlap.
-    fn on(raster: &Raster, dem: &Dem, path: &Path) -> Result<Placed, WorldError> {
+    fn on<T>(raster: &Raster<T>, dem: &Dem, path: &Path) -> Result<Placed, WorldError> {
         let (w, h) = (raster.width as usize, raster.height as usize);
         let [ex, ey] = dem.extent_m();
         let to_raster = match (
@@ -621,9 +620,9 @@ impl ValueMap {
         path: &Path,
         dem: &Dem,
         what: &'static str,
-        scale: impl FnOnce(&Raster) -> Result<Box<dyn Fn(f64) -> f64>, WorldError>,
+        scale: impl FnOnce(&Raster<f64>) -> Result<Box<dyn Fn(f64) -> f64>, WorldError>,
     ) -> Result<ValueMap, WorldError> {
-        let raster = read_map(path).map_err(|e| as_map(e, what))?;
+        let raster = read_values(path).map_err(|e| as_map(e, what))?;
         let placed = Placed::on(&raster, dem, path).map_err(|e| as_map(e, what))?;
         let f = scale(&raster).map_err(|e| as_map(e, what))?;
         let values = raster.values.iter().map(|v| v.map(&f)).collect();
@@ -639,102 +638,191 @@ impl ValueMap {
 /// A raster as read: values row 0 north (`None`: the file's nodata), the value that means
 /// "full" in its format (255 in an 8-bit PNG, 65535 in a 16-bit one, 1 in a GeoTIFF), and its
 /// georeferencing where it has any.
-struct Raster {
+struct Raster<T> {
     width: u32,
     height: u32,
-    values: Vec<Option<f64>>,
+    values: Vec<Option<T>>,
     full: f64,
     crs: String,
     origin: Option<[f64; 2]>,
     pixel_size: Option<[f64; 2]>,
 }
 
-/// Reads a PNG or GeoTIFF class map, told apart by content.
-fn read_map(path: &Path) -> Result<Raster, WorldError> {
+/// The two formats a map may be in, told apart by content.
+enum MapFormat {
+    Png,
+    Tiff,
+}
+
+fn map_format(path: &Path) -> Result<MapFormat, WorldError> {
     let (mut file, _) = crate::world::format::open_regular(path)?;
     let mut magic = [0u8; 8];
     let n = std::io::Read::read(&mut file, &mut magic).map_err(|e| WorldError::Io {
         path: path.to_path_buf(),
         source: e,
     })?;
-    drop(file);
     let magic = &magic[..n];
     if magic.starts_with(b"\x89PNG") {
-        return read_png(path);
+        Ok(MapFormat::Png)
+    } else if magic.starts_with(b"II*\0") || magic.starts_with(b"MM\0*") {
+        Ok(MapFormat::Tiff)
+    } else {
+        Err(map_error(
+            path,
+            "not a PNG or a TIFF (a map is a GeoTIFF of one band, or a grayscale PNG)",
+        ))
     }
-    if magic.starts_with(b"II*\0") || magic.starts_with(b"MM\0*") {
-        // Read as it is; a map without georeferencing with a unit cell (it spans the DEM).
-        let g = match crate::world::geotiff::load(path, None) {
-            Err(WorldError::NoGeoreference { .. }) => {
-                crate::world::geotiff::load(path, Some([1.0, 1.0]))?
-            }
-            other => other?,
-        };
-        let values = g
-            .heights
-            .iter()
-            .map(|&v| v.is_finite().then_some(f64::from(v)))
-            .collect();
-        return Ok(Raster {
-            width: g.width,
-            height: g.height,
-            values,
-            full: 1.0,
-            crs: g.crs,
-            origin: g.origin,
-            pixel_size: g.pixel_size,
-        });
-    }
-    Err(map_error(
-        path,
-        "not a PNG or a TIFF (a map is a GeoTIFF of one band, or a grayscale PNG)",
-    ))
 }
 
-fn read_png(path: &Path) -> Result<Raster, WorldError> {
+/// Reads a class map: a GeoTIFF of one uint8 or uint16 band (grayscale or with a colour
+/// table), or a grayscale or palette PNG; codes exactly as the file holds them.
+fn read_classes(path: &Path) -> Result<Raster<u32>, WorldError> {
+    match map_format(path)? {
+        MapFormat::Png => read_png(path, true),
+        MapFormat::Tiff => {
+            let g = crate::world::geotiff::load_classes(path, MAX_MAP_SAMPLES)?;
+            Ok(Raster {
+                width: g.width,
+                height: g.height,
+                values: g.codes,
+                full: 1.0,
+                crs: g.crs,
+                origin: g.origin,
+                pixel_size: g.pixel_size,
+            })
+        }
+    }
+}
+
+/// Reads a density map or mask: a grayscale PNG or a GeoTIFF of one band of any sample type a
+/// DEM may have.
+fn read_values(path: &Path) -> Result<Raster<f64>, WorldError> {
+    match map_format(path)? {
+        MapFormat::Png => {
+            let r = read_png(path, false)?;
+            Ok(Raster {
+                values: r.values.into_iter().map(|v| v.map(f64::from)).collect(),
+                width: r.width,
+                height: r.height,
+                full: r.full,
+                crs: r.crs,
+                origin: r.origin,
+                pixel_size: r.pixel_size,
+            })
+        }
+        MapFormat::Tiff => {
+            // Read as it is; a map without georeferencing with a unit cell (it spans the DEM).
+            let g = match crate::world::geotiff::load(path, None) {
+                Err(WorldError::NoGeoreference { .. }) => {
+                    crate::world::geotiff::load(path, Some([1.0, 1.0]))?
+                }
+                other => other?,
+            };
+            let values = g
+                .heights
+                .iter()
+                .map(|&v| v.is_finite().then_some(f64::from(v)))
+                .collect();
+            Ok(Raster {
+                width: g.width,
+                height: g.height,
+                values,
+                full: 1.0,
+                crs: g.crs,
+                origin: g.origin,
+                pixel_size: g.pixel_size,
+            })
+        }
+    }
+}
+
+/// Reads a PNG map as the samples it stores: a grayscale PNG of 1 to 16 bits, or, for a class
+/// map (`classes`), a palette PNG's indices too (its colours are not read). "Full" is the
+/// largest value of its bit depth.
+fn read_png(path: &Path, classes: bool) -> Result<Raster<u32>, WorldError> {
     let bytes = std::fs::read(path).map_err(|e| WorldError::Io {
         path: path.to_path_buf(),
         source: e,
     })?;
-    let mut reader = image::ImageReader::new(std::io::Cursor::new(&bytes));
-    reader.set_format(image::ImageFormat::Png);
-    let mut limits = image::Limits::default();
-    limits.max_alloc = Some(MAX_MAP_SAMPLES * 2);
-    reader.limits(limits);
-    let img = reader.decode().map_err(|e| WorldError::CorruptImage {
+    let corrupt = |e: png::DecodingError| WorldError::CorruptImage {
         path: path.to_path_buf(),
         format: "PNG",
         message: e.to_string(),
-    })?;
-    let (width, height) = (img.width(), img.height());
+    };
+    let mut decoder = png::Decoder::new_with_limits(
+        std::io::Cursor::new(&bytes),
+        png::Limits {
+            bytes: (MAX_MAP_SAMPLES * 2) as usize,
+        },
+    );
+    // The samples as stored: no palette expanded, no bit depth scaled.
+    decoder.set_transformations(png::Transformations::IDENTITY);
+    let mut reader = decoder.read_info().map_err(corrupt)?;
+    let info = reader.info();
+    let (width, height) = (info.width, info.height);
+    let (color, bits) = (info.color_type, info.bit_depth as u32);
+    let accepted = match color {
+        png::ColorType::Grayscale => true,
+        png::ColorType::Indexed => classes,
+        _ => false,
+    };
+    if !accepted {
+        let kind = match color {
+            png::ColorType::Grayscale => "grayscale",
+            png::ColorType::Rgb => "RGB",
+            png::ColorType::Indexed => "palette (indexed-colour)",
+            png::ColorType::GrayscaleAlpha => "grayscale with alpha",
+            png::ColorType::Rgba => "RGBA",
+        };
+        let wanted = if classes {
+            "a land-cover map is grayscale (8 or 16 bits) or a palette PNG, one class code a \
+             pixel"
+        } else {
+            "a map is grayscale, 8 or 16 bits, one value a pixel"
+        };
+        return Err(map_error(
+            path,
+            format!("the PNG is {bits}-bit {kind}: {wanted}"),
+        ));
+    }
     if width < 2 || height < 2 || u64::from(width) * u64::from(height) > MAX_MAP_SAMPLES {
         return Err(map_error(
             path,
             format!("{width}x{height} samples: at least 2x2 and at most {MAX_MAP_SAMPLES}"),
         ));
     }
-    let (values, full): (Vec<u32>, f64) = match img {
-        image::DynamicImage::ImageLuma8(g) => {
-            (g.into_raw().into_iter().map(u32::from).collect(), 255.0)
-        }
-        image::DynamicImage::ImageLuma16(g) => {
-            (g.into_raw().into_iter().map(u32::from).collect(), 65535.0)
-        }
-        other => {
-            return Err(map_error(
-                path,
-                format!(
-                    "a {:?} PNG: a map is grayscale, 8 or 16 bits, one value a pixel",
-                    other.color()
-                ),
-            ));
+    let size = reader.output_buffer_size().ok_or_else(|| {
+        map_error(
+            path,
+            format!("{width}x{height} samples are too many to hold"),
+        )
+    })?;
+    let mut buf = vec![0u8; size];
+    let frame = reader.next_frame(&mut buf).map_err(corrupt)?;
+    let line = frame.line_size;
+    // One sample a pixel: whole bytes (big-endian at 16 bits) or packed, first pixel in the
+    // high bits.
+    let sample = |row: &[u8], c: usize| -> u32 {
+        match bits {
+            16 => u32::from(u16::from_be_bytes([row[2 * c], row[2 * c + 1]])),
+            8 => u32::from(row[c]),
+            b => {
+                let per_byte = (8 / b) as usize;
+                let shift = 8 - b * (1 + (c % per_byte) as u32);
+                u32::from(row[c / per_byte] >> shift) & ((1 << b) - 1)
+            }
         }
     };
+    let values = buf
+        .chunks(line)
+        .take(height as usize)
+        .flat_map(|row| (0..width as usize).map(move |c| Some(sample(row, c))))
+        .collect();
     Ok(Raster {
         width,
         height,
-        values: values.into_iter().map(|v| Some(f64::from(v))).collect(),
-        full,
+        values,
+        full: f64::from((1u32 << bits) - 1),
         crs: String::new(),
         origin: None,
         pixel_size: None,

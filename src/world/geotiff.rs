@@ -3,8 +3,11 @@
 //! reads the GeoTIFF tags on top of it.
 //!
 //! - Uncompressed, Deflate, LZW, PackBits or Zstandard chunks.
-//! - One band of uint8, int16, uint16, int32, float32 or float64 (uint8 for class rasters such
-//!   as land cover, read through the same path).
+//! - One band of uint8, int16, uint16, int32, float32 or float64.
+//! - Class rasters (land cover, [`load_classes`]): one band of uint8 or uint16 class codes, read
+//!   as integers, grayscale or with a colour table (a palette image's indices are its codes; the
+//!   colours are not read). Their chunks are all decompressed here, since the `tiff` crate
+//!   refuses to hand out a palette image's indices.
 //! - Cell size from `ModelPixelScale` (with `ModelTiepoint` for the origin) or from an unrotated
 //!   `ModelTransformation`. Rows are mapped north-up (a grid stored south row first is flipped).
 //! - The GeoKey directory says whether the grid is projected (x/y in metres, or in feet, which
@@ -56,7 +59,16 @@ const ANGULAR_DEGREE: u16 = 9102;
 /// A code that means "given by another key".
 const USER_DEFINED: u16 = 32767;
 
-/// Reads a GeoTIFF DEM; nodata samples become NaN.
+/// What a GeoTIFF's samples are read as.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reading {
+    /// Heights (a DEM, or a density map or mask read as one): any sample type read.
+    Heights,
+    /// Class codes (a land-cover map): unsigned integers of at most 16 bits, grayscale or
+    /// indices into a colour table.
+    Classes,
+}
+
 /// What a GeoTIFF's header says: its size, sample type, compression and chunks.
 struct Header {
     width: u32,
@@ -75,6 +87,7 @@ fn read_header<R: Read + Seek>(
     decoder: &mut Decoder<R>,
     file_len: u64,
     max_samples: u64,
+    reading: Reading,
 ) -> Result<Header, WorldError> {
     let (width, height) = decoder.dimensions().map_err(|e| tiff_error(path, e))?;
     if width < 2 || height < 2 || u64::from(width) * u64::from(height) > max_samples {
@@ -94,38 +107,61 @@ fn read_header<R: Read + Seek>(
     };
     let bands = tag_u16(Tag::SamplesPerPixel)?.unwrap_or(1);
     if bands != 1 {
+        let read = match reading {
+            Reading::Heights => "only single-band elevation rasters are read",
+            Reading::Classes => "a class map is one band of class codes",
+        };
         return Err(unsupported(
             path,
-            format!(
-                "{bands} bands (samples per pixel): only single-band elevation rasters are read"
-            ),
+            format!("{bands} bands (samples per pixel): {read}"),
         ));
     }
     let bits = tag_u16(Tag::BitsPerSample)?.unwrap_or(1);
     let sample_format = tag_u16(Tag::SampleFormat)?.unwrap_or(1);
-    let sample = match (sample_format, bits) {
-        (1, 8) => SampleType::U8,
-        (1, 16) => SampleType::U16,
-        (2, 16) => SampleType::I16,
-        (2, 32) => SampleType::I32,
-        (3, 32) => SampleType::F32,
-        (3, 64) => SampleType::F64,
-        (f, b) => {
-            let kind = match f {
-                1 => "uint",
-                2 => "int",
-                3 => "float",
-                _ => "sample format ",
-            };
+    let sample = match (reading, sample_format, bits) {
+        (_, 1, 8) => SampleType::U8,
+        (_, 1, 16) => SampleType::U16,
+        (Reading::Heights, 2, 16) => SampleType::I16,
+        (Reading::Heights, 2, 32) => SampleType::I32,
+        (Reading::Heights, 3, 32) => SampleType::F32,
+        (Reading::Heights, 3, 64) => SampleType::F64,
+        (Reading::Heights, f, b) => {
             return Err(unsupported(
                 path,
                 format!(
-                    "sample type {kind}{b}: samples must be uint8, int16, uint16, int32, float32 or \
-                     float64"
+                    "sample type {}: samples must be uint8, int16, uint16, int32, float32 or \
+                     float64",
+                    sample_type_name(f, b)
                 ),
             ));
         }
+        (Reading::Classes, f, b) => {
+            return Err(WorldError::LandCover {
+                path: path.to_path_buf(),
+                what: "land cover",
+                problem: format!(
+                    "its band is {}: a land-cover map's band holds class codes as unsigned \
+                     integers of 8 or 16 bits (uint8 or uint16, grayscale or with a colour \
+                     table); convert it to whole class codes first (gdal_translate -ot UInt16, \
+                     or -ot Byte for codes up to 255)",
+                    sample_type_name(f, b)
+                ),
+            });
+        }
     };
+    // A class map is grayscale or colour-mapped; its colour table is not read (the indices are
+    // the codes).
+    let photometric = tag_u16(Tag::PhotometricInterpretation)?;
+    if reading == Reading::Classes && !matches!(photometric, None | Some(0 | 1 | 3)) {
+        return Err(unsupported(
+            path,
+            format!(
+                "photometric interpretation {}: a class map is grayscale (0 or 1) or indices \
+                 into a colour table (3)",
+                photometric.unwrap_or_default()
+            ),
+        ));
+    }
     let compression = tag_u16(Tag::Compression)?.unwrap_or(1);
     if !matches!(compression, 1 | 5 | 8 | 32946 | 32773 | ZSTD) {
         return Err(unsupported(
@@ -231,12 +267,19 @@ fn limits() -> Limits {
     limits
 }
 
+/// Reads a GeoTIFF DEM; nodata samples become NaN.
 pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, WorldError> {
     let (file, file_len) = super::format::open_regular(path)?;
     let mut decoder = Decoder::new(BufReader::new(file))
         .map_err(|e| tiff_error(path, e))?
         .with_limits(limits());
-    let header = read_header(path, &mut decoder, file_len, MAX_DEM_SAMPLES)?;
+    let header = read_header(
+        path,
+        &mut decoder,
+        file_len,
+        MAX_DEM_SAMPLES,
+        Reading::Heights,
+    )?;
     let Header {
         width,
         height,
@@ -289,6 +332,67 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
         origin: grid.origin,
         pixel_size: grid.pixel_size,
         nodata_filled: 0,
+    })
+}
+
+/// A class raster (a land-cover map) as read by [`load_classes`]: class codes row 0 north and
+/// where it lies.
+pub(crate) struct ClassGrid {
+    pub width: u32,
+    pub height: u32,
+    /// Class codes, row 0 north, west first; `None` where the file's nodata (`GDAL_NODATA`)
+    /// is.
+    pub codes: Vec<Option<u32>>,
+    /// The coordinate system's description (empty without georeferencing).
+    pub crs: String,
+    /// The south-west sample's coordinates, where the file is georeferenced.
+    pub origin: Option<[f64; 2]>,
+    /// Spacing in the coordinate system's units (x, y), where the file is georeferenced.
+    pub pixel_size: Option<[f64; 2]>,
+}
+
+/// Reads a GeoTIFF of class codes: one band of uint8 or uint16, grayscale or indices into a
+/// colour table, read exactly as integers; at most `max_samples` samples. Another sample type
+/// is refused before anything is decoded, naming it and what is read. A file without (usable)
+/// georeferencing is read as a bare grid (no origin or pixel size).
+pub(crate) fn load_classes(path: &Path, max_samples: u64) -> Result<ClassGrid, WorldError> {
+    let (file, file_len) = super::format::open_regular(path)?;
+    let mut decoder = Decoder::new(BufReader::new(file))
+        .map_err(|e| tiff_error(path, e))?
+        .with_limits(limits());
+    let header = read_header(path, &mut decoder, file_len, max_samples, Reading::Classes)?;
+    let layout = chunk_layout(path, &mut decoder, &header)?;
+    let geo = GeoTags::read(path, &mut decoder)?;
+    let (width, height) = (header.width, header.height);
+    let grid = match geo.grid(path, width, height, false) {
+        Err(WorldError::NoGeoreference { .. }) => geo.grid(path, width, height, true)?,
+        other => other?,
+    };
+    // The `tiff` crate reads no palette image's indices, so every codec is decoded here.
+    let bits = decode_chunks(path, &layout, &header.chunks, Codec::of(header.compression))?;
+    let (w, h) = (width as usize, height as usize);
+    if bits.len() != w * h {
+        return Err(corrupt(
+            path,
+            format!("{} samples decoded, {w}x{h} expected", bits.len()),
+        ));
+    }
+    let nodata = geo
+        .nodata
+        .filter(|n| n.fract() == 0.0 && *n >= 0.0 && *n <= f64::from(u32::MAX))
+        .map(|n| n as u64);
+    let mut codes: Vec<Option<u32>> = bits
+        .into_iter()
+        .map(|v| (Some(v) != nodata).then_some(v as u32))
+        .collect();
+    north_up(&mut codes, w, grid.flip_rows, grid.flip_cols);
+    Ok(ClassGrid {
+        width,
+        height,
+        codes,
+        crs: grid.crs,
+        origin: grid.origin,
+        pixel_size: grid.pixel_size,
     })
 }
 
@@ -654,6 +758,17 @@ fn linear_unit_m(code: u16) -> Option<f64> {
     }
 }
 
+/// A sample type by its TIFF sample format and bits: `uint8`, `float32`, `int32`.
+fn sample_type_name(format: u16, bits: u16) -> String {
+    let kind = match format {
+        1 => "uint",
+        2 => "int",
+        3 => "float",
+        _ => return format!("sample format {format} of {bits} bits"),
+    };
+    format!("{kind}{bits}")
+}
+
 fn compression_name(code: u16) -> &'static str {
     match code {
         1 => "none",
@@ -738,6 +853,17 @@ enum Codec {
 }
 
 impl Codec {
+    /// The codec of a TIFF compression code that [`read_header`] accepted.
+    fn of(compression: u16) -> Codec {
+        match compression {
+            1 => Codec::None,
+            5 => Codec::Lzw,
+            8 | 32946 => Codec::Deflate,
+            32773 => Codec::PackBits,
+            _ => Codec::Zstd,
+        }
+    }
+
     fn name(self) -> &'static str {
         match self {
             Codec::None => "uncompressed",
@@ -1009,15 +1135,9 @@ pub(crate) fn open_windows<R: Read + Seek>(
     let mut decoder = Decoder::new(reader)
         .map_err(|e| tiff_error(path, e))?
         .with_limits(limits());
-    let header = read_header(path, &mut decoder, len, max_samples)?;
+    let header = read_header(path, &mut decoder, len, max_samples, Reading::Heights)?;
     let layout = chunk_layout(path, &mut decoder, &header)?;
-    let codec = match header.compression {
-        1 => Codec::None,
-        5 => Codec::Lzw,
-        8 | 32946 => Codec::Deflate,
-        32773 => Codec::PackBits,
-        _ => Codec::Zstd,
-    };
+    let codec = Codec::of(header.compression);
     let geo = GeoTags::read(path, &mut decoder)?;
     let grid = geo.grid(path, header.width, header.height, cell_override.is_some())?;
     let [cell_ew_m, cell_ns_m] = cell_override.unwrap_or(grid.cell_m);
@@ -1096,7 +1216,7 @@ impl TiffWindows {
 
 /// Turns rows of `w` samples stored south first (`flip_rows`) or east first (`flip_cols`)
 /// north up and west first, in place.
-fn north_up(heights: &mut [f32], w: usize, flip_rows: bool, flip_cols: bool) {
+fn north_up<T>(heights: &mut [T], w: usize, flip_rows: bool, flip_cols: bool) {
     let h = heights.len() / w;
     if flip_rows {
         for r in 0..h / 2 {
