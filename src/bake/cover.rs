@@ -126,7 +126,8 @@ impl CoverTable {
                 }
             }
         };
-        let table: CoverTable = toml::from_str(&text).map_err(|e| table_error(spec, e))?;
+        let table: CoverTable = toml::from_str(&text)
+            .map_err(|e| table_error(spec, crate::world::manifest::toml_error(&text, &e)))?;
         table.check(spec)?;
         Ok(table)
     }
@@ -832,6 +833,22 @@ fn read_png(path: &Path, classes: bool) -> Result<Raster<u32>, WorldError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A table's syntax error quotes a bounded part of its line (a 1 MiB line of NULs quoted
+    /// whole, escaped, made an error of 6 MB).
+    #[test]
+    fn a_tables_syntax_error_is_bounded() {
+        let tmp = tempfile::tempdir().unwrap();
+        let file = tmp.path().join("t.toml");
+        std::fs::write(&file, "\0".repeat((MAX_TABLE_BYTES - 1) as usize)).unwrap();
+        let text = CoverTable::load(&file).unwrap_err().to_string();
+        assert!(
+            text.len() < 1000 && text.contains("t.toml"),
+            "{}",
+            &text[..1000]
+        );
+        assert!(text.contains("line 1, column"), "{text}");
+    }
 
     #[test]
     fn the_built_in_tables_read_and_resolve_for_the_baked_grass_types() {
