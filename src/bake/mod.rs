@@ -57,7 +57,8 @@ use crate::world::dem::{Dem, DemFormat, DemOptions};
 use crate::world::error::WorldError;
 use crate::world::format::write_atomic;
 use crate::world::manifest::{
-    Manifest, Sky, WindDefaults, WorldSource, forbidden_control, without_control_characters,
+    MIN_GRASS_TILE_M, Manifest, Sky, WindDefaults, WorldSource, forbidden_control,
+    without_control_characters,
 };
 use crate::world::tile::Pyramid;
 
@@ -424,6 +425,27 @@ pub fn bake(
             levels
         );
         match e {
+            // The finest tiles too wide (too narrow is refused by `check_cell_size`): said in
+            // the options' terms, not the manifest's.
+            WorldError::OutOfRange { field, .. } if field == "pyramid.derived_levels" => {
+                use crate::world::manifest::MAX_GRASS_TILE_M;
+                WorldError::bad_option(
+                    options,
+                    given,
+                    format!(
+                        "such that the finest tiles, where the grass grows, are \
+                         {MIN_GRASS_TILE_M} to {MAX_GRASS_TILE_M} m wide: the finest stored \
+                         level's tiles are {} m (the cell x the tile's cells), and the at most \
+                         {} derived levels below them halve that only to {} m (a smaller cell, \
+                         or fewer cells a tile or stored levels)",
+                        crate::world::error::short_number(cell * f64::from(opts.tile_cells)),
+                        24 - u32::from(levels),
+                        crate::world::error::short_number(
+                            cell * f64::from(opts.tile_cells) / 2f64.powi(24 - i32::from(levels))
+                        ),
+                    ),
+                )
+            }
             WorldError::OutOfRange { field, allowed, .. } if field.starts_with("pyramid.") => {
                 WorldError::bad_option(
                     options,
@@ -857,16 +879,53 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
             ),
         ));
     }
-    if let Some(c) = opts.cell_size_m
-        && !(c.is_finite() && c > 0.0)
-    {
-        return Err(WorldError::bad_option(
-            "--cell-size",
-            c,
-            "a positive number of metres".into(),
-        ));
+    if let Some(c) = opts.cell_size_m {
+        if !(c.is_finite() && c > 0.0) {
+            return Err(WorldError::bad_option(
+                "--cell-size",
+                c,
+                "a positive number of metres".into(),
+            ));
+        }
+        if c < min_bake_cell_m(t) {
+            // More cells a tile make tiles of this cell wide enough, where there are such.
+            let tiles = (MIN_GRASS_TILE_M / c).log2().ceil().exp2();
+            let hint = if c >= MIN_BAKE_CELL_M && tiles <= 1024.0 {
+                format!(", or pass --tile-cells {tiles} or more")
+            } else {
+                String::new()
+            };
+            return Err(WorldError::bad_option(
+                "--cell-size",
+                c,
+                format!("{}{hint}", least_cell_words(t)),
+            ));
+        }
     }
     Ok(())
+}
+
+/// Smallest cell a bake of `tile_cells` cells a tile resamples to: at least
+/// [`MIN_BAKE_CELL_M`], and such that the finest stored tiles are at least
+/// [`MIN_GRASS_TILE_M`] wide (derived levels only halve them, and are left out where they
+/// would make them narrower).
+pub fn min_bake_cell_m(tile_cells: u32) -> f64 {
+    (MIN_GRASS_TILE_M / f64::from(tile_cells)).max(MIN_BAKE_CELL_M)
+}
+
+/// [`min_bake_cell_m`] in words, why included.
+fn least_cell_words(tile_cells: u32) -> String {
+    let least = min_bake_cell_m(tile_cells);
+    if least > MIN_BAKE_CELL_M {
+        // Exact: 0.5 over a power of two prints in full.
+        format!(
+            "at least {least} m with --tile-cells {tile_cells} (0.5 m / {tile_cells}: the finest \
+             tiles, where the grass grows, must be at least {MIN_GRASS_TILE_M} m wide, and none \
+             is narrower than a stored tile of {tile_cells} cells)"
+        )
+    } else {
+        format!("at least {least} m (a bake resamples to at least 1 mm cells)")
+    }
 }
 
 /// Smallest cell a bake resamples to, metres.
@@ -875,8 +934,8 @@ pub const MIN_BAKE_CELL_M: f64 = 1e-3;
 /// Most cells a side a bake resamples the DEM to.
 pub const MAX_BAKE_CELLS: f64 = 65_536.0;
 
-/// Refuses a cell size (given, or the DEM's own) below a millimetre or resampling the DEM to
-/// more than [`MAX_BAKE_CELLS`] a side, naming the option it came from (`--cell-size`, or
+/// Refuses a cell size (given, or the DEM's own) below [`min_bake_cell_m`] or resampling the
+/// DEM to more than [`MAX_BAKE_CELLS`] a side, naming the option it came from (`--cell-size`, or
 /// `--dem-cell-size` for the DEM's own) or else the sidecar's field. Where the cell is the
 /// DEM's own and too many cells span the DEM, the DEM's cells may each be large enough: the
 /// bake's cell is the smaller of them, and the extent comes from the larger; the error then
@@ -886,11 +945,20 @@ fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), World
     let dem_path = opts.dem.as_path();
     let extent = dem.extent_m();
     let cells = extent[0].max(extent[1]) / cell;
-    let least = (extent[0].max(extent[1]) / MAX_BAKE_CELLS).max(MIN_BAKE_CELL_M);
-    if cell >= MIN_BAKE_CELL_M && cells <= MAX_BAKE_CELLS {
+    let floor = min_bake_cell_m(opts.tile_cells);
+    let least = (extent[0].max(extent[1]) / MAX_BAKE_CELLS).max(floor);
+    if cell >= floor && cells <= MAX_BAKE_CELLS {
         return Ok(());
     }
-    let allowed = if cell >= MIN_BAKE_CELL_M && opts.cell_size_m.is_none() {
+    let allowed = if cell < floor {
+        // The DEM's own cell (a --cell-size this small was refused with the options).
+        format!(
+            "{}: the bake's cell, the DEM's smaller cell rounded, would be {} m; pass \
+             --cell-size {least} or more",
+            least_cell_words(opts.tile_cells),
+            short_number(cell)
+        )
+    } else if opts.cell_size_m.is_none() {
         format!(
             "cells over which the DEM spans at most {MAX_BAKE_CELLS} of the bake's cells a \
              side: its {}x{} samples span {} x {} m, {} cells of {} m (the smaller cell, \
@@ -905,8 +973,8 @@ fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), World
         )
     } else {
         format!(
-            "at least {} m for this DEM ({}x{} samples, {} x {} m; a bake resamples to at least \
-             1 mm cells and at most {MAX_BAKE_CELLS} cells a side)",
+            "at least {} m for this DEM ({}x{} samples, {} x {} m; a bake resamples to at most \
+             {MAX_BAKE_CELLS} cells a side)",
             short_number(least),
             dem.width,
             dem.height,
@@ -918,11 +986,6 @@ fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), World
     match (opts.cell_size_m, opts.dem_cell_size_m) {
         (Some(c), _) => Err(WorldError::bad_option("--cell-size", c, allowed)),
         // The DEM's cells came from the option, not from the file or its sidecar.
-        (None, Some(given)) if cell < MIN_BAKE_CELL_M => Err(WorldError::bad_option(
-            "--dem-cell-size",
-            cells(given),
-            format!("{allowed}, or pass --cell-size"),
-        )),
         (None, Some(given)) => Err(WorldError::bad_option(
             "--dem-cell-size",
             cells(given),
@@ -935,11 +998,7 @@ fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), World
                 None => "its cells".into(),
             },
             value: cells([dem.cell_ew_m, dem.cell_ns_m]),
-            allowed: if cell < MIN_BAKE_CELL_M {
-                format!("{allowed}, or pass --cell-size")
-            } else {
-                allowed
-            },
+            allowed,
         }),
     }
 }

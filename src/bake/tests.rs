@@ -290,3 +290,71 @@ fn path_heights_are_the_drawn_ground_of_the_finest_derived_level() {
     }
     assert!(checked > 1000, "{checked}");
 }
+
+/// A cell too small for the tile's cells (the finest tiles, where the grass grows, at least
+/// 0.5 m wide) is refused in plain words, naming the option or the DEM's sidecar and the least
+/// cell, before anything is written.
+#[test]
+fn cells_too_small_for_the_tiles_are_refused_naming_the_least() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("fine.png");
+    image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(8, 8, |c, r| {
+        image::Luma([(100 + r + c) as u16])
+    })
+    .save(&png)
+    .unwrap();
+    let write_sidecar = |cell: f64| {
+        let json = serde_json::json!({
+            "width": 8,
+            "height": 8,
+            "cell_size_m": { "east_west": cell, "north_south": cell },
+        });
+        std::fs::write(png.with_extension("json"), json.to_string()).unwrap();
+    };
+    write_sidecar(10.0);
+    let out = dir.path().join("w");
+    let refusal = |cell_size_m: Option<f64>, tile_cells: u32| {
+        let opts = BakeOptions {
+            dem: png.clone(),
+            out: out.clone(),
+            cell_size_m,
+            tile_cells,
+            ..Default::default()
+        };
+        let e = bake(&opts, &mut |_, _, _| {}).unwrap_err().to_string();
+        assert!(!out.exists(), "{e}");
+        assert!(
+            !e.contains("derived_levels") && !e.contains("root tile"),
+            "{e}"
+        );
+        e
+    };
+    let e = refusal(Some(0.002), 128);
+    for want in [
+        "--cell-size 0.002",
+        "at least 0.00390625 m",
+        "--tile-cells 128",
+        "--tile-cells 256",
+    ] {
+        assert!(e.contains(want), "{e} lacks {want:?}");
+    }
+    // Below a millimetre no tile size helps.
+    let e = refusal(Some(0.0005), 1024);
+    assert!(
+        e.contains("--cell-size 0.0005: must be at least 0.001 m"),
+        "{e}"
+    );
+    // The DEM's own cell, where no --cell-size is given: its sidecar named.
+    for cell in [0.001, 1e-30] {
+        write_sidecar(cell);
+        let e = refusal(None, 128);
+        for want in [
+            "fine.json",
+            "cell_size_m",
+            "at least 0.00390625 m",
+            "--cell-size 0.00390625",
+        ] {
+            assert!(e.contains(want), "{cell}: {e} lacks {want:?}");
+        }
+    }
+}

@@ -9,6 +9,9 @@
 //!   the heights where files overlap; the others must agree with it there within
 //!   [`OVERLAP_TOLERANCE_M`] (adjacent SRTM tiles share their edge rows exactly), else the join
 //!   is refused naming both files.
+//! - **Grids**: files of the same spacing must lie on one grid, a whole number of samples
+//!   apart; one offset by part of a cell is refused, with the offset and a `gdalwarp` that puts
+//!   it on the other's grid (a coarser file is resampled anyway).
 //! - **Gaps**: ground no file covers is nodata, filled like the files' own voids, as long as no
 //!   gap runs more than [`MAX_GAP_SAMPLES`] samples along a row or column; a wider one (files
 //!   that are not neighbours) is refused, naming where it is.
@@ -286,6 +289,7 @@ impl Layout {
                     ),
                 ));
             }
+            check_grid_alignment(&parts, f, &dem, origin, size)?;
             parts.push(Part {
                 path: f.clone(),
                 rows,
@@ -558,6 +562,102 @@ impl Layout {
     }
 }
 
+/// Largest offset between the grids of two files of the same spacing that is taken as float
+/// rounding, in cells.
+const MAX_GRID_OFFSET_CELLS: f64 = 1e-3;
+
+/// Refuses file `path` (`dem`, its south-west sample at `origin`, its spacing `size`) where its
+/// grid has the spacing of an earlier file's in `parts` but is offset from it by part of a
+/// cell: their samples cannot be joined one for one (where they meet, a column or row of the
+/// joined grid would fall between them, or each be half the other's), naming both, the offset
+/// in cells and in metres, and how to put one on the other's grid.
+fn check_grid_alignment(
+    parts: &[Part],
+    path: &Path,
+    dem: &Dem,
+    origin: [f64; 2],
+    size: [f64; 2],
+) -> Result<(), WorldError> {
+    let same = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs());
+    let Some(other) = parts
+        .iter()
+        .find(|p| same(p.size[0], size[0]) && same(p.size[1], size[1]))
+    else {
+        return Ok(());
+    };
+    let fraction = [0, 1].map(|a| {
+        let cells = (origin[a] - other.origin[a]) / size[a];
+        cells - cells.round()
+    });
+    if fraction.iter().all(|f| f.abs() <= MAX_GRID_OFFSET_CELLS) {
+        return Ok(());
+    }
+    use super::error::short_number;
+    let degrees = dem.crs.contains("degrees");
+    let metres = [dem.cell_ew_m, dem.cell_ns_m];
+    let offsets: Vec<String> = [(0, "east-west"), (1, "north-south")]
+        .into_iter()
+        .filter(|&(a, _)| fraction[a].abs() > MAX_GRID_OFFSET_CELLS)
+        .map(|(a, axis)| {
+            let units = if degrees {
+                format!("{}°, ", trimmed(fraction[a].abs() * size[a]))
+            } else {
+                String::new()
+            };
+            format!(
+                "{} of a cell {axis} ({units}{} m)",
+                short_number(fraction[a].abs()),
+                short_number(fraction[a].abs() * metres[a])
+            )
+        })
+        .collect();
+    // The file's bounds (its cells' outer edges) shrunk to the other file's cell edges: what
+    // gdalwarp -te needs to resample it onto that grid.
+    let n = [dem.width, dem.height].map(|n| f64::from(n - 1));
+    let edge = [0, 1].map(|a| other.origin[a] - 0.5 * size[a]);
+    let snap = |a: usize, v: f64, up: bool| {
+        let k = (v - edge[a]) / size[a];
+        let k = if up { k.ceil() } else { k.floor() };
+        trimmed(edge[a] + k * size[a])
+    };
+    let te = [
+        snap(0, origin[0] - 0.5 * size[0], true),
+        snap(1, origin[1] - 0.5 * size[1], true),
+        snap(0, origin[0] + (n[0] + 0.5) * size[0], false),
+        snap(1, origin[1] + (n[1] + 0.5) * size[1], false),
+    ];
+    let name = super::window::file_name_of(path);
+    Err(mosaic_error(
+        path,
+        format!(
+            "its grid is offset from that of {} by {}: the files have the same spacing ({} x {} \
+             in their coordinate system) but their samples do not line up, so they cannot be \
+             joined sample for sample. Resample one onto the other's grid first, e.g. gdalwarp \
+             -tr {} {} -te {} -r bilinear {name} aligned_{name}{}",
+            other.path.display(),
+            offsets.join(" and "),
+            trimmed(size[0]),
+            trimmed(size[1]),
+            trimmed(size[0]),
+            trimmed(size[1]),
+            te.join(" "),
+            if (0..2).all(|a| (edge[a] / size[a] - (edge[a] / size[a]).round()).abs() < 1e-6) {
+                " (or -tap in place of -te: that grid's cell edges are whole multiples of the \
+                 spacing)"
+            } else {
+                ""
+            },
+        ),
+    ))
+}
+
+/// `v` to nine decimals, without trailing zeros: coordinates in metres or degrees, short.
+fn trimmed(v: f64) -> String {
+    let s = format!("{v:.9}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" { "0".into() } else { s.into() }
+}
+
 fn gap_error(
     parts: &[Part],
     run: usize,
@@ -577,4 +677,86 @@ fn gap_error(
             names.join(", ")
         ),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tiff::encoder::{TiffEncoder, colortype};
+    use tiff::tags::Tag;
+
+    /// Writes a GeoTIFF of `n` x `n` float samples of `cell` m in EPSG:32633 (pixel is area),
+    /// its north-west sample's corner at (`x0`, `y0`), heights a gentle slope.
+    fn write_tile(path: &Path, n: u32, cell: f64, x0: f64, y0: f64) {
+        let data: Vec<f32> = (0..n * n)
+            .map(|k| {
+                let (c, r) = (f64::from(k % n), f64::from(k / n));
+                (100.0 + 0.01 * (x0 + (c + 0.5) * cell) - 0.02 * (y0 - (r + 0.5) * cell)) as f32
+            })
+            .collect();
+        let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+        let mut enc = TiffEncoder::new(&mut file).unwrap();
+        let mut image = enc.new_image::<colortype::Gray32Float>(n, n).unwrap();
+        let d = image.encoder();
+        d.write_tag(Tag::ModelPixelScaleTag, &[cell, cell, 0.0][..])
+            .unwrap();
+        d.write_tag(Tag::ModelTiepointTag, &[0.0, 0.0, 0.0, x0, y0, 0.0][..])
+            .unwrap();
+        let keys: Vec<u16> = [
+            [1, 1, 0, 3],
+            [1024, 0, 1, 1],
+            [1025, 0, 1, 1],
+            [3072, 0, 1, 32633],
+        ]
+        .concat();
+        d.write_tag(Tag::GeoKeyDirectoryTag, &keys[..]).unwrap();
+        image.write_data(&data).unwrap();
+    }
+
+    #[test]
+    fn files_whose_grids_are_offset_by_part_of_a_cell_are_refused_saying_so() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = dir.path().join("s_a.tif");
+        let b = dir.path().join("s_b.tif");
+        write_tile(&a, 64, 10.0, 500_000.0, 4_100_000.0);
+        write_tile(&b, 64, 10.0, 500_635.0, 4_100_000.0);
+        let e = load_files(
+            &[a.clone(), b],
+            Path::new("s_a.tif"),
+            &DemOptions::default(),
+        )
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+        for want in [
+            "s_b.tif",
+            "s_a.tif",
+            "offset",
+            "0.5 of a cell east-west (5 m)",
+            "cannot be joined sample for sample",
+            "gdalwarp -tr 10 10 -te 500640 4099360 501270 4100000",
+            "-tap",
+        ] {
+            assert!(e.contains(want), "{e:?} lacks {want:?}");
+        }
+        assert!(!e.contains("gap"), "{e}");
+        // A quarter of a cell north-south, in a file that would otherwise join.
+        let c = dir.path().join("s_c.tif");
+        write_tile(&c, 64, 10.0, 500_630.0, 4_100_002.5);
+        let e = load_files(
+            &[a.clone(), c],
+            Path::new("s_a.tif"),
+            &DemOptions::default(),
+        )
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("0.25 of a cell north-south (2.5 m)"), "{e}");
+        assert!(!e.contains("east-west"), "{e}");
+        // On the same grid, sharing a column, they join.
+        let d = dir.path().join("s_d.tif");
+        write_tile(&d, 64, 10.0, 500_630.0, 4_100_000.0);
+        let dem = load_files(&[a, d], Path::new("s_a.tif"), &DemOptions::default()).unwrap();
+        assert_eq!((dem.width, dem.height), (127, 64));
+    }
 }
