@@ -366,6 +366,44 @@ fn a_map_in_geographic_coordinates_is_reprojected_onto_a_utm_dem() {
         seen[k] += 1;
     }
     assert!(seen.iter().all(|&n| n > 100), "{seen:?}");
+
+    // The same map inside a larger one, a code no table lists (77) 150 samples around it, as
+    // a DEM lies inside an ESA WorldCover tile: only the window over the DEM is read, and it
+    // paints the same.
+    let pad = 150;
+    let wide = [size[0] + 2 * pad, size[1] + 2 * pad];
+    let padded: Vec<u8> = (0..wide[1])
+        .flat_map(|r| (0..wide[0]).map(move |c| (r, c)))
+        .map(|(r, c)| {
+            let (c, r) = (c.wrapping_sub(pad), r.wrapping_sub(pad));
+            if c < size[0] && r < size[1] {
+                data[(r * size[0] + c) as usize]
+            } else {
+                77
+            }
+        })
+        .collect();
+    let tile = dir.path().join("tile_4326.tif");
+    let shift = f64::from(pad) * step;
+    write_geotiff::<colortype::Gray8>(
+        &tile,
+        wide,
+        [step; 2],
+        [lo.x - shift, hi.y + shift],
+        4326,
+        &padded,
+    );
+    let out_tile = dir.path().join("geo_tile");
+    bake(
+        &opts(
+            &dem,
+            &out_tile,
+            Some((tile, PathBuf::from("esa-worldcover"))),
+        ),
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert_eq!(finest_samples(&out_tile), finest_samples(&out));
 }
 
 /// Bakes, into `dir/name`, the DEM with a PNG map spanning it: grassland in its west half,
@@ -830,5 +868,288 @@ fn the_baylands_world_carries_its_materials_and_renders() {
         let p = common::failure_dir().join("baylands_tour.png");
         image.save(&p).unwrap();
         panic!("{ground} of {n} ground pixels (frame in {})", p.display());
+    }
+}
+
+/// Writes a one-band uint8 GeoTIFF of `data` (rows from the north) in square tiles of `tile`
+/// samples, each compressed with Deflate, as land-cover products are (ESA WorldCover's tiles
+/// are 36000 x 36000 samples in tiles of 1024).
+fn write_tiled_map(
+    path: &Path,
+    size: [u32; 2],
+    tile: u32,
+    cell: f64,
+    corner: [f64; 2],
+    data: &[u8],
+) {
+    use std::io::Write;
+    let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut enc = TiffEncoder::new(&mut file).unwrap();
+    let mut dir = enc.image_directory().unwrap();
+    let (mut offsets, mut counts) = (Vec::new(), Vec::new());
+    for ty in 0..size[1].div_ceil(tile) {
+        for tx in 0..size[0].div_ceil(tile) {
+            let mut raw = Vec::new();
+            for r in 0..tile {
+                for c in 0..tile {
+                    let (x, y) = (tx * tile + c, ty * tile + r);
+                    let inside = x < size[0] && y < size[1];
+                    raw.push(if inside {
+                        data[(y * size[0] + x) as usize]
+                    } else {
+                        0
+                    });
+                }
+            }
+            let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(6));
+            z.write_all(&raw).unwrap();
+            let packed = z.finish().unwrap();
+            offsets.push(dir.write_data(&packed[..]).unwrap() as u32);
+            counts.push(packed.len() as u32);
+        }
+    }
+    dir.write_tag(Tag::ImageWidth, size[0]).unwrap();
+    dir.write_tag(Tag::ImageLength, size[1]).unwrap();
+    dir.write_tag(Tag::BitsPerSample, 8u16).unwrap();
+    dir.write_tag(Tag::Compression, 8u16).unwrap();
+    dir.write_tag(Tag::PhotometricInterpretation, 1u16).unwrap();
+    dir.write_tag(Tag::SamplesPerPixel, 1u16).unwrap();
+    dir.write_tag(Tag::TileWidth, tile).unwrap();
+    dir.write_tag(Tag::TileLength, tile).unwrap();
+    dir.write_tag(Tag::TileOffsets, &offsets[..]).unwrap();
+    dir.write_tag(Tag::TileByteCounts, &counts[..]).unwrap();
+    dir.write_tag(Tag::ModelPixelScaleTag, &[cell, cell, 0.0][..])
+        .unwrap();
+    dir.write_tag(
+        Tag::ModelTiepointTag,
+        &[0.0, 0.0, 0.0, corner[0], corner[1], 0.0][..],
+    )
+    .unwrap();
+    dir.write_tag(Tag::GeoKeyDirectoryTag, &keys(32633)[..])
+        .unwrap();
+    dir.finish().unwrap();
+}
+
+/// A 512 x 512 map whose samples over the DEM (its columns and rows 224..=288) are ESA
+/// WorldCover classes in a varied pattern, and beyond 20 samples around them a code no table
+/// lists (77): read whole, the map would be refused.
+const BIG_MAP: u32 = 512;
+const BIG_FOOTPRINT: [u32; 2] = [224, 288];
+fn big_map_code(c: u32, r: u32) -> u8 {
+    let [lo, hi] = BIG_FOOTPRINT;
+    let near = |v: u32| v + 20 >= lo && v <= hi + 20;
+    if !near(c) || !near(r) {
+        return 77;
+    }
+    [10, 20, 30, 40, 50, 60, 80, 90, 0][((c / 7 + r / 5) % 9) as usize]
+}
+
+/// The big map's top-left corner: its sample (224, 224) is the DEM's north-west sample, with
+/// samples of the DEM's size (20 m).
+fn big_map_corner() -> [f64; 2] {
+    let off = f64::from(BIG_FOOTPRINT[0]) * DEM_CELL;
+    [DEM_CORNER[0] - off, DEM_CORNER[1] + off]
+}
+
+#[test]
+fn a_map_larger_than_the_limit_is_read_by_the_window_over_the_dem() {
+    use verdant::bake::cover::{CoverMap, CoverTable, MapWindow};
+    let dir = tempfile::tempdir().unwrap();
+    let dem_path = write_dem(dir.path());
+    let data: Vec<u8> = (0..BIG_MAP)
+        .flat_map(|r| (0..BIG_MAP).map(move |c| big_map_code(c, r)))
+        .collect();
+    let big = dir.path().join("big.tif");
+    write_tiled_map(&big, [BIG_MAP; 2], 64, DEM_CELL, big_map_corner(), &data);
+    // The same map cropped by hand to 92 x 92 samples around the DEM (in strips, uncompressed).
+    let (first, side) = (210u32, 92u32);
+    let cropped: Vec<u8> = (first..first + side)
+        .flat_map(|r| (first..first + side).map(move |c| big_map_code(c, r)))
+        .collect();
+    assert!(!cropped.contains(&77));
+    let crop = dir.path().join("crop.tif");
+    let shift = f64::from(first) * DEM_CELL;
+    let [x, y] = big_map_corner();
+    write_geotiff::<colortype::Gray8>(
+        &crop,
+        [side; 2],
+        [DEM_CELL; 2],
+        [x + shift, y - shift],
+        32633,
+        &cropped,
+    );
+
+    // With a limit of 10,000 samples (the map holds 262,144), it is read by its window: the
+    // DEM's footprint and 2 samples around it, 69 x 69 samples, all that is held.
+    let dem = verdant::world::Dem::load(&dem_path).unwrap();
+    let esa = PathBuf::from("esa-worldcover");
+    let table = CoverTable::load(&esa).unwrap();
+    let types = verdant::bake::default_grass_types();
+    let map = CoverMap::load_within(&big, &dem, &table, &esa, &types, 10_000).unwrap();
+    let want = MapWindow {
+        map_size: [BIG_MAP; 2],
+        first: [222, 222],
+        size: [69, 69],
+    };
+    assert_eq!(map.window(), want);
+    // (Read whole it would be refused as well: it holds code 77, which the table lacks.) The
+    // map cropped by hand gives the same window, from its strips.
+    let crop_window = CoverMap::load_within(&crop, &dem, &table, &esa, &types, 10_000)
+        .unwrap()
+        .window();
+    assert_eq!(crop_window.first, [12, 12]);
+    assert_eq!(crop_window.size, want.size);
+
+    // A bake with the whole map paints as one with the map cropped by hand.
+    let baked = |map: &Path, name: &str| {
+        let out = dir.path().join(name);
+        bake(
+            &opts(&dem_path, &out, Some((map.to_path_buf(), esa.clone()))),
+            &mut |_, _, _| {},
+        )
+        .unwrap();
+        finest_samples(&out)
+    };
+    let (whole, by_hand) = (baked(&big, "big"), baked(&crop, "crop"));
+    assert_eq!(whole, by_hand);
+    // And as the crop stored south row first (a ModelTransformation with rows going north):
+    // its window is read from the rows as stored.
+    let south_up = dir.path().join("crop_south_up.tif");
+    {
+        let rows: Vec<u8> = cropped
+            .chunks(side as usize)
+            .rev()
+            .flatten()
+            .copied()
+            .collect();
+        let south = y - shift - f64::from(side) * DEM_CELL;
+        let m = [
+            DEM_CELL,
+            0.0,
+            0.0,
+            x + shift,
+            0.0,
+            DEM_CELL,
+            0.0,
+            south,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        ];
+        let mut file = std::io::BufWriter::new(std::fs::File::create(&south_up).unwrap());
+        let mut enc = TiffEncoder::new(&mut file).unwrap();
+        let mut image = enc.new_image::<colortype::Gray8>(side, side).unwrap();
+        let d = image.encoder();
+        d.write_tag(Tag::ModelTransformationTag, &m[..]).unwrap();
+        d.write_tag(Tag::GeoKeyDirectoryTag, &keys(32633)[..])
+            .unwrap();
+        image.write_data(&rows).unwrap();
+    }
+    assert_eq!(baked(&south_up, "south_up"), whole);
+    // The classes painted: water where the map says 80.
+    let water = whole
+        .iter()
+        .filter(|s| s.3 == Material::Water as u8)
+        .count();
+    assert!(water > 100, "{water} samples of water");
+}
+
+#[test]
+fn a_window_over_the_limit_is_refused_naming_the_map_the_window_and_how_to_crop_it() {
+    use verdant::bake::cover::{CoverMap, CoverTable};
+    let dir = tempfile::tempdir().unwrap();
+    let dem_path = write_dem(dir.path());
+    // 128 x 128 samples of 10 m over the DEM exactly: the window is the whole map.
+    let map = dir.path().join("spanning.tif");
+    let data: Vec<u8> = (0..128 * 128).map(|k| [30, 80][k % 2]).collect();
+    write_tiled_map(&map, [128; 2], 32, 10.0, DEM_CORNER, &data);
+    let dem = verdant::world::Dem::load(&dem_path).unwrap();
+    let esa = PathBuf::from("esa-worldcover");
+    let table = CoverTable::load(&esa).unwrap();
+    let types = verdant::bake::default_grass_types();
+    let e = match CoverMap::load_within(&map, &dem, &table, &esa, &types, 10_000) {
+        Ok(m) => panic!("read a window of {:?}", m.window()),
+        Err(e) => e.to_string(),
+    };
+    for w in [
+        "spanning.tif",
+        "land cover",
+        "window of 128x128 samples",
+        "of its 128x128",
+        "10000",
+        "crop the map",
+    ] {
+        assert!(e.contains(w), "{e:?} lacks {w:?}");
+    }
+    // Within the limit it is read, whole.
+    let m = CoverMap::load_within(&map, &dem, &table, &esa, &types, 128 * 128).unwrap();
+    assert_eq!(m.window().size, [128, 128]);
+}
+
+#[test]
+fn a_palette_geotiff_is_refused_as_a_dem_or_a_density_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path());
+    let n = DEM_SIZE as usize;
+    let indices: Vec<u8> = (0..n * n).map(|k| (k % 200) as u8).collect();
+    let palette = |name: &str, compression: Compression| {
+        let path = dir.path().join(name);
+        write_geotiff_as::<colortype::Gray8>(
+            &path,
+            [DEM_SIZE; 2],
+            [DEM_CELL; 2],
+            DEM_CORNER,
+            32633,
+            &indices,
+            compression,
+            true,
+        );
+        path
+    };
+    let lzw = palette("palette_lzw.tif", Compression::Lzw);
+    let deflate = palette(
+        "palette_deflate.tif",
+        Compression::Deflate(Default::default()),
+    );
+    let cases = [
+        (opts(&lzw, &dir.path().join("o1"), None), "palette_lzw.tif"),
+        (
+            opts(&deflate, &dir.path().join("o2"), None),
+            "palette_deflate.tif",
+        ),
+        (
+            BakeOptions {
+                density_map: Some(lzw.clone()),
+                ..opts(&dem, &dir.path().join("o3"), None)
+            },
+            "palette_lzw.tif",
+        ),
+        (
+            BakeOptions {
+                mask: Some(deflate.clone()),
+                ..opts(&dem, &dir.path().join("o4"), None)
+            },
+            "palette_deflate.tif",
+        ),
+    ];
+    for (k, (o, name)) in cases.into_iter().enumerate() {
+        let e = match bake(&o, &mut |_, _, _| {}) {
+            Ok(_) => panic!("case {k} baked"),
+            Err(e) => e.to_string(),
+        };
+        for w in [
+            name,
+            "palette image",
+            "class indices",
+            "not heights or values",
+        ] {
+            assert!(e.contains(w), "case {k}: {e:?} lacks {w:?}");
+        }
+        assert!(!o.out.exists(), "case {k}: nothing written");
     }
 }

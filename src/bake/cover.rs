@@ -7,9 +7,11 @@
 //!   a colour table, a palette PNG) is read by its indices. Codes are read exactly, as integers;
 //!   a band of another sample type (float, signed, 32-bit) is refused, naming it. A georeferenced
 //!   GeoTIFF is placed on the DEM by both files' georeferencing (reprojected by their EPSG codes
-//!   where their coordinate systems differ); its size, resolution and extent are its own. A
-//!   PNG, or a GeoTIFF without georeferencing, spans the DEM exactly (first row north). Each
-//!   sample of the finest grid takes the class of the map's nearest sample.
+//!   where their coordinate systems differ); its size, resolution and extent are its own, and
+//!   only its window over the DEM's footprint is read (a whole ESA WorldCover tile or NLCD's
+//!   CONUS map is given as it is; the window is bounded). A PNG, or a GeoTIFF without
+//!   georeferencing, spans the DEM exactly (first row north) and is read whole. Each sample of
+//!   the finest grid takes the class of the map's nearest sample.
 //! - **The table**: TOML, `name`, `nodata` (class codes that say "no data here") and one
 //!   `[[class]]` per code: `code`, `name`, `grass` (one of the world's grass types, or "none":
 //!   nothing grows), `density` (the grass map's cover there, 0 to 1) and, optionally,
@@ -48,6 +50,8 @@ pub const BUILT_IN_TABLES: [(&str, &str); 2] = [
 const MAX_TABLE_BYTES: u64 = 1 << 20;
 /// Largest map read, samples (as a DEM).
 const MAX_MAP_SAMPLES: u64 = crate::world::dem::MAX_DEM_SAMPLES;
+/// Samples read beyond the DEM's footprint on every side of a georeferenced map's window.
+const WINDOW_MARGIN: usize = 2;
 /// Unknown classes named in an error at most.
 const NAMED_UNKNOWN: usize = 8;
 
@@ -256,9 +260,22 @@ fn as_map(e: WorldError, what: &'static str) -> WorldError {
     }
 }
 
+/// The part of a land-cover map that was read: all of it, or of a georeferenced GeoTIFF the
+/// window over the DEM's footprint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MapWindow {
+    /// The whole map's samples: columns, rows.
+    pub map_size: [u32; 2],
+    /// The window's north-west sample: column from the west, row from the north.
+    pub first: [u32; 2],
+    /// The window's samples: columns, rows (what was decoded and is held).
+    pub size: [u32; 2],
+}
+
 /// A land-cover map placed on the DEM, with its table resolved for the world's grass types.
 pub struct CoverMap {
     placed: Placed,
+    window: MapWindow,
     /// Class codes, row 0 north; `None` where the map says nodata.
     codes: Vec<Option<u32>>,
     /// Per code: what it paints.
@@ -275,10 +292,9 @@ impl CoverMap {
     }
 
     /// Reads the map at `path`, places it on `dem` and resolves `table` for `grass_types`.
-    /// Refuses a map whose samples are not unsigned integers of at most 16 bits (a float or
-    /// signed band, naming its type), one that cannot be placed (another coordinate system, no
-    /// overlap with the DEM, a georeferenced map on a DEM without georeferencing) and one that
-    /// holds codes the table does not list, naming them.
+    /// Of a georeferenced GeoTIFF only the window over the DEM's footprint is read (a map of
+    /// any size: a whole ESA WorldCover tile or NLCD's CONUS), at most 2^28 samples;
+    /// see [`CoverMap::load_within`].
     pub fn load(
         path: &Path,
         dem: &Dem,
@@ -286,12 +302,30 @@ impl CoverMap {
         table_path: &Path,
         grass_types: &[GrassType],
     ) -> Result<CoverMap, WorldError> {
+        Self::load_within(path, dem, table, table_path, grass_types, MAX_MAP_SAMPLES)
+    }
+
+    /// [`CoverMap::load`] holding at most `max_samples` of the map: the window of a
+    /// georeferenced GeoTIFF over the DEM's footprint (and two samples around it), or a
+    /// GeoTIFF without georeferencing whole (a PNG map is read whole, at most 2^28 samples).
+    /// Refuses a window (or a map read whole) of more samples, naming its size and how to crop
+    /// the map; a map whose samples are not unsigned integers of at
+    /// most 16 bits (a float or signed band, naming its type), one that cannot be placed
+    /// (another coordinate system, no overlap with the DEM, a georeferenced map on a DEM
+    /// without georeferencing) and one that holds codes the table does not list where it is
+    /// read, naming them.
+    pub fn load_within(
+        path: &Path,
+        dem: &Dem,
+        table: &CoverTable,
+        table_path: &Path,
+        grass_types: &[GrassType],
+        max_samples: u64,
+    ) -> Result<CoverMap, WorldError> {
         let painted = table.resolve(table_path, grass_types)?;
-        let raster = read_classes(path)?;
-        let placed = Placed::on(&raster, dem, path)?;
+        let (placed, codes, window) = read_classes(path, dem, max_samples)?;
         let nodata: std::collections::BTreeSet<u32> = table.nodata.iter().copied().collect();
-        let codes: Vec<Option<u32>> = raster
-            .values
+        let codes: Vec<Option<u32>> = codes
             .into_iter()
             .map(|c| c.filter(|c| !nodata.contains(c)))
             .collect();
@@ -323,9 +357,15 @@ impl CoverMap {
         }
         Ok(CoverMap {
             placed,
+            window,
             codes,
             painted,
         })
+    }
+
+    /// The part of the map that was read and is held.
+    pub fn window(&self) -> MapWindow {
+        self.window
     }
 
     /// What the map paints at world position `p` (metres from the DEM's south-west sample), or
@@ -336,11 +376,15 @@ impl CoverMap {
     }
 }
 
-/// A raster placed on the DEM: its size, and world position (metres from the DEM's south-west
-/// sample) to its column and row from the south.
+/// A raster placed on the DEM: its size (or the size of the window of it that was read), and
+/// world position (metres from the DEM's south-west sample) to its column and row from the
+/// south.
 struct Placed {
     width: usize,
     height: usize,
+    /// The window's south-west sample in the whole raster: column from the west, row from the
+    /// south (`[0, 0]` where it was read whole).
+    first: [usize; 2],
     to_raster: ToRaster,
 }
 
@@ -472,7 +516,7 @@ fn reprojection_lattice(
 impl Placed {
     /// Places `raster` (read from `path`) on `dem` by their georeferencing, or over the whole
     /// DEM where the raster has none; refuses what cannot be placed or does not overlap.
-    fn on<T>(raster: &Raster<T>, dem: &Dem, path: &Path) -> Result<Placed, WorldError> {
+    fn on(raster: &Georef, dem: &Dem, path: &Path) -> Result<Placed, WorldError> {
         let (w, h) = (raster.width as usize, raster.height as usize);
         let [ex, ey] = dem.extent_m();
         let to_raster = match (
@@ -516,6 +560,7 @@ impl Placed {
         let placed = Placed {
             width: w,
             height: h,
+            first: [0, 0],
             to_raster,
         };
         match &placed.to_raster {
@@ -563,10 +608,55 @@ impl Placed {
         Ok(placed)
     }
 
-    /// The index (row 0 north) of the sample nearest world position `p`, `None` beyond the map.
+    /// The DEM's footprint on the whole raster, `margin` samples wider on every side and
+    /// clamped to it: its first and last columns (from the west) and rows (from the south),
+    /// inclusive. Every world position inside the DEM maps to a sample of it. Only for a
+    /// raster placed by [`Placed::on`] that overlaps the DEM.
+    fn footprint(&self, dem: &Dem, margin: usize) -> [[usize; 2]; 2] {
+        let (lo, hi) = match &self.to_raster {
+            ToRaster::Linear { a, b } => {
+                // Linear: the DEM's corners bound it.
+                let [ex, ey] = dem.extent_m();
+                let q0 = *a;
+                let q1 = *a + *b * DVec2::new(ex, ey);
+                (q0.min(q1), q0.max(q1))
+            }
+            // The lattice reaches a node beyond the DEM's every edge.
+            ToRaster::Lattice { at, .. } => at.iter().fold(
+                (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+                |(lo, hi), q| (lo.min(*q), hi.max(*q)),
+            ),
+        };
+        let m = margin as f64;
+        let span = |lo: f64, hi: f64, n: usize| {
+            let last = (n - 1) as f64;
+            let first = (lo.round() - m).clamp(0.0, last) as usize;
+            let end = (hi.round() + m).clamp(0.0, last) as usize;
+            [first, end.max(first)]
+        };
+        [span(lo.x, hi.x, self.width), span(lo.y, hi.y, self.height)]
+    }
+
+    /// The raster cut to a window of `size` samples (columns, rows) whose south-west sample is
+    /// the whole raster's `first` (column from the west, row from the south): positions map to
+    /// the same samples, and beyond the window to none.
+    fn window(self, first: [usize; 2], size: [usize; 2]) -> Placed {
+        Placed {
+            width: size[0],
+            height: size[1],
+            first,
+            ..self
+        }
+    }
+
+    /// The index (row 0 north) of the sample nearest world position `p`, `None` beyond the map
+    /// (or the window of it that was read).
     fn index_at(&self, p: DVec2) -> Option<usize> {
         let q = self.to_raster.map(p);
-        let (c, r) = (q.x.round(), q.y.round());
+        // The nearest sample of the whole raster, then its place in the window (exactly: whole
+        // numbers).
+        let c = q.x.round() - self.first[0] as f64;
+        let r = q.y.round() - self.first[1] as f64;
         if c < 0.0 || r < 0.0 || c >= self.width as f64 || r >= self.height as f64 {
             return None;
         }
@@ -624,7 +714,7 @@ impl ValueMap {
         scale: impl FnOnce(&Raster<f64>) -> Result<Box<dyn Fn(f64) -> f64>, WorldError>,
     ) -> Result<ValueMap, WorldError> {
         let raster = read_values(path).map_err(|e| as_map(e, what))?;
-        let placed = Placed::on(&raster, dem, path).map_err(|e| as_map(e, what))?;
+        let placed = Placed::on(&raster.geo, dem, path).map_err(|e| as_map(e, what))?;
         let f = scale(&raster).map_err(|e| as_map(e, what))?;
         let values = raster.values.iter().map(|v| v.map(&f)).collect();
         Ok(ValueMap { placed, values })
@@ -636,17 +726,22 @@ impl ValueMap {
     }
 }
 
-/// A raster as read: values row 0 north (`None`: the file's nodata), the value that means
-/// "full" in its format (255 in an 8-bit PNG, 65535 in a 16-bit one, 1 in a GeoTIFF), and its
-/// georeferencing where it has any.
-struct Raster<T> {
+/// A raster's size and georeferencing (where it has any), known before its samples are read.
+struct Georef {
     width: u32,
     height: u32,
-    values: Vec<Option<T>>,
-    full: f64,
     crs: String,
     origin: Option<[f64; 2]>,
     pixel_size: Option<[f64; 2]>,
+}
+
+/// A raster as read: its size and georeferencing, values row 0 north (`None`: the file's
+/// nodata), and the value that means "full" in its format (255 in an 8-bit PNG, 65535 in a
+/// 16-bit one, 1 in a GeoTIFF).
+struct Raster<T> {
+    geo: Georef,
+    values: Vec<Option<T>>,
+    full: f64,
 }
 
 /// The two formats a map may be in, told apart by content.
@@ -675,24 +770,81 @@ fn map_format(path: &Path) -> Result<MapFormat, WorldError> {
     }
 }
 
-/// Reads a class map: a GeoTIFF of one uint8 or uint16 band (grayscale or with a colour
-/// table), or a grayscale or palette PNG; codes exactly as the file holds them.
-fn read_classes(path: &Path) -> Result<Raster<u32>, WorldError> {
-    match map_format(path)? {
-        MapFormat::Png => read_png(path, true),
-        MapFormat::Tiff => {
-            let g = crate::world::geotiff::load_classes(path, MAX_MAP_SAMPLES)?;
-            Ok(Raster {
-                width: g.width,
-                height: g.height,
-                values: g.codes,
-                full: 1.0,
-                crs: g.crs,
-                origin: g.origin,
-                pixel_size: g.pixel_size,
-            })
+/// Reads a class map and places it on `dem`: a GeoTIFF of one uint8 or uint16 band
+/// (grayscale or with a colour table), or a grayscale or palette PNG; codes exactly as the file
+/// holds them. Of a georeferenced GeoTIFF only the window over the DEM's footprint is read (its
+/// strips or tiles that hold it decoded, one at a time), and the window may hold at most
+/// `max_samples`; a PNG, or a GeoTIFF without georeferencing, spans the DEM and is read whole
+/// (a PNG of at most [`MAX_MAP_SAMPLES`], a GeoTIFF of at most `max_samples`).
+fn read_classes(
+    path: &Path,
+    dem: &Dem,
+    max_samples: u64,
+) -> Result<(Placed, Vec<Option<u32>>, MapWindow), WorldError> {
+    let tiff = match map_format(path)? {
+        MapFormat::Png => {
+            let raster = read_png(path, true)?;
+            let placed = Placed::on(&raster.geo, dem, path)?;
+            let size = [raster.geo.width, raster.geo.height];
+            let window = MapWindow {
+                map_size: size,
+                first: [0, 0],
+                size,
+            };
+            return Ok((placed, raster.values, window));
         }
+        MapFormat::Tiff => crate::world::geotiff::open_classes(path)?,
+    };
+    let geo = Georef {
+        width: tiff.width,
+        height: tiff.height,
+        crs: tiff.crs.clone(),
+        origin: tiff.origin,
+        pixel_size: tiff.pixel_size,
+    };
+    let placed = Placed::on(&geo, dem, path)?;
+    let map_size = [geo.width, geo.height];
+    let whole = geo.origin.is_none() || geo.pixel_size.is_none();
+    let [cols, rows] = if whole {
+        [[0, geo.width as usize - 1], [0, geo.height as usize - 1]]
+    } else {
+        placed.footprint(dem, WINDOW_MARGIN)
+    };
+    let size = [cols[1] + 1 - cols[0], rows[1] + 1 - rows[0]];
+    // The window's north-west sample: rows are counted from the north in the file.
+    let first = [cols[0], geo.height as usize - 1 - rows[1]];
+    let samples = size[0] as u64 * size[1] as u64;
+    if samples > max_samples {
+        let [w, h] = map_size;
+        let problem = if whole {
+            format!(
+                "{w}x{h} samples, more than the {max_samples} a map is read with at most: a map \
+                 without georeferencing spans the DEM and is read whole; georeference it (only \
+                 its part over the DEM is then read) or resample it smaller"
+            )
+        } else {
+            format!(
+                "its part over the DEM is a window of {}x{} samples (columns {}..{}, rows {}..{} \
+                 from the north of its {w}x{h}), more than the {max_samples} a map is read with \
+                 at most: crop the map to the DEM's area first (gdal_translate -projwin, or \
+                 gdalwarp -te with -r near), or bake a smaller DEM",
+                size[0],
+                size[1],
+                first[0],
+                first[0] + size[0],
+                first[1],
+                first[1] + size[1],
+            )
+        };
+        return Err(map_error(path, problem));
     }
+    let codes = tiff.read_window(first, size)?;
+    let window = MapWindow {
+        map_size,
+        first: first.map(|v| v as u32),
+        size: size.map(|v| v as u32),
+    };
+    Ok((placed.window([cols[0], rows[0]], size), codes, window))
 }
 
 /// Reads a density map or mask: a grayscale PNG or a GeoTIFF of one band of any sample type a
@@ -703,12 +855,8 @@ fn read_values(path: &Path) -> Result<Raster<f64>, WorldError> {
             let r = read_png(path, false)?;
             Ok(Raster {
                 values: r.values.into_iter().map(|v| v.map(f64::from)).collect(),
-                width: r.width,
-                height: r.height,
+                geo: r.geo,
                 full: r.full,
-                crs: r.crs,
-                origin: r.origin,
-                pixel_size: r.pixel_size,
             })
         }
         MapFormat::Tiff => {
@@ -725,13 +873,15 @@ fn read_values(path: &Path) -> Result<Raster<f64>, WorldError> {
                 .map(|&v| v.is_finite().then_some(f64::from(v)))
                 .collect();
             Ok(Raster {
-                width: g.width,
-                height: g.height,
+                geo: Georef {
+                    width: g.width,
+                    height: g.height,
+                    crs: g.crs,
+                    origin: g.origin,
+                    pixel_size: g.pixel_size,
+                },
                 values,
                 full: 1.0,
-                crs: g.crs,
-                origin: g.origin,
-                pixel_size: g.pixel_size,
             })
         }
     }
@@ -789,7 +939,11 @@ fn read_png(path: &Path, classes: bool) -> Result<Raster<u32>, WorldError> {
     if width < 2 || height < 2 || u64::from(width) * u64::from(height) > MAX_MAP_SAMPLES {
         return Err(map_error(
             path,
-            format!("{width}x{height} samples: at least 2x2 and at most {MAX_MAP_SAMPLES}"),
+            format!(
+                "{width}x{height} samples: at least 2x2 and at most {MAX_MAP_SAMPLES} (a PNG map \
+                 spans the DEM and is read whole: resample it smaller, or give a georeferenced \
+                 GeoTIFF, of which only the part over the DEM is read)"
+            ),
         ));
     }
     let size = reader.output_buffer_size().ok_or_else(|| {
@@ -820,13 +974,15 @@ fn read_png(path: &Path, classes: bool) -> Result<Raster<u32>, WorldError> {
         .flat_map(|row| (0..width as usize).map(move |c| Some(sample(row, c))))
         .collect();
     Ok(Raster {
-        width,
-        height,
+        geo: Georef {
+            width,
+            height,
+            crs: String::new(),
+            origin: None,
+            pixel_size: None,
+        },
         values,
         full: f64::from((1u32 << bits) - 1),
-        crs: String::new(),
-        origin: None,
-        pixel_size: None,
     })
 }
 

@@ -4,10 +4,13 @@
 //!
 //! - Uncompressed, Deflate, LZW, PackBits or Zstandard chunks.
 //! - One band of uint8, int16, uint16, int32, float32 or float64.
-//! - Class rasters (land cover, [`load_classes`]): one band of uint8 or uint16 class codes, read
+//! - Class rasters (land cover, [`open_classes`]): one band of uint8 or uint16 class codes, read
 //!   as integers, grayscale or with a colour table (a palette image's indices are its codes; the
-//!   colours are not read). Their chunks are all decompressed here, since the `tiff` crate
+//!   colours are not read), of any size, a window at a time: only the strips or tiles that hold
+//!   the window are decoded. Their chunks are all decompressed here, since the `tiff` crate
 //!   refuses to hand out a palette image's indices.
+//! - A palette image read as heights (a DEM, a density map, a mask) is refused before anything
+//!   is decoded: its samples are class indices.
 //! - Cell size from `ModelPixelScale` (with `ModelTiepoint` for the origin) or from an unrotated
 //!   `ModelTransformation`. Rows are mapped north-up (a grid stored south row first is flipped).
 //! - The GeoKey directory says whether the grid is projected (x/y in metres, or in feet, which
@@ -56,6 +59,8 @@ const MODEL_GEOGRAPHIC: u16 = 2;
 const RASTER_PIXEL_IS_POINT: u16 = 2;
 /// Angular unit: degree.
 const ANGULAR_DEGREE: u16 = 9102;
+/// PhotometricInterpretation of a palette (colour-mapped) image.
+const PALETTE: u16 = 3;
 /// A code that means "given by another key".
 const USER_DEFINED: u16 = 32767;
 
@@ -116,6 +121,18 @@ fn read_header<R: Read + Seek>(
             format!("{bands} bands (samples per pixel): {read}"),
         ));
     }
+    // A palette image's samples are indices into its colour table: class codes, which only a
+    // class map reads; as heights or values they would be nonsense, read without a word.
+    let photometric = tag_u16(Tag::PhotometricInterpretation)?;
+    if reading == Reading::Heights && photometric == Some(PALETTE) {
+        return Err(unsupported(
+            path,
+            "a palette image (PhotometricInterpretation 3, RGBPalette): its samples are class \
+             indices into a colour table, not heights or values (a land-cover map is given \
+             with --land-cover; a DEM, a density map or a mask is a grayscale band)"
+                .into(),
+        ));
+    }
     let bits = tag_u16(Tag::BitsPerSample)?.unwrap_or(1);
     let sample_format = tag_u16(Tag::SampleFormat)?.unwrap_or(1);
     let sample = match (reading, sample_format, bits) {
@@ -151,8 +168,7 @@ fn read_header<R: Read + Seek>(
     };
     // A class map is grayscale or colour-mapped; its colour table is not read (the indices are
     // the codes).
-    let photometric = tag_u16(Tag::PhotometricInterpretation)?;
-    if reading == Reading::Classes && !matches!(photometric, None | Some(0 | 1 | 3)) {
+    if reading == Reading::Classes && !matches!(photometric, None | Some(0 | 1 | PALETTE)) {
         return Err(unsupported(
             path,
             format!(
@@ -335,32 +351,39 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
     })
 }
 
-/// A class raster (a land-cover map) as read by [`load_classes`]: class codes row 0 north and
-/// where it lies.
-pub(crate) struct ClassGrid {
+/// A GeoTIFF of class codes (a land-cover map) opened by [`open_classes`]: its size and where
+/// it lies, read from its header; its samples are read a window at a time
+/// ([`ClassTiff::read_window`]), only the strips or tiles that hold the window decoded.
+pub(crate) struct ClassTiff {
     pub width: u32,
     pub height: u32,
-    /// Class codes, row 0 north, west first; `None` where the file's nodata (`GDAL_NODATA`)
-    /// is.
-    pub codes: Vec<Option<u32>>,
     /// The coordinate system's description (empty without georeferencing).
     pub crs: String,
     /// The south-west sample's coordinates, where the file is georeferenced.
     pub origin: Option<[f64; 2]>,
     /// Spacing in the coordinate system's units (x, y), where the file is georeferenced.
     pub pixel_size: Option<[f64; 2]>,
+    path: PathBuf,
+    layout: ChunkLayout,
+    chunks: Vec<(u64, u64)>,
+    codec: Codec,
+    /// The file's nodata code (`GDAL_NODATA`), where it is a whole number.
+    nodata: Option<u64>,
+    flip_rows: bool,
+    flip_cols: bool,
 }
 
-/// Reads a GeoTIFF of class codes: one band of uint8 or uint16, grayscale or indices into a
-/// colour table, read exactly as integers; at most `max_samples` samples. Another sample type
-/// is refused before anything is decoded, naming it and what is read. A file without (usable)
-/// georeferencing is read as a bare grid (no origin or pixel size).
-pub(crate) fn load_classes(path: &Path, max_samples: u64) -> Result<ClassGrid, WorldError> {
+/// Opens a GeoTIFF of class codes: one band of uint8 or uint16, grayscale or indices into a
+/// colour table. Another sample type is refused before anything is decoded, naming it and what
+/// is read. A file without (usable) georeferencing is read as a bare grid (no origin or pixel
+/// size). The map may be of any size: nothing is decoded until a window is read.
+pub(crate) fn open_classes(path: &Path) -> Result<ClassTiff, WorldError> {
     let (file, file_len) = super::format::open_regular(path)?;
     let mut decoder = Decoder::new(BufReader::new(file))
         .map_err(|e| tiff_error(path, e))?
         .with_limits(limits());
-    let header = read_header(path, &mut decoder, file_len, max_samples, Reading::Classes)?;
+    // Its size is bounded by the window read, not here.
+    let header = read_header(path, &mut decoder, file_len, u64::MAX, Reading::Classes)?;
     let layout = chunk_layout(path, &mut decoder, &header)?;
     let geo = GeoTags::read(path, &mut decoder)?;
     let (width, height) = (header.width, header.height);
@@ -368,32 +391,74 @@ pub(crate) fn load_classes(path: &Path, max_samples: u64) -> Result<ClassGrid, W
         Err(WorldError::NoGeoreference { .. }) => geo.grid(path, width, height, true)?,
         other => other?,
     };
-    // The `tiff` crate reads no palette image's indices, so every codec is decoded here.
-    let bits = decode_chunks(path, &layout, &header.chunks, Codec::of(header.compression))?;
-    let (w, h) = (width as usize, height as usize);
-    if bits.len() != w * h {
-        return Err(corrupt(
-            path,
-            format!("{} samples decoded, {w}x{h} expected", bits.len()),
-        ));
-    }
     let nodata = geo
         .nodata
         .filter(|n| n.fract() == 0.0 && *n >= 0.0 && *n <= f64::from(u32::MAX))
         .map(|n| n as u64);
-    let mut codes: Vec<Option<u32>> = bits
-        .into_iter()
-        .map(|v| (Some(v) != nodata).then_some(v as u32))
-        .collect();
-    north_up(&mut codes, w, grid.flip_rows, grid.flip_cols);
-    Ok(ClassGrid {
+    Ok(ClassTiff {
         width,
         height,
-        codes,
         crs: grid.crs,
         origin: grid.origin,
         pixel_size: grid.pixel_size,
+        path: path.to_path_buf(),
+        layout,
+        chunks: header.chunks,
+        // The `tiff` crate reads no palette image's indices, so every codec is decoded here.
+        codec: Codec::of(header.compression),
+        nodata,
+        flip_rows: grid.flip_rows,
+        flip_cols: grid.flip_cols,
     })
+}
+
+impl ClassTiff {
+    /// The class codes of the window of `size` samples (columns, rows) whose north-west sample
+    /// is `first` (column from the west, row from the north), row 0 north, west first; `None`
+    /// where the file's nodata is. Only the strips or tiles that hold the window are read and
+    /// decoded, one at a time: what is held is the window and one chunk.
+    pub(crate) fn read_window(
+        &self,
+        first: [usize; 2],
+        size: [usize; 2],
+    ) -> Result<Vec<Option<u32>>, WorldError> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let [cols, rows] = [
+            [first[0], first[0] + size[0]],
+            [first[1], first[1] + size[1]],
+        ];
+        assert!(cols[1] <= w && rows[1] <= h, "a window inside the map");
+        // The window as the file stores it.
+        let stored_cols = if self.flip_cols {
+            [w - cols[1], w - cols[0]]
+        } else {
+            cols
+        };
+        let stored_rows = if self.flip_rows {
+            [h - rows[1], h - rows[0]]
+        } else {
+            rows
+        };
+        let mut codes = vec![None; size[0] * size[1]];
+        let (mut file, _) = super::format::open_regular(&self.path)?;
+        let mut read = |offset: u64, count: u64| read_chunk(&self.path, &mut file, offset, count);
+        decode_window(
+            &self.path,
+            &self.layout,
+            &self.chunks,
+            self.codec,
+            &mut read,
+            [stored_cols, stored_rows],
+            &mut |r, c, bits| {
+                let at = r * size[0] + c;
+                for (code, &v) in codes[at..at + bits.len()].iter_mut().zip(bits) {
+                    *code = (Some(v) != self.nodata).then_some(v as u32);
+                }
+            },
+        )?;
+        north_up(&mut codes, size[0].max(1), self.flip_rows, self.flip_cols);
+        Ok(codes)
+    }
 }
 
 /// The GeoTIFF tags of the first image.
@@ -936,6 +1001,20 @@ impl Codec {
     }
 }
 
+/// `count` bytes of `file` from `offset` (a chunk's packed bytes).
+fn read_chunk(
+    path: &Path,
+    file: &mut std::fs::File,
+    offset: u64,
+    count: u64,
+) -> Result<Vec<u8>, WorldError> {
+    let mut packed = vec![0u8; count as usize];
+    file.seek(SeekFrom::Start(offset))
+        .and_then(|_| file.read_exact(&mut packed))
+        .map_err(|e| WorldError::io(path, e))?;
+    Ok(packed)
+}
+
 fn decode_chunks(
     path: &Path,
     layout: &ChunkLayout,
@@ -943,13 +1022,7 @@ fn decode_chunks(
     codec: Codec,
 ) -> Result<Vec<u64>, WorldError> {
     let (mut file, _) = super::format::open_regular(path)?;
-    let mut read = |offset: u64, count: u64| -> Result<Vec<u8>, WorldError> {
-        let mut packed = vec![0u8; count as usize];
-        file.seek(SeekFrom::Start(offset))
-            .and_then(|_| file.read_exact(&mut packed))
-            .map_err(|e| WorldError::io(path, e))?;
-        Ok(packed)
-    };
+    let mut read = |offset: u64, count: u64| read_chunk(path, &mut file, offset, count);
     decode_rows(
         path,
         layout,
@@ -971,6 +1044,39 @@ fn decode_rows(
     read: &mut dyn FnMut(u64, u64) -> Result<Vec<u8>, WorldError>,
     rows: [usize; 2],
 ) -> Result<Vec<u64>, WorldError> {
+    let w = layout.width as usize;
+    let mut out = vec![0u64; w * (rows[1] - rows[0])];
+    decode_window(
+        path,
+        layout,
+        chunks,
+        codec,
+        read,
+        [[0, w], rows],
+        &mut |r, c, bits| {
+            let at = r * w + c;
+            out[at..at + bits.len()].copy_from_slice(bits);
+        },
+    )?;
+    Ok(out)
+}
+
+/// Decodes the chunks that hold the window of image columns `window[0]` and rows `window[1]`
+/// (as stored: from the first column and row stored, ends exclusive), one at a time, their
+/// bytes read by `read(offset, count)`, and hands each chunk row's part of the window to
+/// `put(row, column, samples)` (row and column in the window; each sample's bit pattern in the
+/// low `sample_bytes` bytes). A strip is decoded whole (it spans every column); a tile outside
+/// the window is not read.
+fn decode_window(
+    path: &Path,
+    layout: &ChunkLayout,
+    chunks: &[(u64, u64)],
+    codec: Codec,
+    read: &mut dyn FnMut(u64, u64) -> Result<Vec<u8>, WorldError>,
+    window: [[usize; 2]; 2],
+    put: &mut dyn FnMut(usize, usize, &[u64]),
+) -> Result<(), WorldError> {
+    let [cols, rows] = window;
     let [cw, ch] = layout.chunk_size.map(|v| v as usize);
     let (w, h) = (layout.width as usize, layout.height as usize);
     let across = w.div_ceil(cw);
@@ -981,69 +1087,74 @@ fn decode_rows(
             format!("{} chunks, {expected} expected", chunks.len()),
         ));
     }
+    if cols[0] >= cols[1] || rows[0] >= rows[1] {
+        return Ok(());
+    }
     let b = layout.sample_bytes;
     let mask = if b == 8 {
         u64::MAX
     } else {
         (1u64 << (8 * b)) - 1
     };
-    let mut out = vec![0u64; w * (rows[1] - rows[0])];
     let mut row = vec![0u64; cw];
-    let first = (rows[0] / ch) * across;
-    let last = rows[1].div_ceil(ch) * across;
-    for (index, &(offset, count)) in chunks.iter().enumerate().take(last).skip(first) {
-        let (x0, y0) = ((index % across) * cw, (index / across) * ch);
-        let packed = read(offset, count)?;
-        let chunk_rows = ch.min(h - y0);
-        let data = codec
-            .decode(&packed, cw * ch * b)
-            .map_err(|e| corrupt(path, format!("{} chunk {index}: {e}", codec.name())))?;
-        if data.len() < chunk_rows * cw * b {
-            return Err(corrupt(
-                path,
-                format!(
-                    "{} chunk {index} holds {} bytes, {} expected",
-                    codec.name(),
-                    data.len(),
-                    chunk_rows * cw * b
-                ),
-            ));
-        }
-        for (r, bytes) in data.chunks_exact(cw * b).take(chunk_rows).enumerate() {
-            let y = y0 + r;
-            if y < rows[0] || y >= rows[1] {
-                continue;
+    for ty in rows[0] / ch..rows[1].div_ceil(ch) {
+        for tx in cols[0] / cw..cols[1].div_ceil(cw) {
+            let index = ty * across + tx;
+            let (offset, count) = chunks[index];
+            let (x0, y0) = (tx * cw, ty * ch);
+            let packed = read(offset, count)?;
+            let chunk_rows = ch.min(h - y0);
+            let data = codec
+                .decode(&packed, cw * ch * b)
+                .map_err(|e| corrupt(path, format!("{} chunk {index}: {e}", codec.name())))?;
+            drop(packed);
+            if data.len() < chunk_rows * cw * b {
+                return Err(corrupt(
+                    path,
+                    format!(
+                        "{} chunk {index} holds {} bytes, {} expected",
+                        codec.name(),
+                        data.len(),
+                        chunk_rows * cw * b
+                    ),
+                ));
             }
-            if layout.predictor == 3 {
-                // Floating-point predictor: byte differences along the row, over byte planes
-                // (most significant first).
-                let mut plane = bytes.to_vec();
-                for j in 1..plane.len() {
-                    plane[j] = plane[j].wrapping_add(plane[j - 1]);
+            // The window's columns in this chunk.
+            let (xa, xb) = (cols[0].max(x0), cols[1].min(x0 + cw).min(w));
+            for (r, bytes) in data.chunks_exact(cw * b).take(chunk_rows).enumerate() {
+                let y = y0 + r;
+                if y < rows[0] || y >= rows[1] {
+                    continue;
                 }
-                for (i, v) in row.iter_mut().enumerate() {
-                    *v = (0..b).fold(0, |acc, k| (acc << 8) | u64::from(plane[k * cw + i]));
-                }
-            } else {
-                for (v, s) in row.iter_mut().zip(bytes.chunks_exact(b)) {
-                    *v = if layout.big_endian {
-                        s.iter().fold(0, |acc, &x| (acc << 8) | u64::from(x))
-                    } else {
-                        s.iter().rev().fold(0, |acc, &x| (acc << 8) | u64::from(x))
-                    };
-                }
-                if layout.predictor == 2 {
-                    for i in 1..cw {
-                        row[i] = row[i].wrapping_add(row[i - 1]) & mask;
+                if layout.predictor == 3 {
+                    // Floating-point predictor: byte differences along the row, over byte
+                    // planes (most significant first).
+                    let mut plane = bytes.to_vec();
+                    for j in 1..plane.len() {
+                        plane[j] = plane[j].wrapping_add(plane[j - 1]);
+                    }
+                    for (i, v) in row.iter_mut().enumerate() {
+                        *v = (0..b).fold(0, |acc, k| (acc << 8) | u64::from(plane[k * cw + i]));
+                    }
+                } else {
+                    for (v, s) in row.iter_mut().zip(bytes.chunks_exact(b)) {
+                        *v = if layout.big_endian {
+                            s.iter().fold(0, |acc, &x| (acc << 8) | u64::from(x))
+                        } else {
+                            s.iter().rev().fold(0, |acc, &x| (acc << 8) | u64::from(x))
+                        };
+                    }
+                    if layout.predictor == 2 {
+                        for i in 1..cw {
+                            row[i] = row[i].wrapping_add(row[i - 1]) & mask;
+                        }
                     }
                 }
+                put(y - rows[0], xa - cols[0], &row[xa - x0..xb - x0]);
             }
-            let n = cw.min(w - x0);
-            let at = (y - rows[0]) * w + x0;
-            out[at..at + n].copy_from_slice(&row[..n]);
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 /// Heights in metres from decoded samples: nodata (the value as the file's own type would hold
