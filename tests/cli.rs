@@ -2354,11 +2354,7 @@ fn an_interrupted_soak_reports_the_frames_it_flew() {
 /// Sends SIGINT to `child`, waits for it, checks that it ended with status 130 and no panic, and
 /// returns its stderr and the report it wrote at `report`.
 fn interrupt(child: std::process::Child, report: &Path) -> (String, serde_json::Value) {
-    let kill = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success());
+    common::send_sigint(&child);
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(out.status.code(), Some(130), "{stderr}");

@@ -144,20 +144,20 @@ fn keys(epsg: u16) -> Vec<u16> {
 /// Writes a GeoTIFF tile of `n` x `n` samples of 20 m in EPSG `epsg`, its north-west sample's
 /// corner at (`x0`, `y0`), heights from `f` of the sample's centre (plus `offset`).
 fn write_tile(path: &Path, epsg: u16, n: u32, x0: f64, y0: f64, offset: f32) {
-    write_tile_with(path, epsg, n, x0, y0, offset, None);
+    write_tile_with(path, epsg, n, 20.0, [x0, y0], offset, None);
 }
 
-/// [`write_tile`] with one sample (column, row from the north) set to a height of its own.
+/// [`write_tile`] with samples of `cell` metres, its north-west corner at `[x0, y0]`, and one
+/// sample (column, row from the north) set to a height of its own.
 fn write_tile_with(
     path: &Path,
     epsg: u16,
     n: u32,
-    x0: f64,
-    y0: f64,
+    cell: f64,
+    [x0, y0]: [f64; 2],
     offset: f32,
     spike: Option<(u32, u32, f32)>,
 ) {
-    let cell = 20.0;
     let data: Vec<f32> = (0..n * n)
         .map(|k| {
             if let Some((sc, sr, h)) = spike
@@ -592,8 +592,8 @@ fn an_implausible_height_in_a_mosaic_names_the_file_it_is_in() {
         &four[3],
         32633,
         33,
-        400_640.0,
-        4_099_360.0,
+        20.0,
+        [400_640.0, 4_099_360.0],
         0.0,
         Some((5, 7, 3e8)),
     );
@@ -613,4 +613,47 @@ fn an_implausible_height_in_a_mosaic_names_the_file_it_is_in() {
         "{err}"
     );
     assert!(!dir.path().join("out").exists());
+}
+
+/// Files of one spacing whose grids are offset by part of a cell are refused saying by how much
+/// and how to align them (they were called "not neighbours" with a gap between them), and files
+/// on the same grid join.
+#[test]
+fn files_whose_grids_are_offset_by_part_of_a_cell_are_refused_saying_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let tile = |name: &str, x0: f64, y0: f64| {
+        let path = dir.path().join(name);
+        write_tile_with(&path, 32633, 64, 10.0, [x0, y0], 0.0, None);
+        path
+    };
+    let a = tile("s_a.tif", 500_000.0, 4_100_000.0);
+    let b = tile("s_b.tif", 500_635.0, 4_100_000.0);
+    let e = load_dems(&[a.clone(), b], &DemOptions::default())
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    for want in [
+        "s_b.tif",
+        "s_a.tif",
+        "offset",
+        "0.5 of a cell east-west (5 m)",
+        "cannot be joined sample for sample",
+        "gdalwarp -tr 10 10 -te 500640 4099360 501270 4100000",
+        "-tap",
+    ] {
+        assert!(e.contains(want), "{e:?} lacks {want:?}");
+    }
+    assert!(!e.contains("gap"), "{e}");
+    // A quarter of a cell north-south, in a file that would otherwise join.
+    let c = tile("s_c.tif", 500_630.0, 4_100_002.5);
+    let e = load_dems(&[a.clone(), c], &DemOptions::default())
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("0.25 of a cell north-south (2.5 m)"), "{e}");
+    assert!(!e.contains("east-west"), "{e}");
+    // On the same grid, sharing a column, they join.
+    let d = tile("s_d.tif", 500_630.0, 4_100_000.0);
+    let dem = load_dems(&[a, d], &DemOptions::default()).unwrap();
+    assert_eq!((dem.width, dem.height), (127, 64));
 }

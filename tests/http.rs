@@ -1898,11 +1898,7 @@ fn an_interrupted_warm_up_ends_the_fly_at_once() {
         std::thread::sleep(Duration::from_millis(50));
     }
     let stopped = Instant::now();
-    let kill = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success());
+    common::send_sigint(&child);
     let status = child.wait().unwrap();
     let took = stopped.elapsed();
     let stderr = reader.join().unwrap();

@@ -159,6 +159,8 @@ impl Grid {
         let v = p.y / s + o[1] as f64;
         let (a0, b0) = (u.floor() as i64 - 2, v.floor() as i64 - 2);
         let (last_a, last_b) = (self.width as i64 - 1, self.height as i64 - 1);
+        let wx: [f64; 6] =
+            std::array::from_fn(|k| basis_at(basis, halvings, u - (a0 + k as i64) as f64));
         let mut sum = 0.0;
         for b in b0..b0 + 6 {
             let wy = basis_at(basis, halvings, v - b as f64);
@@ -166,11 +168,10 @@ impl Grid {
                 continue;
             }
             let row_b = b.clamp(0, last_b) as usize;
-            let mut row = 0.0;
-            for a in a0..a0 + 6 {
-                let wx = basis_at(basis, halvings, u - a as f64);
-                row += wx * f64::from(self.at(a.clamp(0, last_a) as usize, row_b));
-            }
+            let row: f64 = (a0..a0 + 6)
+                .zip(wx)
+                .map(|(a, w)| w * f64::from(self.at(a.clamp(0, last_a) as usize, row_b)))
+                .sum();
             sum += wy * row;
         }
         sum

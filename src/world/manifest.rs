@@ -569,9 +569,14 @@ pub fn toml_error(text: &str, e: &toml::de::Error) -> String {
     let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
     let line_end = text[start..].find('\n').map_or(text.len(), |i| start + i);
     let line_no = text[..line_start].matches('\n').count() + 1;
-    let before: Vec<char> = text[line_start..start].chars().collect();
-    let column = before.len() + 1;
-    let skip = before.len().saturating_sub(TOML_ERROR_QUOTE_CHARS);
+    let before = &text[line_start..start];
+    let column = before.chars().count() + 1;
+    // The last characters before the error, from this byte on.
+    let quoted_from = before
+        .char_indices()
+        .rev()
+        .nth(TOML_ERROR_QUOTE_CHARS - 1)
+        .map_or(0, |(i, _)| i);
     let after: String = text[start..line_end]
         .chars()
         .take(TOML_ERROR_QUOTE_CHARS)
@@ -587,8 +592,12 @@ pub fn toml_error(text: &str, e: &toml::de::Error) -> String {
             })
             .collect()
     };
-    let head = escape(&before[skip..].iter().collect::<String>());
-    let head = if skip > 0 { format!("...{head}") } else { head };
+    let head = escape(&before[quoted_from..]);
+    let head = if quoted_from > 0 {
+        format!("...{head}")
+    } else {
+        head
+    };
     let tail = escape(&after);
     let tail = if start + after.len() < line_end {
         format!("{tail}...")

@@ -190,17 +190,8 @@ impl Terrain {
     /// Height at `p` by bilinear interpolation in the finest stored level.
     pub fn height(&self, p: DVec2) -> f64 {
         let pyramid = &self.world.manifest.pyramid;
-        let level = pyramid.stored_levels - 1;
-        let id = pyramid.tile_at(level, p).expect("point inside the world");
-        let tile = &self.tiles[&id];
-        let cell = pyramid.cell_size_m(level);
-        let u = (p - pyramid.bounds(id).min) / cell + f64::from(pyramid.border);
-        let (i, j) = (u.x.floor() as u32, u.y.floor() as u32);
-        let (fu, fv) = (u.x - f64::from(i), u.y - f64::from(j));
-        let h = |i, j| f64::from(tile.height_at(i, j));
-        let s = h(i, j) * (1.0 - fu) + h(i + 1, j) * fu;
-        let n = h(i, j + 1) * (1.0 - fu) + h(i + 1, j + 1) * fu;
-        s * (1.0 - fv) + n * fv
+        let id = pyramid.tile_at(pyramid.stored_levels - 1, p);
+        self.bilinear(&self.tiles[&id.expect("point inside the world")], p)
     }
 
     /// Height at `p` of the ground the renderer draws near the camera: the finest derived
@@ -208,11 +199,20 @@ impl Terrain {
     /// (`verdant::stream::derive_child`, with the manifest's detail), sampled bilinearly.
     pub fn drawn_height(&self, p: DVec2) -> f64 {
         let pyramid = &self.world.manifest.pyramid;
-        let level = pyramid.max_level();
-        let id = pyramid.tile_at(level, p).expect("point inside the world");
-        let tile = self.drawn_tile(id);
-        let cell = pyramid.cell_size_m(level);
-        let u = (p - pyramid.bounds(id).min) / cell + f64::from(pyramid.border);
+        let id = pyramid.tile_at(pyramid.max_level(), p);
+        let id = id.expect("point inside the world");
+        self.derive(id);
+        match self.tiles.get(&id) {
+            Some(tile) => self.bilinear(tile, p),
+            None => self.bilinear(&self.derived.borrow()[&id], p),
+        }
+    }
+
+    /// Height at `p` (inside `tile`) by bilinear interpolation between its samples.
+    fn bilinear(&self, tile: &TileData, p: DVec2) -> f64 {
+        let pyramid = &self.world.manifest.pyramid;
+        let cell = pyramid.cell_size_m(tile.id.level);
+        let u = (p - pyramid.bounds(tile.id).min) / cell + f64::from(pyramid.border);
         let (i, j) = (u.x.floor() as u32, u.y.floor() as u32);
         let (fu, fv) = (u.x - f64::from(i), u.y - f64::from(j));
         let h = |i, j| f64::from(tile.height_at(i, j));
@@ -221,20 +221,22 @@ impl Terrain {
         s * (1.0 - fv) + n * fv
     }
 
-    /// Tile `id`: stored, or derived from its parent (kept for the next lookups).
-    fn drawn_tile(&self, id: TileId) -> TileData {
-        if let Some(t) = self.tiles.get(&id) {
-            return t.clone();
+    /// Makes tile `id` and the ancestors it needs, where not stored, from their parents (kept
+    /// for the next lookups).
+    fn derive(&self, id: TileId) {
+        if self.tiles.contains_key(&id) || self.derived.borrow().contains_key(&id) {
+            return;
         }
-        if let Some(t) = self.derived.borrow().get(&id) {
-            return t.clone();
-        }
-        let parent = self.drawn_tile(id.parent().expect("a stored ancestor"));
+        let parent = id.parent().expect("a stored ancestor");
+        self.derive(parent);
         let manifest = &self.world.manifest;
         let params = verdant::stream::DeriveParams::for_manifest(manifest);
-        let tile = verdant::stream::derive_child(&manifest.pyramid, &parent, id, &params);
-        self.derived.borrow_mut().insert(id, tile.clone());
-        tile
+        let tile = {
+            let derived = self.derived.borrow();
+            let parent = self.tiles.get(&parent).unwrap_or_else(|| &derived[&parent]);
+            verdant::stream::derive_child(&manifest.pyramid, parent, id, &params)
+        };
+        self.derived.borrow_mut().insert(id, tile);
     }
 
     /// Clearance of the camera above the terrain (the finest stored level) at `samples` points
@@ -396,4 +398,13 @@ pub fn mkfifo(path: &Path) {
         .status()
         .expect("run mkfifo");
     assert!(status.success(), "mkfifo {}", path.display());
+}
+
+/// Sends SIGINT (Ctrl-C) to `child`.
+pub fn send_sigint(child: &std::process::Child) {
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
 }
