@@ -1183,10 +1183,62 @@ fn a_first_frame_larger_than_the_atlas_names_the_atlas() {
         tmp.path(),
     );
     assert!(
-        stderr.contains("the atlas is full (all 24 slots hold tiles this view wants more)")
+        stderr
+            .contains("the atlas is full (all 24 slots hold tiles this view wants more; it holds ")
             && stderr.contains("--atlas-slots"),
         "{stderr}"
     );
+}
+
+/// The default atlas is sized to the world's pyramid: a bake at 10 km cells has 18 levels, and
+/// its wind tour's first frame holds 350 tiles; the 256 slots every world had left its far
+/// tiles and all its grass tiles unloaded (no blade drawn, a warning naming --atlas-slots).
+/// The report says how many tiles a frame held, against the slots in use.
+#[test]
+fn a_deep_worlds_default_atlas_holds_its_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dem = common::root().join("worlds/santa-cruz/source/santa_cruz_1024.png");
+    let bake = verdant(
+        &[
+            "bake",
+            "--dem",
+            dem.to_str().unwrap(),
+            "--out",
+            "w",
+            "--cell-size",
+            "10000",
+        ],
+        tmp.path(),
+    );
+    assert!(
+        bake.status.success(),
+        "{}",
+        String::from_utf8_lossy(&bake.stderr)
+    );
+    let world = verdant::world::World::open(&tmp.path().join("w")).unwrap();
+    assert_eq!(world.manifest.pyramid.level_count(), 18);
+    let (report, stderr) = fly_report_and_stderr(
+        &[
+            "w",
+            "--path",
+            "wind-tour",
+            "--frames",
+            "2",
+            "--size",
+            "32x18",
+            "--no-images",
+        ],
+        tmp.path(),
+    );
+    assert!(!stderr.contains("atlas is full"), "{stderr}");
+    let s = &report["summary"];
+    let held = s["atlas_peak_held"].as_u64().unwrap();
+    assert!(held > 256, "a frame held {held} tiles");
+    assert!(
+        s["grass_drawn_high"]["median"].as_f64().unwrap() > 1000.0,
+        "{s}"
+    );
+    assert_eq!(s["resident_fraction"]["median"].as_f64(), Some(1.0), "{s}");
 }
 
 /// A coarse DEM gets the derived levels that bring its finest tiles (the grass's) within 64 m:

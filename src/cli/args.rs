@@ -16,9 +16,11 @@ pub(crate) struct StreamArgs {
     #[arg(long, default_value = "64", value_parser = parse_mib)]
     pub(crate) cache_mib: u64,
     /// Slots of the GPU tile atlas (each holds one tile), 2..=4096; more than the world's
-    /// level-0 tiles and at most the adapter's texture array layers.
-    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(2..=4096))]
-    pub(crate) atlas_slots: u32,
+    /// level-0 tiles and at most the adapter's texture array layers (default: sized to the
+    /// world, 24 a level of its pyramid besides its level-0 and grass tiles, at least 256 and at
+    /// most 2048).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=4096))]
+    pub(crate) atlas_slots: Option<u32>,
     /// Tile loads in flight at most, 1..=64.
     #[arg(long, default_value_t = 8, value_parser = RangedU64ValueParser::<usize>::new().range(1..=64))]
     pub(crate) max_loads: usize,
@@ -58,7 +60,9 @@ impl StreamArgs {
         let mut c = ServiceConfig {
             // parse_mib has checked that the bytes fit a u64.
             cache_bytes: self.cache_mib << 20,
-            atlas_slots: self.atlas_slots,
+            atlas_slots: self
+                .atlas_slots
+                .unwrap_or(verdant::tools::WORLD_ATLAS_SLOTS),
             ..ServiceConfig::default()
         };
         c.stream.max_in_flight = self.max_loads;

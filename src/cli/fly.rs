@@ -382,11 +382,12 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
         s.frame_ms.median, s.frame_ms.p99, s.tiles_drawn.median
     );
     println!(
-        "tiles resident at their own level: median {:.0}%, holes {}, cache peak {:.1} MiB, atlas peak {} slots",
+        "tiles resident at their own level: median {:.0}%, holes {}, cache peak {:.1} MiB, atlas peak {} slots (a frame held at most {} tiles)",
         100.0 * s.resident_fraction.median,
         s.holes,
         s.cache_peak_bytes as f64 / (1 << 20) as f64,
-        s.atlas_peak_slots
+        s.atlas_peak_slots,
+        s.atlas_peak_held
     );
     println!(
         "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",

@@ -158,6 +158,15 @@ impl RingSettings {
             hysteresis_m: 0.1 * size,
         }
     }
+
+    /// The most grass tiles these rings hold at once: every tile within the low radius (plus
+    /// the hysteresis) of the camera, counted as the square of tiles around it.
+    pub fn most_tiles(&self, pyramid: &Pyramid) -> u32 {
+        let size = pyramid.tile_size_m(self.level);
+        let reach = self.low_radius_m + self.hysteresis_m;
+        let side = (2.0 * (reach / size).ceil() + 1.0).min(f64::from(u16::MAX)) as u32;
+        side * side
+    }
 }
 
 /// The grass tiles around the camera and their rings, with hysteresis: a tile keeps its ring

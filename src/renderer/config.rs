@@ -120,6 +120,39 @@ pub const NEAR_RANGE_M: std::ops::RangeInclusive<f32> = 0.0..=200.0;
 pub const LOD_FACTOR_RANGE: std::ops::RangeInclusive<f64> = 0.25..=8.0;
 /// Largest terrain mesh step, samples.
 pub const MAX_MESH_STEP: u32 = 16;
+/// Atlas slots [`RendererConfig::for_world`] gives a frame's terrain a level of the pyramid (at
+/// LOD factor 1). A frame holds the tiles it draws and their ancestors; along the default
+/// world's paths (9 levels) the most was 135, along a 10 km-cell bake's (18 levels) 350: 15 and
+/// 19.4 a level, grass tiles and level-0 tiles included.
+pub const ATLAS_SLOTS_PER_LEVEL: u32 = 24;
+/// The fewest atlas slots [`RendererConfig::for_world`] gives a world.
+pub const MIN_DEFAULT_ATLAS_SLOTS: u32 = 256;
+/// The most atlas slots [`RendererConfig::for_world`] gives a world: the texture array layers
+/// of desktop GPUs (an adapter with fewer refuses more, naming the limit).
+pub const MAX_DEFAULT_ATLAS_SLOTS: u32 = 2048;
+
+/// Atlas slots enough for the frames of a world of `pyramid` at terrain LOD factor `lod_factor`: its
+/// level-0 tiles, its grass rings' tiles and [`ATLAS_SLOTS_PER_LEVEL`] a level of its pyramid
+/// (times the square of `lod_factor` above 1: a tile splits within that many tile edges of the
+/// camera), within [`MIN_DEFAULT_ATLAS_SLOTS`]..=[`MAX_DEFAULT_ATLAS_SLOTS`]. Each slot holds one
+/// tile (`samples_per_side^2 x 8` bytes of GPU memory: 133 KiB in the default world).
+pub fn default_atlas_slots(pyramid: &crate::world::Pyramid, lod_factor: f64) -> u32 {
+    let [nx, ny] = pyramid.tiles_at(0);
+    let roots = u64::from(nx) * u64::from(ny);
+    let grass = u64::from(RingSettings::for_pyramid(pyramid).most_tiles(pyramid));
+    let scale = if lod_factor.is_finite() {
+        lod_factor.clamp(1.0, *LOD_FACTOR_RANGE.end())
+    } else {
+        1.0
+    };
+    let per_level = (f64::from(ATLAS_SLOTS_PER_LEVEL) * scale * scale).ceil() as u64;
+    let levels = u64::from(pyramid.level_count());
+    let want = roots + 1 + grass + per_level * levels;
+    want.clamp(
+        u64::from(MIN_DEFAULT_ATLAS_SLOTS),
+        u64::from(MAX_DEFAULT_ATLAS_SLOTS),
+    ) as u32
+}
 
 impl Default for GrassConfig {
     fn default() -> Self {
@@ -190,10 +223,14 @@ where
 }
 
 impl RendererConfig {
-    /// Defaults for `world`.
+    /// Defaults for `world`: among them an atlas of [`default_atlas_slots`] slots, sized to its
+    /// pyramid.
     pub fn for_world(world: &World) -> Self {
         Self {
-            service: ServiceConfig::default(),
+            service: ServiceConfig {
+                atlas_slots: default_atlas_slots(&world.manifest.pyramid, 1.0),
+                ..ServiceConfig::default()
+            },
             lod_factor: 1.0,
             derive: DeriveParams::for_manifest(&world.manifest),
             grass_rings: Some(RingSettings::for_pyramid(&world.manifest.pyramid)),
@@ -508,6 +545,36 @@ mod tests {
     fn world() -> World {
         World::open(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz"))
             .unwrap()
+    }
+
+    #[test]
+    fn the_default_atlas_grows_with_the_pyramids_levels() {
+        let world = world();
+        let p = world.manifest.pyramid.clone();
+        // The default world (9 levels) keeps the 256 slots its paths were measured with.
+        assert_eq!(p.level_count(), 9);
+        assert_eq!(RendererConfig::for_world(&world).service.atlas_slots, 256);
+        // A world of 18 levels held 350 tiles along its wind tour: it gets room for them.
+        let deep = crate::world::Pyramid {
+            derived_levels: 15,
+            ..p.clone()
+        };
+        let [nx, ny] = deep.tiles_at(0);
+        let grass = RingSettings::for_pyramid(&deep).most_tiles(&deep);
+        let slots = default_atlas_slots(&deep, 1.0);
+        assert_eq!(slots, nx * ny + 1 + grass + 18 * ATLAS_SLOTS_PER_LEVEL);
+        assert!(slots >= 400, "{slots}");
+        // Twice the LOD factor splits tiles within twice the distance: four times the slots a level.
+        let wide = default_atlas_slots(&deep, 2.0);
+        assert_eq!(wide, nx * ny + 1 + grass + 18 * 4 * ATLAS_SLOTS_PER_LEVEL);
+        // A factor below 1 keeps the slots of 1; NaN too. The bounds hold.
+        assert_eq!(default_atlas_slots(&deep, 0.25), slots);
+        assert_eq!(default_atlas_slots(&deep, f64::NAN), slots);
+        let deepest = crate::world::Pyramid {
+            derived_levels: 200,
+            ..p
+        };
+        assert_eq!(default_atlas_slots(&deepest, 8.0), MAX_DEFAULT_ATLAS_SLOTS);
     }
 
     #[test]

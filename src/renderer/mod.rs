@@ -44,10 +44,11 @@ use readback::StatsRing;
 use targets::{check_formats, check_size};
 
 pub use config::{
-    ConfigError, DEFAULT_INFILL_M, DEFAULT_LOD_WIDEN, DEFAULT_MESH_STEP, ELEVATION_FADE_RANGE,
-    GrassConfig, INFILL_RANGE_M, LOD_FACTOR_RANGE, LOD_WIDEN_RANGE, MAX_CARD_REACH, MAX_MESH_STEP,
-    MAX_PLANT_LOD_M, NEAR_RANGE_M, RendererConfig, RendererOptions, SPACING_RANGE_M,
-    WIDTH_SCALE_RANGE,
+    ATLAS_SLOTS_PER_LEVEL, ConfigError, DEFAULT_INFILL_M, DEFAULT_LOD_WIDEN, DEFAULT_MESH_STEP,
+    ELEVATION_FADE_RANGE, GrassConfig, INFILL_RANGE_M, LOD_FACTOR_RANGE, LOD_WIDEN_RANGE,
+    MAX_CARD_REACH, MAX_DEFAULT_ATLAS_SLOTS, MAX_MESH_STEP, MAX_PLANT_LOD_M,
+    MIN_DEFAULT_ATLAS_SLOTS, NEAR_RANGE_M, RendererConfig, RendererOptions, SPACING_RANGE_M,
+    WIDTH_SCALE_RANGE, default_atlas_slots,
 };
 pub use error::RendererError;
 pub use frame::{FrameInput, FrameStats, MissingTile, WarmUp};

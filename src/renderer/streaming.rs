@@ -137,8 +137,9 @@ impl Renderer {
                     // Every slot holds a tile the view wants more: the atlas is too small for
                     // this view, not the loading stuck.
                     format!(
-                        "the atlas is full (all {slots} slots hold tiles this view wants more); \
-                         give it more slots (--atlas-slots)"
+                        "the atlas is full (all {slots} slots hold tiles this view wants more; \
+                         it holds {} with their ancestors); give it more slots (--atlas-slots)",
+                        stats.held
                     )
                 } else if stalled {
                     "nothing was loading".to_owned()

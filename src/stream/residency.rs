@@ -86,6 +86,10 @@ pub struct ResidencyStats {
     pub atlas_used: u32,
     /// Atlas slots in all.
     pub atlas_slots: u32,
+    /// Tiles the frame holds in the atlas: the wanted ones and all their ancestors (a frame
+    /// needs at least this many slots to draw every wanted tile at its own level).
+    #[serde(default)]
+    pub held: u32,
     /// Atlas evictions so far.
     pub evictions: u64,
     /// Tiles uploaded this frame.
@@ -369,6 +373,7 @@ impl TileService {
             desired: wants.len() as u32,
             atlas_slots: self.config.atlas_slots,
             atlas_used: self.resident.len() as u32,
+            held: protect.len() as u32,
             evictions: self.evictions,
             uploaded: plan.uploads.len() as u32,
             derived: plan.derives.len() as u32,

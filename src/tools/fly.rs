@@ -50,7 +50,8 @@ pub struct FlyOptions {
     pub out: PathBuf,
     /// Write a PNG for every frame (the report is always written).
     pub write_images: bool,
-    /// Limits of the tile service.
+    /// Limits of the tile service; `atlas_slots` [`super::WORLD_ATLAS_SLOTS`] sizes the atlas to
+    /// the world.
     pub service: crate::stream::ServiceConfig,
     /// Wind scene of the manifest for the whole flight (default: the path's wind keys if it has
     /// any, else `breeze`, else the manifest's wind).
@@ -190,7 +191,7 @@ impl FlyOptions {
         path: &crate::world::CameraPath,
     ) -> Result<RendererConfig, SettingError> {
         let mut config = RendererConfig::for_world(world);
-        config.service = self.service;
+        config.service = super::service_over(self.service, &config);
         config.wind_scene = self.wind_scene.clone();
         config.wind_keys = path.wind.clone();
         config.features = config.features.switched(&self.disable, &self.enable);
@@ -580,6 +581,7 @@ impl FlySummary {
                 .map(|f| f.residency.atlas_used)
                 .max()
                 .unwrap_or(0),
+            atlas_peak_held: frames.iter().map(|f| f.residency.held).max().unwrap_or(0),
             grass_considered: Summary::of(&series(&|f| {
                 f64::from(f.grass.considered[0]) + f64::from(f.grass.considered[1])
             })),

@@ -44,6 +44,27 @@ use std::sync::Arc;
 use crate::stream::{HttpOptions, HttpSource, TileSource};
 use crate::world::World;
 
+/// The `atlas_slots` of a tool's [`crate::stream::ServiceConfig`] that stands for the world's
+/// default ([`crate::renderer::default_atlas_slots`]): what the command line passes unless
+/// `--atlas-slots` is given.
+pub const WORLD_ATLAS_SLOTS: u32 = 0;
+
+/// A tool's `service` limits over `config` (a [`crate::RendererConfig::for_world`]'s): an
+/// `atlas_slots` of [`WORLD_ATLAS_SLOTS`] keeps the config's, sized to the world.
+pub fn service_over(
+    service: crate::stream::ServiceConfig,
+    config: &crate::RendererConfig,
+) -> crate::stream::ServiceConfig {
+    crate::stream::ServiceConfig {
+        atlas_slots: if service.atlas_slots == WORLD_ATLAS_SLOTS {
+            config.service.atlas_slots
+        } else {
+            service.atlas_slots
+        },
+        ..service
+    }
+}
+
 /// The camera path `name` of `world` (opened from `location`), or its first path when `name`
 /// is `None`; a missing one is an error naming the world and the paths it has.
 pub fn camera_path(

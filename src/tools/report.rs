@@ -123,6 +123,10 @@ pub struct FlySummary {
     pub cache_peak_bytes: u64,
     /// Most atlas slots in use.
     pub atlas_peak_slots: u32,
+    /// Most tiles a frame held: wanted and their ancestors (the atlas slots the path needs to
+    /// draw every wanted tile at its own level).
+    #[serde(default)]
+    pub atlas_peak_held: u32,
     /// Grass blades considered a frame, both LODs.
     pub grass_considered: Summary,
     /// Grass blades drawn a frame at high LOD.
@@ -222,6 +226,8 @@ pub struct FlyTotals {
     pub cache_peak_bytes: u64,
     /// Most atlas slots in use.
     pub atlas_peak_slots: u32,
+    /// Most tiles a frame held (wanted and their ancestors).
+    pub atlas_peak_held: u32,
 }
 
 impl FlyTotals {
@@ -230,6 +236,7 @@ impl FlyTotals {
         self.holes += u64::from(f.residency.holes);
         self.cache_peak_bytes = self.cache_peak_bytes.max(f.residency.cache.peak_bytes);
         self.atlas_peak_slots = self.atlas_peak_slots.max(f.residency.atlas_used);
+        self.atlas_peak_held = self.atlas_peak_held.max(f.residency.held);
     }
 }
 
@@ -248,6 +255,7 @@ impl FlyReport {
         summary.holes = totals.holes;
         summary.cache_peak_bytes = totals.cache_peak_bytes;
         summary.atlas_peak_slots = totals.atlas_peak_slots;
+        summary.atlas_peak_held = totals.atlas_peak_held;
         Self {
             world,
             path,

@@ -42,7 +42,8 @@ pub struct SoakOptions {
     pub settle_frames: u32,
     /// Share of the run (at least 3 s) before memory is expected to stay flat.
     pub warmup_fraction: f64,
-    /// Limits of the tile service.
+    /// Limits of the tile service; `atlas_slots` [`super::WORLD_ATLAS_SLOTS`] sizes the atlas to
+    /// the world.
     pub service: crate::stream::ServiceConfig,
     /// Fly without grass (and so without its wind): the streaming system alone.
     pub no_grass: bool,
@@ -86,7 +87,10 @@ impl Default for SoakOptions {
             rss_tolerance_bytes: 12 << 20,
             max_recovery_frames: 50,
             max_stall_ms: 5000.0,
-            service: crate::stream::ServiceConfig::default(),
+            service: crate::stream::ServiceConfig {
+                atlas_slots: super::WORLD_ATLAS_SLOTS,
+                ..Default::default()
+            },
             no_grass: false,
             aa: crate::aa::AntiAliasing::default(),
             faults: 0.0,
@@ -527,7 +531,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let ground = Ground::new(&world, source.as_ref())?;
     let ctx = GpuContext::new()?;
     let mut config = RendererConfig::for_world(&world);
-    config.service = opts.service;
+    config.service = super::service_over(opts.service, &config);
     config.aa = opts.aa;
     if opts.no_grass {
         config.grass_rings = None;

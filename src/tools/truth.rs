@@ -82,10 +82,11 @@ pub fn offsets(k: u32) -> Vec<Vec2> {
 /// square of tiles around it.
 pub fn grass_tiles_bound(world: &World) -> u32 {
     let base = RingSettings::for_pyramid(&world.manifest.pyramid);
-    let size = world.manifest.pyramid.tile_size_m(base.level);
-    let reach = REACH_FACTOR * base.low_radius_m + base.hysteresis_m;
-    let side = 2 * (reach / size).ceil() as u32 + 1;
-    side * side
+    RingSettings {
+        low_radius_m: REACH_FACTOR * base.low_radius_m,
+        ..base
+    }
+    .most_tiles(&world.manifest.pyramid)
 }
 
 /// Atlas slots the truth asks for: room for every grass tile of [`grass_tiles_bound`] and the
@@ -413,7 +414,7 @@ pub fn run_fly_truth(
     let out_dir = OutDir::create_for(&opts.out, "fly")?;
     let ctx = GpuContext::new()?;
     let mut base = RendererConfig::for_world(&world);
-    base.service = opts.service;
+    base.service = super::service_over(opts.service, &base);
     base.wind_scene = opts.wind_scene.clone();
     base.wind_keys = path.wind.clone();
     base.features = base.features.switched(&opts.disable, &opts.enable);

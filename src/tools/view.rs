@@ -45,7 +45,8 @@ pub struct ViewOptions {
     pub frames: Option<u32>,
     /// Write the last frame to this PNG file (with `frames`).
     pub screenshot: Option<PathBuf>,
-    /// Limits of the tile service.
+    /// Limits of the tile service; `atlas_slots` [`super::WORLD_ATLAS_SLOTS`] sizes the atlas to
+    /// the world.
     pub service: ServiceConfig,
     /// Wind scene to start with (default: the path's wind keys, else `breeze`).
     pub wind_scene: Option<String>,
@@ -222,7 +223,7 @@ impl Viewer {
         };
         let path = &paths[path_index];
         let mut rc = RendererConfig::for_world(&world);
-        rc.service = self.opts.service;
+        rc.service = super::service_over(self.opts.service, &rc);
         rc.wind_scene = self.opts.wind_scene.clone();
         if let Some(aa) = self.opts.aa {
             rc.aa = aa;
