@@ -1916,3 +1916,66 @@ fn an_interrupted_warm_up_ends_the_fly_at_once() {
         "{stderr}"
     );
 }
+
+/// A window the user flies waits for its first frame's tiles only briefly (it waited up to 30 s,
+/// not answering, while a slow server sent them): it opens on the tiles that have come, saying
+/// how many are still loading.
+#[test]
+fn the_viewer_opens_its_window_while_a_slow_servers_tiles_load() {
+    use std::os::unix::process::CommandExt;
+    let server = FaultServer::start(common::default_world(), Duration::ZERO, |path, _| {
+        if path.starts_with("/tiles/") && !path.starts_with("/tiles/L0/") {
+            Reply::Stall
+        } else {
+            Reply::File
+        }
+    });
+    let mut child = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 320x240x24"])
+        .arg(env!("CARGO_BIN_EXE_verdant"))
+        .args(["view", &server.url, "--size", "64x36"])
+        .env("RUST_LOG", "verdant=info")
+        .process_group(0)
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("xvfb-run is needed for the viewer's test (Debian package xvfb)");
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if line.contains("still loading") {
+                let _ = tx.send(());
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    // The tiles stall for 30 s, and the old wait was as long: the window must open well before.
+    let started = Instant::now();
+    let opened = rx.recv_timeout(Duration::from_secs(20));
+    let took = started.elapsed();
+    let stalled = server
+        .asked
+        .lock()
+        .unwrap()
+        .keys()
+        .any(|p| p.starts_with("/tiles/") && !p.starts_with("/tiles/L0/"));
+    // The whole group: xvfb-run, its X server and the viewer.
+    let kill = Command::new("kill")
+        .args(["-TERM", "--", &format!("-{}", child.id())])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let _ = child.wait();
+    let stderr = reader.join().unwrap();
+    assert!(opened.is_ok(), "no window after {took:?}:\n{stderr}");
+    assert!(stalled, "no finer tile was asked for:\n{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        stderr.contains("of the first frame's tiles still loading; they stream in as it draws"),
+        "{stderr}"
+    );
+}

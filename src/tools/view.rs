@@ -167,6 +167,10 @@ fn depth_target(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Texture
     )
 }
 
+/// How long an interactive window waits for its first frame's tiles before it opens on what has
+/// come (a local world's take well under a second).
+const INTERACTIVE_WARM_UP: Duration = Duration::from_secs(2);
+
 impl Viewer {
     fn start(&mut self, event_loop: &ActiveEventLoop) -> Result<State> {
         let (world, source) = self.world.take().context("the viewer started twice")?;
@@ -236,19 +240,38 @@ impl Viewer {
         let mut renderer = Renderer::with_source(&ctx.device, &ctx.queue, world, source, options)?;
         let t0 = path.keys[0].t_s;
         let start = sample_path(path, t0);
-        // The first frame starts complete; after that, streaming shows.
-        let warm_up = renderer.warm_up_report(&start, Duration::from_secs(30))?;
+        // A run of N frames (a screenshot, say) starts complete, as `fly` does. A window the
+        // user flies waits for its first frame's tiles only briefly: over a slow network the
+        // window would not answer for the whole wait; it opens on what has come (the coarser
+        // tiles drawing the finer ones) and streaming shows.
+        let interactive = self.opts.frames.is_none();
+        let wait = if interactive {
+            INTERACTIVE_WARM_UP
+        } else {
+            Duration::from_secs(30)
+        };
+        let warm_up = renderer.warm_up_report(&start, wait)?;
         let streamed = crate::tools::fly::check_streaming(
             &self.opts.world,
             &renderer.world().manifest.pyramid,
             &renderer.service().stats(),
             &warm_up,
         );
+        // Tiles kept out by a failed load, not merely still on their way.
+        let failed = warm_up
+            .missing
+            .iter()
+            .any(|m| renderer.service().blocked_by(m.tile).is_some());
         match streamed {
-            // A run of N frames (a screenshot, say) would show the coarsest tiles only.
-            Err(e) if self.opts.frames.is_some() => return Err(e.into()),
-            Err(e) => log::warn!("{e}"),
-            Ok(()) => {}
+            // A run of N frames would show the coarsest tiles only.
+            Err(e) if !interactive => return Err(e.into()),
+            Err(e) if failed => log::warn!("{e}"),
+            _ if !warm_up.missing.is_empty() && !failed => log::info!(
+                "the window opens with {} of the first frame's tiles still loading; they \
+                 stream in as it draws",
+                warm_up.missing.len()
+            ),
+            _ => {}
         }
         let depth = depth_target(&ctx.device, w, h);
         let wind_scene = renderer.wind_scene_at(0.0);
