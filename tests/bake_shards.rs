@@ -244,7 +244,12 @@ fn parts_of_another_bake_and_bad_shards_are_refused() {
     other.seed = 7;
     let e = run(&other).unwrap_err().to_string();
     assert!(e.contains(".w.shards") && e.contains("another bake"), "{e}");
-    // So is another shard count.
+    assert!(
+        e.contains("--shard 1/2") && e.contains("other options or input files"),
+        "{e}"
+    );
+    // The same bake in another count of shards is refused naming the count to use (it was
+    // "another bake's", naming --shard for a finish).
     let e = run(&opts(
         &dem,
         &out,
@@ -252,7 +257,25 @@ fn parts_of_another_bake_and_bad_shards_are_refused() {
     ))
     .unwrap_err()
     .to_string();
-    assert!(e.contains("another bake"), "{e}");
+    assert!(
+        e.contains("--shard 1/3") && e.contains("sharded 2 ways there, not 3; run --shard 1/2"),
+        "{e}"
+    );
+    let e = run(&opts(&dem, &out, Some(ShardStep::Finish { count: 3 })))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("--finish-shards 3") && e.contains("run --finish-shards 2"),
+        "{e}"
+    );
+    let e = run(&opts(
+        &dem,
+        &out,
+        Some(ShardStep::Shard { index: 2, count: 3 }),
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("run --shard I/2 (I from 0 to 1)"), "{e}");
     // A folder of the parts' name that a bake did not make is never adopted (the finish
     // removes the parts folder): its files stay.
     let mine = dir.path().join("m");
@@ -292,6 +315,35 @@ fn parts_of_another_bake_and_bad_shards_are_refused() {
             .to_string();
         assert!(e.contains(want), "{e}");
     }
+}
+
+/// A shard refused for its input (here a DEM whose cells are too small for the tiles) leaves no
+/// parts folder: it left one holding its fingerprint, and the same shard run again as the error
+/// advised (with --cell-size) was refused as "another bake's".
+#[test]
+fn a_shard_refused_for_its_dem_leaves_no_parts_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = common::write_dem(
+        dir.path(),
+        "tiny",
+        [161, 161],
+        [0.001, 0.001],
+        [0.0, 0.1],
+        |x, y| 1.0 + 0.1 * x + 0.05 * y,
+    );
+    let out = dir.path().join("w");
+    let mut o = opts(&dem, &out, Some(ShardStep::Shard { index: 0, count: 2 }));
+    o.cell_size_m = None;
+    o.stored_levels = 0;
+    let e = run(&o).unwrap_err().to_string();
+    assert!(e.contains("pass --cell-size"), "{e}");
+    let parts = verdant::bake::shard::parts_dir(&out);
+    assert!(!parts.exists(), "{} was left behind", parts.display());
+    assert!(!out.exists());
+    o.cell_size_m = Some(0.05);
+    let report = run(&o).unwrap();
+    assert!(report.tiles_written > 0);
+    assert!(parts.join("fingerprint").is_file());
 }
 
 #[test]

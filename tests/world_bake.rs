@@ -1666,3 +1666,36 @@ fn replace_keeps_the_hand_made_parts_of_a_manifest_refused_elsewhere() {
     assert_eq!(rebaked.pyramid.derived_levels, derived);
     assert_eq!(rebaked.plant_types.len(), 2);
 }
+
+/// A world folder whose bake was stopped while moving the world in (its staging folder beside
+/// it holds the journal of that move) says so and how to put it right, not just "world.toml:
+/// file not found".
+#[test]
+fn a_world_whose_bake_stopped_while_moving_it_in_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let w = dir.path().join("w");
+    std::fs::create_dir_all(w.join("tiles")).unwrap();
+    let staging = dir.path().join(".w.baking.4242-0");
+    std::fs::create_dir_all(&staging).unwrap();
+    std::fs::write(staging.join("publishing.json"), "{}").unwrap();
+    let e = verdant::World::open(&w).unwrap_err().to_string();
+    assert!(
+        e.contains("no world.toml")
+            && e.contains(".w.baking.4242-0")
+            && e.contains("run the bake into it again"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&w).unwrap();
+    let e = verdant::World::open(&w).unwrap_err().to_string();
+    assert!(
+        e.contains("no such folder") && e.contains(".w.baking.4242-0"),
+        "{e}"
+    );
+    // A staging folder that is not moving a world in (a bake under way) changes nothing.
+    std::fs::remove_file(staging.join("publishing.json")).unwrap();
+    let e = verdant::World::open(&w).unwrap_err().to_string();
+    assert!(e.contains("world directory not found"), "{e}");
+    std::fs::create_dir_all(&w).unwrap();
+    let e = verdant::World::open(&w).unwrap_err().to_string();
+    assert!(e.ends_with("world.toml: file not found"), "{e}");
+}

@@ -290,7 +290,7 @@ pub fn bake(
     let parts = match opts.shard {
         None => None,
         Some(step) => {
-            let parts = shard::Parts::open(&out, step.count(), shard::fingerprint(opts, &files)?)?;
+            let parts = shard::Parts::open(&out, step, shard::fingerprint(opts, &files)?)?;
             match step {
                 ShardStep::Shard { index, .. } => {
                     if let Some(mut report) = parts.done(index) {
@@ -614,6 +614,7 @@ pub fn bake(
             out: &parts.dir,
             ..producer
         };
+        parts.claim()?;
         match *step {
             ShardStep::Shard { index, .. } => {
                 let (n, peak) = produce(&producer, share(Some(index)), &cancelled, progress)?;

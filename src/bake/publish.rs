@@ -134,7 +134,7 @@ const STAGING_WORLD: &str = "world";
 /// The folder in a staging folder that the replaced world is moved to while the new one goes in.
 const STAGING_PREVIOUS: &str = "previous";
 /// The record of a publish in a staging folder ([`Journal`]), written before its first move.
-const STAGING_JOURNAL: &str = "publishing.json";
+const STAGING_JOURNAL: &str = crate::world::PUBLISH_JOURNAL;
 /// Where a published sharded bake's parts folder goes, to be removed with the staging folder.
 const STAGING_SPENT_PARTS: &str = "parts";
 /// A staging folder without a lock file belongs to a bake that is just starting, unless it was

@@ -189,41 +189,60 @@ pub(super) struct Parts {
     pub(super) dir: PathBuf,
     fingerprint: String,
     count: u32,
+    /// The step this run takes, for its errors' option.
+    step: ShardStep,
 }
 
 /// The file in a parts folder that holds its bake's fingerprint record ([`Parts::record`]).
 pub(super) const FINGERPRINT_FILE: &str = "fingerprint";
 
 impl Parts {
-    /// Opens (creating it where it does not exist) the parts folder for a bake into `out` of
-    /// `count` shards; refuses one that holds another bake's parts.
-    pub(super) fn open(out: &Path, count: u32, fingerprint: String) -> Result<Parts, WorldError> {
-        let dir = parts_dir(out);
-        std::fs::create_dir_all(&dir).map_err(|e| WorldError::io(&dir, e))?;
-        let record = record(&fingerprint, count);
+    /// The parts folder for a bake into `out` of `count` shards, checked but not yet made:
+    /// refuses one that holds another bake's parts, or files that are not a bake's. Nothing is
+    /// written until [`Parts::claim`], so that a bake refused for its input (a DEM read and found
+    /// wanting) leaves no parts folder behind to refuse the next, corrected, bake.
+    pub(super) fn open(
+        out: &Path,
+        step: ShardStep,
+        fingerprint: String,
+    ) -> Result<Parts, WorldError> {
+        let parts = Parts {
+            dir: parts_dir(out),
+            fingerprint,
+            count: step.count(),
+            step,
+        };
+        parts.check(false)?;
+        Ok(parts)
+    }
+
+    /// Makes the parts folder where it does not exist and records this bake's fingerprint in
+    /// it, checking again (another shard may have made it since [`Parts::open`]).
+    pub(super) fn claim(&self) -> Result<(), WorldError> {
+        self.check(true)
+    }
+
+    fn check(&self, claim: bool) -> Result<(), WorldError> {
+        let dir = &self.dir;
+        if claim {
+            std::fs::create_dir_all(dir).map_err(|e| WorldError::io(dir, e))?;
+        }
+        let record = self.record();
         let file = dir.join(FINGERPRINT_FILE);
         match std::fs::read_to_string(&file) {
             Ok(found) if found == record => {}
-            Ok(found) => {
-                return Err(WorldError::bad_option(
-                    "--shard",
-                    dir.display(),
-                    format!(
-                        "the parts of the same bake (options, input files and shard count): \
-                         this folder holds another bake's ({}); finish that bake, or remove \
-                         the folder",
-                        found.trim()
-                    ),
-                ));
-            }
+            Ok(found) => return Err(self.not_ours(&found)),
             Err(_) => {
                 // A folder of that name that is not a bake's parts (it holds anything but
                 // another shard's fingerprint being written) is the user's: never adopted, so
                 // that the finish, which removes the parts folder, removes nothing of theirs.
-                let theirs = std::fs::read_dir(&dir)
-                    .map_err(|e| WorldError::io(&dir, e))?
-                    .filter_map(Result::ok)
-                    .any(|e| !e.file_name().to_string_lossy().starts_with(".fingerprint."));
+                let theirs = match std::fs::read_dir(dir) {
+                    Ok(entries) => entries
+                        .filter_map(Result::ok)
+                        .any(|e| !e.file_name().to_string_lossy().starts_with(".fingerprint.")),
+                    Err(e) if !claim && e.kind() == std::io::ErrorKind::NotFound => false,
+                    Err(e) => return Err(WorldError::io(dir, e)),
+                };
                 if theirs {
                     return Err(WorldError::bad_option(
                         "--shard",
@@ -233,14 +252,52 @@ impl Parts {
                             .into(),
                     ));
                 }
-                write_atomic(&file, record.as_bytes())?;
+                if claim {
+                    write_atomic(&file, record.as_bytes())?;
+                }
             }
         }
-        Ok(Parts {
-            dir,
-            fingerprint,
-            count,
-        })
+        Ok(())
+    }
+
+    /// The error for a parts folder whose fingerprint file holds `found`, not this bake's record:
+    /// the same bake in another count of shards names the count to use; any other bake says
+    /// that its options or input files differ.
+    fn not_ours(&self, found: &str) -> WorldError {
+        let (option, value, index) = match self.step {
+            ShardStep::Shard { index, count } => {
+                ("--shard", format!("{index}/{count}"), Some(index))
+            }
+            ShardStep::Finish { count } => ("--finish-shards", count.to_string(), None),
+        };
+        let dir = self.dir.display();
+        let mut words = found.split_whitespace();
+        let (theirs, their_count) = (
+            words.next(),
+            words.next().and_then(|n| n.parse::<u32>().ok()),
+        );
+        let allowed = match (theirs, their_count) {
+            (Some(f), Some(n)) if f == self.fingerprint => {
+                let again = match index {
+                    Some(i) if i < n => format!("--shard {i}/{n}"),
+                    Some(_) => format!("--shard I/{n} (I from 0 to {})", n - 1),
+                    None => format!("--finish-shards {n}"),
+                };
+                format!(
+                    "the shard count of the bake whose parts are in {dir}: this same bake (its \
+                     options and input files) was sharded {n} ways there, not {}; run {again}, \
+                     or remove the folder to start again in {} shards",
+                    self.count, self.count
+                )
+            }
+            _ => format!(
+                "the parts of the same bake: {dir} holds the parts of another bake, made with \
+                 other options or input files ({}); finish that bake with the options it was \
+                 given, or remove the folder",
+                found.trim()
+            ),
+        };
+        WorldError::bad_option(option, value, allowed)
     }
 
     /// What the parts folder's fingerprint file holds.

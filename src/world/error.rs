@@ -28,6 +28,25 @@ pub enum WorldError {
         path: PathBuf,
     },
 
+    /// A world folder without its world, where a bake into it was stopped while moving its
+    /// world in: the staging folder beside it holds the world.
+    #[error(
+        "{}: {what}: a bake into this folder was stopped while moving its world in, and {} \
+         holds it; run the bake into it again (`verdant bake ... --out {}`), which puts the \
+         folder right before anything else",
+        path.display(),
+        staging.display(),
+        path.display()
+    )]
+    InterruptedBake {
+        /// The world folder asked for.
+        path: PathBuf,
+        /// What is missing: its `world.toml` or the folder itself.
+        what: &'static str,
+        /// The bake's staging folder beside it.
+        staging: PathBuf,
+    },
+
     /// A file that the world or the baker needs does not exist.
     #[error("{}: file not found", path.display())]
     MissingFile {
@@ -706,6 +725,7 @@ impl WorldError {
         match self {
             Io { path, .. }
             | MissingWorldDir { path }
+            | InterruptedBake { path, .. }
             | MissingFile { path }
             | ManifestSyntax { path, .. }
             | NonFinite { path, .. }

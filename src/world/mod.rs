@@ -80,12 +80,29 @@ pub struct World {
 impl World {
     /// Opens the world in `dir`: reads and validates `dir/world.toml`.
     pub fn open(dir: &Path) -> Result<World, WorldError> {
-        if !dir.is_dir() {
-            return Err(WorldError::MissingWorldDir {
+        let interrupted = |what| {
+            interrupted_bake(dir).map(|staging| WorldError::InterruptedBake {
                 path: dir.to_path_buf(),
-            });
+                what,
+                staging,
+            })
+        };
+        if !dir.is_dir() {
+            return Err(interrupted("no such folder").unwrap_or_else(|| {
+                WorldError::MissingWorldDir {
+                    path: dir.to_path_buf(),
+                }
+            }));
         }
-        let manifest = Manifest::from_path(&dir.join("world.toml"))?;
+        let manifest_path = dir.join("world.toml");
+        let manifest = match Manifest::from_path(&manifest_path) {
+            Err(WorldError::MissingFile { path }) if path == manifest_path => {
+                return Err(
+                    interrupted("no world.toml").unwrap_or(WorldError::MissingFile { path })
+                );
+            }
+            other => other?,
+        };
         Ok(World {
             dir: dir.to_path_buf(),
             manifest,
@@ -115,6 +132,31 @@ impl World {
     pub fn tile_path(&self, id: TileId, kind: TileFile) -> PathBuf {
         tile_path(&self.dir, id, kind)
     }
+}
+
+/// The file a bake's staging folder holds while it moves its world into the output folder.
+pub(crate) const PUBLISH_JOURNAL: &str = "publishing.json";
+
+/// The staging folder of a bake into `dir` that was stopped while moving its world in
+/// (`.NAME.baking.*` beside it, holding [`PUBLISH_JOURNAL`]), if there is one.
+fn interrupted_bake(dir: &Path) -> Option<PathBuf> {
+    let name = dir.file_name()?.to_string_lossy().into_owned();
+    let parent = match dir.parent() {
+        Some(p) if p.as_os_str().is_empty() => Path::new("."),
+        Some(p) => p,
+        None => return None,
+    };
+    let prefix = format!(".{name}.baking.");
+    std::fs::read_dir(parent)
+        .ok()?
+        .filter_map(Result::ok)
+        .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+        .map(|e| e.path())
+        .find(|p| p.join(PUBLISH_JOURNAL).is_file())
+        .map(|p| match dir.parent() {
+            Some(q) if q.as_os_str().is_empty() => PathBuf::from(p.file_name().unwrap_or_default()),
+            _ => p,
+        })
 }
 
 #[cfg(test)]
