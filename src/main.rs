@@ -51,12 +51,20 @@ enum Command {
         addr: String,
     },
     /// Benchmarks of the renderer.
+    ///
+    /// Ctrl-C (or SIGTERM) stops a benchmark at its next frame, view or setting: what it
+    /// measured so far is written (the JSON report marked "interrupted": true, the charts'
+    /// titles "partial") and it exits with status 130; a second Ctrl-C ends it at once.
     #[command(allow_negative_numbers = true)]
     Bench {
         #[command(subcommand)]
         what: BenchCommand,
     },
     /// Measure methods against real data and chart speed against accuracy.
+    ///
+    /// Ctrl-C (or SIGTERM) stops an evaluation after the method or run under way: those done
+    /// are written (the charts' titles "partial") and it exits with status 130; a second
+    /// Ctrl-C ends it at once.
     #[command(allow_negative_numbers = true)]
     Eval {
         #[command(subcommand)]

@@ -1883,6 +1883,12 @@ fn fly_at_a_size_beyond_the_adapters_buffers_names_the_limit() {
 /// `bench aa` on the default world at its smallest: 64x36, two frames a sequence with no
 /// run-up, the truth 2x2 out to one view distance, no paths, one timed frame; then `extra`.
 fn tiny_bench_aa(dir: &Path, extra: &[&str]) -> Output {
+    let args = tiny_bench_aa_args(extra);
+    verdant(&args.iter().map(String::as_str).collect::<Vec<_>>(), dir)
+}
+
+/// The arguments of [`tiny_bench_aa`].
+fn tiny_bench_aa_args(extra: &[&str]) -> Vec<String> {
     let world = common::default_world();
     let mut args = vec![
         "bench",
@@ -1915,7 +1921,7 @@ fn tiny_bench_aa(dir: &Path, extra: &[&str]) -> Output {
         args.drain(at..at + 2);
     }
     args.extend_from_slice(extra);
-    verdant(&args, dir)
+    args.into_iter().map(String::from).collect()
 }
 
 #[test]
@@ -2413,4 +2419,300 @@ fn interrupt(child: std::process::Child, report: &Path) -> (String, serde_json::
     assert!(!stderr.contains("panicked"), "{stderr}");
     let report = serde_json::from_slice(&std::fs::read(report).unwrap()).unwrap();
     (stderr, report)
+}
+
+/// Runs verdant with `args` in `cwd` and sends it SIGINT once its stderr has the line `marker`
+/// (a progress line that follows a measurement); returns its exit status, stdout and stderr,
+/// after checking that it did not panic.
+fn interrupted_at(args: &[&str], cwd: &Path, marker: &str) -> (Option<i32>, String, String) {
+    use std::io::BufRead;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(args)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run verdant");
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stderr).lines() {
+            let Ok(line) = line else { break };
+            all.push_str(&line);
+            all.push('\n');
+            let _ = tx.send(line);
+        }
+        all
+    });
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_secs(300)) {
+            Ok(line) if line == marker => break,
+            Ok(_) => {}
+            Err(e) => {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!(
+                    "no line {marker:?} ({e}); stderr:\n{}",
+                    reader.join().unwrap()
+                );
+            }
+        }
+    }
+    common::send_sigint(&child);
+    let out = child.wait_with_output().unwrap();
+    let stderr = reader.join().unwrap();
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr,
+    )
+}
+
+/// The rows of a CSV table, each a map from its column's name to its cell.
+fn csv_rows(file: &Path) -> Vec<std::collections::HashMap<String, String>> {
+    let text = std::fs::read_to_string(file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    lines
+        .map(|l| {
+            let cells: Vec<&str> = l.split(',').collect();
+            assert_eq!(cells.len(), header.len(), "{l}");
+            header
+                .iter()
+                .zip(cells)
+                .map(|(h, c)| (h.to_string(), c.to_owned()))
+                .collect()
+        })
+        .collect()
+}
+
+/// The names of the files in `dir`, sorted.
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// Ctrl-C (SIGINT) during `bench blades` stops it at the next blade count or timing: the
+/// counts measured so far are written (the timed ones with their timings, the others with empty
+/// timing cells), `bench_blades.json` marked interrupted, the summary says it is partial, and
+/// the status is 130; a file of the user's in --out stays. (It died with nothing written.)
+#[test]
+fn an_interrupted_bench_blades_writes_the_counts_it_measured() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("b");
+    std::fs::create_dir(&dir).unwrap();
+    std::fs::write(dir.join("notes.txt"), "mine").unwrap();
+    let counts = ["5000", "10000", "20000"];
+    let joined = counts.join(",");
+    let args = |rounds: &'static str| {
+        vec![
+            "bench",
+            "blades",
+            "--size",
+            "32x18",
+            "--counts",
+            joined.as_str(),
+            "--warmup-frames",
+            "0",
+            "--timed-frames",
+            "150",
+            "--rounds",
+            rounds,
+            "--truth",
+            "1",
+            "--out",
+            "b",
+        ]
+    };
+    let check = |stdout: &str, stderr: &str, code: Option<i32>| {
+        assert_eq!(code, Some(130), "{stderr}");
+        assert!(
+            stdout.contains("wrote b (partial: the run was interrupted)"),
+            "{stdout}"
+        );
+        let report: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("bench_blades.json")).unwrap()).unwrap();
+        assert_eq!(report["interrupted"], true);
+        let results = report["results"].as_array().unwrap().clone();
+        let rows = csv_rows(&dir.join("blades.csv"));
+        assert_eq!(rows.len(), results.len());
+        assert!((1..=counts.len()).contains(&rows.len()), "{rows:?}");
+        for (row, (r, count)) in rows.iter().zip(results.iter().zip(counts)) {
+            assert_eq!(row["blades"], count);
+            assert_eq!(r["blades"].as_u64().unwrap().to_string(), count);
+            // Every count reported was drawn and measured against the truth.
+            assert!(row["drawn_high"].parse::<u64>().unwrap() > 0, "{row:?}");
+            let flip: f64 = row["flip_vs_truth"].parse().unwrap();
+            assert!(flip > 0.0 && flip < 1.0, "{row:?}");
+        }
+        let timed = results
+            .iter()
+            .filter(|r| r["draw"]["frames"].as_u64().unwrap() > 0)
+            .count();
+        for (row, r) in rows.iter().zip(&results) {
+            // A count is timed in whole rounds of 150 frames, or not at all: then its timing
+            // cells are empty, never a 0 ms that was not measured.
+            let frames = r["draw"]["frames"].as_u64().unwrap();
+            assert_eq!(frames % 150, 0, "{r}");
+            assert_eq!(row["draw_ms"].is_empty(), frames == 0, "{row:?}");
+            if frames > 0 {
+                assert!(row["draw_ms"].parse::<f64>().unwrap() > 0.0, "{row:?}");
+            }
+        }
+        assert!(
+            stderr.contains(&format!(
+                "interrupted: stopped part-way; b/bench_blades.json describes the {} of 3 blade \
+                 counts measured so far ({timed} of them timed)",
+                rows.len()
+            )),
+            "{stderr}"
+        );
+        // Every output written whole, nothing of the user's lost, no temporary left.
+        assert_eq!(
+            names_in(&dir),
+            [
+                "bench_blades.json",
+                "blades.csv",
+                "blades_error.png",
+                "blades_ratio.png",
+                "blades_time.png",
+                "notes.txt"
+            ]
+        );
+        for chart in ["blades_error.png", "blades_ratio.png", "blades_time.png"] {
+            image::open(dir.join(chart)).unwrap();
+        }
+        assert_eq!(
+            std::fs::read_to_string(dir.join("notes.txt")).unwrap(),
+            "mine"
+        );
+        (rows.len(), timed)
+    };
+    // Stopped while the counts' images are captured: none of them timed.
+    let (code, stdout, stderr) = interrupted_at(&args("1"), tmp.path(), "images: 1/3");
+    let (measured, timed) = check(&stdout, &stderr, code);
+    assert!(measured < counts.len() && timed == 0, "{measured} {timed}");
+    // Stopped in the timings (a hundred rounds): every count's images, some of them timed.
+    let (code, stdout, stderr) = interrupted_at(&args("100"), tmp.path(), "timing: 1/300");
+    let (measured, timed) = check(&stdout, &stderr, code);
+    assert!(
+        measured == counts.len() && (1..counts.len()).contains(&timed),
+        "{measured} {timed}"
+    );
+}
+
+/// Ctrl-C (SIGINT) during `bench aa`, the longest benchmark, stops it at the next frame: the
+/// frames measured of the sequence under way are written (`aa_frames.csv`, `aa.json` marked
+/// interrupted; the sequence, cut short, is not summed up), with the size's chart, and the
+/// status is 130.
+#[test]
+fn an_interrupted_bench_aa_writes_the_frames_it_measured() {
+    let tmp = tempfile::tempdir().unwrap();
+    let args = tiny_bench_aa_args(&[
+        "--aa",
+        "off",
+        "--sequences",
+        "still,dolly",
+        "--frames",
+        "6",
+        "--out",
+        "a",
+    ]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (code, stdout, stderr) = interrupted_at(&args, tmp.path(), "64x36 still: 1/6");
+    assert_eq!(code, Some(130), "{stderr}");
+    assert!(
+        stdout.contains("wrote a (partial: the run was interrupted)"),
+        "{stdout}"
+    );
+    let dir = tmp.path().join("a");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("aa.json")).unwrap()).unwrap();
+    assert_eq!(report["interrupted"], true);
+    let frames = report["frames"].as_array().unwrap();
+    assert!((1..6).contains(&frames.len()), "{}", frames.len());
+    for (i, f) in frames.iter().enumerate() {
+        assert_eq!(
+            (f["motion"].as_str(), f["method"].as_str()),
+            (Some("still"), Some("off"))
+        );
+        assert_eq!(f["frame"].as_u64(), Some(i as u64));
+        let flip = f["flip"].as_f64().unwrap();
+        assert!(flip > 0.0 && flip < 1.0, "{f}");
+    }
+    assert!(report["sequences"].as_array().unwrap().is_empty());
+    assert!(report["timings"].as_array().unwrap().is_empty());
+    let rows = csv_rows(&dir.join("aa_frames.csv"));
+    assert_eq!(rows.len(), frames.len());
+    assert!(csv_rows(&dir.join("aa_sequences.csv")).is_empty());
+    assert!(csv_rows(&dir.join("aa_timing.csv")).is_empty());
+    image::open(dir.join("aa_64x36.png")).unwrap();
+    assert!(
+        stderr.contains(&format!(
+            "interrupted: stopped part-way; a/aa.json describes the {} frames, 0 sequences, 0 \
+             path views and 0 timings measured so far",
+            frames.len()
+        )),
+        "{stderr}"
+    );
+    assert!(!names_in(&dir).iter().any(|n| n.ends_with(".tmp")));
+}
+
+/// Ctrl-C (SIGINT) during `eval derive` stops it after the method under way: the methods run
+/// are written to `derive.csv` and the charts (titled partial), the summary says it is partial,
+/// and the status is 130.
+#[test]
+fn an_interrupted_eval_derive_writes_the_methods_it_ran() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dem = common::root().join("worlds/santa-cruz/source/santa_cruz_1024.png");
+    let (code, stdout, stderr) = interrupted_at(
+        &[
+            "eval",
+            "derive",
+            "--dem",
+            dem.to_str().unwrap(),
+            "--out",
+            "ev",
+        ],
+        tmp.path(),
+        "methods: 1/10",
+    );
+    assert_eq!(code, Some(130), "{stderr}");
+    let dir = tmp.path().join("ev");
+    let rows = csv_rows(&dir.join("derive.csv"));
+    assert!((1..10).contains(&rows.len()), "{rows:?}");
+    for (row, method) in rows.iter().zip(["nearest", "bilinear", "bicubic"]) {
+        assert_eq!(row["method"], method);
+        assert!(row["rmse_m"].parse::<f64>().unwrap() > 0.0, "{row:?}");
+    }
+    // The runtime's method, the last, was not run.
+    assert!(!rows.iter().any(|r| r["runtime_default"] == "true"));
+    assert!(
+        stdout.contains(
+            "runtime method: calibrated (not run); wrote derive.csv and charts to ev \
+                         (partial: the eval was interrupted)"
+        ),
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains(&format!(
+            "interrupted: stopped after {} of 10 methods; ev/derive.csv holds those",
+            rows.len()
+        )),
+        "{stderr}"
+    );
+    for chart in [
+        "derive_height.png",
+        "derive_slope.png",
+        "derive_flattening.png",
+        "derive_roughness.png",
+    ] {
+        image::open(dir.join(chart)).unwrap();
+    }
 }

@@ -166,3 +166,53 @@ fn neither_euler_step_survives_steady_half_second_frames() {
         }
     }
 }
+
+/// A stop asked for during the eval (Ctrl-C on the command line) ends it after the run under
+/// way: the runs made are written to `sway.csv` and the charts, the report marked interrupted,
+/// and an integrator that never ran is not called stable; asked for before the first run,
+/// nothing is written.
+#[test]
+fn a_stopped_sway_eval_writes_the_runs_it_made() {
+    use verdant::bake::CancelFlag;
+    use verdant::tools::stop::Stop;
+    let tmp = tempfile::tempdir().unwrap();
+    let flag = CancelFlag::new();
+    let stop = Stop::new(Some(flag.clone()));
+    let out = tmp.path().join("sway");
+    let mut heard = Vec::new();
+    let report = sway::run_sway_eval(&out, &stop, &mut |done, total| {
+        heard.push((done, total));
+        if done == 2 {
+            flag.cancel();
+        }
+    })
+    .unwrap();
+    assert_eq!(heard, [(1, 54), (2, 54)]);
+    assert!(report.interrupted);
+    assert_eq!(report.results.len(), 2);
+    let csv = std::fs::read_to_string(out.join("sway.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    let first = Integrator::ALL[0].name();
+    assert_eq!(rows.len(), 2, "{csv}");
+    for (row, dt) in rows.iter().zip(EVAL_STEPS_S) {
+        assert_eq!((row[0], row[1]), ("stiff", first), "{csv}");
+        assert!((row[2].parse::<f64>().unwrap() - dt).abs() < 1e-6, "{csv}");
+    }
+    for chart in [
+        "sway_error.png",
+        "sway_error_soft.png",
+        "sway_stability.png",
+    ] {
+        image::open(out.join(chart)).unwrap();
+    }
+    assert!(report.stable.iter().all(|i| i.name() == first));
+    // Stopped before the first run: nothing measured, nothing written, no folder made.
+    let none = tmp.path().join("none");
+    let report = sway::run_sway_eval(&none, &stop, &mut |_, _| {}).unwrap();
+    assert!(report.interrupted && report.results.is_empty());
+    assert!(!none.exists());
+}

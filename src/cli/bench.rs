@@ -1,10 +1,11 @@
 //! `verdant bench`: the benchmarks' subcommands, their timing options and the tables they
 //! print.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Subcommand;
+use verdant::tools::timing::Timing;
 
 use super::args::{float_in, parse_size, parse_vec3, resolve_world};
 use super::progress::{finish_bars, stage_bars};
@@ -347,10 +348,51 @@ pub(crate) struct TimingArgs {
     pub(crate) rounds: Option<u32>,
 }
 
-pub(crate) fn bench_features(opts: verdant::tools::BenchLodOptions) -> Result<()> {
+/// `value`, a figure of `timing`, with `decimals` decimals; "-" where a run stopped early did
+/// not time it.
+fn timed(timing: &Timing, value: f64, decimals: usize) -> String {
+    if timing.measured() {
+        format!("{value:.decimals$}")
+    } else {
+        "-".to_owned()
+    }
+}
+
+/// The last line of a benchmark's summary: where it wrote, and that it is partial if the run
+/// was stopped early.
+fn wrote(out: &Path, interrupted: bool) {
+    if interrupted {
+        println!("wrote {} (partial: the run was interrupted)", out.display());
+    } else {
+        println!("wrote {}", out.display());
+    }
+}
+
+/// The error that ends a benchmark stopped early (status 130): what `report` (a file in `out`)
+/// holds of it, or that nothing was measured (and nothing written).
+fn interrupted(measured: bool, out: &Path, report: &str, holds: String) -> anyhow::Error {
+    if measured {
+        super::Interrupted(format!(
+            "stopped part-way; {} describes {holds}",
+            out.join(report).display()
+        ))
+        .into()
+    } else {
+        super::Interrupted("stopped before the first measurement; nothing written".to_owned())
+            .into()
+    }
+}
+
+pub(crate) fn bench_features(mut opts: verdant::tools::BenchLodOptions) -> Result<()> {
+    // Ctrl-C stops the run at the next view or variant, writing what was measured; a second
+    // one ends the process at once.
+    opts.stop = Some(super::stop_on_signals()?);
     let (bars, mut update) = stage_bars();
     let r = verdant::tools::run_bench_features(&opts, &mut update)?;
-    finish_bars(&bars);
+    finish_bars(&bars, r.interrupted);
+    if r.features.is_empty() {
+        return Err(interrupted(false, &opts.out, "", String::new()));
+    }
     println!(
         "{} [{}], {}x{}",
         r.adapter.name, r.adapter.backend, r.size.0, r.size.1
@@ -359,29 +401,51 @@ pub(crate) fn bench_features(opts: verdant::tools::BenchLodOptions) -> Result<()
         "{:<18} {:>10} {:>8} {:>10} {:>13}",
         "feature off", "GPU ms", "IQR %", "cost ms", "contribution"
     );
+    let full = r.features[0].timing;
     for f in &r.features {
+        let t = &f.timing;
         println!(
-            "{:<18} {:>10.3} {:>8.1} {:>10.3} {:>13.4}{}",
+            "{:<18} {:>10} {:>8} {:>10} {:>13.4}{}",
             f.feature,
-            f.gpu_ms,
-            100.0 * f.timing.spread,
-            f.cost_ms,
-            f.contribution,
-            if f.timing.noisy {
-                "  (spread above 10%)"
+            timed(t, f.gpu_ms, 3),
+            timed(t, 100.0 * t.spread, 1),
+            if full.measured() {
+                timed(t, f.cost_ms, 3)
             } else {
-                ""
-            }
+                "-".to_owned()
+            },
+            f.contribution,
+            if t.noisy { "  (spread above 10%)" } else { "" }
         );
     }
-    println!("wrote {}", opts.out.display());
+    wrote(&opts.out, r.interrupted);
+    if r.interrupted {
+        let timed = r.features.iter().filter(|f| f.timing.measured()).count();
+        return Err(interrupted(
+            true,
+            &opts.out,
+            "bench_features.json",
+            format!(
+                "the {} variants measured so far ({timed} of them timed)",
+                r.features.len()
+            ),
+        ));
+    }
     Ok(())
 }
 
-pub(crate) fn bench_blades(opts: verdant::tools::bench_blades::BenchBladesOptions) -> Result<()> {
+pub(crate) fn bench_blades(
+    mut opts: verdant::tools::bench_blades::BenchBladesOptions,
+) -> Result<()> {
+    // Ctrl-C stops the run at the next blade count or timing, writing what was measured; a
+    // second one ends the process at once.
+    opts.stop = Some(super::stop_on_signals()?);
     let (bars, mut update) = stage_bars();
     let r = verdant::tools::bench_blades::run_bench_blades(&opts, &mut update)?;
-    finish_bars(&bars);
+    finish_bars(&bars, r.interrupted);
+    if r.results.is_empty() {
+        return Err(interrupted(false, &opts.out, "", String::new()));
+    }
     println!(
         "{} [{}], {}x{}",
         r.adapter.name, r.adapter.backend, r.size.0, r.size.1
@@ -401,18 +465,19 @@ pub(crate) fn bench_blades(opts: verdant::tools::bench_blades::BenchBladesOption
         "FLIP"
     );
     for b in &r.results {
+        let t = &b.draw;
         println!(
-            "{:>10} {:>9} {:>9} {:>11} {:>9.3} {:>9.3} {:>9.3} {:>8.2} {:>8.3} {:>7.2} {:>7.4}{}",
+            "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7.4}{}",
             b.blades,
             b.drawn[0],
             b.drawn[1],
             b.vertices,
-            b.generate.median_ms,
-            b.draw.median_ms,
-            b.floor.median_ms,
-            b.ns_per_blade,
-            b.ns_per_vertex,
-            b.ratio_to_floor,
+            timed(t, b.generate.median_ms, 3),
+            timed(t, b.draw.median_ms, 3),
+            timed(t, b.floor.median_ms, 3),
+            timed(t, b.ns_per_blade, 2),
+            timed(t, b.ns_per_vertex, 3),
+            timed(t, b.ratio_to_floor, 2),
             b.flip_vs_no_lod,
             if b.draw.noisy || b.floor.noisy {
                 "  (spread above 10%)"
@@ -422,19 +487,36 @@ pub(crate) fn bench_blades(opts: verdant::tools::bench_blades::BenchBladesOption
         );
     }
     println!(
-        "timing: {} rounds of {} frames after {} untimed, per count; wrote {}",
-        r.counts.rounds,
-        r.counts.timed,
-        r.counts.warmup,
-        opts.out.display()
+        "timing: {} rounds of {} frames after {} untimed, per count",
+        r.counts.rounds, r.counts.timed, r.counts.warmup
     );
+    wrote(&opts.out, r.interrupted);
+    if r.interrupted {
+        let timed = r.results.iter().filter(|b| b.draw.measured()).count();
+        return Err(interrupted(
+            true,
+            &opts.out,
+            "bench_blades.json",
+            format!(
+                "the {} of {} blade counts measured so far ({timed} of them timed)",
+                r.results.len(),
+                opts.counts.len()
+            ),
+        ));
+    }
     Ok(())
 }
 
-pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
+pub(crate) fn bench_lod(mut opts: verdant::tools::BenchLodOptions) -> Result<()> {
+    // Ctrl-C stops the run at the next frame, view or setting, writing what was measured; a
+    // second one ends the process at once.
+    opts.stop = Some(super::stop_on_signals()?);
     let (bars, mut update) = stage_bars();
     let r = verdant::tools::run_bench_lod(&opts, &mut update)?;
-    finish_bars(&bars);
+    finish_bars(&bars, r.interrupted);
+    if r.dolly.is_empty() {
+        return Err(interrupted(false, &opts.out, "", String::new()));
+    }
     println!(
         "{} [{}], {}x{}, the views along the path {:?}",
         r.adapter.name, r.adapter.backend, r.size.0, r.size.1, r.path
@@ -473,12 +555,13 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
     );
     let ms = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
     for s in &r.settings {
+        let t = &s.frame;
         println!(
-            "{:<16} {:>9.3} {:>8.1} {:>10.2} {:>9.4} {:>9.4} {:>9.4} {:>10.0} {:>7} {:>11} {:>10}{}",
+            "{:<16} {:>9} {:>8} {:>10} {:>9.4} {:>9.4} {:>9.4} {:>10.0} {:>7} {:>11} {:>10}{}",
             s.setting.name,
-            s.gpu.median_ms,
-            100.0 * s.gpu.spread,
-            s.frame.median_ms,
+            timed(t, s.gpu.median_ms, 3),
+            timed(t, 100.0 * s.gpu.spread, 1),
+            timed(t, s.frame.median_ms, 2),
             s.vs_truth.flip,
             s.vs_truth.coarse,
             s.flip_frame_vs_truth,
@@ -504,13 +587,18 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
             k = r.supersample
         );
     }
-    println!(
-        "on the front against the {k}x{k} truth: {}; by the coarse FLIP: {}",
-        r.front.join(", "),
-        r.coarse_front.join(", "),
-        k = r.truth_k
-    );
-    if let Some(p) = &r.flight_path {
+    // The fronts are over the settings timed: every setting, unless the run was stopped early.
+    if r.settings.iter().any(|s| s.frame.measured()) {
+        println!(
+            "on the front against the {k}x{k} truth: {}; by the coarse FLIP: {}",
+            r.front.join(", "),
+            r.coarse_front.join(", "),
+            k = r.truth_k
+        );
+    }
+    if let Some(p) = &r.flight_path
+        && r.settings.iter().any(|s| s.flight.is_some())
+    {
         println!(
             "flight: {} frames along the path {p:?} per round ({unit} time per frame, after an \
              untimed flight); on the front of its p99 against the pixel FLIP: {}{}",
@@ -523,22 +611,45 @@ pub(crate) fn bench_lod(opts: verdant::tools::BenchLodOptions) -> Result<()> {
             }
         );
     }
-    println!(
-        "default setting {} the Pareto front; wrote {}",
-        if r.default_on_front {
-            "is on"
-        } else {
-            "is NOT on"
-        },
-        opts.out.display()
-    );
+    if r.settings.first().is_some_and(|s| s.frame.measured()) {
+        println!(
+            "default setting {} the Pareto front",
+            if r.default_on_front {
+                "is on"
+            } else {
+                "is NOT on"
+            }
+        );
+    }
+    wrote(&opts.out, r.interrupted);
+    if r.interrupted {
+        let timed = r.settings.iter().filter(|s| s.frame.measured()).count();
+        return Err(interrupted(
+            true,
+            &opts.out,
+            "bench_lod.json",
+            format!(
+                "the {} of {} dolly frames and the {} settings measured so far ({timed} of them \
+                 timed)",
+                r.dolly.len(),
+                opts.dolly_frames,
+                r.settings.len()
+            ),
+        ));
+    }
     Ok(())
 }
 
-pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result<()> {
+pub(crate) fn bench_aa(mut opts: verdant::tools::bench_aa::BenchAaOptions) -> Result<()> {
+    // Ctrl-C stops the run at the next frame, view or timing, writing what was measured; a
+    // second one ends the process at once.
+    opts.stop = Some(super::stop_on_signals()?);
     let (bars, mut update) = stage_bars();
     let r = verdant::tools::bench_aa::run_bench_aa(&opts, &mut update)?;
-    finish_bars(&bars);
+    finish_bars(&bars, r.interrupted);
+    if r.frames.is_empty() && r.paths.is_empty() {
+        return Err(interrupted(false, &opts.out, "", String::new()));
+    }
     println!(
         "{} [{}], against the {}x{} truth",
         r.adapter.name, r.adapter.backend, r.truth_k, r.truth_k
@@ -624,7 +735,21 @@ pub(crate) fn bench_aa(opts: verdant::tools::bench_aa::BenchAaOptions) -> Result
             t.aa_ms
         );
     }
-    println!("wrote {}", opts.out.display());
+    wrote(&opts.out, r.interrupted);
+    if r.interrupted {
+        return Err(interrupted(
+            true,
+            &opts.out,
+            "aa.json",
+            format!(
+                "the {} frames, {} sequences, {} path views and {} timings measured so far",
+                r.frames.len(),
+                r.sequences.len(),
+                r.paths.len(),
+                r.timings.len()
+            ),
+        ));
+    }
     Ok(())
 }
 
@@ -672,6 +797,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
             truth_k: truth.truth,
+            stop: None,
         }),
         BenchCommand::Lod {
             world,
@@ -701,6 +827,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             aa: None,
             flight,
             flight_frames,
+            stop: None,
         }),
         BenchCommand::Aa {
             world,
@@ -737,6 +864,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
                 warmup_frames: timing.warmup_frames,
                 timed_frames: timing.timed_frames,
                 rounds: timing.rounds,
+                stop: None,
             })
         }
     }

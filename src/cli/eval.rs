@@ -6,7 +6,9 @@ use anyhow::Result;
 use clap::Subcommand;
 use indicatif::ProgressBar;
 
-use super::progress::bar;
+use verdant::tools::stop::Stop;
+
+use super::progress::{bar, lines};
 
 #[derive(Subcommand)]
 pub(crate) enum EvalCommand {
@@ -38,16 +40,31 @@ pub(crate) enum EvalCommand {
 
 pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
     use verdant::tools::eval_derive as eval;
+    // Ctrl-C stops the eval after the method under way, writing the methods run; a second one
+    // ends the process at once.
+    let stop = Stop::new(Some(super::stop_on_signals()?));
+    let lines = lines();
     let mut pb: Option<ProgressBar> = None;
-    let report = eval::run_derive_eval(dem_path, factor, out, &mut |method, done, total| {
+    let report = eval::run_derive_eval(dem_path, factor, out, &stop, &mut |method, done, total| {
+        if lines {
+            eprintln!("methods: {done}/{total}");
+        }
         let pb = pb.get_or_insert_with(|| bar(total, "methods"));
         pb.set_message(method.to_owned());
         pb.set_position(done);
     });
+    let interrupted = report.as_ref().is_ok_and(|r| r.interrupted);
     if let Some(pb) = pb {
-        pb.finish();
+        if interrupted {
+            pb.abandon();
+        } else {
+            pb.finish();
+        }
     }
     let report = report?;
+    if report.results.is_empty() {
+        return Err(nothing_measured());
+    }
     println!(
         "{:<22} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11}  parameters",
         "method", "RMSE m", "max m", "slope deg", "bias deg", "rough", "ms/tile"
@@ -84,23 +101,76 @@ pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<
         "on the joint Pareto front (time, height, slope, flattening, roughness): {}",
         report.front.join(", ")
     );
+    let runtime = if !report
+        .results
+        .iter()
+        .any(|r| r.method == eval::RUNTIME_METHOD)
+    {
+        "not run"
+    } else if report.runtime_on_front() {
+        "on the joint front"
+    } else {
+        "NOT on the joint front"
+    };
     println!(
-        "runtime method: {} ({} the joint front); wrote derive.csv and charts to {}",
+        "runtime method: {} ({runtime}); wrote derive.csv and charts to {}{}",
         eval::RUNTIME_METHOD,
-        if report.runtime_on_front() {
-            "on"
-        } else {
-            "NOT on"
-        },
-        out.display()
+        out.display(),
+        partial(report.interrupted)
     );
+    if report.interrupted {
+        let total = eval::methods().len() + 2;
+        return Err(super::Interrupted(format!(
+            "stopped after {} of {total} methods; {} holds those",
+            report.results.len(),
+            out.join("derive.csv").display()
+        ))
+        .into());
+    }
     Ok(())
+}
+
+/// The words after a summary's "wrote ..." of an eval that was stopped early.
+fn partial(interrupted: bool) -> &'static str {
+    if interrupted {
+        " (partial: the eval was interrupted)"
+    } else {
+        ""
+    }
+}
+
+/// The error that ends an eval stopped before its first result (status 130).
+fn nothing_measured() -> anyhow::Error {
+    super::Interrupted("stopped before the first measurement; nothing written".to_owned()).into()
 }
 
 pub(crate) fn eval_sway(out: &Path) -> Result<()> {
     use verdant::tools::eval_sway as sway;
     use verdant::tools::sway_integrators::{EulerLimits, Integrator, Preset, RENDERER_INTEGRATOR};
-    let report = sway::run_sway_eval(out)?;
+    // Ctrl-C stops the eval after the run under way, writing the runs made; a second one ends
+    // the process at once.
+    let stop = Stop::new(Some(super::stop_on_signals()?));
+    let lines = lines();
+    let mut pb: Option<ProgressBar> = None;
+    let report = sway::run_sway_eval(out, &stop, &mut |done, total| {
+        if lines {
+            eprintln!("runs: {done}/{total}");
+        }
+        pb.get_or_insert_with(|| bar(total, "runs"))
+            .set_position(done);
+    });
+    let interrupted = report.as_ref().is_ok_and(|r| r.interrupted);
+    if let Some(pb) = pb {
+        if interrupted {
+            pb.abandon();
+        } else {
+            pb.finish();
+        }
+    }
+    let report = report?;
+    if report.results.is_empty() {
+        return Err(nothing_measured());
+    }
     for preset in Preset::ALL {
         let spring = preset.spring();
         println!(
@@ -145,15 +215,31 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
         }
     );
     println!(
-        "renderer integrator: {} ({}); wrote sway.csv and charts to {}",
+        "renderer integrator: {} ({}); wrote sway.csv and charts to {}{}",
         RENDERER_INTEGRATOR.name(),
-        if report.renderer_bounded() {
+        if !report
+            .results
+            .iter()
+            .any(|r| r.integrator == RENDERER_INTEGRATOR)
+        {
+            "not run"
+        } else if report.renderer_bounded() {
             "bounded in every run above, and exact for wind held over a frame"
         } else {
             "NOT bounded in every run above"
         },
-        out.display()
+        out.display(),
+        partial(report.interrupted)
     );
+    if report.interrupted {
+        let total = Preset::ALL.len() * Integrator::ALL.len() * sway::EVAL_STEPS_S.len();
+        return Err(super::Interrupted(format!(
+            "stopped after {} of {total} runs; {} holds those",
+            report.results.len(),
+            out.join("sway.csv").display()
+        ))
+        .into());
+    }
     Ok(())
 }
 

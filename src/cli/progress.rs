@@ -9,8 +9,7 @@ pub(crate) type StageBars = std::rc::Rc<std::cell::RefCell<Vec<(String, Progress
 pub(crate) fn stage_bars() -> (StageBars, impl FnMut(&str, u64, u64)) {
     let bars = std::rc::Rc::new(std::cell::RefCell::new(Vec::<(String, ProgressBar)>::new()));
     let inner = bars.clone();
-    // Without a terminal (a batch job's log) the bars draw nothing: a line a step instead.
-    let lines = !std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let lines = lines();
     let update = move |stage: &str, done: u64, total: u64| {
         if lines {
             eprintln!("{stage}: {done}/{total}");
@@ -29,10 +28,25 @@ pub(crate) fn stage_bars() -> (StageBars, impl FnMut(&str, u64, u64)) {
     (bars, update)
 }
 
-pub(crate) fn finish_bars(bars: &std::cell::RefCell<Vec<(String, ProgressBar)>>) {
+/// Ends the bars of a run: the last one finished, or left where it stopped if the run was
+/// `interrupted`.
+pub(crate) fn finish_bars(
+    bars: &std::cell::RefCell<Vec<(String, ProgressBar)>>,
+    interrupted: bool,
+) {
     if let Some((_, pb)) = bars.borrow().last() {
-        pb.finish();
+        if interrupted {
+            pb.abandon();
+        } else {
+            pb.finish();
+        }
     }
+}
+
+/// Whether progress is written a line a step: without a terminal (a batch job's log) the bars
+/// draw nothing.
+pub(crate) fn lines() -> bool {
+    !std::io::IsTerminal::is_terminal(&std::io::stderr())
 }
 
 pub(crate) fn bar(len: u64, what: &str) -> ProgressBar {

@@ -29,6 +29,7 @@ use crate::gpu::GpuContext;
 use crate::tools::Scene;
 use crate::tools::fly::{OptionError, check_range, check_size};
 use crate::tools::metrics::{COARSE_FACTOR, COVERAGE_DISTANCE_M, coarse_flip, flip_compare};
+use crate::tools::stop::Stop;
 use crate::tools::truth::Truth;
 use crate::world::World;
 
@@ -79,6 +80,10 @@ pub struct BenchLodOptions {
     /// Frames of the flight, evenly spaced along the whole path (`--flight-frames`,
     /// 2..=[`MAX_FLIGHT_FRAMES`]).
     pub flight_frames: u32,
+    /// A flag that ends the run early (Ctrl-C on the command line): at the next frame, setting
+    /// or view, what was measured so far is written, the report marked interrupted (see
+    /// [`crate::tools::stop`]).
+    pub stop: Option<crate::bake::CancelFlag>,
 }
 
 /// The most frames of bench lod's flight (`--flight-frames`).
@@ -104,6 +109,7 @@ impl Default for BenchLodOptions {
             aa: None,
             flight: None,
             flight_frames: DEFAULT_FLIGHT_FRAMES,
+            stop: None,
         }
     }
 }
@@ -220,6 +226,8 @@ pub(crate) struct Bench<'a> {
     pub(crate) ctx: &'a GpuContext,
     pub(crate) world: &'a World,
     pub(crate) size: (u32, u32),
+    /// Ends the warm-ups of its frames and truths early (see [`crate::tools::stop`]).
+    pub(crate) stop: &'a Stop,
 }
 
 impl Bench<'_> {
@@ -234,13 +242,14 @@ impl Bench<'_> {
         )?)
     }
 
-    /// Renders `camera` after bringing its tiles in; returns the image and the stats.
+    /// Renders `camera` after bringing its tiles in; returns the image and the stats
+    /// ([`crate::tools::stop::Stopped`] if the run was stopped meanwhile).
     pub(crate) fn frame(
         &self,
         scene: &mut Scene,
         camera: &Camera,
     ) -> Result<(image::RgbaImage, crate::renderer::FrameStats)> {
-        warm_up(scene, camera)?;
+        warm_up(scene, camera, self.stop)?;
         let stats = scene.render(self.ctx, camera)?;
         Ok((scene.read_image(self.ctx)?, stats))
     }
@@ -248,14 +257,15 @@ impl Bench<'_> {
     /// `config`'s frames at the benchmark's size supersampled `k` x `k` in linear light (the
     /// truth's machinery with the setting's own grass).
     pub(crate) fn supersampled(&self, config: RendererConfig, k: u32) -> Result<Truth> {
-        Truth::with_config(
+        Ok(Truth::with_config(
             self.ctx,
             self.world.clone(),
             std::sync::Arc::new(self.world.clone()),
             self.size,
             k,
             config,
-        )
+        )?
+        .with_stop(self.stop.clone()))
     }
 
     /// The truth at the benchmark's size, K = `k`, on top of `base` (its features and wind; see
@@ -281,11 +291,12 @@ impl Bench<'_> {
     }
 }
 
-/// Brings in the tiles `camera` wants, waiting up to [`crate::tools::fly::FIRST_FRAME_WAIT`];
-/// fails if streaming delivered nothing (see [`crate::tools::fly::check_streaming`]). Tiles
-/// still missing otherwise are drawn from their ancestors, as in any frame.
-pub(crate) fn warm_up(scene: &mut Scene, camera: &Camera) -> Result<()> {
-    let report = scene.warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+/// Brings in the tiles `camera` wants, waiting up to [`crate::tools::fly::FIRST_FRAME_WAIT`]
+/// or until `stop` is asked for ([`crate::tools::stop::Stopped`]); fails if streaming delivered
+/// nothing (see [`crate::tools::fly::check_streaming`]). Tiles still missing otherwise are drawn
+/// from their ancestors, as in any frame.
+pub(crate) fn warm_up(scene: &mut Scene, camera: &Camera, stop: &Stop) -> Result<()> {
+    let report = stop.warm_up(scene, camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
     crate::tools::fly::check_streaming(
         &scene.world().dir,
         &scene.world().manifest.pyramid,

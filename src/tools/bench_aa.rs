@@ -28,7 +28,9 @@
 //! to look at (`WxH_SEQUENCE_METHOD.png`, `WxH_SEQUENCE_truth.png`). With bench lod's settings
 //! named (`--settings`), each method is measured with each of them too, as a method of its own
 //! (`METHOD+SETTING`, [`setting_label`]). The tables are written after each sequence and path
-//! as well as at the end ([`write_tables`]): a run stopped part-way keeps what it measured.
+//! as well as at the end ([`write_tables`]): a run that fails part-way keeps what it measured.
+//! A run stopped early ([`BenchAaOptions::stop`], Ctrl-C) writes every output with what it
+//! measured, `aa.json` marked `interrupted`.
 
 use std::path::PathBuf;
 
@@ -47,6 +49,7 @@ use crate::tools::fly::{OutDir, write_json, write_png, write_text};
 use crate::tools::metrics::{COARSE_FACTOR, coarse_flip, flip_compare, rgb};
 use crate::tools::metrics::{Chart, ChartPoint};
 use crate::tools::report::AdapterReport;
+use crate::tools::stop::{Stop, caught, chart_title};
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_frames};
 use crate::tools::truth::Truth;
 use crate::world::{CameraPath, World};
@@ -108,6 +111,10 @@ pub struct BenchAaOptions {
     pub timed_frames: Option<u32>,
     /// Interleaved rounds (default: by adapter).
     pub rounds: Option<u32>,
+    /// A flag that ends the run early (Ctrl-C on the command line): at the next frame, view or
+    /// timing, what was measured so far is written, the report marked interrupted (see
+    /// [`crate::tools::stop`]).
+    pub stop: Option<crate::bake::CancelFlag>,
 }
 
 impl Default for BenchAaOptions {
@@ -130,6 +137,7 @@ impl Default for BenchAaOptions {
             warmup_frames: None,
             timed_frames: None,
             rounds: None,
+            stop: None,
         }
     }
 }
@@ -486,6 +494,31 @@ pub struct AaTiming {
     pub gpu: bool,
 }
 
+/// The timing of the methods at one size under way: each method's name, frame times and
+/// anti-aliasing times (milliseconds) over the rounds run.
+struct TimingSamples {
+    size: (u32, u32),
+    methods: Vec<(String, Vec<f64>, Vec<f64>)>,
+}
+
+impl TimingSamples {
+    /// The timings of the methods timed in a round at least (every method, unless the run was
+    /// stopped in the first round); `gpu`: the figures are GPU times.
+    fn timings(self, gpu: bool) -> impl Iterator<Item = AaTiming> {
+        let size = self.size;
+        self.methods
+            .into_iter()
+            .filter(|(_, frame, _)| !frame.is_empty())
+            .map(move |(method, frame, aa)| AaTiming {
+                size,
+                method,
+                frame: Timing::of(&frame),
+                aa_ms: if gpu { Timing::of(&aa).median_ms } else { 0.0 },
+                gpu,
+            })
+    }
+}
+
 /// Everything `bench aa` measured.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchAaReport {
@@ -509,6 +542,10 @@ pub struct BenchAaReport {
     pub truth_content: bool,
     /// Timing frame counts.
     pub counts: FrameCounts,
+    /// Whether the run was stopped before its end (Ctrl-C; [`BenchAaOptions::stop`]): the
+    /// report holds what was measured until then (the frames of a sequence cut short are in
+    /// `frames`, not in `sequences`; a method timed in no round has no timing).
+    pub interrupted: bool,
 }
 
 /// Pixel FLIP and coarse FLIP of `actual` against `reference`.
@@ -591,23 +628,29 @@ fn supersampled(
 }
 
 /// Steps the truth's wind, sway and trail through a frame that is not measured (its tiles
-/// brought in first).
+/// brought in first, unless `stop` is asked for meanwhile: [`crate::tools::stop::Stopped`]).
 fn advance(
     truth: &mut Truth,
     ctx: &GpuContext,
     camera: &Camera,
     time_s: f64,
     walker: Option<DVec2>,
+    stop: &Stop,
 ) -> Result<()> {
-    truth
-        .scene()
-        .warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+    stop.warm_up(truth.scene(), camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
     truth.advance(ctx, camera, time_s, walker)
 }
 
-/// Renders one frame of `scene`, its tiles brought in first.
-fn frame(ctx: &GpuContext, scene: &mut Scene, camera: &Camera, time_s: f64) -> Result<RgbaImage> {
-    scene.warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+/// Renders one frame of `scene`, its tiles brought in first (unless `stop` is asked for
+/// meanwhile: [`crate::tools::stop::Stopped`]).
+fn frame(
+    ctx: &GpuContext,
+    scene: &mut Scene,
+    camera: &Camera,
+    time_s: f64,
+    stop: &Stop,
+) -> Result<RgbaImage> {
+    stop.warm_up(scene, camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
     scene.render_frame(ctx, camera, time_s, Some(camera.position.truncate()))?;
     Ok(scene.read_image(ctx)?)
 }
@@ -641,6 +684,7 @@ pub fn run_bench_aa(
     )?;
     let out_dir = OutDir::create_for(&opts.out, "bench aa")?;
     let ctx = GpuContext::new()?;
+    let stop = Stop::new(opts.stop.clone());
     let mut configs = vec![(String::new(), RendererConfig::for_world(&world))];
     for s in &settings {
         configs.push((format!("+{}", setting_label(&s.name)), s.config(&world)));
@@ -663,235 +707,263 @@ pub fn run_bench_aa(
     let mut sequences = Vec::new();
     let mut path_views = Vec::new();
     let mut timings = Vec::new();
-    for &size in &opts.sizes {
-        let mut reference = truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?;
-        let make_scenes = || -> Result<Vec<(String, Scene)>> {
-            opts.variants()
-                .into_iter()
-                .flat_map(|(name, m, taa)| {
-                    configs.iter().map(move |(suffix, config)| {
-                        let mut config = config.clone();
-                        config.aa = m;
-                        config.taa = taa;
-                        (format!("{name}{suffix}"), config)
+    // The sequence under way (a list of frames per method) and the timing under way: kept by a
+    // run stopped part-way.
+    let mut sequence: Vec<Vec<AaFrame>> = Vec::new();
+    let mut timing: Option<TimingSamples> = None;
+    // Stopped (Ctrl-C) between frames, views or timings, what was measured is reported: the
+    // frames of a sequence cut short among every frame, but not as a sequence; the views of a
+    // path measured; each method's timing over the rounds it was timed, if any.
+    let interrupted = caught((|| -> Result<()> {
+        for &size in &opts.sizes {
+            let mut reference = truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?
+                .with_stop(stop.clone());
+            let make_scenes = || -> Result<Vec<(String, Scene)>> {
+                opts.variants()
+                    .into_iter()
+                    .flat_map(|(name, m, taa)| {
+                        configs.iter().map(move |(suffix, config)| {
+                            let mut config = config.clone();
+                            config.aa = m;
+                            config.taa = taa;
+                            (format!("{name}{suffix}"), config)
+                        })
                     })
-                })
-                .map(|(name, config)| {
-                    Ok((
-                        name,
-                        Scene::new(&ctx, world.clone(), size.0, size.1, config)?,
-                    ))
-                })
-                .collect()
-        };
-        let mut scenes = make_scenes()?;
-        for &motion in &opts.motions {
-            // Every method and the truth step through the same frames together.
-            let mut truth_prev: Option<RgbaImage> = None;
-            let mut prev: Vec<Option<RgbaImage>> = vec![None; scenes.len()];
-            let mut seq: Vec<Vec<AaFrame>> = vec![Vec::new(); scenes.len()];
-            let first = -i64::from(opts.run_up);
-            for i in first..i64::from(opts.frames) {
-                let (camera, t) = motion.frame(&start, t0, i, opts.frames);
-                let walker = Some(camera.position.truncate());
-                let truth_img = if i >= 0 {
-                    Some(reference.render(&ctx, &camera, t, walker)?)
-                } else {
-                    advance(&mut reference, &ctx, &camera, t, walker)?;
-                    None
-                };
-                for (m, (method, scene)) in scenes.iter_mut().enumerate() {
-                    let img = frame(&ctx, scene, &camera, t)?;
-                    if let Some(truth_img) = &truth_img {
-                        let change = prev[m].as_ref().map_or(0.0, |p| mean_change(p, &img));
-                        let truth_change = truth_prev
-                            .as_ref()
-                            .map_or(0.0, |p| mean_change(p, truth_img));
-                        let (flip, coarse_flip) = flips(truth_img, &img)?;
-                        seq[m].push(AaFrame {
-                            size,
-                            method: method.clone(),
-                            motion,
-                            frame: i as u32,
-                            flip,
-                            coarse_flip,
-                            change,
-                            truth_change,
-                        });
-                    }
-                    prev[m] = Some(img);
-                }
-                if truth_img.is_some() {
-                    truth_prev = truth_img;
-                }
-                progress(
-                    &format!("{}x{} {}", size.0, size.1, motion.name()),
-                    (i - first + 1) as u64,
-                    (i64::from(opts.frames) - first) as u64,
-                );
-            }
-            for (m, (method, _)) in scenes.iter().enumerate() {
-                let f = &seq[m];
-                let n = f.len() as f64;
-                // The teleport's jump is a change of view, not flicker: its frame is left out.
-                let jump = (opts.frames / 2) as usize;
-                let moved = |x: &AaFrame| {
-                    x.frame > 0 && !(motion == Motion::Teleport && x.frame as usize == jump)
-                };
-                let changes: Vec<&AaFrame> = f.iter().filter(|x| moved(x)).collect();
-                let k = changes.len().max(1) as f64;
-                let flicker = changes.iter().map(|x| x.change).sum::<f64>() / k;
-                let truth_flicker = changes.iter().map(|x| x.truth_change).sum::<f64>() / k;
-                let frame_flips: Vec<f64> = f.iter().map(|x| x.flip).collect();
-                let mean = |of: fn(&AaFrame) -> f64| f.iter().map(of).sum::<f64>() / n.max(1.0);
-                sequences.push(AaSequence {
-                    size,
-                    method: method.clone(),
-                    motion,
-                    flip_mean: mean(|x| x.flip),
-                    coarse_flip_mean: mean(|x| x.coarse_flip),
-                    flicker,
-                    truth_flicker,
-                    flicker_ratio: flicker / truth_flicker.max(1e-9),
-                    recovery_frames: (motion == Motion::Teleport)
-                        .then(|| recovery_frames(&frame_flips, jump))
-                        .flatten(),
-                });
-            }
-            // The last frame of the sequence, each method's and the truth's, to look at.
-            let name = |what: &str| {
-                opts.out.join(format!(
-                    "{}x{}_{}_{what}.png",
-                    size.0,
-                    size.1,
-                    motion.name()
-                ))
+                    .map(|(name, config)| {
+                        Ok((
+                            name,
+                            Scene::new(&ctx, world.clone(), size.0, size.1, config)?,
+                        ))
+                    })
+                    .collect()
             };
-            if let Some(img) = &truth_prev {
-                write_png(&name("truth"), img)?;
-            }
-            for (m, (method, _)) in scenes.iter().enumerate() {
-                if let Some(img) = &prev[m] {
-                    write_png(&name(method), img)?;
-                }
-            }
-            frames.extend(seq.into_iter().flatten());
-            write_tables(&opts.out, &frames, &sequences, &path_views)?;
-        }
-        // The paths: four views spread along each, reached by flight along it; the bounds
-        // step through the same frames as the truth. Every renderer starts them fresh, as the
-        // bounds do: a frame carries state into the next (the wind field's attack and release,
-        // the walker's fading trail, the sway springs), and the sequences left theirs in the
-        // truth and the methods.
-        let (mut reference, mut bounds): (Truth, Vec<(Bound, Truth)>) = if paths.is_empty() {
-            (reference, Vec::new())
-        } else {
-            drop(reference);
-            scenes.clear();
-            scenes = make_scenes()?;
-            let truth = truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?;
-            let bounds = Bound::measured(opts.truth_noise)
-                .into_iter()
-                .map(|b| {
-                    Ok((
-                        b,
-                        b.renderer(&ctx, &world, size, opts.truth_k, opts.truth_reach)?,
-                    ))
-                })
-                .collect::<Result<_>>()?;
-            (truth, bounds)
-        };
-        for path in &paths {
-            let (a, b) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
-            for j in 0..4 {
-                let t_view = a + (b - a) * (0.125 + 0.25 * f64::from(j));
-                for r in (0..=opts.run_up).rev() {
-                    let t = t_view - f64::from(r) * DT_S;
-                    let camera = sample_path(path, t);
-                    let walker = Some(crate::camera::walker_at(&world.manifest, path, t));
-                    let truth_img = if r == 0 {
+            let mut scenes = make_scenes()?;
+            for &motion in &opts.motions {
+                // Every method and the truth step through the same frames together.
+                let mut truth_prev: Option<RgbaImage> = None;
+                let mut prev: Vec<Option<RgbaImage>> = vec![None; scenes.len()];
+                sequence = vec![Vec::new(); scenes.len()];
+                let first = -i64::from(opts.run_up);
+                for i in first..i64::from(opts.frames) {
+                    stop.check()?;
+                    let (camera, t) = motion.frame(&start, t0, i, opts.frames);
+                    let walker = Some(camera.position.truncate());
+                    let truth_img = if i >= 0 {
                         Some(reference.render(&ctx, &camera, t, walker)?)
                     } else {
-                        advance(&mut reference, &ctx, &camera, t, walker)?;
+                        advance(&mut reference, &ctx, &camera, t, walker, &stop)?;
                         None
                     };
-                    for (bound, renderer) in bounds.iter_mut() {
+                    // The frame's figures, kept once every method has drawn it.
+                    let mut measured = Vec::new();
+                    for (m, (method, scene)) in scenes.iter_mut().enumerate() {
+                        let img = frame(&ctx, scene, &camera, t, &stop)?;
                         if let Some(truth_img) = &truth_img {
-                            let img = renderer.render(&ctx, &camera, t, walker)?;
+                            let change = prev[m].as_ref().map_or(0.0, |p| mean_change(p, &img));
+                            let truth_change = truth_prev
+                                .as_ref()
+                                .map_or(0.0, |p| mean_change(p, truth_img));
                             let (flip, coarse_flip) = flips(truth_img, &img)?;
-                            path_views.push(AaPathView {
-                                size,
-                                method: bound.name(opts.truth_k),
-                                bound: true,
-                                path: path.name.clone(),
-                                t_s: t,
-                                flip,
-                                coarse_flip,
-                            });
-                        } else {
-                            advance(renderer, &ctx, &camera, t, walker)?;
-                        }
-                    }
-                    for (method, scene) in scenes.iter_mut() {
-                        scene.warm_up_report(&camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
-                        scene.render_frame(&ctx, &camera, t, walker)?;
-                        if let Some(truth_img) = &truth_img {
-                            let img = scene.read_image(&ctx)?;
-                            let (flip, coarse_flip) = flips(truth_img, &img)?;
-                            path_views.push(AaPathView {
+                            measured.push(AaFrame {
                                 size,
                                 method: method.clone(),
-                                bound: false,
-                                path: path.name.clone(),
-                                t_s: t,
+                                motion,
+                                frame: i as u32,
                                 flip,
                                 coarse_flip,
+                                change,
+                                truth_change,
                             });
                         }
+                        prev[m] = Some(img);
                     }
-                }
-            }
-            write_tables(&opts.out, &frames, &sequences, &path_views)?;
-            progress(&format!("path {}", path.name), 1, 1);
-        }
-        drop(bounds);
-        drop(reference);
-        // Speed: interleaved rounds at the still view.
-        let mut samples: Vec<(Vec<f64>, Vec<f64>)> = vec![(Vec::new(), Vec::new()); scenes.len()];
-        if let Some((_, scene)) = scenes.first_mut() {
-            ramp_up(&ctx, scene, &start, t0, Some(start.position.truncate()))?;
-        }
-        for round in 0..counts.rounds {
-            for (m, (_, scene)) in scenes.iter_mut().enumerate() {
-                scene.warm_up_report(&start, crate::tools::fly::FIRST_FRAME_WAIT)?;
-                let walker = Some(start.position.truncate());
-                for (stats, wall) in
-                    run_frames(&ctx, scene, &start, t0, walker, counts.warmup, counts.timed)?
-                {
-                    samples[m].0.push(frame_ms(&stats, wall, gpu));
-                    samples[m].1.push(
-                        stats
-                            .gpu
-                            .iter()
-                            .filter(|(n, _)| n.starts_with("taa") || n.starts_with("msaa"))
-                            .map(|(_, ms)| ms)
-                            .sum(),
+                    for (m, f) in measured.into_iter().enumerate() {
+                        sequence[m].push(f);
+                    }
+                    if truth_img.is_some() {
+                        truth_prev = truth_img;
+                    }
+                    progress(
+                        &format!("{}x{} {}", size.0, size.1, motion.name()),
+                        (i - first + 1) as u64,
+                        (i64::from(opts.frames) - first) as u64,
                     );
                 }
+                for (m, (method, _)) in scenes.iter().enumerate() {
+                    let f = &sequence[m];
+                    let n = f.len() as f64;
+                    // The teleport's jump is a change of view, not flicker: its frame is left
+                    // out.
+                    let jump = (opts.frames / 2) as usize;
+                    let moved = |x: &AaFrame| {
+                        x.frame > 0 && !(motion == Motion::Teleport && x.frame as usize == jump)
+                    };
+                    let changes: Vec<&AaFrame> = f.iter().filter(|x| moved(x)).collect();
+                    let k = changes.len().max(1) as f64;
+                    let flicker = changes.iter().map(|x| x.change).sum::<f64>() / k;
+                    let truth_flicker = changes.iter().map(|x| x.truth_change).sum::<f64>() / k;
+                    let frame_flips: Vec<f64> = f.iter().map(|x| x.flip).collect();
+                    let mean = |of: fn(&AaFrame) -> f64| f.iter().map(of).sum::<f64>() / n.max(1.0);
+                    sequences.push(AaSequence {
+                        size,
+                        method: method.clone(),
+                        motion,
+                        flip_mean: mean(|x| x.flip),
+                        coarse_flip_mean: mean(|x| x.coarse_flip),
+                        flicker,
+                        truth_flicker,
+                        flicker_ratio: flicker / truth_flicker.max(1e-9),
+                        recovery_frames: (motion == Motion::Teleport)
+                            .then(|| recovery_frames(&frame_flips, jump))
+                            .flatten(),
+                    });
+                }
+                // The last frame of the sequence, each method's and the truth's, to look at.
+                let name = |what: &str| {
+                    opts.out.join(format!(
+                        "{}x{}_{}_{what}.png",
+                        size.0,
+                        size.1,
+                        motion.name()
+                    ))
+                };
+                if let Some(img) = &truth_prev {
+                    write_png(&name("truth"), img)?;
+                }
+                for (m, (method, _)) in scenes.iter().enumerate() {
+                    if let Some(img) = &prev[m] {
+                        write_png(&name(method), img)?;
+                    }
+                }
+                frames.extend(std::mem::take(&mut sequence).into_iter().flatten());
+                write_tables(&opts.out, &frames, &sequences, &path_views)?;
             }
-            progress("timing", u64::from(round) + 1, u64::from(counts.rounds));
+            // The paths: four views spread along each, reached by flight along it; the bounds
+            // step through the same frames as the truth. Every renderer starts them fresh, as
+            // the bounds do: a frame carries state into the next (the wind field's attack and
+            // release, the walker's fading trail, the sway springs), and the sequences left
+            // theirs in the truth and the methods.
+            let (mut reference, mut bounds): (Truth, Vec<(Bound, Truth)>) = if paths.is_empty() {
+                (reference, Vec::new())
+            } else {
+                drop(reference);
+                scenes.clear();
+                scenes = make_scenes()?;
+                let truth = truth_for(&ctx, &world, size, opts.truth_k, opts.truth_reach)?
+                    .with_stop(stop.clone());
+                let bounds = Bound::measured(opts.truth_noise)
+                    .into_iter()
+                    .map(|b| {
+                        Ok((
+                            b,
+                            b.renderer(&ctx, &world, size, opts.truth_k, opts.truth_reach)?
+                                .with_stop(stop.clone()),
+                        ))
+                    })
+                    .collect::<Result<_>>()?;
+                (truth, bounds)
+            };
+            for path in &paths {
+                let (a, b) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
+                for j in 0..4 {
+                    let t_view = a + (b - a) * (0.125 + 0.25 * f64::from(j));
+                    for r in (0..=opts.run_up).rev() {
+                        stop.check()?;
+                        let t = t_view - f64::from(r) * DT_S;
+                        let camera = sample_path(path, t);
+                        let walker = Some(crate::camera::walker_at(&world.manifest, path, t));
+                        let truth_img = if r == 0 {
+                            Some(reference.render(&ctx, &camera, t, walker)?)
+                        } else {
+                            advance(&mut reference, &ctx, &camera, t, walker, &stop)?;
+                            None
+                        };
+                        // The view's figures, kept once every bound and method has drawn it.
+                        let mut measured = Vec::new();
+                        for (bound, renderer) in bounds.iter_mut() {
+                            if let Some(truth_img) = &truth_img {
+                                let img = renderer.render(&ctx, &camera, t, walker)?;
+                                let (flip, coarse_flip) = flips(truth_img, &img)?;
+                                measured.push(AaPathView {
+                                    size,
+                                    method: bound.name(opts.truth_k),
+                                    bound: true,
+                                    path: path.name.clone(),
+                                    t_s: t,
+                                    flip,
+                                    coarse_flip,
+                                });
+                            } else {
+                                advance(renderer, &ctx, &camera, t, walker, &stop)?;
+                            }
+                        }
+                        for (method, scene) in scenes.iter_mut() {
+                            stop.warm_up(scene, &camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+                            scene.render_frame(&ctx, &camera, t, walker)?;
+                            if let Some(truth_img) = &truth_img {
+                                let img = scene.read_image(&ctx)?;
+                                let (flip, coarse_flip) = flips(truth_img, &img)?;
+                                measured.push(AaPathView {
+                                    size,
+                                    method: method.clone(),
+                                    bound: false,
+                                    path: path.name.clone(),
+                                    t_s: t,
+                                    flip,
+                                    coarse_flip,
+                                });
+                            }
+                        }
+                        path_views.extend(measured);
+                    }
+                }
+                write_tables(&opts.out, &frames, &sequences, &path_views)?;
+                progress(&format!("path {}", path.name), 1, 1);
+            }
+            drop(bounds);
+            drop(reference);
+            // Speed: interleaved rounds at the still view.
+            let samples = &mut timing
+                .insert(TimingSamples {
+                    size,
+                    methods: scenes
+                        .iter()
+                        .map(|(method, _)| (method.clone(), Vec::new(), Vec::new()))
+                        .collect(),
+                })
+                .methods;
+            if let Some((_, scene)) = scenes.first_mut() {
+                ramp_up(&ctx, scene, &start, t0, Some(start.position.truncate()))?;
+            }
+            for round in 0..counts.rounds {
+                for (m, (_, scene)) in scenes.iter_mut().enumerate() {
+                    stop.check()?;
+                    stop.warm_up(scene, &start, crate::tools::fly::FIRST_FRAME_WAIT)?;
+                    let walker = Some(start.position.truncate());
+                    for (stats, wall) in
+                        run_frames(&ctx, scene, &start, t0, walker, counts.warmup, counts.timed)?
+                    {
+                        samples[m].1.push(frame_ms(&stats, wall, gpu));
+                        samples[m].2.push(
+                            stats
+                                .gpu
+                                .iter()
+                                .filter(|(n, _)| n.starts_with("taa") || n.starts_with("msaa"))
+                                .map(|(_, ms)| ms)
+                                .sum(),
+                        );
+                    }
+                }
+                progress("timing", u64::from(round) + 1, u64::from(counts.rounds));
+            }
+            timings.extend(timing.take().into_iter().flat_map(|t| t.timings(gpu)));
         }
-        for (m, (method, _)) in scenes.iter().enumerate() {
-            let aa = Timing::of(&samples[m].1);
-            timings.push(AaTiming {
-                size,
-                method: method.clone(),
-                frame: Timing::of(&samples[m].0),
-                aa_ms: if gpu { aa.median_ms } else { 0.0 },
-                gpu,
-            });
-        }
-    }
+        Ok(())
+    })())?;
+    // What a stopped run was measuring: the frames of the sequence cut short, and the methods
+    // timed in the rounds it ran.
+    frames.extend(sequence.into_iter().flatten());
+    timings.extend(timing.into_iter().flat_map(|t| t.timings(gpu)));
     let report = BenchAaReport {
         adapter: AdapterReport::of(&ctx),
         truth_k: opts.truth_k,
@@ -903,7 +975,13 @@ pub fn run_bench_aa(
         settings,
         truth_content,
         counts,
+        interrupted,
     };
+    if report.frames.is_empty() && report.paths.is_empty() {
+        // Stopped before the first frame was measured: nothing written (an earlier run's files
+        // stay as they were).
+        return Ok(report);
+    }
     write_outputs(opts, &report)?;
     out_dir.keep();
     Ok(report)
@@ -994,7 +1072,11 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
     }
     write_text(&opts.out.join("aa_timing.csv"), &csv)?;
     write_json(&opts.out.join("aa.json"), r)?;
-    for &size in &opts.sizes {
+    // A chart per size measured (every size, unless the run was stopped early).
+    let measured = |size: (u32, u32)| {
+        r.frames.iter().any(|f| f.size == size) || r.paths.iter().any(|p| p.size == size)
+    };
+    for &size in opts.sizes.iter().filter(|&&s| measured(s)) {
         let points = r
             .timings
             .iter()
@@ -1015,9 +1097,12 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
             })
             .collect();
         Chart {
-            title: format!(
-                "Anti-aliasing at {}x{}: error against the {}x{} truth and cost",
-                size.0, size.1, r.truth_k, r.truth_k
+            title: chart_title(
+                format!(
+                    "Anti-aliasing at {}x{}: error against the {}x{} truth and cost",
+                    size.0, size.1, r.truth_k, r.truth_k
+                ),
+                r.interrupted,
             ),
             x_label: if r.timings.first().is_some_and(|t| t.gpu) {
                 "GPU time per frame (ms)".into()

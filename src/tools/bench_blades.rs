@@ -33,6 +33,7 @@ use crate::stream::TileSource;
 use crate::tools::bench::{Measures, rgb};
 use crate::tools::fly::{OptionError, OutDir, check_range, check_size, write_text};
 use crate::tools::metrics::{LineChart, Series, flip_compare};
+use crate::tools::stop::{Stop, caught, chart_title};
 use crate::tools::timing::{FrameCounts, Timing, ramp_up, run_frames};
 use crate::tools::truth::Truth;
 use crate::tools::{AdapterReport, Scene, write_json};
@@ -63,6 +64,10 @@ pub struct BenchBladesOptions {
     pub rounds: Option<u32>,
     /// Sub-samples a pixel side of the truth (`--truth`, 1..=8).
     pub truth_k: u32,
+    /// A flag that ends the run early (Ctrl-C on the command line): at the next blade count or
+    /// timing, what was measured so far is written, the report marked interrupted (see
+    /// [`crate::tools::stop`]).
+    pub stop: Option<crate::bake::CancelFlag>,
 }
 
 impl Default for BenchBladesOptions {
@@ -79,6 +84,7 @@ impl Default for BenchBladesOptions {
             timed_frames: None,
             rounds: None,
             truth_k: crate::tools::truth::DEFAULT_K,
+            stop: None,
         }
     }
 }
@@ -270,8 +276,12 @@ pub struct BenchBladesReport {
     pub truth_k: u32,
     /// The frame counts of the timings.
     pub counts: FrameCounts,
-    /// One row per blade count.
+    /// One row per blade count (of a run stopped early, the counts whose images were
+    /// captured, with the rounds timed so far: none where `draw.frames` is 0).
     pub results: Vec<BladesResult>,
+    /// Whether the run was stopped before its end (Ctrl-C; [`BenchBladesOptions::stop`]): the
+    /// report holds what was measured until then.
+    pub interrupted: bool,
 }
 
 /// The field's manifest: one grass type, tiles of 50 m at the finest level (the grass level),
@@ -442,7 +452,9 @@ pub fn field_camera(opts: &BenchBladesOptions, aspect: f32) -> Camera {
 }
 
 /// Runs the benchmark and writes `bench_blades.json`, `blades.csv`, `blades_time.png`,
-/// `blades_ratio.png` and `blades_error.png` into `opts.out`.
+/// `blades_ratio.png` and `blades_error.png` into `opts.out`. Stopped early
+/// ([`BenchBladesOptions::stop`]), it writes them with the counts measured so far, the report
+/// marked interrupted; stopped before the first count's images, it writes nothing.
 pub fn run_bench_blades(
     opts: &BenchBladesOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
@@ -504,6 +516,7 @@ pub fn run_bench_blades(
         .collect::<Result<_>>()?;
     let spacings: Vec<f64> = sizes.iter().map(|s| s.0).collect();
     let total = spacings.len() as u64;
+    let stop = Stop::new(opts.stop.clone());
     let scene_for = |size: (f64, u32), lod: bool| -> Result<Scene> {
         let mut scene = Scene::with_source(
             &ctx,
@@ -513,7 +526,8 @@ pub fn run_bench_blades(
             opts.size.1,
             config(size, lod),
         )?;
-        if !scene.warm_up(&ctx, &camera, std::time::Duration::from_secs(60))? {
+        let warm_up = stop.warm_up(&mut scene, &camera, std::time::Duration::from_secs(60))?;
+        if !warm_up.missing.is_empty() {
             bail!("the field's tiles did not load");
         }
         Ok(scene)
@@ -535,90 +549,98 @@ pub fn run_bench_blades(
         });
         c
     };
-    let mut scenes = Vec::new();
-    let mut images = Vec::new();
-    for (k, &size) in sizes.iter().enumerate() {
-        let mut truth = Truth::with_config(
-            &ctx,
-            world.clone(),
-            source.clone(),
-            opts.size,
-            opts.truth_k,
-            truth_config(size),
-        )?;
-        let walker = Some(camera.position.truncate());
-        let truth_image = truth.render(&ctx, &camera, 0.0, walker)?;
-        drop(truth);
-        let mut reference = scene_for(size, false)?;
-        reference.render(&ctx, &camera)?;
-        let no_lod = reference.read_image(&ctx)?;
-        drop(reference);
-        let mut scene = scene_for(size, true)?;
-        let stats = scene.render(&ctx, &camera)?;
-        let image = scene.read_image(&ctx)?;
-        let flip = f64::from(flip_compare(&rgb(&no_lod), &rgb(&image))?.mean);
-        images.push((stats, Measures::of(&truth_image, &image)?, flip));
-        scenes.push(scene);
-        progress("images", k as u64 + 1, total);
-    }
-
     // Then the timings, in interleaved rounds: the grass frame, then its floor.
     // The floor per statistics LOD: the high ring's near blades have more segments than the
     // rest of it; the floor counts them all at the rest's.
     let [_, high, low] = RendererConfig::for_world(&world).grass.segments;
     let segments = [high, low];
-    let floor = FloorPass::new(&ctx, opts.size, segments);
+    let mut scenes = Vec::new();
+    let mut images = Vec::new();
     let mut frame_samples = vec![Vec::new(); spacings.len()];
     let mut generate_samples = vec![Vec::new(); spacings.len()];
     let mut draw_samples = vec![Vec::new(); spacings.len()];
     let mut floor_samples = vec![Vec::new(); spacings.len()];
     let mut floor_vertices = vec![0u64; spacings.len()];
-    if let Some(scene) = scenes.first_mut() {
-        ramp_up(&ctx, scene, &camera, 0.0, Some(camera.position.truncate()))?;
-    }
-    for round in 0..counts.rounds {
-        for (k, scene) in scenes.iter_mut().enumerate() {
-            let walker = Some(camera.position.truncate());
-            for (stats, wall) in run_frames(
+    // Stopped (Ctrl-C) at a count or a timing, the counts whose images were captured are
+    // reported, with the rounds timed so far.
+    let interrupted = caught((|| -> Result<()> {
+        for (k, &size) in sizes.iter().enumerate() {
+            stop.check()?;
+            let truth = Truth::with_config(
                 &ctx,
-                scene,
-                &camera,
-                0.0,
-                walker,
-                counts.warmup,
-                counts.timed,
-            )? {
-                let pass = |name: &str| {
-                    stats
-                        .gpu
-                        .iter()
-                        .filter(|(n, _)| n == name)
-                        .map(|(_, t)| t)
-                        .sum::<f64>()
-                };
-                frame_samples[k].push(if ctx.timestamps {
-                    stats.gpu.iter().map(|(_, t)| t).sum()
-                } else {
-                    wall
-                });
-                generate_samples[k].push(pass("grass_generate"));
-                draw_samples[k].push(pass("grass_draw"));
-            }
-            let drawn = images[k].0.grass.drawn;
-            let (times, vertices) = floor.time(&ctx, drawn, counts)?;
-            floor_samples[k].extend(times);
-            floor_vertices[k] = vertices;
-            progress(
-                "timing",
-                u64::from(round) * total + k as u64 + 1,
-                u64::from(counts.rounds) * total,
-            );
+                world.clone(),
+                source.clone(),
+                opts.size,
+                opts.truth_k,
+                truth_config(size),
+            )?;
+            let walker = Some(camera.position.truncate());
+            let truth_image = truth
+                .with_stop(stop.clone())
+                .render(&ctx, &camera, 0.0, walker)?;
+            let mut reference = scene_for(size, false)?;
+            reference.render(&ctx, &camera)?;
+            let no_lod = reference.read_image(&ctx)?;
+            drop(reference);
+            let mut scene = scene_for(size, true)?;
+            let stats = scene.render(&ctx, &camera)?;
+            let image = scene.read_image(&ctx)?;
+            let flip = f64::from(flip_compare(&rgb(&no_lod), &rgb(&image))?.mean);
+            images.push((stats, Measures::of(&truth_image, &image)?, flip));
+            scenes.push(scene);
+            progress("images", k as u64 + 1, total);
         }
-    }
+
+        let floor = FloorPass::new(&ctx, opts.size, segments);
+        if let Some(scene) = scenes.first_mut() {
+            ramp_up(&ctx, scene, &camera, 0.0, Some(camera.position.truncate()))?;
+        }
+        for round in 0..counts.rounds {
+            for (k, scene) in scenes.iter_mut().enumerate() {
+                stop.check()?;
+                let walker = Some(camera.position.truncate());
+                for (stats, wall) in run_frames(
+                    &ctx,
+                    scene,
+                    &camera,
+                    0.0,
+                    walker,
+                    counts.warmup,
+                    counts.timed,
+                )? {
+                    let pass = |name: &str| {
+                        stats
+                            .gpu
+                            .iter()
+                            .filter(|(n, _)| n == name)
+                            .map(|(_, t)| t)
+                            .sum::<f64>()
+                    };
+                    frame_samples[k].push(if ctx.timestamps {
+                        stats.gpu.iter().map(|(_, t)| t).sum()
+                    } else {
+                        wall
+                    });
+                    generate_samples[k].push(pass("grass_generate"));
+                    draw_samples[k].push(pass("grass_draw"));
+                }
+                let drawn = images[k].0.grass.drawn;
+                let (times, vertices) = floor.time(&ctx, drawn, counts)?;
+                floor_samples[k].extend(times);
+                floor_vertices[k] = vertices;
+                progress(
+                    "timing",
+                    u64::from(round) * total + k as u64 + 1,
+                    u64::from(counts.rounds) * total,
+                );
+            }
+        }
+        Ok(())
+    })())?;
     drop(scenes);
 
     let mut results = Vec::new();
-    for (k, &spacing) in spacings.iter().enumerate() {
+    for (k, &spacing) in spacings.iter().enumerate().take(images.len()) {
         let (stats, vs_truth, flip): &(FrameStats, Measures, f64) = &images[k];
         let g = &stats.grass;
         let vertices = strip_vertices(g.drawn, segments);
@@ -654,14 +676,20 @@ pub fn run_bench_blades(
             flip_vs_no_lod: *flip,
         });
     }
-    write_outputs(opts, &results)?;
     let report = BenchBladesReport {
         adapter: AdapterReport::of(&ctx),
         size: opts.size,
         truth_k: opts.truth_k,
         counts,
         results,
+        interrupted,
     };
+    if report.results.is_empty() {
+        // Stopped before the first count's images: nothing measured, nothing written (an
+        // earlier run's files stay as they were).
+        return Ok(report);
+    }
+    write_outputs(opts, &report)?;
     write_json(&opts.out.join("bench_blades.json"), &report)?;
     out_dir.keep();
     Ok(report)
@@ -674,8 +702,12 @@ pub fn strip_vertices(drawn: [u32; 2], segments: [u32; 2]) -> u64 {
         .sum()
 }
 
-fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<()> {
+/// Writes the table and the charts; the figures a run stopped early did not time are empty
+/// cells, and left off the charts.
+fn write_outputs(opts: &BenchBladesOptions, report: &BenchBladesReport) -> Result<()> {
     use std::fmt::Write as _;
+    let results = &report.results;
+    let title = |t: &str| chart_title(t, report.interrupted);
     let mut csv = String::from(
         "blades,spacing_m,considered_high,considered_low,empty,culled,drawn_high,drawn_low,vertices,\
          generate_ms,draw_ms,draw_q1_ms,draw_q3_ms,draw_spread,frame_ms,floor_ms,floor_spread,\
@@ -683,9 +715,11 @@ fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<
          coarse_flip_vs_truth,flip_vs_no_lod\n",
     );
     for r in results {
+        // A count's draw, frame, generation and floor are timed together.
+        let t = &r.draw;
         let _ = writeln!(
             csv,
-            "{},{:.4},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{:.3},{:.4},{:.3},{},{:.5},{:.5},{:.5}",
+            "{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.5},{:.5},{:.5}",
             r.blades,
             r.spacing_m,
             r.considered[0],
@@ -695,19 +729,27 @@ fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<
             r.drawn[0],
             r.drawn[1],
             r.vertices,
-            r.generate.median_ms,
-            r.draw.median_ms,
-            r.draw.q1_ms,
-            r.draw.q3_ms,
-            r.draw.spread,
-            r.frame.median_ms,
-            r.floor.median_ms,
-            r.floor.spread,
-            r.floor_vertices,
-            r.ns_per_blade,
-            r.ns_per_vertex,
-            r.ratio_to_floor,
-            r.draw.noisy || r.floor.noisy,
+            t.cell(r.generate.median_ms, 4),
+            t.cell(r.draw.median_ms, 4),
+            t.cell(r.draw.q1_ms, 4),
+            t.cell(r.draw.q3_ms, 4),
+            t.cell(r.draw.spread, 4),
+            t.cell(r.frame.median_ms, 4),
+            t.cell(r.floor.median_ms, 4),
+            t.cell(r.floor.spread, 4),
+            if t.measured() {
+                r.floor_vertices.to_string()
+            } else {
+                String::new()
+            },
+            t.cell(r.ns_per_blade, 3),
+            t.cell(r.ns_per_vertex, 4),
+            t.cell(r.ratio_to_floor, 3),
+            if t.measured() {
+                (r.draw.noisy || r.floor.noisy).to_string()
+            } else {
+                String::new()
+            },
             r.vs_truth.flip,
             r.vs_truth.coarse,
             r.flip_vs_no_lod
@@ -718,33 +760,41 @@ fn write_outputs(opts: &BenchBladesOptions, results: &[BladesResult]) -> Result<
         name: name.into(),
         points: results.iter().map(|r| (r.blades as f64, f(r))).collect(),
     };
+    let timed_series = |name: &str, f: &dyn Fn(&BladesResult) -> f64| Series {
+        name: name.into(),
+        points: results
+            .iter()
+            .filter(|r| r.draw.measured())
+            .map(|r| (r.blades as f64, f(r)))
+            .collect(),
+    };
     LineChart {
-        title: "Grass GPU time against blade count".into(),
+        title: title("Grass GPU time against blade count"),
         x_label: "blades in the field".into(),
         y_label: "GPU time (ms)".into(),
         log_x: true,
         log_y: true,
         series: vec![
-            series("grass draw", &|r| r.draw.median_ms),
-            series("floor (same vertices, trivial shader)", &|r| {
+            timed_series("grass draw", &|r| r.draw.median_ms),
+            timed_series("floor (same vertices, trivial shader)", &|r| {
                 r.floor.median_ms
             }),
-            series("generation + wind", &|r| r.generate.median_ms),
-            series("whole frame", &|r| r.frame.median_ms),
+            timed_series("generation + wind", &|r| r.generate.median_ms),
+            timed_series("whole frame", &|r| r.frame.median_ms),
         ],
     }
     .write_png(&opts.out.join("blades_time.png"), 900, 600)?;
     LineChart {
-        title: "Grass draw against the vertex floor".into(),
+        title: title("Grass draw against the vertex floor"),
         x_label: "blades in the field".into(),
         y_label: "grass draw time / floor time".into(),
         log_x: true,
         log_y: false,
-        series: vec![series("ratio to floor", &|r| r.ratio_to_floor)],
+        series: vec![timed_series("ratio to floor", &|r| r.ratio_to_floor)],
     }
     .write_png(&opts.out.join("blades_ratio.png"), 900, 600)?;
     LineChart {
-        title: "Image error against blade count".into(),
+        title: title("Image error against blade count"),
         x_label: "blades in the field".into(),
         y_label: "FLIP".into(),
         log_x: true,

@@ -15,6 +15,7 @@ use crate::gpu::GpuContext;
 use crate::tools::bench::{Bench, BenchLodOptions, Measures, warm_up};
 use crate::tools::fly::{OutDir, write_text};
 use crate::tools::metrics::{COVERAGE_DISTANCE_M, Chart, ChartPoint};
+use crate::tools::stop::{Stop, caught, chart_title};
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_frames};
 use crate::tools::{AdapterReport, write_json};
 use crate::world::World;
@@ -55,8 +56,13 @@ pub struct BenchFeaturesReport {
     pub truth_k: u32,
     /// The variants' anti-aliasing (`off`, `taa`, `msaa`).
     pub anti_aliasing: String,
-    /// The full render first, then one row per feature switched off.
+    /// The full render first, then one row per feature switched off (of a run stopped early,
+    /// the variants whose images were captured: their timings are of the rounds run, none
+    /// where `timing.frames` is 0).
     pub features: Vec<FeatureResult>,
+    /// Whether the run was stopped before its end (Ctrl-C; [`BenchLodOptions::stop`]): the
+    /// report holds what was measured until then.
+    pub interrupted: bool,
 }
 
 /// `verdant bench features`: each feature's GPU cost against its contribution to the image
@@ -69,7 +75,9 @@ pub struct BenchFeaturesReport {
 /// trail are under way. The images are captured first; then the variants are timed in interleaved
 /// rounds at each view's time (see [`crate::tools::timing`]). A world without such a path is viewed
 /// along `meadow` (else its first path) in the storm. Writes `bench_features.json`, `features.csv`,
-/// `features.png` and `features_coarse.png`.
+/// `features.png` and `features_coarse.png`. Stopped early ([`BenchLodOptions::stop`]), it
+/// writes them with the variants measured so far, the report marked interrupted; stopped before
+/// the first variant's images, it writes nothing.
 pub fn run_bench_features(
     opts: &BenchLodOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
@@ -129,10 +137,12 @@ pub fn run_bench_features(
         opts.rounds,
     );
     let lead_frames = counts.warmup.max(1);
+    let stop = Stop::new(opts.stop.clone());
     let bench = Bench {
         ctx: &ctx,
         world: &world,
         size: opts.size,
+        stop: &stop,
     };
     let variant_config = |features| {
         let mut config = RendererConfig::for_world(&world);
@@ -144,17 +154,25 @@ pub fn run_bench_features(
         }
         config
     };
-    // The truth at each view, after the same lead-in as the variants (plain frames: only the
-    // last frame, at the view's time, is supersampled).
     let mut truths = Vec::new();
-    {
+    let mut scenes = Vec::new();
+    let mut all_images = Vec::new();
+    // Timed frames hold each view's time: the same image every frame.
+    let mut samples = vec![vec![Vec::new(); times.len()]; variants.len()];
+    let total = variants.len() as u64;
+    // Stopped (Ctrl-C) at a view or a variant, the variants whose images were all captured are
+    // reported, with the rounds timed so far.
+    let interrupted = caught((|| -> Result<()> {
+        // The truth at each view, after the same lead-in as the variants (plain frames: only
+        // the last frame, at the view's time, is supersampled).
         let mut truth = bench.truth(
             &variant_config(Features::all()),
             opts.truth_k,
             opts.truth_reach,
         )?;
         for (i, &t) in times.iter().enumerate() {
-            warm_up(truth.scene(), &sample_path(&path, t))?;
+            stop.check()?;
+            warm_up(truth.scene(), &sample_path(&path, t), &stop)?;
             for f in 0..lead_frames {
                 let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(lead_frames));
                 truth.advance(&ctx, &sample_path(&path, tf), tf, Some(walker_at(tf)))?;
@@ -162,58 +180,72 @@ pub fn run_bench_features(
             truths.push(truth.render(&ctx, &sample_path(&path, t), t, Some(walker_at(t)))?);
             progress("truth", i as u64 + 1, times.len() as u64);
         }
-    }
-    let mut scenes = Vec::new();
-    let mut all_images = Vec::new();
-    let total = variants.len() as u64;
-    for (k, (_, features)) in variants.iter().enumerate() {
-        let mut scene = bench.scene(variant_config(*features))?;
-        let (mut images, mut coverage) = (Vec::new(), Vec::new());
-        scene.set_coverage_capture(true)?;
-        for &t in &times {
-            warm_up(&mut scene, &sample_path(&path, t))?;
-            // The lead-in: the camera and the walker along the path up to the view's time.
-            for f in 0..=lead_frames {
-                let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(lead_frames));
-                scene.render_frame(&ctx, &sample_path(&path, tf), tf, Some(walker_at(tf)))?;
-            }
-            images.push(scene.read_image(&ctx)?);
-            coverage.push(scene.coverage(&ctx, COVERAGE_DISTANCE_M)?.fraction);
-        }
-        scene.set_coverage_capture(false)?;
-        scenes.push(scene);
-        all_images.push((images, coverage));
-        progress("images", k as u64 + 1, total);
-    }
-    // Timed frames hold each view's time: the same image every frame.
-    let mut samples = vec![vec![Vec::new(); times.len()]; variants.len()];
-    if let (Some(scene), Some(&t)) = (scenes.first_mut(), times.first()) {
-        ramp_up(&ctx, scene, &sample_path(&path, t), t, Some(walker_at(t)))?;
-    }
-    for round in 0..counts.rounds {
-        for (k, scene) in scenes.iter_mut().enumerate() {
-            for (vi, &t) in times.iter().enumerate() {
-                let cam = sample_path(&path, t);
-                for (stats, wall) in run_frames(
-                    &ctx,
-                    scene,
-                    &cam,
-                    t,
-                    Some(walker_at(t)),
-                    counts.warmup,
-                    counts.timed,
-                )? {
-                    samples[k][vi].push(frame_ms(&stats, wall, ctx.timestamps));
+        drop(truth);
+        for (k, (_, features)) in variants.iter().enumerate() {
+            let mut scene = bench.scene(variant_config(*features))?;
+            let (mut images, mut coverage) = (Vec::new(), Vec::new());
+            scene.set_coverage_capture(true)?;
+            for &t in &times {
+                stop.check()?;
+                warm_up(&mut scene, &sample_path(&path, t), &stop)?;
+                // The lead-in: the camera and the walker along the path up to the view's time.
+                for f in 0..=lead_frames {
+                    let tf = t - LEAD_S * (1.0 - f64::from(f) / f64::from(lead_frames));
+                    scene.render_frame(&ctx, &sample_path(&path, tf), tf, Some(walker_at(tf)))?;
                 }
+                images.push(scene.read_image(&ctx)?);
+                coverage.push(scene.coverage(&ctx, COVERAGE_DISTANCE_M)?.fraction);
             }
-            progress(
-                "timing",
-                u64::from(round) * total + k as u64 + 1,
-                u64::from(counts.rounds) * total,
-            );
+            scene.set_coverage_capture(false)?;
+            scenes.push(scene);
+            all_images.push((images, coverage));
+            progress("images", k as u64 + 1, total);
         }
-    }
+        if let (Some(scene), Some(&t)) = (scenes.first_mut(), times.first()) {
+            ramp_up(&ctx, scene, &sample_path(&path, t), t, Some(walker_at(t)))?;
+        }
+        for round in 0..counts.rounds {
+            for (k, scene) in scenes.iter_mut().enumerate() {
+                // A variant's views are timed together: a round stopped part-way leaves the
+                // variants it reached with one round more than the others.
+                stop.check()?;
+                for (vi, &t) in times.iter().enumerate() {
+                    let cam = sample_path(&path, t);
+                    for (stats, wall) in run_frames(
+                        &ctx,
+                        scene,
+                        &cam,
+                        t,
+                        Some(walker_at(t)),
+                        counts.warmup,
+                        counts.timed,
+                    )? {
+                        samples[k][vi].push(frame_ms(&stats, wall, ctx.timestamps));
+                    }
+                }
+                progress(
+                    "timing",
+                    u64::from(round) * total + k as u64 + 1,
+                    u64::from(counts.rounds) * total,
+                );
+            }
+        }
+        Ok(())
+    })())?;
     drop(scenes);
+    let mut report = BenchFeaturesReport {
+        adapter: AdapterReport::of(&ctx),
+        size: opts.size,
+        truth_k: opts.truth_k,
+        anti_aliasing: opts.aa.unwrap_or_default().name().to_owned(),
+        features: Vec::new(),
+        interrupted,
+    };
+    if all_images.is_empty() {
+        // Stopped before any variant's images: nothing measured, nothing written (an earlier
+        // run's files stay as they were).
+        return Ok(report);
+    }
     let rows: Vec<(String, Timing, Vec<image::RgbaImage>, f64)> = variants
         .iter()
         .zip(samples)
@@ -224,8 +256,7 @@ pub fn run_bench_features(
             (name.clone(), t, images, c)
         })
         .collect();
-    let full_ms = rows[0].1.median_ms;
-    let mut features = Vec::new();
+    let full = rows[0].1;
     for (name, timing, images, coverage) in &rows {
         let (mut contributions, mut vs_truth) = (Vec::new(), Vec::new());
         for ((a, b), t) in rows[0].2.iter().zip(images).zip(&truths) {
@@ -233,34 +264,50 @@ pub fn run_bench_features(
             vs_truth.push(Measures::of(t, b)?);
         }
         let contribution = Measures::mean(&contributions);
-        features.push(FeatureResult {
+        report.features.push(FeatureResult {
             feature: name.clone(),
             gpu_ms: timing.median_ms,
             timing: *timing,
-            cost_ms: full_ms - timing.median_ms,
+            cost_ms: if full.measured() && timing.measured() {
+                full.median_ms - timing.median_ms
+            } else {
+                0.0
+            },
             contribution: contribution.flip,
             contribution_coarse: contribution.coarse,
             vs_truth: Measures::mean(&vs_truth),
             coverage: *coverage,
         });
     }
+    let features = &report.features;
     use std::fmt::Write as _;
     let mut csv = String::from(
         "feature,gpu_ms_without,q1_ms,q3_ms,spread,noisy,frames,cost_ms,contribution_flip,\
          contribution_coarse_flip,flip_vs_truth,coarse_flip_vs_truth,coverage\n",
     );
-    for r in &features {
+    // Figures that a stopped run did not time are empty cells.
+    for r in features {
+        let t = &r.timing;
+        let cost = if full.measured() && t.measured() {
+            format!("{:.4}", r.cost_ms)
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             csv,
-            "{},{:.4},{:.4},{:.4},{:.4},{},{},{:.4},{:.5},{:.5},{:.5},{:.5},{:.4}",
+            "{},{},{},{},{},{},{},{},{:.5},{:.5},{:.5},{:.5},{:.4}",
             r.feature,
-            r.gpu_ms,
-            r.timing.q1_ms,
-            r.timing.q3_ms,
-            r.timing.spread,
-            r.timing.noisy,
-            r.timing.frames,
-            r.cost_ms,
+            t.cell(r.gpu_ms, 4),
+            t.cell(t.q1_ms, 4),
+            t.cell(t.q3_ms, 4),
+            t.cell(t.spread, 4),
+            if t.measured() {
+                t.noisy.to_string()
+            } else {
+                String::new()
+            },
+            t.frames,
+            cost,
             r.contribution,
             r.contribution_coarse,
             r.vs_truth.flip,
@@ -270,14 +317,19 @@ pub fn run_bench_features(
     }
     write_text(&opts.out.join("features.csv"), &csv)?;
     let chart = |y_label: &str, y: &dyn Fn(&FeatureResult) -> f64| Chart {
-        title: "Grass features: GPU cost against contribution to the image".into(),
+        title: chart_title(
+            "Grass features: GPU cost against contribution to the image",
+            interrupted,
+        ),
         x_label: "GPU cost (ms a frame, full render minus the render without it)".into(),
         y_label: y_label.into(),
         log_x: false,
         log_y: false,
+        // A feature has a cost where both it and the full render were timed.
         points: features
             .iter()
             .skip(1)
+            .filter(|r| full.measured() && r.timing.measured())
             .map(|r| ChartPoint {
                 label: if r.timing.noisy {
                     format!("{} (noisy)", r.feature)
@@ -299,13 +351,6 @@ pub fn run_bench_features(
         &|r| r.contribution_coarse,
     )
     .write_png_with_front(&opts.out.join("features_coarse.png"), 900, 600, |_| false)?;
-    let report = BenchFeaturesReport {
-        adapter: AdapterReport::of(&ctx),
-        size: opts.size,
-        truth_k: opts.truth_k,
-        anti_aliasing: opts.aa.unwrap_or_default().name().to_owned(),
-        features,
-    };
     write_json(&opts.out.join("bench_features.json"), &report)?;
     out_dir.keep();
     Ok(report)

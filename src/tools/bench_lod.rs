@@ -46,6 +46,7 @@ use crate::tools::metrics::{
     Chart, ChartPoint, LineChart, Series, Summary, band_mask, flip_error_map, masked_mean,
     pareto_front, ray_distances,
 };
+use crate::tools::stop::{Stop, caught, chart_title};
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_flight, run_frames};
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::World;
@@ -382,8 +383,9 @@ pub struct SettingResult {
     /// same as `vs_truth.flip` unless `--supersample` measured supersampled images, when the
     /// difference is what one sample a pixel adds to what the setting draws.
     pub flip_frame_vs_truth: f64,
-    /// Mean pixel FLIP against the "no LOD" setting's render over the views (the old figure).
-    pub flip_vs_no_lod: f64,
+    /// Mean pixel FLIP against the "no LOD" setting's render over the views (the old figure;
+    /// `None` in a run stopped before the no-LOD setting's images were captured).
+    pub flip_vs_no_lod: Option<f64>,
     /// Blades drawn per frame (median).
     pub blades_drawn: f64,
     /// Grass coverage within [`crate::tools::metrics::COVERAGE_DISTANCE_M`] (see
@@ -395,7 +397,7 @@ pub struct SettingResult {
     /// On the Pareto front of time against the coarse FLIP against the truth.
     pub pareto_coarse: bool,
     /// GPU time per frame along the flight (wall time without timestamps); `None` without a
-    /// flight.
+    /// flight, or in a run stopped before this setting's flight was timed.
     pub flight: Option<FlightTiming>,
     /// On the Pareto front of the flight's p99 against pixel FLIP against the truth.
     pub pareto_flight: bool,
@@ -534,7 +536,8 @@ pub struct BenchLodReport {
     /// The same on frames without switches of either (the noise floor of the measure; 0 when
     /// every frame had one).
     pub worst_change_without_switch: f64,
-    /// The settings.
+    /// The settings (of a run stopped early, those whose images were captured, with the rounds
+    /// timed so far: none where `frame.frames` is 0).
     pub settings: Vec<SettingResult>,
     /// Whether the default setting is on the Pareto front of pixel FLIP against the truth.
     pub default_on_front: bool,
@@ -556,13 +559,18 @@ pub struct BenchLodReport {
     /// The frame counts of the timings.
     pub counts: FrameCounts,
     /// The far field against the truth's real blades out to [`FAR_BAND_FACTOR`] times the view
-    /// distance.
+    /// distance (no views in a run stopped before the default setting's images).
     pub far_band: FarBand,
+    /// Whether the run was stopped before its end (Ctrl-C; [`BenchLodOptions::stop`]): the
+    /// report holds what was measured until then.
+    pub interrupted: bool,
 }
 
 /// Runs the benchmark and writes `bench_lod.json`, `dolly.csv`, `dolly.png`, `lod_settings.csv`,
 /// `lod_settings.png`, `lod_settings_coarse.png`, `lod_coverage.png`, `far_band.csv` and, with a
-/// flight, `lod_settings_flight.png` into `opts.out`.
+/// flight, `lod_settings_flight.png` into `opts.out`. Stopped early ([`BenchLodOptions::stop`]),
+/// it writes them with what was measured so far, the report marked interrupted; stopped before
+/// the dolly's first frame, it writes nothing.
 pub fn run_bench_lod(
     opts: &BenchLodOptions,
     progress: &mut dyn FnMut(&str, u64, u64),
@@ -583,81 +591,251 @@ pub fn run_bench_lod(
     let flight = flight_path(&world, &opts.world, &opts.flight, &path)?;
     let out_dir = OutDir::create_for(&opts.out, "bench lod")?;
     let ctx = GpuContext::new()?;
+    let stop = Stop::new(opts.stop.clone());
     let bench = Bench {
         ctx: &ctx,
         world: &world,
         size: opts.size,
+        stop: &stop,
     };
     let settings = chosen_settings(lod_settings(&world), &opts.settings)?;
-    // Every frame of the benchmark is drawn at time 0 (`Scene::render` keeps the last frame's
-    // time), the camera leaving the trail: so is the truth.
-    let mut truth = bench.truth(
-        &RendererConfig::for_world(&world),
-        opts.truth_k,
-        opts.truth_reach,
-    )?;
-
-    // (a) The dolly: forward along the path's direction, from where the path starts.
-    let start = sample_path(&path, path.keys[0].t_s);
-    let ring_m = settings[0].high_radius_tiles
-        * world
-            .manifest
-            .pyramid
-            .tile_size_m(RingSettings::for_pyramid(&world.manifest.pyramid).level);
-    // Far enough that tiles ahead cross the high/low boundary during the dolly.
-    let step = 1.5 * ring_m / f64::from(opts.dolly_frames);
-    let mut lod_scene = bench.scene(settings[0].config(&world))?;
     let no_lod = settings
         .iter()
         .find(|s| s.name == "no LOD")
         .expect("the no-LOD setting")
         .clone();
-    let mut full_scene = bench.scene(no_lod.config(&world))?;
+    let no_lod_index = settings
+        .iter()
+        .position(|s| s.name == no_lod.name)
+        .expect("the no-LOD setting");
+    // The four views along the path, and the far band between the default view distance and
+    // the truth's reach.
+    let views: Vec<Camera> = [0.1, 0.35, 0.6, 0.85]
+        .iter()
+        .map(|u| sample_path(&path, path.keys[0].t_s + u * path.duration_s))
+        .collect();
+    let tile_m = world
+        .manifest
+        .pyramid
+        .tile_size_m(RingSettings::for_pyramid(&world.manifest.pyramid).level);
+    let near_m = settings[0].view_distance_tiles * tile_m;
+    let far_m = opts.truth_reach.min(FAR_BAND_FACTOR) * near_m;
+    let counts = FrameCounts::for_adapter(&ctx.info).with(
+        opts.warmup_frames,
+        opts.timed_frames,
+        opts.rounds,
+    );
+    let n_views = views.len();
+    let total = settings.len() as u64;
+    let steps = u64::from(counts.rounds) * total;
+
+    // What the stages measure; a run stopped early (Ctrl-C) reports what they hold by then.
     let mut dolly = Vec::new();
-    let mut prev: Option<(image::RgbaImage, image::RgbaImage)> = None;
-    let mut prev_rings: Option<Vec<(crate::world::TileId, crate::lod::Ring)>> = None;
-    let mut prev_trees: Option<std::collections::HashMap<(i64, i64), u8>> = None;
-    for f in 0..opts.dolly_frames {
-        let fwd = start.forward();
-        let horizontal = DVec3::new(fwd.x, fwd.y, 0.0).normalize_or_zero();
-        let mut cam = start;
-        cam.position += horizontal * step * f64::from(f);
-        let (a, _) = bench.frame(&mut lod_scene, &cam)?;
-        let rings = lod_scene.grass_rings();
-        let trees = tree_levels(&lod_scene.renderer().read_tree_instances(), cam.position);
-        let (b, _) = bench.frame(&mut full_scene, &cam)?;
-        let t = truth.render(&ctx, &cam, 0.0, Some(cam.position.truncate()))?;
-        let switches = match &prev_rings {
-            Some(p) => rings
-                .iter()
-                .filter(|r| p.iter().any(|q| q.0 == r.0 && q.1 != r.1))
-                .count() as u32,
-            None => 0,
-        };
-        let (change_lod, change_no_lod) = match &prev {
-            Some((pa, pb)) => (flip(pa, &a)?, flip(pb, &b)?),
-            None => (0.0, 0.0),
-        };
-        let vs_truth = Measures::of(&t, &a)?;
-        let jump = dolly.last().map_or(0.0, |d: &DollyFrame| {
-            (vs_truth.flip - d.vs_truth.flip).abs()
-        });
-        dolly.push(DollyFrame {
-            frame: f,
-            vs_truth,
-            flip_vs_no_lod: flip(&b, &a)?,
-            change_lod,
-            change_no_lod,
-            jump,
-            ring_switches: switches,
-            tree_switches: prev_trees.as_ref().map_or(0, |p| tree_switches(p, &trees)),
-        });
-        prev = Some((a, b));
-        prev_rings = Some(rings);
-        prev_trees = Some(trees);
-        progress("dolly", u64::from(f) + 1, u64::from(opts.dolly_frames));
-    }
-    drop((lod_scene, full_scene));
+    let (mut truths, mut masks, mut no_far_field) = (Vec::new(), Vec::new(), Vec::new());
+    // Per setting whose images were all captured, in the settings' order: its scene (kept for
+    // the timings), its images and their figures.
+    let mut scenes = Vec::new();
+    let mut images = Vec::new();
+    let mut partial = Vec::new();
+    // The far band and the settings' FLIP against no LOD, once every setting's images are in
+    // (the images are then let go before the timings).
+    let mut references: Option<(FarBand, Vec<Option<f64>>)> = None;
+    let mut gpu_samples = vec![vec![Vec::new(); n_views]; settings.len()];
+    let mut wall_samples = vec![vec![Vec::new(); n_views]; settings.len()];
+    let mut flight_samples = vec![Vec::new(); settings.len()];
+    let interrupted = caught((|| -> Result<()> {
+        // Every frame of the benchmark is drawn at time 0 (`Scene::render` keeps the last
+        // frame's time), the camera leaving the trail: so is the truth.
+        let mut truth = bench.truth(
+            &RendererConfig::for_world(&world),
+            opts.truth_k,
+            opts.truth_reach,
+        )?;
+
+        // (a) The dolly: forward along the path's direction, from where the path starts.
+        let start = sample_path(&path, path.keys[0].t_s);
+        let ring_m = settings[0].high_radius_tiles * tile_m;
+        // Far enough that tiles ahead cross the high/low boundary during the dolly.
+        let step = 1.5 * ring_m / f64::from(opts.dolly_frames);
+        let mut lod_scene = bench.scene(settings[0].config(&world))?;
+        let mut full_scene = bench.scene(no_lod.config(&world))?;
+        let mut prev: Option<(image::RgbaImage, image::RgbaImage)> = None;
+        let mut prev_rings: Option<Vec<(crate::world::TileId, crate::lod::Ring)>> = None;
+        let mut prev_trees: Option<std::collections::HashMap<(i64, i64), u8>> = None;
+        for f in 0..opts.dolly_frames {
+            stop.check()?;
+            let fwd = start.forward();
+            let horizontal = DVec3::new(fwd.x, fwd.y, 0.0).normalize_or_zero();
+            let mut cam = start;
+            cam.position += horizontal * step * f64::from(f);
+            let (a, _) = bench.frame(&mut lod_scene, &cam)?;
+            let rings = lod_scene.grass_rings();
+            let trees = tree_levels(&lod_scene.renderer().read_tree_instances(), cam.position);
+            let (b, _) = bench.frame(&mut full_scene, &cam)?;
+            let t = truth.render(&ctx, &cam, 0.0, Some(cam.position.truncate()))?;
+            let switches = match &prev_rings {
+                Some(p) => rings
+                    .iter()
+                    .filter(|r| p.iter().any(|q| q.0 == r.0 && q.1 != r.1))
+                    .count() as u32,
+                None => 0,
+            };
+            let (change_lod, change_no_lod) = match &prev {
+                Some((pa, pb)) => (flip(pa, &a)?, flip(pb, &b)?),
+                None => (0.0, 0.0),
+            };
+            let vs_truth = Measures::of(&t, &a)?;
+            let jump = dolly.last().map_or(0.0, |d: &DollyFrame| {
+                (vs_truth.flip - d.vs_truth.flip).abs()
+            });
+            dolly.push(DollyFrame {
+                frame: f,
+                vs_truth,
+                flip_vs_no_lod: flip(&b, &a)?,
+                change_lod,
+                change_no_lod,
+                jump,
+                ring_switches: switches,
+                tree_switches: prev_trees.as_ref().map_or(0, |p| tree_switches(p, &trees)),
+            });
+            prev = Some((a, b));
+            prev_rings = Some(rings);
+            prev_trees = Some(trees);
+            progress("dolly", u64::from(f) + 1, u64::from(opts.dolly_frames));
+        }
+        drop((lod_scene, full_scene));
+
+        // (b) and (c): the truth at the four views, with the far band's masks from its depth,
+        // and the default without the far field.
+        let (w, h) = opts.size;
+        for (i, v) in views.iter().enumerate() {
+            stop.check()?;
+            truths.push(truth.render(&ctx, v, 0.0, Some(v.position.truncate()))?);
+            let depth = truth.read_depth(&ctx)?;
+            let inv = v.view_proj_relative(w as f32 / h as f32).inverse();
+            let distances = ray_distances(&depth, w, h, inv);
+            masks.push(band_mask(&distances, near_m as f32, far_m as f32));
+            progress("truth", i as u64 + 1, views.len() as u64);
+        }
+        drop(truth);
+        let mut config = settings[0].config(&world);
+        config.features = config.features.without(crate::features::Feature::FarField);
+        // With the truth's blades out to the view distance only (`--truth-reach 1`) the band is
+        // empty, and the default without the far field is not drawn.
+        if far_m > near_m {
+            if opts.supersample > 1 {
+                let mut ss = bench.supersampled(config, opts.supersample)?;
+                for v in &views {
+                    stop.check()?;
+                    no_far_field.push(ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?);
+                }
+            } else {
+                let mut scene = Scene::new(&ctx, world.clone(), w, h, config)?;
+                for v in &views {
+                    stop.check()?;
+                    no_far_field.push(bench.frame(&mut scene, v)?.0);
+                }
+            }
+        }
+        progress("far band", 1, 1);
+        // Images first, every setting's scene kept for the timings.
+        for (k, s) in settings.iter().enumerate() {
+            let mut scene = bench.scene(s.config(&world))?;
+            let (mut measures, mut blades, mut coverage) = (Vec::new(), Vec::new(), Vec::new());
+            let mut own = Vec::new();
+            let mut frame_flips = Vec::new();
+            // With --supersample, the images measured are the setting's frames supersampled;
+            // the blades drawn and the coverage stay the frame's own.
+            let mut ss = if opts.supersample > 1 {
+                Some(bench.supersampled(s.config(&world), opts.supersample)?)
+            } else {
+                None
+            };
+            for (v, t) in views.iter().zip(&truths) {
+                stop.check()?;
+                let (mut img, stats, c) = bench.frame_with_coverage(&mut scene, v)?;
+                let frame = Measures::of(t, &img)?;
+                frame_flips.push(frame.flip);
+                measures.push(match &mut ss {
+                    Some(ss) => {
+                        img = ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?;
+                        Measures::of(t, &img)?
+                    }
+                    None => frame,
+                });
+                blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
+                coverage.push(c);
+                own.push(img);
+            }
+            scenes.push(scene);
+            images.push(own);
+            partial.push((measures, blades, coverage, frame_flips));
+            progress("images", k as u64 + 1, total);
+        }
+        references = Some(reference_figures(
+            (near_m, far_m),
+            (&truths, &masks),
+            &images,
+            &no_far_field,
+            no_lod_index,
+        )?);
+        (truths, masks, images, no_far_field) = Default::default();
+
+        // Then the timings, in interleaved rounds.
+        if let Some(scene) = scenes.first_mut() {
+            ramp_up(
+                &ctx,
+                scene,
+                &views[0],
+                0.0,
+                Some(views[0].position.truncate()),
+            )?;
+        }
+        for round in 0..counts.rounds {
+            for (k, scene) in scenes.iter_mut().enumerate() {
+                // A setting's views are timed together: a round stopped part-way leaves the
+                // settings it reached with one round more than the others.
+                stop.check()?;
+                for (vi, v) in views.iter().enumerate() {
+                    let walker = Some(v.position.truncate());
+                    for (stats, wall) in
+                        run_frames(&ctx, scene, v, 0.0, walker, counts.warmup, counts.timed)?
+                    {
+                        gpu_samples[k][vi].push(frame_ms(&stats, wall, true));
+                        wall_samples[k][vi].push(wall);
+                    }
+                }
+                progress("timing", u64::from(round) * total + k as u64 + 1, steps);
+            }
+        }
+        if let Some(fp) = &flight {
+            let shots = flight_shots(fp, opts.flight_frames);
+            // One untimed flight each, every frame's tiles waited for: the timed ones find the
+            // path streamed in (as far as the tile cache holds it).
+            for (k, scene) in scenes.iter_mut().enumerate() {
+                for (camera, _, _) in &shots {
+                    stop.warm_up(scene, camera, FLIGHT_TILE_WAIT)?;
+                }
+                run_flight(&ctx, scene, &shots)?;
+                progress("flight", k as u64 + 1, total + steps);
+            }
+            for round in 0..counts.rounds {
+                for (k, scene) in scenes.iter_mut().enumerate() {
+                    stop.check()?;
+                    for (stats, wall) in run_flight(&ctx, scene, &shots)? {
+                        flight_samples[k].push(frame_ms(&stats, wall, ctx.timestamps));
+                    }
+                    progress(
+                        "flight",
+                        total + u64::from(round) * total + k as u64 + 1,
+                        total + steps,
+                    );
+                }
+            }
+        }
+        Ok(())
+    })())?;
+    drop(scenes);
     let worst_pop = dolly
         .iter()
         .skip(1)
@@ -676,165 +854,26 @@ pub fn run_bench_lod(
         .filter(|d| d.ring_switches == 0 && d.tree_switches == 0)
         .map(|d| d.jump)
         .fold(0.0, f64::max);
-
-    // (b) and (c): the truth at four views along the path, with the far band's masks from its
-    // depth, and the default without the far field.
-    let views: Vec<Camera> = [0.1, 0.35, 0.6, 0.85]
-        .iter()
-        .map(|u| sample_path(&path, path.keys[0].t_s + u * path.duration_s))
-        .collect();
-    let tile_m = world
-        .manifest
-        .pyramid
-        .tile_size_m(RingSettings::for_pyramid(&world.manifest.pyramid).level);
-    let near_m = settings[0].view_distance_tiles * tile_m;
-    let far_m = opts.truth_reach.min(FAR_BAND_FACTOR) * near_m;
-    let (w, h) = opts.size;
-    let (mut truths, mut masks) = (Vec::new(), Vec::new());
-    for (i, v) in views.iter().enumerate() {
-        truths.push(truth.render(&ctx, v, 0.0, Some(v.position.truncate()))?);
-        let depth = truth.read_depth(&ctx)?;
-        let inv = v.view_proj_relative(w as f32 / h as f32).inverse();
-        let distances = ray_distances(&depth, w, h, inv);
-        masks.push(band_mask(&distances, near_m as f32, far_m as f32));
-        progress("truth", i as u64 + 1, views.len() as u64);
-    }
-    drop(truth);
-    let mut config = settings[0].config(&world);
-    config.features = config.features.without(crate::features::Feature::FarField);
-    let mut no_far_field = Vec::new();
-    // With the truth's blades out to the view distance only (`--truth-reach 1`) the band is
-    // empty, and the default without the far field is not drawn.
-    if far_m > near_m {
-        if opts.supersample > 1 {
-            let mut ss = bench.supersampled(config, opts.supersample)?;
-            for v in &views {
-                no_far_field.push(ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?);
-            }
-        } else {
-            let mut scene = Scene::new(&ctx, world.clone(), w, h, config)?;
-            for v in &views {
-                no_far_field.push(bench.frame(&mut scene, v)?.0);
-            }
-        }
-    }
-    progress("far band", 1, 1);
-    // Images first, every setting's scene kept for the timings.
-    let mut scenes = Vec::new();
-    let mut images = Vec::new();
-    let mut partial = Vec::new();
-    let total = settings.len() as u64;
-    for (k, s) in settings.iter().enumerate() {
-        let mut scene = bench.scene(s.config(&world))?;
-        let (mut measures, mut blades, mut coverage) = (Vec::new(), Vec::new(), Vec::new());
-        let mut own = Vec::new();
-        let mut frame_flips = Vec::new();
-        // With --supersample, the images measured are the setting's frames supersampled;
-        // the blades drawn and the coverage stay the frame's own.
-        let mut ss = if opts.supersample > 1 {
-            Some(bench.supersampled(s.config(&world), opts.supersample)?)
-        } else {
-            None
-        };
-        for (v, t) in views.iter().zip(&truths) {
-            let (mut img, stats, c) = bench.frame_with_coverage(&mut scene, v)?;
-            let frame = Measures::of(t, &img)?;
-            frame_flips.push(frame.flip);
-            measures.push(match &mut ss {
-                Some(ss) => {
-                    img = ss.render(&ctx, v, 0.0, Some(v.position.truncate()))?;
-                    Measures::of(t, &img)?
-                }
-                None => frame,
-            });
-            blades.push(f64::from(stats.grass.drawn[0] + stats.grass.drawn[1]));
-            coverage.push(c);
-            own.push(img);
-        }
-        scenes.push(scene);
-        images.push(own);
-        partial.push((measures, blades, coverage, frame_flips));
-        progress("images", k as u64 + 1, total);
-    }
-    let far_band = far_band((near_m, far_m), &truths, &masks, &images[0], &no_far_field)?;
-    let no_lod_index = settings
-        .iter()
-        .position(|s| s.name == no_lod.name)
-        .expect("the no-LOD setting");
-    let mut vs_no_lod = Vec::new();
-    for own in &images {
-        let mut flips = Vec::new();
-        for (r, a) in images[no_lod_index].iter().zip(own) {
-            flips.push(flip(r, a)?);
-        }
-        vs_no_lod.push(flips.iter().sum::<f64>() / flips.len().max(1) as f64);
-    }
+    // Stopped before every setting's images were in: the far band and the FLIP against no LOD
+    // of what was captured.
+    let (far_band, vs_no_lod) = match references {
+        Some(r) => r,
+        None => reference_figures(
+            (near_m, far_m),
+            (&truths, &masks),
+            &images,
+            &no_far_field,
+            no_lod_index,
+        )?,
+    };
     drop((truths, masks, images, no_far_field));
-    // Then the timings, in interleaved rounds.
-    let counts = FrameCounts::for_adapter(&ctx.info).with(
-        opts.warmup_frames,
-        opts.timed_frames,
-        opts.rounds,
-    );
-    let n_views = views.len();
-    let mut gpu_samples = vec![vec![Vec::new(); n_views]; settings.len()];
-    let mut wall_samples = vec![vec![Vec::new(); n_views]; settings.len()];
-    let steps = u64::from(counts.rounds) * total;
-    if let Some(scene) = scenes.first_mut() {
-        ramp_up(
-            &ctx,
-            scene,
-            &views[0],
-            0.0,
-            Some(views[0].position.truncate()),
-        )?;
-    }
-    for round in 0..counts.rounds {
-        for (k, scene) in scenes.iter_mut().enumerate() {
-            for (vi, v) in views.iter().enumerate() {
-                let walker = Some(v.position.truncate());
-                for (stats, wall) in
-                    run_frames(&ctx, scene, v, 0.0, walker, counts.warmup, counts.timed)?
-                {
-                    gpu_samples[k][vi].push(frame_ms(&stats, wall, true));
-                    wall_samples[k][vi].push(wall);
-                }
-            }
-            progress("timing", u64::from(round) * total + k as u64 + 1, steps);
-        }
-    }
-    let mut flight_samples = vec![Vec::new(); settings.len()];
-    if let Some(fp) = &flight {
-        let shots = flight_shots(fp, opts.flight_frames);
-        // One untimed flight each, every frame's tiles waited for: the timed ones find the
-        // path streamed in (as far as the tile cache holds it).
-        for (k, scene) in scenes.iter_mut().enumerate() {
-            for (camera, _, _) in &shots {
-                scene.warm_up(&ctx, camera, FLIGHT_TILE_WAIT)?;
-            }
-            run_flight(&ctx, scene, &shots)?;
-            progress("flight", k as u64 + 1, total + steps);
-        }
-        for round in 0..counts.rounds {
-            for (k, scene) in scenes.iter_mut().enumerate() {
-                for (stats, wall) in run_flight(&ctx, scene, &shots)? {
-                    flight_samples[k].push(frame_ms(&stats, wall, ctx.timestamps));
-                }
-                progress(
-                    "flight",
-                    total + u64::from(round) * total + k as u64 + 1,
-                    total + steps,
-                );
-            }
-        }
-    }
-    drop(scenes);
     let mut results = Vec::new();
-    for (k, s) in settings.iter().enumerate() {
+    for (k, s) in settings.iter().enumerate().take(partial.len()) {
         let (measures, blades, coverage, frame_flips) = &partial[k];
         let timing = |samples: &[Vec<f64>]| {
             Timing::over_views(&samples.iter().map(|v| Timing::of(v)).collect::<Vec<_>>())
         };
+        let frame = timing(&wall_samples[k]);
         results.push(SettingResult {
             setting: s.clone(),
             gpu: if ctx.timestamps {
@@ -842,7 +881,7 @@ pub fn run_bench_lod(
             } else {
                 Timing::default()
             },
-            frame: timing(&wall_samples[k]),
+            frame,
             vs_truth: Measures::mean(measures),
             flip_frame_vs_truth: frame_flips.iter().sum::<f64>() / frame_flips.len().max(1) as f64,
             flip_vs_no_lod: vs_no_lod[k],
@@ -850,9 +889,9 @@ pub fn run_bench_lod(
             coverage: coverage.iter().sum::<f64>() / coverage.len() as f64,
             pareto: false,
             pareto_coarse: false,
-            flight: flight
-                .as_ref()
-                .map(|_| FlightTiming::of(&flight_samples[k])),
+            // A run stopped before this setting's flight was timed has none.
+            flight: (flight.is_some() && !flight_samples[k].is_empty())
+                .then(|| FlightTiming::of(&flight_samples[k])),
             pareto_flight: false,
         });
     }
@@ -864,18 +903,25 @@ pub fn run_bench_lod(
             r.frame.median_ms
         }
     };
-    let front_of = |time: &dyn Fn(&SettingResult) -> f64, error: &dyn Fn(&SettingResult) -> f64| {
-        let xy: Vec<(f64, f64)> = results.iter().map(|r| (time(r), error(r))).collect();
+    // The fronts are over the settings timed (all of them, unless the run was stopped early).
+    let front_of = |time: &dyn Fn(&SettingResult) -> Option<f64>,
+                    error: &dyn Fn(&SettingResult) -> f64| {
+        let timed: Vec<usize> = (0..results.len())
+            .filter(|&i| time(&results[i]).is_some())
+            .collect();
+        let xy: Vec<(f64, f64)> = timed
+            .iter()
+            .map(|&i| (time(&results[i]).unwrap_or(0.0), error(&results[i])))
+            .collect();
         let mut front = pareto_front(&xy);
         front.sort_by(|&a, &b| xy[a].0.total_cmp(&xy[b].0));
-        front
+        front.into_iter().map(|i| timed[i]).collect::<Vec<usize>>()
     };
-    let front = front_of(&time, &|r| r.vs_truth.flip);
-    let coarse_front = front_of(&time, &|r| r.vs_truth.coarse);
+    let views_time = |r: &SettingResult| r.frame.measured().then(|| time(r));
+    let front = front_of(&views_time, &|r| r.vs_truth.flip);
+    let coarse_front = front_of(&views_time, &|r| r.vs_truth.coarse);
     let flight_front = if flight.is_some() {
-        front_of(&|r| r.flight.map_or(0.0, |f| f.p99_ms), &|r| {
-            r.vs_truth.flip
-        })
+        front_of(&|r| r.flight.map(|f| f.p99_ms), &|r| r.vs_truth.flip)
     } else {
         Vec::new()
     };
@@ -896,9 +942,7 @@ pub fn run_bench_lod(
     };
     let (front, coarse_front, flight_front) =
         (names(&front), names(&coarse_front), names(&flight_front));
-
-    write_outputs(opts, &dolly, &results, ctx.timestamps)?;
-    write_far_band(opts, &far_band)?;
+    let default = results.first();
     let report = BenchLodReport {
         adapter: AdapterReport::of(&ctx),
         size: opts.size,
@@ -908,22 +952,62 @@ pub fn run_bench_lod(
         worst_pop,
         worst_tree_pop,
         worst_change_without_switch,
-        default_on_front: results[0].pareto,
-        default_on_coarse_front: results[0].pareto_coarse,
+        default_on_front: default.is_some_and(|r| r.pareto),
+        default_on_coarse_front: default.is_some_and(|r| r.pareto_coarse),
         front,
         coarse_front,
         flight_path: flight.as_ref().map(|p| p.name.clone()),
         flight_frames: opts.flight_frames,
-        default_on_flight_front: flight.as_ref().map(|_| results[0].pareto_flight),
+        default_on_flight_front: flight
+            .as_ref()
+            .map(|_| default.is_some_and(|r| r.pareto_flight)),
         flight_front,
         counts,
+        interrupted,
         dolly,
         settings: results,
         far_band,
     };
+    if report.dolly.is_empty() {
+        // Stopped before the dolly's first frame: nothing measured, nothing written (an
+        // earlier run's files stay as they were).
+        return Ok(report);
+    }
+    write_outputs(opts, &report, ctx.timestamps)?;
+    write_far_band(opts, &report.far_band)?;
     write_json(&opts.out.join("bench_lod.json"), &report)?;
     out_dir.keep();
     Ok(report)
+}
+
+/// The far band's figures and each captured setting's mean pixel FLIP against the no-LOD
+/// setting over the views (`None` where the no-LOD setting's images were not captured, in a
+/// run stopped early); the band is empty unless the truths and the default's images are all in.
+fn reference_figures(
+    (near_m, far_m): (f64, f64),
+    (truths, masks): (&[image::RgbaImage], &[Vec<bool>]),
+    images: &[Vec<image::RgbaImage>],
+    no_far_field: &[image::RgbaImage],
+    no_lod_index: usize,
+) -> Result<(FarBand, Vec<Option<f64>>)> {
+    let band = match images.first() {
+        Some(default) => far_band((near_m, far_m), truths, masks, default, no_far_field)?,
+        None => far_band((near_m, far_m), &[], &[], &[], &[])?,
+    };
+    let mut vs_no_lod = Vec::new();
+    for own in images {
+        vs_no_lod.push(match images.get(no_lod_index) {
+            Some(reference) => {
+                let mut flips = Vec::new();
+                for (r, a) in reference.iter().zip(own) {
+                    flips.push(flip(r, a)?);
+                }
+                Some(flips.iter().sum::<f64>() / flips.len().max(1) as f64)
+            }
+            None => None,
+        });
+    }
+    Ok((band, vs_no_lod))
 }
 
 /// The longest bench lod waits for a flight frame's tiles in its untimed flight.
@@ -1025,13 +1109,12 @@ fn write_far_band(opts: &BenchLodOptions, band: &FarBand) -> Result<()> {
     Ok(())
 }
 
-fn write_outputs(
-    opts: &BenchLodOptions,
-    dolly: &[DollyFrame],
-    results: &[SettingResult],
-    gpu: bool,
-) -> Result<()> {
+/// Writes the dolly's and the settings' tables and charts; the figures a run stopped early did
+/// not time are empty cells, and its settings without them are left off the charts of time.
+fn write_outputs(opts: &BenchLodOptions, report: &BenchLodReport, gpu: bool) -> Result<()> {
     use std::fmt::Write as _;
+    let (dolly, results) = (&report.dolly, &report.settings);
+    let title = |t: &str| chart_title(t, report.interrupted);
     let mut csv = String::from(
         "frame,flip_vs_truth,coarse_flip_vs_truth,jump,flip_vs_no_lod,change_lod,change_no_lod,\
          ring_switches,tree_switches\n",
@@ -1055,7 +1138,7 @@ fn write_outputs(
     let line =
         |f: &dyn Fn(&DollyFrame) -> f64| dolly.iter().map(|d| (f64::from(d.frame), f(d))).collect();
     LineChart {
-        title: "LOD dolly across the ring boundary".into(),
+        title: title("LOD dolly across the ring boundary"),
         x_label: "frame".into(),
         y_label: "FLIP".into(),
         log_x: false,
@@ -1095,10 +1178,12 @@ fn write_outputs(
     );
     for r in results {
         let s = &r.setting;
+        // Every figure of the views' timings is the frames' (and, with timestamps, the GPU's).
+        let t = &r.frame;
         let flight = |f: fn(&FlightTiming) -> String| r.flight.as_ref().map_or(String::new(), f);
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.4},{},{},{:.5},{:.5},{:.5},{:.5},{:.0},{:.4},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.5},{:.5},{:.5},{},{:.0},{:.4},{},{},{},{},{},{},{}",
             s.name,
             s.high_radius_tiles,
             s.view_distance_tiles,
@@ -1119,18 +1204,25 @@ fn write_outputs(
             s.tree_lod_m.map_or(String::new(), |m| m[0].to_string()),
             s.tree_lod_m.map_or(String::new(), |m| m[1].to_string()),
             s.tree_thin_m.map_or(String::new(), |m| m.to_string()),
-            r.gpu.median_ms,
-            r.gpu.q1_ms,
-            r.gpu.q3_ms,
-            r.gpu.spread,
-            r.frame.median_ms,
-            r.frame.spread,
-            if gpu { r.gpu.noisy } else { r.frame.noisy },
+            t.cell(r.gpu.median_ms, 4),
+            t.cell(r.gpu.q1_ms, 4),
+            t.cell(r.gpu.q3_ms, 4),
+            t.cell(r.gpu.spread, 4),
+            t.cell(r.frame.median_ms, 3),
+            t.cell(r.frame.spread, 4),
+            if !t.measured() {
+                String::new()
+            } else if gpu {
+                r.gpu.noisy.to_string()
+            } else {
+                r.frame.noisy.to_string()
+            },
             r.frame.frames,
             r.vs_truth.flip,
             r.vs_truth.coarse,
             r.flip_frame_vs_truth,
-            r.flip_vs_no_lod,
+            r.flip_vs_no_lod
+                .map_or(String::new(), |f| format!("{f:.5}")),
             r.blades_drawn,
             r.coverage,
             r.pareto,
@@ -1155,14 +1247,15 @@ fn write_outputs(
             r.frame.median_ms
         }
     };
-    let chart = |title: &str, y_label: &str, y: &dyn Fn(&SettingResult) -> f64| Chart {
-        title: title.into(),
+    let chart = |heading: &str, y_label: &str, y: &dyn Fn(&SettingResult) -> f64| Chart {
+        title: title(heading),
         x_label: x_label.into(),
         y_label: y_label.into(),
         log_x: true,
         log_y: false,
         points: results
             .iter()
+            .filter(|r| r.frame.measured())
             .map(|r| ChartPoint {
                 label: if (gpu && r.gpu.noisy) || (!gpu && r.frame.noisy) {
                     format!("{} (noisy)", r.setting.name)
@@ -1198,7 +1291,7 @@ fn write_outputs(
     .write_png(&opts.out.join("lod_coverage.png"), 900, 600)?;
     // The flight's worst frames against the error: the cost a setting has where the four
     // views do not look.
-    if results.iter().all(|r| r.flight.is_some()) {
+    if report.flight_path.is_some() {
         let mut c = chart(
             "Grass LOD settings along the flight: 99th percentile frame against accuracy",
             &format!("pixel FLIP against the {k}x{k} truth"),
@@ -1208,10 +1301,17 @@ fn write_outputs(
             "{} time of the flight's 99th percentile frame (ms)",
             if gpu { "GPU" } else { "wall" }
         );
-        for (p, r) in c.points.iter_mut().zip(results) {
-            p.x = r.flight.map_or(0.0, |f| f.p99_ms);
-            p.label.clone_from(&r.setting.name);
-        }
+        c.points = results
+            .iter()
+            .filter_map(|r| {
+                Some(ChartPoint {
+                    label: r.setting.name.clone(),
+                    x: r.flight?.p99_ms,
+                    y: r.vs_truth.flip,
+                    chosen: r.setting.name == "default",
+                })
+            })
+            .collect();
         c.write_png(&opts.out.join("lod_settings_flight.png"), 900, 600)?;
     }
     Ok(())

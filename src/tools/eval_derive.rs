@@ -500,11 +500,13 @@ type ChartSpec = (&'static str, &'static str, fn(&MethodResult) -> f64);
 /// Writes `derive.csv` and the charts `derive_height.png` (height RMSE), `derive_slope.png`
 /// (slope RMSE), `derive_flattening.png` (slope bias) and `derive_roughness.png` against time
 /// per tile into `out` (created if needed; locked while they are written, see
-/// [`crate::tools::fly::OutDir`]).
+/// [`crate::tools::fly::OutDir`]). With `interrupted` (an eval stopped before its last method),
+/// the charts' titles say that they are partial.
 pub fn write_results(
     results: &[MethodResult],
     dem_name: &str,
     out: &std::path::Path,
+    interrupted: bool,
 ) -> anyhow::Result<()> {
     let out_dir = crate::tools::fly::OutDir::create_for(out, "eval derive")?;
     use std::fmt::Write as _;
@@ -558,7 +560,10 @@ pub fn write_results(
     ];
     for (file, y_label, value) in charts {
         let chart = crate::tools::metrics::Chart {
-            title: format!("{dem_name}: derived from 1/{factor} resolution"),
+            title: crate::tools::stop::chart_title(
+                format!("{dem_name}: derived from 1/{factor} resolution"),
+                interrupted,
+            ),
             x_label: "CPU time per 133x133 tile (ms)".into(),
             y_label: y_label.into(),
             log_x: true,
@@ -589,6 +594,8 @@ pub struct DeriveEvalReport {
     pub results: Vec<MethodResult>,
     /// Names of the methods on the joint Pareto front ([`joint_front`]).
     pub front: Vec<String>,
+    /// Whether the eval was stopped before its last method: `results` holds the methods run.
+    pub interrupted: bool,
 }
 
 impl DeriveEvalReport {
@@ -599,7 +606,10 @@ impl DeriveEvalReport {
 
     /// The calibrated method's fit to the coarse grid, when it ran.
     pub fn calibration(&self) -> Option<&DeriveCalibration> {
-        self.results.last().and_then(|r| r.fit.as_ref())
+        self.results
+            .last()
+            .filter(|r| r.method == RUNTIME_METHOD)
+            .and_then(|r| r.fit.as_ref())
     }
 }
 
@@ -613,11 +623,14 @@ pub fn min_side(factor: usize) -> usize {
 /// charts into `out` ([`write_results`]). `progress` hears each method's name before it runs,
 /// with the methods done and their total. Refuses a factor that is not a power of two from 2
 /// to 64, a DEM too small for it or with heights beyond a planet's surface, and results that
-/// are not finite (then nothing is written).
+/// are not finite (then nothing is written). Stopped early (`stop`, Ctrl-C on the command line;
+/// tested between methods), it writes the methods run so far, the report marked interrupted;
+/// stopped before the first method's result, it writes nothing.
 pub fn run_derive_eval(
     dem_path: &std::path::Path,
     factor: usize,
     out: &std::path::Path,
+    stop: &crate::tools::stop::Stop,
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> anyhow::Result<DeriveEvalReport> {
     use anyhow::{Context as _, bail};
@@ -647,19 +660,33 @@ pub fn run_derive_eval(
             }
         );
     }
-    let truth = dem_grid(&dem);
-    let fixed = methods();
-    let total = fixed.len() as u64 + 2;
-    let mut results = Vec::new();
-    for m in fixed {
-        progress(&m.name(), results.len() as u64, total);
-        results.push(evaluate(&truth, factor, m, 5));
+    let truth = &dem_grid(&dem);
+    // The fixed methods, the fitted kernel, then the runtime's method.
+    let mut runs: Vec<(String, Box<dyn Fn() -> MethodResult>)> = Vec::new();
+    for m in methods() {
+        runs.push((m.name(), Box::new(move || evaluate(truth, factor, m, 5))));
     }
-    progress("fitted kernel", results.len() as u64, total);
-    results.push(evaluate_kernel(&truth, factor, 5));
-    progress(RUNTIME_METHOD, results.len() as u64, total);
-    results.push(evaluate_calibrated(&truth, factor, 5));
-    progress(RUNTIME_METHOD, total, total);
+    runs.push((
+        "fitted kernel".to_owned(),
+        Box::new(move || evaluate_kernel(truth, factor, 5)),
+    ));
+    runs.push((
+        RUNTIME_METHOD.to_owned(),
+        Box::new(move || evaluate_calibrated(truth, factor, 5)),
+    ));
+    let total = runs.len() as u64;
+    let mut results = Vec::new();
+    for (name, run) in &runs {
+        if stop.requested() {
+            break;
+        }
+        progress(name, results.len() as u64, total);
+        results.push(run());
+    }
+    let interrupted = results.len() < runs.len();
+    if !interrupted {
+        progress(RUNTIME_METHOD, total, total);
+    }
     if let Some(r) = results.iter().find(|r| {
         ![r.rmse_m, r.max_m, r.slope_rmse_deg, r.slope_bias_deg]
             .iter()
@@ -671,16 +698,28 @@ pub fn run_derive_eval(
             r.method
         );
     }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let name = dem_path
-        .file_stem()
-        .map_or("DEM".into(), |s| s.to_string_lossy().into_owned());
-    write_results(&results, &name, out)?;
     let front = joint_front(&results)
         .into_iter()
         .map(|i| results[i].method.clone())
         .collect();
-    Ok(DeriveEvalReport { results, front })
+    if results.is_empty() {
+        // Stopped before the first method's result: nothing written.
+        return Ok(DeriveEvalReport {
+            results,
+            front,
+            interrupted,
+        });
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let name = dem_path
+        .file_stem()
+        .map_or("DEM".into(), |s| s.to_string_lossy().into_owned());
+    write_results(&results, &name, out, interrupted)?;
+    Ok(DeriveEvalReport {
+        results,
+        front,
+        interrupted,
+    })
 }
 
 #[cfg(test)]

@@ -9,6 +9,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::tools::metrics::{Chart, ChartPoint, LineChart, Series, Summary};
+use crate::tools::stop::{Stop, chart_title};
 use crate::tools::sway_integrators::{EulerLimits, Integrator, Preset, RENDERER_INTEGRATOR};
 use crate::wind::spring::{SwaySpring, SwayState, exact_step};
 
@@ -265,26 +266,39 @@ pub fn evaluate(preset: Preset, integrator: Integrator, dt: f64) -> SwayResult {
 /// Every preset, integrator and step of the eval (preset by preset, then integrator, then
 /// step).
 pub fn evaluate_all() -> Vec<SwayResult> {
+    evaluate_until(&Stop::default(), &mut |_, _| {})
+}
+
+/// Every run [`evaluate_all`] makes, in its order, until `stop` is asked for (between runs:
+/// then the runs made so far); `progress` hears the runs done and their total after each.
+pub fn evaluate_until(stop: &Stop, progress: &mut dyn FnMut(u64, u64)) -> Vec<SwayResult> {
+    let runs: Vec<(Preset, Integrator, f64)> = Preset::ALL
+        .into_iter()
+        .flat_map(|p| {
+            Integrator::ALL
+                .into_iter()
+                .flat_map(move |i| EVAL_STEPS_S.map(|dt| (p, i, dt)))
+        })
+        .collect();
     let mut out = Vec::new();
-    for preset in Preset::ALL {
-        for integrator in Integrator::ALL {
-            for dt in EVAL_STEPS_S {
-                out.push(evaluate(preset, integrator, dt));
-            }
+    for (preset, integrator, dt) in runs.iter().copied() {
+        if stop.requested() {
+            break;
         }
+        out.push(evaluate(preset, integrator, dt));
+        progress(out.len() as u64, runs.len() as u64);
     }
     out
 }
 
-/// The integrators that stayed bounded in every run of `results`.
+/// The integrators that stayed bounded in every run of `results` (an integrator with no run
+/// there, in an eval stopped early, is not among them).
 pub fn stable_everywhere(results: &[SwayResult]) -> Vec<Integrator> {
     Integrator::ALL
         .into_iter()
         .filter(|i| {
-            results
-                .iter()
-                .filter(|r| r.integrator == *i)
-                .all(|r| r.stable)
+            let mut runs = results.iter().filter(|r| r.integrator == *i).peekable();
+            runs.peek().is_some() && runs.all(|r| r.stable)
         })
         .collect()
 }
@@ -312,9 +326,26 @@ pub fn dt_label(dt: f64) -> String {
 /// - `sway_stability.png`: largest `|x|` against the time step, one line per integrator, for the
 ///   stiff preset, with the blow-up threshold and the theoretical limits of the two Euler
 ///   steps.
-pub fn run_sway_eval(out: &Path) -> anyhow::Result<SwayEvalReport> {
+///
+/// `progress` hears the runs done and their total. Stopped early (`stop`, Ctrl-C on the command
+/// line), it writes the runs made so far, the charts' titles saying so and the report marked
+/// interrupted; stopped before the first run, it writes nothing.
+pub fn run_sway_eval(
+    out: &Path,
+    stop: &Stop,
+    progress: &mut dyn FnMut(u64, u64),
+) -> anyhow::Result<SwayEvalReport> {
     let out_dir = crate::tools::fly::OutDir::create_for(out, "eval sway")?;
-    let results = evaluate_all();
+    let results = evaluate_until(stop, progress);
+    let interrupted =
+        results.len() < Preset::ALL.len() * Integrator::ALL.len() * EVAL_STEPS_S.len();
+    if results.is_empty() {
+        return Ok(SwayEvalReport {
+            results,
+            stable: Vec::new(),
+            interrupted,
+        });
+    }
     write_csv(&results, &out.join("sway.csv"))?;
     for (preset, file) in [
         (Preset::Stiff, "sway_error.png"),
@@ -322,25 +353,31 @@ pub fn run_sway_eval(out: &Path) -> anyhow::Result<SwayEvalReport> {
     ] {
         // Only runs that stayed bounded make the Pareto front: a blown-up run's error is a
         // placeholder.
-        error_chart(&results, preset)
-            .write_png_with_front(&out.join(file), 1100, 750, |p| !p.label.ends_with(BLEW_UP))?;
+        let mut chart = error_chart(&results, preset);
+        chart.title = chart_title(chart.title, interrupted);
+        chart.write_png_with_front(&out.join(file), 1100, 750, |p| !p.label.ends_with(BLEW_UP))?;
     }
-    stability_chart(&results, Preset::Stiff).write_png(
-        &out.join("sway_stability.png"),
-        1000,
-        650,
-    )?;
+    let mut chart = stability_chart(&results, Preset::Stiff);
+    chart.title = chart_title(chart.title, interrupted);
+    chart.write_png(&out.join("sway_stability.png"), 1000, 650)?;
     out_dir.keep();
     let stable = stable_everywhere(&results);
-    Ok(SwayEvalReport { results, stable })
+    Ok(SwayEvalReport {
+        results,
+        stable,
+        interrupted,
+    })
 }
 
 /// What [`run_sway_eval`] measured.
 pub struct SwayEvalReport {
     /// One result per preset, integrator and time step ([`evaluate_all`]).
     pub results: Vec<SwayResult>,
-    /// The integrators that stayed bounded in every run ([`stable_everywhere`]).
+    /// The integrators that stayed bounded in every run ([`stable_everywhere`]; of a run
+    /// stopped early, in every run made).
     pub stable: Vec<Integrator>,
+    /// Whether the eval was stopped before its last run: `results` holds the runs made.
+    pub interrupted: bool,
 }
 
 impl SwayEvalReport {

@@ -22,6 +22,7 @@ pub(crate) mod rng;
 pub mod scene;
 pub mod serve;
 pub mod soak;
+pub mod stop;
 pub mod sway_integrators;
 pub mod timing;
 pub mod truth;

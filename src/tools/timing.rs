@@ -53,6 +53,22 @@ impl Timing {
         }
     }
 
+    /// Whether any frame was timed: a run stopped before it timed a setting has none, and its
+    /// figures are zero.
+    pub fn measured(&self) -> bool {
+        self.frames > 0
+    }
+
+    /// `value`, one of this timing's figures or one computed from them, as a CSV cell with
+    /// `decimals` decimals; an empty cell when nothing was timed ([`Timing::measured`]).
+    pub fn cell(&self, value: f64, decimals: usize) -> String {
+        if self.measured() {
+            format!("{value:.decimals$}")
+        } else {
+            String::new()
+        }
+    }
+
     /// One figure for several views of a setting: the mean of their medians and quartiles, the
     /// largest of their spreads.
     pub fn over_views(views: &[Timing]) -> Self {

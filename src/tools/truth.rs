@@ -234,6 +234,7 @@ pub fn mean_linear(images: &[image::RgbaImage]) -> Option<image::RgbaImage> {
 pub struct Truth {
     scene: Scene,
     k: u32,
+    stop: crate::tools::stop::Stop,
 }
 
 impl Truth {
@@ -265,7 +266,18 @@ impl Truth {
         };
         let scene = Scene::with_source(ctx, world, source, width, height, config)
             .context("the truth's renderer")?;
-        Ok(Self { scene, k })
+        Ok(Self {
+            scene,
+            k,
+            stop: crate::tools::stop::Stop::default(),
+        })
+    }
+
+    /// This truth with its warm-ups ended by `stop` (a benchmark's Ctrl-C): a frame whose
+    /// warm-up was stopped is not drawn, [`crate::tools::stop::Stopped`] is returned instead.
+    pub fn with_stop(mut self, stop: crate::tools::stop::Stop) -> Self {
+        self.stop = stop;
+        self
     }
 
     /// Sub-samples a pixel side.
@@ -294,8 +306,8 @@ impl Truth {
 
     /// The truth frame from `camera` at `time_s` with the trail left by `walker` (see the module
     /// docs): the tiles the camera wants are brought in first (waiting up to
-    /// [`crate::tools::fly::FIRST_FRAME_WAIT`]), then the K*K sub-samples are drawn and averaged
-    /// in linear light.
+    /// [`crate::tools::fly::FIRST_FRAME_WAIT`], or until its stop is asked for: see
+    /// [`Truth::with_stop`]), then the K*K sub-samples are drawn and averaged in linear light.
     pub fn render(
         &mut self,
         ctx: &GpuContext,
@@ -330,9 +342,9 @@ impl Truth {
         walker: Option<DVec2>,
         sink: &mut dyn FnMut(image::RgbaImage),
     ) -> Result<()> {
-        let report = self
-            .scene
-            .warm_up_report(camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
+        let report =
+            self.stop
+                .warm_up(&mut self.scene, camera, crate::tools::fly::FIRST_FRAME_WAIT)?;
         crate::tools::fly::check_streaming(
             &self.scene.world().dir,
             &self.scene.world().manifest.pyramid,
