@@ -871,41 +871,42 @@ fn the_baylands_world_carries_its_materials_and_renders() {
     }
 }
 
-/// Writes a one-band uint8 GeoTIFF of `data` (rows from the north) in square tiles of `tile`
-/// samples, each compressed with Deflate, as land-cover products are (ESA WorldCover's tiles
-/// are 36000 x 36000 samples in tiles of 1024).
+/// Writes a one-band uint8 GeoTIFF of samples `sample(column, row)` (row 0 north) in square
+/// tiles of `tile` samples, each compressed with Deflate, as land-cover products are (ESA
+/// WorldCover's tiles are 36000 x 36000 samples in tiles of 1024). A tile that holds the same
+/// samples as the one before it is compressed once, so that a large map of one value is small.
 fn write_tiled_map(
     path: &Path,
     size: [u32; 2],
     tile: u32,
     cell: f64,
     corner: [f64; 2],
-    data: &[u8],
+    sample: &dyn Fn(u32, u32) -> u8,
 ) {
     use std::io::Write;
     let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
     let mut enc = TiffEncoder::new(&mut file).unwrap();
     let mut dir = enc.image_directory().unwrap();
     let (mut offsets, mut counts) = (Vec::new(), Vec::new());
+    let (mut last_raw, mut last_packed) = (Vec::new(), Vec::new());
     for ty in 0..size[1].div_ceil(tile) {
         for tx in 0..size[0].div_ceil(tile) {
-            let mut raw = Vec::new();
+            let mut raw = Vec::with_capacity((tile * tile) as usize);
             for r in 0..tile {
                 for c in 0..tile {
                     let (x, y) = (tx * tile + c, ty * tile + r);
                     let inside = x < size[0] && y < size[1];
-                    raw.push(if inside {
-                        data[(y * size[0] + x) as usize]
-                    } else {
-                        0
-                    });
+                    raw.push(if inside { sample(x, y) } else { 0 });
                 }
             }
-            let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(6));
-            z.write_all(&raw).unwrap();
-            let packed = z.finish().unwrap();
-            offsets.push(dir.write_data(&packed[..]).unwrap() as u32);
-            counts.push(packed.len() as u32);
+            if raw != last_raw {
+                let mut z =
+                    flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(6));
+                z.write_all(&raw).unwrap();
+                (last_raw, last_packed) = (raw, z.finish().unwrap());
+            }
+            offsets.push(dir.write_data(&last_packed[..]).unwrap() as u32);
+            counts.push(last_packed.len() as u32);
         }
     }
     dir.write_tag(Tag::ImageWidth, size[0]).unwrap();
@@ -956,11 +957,15 @@ fn a_map_larger_than_the_limit_is_read_by_the_window_over_the_dem() {
     use verdant::bake::cover::{CoverMap, CoverTable, MapWindow};
     let dir = tempfile::tempdir().unwrap();
     let dem_path = write_dem(dir.path());
-    let data: Vec<u8> = (0..BIG_MAP)
-        .flat_map(|r| (0..BIG_MAP).map(move |c| big_map_code(c, r)))
-        .collect();
     let big = dir.path().join("big.tif");
-    write_tiled_map(&big, [BIG_MAP; 2], 64, DEM_CELL, big_map_corner(), &data);
+    write_tiled_map(
+        &big,
+        [BIG_MAP; 2],
+        64,
+        DEM_CELL,
+        big_map_corner(),
+        &big_map_code,
+    );
     // The same map cropped by hand to 92 x 92 samples around the DEM (in strips, uncompressed).
     let (first, side) = (210u32, 92u32);
     let cropped: Vec<u8> = (first..first + side)
@@ -1066,8 +1071,9 @@ fn a_window_over_the_limit_is_refused_naming_the_map_the_window_and_how_to_crop_
     let dem_path = write_dem(dir.path());
     // 128 x 128 samples of 10 m over the DEM exactly: the window is the whole map.
     let map = dir.path().join("spanning.tif");
-    let data: Vec<u8> = (0..128 * 128).map(|k| [30, 80][k % 2]).collect();
-    write_tiled_map(&map, [128; 2], 32, 10.0, DEM_CORNER, &data);
+    write_tiled_map(&map, [128; 2], 32, 10.0, DEM_CORNER, &|c, _| {
+        [30, 80][c as usize % 2]
+    });
     let dem = verdant::world::Dem::load(&dem_path).unwrap();
     let esa = PathBuf::from("esa-worldcover");
     let table = CoverTable::load(&esa).unwrap();
@@ -1151,5 +1157,176 @@ fn a_palette_geotiff_is_refused_as_a_dem_or_a_density_map() {
             assert!(e.contains(w), "case {k}: {e:?} lacks {w:?}");
         }
         assert!(!o.out.exists(), "case {k}: nothing written");
+    }
+}
+
+/// A density map and a mask of 16448 x 16448 samples of 20 m (more than the 2^28 a map is read
+/// whole with), tiled, the DEM over their samples 8000..=8064 of each axis. Within 20 samples
+/// of the DEM they vary; beyond, they would clear all grass (density 0, mask 1).
+const HUGE_MAP: u32 = 16448;
+const HUGE_FOOTPRINT: [u32; 2] = [8000, 8064];
+fn near_huge_footprint(c: u32, r: u32) -> bool {
+    let [lo, hi] = HUGE_FOOTPRINT;
+    let near = |v: u32| v + 20 >= lo && v <= hi + 20;
+    near(c) && near(r)
+}
+fn huge_density(c: u32, r: u32) -> u8 {
+    if near_huge_footprint(c, r) {
+        ((c * 13 + r * 7) % 256) as u8
+    } else {
+        0
+    }
+}
+fn huge_mask(c: u32, r: u32) -> u8 {
+    if near_huge_footprint(c, r) {
+        u8::from((8030..8034).contains(&r) || (8040..8042).contains(&c))
+    } else {
+        1
+    }
+}
+
+/// The huge density map and mask (tiled, Deflate), and the same cropped by hand to samples
+/// 7980..=8084 of each axis (uncompressed strips): density, mask, cropped density, cropped
+/// mask.
+fn write_huge_maps(dir: &Path) -> [PathBuf; 4] {
+    let off = f64::from(HUGE_FOOTPRINT[0]) * DEM_CELL;
+    let corner = [DEM_CORNER[0] - off, DEM_CORNER[1] + off];
+    let (first, side) = (7980u32, 105u32);
+    let shift = f64::from(first) * DEM_CELL;
+    let crop_corner = [corner[0] + shift, corner[1] - shift];
+    let mut paths = Vec::new();
+    for (name, f) in [
+        ("density", &huge_density as &dyn Fn(u32, u32) -> u8),
+        ("mask", &huge_mask),
+    ] {
+        let whole = dir.join(format!("huge_{name}.tif"));
+        write_tiled_map(&whole, [HUGE_MAP; 2], 512, DEM_CELL, corner, f);
+        let cropped: Vec<u8> = (first..first + side)
+            .flat_map(|r| (first..first + side).map(move |c| f(c, r)))
+            .collect();
+        let crop = dir.join(format!("crop_{name}.tif"));
+        write_geotiff::<colortype::Gray8>(
+            &crop,
+            [side; 2],
+            [DEM_CELL; 2],
+            crop_corner,
+            32633,
+            &cropped,
+        );
+        paths.push((whole, crop));
+    }
+    let [(density, crop_density), (mask, crop_mask)] = <[_; 2]>::try_from(paths).unwrap();
+    [density, mask, crop_density, crop_mask]
+}
+
+#[test]
+fn a_density_map_and_a_mask_larger_than_a_map_read_whole_are_read_by_the_window_over_the_dem() {
+    use verdant::bake::cover::{MapWindow, ValueMap};
+    let dir = tempfile::tempdir().unwrap();
+    let dem_path = write_dem(dir.path());
+    let [density, mask, crop_density, crop_mask] = write_huge_maps(dir.path());
+    // A bake with the whole maps paints as one with the maps cropped by hand.
+    let baked = |maps: Option<(&Path, &Path)>, name: &str| {
+        let out = dir.path().join(name);
+        let mut o = opts(&dem_path, &out, None);
+        if let Some((density, mask)) = maps {
+            o.density_map = Some(density.to_path_buf());
+            o.mask = Some(mask.to_path_buf());
+        }
+        bake(&o, &mut |_, _, _| {}).unwrap_or_else(|e| panic!("{name}: {e}"));
+        finest_samples(&out)
+    };
+    let whole = baked(Some((&density, &mask)), "whole");
+    let by_hand = baked(Some((&crop_density, &crop_mask)), "by_hand");
+    assert_eq!(whole, by_hand);
+    // The maps did their work: they scaled and cleared the grass, and left some.
+    let plain = baked(None, "plain");
+    let changed = whole.iter().zip(&plain).filter(|(a, b)| a != b).count();
+    let grown = whole.iter().filter(|s| s.2 > 0).count();
+    assert!(
+        changed * 2 > whole.len(),
+        "{changed} of {} changed",
+        whole.len()
+    );
+    assert!(
+        grown * 4 > whole.len(),
+        "{grown} of {} grow grass",
+        whole.len()
+    );
+
+    // Under a limit of 10,000 samples (the maps hold 270 million) each is read by its window:
+    // the DEM's footprint and 2 samples around it, 69 x 69 samples, all that is held.
+    let dem = verdant::world::Dem::load(&dem_path).unwrap();
+    let want = MapWindow {
+        map_size: [HUGE_MAP; 2],
+        first: [7998, 7998],
+        size: [69, 69],
+    };
+    let maps = [
+        ValueMap::density_within(&density, &dem, 10_000).unwrap(),
+        ValueMap::mask_within(&mask, &dem, 10_000).unwrap(),
+    ];
+    let crops = [
+        ValueMap::density_within(&crop_density, &dem, 10_000).unwrap(),
+        ValueMap::mask_within(&crop_mask, &dem, 10_000).unwrap(),
+    ];
+    for (map, crop) in maps.iter().zip(&crops) {
+        assert_eq!(map.window(), want);
+        assert_eq!(crop.window().first, [18, 18]);
+        assert_eq!(crop.window().size, want.size);
+    }
+    // They give the values of the maps cropped by hand at every sample of the DEM, and between.
+    let extent = f64::from(DEM_SIZE - 1) * DEM_CELL;
+    let mut seen = [0usize; 4];
+    for j in 0..2 * DEM_SIZE - 1 {
+        for i in 0..2 * DEM_SIZE - 1 {
+            let p = DVec2::new(f64::from(i), f64::from(j)) * (DEM_CELL / 2.0);
+            assert!(p.x <= extent && p.y <= extent);
+            for (k, (map, crop)) in maps.iter().zip(&crops).enumerate() {
+                let v = map.at(p);
+                assert_eq!(v, crop.at(p), "map {k} at {p}");
+                let v = v.unwrap_or_else(|| panic!("map {k} at {p}: no value"));
+                seen[2 * k + usize::from(v > 0.5)] += 1;
+            }
+        }
+    }
+    // Both maps hold values above and below a half over the DEM.
+    assert!(seen.iter().all(|&n| n > 500), "{seen:?}");
+}
+
+#[test]
+fn a_density_map_or_mask_window_over_the_limit_is_refused_naming_it_the_window_and_how_to_crop() {
+    use verdant::bake::cover::ValueMap;
+    let dir = tempfile::tempdir().unwrap();
+    let dem_path = write_dem(dir.path());
+    let dem = verdant::world::Dem::load(&dem_path).unwrap();
+    // 128 x 128 samples of 10 m over the DEM exactly: the window is the whole map.
+    let map = dir.path().join("spanning.tif");
+    write_tiled_map(&map, [128; 2], 32, 10.0, DEM_CORNER, &|c, r| {
+        ((c + r) % 256) as u8
+    });
+    type Read =
+        fn(&Path, &verdant::world::Dem, u64) -> Result<ValueMap, verdant::world::WorldError>;
+    for (read, what) in [
+        (ValueMap::density_within as Read, "density map"),
+        (ValueMap::mask_within, "mask"),
+    ] {
+        let e = match read(&map, &dem, 10_000) {
+            Ok(m) => panic!("{what}: read a window of {:?}", m.window()),
+            Err(e) => e.to_string(),
+        };
+        for w in [
+            "spanning.tif",
+            what,
+            "window of 128x128 samples",
+            "of its 128x128",
+            "10000",
+            "crop the map",
+        ] {
+            assert!(e.contains(w), "{what}: {e:?} lacks {w:?}");
+        }
+        // Within the limit it is read, whole.
+        let m = read(&map, &dem, 128 * 128).unwrap();
+        assert_eq!(m.window().size, [128, 128], "{what}");
     }
 }

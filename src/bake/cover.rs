@@ -22,8 +22,9 @@
 //! - Where the map does not reach, or says nodata, the procedural rule paints as before. The
 //!   slope rule holds everywhere: no grass on ground steeper than
 //!   [`super::paint::MAX_GRASS_SLOPE_DEG`], whatever the class.
-//! - **Value maps** ([`ValueMap`]), placed the same way: a density map (0 to 1) scales the
-//!   painted cover, a mask (not 0) clears it.
+//! - **Value maps** ([`ValueMap`]), placed and read the same way (of a georeferenced GeoTIFF
+//!   only the window over the DEM): a density map (0 to 1) scales the painted cover, a mask
+//!   (not 0) clears it.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -323,7 +324,19 @@ impl CoverMap {
         max_samples: u64,
     ) -> Result<CoverMap, WorldError> {
         let painted = table.resolve(table_path, grass_types)?;
-        let (placed, codes, window) = read_classes(path, dem, max_samples)?;
+        let MapRead {
+            placed,
+            samples: codes,
+            window,
+            ..
+        } = read_map(
+            path,
+            dem,
+            max_samples,
+            MapKind::Classes,
+            Some,
+            |tiff, first, size| tiff.read_classes(first, size),
+        )?;
         let nodata: std::collections::BTreeSet<u32> = table.nodata.iter().copied().collect();
         let codes: Vec<Option<u32>> = codes
             .into_iter()
@@ -665,64 +678,130 @@ impl Placed {
 }
 
 /// A map of one value a sample, placed on the DEM: a density map (0 to 1: the grass map's cover
-/// is multiplied by it) or a mask (nothing grows where it is not 0).
+/// is multiplied by it) or a mask (nothing grows where it is not 0). Of a georeferenced GeoTIFF
+/// only the window over the DEM's footprint is read and held, as of a land-cover map.
 pub struct ValueMap {
     placed: Placed,
-    /// Values row 0 north, scaled to 0..=1 for a density map; `None` where the file says
-    /// nodata.
-    values: Vec<Option<f64>>,
+    window: MapWindow,
+    samples: Samples,
 }
+
+/// A [`ValueMap`]'s samples (of its window), row 0 north.
+enum Samples {
+    /// A density map's values as read (NaN where the file says nodata), 4 bytes a sample; a
+    /// value `v` is `v / full` (at most 1).
+    Density { values: Vec<f32>, full: f64 },
+    /// A mask's samples, 1 byte each: [`MASK_CLEAR`] where its value is not 0, 0 where it is,
+    /// [`MASK_NODATA`] where the file says nodata.
+    Mask(Vec<u8>),
+}
+
+/// A mask sample whose value is not 0: nothing grows there.
+const MASK_CLEAR: u8 = 1;
+/// A mask sample where the file says nodata: it masks nothing.
+const MASK_NODATA: u8 = 2;
 
 impl ValueMap {
     /// A density map: an 8- or 16-bit grayscale PNG (0 to its largest value), or a GeoTIFF of
-    /// values from 0 to 1 (a float band), 0 to 255 or 0 to 65535 (an integer band: which, by its
-    /// largest value). Refuses negative values and what [`CoverMap::load`] refuses.
+    /// values from 0 to 1 (a float band), 0 to 255 or 0 to 65535 (an integer band: which, by the
+    /// largest value read). Of a georeferenced GeoTIFF only the window over the DEM's footprint
+    /// is read (a map of any size), at most 2^28 samples; see [`ValueMap::density_within`].
     pub fn density(path: &Path, dem: &Dem) -> Result<ValueMap, WorldError> {
-        Self::read(path, dem, "density map", |raster| {
-            if raster.values.iter().flatten().any(|&v| v < 0.0) {
-                return Err(map_error(path, "it holds values below 0"));
-            }
-            let max = raster
-                .values
-                .iter()
-                .flatten()
-                .fold(0.0f64, |m, &v| m.max(v));
-            let full = if raster.full > 1.0 || max <= 1.0 {
-                raster.full
-            } else if max <= 255.0 {
-                255.0
-            } else {
-                65535.0
-            };
-            Ok(Box::new(move |v| (v / full).min(1.0)))
-        })
+        Self::density_within(path, dem, MAX_MAP_SAMPLES)
     }
 
-    /// A mask: nothing grows where its value is not 0 (nodata masks nothing).
-    pub fn mask(path: &Path, dem: &Dem) -> Result<ValueMap, WorldError> {
-        Self::read(path, dem, "mask", |_| {
-            Ok(Box::new(|v| if v != 0.0 { 1.0 } else { 0.0 }))
-        })
-    }
-
-    /// Reads the map at `path`, places it on `dem`, and maps each value by what `scale` makes
-    /// of the raster.
-    fn read(
+    /// [`ValueMap::density`] holding at most `max_samples` of the map, read as
+    /// [`CoverMap::load_within`] reads a land-cover map (the window of a georeferenced GeoTIFF,
+    /// or a map without georeferencing whole). Refuses negative values where it is read, a
+    /// window (or a map read whole) of more samples, naming its size and how to crop the map,
+    /// and what [`CoverMap::load_within`] refuses of a map's format and placing.
+    pub fn density_within(
         path: &Path,
         dem: &Dem,
-        what: &'static str,
-        scale: impl FnOnce(&Raster<f64>) -> Result<Box<dyn Fn(f64) -> f64>, WorldError>,
+        max_samples: u64,
     ) -> Result<ValueMap, WorldError> {
-        let raster = read_values(path).map_err(|e| as_map(e, what))?;
-        let placed = Placed::on(&raster.geo, dem, path).map_err(|e| as_map(e, what))?;
-        let f = scale(&raster).map_err(|e| as_map(e, what))?;
-        let values = raster.values.iter().map(|v| v.map(&f)).collect();
-        Ok(ValueMap { placed, values })
+        let what = "density map";
+        let read = read_map(
+            path,
+            dem,
+            max_samples,
+            MapKind::Values,
+            |v| v as f32,
+            |tiff, first, size| tiff.read_values(first, size, |v| v),
+        )
+        .map_err(|e| as_map(e, what))?;
+        let values = read.samples;
+        // NaN (nodata) is neither below 0 nor the largest.
+        if values.iter().any(|&v| v < 0.0) {
+            return Err(as_map(map_error(path, "it holds values below 0"), what));
+        }
+        let max = values.iter().fold(0.0f64, |m, &v| m.max(f64::from(v)));
+        let full = if read.full > 1.0 || max <= 1.0 {
+            read.full
+        } else if max <= 255.0 {
+            255.0
+        } else {
+            65535.0
+        };
+        Ok(ValueMap {
+            placed: read.placed,
+            window: read.window,
+            samples: Samples::Density { values, full },
+        })
     }
 
-    /// The value at world position `p`, `None` beyond the map or where it says nodata.
+    /// A mask: nothing grows where its value is not 0 (nodata masks nothing). Read as
+    /// [`ValueMap::density`] is; see [`ValueMap::mask_within`].
+    pub fn mask(path: &Path, dem: &Dem) -> Result<ValueMap, WorldError> {
+        Self::mask_within(path, dem, MAX_MAP_SAMPLES)
+    }
+
+    /// [`ValueMap::mask`] holding at most `max_samples` of the map, as
+    /// [`ValueMap::density_within`].
+    pub fn mask_within(path: &Path, dem: &Dem, max_samples: u64) -> Result<ValueMap, WorldError> {
+        let clear = |v: f32| {
+            if v.is_nan() {
+                MASK_NODATA
+            } else {
+                u8::from(v != 0.0) * MASK_CLEAR
+            }
+        };
+        let read = read_map(
+            path,
+            dem,
+            max_samples,
+            MapKind::Values,
+            |v| u8::from(v != 0) * MASK_CLEAR,
+            |tiff, first, size| tiff.read_values(first, size, clear),
+        )
+        .map_err(|e| as_map(e, "mask"))?;
+        Ok(ValueMap {
+            placed: read.placed,
+            window: read.window,
+            samples: Samples::Mask(read.samples),
+        })
+    }
+
+    /// The part of the map that was read and is held.
+    pub fn window(&self) -> MapWindow {
+        self.window
+    }
+
+    /// The value at world position `p` (a density map's scaled to 0..=1, a mask's 1 where it
+    /// clears and 0 where not), `None` beyond the map (or the window of it read) or where it
+    /// says nodata.
     pub fn at(&self, p: DVec2) -> Option<f64> {
-        self.values[self.placed.index_at(p)?]
+        let i = self.placed.index_at(p)?;
+        match &self.samples {
+            Samples::Density { values, full } => {
+                let v = values[i];
+                (!v.is_nan()).then(|| (f64::from(v) / full).min(1.0))
+            }
+            Samples::Mask(m) => match m[i] {
+                MASK_NODATA => None,
+                v => Some(f64::from(v)),
+            },
+        }
     }
 }
 
@@ -735,12 +814,11 @@ struct Georef {
     pixel_size: Option<[f64; 2]>,
 }
 
-/// A raster as read: its size and georeferencing, values row 0 north (`None`: the file's
-/// nodata), and the value that means "full" in its format (255 in an 8-bit PNG, 65535 in a
-/// 16-bit one, 1 in a GeoTIFF).
-struct Raster<T> {
+/// A PNG map as read: its size (and no georeferencing), its samples row 0 north, and the value
+/// that means "full" (255 in an 8-bit PNG, 65535 in a 16-bit one).
+struct Raster {
     geo: Georef,
-    values: Vec<Option<T>>,
+    values: Vec<u32>,
     full: f64,
 }
 
@@ -770,30 +848,63 @@ fn map_format(path: &Path) -> Result<MapFormat, WorldError> {
     }
 }
 
-/// Reads a class map and places it on `dem`: a GeoTIFF of one uint8 or uint16 band
-/// (grayscale or with a colour table), or a grayscale or palette PNG; codes exactly as the file
-/// holds them. Of a georeferenced GeoTIFF only the window over the DEM's footprint is read (its
-/// strips or tiles that hold it decoded, one at a time), and the window may hold at most
-/// `max_samples`; a PNG, or a GeoTIFF without georeferencing, spans the DEM and is read whole
-/// (a PNG of at most [`MAX_MAP_SAMPLES`], a GeoTIFF of at most `max_samples`).
-fn read_classes(
+/// What a map's samples are: class codes (a land-cover map) or values (a density map, a mask).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum MapKind {
+    Classes,
+    Values,
+}
+
+/// A map placed on the DEM and the part of it read: its samples (row 0 north) as kept, and the
+/// value that means "full" in its format (255 in an 8-bit PNG, 65535 in a 16-bit one, 1 in a
+/// GeoTIFF).
+struct MapRead<T> {
+    placed: Placed,
+    samples: Vec<T>,
+    window: MapWindow,
+    full: f64,
+}
+
+/// Reads a map and places it on `dem`: a GeoTIFF of one band (of class codes, `kind`
+/// Classes: uint8 or uint16, grayscale or with a colour table; of values: any sample type a DEM
+/// may have), or a grayscale PNG (or, of class codes, a palette PNG's indices), its samples kept
+/// as `from_png` and `from_tiff` make them. Of a georeferenced GeoTIFF only the window over the
+/// DEM's footprint is read (its strips or tiles that hold it decoded, one at a time, by
+/// `from_tiff(map, first, size)`), and the window may hold at most `max_samples`; a PNG, or a
+/// GeoTIFF without georeferencing, spans the DEM and is read whole (a PNG of at most
+/// [`MAX_MAP_SAMPLES`], a GeoTIFF of at most `max_samples`).
+fn read_map<T>(
     path: &Path,
     dem: &Dem,
     max_samples: u64,
-) -> Result<(Placed, Vec<Option<u32>>, MapWindow), WorldError> {
+    kind: MapKind,
+    from_png: impl Fn(u32) -> T,
+    from_tiff: impl FnOnce(
+        &crate::world::geotiff::MapTiff,
+        [usize; 2],
+        [usize; 2],
+    ) -> Result<Vec<T>, WorldError>,
+) -> Result<MapRead<T>, WorldError> {
     let tiff = match map_format(path)? {
         MapFormat::Png => {
-            let raster = read_png(path, true)?;
+            let raster = read_png(path, kind == MapKind::Classes)?;
             let placed = Placed::on(&raster.geo, dem, path)?;
             let size = [raster.geo.width, raster.geo.height];
-            let window = MapWindow {
-                map_size: size,
-                first: [0, 0],
-                size,
-            };
-            return Ok((placed, raster.values, window));
+            return Ok(MapRead {
+                placed,
+                samples: raster.values.into_iter().map(from_png).collect(),
+                window: MapWindow {
+                    map_size: size,
+                    first: [0, 0],
+                    size,
+                },
+                full: raster.full,
+            });
         }
-        MapFormat::Tiff => crate::world::geotiff::open_classes(path)?,
+        MapFormat::Tiff => match kind {
+            MapKind::Classes => crate::world::geotiff::open_classes(path)?,
+            MapKind::Values => crate::world::geotiff::open_values(path)?,
+        },
     };
     let geo = Georef {
         width: tiff.width,
@@ -838,59 +949,23 @@ fn read_classes(
         };
         return Err(map_error(path, problem));
     }
-    let codes = tiff.read_window(first, size)?;
-    let window = MapWindow {
-        map_size,
-        first: first.map(|v| v as u32),
-        size: size.map(|v| v as u32),
-    };
-    Ok((placed.window([cols[0], rows[0]], size), codes, window))
-}
-
-/// Reads a density map or mask: a grayscale PNG or a GeoTIFF of one band of any sample type a
-/// DEM may have.
-fn read_values(path: &Path) -> Result<Raster<f64>, WorldError> {
-    match map_format(path)? {
-        MapFormat::Png => {
-            let r = read_png(path, false)?;
-            Ok(Raster {
-                values: r.values.into_iter().map(|v| v.map(f64::from)).collect(),
-                geo: r.geo,
-                full: r.full,
-            })
-        }
-        MapFormat::Tiff => {
-            // Read as it is; a map without georeferencing with a unit cell (it spans the DEM).
-            let g = match crate::world::geotiff::load(path, None) {
-                Err(WorldError::NoGeoreference { .. }) => {
-                    crate::world::geotiff::load(path, Some([1.0, 1.0]))?
-                }
-                other => other?,
-            };
-            let values = g
-                .heights
-                .iter()
-                .map(|&v| v.is_finite().then_some(f64::from(v)))
-                .collect();
-            Ok(Raster {
-                geo: Georef {
-                    width: g.width,
-                    height: g.height,
-                    crs: g.crs,
-                    origin: g.origin,
-                    pixel_size: g.pixel_size,
-                },
-                values,
-                full: 1.0,
-            })
-        }
-    }
+    let samples = from_tiff(&tiff, first, size)?;
+    Ok(MapRead {
+        placed: placed.window([cols[0], rows[0]], size),
+        samples,
+        window: MapWindow {
+            map_size,
+            first: first.map(|v| v as u32),
+            size: size.map(|v| v as u32),
+        },
+        full: 1.0,
+    })
 }
 
 /// Reads a PNG map as the samples it stores: a grayscale PNG of 1 to 16 bits, or, for a class
 /// map (`classes`), a palette PNG's indices too (its colours are not read). "Full" is the
 /// largest value of its bit depth.
-fn read_png(path: &Path, classes: bool) -> Result<Raster<u32>, WorldError> {
+fn read_png(path: &Path, classes: bool) -> Result<Raster, WorldError> {
     let bytes = std::fs::read(path).map_err(|e| WorldError::Io {
         path: path.to_path_buf(),
         source: e,
@@ -971,7 +1046,7 @@ fn read_png(path: &Path, classes: bool) -> Result<Raster<u32>, WorldError> {
     let values = buf
         .chunks(line)
         .take(height as usize)
-        .flat_map(|row| (0..width as usize).map(move |c| Some(sample(row, c))))
+        .flat_map(|row| (0..width as usize).map(move |c| sample(row, c)))
         .collect();
     Ok(Raster {
         geo: Georef {

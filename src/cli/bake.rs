@@ -65,11 +65,11 @@ pub(crate) struct BakeArgs {
     pub(crate) cover_table: Option<PathBuf>,
     /// A density map that scales the grass cover: a grayscale PNG spanning the DEM (0 to its
     /// largest value), or a GeoTIFF placed like --land-cover (0..1 floats, or 0..255 or 0..65535
-    /// integers).
+    /// integers), of which only the part over the DEM is read (at most 2^28 samples).
     #[arg(long)]
     pub(crate) density_map: Option<PathBuf>,
     /// A mask: nothing grows where it is not 0 (a PNG spanning the DEM, or a GeoTIFF placed like
-    /// --land-cover).
+    /// --land-cover, of which only the part over the DEM is read, at most 2^28 samples).
     #[arg(long)]
     pub(crate) mask: Option<PathBuf>,
     /// Bake only shard I of N (I from 0 to N-1, e.g. a Kubernetes indexed Job's

@@ -8,7 +8,8 @@
 //!   as integers, grayscale or with a colour table (a palette image's indices are its codes; the
 //!   colours are not read), of any size, a window at a time: only the strips or tiles that hold
 //!   the window are decoded. Their chunks are all decompressed here, since the `tiff` crate
-//!   refuses to hand out a palette image's indices.
+//!   refuses to hand out a palette image's indices. Value rasters (density maps and masks,
+//!   [`open_values`]) are read the same way, their samples as a DEM's heights.
 //! - A palette image read as heights (a DEM, a density map, a mask) is refused before anything
 //!   is decoded: its samples are class indices.
 //! - Cell size from `ModelPixelScale` (with `ModelTiepoint` for the origin) or from an unrotated
@@ -351,10 +352,11 @@ pub(crate) fn load(path: &Path, cell_override: Option<[f64; 2]>) -> Result<Dem, 
     })
 }
 
-/// A GeoTIFF of class codes (a land-cover map) opened by [`open_classes`]: its size and where
-/// it lies, read from its header; its samples are read a window at a time
-/// ([`ClassTiff::read_window`]), only the strips or tiles that hold the window decoded.
-pub(crate) struct ClassTiff {
+/// A GeoTIFF map opened by [`open_classes`] (class codes: a land-cover map) or [`open_values`]
+/// (values: a density map or a mask): its size and where it lies, read from its header; its
+/// samples are read a window at a time ([`MapTiff::read_classes`], [`MapTiff::read_values`]),
+/// only the strips or tiles that hold the window decoded.
+pub(crate) struct MapTiff {
     pub width: u32,
     pub height: u32,
     /// The coordinate system's description (empty without georeferencing).
@@ -364,11 +366,14 @@ pub(crate) struct ClassTiff {
     /// Spacing in the coordinate system's units (x, y), where the file is georeferenced.
     pub pixel_size: Option<[f64; 2]>,
     path: PathBuf,
+    reading: Reading,
     layout: ChunkLayout,
     chunks: Vec<(u64, u64)>,
     codec: Codec,
-    /// The file's nodata code (`GDAL_NODATA`), where it is a whole number.
-    nodata: Option<u64>,
+    /// The file's nodata code (`GDAL_NODATA`), where it is a whole number (class codes).
+    nodata_code: Option<u64>,
+    /// How a sample becomes a value (values).
+    to_value: ToHeight,
     flip_rows: bool,
     flip_cols: bool,
 }
@@ -377,13 +382,24 @@ pub(crate) struct ClassTiff {
 /// colour table. Another sample type is refused before anything is decoded, naming it and what
 /// is read. A file without (usable) georeferencing is read as a bare grid (no origin or pixel
 /// size). The map may be of any size: nothing is decoded until a window is read.
-pub(crate) fn open_classes(path: &Path) -> Result<ClassTiff, WorldError> {
+pub(crate) fn open_classes(path: &Path) -> Result<MapTiff, WorldError> {
+    open_map(path, Reading::Classes)
+}
+
+/// Opens a GeoTIFF of values (a density map or a mask): one band of any sample type a DEM may
+/// have, read as a DEM's heights are (nodata, NaN and infinities are no value); a palette image
+/// is refused before anything is decoded. Otherwise as [`open_classes`].
+pub(crate) fn open_values(path: &Path) -> Result<MapTiff, WorldError> {
+    open_map(path, Reading::Heights)
+}
+
+fn open_map(path: &Path, reading: Reading) -> Result<MapTiff, WorldError> {
     let (file, file_len) = super::format::open_regular(path)?;
     let mut decoder = Decoder::new(BufReader::new(file))
         .map_err(|e| tiff_error(path, e))?
         .with_limits(limits());
     // Its size is bounded by the window read, not here.
-    let header = read_header(path, &mut decoder, file_len, u64::MAX, Reading::Classes)?;
+    let header = read_header(path, &mut decoder, file_len, u64::MAX, reading)?;
     let layout = chunk_layout(path, &mut decoder, &header)?;
     let geo = GeoTags::read(path, &mut decoder)?;
     let (width, height) = (header.width, header.height);
@@ -391,37 +407,68 @@ pub(crate) fn open_classes(path: &Path) -> Result<ClassTiff, WorldError> {
         Err(WorldError::NoGeoreference { .. }) => geo.grid(path, width, height, true)?,
         other => other?,
     };
-    let nodata = geo
+    let nodata_code = geo
         .nodata
         .filter(|n| n.fract() == 0.0 && *n >= 0.0 && *n <= f64::from(u32::MAX))
         .map(|n| n as u64);
-    Ok(ClassTiff {
+    Ok(MapTiff {
         width,
         height,
         crs: grid.crs,
         origin: grid.origin,
         pixel_size: grid.pixel_size,
         path: path.to_path_buf(),
+        reading,
         layout,
         chunks: header.chunks,
         // The `tiff` crate reads no palette image's indices, so every codec is decoded here.
         codec: Codec::of(header.compression),
-        nodata,
+        nodata_code,
+        to_value: ToHeight::new(header.sample, geo.nodata, geo.vertical_unit_m),
         flip_rows: grid.flip_rows,
         flip_cols: grid.flip_cols,
     })
 }
 
-impl ClassTiff {
+impl MapTiff {
     /// The class codes of the window of `size` samples (columns, rows) whose north-west sample
     /// is `first` (column from the west, row from the north), row 0 north, west first; `None`
     /// where the file's nodata is. Only the strips or tiles that hold the window are read and
-    /// decoded, one at a time: what is held is the window and one chunk.
-    pub(crate) fn read_window(
+    /// decoded, one at a time: what is held is the window and one chunk. Only for a map opened
+    /// by [`open_classes`].
+    pub(crate) fn read_classes(
         &self,
         first: [usize; 2],
         size: [usize; 2],
     ) -> Result<Vec<Option<u32>>, WorldError> {
+        assert_eq!(self.reading, Reading::Classes, "a class map");
+        let nodata = self.nodata_code;
+        self.read_window(first, size, |v| (Some(v) != nodata).then_some(v as u32))
+    }
+
+    /// The values of a window (as [`MapTiff::read_classes`]), each as a DEM's height would be
+    /// (NaN where the file's nodata is, or the sample is NaN or infinite), kept as what `keep`
+    /// makes of it: what is held is the window of `T` and one chunk. Only for a map opened by
+    /// [`open_values`].
+    pub(crate) fn read_values<T: Clone + Default>(
+        &self,
+        first: [usize; 2],
+        size: [usize; 2],
+        keep: impl Fn(f32) -> T,
+    ) -> Result<Vec<T>, WorldError> {
+        assert_eq!(self.reading, Reading::Heights, "a map of values");
+        let to = self.to_value;
+        self.read_window(first, size, |v| keep(to.of_bits(v)))
+    }
+
+    /// The window of `size` samples whose north-west sample is `first`, row 0 north, each
+    /// sample's bit pattern made into what `each` makes of it.
+    fn read_window<T: Clone + Default>(
+        &self,
+        first: [usize; 2],
+        size: [usize; 2],
+        each: impl Fn(u64) -> T,
+    ) -> Result<Vec<T>, WorldError> {
         let (w, h) = (self.width as usize, self.height as usize);
         let [cols, rows] = [
             [first[0], first[0] + size[0]],
@@ -439,7 +486,7 @@ impl ClassTiff {
         } else {
             rows
         };
-        let mut codes = vec![None; size[0] * size[1]];
+        let mut out = vec![T::default(); size[0] * size[1]];
         let (mut file, _) = super::format::open_regular(&self.path)?;
         let mut read = |offset: u64, count: u64| read_chunk(&self.path, &mut file, offset, count);
         decode_window(
@@ -451,13 +498,13 @@ impl ClassTiff {
             [stored_cols, stored_rows],
             &mut |r, c, bits| {
                 let at = r * size[0] + c;
-                for (code, &v) in codes[at..at + bits.len()].iter_mut().zip(bits) {
-                    *code = (Some(v) != self.nodata).then_some(v as u32);
+                for (o, &v) in out[at..at + bits.len()].iter_mut().zip(bits) {
+                    *o = each(v);
                 }
             },
         )?;
-        north_up(&mut codes, size[0].max(1), self.flip_rows, self.flip_cols);
-        Ok(codes)
+        north_up(&mut out, size[0].max(1), self.flip_rows, self.flip_cols);
+        Ok(out)
     }
 }
 
@@ -1157,9 +1204,56 @@ fn decode_window(
     Ok(())
 }
 
-/// Heights in metres from decoded samples: nodata (the value as the file's own type would hold
-/// it, so that a float32 grid with nodata "-3.4028234663852886e+38" matches its samples
-/// exactly), NaN and infinities become NaN.
+/// How a sample becomes a height in metres (or a map's value): nodata (the value as the file's
+/// own type would hold it, so that a float32 grid with nodata "-3.4028234663852886e+38" matches
+/// its samples exactly), NaN and infinities become NaN; the rest is scaled by the vertical unit.
+#[derive(Clone, Copy, Debug)]
+struct ToHeight {
+    sample: SampleType,
+    /// The nodata value as a sample of the file's type holds it (none where it cannot).
+    nodata: Option<f64>,
+    /// Metres per unit.
+    vertical: f64,
+}
+
+impl ToHeight {
+    fn new(sample: SampleType, nodata: Option<f64>, vertical: f64) -> ToHeight {
+        let whole_in = |n: f64, lo: f64, hi: f64| n.fract() == 0.0 && (lo..=hi).contains(&n);
+        let nodata = nodata.filter(|&n| match sample {
+            SampleType::U8 => whole_in(n, 0.0, 255.0),
+            SampleType::I16 => whole_in(n, -32768.0, 32767.0),
+            SampleType::U16 => whole_in(n, 0.0, 65535.0),
+            SampleType::I32 => n.fract() == 0.0 && n.abs() <= 2_147_483_648.0,
+            SampleType::F32 | SampleType::F64 => true,
+        });
+        // A float32 sample equals nodata as float32 (exactly, as float64).
+        let nodata = match sample {
+            SampleType::F32 => nodata.map(|n| f64::from(n as f32)),
+            _ => nodata,
+        };
+        ToHeight {
+            sample,
+            nodata,
+            vertical,
+        }
+    }
+
+    /// The height of a sample of value `v`.
+    fn height(&self, v: f64) -> f32 {
+        if Some(v) == self.nodata || !v.is_finite() {
+            f32::NAN
+        } else {
+            (v * self.vertical) as f32
+        }
+    }
+
+    /// The height of a sample of bit pattern `bits` (in its low bytes).
+    fn of_bits(&self, bits: u64) -> f32 {
+        self.height(self.sample.value(bits))
+    }
+}
+
+/// Heights in metres from decoded samples, as [`ToHeight`] makes them.
 fn heights_of(
     path: &Path,
     values: DecodingResult,
@@ -1167,45 +1261,14 @@ fn heights_of(
     nodata: Option<f64>,
     vertical: f64,
 ) -> Result<Vec<f32>, WorldError> {
-    let to_height = |v: f64, nodata_hit: bool| -> f32 {
-        if nodata_hit || !v.is_finite() {
-            f32::NAN
-        } else {
-            (v * vertical) as f32
-        }
-    };
+    let to = ToHeight::new(sample, nodata, vertical);
     let raw: Vec<f32> = match values {
-        DecodingResult::U8(v) => {
-            let nd = nodata.filter(|n| n.fract() == 0.0 && (0.0..=255.0).contains(n));
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
-                .collect()
-        }
-        DecodingResult::I16(v) => {
-            let nd = nodata.filter(|n| n.fract() == 0.0 && (-32768.0..=32767.0).contains(n));
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
-                .collect()
-        }
-        DecodingResult::U16(v) => {
-            let nd = nodata.filter(|n| n.fract() == 0.0 && (0.0..=65535.0).contains(n));
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
-                .collect()
-        }
-        DecodingResult::I32(v) => {
-            let nd = nodata.filter(|n| n.fract() == 0.0 && n.abs() <= 2_147_483_648.0);
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(f64::from(x)) == nd))
-                .collect()
-        }
-        DecodingResult::F32(v) => {
-            let nd = nodata.map(|n| n as f32);
-            v.iter()
-                .map(|&x| to_height(f64::from(x), Some(x) == nd))
-                .collect()
-        }
-        DecodingResult::F64(v) => v.iter().map(|&x| to_height(x, Some(x) == nodata)).collect(),
+        DecodingResult::U8(v) => v.iter().map(|&x| to.height(f64::from(x))).collect(),
+        DecodingResult::I16(v) => v.iter().map(|&x| to.height(f64::from(x))).collect(),
+        DecodingResult::U16(v) => v.iter().map(|&x| to.height(f64::from(x))).collect(),
+        DecodingResult::I32(v) => v.iter().map(|&x| to.height(f64::from(x))).collect(),
+        DecodingResult::F32(v) => v.iter().map(|&x| to.height(f64::from(x))).collect(),
+        DecodingResult::F64(v) => v.iter().map(|&x| to.height(x)).collect(),
         _ => {
             return Err(unsupported(
                 path,
@@ -1369,6 +1432,18 @@ impl SampleType {
         matches!(self, SampleType::F32 | SampleType::F64)
     }
 
+    /// The value of a sample of bit pattern `bits` (in its low bytes).
+    fn value(self, bits: u64) -> f64 {
+        match self {
+            SampleType::U8 => f64::from(bits as u8),
+            SampleType::U16 => f64::from(bits as u16),
+            SampleType::I16 => f64::from(bits as u16 as i16),
+            SampleType::I32 => f64::from(bits as u32 as i32),
+            SampleType::F32 => f64::from(f32::from_bits(bits as u32)),
+            SampleType::F64 => f64::from_bits(bits),
+        }
+    }
+
     /// Bit patterns as the typed samples that the `tiff` crate would have returned.
     fn typed(self, bits: Vec<u64>) -> DecodingResult {
         let it = bits.into_iter();
@@ -1415,6 +1490,167 @@ fn tiff_error(path: &Path, e: TiffError) -> WorldError {
 #[cfg(test)]
 mod tests {
     use super::Codec;
+    use std::path::Path;
+    use tiff::encoder::{Compression, TiffEncoder, colortype};
+    use tiff::tags::{Predictor, Tag};
+
+    /// Writes a 23 x 19 GeoTIFF (EPSG:32633, 10 m) of `data` (rows as stored), in strips of 4
+    /// rows, with `GDAL_NODATA` `nodata`; with `south_up` its rows are stored south first.
+    fn write_map<C: colortype::ColorType>(
+        path: &Path,
+        data: &[C::Inner],
+        nodata: &str,
+        compression: Compression,
+        predictor: Predictor,
+        south_up: bool,
+    ) where
+        [C::Inner]: tiff::encoder::TiffValue,
+    {
+        let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+        let mut enc = TiffEncoder::new(&mut file)
+            .unwrap()
+            .with_compression(compression)
+            .with_predictor(predictor);
+        let mut image = enc.new_image::<C>(23, 19).unwrap();
+        image.rows_per_strip(4).unwrap();
+        let d = image.encoder();
+        let (north, step_y) = if south_up {
+            (4_000_000.0, 10.0)
+        } else {
+            (4_000_190.0, -10.0)
+        };
+        let m = [
+            10.0, 0.0, 0.0, 500_000.0, 0.0, step_y, 0.0, north, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            1.0,
+        ];
+        d.write_tag(Tag::ModelTransformationTag, &m[..]).unwrap();
+        let keys: [u16; 16] = [1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 32633];
+        d.write_tag(Tag::GeoKeyDirectoryTag, &keys[..]).unwrap();
+        d.write_tag(Tag::GdalNodata, nodata).unwrap();
+        image.write_data(data).unwrap();
+    }
+
+    /// A map of values read a window at a time ([`super::open_values`]) holds at every sample
+    /// the height a DEM read whole ([`super::load`], through the `tiff` crate's decoder) holds
+    /// there, bit for bit: a density map or a mask reads as a DEM of the same file does. Every
+    /// sample type, nodata as the file's type holds it, NaN and infinities, uncompressed and
+    /// Deflate (with the horizontal predictor on integers), north-up and south-up, windows whole
+    /// and inside.
+    #[test]
+    fn a_value_maps_window_holds_what_a_dem_read_whole_holds() {
+        let dir = tempfile::tempdir().unwrap();
+        // Each sample's value from its index: varied, every `every`-th the nodata value, and for
+        // floats NaN and infinities among them.
+        let values = |every: usize, nodata: f64, scale: f64, float: bool| -> Vec<f64> {
+            (0..23 * 19)
+                .map(|k| match k % 11 {
+                    0 if float => f64::NAN,
+                    1 if float => f64::INFINITY,
+                    2 if float => f64::NEG_INFINITY,
+                    _ if k % every == 0 => nodata,
+                    _ => (((k * 37) % 101) as f64 - 50.0) * scale,
+                })
+                .collect()
+        };
+        let mut cases = 0;
+        for (south_up, deflate) in [(false, false), (true, true), (false, true), (true, false)] {
+            let compression = || match deflate {
+                true => Compression::Deflate(Default::default()),
+                false => Compression::Uncompressed,
+            };
+            let horizontal = match deflate {
+                true => Predictor::Horizontal,
+                false => Predictor::None,
+            };
+            let path = |t: &str| dir.path().join(format!("{t}_{south_up}_{deflate}.tif"));
+            let v = values(9, 7.0, 1.0, false);
+            let u8s: Vec<u8> = v.iter().map(|&v| v.abs() as u8).collect();
+            write_map::<colortype::Gray8>(
+                &path("u8"),
+                &u8s,
+                "7",
+                compression(),
+                horizontal,
+                south_up,
+            );
+            let v = values(9, -9999.0, 300.0, false);
+            let i16s: Vec<i16> = v.iter().map(|&v| v as i16).collect();
+            write_map::<colortype::GrayI16>(
+                &path("i16"),
+                &i16s,
+                "-9999",
+                compression(),
+                horizontal,
+                south_up,
+            );
+            let v = values(7, 65535.0, 600.0, false);
+            let u16s: Vec<u16> = v.iter().map(|&v| v.abs() as u16).collect();
+            write_map::<colortype::Gray16>(
+                &path("u16"),
+                &u16s,
+                "65535",
+                compression(),
+                horizontal,
+                south_up,
+            );
+            let v = values(5, f64::from(i32::MIN), 70_000.0, false);
+            let i32s: Vec<i32> = v.iter().map(|&v| v as i32).collect();
+            write_map::<colortype::GrayI32>(
+                &path("i32"),
+                &i32s,
+                "-2147483648",
+                compression(),
+                horizontal,
+                south_up,
+            );
+            let v = values(13, f64::from(-f32::MAX), 1.0 / 7.0, true);
+            let f32s: Vec<f32> = v.iter().map(|&v| v as f32).collect();
+            write_map::<colortype::Gray32Float>(
+                &path("f32"),
+                &f32s,
+                "-3.4028234663852886e+38",
+                compression(),
+                Predictor::None,
+                south_up,
+            );
+            let v = values(13, -9999.5, 1.0 / 7.0, true);
+            write_map::<colortype::Gray64Float>(
+                &path("f64"),
+                &v,
+                "-9999.5",
+                compression(),
+                Predictor::None,
+                south_up,
+            );
+            for t in ["u8", "i16", "u16", "i32", "f32", "f64"] {
+                let p = path(t);
+                let dem = super::load(&p, None).unwrap();
+                let map = super::open_values(&p).unwrap();
+                assert_eq!([map.width, map.height], [23, 19]);
+                assert_eq!(map.origin, dem.origin);
+                let nodata = dem.heights.iter().filter(|h| h.is_nan()).count();
+                assert!(nodata > 20, "{}: {nodata} nodata", p.display());
+                for (first, size) in [([0, 0], [23, 19]), ([3, 5], [11, 7]), ([22, 0], [1, 19])] {
+                    let got = map.read_values(first, size, |v| v).unwrap();
+                    let want: Vec<f32> = (first[1]..first[1] + size[1])
+                        .flat_map(|r| {
+                            let row = &dem.heights[r * 23..(r + 1) * 23];
+                            row[first[0]..first[0] + size[0]].iter().copied()
+                        })
+                        .collect();
+                    let bits = |v: &[f32]| v.iter().map(|h| h.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(
+                        bits(&got),
+                        bits(&want),
+                        "{} {first:?} {size:?}",
+                        p.display()
+                    );
+                    cases += 1;
+                }
+            }
+        }
+        assert_eq!(cases, 4 * 6 * 3);
+    }
 
     /// A chunk decodes to at most the bytes its tile or strip holds, however far its codes
     /// would expand: 40 MB of zeros packed into a few kilobytes of LZW give the 4 KiB asked
