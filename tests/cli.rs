@@ -1190,6 +1190,22 @@ fn a_first_frame_larger_than_the_atlas_names_the_atlas() {
     );
 }
 
+/// The default world's DEM baked into `dir/w` with `options`, and the world opened.
+fn bake_santa_cruz_dem(dir: &Path, options: &[&str]) -> verdant::World {
+    let dem = common::root().join("worlds/santa-cruz/source/santa_cruz_1024.png");
+    let args: Vec<&str> = ["bake", "--dem", dem.to_str().unwrap(), "--out", "w"]
+        .into_iter()
+        .chain(options.iter().copied())
+        .collect();
+    let bake = verdant(&args, dir);
+    assert!(
+        bake.status.success(),
+        "{}",
+        String::from_utf8_lossy(&bake.stderr)
+    );
+    verdant::World::open(&dir.join("w")).unwrap()
+}
+
 /// The default atlas is sized to the world's pyramid: a bake at 10 km cells has 18 levels, and
 /// its wind tour's first frame holds 350 tiles; the 256 slots every world had left its far
 /// tiles and all its grass tiles unloaded (no blade drawn, a warning naming --atlas-slots).
@@ -1197,25 +1213,7 @@ fn a_first_frame_larger_than_the_atlas_names_the_atlas() {
 #[test]
 fn a_deep_worlds_default_atlas_holds_its_frames() {
     let tmp = tempfile::tempdir().unwrap();
-    let dem = common::root().join("worlds/santa-cruz/source/santa_cruz_1024.png");
-    let bake = verdant(
-        &[
-            "bake",
-            "--dem",
-            dem.to_str().unwrap(),
-            "--out",
-            "w",
-            "--cell-size",
-            "10000",
-        ],
-        tmp.path(),
-    );
-    assert!(
-        bake.status.success(),
-        "{}",
-        String::from_utf8_lossy(&bake.stderr)
-    );
-    let world = verdant::world::World::open(&tmp.path().join("w")).unwrap();
+    let world = bake_santa_cruz_dem(tmp.path(), &["--cell-size", "10000"]);
     assert_eq!(world.manifest.pyramid.level_count(), 18);
     let (report, stderr) = fly_report_and_stderr(
         &[
@@ -1248,14 +1246,9 @@ fn a_deep_worlds_default_atlas_holds_its_frames() {
 #[test]
 fn a_coarse_bake_derives_levels_down_to_grass_sized_tiles() {
     let tmp = tempfile::tempdir().unwrap();
-    let dem = common::root().join("worlds/santa-cruz/source/santa_cruz_1024.png");
-    let bake = verdant(
+    let world = bake_santa_cruz_dem(
+        tmp.path(),
         &[
-            "bake",
-            "--dem",
-            dem.to_str().unwrap(),
-            "--out",
-            "w",
             "--tile-cells",
             "1024",
             "--levels",
@@ -1263,15 +1256,8 @@ fn a_coarse_bake_derives_levels_down_to_grass_sized_tiles() {
             "--cell-size",
             "10000",
         ],
-        tmp.path(),
-    );
-    assert!(
-        bake.status.success(),
-        "{}",
-        String::from_utf8_lossy(&bake.stderr)
     );
     let manifest = tmp.path().join("w/world.toml");
-    let world = verdant::world::World::open(&tmp.path().join("w")).unwrap();
     let pyramid = &world.manifest.pyramid;
     assert_eq!(pyramid.derived_levels, 18);
     let finest = pyramid.tile_size_m(pyramid.max_level());

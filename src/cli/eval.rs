@@ -54,13 +54,7 @@ pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<
         pb.set_position(done);
     });
     let interrupted = report.as_ref().is_ok_and(|r| r.interrupted);
-    if let Some(pb) = pb {
-        if interrupted {
-            pb.abandon();
-        } else {
-            pb.finish();
-        }
-    }
+    super::progress::end_bar(pb.as_ref(), interrupted);
     let report = report?;
     if report.results.is_empty() {
         return Err(nothing_measured());
@@ -160,13 +154,7 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
             .set_position(done);
     });
     let interrupted = report.as_ref().is_ok_and(|r| r.interrupted);
-    if let Some(pb) = pb {
-        if interrupted {
-            pb.abandon();
-        } else {
-            pb.finish();
-        }
-    }
+    super::progress::end_bar(pb.as_ref(), interrupted);
     let report = report?;
     if report.results.is_empty() {
         return Err(nothing_measured());

@@ -337,13 +337,7 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
             pb.set_position(done);
         }
     })?;
-    if let Some(pb) = frames {
-        if report.interrupted {
-            pb.abandon();
-        } else {
-            pb.finish();
-        }
-    }
+    super::progress::end_bar(frames.as_ref(), report.interrupted);
     if report.interrupted {
         // Frames of an earlier, longer run beyond those this one wrote are not this run's.
         let written = if opts.write_images {

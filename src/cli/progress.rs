@@ -34,12 +34,16 @@ pub(crate) fn finish_bars(
     bars: &std::cell::RefCell<Vec<(String, ProgressBar)>>,
     interrupted: bool,
 ) {
-    if let Some((_, pb)) = bars.borrow().last() {
-        if interrupted {
-            pb.abandon();
-        } else {
-            pb.finish();
-        }
+    end_bar(bars.borrow().last().map(|(_, pb)| pb), interrupted);
+}
+
+/// Ends a run's bar, if it drew one: finished, or left where it stopped if the run was
+/// `interrupted`.
+pub(crate) fn end_bar(pb: Option<&ProgressBar>, interrupted: bool) {
+    match pb {
+        Some(pb) if interrupted => pb.abandon(),
+        Some(pb) => pb.finish(),
+        None => {}
     }
 }
 

@@ -103,13 +103,7 @@ pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
         pb.get_or_insert_with(|| bar(total, "frames"))
             .set_position(done);
     })?;
-    if let Some(pb) = pb {
-        if r.interrupted {
-            pb.abandon();
-        } else {
-            pb.finish();
-        }
-    }
+    super::progress::end_bar(pb.as_ref(), r.interrupted);
     let mib = |b: u64| b as f64 / 1048576.0;
     println!(
         "{} frames ({:.0} s at {} m/s) on {}: frame p50 {:.1} ms, p99 {:.1} ms",
