@@ -49,6 +49,9 @@ struct PlantType {
     limits: vec4<f32>,
     // Plants per square metre on each of 16 grass types.
     density: array<vec4<f32>, 4>,
+    // x: the type's own switch from level 0 to 1 (m; nearer than the settings' for a heavy
+    // mesh read from a file): it switches at the nearer of this and params.lod.x
+    lod: vec4<f32>,
 }
 
 struct Params {
@@ -61,8 +64,8 @@ struct Params {
     // x: cell edge (m), y: tile edge (m), z: start of the thinning toward the view distance
     // (m), w: the view distance (m)
     dims: vec4<f32>,
-    // x: switch from level 0 to 1 (m), y: from level 1 to the card (m), z: width of each
-    // cross-fade band (m)
+    // x: switch from level 0 to 1 (m; a type switches at the nearer of this and its lod.x),
+    // y: from level 1 to the card (m), z: width of each cross-fade band (m)
     lod: vec4<f32>,
     // Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m); z: where
     // the plants start to thin out with distance, survivors grown to keep the cover (m); w: the
@@ -271,11 +274,12 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
     inst.fade = 1.0;
     // The level by distance, cross-faded over a band centred on each switch.
     let half_band = 0.5 * params.lod.z;
+    let to_1 = min(params.lod.x, ty.lod.x);
     var level = 2u;
     var t_band = -1.0;
-    if dist < params.lod.x + half_band {
+    if dist < to_1 + half_band {
         level = 0u;
-        t_band = (dist - (params.lod.x - half_band)) / max(params.lod.z, 1e-3);
+        t_band = (dist - (to_1 - half_band)) / max(params.lod.z, 1e-3);
     } else if dist < params.lod.y + half_band {
         level = 1u;
         t_band = (dist - (params.lod.y - half_band)) / max(params.lod.z, 1e-3);

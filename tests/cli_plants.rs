@@ -145,6 +145,62 @@ fn bad_plant_files_are_refused_naming_the_file() {
     }
 }
 
+#[test]
+fn plant_files_that_would_draw_nothing_are_refused_naming_type_file_and_reason() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = world_with_plant(tmp.path(), "PLACEHOLDER");
+    let manifest = std::fs::read_to_string(w.join("world.toml")).unwrap();
+    for (file, mesh, reason) in common::undrawable_plants() {
+        write_plant_gltf(&w.join(file), &mesh, None).unwrap();
+        std::fs::write(w.join("world.toml"), manifest.replace("PLACEHOLDER", file)).unwrap();
+        let out = fly_path(&w, tmp.path(), "meadow", "32x18");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{file}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{file}: {stderr}");
+        for n in [file, "\"marigold\"", reason] {
+            assert!(
+                stderr.contains(n),
+                "{file}: stderr should name {n:?}: {stderr}"
+            );
+        }
+        assert!(
+            !tmp.path().join("o/report.json").exists(),
+            "{file}: nothing is written"
+        );
+    }
+}
+
+#[test]
+fn a_heavy_gltf_plant_is_drawn_reduced_within_a_triangle_budget() {
+    use verdant::plants::set::{FILE_REDUCED_TRIANGLES, FULL_MESH_TRIANGLE_BUDGET};
+    let tmp = tempfile::tempdir().unwrap();
+    let w = world_with_plant(tmp.path(), "plants/heavy.gltf");
+    std::fs::create_dir_all(w.join("plants")).unwrap();
+    let heavy = common::heavy_plant();
+    assert_eq!(heavy.triangles(), 130_050);
+    write_plant_gltf(&w.join("plants/heavy.gltf"), &heavy, None).unwrap();
+    let out = fly_path(&w, tmp.path(), "meadow", "32x18");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "fly failed: {stderr}");
+    // The start-up says where the full mesh gives way.
+    assert!(
+        stderr.contains("\"marigold\"") && stderr.contains("switches to its reduced level"),
+        "{stderr}"
+    );
+    let plants = &report(tmp.path())["frames"][0]["plants"];
+    let drawn = plants["drawn"].as_u64().unwrap();
+    let triangles = plants["triangles"].as_u64().unwrap();
+    // Thousands of plants in view (about 5,000 in this frame), each of the file's 130,050
+    // triangles, would make hundreds of millions; the full meshes near the camera stay within
+    // the budget and the rest are reduced.
+    assert!(drawn > 2_000, "{plants}");
+    let bound = FULL_MESH_TRIANGLE_BUDGET as u64 + drawn * FILE_REDUCED_TRIANGLES as u64;
+    assert!(
+        triangles >= drawn && triangles <= bound,
+        "{triangles} triangles for {drawn} plants, more than {bound}: {plants}"
+    );
+}
+
 /// The frame's rows above the horizon: the top `share` of the image, as RGB.
 fn top_rows(png: &Path, share: f64) -> Vec<[u8; 3]> {
     let img = image::open(png).unwrap().to_rgb8();

@@ -227,6 +227,8 @@ struct Placed {
     stats: [u32; counter::COUNT],
     per_tile: Vec<usize>,
     gpu_stats: verdant::plants::renderer::PlantStats,
+    /// The triangles of the CPU's instances' meshes.
+    triangles: u64,
     hiz: HiZ,
 }
 
@@ -290,12 +292,18 @@ fn place_jobs(rig: &mut Rig, work: &[(PlantJob, TileData)]) -> Placed {
     }
     gpu_all.sort_by_key(key);
     cpu.sort_by_key(key);
+    let meshes = rig.plants.params().meshes;
+    let triangles = cpu
+        .iter()
+        .map(|p| u64::from(meshes[p.plant_type() * LEVELS + p.level()][0] / 3))
+        .sum();
     Placed {
         gpu: gpu_all,
         cpu,
         stats,
         per_tile,
         gpu_stats,
+        triangles,
         hiz,
     }
 }
@@ -321,6 +329,7 @@ fn assert_same_placement(p: &Placed) {
     assert_eq!(gpu_stats.culled_occlusion, stats[counter::OCCLUSION]);
     assert_eq!(gpu_stats.drawn as usize, cpu.len());
     assert_eq!(gpu_stats.overflow, 0);
+    assert_eq!(gpu_stats.triangles, p.triangles);
 }
 
 #[test]
@@ -564,6 +573,43 @@ fn a_gltf_plant_is_placed_where_its_rule_puts_it_as_the_cpu_mirror_places_it() {
     let levels: std::collections::HashSet<usize> = placed.cpu.iter().map(|p| p.level()).collect();
     assert!(levels.len() >= 2, "levels placed: {levels:?}");
     assert_same_placement(&placed);
+}
+
+#[test]
+fn a_heavy_gltf_plant_switches_to_its_reduced_level_nearer_as_the_cpu_mirror_does() {
+    let tmp = tempfile::tempdir().unwrap();
+    let w = common::world_with_plant(tmp.path(), "plants/dome.gltf");
+    std::fs::create_dir_all(w.join("plants")).unwrap();
+    // 19,602 triangles at 1.5 plants per m2: drawn in full within about 6.6 m.
+    let dome = common::dome_plant(100);
+    verdant::plants::write_plant_gltf(&w.join("plants/dome.gltf"), &dome, None).unwrap();
+    let mut rig = Rig::with_world(&w, 16_384);
+    let settings = *rig.plants.settings();
+    let set = PlantSet::build(&rig.manifest, &w).unwrap();
+    let reach = set.models[0].full_mesh_reach_m;
+    assert!(
+        reach > 4.0 && reach + 0.5 * settings.band_m < settings.lod_m[0],
+        "{reach} m"
+    );
+    let placed = place_four_tiles(&mut rig);
+    assert_same_placement(&placed);
+    let dist = |p: &PlantInstance| glam::Vec3::from_array(p.pos).length();
+    let near: Vec<f32> = placed
+        .cpu
+        .iter()
+        .filter(|p| p.level() == 0)
+        .map(dist)
+        .collect();
+    // Full meshes near the camera, none beyond the reach; reduced ones well within the
+    // settings' switch.
+    assert!(near.len() > 5, "{near:?}");
+    assert!(near.iter().all(|&d| d < reach), "{reach} m: {near:?}");
+    let reduced_near = placed
+        .cpu
+        .iter()
+        .filter(|p| p.level() == 1 && dist(p) < settings.lod_m[0] - 2.0)
+        .count();
+    assert!(reduced_near > 50, "{reduced_near}");
 }
 
 #[test]

@@ -918,3 +918,122 @@ fn glb_files_with_wrong_numbers_or_missing_members_never_panic() {
     // The scene without its BIN chunk.
     load_garbled(&path, &glb(&doc, &[]));
 }
+
+/// A plant type named "marigold" (the default world's first type renamed) whose mesh is `file`.
+fn marigold(file: &str) -> verdant::world::PlantType {
+    let manifest =
+        verdant::world::Manifest::from_path(&common::default_world().join("world.toml")).unwrap();
+    let mut t = manifest.plant_types[0].clone();
+    t.name = "marigold".into();
+    t.mesh = file.into();
+    t
+}
+
+/// The message of the error refusing the plant type "marigold" whose file `name` holds `mesh`,
+/// after checking that it names the type, the file and `reason`.
+fn refused_model(name: &str, mesh: &PlantMesh, reason: &str) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    write_plant_gltf(&path, mesh, None).unwrap();
+    let Err(err) = verdant::plants::set::model(&marigold(name), dir.path()) else {
+        panic!("the plant type of {name} must be refused");
+    };
+    let message = err.to_string();
+    for needle in ["\"marigold\"", &path.display().to_string(), reason] {
+        assert!(
+            message.contains(needle),
+            "{message:?} does not name {needle:?}"
+        );
+    }
+    message
+}
+
+/// The case of `common::undrawable_plants` written to `name`.
+fn undrawable(name: &str) -> (PlantMesh, &'static str) {
+    let (_, mesh, reason) = common::undrawable_plants()
+        .into_iter()
+        .find(|(n, _, _)| *n == name)
+        .unwrap();
+    (mesh, reason)
+}
+
+#[test]
+fn a_triangle_primitive_of_two_indices_is_refused_as_drawing_nothing() {
+    let (mesh, reason) = undrawable("two_indices.gltf");
+    refused_model("two_indices.gltf", &mesh, reason);
+}
+
+#[test]
+fn a_mesh_whose_every_triangle_is_degenerate_is_refused() {
+    let (mesh, reason) = undrawable("degenerate.gltf");
+    let message = refused_model("degenerate.gltf", &mesh, reason);
+    assert!(message.contains("3 triangles"), "{message}");
+    // One triangle with an area among degenerate ones is a plant.
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = common::small_plant_indexed(&[0, 0, 0, 1, 1, 1, 0, 1, 2]);
+    write_plant_gltf(&dir.path().join("one.gltf"), &mesh, None).unwrap();
+    verdant::plants::set::model(&marigold("one.gltf"), dir.path()).unwrap();
+}
+
+#[test]
+fn a_mesh_that_overflows_once_scaled_to_unit_height_is_refused() {
+    let (mesh, reason) = undrawable("overflowing.gltf");
+    refused_model("overflowing.gltf", &mesh, reason);
+}
+
+#[test]
+fn a_mesh_far_wider_than_high_is_refused() {
+    let (mesh, reason) = undrawable("wide.gltf");
+    refused_model("wide.gltf", &mesh, reason);
+    // 2e6 m wide and 1 m high: refused; 40 m wide and 1 m high (a reach of 20 times the
+    // height): a plant.
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = common::small_plant_moved(|[x, y, z]| [x / 0.3 * 20.0, y, z]);
+    write_plant_gltf(&dir.path().join("creeping.gltf"), &mesh, None).unwrap();
+    let model = verdant::plants::set::model(&marigold("creeping.gltf"), dir.path()).unwrap();
+    assert!(
+        (model.radius_ratio - 20.0).abs() < 1e-3,
+        "{}",
+        model.radius_ratio
+    );
+}
+
+#[test]
+fn a_heavy_plant_gets_a_reduced_level_and_a_nearer_switch() {
+    use verdant::plants::set::{FILE_REDUCED_TRIANGLES, FULL_MESH_TRIANGLE_BUDGET};
+    let dir = tempfile::tempdir().unwrap();
+    let heavy = common::heavy_plant();
+    write_plant_gltf(&dir.path().join("heavy.gltf"), &heavy, None).unwrap();
+    let t = marigold("heavy.gltf");
+    let model = verdant::plants::set::model(&t, dir.path()).unwrap();
+    let [full, reduced, _] = &model.lods;
+    assert_eq!(full.triangles(), 130_050);
+    assert!(
+        (FILE_REDUCED_TRIANGLES / 4..=FILE_REDUCED_TRIANGLES).contains(&reduced.triangles()),
+        "{} triangles",
+        reduced.triangles()
+    );
+    // The same plant, coarser: its height and reach, and vertices of the full mesh.
+    assert!((reduced.height() / full.height() - 1.0).abs() < 0.15);
+    assert!((reduced.radius() / full.radius() - 1.0).abs() < 0.2);
+    assert!(reduced.vertices.iter().all(|v| full.vertices.contains(v)));
+    // Its full meshes at the type's highest density within the reach make the budget.
+    let density = t.density.values().copied().fold(0.0f32, f32::max);
+    let r = model.full_mesh_reach_m;
+    let triangles = std::f32::consts::PI * r * r * density * 130_050.0;
+    assert!(
+        (triangles / FULL_MESH_TRIANGLE_BUDGET - 1.0).abs() < 1e-3,
+        "{r} m: {triangles}"
+    );
+    assert!(r < 10.0, "{r}");
+
+    // A light plant keeps its mesh at both levels and the settings' switch.
+    write_plant_gltf(&dir.path().join("light.gltf"), &common::small_plant(), None).unwrap();
+    let model = verdant::plants::set::model(&marigold("light.gltf"), dir.path()).unwrap();
+    assert_eq!(model.lods[0], model.lods[1]);
+    assert!(
+        model.full_mesh_reach_m > 150.0,
+        "{}",
+        model.full_mesh_reach_m
+    );
+}

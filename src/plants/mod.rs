@@ -6,6 +6,7 @@
 //! - [`card`]: their far level, crossed cards with a picture rendered from the mesh.
 //! - [`gltf`]: a user's plant read from a glTF 2.0 file (`.gltf` or `.glb`).
 //! - [`set`]: a world's plant types made ready for the GPU (meshes of unit height, textures).
+//! - [`reduce`]: the reduced level of a plant read from a file (vertex clustering to a budget).
 //! - `place`: placement and culling per grass tile (`shaders/plants_place.wgsl`); mirror
 //!   [`place_cpu`].
 //! - `draw`: the indirect draws with the wind's bending and the shading
@@ -26,6 +27,7 @@ pub mod particles_cpu;
 mod place;
 pub mod place_cpu;
 pub mod recipe;
+pub mod reduce;
 pub mod renderer;
 pub mod set;
 pub mod shadow;

@@ -70,8 +70,12 @@ pub struct PlantTypeGpu {
     pub limits: [f32; 4],
     /// Plants per square metre on each of 16 grass types.
     pub density: [[f32; 4]; 4],
+    /// x: the type's own switch from level 0 to 1 (m; nearer than the settings' for a heavy mesh
+    /// read from a file, `crate::plants::renderer::full_mesh_switch`): it switches at the nearer
+    /// of this and `PlaceParams::lod`'s; y, z, w unused.
+    pub lod: [f32; 4],
 }
-const _: () = assert!(std::mem::size_of::<PlantTypeGpu>() == 96);
+const _: () = assert!(std::mem::size_of::<PlantTypeGpu>() == 112);
 
 /// The placement's frame constants; mirrors `Params` in the shader.
 #[repr(C)]
@@ -88,8 +92,9 @@ pub struct PlaceParams {
     /// x: cell edge (m), y: tile edge (m), z: start of the thinning toward the view distance
     /// (m), w: the view distance (m).
     pub dims: [f32; 4],
-    /// x: switch from level 0 to 1 (m), y: from level 1 to the cards (m), z: width of each
-    /// cross-fade band (m); w unused.
+    /// x: switch from level 0 to 1 (m; a type switches at the nearer of this and its own
+    /// `PlantTypeGpu::lod`), y: from level 1 to the cards (m), z: width of each cross-fade band
+    /// (m); w unused.
     pub lod: [f32; 4],
     /// Far jobs: x: start of their thinning (m), y: the end of the cards' reach (m); z: where
     /// the plants start to thin out with distance, survivors grown to keep the cover (m); w: the
@@ -105,7 +110,7 @@ pub struct PlaceParams {
     pub meshes: [[u32; 4]; REGIONS],
 }
 const _: () =
-    assert!(std::mem::size_of::<PlaceParams>() == 64 + 96 + 16 * 6 + 256 + 96 * 8 + 16 * 24);
+    assert!(std::mem::size_of::<PlaceParams>() == 64 + 96 + 16 * 6 + 256 + 112 * 8 + 16 * 24);
 
 /// One plant to draw; mirrors `PlantInstance` in the shader.
 #[repr(C)]
@@ -362,6 +367,7 @@ fn place_cell(
         fade: 1.0,
     };
     let [to_1, to_card, band, _] = params.lod;
+    let to_1 = to_1.min(ty.lod[0]);
     let half = 0.5 * band;
     let (level, t_band) = if dist < to_1 + half {
         (0u32, (dist - (to_1 - half)) / band.max(1e-3))

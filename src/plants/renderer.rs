@@ -194,10 +194,14 @@ pub struct PlantStats {
     pub overflow: u32,
     /// Instances drawn (a plant in a cross-fade counts twice).
     pub drawn: u32,
+    /// Triangles the draws draw: each (type, level)'s instances times its mesh's triangles.
+    #[serde(default)]
+    pub triangles: u64,
 }
 
 impl PlantStats {
-    /// The figures from the 8 counters of `shaders/plants_place.wgsl`.
+    /// The figures from the 8 counters of `shaders/plants_place.wgsl` (no triangles: see
+    /// [`PlantStats::with_draws`]).
     pub fn from_counts(c: &[u32; counter::COUNT]) -> Self {
         Self {
             considered: c[counter::CONSIDERED],
@@ -208,9 +212,23 @@ impl PlantStats {
             culled_occlusion: c[counter::OCCLUSION],
             overflow: c[counter::OVERFLOW],
             drawn: c[counter::DRAWN],
+            triangles: 0,
         }
     }
+
+    /// These figures with the triangles of the draws `args` (the indexed indirect draws of
+    /// [`PlantRenderer::args_buffer`], 5 u32 each: index count, instances, ...).
+    pub fn with_draws(self, args: &[u32]) -> Self {
+        let triangles = args
+            .chunks_exact(5)
+            .map(|a| u64::from(a[0] / 3) * u64::from(a[1]))
+            .sum();
+        Self { triangles, ..self }
+    }
 }
+
+/// Bytes of a plant stage's draw arguments ([`PlantRenderer::args_buffer`]).
+pub const ARGS_BYTES: u64 = REGIONS as u64 * 20;
 
 /// The draw's frame constants; mirrors `PlantFrame` in the shader.
 #[repr(C)]
@@ -303,9 +321,26 @@ fn pack_meshes(
     (vertices, indices, table)
 }
 
-/// The per-type constants of the placement for the types `ids`, from the manifest and the
-/// models.
-fn type_table(manifest: &Manifest, set: &PlantSet, ids: &[usize]) -> [PlantTypeGpu; TYPES] {
+/// Where `model`'s own switch from its full mesh to its reduced one lies ([`PlantTypeGpu::lod`]):
+/// half of `settings`' cross-fade band short of its reach
+/// ([`crate::plants::set::PlantModel::full_mesh_reach_m`]), so that no full mesh is drawn
+/// beyond it; [`f32::MAX`] (the settings' switch) for a model without one.
+pub fn full_mesh_switch(model: &crate::plants::set::PlantModel, settings: &PlantSettings) -> f32 {
+    if model.full_mesh_reach_m == f32::MAX {
+        f32::MAX
+    } else {
+        model.full_mesh_reach_m - 0.5 * settings.band_m.max(0.0)
+    }
+}
+
+/// The per-type constants of the placement for the types `ids`, from the manifest, the models
+/// and the settings.
+fn type_table(
+    manifest: &Manifest,
+    set: &PlantSet,
+    ids: &[usize],
+    settings: &PlantSettings,
+) -> [PlantTypeGpu; TYPES] {
     let mut types = [PlantTypeGpu::default(); TYPES];
     for (i, &id) in ids.iter().take(TYPES).enumerate() {
         let (t, m) = (&manifest.plant_types[id], &set.models[id]);
@@ -327,6 +362,9 @@ fn type_table(manifest: &Manifest, set: &PlantSet, ids: &[usize]) -> [PlantTypeG
                 m.radius_ratio,
             ],
             density,
+            // The full mesh is drawn out to its switch and half a band beyond: the switch
+            // half a band short of the model's reach keeps it within.
+            lod: [full_mesh_switch(m, settings), 0.0, 0.0, 0.0],
         };
     }
     types
@@ -427,6 +465,28 @@ impl PlantRenderer {
         let per_tile = (tile_m / cell).round().max(1.0) as u32;
         let p = &manifest.pyramid;
         let (vertex_data, index_data, meshes) = pack_meshes(set, &ids);
+        if cascades == 0 {
+            for &id in &ids {
+                let (t, m) = (&manifest.plant_types[id], &set.models[id]);
+                let switch = full_mesh_switch(m, &settings);
+                if switch < settings.lod_m[0] {
+                    log::warn!(
+                        "plant type {:?}: its mesh of {} triangles switches to its reduced level \
+                         of {} triangles at {:.1} m from the camera, not {} m, so that its full \
+                         meshes (within {:.1} m) at {} plants per m2 stay within {} triangles \
+                         around the camera",
+                        t.name,
+                        m.lods[0].triangles(),
+                        m.lods[1].triangles(),
+                        switch,
+                        settings.lod_m[0],
+                        m.full_mesh_reach_m,
+                        t.density.values().copied().fold(0.0f32, f32::max),
+                        crate::plants::set::FULL_MESH_TRIANGLE_BUDGET,
+                    );
+                }
+            }
+        }
         let params = PlaceParams {
             view_proj: Mat4::IDENTITY.to_cols_array_2d(),
             planes: [[0.0; 4]; 6],
@@ -455,7 +515,7 @@ impl PlantRenderer {
                 manifest.grass_types.len().min(16) as u32,
             ],
             hiz_levels: hiz_levels(hiz),
-            types: type_table(manifest, set, &ids),
+            types: type_table(manifest, set, &ids, &settings),
             meshes,
         };
         let params_buffer = buffer(
@@ -482,7 +542,7 @@ impl PlantRenderer {
         let stats = buffer("plants stats", 32, U::STORAGE | U::COPY_DST | U::COPY_SRC);
         let args = buffer(
             "plants draw args",
-            REGIONS as u64 * 20,
+            ARGS_BYTES,
             U::STORAGE | U::INDIRECT | U::COPY_SRC,
         );
         let vertices = buffer(
@@ -937,11 +997,15 @@ impl PlantRenderer {
         &self.stats
     }
 
-    /// Reads the counters of the last recorded frame (for tests and tools: waits for the GPU).
+    /// Reads the counters and the draws' triangles of the last recorded frame (for tests and
+    /// tools: waits for the GPU).
     pub fn read_stats(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> PlantStats {
         let c: Vec<u32> = crate::gpu::read_buffer_pod(device, queue, &self.stats, ..)
             .expect("read back the plant counters");
+        let args: Vec<u32> = crate::gpu::read_buffer_pod(device, queue, &self.args, ..)
+            .expect("read back the draw arguments");
         PlantStats::from_counts(&c[..counter::COUNT].try_into().expect("8 counters"))
+            .with_draws(&args)
     }
 
     /// Reads back the instances of every region of the last recorded frame (for tests): per

@@ -12,6 +12,30 @@ use crate::world::Manifest;
 /// glTF base colour is resampled to it).
 pub const TEXTURE_SIZE: u32 = 128;
 
+/// The farthest a plant file's mesh may reach from its root's axis (the file's origin), over
+/// its height: a footprint up to 50 times the plant's height (a creeping plant, moss, a water
+/// lily's pads) is a plant; one wider is a mis-scaled or mis-placed file, whose every plant
+/// would cover the ground for tens of metres around it.
+pub const MAX_RADIUS_RATIO: f32 = 25.0;
+
+/// The most triangles of the reduced level of a plant read from a file (drawn from the full
+/// mesh's reach to the view distance, where most plants are): about the built-in bush's.
+pub const FILE_REDUCED_TRIANGLES: usize = 128;
+
+/// [`FILE_REDUCED_TRIANGLES`] for a tree read from a file (drawn from tens to hundreds of
+/// metres, where a tree is still tens of pixels high): about the built-in broadleaf's.
+pub const FILE_TREE_REDUCED_TRIANGLES: usize = 512;
+
+/// The most triangles that the full meshes of a plant type read from a file may put around the
+/// camera: its full mesh is drawn only as near as keeps its triangles times the plants its
+/// highest density places in a full circle of that radius within this
+/// ([`PlantModel::full_mesh_reach_m`]).
+pub const FULL_MESH_TRIANGLE_BUDGET: f32 = 4.0e6;
+
+/// Twice a triangle's area (on the mesh scaled to unit height) at or below which it counts as
+/// degenerate: a sliver of 10 microns by a micron.
+const DEGENERATE_AREA: f32 = 1e-11;
+
 /// A plant file that could not be used.
 #[derive(Debug, thiserror::Error)]
 pub enum PlantError {
@@ -32,6 +56,55 @@ pub enum PlantError {
         /// The file.
         file: PathBuf,
     },
+    /// A plant mesh whose coordinates overflow once it is scaled to unit height.
+    #[error(
+        "plant type {name:?}: the mesh of {} is not finite once scaled to unit height: it is \
+         {height:e} high and a vertex lies {reach:e} from its root, which overflows",
+        file.display()
+    )]
+    NotFinite {
+        /// The plant type.
+        name: String,
+        /// The file.
+        file: PathBuf,
+        /// The mesh's height in the file's units.
+        height: f32,
+        /// The largest coordinate of a vertex in the file's units.
+        reach: f32,
+    },
+    /// A plant mesh of which every triangle has no area: nothing would be drawn.
+    #[error(
+        "plant type {name:?}: every one of the {triangles} triangles of the mesh of {} is \
+         degenerate (zero area): nothing would be drawn",
+        file.display()
+    )]
+    Degenerate {
+        /// The plant type.
+        name: String,
+        /// The file.
+        file: PathBuf,
+        /// Its triangles.
+        triangles: usize,
+    },
+    /// A plant mesh that reaches farther from its root's axis than [`MAX_RADIUS_RATIO`] times
+    /// its height.
+    #[error(
+        "plant type {name:?}: the mesh of {} reaches {ratio:.3e} times its height from its \
+         root's axis (the file's origin, y up), more than the limit of {limit} (a footprint of \
+         at most {} times the plant's height)",
+        file.display(),
+        2.0 * limit
+    )]
+    TooWide {
+        /// The plant type.
+        name: String,
+        /// The file.
+        file: PathBuf,
+        /// The farthest horizontal distance of a vertex from the axis, over the height.
+        ratio: f32,
+        /// [`MAX_RADIUS_RATIO`].
+        limit: f32,
+    },
 }
 
 /// One plant type's meshes and pictures.
@@ -45,6 +118,13 @@ pub struct PlantModel {
     pub card: PlantImage,
     /// Widest reach from the axis over height (for the culling sphere).
     pub radius_ratio: f32,
+    /// The farthest from the camera that the full mesh (`lods[0]`) may be drawn, metres: for a
+    /// plant read from a file, the radius within which its full meshes at the type's highest
+    /// density stay within [`FULL_MESH_TRIANGLE_BUDGET`] triangles; [`f32::MAX`] for a recipe,
+    /// whose meshes are small. The renderer draws no full mesh beyond it: the type's switch to
+    /// the reduced level lies half a cross-fade band short of it where that is nearer than the
+    /// settings' switch (`crate::plants::renderer::full_mesh_switch`).
+    pub full_mesh_reach_m: f32,
 }
 
 /// The models of a world's plant types, in manifest order.
@@ -96,6 +176,7 @@ pub fn model_with(
 ) -> Result<PlantModel, PlantError> {
     use crate::plants::recipe::{Recipe, generate};
     let recipe = Recipe::from_name(&t.mesh);
+    let mut full_mesh_reach_m = f32::MAX;
     let (lods, texture, card) = match recipe {
         Some(r) => {
             let p = generate(r, t.seed, t.color);
@@ -118,11 +199,17 @@ pub fn model_with(
                     file,
                 });
             }
+            let reach = mesh
+                .vertices
+                .iter()
+                .flat_map(|v| v.position)
+                .fold(0.0f32, |m, c| m.max(c.abs()));
             for v in &mut mesh.vertices {
                 for c in &mut v.position {
                     *c /= h;
                 }
             }
+            check_drawable(t, &file, &mesh, h, reach)?;
             // Light through the leaf: the thickness texture (green, 0 thin .. 1 thick) baked
             // into each vertex's thinness.
             if let Some(th) = &loaded.thickness {
@@ -144,7 +231,14 @@ pub fn model_with(
             }
             let card = crate::plants::card::render_card(&textured, TEXTURE_SIZE);
             let cards = crate::plants::card::crossed_cards(&mesh);
-            ([mesh.clone(), mesh, cards], texture, card)
+            let budget = if t.is_tree() {
+                FILE_TREE_REDUCED_TRIANGLES
+            } else {
+                FILE_REDUCED_TRIANGLES
+            };
+            let reduced = crate::plants::reduce::reduce(&mesh, budget);
+            full_mesh_reach_m = full_mesh_reach(mesh.triangles(), t);
+            ([mesh, reduced, cards], texture, card)
         }
     };
     let radius_ratio = lods[0].radius() / lods[0].height().max(1e-6);
@@ -159,7 +253,68 @@ pub fn model_with(
         texture: resample(&texture, TEXTURE_SIZE),
         card,
         radius_ratio,
+        full_mesh_reach_m,
     })
+}
+
+/// Refuses a file's mesh (scaled to unit height; `height` and `reach`, its largest coordinate,
+/// in the file's units) that would draw nothing or nothing sane: coordinates that overflowed,
+/// no triangle with an area, or a reach from the axis beyond [`MAX_RADIUS_RATIO`].
+fn check_drawable(
+    t: &crate::world::PlantType,
+    file: &Path,
+    mesh: &PlantMesh,
+    height: f32,
+    reach: f32,
+) -> Result<(), PlantError> {
+    let finite = mesh
+        .vertices
+        .iter()
+        .all(|v| v.position.iter().all(|c| c.is_finite()));
+    if !finite {
+        return Err(PlantError::NotFinite {
+            name: t.name.clone(),
+            file: file.to_owned(),
+            height,
+            reach,
+        });
+    }
+    let p = |i: u32| glam::Vec3::from_array(mesh.vertices[i as usize].position);
+    let has_area = mesh
+        .indices
+        .chunks_exact(3)
+        .any(|t| (p(t[1]) - p(t[0])).cross(p(t[2]) - p(t[0])).length() > DEGENERATE_AREA);
+    if !has_area {
+        return Err(PlantError::Degenerate {
+            name: t.name.clone(),
+            file: file.to_owned(),
+            triangles: mesh.triangles(),
+        });
+    }
+    // The mesh is of unit height: its radius is the ratio.
+    let ratio = mesh.radius();
+    if ratio > MAX_RADIUS_RATIO {
+        return Err(PlantError::TooWide {
+            name: t.name.clone(),
+            file: file.to_owned(),
+            ratio,
+            limit: MAX_RADIUS_RATIO,
+        });
+    }
+    Ok(())
+}
+
+/// The radius within which `triangles` a plant of type `t`, at its highest density all around
+/// the camera, stay within [`FULL_MESH_TRIANGLE_BUDGET`] (metres; [`f32::MAX`] where the type
+/// grows nowhere).
+pub fn full_mesh_reach(triangles: usize, t: &crate::world::PlantType) -> f32 {
+    let density = t.density.values().copied().fold(0.0f32, f32::max);
+    let per_m2 = triangles as f32 * density;
+    if per_m2 > 0.0 {
+        (FULL_MESH_TRIANGLE_BUDGET / (std::f32::consts::PI * per_m2)).sqrt()
+    } else {
+        f32::MAX
+    }
 }
 
 /// The byte index of the texel of `img` nearest `uv` (repeating).

@@ -1284,7 +1284,7 @@ impl Renderer {
             .map(|layer| {
                 layer
                     .filter(|p| self.features.has(p.layer().feature()))
-                    .map(|p| p.stats_buffer())
+                    .map(|p| (p.stats_buffer(), p.args_buffer()))
             });
         stats.plants = plants.map(|_| Default::default());
         stats.trees = trees.map(|_| Default::default());

@@ -9,6 +9,13 @@ use super::{FrameStats, MAX_READY_STATS, READBACK_SLOTS};
 use crate::gpu::GpuTimer;
 use crate::grass::GrassStats;
 
+use crate::plants::renderer::ARGS_BYTES;
+
+/// Where the plant layers' figures start in a slot after the timestamps: after the grass's
+/// counters (64 bytes) and the hole check's (16), each layer's counters (32 bytes), then each
+/// layer's draw arguments.
+const PLANTS_AT: u64 = 64 + 16;
+
 const FREE: u8 = 0;
 const PENDING: u8 = 1;
 const MAPPED: u8 = 2;
@@ -37,7 +44,7 @@ impl StatsRing {
             .map(|_| ReadbackSlot {
                 buffer: device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("frame figures readback"),
-                    size: timestamp_bytes + 64 + 16 + 64,
+                    size: timestamp_bytes + PLANTS_AT + 2 * (32 + ARGS_BYTES),
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
@@ -59,7 +66,7 @@ impl StatsRing {
         timer: &GpuTimer,
         counters: Option<&wgpu::Buffer>,
         holes: &wgpu::Buffer,
-        plants: [Option<&wgpu::Buffer>; 2],
+        plants: [Option<(&wgpu::Buffer, &wgpu::Buffer)>; 2],
         stats: FrameStats,
     ) {
         let Some(slot) = self
@@ -80,11 +87,13 @@ impl StatsRing {
             encoder.copy_buffer_to_buffer(c, 0, &slot.buffer, self.timestamp_bytes, 64);
         }
         encoder.copy_buffer_to_buffer(holes, 0, &slot.buffer, self.timestamp_bytes + 64, 16);
-        // The plants' counters, then the trees'.
+        // The plants' counters and draws, then the trees'.
         for (k, p) in plants.into_iter().enumerate() {
-            if let Some(p) = p {
-                let at = self.timestamp_bytes + 80 + 32 * k as u64;
-                encoder.copy_buffer_to_buffer(p, 0, &slot.buffer, at, 32);
+            if let Some((counters, args)) = p {
+                let at = self.timestamp_bytes + PLANTS_AT + 32 * k as u64;
+                encoder.copy_buffer_to_buffer(counters, 0, &slot.buffer, at, 32);
+                let at = self.timestamp_bytes + PLANTS_AT + 64 + ARGS_BYTES * k as u64;
+                encoder.copy_buffer_to_buffer(args, 0, &slot.buffer, at, ARGS_BYTES);
             }
         }
         slot.state.store(PENDING, Ordering::Release);
@@ -111,18 +120,22 @@ impl StatsRing {
                         stats.grass = GrassStats::from_counts(stats.grass.tiles, &c);
                         // Atlas reads that found another tile than expected (HoleCheck).
                         stats.residency.holes += counters.get(16).copied().unwrap_or(0);
-                        let read = |at: usize| {
+                        let read = |k: usize| {
+                            let at = PLANTS_AT as usize / 4 + 8 * k;
                             let p: [u32; 8] = counters
                                 .get(at..at + 8)
                                 .and_then(|p| p.try_into().ok())
                                 .unwrap_or([0; 8]);
-                            crate::plants::PlantStats::from_counts(&p)
+                            let words = ARGS_BYTES as usize / 4;
+                            let at = PLANTS_AT as usize / 4 + 16 + words * k;
+                            let args = counters.get(at..at + words).unwrap_or(&[]);
+                            crate::plants::PlantStats::from_counts(&p).with_draws(args)
                         };
                         if stats.plants.is_some() {
-                            stats.plants = Some(read(20));
+                            stats.plants = Some(read(0));
                         }
                         if stats.trees.is_some() {
-                            stats.trees = Some(read(28));
+                            stats.trees = Some(read(1));
                         }
                     }
                     slot.buffer.unmap();

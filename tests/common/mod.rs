@@ -337,6 +337,88 @@ pub fn small_plant() -> verdant::plants::PlantMesh {
     verdant::plants::PlantMesh { vertices, indices }
 }
 
+/// `small_plant()` with its triangles' indices replaced by `indices` (which may draw nothing).
+pub fn small_plant_indexed(indices: &[u32]) -> verdant::plants::PlantMesh {
+    verdant::plants::PlantMesh {
+        indices: indices.to_vec(),
+        ..small_plant()
+    }
+}
+
+/// `small_plant()` with each vertex's position mapped by `f`.
+pub fn small_plant_moved(f: impl Fn([f32; 3]) -> [f32; 3]) -> verdant::plants::PlantMesh {
+    let mut mesh = small_plant();
+    for v in &mut mesh.vertices {
+        v.position = f(v.position);
+    }
+    mesh
+}
+
+/// Plant meshes that a glTF file holds and that would draw nothing, or nothing sane: the file's
+/// name, the mesh, and a word of the reason the plant type is refused for.
+pub fn undrawable_plants() -> Vec<(&'static str, verdant::plants::PlantMesh, &'static str)> {
+    vec![
+        // A TRIANGLES primitive of two indices: no triangle.
+        (
+            "two_indices.gltf",
+            small_plant_indexed(&[0, 1]),
+            "no triangles",
+        ),
+        // Every triangle's corners on one or two vertices.
+        (
+            "degenerate.gltf",
+            small_plant_indexed(&[0, 0, 0, 1, 1, 1, 2, 2, 3]),
+            "degenerate (zero area)",
+        ),
+        // 2e-6 high and 1e33 wide: past f32's range once scaled to unit height.
+        (
+            "overflowing.gltf",
+            small_plant_moved(|[x, y, z]| [x / 0.3 * 1e33, y, z * 2e-6]),
+            "not finite",
+        ),
+        // 1 m high and 2e6 m wide.
+        (
+            "wide.gltf",
+            small_plant_moved(|[x, y, z]| [x * 1e6 / 0.3, y, z]),
+            "times its height",
+        ),
+    ]
+}
+
+/// A plant at the loader's limits: 65,536 vertices and 130,050 triangles ([`dome_plant`] of
+/// 256).
+pub fn heavy_plant() -> verdant::plants::PlantMesh {
+    dome_plant(256)
+}
+
+/// A dome 1 m high of `n` x `n` vertices, 2 (n - 1)^2 triangles.
+pub fn dome_plant(n: u32) -> verdant::plants::PlantMesh {
+    let mut vertices = Vec::with_capacity((n * n) as usize);
+    for j in 0..n {
+        let z = j as f32 / (n - 1) as f32;
+        let r = 0.05 + 0.35 * (std::f32::consts::PI * z).sin();
+        for i in 0..n {
+            let a = std::f32::consts::TAU * i as f32 / (n - 1) as f32;
+            vertices.push(verdant::plants::PlantVertex {
+                position: [r * a.cos(), r * a.sin(), z],
+                normal: [a.cos(), a.sin(), 0.0],
+                wind: [0.5, 0.0, z, 1.0],
+                albedo: [0.2, 0.5, 0.1, 0.5],
+                uv: [i as f32 / (n - 1) as f32, 1.0 - z],
+            });
+        }
+    }
+    let mut indices = Vec::with_capacity(((n - 1) * (n - 1) * 6) as usize);
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let a = j * n + i;
+            let (b, c, d) = (a + 1, a + n + 1, a + n);
+            indices.extend([a, b, c, a, c, d]);
+        }
+    }
+    verdant::plants::PlantMesh { vertices, indices }
+}
+
 /// The default world with its plant types replaced by one glTF plant `mesh` on the meadow.
 pub fn world_with_plant(dir: &Path, mesh: &str) -> std::path::PathBuf {
     let w = world_copy(dir);

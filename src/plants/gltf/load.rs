@@ -85,6 +85,9 @@ impl Loader<'_> {
         if mesh.vertices.is_empty() {
             return Err(PlantFileError::NoMesh { path });
         }
+        if mesh.indices.is_empty() {
+            return Err(PlantFileError::NoTriangles { path });
+        }
         let height = mesh.height();
         for (v, painted) in mesh.vertices.iter_mut().zip(painted) {
             if !painted {

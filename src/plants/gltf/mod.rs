@@ -154,6 +154,17 @@ pub enum PlantFileError {
         /// The glTF file.
         path: PathBuf,
     },
+    /// Triangle primitives with `POSITION` were found, but none draws a triangle (each has
+    /// fewer than three indices, or vertices when it has no indices).
+    #[error(
+        "plant file {} has no triangles: its triangle primitives hold fewer than three indices \
+         (or vertices) each, so nothing would be drawn",
+        path.display()
+    )]
+    NoTriangles {
+        /// The glTF file.
+        path: PathBuf,
+    },
     /// More than [`MAX_PLANT_VERTICES`] vertices.
     #[error(
         "plant file {} has {count} vertices, more than the limit of {limit}",
