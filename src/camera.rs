@@ -126,12 +126,13 @@ impl Camera {
     }
 }
 
-/// The camera on `path` at time `t_s` (clamped to the path's keys): Catmull-Rom through the key
-/// positions, yaw and pitch interpolated the short way round.
+/// The camera on `path` at time `t_s` (clamped to the path's keys, from
+/// [`CameraPath::start_s`] to [`CameraPath::end_s`]): Catmull-Rom through the key positions,
+/// yaw and pitch interpolated the short way round.
 pub fn sample_path(path: &CameraPath, t_s: f64) -> Camera {
     let keys = &path.keys;
     let last = keys.len() - 1;
-    let t = t_s.clamp(keys[0].t_s, keys[last].t_s);
+    let t = t_s.clamp(path.start_s(), path.end_s());
     let i = keys
         .windows(2)
         .position(|w| t <= w[1].t_s)

@@ -272,6 +272,8 @@ fn a_short_soak_holds_its_ceilings_and_its_memory() {
     );
     assert!(r["teleports"].as_array().unwrap().len() >= 2);
     assert!(r["rss_peak_bytes"].as_u64().unwrap() > 0);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("after a teleport (median of"), "{stdout}");
 }
 
 #[test]
@@ -347,6 +349,39 @@ fn a_short_soak_with_grass_recovers_after_every_teleport_without_stalls() {
     assert!(r["longest_frame_ms"].as_f64().unwrap() <= 10000.0);
     assert!(r["rss_after_warmup_bytes"].as_u64().unwrap() > 0);
     assert!(r["rss_growth_bytes"].as_u64().unwrap() <= 12 << 20);
+}
+
+/// A soak that ends before its first teleport (one every 10 s) says that there was none, not
+/// that full detail was never reached after one.
+#[test]
+fn a_soak_without_teleports_says_there_were_none() {
+    let _serial = SOAKS.lock().unwrap_or_else(|e| e.into_inner());
+    let tmp = tempfile::tempdir().unwrap();
+    let out = verdant(
+        &[
+            "soak",
+            common::default_world().to_str().unwrap(),
+            "--seconds",
+            "4.6",
+            "--no-grass",
+            "--size",
+            "32x18",
+            "--max-stall-ms",
+            "60000",
+            "--out",
+            "soak",
+        ],
+        tmp.path(),
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "soak failed: {stderr}");
+    assert!(stdout.contains("no teleport in this run"), "{stdout}");
+    assert!(!stdout.contains("never reached"), "{stdout}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tmp.path().join("soak/soak.json")).unwrap())
+            .unwrap();
+    assert_eq!(r["teleports"].as_array().map(Vec::len), Some(0));
 }
 
 #[test]

@@ -101,6 +101,45 @@ fn the_wind_tour_changes_scenes_and_its_walker_leaves_the_trail() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("sparkles"));
 }
 
+/// `--wind SCENE` in a world without `[[wind_scenes]]` says that the world has none and what
+/// the option needs, not an empty list of the scenes it has.
+#[test]
+fn fly_wind_in_a_world_without_wind_scenes_says_it_has_none() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::world_copy(tmp.path());
+    let toml = world.join("world.toml");
+    let mut m = Manifest::from_path(&toml).unwrap();
+    m.wind_scenes.clear();
+    for p in &mut m.paths {
+        p.wind.clear();
+    }
+    std::fs::write(&toml, m.to_toml()).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["fly", world.to_str().unwrap(), "--wind", "breeze"])
+        .args([
+            "--frames",
+            "1",
+            "--size",
+            "32x18",
+            "--no-images",
+            "--out",
+            "fly",
+        ])
+        .current_dir(tmp.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    common::assert_fails_naming(
+        &out,
+        &[
+            "no wind scene called \"breeze\"",
+            "the world has no wind scenes",
+            "[[wind_scenes]]",
+        ],
+    );
+    assert!(!stderr.contains("the world has: )"), "{stderr}");
+}
+
 #[test]
 fn bench_features_charts_every_feature_in_the_wind_tour() {
     let tmp = tempfile::tempdir().unwrap();

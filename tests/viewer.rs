@@ -59,6 +59,7 @@ fn the_viewer_on_a_virtual_display_shows_what_the_headless_renderer_does() {
         out.status
     );
     assert!(stdout.contains(&format!("{FRAMES} frames")), "{stdout}");
+    assert!(!stderr.contains("no frame drew any terrain"), "{stderr}");
     let viewer = image::open(&shot).expect("the screenshot").to_rgb8();
     let headless = image::DynamicImage::ImageRgba8(headless_view()).to_rgb8();
     let r = flip_compare(&headless, &viewer).unwrap();
@@ -80,6 +81,36 @@ fn the_viewer_on_a_virtual_display_shows_what_the_headless_renderer_does() {
             failures.display()
         );
     }
+}
+
+/// A view of a camera path entirely outside the world (40 km out of it) draws sky alone, and
+/// says so as `fly` does, instead of writing its sky-only screenshot in silence.
+#[test]
+fn the_viewer_warns_when_no_frame_drew_terrain() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = common::world_copy(dir.path());
+    let toml = world.join("world.toml");
+    let mut text = std::fs::read_to_string(&toml).unwrap();
+    text.push_str(
+        "\n[[paths]]\nname = \"away\"\nduration_s = 2.0\n\
+         [[paths.keys]]\nt_s = 0.0\nposition_m = [-40000.0, -40000.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n\
+         [[paths.keys]]\nt_s = 2.0\nposition_m = [-40010.0, -40010.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n",
+    );
+    std::fs::write(&toml, text).unwrap();
+    let shot = dir.path().join("v.png");
+    let out = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 640x480x24", verdant_bin(), "view"])
+        .arg(&world)
+        .args(["--path", "away", "--size", "32x18", "--frames", "2"])
+        .arg("--screenshot")
+        .arg(&shot)
+        .output()
+        .expect("xvfb-run is needed for the viewer's test (Debian package xvfb)");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "verdant view failed: {stderr}");
+    assert!(shot.is_file());
+    assert!(stderr.contains("no frame drew any terrain"), "{stderr}");
+    assert!(stderr.contains("\"away\""), "{stderr}");
 }
 
 #[test]

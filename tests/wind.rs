@@ -8,6 +8,7 @@ mod common;
 use std::path::Path;
 
 use glam::{DVec2, DVec3, Vec2};
+use verdant::camera::sample_path;
 use verdant::gpu::{GpuContext, GpuTimer};
 use verdant::wind::config::{DEFAULT_CELL_M, DEFAULT_CELLS};
 use verdant::wind::{
@@ -877,6 +878,40 @@ fn committed_world_has_the_wind_scenes_and_the_helicopter_path() {
     let c = WindConfig::from_scene(&bare, None).unwrap();
     assert_eq!(c.ambient, AmbientWind::from(&m.wind));
     assert_eq!(c.cell_m, DEFAULT_CELL_M);
+    // Asking it for a scene by name says that it has none, not an empty list.
+    let err = WindConfig::from_scene(&bare, Some("breeze")).unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("no wind scene called \"breeze\"")
+            && text.contains("the world has no wind scenes")
+            && text.contains("[[wind_scenes]]"),
+        "{text}"
+    );
+}
+
+/// A source that follows a camera path loops over the whole path as its keys span it (the
+/// length every tool flies), not over what a `duration_s` field says.
+#[test]
+fn a_path_following_source_loops_over_the_whole_path() {
+    let m = parse(SMALL).unwrap();
+    let config = WindConfig::from_scene(&m, Some("gusty")).unwrap();
+    let mut source = config.source_list[1].clone();
+    let path = source.path.as_mut().unwrap();
+    assert_eq!(path.name, "overview");
+    // What validation refuses; set here to tell the keys' span (10 s) from the field.
+    path.duration_s = 4.0;
+    let path = path.clone();
+    for t in [1.0, 7.0, 9.5] {
+        let want = sample_path(&path, t).position.truncate();
+        let at = source.position_at(t).unwrap();
+        assert!(at.distance(want) < 1e-9, "at {t} s: {at} instead of {want}");
+        let again = source.position_at(t + 10.0).unwrap();
+        assert!(
+            again.distance(want) < 1e-6,
+            "at {} s: {again} instead of {want}",
+            t + 10.0
+        );
+    }
 }
 
 const SMALL: &str = r#"

@@ -255,6 +255,8 @@ fn small_narrow_and_fine_dems_get_paths_over_their_own_ground() {
         let [ex, ey] = m.extent_m;
         assert!(m.paths.len() >= 7, "{name}");
         for p in &m.paths {
+            // The bake states each path's length as its keys span it.
+            assert_eq!(p.duration_s, p.length_s(), "{name}: path {}", p.name);
             for k in &p.keys {
                 let [x, y, _] = k.position_m;
                 assert!(

@@ -450,10 +450,15 @@ fn manifest_bad_camera_paths() {
         "{err}"
     );
     assert!(err.to_string().contains("\"overview\""), "{err}");
+    assert!(err.to_string().contains("paths[0].keys has 1 key"), "{err}");
 
     let err = broken("{ t_s = 10.0,", "{ t_s = 0.0,");
     assert!(
         matches!(err, WorldError::PathKeysOutOfOrder { index: 1, .. }),
+        "{err}"
+    );
+    assert!(
+        err.to_string().contains("paths[0].keys[1].t_s = 0"),
         "{err}"
     );
 
@@ -463,6 +468,72 @@ fn manifest_bad_camera_paths() {
         matches!(err, WorldError::DuplicatePath { ref name, .. } if name == "overview"),
         "{err}"
     );
+}
+
+/// A camera path's length is the span of its keys' times, from the first key's `t_s` to the
+/// last's: every tool flies that. A `duration_s` that says otherwise (by more than a thousandth
+/// of a second) is refused naming the file, the path, the field and both values, not flown
+/// over a part of the path or clamped to its last key.
+#[test]
+fn a_path_duration_that_disagrees_with_its_keys_is_refused() {
+    for (to, shown) in [
+        ("duration_s = 1000.0", "duration_s = 1000 "),
+        ("duration_s = 4.0", "duration_s = 4 "),
+        ("duration_s = 10.01", "duration_s = 10.01 "),
+    ] {
+        let err = broken("duration_s = 10.0", to);
+        let text = err.to_string();
+        for needle in [
+            "camera path \"overview\"",
+            "paths[0].duration_s",
+            shown,
+            "span 10 s",
+            "t_s 0 to 10",
+        ] {
+            assert!(text.contains(needle), "{needle:?} not in: {text}");
+        }
+    }
+    // Within the tolerance: accepted.
+    parse(&VALID.replace("duration_s = 10.0", "duration_s = 10.0004")).unwrap();
+    // Keys that start after 0: the span counts from the first key.
+    let later = VALID
+        .replace("{ t_s = 0.0,", "{ t_s = 5.0,")
+        .replace("{ t_s = 10.0,", "{ t_s = 15.0,");
+    parse(&later).unwrap();
+    let err = parse(&later.replace("duration_s = 10.0", "duration_s = 15.0")).unwrap_err();
+    assert!(err.to_string().contains("t_s 5 to 15"), "{err}");
+}
+
+/// Every world shipped under worlds/ (and so the bake that wrote them) states its paths'
+/// lengths as their keys span them.
+#[test]
+fn every_shipped_world_manifest_validates() {
+    let worlds = Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&worlds).unwrap() {
+        let toml = entry.unwrap().path().join("world.toml");
+        if toml.is_file() {
+            let m = Manifest::from_path(&toml).unwrap_or_else(|e| panic!("{e}"));
+            assert!(!m.paths.is_empty(), "{}", toml.display());
+            seen += 1;
+        }
+    }
+    assert!(seen >= 2, "{seen} worlds");
+}
+
+/// A path's wind key that names a scene of a world without wind scenes says so, instead of
+/// listing none.
+#[test]
+fn a_wind_key_in_a_world_without_wind_scenes_says_there_are_none() {
+    let err = broken(
+        "duration_s = 10.0\n",
+        "duration_s = 10.0\nwind = [{ t_s = 0.0, scene = \"gale\" }]\n",
+    );
+    let text = err.to_string();
+    assert!(text.contains("paths[0].wind[0].scene = \"gale\""), "{text}");
+    assert!(text.contains("the world has no wind scenes"), "{text}");
+    assert!(text.contains("[[wind_scenes]]"), "{text}");
+    assert!(!text.contains("the world has: )"), "{text}");
 }
 
 /// Texts of a manifest are printed to terminals and window titles: a control character (an

@@ -189,11 +189,9 @@ pub(super) fn overview_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
             a + d * u + side * (std::f64::consts::TAU * u).sin()
         })
         .collect();
-    CameraPath {
-        name: "overview".into(),
-        duration_s: DURATION,
-        walker: None,
-        keys: keys_along(
+    CameraPath::through(
+        "overview",
+        keys_along(
             grid,
             extent,
             &points,
@@ -202,8 +200,7 @@ pub(super) fn overview_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
             150.0,
             -14.0,
         ),
-        wind: Vec::new(),
-    }
+    )
 }
 
 /// The grassiest, gentlest 1.6 km line of the data area: its centre and its direction, heading
@@ -268,13 +265,10 @@ pub(super) fn low_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         .iter()
         .map(|t| c + dir * LENGTH * (t / DURATION - 0.5))
         .collect();
-    CameraPath {
-        name: "low".into(),
-        duration_s: DURATION,
-        walker: None,
-        keys: keys_along(grid, extent, &points, &times, LOW_CLEARANCE_M, 20.0, -8.0),
-        wind: Vec::new(),
-    }
+    CameraPath::through(
+        "low",
+        keys_along(grid, extent, &points, &times, LOW_CLEARANCE_M, 20.0, -8.0),
+    )
 }
 
 /// The tour, the default path: 30 s descending from high above the highest ground near the
@@ -370,13 +364,7 @@ pub(super) fn tour_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         key.position_m[2] = round_to(key.position_m[2] + clearance[k], 2);
         key.pitch_deg = round_to(pitch[k], 2);
     }
-    CameraPath {
-        name: "tour".into(),
-        duration_s: APPROACH_S + GLIDE_S,
-        walker: None,
-        keys,
-        wind: Vec::new(),
-    }
+    CameraPath::through("tour", keys)
 }
 
 /// A 24 s glide at 8 m/s a couple of metres above the meadow in the middle of the grassy line:
@@ -394,13 +382,10 @@ pub(super) fn meadow_path(painted: &Painted, extent: [f64; 2]) -> CameraPath {
         .iter()
         .map(|t| c + dir * LENGTH * (t / DURATION - 0.5))
         .collect();
-    CameraPath {
-        name: "meadow".into(),
-        duration_s: DURATION,
-        walker: None,
-        keys: keys_along(grid, extent, &points, &times, MEADOW_CLEARANCE_M, 2.0, -6.0),
-        wind: Vec::new(),
-    }
+    CameraPath::through(
+        "meadow",
+        keys_along(grid, extent, &points, &times, MEADOW_CLEARANCE_M, 2.0, -6.0),
+    )
 }
 
 /// The middle and direction of the helicopter's pass: the tall-grass spot nearest the middle
@@ -487,11 +472,9 @@ pub(super) fn helicopter_path(painted: &Painted, extent: [f64; 2]) -> CameraPath
         .iter()
         .map(|t| c + dir * LENGTH * (t / DURATION - 0.5))
         .collect();
-    CameraPath {
-        name: HELICOPTER_PATH.into(),
-        duration_s: DURATION,
-        walker: None,
-        keys: keys_along(
+    CameraPath::through(
+        HELICOPTER_PATH,
+        keys_along(
             grid,
             extent,
             &points,
@@ -500,8 +483,7 @@ pub(super) fn helicopter_path(painted: &Painted, extent: [f64; 2]) -> CameraPath
             5.0,
             -30.0,
         ),
-        wind: Vec::new(),
-    }
+    )
 }
 
 /// Name of the baked fly-through that shows the wind scenes in turn.
@@ -562,18 +544,12 @@ pub(super) fn wind_tour_paths(painted: &Painted, extent: [f64; 2]) -> (CameraPat
         .iter()
         .map(|t| centre + DVec2::from_angle(omega * t) * WALK_RADIUS_M)
         .collect();
-    let walker = CameraPath {
-        name: WALKER_PATH.into(),
-        duration_s: WIND_TOUR_S,
-        walker: None,
-        keys: keys_along(grid, extent, &walk_points, &times, 1.7, 0.0, 0.0),
-        wind: Vec::new(),
-    };
+    let walker = CameraPath::through(
+        WALKER_PATH,
+        keys_along(grid, extent, &walk_points, &times, 1.7, 0.0, 0.0),
+    );
     let tour = CameraPath {
-        name: WIND_TOUR_PATH.into(),
-        duration_s: WIND_TOUR_S,
         walker: Some(WALKER_PATH.into()),
-        keys,
         wind: WIND_TOUR_SCENES
             .iter()
             .map(|&(scene, t_s)| WindKey {
@@ -582,6 +558,7 @@ pub(super) fn wind_tour_paths(painted: &Painted, extent: [f64; 2]) -> (CameraPat
                 blend_s: DEFAULT_WIND_BLEND_S,
             })
             .collect(),
+        ..CameraPath::through(WIND_TOUR_PATH, keys)
     };
     (tour, walker)
 }

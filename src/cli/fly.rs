@@ -387,11 +387,11 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
         "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",
         s.grass_considered.median, s.grass_drawn_high.median, s.grass_drawn_low.median
     );
-    if s.tiles_drawn.max == 0.0 {
-        log::warn!(
-            "no frame drew any terrain: the camera path runs outside the world or looks away \
-             from it (see the camera positions in report.json)"
-        );
+    if let Some(warning) = verdant::tools::fly::no_terrain_drawn(
+        s.tiles_drawn.max as u32,
+        "see the camera positions in report.json",
+    ) {
+        log::warn!("{warning}");
     }
     if s.grass_overflow.max > 0.0 {
         log::warn!(

@@ -129,17 +129,24 @@ pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
             r.plants_overflow_total
         );
     }
+    // A run shorter than the time to its first teleport has none to measure: say so, rather
+    // than that full detail was never reached.
+    let detail = match (r.teleports.len(), r.full_detail_after_teleport_s) {
+        (0, _) => format!(
+            "no teleport in this run (the first comes after {} s of flight)",
+            opts.teleport_every_s
+        ),
+        (n, Some(s)) => format!("full detail {s:.1} s after a teleport (median of {n})"),
+        (n, None) => format!("full detail never reached after a teleport ({n} teleports)"),
+    };
     println!(
         "loads: {} completed, {} cancelled, {} failed; {} evictions; cache hit rate {:.0}%; \
-         full detail {} after a teleport (median of {})",
+         {detail}",
         r.loads_completed,
         r.loads_cancelled,
         r.loads_failed,
         r.evictions,
         100.0 * r.cache_hit_rate,
-        r.full_detail_after_teleport_s
-            .map_or("never reached".to_owned(), |s| format!("{s:.1} s")),
-        r.teleports.len()
     );
     if let Some(f) = &r.faults {
         let injected = match (&f.files, &f.http) {

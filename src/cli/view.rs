@@ -81,5 +81,21 @@ pub(crate) fn view(args: ViewArgs) -> Result<()> {
     if let Some(file) = screenshot {
         println!("wrote {}", file.display());
     }
+    // A run of N frames (a session the user ends reports no frames) that drew sky alone.
+    if summary.frames > 0
+        && let Some(warning) = verdant::tools::fly::no_terrain_drawn(
+            summary.tiles_drawn_max,
+            &if follow {
+                format!("the view followed camera path {:?}", summary.path)
+            } else {
+                format!(
+                    "the view stood at the first key of camera path {:?}",
+                    summary.path
+                )
+            },
+        )
+    {
+        log::warn!("{warning}");
+    }
     Ok(())
 }

@@ -701,8 +701,8 @@ pub fn run_bench_aa(
         opts.timed_frames,
         opts.rounds,
     );
-    let start = sample_path(&start_path, start_path.keys[0].t_s);
-    let t0 = start_path.keys[0].t_s;
+    let t0 = start_path.start_s();
+    let start = sample_path(&start_path, t0);
     let mut frames = Vec::new();
     let mut sequences = Vec::new();
     let mut path_views = Vec::new();
@@ -864,9 +864,8 @@ pub fn run_bench_aa(
                 (truth, bounds)
             };
             for path in &paths {
-                let (a, b) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
                 for j in 0..4 {
-                    let t_view = a + (b - a) * (0.125 + 0.25 * f64::from(j));
+                    let t_view = path.time_at(0.125 + 0.25 * f64::from(j));
                     for r in (0..=opts.run_up).rev() {
                         stop.check()?;
                         let t = t_view - f64::from(r) * DT_S;

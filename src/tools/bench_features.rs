@@ -92,14 +92,13 @@ pub fn run_bench_features(
         Some(p) => p.clone(),
         None => bail!("world {} has no camera paths", opts.world.display()),
     };
-    let t0 = path.keys[0].t_s;
-    let end = t0 + path.duration_s;
+    let (t0, end) = (path.start_s(), path.end_s());
     // One view 70% of the way through each wind scene (at least LEAD_S into the path), or four
     // views along a path without wind keys.
     let times: Vec<f64> = if path.wind.is_empty() {
         [0.1, 0.35, 0.6, 0.85]
             .iter()
-            .map(|u| t0 + u * path.duration_s)
+            .map(|&u| path.time_at(u))
             .collect()
     } else {
         path.wind

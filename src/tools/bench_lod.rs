@@ -612,7 +612,7 @@ pub fn run_bench_lod(
     // the truth's reach.
     let views: Vec<Camera> = [0.1, 0.35, 0.6, 0.85]
         .iter()
-        .map(|u| sample_path(&path, path.keys[0].t_s + u * path.duration_s))
+        .map(|u| sample_path(&path, path.time_at(*u)))
         .collect();
     let tile_m = world
         .manifest
@@ -653,7 +653,7 @@ pub fn run_bench_lod(
         )?;
 
         // (a) The dolly: forward along the path's direction, from where the path starts.
-        let start = sample_path(&path, path.keys[0].t_s);
+        let start = sample_path(&path, path.start_s());
         let ring_m = settings[0].high_radius_tiles * tile_m;
         // Far enough that tiles ahead cross the high/low boundary during the dolly.
         let step = 1.5 * ring_m / f64::from(opts.dolly_frames);
@@ -1036,11 +1036,10 @@ pub fn flight_shots(
     path: &crate::world::CameraPath,
     frames: u32,
 ) -> Vec<(Camera, f64, Option<glam::DVec2>)> {
-    let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
     let last = f64::from(frames.max(2) - 1);
     (0..frames)
         .map(|i| {
-            let camera = sample_path(path, t0 + (t1 - t0) * f64::from(i) / last);
+            let camera = sample_path(path, path.time_at(f64::from(i) / last));
             (camera, 0.0, Some(camera.position.truncate()))
         })
         .collect()

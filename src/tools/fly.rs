@@ -132,7 +132,7 @@ const WAIT_JUMP_M: f64 = 25.0;
 const FRAME_TILE_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
 
 fn path_start_position(path: &crate::world::CameraPath) -> glam::DVec3 {
-    sample_path(path, path.keys[0].t_s).position
+    sample_path(path, path.start_s()).position
 }
 
 /// The longest the first frame waits for its tiles.
@@ -286,6 +286,7 @@ pub fn run_fly_with_source(
     opts.validate()?;
     let path = crate::tools::camera_path(&world, &opts.world, opts.path.as_deref())?;
     // Checked before anything is written.
+    crate::tools::check_wind_option(&world, opts.wind_scene.as_deref())?;
     let config = opts.renderer_config(&world, &path)?;
     let out_dir = OutDir::create_for(&opts.out, "fly")?;
     let stale = stale_frames(&opts.out, if opts.write_images { opts.frames } else { 0 });
@@ -306,7 +307,7 @@ pub fn run_fly_with_source(
     // A stop asked for (Ctrl-C) ends the warm-up too, and then the run before its first frame.
     let stopped = || opts.stop.as_ref().is_some_and(|s| s.is_cancelled());
     progress(FlyProgress::WarmingUp);
-    let first_camera = sample_path(&path, path.keys[0].t_s);
+    let first_camera = sample_path(&path, path.start_s());
     let warm_up = scene.warm_up_until(&first_camera, first_frame_wait, &stopped)?;
     let mut warm_up_missing = Vec::new();
     if !stopped() {
@@ -337,7 +338,6 @@ pub fn run_fly_with_source(
         totals: FlyTotals::default(),
     };
     let last = (opts.frames.max(2) - 1) as f64;
-    let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
     // Without images nothing needs a frame back: frames are submitted as an application
     // submits them, at most FRAMES_IN_FLIGHT ahead of the GPU, and their figures are taken as
     // they come back. With images, each frame is waited for and read back.
@@ -352,7 +352,7 @@ pub fn run_fly_with_source(
             interrupted = true;
             break;
         }
-        let t_s = t0 + (t1 - t0) * f64::from(i) / last;
+        let t_s = path.time_at(f64::from(i) / last);
         let camera = sample_path(&path, t_s);
         // Frames written far apart along the path (a short fly-through) wait, boundedly, for
         // the tiles they need: each picture shows the world at full detail where its camera
@@ -435,7 +435,7 @@ pub fn run_fly_with_source(
             } else {
                 0
             };
-            let t_s = t0 + (t1 - t0) * f64::from(i) / last;
+            let t_s = path.time_at(f64::from(i) / last);
             let camera = sample_path(&path, t_s);
             scene.warm_up_until(&camera, std::time::Duration::from_secs(30), &stopped)?;
             let walker_xy = walker_at(&scene.world().manifest, &path, t_s);
@@ -502,6 +502,18 @@ fn take_figures(
         }
     }
     Ok(())
+}
+
+/// The warning for a run of which no frame drew any terrain (its camera outside the world, or
+/// looking away from it), given the most terrain tiles a frame drew; `None` where a frame drew
+/// some. `camera` says where the run's camera was. `fly` and `view` both warn with it.
+pub fn no_terrain_drawn(most_tiles_drawn: u32, camera: &str) -> Option<String> {
+    (most_tiles_drawn == 0).then(|| {
+        format!(
+            "no frame drew any terrain: the camera path runs outside the world or looks away \
+             from it ({camera})"
+        )
+    })
 }
 
 /// Fails when a warm-up ended with tiles missing and not one tile beyond the level-0 tiles

@@ -91,6 +91,19 @@ pub fn camera_path(
     }
 }
 
+/// Checks `--wind SCENE` against `world` before anything is opened or written: the scene must
+/// be one of the world's `[[wind_scenes]]`; the error names the option and the scenes the world
+/// has (or says that it has none).
+pub fn check_wind_option(world: &World, scene: Option<&str>) -> anyhow::Result<()> {
+    use anyhow::Context;
+    if let Some(name) = scene {
+        crate::wind::WindConfig::from_scene(&world.manifest, Some(name)).with_context(|| {
+            format!("--wind {name:?}: the option takes the name of one of the world's wind scenes")
+        })?;
+    }
+    Ok(())
+}
+
 /// Opens a world and the source of its tiles: its folder, or, when `location` is an `http://`
 /// address, the world served there (`stream::HttpSource`).
 pub fn open_world(

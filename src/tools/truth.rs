@@ -438,7 +438,6 @@ pub fn run_fly_truth(
     let mut truth = Truth::with_config(&ctx, world, source, opts.size, k, config)?;
     progress(FlyProgress::WarmingUp);
     let last = f64::from(opts.frames.max(2) - 1);
-    let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
     let mut frames = Vec::new();
     let mut interrupted = false;
     for i in 0..opts.frames {
@@ -446,7 +445,7 @@ pub fn run_fly_truth(
             interrupted = true;
             break;
         }
-        let t_s = t0 + (t1 - t0) * f64::from(i) / last;
+        let t_s = path.time_at(f64::from(i) / last);
         let camera = sample_path(&path, t_s);
         let walker = walker_at(&manifest, &path, t_s);
         let image = truth.render(&ctx, &camera, t_s, Some(walker))?;

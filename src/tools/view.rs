@@ -54,7 +54,8 @@ pub struct ViewOptions {
     pub aa: Option<crate::aa::AntiAliasing>,
 }
 
-/// What a viewing session measured.
+/// What a run of [`ViewOptions::frames`] frames measured (a session the user ends reports
+/// nothing: its frames are 0).
 #[derive(Clone, Debug, Default)]
 pub struct ViewSummary {
     /// Frames drawn.
@@ -63,6 +64,11 @@ pub struct ViewSummary {
     pub median_frame_ms: f64,
     /// The adapter, backend and driver.
     pub adapter: String,
+    /// The camera path the view started on (at its first key).
+    pub path: String,
+    /// The most terrain tiles a frame drew (0: no frame drew any terrain, see
+    /// [`super::fly::no_terrain_drawn`]).
+    pub tiles_drawn_max: u32,
 }
 
 /// Opens the window and runs until it is closed (or `frames` are drawn).
@@ -86,6 +92,7 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
     {
         bail!("world {} has no camera path {name:?}", opts.world.display());
     }
+    crate::tools::check_wind_option(&world, opts.wind_scene.as_deref())?;
     let no_display = std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty())
         && std::env::var_os("WAYLAND_DISPLAY").is_none_or(|d| d.is_empty());
     let hint = "`verdant view` needs a desktop session (X11 or Wayland); for a headless run \
@@ -154,6 +161,8 @@ struct State {
     frames: u64,
     title_at: Instant,
     last_stats: Option<FrameStats>,
+    /// The most terrain tiles a frame drew, over the frames whose figures have come back.
+    tiles_drawn_max: u32,
     wind_scene: String,
 }
 
@@ -238,7 +247,7 @@ impl Viewer {
         let mut options = RendererOptions::new(&world, format, crate::terrain::DEPTH_FORMAT, w, h);
         options.config = rc;
         let mut renderer = Renderer::with_source(&ctx.device, &ctx.queue, world, source, options)?;
-        let t0 = path.keys[0].t_s;
+        let t0 = path.start_s();
         let start = sample_path(path, t0);
         // A run of N frames (a screenshot, say) starts complete, as `fly` does. A window the
         // user flies waits for its first frame's tiles only briefly: over a slow network the
@@ -299,6 +308,7 @@ impl Viewer {
             frames: 0,
             title_at: Instant::now(),
             last_stats: None,
+            tiles_drawn_max: 0,
             wind_scene,
         })
     }
@@ -431,12 +441,12 @@ impl State {
                 self.following = !self.following;
                 if self.following {
                     // Pick the path up where it is nearest the camera's time on it.
-                    self.path_t = self.path_t.max(self.paths[self.path_index].keys[0].t_s);
+                    self.path_t = self.path_t.max(self.paths[self.path_index].start_s());
                 }
             }
             KeyCode::KeyN => {
                 self.path_index = (self.path_index + 1) % self.paths.len();
-                self.path_t = self.paths[self.path_index].keys[0].t_s;
+                self.path_t = self.paths[self.path_index].start_s();
             }
             KeyCode::KeyL => {
                 self.overlay = !self.overlay;
@@ -482,7 +492,7 @@ impl State {
     fn camera(&mut self, dt: f64) -> (Camera, Option<glam::DVec2>) {
         let path = &self.paths[self.path_index];
         if self.following {
-            let (t0, t1) = (path.keys[0].t_s, path.keys[path.keys.len() - 1].t_s);
+            let (t0, t1) = (path.start_s(), path.end_s());
             self.path_t += dt;
             if self.path_t > t1 {
                 self.path_t = t0 + (self.path_t - t1) % (t1 - t0).max(1e-3);
@@ -594,14 +604,22 @@ impl Viewer {
             .opts
             .frames
             .is_some_and(|n| s.frames + 1 >= u64::from(n));
-        s.ctx.queue.submit([encoder.finish()]);
+        let submission = s.ctx.queue.submit([encoder.finish()]);
         if last && let Some(file) = &self.opts.screenshot {
             save_screenshot(&s.ctx, &frame.texture, file)?;
         }
         s.window.pre_present_notify();
         s.ctx.queue.present(frame);
         s.frames += 1;
-        if let Some(st) = s.renderer.take_stats().pop() {
+        if last {
+            // Every frame's figures, the last ones included, before the summary.
+            let _ = s.ctx.device.poll(wgpu::PollType::Wait {
+                submission_index: Some(submission),
+                timeout: None,
+            });
+        }
+        for st in s.renderer.take_stats() {
+            s.tiles_drawn_max = s.tiles_drawn_max.max(st.tiles_drawn);
             s.last_stats = Some(st);
         }
         s.update_title();
@@ -612,6 +630,8 @@ impl Viewer {
                 frames: s.frames,
                 median_frame_ms: sorted.get(sorted.len() / 2).copied().unwrap_or(0.0),
                 adapter: s.ctx.describe(),
+                path: s.paths[s.path_index].name.clone(),
+                tiles_drawn_max: s.tiles_drawn_max,
             };
             event_loop.exit();
         }

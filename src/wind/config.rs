@@ -87,13 +87,21 @@ pub struct SourceConfig {
 
 impl SourceConfig {
     /// Where the source is at scene time `time_s`: its fixed position, or its path's position
-    /// (looping over the path's duration, counted from the source's start); `None` for a
-    /// directional source without a position.
+    /// (looping over the whole path, [`CameraPath::length_s`], counted from the source's start);
+    /// `None` for a directional source without a position.
     pub fn position_at(&self, time_s: f64) -> Option<DVec2> {
         if let Some(path) = &self.path {
-            let local = (time_s - self.source.start_s()).rem_euclid(path.duration_s);
-            let t0 = path.keys.first().map_or(0.0, |k| k.t_s);
-            return Some(sample_path(path, t0 + local).position.truncate());
+            let local = time_s - self.source.start_s();
+            // A validated path spans a positive time; guard the loop all the same.
+            let local = match path.length_s() {
+                length if length > 0.0 => local.rem_euclid(length),
+                _ => 0.0,
+            };
+            return Some(
+                sample_path(path, path.start_s() + local)
+                    .position
+                    .truncate(),
+            );
         }
         match self.source.placement() {
             SourcePlacement::Fixed(p) => Some(DVec2::from_array(p)),
@@ -112,11 +120,14 @@ impl SourceConfig {
 #[non_exhaustive]
 pub enum WindError {
     /// No wind scene has the name asked for.
-    #[error("no wind scene called \"{name}\" (the world has: {available})")]
+    #[error(
+        "no wind scene called \"{name}\" ({})",
+        crate::world::wind_scenes_held(.available)
+    )]
     UnknownScene {
         /// The name asked for.
         name: String,
-        /// The scenes the world has, comma-separated.
+        /// The scenes the world has, comma-separated (empty when it has none).
         available: String,
     },
     /// A source follows a camera path that the manifest does not have (a manifest that was not

@@ -184,19 +184,26 @@ pub enum WorldError {
     },
 
     /// A camera path has fewer than two keys.
-    #[error("{}: camera path \"{name}\" has {keys} key(s): at least 2 are needed", path.display())]
+    #[error(
+        "{}: camera path \"{name}\": {field} has {keys} key(s): at least 2 are needed (its \
+         length is the span of its keys' times)",
+        path.display()
+    )]
     PathTooShort {
         /// The manifest file.
         path: PathBuf,
         /// The path's name.
         name: String,
+        /// The field (e.g. `paths[2].keys`).
+        field: String,
         /// The number of keys found.
         keys: usize,
     },
 
     /// A camera path's keys are not in strictly increasing time order.
     #[error(
-        "{}: camera path \"{name}\": keys[{index}].t_s = {t_s} does not come after the previous key's {previous_t_s}",
+        "{}: camera path \"{name}\": {field} = {t_s} does not come after the previous key's \
+         {previous_t_s} (keys are listed in increasing time order)",
         path.display()
     )]
     PathKeysOutOfOrder {
@@ -204,12 +211,37 @@ pub enum WorldError {
         path: PathBuf,
         /// The path's name.
         name: String,
+        /// The field (e.g. `paths[2].keys[3].t_s`).
+        field: String,
         /// Index of the offending key.
         index: usize,
         /// Its time.
         t_s: f64,
         /// The time of the key before it.
         previous_t_s: f64,
+    },
+
+    /// A camera path's `duration_s` is not the span of its keys' times (which every tool flies).
+    #[error(
+        "{}: camera path \"{name}\": {field} = {duration_s} does not match its keys, which span \
+         {span_s} s (t_s {first_t_s} to {last_t_s}); set {field} = {span_s}, or move the keys",
+        path.display()
+    )]
+    PathDurationMismatch {
+        /// The manifest file.
+        path: PathBuf,
+        /// The path's name.
+        name: String,
+        /// The field (e.g. `paths[2].duration_s`).
+        field: String,
+        /// The duration the manifest states, seconds.
+        duration_s: f64,
+        /// The span of the keys' times, seconds.
+        span_s: f64,
+        /// The first key's time, seconds.
+        first_t_s: f64,
+        /// The last key's time, seconds.
+        last_t_s: f64,
     },
 
     /// Two camera paths share a name.
@@ -243,8 +275,9 @@ pub enum WorldError {
 
     /// A camera path's wind key names a wind scene that the manifest does not have.
     #[error(
-        "{}: {field} = \"{name}\": no wind scene has this name (the world has: {available})",
-        path.display()
+        "{}: {field} = \"{name}\": no wind scene has this name ({})",
+        path.display(),
+        crate::world::wind_scenes_held(.available)
     )]
     UnknownWindSceneRef {
         /// The manifest file.
@@ -253,7 +286,7 @@ pub enum WorldError {
         field: String,
         /// The name referred to.
         name: String,
-        /// The scenes the world has (see [`crate::world::name_list`]).
+        /// The scenes the world has (see [`crate::world::name_list`]; empty when it has none).
         available: String,
     },
 
@@ -744,6 +777,7 @@ impl WorldError {
             | BadGrassRange { path, .. }
             | PathTooShort { path, .. }
             | PathKeysOutOfOrder { path, .. }
+            | PathDurationMismatch { path, .. }
             | DuplicatePath { path, .. }
             | TileNotStored { path, .. }
             | CorruptImage { path, .. }

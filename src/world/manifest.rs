@@ -27,8 +27,8 @@ mod scenes;
 mod validate;
 
 pub use scenes::{
-    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, MAX_WIND_SOURCES, SourcePlacement, WindDefaults,
-    WindKey, WindScene, WindSource,
+    CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, MAX_WIND_SOURCES, PATH_DURATION_TOLERANCE_S,
+    SourcePlacement, WindDefaults, WindKey, WindScene, WindSource,
 };
 
 /// Most root tiles (x times y) a world may have.

@@ -41,8 +41,9 @@ pub use grass_density::GrassPeak;
 pub use manifest::{
     CameraKey, CameraPath, DEFAULT_WIND_BLEND_S, DeriveCalibration, DeriveMode, FeatureSwitches,
     GrassType, LEGACY_DETAIL, MAX_DETAIL, MAX_GRASS_TYPES, MAX_PLANT_DENSITY, MAX_PLANT_SIZE_M,
-    MAX_PLANT_TYPES, MAX_WIND_SOURCES, Manifest, PLANT_RECIPES, PlantType, PlantWind, Sky,
-    SourcePlacement, TREE_MIN_HEIGHT_M, WindDefaults, WindKey, WindScene, WindSource, WorldSource,
+    MAX_PLANT_TYPES, MAX_WIND_SOURCES, Manifest, PATH_DURATION_TOLERANCE_S, PLANT_RECIPES,
+    PlantType, PlantWind, Sky, SourcePlacement, TREE_MIN_HEIGHT_M, WindDefaults, WindKey,
+    WindScene, WindSource, WorldSource,
 };
 pub use material::{MATERIAL_COUNT, Material};
 pub use tile::{Bounds, Pyramid, TileId};
@@ -66,6 +67,18 @@ pub fn name_list<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
         text.push_str(&format!(" and {} more", names.len() - SHOWN));
     }
     text
+}
+
+/// What a message says of the wind scenes a world has, given their [`name_list`]: the list, or,
+/// where it is empty, that the world has none and where a scene is declared.
+pub fn wind_scenes_held(available: &str) -> String {
+    if available.is_empty() {
+        "the world has no wind scenes: a scene is a [[wind_scenes]] table of the world's \
+         world.toml"
+            .to_owned()
+    } else {
+        format!("the world has: {available}")
+    }
 }
 
 /// An opened world: its directory and its validated manifest.

@@ -259,7 +259,10 @@ impl WindSource {
 pub struct CameraPath {
     /// Name, unique within the world.
     pub name: String,
-    /// Length of the flight, seconds (above 0, at most [`MAX_TIME_S`](super::MAX_TIME_S)).
+    /// Length of the flight, seconds: the span of the keys' times ([`CameraPath::length_s`],
+    /// which is what every tool flies), stated in the manifest for its reader; validation
+    /// refuses one that differs from the keys' span by more than
+    /// [`PATH_DURATION_TOLERANCE_S`] (and one above [`MAX_TIME_S`](super::MAX_TIME_S)).
     pub duration_s: f64,
     /// Name of the camera path whose positions leave the trail in the grass while this path is
     /// flown (default: this path itself, the camera).
@@ -271,6 +274,48 @@ pub struct CameraPath {
     /// scene is chosen per run).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub wind: Vec<WindKey>,
+}
+
+/// How far a camera path's `duration_s` may differ from its keys' span, seconds (a rounding in
+/// the text of the manifest, never a different length).
+pub const PATH_DURATION_TOLERANCE_S: f64 = 1e-3;
+
+impl CameraPath {
+    /// A path through `keys` (in strictly increasing time order), its `duration_s` their span,
+    /// without a walker or wind keys.
+    pub fn through(name: impl Into<String>, keys: Vec<CameraKey>) -> Self {
+        let mut path = Self {
+            name: name.into(),
+            duration_s: 0.0,
+            walker: None,
+            keys,
+            wind: Vec::new(),
+        };
+        path.duration_s = path.length_s();
+        path
+    }
+
+    /// Time of the first key, seconds (0 for a path without keys, which validation refuses).
+    pub fn start_s(&self) -> f64 {
+        self.keys.first().map_or(0.0, |k| k.t_s)
+    }
+
+    /// Time of the last key, seconds.
+    pub fn end_s(&self) -> f64 {
+        self.keys.last().map_or(0.0, |k| k.t_s)
+    }
+
+    /// The path's length, seconds: the span of its keys' times, from the first key's to the
+    /// last's. Every tool flies a path over this span (`duration_s` states it; validation checks
+    /// that they agree).
+    pub fn length_s(&self) -> f64 {
+        self.end_s() - self.start_s()
+    }
+
+    /// The time a `fraction` (0 at the first key, 1 at the last) of the way along the path.
+    pub fn time_at(&self, fraction: f64) -> f64 {
+        self.start_s() + fraction * self.length_s()
+    }
 }
 
 /// A change of wind scene along a camera path.

@@ -231,6 +231,7 @@ impl Manifest {
                 return Err(WorldError::PathTooShort {
                     path: path.to_path_buf(),
                     name: cam.name.clone(),
+                    field: format!("paths[{pi}].keys"),
                     keys: cam.keys.len(),
                 });
             }
@@ -249,11 +250,26 @@ impl Manifest {
                     return Err(WorldError::PathKeysOutOfOrder {
                         path: path.to_path_buf(),
                         name: cam.name.clone(),
+                        field: field("t_s"),
                         index: ki,
                         t_s: key.t_s,
                         previous_t_s: cam.keys[ki - 1].t_s,
                     });
                 }
+            }
+            // Every tool flies the keys' span: a duration that says otherwise would have one
+            // tool fly a part of the path, or clamp to its last key, while another flies it all.
+            let span_s = cam.length_s();
+            if (cam.duration_s - span_s).abs() > PATH_DURATION_TOLERANCE_S {
+                return Err(WorldError::PathDurationMismatch {
+                    path: path.to_path_buf(),
+                    name: cam.name.clone(),
+                    field: duration,
+                    duration_s: cam.duration_s,
+                    span_s,
+                    first_t_s: cam.start_s(),
+                    last_t_s: cam.end_s(),
+                });
             }
         }
         self.validate_wind_scenes(&v)?;
