@@ -299,6 +299,14 @@ pub fn dt_label(dt: f64) -> String {
     }
 }
 
+/// The files [`run_sway_eval`] writes into its output folder.
+const FILES: [&str; 4] = [
+    "sway.csv",
+    "sway_error.png",
+    "sway_error_soft.png",
+    "sway_stability.png",
+];
+
 /// Runs the eval ([`evaluate_all`]) and writes into `out` (created if needed):
 ///
 /// - `sway.csv`: one row per preset, integrator and time step: `rms_error`, `max_error` and
@@ -313,7 +321,11 @@ pub fn dt_label(dt: f64) -> String {
 ///   stiff preset, with the blow-up threshold and the theoretical limits of the two Euler
 ///   steps.
 pub fn run_sway_eval(out: &Path) -> anyhow::Result<SwayEvalReport> {
-    let out_dir = crate::tools::fly::OutDir::create_for(out, "eval sway")?;
+    let out_dir = crate::tools::fly::OutDir::create_for(
+        out,
+        "eval sway",
+        &crate::tools::fly::Outputs::named(&FILES),
+    )?;
     let results = evaluate_all();
     write_csv(&results, &out.join("sway.csv"))?;
     for (preset, file) in [
