@@ -1611,6 +1611,262 @@ fn a_fly_onto_a_full_disk_leaves_no_half_written_file() {
     assert_eq!(std::fs::read(&earlier).unwrap(), earlier_bytes);
 }
 
+/// Runs verdant in `cwd`; `None` if it runs past `limit` (then it is killed).
+fn verdant_or_timeout(args: &[&str], cwd: &Path, limit: std::time::Duration) -> Option<Output> {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(args)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run verdant");
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > limit {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            return None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    Some(child.wait_with_output().unwrap())
+}
+
+/// No run writes over one of its own inputs, nor over a file in its --out that an output of
+/// the same name would replace and that is no earlier run's output (a DEM: a 16-bit PNG, or a
+/// PNG with its JSON sidecar, or that sidecar). Each command that writes into --out refuses at
+/// once, naming the file and why, and writes nothing; a run over its own earlier outputs goes
+/// on as before.
+#[test]
+fn a_run_never_writes_over_its_input_or_a_dem_in_its_output_folder() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::default_world();
+    let w = world.to_str().unwrap();
+    let od = tmp.path().join("od");
+    std::fs::create_dir(&od).unwrap();
+    let dem = |dir: &Path, name: &str| {
+        common::write_dem(dir, name, [65, 65], [10.0, 10.0], [0.0, 0.1], |x, y| {
+            100.0 + x * 0.1 + y * 0.05
+        })
+    };
+    dem(tmp.path(), "other");
+    let mut failures = Vec::new();
+    // (the DEM in od, the run, what the error says)
+    let cases: Vec<(&str, Vec<&str>, &str)> = vec![
+        (
+            "derive_height",
+            vec![
+                "eval",
+                "derive",
+                "--dem",
+                "od/derive_height.png",
+                "--factor",
+                "4",
+                "--out",
+                "od",
+            ],
+            "--dem",
+        ),
+        (
+            "",
+            vec![
+                "eval",
+                "derive",
+                "--dem",
+                "od/../od/derive.csv",
+                "--out",
+                "./od",
+            ],
+            "--dem",
+        ),
+        (
+            "derive_roughness",
+            vec!["eval", "derive", "--dem", "other.png", "--out", "od"],
+            "may be a DEM",
+        ),
+        (
+            "sway_error",
+            vec!["eval", "sway", "--out", "od"],
+            "may be a DEM",
+        ),
+        (
+            "frame_00001",
+            vec!["fly", w, "--frames", "2", "--size", "32x18", "--out", "od"],
+            "may be a DEM",
+        ),
+        (
+            "frame_00000",
+            vec![
+                "fly", w, "--truth", "2", "--frames", "2", "--size", "32x18", "--out", "od",
+            ],
+            "may be a DEM",
+        ),
+        (
+            "report",
+            vec![
+                "fly",
+                w,
+                "--frames",
+                "1",
+                "--size",
+                "32x18",
+                "--no-images",
+                "--out",
+                "od",
+            ],
+            "may be a DEM",
+        ),
+        (
+            "soak",
+            vec![
+                "soak",
+                w,
+                "--seconds",
+                "5",
+                "--size",
+                "32x18",
+                "--out",
+                "od",
+            ],
+            "may be a DEM",
+        ),
+        (
+            "dolly",
+            vec![
+                "bench",
+                "lod",
+                w,
+                "--size",
+                "32x18",
+                "--dolly-frames",
+                "2",
+                "--out",
+                "od",
+            ],
+            "may be a DEM",
+        ),
+        (
+            "features",
+            vec!["bench", "features", w, "--size", "32x18", "--out", "od"],
+            "may be a DEM",
+        ),
+        (
+            "blades_time",
+            vec!["bench", "blades", "--size", "32x18", "--out", "od"],
+            "may be a DEM",
+        ),
+        (
+            "aa_32x18",
+            vec![
+                "bench", "aa", w, "--size", "32x18", "--frames", "2", "--out", "od",
+            ],
+            "may be a DEM",
+        ),
+    ];
+    for (name, args, why) in cases {
+        if name.is_empty() {
+            // A PNG DEM named derive.csv (its sidecar derive.json): read by content, and no
+            // chart's name, so only its being the run's input keeps it.
+            dem(&od, "derive");
+            std::fs::rename(od.join("derive.png"), od.join("derive.csv")).unwrap();
+        } else {
+            dem(&od, name);
+        }
+        let before = common::read_all_files(&od);
+        let out = verdant_or_timeout(&args, tmp.path(), std::time::Duration::from_secs(30));
+        let stderr = out.as_ref().map_or("(ran past 30 s)".into(), |o| {
+            String::from_utf8_lossy(&o.stderr).into_owned()
+        });
+        // The file named: the DEM the run would write over (the one named like a JSON output
+        // is its sidecar), or the DEM it reads.
+        let file = match name {
+            "" => "derive.csv".to_owned(),
+            "report" | "soak" => format!("od/{name}.json"),
+            _ => format!("od/{name}.png"),
+        };
+        let refused = out.as_ref().is_some_and(|o| o.status.code() == Some(1))
+            && stderr.contains(&file)
+            && stderr.contains(why)
+            && stderr.contains("--out")
+            && !stderr.contains("panicked");
+        let after = common::read_all_files(&od);
+        if !refused || after != before {
+            let changed: Vec<_> = after
+                .iter()
+                .filter(|(p, b)| before.get(*p) != Some(b))
+                .map(|(p, _)| p.display().to_string())
+                .chain(
+                    before
+                        .keys()
+                        .filter(|p| !after.contains_key(*p))
+                        .map(|p| p.display().to_string()),
+                )
+                .collect();
+            failures.push(format!(
+                "{args:?}: refused {refused}, files changed {changed:?}: {stderr}"
+            ));
+        }
+        for f in std::fs::read_dir(&od).unwrap() {
+            std::fs::remove_file(f.unwrap().path()).unwrap();
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    // A run over its own earlier outputs goes on (charts, whose PNGs are 8-bit RGB).
+    for _ in 0..2 {
+        let out = verdant(
+            &["eval", "derive", "--dem", "other.png", "--out", "od"],
+            tmp.path(),
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    assert!(od.join("derive_height.png").is_file());
+}
+
+/// A run that cannot write its lock file (a file size limit of 0 fails every write, as a full
+/// disk does, once the empty lock file is made) fails naming it and leaves nothing behind: the
+/// output folder and the folders above it that it made are removed, and in a folder that was
+/// there the lock file it made is removed.
+#[test]
+fn a_run_that_cannot_write_its_lock_leaves_no_output_folder() {
+    let tmp = tempfile::tempdir().unwrap();
+    let world = common::default_world();
+    std::fs::create_dir(tmp.path().join("kept")).unwrap();
+    for out_dir in ["new/o", "kept"] {
+        for args in [
+            vec!["eval", "sway", "--out", out_dir],
+            vec![
+                "fly",
+                world.to_str().unwrap(),
+                "--frames",
+                "1",
+                "--size",
+                "32x18",
+                "--out",
+                out_dir,
+            ],
+        ] {
+            let out = Command::new("bash")
+                .args([
+                    "-c",
+                    "trap '' XFSZ; ulimit -f 0; exec \"$0\" \"$@\"",
+                    env!("CARGO_BIN_EXE_verdant"),
+                ])
+                .args(&args)
+                .current_dir(tmp.path())
+                .output()
+                .unwrap();
+            assert_fails_naming(&out, &[out_dir, ".verdant.lock"]);
+            assert!(!tmp.path().join("new").exists(), "{args:?} left its folder");
+            assert_eq!(files_under(tmp.path()), Vec::<String>::new(), "{args:?}");
+            assert!(tmp.path().join("kept").is_dir());
+        }
+    }
+}
+
 #[test]
 fn a_second_run_into_a_busy_output_folder_is_refused() {
     let tmp = tempfile::tempdir().unwrap();
@@ -1650,7 +1906,12 @@ fn a_second_run_into_a_busy_output_folder_is_refused() {
     // However the first run ends (here, killed), the OS lets go of its lock.
     first.kill().unwrap();
     first.wait().unwrap();
-    let dir = verdant::tools::fly::OutDir::create_for(&tmp.path().join("o"), "test").unwrap();
+    let dir = verdant::tools::fly::OutDir::create_for(
+        &tmp.path().join("o"),
+        "test",
+        &verdant::tools::fly::Outputs::named(&[]),
+    )
+    .unwrap();
     dir.keep();
 }
 
@@ -2225,8 +2486,8 @@ fn a_screenshot_never_replaces_a_world_file_or_a_file_that_is_not_a_png() {
         ("shots.png", "is a folder"),
         ("world/source/shot.png", "inside the world"),
         ("missing/../world/shot.png", "does not exist"),
-        ("dem.png", "is not a screenshot"),
-        ("map.png", "is not a screenshot"),
+        ("dem.png", "is a 16-bit grey PNG"),
+        ("map.png", "is an 8-bit grey PNG"),
         ("shot.png/", "must name a .png file"),
         ("notes.png/shot.png", "is not a folder"),
     ];

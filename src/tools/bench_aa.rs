@@ -45,7 +45,7 @@ use crate::aa::taa::TaaSettings;
 use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::tools::Scene;
-use crate::tools::fly::{OutDir, write_json, write_png, write_text};
+use crate::tools::fly::{OutDir, Outputs, write_json, write_png, write_text};
 use crate::tools::metrics::{COARSE_FACTOR, coarse_flip, flip_compare, rgb};
 use crate::tools::metrics::{Chart, ChartPoint};
 use crate::tools::report::AdapterReport;
@@ -682,7 +682,37 @@ pub fn run_bench_aa(
         &crate::tools::bench_lod::lod_settings(&world),
         &named,
     )?;
-    let out_dir = OutDir::create_for(&opts.out, "bench aa")?;
+    // Its tables and report, a chart per size and the last frames of each size and motion.
+    let charts: Vec<String> = opts
+        .sizes
+        .iter()
+        .map(|s| format!("aa_{}x{}.png", s.0, s.1))
+        .collect();
+    let last_frames: Vec<String> = opts
+        .sizes
+        .iter()
+        .flat_map(|s| {
+            opts.motions
+                .iter()
+                .map(move |m| format!("{}x{}_{}_", s.0, s.1, m.name()))
+        })
+        .collect();
+    let out_dir = OutDir::create_for(
+        &opts.out,
+        "bench aa",
+        &Outputs::matching(|n| {
+            [
+                "aa.json",
+                "aa_frames.csv",
+                "aa_sequences.csv",
+                "aa_paths.csv",
+                "aa_timing.csv",
+            ]
+            .contains(&n)
+                || charts.iter().any(|c| c == n)
+                || (n.ends_with(".png") && last_frames.iter().any(|p| n.starts_with(p.as_str())))
+        }),
+    )?;
     let ctx = GpuContext::new()?;
     let stop = Stop::new(opts.stop.clone());
     let mut configs = vec![(String::new(), RendererConfig::for_world(&world))];

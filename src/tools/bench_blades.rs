@@ -31,7 +31,7 @@ use crate::lod::RingSettings;
 use crate::renderer::FrameStats;
 use crate::stream::TileSource;
 use crate::tools::bench::{Measures, rgb};
-use crate::tools::fly::{OptionError, OutDir, check_range, check_size, write_text};
+use crate::tools::fly::{OptionError, OutDir, Outputs, check_range, check_size, write_text};
 use crate::tools::metrics::{LineChart, Series, flip_compare};
 use crate::tools::stop::{Stop, caught, chart_title};
 use crate::tools::timing::{FrameCounts, Timing, ramp_up, run_frames};
@@ -451,6 +451,15 @@ pub fn field_camera(opts: &BenchBladesOptions, aspect: f32) -> Camera {
     Camera::with_view(eye, view, proj)
 }
 
+/// The files [`run_bench_blades`] writes into its output folder.
+const FILES: [&str; 5] = [
+    "bench_blades.json",
+    "blades.csv",
+    "blades_time.png",
+    "blades_ratio.png",
+    "blades_error.png",
+];
+
 /// Runs the benchmark and writes `bench_blades.json`, `blades.csv`, `blades_time.png`,
 /// `blades_ratio.png` and `blades_error.png` into `opts.out`. Stopped early
 /// ([`BenchBladesOptions::stop`]), it writes them with the counts measured so far, the report
@@ -460,7 +469,7 @@ pub fn run_bench_blades(
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> Result<BenchBladesReport> {
     opts.validate()?;
-    let out_dir = OutDir::create_for(&opts.out, "bench blades")?;
+    let out_dir = OutDir::create_for(&opts.out, "bench blades", &Outputs::named(&FILES))?;
     let (world, source) = flat_field(opts.field_m)?;
     let ctx = GpuContext::new()?;
     let camera = field_camera(opts, opts.size.0 as f32 / opts.size.1 as f32);

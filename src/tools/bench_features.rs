@@ -13,7 +13,7 @@ use crate::RendererConfig;
 use crate::camera::sample_path;
 use crate::gpu::GpuContext;
 use crate::tools::bench::{Bench, BenchLodOptions, Measures, warm_up};
-use crate::tools::fly::{OutDir, write_text};
+use crate::tools::fly::{OutDir, Outputs, write_text};
 use crate::tools::metrics::{COVERAGE_DISTANCE_M, Chart, ChartPoint};
 use crate::tools::stop::{Stop, caught, chart_title};
 use crate::tools::timing::{FrameCounts, Timing, frame_ms, ramp_up, run_frames};
@@ -65,6 +65,14 @@ pub struct BenchFeaturesReport {
     pub interrupted: bool,
 }
 
+/// The files [`run_bench_features`] writes into its output folder.
+const FILES: [&str; 4] = [
+    "bench_features.json",
+    "features.csv",
+    "features.png",
+    "features_coarse.png",
+];
+
 /// `verdant bench features`: each feature's GPU cost against its contribution to the image
 /// (FLIP between the full render and the render with that feature off), charted one against
 /// the other, and each variant's error against the truth (all features on; reached by the same
@@ -112,7 +120,7 @@ pub fn run_bench_features(
     };
     let scene_name =
         (path.wind.is_empty() && m.wind_scene("storm").is_some()).then(|| "storm".to_owned());
-    let out_dir = OutDir::create_for(&opts.out, "bench features")?;
+    let out_dir = OutDir::create_for(&opts.out, "bench features", &Outputs::named(&FILES))?;
     let ctx = GpuContext::new()?;
     let variants: Vec<(String, Features)> = std::iter::once(("all".to_owned(), Features::all()))
         .chain(

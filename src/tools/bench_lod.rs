@@ -41,7 +41,7 @@ use crate::camera::{Camera, sample_path};
 use crate::gpu::GpuContext;
 use crate::lod::RingSettings;
 use crate::tools::bench::{Bench, BenchLodOptions, Measures, flip, rgb};
-use crate::tools::fly::{OutDir, write_text};
+use crate::tools::fly::{OutDir, Outputs, write_text};
 use crate::tools::metrics::{
     Chart, ChartPoint, LineChart, Series, Summary, band_mask, flip_error_map, masked_mean,
     pareto_front, ray_distances,
@@ -566,6 +566,19 @@ pub struct BenchLodReport {
     pub interrupted: bool,
 }
 
+/// The files [`run_bench_lod`] writes into its output folder.
+const FILES: [&str; 9] = [
+    "bench_lod.json",
+    "dolly.csv",
+    "dolly.png",
+    "lod_settings.csv",
+    "lod_settings.png",
+    "lod_settings_coarse.png",
+    "lod_coverage.png",
+    "far_band.csv",
+    "lod_settings_flight.png",
+];
+
 /// Runs the benchmark and writes `bench_lod.json`, `dolly.csv`, `dolly.png`, `lod_settings.csv`,
 /// `lod_settings.png`, `lod_settings_coarse.png`, `lod_coverage.png`, `far_band.csv` and, with a
 /// flight, `lod_settings_flight.png` into `opts.out`. Stopped early ([`BenchLodOptions::stop`]),
@@ -589,7 +602,7 @@ pub fn run_bench_lod(
         },
     };
     let flight = flight_path(&world, &opts.world, &opts.flight, &path)?;
-    let out_dir = OutDir::create_for(&opts.out, "bench lod")?;
+    let out_dir = OutDir::create_for(&opts.out, "bench lod", &Outputs::named(&FILES))?;
     let ctx = GpuContext::new()?;
     let stop = Stop::new(opts.stop.clone());
     let bench = Bench {

@@ -497,18 +497,26 @@ pub fn joint_front(results: &[MethodResult]) -> Vec<usize> {
 /// A chart of [`write_results`]: its file, its y axis, and the measure it plots.
 type ChartSpec = (&'static str, &'static str, fn(&MethodResult) -> f64);
 
+/// The files [`write_results`] writes.
+pub const FILES: [&str; 5] = [
+    "derive.csv",
+    "derive_height.png",
+    "derive_slope.png",
+    "derive_flattening.png",
+    "derive_roughness.png",
+];
+
 /// Writes `derive.csv` and the charts `derive_height.png` (height RMSE), `derive_slope.png`
 /// (slope RMSE), `derive_flattening.png` (slope bias) and `derive_roughness.png` against time
-/// per tile into `out` (created if needed; locked while they are written, see
-/// [`crate::tools::fly::OutDir`]). With `interrupted` (an eval stopped before its last method),
-/// the charts' titles say that they are partial.
+/// per tile ([`FILES`]) into the output folder `out`. With `interrupted` (an eval stopped
+/// before its last method), the charts' titles say that they are partial.
 pub fn write_results(
     results: &[MethodResult],
     dem_name: &str,
-    out: &std::path::Path,
+    out: &crate::tools::fly::OutDir,
     interrupted: bool,
 ) -> anyhow::Result<()> {
-    let out_dir = crate::tools::fly::OutDir::create_for(out, "eval derive")?;
+    let out = out.path();
     use std::fmt::Write as _;
     let chosen = RUNTIME_METHOD;
     let front = joint_front(results);
@@ -583,7 +591,6 @@ pub fn write_results(
         };
         chart.write_png(&out.join(file), 900, 600)?;
     }
-    out_dir.keep();
     Ok(())
 }
 
@@ -622,10 +629,12 @@ pub fn min_side(factor: usize) -> usize {
 /// Runs `eval derive` on the DEM at `dem_path` downsampled by `factor` and writes its CSV and
 /// charts into `out` ([`write_results`]). `progress` hears each method's name before it runs,
 /// with the methods done and their total. Refuses a factor that is not a power of two from 2
-/// to 64, a DEM too small for it or with heights beyond a planet's surface, and results that
-/// are not finite (then nothing is written). Stopped early (`stop`, Ctrl-C on the command line;
-/// tested between methods), it writes the methods run so far, the report marked interrupted;
-/// stopped before the first method's result, it writes nothing.
+/// to 64, an `out` where an output would replace the DEM, its sidecar or a file that is no
+/// earlier run's output ([`crate::tools::fly::OutDir::create_for`]), a DEM too small for the
+/// factor or with heights beyond a planet's surface, and results that are not finite (then
+/// nothing is written). Stopped early (`stop`, Ctrl-C on the command line; tested between
+/// methods), it writes the methods run so far, the report marked interrupted; stopped before
+/// the first method's result, it writes nothing (and a folder it made is removed).
 pub fn run_derive_eval(
     dem_path: &std::path::Path,
     factor: usize,
@@ -633,10 +642,17 @@ pub fn run_derive_eval(
     stop: &crate::tools::stop::Stop,
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> anyhow::Result<DeriveEvalReport> {
-    use anyhow::{Context as _, bail};
+    use anyhow::bail;
     if !(factor.is_power_of_two() && (2..=64).contains(&factor)) {
         bail!("--factor must be a power of two from 2 to 64, got {factor}");
     }
+    let mut outputs = crate::tools::fly::Outputs::named(&FILES)
+        .reading("the DEM this run reads (--dem)", dem_path);
+    if let Some(sidecar) = crate::world::dem::sidecar_of(dem_path) {
+        outputs = outputs.reading("the sidecar of the DEM this run reads (--dem)", &sidecar);
+    }
+    // Taken before the work: a run refused for its --out is refused at once.
+    let out_dir = crate::tools::fly::OutDir::create_for(out, "eval derive", &outputs)?;
     let dem = Dem::load(dem_path)?;
     // Heights no planet has (a wrong scale in a sidecar) are refused as the baker refuses them.
     crate::bake::check_dem_heights(&dem, dem_path)?;
@@ -710,11 +726,11 @@ pub fn run_derive_eval(
             interrupted,
         });
     }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let name = dem_path
         .file_stem()
         .map_or("DEM".into(), |s| s.to_string_lossy().into_owned());
-    write_results(&results, &name, out, interrupted)?;
+    write_results(&results, &name, &out_dir, interrupted)?;
+    out_dir.keep();
     Ok(DeriveEvalReport {
         results,
         front,

@@ -313,6 +313,14 @@ pub fn dt_label(dt: f64) -> String {
     }
 }
 
+/// The files [`run_sway_eval`] writes into its output folder.
+const FILES: [&str; 4] = [
+    "sway.csv",
+    "sway_error.png",
+    "sway_error_soft.png",
+    "sway_stability.png",
+];
+
 /// Runs the eval ([`evaluate_all`]) and writes into `out` (created if needed):
 ///
 /// - `sway.csv`: one row per preset, integrator and time step: `rms_error`, `max_error` and
@@ -335,7 +343,11 @@ pub fn run_sway_eval(
     stop: &Stop,
     progress: &mut dyn FnMut(u64, u64),
 ) -> anyhow::Result<SwayEvalReport> {
-    let out_dir = crate::tools::fly::OutDir::create_for(out, "eval sway")?;
+    let out_dir = crate::tools::fly::OutDir::create_for(
+        out,
+        "eval sway",
+        &crate::tools::fly::Outputs::named(&FILES),
+    )?;
     let results = evaluate_until(stop, progress);
     let interrupted =
         results.len() < Preset::ALL.len() * Integrator::ALL.len() * EVAL_STEPS_S.len();

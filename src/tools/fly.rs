@@ -26,7 +26,8 @@ use crate::world::World;
 // they lived here.
 pub use crate::tools::options::{MAX_IMAGE_SIDE, OptionError, check_range, check_size};
 pub use crate::tools::output::{
-    LOCK_FILE, OutDir, OutDirError, WriteError, write_atomic, write_json, write_png, write_text,
+    LOCK_FILE, OutDir, OutDirError, Outputs, WriteError, write_atomic, write_json, write_png,
+    write_text,
 };
 
 /// Frames whose grass coverage a fly-through without images measures: evenly spaced over the
@@ -102,6 +103,21 @@ pub enum FlyProgress {
     /// Frame images in the output folder that this run does not write (an earlier run's):
     /// how many, and the first and last of their names.
     StaleFrames(usize, String, String),
+}
+
+/// The name of frame `i`'s image: `frame_00042.png`.
+pub fn frame_file_name(i: u32) -> String {
+    format!("frame_{i:05}.png")
+}
+
+/// The index of the frame image named `name`, if it is one ([`frame_file_name`]).
+pub fn frame_index(name: &str) -> Option<u32> {
+    let i = name
+        .strip_prefix("frame_")?
+        .strip_suffix(".png")?
+        .parse()
+        .ok()?;
+    (frame_file_name(i) == name).then_some(i)
 }
 
 /// The frame images (`frame_NNNNN.png`) in `dir` that a run writing `written` of them leaves as
@@ -288,8 +304,13 @@ pub fn run_fly_with_source(
     // Checked before anything is written.
     crate::tools::check_wind_option(&world, opts.wind_scene.as_deref())?;
     let config = opts.renderer_config(&world, &path)?;
-    let out_dir = OutDir::create_for(&opts.out, "fly")?;
-    let stale = stale_frames(&opts.out, if opts.write_images { opts.frames } else { 0 });
+    let frames = if opts.write_images { opts.frames } else { 0 };
+    let out_dir = OutDir::create_for(
+        &opts.out,
+        "fly",
+        &Outputs::matching(|n| n == "report.json" || frame_index(n).is_some_and(|i| i < frames)),
+    )?;
+    let stale = stale_frames(&opts.out, frames);
     if let (Some(first), Some(last)) = (stale.first(), stale.last()) {
         progress(FlyProgress::StaleFrames(
             stale.len(),
@@ -393,7 +414,7 @@ pub fn run_fly_with_source(
                 pixels: c.pixels,
                 covered: c.covered,
             });
-            let file = opts.out.join(format!("frame_{i:05}.png"));
+            let file = opts.out.join(frame_file_name(i));
             if tx.send((file, image)).is_err() {
                 break; // the writer failed; its error is reported below
             }

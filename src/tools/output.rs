@@ -1,6 +1,8 @@
 //! Output files and folders of the tools. Every file the tools write goes through
 //! [`write_atomic`] (whole or not at all), and every output folder is held by an [`OutDir`]
-//! (a lock file naming the process) while a run writes into it.
+//! (a lock file naming the process) while a run writes into it. Taking the folder checks the
+//! files the run will write there ([`Outputs`]): none may be one of the run's inputs, or a file
+//! that no run wrote ([`not_an_output`]: a DEM, say).
 
 use std::fs::File;
 use std::io::{Read, Write};
@@ -148,6 +150,35 @@ pub enum OutDirError {
         /// What stands in the way, in words.
         what: String,
     },
+    /// A file the run would write in the folder is one that it reads.
+    #[error(
+        "{}: it is {what}, and {tool} writes a file of this name into its --out, which would \
+         replace it; choose another --out",
+        file.display()
+    )]
+    ReplacesInput {
+        /// The file.
+        file: PathBuf,
+        /// What it is to the run, in words (`the DEM this run reads (--dem)`).
+        what: String,
+        /// The run's tool.
+        tool: String,
+    },
+    /// A file the run would write in the folder is there already, and is no earlier run's
+    /// output ([`not_an_output`]).
+    #[error(
+        "{}: {tool} writes a file of this name into its --out, and this one {why}; a run \
+         replaces only an earlier run's output: move the file or choose another --out",
+        file.display()
+    )]
+    NotAnOutput {
+        /// The file.
+        file: PathBuf,
+        /// The run's tool.
+        tool: String,
+        /// What the file is, in words ([`not_an_output`]).
+        why: String,
+    },
     /// The folder is one no run writes into: the root of the file system, a world's own folder
     /// or a world's `tiles/`.
     #[error("{}: {why}; choose another --out", path.display())]
@@ -157,6 +188,142 @@ pub enum OutDirError {
         /// What it is.
         why: &'static str,
     },
+}
+
+/// The files a run writes into its output folder, and the files it reads. Taking the folder
+/// ([`OutDir::create_for`]) refuses, before anything is written, a run that would write over
+/// one of its inputs or over a file there that is no earlier run's output ([`not_an_output`]).
+pub struct Outputs<'a> {
+    writes: Box<dyn Fn(&str) -> bool + 'a>,
+    reads: Vec<(String, PathBuf)>,
+}
+
+impl<'a> Outputs<'a> {
+    /// A run that writes the files named `names`.
+    pub fn named(names: &'a [&'a str]) -> Self {
+        Self::matching(move |n| names.contains(&n))
+    }
+
+    /// A run that writes the files whose names `writes` accepts (numbered frames, say).
+    pub fn matching(writes: impl Fn(&str) -> bool + 'a) -> Self {
+        Self {
+            writes: Box::new(writes),
+            reads: Vec::new(),
+        }
+    }
+
+    /// The run reads `file` too; `what` says what it is to the user (`the DEM this run reads
+    /// (--dem)`). It is compared with the files to write by their canonical paths.
+    pub fn reading(mut self, what: impl Into<String>, file: &Path) -> Self {
+        self.reads.push((what.into(), file.to_path_buf()));
+        self
+    }
+}
+
+/// Why the file at `file`, if there is one, is not a file that a run of verdant may write over:
+/// not a regular file, or, by its name, a `.png` that is not an 8-bit RGB or RGBA PNG without
+/// a JSON sidecar (what the tools write: a 16-bit or grey PNG, or one with a sidecar, may be a
+/// DEM or a map), or a `.json` beside a `.png` of the same name (a DEM's sidecar). A symbolic
+/// link is judged by the file it leads to. `None` where there is no file, or one that may be
+/// replaced, or a folder (no file is renamed over a folder: the write fails, naming it). The
+/// words follow the file's name: `is not a PNG image`.
+pub fn not_an_output(file: &Path) -> Option<String> {
+    let meta = match std::fs::metadata(file) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return None,
+        Err(e) => return Some(format!("cannot be examined ({e})")),
+        Ok(m) => m,
+    };
+    if meta.is_dir() {
+        return None;
+    }
+    if !meta.is_file() {
+        return Some("is not a regular file".into());
+    }
+    let named = |e: &str| file.extension().is_some_and(|x| x.eq_ignore_ascii_case(e));
+    if named("png") {
+        // The signature, then IHDR: length, "IHDR", width, height, bit depth, colour type.
+        let mut head = [0u8; 26];
+        let read = File::open(file)
+            .and_then(|mut f| f.read_exact(&mut head))
+            .is_ok();
+        if !(read && head[..8] == *b"\x89PNG\r\n\x1a\n" && &head[12..16] == b"IHDR") {
+            return Some("is not a PNG image".into());
+        }
+        let sidecar = crate::world::dem::sidecar_path(file);
+        if sidecar.exists() {
+            return Some(format!(
+                "has a JSON sidecar, {}: it may be a DEM",
+                sidecar.display()
+            ));
+        }
+        let (depth, colour) = (head[24], head[25]);
+        if depth != 8 || !matches!(colour, 2 | 6) {
+            let colour = match colour {
+                0 => "grey",
+                2 => "RGB",
+                3 => "palette",
+                4 => "grey and alpha",
+                6 => "RGBA",
+                _ => "unknown colour type",
+            };
+            let a = if depth == 8 { "an" } else { "a" };
+            return Some(format!(
+                "is {a} {depth}-bit {colour} PNG, where verdant writes 8-bit RGB or RGBA: it \
+                 may be a DEM, a map or a picture"
+            ));
+        }
+    } else if named("json") {
+        let png = file.with_extension("png");
+        if png.is_file() {
+            return Some(format!(
+                "is the sidecar of {}: it may be a DEM's",
+                png.display()
+            ));
+        }
+    }
+    None
+}
+
+/// Refuses a run into `dir` that would write over one of its inputs or over a file that is
+/// no earlier run's output. Only the files there are looked at (a folder that is not there
+/// holds none), the lock file among them.
+fn check_outputs(dir: &Path, tool: &str, outputs: &Outputs) -> Result<(), OutDirError> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    let reads: Vec<(&str, PathBuf)> = outputs
+        .reads
+        .iter()
+        .filter_map(|(what, file)| Some((what.as_str(), file.canonicalize().ok()?)))
+        .collect();
+    let mut names: Vec<String> = entries
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n == LOCK_FILE || (outputs.writes)(n))
+        .collect();
+    names.sort();
+    for name in names {
+        let file = dir.join(&name);
+        if let Ok(real) = file.canonicalize()
+            && let Some((what, _)) = reads.iter().find(|(_, r)| *r == real)
+        {
+            return Err(OutDirError::ReplacesInput {
+                file,
+                what: (*what).to_owned(),
+                tool: tool.to_owned(),
+            });
+        }
+        // The lock file is no output: `lock_folder` refuses what must not be taken for one.
+        if name != LOCK_FILE
+            && let Some(why) = not_an_output(&file)
+        {
+            return Err(OutDirError::NotAnOutput {
+                file,
+                tool: tool.to_owned(),
+                why,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// What keeps `path` from being a folder, if anything does: the nearest of it and the folders
@@ -201,7 +368,8 @@ fn owner_words(pid: Option<u32>, tool: &str) -> String {
 /// instead of mixing its files with this one's; the OS releases the lock when the process ends,
 /// however it ends. If the run created the folder (and any of its parents) and fails before
 /// writing anything into it, the folders it created are removed again (only while empty), so an
-/// early failure leaves no trace.
+/// early failure leaves no trace: a lock file that could not be written (a full disk) is
+/// removed too.
 pub struct OutDir {
     path: PathBuf,
     /// The folders this run created, the deepest first: `path` and the parents it lacked.
@@ -215,25 +383,28 @@ pub struct OutDir {
 }
 
 impl OutDir {
-    /// Creates `path` (and its parents) where needed and locks it for this process, named in
-    /// the lock by its first argument (the `verdant` subcommand).
-    pub fn create(path: &Path) -> Result<Self, OutDirError> {
+    /// [`OutDir::create_for`] for the tool named by this process's first argument (the
+    /// `verdant` subcommand).
+    pub fn create(path: &Path, outputs: &Outputs) -> Result<Self, OutDirError> {
         let tool = std::env::args()
             .nth(1)
             .filter(|a| !a.starts_with('-'))
             .unwrap_or_default();
-        Self::create_for(path, &tool)
+        Self::create_for(path, &tool, outputs)
     }
 
     /// Creates `path` (and its parents) where needed and locks it for `tool` (`fly`,
-    /// `bench lod`, ...), which a refused second run names.
-    pub fn create_for(path: &Path, tool: &str) -> Result<Self, OutDirError> {
+    /// `bench lod`, ...), which a refused second run names. Refused before anything is
+    /// written where a file the run writes there (`outputs`) is one of its inputs or no
+    /// earlier run's output ([`not_an_output`]).
+    pub fn create_for(path: &Path, tool: &str, outputs: &Outputs) -> Result<Self, OutDirError> {
         if let Some(why) = crate::world::format::refused_output(path) {
             return Err(OutDirError::Refused {
                 path: path.to_path_buf(),
                 why,
             });
         }
+        check_outputs(path, tool, outputs)?;
         let created = crate::world::format::missing_folders(path);
         let passed_through = passed_through(path, &created);
         // The folder as resolved first (`new/.` names `new`, which `create_dir_all` of the
@@ -262,7 +433,7 @@ impl OutDir {
             kept: false,
             lock: None,
         };
-        dir.lock = lock_folder(path, tool)?;
+        dir.lock = Some(lock_folder(path, tool)?);
         Ok(dir)
     }
 
@@ -277,39 +448,57 @@ impl OutDir {
     }
 }
 
-/// Takes the lock of `dir` for `tool`; `None` where the file system has no locks.
-fn lock_folder(dir: &Path, tool: &str) -> Result<Option<File>, OutDirError> {
+/// Takes the lock of `dir` for `tool`. Where the file system has no locks, the lock file is
+/// written all the same (and removed when the run ends), but holds nothing. A lock file this
+/// run made, or took, is removed again if the run fails to take it (a full disk makes the
+/// file, then fails to write it).
+fn lock_folder(dir: &Path, tool: &str) -> Result<File, OutDirError> {
     let file = dir.join(LOCK_FILE);
     let failed = |source| OutDirError::Lock {
         path: dir.to_path_buf(),
         source,
     };
+    // Never through a symbolic link: the lock is truncated and written, and a link would have
+    // that done to whatever file it leads to.
+    let not_regular = || {
+        failed(std::io::Error::other(
+            "it is not a regular file (a symbolic link, a folder or a device); remove it if no \
+             run of verdant is writing here",
+        ))
+    };
+    let open = |create_new: bool| {
+        let mut options = std::fs::OpenOptions::new();
+        options.read(true).write(true).create_new(create_new);
+        #[cfg(unix)]
+        std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NOFOLLOW);
+        options.open(&file)
+    };
     // A run that lets go of the lock removes the file first: a file locked here after that
     // removal is no longer the folder's lock, and the lock is taken again on the new one.
     for _ in 0..100 {
-        // Never through a symbolic link: the lock is truncated and written, and a link would
-        // have that done to whatever file it leads to.
-        let not_regular = || {
-            failed(std::io::Error::other(
-                "it is not a regular file (a symbolic link, a folder or a device); remove it if \
-                 no run of verdant is writing here",
-            ))
-        };
         if std::fs::symlink_metadata(&file).is_ok_and(|m| !m.is_file()) {
             return Err(not_regular());
         }
-        let mut options = std::fs::OpenOptions::new();
-        options.read(true).write(true).create(true).truncate(false);
-        #[cfg(unix)]
-        std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NOFOLLOW);
-        let mut f = options.open(&file).map_err(|e| {
+        // Whether this run made the file: then it goes again if the run does not take it.
+        let opened = match open(false) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => open(true).map(|f| (f, true)),
+            r => r.map(|f| (f, false)),
+        };
+        let (mut f, made) = match opened {
+            Ok(o) => o,
+            // Made by another run between the two opens: taken as found, again.
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             #[cfg(unix)]
-            if e.raw_os_error() == Some(libc::ELOOP) {
-                return not_regular();
+            Err(e) if e.raw_os_error() == Some(libc::ELOOP) => return Err(not_regular()),
+            Err(e) => return Err(failed(e)),
+        };
+        let give_up = |e: OutDirError| {
+            if made {
+                let _ = std::fs::remove_file(&file);
             }
-            failed(e)
-        })?;
-        let meta = f.metadata().map_err(failed)?;
+            e
+        };
+        let meta = f.metadata().map_err(|e| give_up(failed(e)))?;
         if !meta.is_file() {
             return Err(not_regular());
         }
@@ -323,8 +512,13 @@ fn lock_folder(dir: &Path, tool: &str) -> Result<Option<File>, OutDirError> {
             )));
         }
         match f.try_lock() {
-            Ok(()) => {}
+            Ok(()) => {
+                if !same_file(&f, &file) {
+                    continue;
+                }
+            }
             Err(std::fs::TryLockError::WouldBlock) => {
+                // Another run's, even if made here: it took it first.
                 let mut text = String::new();
                 let _ = f.read_to_string(&mut text);
                 let mut words = text.split_whitespace();
@@ -341,17 +535,18 @@ fn lock_folder(dir: &Path, tool: &str) -> Result<Option<File>, OutDirError> {
                     "the file system of {} has no file locks: two runs into it would not be told apart",
                     dir.display()
                 );
-                return Ok(None);
             }
-            Err(std::fs::TryLockError::Error(e)) => return Err(failed(e)),
+            Err(std::fs::TryLockError::Error(e)) => return Err(give_up(failed(e))),
         }
-        if !same_file(&f, &file) {
-            continue;
+        if let Err(e) = f
+            .set_len(0)
+            .and_then(|()| f.write_all(format!("{} {tool}\n", std::process::id()).as_bytes()))
+        {
+            // Held (or made) here: removed, as a run that ends removes it.
+            let _ = std::fs::remove_file(&file);
+            return Err(failed(e));
         }
-        f.set_len(0).map_err(failed)?;
-        f.write_all(format!("{} {tool}\n", std::process::id()).as_bytes())
-            .map_err(failed)?;
-        return Ok(Some(f));
+        return Ok(f);
     }
     Err(failed(std::io::Error::other(
         "its lock file kept being replaced",
@@ -407,6 +602,11 @@ fn passed_through(path: &Path, created: &[PathBuf]) -> Vec<PathBuf> {
 mod tests {
     use super::*;
 
+    /// A run that writes no file into its folder.
+    fn nothing() -> Outputs<'static> {
+        Outputs::named(&[])
+    }
+
     /// Passes `left` bytes on, then fails as a full disk does.
     struct FailAfter<'a> {
         inner: &'a mut dyn Write,
@@ -452,7 +652,7 @@ mod tests {
             ),
         ];
         for (out, said) in cases {
-            let e = OutDir::create_for(&out, "fly").err().unwrap();
+            let e = OutDir::create_for(&out, "fly", &nothing()).err().unwrap();
             let text = e.to_string();
             assert!(matches!(e, OutDirError::NotAFolder { .. }), "{text}");
             assert!(text.contains(&said) && text.contains("--out"), "{text}");
@@ -534,12 +734,12 @@ mod tests {
     fn a_held_output_folder_refuses_a_second_run_until_it_is_let_go() {
         let tmp = tempfile::tempdir().unwrap();
         let out = tmp.path().join("out");
-        let first = OutDir::create_for(&out, "fly").unwrap();
+        let first = OutDir::create_for(&out, "fly", &nothing()).unwrap();
         let lock = std::fs::read_to_string(out.join(LOCK_FILE)).unwrap();
         assert_eq!(lock, format!("{} fly\n", std::process::id()));
         // A second run (another open of the lock file: flock locks are per open file) is
         // refused, naming the folder, the first run's process and tool, and what to do.
-        let e = match OutDir::create_for(&out, "bench lod") {
+        let e = match OutDir::create_for(&out, "bench lod", &nothing()) {
             Err(e) => e,
             Ok(_) => panic!("a second run was let into a held folder"),
         };
@@ -558,11 +758,11 @@ mod tests {
         drop(first);
         assert!(!out.exists());
         // Then a second run gets in, and a kept folder loses only its lock file.
-        let second = OutDir::create_for(&out, "bench lod").unwrap();
+        let second = OutDir::create_for(&out, "bench lod", &nothing()).unwrap();
         std::fs::write(out.join("report.json"), "{}").unwrap();
         second.keep();
         assert_eq!(names(&out), ["report.json"]);
-        let third = OutDir::create(&out).unwrap();
+        let third = OutDir::create(&out, &nothing()).unwrap();
         drop(third);
         assert_eq!(names(&out), ["report.json"]);
     }
@@ -584,7 +784,7 @@ mod tests {
         let folder = tmp.path().join("out3");
         std::fs::create_dir_all(folder.join(LOCK_FILE)).unwrap();
         for dir in [&out, &dangling, &folder] {
-            let e = match OutDir::create_for(dir, "eval sway") {
+            let e = match OutDir::create_for(dir, "eval sway", &nothing()) {
                 Err(e) => e.to_string(),
                 Ok(_) => panic!(
                     "{}: a run took a lock that is not a regular file",
@@ -600,7 +800,7 @@ mod tests {
         let linked = tmp.path().join("out4");
         std::fs::create_dir(&linked).unwrap();
         std::fs::hard_link(&precious, linked.join(LOCK_FILE)).unwrap();
-        let e = match OutDir::create_for(&linked, "fly") {
+        let e = match OutDir::create_for(&linked, "fly", &nothing()) {
             Err(e) => e.to_string(),
             Ok(_) => panic!("a run took a lock that is a hard link"),
         };
@@ -618,15 +818,15 @@ mod tests {
     fn an_output_folder_spelled_through_a_new_folder_leaves_it_behind_no_more() {
         let tmp = tempfile::tempdir().unwrap();
         let out = tmp.path().join("nn/../outx");
-        let dir = OutDir::create_for(&out, "fly").unwrap();
+        let dir = OutDir::create_for(&out, "fly", &nothing()).unwrap();
         std::fs::write(out.join("report.json"), "{}").unwrap();
         dir.keep();
         assert_eq!(names(tmp.path()), ["outx"]);
         assert_eq!(names(&tmp.path().join("outx")), ["report.json"]);
-        drop(OutDir::create_for(&tmp.path().join("mm/../outy"), "fly").unwrap());
+        drop(OutDir::create_for(&tmp.path().join("mm/../outy"), "fly", &nothing()).unwrap());
         assert_eq!(names(tmp.path()), ["outx"]);
         std::fs::create_dir(tmp.path().join("kept")).unwrap();
-        drop(OutDir::create_for(&tmp.path().join("kept/../outz"), "fly").unwrap());
+        drop(OutDir::create_for(&tmp.path().join("kept/../outz"), "fly", &nothing()).unwrap());
         assert_eq!(names(tmp.path()), ["kept", "outx"]);
     }
 
@@ -635,7 +835,7 @@ mod tests {
     fn an_output_folder_named_through_a_dot_is_made() {
         let tmp = tempfile::tempdir().unwrap();
         let out = tmp.path().join("o6/.");
-        let dir = OutDir::create_for(&out, "fly").unwrap();
+        let dir = OutDir::create_for(&out, "fly", &nothing()).unwrap();
         std::fs::write(out.join("report.json"), "{}").unwrap();
         dir.keep();
         assert_eq!(names(&tmp.path().join("o6")), ["report.json"]);
@@ -646,20 +846,116 @@ mod tests {
         let tmp = tempfile::tempdir().unwrap();
         // zz/yy/out, none of it there: a run that fails with nothing written leaves no zz.
         let out = tmp.path().join("zz/yy/out");
-        drop(OutDir::create_for(&out, "fly").unwrap());
+        drop(OutDir::create_for(&out, "fly", &nothing()).unwrap());
         assert!(names(tmp.path()).is_empty(), "{:?}", names(tmp.path()));
         // A parent that was there stays; so do the ones holding something else by then.
         std::fs::create_dir(tmp.path().join("zz")).unwrap();
-        let dir = OutDir::create_for(&out, "fly").unwrap();
+        let dir = OutDir::create_for(&out, "fly", &nothing()).unwrap();
         std::fs::write(tmp.path().join("zz/yy/note.txt"), "mine").unwrap();
         drop(dir);
         assert_eq!(names(&tmp.path().join("zz/yy")), ["note.txt"]);
         assert!(!out.exists());
         // A kept run keeps them all.
         let kept = tmp.path().join("a/b");
-        let dir = OutDir::create_for(&kept, "fly").unwrap();
+        let dir = OutDir::create_for(&kept, "fly", &nothing()).unwrap();
         dir.keep();
         assert!(kept.is_dir());
+    }
+
+    /// A folder is refused, before anything is written, where a file the run writes there is
+    /// one of its inputs (however it is spelled) or is no earlier run's output, saying which
+    /// and why; an earlier run's outputs (8-bit RGB and RGBA PNGs, text) are replaced as before,
+    /// and files the run does not write are not looked at.
+    #[test]
+    fn a_run_is_refused_where_it_would_write_over_its_input_or_a_users_file() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("out");
+        std::fs::create_dir(&out).unwrap();
+        image::RgbImage::new(2, 2)
+            .save(out.join("chart.png"))
+            .unwrap();
+        image::RgbaImage::new(2, 2)
+            .save(out.join("frame.png"))
+            .unwrap();
+        std::fs::write(out.join("t.csv"), "a,b\n").unwrap();
+        std::fs::write(out.join("r.json"), "{}").unwrap();
+        let earlier = ["chart.png", "frame.png", "r.json", "t.csv"];
+        OutDir::create_for(&out, "bench lod", &Outputs::named(&earlier))
+            .unwrap()
+            .keep();
+        // An input named through a link to the folder and `..`, and the lock file as an input
+        // (which taking the lock would truncate).
+        std::os::unix::fs::symlink(&out, tmp.path().join("link")).unwrap();
+        std::fs::write(out.join(LOCK_FILE), "my data").unwrap();
+        for (written, input) in [
+            ("t.csv", tmp.path().join("link/../out/t.csv")),
+            ("derive.csv", out.join(LOCK_FILE)),
+        ] {
+            let e = OutDir::create_for(
+                &out,
+                "eval derive",
+                &Outputs::named(&[written]).reading("the DEM this run reads (--dem)", &input),
+            )
+            .err()
+            .unwrap();
+            let text = e.to_string();
+            assert!(matches!(e, OutDirError::ReplacesInput { .. }), "{text}");
+            let file = out.join(input.file_name().unwrap()).display().to_string();
+            for needle in [
+                file.as_str(),
+                "(--dem)",
+                "eval derive",
+                "choose another --out",
+            ] {
+                assert!(text.contains(needle), "{needle:?} not in {text:?}");
+            }
+        }
+        assert_eq!(
+            std::fs::read_to_string(out.join(LOCK_FILE)).unwrap(),
+            "my data"
+        );
+        std::fs::remove_file(out.join(LOCK_FILE)).unwrap();
+        // Files that no run wrote, each refused saying what it is.
+        image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::new(2, 2)
+            .save(out.join("dem.png"))
+            .unwrap();
+        image::GrayImage::new(2, 2)
+            .save(out.join("map.png"))
+            .unwrap();
+        image::RgbImage::new(2, 2)
+            .save(out.join("shot.png"))
+            .unwrap();
+        std::fs::write(out.join("shot.json"), "{}").unwrap();
+        image::RgbImage::new(2, 2)
+            .save(out.join("pic.png"))
+            .unwrap();
+        std::fs::write(out.join("pic.json"), "{}").unwrap();
+        std::fs::write(out.join("notes.png"), "my notes").unwrap();
+        std::fs::create_dir(out.join("shots.png")).unwrap();
+        let before = names(&out);
+        for (name, why) in [
+            ("dem.png", "is a 16-bit grey PNG"),
+            ("map.png", "is an 8-bit grey PNG"),
+            ("shot.png", "has a JSON sidecar"),
+            ("pic.json", "is the sidecar of"),
+            ("notes.png", "is not a PNG image"),
+        ] {
+            let e = OutDir::create_for(&out, "fly", &Outputs::named(&[name]))
+                .err()
+                .unwrap();
+            let text = e.to_string();
+            assert!(matches!(e, OutDirError::NotAnOutput { .. }), "{text}");
+            let file = out.join(name).display().to_string();
+            for needle in [file.as_str(), why, "fly writes", "--out"] {
+                assert!(text.contains(needle), "{needle:?} not in {text:?}");
+            }
+        }
+        // Only the files the run writes are looked at; a folder in an output's place is left to
+        // fail the write that meets it (nothing is lost there).
+        OutDir::create_for(&out, "fly", &Outputs::named(&["report.json", "shots.png"]))
+            .unwrap()
+            .keep();
+        assert_eq!(names(&out), before);
     }
 
     #[test]
@@ -667,7 +963,7 @@ mod tests {
         // A run that was killed leaves its lock file, but no lock: the OS let go of it.
         let tmp = tempfile::tempdir().unwrap();
         std::fs::write(tmp.path().join(LOCK_FILE), "4000000000 fly\n").unwrap();
-        let dir = OutDir::create_for(tmp.path(), "fly").unwrap();
+        let dir = OutDir::create_for(tmp.path(), "fly", &nothing()).unwrap();
         let lock = std::fs::read_to_string(tmp.path().join(LOCK_FILE)).unwrap();
         assert_eq!(lock, format!("{} fly\n", std::process::id()));
         dir.keep();

@@ -466,7 +466,11 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             min_s
         );
     }
-    let out_dir = crate::tools::output::OutDir::create(&opts.out)?;
+    // The faulty copy of the world is not among them: it is checked where it is made.
+    let out_dir = crate::tools::output::OutDir::create(
+        &opts.out,
+        &crate::tools::output::Outputs::named(&["soak.json"]),
+    )?;
     let is_url = opts.world.to_str().is_some_and(crate::stream::http::is_url);
     // With faults on a world on disk, the soak flies a copy whose files it breaks.
     let mut file_faults = if opts.faults > 0.0 && !is_url {

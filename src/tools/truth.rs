@@ -34,7 +34,10 @@ use crate::camera::{Camera, sample_path, walker_at};
 use crate::gpu::GpuContext;
 use crate::lod::RingSettings;
 use crate::stream::TileSource;
-use crate::tools::fly::{FlyOptions, FlyProgress, OptionError, OutDir, check_range, write_png};
+use crate::tools::fly::{
+    FlyOptions, FlyProgress, OptionError, OutDir, Outputs, check_range, frame_file_name,
+    frame_index, write_png,
+};
 use crate::tools::metrics::{decode_srgb8, encode_srgb8};
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::World;
@@ -423,7 +426,13 @@ pub fn run_fly_truth(
     let started = std::time::Instant::now();
     let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
     let path = crate::tools::camera_path(&world, &opts.world, opts.path.as_deref())?;
-    let out_dir = OutDir::create_for(&opts.out, "fly")?;
+    let out_dir = OutDir::create_for(
+        &opts.out,
+        "fly",
+        &Outputs::matching(|n| {
+            n == "truth.json" || frame_index(n).is_some_and(|i| i < opts.frames)
+        }),
+    )?;
     let ctx = GpuContext::new()?;
     let mut base = RendererConfig::for_world(&world);
     base.service = super::service_over(opts.service, &base);
@@ -449,7 +458,7 @@ pub fn run_fly_truth(
         let camera = sample_path(&path, t_s);
         let walker = walker_at(&manifest, &path, t_s);
         let image = truth.render(&ctx, &camera, t_s, Some(walker))?;
-        let file: PathBuf = opts.out.join(format!("frame_{i:05}.png"));
+        let file: PathBuf = opts.out.join(frame_file_name(i));
         write_png(&file, &image)?;
         frames.push(TruthFrame {
             index: i,

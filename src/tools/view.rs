@@ -641,8 +641,8 @@ impl Viewer {
 
 /// Checks `--screenshot FILE` before anything is drawn: a `.png` in an existing folder that is
 /// in no world (a world's folder or any folder below it), and, where the file exists already,
-/// an 8-bit RGBA PNG without a JSON sidecar beside it (what a screenshot is), never a file of
-/// another kind: not a DEM, a map or a picture of another kind.
+/// one that a run may write over ([`crate::tools::output::not_an_output`]: an 8-bit RGB or RGBA
+/// PNG without a JSON sidecar beside it), never a file of another kind: not a DEM or a map.
 fn check_screenshot(file: &Path) -> Result<()> {
     let shown = file.display();
     let trailing_slash = file.as_os_str().as_encoded_bytes().ends_with(b"/");
@@ -683,34 +683,15 @@ fn check_screenshot(file: &Path) -> Result<()> {
             world.display()
         );
     }
-    match std::fs::symlink_metadata(file) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
-        Err(e) => bail!("--screenshot {shown}: {e}"),
-        Ok(m) if m.is_dir() => bail!("--screenshot {shown}: is a folder"),
-        Ok(m) if !m.is_file() => bail!("--screenshot {shown}: exists and is not a regular file"),
-        Ok(_) => {
-            // The signature, then IHDR: length, "IHDR", width, height, bit depth, colour type.
-            let mut head = [0u8; 26];
-            let read = std::fs::File::open(file)
-                .and_then(|mut f| std::io::Read::read_exact(&mut f, &mut head))
-                .is_ok();
-            let is_png = read && head[..8] == *b"\x89PNG\r\n\x1a\n" && &head[12..16] == b"IHDR";
-            if !is_png {
-                bail!(
-                    "--screenshot {shown}: exists and is not a PNG image; a screenshot replaces \
-                     only an earlier screenshot"
-                );
-            }
-            let rgba8 = head[24] == 8 && head[25] == 6;
-            if !rgba8 || file.with_extension("json").exists() {
-                bail!(
-                    "--screenshot {shown}: exists and is not a screenshot (an 8-bit RGBA PNG \
-                     without a .json sidecar: this one may be a DEM, a map or a picture); a \
-                     screenshot replaces only an earlier screenshot"
-                );
-            }
-            Ok(())
-        }
+    if file.is_dir() {
+        bail!("--screenshot {shown}: is a folder");
+    }
+    match crate::tools::output::not_an_output(file) {
+        None => Ok(()),
+        Some(why) => bail!(
+            "--screenshot {shown}: exists and {why}; a screenshot replaces only an earlier \
+             screenshot"
+        ),
     }
 }
 
