@@ -1143,15 +1143,7 @@ fn grass_that_overflows_its_pool_is_reported_and_warned_of() {
 #[test]
 fn a_path_outside_the_world_is_warned_of() {
     let tmp = tempfile::tempdir().unwrap();
-    let w = common::world_copy(tmp.path());
-    let toml = w.join("world.toml");
-    let mut text = std::fs::read_to_string(&toml).unwrap();
-    text.push_str(
-        "\n[[paths]]\nname = \"away\"\nduration_s = 2.0\n\
-         [[paths.keys]]\nt_s = 0.0\nposition_m = [-40000.0, -40000.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n\
-         [[paths.keys]]\nt_s = 2.0\nposition_m = [-40010.0, -40010.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n",
-    );
-    std::fs::write(&toml, text).unwrap();
+    let w = common::world_with_a_path_away(tmp.path());
     let (_, stderr) = fly_report_and_stderr(
         &[
             w.to_str().unwrap(),

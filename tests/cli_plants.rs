@@ -129,19 +129,7 @@ fn bad_plant_files_are_refused_naming_the_file() {
         make(&w);
         std::fs::write(w.join("world.toml"), manifest.replace("PLACEHOLDER", file)).unwrap();
         let out = fly(&w, tmp.path());
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{file}: {stderr}");
-        assert!(!stderr.contains("panicked"), "{file}: {stderr}");
-        for n in needles {
-            assert!(
-                stderr.contains(n),
-                "{file}: stderr should name {n:?}: {stderr}"
-            );
-        }
-        assert!(
-            !tmp.path().join("o/report.json").exists(),
-            "{file}: nothing is written"
-        );
+        assert_refused(&out, file, needles.iter().copied(), tmp.path());
     }
 }
 
@@ -154,19 +142,7 @@ fn plant_files_that_would_draw_nothing_are_refused_naming_type_file_and_reason()
         write_plant_gltf(&w.join(file), &mesh, None).unwrap();
         std::fs::write(w.join("world.toml"), manifest.replace("PLACEHOLDER", file)).unwrap();
         let out = fly_path(&w, tmp.path(), "meadow", "32x18");
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{file}: {stderr}");
-        assert!(!stderr.contains("panicked"), "{file}: {stderr}");
-        for n in [file, "\"marigold\"", reason] {
-            assert!(
-                stderr.contains(n),
-                "{file}: stderr should name {n:?}: {stderr}"
-            );
-        }
-        assert!(
-            !tmp.path().join("o/report.json").exists(),
-            "{file}: nothing is written"
-        );
+        assert_refused(&out, file, [file, "\"marigold\"", reason], tmp.path());
     }
 }
 
@@ -375,5 +351,28 @@ fn a_gltf_plant_over_http_renders_what_the_folder_renders() {
     assert!(
         stderr.contains("marigold") && stderr.contains(&server.url()),
         "{stderr}"
+    );
+}
+
+/// A run refused for the plant file `file`: status 1, no panic, every one of `needles` in its
+/// stderr, and no report written into `dir/o`.
+fn assert_refused<'a>(
+    out: &std::process::Output,
+    file: &str,
+    needles: impl IntoIterator<Item = &'a str>,
+    dir: &std::path::Path,
+) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{file}: {stderr}");
+    assert!(!stderr.contains("panicked"), "{file}: {stderr}");
+    for n in needles {
+        assert!(
+            stderr.contains(n),
+            "{file}: stderr should name {n:?}: {stderr}"
+        );
+    }
+    assert!(
+        !dir.join("o/report.json").exists(),
+        "{file}: nothing is written"
     );
 }

@@ -88,15 +88,7 @@ fn the_viewer_on_a_virtual_display_shows_what_the_headless_renderer_does() {
 #[test]
 fn the_viewer_warns_when_no_frame_drew_terrain() {
     let dir = tempfile::tempdir().unwrap();
-    let world = common::world_copy(dir.path());
-    let toml = world.join("world.toml");
-    let mut text = std::fs::read_to_string(&toml).unwrap();
-    text.push_str(
-        "\n[[paths]]\nname = \"away\"\nduration_s = 2.0\n\
-         [[paths.keys]]\nt_s = 0.0\nposition_m = [-40000.0, -40000.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n\
-         [[paths.keys]]\nt_s = 2.0\nposition_m = [-40010.0, -40010.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n",
-    );
-    std::fs::write(&toml, text).unwrap();
+    let world = common::world_with_a_path_away(dir.path());
     let shot = dir.path().join("v.png");
     let out = Command::new("xvfb-run")
         .args(["-a", "-s", "-screen 0 640x480x24", verdant_bin(), "view"])

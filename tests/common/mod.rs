@@ -292,6 +292,21 @@ pub fn world_copy(dir: &Path) -> PathBuf {
     w
 }
 
+/// A copy of the default world in `dir` with a camera path `away` that stands 40 km out of it,
+/// looking further away: no frame of it draws terrain.
+pub fn world_with_a_path_away(dir: &Path) -> PathBuf {
+    let world = world_copy(dir);
+    let toml = world.join("world.toml");
+    let mut text = std::fs::read_to_string(&toml).unwrap();
+    text.push_str(
+        "\n[[paths]]\nname = \"away\"\nduration_s = 2.0\n\
+         [[paths.keys]]\nt_s = 0.0\nposition_m = [-40000.0, -40000.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n\
+         [[paths.keys]]\nt_s = 2.0\nposition_m = [-40010.0, -40010.0, 300.0]\nyaw_deg = 225.0\npitch_deg = 0.0\n",
+    );
+    std::fs::write(&toml, text).unwrap();
+    world
+}
+
 /// The command failed with status 1, without a panic, and its stderr names every needle.
 pub fn assert_fails_naming(out: &std::process::Output, needles: &[&str]) {
     let stderr = String::from_utf8_lossy(&out.stderr);
