@@ -107,11 +107,23 @@ fn error_chain(e: &anyhow::Error) -> String {
     out
 }
 
+/// Whether `e` ends a run that Ctrl-C (SIGINT) or SIGTERM stopped: a run that wrote what it
+/// had, or a bake that was cancelled and removed what it had begun.
+fn interrupted(e: &anyhow::Error) -> bool {
+    e.chain().any(|cause| {
+        cause.downcast_ref::<cli::Interrupted>().is_some()
+            || matches!(
+                cause.downcast_ref::<verdant::world::WorldError>(),
+                Some(verdant::world::WorldError::Cancelled { .. })
+            )
+    })
+}
+
 fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) if e.downcast_ref::<cli::Interrupted>().is_some() => {
+        Err(e) if interrupted(&e) => {
             eprintln!("interrupted: {}", cli::terminal_safe(&error_chain(&e)));
             ExitCode::from(130)
         }

@@ -1852,6 +1852,37 @@ fn a_chunked_body_cut_short_is_retried() {
 /// after the warm-up's minute.
 #[test]
 fn an_interrupted_warm_up_ends_the_fly_at_once() {
+    let (tmp, stderr) = interrupted_in_warm_up(&[]);
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("out/report.json")).unwrap()).unwrap();
+    assert_eq!(report["interrupted"], true);
+    assert_eq!(report["frames_flown"], 0);
+    assert!(
+        stderr.contains("interrupted: stopped before the first frame"),
+        "{stderr}"
+    );
+}
+
+/// The same for `verdant fly --truth`, which waited out the warm-up's minute and then failed
+/// for the tiles that had not come.
+#[test]
+fn an_interrupted_warm_up_ends_the_truth_at_once() {
+    let (tmp, stderr) = interrupted_in_warm_up(&["--truth", "2"]);
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("out/truth.json")).unwrap()).unwrap();
+    assert_eq!(report["interrupted"], true);
+    assert_eq!(report["frames"].as_array().map(Vec::len), Some(0));
+    assert!(
+        stderr.contains("interrupted: stopped after 0 of 3 frames"),
+        "{stderr}"
+    );
+}
+
+/// Runs `verdant fly` with `args` over a server whose finer tiles stall, sends SIGINT once the
+/// first frame's warm-up waits for one, and checks that the run ended within seconds with
+/// status 130 and no panic; returns the temporary folder holding its output folder `out`, and
+/// its stderr.
+fn interrupted_in_warm_up(args: &[&str]) -> (tempfile::TempDir, String) {
     let server = FaultServer::start(common::default_world(), Duration::ZERO, |path, _| {
         // The level-0 tiles are loaded with the world; the finer ones are the warm-up's.
         if path.starts_with("/tiles/") && !path.starts_with("/tiles/L0/") {
@@ -1861,10 +1892,12 @@ fn an_interrupted_warm_up_ends_the_fly_at_once() {
         }
     });
     let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
     let mut child = Command::new(env!("CARGO_BIN_EXE_verdant"))
         .args(["fly", &server.url, "--frames", "3", "--size", "16x9"])
+        .args(args)
         .arg("--out")
-        .arg(tmp.path().join("out"))
+        .arg(&out)
         .stderr(Stdio::piped())
         .stdout(Stdio::null())
         .spawn()
@@ -1906,15 +1939,7 @@ fn an_interrupted_warm_up_ends_the_fly_at_once() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     // The tiles stall for 30 s and the warm-up waits up to 60: the stop must not wait for them.
     assert!(took < Duration::from_secs(15), "{took:?}\n{stderr}");
-    let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(tmp.path().join("out/report.json")).unwrap())
-            .unwrap();
-    assert_eq!(report["interrupted"], true);
-    assert_eq!(report["frames_flown"], 0);
-    assert!(
-        stderr.contains("interrupted: stopped before the first frame"),
-        "{stderr}"
-    );
+    (tmp, stderr)
 }
 
 /// A window the user flies waits for its first frame's tiles only briefly (it waited up to 30 s,

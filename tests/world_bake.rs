@@ -1576,10 +1576,27 @@ impl Drop for Running {
     }
 }
 
-/// SIGTERM during a bake stops it: status 1, a message, no world and no staging folder left.
+/// SIGTERM during a bake stops it: status 130, a message, no world and no staging folder left.
 #[cfg(unix)]
 #[test]
 fn cli_sigterm_during_a_bake_cleans_up() {
+    signalled_bake_cleans_up(&[("-TERM", 0)]);
+}
+
+/// A stop sent twice at once (GNU `timeout -s INT`, which signals the bake and then its
+/// process group) is one stop: the bake still cleans up, where it ended at once as for a
+/// second Ctrl-C and left its staging folder to the next bake.
+#[cfg(unix)]
+#[test]
+fn a_stop_signal_sent_twice_at_once_still_cleans_up() {
+    signalled_bake_cleans_up(&[("-INT", 500), ("-INT", 20)]);
+}
+
+/// Starts a bake that writes tiles for many seconds, sends it `signals` once it is writing
+/// tiles (each after its pause in milliseconds), and checks that it stopped cleanly: status
+/// 130, a message, no world and no staging folder left.
+#[cfg(unix)]
+fn signalled_bake_cleans_up(signals: &[(&str, u64)]) {
     use std::time::{Duration, Instant};
     let dir = tempfile::tempdir().unwrap();
     let dem = common::root().join("tests/data/east_bay_768.png");
@@ -1611,11 +1628,14 @@ fn cli_sigterm_during_a_bake_cleans_up() {
         );
         std::thread::sleep(Duration::from_millis(5));
     };
-    let kill = std::process::Command::new("kill")
-        .args(["-TERM", &child.0.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success());
+    for &(signal, pause_ms) in signals {
+        std::thread::sleep(Duration::from_millis(pause_ms));
+        let kill = std::process::Command::new("kill")
+            .args([signal, &child.0.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(kill.success());
+    }
     let deadline = Instant::now() + Duration::from_secs(30);
     let status = loop {
         if let Some(status) = child.0.try_wait().unwrap() {
@@ -1623,13 +1643,13 @@ fn cli_sigterm_during_a_bake_cleans_up() {
         }
         assert!(
             Instant::now() < deadline,
-            "the bake did not stop on SIGTERM"
+            "the bake did not stop on {signals:?}"
         );
         std::thread::sleep(Duration::from_millis(10));
     };
     let mut stderr = String::new();
     std::io::Read::read_to_string(&mut child.0.stderr.take().unwrap(), &mut stderr).unwrap();
-    assert_eq!(status.code(), Some(1), "{stderr}");
+    assert_eq!(status.code(), Some(130), "{stderr}");
     assert!(stderr.contains("bake cancelled"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(!staging.exists(), "{} is left", staging.display());

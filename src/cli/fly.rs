@@ -269,11 +269,12 @@ impl FlyArgs {
 pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
     opts.stop = Some(super::stop_on_signals()?);
     let mut pb: Option<ProgressBar> = None;
-    let r = verdant::tools::truth::run_fly_truth(&opts, k, &mut |p| {
-        if let FlyProgress::Frame(done, total) = p {
-            pb.get_or_insert_with(|| bar(total, "truth"))
-                .set_position(done);
-        }
+    let r = verdant::tools::truth::run_fly_truth(&opts, k, &mut |p| match p {
+        FlyProgress::WarmingUp => eprintln!("loading the first frame's tiles"),
+        FlyProgress::Frame(done, total) => pb
+            .get_or_insert_with(|| bar(total, "truth"))
+            .set_position(done),
+        _ => {}
     })?;
     if let Some(pb) = pb {
         pb.finish();

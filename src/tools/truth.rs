@@ -276,8 +276,9 @@ impl Truth {
         })
     }
 
-    /// This truth with its warm-ups ended by `stop` (a benchmark's Ctrl-C): a frame whose
-    /// warm-up was stopped is not drawn, [`crate::tools::stop::Stopped`] is returned instead.
+    /// This truth with its warm-ups and frames ended by `stop` (Ctrl-C): a frame whose warm-up
+    /// or sub-samples were stopped is not finished, [`crate::tools::stop::Stopped`] is returned
+    /// instead.
     pub fn with_stop(mut self, stop: crate::tools::stop::Stop) -> Self {
         self.stop = stop;
         self
@@ -355,6 +356,12 @@ impl Truth {
             &report,
         )?;
         for (i, offset) in offsets(self.k).into_iter().enumerate() {
+            // A stop asked for between sub-samples ends the frame: at 8x8 and a large size a
+            // frame's 64 draws take seconds.
+            if let Err(stopped) = self.stop.check() {
+                self.scene.set_jitter(Vec2::ZERO);
+                return Err(stopped.into());
+            }
             self.scene.set_jitter(offset);
             // Every sub-sample at the same time: only the first advances the wind and sway.
             let drawn = self.scene.render_frame(ctx, camera, time_s, walker);
@@ -444,7 +451,10 @@ pub fn run_fly_truth(
     let config = truth_config(&world, &base, atlas_slots(&world, &ctx.device));
     let world_name = world.manifest.name.clone();
     let manifest = world.manifest.clone();
-    let mut truth = Truth::with_config(&ctx, world, source, opts.size, k, config)?;
+    // Ctrl-C ends the run between frames, inside a frame's warm-up or between its sub-samples;
+    // the frames drawn are kept and described.
+    let mut truth = Truth::with_config(&ctx, world, source, opts.size, k, config)?
+        .with_stop(crate::tools::stop::Stop::new(opts.stop.clone()));
     progress(FlyProgress::WarmingUp);
     let last = f64::from(opts.frames.max(2) - 1);
     let mut frames = Vec::new();
@@ -457,7 +467,14 @@ pub fn run_fly_truth(
         let t_s = path.time_at(f64::from(i) / last);
         let camera = sample_path(&path, t_s);
         let walker = walker_at(&manifest, &path, t_s);
-        let image = truth.render(&ctx, &camera, t_s, Some(walker))?;
+        let image = match truth.render(&ctx, &camera, t_s, Some(walker)) {
+            Ok(image) => image,
+            Err(e) if e.is::<crate::tools::stop::Stopped>() => {
+                interrupted = true;
+                break;
+            }
+            Err(e) => return Err(e),
+        };
         let file: PathBuf = opts.out.join(frame_file_name(i));
         write_png(&file, &image)?;
         frames.push(TruthFrame {
