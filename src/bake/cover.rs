@@ -277,8 +277,8 @@ pub struct MapWindow {
 pub struct CoverMap {
     placed: Placed,
     window: MapWindow,
-    /// Class codes, row 0 north; `None` where the map says nodata.
-    codes: Vec<Option<u32>>,
+    /// Class codes (of at most 16 bits), row 0 north; `None` where the map says nodata.
+    codes: Vec<Option<u16>>,
     /// Per code: what it paints.
     painted: BTreeMap<u32, ClassPaint>,
 }
@@ -334,18 +334,19 @@ impl CoverMap {
             dem,
             max_samples,
             MapKind::Classes,
-            Some,
+            // A PNG's samples are of at most 16 bits.
+            |v| Some(v as u16),
             |tiff, first, size| tiff.read_classes(first, size),
         )?;
         let nodata: std::collections::BTreeSet<u32> = table.nodata.iter().copied().collect();
-        let codes: Vec<Option<u32>> = codes
+        let codes: Vec<Option<u16>> = codes
             .into_iter()
-            .map(|c| c.filter(|c| !nodata.contains(c)))
+            .map(|c| c.filter(|c| !nodata.contains(&u32::from(*c))))
             .collect();
         let mut unknown: BTreeMap<u32, usize> = BTreeMap::new();
-        for c in codes.iter().flatten() {
-            if !painted.contains_key(c) {
-                *unknown.entry(*c).or_default() += 1;
+        for &c in codes.iter().flatten() {
+            if !painted.contains_key(&u32::from(c)) {
+                *unknown.entry(u32::from(c)).or_default() += 1;
             }
         }
         if !unknown.is_empty() {
@@ -381,11 +382,16 @@ impl CoverMap {
         self.window
     }
 
+    /// Bytes its window's codes take.
+    pub fn held_bytes(&self) -> u64 {
+        std::mem::size_of_val(self.codes.as_slice()) as u64
+    }
+
     /// What the map paints at world position `p` (metres from the DEM's south-west sample), or
     /// `None` where it does not reach or says nodata.
     pub fn paint_at(&self, p: DVec2) -> Option<ClassPaint> {
         let code = self.codes[self.placed.index_at(p)?]?;
-        self.painted.get(&code).copied()
+        self.painted.get(&u32::from(code)).copied()
     }
 }
 
@@ -785,6 +791,14 @@ impl ValueMap {
     /// The part of the map that was read and is held.
     pub fn window(&self) -> MapWindow {
         self.window
+    }
+
+    /// Bytes its window's samples take.
+    pub fn held_bytes(&self) -> u64 {
+        (match &self.samples {
+            Samples::Density { values, .. } => std::mem::size_of_val(values.as_slice()),
+            Samples::Mask(m) => m.len(),
+        }) as u64
     }
 
     /// The value at world position `p` (a density map's scaled to 0..=1, a mask's 1 where it

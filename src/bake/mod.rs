@@ -503,7 +503,19 @@ pub fn bake(
         .iter()
         .map(|e| (e / cell).floor() as u64 + 1)
         .product::<u64>();
-    let plan = Plan::new(opts.memory_mib, &manifest.pyramid, &source, data_samples)?;
+    let map_bytes = cover.as_ref().map_or(0, cover::CoverMap::held_bytes)
+        + [&density, &mask]
+            .into_iter()
+            .flatten()
+            .map(cover::ValueMap::held_bytes)
+            .sum::<u64>();
+    let plan = Plan::new(
+        opts.memory_mib,
+        &manifest.pyramid,
+        &source,
+        map_bytes,
+        data_samples,
+    )?;
     source.set_cache(plan.cached);
     let survey = survey::survey(
         &source,

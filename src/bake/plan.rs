@@ -12,7 +12,9 @@
 //! - the **calibration sample**: the derivation is fitted on the data area, or on a window of
 //!   it centred on the world where the whole would not fit;
 //! - the DEM: a single file whole; a mosaic's files and chunks in caches (see
-//!   `super::source`).
+//!   `super::source`);
+//! - the maps (land cover, density, mask): the windows of them over the DEM, read before the
+//!   plan is made and held to the end.
 
 use crate::world::error::WorldError;
 use crate::world::tile::Pyramid;
@@ -60,12 +62,13 @@ impl Plan {
         coarse_grid(&self.shape, self.stride)
     }
 
-    /// Plans a bake of `pyramid` from `dem` within `limit_mib`; refuses a limit too small for
-    /// the smallest plan, naming what it would need.
+    /// Plans a bake of `pyramid` from `dem`, holding maps of `map_bytes`, within `limit_mib`;
+    /// refuses a limit too small for the smallest plan, naming what it would need.
     pub(super) fn new(
         limit_mib: u64,
         pyramid: &Pyramid,
         dem: &DemSource,
+        map_bytes: u64,
         data_samples: u64,
     ) -> Result<Plan, WorldError> {
         let shape = Shape::of(pyramid);
@@ -77,7 +80,7 @@ impl Plan {
         let [chunk, making] = dem.cache_unit_bytes();
         // The DEM: a whole one, or one chunk being made per thread and a few chunks cached.
         let dem_bytes = |threads: u64| dem.resident_bytes() + threads * making + 4 * chunk;
-        let fixed = |threads: u64| BASE_BYTES + dem_bytes(threads);
+        let fixed = |threads: u64| BASE_BYTES + dem_bytes(threads) + map_bytes;
         let too_small = |need: u64| {
             WorldError::bad_option(
                 "--memory-mib",
@@ -85,8 +88,8 @@ impl Plan {
                 format!(
                     "at least {} for this world and DEM (a bake holds {} there)",
                     need.div_ceil(1 << 20),
-                    "its DEM, a sample of the data area, a subsample of the finest grid and \
-                     one block a thread"
+                    "its DEM, its maps, a sample of the data area, a subsample of the finest \
+                     grid and one block a thread"
                 ),
             )
         };
@@ -216,7 +219,7 @@ mod tests {
             for cells in [1_000.0, 8_000.0, 30_000.0, 65_000.0] {
                 let dem = header(cells as u32, 25.0);
                 let p = pyramid(cells, 25.0, 3);
-                let plan = Plan::new(limit, &p, &dem, (cells * cells) as u64).unwrap();
+                let plan = Plan::new(limit, &p, &dem, 0, (cells * cells) as u64).unwrap();
                 assert!(
                     plan.peak_bytes <= limit << 20,
                     "{cells} cells at {limit} MiB: plans {} MiB",
@@ -246,6 +249,7 @@ mod tests {
             2048,
             &pyramid(1000.0, 25.0, 3),
             &header(1000, 25.0),
+            0,
             1 << 20,
         )
         .unwrap();
@@ -260,12 +264,30 @@ mod tests {
             8,
             &pyramid(30_000.0, 25.0, 3),
             &header(30_000, 25.0),
+            0,
             1 << 20,
         )
         .unwrap_err()
         .to_string();
         assert!(
             e.contains("--memory-mib 8") && e.contains("at least"),
+            "{e}"
+        );
+    }
+
+    /// The maps' windows count against the limit: they raise the plan's peak by their bytes,
+    /// and maps larger than the limit are refused before a tile is made.
+    #[test]
+    fn the_maps_count_against_the_limit() {
+        let (p, dem) = (pyramid(1000.0, 25.0, 3), header(1000, 25.0));
+        let without = Plan::new(2048, &p, &dem, 0, 1 << 20).unwrap();
+        let with = Plan::new(2048, &p, &dem, 300 << 20, 1 << 20).unwrap();
+        assert_eq!(with.peak_bytes, without.peak_bytes + (300 << 20));
+        let e = Plan::new(256, &p, &dem, 300 << 20, 1 << 20)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--memory-mib 256") && e.contains("at least") && e.contains("its maps"),
             "{e}"
         );
     }

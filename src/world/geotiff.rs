@@ -433,17 +433,17 @@ fn open_map(path: &Path, reading: Reading) -> Result<MapTiff, WorldError> {
 impl MapTiff {
     /// The class codes of the window of `size` samples (columns, rows) whose north-west sample
     /// is `first` (column from the west, row from the north), row 0 north, west first; `None`
-    /// where the file's nodata is. Only the strips or tiles that hold the window are read and
-    /// decoded, one at a time: what is held is the window and one chunk. Only for a map opened
-    /// by [`open_classes`].
+    /// where the file's nodata is (codes are of 8 or 16 bits: 4 bytes a sample are held).
+    /// Only the strips or tiles that hold the window are read and decoded, one at a time: what
+    /// is held is the window and one chunk. Only for a map opened by [`open_classes`].
     pub(crate) fn read_classes(
         &self,
         first: [usize; 2],
         size: [usize; 2],
-    ) -> Result<Vec<Option<u32>>, WorldError> {
+    ) -> Result<Vec<Option<u16>>, WorldError> {
         assert_eq!(self.reading, Reading::Classes, "a class map");
         let nodata = self.nodata_code;
-        self.read_window(first, size, |v| (Some(v) != nodata).then_some(v as u32))
+        self.read_window(first, size, |v| (Some(v) != nodata).then_some(v as u16))
     }
 
     /// The values of a window (as [`MapTiff::read_classes`]), each as a DEM's height would be
