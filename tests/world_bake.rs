@@ -1721,3 +1721,32 @@ fn a_world_whose_bake_stopped_while_moving_it_in_says_so() {
     let e = verdant::World::open(&w).unwrap_err().to_string();
     assert!(e.ends_with("world.toml: file not found"), "{e}");
 }
+
+/// An output folder where another file system is mounted (a volume, a USB disk) is refused
+/// before anything is read or made: the world is staged beside it, on its parent's file system,
+/// and the move in at the end failed ("Invalid cross-device link") after the whole bake.
+/// `/proc` is a mount point on every Linux system.
+#[cfg(target_os = "linux")]
+#[test]
+fn an_output_folder_that_is_a_mount_point_is_refused_before_the_bake() {
+    let dem = common::root().join("tests/data/east_bay_768.png");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["bake", "--dem", dem.to_str().unwrap(), "--out", "/proc"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    for want in [
+        "--out /proc",
+        "another file system is mounted",
+        "bake into a folder inside it, such as /proc/world",
+    ] {
+        assert!(stderr.contains(want), "{want:?} in {stderr}");
+    }
+    assert!(!stderr.contains("read "), "the DEM was read: {stderr}");
+    let left: Vec<String> = staging_folders(Path::new("/"))
+        .into_iter()
+        .filter(|n| n.starts_with(".proc.baking."))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+}

@@ -22,6 +22,19 @@ pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
             ),
         ));
     }
+    if let Some(parent) = mounted_apart(out) {
+        return Err(WorldError::bad_option(
+            "--out",
+            out.display(),
+            format!(
+                "a folder on its parent folder's file system (this one is where another file \
+                 system is mounted: the world is staged beside it, in {}, and could not be \
+                 moved in at the end); bake into a folder inside it, such as {}",
+                parent.display(),
+                out.join("world").display()
+            ),
+        ));
+    }
     match std::fs::symlink_metadata(out) {
         Ok(m) if m.file_type().is_symlink() && std::fs::metadata(out).is_err() => {
             return Err(WorldError::bad_option(
@@ -99,6 +112,25 @@ fn not_a_manifest(path: &Path) -> Option<String> {
             "not TOML: {}",
             e.to_string().lines().next().unwrap_or_default()
         )),
+    }
+}
+
+/// The folder the staging folder would go in (the parent of `out` resolved by
+/// [`resolve_out`]) where `out` is a mount point, on another file system than it: a folder
+/// cannot be moved across file systems, so the world could not be published there.
+fn mounted_apart(out: &Path) -> Option<PathBuf> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let path = resolve_out(out).ok()?;
+        let parent = path.parent()?;
+        let (here, above) = (std::fs::metadata(&path).ok()?, std::fs::metadata(parent).ok()?);
+        (here.is_dir() && here.dev() != above.dev()).then(|| parent.to_path_buf())
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = out;
+        None
     }
 }
 
