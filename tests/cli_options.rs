@@ -269,6 +269,34 @@ fn a_soak_too_fast_for_its_world_is_refused_by_the_library() {
             "{text}"
         );
     }
+    // A world 1 m across takes at most 0.4 m/s (a frame of 0.1 s may step 4% of it): the range
+    // is given as it is checked, not rounded to "0..=0".
+    let small = tmp.path().join("small");
+    std::fs::create_dir(&small).unwrap();
+    let default = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz");
+    let manifest = std::fs::read_to_string(default.join("world.toml")).unwrap();
+    let manifest: String = manifest
+        .lines()
+        .map(|l| match l.starts_with("extent_m = ") {
+            true => "extent_m = [1.0, 1.0]".to_string(),
+            false => l.to_string(),
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(small.join("world.toml"), manifest).unwrap();
+    std::os::unix::fs::symlink(default.join("tiles"), small.join("tiles")).unwrap();
+    let opts = verdant::tools::SoakOptions {
+        world: small,
+        speed_mps: 0.5,
+        out: tmp.path().join("soak"),
+        ..Default::default()
+    };
+    let e = verdant::tools::run_soak(&opts, &mut |_, _| {}).unwrap_err();
+    let text = format!("{e:#}");
+    assert!(
+        text.contains("(a world 1 m across)") && text.contains("it must be in 0..=0.4 m/s"),
+        "{text}"
+    );
 }
 
 /// The grass options and the mesh step have no range of their own on the command line: the

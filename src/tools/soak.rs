@@ -13,6 +13,7 @@ use crate::gpu::GpuContext;
 use crate::renderer::RendererConfig;
 use crate::tools::metrics::Summary;
 use crate::tools::report::Thinned;
+use crate::world::error::short_number;
 use crate::tools::rng::Rng;
 use crate::tools::{AdapterReport, Scene, write_json};
 use crate::world::{TileData, TileId, World};
@@ -522,15 +523,16 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let [ex, ey] = world.manifest.extent_m;
     // The pull toward the middle keeps the camera over the world only while a frame's step is
     // well inside the margin it turns at.
-    let most_speed = 0.04 * ex.min(ey) / opts.dt_s;
+    // To the 1/10,000 m/s the error names, so that the speed named is one the check takes.
+    let most_speed = (0.04 * ex.min(ey) / opts.dt_s * 1e4).round() / 1e4;
     anyhow::ensure!(
         opts.speed_mps <= most_speed,
-        "--speed {} m/s would leave {} (a world {:.0} m across) within a few frames: it must be \
-         in 0..={:.0} m/s for this world",
+        "--speed {} m/s would leave {} (a world {} m across) within a few frames: it must be \
+         in 0..={} m/s for this world",
         opts.speed_mps,
         world.manifest.name,
-        ex.min(ey),
-        most_speed
+        short_number(ex.min(ey)),
+        short_number(most_speed)
     );
     let ground = Ground::new(&world, source.as_ref())?;
     let ctx = GpuContext::new()?;
