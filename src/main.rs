@@ -12,6 +12,7 @@ use cli::bake::BakeArgs;
 use cli::bench::BenchCommand;
 use cli::eval::EvalCommand;
 use cli::fly::FlyArgs;
+use cli::out::note;
 use cli::soak::SoakArgs;
 use cli::view::ViewArgs;
 
@@ -121,15 +122,42 @@ fn interrupted(e: &anyhow::Error) -> bool {
 
 fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
-    match run(Cli::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) if interrupted(&e) => {
-            eprintln!("interrupted: {}", cli::terminal_safe(&error_chain(&e)));
-            ExitCode::from(130)
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        // --help, --version and `help`: on standard output, checked, as every line the tool
+        // prints (clap's own printing ignores a failed write and exits 0).
+        Err(e) if !e.use_stderr() => {
+            let printed = e
+                .print()
+                .and_then(|()| std::io::Write::flush(&mut std::io::stdout()));
+            return match cli::out::checked(printed) {
+                Ok(()) => ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(1)),
+                Err(failed) => {
+                    note!("error: {failed}");
+                    ExitCode::FAILURE
+                }
+            };
         }
+        // A bad argument: clap's error on standard error, status 2.
+        Err(e) => e.exit(),
+    };
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            if let Some(failed) = e
+                .chain()
+                .find_map(|c| c.downcast_ref::<cli::out::StdoutFailed>())
+            {
+                // Standard output is gone whatever the run was doing: said alone.
+                note!("error: {failed}");
+                return ExitCode::FAILURE;
+            }
+            if interrupted(&e) {
+                note!("interrupted: {}", cli::terminal_safe(&error_chain(&e)));
+                return ExitCode::from(130);
+            }
             // A file's name in the message must not drive the terminal.
-            eprintln!("error: {}", cli::terminal_safe(&error_chain(&e)));
+            note!("error: {}", cli::terminal_safe(&error_chain(&e)));
             ExitCode::FAILURE
         }
     }

@@ -8,6 +8,7 @@ use indicatif::ProgressBar;
 use verdant::bake::{BakeOptions, bake};
 
 use super::args::parse_cell_size;
+use super::out::say;
 use super::progress::bar;
 use super::shown;
 
@@ -164,13 +165,13 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         pb.finish();
     }
     if report.already_done {
-        println!(
+        say!(
             "shard already done: nothing to do ({} tiles written by its earlier run)",
             report.tiles_written
-        );
+        )?;
         return Ok(());
     }
-    println!(
+    say!(
         "read {} ({}, {}x{} samples of {:.3} m x {:.3} m, {} nodata samples filled)",
         shown(&opts.dem),
         report.dem_format.name(),
@@ -179,26 +180,28 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         report.dem_cell_size_m[0],
         report.dem_cell_size_m[1],
         report.nodata_filled
-    );
+    )?;
     match opts.shard {
-        Some(verdant::bake::ShardStep::Shard { index, count }) => println!(
+        Some(verdant::bake::ShardStep::Shard { index, count }) => say!(
             "baked shard {index} of {count}: {} tiles into {} in {:.1} s",
             report.tiles_written,
             shown(&verdant::bake::shard::parts_dir(&opts.out)),
             report.seconds
-        ),
-        _ => println!(
+        )?,
+        _ => say!(
             "baked {} tiles in {} levels into {} in {:.1} s",
             report.tiles_written,
             report.levels,
             shown(&opts.out),
             report.seconds
-        ),
+        )?,
     }
-    println!(
+    say!(
         "memory: peak {:.0} MiB resident (limit {} MiB, planned {} MiB)",
-        report.peak_memory_mib, report.memory_limit_mib, report.planned_mib
-    );
+        report.peak_memory_mib,
+        report.memory_limit_mib,
+        report.planned_mib
+    )?;
     let carried = &report.carried;
     if !carried.is_empty() {
         let list = |names: &[String]| {
@@ -219,7 +222,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         .into_iter()
         .flatten()
         .collect();
-        println!(
+        say!(
             "kept from the replaced world.toml: {}{} (--fresh-manifest drops them)",
             parts.join(", "),
             if carried.rewritten {
@@ -228,7 +231,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
             } else {
                 ""
             }
-        );
+        )?;
         if !carried.paths_outside.is_empty() {
             log::warn!(
                 "kept camera path(s) {} run outside the new world's data area",
@@ -237,10 +240,10 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         }
     }
     if !carried.replaced.is_empty() {
-        println!(
+        say!(
             "the bake wrote its own {} over the replaced world.toml's, which differed",
             carried.replaced.join(", ")
-        );
+        )?;
     }
     Ok(())
 }

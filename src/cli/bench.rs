@@ -8,6 +8,7 @@ use clap::Subcommand;
 use verdant::tools::timing::Timing;
 
 use super::args::{float_in, parse_size, parse_vec3, resolve_world};
+use super::out::say;
 use super::progress::{finish_bars, stage_bars};
 
 #[derive(Subcommand)]
@@ -360,12 +361,13 @@ fn timed(timing: &Timing, value: f64, decimals: usize) -> String {
 
 /// The last line of a benchmark's summary: where it wrote, and that it is partial if the run
 /// was stopped early.
-fn wrote(out: &Path, interrupted: bool) {
+fn wrote(out: &Path, interrupted: bool) -> Result<()> {
     if interrupted {
-        println!("wrote {} (partial: the run was interrupted)", out.display());
+        say!("wrote {} (partial: the run was interrupted)", out.display())?;
     } else {
-        println!("wrote {}", out.display());
+        say!("wrote {}", out.display())?;
     }
+    Ok(())
 }
 
 /// The error that ends a benchmark stopped early (status 130): what `report` (a file in `out`)
@@ -393,18 +395,25 @@ pub(crate) fn bench_features(mut opts: verdant::tools::BenchLodOptions) -> Resul
     if r.features.is_empty() {
         return Err(interrupted(false, &opts.out, "", String::new()));
     }
-    println!(
+    say!(
         "{} [{}], {}x{}",
-        r.adapter.name, r.adapter.backend, r.size.0, r.size.1
-    );
-    println!(
+        r.adapter.name,
+        r.adapter.backend,
+        r.size.0,
+        r.size.1
+    )?;
+    say!(
         "{:<18} {:>10} {:>8} {:>10} {:>13}",
-        "feature off", "GPU ms", "IQR %", "cost ms", "contribution"
-    );
+        "feature off",
+        "GPU ms",
+        "IQR %",
+        "cost ms",
+        "contribution"
+    )?;
     let full = r.features[0].timing;
     for f in &r.features {
         let t = &f.timing;
-        println!(
+        say!(
             "{:<18} {:>10} {:>8} {:>10} {:>13.4}{}",
             f.feature,
             timed(t, f.gpu_ms, 3),
@@ -416,9 +425,9 @@ pub(crate) fn bench_features(mut opts: verdant::tools::BenchLodOptions) -> Resul
             },
             f.contribution,
             if t.noisy { "  (spread above 10%)" } else { "" }
-        );
+        )?;
     }
-    wrote(&opts.out, r.interrupted);
+    wrote(&opts.out, r.interrupted)?;
     if r.interrupted {
         let timed = r.features.iter().filter(|f| f.timing.measured()).count();
         return Err(interrupted(
@@ -446,11 +455,14 @@ pub(crate) fn bench_blades(
     if r.results.is_empty() {
         return Err(interrupted(false, &opts.out, "", String::new()));
     }
-    println!(
+    say!(
         "{} [{}], {}x{}",
-        r.adapter.name, r.adapter.backend, r.size.0, r.size.1
-    );
-    println!(
+        r.adapter.name,
+        r.adapter.backend,
+        r.size.0,
+        r.size.1
+    )?;
+    say!(
         "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7}",
         "blades",
         "drawn hi",
@@ -463,10 +475,10 @@ pub(crate) fn bench_blades(
         "ns/vert",
         "x floor",
         "FLIP"
-    );
+    )?;
     for b in &r.results {
         let t = &b.draw;
-        println!(
+        say!(
             "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7.4}{}",
             b.blades,
             b.drawn[0],
@@ -484,13 +496,15 @@ pub(crate) fn bench_blades(
             } else {
                 ""
             }
-        );
+        )?;
     }
-    println!(
+    say!(
         "timing: {} rounds of {} frames after {} untimed, per count",
-        r.counts.rounds, r.counts.timed, r.counts.warmup
-    );
-    wrote(&opts.out, r.interrupted);
+        r.counts.rounds,
+        r.counts.timed,
+        r.counts.warmup
+    )?;
+    wrote(&opts.out, r.interrupted)?;
     if r.interrupted {
         let timed = r.results.iter().filter(|b| b.draw.measured()).count();
         return Err(interrupted(
@@ -517,19 +531,24 @@ pub(crate) fn bench_lod(mut opts: verdant::tools::BenchLodOptions) -> Result<()>
     if r.dolly.is_empty() {
         return Err(interrupted(false, &opts.out, "", String::new()));
     }
-    println!(
+    say!(
         "{} [{}], {}x{}, the views along the path {:?}",
-        r.adapter.name, r.adapter.backend, r.size.0, r.size.1, r.path
-    );
-    println!(
+        r.adapter.name,
+        r.adapter.backend,
+        r.size.0,
+        r.size.1,
+        r.path
+    )?;
+    say!(
         "dolly: largest jump of the error against the truth: {:.4} FLIP on frames with ring switches, {:.4} on frames without a switch",
-        r.worst_pop, r.worst_change_without_switch
-    );
+        r.worst_pop,
+        r.worst_change_without_switch
+    )?;
     if let Some(t) = r.worst_tree_pop {
-        println!("dolly: {t:.4} FLIP on frames where trees switched level (and no ring)");
+        say!("dolly: {t:.4} FLIP on frames where trees switched level (and no ring)")?;
     }
     let flip = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
-    println!(
+    say!(
         "far band ({:.0}-{:.0} m, {} pixels) against the truth's blades out to {:.0} m: {} FLIP with the far field, {} without",
         r.far_band.near_m,
         r.far_band.far_m,
@@ -537,9 +556,9 @@ pub(crate) fn bench_lod(mut opts: verdant::tools::BenchLodOptions) -> Result<()>
         r.far_band.far_m,
         flip(r.far_band.flip_far_field),
         flip(r.far_band.flip_no_far_field)
-    );
+    )?;
     let unit = if r.adapter.timestamps { "GPU" } else { "frame" };
-    println!(
+    say!(
         "{:<16} {:>9} {:>8} {:>10} {:>9} {:>9} {:>9} {:>10} {:>7} {:>11} {:>10}",
         "setting",
         "GPU ms",
@@ -552,11 +571,11 @@ pub(crate) fn bench_lod(mut opts: verdant::tools::BenchLodOptions) -> Result<()>
         "front",
         "flight med",
         "flight p99"
-    );
+    )?;
     let ms = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
     for s in &r.settings {
         let t = &s.frame;
-        println!(
+        say!(
             "{:<16} {:>9} {:>8} {:>10} {:>9.4} {:>9.4} {:>9.4} {:>10.0} {:>7} {:>11} {:>10}{}",
             s.setting.name,
             timed(t, s.gpu.median_ms, 3),
@@ -574,32 +593,34 @@ pub(crate) fn bench_lod(mut opts: verdant::tools::BenchLodOptions) -> Result<()>
             } else {
                 ""
             }
-        );
+        )?;
     }
-    println!(
+    say!(
         "timing: {} rounds of {} frames after {} untimed, per view and setting",
-        r.counts.rounds, r.counts.timed, r.counts.warmup
-    );
+        r.counts.rounds,
+        r.counts.timed,
+        r.counts.warmup
+    )?;
     if r.supersample > 1 {
-        println!(
+        say!(
             "the settings' images supersampled {k}x{k} (their content against the truth's; \
              FLIP 1x and the times of their own frames)",
             k = r.supersample
-        );
+        )?;
     }
     // The fronts are over the settings timed: every setting, unless the run was stopped early.
     if r.settings.iter().any(|s| s.frame.measured()) {
-        println!(
+        say!(
             "on the front against the {k}x{k} truth: {}; by the coarse FLIP: {}",
             r.front.join(", "),
             r.coarse_front.join(", "),
             k = r.truth_k
-        );
+        )?;
     }
     if let Some(p) = &r.flight_path
         && r.settings.iter().any(|s| s.flight.is_some())
     {
-        println!(
+        say!(
             "flight: {} frames along the path {p:?} per round ({unit} time per frame, after an \
              untimed flight); on the front of its p99 against the pixel FLIP: {}{}",
             r.flight_frames,
@@ -609,19 +630,19 @@ pub(crate) fn bench_lod(mut opts: verdant::tools::BenchLodOptions) -> Result<()>
             } else {
                 ""
             }
-        );
+        )?;
     }
     if r.settings.first().is_some_and(|s| s.frame.measured()) {
-        println!(
+        say!(
             "default setting {} the Pareto front",
             if r.default_on_front {
                 "is on"
             } else {
                 "is NOT on"
             }
-        );
+        )?;
     }
-    wrote(&opts.out, r.interrupted);
+    wrote(&opts.out, r.interrupted)?;
     if r.interrupted {
         let timed = r.settings.iter().filter(|s| s.frame.measured()).count();
         return Err(interrupted(
@@ -650,10 +671,13 @@ pub(crate) fn bench_aa(mut opts: verdant::tools::bench_aa::BenchAaOptions) -> Re
     if r.frames.is_empty() && r.paths.is_empty() {
         return Err(interrupted(false, &opts.out, "", String::new()));
     }
-    println!(
+    say!(
         "{} [{}], against the {}x{} truth",
-        r.adapter.name, r.adapter.backend, r.truth_k, r.truth_k
-    );
+        r.adapter.name,
+        r.adapter.backend,
+        r.truth_k,
+        r.truth_k
+    )?;
     // The method column as wide as its longest name (a setting's is long).
     let w = r
         .timings
@@ -663,12 +687,19 @@ pub(crate) fn bench_aa(mut opts: verdant::tools::bench_aa::BenchAaOptions) -> Re
         .max()
         .unwrap_or(0)
         .max(11);
-    println!(
+    say!(
         "{:<10} {:<w$} {:<9} {:>8} {:>8} {:>9} {:>7} {:>9}",
-        "size", "method", "sequence", "FLIP", "coarse", "flicker", "x truth", "recovery"
-    );
+        "size",
+        "method",
+        "sequence",
+        "FLIP",
+        "coarse",
+        "flicker",
+        "x truth",
+        "recovery"
+    )?;
     for s in &r.sequences {
-        println!(
+        say!(
             "{:<10} {:<w$} {:<9} {:>8.4} {:>8.4} {:>9.2} {:>7.2} {:>9}",
             format!("{}x{}", s.size.0, s.size.1),
             s.method,
@@ -678,7 +709,7 @@ pub(crate) fn bench_aa(mut opts: verdant::tools::bench_aa::BenchAaOptions) -> Re
             s.flicker,
             s.flicker_ratio,
             s.recovery_frames.map_or(String::new(), |n| n.to_string())
-        );
+        )?;
     }
     // The paths: each method's and each bound's mean over the path's views.
     struct PathRow<'a> {
@@ -713,7 +744,7 @@ pub(crate) fn bench_aa(mut opts: verdant::tools::bench_aa::BenchAaOptions) -> Re
     }
     for x in rows {
         let n = f64::from(x.views);
-        println!(
+        say!(
             "{:<10} {:<w$} path {:<10} FLIP {:.4}, coarse {:.4} over {} views{}",
             x.size,
             x.method,
@@ -722,10 +753,10 @@ pub(crate) fn bench_aa(mut opts: verdant::tools::bench_aa::BenchAaOptions) -> Re
             x.sums[1] / n,
             x.views,
             if x.bound { " (bound)" } else { "" }
-        );
+        )?;
     }
     for t in &r.timings {
-        println!(
+        say!(
             "{:<10} {:<w$} {} {:.3} ms (IQR {:.1}%), of which anti-aliasing {:.3} ms",
             format!("{}x{}", t.size.0, t.size.1),
             t.method,
@@ -733,9 +764,9 @@ pub(crate) fn bench_aa(mut opts: verdant::tools::bench_aa::BenchAaOptions) -> Re
             t.frame.median_ms,
             100.0 * t.frame.spread,
             t.aa_ms
-        );
+        )?;
     }
-    wrote(&opts.out, r.interrupted);
+    wrote(&opts.out, r.interrupted)?;
     if r.interrupted {
         return Err(interrupted(
             true,

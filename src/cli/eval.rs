@@ -8,6 +8,7 @@ use indicatif::ProgressBar;
 
 use verdant::tools::stop::Stop;
 
+use super::out::{note, say};
 use super::progress::{bar, lines};
 
 #[derive(Subcommand)]
@@ -47,7 +48,7 @@ pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<
     let mut pb: Option<ProgressBar> = None;
     let report = eval::run_derive_eval(dem_path, factor, out, &stop, &mut |method, done, total| {
         if lines {
-            eprintln!("methods: {done}/{total}");
+            note!("methods: {done}/{total}");
         }
         let pb = pb.get_or_insert_with(|| bar(total, "methods"));
         pb.set_message(method.to_owned());
@@ -59,17 +60,23 @@ pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<
     if report.results.is_empty() {
         return Err(nothing_measured());
     }
-    println!(
+    say!(
         "{:<22} {:>9} {:>9} {:>10} {:>10} {:>9} {:>11}  parameters",
-        "method", "RMSE m", "max m", "slope deg", "bias deg", "rough", "ms/tile"
-    );
+        "method",
+        "RMSE m",
+        "max m",
+        "slope deg",
+        "bias deg",
+        "rough",
+        "ms/tile"
+    )?;
     for r in &report.results {
         let rough = if r.roughness_ratio.is_nan() {
             "-".to_owned()
         } else {
             format!("{:.3}", r.roughness_ratio)
         };
-        println!(
+        say!(
             "{:<22} {:>9.3} {:>9.2} {:>10.3} {:>10.3} {:>9} {:>11.4}  {}",
             r.method,
             r.rmse_m,
@@ -79,22 +86,22 @@ pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<
             rough,
             r.ms_per_tile,
             r.parameters()
-        );
+        )?;
     }
     if report.results.iter().any(|r| r.roughness_ratio.is_nan()) {
-        println!(
+        say!(
             "roughness: not measured, the DEM is smoother than the {} mm of curvature a ratio \
              is measured against (a plane)",
             verdant::tools::eval_derive::MIN_ROUGHNESS_M * 1e3
-        );
+        )?;
     }
     if let Some(fit) = report.calibration() {
-        println!("calibration from the coarse grid: {}", fit.note);
+        say!("calibration from the coarse grid: {}", fit.note)?;
     }
-    println!(
+    say!(
         "on the joint Pareto front (time, height, slope, flattening, roughness): {}",
         report.front.join(", ")
-    );
+    )?;
     let runtime = if !report
         .results
         .iter()
@@ -106,12 +113,12 @@ pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<
     } else {
         "NOT on the joint front"
     };
-    println!(
+    say!(
         "runtime method: {} ({runtime}); wrote derive.csv and charts to {}{}",
         eval::RUNTIME_METHOD,
         out.display(),
         partial(report.interrupted)
-    );
+    )?;
     if report.interrupted {
         let total = eval::methods().len() + 2;
         return Err(super::Interrupted(format!(
@@ -148,7 +155,7 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
     let mut pb: Option<ProgressBar> = None;
     let report = sway::run_sway_eval(out, &stop, &mut |done, total| {
         if lines {
-            eprintln!("runs: {done}/{total}");
+            note!("runs: {done}/{total}");
         }
         pb.get_or_insert_with(|| bar(total, "runs"))
             .set_position(done);
@@ -161,7 +168,7 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
     }
     for preset in Preset::ALL {
         let spring = preset.spring();
-        println!(
+        say!(
             "{} spring (grass stiffness {}): k {:.1} 1/s^2, c {:.2} 1/s ({:.3} Hz, damping ratio {:.2}); \
              explicit Euler stable below {:.1} ms, semi-implicit below {:.1} ms",
             preset.name(),
@@ -172,14 +179,19 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
             spring.damping_ratio(),
             spring.explicit_euler_max_dt() * 1e3,
             spring.semi_implicit_euler_max_dt() * 1e3
-        );
+        )?;
     }
-    println!(
+    say!(
         "{:<7} {:<14} {:>7} {:>11} {:>11} {:>8}  stable",
-        "preset", "integrator", "dt", "RMS rad", "max rad", "ns/step"
-    );
+        "preset",
+        "integrator",
+        "dt",
+        "RMS rad",
+        "max rad",
+        "ns/step"
+    )?;
     for r in &report.results {
-        println!(
+        say!(
             "{:<7} {:<14} {:>7} {:>11.3e} {:>11.3e} {:>8.1}  {}",
             r.preset,
             r.integrator.name(),
@@ -191,18 +203,18 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
                 None => "yes".to_owned(),
                 Some(t) => format!("NO, blew up at {t:.2} s"),
             }
-        );
+        )?;
     }
     let names: Vec<&str> = report.stable.iter().map(Integrator::name).collect();
-    println!(
+    say!(
         "stable at every step and at the 0.5 s hitch, both presets: {}",
         if names.is_empty() {
             "none".to_owned()
         } else {
             names.join(", ")
         }
-    );
-    println!(
+    )?;
+    say!(
         "renderer integrator: {} ({}); wrote sway.csv and charts to {}{}",
         RENDERER_INTEGRATOR.name(),
         if !report
@@ -218,7 +230,7 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
         },
         out.display(),
         partial(report.interrupted)
-    );
+    )?;
     if report.interrupted {
         let total = Preset::ALL.len() * Integrator::ALL.len() * sway::EVAL_STEPS_S.len();
         return Err(super::Interrupted(format!(

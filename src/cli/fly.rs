@@ -9,6 +9,7 @@ use verdant::renderer::{DEFAULT_MESH_STEP, GrassConfig};
 use verdant::tools::{FlyOptions, FlyProgress, run_fly};
 
 use super::args::{MAX_FRAMES, StreamArgs, TaaArgs, float_in, parse_size, resolve_world};
+use super::out::{note, say};
 use super::progress::bar;
 
 // The options of `verdant fly`.
@@ -270,7 +271,7 @@ pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
     opts.stop = Some(super::stop_on_signals()?);
     let mut pb: Option<ProgressBar> = None;
     let r = verdant::tools::truth::run_fly_truth(&opts, k, &mut |p| match p {
-        FlyProgress::WarmingUp => eprintln!("loading the first frame's tiles"),
+        FlyProgress::WarmingUp => note!("loading the first frame's tiles"),
         FlyProgress::Frame(done, total) => pb
             .get_or_insert_with(|| bar(total, "truth"))
             .set_position(done),
@@ -279,7 +280,7 @@ pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
     if let Some(pb) = pb {
         pb.finish();
     }
-    println!(
+    say!(
         "{} truth frames ({k}x{k} sub-samples) of {} ({}) at {}x{} in {:.1} s; wrote {}",
         r.frames.len(),
         r.world,
@@ -288,7 +289,7 @@ pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
         r.size.1,
         r.seconds,
         opts.out.display()
-    );
+    )?;
     if r.interrupted {
         return Err(super::Interrupted(format!(
             "stopped after {} of {} frames; {} describes those",
@@ -307,14 +308,14 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
     opts.stop = Some(super::stop_on_signals()?);
     let mut frames: Option<ProgressBar> = None;
     let report = run_fly(&opts, &mut |p| match p {
-        FlyProgress::WarmingUp => eprintln!("loading the first frame's tiles"),
+        FlyProgress::WarmingUp => note!("loading the first frame's tiles"),
         FlyProgress::WarmUpIncomplete(missing) => {
-            eprintln!(
+            note!(
                 "warning: not every tile of the first frame became resident; going on, drawing \
                  these from their ancestors:"
             );
             for m in missing {
-                eprintln!("  {m}");
+                note!("  {m}");
             }
         }
         FlyProgress::StaleFrames(count, first, last) => {
@@ -323,7 +324,7 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
             } else {
                 format!("{first} to {last}")
             };
-            eprintln!(
+            note!(
                 "warning: {} holds {count} frame image{} of an earlier run that this run does not \
                  write ({which}), which this run's report does not describe",
                 opts.out.display(),
@@ -332,7 +333,7 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
         }
         FlyProgress::Frame(done, total) => {
             let pb = frames.get_or_insert_with(|| {
-                eprintln!("rendering {total} frames");
+                note!("rendering {total} frames");
                 bar(total, "frames")
             });
             pb.set_position(done);
@@ -348,7 +349,7 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
         };
         let stale = verdant::tools::fly::stale_frames(&opts.out, written);
         if let (Some(first), Some(last)) = (stale.first(), stale.last()) {
-            eprintln!(
+            note!(
                 "warning: {} holds {} frame images of an earlier run beyond the {written} this \
                  run wrote ({first} to {last}), which its report does not describe",
                 opts.out.display(),
@@ -364,30 +365,34 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
         .into());
     }
     let s = &report.summary;
-    println!(
+    say!(
         "{} frames of {} ({}) on {} [{}]",
         report.frames.len(),
         report.world,
         report.path,
         report.adapter.name,
         report.adapter.backend
-    );
-    println!(
+    )?;
+    say!(
         "frame time: median {:.2} ms, p99 {:.2} ms; tiles drawn: median {:.0}",
-        s.frame_ms.median, s.frame_ms.p99, s.tiles_drawn.median
-    );
-    println!(
+        s.frame_ms.median,
+        s.frame_ms.p99,
+        s.tiles_drawn.median
+    )?;
+    say!(
         "tiles resident at their own level: median {:.0}%, holes {}, cache peak {:.1} MiB, atlas peak {} slots (a frame held at most {} tiles)",
         100.0 * s.resident_fraction.median,
         s.holes,
         s.cache_peak_bytes as f64 / (1 << 20) as f64,
         s.atlas_peak_slots,
         s.atlas_peak_held
-    );
-    println!(
+    )?;
+    say!(
         "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",
-        s.grass_considered.median, s.grass_drawn_high.median, s.grass_drawn_low.median
-    );
+        s.grass_considered.median,
+        s.grass_drawn_high.median,
+        s.grass_drawn_low.median
+    )?;
     if let Some(warning) = verdant::tools::fly::no_terrain_drawn(
         s.tiles_drawn.max as u32,
         "see the camera positions in report.json",
@@ -404,17 +409,17 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
             s.grass_overflow.median
         );
     }
-    println!(
+    say!(
         "grass coverage within {:.0} m: median {:.1}%, mean {:.1}% over {} frames",
         verdant::tools::metrics::COVERAGE_DISTANCE_M,
         100.0 * s.coverage.median,
         100.0 * s.coverage.mean,
         report.coverage.len()
-    );
+    )?;
     for (pass, t) in &s.gpu_ms {
-        println!("gpu {pass}: median {:.3} ms, p99 {:.3} ms", t.median, t.p99);
+        say!("gpu {pass}: median {:.3} ms, p99 {:.3} ms", t.median, t.p99)?;
     }
-    println!("wrote {}", opts.out.join("report.json").display());
+    say!("wrote {}", opts.out.join("report.json").display())?;
     if report.interrupted {
         return Err(super::Interrupted(format!(
             "stopped after {} of {} frames; {} describes those",

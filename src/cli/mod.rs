@@ -6,13 +6,12 @@ pub(crate) mod bake;
 pub(crate) mod bench;
 pub(crate) mod eval;
 pub(crate) mod fly;
+pub(crate) mod out;
 pub(crate) mod progress;
 pub(crate) mod serve;
 pub(crate) mod soak;
 pub(crate) mod view;
 
-/// `text` safe to print to a terminal: every control character but a tab or a line break
-/// written as an escape (`\u{1b}`), so that a file's name cannot drive the terminal.
 /// The flag that Ctrl-C (SIGINT) and SIGTERM set for a long run (a bake, a flight, a soak),
 /// which then stops cleanly; a second signal ends the process at once.
 pub(crate) fn stop_on_signals() -> anyhow::Result<verdant::bake::CancelFlag> {
@@ -34,6 +33,8 @@ impl std::fmt::Display for Interrupted {
 
 impl std::error::Error for Interrupted {}
 
+/// `text` safe to print to a terminal: every control character but a tab or a line break
+/// written as an escape (`\u{1b}`), so that a file's name cannot drive the terminal.
 pub(crate) fn terminal_safe(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     for c in text.chars() {

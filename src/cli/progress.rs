@@ -2,6 +2,8 @@
 
 use indicatif::{ProgressBar, ProgressStyle};
 
+use super::out::note;
+
 /// The progress bars of [`stage_bars`], shared with its update function.
 pub(crate) type StageBars = std::rc::Rc<std::cell::RefCell<Vec<(String, ProgressBar)>>>;
 
@@ -12,7 +14,7 @@ pub(crate) fn stage_bars() -> (StageBars, impl FnMut(&str, u64, u64)) {
     let lines = lines();
     let update = move |stage: &str, done: u64, total: u64| {
         if lines {
-            eprintln!("{stage}: {done}/{total}");
+            note!("{stage}: {done}/{total}");
         }
         let mut bars = inner.borrow_mut();
         if bars.last().is_none_or(|(s, _)| s != stage) {

@@ -3,6 +3,7 @@
 use anyhow::{Result, bail};
 
 use super::args::resolve_world;
+use super::out::say;
 
 pub(crate) fn serve(world: &str, addr: &str) -> Result<()> {
     let dir = resolve_world(world)?;
@@ -10,7 +11,7 @@ pub(crate) fn serve(world: &str, addr: &str) -> Result<()> {
         bail!("verdant serve serves a world folder, not {world}");
     }
     let server = verdant::tools::serve::WorldServer::start(&dir, addr)?;
-    println!("serving {} at {}", dir.display(), server.url());
+    say!("serving {} at {}", dir.display(), server.url())?;
     server.wait();
     Ok(())
 }

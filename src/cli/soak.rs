@@ -8,6 +8,7 @@ use indicatif::ProgressBar;
 use verdant::tools::{SoakOptions, run_soak};
 
 use super::args::{StreamArgs, float_in, parse_size, resolve_world};
+use super::out::{note, say};
 use super::progress::bar;
 
 // The options of `verdant soak`.
@@ -105,11 +106,16 @@ pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
     })?;
     super::progress::end_bar(pb.as_ref(), r.interrupted);
     let mib = |b: u64| b as f64 / 1048576.0;
-    println!(
+    say!(
         "{} frames ({:.0} s at {} m/s) on {}: frame p50 {:.1} ms, p99 {:.1} ms",
-        r.frames, r.seconds, r.speed_mps, r.adapter.name, r.frame_ms.median, r.frame_ms.p99
-    );
-    println!(
+        r.frames,
+        r.seconds,
+        r.speed_mps,
+        r.adapter.name,
+        r.frame_ms.median,
+        r.frame_ms.p99
+    )?;
+    say!(
         "peak RSS {:.1} MiB, growth after warm-up {:.1} MiB (halves {:.1} and {:.1} MiB); cache peak {:.1} of {:.1} MiB; atlas peak {} of {} slots",
         mib(r.rss_peak_bytes),
         mib(r.rss_growth_bytes),
@@ -119,15 +125,15 @@ pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
         mib(r.cache_ceiling_bytes),
         r.atlas_peak_slots,
         r.atlas_slots
-    );
+    )?;
     if r.plants_drawn_peak + r.trees_drawn_peak > 0 {
-        println!(
+        say!(
             "most drawn in a frame: {} blades, {} plants, {} trees; {} plant and tree instances overflowed",
             r.grass_blades_drawn_peak,
             r.plants_drawn_peak,
             r.trees_drawn_peak,
             r.plants_overflow_total
-        );
+        )?;
     }
     // A run shorter than the time to its first teleport has none to measure: say so, rather
     // than that full detail was never reached.
@@ -139,7 +145,7 @@ pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
         (n, Some(s)) => format!("full detail {s:.1} s after a teleport (median of {n})"),
         (n, None) => format!("full detail never reached after a teleport ({n} teleports)"),
     };
-    println!(
+    say!(
         "loads: {} completed, {} cancelled, {} failed; {} evictions; cache hit rate {:.0}%; \
          {detail}",
         r.loads_completed,
@@ -147,23 +153,26 @@ pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
         r.loads_failed,
         r.evictions,
         100.0 * r.cache_hit_rate,
-    );
+    )?;
     if let Some(f) = &r.faults {
         let injected = match (&f.files, &f.http) {
             (Some(c), _) => format!("{} tile files broken", c.injected()),
             (_, Some(h)) => format!("{} of {} requests faulted", h.faults(), h.requests),
             _ => "none injected".to_owned(),
         };
-        println!(
+        say!(
             "faults at rate {}: {injected}, {} loads failed, {} tiles healed, at most {} \
              desired tiles drawn from an ancestor for a fault",
-            f.rate, f.loads_failed, f.tiles_healed, f.fault_blocked_peak
-        );
+            f.rate,
+            f.loads_failed,
+            f.tiles_healed,
+            f.fault_blocked_peak
+        )?;
     }
-    println!("wrote {}", opts.out.join("soak.json").display());
+    say!("wrote {}", opts.out.join("soak.json").display())?;
     if !r.violations.is_empty() {
         for v in r.violations.iter().take(20) {
-            eprintln!("violation: {v}");
+            note!("violation: {v}");
         }
         if r.interrupted {
             return Err(super::Interrupted(format!(

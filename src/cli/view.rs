@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 
 use super::args::{MAX_FRAMES, StreamArgs, parse_size, resolve_world};
+use super::out::say;
 
 // The options of `verdant view`.
 #[derive(clap::Args)]
@@ -68,18 +69,18 @@ pub(crate) fn view(args: ViewArgs) -> Result<()> {
     })?;
     if summary.frames < 2 {
         // One frame has no time between frames to take a median of.
-        println!("{} frame on {}", summary.frames, summary.adapter);
+        say!("{} frame on {}", summary.frames, summary.adapter)?;
     } else {
-        println!(
+        say!(
             "{} frames, median {:.1} ms a frame ({:.1} fps) on {}",
             summary.frames,
             summary.median_frame_ms,
             1e3 / summary.median_frame_ms.max(1e-3),
             summary.adapter
-        );
+        )?;
     }
     if let Some(file) = screenshot {
-        println!("wrote {}", file.display());
+        say!("wrote {}", file.display())?;
     }
     // A run of N frames (a session the user ends reports no frames) that drew sky alone.
     if summary.frames > 0
