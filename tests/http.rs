@@ -1854,7 +1854,8 @@ fn a_chunked_body_cut_short_is_retried() {
 fn an_interrupted_warm_up_ends_the_fly_at_once() {
     let (tmp, stderr) = interrupted_in_warm_up(&[]);
     let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(tmp.path().join("out/report.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(tmp.path().join("out/report.json")).unwrap())
+            .unwrap();
     assert_eq!(report["interrupted"], true);
     assert_eq!(report["frames_flown"], 0);
     assert!(

@@ -560,6 +560,26 @@ fn control_characters_in_a_manifests_texts_are_refused() {
             "grass_types[1].name",
             "U+009B",
         ),
+        // A right-to-left override (and the other marks that reorder text) makes a name read
+        // as another one.
+        (
+            "name = \"test\"",
+            "name = \"san\\u202eta-cruz\"",
+            "name",
+            "U+202E",
+        ),
+        (
+            "name = \"overview\"",
+            "name = \"over\\u200fview\"",
+            "paths[0].name",
+            "U+200F",
+        ),
+        (
+            "name = \"meadow\"",
+            "name = \"mea\\u2067dow\"",
+            "grass_types[1].name",
+            "U+2067",
+        ),
     ] {
         let e = broken(from, to).to_string();
         for needle in [field, code, "control character"] {
@@ -596,6 +616,56 @@ fn control_characters_in_a_manifests_texts_are_refused() {
         verdant::world::manifest::without_control_characters("a\u{1b}b\tc\n"),
         "a\u{FFFD}b\tc\n"
     );
+}
+
+/// A name of a million characters was accepted and printed whole in every line that names the
+/// world: names are at most 256 characters, other texts 4096, each refused naming the field.
+#[test]
+fn overlong_texts_in_a_manifest_are_refused() {
+    let long = |n: usize| "x".repeat(n);
+    for (from, to, field, says) in [
+        (
+            "name = \"test\"".to_string(),
+            format!("name = \"{}\"", long(1_000_000)),
+            "name",
+            "a text of 1000000 characters",
+        ),
+        (
+            "name = \"overview\"".to_string(),
+            format!("name = \"{}\"", long(257)),
+            "paths[0].name",
+            "at most 256 characters",
+        ),
+        (
+            "description = \"a small test world\"".to_string(),
+            format!("description = \"{}\"", long(4097)),
+            "description",
+            "at most 4096 characters",
+        ),
+    ] {
+        let e = broken(&from, &to).to_string();
+        for needle in [field, says] {
+            assert!(
+                e.contains(needle),
+                "{needle:?} not in {:?}",
+                &e[..e.len().min(300)]
+            );
+        }
+        assert!(
+            e.len() < 1000,
+            "the error repeats the text: {} bytes",
+            e.len()
+        );
+    }
+    // At the limits, accepted.
+    let ok = VALID
+        .replacen("name = \"test\"", &format!("name = \"{}\"", long(256)), 1)
+        .replacen(
+            "description = \"a small test world\"",
+            &format!("description = \"{}\"", long(4096)),
+            1,
+        );
+    assert!(parse(&ok).is_ok());
 }
 
 #[test]

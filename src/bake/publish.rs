@@ -124,7 +124,10 @@ fn mounted_apart(out: &Path) -> Option<PathBuf> {
         use std::os::unix::fs::MetadataExt;
         let path = resolve_out(out).ok()?;
         let parent = path.parent()?;
-        let (here, above) = (std::fs::metadata(&path).ok()?, std::fs::metadata(parent).ok()?);
+        let (here, above) = (
+            std::fs::metadata(&path).ok()?,
+            std::fs::metadata(parent).ok()?,
+        );
         (here.is_dir() && here.dev() != above.dev()).then(|| parent.to_path_buf())
     }
     #[cfg(not(unix))]

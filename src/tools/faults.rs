@@ -111,7 +111,7 @@ impl FileFaults {
                     copy.display()
                 )
             })?;
-            eprintln!(
+            log::warn!(
                 "removed {}, the faulty copy of the world that an interrupted run left",
                 copy.display()
             );

@@ -13,9 +13,9 @@ use crate::gpu::GpuContext;
 use crate::renderer::RendererConfig;
 use crate::tools::metrics::Summary;
 use crate::tools::report::Thinned;
-use crate::world::error::short_number;
 use crate::tools::rng::Rng;
 use crate::tools::{AdapterReport, Scene, write_json};
+use crate::world::error::short_number;
 use crate::world::{TileData, TileId, World};
 
 /// What `verdant soak` is asked to do.

@@ -650,9 +650,59 @@ impl Manifest {
 }
 
 /// Whether `c` is a control character a manifest's text may not hold: any but a tab or a line
-/// break (an escape sequence in a world's name would drive the terminal that prints it).
+/// break (an escape sequence in a world's name would drive the terminal that prints it), and
+/// the characters that reorder the text around them (bidirectional marks, embeddings, overrides
+/// and isolates: a right-to-left override makes a name read as another one).
 pub fn forbidden_control(c: char) -> bool {
-    c.is_control() && !matches!(c, '\t' | '\n' | '\r')
+    (c.is_control() && !matches!(c, '\t' | '\n' | '\r'))
+        || matches!(
+            c,
+            '\u{061C}' | '\u{200E}' | '\u{200F}' | '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}'
+        )
+}
+
+/// The most characters a name in a manifest may have (of a world, a camera path, a wind scene,
+/// a grass or plant type): names are printed in lines and window titles.
+pub const MAX_NAME_CHARS: usize = 256;
+/// The most characters any other text in a manifest may have (a file's name, a source's
+/// description).
+pub const MAX_TEXT_CHARS: usize = 4096;
+
+/// The first text of `manifest` longer than it may be ([`MAX_NAME_CHARS`] for a `name`,
+/// [`MAX_TEXT_CHARS`] for any other), as the field's path, its length and the limit.
+fn overlong_text(manifest: &Manifest) -> Option<(String, usize, usize)> {
+    fn walk(v: &serde_json::Value, at: &str, most: usize) -> Option<(String, usize, usize)> {
+        match v {
+            serde_json::Value::String(t) => {
+                let n = t.chars().count();
+                (n > most).then(|| (at.to_owned(), n, most))
+            }
+            serde_json::Value::Array(a) => a
+                .iter()
+                .enumerate()
+                .find_map(|(i, v)| walk(v, &format!("{at}[{i}]"), MAX_TEXT_CHARS)),
+            serde_json::Value::Object(o) => o.iter().find_map(|(k, v)| {
+                // A map's keys are names (a plant's density by grass type's name).
+                let n = k.chars().count();
+                if n > MAX_NAME_CHARS {
+                    return Some((format!("{at} (a key)"), n, MAX_NAME_CHARS));
+                }
+                let most = if k == "name" {
+                    MAX_NAME_CHARS
+                } else {
+                    MAX_TEXT_CHARS
+                };
+                let at = if at.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{at}.{k}")
+                };
+                walk(v, &at, most)
+            }),
+            _ => None,
+        }
+    }
+    walk(&serde_json::to_value(manifest).ok()?, "", MAX_TEXT_CHARS)
 }
 
 /// `text` with every control character a manifest may not hold ([`forbidden_control`]) replaced

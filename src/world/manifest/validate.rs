@@ -21,8 +21,16 @@ impl Manifest {
                     "a text holding the control character U+{:04X}",
                     u32::from(c)
                 ),
-                "text without control characters (tabs and line breaks aside): a world's names \
-                 are printed to terminals and window titles",
+                "text without control characters (tabs and line breaks aside) or characters \
+                 that reorder the text around them: a world's names are printed to terminals \
+                 and window titles",
+            ));
+        }
+        if let Some((field, chars, most)) = overlong_text(self) {
+            return Err(v.out_of_range(
+                &field,
+                format!("a text of {chars} characters"),
+                &format!("at most {most} characters: a world's names are printed in lines and window titles"),
             ));
         }
 
