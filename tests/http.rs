@@ -2004,3 +2004,59 @@ fn the_viewer_opens_its_window_while_a_slow_servers_tiles_load() {
         "{stderr}"
     );
 }
+
+/// Runs `f` on a thread of its own and returns what it returns, failing the test if it takes
+/// longer than `limit` (the thread is left behind: a hang must fail the test, not stall it).
+fn within<T: Send + 'static>(what: &str, limit: Duration, f: impl FnOnce() -> T + Send + 'static) -> T {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(f());
+    });
+    rx.recv_timeout(limit)
+        .unwrap_or_else(|_| panic!("{what}: no end within {limit:?}"))
+}
+
+/// A cache entry's metadata that is not a regular file (a FIFO, whose opening would wait for a
+/// writer for ever, holding the cache's lock) is a damaged entry: dropped, and its file
+/// fetched again at once, for the manifest as for a tile's file; the entry is written anew as a
+/// regular file.
+#[test]
+fn a_fifo_in_the_cache_is_dropped_not_opened() {
+    let dir = common::default_world();
+    let ours = WorldServer::start(&dir, "127.0.0.1:0").unwrap();
+    let url = ours.url();
+    let tmp = tempfile::tempdir().unwrap();
+    let cache = tmp.path().join("cache");
+    let options = cached_options(&cache);
+    let id = TileId::new(2, 1, 1);
+    let local = World::open(&dir).unwrap();
+    let (_, first) = HttpSource::open(&url, options.clone()).unwrap();
+    first.load(id).unwrap();
+    let entries = cache_entries(&cache);
+    let manifest_meta = entries[&format!("{url}world.toml")].1.clone();
+    let height_meta = entries[&first.tile_url(id, TileFile::Height)].1.clone();
+    drop(first);
+
+    // The manifest's metadata a FIFO: the world opens, the manifest fetched again in full.
+    std::fs::remove_file(&manifest_meta).unwrap();
+    common::mkfifo(&manifest_meta);
+    let (u, o) = (url.clone(), options.clone());
+    let (world, source) = within("an open over a FIFO", Duration::from_secs(20), move || {
+        HttpSource::open(&u, o).unwrap()
+    });
+    assert_eq!(world.manifest, local.manifest);
+    assert_eq!(source.stats().cache_hits, 0);
+    assert!(std::fs::symlink_metadata(&manifest_meta).unwrap().is_file());
+
+    // A tile's: the tile loads, its height file fetched again, the two others revalidated.
+    std::fs::remove_file(&height_meta).unwrap();
+    common::mkfifo(&height_meta);
+    let source = Arc::new(source);
+    let s = Arc::clone(&source);
+    let tile = within("a tile over a FIFO", Duration::from_secs(20), move || {
+        s.load(id).unwrap()
+    });
+    assert_eq!(tile, local.load_tile(id).unwrap());
+    assert_eq!(source.stats().cache_hits, 2, "{:?}", source.stats());
+    assert!(std::fs::symlink_metadata(&height_meta).unwrap().is_file());
+}
