@@ -9,8 +9,9 @@
 //! unchanged. A request has a deadline ([`HttpOptions::timeout`], at most [`MAX_TIMEOUT`]);
 //! transient failures (a connection refused or reset, a 5xx status, a body cut short by its
 //! `Content-Length` or mid-chunk) are retried after a wait that doubles from
-//! [`HttpOptions::backoff`] up to [`HttpOptions::backoff_max`] (each retry is logged as a
-//! warning: what, why and when); anything else (a 4xx status, a stall past the deadline, a
+//! [`HttpOptions::backoff`] up to [`HttpOptions::backoff_max`], or after the wait a `503`'s
+//! `Retry-After` asks for where it is longer, again at most `backoff_max` (each retry is logged
+//! as a warning: what, why and when); anything else (a 4xx status, a stall past the deadline, a
 //! body that is not a tile or is too large) fails the load at once, and the streamer counts it
 //! as a fault exactly like a corrupt tile on disk.
 //!
@@ -273,7 +274,8 @@ pub struct HttpOptions {
     /// Wait before the first retry, doubled before each next one up to `backoff_max`. Default
     /// 200 ms.
     pub backoff: Duration,
-    /// The longest wait before a retry, at most [`MAX_BACKOFF`] (60 s). Default 5 s.
+    /// The longest wait before a retry, at most [`MAX_BACKOFF`] (60 s), also when a `503`'s
+    /// `Retry-After` asks for longer. Default 5 s.
     pub backoff_max: Duration,
     /// The on-disk cache of fetched files; none by default.
     pub cache: Option<HttpCacheConfig>,
