@@ -2141,3 +2141,45 @@ fn a_503_is_retried_after_the_wait_the_server_asks_for() {
         "asked to wait an hour, waited {second:?} (the most is 1.5 s)"
     );
 }
+
+/// A world's address with spaces and characters past ASCII in its path and query is sent
+/// percent-encoded, as its file names are; `%XX` escapes already in it are kept as they are,
+/// and a `%` that starts none is encoded.
+#[test]
+fn an_address_with_spaces_and_non_ascii_is_sent_percent_encoded() {
+    let asked = Arc::new(Mutex::new(Vec::<String>::new()));
+    let a = asked.clone();
+    let folder = "/a%20b/w%C3%B6rld%20x%20%F0%9F%8C%B2/";
+    let server = RawServer::start(move |target, stream, _| {
+        a.lock().unwrap().push(target.to_string());
+        match target
+            .strip_suffix("?t=a%20b")
+            .and_then(|p| p.strip_prefix(folder))
+        {
+            Some(name) => world_file(stream, name),
+            None => stream.write_all(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n"),
+        }
+    });
+    let local = World::open(&common::default_world()).unwrap();
+    let id = TileId::new(0, 0, 0);
+    for url in [
+        format!("http://{}/a b/wörld x 🌲/?t=a b", server.authority),
+        format!("http://{}{folder}?t=a%20b", server.authority),
+        format!("http://{}/a%20b/wörld%20x 🌲?t=a b", server.authority),
+    ] {
+        asked.lock().unwrap().clear();
+        let (world, source) = HttpSource::open(&url, quick_options())
+            .unwrap_or_else(|e| panic!("{url}: {e}; asked {:?}", asked.lock().unwrap()));
+        assert_eq!(world.manifest, local.manifest, "{url}");
+        assert_eq!(source.load(id).unwrap(), local.load_tile(id).unwrap(), "{url}");
+        assert_eq!(
+            source.base_url(),
+            format!("http://{}{folder}", server.authority)
+        );
+        let asked = asked.lock().unwrap().clone();
+        assert_eq!(asked[0], format!("{folder}world.toml?t=a%20b"), "{url}");
+    }
+    asked.lock().unwrap().clear();
+    let _ = HttpSource::open(&format!("http://{}/100%/", server.authority), quick_options());
+    assert_eq!(asked.lock().unwrap()[0], "/100%25/world.toml");
+}

@@ -424,7 +424,9 @@ impl WorldUrl {
     }
 
     /// `url` with its scheme and host in lower case (which they are in any case, RFC 3986 6.2.2.1;
-    /// the client library refuses an upper-case scheme) and without its fragment.
+    /// the client library refuses an upper-case scheme), its path and query percent-encoded
+    /// where they hold what a URL cannot (spaces, characters past ASCII; see [`encode_part`])
+    /// and without its fragment.
     fn normalize(url: &str) -> String {
         let url = url.split('#').next().unwrap_or(url);
         let Some((scheme, rest)) = url.split_once("://") else {
@@ -437,10 +439,13 @@ impl WorldUrl {
             Some((user, host)) => (format!("{user}@"), host),
             None => (String::new(), authority),
         };
+        let (path, query) = after.split_at(after.find('?').unwrap_or(after.len()));
         format!(
-            "{}://{user}{}{after}",
+            "{}://{user}{}{}{}",
             scheme.to_ascii_lowercase(),
-            host.to_ascii_lowercase()
+            host.to_ascii_lowercase(),
+            encode_part(path, b""),
+            encode_part(query, b"?"),
         )
     }
 
@@ -448,6 +453,30 @@ impl WorldUrl {
     fn join(&self, name: &str) -> String {
         format!("{}{name}{}", self.base, self.query)
     }
+}
+
+/// `part` of a URL (its path, or with `also` = `?` its query) with every byte that RFC 3986 3.3
+/// does not allow there percent-encoded (a space, a control, each byte of a character past
+/// ASCII, a `%` that starts no escape), so that an address written as a folder's name (`a
+/// b/wörld/`) is sent as one. What it allows, `%XX` escapes among it, is kept as it is: an
+/// address already encoded is unchanged.
+fn encode_part(part: &str, also: &[u8]) -> String {
+    let bytes = part.as_bytes();
+    let mut out = String::with_capacity(part.len());
+    for (i, &b) in bytes.iter().enumerate() {
+        let escape = b == b'%'
+            && bytes.get(i + 1).is_some_and(u8::is_ascii_hexdigit)
+            && bytes.get(i + 2).is_some_and(u8::is_ascii_hexdigit);
+        let allowed = b.is_ascii_alphanumeric()
+            || b"-._~!$&'()*+,;=:@/".contains(&b)
+            || also.contains(&b);
+        if escape || allowed {
+            out.push(char::from(b));
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
 }
 
 /// A world's tiles fetched over HTTP; see the module docs.
@@ -756,6 +785,26 @@ mod tests {
             url.join("tiles/L0/0_0.height.exr"),
             "http://h/w/tiles/L0/0_0.height.exr?t=1"
         );
+    }
+
+    /// What a URL cannot hold is percent-encoded, byte by byte of its UTF-8; what it can, and
+    /// escapes already made, are kept.
+    #[test]
+    fn an_address_is_percent_encoded_where_it_must_be() {
+        for (url, normal) in [
+            ("http://h/a b/", "http://h/a%20b/"),
+            ("http://h/w\u{f6}rld/\u{1f332}", "http://h/w%C3%B6rld/%F0%9F%8C%B2"),
+            ("http://h/a%20b/c%2Fd", "http://h/a%20b/c%2Fd"),
+            ("http://h/100%/%4", "http://h/100%25/%254"),
+            ("http://h/%zz", "http://h/%25zz"),
+            ("http://h/a\"b<c>^`{|}", "http://h/a%22b%3Cc%3E%5E%60%7B%7C%7D"),
+            ("http://h/ok-._~!$&'()*+,;=:@/", "http://h/ok-._~!$&'()*+,;=:@/"),
+            ("http://h/w?q=a b&r=/?x", "http://h/w?q=a%20b&r=/?x"),
+            ("http://h/w?x#frag ment", "http://h/w?x"),
+            ("http://h/p?q", "http://h/p?q"),
+        ] {
+            assert_eq!(WorldUrl::normalize(url), normal, "{url}");
+        }
     }
 
     #[test]
