@@ -2183,3 +2183,42 @@ fn an_address_with_spaces_and_non_ascii_is_sent_percent_encoded() {
     let _ = HttpSource::open(&format!("http://{}/100%/", server.authority), quick_options());
     assert_eq!(asked.lock().unwrap()[0], "/100%25/world.toml");
 }
+
+/// Two common ways of writing a world's address: naming its `world.toml`, and with dot
+/// segments (`./`, `tiles/../`). Each is read as the world's folder (dot segments removed as
+/// RFC 3986 5.2.4 has it), and the server removes them from a request's path too, never above
+/// its root: a path that climbs out of it, or `%2e%2e` (a name, not a segment), is still 404.
+#[test]
+fn an_address_naming_world_toml_or_with_dot_segments_is_the_worlds_folder() {
+    let dir = common::default_world();
+    let ours = WorldServer::start(&dir, "127.0.0.1:0").unwrap();
+    let base = ours.url();
+    let local = World::open(&dir).unwrap();
+    for url in [
+        format!("{base}world.toml"),
+        format!("{base}./"),
+        format!("{base}./world.toml?x=1"),
+        format!("{base}tiles/../"),
+        format!("{base}tiles/L0/./../.."),
+    ] {
+        let (world, source) =
+            HttpSource::open(&url, quick_options()).unwrap_or_else(|e| panic!("{url}: {e}"));
+        assert_eq!(world.manifest, local.manifest, "{url}");
+        assert_eq!(source.base_url(), base, "{url}");
+    }
+    for (path, status) in [
+        ("/./world.toml", "200"),
+        ("/tiles/L0/../../world.toml", "200"),
+        ("/tiles/./L0/0_0.type.png", "200"),
+        ("/tiles/L0/..", "404"),
+        ("/../world.toml", "404"),
+        ("/tiles/../../world.toml", "404"),
+        ("/tiles/%2e%2e/world.toml", "404"),
+    ] {
+        let (head, _) = ask_server(
+            ours.addr(),
+            &format!("GET {path} HTTP/1.1\r\nHost: x\r\n\r\n"),
+        );
+        assert!(head.starts_with(&format!("HTTP/1.1 {status}")), "{path}: {head}");
+    }
+}

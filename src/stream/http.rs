@@ -413,10 +413,15 @@ struct WorldUrl {
 
 impl WorldUrl {
     /// Splits `url` (already checked to be `http://` with a host); its fragment, which names
-    /// nothing on the server, is dropped.
+    /// nothing on the server, is dropped. An address that names the world's manifest
+    /// (`.../world.toml`) is taken for its folder's.
     fn parse(url: &str) -> WorldUrl {
         let url = Self::normalize(url);
         let (path, query) = url.split_at(url.find('?').unwrap_or(url.len()));
+        let path = match path.strip_suffix("/world.toml") {
+            Some(folder) if folder.len() > "http://".len() => folder,
+            _ => path,
+        };
         WorldUrl {
             base: format!("{}/", path.trim_end_matches('/')),
             query: if query == "?" { "" } else { query }.to_string(),
@@ -425,8 +430,9 @@ impl WorldUrl {
 
     /// `url` with its scheme and host in lower case (which they are in any case, RFC 3986 6.2.2.1;
     /// the client library refuses an upper-case scheme), its path and query percent-encoded
-    /// where they hold what a URL cannot (spaces, characters past ASCII; see [`encode_part`])
-    /// and without its fragment.
+    /// where they hold what a URL cannot (spaces, characters past ASCII; see [`encode_part`]),
+    /// the dot segments of its path removed (`./`, `a/../`: [`remove_dot_segments`]), and
+    /// without its fragment.
     fn normalize(url: &str) -> String {
         let url = url.split('#').next().unwrap_or(url);
         let Some((scheme, rest)) = url.split_once("://") else {
@@ -444,7 +450,7 @@ impl WorldUrl {
             "{}://{user}{}{}{}",
             scheme.to_ascii_lowercase(),
             host.to_ascii_lowercase(),
-            encode_part(path, b""),
+            remove_dot_segments(&encode_part(path, b"")),
             encode_part(query, b"?"),
         )
     }
@@ -477,6 +483,32 @@ fn encode_part(part: &str, also: &[u8]) -> String {
         }
     }
     out
+}
+
+/// `path` (empty or starting with `/`) without its dot segments, as RFC 3986 5.2.4 has it: a
+/// `.` segment goes, a `..` takes the segment before it along (none above the root), and a
+/// path that ends in either ends in `/`: `/a/./b/../c` is `/a/c`, `/a/b/..` is `/a/`.
+fn remove_dot_segments(path: &str) -> String {
+    let Some(rest) = path.strip_prefix('/') else {
+        return path.to_string();
+    };
+    let segments: Vec<&str> = rest.split('/').collect();
+    let last = segments.len() - 1;
+    let mut out: Vec<&str> = Vec::with_capacity(segments.len());
+    for (i, segment) in segments.into_iter().enumerate() {
+        match segment {
+            "." | ".." => {
+                if segment == ".." {
+                    out.pop();
+                }
+                if i == last {
+                    out.push("");
+                }
+            }
+            _ => out.push(segment),
+        }
+    }
+    format!("/{}", out.join("/"))
 }
 
 /// A world's tiles fetched over HTTP; see the module docs.
@@ -804,6 +836,43 @@ mod tests {
             ("http://h/p?q", "http://h/p?q"),
         ] {
             assert_eq!(WorldUrl::normalize(url), normal, "{url}");
+        }
+    }
+
+    /// Dot segments go as RFC 3986 5.2.4 has it (its examples among these), and an address
+    /// naming the world's manifest is its folder's.
+    #[test]
+    fn dot_segments_are_removed_and_a_manifest_names_its_folder() {
+        for (path, without) in [
+            ("/a/b/c/./../../g", "/a/g"),
+            ("/mid/content=5/../6", "/mid/6"),
+            ("/./", "/"),
+            ("/.", "/"),
+            ("/..", "/"),
+            ("/../../a", "/a"),
+            ("/a/b/..", "/a/"),
+            ("/a/./b/", "/a/b/"),
+            ("/a//b/../c", "/a//c"),
+            ("/a/.b/..c/", "/a/.b/..c/"),
+            ("", ""),
+            ("/", "/"),
+        ] {
+            assert_eq!(remove_dot_segments(path), without, "{path}");
+        }
+        for (url, base, query) in [
+            ("http://h/w/world.toml", "http://h/w/", ""),
+            ("http://h/world.toml?t=1", "http://h/", "?t=1"),
+            ("http://h/w/./tiles/../world.toml", "http://h/w/", ""),
+            ("http://h/w/my-world.toml", "http://h/w/my-world.toml/", ""),
+            ("http://h/./", "http://h/", ""),
+            ("http://h/a/b/../../c/.", "http://h/c/", ""),
+        ] {
+            let parsed = WorldUrl::parse(url);
+            assert_eq!(
+                (parsed.base.as_str(), parsed.query.as_str()),
+                (base, query),
+                "{url}"
+            );
         }
     }
 

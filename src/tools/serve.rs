@@ -475,9 +475,23 @@ pub fn content_type(path: &Path) -> &'static str {
 /// The file under `root` that a request path names, if it names one inside it.
 fn resolve(root: &Path, url: &str) -> Option<PathBuf> {
     let raw = url.split(['?', '#']).next().unwrap_or("");
-    // Percent-encoded names (a plant file `my%20fern.gltf`) are decoded first, then checked
-    // like any other: `%2e%2e` is `..` and refused, a NUL never reaches the file system.
-    let path = percent_encoding::percent_decode_str(raw)
+    // Dot segments as written (`/./world.toml`, `/tiles/L0/../../world.toml`) are removed
+    // first (RFC 3986 5.2.4), but never above the root: a path that climbs out is refused.
+    let mut segments = Vec::new();
+    for segment in raw.split('/') {
+        match segment {
+            "" | "." => {}
+            ".." => {
+                segments.pop()?;
+            }
+            _ => segments.push(segment),
+        }
+    }
+    let raw = segments.join("/");
+    // Percent-encoded names (a plant file `my%20fern.gltf`) are decoded then, and checked
+    // like any other: `%2e%2e` is a name, `..`, and refused; a NUL never reaches the file
+    // system.
+    let path = percent_encoding::percent_decode_str(&raw)
         .decode_utf8()
         .ok()?
         .into_owned();
