@@ -2222,3 +2222,43 @@ fn an_address_naming_world_toml_or_with_dot_segments_is_the_worlds_folder() {
         assert!(head.starts_with(&format!("HTTP/1.1 {status}")), "{path}: {head}");
     }
 }
+
+/// The address `verdant serve` gives is one a client can fetch: listening on every IPv4
+/// address it is 127.0.0.1's, on every IPv6 address ::1's. Listening on IPv6 it warns that
+/// verdant's own client cannot reach it, and the client's refusal of an IPv6 host says what to
+/// do instead, never "localhost" (which reaches 127.0.0.1, where nothing may listen).
+#[test]
+fn the_servers_address_is_one_a_client_can_fetch() {
+    let logs = warnings();
+    let dir = common::default_world();
+    let any = WorldServer::start(&dir, "0.0.0.0:0").unwrap();
+    assert_eq!(any.url(), format!("http://127.0.0.1:{}/", any.addr().port()));
+    let (world, _) = HttpSource::open(&any.url(), quick_options()).unwrap();
+    assert_eq!(world.manifest, World::open(&dir).unwrap().manifest);
+    // Where the machine has IPv6 (this test asks nothing of it where not).
+    if TcpListener::bind("[::1]:0").is_ok() {
+        for addr in ["[::1]:0", "[::]:0"] {
+            let six = WorldServer::start(&dir, addr).unwrap();
+            let port = six.addr().port();
+            assert_eq!(six.url(), format!("http://[::1]:{port}/"), "{addr}");
+            let said: Vec<String> = logs
+                .lock()
+                .unwrap()
+                .iter()
+                .filter(|l| l.contains(&format!(":{port}")))
+                .cloned()
+                .collect();
+            assert!(
+                said.len() == 1 && said[0].contains("IPv6") && said[0].contains("127.0.0.1"),
+                "{addr}: {said:?}"
+            );
+            let e = HttpSource::open(&six.url(), quick_options())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("IPv4") && e.contains("127.0.0.1") && !e.contains("localhost"),
+                "{e}"
+            );
+        }
+    }
+}

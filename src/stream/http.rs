@@ -367,8 +367,9 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
         };
         if !host.is_empty() {
             return Err(bad(
-                "an IPv6 address as the host, which the HTTP client cannot reach: use a host \
-                 name that resolves to it (localhost for ::1)",
+                "an IPv6 address as the host, which the HTTP client cannot reach: serve the \
+                 world on an IPv4 address too (verdant serve --addr 127.0.0.1:PORT) and give \
+                 that, or a host name that resolves to an IPv4 address it listens on",
             ));
         }
         match after {

@@ -6,7 +6,7 @@
 //! server, object store or CDN instead.
 
 use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::path::{Component, Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
@@ -125,6 +125,7 @@ impl WorldServer {
         let addr = listener
             .local_addr()
             .context("the server has no IP address")?;
+        warn_ipv6(addr);
         // Each connection carries the deadline of its head, counted from its accept.
         let (tx, rx) = sync_channel::<(TcpStream, Instant)>(limits.queued.max(1));
         let rx = Arc::new(Mutex::new(rx));
@@ -156,9 +157,10 @@ impl WorldServer {
         self.addr
     }
 
-    /// The world's URL: `http://ADDR/`.
+    /// The world's URL, one a client can fetch: `http://ADDR/`, with 127.0.0.1 for a server
+    /// that listens on every IPv4 address (`0.0.0.0`) and `[::1]` for every IPv6 one (`[::]`).
     pub fn url(&self) -> String {
-        format!("http://{}/", self.addr)
+        format!("http://{}/", fetchable(self.addr))
     }
 
     /// Serves until the process ends.
@@ -181,6 +183,35 @@ impl Drop for WorldServer {
         for w in self.workers.drain(..) {
             let _ = w.join();
         }
+    }
+}
+
+/// `addr` as a client reaches it: the loopback address of its family for an unspecified one
+/// (an address to listen on, not to fetch).
+fn fetchable(addr: SocketAddr) -> SocketAddr {
+    match addr.ip() {
+        IpAddr::V4(ip) if ip.is_unspecified() => (Ipv4Addr::LOCALHOST, addr.port()).into(),
+        IpAddr::V6(ip) if ip.is_unspecified() => (Ipv6Addr::LOCALHOST, addr.port()).into(),
+        _ => addr,
+    }
+}
+
+/// Warns, for a server listening on IPv6, that verdant's own HTTP client cannot reach it
+/// there, and how to serve it so that it can.
+fn warn_ipv6(addr: SocketAddr) {
+    let port = addr.port();
+    match addr.ip() {
+        IpAddr::V6(ip) if ip.is_unspecified() => log::warn!(
+            "serve: listening on {addr}, every IPv6 address, which verdant's own HTTP client \
+             cannot reach (it reaches 127.0.0.1:{port} only where the system takes IPv4 \
+             connections on IPv6 sockets); for it, serve on an IPv4 address (--addr \
+             127.0.0.1:{port} or 0.0.0.0:{port})"
+        ),
+        IpAddr::V6(_) => log::warn!(
+            "serve: listening on {addr}, IPv6 only, which verdant's own HTTP client cannot \
+             reach; for it, serve on an IPv4 address (--addr 127.0.0.1:{port})"
+        ),
+        IpAddr::V4(_) => {}
     }
 }
 
