@@ -1854,7 +1854,8 @@ fn a_chunked_body_cut_short_is_retried() {
 fn an_interrupted_warm_up_ends_the_fly_at_once() {
     let (tmp, stderr) = interrupted_in_warm_up(&[]);
     let report: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(tmp.path().join("out/report.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(tmp.path().join("out/report.json")).unwrap())
+            .unwrap();
     assert_eq!(report["interrupted"], true);
     assert_eq!(report["frames_flown"], 0);
     assert!(
@@ -2007,7 +2008,11 @@ fn the_viewer_opens_its_window_while_a_slow_servers_tiles_load() {
 
 /// Runs `f` on a thread of its own and returns what it returns, failing the test if it takes
 /// longer than `limit` (the thread is left behind: a hang must fail the test, not stall it).
-fn within<T: Send + 'static>(what: &str, limit: Duration, f: impl FnOnce() -> T + Send + 'static) -> T {
+fn within<T: Send + 'static>(
+    what: &str,
+    limit: Duration,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> T {
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let _ = tx.send(f());
@@ -2128,7 +2133,10 @@ fn a_503_is_retried_after_the_wait_the_server_asks_for() {
         ..quick_options()
     };
     let (world, _) = HttpSource::open(&server.url, options).unwrap();
-    assert_eq!(world.manifest.name, World::open(&common::default_world()).unwrap().manifest.name);
+    assert_eq!(
+        world.manifest.name,
+        World::open(&common::default_world()).unwrap().manifest.name
+    );
     let times = times.lock().unwrap().clone();
     assert_eq!(times.len(), 3);
     let (first, second) = (times[1] - times[0], times[2] - times[1]);
@@ -2171,7 +2179,11 @@ fn an_address_with_spaces_and_non_ascii_is_sent_percent_encoded() {
         let (world, source) = HttpSource::open(&url, quick_options())
             .unwrap_or_else(|e| panic!("{url}: {e}; asked {:?}", asked.lock().unwrap()));
         assert_eq!(world.manifest, local.manifest, "{url}");
-        assert_eq!(source.load(id).unwrap(), local.load_tile(id).unwrap(), "{url}");
+        assert_eq!(
+            source.load(id).unwrap(),
+            local.load_tile(id).unwrap(),
+            "{url}"
+        );
         assert_eq!(
             source.base_url(),
             format!("http://{}{folder}", server.authority)
@@ -2180,7 +2192,10 @@ fn an_address_with_spaces_and_non_ascii_is_sent_percent_encoded() {
         assert_eq!(asked[0], format!("{folder}world.toml?t=a%20b"), "{url}");
     }
     asked.lock().unwrap().clear();
-    let _ = HttpSource::open(&format!("http://{}/100%/", server.authority), quick_options());
+    let _ = HttpSource::open(
+        &format!("http://{}/100%/", server.authority),
+        quick_options(),
+    );
     assert_eq!(asked.lock().unwrap()[0], "/100%25/world.toml");
 }
 
@@ -2219,7 +2234,10 @@ fn an_address_naming_world_toml_or_with_dot_segments_is_the_worlds_folder() {
             ours.addr(),
             &format!("GET {path} HTTP/1.1\r\nHost: x\r\n\r\n"),
         );
-        assert!(head.starts_with(&format!("HTTP/1.1 {status}")), "{path}: {head}");
+        assert!(
+            head.starts_with(&format!("HTTP/1.1 {status}")),
+            "{path}: {head}"
+        );
     }
 }
 
@@ -2232,7 +2250,10 @@ fn the_servers_address_is_one_a_client_can_fetch() {
     let logs = warnings();
     let dir = common::default_world();
     let any = WorldServer::start(&dir, "0.0.0.0:0").unwrap();
-    assert_eq!(any.url(), format!("http://127.0.0.1:{}/", any.addr().port()));
+    assert_eq!(
+        any.url(),
+        format!("http://127.0.0.1:{}/", any.addr().port())
+    );
     let (world, _) = HttpSource::open(&any.url(), quick_options()).unwrap();
     assert_eq!(world.manifest, World::open(&dir).unwrap().manifest);
     // Where the machine has IPv6 (this test asks nothing of it where not).

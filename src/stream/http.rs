@@ -474,9 +474,8 @@ fn encode_part(part: &str, also: &[u8]) -> String {
         let escape = b == b'%'
             && bytes.get(i + 1).is_some_and(u8::is_ascii_hexdigit)
             && bytes.get(i + 2).is_some_and(u8::is_ascii_hexdigit);
-        let allowed = b.is_ascii_alphanumeric()
-            || b"-._~!$&'()*+,;=:@/".contains(&b)
-            || also.contains(&b);
+        let allowed =
+            b.is_ascii_alphanumeric() || b"-._~!$&'()*+,;=:@/".contains(&b) || also.contains(&b);
         if escape || allowed {
             out.push(char::from(b));
         } else {
@@ -826,12 +825,21 @@ mod tests {
     fn an_address_is_percent_encoded_where_it_must_be() {
         for (url, normal) in [
             ("http://h/a b/", "http://h/a%20b/"),
-            ("http://h/w\u{f6}rld/\u{1f332}", "http://h/w%C3%B6rld/%F0%9F%8C%B2"),
+            (
+                "http://h/w\u{f6}rld/\u{1f332}",
+                "http://h/w%C3%B6rld/%F0%9F%8C%B2",
+            ),
             ("http://h/a%20b/c%2Fd", "http://h/a%20b/c%2Fd"),
             ("http://h/100%/%4", "http://h/100%25/%254"),
             ("http://h/%zz", "http://h/%25zz"),
-            ("http://h/a\"b<c>^`{|}", "http://h/a%22b%3Cc%3E%5E%60%7B%7C%7D"),
-            ("http://h/ok-._~!$&'()*+,;=:@/", "http://h/ok-._~!$&'()*+,;=:@/"),
+            (
+                "http://h/a\"b<c>^`{|}",
+                "http://h/a%22b%3Cc%3E%5E%60%7B%7C%7D",
+            ),
+            (
+                "http://h/ok-._~!$&'()*+,;=:@/",
+                "http://h/ok-._~!$&'()*+,;=:@/",
+            ),
             ("http://h/w?q=a b&r=/?x", "http://h/w?q=a%20b&r=/?x"),
             ("http://h/w?x#frag ment", "http://h/w?x"),
             ("http://h/p?q", "http://h/p?q"),

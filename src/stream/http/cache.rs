@@ -241,7 +241,9 @@ impl DiskCache {
             .and_then(|(h, l)| Some((u64::from_str_radix(h, 16).ok()?, l.parse::<u64>().ok()?)))
             .ok_or("no checksum in metadata")?;
         if len > max {
-            return Err(format!("body of {len} bytes, more than the {max} this file may hold"));
+            return Err(format!(
+                "body of {len} bytes, more than the {max} this file may hold"
+            ));
         }
         let body = read_cached(&self.path(key, "body"), len, "body")?;
         if body.len() as u64 != len || fnv1a64(&body) != hash {
