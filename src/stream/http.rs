@@ -9,8 +9,9 @@
 //! unchanged. A request has a deadline ([`HttpOptions::timeout`], at most [`MAX_TIMEOUT`]);
 //! transient failures (a connection refused or reset, a 5xx status, a body cut short by its
 //! `Content-Length` or mid-chunk) are retried after a wait that doubles from
-//! [`HttpOptions::backoff`] up to [`HttpOptions::backoff_max`] (each retry is logged as a
-//! warning: what, why and when); anything else (a 4xx status, a stall past the deadline, a
+//! [`HttpOptions::backoff`] up to [`HttpOptions::backoff_max`], or after the wait a `503`'s
+//! `Retry-After` asks for where it is longer, again at most `backoff_max` (each retry is logged
+//! as a warning: what, why and when); anything else (a 4xx status, a stall past the deadline, a
 //! body that is not a tile or is too large) fails the load at once, and the streamer counts it
 //! as a fault exactly like a corrupt tile on disk.
 //!
@@ -273,7 +274,8 @@ pub struct HttpOptions {
     /// Wait before the first retry, doubled before each next one up to `backoff_max`. Default
     /// 200 ms.
     pub backoff: Duration,
-    /// The longest wait before a retry, at most [`MAX_BACKOFF`] (60 s). Default 5 s.
+    /// The longest wait before a retry, at most [`MAX_BACKOFF`] (60 s), also when a `503`'s
+    /// `Retry-After` asks for longer. Default 5 s.
     pub backoff_max: Duration,
     /// The on-disk cache of fetched files; none by default.
     pub cache: Option<HttpCacheConfig>,
@@ -365,8 +367,9 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
         };
         if !host.is_empty() {
             return Err(bad(
-                "an IPv6 address as the host, which the HTTP client cannot reach: use a host \
-                 name that resolves to it (localhost for ::1)",
+                "an IPv6 address as the host, which the HTTP client cannot reach: serve the \
+                 world on an IPv4 address too (verdant serve --addr 127.0.0.1:PORT) and give \
+                 that, or a host name that resolves to an IPv4 address it listens on",
             ));
         }
         match after {
@@ -411,10 +414,15 @@ struct WorldUrl {
 
 impl WorldUrl {
     /// Splits `url` (already checked to be `http://` with a host); its fragment, which names
-    /// nothing on the server, is dropped.
+    /// nothing on the server, is dropped. An address that names the world's manifest
+    /// (`.../world.toml`) is taken for its folder's.
     fn parse(url: &str) -> WorldUrl {
         let url = Self::normalize(url);
         let (path, query) = url.split_at(url.find('?').unwrap_or(url.len()));
+        let path = match path.strip_suffix("/world.toml") {
+            Some(folder) if folder.len() > "http://".len() => folder,
+            _ => path,
+        };
         WorldUrl {
             base: format!("{}/", path.trim_end_matches('/')),
             query: if query == "?" { "" } else { query }.to_string(),
@@ -422,7 +430,10 @@ impl WorldUrl {
     }
 
     /// `url` with its scheme and host in lower case (which they are in any case, RFC 3986 6.2.2.1;
-    /// the client library refuses an upper-case scheme) and without its fragment.
+    /// the client library refuses an upper-case scheme), its path and query percent-encoded
+    /// where they hold what a URL cannot (spaces, characters past ASCII; see [`encode_part`]),
+    /// the dot segments of its path removed (`./`, `a/../`: [`remove_dot_segments`]), and
+    /// without its fragment.
     fn normalize(url: &str) -> String {
         let url = url.split('#').next().unwrap_or(url);
         let Some((scheme, rest)) = url.split_once("://") else {
@@ -435,10 +446,13 @@ impl WorldUrl {
             Some((user, host)) => (format!("{user}@"), host),
             None => (String::new(), authority),
         };
+        let (path, query) = after.split_at(after.find('?').unwrap_or(after.len()));
         format!(
-            "{}://{user}{}{after}",
+            "{}://{user}{}{}{}",
             scheme.to_ascii_lowercase(),
-            host.to_ascii_lowercase()
+            host.to_ascii_lowercase(),
+            remove_dot_segments(&encode_part(path, b"")),
+            encode_part(query, b"?"),
         )
     }
 
@@ -446,6 +460,55 @@ impl WorldUrl {
     fn join(&self, name: &str) -> String {
         format!("{}{name}{}", self.base, self.query)
     }
+}
+
+/// `part` of a URL (its path, or with `also` = `?` its query) with every byte that RFC 3986 3.3
+/// does not allow there percent-encoded (a space, a control, each byte of a character past
+/// ASCII, a `%` that starts no escape), so that an address written as a folder's name (`a
+/// b/wörld/`) is sent as one. What it allows, `%XX` escapes among it, is kept as it is: an
+/// address already encoded is unchanged.
+fn encode_part(part: &str, also: &[u8]) -> String {
+    let bytes = part.as_bytes();
+    let mut out = String::with_capacity(part.len());
+    for (i, &b) in bytes.iter().enumerate() {
+        let escape = b == b'%'
+            && bytes.get(i + 1).is_some_and(u8::is_ascii_hexdigit)
+            && bytes.get(i + 2).is_some_and(u8::is_ascii_hexdigit);
+        let allowed =
+            b.is_ascii_alphanumeric() || b"-._~!$&'()*+,;=:@/".contains(&b) || also.contains(&b);
+        if escape || allowed {
+            out.push(char::from(b));
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
+}
+
+/// `path` (empty or starting with `/`) without its dot segments, as RFC 3986 5.2.4 has it: a
+/// `.` segment goes, a `..` takes the segment before it along (none above the root), and a
+/// path that ends in either ends in `/`: `/a/./b/../c` is `/a/c`, `/a/b/..` is `/a/`.
+fn remove_dot_segments(path: &str) -> String {
+    let Some(rest) = path.strip_prefix('/') else {
+        return path.to_string();
+    };
+    let segments: Vec<&str> = rest.split('/').collect();
+    let last = segments.len() - 1;
+    let mut out: Vec<&str> = Vec::with_capacity(segments.len());
+    for (i, segment) in segments.into_iter().enumerate() {
+        match segment {
+            "." | ".." => {
+                if segment == ".." {
+                    out.pop();
+                }
+                if i == last {
+                    out.push("");
+                }
+            }
+            _ => out.push(segment),
+        }
+    }
+    format!("/{}", out.join("/"))
 }
 
 /// A world's tiles fetched over HTTP; see the module docs.
@@ -754,6 +817,72 @@ mod tests {
             url.join("tiles/L0/0_0.height.exr"),
             "http://h/w/tiles/L0/0_0.height.exr?t=1"
         );
+    }
+
+    /// What a URL cannot hold is percent-encoded, byte by byte of its UTF-8; what it can, and
+    /// escapes already made, are kept.
+    #[test]
+    fn an_address_is_percent_encoded_where_it_must_be() {
+        for (url, normal) in [
+            ("http://h/a b/", "http://h/a%20b/"),
+            (
+                "http://h/w\u{f6}rld/\u{1f332}",
+                "http://h/w%C3%B6rld/%F0%9F%8C%B2",
+            ),
+            ("http://h/a%20b/c%2Fd", "http://h/a%20b/c%2Fd"),
+            ("http://h/100%/%4", "http://h/100%25/%254"),
+            ("http://h/%zz", "http://h/%25zz"),
+            (
+                "http://h/a\"b<c>^`{|}",
+                "http://h/a%22b%3Cc%3E%5E%60%7B%7C%7D",
+            ),
+            (
+                "http://h/ok-._~!$&'()*+,;=:@/",
+                "http://h/ok-._~!$&'()*+,;=:@/",
+            ),
+            ("http://h/w?q=a b&r=/?x", "http://h/w?q=a%20b&r=/?x"),
+            ("http://h/w?x#frag ment", "http://h/w?x"),
+            ("http://h/p?q", "http://h/p?q"),
+        ] {
+            assert_eq!(WorldUrl::normalize(url), normal, "{url}");
+        }
+    }
+
+    /// Dot segments go as RFC 3986 5.2.4 has it (its examples among these), and an address
+    /// naming the world's manifest is its folder's.
+    #[test]
+    fn dot_segments_are_removed_and_a_manifest_names_its_folder() {
+        for (path, without) in [
+            ("/a/b/c/./../../g", "/a/g"),
+            ("/mid/content=5/../6", "/mid/6"),
+            ("/./", "/"),
+            ("/.", "/"),
+            ("/..", "/"),
+            ("/../../a", "/a"),
+            ("/a/b/..", "/a/"),
+            ("/a/./b/", "/a/b/"),
+            ("/a//b/../c", "/a//c"),
+            ("/a/.b/..c/", "/a/.b/..c/"),
+            ("", ""),
+            ("/", "/"),
+        ] {
+            assert_eq!(remove_dot_segments(path), without, "{path}");
+        }
+        for (url, base, query) in [
+            ("http://h/w/world.toml", "http://h/w/", ""),
+            ("http://h/world.toml?t=1", "http://h/", "?t=1"),
+            ("http://h/w/./tiles/../world.toml", "http://h/w/", ""),
+            ("http://h/w/my-world.toml", "http://h/w/my-world.toml/", ""),
+            ("http://h/./", "http://h/", ""),
+            ("http://h/a/b/../../c/.", "http://h/c/", ""),
+        ] {
+            let parsed = WorldUrl::parse(url);
+            assert_eq!(
+                (parsed.base.as_str(), parsed.query.as_str()),
+                (base, query),
+                "{url}"
+            );
+        }
     }
 
     #[test]

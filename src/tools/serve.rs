@@ -6,7 +6,7 @@
 //! server, object store or CDN instead.
 
 use std::io::{BufRead, BufReader, Read, Write};
-use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::path::{Component, Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
@@ -28,8 +28,11 @@ pub const MAX_HEADERS: usize = 100;
 /// The server's limits in time and waiting connections.
 #[derive(Clone, Copy, Debug)]
 pub struct ServeLimits {
-    /// The longest a client may take to send its request's head, from the moment a worker
-    /// takes its connection (a client that sends nothing, or trickles, is closed after it).
+    /// The longest a client may take to send its request's head, from the moment its
+    /// connection is accepted (a client that sends nothing, or trickles, is closed after it;
+    /// one whose time passed while it waited for a worker is closed at once, unless its whole
+    /// head has come meanwhile), so that idle connections hold the others back by about this
+    /// long at most, however many of them wait.
     pub head: Duration,
     /// The longest one write of the answer may wait on a client that does not read.
     pub write: Duration,
@@ -109,8 +112,9 @@ impl WorldServer {
     ///
     /// What the server holds is bounded whatever its clients do: [`WORKERS`] threads answer
     /// requests, one more accepts connections into a queue of `limits.queued` (a connection
-    /// past it is answered `503` and closed), a request's head is read within `limits.head` and
-    /// at most [`MAX_HEAD_BYTES`], and every connection is closed after its one answer.
+    /// past it is answered `503` and closed), a request's head is read within `limits.head` of
+    /// its connection's accept and at most [`MAX_HEAD_BYTES`], and every connection is closed
+    /// after its one answer.
     pub fn start_with(root: &Path, addr: &str, limits: ServeLimits) -> Result<WorldServer> {
         let root = Arc::new(
             root.canonicalize()
@@ -121,20 +125,24 @@ impl WorldServer {
         let addr = listener
             .local_addr()
             .context("the server has no IP address")?;
-        let (tx, rx) = sync_channel::<TcpStream>(limits.queued.max(1));
+        warn_ipv6(addr);
+        // Each connection carries the deadline of its head, counted from its accept.
+        let (tx, rx) = sync_channel::<(TcpStream, Instant)>(limits.queued.max(1));
         let rx = Arc::new(Mutex::new(rx));
         let workers = (0..WORKERS)
             .map(|_| {
                 let (rx, root) = (Arc::clone(&rx), Arc::clone(&root));
                 std::thread::spawn(move || {
-                    work(&rx, |stream| serve_connection(&root, stream, limits));
+                    work(&rx, |(stream, deadline)| {
+                        serve_connection(&root, stream, deadline, limits)
+                    });
                 })
             })
             .collect();
         let stop = Arc::new(AtomicBool::new(false));
         let acceptor = {
             let stop = Arc::clone(&stop);
-            std::thread::spawn(move || accept(&listener, &tx, &stop))
+            std::thread::spawn(move || accept(&listener, &tx, limits.head, &stop))
         };
         Ok(WorldServer {
             addr,
@@ -149,9 +157,10 @@ impl WorldServer {
         self.addr
     }
 
-    /// The world's URL: `http://ADDR/`.
+    /// The world's URL, one a client can fetch: `http://ADDR/`, with 127.0.0.1 for a server
+    /// that listens on every IPv4 address (`0.0.0.0`) and `[::1]` for every IPv6 one (`[::]`).
     pub fn url(&self) -> String {
-        format!("http://{}/", self.addr)
+        format!("http://{}/", fetchable(self.addr))
     }
 
     /// Serves until the process ends.
@@ -177,10 +186,45 @@ impl Drop for WorldServer {
     }
 }
 
-/// Accepts connections into the workers' queue until `stop`; a connection the queue has no
-/// room for is answered `503` and closed here. An accept that fails (out of file descriptors)
-/// is logged and retried after a pause: the server goes on.
-fn accept(listener: &TcpListener, queue: &SyncSender<TcpStream>, stop: &AtomicBool) {
+/// `addr` as a client reaches it: the loopback address of its family for an unspecified one
+/// (an address to listen on, not to fetch).
+fn fetchable(addr: SocketAddr) -> SocketAddr {
+    match addr.ip() {
+        IpAddr::V4(ip) if ip.is_unspecified() => (Ipv4Addr::LOCALHOST, addr.port()).into(),
+        IpAddr::V6(ip) if ip.is_unspecified() => (Ipv6Addr::LOCALHOST, addr.port()).into(),
+        _ => addr,
+    }
+}
+
+/// Warns, for a server listening on IPv6, that verdant's own HTTP client cannot reach it
+/// there, and how to serve it so that it can.
+fn warn_ipv6(addr: SocketAddr) {
+    let port = addr.port();
+    match addr.ip() {
+        IpAddr::V6(ip) if ip.is_unspecified() => log::warn!(
+            "serve: listening on {addr}, every IPv6 address, which verdant's own HTTP client \
+             cannot reach (it reaches 127.0.0.1:{port} only where the system takes IPv4 \
+             connections on IPv6 sockets); for it, serve on an IPv4 address (--addr \
+             127.0.0.1:{port} or 0.0.0.0:{port})"
+        ),
+        IpAddr::V6(_) => log::warn!(
+            "serve: listening on {addr}, IPv6 only, which verdant's own HTTP client cannot \
+             reach; for it, serve on an IPv4 address (--addr 127.0.0.1:{port})"
+        ),
+        IpAddr::V4(_) => {}
+    }
+}
+
+/// Accepts connections into the workers' queue until `stop`, each with the deadline of its
+/// request's head (`head` from now); a connection the queue has no room for is answered `503`
+/// and closed here. An accept that fails (out of file descriptors) is logged and retried after
+/// a pause: the server goes on.
+fn accept(
+    listener: &TcpListener,
+    queue: &SyncSender<(TcpStream, Instant)>,
+    head: Duration,
+    stop: &AtomicBool,
+) {
     let mut told = false;
     loop {
         let stream = listener.accept();
@@ -188,9 +232,9 @@ fn accept(listener: &TcpListener, queue: &SyncSender<TcpStream>, stop: &AtomicBo
             return;
         }
         match stream {
-            Ok((stream, _)) => match queue.try_send(stream) {
+            Ok((stream, _)) => match queue.try_send((stream, Instant::now() + head)) {
                 Ok(()) => {}
-                Err(TrySendError::Full(mut stream)) => {
+                Err(TrySendError::Full((mut stream, _))) => {
                     let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
                     let _ = stream.write_all(
                         b"HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\n\
@@ -268,9 +312,8 @@ enum HeadError {
     Gone(std::io::Error),
 }
 
-/// Reads a request's head within `limit` of time and [`MAX_HEAD_BYTES`].
-fn read_head(stream: &TcpStream, limit: Duration) -> Result<Head, HeadError> {
-    let deadline = Instant::now() + limit;
+/// Reads a request's head by `deadline` and within [`MAX_HEAD_BYTES`].
+fn read_head(stream: &TcpStream, deadline: Instant) -> Result<Head, HeadError> {
     let mut reader = BufReader::new(Deadline { stream, deadline }).take(MAX_HEAD_BYTES as u64);
     let mut lines = Vec::new();
     loop {
@@ -333,7 +376,9 @@ fn read_head(stream: &TcpStream, limit: Duration) -> Result<Head, HeadError> {
     })
 }
 
-/// A stream read with one deadline for the whole of what is read through it.
+/// A stream read with one deadline for the whole of what is read through it. Past the
+/// deadline only what has already come is read, without waiting for more: a connection that
+/// waited in the queue past its time is answered if its request is there, else closed at once.
 struct Deadline<'s> {
     stream: &'s TcpStream,
     deadline: Instant,
@@ -342,11 +387,19 @@ struct Deadline<'s> {
 impl Read for Deadline<'_> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         let left = self.deadline.saturating_duration_since(Instant::now());
-        if left.is_zero() {
-            return Err(std::io::ErrorKind::TimedOut.into());
-        }
-        self.stream.set_read_timeout(Some(left))?;
         let mut stream = self.stream;
+        if left.is_zero() {
+            stream.set_nonblocking(true)?;
+            let read = stream.read(buf);
+            stream.set_nonblocking(false)?;
+            return match read {
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                    Err(std::io::ErrorKind::TimedOut.into())
+                }
+                read => read,
+            };
+        }
+        stream.set_read_timeout(Some(left))?;
         stream.read(buf)
     }
 }
@@ -413,11 +466,17 @@ fn reason(status: u16) -> &'static str {
     }
 }
 
-/// Answers the one request of a connection, then closes it.
-fn serve_connection(root: &Path, stream: TcpStream, limits: ServeLimits) -> std::io::Result<()> {
+/// Answers the one request of a connection, whose head must have come by `deadline`, then
+/// closes it.
+fn serve_connection(
+    root: &Path,
+    stream: TcpStream,
+    deadline: Instant,
+    limits: ServeLimits,
+) -> std::io::Result<()> {
     stream.set_write_timeout(Some(limits.write))?;
     let mut out = std::io::BufWriter::new(&stream);
-    let result = match read_head(&stream, limits.head) {
+    let result = match read_head(&stream, deadline) {
         Ok(head) => answer(root, &head, &mut out),
         Err(HeadError::Bad) => Answer::new(400).send(&mut out, b"bad request\n", false),
         Err(HeadError::TooLarge) => {
@@ -447,9 +506,23 @@ pub fn content_type(path: &Path) -> &'static str {
 /// The file under `root` that a request path names, if it names one inside it.
 fn resolve(root: &Path, url: &str) -> Option<PathBuf> {
     let raw = url.split(['?', '#']).next().unwrap_or("");
-    // Percent-encoded names (a plant file `my%20fern.gltf`) are decoded first, then checked
-    // like any other: `%2e%2e` is `..` and refused, a NUL never reaches the file system.
-    let path = percent_encoding::percent_decode_str(raw)
+    // Dot segments as written (`/./world.toml`, `/tiles/L0/../../world.toml`) are removed
+    // first (RFC 3986 5.2.4), but never above the root: a path that climbs out is refused.
+    let mut segments = Vec::new();
+    for segment in raw.split('/') {
+        match segment {
+            "" | "." => {}
+            ".." => {
+                segments.pop()?;
+            }
+            _ => segments.push(segment),
+        }
+    }
+    let raw = segments.join("/");
+    // Percent-encoded names (a plant file `my%20fern.gltf`) are decoded then, and checked
+    // like any other: `%2e%2e` is a name, `..`, and refused; a NUL never reaches the file
+    // system.
+    let path = percent_encoding::percent_decode_str(&raw)
         .decode_utf8()
         .ok()?
         .into_owned();

@@ -79,6 +79,25 @@ fn is_temporary(name: &str) -> bool {
             .is_none_or(|pid| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
 }
 
+/// The bytes of one of the cache's files, `what` (its body or metadata), of at most `max`
+/// bytes. A file that is not a regular one (a FIFO, whose opening would wait for a writer for
+/// ever, and with it every load behind the cache's lock; a device) is refused before it is
+/// opened, as worlds' files are, and so is one longer than `max`.
+fn read_cached(path: &std::path::Path, max: u64, what: &str) -> Result<Vec<u8>, String> {
+    use crate::world::WorldError;
+    match crate::world::format::read_regular(path, max) {
+        Ok(bytes) => Ok(bytes),
+        Err(WorldError::NotARegularFile { kind, .. }) => {
+            Err(format!("{what} is not a regular file ({kind})"))
+        }
+        Err(WorldError::FileTooLarge { size, .. }) => {
+            Err(format!("{what} of {size} bytes, more than {max}"))
+        }
+        Err(WorldError::Io { source, .. }) => Err(format!("{what}: {source}")),
+        Err(e) => Err(format!("{what}: {e}")),
+    }
+}
+
 /// Fetched bodies on disk, one `{key}.body` and `{key}.meta` per URL, the key a hash of the
 /// URL. The metadata holds three lines: the URL, the validator, and `fnv1a64 {hex} {length}`
 /// of the body. Each is written to a temporary file and renamed into place, the body before
@@ -206,13 +225,7 @@ impl DiskCache {
         max: u64,
     ) -> Result<(Validator, Vec<u8>), String> {
         let meta_path = self.path(key, "meta");
-        let meta_len = std::fs::metadata(&meta_path)
-            .map_err(|e| format!("metadata: {e}"))?
-            .len();
-        if meta_len > MAX_META_BYTES {
-            return Err(format!("metadata of {meta_len} bytes"));
-        }
-        let meta = std::fs::read(&meta_path).map_err(|e| format!("metadata: {e}"))?;
+        let meta = read_cached(&meta_path, MAX_META_BYTES, "metadata")?;
         let meta = String::from_utf8(meta).map_err(|_| "metadata not UTF-8".to_string())?;
         let lines: Vec<&str> = meta.lines().collect();
         let [meta_url, validator, sum] = lines[..] else {
@@ -227,14 +240,12 @@ impl DiskCache {
             .and_then(|s| s.split_once(' '))
             .and_then(|(h, l)| Some((u64::from_str_radix(h, 16).ok()?, l.parse::<u64>().ok()?)))
             .ok_or("no checksum in metadata")?;
-        let body_path = self.path(key, "body");
-        let size = std::fs::metadata(&body_path)
-            .map_err(|e| format!("body: {e}"))?
-            .len();
-        if size != len || size > max {
-            return Err(format!("body of {size} bytes, {len} expected"));
+        if len > max {
+            return Err(format!(
+                "body of {len} bytes, more than the {max} this file may hold"
+            ));
         }
-        let body = std::fs::read(&body_path).map_err(|e| format!("body: {e}"))?;
+        let body = read_cached(&self.path(key, "body"), len, "body")?;
         if body.len() as u64 != len || fnv1a64(&body) != hash {
             return Err("body does not match its checksum".into());
         }

@@ -93,13 +93,22 @@ impl Client {
             }
             attempt += 1;
             self.requests.fetch_add(1, Ordering::Relaxed);
-            match self.fetch_once(url, max, attempt, &cached, range) {
+            let mut retry_after = None;
+            match self.fetch_once(url, max, attempt, &cached, range, &mut retry_after) {
                 Ok(bytes) => return Ok(bytes),
                 Err(e) if attempt <= self.options.retries && is_transient(&e) => {
                     self.retries.fetch_add(1, Ordering::Relaxed);
-                    let wait = self.options.retry_delay(attempt);
+                    // A wait the server asked for (a 503's Retry-After) is honoured up to the
+                    // longest wait between retries.
+                    let backoff = self.options.retry_delay(attempt);
+                    let asked = retry_after.map(|a: Duration| a.min(self.options.backoff_max));
+                    let wait = asked.map_or(backoff, |a| a.max(backoff));
+                    let why = match retry_after {
+                        Some(a) => format!(" (the server asked for {} s)", a.as_secs()),
+                        None => String::new(),
+                    };
                     log::warn!(
-                        "{e}; retry {attempt} of {} in {:.1} s",
+                        "{e}; retry {attempt} of {} in {:.1} s{why}",
                         self.options.retries,
                         wait.as_secs_f64()
                     );
@@ -117,7 +126,7 @@ impl Client {
     }
 
     /// One request: its response checked and its body read, at most `max` bytes (or the
-    /// cached body on a `304`).
+    /// cached body on a `304`). A `503` with a `Retry-After` of seconds sets `retry_after`.
     pub(super) fn fetch_once(
         &self,
         url: &str,
@@ -125,6 +134,7 @@ impl Client {
         attempts: u32,
         cached: &Option<(Validator, Vec<u8>)>,
         range: Option<[u64; 2]>,
+        retry_after: &mut Option<Duration>,
     ) -> Result<Vec<u8>, HttpError> {
         let timeout_s = self.options.timeout_s();
         let mut request = minreq::get(url)
@@ -200,6 +210,14 @@ impl Client {
             });
         }
         if !(200..300).contains(&response.status_code) {
+            // Seconds only: a date would need the clock of the server, which may be wrong.
+            if response.status_code == 503 {
+                *retry_after = response
+                    .headers
+                    .get("retry-after")
+                    .and_then(|v| v.trim().parse::<u64>().ok())
+                    .map(Duration::from_secs);
+            }
             return Err(HttpError::Status {
                 url: url.into(),
                 status: response.status_code,
