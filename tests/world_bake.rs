@@ -1628,14 +1628,23 @@ fn signalled_bake_cleans_up(signals: &[(&str, u64)]) {
         );
         std::thread::sleep(Duration::from_millis(5));
     };
-    for &(signal, pause_ms) in signals {
-        std::thread::sleep(Duration::from_millis(pause_ms));
-        let kill = std::process::Command::new("kill")
-            .args([signal, &child.0.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(kill.success());
-    }
+    // One shell sends them all with its own `kill`, so that signals meant to come close
+    // together do, however loaded the machine (no process started between them).
+    let script: Vec<String> = signals
+        .iter()
+        .map(|(signal, pause_ms)| {
+            format!(
+                "sleep {}; kill {signal} {}",
+                *pause_ms as f64 / 1000.0,
+                child.0.id()
+            )
+        })
+        .collect();
+    let kill = std::process::Command::new("sh")
+        .args(["-c", &script.join("; ")])
+        .status()
+        .unwrap();
+    assert!(kill.success());
     let deadline = Instant::now() + Duration::from_secs(30);
     let status = loop {
         if let Some(status) = child.0.try_wait().unwrap() {

@@ -892,6 +892,19 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
             ),
         ));
     }
+    if let Some(name) = &opts.name
+        && name.chars().count() > crate::world::manifest::MAX_NAME_CHARS
+    {
+        return Err(WorldError::bad_option(
+            "--name",
+            format!("of {} characters", name.chars().count()),
+            format!(
+                "a name of at most {} characters: a world's name is printed in lines and \
+                 window titles",
+                crate::world::manifest::MAX_NAME_CHARS
+            ),
+        ));
+    }
     if let Some(c) = opts.cell_size_m {
         if !(c.is_finite() && c > 0.0) {
             return Err(WorldError::bad_option(

@@ -232,7 +232,8 @@ fn accept(
             return;
         }
         match stream {
-            Ok((stream, _)) => match queue.try_send((stream, Instant::now() + head)) {
+            // However long the head time (a limit of years stands for none), a deadline.
+            Ok((stream, _)) => match queue.try_send((stream, deadline_after(head))) {
                 Ok(()) => {}
                 Err(TrySendError::Full((mut stream, _))) => {
                     let _ = stream.set_write_timeout(Some(Duration::from_millis(200)));
@@ -705,9 +706,27 @@ fn truncate_to_seconds(t: SystemTime) -> SystemTime {
     UNIX_EPOCH + std::time::Duration::from_secs(s)
 }
 
+/// `head` from now, or a year from now where that is later (or past what an `Instant` holds).
+fn deadline_after(head: Duration) -> Instant {
+    const YEAR: Duration = Duration::from_secs(365 * 24 * 3600);
+    let now = Instant::now();
+    now.checked_add(head.min(YEAR)).unwrap_or(now)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A head time of any length gives a deadline: `Duration::MAX` (no limit, as a caller
+    /// may write it) panicked in the thread that accepts connections, which then accepted none.
+    #[test]
+    fn any_head_time_gives_a_deadline() {
+        let now = Instant::now();
+        for head in [Duration::ZERO, Duration::from_secs(10), Duration::MAX] {
+            let at = deadline_after(head);
+            assert!(at >= now + head.min(Duration::from_secs(3600)), "{head:?}");
+        }
+    }
 
     #[test]
     fn ranges_are_read_as_rfc_9110_writes_them() {

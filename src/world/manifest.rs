@@ -662,47 +662,41 @@ pub fn forbidden_control(c: char) -> bool {
 }
 
 /// The most characters a name in a manifest may have (of a world, a camera path, a wind scene,
-/// a grass or plant type): names are printed in lines and window titles.
+/// a grass or plant type, and the names a map is keyed by): names are printed in lines and
+/// window titles. Other texts (a description, the source's file names, which a bake of
+/// thousands of DEM files joins) are not limited.
 pub const MAX_NAME_CHARS: usize = 256;
-/// The most characters any other text in a manifest may have (a file's name, a source's
-/// description).
-pub const MAX_TEXT_CHARS: usize = 4096;
 
-/// The first text of `manifest` longer than it may be ([`MAX_NAME_CHARS`] for a `name`,
-/// [`MAX_TEXT_CHARS`] for any other), as the field's path, its length and the limit.
-fn overlong_text(manifest: &Manifest) -> Option<(String, usize, usize)> {
-    fn walk(v: &serde_json::Value, at: &str, most: usize) -> Option<(String, usize, usize)> {
+/// The first name of `manifest` longer than [`MAX_NAME_CHARS`], as the field's path and its
+/// length.
+fn overlong_name(manifest: &Manifest) -> Option<(String, usize)> {
+    fn walk(v: &serde_json::Value, at: &str, name: bool) -> Option<(String, usize)> {
         match v {
-            serde_json::Value::String(t) => {
+            serde_json::Value::String(t) if name => {
                 let n = t.chars().count();
-                (n > most).then(|| (at.to_owned(), n, most))
+                (n > MAX_NAME_CHARS).then(|| (at.to_owned(), n))
             }
             serde_json::Value::Array(a) => a
                 .iter()
                 .enumerate()
-                .find_map(|(i, v)| walk(v, &format!("{at}[{i}]"), MAX_TEXT_CHARS)),
+                .find_map(|(i, v)| walk(v, &format!("{at}[{i}]"), false)),
             serde_json::Value::Object(o) => o.iter().find_map(|(k, v)| {
                 // A map's keys are names (a plant's density by grass type's name).
                 let n = k.chars().count();
                 if n > MAX_NAME_CHARS {
-                    return Some((format!("{at} (a key)"), n, MAX_NAME_CHARS));
+                    return Some((format!("{at} (a key)"), n));
                 }
-                let most = if k == "name" {
-                    MAX_NAME_CHARS
-                } else {
-                    MAX_TEXT_CHARS
-                };
                 let at = if at.is_empty() {
                     k.clone()
                 } else {
                     format!("{at}.{k}")
                 };
-                walk(v, &at, most)
+                walk(v, &at, k == "name")
             }),
             _ => None,
         }
     }
-    walk(&serde_json::to_value(manifest).ok()?, "", MAX_TEXT_CHARS)
+    walk(&serde_json::to_value(manifest).ok()?, "", false)
 }
 
 /// `text` with every control character a manifest may not hold ([`forbidden_control`]) replaced

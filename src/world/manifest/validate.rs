@@ -26,11 +26,14 @@ impl Manifest {
                  and window titles",
             ));
         }
-        if let Some((field, chars, most)) = overlong_text(self) {
+        if let Some((field, chars)) = overlong_name(self) {
             return Err(v.out_of_range(
                 &field,
-                format!("a text of {chars} characters"),
-                &format!("at most {most} characters: a world's names are printed in lines and window titles"),
+                format!("a name of {chars} characters"),
+                &format!(
+                    "at most {MAX_NAME_CHARS} characters: a world's names are printed in lines \
+                     and window titles"
+                ),
             ));
         }
 
