@@ -395,13 +395,7 @@ pub(crate) fn bench_features(mut opts: verdant::tools::BenchLodOptions) -> Resul
     if r.features.is_empty() {
         return Err(interrupted(false, &opts.out, "", String::new()));
     }
-    say!(
-        "{} [{}], {}x{}",
-        r.adapter.name,
-        r.adapter.backend,
-        r.size.0,
-        r.size.1
-    )?;
+    say_adapter(&r.adapter, r.size)?;
     say!(
         "{:<18} {:>10} {:>8} {:>10} {:>13}",
         "feature off",
@@ -455,13 +449,7 @@ pub(crate) fn bench_blades(
     if r.results.is_empty() {
         return Err(interrupted(false, &opts.out, "", String::new()));
     }
-    say!(
-        "{} [{}], {}x{}",
-        r.adapter.name,
-        r.adapter.backend,
-        r.size.0,
-        r.size.1
-    )?;
+    say_adapter(&r.adapter, r.size)?;
     say!(
         "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7}",
         "blades",
@@ -964,4 +952,13 @@ mod tests {
         assert_eq!(got, [(false, 0.0), (false, 4.0), (true, 0.0), (true, 4.0)]);
         assert!(Lists::try_parse_from(["bench", "--taa-sway-falloff", "17"]).is_err());
     }
+}
+
+/// The first line of a benchmark's table: the adapter it ran on and the frame's size.
+fn say_adapter(
+    adapter: &verdant::tools::report::AdapterReport,
+    (width, height): (u32, u32),
+) -> Result<()> {
+    say!("{} [{}], {width}x{height}", adapter.name, adapter.backend)?;
+    Ok(())
 }
