@@ -889,6 +889,15 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
     }
 }
 
+/// The first line of a benchmark's table: the adapter it ran on and the frame's size.
+fn say_adapter(
+    adapter: &verdant::tools::report::AdapterReport,
+    (width, height): (u32, u32),
+) -> Result<()> {
+    say!("{} [{}], {width}x{height}", adapter.name, adapter.backend)?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -952,13 +961,4 @@ mod tests {
         assert_eq!(got, [(false, 0.0), (false, 4.0), (true, 0.0), (true, 4.0)]);
         assert!(Lists::try_parse_from(["bench", "--taa-sway-falloff", "17"]).is_err());
     }
-}
-
-/// The first line of a benchmark's table: the adapter it ran on and the frame's size.
-fn say_adapter(
-    adapter: &verdant::tools::report::AdapterReport,
-    (width, height): (u32, u32),
-) -> Result<()> {
-    say!("{} [{}], {width}x{height}", adapter.name, adapter.backend)?;
-    Ok(())
 }
