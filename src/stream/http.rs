@@ -451,7 +451,13 @@ impl WorldUrl {
             "{}://{user}{}{}{}",
             scheme.to_ascii_lowercase(),
             host.to_ascii_lowercase(),
-            remove_dot_segments(&encode_part(path, b"")),
+            // A dot written as its escape is a dot (RFC 3986 6.2.2.2: an unreserved
+            // character's escape is the character), and a dot segment then.
+            remove_dot_segments(
+                &encode_part(path, b"")
+                    .replace("%2E", ".")
+                    .replace("%2e", ".")
+            ),
             encode_part(query, b"?"),
         )
     }
@@ -874,6 +880,8 @@ mod tests {
             ("http://h/w/./tiles/../world.toml", "http://h/w/", ""),
             ("http://h/w/my-world.toml", "http://h/w/my-world.toml/", ""),
             ("http://h/./", "http://h/", ""),
+            ("http://h/w/%2E%2e/v/%2E/", "http://h/v/", ""),
+            ("http://h/w/a%2Eb/", "http://h/w/a.b/", ""),
             ("http://h/a/b/../../c/.", "http://h/c/", ""),
         ] {
             let parsed = WorldUrl::parse(url);
