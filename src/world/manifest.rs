@@ -667,38 +667,6 @@ pub fn forbidden_control(c: char) -> bool {
 /// thousands of DEM files joins) are not limited.
 pub const MAX_NAME_CHARS: usize = 256;
 
-/// The first name of `manifest` longer than [`MAX_NAME_CHARS`], as the field's path and its
-/// length.
-fn overlong_name(manifest: &Manifest) -> Option<(String, usize)> {
-    fn walk(v: &serde_json::Value, at: &str, name: bool) -> Option<(String, usize)> {
-        match v {
-            serde_json::Value::String(t) if name => {
-                let n = t.chars().count();
-                (n > MAX_NAME_CHARS).then(|| (at.to_owned(), n))
-            }
-            serde_json::Value::Array(a) => a
-                .iter()
-                .enumerate()
-                .find_map(|(i, v)| walk(v, &format!("{at}[{i}]"), false)),
-            serde_json::Value::Object(o) => o.iter().find_map(|(k, v)| {
-                // A map's keys are names (a plant's density by grass type's name).
-                let n = k.chars().count();
-                if n > MAX_NAME_CHARS {
-                    return Some((format!("{at} (a key)"), n));
-                }
-                let at = if at.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{at}.{k}")
-                };
-                walk(v, &at, k == "name")
-            }),
-            _ => None,
-        }
-    }
-    walk(&serde_json::to_value(manifest).ok()?, "", false)
-}
-
 /// `text` with every control character a manifest may not hold ([`forbidden_control`]) replaced
 /// by U+FFFD: for texts a bake takes from files (their names, a sidecar's `place`), which are
 /// no fault of the user's and should not stop a bake.
@@ -708,33 +676,53 @@ pub fn without_control_characters(text: &str) -> String {
         .collect()
 }
 
+/// The first name of `manifest` longer than [`MAX_NAME_CHARS`], as the field's path and its
+/// length.
+fn overlong_name(manifest: &Manifest) -> Option<(String, usize)> {
+    first_text(manifest, &|field, text, name| {
+        let n = text.chars().count();
+        (name && n > MAX_NAME_CHARS).then(|| (field.to_owned(), n))
+    })
+}
+
 /// The first text of `manifest` holding a control character it may not hold
 /// ([`forbidden_control`]), as the field's path (`paths[2].name`) and the character.
 fn control_character(manifest: &Manifest) -> Option<(String, char)> {
-    fn forbidden(t: &str) -> Option<char> {
-        t.chars().find(|&c| forbidden_control(c))
-    }
-    fn walk(v: &serde_json::Value, at: &str) -> Option<(String, char)> {
+    first_text(manifest, &|field, text, _| {
+        text.chars()
+            .find(|&c| forbidden_control(c))
+            .map(|c| (field.to_owned(), c))
+    })
+}
+
+/// The first of `manifest`'s texts for which `found(field, text, is_name)` gives something:
+/// every string, with its field's path (`paths[2].name`), a name being a `name` field's value
+/// or a map's key (a plant's density by grass type's name: `plants[0].density."meadow"`).
+fn first_text<T>(manifest: &Manifest, found: &dyn Fn(&str, &str, bool) -> Option<T>) -> Option<T> {
+    fn walk<T>(
+        v: &serde_json::Value,
+        at: &str,
+        name: bool,
+        found: &dyn Fn(&str, &str, bool) -> Option<T>,
+    ) -> Option<T> {
         match v {
-            serde_json::Value::String(t) => forbidden(t).map(|c| (at.to_owned(), c)),
+            serde_json::Value::String(t) => found(at, t, name),
             serde_json::Value::Array(a) => a
                 .iter()
                 .enumerate()
-                .find_map(|(i, v)| walk(v, &format!("{at}[{i}]"))),
+                .find_map(|(i, v)| walk(v, &format!("{at}[{i}]"), false, found)),
             serde_json::Value::Object(o) => o.iter().find_map(|(k, v)| {
-                // A map's keys are texts too (a plant's density by grass type's name).
-                if let Some(c) = forbidden(k) {
-                    return Some((format!("{at}.{k:?}"), c));
-                }
-                let at = if at.is_empty() {
-                    k.clone()
-                } else {
-                    format!("{at}.{k}")
-                };
-                walk(v, &at)
+                found(&format!("{at}.{k:?}"), k, true).or_else(|| {
+                    let at = if at.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{at}.{k}")
+                    };
+                    walk(v, &at, k == "name", found)
+                })
             }),
             _ => None,
         }
     }
-    walk(&serde_json::to_value(manifest).ok()?, "")
+    walk(&serde_json::to_value(manifest).ok()?, "", false, found)
 }
