@@ -1759,3 +1759,70 @@ fn an_output_folder_that_is_a_mount_point_is_refused_before_the_bake() {
         .collect();
     assert!(left.is_empty(), "{left:?}");
 }
+
+/// Under an address-space limit (`ulimit -v`, a batch job's `vmem`) the default memory limit of
+/// 2048 MiB let a large DEM's bake plan more than the process could map: it ended on a failed
+/// allocation (status 134) or a panic starting its threads. The default now fits under the
+/// limit, saying so, and a `--memory-mib` above it is warned of.
+#[cfg(target_os = "linux")]
+#[test]
+fn the_default_memory_limit_fits_under_the_address_space_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let bake_under = |limit_kib: u64, more: &str, out: &str| {
+        let script = format!(
+            "ulimit -v {limit_kib} && exec \"$0\" bake --dem \"$1\" --out {out} --cell-size 20 \
+             --tile-cells 16 --levels 2 {more}"
+        );
+        std::process::Command::new("sh")
+            .args([
+                "-c",
+                &script,
+                env!("CARGO_BIN_EXE_verdant"),
+                dem.to_str().unwrap(),
+            ])
+            .current_dir(dir.path())
+            .output()
+            .unwrap()
+    };
+    // 1 GiB: three quarters of what is left after the process's own mappings.
+    let run = bake_under(1 << 20, "", "a");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr),
+    );
+    assert!(run.status.success(), "{stderr}");
+    let note = "not the default 2048 MiB: the address-space limit (ulimit -v) of 1024 MiB leaves \
+                this process";
+    assert!(stderr.contains(note), "{note:?} in {stderr}");
+    let limit: u64 = stderr
+        .split("memory: limit ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("the limit in {stderr}"));
+    assert!((600..=768).contains(&limit), "{limit} MiB of 1024");
+    assert!(stdout.contains(&format!("(limit {limit} MiB")), "{stdout}");
+    assert!(dir.path().join("a/world.toml").is_file());
+
+    // A limit asked for above what the process can hold is kept, with a warning.
+    let run = bake_under(1 << 20, "--memory-mib 2048", "b");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr),
+    );
+    assert!(run.status.success(), "{stderr}");
+    let warning = "warning: --memory-mib 2048 is more than this process can hold: the \
+                   address-space limit (ulimit -v) of 1024 MiB";
+    assert!(stderr.contains(warning), "{warning:?} in {stderr}");
+    assert!(
+        stderr.contains(&format!("(--memory-mib {limit} fits)")),
+        "{stderr}"
+    );
+    assert!(stdout.contains("(limit 2048 MiB"), "{stdout}");
+
+    // One that fits says nothing.
+    let run = bake_under(1 << 20, "--memory-mib 256", "c");
+    assert!(run.status.success());
+    assert!(!String::from_utf8_lossy(&run.stderr).contains("memory"));
+}

@@ -65,6 +65,7 @@ use crate::world::tile::Pyramid;
 mod author;
 mod cancel;
 mod carry;
+pub mod ceiling;
 pub mod cover;
 mod paint;
 pub mod plan;
@@ -720,6 +721,30 @@ fn grass_peak(pyramid: &Pyramid, density: f32) -> crate::world::GrassPeak {
         short_m: crate::world::grass_density::SHORT_GRASS_M,
         density,
     }
+}
+
+/// Starts up to `threads` workers on `scope`, each running the closure `make` gives it: as many
+/// as the system lets start, at least one, or the error of the first that could not.
+fn spawn_workers<'scope, F>(
+    scope: &'scope std::thread::Scope<'scope, '_>,
+    threads: usize,
+    mut make: impl FnMut() -> F,
+) -> Result<usize, WorldError>
+where
+    F: FnOnce() + Send + 'scope,
+{
+    let mut started = 0;
+    for k in 0..threads.max(1) {
+        match std::thread::Builder::new()
+            .name(format!("bake-{k}"))
+            .spawn_scoped(scope, make())
+        {
+            Ok(_) => started += 1,
+            Err(_) if started > 0 => break,
+            Err(source) => return Err(WorldError::Threads { source }),
+        }
+    }
+    Ok(started)
 }
 
 /// The process's peak resident memory so far, MiB (Linux's `VmHWM`; 0 where unknown).

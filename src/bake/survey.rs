@@ -124,9 +124,9 @@ pub(super) fn survey(
     let (tx, rx) = mpsc::sync_channel::<Result<Square, WorldError>>(2 * plan.threads);
     let mut first_error = None;
     std::thread::scope(|scope| {
-        for _ in 0..plan.threads {
+        let started = super::spawn_workers(scope, plan.threads, || {
             let (tx, next, look) = (tx.clone(), &next, &look);
-            scope.spawn(move || {
+            move || {
                 loop {
                     let k = next.fetch_add(1, Ordering::Relaxed);
                     if k >= total {
@@ -140,9 +140,13 @@ pub(super) fn survey(
                         break;
                     }
                 }
-            });
-        }
+            }
+        });
         drop(tx);
+        if let Err(e) = started {
+            first_error = Some(e);
+            return;
+        }
         let mut done = 0u64;
         for result in rx {
             match result {

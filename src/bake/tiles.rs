@@ -97,10 +97,10 @@ pub(super) fn produce(
     let mut first_error = None;
     let mut peak = 0f32;
     std::thread::scope(|scope| {
-        for _ in 0..p.plan.threads {
+        let started = super::spawn_workers(scope, p.plan.threads, || {
             let tx = tx.clone();
             let (work, next, write) = (&work, &next, &write);
-            scope.spawn(move || {
+            move || {
                 while let Some(item) = work.get(next.fetch_add(1, Ordering::Relaxed)) {
                     let failed = match item {
                         Work::Coarse(id) => {
@@ -131,9 +131,13 @@ pub(super) fn produce(
                         break;
                     }
                 }
-            });
-        }
+            }
+        });
         drop(tx);
+        if let Err(e) = started {
+            first_error = Some(e);
+            return;
+        }
         let mut done = 0;
         for result in rx {
             match result {

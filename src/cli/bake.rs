@@ -5,10 +5,11 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 
+use verdant::bake::ceiling::Ceiling;
 use verdant::bake::{BakeOptions, bake};
 
 use super::args::parse_cell_size;
-use super::out::say;
+use super::out::{note, say};
 use super::progress::bar;
 use super::shown;
 
@@ -84,10 +85,11 @@ pub(crate) struct BakeArgs {
     pub(crate) finish_shards: Option<u32>,
     /// The most memory the bake may hold, MiB, 1..=1048576: it reads a mosaic's files a chunk
     /// at a time and makes the finer levels block by block, so any world bakes within it (a
-    /// single DEM file is held whole and counts against it).
-    #[arg(long, value_name = "MIB", default_value_t = verdant::bake::plan::DEFAULT_MEMORY_MIB,
-          value_parser = super::args::parse_mib)]
-    pub(crate) memory_mib: u64,
+    /// single DEM file is held whole and counts against it). Default 2048, or less where the
+    /// process's address-space limit (ulimit -v) or its control group's memory limit leaves
+    /// less.
+    #[arg(long, value_name = "MIB", value_parser = super::args::parse_mib)]
+    pub(crate) memory_mib: Option<u64>,
 }
 
 fn parse_shard(s: &str) -> Result<(u32, u32), String> {
@@ -99,6 +101,37 @@ fn parse_shard(s: &str) -> Result<(u32, u32), String> {
     );
     // The range is the baker's to check (`ShardStep::check`), with the other options.
     Ok((i, n))
+}
+
+/// The bake's memory limit: `asked` (`--memory-mib`), or the default lowered to what an outside
+/// limit leaves (`ceiling`), saying so; a limit asked for above it is kept, with a warning.
+fn memory_limit(asked: Option<u64>, ceiling: Option<Ceiling>) -> u64 {
+    let default = verdant::bake::plan::DEFAULT_MEMORY_MIB;
+    let Some(c) = ceiling.filter(|c| c.mib < asked.unwrap_or(default)) else {
+        return asked.unwrap_or(default);
+    };
+    let held = format!(
+        "{} of {} MiB leaves this process {} MiB more (it holds {} MiB)",
+        c.what,
+        c.limit_mib,
+        c.limit_mib.saturating_sub(c.used_mib),
+        c.used_mib
+    );
+    match asked {
+        None => {
+            let mib = c.mib.max(1);
+            note!("memory: limit {mib} MiB, not the default {default} MiB: {held}");
+            mib
+        }
+        Some(mib) => {
+            note!(
+                "warning: --memory-mib {mib} is more than this process can hold: {held}; the \
+                 bake may end on a failed allocation (--memory-mib {} fits)",
+                c.mib.max(1)
+            );
+            mib
+        }
+    }
 }
 
 pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
@@ -126,6 +159,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         (None, Some(count)) => Some(verdant::bake::ShardStep::Finish { count }),
         (None, None) => None,
     };
+    let memory_mib = memory_limit(memory_mib, verdant::bake::ceiling::process_ceiling());
     let mut dems = dem.into_iter();
     let opts = BakeOptions {
         dem: dems.next().unwrap_or_default(),

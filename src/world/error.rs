@@ -733,6 +733,17 @@ pub enum WorldError {
         problem: String,
     },
 
+    /// Not even one of a bake's worker threads could be started.
+    #[error(
+        "could not start a thread for the bake: {source} (the process's limits on threads or \
+         memory: ulimit -u, ulimit -v)"
+    )]
+    Threads {
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+
     /// A file fetched from a world served over HTTP could not be had: the server said no, the
     /// connection failed or stalled, or the body was cut short (the error names the URL).
     #[error(transparent)]
@@ -808,7 +819,7 @@ impl WorldError {
             | LandCover { path, .. }
             | DemMosaic { path, .. }
             | CoverTable { path, .. } => Some(path),
-            BadOption { .. } | Fetch(_) => None,
+            BadOption { .. } | Threads { .. } | Fetch(_) => None,
         }
     }
 
