@@ -60,6 +60,46 @@ impl Camera {
         c
     }
 
+    /// Why this camera cannot be drawn from, or `Ok`: its position, yaw and pitch must be
+    /// finite; its field of view between 0 and 180 degrees (exclusive) and its near plane above
+    /// zero; or, with the caller's own view and projection, both matrices finite and
+    /// invertible.
+    pub fn check(&self) -> Result<(), String> {
+        if !self.position.is_finite() {
+            return Err(format!("camera position {} is not finite", self.position));
+        }
+        if !(self.yaw_deg.is_finite() && self.pitch_deg.is_finite()) {
+            return Err(format!(
+                "camera yaw {} and pitch {} degrees must be finite",
+                self.yaw_deg, self.pitch_deg
+            ));
+        }
+        if let Some(c) = &self.custom {
+            for (what, m) in [("view", c.view), ("projection", c.proj)] {
+                let det = m.determinant();
+                if !m.is_finite() || !det.is_finite() || det == 0.0 {
+                    return Err(format!(
+                        "the caller's {what} matrix must be finite and invertible: {m}"
+                    ));
+                }
+            }
+            return Ok(());
+        }
+        if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 180.0) {
+            return Err(format!(
+                "camera field of view {} degrees: must be between 0 and 180 (exclusive)",
+                self.fov_y_deg
+            ));
+        }
+        if !(self.near_m > 0.0 && self.near_m.is_finite()) {
+            return Err(format!(
+                "camera near plane {} m: must be finite and above zero",
+                self.near_m
+            ));
+        }
+        Ok(())
+    }
+
     /// Unit view direction.
     pub fn forward(&self) -> DVec3 {
         if let Some(c) = &self.custom {

@@ -696,3 +696,154 @@ fn passes_past_the_timers_room_are_counted_untimed_and_a_frame_has_room_for_ever
     assert!(error.is_none(), "{error:?}");
     assert!(full.enabled());
 }
+
+/// A small renderer of the default world with its targets, for the tests of the front door's
+/// refusals.
+fn small_renderer(ctx: &verdant::gpu::GpuContext) -> (Renderer, Targets, Camera) {
+    let world = World::open(&common::default_world()).unwrap();
+    let camera = overview_camera(&world);
+    let (c, d) = (
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+    );
+    let options = RendererOptions::new(&world, c, d, 64, 36);
+    let renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
+    (renderer, targets(&ctx.device, c, d, (64, 36)), camera)
+}
+
+/// Prepares and records one frame of `input` into `t`; submits it where it was recorded.
+fn frame(
+    ctx: &verdant::gpu::GpuContext,
+    renderer: &mut Renderer,
+    t: &Targets,
+    input: &FrameInput,
+) -> Result<(), RendererError> {
+    renderer.prepare(&ctx.queue, input);
+    let mut encoder = ctx.device.create_command_encoder(&Default::default());
+    renderer.record(&mut encoder, &t.color_view, &t.depth_view)?;
+    ctx.queue.submit([encoder.finish()]);
+    Ok(())
+}
+
+/// A frame recorded into an encoder the application drops without submitting (its error
+/// path) held its readback slot for ever: four such frames stopped every later frame's figures
+/// for good, and fewer lost theirs without counting them. Now such a frame's figures are counted
+/// as dropped, and its slot serves the next frames.
+#[test]
+fn frames_whose_encoders_are_dropped_unsubmitted_are_counted_and_the_ring_goes_on() {
+    let ctx = common::gpu();
+    let (mut renderer, t, camera) = small_renderer(&ctx);
+    let abandoned = READBACK_SLOTS as u64 + 1;
+    for i in 0..abandoned {
+        renderer.prepare(&ctx.queue, &FrameInput::new(camera, i as f64 / 60.0));
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        renderer
+            .record(&mut encoder, &t.color_view, &t.depth_view)
+            .unwrap();
+        if i % 2 == 1 {
+            // Finished into a command buffer, which is dropped in its turn.
+            drop(encoder.finish());
+        }
+    }
+    for i in abandoned..abandoned + 3 {
+        frame(
+            &ctx,
+            &mut renderer,
+            &t,
+            &FrameInput::new(camera, i as f64 / 60.0),
+        )
+        .unwrap();
+        let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+        let got = renderer.take_stats();
+        assert_eq!(
+            got.iter().map(|s| s.frame).collect::<Vec<_>>(),
+            [i],
+            "figures of the frame submitted"
+        );
+    }
+    // Every abandoned frame counted: the last one's slot was free for the first frame after.
+    assert_eq!(renderer.stats_dropped(), abandoned);
+}
+
+/// Inputs that cannot be drawn (a camera, time or jitter that is not finite, a field of view of
+/// 0 or 180 degrees, a near plane at 0, matrices of the caller's that cannot be inverted) gave
+/// a frame of sky, or of nothing, with `Ok`, and a warm-up from a NaN camera said every tile was
+/// resident. Each is refused naming what is wrong, and the next good frame draws. So is the
+/// record of a frame prepared before a resize or a switch of anti-aliasing (it was drawn black,
+/// or at the old size, with `Ok`).
+#[test]
+fn inputs_that_cannot_be_drawn_and_stale_frames_are_refused() {
+    let ctx = common::gpu();
+    let (mut renderer, t, camera) = small_renderer(&ctx);
+    let with = |f: &dyn Fn(&mut FrameInput)| {
+        let mut input = FrameInput::new(camera, 0.5);
+        f(&mut input);
+        input
+    };
+    let zero = verdant::camera::CustomView {
+        view: glam::Mat4::IDENTITY,
+        proj: glam::Mat4::ZERO,
+    };
+    let cases: Vec<(FrameInput, &str)> = vec![
+        (with(&|i| i.camera.position.x = f64::NAN), "camera position"),
+        (with(&|i| i.camera.yaw_deg = f64::INFINITY), "yaw inf"),
+        (
+            with(&|i| i.camera.fov_y_deg = 0.0),
+            "field of view 0 degrees",
+        ),
+        (
+            with(&|i| i.camera.fov_y_deg = 180.0),
+            "field of view 180 degrees",
+        ),
+        (with(&|i| i.camera.near_m = 0.0), "near plane 0 m"),
+        (with(&|i| i.camera.custom = Some(zero)), "projection matrix"),
+        (with(&|i| i.time_s = f64::NAN), "time NaN s"),
+        (with(&|i| i.jitter_px.x = f32::NAN), "jitter"),
+        (
+            with(&|i| i.walker = Some(glam::DVec2::NAN)),
+            "walker position",
+        ),
+    ];
+    for (input, want) in &cases {
+        let e = frame(&ctx, &mut renderer, &t, input).unwrap_err();
+        assert!(matches!(e, RendererError::FrameInput(_)), "{e}");
+        let message = e.to_string();
+        assert!(message.contains(want), "{want:?} in {message}");
+        assert!(message.starts_with("the frame's input cannot be drawn: "));
+    }
+    let mut nan = camera;
+    nan.pitch_deg = f64::NAN;
+    let e = renderer
+        .warm_up(&nan, Duration::from_secs(1))
+        .expect_err("a warm-up from a NaN camera");
+    assert!(e.to_string().contains("pitch NaN"), "{e}");
+    frame(&ctx, &mut renderer, &t, &FrameInput::new(camera, 1.0)).unwrap();
+
+    // A change between prepare and record.
+    for change in ["resized", "switched"] {
+        renderer.prepare(&ctx.queue, &FrameInput::new(camera, 2.0));
+        if change == "resized" {
+            renderer.resize(32, 18).unwrap();
+        } else {
+            renderer
+                .set_anti_aliasing(verdant::aa::AntiAliasing::Msaa)
+                .unwrap();
+        }
+        let t = targets(
+            &ctx.device,
+            t.color.format(),
+            wgpu::TextureFormat::Depth32Float,
+            (32, 18),
+        );
+        let mut encoder = ctx.device.create_command_encoder(&Default::default());
+        let e = renderer
+            .record(&mut encoder, &t.color_view, &t.depth_view)
+            .unwrap_err();
+        assert!(matches!(e, RendererError::ChangedAfterPrepare(_)), "{e}");
+        assert!(
+            e.to_string().contains(change) && e.to_string().contains("prepare the frame again"),
+            "{e}"
+        );
+        frame(&ctx, &mut renderer, &t, &FrameInput::new(camera, 3.0)).unwrap();
+    }
+}

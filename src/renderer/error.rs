@@ -152,6 +152,20 @@ pub enum RendererError {
         /// What the renderer expects.
         expected: String,
     },
+    /// The frame's input cannot be drawn ([`FrameInput::check`](super::FrameInput::check)): a
+    /// camera, time or jitter that is not finite, a field of view outside 0..180 degrees, a
+    /// near plane not above zero, matrices that cannot be inverted. Returned by
+    /// [`Renderer::record`](super::Renderer::record) after a
+    /// [`Renderer::prepare`](super::Renderer::prepare) of such an input (which prepared
+    /// nothing), and by the warm-up for such a camera.
+    #[error("the frame's input cannot be drawn: {0}")]
+    FrameInput(String),
+    /// The renderer was resized, or its anti-aliasing switched, between
+    /// [`Renderer::prepare`](super::Renderer::prepare) and
+    /// [`Renderer::record`](super::Renderer::record): the prepared frame was for the renderer
+    /// as it was, and is not drawn.
+    #[error("{0} between prepare and record: prepare the frame again")]
+    ChangedAfterPrepare(&'static str),
     /// [`Renderer::record`](super::Renderer::record) was called without a
     /// [`Renderer::prepare`](super::Renderer::prepare) before it.
     #[error("record was called without prepare: call prepare once before each record")]

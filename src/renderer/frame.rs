@@ -28,6 +28,24 @@ pub struct FrameInput {
 }
 
 impl FrameInput {
+    /// Why this frame cannot be drawn, or `Ok`: its camera ([`Camera::check`]), time, walker
+    /// and jitter must be finite.
+    pub fn check(&self) -> Result<(), String> {
+        self.camera.check()?;
+        if !self.time_s.is_finite() {
+            return Err(format!("time {} s is not finite", self.time_s));
+        }
+        if let Some(w) = self.walker
+            && !w.is_finite()
+        {
+            return Err(format!("walker position {w} is not finite"));
+        }
+        if !self.jitter_px.is_finite() {
+            return Err(format!("jitter {} pixels is not finite", self.jitter_px));
+        }
+        Ok(())
+    }
+
     /// A frame from `camera` at `time_s`, the camera leaving the trail.
     pub fn new(camera: Camera, time_s: f64) -> Self {
         Self {

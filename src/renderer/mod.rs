@@ -216,6 +216,9 @@ pub struct Renderer {
     time_s: Option<f64>,
     frame: u64,
     prepared: Option<Prepared>,
+    /// Why the last prepare left no frame to record, where it did not (an input that cannot be
+    /// drawn, or a change to the renderer after it): [`Renderer::record`]'s error.
+    unprepared: Option<RendererError>,
     /// A copy of the depth target after the terrain colour passes, when asked for
     /// ([`Renderer::set_terrain_depth_capture`]).
     terrain_depth: Option<wgpu::Texture>,
@@ -604,6 +607,7 @@ impl Renderer {
                 time_s: None,
                 frame: 0,
                 prepared: None,
+                unprepared: None,
                 terrain_depth: None,
                 taa,
                 taa_settings: config.taa,
@@ -818,6 +822,7 @@ impl Renderer {
                     .then(|| Msaa::new(&self.device, &self.targets));
                 Ok((taa, msaa))
             })?;
+        self.unprepare("the anti-aliasing was switched");
         self.taa = taa;
         self.msaa = msaa;
         let samples = if self.msaa.is_some() {
@@ -876,6 +881,7 @@ impl Renderer {
             })
         };
         let resized = resize_to(self, (width, height), "the renderer's targets");
+        self.unprepare("the renderer was resized");
         if resized.is_err() {
             // The targets made at the new size are let go before the old size's are made again.
             resize_to(
@@ -885,6 +891,16 @@ impl Renderer {
             )?;
         }
         resized
+    }
+
+    /// Lets go of a frame prepared for the renderer as it was before `change` (its derivations
+    /// are submitted, as for any frame prepared and not recorded): its record is refused,
+    /// naming the change, until the next prepare.
+    fn unprepare(&mut self, change: &'static str) {
+        if self.prepared.is_some() {
+            self.flush_unrecorded();
+            self.unprepared = Some(RendererError::ChangedAfterPrepare(change));
+        }
     }
 
     /// Makes every target of the frame's size again at `width` x `height`.
@@ -919,6 +935,11 @@ impl Renderer {
         let start = Instant::now();
         self.collect_stats();
         self.flush_unrecorded();
+        if let Err(problem) = input.check() {
+            self.unprepared = Some(RendererError::FrameInput(problem));
+            return;
+        }
+        self.unprepared = None;
         // The view, once for every stage: the caller's jitter plus the temporal
         // anti-aliasing's.
         let jitter = input.jitter_px + self.taa.as_ref().map_or(Vec2::ZERO, |t| t.next_jitter());
@@ -1125,7 +1146,7 @@ impl Renderer {
         let start = Instant::now();
         self.check_targets(color, depth)?;
         let Some(frame) = self.prepared.take() else {
-            return Err(RendererError::NotPrepared);
+            return Err(self.unprepared.take().unwrap_or(RendererError::NotPrepared));
         };
         self.timer.begin_frame();
 

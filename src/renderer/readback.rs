@@ -20,6 +20,34 @@ const FREE: u8 = 0;
 const PENDING: u8 = 1;
 const MAPPED: u8 = 2;
 const FAILED: u8 = 3;
+/// The slot's encoder was dropped without being submitted: its map callback was dropped
+/// uncalled, and the buffer was never mapped.
+const ABANDONED: u8 = 4;
+
+/// The end of a slot's wait, carried by its map callback: the mapping's result where the
+/// callback runs, or, where wgpu drops the callback uncalled (the encoder, or its command
+/// buffer, dropped without being submitted), [`ABANDONED`], so that the slot is not waited for
+/// forever.
+struct Settle {
+    state: Arc<AtomicU8>,
+    settled: bool,
+}
+
+impl Settle {
+    fn settle(mut self, mapped: bool) {
+        let state = if mapped { MAPPED } else { FAILED };
+        self.state.store(state, Ordering::Release);
+        self.settled = true;
+    }
+}
+
+impl Drop for Settle {
+    fn drop(&mut self) {
+        if !self.settled {
+            self.state.store(ABANDONED, Ordering::Release);
+        }
+    }
+}
 
 /// One frame's figures on their way back: a buffer mapped on submit, and what the CPU knew.
 struct ReadbackSlot {
@@ -97,9 +125,12 @@ impl StatsRing {
             }
         }
         slot.state.store(PENDING, Ordering::Release);
-        let state = slot.state.clone();
+        let settle = Settle {
+            state: slot.state.clone(),
+            settled: false,
+        };
         encoder.map_buffer_on_submit(&slot.buffer, wgpu::MapMode::Read, .., move |r| {
-            state.store(if r.is_ok() { MAPPED } else { FAILED }, Ordering::Release);
+            settle.settle(r.is_ok());
         });
         slot.frame = Some((stats, names));
     }
@@ -145,6 +176,11 @@ impl StatsRing {
                 FAILED => {
                     slot.frame = None;
                     slot.buffer.unmap();
+                    slot.state.store(FREE, Ordering::Release);
+                    self.dropped += 1;
+                }
+                ABANDONED => {
+                    slot.frame = None;
                     slot.state.store(FREE, Ordering::Release);
                     self.dropped += 1;
                 }

@@ -98,6 +98,7 @@ impl Renderer {
         stop: &dyn Fn() -> bool,
     ) -> Result<WarmUp, RendererError> {
         let start = Instant::now();
+        camera.check().map_err(RendererError::FrameInput)?;
         self.flush_unrecorded();
         let mut last_change = Instant::now();
         let mut last_resident = u32::MAX;
