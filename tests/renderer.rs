@@ -242,24 +242,17 @@ fn a_frame_is_recorded_and_submitted_without_waiting_and_its_figures_come_later(
 #[test]
 fn figures_of_frames_in_flight_stay_within_the_ring() {
     let ctx = common::gpu();
-    let world = World::open(&common::default_world()).unwrap();
-    let camera = overview_camera(&world);
-    let (c, d) = (
-        wgpu::TextureFormat::Rgba8UnormSrgb,
-        wgpu::TextureFormat::Depth32Float,
-    );
-    let options = RendererOptions::new(&world, c, d, 64, 36);
-    let mut renderer = Renderer::new(&ctx.device, &ctx.queue, world, options).unwrap();
-    let t = targets(&ctx.device, c, d, (64, 36));
+    let (mut renderer, t, camera) = small_renderer(&ctx);
     // Many frames submitted back to back, none waited for, figures never taken.
     let frames = 3 * MAX_READY_STATS as u64;
     for i in 0..frames {
-        renderer.prepare(&ctx.queue, &FrameInput::new(camera, i as f64 / 60.0));
-        let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        renderer
-            .record(&mut encoder, &t.color_view, &t.depth_view)
-            .unwrap();
-        ctx.queue.submit([encoder.finish()]);
+        frame(
+            &ctx,
+            &mut renderer,
+            &t,
+            &FrameInput::new(camera, i as f64 / 60.0),
+        )
+        .unwrap();
     }
     let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
     let delivered = renderer.take_stats();
@@ -282,12 +275,8 @@ fn figures_of_frames_in_flight_stay_within_the_ring() {
     // With figures taken every frame and the GPU waited for, none is lost.
     let before = renderer.stats_dropped();
     for i in 0..2 * READBACK_SLOTS as u64 {
-        renderer.prepare(&ctx.queue, &FrameInput::new(camera, 1.0 + i as f64 / 60.0));
-        let mut encoder = ctx.device.create_command_encoder(&Default::default());
-        renderer
-            .record(&mut encoder, &t.color_view, &t.depth_view)
-            .unwrap();
-        ctx.queue.submit([encoder.finish()]);
+        let input = FrameInput::new(camera, 1.0 + i as f64 / 60.0);
+        frame(&ctx, &mut renderer, &t, &input).unwrap();
         let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
         let got = renderer.take_stats();
         assert_eq!(got.len(), 1);
