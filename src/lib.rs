@@ -70,7 +70,8 @@
 //!   `renderer/frame.rs`, [`RendererError`] in `renderer/error.rs`, the targets' formats and size
 //!   checks in `renderer/targets.rs`; its settings in `renderer/config.rs`
 //!   ([`RendererConfig`] with [`GrassConfig`], [`RendererOptions`];
-//!   [`RendererConfig::validate`] checks every range once, called by [`Renderer::new`]); the
+//!   [`RendererConfig::validate`] checks every range once, [`RendererConfig::validate_for`]
+//!   those that depend on the world too, called by [`Renderer::new`]); the
 //!   frame's view, worked out once in [`Renderer::prepare`] (`renderer/view.rs`,
 //!   [`renderer::FrameView`]).
 //! - `tools` (feature `cli`): the headless scene, fly-throughs and their reports, soak, the

@@ -132,10 +132,19 @@ pub enum Ring {
 /// default").
 pub const DEFAULT_VIEW_TILES: f64 = 4.0 / 3.0;
 
+/// The coarsest grass tiles, in levels above the pyramid's finest level (where
+/// [`RingSettings::for_pyramid`] puts them; [`crate::RendererConfig::validate_for`]): each level
+/// up doubles a grass tile's edge and quadruples the blades it generates a frame (and a pool
+/// slot holds), every one of them generated whatever the view distance. Two levels up the
+/// default world's grass tiles are 200 m wide, 16 times the blades of its 50 m tiles.
+pub const MAX_GRASS_LEVELS_UP: u8 = 2;
+
 /// Settings of the grass rings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RingSettings {
-    /// Quadtree level of grass tiles.
+    /// Quadtree level of grass tiles: the pyramid's finest by default, at most
+    /// [`MAX_GRASS_LEVELS_UP`] levels coarser
+    /// ([`crate::RendererConfig::validate_for`]).
     pub level: u8,
     /// Tiles nearer than this (3D distance to the tile's box) are high LOD, metres.
     pub high_radius_m: f64,

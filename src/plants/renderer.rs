@@ -455,7 +455,8 @@ impl PlantRenderer {
         use wgpu::BufferUsages as U;
         let ids = layer.types(manifest);
         let types = ids.len() as u32;
-        let capacity = (settings.capacity.max(8).div_ceil(8) * 8).min(max_capacity(types));
+        let capacity =
+            (settings.capacity.max(8).div_ceil(8).saturating_mul(8)).min(max_capacity(types));
         let settings = PlantSettings {
             capacity,
             ..settings

@@ -24,7 +24,8 @@ pub struct RendererConfig {
     pub lod_factor: f64,
     /// Derivation of child tiles.
     pub derive: DeriveParams,
-    /// Grass rings, or none to ask for no grass tiles (no grass, no wind).
+    /// Grass rings, or none to ask for no grass tiles (no grass, no wind); their level is
+    /// checked against the world's pyramid by [`RendererConfig::validate_for`].
     pub grass_rings: Option<RingSettings>,
     /// The grass's settings: blade spacing, width, infill, segments, pool capacity.
     pub grass: GrassConfig,
@@ -222,6 +223,84 @@ where
     }
 }
 
+/// The longest wait before a failed tile is loaded again, seconds
+/// (`service.fault_retry_s`, `service.fault_retry_max_s`; about 31 years).
+const MAX_FAULT_RETRY_S: f64 = 1e9;
+
+/// Checks the plants' (`trees` false) or the trees' settings, each field named with its
+/// layer's prefix: `capacity` in 1..=[`crate::plants::renderer::max_capacity`]`(1)`,
+/// `0 < near <= far <=` [`MAX_PLANT_LOD_M`], `band_m` 0..=[`MAX_PLANT_LOD_M`], the cards'
+/// reach 1 to [`MAX_CARD_REACH`] view distances, `thin_m` above 0 and at most
+/// [`MAX_PLANT_LOD_M`], `min_keep` above 0 and at most 1, `cell_m`
+/// [`crate::plants::PLANT_CELL_M`] to 64 m; the trees' `view_m` (the plants' follows the
+/// grass's) `0 <= START <= END`, END above 0 and at most
+/// [`crate::world::manifest::MAX_FOG_DISTANCE_M`].
+fn validate_plants(s: &crate::plants::PlantSettings, trees: bool) -> Result<(), ConfigError> {
+    macro_rules! field {
+        ($name:literal) => {
+            if trees {
+                concat!("trees.", $name)
+            } else {
+                concat!("plants.", $name)
+            }
+        };
+    }
+    // More than a region of one type's pool holds is never honoured (a layer of more types
+    // holds fewer a region, and is given that many).
+    let most = crate::plants::renderer::max_capacity(1);
+    check(field!("capacity"), s.capacity, &(1..=most), " instances")?;
+    let [near, far] = s.lod_m;
+    if !(near > 0.0 && near <= far && far <= MAX_PLANT_LOD_M) {
+        return Err(ConfigError::new(
+            field!("lod_m"),
+            s.lod_m,
+            format!("NEAR,FAR with 0 < NEAR <= FAR <= {MAX_PLANT_LOD_M} m"),
+        ));
+    }
+    check(field!("band_m"), s.band_m, &(0.0..=MAX_PLANT_LOD_M), " m")?;
+    if !(1.0..=MAX_CARD_REACH).contains(&s.card_reach) {
+        return Err(ConfigError::new(
+            field!("card_reach"),
+            s.card_reach,
+            format!("1 to {MAX_CARD_REACH} view distances"),
+        ));
+    }
+    if !(s.thin_m > 0.0 && s.thin_m <= MAX_PLANT_LOD_M) {
+        return Err(ConfigError::new(
+            field!("thin_m"),
+            s.thin_m,
+            format!("above 0, at most {MAX_PLANT_LOD_M} m"),
+        ));
+    }
+    if !(s.min_keep > 0.0 && s.min_keep <= 1.0) {
+        return Err(ConfigError::new(
+            field!("min_keep"),
+            s.min_keep,
+            "above 0, at most 1",
+        ));
+    }
+    let cell = crate::plants::PLANT_CELL_M;
+    if !(s.cell_m >= cell && s.cell_m <= 64.0) {
+        return Err(ConfigError::new(
+            field!("cell_m"),
+            s.cell_m,
+            format!("{cell} to 64 m"),
+        ));
+    }
+    if trees {
+        let [start, end] = s.view_m;
+        let most = crate::world::manifest::MAX_FOG_DISTANCE_M as f32;
+        if !(start >= 0.0 && start <= end && end > 0.0 && end <= most) {
+            return Err(ConfigError::new(
+                "trees.view_m",
+                s.view_m,
+                format!("START,END with 0 <= START <= END, 0 < END <= {most} m"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 impl RendererConfig {
     /// Defaults for `world`: among them an atlas of [`default_atlas_slots`] slots, sized to its
     /// pyramid.
@@ -250,15 +329,22 @@ impl RendererConfig {
 
     /// Checks every setting against its range, stated in the error: `lod_factor` in
     /// [`LOD_FACTOR_RANGE`], `mesh_step` a power of two in 1..=[`MAX_MESH_STEP`], the tile
-    /// service's per-frame budgets at least 1, the grass rings' radii (finite, the high radius
-    /// and the low one above 0, the high one allowed past the low one, the hysteresis at least
-    /// 0), the plants' level-of-detail switches (`0 < near <= far <=` [`MAX_PLANT_LOD_M`]), their
-    /// cards' reach (1 to [`MAX_CARD_REACH`] view distances), the start of their thinning with
-    /// distance (above 0, at most [`MAX_PLANT_LOD_M`]), the temporal anti-aliasing's history
+    /// service's per-frame budgets (uploads at least 1, derives 1..=`service.atlas_slots`) and
+    /// its waits before a failed tile is loaded again (0..=1e9 s each), the grass rings' radii
+    /// (finite, the high radius and the low one above 0, the high one allowed past the low one,
+    /// the hysteresis at least 0), the plants' and the trees' settings (pool regions of
+    /// 1..=[`crate::plants::renderer::max_capacity`]`(1)` instances, level-of-detail switches
+    /// `0 < near <= far <=` [`MAX_PLANT_LOD_M`] with cross-fade bands of
+    /// 0..=[`MAX_PLANT_LOD_M`] m, cards' reach 1 to [`MAX_CARD_REACH`] view distances, the start
+    /// of their thinning with distance above 0 and at most [`MAX_PLANT_LOD_M`], the fewest kept
+    /// above 0 and at most 1, placement cells of [`crate::plants::PLANT_CELL_M`] to 64 m, the
+    /// trees' view distances `0 <= START <= END`, END above 0 and at most
+    /// [`crate::world::manifest::MAX_FOG_DISTANCE_M`]), the temporal anti-aliasing's history
     /// (2..=256 samples, its clip 0.25..=16 standard deviations, its motion falloff 0..=16) and
     /// [`GrassConfig::validate`].
-    /// NaN and infinities are out of every range. What depends on the world or the adapter
-    /// (atlas slots, cache size, the rings' level) is checked by [`crate::Renderer::new`].
+    /// NaN and infinities are out of every range. What depends on the world is checked by
+    /// [`RendererConfig::validate_for`] (the rings' level), and what depends on the adapter
+    /// (atlas slots, cache size) by [`crate::Renderer::new`].
     pub fn validate(&self) -> Result<(), ConfigError> {
         check("lod_factor", self.lod_factor, &LOD_FACTOR_RANGE, "")?;
         if !(self.mesh_step.is_power_of_two() && self.mesh_step <= MAX_MESH_STEP) {
@@ -274,11 +360,25 @@ impl RendererConfig {
             &(1..=u32::MAX),
             "",
         )?;
+        // A derived tile takes an atlas slot, and the derivation's staging textures have a
+        // layer each (`Renderer::new` holds the slots to the adapter's texture array layers).
         check(
             "service.derives_per_frame",
             self.service.derives_per_frame,
-            &(1..=u32::MAX),
-            "",
+            &(1..=self.service.atlas_slots.max(1)),
+            " (at most service.atlas_slots)",
+        )?;
+        check(
+            "service.fault_retry_s",
+            self.service.fault_retry_s,
+            &(0.0..=MAX_FAULT_RETRY_S),
+            " s",
+        )?;
+        check(
+            "service.fault_retry_max_s",
+            self.service.fault_retry_max_s,
+            &(0.0..=MAX_FAULT_RETRY_S),
+            " s",
         )?;
         if let Some(r) = &self.grass_rings {
             let finite = [r.high_radius_m, r.low_radius_m, r.hysteresis_m]
@@ -308,60 +408,9 @@ impl RendererConfig {
                 ));
             }
         }
-        let [near, far] = self.plants.lod_m;
-        if !(near > 0.0 && near <= far && far <= MAX_PLANT_LOD_M) {
-            return Err(ConfigError::new(
-                "plants.lod_m",
-                self.plants.lod_m,
-                format!("NEAR,FAR with 0 < NEAR <= FAR <= {MAX_PLANT_LOD_M} m"),
-            ));
-        }
-        let thin = self.plants.thin_m;
-        if !(thin > 0.0 && thin <= MAX_PLANT_LOD_M) {
-            return Err(ConfigError::new(
-                "plants.thin_m",
-                thin,
-                format!("above 0, at most {MAX_PLANT_LOD_M} m"),
-            ));
-        }
-        let reach = self.plants.card_reach;
-        if !(1.0..=MAX_CARD_REACH).contains(&reach) {
-            return Err(ConfigError::new(
-                "plants.card_reach",
-                reach,
-                format!("1 to {MAX_CARD_REACH} view distances"),
-            ));
-        }
+        validate_plants(&self.plants, false)?;
         if let Some(t) = &self.trees {
-            let [near, far] = t.lod_m;
-            if !(near > 0.0 && near <= far && far <= MAX_PLANT_LOD_M) {
-                return Err(ConfigError::new(
-                    "trees.lod_m",
-                    t.lod_m,
-                    format!("NEAR,FAR with 0 < NEAR <= FAR <= {MAX_PLANT_LOD_M} m"),
-                ));
-            }
-            if !(t.thin_m > 0.0 && t.thin_m <= MAX_PLANT_LOD_M) {
-                return Err(ConfigError::new(
-                    "trees.thin_m",
-                    t.thin_m,
-                    format!("above 0, at most {MAX_PLANT_LOD_M} m"),
-                ));
-            }
-            if !(t.min_keep > 0.0 && t.min_keep <= 1.0) {
-                return Err(ConfigError::new(
-                    "trees.min_keep",
-                    t.min_keep,
-                    "above 0, at most 1",
-                ));
-            }
-            if !(t.cell_m >= crate::plants::PLANT_CELL_M && t.cell_m <= 64.0) {
-                return Err(ConfigError::new(
-                    "trees.cell_m",
-                    t.cell_m,
-                    format!("{} to 64 m", crate::plants::PLANT_CELL_M),
-                ));
-            }
+            validate_plants(t, true)?;
         }
         self.taa.validate()?;
         let checked = [
@@ -377,6 +426,34 @@ impl RendererConfig {
             });
         }
         self.grass.validate()
+    }
+
+    /// [`Self::validate`], then what depends on `world` (its pyramid), which
+    /// [`crate::Renderer::new`] checks: the grass rings' `level` one of the pyramid's, its
+    /// finest (the default) or at most [`crate::lod::MAX_GRASS_LEVELS_UP`] levels coarser
+    /// (above the finest there is no data; a coarser grass tile generates four times the blades
+    /// a level, all of them every frame).
+    pub fn validate_for(&self, world: &World) -> Result<(), ConfigError> {
+        self.validate()?;
+        if let Some(r) = &self.grass_rings {
+            let pyramid = &world.manifest.pyramid;
+            let finest = pyramid.max_level();
+            let coarsest = finest.saturating_sub(crate::lod::MAX_GRASS_LEVELS_UP);
+            if !(coarsest..=finest).contains(&r.level) {
+                return Err(ConfigError::new(
+                    "grass_rings.level",
+                    r.level,
+                    format!(
+                        "in {coarsest}..={finest}: the world's finest level ({} m grass tiles) \
+                         or at most {} levels coarser ({} m)",
+                        pyramid.tile_size_m(finest),
+                        crate::lod::MAX_GRASS_LEVELS_UP,
+                        pyramid.tile_size_m(coarsest),
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The trees' settings for `world`: [`Self::trees`], else
@@ -602,7 +679,7 @@ mod tests {
             (
                 with(&|c| c.service.derives_per_frame = 0),
                 "service.derives_per_frame",
-                "1..=4294967295",
+                "1..=256 (at most service.atlas_slots)",
             ),
             (
                 with(&|c| c.service.uploads_per_frame = 0),
@@ -709,6 +786,187 @@ mod tests {
             let text = e.to_string();
             assert!(text.contains(field) && text.contains(range), "{text}");
         }
+    }
+
+    #[test]
+    fn settings_that_new_and_prepare_rely_on_are_refused() {
+        // Each of these passed before and then panicked or hung in `Renderer::new` or
+        // `prepare` (or went silently into the shaders).
+        let world = world();
+        let base = RendererConfig::for_world(&world);
+        let trees = base.tree_settings(&world).unwrap();
+        let with = |f: &dyn Fn(&mut RendererConfig)| {
+            let mut c = base.clone();
+            f(&mut c);
+            c
+        };
+        let with_trees = |f: &dyn Fn(&mut crate::plants::PlantSettings)| {
+            let mut c = base.clone();
+            let mut t = trees;
+            f(&mut t);
+            c.trees = Some(t);
+            c
+        };
+        let most = crate::plants::renderer::max_capacity(1);
+        assert_eq!(most, 1_398_096, "README.md states this figure");
+        let capacity = format!("in 1..={most} instances");
+        let cases: Vec<(RendererConfig, &str, &str)> = vec![
+            (
+                with(&|c| c.service.derives_per_frame = 2049),
+                "service.derives_per_frame",
+                "in 1..=256 (at most service.atlas_slots)",
+            ),
+            (
+                with(&|c| c.service.derives_per_frame = u32::MAX),
+                "service.derives_per_frame",
+                "in 1..=256 (at most service.atlas_slots)",
+            ),
+            (
+                with(&|c| c.service.fault_retry_s = f64::NAN),
+                "service.fault_retry_s",
+                "in 0..=1000000000 s",
+            ),
+            (
+                with(&|c| c.service.fault_retry_max_s = -1.0),
+                "service.fault_retry_max_s",
+                "in 0..=1000000000 s",
+            ),
+            (
+                with(&|c| c.plants.capacity = u32::MAX),
+                "plants.capacity",
+                &capacity,
+            ),
+            (
+                with(&|c| c.plants.capacity = 0),
+                "plants.capacity",
+                &capacity,
+            ),
+            (
+                with_trees(&|t| t.capacity = u32::MAX),
+                "trees.capacity",
+                &capacity,
+            ),
+            (
+                with(&|c| c.plants.cell_m = 0.0),
+                "plants.cell_m",
+                "0.5 to 64 m",
+            ),
+            (
+                with(&|c| c.plants.cell_m = 1e-3),
+                "plants.cell_m",
+                "0.5 to 64 m",
+            ),
+            (
+                with(&|c| c.plants.cell_m = f32::NAN),
+                "plants.cell_m",
+                "0.5 to 64 m",
+            ),
+            (
+                with(&|c| c.plants.band_m = f32::NAN),
+                "plants.band_m",
+                "in 0..=10000 m",
+            ),
+            (
+                with(&|c| c.plants.band_m = -50.0),
+                "plants.band_m",
+                "in 0..=10000 m",
+            ),
+            (
+                with(&|c| c.plants.min_keep = 0.0),
+                "plants.min_keep",
+                "above 0, at most 1",
+            ),
+            (
+                with_trees(&|t| t.band_m = 1e30),
+                "trees.band_m",
+                "in 0..=10000 m",
+            ),
+            (
+                with_trees(&|t| t.card_reach = f32::NAN),
+                "trees.card_reach",
+                "1 to 16 view distances",
+            ),
+            (
+                with_trees(&|t| t.view_m = [f32::NAN; 2]),
+                "trees.view_m",
+                "0 <= START <= END",
+            ),
+            (
+                with_trees(&|t| t.view_m = [200.0, 100.0]),
+                "trees.view_m",
+                "0 <= START <= END",
+            ),
+            (
+                with_trees(&|t| t.view_m = [0.0, f32::INFINITY]),
+                "trees.view_m",
+                "0 < END <=",
+            ),
+            (
+                with_trees(&|t| t.cell_m = 0.1),
+                "trees.cell_m",
+                "0.5 to 64 m",
+            ),
+        ];
+        for (config, field, range) in cases {
+            let e = config.validate().unwrap_err();
+            assert_eq!(e.field, field, "{e}");
+            let text = e.to_string();
+            assert!(text.contains(field) && text.contains(range), "{text}");
+        }
+        // The bounds themselves are taken.
+        let mut c = with_trees(&|t| {
+            t.capacity = most;
+            t.band_m = MAX_PLANT_LOD_M;
+            t.view_m = [0.0, 1.0];
+            t.cell_m = 64.0;
+        });
+        c.plants.capacity = 1;
+        c.plants.band_m = 0.0;
+        c.plants.cell_m = crate::plants::PLANT_CELL_M;
+        c.plants.min_keep = 1.0;
+        c.service.derives_per_frame = c.service.atlas_slots;
+        c.service.fault_retry_s = 0.0;
+        c.service.fault_retry_max_s = MAX_FAULT_RETRY_S;
+        c.validate().unwrap();
+        // The plants' view distance follows the grass's: its own is not looked at.
+        with(&|c| c.plants.view_m = [f32::NAN; 2])
+            .validate()
+            .unwrap();
+    }
+
+    #[test]
+    fn the_rings_level_is_the_worlds_finest_or_a_little_coarser() {
+        let world = world();
+        let base = RendererConfig::for_world(&world);
+        base.validate_for(&world).unwrap();
+        let finest = world.manifest.pyramid.max_level();
+        assert_eq!(finest, 8);
+        let at = |level: u8| {
+            let mut c = base.clone();
+            c.grass_rings.as_mut().unwrap().level = level;
+            c
+        };
+        at(finest - crate::lod::MAX_GRASS_LEVELS_UP)
+            .validate_for(&world)
+            .unwrap();
+        for level in [0, finest - 3, finest + 1, 200] {
+            let c = at(level);
+            // The world-free checks cannot tell.
+            c.validate().unwrap();
+            let e = c.validate_for(&world).unwrap_err();
+            assert_eq!(e.field, "grass_rings.level", "{e}");
+            assert_eq!(e.value, level.to_string());
+            let text = e.to_string();
+            let want = "in 6..=8: the world's finest level (50 m grass tiles) \
+                        or at most 2 levels coarser (200 m)";
+            assert!(text.contains(want), "{text}");
+        }
+        // Without grass there is no level to check; the world-free checks still run.
+        let mut c = at(200);
+        c.grass_rings = None;
+        c.validate_for(&world).unwrap();
+        c.lod_factor = f64::NAN;
+        assert_eq!(c.validate_for(&world).unwrap_err().field, "lod_factor");
     }
 
     #[test]

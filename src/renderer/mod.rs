@@ -255,7 +255,7 @@ impl Renderer {
         options: RendererOptions,
     ) -> Result<Self, RendererError> {
         let config = options.config;
-        config.validate()?;
+        config.validate_for(&world)?;
         let targets = Targets {
             color_format: options.color_format,
             depth_format: options.depth_format,
