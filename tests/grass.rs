@@ -274,7 +274,7 @@ impl Rig {
         }
         self.grass
             .hiz
-            .record(&self.ctx.device, &mut encoder, &self.depth, &mut timer);
+            .record(&self.ctx.device, &mut encoder, &dv, &mut timer);
         let tiles = self.grass.record(
             &self.ctx.queue,
             &mut encoder,
@@ -864,9 +864,7 @@ fn gpu_wind_on_blades_matches_the_cpu_mirror() {
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        grass
-            .hiz
-            .record(&ctx.device, &mut encoder, &depth, &mut timer);
+        grass.hiz.record(&ctx.device, &mut encoder, &dv, &mut timer);
         grass.record(&ctx.queue, &mut encoder, &[job], &cv, None, &dv, &mut timer);
         ctx.queue.submit([encoder.finish()]);
         ctx.wait_idle();

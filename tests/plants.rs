@@ -171,7 +171,7 @@ impl Rig {
             });
         }
         self.hiz
-            .record(&self.ctx.device, &mut encoder, &self.depth, &mut timer);
+            .record(&self.ctx.device, &mut encoder, &dv, &mut timer);
         self.plants
             .record(&self.ctx.queue, &mut encoder, jobs, &cv, &dv, &mut timer);
         self.ctx.queue.submit([encoder.finish()]);

@@ -212,7 +212,7 @@ impl Msaa {
         timer: &mut crate::gpu::GpuTimer,
     ) {
         let (scene, layout) = (&self.scene, &self.expand_layout);
-        let group = self.expand_group.get(depth.texture(), |depth| {
+        let group = self.expand_group.get(depth, |depth| {
             bind_group(
                 device,
                 "msaa expand",

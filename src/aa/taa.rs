@@ -495,7 +495,6 @@ impl Taa {
         timer: &mut crate::gpu::GpuTimer,
     ) {
         let (read, write) = (self.read, 1 - self.read);
-        let texture = depth.texture();
         let (scene, history, spread, buffer, layout, motion) = (
             &self.textures.scene,
             &self.textures.history,
@@ -504,7 +503,7 @@ impl Taa {
             &self.resolve_layout,
             &self.motion,
         );
-        let group = self.resolve_groups[read].get(texture, |depth| {
+        let group = self.resolve_groups[read].get(depth, |depth| {
             crate::gpu::layout::bind_group_with_indices(
                 device,
                 "taa resolve",
@@ -526,7 +525,9 @@ impl Taa {
                 label: Some("taa resolve"),
                 timestamp_writes: timer.compute_pass("taa_resolve"),
             });
-            let size = texture.size();
+            // The frame's size (the caller's depth may be a view of one level of a larger
+            // texture).
+            let size = self.textures.scene.texture().size();
             pass.set_pipeline(&self.resolve);
             pass.set_bind_group(0, group, &[]);
             pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);

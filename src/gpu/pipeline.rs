@@ -275,21 +275,25 @@ pub fn depth_view(texture: &wgpu::Texture) -> wgpu::TextureView {
     })
 }
 
-/// A bind group that reads a depth target, made again only when the target's texture changes
+/// A bind group that reads a depth target, made again only when the target's view changes
 /// (a new frame's target, or a resize): the passes that read the depth keep one each.
+///
+/// It binds the caller's view itself, not a view of its whole texture: a view of one layer or
+/// one mip level of a larger texture is read where it is drawn. (The renderer's depth formats
+/// have no stencil, so the view's whole aspect is its depth.)
 #[derive(Default)]
-pub struct DepthBound(Option<(wgpu::Texture, wgpu::BindGroup)>);
+pub struct DepthBound(Option<(wgpu::TextureView, wgpu::BindGroup)>);
 
 impl DepthBound {
-    /// The bind group for `depth`, made by `make` from a view of its depth when `depth` is not
-    /// the texture of the last one.
+    /// The bind group for `depth`, made by `make` from it when `depth` is not the view of the
+    /// last one.
     pub fn get(
         &mut self,
-        depth: &wgpu::Texture,
+        depth: &wgpu::TextureView,
         make: impl FnOnce(&wgpu::TextureView) -> wgpu::BindGroup,
     ) -> &wgpu::BindGroup {
-        if self.0.as_ref().is_none_or(|(t, _)| t != depth) {
-            self.0 = Some((depth.clone(), make(&depth_view(depth))));
+        if self.0.as_ref().is_none_or(|(v, _)| v != depth) {
+            self.0 = Some((depth.clone(), make(depth)));
         }
         &self.0.as_ref().expect("made above").1
     }

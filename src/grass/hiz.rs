@@ -14,7 +14,7 @@ pub struct HiZPyramid {
     reduce: wgpu::ComputePipeline,
     copy_layout: wgpu::BindGroupLayout,
     level_buffer: wgpu::Buffer,
-    /// The depth texture the copy reads and its bind group (made again when the texture changes).
+    /// The depth view the copy reads and its bind group (made again when the view changes).
     copy_group: DepthBound,
     reduce_group: wgpu::BindGroup,
     /// (offset in floats, width, height) of each level.
@@ -147,13 +147,13 @@ impl HiZPyramid {
         crate::grass::HiZ { mips }
     }
 
-    /// Records the build of the pyramid from `depth` (of the pyramid's size; its bind group is
-    /// made when the texture differs from the last one's).
+    /// Records the build of the pyramid from `depth` (a view of the pyramid's size; its bind
+    /// group is made when the view differs from the last one's).
     pub fn record(
         &mut self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
-        depth: &wgpu::Texture,
+        depth: &wgpu::TextureView,
         timer: &mut GpuTimer,
     ) {
         let copy_group = self.copy_group.get(depth, |depth| {

@@ -132,17 +132,35 @@ pub enum RendererError {
         /// The smallest ceiling in MiB that holds one tile.
         min_mib: u64,
     },
-    /// The colour format is not one the renderer draws into.
+    /// The colour format is not one the renderer draws into on any device.
     #[error(
         "colour format {0:?} is not supported (use an 8-bit RGBA/BGRA format, sRGB or not, \
-         Rgb10a2Unorm, Rgba16Unorm, Rgba16Float, Rgba32Float or Rg11b10Ufloat)"
+         Rgb10a2Unorm or Rgba16Float; on a device with the features they need, Rgba32Float, \
+         Rg11b10Ufloat or Rgba16Unorm)"
     )]
     ColorFormat(wgpu::TextureFormat),
+    /// The colour format is one the renderer draws into, but not on this device: it cannot
+    /// render into it, blend it or (with [`AntiAliasing::Msaa`](crate::aa::AntiAliasing::Msaa))
+    /// multisample it without a feature the device was not made with.
+    #[error(
+        "colour format {format:?} cannot be drawn into on this device: {reason}; formats this \
+         device draws into: {usable:?}"
+    )]
+    ColorFormatOnDevice {
+        /// The format asked for.
+        format: wgpu::TextureFormat,
+        /// Why not, naming the wgpu feature that would make it work where there is one.
+        reason: String,
+        /// The colour formats the renderer draws into on this device.
+        usable: Vec<wgpu::TextureFormat>,
+    },
     /// The depth format is not one the renderer draws into.
     #[error("depth format {0:?} is not supported (use Depth32Float or Depth24Plus)")]
     DepthFormat(wgpu::TextureFormat),
     /// A target given to [`Renderer::record`](super::Renderer::record) does not match the
-    /// renderer's targets.
+    /// renderer's targets: its format, usage, samples, size, or a view of more (or another
+    /// size) than one mip level and one layer. `found` describes the view's texture and, for
+    /// what only the view tells, wgpu's own words.
     #[error("the {which} target is {found}, but the renderer was made for {expected}")]
     Target {
         /// `"colour"` or `"depth"`.

@@ -41,7 +41,7 @@ mod view;
 
 use hole_check::HoleCheck;
 use readback::StatsRing;
-use targets::{check_formats, check_size};
+use targets::{TargetCheck, check_formats, check_size};
 
 pub use config::{
     ATLAS_SLOTS_PER_LEVEL, ConfigError, DEFAULT_INFILL_M, DEFAULT_LOD_WIDEN, DEFAULT_MESH_STEP,
@@ -53,7 +53,9 @@ pub use config::{
 pub use error::RendererError;
 pub use frame::{FrameInput, FrameStats, MissingTile, WarmUp};
 pub use streaming::WARM_UP_STALL;
-pub use targets::{DEPTH_FORMATS, hiz_bytes};
+pub use targets::{
+    COLOR_FORMATS, DEPTH_FORMATS, color_format_problem, hiz_bytes, usable_color_formats,
+};
 pub use view::FrameView;
 
 use std::sync::Arc;
@@ -230,6 +232,8 @@ pub struct Renderer {
     /// The multisampling of the grass, when on: terrain and sky are drawn into its texture,
     /// the blades into its multisampled targets, resolved into the caller's.
     msaa: Option<Msaa>,
+    /// What checks the caller's targets on each frame.
+    target_check: TargetCheck,
 }
 
 impl Renderer {
@@ -262,8 +266,12 @@ impl Renderer {
             width: options.width,
             height: options.height,
         };
-        check_formats(&targets)?;
         let grass_on = config.grass_rings.is_some();
+        check_formats(
+            device,
+            &targets,
+            config.aa == AntiAliasing::Msaa && grass_on,
+        )?;
         check_size(device, targets.width, targets.height, grass_on)?;
         let limits = device.limits();
         let pyramid = world.manifest.pyramid.clone();
@@ -612,6 +620,7 @@ impl Renderer {
                 taa,
                 taa_settings: config.taa,
                 msaa,
+                target_check: TargetCheck::new(device, &targets),
             };
             Ok(renderer)
         };
@@ -1137,6 +1146,15 @@ impl Renderer {
     ///    `aa_taa.wgsl`), and the result written into `color`;
     /// 9. the pass timestamps and grass counters copied into the readback ring, mapped when the
     ///    encoder's work is submitted ([`Renderer::stats`]).
+    ///
+    /// `color` and `depth` must match the renderer's targets: its formats (the colour view may
+    /// be the sRGB or plain variant of its texture's format) and size, one sample, each a 2D
+    /// view of one mip level and one layer (of a larger texture too), of a texture with
+    /// `RENDER_ATTACHMENT` usage (the depth's also `TEXTURE_BINDING`, and `COPY_SRC` with the
+    /// terrain-only depth captured). A target that does not is [`RendererError::Target`],
+    /// before anything is recorded. A view does not tell its levels, layers or format, so the
+    /// first time a pair of views is given wgpu is asked about them under an error scope
+    /// (nothing is submitted); the same pair again is not asked about again.
     pub fn record(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -1187,7 +1205,7 @@ impl Renderer {
         if let Some(g) = &mut self.grass {
             g.renderer
                 .hiz
-                .record(&self.device, encoder, depth.texture(), &mut self.timer);
+                .record(&self.device, encoder, depth, &mut self.timer);
         }
         // With anti-aliasing the terrain and sky are drawn into its texture: temporal
         // anti-aliasing resolves the whole frame into `color` (8.), multisampling copies it

@@ -240,7 +240,7 @@ impl ContactShadowPass {
 
     /// Records the passes: the factors found in `depth` and the trees' shadow `map`
     /// (compute, `contact_shadows`), then `color` multiplied by them (`contact_shadows_apply`).
-    /// The compute pass's bind group is made again only when the depth texture changes (or
+    /// The compute pass's bind group is made again only when the depth view changes (or
     /// the targets are resized); `map` must be the same every frame.
     pub fn record(
         &mut self,
@@ -251,8 +251,7 @@ impl ContactShadowPass {
         map: &crate::plants::shadow::TreeShadowMap,
         timer: &mut crate::gpu::GpuTimer,
     ) {
-        let texture = depth.texture();
-        let group = self.bound.get(texture, |depth| {
+        let group = self.bound.get(depth, |depth| {
             bind_group_with_indices(
                 device,
                 "contact shadows",
@@ -271,7 +270,9 @@ impl ContactShadowPass {
                 label: Some("contact shadows"),
                 timestamp_writes: timer.compute_pass("contact_shadows"),
             });
-            let size = texture.size();
+            // The targets' size (the caller's depth may be a view of one level of a larger
+            // texture).
+            let size = self.factors.texture().size();
             pass.set_pipeline(&self.compute);
             pass.set_bind_group(0, group, &[]);
             pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);

@@ -497,6 +497,12 @@ impl TerrainRenderer {
         self.uniforms.overlay[2] = ring_radii_m[1];
     }
 
+    /// The G-buffer's view: a render target of the targets' size (the renderer checks a
+    /// caller's view against it).
+    pub fn gbuffer_view(&self) -> &wgpu::TextureView {
+        &self.deferred.gbuffer
+    }
+
     /// Most tiles a frame can draw.
     pub fn max_tiles(&self) -> u32 {
         self.max_tiles
@@ -578,7 +584,7 @@ impl TerrainRenderer {
         depth: &wgpu::TextureView,
         timer: &mut GpuTimer,
     ) {
-        let group = self.shade_bound.get(depth.texture(), |depth| {
+        let group = self.shade_bound.get(depth, |depth| {
             bind_group_with_indices(
                 device,
                 "terrain shade",
@@ -598,7 +604,9 @@ impl TerrainRenderer {
                 label: Some("terrain shade"),
                 timestamp_writes: timer.compute_pass("terrain_shade"),
             });
-            let size = depth.texture().size();
+            // The targets' size (the caller's depth may be a view of one level of a larger
+            // texture).
+            let size = self.deferred.gbuffer.texture().size();
             pass.set_pipeline(&self.shade);
             pass.set_bind_group(0, group, &[]);
             pass.dispatch_workgroups(size.width.div_ceil(8), size.height.div_ceil(8), 1);
