@@ -822,6 +822,8 @@ impl Renderer {
         if aa == self.anti_aliasing() {
             return Ok(());
         }
+        let msaa = aa == AntiAliasing::Msaa && self.grass.is_some();
+        check_formats(&self.device, &self.targets, msaa)?;
         let size = (self.targets.width, self.targets.height);
         let (taa, msaa) =
             allocate_at_size(&self.device, "the anti-aliasing's targets", size, || {
