@@ -335,7 +335,8 @@ impl Renderer {
                 &pyramid,
                 &config.derive,
                 &atlas,
-                config.service.derives_per_frame,
+                // Never more a frame than the atlas has slots: a derived tile takes one.
+                config.service.derives_per_frame.min(slots),
             );
             let mut terrain = TerrainRenderer::new(
                 device,
