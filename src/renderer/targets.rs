@@ -443,20 +443,14 @@ fn try_color_format(
 ) -> Option<String> {
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let texture = |samples, usage| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("colour format check"),
-            size: wgpu::Extent3d {
-                width: 1,
-                height: 1,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: samples,
-            dimension: wgpu::TextureDimension::D2,
+        crate::gpu::multisampled_texture(
+            device,
+            "colour format check",
             format,
             usage,
-            view_formats: &[],
-        })
+            (1, 1),
+            samples,
+        )
     };
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("colour format check"),
