@@ -267,14 +267,6 @@ pub fn array_view(texture: &wgpu::Texture) -> wgpu::TextureView {
     })
 }
 
-/// A view of the depth of a depth target, for reading it as `texture_depth_2d`.
-pub fn depth_view(texture: &wgpu::Texture) -> wgpu::TextureView {
-    texture.create_view(&wgpu::TextureViewDescriptor {
-        aspect: wgpu::TextureAspect::DepthOnly,
-        ..Default::default()
-    })
-}
-
 /// A bind group that reads a depth target, made again only when the target's view changes
 /// (a new frame's target, or a resize): the passes that read the depth keep one each.
 ///

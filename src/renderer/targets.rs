@@ -206,16 +206,18 @@ impl Renderer {
             depth_usage |= U::COPY_SRC;
         }
         // The terrain-only depth is copied from the texture's first level and layer.
-        let capture_note = if capture {
-            format!(
-                ", the texture itself {}x{} with one layer (the capture of the terrain-only \
-                 depth copies its first level and layer)",
-                t.width, t.height
-            )
-        } else {
-            String::new()
+        let depth_expected = || {
+            let capture_note = if capture {
+                format!(
+                    ", the texture itself {}x{} with one layer (the capture of the terrain-only \
+                     depth copies its first level and layer)",
+                    t.width, t.height
+                )
+            } else {
+                String::new()
+            };
+            expected(t.depth_format, depth_usage, &capture_note)
         };
-        let depth_expected = || expected(t.depth_format, depth_usage, &capture_note);
         if !plain(d, depth_usage)
             || d.format() != t.depth_format
             || capture && (level_size(d, 0) != size || d.depth_or_array_layers() != 1)
@@ -262,61 +264,61 @@ impl Renderer {
     /// the renderer's size) drawn by a pipeline of the depth format, and read as
     /// `texture_depth_2d`. Nothing is submitted.
     fn probe_depth(&self, depth: &wgpu::TextureView) -> Option<wgpu::Error> {
-        let device = &self.device;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("target check: depth"),
-        });
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        let gbuffer = [Some(load(self.terrain.gbuffer_view()))];
+        self.probe_pass(&gbuffer, Some(depth), &self.target_check.depth, || {
+            drop(self.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("target check: depth"),
-                color_attachments: &[Some(load(self.terrain.gbuffer_view()))],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Load,
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&self.target_check.depth);
-        }
-        drop(encoder.finish());
-        drop(device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("target check: depth"),
-            layout: &self.target_check.depth_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::TextureView(depth),
-            }],
-        }));
-        pollster::block_on(scope.pop())
+                layout: &self.target_check.depth_layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(depth),
+                }],
+            }));
+        })
     }
 
     /// wgpu's error, if any, for `color` as the colour target of a pass beside the G-buffer
     /// drawn by a pipeline of the colour format. Nothing is submitted.
     fn probe_color(&self, color: &wgpu::TextureView) -> Option<wgpu::Error> {
+        let targets = [Some(load(color)), Some(load(self.terrain.gbuffer_view()))];
+        self.probe_pass(&targets, None, &self.target_check.color, || {})
+    }
+
+    /// wgpu's validation error, if any, from a render pass of `pipeline` over `colors` (and
+    /// `depth`), recorded and finished but never submitted, and from `also` after it.
+    fn probe_pass(
+        &self,
+        colors: &[Option<wgpu::RenderPassColorAttachment<'_>>],
+        depth: Option<&wgpu::TextureView>,
+        pipeline: &wgpu::RenderPipeline,
+        also: impl FnOnce(),
+    ) -> Option<wgpu::Error> {
         let device = &self.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("target check: colour"),
-        });
+        let label = Some("target check");
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label });
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("target check: colour"),
-                color_attachments: &[Some(load(color)), Some(load(self.terrain.gbuffer_view()))],
-                depth_stencil_attachment: None,
+                label,
+                color_attachments: colors,
+                depth_stencil_attachment: depth.map(|view| {
+                    wgpu::RenderPassDepthStencilAttachment {
+                        view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Load,
+                            store: wgpu::StoreOp::Store,
+                        }),
+                        stencil_ops: None,
+                    }
+                }),
                 timestamp_writes: None,
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&self.target_check.color);
+            pass.set_pipeline(pipeline);
         }
         drop(encoder.finish());
+        also();
         pollster::block_on(scope.pop())
     }
 }
