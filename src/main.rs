@@ -10,6 +10,7 @@ mod cli;
 
 use cli::bake::BakeArgs;
 use cli::bench::BenchCommand;
+use cli::check::CheckArgs;
 use cli::eval::EvalCommand;
 use cli::fly::FlyArgs;
 use cli::out::note;
@@ -74,6 +75,13 @@ enum Command {
     /// Bake a DEM (GeoTIFF, SRTM .hgt, or 16-bit PNG with a JSON sidecar) into a world folder.
     #[command(allow_negative_numbers = true)]
     Bake(BakeArgs),
+    /// Read every stored tile of a world as the renderer reads it, on disk or over HTTP: each
+    /// file decoded and checked against the manifest and against the stamp its bake wrote into
+    /// it (which tile, which bake). Lists the tiles that cannot be read and exits non-zero if
+    /// there is one.
+    ///
+    /// Ctrl-C (or SIGTERM) stops the check: it says how far it got and exits with status 130.
+    Check(CheckArgs),
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -88,6 +96,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench { what } => cli::bench::run(what),
         Command::Eval { what } => cli::eval::run(what),
         Command::Bake(args) => cli::bake::bake_world(args),
+        Command::Check(args) => cli::check::check(args),
     }
 }
 

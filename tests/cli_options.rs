@@ -51,6 +51,8 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
         &["--max-loads", "1..=64"],
     ),
     (&["soak", "--max-loads", "0"], &["--max-loads", "1..=64"]),
+    (&["check", "--threads", "0"], &["--threads", "1..=64"]),
+    (&["check", "--threads", "65"], &["--threads", "1..=64"]),
     // Retries whose doubling backoff ran for hours.
     (
         &["fly", "--http-retries", "30"],
@@ -228,6 +230,7 @@ fn every_numeric_option_states_its_range_in_its_help() {
             &["--tile-cells", "--levels", "--memory-mib"][..],
         ),
         (&["eval", "derive"][..], &["--factor"][..]),
+        (&["check"][..], &["--threads"][..]),
     ] {
         let mut args = sub.to_vec();
         args.push("--help");

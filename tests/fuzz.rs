@@ -71,6 +71,7 @@ fn tile_seeds() -> (TileCheck, [Vec<u8>; 3]) {
             height_range_m: [0.0, 100.0],
             grass_type_count: 3,
             materials: false,
+            bake_id: None,
         },
     };
     (

@@ -225,6 +225,42 @@ fn bake_is_deterministic_and_leaves_no_temporary_files() {
     assert!(files_a == files_b, "tile files differ between two bakes");
 }
 
+/// Every file a bake writes carries its own name and the bake's id (the manifest's
+/// `bake_id`), and the world reads back through those checks; a bake of other inputs (another
+/// seed) has another id.
+#[test]
+fn a_bake_stamps_every_tile_file_with_its_name_and_its_bake() {
+    use verdant::world::format::{read_stamp, stamp};
+    use verdant::world::{TileFile, World};
+    let dir = tempfile::tempdir().unwrap();
+    let world = World::open(&hills_world(dir.path())).unwrap();
+    let id = world
+        .manifest
+        .bake_id_value()
+        .expect("a baked world has a bake_id");
+    for tile in world.stored_tiles() {
+        for kind in TileFile::ALL {
+            let bytes = std::fs::read(world.tile_path(tile, kind)).unwrap();
+            assert_eq!(read_stamp(&bytes, kind), Some(stamp(tile, kind, id)));
+        }
+        world.load_tile(tile).unwrap();
+    }
+    let dem = dir.path().join("hills.png");
+    let other = BakeOptions {
+        dem,
+        out: dir.path().join("other"),
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        seed: 8,
+        ..Default::default()
+    };
+    bake(&other, &mut |_, _, _| {}).unwrap();
+    let other = World::open(&dir.path().join("other")).unwrap();
+    assert!(other.manifest.bake_id.is_some());
+    assert_ne!(other.manifest.bake_id, world.manifest.bake_id);
+}
+
 /// DEMs the paths were not designed for: a strip three cells wide, a patch of two by two, and
 /// lidar-fine cells (5 cm, where the search for the wind scenes' tall grass once grew with the
 /// inverse fourth power of the cell and took hours). Each bakes, and every key of every path

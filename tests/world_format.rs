@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use common::{Rng, Terrain};
 use verdant::world::{
     Manifest, Pyramid, ReadOptions, TileData, TileFile, TileId, World, WorldError, read_tile,
-    read_tile_with, tile_path, write_tile,
+    read_tile_with, tile_path, write_tile, write_tile_with,
 };
 
 fn repo_world() -> PathBuf {
@@ -761,6 +761,133 @@ fn files_store_north_first() {
     }
 }
 
+/// A stamped world's tile files are checked against their stamps: a file copied over
+/// another's (of another tile, or another map of the same tile) and a file of another bake are
+/// refused naming both; an unstamped file (edited by hand) and a world without a `bake_id` are
+/// read as they are.
+#[test]
+fn tile_files_are_checked_against_their_stamps() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = pyramid();
+    let ours = 0x0123_4567_89ab_cdef;
+    let theirs = 0xfedc_ba98_7654_3210;
+    let options = ReadOptions {
+        height_range_m: RANGE,
+        grass_type_count: 256,
+        materials: false,
+        bake_id: Some(ours),
+    };
+    let [a, b] = [TileId::new(1, 2, 1), TileId::new(1, 3, 1)];
+    for (k, id) in [a, b].into_iter().enumerate() {
+        let tile = random_tile(id, p.samples_per_side(), 20 + k as u64);
+        write_tile_with(dir.path(), &p, &tile, Some(ours)).unwrap();
+        assert_eq!(read_tile_with(dir.path(), &p, id, &options).unwrap(), tile);
+    }
+    let read = |options: &ReadOptions| read_tile_with(dir.path(), &p, a, options);
+    let put_back = || {
+        write_tile_with(
+            dir.path(),
+            &p,
+            &random_tile(a, p.samples_per_side(), 20),
+            Some(ours),
+        )
+        .unwrap()
+    };
+
+    // Another tile's height file copied over a's.
+    std::fs::copy(
+        tile_path(dir.path(), b, TileFile::Height),
+        tile_path(dir.path(), a, TileFile::Height),
+    )
+    .unwrap();
+    let err = read(&options).unwrap_err();
+    assert!(matches!(err, WorldError::TileStamp { .. }), "{err}");
+    assert_names(&err, "tiles/L1/2_1.height.exr");
+    let msg = err.to_string();
+    assert!(msg.contains("holds L1/3_1.height.exr"), "{msg}");
+    assert!(msg.contains("not L1/2_1.height.exr"), "{msg}");
+    // Without a bake_id nothing is checked: the copy reads as the other tile's heights.
+    let unchecked = ReadOptions {
+        bake_id: None,
+        ..options
+    };
+    assert!(read(&unchecked).is_ok());
+    put_back();
+
+    // The density map copied over the type map of the same tile.
+    std::fs::copy(
+        tile_path(dir.path(), a, TileFile::Density),
+        tile_path(dir.path(), a, TileFile::Type),
+    )
+    .unwrap();
+    let err = read(&options).unwrap_err();
+    assert!(matches!(err, WorldError::TileStamp { .. }), "{err}");
+    assert!(
+        err.to_string().contains("holds L1/2_1.density.png"),
+        "{err}"
+    );
+    put_back();
+
+    // A file of another bake of the same tile.
+    let other = tempfile::tempdir().unwrap();
+    write_tile_with(
+        other.path(),
+        &p,
+        &random_tile(a, p.samples_per_side(), 30),
+        Some(theirs),
+    )
+    .unwrap();
+    std::fs::copy(
+        tile_path(other.path(), a, TileFile::Density),
+        tile_path(dir.path(), a, TileFile::Density),
+    )
+    .unwrap();
+    let err = read(&options).unwrap_err();
+    assert!(matches!(err, WorldError::TileStamp { .. }), "{err}");
+    assert_names(&err, "tiles/L1/2_1.density.png");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("fedcba9876543210") && msg.contains("0123456789abcdef"),
+        "{msg}"
+    );
+    put_back();
+    assert!(read(&options).is_ok());
+
+    // A map written without a stamp (as an image editor may save it) is read as it is.
+    let mut edited = random_tile(a, p.samples_per_side(), 20);
+    edited.density.iter_mut().for_each(|d| *d = 255 - *d);
+    let unstamped = tempfile::tempdir().unwrap();
+    write_tile(unstamped.path(), &p, &edited).unwrap();
+    std::fs::copy(
+        tile_path(unstamped.path(), a, TileFile::Density),
+        tile_path(dir.path(), a, TileFile::Density),
+    )
+    .unwrap();
+    assert_eq!(read(&options).unwrap().density, edited.density);
+}
+
+/// A manifest's bake_id is 16 lowercase hexadecimal digits, as the baker writes it.
+#[test]
+fn a_bake_id_that_is_not_sixteen_hex_digits_is_refused() {
+    let with =
+        |id: &str| VALID.replacen("[pyramid]", &format!("bake_id = \"{id}\"\n\n[pyramid]"), 1);
+    let m = Manifest::parse(&with("0123456789abcdef"), toml_path()).unwrap();
+    assert_eq!(m.bake_id_value(), Some(0x0123_4567_89ab_cdef));
+    for bad in [
+        "0123456789ABCDEF",
+        "0123",
+        "0123456789abcdefa",
+        "0123456789abcdeg",
+        "",
+    ] {
+        let err = Manifest::parse(&with(bad), toml_path()).unwrap_err();
+        assert!(
+            matches!(err, WorldError::OutOfRange { ref field, .. } if field == "bake_id"),
+            "{bad:?}: {err}"
+        );
+    }
+}
+
 fn written_tile(dir: &Path) -> (Pyramid, TileId) {
     let p = pyramid();
     let id = TileId::new(1, 2, 1);
@@ -1006,6 +1133,7 @@ fn grass_types_beyond_the_manifest_are_refused() {
         height_range_m: RANGE,
         grass_type_count: 3,
         materials: false,
+        bake_id: None,
     };
     let err = read_tile_with(dir.path(), &p, id, &options).unwrap_err();
     assert!(
@@ -1104,6 +1232,7 @@ fn low_bit_depth_maps_read_as_their_values() {
             height_range_m: RANGE,
             grass_type_count: 4,
             materials: false,
+            bake_id: None,
         };
         let tile = read_tile_with(dir.path(), &p, id, &options)
             .unwrap_or_else(|e| panic!("{bits}-bit maps: {e}"));

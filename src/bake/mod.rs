@@ -370,6 +370,7 @@ pub fn bake(
         .name
         .clone()
         .unwrap_or_else(|| default_name(&out, &opts.dem));
+    let bake_id = shard::bake_id(opts, &files)?;
     let mut manifest = Manifest {
         name,
         description: description(dem, &opts.dem, cell),
@@ -411,6 +412,7 @@ pub fn bake(
         grass_peak: None,
         plant_types: Vec::new(),
         materials: false,
+        bake_id: Some(bake_id),
     };
     // Refuse absurd sizes before allocating anything, naming the options that made them: the
     // manifest is not written yet, so its fields would name nothing the user gave.
@@ -725,7 +727,7 @@ fn grass_peak(pyramid: &Pyramid, density: f32) -> crate::world::GrassPeak {
 
 /// Starts up to `threads` workers on `scope`, each running the closure `make` gives it: as many
 /// as the system lets start, at least one, or the error of the first that could not.
-fn spawn_workers<'scope, F>(
+pub(crate) fn spawn_workers<'scope, F>(
     scope: &'scope std::thread::Scope<'scope, '_>,
     threads: usize,
     mut make: impl FnMut() -> F,
@@ -736,7 +738,7 @@ where
     let mut started = 0;
     for k in 0..threads.max(1) {
         match std::thread::Builder::new()
-            .name(format!("bake-{k}"))
+            .name(format!("worker-{k}"))
             .spawn_scoped(scope, make())
         {
             Ok(_) => started += 1,

@@ -128,13 +128,49 @@ fn fnv(bytes: &[u8], mut h: u64) -> u64 {
 /// A fingerprint of what a bake makes: its options (but not where it writes or how it is run)
 /// and the size and modification time of every input file.
 pub fn fingerprint(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, WorldError> {
+    let text = inputs(opts, dem_files, true)?;
+    Ok(format!(
+        "{:016x}",
+        fnv(text.as_bytes(), 0xcbf2_9ce4_8422_2325)
+    ))
+}
+
+/// The id a bake stamps its tiles with (the manifest's `bake_id`, 16 hexadecimal digits): a
+/// fingerprint of what makes the tiles (the [`fingerprint`]'s inputs but the world's name, which
+/// is the manifest's alone) and of the crate's version. Every shard of a sharded bake and its
+/// finish agree on it without a word between them, and a bake of the same inputs by the same
+/// version writes the same tiles, byte for byte.
+pub fn bake_id(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, WorldError> {
+    let text = format!(
+        "{}version {}\n",
+        inputs(opts, dem_files, false)?,
+        env!("CARGO_PKG_VERSION")
+    );
+    Ok(format!(
+        "{:016x}",
+        fnv(text.as_bytes(), 0xcbf2_9ce4_8422_2325)
+    ))
+}
+
+/// What [`fingerprint`] and [`bake_id`] hash: the options that shape the world (its `name` only
+/// with `with_name`) and each input file's size and modification time.
+fn inputs(
+    opts: &BakeOptions,
+    dem_files: &[PathBuf],
+    with_name: bool,
+) -> Result<String, WorldError> {
+    let name = if with_name {
+        opts.name.as_deref()
+    } else {
+        None
+    };
     let mut text = format!(
         "dem {:?} more {:?} dem_cell {:?} name {:?} cell {:?} tile_cells {} levels {} seed {} \
          cover {:?} density {:?} mask {:?}\n",
         opts.dem,
         opts.more_dems,
         opts.dem_cell_size_m,
-        opts.name,
+        name,
         opts.cell_size_m,
         opts.tile_cells,
         opts.stored_levels,
@@ -166,10 +202,7 @@ pub fn fingerprint(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, 
             .map_or(0, |d| d.as_nanos());
         text.push_str(&format!("{} {} {modified}\n", p.display(), meta.len()));
     }
-    Ok(format!(
-        "{:016x}",
-        fnv(text.as_bytes(), 0xcbf2_9ce4_8422_2325)
-    ))
+    Ok(text)
 }
 
 /// The fingerprint record of a bake of `count` shards.

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 
 use crate::world::error::WorldError;
-use crate::world::format::{TileData, write_tile};
+use crate::world::format::{TileData, write_tile_with};
 use crate::world::manifest::Manifest;
 use crate::world::tile::{Pyramid, TileId};
 
@@ -82,6 +82,7 @@ pub(super) fn produce(
     let finest = pyramid.stored_levels - 1;
     let window = window_cells(pyramid, pyramid.tile_size_m(pyramid.max_level()));
     let split = split_shares(&p.manifest.grass_types, SHORT_GRASS_M);
+    let bake_id = p.manifest.bake_id_value();
     let write = |tile: TileData| -> Result<f32, WorldError> {
         cancelled()?;
         let peak = if tile.id.level == finest {
@@ -89,7 +90,7 @@ pub(super) fn produce(
         } else {
             0.0
         };
-        write_tile(p.out, pyramid, &tile)?;
+        write_tile_with(p.out, pyramid, &tile, bake_id)?;
         Ok(peak)
     };
     let next = AtomicUsize::new(0);

@@ -24,6 +24,13 @@ pub(crate) struct StreamArgs {
     /// Tile loads in flight at most, 1..=64.
     #[arg(long, default_value_t = 8, value_parser = RangedU64ValueParser::<usize>::new().range(1..=64))]
     pub(crate) max_loads: usize,
+    #[command(flatten)]
+    pub(crate) http: HttpArgs,
+}
+
+/// How a world over HTTP is fetched, shared by the commands that open worlds.
+#[derive(clap::Args, Clone)]
+pub(crate) struct HttpArgs {
     /// A world over HTTP: deadline of one request, whole seconds, 1..=3600.
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=3600))]
     pub(crate) http_timeout_s: u64,
@@ -40,8 +47,8 @@ pub(crate) struct StreamArgs {
     pub(crate) http_cache_mib: u64,
 }
 
-impl StreamArgs {
-    pub(crate) fn http(&self) -> verdant::stream::HttpOptions {
+impl HttpArgs {
+    pub(crate) fn options(&self) -> verdant::stream::HttpOptions {
         verdant::stream::HttpOptions {
             timeout: std::time::Duration::from_secs(self.http_timeout_s),
             retries: self.http_retries,
@@ -54,6 +61,12 @@ impl StreamArgs {
                 }),
             ..Default::default()
         }
+    }
+}
+
+impl StreamArgs {
+    pub(crate) fn http(&self) -> verdant::stream::HttpOptions {
+        self.http.options()
     }
 
     pub(crate) fn service(self) -> ServiceConfig {

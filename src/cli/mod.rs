@@ -4,6 +4,7 @@
 pub(crate) mod args;
 pub(crate) mod bake;
 pub(crate) mod bench;
+pub(crate) mod check;
 pub(crate) mod eval;
 pub(crate) mod fly;
 pub(crate) mod out;

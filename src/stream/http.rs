@@ -41,7 +41,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use crate::world::format::{
-    decode_density, decode_grass_types, decode_heights, decode_material, max_file_bytes,
+    check_stamp, decode_density, decode_grass_types, decode_heights, decode_material,
+    max_file_bytes,
 };
 use crate::world::manifest::MAX_MANIFEST_BYTES;
 use crate::world::{Manifest, ReadOptions, TileData, TileFile, TileId, World, WorldError};
@@ -661,12 +662,14 @@ impl TileSource for HttpSource {
             height_range_m: self.manifest.height_range_m,
             grass_type_count: self.manifest.grass_types.len(),
             materials: self.manifest.materials,
+            bake_id: self.manifest.bake_id_value(),
         };
         let get = |kind| -> Result<(Vec<u8>, String), WorldError> {
             let url = self.tile_url(id, kind);
             let bytes = self
                 .client
                 .fetch(&url, max_file_bytes(kind, size), Some(cancelled))?;
+            check_stamp(&bytes, id, kind, &options, Path::new(&url))?;
             Ok((bytes, url))
         };
         let (bytes, url) = get(TileFile::Height)?;

@@ -9,6 +9,7 @@ pub mod bench_aa;
 pub mod bench_blades;
 pub mod bench_features;
 pub mod bench_lod;
+pub mod check;
 pub mod eval_derive;
 pub mod eval_sway;
 pub mod fault_proxy;

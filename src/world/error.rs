@@ -417,6 +417,16 @@ pub enum WorldError {
         count: usize,
     },
 
+    /// A tile file's stamp names another tile file or another bake than the world's
+    /// (`crate::world::format::check_stamp`).
+    #[error("{}: {message}", path.display())]
+    TileStamp {
+        /// The file.
+        path: PathBuf,
+        /// What the stamp says, and what to do.
+        message: String,
+    },
+
     /// In-memory tile data does not fit the pyramid (a caller's mistake, caught before writing).
     #[error("{}: tile data does not fit the pyramid: {message}", path.display())]
     BadTileData {
@@ -791,6 +801,7 @@ impl WorldError {
             | PathDurationMismatch { path, .. }
             | DuplicatePath { path, .. }
             | TileNotStored { path, .. }
+            | TileStamp { path, .. }
             | CorruptImage { path, .. }
             | WrongDimensions { path, .. }
             | WrongLayout { path, .. }

@@ -17,6 +17,10 @@
 //! `bounds.min + ((i - border) * cell, (j - border) * cell)`, so neighbouring tiles share their
 //! edge and border samples, with identical values.
 //!
+//! The baker stamps each file with its own name and the bake's id ([`stamp`]), which readers
+//! check where the manifest has a `bake_id` ([`check_stamp`]): a file copied over another, or one
+//! of another bake, is refused rather than drawn.
+//!
 //! Files are written to a temporary name and renamed into place, so that an interrupted writer
 //! never leaves half a tile. Readers check everything and never panic on bad bytes.
 
@@ -53,6 +57,12 @@ pub enum TileFile {
 impl TileFile {
     /// The three every tile has, in the order height, type, density.
     pub const ALL: [TileFile; 3] = [TileFile::Height, TileFile::Type, TileFile::Density];
+
+    /// The file's name under a world's `tiles/` folder, as its stamp names it:
+    /// `L{level}/{x}_{y}.{kind}`.
+    pub fn name_in_tiles(self, id: TileId) -> String {
+        format!("L{}/{}_{}.{}", id.level, id.x, id.y, self.suffix())
+    }
 
     fn suffix(self) -> &'static str {
         match self {
@@ -187,10 +197,117 @@ pub struct ReadOptions {
     /// Whether the world's tiles have a material map (the manifest's `materials`), read and
     /// checked then.
     pub materials: bool,
+    /// The bake that wrote the world's tiles (the manifest's `bake_id`): each file's stamp is
+    /// checked against it and the file's own name ([`check_stamp`]). `None`: not checked.
+    pub bake_id: Option<u64>,
 }
 
-/// Writes the files of `tile` (the material map only where it has one), each through a temporary file renamed into place.
+/// The key of a tile file's stamp: the keyword of a PNG `tEXt` chunk, the name of a text
+/// attribute in an EXR header.
+pub const STAMP_KEY: &str = "verdant-tile";
+
+/// The stamp the baker writes into a tile file: the file's name under `tiles/`
+/// ([`TileFile::name_in_tiles`]) and the bake's id, 16 hexadecimal digits:
+/// `L2/3_4.type.png 0123456789abcdef`.
+pub fn stamp(id: TileId, kind: TileFile, bake_id: u64) -> String {
+    format!("{} {bake_id:016x}", kind.name_in_tiles(id))
+}
+
+/// The stamp a tile file's bytes carry, if they carry one and their header can be read (where
+/// it cannot, the decoder says what is wrong with the file).
+pub fn read_stamp(bytes: &[u8], kind: TileFile) -> Option<String> {
+    match kind {
+        TileFile::Height => guarded(|| {
+            let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
+                .map_err(|e| e.to_string())?;
+            let key = exr::meta::attribute::Text::new_or_none(STAMP_KEY);
+            Ok(meta.headers.first().and_then(|h| {
+                match key.as_ref().and_then(|k| h.own_attributes.other.get(k)) {
+                    Some(exr::meta::attribute::AttributeValue::Text(t)) => Some(t.to_string()),
+                    _ => None,
+                }
+            }))
+        })
+        .ok()
+        .flatten(),
+        TileFile::Type | TileFile::Density | TileFile::Material => guarded(|| {
+            let reader = png::Decoder::new(Cursor::new(bytes))
+                .read_info()
+                .map_err(|e| e.to_string())?;
+            Ok(reader
+                .info()
+                .uncompressed_latin1_text
+                .iter()
+                .find(|t| t.keyword == STAMP_KEY)
+                .map(|t| t.text.clone()))
+        })
+        .ok()
+        .flatten(),
+    }
+}
+
+/// Checks that a tile file's `bytes` are the file `kind` of tile `id` written by the bake
+/// `options.bake_id`, by the stamp the baker wrote into it ([`stamp`]): a file that names
+/// another tile (copied or renamed over this one) or another bake (left by an older world, as
+/// a copy, cache or mirror may hold it) is refused, naming both. A file without a stamp (one
+/// edited by hand, which an image editor may write without it) is taken as it is, and so is
+/// every file of a world without a `bake_id`. `path` names the file in errors.
+pub fn check_stamp(
+    bytes: &[u8],
+    id: TileId,
+    kind: TileFile,
+    options: &ReadOptions,
+    path: &Path,
+) -> Result<(), WorldError> {
+    let Some(bake_id) = options.bake_id else {
+        return Ok(());
+    };
+    let Some(found) = read_stamp(bytes, kind) else {
+        return Ok(());
+    };
+    let refuse = |message: String| {
+        Err(WorldError::TileStamp {
+            path: path.to_path_buf(),
+            message,
+        })
+    };
+    let name = kind.name_in_tiles(id);
+    let Some((found_name, found_bake)) = found.split_once(' ') else {
+        return refuse(format!(
+            "its {STAMP_KEY} stamp {found:?} is not \"{name} BAKE_ID\""
+        ));
+    };
+    if found_name != name {
+        return refuse(format!(
+            "holds {found_name} (its {STAMP_KEY} stamp), not {name}: a tile file copied or \
+             renamed over another; restore the file, or bake the world again"
+        ));
+    }
+    let want = format!("{bake_id:016x}");
+    if found_bake != want {
+        return refuse(format!(
+            "written by another bake (bake_id {found_bake:?}) than the world's world.toml \
+             (bake_id \"{want}\"): tiles of two bakes mixed, as a copy, cache or mirror of an \
+             older world may hold them; copy or bake the world again whole"
+        ));
+    }
+    Ok(())
+}
+
+/// Writes the files of `tile` (the material map only where it has one), each through a
+/// temporary file renamed into place, without stamps ([`write_tile_with`]).
 pub fn write_tile(world_dir: &Path, pyramid: &Pyramid, tile: &TileData) -> Result<(), WorldError> {
+    write_tile_with(world_dir, pyramid, tile, None)
+}
+
+/// [`write_tile`], each file stamped with its name and `bake_id` where one is given
+/// ([`stamp`]), as the baker writes them.
+pub fn write_tile_with(
+    world_dir: &Path,
+    pyramid: &Pyramid,
+    tile: &TileData,
+    bake_id: Option<u64>,
+) -> Result<(), WorldError> {
     let size = pyramid.samples_per_side();
     let n = size as usize * size as usize;
     let height_path = tile_path(world_dir, tile.id, TileFile::Height);
@@ -225,8 +342,13 @@ pub fn write_tile(world_dir: &Path, pyramid: &Pyramid, tile: &TileData) -> Resul
         )));
     }
 
-    let exr = encode_exr(&north_first(&tile.heights, size), size)
-        .map_err(|message| bad(format!("EXR encoding failed: {message}")))?;
+    let stamp_of = |kind| bake_id.map(|b| stamp(tile.id, kind, b));
+    let exr = encode_exr(
+        &north_first(&tile.heights, size),
+        size,
+        stamp_of(TileFile::Height).as_deref(),
+    )
+    .map_err(|message| bad(format!("EXR encoding failed: {message}")))?;
     write_atomic(&height_path, &exr)?;
     for (kind, data) in [
         (TileFile::Type, &tile.grass_type),
@@ -237,12 +359,12 @@ pub fn write_tile(world_dir: &Path, pyramid: &Pyramid, tile: &TileData) -> Resul
             continue;
         }
         let path = tile_path(world_dir, tile.id, kind);
-        let png = encode_png_l8(&north_first(data, size), size).map_err(|message| {
-            WorldError::BadTileData {
+        let png = encode_map(&north_first(data, size), size, stamp_of(kind).as_deref()).map_err(
+            |message| WorldError::BadTileData {
                 path: path.clone(),
                 message: format!("PNG encoding failed: {message}"),
-            }
-        })?;
+            },
+        )?;
         write_atomic(&path, &png)?;
     }
     Ok(())
@@ -260,6 +382,7 @@ pub fn read_tile(
         height_range_m,
         grass_type_count: 256,
         materials: false,
+        bake_id: None,
     };
     read_tile_with(world_dir, pyramid, id, &options)
 }
@@ -279,18 +402,20 @@ pub fn read_tile_with(
     }
     let size = pyramid.samples_per_side();
 
-    let path = tile_path(world_dir, id, TileFile::Height);
-    let bytes = read_regular(&path, max_file_bytes(TileFile::Height, size))?;
+    let read = |kind| -> Result<(Vec<u8>, PathBuf), WorldError> {
+        let path = tile_path(world_dir, id, kind);
+        let bytes = read_regular(&path, max_file_bytes(kind, size))?;
+        check_stamp(&bytes, id, kind, options, &path)?;
+        Ok((bytes, path))
+    };
+    let (bytes, path) = read(TileFile::Height)?;
     let heights = decode_heights(&bytes, size, options, &path)?;
-    let path = tile_path(world_dir, id, TileFile::Type);
-    let bytes = read_regular(&path, max_file_bytes(TileFile::Type, size))?;
+    let (bytes, path) = read(TileFile::Type)?;
     let grass_type = decode_grass_types(&bytes, size, options, &path)?;
-    let path = tile_path(world_dir, id, TileFile::Density);
-    let bytes = read_regular(&path, max_file_bytes(TileFile::Density, size))?;
+    let (bytes, path) = read(TileFile::Density)?;
     let density = decode_density(&bytes, size, &path)?;
     let material = if options.materials {
-        let path = tile_path(world_dir, id, TileFile::Material);
-        let bytes = read_regular(&path, max_file_bytes(TileFile::Material, size))?;
+        let (bytes, path) = read(TileFile::Material)?;
         decode_material(&bytes, size, &path)?
     } else {
         Vec::new()
@@ -524,12 +649,20 @@ fn guarded<T>(f: impl FnOnce() -> Result<T, String>) -> Result<T, String> {
     catch_unwind(AssertUnwindSafe(f)).unwrap_or_else(|_| Err("the decoder failed".into()))
 }
 
-fn encode_exr(rows_north_first: &[f32], size: u32) -> Result<Vec<u8>, String> {
+fn encode_exr(rows_north_first: &[f32], size: u32, stamp: Option<&str>) -> Result<Vec<u8>, String> {
     use exr::prelude::*;
     let channel = AnyChannel::new("Y", FlatSamples::F32(rows_north_first.to_vec()));
+    let mut attributes = LayerAttributes::named("height");
+    if let Some(stamp) = stamp {
+        let text = |s: &str| Text::new_or_none(s).ok_or_else(|| format!("{s:?} is not ASCII"));
+        attributes.other.insert(
+            text(STAMP_KEY)?,
+            exr::meta::attribute::AttributeValue::Text(text(stamp)?),
+        );
+    }
     let layer = Layer::new(
         (size as usize, size as usize),
-        LayerAttributes::named("height"),
+        attributes,
         Encoding {
             compression: Compression::ZIP16,
             blocks: Blocks::ScanLines,
@@ -622,27 +755,27 @@ fn decode_exr(bytes: &[u8], size: u32, path: &Path) -> Result<Vec<f32>, WorldErr
     }
 }
 
-pub(crate) fn encode_png_l8(rows: &[u8], size: u32) -> Result<Vec<u8>, String> {
-    encode_png(rows, size, size, image::ExtendedColorType::L8)
-}
-
-/// Encodes a grayscale PNG (`L8` from bytes, `L16` from native-endian u16 bytes).
-pub(crate) fn encode_png(
-    bytes: &[u8],
-    width: u32,
-    height: u32,
-    color: image::ExtendedColorType,
-) -> Result<Vec<u8>, String> {
-    use image::ImageEncoder;
-    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
-    let bytes_per_pixel = u64::from(color.bits_per_pixel()).div_ceil(8);
-    if u64::from(width) * u64::from(height) * bytes_per_pixel != bytes.len() as u64 {
+/// Encodes a tile's map: an 8-bit grayscale PNG of `size x size`, carrying `stamp` (in a
+/// `tEXt` chunk keyed [`STAMP_KEY`], before the image data) where one is given.
+fn encode_map(rows: &[u8], size: u32, stamp: Option<&str>) -> Result<Vec<u8>, String> {
+    if rows.len() as u64 != u64::from(size) * u64::from(size) {
         return Err("buffer size does not match the image size".into());
     }
     let mut out = Vec::new();
-    PngEncoder::new_with_quality(&mut out, CompressionType::Best, FilterType::Adaptive)
-        .write_image(bytes, width, height, color)
-        .map_err(|e| e.to_string())?;
+    let mut encoder = png::Encoder::new(&mut out, size, size);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(png::BitDepth::Eight);
+    // As the image crate's `CompressionType::Best` with adaptive filtering.
+    encoder.set_compression(png::Compression::High);
+    encoder.set_filter(png::Filter::Adaptive);
+    if let Some(stamp) = stamp {
+        encoder
+            .add_text_chunk(STAMP_KEY.to_owned(), stamp.to_owned())
+            .map_err(|e| e.to_string())?;
+    }
+    let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
+    writer.write_image_data(rows).map_err(|e| e.to_string())?;
+    writer.finish().map_err(|e| e.to_string())?;
     Ok(out)
 }
 

@@ -142,6 +142,13 @@ pub struct Manifest {
     /// (the default, and every world baked before materials) the ground follows the grass types.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub materials: bool,
+    /// Which bake wrote the tiles: 16 hexadecimal digits, written by the baker, which stamps
+    /// every tile file with its own name and this id (see [`super::format::check_stamp`]), so
+    /// that a tile file copied over another, or one left by another bake (a copy, cache or
+    /// mirror of an older world), is refused rather than drawn. Absent in worlds baked before
+    /// the stamps and in hand-made ones: their files are not checked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bake_id: Option<String>,
 }
 
 /// Most plant types a world has.
@@ -636,6 +643,14 @@ impl Manifest {
     pub fn to_toml(&self) -> String {
         // Every field is a plain string, number or array: serialisation cannot fail.
         toml::to_string(self).unwrap_or_default()
+    }
+
+    /// The [`Manifest::bake_id`] as a number (`None` where the world has none; a manifest that
+    /// passed [`Manifest::validate`] holds a valid one).
+    pub fn bake_id_value(&self) -> Option<u64> {
+        self.bake_id
+            .as_deref()
+            .and_then(|id| u64::from_str_radix(id, 16).ok())
     }
 
     /// The camera path called `name`.

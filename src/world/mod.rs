@@ -35,7 +35,8 @@ use std::path::{Path, PathBuf};
 pub use dem::{Dem, DemFormat, DemOptions};
 pub use error::WorldError;
 pub use format::{
-    ReadOptions, TileData, TileFile, read_tile, read_tile_with, tile_path, write_tile,
+    ReadOptions, TileData, TileFile, check_stamp, read_tile, read_tile_with, tile_path, write_tile,
+    write_tile_with,
 };
 pub use grass_density::GrassPeak;
 pub use manifest::{
@@ -128,6 +129,7 @@ impl World {
             height_range_m: self.manifest.height_range_m,
             grass_type_count: self.manifest.grass_types.len(),
             materials: self.manifest.materials,
+            bake_id: self.manifest.bake_id_value(),
         };
         read_tile_with(&self.dir, &self.manifest.pyramid, id, &options)
     }

@@ -37,6 +37,15 @@ impl Manifest {
             ));
         }
 
+        if let Some(id) = &self.bake_id
+            && (id.len() != 16 || !id.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f')))
+        {
+            return Err(v.out_of_range(
+                "bake_id",
+                format!("{id:?}"),
+                "16 lowercase hexadecimal digits, as the baker writes it",
+            ));
+        }
         for axis in 0..2 {
             v.positive(&format!("extent_m[{axis}]"), self.extent_m[axis])?;
         }
