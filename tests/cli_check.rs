@@ -130,3 +130,67 @@ fn check_of_a_world_without_stamps_says_so() {
     assert!(out.status.success(), "{stdout}{stderr}");
     assert!(stdout.contains("no stamps checked"), "{stdout}");
 }
+
+fn stamp(world: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["check", world.to_str().unwrap(), "--stamp"])
+        .output()
+        .expect("run verdant check --stamp")
+}
+
+/// `check --stamp` records a world's tiles as they are now (a map copied over another on
+/// purpose), keeping every line of world.toml but its bake_id; stamping again an unchanged world
+/// gives the same id; a tile that cannot be read stops it before anything is written; and a
+/// world over HTTP is refused.
+#[test]
+fn check_stamp_records_a_hand_edited_world_and_writes_nothing_when_a_tile_is_broken() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = small_world(dir.path(), "hills", 7);
+    let manifest = world.join("world.toml");
+    let baked = std::fs::read_to_string(&manifest).unwrap();
+    let [a, b] = [TileId::new(1, 0, 0), TileId::new(1, 1, 0)];
+    std::fs::copy(
+        tile_path(&world, b, TileFile::Density),
+        tile_path(&world, a, TileFile::Density),
+    )
+    .unwrap();
+    assert_eq!(check(world.to_str().unwrap()).status.code(), Some(1));
+
+    let out = stamp(&world);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    let stamped = std::fs::read_to_string(&manifest).unwrap();
+    let id_line = |t: &str| t.lines().find(|l| l.starts_with("bake_id")).map(str::to_owned);
+    let (old_id, new_id) = (id_line(&baked).unwrap(), id_line(&stamped).unwrap());
+    assert_ne!(old_id, new_id);
+    assert_eq!(stamped.replace(&new_id, &old_id), baked);
+    assert!(stdout.contains(&new_id["bake_id = ".len()..]), "{stdout}");
+    let out = check(world.to_str().unwrap());
+    assert!(out.status.success(), "{:?}", text(&out));
+    // The copy is what the world holds now: a's density is b's.
+    let w = verdant::World::open(&world).unwrap();
+    assert_eq!(w.load_tile(a).unwrap().density, w.load_tile(b).unwrap().density);
+
+    assert!(stamp(&world).status.success());
+    assert_eq!(std::fs::read_to_string(&manifest).unwrap(), stamped);
+
+    // A truncated file: nothing is written.
+    let path = tile_path(&world, b, TileFile::Height);
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    let before = common::read_all_files(&world);
+    let out = stamp(&world);
+    let (stdout, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+    assert!(stdout.starts_with("L1/1_0: "), "{stdout}");
+    assert!(stderr.contains("nothing stamped"), "{stderr}");
+    assert_eq!(common::read_all_files(&world), before);
+
+    let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["check", "http://127.0.0.1:9/", "--stamp"])
+        .output()
+        .unwrap();
+    let (_, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("--stamp writes the files of a world folder"), "{stderr}");
+}

@@ -2,7 +2,7 @@
 
 use anyhow::{Result, bail};
 
-use verdant::tools::check::{CheckOptions, MAX_CHECK_THREADS, check_world};
+use verdant::tools::check::{CheckOptions, MAX_CHECK_THREADS, check_world, stamp_world};
 
 use super::args::{HttpArgs, resolve_world};
 use super::out::{note, say};
@@ -18,6 +18,12 @@ pub(crate) struct CheckArgs {
     /// Tiles read at once, 1..=64 (several hide a server's latency).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=MAX_CHECK_THREADS as u64))]
     pub(crate) threads: u64,
+    /// Stamp every tile file as a bake does (a world folder written by hand or by other tools,
+    /// or whose maps were edited by hand): every tile is read first, and where one cannot be
+    /// nothing is written; then each file is written again with its stamp and world.toml gets
+    /// the new bake_id (its text otherwise kept).
+    #[arg(long)]
+    pub(crate) stamp: bool,
     #[command(flatten)]
     pub(crate) http: HttpArgs,
 }
@@ -27,6 +33,9 @@ const LISTED: usize = 50;
 
 pub(crate) fn check(args: CheckArgs) -> Result<()> {
     let location = resolve_world(&args.world)?;
+    if args.stamp {
+        return stamp(&args.world, &location);
+    }
     let (world, source) = verdant::tools::open_world(&location, &args.http.options())?;
     let cancel = super::stop_on_signals()?;
     let options = CheckOptions {
@@ -82,5 +91,53 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
         );
     }
     say!("{read}: every tile is whole ({stamps})")?;
+    Ok(())
+}
+
+/// `verdant check --stamp`.
+fn stamp(given: &str, dir: &std::path::Path) -> Result<()> {
+    if verdant::stream::http::is_url(given) {
+        bail!(
+            "--stamp writes the files of a world folder, not of {given}: stamp the folder it is served from"
+        );
+    }
+    let cancel = super::stop_on_signals()?;
+    let mut pb = None;
+    let report = stamp_world(dir, Some(&cancel), &mut |done, total| {
+        pb.get_or_insert_with(|| bar(total, "stamping"))
+            .set_position(done);
+    });
+    end_bar(pb.as_ref(), report.is_err());
+    let report = match report {
+        Err(verdant::world::WorldError::Cancelled { .. }) => {
+            return Err(Interrupted(format!(
+                "stamping {} stopped: the world reads as it is, unchecked (its world.toml has no \
+                 bake_id); stamp it again to finish",
+                super::shown(dir)
+            ))
+            .into());
+        }
+        other => other?,
+    };
+    for (id, why) in report.failed.iter().take(LISTED) {
+        say!("L{}/{}_{}: {}", id.level, id.x, id.y, terminal_safe(why))?;
+    }
+    if report.failed.len() > LISTED {
+        say!("and {} more tiles", report.failed.len() - LISTED)?;
+    }
+    let Some(id) = &report.bake_id else {
+        bail!(
+            "{} of {} tiles of {} cannot be read: nothing stamped",
+            report.failed.len(),
+            report.tiles,
+            super::shown(dir)
+        );
+    };
+    say!(
+        "stamped the {} tiles of {} with bake_id \"{id}\" in {:.1} s",
+        report.tiles,
+        super::shown(dir),
+        report.seconds
+    )?;
     Ok(())
 }
