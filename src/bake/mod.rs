@@ -265,6 +265,9 @@ pub struct BakeReport {
     /// that was killed while moving its world in (see [`bake`]). Also logged as warnings.
     #[serde(default)]
     pub recovered: Vec<String>,
+    /// The id the bake stamped its tiles with (the manifest's `bake_id`).
+    #[serde(default)]
+    pub bake_id: String,
 }
 
 /// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
@@ -595,6 +598,7 @@ pub fn bake(
         peak_memory_mib: peak_memory_mib(),
         carried: Carried::default(),
         recovered: recovered.clone(),
+        bake_id: manifest.bake_id.clone().unwrap_or_default(),
     };
     let paint_inputs = tiles::BlockPaint {
         height_range,

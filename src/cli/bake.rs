@@ -223,11 +223,12 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
             report.seconds
         )?,
         _ => say!(
-            "baked {} tiles in {} levels into {} in {:.1} s",
+            "baked {} tiles in {} levels into {} in {:.1} s (bake_id {})",
             report.tiles_written,
             report.levels,
             shown(&opts.out),
-            report.seconds
+            report.seconds,
+            report.bake_id
         )?,
     }
     say!(
