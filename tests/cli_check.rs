@@ -160,7 +160,11 @@ fn check_stamp_records_a_hand_edited_world_and_writes_nothing_when_a_tile_is_bro
     let (stdout, stderr) = text(&out);
     assert!(out.status.success(), "{stdout}{stderr}");
     let stamped = std::fs::read_to_string(&manifest).unwrap();
-    let id_line = |t: &str| t.lines().find(|l| l.starts_with("bake_id")).map(str::to_owned);
+    let id_line = |t: &str| {
+        t.lines()
+            .find(|l| l.starts_with("bake_id"))
+            .map(str::to_owned)
+    };
     let (old_id, new_id) = (id_line(&baked).unwrap(), id_line(&stamped).unwrap());
     assert_ne!(old_id, new_id);
     assert_eq!(stamped.replace(&new_id, &old_id), baked);
@@ -169,7 +173,10 @@ fn check_stamp_records_a_hand_edited_world_and_writes_nothing_when_a_tile_is_bro
     assert!(out.status.success(), "{:?}", text(&out));
     // The copy is what the world holds now: a's density is b's.
     let w = verdant::World::open(&world).unwrap();
-    assert_eq!(w.load_tile(a).unwrap().density, w.load_tile(b).unwrap().density);
+    assert_eq!(
+        w.load_tile(a).unwrap().density,
+        w.load_tile(b).unwrap().density
+    );
 
     assert!(stamp(&world).status.success());
     assert_eq!(std::fs::read_to_string(&manifest).unwrap(), stamped);
@@ -192,5 +199,85 @@ fn check_stamp_records_a_hand_edited_world_and_writes_nothing_when_a_tile_is_bro
         .unwrap();
     let (_, stderr) = text(&out);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains("--stamp writes the files of a world folder"), "{stderr}");
+    assert!(
+        stderr.contains("--stamp writes the files of a world folder"),
+        "{stderr}"
+    );
+}
+
+/// A server that answers `world.toml` with `manifest` and holds every other request open
+/// without an answer; its address.
+fn stalling_server(manifest: Vec<u8>) -> String {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    std::thread::spawn(move || {
+        for stream in listener.incoming() {
+            let Ok(mut stream) = stream else { continue };
+            let manifest = manifest.clone();
+            std::thread::spawn(move || {
+                let mut head = Vec::new();
+                let mut byte = [0u8; 1];
+                while !head.ends_with(b"\r\n\r\n") && stream.read(&mut byte).is_ok_and(|n| n == 1) {
+                    head.push(byte[0]);
+                }
+                let line = String::from_utf8_lossy(&head)
+                    .lines()
+                    .next()
+                    .unwrap_or("")
+                    .to_owned();
+                if line.contains("world.toml") {
+                    let _ = write!(
+                        stream,
+                        "HTTP/1.1 200 OK\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                        manifest.len()
+                    );
+                    let _ = stream.write_all(&manifest);
+                } else {
+                    std::thread::sleep(std::time::Duration::from_secs(120));
+                }
+            });
+        }
+    });
+    format!("http://{addr}/")
+}
+
+/// Ctrl-C stops a check at once, reads waiting on a server that does not answer included: it
+/// says how far it got and exits with status 130, the reads it cut short not listed as failures.
+#[test]
+fn ctrl_c_stops_a_check_waiting_on_a_silent_server_at_once() {
+    use std::io::BufRead;
+    let dir = tempfile::tempdir().unwrap();
+    let world = small_world(dir.path(), "hills", 7);
+    let url = stalling_server(std::fs::read(world.join("world.toml")).unwrap());
+    let mut child = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["check", &url, "--threads", "64", "--http-timeout-s", "100"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first progress line says the check has begun (its reads then wait on the server).
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut first = String::new();
+    stderr.read_line(&mut first).unwrap();
+    assert!(first.starts_with("checked 0/"), "{first}");
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let sent = std::time::Instant::now();
+    common::send_sigint(&child);
+    let out = child.wait_with_output().unwrap();
+    let waited = sent.elapsed();
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut stderr, &mut rest).unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(130), "{stdout}{rest}");
+    assert!(
+        waited.as_secs_f64() < 10.0,
+        "stopped {waited:?} after Ctrl-C"
+    );
+    assert!(
+        stdout.contains("of hills read") && stdout.contains("stopped"),
+        "{stdout}"
+    );
+    assert!(!stdout.lines().any(|l| l.starts_with('L')), "{stdout}");
+    assert!(!rest.contains("panicked"), "{rest}");
 }

@@ -259,6 +259,16 @@ fn a_bake_stamps_every_tile_file_with_its_name_and_its_bake() {
     let other = World::open(&dir.path().join("other")).unwrap();
     assert!(other.manifest.bake_id.is_some());
     assert_ne!(other.manifest.bake_id, world.manifest.bake_id);
+
+    // The same DEM with its sidecar's height scale doubled: other heights, another id.
+    common::write_sidecar(dir.path(), "hills", DEM_SIZE, DEM_CELLS, [0.0, 0.02]);
+    let scaled = small_bake(dir.path(), dir.path().join("hills.png"), "scaled");
+    let scaled = World::open(&scaled).unwrap();
+    assert_ne!(
+        scaled.manifest.height_range_m,
+        world.manifest.height_range_m
+    );
+    assert_ne!(scaled.manifest.bake_id, world.manifest.bake_id);
 }
 
 /// DEMs the paths were not designed for: a strip three cells wide, a patch of two by two, and

@@ -853,7 +853,8 @@ fn tile_files_are_checked_against_their_stamps() {
     put_back();
     assert!(read(&options).is_ok());
 
-    // A map written without a stamp (as an image editor may save it) is read as it is.
+    // A map written without a stamp (as an image editor may save it, or a server's optimiser
+    // strip it) is refused, saying how to record a change that was meant.
     let mut edited = random_tile(a, p.samples_per_side(), 20);
     edited.density.iter_mut().for_each(|d| *d = 255 - *d);
     let unstamped = tempfile::tempdir().unwrap();
@@ -863,7 +864,63 @@ fn tile_files_are_checked_against_their_stamps() {
         tile_path(dir.path(), a, TileFile::Density),
     )
     .unwrap();
-    assert_eq!(read(&options).unwrap().density, edited.density);
+    let err = read(&options).unwrap_err();
+    assert!(matches!(err, WorldError::TileStamp { .. }), "{err}");
+    let msg = err.to_string();
+    assert!(msg.contains("carries no verdant-tile stamp"), "{msg}");
+    assert!(msg.contains("verdant check WORLD --stamp"), "{msg}");
+    assert_eq!(read(&unchecked).unwrap().density, edited.density);
+    put_back();
+
+    // Stamps the baker does not write: each refused, the stamp's text escaped in the message.
+    let density_path = tile_path(dir.path(), a, TileFile::Density);
+    let size = p.samples_per_side();
+    for (stamps, says) in [
+        (
+            vec!["\u{1b}]0;title\u{7}\nL5/5_5: forged 0123456789abcdef".to_owned()],
+            "is not \"L1/2_1.density.png 0123456789abcdef\" nor any stamp",
+        ),
+        (
+            vec!["L1/2_1.density.png ".to_owned()],
+            "nor any stamp the baker writes",
+        ),
+        (
+            vec!["L1/2_1.density.png  0123456789abcdef".to_owned()],
+            "nor any stamp",
+        ),
+        (vec!["x".repeat(5000)], "..."),
+        (
+            vec!["L1/2_1.density.png 0123456789abcdef".to_owned(); 2],
+            "carries 2 verdant-tile stamps",
+        ),
+    ] {
+        std::fs::write(&density_path, png_with_texts(size, &stamps)).unwrap();
+        let err = read(&options).unwrap_err();
+        let msg = err.to_string();
+        assert!(matches!(err, WorldError::TileStamp { .. }), "{msg}");
+        assert!(msg.contains(says), "{stamps:?}: {msg}");
+        assert!(!msg.chars().any(|c| c.is_control()), "{msg:?}");
+        assert!(msg.len() < 600, "{} bytes", msg.len());
+    }
+}
+
+/// A grayscale PNG of `size` a side carrying `texts` as `verdant-tile` text chunks.
+fn png_with_texts(size: u32, texts: &[String]) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut encoder = png::Encoder::new(&mut out, size, size);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(png::BitDepth::Eight);
+    for t in texts {
+        encoder
+            .add_text_chunk("verdant-tile".to_owned(), t.clone())
+            .unwrap();
+    }
+    let mut writer = encoder.write_header().unwrap();
+    writer
+        .write_image_data(&vec![128; (size * size) as usize])
+        .unwrap();
+    writer.finish().unwrap();
+    out
 }
 
 /// A manifest's bake_id is 16 lowercase hexadecimal digits, as the baker writes it.

@@ -153,47 +153,79 @@ pub fn bake_id(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, Worl
 }
 
 /// What [`fingerprint`] and [`bake_id`] hash: the options that shape the world (its `name` only
-/// with `with_name`) and each input file's size and modification time.
+/// with `with_name`) and each input file's size and modification time: the DEM files, the files
+/// the user named (a VRT that lists DEMs, a folder's files), a PNG DEM's JSON sidecar (its
+/// heights' scale and cells), the land-cover map and table, the density map and the mask. For
+/// the [`bake_id`] (`with_name` false) each file is named by its canonical path, so that two
+/// spellings of one file (`./dem.png`, `/data/dem.png`) give one id.
 fn inputs(
     opts: &BakeOptions,
     dem_files: &[PathBuf],
     with_name: bool,
 ) -> Result<String, WorldError> {
-    let name = if with_name {
-        opts.name.as_deref()
+    let name = opts.name.as_deref();
+    let mut text = if with_name {
+        format!(
+            "dem {:?} more {:?} dem_cell {:?} name {:?} cell {:?} tile_cells {} levels {} seed {} \
+             cover {:?} density {:?} mask {:?}\n",
+            opts.dem,
+            opts.more_dems,
+            opts.dem_cell_size_m,
+            name,
+            opts.cell_size_m,
+            opts.tile_cells,
+            opts.stored_levels,
+            opts.seed,
+            opts.land_cover,
+            opts.density_map,
+            opts.mask
+        )
     } else {
-        None
+        // The files are named below, by their canonical paths, each with its role's place in
+        // the list; how the user spelled them does not matter.
+        format!(
+            "dem_cell {:?} cell {:?} tile_cells {} levels {} seed {} cover {} density {} mask {}\n",
+            opts.dem_cell_size_m,
+            opts.cell_size_m,
+            opts.tile_cells,
+            opts.stored_levels,
+            opts.seed,
+            opts.land_cover.is_some(),
+            opts.density_map.is_some(),
+            opts.mask.is_some()
+        )
     };
-    let mut text = format!(
-        "dem {:?} more {:?} dem_cell {:?} name {:?} cell {:?} tile_cells {} levels {} seed {} \
-         cover {:?} density {:?} mask {:?}\n",
-        opts.dem,
-        opts.more_dems,
-        opts.dem_cell_size_m,
-        name,
-        opts.cell_size_m,
-        opts.tile_cells,
-        opts.stored_levels,
-        opts.seed,
-        opts.land_cover,
-        opts.density_map,
-        opts.mask
-    );
-    let mut inputs: Vec<&Path> = dem_files.iter().map(PathBuf::as_path).collect();
-    if let Some((map, table)) = &opts.land_cover {
-        inputs.push(map);
-        if table.is_file() {
-            inputs.push(table);
+    let mut inputs: Vec<PathBuf> = dem_files.to_vec();
+    for named in std::iter::once(&opts.dem).chain(&opts.more_dems) {
+        if named.is_file() && !inputs.contains(named) {
+            inputs.push(named.clone());
         }
     }
-    inputs.extend(opts.density_map.as_deref());
-    inputs.extend(opts.mask.as_deref());
-    for p in inputs {
+    let sidecars: Vec<PathBuf> = inputs
+        .iter()
+        .filter_map(|p| crate::world::dem::sidecar_of(p))
+        .filter(|s| s.is_file())
+        .collect();
+    inputs.extend(sidecars);
+    if let Some((map, table)) = &opts.land_cover {
+        inputs.push(map.clone());
+        if table.is_file() {
+            inputs.push(table.clone());
+        }
+    }
+    inputs.extend(opts.density_map.clone());
+    inputs.extend(opts.mask.clone());
+    for p in &inputs {
         if crate::world::window::is_remote(p) {
             // An address: its name only (the server's file is not asked for here).
             text.push_str(&format!("{}\n", p.display()));
             continue;
         }
+        let p = match with_name {
+            true => p.clone(),
+            false => p.canonicalize().unwrap_or_else(|_| p.clone()),
+        };
+        let p = p.as_path();
         let meta = std::fs::metadata(p).map_err(|e| WorldError::io(p, e))?;
         let modified = meta
             .modified()

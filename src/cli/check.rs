@@ -46,7 +46,7 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
     let log_lines = lines();
     // The tenths of the way logged so far.
     let mut logged = None;
-    let report = check_world(&world, source.as_ref(), &options, &mut |done, total| {
+    let report = check_world(&world, source, &options, &mut |done, total| {
         if log_lines {
             // A line a tenth of the way, for a batch job's log.
             let tenth = (done * 10).checked_div(total).unwrap_or(10);

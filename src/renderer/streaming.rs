@@ -151,10 +151,15 @@ impl Renderer {
                     .into_iter()
                     .map(|tile| {
                         let reason = match self.service.blocked_by(tile) {
-                            Some((t, e)) if t == tile => format!("failed to load: {e}"),
+                            Some((t, e)) if t == tile => {
+                                format!("failed to load: {}", crate::world::printable(e))
+                            }
                             Some((t, e)) => format!(
-                                "derived from tile L{} {}_{}, which failed to load: {e}",
-                                t.level, t.x, t.y
+                                "derived from tile L{} {}_{}, which failed to load: {}",
+                                t.level,
+                                t.x,
+                                t.y,
+                                crate::world::printable(e)
                             ),
                             None => why_else.clone(),
                         };

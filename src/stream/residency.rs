@@ -252,7 +252,8 @@ impl TileService {
                 Loaded::Failed { id, error } => match self.failed.get_mut(&id) {
                     None => {
                         log::warn!(
-                            "tile {id:?} failed to load, drawing its ancestor instead: {error}"
+                            "tile {id:?} failed to load, drawing its ancestor instead: {}",
+                            crate::world::printable(&error)
                         );
                         self.failed.insert(
                             id,
@@ -270,9 +271,10 @@ impl TileService {
                         f.retrying = false;
                         f.retry_at = now + fault_retry_delay(first_s, max_s, f.attempts);
                         log::info!(
-                            "tile {id:?} failed again ({} times), next try in {:.0} s: {error}",
+                            "tile {id:?} failed again ({} times), next try in {:.0} s: {}",
                             f.attempts,
-                            (f.retry_at - now).as_secs_f64()
+                            (f.retry_at - now).as_secs_f64(),
+                            crate::world::printable(&error)
                         );
                         f.error = error;
                     }

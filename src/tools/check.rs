@@ -2,8 +2,8 @@
 //! its size, decoded, checked against the manifest and against its stamp), on disk or over
 //! HTTP, so that a world copied, mirrored or edited by hand can be checked before it is flown.
 
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use crate::bake::CancelFlag;
@@ -42,10 +42,13 @@ pub struct CheckReport {
 
 /// Reads every stored tile of `world` from `source` (its folder, or its server) on
 /// `options.threads` threads; `progress(done, total)` is called from the calling thread as tiles
-/// are read. Failures are collected, not returned: a check reports every bad tile.
+/// are read. Failures are collected, not returned: a check reports every bad tile. Once
+/// `options.cancel` is set no tile is asked for again and the check returns at once, marked
+/// interrupted: a read still waiting on its server ends on its own thread (an HTTP source sends
+/// no further request for it), its outcome not counted.
 pub fn check_world(
     world: &World,
-    source: &dyn TileSource,
+    source: Arc<dyn TileSource>,
     options: &CheckOptions,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<CheckReport, WorldError> {
@@ -57,62 +60,94 @@ pub fn check_world(
         ));
     }
     let start = Instant::now();
-    let tiles: Vec<TileId> = world.stored_tiles().collect();
-    let total = tiles.len() as u64;
-    let next = AtomicUsize::new(0);
-    let done = AtomicU64::new(0);
-    let failed = Mutex::new(Vec::new());
-    let stopped = || {
-        options
-            .cancel
-            .as_ref()
-            .is_some_and(CancelFlag::is_cancelled)
-    };
+    let cancel = options.cancel.clone().unwrap_or_default();
+    let shared = Arc::new(Shared {
+        tiles: world.stored_tiles().collect(),
+        next: AtomicUsize::new(0),
+        done: AtomicU64::new(0),
+        finished: AtomicUsize::new(0),
+        failed: Mutex::new(Vec::new()),
+        cancelled: cancel.shared(),
+    });
+    let total = shared.tiles.len() as u64;
     progress(0, total);
-    let finished = AtomicUsize::new(0);
-    std::thread::scope(|scope| -> Result<(), WorldError> {
-        let work = || {
-            loop {
-                if stopped() {
-                    break;
-                }
-                let k = next.fetch_add(1, Ordering::Relaxed);
-                let Some(&id) = tiles.get(k) else { break };
-                if let Err(e) = source.load(id) {
-                    failed
-                        .lock()
-                        .unwrap_or_else(|e| e.into_inner())
-                        .push((k, id, e.to_string()));
-                }
-                done.fetch_add(1, Ordering::Relaxed);
-            }
-            finished.fetch_add(1, Ordering::Release);
-        };
-        let started = crate::bake::spawn_workers(scope, options.threads, || work)?;
-        // The calling thread reports progress while the workers read.
-        let mut shown = u64::MAX;
-        while finished.load(Ordering::Acquire) < started {
-            let now = done.load(Ordering::Relaxed);
-            if now != shown {
-                progress(now, total);
-                shown = now;
-            }
-            std::thread::sleep(std::time::Duration::from_millis(50));
+    let mut started = 0;
+    for k in 0..options.threads {
+        let (shared, source) = (Arc::clone(&shared), Arc::clone(&source));
+        let worker = move || shared.work(source.as_ref());
+        match std::thread::Builder::new()
+            .name(format!("check-{k}"))
+            .spawn(worker)
+        {
+            Ok(_) => started += 1,
+            Err(_) if started > 0 => break,
+            Err(source) => return Err(WorldError::Threads { source }),
         }
-        Ok(())
-    })?;
-    let checked = done.load(Ordering::Relaxed);
+    }
+    // The calling thread reports progress while the workers read, and leaves them to their last
+    // reads once the check is cancelled.
+    let mut shown = u64::MAX;
+    while shared.finished.load(Ordering::Acquire) < started && !cancel.is_cancelled() {
+        let now = shared.done.load(Ordering::Relaxed);
+        if now != shown {
+            progress(now, total);
+            shown = now;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let interrupted = cancel.is_cancelled();
+    let checked = shared.done.load(Ordering::Relaxed);
     progress(checked, total);
-    let mut failed = failed.into_inner().unwrap_or_else(|e| e.into_inner());
+    let mut failed = shared
+        .failed
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .clone();
     failed.sort_by_key(|&(k, ..)| k);
     Ok(CheckReport {
         tiles: total,
         checked,
         failed: failed.into_iter().map(|(_, id, e)| (id, e)).collect(),
         stamped: world.manifest.bake_id.is_some(),
-        interrupted: checked < total,
+        interrupted: interrupted || checked < total,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// What [`check_world`]'s workers share.
+struct Shared {
+    tiles: Vec<TileId>,
+    /// The next tile to read.
+    next: AtomicUsize,
+    /// Tiles read.
+    done: AtomicU64,
+    /// Workers that have ended.
+    finished: AtomicUsize,
+    /// (index, tile, why) of each tile that could not be read.
+    failed: Mutex<Vec<(usize, TileId, String)>>,
+    cancelled: Arc<AtomicBool>,
+}
+
+impl Shared {
+    fn work(&self, source: &dyn TileSource) {
+        while !self.cancelled.load(Ordering::SeqCst) {
+            let k = self.next.fetch_add(1, Ordering::Relaxed);
+            let Some(&id) = self.tiles.get(k) else { break };
+            let result = source.load_cancellable(id, &self.cancelled);
+            if self.cancelled.load(Ordering::SeqCst) {
+                // A read cut short by the cancel: neither a failure nor a tile read.
+                break;
+            }
+            if let Err(e) = result {
+                self.failed
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .push((k, id, e.to_string()));
+            }
+            self.done.fetch_add(1, Ordering::Relaxed);
+        }
+        self.finished.fetch_add(1, Ordering::Release);
+    }
 }
 
 /// What [`stamp_world`] did.

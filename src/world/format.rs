@@ -213,23 +213,32 @@ pub fn stamp(id: TileId, kind: TileFile, bake_id: u64) -> String {
     format!("{} {bake_id:016x}", kind.name_in_tiles(id))
 }
 
-/// The stamp a tile file's bytes carry, if they carry one and their header can be read (where
-/// it cannot, the decoder says what is wrong with the file).
+/// The stamp a tile file's bytes carry: the first, if they carry any and their header can be
+/// read ([`read_stamps`]).
 pub fn read_stamp(bytes: &[u8], kind: TileFile) -> Option<String> {
+    read_stamps(bytes, kind).and_then(|s| s.into_iter().next())
+}
+
+/// Every stamp a tile file's bytes carry (a PNG's `tEXt` chunks keyed [`STAMP_KEY`] before its
+/// image data; an EXR header's text attribute of that name), or `None` where their header
+/// cannot be read (the decoder then says what is wrong with the file).
+pub fn read_stamps(bytes: &[u8], kind: TileFile) -> Option<Vec<String>> {
     match kind {
         TileFile::Height => guarded(|| {
             let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
                 .map_err(|e| e.to_string())?;
             let key = exr::meta::attribute::Text::new_or_none(STAMP_KEY);
-            Ok(meta.headers.first().and_then(|h| {
-                match key.as_ref().and_then(|k| h.own_attributes.other.get(k)) {
-                    Some(exr::meta::attribute::AttributeValue::Text(t)) => Some(t.to_string()),
-                    _ => None,
-                }
-            }))
+            let found = meta
+                .headers
+                .first()
+                .and_then(|h| key.as_ref().and_then(|k| h.own_attributes.other.get(k)));
+            Ok(match found {
+                Some(exr::meta::attribute::AttributeValue::Text(t)) => vec![t.to_string()],
+                // An attribute of the name but of another type stamps nothing.
+                _ => Vec::new(),
+            })
         })
-        .ok()
-        .flatten(),
+        .ok(),
         TileFile::Type | TileFile::Density | TileFile::Material => guarded(|| {
             let reader = png::Decoder::new(Cursor::new(bytes))
                 .read_info()
@@ -238,20 +247,45 @@ pub fn read_stamp(bytes: &[u8], kind: TileFile) -> Option<String> {
                 .info()
                 .uncompressed_latin1_text
                 .iter()
-                .find(|t| t.keyword == STAMP_KEY)
-                .map(|t| t.text.clone()))
+                .filter(|t| t.keyword == STAMP_KEY)
+                .map(|t| t.text.clone())
+                .collect())
         })
-        .ok()
-        .flatten(),
+        .ok(),
     }
+}
+
+/// The longest stamp the baker writes, and more: a level, two coordinates of up to ten digits,
+/// the longest suffix and the id.
+const MAX_STAMP_BYTES: usize = 80;
+
+/// A stamp as the baker writes it, split into the file's name and the id; `None` for anything
+/// else.
+fn parse_stamp(stamp: &str) -> Option<(&str, &str)> {
+    if stamp.len() > MAX_STAMP_BYTES {
+        return None;
+    }
+    let (name, id) = stamp.split_once(' ')?;
+    let name_ok = !name.is_empty() && name.bytes().all(|b| b.is_ascii_graphic());
+    let id_ok = id.len() == 16 && id.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'));
+    (name_ok && id_ok).then_some((name, id))
+}
+
+/// A stamp's text as a message quotes it: escaped (a stamp comes from a file, perhaps a
+/// server's, and must not drive the terminal that prints it) and cut short.
+fn quoted_stamp(stamp: &str) -> String {
+    let cut: String = stamp.chars().take(MAX_STAMP_BYTES).collect();
+    let more = if cut.len() < stamp.len() { "..." } else { "" };
+    format!("{cut:?}{more}")
 }
 
 /// Checks that a tile file's `bytes` are the file `kind` of tile `id` written by the bake
 /// `options.bake_id`, by the stamp the baker wrote into it ([`stamp`]): a file that names
 /// another tile (copied or renamed over this one) or another bake (left by an older world, as
-/// a copy, cache or mirror may hold it) is refused, naming both. A file without a stamp (one
-/// edited by hand, which an image editor may write without it) is taken as it is, and so is
-/// every file of a world without a `bake_id`. `path` names the file in errors.
+/// a copy, cache or mirror may hold it), a file without a stamp (edited by hand, or its
+/// metadata stripped by a tool or a server's image optimiser) and one with several are refused,
+/// naming the file and what was found. Every file of a world without a `bake_id` is taken as it
+/// is. `path` names the file in errors.
 pub fn check_stamp(
     bytes: &[u8],
     id: TileId,
@@ -262,7 +296,7 @@ pub fn check_stamp(
     let Some(bake_id) = options.bake_id else {
         return Ok(());
     };
-    let Some(found) = read_stamp(bytes, kind) else {
+    let Some(stamps) = read_stamps(bytes, kind) else {
         return Ok(());
     };
     let refuse = |message: String| {
@@ -271,10 +305,29 @@ pub fn check_stamp(
             message,
         })
     };
+    let want = format!("{bake_id:016x}");
     let name = kind.name_in_tiles(id);
-    let Some((found_name, found_bake)) = found.split_once(' ') else {
+    let found = match stamps.as_slice() {
+        [] => {
+            return refuse(format!(
+                "carries no {STAMP_KEY} stamp, though the world's world.toml names the bake \
+                 that wrote its tiles (bake_id \"{want}\"): a file edited by hand, or one whose \
+                 metadata a tool or server stripped; if the change was meant, `verdant check \
+                 WORLD --stamp` records the world as it is now"
+            ));
+        }
+        [one] => one,
+        many => {
+            return refuse(format!(
+                "carries {} {STAMP_KEY} stamps where the baker writes one",
+                many.len()
+            ));
+        }
+    };
+    let Some((found_name, found_bake)) = parse_stamp(found) else {
         return refuse(format!(
-            "its {STAMP_KEY} stamp {found:?} is not \"{name} BAKE_ID\""
+            "its {STAMP_KEY} stamp {} is not \"{name} {want}\" nor any stamp the baker writes",
+            quoted_stamp(found)
         ));
     };
     if found_name != name {
@@ -283,10 +336,9 @@ pub fn check_stamp(
              renamed over another; restore the file, or bake the world again"
         ));
     }
-    let want = format!("{bake_id:016x}");
     if found_bake != want {
         return refuse(format!(
-            "written by another bake (bake_id {found_bake:?}) than the world's world.toml \
+            "written by another bake (bake_id \"{found_bake}\") than the world's world.toml \
              (bake_id \"{want}\"): tiles of two bakes mixed, as a copy, cache or mirror of an \
              older world may hold them; copy or bake the world again whole"
         ));

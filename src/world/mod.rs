@@ -70,6 +70,22 @@ pub fn name_list<'a>(names: impl IntoIterator<Item = &'a str>) -> String {
     text
 }
 
+/// `text` as one line safe to print or log: every control character (line breaks and tabs
+/// among them) and every character that reorders the text around it written as its escape
+/// (`\u{1b}`), so that an error quoting what a file or a server said cannot drive the
+/// terminal, forge a line, or read as another text.
+pub fn printable(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_control() || manifest::forbidden_control(c) {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
 /// What a message says of the wind scenes a world has, given their [`name_list`]: the list, or,
 /// where it is empty, that the world has none and where a scene is declared.
 pub fn wind_scenes_held(available: &str) -> String {
@@ -176,6 +192,19 @@ fn interrupted_bake(dir: &Path) -> Option<PathBuf> {
 
 #[cfg(test)]
 mod tests {
+    /// Control characters, line breaks and bidirectional overrides come out as escapes; the
+    /// rest (names in any script) as it was.
+    #[test]
+    fn printable_text_is_one_line_that_cannot_drive_a_terminal() {
+        let text = "L2/0_0.type.png: \u{1b}]0;title\u{7}\r\nforged\tline \u{202e}abc wörld 山";
+        let out = super::printable(text);
+        assert_eq!(
+            out,
+            "L2/0_0.type.png: \\u{1b}]0;title\\u{7}\\r\\nforged\\tline \\u{202e}abc wörld 山"
+        );
+        assert!(!out.chars().any(|c| c.is_control()));
+    }
+
     #[test]
     fn a_name_list_shows_a_dozen_and_counts_the_rest() {
         assert_eq!(super::name_list(["tour", "meadow"]), "\"tour\", \"meadow\"");
