@@ -117,21 +117,13 @@ pub fn owner(pyramid: &Pyramid, count: u32, id: TileId) -> Option<u32> {
 }
 
 /// FNV-1a, 64 bits: a fingerprint that is the same in every build.
-fn fnv(bytes: &[u8], mut h: u64) -> u64 {
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
-}
-
 /// A fingerprint of what a bake makes: its options (but not where it writes or how it is run)
 /// and the size and modification time of every input file.
 pub fn fingerprint(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, WorldError> {
     let text = inputs(opts, dem_files, true)?;
     Ok(format!(
         "{:016x}",
-        fnv(text.as_bytes(), 0xcbf2_9ce4_8422_2325)
+        crate::hash::fnv1a64(crate::hash::FNV_BASIS, text.as_bytes())
     ))
 }
 
@@ -148,7 +140,7 @@ pub fn bake_id(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, Worl
     );
     Ok(format!(
         "{:016x}",
-        fnv(text.as_bytes(), 0xcbf2_9ce4_8422_2325)
+        crate::hash::fnv1a64(crate::hash::FNV_BASIS, text.as_bytes())
     ))
 }
 

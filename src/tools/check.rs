@@ -195,19 +195,23 @@ pub fn stamp_world(
     let total = 2 * tiles.len() as u64;
     progress(0, total);
     // The first pass reads every tile and fingerprints its samples.
-    let mut hash = Fnv::default();
+    let mut hash = crate::hash::FNV_BASIS;
     let mut failed = Vec::new();
     for (k, &id) in tiles.iter().enumerate() {
         stopped()?;
         match unchecked.load_tile(id) {
             Ok(tile) => {
-                hash.write(&[id.level]);
-                hash.write(&id.x.to_le_bytes());
-                hash.write(&id.y.to_le_bytes());
-                hash.write(bytemuck::cast_slice(&tile.heights));
-                hash.write(&tile.grass_type);
-                hash.write(&tile.density);
-                hash.write(&tile.material);
+                for bytes in [
+                    &[id.level][..],
+                    &id.x.to_le_bytes(),
+                    &id.y.to_le_bytes(),
+                    bytemuck::cast_slice(&tile.heights),
+                    &tile.grass_type,
+                    &tile.density,
+                    &tile.material,
+                ] {
+                    hash = crate::hash::fnv1a64(hash, bytes);
+                }
             }
             Err(e) => failed.push((id, e.to_string())),
         }
@@ -222,7 +226,7 @@ pub fn stamp_world(
     if !failed.is_empty() {
         return Ok(report(failed, None));
     }
-    let bake_id = format!("{:016x}", hash.0);
+    let bake_id = format!("{hash:016x}");
     let text =
         std::fs::read_to_string(&manifest_path).map_err(|e| WorldError::io(&manifest_path, e))?;
     let without = with_bake_id(&text, None, &manifest_path)?;
@@ -235,29 +239,11 @@ pub fn stamp_world(
     for (k, &id) in tiles.iter().enumerate() {
         stopped()?;
         let tile = unchecked.load_tile(id)?;
-        write_tile_with(dir, pyramid, &tile, Some(hash.0))?;
+        write_tile_with(dir, pyramid, &tile, Some(hash))?;
         progress((tiles.len() + k) as u64 + 1, total);
     }
     write_atomic(&manifest_path, with.as_bytes())?;
     Ok(report(Vec::new(), Some(bake_id)))
-}
-
-/// FNV-1a, 64 bits: the fingerprint of a world's samples.
-struct Fnv(u64);
-
-impl Default for Fnv {
-    fn default() -> Self {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-}
-
-impl Fnv {
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 ^= u64::from(b);
-            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    }
 }
 
 /// A manifest's `text` with its top-level `bake_id` line removed, and, with `id`, a new one

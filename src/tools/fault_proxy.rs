@@ -411,11 +411,8 @@ fn work(shared: &Shared, rx: &Mutex<Receiver<TcpStream>>) {
 pub fn choose(seed: u64, path: &str, nth: u64, rate: f64) -> Option<Fault> {
     // FNV-1a over the path and the count, from a basis keyed by the seed, then a SplitMix64
     // finish so that every bit depends on every input.
-    let mut h = 0xcbf2_9ce4_8422_2325 ^ splitmix64(seed);
-    for b in path.bytes().chain(nth.to_le_bytes()) {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
+    let h = crate::hash::FNV_BASIS ^ splitmix64(seed);
+    let h = crate::hash::fnv1a64(crate::hash::fnv1a64(h, path.as_bytes()), &nth.to_le_bytes());
     let h = splitmix64(h);
     let unit = (h >> 11) as f64 / (1u64 << 53) as f64;
     if unit >= rate {

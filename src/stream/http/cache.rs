@@ -40,15 +40,10 @@ impl Validator {
     }
 }
 
-/// FNV-1a, 64 bits: stable across runs and platforms; enough to name a URL's entry and to
-/// catch a damaged body (not an adversary).
+/// FNV-1a, 64 bits ([`crate::hash::fnv1a64`]): enough to name a URL's entry and to catch a
+/// damaged body (not an adversary).
 pub(super) fn fnv1a64(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
+    crate::hash::fnv1a64(crate::hash::FNV_BASIS, bytes)
 }
 
 /// The most bytes of a cache entry's metadata (a URL, a validator and a checksum).
