@@ -193,16 +193,75 @@ fn check_stamp_records_a_hand_edited_world_and_writes_nothing_when_a_tile_is_bro
     assert!(stderr.contains("nothing stamped"), "{stderr}");
     assert_eq!(common::read_all_files(&world), before);
 
-    let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
-        .args(["check", "http://127.0.0.1:9/", "--stamp"])
-        .output()
-        .unwrap();
-    let (_, stderr) = text(&out);
-    assert_eq!(out.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains("--stamp writes the files of a world folder"),
-        "{stderr}"
+    let refused = |args: &[&str], says: &str| {
+        let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        let (_, stderr) = text(&out);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(says), "{args:?}: {stderr}");
+    };
+    refused(
+        &["check", "http://127.0.0.1:9/", "--stamp"],
+        "--stamp writes the files of a world folder",
     );
+    // It writes only where it is pointed: not the default world, nor a name under ./worlds.
+    refused(&["check", "--stamp"], "name the world folder to stamp");
+    refused(
+        &["check", "santa-cruz", "--stamp"],
+        "is not looked up for a write",
+    );
+}
+
+/// `check --stamp` keeps each file's permissions, and refuses (writing nothing) a world whose
+/// world.toml or a tile file is a symbolic link: rewriting it would replace the link and leave
+/// its target, perhaps another world's, as it was.
+#[cfg(unix)]
+#[test]
+fn check_stamp_keeps_permissions_and_refuses_links() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let world = small_world(dir.path(), "hills", 7);
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o7777;
+    let set = |p: &Path, m: u32| {
+        std::fs::set_permissions(p, std::fs::Permissions::from_mode(m)).unwrap();
+    };
+    let manifest = world.join("world.toml");
+    let tile = tile_path(&world, TileId::new(1, 0, 0), TileFile::Type);
+    set(&manifest, 0o600);
+    set(&tile, 0o440);
+    let out = stamp(&world);
+    assert!(out.status.success(), "{:?}", text(&out));
+    assert_eq!((mode(&manifest), mode(&tile)), (0o600, 0o440));
+
+    let other = small_world(dir.path(), "other", 8);
+    for link in [
+        manifest.clone(),
+        tile_path(&world, TileId::new(0, 0, 0), TileFile::Height),
+    ] {
+        let before = common::read_all_files(&world);
+        let kept = link.with_extension("kept");
+        std::fs::rename(&link, &kept).unwrap();
+        std::os::unix::fs::symlink(other.join(link.strip_prefix(&world).unwrap()), &link).unwrap();
+        let out = stamp(&world);
+        let (stdout, stderr) = text(&out);
+        assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+        assert!(
+            stderr.contains("a symbolic link") && stderr.contains("nothing was written"),
+            "{stderr}"
+        );
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        std::fs::remove_file(&link).unwrap();
+        std::fs::rename(&kept, &link).unwrap();
+        assert_eq!(common::read_all_files(&world), before);
+    }
 }
 
 /// A server that answers `world.toml` with `manifest` and holds every other request open

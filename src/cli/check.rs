@@ -12,9 +12,9 @@ use super::{Interrupted, terminal_safe};
 /// The options of `verdant check`.
 #[derive(clap::Args)]
 pub(crate) struct CheckArgs {
-    /// World folder, the name of a world under ./worlds, or a world's http:// address.
-    #[arg(default_value = "santa-cruz")]
-    pub(crate) world: String,
+    /// World folder, the name of a world under ./worlds, or a world's http:// address
+    /// (default: santa-cruz); with --stamp, a world folder's path, given.
+    pub(crate) world: Option<String>,
     /// Tiles read at once, 1..=64 (several hide a server's latency).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=MAX_CHECK_THREADS as u64))]
     pub(crate) threads: u64,
@@ -32,10 +32,10 @@ pub(crate) struct CheckArgs {
 const LISTED: usize = 50;
 
 pub(crate) fn check(args: CheckArgs) -> Result<()> {
-    let location = resolve_world(&args.world)?;
     if args.stamp {
-        return stamp(&args.world, &location);
+        return stamp(args.world.as_deref());
     }
+    let location = resolve_world(args.world.as_deref().unwrap_or("santa-cruz"))?;
     let (world, source) = verdant::tools::open_world(&location, &args.http.options())?;
     let cancel = super::stop_on_signals()?;
     let options = CheckOptions {
@@ -60,8 +60,14 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
     })?;
     end_bar(pb.as_ref(), report.interrupted);
     let name = terminal_safe(&world.manifest.name);
-    for (id, why) in report.failed.iter().take(LISTED) {
-        say!("L{}/{}_{}: {}", id.level, id.x, id.y, terminal_safe(why))?;
+    for f in report.failed.iter().take(LISTED) {
+        say!(
+            "L{}/{}_{}: {}",
+            f.tile.level,
+            f.tile.x,
+            f.tile.y,
+            terminal_safe(&f.error)
+        )?;
     }
     if report.failed.len() > LISTED {
         say!("and {} more tiles", report.failed.len() - LISTED)?;
@@ -95,15 +101,38 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
 }
 
 /// `verdant check --stamp`.
-fn stamp(given: &str, dir: &std::path::Path) -> Result<()> {
+fn stamp(given: Option<&str>) -> Result<()> {
+    // It writes: only where the user points, never a world found by name (the source tree's own).
+    let Some(given) = given else {
+        bail!("--stamp rewrites a world's files: name the world folder to stamp, by its path");
+    };
     if verdant::stream::http::is_url(given) {
         bail!(
-            "--stamp writes the files of a world folder, not of {given}: stamp the folder it is served from"
+            "--stamp writes the files of a world folder, not of {}: stamp the folder it is \
+             served from",
+            terminal_safe(given)
+        );
+    }
+    let dir = std::path::Path::new(given);
+    if !dir.join("world.toml").is_file() {
+        bail!(
+            "{}: no world.toml there; --stamp takes a world folder's path (a name under \
+             ./worlds is not looked up for a write)",
+            super::shown(dir)
         );
     }
     let cancel = super::stop_on_signals()?;
     let mut pb = None;
+    let log_lines = lines();
+    let mut logged = None;
     let report = stamp_world(dir, Some(&cancel), &mut |done, total| {
+        if log_lines {
+            let tenth = (done * 10).checked_div(total).unwrap_or(10);
+            if logged.is_none_or(|t| tenth > t) {
+                logged = Some(tenth);
+                note!("stamping: {done}/{total} tile reads and writes");
+            }
+        }
         pb.get_or_insert_with(|| bar(total, "stamping"))
             .set_position(done);
     });
@@ -111,16 +140,32 @@ fn stamp(given: &str, dir: &std::path::Path) -> Result<()> {
     let report = match report {
         Err(verdant::world::WorldError::Cancelled { .. }) => {
             return Err(Interrupted(format!(
-                "stamping {} stopped: the world reads as it is, unchecked (its world.toml has no \
-                 bake_id); stamp it again to finish",
+                "stamping {} stopped before anything was written: the world is as it was",
+                super::shown(dir)
+            ))
+            .into());
+        }
+        Err(e @ verdant::world::WorldError::StampIncomplete { .. })
+            if matches!(&e, verdant::world::WorldError::StampIncomplete { source, .. }
+                if matches!(**source, verdant::world::WorldError::Cancelled { .. })) =>
+        {
+            return Err(Interrupted(format!(
+                "stamping {} stopped half way: the world reads as it is, unchecked (its \
+                 world.toml has no bake_id), and stamping it again finishes the work",
                 super::shown(dir)
             ))
             .into());
         }
         other => other?,
     };
-    for (id, why) in report.failed.iter().take(LISTED) {
-        say!("L{}/{}_{}: {}", id.level, id.x, id.y, terminal_safe(why))?;
+    for f in report.failed.iter().take(LISTED) {
+        say!(
+            "L{}/{}_{}: {}",
+            f.tile.level,
+            f.tile.x,
+            f.tile.y,
+            terminal_safe(&f.error)
+        )?;
     }
     if report.failed.len() > LISTED {
         say!("and {} more tiles", report.failed.len() - LISTED)?;

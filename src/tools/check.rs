@@ -22,6 +22,15 @@ pub struct CheckOptions {
     pub cancel: Option<CancelFlag>,
 }
 
+/// A tile that cannot be read, and why.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FailedTile {
+    /// The tile.
+    pub tile: TileId,
+    /// Why, as a message naming the file.
+    pub error: String,
+}
+
 /// What a check found.
 #[derive(Debug, serde::Serialize)]
 pub struct CheckReport {
@@ -30,7 +39,7 @@ pub struct CheckReport {
     /// Tiles read (all of them unless the check was stopped).
     pub checked: u64,
     /// Each tile that cannot be read, with why, coarsest level first.
-    pub failed: Vec<(TileId, String)>,
+    pub failed: Vec<FailedTile>,
     /// Whether the world's tile files carry stamps that were checked (its manifest has a
     /// `bake_id`).
     pub stamped: bool,
@@ -107,7 +116,10 @@ pub fn check_world(
     Ok(CheckReport {
         tiles: total,
         checked,
-        failed: failed.into_iter().map(|(_, id, e)| (id, e)).collect(),
+        failed: failed
+            .into_iter()
+            .map(|(_, tile, error)| FailedTile { tile, error })
+            .collect(),
         stamped: world.manifest.bake_id.is_some(),
         interrupted: interrupted || checked < total,
         seconds: start.elapsed().as_secs_f64(),
@@ -157,7 +169,7 @@ pub struct StampReport {
     pub tiles: u64,
     /// Each tile that cannot be read (its files' stamps aside), with why: where there is one,
     /// nothing was written.
-    pub failed: Vec<(TileId, String)>,
+    pub failed: Vec<FailedTile>,
     /// The id the files were stamped with (the manifest's new `bake_id`); `None` where nothing
     /// was written.
     pub bake_id: Option<String>,
@@ -166,20 +178,27 @@ pub struct StampReport {
 }
 
 /// Stamps every tile file of the world in `dir` as a bake would ([`crate::world::format::stamp`]),
-/// for a world written by hand or by other tools, or one whose maps were edited by hand: every
-/// tile is read first (checked as the renderer checks it, but for the stamps it carries now), and
-/// where one cannot be read nothing is written. The id is a fingerprint of the tiles' samples, so
-/// stamping a world again that has not changed gives the same id. The manifest loses its
-/// `bake_id` first and gets the new one last, each rewrite atomic: a stamping stopped half way
-/// (Ctrl-C through `cancel`, a full disk) leaves a world that reads, unchecked, and stamping it
-/// again finishes the work. The manifest's text is kept as it is (comments and all) but for the
-/// one `bake_id` line. `progress(done, total)` counts tiles over both passes.
+/// for a world written by hand or by other tools, or one whose maps were edited by hand.
+///
+/// Nothing is written unless every tile reads (checked as the renderer checks it, but for the
+/// stamps it carries now: those that cannot are listed in the report), no file to be rewritten is
+/// a symbolic link (rewriting it would replace the link, its target, perhaps another world's,
+/// left as it was) and every folder to be written to takes a file. The id is a fingerprint of the
+/// tiles' samples, so stamping a world again that has not changed gives the same id and files.
+/// The manifest then loses its `bake_id`, every file is written again stamped, keeping its
+/// permissions, and the manifest gets the new id last, each rewrite atomic: a stamping stopped
+/// half way (Ctrl-C through `cancel`, a full disk) leaves a world that reads, unchecked, and is
+/// a [`WorldError::StampIncomplete`]; stamping it again finishes the work. The manifest's text is
+/// kept as it is (comments and all) but for its `bake_id` ([`with_bake_id`]). A stop before
+/// anything was written is a [`WorldError::Cancelled`]. `progress(done, total)` counts tiles
+/// over both passes.
 pub fn stamp_world(
     dir: &std::path::Path,
     cancel: Option<&CancelFlag>,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<StampReport, WorldError> {
     use crate::world::format::{write_atomic, write_tile_with};
+    use crate::world::{TileFile, tile_path};
     let start = Instant::now();
     let world = World::open(dir)?;
     let manifest_path = dir.join("world.toml");
@@ -191,14 +210,43 @@ pub fn stamp_world(
     };
     let mut unchecked = world.clone();
     unchecked.manifest.bake_id = None;
+    let kinds: Vec<TileFile> = TileFile::ALL
+        .into_iter()
+        .chain(world.manifest.materials.then_some(TileFile::Material))
+        .collect();
     let tiles: Vec<TileId> = world.stored_tiles().collect();
     let total = 2 * tiles.len() as u64;
+    let refuse = |path: &std::path::Path, why: String| WorldError::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(format!(
+            "{why}; --stamp rewrites every tile file and world.toml in place: nothing was written"
+        )),
+    };
+    let is_link = |path: &std::path::Path| {
+        std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink())
+    };
+    if is_link(&manifest_path) {
+        return Err(refuse(
+            &manifest_path,
+            "a symbolic link: stamp the world it leads to, or copy the file in".into(),
+        ));
+    }
     progress(0, total);
     // The first pass reads every tile and fingerprints its samples.
     let mut hash = crate::hash::FNV_BASIS;
     let mut failed = Vec::new();
     for (k, &id) in tiles.iter().enumerate() {
         stopped()?;
+        if let Some(link) = kinds
+            .iter()
+            .map(|&kind| tile_path(dir, id, kind))
+            .find(|p| is_link(p))
+        {
+            return Err(refuse(
+                &link,
+                "a symbolic link: copy the file in, or stamp the world it belongs to".into(),
+            ));
+        }
         match unchecked.load_tile(id) {
             Ok(tile) => {
                 for bytes in [
@@ -213,7 +261,10 @@ pub fn stamp_world(
                     hash = crate::hash::fnv1a64(hash, bytes);
                 }
             }
-            Err(e) => failed.push((id, e.to_string())),
+            Err(e) => failed.push(FailedTile {
+                tile: id,
+                error: e.to_string(),
+            }),
         }
         progress(k as u64 + 1, total);
     }
@@ -226,84 +277,111 @@ pub fn stamp_world(
     if !failed.is_empty() {
         return Ok(report(failed, None));
     }
+    // Every folder written to takes a file (a read-only one would stop the work half way).
+    let folders = std::iter::once(dir.to_path_buf()).chain(
+        (0..world.manifest.pyramid.stored_levels)
+            .map(|level| dir.join("tiles").join(format!("L{level}"))),
+    );
+    for folder in folders {
+        let probe = folder.join(format!(".verdant-stamp-probe.{}", std::process::id()));
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&probe)
+        {
+            Ok(_) => {
+                let _ = std::fs::remove_file(&probe);
+            }
+            Err(e) => return Err(refuse(&folder, format!("cannot write a file here ({e})"))),
+        }
+    }
     let bake_id = format!("{hash:016x}");
     let text =
         std::fs::read_to_string(&manifest_path).map_err(|e| WorldError::io(&manifest_path, e))?;
     let without = with_bake_id(&text, None, &manifest_path)?;
     let with = with_bake_id(&text, Some(&bake_id), &manifest_path)?;
-    if without != text {
-        write_atomic(&manifest_path, without.as_bytes())?;
-    }
-    // The second pass writes every file again, stamped.
+    let manifest_mode = std::fs::metadata(&manifest_path)
+        .map(|m| m.permissions())
+        .map_err(|e| WorldError::io(&manifest_path, e))?;
+    // A file written again keeps the permissions it had.
+    let rewrite_manifest = |text: &str| -> Result<(), WorldError> {
+        write_atomic(&manifest_path, text.as_bytes())?;
+        std::fs::set_permissions(&manifest_path, manifest_mode.clone())
+            .map_err(|e| WorldError::io(&manifest_path, e))
+    };
     let pyramid = &world.manifest.pyramid;
-    for (k, &id) in tiles.iter().enumerate() {
-        stopped()?;
-        let tile = unchecked.load_tile(id)?;
-        write_tile_with(dir, pyramid, &tile, Some(hash))?;
-        progress((tiles.len() + k) as u64 + 1, total);
-    }
-    write_atomic(&manifest_path, with.as_bytes())?;
+    let mut write_pass = || -> Result<(), WorldError> {
+        if without != text {
+            rewrite_manifest(&without)?;
+        }
+        // The second pass writes every file again, stamped.
+        for (k, &id) in tiles.iter().enumerate() {
+            stopped()?;
+            let modes = kinds
+                .iter()
+                .map(|&kind| {
+                    let path = tile_path(dir, id, kind);
+                    std::fs::metadata(&path)
+                        .map(|m| (path.clone(), m.permissions()))
+                        .map_err(|e| WorldError::io(&path, e))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            let tile = unchecked.load_tile(id)?;
+            write_tile_with(dir, pyramid, &tile, Some(hash))?;
+            for (path, mode) in modes {
+                std::fs::set_permissions(&path, mode).map_err(|e| WorldError::io(&path, e))?;
+            }
+            progress((tiles.len() + k) as u64 + 1, total);
+        }
+        rewrite_manifest(&with)
+    };
+    write_pass().map_err(|source| WorldError::StampIncomplete {
+        path: dir.to_path_buf(),
+        source: Box::new(source),
+    })?;
     Ok(report(Vec::new(), Some(bake_id)))
 }
 
-/// A manifest's `text` with its top-level `bake_id` line removed, and, with `id`, a new one
-/// before its first table; everything else as it was. The result is parsed again and refused
-/// (naming `path`) unless it says what was meant.
+/// A manifest's `text` with its top-level `bake_id` set to `id`, or removed; everything else
+/// (comments, layout, line endings) as it was, as `toml_edit` keeps a document. The result is
+/// parsed again and refused (naming `path`) unless it says what was meant.
 pub fn with_bake_id(
     text: &str,
     id: Option<&str>,
     path: &std::path::Path,
 ) -> Result<String, WorldError> {
-    let is_table = |line: &str| line.trim_start().starts_with('[');
-    let lines: Vec<&str> = text.split_inclusive('\n').collect();
-    let first_table = lines
-        .iter()
-        .position(|l| is_table(l))
-        .unwrap_or(lines.len());
-    let is_bake_id = |line: &str| {
-        line.trim_start()
-            .strip_prefix("bake_id")
-            .is_some_and(|rest| rest.trim_start().starts_with('='))
+    let syntax = |message: String| WorldError::ManifestSyntax {
+        path: path.to_path_buf(),
+        message,
     };
-    // The new line goes before the comments over the first table (they are the table's).
-    let mut at = first_table;
-    while at > 0 && lines[at - 1].trim_start().starts_with('#') {
-        at -= 1;
+    let mut doc: toml_edit::DocumentMut = text.parse().map_err(|e| syntax(format!("{e}")))?;
+    match (id, doc.get_mut("bake_id")) {
+        // Rewritten in place, its spacing and comment kept.
+        (Some(id), Some(toml_edit::Item::Value(old))) => {
+            let decor = old.decor().clone();
+            *old = toml_edit::Value::from(id);
+            *old.decor_mut() = decor;
+        }
+        // New: after the manifest's last top-level key, where the baker writes it.
+        (Some(id), _) => {
+            doc.insert("bake_id", toml_edit::value(id));
+        }
+        (None, _) => {
+            doc.remove("bake_id");
+        }
     }
-    let mut out = String::with_capacity(text.len() + 32);
-    let mut put = false;
-    let mut skip_blank = false;
-    for (k, line) in lines.iter().enumerate() {
-        if k < first_table && is_bake_id(line) {
-            // The blank line this function puts after it goes with it.
-            skip_blank = true;
-            continue;
-        }
-        if std::mem::take(&mut skip_blank) && line.trim().is_empty() {
-            continue;
-        }
-        if k == at
-            && let Some(id) = id
-        {
-            out.push_str(&format!("bake_id = \"{id}\"\n\n"));
-            put = true;
-        }
-        out.push_str(line);
-    }
-    if let (Some(id), false) = (id, put) {
-        if !out.is_empty() && !out.ends_with('\n') {
-            out.push('\n');
-        }
-        out.push_str(&format!("bake_id = \"{id}\"\n"));
+    let mut out = doc.to_string();
+    // A file of CRLF lines stays one: the lines the document writes anew end in LF.
+    if text.contains("\r\n") && !text.replace("\r\n", "").contains('\n') {
+        out = out.replace("\r\n", "\n").replace('\n', "\r\n");
     }
     let parsed = crate::world::Manifest::parse(&out, path)?;
     if parsed.bake_id.as_deref() != id {
-        return Err(WorldError::ManifestSyntax {
-            path: path.to_path_buf(),
-            message: "its bake_id line could not be rewritten: a top-level `bake_id = \"...\"` \
-                      line is expected before the first table"
+        return Err(syntax(
+            "its top-level bake_id could not be rewritten (a manifest is expected to hold it as \
+             a key of its own, before its first table)"
                 .into(),
-        });
+        ));
     }
     Ok(out)
 }
@@ -315,34 +393,50 @@ mod tests {
 
     const MANIFEST: &str = "# A world.\nname = \"w\"\nextent_m = [100.0, 100.0]\nheight_range_m = [0.0, 1.0]\n\n# The pyramid.\n[pyramid]\nroot_tile_size_m = 64.0\nroot_tiles = [2, 2]\ntile_cells = 16\nborder = 2\nstored_levels = 1\nderived_levels = 0\n\n[[grass_types]]\nname = \"bare\"\nground_color = [0.3, 0.3, 0.3]\nbase_color = [0.3, 0.3, 0.3]\ntip_color = [0.3, 0.3, 0.3]\nheight_m = [0.0, 0.0]\nwidth_m = [0.0, 0.0]\nstiffness = 1.0\n";
 
-    /// The bake_id line goes in before the first table, replaces one that is there, and comes
-    /// out again; every other line (comments included) stays as it was.
+    /// The bake_id goes in after the last top-level key (where the baker writes it), is
+    /// rewritten in place, and comes out again; every other line (comments included) stays as
+    /// it was, in a manifest of CRLF lines too, and so does a bake_id's look-alike in a
+    /// multi-line string.
     #[test]
-    fn a_manifests_bake_id_line_is_put_in_replaced_and_taken_out_alone() {
+    fn a_manifests_bake_id_is_put_in_replaced_and_taken_out_alone() {
         let path = Path::new("w/world.toml");
         let with = with_bake_id(MANIFEST, Some("0123456789abcdef"), path).unwrap();
         assert_eq!(
             with,
             MANIFEST.replace(
-                "# The pyramid.\n[pyramid]",
-                "bake_id = \"0123456789abcdef\"\n\n# The pyramid.\n[pyramid]"
+                "height_range_m = [0.0, 1.0]\n",
+                "height_range_m = [0.0, 1.0]\nbake_id = \"0123456789abcdef\"\n"
             )
         );
         let again = with_bake_id(&with, Some("fedcba9876543210"), path).unwrap();
         assert_eq!(again, with.replace("0123456789abcdef", "fedcba9876543210"));
-        let without = with_bake_id(&again, None, path).unwrap();
-        assert_eq!(without, MANIFEST);
-        // A manifest the baker wrote: the line where it put it, replaced in place.
-        let baked = MANIFEST.replace(
-            "\n# The pyramid.",
-            "bake_id = \"0123456789abcdef\"\n\n# The pyramid.",
+        assert_eq!(with_bake_id(&again, None, path).unwrap(), MANIFEST);
+        // Where a hand put it, with its comment, quoted: rewritten in place.
+        let placed = MANIFEST.replace(
+            "name = \"w\"\n",
+            "name = \"w\"\n\"bake_id\" = \"0123456789abcdef\" # stamped\n",
         );
-        let restamped = with_bake_id(&baked, Some("fedcba9876543210"), path).unwrap();
+        let restamped = with_bake_id(&placed, Some("fedcba9876543210"), path).unwrap();
         assert_eq!(
             restamped,
-            baked.replace("0123456789abcdef", "fedcba9876543210")
+            placed.replace("0123456789abcdef", "fedcba9876543210")
         );
-        // A bake_id inside a table is the table's (and refused by the manifest), not replaced.
+        // A multi-line description holding a line like it is text, kept.
+        let described = MANIFEST.replace(
+            "name = \"w\"\n",
+            "name = \"w\"\ndescription = \"\"\"\nbake_id = \"0000000000000000\"\n[x]\n\"\"\"\n",
+        );
+        let out = with_bake_id(&described, Some("0123456789abcdef"), path).unwrap();
+        assert!(
+            out.contains("\"\"\"\nbake_id = \"0000000000000000\"\n[x]\n\"\"\""),
+            "{out}"
+        );
+        assert_eq!(with_bake_id(&out, None, path).unwrap(), described);
+        // CRLF lines stay CRLF.
+        let crlf = MANIFEST.replace('\n', "\r\n");
+        let out = with_bake_id(&crlf, Some("0123456789abcdef"), path).unwrap();
+        assert_eq!(out, with.replace('\n', "\r\n"));
+        // A bake_id inside a table is the table's (and refused by the manifest).
         let inside = MANIFEST.replace("stiffness = 1.0\n", "stiffness = 1.0\nbake_id = \"x\"\n");
         assert!(with_bake_id(&inside, Some("0123456789abcdef"), path).is_err());
     }

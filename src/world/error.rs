@@ -427,6 +427,21 @@ pub enum WorldError {
         message: String,
     },
 
+    /// `verdant check --stamp` stopped after it began to write (`crate::tools::check::stamp_world`):
+    /// the world reads, unchecked, and stamping it again finishes the work.
+    #[error(
+        "{}: stamping stopped half way: {source}; the world reads as it is, unchecked (its \
+         world.toml has no bake_id), and stamping it again finishes the work",
+        path.display()
+    )]
+    StampIncomplete {
+        /// The world folder.
+        path: PathBuf,
+        /// What stopped it.
+        #[source]
+        source: Box<WorldError>,
+    },
+
     /// In-memory tile data does not fit the pyramid (a caller's mistake, caught before writing).
     #[error("{}: tile data does not fit the pyramid: {message}", path.display())]
     BadTileData {
@@ -802,6 +817,7 @@ impl WorldError {
             | DuplicatePath { path, .. }
             | TileNotStored { path, .. }
             | TileStamp { path, .. }
+            | StampIncomplete { path, .. }
             | CorruptImage { path, .. }
             | WrongDimensions { path, .. }
             | WrongLayout { path, .. }

@@ -85,8 +85,20 @@ pub fn is_tile_file_name(name: &str) -> bool {
     })
 }
 
+/// Whether `name` is a temporary file that [`write_atomic`] writes a tile file through
+/// (`.{x}_{y}.{kind}.{pid}.tmp`), left where a writer (a bake, `verdant check --stamp`) was killed.
+pub fn is_tile_temporary_name(name: &str) -> bool {
+    name.strip_prefix('.')
+        .and_then(|n| n.strip_suffix(".tmp"))
+        .and_then(|n| n.rsplit_once('.'))
+        .is_some_and(|(file, pid)| {
+            !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()) && is_tile_file_name(file)
+        })
+}
+
 /// The first entry of `tiles` (a world's `tiles/` folder) that is not what a bake writes there:
-/// anything but folders `L{level}` holding regular files named by [`is_tile_file_name`]. None
+/// anything but folders `L{level}` holding regular files named by [`is_tile_file_name`] (or
+/// [`is_tile_temporary_name`]: a killed writer's). None
 /// when there is none (or `tiles` does not exist, or is a symlink: replacing it removes the link
 /// alone).
 pub fn first_foreign_in_tiles(tiles: &Path) -> std::io::Result<Option<PathBuf>> {
@@ -109,7 +121,10 @@ pub fn first_foreign_in_tiles(tiles: &Path) -> std::io::Result<Option<PathBuf>> 
         }
         for file in std::fs::read_dir(level.path())? {
             let file = file?;
-            let named = file.file_name().to_str().is_some_and(is_tile_file_name);
+            let named = file
+                .file_name()
+                .to_str()
+                .is_some_and(|n| is_tile_file_name(n) || is_tile_temporary_name(n));
             if !named || !file.file_type()?.is_file() {
                 return Ok(Some(file.path()));
             }
@@ -1052,4 +1067,28 @@ pub fn resolve_lexically(path: &Path) -> std::io::Result<Option<PathBuf>> {
         }
     }
     Ok(None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{is_tile_file_name, is_tile_temporary_name};
+
+    /// A killed writer's temporary of a tile file is known for one (a `--replace` may remove
+    /// it); anything else of the kind is not.
+    #[test]
+    fn a_tile_files_temporary_is_told_from_other_files() {
+        assert!(is_tile_file_name("3_4.type.png"));
+        assert!(is_tile_temporary_name(".3_4.type.png.23793.tmp"));
+        assert!(is_tile_temporary_name(".0_0.height.exr.1.tmp"));
+        for other in [
+            "3_4.type.png.23793.tmp",
+            ".3_4.type.png..tmp",
+            ".3_4.type.png.12a.tmp",
+            ".notes.txt.1.tmp",
+            ".3_4.type.png.1.tmp.bak",
+            "3_4.type.png",
+        ] {
+            assert!(!is_tile_temporary_name(other), "{other}");
+        }
+    }
 }
