@@ -196,7 +196,7 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
     })
     .with_context(|| format!("baking {}", shown(&opts.dem)))?;
     if let Some((_, pb)) = current {
-        pb.finish();
+        super::progress::end_bar(Some(&pb), false);
     }
     if report.already_done {
         say!(

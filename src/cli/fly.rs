@@ -277,9 +277,7 @@ pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
             .set_position(done),
         _ => {}
     })?;
-    if let Some(pb) = pb {
-        pb.finish();
-    }
+    super::progress::end_bar(pb.as_ref(), false);
     say!(
         "{} truth frames ({k}x{k} sub-samples) of {} ({}) at {}x{} in {:.1} s; wrote {}",
         r.frames.len(),

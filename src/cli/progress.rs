@@ -42,10 +42,16 @@ pub(crate) fn finish_bars(
 /// Ends a run's bar, if it drew one: finished, or left where it stopped if the run was
 /// `interrupted`.
 pub(crate) fn end_bar(pb: Option<&ProgressBar>, interrupted: bool) {
-    match pb {
-        Some(pb) if interrupted => pb.abandon(),
-        Some(pb) => pb.finish(),
-        None => {}
+    let Some(pb) = pb else { return };
+    if interrupted {
+        pb.abandon();
+    } else {
+        pb.finish();
+    }
+    // The bar leaves the cursor at the end of its line: what is printed next (a summary on
+    // standard output) starts a line of its own.
+    if !pb.is_hidden() {
+        note!("");
     }
 }
 
