@@ -731,7 +731,7 @@ fn grass_peak(pyramid: &Pyramid, density: f32) -> crate::world::GrassPeak {
 
 /// Starts up to `threads` workers on `scope`, each running the closure `make` gives it: as many
 /// as the system lets start, at least one, or the error of the first that could not.
-pub(crate) fn spawn_workers<'scope, F>(
+fn spawn_workers<'scope, F>(
     scope: &'scope std::thread::Scope<'scope, '_>,
     threads: usize,
     mut make: impl FnMut() -> F,
@@ -742,7 +742,7 @@ where
     let mut started = 0;
     for k in 0..threads.max(1) {
         match std::thread::Builder::new()
-            .name(format!("worker-{k}"))
+            .name(format!("bake-{k}"))
             .spawn_scoped(scope, make())
         {
             Ok(_) => started += 1,
