@@ -105,6 +105,35 @@ fn check_passes_a_whole_world_and_lists_copied_and_foreign_tile_files() {
         "{stderr}"
     );
 
+    // The same as one JSON document on standard output.
+    let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["check", shown, "--json"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["world"], "hills");
+    let failed = doc["report"]["failed"].as_array().unwrap();
+    let tiles: Vec<(u64, u64, u64)> = failed
+        .iter()
+        .map(|f| {
+            let t = &f["tile"];
+            (
+                t["level"].as_u64().unwrap(),
+                t["x"].as_u64().unwrap(),
+                t["y"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(tiles, [(0, 0, 0), (1, 0, 0)]);
+    assert!(
+        failed[1]["error"]
+            .as_str()
+            .unwrap()
+            .contains("holds L1/1_0.type.png")
+    );
+    assert_eq!(doc["report"]["checked"], doc["report"]["tiles"]);
+
     // The same world served over HTTP: the same two tiles.
     let server = WorldServer::start(&world, "127.0.0.1:0").unwrap();
     let out = check(&server.url());

@@ -24,6 +24,10 @@ pub(crate) struct CheckArgs {
     /// the new bake_id (its text otherwise kept).
     #[arg(long)]
     pub(crate) stamp: bool,
+    /// Print the report as one JSON document on standard output instead of lines: the world,
+    /// the tiles read and each that cannot be, with why (the exit status as without it).
+    #[arg(long)]
+    pub(crate) json: bool,
     #[command(flatten)]
     pub(crate) http: HttpArgs,
 }
@@ -33,6 +37,9 @@ const LISTED: usize = 50;
 
 pub(crate) fn check(args: CheckArgs) -> Result<()> {
     if args.stamp {
+        if args.json {
+            bail!("--json reports a check; --stamp prints what it did as lines");
+        }
         return stamp(args.world.as_deref());
     }
     let location = resolve_world(args.world.as_deref().unwrap_or("santa-cruz"))?;
@@ -60,7 +67,20 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
     })?;
     end_bar(pb.as_ref(), report.interrupted);
     let name = terminal_safe(&world.manifest.name);
-    for f in report.failed.iter().take(LISTED) {
+    if args.json {
+        let document = serde_json::json!({
+            "world": world.manifest.name,
+            "location": location.display().to_string(),
+            "bake_id": world.manifest.bake_id,
+            "report": report,
+        });
+        say!("{}", serde_json::to_string_pretty(&document)?)?;
+    }
+    for f in report
+        .failed
+        .iter()
+        .take(if args.json { 0 } else { LISTED })
+    {
         say!(
             "L{}/{}_{}: {}",
             f.tile.level,
@@ -69,7 +89,7 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
             terminal_safe(&f.error)
         )?;
     }
-    if report.failed.len() > LISTED {
+    if report.failed.len() > LISTED && !args.json {
         say!("and {} more tiles", report.failed.len() - LISTED)?;
     }
     let stamps = if report.stamped {
@@ -81,8 +101,18 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
         "{} of {} tiles of {name} read in {:.1} s",
         report.checked, report.tiles, report.seconds
     );
+    // With --json the summary goes to standard error: standard output holds the document alone.
+    let json = args.json;
+    let summary = |text: String| -> Result<()> {
+        if json {
+            note!("{text}");
+        } else {
+            say!("{text}")?;
+        }
+        Ok(())
+    };
     if report.interrupted {
-        say!("{read}; stopped")?;
+        summary(format!("{read}; stopped"))?;
         return Err(Interrupted(format!(
             "check stopped after {} of {} tiles",
             report.checked, report.tiles
@@ -96,7 +126,7 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
             report.tiles
         );
     }
-    say!("{read}: every tile is whole ({stamps})")?;
+    summary(format!("{read}: every tile is whole ({stamps})"))?;
     Ok(())
 }
 
