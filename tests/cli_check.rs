@@ -369,3 +369,32 @@ fn ctrl_c_stops_a_check_waiting_on_a_silent_server_at_once() {
     assert!(!stdout.lines().any(|l| l.starts_with('L')), "{stdout}");
     assert!(!rest.contains("panicked"), "{rest}");
 }
+
+/// A flight over a world with a tile file copied over another draws it from its ancestors and
+/// says so in its summary, pointing at `verdant check`.
+#[test]
+fn a_flight_over_a_tile_that_cannot_be_read_says_so_in_its_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = small_world(dir.path(), "hills", 7);
+    std::fs::copy(
+        tile_path(&world, TileId::new(1, 1, 0), TileFile::Type),
+        tile_path(&world, TileId::new(1, 0, 0), TileFile::Type),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["fly", world.to_str().unwrap(), "--path", "overview"])
+        .args(["--frames", "2", "--size", "32x18", "--no-images"])
+        .args(["--out", dir.path().join("fly").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    assert!(stderr.contains("holds L1/1_0.type.png"), "{stderr}");
+    assert!(
+        // (A slow machine may retry the load once more within the flight.)
+        stdout.contains("tile faults: ")
+            && stdout.contains("loads failed, at most 1 tiles")
+            && stdout.contains("`verdant check`"),
+        "{stdout}"
+    );
+}

@@ -385,6 +385,24 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
         s.atlas_peak_slots,
         s.atlas_peak_held
     )?;
+    // Tiles that could not be loaded were warned of as they failed, before the frames' lines:
+    // the summary says so again, where it is read.
+    let faults = report
+        .frames
+        .iter()
+        .map(|f| f.residency.faults)
+        .max()
+        .unwrap_or(0);
+    let failed_loads = report
+        .frames
+        .last()
+        .map_or(0, |f| f.residency.stream.failed);
+    if faults > 0 || failed_loads > 0 {
+        say!(
+            "tile faults: {failed_loads} loads failed, at most {faults} tiles a frame drawn from \
+             their ancestors instead (the warnings above say why; `verdant check` lists them)"
+        )?;
+    }
     say!(
         "grass blades a frame: considered median {:.0}, drawn median {:.0} high LOD + {:.0} low LOD",
         s.grass_considered.median,
