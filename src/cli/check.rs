@@ -66,7 +66,8 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
             .set_position(done);
     })?;
     end_bar(pb.as_ref(), report.interrupted);
-    let name = terminal_safe(&world.manifest.name);
+    // One line whatever the name holds (a manifest's name may hold a line break).
+    let name = verdant::world::printable(&world.manifest.name);
     if args.json {
         let document = serde_json::json!({
             "world": world.manifest.name,

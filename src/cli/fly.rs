@@ -390,7 +390,7 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
     let faults = report
         .frames
         .iter()
-        .map(|f| f.residency.faults)
+        .map(|f| f.residency.fault_blocked)
         .max()
         .unwrap_or(0);
     let failed_loads = report

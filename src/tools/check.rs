@@ -231,6 +231,20 @@ pub fn stamp_world(
             "a symbolic link: stamp the world it leads to, or copy the file in".into(),
         ));
     }
+    // A linked tiles/ or level folder would have another world's files rewritten through it.
+    let tiles_dir = dir.join("tiles");
+    let levels = (0..world.manifest.pyramid.stored_levels).map(|l| tiles_dir.join(format!("L{l}")));
+    if let Some(link) = std::iter::once(tiles_dir.clone())
+        .chain(levels)
+        .find(|p| is_link(p))
+    {
+        return Err(refuse(
+            &link,
+            "a symbolic link to a folder: its files may be another world's; copy the folder in, \
+             or stamp the world it belongs to"
+                .into(),
+        ));
+    }
     progress(0, total);
     // The first pass reads every tile and fingerprints its samples.
     let mut hash = crate::hash::FNV_BASIS;
@@ -354,7 +368,12 @@ pub fn with_bake_id(
         path: path.to_path_buf(),
         message,
     };
-    let mut doc: toml_edit::DocumentMut = text.parse().map_err(|e| syntax(format!("{e}")))?;
+    // A byte-order mark and the want of a last line break are kept too.
+    let (bom, body) = match text.strip_prefix('\u{feff}') {
+        Some(body) => ("\u{feff}", body),
+        None => ("", text),
+    };
+    let mut doc: toml_edit::DocumentMut = body.parse().map_err(|e| syntax(format!("{e}")))?;
     match (id, doc.get_mut("bake_id")) {
         // Rewritten in place, its spacing and comment kept.
         (Some(id), Some(toml_edit::Item::Value(old))) => {
@@ -372,9 +391,14 @@ pub fn with_bake_id(
     }
     let mut out = doc.to_string();
     // A file of CRLF lines stays one: the lines the document writes anew end in LF.
-    if text.contains("\r\n") && !text.replace("\r\n", "").contains('\n') {
+    if body.contains("\r\n") && !body.replace("\r\n", "").contains('\n') {
         out = out.replace("\r\n", "\n").replace('\n', "\r\n");
     }
+    if !body.is_empty() && !body.ends_with('\n') {
+        let trimmed = out.trim_end_matches(['\r', '\n']).len();
+        out.truncate(trimmed);
+    }
+    let out = format!("{bom}{out}");
     let parsed = crate::world::Manifest::parse(&out, path)?;
     if parsed.bake_id.as_deref() != id {
         return Err(syntax(
@@ -436,6 +460,14 @@ mod tests {
         let crlf = MANIFEST.replace('\n', "\r\n");
         let out = with_bake_id(&crlf, Some("0123456789abcdef"), path).unwrap();
         assert_eq!(out, with.replace('\n', "\r\n"));
+        // A byte-order mark and a last line without a break stay as they were.
+        let marked = format!("\u{feff}{}", MANIFEST.trim_end());
+        let out = with_bake_id(&marked, Some("0123456789abcdef"), path).unwrap();
+        assert!(
+            out.starts_with('\u{feff}') && out.ends_with("stiffness = 1.0"),
+            "{out:?}"
+        );
+        assert_eq!(with_bake_id(&out, None, path).unwrap(), marked);
         // A bake_id inside a table is the table's (and refused by the manifest).
         let inside = MANIFEST.replace("stiffness = 1.0\n", "stiffness = 1.0\nbake_id = \"x\"\n");
         assert!(with_bake_id(&inside, Some("0123456789abcdef"), path).is_err());

@@ -687,7 +687,15 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WorldError> 
         path: path.to_path_buf(),
         source,
     };
-    std::fs::write(&tmp, bytes).map_err(io)?;
+    // A file of its own: a killed writer's temporary of the same name goes first, and whatever
+    // is at the name then (a link, say) is refused rather than written through.
+    let _ = std::fs::remove_file(&tmp);
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .and_then(|mut f| std::io::Write::write_all(&mut f, bytes))
+        .map_err(io)?;
     std::fs::rename(&tmp, path).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
         io(e)
