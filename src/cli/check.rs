@@ -2,11 +2,13 @@
 
 use anyhow::{Result, bail};
 
-use verdant::tools::check::{CheckOptions, MAX_CHECK_THREADS, check_world, stamp_world};
+use verdant::tools::check::{
+    CheckOptions, FailedTile, MAX_CHECK_THREADS, check_world, stamp_world,
+};
 
 use super::args::{HttpArgs, resolve_world};
 use super::out::{note, say};
-use super::progress::{bar, end_bar, lines};
+use super::progress::TenthsBar;
 use super::{Interrupted, terminal_safe};
 
 /// The options of `verdant check`.
@@ -49,23 +51,11 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
         threads: args.threads as usize,
         cancel: Some(cancel),
     };
-    let mut pb = None;
-    let log_lines = lines();
-    // The tenths of the way logged so far.
-    let mut logged = None;
+    let mut progress = TenthsBar::new("tiles", "checked", "tiles");
     let report = check_world(&world, source, &options, &mut |done, total| {
-        if log_lines {
-            // A line a tenth of the way, for a batch job's log.
-            let tenth = (done * 10).checked_div(total).unwrap_or(10);
-            if logged.is_none_or(|t| tenth > t) {
-                logged = Some(tenth);
-                note!("checked {done}/{total} tiles");
-            }
-        }
-        pb.get_or_insert_with(|| bar(total, "tiles"))
-            .set_position(done);
+        progress.set(done, total)
     })?;
-    end_bar(pb.as_ref(), report.interrupted);
+    progress.end(report.interrupted);
     // One line whatever the name holds (a manifest's name may hold a line break).
     let name = verdant::world::printable(&world.manifest.name);
     if args.json {
@@ -77,21 +67,8 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
         });
         say!("{}", serde_json::to_string_pretty(&document)?)?;
     }
-    for f in report
-        .failed
-        .iter()
-        .take(if args.json { 0 } else { LISTED })
-    {
-        say!(
-            "L{}/{}_{}: {}",
-            f.tile.level,
-            f.tile.x,
-            f.tile.y,
-            terminal_safe(&f.error)
-        )?;
-    }
-    if report.failed.len() > LISTED && !args.json {
-        say!("and {} more tiles", report.failed.len() - LISTED)?;
+    if !args.json {
+        list_failed(&report.failed)?;
     }
     let stamps = if report.stamped {
         "every file checked against its stamp"
@@ -153,21 +130,11 @@ fn stamp(given: Option<&str>) -> Result<()> {
         );
     }
     let cancel = super::stop_on_signals()?;
-    let mut pb = None;
-    let log_lines = lines();
-    let mut logged = None;
+    let mut progress = TenthsBar::new("stamping", "stamping:", "tile reads and writes");
     let report = stamp_world(dir, Some(&cancel), &mut |done, total| {
-        if log_lines {
-            let tenth = (done * 10).checked_div(total).unwrap_or(10);
-            if logged.is_none_or(|t| tenth > t) {
-                logged = Some(tenth);
-                note!("stamping: {done}/{total} tile reads and writes");
-            }
-        }
-        pb.get_or_insert_with(|| bar(total, "stamping"))
-            .set_position(done);
+        progress.set(done, total)
     });
-    end_bar(pb.as_ref(), report.is_err());
+    progress.end(report.is_err());
     let report = match report {
         Err(verdant::world::WorldError::Cancelled { .. }) => {
             return Err(Interrupted(format!(
@@ -176,9 +143,8 @@ fn stamp(given: Option<&str>) -> Result<()> {
             ))
             .into());
         }
-        Err(e @ verdant::world::WorldError::StampIncomplete { .. })
-            if matches!(&e, verdant::world::WorldError::StampIncomplete { source, .. }
-                if matches!(**source, verdant::world::WorldError::Cancelled { .. })) =>
+        Err(verdant::world::WorldError::StampIncomplete { ref source, .. })
+            if matches!(**source, verdant::world::WorldError::Cancelled { .. }) =>
         {
             return Err(Interrupted(format!(
                 "stamping {} stopped half way: the world reads as it is, unchecked (its \
@@ -189,18 +155,7 @@ fn stamp(given: Option<&str>) -> Result<()> {
         }
         other => other?,
     };
-    for f in report.failed.iter().take(LISTED) {
-        say!(
-            "L{}/{}_{}: {}",
-            f.tile.level,
-            f.tile.x,
-            f.tile.y,
-            terminal_safe(&f.error)
-        )?;
-    }
-    if report.failed.len() > LISTED {
-        say!("and {} more tiles", report.failed.len() - LISTED)?;
-    }
+    list_failed(&report.failed)?;
     let Some(id) = &report.bake_id else {
         bail!(
             "{} of {} tiles of {} cannot be read: nothing stamped",
@@ -215,5 +170,17 @@ fn stamp(given: Option<&str>) -> Result<()> {
         super::shown(dir),
         report.seconds
     )?;
+    Ok(())
+}
+
+/// Lists the tiles that cannot be read, one a line (the first [`LISTED`]; the rest counted).
+fn list_failed(failed: &[FailedTile]) -> Result<()> {
+    for f in failed.iter().take(LISTED) {
+        let t = f.tile;
+        say!("L{}/{}_{}: {}", t.level, t.x, t.y, terminal_safe(&f.error))?;
+    }
+    if failed.len() > LISTED {
+        say!("and {} more tiles", failed.len() - LISTED)?;
+    }
     Ok(())
 }

@@ -73,3 +73,47 @@ pub(crate) fn bar(len: u64, what: &str) -> ProgressBar {
     pb.set_message(what.to_owned());
     pb
 }
+
+/// A bar for one run of `total` steps, named `name`, that also logs a line a tenth of the way
+/// (`{prefix} {done}/{total} {unit}`) where there is no terminal for the bar (a batch job's log).
+pub(crate) struct TenthsBar {
+    name: &'static str,
+    prefix: &'static str,
+    unit: &'static str,
+    pb: Option<ProgressBar>,
+    log_lines: bool,
+    /// The tenths of the way logged so far.
+    logged: Option<u64>,
+}
+
+impl TenthsBar {
+    pub(crate) fn new(name: &'static str, prefix: &'static str, unit: &'static str) -> Self {
+        Self {
+            name,
+            prefix,
+            unit,
+            pb: None,
+            log_lines: lines(),
+            logged: None,
+        }
+    }
+
+    pub(crate) fn set(&mut self, done: u64, total: u64) {
+        if self.log_lines {
+            let tenth = (done * 10).checked_div(total).unwrap_or(10);
+            if self.logged.is_none_or(|t| tenth > t) {
+                self.logged = Some(tenth);
+                note!("{} {done}/{total} {}", self.prefix, self.unit);
+            }
+        }
+        let name = self.name;
+        self.pb
+            .get_or_insert_with(|| bar(total, name))
+            .set_position(done);
+    }
+
+    /// Ends the bar as [`end_bar`] does.
+    pub(crate) fn end(&self, interrupted: bool) {
+        end_bar(self.pb.as_ref(), interrupted);
+    }
+}

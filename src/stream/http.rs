@@ -602,8 +602,7 @@ impl HttpSource {
 
     /// The URL of one of a tile's files.
     pub fn tile_url(&self, id: TileId, kind: TileFile) -> String {
-        let path = crate::world::tile_path(Path::new(""), id, kind);
-        self.url.join(&path.to_string_lossy().replace('\\', "/"))
+        self.url.join(&format!("tiles/{}", kind.name_in_tiles(id)))
     }
 }
 
