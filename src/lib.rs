@@ -3,7 +3,7 @@
 //! The engine is a library with one front door, [`Renderer`]: it draws a world's terrain and
 //! grass into the caller's colour and depth targets, recording every pass into the caller's
 //! command encoder (see `examples/embed.rs`). The command-line tools (fly, view, soak, bench,
-//! eval, bake, serve) are built on top of it, behind the `cli` feature: `main.rs` parses the
+//! eval, bake, serve, check) are built on top of it, behind the `cli` feature: `main.rs` parses the
 //! arguments and dispatches, and each command's arguments and printing are in `src/cli/`.
 //!
 //! Crate map, leaves first:

@@ -125,9 +125,9 @@ pub(crate) struct TaaArgs {
     #[arg(long, value_name = "K", value_parser = float_in(0.0, 16.0))]
     pub(crate) taa_pixel_spread: Option<f64>,
     /// With --aa taa: how much faster a surface's history shortens with its parallax (what it
-    /// moved beyond the camera's turn), 0..=16: at most N / (1 + pixels moved + F x pixels of
+    /// moved beyond the camera's turn), 0..=16: at most N / (1 + pixels moved + P x pixels of
     /// parallax) samples (default 2).
-    #[arg(long, value_name = "F", value_parser = float_in(0.0, 16.0))]
+    #[arg(long, value_name = "P", value_parser = float_in(0.0, 16.0))]
     pub(crate) taa_parallax_falloff: Option<f64>,
     /// With --aa taa: the fewest samples a moving surface's history keeps, 1..=256 and at
     /// most --taa-samples (default 1: a surface that moved far leans on its current sample

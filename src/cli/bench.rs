@@ -49,7 +49,7 @@ pub(crate) enum BenchCommand {
         #[command(flatten)]
         timing: TimingArgs,
         #[command(flatten)]
-        truth: TruthArgs,
+        truth: TruthSamples,
     },
     /// Each grass feature's GPU cost against its contribution to the image (FLIP between the
     /// render with and without it), charted one against the other.
@@ -323,14 +323,21 @@ fn parse_method(s: &str) -> Result<verdant::aa::AntiAliasing, String> {
 /// What the benchmarks measure their images against.
 #[derive(clap::Args, Clone, Copy)]
 pub(crate) struct TruthArgs {
-    /// Sub-samples a pixel side of the truth (supersampled in linear light), 1..=8.
-    #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
-    pub(crate) truth: u32,
+    #[command(flatten)]
+    pub(crate) samples: TruthSamples,
     /// How far the truth draws blades, in default view distances, 1..=9 (67 m each in the
     /// default world; less is quicker, and the far band is then measured out to this many view
     /// distances only).
     #[arg(long, value_name = "R", default_value_t = verdant::tools::truth::REACH_FACTOR, value_parser = float_in(1.0, verdant::tools::truth::REACH_FACTOR))]
     pub(crate) truth_reach: f64,
+}
+
+/// The truth's sub-samples (all `bench blades` takes: its truth reaches over its whole field).
+#[derive(clap::Args, Clone, Copy)]
+pub(crate) struct TruthSamples {
+    /// Sub-samples a pixel side of the truth (supersampled in linear light), 1..=8.
+    #[arg(long, value_name = "K", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=8))]
+    pub(crate) truth: u32,
 }
 
 /// How the benchmarks time: interleaved rounds over the settings, each measurement's frames
@@ -790,7 +797,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             warmup_frames: timing.warmup_frames,
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
-            truth_k: truth.truth,
+            truth_k: truth.samples.truth,
             truth_reach: truth.truth_reach,
             ..Default::default()
         }),
@@ -839,7 +846,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             timed_frames: timing.timed_frames,
             rounds: timing.rounds,
             path,
-            truth_k: truth.truth,
+            truth_k: truth.samples.truth,
             truth_reach: truth.truth_reach,
             settings,
             supersample,
@@ -872,7 +879,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
                 methods: aa,
                 frames,
                 run_up,
-                truth_k: truth.truth,
+                truth_k: truth.samples.truth,
                 truth_reach: truth.truth_reach,
                 truth_noise,
                 path,

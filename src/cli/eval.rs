@@ -14,11 +14,11 @@ use super::progress::{bar, lines};
 #[derive(Subcommand)]
 pub(crate) enum EvalCommand {
     /// Downsample a DEM by K, derive it back with each method (nearest, bilinear, bicubic,
-    /// bicubic + fixed detail, and the calibrated detail fitted to the coarse grid), and chart
-    /// height and slope error against time per tile.
+    /// bicubic + fixed detail, inherited detail, a kernel fitted to the coarse grid, and the
+    /// calibrated detail fitted to it), and chart height and slope error against time per tile.
     #[command(allow_negative_numbers = true)]
     Derive {
-        /// The DEM's PNG (16-bit, with its JSON sidecar).
+        /// The DEM: a GeoTIFF, an SRTM .hgt, or a 16-bit PNG with its JSON sidecar.
         #[arg(long)]
         dem: PathBuf,
         /// Downsampling factor, a power of two in 2..=64.

@@ -43,27 +43,27 @@ pub(crate) struct FlyArgs {
     /// the manifest's [features] table).
     #[arg(long, value_delimiter = ',')]
     pub(crate) disable: Vec<verdant::features::Feature>,
-    /// Grass features to switch on that the manifest's [features] table switches off,
-    /// comma-separated.
+    /// Features to switch on that the manifest's [features] table switches off,
+    /// comma-separated (the names of --disable).
     #[arg(long, value_delimiter = ',')]
     pub(crate) enable: Vec<verdant::features::Feature>,
-    /// Blade spacing of the near grass grid, metres (default: the renderer's).
+    /// Blade spacing of the near grass grid, metres, 0.02..=5 (default: the renderer's).
     #[arg(long)]
     pub(crate) grass_spacing_m: Option<f32>,
-    /// Every grass type's blade width times this (default: the renderer's).
+    /// Every grass type's blade width times this, 0.05..=20 (default: the renderer's).
     #[arg(long)]
     pub(crate) grass_width_scale: Option<f32>,
     /// Radii of the grass infill near the camera, HALF,QUARTER metres: blades at half the
-    /// spacing out to the first, at a quarter of it out to the second; 0,0 turns it off
-    /// (default: the renderer's).
+    /// spacing out to the first, at a quarter of it out to the second, each 0..=100 and
+    /// QUARTER no larger than HALF; 0,0 turns it off (default: the renderer's).
     #[arg(long, value_delimiter = ',')]
     pub(crate) grass_infill_m: Option<Vec<f32>>,
     /// Blade segments NEAR,HIGH,LOW: of the blades near the camera, the rest of the high
-    /// ring and the low ring (default: the renderer's).
+    /// ring and the low ring, each 1..=64 (default: the renderer's).
     #[arg(long, value_delimiter = ',')]
     pub(crate) grass_segments: Option<Vec<u32>>,
-    /// Horizontal radius of the blades drawn with the NEAR segments, metres (default: the
-    /// renderer's).
+    /// Horizontal radius of the blades drawn with the NEAR segments, metres, 0..=200
+    /// (default: the renderer's).
     #[arg(long)]
     pub(crate) grass_near_m: Option<f32>,
     /// How many times as wide the low ring's blades are drawn (the blades the low grid keeps
@@ -81,7 +81,8 @@ pub(crate) struct FlyArgs {
     #[arg(long, value_name = "M", value_parser = float_in(10.0, 300.0))]
     pub(crate) grass_view_m: Option<f64>,
     /// Plants' level-of-detail switches NEAR,FAR, metres: the full mesh out to NEAR, the
-    /// reduced mesh out to FAR, crossed cards beyond (default: the renderer's, 25,150).
+    /// reduced mesh out to FAR, crossed cards beyond, 0 < NEAR <= FAR <= 10000 (default: the
+    /// renderer's, 25,150).
     #[arg(long, value_delimiter = ',')]
     pub(crate) plant_lod_m: Option<Vec<f32>>,
     /// How far plants reach beyond the grass, in view distances: thinning out from the view
@@ -90,17 +91,18 @@ pub(crate) struct FlyArgs {
     #[arg(long)]
     pub(crate) plant_card_reach: Option<f32>,
     /// Beyond this distance, metres, plants thin out as the square of the distance, down to
-    /// half of them, the survivors grown to keep the cover (default: the renderer's, 50).
+    /// half of them, the survivors grown to keep the cover, above 0 and at most 10000
+    /// (default: the renderer's, 50).
     #[arg(long)]
     pub(crate) plant_thin_m: Option<f32>,
     /// Trees' level-of-detail switches NEAR,FAR, metres: the full mesh out to NEAR, the
-    /// reduced mesh out to FAR, crossed cards beyond, to the fog (default: the renderer's,
-    /// 60,300).
+    /// reduced mesh out to FAR, crossed cards beyond, to the fog, 0 < NEAR <= FAR <= 10000
+    /// (default: the renderer's, 60,300).
     #[arg(long, value_delimiter = ',')]
     pub(crate) tree_lod_m: Option<Vec<f32>>,
     /// Beyond this distance, metres, trees thin out as the square of the distance, down to
-    /// --tree-min-keep of them, the survivors grown to keep the cover (default: the
-    /// renderer's, 1600).
+    /// --tree-min-keep of them, the survivors grown to keep the cover, above 0 and at most
+    /// 10000 (default: the renderer's, 1600).
     #[arg(long)]
     pub(crate) tree_thin_m: Option<f32>,
     /// The fewest trees the thinning keeps, above 0 and at most 1 (default: the renderer's,
@@ -121,8 +123,8 @@ pub(crate) struct FlyArgs {
     /// (default 0,25).
     #[arg(long, value_delimiter = ',')]
     pub(crate) tree_shadow_lod_m: Option<Vec<f32>>,
-    /// Terrain mesh: one vertex every this many samples of a tile (1, 2, 4, ...; default:
-    /// the renderer's).
+    /// Terrain mesh: one vertex every this many samples of a tile, a power of two in 1..=16
+    /// (default: the renderer's).
     #[arg(long)]
     pub(crate) mesh_step: Option<u32>,
     /// Anti-aliasing: off, taa (temporal: jittered frames folded into a reprojected history;
