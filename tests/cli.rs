@@ -1188,6 +1188,24 @@ fn frames_an_earlier_run_left_in_the_output_folder_are_warned_of() {
     assert!(tmp.path().join("fly/frame_00003.png").is_file());
     let (_, stderr) = fly_report_and_stderr(&args("4"), tmp.path());
     assert!(!stderr.contains("earlier run"), "{stderr}");
+    // The truth's frames over a flight's: the flight's report and its later frames are named
+    // (the truth's run dropped the warnings), and the other way about.
+    let mut truth = vec!["fly"];
+    truth.extend(args("1"));
+    truth.extend(["--truth", "1", "--out", "fly"]);
+    let out = verdant(&truth, tmp.path());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("holds 3 frame images of an earlier run")
+            && stderr.contains("holds report.json of an earlier run"),
+        "{stderr}"
+    );
+    let (_, stderr) = fly_report_and_stderr(&args("1"), tmp.path());
+    assert!(
+        stderr.contains("holds truth.json of an earlier run"),
+        "{stderr}"
+    );
 }
 
 /// A first frame that wants more tiles than the atlas holds says so, naming --atlas-slots
@@ -2217,6 +2235,11 @@ fn bench_aa_measures_every_method_against_the_truth_in_every_sequence() {
         assert!(flip > 0.0 && flip < 1.0, "{line}");
         // Only the teleport says how long it took to settle.
         assert_eq!(f[3] == "teleport", !f[8].is_empty(), "{line}");
+        // Two frames leave the teleport none but its jump, which is no flicker: its flicker
+        // cells are empty (they read -0.0000); the others' are measured.
+        for col in 5..=7 {
+            assert_eq!(f[3] == "teleport", f[col].is_empty(), "{line}");
+        }
         // The coarse measure beside it: blocks of 8 x 8 pixels average away much of the
         // sampling's error, so it errs less than pixel FLIP but not nothing.
         let coarse: f64 = f[9].parse().unwrap();

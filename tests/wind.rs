@@ -1087,6 +1087,25 @@ fn invalid_wind_sources_get_errors_naming_the_field() {
         matches!(err, WorldError::ManifestSyntax { .. }) && err.to_string().contains("spin"),
         "{err}"
     );
+    // A field of another kind, and one a kind needs, are named.
+    let err = broken("inflow_mps = -2.0", "inflow_mps = -2.0, direction_deg = 1.0");
+    assert!(err.to_string().contains("`direction_deg`"), "{err}");
+    let err = broken("radius_m = 25.0, ", "");
+    assert!(err.to_string().contains("`radius_m`"), "{err}");
+    // A value of the wrong shape in a source written as a table is shown on its own line (it
+    // was shown on the table's header, without the field).
+    let table = format!(
+        "{SMALL}\n[[wind_scenes]]\nname = \"still\"\n\n[[wind_scenes.sources]]\nkind = \"omni\"\n\
+         radius_m = 30.0\nspeed_mps = 10.0\nposition_m = [1.0, 2.0, 3.0]\n"
+    );
+    let err = parse(&table).unwrap_err().to_string();
+    assert!(
+        err.contains("position_m = [1.0, 2.0, 3.0]") && err.contains("invalid length 3"),
+        "{err}"
+    );
+    // And a strength key of three numbers.
+    let err = broken("[2.0, 1.0]", "[2.0, 1.0, 5.0]").to_string();
+    assert!(err.contains("invalid length 3"), "{err}");
     // Too many sources.
     let many = (0..9)
         .map(|_| "{ kind = \"directional\", direction_deg = 0.0, speed_mps = 1.0 }")

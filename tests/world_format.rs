@@ -1605,6 +1605,38 @@ wind = { bend = 0.05 }
     assert!(err.contains("density.meadow"), "{err}");
 }
 
+/// A 32-bit field's range is inclusive of its ends as the file writes them (0.01 reads as
+/// 0.0099999998 in 32 bits, and was refused as below 0.01), and a refused value is printed as the
+/// file holds it.
+#[test]
+fn a_32_bit_fields_range_ends_are_inclusive_and_its_value_printed_as_written() {
+    let plant = r#"
+[[plant_types]]
+name = "poppy"
+mesh = "flower"
+size_m = [0.01, 0.01]
+density = { meadow = 0.4 }
+wind = { sway_damping = 0.01 }
+"#;
+    let m = parse(&format!("{VALID}{plant}")).unwrap();
+    assert_eq!(m.plant_types[0].size_m, [0.01, 0.01]);
+    assert_eq!(m.plant_types[0].wind.sway_damping, 0.01);
+    for (from, to, shown) in [
+        ("sway_damping = 0.01", "sway_damping = 0.0099", "sway_damping = 0.0099:"),
+        ("size_m = [0.01, 0.01]", "size_m = [0.0099, 0.01]", "size_m = [0.0099, 0.01]:"),
+        ("meadow = 0.4", "meadow = -0.45", "density.meadow = -0.45"),
+    ] {
+        let err = parse(&format!("{VALID}{}", plant.replace(from, to)))
+            .expect_err(to)
+            .to_string();
+        assert!(err.contains(shown), "{to}: {err}");
+    }
+    let err = parse(&VALID.replacen("tip_color = [0.2, 0.5, 0.1]", "tip_color = [-0.1, 0.5, 0.1]", 1))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("tip_color[0] = -0.1:"), "{err}");
+}
+
 /// The finest tiles, where the grass grows, are 0.5 to 1024 m wide: a pyramid outside that is
 /// refused naming `pyramid.derived_levels` and the counts that fit (tiles of kilometres made a
 /// frame that never finished, tiles of centimetres an error about a renderer setting).

@@ -458,7 +458,7 @@ pub(crate) fn bench_blades(
     }
     say_adapter(&r.adapter, r.size)?;
     say!(
-        "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7}",
+        "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7} {:>7} {:>7}",
         "blades",
         "drawn hi",
         "drawn lo",
@@ -469,12 +469,14 @@ pub(crate) fn bench_blades(
         "ns/blade",
         "ns/vert",
         "x floor",
-        "FLIP"
+        "FLIP",
+        "coarse",
+        "vs noLOD"
     )?;
     for b in &r.results {
         let t = &b.draw;
         say!(
-            "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7.4}{}",
+            "{:>10} {:>9} {:>9} {:>11} {:>9} {:>9} {:>9} {:>8} {:>8} {:>7} {:>7.4} {:>7.4} {:>8.4}{}",
             b.blades,
             b.drawn[0],
             b.drawn[1],
@@ -485,6 +487,8 @@ pub(crate) fn bench_blades(
             timed(t, b.ns_per_blade, 2),
             timed(t, b.ns_per_vertex, 3),
             timed(t, b.ratio_to_floor, 2),
+            b.vs_truth.flip,
+            b.vs_truth.coarse,
             b.flip_vs_no_lod,
             if b.draw.noisy || b.floor.noisy {
                 "  (spread above 10%)"
@@ -493,6 +497,11 @@ pub(crate) fn bench_blades(
             }
         )?;
     }
+    say!(
+        "FLIP and coarse: against the {k}x{k} truth of the field; vs noLOD: pixel FLIP against the \
+         same field with no LOD",
+        k = r.truth_k
+    )?;
     say!(
         "timing: {} rounds of {} frames after {} untimed, per count",
         r.counts.rounds,
@@ -618,7 +627,7 @@ pub(crate) fn bench_lod(mut opts: verdant::tools::BenchLodOptions) -> Result<()>
         say!(
             "flight: {} frames along the path {p:?} per round ({unit} time per frame, after an \
              untimed flight); on the front of its p99 against the pixel FLIP: {}{}",
-            r.flight_frames,
+            r.flight_frames.unwrap_or(0),
             r.flight_front.join(", "),
             if r.default_on_flight_front == Some(false) {
                 " (the default is not on it)"
@@ -627,14 +636,10 @@ pub(crate) fn bench_lod(mut opts: verdant::tools::BenchLodOptions) -> Result<()>
             }
         )?;
     }
-    if r.settings.first().is_some_and(|s| s.frame.measured()) {
+    if let Some(on) = r.default_on_front {
         say!(
             "default setting {} the Pareto front",
-            if r.default_on_front {
-                "is on"
-            } else {
-                "is NOT on"
-            }
+            if on { "is on" } else { "is NOT on" }
         )?;
     }
     wrote(&opts.out, r.interrupted)?;
@@ -695,14 +700,14 @@ pub(crate) fn bench_aa(mut opts: verdant::tools::bench_aa::BenchAaOptions) -> Re
     )?;
     for s in &r.sequences {
         say!(
-            "{:<10} {:<w$} {:<9} {:>8.4} {:>8.4} {:>9.2} {:>7.2} {:>9}",
+            "{:<10} {:<w$} {:<9} {:>8.4} {:>8.4} {:>9} {:>7} {:>9}",
             format!("{}x{}", s.size.0, s.size.1),
             s.method,
             s.motion.name(),
             s.flip_mean,
             s.coarse_flip_mean,
-            s.flicker,
-            s.flicker_ratio,
+            s.flicker.map_or("-".into(), |f| format!("{f:.2}")),
+            s.flicker_ratio.map_or("-".into(), |f| format!("{f:.2}")),
             s.recovery_frames.map_or(String::new(), |n| n.to_string())
         )?;
     }

@@ -268,6 +268,31 @@ impl FlyArgs {
     }
 }
 
+/// Warns of what an earlier run left in the output folder `out` beside this run's outputs.
+fn warn_of_stale(out: &std::path::Path, p: FlyProgress) {
+    match p {
+        FlyProgress::StaleFrames(count, first, last) => {
+            let which = if count == 1 {
+                first
+            } else {
+                format!("{first} to {last}")
+            };
+            note!(
+                "warning: {} holds {count} frame image{} of an earlier run that this run does not \
+                 write ({which}), which this run's report does not describe",
+                out.display(),
+                if count == 1 { "" } else { "s" }
+            );
+        }
+        FlyProgress::StaleReport(report) => note!(
+            "warning: {} holds {report} of an earlier run, which describes frame images this \
+             run writes over",
+            out.display()
+        ),
+        _ => {}
+    }
+}
+
 /// `fly --truth K`: the path's frames rendered as the truth.
 pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
     opts.stop = Some(super::stop_on_signals()?);
@@ -277,6 +302,9 @@ pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
         FlyProgress::Frame(done, total) => pb
             .get_or_insert_with(|| bar(total, "truth"))
             .set_position(done),
+        p @ (FlyProgress::StaleFrames(..) | FlyProgress::StaleReport(_)) => {
+            warn_of_stale(&opts.out, p)
+        }
         _ => {}
     })?;
     super::progress::end_bar(pb.as_ref(), false);
@@ -318,18 +346,8 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
                 note!("  {m}");
             }
         }
-        FlyProgress::StaleFrames(count, first, last) => {
-            let which = if count == 1 {
-                first
-            } else {
-                format!("{first} to {last}")
-            };
-            note!(
-                "warning: {} holds {count} frame image{} of an earlier run that this run does not \
-                 write ({which}), which this run's report does not describe",
-                opts.out.display(),
-                if count == 1 { "" } else { "s" }
-            );
+        p @ (FlyProgress::StaleFrames(..) | FlyProgress::StaleReport(_)) => {
+            warn_of_stale(&opts.out, p)
         }
         FlyProgress::Frame(done, total) => {
             let pb = frames.get_or_insert_with(|| {

@@ -329,6 +329,8 @@ pub fn full_mesh_switch(model: &crate::plants::set::PlantModel, settings: &Plant
     if model.full_mesh_reach_m == f32::MAX {
         f32::MAX
     } else {
+        // Negative where the reach is within half the cross-fade band: the full mesh then shows
+        // only faded, within the reach.
         model.full_mesh_reach_m - 0.5 * settings.band_m.max(0.0)
     }
 }
@@ -470,7 +472,19 @@ impl PlantRenderer {
             for &id in &ids {
                 let (t, m) = (&manifest.plant_types[id], &set.models[id]);
                 let switch = full_mesh_switch(m, &settings);
-                if switch < settings.lod_m[0] {
+                if switch <= 0.0 {
+                    log::warn!(
+                        "plant type {:?}: its mesh of {} triangles is drawn only faded into its \
+                         reduced level of {} triangles, within {:.1} m of the camera, so that its \
+                         full meshes at {} plants per m2 stay within {} triangles around it",
+                        t.name,
+                        m.lods[0].triangles(),
+                        m.lods[1].triangles(),
+                        m.full_mesh_reach_m,
+                        t.density.values().copied().fold(0.0f32, f32::max),
+                        crate::plants::set::FULL_MESH_TRIANGLE_BUDGET,
+                    );
+                } else if switch < settings.lod_m[0] {
                     log::warn!(
                         "plant type {:?}: its mesh of {} triangles switches to its reduced level \
                          of {} triangles at {:.1} m from the camera, not {} m, so that its full \

@@ -49,7 +49,9 @@ pub enum PlantError {
         source: crate::plants::gltf::PlantFileError,
     },
     /// A plant mesh that has no height.
-    #[error("plant type {name:?}: the mesh of {file} is flat (no vertex above its root)")]
+    #[error(
+        "plant type {name:?}: the mesh of {file} is flat (no vertex more than 1 µm above its root)"
+    )]
     Flat {
         /// The plant type.
         name: String,
@@ -136,8 +138,12 @@ pub struct PlantSet {
 
 impl PlantSet {
     /// Builds the models of `manifest`'s plant types; glTF files are read relative to `dir`.
+    /// A file reached through a symbolic link out of `dir` is refused
+    /// ([`crate::plants::gltf::read_plant_file_within`]).
     pub fn build(manifest: &Manifest, dir: &Path) -> Result<Self, PlantError> {
-        Self::build_with(manifest, dir, &crate::plants::gltf::read_plant_file)
+        Self::build_with(manifest, dir, &|path: &Path| {
+            crate::plants::gltf::read_plant_file_within(dir, path)
+        })
     }
 
     /// Like [`PlantSet::build`], each glTF file (and the buffers and images it names) read by
@@ -165,7 +171,9 @@ fn white() -> PlantImage {
 
 /// The model of plant type `t`.
 pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, PlantError> {
-    model_with(t, dir, &crate::plants::gltf::read_plant_file)
+    model_with(t, dir, &|path: &Path| {
+        crate::plants::gltf::read_plant_file_within(dir, path)
+    })
 }
 
 /// Like [`model`], a glTF file read by `read` ([`PlantSet::build_with`]).

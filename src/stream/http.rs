@@ -389,6 +389,12 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
     if host.is_empty() {
         return Err(bad("no host: expected http://HOST[:PORT]/PATH"));
     }
+    if host.contains(':') {
+        // `host:1:2` would be fetched from host's port 80 by the HTTP client.
+        return Err(bad(
+            "more than one port (a host name holds no ':'): expected http://HOST[:PORT]/PATH",
+        ));
+    }
     if let Some(port) = port
         && !port.parse::<u16>().is_ok_and(|p| p > 0)
     {
@@ -710,6 +716,8 @@ mod tests {
             "http://127.0.0.1:0/",
             "http://127.0.0.1:/",
             "http://h:80x/",
+            "http://127.0.0.1:8123:9099/",
+            "http://h::80/",
             "http://[::1",
             "http://[::1]x/",
             "http://[::1]/w",

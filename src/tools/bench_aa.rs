@@ -365,12 +365,13 @@ pub struct AaSequence {
     pub flip_mean: f64,
     /// Mean coarse FLIP against the truth over its frames.
     pub coarse_flip_mean: f64,
-    /// Mean change between consecutive frames (0..255).
-    pub flicker: f64,
+    /// Mean change between consecutive frames (0..255); `None` where no frame was measured
+    /// (a teleport sequence of two frames: the jump's frame is left out).
+    pub flicker: Option<f64>,
     /// The truth's.
-    pub truth_flicker: f64,
+    pub truth_flicker: Option<f64>,
     /// `flicker / truth_flicker`.
-    pub flicker_ratio: f64,
+    pub flicker_ratio: Option<f64>,
     /// Teleport only: frames after the jump until FLIP stays within 10% of its steady value
     /// (the mean over the last quarter); 0 when the first frame after the jump already is.
     pub recovery_frames: Option<u32>,
@@ -829,9 +830,12 @@ pub fn run_bench_aa(
                         x.frame > 0 && !(motion == Motion::Teleport && x.frame as usize == jump)
                     };
                     let changes: Vec<&AaFrame> = f.iter().filter(|x| moved(x)).collect();
-                    let k = changes.len().max(1) as f64;
-                    let flicker = changes.iter().map(|x| x.change).sum::<f64>() / k;
-                    let truth_flicker = changes.iter().map(|x| x.truth_change).sum::<f64>() / k;
+                    let k = changes.len() as f64;
+                    let measured = |of: fn(&AaFrame) -> f64| {
+                        (!changes.is_empty()).then(|| changes.iter().map(|x| of(x)).sum::<f64>() / k)
+                    };
+                    let flicker = measured(|x| x.change);
+                    let truth_flicker = measured(|x| x.truth_change);
                     let frame_flips: Vec<f64> = f.iter().map(|x| x.flip).collect();
                     let mean = |of: fn(&AaFrame) -> f64| f.iter().map(of).sum::<f64>() / n.max(1.0);
                     sequences.push(AaSequence {
@@ -842,7 +846,7 @@ pub fn run_bench_aa(
                         coarse_flip_mean: mean(|x| x.coarse_flip),
                         flicker,
                         truth_flicker,
-                        flicker_ratio: flicker / truth_flicker.max(1e-9),
+                        flicker_ratio: flicker.zip(truth_flicker).map(|(f, t)| f / t.max(1e-9)),
                         recovery_frames: (motion == Motion::Teleport)
                             .then(|| recovery_frames(&frame_flips, jump))
                             .flatten(),
@@ -1048,18 +1052,20 @@ pub fn write_tables(
         "width,height,method,motion,flip_mean,flicker,truth_flicker,flicker_ratio,recovery_frames,\
          coarse_flip_mean\n",
     );
+    // Empty where nothing was measured.
+    let cell = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
     for s in sequences {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{:.5},{:.4},{:.4},{:.4},{},{:.5}",
+            "{},{},{},{},{:.5},{},{},{},{},{:.5}",
             s.size.0,
             s.size.1,
             s.method,
             s.motion.name(),
             s.flip_mean,
-            s.flicker,
-            s.truth_flicker,
-            s.flicker_ratio,
+            cell(s.flicker),
+            cell(s.truth_flicker),
+            cell(s.flicker_ratio),
             s.recovery_frames.map_or(String::new(), |n| n.to_string()),
             s.coarse_flip_mean
         );

@@ -539,18 +539,19 @@ pub struct BenchLodReport {
     /// The settings (of a run stopped early, those whose images were captured, with the rounds
     /// timed so far: none where `frame.frames` is 0).
     pub settings: Vec<SettingResult>,
-    /// Whether the default setting is on the Pareto front of pixel FLIP against the truth.
-    pub default_on_front: bool,
-    /// Whether it is on the front of the coarse FLIP.
-    pub default_on_coarse_front: bool,
+    /// Whether the default setting is on the Pareto front of pixel FLIP against the truth
+    /// (`None` in a run stopped before it was timed).
+    pub default_on_front: Option<bool>,
+    /// Whether it is on the front of the coarse FLIP (`None` as above).
+    pub default_on_coarse_front: Option<bool>,
     /// The settings on the front of pixel FLIP against the truth, fastest first.
     pub front: Vec<String>,
     /// The settings on the front of the coarse FLIP against the truth, fastest first.
     pub coarse_front: Vec<String>,
     /// The camera path of the flight (`None`: no flight).
     pub flight_path: Option<String>,
-    /// Frames of each flight.
-    pub flight_frames: u32,
+    /// Frames of each flight (`None`: no flight).
+    pub flight_frames: Option<u32>,
     /// The settings on the front of the flight's p99 time against pixel FLIP, fastest first
     /// (empty without a flight).
     pub flight_front: Vec<String>,
@@ -956,6 +957,7 @@ pub fn run_bench_lod(
     let (front, coarse_front, flight_front) =
         (names(&front), names(&coarse_front), names(&flight_front));
     let default = results.first();
+    let timed_default = default.filter(|r| r.frame.measured());
     let report = BenchLodReport {
         adapter: AdapterReport::of(&ctx),
         size: opts.size,
@@ -965,12 +967,12 @@ pub fn run_bench_lod(
         worst_pop,
         worst_tree_pop,
         worst_change_without_switch,
-        default_on_front: default.is_some_and(|r| r.pareto),
-        default_on_coarse_front: default.is_some_and(|r| r.pareto_coarse),
+        default_on_front: timed_default.map(|r| r.pareto),
+        default_on_coarse_front: timed_default.map(|r| r.pareto_coarse),
         front,
         coarse_front,
         flight_path: flight.as_ref().map(|p| p.name.clone()),
-        flight_frames: opts.flight_frames,
+        flight_frames: flight.as_ref().map(|_| opts.flight_frames),
         default_on_flight_front: flight
             .as_ref()
             .map(|_| default.is_some_and(|r| r.pareto_flight)),

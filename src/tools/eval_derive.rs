@@ -528,14 +528,19 @@ pub fn write_results(
         let fit = r.fit.as_ref();
         let _ = writeln!(
             csv,
-            "{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{},{},{},{},{},{},{}",
+            "{},{},{:.4},{:.4},{:.4},{:.4},{},{:.5},{},{},{},{},{},{},{}",
             r.method,
             r.factor,
             r.rmse_m,
             r.max_m,
             r.slope_rmse_deg,
             r.slope_bias_deg,
-            r.roughness_ratio,
+            // Empty where the truth has no roughness to be a ratio of.
+            if r.roughness_ratio.is_nan() {
+                String::new()
+            } else {
+                format!("{:.4}", r.roughness_ratio)
+            },
             r.ms_per_tile,
             front.contains(&i),
             r.method == chosen,
@@ -567,9 +572,18 @@ pub fn write_results(
         }),
     ];
     for (file, y_label, value) in charts {
+        // A measure with no value (roughness against a flat truth) gets no point, and says so.
+        let measured = results.iter().any(|r| value(r).is_finite());
         let chart = crate::tools::metrics::Chart {
             title: crate::tools::stop::chart_title(
-                format!("{dem_name}: derived from 1/{factor} resolution"),
+                format!(
+                    "{dem_name}: derived from 1/{factor} resolution{}",
+                    if measured {
+                        ""
+                    } else {
+                        " (not measured: the truth has none)"
+                    }
+                ),
                 interrupted,
             ),
             x_label: "CPU time per 133x133 tile (ms)".into(),
@@ -578,6 +592,7 @@ pub fn write_results(
             log_y: false,
             points: results
                 .iter()
+                .filter(|r| value(r).is_finite())
                 .map(|r| crate::tools::metrics::ChartPoint {
                     label: match &r.fit {
                         Some(f) => format!("{} (H {:.2})", r.method, f.hurst),
@@ -874,6 +889,22 @@ mod tests {
             );
         }
         assert!(!joint_front(&results).is_empty());
+        // Written as empty cells, not NaN (a chart drew NaN as a roughness error of 0).
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("out");
+        let dir = crate::tools::fly::OutDir::create_for(
+            &out,
+            "eval derive",
+            &crate::tools::fly::Outputs::named(&FILES),
+        )
+        .unwrap();
+        write_results(&results, "plane", &dir, false).unwrap();
+        let csv = std::fs::read_to_string(out.join("derive.csv")).unwrap();
+        assert!(!csv.to_lowercase().contains("nan"), "{csv}");
+        for row in csv.lines().skip(1) {
+            assert_eq!(row.split(',').nth(6), Some(""), "{row}");
+        }
+        assert!(out.join("derive_roughness.png").is_file());
         assert!(
             evaluate(&smooth_grid(), 4, DeriveMethod::Bicubic, 1)
                 .roughness_ratio

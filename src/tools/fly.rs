@@ -103,6 +103,31 @@ pub enum FlyProgress {
     /// Frame images in the output folder that this run does not write (an earlier run's):
     /// how many, and the first and last of their names.
     StaleFrames(usize, String, String),
+    /// The other kind of run's report in the output folder (`truth.json` beside a flight's
+    /// frames, `report.json` beside the truth's), describing frames this run writes over.
+    StaleReport(&'static str),
+}
+
+/// Tells `progress` of what an earlier run left in `out` that this one, writing `frames` frame
+/// images, leaves beside them: frame images past them, and `other_report` (the other kind of
+/// run's report) when it writes any.
+pub fn warn_of_stale_outputs(
+    out: &Path,
+    frames: u32,
+    other_report: &'static str,
+    progress: &mut dyn FnMut(FlyProgress),
+) {
+    let stale = stale_frames(out, frames);
+    if let (Some(first), Some(last)) = (stale.first(), stale.last()) {
+        progress(FlyProgress::StaleFrames(
+            stale.len(),
+            first.clone(),
+            last.clone(),
+        ));
+    }
+    if frames > 0 && out.join(other_report).exists() {
+        progress(FlyProgress::StaleReport(other_report));
+    }
 }
 
 /// The name of frame `i`'s image: `frame_00042.png`.
@@ -310,14 +335,7 @@ pub fn run_fly_with_source(
         "fly",
         &Outputs::matching(|n| n == "report.json" || frame_index(n).is_some_and(|i| i < frames)),
     )?;
-    let stale = stale_frames(&opts.out, frames);
-    if let (Some(first), Some(last)) = (stale.first(), stale.last()) {
-        progress(FlyProgress::StaleFrames(
-            stale.len(),
-            first.clone(),
-            last.clone(),
-        ));
-    }
+    warn_of_stale_outputs(&opts.out, frames, "truth.json", progress);
 
     let ctx = GpuContext::new()?;
     let world_name = world.manifest.name.clone();

@@ -440,6 +440,7 @@ pub fn run_fly_truth(
             n == "truth.json" || frame_index(n).is_some_and(|i| i < opts.frames)
         }),
     )?;
+    crate::tools::fly::warn_of_stale_outputs(&opts.out, opts.frames, "report.json", progress);
     let ctx = GpuContext::new()?;
     let mut base = RendererConfig::for_world(&world);
     base.service = super::service_over(opts.service, &base);

@@ -58,7 +58,11 @@ pub struct WindScene {
 /// +-[`MAX_ANGLE_DEG`](super::MAX_ANGLE_DEG), `position_m` within +-[`MAX_POSITION_M`](super::MAX_POSITION_M), `start_s` 0..=[`MAX_TIME_S`](super::MAX_TIME_S),
 /// strength key times within +-[`MAX_TIME_S`](super::MAX_TIME_S) and factors 0..=[`MAX_WIND_STRENGTH`](super::MAX_WIND_STRENGTH).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+#[serde(
+    tag = "kind",
+    rename_all = "lowercase",
+    try_from = "WrittenWindSource"
+)]
 pub enum WindSource {
     /// A uniform wind everywhere (placement is ignored).
     Directional {
@@ -135,6 +139,110 @@ pub enum WindSource {
         #[serde(default, skip_serializing_if = "std::ops::Not::not")]
         repeat: bool,
     },
+}
+
+/// A wind source as its table is written: its `kind` and the fields of every kind, each read
+/// in place (a value of the wrong shape is named with its field and line, which reading the
+/// kinds' variants directly lost), then checked against the kind into a [`WindSource`].
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WrittenWindSource {
+    kind: String,
+    direction_deg: Option<f64>,
+    speed_mps: Option<f64>,
+    radius_m: Option<f64>,
+    clockwise: Option<bool>,
+    inflow_mps: Option<f64>,
+    #[serde(default, deserialize_with = "super::exact_opt")]
+    position_m: Option<[f64; 2]>,
+    path: Option<String>,
+    #[serde(default)]
+    start_s: f64,
+    #[serde(default, deserialize_with = "exact_pairs")]
+    strength: Vec<[f64; 2]>,
+    #[serde(default)]
+    repeat: bool,
+}
+
+/// Reads a list of `[time, factor]` pairs, refusing a pair of another length ([`super::exact`]).
+fn exact_pairs<'de, D>(d: D) -> Result<Vec<[f64; 2]>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    Vec::<Vec<f64>>::deserialize(d)?
+        .into_iter()
+        .map(super::array_of)
+        .collect()
+}
+
+impl TryFrom<WrittenWindSource> for WindSource {
+    type Error = String;
+
+    fn try_from(w: WrittenWindSource) -> Result<Self, String> {
+        let kind = w.kind.as_str();
+        let need = |value: Option<f64>, field: &str| {
+            value.ok_or_else(|| format!("missing field `{field}` of a {kind} wind source"))
+        };
+        let foreign = |present: bool, field: &str| {
+            if present {
+                Err(format!(
+                    "unknown field `{field}` for a {kind} wind source (it belongs to another kind)"
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        let (position_m, path, start_s, strength, repeat) =
+            (w.position_m, w.path, w.start_s, w.strength, w.repeat);
+        match kind {
+            "directional" => {
+                foreign(w.radius_m.is_some(), "radius_m")?;
+                foreign(w.clockwise.is_some(), "clockwise")?;
+                foreign(w.inflow_mps.is_some(), "inflow_mps")?;
+                Ok(WindSource::Directional {
+                    direction_deg: need(w.direction_deg, "direction_deg")?,
+                    speed_mps: need(w.speed_mps, "speed_mps")?,
+                    position_m,
+                    path,
+                    start_s,
+                    strength,
+                    repeat,
+                })
+            }
+            "omni" => {
+                foreign(w.direction_deg.is_some(), "direction_deg")?;
+                foreign(w.clockwise.is_some(), "clockwise")?;
+                foreign(w.inflow_mps.is_some(), "inflow_mps")?;
+                Ok(WindSource::Omni {
+                    radius_m: need(w.radius_m, "radius_m")?,
+                    speed_mps: need(w.speed_mps, "speed_mps")?,
+                    position_m,
+                    path,
+                    start_s,
+                    strength,
+                    repeat,
+                })
+            }
+            "vortex" => {
+                foreign(w.direction_deg.is_some(), "direction_deg")?;
+                Ok(WindSource::Vortex {
+                    radius_m: need(w.radius_m, "radius_m")?,
+                    speed_mps: need(w.speed_mps, "speed_mps")?,
+                    clockwise: w.clockwise.unwrap_or(false),
+                    inflow_mps: w.inflow_mps.unwrap_or(0.0),
+                    position_m,
+                    path,
+                    start_s,
+                    strength,
+                    repeat,
+                })
+            }
+            other => Err(format!(
+                "unknown wind source kind {other:?}: expected \"directional\", \"omni\" or \
+                 \"vortex\""
+            )),
+        }
+    }
 }
 
 fn is_zero(x: &f64) -> bool {

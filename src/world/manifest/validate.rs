@@ -363,7 +363,7 @@ impl Manifest {
             v.all_within(&field("color"), &p.color, [0.0, 1.0], "")?;
             let [lo, hi] = p.size_m;
             v.all_finite(&field("size_m"), &p.size_m)?;
-            if !(f64::from(lo) >= MIN_PLANT_SIZE_M && lo <= hi && f64::from(hi) <= MAX_PLANT_SIZE_M)
+            if !(lo.decimal() >= MIN_PLANT_SIZE_M && lo <= hi && hi.decimal() <= MAX_PLANT_SIZE_M)
             {
                 return Err(v.out_of_range(
                     &field("size_m"),
@@ -621,14 +621,45 @@ impl Manifest {
     }
 }
 
+/// A number of the manifest as its file writes it: a 32-bit field's value is the shortest decimal
+/// that reads back as it (0.01, not 0.009999999776482582), so that a range's ends are inclusive
+/// for what the file says and an error prints what the file holds.
+trait Decimal: Copy {
+    fn decimal(self) -> f64;
+}
+
+impl Decimal for f32 {
+    fn decimal(self) -> f64 {
+        // Rust prints an f32 as the shortest decimal that reads back as it.
+        self.to_string().parse().unwrap_or(f64::from(self))
+    }
+}
+
+impl Decimal for f64 {
+    fn decimal(self) -> f64 {
+        self
+    }
+}
+
+macro_rules! exact_decimal {
+    ($($t:ty),*) => {$(
+        impl Decimal for $t {
+            fn decimal(self) -> f64 {
+                f64::from(self)
+            }
+        }
+    )*};
+}
+exact_decimal!(u8, u16, u32, i8, i16, i32);
+
 /// Builds validation errors that name the manifest file.
 struct Validator<'a> {
     path: &'a Path,
 }
 
 impl Validator<'_> {
-    fn finite(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
-        let value = value.into();
+    fn finite(&self, field: &str, value: impl Decimal) -> Result<(), WorldError> {
+        let value = value.decimal();
         if value.is_finite() {
             Ok(())
         } else {
@@ -640,15 +671,15 @@ impl Validator<'_> {
         }
     }
 
-    fn all_finite<T: Copy + Into<f64>>(&self, field: &str, values: &[T]) -> Result<(), WorldError> {
+    fn all_finite<T: Decimal>(&self, field: &str, values: &[T]) -> Result<(), WorldError> {
         for (i, &x) in values.iter().enumerate() {
             self.finite(&format!("{field}[{i}]"), x)?;
         }
         Ok(())
     }
 
-    fn positive(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
-        let value = value.into();
+    fn positive(&self, field: &str, value: impl Decimal) -> Result<(), WorldError> {
+        let value = value.decimal();
         self.finite(field, value)?;
         if value > 0.0 {
             Ok(())
@@ -657,8 +688,8 @@ impl Validator<'_> {
         }
     }
 
-    fn non_negative(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
-        let value = value.into();
+    fn non_negative(&self, field: &str, value: impl Decimal) -> Result<(), WorldError> {
+        let value = value.decimal();
         self.finite(field, value)?;
         if value >= 0.0 {
             Ok(())
@@ -675,11 +706,11 @@ impl Validator<'_> {
     fn at_most(
         &self,
         field: &str,
-        value: impl Into<f64>,
+        value: impl Decimal,
         most: f64,
         unit: &str,
     ) -> Result<(), WorldError> {
-        let value = value.into();
+        let value = value.decimal();
         self.finite(field, value)?;
         if value <= most {
             Ok(())
@@ -696,11 +727,11 @@ impl Validator<'_> {
     fn within(
         &self,
         field: &str,
-        value: impl Into<f64>,
+        value: impl Decimal,
         [lo, hi]: [f64; 2],
         unit: &str,
     ) -> Result<(), WorldError> {
-        let value = value.into();
+        let value = value.decimal();
         self.finite(field, value)?;
         if (lo..=hi).contains(&value) {
             Ok(())
@@ -710,7 +741,7 @@ impl Validator<'_> {
         }
     }
 
-    fn all_within<T: Copy + Into<f64>>(
+    fn all_within<T: Decimal>(
         &self,
         field: &str,
         values: &[T],
@@ -723,11 +754,11 @@ impl Validator<'_> {
         Ok(())
     }
 
-    fn angle(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+    fn angle(&self, field: &str, value: impl Decimal) -> Result<(), WorldError> {
         self.within(field, value, [-MAX_ANGLE_DEG, MAX_ANGLE_DEG], " degrees")
     }
 
-    fn time(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
+    fn time(&self, field: &str, value: impl Decimal) -> Result<(), WorldError> {
         self.within(field, value, [-MAX_TIME_S, MAX_TIME_S], " s")
     }
 
@@ -735,8 +766,8 @@ impl Validator<'_> {
         self.all_within(field, values, [-MAX_POSITION_M, MAX_POSITION_M], " m")
     }
 
-    fn speed(&self, field: &str, value: impl Into<f64>) -> Result<(), WorldError> {
-        let value = value.into();
+    fn speed(&self, field: &str, value: impl Decimal) -> Result<(), WorldError> {
+        let value = value.decimal();
         self.non_negative(field, value)?;
         self.at_most(field, value, MAX_WIND_SPEED_MPS, " m/s")
     }
