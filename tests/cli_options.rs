@@ -204,6 +204,12 @@ fn every_numeric_option_states_its_range_in_its_help() {
                 "--atlas-slots",
                 "--cache-mib",
                 "--http-cache-mib",
+                "--grass-spacing-m",
+                "--grass-width-scale",
+                "--grass-infill-m",
+                "--grass-segments",
+                "--grass-near-m",
+                "--mesh-step",
             ][..],
         ),
         (
@@ -249,6 +255,19 @@ fn every_numeric_option_states_its_range_in_its_help() {
                 "{sub:?} {o}'s help states no range: {entry}"
             );
         }
+    }
+}
+
+/// The benchmarks measure worlds on disk: an address is refused naming it (it was looked for
+/// as a folder, "world directory not found").
+#[test]
+fn a_benchmark_of_a_world_over_http_is_refused_naming_the_address() {
+    for bench in ["lod", "features", "aa"] {
+        assert_refused(
+            &["bench", bench, "http://127.0.0.1:9/w/"],
+            1,
+            &["http://127.0.0.1:9/w/: the benchmarks measure a world on disk"],
+        );
     }
 }
 

@@ -883,8 +883,8 @@ fn the_server_holds_its_connections_and_request_heads_within_bounds() {
 }
 
 /// Requests as RFC 9112 has them: a target's query may hold anything (`?u=http://h/x` is not
-/// an absolute target), an HTTP/1.1 request without a Host and a target that is neither a path
-/// nor absolute are 400, bytes past ASCII in a header's value are kept, and a Range under an
+/// an absolute target), an HTTP/1.1 request without a Host, a request with two and a target
+/// that is neither a path nor absolute are 400, bytes past ASCII in a header's value are kept, and a Range under an
 /// If-Range of another version is answered whole.
 #[test]
 fn the_server_reads_requests_as_rfc_9112_has_them() {
@@ -910,6 +910,9 @@ fn the_server_reads_requests_as_rfc_9112_has_them() {
         &b"GET /a.txt HTTP/1.1\r\n\r\n"[..],
         b"GET a.txt HTTP/1.1\r\nHost: x\r\n\r\n",
         b"GET /a.txt HTTP/1.\r\nHost: x\r\n\r\n",
+        // Two hosts (RFC 9112, 3.2), in either version.
+        b"GET /a.txt HTTP/1.1\r\nHost: x\r\nHost: y\r\n\r\n",
+        b"GET /a.txt HTTP/1.0\r\nHost: x\r\nhost: x\r\n\r\n",
     ] {
         let answer = ask(bad);
         assert!(

@@ -601,53 +601,6 @@ fn load_listing(
 /// A buffer or image is read from the glTF file's folder or below it, never through `..`
 /// (percent-encoded or not), an absolute path, a scheme or a backslash: the URI is refused by
 /// name before any file it names is asked for, whatever reads the files (disk or HTTP).
-/// A world's plant read through a symbolic link out of the world's folder is refused, whether
-/// the link is the glTF file, a buffer it names or a folder on the way; links within the world
-/// are followed.
-#[cfg(unix)]
-#[test]
-fn links_out_of_the_world_are_not_followed() {
-    use std::os::unix::fs::symlink;
-    let dir = tempfile::tempdir().unwrap();
-    let world = dir.path().join("world");
-    let plants = world.join("plants");
-    std::fs::create_dir_all(&plants).unwrap();
-    let (mut doc, bin) = triangle();
-    doc["buffers"][0]["uri"] = json!("tri.bin");
-    let gltf = serde_json::to_vec(&doc).unwrap();
-    let elsewhere = dir.path().join("elsewhere");
-    std::fs::create_dir_all(&elsewhere).unwrap();
-    write(&elsewhere, "tri.bin", &bin);
-    write(&elsewhere, "tri.gltf", &gltf);
-    let load = |path: &Path| {
-        verdant::plants::load_plant_from(path, &|p: &Path| {
-            verdant::plants::read_plant_file_within(&world, p)
-        })
-    };
-    let refused = |err: PlantFileError| {
-        let text = err.to_string();
-        assert!(
-            text.contains("symbolic link out of the world's folder"),
-            "{text}"
-        );
-    };
-    // The buffer a link out.
-    write(&plants, "tri.gltf", &gltf);
-    symlink(elsewhere.join("tri.bin"), plants.join("tri.bin")).unwrap();
-    refused(load(&plants.join("tri.gltf")).unwrap_err());
-    // The glTF file a link out.
-    symlink(elsewhere.join("tri.gltf"), plants.join("out.gltf")).unwrap();
-    refused(load(&plants.join("out.gltf")).unwrap_err());
-    // A folder on the way a link out.
-    symlink(&elsewhere, world.join("linked")).unwrap();
-    refused(load(&world.join("linked").join("tri.gltf")).unwrap_err());
-    // Links within the world are followed.
-    std::fs::remove_file(plants.join("tri.bin")).unwrap();
-    write(&world, "tri.bin", &bin);
-    symlink(world.join("tri.bin"), plants.join("tri.bin")).unwrap();
-    load(&plants.join("tri.gltf")).unwrap();
-}
-
 #[test]
 fn uris_leaving_the_gltf_files_folder_are_refused_before_any_read() {
     let dir = tempfile::tempdir().unwrap();

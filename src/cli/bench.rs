@@ -315,6 +315,19 @@ fn taa_variants(lists: &TaaLists) -> Vec<verdant::aa::taa::TaaSettings> {
     })
 }
 
+/// The world folder a benchmark measures: a folder or a world's name, not an address (its
+/// tiles are read from disk, so that a network's delays stay out of the figures).
+fn world_on_disk(arg: &str) -> anyhow::Result<std::path::PathBuf> {
+    if verdant::stream::http::is_url(arg) {
+        anyhow::bail!(
+            "{arg}: the benchmarks measure a world on disk, not over HTTP (a network's delays \
+             would be in their figures): copy the world's folder here, or fly it with `verdant \
+             fly {arg}`"
+        );
+    }
+    resolve_world(arg)
+}
+
 /// Parses an anti-aliasing method's name.
 fn parse_method(s: &str) -> Result<verdant::aa::AntiAliasing, String> {
     s.trim().parse()
@@ -795,7 +808,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             timing,
             truth,
         } => bench_features(verdant::tools::BenchLodOptions {
-            world: resolve_world(&world)?,
+            world: world_on_disk(&world)?,
             out,
             size,
             aa,
@@ -843,7 +856,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
             timing,
             truth,
         } => bench_lod(verdant::tools::BenchLodOptions {
-            world: resolve_world(&world)?,
+            world: world_on_disk(&world)?,
             out,
             size,
             dolly_frames,
@@ -878,7 +891,7 @@ pub(crate) fn run(what: BenchCommand) -> Result<()> {
         } => {
             taa.check(aa.contains(&verdant::aa::AntiAliasing::Taa))?;
             bench_aa(verdant::tools::bench_aa::BenchAaOptions {
-                world: resolve_world(&world)?,
+                world: world_on_disk(&world)?,
                 out,
                 sizes: size,
                 methods: aa,

@@ -36,7 +36,7 @@ pub use card::{crossed_cards, render_card};
 pub use gltf::{
     LoadedPlant, MAX_PLANT_BUFFER_BYTES, MAX_PLANT_JSON_BYTES, MAX_PLANT_TRIANGLES,
     MAX_PLANT_VERTICES, MAX_TEXTURE_SIZE, PlantFileError, PlantFileReader, PlantTexture,
-    load_plant, load_plant_from, read_plant_file, read_plant_file_within, write_plant_gltf,
+    load_plant, load_plant_from, read_plant_file, write_plant_gltf,
 };
 pub use mesh::{PlantImage, PlantMesh, PlantVertex};
 pub use recipe::{PlantLods, Recipe, generate};

@@ -138,12 +138,8 @@ pub struct PlantSet {
 
 impl PlantSet {
     /// Builds the models of `manifest`'s plant types; glTF files are read relative to `dir`.
-    /// A file reached through a symbolic link out of `dir` is refused
-    /// ([`crate::plants::gltf::read_plant_file_within`]).
     pub fn build(manifest: &Manifest, dir: &Path) -> Result<Self, PlantError> {
-        Self::build_with(manifest, dir, &|path: &Path| {
-            crate::plants::gltf::read_plant_file_within(dir, path)
-        })
+        Self::build_with(manifest, dir, &crate::plants::gltf::read_plant_file)
     }
 
     /// Like [`PlantSet::build`], each glTF file (and the buffers and images it names) read by
@@ -171,9 +167,7 @@ fn white() -> PlantImage {
 
 /// The model of plant type `t`.
 pub fn model(t: &crate::world::PlantType, dir: &Path) -> Result<PlantModel, PlantError> {
-    model_with(t, dir, &|path: &Path| {
-        crate::plants::gltf::read_plant_file_within(dir, path)
-    })
+    model_with(t, dir, &crate::plants::gltf::read_plant_file)
 }
 
 /// Like [`model`], a glTF file read by `read` ([`PlantSet::build_with`]).

@@ -224,10 +224,17 @@ impl<'a> Outputs<'a> {
 /// not a regular file, or, by its name, a `.png` that is not an 8-bit RGB or RGBA PNG without
 /// a JSON sidecar (what the tools write: a 16-bit or grey PNG, or one with a sidecar, may be a
 /// DEM or a map), or a `.json` beside a `.png` of the same name (a DEM's sidecar). A symbolic
-/// link is judged by the file it leads to. `None` where there is no file, or one that may be
+/// link is refused whatever it leads to: the run's rename would replace it. `None` where there is no file, or one that may be
 /// replaced, or a folder (no file is renamed over a folder: the write fails, naming it). The
 /// words follow the file's name: `is not a PNG image`.
 pub fn not_an_output(file: &Path) -> Option<String> {
+    // A link is the user's: the run's rename would replace it with a file (its target kept).
+    if std::fs::symlink_metadata(file).is_ok_and(|m| m.file_type().is_symlink()) {
+        return Some(
+            "is a symbolic link, which writing the run's output there would replace with a file"
+                .into(),
+        );
+    }
     let meta = match std::fs::metadata(file) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return None,
         Err(e) => return Some(format!("cannot be examined ({e})")),
@@ -932,8 +939,13 @@ mod tests {
         std::fs::write(out.join("pic.json"), "{}").unwrap();
         std::fs::write(out.join("notes.png"), "my notes").unwrap();
         std::fs::create_dir(out.join("shots.png")).unwrap();
+        // A link to a file an earlier run could have written (the rename would replace it).
+        std::fs::write(tmp.path().join("precious.csv"), "a,b\n").unwrap();
+        std::os::unix::fs::symlink(tmp.path().join("precious.csv"), out.join("linked.csv"))
+            .unwrap();
         let before = names(&out);
         for (name, why) in [
+            ("linked.csv", "is a symbolic link"),
             ("dem.png", "is a 16-bit grey PNG"),
             ("map.png", "is an 8-bit grey PNG"),
             ("shot.png", "has a JSON sidecar"),

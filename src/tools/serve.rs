@@ -366,8 +366,12 @@ fn read_head(stream: &TcpStream, deadline: Instant) -> Result<Head, HeadError> {
         }
         headers.push((name.to_string(), value.trim().to_string()));
     }
-    // An HTTP/1.1 request names its host (RFC 9112, 3.2).
-    if version == "HTTP/1.1" && !headers.iter().any(|(n, _)| n.eq_ignore_ascii_case("Host")) {
+    // An HTTP/1.1 request names its host, and no request names two (RFC 9112, 3.2).
+    let hosts = headers
+        .iter()
+        .filter(|(n, _)| n.eq_ignore_ascii_case("Host"))
+        .count();
+    if hosts > 1 || (version == "HTTP/1.1" && hosts == 0) {
         return Err(HeadError::Bad);
     }
     Ok(Head {

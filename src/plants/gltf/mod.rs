@@ -77,24 +77,6 @@ pub fn read_plant_file(path: &Path) -> Result<Vec<u8>, io::Error> {
     crate::world::format::read_regular(path, MAX_PLANT_FILE_BYTES).map_err(plant_file_io_error)
 }
 
-/// [`read_plant_file`] for a world on disk in the folder `root`: a file that is, or is reached
-/// through, a symbolic link out of the folder is refused, as a name with `..` is (a world
-/// unpacked from an archive reads no file beyond its own).
-pub fn read_plant_file_within(root: &Path, path: &Path) -> Result<Vec<u8>, io::Error> {
-    let real_root = root.canonicalize()?;
-    let Ok(real) = path.canonicalize() else {
-        // Missing, or unreadable: said as for any plant file.
-        return read_plant_file(path);
-    };
-    if !real.starts_with(&real_root) {
-        return Err(io::Error::other(
-            "a symbolic link out of the world's folder, which is not followed: copy the file \
-             into the world",
-        ));
-    }
-    read_plant_file(&real)
-}
-
 /// A world's error reading a plant's file, as the I/O error [`PlantFileError::Read`] gives
 /// after the file's name: the reason alone, without the path again.
 pub fn plant_file_io_error(e: crate::world::WorldError) -> io::Error {

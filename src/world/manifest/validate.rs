@@ -336,7 +336,7 @@ impl Manifest {
                 .extension()
                 .is_some_and(|e| e.eq_ignore_ascii_case("gltf") || e.eq_ignore_ascii_case("glb"));
             // A glTF file is named relative to the world's folder and stays inside it: the
-            // same file on disk and over HTTP, and no world reads files beyond its own.
+            // same file on disk and over HTTP, and no name leads out of the world's folder.
             // A backslash is a separator on some servers and file systems: not in a name.
             let inside = std::path::Path::new(&p.mesh)
                 .components()
