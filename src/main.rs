@@ -77,8 +77,9 @@ enum Command {
     Bake(BakeArgs),
     /// Read every stored tile of a world as the renderer reads it, on disk or over HTTP: each
     /// file decoded and checked against the manifest and against the stamp its bake wrote into
-    /// it (which tile, which bake). Lists the tiles that cannot be read and exits non-zero if
-    /// there is one.
+    /// it (which tile, which bake), and every plant file the world names, loaded as the
+    /// renderer loads it. Lists the tiles and plant files that cannot be read and exits non-zero
+    /// if there is one.
     ///
     /// Ctrl-C (or SIGTERM) stops the check: it says how far it got and exits with status 130.
     Check(CheckArgs),

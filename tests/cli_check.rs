@@ -150,6 +150,60 @@ fn check_passes_a_whole_world_and_lists_copied_and_foreign_tile_files() {
     );
 }
 
+/// The plant files a world names are read too, as the renderer reads them before its first
+/// frame: a world whose every tile is whole but whose glTF plant cannot be read fails the
+/// check, naming the plant type and the file (it passed, and every flight then failed).
+#[test]
+fn check_reads_the_worlds_plant_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let world = small_world(dir.path(), "hills", 7);
+    let grass = verdant::World::open(&world).unwrap().manifest.grass_types[1]
+        .name
+        .clone();
+    let plants = world.join("plants");
+    std::fs::create_dir_all(&plants).unwrap();
+    let fern = verdant::plants::recipe::Recipe::from_name("fern").unwrap();
+    let mesh = &verdant::plants::recipe::generate(fern, 1, [0.2, 0.5, 0.1]).lods[0];
+    verdant::plants::write_plant_gltf(&plants.join("fern.gltf"), mesh, None).unwrap();
+    let mut manifest = std::fs::read_to_string(world.join("world.toml")).unwrap();
+    manifest.push_str(&format!(
+        "\n[[plant_types]]\nname = \"my fern\"\nmesh = \"plants/fern.gltf\"\n\
+         size_m = [0.3, 0.5]\ndensity = {{ \"{grass}\" = 0.2 }}\n"
+    ));
+    std::fs::write(world.join("world.toml"), manifest).unwrap();
+    let shown = world.to_str().unwrap();
+
+    let out = check(shown);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    assert!(
+        stdout.contains("and its plant file of hills read")
+            && stdout.contains("every tile and plant file is whole"),
+        "{stdout}"
+    );
+
+    std::fs::write(plants.join("fern.gltf"), "").unwrap();
+    let out = check(shown);
+    let (stdout, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+    assert!(
+        stdout.contains("plant type \"my fern\": ") && stdout.contains("fern.gltf"),
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains("1 of 1 plant files of hills cannot be read (every tile is whole"),
+        "{stderr}"
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["check", shown, "--json"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["report"]["plant_files"], 1);
+    assert_eq!(doc["report"]["failed_plants"][0]["plant_type"], "my fern");
+}
+
 /// A world without a bake_id (the committed default world, baked before stamps) is read whole,
 /// and the check says that it had no stamps to check.
 #[test]

@@ -68,6 +68,9 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
         say!("{}", serde_json::to_string_pretty(&document)?)?;
     }
     if !args.json {
+        for p in &report.failed_plants {
+            say!("plant type {:?}: {}", p.plant_type, terminal_safe(&p.error))?;
+        }
         list_failed(&report.failed)?;
     }
     let stamps = if report.stamped {
@@ -75,8 +78,13 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
     } else {
         "no stamps checked: the world has no bake_id, baked before stamps or by hand"
     };
+    let plants = match report.plant_files {
+        0 => String::new(),
+        1 => " and its plant file".to_string(),
+        n => format!(" and its {n} plant files"),
+    };
     let read = format!(
-        "{} of {} tiles of {name} read in {:.1} s",
+        "{} of {} tiles{plants} of {name} read in {:.1} s",
         report.checked, report.tiles, report.seconds
     );
     // With --json the summary goes to standard error: standard output holds the document alone.
@@ -97,14 +105,30 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
         ))
         .into());
     }
+    let plants_failed = match report.failed_plants.len() {
+        0 => String::new(),
+        n => format!(
+            "{n} of {} plant files of {name} cannot be read{}",
+            report.plant_files,
+            if report.failed.is_empty() { "" } else { "; " }
+        ),
+    };
     if !report.failed.is_empty() {
         bail!(
-            "{} of {} tiles of {name} cannot be read ({stamps})",
+            "{plants_failed}{} of {} tiles of {name} cannot be read ({stamps})",
             report.failed.len(),
             report.tiles
         );
     }
-    summary(format!("{read}: every tile is whole ({stamps})"))?;
+    if !plants_failed.is_empty() {
+        bail!("{plants_failed} (every tile is whole; {stamps})");
+    }
+    let whole = if report.plant_files > 0 {
+        "every tile and plant file is whole"
+    } else {
+        "every tile is whole"
+    };
+    summary(format!("{read}: {whole} ({stamps})"))?;
     Ok(())
 }
 

@@ -1,6 +1,7 @@
 //! `verdant check`: every stored tile of a world read as the renderer reads it (each file within
-//! its size, decoded, checked against the manifest and against its stamp), on disk or over
-//! HTTP, so that a world copied, mirrored or edited by hand can be checked before it is flown.
+//! its size, decoded, checked against the manifest and against its stamp), and every plant file
+//! it names, on disk or over HTTP, so that a world copied, mirrored or edited by hand can be
+//! checked before it is flown.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -31,6 +32,15 @@ pub struct FailedTile {
     pub error: String,
 }
 
+/// A plant type whose file cannot be read, and why.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FailedPlant {
+    /// The plant type's name.
+    pub plant_type: String,
+    /// Why, as a message naming the file.
+    pub error: String,
+}
+
 /// What a check found.
 #[derive(Debug, serde::Serialize)]
 pub struct CheckReport {
@@ -40,6 +50,11 @@ pub struct CheckReport {
     pub checked: u64,
     /// Each tile that cannot be read, with why, coarsest level first.
     pub failed: Vec<FailedTile>,
+    /// The plant types drawn from a glTF file of the world's (read first, as the renderer reads
+    /// them before its first frame).
+    pub plant_files: u64,
+    /// Each of those whose file (or a buffer or image it names) cannot be read or is refused.
+    pub failed_plants: Vec<FailedPlant>,
     /// Whether the world's tile files carry stamps that were checked (its manifest has a
     /// `bake_id`).
     pub stamped: bool,
@@ -70,6 +85,7 @@ pub fn check_world(
     }
     let start = Instant::now();
     let cancel = options.cancel.clone().unwrap_or_default();
+    let (plant_files, failed_plants) = check_plants(world, source.as_ref());
     let shared = Arc::new(Shared {
         tiles: world.stored_tiles().collect(),
         next: AtomicUsize::new(0),
@@ -120,10 +136,39 @@ pub fn check_world(
             .into_iter()
             .map(|(_, tile, error)| FailedTile { tile, error })
             .collect(),
+        plant_files,
+        failed_plants,
         stamped: world.manifest.bake_id.is_some(),
         interrupted: interrupted || checked < total,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// Reads the glTF file of each of `world`'s plant types that names one, from `source`, as the
+/// renderer does before its first frame (every buffer and image, the checks and the reduced
+/// levels): how many there are, and each that fails.
+fn check_plants(world: &World, source: &dyn TileSource) -> (u64, Vec<FailedPlant>) {
+    let read = |path: &std::path::Path| -> std::io::Result<Vec<u8>> {
+        let name = path.strip_prefix(&world.dir).unwrap_or(path);
+        source
+            .read_file(name, crate::plants::gltf::MAX_PLANT_FILE_BYTES)
+            .map_err(crate::plants::gltf::plant_file_io_error)
+    };
+    let mut files = 0;
+    let mut failed = Vec::new();
+    for t in &world.manifest.plant_types {
+        if crate::plants::recipe::Recipe::from_name(&t.mesh).is_some() {
+            continue;
+        }
+        files += 1;
+        if let Err(e) = crate::plants::set::model_with(t, &world.dir, &read) {
+            failed.push(FailedPlant {
+                plant_type: t.name.clone(),
+                error: e.to_string(),
+            });
+        }
+    }
+    (files, failed)
 }
 
 /// What [`check_world`]'s workers share.
