@@ -182,34 +182,72 @@ fn a_stopped_finish_keeps_the_shards_tiles_for_the_next() {
 
 /// A finish refuses to publish while a shard recorded done lacks any of its tile files,
 /// naming the file and telling to run the shard again, which then bakes its tiles again.
+/// How a shard's tile file is lost or damaged before the finish.
+#[derive(Clone, Copy, Debug)]
+enum Damage {
+    Removed,
+    /// Cut short, as a lost write leaves it.
+    Truncated,
+    /// Another tile's file copied over it (a part copied from elsewhere).
+    Swapped,
+}
+
 #[test]
-fn a_finish_refuses_shards_whose_tiles_are_missing() {
+fn a_finish_refuses_shards_whose_tiles_are_missing_or_damaged() {
     let dir = tempfile::tempdir().unwrap();
     let dem = dem(dir.path());
     let whole = dir.path().join("whole");
     run(&opts(&dem, &whole, None)).unwrap();
     // Two shards: the finish publishes the shards' manifest; three: it bakes the roots first.
-    for count in [2, 3] {
-        let out = dir.path().join(format!("w{count}"));
+    for (count, damage) in [
+        (2, Damage::Removed),
+        (3, Damage::Removed),
+        (2, Damage::Truncated),
+        (3, Damage::Swapped),
+    ] {
+        let out = dir.path().join(format!("w{count}{damage:?}"));
         let parts = verdant::bake::shard::parts_dir(&out);
         for index in 0..count {
             run(&opts(&dem, &out, Some(ShardStep::Shard { index, count }))).unwrap();
         }
-        // The last tile file of the finest level goes missing.
-        let gone = tile_files(&parts)
+        // The last tile file of the finest level is lost or damaged.
+        let files: Vec<PathBuf> = tile_files(&parts)
             .into_iter()
-            .rfind(|p| p.starts_with("tiles/L2"))
-            .unwrap();
-        std::fs::remove_file(parts.join(&gone)).unwrap();
+            .filter(|p| p.starts_with("tiles/L2"))
+            .collect();
+        let gone = files.last().unwrap().clone();
+        let at = parts.join(&gone);
+        let why = match damage {
+            Damage::Removed => {
+                std::fs::remove_file(&at).unwrap();
+                "missing"
+            }
+            Damage::Truncated => {
+                let len = std::fs::metadata(&at).unwrap().len();
+                let f = std::fs::OpenOptions::new().write(true).open(&at).unwrap();
+                f.set_len(len / 2).unwrap();
+                "cannot be read"
+            }
+            Damage::Swapped => {
+                // The same kind of file of another tile.
+                let kind = gone.extension().unwrap();
+                let other = files
+                    .iter()
+                    .find(|p| *p != &gone && p.to_string_lossy().ends_with(&*kind.to_string_lossy()))
+                    .unwrap();
+                std::fs::copy(parts.join(other), &at).unwrap();
+                "cannot be read"
+            }
+        };
         let e = run(&opts(&dem, &out, Some(ShardStep::Finish { count })))
             .unwrap_err()
             .to_string();
         let name = gone.file_name().unwrap().to_string_lossy();
         assert!(
-            e.contains(&*name) && e.contains(&format!("--shard I/{count}")),
-            "{count} shards: {e}"
+            e.contains(&*name) && e.contains(why) && e.contains(&format!("--shard I/{count}")),
+            "{count} shards, {damage:?}: {e}"
         );
-        assert!(!out.exists(), "{count} shards: nothing is published");
+        assert!(!out.exists(), "{count} shards, {damage:?}: nothing is published");
         // The shard that lost it is run again; the others are done.
         let rerun: Vec<u32> = (0..count)
             .filter(|&index| {

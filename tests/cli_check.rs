@@ -187,7 +187,9 @@ fn check_reads_the_worlds_plant_files() {
     let (stdout, stderr) = text(&out);
     assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
     assert!(
-        stdout.contains("plant type \"my fern\": ") && stdout.contains("fern.gltf"),
+        stdout.contains("plant type \"my fern\": ")
+            && !stdout.contains("\"my fern\": plant type")
+            && stdout.contains("fern.gltf"),
         "{stdout}"
     );
     assert!(
@@ -393,14 +395,25 @@ fn stalling_server(manifest: Vec<u8>) -> String {
     format!("http://{addr}/")
 }
 
-/// Ctrl-C stops a check at once, reads waiting on a server that does not answer included: it
-/// says how far it got and exits with status 130, the reads it cut short not listed as failures.
+/// Ctrl-C stops a check at once, reads of tiles and plant files waiting on a server that does
+/// not answer included: it says how far it got and exits with status 130, the reads it cut short not listed as failures.
 #[test]
 fn ctrl_c_stops_a_check_waiting_on_a_silent_server_at_once() {
     use std::io::BufRead;
     let dir = tempfile::tempdir().unwrap();
     let world = small_world(dir.path(), "hills", 7);
-    let url = stalling_server(std::fs::read(world.join("world.toml")).unwrap());
+    // With a plant file, which the server holds back as it holds the tiles (the check waited
+    // out the timeout on it before it began on the tiles).
+    let grass = verdant::World::open(&world).unwrap().manifest.grass_types[1]
+        .name
+        .clone();
+    let mut manifest = std::fs::read_to_string(world.join("world.toml")).unwrap();
+    manifest.push_str(&format!(
+        "\n[[plant_types]]\nname = \"fern\"\nmesh = \"plants/fern.gltf\"\n\
+         size_m = [0.3, 0.5]\ndensity = {{ \"{grass}\" = 0.2 }}\n"
+    ));
+    let url = stalling_server(manifest.into_bytes());
+    let spawned = std::time::Instant::now();
     let mut child = Command::new(env!("CARGO_BIN_EXE_verdant"))
         .args(["check", &url, "--threads", "64", "--http-timeout-s", "100"])
         .stdout(std::process::Stdio::piped())
@@ -424,6 +437,12 @@ fn ctrl_c_stops_a_check_waiting_on_a_silent_server_at_once() {
     assert!(
         waited.as_secs_f64() < 10.0,
         "stopped {waited:?} after Ctrl-C"
+    );
+    // Begun on the tiles at once, the plant file still waiting.
+    assert!(
+        spawned.elapsed().as_secs_f64() < 30.0,
+        "ended {:?} after it started",
+        spawned.elapsed()
     );
     assert!(
         stdout.contains("of hills read") && stdout.contains("stopped"),

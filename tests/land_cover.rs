@@ -596,6 +596,39 @@ fn a_palette_map_is_read_by_its_indices_as_class_codes() {
     assert_eq!(baked(png_path, "halves_palette"), halves, "palette PNG");
 }
 
+/// A float density map holding values past the largest scale (a huge number standing in for an
+/// undeclared nodata) is refused naming the file: it painted full grass. (Infinities read as
+/// nodata, as in a DEM.)
+#[test]
+fn a_float_density_map_past_every_scale_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path());
+    for (name, value, says) in [
+        ("huge.tif", 1e30, "the value 1000000015047466200000000000000"),
+        ("wide.tif", 70000.0, "the value 70000"),
+    ] {
+        let path = dir.path().join(name);
+        let data = map_codes(|_| value);
+        write_geotiff::<colortype::Gray32Float>(
+            &path,
+            MAP_SIZE,
+            [MAP_CELL; 2],
+            MAP_CORNER,
+            32633,
+            &data,
+        );
+        let out = dir.path().join(format!("out_{name}"));
+        let mut o = opts(&dem, &out, None);
+        o.density_map = Some(path);
+        let e = bake(&o, &mut |_, _, _| {}).unwrap_err().to_string();
+        assert!(
+            e.contains(name) && e.contains("density map") && e.contains(says),
+            "{name}: {e}"
+        );
+        assert!(!out.exists(), "{name}: nothing written");
+    }
+}
+
 #[test]
 fn a_map_of_floats_or_signed_or_wide_integers_is_refused_naming_its_sample_type() {
     let dir = tempfile::tempdir().unwrap();

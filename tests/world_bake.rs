@@ -228,6 +228,45 @@ fn bake_is_deterministic_and_leaves_no_temporary_files() {
 /// Every file a bake writes carries its own name and the bake's id (the manifest's
 /// `bake_id`), and the world reads back through those checks; a bake of other inputs (another
 /// seed) has another id.
+/// A DEM rewritten while the bake runs (read in windows, a bake of a large DEM reads it to the
+/// end) is refused before anything is published, naming it: the world mixed its two versions
+/// under the first one's id, and said nothing.
+#[test]
+fn a_dem_changed_during_the_bake_is_refused_and_nothing_is_published() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, hills);
+    let out = dir.path().join("w");
+    let opts = BakeOptions {
+        dem: dem.clone(),
+        out: out.clone(),
+        cell_size_m: Some(20.0),
+        tile_cells: 16,
+        stored_levels: 2,
+        ..Default::default()
+    };
+    let mut touched = false;
+    let err = bake(&opts, &mut |stage, _, _| {
+        if stage == BakeStage::WriteTiles && !touched {
+            touched = true;
+            // Other heights, and a later time, as a writer leaves the file.
+            write_dem(dir.path(), "hills", DEM_SIZE, DEM_CELLS, DEM_SCALE, wall);
+            let f = std::fs::File::options().write(true).open(&dem).unwrap();
+            f.set_modified(std::time::SystemTime::now() + std::time::Duration::from_secs(10))
+                .unwrap();
+        }
+    })
+    .unwrap_err();
+    assert!(touched);
+    let text = err.to_string();
+    assert!(
+        text.contains("hills.png") && text.contains("changed while the bake read it"),
+        "{text}"
+    );
+    assert!(!out.exists(), "nothing is published");
+    // Once it is still, it bakes.
+    bake(&opts, &mut |_, _, _| {}).unwrap();
+}
+
 #[test]
 fn a_bake_stamps_every_tile_file_with_its_name_and_its_bake() {
     use verdant::world::format::{read_stamp, stamp};

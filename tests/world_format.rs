@@ -1596,13 +1596,17 @@ wind = { bend = 0.05 }
     // Two types whose densities add up past the grid's one plant a cell.
     let crowded = with(&format!(
         "{}{}",
-        plant.replace("meadow = 0.4", "meadow = 3.0"),
+        plant.replace("meadow = 0.4", "meadow = 0.45"),
         plant
             .replace("poppy", "daisy")
-            .replace("meadow = 0.4", "meadow = 3.0")
+            .replace("meadow = 0.4", "meadow = 3.96")
     ));
     let err = parse(&crowded).expect_err("crowded").to_string();
-    assert!(err.contains("density.meadow"), "{err}");
+    // The sum as the file's numbers add up (it printed 4.4100000113248825).
+    assert!(
+        err.contains("density.meadow = 4.41 plants per m2 in all"),
+        "{err}"
+    );
 }
 
 /// A 32-bit field's range is inclusive of its ends as the file writes them (0.01 reads as

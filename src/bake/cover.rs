@@ -742,6 +742,20 @@ impl ValueMap {
             return Err(as_map(map_error(path, "it holds values below 0"), what));
         }
         let max = values.iter().fold(0.0f64, |m, &v| m.max(f64::from(v)));
+        // Past the largest scale a value has no meaning: a huge number standing in for an
+        // undeclared nodata would paint full grass.
+        if read.full <= 1.0 && max > 65535.0 {
+            return Err(as_map(
+                map_error(
+                    path,
+                    format!(
+                        "it holds the value {max} where densities run 0 to 1, 0 to 255 or 0 to \
+                         65535 (a nodata value the file does not declare? set GDAL_NODATA)"
+                    ),
+                ),
+                what,
+            ));
+        }
         let full = if read.full > 1.0 || max <= 1.0 {
             read.full
         } else if max <= 255.0 {

@@ -374,6 +374,8 @@ pub fn bake(
         .clone()
         .unwrap_or_else(|| default_name(&out, &opts.dem));
     let bake_id = shard::bake_id(opts, &files)?;
+    // Checked again before anything is published: inputs that change during the bake refuse it.
+    let inputs_at_start = shard::input_record(opts, &files)?;
     let mut manifest = Manifest {
         name,
         description: description(dem, &opts.dem, cell),
@@ -500,8 +502,16 @@ pub fn bake(
     };
     if let Some((ShardStep::Finish { .. }, parts)) = &parts {
         // Before the survey: a finish that cannot publish fails at once.
-        let materials = cover.as_ref().is_some_and(|c| c.has_materials());
-        parts.check_tiles(&manifest.pyramid, materials)?;
+        // The shards' tiles are read before the survey has the height range and the cover its
+        // grass types: any plausible height and type pass here, the stamp and the rest are
+        // checked.
+        let options = crate::world::format::ReadOptions {
+            height_range_m: crate::world::PLAUSIBLE_HEIGHTS_M.map(|h| h as f32),
+            grass_type_count: 256,
+            materials: cover.as_ref().is_some_and(|c| c.has_materials()),
+            bake_id: manifest.bake_id_value(),
+        };
+        parts.check_tiles(&manifest.pyramid, &options)?;
     }
     cancelled()?;
 
@@ -641,6 +651,7 @@ pub fn bake(
                 manifest.grass_peak = Some(grass_peak(pyramid, peak));
                 write_atomic(&parts.dir.join("world.toml"), manifest.to_toml().as_bytes())?;
                 let report = report(n, peak);
+                shard::check_inputs_unchanged(opts, &files, &inputs_at_start)?;
                 parts.mark_done(index, &report)?;
                 return Ok(report);
             }
@@ -679,6 +690,7 @@ pub fn bake(
     write_atomic(&staging.world().join("world.toml"), text.as_bytes())?;
     // The last chance to stop: once the world is being moved into place, it is finished.
     cancelled()?;
+    shard::check_inputs_unchanged(opts, &files, &inputs_at_start)?;
     // The world goes out; a sharded bake's parts are then spent, and removed.
     staging.publish(from_parts.as_deref())?;
     progress(BakeStage::WriteManifest, 1, 1);
@@ -795,7 +807,13 @@ fn finish_from_parts(
         .filter_map(|i| parts.done(i))
         .fold(0f32, |p, r| p.max(r.grass_peak));
     manifest.grass_peak = Some(grass_peak(pyramid, peak));
-    parts.check_tiles(pyramid, manifest.materials)?;
+    let options = crate::world::format::ReadOptions {
+        height_range_m: manifest.height_range_m,
+        grass_type_count: manifest.grass_types.len(),
+        materials: manifest.materials,
+        bake_id: manifest.bake_id_value(),
+    };
+    parts.check_tiles(pyramid, &options)?;
     let start = Instant::now();
     let staging = Staging::begin(out, &opts.out, opts.replace)?;
     let (text, carried) = manifest_text(&manifest, out, opts)?;

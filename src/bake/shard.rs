@@ -144,6 +144,45 @@ pub fn bake_id(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, Worl
     ))
 }
 
+/// The record of a bake's input files as they are now (each one's size and modification time,
+/// what [`bake_id`] hashes), for [`check_inputs_unchanged`] at the bake's end.
+pub(super) fn input_record(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, WorldError> {
+    inputs(opts, dem_files, false)
+}
+
+/// Refuses a bake whose input files changed since `record` was taken at its start: tiles cut
+/// from a DEM rewritten half way through mix its two versions, under the id of the first.
+/// Names the first file that changed (or went).
+pub(super) fn check_inputs_unchanged(
+    opts: &BakeOptions,
+    dem_files: &[PathBuf],
+    record: &str,
+) -> Result<(), WorldError> {
+    let changed = |path: PathBuf| WorldError::Io {
+        path,
+        source: std::io::Error::other(
+            "changed while the bake read it (its size or modification time is not what it was \
+             at the bake's start): nothing was written to the output folder; bake again once it \
+             has stopped changing",
+        ),
+    };
+    let now = match inputs(opts, dem_files, false) {
+        Ok(now) => now,
+        Err(e) => return Err(changed(e.path().map_or_else(|| opts.dem.clone(), Path::to_path_buf))),
+    };
+    if now == record {
+        return Ok(());
+    }
+    // Each file's line is "PATH SIZE MTIME": the first that differs names the file.
+    let file = |line: &str| line.rsplitn(3, ' ').nth(2).map(PathBuf::from);
+    let differs = record
+        .lines()
+        .zip(now.lines())
+        .find(|(a, b)| a != b)
+        .and_then(|(a, _)| file(a));
+    Err(changed(differs.unwrap_or_else(|| opts.dem.clone())))
+}
+
 /// What [`fingerprint`] and [`bake_id`] hash: the options that shape the world (its `name` only
 /// with `with_name`) and each input file's size and modification time: the DEM files, the files
 /// the user named (a VRT that lists DEMs, a folder's files), a PNG DEM's JSON sidecar (its
@@ -412,13 +451,23 @@ impl Parts {
     /// world would be published without them. Names the first file missing and every shard
     /// missing one, and removes those shards' records, so that running them again writes
     /// their tiles again.
-    pub(super) fn check_tiles(&self, pyramid: &Pyramid, materials: bool) -> Result<(), WorldError> {
+    ///
+    /// Each tile is then read as the renderer reads it (`options`: the finished manifest's
+    /// ranges and bake id), on every core: a file cut short, or another tile's or another
+    /// bake's (a shared volume's lost write, a part copied from elsewhere), fails the finish
+    /// as a missing one does.
+    pub(super) fn check_tiles(
+        &self,
+        pyramid: &Pyramid,
+        options: &crate::world::format::ReadOptions,
+    ) -> Result<(), WorldError> {
         let kinds: Vec<TileFile> = TileFile::ALL
             .into_iter()
-            .chain(materials.then_some(TileFile::Material))
+            .chain(options.materials.then_some(TileFile::Material))
             .collect();
         let mut missing = std::collections::BTreeSet::new();
         let mut first = None;
+        let mut present = Vec::new();
         for id in super::tiles::stored_tiles(pyramid) {
             let Some(shard) = owner(pyramid, self.count, id) else {
                 continue;
@@ -430,12 +479,61 @@ impl Parts {
                 .iter()
                 .map(|&kind| tile_path(&self.dir, id, kind))
                 .find(|path| !path.is_file());
-            if let Some(path) = absent {
-                missing.insert(shard);
-                first.get_or_insert(path);
+            match absent {
+                Some(path) => {
+                    missing.insert(shard);
+                    first.get_or_insert((path, "missing".to_string()));
+                }
+                None => present.push((id, shard)),
             }
         }
-        let Some(path) = first else {
+        if first.is_none() {
+            // Every file is there: each read whole, in order, the first failure kept.
+            let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
+            let chunk = present.len().div_ceil(threads).max(1);
+            let bad: Vec<(TileId, u32, WorldError)> = std::thread::scope(|scope| {
+                let workers: Vec<_> = present
+                    .chunks(chunk)
+                    .map(|part| {
+                        scope.spawn(move || {
+                            part.iter()
+                                .filter_map(|&(id, shard)| {
+                                    crate::world::format::read_tile_with(
+                                        &self.dir, pyramid, id, options,
+                                    )
+                                    .err()
+                                    .map(|e| (id, shard, e))
+                                })
+                                .collect::<Vec<_>>()
+                        })
+                    })
+                    .collect();
+                workers
+                    .into_iter()
+                    .flat_map(|w| w.join().unwrap_or_default())
+                    .collect()
+            });
+            for (id, shard, e) in bad {
+                missing.insert(shard);
+                if first.is_none() {
+                    let path = e
+                        .path()
+                        .map(Path::to_path_buf)
+                        .unwrap_or_else(|| tile_path(&self.dir, id, TileFile::Height));
+                    let why = match &e {
+                        WorldError::Io { source, .. } => source.to_string(),
+                        e => {
+                            // The message without the file's name, which leads the error.
+                            let text = e.to_string();
+                            let shown = format!("{}: ", path.display());
+                            text.strip_prefix(&shown).unwrap_or(&text).to_string()
+                        }
+                    };
+                    first = Some((path, format!("cannot be read ({why})")));
+                }
+            }
+        }
+        let Some((path, why)) = first else {
             return Ok(());
         };
         for &shard in &missing {
@@ -443,6 +541,7 @@ impl Parts {
         }
         Err(WorldError::ShardTilesMissing {
             path,
+            why,
             parts: self.dir.clone(),
             shards: missing.into_iter().collect(),
             count: self.count,

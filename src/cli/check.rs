@@ -69,7 +69,8 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
     }
     if !args.json {
         for p in &report.failed_plants {
-            say!("plant type {:?}: {}", p.plant_type, terminal_safe(&p.error))?;
+            // The error names the plant type and its file.
+            say!("{}", terminal_safe(&p.error))?;
         }
         list_failed(&report.failed)?;
     }

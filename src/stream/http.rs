@@ -395,10 +395,16 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
             "more than one port (a host name holds no ':'): expected http://HOST[:PORT]/PATH",
         ));
     }
+    // Digits alone, without leading zeros: `+80` and `080` parse as 80, but the HTTP client
+    // keeps the host's text as written and takes the answer for a redirect.
     if let Some(port) = port
-        && !port.parse::<u16>().is_ok_and(|p| p > 0)
+        && !(port.bytes().all(|b| b.is_ascii_digit())
+            && !port.starts_with('0')
+            && port.parse::<u16>().is_ok_and(|p| p > 0))
     {
-        return Err(bad("the port must be a number in 1..=65535"));
+        return Err(bad(
+            "the port must be a number in 1..=65535, in digits without leading zeros",
+        ));
     }
     Ok(())
 }
@@ -717,6 +723,8 @@ mod tests {
             "http://127.0.0.1:/",
             "http://h:80x/",
             "http://127.0.0.1:8123:9099/",
+            "http://127.0.0.1:+44453/",
+            "http://127.0.0.1:044453/",
             "http://h::80/",
             "http://[::1",
             "http://[::1]x/",

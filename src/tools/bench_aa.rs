@@ -806,7 +806,11 @@ pub fn run_bench_aa(
                                 truth_change,
                             });
                         }
-                        prev[m] = Some(img);
+                        // From the first measured frame on, as the truth's: the first's change is
+                        // 0 for both (it was the method's change from the run-up's last frame).
+                        if truth_img.is_some() {
+                            prev[m] = Some(img);
+                        }
                     }
                     for (m, f) in measured.into_iter().enumerate() {
                         sequence[m].push(f);

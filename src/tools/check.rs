@@ -41,6 +41,9 @@ pub struct FailedPlant {
     pub error: String,
 }
 
+/// How many plant types name a file of the world's, and each whose file cannot be read.
+type PlantsChecked = (u64, Vec<FailedPlant>);
+
 /// What a check found.
 #[derive(Debug, serde::Serialize)]
 pub struct CheckReport {
@@ -85,7 +88,23 @@ pub fn check_world(
     }
     let start = Instant::now();
     let cancel = options.cancel.clone().unwrap_or_default();
-    let (plant_files, failed_plants) = check_plants(world, source.as_ref());
+    // The plant files are read on a thread of their own beside the tiles, so that a cancel
+    // does not wait on a server that holds one back.
+    let plants: Arc<Mutex<Option<PlantsChecked>>> = Arc::default();
+    {
+        let (world, source, plants) = (world.clone(), Arc::clone(&source), Arc::clone(&plants));
+        let reader = move || {
+            let checked = check_plants(&world, source.as_ref());
+            *plants.lock().unwrap_or_else(|e| e.into_inner()) = Some(checked);
+        };
+        if let Err(source) = std::thread::Builder::new()
+            .name("check-plants".into())
+            .spawn(reader)
+        {
+            return Err(WorldError::Threads { source });
+        }
+    }
+    let plants_read = || plants.lock().unwrap_or_else(|e| e.into_inner()).is_some();
     let shared = Arc::new(Shared {
         tiles: world.stored_tiles().collect(),
         next: AtomicUsize::new(0),
@@ -112,7 +131,9 @@ pub fn check_world(
     // The calling thread reports progress while the workers read, and leaves them to their last
     // reads once the check is cancelled.
     let mut shown = u64::MAX;
-    while shared.finished.load(Ordering::Acquire) < started && !cancel.is_cancelled() {
+    while (shared.finished.load(Ordering::Acquire) < started || !plants_read())
+        && !cancel.is_cancelled()
+    {
         let now = shared.done.load(Ordering::Relaxed);
         if now != shown {
             progress(now, total);
@@ -122,6 +143,16 @@ pub fn check_world(
     }
     let interrupted = cancel.is_cancelled();
     let checked = shared.done.load(Ordering::Relaxed);
+    // Stopped before the plant files were read: they count as the types that name one, none
+    // failed.
+    let (plants_read_at_end, plant_files, failed_plants) = plants
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .take()
+        .map_or_else(
+            || (false, plant_file_types(world), Vec::new()),
+            |(n, failed)| (true, n, failed),
+        );
     progress(checked, total);
     let mut failed = shared
         .failed
@@ -139,7 +170,7 @@ pub fn check_world(
         plant_files,
         failed_plants,
         stamped: world.manifest.bake_id.is_some(),
-        interrupted: interrupted || checked < total,
+        interrupted: interrupted || checked < total || !plants_read_at_end,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
@@ -154,13 +185,11 @@ fn check_plants(world: &World, source: &dyn TileSource) -> (u64, Vec<FailedPlant
             .read_file(name, crate::plants::gltf::MAX_PLANT_FILE_BYTES)
             .map_err(crate::plants::gltf::plant_file_io_error)
     };
-    let mut files = 0;
     let mut failed = Vec::new();
     for t in &world.manifest.plant_types {
         if crate::plants::recipe::Recipe::from_name(&t.mesh).is_some() {
             continue;
         }
-        files += 1;
         if let Err(e) = crate::plants::set::model_with(t, &world.dir, &read) {
             failed.push(FailedPlant {
                 plant_type: t.name.clone(),
@@ -168,7 +197,17 @@ fn check_plants(world: &World, source: &dyn TileSource) -> (u64, Vec<FailedPlant
             });
         }
     }
-    (files, failed)
+    (plant_file_types(world), failed)
+}
+
+/// The plant types of `world` drawn from a file of its own (not a recipe).
+fn plant_file_types(world: &World) -> u64 {
+    world
+        .manifest
+        .plant_types
+        .iter()
+        .filter(|t| crate::plants::recipe::Recipe::from_name(&t.mesh).is_none())
+        .count() as u64
 }
 
 /// What [`check_world`]'s workers share.

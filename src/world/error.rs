@@ -585,10 +585,11 @@ pub enum WorldError {
     },
 
     /// A sharded bake's finish found a tile file missing from the parts folder of a shard
-    /// recorded done: the world would be published without it. The records of the shards
-    /// missing files are removed, so that they can be run again.
+    /// recorded done, or one that cannot be read (cut short, or another tile's or bake's): the
+    /// world would be published without it. The records of the shards with such files are
+    /// removed, so that they can be run again.
     #[error(
-        "{}: missing from the parts of the sharded bake in {}, though shard{} {} of {count} {} \
+        "{}: {why} in the parts of the sharded bake in {}, though shard{} {} of {count} {} \
          recorded done; {} record{} removed: run {} again (--shard I/{count}), then \
          --finish-shards {count}",
         path.display(),
@@ -601,8 +602,10 @@ pub enum WorldError {
         if shards.len() == 1 { "it" } else { "them" },
     )]
     ShardTilesMissing {
-        /// The first tile file found missing.
+        /// The first tile file found missing or unreadable.
         path: PathBuf,
+        /// What is wrong with it: `missing`, or why it cannot be read.
+        why: String,
         /// The parts folder.
         parts: PathBuf,
         /// The shards that lack tile files, each recorded done.

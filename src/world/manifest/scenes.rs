@@ -145,7 +145,7 @@ pub enum WindSource {
 /// in place (a value of the wrong shape is named with its field and line, which reading the
 /// kinds' variants directly lost), then checked against the kind into a [`WindSource`].
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, expecting = "a wind source: a table with its kind and fields")]
 struct WrittenWindSource {
     kind: String,
     direction_deg: Option<f64>,
@@ -162,6 +162,14 @@ struct WrittenWindSource {
     strength: Vec<[f64; 2]>,
     #[serde(default)]
     repeat: bool,
+}
+
+/// `kind` with its indefinite article: "an omni", "a vortex".
+fn article(kind: &str) -> String {
+    match kind.chars().next() {
+        Some('a' | 'e' | 'i' | 'o' | 'u') => format!("an {kind}"),
+        _ => format!("a {kind}"),
+    }
 }
 
 /// Reads a list of `[time, factor]` pairs, refusing a pair of another length ([`super::exact`]).
@@ -181,12 +189,13 @@ impl TryFrom<WrittenWindSource> for WindSource {
     fn try_from(w: WrittenWindSource) -> Result<Self, String> {
         let kind = w.kind.as_str();
         let need = |value: Option<f64>, field: &str| {
-            value.ok_or_else(|| format!("missing field `{field}` of a {kind} wind source"))
+            value.ok_or_else(|| format!("missing field `{field}` of {} wind source", article(kind)))
         };
         let foreign = |present: bool, field: &str| {
             if present {
                 Err(format!(
-                    "unknown field `{field}` for a {kind} wind source (it belongs to another kind)"
+                    "unknown field `{field}` for {} wind source (it belongs to another kind)",
+                    article(kind)
                 ))
             } else {
                 Ok(())

@@ -383,7 +383,7 @@ impl Manifest {
                     ));
                 };
                 v.within(&at, d, [0.0, MAX_PLANT_DENSITY], " plants per m2")?;
-                per_grass[g] += f64::from(d);
+                per_grass[g] += d.decimal();
             }
             v.within(
                 &field("max_slope_deg"),
@@ -422,7 +422,8 @@ impl Manifest {
         {
             return Err(v.out_of_range(
                 &format!("plant_types[*].density.{}", self.grass_types[g].name),
-                format!("{total} plants per m2 in all"),
+                // The file's decimals added up, without the sum's rounding noise.
+                format!("{} plants per m2 in all", number((total * 1e6).round() / 1e6)),
                 &format!("at most {MAX_PLANT_DENSITY} plants per m2 of all types together"),
             ));
         }
