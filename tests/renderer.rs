@@ -272,6 +272,8 @@ fn figures_of_frames_in_flight_stay_within_the_ring() {
         "the newest are kept"
     );
     assert!(renderer.take_stats().is_empty(), "taken once");
+    // The newest figures stay readable after they were taken (stats() said None).
+    assert_eq!(renderer.stats().map(|s| s.frame), Some(frames - 1));
     // With figures taken every frame and the GPU waited for, none is lost.
     let before = renderer.stats_dropped();
     for i in 0..2 * READBACK_SLOTS as u64 {
@@ -283,6 +285,40 @@ fn figures_of_frames_in_flight_stay_within_the_ring() {
         assert_eq!(got[0].frame, frames + i);
     }
     assert_eq!(renderer.stats_dropped(), before);
+}
+
+/// A device made with limits below WebGPU's defaults (a downlevel profile: four storage buffers
+/// a stage, where the grass's compute pass binds six) is refused by `Renderer::new` naming the
+/// limits (it panicked in wgpu's validation as a pipeline was made).
+#[test]
+fn a_device_with_downlevel_limits_is_refused_naming_them() {
+    let ctx = common::gpu();
+    let (device, queue) = pollster::block_on(ctx.adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("downlevel"),
+        required_limits: wgpu::Limits::downlevel_defaults(),
+        ..Default::default()
+    }))
+    .expect("a device with downlevel limits");
+    let world = World::open(&common::default_world()).unwrap();
+    let options = RendererOptions::new(
+        &world,
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureFormat::Depth32Float,
+        64,
+        36,
+    );
+    let e = Renderer::new(&device, &queue, world, options)
+        .err()
+        .expect("refused");
+    assert!(matches!(e, RendererError::DeviceLimits { .. }), "{e}");
+    let text = e.to_string();
+    assert!(
+        text.contains("max_storage_buffers_per_shader_stage 4 (8 needed)")
+            && text.contains("adapter.limits()"),
+        "{text}"
+    );
+    // The adapter's own limits (what the tools and the example ask for) are enough.
+    verdant::renderer::check_device_limits(&ctx.device).unwrap();
 }
 
 /// A device of the test's adapter whose largest storage buffer binding is 128 MiB (the WebGPU
@@ -755,7 +791,8 @@ fn frames_whose_encoders_are_dropped_unsubmitted_are_counted_and_the_ring_goes_o
 }
 
 /// Inputs that cannot be drawn (a camera, time or jitter that is not finite, a field of view of
-/// 0 or 180 degrees, a near plane at 0, matrices of the caller's that cannot be inverted) gave
+/// 0 or 180 degrees, a near plane at 0, matrices of the caller's that cannot be inverted, and
+/// finite values whose projection is not, in 32 bits) gave
 /// a frame of sky, or of nothing, with `Ok`, and a warm-up from a NaN camera said every tile was
 /// resident. Each is refused naming what is wrong, and the next good frame draws. So is the
 /// record of a frame prepared before a resize or a switch of anti-aliasing (it was drawn black,
@@ -791,6 +828,19 @@ fn inputs_that_cannot_be_drawn_and_stale_frames_are_refused() {
         (
             with(&|i| i.walker = Some(glam::DVec2::NAN)),
             "walker position",
+        ),
+        // Finite each, but not in the projection they make (drawn as flat sky with `Ok`).
+        (
+            with(&|i| i.camera.fov_y_deg = 1e-40),
+            "view-projection is not finite and invertible",
+        ),
+        (
+            with(&|i| i.camera.near_m = 1e-45),
+            "view-projection is not finite and invertible",
+        ),
+        (
+            with(&|i| i.jitter_px = glam::Vec2::splat(3e38)),
+            "view-projection with its jitter is not finite",
         ),
     ];
     for (input, want) in &cases {

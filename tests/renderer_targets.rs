@@ -301,6 +301,8 @@ fn colour_formats_the_device_cannot_draw_into_are_refused_saying_why() {
         for word in [&format!("{format:?}"), why, "Rgba16Float", "Bgra8UnormSrgb"] {
             assert!(text.contains(word), "{format:?}: {word:?} not in: {text}");
         }
+        // The feature by its name, not wgpu's structure ("Features { features_wgpu: ...").
+        assert!(!text.contains("Features {"), "{format:?}: {text}");
     }
 }
 

@@ -121,6 +121,13 @@ pub const NEAR_RANGE_M: std::ops::RangeInclusive<f32> = 0.0..=200.0;
 pub const LOD_FACTOR_RANGE: std::ops::RangeInclusive<f64> = 0.25..=8.0;
 /// Largest terrain mesh step, samples.
 pub const MAX_MESH_STEP: u32 = 16;
+
+/// The most grass tiles the rings may reach ([`RendererConfig::validate_for`]): the square of
+/// tiles around the camera within the low ring and its hysteresis, as far as the world goes.
+/// The truth's reach in the default world is 625 of them, `bench blades`' largest field 10,000;
+/// a ring of 10,000 km selected all 393,216 of a large world each frame (1.8 s of CPU) and drew
+/// none of them, the pool holding far fewer.
+pub const MAX_RING_TILES: u64 = 16_384;
 /// Atlas slots [`RendererConfig::for_world`] gives a frame's terrain a level of the pyramid (at
 /// LOD factor 1). A frame holds the tiles it draws and their ancestors; along the default
 /// world's paths (9 levels) the most was 135, along a 10 km-cell bake's (18 levels) 350: 15 and
@@ -382,30 +389,22 @@ impl RendererConfig {
             " s",
         )?;
         if let Some(r) = &self.grass_rings {
-            let finite = [r.high_radius_m, r.low_radius_m, r.hysteresis_m]
-                .iter()
-                .all(|v| v.is_finite());
-            if !finite || r.high_radius_m <= 0.0 {
-                return Err(ConfigError::new(
-                    "grass_rings.high_radius_m",
-                    r.high_radius_m,
-                    "above 0 m (and every radius finite)",
-                ));
-            }
             // A high ring reaching past the view distance is allowed: every grass tile in view
-            // is then high LOD (the truth's renders draw so).
-            if r.low_radius_m <= 0.0 {
-                return Err(ConfigError::new(
-                    "grass_rings.low_radius_m",
-                    r.low_radius_m,
-                    "above 0 m",
-                ));
+            // is then high LOD (the truth's renders draw so). How far a ring may reach depends
+            // on the world's grass tiles ([`Self::validate_for`]).
+            for (field, value) in [
+                ("grass_rings.high_radius_m", r.high_radius_m),
+                ("grass_rings.low_radius_m", r.low_radius_m),
+            ] {
+                if !(value.is_finite() && value > 0.0) {
+                    return Err(ConfigError::new(field, value, "finite and above 0 m"));
+                }
             }
-            if r.hysteresis_m < 0.0 {
+            if !(r.hysteresis_m.is_finite() && r.hysteresis_m >= 0.0) {
                 return Err(ConfigError::new(
                     "grass_rings.hysteresis_m",
                     r.hysteresis_m,
-                    "at least 0 m",
+                    "finite and at least 0 m",
                 ));
             }
         }
@@ -450,6 +449,26 @@ impl RendererConfig {
                         pyramid.tile_size_m(finest),
                         crate::lod::MAX_GRASS_LEVELS_UP,
                         pyramid.tile_size_m(coarsest),
+                    ),
+                ));
+            }
+            let tile_m = pyramid.tile_size_m(r.level);
+            let reach = r.low_radius_m + r.hysteresis_m;
+            let side = 2.0 * (reach / tile_m).ceil() + 1.0;
+            let [nx, ny] = pyramid.tiles_at(r.level).map(f64::from);
+            let tiles = side.min(nx) * side.min(ny);
+            if tiles > MAX_RING_TILES as f64 {
+                // The radius that reaches that many, in a world as wide as this one.
+                let half = ((MAX_RING_TILES as f64).sqrt() - 1.0) / 2.0;
+                return Err(ConfigError::new(
+                    "grass_rings.low_radius_m",
+                    r.low_radius_m,
+                    format!(
+                        "small enough that the rings reach at most {MAX_RING_TILES} of the \
+                         world's {tile_m} m grass tiles (with the hysteresis of {} m they reach \
+                         {tiles}): about {} m at most",
+                        r.hysteresis_m,
+                        (half.floor() * tile_m - r.hysteresis_m).max(0.0)
                     ),
                 ));
             }
@@ -694,7 +713,7 @@ mod tests {
             ),
             (
                 with(&|c| c.grass_rings.as_mut().unwrap().low_radius_m = f64::INFINITY),
-                "grass_rings.high_radius_m",
+                "grass_rings.low_radius_m",
                 "finite",
             ),
             (
@@ -706,6 +725,11 @@ mod tests {
                 with(&|c| c.grass_rings.as_mut().unwrap().hysteresis_m = -1.0),
                 "grass_rings.hysteresis_m",
                 "at least 0 m",
+            ),
+            (
+                with(&|c| c.grass_rings.as_mut().unwrap().hysteresis_m = f64::NAN),
+                "grass_rings.hysteresis_m",
+                "finite",
             ),
             (
                 with(&|c| c.grass.spacing_m = 0.01),
@@ -958,6 +982,33 @@ mod tests {
         c.validate_for(&world).unwrap();
         c.lod_factor = f64::NAN;
         assert_eq!(c.validate_for(&world).unwrap_err().field, "lod_factor");
+    }
+
+    /// Rings reach at most MAX_RING_TILES of the world's grass tiles (a ring of 10,000 km
+    /// selected every grass tile of the world each frame, 1.8 s of CPU, and drew none); the
+    /// truth's reach is well within it.
+    #[test]
+    fn the_rings_reach_a_bounded_number_of_grass_tiles() {
+        let world = world();
+        let base = RendererConfig::for_world(&world);
+        let truth = crate::tools::truth::truth_config(&world, &base, 256);
+        truth.validate_for(&world).unwrap();
+        // A high ring past the view distance draws every tile in view high: allowed.
+        let mut c = base.clone();
+        c.grass_rings.as_mut().unwrap().high_radius_m = 1e7;
+        c.validate_for(&world).unwrap();
+        for low in [1e7, 3200.0] {
+            let mut c = base.clone();
+            c.grass_rings.as_mut().unwrap().low_radius_m = low;
+            c.validate().unwrap();
+            let e = c.validate_for(&world).unwrap_err();
+            assert_eq!(e.field, "grass_rings.low_radius_m", "{e}");
+            assert!(
+                e.to_string()
+                    .contains("at most 16384 of the world's 50 m grass tiles"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -25,6 +25,18 @@ pub enum RendererError {
     /// The wind scene asked for does not exist or does not fit.
     #[error(transparent)]
     Wind(#[from] WindError),
+    /// The device was made with limits below WebGPU's defaults, which the renderer's passes
+    /// need ([`super::required_limits`]).
+    #[error(
+        "the device's limits are below what the renderer needs (WebGPU's defaults, \
+         wgpu::Limits::default()): {}; make the device with required_limits: adapter.limits() \
+         (or wgpu::Limits::default()) on an adapter that offers them",
+        short.join(", ")
+    )]
+    DeviceLimits {
+        /// Each limit that falls short: its name, the device's value and the least needed.
+        short: Vec<String>,
+    },
     /// The atlas slot count does not fit the adapter or the world.
     #[error(
         "an atlas of {slots} slots does not fit: it needs more slots than the world's {roots} \

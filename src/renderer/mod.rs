@@ -79,6 +79,32 @@ use crate::world::{TileId, World};
 /// are still on their way gets no figures (counted in [`Renderer::stats_dropped`]).
 pub const READBACK_SLOTS: usize = 4;
 
+/// The device limits the renderer needs: WebGPU's defaults, which every desktop adapter
+/// offers (its passes bind up to six storage buffers in one stage, more than a downlevel device
+/// has). Make the device with `required_limits: adapter.limits()` or these.
+pub fn required_limits() -> wgpu::Limits {
+    wgpu::Limits::default()
+}
+
+/// Refuses a device whose limits fall short of [`required_limits`], naming each limit (a
+/// pipeline of the renderer would otherwise fail wgpu's validation as it is made);
+/// [`Renderer::new`] checks this first.
+pub fn check_device_limits(device: &wgpu::Device) -> Result<(), RendererError> {
+    check_limits(&device.limits())
+}
+
+fn check_limits(limits: &wgpu::Limits) -> Result<(), RendererError> {
+    let mut short = Vec::new();
+    required_limits().check_limits_with_fail_fn(limits, false, |name, needed, has| {
+        short.push(format!("{name} {has} ({needed} needed)"));
+    });
+    if short.is_empty() {
+        Ok(())
+    } else {
+        Err(RendererError::DeviceLimits { short })
+    }
+}
+
 /// Refuses a grass tile of `tile_m` whose grid of `cell_m` needs more workgroups of 8 points
 /// a side than the device dispatches (`limit` a dimension).
 /// Runs `make`, which allocates GPU memory, turning the device's out-of-memory error into
@@ -258,6 +284,7 @@ impl Renderer {
         source: Arc<dyn TileSource>,
         options: RendererOptions,
     ) -> Result<Self, RendererError> {
+        check_limits(&device.limits())?;
         let config = options.config;
         config.validate_for(&world)?;
         let targets = Targets {
@@ -961,6 +988,10 @@ impl Renderer {
             self.targets.width,
             self.targets.height,
         );
+        if let Err(problem) = view.check() {
+            self.unprepared = Some(RendererError::FrameInput(problem));
+            return;
+        }
         if let Some(taa) = &mut self.taa {
             taa.prepare(&self.queue, view.unjittered, view.eye, view.forward);
         }
@@ -1341,11 +1372,11 @@ impl Renderer {
         Ok(())
     }
 
-    /// Figures of the newest frame that has come back (polling the device without waiting);
-    /// `None` before the first has.
+    /// Figures of the newest frame that has come back (polling the device without waiting),
+    /// whether or not [`Self::take_stats`] has taken it since; `None` before the first has.
     pub fn stats(&mut self) -> Option<&FrameStats> {
         self.collect_stats();
-        self.readback.ready.back()
+        self.readback.latest.as_ref()
     }
 
     /// Every frame's figures that have come back since the last call, oldest first (at most

@@ -63,6 +63,8 @@ pub(super) struct StatsRing {
     slots: Vec<ReadbackSlot>,
     timestamp_bytes: u64,
     pub(super) ready: VecDeque<FrameStats>,
+    /// The newest figures that came back, kept when `ready` is taken.
+    pub(super) latest: Option<FrameStats>,
     pub(super) dropped: u64,
 }
 
@@ -84,6 +86,7 @@ impl StatsRing {
             slots,
             timestamp_bytes,
             ready: VecDeque::with_capacity(MAX_READY_STATS + 1),
+            latest: None,
             dropped: 0,
         }
     }
@@ -193,6 +196,7 @@ impl StatsRing {
                 self.ready.pop_front();
                 self.dropped += 1;
             }
+            self.latest = Some(s.clone());
             self.ready.push_back(s);
         }
     }

@@ -386,9 +386,14 @@ pub fn color_format_problem(
     let features = device.features();
     let needs = format.required_features();
     if !features.contains(needs) {
+        let missing: Vec<&str> = needs
+            .difference(features)
+            .iter_names()
+            .map(|(name, _)| name)
+            .collect();
         return Some(format!(
-            "it needs the device feature {:?}",
-            needs.difference(features)
+            "it needs the device feature {} (wgpu::Features)",
+            missing.join(" and ")
         ));
     }
     if features.contains(wgpu::Features::TEXTURE_ADAPTER_SPECIFIC_FORMAT_FEATURES) {

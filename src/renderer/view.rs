@@ -27,6 +27,31 @@ pub struct FrameView {
 }
 
 impl FrameView {
+    /// Refuses a view whose projection, as drawn, is not finite and invertible in 32 bits
+    /// though each input was finite on its own (a field of view of 1e-40 degrees, a near plane
+    /// of 1e-45 m, a jitter of 3e38 pixels, a custom view and projection whose product
+    /// overflows): such a frame drew as flat sky, and the temporal history kept it.
+    pub fn check(&self) -> Result<(), String> {
+        for (what, m) in [
+            ("", self.unjittered),
+            ("with its jitter", self.view_proj),
+        ] {
+            let inverse = m.inverse();
+            if !(m.is_finite() && m.determinant().is_normal() && inverse.is_finite()) {
+                return Err(format!(
+                    "the camera's view-projection{} is not finite and invertible in 32 bits \
+                     (a field of view, near plane, jitter or custom matrix too extreme): {m}",
+                    if what.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" {what}")
+                    }
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// The view of `camera` on a `width` x `height` target, shifted by `jitter_px`.
     pub fn new(camera: &Camera, jitter_px: Vec2, width: u32, height: u32) -> Self {
         let aspect = width as f32 / height as f32;
