@@ -233,7 +233,9 @@ fn a_finish_refuses_shards_whose_tiles_are_missing_or_damaged() {
                 let kind = gone.extension().unwrap();
                 let other = files
                     .iter()
-                    .find(|p| *p != &gone && p.to_string_lossy().ends_with(&*kind.to_string_lossy()))
+                    .find(|p| {
+                        *p != &gone && p.to_string_lossy().ends_with(&*kind.to_string_lossy())
+                    })
                     .unwrap();
                 std::fs::copy(parts.join(other), &at).unwrap();
                 "cannot be read"
@@ -247,7 +249,10 @@ fn a_finish_refuses_shards_whose_tiles_are_missing_or_damaged() {
             e.contains(&*name) && e.contains(why) && e.contains(&format!("--shard I/{count}")),
             "{count} shards, {damage:?}: {e}"
         );
-        assert!(!out.exists(), "{count} shards, {damage:?}: nothing is published");
+        assert!(
+            !out.exists(),
+            "{count} shards, {damage:?}: nothing is published"
+        );
         // The shard that lost it is run again; the others are done.
         let rerun: Vec<u32> = (0..count)
             .filter(|&index| {

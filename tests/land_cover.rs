@@ -604,7 +604,11 @@ fn a_float_density_map_past_every_scale_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let dem = write_dem(dir.path());
     for (name, value, says) in [
-        ("huge.tif", 1e30, "the value 1000000015047466200000000000000"),
+        (
+            "huge.tif",
+            1e30,
+            "the value 1000000015047466200000000000000",
+        ),
         ("wide.tif", 70000.0, "the value 70000"),
     ] {
         let path = dir.path().join(name);

@@ -1088,7 +1088,10 @@ fn invalid_wind_sources_get_errors_naming_the_field() {
         "{err}"
     );
     // A field of another kind, and one a kind needs, are named.
-    let err = broken("inflow_mps = -2.0", "inflow_mps = -2.0, direction_deg = 1.0");
+    let err = broken(
+        "inflow_mps = -2.0",
+        "inflow_mps = -2.0, direction_deg = 1.0",
+    );
     assert!(err.to_string().contains("`direction_deg`"), "{err}");
     let err = broken("radius_m = 25.0, ", "");
     assert!(err.to_string().contains("`radius_m`"), "{err}");

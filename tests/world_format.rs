@@ -1626,8 +1626,16 @@ wind = { sway_damping = 0.01 }
     assert_eq!(m.plant_types[0].size_m, [0.01, 0.01]);
     assert_eq!(m.plant_types[0].wind.sway_damping, 0.01);
     for (from, to, shown) in [
-        ("sway_damping = 0.01", "sway_damping = 0.0099", "sway_damping = 0.0099:"),
-        ("size_m = [0.01, 0.01]", "size_m = [0.0099, 0.01]", "size_m = [0.0099, 0.01]:"),
+        (
+            "sway_damping = 0.01",
+            "sway_damping = 0.0099",
+            "sway_damping = 0.0099:",
+        ),
+        (
+            "size_m = [0.01, 0.01]",
+            "size_m = [0.0099, 0.01]",
+            "size_m = [0.0099, 0.01]:",
+        ),
         ("meadow = 0.4", "meadow = -0.45", "density.meadow = -0.45"),
     ] {
         let err = parse(&format!("{VALID}{}", plant.replace(from, to)))
@@ -1635,9 +1643,13 @@ wind = { sway_damping = 0.01 }
             .to_string();
         assert!(err.contains(shown), "{to}: {err}");
     }
-    let err = parse(&VALID.replacen("tip_color = [0.2, 0.5, 0.1]", "tip_color = [-0.1, 0.5, 0.1]", 1))
-        .unwrap_err()
-        .to_string();
+    let err = parse(&VALID.replacen(
+        "tip_color = [0.2, 0.5, 0.1]",
+        "tip_color = [-0.1, 0.5, 0.1]",
+        1,
+    ))
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("tip_color[0] = -0.1:"), "{err}");
 }
 

@@ -146,7 +146,10 @@ pub fn bake_id(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, Worl
 
 /// The record of a bake's input files as they are now (each one's size and modification time,
 /// what [`bake_id`] hashes), for [`check_inputs_unchanged`] at the bake's end.
-pub(super) fn input_record(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, WorldError> {
+pub(super) fn input_record(
+    opts: &BakeOptions,
+    dem_files: &[PathBuf],
+) -> Result<String, WorldError> {
     inputs(opts, dem_files, false)
 }
 
@@ -168,7 +171,11 @@ pub(super) fn check_inputs_unchanged(
     };
     let now = match inputs(opts, dem_files, false) {
         Ok(now) => now,
-        Err(e) => return Err(changed(e.path().map_or_else(|| opts.dem.clone(), Path::to_path_buf))),
+        Err(e) => {
+            return Err(changed(
+                e.path().map_or_else(|| opts.dem.clone(), Path::to_path_buf),
+            ));
+        }
     };
     if now == record {
         return Ok(());

@@ -32,10 +32,7 @@ impl FrameView {
     /// of 1e-45 m, a jitter of 3e38 pixels, a custom view and projection whose product
     /// overflows): such a frame drew as flat sky, and the temporal history kept it.
     pub fn check(&self) -> Result<(), String> {
-        for (what, m) in [
-            ("", self.unjittered),
-            ("with its jitter", self.view_proj),
-        ] {
+        for (what, m) in [("", self.unjittered), ("with its jitter", self.view_proj)] {
             let inverse = m.inverse();
             if !(m.is_finite() && m.determinant().is_normal() && inverse.is_finite()) {
                 return Err(format!(

@@ -836,7 +836,8 @@ pub fn run_bench_aa(
                     let changes: Vec<&AaFrame> = f.iter().filter(|x| moved(x)).collect();
                     let k = changes.len() as f64;
                     let measured = |of: fn(&AaFrame) -> f64| {
-                        (!changes.is_empty()).then(|| changes.iter().map(|x| of(x)).sum::<f64>() / k)
+                        (!changes.is_empty())
+                            .then(|| changes.iter().map(|x| of(x)).sum::<f64>() / k)
                     };
                     let flicker = measured(|x| x.change);
                     let truth_flicker = measured(|x| x.truth_change);

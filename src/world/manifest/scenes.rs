@@ -58,11 +58,7 @@ pub struct WindScene {
 /// +-[`MAX_ANGLE_DEG`](super::MAX_ANGLE_DEG), `position_m` within +-[`MAX_POSITION_M`](super::MAX_POSITION_M), `start_s` 0..=[`MAX_TIME_S`](super::MAX_TIME_S),
 /// strength key times within +-[`MAX_TIME_S`](super::MAX_TIME_S) and factors 0..=[`MAX_WIND_STRENGTH`](super::MAX_WIND_STRENGTH).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(
-    tag = "kind",
-    rename_all = "lowercase",
-    try_from = "WrittenWindSource"
-)]
+#[serde(tag = "kind", rename_all = "lowercase", try_from = "WrittenWindSource")]
 pub enum WindSource {
     /// A uniform wind everywhere (placement is ignored).
     Directional {
@@ -145,7 +141,10 @@ pub enum WindSource {
 /// in place (a value of the wrong shape is named with its field and line, which reading the
 /// kinds' variants directly lost), then checked against the kind into a [`WindSource`].
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields, expecting = "a wind source: a table with its kind and fields")]
+#[serde(
+    deny_unknown_fields,
+    expecting = "a wind source: a table with its kind and fields"
+)]
 struct WrittenWindSource {
     kind: String,
     direction_deg: Option<f64>,

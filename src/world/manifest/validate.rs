@@ -363,8 +363,7 @@ impl Manifest {
             v.all_within(&field("color"), &p.color, [0.0, 1.0], "")?;
             let [lo, hi] = p.size_m;
             v.all_finite(&field("size_m"), &p.size_m)?;
-            if !(lo.decimal() >= MIN_PLANT_SIZE_M && lo <= hi && hi.decimal() <= MAX_PLANT_SIZE_M)
-            {
+            if !(lo.decimal() >= MIN_PLANT_SIZE_M && lo <= hi && hi.decimal() <= MAX_PLANT_SIZE_M) {
                 return Err(v.out_of_range(
                     &field("size_m"),
                     format!("[{lo}, {hi}]"),
@@ -423,7 +422,10 @@ impl Manifest {
             return Err(v.out_of_range(
                 &format!("plant_types[*].density.{}", self.grass_types[g].name),
                 // The file's decimals added up, without the sum's rounding noise.
-                format!("{} plants per m2 in all", number((total * 1e6).round() / 1e6)),
+                format!(
+                    "{} plants per m2 in all",
+                    number((total * 1e6).round() / 1e6)
+                ),
                 &format!("at most {MAX_PLANT_DENSITY} plants per m2 of all types together"),
             ));
         }
