@@ -38,6 +38,19 @@ fn small_world(dir: &Path, name: &str, seed: u64) -> PathBuf {
     out
 }
 
+/// The manifest of `world` with a plant type `name` drawn from `plants/fern.gltf`.
+fn with_plant_file(world: &Path, name: &str) -> String {
+    let grass = verdant::World::open(world).unwrap().manifest.grass_types[1]
+        .name
+        .clone();
+    let mut manifest = std::fs::read_to_string(world.join("world.toml")).unwrap();
+    manifest.push_str(&format!(
+        "\n[[plant_types]]\nname = \"{name}\"\nmesh = \"plants/fern.gltf\"\n\
+         size_m = [0.3, 0.5]\ndensity = {{ \"{grass}\" = 0.2 }}\n"
+    ));
+    manifest
+}
+
 fn check(world: &str) -> Output {
     Command::new(env!("CARGO_BIN_EXE_verdant"))
         .args(["check", world, "--threads", "2"])
@@ -157,19 +170,12 @@ fn check_passes_a_whole_world_and_lists_copied_and_foreign_tile_files() {
 fn check_reads_the_worlds_plant_files() {
     let dir = tempfile::tempdir().unwrap();
     let world = small_world(dir.path(), "hills", 7);
-    let grass = verdant::World::open(&world).unwrap().manifest.grass_types[1]
-        .name
-        .clone();
     let plants = world.join("plants");
     std::fs::create_dir_all(&plants).unwrap();
     let fern = verdant::plants::recipe::Recipe::from_name("fern").unwrap();
     let mesh = &verdant::plants::recipe::generate(fern, 1, [0.2, 0.5, 0.1]).lods[0];
     verdant::plants::write_plant_gltf(&plants.join("fern.gltf"), mesh, None).unwrap();
-    let mut manifest = std::fs::read_to_string(world.join("world.toml")).unwrap();
-    manifest.push_str(&format!(
-        "\n[[plant_types]]\nname = \"my fern\"\nmesh = \"plants/fern.gltf\"\n\
-         size_m = [0.3, 0.5]\ndensity = {{ \"{grass}\" = 0.2 }}\n"
-    ));
+    let manifest = with_plant_file(&world, "my fern");
     std::fs::write(world.join("world.toml"), manifest).unwrap();
     let shown = world.to_str().unwrap();
 
@@ -404,15 +410,7 @@ fn ctrl_c_stops_a_check_waiting_on_a_silent_server_at_once() {
     let world = small_world(dir.path(), "hills", 7);
     // With a plant file, which the server holds back as it holds the tiles (the check waited
     // out the timeout on it before it began on the tiles).
-    let grass = verdant::World::open(&world).unwrap().manifest.grass_types[1]
-        .name
-        .clone();
-    let mut manifest = std::fs::read_to_string(world.join("world.toml")).unwrap();
-    manifest.push_str(&format!(
-        "\n[[plant_types]]\nname = \"fern\"\nmesh = \"plants/fern.gltf\"\n\
-         size_m = [0.3, 0.5]\ndensity = {{ \"{grass}\" = 0.2 }}\n"
-    ));
-    let url = stalling_server(manifest.into_bytes());
+    let url = stalling_server(with_plant_file(&world, "fern").into_bytes());
     let spawned = std::time::Instant::now();
     let mut child = Command::new(env!("CARGO_BIN_EXE_verdant"))
         .args(["check", &url, "--threads", "64", "--http-timeout-s", "100"])

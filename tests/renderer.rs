@@ -293,12 +293,7 @@ fn figures_of_frames_in_flight_stay_within_the_ring() {
 #[test]
 fn a_device_with_downlevel_limits_is_refused_naming_them() {
     let ctx = common::gpu();
-    let (device, queue) = pollster::block_on(ctx.adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some("downlevel"),
-        required_limits: wgpu::Limits::downlevel_defaults(),
-        ..Default::default()
-    }))
-    .expect("a device with downlevel limits");
+    let (device, queue) = device_with_limits(&ctx, wgpu::Limits::downlevel_defaults());
     let world = World::open(&common::default_world()).unwrap();
     let options = RendererOptions::new(
         &world,
@@ -321,17 +316,25 @@ fn a_device_with_downlevel_limits_is_refused_naming_them() {
     verdant::renderer::check_device_limits(&ctx.device).unwrap();
 }
 
+/// A device of the test's adapter with `limits`.
+fn device_with_limits(
+    ctx: &verdant::gpu::GpuContext,
+    limits: wgpu::Limits,
+) -> (wgpu::Device, wgpu::Queue) {
+    pollster::block_on(ctx.adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("lower limits"),
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .expect("a device with lower limits")
+}
+
 /// A device of the test's adapter whose largest storage buffer binding is 128 MiB (the WebGPU
 /// default; many adapters allow no more).
 fn device_with_small_buffers(ctx: &verdant::gpu::GpuContext) -> (wgpu::Device, wgpu::Queue) {
     let mut limits = ctx.adapter.limits();
     limits.max_storage_buffer_binding_size = limits.max_storage_buffer_binding_size.min(128 << 20);
-    pollster::block_on(ctx.adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some("small buffers"),
-        required_limits: limits,
-        ..Default::default()
-    }))
-    .expect("a device with lower limits")
+    device_with_limits(ctx, limits)
 }
 
 #[test]

@@ -373,9 +373,9 @@ pub fn bake(
         .name
         .clone()
         .unwrap_or_else(|| default_name(&out, &opts.dem));
-    let bake_id = shard::bake_id(opts, &files)?;
     // Checked again before anything is published: inputs that change during the bake refuse it.
     let inputs_at_start = shard::input_record(opts, &files)?;
+    let bake_id = shard::bake_id_of(&inputs_at_start);
     let mut manifest = Manifest {
         name,
         description: description(dem, &opts.dem, cell),

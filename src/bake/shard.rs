@@ -133,15 +133,16 @@ pub fn fingerprint(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, 
 /// finish agree on it without a word between them, and a bake of the same inputs by the same
 /// version writes the same tiles, byte for byte.
 pub fn bake_id(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, WorldError> {
-    let text = format!(
-        "{}version {}\n",
-        inputs(opts, dem_files, false)?,
-        env!("CARGO_PKG_VERSION")
-    );
-    Ok(format!(
+    Ok(bake_id_of(&input_record(opts, dem_files)?))
+}
+
+/// The [`bake_id`] of a bake whose [`input_record`] is `record`.
+pub(super) fn bake_id_of(record: &str) -> String {
+    let text = format!("{record}version {}\n", env!("CARGO_PKG_VERSION"));
+    format!(
         "{:016x}",
         crate::hash::fnv1a64(crate::hash::FNV_BASIS, text.as_bytes())
-    ))
+    )
 }
 
 /// The record of a bake's input files as they are now (each one's size and modification time,
@@ -517,7 +518,7 @@ impl Parts {
                     .collect();
                 workers
                     .into_iter()
-                    .flat_map(|w| w.join().unwrap_or_default())
+                    .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
                     .collect()
             });
             for (id, shard, e) in bad {

@@ -284,7 +284,7 @@ impl Renderer {
         source: Arc<dyn TileSource>,
         options: RendererOptions,
     ) -> Result<Self, RendererError> {
-        check_limits(&device.limits())?;
+        check_device_limits(device)?;
         let config = options.config;
         config.validate_for(&world)?;
         let targets = Targets {
@@ -428,11 +428,8 @@ impl Renderer {
                         None
                     } else {
                         // glTF plants come from where the tiles do (a world over HTTP fetches them).
-                        let read = |path: &std::path::Path| -> std::io::Result<Vec<u8>> {
-                            let name = path.strip_prefix(&world.dir).unwrap_or(path);
-                            source
-                                .read_file(name, crate::plants::gltf::MAX_PLANT_FILE_BYTES)
-                                .map_err(crate::plants::gltf::plant_file_io_error)
+                        let read = |path: &std::path::Path| {
+                            crate::plants::gltf::read_from_source(source.as_ref(), &world.dir, path)
                         };
                         Some(crate::plants::PlantSet::build_with(
                             &world.manifest,
@@ -1376,14 +1373,19 @@ impl Renderer {
     /// whether or not [`Self::take_stats`] has taken it since; `None` before the first has.
     pub fn stats(&mut self) -> Option<&FrameStats> {
         self.collect_stats();
-        self.readback.latest.as_ref()
+        let r = &self.readback;
+        r.ready.back().or(r.taken_last.as_ref())
     }
 
     /// Every frame's figures that have come back since the last call, oldest first (at most
     /// [`MAX_READY_STATS`]; older ones are dropped). Polls the device without waiting.
     pub fn take_stats(&mut self) -> Vec<FrameStats> {
         self.collect_stats();
-        self.readback.ready.drain(..).collect()
+        let taken: Vec<FrameStats> = self.readback.ready.drain(..).collect();
+        if let Some(last) = taken.last() {
+            self.readback.taken_last = Some(last.clone());
+        }
+        taken
     }
 
     /// Frames recorded whose figures were lost: all readback slots were still on their way

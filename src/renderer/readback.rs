@@ -63,8 +63,9 @@ pub(super) struct StatsRing {
     slots: Vec<ReadbackSlot>,
     timestamp_bytes: u64,
     pub(super) ready: VecDeque<FrameStats>,
-    /// The newest figures that came back, kept when `ready` is taken.
-    pub(super) latest: Option<FrameStats>,
+    /// The newest of the figures last taken from `ready`: the newest to come back while
+    /// `ready` is empty.
+    pub(super) taken_last: Option<FrameStats>,
     pub(super) dropped: u64,
 }
 
@@ -86,7 +87,7 @@ impl StatsRing {
             slots,
             timestamp_bytes,
             ready: VecDeque::with_capacity(MAX_READY_STATS + 1),
-            latest: None,
+            taken_last: None,
             dropped: 0,
         }
     }
@@ -196,7 +197,6 @@ impl StatsRing {
                 self.ready.pop_front();
                 self.dropped += 1;
             }
-            self.latest = Some(s.clone());
             self.ready.push_back(s);
         }
     }

@@ -32,17 +32,11 @@ impl FrameView {
     /// of 1e-45 m, a jitter of 3e38 pixels, a custom view and projection whose product
     /// overflows): such a frame drew as flat sky, and the temporal history kept it.
     pub fn check(&self) -> Result<(), String> {
-        for (what, m) in [("", self.unjittered), ("with its jitter", self.view_proj)] {
-            let inverse = m.inverse();
-            if !(m.is_finite() && m.determinant().is_normal() && inverse.is_finite()) {
+        for (what, m) in [("", self.unjittered), (" with its jitter", self.view_proj)] {
+            if !(m.is_finite() && m.determinant().is_normal() && m.inverse().is_finite()) {
                 return Err(format!(
-                    "the camera's view-projection{} is not finite and invertible in 32 bits \
-                     (a field of view, near plane, jitter or custom matrix too extreme): {m}",
-                    if what.is_empty() {
-                        String::new()
-                    } else {
-                        format!(" {what}")
-                    }
+                    "the camera's view-projection{what} is not finite and invertible in 32 bits \
+                     (a field of view, near plane, jitter or custom matrix too extreme): {m}"
                 ));
             }
         }

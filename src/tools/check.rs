@@ -41,9 +41,6 @@ pub struct FailedPlant {
     pub error: String,
 }
 
-/// How many plant types name a file of the world's, and each whose file cannot be read.
-type PlantsChecked = (u64, Vec<FailedPlant>);
-
 /// What a check found.
 #[derive(Debug, serde::Serialize)]
 pub struct CheckReport {
@@ -90,7 +87,7 @@ pub fn check_world(
     let cancel = options.cancel.clone().unwrap_or_default();
     // The plant files are read on a thread of their own beside the tiles, so that a cancel
     // does not wait on a server that holds one back.
-    let plants: Arc<Mutex<Option<PlantsChecked>>> = Arc::default();
+    let plants: Arc<Mutex<Option<Vec<FailedPlant>>>> = Arc::default();
     {
         let (world, source, plants) = (world.clone(), Arc::clone(&source), Arc::clone(&plants));
         let reader = move || {
@@ -143,16 +140,9 @@ pub fn check_world(
     }
     let interrupted = cancel.is_cancelled();
     let checked = shared.done.load(Ordering::Relaxed);
-    // Stopped before the plant files were read: they count as the types that name one, none
-    // failed.
-    let (plants_read_at_end, plant_files, failed_plants) = plants
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .take()
-        .map_or_else(
-            || (false, plant_file_types(world), Vec::new()),
-            |(n, failed)| (true, n, failed),
-        );
+    // Stopped before the plant files were read: none counted as failed.
+    let failed_plants = plants.lock().unwrap_or_else(|e| e.into_inner()).take();
+    let plants_read_at_end = failed_plants.is_some();
     progress(checked, total);
     let mut failed = shared
         .failed
@@ -167,47 +157,38 @@ pub fn check_world(
             .into_iter()
             .map(|(_, tile, error)| FailedTile { tile, error })
             .collect(),
-        plant_files,
-        failed_plants,
+        plant_files: plant_file_types(world).count() as u64,
+        failed_plants: failed_plants.unwrap_or_default(),
         stamped: world.manifest.bake_id.is_some(),
         interrupted: interrupted || checked < total || !plants_read_at_end,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
 
-/// Reads the glTF file of each of `world`'s plant types that names one, from `source`, as the
-/// renderer does before its first frame (every buffer and image, the checks and the reduced
-/// levels): how many there are, and each that fails.
-fn check_plants(world: &World, source: &dyn TileSource) -> (u64, Vec<FailedPlant>) {
-    let read = |path: &std::path::Path| -> std::io::Result<Vec<u8>> {
-        let name = path.strip_prefix(&world.dir).unwrap_or(path);
-        source
-            .read_file(name, crate::plants::gltf::MAX_PLANT_FILE_BYTES)
-            .map_err(crate::plants::gltf::plant_file_io_error)
-    };
-    let mut failed = Vec::new();
-    for t in &world.manifest.plant_types {
-        if crate::plants::recipe::Recipe::from_name(&t.mesh).is_some() {
-            continue;
-        }
-        if let Err(e) = crate::plants::set::model_with(t, &world.dir, &read) {
-            failed.push(FailedPlant {
-                plant_type: t.name.clone(),
-                error: e.to_string(),
-            });
-        }
-    }
-    (plant_file_types(world), failed)
-}
-
-/// The plant types of `world` drawn from a file of its own (not a recipe).
-fn plant_file_types(world: &World) -> u64 {
+/// The plant types of `world` drawn from a glTF file of its own (not a recipe).
+fn plant_file_types(world: &World) -> impl Iterator<Item = &crate::world::PlantType> {
     world
         .manifest
         .plant_types
         .iter()
         .filter(|t| crate::plants::recipe::Recipe::from_name(&t.mesh).is_none())
-        .count() as u64
+}
+
+/// Reads the glTF file of each of `world`'s plant types that names one, from `source`, as the
+/// renderer does before its first frame (every buffer and image, the checks and the reduced
+/// levels): each that fails.
+fn check_plants(world: &World, source: &dyn TileSource) -> Vec<FailedPlant> {
+    let read =
+        |path: &std::path::Path| crate::plants::gltf::read_from_source(source, &world.dir, path);
+    plant_file_types(world)
+        .filter_map(|t| {
+            let e = crate::plants::set::model_with(t, &world.dir, &read).err()?;
+            Some(FailedPlant {
+                plant_type: t.name.clone(),
+                error: e.to_string(),
+            })
+        })
+        .collect()
 }
 
 /// What [`check_world`]'s workers share.

@@ -77,6 +77,19 @@ pub fn read_plant_file(path: &Path) -> Result<Vec<u8>, io::Error> {
     crate::world::format::read_regular(path, MAX_PLANT_FILE_BYTES).map_err(plant_file_io_error)
 }
 
+/// Reads a plant's file (its glTF file, or a buffer or image that file names) by its path under
+/// the world's folder `dir`, from the world's tile source: its folder, or its server.
+pub fn read_from_source(
+    source: &dyn crate::stream::TileSource,
+    dir: &Path,
+    path: &Path,
+) -> Result<Vec<u8>, io::Error> {
+    let name = path.strip_prefix(dir).unwrap_or(path);
+    source
+        .read_file(name, MAX_PLANT_FILE_BYTES)
+        .map_err(plant_file_io_error)
+}
+
 /// A world's error reading a plant's file, as the I/O error [`PlantFileError::Read`] gives
 /// after the file's name: the reason alone, without the path again.
 pub fn plant_file_io_error(e: crate::world::WorldError) -> io::Error {

@@ -644,16 +644,11 @@ impl Decimal for f64 {
     }
 }
 
-macro_rules! exact_decimal {
-    ($($t:ty),*) => {$(
-        impl Decimal for $t {
-            fn decimal(self) -> f64 {
-                f64::from(self)
-            }
-        }
-    )*};
+impl Decimal for u32 {
+    fn decimal(self) -> f64 {
+        f64::from(self)
+    }
 }
-exact_decimal!(u8, u16, u32, i8, i16, i32);
 
 /// Builds validation errors that name the manifest file.
 struct Validator<'a> {
