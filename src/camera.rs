@@ -117,15 +117,21 @@ impl Camera {
     /// View-projection with the eye at the origin: positions fed to it must be camera-relative.
     /// Reverse-Z with an infinite far plane (depth 1 at the near plane, 0 at infinity).
     pub fn view_proj_relative(&self, aspect: f32) -> Mat4 {
+        let (view, proj) = self.view_and_projection(aspect);
+        proj * view
+    }
+
+    /// The view (rotation only: the eye at the origin) and the projection, apart.
+    pub fn view_and_projection(&self, aspect: f32) -> (Mat4, Mat4) {
         if let Some(c) = &self.custom {
-            return c.proj * c.view;
+            return (c.view, c.proj);
         }
         use glam::camera::rh::{proj::directx, view::look_to_mat4};
         let view = look_to_mat4(Vec3::ZERO, self.forward().as_vec3(), Vec3::Z);
         // wgpu's clip space is Direct3D's: z in [0, 1], y up.
         let proj =
             directx::perspective_infinite_reverse(self.fov_y_deg.to_radians(), aspect, self.near_m);
-        proj * view
+        (view, proj)
     }
 
     /// This camera with its image shifted by `offset_px` pixels (x right, y down) on a
@@ -136,20 +142,7 @@ impl Camera {
         if offset_px == Vec2::ZERO {
             return *self;
         }
-        let (view, proj) = match &self.custom {
-            Some(c) => (c.view, c.proj),
-            None => {
-                use glam::camera::rh::{proj::directx, view::look_to_mat4};
-                (
-                    look_to_mat4(Vec3::ZERO, self.forward().as_vec3(), Vec3::Z),
-                    directx::perspective_infinite_reverse(
-                        self.fov_y_deg.to_radians(),
-                        aspect,
-                        self.near_m,
-                    ),
-                )
-            }
-        };
+        let (view, proj) = self.view_and_projection(aspect);
         // Clip-space x' = x + tx w moves normalised x by tx: 2 / width per pixel (y is up in
         // normalised coordinates and down in pixels).
         let shift = Mat4::from_translation(Vec3::new(

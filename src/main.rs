@@ -123,6 +123,9 @@ fn error_chain(e: &anyhow::Error) -> String {
 fn interrupted(e: &anyhow::Error) -> bool {
     e.chain().any(|cause| {
         cause.downcast_ref::<cli::Interrupted>().is_some()
+            || cause
+                .downcast_ref::<verdant::tools::stop::Stopped>()
+                .is_some()
             || matches!(
                 cause.downcast_ref::<verdant::world::WorldError>(),
                 Some(verdant::world::WorldError::Cancelled { .. })

@@ -346,7 +346,14 @@ fn resolve_matches_mirror(ctx: &verdant::gpu::GpuContext, settings: TaaSettings)
             pass.draw(0..3, 0..1);
         }
         ctx.queue.submit([encoder.finish()]);
-        let reset = taa.prepare(&ctx.queue, vp, camera.position, camera.forward());
+        let projection = camera.view_and_projection(aspect).1;
+        let reset = taa.prepare(
+            &ctx.queue,
+            vp,
+            projection,
+            camera.position,
+            camera.forward(),
+        );
         assert_eq!(reset, step == 0);
         let mut encoder = ctx.device.create_command_encoder(&Default::default());
         taa.record(

@@ -479,3 +479,63 @@ fn a_flight_over_a_tile_that_cannot_be_read_says_so_in_its_summary() {
         "{stdout}"
     );
 }
+
+/// Ctrl-C stops a flight and a soak at once while they wait for a world's manifest from a
+/// server that does not answer (the first signal was taken and the run waited out the
+/// request's deadline, 100 s here).
+#[test]
+fn ctrl_c_stops_a_flight_and_a_soak_waiting_for_the_worlds_manifest() {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}/", listener.local_addr().unwrap());
+    // Accepts every connection and says nothing.
+    std::thread::spawn(move || {
+        let mut held = Vec::new();
+        for stream in listener.incoming().flatten() {
+            held.push(stream);
+        }
+    });
+    let dir = tempfile::tempdir().unwrap();
+    for (tool, out) in [("fly", "fly"), ("soak", "soak")] {
+        let child = Command::new(env!("CARGO_BIN_EXE_verdant"))
+            .args([tool, &url, "--http-timeout-s", "100", "--size", "32x18"])
+            .args(["--out", dir.path().join(out).to_str().unwrap()])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(1500));
+        let sent = std::time::Instant::now();
+        common::send_sigint(&child);
+        let out = child.wait_with_output().unwrap();
+        let waited = sent.elapsed();
+        let (stdout, stderr) = text(&out);
+        assert_eq!(out.status.code(), Some(130), "{tool}: {stdout}{stderr}");
+        assert!(
+            waited.as_secs_f64() < 10.0,
+            "{tool} stopped {waited:?} after Ctrl-C"
+        );
+        assert!(
+            stderr.contains("stopped while the world was being fetched"),
+            "{tool}: {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{tool}: {stderr}");
+    }
+}
+
+/// A world named by a bare name is the folder of that name here when there is one, though it
+/// holds no world.toml: the check fails naming it, and never reads the world of the same name
+/// under the source tree's worlds/ instead.
+#[test]
+fn a_folder_named_here_is_the_world_named_even_without_its_manifest() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("santa-cruz/tiles")).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["check", "santa-cruz", "--json"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let (stdout, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+    assert!(stderr.contains("santa-cruz/world.toml"), "{stderr}");
+    assert!(!stdout.contains("\"location\""), "{stdout}");
+}

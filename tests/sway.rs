@@ -56,6 +56,20 @@ fn the_renderer_integrator_is_the_one_the_eval_finds_stable_everywhere() {
         Preset::ALL.len() * Integrator::ALL.len() * EVAL_STEPS_S.len()
     );
     assert_eq!(sway::stable_everywhere(&results), vec![RENDERER_INTEGRATOR]);
+    // An eval stopped early: an integrator run at some steps, or with one preset, is not
+    // called stable everywhere, however its runs went.
+    let stiff_only: Vec<_> = results
+        .iter()
+        .filter(|r| r.preset == Preset::ALL[0].name())
+        .cloned()
+        .collect();
+    assert!(sway::stable_everywhere(&stiff_only).is_empty());
+    let without_last_step: Vec<_> = results
+        .iter()
+        .filter(|r| r.dt_s != EVAL_STEPS_S[EVAL_STEPS_S.len() - 1])
+        .cloned()
+        .collect();
+    assert!(sway::stable_everywhere(&without_last_step).is_empty());
     for r in results
         .iter()
         .filter(|r| r.integrator == RENDERER_INTEGRATOR)

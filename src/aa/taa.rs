@@ -42,6 +42,11 @@ pub struct TaaSettings {
     pub cut_distance_m: f64,
     /// A camera that turns by more than this in one frame (degrees) starts every history again.
     pub cut_angle_deg: f64,
+    /// A projection whose focal length or near plane changes by more than this factor in one
+    /// frame (a change of lens, a zoom cut, a near plane pushed past the scene and back)
+    /// starts every history again: the history drawn through the other lens is too blurred or
+    /// too far off (a frame whose near plane clipped the ground away left sky in it).
+    pub cut_zoom: f32,
     /// Whether the grass blades write their own motion vectors (their wind over the frame) for the
     /// resolve, where otherwise a blade's pixel is reprojected through its depth (the camera's move
     /// alone). Off by default: measured on the meadow at 60 frames a second in its breeze, a blade
@@ -112,6 +117,7 @@ impl Default for TaaSettings {
             motion_falloff: 1.0,
             cut_distance_m: 20.0,
             cut_angle_deg: 30.0,
+            cut_zoom: 2.0,
             blade_motion: false,
             // Measured against the truth (docs/anti-aliasing.md, `bench aa`): off, the spread takes
             // 7% off a still view's error at 960x540 but nothing at 1920x1080, and costs the
@@ -168,10 +174,30 @@ pub fn reprojection(last_view_proj: Mat4, last_eye: DVec3, view_proj: Mat4, eye:
     (last * DMat4::from_translation(eye - last_eye) * current.inverse()).as_mat4()
 }
 
+/// Whether the projection changed its lens by more than `factor` between two frames: its
+/// horizontal or vertical focal length (the field of view) or its depth term (the near plane
+/// of a reverse-Z projection) grew or shrank by more than `factor`, or changed sign.
+pub fn lens_changed(last: Mat4, now: Mat4, factor: f32) -> bool {
+    [
+        (last.x_axis.x, now.x_axis.x),
+        (last.y_axis.y, now.y_axis.y),
+        (last.w_axis.z, now.w_axis.z),
+    ]
+    .into_iter()
+    .any(|(a, b)| {
+        if a == b {
+            return false;
+        }
+        let ratio = a / b;
+        !(ratio > 0.0 && ratio <= factor && ratio >= 1.0 / factor)
+    })
+}
+
 /// The camera of the last resolved frame.
 #[derive(Clone, Copy, Debug)]
 struct LastView {
     view_proj: Mat4,
+    projection: Mat4,
     eye: DVec3,
     forward: DVec3,
 }
@@ -435,14 +461,16 @@ impl Taa {
         super::jitter(self.frames)
     }
 
-    /// Sets up the resolve of the frame drawn from `view_proj` (camera-relative, unjittered)
-    /// at `eye` looking along `forward`: the reprojection from the last frame, or a start
-    /// from scratch after a cut (a move or a turn past the settings' limits). Returns whether
-    /// the histories start again.
+    /// Sets up the resolve of the frame drawn from `view_proj` (camera-relative, unjittered,
+    /// whose projection alone is `projection`) at `eye` looking along `forward`: the
+    /// reprojection from the last frame, or a start from scratch after a cut (a move, a turn
+    /// or a change of projection past the settings' limits). Returns whether the histories
+    /// start again.
     pub fn prepare(
         &mut self,
         queue: &wgpu::Queue,
         view_proj: Mat4,
+        projection: Mat4,
         eye: DVec3,
         forward: DVec3,
     ) -> bool {
@@ -457,6 +485,7 @@ impl Taa {
                     .to_degrees();
                 (eye - last.eye).length() > self.settings.cut_distance_m
                     || angle > self.settings.cut_angle_deg
+                    || lens_changed(last.projection, projection, self.settings.cut_zoom)
             }
         };
         self.params.reproject = match self.last {
@@ -476,6 +505,7 @@ impl Taa {
         queue.write_buffer(&self.buffer, 0, bytemuck::bytes_of(&self.params));
         self.last = Some(LastView {
             view_proj,
+            projection,
             eye,
             forward,
         });
@@ -566,5 +596,33 @@ mod tests {
         let then = vp * p.extend(1.0);
         let back = m * (now / now.w);
         assert!(((back / back.w) - then / then.w).length() < 1e-4);
+    }
+
+    #[test]
+    fn a_change_of_lens_past_the_factor_is_a_cut_and_a_smaller_one_is_not() {
+        let mut camera = crate::Camera::new(DVec3::ZERO, 0.0, 0.0);
+        let lens = |c: &crate::Camera| c.view_and_projection(16.0 / 9.0).1;
+        let start = lens(&camera);
+        assert!(!lens_changed(start, start, 2.0));
+        // A zoom from 60 to 45 degrees (focal length x1.39) is followed by the reprojection;
+        // to 25 degrees (x2.6) it starts again.
+        camera.fov_y_deg = 45.0;
+        assert!(!lens_changed(start, lens(&camera), 2.0));
+        camera.fov_y_deg = 25.0;
+        assert!(lens_changed(start, lens(&camera), 2.0));
+        assert!(lens_changed(lens(&camera), start, 2.0));
+        // The near plane: 0.5 m to 0.7 m goes on, to 100 m (the ground clipped away) and back
+        // starts again.
+        camera.fov_y_deg = 60.0;
+        camera.near_m = 0.7;
+        assert!(!lens_changed(start, lens(&camera), 2.0));
+        camera.near_m = 100.0;
+        assert!(lens_changed(start, lens(&camera), 2.0));
+        assert!(lens_changed(lens(&camera), start, 2.0));
+        // A projection of another kind (an orthographic one of the same scale: no depth term).
+        let mut ortho = start;
+        ortho.w_axis.z = 0.0;
+        assert!(lens_changed(start, ortho, 2.0));
+        assert!(lens_changed(ortho, start, 2.0));
     }
 }

@@ -281,6 +281,11 @@ pub(crate) fn resolve_world(arg: &str) -> Result<PathBuf> {
         return Ok(direct.to_path_buf());
     }
     // A bare name is also looked for under the worlds folders; a path only where it points.
+    // A folder of that name here is the world named, though its world.toml is missing or
+    // cannot be read (the loader says which): never another world of the same name.
+    if direct.is_dir() {
+        return Ok(direct.to_path_buf());
+    }
     let bare = direct.components().count() == 1 && !direct.is_absolute();
     let mut candidates: Vec<PathBuf> = Vec::new();
     if bare {
@@ -297,10 +302,6 @@ pub(crate) fn resolve_world(arg: &str) -> Result<PathBuf> {
                 candidates.push(c);
             }
         }
-    }
-    if direct.is_dir() {
-        // Let the world loader say what is missing.
-        return Ok(direct.to_path_buf());
     }
     match candidates.first() {
         Some(c) => bail!(

@@ -208,7 +208,9 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
     let names: Vec<&str> = report.stable.iter().map(Integrator::name).collect();
     say!(
         "stable at every step and at the 0.5 s hitch, both presets: {}",
-        if names.is_empty() {
+        if names.is_empty() && report.interrupted {
+            "not known: the eval stopped before every run was made".to_owned()
+        } else if names.is_empty() {
             "none".to_owned()
         } else {
             names.join(", ")

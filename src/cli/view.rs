@@ -67,6 +67,10 @@ pub(crate) fn view(args: ViewArgs) -> Result<()> {
         wind_scene: wind,
         aa,
     })?;
+    // A session the user ends reports nothing.
+    if frames.is_none() {
+        return Ok(());
+    }
     if summary.frames < 2 {
         // One frame has no time between frames to take a median of.
         say!("{} frame on {}", summary.frames, summary.adapter)?;

@@ -990,7 +990,13 @@ impl Renderer {
             return;
         }
         if let Some(taa) = &mut self.taa {
-            taa.prepare(&self.queue, view.unjittered, view.eye, view.forward);
+            taa.prepare(
+                &self.queue,
+                view.unjittered,
+                view.projection,
+                view.eye,
+                view.forward,
+            );
         }
         let camera = view.camera;
         let dt = self

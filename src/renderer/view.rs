@@ -20,6 +20,8 @@ pub struct FrameView {
     pub view_proj: Mat4,
     /// The same without the jitter.
     pub unjittered: Mat4,
+    /// The projection alone, without the jitter.
+    pub projection: Mat4,
     /// The frustum of [`FrameView::view_proj`].
     pub frustum: Frustum,
     /// The sub-pixel offset of the image, pixels.
@@ -54,6 +56,7 @@ impl FrameView {
             forward: camera.forward(),
             view_proj,
             unjittered: camera.view_proj_relative(aspect),
+            projection: camera.view_and_projection(aspect).1,
             frustum: Frustum::from_view_proj(view_proj),
             jitter_px,
         }

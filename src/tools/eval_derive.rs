@@ -635,6 +635,23 @@ impl DeriveEvalReport {
     }
 }
 
+/// What the eval says of a DEM whose nodata samples were filled (from the heights around
+/// them, as a bake fills them): the methods are scored against those invented heights too.
+pub fn filled_note(dem: &Dem, path: &std::path::Path) -> Option<String> {
+    if dem.nodata_filled == 0 {
+        return None;
+    }
+    let total = u64::from(dem.width) * u64::from(dem.height);
+    Some(format!(
+        "{}: {} of its {total} samples ({:.1}%) are nodata, filled from the heights around them; \
+         the methods are scored against the filled heights there too (a DEM without nodata \
+         measures them against real ground alone)",
+        path.display(),
+        dem.nodata_filled,
+        100.0 * dem.nodata_filled as f64 / total as f64
+    ))
+}
+
 /// Samples a side a DEM needs for `eval derive --factor factor`: the comparison leaves out
 /// `2 * factor` samples at each edge and keeps at least 8 a side between them.
 pub fn min_side(factor: usize) -> usize {
@@ -671,6 +688,9 @@ pub fn run_derive_eval(
     let dem = Dem::load(dem_path)?;
     // Heights no planet has (a wrong scale in a sidecar) are refused as the baker refuses them.
     crate::bake::check_dem_heights(&dem, dem_path)?;
+    if let Some(note) = filled_note(&dem, dem_path) {
+        log::warn!("{note}");
+    }
     let side = dem.width.min(dem.height) as usize;
     let needed = min_side(factor);
     if side < needed {
@@ -756,6 +776,22 @@ pub fn run_derive_eval(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_dem_with_filled_nodata_is_noted_and_one_without_is_not() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("worlds/santa-cruz/source/santa_cruz_1024.png");
+        let mut dem = Dem::load(&path).unwrap();
+        assert_eq!(dem.nodata_filled, 0);
+        assert_eq!(filled_note(&dem, &path), None);
+        dem.nodata_filled = 104_858;
+        let note = filled_note(&dem, &path).unwrap();
+        assert!(note.contains("santa_cruz_1024.png"), "{note}");
+        assert!(
+            note.contains("104858 of its 1048576 samples (10.0%) are nodata"),
+            "{note}"
+        );
+    }
 
     fn smooth_grid() -> Grid {
         let (w, h) = (65, 49);

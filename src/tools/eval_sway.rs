@@ -291,14 +291,20 @@ pub fn evaluate_until(stop: &Stop, progress: &mut dyn FnMut(u64, u64)) -> Vec<Sw
     out
 }
 
-/// The integrators that stayed bounded in every run of `results` (an integrator with no run
-/// there, in an eval stopped early, is not among them).
+/// The integrators that stayed bounded in every run of `results` and were run at every step
+/// of [`EVAL_STEPS_S`] with both presets (an integrator that an eval stopped early ran only in
+/// part is not among them).
 pub fn stable_everywhere(results: &[SwayResult]) -> Vec<Integrator> {
     Integrator::ALL
         .into_iter()
         .filter(|i| {
-            let mut runs = results.iter().filter(|r| r.integrator == *i).peekable();
-            runs.peek().is_some() && runs.all(|r| r.stable)
+            let runs: Vec<&SwayResult> = results.iter().filter(|r| r.integrator == *i).collect();
+            let ran_everywhere = Preset::ALL.iter().all(|p| {
+                EVAL_STEPS_S
+                    .iter()
+                    .all(|dt| runs.iter().any(|r| r.preset == p.name() && r.dt_s == *dt))
+            });
+            ran_everywhere && runs.iter().all(|r| r.stable)
         })
         .collect()
 }

@@ -310,7 +310,8 @@ impl From<ConfigError> for SettingError {
 /// Runs a fly-through and writes its frames and `report.json` into `opts.out`.
 pub fn run_fly(opts: &FlyOptions, progress: &mut dyn FnMut(FlyProgress)) -> Result<FlyReport> {
     opts.validate()?;
-    let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
+    let (world, source) =
+        crate::tools::open_world_until(&opts.world, &opts.http, opts.stop.as_ref())?;
     run_fly_with_source(opts, world, source, FIRST_FRAME_WAIT, progress)
 }
 

@@ -123,6 +123,50 @@ pub fn open_world(
     }
 }
 
+/// [`open_world`], given up at once when `stop` is set while a world over HTTP is being
+/// fetched (a server that does not answer holds a request up to its deadline, which may be an
+/// hour): the world is opened on a thread of its own, left to its request when the stop comes,
+/// and [`stop::Stopped`] is returned (the command line exits with status 130). A folder, or
+/// no stop, is opened as [`open_world`] opens it.
+pub fn open_world_until(
+    location: &Path,
+    http: &HttpOptions,
+    stop: Option<&crate::bake::CancelFlag>,
+) -> anyhow::Result<(World, Arc<dyn TileSource>)> {
+    let remote = location.to_str().is_some_and(crate::stream::http::is_url);
+    use anyhow::Context as _;
+    let Some(stop) = stop.filter(|_| remote) else {
+        return open_world(location, http);
+    };
+    let (tx, rx) = std::sync::mpsc::channel();
+    let (at, options) = (location.to_path_buf(), http.clone());
+    std::thread::Builder::new()
+        .name("open world".into())
+        .spawn(move || {
+            // The receiver is gone once the run stopped: nothing is left to tell.
+            let _ = tx.send(open_world(&at, &options));
+        })
+        .context("starting the thread that opens the world")?;
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+            Ok(opened) => return opened,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) if stop.is_cancelled() => {
+                return Err(anyhow::Error::new(stop::Stopped).context(format!(
+                    "{}: stopped while the world was being fetched",
+                    location.display()
+                )));
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                anyhow::bail!(
+                    "{}: the thread opening the world ended without an answer",
+                    location.display()
+                );
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

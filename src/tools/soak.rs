@@ -490,7 +490,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     // as without --faults (that address and the real error), not as the proxy's 502 at an
     // address of its own.
     let proxy = if opts.faults > 0.0 && is_url {
-        crate::tools::open_world(&opts.world, &opts.http)?;
+        crate::tools::open_world_until(&opts.world, &opts.http, opts.stop.as_ref())?;
         Some(crate::tools::fault_proxy::FaultProxy::start_with(
             &opts.world.to_string_lossy(),
             crate::tools::fault_proxy::FaultOptions {
@@ -511,8 +511,8 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         (_, Some(p)) => PathBuf::from(p.url()),
         _ => opts.world.clone(),
     };
-    let (world, source) =
-        crate::tools::open_world(&location, &opts.http).map_err(|e| match &proxy {
+    let (world, source) = crate::tools::open_world_until(&location, &opts.http, opts.stop.as_ref())
+        .map_err(|e| match &proxy {
             Some(p) => e.context(format!(
                 "{}: through the soak's fault proxy at {}",
                 opts.world.display(),

@@ -431,7 +431,8 @@ pub fn run_fly_truth(
         bail!("--truth writes the frames as images: it cannot be used with --no-images");
     }
     let started = std::time::Instant::now();
-    let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
+    let (world, source) =
+        crate::tools::open_world_until(&opts.world, &opts.http, opts.stop.as_ref())?;
     let path = crate::tools::camera_path(&world, &opts.world, opts.path.as_deref())?;
     let out_dir = OutDir::create_for(
         &opts.out,

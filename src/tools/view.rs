@@ -113,10 +113,20 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
     event_loop
         .run_app(&mut app)
         .context("the window's event loop failed")?;
-    match app.error {
-        Some(e) => Err(e),
-        None => Ok(app.summary),
+    if let Some(e) = app.error {
+        return Err(e);
     }
+    // A run of N frames whose window was closed (or Escape pressed) before the last.
+    if let Some(n) = app.opts.frames
+        && app.summary.frames < u64::from(n)
+    {
+        let drawn = app.state.as_ref().map_or(0, |s| s.frames);
+        let shot = app.opts.screenshot.as_ref().map_or(String::new(), |f| {
+            format!("; {} was not written", f.display())
+        });
+        bail!("the window was closed after {drawn} of {n} frames{shot}");
+    }
+    Ok(app.summary)
 }
 
 struct Viewer {
@@ -164,6 +174,9 @@ struct State {
     /// The most terrain tiles a frame drew, over the frames whose figures have come back.
     tiles_drawn_max: u32,
     wind_scene: String,
+    /// The window's size while it is larger than the renderer draws (past the device's
+    /// largest texture or the renderer's pixels): drawing pauses until it fits again.
+    too_large: Option<(u32, u32)>,
 }
 
 fn depth_target(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Texture {
@@ -310,11 +323,16 @@ impl Viewer {
             last_stats: None,
             tiles_drawn_max: 0,
             wind_scene,
+            too_large: None,
         })
     }
 
+    /// Ends the run with `e`, or with the first error if one came before (a frame already
+    /// asked for may fail after it, for the same cause).
     fn fail(&mut self, event_loop: &ActiveEventLoop, e: anyhow::Error) {
-        self.error = Some(e);
+        if self.error.is_none() {
+            self.error = Some(e);
+        }
         event_loop.exit();
     }
 }
@@ -352,13 +370,38 @@ impl ApplicationHandler for Viewer {
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
             WindowEvent::Resized(size) if size.width > 0 && size.height > 0 => {
-                s.config.width = size.width;
-                s.config.height = size.height;
-                s.surface.configure(&s.ctx.device, &s.config);
-                s.depth = depth_target(&s.ctx.device, size.width, size.height);
-                s.depth_view = s.depth.create_view(&Default::default());
-                if let Err(e) = s.renderer.resize(size.width, size.height) {
-                    self.fail(event_loop, e.into());
+                let (width, height) = (size.width, size.height);
+                // The renderer first: a size it cannot draw leaves it, the surface and the
+                // depth target as they were.
+                match s.renderer.resize(width, height) {
+                    Ok(()) => {
+                        s.too_large = None;
+                        s.config.width = width;
+                        s.config.height = height;
+                        s.surface.configure(&s.ctx.device, &s.config);
+                        s.depth = depth_target(&s.ctx.device, width, height);
+                        s.depth_view = s.depth.create_view(&Default::default());
+                    }
+                    // A session: drawing pauses until the window is made smaller.
+                    Err(e) if self.opts.frames.is_none() => {
+                        if s.too_large.is_none() {
+                            log::warn!(
+                                "the window is {width}x{height}, larger than verdant draws \
+                                 ({e}); drawing pauses until it is made smaller"
+                            );
+                        }
+                        s.too_large = Some((width, height));
+                        s.window.set_title(&format!(
+                            "verdant: the window is too large to draw ({width}x{height}); \
+                             make it smaller"
+                        ));
+                    }
+                    // A run of N frames cannot draw them at the size asked.
+                    Err(e) => self.fail(
+                        event_loop,
+                        anyhow::Error::new(e)
+                            .context(format!("the window was resized to {width}x{height}")),
+                    ),
                 }
             }
             WindowEvent::KeyboardInput { event, .. } => {
@@ -413,7 +456,10 @@ impl ApplicationHandler for Viewer {
     }
 
     fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
-        if let Some(s) = &self.state {
+        // Nothing is drawn while the window is too large: the loop waits for its next resize.
+        if let Some(s) = &self.state
+            && s.too_large.is_none()
+        {
             s.window.request_redraw();
         }
     }
@@ -565,6 +611,9 @@ impl Viewer {
         let Some(s) = &mut self.state else {
             return Ok(());
         };
+        if s.too_large.is_some() {
+            return Ok(());
+        }
         let now = Instant::now();
         let wall_ms = now.duration_since(s.last_frame).as_secs_f64() * 1e3;
         s.last_frame = now;
