@@ -209,7 +209,7 @@ impl Renderer {
                 continue;
             }
             if let Err(e) = self.atlas.upload(&self.queue, *slot, tile) {
-                log::warn!("tile {:?} left out of the atlas: {e}", tile.id);
+                log::warn!("tile {} left out of the atlas: {e}", tile.id);
             }
         }
         plan.derives

@@ -36,7 +36,7 @@ pub enum AtlasError {
         slots: u32,
     },
     /// The tile's sample count differs from the atlas's.
-    #[error("tile {tile:?} has {found} samples a side, the atlas holds {expected}")]
+    #[error("tile {tile} has {found} samples a side, the atlas holds {expected}")]
     WrongSize {
         /// The tile.
         tile: crate::world::TileId,

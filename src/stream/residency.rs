@@ -241,18 +241,14 @@ impl TileService {
                 Loaded::Tile(tile) => {
                     if let Some(f) = self.failed.remove(&tile.id) {
                         self.healed += 1;
-                        log::info!(
-                            "tile {:?} loaded after {} failed loads",
-                            tile.id,
-                            f.attempts
-                        );
+                        log::info!("tile {} loaded after {} failed loads", tile.id, f.attempts);
                     }
                     self.cache.insert(tile);
                 }
                 Loaded::Failed { id, error } => match self.failed.get_mut(&id) {
                     None => {
                         log::warn!(
-                            "tile {id:?} failed to load, drawing its ancestor instead: {}",
+                            "tile {id} failed to load, drawing its ancestor instead: {}",
                             crate::world::printable(&error)
                         );
                         self.failed.insert(
@@ -271,7 +267,7 @@ impl TileService {
                         f.retrying = false;
                         f.retry_at = now + fault_retry_delay(first_s, max_s, f.attempts);
                         log::info!(
-                            "tile {id:?} failed again ({} times), next try in {:.0} s: {}",
+                            "tile {id} failed again ({} times), next try in {:.0} s: {}",
                             f.attempts,
                             (f.retry_at - now).as_secs_f64(),
                             crate::world::printable(&error)

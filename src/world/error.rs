@@ -320,7 +320,7 @@ pub enum WorldError {
     },
 
     /// A tile was asked for that the world does not store.
-    #[error("{}: tile {id:?} is not a stored tile of this world", path.display())]
+    #[error("{}: tile {id} is not a stored tile of this world", path.display())]
     TileNotStored {
         /// The world directory.
         path: PathBuf,

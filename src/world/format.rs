@@ -383,7 +383,7 @@ pub fn write_tile_with(
         message,
     };
     if !pyramid.contains(tile.id) {
-        return Err(bad(format!("tile {:?} is outside the pyramid", tile.id)));
+        return Err(bad(format!("tile {} is outside the pyramid", tile.id)));
     }
     if tile.size != size
         || tile.heights.len() != n

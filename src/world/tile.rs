@@ -20,6 +20,13 @@ pub struct TileId {
     pub y: u32,
 }
 
+/// `L2 5_8`: the level, then the column and row, as the tile's files are named.
+impl std::fmt::Display for TileId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "L{} {}_{}", self.level, self.x, self.y)
+    }
+}
+
 impl TileId {
     /// The tile at `(x, y)` of `level`.
     pub const fn new(level: u8, x: u32, y: u32) -> Self {
