@@ -20,16 +20,19 @@
 //! [`crate::world::format::max_file_bytes`] for the world's tile size (twice its
 //! raw samples plus 64 KiB of headers: 202 KiB for a height file of the default world's
 //! 133-sample tiles). A `Content-Length` beyond the limit is refused before the body is read; a
-//! body without one (chunked or ended by closing) is cut off at the limit. Redirects are
-//! followed up to [`MAX_REDIRECTS`] hops, with a warning (once per pair of hosts) when they
-//! lead to another host.
+//! body without one (chunked or ended by closing) is cut off at the limit; a response's head
+//! (status line and headers) at 64 KiB. Redirects (301, 302, 303, 307, 308) are followed up
+//! to [`MAX_REDIRECTS`] hops, each `Location` resolved against the URL that sent it (RFC 3986
+//! 5.2) and checked as the world's address is: one to another scheme (`https` among them),
+//! an IPv6 host or an address with credentials is refused at once, naming it. A move to
+//! another host is warned of (once per pair of hosts).
 //!
 //! Fetched files can be kept in an on-disk cache bounded in bytes, revalidated with the
 //! server's `ETag` or `Last-Modified` (a conditional GET that costs a `304` and no body). Each
 //! cached body is checked against the length and FNV-1a checksum in its metadata before use; a
 //! damaged entry is dropped and the file fetched again unconditionally.
 //!
-//! Plain HTTP only (the client, `minreq`, is built without TLS); put a TLS-terminating proxy in
+//! Plain HTTP only (the client, `ureq`, is built without TLS); put a TLS-terminating proxy in
 //! front for `https`.
 //!
 //! This module holds the options, the errors and the source; the requests and their bounded
@@ -323,7 +326,8 @@ impl HttpOptions {
             .min(self.backoff_max)
     }
 
-    /// The deadline as minreq takes it: whole seconds, within 1..=3600.
+    /// The deadline of one request (with its redirects and its body) in whole seconds, within
+    /// 1..=3600.
     fn timeout_s(&self) -> u64 {
         let s = self.timeout.min(MAX_TIMEOUT);
         (s.as_secs() + u64::from(s.subsec_nanos() > 0)).max(1)
@@ -797,7 +801,7 @@ mod tests {
             .validate()
             .unwrap_err();
         assert!(e.to_string().contains("1..=3600 s"), "{e}");
-        // Never more than the range, whatever is asked: minreq adds it to an Instant.
+        // Never more than the range, whatever is asked: it is added to an Instant.
         assert_eq!(with(Duration::MAX).timeout_s(), 3600);
     }
 

@@ -14,13 +14,14 @@ pub(super) enum Validator {
 }
 
 impl Validator {
-    pub(super) fn from_headers(headers: &HashMap<String, String>) -> Option<Validator> {
-        if let Some(tag) = headers.get("etag") {
-            return Some(Validator::ETag(tag.trim().to_string()));
+    /// The response's `ETag`, or else its `Last-Modified` (a value that is not text, which
+    /// could not be sent back, counts as none).
+    pub(super) fn from_headers(headers: &ureq::http::HeaderMap) -> Option<Validator> {
+        let text = |name| Some(headers.get(name)?.to_str().ok()?.trim().to_string());
+        if let Some(tag) = text("etag") {
+            return Some(Validator::ETag(tag));
         }
-        headers
-            .get("last-modified")
-            .map(|d| Validator::LastModified(d.trim().to_string()))
+        text("last-modified").map(Validator::LastModified)
     }
 
     pub(super) fn to_line(&self) -> String {

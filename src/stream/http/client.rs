@@ -5,10 +5,12 @@ use std::collections::VecDeque;
 use std::io::Read;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use super::cache::{DiskCache, Validator};
-use super::{HttpError, HttpOptions, MAX_REDIRECTS};
+use super::{
+    HttpError, HttpOptions, MAX_REDIRECTS, WorldUrl, check_authority, remove_dot_segments,
+};
 
 /// The most bytes of a response's status line and headers (a server that sends more is
 /// refused rather than buffered).
@@ -27,6 +29,10 @@ pub(super) const MAX_REDIRECT_PAIRS: usize = 64;
 /// The requests, their retries, the cache and the counters.
 pub(super) struct Client {
     pub(super) options: HttpOptions,
+    /// The HTTP/1.1 client: no proxy, no pooled connections (a connection per request, as
+    /// the servers' fault counts and the retries expect), heads of at most [`MAX_HEAD_BYTES`],
+    /// statuses returned rather than made errors, redirects left to [`Client::fetch_once`].
+    agent: ureq::Agent,
     pub(super) cache: Option<Mutex<DiskCache>>,
     /// Pairs of hosts (from, to) whose redirect has been reported, oldest first; at most
     /// [`MAX_REDIRECT_PAIRS`].
@@ -44,8 +50,17 @@ pub(super) struct Client {
 impl Client {
     /// A client with these options and this disk cache, its counters at zero.
     pub(super) fn new(options: HttpOptions, cache: Option<Mutex<DiskCache>>) -> Client {
+        let config = ureq::Agent::config_builder()
+            .proxy(None)
+            .http_status_as_error(false)
+            .max_redirects(0)
+            .max_response_header_size(MAX_HEAD_BYTES)
+            .max_idle_connections(0)
+            .max_idle_connections_per_host(0)
+            .build();
         Client {
             options,
+            agent: ureq::Agent::new_with_config(config),
             cache,
             redirects_seen: Mutex::new(VecDeque::new()),
             requests: AtomicU64::new(0),
@@ -126,7 +141,8 @@ impl Client {
     }
 
     /// One request: its response checked and its body read, at most `max` bytes (or the
-    /// cached body on a `304`). A `503` with a `Retry-After` of seconds sets `retry_after`.
+    /// cached body on a `304`), after at most [`MAX_REDIRECTS`] redirects, all within one
+    /// deadline. A `503` with a `Retry-After` of seconds sets `retry_after`.
     pub(super) fn fetch_once(
         &self,
         url: &str,
@@ -137,91 +153,96 @@ impl Client {
         retry_after: &mut Option<Duration>,
     ) -> Result<Vec<u8>, HttpError> {
         let timeout_s = self.options.timeout_s();
-        let mut request = minreq::get(url)
-            .with_timeout(timeout_s)
-            .with_max_redirects(MAX_REDIRECTS)
-            .with_max_headers_size(MAX_HEAD_BYTES)
-            .with_max_status_line_length(MAX_HEAD_BYTES);
-        if let Some([first, count]) = range {
-            let last = first + count.max(1) - 1;
-            request = request.with_header("Range", format!("bytes={first}-{last}"));
-        }
-        if let Some((validator, _)) = cached {
-            request = match validator {
-                Validator::ETag(tag) => request.with_header("If-None-Match", tag.as_str()),
-                Validator::LastModified(date) => {
-                    request.with_header("If-Modified-Since", date.as_str())
-                }
-            };
-        }
+        let deadline = Instant::now() + Duration::from_secs(timeout_s);
         let timed_out = || HttpError::TimedOut {
             url: url.into(),
             timeout_s,
         };
-        let mut response = match request.send_lazy() {
-            Ok(response) => response,
-            Err(minreq::Error::IoError(e)) if is_timeout(&e) => return Err(timed_out()),
-            Err(minreq::Error::IoError(e)) => {
-                return Err(HttpError::Transport {
-                    url: url.into(),
-                    attempts,
-                    message: e.to_string(),
-                });
-            }
-            Err(e @ minreq::Error::AddressNotFound) => {
-                return Err(HttpError::Transport {
-                    url: url.into(),
-                    attempts,
-                    message: e.to_string(),
-                });
-            }
-            Err(e @ minreq::Error::TooManyRedirections) => {
-                return Err(HttpError::BadResponse {
-                    url: url.into(),
-                    message: format!("{e}: at most {MAX_REDIRECTS} are followed"),
-                });
-            }
-            Err(e) => {
-                return Err(HttpError::BadResponse {
-                    url: url.into(),
-                    message: e.to_string(),
-                });
-            }
+        let bad = |message: String| HttpError::BadResponse {
+            url: url.into(),
+            message,
         };
-        self.note_redirect(url, &response.url);
-        if response.status_code == 304
+        // Redirects are followed here rather than by the library: each target is resolved
+        // against the URL that sent it (RFC 3986 5.2) and checked as the world's address is,
+        // and one that cannot be fetched is refused at once.
+        let mut target = url.to_string();
+        let mut redirects = 0;
+        let mut response = loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Err(timed_out());
+            }
+            let mut request = self
+                .agent
+                .get(target.as_str())
+                .config()
+                .timeout_global(Some(left))
+                .build();
+            if let Some([first, count]) = range {
+                let last = first + count.max(1) - 1;
+                request = request.header("Range", format!("bytes={first}-{last}"));
+            }
+            if let Some((validator, _)) = cached {
+                request = match validator {
+                    Validator::ETag(tag) => request.header("If-None-Match", tag.as_str()),
+                    Validator::LastModified(date) => {
+                        request.header("If-Modified-Since", date.as_str())
+                    }
+                };
+            }
+            let response = request
+                .call()
+                .map_err(|e| call_error(url, attempts, timeout_s, e))?;
+            let status = response.status().as_u16();
+            if !matches!(status, 301 | 302 | 303 | 307 | 308) {
+                break response;
+            }
+            let Some(location) = response.headers().get("location") else {
+                return Err(bad(format!("HTTP {status} redirect without a Location")));
+            };
+            let next = redirect_target(&target, &String::from_utf8_lossy(location.as_bytes()))
+                .map_err(|problem| bad(format!("HTTP {status} redirect to {problem}")))?;
+            if redirects == MAX_REDIRECTS {
+                return Err(bad(format!(
+                    "more than {MAX_REDIRECTS} redirects (the last to {}): at most \
+                     {MAX_REDIRECTS} are followed",
+                    without_userinfo(&next)
+                )));
+            }
+            redirects += 1;
+            target = next;
+        };
+        self.note_redirect(url, &target);
+        let status = response.status().as_u16();
+        if status == 304
             && let Some((_, body)) = cached
         {
             self.cache_hits.fetch_add(1, Ordering::Relaxed);
             return Ok(body.clone());
         }
-        // minreq stands a 503 in for a reply without a status line: the server closed the
-        // connection unanswered, or does not speak HTTP. Said so, and retried as a transport
-        // failure is.
-        if response.status_code == 503
-            && response.reason_phrase == "Server did not provide a status line"
-        {
-            return Err(HttpError::Transport {
-                url: url.into(),
-                attempts,
-                message: "the server closed the connection without an HTTP reply (no status \
-                          line: it answered nothing, or not in HTTP)"
-                    .into(),
-            });
-        }
-        if !(200..300).contains(&response.status_code) {
+        let header = |name: &str| {
+            response
+                .headers()
+                .get(name)
+                .map(|v| String::from_utf8_lossy(v.as_bytes()).trim().to_string())
+        };
+        if !(200..300).contains(&status) {
             // Seconds only: a date would need the clock of the server, which may be wrong.
-            if response.status_code == 503 {
-                *retry_after = response
-                    .headers
-                    .get("retry-after")
-                    .and_then(|v| v.trim().parse::<u64>().ok())
+            if status == 503 {
+                *retry_after = header("retry-after")
+                    .and_then(|v| v.parse::<u64>().ok())
                     .map(Duration::from_secs);
             }
             return Err(HttpError::Status {
                 url: url.into(),
-                status: response.status_code,
-                reason: response.reason_phrase.clone(),
+                status: i32::from(status),
+                // The client library keeps the status, not the server's words for it (which a
+                // client is to ignore, RFC 9112 4): its standard reason.
+                reason: response
+                    .status()
+                    .canonical_reason()
+                    .unwrap_or("(unknown status)")
+                    .to_string(),
                 attempts,
             });
         }
@@ -231,25 +252,15 @@ impl Client {
             None => max,
         };
         if let Some([first, count]) = range {
-            let bad = |message: String| HttpError::BadResponse {
-                url: url.into(),
-                message,
-            };
-            if response.status_code != 206 {
+            if status != 206 {
                 return Err(bad(format!(
-                    "HTTP {} to a range request: the server must answer range requests \
-                     (206 Partial Content) for a DEM to be read in windows",
-                    response.status_code
+                    "HTTP {status} to a range request: the server must answer range requests \
+                     (206 Partial Content) for a DEM to be read in windows"
                 )));
             }
             // "bytes FIRST-LAST/TOTAL"
-            let header = response
-                .headers
-                .get("content-range")
-                .cloned()
-                .unwrap_or_default();
+            let header = header("content-range").unwrap_or_default();
             let parsed = header
-                .trim()
                 .strip_prefix("bytes ")
                 .and_then(|r| r.split_once('/'))
                 .and_then(|(span, total)| {
@@ -272,11 +283,9 @@ impl Client {
                 }
             }
         }
-        // minreq has refused a Content-Length that is not a number; chunked bodies have none.
-        let expected = response
-            .headers
-            .get("content-length")
-            .and_then(|v| v.trim().parse::<u64>().ok());
+        // The library has refused a Content-Length that is not a number, and differing ones
+        // (RFC 9112 6.3); a chunked or close-delimited body has none.
+        let expected = response.body().content_length();
         if let Some(size) = expected
             && size > max
         {
@@ -286,40 +295,69 @@ impl Client {
                 max,
             });
         }
-        let chunked = response
-            .headers
-            .get("transfer-encoding")
-            .is_some_and(|v| v.trim().eq_ignore_ascii_case("chunked"));
-        let validator = Validator::from_headers(&response.headers);
+        let chunked = expected.is_none()
+            && response
+                .headers()
+                .get_all("transfer-encoding")
+                .iter()
+                .any(|v| {
+                    String::from_utf8_lossy(v.as_bytes())
+                        .to_ascii_lowercase()
+                        .contains("chunked")
+                });
+        let validator = Validator::from_headers(response.headers());
         let capacity = expected.unwrap_or(64 << 10).min(max).min(MAX_PREALLOCATED);
         let mut body = Vec::with_capacity(capacity as usize);
         // One byte past the limit tells a body that is too long from one that just fits.
-        let read = Read::take(&mut response, max.saturating_add(1)).read_to_end(&mut body);
+        let read = response
+            .body_mut()
+            .as_reader()
+            .take(max.saturating_add(1))
+            .read_to_end(&mut body);
         self.bytes.fetch_add(body.len() as u64, Ordering::Relaxed);
-        match read {
-            Ok(_) => {}
-            Err(e) if is_timeout(&e) => return Err(timed_out()),
-            Err(e) => {
-                return Err(HttpError::Transport {
+        if let Err(e) = read {
+            let received = body.len() as u64;
+            // The library ends a body early with an error: the connection closed before its
+            // `Content-Length` or its last chunk.
+            return Err(match ureq::Error::from(e) {
+                ureq::Error::Timeout(_) => timed_out(),
+                ureq::Error::Io(e) if is_timeout(&e) => timed_out(),
+                ureq::Error::Io(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+                    match expected {
+                        Some(expected) => HttpError::Truncated {
+                            url: url.into(),
+                            expected,
+                            received,
+                            attempts,
+                        },
+                        None if chunked => HttpError::ChunksCutShort {
+                            url: url.into(),
+                            received,
+                            attempts,
+                        },
+                        None => HttpError::Transport {
+                            url: url.into(),
+                            attempts,
+                            message: format!("body after {received} bytes: {e}"),
+                        },
+                    }
+                }
+                ureq::Error::Io(e) => HttpError::Transport {
                     url: url.into(),
                     attempts,
-                    message: format!("body after {} bytes: {e}", body.len()),
-                });
-            }
+                    message: format!("body after {received} bytes: {e}"),
+                },
+                e => HttpError::Transport {
+                    url: url.into(),
+                    attempts,
+                    message: format!("body after {received} bytes: {e}"),
+                },
+            });
         }
         if body.len() as u64 > max {
             return Err(HttpError::BodyTooLong {
                 url: url.into(),
                 max,
-            });
-        }
-        // minreq replaces Transfer-Encoding by a Content-Length once it has seen the last
-        // chunk, and ends the body without an error when the connection closes mid-chunk.
-        if chunked && response.headers.contains_key("transfer-encoding") {
-            return Err(HttpError::ChunksCutShort {
-                url: url.into(),
-                received: body.len() as u64,
-                attempts,
             });
         }
         if let Some(expected) = expected
@@ -378,12 +416,174 @@ pub(super) fn host_of(url: &str) -> &str {
     rest.split(['/', '?', '#']).next().unwrap_or(rest)
 }
 
-/// Whether an I/O error is the deadline passing (minreq's own, or a socket timeout).
+/// Whether an I/O error is the deadline passing (a socket timeout).
 pub(super) fn is_timeout(e: &std::io::Error) -> bool {
     matches!(
         e.kind(),
         std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
     )
+}
+
+/// The error of a request that brought no response (its head, that is).
+fn call_error(url: &str, attempts: u32, timeout_s: u64, e: ureq::Error) -> HttpError {
+    let transport = |message: String| HttpError::Transport {
+        url: url.into(),
+        attempts,
+        message,
+    };
+    let bad = |message: String| HttpError::BadResponse {
+        url: url.into(),
+        message,
+    };
+    match e {
+        ureq::Error::Timeout(_) => HttpError::TimedOut {
+            url: url.into(),
+            timeout_s,
+        },
+        ureq::Error::Io(e) if is_timeout(&e) => HttpError::TimedOut {
+            url: url.into(),
+            timeout_s,
+        },
+        ureq::Error::Io(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => transport(
+            "the server closed the connection without an HTTP reply, or before the end of its \
+             status line and headers"
+                .into(),
+        ),
+        ureq::Error::Io(e) => transport(e.to_string()),
+        ureq::Error::HostNotFound => transport("no address found for the host".into()),
+        e @ (ureq::Error::ConnectionFailed | ureq::Error::BodyStalled) => transport(e.to_string()),
+        ureq::Error::LargeResponseHeader(..) => bad(format!(
+            "response head (status line and headers) longer than the {MAX_HEAD_BYTES} bytes \
+             allowed (reading stopped)"
+        )),
+        ureq::Error::Protocol(e) => bad(format!("not a well-formed HTTP/1.1 response: {e}")),
+        e => bad(e.to_string()),
+    }
+}
+
+/// Where a redirect from `from` with `Location: location` leads: the location resolved
+/// against `from` (RFC 3986 5.2), normalized as the world's address is, and checked to be one
+/// that can be fetched; or what is wrong with it, naming it.
+fn redirect_target(from: &str, location: &str) -> Result<String, String> {
+    let target = WorldUrl::normalize(&resolve_reference(from, location));
+    let scheme = target.split_once(':').map_or("", |(s, _)| s);
+    if scheme.eq_ignore_ascii_case("https") {
+        return Err(format!(
+            "{}: https is not built in (the client speaks plain HTTP only): serve the world \
+             over http, or put a TLS proxy in front of the server that redirects",
+            without_userinfo(&target)
+        ));
+    }
+    if !scheme.eq_ignore_ascii_case("http") {
+        return Err(format!(
+            "{}, which is not an http:// address (only plain HTTP is fetched)",
+            without_userinfo(&target)
+        ));
+    }
+    check_authority(&target).map_err(|e| e.to_string())?;
+    Ok(target)
+}
+
+/// `url` with the user's name and password in its authority, if any, replaced by `…`.
+fn without_userinfo(url: &str) -> String {
+    let Some((scheme, rest)) = url.split_once("://") else {
+        return url.to_string();
+    };
+    let end = rest.find(['/', '?', '#']).unwrap_or(rest.len());
+    match rest[..end].rsplit_once('@') {
+        Some((_, host)) => format!("{scheme}://…@{host}{}", &rest[end..]),
+        None => url.to_string(),
+    }
+}
+
+/// A URI reference split as RFC 3986 3 has it (its fragment dropped): `scheme:`,
+/// `//authority`, the path and `?query`, each part absent or without its delimiter.
+struct Parts<'a> {
+    scheme: Option<&'a str>,
+    authority: Option<&'a str>,
+    path: &'a str,
+    query: Option<&'a str>,
+}
+
+impl<'a> Parts<'a> {
+    fn split(reference: &'a str) -> Parts<'a> {
+        let r = reference.split('#').next().unwrap_or(reference);
+        // A scheme is a letter, then letters, digits, `+`, `-` or `.`, before the first `:`.
+        let scheme_end = r.find(':').filter(|&i| {
+            i > 0
+                && r.as_bytes()[0].is_ascii_alphabetic()
+                && r[..i]
+                    .bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || b"+-.".contains(&b))
+        });
+        let (scheme, rest) = match scheme_end {
+            Some(i) => (Some(&r[..i]), &r[i + 1..]),
+            None => (None, r),
+        };
+        let (authority, rest) = match rest.strip_prefix("//") {
+            Some(after) => {
+                let end = after.find(['/', '?']).unwrap_or(after.len());
+                (Some(&after[..end]), &after[end..])
+            }
+            None => (None, rest),
+        };
+        let (path, query) = match rest.split_once('?') {
+            Some((path, query)) => (path, Some(query)),
+            None => (rest, None),
+        };
+        Parts {
+            scheme,
+            authority,
+            path,
+            query,
+        }
+    }
+}
+
+/// `reference` (a redirect's `Location`: absolute, `//host/...`, `/path`, `path`, `../path`,
+/// `?query` or empty) resolved against the absolute URL `base`, as RFC 3986 5.2.2 has it; the
+/// fragment is dropped.
+pub(super) fn resolve_reference(base: &str, reference: &str) -> String {
+    let b = Parts::split(base);
+    let r = Parts::split(reference.trim());
+    let (scheme, authority, path, query) = if r.scheme.is_some() {
+        (r.scheme, r.authority, remove_dot_segments(r.path), r.query)
+    } else if r.authority.is_some() {
+        (b.scheme, r.authority, remove_dot_segments(r.path), r.query)
+    } else if r.path.is_empty() {
+        (
+            b.scheme,
+            b.authority,
+            b.path.to_string(),
+            r.query.or(b.query),
+        )
+    } else if r.path.starts_with('/') {
+        (b.scheme, b.authority, remove_dot_segments(r.path), r.query)
+    } else {
+        // Merged (5.2.3): the base's path up to its last `/`, then the reference's.
+        let merged = if b.authority.is_some() && b.path.is_empty() {
+            format!("/{}", r.path)
+        } else {
+            let dir = b.path.rfind('/').map_or("", |i| &b.path[..=i]);
+            format!("{dir}{}", r.path)
+        };
+        (b.scheme, b.authority, remove_dot_segments(&merged), r.query)
+    };
+    let mut out = String::new();
+    if let Some(scheme) = scheme {
+        out.push_str(scheme);
+        out.push(':');
+    }
+    if let Some(authority) = authority {
+        out.push_str("//");
+        out.push_str(authority);
+    }
+    out.push_str(&path);
+    if let Some(query) = query {
+        out.push('?');
+        out.push_str(query);
+    }
+    out
 }
 
 /// Failures worth another try: the connection, the server's own errors, a body cut short.
@@ -409,6 +609,95 @@ mod tests {
         );
         assert_eq!(host_of("http://b.example?x=1"), "b.example");
         assert_eq!(host_of("http://c"), "c");
+    }
+
+    /// RFC 3986 5.4's examples of resolving a reference against `http://a/b/c/d;p?q` (those
+    /// of its schemes: `g:h` is kept as it is), normal and abnormal, and the fragment dropped.
+    #[test]
+    fn references_resolve_as_rfc_3986_has_it() {
+        let base = "http://a/b/c/d;p?q";
+        for (reference, resolved) in [
+            ("g:h", "g:h"),
+            ("g", "http://a/b/c/g"),
+            ("./g", "http://a/b/c/g"),
+            ("g/", "http://a/b/c/g/"),
+            ("/g", "http://a/g"),
+            ("//g", "http://g"),
+            ("?y", "http://a/b/c/d;p?y"),
+            ("g?y", "http://a/b/c/g?y"),
+            ("#s", "http://a/b/c/d;p?q"),
+            ("g#s", "http://a/b/c/g"),
+            ("g?y#s", "http://a/b/c/g?y"),
+            (";x", "http://a/b/c/;x"),
+            ("g;x", "http://a/b/c/g;x"),
+            ("", "http://a/b/c/d;p?q"),
+            (".", "http://a/b/c/"),
+            ("./", "http://a/b/c/"),
+            ("..", "http://a/b/"),
+            ("../", "http://a/b/"),
+            ("../g", "http://a/b/g"),
+            ("../..", "http://a/"),
+            ("../../", "http://a/"),
+            ("../../g", "http://a/g"),
+            ("../../../g", "http://a/g"),
+            ("../../../../g", "http://a/g"),
+            ("/./g", "http://a/g"),
+            ("/../g", "http://a/g"),
+            ("g.", "http://a/b/c/g."),
+            (".g", "http://a/b/c/.g"),
+            ("g..", "http://a/b/c/g.."),
+            ("..g", "http://a/b/c/..g"),
+            ("./../g", "http://a/b/g"),
+            ("./g/.", "http://a/b/c/g/"),
+            ("g/./h", "http://a/b/c/g/h"),
+            ("g/../h", "http://a/b/c/h"),
+            ("g;x=1/./y", "http://a/b/c/g;x=1/y"),
+            ("g;x=1/../y", "http://a/b/c/y"),
+            ("g?y/./x", "http://a/b/c/g?y/./x"),
+            ("g#s/../x", "http://a/b/c/g"),
+            ("http:g", "http:g"),
+            ("HTTP://B:80/x/../y", "HTTP://B:80/y"),
+        ] {
+            assert_eq!(
+                resolve_reference(base, reference),
+                resolved,
+                "{reference:?}"
+            );
+        }
+        // A base without a path merges under the root.
+        assert_eq!(
+            resolve_reference("http://h:1", "w.toml"),
+            "http://h:1/w.toml"
+        );
+    }
+
+    /// A redirect's target is normalized and checked: only `http://` addresses that the
+    /// world's own would pass, each refusal naming the target without its credentials.
+    #[test]
+    fn redirect_targets_are_checked_as_addresses_are() {
+        let from = "http://h:1/w/world.toml";
+        assert_eq!(
+            redirect_target(from, "../v/a b.toml#x").unwrap(),
+            "http://h:1/v/a%20b.toml"
+        );
+        assert_eq!(
+            redirect_target(from, "HTTP://Other:2/x").unwrap(),
+            "http://other:2/x"
+        );
+        for (location, said) in [
+            (
+                "file:///etc/passwd",
+                "file:///etc/passwd, which is not an http://",
+            ),
+            ("https://s/w", "https://s/w: https is not built in"),
+            ("ftp://u:pw@f/x", "ftp://…@f/x, which"),
+            ("http://[::1]:2/x", "IPv6"),
+            ("//u:pw@h:3/x", "credentials"),
+            ("http:///x", "no host"),
+        ] {
+            let e = redirect_target(from, location).unwrap_err();
+            assert!(e.contains(said) && !e.contains("pw"), "{location}: {e}");
+        }
     }
 
     /// Redirects to ever new hosts keep at most [`MAX_REDIRECT_PAIRS`] pairs, the newest: the
