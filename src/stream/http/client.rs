@@ -57,6 +57,7 @@ impl Client {
             .max_response_header_size(MAX_HEAD_BYTES)
             .max_idle_connections(0)
             .max_idle_connections_per_host(0)
+            .user_agent(concat!("verdant/", env!("CARGO_PKG_VERSION")))
             .build();
         Client {
             options,
