@@ -463,7 +463,7 @@ fn error_chart(results: &[SwayResult], preset: Preset) -> Chart {
     }
     Chart {
         title: format!(
-            "Sway, {} spring ({:.2} Hz, damping ratio {:.2}): error against cost; blown-up runs above {cap:.0e}",
+            "Sway, {} spring ({:.2} Hz, damping ratio {:.2}): error against cost; blown-up runs drawn from {cap:.2e} up",
             preset.name(),
             spring.natural_frequency_hz(),
             spring.damping_ratio(),

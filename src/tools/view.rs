@@ -572,12 +572,14 @@ impl State {
         let recent = &self.frame_times_ms[self.frame_times_ms.len() - n..];
         let mut sorted = recent.to_vec();
         sorted.sort_by(f64::total_cmp);
-        let frame_ms = sorted.get(n / 2).copied().unwrap_or(0.0);
+        // No time between frames yet: no frame time to show.
+        let timing = match sorted.get(n / 2) {
+            Some(&ms) => format!("{ms:.1} ms ({:.0} fps)", 1e3 / ms.max(1e-3)),
+            None => "first frame".to_owned(),
+        };
         let mut title = format!(
-            "verdant: {} | {:.1} ms ({:.0} fps)",
-            self.renderer.world().manifest.name,
-            frame_ms,
-            1e3 / frame_ms.max(1e-3)
+            "verdant: {} | {timing}",
+            self.renderer.world().manifest.name
         );
         if let Some(st) = &self.last_stats {
             let gpu: f64 = st.gpu.iter().map(|(_, t)| t).sum();
