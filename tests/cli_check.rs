@@ -487,11 +487,13 @@ fn a_flight_over_a_tile_that_cannot_be_read_says_so_in_its_summary() {
 fn ctrl_c_stops_a_flight_and_a_soak_waiting_for_the_worlds_manifest() {
     let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
     let url = format!("http://{}/", listener.local_addr().unwrap());
-    // Accepts every connection and says nothing.
+    // Accepts every connection, says nothing, and tells of each.
+    let (connected, connections) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let mut held = Vec::new();
         for stream in listener.incoming().flatten() {
             held.push(stream);
+            let _ = connected.send(());
         }
     });
     let dir = tempfile::tempdir().unwrap();
@@ -503,7 +505,12 @@ fn ctrl_c_stops_a_flight_and_a_soak_waiting_for_the_worlds_manifest() {
             .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(1500));
+        // The run has asked for the manifest (its signal handler is in place before it opens
+        // the world), and waits.
+        connections
+            .recv_timeout(std::time::Duration::from_secs(120))
+            .unwrap_or_else(|_| panic!("{tool} never asked for the world's manifest"));
+        std::thread::sleep(std::time::Duration::from_millis(300));
         let sent = std::time::Instant::now();
         common::send_sigint(&child);
         let out = child.wait_with_output().unwrap();
@@ -537,5 +544,7 @@ fn a_folder_named_here_is_the_world_named_even_without_its_manifest() {
     let (stdout, stderr) = text(&out);
     assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
     assert!(stderr.contains("santa-cruz/world.toml"), "{stderr}");
+    // The world of that name under the source tree is named as not used.
+    assert!(stderr.contains("is not used"), "{stderr}");
     assert!(!stdout.contains("\"location\""), "{stdout}");
 }

@@ -42,10 +42,11 @@ pub struct TaaSettings {
     pub cut_distance_m: f64,
     /// A camera that turns by more than this in one frame (degrees) starts every history again.
     pub cut_angle_deg: f64,
-    /// A projection whose focal length or near plane changes by more than this factor in one
-    /// frame (a change of lens, a zoom cut, a near plane pushed past the scene and back)
-    /// starts every history again: the history drawn through the other lens is too blurred or
-    /// too far off (a frame whose near plane clipped the ground away left sky in it).
+    /// A projection whose focal length (horizontal or vertical: a change of aspect counts) or
+    /// near plane changes by more than this factor in one frame (a change of lens, a zoom cut,
+    /// a near plane pushed past the scene and back) starts every history again: the history
+    /// drawn through the other lens is too blurred or too far off (a frame whose near plane
+    /// clipped the ground away left sky in it). 1..=1e6.
     pub cut_zoom: f32,
     /// Whether the grass blades write their own motion vectors (their wind over the frame) for the
     /// resolve, where otherwise a blade's pixel is reprojected through its depth (the camera's move

@@ -270,6 +270,17 @@ pub(crate) fn parse_cell_size(s: &str) -> Result<[f64; 2], String> {
     }
 }
 
+/// Where a world given by a bare name is looked for besides the folder of that name here:
+/// under ./worlds, then under the source tree's worlds.
+fn named_worlds(arg: &str) -> [PathBuf; 2] {
+    [
+        Path::new("worlds").join(arg),
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("worlds")
+            .join(arg),
+    ]
+}
+
 /// A world argument is a folder, or a name under `./worlds` or the crate's own `worlds`.
 pub(crate) fn resolve_world(arg: &str) -> Result<PathBuf> {
     if verdant::stream::http::is_url(arg) {
@@ -283,18 +294,24 @@ pub(crate) fn resolve_world(arg: &str) -> Result<PathBuf> {
     // A bare name is also looked for under the worlds folders; a path only where it points.
     // A folder of that name here is the world named, though its world.toml is missing or
     // cannot be read (the loader says which): never another world of the same name.
+    let bare = direct.components().count() == 1 && !direct.is_absolute();
     if direct.is_dir() {
+        let elsewhere = named_worlds(arg)
+            .into_iter()
+            .find(|c| bare && c.join("world.toml").is_file());
+        if let Some(other) = elsewhere {
+            log::warn!(
+                "{arg:?} is the folder {} here, which holds no readable world.toml; the world \
+                 at {} is not used (name its path to use it)",
+                direct.display(),
+                other.display()
+            );
+        }
         return Ok(direct.to_path_buf());
     }
-    let bare = direct.components().count() == 1 && !direct.is_absolute();
     let mut candidates: Vec<PathBuf> = Vec::new();
     if bare {
-        for c in [
-            Path::new("worlds").join(arg),
-            Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("worlds")
-                .join(arg),
-        ] {
+        for c in named_worlds(arg) {
             if c.join("world.toml").is_file() {
                 return Ok(c);
             }

@@ -212,6 +212,11 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
             "not known: the eval stopped before every run was made".to_owned()
         } else if names.is_empty() {
             "none".to_owned()
+        } else if report.interrupted {
+            format!(
+                "{} (the others not run at every step: the eval was stopped)",
+                names.join(", ")
+            )
         } else {
             names.join(", ")
         }

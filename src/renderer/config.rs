@@ -516,7 +516,7 @@ impl RendererConfig {
 impl crate::aa::taa::TaaSettings {
     /// Checks every setting of the temporal method against its range, stated in the error:
     /// `max_samples` 2..=256, `clip_sigma` 0.25..=16, the falloffs and `pixel_spread` 0..=16,
-    /// `min_samples` 1..=`max_samples`, `reconstruct_px` 0..=2.
+    /// `min_samples` 1..=`max_samples`, `reconstruct_px` 0..=2, `cut_zoom` 1..=1e6.
     pub fn validate(&self) -> Result<(), ConfigError> {
         check("taa.max_samples", self.max_samples, &(2..=256), "")?;
         check("taa.clip_sigma", self.clip_sigma, &(0.25..=16.0), "")?;
@@ -541,6 +541,7 @@ impl crate::aa::taa::TaaSettings {
             &(0.0..=2.0),
             " pixels",
         )?;
+        check("taa.cut_zoom", self.cut_zoom, &(1.0..=1e6), " times")?;
         Ok(())
     }
 }
@@ -780,6 +781,11 @@ mod tests {
                 with(&|c| c.taa.clip_sigma = f32::NAN),
                 "taa.clip_sigma",
                 "0.25..=16",
+            ),
+            (
+                with(&|c| c.taa.cut_zoom = 0.5),
+                "taa.cut_zoom",
+                "1..=1000000 times",
             ),
             (
                 with(&|c| c.taa.min_samples = 0.5),

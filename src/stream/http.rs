@@ -23,8 +23,8 @@
 //! body without one (chunked or ended by closing) is cut off at the limit; a response's head
 //! (status line and headers) at 64 KiB. Redirects (301, 302, 303, 307, 308) are followed up
 //! to [`MAX_REDIRECTS`] hops, each `Location` resolved against the URL that sent it (RFC 3986
-//! 5.2) and checked as the world's address is: one to another scheme (`https` among them),
-//! an IPv6 host or an address with credentials is refused at once, naming it. A move to
+//! 5.2) and checked as the world's address is: one to another scheme (`https` among them)
+//! or an address with credentials is refused at once, naming it. A move to
 //! another host is warned of (once per pair of hosts).
 //!
 //! Fetched files can be kept in an on-disk cache bounded in bytes, revalidated with the
@@ -370,20 +370,20 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
         let Some((host, after)) = v6.split_once(']') else {
             return Err(bad("an IPv6 host without its closing ]"));
         };
-        if !host.is_empty() {
+        if host.parse::<std::net::Ipv6Addr>().is_err() {
             return Err(bad(
-                "an IPv6 address as the host, which the HTTP client cannot reach: serve the \
-                 world on an IPv4 address too (verdant serve --addr 127.0.0.1:PORT) and give \
-                 that, or a host name that resolves to an IPv4 address it listens on",
+                "not an IPv6 address between [ and ]: expected http://[IPv6]:PORT/PATH",
             ));
         }
-        match after {
-            "" => (host, None),
+        // Checked as an address: the host's colons are its own.
+        let port = match after {
+            "" => None,
             _ => match after.strip_prefix(':') {
-                Some(port) => (host, Some(port)),
+                Some(port) => Some(port),
                 None => return Err(bad("expected http://[IPv6]:PORT/PATH")),
             },
-        }
+        };
+        return check_port(port).map_err(bad);
     } else {
         match authority.rsplit_once(':') {
             Some((host, port)) => (host, Some(port)),
@@ -399,18 +399,24 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
             "more than one port (a host name holds no ':'): expected http://HOST[:PORT]/PATH",
         ));
     }
-    // Digits alone, without leading zeros: `+80` and `080` parse as 80, but the HTTP client
-    // keeps the host's text as written and takes the answer for a redirect.
-    if let Some(port) = port
-        && !(port.bytes().all(|b| b.is_ascii_digit())
-            && !port.starts_with('0')
-            && port.parse::<u16>().is_ok_and(|p| p > 0))
-    {
-        return Err(bad(
-            "the port must be a number in 1..=65535, in digits without leading zeros",
-        ));
+    check_port(port).map_err(bad)
+}
+
+/// A port as written after a host's `:` (none: the default): digits alone, without leading
+/// zeros, in 1..=65535.
+fn check_port(port: Option<&str>) -> Result<(), &'static str> {
+    // `+80` and `080` parse as 80, but the HTTP client keeps the host's text as written and
+    // takes the answer for a redirect.
+    match port {
+        Some(port)
+            if !(port.bytes().all(|b| b.is_ascii_digit())
+                && !port.starts_with('0')
+                && port.parse::<u16>().is_ok_and(|p| p > 0)) =>
+        {
+            Err("the port must be a number in 1..=65535, in digits without leading zeros")
+        }
+        _ => Ok(()),
     }
-    Ok(())
 }
 
 /// Whether a world argument is an HTTP address rather than a folder.
@@ -714,9 +720,9 @@ impl TileSource for HttpSource {
 mod tests {
     use super::*;
 
-    /// Addresses with no host or a port outside 1..=65535, an IPv6 address as the host (the
-    /// client cannot reach one) and credentials are refused before any request; hosts by name
-    /// and IPv4 with or without a port pass.
+    /// Addresses with no host or a port outside 1..=65535, a bracketed host that is not an
+    /// IPv6 address, and credentials are refused before any request; hosts by name, IPv4 and
+    /// IPv6 with or without a port pass.
     #[test]
     fn an_address_without_a_host_or_with_a_bad_port_is_refused() {
         for bad in [
@@ -732,8 +738,9 @@ mod tests {
             "http://h::80/",
             "http://[::1",
             "http://[::1]x/",
-            "http://[::1]/w",
-            "http://[::1]:8000/w",
+            "http://[::1]:080/w",
+            "http://[host]:8000/w",
+            "http://[127.0.0.1]/w",
         ] {
             let err = check_authority(bad).err().map(|e| e.to_string());
             assert!(
@@ -751,6 +758,9 @@ mod tests {
             "http://localhost/",
             "http://example.org:8080/worlds/a?x=1",
             "http://10.0.0.1:65535",
+            "http://[::1]/w",
+            "http://[::1]:8000/w",
+            "http://[2001:db8::7]:80/w",
         ] {
             assert!(check_authority(good).is_ok(), "{good}");
         }

@@ -125,7 +125,8 @@ pub fn open_world(
 
 /// [`open_world`], given up at once when `stop` is set while a world over HTTP is being
 /// fetched (a server that does not answer holds a request up to its deadline, which may be an
-/// hour): the world is opened on a thread of its own, left to its request when the stop comes,
+/// hour): the world is opened on a thread of its own, left to its request when the stop comes
+/// (it ends with its request's deadline and retries: the command line exits before),
 /// and [`stop::Stopped`] is returned (the command line exits with status 130). A folder, or
 /// no stop, is opened as [`open_world`] opens it.
 pub fn open_world_until(
@@ -140,7 +141,7 @@ pub fn open_world_until(
     };
     let (tx, rx) = std::sync::mpsc::channel();
     let (at, options) = (location.to_path_buf(), http.clone());
-    std::thread::Builder::new()
+    let opener = std::thread::Builder::new()
         .name("open world".into())
         .spawn(move || {
             // The receiver is gone once the run stopped: nothing is left to tell.
@@ -157,12 +158,15 @@ pub fn open_world_until(
                 )));
             }
             Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                anyhow::bail!(
+            // It panicked: the panic goes on here, as it would have had the world been
+            // opened on this thread.
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => match opener.join() {
+                Err(panic) => std::panic::resume_unwind(panic),
+                Ok(()) => anyhow::bail!(
                     "{}: the thread opening the world ended without an answer",
                     location.display()
-                );
-            }
+                ),
+            },
         }
     }
 }

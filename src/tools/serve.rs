@@ -125,7 +125,6 @@ impl WorldServer {
         let addr = listener
             .local_addr()
             .context("the server has no IP address")?;
-        warn_ipv6(addr);
         // Each connection carries the deadline of its head, counted from its accept.
         let (tx, rx) = sync_channel::<(TcpStream, Instant)>(limits.queued.max(1));
         let rx = Arc::new(Mutex::new(rx));
@@ -193,25 +192,6 @@ fn fetchable(addr: SocketAddr) -> SocketAddr {
         IpAddr::V4(ip) if ip.is_unspecified() => (Ipv4Addr::LOCALHOST, addr.port()).into(),
         IpAddr::V6(ip) if ip.is_unspecified() => (Ipv6Addr::LOCALHOST, addr.port()).into(),
         _ => addr,
-    }
-}
-
-/// Warns, for a server listening on IPv6, that verdant's own HTTP client cannot reach it
-/// there, and how to serve it so that it can.
-fn warn_ipv6(addr: SocketAddr) {
-    let port = addr.port();
-    match addr.ip() {
-        IpAddr::V6(ip) if ip.is_unspecified() => log::warn!(
-            "serve: listening on {addr}, every IPv6 address, which verdant's own HTTP client \
-             cannot reach (it reaches 127.0.0.1:{port} only where the system takes IPv4 \
-             connections on IPv6 sockets); for it, serve on an IPv4 address (--addr \
-             127.0.0.1:{port} or 0.0.0.0:{port})"
-        ),
-        IpAddr::V6(_) => log::warn!(
-            "serve: listening on {addr}, IPv6 only, which verdant's own HTTP client cannot \
-             reach; for it, serve on an IPv4 address (--addr 127.0.0.1:{port})"
-        ),
-        IpAddr::V4(_) => {}
     }
 }
 

@@ -31,8 +31,12 @@ impl Validator {
         }
     }
 
+    /// The validator a cache entry's metadata line names; none for a line that names none, or
+    /// whose value cannot be sent back as a header (a damaged entry: dropped, and the file
+    /// fetched again, rather than refused by the client on every run).
     pub(super) fn from_line(line: &str) -> Option<Validator> {
         let (kind, value) = line.split_once(' ')?;
+        ureq::http::HeaderValue::from_str(value).ok()?;
         match kind {
             "etag" => Some(Validator::ETag(value.to_string())),
             "last-modified" => Some(Validator::LastModified(value.to_string())),

@@ -193,7 +193,7 @@ impl Client {
             }
             let response = request
                 .call()
-                .map_err(|e| call_error(url, attempts, timeout_s, e))?;
+                .map_err(|e| call_error(&shown(url, &target), attempts, timeout_s, e))?;
             let status = response.status().as_u16();
             if !matches!(status, 301 | 302 | 303 | 307 | 308) {
                 break response;
@@ -235,7 +235,7 @@ impl Client {
                     .map(Duration::from_secs);
             }
             return Err(HttpError::Status {
-                url: url.into(),
+                url: shown(url, &target),
                 status: i32::from(status),
                 // The client library keeps the status, not the server's words for it (which a
                 // client is to ignore, RFC 9112 4): its standard reason.
@@ -307,6 +307,9 @@ impl Client {
                         .contains("chunked")
                 });
         let validator = Validator::from_headers(response.headers());
+        // A body that only the connection's close ends (no length, not chunked) may have been
+        // cut short by a reset without a sign of it: read, but not kept in the disk cache.
+        let delimited = expected.is_some() || chunked;
         let capacity = expected.unwrap_or(64 << 10).min(max).min(MAX_PREALLOCATED);
         let mut body = Vec::with_capacity(capacity as usize);
         // One byte past the limit tells a body that is too long from one that just fits.
@@ -372,7 +375,7 @@ impl Client {
             });
         }
         match (&self.cache, validator, range) {
-            (Some(cache), Some(validator), None) => {
+            (Some(cache), Some(validator), None) if delimited => {
                 if let Ok(mut cache) = cache.lock() {
                     cache.put(url, &validator, &body);
                 }
@@ -457,8 +460,24 @@ fn call_error(url: &str, attempts: u32, timeout_s: u64, e: ureq::Error) -> HttpE
             "response head (status line and headers) longer than the {MAX_HEAD_BYTES} bytes \
              allowed (reading stopped)"
         )),
-        ureq::Error::Protocol(e) => bad(format!("not a well-formed HTTP/1.1 response: {e}")),
+        ureq::Error::Protocol(e) => bad(format!(
+            "not a well-formed HTTP/1.1 response: {e} (at most {MAX_RESPONSE_HEADERS} headers \
+             are read, each on a line of its own)"
+        )),
         e => bad(e.to_string()),
+    }
+}
+
+/// The most headers a response may have (the HTTP library's limit): more is refused as a
+/// response that is not well-formed.
+const MAX_RESPONSE_HEADERS: usize = 128;
+
+/// `url` as an error names it: with the address it was redirected to, where it was.
+fn shown(url: &str, target: &str) -> String {
+    if url == target {
+        url.to_string()
+    } else {
+        format!("{url} (redirected to {})", without_userinfo(target))
     }
 }
 
@@ -685,14 +704,18 @@ mod tests {
             redirect_target(from, "HTTP://Other:2/x").unwrap(),
             "http://other:2/x"
         );
+        assert_eq!(
+            redirect_target(from, "http://[::1]:2/x").unwrap(),
+            "http://[::1]:2/x"
+        );
         for (location, said) in [
+            ("http://[zz]:2/x", "not an IPv6 address"),
             (
                 "file:///etc/passwd",
                 "file:///etc/passwd, which is not an http://",
             ),
             ("https://s/w", "https://s/w: https is not built in"),
             ("ftp://u:pw@f/x", "ftp://…@f/x, which"),
-            ("http://[::1]:2/x", "IPv6"),
             ("//u:pw@h:3/x", "credentials"),
             ("http:///x", "no host"),
         ] {
