@@ -2508,3 +2508,59 @@ fn a_redirect_where_the_client_cannot_go_is_refused_at_once_naming_it() {
         );
     }
 }
+
+/// A reply that is not the whole file as sent (a 206 part or a 204 to a request without a
+/// range, a body in a transfer coding other than chunked, or in a content coding nobody asked
+/// for) is refused at once naming what it was, never taken (and cached) for the file's bytes;
+/// and an error after a redirect names the address that answered too.
+#[test]
+fn a_reply_that_is_not_the_whole_file_is_refused_naming_why() {
+    for (reply, said) in [
+        (
+            "HTTP/1.1 206 Partial Content\r\nContent-Range: bytes 0-4/99\r\nContent-Length: 5\r\nETag: \"x\"\r\n\r\nhello",
+            "HTTP 206 to a request for the whole file",
+        ),
+        (
+            "HTTP/1.1 204 No Content\r\nETag: \"x\"\r\n\r\n",
+            "HTTP 204 to a request for the whole file",
+        ),
+        (
+            "HTTP/1.1 200 OK\r\nTransfer-Encoding: gzip, chunked\r\nETag: \"x\"\r\n\r\n5\r\nhello\r\n0\r\n\r\n",
+            "Transfer-Encoding \"gzip, chunked\": only chunked is read",
+        ),
+        (
+            "HTTP/1.1 200 OK\r\nContent-Encoding: gzip\r\nContent-Length: 5\r\nETag: \"x\"\r\n\r\nhello",
+            "Content-Encoding \"gzip\", which was not asked for",
+        ),
+    ] {
+        let server = RawServer::start(move |_, stream, _| write!(stream, "{reply}"));
+        let e = HttpSource::open(&server.url, quick_options()).unwrap_err();
+        assert!(
+            matches!(http_error(&e), HttpError::BadResponse { .. }),
+            "{said}: {e}"
+        );
+        assert!(e.to_string().contains(said), "{said}: {e}");
+        assert_eq!(server.asked.load(Ordering::SeqCst), 1, "{said}: retried");
+    }
+    // A body cut short at the address a redirect led to: both are named.
+    let server = RawServer::start(move |path, stream, _| {
+        if path.starts_with("/z/") {
+            write!(
+                stream,
+                "HTTP/1.1 200 OK\r\nContent-Length: 100\r\n\r\nshort"
+            )
+        } else {
+            write!(
+                stream,
+                "HTTP/1.1 302 Found\r\nLocation: /z/world.toml\r\nContent-Length: 0\r\n\r\n"
+            )
+        }
+    });
+    let e = HttpSource::open(&server.url, quick_options())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("world.toml (redirected to ") && e.contains("/z/world.toml)"),
+        "{e}"
+    );
+}

@@ -214,6 +214,16 @@ impl Client {
             target = next;
         };
         self.note_redirect(url, &target);
+        // Errors from here on name the address that answered too, where it was redirected.
+        let at = shown(url, &target);
+        let bad = |message: String| HttpError::BadResponse {
+            url: at.clone(),
+            message,
+        };
+        let timed_out = || HttpError::TimedOut {
+            url: at.clone(),
+            timeout_s,
+        };
         let status = response.status().as_u16();
         if status == 304
             && let Some((_, body)) = cached
@@ -235,7 +245,7 @@ impl Client {
                     .map(Duration::from_secs);
             }
             return Err(HttpError::Status {
-                url: shown(url, &target),
+                url: at.clone(),
                 status: i32::from(status),
                 // The client library keeps the status, not the server's words for it (which a
                 // client is to ignore, RFC 9112 4): its standard reason.
@@ -246,6 +256,32 @@ impl Client {
                     .to_string(),
                 attempts,
             });
+        }
+        // A whole file comes as a 200 alone: a 206 (a part) or a 204 (nothing) to a request
+        // without a range would be taken, and cached, for the file.
+        if range.is_none() && status != 200 {
+            return Err(bad(format!(
+                "HTTP {status} to a request for the whole file (only 200 carries it)"
+            )));
+        }
+        // Chunked is the only transfer coding read: another (gzip, compress) would leave the
+        // body coded, taken and cached for the file's bytes.
+        if let Some(coding) =
+            header("transfer-encoding").filter(|c| !c.eq_ignore_ascii_case("chunked"))
+        {
+            return Err(bad(format!(
+                "Transfer-Encoding {coding:?}: only chunked is read (serve the file without \
+                 another coding)"
+            )));
+        }
+        // Nothing asked for a coded body (no Accept-Encoding is sent): one sent coded would be
+        // taken, and cached, for the file's bytes.
+        if let Some(coding) = header("content-encoding")
+            .filter(|c| !c.is_empty() && !c.eq_ignore_ascii_case("identity"))
+        {
+            return Err(bad(format!(
+                "Content-Encoding {coding:?}, which was not asked for and is not read"
+            )));
         }
         // A range's body is what was asked, whatever the server claims of the file's length.
         let max = match range {
@@ -291,7 +327,7 @@ impl Client {
             && size > max
         {
             return Err(HttpError::TooLarge {
-                url: url.into(),
+                url: at.clone(),
                 size,
                 max,
             });
@@ -329,30 +365,30 @@ impl Client {
                 ureq::Error::Io(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
                     match expected {
                         Some(expected) => HttpError::Truncated {
-                            url: url.into(),
+                            url: at.clone(),
                             expected,
                             received,
                             attempts,
                         },
                         None if chunked => HttpError::ChunksCutShort {
-                            url: url.into(),
+                            url: at.clone(),
                             received,
                             attempts,
                         },
                         None => HttpError::Transport {
-                            url: url.into(),
+                            url: at.clone(),
                             attempts,
                             message: format!("body after {received} bytes: {e}"),
                         },
                     }
                 }
                 ureq::Error::Io(e) => HttpError::Transport {
-                    url: url.into(),
+                    url: at.clone(),
                     attempts,
                     message: format!("body after {received} bytes: {e}"),
                 },
                 e => HttpError::Transport {
-                    url: url.into(),
+                    url: at.clone(),
                     attempts,
                     message: format!("body after {received} bytes: {e}"),
                 },
@@ -360,7 +396,7 @@ impl Client {
         }
         if body.len() as u64 > max {
             return Err(HttpError::BodyTooLong {
-                url: url.into(),
+                url: at.clone(),
                 max,
             });
         }
@@ -368,7 +404,7 @@ impl Client {
             && (body.len() as u64) < expected
         {
             return Err(HttpError::Truncated {
-                url: url.into(),
+                url: at.clone(),
                 expected,
                 received: body.len() as u64,
                 attempts,
@@ -460,10 +496,11 @@ fn call_error(url: &str, attempts: u32, timeout_s: u64, e: ureq::Error) -> HttpE
             "response head (status line and headers) longer than the {MAX_HEAD_BYTES} bytes \
              allowed (reading stopped)"
         )),
-        ureq::Error::Protocol(e) => bad(format!(
+        ureq::Error::Protocol(e) if e.to_string().contains("too many headers") => bad(format!(
             "not a well-formed HTTP/1.1 response: {e} (at most {MAX_RESPONSE_HEADERS} headers \
              are read, each on a line of its own)"
         )),
+        ureq::Error::Protocol(e) => bad(format!("not a well-formed HTTP/1.1 response: {e}")),
         e => bad(e.to_string()),
     }
 }
