@@ -2511,7 +2511,8 @@ fn a_redirect_where_the_client_cannot_go_is_refused_at_once_naming_it() {
 
 /// A reply that is not the whole file as sent (a 206 part or a 204 to a request without a
 /// range, a body in a transfer coding other than chunked, or in a content coding nobody asked
-/// for) is refused at once naming what it was, never taken (and cached) for the file's bytes;
+/// for, a 304 to a request that was not conditional, a chunk size that is not a number) is
+/// refused at once naming what it was, never taken (and cached) for the file's bytes;
 /// and an error after a redirect names the address that answered too.
 #[test]
 fn a_reply_that_is_not_the_whole_file_is_refused_naming_why() {
@@ -2531,6 +2532,14 @@ fn a_reply_that_is_not_the_whole_file_is_refused_naming_why() {
         (
             "HTTP/1.1 200 OK\r\nContent-Encoding: gzip\r\nContent-Length: 5\r\nETag: \"x\"\r\n\r\nhello",
             "Content-Encoding \"gzip\", which was not asked for",
+        ),
+        (
+            "HTTP/1.1 304 Not Modified\r\n\r\n",
+            "HTTP 304 Not Modified to a request that was not conditional",
+        ),
+        (
+            "HTTP/1.1 200 OK\r\nTransfer-Encoding: chunked\r\n\r\nzz\r\nhello\r\n0\r\n\r\n",
+            "body not well-formed after 0 bytes",
         ),
     ] {
         let server = RawServer::start(move |_, stream, _| write!(stream, "{reply}"));

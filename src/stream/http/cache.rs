@@ -234,7 +234,13 @@ impl DiskCache {
         if meta_url != url {
             return Err(format!("metadata names {meta_url}"));
         }
-        let validator = Validator::from_line(validator).ok_or("no validator in metadata")?;
+        let validator = Validator::from_line(validator).ok_or(
+            if validator.starts_with("etag ") || validator.starts_with("last-modified ") {
+                "a validator that cannot be sent back as a header"
+            } else {
+                "no validator in metadata"
+            },
+        )?;
         let (hash, len) = sum
             .strip_prefix("fnv1a64 ")
             .and_then(|s| s.split_once(' '))
@@ -523,7 +529,7 @@ mod tests {
         let key = DiskCache::key(url);
         let (body_path, meta_path) = (cache.path(&key, "body"), cache.path(&key, "meta"));
         type Damage = fn(&Path, &Path);
-        let damages: [(&str, Damage); 6] = [
+        let damages: [(&str, Damage); 7] = [
             ("a flipped byte", |b, _| {
                 let mut bytes = std::fs::read(b).unwrap();
                 bytes[3] ^= 0x80;
@@ -546,6 +552,11 @@ mod tests {
                 let meta = std::fs::read_to_string(m).unwrap();
                 std::fs::write(m, meta.replace("world.toml", "other.toml")).unwrap();
             }),
+            // A validator with a control character: the client could not send it back.
+            ("a validator that cannot be a header", |_, m| {
+                let meta = std::fs::read_to_string(m).unwrap();
+                std::fs::write(m, meta.replace("07:28:00", "07:28\u{1}00")).unwrap();
+            }),
         ];
         for (what, damage) in damages {
             cache.put(url, &tag, b"name = \"santa-cruz\"\n");
@@ -559,6 +570,13 @@ mod tests {
             assert!(!body_path.exists() && !meta_path.exists(), "{what}: kept");
             assert_eq!((cache.bytes, cache.entries.len()), (0, 0), "{what}");
         }
+        // Said as what it is.
+        cache.put(url, &tag, b"x");
+        let meta = std::fs::read_to_string(&meta_path).unwrap();
+        std::fs::write(&meta_path, meta.replace("07:28:00", "07:28\u{7f}00")).unwrap();
+        let problem = cache.read_entry(&key, url, 1000).unwrap_err();
+        assert_eq!(problem, "a validator that cannot be sent back as a header");
+        cache.remove(&key);
         // A whole body larger than the file may now be is not used either.
         cache.put(url, &tag, &[b'a'; 100]);
         assert!(cache.get(url, 99).is_none());

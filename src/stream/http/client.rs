@@ -237,6 +237,13 @@ impl Client {
                 .get(name)
                 .map(|v| String::from_utf8_lossy(v.as_bytes()).trim().to_string())
         };
+        if status == 304 && cached.is_none() {
+            return Err(bad(
+                "HTTP 304 Not Modified to a request that was not conditional (nothing was \
+                 cached to fall back on)"
+                    .into(),
+            ));
+        }
         if !(200..300).contains(&status) {
             // Seconds only: a date would need the clock of the server, which may be wrong.
             if status == 503 {
@@ -387,6 +394,10 @@ impl Client {
                     attempts,
                     message: format!("body after {received} bytes: {e}"),
                 },
+                // A chunk size that is not one: the server's fault, not the connection's.
+                ureq::Error::Protocol(e) => {
+                    bad(format!("body not well-formed after {received} bytes: {e}"))
+                }
                 e => HttpError::Transport {
                     url: at.clone(),
                     attempts,
