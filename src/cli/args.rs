@@ -296,10 +296,11 @@ pub(crate) fn resolve_world(arg: &str) -> Result<PathBuf> {
     // cannot be read (the loader says which): never another world of the same name.
     let bare = direct.components().count() == 1 && !direct.is_absolute();
     if direct.is_dir() {
-        let elsewhere = named_worlds(arg)
-            .into_iter()
-            .find(|c| bare && c.join("world.toml").is_file());
-        if let Some(other) = elsewhere {
+        if bare
+            && let Some(other) = named_worlds(arg)
+                .into_iter()
+                .find(|c| c.join("world.toml").is_file())
+        {
             log::warn!(
                 "{arg:?} is the folder {} here, which holds no readable world.toml; the world \
                  at {} is not used (name its path to use it)",

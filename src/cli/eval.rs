@@ -208,17 +208,14 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
     let names: Vec<&str> = report.stable.iter().map(Integrator::name).collect();
     say!(
         "stable at every step and at the 0.5 s hitch, both presets: {}",
-        if names.is_empty() && report.interrupted {
-            "not known: the eval stopped before every run was made".to_owned()
-        } else if names.is_empty() {
-            "none".to_owned()
-        } else if report.interrupted {
-            format!(
+        match (names.is_empty(), report.interrupted) {
+            (true, true) => "not known: the eval stopped before every run was made".to_owned(),
+            (true, false) => "none".to_owned(),
+            (false, true) => format!(
                 "{} (the others not run at every step: the eval was stopped)",
                 names.join(", ")
-            )
-        } else {
-            names.join(", ")
+            ),
+            (false, false) => names.join(", "),
         }
     )?;
     say!(

@@ -174,9 +174,9 @@ struct State {
     /// The most terrain tiles a frame drew, over the frames whose figures have come back.
     tiles_drawn_max: u32,
     wind_scene: String,
-    /// The window's size while it is larger than the renderer draws (past the device's
-    /// largest texture or the renderer's pixels): drawing pauses until it fits again.
-    too_large: Option<(u32, u32)>,
+    /// Whether the window is larger than the renderer draws (past the device's largest
+    /// texture or the renderer's pixels): drawing pauses until it fits again.
+    too_large: bool,
 }
 
 fn depth_target(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Texture {
@@ -323,7 +323,7 @@ impl Viewer {
             last_stats: None,
             tiles_drawn_max: 0,
             wind_scene,
-            too_large: None,
+            too_large: false,
         })
     }
 
@@ -375,7 +375,7 @@ impl ApplicationHandler for Viewer {
                 // depth target as they were.
                 match s.renderer.resize(width, height) {
                     Ok(()) => {
-                        s.too_large = None;
+                        s.too_large = false;
                         s.config.width = width;
                         s.config.height = height;
                         s.surface.configure(&s.ctx.device, &s.config);
@@ -384,13 +384,13 @@ impl ApplicationHandler for Viewer {
                     }
                     // A session: drawing pauses until the window is made smaller.
                     Err(e) if self.opts.frames.is_none() => {
-                        if s.too_large.is_none() {
+                        if !s.too_large {
                             log::warn!(
                                 "the window is {width}x{height}, larger than verdant draws \
                                  ({e}); drawing pauses until it is made smaller"
                             );
                         }
-                        s.too_large = Some((width, height));
+                        s.too_large = true;
                         s.window.set_title(&format!(
                             "verdant: the window is too large to draw ({width}x{height}); \
                              make it smaller"
@@ -458,7 +458,7 @@ impl ApplicationHandler for Viewer {
     fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
         // Nothing is drawn while the window is too large: the loop waits for its next resize.
         if let Some(s) = &self.state
-            && s.too_large.is_none()
+            && !s.too_large
         {
             s.window.request_redraw();
         }
@@ -613,7 +613,7 @@ impl Viewer {
         let Some(s) = &mut self.state else {
             return Ok(());
         };
-        if s.too_large.is_some() {
+        if s.too_large {
             return Ok(());
         }
         let now = Instant::now();

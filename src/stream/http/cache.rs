@@ -31,16 +31,19 @@ impl Validator {
         }
     }
 
-    /// The validator a cache entry's metadata line names; none for a line that names none, or
-    /// whose value cannot be sent back as a header (a damaged entry: dropped, and the file
-    /// fetched again, rather than refused by the client on every run).
-    pub(super) fn from_line(line: &str) -> Option<Validator> {
-        let (kind, value) = line.split_once(' ')?;
-        ureq::http::HeaderValue::from_str(value).ok()?;
-        match kind {
-            "etag" => Some(Validator::ETag(value.to_string())),
-            "last-modified" => Some(Validator::LastModified(value.to_string())),
-            _ => None,
+    /// The validator a cache entry's metadata line names, or why there is none: the line
+    /// names none, or its value cannot be sent back as a header (a damaged entry: dropped, and
+    /// the file fetched again, rather than refused by the client on every run).
+    pub(super) fn from_line(line: &str) -> Result<Validator, &'static str> {
+        let validator = match line.split_once(' ') {
+            Some(("etag", value)) => Validator::ETag(value.to_string()),
+            Some(("last-modified", value)) => Validator::LastModified(value.to_string()),
+            _ => return Err("no validator in metadata"),
+        };
+        let (Validator::ETag(value) | Validator::LastModified(value)) = &validator;
+        match ureq::http::HeaderValue::from_str(value) {
+            Ok(_) => Ok(validator),
+            Err(_) => Err("a validator that cannot be sent back as a header"),
         }
     }
 }
@@ -234,13 +237,7 @@ impl DiskCache {
         if meta_url != url {
             return Err(format!("metadata names {meta_url}"));
         }
-        let validator = Validator::from_line(validator).ok_or(
-            if validator.starts_with("etag ") || validator.starts_with("last-modified ") {
-                "a validator that cannot be sent back as a header"
-            } else {
-                "no validator in metadata"
-            },
-        )?;
+        let validator = Validator::from_line(validator)?;
         let (hash, len) = sum
             .strip_prefix("fnv1a64 ")
             .and_then(|s| s.split_once(' '))

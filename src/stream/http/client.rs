@@ -225,9 +225,14 @@ impl Client {
             timeout_s,
         };
         let status = response.status().as_u16();
-        if status == 304
-            && let Some((_, body)) = cached
-        {
+        if status == 304 {
+            let Some((_, body)) = cached else {
+                return Err(bad(
+                    "HTTP 304 Not Modified to a request that was not conditional (nothing was \
+                     cached to fall back on)"
+                        .into(),
+                ));
+            };
             self.cache_hits.fetch_add(1, Ordering::Relaxed);
             return Ok(body.clone());
         }
@@ -237,13 +242,6 @@ impl Client {
                 .get(name)
                 .map(|v| String::from_utf8_lossy(v.as_bytes()).trim().to_string())
         };
-        if status == 304 && cached.is_none() {
-            return Err(bad(
-                "HTTP 304 Not Modified to a request that was not conditional (nothing was \
-                 cached to fall back on)"
-                    .into(),
-            ));
-        }
         if !(200..300).contains(&status) {
             // Seconds only: a date would need the clock of the server, which may be wrong.
             if status == 503 {
@@ -273,9 +271,13 @@ impl Client {
         }
         // Chunked is the only transfer coding read: another (gzip, compress) would leave the
         // body coded, taken and cached for the file's bytes.
-        if let Some(coding) =
-            header("transfer-encoding").filter(|c| !c.eq_ignore_ascii_case("chunked"))
-        {
+        let codings: Vec<String> = response
+            .headers()
+            .get_all("transfer-encoding")
+            .iter()
+            .map(|v| String::from_utf8_lossy(v.as_bytes()).trim().to_string())
+            .collect();
+        if let Some(coding) = codings.iter().find(|c| !c.eq_ignore_ascii_case("chunked")) {
             return Err(bad(format!(
                 "Transfer-Encoding {coding:?}: only chunked is read (serve the file without \
                  another coding)"
@@ -339,16 +341,8 @@ impl Client {
                 max,
             });
         }
-        let chunked = expected.is_none()
-            && response
-                .headers()
-                .get_all("transfer-encoding")
-                .iter()
-                .any(|v| {
-                    String::from_utf8_lossy(v.as_bytes())
-                        .to_ascii_lowercase()
-                        .contains("chunked")
-                });
+        // Every coding is chunked (any other was refused above).
+        let chunked = expected.is_none() && !codings.is_empty();
         let validator = Validator::from_headers(response.headers());
         // A body that only the connection's close ends (no length, not chunked) may have been
         // cut short by a reset without a sign of it: read, but not kept in the disk cache.
@@ -364,6 +358,11 @@ impl Client {
         self.bytes.fetch_add(body.len() as u64, Ordering::Relaxed);
         if let Err(e) = read {
             let received = body.len() as u64;
+            let transport = |e: &dyn std::fmt::Display| HttpError::Transport {
+                url: at.clone(),
+                attempts,
+                message: format!("body after {received} bytes: {e}"),
+            };
             // The library ends a body early with an error: the connection closed before its
             // `Content-Length` or its last chunk.
             return Err(match ureq::Error::from(e) {
@@ -382,27 +381,15 @@ impl Client {
                             received,
                             attempts,
                         },
-                        None => HttpError::Transport {
-                            url: at.clone(),
-                            attempts,
-                            message: format!("body after {received} bytes: {e}"),
-                        },
+                        None => transport(&e),
                     }
                 }
-                ureq::Error::Io(e) => HttpError::Transport {
-                    url: at.clone(),
-                    attempts,
-                    message: format!("body after {received} bytes: {e}"),
-                },
+                ureq::Error::Io(e) => transport(&e),
                 // A chunk size that is not one: the server's fault, not the connection's.
                 ureq::Error::Protocol(e) => {
                     bad(format!("body not well-formed after {received} bytes: {e}"))
                 }
-                e => HttpError::Transport {
-                    url: at.clone(),
-                    attempts,
-                    message: format!("body after {received} bytes: {e}"),
-                },
+                e => transport(&e),
             });
         }
         if body.len() as u64 > max {
