@@ -9,8 +9,12 @@
 // the terrain's Hi-Z cull it. A survivor goes to its type's
 // level of detail by distance (a dithered cross-fade: within a band around each switch it goes
 // to both levels, each drawing a complementary share of its pixels) and is appended to that
-// (type, level)'s region of the instance pool. A second entry point turns the counters into
-// indexed indirect draws, clamped to the region's capacity, and counts the overflow.
+// (type, level)'s region of the instance pool, unless the region was crowded the frame before:
+// then it is kept by its own number with the chance that fills the region to a little less than
+// its capacity (crowd_fill in place_cpu.rs), the survivors grown to keep the cover (the same plants from frame to frame, where
+// a full region would drop whichever came last). A second entry point turns the counters into
+// indexed indirect draws, clamped to the region's capacity, counts the overflow, and sets each
+// region's chance for the next frame.
 // CPU mirror: src/plants/place_cpu.rs.
 
 #include "shared/hash.wgsl"
@@ -93,10 +97,19 @@ struct DrawIndexedArgs {
 @group(0) @binding(3) var grass: texture_2d_array<u32>;
 @group(0) @binding(4) var<storage, read> hiz: array<f32>;
 @group(0) @binding(5) var<storage, read_write> instances: array<PlantInstance>;
-// Per (type, level): instances wanted (may exceed the capacity).
-@group(0) @binding(6) var<storage, read_write> counters: array<atomic<u32>, 24>;
+// Per (type, level) region, `type * 3 + level`.
+struct Counters {
+    // Instances appended this frame (may exceed the capacity).
+    appended: array<atomic<u32>, 24>,
+    // Instances that passed every test but the thinning of crowded regions this frame.
+    wanted: array<atomic<u32>, 24>,
+    // The chance of keeping a plant, from what the region wanted the frame before
+    // (crowd_keeps in place_cpu.rs; written by finalize_draws, 1 when the stage is made).
+    keep: array<f32, 24>,
+}
+@group(0) @binding(6) var<storage, read_write> counters: Counters;
 // The counters of `counter` in place_cpu.rs.
-@group(0) @binding(7) var<storage, read_write> stats: array<atomic<u32>, 8>;
+@group(0) @binding(7) var<storage, read_write> stats: array<atomic<u32>, 9>;
 @group(0) @binding(8) var<storage, read_write> args: array<DrawIndexedArgs, 24>;
 
 const CONSIDERED: u32 = 0u;
@@ -107,12 +120,18 @@ const FRUSTUM: u32 = 4u;
 const OCCLUSION: u32 = 5u;
 const OVERFLOW: u32 = 6u;
 const DRAWN: u32 = 7u;
+const CROWDED: u32 = 8u;
+const STATS: u32 = 9u;
+
+// CROWD_FILL (see crowd_fill) and CROWD_MAX_GROWTH in place_cpu.rs.
+const CROWD_FILL: f32 = 0.95;
+const CROWD_MAX_GROWTH: f32 = 1.4142135;
 
 // Salts of the placement's hashes (as in place_cpu.rs).
 const SALT_CELL: u32 = 0x9e1a7u;
 const SALT_CLUMP: u32 = 0x5c1f3u;
 
-var<workgroup> local_stats: array<atomic<u32>, 8>;
+var<workgroup> local_stats: array<atomic<u32>, 9>;
 
 fn tally(c: u32) {
     atomicAdd(&local_stats[c], 1u);
@@ -151,7 +170,7 @@ fn clump_factor(t: u32, cell: vec2<u32>) -> f32 {
 
 fn emit_plant(t: u32, level: u32, inst: PlantInstance) {
     let region = t * 3u + level;
-    let index = atomicAdd(&counters[region], 1u);
+    let index = atomicAdd(&counters.appended[region], 1u);
     if index < params.limits.y {
         var i = inst;
         i.kind = t | (level << 8u);
@@ -165,7 +184,7 @@ fn place(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(local_invocation_index) lid: u32,
 ) {
-    if lid < 8u {
+    if lid < STATS {
         atomicStore(&local_stats[lid], 0u);
     }
     workgroupBarrier();
@@ -175,7 +194,7 @@ fn place(
         place_cell(job, gid.x, gid.y);
     }
     workgroupBarrier();
-    if lid < 8u {
+    if lid < STATS {
         let v = atomicLoad(&local_stats[lid]);
         if v > 0u {
             atomicAdd(&stats[lid], v);
@@ -253,25 +272,6 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
         return;
     }
     scale = scale / sqrt(keep);
-    let radius = scale * max(ty.limits.w, 0.5);
-    let center = pos + vec3<f32>(0.0, 0.0, 0.5 * scale);
-    for (var i = 0; i < 5; i++) {
-        let plane = params.planes[i];
-        if dot(plane.xyz, center) + plane.w < -radius {
-            tally(FRUSTUM);
-            return;
-        }
-    }
-    if occluded(center, radius) {
-        tally(OCCLUSION);
-        return;
-    }
-    var inst: PlantInstance;
-    inst.pos = pos;
-    inst.yaw = rand01(hash_u32(h0 ^ 6u)) * 6.2831855;
-    inst.scale = scale;
-    inst.hash = h0;
-    inst.fade = 1.0;
     // The level by distance, cross-faded over a band centred on each switch.
     let half_band = 0.5 * params.lod.z;
     let to_1 = min(params.lod.x, ty.lod.x);
@@ -284,7 +284,49 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
         level = 1u;
         t_band = (dist - (params.lod.y - half_band)) / max(params.lod.z, 1e-3);
     }
-    if level < 2u && t_band > 0.0 {
+    let faded = level < 2u && t_band > 0.0;
+    let region = chosen * 3u + level;
+    // A crowded region (the frame before) keeps a plant by its own number, the survivor grown
+    // to keep the cover; a plant in a cross-fade by the more crowded of its two regions.
+    var crowd = counters.keep[region];
+    if faded {
+        crowd = min(crowd, counters.keep[region + 1u]);
+    }
+    let crowd_kept = rand01(hash_u32(h0 ^ 9u)) < crowd;
+    // The culling sphere holds the plant however much it grows (so that what a region wants
+    // does not follow how crowded it was, only whether it was).
+    let reach = select(1.0, CROWD_MAX_GROWTH, crowd < 1.0);
+    let radius = reach * scale * max(ty.limits.w, 0.5);
+    let center = pos + vec3<f32>(0.0, 0.0, 0.5 * reach * scale);
+    if crowd_kept {
+        scale = scale * min(1.0 / sqrt(max(crowd, 1e-6)), CROWD_MAX_GROWTH);
+    }
+    for (var i = 0; i < 5; i++) {
+        let plane = params.planes[i];
+        if dot(plane.xyz, center) + plane.w < -radius {
+            tally(FRUSTUM);
+            return;
+        }
+    }
+    if occluded(center, radius) {
+        tally(OCCLUSION);
+        return;
+    }
+    atomicAdd(&counters.wanted[region], 1u);
+    if faded {
+        atomicAdd(&counters.wanted[region + 1u], 1u);
+    }
+    if !crowd_kept {
+        tally(CROWDED);
+        return;
+    }
+    var inst: PlantInstance;
+    inst.pos = pos;
+    inst.yaw = rand01(hash_u32(h0 ^ 6u)) * 6.2831855;
+    inst.scale = scale;
+    inst.hash = h0;
+    inst.fade = 1.0;
+    if faded {
         // Within the band: the nearer level keeps the pixels whose dither is below 1 - t,
         // the farther one the rest.
         inst.fade = 1.0 - t_band;
@@ -297,16 +339,22 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
 }
 
 // One invocation per (type, level): the indexed indirect draw from its counter, clamped to the
-// region's capacity; overflow and drawn instances go to the statistics.
+// region's capacity; overflow and drawn instances go to the statistics; the chance of keeping a
+// plant in the next frame from what the region wanted in this one (crowd_keeps in
+// place_cpu.rs).
 @compute @workgroup_size(24, 1, 1)
 fn finalize_draws(@builtin(local_invocation_index) region: u32) {
-    let wanted = atomicLoad(&counters[region]);
-    let drawn = min(wanted, params.limits.y);
+    let appended = atomicLoad(&counters.appended[region]);
+    let drawn = min(appended, params.limits.y);
+    let capacity = f32(params.limits.y);
+    let fit = max(min(CROWD_FILL * capacity, capacity - 3.0 * sqrt(capacity)), 1.0);
+    let wanted = f32(atomicLoad(&counters.wanted[region]));
+    counters.keep[region] = select(fit / wanted, 1.0, wanted <= fit);
     let mesh = params.meshes[region];
     var count = 0u;
     if region / 3u < params.limits.z {
         count = drawn;
-        atomicAdd(&stats[OVERFLOW], wanted - drawn);
+        atomicAdd(&stats[OVERFLOW], appended - drawn);
         atomicAdd(&stats[DRAWN], drawn);
     }
     args[region] = DrawIndexedArgs(mesh.x, count, mesh.y, i32(mesh.z), 0u);

@@ -13,7 +13,9 @@ use verdant::features::Features;
 use verdant::gpu::{GpuContext, GpuTimer, Targets};
 use verdant::grass::{HiZ, HiZPyramid, TileJob};
 use verdant::lod::Frustum;
-use verdant::plants::place_cpu::{LEVELS, PlantInstance, PlantJob, counter, place_tile};
+use verdant::plants::place_cpu::{
+    LEVELS, PlantInstance, PlantJob, REGIONS, counter, crowd_keeps, place_tile, place_tile_crowded,
+};
 use verdant::plants::{PlantLayer, PlantRenderer, PlantSet, PlantSettings, Recipe, generate};
 use verdant::stream::TileAtlas;
 use verdant::world::{Manifest, TileData, TileId, World};
@@ -329,6 +331,8 @@ fn assert_same_placement(p: &Placed) {
     assert_eq!(gpu_stats.culled_occlusion, stats[counter::OCCLUSION]);
     assert_eq!(gpu_stats.drawn as usize, cpu.len());
     assert_eq!(gpu_stats.overflow, 0);
+    assert_eq!(gpu_stats.crowded, 0);
+    assert_eq!(stats[counter::CROWDED], 0);
     assert_eq!(gpu_stats.triangles, p.triangles);
 }
 
@@ -613,17 +617,17 @@ fn a_heavy_gltf_plant_switches_to_its_reduced_level_nearer_as_the_cpu_mirror_doe
 }
 
 #[test]
-fn a_full_region_drops_and_counts_the_rest_and_the_pool_does_not_grow() {
+fn a_crowded_region_thins_the_same_plants_frame_after_frame_and_the_pool_does_not_grow() {
     let mut small = Rig::new(64);
     let level = small.manifest.pyramid.max_level();
     let cell = small.manifest.pyramid.cell_size_m(level) as f32;
     let tm = small.tile_m;
     let bytes = small.plants.pool_bytes();
-    let mut jobs = Vec::new();
+    let mut work = Vec::new();
     for k in 0..4u32 {
         let t = synthetic_tile(&small.manifest, TileId::new(level, 100 + k, 100), "meadow");
         small.atlas.upload(&small.ctx.queue, k, &t).unwrap();
-        jobs.push(PlantJob::near(&TileJob {
+        let job = PlantJob::near(&TileJob {
             origin: [-tm + tm * (k % 2) as f32, 1.0 + tm * (k / 2) as f32],
             cell,
             layer: k,
@@ -631,19 +635,127 @@ fn a_full_region_drops_and_counts_the_rest_and_the_pool_does_not_grow() {
             tile_y: 100,
             lod: 0,
             slot: 0,
-        }));
+        });
+        work.push((job, t));
     }
+    let jobs: Vec<PlantJob> = work.iter().map(|w| w.0).collect();
     let camera = Camera::new(DVec3::new(0.0, 0.0, f64::from(ALTITUDE)), 90.0, -20.0);
-    small.run(&camera, &jobs);
-    let stats = small.plants.read_stats(&small.ctx.device, &small.ctx.queue);
-    let regions = small
-        .plants
-        .read_instances(&small.ctx.device, &small.ctx.queue);
-    assert!(stats.overflow > 0, "{stats:?}");
+    let (device, queue) = (&small.ctx.device.clone(), &small.ctx.queue.clone());
+    // The CPU mirror's placement of the four tiles with the regions' chances `keeps`: the
+    // instances (sorted), the counters and what each region wanted.
+    let mirror =
+        |params: &verdant::plants::place_cpu::PlaceParams, keeps: &[f32; REGIONS], hiz: &HiZ| {
+            let mut instances = Vec::new();
+            let mut stats = [0u32; counter::COUNT];
+            let mut wanted = [0u32; REGIONS];
+            for (j, t) in &work {
+                let out = place_tile_crowded(params, keeps, j, t, hiz);
+                instances.extend(out.instances);
+                for (s, o) in stats.iter_mut().zip(out.stats) {
+                    *s += o;
+                }
+                for (w, o) in wanted.iter_mut().zip(out.wanted) {
+                    *w += o;
+                }
+            }
+            instances.sort_by_key(key);
+            (instances, stats, wanted)
+        };
+
+    // The first frame: no region was crowded before it; the full ones drop the rest.
+    let hiz = small.run(&camera, &jobs);
+    let first = small.plants.read_stats(device, queue);
+    let regions = small.plants.read_instances(device, queue);
+    assert!(first.overflow > 0, "{first:?}");
+    assert_eq!(first.crowded, 0, "{first:?}");
     assert!(regions.iter().all(|r| r.len() <= 64));
     assert_eq!(
-        stats.drawn as usize,
+        first.drawn as usize,
         regions.iter().map(Vec::len).sum::<usize>()
+    );
+    let (keeps, wanted) = small.plants.read_crowding(device, queue);
+    let params = *small.plants.params();
+    let ones = [1.0f32; REGIONS];
+    let (unthinned, _, cpu_wanted) = mirror(&params, &ones, &hiz);
+    assert_eq!(
+        wanted, cpu_wanted,
+        "what each region wanted, GPU against CPU"
+    );
+    let cpu_keeps = crowd_keeps(&cpu_wanted, 64);
+    for r in 0..REGIONS {
+        assert!(
+            (keeps[r] - cpu_keeps[r]).abs() <= 1e-6 * cpu_keeps[r],
+            "region {r}: keeps {} on the GPU against {} on the CPU",
+            keeps[r],
+            cpu_keeps[r]
+        );
+    }
+    let crowded = (0..REGIONS).filter(|&r| keeps[r] < 1.0).count();
+    assert!(crowded >= 1, "some region is crowded: {wanted:?}");
+
+    // The next frames of the same view: every crowded region thinned to fit, nothing dropped,
+    // the same plants as the CPU mirror keeps with the chances of the frame before. (A crowded
+    // region culls with the sphere its plants may grow to, so the second of them wants a
+    // little more than the first; from then on the same plants frame after frame.)
+    let mut frames = Vec::new();
+    for _ in 0..3 {
+        let (keeps, _) = small.plants.read_crowding(device, queue);
+        let hiz = small.run(&camera, &jobs);
+        let stats = small.plants.read_stats(device, queue);
+        let regions = small.plants.read_instances(device, queue);
+        let (cpu, cpu_stats, _) = mirror(&params, &keeps, &hiz);
+        assert_eq!(stats.overflow, 0, "{stats:?}");
+        assert_eq!(stats.crowded, cpu_stats[counter::CROWDED], "{stats:?}");
+        assert!(stats.crowded > 0, "{stats:?}");
+        let mut gpu: Vec<PlantInstance> = regions.iter().flatten().copied().collect();
+        gpu.sort_by_key(key);
+        assert_eq!(gpu.len(), cpu.len(), "instances, GPU against CPU");
+        for (g, c) in gpu.iter().zip(&cpu) {
+            assert_eq!(key(g), key(c));
+            assert!((g.scale - c.scale).abs() < 1e-5, "{g:?} against {c:?}");
+        }
+        for (r, region) in regions.iter().enumerate() {
+            let fill = verdant::plants::place_cpu::crowd_fill(64);
+            if keeps[r] < 1.0 {
+                // Thinned to about its aim (each plant kept by its own number).
+                let n = region.len() as f32;
+                assert!(
+                    n <= 64.0 && (n - fill).abs() <= 3.0 * fill.sqrt() + 1.0,
+                    "region {r}: {n} kept, aimed at {fill}"
+                );
+            }
+        }
+        // A survivor of a crowded region is grown to keep the cover, by at most the square root
+        // of 2; one of an uncrowded region is as it was. (A grown plant may reach into the view
+        // where it did not before.)
+        let before: std::collections::HashMap<_, _> =
+            unthinned.iter().map(|p| (key(p), p.scale)).collect();
+        let mut compared = 0;
+        for p in &gpu {
+            let r = p.plant_type() * LEVELS + p.level();
+            let Some(was) = before.get(&key(p)) else {
+                continue;
+            };
+            compared += 1;
+            let grown = p.scale / was;
+            let want = (1.0 / keeps[r].sqrt()).min(std::f32::consts::SQRT_2);
+            if p.fade == 1.0 {
+                assert!(
+                    (grown - want).abs() < 1e-4,
+                    "{p:?}: grown {grown}, want {want}"
+                );
+            }
+        }
+        assert!(
+            compared * 10 >= gpu.len() * 9,
+            "{compared} of {}",
+            gpu.len()
+        );
+        frames.push(gpu);
+    }
+    assert_eq!(
+        frames[1], frames[2],
+        "the same plants in consecutive frames"
     );
     assert_eq!(small.plants.pool_bytes(), bytes, "the pool's size is fixed");
     // The pool's size follows the capacity and the types, never the view.

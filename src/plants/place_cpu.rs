@@ -47,8 +47,46 @@ pub mod counter {
     pub const OVERFLOW: usize = 6;
     /// Instances drawn.
     pub const DRAWN: usize = 7;
+    /// Plants thinned out because their region was crowded the frame before
+    /// ([`super::crowd_keeps`]).
+    pub const CROWDED: usize = 8;
     /// Counters.
-    pub const COUNT: usize = 8;
+    pub const COUNT: usize = 9;
+}
+
+/// The share of a region's capacity that the thinning of crowded regions aims to fill: a
+/// region whose plants wanted more than [`crowd_fill`] the frame before keeps each plant with
+/// the chance `crowd_fill / wanted`, so that a view that grows by less than the margin between
+/// frames does not overflow.
+pub const CROWD_FILL: f32 = 0.95;
+
+/// The instances a crowded region of `capacity` aims to hold: [`CROWD_FILL`] of it, and at
+/// least three standard deviations of the thinning's draw below it (each plant is kept by its
+/// own number, so the count kept varies about its aim by up to its square root).
+pub fn crowd_fill(capacity: u32) -> f32 {
+    let c = capacity as f32;
+    (CROWD_FILL * c).min(c - 3.0 * c.sqrt()).max(1.0)
+}
+
+/// The most a plant kept in a crowded region grows to keep the cover (by the square root of
+/// its region's thinning, at most this).
+pub const CROWD_MAX_GROWTH: f32 = std::f32::consts::SQRT_2;
+
+/// Each region's chance of keeping a plant in the next frame, from the instances `wanted` by
+/// each region this frame (before any thinning for crowding) and the regions' `capacity`: 1
+/// where they fit within [`crowd_fill`] of it, else the share that does. Mirrors
+/// `finalize_draws` in the shader.
+pub fn crowd_keeps(wanted: &[u32; REGIONS], capacity: u32) -> [f32; REGIONS] {
+    wanted.map(|w| crowd_keep(w, capacity))
+}
+
+fn crowd_keep(wanted: u32, capacity: u32) -> f32 {
+    let fit = crowd_fill(capacity);
+    if wanted as f32 <= fit {
+        1.0
+    } else {
+        fit / wanted as f32
+    }
 }
 
 const SALT_CELL: u32 = 0x9e1a7;
@@ -192,14 +230,18 @@ impl PlantJob {
     }
 }
 
-/// What one tile's placement produced: every instance (before any region's capacity) and the
-/// counters (without overflow and drawn, which depend on the whole frame).
+/// What one tile's placement produced: every instance (before any region's capacity), the
+/// counters (without overflow and drawn, which depend on the whole frame) and what each region
+/// wanted before the thinning of crowded regions.
 #[derive(Clone, Debug, Default)]
 pub struct TilePlants {
     /// Instances in cell order.
     pub instances: Vec<PlantInstance>,
     /// `counter::*`.
     pub stats: [u32; counter::COUNT],
+    /// Per region (`type * LEVELS + level`): the instances that passed every test but the
+    /// thinning of crowded regions (what [`crowd_keeps`] reads).
+    pub wanted: [u32; REGIONS],
 }
 
 /// Value noise in [0, 1) on the lattice of clump cells, salted.
@@ -245,13 +287,27 @@ impl PlantJob {
     }
 }
 
-/// Places and culls the plants of one job (its data tile `tile`), as the shader does.
+/// Places and culls the plants of one job (its data tile `tile`), as the shader does in a
+/// frame where no region was crowded the frame before.
 pub fn place_tile(params: &PlaceParams, job: &PlantJob, tile: &TileData, hiz: &HiZ) -> TilePlants {
+    place_tile_crowded(params, &[1.0; REGIONS], job, tile, hiz)
+}
+
+/// Places and culls the plants of one job (its data tile `tile`), as the shader does, each
+/// region keeping a plant with the chance `keeps` gives it ([`crowd_keeps`] of the frame
+/// before).
+pub fn place_tile_crowded(
+    params: &PlaceParams,
+    keeps: &[f32; REGIONS],
+    job: &PlantJob,
+    tile: &TileData,
+    hiz: &HiZ,
+) -> TilePlants {
     let mut out = TilePlants::default();
     let n = job.cells(params);
     for gy in 0..n {
         for gx in 0..n {
-            place_cell(params, job, tile, hiz, [gx, gy], &mut out);
+            place_cell(params, keeps, job, tile, hiz, [gx, gy], &mut out);
         }
     }
     out
@@ -259,6 +315,7 @@ pub fn place_tile(params: &PlaceParams, job: &PlantJob, tile: &TileData, hiz: &H
 
 fn place_cell(
     params: &PlaceParams,
+    keeps: &[f32; REGIONS],
     job: &PlantJob,
     tile: &TileData,
     hiz: &HiZ,
@@ -337,8 +394,35 @@ fn place_cell(
         return;
     }
     scale /= keep.sqrt();
-    let radius = scale * ty.limits[3].max(0.5);
-    let center = pos + Vec3::new(0.0, 0.0, 0.5 * scale);
+    // The level by distance, cross-faded over a band centred on each switch.
+    let [to_1, to_card, band, _] = params.lod;
+    let to_1 = to_1.min(ty.lod[0]);
+    let half = 0.5 * band;
+    let (level, t_band) = if dist < to_1 + half {
+        (0u32, (dist - (to_1 - half)) / band.max(1e-3))
+    } else if dist < to_card + half {
+        (1, (dist - (to_card - half)) / band.max(1e-3))
+    } else {
+        (2, -1.0)
+    };
+    let faded = level < 2 && t_band > 0.0;
+    let region = t * LEVELS + level as usize;
+    // A crowded region (the frame before) keeps a plant by its own number, the survivor grown
+    // to keep the cover; a plant in a cross-fade by the more crowded of its two regions.
+    let crowd = if faded {
+        keeps[region].min(keeps[region + 1])
+    } else {
+        keeps[region]
+    };
+    let crowd_kept = rand01(hash_u32(h0 ^ 9)) < crowd;
+    // The culling sphere holds the plant however much it grows (so that what a region wants
+    // does not follow how crowded it was, only whether it was).
+    let reach = if crowd < 1.0 { CROWD_MAX_GROWTH } else { 1.0 };
+    let radius = reach * scale * ty.limits[3].max(0.5);
+    let center = pos + Vec3::new(0.0, 0.0, 0.5 * reach * scale);
+    if crowd_kept {
+        scale *= (1.0 / crowd.max(1e-6).sqrt()).min(CROWD_MAX_GROWTH);
+    }
     let outside = params.planes[..5]
         .iter()
         .any(|p| Vec4::from_array(*p).truncate().dot(center) + p[3] < -radius);
@@ -358,6 +442,14 @@ fn place_cell(
         stats[counter::OCCLUSION] += 1;
         return;
     }
+    out.wanted[region] += 1;
+    if faded {
+        out.wanted[region + 1] += 1;
+    }
+    if !crowd_kept {
+        stats[counter::CROWDED] += 1;
+        return;
+    }
     let mut inst = PlantInstance {
         pos: pos.to_array(),
         yaw: rand01(hash_u32(h0 ^ 6)) * std::f32::consts::TAU,
@@ -366,17 +458,7 @@ fn place_cell(
         hash: h0,
         fade: 1.0,
     };
-    let [to_1, to_card, band, _] = params.lod;
-    let to_1 = to_1.min(ty.lod[0]);
-    let half = 0.5 * band;
-    let (level, t_band) = if dist < to_1 + half {
-        (0u32, (dist - (to_1 - half)) / band.max(1e-3))
-    } else if dist < to_card + half {
-        (1, (dist - (to_card - half)) / band.max(1e-3))
-    } else {
-        (2, -1.0)
-    };
-    if level < 2 && t_band > 0.0 {
+    if faded {
         inst.fade = 1.0 - t_band;
         inst.kind = t as u32 | (level << 8);
         out.instances.push(inst);
@@ -422,6 +504,23 @@ mod tests {
                 assert_eq!(dither(x as u32 + 4, y as u32 + 8), want);
             }
         }
+    }
+
+    #[test]
+    fn a_crowded_region_aims_below_its_capacity_by_the_margin_and_the_draws_spread() {
+        // A large region: 95% of it; a small one: three standard deviations of its draw below.
+        assert_eq!(crowd_fill(262_144), 0.95 * 262_144.0);
+        assert_eq!(crowd_fill(64), 40.0);
+        assert_eq!(crowd_fill(4), 1.0);
+        let mut wanted = [0u32; REGIONS];
+        wanted[0] = 1000;
+        wanted[1] = 15_564;
+        wanted[2] = 40_000;
+        let keeps = crowd_keeps(&wanted, 16_384);
+        assert_eq!(keeps[0], 1.0);
+        assert_eq!(keeps[1], 1.0, "within the fill");
+        assert!((keeps[2] * 40_000.0 - 0.95 * 16_384.0).abs() < 0.1, "{}", keeps[2]);
+        assert!(keeps[3..].iter().all(|&k| k == 1.0), "a region that wanted none");
     }
 
     #[test]

@@ -2,8 +2,11 @@
 //! type and level of detail), placement and culling per grass tile in compute
 //! (`shaders/plants_place.wgsl`) and one indexed indirect draw per region
 //! (`shaders/plants_draw.wgsl`), culled against the grass's Hi-Z pyramid and bent by the grass's
-//! wind field. The pool's size is fixed when the stage is made, whatever the view: a region that
-//! fills up drops the rest of its plants and counts them as overflow.
+//! wind field. The pool's size is fixed when the stage is made, whatever the view: a region whose
+//! plants wanted more than [`CROWD_FILL`](crate::plants::place_cpu::CROWD_FILL) of it in one
+//! frame thins them in the next, each plant kept by its own number (the same plants frame after
+//! frame, grown to keep the cover), and a region that fills up all the same drops the rest of
+//! its plants and counts them as overflow.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
@@ -194,13 +197,16 @@ pub struct PlantStats {
     pub overflow: u32,
     /// Instances drawn (a plant in a cross-fade counts twice).
     pub drawn: u32,
+    /// Plants thinned out because their region was crowded the frame before.
+    #[serde(default)]
+    pub crowded: u32,
     /// Triangles the draws draw: each (type, level)'s instances times its mesh's triangles.
     #[serde(default)]
     pub triangles: u64,
 }
 
 impl PlantStats {
-    /// The figures from the 8 counters of `shaders/plants_place.wgsl` (no triangles: see
+    /// The figures from the counters of `shaders/plants_place.wgsl` (no triangles: see
     /// [`PlantStats::with_draws`]).
     pub fn from_counts(c: &[u32; counter::COUNT]) -> Self {
         Self {
@@ -212,6 +218,7 @@ impl PlantStats {
             culled_occlusion: c[counter::OCCLUSION],
             overflow: c[counter::OVERFLOW],
             drawn: c[counter::DRAWN],
+            crowded: c[counter::CROWDED],
             triangles: 0,
         }
     }
@@ -229,6 +236,11 @@ impl PlantStats {
 
 /// Bytes of a plant stage's draw arguments ([`PlantRenderer::args_buffer`]).
 pub const ARGS_BYTES: u64 = REGIONS as u64 * 20;
+/// Bytes of a plant stage's counters ([`PlantRenderer::stats_buffer`]).
+pub const STATS_BYTES: u64 = counter::COUNT as u64 * 4;
+/// Bytes of the per-region counters that a frame starts from zero (appended and wanted); the
+/// chances of keeping a plant in crowded regions follow them and carry over to the next frame.
+const REGION_COUNTER_BYTES: u64 = 2 * REGIONS as u64 * 4;
 
 /// The draw's frame constants; mirrors `PlantFrame` in the shader.
 #[repr(C)]
@@ -551,10 +563,20 @@ impl PlantRenderer {
         );
         let counters = buffer(
             "plants counters",
-            REGIONS as u64 * 4,
-            U::STORAGE | U::COPY_DST,
+            REGION_COUNTER_BYTES + REGIONS as u64 * 4,
+            U::STORAGE | U::COPY_DST | U::COPY_SRC,
         );
-        let stats = buffer("plants stats", 32, U::STORAGE | U::COPY_DST | U::COPY_SRC);
+        // No region crowded before the first frame: every chance 1.
+        queue.write_buffer(
+            &counters,
+            REGION_COUNTER_BYTES,
+            bytemuck::cast_slice(&[1.0f32; REGIONS]),
+        );
+        let stats = buffer(
+            "plants stats",
+            STATS_BYTES,
+            U::STORAGE | U::COPY_DST | U::COPY_SRC,
+        );
         let args = buffer(
             "plants draw args",
             ARGS_BYTES,
@@ -921,7 +943,7 @@ impl PlantRenderer {
         name: &str,
     ) {
         encoder.clear_buffer(&self.stats, 0, None);
-        encoder.clear_buffer(&self.counters, 0, None);
+        encoder.clear_buffer(&self.counters, 0, Some(REGION_COUNTER_BYTES));
         let jobs = &jobs[..jobs.len().min(MAX_JOBS as usize)];
         if !jobs.is_empty() {
             queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(jobs));
@@ -1007,7 +1029,7 @@ impl PlantRenderer {
         &self.args
     }
 
-    /// The buffer of the frame's counters (8 u32, `counter::*`), for a readback.
+    /// The buffer of the frame's counters ([`STATS_BYTES`]: `counter::*`), for a readback.
     pub fn stats_buffer(&self) -> &wgpu::Buffer {
         &self.stats
     }
@@ -1019,8 +1041,27 @@ impl PlantRenderer {
             .expect("read back the plant counters");
         let args: Vec<u32> = crate::gpu::read_buffer_pod(device, queue, &self.args, ..)
             .expect("read back the draw arguments");
-        PlantStats::from_counts(&c[..counter::COUNT].try_into().expect("8 counters"))
+        PlantStats::from_counts(&c[..counter::COUNT].try_into().expect("the counters"))
             .with_draws(&args)
+    }
+
+    /// Reads each region's chance of keeping a plant in the next frame (`type * 3 + level`;
+    /// [`crate::plants::place_cpu::crowd_keeps`] of what the last recorded frame wanted), and
+    /// what each region wanted in that frame (for tests: waits for the GPU).
+    pub fn read_crowding(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+    ) -> ([f32; REGIONS], [u32; REGIONS]) {
+        let words: Vec<u32> = crate::gpu::read_buffer_pod(device, queue, &self.counters, ..)
+            .expect("read back the plant regions' counters");
+        let mut keeps = [0.0f32; REGIONS];
+        let mut wanted = [0u32; REGIONS];
+        for r in 0..REGIONS {
+            wanted[r] = words[REGIONS + r];
+            keeps[r] = f32::from_bits(words[2 * REGIONS + r]);
+        }
+        (keeps, wanted)
     }
 
     /// Reads back the instances of every region of the last recorded frame (for tests): per

@@ -9,7 +9,7 @@ use super::{FrameStats, MAX_READY_STATS, READBACK_SLOTS};
 use crate::gpu::GpuTimer;
 use crate::grass::GrassStats;
 
-use crate::plants::renderer::ARGS_BYTES;
+use crate::plants::renderer::{ARGS_BYTES, STATS_BYTES};
 
 /// Where the plant layers' figures start in a slot after the timestamps: after the grass's
 /// counters (64 bytes) and the hole check's (16), each layer's counters (32 bytes), then each
@@ -75,7 +75,7 @@ impl StatsRing {
             .map(|_| ReadbackSlot {
                 buffer: device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("frame figures readback"),
-                    size: timestamp_bytes + PLANTS_AT + 2 * (32 + ARGS_BYTES),
+                    size: timestamp_bytes + PLANTS_AT + 2 * (STATS_BYTES + ARGS_BYTES),
                     usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 }),
@@ -122,9 +122,9 @@ impl StatsRing {
         // The plants' counters and draws, then the trees'.
         for (k, p) in plants.into_iter().enumerate() {
             if let Some((counters, args)) = p {
-                let at = self.timestamp_bytes + PLANTS_AT + 32 * k as u64;
-                encoder.copy_buffer_to_buffer(counters, 0, &slot.buffer, at, 32);
-                let at = self.timestamp_bytes + PLANTS_AT + 64 + ARGS_BYTES * k as u64;
+                let at = self.timestamp_bytes + PLANTS_AT + STATS_BYTES * k as u64;
+                encoder.copy_buffer_to_buffer(counters, 0, &slot.buffer, at, STATS_BYTES);
+                let at = self.timestamp_bytes + PLANTS_AT + 2 * STATS_BYTES + ARGS_BYTES * k as u64;
                 encoder.copy_buffer_to_buffer(args, 0, &slot.buffer, at, ARGS_BYTES);
             }
         }
@@ -156,13 +156,14 @@ impl StatsRing {
                         // Atlas reads that found another tile than expected (HoleCheck).
                         stats.residency.holes += counters.get(16).copied().unwrap_or(0);
                         let read = |k: usize| {
-                            let at = PLANTS_AT as usize / 4 + 8 * k;
-                            let p: [u32; 8] = counters
-                                .get(at..at + 8)
+                            const N: usize = STATS_BYTES as usize / 4;
+                            let at = PLANTS_AT as usize / 4 + N * k;
+                            let p: [u32; N] = counters
+                                .get(at..at + N)
                                 .and_then(|p| p.try_into().ok())
-                                .unwrap_or([0; 8]);
+                                .unwrap_or([0; N]);
                             let words = ARGS_BYTES as usize / 4;
-                            let at = PLANTS_AT as usize / 4 + 16 + words * k;
+                            let at = PLANTS_AT as usize / 4 + 2 * N + words * k;
                             let args = counters.get(at..at + words).unwrap_or(&[]);
                             crate::plants::PlantStats::from_counts(&p).with_draws(args)
                         };

@@ -645,8 +645,10 @@ impl FlySummary {
             coverage: Summary::default(),
             plants_drawn: layer(&|f| f.plants.map(|p| p.drawn)),
             plants_overflow: layer(&|f| f.plants.map(|p| p.overflow)),
+            plants_crowded: layer(&|f| f.plants.map(|p| p.crowded)),
             trees_drawn: layer(&|f| f.trees.map(|p| p.drawn)),
             trees_overflow: layer(&|f| f.trees.map(|p| p.overflow)),
+            trees_crowded: layer(&|f| f.trees.map(|p| p.crowded)),
         }
     }
 }

@@ -147,6 +147,10 @@ pub struct FlySummary {
     /// Plant instances a frame that did not fit their region of the pool.
     #[serde(default)]
     pub plants_overflow: Summary,
+    /// Plants a frame thinned out because their region of the pool was crowded the frame
+    /// before.
+    #[serde(default)]
+    pub plants_crowded: Summary,
     /// Tree instances drawn a frame (all types and levels; a tree in a cross-fade counts
     /// twice), over the frames that drew trees.
     #[serde(default)]
@@ -154,6 +158,9 @@ pub struct FlySummary {
     /// Tree instances a frame that did not fit their region of the pool.
     #[serde(default)]
     pub trees_overflow: Summary,
+    /// Trees a frame thinned out because their region of the pool was crowded the frame before.
+    #[serde(default)]
+    pub trees_crowded: Summary,
 }
 
 /// The grass coverage of one frame: of the pixels where terrain within

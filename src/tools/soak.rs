@@ -171,6 +171,11 @@ pub struct SoakReport {
     /// pools are fixed: a view that wants more drops the rest).
     #[serde(default)]
     pub plants_overflow_total: u64,
+    /// Plants and trees thinned out because their pool's region was crowded the frame before,
+    /// over all frames (the pools are fixed: a view that wants more than fits thins its plants
+    /// in the next frame, the same ones frame after frame).
+    #[serde(default)]
+    pub plants_crowded_total: u64,
     /// Longest frame, wall time, milliseconds.
     #[serde(default)]
     pub longest_frame_ms: f64,
@@ -567,6 +572,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
     let mut longest_frame_ms = 0.0f64;
     let mut blades_peak = 0u64;
     let (mut plants_peak, mut trees_peak, mut plants_overflow) = (0u64, 0u64, 0u64);
+    let mut plants_crowded = 0u64;
     let (mut cache_peak, mut atlas_peak, mut holes_after_settle) = (0u64, 0u32, 0u32);
     let mut violations = Violations::default();
     let mut rss_timeline: Thinned<(u32, u64, u64)> = Thinned::new(MAX_SOAK_RECORDS);
@@ -649,6 +655,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
             if let Some(p) = p {
                 *peak = (*peak).max(u64::from(p.drawn));
                 plants_overflow += u64::from(p.overflow);
+                plants_crowded += u64::from(p.crowded);
             }
         }
         if ms > opts.max_stall_ms {
@@ -861,6 +868,7 @@ pub fn run_soak(opts: &SoakOptions, progress: &mut dyn FnMut(u64, u64)) -> Resul
         plants_drawn_peak: plants_peak,
         trees_drawn_peak: trees_peak,
         plants_overflow_total: plants_overflow,
+        plants_crowded_total: plants_crowded,
         longest_frame_ms,
         max_recovery_frames: opts.max_recovery_frames,
         max_stall_ms: opts.max_stall_ms,
