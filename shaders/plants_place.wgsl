@@ -10,9 +10,10 @@
 // level of detail by distance (a dithered cross-fade: within a band around each switch it goes
 // to both levels, each drawing a complementary share of its pixels) and is appended to that
 // (type, level)'s region of the instance pool, unless the region was crowded the frame before:
-// then it is kept by its own number with the chance that fills the region to a little less than
-// its capacity (crowd_fill in place_cpu.rs), the survivors grown to keep the cover (the same plants from frame to frame, where
-// a full region would drop whichever came last). A second entry point turns the counters into
+// then it thins from the distance that fills it to a little less than its capacity
+// (crowd_distances in place_cpu.rs), each plant kept by its own number, the nearest all kept
+// and the survivors grown to keep the cover (the same plants frame after frame, where a full
+// region would drop whichever came last). A second entry point turns the counters into
 // indexed indirect draws, clamped to the region's capacity, counts the overflow, and sets each
 // region's chance for the next frame.
 // CPU mirror: src/plants/place_cpu.rs.
@@ -101,11 +102,13 @@ struct DrawIndexedArgs {
 struct Counters {
     // Instances appended this frame (may exceed the capacity).
     appended: array<atomic<u32>, 24>,
-    // Instances that passed every test but the thinning of crowded regions this frame.
-    wanted: array<atomic<u32>, 24>,
-    // The chance of keeping a plant, from what the region wanted the frame before
-    // (crowd_keeps in place_cpu.rs; written by finalize_draws, 1 when the stage is made).
-    keep: array<f32, 24>,
+    // Instances that passed every test but the thinning of crowded regions this frame, by
+    // distance: region * CROWD_BINS + crowd_bin(distance).
+    wanted: array<atomic<u32>, 1536>,
+    // The distance from which the region thins its plants, from what it wanted the frame
+    // before (crowd_distances in place_cpu.rs; written by finalize_draws; UNCROWDED when the
+    // stage is made).
+    crowded_from: array<f32, 24>,
 }
 @group(0) @binding(6) var<storage, read_write> counters: Counters;
 // The counters of `counter` in place_cpu.rs.
@@ -123,9 +126,35 @@ const DRAWN: u32 = 7u;
 const CROWDED: u32 = 8u;
 const STATS: u32 = 9u;
 
-// CROWD_FILL (see crowd_fill) and CROWD_MAX_GROWTH in place_cpu.rs.
+// As in place_cpu.rs.
 const CROWD_FILL: f32 = 0.95;
-const CROWD_MAX_GROWTH: f32 = 1.4142135;
+const CROWD_BINS: u32 = 64u;
+const CROWD_NEAR_M: f32 = 2.0;
+const UNCROWDED: f32 = 3.40282347e38;
+const CROWD_BISECTIONS: u32 = 40u;
+
+// The distance bin of a plant `dist` metres away: a quarter of an octave each from
+// CROWD_NEAR_M, the first holding everything nearer.
+fn crowd_bin(dist: f32) -> u32 {
+    let b = floor(4.0 * log2(max(dist, 1e-6) / CROWD_NEAR_M)) + 1.0;
+    return u32(clamp(b, 0.0, f32(CROWD_BINS - 1u)));
+}
+
+// The near edge of distance bin b, metres (0 for the first).
+fn crowd_bin_near(b: u32) -> f32 {
+    if b == 0u {
+        return 0.0;
+    }
+    return CROWD_NEAR_M * exp2(f32(b - 1u) * 0.25);
+}
+
+// The chance of keeping a plant `dist` metres away in a region crowded from `from_m`.
+fn crowd_keep(dist: f32, from_m: f32) -> f32 {
+    if dist <= from_m {
+        return 1.0;
+    }
+    return (from_m / dist) * (from_m / dist);
+}
 
 // Salts of the placement's hashes (as in place_cpu.rs).
 const SALT_CELL: u32 = 0x9e1a7u;
@@ -266,12 +295,12 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
     }
     // Beyond params.cards.z the plants thin out as the square of the distance (at most
     // 1 - params.cards.w of them go), each survivor grown to keep the cover.
-    let keep = max(min(1.0, params.cards.z * params.cards.z / max(dist * dist, 1e-6)), params.cards.w);
+    let min_keep = params.cards.w;
+    let keep = max(min(1.0, params.cards.z * params.cards.z / max(dist * dist, 1e-6)), min_keep);
     if !kept || rand01(hash_u32(h0 ^ 8u)) >= keep {
         tally(DISTANCE);
         return;
     }
-    scale = scale / sqrt(keep);
     // The level by distance, cross-faded over a band centred on each switch.
     let half_band = 0.5 * params.lod.z;
     let to_1 = min(params.lod.x, ty.lod.x);
@@ -286,21 +315,23 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
     }
     let faded = level < 2u && t_band > 0.0;
     let region = chosen * 3u + level;
-    // A crowded region (the frame before) keeps a plant by its own number, the survivor grown
-    // to keep the cover; a plant in a cross-fade by the more crowded of its two regions.
-    var crowd = counters.keep[region];
+    // A region crowded the frame before thins from a distance, keeping a plant by its own
+    // number (a plant in a cross-fade by the more crowded of its two regions); the survivors
+    // grow to keep the cover as the thinning with distance grows them, together by no more
+    // than that thinning alone may.
+    var crowded_from = counters.crowded_from[region];
     if faded {
-        crowd = min(crowd, counters.keep[region + 1u]);
+        crowded_from = min(crowded_from, counters.crowded_from[region + 1u]);
     }
+    let crowd = crowd_keep(dist, crowded_from);
     let crowd_kept = rand01(hash_u32(h0 ^ 9u)) < crowd;
-    // The culling sphere holds the plant however much it grows (so that what a region wants
-    // does not follow how crowded it was, only whether it was).
-    let reach = select(1.0, CROWD_MAX_GROWTH, crowd < 1.0);
-    let radius = reach * scale * max(ty.limits.w, 0.5);
-    let center = pos + vec3<f32>(0.0, 0.0, 0.5 * reach * scale);
-    if crowd_kept {
-        scale = scale * min(1.0 / sqrt(max(crowd, 1e-6)), CROWD_MAX_GROWTH);
-    }
+    let grown = scale / sqrt(max(keep * crowd, min_keep));
+    // The culling sphere of a crowded region holds the plant however much it grows (so that
+    // what the region wants does not follow how crowded it was, only whether it was).
+    let reach = select(grown, scale / sqrt(min_keep), crowded_from < UNCROWDED);
+    scale = grown;
+    let radius = reach * max(ty.limits.w, 0.5);
+    let center = pos + vec3<f32>(0.0, 0.0, 0.5 * reach);
     for (var i = 0; i < 5; i++) {
         let plane = params.planes[i];
         if dot(plane.xyz, center) + plane.w < -radius {
@@ -312,12 +343,16 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
         tally(OCCLUSION);
         return;
     }
-    atomicAdd(&counters.wanted[region], 1u);
+    let bin = crowd_bin(dist);
+    atomicAdd(&counters.wanted[region * CROWD_BINS + bin], 1u);
     if faded {
-        atomicAdd(&counters.wanted[region + 1u], 1u);
+        atomicAdd(&counters.wanted[(region + 1u) * CROWD_BINS + bin], 1u);
     }
     if !crowd_kept {
         tally(CROWDED);
+        if faded {
+            tally(CROWDED);
+        }
         return;
     }
     var inst: PlantInstance;
@@ -339,17 +374,40 @@ fn place_cell(job: PlantJob, gx: u32, gy: u32) {
 }
 
 // One invocation per (type, level): the indexed indirect draw from its counter, clamped to the
-// region's capacity; overflow and drawn instances go to the statistics; the chance of keeping a
-// plant in the next frame from what the region wanted in this one (crowd_keeps in
-// place_cpu.rs).
+// region's capacity; overflow and drawn instances go to the statistics; the distance from which
+// the region thins its plants in the next frame from what it wanted in this one, by distance
+// (crowd_distances in place_cpu.rs: the distance whose thinning keeps no more than the fill,
+// each bin's plants counted at its near edge, by bisection).
 @compute @workgroup_size(24, 1, 1)
 fn finalize_draws(@builtin(local_invocation_index) region: u32) {
     let appended = atomicLoad(&counters.appended[region]);
     let drawn = min(appended, params.limits.y);
     let capacity = f32(params.limits.y);
     let fit = max(min(CROWD_FILL * capacity, capacity - 3.0 * sqrt(capacity)), 1.0);
-    let wanted = f32(atomicLoad(&counters.wanted[region]));
-    counters.keep[region] = select(fit / wanted, 1.0, wanted <= fit);
+    let first = region * CROWD_BINS;
+    var total = 0.0;
+    for (var b = 0u; b < CROWD_BINS; b++) {
+        total += f32(atomicLoad(&counters.wanted[first + b]));
+    }
+    var thin_from = UNCROWDED;
+    if total > fit {
+        var lo = 0.0;
+        var hi = crowd_bin_near(CROWD_BINS - 1u) * 2.0;
+        for (var i = 0u; i < CROWD_BISECTIONS; i++) {
+            let mid = 0.5 * (lo + hi);
+            var kept = 0.0;
+            for (var b = 0u; b < CROWD_BINS; b++) {
+                kept += f32(atomicLoad(&counters.wanted[first + b])) * crowd_keep(crowd_bin_near(b), mid);
+            }
+            if kept <= fit {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        thin_from = lo;
+    }
+    counters.crowded_from[region] = thin_from;
     let mesh = params.meshes[region];
     var count = 0u;
     if region / 3u < params.limits.z {

@@ -128,8 +128,8 @@ pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
     )?;
     if r.plants_drawn_peak + r.trees_drawn_peak > 0 {
         say!(
-            "most drawn in a frame: {} blades, {} plants, {} trees; {} plants and trees thinned \
-             out where their pool's regions were crowded, {} instances overflowed",
+            "most drawn in a frame: {} blades, {} plants, {} trees; {} plant and tree instances \
+             thinned out where their pool's regions were crowded, {} overflowed",
             r.grass_blades_drawn_peak,
             r.plants_drawn_peak,
             r.trees_drawn_peak,

@@ -47,17 +47,15 @@ pub mod counter {
     pub const OVERFLOW: usize = 6;
     /// Instances drawn.
     pub const DRAWN: usize = 7;
-    /// Plants thinned out because their region was crowded the frame before
-    /// ([`super::crowd_keeps`]).
+    /// Instances thinned out because their region was crowded the frame before
+    /// ([`super::crowd_distances`]; a plant in a cross-fade counts twice, as it does drawn).
     pub const CROWDED: usize = 8;
     /// Counters.
     pub const COUNT: usize = 9;
 }
 
-/// The share of a region's capacity that the thinning of crowded regions aims to fill: a
-/// region whose plants wanted more than [`crowd_fill`] the frame before keeps each plant with
-/// the chance `crowd_fill / wanted`, so that a view that grows by less than the margin between
-/// frames does not overflow.
+/// The share of a region's capacity that the thinning of crowded regions aims to fill, so that
+/// a view that grows by less than the margin between frames does not overflow.
 pub const CROWD_FILL: f32 = 0.95;
 
 /// The instances a crowded region of `capacity` aims to hold: [`CROWD_FILL`] of it, and at
@@ -68,26 +66,77 @@ pub fn crowd_fill(capacity: u32) -> f32 {
     (CROWD_FILL * c).min(c - 3.0 * c.sqrt()).max(1.0)
 }
 
-/// The most a plant kept in a crowded region grows to keep the cover (by the square root of
-/// its region's thinning, at most this).
-pub const CROWD_MAX_GROWTH: f32 = std::f32::consts::SQRT_2;
+/// Distance bins of what each region wants, a quarter of an octave each from
+/// [`CROWD_NEAR_M`] (the first holds everything nearer): out to 131 km.
+pub const CROWD_BINS: usize = 64;
+/// The near edge of the second distance bin, metres.
+pub const CROWD_NEAR_M: f32 = 2.0;
+/// A region's distance from which it thins when nothing crowds it.
+pub const UNCROWDED: f32 = f32::MAX;
 
-/// Each region's chance of keeping a plant in the next frame, from the instances `wanted` by
-/// each region this frame (before any thinning for crowding) and the regions' `capacity`: 1
-/// where they fit within [`crowd_fill`] of it, else the share that does. Mirrors
-/// `finalize_draws` in the shader.
-pub fn crowd_keeps(wanted: &[u32; REGIONS], capacity: u32) -> [f32; REGIONS] {
-    wanted.map(|w| crowd_keep(w, capacity))
+/// The distance bin of a plant `dist` metres away.
+pub fn crowd_bin(dist: f32) -> usize {
+    let b = (4.0 * (dist.max(1e-6) / CROWD_NEAR_M).log2()).floor() + 1.0;
+    b.clamp(0.0, (CROWD_BINS - 1) as f32) as usize
 }
 
-fn crowd_keep(wanted: u32, capacity: u32) -> f32 {
-    let fit = crowd_fill(capacity);
-    if wanted as f32 <= fit {
-        1.0
+/// The near edge of distance bin `b`, metres (0 for the first).
+pub fn crowd_bin_near(b: usize) -> f32 {
+    if b == 0 {
+        0.0
     } else {
-        fit / wanted as f32
+        CROWD_NEAR_M * ((b - 1) as f32 * 0.25).exp2()
     }
 }
+
+/// The chance of keeping a plant `dist` metres away in a region crowded from `from_m`: 1 within
+/// it, falling beyond as the square of the distance (as the thinning with distance).
+pub fn crowd_keep(dist: f32, from_m: f32) -> f32 {
+    if dist <= from_m {
+        1.0
+    } else {
+        (from_m / dist) * (from_m / dist)
+    }
+}
+
+/// Each region's distance from which to thin its plants in the next frame, from what it wanted
+/// this frame by distance (`wanted`: instances per region and [`crowd_bin`], `region *
+/// CROWD_BINS + bin`, before any thinning for crowding) and the regions' `capacity`: [`UNCROWDED`] where they fit within [`crowd_fill`],
+/// else the distance whose thinning ([`crowd_keep`]) would keep no more than that, counting each
+/// bin's plants as at its near edge (so that the estimate is never short), found by bisection.
+/// The nearest plants of a crowded region are kept, the farthest thinned most. Mirrors
+/// `finalize_draws` in the shader.
+pub fn crowd_distances(wanted: &[u32], capacity: u32) -> [f32; REGIONS] {
+    let fit = crowd_fill(capacity);
+    let mut out = [UNCROWDED; REGIONS];
+    for (d, bins) in out.iter_mut().zip(wanted.chunks_exact(CROWD_BINS)) {
+        let total: f32 = bins.iter().map(|&n| n as f32).sum();
+        if total <= fit {
+            continue;
+        }
+        let kept = |from: f32| -> f32 {
+            let mut k = 0.0;
+            for (b, &n) in bins.iter().enumerate() {
+                k += n as f32 * crowd_keep(crowd_bin_near(b), from);
+            }
+            k
+        };
+        let (mut lo, mut hi) = (0.0f32, crowd_bin_near(CROWD_BINS - 1) * 2.0);
+        for _ in 0..CROWD_BISECTIONS {
+            let mid = 0.5 * (lo + hi);
+            if kept(mid) <= fit {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        *d = lo;
+    }
+    out
+}
+
+/// Steps of the bisection of [`crowd_distances`].
+pub const CROWD_BISECTIONS: u32 = 40;
 
 const SALT_CELL: u32 = 0x9e1a7;
 const SALT_CLUMP: u32 = 0x5c1f3;
@@ -233,15 +282,26 @@ impl PlantJob {
 /// What one tile's placement produced: every instance (before any region's capacity), the
 /// counters (without overflow and drawn, which depend on the whole frame) and what each region
 /// wanted before the thinning of crowded regions.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct TilePlants {
     /// Instances in cell order.
     pub instances: Vec<PlantInstance>,
     /// `counter::*`.
     pub stats: [u32; counter::COUNT],
-    /// Per region (`type * LEVELS + level`): the instances that passed every test but the
-    /// thinning of crowded regions (what [`crowd_keeps`] reads).
-    pub wanted: [u32; REGIONS],
+    /// Per region (`type * LEVELS + level`) and distance bin ([`crowd_bin`]), `region *
+    /// CROWD_BINS + bin`: the instances that passed every test but the thinning of crowded
+    /// regions (what [`crowd_distances`] reads).
+    pub wanted: Vec<u32>,
+}
+
+impl Default for TilePlants {
+    fn default() -> Self {
+        Self {
+            instances: Vec::new(),
+            stats: [0; counter::COUNT],
+            wanted: vec![0; REGIONS * CROWD_BINS],
+        }
+    }
 }
 
 /// Value noise in [0, 1) on the lattice of clump cells, salted.
@@ -290,15 +350,15 @@ impl PlantJob {
 /// Places and culls the plants of one job (its data tile `tile`), as the shader does in a
 /// frame where no region was crowded the frame before.
 pub fn place_tile(params: &PlaceParams, job: &PlantJob, tile: &TileData, hiz: &HiZ) -> TilePlants {
-    place_tile_crowded(params, &[1.0; REGIONS], job, tile, hiz)
+    place_tile_crowded(params, &[UNCROWDED; REGIONS], job, tile, hiz)
 }
 
 /// Places and culls the plants of one job (its data tile `tile`), as the shader does, each
-/// region keeping a plant with the chance `keeps` gives it ([`crowd_keeps`] of the frame
-/// before).
+/// region thinning its plants from the distance `crowded_from` gives it ([`crowd_distances`]
+/// of the frame before; [`UNCROWDED`]: none).
 pub fn place_tile_crowded(
     params: &PlaceParams,
-    keeps: &[f32; REGIONS],
+    crowded_from: &[f32; REGIONS],
     job: &PlantJob,
     tile: &TileData,
     hiz: &HiZ,
@@ -307,7 +367,7 @@ pub fn place_tile_crowded(
     let n = job.cells(params);
     for gy in 0..n {
         for gx in 0..n {
-            place_cell(params, keeps, job, tile, hiz, [gx, gy], &mut out);
+            place_cell(params, crowded_from, job, tile, hiz, [gx, gy], &mut out);
         }
     }
     out
@@ -315,7 +375,7 @@ pub fn place_tile_crowded(
 
 fn place_cell(
     params: &PlaceParams,
-    keeps: &[f32; REGIONS],
+    crowded_from: &[f32; REGIONS],
     job: &PlantJob,
     tile: &TileData,
     hiz: &HiZ,
@@ -387,13 +447,12 @@ fn place_cell(
     };
     // Beyond `cards[2]` the plants thin out as the square of the distance, each survivor grown
     // to keep the cover.
-    let keep =
-        (params.cards[2] * params.cards[2] / (dist * dist).max(1e-6)).clamp(params.cards[3], 1.0);
+    let min_keep = params.cards[3];
+    let keep = (params.cards[2] * params.cards[2] / (dist * dist).max(1e-6)).clamp(min_keep, 1.0);
     if !kept || rand01(hash_u32(h0 ^ 8)) >= keep {
         stats[counter::DISTANCE] += 1;
         return;
     }
-    scale /= keep.sqrt();
     // The level by distance, cross-faded over a band centred on each switch.
     let [to_1, to_card, band, _] = params.lod;
     let to_1 = to_1.min(ty.lod[0]);
@@ -407,22 +466,28 @@ fn place_cell(
     };
     let faded = level < 2 && t_band > 0.0;
     let region = t * LEVELS + level as usize;
-    // A crowded region (the frame before) keeps a plant by its own number, the survivor grown
-    // to keep the cover; a plant in a cross-fade by the more crowded of its two regions.
-    let crowd = if faded {
-        keeps[region].min(keeps[region + 1])
+    // A region crowded the frame before thins from a distance, keeping a plant by its own
+    // number (a plant in a cross-fade by the more crowded of its two regions); the survivors
+    // grow to keep the cover as the thinning with distance grows them, together by no more
+    // than that thinning alone may.
+    let from = if faded {
+        crowded_from[region].min(crowded_from[region + 1])
     } else {
-        keeps[region]
+        crowded_from[region]
     };
+    let crowd = crowd_keep(dist, from);
     let crowd_kept = rand01(hash_u32(h0 ^ 9)) < crowd;
-    // The culling sphere holds the plant however much it grows (so that what a region wants
-    // does not follow how crowded it was, only whether it was).
-    let reach = if crowd < 1.0 { CROWD_MAX_GROWTH } else { 1.0 };
-    let radius = reach * scale * ty.limits[3].max(0.5);
-    let center = pos + Vec3::new(0.0, 0.0, 0.5 * reach * scale);
-    if crowd_kept {
-        scale *= (1.0 / crowd.max(1e-6).sqrt()).min(CROWD_MAX_GROWTH);
-    }
+    let grown = scale / (keep * crowd).max(min_keep).sqrt();
+    // The culling sphere of a crowded region holds the plant however much it grows (so that
+    // what the region wants does not follow how crowded it was, only whether it was).
+    let reach = if from < UNCROWDED {
+        scale / min_keep.sqrt()
+    } else {
+        grown
+    };
+    scale = grown;
+    let radius = reach * ty.limits[3].max(0.5);
+    let center = pos + Vec3::new(0.0, 0.0, 0.5 * reach);
     let outside = params.planes[..5]
         .iter()
         .any(|p| Vec4::from_array(*p).truncate().dot(center) + p[3] < -radius);
@@ -442,12 +507,13 @@ fn place_cell(
         stats[counter::OCCLUSION] += 1;
         return;
     }
-    out.wanted[region] += 1;
+    let bin = crowd_bin(dist);
+    out.wanted[region * CROWD_BINS + bin] += 1;
     if faded {
-        out.wanted[region + 1] += 1;
+        out.wanted[(region + 1) * CROWD_BINS + bin] += 1;
     }
     if !crowd_kept {
-        stats[counter::CROWDED] += 1;
+        stats[counter::CROWDED] += 1 + u32::from(faded);
         return;
     }
     let mut inst = PlantInstance {
@@ -507,20 +573,55 @@ mod tests {
     }
 
     #[test]
-    fn a_crowded_region_aims_below_its_capacity_by_the_margin_and_the_draws_spread() {
+    fn a_crowded_region_aims_below_its_capacity_by_the_margin() {
         // A large region: 95% of it; a small one: three standard deviations of its draw below.
         assert_eq!(crowd_fill(262_144), 0.95 * 262_144.0);
         assert_eq!(crowd_fill(64), 40.0);
         assert_eq!(crowd_fill(4), 1.0);
-        let mut wanted = [0u32; REGIONS];
-        wanted[0] = 1000;
-        wanted[1] = 15_564;
-        wanted[2] = 40_000;
-        let keeps = crowd_keeps(&wanted, 16_384);
-        assert_eq!(keeps[0], 1.0);
-        assert_eq!(keeps[1], 1.0, "within the fill");
-        assert!((keeps[2] * 40_000.0 - 0.95 * 16_384.0).abs() < 0.1, "{}", keeps[2]);
-        assert!(keeps[3..].iter().all(|&k| k == 1.0), "a region that wanted none");
+    }
+
+    #[test]
+    fn the_distance_bins_are_quarter_octaves_from_two_metres() {
+        assert_eq!(crowd_bin(0.0), 0);
+        assert_eq!(crowd_bin(1.99), 0);
+        assert_eq!(crowd_bin(2.0), 1);
+        assert_eq!(crowd_bin(4.0), 5);
+        assert_eq!(crowd_bin(1e9), CROWD_BINS - 1);
+        for b in 1..CROWD_BINS {
+            let near = crowd_bin_near(b);
+            assert_eq!(crowd_bin(near * 1.0001), b, "bin {b} from {near} m");
+            assert_eq!(crowd_bin(near * 0.9999), b - 1, "below bin {b}");
+        }
+    }
+
+    #[test]
+    fn a_crowded_region_thins_its_farthest_plants_to_fit_and_keeps_the_nearest() {
+        // 1,000 plants in each bin from 10 m to 1 km in one region; 100 in another.
+        let mut wanted = vec![0u32; REGIONS * CROWD_BINS];
+        let (first, last) = (crowd_bin(10.0), crowd_bin(1000.0));
+        for b in first..=last {
+            wanted[b] = 1000;
+            wanted[CROWD_BINS + b] = 1;
+        }
+        let capacity = 16_384;
+        let from = crowd_distances(&wanted, capacity);
+        assert!(from[1..].iter().all(|&d| d == UNCROWDED));
+        let d = from[0];
+        assert!(d > 10.0 && d < 1000.0, "{d}");
+        // What the thinning keeps of plants spread evenly through each bin: within the fill,
+        // and near it (the estimate counts each bin at its near edge).
+        let mut kept = 0.0;
+        for b in first..=last {
+            for i in 0..1000 {
+                let t = (i as f32 + 0.5) / 1000.0;
+                let dist = crowd_bin_near(b) * (0.25 * t).exp2();
+                kept += crowd_keep(dist, d);
+            }
+        }
+        let fill = crowd_fill(capacity);
+        assert!(kept <= fill && kept > 0.85 * fill, "kept {kept} of {fill}");
+        assert_eq!(crowd_keep(0.5 * d, d), 1.0);
+        assert_eq!(crowd_keep(2.0 * d, d), 0.25);
     }
 
     #[test]

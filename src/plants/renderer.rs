@@ -3,10 +3,11 @@
 //! (`shaders/plants_place.wgsl`) and one indexed indirect draw per region
 //! (`shaders/plants_draw.wgsl`), culled against the grass's Hi-Z pyramid and bent by the grass's
 //! wind field. The pool's size is fixed when the stage is made, whatever the view: a region whose
-//! plants wanted more than [`CROWD_FILL`](crate::plants::place_cpu::CROWD_FILL) of it in one
-//! frame thins them in the next, each plant kept by its own number (the same plants frame after
-//! frame, grown to keep the cover), and a region that fills up all the same drops the rest of
-//! its plants and counts them as overflow.
+//! plants wanted more than [fits](crate::plants::place_cpu::crowd_fill) in one frame thins them
+//! from a distance in the next ([`crate::plants::place_cpu::crowd_distances`]: the nearest all
+//! kept, the farther ones by their own numbers, the same plants frame after frame, grown to keep
+//! the cover), after a cut measuring first ([`PlantRenderer::set_cut`]); a region that fills up
+//! all the same drops the rest of its plants and counts them as overflow.
 
 use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
@@ -22,7 +23,8 @@ use crate::plants::bend_cpu::PlantWindGpu;
 use crate::plants::draw::DrawPass;
 use crate::plants::place::PlacePass;
 use crate::plants::place_cpu::{
-    LEVELS, PlaceParams, PlantInstance, PlantJob, PlantTypeGpu, REGIONS, TYPES, counter,
+    CROWD_BINS, LEVELS, PlaceParams, PlantInstance, PlantJob, PlantTypeGpu, REGIONS, TYPES,
+    UNCROWDED, counter,
 };
 use crate::plants::set::{PlantSet, TEXTURE_SIZE, mips};
 use crate::stream::TileAtlas;
@@ -197,7 +199,8 @@ pub struct PlantStats {
     pub overflow: u32,
     /// Instances drawn (a plant in a cross-fade counts twice).
     pub drawn: u32,
-    /// Plants thinned out because their region was crowded the frame before.
+    /// Instances thinned out because their region was crowded the frame before (a plant in a
+    /// cross-fade counts twice, as in `drawn`).
     #[serde(default)]
     pub crowded: u32,
     /// Triangles the draws draw: each (type, level)'s instances times its mesh's triangles.
@@ -236,11 +239,38 @@ impl PlantStats {
 
 /// Bytes of a plant stage's draw arguments ([`PlantRenderer::args_buffer`]).
 pub const ARGS_BYTES: u64 = REGIONS as u64 * 20;
+/// How far the camera moves between frames, metres, or turns, degrees, for the plant stages to
+/// take the frame as a cut ([`is_cut`]): the temporal anti-aliasing's defaults.
+pub const CUT_DISTANCE_M: f64 = 20.0;
+/// See [`CUT_DISTANCE_M`].
+pub const CUT_ANGLE_DEG: f64 = 30.0;
+
+/// Whether a camera at `eye` looking along `forward` (unit) starts afresh from the last frame's,
+/// `last` (none: the first frame): moved more than [`CUT_DISTANCE_M`] or turned more than
+/// [`CUT_ANGLE_DEG`]. After a cut the plant stages measure how crowded each region is before
+/// they place ([`PlantRenderer::set_cut`]), where the last frame's figures say nothing of this
+/// view.
+pub fn is_cut(
+    last: Option<(glam::DVec3, glam::DVec3)>,
+    eye: glam::DVec3,
+    forward: glam::DVec3,
+) -> bool {
+    last.is_none_or(|(last_eye, last_forward)| {
+        let angle = last_forward
+            .dot(forward)
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
+        eye.distance(last_eye) > CUT_DISTANCE_M || angle > CUT_ANGLE_DEG
+    })
+}
+
 /// Bytes of a plant stage's counters ([`PlantRenderer::stats_buffer`]).
 pub const STATS_BYTES: u64 = counter::COUNT as u64 * 4;
-/// Bytes of the per-region counters that a frame starts from zero (appended and wanted); the
-/// chances of keeping a plant in crowded regions follow them and carry over to the next frame.
-const REGION_COUNTER_BYTES: u64 = 2 * REGIONS as u64 * 4;
+/// Bytes of the per-region counters that a frame starts from zero (appended, and wanted by
+/// distance); the distances from which crowded regions thin follow them and carry over to the
+/// next frame.
+const REGION_COUNTER_BYTES: u64 = (REGIONS + REGIONS * CROWD_BINS) as u64 * 4;
 
 /// The draw's frame constants; mirrors `PlantFrame` in the shader.
 #[repr(C)]
@@ -298,6 +328,8 @@ pub struct PlantRenderer {
     targets: Targets,
     samples: u32,
     atlas_views: (wgpu::TextureView, wgpu::TextureView),
+    /// Whether the frame is a cut ([`PlantRenderer::set_cut`]).
+    cut: bool,
 }
 
 /// Per level of detail of each type of `ids` (indices into `set`): the meshes packed into one
@@ -566,11 +598,11 @@ impl PlantRenderer {
             REGION_COUNTER_BYTES + REGIONS as u64 * 4,
             U::STORAGE | U::COPY_DST | U::COPY_SRC,
         );
-        // No region crowded before the first frame: every chance 1.
+        // No region crowded before the first frame.
         queue.write_buffer(
             &counters,
             REGION_COUNTER_BYTES,
-            bytemuck::cast_slice(&[1.0f32; REGIONS]),
+            bytemuck::cast_slice(&[UNCROWDED; REGIONS]),
         );
         let stats = buffer(
             "plants stats",
@@ -765,6 +797,7 @@ impl PlantRenderer {
             targets: *targets,
             samples: 1,
             atlas_views,
+            cut: false,
         }
     }
 
@@ -910,6 +943,14 @@ impl PlantRenderer {
         }
     }
 
+    /// Sets whether the next recorded frame is a cut ([`is_cut`]): then its placement runs twice,
+    /// the first time only to measure what each region of the pool wants, so that a view
+    /// crowded from its first frame (a teleport over a forest, a frame of a path's far apart
+    /// views) thins its plants at once instead of dropping those that came last.
+    pub fn set_cut(&mut self, cut: bool) {
+        self.cut = cut;
+    }
+
     /// Records a shadow caster's placement on `jobs` and its draws into each of `cascades`
     /// layers of `map` (cleared here).
     pub fn record_shadow(
@@ -942,24 +983,35 @@ impl PlantRenderer {
         timer: &mut GpuTimer,
         name: &str,
     ) {
-        encoder.clear_buffer(&self.stats, 0, None);
-        encoder.clear_buffer(&self.counters, 0, Some(REGION_COUNTER_BYTES));
         let jobs = &jobs[..jobs.len().min(MAX_JOBS as usize)];
         if !jobs.is_empty() {
             queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(jobs));
         }
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("plants place"),
-            timestamp_writes: timer.compute_pass(name),
-        });
-        pass.set_bind_group(0, &self.place_group, &[]);
-        if !jobs.is_empty() {
-            let n = self.params.grid[0];
-            pass.set_pipeline(&self.place_pass.place);
-            pass.dispatch_workgroups(n.div_ceil(8), n.div_ceil(8), jobs.len() as u32);
+        // After a cut, a first placement measures each region's crowding for the second.
+        let measure = self.cut && !jobs.is_empty();
+        for timed in [!measure, true] {
+            encoder.clear_buffer(&self.stats, 0, None);
+            encoder.clear_buffer(&self.counters, 0, Some(REGION_COUNTER_BYTES));
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("plants place"),
+                timestamp_writes: if timed {
+                    timer.compute_pass(name)
+                } else {
+                    None
+                },
+            });
+            pass.set_bind_group(0, &self.place_group, &[]);
+            if !jobs.is_empty() {
+                let n = self.params.grid[0];
+                pass.set_pipeline(&self.place_pass.place);
+                pass.dispatch_workgroups(n.div_ceil(8), n.div_ceil(8), jobs.len() as u32);
+            }
+            pass.set_pipeline(&self.place_pass.finalize);
+            pass.dispatch_workgroups(1, 1, 1);
+            if timed {
+                break;
+            }
         }
-        pass.set_pipeline(&self.place_pass.finalize);
-        pass.dispatch_workgroups(1, 1, 1);
     }
 
     /// Records the indirect draw of every (type, level) region with the draw bind group `group`.
@@ -1045,23 +1097,20 @@ impl PlantRenderer {
             .with_draws(&args)
     }
 
-    /// Reads each region's chance of keeping a plant in the next frame (`type * 3 + level`;
-    /// [`crate::plants::place_cpu::crowd_keeps`] of what the last recorded frame wanted), and
-    /// what each region wanted in that frame (for tests: waits for the GPU).
+    /// Reads each region's distance from which it thins its plants in the next frame (`type *
+    /// 3 + level`; [`crate::plants::place_cpu::crowd_distances`] of what the last recorded
+    /// frame wanted, [`UNCROWDED`] where nothing crowds it), and what each region wanted in that
+    /// frame by distance (`region * CROWD_BINS + bin`; for tests: waits for the GPU).
     pub fn read_crowding(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-    ) -> ([f32; REGIONS], [u32; REGIONS]) {
+    ) -> ([f32; REGIONS], Vec<u32>) {
         let words: Vec<u32> = crate::gpu::read_buffer_pod(device, queue, &self.counters, ..)
             .expect("read back the plant regions' counters");
-        let mut keeps = [0.0f32; REGIONS];
-        let mut wanted = [0u32; REGIONS];
-        for r in 0..REGIONS {
-            wanted[r] = words[REGIONS + r];
-            keeps[r] = f32::from_bits(words[2 * REGIONS + r]);
-        }
-        (keeps, wanted)
+        let wanted = words[REGIONS..REGIONS + REGIONS * CROWD_BINS].to_vec();
+        let from = &words[REGIONS + REGIONS * CROWD_BINS..];
+        (std::array::from_fn(|r| f32::from_bits(from[r])), wanted)
     }
 
     /// Reads back the instances of every region of the last recorded frame (for tests): per

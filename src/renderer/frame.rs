@@ -74,8 +74,8 @@ pub struct FrameStats {
     pub residency: ResidencyStats,
     /// Grass: tiles, blades considered, culled by each test and drawn, per LOD.
     pub grass: GrassStats,
-    /// Plants: cells considered, plants culled by each test and drawn; `None` when the frame
-    /// drew none (no plant types, or the `plants` feature off).
+    /// Plants: cells considered, plants culled by each test, thinned where crowded and drawn;
+    /// `None` when the frame drew none (no plant types, or the `plants` feature off).
     pub plants: Option<crate::plants::PlantStats>,
     /// Trees, as `plants`; `None` when the frame drew none (no tree types, or the `trees`
     /// feature off).

@@ -61,7 +61,7 @@ pub use view::FrameView;
 use std::sync::Arc;
 use std::time::Instant;
 
-use glam::Vec2;
+use glam::{DVec3, Vec2};
 
 use crate::aa::AntiAliasing;
 use crate::aa::msaa::Msaa;
@@ -242,6 +242,8 @@ pub struct Renderer {
     holes: HoleCheck,
     skip_uploads: u32,
     time_s: Option<f64>,
+    /// The last prepared frame's eye and forward direction (for the plant stages' cuts).
+    last_view: Option<(DVec3, DVec3)>,
     frame: u64,
     prepared: Option<Prepared>,
     /// Why the last prepare left no frame to record, where it did not (an input that cannot be
@@ -638,6 +640,7 @@ impl Renderer {
                 holes,
                 skip_uploads: 0,
                 time_s: None,
+                last_view: None,
                 frame: 0,
                 prepared: None,
                 unprepared: None,
@@ -1088,6 +1091,8 @@ impl Renderer {
         };
         self.tree_shadow_map
             .set(queue, shadows.is_some().then_some(cascades.as_slice()));
+        let cut = crate::plants::renderer::is_cut(self.last_view, view.eye, view.forward);
+        self.last_view = Some((view.eye, view.forward));
         if let Some(g) = &mut self.grass {
             let ambient_speed = g.wind.config().ambient_at(input.time_s).speed_mps as f32;
             g.renderer
@@ -1104,6 +1109,14 @@ impl Renderer {
                 camera.position.z as f32,
                 camera.near_m,
             );
+            for p in g
+                .plants
+                .iter_mut()
+                .chain(g.trees.iter_mut())
+                .chain(g.casters.iter_mut())
+            {
+                p.set_cut(cut);
+            }
             for p in g.plants.iter_mut().chain(g.trees.iter_mut()) {
                 p.set_frame(
                     queue,

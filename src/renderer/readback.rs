@@ -12,8 +12,8 @@ use crate::grass::GrassStats;
 use crate::plants::renderer::{ARGS_BYTES, STATS_BYTES};
 
 /// Where the plant layers' figures start in a slot after the timestamps: after the grass's
-/// counters (64 bytes) and the hole check's (16), each layer's counters (32 bytes), then each
-/// layer's draw arguments.
+/// counters (64 bytes) and the hole check's (16), each layer's counters ([`STATS_BYTES`]), then
+/// each layer's draw arguments.
 const PLANTS_AT: u64 = 64 + 16;
 
 const FREE: u8 = 0;

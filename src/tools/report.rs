@@ -73,8 +73,8 @@ pub struct FrameRecord {
     /// Grass: tiles, blades considered, culled by each test (distance, frustum, occlusion),
     /// overflowing and drawn, each per LOD (high, low).
     pub grass: GrassStats,
-    /// Plants: cells considered, plants culled by each test, overflowing and drawn (absent
-    /// when the frame drew none).
+    /// Plants: cells considered, plants culled by each test, thinned where crowded,
+    /// overflowing and drawn (absent when the frame drew none).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plants: Option<crate::plants::PlantStats>,
     /// Trees, as `plants` (absent when the frame drew none).
@@ -147,8 +147,8 @@ pub struct FlySummary {
     /// Plant instances a frame that did not fit their region of the pool.
     #[serde(default)]
     pub plants_overflow: Summary,
-    /// Plants a frame thinned out because their region of the pool was crowded the frame
-    /// before.
+    /// Plant instances a frame thinned out because their region of the pool was crowded the
+    /// frame before.
     #[serde(default)]
     pub plants_crowded: Summary,
     /// Tree instances drawn a frame (all types and levels; a tree in a cross-fade counts
@@ -158,7 +158,8 @@ pub struct FlySummary {
     /// Tree instances a frame that did not fit their region of the pool.
     #[serde(default)]
     pub trees_overflow: Summary,
-    /// Trees a frame thinned out because their region of the pool was crowded the frame before.
+    /// Tree instances a frame thinned out because their region of the pool was crowded the
+    /// frame before.
     #[serde(default)]
     pub trees_crowded: Summary,
 }

@@ -171,9 +171,9 @@ pub struct SoakReport {
     /// pools are fixed: a view that wants more drops the rest).
     #[serde(default)]
     pub plants_overflow_total: u64,
-    /// Plants and trees thinned out because their pool's region was crowded the frame before,
-    /// over all frames (the pools are fixed: a view that wants more than fits thins its plants
-    /// in the next frame, the same ones frame after frame).
+    /// Plant and tree instances thinned out because their pool's region was crowded the frame
+    /// before, over all frames (the pools are fixed: a view that wants more than fits thins its
+    /// farther plants in the next frame, the same ones frame after frame).
     #[serde(default)]
     pub plants_crowded_total: u64,
     /// Longest frame, wall time, milliseconds.
