@@ -987,18 +987,15 @@ impl PlantRenderer {
         if !jobs.is_empty() {
             queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(jobs));
         }
-        // After a cut, a first placement measures each region's crowding for the second.
-        let measure = self.cut && !jobs.is_empty();
-        for timed in [!measure, true] {
+        // After a cut, a first placement measures each region's crowding for the second (both
+        // timed as the stage's placement).
+        let runs = if self.cut && !jobs.is_empty() { 2 } else { 1 };
+        for _ in 0..runs {
             encoder.clear_buffer(&self.stats, 0, None);
             encoder.clear_buffer(&self.counters, 0, Some(REGION_COUNTER_BYTES));
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("plants place"),
-                timestamp_writes: if timed {
-                    timer.compute_pass(name)
-                } else {
-                    None
-                },
+                timestamp_writes: timer.compute_pass(name),
             });
             pass.set_bind_group(0, &self.place_group, &[]);
             if !jobs.is_empty() {
@@ -1008,9 +1005,6 @@ impl PlantRenderer {
             }
             pass.set_pipeline(&self.place_pass.finalize);
             pass.dispatch_workgroups(1, 1, 1);
-            if timed {
-                break;
-            }
         }
     }
 
