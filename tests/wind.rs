@@ -1095,6 +1095,49 @@ fn invalid_wind_sources_get_errors_naming_the_field() {
     assert!(err.to_string().contains("`direction_deg`"), "{err}");
     let err = broken("radius_m = 25.0, ", "");
     assert!(err.to_string().contains("`radius_m`"), "{err}");
+    // An unknown kind is shown where it is written, and a field of another kind on its own
+    // source's line or header (both were shown at the list's start: `sources = [`, or the first
+    // `[[wind_scenes.sources]]`).
+    let err = broken("kind = \"omni\"", "kind = \"tornado\"").to_string();
+    assert!(err.contains("{ kind = \"tornado\""), "{err}");
+    let err = broken(
+        "inflow_mps = -2.0",
+        "inflow_mps = -2.0, direction_deg = 1.0",
+    )
+    .to_string();
+    assert!(err.contains("{ kind = \"vortex\""), "{err}");
+    let tables = format!(
+        "{SMALL}\n[[wind_scenes]]\nname = \"still\"\n\n[[wind_scenes.sources]]\nkind = \"omni\"\n\
+         radius_m = 30.0\nspeed_mps = 10.0\nposition_m = [1.0, 2.0]\n\n\
+         [[wind_scenes.sources]]\nkind = \"omni\"\nradius_m = 30.0\nspeed_mps = 10.0\n\
+         position_m = [1.0, 2.0]\nclockwise = true\n"
+    );
+    let line_of = |text: &str, what: &str, nth: usize| {
+        text.lines()
+            .enumerate()
+            .filter(|(_, l)| l.contains(what))
+            .nth(nth)
+            .unwrap()
+            .0
+            + 1
+    };
+    let second = line_of(&tables, "[[wind_scenes.sources]]", 1);
+    let err = parse(&tables).unwrap_err().to_string();
+    assert!(
+        err.contains(&format!("line {second},")) && err.contains("`clockwise`"),
+        "{err}"
+    );
+    let bad_kind = tables.replacen(
+        "kind = \"omni\"\nradius_m = 30.0\nspeed_mps = 10.0\nposition_m = [1.0, 2.0]\nclockwise",
+        "kind = \"whirl\"\nradius_m = 30.0\nspeed_mps = 10.0\nposition_m = [1.0, 2.0]\nclockwise",
+        1,
+    );
+    let err = parse(&bad_kind).unwrap_err().to_string();
+    let kind_line = line_of(&bad_kind, "kind = \"whirl\"", 0);
+    assert!(
+        err.contains(&format!("line {kind_line},")) && err.contains("whirl"),
+        "{err}"
+    );
     // A value of the wrong shape in a source written as a table is shown on its own line (it
     // was shown on the table's header, without the field).
     let table = format!(

@@ -57,8 +57,8 @@ pub struct WindScene {
 /// `radius_m` above 0 and at most [`MAX_WIND_RADIUS_M`](super::MAX_WIND_RADIUS_M), `direction_deg` within
 /// +-[`MAX_ANGLE_DEG`](super::MAX_ANGLE_DEG), `position_m` within +-[`MAX_POSITION_M`](super::MAX_POSITION_M), `start_s` 0..=[`MAX_TIME_S`](super::MAX_TIME_S),
 /// strength key times within +-[`MAX_TIME_S`](super::MAX_TIME_S) and factors 0..=[`MAX_WIND_STRENGTH`](super::MAX_WIND_STRENGTH).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "lowercase", try_from = "WrittenWindSource")]
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
 pub enum WindSource {
     /// A uniform wind everywhere (placement is ignored).
     Directional {
@@ -146,6 +146,7 @@ pub enum WindSource {
     expecting = "a wind source: a table with its kind and fields"
 )]
 struct WrittenWindSource {
+    #[serde(deserialize_with = "source_kind")]
     kind: String,
     direction_deg: Option<f64>,
     speed_mps: Option<f64>,
@@ -161,6 +162,54 @@ struct WrittenWindSource {
     strength: Vec<[f64; 2]>,
     #[serde(default)]
     repeat: bool,
+}
+
+/// The kinds of wind source.
+const SOURCE_KINDS: [&str; 3] = ["directional", "omni", "vortex"];
+
+/// Reads a wind source's `kind`, refusing one that is not a kind where it is written.
+fn source_kind<'de, D>(d: D) -> Result<String, D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    let kind = String::deserialize(d)?;
+    if SOURCE_KINDS.contains(&kind.as_str()) {
+        Ok(kind)
+    } else {
+        Err(serde::de::Error::custom(unknown_kind(&kind)))
+    }
+}
+
+fn unknown_kind(kind: &str) -> String {
+    format!("unknown wind source kind {kind:?}: expected \"directional\", \"omni\" or \"vortex\"")
+}
+
+/// Reads a wind source's table and checks it against its kind within the table, so that an
+/// error names the source's own place in the file (a conversion after the table was read was
+/// told at the list's start: the first `[[wind_scenes.sources]]`, or `sources = [`).
+impl<'de> Deserialize<'de> for WindSource {
+    fn deserialize<D>(d: D) -> Result<Self, D::Error>
+    where
+        D: serde::Deserializer<'de>,
+    {
+        struct Table;
+        impl<'de> serde::de::Visitor<'de> for Table {
+            type Value = WindSource;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a wind source: a table with its kind and fields")
+            }
+            fn visit_map<A>(self, map: A) -> Result<WindSource, A::Error>
+            where
+                A: serde::de::MapAccess<'de>,
+            {
+                let written = WrittenWindSource::deserialize(
+                    serde::de::value::MapAccessDeserializer::new(map),
+                )?;
+                WindSource::try_from(written).map_err(serde::de::Error::custom)
+            }
+        }
+        d.deserialize_map(Table)
+    }
 }
 
 /// `kind` with its indefinite article: "an omni", "a vortex".
@@ -245,10 +294,7 @@ impl TryFrom<WrittenWindSource> for WindSource {
                     repeat,
                 })
             }
-            other => Err(format!(
-                "unknown wind source kind {other:?}: expected \"directional\", \"omni\" or \
-                 \"vortex\""
-            )),
+            other => Err(unknown_kind(other)),
         }
     }
 }
