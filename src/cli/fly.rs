@@ -445,6 +445,30 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
             s.grass_overflow.median
         );
     }
+    // Plants and trees past their pools: thinned where crowded (the farthest first), dropped
+    // where a region filled all the same.
+    for (layer, crowded, overflow) in [
+        ("plants", &s.plants_crowded, &s.plants_overflow),
+        ("trees", &s.trees_crowded, &s.trees_overflow),
+    ] {
+        if crowded.max > 0.0 {
+            say!(
+                "{layer}: up to {:.0} instances a frame (median {:.0}) thinned out, the farthest \
+                 first, where the view wanted more than their pool's regions hold",
+                crowded.max,
+                crowded.median
+            )?;
+        }
+        if overflow.max > 0.0 {
+            log::warn!(
+                "{layer}: up to {:.0} instances a frame (median {:.0}) did not fit their pool's \
+                 regions and were not drawn (a view that grew past the regions' margin in one \
+                 frame)",
+                overflow.max,
+                overflow.median
+            );
+        }
+    }
     say!(
         "grass coverage within {:.0} m: median {:.1}%, mean {:.1}% over {} frames",
         verdant::tools::metrics::COVERAGE_DISTANCE_M,
