@@ -13,6 +13,11 @@
 //! the thinning band before the view distance (by the plant's own dithered number); a far job
 //! keeps exactly the others, thinned again toward the end of the cards' reach. Each plant near
 //! the view distance is therefore placed by one job, whichever side of the band it falls.
+//!
+//! Crowding: each (type, level) region of the pool counts what it wanted by distance
+//! ([`crowd_bin`]); where that was more than fits ([`crowd_fill`]), the next frame thins the
+//! region's plants from the distance [`crowd_distances`] finds, each by its own number
+//! ([`crowd_keep`]), so that the same plants stay frame after frame and the nearest all stay.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec2, Vec3, Vec4};
