@@ -14,8 +14,8 @@
 // (crowd_distances in place_cpu.rs), each plant kept by its own number, the nearest all kept
 // and the survivors grown to keep the cover (the same plants frame after frame, where a full
 // region would drop whichever came last). A second entry point turns the counters into
-// indexed indirect draws, clamped to the region's capacity, counts the overflow, and sets each
-// region's chance for the next frame.
+// indexed indirect draws, clamped to the region's capacity, counts the overflow, and sets the
+// distance from which each region thins in the next frame.
 // CPU mirror: src/plants/place_cpu.rs.
 
 #include "shared/hash.wgsl"
@@ -384,20 +384,24 @@ fn finalize_draws(@builtin(local_invocation_index) region: u32) {
     let drawn = min(appended, params.limits.y);
     let capacity = f32(params.limits.y);
     let fit = max(min(CROWD_FILL * capacity, capacity - 3.0 * sqrt(capacity)), 1.0);
-    let first = region * CROWD_BINS;
+    // The region's bins, read once, and their near edges.
+    var wanted: array<f32, CROWD_BINS>;
+    var near: array<f32, CROWD_BINS>;
     var total = 0.0;
     for (var b = 0u; b < CROWD_BINS; b++) {
-        total += f32(atomicLoad(&counters.wanted[first + b]));
+        wanted[b] = f32(atomicLoad(&counters.wanted[region * CROWD_BINS + b]));
+        near[b] = crowd_bin_near(b);
+        total += wanted[b];
     }
     var thin_from = UNCROWDED;
     if total > fit {
         var lo = 0.0;
-        var hi = crowd_bin_near(CROWD_BINS - 1u) * 2.0;
+        var hi = near[CROWD_BINS - 1u] * 2.0;
         for (var i = 0u; i < CROWD_BISECTIONS; i++) {
             let mid = 0.5 * (lo + hi);
             var kept = 0.0;
             for (var b = 0u; b < CROWD_BINS; b++) {
-                kept += f32(atomicLoad(&counters.wanted[first + b])) * crowd_keep(crowd_bin_near(b), mid);
+                kept += wanted[b] * crowd_keep(near[b], mid);
             }
             if kept <= fit {
                 lo = mid;

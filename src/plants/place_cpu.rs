@@ -106,13 +106,14 @@ pub fn crowd_keep(dist: f32, from_m: f32) -> f32 {
 
 /// Each region's distance from which to thin its plants in the next frame, from what it wanted
 /// this frame by distance (`wanted`: instances per region and [`crowd_bin`], `region *
-/// CROWD_BINS + bin`, before any thinning for crowding) and the regions' `capacity`: [`UNCROWDED`] where they fit within [`crowd_fill`],
-/// else the distance whose thinning ([`crowd_keep`]) would keep no more than that, counting each
+/// CROWD_BINS + bin`, before any thinning for crowding) and the regions' `capacity`:
+/// [`UNCROWDED`] where they fit within [`crowd_fill`], else the distance whose thinning ([`crowd_keep`]) would keep no more than that, counting each
 /// bin's plants as at its near edge (so that the estimate is never short), found by bisection.
 /// The nearest plants of a crowded region are kept, the farthest thinned most. Mirrors
 /// `finalize_draws` in the shader.
 pub fn crowd_distances(wanted: &[u32], capacity: u32) -> [f32; REGIONS] {
     let fit = crowd_fill(capacity);
+    let near: [f32; CROWD_BINS] = std::array::from_fn(crowd_bin_near);
     let mut out = [UNCROWDED; REGIONS];
     for (d, bins) in out.iter_mut().zip(wanted.chunks_exact(CROWD_BINS)) {
         let total: f32 = bins.iter().map(|&n| n as f32).sum();
@@ -121,12 +122,12 @@ pub fn crowd_distances(wanted: &[u32], capacity: u32) -> [f32; REGIONS] {
         }
         let kept = |from: f32| -> f32 {
             let mut k = 0.0;
-            for (b, &n) in bins.iter().enumerate() {
-                k += n as f32 * crowd_keep(crowd_bin_near(b), from);
+            for (&n, &edge) in bins.iter().zip(&near) {
+                k += n as f32 * crowd_keep(edge, from);
             }
             k
         };
-        let (mut lo, mut hi) = (0.0f32, crowd_bin_near(CROWD_BINS - 1) * 2.0);
+        let (mut lo, mut hi) = (0.0f32, near[CROWD_BINS - 1] * 2.0);
         for _ in 0..CROWD_BISECTIONS {
             let mid = 0.5 * (lo + hi);
             if kept(mid) <= fit {
@@ -601,7 +602,7 @@ mod tests {
 
     #[test]
     fn a_crowded_region_thins_its_farthest_plants_to_fit_and_keeps_the_nearest() {
-        // 1,000 plants in each bin from 10 m to 1 km in one region; 100 in another.
+        // 1,000 plants in each bin from 10 m to 1 km in one region; one in each in another.
         let mut wanted = vec![0u32; REGIONS * CROWD_BINS];
         let (first, last) = (crowd_bin(10.0), crowd_bin(1000.0));
         for b in first..=last {
