@@ -813,6 +813,26 @@ fn a_node_cycle_is_refused() {
     let path = write(dir.path(), "cycle.glb", &glb(&doc, &bin));
     let err = load_err(&path);
     assert!(err.to_string().contains("cycle"), "{err}");
+
+    // A cycle that fans out: a node listing another 20,000 times, which lists itself as often.
+    // Refused as quickly, the nodes still to visit bounded too (they once grew by 20,000 a
+    // visit, to gigabytes, before the count of visits was reached).
+    let (mut doc, bin) = triangle();
+    let fan: Vec<u32> = vec![1; 20_000];
+    doc["nodes"][0]["children"] = json!(fan);
+    doc["nodes"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({ "children": fan }));
+    let path = write(dir.path(), "fan.glb", &glb(&doc, &bin));
+    let start = std::time::Instant::now();
+    let err = load_err(&path);
+    assert!(err.to_string().contains("cycle"), "{err}");
+    assert!(
+        start.elapsed() < std::time::Duration::from_secs(20),
+        "refused only after {:?}",
+        start.elapsed()
+    );
 }
 
 #[test]

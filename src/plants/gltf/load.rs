@@ -16,8 +16,8 @@ use super::{
 };
 use crate::plants::mesh::{PlantImage, PlantMesh, PlantVertex};
 
-/// Node visits after which a scene is refused: a cycle, or a hierarchy that instances itself
-/// exponentially, would otherwise never end.
+/// Node instances after which a scene is refused: a cycle, or a hierarchy that instances itself
+/// exponentially, would otherwise never end (or fill memory with the nodes still to visit).
 const MAX_NODE_VISITS: usize = 65_536;
 
 /// A triangle primitive to read, with the transform from its node's space to plant space.
@@ -136,24 +136,36 @@ impl Loader<'_> {
                 }
             }
             Some(scene) => {
-                let mut stack: Vec<(gltf::Node, Mat4)> = scene.nodes().map(|n| (n, axes)).collect();
-                let mut visits = 0usize;
-                while let Some((node, parent)) = stack.pop() {
-                    visits += 1;
-                    if visits > MAX_NODE_VISITS {
-                        return Err(PlantFileError::NotGltf {
-                            path: self.path.to_owned(),
-                            reason: format!(
-                                "the scene's node hierarchy has a cycle or more than {MAX_NODE_VISITS} node instances"
-                            ),
-                        });
+                // Every node instance is counted as it is queued, so that the queue too stays
+                // within the bound: a node listing itself (or a node that lists it) thousands of
+                // times as a child would otherwise grow it by thousands a visit.
+                let too_many = || PlantFileError::NotGltf {
+                    path: self.path.to_owned(),
+                    reason: format!(
+                        "the scene's node hierarchy has a cycle or more than {MAX_NODE_VISITS} \
+                         node instances"
+                    ),
+                };
+                let mut queued = 0usize;
+                let mut stack: Vec<(gltf::Node, Mat4)> = Vec::new();
+                for node in scene.nodes() {
+                    queued += 1;
+                    if queued > MAX_NODE_VISITS {
+                        return Err(too_many());
                     }
+                    stack.push((node, axes));
+                }
+                while let Some((node, parent)) = stack.pop() {
                     let local = Mat4::from_cols_array_2d(&node.transform().matrix());
                     let world = parent * local;
                     if let Some(mesh) = node.mesh() {
                         meshes.push((mesh, world));
                     }
                     for child in node.children() {
+                        queued += 1;
+                        if queued > MAX_NODE_VISITS {
+                            return Err(too_many());
+                        }
                         stack.push((child, world));
                     }
                 }
