@@ -632,6 +632,67 @@ fn assert_windows_match(label: &str, path: &Path, dem: &Dem) {
             "{label}: rows {a}..{b} read on their own differ from the whole file's"
         );
     }
+    // Windows of columns of those rows: a tiled file gives just the columns asked for and reads
+    // only the tiles that hold them; any other file gives (and reads) whole rows.
+    let tiled = rows.reads_column_windows();
+    for [a, b] in [[3, 20], [0, h]] {
+        let mut bytes = Vec::new();
+        for [c0, c1] in [[0, 1], [5, 21], [w / 2 - 3, w / 2 + 4], [w - 2, w], [0, w]] {
+            let before = rows.bytes_read();
+            let (got, cols) = rows
+                .read_window([a, b], Some([c0, c1]))
+                .unwrap_or_else(|e| panic!("{label}: {e}"));
+            bytes.push(rows.bytes_read() - before);
+            assert_eq!(cols, if tiled { [c0, c1] } else { [0, w] }, "{label}");
+            let cw = cols[1] - cols[0];
+            assert_eq!(got.len(), cw * (b - a), "{label}");
+            for r in a..b {
+                let want = &dem.heights[r * w + cols[0]..r * w + cols[1]];
+                assert!(
+                    got[(r - a) * cw..(r - a + 1) * cw]
+                        .iter()
+                        .zip(want)
+                        .all(|(x, y)| x.to_bits() == y.to_bits()),
+                    "{label}: row {r} of columns {c0}..{c1} read on their own differs from the \
+                     whole file's"
+                );
+            }
+        }
+        // The first column alone against every column: a tiled file reads its first tiles
+        // only; the others read the same bytes whatever the columns.
+        if tiled {
+            assert!(bytes[0] < bytes[4], "{label}: {bytes:?} bytes read");
+        } else {
+            assert_eq!(bytes[0], bytes[4], "{label}: {bytes:?} bytes read");
+        }
+    }
+    // The file as a mosaic of one, windows of it as a chunked bake reads them.
+    let layout = verdant::world::mosaic::Layout::open(
+        &[path.to_path_buf()],
+        &DemOptions::default(),
+        1 << 30,
+    )
+    .unwrap_or_else(|e| panic!("{label}: {e}"));
+    for (cols, rows) in [
+        ([0, w], [0, h]),
+        ([7, 40], [2, 31]),
+        ([w - 9, w], [h - 5, h]),
+    ] {
+        let got = layout
+            .region(cols, rows)
+            .unwrap_or_else(|e| panic!("{label}: {e}"));
+        let want: Vec<f32> = (rows[0]..rows[1])
+            .flat_map(|r| dem.heights[r * w + cols[0]..r * w + cols[1]].to_vec())
+            .collect();
+        assert!(
+            got.len() == want.len()
+                && got
+                    .iter()
+                    .zip(&want)
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+            "{label}: the window {cols:?} x {rows:?} of the file as a mosaic differs"
+        );
+    }
 }
 
 /// Bakes `dem` into `dir/name` with small tiles: 20 m cells, 16-cell tiles, two levels.
@@ -959,6 +1020,31 @@ fn a_transformation_in_feet_stored_south_up_reads_north_up_in_metres() {
     // The south-west sample is the first one stored: x and y of the first pixel's centre.
     assert_eq!(dem.origin, Some([6_000_015.0, 2_000_020.0]));
     assert_windows_match("south-up feet", &tif, &dem);
+
+    // Tiled, stored south first and then also east first: windows of columns come out north up
+    // and west first.
+    spec.layout = Layout::Tiles {
+        width: 16,
+        height: 16,
+    };
+    let tiled = dir.path().join("feet_tiled.tif");
+    write_tiff(&tiled, &spec, w, h, &south_first);
+    let dem_tiled = Dem::load(&tiled).unwrap();
+    assert_heights_match("south-up feet, tiled", &dem_tiled, &dem, 0.0);
+    assert_windows_match("south-up feet, tiled", &tiled, &dem_tiled);
+    let east_first: Vec<f64> = south_first
+        .chunks_exact(w as usize)
+        .flat_map(|row| row.iter().rev().copied().collect::<Vec<_>>())
+        .collect();
+    if let Geo::Matrix { m, .. } = &mut spec.geo {
+        m[0] = -feet[0]; // columns go west
+        m[3] = 6_000_000.0 + feet[0] * f64::from(w);
+    }
+    let flipped = dir.path().join("feet_east_first.tif");
+    write_tiff(&flipped, &spec, w, h, &east_first);
+    let dem_flipped = Dem::load(&flipped).unwrap();
+    assert_heights_match("south-up, east-first feet, tiled", &dem_flipped, &dem, 0.0);
+    assert_windows_match("south-up, east-first feet, tiled", &flipped, &dem_flipped);
 }
 
 /// Nodata samples (GDAL_NODATA) are filled from the heights around them and counted; valid

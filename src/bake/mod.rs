@@ -268,6 +268,10 @@ pub struct BakeReport {
     /// The id the bake stamped its tiles with (the manifest's `bake_id`).
     #[serde(default)]
     pub bake_id: String,
+    /// A DEM read in chunks (a large file, one over HTTP, several joined): the bytes read from
+    /// its files, headers among them, and the files' sizes; `None` for a DEM read whole.
+    #[serde(default)]
+    pub dem_bytes_read: Option<[u64; 2]>,
 }
 
 /// Bakes `opts.dem` into a world at `opts.out`. `progress(stage, done, total)` is called as the
@@ -609,6 +613,7 @@ pub fn bake(
         carried: Carried::default(),
         recovered: recovered.clone(),
         bake_id: manifest.bake_id.clone().unwrap_or_default(),
+        dem_bytes_read: source.bytes_read(),
     };
     let paint_inputs = tiles::BlockPaint {
         height_range,

@@ -146,7 +146,7 @@ impl DemSource {
                 // weights, a third more) and the rows of one file read for it (a strip or a
                 // row of tiles more, decoded as 8-byte patterns and then as heights).
                 let rows = (side + m.layout.largest_chunk_rows()) as u64;
-                let file = m.layout.widest_file() as u64 * rows * (8 + 4);
+                let file = m.layout.widest_read(side) as u64 * rows * (8 + 4);
                 [
                     (CHUNK * CHUNK * 4) as u64,
                     region * (4 + 2) + region * 8 * 4 / 3 + file,
@@ -194,6 +194,15 @@ impl DemSource {
         match self {
             DemSource::Whole(dem) => dem.nodata_filled,
             DemSource::Mosaic(m) => lock(&m.filled).iter().flatten().sum(),
+        }
+    }
+
+    /// A DEM read in chunks: the bytes read from its files so far (headers among them) and
+    /// the files' sizes; `None` for one read whole.
+    pub(super) fn bytes_read(&self) -> Option<[u64; 2]> {
+        match self {
+            DemSource::Whole(_) => None,
+            DemSource::Mosaic(m) => Some(m.layout.bytes_read()),
         }
     }
 

@@ -215,6 +215,15 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         report.dem_cell_size_m[1],
         report.nodata_filled
     )?;
+    if let Some([read, size]) = report.dem_bytes_read {
+        let mib = |b: u64| b as f64 / f64::from(1 << 20);
+        say!(
+            "read the DEM in chunks: {:.1} MiB of its files' {:.1} MiB ({:.2} times)",
+            mib(read),
+            mib(size),
+            read as f64 / size.max(1) as f64
+        )?;
+    }
     match opts.shard {
         Some(verdant::bake::ShardStep::Shard { index, count }) => say!(
             "baked shard {index} of {count}: {} tiles into {} in {:.1} s",

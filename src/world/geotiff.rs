@@ -1355,26 +1355,42 @@ impl TiffWindows {
         self.layout.chunk_size[1] as usize
     }
 
-    /// Heights of rows `rows` (from the north, end exclusive), every column, nodata NaN; the
-    /// file's bytes read by `read(offset, count)`.
-    pub(crate) fn rows(
+    /// Heights of columns `cols` (from the west) of rows `rows` (from the north), ends
+    /// exclusive, west first and north first, nodata NaN; the file's bytes read by
+    /// `read(offset, count)`. Only the strips or tiles that hold the window are read: a tiled
+    /// file's tiles beside it are not.
+    pub(crate) fn window(
         &self,
         read: &mut dyn FnMut(u64, u64) -> Result<Vec<u8>, WorldError>,
+        cols: [usize; 2],
         rows: [usize; 2],
     ) -> Result<Vec<f32>, WorldError> {
         let (w, h) = (self.layout.width as usize, self.layout.height as usize);
-        let stored = if self.flip_rows {
+        debug_assert!(cols[0] <= cols[1] && cols[1] <= w && rows[0] <= rows[1] && rows[1] <= h);
+        // The window as the file stores it.
+        let stored_rows = if self.flip_rows {
             [h - rows[1], h - rows[0]]
         } else {
             rows
         };
-        let bits = decode_rows(
+        let stored_cols = if self.flip_cols {
+            [w - cols[1], w - cols[0]]
+        } else {
+            cols
+        };
+        let ww = cols[1] - cols[0];
+        let mut bits = vec![0u64; ww * (rows[1] - rows[0])];
+        decode_window(
             &self.path,
             &self.layout,
             &self.chunks,
             self.codec,
             read,
-            stored,
+            [stored_cols, stored_rows],
+            &mut |r, c, samples| {
+                let at = r * ww + c;
+                bits[at..at + samples.len()].copy_from_slice(samples);
+            },
         )?;
         let mut out = heights_of(
             &self.path,
@@ -1383,8 +1399,19 @@ impl TiffWindows {
             self.nodata,
             self.vertical,
         )?;
-        north_up(&mut out, w, self.flip_rows, self.flip_cols);
+        north_up(&mut out, ww.max(1), self.flip_rows, self.flip_cols);
         Ok(out)
+    }
+
+    /// Samples a row.
+    pub(crate) fn width(&self) -> usize {
+        self.layout.width as usize
+    }
+
+    /// Whether a window of columns reads less than whole rows: the file is tiled (a strip
+    /// spans every column).
+    pub(crate) fn is_tiled(&self) -> bool {
+        (self.layout.chunk_size[0] as usize) < self.layout.width as usize
     }
 }
 

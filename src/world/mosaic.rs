@@ -180,9 +180,9 @@ struct Part {
 
 impl Part {
     /// The file's height at coordinates `(x, y)` from `heights`, its rows from row `first` (from
-    /// the north) on: bilinear between its samples (exact on them), NaN where a sample used is
-    /// nodata; `None` outside it.
-    fn at(&self, heights: &[f32], first: usize, x: f64, y: f64) -> Option<f32> {
+    /// the north) on, of its columns `cols`: bilinear between its samples (exact on them), NaN
+    /// where a sample used is nodata; `None` outside it.
+    fn at(&self, heights: &[f32], first: usize, cols: [usize; 2], x: f64, y: f64) -> Option<f32> {
         let (w, h) = (self.width, self.height);
         let c = (x - self.origin[0]) / self.size[0];
         let r = (y - self.origin[1]) / self.size[1]; // from the south
@@ -204,7 +204,8 @@ impl Part {
         let (c1, r1) = ((c0 + 1).min(w - 1), (r0 + 1).min(h - 1));
         let (fc, fr) = ((c - c0 as f64) as f32, (r - r0 as f64) as f32);
         // Rows are stored north first.
-        let v = |c: usize, r: usize| heights[(h - 1 - r - first) * w + c];
+        let v =
+            |c: usize, r: usize| heights[(h - 1 - r - first) * (cols[1] - cols[0]) + c - cols[0]];
         if fc == 0.0 && fr == 0.0 {
             return Some(v(c0, r0));
         }
@@ -375,9 +376,29 @@ impl Layout {
         })
     }
 
-    /// The widest file's samples a row.
-    pub fn widest_file(&self) -> usize {
-        self.parts.iter().map(|p| p.width).max().unwrap_or(0)
+    /// The most samples a row that one file's read of a window `side` samples wide holds: a
+    /// tiled GeoTIFF's window (the joined grid has the finest spacing of the files, so a window
+    /// spans at most one file sample a grid sample, and one more each side for the bilinear),
+    /// any other file's whole rows.
+    pub fn widest_read(&self, side: usize) -> usize {
+        self.parts
+            .iter()
+            .map(|p| {
+                if p.rows.reads_column_windows() {
+                    p.width.min(side + 2)
+                } else {
+                    p.width
+                }
+            })
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// Bytes read from the files so far (their headers among them), and the files' sizes.
+    pub fn bytes_read(&self) -> [u64; 2] {
+        self.parts.iter().fold([0, 0], |[read, size], p| {
+            [read + p.rows.bytes_read(), size + p.rows.file_len()]
+        })
     }
 
     /// The most rows a file reads beyond those asked for (a strip's or a tile's rows).
@@ -465,7 +486,16 @@ impl Layout {
                 (row_of(s1).ceil().max(0.0) as usize + 1).min(ph - 1),
             ];
             let first = ph - 1 - south[1];
-            let values = part.rows.read([first, ph - south[0]])?;
+            // And its columns (with the next for the bilinear): a tiled GeoTIFF reads only
+            // those, any other file its rows whole.
+            let pw = part.width;
+            let col_of = |c: usize| (lo[0] + c as f64 * size[0] - part.origin[0]) / part.size[0];
+            let west = (col_of(c0).floor().max(0.0) as usize).min(pw - 1);
+            let east = (col_of(c1).ceil().max(0.0) as usize + 1).min(pw - 1);
+            let (values, got) = part
+                .rows
+                .read_window([first, ph - south[0]], Some([west, east + 1]))?;
+            let vw = got[1] - got[0];
             // A file on the joined grid's own spacing, a whole number of samples from its
             // corner (adjacent SRTM tiles): its samples are copied, as `at` would give them.
             let offset = |a: usize| (part.origin[a] - lo[a]) / size[a];
@@ -480,10 +510,10 @@ impl Layout {
                         if pc < 0 || pr < 0 || pc >= part.width as i64 || pr >= ph as i64 {
                             continue;
                         }
-                        values[(ph - 1 - pr as usize - first) * part.width + pc as usize]
+                        values[(ph - 1 - pr as usize - first) * vw + pc as usize - got[0]]
                     } else {
                         let x = lo[0] + c as f64 * size[0];
-                        let Some(v) = part.at(&values, first, x, y) else {
+                        let Some(v) = part.at(&values, first, got, x, y) else {
                             continue;
                         };
                         v

@@ -46,6 +46,24 @@ trait ReadAt: Send + Sync {
     fn len(&self) -> u64;
 }
 
+/// A [`ReadAt`] that counts the bytes read through it into a counter its [`Rows`] shares.
+struct Counted {
+    inner: Box<dyn ReadAt>,
+    bytes: std::sync::Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl ReadAt for Counted {
+    fn read_at(&self, offset: u64, count: u64) -> Result<Vec<u8>, WorldError> {
+        let out = self.inner.read_at(offset, count)?;
+        self.bytes
+            .fetch_add(out.len() as u64, std::sync::atomic::Ordering::Relaxed);
+        Ok(out)
+    }
+    fn len(&self) -> u64 {
+        self.inner.len()
+    }
+}
+
 /// A file on disk, opened when read: its handle is kept in [`HANDLES`] while it is among the
 /// most recently read, so that a mosaic of thousands of files holds a bounded number open (one
 /// each overran the usual limit of 1024 descriptors a process).
@@ -220,6 +238,10 @@ impl Seek for Blocks<'_> {
 pub struct Rows {
     path: PathBuf,
     kind: Kind,
+    /// The file's size, bytes.
+    len: u64,
+    /// Bytes read from the file so far, its header among them.
+    read: std::sync::Arc<std::sync::atomic::AtomicU64>,
 }
 
 enum Kind {
@@ -244,7 +266,12 @@ impl Rows {
         max_samples: u64,
     ) -> Result<(Dem, Rows), WorldError> {
         Dem::check_cell_option(path, options)?;
-        let src = open_source(path)?;
+        let read = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+        let src: Box<dyn ReadAt> = Box::new(Counted {
+            inner: open_source(path)?,
+            bytes: read.clone(),
+        });
+        let file_len = src.len();
         let head = src.read_at(0, 8.min(src.len()))?;
         let (mut dem, kind) = if head.starts_with(b"\x89PNG\r\n\x1a\n") {
             if is_remote(path) {
@@ -311,17 +338,36 @@ impl Rows {
             Rows {
                 path: path.to_path_buf(),
                 kind,
+                len: file_len,
+                read,
             },
         ))
     }
 
     /// Heights of rows `rows` (from the north, end exclusive), every column, nodata NaN.
     pub fn read(&self, rows: [usize; 2]) -> Result<Vec<f32>, WorldError> {
+        self.read_window(rows, None).map(|(heights, _)| heights)
+    }
+
+    /// Heights of rows `rows` (from the north, end exclusive) over at least columns `cols`
+    /// (from the west, end exclusive; `None`: every column), nodata NaN, with the columns
+    /// they span: `cols` itself from a tiled GeoTIFF, whose tiles beside the window are not
+    /// read; every column from any other file, whose rows are read whole anyway (an `.hgt`
+    /// tile's rows lie whole one after the other, a strip spans every column, a PNG is read
+    /// whole).
+    pub fn read_window(
+        &self,
+        rows: [usize; 2],
+        cols: Option<[usize; 2]>,
+    ) -> Result<(Vec<f32>, [usize; 2]), WorldError> {
         match &self.kind {
             Kind::Png(options) => {
                 let dem = Dem::load_unfilled(&self.path, options)?;
+                self.read
+                    .fetch_add(self.len, std::sync::atomic::Ordering::Relaxed);
                 let w = dem.width as usize;
-                dem.heights
+                let heights = dem
+                    .heights
                     .get(rows[0] * w..rows[1] * w)
                     .map(<[f32]>::to_vec)
                     .ok_or_else(|| WorldError::DemMosaic {
@@ -330,17 +376,42 @@ impl Rows {
                             "it has {} rows now, not the {} it had when the bake began",
                             dem.height, rows[1]
                         ),
-                    })
+                    })?;
+                Ok((heights, [0, w]))
             }
             Kind::Hgt { src, side } => {
                 let bytes = src.read_at(
                     (rows[0] * side * 2) as u64,
                     ((rows[1] - rows[0]) * side * 2) as u64,
                 )?;
-                Ok(super::hgt::heights(&bytes))
+                Ok((super::hgt::heights(&bytes), [0, *side]))
             }
-            Kind::Tiff { src, tiff } => tiff.rows(&mut |o, n| src.read_at(o, n), rows),
+            Kind::Tiff { src, tiff } => {
+                let w = tiff.width();
+                let cols = match cols {
+                    Some(c) if tiff.is_tiled() => [c[0].min(w), c[1].min(w)],
+                    _ => [0, w],
+                };
+                let heights = tiff.window(&mut |o, n| src.read_at(o, n), cols, rows)?;
+                Ok((heights, cols))
+            }
         }
+    }
+
+    /// Bytes read from the file so far (its header among them; a PNG's whole file each time
+    /// it is read).
+    pub fn bytes_read(&self) -> u64 {
+        self.read.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// The file's size, bytes.
+    pub fn file_len(&self) -> u64 {
+        self.len
+    }
+
+    /// Whether [`Rows::read_window`] reads only the columns asked for (a tiled GeoTIFF).
+    pub fn reads_column_windows(&self) -> bool {
+        matches!(&self.kind, Kind::Tiff { tiff, .. } if tiff.is_tiled())
     }
 
     /// Rows read at once beyond those asked for: a strip's or a tile's; `None` for a PNG,
