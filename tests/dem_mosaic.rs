@@ -590,6 +590,58 @@ fn geotiffs_over_http_bake_like_the_files_on_disk() {
     assert!(!dir.path().join("never").exists());
 }
 
+/// A DEM at an address is known by its length and validators as its server gives them: the
+/// bake id of the same address changes with the file behind it, and a file replaced while it
+/// is read in ranges is refused rather than read as a mix of its two versions.
+#[test]
+fn a_remote_dem_that_changes_changes_the_bake_id_and_is_refused_mid_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = dir.path().join("served");
+    std::fs::create_dir_all(&served).unwrap();
+    let tif = served.join("dem.tif");
+    write_tile(&tif, 32633, 65, 400_000.0, 4_100_000.0, 0.0);
+    let server = verdant::tools::serve::WorldServer::start_folder(&served, "127.0.0.1:0").unwrap();
+    let url = format!("{}dem.tif", server.url());
+    let opts = BakeOptions {
+        dem: PathBuf::from(&url),
+        out: dir.path().join("never"),
+        ..Default::default()
+    };
+    let files = vec![PathBuf::from(&url)];
+    let id = |opts: &BakeOptions| verdant::bake::shard::bake_id(opts, &files).unwrap();
+    let before = id(&opts);
+    assert_eq!(id(&opts), before, "the same file, the same id");
+    let file = verdant::stream::http::RangeFile::open(&url, Default::default()).unwrap();
+    let head = file.read_at(0, 8).unwrap();
+
+    // The same size, other heights, another modification time: another ETag.
+    let set_time = |secs: u64| {
+        std::fs::File::options()
+            .write(true)
+            .open(&tif)
+            .unwrap()
+            .set_modified(std::time::UNIX_EPOCH + std::time::Duration::from_secs(secs))
+            .unwrap();
+    };
+    let len = std::fs::metadata(&tif).unwrap().len();
+    write_tile(&tif, 32633, 65, 400_000.0, 4_100_000.0, 7.0);
+    assert_eq!(std::fs::metadata(&tif).unwrap().len(), len);
+    set_time(1_000_000_000);
+    assert_ne!(
+        id(&opts),
+        before,
+        "another file behind the address, another id"
+    );
+    let err = file.read_at(0, 8).unwrap_err().to_string();
+    assert!(
+        err.contains(&url) && err.contains("changed while it was read") && err.contains("ETag"),
+        "{err}"
+    );
+    // Read afresh, it reads.
+    let again = verdant::stream::http::RangeFile::open(&url, Default::default()).unwrap();
+    assert_eq!(again.read_at(0, 8).unwrap(), head);
+}
+
 /// A height beyond a planet's in one file of a mosaic is blamed on that file, at its own
 /// column and row, not on the first file given.
 #[test]

@@ -192,7 +192,8 @@ pub(super) fn check_inputs_unchanged(
 }
 
 /// What [`fingerprint`] and [`bake_id`] hash: the options that shape the world (its `name` only
-/// with `with_name`) and each input file's size and modification time: the DEM files, the files
+/// with `with_name`) and each input file's size and modification time (of a file at an
+/// address, its length, `ETag` and `Last-Modified` as its server gives them): the DEM files, the files
 /// the user named (a VRT that lists DEMs, a folder's files), a PNG DEM's JSON sidecar (its
 /// heights' scale and cells), the land-cover map and table, the density map and the mask. For
 /// the [`bake_id`] (`with_name` false) each file is named by its canonical path, so that two
@@ -256,7 +257,15 @@ fn inputs(
     inputs.extend(opts.mask.clone());
     for p in &inputs {
         if crate::world::window::is_remote(p) {
-            // An address: its name only (the server's file is not asked for here).
+            // An address: its length and validators as its server gives them now (one request
+            // for its first byte), in place of a size and a modification time.
+            #[cfg(feature = "http")]
+            {
+                let url = p.to_string_lossy();
+                let file = crate::stream::http::RangeFile::open(&url, Default::default())?;
+                text.push_str(&format!("{} {} -\n", p.display(), file.identity()));
+            }
+            #[cfg(not(feature = "http"))]
             text.push_str(&format!("{}\n", p.display()));
             continue;
         }

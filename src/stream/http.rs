@@ -113,6 +113,17 @@ impl RangeFile {
         Ok(body)
     }
 
+    /// The file's identity as its server gave it when it was opened, as one word: its length
+    /// and a fingerprint of its `ETag` and `Last-Modified` (a bake's record of its inputs).
+    pub fn identity(&self) -> String {
+        self.client
+            .range_identity
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .as_ref()
+            .map_or_else(|| self.len.to_string(), client::RangeIdentity::word)
+    }
+
     /// Requests sent, bytes received.
     pub fn stats(&self) -> (u64, u64) {
         (

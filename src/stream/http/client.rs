@@ -43,6 +43,10 @@ pub(super) struct Client {
     pub(super) bytes: AtomicU64,
     /// The whole length of the file the last range request read part of.
     pub(super) range_total: AtomicU64,
+    /// What the first range response said of its file: its whole length, its `ETag` and its
+    /// `Last-Modified`. Every later range response must say the same: a file replaced while
+    /// it is read in ranges would otherwise give parts of two versions.
+    pub(super) range_identity: Mutex<Option<RangeIdentity>>,
     /// A file came without a validator and so could not be cached: said once.
     pub(super) uncacheable_told: std::sync::atomic::AtomicBool,
 }
@@ -69,6 +73,7 @@ impl Client {
             cache_hits: AtomicU64::new(0),
             bytes: AtomicU64::new(0),
             range_total: AtomicU64::new(0),
+            range_identity: Mutex::new(None),
             uncacheable_told: std::sync::atomic::AtomicBool::new(false),
         }
     }
@@ -304,6 +309,7 @@ impl Client {
                      (206 Partial Content) for a DEM to be read in windows"
                 )));
             }
+            let (etag, last_modified) = (header("etag"), header("last-modified"));
             // "bytes FIRST-LAST/TOTAL"
             let header = header("content-range").unwrap_or_default();
             let parsed = header
@@ -319,6 +325,27 @@ impl Client {
                 });
             match parsed {
                 Some((a, b, total)) if a == first && b + 1 == first + count.max(1) => {
+                    let now = RangeIdentity {
+                        total,
+                        etag,
+                        last_modified,
+                    };
+                    let mut seen = self
+                        .range_identity
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner);
+                    match &*seen {
+                        None => *seen = Some(now),
+                        Some(was) => {
+                            if let Some(change) = was.change_to(&now) {
+                                return Err(bad(format!(
+                                    "the file changed while it was read ({change}): its parts \
+                                     would mix two versions; read it again once it has stopped \
+                                     changing"
+                                )));
+                            }
+                        }
+                    }
                     self.range_total.store(total, Ordering::Relaxed);
                 }
                 _ => {
@@ -642,6 +669,50 @@ pub(super) fn resolve_reference(base: &str, reference: &str) -> String {
 }
 
 /// Failures worth another try: the connection, the server's own errors, a body cut short.
+/// What a range response says of the whole file: see [`Client::range_identity`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) struct RangeIdentity {
+    pub(super) total: u64,
+    pub(super) etag: Option<String>,
+    pub(super) last_modified: Option<String>,
+}
+
+impl RangeIdentity {
+    /// How the file changed from `self` to `now`, if it did: its length, or its `ETag`, or
+    /// (where neither response has an `ETag`) its `Last-Modified`. A validator that one
+    /// response has and the other lacks is not taken for a change.
+    fn change_to(&self, now: &RangeIdentity) -> Option<String> {
+        if self.total != now.total {
+            return Some(format!(
+                "its length was {} bytes, now {}",
+                self.total, now.total
+            ));
+        }
+        if let (Some(a), Some(b)) = (&self.etag, &now.etag) {
+            return (a != b).then(|| format!("its ETag was {a}, now {b}"));
+        }
+        if let (Some(a), Some(b)) = (&self.last_modified, &now.last_modified) {
+            return (a != b).then(|| format!("its Last-Modified was {a}, now {b}"));
+        }
+        None
+    }
+
+    /// The identity as one word without spaces (for a bake's record of its inputs): the
+    /// length and a fingerprint of the validators.
+    pub(super) fn word(&self) -> String {
+        let text = format!(
+            "{}|{}",
+            self.etag.as_deref().unwrap_or(""),
+            self.last_modified.as_deref().unwrap_or("")
+        );
+        format!(
+            "{}:{:016x}",
+            self.total,
+            crate::hash::fnv1a64(crate::hash::FNV_BASIS, text.as_bytes())
+        )
+    }
+}
+
 pub(super) fn is_transient(e: &HttpError) -> bool {
     match e {
         HttpError::Transport { .. }
