@@ -1594,11 +1594,22 @@ fn cli_bakes_a_geotiff_and_a_plain_tiff_with_a_cell_size() {
         args.extend(extra);
         let out = verdant(&args, dir.path());
         let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-        assert!(
-            out.status.success(),
-            "{name}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{name}: {stderr}");
+        // Standard error is no terminal here, as in a batch job's log: the stages are logged a
+        // line each.
+        for stage in [
+            "loaddem",
+            "resample",
+            "paint",
+            "writetiles",
+            "writemanifest",
+        ] {
+            assert!(
+                stderr.contains(&format!("bake: {stage} ")),
+                "{name}: no line for {stage}: {stderr}"
+            );
+        }
         (World::open(&world).unwrap(), stdout)
     };
     let (world, stdout) = run(&geo, "geo", &[]);

@@ -181,8 +181,28 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         memory_mib,
     };
     let mut current: Option<(String, ProgressBar)> = None;
+    // Without a terminal (a batch job's log) the bars draw nothing: a line as each stage
+    // begins, and one a tenth of its way on where a second has passed since the last line.
+    let log_lines = super::progress::lines();
+    let mut logged: Option<(String, u64)> = None;
+    let started = std::time::Instant::now();
+    let mut last_line = started;
     let report = bake(&opts, &mut |stage, done, total| {
         let label = format!("{stage:?}").to_lowercase();
+        if log_lines {
+            let tenth = (done * 10).checked_div(total).unwrap_or(10);
+            let new_stage = logged.as_ref().is_none_or(|(l, _)| l != &label);
+            let on = logged.as_ref().is_some_and(|(_, t)| tenth > *t)
+                && last_line.elapsed() >= std::time::Duration::from_secs(1);
+            if new_stage || on {
+                logged = Some((label.clone(), tenth));
+                last_line = std::time::Instant::now();
+                note!(
+                    "bake: {label} {done}/{total} ({:.1} s)",
+                    started.elapsed().as_secs_f64()
+                );
+            }
+        }
         if current.as_ref().map(|(l, _)| l != &label).unwrap_or(true) {
             if let Some((_, pb)) = current.take() {
                 pb.finish();
