@@ -590,6 +590,32 @@ fn geotiffs_over_http_bake_like_the_files_on_disk() {
     assert!(!dir.path().join("never").exists());
 }
 
+/// An address verdant cannot fetch is refused for what it is: https (no TLS in this build), and
+/// other schemes, which are not taken for files that are not there.
+#[test]
+fn addresses_of_other_schemes_are_refused_saying_why() {
+    let dir = tempfile::tempdir().unwrap();
+    for (address, says) in [
+        ("https://example.com/dem.tif", "https is not built in"),
+        ("HTTPS://example.com/dem.tif", "https is not built in"),
+        ("ftp://127.0.0.1/dem.tif", "the scheme ftp://"),
+        ("s3://bucket/dem.tif", "the scheme s3://"),
+    ] {
+        let err = bake(
+            &BakeOptions {
+                dem: PathBuf::from(address),
+                out: dir.path().join("never"),
+                ..Default::default()
+            },
+            &mut |_, _, _| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains(address) && err.contains(says), "{err}");
+        assert!(!err.contains("not found"), "{err}");
+    }
+}
+
 /// A DEM at an address is known by its length and validators as its server gives them: the
 /// bake id of the same address changes with the file behind it, and a file replaced while it
 /// is read in ranges is refused rather than read as a mix of its two versions.

@@ -366,6 +366,15 @@ fn check_authority(url: &str) -> Result<(), HttpError> {
         url: url.into(),
         problem,
     };
+    if url
+        .get(..8)
+        .is_some_and(|s| s.eq_ignore_ascii_case("https://"))
+    {
+        return Err(bad(
+            "https is not built in (the client speaks plain HTTP only): serve it over plain \
+             http, or put a TLS proxy in front",
+        ));
+    }
     let rest = url.get("http://".len()..).unwrap_or("");
     let authority = rest.split(['/', '?', '#']).next().unwrap_or("");
     if let Some((_, host)) = authority.rsplit_once('@') {

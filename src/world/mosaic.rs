@@ -44,11 +44,35 @@ fn mosaic_error(path: &Path, problem: impl ToString) -> WorldError {
     }
 }
 
+/// The scheme of `path` where it is an address that verdant does not fetch (`ftp://`,
+/// `s3://`; not `http://` or `https://`, which the HTTP client answers for) and no file of that
+/// name exists.
+fn other_scheme(path: &Path) -> Option<String> {
+    let text = path.to_str()?;
+    let (scheme, _) = text.split_once("://")?;
+    let is_scheme = scheme.len() >= 2
+        && scheme.starts_with(|c: char| c.is_ascii_alphabetic())
+        && scheme
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c));
+    (is_scheme && !super::window::is_remote(path) && !path.exists())
+        .then(|| scheme.to_ascii_lowercase())
+}
+
 /// The DEM files that `dems` name: each a file, a folder (its `.hgt`, `.tif`, `.tiff` files and
 /// its `.png` files with a `.json` sidecar, in name order) or a GDAL `.vrt` (its sources).
 pub fn dem_files(dems: &[PathBuf]) -> Result<Vec<PathBuf>, WorldError> {
     let mut files = Vec::new();
     for d in dems {
+        if let Some(scheme) = other_scheme(d) {
+            return Err(mosaic_error(
+                d,
+                format!(
+                    "an address with the scheme {scheme}://, which verdant does not fetch: a \
+                     DEM is a file, a folder, a .vrt or an http:// address"
+                ),
+            ));
+        }
         if super::window::is_remote(d) && !has_extension(d, "vrt") {
             files.push(d.clone());
         } else if d.is_dir() {
