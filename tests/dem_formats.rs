@@ -695,6 +695,22 @@ fn assert_windows_match(label: &str, path: &Path, dem: &Dem) {
     }
 }
 
+/// A sidecar saved with a byte-order mark (as some Windows editors save JSON) reads as without.
+#[test]
+fn a_sidecar_with_a_byte_order_mark_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let heights = grid(Sample::U16);
+    let png = write_png_twin(dir.path(), "plain", SIZE, CELL, &heights);
+    let want = Dem::load(&png).unwrap();
+    let marked = write_png_twin(dir.path(), "marked", SIZE, CELL, &heights);
+    let sidecar = dir.path().join("marked.json");
+    let text = std::fs::read_to_string(&sidecar).unwrap();
+    std::fs::write(&sidecar, format!("\u{feff}{text}")).unwrap();
+    let got = Dem::load(&marked).unwrap();
+    assert_heights_match("a sidecar with a byte-order mark", &got, &want, 0.0);
+    assert_eq!([got.cell_ew_m, got.cell_ns_m], CELL);
+}
+
 /// Bakes `dem` into `dir/name` with small tiles: 20 m cells, 16-cell tiles, two levels.
 fn small_bake(dem: &Path, dir: &Path, name: &str, dem_cell: Option<[f64; 2]>) -> World {
     let out = dir.join(name);

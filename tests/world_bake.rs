@@ -560,6 +560,13 @@ fn absurd_bake_options_are_refused_before_writing() {
             20.0,
             "--cell-size, --tile-cells and --levels 20 m, 8, 12",
         ),
+        // A root tile beyond f64's range.
+        (
+            16,
+            2,
+            1e307,
+            "--cell-size, --tile-cells and --levels 1.000e307 m, 16, 2",
+        ),
     ] {
         let opts = BakeOptions {
             dem: dem.clone(),

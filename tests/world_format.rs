@@ -377,6 +377,14 @@ fn manifest_absurd_sizes() {
         matches!(err, WorldError::OutOfRange { ref field, .. } if field == "extent_m[0]"),
         "{err}"
     );
+    // A value of hundreds of digits is shown in exponent form, not digit by digit.
+    let err = parse(&VALID.replace("extent_m = [900.0, 1000.0]", "extent_m = [1e300, 1000.0]"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("extent_m[0] = 1e300") && err.len() < 200,
+        "{err}"
+    );
 }
 
 #[test]

@@ -470,6 +470,20 @@ pub fn bake(
                     ),
                 )
             }
+            // A root tile beyond f64's range: as much too large as any other.
+            WorldError::NonFinite { field, .. } if field.starts_with("pyramid.") => {
+                WorldError::bad_option(
+                    options,
+                    given,
+                    format!(
+                        "such that the world's {} (the cell x the tile's cells x 2^(levels - \
+                         1)) is a number at most {} m: these make it {}",
+                        field.trim_start_matches("pyramid."),
+                        crate::world::error::short_number(crate::world::manifest::MAX_ROOT_TILE_M),
+                        crate::world::error::short_number(root_size)
+                    ),
+                )
+            }
             WorldError::TooManyTiles { count, max, .. } => WorldError::bad_option(
                 options,
                 given,

@@ -330,6 +330,11 @@ impl Dem {
             }
             Err(e) => return Err(e),
         };
+        // A byte-order mark, as some editors on Windows save JSON with, is no part of it.
+        let text = match text.strip_prefix('\u{feff}') {
+            Some(rest) => rest.to_owned(),
+            None => text,
+        };
         check_sidecar_keys(&sidecar_file, &text)?;
         let sidecar: Sidecar = serde_json::from_str(&text).map_err(|e| WorldError::BadSidecar {
             path: sidecar_file.clone(),

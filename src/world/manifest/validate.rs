@@ -114,7 +114,7 @@ impl Manifest {
             if self.extent_m[axis] > MAX_EXTENT_M {
                 return Err(v.out_of_range(
                     &format!("extent_m[{axis}]"),
-                    self.extent_m[axis],
+                    number(self.extent_m[axis]),
                     "at most 10,000 km (10000000 m)",
                 ));
             }
@@ -146,7 +146,7 @@ impl Manifest {
         if f64::from(lo) < plo || f64::from(hi) > phi {
             return Err(v.out_of_range(
                 "height_range_m",
-                format!("[{lo}, {hi}]"),
+                format!("[{}, {}]", number(f64::from(lo)), number(f64::from(hi))),
                 &format!("within [{plo}, {phi}] m, the heights of a planet's surface"),
             ));
         }
@@ -303,7 +303,11 @@ impl Manifest {
             v.at_most("grass_peak.short_m", g.short_m, MAX_BLADE_HEIGHT_M, " m")?;
             v.finite("grass_peak.density", g.density)?;
             if !(0.0..=2.0).contains(&g.density) {
-                return Err(v.out_of_range("grass_peak.density", g.density, "in 0..=2"));
+                return Err(v.out_of_range(
+                    "grass_peak.density",
+                    number(f64::from(g.density)),
+                    "in 0..=2",
+                ));
             }
         }
         if let Some(c) = &self.derive {
