@@ -2238,6 +2238,9 @@ fn an_address_naming_world_toml_or_with_dot_segments_is_the_worlds_folder() {
         ("/../world.toml", "404"),
         ("/tiles/../../world.toml", "404"),
         ("/tiles/%2e%2e/world.toml", "404"),
+        // A file's path with a slash after it names a folder, not the file.
+        ("/world.toml/", "404"),
+        ("/tiles/L0/0_0.type.png/", "404"),
     ] {
         let (head, _) = ask_server(
             ours.addr(),
