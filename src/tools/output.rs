@@ -455,6 +455,16 @@ impl OutDir {
     }
 }
 
+/// Whether `text` is what a run writes into its lock file: its process id and its tool, on one
+/// line.
+fn is_lock_text(text: &str) -> bool {
+    let Some(line) = text.strip_suffix('\n') else {
+        return false;
+    };
+    let (pid, tool) = line.split_once(' ').unwrap_or((line, ""));
+    pid.parse::<u32>().is_ok() && !tool.chars().any(char::is_control)
+}
+
 /// Takes the lock of `dir` for `tool`. Where the file system has no locks, the lock file is
 /// written all the same (and removed when the run ends), but holds nothing. A lock file this
 /// run made, or took, is removed again if the run fails to take it (a full disk makes the
@@ -545,8 +555,24 @@ fn lock_folder(dir: &Path, tool: &str) -> Result<File, OutDirError> {
             }
             Err(std::fs::TryLockError::Error(e)) => return Err(give_up(failed(e))),
         }
+        // A file found here is taken over only if it is an earlier run's lock (left by a run
+        // that was killed): empty, or its process id and tool on one line. Anything else is
+        // the user's, which truncating would lose.
+        if !made {
+            let mut text = String::new();
+            let ours = meta.len() <= 256
+                && f.read_to_string(&mut text).is_ok()
+                && (text.is_empty() || is_lock_text(&text));
+            if !ours {
+                return Err(failed(std::io::Error::other(
+                    "it holds something other than a run's process id and tool, so it is no \
+                     lock of verdant's; move it, or choose another --out",
+                )));
+            }
+        }
         if let Err(e) = f
             .set_len(0)
+            .and_then(|()| std::io::Seek::rewind(&mut f))
             .and_then(|()| f.write_all(format!("{} {tool}\n", std::process::id()).as_bytes()))
         {
             // Held (or made) here: removed, as a run that ends removes it.
@@ -735,6 +761,32 @@ mod tests {
         let e = write_text(&dir.path().join("no/t.csv"), "x").unwrap_err();
         assert!(e.to_string().contains("t.csv"), "{e}");
         assert!(!dir.path().join("no").exists());
+    }
+
+    #[test]
+    fn a_file_named_like_the_lock_is_taken_only_if_it_is_a_runs_lock() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("out");
+        std::fs::create_dir_all(&out).unwrap();
+        // The user's own file of that name: refused, and kept as it was.
+        std::fs::write(out.join(LOCK_FILE), "important notes\n").unwrap();
+        let e = match OutDir::create_for(&out, "fly", &nothing()) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("a file of the user's was taken for a lock"),
+        };
+        assert!(e.contains(LOCK_FILE) && e.contains("no lock of verdant's"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(out.join(LOCK_FILE)).unwrap(),
+            "important notes\n"
+        );
+        // A killed run's lock (its process id and tool), or an empty one: taken.
+        for stale in ["4242 bench lod\n", "17 \n", ""] {
+            std::fs::write(out.join(LOCK_FILE), stale).unwrap();
+            let dir = OutDir::create_for(&out, "fly", &nothing()).unwrap();
+            let lock = std::fs::read_to_string(out.join(LOCK_FILE)).unwrap();
+            assert_eq!(lock, format!("{} fly\n", std::process::id()), "{stale:?}");
+            dir.keep();
+        }
     }
 
     #[test]
