@@ -486,14 +486,20 @@ pub(super) fn remove_stale_staging(out: &Path) -> Vec<String> {
             .open(dir.join(STAGING_LOCK));
         let stale = match &lock {
             Ok(file) => file.try_lock().is_ok(),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => entry
-                .metadata()
-                .and_then(|m| m.modified())
-                .is_ok_and(|changed| {
-                    SystemTime::now()
-                        .duration_since(changed)
-                        .is_ok_and(|age| age > UNLOCKED_STAGING_GRACE)
-                }),
+            // Without a lock, only a folder of a staging folder's own entries (or none), as a
+            // bake killed before it made its lock leaves: a folder of that name holding
+            // anything else is not one, and is left alone.
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                holds_only_staging_entries(&dir)
+                    && entry
+                        .metadata()
+                        .and_then(|m| m.modified())
+                        .is_ok_and(|changed| {
+                            SystemTime::now()
+                                .duration_since(changed)
+                                .is_ok_and(|age| age > UNLOCKED_STAGING_GRACE)
+                        })
+            }
             Err(_) => false,
         };
         if stale {
@@ -510,6 +516,29 @@ pub(super) fn remove_stale_staging(out: &Path) -> Vec<String> {
         drop(lock);
     }
     notes
+}
+
+/// Whether every entry of the folder `dir` is one a staging folder holds ([`STAGING_LOCK`],
+/// [`STAGING_WORLD`], [`STAGING_PREVIOUS`], [`STAGING_JOURNAL`], [`STAGING_SPENT_PARTS`], or a
+/// journal's temporary, as a killed write of it leaves one); false where it cannot be read.
+fn holds_only_staging_entries(dir: &Path) -> bool {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return false;
+    };
+    entries.into_iter().all(|e| {
+        e.is_ok_and(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            [
+                STAGING_LOCK,
+                STAGING_WORLD,
+                STAGING_PREVIOUS,
+                STAGING_JOURNAL,
+                STAGING_SPENT_PARTS,
+            ]
+            .contains(&name.as_str())
+                || (name.starts_with(&format!(".{STAGING_JOURNAL}")) && name.ends_with(".tmp"))
+        })
+    })
 }
 
 /// Puts right the output folder `out` after a bake killed while publishing from the staging
@@ -740,6 +769,30 @@ mod tests {
         assert!(!parts.exists());
         let left = std::fs::read_dir(out.parent().unwrap()).unwrap().count();
         assert_eq!(left, 1, "only the output folder is left");
+    }
+
+    /// A folder named like a staging folder that has no lock is removed once it is over the
+    /// grace's age only where it holds nothing but a staging folder's own entries: one holding
+    /// anything else is someone's, and stays.
+    #[test]
+    fn an_unlocked_folder_named_like_staging_is_removed_only_if_it_is_one() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().canonicalize().unwrap().join("w");
+        write(&out.join("world.toml"), OLD_MANIFEST);
+        let theirs = tmp.path().join(".w.baking.12345-0");
+        write(&theirs.join("notes.txt"), "notes");
+        let killed = tmp.path().join(".w.baking.12346-0");
+        std::fs::create_dir_all(killed.join(STAGING_WORLD)).unwrap();
+        let long_ago = SystemTime::now() - UNLOCKED_STAGING_GRACE * 2;
+        for dir in [&theirs, &killed] {
+            std::fs::File::open(dir)
+                .unwrap()
+                .set_modified(long_ago)
+                .unwrap();
+        }
+        remove_stale_staging(&out);
+        assert_eq!(read(&theirs.join("notes.txt")), "notes");
+        assert!(!killed.exists());
     }
 
     /// Only the staging folders of the output folder itself are taken for its own, not those

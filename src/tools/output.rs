@@ -774,7 +774,10 @@ mod tests {
             Err(e) => e.to_string(),
             Ok(_) => panic!("a file of the user's was taken for a lock"),
         };
-        assert!(e.contains(LOCK_FILE) && e.contains("no lock of verdant's"), "{e}");
+        assert!(
+            e.contains(LOCK_FILE) && e.contains("no lock of verdant's"),
+            "{e}"
+        );
         assert_eq!(
             std::fs::read_to_string(out.join(LOCK_FILE)).unwrap(),
             "important notes\n"
