@@ -71,6 +71,52 @@ impl Plan {
         map_bytes: u64,
         data_samples: u64,
     ) -> Result<Plan, WorldError> {
+        let plan = |mib: u64| Self::within(mib, pyramid, dem, map_bytes, data_samples);
+        if let Some(p) = plan(limit_mib) {
+            return Ok(p);
+        }
+        // The least limit that plans: what the plan picks (the calibration's sample, the
+        // subsample's stride) grows with the limit, so the need under this limit is not
+        // enough under that one; the least is searched for, and named.
+        let most = 1u64 << 20;
+        let need = if plan(most).is_none() {
+            None
+        } else {
+            let (mut lo, mut hi) = (limit_mib, most);
+            while hi - lo > 1 {
+                let mid = lo + (hi - lo) / 2;
+                if plan(mid).is_some() {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            Some(hi)
+        };
+        let what = "its DEM, its maps, a sample of the data area, a subsample of the finest grid \
+                    and one block a thread";
+        Err(WorldError::bad_option(
+            "--memory-mib",
+            limit_mib,
+            match need {
+                Some(need) => {
+                    format!("at least {need} for this world and DEM (a bake holds {what} there)")
+                }
+                None => {
+                    format!("more than {most} for this world and DEM (a bake holds {what} there)")
+                }
+            },
+        ))
+    }
+
+    /// [`Plan::new`] within `limit_mib`, or `None` where it does not fit.
+    fn within(
+        limit_mib: u64,
+        pyramid: &Pyramid,
+        dem: &DemSource,
+        map_bytes: u64,
+        data_samples: u64,
+    ) -> Option<Plan> {
         let shape = Shape::of(pyramid);
         let limit = limit_mib.saturating_mul(1 << 20);
         let cores = std::thread::available_parallelism()
@@ -81,18 +127,6 @@ impl Plan {
         // The DEM: a whole one, or one chunk being made per thread and a few chunks cached.
         let dem_bytes = |threads: u64| dem.resident_bytes() + threads * making + 4 * chunk;
         let fixed = |threads: u64| BASE_BYTES + dem_bytes(threads) + map_bytes;
-        let too_small = |need: u64| {
-            WorldError::bad_option(
-                "--memory-mib",
-                limit_mib,
-                format!(
-                    "at least {} for this world and DEM (a bake holds {} there)",
-                    need.div_ceil(1 << 20),
-                    "its DEM, its maps, a sample of the data area, a subsample of the finest \
-                     grid and one block a thread"
-                ),
-            )
-        };
         let calibration = |left: u64| {
             (left / 8 / CALIBRATION_SAMPLE_BYTES)
                 .min(data_samples)
@@ -140,7 +174,7 @@ impl Plan {
         }
         let need = used(1);
         if need > limit || (stride > 1 && coarse_bytes(stride) > left / 2) {
-            return Err(too_small(need.max(limit + 1)));
+            return None;
         }
         let spare = limit - used(threads);
         let cached = match (spare / 2).checked_div(chunk) {
@@ -148,7 +182,7 @@ impl Plan {
             None => 0,
         };
         let peak_bytes = used(threads) + cached.saturating_sub(4) as u64 * chunk;
-        Ok(Plan {
+        Some(Plan {
             shape,
             stride,
             block_level,
@@ -273,6 +307,24 @@ mod tests {
             e.contains("--memory-mib 8") && e.contains("at least"),
             "{e}"
         );
+        // The limit it names plans, and one less does not.
+        let named: u64 = e
+            .split("at least ")
+            .nth(1)
+            .and_then(|t| t.split(' ').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap();
+        let plan = |mib| {
+            Plan::new(
+                mib,
+                &pyramid(30_000.0, 25.0, 3),
+                &header(30_000, 25.0),
+                0,
+                1 << 20,
+            )
+        };
+        assert!(plan(named).is_ok(), "{e}");
+        assert!(plan(named - 1).is_err(), "{e}");
     }
 
     /// The maps' windows count against the limit: they raise the plan's peak by their bytes,

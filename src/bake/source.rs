@@ -66,8 +66,9 @@ fn check_whole_png(
         "--memory-mib",
         memory_mib,
         format!(
-            "at least {} for this DEM ({}: {}x{} samples; a PNG DEM is decoded whole, its file, \
-             16-bit samples and heights held at once; a GeoTIFF is read in windows)",
+            "at least {} to decode this DEM ({}: {}x{} samples; a PNG DEM is decoded whole, its \
+             file, 16-bit samples and heights held at once; a GeoTIFF is read in windows), and \
+             the rest of the bake's plan, checked once it is decoded, may need more",
             need.div_ceil(1 << 20),
             path.display(),
             header.width,
