@@ -590,6 +590,44 @@ fn geotiffs_over_http_bake_like_the_files_on_disk() {
     assert!(!dir.path().join("never").exists());
 }
 
+/// A signal while a request for the DEM is in flight stops the bake as a stop (status 130,
+/// "cancelled"), once the request's deadline has passed, not as the request's failure.
+#[test]
+fn a_bake_stopped_while_a_request_hangs_ends_as_stopped() {
+    let dir = tempfile::tempdir().unwrap();
+    // A server that takes the connection and never answers.
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}/dem.tif", listener.local_addr().unwrap());
+    std::thread::spawn(move || {
+        let mut held = Vec::new();
+        for stream in listener.incoming().flatten() {
+            held.push(stream);
+        }
+    });
+    let out = dir.path().join("never");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_verdant"))
+        .args(["bake", "--dem", &url, "--out"])
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let killed = std::process::Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let start = std::time::Instant::now();
+    let status = child.wait().unwrap();
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut stderr).unwrap();
+    assert_eq!(status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("cancelled"), "{stderr}");
+    assert!(start.elapsed() < std::time::Duration::from_secs(30));
+    assert!(!out.exists());
+}
+
 /// An address verdant cannot fetch is refused for what it is: https (no TLS in this build), and
 /// other schemes, which are not taken for files that are not there.
 #[test]

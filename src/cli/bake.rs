@@ -214,6 +214,22 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
             pb.set_position(done);
         }
     })
+    .map_err(|e| {
+        // A bake asked to stop that then failed (a request over HTTP in flight when the signal
+        // came ran into its deadline) was stopped all the same: nothing of it was kept.
+        let stopped = opts
+            .cancel
+            .as_ref()
+            .is_some_and(verdant::bake::CancelFlag::is_cancelled);
+        if stopped && !matches!(e, verdant::world::WorldError::Cancelled { .. }) {
+            log::warn!("while the bake stopped: {e}");
+            verdant::world::WorldError::Cancelled {
+                path: opts.out.clone(),
+            }
+        } else {
+            e
+        }
+    })
     .with_context(|| format!("baking {}", shown(&opts.dem)))?;
     if let Some((_, pb)) = current {
         super::progress::end_bar(Some(&pb), false);
