@@ -695,6 +695,33 @@ fn assert_windows_match(label: &str, path: &Path, dem: &Dem) {
     }
 }
 
+/// A 1-arc-second tile (3601 x 3601, 26 MB) read as a window of all its rows, which takes
+/// several reads of at most 4 MiB (over HTTP, several requests), holds the whole file's heights.
+#[test]
+fn a_one_arc_second_tile_read_in_pieces_is_the_whole_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let hgt = dir.path().join("N37W123.hgt");
+    let n = 3601u32;
+    let bytes: Vec<u8> = (0..n)
+        .flat_map(|r| (0..n).map(move |c| (c, r)))
+        .flat_map(|(c, r)| (((c * 7 + r * 13) % 2000) as i16).to_be_bytes())
+        .collect();
+    std::fs::write(&hgt, &bytes).unwrap();
+    let dem = Dem::load(&hgt).unwrap();
+    let (_, rows) =
+        verdant::world::window::Rows::open(&hgt, &DemOptions::default(), 1 << 30).unwrap();
+    let all = rows.read([0, n as usize]).unwrap();
+    assert!(
+        all.len() == dem.heights.len()
+            && all
+                .iter()
+                .zip(&dem.heights)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+        "the tile read in pieces differs from the whole file"
+    );
+    assert_eq!(rows.bytes_read(), 8 + bytes.len() as u64);
+}
+
 /// A sidecar saved with a byte-order mark (as some Windows editors save JSON) reads as without.
 #[test]
 fn a_sidecar_with_a_byte_order_mark_reads() {

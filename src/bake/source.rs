@@ -78,9 +78,9 @@ fn check_whole_png(
 }
 
 impl DemSource {
-    /// Opens the DEM files: a local file small enough for a quarter of `memory_mib` is read
-    /// whole (and filled whole); a larger one, a remote one and several are laid out from their
-    /// headers and read in chunks.
+    /// Opens the DEM files: one file small enough for a quarter of `memory_mib` is read whole
+    /// (and filled whole), on disk or at an address; a larger one and several are laid out
+    /// from their headers and read in chunks.
     pub(super) fn open(
         files: &[PathBuf],
         named: &Path,
@@ -102,6 +102,22 @@ impl DemSource {
                 return Ok(DemSource::Whole(crate::world::mosaic::load_files(
                     files, named, options,
                 )?));
+            }
+        }
+        if let [one] = files
+            && crate::world::window::is_remote(one)
+        {
+            // A file at an address small enough for a quarter of the limit: read whole, in one
+            // range request, rather than a chunk at a time (which reads a row of an .hgt tile or
+            // a strip again for each chunk across it), and filled whole, as the same file on
+            // disk would be.
+            let (mut dem, rows) =
+                crate::world::window::Rows::open(one, options, MAX_MOSAIC_SAMPLES)?;
+            let samples = u64::from(dem.width) * u64::from(dem.height);
+            if samples * 4 * 3 <= (memory_mib << 20) / 4 {
+                dem.heights = rows.read([0, dem.height as usize])?;
+                dem.fill_nodata(one)?;
+                return Ok(DemSource::Whole(dem));
             }
         }
         if files.is_empty() {

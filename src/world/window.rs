@@ -234,6 +234,9 @@ impl Seek for Blocks<'_> {
     }
 }
 
+/// The most bytes of an `.hgt` tile read at once (over HTTP, in one request).
+const HGT_READ_BYTES: usize = 4 << 20;
+
 /// A DEM file opened for reading in windows of rows.
 pub struct Rows {
     path: PathBuf,
@@ -380,11 +383,17 @@ impl Rows {
                 Ok((heights, [0, w]))
             }
             Kind::Hgt { src, side } => {
-                let bytes = src.read_at(
-                    (rows[0] * side * 2) as u64,
-                    ((rows[1] - rows[0]) * side * 2) as u64,
-                )?;
-                Ok((super::hgt::heights(&bytes), [0, *side]))
+                // In reads of at most HGT_READ_BYTES (a row at least): over HTTP each is one
+                // request, which must end within the client's deadline.
+                let row_bytes = side * 2;
+                let per_read = (HGT_READ_BYTES / row_bytes).max(1);
+                let mut heights = Vec::with_capacity((rows[1] - rows[0]) * side);
+                for first in (rows[0]..rows[1]).step_by(per_read) {
+                    let n = per_read.min(rows[1] - first);
+                    let bytes = src.read_at((first * row_bytes) as u64, (n * row_bytes) as u64)?;
+                    heights.extend(super::hgt::heights(&bytes));
+                }
+                Ok((heights, [0, *side]))
             }
             Kind::Tiff { src, tiff } => {
                 let w = tiff.width();
