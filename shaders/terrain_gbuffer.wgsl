@@ -2,10 +2,9 @@
 // Positions are camera-relative: the CPU subtracts the camera position in f64 before anything
 // reaches the GPU, so a world tens of kilometres wide does not jitter.
 //
-// Two passes draw it: the depth pre-pass (vertex stage only), and the G-buffer pass over that
-// depth, whose fragments record only where in the atlas each pixel's ground is. The shading,
-// per pixel, is a compute pass (shaders/terrain_shade.wgsl); the functions of both are in
-// shaders/shared/terrain_shading.wgsl.
+// One pass draws it, the G-buffer pass: it writes the depth, and its fragments record only
+// where in the atlas each pixel's ground is. The shading, per pixel, is a compute pass
+// (shaders/terrain_shade.wgsl); the functions of both are in shaders/shared/terrain_shading.wgsl.
 
 #include "shared/terrain_shading.wgsl"
 
@@ -29,7 +28,8 @@ struct TileDraw {
 @group(0) @binding(1) var<storage, read> tiles: array<TileDraw>;
 
 struct VertexOut {
-    // Invariant: the depth pre-pass and the colour pass must produce the same depths.
+    // Invariant: every pass that draws the terrain's mesh (the G-buffer pass, and any that
+    // tests against its depth) must produce the same depths.
     @builtin(position) @invariant clip: vec4<f32>,
     // The atlas texel under the vertex (fractional), in the slot `layer`.
     @location(2) tex: vec2<f32>,

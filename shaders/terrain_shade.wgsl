@@ -1,9 +1,9 @@
 // Terrain shading: a compute pass over the whole target that does, per pixel, all the work of
-// the terrain's and the sky's colour. It reads the depth of the pre-pass (the camera-relative
-// position follows from it and the inverse view-projection) and the G-buffer of the terrain's
-// G-buffer pass (shaders/terrain_gbuffer.wgsl: where in the atlas the pixel's ground is), and
-// writes linear colour into an internal texture that the composite pass
-// (shaders/terrain_composite.wgsl) copies into the colour target.
+// the terrain's and the sky's colour. It reads the depth of the terrain's G-buffer pass (the
+// camera-relative position follows from it and the inverse view-projection) and its G-buffer
+// (shaders/terrain_gbuffer.wgsl: where in the atlas the pixel's ground is), and writes linear
+// colour into an internal texture that the composite pass (shaders/terrain_composite.wgsl)
+// copies into the colour target.
 
 #include "shared/terrain_shading.wgsl"
 

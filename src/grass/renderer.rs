@@ -209,7 +209,7 @@ pub struct GrassRenderer {
     wind_params_buffer: wgpu::Buffer,
     halves: [Half; 2],
     hiz_read_group: wgpu::BindGroup,
-    /// The occlusion pyramid (built from the terrain's depth pre-pass).
+    /// The occlusion pyramid (built from the depth of the terrain's G-buffer pass).
     pub hiz: HiZPyramid,
     /// The targets the blades are drawn into, and their samples a pixel.
     targets: Targets,
