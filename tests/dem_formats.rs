@@ -695,8 +695,82 @@ fn assert_windows_match(label: &str, path: &Path, dem: &Dem) {
     }
 }
 
-/// A 1-arc-second tile (3601 x 3601, 26 MB) read as a window of all its rows, which takes
-/// several reads of at most 4 MiB (over HTTP, several requests), holds the whole file's heights.
+/// Three files joined, one offset from the first by whole samples and one on a grid twice as
+/// coarse (its heights interpolated onto the joined grid), give the same heights in every
+/// window whether the files are tiled (each read only over the window's columns) or striped
+/// (read across whole rows).
+#[test]
+fn a_mosaic_of_tiled_files_joins_like_the_same_files_striped() {
+    let dir = tempfile::tempdir().unwrap();
+    let [x0, y0] = [500_000.0, 4_200_000.0];
+    // Each file: its corner, its cell, its samples.
+    let files = [
+        ([x0, y0], CELL, SIZE),
+        ([x0 + 400.0, y0], CELL, SIZE),
+        // Sample centres on every other sample of the first's grid, from its 60th column.
+        (
+            [x0 + 595.0, y0 + 6.0],
+            [2.0 * CELL[0], 2.0 * CELL[1]],
+            [33, 29],
+        ),
+    ];
+    let write = |layout: Layout, name: &str| -> Vec<std::path::PathBuf> {
+        files
+            .iter()
+            .enumerate()
+            .map(|(k, &(corner, cell, [w, h]))| {
+                let heights: Vec<f64> = (0..h)
+                    .flat_map(|r| (0..w).map(move |c| (c, r)))
+                    .map(|(c, r)| {
+                        let x = corner[0] + (f64::from(c) + 0.5) * cell[0];
+                        let y = corner[1] - (f64::from(r) + 0.5) * cell[1];
+                        landscape(x - x0, y0 - y)
+                    })
+                    .collect();
+                let mut spec = TiffSpec::new(Sample::F32, layout, Compression::Deflate);
+                spec.geo = Geo::Scale {
+                    scale: cell,
+                    corner,
+                    keys: projected_keys(32610, 9001),
+                };
+                let path = dir.path().join(format!("{name}{k}.tif"));
+                write_tiff(&path, &spec, w, h, &heights);
+                path
+            })
+            .collect()
+    };
+    let striped = write(Layout::Strips { rows: 7 }, "striped");
+    let tiled = write(
+        Layout::Tiles {
+            width: 16,
+            height: 16,
+        },
+        "tiled",
+    );
+    let open = |paths: &[std::path::PathBuf]| {
+        verdant::world::mosaic::Layout::open(paths, &DemOptions::default(), 1 << 30).unwrap()
+    };
+    let (a, b) = (open(&striped), open(&tiled));
+    let [w, h] = [a.header.width as usize, a.header.height as usize];
+    assert_eq!([w, h], [125, 57]);
+    for (cols, rows) in [
+        ([0, w], [0, h]),
+        ([3, 50], [5, 40]),
+        ([45, 70], [0, h]),
+        ([58, 125], [10, 57]),
+        ([100, 125], [0, 9]),
+    ] {
+        let (x, y) = (a.region(cols, rows).unwrap(), b.region(cols, rows).unwrap());
+        assert!(
+            x.len() == y.len() && x.iter().zip(&y).all(|(p, q)| p.to_bits() == q.to_bits()),
+            "the window {cols:?} x {rows:?} differs between the tiled and the striped files"
+        );
+        assert!(x.iter().all(|v| v.is_finite()), "{cols:?} x {rows:?}");
+    }
+}
+
+/// A 1-arc-second tile (3601 x 3601, 26 MB) read as a window of all its rows (in reads of at
+/// most 4 MiB, over HTTP a request each) holds the whole file's heights, every byte read once.
 #[test]
 fn a_one_arc_second_tile_read_in_pieces_is_the_whole_file() {
     let dir = tempfile::tempdir().unwrap();

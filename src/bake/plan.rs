@@ -79,7 +79,7 @@ impl Plan {
         // subsample's stride) grows with the limit, so the need under this limit is not
         // enough under that one; the least is searched for, and named.
         let most = 1u64 << 20;
-        let need = if plan(most).is_none() {
+        let need = if limit_mib >= most || plan(most).is_none() {
             None
         } else {
             let (mut lo, mut hi) = (limit_mib, most);

@@ -518,8 +518,8 @@ pub(super) fn remove_stale_staging(out: &Path) -> Vec<String> {
     notes
 }
 
-/// Whether every entry of the folder `dir` is one a staging folder holds ([`STAGING_LOCK`],
-/// [`STAGING_WORLD`], [`STAGING_PREVIOUS`], [`STAGING_JOURNAL`], [`STAGING_SPENT_PARTS`], or a
+/// Whether every entry of the folder `dir` is one a staging folder holds ([`STAGING_LOCK`]
+/// and its first name, [`STAGING_WORLD`], [`STAGING_PREVIOUS`], [`STAGING_JOURNAL`], [`STAGING_SPENT_PARTS`], or a
 /// journal's temporary, as a killed write of it leaves one); false where it cannot be read.
 fn holds_only_staging_entries(dir: &Path) -> bool {
     let Ok(entries) = std::fs::read_dir(dir) else {
@@ -536,6 +536,8 @@ fn holds_only_staging_entries(dir: &Path) -> bool {
                 STAGING_SPENT_PARTS,
             ]
             .contains(&name.as_str())
+                // The lock as it is made, before its rename (`lock_staging`).
+                || name == format!("{STAGING_LOCK}.new")
                 || (name.starts_with(&format!(".{STAGING_JOURNAL}")) && name.ends_with(".tmp"))
         })
     })
@@ -783,6 +785,8 @@ mod tests {
         write(&theirs.join("notes.txt"), "notes");
         let killed = tmp.path().join(".w.baking.12346-0");
         std::fs::create_dir_all(killed.join(STAGING_WORLD)).unwrap();
+        // Killed between making its lock and renaming it.
+        write(&killed.join(format!("{STAGING_LOCK}.new")), "");
         let long_ago = SystemTime::now() - UNLOCKED_STAGING_GRACE * 2;
         for dir in [&theirs, &killed] {
             std::fs::File::open(dir)

@@ -120,7 +120,7 @@ pub fn owner(pyramid: &Pyramid, count: u32, id: TileId) -> Option<u32> {
 /// A fingerprint of what a bake makes: its options (but not where it writes or how it is run)
 /// and the size and modification time of every input file.
 pub fn fingerprint(opts: &BakeOptions, dem_files: &[PathBuf]) -> Result<String, WorldError> {
-    let text = inputs(opts, dem_files, true)?;
+    let text = inputs(opts, dem_files, true, None)?;
     Ok(format!(
         "{:016x}",
         crate::hash::fnv1a64(crate::hash::FNV_BASIS, text.as_bytes())
@@ -151,7 +151,7 @@ pub(super) fn input_record(
     opts: &BakeOptions,
     dem_files: &[PathBuf],
 ) -> Result<String, WorldError> {
-    inputs(opts, dem_files, false)
+    inputs(opts, dem_files, false, None)
 }
 
 /// Refuses a bake whose input files changed since `record` was taken at its start: tiles cut
@@ -170,7 +170,9 @@ pub(super) fn check_inputs_unchanged(
              has stopped changing",
         ),
     };
-    let now = match inputs(opts, dem_files, false) {
+    // A file at an address is not asked for again: a change of it while the bake read it is
+    // refused as its ranges are read (`RangeFile`), and after the last read it cannot matter.
+    let now = match inputs(opts, dem_files, false, Some(record)) {
         Ok(now) => now,
         Err(e) => {
             return Err(changed(
@@ -191,7 +193,8 @@ pub(super) fn check_inputs_unchanged(
     Err(changed(differs.unwrap_or_else(|| opts.dem.clone())))
 }
 
-/// What [`fingerprint`] and [`bake_id`] hash: the options that shape the world (its `name` only
+/// What [`fingerprint`] and [`bake_id`] hash (a file at an address taken from `known`, a
+/// record made before, where it is in it): the options that shape the world (its `name` only
 /// with `with_name`) and each input file's size and modification time (of a file at an
 /// address, its length, `ETag` and `Last-Modified` as its server gives them): the DEM files, the files
 /// the user named (a VRT that lists DEMs, a folder's files), a PNG DEM's JSON sidecar (its
@@ -202,6 +205,7 @@ fn inputs(
     opts: &BakeOptions,
     dem_files: &[PathBuf],
     with_name: bool,
+    known: Option<&str>,
 ) -> Result<String, WorldError> {
     let name = opts.name.as_deref();
     let mut text = if with_name {
@@ -258,7 +262,14 @@ fn inputs(
     for p in &inputs {
         if crate::world::window::is_remote(p) {
             // An address: its length and validators as its server gives them now (one request
-            // for its first byte), in place of a size and a modification time.
+            // for its first byte), in place of a size and a modification time; or its line of
+            // a record `known` already.
+            let start = format!("{} ", p.display());
+            if let Some(line) = known.and_then(|k| k.lines().find(|l| l.starts_with(&start))) {
+                text.push_str(line);
+                text.push('\n');
+                continue;
+            }
             #[cfg(feature = "http")]
             {
                 let url = p.to_string_lossy();

@@ -161,9 +161,11 @@ impl DemSource {
                 let region = (side * side) as u64;
                 // The joined region (heights and owners), the fill's pyramid (values and
                 // weights, a third more) and the rows of one file read for it (a strip or a
-                // row of tiles more, decoded as 8-byte patterns and then as heights).
+                // row of tiles more, decoded as 8-byte patterns and then as heights), with the
+                // strip or tile being decoded.
                 let rows = (side + m.layout.largest_chunk_rows()) as u64;
-                let file = m.layout.widest_read(side) as u64 * rows * (8 + 4);
+                let file = m.layout.widest_read(side) as u64 * rows * (8 + 4)
+                    + m.layout.largest_chunk_bytes();
                 [
                     (CHUNK * CHUNK * 4) as u64,
                     region * (4 + 2) + region * 8 * 4 / 3 + file,

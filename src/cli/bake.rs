@@ -215,13 +215,14 @@ pub(crate) fn bake_world(args: BakeArgs) -> Result<()> {
         }
     })
     .map_err(|e| {
-        // A bake asked to stop that then failed (a request over HTTP in flight when the signal
-        // came ran into its deadline) was stopped all the same: nothing of it was kept.
+        // A bake asked to stop whose request over HTTP, in flight when the signal came, then
+        // failed (it ran into its deadline) was stopped all the same: nothing of it was kept.
+        // Any other failure (a publish that could not be finished) is said as it is.
         let stopped = opts
             .cancel
             .as_ref()
             .is_some_and(verdant::bake::CancelFlag::is_cancelled);
-        if stopped && !matches!(e, verdant::world::WorldError::Cancelled { .. }) {
+        if stopped && matches!(e, verdant::world::WorldError::Fetch(_)) {
             log::warn!("while the bake stopped: {e}");
             verdant::world::WorldError::Cancelled {
                 path: opts.out.clone(),

@@ -491,9 +491,10 @@ pub fn content_type(path: &Path) -> &'static str {
 /// The file under `root` that a request path names, if it names one inside it.
 fn resolve(root: &Path, url: &str) -> Option<PathBuf> {
     let raw = url.split(['?', '#']).next().unwrap_or("");
-    // A path that ends in `/` names a folder, never a file (`/world.toml/` is not
-    // `/world.toml`: an alias of every file would confuse caches in front of the server).
-    if raw.ends_with('/') {
+    // A path whose last segment is empty or a dot segment names a folder, never a file
+    // (`/world.toml/` and `/world.toml/.` are not `/world.toml`: an alias of every file would
+    // confuse caches in front of the server).
+    if matches!(raw.rsplit('/').next(), Some("" | "." | "..")) {
         return None;
     }
     // Dot segments as written (`/./world.toml`, `/tiles/L0/../../world.toml`) are removed

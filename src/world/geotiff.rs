@@ -1403,6 +1403,12 @@ impl TiffWindows {
         Ok(out)
     }
 
+    /// Samples in one strip or tile, and in a row of one.
+    pub(crate) fn chunk_samples(&self) -> [usize; 2] {
+        let [w, h] = self.layout.chunk_size.map(|v| v as usize);
+        [w * h, w]
+    }
+
     /// Samples a row.
     pub(crate) fn width(&self) -> usize {
         self.layout.width as usize

@@ -402,18 +402,28 @@ impl Layout {
 
     /// The most samples a row that one file's read of a window `side` samples wide holds: a
     /// tiled GeoTIFF's window (the joined grid has the finest spacing of the files, so a window
-    /// spans at most one file sample a grid sample, and one more each side for the bilinear),
-    /// any other file's whole rows.
+    /// spans at most one file sample a grid sample, with one more each side for the bilinear
+    /// and one for rounding; at least a tile's width), any other file's whole rows.
     pub fn widest_read(&self, side: usize) -> usize {
         self.parts
             .iter()
-            .map(|p| {
-                if p.rows.reads_column_windows() {
-                    p.width.min(side + 2)
-                } else {
-                    p.width
+            .map(|p| match p.rows.chunk_samples() {
+                Some([_, tile_w]) if p.rows.reads_column_windows() => {
+                    p.width.min((side + 4).max(tile_w))
                 }
+                _ => p.width,
             })
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The most bytes a file's strip or tile takes while it is read: its bytes as stored (at
+    /// most as many as decoded) and decoded, eight bytes a sample each.
+    pub fn largest_chunk_bytes(&self) -> u64 {
+        self.parts
+            .iter()
+            .filter_map(|p| p.rows.chunk_samples())
+            .map(|[samples, _]| samples as u64 * 16)
             .max()
             .unwrap_or(0)
     }

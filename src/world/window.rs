@@ -418,6 +418,15 @@ impl Rows {
         self.len
     }
 
+    /// A GeoTIFF's samples in one strip or tile and in a row of one; `None` for other files
+    /// (read a row at a time, or whole).
+    pub fn chunk_samples(&self) -> Option<[usize; 2]> {
+        match &self.kind {
+            Kind::Tiff { tiff, .. } => Some(tiff.chunk_samples()),
+            _ => None,
+        }
+    }
+
     /// Whether [`Rows::read_window`] reads only the columns asked for (a tiled GeoTIFF).
     pub fn reads_column_windows(&self) -> bool {
         matches!(&self.kind, Kind::Tiff { tiff, .. } if tiff.is_tiled())

@@ -310,6 +310,9 @@ impl Client {
                 )));
             }
             let (etag, last_modified) = (header("etag"), header("last-modified"));
+            // A Last-Modified that is the answer's own date is the time it was made (a script
+            // that serves the file), not the file's: no validator.
+            let last_modified = last_modified.filter(|m| Some(m) != header("date").as_ref());
             // "bytes FIRST-LAST/TOTAL"
             let header = header("content-range").unwrap_or_default();
             let parsed = header
@@ -327,6 +330,7 @@ impl Client {
                 Some((a, b, total)) if a == first && b + 1 == first + count.max(1) => {
                     let now = RangeIdentity {
                         total,
+                        host: host_of(&target).to_ascii_lowercase(),
                         etag,
                         last_modified,
                     };
@@ -668,19 +672,22 @@ pub(super) fn resolve_reference(base: &str, reference: &str) -> String {
     out
 }
 
-/// Failures worth another try: the connection, the server's own errors, a body cut short.
 /// What a range response says of the whole file: see [`Client::range_identity`].
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub(super) struct RangeIdentity {
     pub(super) total: u64,
+    /// The host that answered (after redirects): validators are compared only between answers
+    /// of one host, as mirrors behind a redirector write them each their own way.
+    pub(super) host: String,
     pub(super) etag: Option<String>,
     pub(super) last_modified: Option<String>,
 }
 
 impl RangeIdentity {
-    /// How the file changed from `self` to `now`, if it did: its length, or its `ETag`, or
-    /// (where neither response has an `ETag`) its `Last-Modified`. A validator that one
-    /// response has and the other lacks is not taken for a change.
+    /// How the file changed from `self` to `now`, if it did: its length, or (from the same
+    /// host) its `ETag`, compared weakly (`W/"x"` is `"x"`), or where neither answer has an
+    /// `ETag` its `Last-Modified`. A validator that one answer has and the other lacks is not
+    /// taken for a change.
     fn change_to(&self, now: &RangeIdentity) -> Option<String> {
         if self.total != now.total {
             return Some(format!(
@@ -688,8 +695,12 @@ impl RangeIdentity {
                 self.total, now.total
             ));
         }
+        if self.host != now.host {
+            return None;
+        }
+        let weak = |tag: &str| tag.trim_start_matches("W/").to_owned();
         if let (Some(a), Some(b)) = (&self.etag, &now.etag) {
-            return (a != b).then(|| format!("its ETag was {a}, now {b}"));
+            return (weak(a) != weak(b)).then(|| format!("its ETag was {a}, now {b}"));
         }
         if let (Some(a), Some(b)) = (&self.last_modified, &now.last_modified) {
             return (a != b).then(|| format!("its Last-Modified was {a}, now {b}"));
@@ -700,11 +711,11 @@ impl RangeIdentity {
     /// The identity as one word without spaces (for a bake's record of its inputs): the
     /// length and a fingerprint of the validators.
     pub(super) fn word(&self) -> String {
-        let text = format!(
-            "{}|{}",
-            self.etag.as_deref().unwrap_or(""),
-            self.last_modified.as_deref().unwrap_or("")
-        );
+        // The ETag where there is one (the Last-Modified beside it adds nothing).
+        let text = match &self.etag {
+            Some(tag) => format!("etag {}", tag.trim_start_matches("W/")),
+            None => format!("modified {}", self.last_modified.as_deref().unwrap_or("")),
+        };
         format!(
             "{}:{:016x}",
             self.total,
@@ -713,6 +724,7 @@ impl RangeIdentity {
     }
 }
 
+/// Failures worth another try: the connection, the server's own errors, a body cut short.
 pub(super) fn is_transient(e: &HttpError) -> bool {
     match e {
         HttpError::Transport { .. }
