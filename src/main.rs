@@ -88,7 +88,10 @@ enum Command {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Fly(args) => match args.truth {
-            Some(k) => cli::fly::fly_truth(args.options()?, k),
+            Some(k) => {
+                args.check_truth_options()?;
+                cli::fly::fly_truth(args.options()?, k)
+            }
             None => cli::fly::fly(args.options()?),
         },
         Command::View(args) => cli::view::view(args),

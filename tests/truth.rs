@@ -173,6 +173,28 @@ fn a_bad_factor_is_refused_naming_the_option_and_its_range() {
         assert!(err.contains("--truth") && err.contains("1..=8"), "{err}");
         assert!(!tmp.path().join("t").exists());
     }
+    // Options the truth sets itself are refused with it, before anything runs.
+    for extra in [
+        &["--aa", "taa"][..],
+        &["--taa-samples", "8"],
+        &["--grass-segments", "1,1,1"],
+        &["--grass-view-m", "20"],
+        &["--tree-min-keep", "1"],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_verdant"))
+            .args(["fly", "--truth", "1", "--out", "t"])
+            .args(extra)
+            .current_dir(tmp.path())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{extra:?}: {err}");
+        assert!(
+            err.contains(&format!("{} does not apply to --truth", extra[0])),
+            "{extra:?}: {err}"
+        );
+        assert!(!tmp.path().join("t").exists());
+    }
 }
 
 #[test]
@@ -209,6 +231,10 @@ fn fly_writes_the_paths_frames_as_the_truth() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
     assert_eq!(report["k"], 1);
     assert_eq!(report["frames"].as_array().unwrap().len(), 2);
+    assert_eq!(report["failed_loads"], 0);
     let img = image::open(dir.join("frame_00000.png")).unwrap();
     assert_eq!((img.width(), img.height()), (48, 32));
+    // Standard error is no terminal here: the frames are logged as they are drawn.
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("truth: 2/2 frames"), "{stderr}");
 }

@@ -640,6 +640,26 @@ fn implausible_dem_heights_and_cells_blame_the_sidecar() {
         "{err}"
     );
     assert!(!err.contains("world.toml"), "{err}");
+    // Cells of 1e308 m: the sidecar's field is named as it is read.
+    let png = write_dem(dir.path(), "vast", [20, 16], [5.0, 5.0], [0.0, 1.0], hills);
+    write_sidecar(dir.path(), "vast", [20, 16], [1e308, 10.0], [0.0, 1.0]);
+    let err = bake(
+        &BakeOptions {
+            dem: png,
+            out: out.clone(),
+            tile_cells: 8,
+            stored_levels: 1,
+            ..Default::default()
+        },
+        &mut |_, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("vast.json") && err.contains("cell_size_m.east_west") && err.contains("1e308"),
+        "{err}"
+    );
+    assert!(!out.exists());
 }
 
 /// A DEM cell size too small for a bake that came from `--dem-cell-size` is blamed on the
@@ -1318,7 +1338,8 @@ fn a_dem_spanning_too_many_bake_cells_is_refused_saying_so() {
         dir.path(),
         "wide",
         [20, 16],
-        [1e9, 20.0],
+        // The widest cell a sidecar may give (1,000 km).
+        [1e6, 20.0],
         [0.0, 1.0],
         |_, y| 100.0 + y / 100.0,
     );
@@ -1332,9 +1353,9 @@ fn a_dem_spanning_too_many_bake_cells_is_refused_saying_so() {
     for needle in [
         "wide.json",
         "cell_size_m",
-        "1.900e10",
+        "1.900e7",
         "of the bake's cells a side",
-        "9.500e8 cells of 20 m",
+        "950000 cells of 20 m",
         "--cell-size",
     ] {
         assert!(e.contains(needle), "{needle:?} not in {e}");

@@ -8,7 +8,7 @@ use clap::Subcommand;
 use verdant::tools::timing::Timing;
 
 use super::args::{float_in, parse_size, parse_vec3, resolve_world};
-use super::out::say;
+use super::out::{note, say};
 use super::progress::{finish_bars, stage_bars};
 
 #[derive(Subcommand)]
@@ -497,9 +497,9 @@ pub(crate) fn bench_blades(
             timed(t, b.generate.median_ms, 3),
             timed(t, b.draw.median_ms, 3),
             timed(t, b.floor.median_ms, 3),
-            timed(t, b.ns_per_blade, 2),
-            timed(t, b.ns_per_vertex, 3),
-            timed(t, b.ratio_to_floor, 2),
+            b.ns_per_blade.map_or("-".into(), |v| timed(t, v, 2)),
+            b.ns_per_vertex.map_or("-".into(), |v| timed(t, v, 3)),
+            b.ratio_to_floor.map_or("-".into(), |v| timed(t, v, 2)),
             b.vs_truth.flip,
             b.vs_truth.coarse,
             b.flip_vs_no_lod,
@@ -509,6 +509,13 @@ pub(crate) fn bench_blades(
                 ""
             }
         )?;
+    }
+    if let Some(b) = r.results.iter().find(|b| b.drawn == [0, 0]) {
+        note!(
+            "warning: no blade was drawn with {} blades in the field: the camera (--camera, \
+             --target) sees none of it; its times per blade and vertex are left empty",
+            b.blades
+        );
     }
     say!(
         "FLIP and coarse: against the {k}x{k} truth of the field; vs noLOD: pixel FLIP against the \
@@ -556,15 +563,15 @@ pub(crate) fn bench_lod(mut opts: verdant::tools::BenchLodOptions) -> Result<()>
         r.size.1,
         r.path
     )?;
+    let flip = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
     say!(
-        "dolly: largest jump of the error against the truth: {:.4} FLIP on frames with ring switches, {:.4} on frames without a switch",
-        r.worst_pop,
-        r.worst_change_without_switch
+        "dolly: largest jump of the error against the truth: {} FLIP on frames with ring switches, {} on frames without a switch (-: no such frame)",
+        flip(r.worst_pop),
+        flip(r.worst_change_without_switch)
     )?;
     if let Some(t) = r.worst_tree_pop {
         say!("dolly: {t:.4} FLIP on frames where trees switched level (and no ring)")?;
     }
-    let flip = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.4}"));
     say!(
         "far band ({:.0}-{:.0} m, {} pixels) against the truth's blades out to {:.0} m: {} FLIP with the far field, {} without",
         r.far_band.near_m,

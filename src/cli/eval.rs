@@ -21,6 +21,10 @@ pub(crate) enum EvalCommand {
         /// The DEM: a GeoTIFF, an SRTM .hgt, or a 16-bit PNG with its JSON sidecar.
         #[arg(long)]
         dem: PathBuf,
+        /// Spacing of the DEM's samples in metres, M or EW,NS, in place of what the file says
+        /// (needed for a TIFF without GeoTIFF tags), as bake takes it.
+        #[arg(long, value_name = "M|EW,NS", value_parser = super::args::parse_cell_size)]
+        dem_cell_size: Option<[f64; 2]>,
         /// Downsampling factor, a power of two in 2..=64.
         #[arg(long, default_value_t = 4, value_parser = super::args::power_of_two_in(2, 64))]
         factor: u32,
@@ -39,21 +43,36 @@ pub(crate) enum EvalCommand {
     },
 }
 
-pub(crate) fn eval_derive(dem_path: &Path, factor: usize, out: &Path) -> Result<()> {
+pub(crate) fn eval_derive(
+    dem_path: &Path,
+    dem_cell_size: Option<[f64; 2]>,
+    factor: usize,
+    out: &Path,
+) -> Result<()> {
     use verdant::tools::eval_derive as eval;
     // Ctrl-C stops the eval after the method under way, writing the methods run; a second one
     // ends the process at once.
     let stop = Stop::new(Some(super::stop_on_signals()?));
     let lines = lines();
     let mut pb: Option<ProgressBar> = None;
-    let report = eval::run_derive_eval(dem_path, factor, out, &stop, &mut |method, done, total| {
-        if lines {
-            note!("methods: {done}/{total}");
-        }
-        let pb = pb.get_or_insert_with(|| bar(total, "methods"));
-        pb.set_message(method.to_owned());
-        pb.set_position(done);
-    });
+    let dem = verdant::world::DemOptions {
+        cell_size_m: dem_cell_size,
+    };
+    let report = eval::run_derive_eval(
+        dem_path,
+        &dem,
+        factor,
+        out,
+        &stop,
+        &mut |method, done, total| {
+            if lines {
+                note!("methods: {done}/{total}");
+            }
+            let pb = pb.get_or_insert_with(|| bar(total, "methods"));
+            pb.set_message(method.to_owned());
+            pb.set_position(done);
+        },
+    );
     let interrupted = report.as_ref().is_ok_and(|r| r.interrupted);
     super::progress::end_bar(pb.as_ref(), interrupted);
     let report = report?;
@@ -250,7 +269,12 @@ pub(crate) fn eval_sway(out: &Path) -> Result<()> {
 /// Runs the evaluation asked for.
 pub(crate) fn run(what: EvalCommand) -> Result<()> {
     match what {
-        EvalCommand::Derive { dem, factor, out } => eval_derive(&dem, factor as usize, &out),
+        EvalCommand::Derive {
+            dem,
+            dem_cell_size,
+            factor,
+            out,
+        } => eval_derive(&dem, dem_cell_size, factor as usize, &out),
         EvalCommand::Sway { out } => eval_sway(&out),
     }
 }

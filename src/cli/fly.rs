@@ -3,14 +3,13 @@
 use std::path::PathBuf;
 
 use anyhow::{Result, bail};
-use indicatif::ProgressBar;
 
 use verdant::renderer::{DEFAULT_MESH_STEP, GrassConfig};
 use verdant::tools::{FlyOptions, FlyProgress, run_fly};
 
 use super::args::{MAX_FRAMES, StreamArgs, TaaArgs, float_in, parse_size, resolve_world};
 use super::out::{note, say};
-use super::progress::bar;
+use super::progress::TenthsBar;
 
 // The options of `verdant fly`.
 #[derive(clap::Args)]
@@ -144,6 +143,48 @@ pub(crate) struct FlyArgs {
 }
 
 impl FlyArgs {
+    /// With `--truth`, refuses the options that the truth sets itself (its LOD, segments,
+    /// reach, plants' and trees' meshes, anti-aliasing), naming the first given: a run would
+    /// otherwise take them and draw without them. The grass's spacing, width, infill and
+    /// elevation fade, the mesh step, the features and the wind describe the scene and apply.
+    pub(crate) fn check_truth_options(&self) -> Result<()> {
+        if self.truth.is_none() {
+            return Ok(());
+        }
+        let given = [
+            (self.grass_view_m.is_some(), "--grass-view-m"),
+            (self.grass_segments.is_some(), "--grass-segments"),
+            (self.grass_near_m.is_some(), "--grass-near-m"),
+            (self.grass_lod_widen.is_some(), "--grass-lod-widen"),
+            (self.plant_lod_m.is_some(), "--plant-lod-m"),
+            (self.plant_card_reach.is_some(), "--plant-card-reach"),
+            (self.plant_thin_m.is_some(), "--plant-thin-m"),
+            (self.tree_lod_m.is_some(), "--tree-lod-m"),
+            (self.tree_thin_m.is_some(), "--tree-thin-m"),
+            (self.tree_min_keep.is_some(), "--tree-min-keep"),
+            (self.tree_shadow_m.is_some(), "--tree-shadow-m"),
+            (self.tree_shadow_size.is_some(), "--tree-shadow-size"),
+            (
+                self.tree_shadow_cascades.is_some(),
+                "--tree-shadow-cascades",
+            ),
+            (self.tree_shadow_lod_m.is_some(), "--tree-shadow-lod-m"),
+            (self.aa.is_some(), "--aa"),
+        ]
+        .into_iter()
+        .find_map(|(given, name)| given.then_some(name))
+        .or_else(|| self.taa.first_given());
+        if let Some(option) = given {
+            bail!(
+                "{option} does not apply to --truth, which draws its own level of detail, blade \
+                 segments, reach, plant and tree meshes and anti-aliasing (its sub-samples): \
+                 leave it out (the grass's spacing, width and infill, --mesh-step, the features \
+                 and the wind apply)"
+            );
+        }
+        Ok(())
+    }
+
     pub(crate) fn options(self) -> Result<FlyOptions> {
         let FlyArgs {
             world,
@@ -268,6 +309,21 @@ impl FlyArgs {
     }
 }
 
+/// After an interrupted run that wrote `written` frames into `out`: warns of frames of an
+/// earlier, longer run beyond them, which are not this run's and which its `report` (the file
+/// name) does not describe.
+fn warn_of_frames_beyond(out: &std::path::Path, written: u32, report: &str) {
+    let stale = verdant::tools::fly::stale_frames(out, written);
+    if let (Some(first), Some(last)) = (stale.first(), stale.last()) {
+        note!(
+            "warning: {} holds {} frame images of an earlier run beyond the {written} this run \
+             wrote ({first} to {last}), which its {report} does not describe",
+            out.display(),
+            stale.len()
+        );
+    }
+}
+
 /// Warns of what an earlier run left in the output folder `out` beside this run's outputs.
 fn warn_of_stale(out: &std::path::Path, p: FlyProgress) {
     match p {
@@ -296,18 +352,16 @@ fn warn_of_stale(out: &std::path::Path, p: FlyProgress) {
 /// `fly --truth K`: the path's frames rendered as the truth.
 pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
     opts.stop = Some(super::stop_on_signals()?);
-    let mut pb: Option<ProgressBar> = None;
+    let mut pb = TenthsBar::new("truth", "truth:", "frames");
     let r = verdant::tools::truth::run_fly_truth(&opts, k, &mut |p| match p {
         FlyProgress::WarmingUp => note!("loading the first frame's tiles"),
-        FlyProgress::Frame(done, total) => pb
-            .get_or_insert_with(|| bar(total, "truth"))
-            .set_position(done),
+        FlyProgress::Frame(done, total) => pb.set(done, total),
         p @ (FlyProgress::StaleFrames(..) | FlyProgress::StaleReport(_)) => {
             warn_of_stale(&opts.out, p)
         }
         _ => {}
     })?;
-    super::progress::end_bar(pb.as_ref(), false);
+    pb.end(r.interrupted);
     say!(
         "{} truth frames ({k}x{k} sub-samples) of {} ({}) at {}x{} in {:.1} s; wrote {}",
         r.frames.len(),
@@ -318,7 +372,21 @@ pub(crate) fn fly_truth(mut opts: FlyOptions, k: u32) -> Result<()> {
         r.seconds,
         opts.out.display()
     )?;
+    if r.failed_loads > 0 {
+        note!(
+            "warning: {} tile loads failed during the run and those tiles were drawn from their \
+             ancestors: these frames are not the truth of the world's stored tiles where they \
+             show them (failed_loads in {})",
+            r.failed_loads,
+            opts.out.join("truth.json").display()
+        );
+    }
     if r.interrupted {
+        warn_of_frames_beyond(
+            &opts.out,
+            u32::try_from(r.frames.len()).unwrap_or(u32::MAX),
+            "truth.json",
+        );
         return Err(super::Interrupted(format!(
             "stopped after {} of {} frames; {} describes those",
             r.frames.len(),
@@ -334,7 +402,7 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
     // Ctrl-C ends the flight after the frame under way, writing what was flown; a second one
     // ends the process at once.
     opts.stop = Some(super::stop_on_signals()?);
-    let mut frames: Option<ProgressBar> = None;
+    let mut frames: Option<TenthsBar> = None;
     let report = run_fly(&opts, &mut |p| match p {
         FlyProgress::WarmingUp => note!("loading the first frame's tiles"),
         FlyProgress::WarmUpIncomplete(missing) => {
@@ -350,30 +418,24 @@ pub(crate) fn fly(mut opts: FlyOptions) -> Result<()> {
             warn_of_stale(&opts.out, p)
         }
         FlyProgress::Frame(done, total) => {
-            let pb = frames.get_or_insert_with(|| {
-                note!("rendering {total} frames");
-                bar(total, "frames")
-            });
-            pb.set_position(done);
+            frames
+                .get_or_insert_with(|| {
+                    note!("rendering {total} frames");
+                    TenthsBar::new("frames", "fly:", "frames")
+                })
+                .set(done, total);
         }
     })?;
-    super::progress::end_bar(frames.as_ref(), report.interrupted);
+    if let Some(pb) = &frames {
+        pb.end(report.interrupted);
+    }
     if report.interrupted {
-        // Frames of an earlier, longer run beyond those this one wrote are not this run's.
         let written = if opts.write_images {
             u32::try_from(report.frames_flown).unwrap_or(u32::MAX)
         } else {
             0
         };
-        let stale = verdant::tools::fly::stale_frames(&opts.out, written);
-        if let (Some(first), Some(last)) = (stale.first(), stale.last()) {
-            note!(
-                "warning: {} holds {} frame images of an earlier run beyond the {written} this \
-                 run wrote ({first} to {last}), which its report does not describe",
-                opts.out.display(),
-                stale.len()
-            );
-        }
+        warn_of_frames_beyond(&opts.out, written, "report.json");
     }
     if report.interrupted && report.frames_flown == 0 {
         return Err(super::Interrupted(format!(

@@ -253,12 +253,13 @@ pub struct BladesResult {
     pub floor: Timing,
     /// Vertices the floor pass drew.
     pub floor_vertices: u64,
-    /// Grass draw time per blade drawn, nanoseconds.
-    pub ns_per_blade: f64,
-    /// Grass draw time per vertex, nanoseconds.
-    pub ns_per_vertex: f64,
-    /// The grass draw's time over the floor's.
-    pub ratio_to_floor: f64,
+    /// Grass draw time per blade drawn, nanoseconds (`None` where no blade was drawn: the
+    /// camera sees no grass).
+    pub ns_per_blade: Option<f64>,
+    /// Grass draw time per vertex, nanoseconds (`None` where no vertex was drawn).
+    pub ns_per_vertex: Option<f64>,
+    /// The grass draw's time over the floor's (`None` where the floor took no time).
+    pub ratio_to_floor: Option<f64>,
     /// Error of the frame against the truth of the same field, by both measures.
     pub vs_truth: Measures,
     /// Pixel FLIP of the frame against the same field with no LOD (the old figure).
@@ -674,13 +675,9 @@ pub fn run_bench_blades(
             frame: Timing::of(&frame_samples[k]),
             floor: floor_t,
             floor_vertices: floor_vertices[k],
-            ns_per_blade: draw.median_ms * 1e6 / drawn.max(1) as f64,
-            ns_per_vertex: draw.median_ms * 1e6 / vertices.max(1) as f64,
-            ratio_to_floor: if floor_t.median_ms > 0.0 {
-                draw.median_ms / floor_t.median_ms
-            } else {
-                0.0
-            },
+            ns_per_blade: (drawn > 0).then(|| draw.median_ms * 1e6 / drawn as f64),
+            ns_per_vertex: (vertices > 0).then(|| draw.median_ms * 1e6 / vertices as f64),
+            ratio_to_floor: (floor_t.median_ms > 0.0).then(|| draw.median_ms / floor_t.median_ms),
             vs_truth: *vs_truth,
             flip_vs_no_lod: *flip,
         });
@@ -751,9 +748,9 @@ fn write_outputs(opts: &BenchBladesOptions, report: &BenchBladesReport) -> Resul
             } else {
                 String::new()
             },
-            t.cell(r.ns_per_blade, 3),
-            t.cell(r.ns_per_vertex, 4),
-            t.cell(r.ratio_to_floor, 3),
+            r.ns_per_blade.map_or(String::new(), |v| t.cell(v, 3)),
+            r.ns_per_vertex.map_or(String::new(), |v| t.cell(v, 4)),
+            r.ratio_to_floor.map_or(String::new(), |v| t.cell(v, 3)),
             if t.measured() {
                 (r.draw.noisy || r.floor.noisy).to_string()
             } else {
@@ -769,12 +766,12 @@ fn write_outputs(opts: &BenchBladesOptions, report: &BenchBladesReport) -> Resul
         name: name.into(),
         points: results.iter().map(|r| (r.blades as f64, f(r))).collect(),
     };
-    let timed_series = |name: &str, f: &dyn Fn(&BladesResult) -> f64| Series {
+    let timed_series = |name: &str, f: &dyn Fn(&BladesResult) -> Option<f64>| Series {
         name: name.into(),
         points: results
             .iter()
             .filter(|r| r.draw.measured())
-            .map(|r| (r.blades as f64, f(r)))
+            .filter_map(|r| Some((r.blades as f64, f(r)?)))
             .collect(),
     };
     LineChart {
@@ -784,12 +781,12 @@ fn write_outputs(opts: &BenchBladesOptions, report: &BenchBladesReport) -> Resul
         log_x: true,
         log_y: true,
         series: vec![
-            timed_series("grass draw", &|r| r.draw.median_ms),
+            timed_series("grass draw", &|r| Some(r.draw.median_ms)),
             timed_series("floor (same vertices, trivial shader)", &|r| {
-                r.floor.median_ms
+                Some(r.floor.median_ms)
             }),
-            timed_series("generation + wind", &|r| r.generate.median_ms),
-            timed_series("whole frame", &|r| r.frame.median_ms),
+            timed_series("generation + wind", &|r| Some(r.generate.median_ms)),
+            timed_series("whole frame", &|r| Some(r.frame.median_ms)),
         ],
     }
     .write_png(&opts.out.join("blades_time.png"), 900, 600)?;

@@ -528,14 +528,15 @@ pub struct BenchLodReport {
     /// The dolly.
     pub dolly: Vec<DollyFrame>,
     /// Largest jump of the LOD run's pixel FLIP against the truth on a frame where grass tiles
-    /// switched ring: the popping, as a number.
-    pub worst_pop: f64,
+    /// switched ring: the popping, as a number (`None` without such frames: a dolly that
+    /// crossed no ring).
+    pub worst_pop: Option<f64>,
     /// The same on frames where trees switched level and no grass tile ring (`None` without
     /// such frames: a world without trees).
     pub worst_tree_pop: Option<f64>,
-    /// The same on frames without switches of either (the noise floor of the measure; 0 when
-    /// every frame had one).
-    pub worst_change_without_switch: f64,
+    /// The same on frames without switches of either (the noise floor of the measure; `None`
+    /// when every frame had one).
+    pub worst_change_without_switch: Option<f64>,
     /// The settings (of a run stopped early, those whose images were captured, with the rounds
     /// timed so far: none where `frame.frames` is 0).
     pub settings: Vec<SettingResult>,
@@ -855,7 +856,7 @@ pub fn run_bench_lod(
         .skip(1)
         .filter(|d| d.ring_switches > 0)
         .map(|d| d.jump)
-        .fold(0.0, f64::max);
+        .reduce(f64::max);
     let worst_tree_pop = dolly
         .iter()
         .skip(1)
@@ -867,7 +868,7 @@ pub fn run_bench_lod(
         .skip(1)
         .filter(|d| d.ring_switches == 0 && d.tree_switches == 0)
         .map(|d| d.jump)
-        .fold(0.0, f64::max);
+        .reduce(f64::max);
     // Stopped before every setting's images were in: the far band and the FLIP against no LOD
     // of what was captured.
     let (far_band, vs_no_lod) = match references {

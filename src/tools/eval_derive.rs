@@ -658,7 +658,8 @@ pub fn min_side(factor: usize) -> usize {
     4 * factor + 8
 }
 
-/// Runs `eval derive` on the DEM at `dem_path` downsampled by `factor` and writes its CSV and
+/// Runs `eval derive` on the DEM at `dem_path` (read with `dem_options`: a cell size given in
+/// place of the file's) downsampled by `factor` and writes its CSV and
 /// charts into `out` ([`write_results`]). `progress` hears each method's name before it runs,
 /// with the methods done and their total. Refuses a factor that is not a power of two from 2
 /// to 64, an `out` where an output would replace the DEM, its sidecar or a file that is no
@@ -669,6 +670,7 @@ pub fn min_side(factor: usize) -> usize {
 /// the first method's result, it writes nothing (and a folder it made is removed).
 pub fn run_derive_eval(
     dem_path: &std::path::Path,
+    dem_options: &crate::world::DemOptions,
     factor: usize,
     out: &std::path::Path,
     stop: &crate::tools::stop::Stop,
@@ -685,7 +687,7 @@ pub fn run_derive_eval(
     }
     // Taken before the work: a run refused for its --out is refused at once.
     let out_dir = crate::tools::fly::OutDir::create_for(out, "eval derive", &outputs)?;
-    let dem = Dem::load(dem_path)?;
+    let dem = Dem::load_with(dem_path, dem_options)?;
     // Heights no planet has (a wrong scale in a sidecar) are refused as the baker refuses them.
     crate::bake::check_dem_heights(&dem, dem_path)?;
     if let Some(note) = filled_note(&dem, dem_path) {

@@ -338,6 +338,11 @@ impl Truth {
         Ok(out)
     }
 
+    /// Tile loads that failed so far (drawn from their ancestors).
+    pub fn failed_loads(&self) -> u64 {
+        self.scene.service().stats().stream.failed
+    }
+
     fn each_sample(
         &mut self,
         ctx: &GpuContext,
@@ -414,6 +419,11 @@ pub struct TruthReport {
     /// report covers the frames written.
     #[serde(default)]
     pub interrupted: bool,
+    /// Tile loads that failed during the run (a damaged file, a server that failed): those
+    /// tiles were drawn from their ancestors, so the frames are not the truth of the world's
+    /// stored tiles where they show them.
+    #[serde(default)]
+    pub failed_loads: u64,
 }
 
 /// `verdant fly --truth K`: the path's frames (the same times, cameras, walker and wind as
@@ -495,6 +505,7 @@ pub fn run_fly_truth(
         seconds: started.elapsed().as_secs_f64(),
         frames,
         interrupted,
+        failed_loads: truth.failed_loads(),
     };
     write_json(&opts.out.join("truth.json"), &report)?;
     out_dir.keep();

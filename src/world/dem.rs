@@ -39,6 +39,8 @@ pub const MAX_NODATA_FRACTION: f64 = 0.5;
 pub const MAX_DEM_PNG_BYTES: u64 = 2 * 2 * MAX_DEM_SAMPLES + (64 << 10);
 /// Largest DEM sidecar read, bytes.
 pub const MAX_SIDECAR_BYTES: u64 = 1 << 20;
+/// The widest cell a DEM sidecar may give, metres (1,000 km).
+pub const MAX_SIDECAR_CELL_M: f64 = 1_000_000.0;
 
 /// How to read a DEM.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -358,8 +360,24 @@ impl Dem {
                 Ok(())
             }
         };
-        check("cell_size_m.east_west", sidecar.cell_size_m.east_west)?;
-        check("cell_size_m.north_south", sidecar.cell_size_m.north_south)?;
+        for (field, value) in [
+            ("cell_size_m.east_west", sidecar.cell_size_m.east_west),
+            ("cell_size_m.north_south", sidecar.cell_size_m.north_south),
+        ] {
+            check(field, value)?;
+            // No DEM's samples lie further apart than a few degrees: a cell of thousands of
+            // kilometres is a wrong sidecar, named here rather than by what it breaks later.
+            if value > MAX_SIDECAR_CELL_M {
+                return Err(WorldError::OutOfRange {
+                    path: sidecar_file.clone(),
+                    field: field.into(),
+                    value: format!("{value:e}"),
+                    allowed: format!(
+                        "at most {MAX_SIDECAR_CELL_M} m (1,000 km; a degree of latitude is 111 km)"
+                    ),
+                });
+            }
+        }
         check("height_scale_m", sidecar.height_scale_m)?;
         if !sidecar.height_offset_m.is_finite() {
             return Err(WorldError::NonFinite {

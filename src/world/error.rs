@@ -675,8 +675,8 @@ pub enum WorldError {
     /// A DEM does not say how far apart its samples are (a TIFF without GeoTIFF tags), and no
     /// cell size was given to the baker.
     #[error(
-        "{}: {problem}, so its cell size is unknown: give it in metres \
-         (verdant bake --dem-cell-size M, or EW,NS)",
+        "{}: {problem}, so its cell size is unknown: give it in metres (--dem-cell-size M, \
+         or EW,NS, to verdant bake or verdant eval derive)",
         path.display()
     )]
     NoGeoreference {
