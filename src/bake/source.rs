@@ -107,10 +107,10 @@ impl DemSource {
         if let [one] = files
             && crate::world::window::is_remote(one)
         {
-            // A file at an address small enough for a quarter of the limit: read whole, in one
-            // range request, rather than a chunk at a time (which reads a row of an .hgt tile or
-            // a strip again for each chunk across it), and filled whole, as the same file on
-            // disk would be.
+            // A file at an address small enough for a quarter of the limit: read whole (an .hgt
+            // tile in reads of at most 4 MiB, a GeoTIFF a request a strip or tile) rather than a
+            // chunk at a time (which reads a row of an .hgt tile or a strip again for each chunk
+            // across it), and filled whole, as the same file on disk would be.
             let (mut dem, rows) =
                 crate::world::window::Rows::open(one, options, MAX_MOSAIC_SAMPLES)?;
             let samples = u64::from(dem.width) * u64::from(dem.height);

@@ -469,43 +469,76 @@ impl MapTiff {
         size: [usize; 2],
         each: impl Fn(u64) -> T,
     ) -> Result<Vec<T>, WorldError> {
-        let (w, h) = (self.width as usize, self.height as usize);
         let [cols, rows] = [
             [first[0], first[0] + size[0]],
             [first[1], first[1] + size[1]],
         ];
-        assert!(cols[1] <= w && rows[1] <= h, "a window inside the map");
-        // The window as the file stores it.
-        let stored_cols = if self.flip_cols {
-            [w - cols[1], w - cols[0]]
-        } else {
-            cols
-        };
-        let stored_rows = if self.flip_rows {
-            [h - rows[1], h - rows[0]]
-        } else {
-            rows
-        };
-        let mut out = vec![T::default(); size[0] * size[1]];
+        assert!(
+            cols[1] <= self.width as usize && rows[1] <= self.height as usize,
+            "a window inside the map"
+        );
         let (mut file, _) = super::format::open_regular(&self.path)?;
         let mut read = |offset: u64, count: u64| read_chunk(&self.path, &mut file, offset, count);
-        decode_window(
+        decode_window_north_up(
             &self.path,
             &self.layout,
             &self.chunks,
             self.codec,
             &mut read,
-            [stored_cols, stored_rows],
-            &mut |r, c, bits| {
-                let at = r * size[0] + c;
-                for (o, &v) in out[at..at + bits.len()].iter_mut().zip(bits) {
-                    *o = each(v);
-                }
-            },
-        )?;
-        north_up(&mut out, size[0].max(1), self.flip_rows, self.flip_cols);
-        Ok(out)
+            [self.flip_cols, self.flip_rows],
+            [cols, rows],
+            each,
+        )
     }
+}
+
+/// The samples of columns `cols` and rows `rows` (`window`, from the west and the north, ends
+/// exclusive) of an image stored east first or south first (`flip`: columns, rows), west first
+/// and north first, each sample's bit pattern made into what `each` makes of it. Only the
+/// strips or tiles that hold the window are read (by `read(offset, count)`) and decoded, one
+/// at a time: what is held is the window and one chunk.
+#[allow(clippy::too_many_arguments)]
+fn decode_window_north_up<T: Clone + Default>(
+    path: &Path,
+    layout: &ChunkLayout,
+    chunks: &[(u64, u64)],
+    codec: Codec,
+    read: &mut dyn FnMut(u64, u64) -> Result<Vec<u8>, WorldError>,
+    flip: [bool; 2],
+    window: [[usize; 2]; 2],
+    each: impl Fn(u64) -> T,
+) -> Result<Vec<T>, WorldError> {
+    let (w, h) = (layout.width as usize, layout.height as usize);
+    let [cols, rows] = window;
+    // The window as the file stores it.
+    let stored_cols = if flip[0] {
+        [w - cols[1], w - cols[0]]
+    } else {
+        cols
+    };
+    let stored_rows = if flip[1] {
+        [h - rows[1], h - rows[0]]
+    } else {
+        rows
+    };
+    let ww = cols[1] - cols[0];
+    let mut out = vec![T::default(); ww * (rows[1] - rows[0])];
+    decode_window(
+        path,
+        layout,
+        chunks,
+        codec,
+        read,
+        [stored_cols, stored_rows],
+        &mut |r, c, bits| {
+            let at = r * ww + c;
+            for (o, &v) in out[at..at + bits.len()].iter_mut().zip(bits) {
+                *o = each(v);
+            }
+        },
+    )?;
+    north_up(&mut out, ww.max(1), flip[1], flip[0]);
+    Ok(out)
 }
 
 /// The GeoTIFF tags of the first image.
@@ -1367,40 +1400,23 @@ impl TiffWindows {
     ) -> Result<Vec<f32>, WorldError> {
         let (w, h) = (self.layout.width as usize, self.layout.height as usize);
         debug_assert!(cols[0] <= cols[1] && cols[1] <= w && rows[0] <= rows[1] && rows[1] <= h);
-        // The window as the file stores it.
-        let stored_rows = if self.flip_rows {
-            [h - rows[1], h - rows[0]]
-        } else {
-            rows
-        };
-        let stored_cols = if self.flip_cols {
-            [w - cols[1], w - cols[0]]
-        } else {
-            cols
-        };
-        let ww = cols[1] - cols[0];
-        let mut bits = vec![0u64; ww * (rows[1] - rows[0])];
-        decode_window(
+        let bits = decode_window_north_up(
             &self.path,
             &self.layout,
             &self.chunks,
             self.codec,
             read,
-            [stored_cols, stored_rows],
-            &mut |r, c, samples| {
-                let at = r * ww + c;
-                bits[at..at + samples.len()].copy_from_slice(samples);
-            },
+            [self.flip_cols, self.flip_rows],
+            [cols, rows],
+            |v| v,
         )?;
-        let mut out = heights_of(
+        heights_of(
             &self.path,
             self.sample.typed(bits),
             self.sample,
             self.nodata,
             self.vertical,
-        )?;
-        north_up(&mut out, ww.max(1), self.flip_rows, self.flip_cols);
-        Ok(out)
+        )
     }
 
     /// Samples in one strip or tile, and in a row of one.
