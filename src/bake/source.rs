@@ -9,8 +9,9 @@
 //! for it, so neighbouring tiles agree however the work is split. Files and filled chunks are
 //! kept in small least-recently-used caches whose sizes the memory limit sets.
 
+use std::collections::HashSet;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Condvar, Mutex};
 
 use lru::LruCache;
 
@@ -42,6 +43,10 @@ pub(super) struct Mosaic {
     layout: Layout,
     named: PathBuf,
     chunks: Mutex<LruCache<[usize; 2], Arc<Vec<f32>>>>,
+    /// Chunks being made now, each by one thread; the others that need one wait for it on
+    /// `made` rather than read its files again.
+    making: Mutex<HashSet<[usize; 2]>>,
+    made: Condvar,
     /// Voids filled in each chunk, once it has been made.
     filled: Mutex<Vec<Option<u64>>>,
 }
@@ -132,6 +137,8 @@ impl DemSource {
             layout,
             named: named.to_path_buf(),
             chunks: Mutex::new(LruCache::new(std::num::NonZeroUsize::MIN)),
+            making: Mutex::new(HashSet::new()),
+            made: Condvar::new(),
             filled: Mutex::new(vec![None; n[0] * n[1]]),
         })))
     }
@@ -280,11 +287,38 @@ impl Mosaic {
         [0, 1].map(|a| ((at[a] + 1) * CHUNK).min(n[a] as usize) - at[a] * CHUNK)
     }
 
-    /// Chunk `at` (columns, rows from the north), from the cache or made.
+    /// Chunk `at` (columns, rows from the north), from the cache or made. A chunk another
+    /// thread is making is waited for, not made twice at once.
     fn chunk(&self, at: [usize; 2]) -> Result<Arc<Vec<f32>>, WorldError> {
-        if let Some(c) = lock(&self.chunks).get(&at) {
-            return Ok(c.clone());
+        {
+            let mut making = lock(&self.making);
+            loop {
+                // Looked up with `making` held, so that a chunk finished between the look and
+                // the claim is found, not made again.
+                if let Some(c) = lock(&self.chunks).get(&at) {
+                    return Ok(c.clone());
+                }
+                if making.insert(at) {
+                    break;
+                }
+                while making.contains(&at) {
+                    making = self
+                        .made
+                        .wait(making)
+                        .unwrap_or_else(std::sync::PoisonError::into_inner);
+                }
+            }
         }
+        // Releases the claim however the making ends (an error or a panic too), and wakes
+        // the waiters: they take the chunk from the cache, or make it themselves.
+        struct Claim<'a>(&'a Mosaic, [usize; 2]);
+        impl Drop for Claim<'_> {
+            fn drop(&mut self) {
+                lock(&self.0.making).remove(&self.1);
+                self.0.made.notify_all();
+            }
+        }
+        let _claim = Claim(self, at);
         let chunk = Arc::new(self.make_chunk(at)?);
         lock(&self.chunks).put(at, chunk.clone());
         Ok(chunk)
@@ -359,5 +393,66 @@ impl Mosaic {
         let across = chunks_across(header)[0];
         lock(&self.filled)[at[1] * across + at[0]] = Some(voids);
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An SRTM3 `.hgt` tile of gentle slopes, too large for a quarter of 64 MiB, so that a
+    /// bake reads it in chunks.
+    fn chunked_source(dir: &Path) -> DemSource {
+        let path = dir.join("N37W123.hgt");
+        let side = 1201u32;
+        let mut bytes = Vec::with_capacity((side * side * 2) as usize);
+        for r in 0..side {
+            for c in 0..side {
+                bytes.extend_from_slice(&((100 + (r + 2 * c) / 8) as i16).to_be_bytes());
+            }
+        }
+        std::fs::write(&path, bytes).unwrap();
+        DemSource::open(&[path.clone()], &path, &DemOptions::default(), 64).unwrap()
+    }
+
+    /// Threads that ask for the same chunk at once wait for the one making it rather than
+    /// each read its files again: they read what one thread alone reads.
+    #[test]
+    fn a_chunk_asked_for_at_once_is_made_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let alone = chunked_source(dir.path());
+        let DemSource::Mosaic(alone) = &alone else {
+            panic!("the tile should be read in chunks")
+        };
+        let before = alone.layout.bytes_read()[0];
+        let one = alone.chunk([0, 0]).unwrap();
+        let read_alone = alone.layout.bytes_read()[0] - before;
+        assert!(read_alone > 0);
+
+        let source = chunked_source(dir.path());
+        let DemSource::Mosaic(m) = &source else {
+            panic!("the tile should be read in chunks")
+        };
+        let before = m.layout.bytes_read()[0];
+        let start = std::sync::Barrier::new(4);
+        let chunks: Vec<Arc<Vec<f32>>> = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..4)
+                .map(|_| {
+                    s.spawn(|| {
+                        start.wait();
+                        m.chunk([0, 0]).unwrap()
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        assert_eq!(
+            m.layout.bytes_read()[0] - before,
+            read_alone,
+            "four threads asking at once read the files once"
+        );
+        for c in &chunks {
+            assert_eq!(**c, *one);
+        }
     }
 }

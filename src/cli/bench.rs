@@ -691,6 +691,35 @@ pub(crate) fn bench_aa(mut opts: verdant::tools::bench_aa::BenchAaOptions) -> Re
     if r.frames.is_empty() && r.paths.is_empty() {
         return Err(interrupted(false, &opts.out, "", String::new()));
     }
+    if let (Some(first), Some(last)) = (r.stale_images.first(), r.stale_images.last()) {
+        note!(
+            "warning: {} image{} in {} {} an earlier run's, not this one's ({first}{}): this run \
+             left {} as {} were",
+            r.stale_images.len(),
+            if r.stale_images.len() == 1 { "" } else { "s" },
+            opts.out.display(),
+            if r.stale_images.len() == 1 {
+                "is"
+            } else {
+                "are"
+            },
+            if first == last {
+                String::new()
+            } else {
+                format!(" .. {last}")
+            },
+            if r.stale_images.len() == 1 {
+                "it"
+            } else {
+                "them"
+            },
+            if r.stale_images.len() == 1 {
+                "it"
+            } else {
+                "they"
+            },
+        );
+    }
     say!(
         "{} [{}], against the {}x{} truth",
         r.adapter.name,

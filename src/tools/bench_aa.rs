@@ -547,6 +547,58 @@ pub struct BenchAaReport {
     /// report holds what was measured until then (the frames of a sequence cut short are in
     /// `frames`, not in `sequences`; a method timed in no round has no timing).
     pub interrupted: bool,
+    /// Images of bench aa's in the output folder that this run did not write (an earlier
+    /// run's, of other sizes, sequences or methods, or that a stopped run did not reach), by
+    /// name, in order.
+    pub stale_images: Vec<String>,
+}
+
+impl BenchAaReport {
+    /// Whether any frame or path view of `size` was measured (a chart of it is drawn).
+    pub fn measured(&self, size: (u32, u32)) -> bool {
+        self.frames.iter().any(|f| f.size == size) || self.paths.iter().any(|p| p.size == size)
+    }
+}
+
+/// Whether `name` is one of the images bench aa writes: a chart (`aa_960x540.png`) or a
+/// sequence's last frame (`960x540_dolly_taa.png`).
+fn is_bench_aa_image(name: &str) -> bool {
+    let size = |s: &str| {
+        s.split_once('x').is_some_and(|(w, h)| {
+            [w, h]
+                .iter()
+                .all(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+        })
+    };
+    let Some(stem) = name.strip_suffix(".png") else {
+        return false;
+    };
+    if let Some(chart) = stem.strip_prefix("aa_") {
+        return size(chart);
+    }
+    stem.split_once('_').is_some_and(|(wh, rest)| {
+        size(wh)
+            && rest.split_once('_').is_some_and(|(motion, what)| {
+                Motion::from_name(motion).is_some() && !what.is_empty()
+            })
+    })
+}
+
+/// The images of bench aa's in `out` last written before `since` (an earlier run's), by name.
+pub fn stale_images(out: &std::path::Path, since: std::time::SystemTime) -> Vec<String> {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return Vec::new();
+    };
+    let mut stale: Vec<String> = entries
+        .filter_map(|e| {
+            let e = e.ok()?;
+            let name = e.file_name().into_string().ok()?;
+            let modified = e.metadata().ok()?.modified().ok()?;
+            (is_bench_aa_image(&name) && modified < since).then_some(name)
+        })
+        .collect();
+    stale.sort();
+    stale
 }
 
 /// Pixel FLIP and coarse FLIP of `actual` against `reference`.
@@ -663,6 +715,8 @@ pub fn run_bench_aa(
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> Result<BenchAaReport> {
     opts.validate()?;
+    // An image last written before now is an earlier run's.
+    let started = std::time::SystemTime::now();
     let world = World::open(&opts.world)?;
     let start_path = crate::tools::camera_path(&world, &opts.world, Some(&opts.path))?;
     let paths: Vec<CameraPath> = opts
@@ -1002,7 +1056,7 @@ pub fn run_bench_aa(
     // timed in the rounds it ran.
     frames.extend(sequence.into_iter().flatten());
     timings.extend(timing.into_iter().flat_map(|t| t.timings(gpu)));
-    let report = BenchAaReport {
+    let mut report = BenchAaReport {
         adapter: AdapterReport::of(&ctx),
         truth_k: opts.truth_k,
         truth_reach: opts.truth_reach,
@@ -1014,12 +1068,24 @@ pub fn run_bench_aa(
         truth_content,
         counts,
         interrupted,
+        stale_images: Vec::new(),
     };
     if report.frames.is_empty() && report.paths.is_empty() {
         // Stopped before the first frame was measured: nothing written (an earlier run's files
         // stay as they were).
         return Ok(report);
     }
+    // The charts are written after the report: those of the sizes measured are this run's.
+    let charted: Vec<String> = opts
+        .sizes
+        .iter()
+        .filter(|&&s| report.measured(s))
+        .map(|s| format!("aa_{}x{}.png", s.0, s.1))
+        .collect();
+    report.stale_images = stale_images(&opts.out, started)
+        .into_iter()
+        .filter(|n| !charted.contains(n))
+        .collect();
     write_outputs(opts, &report)?;
     out_dir.keep();
     Ok(report)
@@ -1113,10 +1179,7 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
     write_text(&opts.out.join("aa_timing.csv"), &csv)?;
     write_json(&opts.out.join("aa.json"), r)?;
     // A chart per size measured (every size, unless the run was stopped early).
-    let measured = |size: (u32, u32)| {
-        r.frames.iter().any(|f| f.size == size) || r.paths.iter().any(|p| p.size == size)
-    };
-    for &size in opts.sizes.iter().filter(|&&s| measured(s)) {
+    for &size in opts.sizes.iter().filter(|&&s| r.measured(s)) {
         let points = r
             .timings
             .iter()
@@ -1166,6 +1229,46 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An earlier run's images are told apart from this run's by when they were written, and
+    /// from the user's own files by their names.
+    #[test]
+    fn an_earlier_runs_images_are_found_and_nothing_else() {
+        for name in [
+            "aa_960x540.png",
+            "960x540_dolly_taa.png",
+            "1920x1080_teleport_truth.png",
+            "960x540_still_+segments_9_3_3.png",
+        ] {
+            assert!(is_bench_aa_image(name), "{name}");
+        }
+        for name in [
+            "aa.json",
+            "aa_frames.csv",
+            "aa_960.png",
+            "aa_x540.png",
+            "960x540_walk_taa.png",
+            "960x540_dolly_.png",
+            "960x540_dolly_taa.jpg",
+            "frame_00001.png",
+            "holiday.png",
+        ] {
+            assert!(!is_bench_aa_image(name), "{name}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["aa_1920x1080.png", "1920x1080_pan_msaa.png", "notes.png"] {
+            std::fs::write(dir.path().join(name), b"old").unwrap();
+        }
+        // File times have a coarse grain on some file systems: the run starts well after.
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        let started = std::time::SystemTime::now();
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        std::fs::write(dir.path().join("960x540_pan_taa.png"), b"new").unwrap();
+        assert_eq!(
+            stale_images(dir.path(), started),
+            ["1920x1080_pan_msaa.png", "aa_1920x1080.png"]
+        );
+    }
 
     #[test]
     fn recovery_counts_the_frames_until_the_error_settles() {
