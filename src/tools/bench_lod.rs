@@ -556,7 +556,8 @@ pub struct BenchLodReport {
     /// The settings on the front of the flight's p99 time against pixel FLIP, fastest first
     /// (empty without a flight).
     pub flight_front: Vec<String>,
-    /// Whether the default setting is on that front (`None` without a flight).
+    /// Whether the default setting is on that front (`None` without a flight, or in a run
+    /// stopped before the default's flight was timed).
     pub default_on_flight_front: Option<bool>,
     /// The frame counts of the timings.
     pub counts: FrameCounts,
@@ -974,9 +975,9 @@ pub fn run_bench_lod(
         coarse_front,
         flight_path: flight.as_ref().map(|p| p.name.clone()),
         flight_frames: flight.as_ref().map(|_| opts.flight_frames),
-        default_on_flight_front: flight
-            .as_ref()
-            .map(|_| default.is_some_and(|r| r.pareto_flight)),
+        default_on_flight_front: default
+            .filter(|r| r.flight.is_some())
+            .map(|r| r.pareto_flight),
         flight_front,
         counts,
         interrupted,
