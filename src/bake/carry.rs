@@ -63,7 +63,7 @@ struct Block {
 /// colour) can still be re-baked with its hand-made parts; they are checked as parts of the new
 /// manifest.
 #[derive(serde::Deserialize)]
-struct KeptParts {
+pub(super) struct KeptParts {
     #[serde(default)]
     plant_types: Vec<PlantType>,
     #[serde(default)]
@@ -72,15 +72,13 @@ struct KeptParts {
     wind_scenes: Vec<WindScene>,
 }
 
-fn kept_parts(old_text: &str, old_path: &Path) -> Result<KeptParts, WorldError> {
+pub(super) fn kept_parts(old_text: &str, old_path: &Path) -> Result<KeptParts, WorldError> {
     let syntax = |message: String| WorldError::ManifestSyntax {
         path: old_path.to_path_buf(),
         message: message.trim_end().to_owned(),
     };
-    let error = |e: toml::de::Error| syntax(crate::world::manifest::toml_error(old_text, &e));
-    let mut table: toml::Table = old_text.parse().map_err(error)?;
-    table.retain(|key, _| ["plant_types", "paths", "wind_scenes"].contains(&key));
-    toml::Value::Table(table).try_into().map_err(error)
+    // Read from the text itself (the other keys ignored), so that an error names its line.
+    toml::from_str(old_text).map_err(|e| syntax(crate::world::manifest::toml_error(old_text, &e)))
 }
 
 /// `new_text` (the manifest a bake wrote) with the plant types of `old_text`, and its camera
@@ -372,6 +370,25 @@ mod tests {
         let (text, carried) = carry(&new, &old, path).unwrap();
         assert_eq!(carried.plant_types, ["fern"]);
         assert!(text.contains("# moss lovers") && !carried.rewritten);
+    }
+
+    /// A kept part the old manifest gets wrong is refused at the line it is on, like any
+    /// other error of a manifest.
+    #[test]
+    fn a_kept_part_missing_a_field_is_refused_at_its_line() {
+        let old = manifest(&["bare", "meadow"], "[[plant_types]]\n");
+        let line = old.lines().position(|l| l == "[[plant_types]]").unwrap() + 1;
+        let e = kept_parts(&old, Path::new("w/world.toml"))
+            .err()
+            .expect("a plant type without a name")
+            .to_string();
+        for needle in [
+            "w/world.toml".to_string(),
+            "missing field `name`".to_string(),
+            format!("line {line}"),
+        ] {
+            assert!(e.contains(&needle), "{needle:?} not in {e:?}");
+        }
     }
 
     #[test]

@@ -291,6 +291,8 @@ pub fn bake(
         log::warn!("{note}");
     }
     check_out(&opts.out, opts.replace)?;
+    // The replaced manifest's kept parts are read before hours of baking, not after.
+    replaced_manifest(&out, opts)?;
     let dems: Vec<PathBuf> = std::iter::once(opts.dem.clone())
         .chain(opts.more_dems.iter().cloned())
         .collect();
@@ -728,9 +730,20 @@ fn manifest_text(
     opts: &BakeOptions,
 ) -> Result<(String, Carried), WorldError> {
     let text = manifest.to_toml();
+    match replaced_manifest(out, opts)? {
+        None => Ok((text, Carried::default())),
+        Some(old_text) => carry::carry(&text, &old_text, &opts.out.join("world.toml")),
+    }
+}
+
+/// The text of the `world.toml` that a bake with `--replace` (and without `--fresh-manifest`)
+/// replaces in `out` (resolved) and keeps parts of; `None` where it keeps none. Its kept parts
+/// are read here too, so that a manifest that cannot give them is refused before the bake
+/// starts rather than when it ends.
+fn replaced_manifest(out: &Path, opts: &BakeOptions) -> Result<Option<String>, WorldError> {
     let old = out.join("world.toml");
     if !opts.replace || opts.fresh_manifest || std::fs::symlink_metadata(&old).is_err() {
-        return Ok((text, Carried::default()));
+        return Ok(None);
     }
     let shown = opts.out.join("world.toml");
     let refuse = |e: WorldError| WorldError::Carry {
@@ -747,7 +760,8 @@ fn manifest_text(
             message: format!("not UTF-8 text: {e}"),
         })
     })?;
-    carry::carry(&text, &old_text, &shown)
+    carry::kept_parts(&old_text, &shown).map_err(refuse)?;
+    Ok(Some(old_text))
 }
 
 /// The manifest's record of the densest grass, `density` over windows of the finest grass
