@@ -472,8 +472,21 @@ pub(super) fn remove_stale_staging(out: &Path) -> Vec<String> {
             continue;
         }
         if is_staging_name(&file_name, &name, "removing") {
-            // A removal that was cut short: nothing in it is read any more.
-            let _ = std::fs::remove_dir_all(entry.path());
+            // A removal that was cut short: nothing in it is read any more. Only a folder
+            // named as `discard` names one (`.NAME.removing.PID-N`) and holding only a staging
+            // folder's entries: a folder of the user's of a name like it is left alone.
+            let numbered = file_name
+                .rsplit('.')
+                .next()
+                .and_then(|n| n.split_once('-'))
+                .is_some_and(|(pid, n)| {
+                    [pid, n]
+                        .iter()
+                        .all(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+                });
+            if numbered && holds_only_staging_entries(&entry.path()) {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
             continue;
         }
         if !is_staging_name(&file_name, &name, "baking") {
@@ -797,6 +810,30 @@ mod tests {
         remove_stale_staging(&out);
         assert_eq!(read(&theirs.join("notes.txt")), "notes");
         assert!(!killed.exists());
+    }
+
+    /// A removal cut short is finished only where the folder is one: named as a removal names
+    /// it and holding a staging folder's entries alone. A folder of the user's named like one
+    /// stays, with what it holds.
+    #[test]
+    fn a_folder_named_like_a_removal_is_removed_only_if_it_is_one() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().canonicalize().unwrap().join("w");
+        write(&out.join("world.toml"), OLD_MANIFEST);
+        let mine = tmp.path().join(".w.removing.mine");
+        std::fs::create_dir_all(mine.join(STAGING_WORLD)).unwrap();
+        let theirs = tmp.path().join(".w.removing.12-3");
+        write(&theirs.join("thesis.tex"), "precious");
+        let cut_short = tmp.path().join(".w.removing.12-4");
+        write(
+            &cut_short.join(STAGING_WORLD).join("world.toml"),
+            NEW_MANIFEST,
+        );
+        write(&cut_short.join(STAGING_LOCK), "");
+        remove_stale_staging(&out);
+        assert!(mine.join(STAGING_WORLD).is_dir());
+        assert_eq!(read(&theirs.join("thesis.tex")), "precious");
+        assert!(!cut_short.exists());
     }
 
     /// Only the staging folders of the output folder itself are taken for its own, not those

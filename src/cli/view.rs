@@ -66,10 +66,22 @@ pub(crate) fn view(args: ViewArgs) -> Result<()> {
         service: stream.service(),
         wind_scene: wind,
         aa,
+        // Ctrl-C or SIGTERM ends the view at its next frame, as closing the window does.
+        stop: Some(super::stop_on_signals()?),
     })?;
     // A session the user ends reports nothing.
-    if frames.is_none() {
+    let Some(n) = frames else {
         return Ok(());
+    };
+    if summary.stopped {
+        let shot = screenshot.as_ref().map_or(String::new(), |f| {
+            format!("; {} was not written", f.display())
+        });
+        return Err(super::Interrupted(format!(
+            "the view was stopped after {} of {n} frames{shot}",
+            summary.frames
+        ))
+        .into());
     }
     if summary.frames < 2 {
         // One frame has no time between frames to take a median of.

@@ -52,6 +52,9 @@ pub struct ViewOptions {
     pub wind_scene: Option<String>,
     /// Anti-aliasing to start with (default: the renderer's); T cycles through the methods.
     pub aa: Option<crate::aa::AntiAliasing>,
+    /// Ends the view at its next frame once set (Ctrl-C, SIGTERM): a session as the window's
+    /// closing does, a run of N frames with [`ViewSummary::stopped`].
+    pub stop: Option<crate::bake::CancelFlag>,
 }
 
 /// What a run of [`ViewOptions::frames`] frames measured (a session the user ends reports
@@ -69,6 +72,9 @@ pub struct ViewSummary {
     /// The most terrain tiles a frame drew (0: no frame drew any terrain, see
     /// [`super::fly::no_terrain_drawn`]).
     pub tiles_drawn_max: u32,
+    /// Whether a run of N frames was stopped ([`ViewOptions::stop`]) before its last frame:
+    /// `frames` were drawn, and no screenshot was written.
+    pub stopped: bool,
 }
 
 /// Opens the window and runs until it is closed (or `frames` are drawn).
@@ -116,11 +122,23 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
     if let Some(e) = app.error {
         return Err(e);
     }
+    let drawn = app.state.as_ref().map_or(0, |s| s.frames);
+    let stopped = app.opts.stop.as_ref().is_some_and(|f| f.is_cancelled());
+    if let Some(n) = app.opts.frames
+        && app.summary.frames < u64::from(n)
+        && stopped
+    {
+        // Stopped by a signal: said by the caller, as every run stopped so is.
+        return Ok(ViewSummary {
+            frames: drawn,
+            stopped: true,
+            ..app.summary
+        });
+    }
     // A run of N frames whose window was closed (or Escape pressed) before the last.
     if let Some(n) = app.opts.frames
         && app.summary.frames < u64::from(n)
     {
-        let drawn = app.state.as_ref().map_or(0, |s| s.frames);
         let shot = app.opts.screenshot.as_ref().map_or(String::new(), |f| {
             format!("; {} was not written", f.display())
         });
@@ -455,7 +473,17 @@ impl ApplicationHandler for Viewer {
         }
     }
 
-    fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
+    fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
+        if let Some(stop) = &self.opts.stop {
+            if stop.is_cancelled() {
+                event_loop.exit();
+                return;
+            }
+            // The loop wakes now and then to look, even while it draws nothing.
+            event_loop.set_control_flow(winit::event_loop::ControlFlow::wait_duration(
+                std::time::Duration::from_millis(100),
+            ));
+        }
         // Nothing is drawn while the window is too large: the loop waits for its next resize.
         if let Some(s) = &self.state
             && !s.too_large
@@ -683,6 +711,7 @@ impl Viewer {
                 adapter: s.ctx.describe(),
                 path: s.paths[s.path_index].name.clone(),
                 tiles_drawn_max: s.tiles_drawn_max,
+                stopped: false,
             };
             event_loop.exit();
         }
