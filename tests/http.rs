@@ -2542,6 +2542,11 @@ fn a_reply_that_is_not_the_whole_file_is_refused_naming_why() {
             "Content-Encoding \"gzip\", which was not asked for",
         ),
         (
+            // A second header is a second list of codings, not to be missed.
+            "HTTP/1.1 200 OK\r\nContent-Encoding: identity\r\nContent-Encoding: gzip\r\nContent-Length: 5\r\nETag: \"x\"\r\n\r\nhello",
+            "Content-Encoding \"gzip\", which was not asked for",
+        ),
+        (
             "HTTP/1.1 304 Not Modified\r\n\r\n",
             "HTTP 304 Not Modified to a request that was not conditional",
         ),

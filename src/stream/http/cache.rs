@@ -117,6 +117,9 @@ pub(super) struct DiskCache {
     /// A write has failed and been reported: later failures (a full disk fails every write)
     /// are not reported again.
     pub(super) warned: bool,
+    /// A file whose validator made its metadata longer than [`MAX_META_BYTES`] was not cached:
+    /// said once.
+    told_long_meta: bool,
 }
 
 impl DiskCache {
@@ -144,6 +147,7 @@ impl DiskCache {
             clock: 0,
             entries: HashMap::new(),
             warned: false,
+            told_long_meta: false,
         };
         for entry in std::fs::read_dir(&config.dir).map_err(err)? {
             let Ok(entry) = entry else { continue };
@@ -268,6 +272,19 @@ impl DiskCache {
         if size > self.max_bytes {
             return;
         }
+        // Metadata that `get` would refuse to read is not written (an ETag of kilobytes).
+        if meta.len() as u64 > MAX_META_BYTES {
+            if !self.told_long_meta {
+                log::warn!(
+                    "{url}: not cached: its validator ({} bytes) makes metadata longer than \
+                     the {MAX_META_BYTES} bytes the tile cache reads (files like it are fetched \
+                     whole each time; further ones are not reported)",
+                    validator.to_line().len()
+                );
+                self.told_long_meta = true;
+            }
+            return;
+        }
         let key = Self::key(url);
         self.remove(&key);
         self.evict(size);
@@ -327,6 +344,27 @@ mod tests {
     use std::path::Path;
 
     use super::*;
+
+    /// A file whose validator would make metadata that `get` refuses to read is not cached
+    /// (it was written, then dropped with a warning on every later read); one of ordinary
+    /// metadata beside it is.
+    #[test]
+    fn metadata_too_long_to_read_back_is_not_written() {
+        let tmp = tempfile::tempdir().unwrap();
+        let config = HttpCacheConfig {
+            dir: tmp.path().join("cache"),
+            max_bytes: 1 << 20,
+        };
+        let mut cache = DiskCache::open(&config).unwrap();
+        let long = Validator::ETag(format!("\"{}\"", "e".repeat(20_000)));
+        cache.put("http://h/long", &long, &[1; 100]);
+        assert!(cache.entries.is_empty() && cache.told_long_meta);
+        assert_eq!(std::fs::read_dir(&config.dir).unwrap().count(), 0);
+        assert!(cache.get("http://h/long", 1000).is_none());
+        let short = Validator::ETag("\"a\"".into());
+        cache.put("http://h/short", &short, &[2; 100]);
+        assert_eq!(cache.get("http://h/short", 1000).unwrap().1, [2; 100]);
+    }
 
     #[test]
     fn the_disk_cache_stays_within_its_bytes_and_drops_the_least_recently_used() {

@@ -290,8 +290,21 @@ impl Client {
         }
         // Nothing asked for a coded body (no Accept-Encoding is sent): one sent coded would be
         // taken, and cached, for the file's bytes.
-        if let Some(coding) = header("content-encoding")
-            .filter(|c| !c.is_empty() && !c.eq_ignore_ascii_case("identity"))
+        // Every such header and every coding each lists (a second header is a second list).
+        let content_codings: Vec<String> = response
+            .headers()
+            .get_all("content-encoding")
+            .iter()
+            .flat_map(|v| {
+                String::from_utf8_lossy(v.as_bytes())
+                    .split(',')
+                    .map(|c| c.trim().to_string())
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        if let Some(coding) = content_codings
+            .iter()
+            .find(|c| !c.is_empty() && !c.eq_ignore_ascii_case("identity"))
         {
             return Err(bad(format!(
                 "Content-Encoding {coding:?}, which was not asked for and is not read"
