@@ -311,6 +311,20 @@ pub fn bake(
                 }
                 ShardStep::Finish { .. } => {
                     parts.check_all_done()?;
+                    // Every shard is done, so no shard writes here now: a temporary of a tile
+                    // is a killed or failed shard's, and is not to be published with the tiles.
+                    let swept = crate::world::format::sweep_tile_temporaries(
+                        &parts.dir.join("tiles"),
+                        std::time::Duration::ZERO,
+                    );
+                    if swept > 0 {
+                        log::warn!(
+                            "removed {swept} temporar{} of tile files that a shard's write cut \
+                             short left in {}",
+                            if swept == 1 { "y" } else { "ies" },
+                            parts.dir.join("tiles").display()
+                        );
+                    }
                     // Where no tile crosses shards, the shards' manifest is all the finish
                     // needs: the world is published without being computed again.
                     if let Some(report) = finish_from_parts(&parts, &out, opts, step.count())? {

@@ -180,6 +180,18 @@ fn stamp(given: Option<&str>) -> Result<()> {
         }
         other => other?,
     };
+    if report.temporaries_removed > 0 {
+        note!(
+            "removed {} temporar{} of tile files that a write cut short left in {}",
+            report.temporaries_removed,
+            if report.temporaries_removed == 1 {
+                "y"
+            } else {
+                "ies"
+            },
+            super::shown(&dir.join("tiles"))
+        );
+    }
     list_failed(&report.failed)?;
     let Some(id) = &report.bake_id else {
         bail!(

@@ -238,6 +238,9 @@ pub struct StampReport {
     /// The id the files were stamped with (the manifest's new `bake_id`); `None` where nothing
     /// was written.
     pub bake_id: Option<String>,
+    /// Temporaries of tile files that killed or failed writers left in `tiles/` (over a
+    /// minute old), removed before the stamping.
+    pub temporaries_removed: usize,
     /// Wall-clock time, seconds.
     pub seconds: f64,
 }
@@ -310,6 +313,12 @@ pub fn stamp_world(
                 .into(),
         ));
     }
+    // What a writer killed (or failed) part-way left beside the tiles goes first; a minute
+    // old, so that another stamping's write under way is not taken for one.
+    let temporaries_removed = crate::world::format::sweep_tile_temporaries(
+        &tiles_dir,
+        std::time::Duration::from_secs(60),
+    );
     progress(0, total);
     // The first pass reads every tile and fingerprints its samples.
     let mut hash = crate::hash::FNV_BASIS;
@@ -351,6 +360,7 @@ pub fn stamp_world(
         tiles: tiles.len() as u64,
         failed,
         bake_id,
+        temporaries_removed,
         seconds: start.elapsed().as_secs_f64(),
     };
     if !failed.is_empty() {

@@ -441,6 +441,9 @@ impl OutDir {
             lock: None,
         };
         dir.lock = Some(lock_folder(path, tool)?);
+        // With the lock held no other run writes here: a temporary of one of this run's files
+        // is a killed run's, never to be renamed into place.
+        sweep_temporaries(path, outputs);
         Ok(dir)
     }
 
@@ -452,6 +455,38 @@ impl OutDir {
     /// The run succeeded: the folder stays (its lock is let go).
     pub fn keep(mut self) {
         self.kept = true;
+    }
+}
+
+/// The name of the file that `name` is a [`write_atomic`] temporary of
+/// (`.{file}.{pid}-{n}.tmp`), if it is one.
+fn temporary_of(name: &str) -> Option<&str> {
+    let (file, tag) = name
+        .strip_prefix('.')?
+        .strip_suffix(".tmp")?
+        .rsplit_once('.')?;
+    let (pid, n) = tag.split_once('-')?;
+    ([pid, n]
+        .iter()
+        .all(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+        && !file.is_empty())
+    .then_some(file)
+}
+
+/// Removes from `dir` the temporaries of the files `outputs` writes that a killed run left
+/// (regular files alone; what cannot be removed stays).
+fn sweep_temporaries(dir: &Path, outputs: &Outputs) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(name) = name.to_str() else { continue };
+        if temporary_of(name).is_some_and(|f| (outputs.writes)(f))
+            && e.file_type().is_ok_and(|t| t.is_file())
+        {
+            let _ = std::fs::remove_file(e.path());
+        }
     }
 }
 
@@ -702,6 +737,31 @@ mod tests {
             .collect();
         v.sort();
         v
+    }
+
+    /// A killed run's temporaries of the files a run writes are removed when the next run
+    /// takes the folder; temporaries of other files, and the user's files, stay.
+    #[test]
+    fn a_killed_runs_temporaries_of_this_runs_files_are_swept() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in [
+            ".derive.csv.4-0.tmp",
+            ".frame_00001.png.123-7.tmp",
+            ".notes.txt.4-0.tmp",
+            ".derive.csv.mine.tmp",
+            "derive.csv",
+        ] {
+            std::fs::write(dir.path().join(name), "x").unwrap();
+        }
+        let outputs = Outputs::matching(|n| n == "derive.csv" || n.starts_with("frame_"));
+        let out = OutDir::create_for(dir.path(), "eval derive", &outputs).unwrap();
+        out.keep();
+        assert_eq!(
+            names(dir.path()),
+            [".derive.csv.mine.tmp", ".notes.txt.4-0.tmp", "derive.csv"]
+        );
+        assert_eq!(temporary_of(".a.b.png.1-2.tmp"), Some("a.b.png"));
+        assert_eq!(temporary_of("..1-2.tmp"), None);
     }
 
     #[test]

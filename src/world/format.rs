@@ -690,16 +690,57 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WorldError> 
     // A file of its own: a killed writer's temporary of the same name goes first, and whatever
     // is at the name then (a link, say) is refused rather than written through.
     let _ = std::fs::remove_file(&tmp);
-    std::fs::OpenOptions::new()
+    let mut file = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
         .open(&tmp)
-        .and_then(|mut f| std::io::Write::write_all(&mut f, bytes))
         .map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        io(e)
-    })
+    // From here the temporary is this writer's: a write or rename that fails removes it (a
+    // full disk left part of a tile beside the tiles).
+    std::io::Write::write_all(&mut file, bytes)
+        .and_then(|()| {
+            drop(file);
+            std::fs::rename(&tmp, path)
+        })
+        .map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            io(e)
+        })
+}
+
+/// Removes from a world's `tiles/` folder (its `L{level}` folders) the temporaries of tile
+/// files ([`is_tile_temporary_name`]) last written more than `older_than` ago: a killed or
+/// failed writer's, which no rename will ever put in place. Returns how many it removed.
+pub fn sweep_tile_temporaries(tiles: &Path, older_than: std::time::Duration) -> usize {
+    let Ok(levels) = std::fs::read_dir(tiles) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for level in levels.flatten() {
+        if !level.file_type().is_ok_and(|t| t.is_dir()) {
+            continue;
+        }
+        let Ok(entries) = std::fs::read_dir(level.path()) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let old = e.metadata().is_ok_and(|m| {
+                m.is_file()
+                    && m.modified().is_ok_and(|t| {
+                        std::time::SystemTime::now()
+                            .duration_since(t)
+                            .is_ok_and(|age| age >= older_than)
+                    })
+            });
+            if old
+                && e.file_name().to_str().is_some_and(is_tile_temporary_name)
+                && std::fs::remove_file(e.path()).is_ok()
+            {
+                removed += 1;
+            }
+        }
+    }
+    removed
 }
 
 /// Reorders rows between south-first (memory) and north-first (files); its own inverse.
@@ -1098,5 +1139,48 @@ mod tests {
         ] {
             assert!(!is_tile_temporary_name(other), "{other}");
         }
+    }
+
+    /// The temporaries of tile files older than the grace go; a fresh one (a write under way)
+    /// and every other file stay.
+    #[test]
+    fn old_temporaries_of_tile_files_are_swept_and_nothing_else() {
+        let tmp = tempfile::tempdir().unwrap();
+        let tiles = tmp.path().join("tiles");
+        let level = tiles.join("L2");
+        std::fs::create_dir_all(&level).unwrap();
+        let long_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+        for (name, old) in [
+            (".0_0.height.exr.4.tmp", true),
+            (".1_0.type.png.77.tmp", false),
+            (".notes.txt.4.tmp", true),
+            ("0_0.height.exr", true),
+        ] {
+            let path = level.join(name);
+            std::fs::write(&path, "x").unwrap();
+            if old {
+                std::fs::File::options()
+                    .write(true)
+                    .open(&path)
+                    .unwrap()
+                    .set_modified(long_ago)
+                    .unwrap();
+            }
+        }
+        let swept = super::sweep_tile_temporaries(&tiles, std::time::Duration::from_secs(60));
+        assert_eq!(swept, 1);
+        let mut left: Vec<String> = std::fs::read_dir(&level)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        left.sort();
+        assert_eq!(
+            left,
+            [".1_0.type.png.77.tmp", ".notes.txt.4.tmp", "0_0.height.exr"]
+        );
+        assert_eq!(
+            super::sweep_tile_temporaries(&tiles, std::time::Duration::ZERO),
+            1
+        );
     }
 }
