@@ -128,13 +128,56 @@ fn mounted_apart(out: &Path) -> Option<PathBuf> {
             std::fs::metadata(&path).ok()?,
             std::fs::metadata(parent).ok()?,
         );
-        (here.is_dir() && here.dev() != above.dev()).then(|| parent.to_path_buf())
+        // A bind mount is on the same device as its parent, and a folder cannot be moved into
+        // it either: it is known by the mount table.
+        (here.is_dir() && (here.dev() != above.dev() || is_mount_point(&path)))
+            .then(|| parent.to_path_buf())
     }
     #[cfg(not(unix))]
     {
         let _ = out;
         None
     }
+}
+
+/// Whether `path` (resolved) is where a file system is mounted, by the process's mount table
+/// (`/proc/self/mountinfo`; false where there is none).
+#[cfg(unix)]
+fn is_mount_point(path: &Path) -> bool {
+    let Ok(table) = std::fs::read_to_string("/proc/self/mountinfo") else {
+        return false;
+    };
+    table.lines().any(|line| {
+        line.split(' ')
+            .nth(4)
+            .is_some_and(|at| Path::new(&unescape_mount_path(at)) == path)
+    })
+}
+
+/// A mount table's path with its octal escapes (`\040` for a space) undone.
+#[cfg(unix)]
+fn unescape_mount_path(text: &str) -> std::ffi::OsString {
+    use std::os::unix::ffi::OsStringExt;
+    let bytes = text.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let octal = bytes
+            .get(i + 1..i + 4)
+            .filter(|d| bytes[i] == b'\\' && d.iter().all(|b| (b'0'..=b'7').contains(b)))
+            .map(|d| d.iter().fold(0u32, |v, b| v * 8 + u32::from(b - b'0')));
+        match octal {
+            Some(v) if v <= 0xff => {
+                out.push(v as u8);
+                i += 4;
+            }
+            _ => {
+                out.push(bytes[i]);
+                i += 1;
+            }
+        }
+    }
+    std::ffi::OsString::from_vec(out)
 }
 
 /// `out` made absolute, without `.` or `..` components or a trailing slash: the longest part
@@ -834,6 +877,20 @@ mod tests {
         assert!(mine.join(STAGING_WORLD).is_dir());
         assert_eq!(read(&theirs.join("thesis.tex")), "precious");
         assert!(!cut_short.exists());
+    }
+
+    /// A mount point is known from the mount table, its escapes undone; a plain folder is not
+    /// one.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn mount_points_are_read_from_the_mount_table() {
+        assert!(is_mount_point(Path::new("/proc")));
+        let tmp = tempfile::tempdir().unwrap();
+        assert!(!is_mount_point(&tmp.path().canonicalize().unwrap()));
+        assert_eq!(
+            unescape_mount_path("/mnt/my\\040disk\\134x\\9"),
+            std::ffi::OsString::from("/mnt/my disk\\x\\9")
+        );
     }
 
     /// Only the staging folders of the output folder itself are taken for its own, not those
