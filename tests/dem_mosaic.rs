@@ -588,6 +588,41 @@ fn geotiffs_over_http_bake_like_the_files_on_disk() {
     .to_string();
     assert!(err.contains(&missing) && err.contains("404"), "{err}");
     assert!(!dir.path().join("never").exists());
+
+    // A VRT at an address reads its sources beside it, over HTTP, and never a path on this
+    // machine that it names.
+    write_vrt(&served.join("beside.vrt"), &names);
+    let c = dir.path().join("vrt_beside");
+    small_bake(
+        Path::new(&format!("{url}/beside.vrt")),
+        Vec::new(),
+        &c,
+        20.0,
+    );
+    assert_eq!(world_files(&a), world_files(&c));
+    let text = std::fs::read_to_string(served.join("beside.vrt"))
+        .unwrap()
+        .replacen(
+            "relativeToVRT=\"1\">tile_0_0.tif",
+            "relativeToVRT=\"0\">/etc/passwd",
+            1,
+        );
+    std::fs::write(served.join("local.vrt"), text).unwrap();
+    let err = bake(
+        &BakeOptions {
+            dem: PathBuf::from(format!("{url}/local.vrt")),
+            out: dir.path().join("never"),
+            ..Default::default()
+        },
+        &mut |_, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("/etc/passwd") && err.contains("never by a path on this machine"),
+        "{err}"
+    );
+    assert!(!dir.path().join("never").exists());
 }
 
 /// A signal while a request for the DEM is in flight stops the bake as a stop (status 130,

@@ -164,6 +164,17 @@ fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
             ));
         }
         let relative = node.attribute("relativeToVRT") == Some("1");
+        if super::window::is_remote(vrt) && !relative && !name.starts_with("http://") {
+            // A file served from elsewhere does not choose what is read on this machine.
+            return Err(mosaic_error(
+                vrt,
+                format!(
+                    "source {name:?}: a VRT read over http names its sources by http:// \
+                     addresses or relative to itself (relativeToVRT=\"1\"), never by a path on \
+                     this machine"
+                ),
+            ));
+        }
         let p = if name.starts_with("http://") {
             PathBuf::from(name)
         } else if relative {
