@@ -44,10 +44,12 @@ pub(super) fn check_out(out: &Path, replace: bool) -> Result<(), WorldError> {
             ));
         }
         Ok(_) if !out.is_dir() => {
+            let what =
+                std::fs::metadata(out).map_or("a file", |m| crate::world::format::what_file_is(&m));
             return Err(WorldError::bad_option(
                 "--out",
                 out.display(),
-                "a folder (this is a file)".into(),
+                format!("a folder (this is {what})"),
             ));
         }
         _ => {}

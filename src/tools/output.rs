@@ -351,7 +351,19 @@ fn not_a_folder(path: &Path) -> Option<String> {
     };
     match std::fs::metadata(nearest) {
         Ok(m) if m.is_dir() => None,
-        Ok(_) => Some(format!("{who} is a file, not a folder")),
+        Ok(m) => Some(format!(
+            "{who} is {}, not a folder",
+            crate::world::format::what_file_is(&m)
+        )),
+        // ELOOP: links that lead to each other, or more of them than the system follows.
+        Err(e) if e.raw_os_error() == Some(40) => {
+            let to = std::fs::read_link(nearest).ok()?;
+            Some(format!(
+                "{who} is a symbolic link to {}, which leads back round to itself (a loop of \
+                 links)",
+                to.display()
+            ))
+        }
         Err(_) => {
             let to = std::fs::read_link(nearest).ok()?;
             Some(format!(
@@ -705,7 +717,27 @@ mod tests {
         std::fs::write(&file, "mine").unwrap();
         let link = tmp.path().join("dangling");
         std::os::unix::fs::symlink(tmp.path().join("nowhere"), &link).unwrap();
+        let (loop1, loop2) = (tmp.path().join("loop1"), tmp.path().join("loop2"));
+        std::os::unix::fs::symlink(&loop2, &loop1).unwrap();
+        std::os::unix::fs::symlink(&loop1, &loop2).unwrap();
+        let fifo = tmp.path().join("pipe");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap();
+        assert!(made.success());
         let cases = [
+            (
+                loop1.clone(),
+                format!(
+                    "it is a symbolic link to {}, which leads back round to itself",
+                    loop2.display()
+                ),
+            ),
+            (
+                fifo.clone(),
+                "it is a named pipe (FIFO), not a folder".to_owned(),
+            ),
             (file.clone(), "it is a file, not a folder".to_owned()),
             (
                 file.join("out"),
@@ -727,7 +759,10 @@ mod tests {
         }
         assert_eq!(std::fs::read_to_string(&file).unwrap(), "mine");
         assert!(!tmp.path().join("nowhere").exists());
-        assert_eq!(names(tmp.path()), ["dangling", "notes.txt"]);
+        assert_eq!(
+            names(tmp.path()),
+            ["dangling", "loop1", "loop2", "notes.txt", "pipe"]
+        );
     }
 
     fn names(dir: &Path) -> Vec<String> {

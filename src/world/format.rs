@@ -670,6 +670,22 @@ fn special_kind(t: std::fs::FileType) -> &'static str {
     }
 }
 
+/// What a file that is not a folder is, for errors: "a named pipe (FIFO)", "a socket", "a
+/// device" or "a file".
+pub fn what_file_is(m: &std::fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    let t = m.file_type();
+    if t.is_fifo() {
+        "a named pipe (FIFO)"
+    } else if t.is_socket() {
+        "a socket"
+    } else if t.is_block_device() || t.is_char_device() {
+        "a device"
+    } else {
+        "a file"
+    }
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same directory, creating the
 /// directory where needed.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WorldError> {
