@@ -144,9 +144,24 @@ impl ReadAt for LocalFile {
     fn read_at(&self, offset: u64, count: u64) -> Result<Vec<u8>, WorldError> {
         use std::os::unix::fs::FileExt;
         let mut buf = vec![0u8; count as usize];
-        self.handle()?
-            .read_exact_at(&mut buf, offset)
-            .map_err(|e| WorldError::io(&self.path, e))?;
+        let file = self.handle()?;
+        file.read_exact_at(&mut buf, offset).map_err(|e| {
+            // Within the length it had when it was opened: the file was cut short since.
+            match file.metadata() {
+                Ok(m) if e.kind() == std::io::ErrorKind::UnexpectedEof && m.len() != self.len => {
+                    WorldError::DemMosaic {
+                        path: self.path.clone(),
+                        problem: format!(
+                            "it holds {} bytes now, not the {} it held when it was first read: \
+                             it changed while it was read",
+                            m.len(),
+                            self.len
+                        ),
+                    }
+                }
+                _ => WorldError::io(&self.path, e),
+            }
+        })?;
         Ok(buf)
     }
     fn len(&self) -> u64 {
@@ -445,6 +460,29 @@ impl Rows {
 
 #[cfg(test)]
 mod tests {
+    /// A file cut short after it was opened is said to have changed while it was read, not
+    /// as a bare "failed to fill whole buffer".
+    #[test]
+    fn a_file_cut_short_while_it_is_read_is_said_to_have_changed() {
+        use super::ReadAt;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("N37W123.hgt");
+        std::fs::write(&path, [7u8; 100]).unwrap();
+        let file = super::LocalFile::open(&path).unwrap();
+        assert_eq!(file.read_at(50, 10).unwrap(), [7u8; 10]);
+        std::fs::File::options()
+            .write(true)
+            .open(&path)
+            .unwrap()
+            .set_len(10)
+            .unwrap();
+        let e = file.read_at(50, 10).unwrap_err().to_string();
+        assert!(
+            e.contains("N37W123.hgt") && e.contains("changed while it was read"),
+            "{e}"
+        );
+    }
+
     #[test]
     fn an_address_is_remote_in_any_case_of_its_scheme() {
         use std::path::Path;
