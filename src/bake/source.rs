@@ -412,7 +412,13 @@ mod tests {
             }
         }
         std::fs::write(&path, bytes).unwrap();
-        DemSource::open(&[path.clone()], &path, &DemOptions::default(), 64).unwrap()
+        DemSource::open(
+            std::slice::from_ref(&path),
+            &path,
+            &DemOptions::default(),
+            64,
+        )
+        .unwrap()
     }
 
     /// Threads that ask for the same chunk at once wait for the one making it rather than

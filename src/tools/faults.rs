@@ -127,12 +127,11 @@ impl FileFaults {
         {
             // A partial copy is this run's own (the folder did not exist): not left behind.
             let _ = std::fs::remove_dir_all(copy);
-            return Err(anyhow::Error::new(e)
-                .context(format!(
-                    "cannot copy {} to {} for its faults",
-                    original.display(),
-                    copy.display()
-                )));
+            return Err(anyhow::Error::new(e).context(format!(
+                "cannot copy {} to {} for its faults",
+                original.display(),
+                copy.display()
+            )));
         }
         let mut files = Vec::new();
         let tiles = copy.join("tiles");
