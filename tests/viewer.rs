@@ -122,11 +122,11 @@ fn a_view_of_n_frames_stopped_by_ctrl_c_says_so() {
         .expect("xvfb-run is needed for the viewer's test (Debian package xvfb)");
     // Well after its handlers are in (they are the first thing the command does).
     std::thread::sleep(Duration::from_secs(8));
-    // The viewer itself, found by the screenshot's name in its command line (xvfb-run's own
-    // shell carries it too, and passes the signal on as the terminal would).
+    // The viewer alone, a child of xvfb-run's shell (which a SIGINT would end, and its clean-up
+    // with it).
     let sent = Command::new("pkill")
-        .args(["-INT", "-f"])
-        .arg(shot.to_str().unwrap())
+        .args(["-INT", "-x", "verdant", "-P"])
+        .arg(child.id().to_string())
         .status()
         .unwrap();
     assert!(sent.success(), "no viewer to stop");

@@ -521,8 +521,7 @@ pub(super) fn remove_stale_staging(out: &Path) -> Vec<String> {
             // named as `discard` names one (`.NAME.removing.PID-N`) and holding only a staging
             // folder's entries: a folder of the user's of a name like it is left alone.
             let numbered = file_name
-                .rsplit('.')
-                .next()
+                .strip_prefix(&format!(".{name}.removing."))
                 .and_then(|n| n.split_once('-'))
                 .is_some_and(|(pid, n)| {
                     [pid, n]
@@ -635,6 +634,19 @@ fn recover_publish(out: &Path, dir: &Path) -> Result<Option<String>, String> {
             dir.display()
         )
     })?;
+    // What of the replaced world could not go back (a world.toml put into the folder by hand
+    // since stands where it would go) stays with the staging folder, which is kept.
+    let previous = dir.join(STAGING_PREVIOUS);
+    if std::fs::read_dir(&previous).is_ok_and(|mut e| e.next().is_some()) {
+        return Err(format!(
+            "{}: a bake was killed while moving its world in, and what it had moved aside of the \
+             world it replaced was not put back (the folder holds files of those names now); \
+             {} is kept, with that world in previous/: move what you want of it back by hand, \
+             then remove the folder",
+            out.display(),
+            dir.display()
+        ));
+    }
     if journal.created {
         // Removed only while empty.
         let _ = std::fs::remove_dir(out);
@@ -802,6 +814,28 @@ mod tests {
         }
     }
 
+    /// A publish killed after moving the old world aside, into whose folder a world.toml was
+    /// put by hand since: the old manifest cannot go back, so the staging folder that holds it
+    /// is kept, and said to be, not removed with it.
+    #[test]
+    fn a_replaced_world_that_cannot_go_back_is_kept() {
+        for done in 1..=3 {
+            let tmp = tempfile::tempdir().unwrap();
+            let base = tmp.path().canonicalize().unwrap();
+            let (out, dir, _) = killed_publish(&base, false, true, true, done);
+            let previous = dir.join(STAGING_PREVIOUS).join("world.toml");
+            assert_eq!(read(&previous), OLD_MANIFEST, "{done} moves done");
+            write(&out.join("world.toml"), "by hand");
+            let notes = remove_stale_staging(&out);
+            assert_eq!(read(&previous), OLD_MANIFEST, "{done} moves done");
+            assert_eq!(read(&out.join("world.toml")), "by hand");
+            assert!(
+                notes.len() == 1 && notes[0].contains("is kept, with that world in previous/"),
+                "{done} moves done: {notes:?}"
+            );
+        }
+    }
+
     /// A sharded bake's publish that fails leaves the shards' tiles in their parts folder and
     /// the output folder as it was; one that succeeds removes the parts folder.
     #[test]
@@ -869,6 +903,8 @@ mod tests {
         std::fs::create_dir_all(mine.join(STAGING_WORLD)).unwrap();
         let theirs = tmp.path().join(".w.removing.12-3");
         write(&theirs.join("thesis.tex"), "precious");
+        let dotted = tmp.path().join(".w.removing.old.12-5");
+        std::fs::create_dir_all(dotted.join(STAGING_WORLD)).unwrap();
         let cut_short = tmp.path().join(".w.removing.12-4");
         write(
             &cut_short.join(STAGING_WORLD).join("world.toml"),
@@ -878,6 +914,7 @@ mod tests {
         remove_stale_staging(&out);
         assert!(mine.join(STAGING_WORLD).is_dir());
         assert_eq!(read(&theirs.join("thesis.tex")), "precious");
+        assert!(dotted.join(STAGING_WORLD).is_dir());
         assert!(!cut_short.exists());
     }
 

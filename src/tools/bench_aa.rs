@@ -584,17 +584,16 @@ fn is_bench_aa_image(name: &str) -> bool {
     })
 }
 
-/// The images of bench aa's in `out` last written before `since` (an earlier run's), by name.
-pub fn stale_images(out: &std::path::Path, since: std::time::SystemTime) -> Vec<String> {
+/// The images of bench aa's in `out` other than those named in `written` (this run's): an
+/// earlier run's, by name.
+pub fn stale_images(out: &std::path::Path, written: &[String]) -> Vec<String> {
     let Ok(entries) = std::fs::read_dir(out) else {
         return Vec::new();
     };
     let mut stale: Vec<String> = entries
         .filter_map(|e| {
-            let e = e.ok()?;
-            let name = e.file_name().into_string().ok()?;
-            let modified = e.metadata().ok()?.modified().ok()?;
-            (is_bench_aa_image(&name) && modified < since).then_some(name)
+            let name = e.ok()?.file_name().into_string().ok()?;
+            (is_bench_aa_image(&name) && !written.contains(&name)).then_some(name)
         })
         .collect();
     stale.sort();
@@ -715,8 +714,6 @@ pub fn run_bench_aa(
     progress: &mut dyn FnMut(&str, u64, u64),
 ) -> Result<BenchAaReport> {
     opts.validate()?;
-    // An image last written before now is an earlier run's.
-    let started = std::time::SystemTime::now();
     let world = World::open(&opts.world)?;
     let start_path = crate::tools::camera_path(&world, &opts.world, Some(&opts.path))?;
     let paths: Vec<CameraPath> = opts
@@ -790,6 +787,9 @@ pub fn run_bench_aa(
     let start = sample_path(&start_path, t0);
     let mut frames = Vec::new();
     let mut sequences = Vec::new();
+    // The last frames' images this run wrote, by name (the rest of bench aa's in the folder are
+    // an earlier run's).
+    let mut written: Vec<String> = Vec::new();
     let mut path_views = Vec::new();
     let mut timings = Vec::new();
     // The sequence under way (a list of frames per method) and the timing under way: kept by a
@@ -912,20 +912,18 @@ pub fn run_bench_aa(
                     });
                 }
                 // The last frame of the sequence, each method's and the truth's, to look at.
-                let name = |what: &str| {
-                    opts.out.join(format!(
-                        "{}x{}_{}_{what}.png",
-                        size.0,
-                        size.1,
-                        motion.name()
-                    ))
+                let mut write_last = |what: &str, img: &RgbaImage| -> Result<()> {
+                    let name = format!("{}x{}_{}_{what}.png", size.0, size.1, motion.name());
+                    write_png(&opts.out.join(&name), img)?;
+                    written.push(name);
+                    Ok(())
                 };
                 if let Some(img) = &truth_prev {
-                    write_png(&name("truth"), img)?;
+                    write_last("truth", img)?;
                 }
                 for (m, (method, _)) in scenes.iter().enumerate() {
                     if let Some(img) = &prev[m] {
-                        write_png(&name(method), img)?;
+                        write_last(method, img)?;
                     }
                 }
                 frames.extend(std::mem::take(&mut sequence).into_iter().flatten());
@@ -1076,16 +1074,13 @@ pub fn run_bench_aa(
         return Ok(report);
     }
     // The charts are written after the report: those of the sizes measured are this run's.
-    let charted: Vec<String> = opts
-        .sizes
-        .iter()
-        .filter(|&&s| report.measured(s))
-        .map(|s| format!("aa_{}x{}.png", s.0, s.1))
-        .collect();
-    report.stale_images = stale_images(&opts.out, started)
-        .into_iter()
-        .filter(|n| !charted.contains(n))
-        .collect();
+    written.extend(
+        opts.sizes
+            .iter()
+            .filter(|&&s| report.measured(s))
+            .map(|s| format!("aa_{}x{}.png", s.0, s.1)),
+    );
+    report.stale_images = stale_images(&opts.out, &written);
     write_outputs(opts, &report)?;
     out_dir.keep();
     Ok(report)
@@ -1230,7 +1225,7 @@ fn write_outputs(opts: &BenchAaOptions, r: &BenchAaReport) -> Result<()> {
 mod tests {
     use super::*;
 
-    /// An earlier run's images are told apart from this run's by when they were written, and
+    /// An earlier run's images are told apart from this run's by the names this run wrote, and
     /// from the user's own files by their names.
     #[test]
     fn an_earlier_runs_images_are_found_and_nothing_else() {
@@ -1259,13 +1254,9 @@ mod tests {
         for name in ["aa_1920x1080.png", "1920x1080_pan_msaa.png", "notes.png"] {
             std::fs::write(dir.path().join(name), b"old").unwrap();
         }
-        // File times have a coarse grain on some file systems: the run starts well after.
-        std::thread::sleep(std::time::Duration::from_millis(50));
-        let started = std::time::SystemTime::now();
-        std::thread::sleep(std::time::Duration::from_millis(50));
         std::fs::write(dir.path().join("960x540_pan_taa.png"), b"new").unwrap();
         assert_eq!(
-            stale_images(dir.path(), started),
+            stale_images(dir.path(), &["960x540_pan_taa.png".to_string()]),
             ["1920x1080_pan_msaa.png", "aa_1920x1080.png"]
         );
     }

@@ -314,7 +314,8 @@ pub fn stamp_world(
         ));
     }
     // What a writer killed (or failed) part-way left beside the tiles goes first; a minute
-    // old, so that another stamping's write under way is not taken for one.
+    // old, so that another stamping's write under way is not taken for one (one stalled that
+    // long would find its temporary gone and fail, naming the file: nothing is lost).
     let temporaries_removed = crate::world::format::sweep_tile_temporaries(
         &tiles_dir,
         std::time::Duration::from_secs(60),

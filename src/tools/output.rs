@@ -356,7 +356,7 @@ fn not_a_folder(path: &Path) -> Option<String> {
             crate::world::format::what_file_is(&m)
         )),
         // ELOOP: links that lead to each other, or more of them than the system follows.
-        Err(e) if e.raw_os_error() == Some(40) => {
+        Err(e) if e.raw_os_error() == Some(libc::ELOOP) => {
             let to = std::fs::read_link(nearest).ok()?;
             Some(format!(
                 "{who} is a symbolic link to {}, which leads back round to itself (a loop of \

@@ -90,6 +90,13 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
         check_screenshot(file)?;
     }
     let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
+    if opts.stop.as_ref().is_some_and(|f| f.is_cancelled()) {
+        // Stopped while the world opened (over HTTP, say): nothing drawn.
+        return Ok(ViewSummary {
+            stopped: opts.frames.is_some(),
+            ..ViewSummary::default()
+        });
+    }
     if world.manifest.paths.is_empty() {
         bail!("world {} has no camera paths", opts.world.display());
     }
@@ -258,7 +265,7 @@ impl Viewer {
         config.format = format;
         config.present_mode = present_mode(&caps, self.opts.vsync);
         config.desired_maximum_frame_latency = 2;
-        surface.configure(&ctx.device, &config);
+        configure(&surface, &ctx.device, &config)?;
 
         let paths = world.manifest.paths.clone();
         let path_index = match &self.opts.path {
@@ -355,6 +362,23 @@ impl Viewer {
     }
 }
 
+/// Configures `surface` as `config` says, an error (a display that went away, say) returned
+/// rather than raised as a panic by wgpu's default handler.
+fn configure(
+    surface: &wgpu::Surface<'_>,
+    device: &wgpu::Device,
+    config: &wgpu::SurfaceConfiguration,
+) -> Result<()> {
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    surface.configure(device, config);
+    match pollster::block_on(scope.pop()) {
+        None => Ok(()),
+        Some(e) => {
+            bail!("the window's surface could not be configured (was the display closed?): {e}")
+        }
+    }
+}
+
 fn present_mode(caps: &wgpu::SurfaceCapabilities, vsync: bool) -> wgpu::PresentMode {
     use wgpu::PresentMode as P;
     let wanted: &[P] = if vsync {
@@ -374,16 +398,31 @@ impl ApplicationHandler for Viewer {
         if self.state.is_some() {
             return;
         }
+        // A stop asked for while the world opened, or while the first tiles came in.
+        let flag = self.opts.stop.clone();
+        let stopped = || flag.as_ref().is_some_and(|f| f.is_cancelled());
+        if stopped() {
+            event_loop.exit();
+            return;
+        }
         match self.start(event_loop) {
             Ok(s) => {
                 s.window.request_redraw();
                 self.state = Some(s);
+                if stopped() {
+                    event_loop.exit();
+                }
             }
             Err(e) => self.fail(event_loop, e),
         }
     }
 
     fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        // Nothing more is drawn once a stop is asked for (the display may be going with it).
+        if self.opts.stop.as_ref().is_some_and(|f| f.is_cancelled()) {
+            event_loop.exit();
+            return;
+        }
         let Some(s) = &mut self.state else { return };
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
@@ -396,7 +435,10 @@ impl ApplicationHandler for Viewer {
                         s.too_large = false;
                         s.config.width = width;
                         s.config.height = height;
-                        s.surface.configure(&s.ctx.device, &s.config);
+                        if let Err(e) = configure(&s.surface, &s.ctx.device, &s.config) {
+                            self.fail(event_loop, e);
+                            return;
+                        }
                         s.depth = depth_target(&s.ctx.device, width, height);
                         s.depth_view = s.depth.create_view(&Default::default());
                     }
@@ -539,7 +581,7 @@ impl State {
                 let vsync = self.config.present_mode != wgpu::PresentMode::Fifo;
                 let caps = self.surface.get_capabilities(&self.ctx.adapter);
                 self.config.present_mode = present_mode(&caps, vsync);
-                self.surface.configure(&self.ctx.device, &self.config);
+                configure(&self.surface, &self.ctx.device, &self.config)?;
             }
             KeyCode::Digit1
             | KeyCode::Digit2
@@ -671,7 +713,7 @@ impl Viewer {
             wgpu::CurrentSurfaceTexture::Success(f)
             | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
             wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
-                s.surface.configure(&s.ctx.device, &s.config);
+                configure(&s.surface, &s.ctx.device, &s.config)?;
                 return Ok(());
             }
             _ => return Ok(()), // timed out or occluded: try the next frame

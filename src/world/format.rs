@@ -672,6 +672,14 @@ fn special_kind(t: std::fs::FileType) -> &'static str {
 
 /// What a file that is not a folder is, for errors: "a named pipe (FIFO)", "a socket", "a
 /// device" or "a file".
+#[cfg(not(unix))]
+pub fn what_file_is(_: &std::fs::Metadata) -> &'static str {
+    "a file"
+}
+
+/// What a file that is not a folder is, for errors: "a named pipe (FIFO)", "a socket", "a
+/// device" or "a file".
+#[cfg(unix)]
 pub fn what_file_is(m: &std::fs::Metadata) -> &'static str {
     use std::os::unix::fs::FileTypeExt;
     let t = m.file_type();

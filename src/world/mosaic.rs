@@ -182,6 +182,16 @@ fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
         } else {
             PathBuf::from(name)
         };
+        if super::window::is_remote(vrt) && !super::window::is_remote(&p) {
+            // An absolute name "relative" to the VRT is that path on this machine.
+            return Err(mosaic_error(
+                vrt,
+                format!(
+                    "source {name:?}: a VRT read over http names its sources by http:// \
+                     addresses or relative to itself, never by a path on this machine"
+                ),
+            ));
+        }
         if has_extension(&p, "vrt") {
             return Err(mosaic_error(
                 vrt,

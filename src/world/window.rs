@@ -120,13 +120,14 @@ impl LocalFile {
         }
         let (file, len) = super::format::open_regular(&self.path)?;
         if len != self.len {
-            return Err(WorldError::DemMosaic {
-                path: self.path.clone(),
-                problem: format!(
-                    "it holds {len} bytes now, not the {} it held when it was first read",
+            return Err(WorldError::io(
+                &self.path,
+                std::io::Error::other(format!(
+                    "it holds {len} bytes now, not the {} it held when it was first read: it \
+                     changed while it was read",
                     self.len
-                ),
-            });
+                )),
+            ));
         }
         let file = std::sync::Arc::new(file);
         with_handles(|h| h.put(self.id, std::sync::Arc::clone(&file)));
@@ -149,15 +150,15 @@ impl ReadAt for LocalFile {
             // Within the length it had when it was opened: the file was cut short since.
             match file.metadata() {
                 Ok(m) if e.kind() == std::io::ErrorKind::UnexpectedEof && m.len() != self.len => {
-                    WorldError::DemMosaic {
-                        path: self.path.clone(),
-                        problem: format!(
+                    WorldError::io(
+                        &self.path,
+                        std::io::Error::other(format!(
                             "it holds {} bytes now, not the {} it held when it was first read: \
                              it changed while it was read",
                             m.len(),
                             self.len
-                        ),
-                    }
+                        )),
+                    )
                 }
                 _ => WorldError::io(&self.path, e),
             }

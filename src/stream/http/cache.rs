@@ -272,14 +272,16 @@ impl DiskCache {
         if size > self.max_bytes {
             return;
         }
-        // Metadata that `get` would refuse to read is not written (an ETag of kilobytes).
+        // Metadata that `get` would refuse to read is not written (an ETag of kilobytes), and
+        // an older entry of the address, no longer the file, goes.
         if meta.len() as u64 > MAX_META_BYTES {
+            self.remove(&Self::key(url));
             if !self.told_long_meta {
                 log::warn!(
-                    "{url}: not cached: its validator ({} bytes) makes metadata longer than \
-                     the {MAX_META_BYTES} bytes the tile cache reads (files like it are fetched \
-                     whole each time; further ones are not reported)",
-                    validator.to_line().len()
+                    "{url}: not cached: its address and validator ({} bytes) make metadata \
+                     longer than the {MAX_META_BYTES} bytes the tile cache reads (files like it \
+                     are fetched whole each time; further ones are not reported)",
+                    meta.len()
                 );
                 self.told_long_meta = true;
             }
@@ -364,6 +366,10 @@ mod tests {
         let short = Validator::ETag("\"a\"".into());
         cache.put("http://h/short", &short, &[2; 100]);
         assert_eq!(cache.get("http://h/short", 1000).unwrap().1, [2; 100]);
+        // The file at an address, now with a long validator: its old entry is not kept.
+        cache.put("http://h/short", &long, &[3; 100]);
+        assert!(cache.get("http://h/short", 1000).is_none());
+        assert_eq!(std::fs::read_dir(&config.dir).unwrap().count(), 0);
     }
 
     #[test]
