@@ -600,29 +600,32 @@ fn geotiffs_over_http_bake_like_the_files_on_disk() {
         20.0,
     );
     assert_eq!(world_files(&a), world_files(&c));
-    let text = std::fs::read_to_string(served.join("beside.vrt"))
-        .unwrap()
-        .replacen(
-            "relativeToVRT=\"1\">tile_0_0.tif",
-            "relativeToVRT=\"0\">/etc/passwd",
-            1,
+    // Named as a path, or as an absolute path "relative" to the VRT.
+    for relative in ["0", "1"] {
+        let text = std::fs::read_to_string(served.join("beside.vrt"))
+            .unwrap()
+            .replacen(
+                "relativeToVRT=\"1\">tile_0_0.tif",
+                &format!("relativeToVRT=\"{relative}\">/etc/passwd"),
+                1,
+            );
+        std::fs::write(served.join("local.vrt"), text).unwrap();
+        let err = bake(
+            &BakeOptions {
+                dem: PathBuf::from(format!("{url}/local.vrt")),
+                out: dir.path().join("never"),
+                ..Default::default()
+            },
+            &mut |_, _, _| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("/etc/passwd") && err.contains("never by a path on this machine"),
+            "relativeToVRT={relative}: {err}"
         );
-    std::fs::write(served.join("local.vrt"), text).unwrap();
-    let err = bake(
-        &BakeOptions {
-            dem: PathBuf::from(format!("{url}/local.vrt")),
-            out: dir.path().join("never"),
-            ..Default::default()
-        },
-        &mut |_, _, _| {},
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(
-        err.contains("/etc/passwd") && err.contains("never by a path on this machine"),
-        "{err}"
-    );
-    assert!(!dir.path().join("never").exists());
+        assert!(!dir.path().join("never").exists());
+    }
 }
 
 /// A signal while a request for the DEM is in flight stops the bake as a stop (status 130,
