@@ -105,43 +105,6 @@ fn the_viewer_warns_when_no_frame_drew_terrain() {
     assert!(stderr.contains("\"away\""), "{stderr}");
 }
 
-/// Ctrl-C ends a run of N frames at its next frame as a stop (status 130, saying how many
-/// frames were drawn and that the screenshot was not written), not silently by the signal.
-#[test]
-fn a_view_of_n_frames_stopped_by_ctrl_c_says_so() {
-    let dir = tempfile::tempdir().unwrap();
-    let shot = dir.path().join("stopped-view.png");
-    let child = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 640x480x24", verdant_bin(), "view"])
-        .arg(common::default_world())
-        .args(["--size", "32x18", "--frames", "1000000", "--screenshot"])
-        .arg(&shot)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("xvfb-run is needed for the viewer's test (Debian package xvfb)");
-    // Well after its handlers are in (they are the first thing the command does).
-    std::thread::sleep(Duration::from_secs(8));
-    // The viewer alone, a child of xvfb-run's shell (which a SIGINT would end, and its clean-up
-    // with it).
-    let sent = Command::new("pkill")
-        .args(["-INT", "-x", "verdant", "-P"])
-        .arg(child.id().to_string())
-        .status()
-        .unwrap();
-    assert!(sent.success(), "no viewer to stop");
-    let out = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(130), "{stderr}");
-    assert!(
-        stderr.contains("the view was stopped after")
-            && stderr.contains("of 1000000 frames")
-            && stderr.contains("was not written"),
-        "{stderr}"
-    );
-    assert!(!shot.exists());
-}
-
 #[test]
 fn the_viewer_without_a_display_says_so_and_suggests_fly() {
     let out = Command::new(verdant_bin())

@@ -66,8 +66,9 @@ pub(crate) fn view(args: ViewArgs) -> Result<()> {
         service: stream.service(),
         wind_scene: wind,
         aa,
-        // Ctrl-C or SIGTERM ends the view at its next frame, as closing the window does.
-        stop: Some(super::stop_on_signals()?),
+        // No handler: a signal ends the view at once. Caught, it left the viewer drawing on
+        // after a SIGTERM to its whole group had ended its X server, and winit panics then.
+        stop: None,
     })?;
     // A session the user ends reports nothing.
     let Some(n) = frames else {

@@ -734,10 +734,7 @@ mod tests {
                     loop2.display()
                 ),
             ),
-            (
-                fifo.clone(),
-                "it is a named pipe (FIFO), not a folder".to_owned(),
-            ),
+            (fifo.clone(), "it is a FIFO, not a folder".to_owned()),
             (file.clone(), "it is a file, not a folder".to_owned()),
             (
                 file.join("out"),

@@ -90,7 +90,8 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
         check_screenshot(file)?;
     }
     let (world, source) = crate::tools::open_world(&opts.world, &opts.http)?;
-    if opts.stop.as_ref().is_some_and(|f| f.is_cancelled()) {
+    let stop = crate::tools::stop::Stop::new(opts.stop.clone());
+    if stop.requested() {
         // Stopped while the world opened (over HTTP, say): nothing drawn.
         return Ok(ViewSummary {
             stopped: opts.frames.is_some(),
@@ -118,6 +119,7 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
     };
     let mut app = Viewer {
         opts,
+        stop,
         world: Some((world, source)),
         state: None,
         error: None,
@@ -130,7 +132,7 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
         return Err(e);
     }
     let drawn = app.state.as_ref().map_or(0, |s| s.frames);
-    let stopped = app.opts.stop.as_ref().is_some_and(|f| f.is_cancelled());
+    let stopped = app.stop.requested();
     if let Some(n) = app.opts.frames
         && app.summary.frames < u64::from(n)
         && stopped
@@ -156,6 +158,8 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
 
 struct Viewer {
     opts: ViewOptions,
+    /// [`ViewOptions::stop`], looked at before each frame and event.
+    stop: crate::tools::stop::Stop,
     world: Option<(World, std::sync::Arc<dyn crate::stream::TileSource>)>,
     state: Option<State>,
     error: Option<anyhow::Error>,
@@ -399,9 +403,7 @@ impl ApplicationHandler for Viewer {
             return;
         }
         // A stop asked for while the world opened, or while the first tiles came in.
-        let flag = self.opts.stop.clone();
-        let stopped = || flag.as_ref().is_some_and(|f| f.is_cancelled());
-        if stopped() {
+        if self.stop.requested() {
             event_loop.exit();
             return;
         }
@@ -409,7 +411,7 @@ impl ApplicationHandler for Viewer {
             Ok(s) => {
                 s.window.request_redraw();
                 self.state = Some(s);
-                if stopped() {
+                if self.stop.requested() {
                     event_loop.exit();
                 }
             }
@@ -419,7 +421,7 @@ impl ApplicationHandler for Viewer {
 
     fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
         // Nothing more is drawn once a stop is asked for (the display may be going with it).
-        if self.opts.stop.as_ref().is_some_and(|f| f.is_cancelled()) {
+        if self.stop.requested() {
             event_loop.exit();
             return;
         }
@@ -516,11 +518,11 @@ impl ApplicationHandler for Viewer {
     }
 
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
-        if let Some(stop) = &self.opts.stop {
-            if stop.is_cancelled() {
-                event_loop.exit();
-                return;
-            }
+        if self.stop.requested() {
+            event_loop.exit();
+            return;
+        }
+        if self.opts.stop.is_some() {
             // The loop wakes now and then to look, even while it draws nothing.
             event_loop.set_control_flow(winit::event_loop::ControlFlow::wait_duration(
                 std::time::Duration::from_millis(100),

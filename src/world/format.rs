@@ -670,27 +670,12 @@ fn special_kind(t: std::fs::FileType) -> &'static str {
     }
 }
 
-/// What a file that is not a folder is, for errors: "a named pipe (FIFO)", "a socket", "a
-/// device" or "a file".
-#[cfg(not(unix))]
-pub fn what_file_is(_: &std::fs::Metadata) -> &'static str {
-    "a file"
-}
-
-/// What a file that is not a folder is, for errors: "a named pipe (FIFO)", "a socket", "a
-/// device" or "a file".
-#[cfg(unix)]
+/// What a file that is not a folder is, for errors: "a file", or what [`special_kind`] says.
 pub fn what_file_is(m: &std::fs::Metadata) -> &'static str {
-    use std::os::unix::fs::FileTypeExt;
-    let t = m.file_type();
-    if t.is_fifo() {
-        "a named pipe (FIFO)"
-    } else if t.is_socket() {
-        "a socket"
-    } else if t.is_block_device() || t.is_char_device() {
-        "a device"
-    } else {
+    if m.is_file() {
         "a file"
+    } else {
+        special_kind(m.file_type())
     }
 }
 
