@@ -47,7 +47,7 @@ enum Command {
     Serve {
         /// World folder, or the name of a world under ./worlds.
         #[arg(default_value = "santa-cruz")]
-        world: String,
+        world: std::ffi::OsString,
         /// Address to listen on (port 0 picks a free port).
         #[arg(long, default_value = "127.0.0.1:8000")]
         addr: String,

@@ -548,3 +548,39 @@ fn a_folder_named_here_is_the_world_named_even_without_its_manifest() {
     assert!(stderr.contains("is not used"), "{stderr}");
     assert!(!stdout.contains("\"location\""), "{stdout}");
 }
+
+#[test]
+#[cfg(unix)]
+fn a_world_folder_whose_name_is_not_utf8_is_read_as_bake_wrote_it() {
+    use std::ffi::OsStr;
+    use std::os::unix::ffi::OsStrExt;
+    let dir = tempfile::tempdir().unwrap();
+    // A bake writes any name `--out` gives; every command that reads a world takes it.
+    let name = OsStr::from_bytes(b"w\xff");
+    let world = small_world(dir.path(), "baked", 3);
+    std::fs::rename(&world, dir.path().join(name)).unwrap();
+    let run = |args: &[&OsStr]| {
+        Command::new(env!("CARGO_BIN_EXE_verdant"))
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap()
+    };
+    let out = run(&[
+        OsStr::new("check"),
+        name,
+        OsStr::new("--threads"),
+        OsStr::new("2"),
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    assert!(stdout.contains("every tile is whole"), "{stdout}");
+    let out = run(&[OsStr::new("check"), OsStr::new("--stamp"), name]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}{stderr}");
+    // A name that is not there is named, escaped, as any other missing world.
+    let out = run(&[OsStr::new("check"), OsStr::from_bytes(b"x\xff")]);
+    let (_, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("no world \"x\\xFF\""), "{stderr}");
+}

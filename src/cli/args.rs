@@ -1,6 +1,7 @@
 //! What the commands share: the tile service's options, and parsers of sizes, ranges,
 //! vectors and world arguments whose errors state the range.
 
+use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
@@ -272,7 +273,7 @@ pub(crate) fn parse_cell_size(s: &str) -> Result<[f64; 2], String> {
 
 /// Where a world given by a bare name is looked for besides the folder of that name here:
 /// under ./worlds, then under the source tree's worlds.
-fn named_worlds(arg: &str) -> [PathBuf; 2] {
+fn named_worlds(arg: &OsStr) -> [PathBuf; 2] {
     [
         Path::new("worlds").join(arg),
         Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -281,9 +282,10 @@ fn named_worlds(arg: &str) -> [PathBuf; 2] {
     ]
 }
 
-/// A world argument is a folder, or a name under `./worlds` or the crate's own `worlds`.
-pub(crate) fn resolve_world(arg: &str) -> Result<PathBuf> {
-    if verdant::stream::http::is_url(arg) {
+/// A world argument is a folder, or a name under `./worlds` or the crate's own `worlds`, or a
+/// world's address. A folder's name need not be UTF-8 (a bake writes whatever `--out` names).
+pub(crate) fn resolve_world(arg: &OsStr) -> Result<PathBuf> {
+    if arg.to_str().is_some_and(verdant::stream::http::is_url) {
         // Opened over HTTP by the tools.
         return Ok(PathBuf::from(arg));
     }

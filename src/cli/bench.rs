@@ -57,7 +57,7 @@ pub(crate) enum BenchCommand {
     Features {
         /// World folder, or the name of a world under ./worlds.
         #[arg(default_value = "santa-cruz")]
-        world: String,
+        world: std::ffi::OsString,
         /// Output folder.
         #[arg(long, default_value = "out/bench-features")]
         out: PathBuf,
@@ -79,7 +79,7 @@ pub(crate) enum BenchCommand {
     Lod {
         /// World folder, or the name of a world under ./worlds.
         #[arg(default_value = "santa-cruz")]
-        world: String,
+        world: std::ffi::OsString,
         /// Output folder.
         #[arg(long, default_value = "out/bench-lod")]
         out: PathBuf,
@@ -124,7 +124,7 @@ pub(crate) enum BenchCommand {
     Aa {
         /// World folder, or the name of a world under ./worlds.
         #[arg(default_value = "santa-cruz")]
-        world: String,
+        world: std::ffi::OsString,
         /// Output folder.
         #[arg(long, default_value = "out/bench-aa")]
         out: PathBuf,
@@ -317,8 +317,8 @@ fn taa_variants(lists: &TaaLists) -> Vec<verdant::aa::taa::TaaSettings> {
 
 /// The world folder a benchmark measures: a folder or a world's name, not an address (its
 /// tiles are read from disk, so that a network's delays stay out of the figures).
-fn world_on_disk(arg: &str) -> anyhow::Result<std::path::PathBuf> {
-    if verdant::stream::http::is_url(arg) {
+fn world_on_disk(arg: &std::ffi::OsStr) -> anyhow::Result<std::path::PathBuf> {
+    if let Some(arg) = arg.to_str().filter(|a| verdant::stream::http::is_url(a)) {
         anyhow::bail!(
             "{arg}: the benchmarks measure a world on disk, not over HTTP (a network's delays \
              would be in their figures): copy the world's folder here, or fly it with `verdant \

@@ -16,7 +16,7 @@ use super::{Interrupted, terminal_safe};
 pub(crate) struct CheckArgs {
     /// World folder, the name of a world under ./worlds, or a world's http:// address
     /// (default: santa-cruz); with --stamp, a world folder's path, given.
-    pub(crate) world: Option<String>,
+    pub(crate) world: Option<std::ffi::OsString>,
     /// Tiles read at once, 1..=64 (several hide a server's latency).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(1..=MAX_CHECK_THREADS as u64))]
     pub(crate) threads: u64,
@@ -44,7 +44,11 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
         }
         return stamp(args.world.as_deref());
     }
-    let location = resolve_world(args.world.as_deref().unwrap_or("santa-cruz"))?;
+    let location = resolve_world(
+        args.world
+            .as_deref()
+            .unwrap_or(std::ffi::OsStr::new("santa-cruz")),
+    )?;
     let (world, source) = verdant::tools::open_world(&location, &args.http.options())?;
     let cancel = super::stop_on_signals()?;
     let options = CheckOptions {
@@ -134,16 +138,16 @@ pub(crate) fn check(args: CheckArgs) -> Result<()> {
 }
 
 /// `verdant check --stamp`.
-fn stamp(given: Option<&str>) -> Result<()> {
+fn stamp(given: Option<&std::ffi::OsStr>) -> Result<()> {
     // It writes: only where the user points, never a world found by name (the source tree's own).
     let Some(given) = given else {
         bail!("--stamp rewrites a world's files: name the world folder to stamp, by its path");
     };
-    if verdant::stream::http::is_url(given) {
+    if let Some(url) = given.to_str().filter(|g| verdant::stream::http::is_url(g)) {
         bail!(
             "--stamp writes the files of a world folder, not of {}: stamp the folder it is \
              served from",
-            terminal_safe(given)
+            terminal_safe(url)
         );
     }
     let dir = std::path::Path::new(given);

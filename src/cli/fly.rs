@@ -16,7 +16,7 @@ use super::progress::TenthsBar;
 pub(crate) struct FlyArgs {
     /// World folder, the name of a world under ./worlds, or a world's http:// address.
     #[arg(default_value = "santa-cruz")]
-    pub(crate) world: String,
+    pub(crate) world: std::ffi::OsString,
     /// Camera path from the world's manifest (default: its first path).
     #[arg(long)]
     pub(crate) path: Option<String>,

@@ -16,7 +16,7 @@ use super::progress::bar;
 pub(crate) struct SoakArgs {
     /// World folder, the name of a world under ./worlds, or a world's http:// address.
     #[arg(default_value = "santa-cruz")]
-    pub(crate) world: String,
+    pub(crate) world: std::ffi::OsString,
     /// Simulated flight time, seconds (0.1 s a frame), 4.6..=604800 (a week; the least leaves
     /// room for the memory check after the warm-up's 3 s).
     #[arg(long, default_value_t = 60.0, value_parser = float_in(verdant::tools::soak::MIN_SOAK_S, 604_800.0))]

@@ -12,7 +12,7 @@ use super::out::say;
 pub(crate) struct ViewArgs {
     /// World folder, the name of a world under ./worlds, or a world's http:// address.
     #[arg(default_value = "santa-cruz")]
-    pub(crate) world: String,
+    pub(crate) world: std::ffi::OsString,
     /// Window size, WIDTHxHEIGHT, 1..=16384 pixels a side.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub(crate) size: (u32, u32),
