@@ -310,6 +310,29 @@ fn files_that_do_not_join_are_refused_naming_them() {
         vec![four[0].clone(), far],
         &["gap", "tile_0_0.tif", "far.tif", "not neighbours"],
     );
+    // So far apart that no integer counts the samples between (the count is named, as a
+    // number too large).
+    for (name, x0, count) in [
+        ("beyond", 1e300, "5.000e298 x 33 samples"),
+        ("past_u64", 20.0 * 2f64.powi(63), "9.223e18 x 33 samples"),
+    ] {
+        let beyond = dir.path().join(format!("{name}.tif"));
+        write_tile(&beyond, 32633, 33, x0, 4_100_000.0, 0.0);
+        case(
+            name,
+            vec![four[0].clone(), beyond],
+            &["tile_0_0.tif", "files joined make", count, "a DEM may have"],
+        );
+    }
+    // A VRT that names more files than a mosaic may join: refused as it is read.
+    let many = dir.path().join("many.vrt");
+    let names: Vec<String> = (0..5000).map(|i| format!("t{i}.tif")).collect();
+    write_vrt(&many, &names.iter().map(String::as_str).collect::<Vec<_>>());
+    case(
+        "many",
+        vec![many],
+        &["many.vrt", "names more than 4096 DEM files"],
+    );
     // A DEM without georeferencing.
     let png = common::write_dem(
         dir.path(),

@@ -1367,3 +1367,95 @@ fn a_density_map_or_mask_window_over_the_limit_is_refused_naming_it_the_window_a
         assert_eq!(m.window().size, [128, 128], "{what}");
     }
 }
+
+/// Writes a one-band uint8 GeoTIFF `size` samples of `cell` metres whose top-left corner is
+/// `corner`, in strips of one row each, every row `value` (Deflate, the one compressed row
+/// stored once and named by every strip).
+fn write_striped_map(path: &Path, size: [u32; 2], cell: f64, corner: [f64; 2], value: u8) {
+    use std::io::Write;
+    let mut file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut enc = TiffEncoder::new(&mut file).unwrap();
+    let mut dir = enc.image_directory().unwrap();
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(9));
+    z.write_all(&vec![value; size[0] as usize]).unwrap();
+    let packed = z.finish().unwrap();
+    let offset = dir.write_data(&packed[..]).unwrap() as u32;
+    dir.write_tag(Tag::ImageWidth, size[0]).unwrap();
+    dir.write_tag(Tag::ImageLength, size[1]).unwrap();
+    dir.write_tag(Tag::BitsPerSample, 8u16).unwrap();
+    dir.write_tag(Tag::Compression, 8u16).unwrap();
+    dir.write_tag(Tag::PhotometricInterpretation, 1u16).unwrap();
+    dir.write_tag(Tag::SamplesPerPixel, 1u16).unwrap();
+    dir.write_tag(Tag::RowsPerStrip, 1u32).unwrap();
+    dir.write_tag(Tag::StripOffsets, &vec![offset; size[1] as usize][..])
+        .unwrap();
+    dir.write_tag(
+        Tag::StripByteCounts,
+        &vec![packed.len() as u32; size[1] as usize][..],
+    )
+    .unwrap();
+    dir.write_tag(Tag::ModelPixelScaleTag, &[cell, cell, 0.0][..])
+        .unwrap();
+    dir.write_tag(
+        Tag::ModelTiepointTag,
+        &[0.0, 0.0, 0.0, corner[0], corner[1], 0.0][..],
+    )
+    .unwrap();
+    dir.write_tag(Tag::GeoKeyDirectoryTag, &keys(32633)[..])
+        .unwrap();
+    dir.finish().unwrap();
+}
+
+#[test]
+fn a_map_in_strips_far_wider_than_the_dem_is_read_by_its_window_and_counted_in_the_plan() {
+    use verdant::bake::cover::ValueMap;
+    let dir = tempfile::tempdir().unwrap();
+    let dem_path = write_dem(dir.path());
+    let dem = verdant::world::Dem::load(&dem_path).unwrap();
+    // 2^24 samples a row (one strip each, 16 MiB decoded), of which the DEM's footprint
+    // needs 69; the map starts 4 samples west and north of the DEM's north-west sample.
+    let width = 1u32 << 24;
+    let corner = [
+        DEM_CORNER[0] - 4.0 * DEM_CELL,
+        DEM_CORNER[1] + 4.0 * DEM_CELL,
+    ];
+    let map = dir.path().join("wide.tif");
+    write_striped_map(&map, [width, DEM_SIZE + 8], DEM_CELL, corner, 128);
+    assert!(std::fs::metadata(&map).unwrap().len() < 2 << 20);
+    // The window is the footprint and 2 samples around it; the values are the map's.
+    let m = ValueMap::density(&map, &dem).unwrap();
+    assert_eq!(m.window().first, [2, 2]);
+    assert_eq!(m.window().size, [DEM_SIZE + 4; 2]);
+    let extent = f64::from(DEM_SIZE - 1) * DEM_CELL;
+    for p in [DVec2::ZERO, DVec2::splat(extent), DVec2::new(extent, 0.0)] {
+        assert_eq!(m.at(p), Some(128.0 / 255.0), "at {p}");
+    }
+    // What the read took beside the window, a strip decoded, is counted: it is at least the
+    // strip, and no more than a few of them.
+    let strip = u64::from(width);
+    assert!(
+        (strip..4 * strip).contains(&m.read_bytes()),
+        "{} bytes for strips of {strip}",
+        m.read_bytes()
+    );
+    assert_eq!(m.held_bytes(), u64::from(DEM_SIZE + 4).pow(2) * 4);
+    // A bake's limit too small for that is refused by the plan, naming the least that plans;
+    // that least bakes.
+    let mut o = opts(&dem_path, &dir.path().join("out"), None);
+    o.density_map = Some(map.clone());
+    o.memory_mib = 48;
+    let e = bake(&o, &mut |_, _, _| {}).unwrap_err().to_string();
+    assert!(
+        e.contains("--memory-mib 48") && e.contains("at least"),
+        "{e}"
+    );
+    let need: u64 = e
+        .split("at least ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no need named: {e}"));
+    assert!(need * (1 << 20) > 48 * (1 << 20) + strip, "{need} MiB: {e}");
+    o.memory_mib = need;
+    bake(&o, &mut |_, _, _| {}).unwrap_or_else(|e| panic!("at {need} MiB: {e}"));
+}

@@ -281,6 +281,8 @@ pub struct CoverMap {
     codes: Vec<Option<u16>>,
     /// Per code: what it paints.
     painted: BTreeMap<u32, ClassPaint>,
+    /// The most bytes reading it took beside its codes.
+    read_bytes: u64,
 }
 
 impl CoverMap {
@@ -328,6 +330,7 @@ impl CoverMap {
             placed,
             samples: codes,
             window,
+            read_bytes,
             ..
         } = read_map(
             path,
@@ -374,6 +377,7 @@ impl CoverMap {
             window,
             codes,
             painted,
+            read_bytes,
         })
     }
 
@@ -385,6 +389,12 @@ impl CoverMap {
     /// Bytes its window's codes take.
     pub fn held_bytes(&self) -> u64 {
         std::mem::size_of_val(self.codes.as_slice()) as u64
+    }
+
+    /// The most bytes reading it took beside what it holds: a GeoTIFF's largest chunk as
+    /// stored and decoded, a PNG's file and image.
+    pub fn read_bytes(&self) -> u64 {
+        self.read_bytes
     }
 
     /// What the map paints at world position `p` (metres from the DEM's south-west sample), or
@@ -690,6 +700,7 @@ pub struct ValueMap {
     placed: Placed,
     window: MapWindow,
     samples: Samples,
+    read_bytes: u64,
 }
 
 /// A [`ValueMap`]'s samples (of its window), row 0 north.
@@ -767,6 +778,7 @@ impl ValueMap {
             placed: read.placed,
             window: read.window,
             samples: Samples::Density { values, full },
+            read_bytes: read.read_bytes,
         })
     }
 
@@ -799,12 +811,18 @@ impl ValueMap {
             placed: read.placed,
             window: read.window,
             samples: Samples::Mask(read.samples),
+            read_bytes: read.read_bytes,
         })
     }
 
     /// The part of the map that was read and is held.
     pub fn window(&self) -> MapWindow {
         self.window
+    }
+
+    /// The most bytes reading it took beside what it holds (as [`CoverMap::read_bytes`]).
+    pub fn read_bytes(&self) -> u64 {
+        self.read_bytes
     }
 
     /// Bytes its window's samples take.
@@ -848,6 +866,8 @@ struct Raster {
     geo: Georef,
     values: Vec<u32>,
     full: f64,
+    /// The most bytes reading it took: the file's, the decoded image's and the values'.
+    read_bytes: u64,
 }
 
 /// The two formats a map may be in, told apart by content.
@@ -891,6 +911,8 @@ struct MapRead<T> {
     samples: Vec<T>,
     window: MapWindow,
     full: f64,
+    /// The most bytes reading it took beside its samples as kept.
+    read_bytes: u64,
 }
 
 /// Reads a map and places it on `dem`: a GeoTIFF of one band (of class codes, `kind`
@@ -920,6 +942,7 @@ fn read_map<T>(
             let size = [raster.geo.width, raster.geo.height];
             return Ok(MapRead {
                 placed,
+                read_bytes: raster.read_bytes,
                 samples: raster.values.into_iter().map(from_png).collect(),
                 window: MapWindow {
                     map_size: size,
@@ -979,6 +1002,7 @@ fn read_map<T>(
     }
     let samples = from_tiff(&tiff, first, size)?;
     Ok(MapRead {
+        read_bytes: tiff.chunk_read_bytes(),
         placed: placed.window([cols[0], rows[0]], size),
         samples,
         window: MapWindow {
@@ -994,10 +1018,10 @@ fn read_map<T>(
 /// map (`classes`), a palette PNG's indices too (its colours are not read). "Full" is the
 /// largest value of its bit depth.
 fn read_png(path: &Path, classes: bool) -> Result<Raster, WorldError> {
-    let bytes = std::fs::read(path).map_err(|e| WorldError::Io {
-        path: path.to_path_buf(),
-        source: e,
-    })?;
+    // A regular file (a FIFO or a device is named, not read without end).
+    let (mut file, _) = crate::world::format::open_regular(path)?;
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut file, &mut bytes).map_err(|e| WorldError::io(path, e))?;
     let corrupt = |e: png::DecodingError| WorldError::CorruptImage {
         path: path.to_path_buf(),
         format: "PNG",
@@ -1071,7 +1095,7 @@ fn read_png(path: &Path, classes: bool) -> Result<Raster, WorldError> {
             }
         }
     };
-    let values = buf
+    let values: Vec<u32> = buf
         .chunks(line)
         .take(height as usize)
         .flat_map(|row| (0..width as usize).map(move |c| sample(row, c)))
@@ -1084,6 +1108,7 @@ fn read_png(path: &Path, classes: bool) -> Result<Raster, WorldError> {
             origin: None,
             pixel_size: None,
         },
+        read_bytes: (bytes.len() + buf.len() + 4 * values.len()) as u64,
         values,
         full: f64::from((1u32 << bits) - 1),
     })

@@ -553,12 +553,19 @@ pub fn bake(
         .iter()
         .map(|e| (e / cell).floor() as u64 + 1)
         .product::<u64>();
+    // The maps' windows, held to the end, and the most that reading one of them took (a
+    // chunk of a GeoTIFF, a PNG whole): the peak before the plan, counted in it so that a
+    // map that needs more than the limit is refused by it.
+    let values = || [&density, &mask].into_iter().flatten();
     let map_bytes = cover.as_ref().map_or(0, cover::CoverMap::held_bytes)
-        + [&density, &mask]
+        + values().map(cover::ValueMap::held_bytes).sum::<u64>()
+        + cover
+            .as_ref()
+            .map(cover::CoverMap::read_bytes)
             .into_iter()
-            .flatten()
-            .map(cover::ValueMap::held_bytes)
-            .sum::<u64>();
+            .chain(values().map(cover::ValueMap::read_bytes))
+            .max()
+            .unwrap_or(0);
     let plan = Plan::new(
         opts.memory_mib,
         &manifest.pyramid,

@@ -14,7 +14,8 @@
 //! - the DEM: a single file whole; a mosaic's files and chunks in caches (see
 //!   `super::source`);
 //! - the maps (land cover, density, mask): the windows of them over the DEM, read before the
-//!   plan is made and held to the end.
+//!   plan is made and held to the end, and the most that reading one took (a GeoTIFF's
+//!   largest strip or tile, a PNG whole), so that a limit too small for them is refused.
 
 use crate::world::error::WorldError;
 use crate::world::tile::Pyramid;

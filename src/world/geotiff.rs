@@ -431,6 +431,16 @@ fn open_map(path: &Path, reading: Reading) -> Result<MapTiff, WorldError> {
 }
 
 impl MapTiff {
+    /// The most bytes reading a window takes beside the window itself: the largest chunk's
+    /// bytes as stored, one chunk decoded (a chunk is decoded whole), and a row of it while
+    /// its predictor is undone.
+    pub(crate) fn chunk_read_bytes(&self) -> u64 {
+        let [w, h] = self.layout.chunk_size.map(u64::from);
+        let sample = self.layout.sample_bytes as u64;
+        let stored = self.chunks.iter().map(|c| c.1).max().unwrap_or(0);
+        stored + w * h * sample + w * sample
+    }
+
     /// The class codes of the window of `size` samples (columns, rows) whose north-west sample
     /// is `first` (column from the west, row from the north), row 0 north, west first; `None`
     /// where the file's nodata is (codes are of 8 or 16 bits: 4 bytes a sample are held).
@@ -1029,7 +1039,9 @@ impl Codec {
                     .map_err(|e| format!("{:?}", e.status))
             }
             Codec::PackBits => {
-                let mut out = Vec::with_capacity(limit);
+                // Grown as the runs come: a chunk's claimed size costs nothing until its
+                // bytes are there.
+                let mut out = Vec::new();
                 let mut i = 0;
                 while i < packed.len() && out.len() < limit {
                     let n = packed[i] as i8;
@@ -1048,13 +1060,17 @@ impl Codec {
                 Ok(out)
             }
             Codec::Lzw => {
-                // Into a buffer of the chunk's size: what the codes would expand to beyond it
-                // (a small file can claim gigabytes) is never produced.
+                // Into a buffer of at most the chunk's size, grown as the codes fill it: what
+                // they would expand to beyond it (a small file can claim gigabytes) is never
+                // produced, and a chunk's claimed size costs nothing until its bytes are there.
                 let mut decoder =
                     weezl::decode::Decoder::with_tiff_size_switch(weezl::BitOrder::Msb, 8);
-                let mut out = vec![0u8; limit];
+                let mut out = vec![0u8; limit.min(packed.len().saturating_mul(4).max(1 << 16))];
                 let (mut input, mut filled) = (packed, 0);
                 while filled < limit {
+                    if filled == out.len() {
+                        out.resize(limit.min(out.len() * 2), 0);
+                    }
                     let step = decoder.decode_bytes(input, &mut out[filled..]);
                     input = &input[step.consumed_in..];
                     filled += step.consumed_out;
@@ -1176,7 +1192,11 @@ fn decode_window(
     } else {
         (1u64 << (8 * b)) - 1
     };
-    let mut row = vec![0u64; cw];
+    // A chunk row's samples from its first column to the window's last in it (the horizontal
+    // predictor sums from the chunk's first column), only the window's kept: a strip spans the
+    // image, which may be far wider than the window.
+    let mut row: Vec<u64> = Vec::with_capacity(cw.min(cols[1] - cols[0]));
+    let mut plane: Vec<u8> = Vec::new();
     for ty in rows[0] / ch..rows[1].div_ceil(ch) {
         for tx in cols[0] / cw..cols[1].div_ceil(cw) {
             let index = ty * across + tx;
@@ -1206,31 +1226,42 @@ fn decode_window(
                 if y < rows[0] || y >= rows[1] {
                     continue;
                 }
+                let [from, to] = [xa - x0, xb - x0];
+                row.clear();
                 if layout.predictor == 3 {
                     // Floating-point predictor: byte differences along the row, over byte
                     // planes (most significant first).
-                    let mut plane = bytes.to_vec();
+                    plane.clear();
+                    plane.extend_from_slice(bytes);
                     for j in 1..plane.len() {
                         plane[j] = plane[j].wrapping_add(plane[j - 1]);
                     }
-                    for (i, v) in row.iter_mut().enumerate() {
-                        *v = (0..b).fold(0, |acc, k| (acc << 8) | u64::from(plane[k * cw + i]));
-                    }
+                    row.extend((from..to).map(|i| {
+                        (0..b).fold(0, |acc, k| (acc << 8) | u64::from(plane[k * cw + i]))
+                    }));
                 } else {
-                    for (v, s) in row.iter_mut().zip(bytes.chunks_exact(b)) {
-                        *v = if layout.big_endian {
+                    let value = |s: &[u8]| {
+                        if layout.big_endian {
                             s.iter().fold(0, |acc, &x| (acc << 8) | u64::from(x))
                         } else {
                             s.iter().rev().fold(0, |acc, &x| (acc << 8) | u64::from(x))
-                        };
-                    }
-                    if layout.predictor == 2 {
-                        for i in 1..cw {
-                            row[i] = row[i].wrapping_add(row[i - 1]) & mask;
                         }
+                    };
+                    let samples = bytes.chunks_exact(b).map(value);
+                    if layout.predictor == 2 {
+                        // Each sample is the sum of the differences before it.
+                        let mut sum = 0u64;
+                        for (i, d) in samples.take(to).enumerate() {
+                            sum = sum.wrapping_add(d) & mask;
+                            if i >= from {
+                                row.push(sum);
+                            }
+                        }
+                    } else {
+                        row.extend(samples.skip(from).take(to - from));
                     }
                 }
-                put(y - rows[0], xa - cols[0], &row[xa - x0..xb - x0]);
+                put(y - rows[0], xa - cols[0], &row);
             }
         }
     }

@@ -144,6 +144,7 @@ fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
     }
     let base = vrt.parent().unwrap_or(Path::new("."));
     let mut out: Vec<PathBuf> = Vec::new();
+    let mut named = std::collections::HashSet::new();
     for node in root
         .descendants()
         .filter(|n| n.has_tag_name("SourceFilename"))
@@ -202,8 +203,15 @@ fn vrt_sources(vrt: &Path) -> Result<Vec<PathBuf>, WorldError> {
                 ),
             ));
         }
-        if !out.contains(&p) {
+        if named.insert(p.clone()) {
             out.push(p);
+        }
+        // Told here, not after the whole list is made: a VRT of 16 MiB names 400,000.
+        if out.len() > MAX_MOSAIC_FILES {
+            return Err(mosaic_error(
+                vrt,
+                format!("it names more than {MAX_MOSAIC_FILES} DEM files"),
+            ));
         }
     }
     if out.is_empty() {
@@ -363,16 +371,25 @@ impl Layout {
             f64::NEG_INFINITY,
             f64::max,
         );
-        let n = [0, 1].map(|a| ((hi[a] - lo[a]) / size[a]).round() as u64 + 1);
-        if n[0] * n[1] > max_samples {
+        // Counted in floating point: files far apart make a count no integer holds.
+        let n = [0, 1].map(|a| ((hi[a] - lo[a]) / size[a]).round() + 1.0);
+        let fits = n[0] * n[1] <= max_samples as f64 && n.iter().all(|&v| v <= f64::from(u32::MAX));
+        if !fits {
+            let count = |v: f64| {
+                if v < 1e15 {
+                    format!("{v:.0}")
+                } else {
+                    format!("{v:.3e}")
+                }
+            };
             return Err(mosaic_error(
                 &parts[0].path,
                 format!(
                     "the {} files joined make {} x {} samples, more than the {max_samples} a \
                      DEM may have",
                     parts.len(),
-                    n[0],
-                    n[1]
+                    count(n[0]),
+                    count(n[1])
                 ),
             ));
         }
