@@ -336,7 +336,7 @@ impl RendererConfig {
 
     /// Checks every setting against its range, stated in the error: `lod_factor` in
     /// [`LOD_FACTOR_RANGE`], `mesh_step` a power of two in 1..=[`MAX_MESH_STEP`], the tile
-    /// service's per-frame budgets (uploads at least 1, derives 1..=`service.atlas_slots`) and
+    /// service's per-frame budgets (uploads and derives at least 1 each) and
     /// its waits before a failed tile is loaded again (0..=1e9 s each), the grass rings' radii
     /// (finite, the high radius and the low one above 0, the high one allowed past the low one,
     /// the hysteresis at least 0), the plants' and the trees' settings (pool regions of
