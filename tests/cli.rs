@@ -922,7 +922,14 @@ fn bench_blades_accounts_for_every_blade_and_draws_the_floor_with_as_many_vertic
             assert!((0.0..1.0).contains(&n(r, c)), "{c} in {csv}");
         }
         assert!(n(r, "flip_vs_truth") > 0.0, "{csv}");
+        // The pool holds the field's blades: none overflowed (and no warning said so).
+        assert_eq!(n(r, "overflow"), 0.0, "{csv}");
     }
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("did not fit the grass pool"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     // Four times the blades: more drawn.
     assert!(n(&rows[1], "drawn_high") > n(&rows[0], "drawn_high"));
     for f in [

@@ -83,6 +83,30 @@ const OUT_OF_RANGE: &[(&[&str], &[&str])] = &[
         &["--max-recovery-frames", "1..=100000"],
     ),
     (&["view", "--frames", "0"], &["--frames", "1..=4294967295"]),
+    // A DEM cell past 1,000 km would make an extent beyond f64 of a large DEM.
+    (
+        &[
+            "bake",
+            "--dem",
+            "d.tif",
+            "--out",
+            "w",
+            "--dem-cell-size",
+            "1e308",
+        ],
+        &["--dem-cell-size", "at most 1e6"],
+    ),
+    (
+        &[
+            "eval",
+            "derive",
+            "--dem",
+            "d.tif",
+            "--dem-cell-size",
+            "5,1e7",
+        ],
+        &["--dem-cell-size", "at most 1e6"],
+    ),
     (
         &["fly", "--frames", "4294967296"],
         &["--frames", "1..=4294967295"],

@@ -548,6 +548,8 @@ fn absurd_bake_options_are_refused_before_writing() {
         (16, 2, 0.001, "--cell-size 0.001"),
         (16, 2, 1e-6, "--cell-size 0.000001"),
         (16, 2, -5.0, "--cell-size -5"),
+        // Written short, not as 300 zeros.
+        (16, 2, 1e-300, "--cell-size 1e-300: must be at least"),
         (
             16,
             2,
@@ -747,6 +749,27 @@ fn a_name_with_a_control_character_is_refused_before_writing() {
     assert!(!run.stderr.contains(&0x1b) && !run.stdout.contains(&0x1b));
     assert!(!out.exists());
     assert!(staging_folders(dir.path()).is_empty());
+
+    // An empty name (or only blanks) is refused as the option, not as a world.toml that was
+    // never written.
+    for name in ["", "  "] {
+        let err = bake(
+            &BakeOptions {
+                name: Some(name.into()),
+                ..opts.clone()
+            },
+            &mut |_, _, _| {},
+        )
+        .unwrap_err();
+        assert!(matches!(err, WorldError::BadOption { .. }), "{err}");
+        let text = err.to_string();
+        assert!(
+            text.starts_with("--name") && text.contains("not empty"),
+            "{text}"
+        );
+        assert!(!text.contains("world.toml"), "{text}");
+        assert!(!out.exists());
+    }
 }
 
 /// Control characters in a DEM's file name and its sidecar's texts are no fault of the user's:

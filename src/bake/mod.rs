@@ -996,6 +996,17 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
         ));
     }
     if let Some(name) = &opts.name
+        && name.trim().is_empty()
+    {
+        return Err(WorldError::bad_option(
+            "--name",
+            format!("{name:?}"),
+            "a name, not empty: a world's name is printed in lines and window titles (leave \
+             --name out for the output folder's name)"
+                .into(),
+        ));
+    }
+    if let Some(name) = &opts.name
         && name.chars().count() > crate::world::manifest::MAX_NAME_CHARS
     {
         return Err(WorldError::bad_option(
@@ -1012,7 +1023,7 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
         if !(c.is_finite() && c > 0.0) {
             return Err(WorldError::bad_option(
                 "--cell-size",
-                c,
+                given_number(c),
                 "a positive number of metres".into(),
             ));
         }
@@ -1026,12 +1037,19 @@ fn check_options(opts: &BakeOptions) -> Result<(), WorldError> {
             };
             return Err(WorldError::bad_option(
                 "--cell-size",
-                c,
+                given_number(c),
                 format!("{}{hint}", least_cell_words(t)),
             ));
         }
     }
     Ok(())
+}
+
+/// A number as given, in full, unless that takes more than 16 characters (`1e-300`, not 300
+/// zeros).
+fn given_number(v: f64) -> String {
+    let s = v.to_string();
+    if s.len() > 16 { format!("{v:e}") } else { s }
 }
 
 /// Smallest cell a bake of `tile_cells` cells a tile resamples to: at least
@@ -1113,7 +1131,11 @@ fn check_cell_size(dem: &Dem, opts: &BakeOptions, cell: f64) -> Result<(), World
     };
     let cells = |[ew, ns]: [f64; 2]| format!("{} x {}", short_number(ew), short_number(ns));
     match (opts.cell_size_m, opts.dem_cell_size_m) {
-        (Some(c), _) => Err(WorldError::bad_option("--cell-size", c, allowed)),
+        (Some(c), _) => Err(WorldError::bad_option(
+            "--cell-size",
+            given_number(c),
+            allowed,
+        )),
         // The DEM's cells came from the option, not from the file or its sidecar.
         (None, Some(given)) => Err(WorldError::bad_option(
             "--dem-cell-size",

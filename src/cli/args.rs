@@ -259,10 +259,15 @@ pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
 
 /// A DEM cell size: `M` (square) or `EW,NS`, metres, each finite and positive.
 pub(crate) fn parse_cell_size(s: &str) -> Result<[f64; 2], String> {
+    // Past 1,000 km a cell is no DEM's on this planet (a degree is 111 km), and the DEM's
+    // extent could overflow.
+    const MAX_CELL_M: f64 = 1e6;
     let parse = |v: &str| -> Result<f64, String> {
         match v.trim().parse::<f64>() {
-            Ok(m) if m.is_finite() && m > 0.0 => Ok(m),
-            _ => Err(format!("{v:?} is not a positive number of metres")),
+            Ok(m) if m.is_finite() && m > 0.0 && m <= MAX_CELL_M => Ok(m),
+            _ => Err(format!(
+                "{v:?} is not a positive number of metres of at most {MAX_CELL_M:e}"
+            )),
         }
     };
     match s.split_once(',') {

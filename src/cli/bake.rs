@@ -21,8 +21,8 @@ pub(crate) struct BakeArgs {
     /// georeferencing, --dem repeated, a folder of them, or a GDAL VRT mosaic.
     #[arg(long, required = true)]
     pub(crate) dem: Vec<PathBuf>,
-    /// Spacing of the DEM's samples in metres, M or EW,NS, in place of what the file says
-    /// (needed for a TIFF without GeoTIFF tags).
+    /// Spacing of the DEM's samples in metres, M or EW,NS (each above 0 and at most 1e6), in
+    /// place of what the file says (needed for a TIFF without GeoTIFF tags).
     #[arg(long, value_name = "M|EW,NS", value_parser = parse_cell_size)]
     pub(crate) dem_cell_size: Option<[f64; 2]>,
     /// The world folder to write.

@@ -21,8 +21,8 @@ pub(crate) enum EvalCommand {
         /// The DEM: a GeoTIFF, an SRTM .hgt, or a 16-bit PNG with its JSON sidecar.
         #[arg(long)]
         dem: PathBuf,
-        /// Spacing of the DEM's samples in metres, M or EW,NS, in place of what the file says
-        /// (needed for a TIFF without GeoTIFF tags), as bake takes it.
+        /// Spacing of the DEM's samples in metres, M or EW,NS (each above 0 and at most 1e6), in
+        /// place of what the file says (needed for a TIFF without GeoTIFF tags), as bake takes it.
         #[arg(long, value_name = "M|EW,NS", value_parser = super::args::parse_cell_size)]
         dem_cell_size: Option<[f64; 2]>,
         /// Downsampling factor, a power of two in 2..=64.

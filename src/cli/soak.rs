@@ -107,9 +107,9 @@ pub(crate) fn soak(mut opts: SoakOptions) -> Result<()> {
     super::progress::end_bar(pb.as_ref(), r.interrupted);
     let mib = |b: u64| b as f64 / 1048576.0;
     say!(
-        "{} frames ({:.0} s at {} m/s) on {}: frame p50 {:.1} ms, p99 {:.1} ms",
+        "{} frames ({} s at {} m/s) on {}: frame p50 {:.1} ms, p99 {:.1} ms",
         r.frames,
-        r.seconds,
+        verdant::world::error::short_number(r.seconds),
         r.speed_mps,
         r.adapter.name,
         r.frame_ms.median,

@@ -239,6 +239,10 @@ pub struct BladesResult {
     pub empty: u32,
     /// Culled by distance, frustum and occlusion, and overflowing, summed over both LODs.
     pub culled: u32,
+    /// Of those, the blades that passed every test but did not fit their tile's slot of the
+    /// grass pool (summed over both LODs): 0 unless the field's blades a tile need more than
+    /// the device binds, and then the figures are of a frame that lacks them.
+    pub overflow: u32,
     /// Blades drawn per LOD.
     pub drawn: [u32; 2],
     /// Vertices the grass draw runs.
@@ -668,6 +672,7 @@ pub fn run_bench_blades(
             considered: g.considered,
             empty: g.empty[0] + g.empty[1],
             culled,
+            overflow: g.overflow[0] + g.overflow[1],
             drawn: g.drawn,
             vertices,
             generate: Timing::of(&generate_samples[k]),
@@ -718,14 +723,14 @@ fn write_outputs(opts: &BenchBladesOptions, report: &BenchBladesReport) -> Resul
         "blades,spacing_m,considered_high,considered_low,empty,culled,drawn_high,drawn_low,vertices,\
          generate_ms,draw_ms,draw_q1_ms,draw_q3_ms,draw_spread,frame_ms,floor_ms,floor_spread,\
          floor_vertices,ns_per_blade,ns_per_vertex,ratio_to_floor,noisy,flip_vs_truth,\
-         coarse_flip_vs_truth,flip_vs_no_lod\n",
+         coarse_flip_vs_truth,flip_vs_no_lod,overflow\n",
     );
     for r in results {
         // A count's draw, frame, generation and floor are timed together.
         let t = &r.draw;
         let _ = writeln!(
             csv,
-            "{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.5},{:.5},{:.5}",
+            "{},{:.4},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{:.5},{:.5},{:.5},{}",
             r.blades,
             r.spacing_m,
             r.considered[0],
@@ -758,7 +763,8 @@ fn write_outputs(opts: &BenchBladesOptions, report: &BenchBladesReport) -> Resul
             },
             r.vs_truth.flip,
             r.vs_truth.coarse,
-            r.flip_vs_no_lod
+            r.flip_vs_no_lod,
+            r.overflow
         );
     }
     write_text(&opts.out.join("blades.csv"), &csv)?;

@@ -225,7 +225,8 @@ impl FlyOptions {
     }
 
     /// The renderer's settings for flying `path` through `world`, checked by
-    /// [`RendererConfig::validate`]; a setting out of its range names its command-line option.
+    /// [`RendererConfig::validate_for`]; a setting out of its range names its command-line
+    /// option.
     pub fn renderer_config(
         &self,
         world: &World,
@@ -255,7 +256,9 @@ impl FlyOptions {
         if config.tree_shadows.is_some() {
             config.tree_shadows = Some(self.tree_shadows);
         }
-        config.validate().map_err(SettingError::from)?;
+        // What depends on the world too (the rings' reach in its grass tiles), so that a
+        // setting out of range there names its option as well.
+        config.validate_for(world).map_err(SettingError::from)?;
         Ok(config)
     }
 }
@@ -845,5 +848,17 @@ mod tests {
             let text = e.to_string();
             assert!(text.contains(option) && text.contains(range), "{text}");
         }
+        // What depends on the world names its option too: in a world of grass tiles 64 times
+        // finer, a view the default world takes reaches too many of them.
+        let mut fine = world.clone();
+        fine.manifest.pyramid.derived_levels += 6;
+        let e = FlyOptions {
+            grass_view_m: Some(100.0),
+            ..fly_options()
+        }
+        .renderer_config(&fine, &path)
+        .unwrap_err();
+        assert_eq!(e.option, "--grass-view-m");
+        assert!(e.to_string().contains("m at most"), "{e}");
     }
 }

@@ -592,7 +592,15 @@ impl Manifest {
                 return Err(WorldError::WindSourcePlacement {
                     path: v.path.to_path_buf(),
                     field: at.to_string(),
-                    message: format!("a {} source needs position_m or path", source.kind_name()),
+                    message: format!(
+                        "{} {} source needs position_m or path",
+                        if source.kind_name() == "omni" {
+                            "an"
+                        } else {
+                            "a"
+                        },
+                        source.kind_name()
+                    ),
                 });
             }
             _ => {}
