@@ -74,13 +74,69 @@ pub fn write_atomic(
     Ok(())
 }
 
+/// How each report and table the tools write begins (by its file name): a file of that name in
+/// an output folder that begins otherwise is no earlier run's output ([`not_an_output`]), and
+/// is not written over. The JSON reports begin with their first field (serde keeps the
+/// structs' order), the tables with their first columns; [`write_json`] and [`write_text`]
+/// check in debug builds that what they write begins so.
+const BEGINNINGS: &[(&str, &str)] = &[
+    ("report.json", "{\n  \"world\": "),
+    ("soak.json", "{\n  \"world\": "),
+    ("truth.json", "{\n  \"world\": "),
+    ("bench_lod.json", "{\n  \"adapter\": "),
+    ("bench_blades.json", "{\n  \"adapter\": "),
+    ("bench_features.json", "{\n  \"adapter\": "),
+    ("aa.json", "{\n  \"adapter\": "),
+    ("far_band.csv", "view,band_pixels,"),
+    ("dolly.csv", "frame,flip_vs_truth,"),
+    ("lod_settings.csv", "setting,high_radius_tiles,"),
+    ("blades.csv", "blades,spacing_m,"),
+    ("features.csv", "feature,gpu_ms_without,"),
+    ("aa_frames.csv", "width,height,method,motion,frame,"),
+    ("aa_sequences.csv", "width,height,method,motion,flip_mean,"),
+    ("aa_paths.csv", "width,height,method,bound,path,"),
+    ("aa_timing.csv", "width,height,method,frame_ms,"),
+    ("derive.csv", "method,factor,"),
+    ("sway.csv", "preset,integrator,"),
+];
+
+/// How the report or table named `name` begins, where it is one of the tools'.
+fn beginning_of(name: &str) -> Option<&'static str> {
+    BEGINNINGS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, begins)| *begins)
+}
+
+/// In debug builds, that `bytes` written as `file` begin as [`BEGINNINGS`] says.
+fn debug_check_beginning(file: &Path, bytes: &[u8]) {
+    if let Some(begins) = file
+        .file_name()
+        .and_then(|n| n.to_str())
+        .and_then(beginning_of)
+    {
+        debug_assert!(
+            bytes.starts_with(begins.as_bytes()),
+            "{} begins {:?}, not {begins:?} as output::BEGINNINGS says",
+            file.display(),
+            String::from_utf8_lossy(&bytes[..bytes.len().min(begins.len() + 16)])
+        );
+    }
+}
+
 /// Writes `value` as pretty JSON through [`write_atomic`].
 pub fn write_json<T: serde::Serialize>(file: &Path, value: &T) -> Result<(), WriteError> {
-    write_atomic(file, |w| Ok(serde_json::to_writer_pretty(w, value)?))
+    let bytes = serde_json::to_vec_pretty(value).map_err(|e| WriteError {
+        path: file.to_path_buf(),
+        source: e.into(),
+    })?;
+    debug_check_beginning(file, &bytes);
+    write_atomic(file, |w| w.write_all(&bytes))
 }
 
 /// Writes `text` (a CSV table, say) through [`write_atomic`].
 pub fn write_text(file: &Path, text: &str) -> Result<(), WriteError> {
+    debug_check_beginning(file, text.as_bytes());
     write_atomic(file, |w| w.write_all(text.as_bytes()))
 }
 
@@ -285,6 +341,22 @@ pub fn not_an_output(file: &Path) -> Option<String> {
             return Some(format!(
                 "is the sidecar of {}: it may be a DEM's",
                 png.display()
+            ));
+        }
+    }
+    // A report or table of the tools' begins as they write it.
+    if let Some(begins) = file
+        .file_name()
+        .and_then(|n| n.to_str())
+        .and_then(beginning_of)
+    {
+        let mut head = vec![0u8; begins.len()];
+        let read = File::open(file).and_then(|mut f| f.read_exact(&mut head));
+        if read.is_err() || head != begins.as_bytes() {
+            return Some(format!(
+                "does not begin as verdant's {} does ({:?}): it is not an earlier run's output",
+                file.file_name().map_or("".into(), |n| n.to_string_lossy()),
+                begins
             ));
         }
     }
@@ -771,6 +843,45 @@ mod tests {
         v
     }
 
+    /// A report or table of the user's that bears an output's name is refused, and nothing is
+    /// written over it; one written as the tools write it is an earlier run's, and replaced.
+    #[test]
+    fn a_report_or_table_of_the_users_by_an_outputs_name_is_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let (report, table) = (
+            dir.path().join("report.json"),
+            dir.path().join("derive.csv"),
+        );
+        let outputs = Outputs::named(&["report.json", "derive.csv"]);
+        for (file, mine) in [
+            (&report, "{\"my\": \"thesis results\"}\n"),
+            (&table, "my,own\n1,2\n"),
+            (&table, ""),
+        ] {
+            let _ = std::fs::remove_file(&report);
+            let _ = std::fs::remove_file(&table);
+            std::fs::write(file, mine).unwrap();
+            let e = match OutDir::create_for(dir.path(), "fly", &outputs) {
+                Ok(_) => panic!("{} taken over: {mine:?}", file.display()),
+                Err(e) => e.to_string(),
+            };
+            assert!(e.contains(&file.display().to_string()), "{e}");
+            assert!(e.contains("does not begin as verdant's"), "{e}");
+            assert_eq!(std::fs::read_to_string(file).unwrap(), mine);
+        }
+        // As the tools write them: taken.
+        #[derive(serde::Serialize)]
+        struct Report {
+            world: String,
+        }
+        std::fs::remove_file(&table).unwrap();
+        write_json(&report, &Report { world: "w".into() }).unwrap();
+        write_text(&table, "method,factor,rmse_m\n").unwrap();
+        OutDir::create_for(dir.path(), "fly", &outputs).unwrap();
+        assert_eq!(beginning_of("report.json"), Some("{\n  \"world\": "));
+        assert_eq!(beginning_of("notes.csv"), None);
+    }
+
     /// A killed run's temporaries of the files a run writes are removed when the next run
     /// takes the folder; temporaries of other files, and the user's files, stay.
     #[test]
@@ -785,6 +896,8 @@ mod tests {
         ] {
             std::fs::write(dir.path().join(name), "x").unwrap();
         }
+        // An earlier run's table.
+        std::fs::write(dir.path().join("derive.csv"), "method,factor,rmse_m\n").unwrap();
         let outputs = Outputs::matching(|n| n == "derive.csv" || n.starts_with("frame_"));
         let out = OutDir::create_for(dir.path(), "eval derive", &outputs).unwrap();
         out.keep();

@@ -98,13 +98,24 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
             ..ViewSummary::default()
         });
     }
-    if world.manifest.paths.is_empty() {
-        bail!("world {} has no camera paths", opts.world.display());
-    }
     if let Some(name) = &opts.path
         && world.manifest.path(name).is_none()
     {
-        bail!("world {} has no camera path {name:?}", opts.world.display());
+        let names: Vec<&str> = world
+            .manifest
+            .paths
+            .iter()
+            .map(|p| p.name.as_str())
+            .collect();
+        bail!(
+            "world {} has no camera path {name:?} ({})",
+            opts.world.display(),
+            if names.is_empty() {
+                "it has none".to_owned()
+            } else {
+                format!("it has: {}", names.join(", "))
+            }
+        );
     }
     crate::tools::check_wind_option(&world, opts.wind_scene.as_deref())?;
     let no_display = std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty())
@@ -271,7 +282,7 @@ impl Viewer {
         config.desired_maximum_frame_latency = 2;
         configure(&surface, &ctx.device, &config)?;
 
-        let paths = world.manifest.paths.clone();
+        let paths = paths_of(&world);
         let path_index = match &self.opts.path {
             Some(name) => paths.iter().position(|p| &p.name == name).unwrap_or(0),
             None => 0,
@@ -841,4 +852,60 @@ fn save_screenshot(
         .context("screenshot size")?;
     crate::tools::output::write_png(file, &img).context("cannot write the screenshot")?;
     Ok(())
+}
+
+/// The camera paths the viewer follows (P, N): the world's, or where it has none (a world
+/// written by hand), one of its own, `overview`: the world's centre from above its highest
+/// point, looking north and down.
+fn paths_of(world: &World) -> Vec<crate::world::CameraPath> {
+    let m = &world.manifest;
+    if !m.paths.is_empty() {
+        return m.paths.clone();
+    }
+    let at = |t_s: f64| crate::world::CameraKey {
+        t_s,
+        position_m: [
+            0.5 * m.extent_m[0],
+            0.5 * m.extent_m[1],
+            f64::from(m.height_range_m[1]) + 30.0,
+        ],
+        yaw_deg: 90.0,
+        pitch_deg: -20.0,
+    };
+    vec![crate::world::CameraPath::through(
+        "overview",
+        vec![at(0.0), at(10.0)],
+    )]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A world without camera paths is viewed from above its centre; one with paths by them.
+    #[test]
+    fn a_world_without_camera_paths_is_viewed_from_above_its_centre() {
+        let mut world =
+            World::open(&Path::new(env!("CARGO_MANIFEST_DIR")).join("worlds/santa-cruz")).unwrap();
+        let named: Vec<String> = paths_of(&world).into_iter().map(|p| p.name).collect();
+        let theirs: Vec<String> = world
+            .manifest
+            .paths
+            .iter()
+            .map(|p| p.name.clone())
+            .collect();
+        assert_eq!(named, theirs);
+        world.manifest.paths.clear();
+        let paths = paths_of(&world);
+        assert_eq!(paths.len(), 1);
+        let path = &paths[0];
+        assert_eq!(path.name, "overview");
+        assert!(path.length_s() > 0.0);
+        let m = &world.manifest;
+        let c = sample_path(path, path.start_s());
+        assert!((c.position.x - 0.5 * m.extent_m[0]).abs() < 1e-6);
+        assert!((c.position.y - 0.5 * m.extent_m[1]).abs() < 1e-6);
+        assert!(c.position.z > f64::from(m.height_range_m[1]));
+        assert!(c.pitch_deg < 0.0);
+    }
 }
