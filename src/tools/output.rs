@@ -124,7 +124,8 @@ fn debug_check_beginning(file: &Path, bytes: &[u8]) {
     }
 }
 
-/// Writes `value` as pretty JSON through [`write_atomic`].
+/// Writes `value` as pretty JSON through [`write_atomic`]. A file named as one of the tools'
+/// reports must begin as `BEGINNINGS` in this module says (checked in debug builds).
 pub fn write_json<T: serde::Serialize>(file: &Path, value: &T) -> Result<(), WriteError> {
     let bytes = serde_json::to_vec_pretty(value).map_err(|e| WriteError {
         path: file.to_path_buf(),
