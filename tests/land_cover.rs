@@ -908,6 +908,33 @@ fn the_baylands_world_carries_its_materials_and_renders() {
     }
 }
 
+/// Writes the tags a one-band uint8 Deflate GeoTIFF map shares (its size, sample type and
+/// compression, and its georeferencing: samples of `cell` m, the top-left corner at `corner`,
+/// UTM zone 33N) beside the chunk tags already written, and finishes it.
+fn finish_map<W: std::io::Write + std::io::Seek>(
+    mut dir: tiff::encoder::DirectoryEncoder<'_, W, tiff::encoder::TiffKindStandard>,
+    size: [u32; 2],
+    cell: f64,
+    corner: [f64; 2],
+) {
+    dir.write_tag(Tag::ImageWidth, size[0]).unwrap();
+    dir.write_tag(Tag::ImageLength, size[1]).unwrap();
+    dir.write_tag(Tag::BitsPerSample, 8u16).unwrap();
+    dir.write_tag(Tag::Compression, 8u16).unwrap();
+    dir.write_tag(Tag::PhotometricInterpretation, 1u16).unwrap();
+    dir.write_tag(Tag::SamplesPerPixel, 1u16).unwrap();
+    dir.write_tag(Tag::ModelPixelScaleTag, &[cell, cell, 0.0][..])
+        .unwrap();
+    dir.write_tag(
+        Tag::ModelTiepointTag,
+        &[0.0, 0.0, 0.0, corner[0], corner[1], 0.0][..],
+    )
+    .unwrap();
+    dir.write_tag(Tag::GeoKeyDirectoryTag, &keys(32633)[..])
+        .unwrap();
+    dir.finish().unwrap();
+}
+
 /// Writes a one-band uint8 GeoTIFF of samples `sample(column, row)` (row 0 north) in square
 /// tiles of `tile` samples, each compressed with Deflate, as land-cover products are (ESA
 /// WorldCover's tiles are 36000 x 36000 samples in tiles of 1024). A tile that holds the same
@@ -946,26 +973,11 @@ fn write_tiled_map(
             counts.push(last_packed.len() as u32);
         }
     }
-    dir.write_tag(Tag::ImageWidth, size[0]).unwrap();
-    dir.write_tag(Tag::ImageLength, size[1]).unwrap();
-    dir.write_tag(Tag::BitsPerSample, 8u16).unwrap();
-    dir.write_tag(Tag::Compression, 8u16).unwrap();
-    dir.write_tag(Tag::PhotometricInterpretation, 1u16).unwrap();
-    dir.write_tag(Tag::SamplesPerPixel, 1u16).unwrap();
     dir.write_tag(Tag::TileWidth, tile).unwrap();
     dir.write_tag(Tag::TileLength, tile).unwrap();
     dir.write_tag(Tag::TileOffsets, &offsets[..]).unwrap();
     dir.write_tag(Tag::TileByteCounts, &counts[..]).unwrap();
-    dir.write_tag(Tag::ModelPixelScaleTag, &[cell, cell, 0.0][..])
-        .unwrap();
-    dir.write_tag(
-        Tag::ModelTiepointTag,
-        &[0.0, 0.0, 0.0, corner[0], corner[1], 0.0][..],
-    )
-    .unwrap();
-    dir.write_tag(Tag::GeoKeyDirectoryTag, &keys(32633)[..])
-        .unwrap();
-    dir.finish().unwrap();
+    finish_map(dir, size, cell, corner);
 }
 
 /// A 512 x 512 map whose samples over the DEM (its columns and rows 224..=288) are ESA
@@ -1380,12 +1392,6 @@ fn write_striped_map(path: &Path, size: [u32; 2], cell: f64, corner: [f64; 2], v
     z.write_all(&vec![value; size[0] as usize]).unwrap();
     let packed = z.finish().unwrap();
     let offset = dir.write_data(&packed[..]).unwrap() as u32;
-    dir.write_tag(Tag::ImageWidth, size[0]).unwrap();
-    dir.write_tag(Tag::ImageLength, size[1]).unwrap();
-    dir.write_tag(Tag::BitsPerSample, 8u16).unwrap();
-    dir.write_tag(Tag::Compression, 8u16).unwrap();
-    dir.write_tag(Tag::PhotometricInterpretation, 1u16).unwrap();
-    dir.write_tag(Tag::SamplesPerPixel, 1u16).unwrap();
     dir.write_tag(Tag::RowsPerStrip, 1u32).unwrap();
     dir.write_tag(Tag::StripOffsets, &vec![offset; size[1] as usize][..])
         .unwrap();
@@ -1394,16 +1400,7 @@ fn write_striped_map(path: &Path, size: [u32; 2], cell: f64, corner: [f64; 2], v
         &vec![packed.len() as u32; size[1] as usize][..],
     )
     .unwrap();
-    dir.write_tag(Tag::ModelPixelScaleTag, &[cell, cell, 0.0][..])
-        .unwrap();
-    dir.write_tag(
-        Tag::ModelTiepointTag,
-        &[0.0, 0.0, 0.0, corner[0], corner[1], 0.0][..],
-    )
-    .unwrap();
-    dir.write_tag(Tag::GeoKeyDirectoryTag, &keys(32633)[..])
-        .unwrap();
-    dir.finish().unwrap();
+    finish_map(dir, size, cell, corner);
 }
 
 #[test]

@@ -512,7 +512,9 @@ pub(crate) fn bench_blades(
     }
     for b in r.results.iter().filter(|b| b.overflow > 0) {
         note!(
-            "warning: with {} blades in the field, {} blades a frame did not fit the grass pool              (the device binds fewer blades a tile than the field needs): that count's figures              are of a frame without them (`overflow` in blades.csv and bench_blades.json)",
+            "warning: with {} blades in the field, {} blades a frame did not fit the grass pool \
+             (the device binds fewer blades a tile than the field needs): that count's figures \
+             are of a frame without them (`overflow` in blades.csv and bench_blades.json)",
             b.blades,
             b.overflow
         );

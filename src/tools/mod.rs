@@ -77,10 +77,18 @@ pub fn camera_path(
     use anyhow::Context;
     match name {
         Some(name) => world.manifest.path(name).cloned().with_context(|| {
+            let paths = &world.manifest.paths;
             format!(
-                "world {} has no camera path {name:?} (it has: {})",
+                "world {} has no camera path {name:?} ({})",
                 location.display(),
-                crate::world::name_list(world.manifest.paths.iter().map(|p| p.name.as_str()))
+                if paths.is_empty() {
+                    "it has none".to_owned()
+                } else {
+                    format!(
+                        "it has: {}",
+                        crate::world::name_list(paths.iter().map(|p| p.name.as_str()))
+                    )
+                }
             )
         }),
         None => world

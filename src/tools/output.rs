@@ -108,13 +108,16 @@ fn beginning_of(name: &str) -> Option<&'static str> {
         .map(|(_, begins)| *begins)
 }
 
-/// In debug builds, that `bytes` written as `file` begin as [`BEGINNINGS`] says.
-fn debug_check_beginning(file: &Path, bytes: &[u8]) {
-    if let Some(begins) = file
-        .file_name()
+/// [`beginning_of`] the file `file` names.
+fn beginning_for(file: &Path) -> Option<&'static str> {
+    file.file_name()
         .and_then(|n| n.to_str())
         .and_then(beginning_of)
-    {
+}
+
+/// In debug builds, that `bytes` written as `file` begin as [`BEGINNINGS`] says.
+fn debug_check_beginning(file: &Path, bytes: &[u8]) {
+    if let Some(begins) = beginning_for(file) {
         debug_assert!(
             bytes.starts_with(begins.as_bytes()),
             "{} begins {:?}, not {begins:?} as output::BEGINNINGS says",
@@ -346,18 +349,14 @@ pub fn not_an_output(file: &Path) -> Option<String> {
         }
     }
     // A report or table of the tools' begins as they write it.
-    if let Some(begins) = file
-        .file_name()
-        .and_then(|n| n.to_str())
-        .and_then(beginning_of)
-    {
+    if let Some(begins) = beginning_for(file) {
         let mut head = vec![0u8; begins.len()];
         let read = File::open(file).and_then(|mut f| f.read_exact(&mut head));
         if read.is_err() || head != begins.as_bytes() {
             return Some(format!(
-                "does not begin as verdant's {} does ({:?}): it is not an earlier run's output",
+                "does not begin as verdant's {} does ({begins:?}): it is not an earlier run's \
+                 output",
                 file.file_name().map_or("".into(), |n| n.to_string_lossy()),
-                begins
             ));
         }
     }

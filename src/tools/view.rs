@@ -98,24 +98,8 @@ pub fn run_view(opts: ViewOptions) -> Result<ViewSummary> {
             ..ViewSummary::default()
         });
     }
-    if let Some(name) = &opts.path
-        && world.manifest.path(name).is_none()
-    {
-        let names: Vec<&str> = world
-            .manifest
-            .paths
-            .iter()
-            .map(|p| p.name.as_str())
-            .collect();
-        bail!(
-            "world {} has no camera path {name:?} ({})",
-            opts.world.display(),
-            if names.is_empty() {
-                "it has none".to_owned()
-            } else {
-                format!("it has: {}", names.join(", "))
-            }
-        );
+    if opts.path.is_some() {
+        crate::tools::camera_path(&world, &opts.world, opts.path.as_deref())?;
     }
     crate::tools::check_wind_option(&world, opts.wind_scene.as_deref())?;
     let no_display = std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty())

@@ -213,7 +213,7 @@ impl<'de> Deserialize<'de> for WindSource {
 }
 
 /// `kind` with its indefinite article: "an omni", "a vortex".
-fn article(kind: &str) -> String {
+pub(super) fn article(kind: &str) -> String {
     match kind.chars().next() {
         Some('a' | 'e' | 'i' | 'o' | 'u') => format!("an {kind}"),
         _ => format!("a {kind}"),

@@ -593,13 +593,8 @@ impl Manifest {
                     path: v.path.to_path_buf(),
                     field: at.to_string(),
                     message: format!(
-                        "{} {} source needs position_m or path",
-                        if source.kind_name() == "omni" {
-                            "an"
-                        } else {
-                            "a"
-                        },
-                        source.kind_name()
+                        "{} source needs position_m or path",
+                        scenes::article(source.kind_name())
                     ),
                 });
             }
